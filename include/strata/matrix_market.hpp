@@ -1,0 +1,53 @@
+// strata — Matrix Market input and output (NIST format, https://math.nist.gov/MatrixMarket).
+//
+// Read: `coordinate` real / integer / pattern with general / symmetric / skew-symmetric
+// symmetry, and `array` real / integer general (dense right-hand sides). Files ending in
+// ".gz" are decompressed with zlib. Complex and Hermitian files are NotSupported.
+// Every malformed file raises ParseError naming the file and 1-based line: bad banner,
+// bad size line, wrong entry count, index out of range, non-numeric value, NaN/Inf,
+// truncated file.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "strata/sparse_matrix.hpp"
+
+namespace strata {
+
+/// Symmetry declared in a Matrix Market banner.
+enum class MMSymmetry { general, symmetric, skew_symmetric };
+
+/// A coordinate matrix as read: CSC, 0-based, duplicates summed, indices sorted.
+/// `symmetric`: storage is Storage::lower, holding the entries as the file gives them
+/// (upper-triangle entries of a symmetric file are moved to the lower triangle).
+/// `skew_symmetric`: expanded to Storage::full (a_ji = -a_ij). `pattern` files get
+/// values 1.0.
+struct MMMatrix {
+  SparseMatrix matrix;
+  MMSymmetry symmetry = MMSymmetry::general;
+  bool pattern = false;  ///< the file had no values
+};
+
+/// Reads a sparse coordinate matrix from PATH (".gz" decompressed). Throws ParseError,
+/// NotSupported.
+MMMatrix read_matrix_market(const std::string& path);
+
+/// Reads a dense `array` (or a coordinate file, densified) into a column-major
+/// rows×cols array. Throws ParseError.
+std::vector<double> read_dense_matrix_market(const std::string& path, index_t* rows,
+                                             index_t* cols);
+
+/// Writes A as `coordinate real general` (or `symmetric` when A.storage is lower or
+/// upper; an upper-stored matrix is written as its transpose's lower triangle).
+/// Values are written with 17 significant digits. The file is written under a
+/// temporary name and renamed when complete, so PATH is never left partial.
+/// Throws Error when the file cannot be written.
+void write_matrix_market(const std::string& path, const SparseMatrix& a);
+
+/// Writes a column-major rows×cols dense array as `array real general`, atomically
+/// (temporary file, then rename).
+void write_dense_matrix_market(const std::string& path, const double* values, index_t rows,
+                               index_t cols);
+
+}  // namespace strata

@@ -1,0 +1,91 @@
+// strata — solver options. Every field has a documented default; a default-constructed
+// Options is what `strata solve` uses when no flag is given.
+#pragma once
+
+#include <cstddef>
+#include <vector>
+
+#include "strata/types.hpp"
+
+namespace strata {
+
+/// The factorization a matrix gets.
+enum class MatrixType {
+  automatic,             ///< spd if symmetric and a Cholesky attempt succeeds, else
+                         ///< symmetric_indefinite if symmetric, else general.
+  spd,                   ///< symmetric positive definite: Cholesky L Lᵀ.
+  symmetric_indefinite,  ///< symmetric: L D Lᵀ with Bunch–Kaufman 1×1/2×2 pivots.
+  general,               ///< unsymmetric: L U on the pattern of A + Aᵀ.
+};
+
+/// The fill-reducing ordering computed in the analysis phase.
+enum class OrderingMethod {
+  nested_dissection,  ///< strata's own driver: recursive METIS vertex separators, AMD in
+                      ///< leaves; keeps the separator tree (default).
+  metis,              ///< METIS_NodeND on the whole graph.
+  amd,                ///< SuiteSparse AMD on the whole graph.
+  natural,            ///< identity permutation.
+  user,               ///< Options::user_permutation.
+};
+
+/// Where the numeric phases run.
+enum class Backend {
+  cpu,        ///< BLAS/LAPACK on host threads (default).
+  cuda,       ///< one or more CUDA GPUs; NotSupported in a build without CUDA.
+  automatic,  ///< cuda when a GPU is present and the build has CUDA, else cpu.
+};
+
+/// Options of every phase. Units: bytes for memory, seconds for time.
+struct Options {
+  // --- structure ---
+  /// Factorization type (default: automatic).
+  MatrixType type = MatrixType::automatic;
+
+  // --- analysis ---
+  /// Fill-reducing ordering (default: nested_dissection).
+  OrderingMethod ordering = OrderingMethod::nested_dissection;
+  /// Permutation for OrderingMethod::user: user_permutation[k] is the original index of
+  /// the k-th pivot (0-based, "new to old", as CHOLMOD's Perm). Must be a permutation of
+  /// 0..n-1 or analyze throws InvalidInput.
+  std::vector<index_t> user_permutation;
+  /// Nested dissection stops bisecting a subgraph of at most this many vertices and
+  /// orders it with AMD (default 128).
+  index_t nd_leaf_size = 128;
+  /// Relaxed amalgamation: a child front is merged into its parent when the merged front
+  /// has at most `relax_small` pivots, or when the share of explicit zeros it adds stays
+  /// below relax_zeros_{1,2,3} for fronts of at most relax_size_{1,2} pivots / larger.
+  /// Defaults follow CHOLMOD's (nrelax = 4, 16, 48; zrelax = 0.8, 0.1, 0.05).
+  index_t relax_small = 4;
+  index_t relax_size_1 = 16;
+  index_t relax_size_2 = 48;
+  double relax_zeros_1 = 0.8;
+  double relax_zeros_2 = 0.1;
+  double relax_zeros_3 = 0.05;
+  /// Separator blocking: a front with more pivot columns than this is split into a chain
+  /// of fronts of at most this many pivots (the paper's maximum block size; default 256).
+  index_t max_block_size = 256;
+  /// Device memory budget for the memory plan, in bytes; 0 means "the whole device"
+  /// (for the CPU backend: no limit). Default 0.
+  std::size_t device_memory_limit = 0;
+
+  // --- numeric factorization ---
+  /// Where factorize/solve run (default: cpu).
+  Backend backend = Backend::cpu;
+  /// Host threads for the CPU backend; 0 means all hardware threads (default 0).
+  int num_threads = 0;
+  /// For `general`: permute large entries onto the diagonal by a maximum weighted
+  /// matching and scale rows and columns (MC64-style, Duff & Koster 2001). Default on.
+  bool matching_and_scaling = true;
+  /// Static pivoting: a pivot with |d| < static_pivot_epsilon · ‖A‖₁ (after scaling) is
+  /// replaced by ±static_pivot_epsilon · ‖A‖₁ and counted in FactorStats (default 1e-10).
+  double static_pivot_epsilon = 1e-10;
+
+  // --- solve ---
+  /// Most iterative refinement steps after the first solve (default 10; 0 disables).
+  int refinement_max_steps = 10;
+  /// Refinement stops once the backward error ‖b−Ax‖∞ / (‖A‖∞‖x‖∞ + ‖b‖∞) is at or below
+  /// this value, or stops decreasing by at least half per step (default 1e-15).
+  double refinement_tolerance = 1e-15;
+};
+
+}  // namespace strata

@@ -1,0 +1,81 @@
+// strata — statistics reported by each phase. Numerical outcomes (perturbed pivots,
+// inertia, refinement) are reported here rather than thrown.
+#pragma once
+
+#include <cstddef>
+#include <string>
+#include <vector>
+
+#include "strata/options.hpp"
+#include "strata/types.hpp"
+
+namespace strata {
+
+/// One batch of the memory plan: fronts schedule[begin..end) of one level processed
+/// together. `bytes` is its working set (fronts, contribution blocks read and written).
+/// `tiled` marks a batch of a single front that alone exceeds the budget and must be
+/// factored tile by tile.
+struct BatchInfo {
+  index_t level = 0;
+  index_t begin = 0;
+  index_t end = 0;
+  std::size_t bytes = 0;
+  bool tiled = false;
+};
+
+/// Results of the analysis phase (pattern only).
+struct AnalysisStats {
+  index_t n = 0;
+  index_t nnz_a = 0;              ///< entries of the full (both triangles) matrix A
+  index_t nnz_l = 0;              ///< exact nnz(L), diagonal included (no amalgamation)
+  index_t nnz_l_fronts = 0;       ///< entries of L as stored in fronts (with amalgamation zeros)
+  double factor_flops = 0;        ///< flops of a Cholesky of the fronts (LU: about 2×)
+  index_t n_fronts = 0;
+  index_t largest_front_rows = 0;     ///< rows of the largest front
+  index_t largest_front_pivots = 0;   ///< most pivots in one front
+  index_t tree_height = 0;            ///< levels in the assembly tree
+  std::vector<index_t> fronts_per_level;  ///< level 0 is processed first (deepest)
+  std::size_t peak_working_bytes = 0;     ///< in-core multifrontal working memory peak
+  std::size_t factor_bytes = 0;           ///< bytes of the factor as stored in fronts
+  std::size_t memory_budget = 0;          ///< budget the plan was made for (0: unlimited)
+  std::vector<BatchInfo> batches;         ///< the memory plan
+  MatrixType type = MatrixType::automatic;  ///< type the analysis was made for
+  OrderingMethod ordering = OrderingMethod::nested_dissection;
+  double ordering_seconds = 0;
+  double symbolic_seconds = 0;
+  double plan_seconds = 0;
+  double total_seconds = 0;
+};
+
+/// Results of the last factorize/refactorize.
+struct FactorStats {
+  MatrixType type = MatrixType::automatic;  ///< the factorization actually computed
+  std::string backend;                      ///< "cpu" or "cuda"
+  double seconds = 0;
+  double gflops = 0;                   ///< AnalysisStats::factor_flops (×2 for LU) / seconds
+  index_t perturbed_pivots = 0;        ///< tiny pivots replaced by ±ε‖A‖ (static pivoting)
+  index_t two_by_two_pivots = 0;       ///< LDLᵀ: number of 2×2 pivot blocks
+  index_t inertia_positive = 0;        ///< LDLᵀ/LLᵀ: eigenvalue signs of D (after perturbation)
+  index_t inertia_negative = 0;
+  index_t inertia_zero = 0;
+  double log_abs_determinant = 0;      ///< log|det A| (spd, LDLᵀ and LU)
+  int determinant_sign = 0;            ///< sign of det A: -1, 0 or 1
+  double matrix_norm = 0;              ///< ‖A‖₁ used for static pivoting (after scaling)
+};
+
+/// Results of the last solve.
+struct SolveStats {
+  double seconds = 0;
+  int refinement_steps = 0;
+  double backward_error = 0;  ///< max over right-hand sides of ‖b−Ax‖∞/(‖A‖∞‖x‖∞+‖b‖∞)
+  bool refinement_converged = false;  ///< reached Options::refinement_tolerance
+};
+
+/// All statistics of a Solver.
+struct Stats {
+  AnalysisStats analysis;
+  FactorStats factor;
+  SolveStats solve;
+};
+
+}  // namespace strata

@@ -1,0 +1,24 @@
+// strata — typed exceptions (see include/strata/errors.hpp).
+#include "strata/errors.hpp"
+
+#include <string>
+
+namespace strata {
+
+ParseError::ParseError(std::string file, index_t line, const std::string& message)
+    : InvalidInput(file + ":" + std::to_string(line) + ": " + message),
+      file_(std::move(file)),
+      line_(line) {}
+
+OutOfMemory::OutOfMemory(std::size_t bytes_requested, const std::string& where)
+    : Error("out of memory: " + where + " asked for " + std::to_string(bytes_requested) +
+            " bytes"),
+      bytes_(bytes_requested) {}
+
+NotPositiveDefinite::NotPositiveDefinite(index_t column, double pivot)
+    : Error("matrix is not positive definite: pivot " + std::to_string(pivot) +
+            " at column " + std::to_string(column) + " (0-based, original numbering)"),
+      column_(column),
+      pivot_(pivot) {}
+
+}  // namespace strata

@@ -1,0 +1,60 @@
+// strata — dense partial factorization of one front on the CPU (BLAS/LAPACK).
+//
+// A front F is an m×m dense column-major matrix (leading dimension ld ≥ m) whose first
+// k rows/columns are fully summed (the pivot block). A partial factorization eliminates
+// those k pivots and leaves the Schur complement (the contribution block, update matrix)
+// in F[k:m, k:m]:
+//
+//   LLᵀ:  F = [F11 F21ᵀ; F21 F22] (lower triangle referenced)
+//         → L11 (lower, F[0:k,0:k]), L21 = F21 L11⁻ᵀ (F[k:m,0:k]),
+//           S = F22 − L21 L21ᵀ (lower triangle of F[k:m,k:m]).
+//   LDLᵀ: P F11 Pᵀ = L11 D L11ᵀ with Bunch–Kaufman 1×1/2×2 pivots chosen only among the k
+//         fully summed columns (restricted pivoting); L11 unit lower in F[0:k,0:k] below
+//         the diagonal, D on the diagonal (2×2 blocks use F(j+1,j) as off-diagonal),
+//         L21 = F21 Pᵀ L11⁻ᵀ D⁻¹ in F[k:m,0:k], S = F22 − L21 D L21ᵀ (lower triangle).
+//   LU:   P F11 = L11 U11 with partial pivoting among the k fully summed rows; F full.
+//         L11 unit lower and U11 upper in F[0:k,0:k], U12 = L11⁻¹ P F12 in F[0:k,k:m],
+//         L21 = F21 U11⁻¹ in F[k:m,0:k], S = F22 − L21 U12 in F[k:m,k:m].
+//
+// Static pivoting (LDLᵀ, LU): a pivot with |p| < static_pivot is replaced by
+// sign(p)·static_pivot (sign(0) taken as +) and counted; no pivot is ever delayed
+// (Duff & Pralet 2007; Li & Demmel 1998, SuperLU_DIST's GESP).
+//
+// Sources: Bunch & Kaufman 1977; Golub & Van Loan, "Matrix Computations", 4th ed., §4.4
+// (blocked LDLᵀ) and §3.4 (blocked LU).
+#pragma once
+
+#include "strata/types.hpp"
+
+namespace strata::numeric::cpu {
+
+/// Numerical outcomes of partial factorizations, accumulated over fronts.
+struct PivotStats {
+  index_t perturbed = 0;    ///< pivots replaced by ±static_pivot
+  index_t two_by_two = 0;   ///< 2×2 pivot blocks (LDLᵀ)
+  index_t positive = 0;     ///< inertia of D (LLᵀ: every pivot is positive)
+  index_t negative = 0;
+  index_t zero = 0;
+  double log_abs_det = 0;   ///< Σ log|pivot| (LU: of U11's diagonal)
+  int det_sign = 1;         ///< sign of the product of pivots, ignoring row swaps for LU
+  void merge(const PivotStats& o);
+};
+
+/// LLᵀ partial factorization (dpotrf, dtrsm, dsyrk). Returns -1 on success, or the local
+/// index (0..k-1) of the first pivot that is not positive (F is then partly overwritten).
+index_t factor_front_llt(double* f, index_t m, index_t k, index_t ld, PivotStats& stats);
+
+/// LDLᵀ partial factorization with restricted Bunch–Kaufman pivoting (α = (1+√17)/8) and
+/// static pivoting. On return local_perm[0..k) gives the symmetric permutation applied to
+/// the pivot block: position i now holds original local index local_perm[i]; and
+/// pivot_size[i] is 1 for a 1×1 pivot, 2 for both columns of a 2×2 pivot.
+void factor_front_ldlt(double* f, index_t m, index_t k, index_t ld, double static_pivot,
+                       index_t* local_perm, int* pivot_size, PivotStats& stats);
+
+/// LU partial factorization with partial pivoting restricted to the fully summed rows and
+/// static pivoting. On return local_perm[0..k) gives the row permutation of the pivot
+/// block: row i now holds original local row local_perm[i] (rows k..m are not moved).
+void factor_front_lu(double* f, index_t m, index_t k, index_t ld, double static_pivot,
+                     index_t* local_perm, PivotStats& stats);
+
+}  // namespace strata::numeric::cpu

@@ -1,0 +1,32 @@
+// strata — maximum weighted matching and scaling for unsymmetric matrices (MC64-style).
+#pragma once
+
+#include <vector>
+
+#include "strata/sparse_matrix.hpp"
+
+namespace strata::ordering {
+
+/// Result of a maximum-product matching with scaling.
+/// column_permutation[j] is the original column placed at position j, so that the
+/// permuted matrix A(:, column_permutation) has the matched entries on its diagonal.
+/// row_scaling / column_scaling (in ORIGINAL numbering) are exp(u_i), exp(v_j) of the
+/// dual variables, so that Dr·A·Dc has |entries| <= 1 and |matched entries| == 1.
+/// structurally_singular is true when no perfect matching exists; unmatched columns
+/// are then placed on unmatched rows arbitrarily and n_matched < n.
+struct Matching {
+  std::vector<index_t> column_permutation;
+  std::vector<double> row_scaling;
+  std::vector<double> column_scaling;
+  index_t n_matched = 0;
+  bool structurally_singular = false;
+};
+
+/// Maximum product transversal with scaling (Duff & Koster 2001, MC64 job 5): maximizes
+/// the product of |diagonal| by a shortest augmenting path (Dijkstra) method on
+/// c_ij = log max_k|a_kj| − log|a_ij|. Explicit zeros are not matched. A is square,
+/// any layout and storage (symmetric storage is expanded). Throws InvalidInput if A is
+/// not square.
+Matching maximum_product_matching(const SparseMatrix& a);
+
+}  // namespace strata::ordering

@@ -1,0 +1,65 @@
+// strata — fill-reducing orderings and the separator tree of nested dissection.
+#pragma once
+
+#include <vector>
+
+#include "ordering/graph.hpp"
+#include "strata/options.hpp"
+
+namespace strata::ordering {
+
+/// The separator tree of a nested dissection: one node per separator and per leaf.
+/// Node v owns the pivots begin..end-1 of the permuted order (its separator's vertices,
+/// or the whole leaf subgraph). Nodes are stored in postorder: children come before
+/// their parent and the root is last; a node's subtree covers a contiguous range of
+/// pivots ending at its own `end`. Disconnected components hang under a root with an
+/// empty separator (begin == end). `work` is filled by the symbolic phase (factor flops
+/// of the node's subtree) so that the multi-GPU split can balance by work.
+struct SeparatorTree {
+  struct Node {
+    index_t begin = 0;
+    index_t end = 0;
+    index_t parent = -1;
+    std::vector<index_t> children;
+    index_t subtree_begin = 0;  ///< first pivot of the node's subtree
+    double work = 0;
+  };
+  std::vector<Node> nodes;
+  bool empty() const { return nodes.empty(); }
+};
+
+/// Options of the nested dissection driver.
+struct NestedDissectionOptions {
+  index_t leaf_size = 128;   ///< subgraphs of at most this many vertices are leaves (AMD)
+  int seed = 1;              ///< METIS seed, for reproducibility
+};
+
+/// Result of an ordering: perm[k] is the original index of the k-th pivot (new to old).
+struct OrderingResult {
+  std::vector<index_t> perm;
+  SeparatorTree tree;  ///< empty unless nested_dissection
+};
+
+/// strata's nested dissection: recursive vertex-separator bisection with
+/// METIS_ComputeVertexSeparator, connected components split first, AMD inside leaves;
+/// numbering left part, right part, separator last. Records the separator tree.
+/// Method: George 1973 (nested dissection); Karypis & Kumar 1998 (METIS).
+OrderingResult nested_dissection(const Graph& g, const NestedDissectionOptions& opts);
+
+/// METIS_NodeND on the whole graph.
+std::vector<index_t> metis_ordering(const Graph& g);
+
+/// SuiteSparse AMD (Amestoy, Davis & Duff 1996) on the whole graph.
+std::vector<index_t> amd_ordering(const Graph& g);
+
+/// Computes the ordering requested by `opts` (user_permutation is checked: throws
+/// InvalidInput naming the first repeated or out-of-range entry).
+OrderingResult compute_ordering(const Graph& g, const Options& opts);
+
+/// Inverse permutation: result[perm[k]] = k.
+std::vector<index_t> invert_permutation(const std::vector<index_t>& perm);
+
+/// True when perm is a permutation of 0..n-1.
+bool is_permutation(const std::vector<index_t>& perm, index_t n);
+
+}  // namespace strata::ordering

@@ -1,0 +1,98 @@
+// strata — symbolic factorization: elimination tree, postorder, column counts,
+// supernodes, relaxed amalgamation, separator blocking, assembly tree, level schedule.
+//
+// Every function here takes the pattern of a symmetric matrix already permuted by the
+// fill-reducing ordering, as a full (both triangles) canonical CSC SparseMatrix (values
+// ignored). For `general` matrices that is the pattern of P(A + Aᵀ)Pᵀ.
+//
+// Sources: Liu 1990 (elimination tree); Gilbert, Ng & Peyton 1994 (column counts in
+// near-linear time); Ashcraft & Grimes 1989 (relaxed supernode amalgamation);
+// Davis, "Direct Methods for Sparse Linear Systems" (SIAM 2006), ch. 4.
+#pragma once
+
+#include <cstddef>
+#include <vector>
+
+#include "strata/options.hpp"
+#include "strata/sparse_matrix.hpp"
+
+namespace strata::symbolic {
+
+/// Elimination tree: parent[j] is the parent of column j, -1 for a root.
+std::vector<index_t> elimination_tree(const SparseMatrix& a);
+
+/// Postorder of a forest given by parent[] (children visited in increasing order):
+/// post[k] is the k-th node visited.
+std::vector<index_t> postorder(const std::vector<index_t>& parent);
+
+/// Column counts of the Cholesky factor L (diagonal included): colcount[j] = nnz(L(:,j)).
+/// `post` is a postorder of `parent`. Gilbert–Ng–Peyton with Tarjan's disjoint sets.
+std::vector<index_t> column_counts(const SparseMatrix& a, const std::vector<index_t>& parent,
+                                   const std::vector<index_t>& post);
+
+/// The assembly tree of fronts. Columns are in the permuted, postordered numbering.
+/// Front f eliminates the pivot columns first_pivot[f] .. first_pivot[f+1]-1; its rows
+/// are rows[row_offsets[f] .. row_offsets[f+1]-1], sorted ascending, the first
+/// n_pivots(f) of them being its pivot columns. Fronts are numbered in postorder
+/// (children before parents), so first_pivot is increasing and covers 0..n.
+struct AssemblyTree {
+  index_t n = 0;
+  std::vector<index_t> first_pivot{0};   ///< size n_fronts + 1
+  std::vector<index_t> row_offsets{0};   ///< size n_fronts + 1
+  std::vector<index_t> rows;
+  std::vector<index_t> parent;           ///< parent front, -1 for a root
+  std::vector<index_t> child_offsets{0}; ///< children of f: children[child_offsets[f]..]
+  std::vector<index_t> children;
+  std::vector<index_t> front_of_column;  ///< front that eliminates column j
+
+  index_t n_fronts() const { return static_cast<index_t>(parent.size()); }
+  index_t n_pivots(index_t f) const { return first_pivot[f + 1] - first_pivot[f]; }
+  index_t n_rows(index_t f) const { return row_offsets[f + 1] - row_offsets[f]; }
+  /// Order of the contribution block (update matrix) front f passes to its parent.
+  index_t cb_size(index_t f) const { return n_rows(f) - n_pivots(f); }
+  const index_t* rows_of(index_t f) const { return rows.data() + row_offsets[f]; }
+};
+
+/// Everything the symbolic phase computes.
+struct SymbolicFactorization {
+  std::vector<index_t> parent;    ///< elimination tree of the input pattern
+  std::vector<index_t> post;      ///< its postorder
+  std::vector<index_t> colcount;  ///< exact column counts, in the INPUT numbering
+  index_t nnz_l = 0;              ///< Σ colcount (exact, no amalgamation)
+  AssemblyTree tree;              ///< in the postordered numbering
+  /// The tree's numbering is the input numbering permuted by `post`: column k of the
+  /// tree is column post[k] of the input.
+};
+
+/// Relaxed amalgamation and blocking parameters (see Options for the meaning).
+struct AmalgamationOptions {
+  index_t relax_small = 4;
+  index_t relax_size_1 = 16;
+  index_t relax_size_2 = 48;
+  double relax_zeros_1 = 0.8;
+  double relax_zeros_2 = 0.1;
+  double relax_zeros_3 = 0.05;
+  index_t max_block_size = 256;  ///< separator blocking; <= 0 disables
+};
+
+/// Runs the whole symbolic phase: etree, postorder, column counts, fundamental
+/// supernodes, relaxed amalgamation, separator blocking, row structures of the fronts.
+SymbolicFactorization analyze_pattern(const SparseMatrix& a, const AmalgamationOptions& opts);
+
+/// Factor flops of front f for Cholesky: Σ over its pivots of (number of rows below and
+/// including the pivot)² — the usual count Σ_j c_j² for c_j = rows of L(:,j) in the front.
+double front_flops(const AssemblyTree& t, index_t f);
+
+/// The paper's level schedule (BFS reverse-level traversal): level of a front is its
+/// depth in the tree; levels are processed deepest first, so schedule level 0 is the
+/// deepest depth. All fronts of one level are independent.
+struct LevelSchedule {
+  std::vector<index_t> level_offsets{0};  ///< size n_levels + 1
+  std::vector<index_t> fronts;            ///< fronts of level l: fronts[level_offsets[l]..]
+  std::vector<index_t> level_of;          ///< level of each front
+  index_t n_levels() const { return static_cast<index_t>(level_offsets.size()) - 1; }
+};
+
+LevelSchedule level_schedule(const AssemblyTree& t);
+
+}  // namespace strata::symbolic

@@ -1,0 +1,143 @@
+// strata tests — shared helpers (see test_support.hpp).
+#include "support/test_support.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <set>
+
+#include "core/blas.hpp"
+
+namespace strata::test {
+
+std::string matrix_path(const std::string& name) {
+  return std::string(STRATA_MATRIX_DIR) + "/" + name + ".mtx.gz";
+}
+
+std::vector<std::string> shared_matrix_names() {
+  std::vector<std::string> names;
+  for (const auto& e : std::filesystem::directory_iterator(STRATA_MATRIX_DIR)) {
+    const std::string f = e.path().filename().string();
+    const std::string ext = ".mtx.gz";
+    if (f.size() > ext.size() && f.compare(f.size() - ext.size(), ext.size(), ext) == 0)
+      names.push_back(f.substr(0, f.size() - ext.size()));
+  }
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+std::mt19937_64 fresh_rng(unsigned long long* seed_out) {
+  std::random_device rd;
+  const unsigned long long seed = (static_cast<unsigned long long>(rd()) << 32) ^ rd();
+  if (seed_out) *seed_out = seed;
+  return std::mt19937_64(seed);
+}
+
+SparseMatrix random_sparse(index_t n, index_t per_column, RandomKind kind, std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> val(-1.0, 1.0);
+  std::uniform_int_distribution<index_t> row(0, std::max<index_t>(n - 1, 0));
+  const bool symmetric = kind != RandomKind::general;
+  std::vector<std::set<index_t>> cols(n);
+  for (index_t j = 0; j < n; ++j)
+    for (index_t t = 0; t < per_column; ++t) {
+      index_t i = row(rng);
+      if (i == j) continue;
+      if (symmetric) cols[std::min(i, j)].insert(std::max(i, j));  // lower: row > col
+      else cols[j].insert(i);
+    }
+  // Diagonal: spd dominant; indefinite mixed signs with ~1/4 zero diagonals; general
+  // with ~1/4 zero diagonals (made nonsingular by the random off-diagonal entries).
+  std::vector<double> diag(n);
+  std::uniform_int_distribution<int> coin(0, 3);
+  for (index_t j = 0; j < n; ++j) {
+    switch (kind) {
+      case RandomKind::spd: diag[j] = 0; break;  // set below from row sums
+      case RandomKind::symmetric_indefinite:
+        diag[j] = coin(rng) == 0 ? 0.0 : (coin(rng) < 2 ? 1.0 : -1.0) * (0.5 + std::abs(val(rng)));
+        break;
+      case RandomKind::general: diag[j] = coin(rng) == 0 ? 0.0 : 2.0 * val(rng); break;
+    }
+  }
+  SparseMatrix a;
+  a.n_rows = a.n_cols = n;
+  a.storage = symmetric ? Storage::lower : Storage::full;
+  std::vector<std::vector<double>> vals(n);
+  std::vector<double> rowsum(n, 0.0);
+  for (index_t j = 0; j < n; ++j)
+    for (index_t i : cols[j]) {
+      double v = val(rng);
+      vals[j].push_back(v);
+      rowsum[i] += std::abs(v);
+      rowsum[j] += std::abs(v);
+    }
+  // A zero diagonal in a 1×1 matrix would be singular: keep n = 1 nonsingular.
+  for (index_t j = 0; j < n; ++j) {
+    if (kind == RandomKind::spd) diag[j] = rowsum[j] + 1.0;
+    if (n == 1 && diag[j] == 0.0) diag[j] = 1.0;
+  }
+  a.offsets.assign(1, 0);
+  for (index_t j = 0; j < n; ++j) {
+    // canonical: sorted rows; the diagonal goes in its sorted place
+    std::vector<std::pair<index_t, double>> col;
+    if (diag[j] != 0.0 || kind == RandomKind::spd) col.push_back({j, diag[j]});
+    index_t t = 0;
+    for (index_t i : cols[j]) col.push_back({i, vals[j][t++]});
+    std::sort(col.begin(), col.end());
+    for (auto& [i, v] : col) {
+      a.indices.push_back(i);
+      a.values.push_back(v);
+    }
+    a.offsets.push_back(static_cast<index_t>(a.indices.size()));
+  }
+  return a;
+}
+
+std::vector<double> to_dense(const SparseMatrix& a) {
+  std::vector<double> d(static_cast<size_t>(a.n_rows * a.n_cols), 0.0);
+  for (index_t j = 0; j < a.n_major(); ++j)
+    for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p) {
+      index_t r = a.layout == Layout::csc ? a.indices[p] : j;
+      index_t c = a.layout == Layout::csc ? j : a.indices[p];
+      double v = a.values.empty() ? 1.0 : a.values[p];
+      d[r + c * a.n_rows] += v;
+      if (a.storage != Storage::full && r != c) d[c + r * a.n_rows] += v;
+    }
+  return d;
+}
+
+bool dense_solve(std::vector<double> a, index_t n, std::vector<double>& b, index_t nrhs) {
+  if (n == 0) return true;
+  int ni = static_cast<int>(n), nr = static_cast<int>(nrhs), info = 0;
+  std::vector<int> ipiv(n);
+  dgesv_(&ni, &nr, a.data(), &ni, ipiv.data(), b.data(), &ni, &info);
+  return info == 0;
+}
+
+double backward_error(const SparseMatrix& a, const double* x, const double* b) {
+  const index_t n = a.n_rows;
+  std::vector<double> ax(n);
+  multiply(a, x, ax.data());
+  std::vector<double> d = to_dense(a);  // small matrices only: for ‖A‖∞
+  double anorm = 0, xnorm = 0, bnorm = 0, rnorm = 0;
+  for (index_t i = 0; i < n; ++i) {
+    double s = 0;
+    for (index_t j = 0; j < a.n_cols; ++j) s += std::abs(d[i + j * n]);
+    anorm = std::max(anorm, s);
+    rnorm = std::max(rnorm, std::abs(b[i] - ax[i]));
+    bnorm = std::max(bnorm, std::abs(b[i]));
+  }
+  for (index_t j = 0; j < a.n_cols; ++j) xnorm = std::max(xnorm, std::abs(x[j]));
+  const double den = anorm * xnorm + bnorm;
+  return den == 0 ? rnorm : rnorm / den;
+}
+
+double relative_difference(const std::vector<double>& x, const std::vector<double>& y) {
+  double num = 0, den = 0;
+  for (size_t i = 0; i < x.size(); ++i) {
+    num = std::max(num, std::abs(x[i] - y[i]));
+    den = std::max(den, std::abs(y[i]));
+  }
+  return den == 0 ? num : num / den;
+}
+
+}  // namespace strata::test

@@ -1,0 +1,47 @@
+// strata tests — shared helpers: paths to the shared matrices, random matrices of each
+// type, dense conversions and dense LAPACK references.
+#pragma once
+
+#include <random>
+#include <string>
+#include <vector>
+
+#include "strata/sparse_matrix.hpp"
+
+namespace strata::test {
+
+/// Path of a shared SuiteSparse matrix, e.g. matrix_path("bcsstk09") → ".../bcsstk09.mtx.gz".
+std::string matrix_path(const std::string& name);
+
+/// Names (without .mtx.gz) of every matrix in the shared folder, sorted.
+std::vector<std::string> shared_matrix_names();
+
+/// A fresh random engine, seeded from std::random_device; the seed is printed through
+/// gtest's RecordProperty/SCOPED_TRACE by the caller when it matters.
+std::mt19937_64 fresh_rng(unsigned long long* seed_out = nullptr);
+
+/// Kinds of random matrices.
+enum class RandomKind { spd, symmetric_indefinite, general };
+
+/// A random sparse n×n matrix with about `per_column` off-diagonal entries per column.
+/// spd: symmetric, diagonally dominant, positive diagonal (Storage::lower).
+/// symmetric_indefinite: symmetric with diagonal entries of both signs and some zero
+/// diagonal entries (a KKT-like block), nonsingular with probability ~1 (Storage::lower).
+/// general: unsymmetric, with some zero diagonal entries, nonsingular with probability ~1
+/// (Storage::full). Canonical CSC.
+SparseMatrix random_sparse(index_t n, index_t per_column, RandomKind kind, std::mt19937_64& rng);
+
+/// Dense column-major n_rows×n_cols copy of A (symmetric storage expanded).
+std::vector<double> to_dense(const SparseMatrix& a);
+
+/// Solves the dense system with LAPACK dgesv (column-major, n×nrhs). Returns false if
+/// dgesv reports a singular matrix.
+bool dense_solve(std::vector<double> a, index_t n, std::vector<double>& b, index_t nrhs);
+
+/// ‖b − A x‖∞ / (‖A‖∞ ‖x‖∞ + ‖b‖∞) for one right-hand side.
+double backward_error(const SparseMatrix& a, const double* x, const double* b);
+
+/// Max-norm relative difference ‖x − y‖∞ / ‖y‖∞ (or the absolute one when y is 0).
+double relative_difference(const std::vector<double>& x, const std::vector<double>& y);
+
+}  // namespace strata::test
