@@ -1,0 +1,319 @@
+// strata — the analysis phase (DESIGN.md §1 step 2).
+//
+// Order of work:
+//   1. canonical pattern of the input (lower triangle for symmetric types, full for
+//      general), validated;
+//   2. general only: maximum product matching and scaling (Duff & Koster 2001), so that
+//      B = Dr·A(:,q)·Dc has a large diagonal and static pivoting is rarely needed;
+//   3. the fill-reducing ordering on the graph of B + Bᵀ (nested dissection by default);
+//   4. the symbolic phase on the permuted pattern: etree, postorder, column counts,
+//      supernodes, amalgamation, separator blocking — the assembly tree;
+//   5. the level schedule and the memory plan for the device budget;
+//   6. layouts computed once and reused by every (re)factorization: where every input
+//      entry lands in its front (assembly map), where each contribution block lives in
+//      the CB arena, and where each front's factor panel is stored.
+#include "core/analysis.hpp"
+
+#include <algorithm>
+#include <map>
+
+#include "core/timer.hpp"
+#include "ordering/matching.hpp"
+#include "strata/errors.hpp"
+
+namespace strata {
+namespace {
+
+// Lower triangle (diagonal included) of a symmetric matrix given in any storage, as
+// canonical CSC. For `full` storage the upper entries are ignored.
+SparseMatrix lower_triangle(const SparseMatrix& a) {
+  SparseMatrix full = expand_symmetric(a);
+  SparseMatrix low;
+  low.n_rows = low.n_cols = full.n_cols;
+  low.storage = Storage::lower;
+  low.offsets.assign(full.n_cols + 1, 0);
+  const bool vals = !full.values.empty();
+  for (index_t j = 0; j < full.n_cols; ++j) {
+    for (index_t p = full.offsets[j]; p < full.offsets[j + 1]; ++p)
+      if (full.indices[p] >= j) {
+        low.indices.push_back(full.indices[p]);
+        if (vals) low.values.push_back(full.values[p]);
+      }
+    low.offsets[j + 1] = static_cast<index_t>(low.indices.size());
+  }
+  return low;
+}
+
+// Pattern of B + Bᵀ as a full canonical CSC (values dropped), where B = A(:, q)
+// (q empty: B = A) for general matrices, or the expanded lower triangle for symmetric.
+SparseMatrix symmetric_pattern(const SparseMatrix& c, bool symmetric,
+                               const std::vector<index_t>& q_inv) {
+  SparseMatrix p;
+  p.n_rows = p.n_cols = c.n_cols;
+  p.layout = Layout::csc;
+  p.storage = Storage::full;
+  p.offsets = c.offsets;
+  p.indices = c.indices;
+  if (!symmetric && !q_inv.empty()) {
+    // B(:, q_inv[j]) = A(:, j): rebuild by columns of B.
+    SparseMatrix b;
+    b.n_rows = b.n_cols = c.n_cols;
+    std::vector<index_t> cnt(c.n_cols + 1, 0);
+    for (index_t j = 0; j < c.n_cols; ++j) cnt[q_inv[j] + 1] = c.offsets[j + 1] - c.offsets[j];
+    for (index_t j = 0; j < c.n_cols; ++j) cnt[j + 1] += cnt[j];
+    b.offsets = cnt;
+    b.indices.resize(c.nnz());
+    for (index_t j = 0; j < c.n_cols; ++j)
+      std::copy(c.indices.begin() + c.offsets[j], c.indices.begin() + c.offsets[j + 1],
+                b.indices.begin() + cnt[q_inv[j]]);
+    p.offsets = std::move(b.offsets);
+    p.indices = std::move(b.indices);
+  }
+  // symmetrize: lower storage expands; a full unsymmetric pattern is mirrored too
+  // (expand_symmetric of a "lower"-declared matrix mirrors every off-diagonal entry,
+  // which for a full matrix gives B + Bᵀ with duplicates summed away).
+  SparseMatrix mirrored;
+  mirrored.n_rows = mirrored.n_cols = p.n_cols;
+  mirrored.layout = Layout::csc;
+  mirrored.storage = Storage::full;
+  // gather both (i,j) and (j,i)
+  std::vector<index_t> cnt(p.n_cols + 1, 0);
+  for (index_t j = 0; j < p.n_cols; ++j)
+    for (index_t k = p.offsets[j]; k < p.offsets[j + 1]; ++k) {
+      ++cnt[j + 1];
+      if (p.indices[k] != j) ++cnt[p.indices[k] + 1];
+    }
+  for (index_t j = 0; j < p.n_cols; ++j) cnt[j + 1] += cnt[j];
+  mirrored.offsets = cnt;
+  mirrored.indices.resize(cnt.back());
+  for (index_t j = 0; j < p.n_cols; ++j)
+    for (index_t k = p.offsets[j]; k < p.offsets[j + 1]; ++k) {
+      const index_t i = p.indices[k];
+      mirrored.indices[cnt[j]++] = i;
+      if (i != j) mirrored.indices[cnt[i]++] = j;
+    }
+  return canonicalize(mirrored);  // sorts and removes the duplicates of B ∩ Bᵀ
+}
+
+// Local index of global row `row` in the sorted row list of front f (binary search).
+index_t local_row(const symbolic::AssemblyTree& t, index_t f, index_t row) {
+  const index_t* r = t.rows_of(f);
+  const index_t m = t.n_rows(f);
+  const index_t* it = std::lower_bound(r, r + m, row);
+  return it - r;
+}
+
+AssemblyMap build_assembly_map(const SparseMatrix& c, const Analysis& an) {
+  const auto& t = an.tree;
+  const index_t nf = t.n_fronts();
+  std::vector<index_t> q_inv;
+  if (!an.matching_perm.empty()) q_inv = ordering::invert_permutation(an.matching_perm);
+  // (front, dst) for each entry, then bucket by front
+  std::vector<index_t> front_of(c.nnz()), dst(c.nnz());
+  std::vector<index_t> count(nf + 1, 0);
+  for (index_t j = 0; j < c.n_cols; ++j) {
+    const index_t bj = q_inv.empty() ? j : q_inv[j];
+    const index_t pj = an.iperm[bj];
+    for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) {
+      const index_t pi = an.iperm[c.indices[p]];
+      const index_t lo = std::min(pi, pj), hi = std::max(pi, pj);
+      const index_t f = t.front_of_column[lo];
+      const index_t m = t.n_rows(f);
+      const index_t lc = lo - t.first_pivot[f];  // pivot column of the front
+      const index_t lr = local_row(t, f, hi);
+      // symmetric: lower triangle (row hi, column lo); general: (pi, pj) as it stands
+      dst[p] = (an.symmetric || pi >= pj) ? lc * m + lr : lr * m + lc;
+      front_of[p] = f;
+      ++count[f + 1];
+    }
+  }
+  for (index_t f = 0; f < nf; ++f) count[f + 1] += count[f];
+  AssemblyMap map;
+  map.entry_offsets = count;
+  map.entry_src.resize(c.nnz());
+  map.entry_dst.resize(c.nnz());
+  for (index_t p = 0; p < c.nnz(); ++p) {
+    const index_t k = count[front_of[p]]++;
+    map.entry_src[k] = p;
+    map.entry_dst[k] = dst[p];
+  }
+  return map;
+}
+
+// First-fit placement of contribution blocks in one arena, following the level order:
+// a level's blocks are allocated after its children's blocks are released.
+CbLayout plan_cb_layout(const symbolic::AssemblyTree& t, const symbolic::LevelSchedule& s) {
+  CbLayout out;
+  out.cb_offset.assign(t.n_fronts(), 0);
+  std::map<std::size_t, std::size_t> free_list;  // offset -> size
+  std::size_t top = 0;
+  auto release = [&](std::size_t off, std::size_t size) {
+    auto it = free_list.emplace(off, size).first;
+    auto next = std::next(it);
+    if (next != free_list.end() && it->first + it->second == next->first) {
+      it->second += next->second;
+      free_list.erase(next);
+    }
+    if (it != free_list.begin()) {
+      auto prev = std::prev(it);
+      if (prev->first + prev->second == it->first) {
+        prev->second += it->second;
+        free_list.erase(it);
+        it = prev;
+      }
+    }
+    if (it->first + it->second == top) {  // give the tail back
+      top = it->first;
+      free_list.erase(it);
+    }
+  };
+  auto allocate = [&](std::size_t size) -> std::size_t {
+    for (auto it = free_list.begin(); it != free_list.end(); ++it)
+      if (it->second >= size) {
+        const std::size_t off = it->first;
+        const std::size_t rest = it->second - size;
+        free_list.erase(it);
+        if (rest) free_list.emplace(off + size, rest);
+        return off;
+      }
+    const std::size_t off = top;
+    top += size;
+    out.arena_size = std::max(out.arena_size, top);
+    return off;
+  };
+  for (index_t l = 0; l < s.n_levels(); ++l) {
+    // children of this level's fronts are consumed by this level: the CB written by a
+    // front may not share memory with a CB read by another front of the same level, so
+    // all allocations of the level happen before its releases.
+    for (index_t p = s.level_offsets[l]; p < s.level_offsets[l + 1]; ++p) {
+      const index_t f = s.fronts[p];
+      const std::size_t cb = static_cast<std::size_t>(t.cb_size(f));
+      if (cb > 0 && t.parent[f] >= 0) out.cb_offset[f] = allocate(cb * cb);
+    }
+    for (index_t p = s.level_offsets[l]; p < s.level_offsets[l + 1]; ++p) {
+      const index_t f = s.fronts[p];
+      for (index_t k = t.child_offsets[f]; k < t.child_offsets[f + 1]; ++k) {
+        const index_t c = t.children[k];
+        const std::size_t cb = static_cast<std::size_t>(t.cb_size(c));
+        if (cb > 0) release(out.cb_offset[c], cb * cb);
+      }
+    }
+  }
+  return out;
+}
+
+FactorLayout plan_factor_layout(const symbolic::AssemblyTree& t, bool lu) {
+  FactorLayout out;
+  out.panel_offset.assign(t.n_fronts() + 1, 0);
+  for (index_t f = 0; f < t.n_fronts(); ++f) {
+    const std::size_t m = t.n_rows(f), k = t.n_pivots(f);
+    out.panel_offset[f + 1] = out.panel_offset[f] + m * k + (lu ? k * (m - k) : 0);
+  }
+  out.total = out.panel_offset.back();
+  return out;
+}
+
+}  // namespace
+
+SparseMatrix canonical_values(const Analysis& an, const SparseMatrix& a) {
+  if (a.n_rows != an.n || a.n_cols != an.n)
+    throw InvalidInput("matrix is " + std::to_string(a.n_rows) + "x" + std::to_string(a.n_cols) +
+                       ", the analysis was for " + std::to_string(an.n) + "x" +
+                       std::to_string(an.n));
+  SparseMatrix c = an.symmetric ? lower_triangle(a) : canonicalize(a);
+  if (c.offsets != an.pattern_offsets || c.indices != an.pattern_indices)
+    throw InvalidInput("the matrix pattern differs from the analyzed pattern; call analyze again");
+  if (c.values.empty() && c.nnz() > 0) throw InvalidInput("the matrix has no values");
+  return c;
+}
+
+Analysis analyze_matrix(const SparseMatrix& a, const Options& opts) {
+  Timer total;
+  if (a.n_rows != a.n_cols)
+    throw InvalidInput("matrix must be square, got " + std::to_string(a.n_rows) + "x" +
+                       std::to_string(a.n_cols));
+  if (opts.max_block_size < 1) throw InvalidInput("max_block_size must be at least 1");
+  if (opts.nd_leaf_size < 1) throw InvalidInput("nd_leaf_size must be at least 1");
+  Analysis an;
+  an.n = a.n_rows;
+  an.input_storage = a.storage;
+  an.type = opts.type;
+  if (an.type == MatrixType::automatic) {
+    const bool sym = a.storage != Storage::full ||
+                     (a.has_values() && is_numerically_symmetric(a));
+    an.type = sym ? MatrixType::automatic : MatrixType::general;
+  }
+  an.symmetric = an.type != MatrixType::general;
+  SparseMatrix c = an.symmetric ? lower_triangle(a) : expand_symmetric(a);
+  an.pattern_offsets = c.offsets;
+  an.pattern_indices = c.indices;
+
+  Timer step;
+  std::vector<index_t> q_inv;
+  if (!an.symmetric && opts.matching_and_scaling && an.n > 0 && !c.values.empty()) {
+    ordering::Matching m = ordering::maximum_product_matching(c);
+    an.matching_perm = std::move(m.column_permutation);
+    an.row_scaling = std::move(m.row_scaling);
+    an.col_scaling = std::move(m.column_scaling);
+    an.structurally_singular = m.structurally_singular;
+    q_inv = ordering::invert_permutation(an.matching_perm);
+  }
+  const SparseMatrix pattern = symmetric_pattern(c, an.symmetric, q_inv);
+  ordering::OrderingResult ord = ordering::compute_ordering(ordering::graph_of(pattern), opts);
+  an.stats.ordering_seconds = step.seconds();
+
+  step.reset();
+  const SparseMatrix permuted = symbolic::permute_symmetric_pattern(pattern, ord.perm);
+  symbolic::AmalgamationOptions ao;
+  ao.relax_small = opts.relax_small;
+  ao.relax_size_1 = opts.relax_size_1;
+  ao.relax_size_2 = opts.relax_size_2;
+  ao.relax_zeros_1 = opts.relax_zeros_1;
+  ao.relax_zeros_2 = opts.relax_zeros_2;
+  ao.relax_zeros_3 = opts.relax_zeros_3;
+  ao.max_block_size = opts.max_block_size;
+  symbolic::SymbolicFactorization sym = symbolic::analyze_pattern(permuted, ao);
+  // the tree is in the postordered numbering: pivot k is permuted column post[k]
+  an.perm.resize(an.n);
+  for (index_t k = 0; k < an.n; ++k) an.perm[k] = ord.perm[sym.post[k]];
+  an.iperm = ordering::invert_permutation(an.perm);
+  an.separator_tree = std::move(ord.tree);
+  an.tree = std::move(sym.tree);
+  an.schedule = symbolic::level_schedule(an.tree);
+  an.stats.symbolic_seconds = step.seconds();
+
+  step.reset();
+  const bool lu = !an.symmetric;
+  an.plan = schedule::plan_memory(an.tree, an.schedule, opts.device_memory_limit, lu);
+  an.assembly = build_assembly_map(c, an);
+  an.cb_layout = plan_cb_layout(an.tree, an.schedule);
+  an.factor_layout = plan_factor_layout(an.tree, lu);
+  an.stats.plan_seconds = step.seconds();
+
+  // statistics
+  AnalysisStats& st = an.stats;
+  st.n = an.n;
+  st.nnz_a = pattern.nnz();
+  st.nnz_l = sym.nnz_l;
+  st.type = an.type;
+  st.ordering = opts.ordering;
+  st.n_fronts = an.tree.n_fronts();
+  for (index_t f = 0; f < an.tree.n_fronts(); ++f) {
+    const index_t m = an.tree.n_rows(f), k = an.tree.n_pivots(f);
+    st.nnz_l_fronts += k * m - k * (k - 1) / 2;
+    st.factor_flops += symbolic::front_flops(an.tree, f);
+    st.largest_front_rows = std::max(st.largest_front_rows, m);
+    st.largest_front_pivots = std::max(st.largest_front_pivots, k);
+  }
+  st.tree_height = an.schedule.n_levels();
+  for (index_t l = 0; l < an.schedule.n_levels(); ++l)
+    st.fronts_per_level.push_back(an.schedule.level_offsets[l + 1] - an.schedule.level_offsets[l]);
+  st.peak_working_bytes = an.plan.peak_in_core_bytes;
+  st.factor_bytes = an.plan.factor_bytes;
+  st.memory_budget = an.plan.budget;
+  st.batches = an.plan.batches;
+  st.total_seconds = total.seconds();
+  return an;
+}
+
+}  // namespace strata

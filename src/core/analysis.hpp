@@ -1,0 +1,80 @@
+// strata — the result of the analysis phase: everything the numeric phases need that
+// depends on the pattern alone (plus, for `general`, the matching and scaling computed
+// from the values given at analysis and reused by every refactorization).
+#pragma once
+
+#include <vector>
+
+#include "ordering/ordering.hpp"
+#include "schedule/memory_plan.hpp"
+#include "strata/options.hpp"
+#include "strata/sparse_matrix.hpp"
+#include "strata/stats.hpp"
+#include "symbolic/symbolic.hpp"
+
+namespace strata {
+
+/// Where each stored entry of the canonical input lands in the fronts: the entries that
+/// front f receives are entry_src[entry_offsets[f] .. entry_offsets[f+1]-1] (indices into
+/// the canonical input's values) added at the column-major offsets entry_dst[...] of the
+/// n_rows(f)×n_rows(f) front.
+struct AssemblyMap {
+  std::vector<index_t> entry_offsets{0};
+  std::vector<index_t> entry_src;
+  std::vector<index_t> entry_dst;
+};
+
+/// Contribution blocks live in one arena whose layout is planned once: cb_offset[f] is
+/// where front f's contribution block (cb_size(f)² doubles, column-major) starts.
+/// The layout is a first-fit simulation of the level schedule, so blocks whose lifetimes
+/// overlap never overlap in memory.
+struct CbLayout {
+  std::vector<std::size_t> cb_offset;
+  std::size_t arena_size = 0;  ///< doubles
+};
+
+/// Factor storage layout: front f keeps its first k = n_pivots(f) columns (n_rows×k,
+/// L11 / U11 packed with L21) at panel_offset[f]; for LU also the k×(n_rows−k) block
+/// U12 right after it.
+struct FactorLayout {
+  std::vector<std::size_t> panel_offset;  ///< size n_fronts + 1
+  std::size_t total = 0;                  ///< doubles
+};
+
+struct Analysis {
+  index_t n = 0;
+  MatrixType type = MatrixType::automatic;  ///< spd, symmetric_indefinite or general;
+                                            ///< automatic here means "symmetric, try spd"
+  bool symmetric = true;                    ///< uses the lower triangle of a symmetric matrix
+  /// Canonical pattern of the input as analyzed (lower triangle for symmetric types, full
+  /// for general): refactorize checks that new values come with this pattern.
+  std::vector<index_t> pattern_offsets;
+  std::vector<index_t> pattern_indices;
+  Storage input_storage = Storage::full;
+  // general: matching and scaling (original numbering); empty when not used
+  std::vector<index_t> matching_perm;  ///< column j of B is column matching_perm[j] of A
+  std::vector<double> row_scaling;
+  std::vector<double> col_scaling;
+  bool structurally_singular = false;
+  /// Pivot order: pivot k is column perm[k] of B (new to old); iperm is its inverse.
+  std::vector<index_t> perm;
+  std::vector<index_t> iperm;
+  ordering::SeparatorTree separator_tree;
+  symbolic::AssemblyTree tree;
+  symbolic::LevelSchedule schedule;
+  schedule::MemoryPlan plan;
+  AssemblyMap assembly;
+  CbLayout cb_layout;
+  FactorLayout factor_layout;
+  AnalysisStats stats;
+};
+
+/// Runs the analysis phase (see Solver::analyze). `a` must be square.
+Analysis analyze_matrix(const SparseMatrix& a, const Options& opts);
+
+/// The canonical form the numeric phases read values from: lower triangle (symmetric
+/// types, from any storage) or full (general), CSC, sorted, duplicates summed. Throws
+/// InvalidInput if its pattern differs from the analyzed one.
+SparseMatrix canonical_values(const Analysis& an, const SparseMatrix& a);
+
+}  // namespace strata

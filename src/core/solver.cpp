@@ -1,0 +1,325 @@
+// strata — the Solver: phases, type resolution, scaling, and iterative refinement.
+//
+// The Solver keeps the Analysis (pattern), the canonical values of the last factorized
+// matrix (for residuals), the factor and the executor's workspaces. factorize and
+// refactorize run the same code: every buffer is sized by the analysis and reused, so a
+// refactorization gives bitwise the factor a fresh factorization would.
+//
+// Iterative refinement (Wilkinson; Higham, "Accuracy and Stability of Numerical
+// Algorithms", ch. 12): x ← x + A⁻¹(b − A x) with the residual in working precision,
+// stopping at the normwise backward error ‖b−Ax‖∞ / (‖A‖∞‖x‖∞ + ‖b‖∞) ≤ tolerance, or
+// when a step fails to halve it.
+#include <algorithm>
+#include <cmath>
+#include <optional>
+
+#include "core/analysis.hpp"
+#include "core/timer.hpp"
+#include "numeric/factor.hpp"
+#include "strata/solver.hpp"
+
+namespace strata {
+namespace detail {
+
+struct SolverState {
+  Options options;
+  std::optional<Analysis> analysis;
+  SparseMatrix values;               // canonical input values of the factorized matrix
+  std::vector<double> scaled;        // values as assembled (scaled for general)
+  std::vector<double> cb_arena;
+  numeric::NumericFactor factor;
+  std::unique_ptr<numeric::Executor> executor;
+  MatrixType resolved = MatrixType::automatic;
+  double norm_inf = 0;               // ‖A‖∞ of the input
+  Stats stats;
+};
+
+}  // namespace detail
+
+namespace {
+
+using detail::SolverState;
+
+// ‖A‖∞ (max row sum) of a canonical matrix with symmetric storage expanded.
+double norm_inf(const SparseMatrix& c) {
+  std::vector<double> row(c.n_rows, 0.0);
+  for (index_t j = 0; j < c.n_cols; ++j)
+    for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) {
+      const double v = std::abs(c.values[p]);
+      row[c.indices[p]] += v;
+      if (c.storage != Storage::full && c.indices[p] != j) row[j] += v;
+    }
+  double m = 0;
+  for (double r : row) m = std::max(m, r);
+  return m;
+}
+
+// Parity of a permutation: +1 even, -1 odd.
+int parity(const std::vector<index_t>& p) {
+  std::vector<char> seen(p.size(), 0);
+  int sign = 1;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    if (seen[i]) continue;
+    std::size_t len = 0;
+    for (std::size_t j = i; !seen[j]; j = static_cast<std::size_t>(p[j])) {
+      seen[j] = 1;
+      ++len;
+    }
+    if (len % 2 == 0) sign = -sign;
+  }
+  return sign;
+}
+
+void run_factorization(SolverState& s, const SparseMatrix& a) {
+  Timer timer;
+  const Analysis& an = *s.analysis;
+  s.values = canonical_values(an, a);
+  s.norm_inf = norm_inf(s.values);
+  // scaled values: general matrices use Dr·A·Dc from the matching
+  const SparseMatrix& c = s.values;
+  s.scaled.resize(c.nnz());
+  const bool scale = !an.row_scaling.empty();
+  double norm1 = 0;
+  {
+    std::vector<double> colsum(c.n_cols, 0.0);
+    for (index_t j = 0; j < c.n_cols; ++j)
+      for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) {
+        const index_t i = c.indices[p];
+        const double v = scale ? c.values[p] * an.row_scaling[i] * an.col_scaling[j] : c.values[p];
+        s.scaled[p] = v;
+        colsum[j] += std::abs(v);
+        if (an.symmetric && i != j) colsum[i] += std::abs(v);
+      }
+    for (double v : colsum) norm1 = std::max(norm1, v);
+  }
+  const double static_pivot = s.options.static_pivot_epsilon * (norm1 > 0 ? norm1 : 1.0);
+
+  if (!s.executor) {
+    const bool gpu = s.options.backend == Backend::cuda ||
+                     (s.options.backend == Backend::automatic && numeric::cuda_available());
+    s.executor = gpu ? numeric::make_cuda_executor(s.options)
+                     : numeric::make_cpu_executor(s.options.num_threads);
+  }
+
+  MatrixType type = an.type;
+  if (type == MatrixType::automatic) {
+    // symmetric: try Cholesky, fall back to LDLᵀ on a non-positive pivot
+    try {
+      numeric::factorize(an, s.scaled, MatrixType::spd, static_pivot, *s.executor, s.factor,
+                         s.cb_arena);
+      type = MatrixType::spd;
+    } catch (const NotPositiveDefinite&) {
+      type = MatrixType::symmetric_indefinite;
+    }
+  }
+  if (type != MatrixType::spd || an.type != MatrixType::automatic)
+    numeric::factorize(an, s.scaled, type, static_pivot, *s.executor, s.factor, s.cb_arena);
+  s.resolved = type;
+
+  FactorStats& fs = s.stats.factor;
+  fs = FactorStats{};
+  fs.type = type;
+  fs.backend = s.executor->name();
+  numeric::cpu::PivotStats total;
+  for (const auto& ps : s.factor.front_stats) total.merge(ps);
+  fs.perturbed_pivots = total.perturbed;
+  fs.two_by_two_pivots = total.two_by_two;
+  fs.inertia_positive = total.positive;
+  fs.inertia_negative = total.negative;
+  fs.inertia_zero = total.zero;
+  fs.matrix_norm = norm1;
+  // det A from det B = det(Dr) det(A) det(Q) det(Dc)
+  double logdet = total.log_abs_det;
+  int sign = total.det_sign;
+  if (scale) {
+    for (double r : an.row_scaling) logdet -= std::log(r);
+    for (double v : an.col_scaling) logdet -= std::log(v);
+  }
+  if (!an.matching_perm.empty()) sign *= parity(an.matching_perm);
+  fs.log_abs_determinant = logdet;
+  fs.determinant_sign = sign;
+  fs.seconds = timer.seconds();
+  const double flops = s.stats.analysis.factor_flops * (type == MatrixType::general ? 2.0 : 1.0);
+  fs.gflops = fs.seconds > 0 ? flops / fs.seconds * 1e-9 : 0;
+}
+
+// One solve with the factor: x = A⁻¹ b for nrhs columns (original numbering).
+void apply_inverse(const SolverState& s, const double* b, double* x, index_t nrhs,
+                   std::vector<double>& work) {
+  const Analysis& an = *s.analysis;
+  const index_t n = an.n;
+  work.resize(static_cast<std::size_t>(n) * nrhs);
+  const bool scale = !an.row_scaling.empty();
+  const bool match = !an.matching_perm.empty();
+  for (index_t r = 0; r < nrhs; ++r)
+    for (index_t k = 0; k < n; ++k) {
+      const index_t i = an.perm[k];  // row of B is a row of A
+      work[k + r * n] = b[i + r * n] * (scale ? an.row_scaling[i] : 1.0);
+    }
+  numeric::solve_in_place(an, s.factor, work.data(), nrhs);
+  for (index_t r = 0; r < nrhs; ++r)
+    for (index_t k = 0; k < n; ++k) {
+      const index_t col = match ? an.matching_perm[an.perm[k]] : an.perm[k];
+      x[col + r * n] = work[k + r * n] * (scale ? an.col_scaling[col] : 1.0);
+    }
+}
+
+}  // namespace
+
+Solver::Solver(Options options) : state_(std::make_unique<detail::SolverState>()) {
+  state_->options = std::move(options);
+}
+Solver::~Solver() = default;
+Solver::Solver(Solver&&) noexcept = default;
+Solver& Solver::operator=(Solver&&) noexcept = default;
+
+void Solver::analyze(const SparseMatrix& a) {
+  validate(a);
+  state_->factor = numeric::NumericFactor{};
+  state_->cb_arena.clear();
+  state_->analysis.reset();
+  state_->analysis = analyze_matrix(a, state_->options);
+  state_->stats = Stats{};
+  state_->stats.analysis = state_->analysis->stats;
+  state_->resolved = MatrixType::automatic;
+}
+
+void Solver::factorize(const SparseMatrix& a) {
+  if (!state_->analysis) analyze(a);
+  state_->factor.valid = false;
+  run_factorization(*state_, a);
+}
+
+void Solver::refactorize(const SparseMatrix& a) {
+  if (!state_->analysis) throw InvalidState("refactorize called before analyze");
+  state_->factor.valid = false;
+  run_factorization(*state_, a);
+}
+
+void Solver::solve(const double* b, double* x, index_t nrhs) {
+  SolverState& s = *state_;
+  if (!s.analysis || !s.factor.valid) throw InvalidState("solve called before factorize");
+  if (nrhs < 0) throw InvalidInput("negative number of right-hand sides");
+  Timer timer;
+  const index_t n = s.analysis->n;
+  const Options& o = s.options;
+  for (index_t i = 0; i < n * nrhs; ++i)
+    if (!std::isfinite(b[i]))
+      throw InvalidInput("right-hand side entry " + std::to_string(i % std::max<index_t>(n, 1)) +
+                         " of column " + std::to_string(i / std::max<index_t>(n, 1)) +
+                         " is not finite");
+  std::vector<double> work, r(static_cast<std::size_t>(n) * nrhs), d(r.size());
+  apply_inverse(s, b, x, nrhs, work);
+
+  // backward error of each column; refine the columns above the tolerance
+  auto berr_of = [&](index_t col) {
+    const double* xc = x + col * n;
+    const double* bc = b + col * n;
+    double* rc = r.data() + col * n;
+    multiply(s.values, xc, rc);
+    double rn = 0, xn = 0, bn = 0;
+    for (index_t i = 0; i < n; ++i) {
+      rc[i] = bc[i] - rc[i];
+      rn = std::max(rn, std::abs(rc[i]));
+      xn = std::max(xn, std::abs(xc[i]));
+      bn = std::max(bn, std::abs(bc[i]));
+    }
+    const double den = s.norm_inf * xn + bn;
+    return den > 0 ? rn / den : rn;
+  };
+  std::vector<double> berr(nrhs), last(nrhs);
+  std::vector<char> active(nrhs, 1);
+  int steps = 0;
+  for (index_t c = 0; c < nrhs; ++c) berr[c] = berr_of(c);
+  for (; steps < o.refinement_max_steps; ++steps) {
+    bool any = false;
+    for (index_t c = 0; c < nrhs; ++c) {
+      if (active[c] && berr[c] <= o.refinement_tolerance) active[c] = 0;
+      any |= active[c] != 0;
+    }
+    if (!any) break;
+    apply_inverse(s, r.data(), d.data(), nrhs, work);
+    bool improved = false;
+    for (index_t c = 0; c < nrhs; ++c) {
+      if (!active[c]) continue;
+      std::vector<double> saved(x + c * n, x + (c + 1) * n);
+      for (index_t i = 0; i < n; ++i) x[i + c * n] += d[i + c * n];
+      last[c] = berr[c];
+      berr[c] = berr_of(c);
+      if (berr[c] > 0.5 * last[c]) {  // no longer converging: keep the better iterate
+        if (berr[c] > last[c]) {
+          std::copy(saved.begin(), saved.end(), x + c * n);
+          berr[c] = last[c];
+          berr_of(c);
+        }
+        active[c] = 0;
+      } else {
+        improved = true;
+      }
+    }
+    if (!improved) {
+      ++steps;
+      break;
+    }
+  }
+  SolveStats& ss = s.stats.solve;
+  ss.refinement_steps = steps;
+  ss.backward_error = 0;
+  for (index_t c = 0; c < nrhs; ++c) ss.backward_error = std::max(ss.backward_error, berr[c]);
+  ss.refinement_converged = ss.backward_error <= o.refinement_tolerance;
+  ss.seconds = timer.seconds();
+}
+
+std::vector<double> Solver::solve(const std::vector<double>& b) {
+  const index_t n = size();
+  if (n == 0) {
+    if (!b.empty()) throw InvalidInput("right-hand side has " + std::to_string(b.size()) +
+                                       " entries for a 0x0 matrix");
+    return {};
+  }
+  if (b.empty() || static_cast<index_t>(b.size()) % n != 0)
+    throw InvalidInput("right-hand side has " + std::to_string(b.size()) +
+                       " entries, not a multiple of n = " + std::to_string(n));
+  std::vector<double> x(b.size());
+  solve(b.data(), x.data(), static_cast<index_t>(b.size()) / n);
+  return x;
+}
+
+index_t Solver::size() const { return state_->analysis ? state_->analysis->n : 0; }
+MatrixType Solver::matrix_type() const { return state_->resolved; }
+const Stats& Solver::stats() const { return state_->stats; }
+const Options& Solver::options() const { return state_->options; }
+const std::vector<index_t>& Solver::permutation() const {
+  static const std::vector<index_t> empty;
+  return state_->analysis ? state_->analysis->perm : empty;
+}
+
+const char* to_string(MatrixType t) {
+  switch (t) {
+    case MatrixType::automatic: return "auto";
+    case MatrixType::spd: return "spd";
+    case MatrixType::symmetric_indefinite: return "symmetric_indefinite";
+    case MatrixType::general: return "general";
+  }
+  return "?";
+}
+const char* to_string(OrderingMethod o) {
+  switch (o) {
+    case OrderingMethod::nested_dissection: return "nd";
+    case OrderingMethod::metis: return "metis";
+    case OrderingMethod::amd: return "amd";
+    case OrderingMethod::natural: return "natural";
+    case OrderingMethod::user: return "user";
+  }
+  return "?";
+}
+const char* to_string(Backend b) {
+  switch (b) {
+    case Backend::cpu: return "cpu";
+    case Backend::cuda: return "cuda";
+    case Backend::automatic: return "auto";
+  }
+  return "?";
+}
+
+}  // namespace strata

@@ -1,0 +1,190 @@
+// strata — the CPU executor: fronts of a batch on host threads, dense work in BLAS.
+//
+// Parallelism (no oversubscription): fronts whose factorization is large (more than
+// kBigFrontFlops) are processed one after another with multithreaded OpenBLAS; the others
+// are distributed over OpenMP threads with OpenBLAS restricted to one thread. Each
+// thread owns a dense front workspace and a row-position map of size n, reused from
+// front to front and from factorization to factorization.
+//
+// Per front f with m rows and k pivots:
+//   1. zero the m×m workspace, scatter the original entries (assembly map),
+//   2. extend-add each child's contribution block (rows relative to f via the map),
+//   3. partial factorization (dense_front.hpp),
+//   4. copy the first k columns (and U12 for LU) to the factor, the contribution block
+//      F[k:m, k:m] to the CB arena, and the permuted pivot rows to the factor's rows.
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <exception>
+
+#include "core/blas.hpp"
+#include "numeric/factor.hpp"
+#include "strata/errors.hpp"
+
+namespace strata::numeric {
+namespace {
+
+constexpr double kBigFrontFlops = 2e7;
+
+struct Workspace {
+  std::vector<double> front;
+  std::vector<index_t> position;  // global row -> local row in the current front, or -1
+  std::vector<index_t> local_perm;
+  std::vector<int> pivot_size;
+};
+
+class CpuExecutor final : public Executor {
+ public:
+  explicit CpuExecutor(int threads)
+      : threads_(threads > 0 ? threads : std::max(1, omp_get_num_procs())) {}
+  const char* name() const override { return "cpu"; }
+
+  void begin(const FactorContext& ctx) override {
+    const index_t n = ctx.analysis->n;
+    ws_.resize(threads_);
+    for (auto& w : ws_) w.position.assign(n, -1);
+  }
+
+  void factor_batch(const FactorContext& ctx, const BatchInfo& batch) override {
+    const Analysis& an = *ctx.analysis;
+    const auto& s = an.schedule;
+    std::vector<index_t> big, small;
+    for (index_t p = batch.begin; p < batch.end; ++p) {
+      const index_t f = s.fronts[p];
+      (symbolic::front_flops(an.tree, f) > kBigFrontFlops ? big : small).push_back(f);
+    }
+    // small fronts: one BLAS thread each, fronts over OpenMP threads
+    if (!small.empty()) {
+      openblas_set_num_threads(1);
+      std::exception_ptr error;
+      const int nt = static_cast<int>(std::min<std::size_t>(threads_, small.size()));
+#pragma omp parallel for schedule(dynamic, 1) num_threads(nt)
+      for (std::size_t i = 0; i < small.size(); ++i) {
+        try {
+          process_front(ctx, small[i], ws_[omp_get_thread_num()]);
+        } catch (...) {
+#pragma omp critical(strata_cpu_error)
+          if (!error) error = std::current_exception();
+        }
+      }
+      if (error) std::rethrow_exception(error);
+    }
+    // big fronts: one at a time, all threads inside BLAS
+    if (!big.empty()) {
+      openblas_set_num_threads(threads_);
+      for (index_t f : big) process_front(ctx, f, ws_[0]);
+    }
+  }
+
+ private:
+  void process_front(const FactorContext& ctx, index_t f, Workspace& w) const;
+  int threads_;
+  std::vector<Workspace> ws_;
+};
+
+void CpuExecutor::process_front(const FactorContext& ctx, index_t f, Workspace& w) const {
+  const Analysis& an = *ctx.analysis;
+  const auto& t = an.tree;
+  NumericFactor& fac = *ctx.factor;
+  const bool lu = ctx.type == MatrixType::general;
+  const index_t m = t.n_rows(f), k = t.n_pivots(f);
+  const index_t* rows = t.rows_of(f);
+  const std::size_t mm = static_cast<std::size_t>(m) * m;
+  if (w.front.size() < mm) w.front.resize(mm);
+  double* F = w.front.data();
+  std::fill(F, F + mm, 0.0);
+
+  // 1. original entries
+  const auto& am = an.assembly;
+  for (index_t e = am.entry_offsets[f]; e < am.entry_offsets[f + 1]; ++e)
+    F[am.entry_dst[e]] += ctx.values[am.entry_src[e]];
+
+  // 2. extend-add of the children's contribution blocks
+  for (index_t i = 0; i < m; ++i) w.position[rows[i]] = i;
+  const std::vector<double>& arena = *ctx.cb_arena;
+  for (index_t q = t.child_offsets[f]; q < t.child_offsets[f + 1]; ++q) {
+    const index_t c = t.children[q];
+    const index_t mc = t.cb_size(c);
+    if (mc == 0) continue;
+    const index_t* crow = t.rows_of(c) + t.n_pivots(c);
+    const double* cb = arena.data() + an.cb_layout.cb_offset[c];
+    // local positions of the child's CB rows in f (increasing, since both are sorted)
+    thread_local std::vector<index_t> rel;
+    rel.resize(mc);
+    for (index_t i = 0; i < mc; ++i) rel[i] = w.position[crow[i]];
+    for (index_t jj = 0; jj < mc; ++jj) {
+      double* dst = F + rel[jj] * m;
+      const double* src = cb + jj * mc;
+      for (index_t ii = lu ? 0 : jj; ii < mc; ++ii) dst[rel[ii]] += src[ii];
+    }
+  }
+  for (index_t i = 0; i < m; ++i) w.position[rows[i]] = -1;
+
+  // 3. partial factorization
+  cpu::PivotStats& ps = fac.front_stats[f];
+  ps = cpu::PivotStats{};
+  w.local_perm.resize(k);
+  w.pivot_size.resize(k);
+  switch (ctx.type) {
+    case MatrixType::spd: {
+      const index_t bad = cpu::factor_front_llt(F, m, k, m, ps);
+      if (bad >= 0) {
+        const index_t pivot = t.first_pivot[f] + bad;
+        throw NotPositiveDefinite(an.perm[pivot], F[bad * m + bad]);
+      }
+      for (index_t i = 0; i < k; ++i) w.local_perm[i] = i;
+      break;
+    }
+    case MatrixType::symmetric_indefinite:
+      cpu::factor_front_ldlt(F, m, k, m, ctx.static_pivot, w.local_perm.data(),
+                             w.pivot_size.data(), ps);
+      break;
+    case MatrixType::general:
+      cpu::factor_front_lu(F, m, k, m, ctx.static_pivot, w.local_perm.data(), ps);
+      break;
+    default:
+      throw InvalidInput("internal: unresolved matrix type in the CPU executor");
+  }
+
+  // 4. store the factor panel, the permuted pivot rows, D, and the contribution block
+  double* panel = fac.panels.data() + an.factor_layout.panel_offset[f];
+  std::memcpy(panel, F, sizeof(double) * m * k);
+  if (lu)
+    for (index_t j = k; j < m; ++j)  // U12: rows 0..k-1 of columns k..m-1
+      std::memcpy(panel + m * k + (j - k) * k, F + j * m, sizeof(double) * k);
+  index_t* frows = fac.rows.data() + t.row_offsets[f];
+  for (index_t i = 0; i < k; ++i) frows[i] = rows[w.local_perm[i]];
+  for (index_t i = k; i < m; ++i) frows[i] = rows[i];
+  if (ctx.type == MatrixType::symmetric_indefinite) {
+    const index_t p0 = t.first_pivot[f];
+    for (index_t i = 0; i < k; ++i) {
+      fac.d_diag[p0 + i] = panel[i * m + i];
+      panel[i * m + i] = 1.0;
+      fac.pivot_size[p0 + i] = w.pivot_size[i] == 2 && (i == 0 || fac.pivot_size[p0 + i - 1] != 2)
+                                   ? 2 : (w.pivot_size[i] == 2 ? 0 : 1);
+      fac.d_off[p0 + i] = 0.0;
+      if (fac.pivot_size[p0 + i] == 2) {
+        fac.d_off[p0 + i] = panel[i * m + i + 1];
+        panel[i * m + i + 1] = 0.0;
+      }
+    }
+  }
+  const index_t mc = m - k;
+  if (mc > 0 && t.parent[f] >= 0) {
+    double* cb = ctx.cb_arena->data() + an.cb_layout.cb_offset[f];
+    for (index_t jj = 0; jj < mc; ++jj) {
+      const index_t i0 = lu ? 0 : jj;
+      std::memcpy(cb + jj * mc + i0, F + (k + jj) * m + k + i0, sizeof(double) * (mc - i0));
+    }
+  }
+}
+
+}  // namespace
+
+std::unique_ptr<Executor> make_cpu_executor(int threads) {
+  return std::make_unique<CpuExecutor>(threads);
+}
+
+}  // namespace strata::numeric

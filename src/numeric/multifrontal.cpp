@@ -1,0 +1,46 @@
+// strata — the multifrontal driver (Duff & Reid 1983; Liu 1992), level by level.
+//
+// The fronts are processed in the order of the memory plan: batches of one level of
+// the paper's reverse-BFS level schedule (Jung & Bae 2018), deepest level first. All
+// fronts of a batch are independent, so an executor may run them concurrently (host
+// threads, or one batched GPU launch). The driver owns nothing backend-specific: it sizes
+// the factor storage once (reused by refactorization), hands batches to the executor,
+// and merges the per-front pivot statistics in front order so that the result does not
+// depend on the thread count.
+#include <algorithm>
+
+#include "numeric/factor.hpp"
+
+namespace strata::numeric {
+
+void factorize(const Analysis& an, const std::vector<double>& scaled_values, MatrixType type,
+               double static_pivot, Executor& exec, NumericFactor& factor,
+               std::vector<double>& cb_arena) {
+  const auto& t = an.tree;
+  factor.type = type;
+  factor.valid = false;
+  // Storage is sized once; refactorization reuses it (resize is a no-op then).
+  factor.panels.resize(an.factor_layout.total);
+  factor.rows.resize(t.rows.size());
+  factor.front_stats.assign(t.n_fronts(), cpu::PivotStats{});
+  if (type == MatrixType::symmetric_indefinite) {
+    factor.d_diag.resize(an.n);
+    factor.d_off.resize(an.n);
+    factor.pivot_size.resize(an.n);
+  }
+  cb_arena.resize(an.cb_layout.arena_size);
+
+  FactorContext ctx;
+  ctx.analysis = &an;
+  ctx.values = scaled_values.data();
+  ctx.type = type;
+  ctx.static_pivot = static_pivot;
+  ctx.factor = &factor;
+  ctx.cb_arena = &cb_arena;
+  exec.begin(ctx);
+  for (const BatchInfo& b : an.plan.batches) exec.factor_batch(ctx, b);
+  exec.end(ctx);
+  factor.valid = true;
+}
+
+}  // namespace strata::numeric
