@@ -1,0 +1,152 @@
+// strata benchmark — the analysis phase against CHOLMOD's analyze with METIS.
+//
+// For each problem: nnz(L), factor flops and analysis time of strata (its own nested
+// dissection by default) next to cholmod_l_analyze with the METIS ordering, in the same
+// run; the median of --repeat runs is reported. Results: bench/results/analysis-*.json.
+//
+//   bench_analysis [--problems a,b,...] [--repeat R] [--ordering nd|metis|amd]
+#include <cholmod.h>
+#include <sys/resource.h>
+
+#include <CLI/CLI.hpp>
+#include <fmt/core.h>
+
+#include "bench_common.hpp"
+#include "core/timer.hpp"
+#include "strata/strata.hpp"
+
+using namespace strata;
+using json = nlohmann::json;
+
+namespace {
+
+struct CholmodAnalysis {
+  double lnz = 0, flops = 0, seconds = 0;
+};
+
+CholmodAnalysis cholmod_analysis(const SparseMatrix& a, bool symmetric, int repeat) {
+  cholmod_common cc;
+  cholmod_l_start(&cc);
+  cc.nmethods = 1;
+  cc.method[0].ordering = CHOLMOD_METIS;
+  // CHOLMOD analyzes A (stype -1: lower triangle) or, unsymmetric, A+Aᵀ via stype 0 and
+  // cholmod_analyze of A Aᵀ — so for unsymmetric problems hand it the symmetrized pattern.
+  SparseMatrix s = symmetric ? canonicalize(a) : expand_symmetric(a);
+  if (!symmetric) {  // lower triangle of A + Aᵀ
+    SparseMatrix t = s;
+    t.layout = Layout::csr;  // transpose
+    SparseMatrix tt = canonicalize(t);
+    SparseMatrix sum;
+    sum.n_rows = sum.n_cols = s.n_cols;
+    sum.storage = Storage::lower;
+    sum.offsets.assign(s.n_cols + 1, 0);
+    for (index_t j = 0; j < s.n_cols; ++j) {
+      std::vector<index_t> rows;
+      for (index_t p = s.offsets[j]; p < s.offsets[j + 1]; ++p)
+        if (s.indices[p] >= j) rows.push_back(s.indices[p]);
+      for (index_t p = tt.offsets[j]; p < tt.offsets[j + 1]; ++p)
+        if (tt.indices[p] >= j) rows.push_back(tt.indices[p]);
+      std::sort(rows.begin(), rows.end());
+      rows.erase(std::unique(rows.begin(), rows.end()), rows.end());
+      for (index_t r : rows) sum.indices.push_back(r);
+      sum.offsets[j + 1] = sum.indices.size();
+    }
+    s = std::move(sum);
+  }
+  const index_t n = s.n_cols;
+  cholmod_sparse* A = cholmod_l_allocate_sparse(n, n, s.nnz(), 1, 1, -1, CHOLMOD_PATTERN, &cc);
+  std::copy(s.offsets.begin(), s.offsets.end(), static_cast<SuiteSparse_long*>(A->p));
+  std::copy(s.indices.begin(), s.indices.end(), static_cast<SuiteSparse_long*>(A->i));
+  std::vector<double> times;
+  CholmodAnalysis r;
+  for (int k = 0; k < repeat; ++k) {
+    Timer t;
+    cholmod_factor* L = cholmod_l_analyze(A, &cc);
+    times.push_back(t.seconds());
+    r.lnz = cc.lnz;
+    r.flops = cc.fl;
+    cholmod_l_free_factor(&L, &cc);
+  }
+  r.seconds = bench::median(times);
+  cholmod_l_free_sparse(&A, &cc);
+  cholmod_l_finish(&cc);
+  return r;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"strata analysis benchmark (vs CHOLMOD + METIS)"};
+  std::vector<std::string> problems = {"bcsstk09", "bcsstk13", "bcsstk16", "ccx_segmenttet_K",
+                                       "ccx_cubef2f3_K", "lap3d-60", "lap3d-80", "elast3d-30",
+                                       "elast3d-40"};
+  int repeat = 3;
+  std::string ordering = "nd";
+  bool no_cholmod = false;
+  app.add_option("--problems", problems, "problems (shared matrix names or lap3d-N, elast3d-N)")
+      ->delimiter(',');
+  app.add_option("--repeat", repeat, "runs per measurement (median reported)");
+  app.add_option("--ordering", ordering)->check(CLI::IsMember({"nd", "metis", "amd"}));
+  app.add_flag("--no-cholmod", no_cholmod, "skip the CHOLMOD reference (e.g. for huge problems)");
+  CLI11_PARSE(app, argc, argv);
+
+  json out = bench::run_metadata(argc, argv);
+  out["benchmark"] = "analysis";
+  out["rows"] = json::array();
+  fmt::print("{:<18} {:>9} {:>12} {:>12} {:>6} {:>10} {:>10} {:>8} {:>8} {:>6}\n", "problem", "n",
+             "nnzL strata", "nnzL cholmod", "ratio", "flops s", "flops c", "t strata", "t chol",
+             "ratio");
+  std::vector<double> lnz_ratios, time_ratios;
+  for (const std::string& name : problems) {
+    bench::Problem p = bench::load_problem(name);
+    Options o;
+    o.type = p.symmetric ? MatrixType::spd : MatrixType::general;
+    o.matching_and_scaling = false;  // pattern-only comparison
+    o.ordering = ordering == "nd" ? OrderingMethod::nested_dissection
+                 : ordering == "metis" ? OrderingMethod::metis : OrderingMethod::amd;
+    std::vector<double> times;
+    AnalysisStats st;
+    for (int k = 0; k < repeat; ++k) {
+      Solver s(o);
+      Timer t;
+      s.analyze(p.a);
+      times.push_back(t.seconds());
+      st = s.stats().analysis;
+    }
+    const double ts = bench::median(times);
+    json row = {{"problem", name}, {"n", st.n}, {"nnz_a", st.nnz_a},
+                {"strata", {{"nnz_l", st.nnz_l}, {"flops", st.factor_flops}, {"seconds", ts},
+                            {"ordering_seconds", st.ordering_seconds},
+                            {"symbolic_seconds", st.symbolic_seconds},
+                            {"plan_seconds", st.plan_seconds}, {"fronts", st.n_fronts},
+                            {"tree_height", st.tree_height}}}};
+    if (!no_cholmod) {
+      CholmodAnalysis c = cholmod_analysis(p.a, p.symmetric, repeat);
+      row["cholmod_metis"] = {{"nnz_l", c.lnz}, {"flops", c.flops}, {"seconds", c.seconds}};
+      row["nnz_l_ratio"] = st.nnz_l / c.lnz;
+      row["time_ratio"] = ts / c.seconds;
+      lnz_ratios.push_back(st.nnz_l / c.lnz);
+      time_ratios.push_back(ts / c.seconds);
+      fmt::print("{:<18} {:>9} {:>12} {:>12.0f} {:>6.3f} {:>10.3g} {:>10.3g} {:>8.3f} {:>8.3f} {:>6.2f}\n",
+                 name, st.n, st.nnz_l, c.lnz, st.nnz_l / c.lnz, st.factor_flops, c.flops, ts,
+                 c.seconds, ts / c.seconds);
+    } else {
+      fmt::print("{:<18} {:>9} {:>12} {:>12} {:>6} {:>10.3g} {:>10} {:>8.3f}\n", name, st.n,
+                 st.nnz_l, "-", "-", st.factor_flops, "-", ts);
+    }
+    std::fflush(stdout);
+    out["rows"].push_back(row);
+  }
+  struct rusage ru;
+  getrusage(RUSAGE_SELF, &ru);
+  out["peak_rss_bytes"] = static_cast<double>(ru.ru_maxrss) * 1024.0;
+  if (!lnz_ratios.empty()) {
+    out["geomean_nnz_l_ratio"] = bench::geometric_mean(lnz_ratios);
+    out["geomean_time_ratio"] = bench::geometric_mean(time_ratios);
+    fmt::print("geometric mean: nnz(L) ratio {:.3f}, analysis time ratio {:.3f}\n",
+               bench::geometric_mean(lnz_ratios), bench::geometric_mean(time_ratios));
+  }
+  fmt::print("peak RSS {:.1f} MB\n", ru.ru_maxrss / 1024.0);
+  fmt::print("results: {}\n", bench::write_result(out, "analysis"));
+  return 0;
+}

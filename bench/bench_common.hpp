@@ -1,0 +1,35 @@
+// strata benchmarks — shared pieces: problems by name, run metadata, result files.
+#pragma once
+
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "strata/sparse_matrix.hpp"
+
+namespace strata::bench {
+
+/// A benchmark problem: a shared SuiteSparse matrix by name ("bcsstk16"), or a generated
+/// one: "lap3d-N" (7-point Laplacian N³), "elast3d-N" (3-dof 27-point stencil N³),
+/// "lap2d-N". Symmetric problems come as Storage::lower.
+struct Problem {
+  std::string name;
+  SparseMatrix a;
+  bool symmetric = true;
+};
+Problem load_problem(const std::string& name);
+
+/// Machine, date, git commit and the exact command line of this run.
+nlohmann::json run_metadata(int argc, char** argv);
+
+/// Writes `j` to bench/results/<stem>-<UTC date-time>.json atomically (temporary file,
+/// then rename) and returns the path.
+std::string write_result(const nlohmann::json& j, const std::string& stem);
+
+/// Geometric mean of positive values (0 for an empty list).
+double geometric_mean(const std::vector<double>& v);
+
+/// Median of the values (they are copied).
+double median(std::vector<double> v);
+
+}  // namespace strata::bench
