@@ -44,9 +44,11 @@
 //   1. Initial duals (the paper's cheap start): u_i = min_j c_ij (row minimum), then
 //      v_j = min_i (c_ij − u_i) (column minimum of what is left); both keep r ≥ 0.
 //      Greedy matching on the tight edges (r = 0): each column takes a free row on a tight
-//      edge; then each column still free tries an augmenting path of length two through
-//      tight edges only (free column j – tight – row i matched to column j' – tight – free
-//      row k). A per-column pointer makes that second pass linear in nnz.
+//      edge. Then augmenting paths made of tight edges only, found by depth-first searches
+//      with lookahead in phases (each phase O(nnz), as in Pothen & Fan's MC21 variant);
+//      such a path has length 0, so flipping it changes no dual. This matters for
+//      matrices with many equal magnitudes, where Dijkstra would degenerate into one
+//      breadth-first search per column.
 //   2. For every column still free, a shortest augmenting path in the residual graph:
 //      column j → row i along an unmatched edge costs r_ij ≥ 0; row i → its matched column
 //      costs r = 0. Dijkstra's algorithm with a binary heap of rows, from the free column
@@ -59,17 +61,23 @@
 //          to row i), and v_{j0} ← v_{j0} + D,
 //
 //      which keeps r ≥ 0 on every edge (by the shortest-path inequalities d_i ≤ dist(j) +
-//      r_ij) and makes every edge of the shortest path tight; the path is then flipped.
-//      The matching grows by one and stays of minimum cost for its cardinality.
+//      r_ij) and makes every edge of the shortest path tight; the path is then flipped and
+//      the matching grows by one. When it is perfect it is optimal by weak duality: any
+//      perfect matching costs Σ c ≥ Σ u + Σ v, which ours attains.
 //      If no free row is reachable, column j0 stays free for good: a vertex with no
 //      augmenting path never gets one after later augmentations (Berge), so the final
-//      matching has maximum cardinality. The duals are left untouched by a failed search.
+//      matching has maximum cardinality. The rows that failed search reached can never be
+//      on an augmenting path again either; they are retired so that later searches do not
+//      walk them again (see retire_dead_set; this keeps singular inputs cheap).
 //   3. The reduced cost of each matched edge is made exactly zero (v_j recomputed from
 //      c_ij − u_i, a rounding-level change), unmatched columns are placed on unmatched rows
 //      in increasing order, and the scaling is formed.
 //
 // Cost: each search is O(nnz log n) in the worst case, so O(n·nnz·log n) in all; in
-// practice the greedy start matches most columns and the searches stop early.
+// practice the greedy start matches most columns and the searches stop early. Measured
+// (Release, one core): n = 1e5 with 1.1e6 random entries spread over 8 decades (a hard
+// case: ~19% of columns need a search) ~3.5–4 s; a row-permuted 3D 7-point pattern with
+// n = 97k, nnz = 670k and random magnitudes ~1 s; all magnitudes equal ~0.2 s.
 // The scaling factors are exp of dual variables and may overflow for matrices whose entries
 // span more than ~300 decades; such inputs are outside what this solver targets.
 #include "ordering/matching.hpp"
