@@ -43,11 +43,11 @@ std::vector<index_t> column_counts(const SparseMatrix& a, const std::vector<inde
 /// (children before parents), so first_pivot is increasing and covers 0..n.
 struct AssemblyTree {
   index_t n = 0;
-  std::vector<index_t> first_pivot{0};  ///< size n_fronts + 1
-  std::vector<index_t> row_offsets{0};  ///< size n_fronts + 1
+  std::vector<index_t> first_pivot{0};   ///< size n_fronts + 1
+  std::vector<index_t> row_offsets{0};   ///< size n_fronts + 1
   std::vector<index_t> rows;
-  std::vector<index_t> parent;            ///< parent front, -1 for a root
-  std::vector<index_t> child_offsets{0};  ///< children of f: children[child_offsets[f]..]
+  std::vector<index_t> parent;           ///< parent front, -1 for a root
+  std::vector<index_t> child_offsets{0}; ///< children of f: children[child_offsets[f]..]
   std::vector<index_t> children;
   std::vector<index_t> front_of_column;  ///< front that eliminates column j
 
@@ -83,8 +83,7 @@ struct AmalgamationOptions {
 
 /// Runs the whole symbolic phase: etree, postorder, column counts, fundamental
 /// supernodes, relaxed amalgamation, separator blocking, row structures of the fronts.
-/// Time and memory are linear in n + nnz(A) + Σ rows of the fronts (the column counts add
-/// an inverse-Ackermann-like factor). Throws InvalidInput when the pattern is not square
+/// Time and memory are near-linear in n + nnz(A) + Σ rows of the fronts. Throws InvalidInput when the pattern is not square
 /// or not symmetric (checked in O(nnz) on the canonical, sorted form).
 SymbolicFactorization analyze_pattern(const SparseMatrix& a, const AmalgamationOptions& opts);
 
