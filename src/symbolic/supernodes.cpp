@@ -18,9 +18,14 @@
 //    the rows of the parent it does not have. They merge when ns <= relax_small, or when
 //    the fraction z of explicit zeros in the merged trapezoid is below relax_zeros_1 if
 //    ns <= relax_size_1, below relax_zeros_2 if ns <= relax_size_2, below relax_zeros_3
-//    otherwise (with decreasing thresholds, as the defaults are, this is exactly
-//    CHOLMOD's rule). relax_small <= 1 with zero thresholds gives the fundamental
-//    supernodes unchanged.
+//    otherwise (with decreasing thresholds, as the defaults are, this is CHOLMOD's
+//    rule). Two details follow CHOLMOD (cholmod_super_symbolic) exactly: a merge that
+//    adds no explicit zeros is always made, and the zeros added by a merge accepted for
+//    its size alone (ns <= relax_small) are not counted in the zero fractions of later
+//    merges. With the same parameters the fronts are then exactly CHOLMOD's relaxed
+//    supernodes (the tests check this). relax_small <= 1 with zero thresholds gives
+//    fronts without amalgamation zeros: the fundamental supernodes, plus last children
+//    that fit their parent exactly.
 //  * Separator blocking (Jung & Bae 2018, "separators divided into smaller blocks"): a
 //    front with more than max_block_size pivots becomes a chain of fronts: pieces of
 //    exactly max_block_size pivots from the bottom up, the remainder on top; each piece's
@@ -108,7 +113,10 @@ Partition relaxed_amalgamation(const Partition& fs, const std::vector<index_t>& 
     const index_t ns = ncols[s] + ncols[s + 1];
     const double per_col_new = static_cast<double>(nrows[s + 1] + ncols[s] - nrows[s]);
     const double total_zeros = zeros[s + 1] + static_cast<double>(ncols[s]) * per_col_new;
-    bool merge = ns <= o.relax_small;
+    // Small merges are made unconditionally and, as in CHOLMOD, their zeros are not
+    // counted in later fractions; a merge that adds no explicit zeros is always made.
+    const bool small = ns <= o.relax_small;
+    bool merge = small || per_col_new == 0;
     if (!merge) {
       const double xns = static_cast<double>(ns);
       const double size =
@@ -120,7 +128,7 @@ Partition relaxed_amalgamation(const Partition& fs, const std::vector<index_t>& 
       merge = z < limit;
     }
     if (merge) {
-      zeros[s] = total_zeros;
+      zeros[s] = small ? zeros[s + 1] : total_zeros;
       merged[s + 1] = s;
       nrows[s] = ncols[s] + nrows[s + 1];
       ncols[s] += ncols[s + 1];

@@ -1,7 +1,7 @@
 // strata tests — symbolic factorization: elimination tree, postorder, column counts
 // (checked exactly against CHOLMOD's cholmod_l_analyze and a dense symbolic elimination),
-// the assembly tree (supernodes, relaxed amalgamation, separator blocking, row
-// structures) and the level schedule.
+// the assembly tree (supernodes and relaxed amalgamation, checked against CHOLMOD's
+// supernodal analysis; separator blocking; row structures) and the level schedule.
 #include <cholmod.h>
 #include <gtest/gtest.h>
 #include <metis.h>
@@ -143,6 +143,60 @@ CholmodCounts cholmod_counts(const SparseMatrix& full) {
   cholmod_l_free_sparse(&a, &c);
   cholmod_l_finish(&c);
   return out;
+}
+
+/// CHOLMOD's supernode partition (first column of each supernode, then n) of a full
+/// symmetric pattern analysed in its natural order, with CHOLMOD's default relaxation.
+std::vector<index_t> cholmod_supernodes(const SparseMatrix& full) {
+  const index_t n = full.n_cols;
+  cholmod_common c;
+  cholmod_l_start(&c);
+  c.nmethods = 1;
+  c.method[0].ordering = CHOLMOD_NATURAL;
+  c.postorder = 0;
+  c.supernodal = CHOLMOD_SUPERNODAL;
+  index_t nzl = 0;
+  for (index_t j = 0; j < n; ++j)
+    for (index_t p = full.offsets[j]; p < full.offsets[j + 1]; ++p)
+      if (full.indices[p] >= j) ++nzl;
+  cholmod_sparse* a =
+      cholmod_l_allocate_sparse(n, n, std::max<index_t>(nzl, 1), 1, 1, -1, CHOLMOD_PATTERN, &c);
+  auto* ap = static_cast<SuiteSparse_long*>(a->p);
+  auto* ai = static_cast<SuiteSparse_long*>(a->i);
+  index_t w = 0;
+  for (index_t j = 0; j < n; ++j) {
+    ap[j] = w;
+    for (index_t p = full.offsets[j]; p < full.offsets[j + 1]; ++p)
+      if (full.indices[p] >= j) ai[w++] = full.indices[p];
+  }
+  ap[n] = w;
+  std::vector<index_t> out;
+  cholmod_factor* l = cholmod_l_analyze(a, &c);
+  EXPECT_NE(l, nullptr);
+  if (l) {
+    EXPECT_TRUE(l->is_super);
+    auto* super = static_cast<SuiteSparse_long*>(l->super);
+    out.assign(super, super + l->nsuper + 1);
+    cholmod_l_free_factor(&l, &c);
+  }
+  cholmod_l_free_sparse(&a, &c);
+  cholmod_l_finish(&c);
+  return out;
+}
+
+/// With CHOLMOD's default relaxation and no blocking, the fronts are exactly CHOLMOD's
+/// relaxed supernodes. CHOLMOD finds supernodes in the order it is given, so it gets the
+/// pattern permuted by our postorder (its own postorder is off).
+void expect_cholmod_supernodes(const SparseMatrix& b, const std::vector<index_t>& post) {
+  AmalgamationOptions o;  // CHOLMOD's nrelax / zrelax defaults
+  o.max_block_size = 0;
+  const SparseMatrix bp = symbolic::permute_symmetric_pattern(b, post);
+  const SymbolicFactorization sf = symbolic::analyze_pattern(bp, o);
+  EXPECT_EQ(sf.post, identity(b.n_cols)) << "a postordered pattern is its own postorder";
+  if (b.n_cols > 0) {
+    const std::vector<index_t> cs = cholmod_supernodes(bp);
+    EXPECT_EQ(sf.tree.first_pivot, cs);
+  }
 }
 
 /// Reference symbolic factorization by dense (bitset) elimination: the structure of
@@ -366,6 +420,7 @@ void check_all(const SparseMatrix& pattern, const std::vector<index_t>& perm,
   EXPECT_EQ(cc, chol.colcount);
   const index_t nnz_l = std::accumulate(cc.begin(), cc.end(), index_t{0});
   EXPECT_EQ(static_cast<double>(nnz_l), chol.lnz);
+  expect_cholmod_supernodes(b, post);
 
   AmalgamationOptions none;
   none.relax_small = 1;
@@ -525,9 +580,8 @@ TEST(Symbolic, FundamentalSupernodesAndRelaxation) {
 TEST(Symbolic, RelaxationRuleOnAStar) {
   // An arrow matrix: n-1 leaves all coupled to the last column only. Each leaf is a
   // fundamental supernode of 1 pivot and 2 rows; the root (n-1 children) has 1 pivot.
-  // Only the last leaf can merge (CHOLMOD's rule merges a child into the parent that
-  // starts right after it); merging it adds no zeros, as [leaf, root] is dense, while
-  // merging the next leaf into that would add one.
+  // Only the last child of a front can merge into it (CHOLMOD's rule: the parent must
+  // start right after the child, so pivots stay contiguous).
   const index_t n = 10;
   SparseMatrix low;
   low.n_rows = low.n_cols = n;
@@ -539,20 +593,29 @@ TEST(Symbolic, RelaxationRuleOnAStar) {
     low.offsets.push_back(static_cast<index_t>(low.indices.size()));
   }
   const SparseMatrix pattern = symmetric_pattern(low);
+  // Relaxation off: the last leaf still merges, as [8, 9] is dense (no zeros added);
+  // leaf 7 would add the zero L(8, 7).
   AmalgamationOptions none;
   none.relax_small = 1;
   none.relax_zeros_1 = none.relax_zeros_2 = none.relax_zeros_3 = 0;
   SymbolicFactorization sf = symbolic::analyze_pattern(pattern, none);
-  EXPECT_EQ(sf.tree.n_fronts(), n);  // no fundamental supernode has two columns
-  AmalgamationOptions zero_fill = none;
-  zero_fill.relax_zeros_1 = zero_fill.relax_zeros_2 = zero_fill.relax_zeros_3 = 1e-12;
-  sf = symbolic::analyze_pattern(pattern, zero_fill);
-  EXPECT_EQ(sf.tree.n_fronts(), n - 1);
+  ASSERT_EQ(sf.tree.n_fronts(), n - 1);
   const symbolic::LevelSchedule s = symbolic::level_schedule(sf.tree);
   ASSERT_EQ(s.n_levels(), 2);
   EXPECT_EQ(s.level_offsets[1] - s.level_offsets[0], n - 2);    // the leaves, in one level
   EXPECT_EQ(symbolic::front_flops(sf.tree, 0), 4.0);            // 1 pivot, 2 rows
   EXPECT_EQ(symbolic::front_flops(sf.tree, n - 2), 4.0 + 1.0);  // {8, 9}: rows 2, 1
+  // relax_small 3 merges leaf 7 for its size ({7, 8, 9}, one true zero). With a zero
+  // threshold of 0.25, leaf 6 then merges only because, as in CHOLMOD, the zero of the
+  // size-only merge is not counted: 2 new zeros / 10 entries = 0.2 (3 / 10 counting
+  // it). Leaf 5 would make 2 + 3 zeros of 15: 0.33, no merge.
+  AmalgamationOptions small = none;
+  small.relax_small = 3;
+  small.relax_zeros_1 = small.relax_zeros_2 = small.relax_zeros_3 = 0.25;
+  sf = symbolic::analyze_pattern(pattern, small);
+  ASSERT_EQ(sf.tree.n_fronts(), n - 3);
+  EXPECT_EQ(sf.tree.first_pivot[n - 4], 6);
+  EXPECT_EQ(sf.tree.n_rows(n - 4), 4);
 }
 
 TEST(Symbolic, FrontFlops) {
@@ -616,7 +679,13 @@ TEST(Symbolic, SharedMatricesAgainstCholmod) {
   for (const std::string& name : names) {
     const MMMatrix m = read_matrix_market(test::matrix_path(name));
     const SparseMatrix pattern = symmetric_pattern(m.matrix);
-    check_all(pattern, metis_order(pattern), name);
+    const std::vector<index_t> perm = metis_order(pattern);
+    check_all(pattern, perm, name);
+    const SymbolicFactorization sf = symbolic::analyze_pattern(
+        symbolic::permute_symmetric_pattern(pattern, perm), AmalgamationOptions{});
+    std::printf("  %-24s n %7lld  nnz(A+A') %8lld  nnz(L) %9lld  fronts %6lld\n", name.c_str(),
+                static_cast<long long>(pattern.n_cols), static_cast<long long>(pattern.nnz()),
+                static_cast<long long>(sf.nnz_l), static_cast<long long>(sf.tree.n_fronts()));
     if (HasFatalFailure()) return;
   }
 }
@@ -669,6 +738,12 @@ void time_grid(index_t k) {
       static_cast<long long>(max_rows), static_cast<long long>(s.n_levels()), flops, t_metis,
       t_perm, t_etree, t_post, t_counts, t_analyze, t_levels);
   EXPECT_EQ(sf.colcount, cc);
+  timer.reset();
+  const CholmodCounts chol = cholmod_counts(b);
+  std::printf("  cholmod_l_analyze (natural order, simplicial, for comparison) %.3f s\n",
+              timer.seconds());
+  EXPECT_EQ(cc, chol.colcount);
+  EXPECT_EQ(static_cast<double>(sf.nnz_l), chol.lnz);
 }
 
 TEST(Symbolic, Timing40Cubed) { time_grid(40); }
