@@ -192,6 +192,11 @@ void require_symmetric_pattern(const SparseMatrix& a) {
 
 }  // namespace
 
+// Flop convention: a pivot column with c entries (diagonal included) costs c² — about
+// c²/2 multiply-adds of its rank-one update of the trailing c−1 rows, counted as 2 flops
+// each, which dominates the c−1 divisions and the square root. Σ_j c_j² is the usual
+// Cholesky count (George & Liu 1981); CHOLMOD's Common->fl is the same sum over the
+// columns of L (the tests check both). LU on the same fronts costs about twice as much.
 double front_flops(const AssemblyTree& t, index_t f) {
   const index_t np = t.n_pivots(f), nr = t.n_rows(f);
   double flops = 0;

@@ -19,16 +19,6 @@
 #include "support/test_support.hpp"
 #include "symbolic/symbolic.hpp"
 
-// The Matrix Market reader (src/sparse/matrix_market.cpp) is written on another branch.
-// The shared-matrix tests are compiled once its implementation is in the tree (it is
-// globbed into the library then); before that they are skipped, so that this file still
-// links.
-#if __has_include("sparse/matrix_market.cpp") || defined(STRATA_FORCE_MM_TESTS)
-#define STRATA_HAVE_MM_READER 1
-#else
-#define STRATA_HAVE_MM_READER 0
-#endif
-
 namespace strata {
 namespace {
 
@@ -103,6 +93,7 @@ std::vector<index_t> random_order(index_t n, std::mt19937_64& rng) {
 struct CholmodCounts {
   std::vector<index_t> colcount;
   double lnz = 0;
+  double fl = 0;  ///< CHOLMOD's flop count of the factorization
 };
 
 CholmodCounts cholmod_counts(const SparseMatrix& full) {
@@ -136,6 +127,7 @@ CholmodCounts cholmod_counts(const SparseMatrix& full) {
     auto* cc = static_cast<SuiteSparse_long*>(l->ColCount);
     out.colcount.assign(cc, cc + n);
     out.lnz = c.lnz;
+    out.fl = c.fl;
     auto* perm = static_cast<SuiteSparse_long*>(l->Perm);
     for (index_t k = 0; k < n; ++k) EXPECT_EQ(perm[k], k) << "CHOLMOD permuted the matrix";
     cholmod_l_free_factor(&l, &c);
@@ -344,6 +336,10 @@ void check_tree(const SparseMatrix& full, const SymbolicFactorization& sf,
   EXPECT_GE(l_entries, sf.nnz_l);
   if (exact) {
     EXPECT_EQ(l_entries, sf.nnz_l);
+    double front_total = 0, column_total = 0;
+    for (index_t f = 0; f < nf; ++f) front_total += symbolic::front_flops(t, f);
+    for (index_t c : sf.colcount) column_total += static_cast<double>(c) * static_cast<double>(c);
+    EXPECT_EQ(front_total, column_total);
     for (index_t f = 0; f < nf; ++f)
       for (index_t k = 0; k < t.n_pivots(f); ++k)
         ASSERT_EQ(sf.colcount[sf.post[t.first_pivot[f] + k]], t.n_rows(f) - k);
@@ -420,6 +416,9 @@ void check_all(const SparseMatrix& pattern, const std::vector<index_t>& perm,
   EXPECT_EQ(cc, chol.colcount);
   const index_t nnz_l = std::accumulate(cc.begin(), cc.end(), index_t{0});
   EXPECT_EQ(static_cast<double>(nnz_l), chol.lnz);
+  double flops = 0;  // the convention of front_flops: Σ_j c_j²
+  for (index_t c : cc) flops += static_cast<double>(c) * static_cast<double>(c);
+  EXPECT_EQ(flops, chol.fl);
   expect_cholmod_supernodes(b, post);
 
   AmalgamationOptions none;
@@ -672,7 +671,6 @@ TEST(Symbolic, RejectsUnsymmetricPattern) {
   EXPECT_THROW(symbolic::analyze_pattern(a, {}), InvalidInput);
 }
 
-#if STRATA_HAVE_MM_READER
 TEST(Symbolic, SharedMatricesAgainstCholmod) {
   const std::vector<std::string> names = test::shared_matrix_names();
   ASSERT_FALSE(names.empty());
@@ -689,12 +687,6 @@ TEST(Symbolic, SharedMatricesAgainstCholmod) {
     if (HasFatalFailure()) return;
   }
 }
-#else
-TEST(Symbolic, SharedMatricesAgainstCholmod) {
-  GTEST_SKIP() << "the Matrix Market reader (src/sparse/matrix_market.cpp) is not in this "
-                  "tree yet";
-}
-#endif
 
 // Timing of the whole symbolic phase on the 7-point Laplacian of a 100³ grid
 // (1,000,000 columns) ordered by METIS. Disabled by default (METIS alone takes a while
