@@ -167,6 +167,10 @@ Partition block_separators(const Partition& p, index_t max_block, std::vector<ch
 /// column i are met in the order they are stored; each entry A(i, j), i > j, must be the
 /// next unmatched one above the diagonal of column i. O(nnz), O(n) memory.
 void require_symmetric_pattern(const SparseMatrix& a) {
+  auto fail = [](index_t r, index_t c) {
+    throw InvalidInput("analyze_pattern: the pattern is not symmetric (or not sorted): entry (" +
+                       std::to_string(r) + ", " + std::to_string(c) + ") has no mirror entry");
+  };
   const index_t n = a.n_cols;
   std::vector<index_t> next(a.offsets.begin(), a.offsets.end() - 1);
   for (index_t j = 0; j < n; ++j)
@@ -174,20 +178,11 @@ void require_symmetric_pattern(const SparseMatrix& a) {
       const index_t i = a.indices[p];
       if (i < 0 || i >= n) throw InvalidInput("analyze_pattern: row index out of range");
       if (i <= j) continue;
-      if (next[i] >= a.offsets[i + 1] || a.indices[next[i]] != j)
-        throw InvalidInput(
-            "analyze_pattern: the pattern is not symmetric (or not sorted): "
-            "entry (" +
-            std::to_string(i) + ", " + std::to_string(j) + ") has no match (" + std::to_string(j) +
-            ", " + std::to_string(i) + ")");
+      if (next[i] >= a.offsets[i + 1] || a.indices[next[i]] != j) fail(i, j);
       ++next[i];
     }
   for (index_t i = 0; i < n; ++i)
-    if (next[i] < a.offsets[i + 1] && a.indices[next[i]] < i)
-      throw InvalidInput(
-          "analyze_pattern: the pattern is not symmetric (or not sorted): "
-          "entry (" +
-          std::to_string(a.indices[next[i]]) + ", " + std::to_string(i) + ") has no match");
+    if (next[i] < a.offsets[i + 1] && a.indices[next[i]] < i) fail(a.indices[next[i]], i);
 }
 
 }  // namespace
