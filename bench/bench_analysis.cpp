@@ -6,10 +6,10 @@
 //
 //   bench_analysis [--problems a,b,...] [--repeat R] [--ordering nd|metis|amd]
 #include <cholmod.h>
+#include <fmt/core.h>
 #include <sys/resource.h>
 
 #include <CLI/CLI.hpp>
-#include <fmt/core.h>
 
 #include "bench_common.hpp"
 #include "core/timer.hpp"
@@ -77,9 +77,9 @@ CholmodAnalysis cholmod_analysis(const SparseMatrix& a, bool symmetric, int repe
 
 int main(int argc, char** argv) {
   CLI::App app{"strata analysis benchmark (vs CHOLMOD + METIS)"};
-  std::vector<std::string> problems = {"bcsstk09", "bcsstk13", "bcsstk16", "ccx_segmenttet_K",
-                                       "ccx_cubef2f3_K", "lap3d-60", "lap3d-80", "elast3d-30",
-                                       "elast3d-40"};
+  std::vector<std::string> problems = {"bcsstk09",         "bcsstk13",       "bcsstk16",
+                                       "ccx_segmenttet_K", "ccx_cubef2f3_K", "lap3d-60",
+                                       "lap3d-80",         "elast3d-30",     "elast3d-40"};
   int repeat = 3;
   std::string ordering = "nd";
   bool no_cholmod = false;
@@ -102,8 +102,9 @@ int main(int argc, char** argv) {
     Options o;
     o.type = p.symmetric ? MatrixType::spd : MatrixType::general;
     o.matching_and_scaling = false;  // pattern-only comparison
-    o.ordering = ordering == "nd" ? OrderingMethod::nested_dissection
-                 : ordering == "metis" ? OrderingMethod::metis : OrderingMethod::amd;
+    o.ordering = ordering == "nd"      ? OrderingMethod::nested_dissection
+                 : ordering == "metis" ? OrderingMethod::metis
+                                       : OrderingMethod::amd;
     std::vector<double> times;
     AnalysisStats st;
     for (int k = 0; k < repeat; ++k) {
@@ -114,12 +115,18 @@ int main(int argc, char** argv) {
       st = s.stats().analysis;
     }
     const double ts = bench::median(times);
-    json row = {{"problem", name}, {"n", st.n}, {"nnz_a", st.nnz_a},
-                {"strata", {{"nnz_l", st.nnz_l}, {"flops", st.factor_flops}, {"seconds", ts},
-                            {"ordering_seconds", st.ordering_seconds},
-                            {"symbolic_seconds", st.symbolic_seconds},
-                            {"plan_seconds", st.plan_seconds}, {"fronts", st.n_fronts},
-                            {"tree_height", st.tree_height}}}};
+    json row = {{"problem", name},
+                {"n", st.n},
+                {"nnz_a", st.nnz_a},
+                {"strata",
+                 {{"nnz_l", st.nnz_l},
+                  {"flops", st.factor_flops},
+                  {"seconds", ts},
+                  {"ordering_seconds", st.ordering_seconds},
+                  {"symbolic_seconds", st.symbolic_seconds},
+                  {"plan_seconds", st.plan_seconds},
+                  {"fronts", st.n_fronts},
+                  {"tree_height", st.tree_height}}}};
     if (!no_cholmod) {
       CholmodAnalysis c = cholmod_analysis(p.a, p.symmetric, repeat);
       row["cholmod_metis"] = {{"nnz_l", c.lnz}, {"flops", c.flops}, {"seconds", c.seconds}};
@@ -127,9 +134,10 @@ int main(int argc, char** argv) {
       row["time_ratio"] = ts / c.seconds;
       lnz_ratios.push_back(st.nnz_l / c.lnz);
       time_ratios.push_back(ts / c.seconds);
-      fmt::print("{:<18} {:>9} {:>12} {:>12.0f} {:>6.3f} {:>10.3g} {:>10.3g} {:>8.3f} {:>8.3f} {:>6.2f}\n",
-                 name, st.n, st.nnz_l, c.lnz, st.nnz_l / c.lnz, st.factor_flops, c.flops, ts,
-                 c.seconds, ts / c.seconds);
+      fmt::print(
+          "{:<18} {:>9} {:>12} {:>12.0f} {:>6.3f} {:>10.3g} {:>10.3g} {:>8.3f} {:>8.3f} {:>6.2f}\n",
+          name, st.n, st.nnz_l, c.lnz, st.nnz_l / c.lnz, st.factor_flops, c.flops, ts, c.seconds,
+          ts / c.seconds);
     } else {
       fmt::print("{:<18} {:>9} {:>12} {:>12} {:>6} {:>10.3g} {:>10} {:>8.3f}\n", name, st.n,
                  st.nnz_l, "-", "-", st.factor_flops, "-", ts);

@@ -45,10 +45,14 @@ Problem load_problem(const std::string& name) {
   if (dash != std::string::npos) {
     const std::string kind = name.substr(0, dash);
     const index_t k = std::stoll(name.substr(dash + 1));
-    if (kind == "lap3d") p.a = generators::laplacian_3d(k, k, k);
-    else if (kind == "lap2d") p.a = generators::laplacian_2d(k, k);
-    else if (kind == "elast3d") p.a = generators::elasticity_3d(k, k, k);
-    else throw InvalidInput("unknown generated problem " + name);
+    if (kind == "lap3d")
+      p.a = generators::laplacian_3d(k, k, k);
+    else if (kind == "lap2d")
+      p.a = generators::laplacian_2d(k, k);
+    else if (kind == "elast3d")
+      p.a = generators::elasticity_3d(k, k, k);
+    else
+      throw InvalidInput("unknown generated problem " + name);
     return p;
   }
   MMMatrix mm = read_matrix_market(std::string(STRATA_MATRIX_DIR) + "/" + name + ".mtx.gz");
@@ -64,14 +68,20 @@ nlohmann::json run_metadata(int argc, char** argv) {
   while (!cpu.empty() && cpu.front() == ' ') cpu.erase(cpu.begin());
   char host[256] = {0};
   gethostname(host, sizeof host - 1);
-  return {{"date", utc_now("%Y-%m-%dT%H:%M:%SZ")},
-          {"command", cmd},
-          {"git_commit", command_output("git -C " STRATA_SOURCE_DIR " rev-parse --short HEAD 2>/dev/null")},
-          {"git_dirty", !command_output("git -C " STRATA_SOURCE_DIR " status --porcelain --untracked-files=no 2>/dev/null").empty()},
-          {"machine", {{"host", host},
-                       {"cpu", cpu},
-                       {"hardware_threads", std::thread::hardware_concurrency()},
-                       {"gpu", command_output("nvidia-smi --query-gpu=name --format=csv,noheader 2>/dev/null | head -1")}}}};
+  return {
+      {"date", utc_now("%Y-%m-%dT%H:%M:%SZ")},
+      {"command", cmd},
+      {"git_commit",
+       command_output("git -C " STRATA_SOURCE_DIR " rev-parse --short HEAD 2>/dev/null")},
+      {"git_dirty", !command_output("git -C " STRATA_SOURCE_DIR
+                                    " status --porcelain --untracked-files=no 2>/dev/null")
+                         .empty()},
+      {"machine",
+       {{"host", host},
+        {"cpu", cpu},
+        {"hardware_threads", std::thread::hardware_concurrency()},
+        {"gpu", command_output(
+                    "nvidia-smi --query-gpu=name --format=csv,noheader 2>/dev/null | head -1")}}}};
 }
 
 std::string write_result(const nlohmann::json& j, const std::string& stem) {

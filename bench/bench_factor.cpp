@@ -10,10 +10,10 @@
 //
 //   bench_factor [--problems a,b,...] [--repeat R] [--threads T] [--no-mumps]
 #include <cholmod.h>
+#include <fmt/core.h>
 
 #include <CLI/CLI.hpp>
 #include <cmath>
-#include <fmt/core.h>
 
 #ifdef STRATA_BENCH_HAVE_MUMPS
 #include <dmumps_c.h>
@@ -120,7 +120,7 @@ RefResult run_mumps(const SparseMatrix& a, const std::vector<index_t>& perm,
   id.icntl[1] = -1;
   id.icntl[2] = -1;
   id.icntl[3] = 0;
-  id.icntl[6] = 1;   // ICNTL(7) = 1: given ordering in PERM_IN (position of each variable)
+  id.icntl[6] = 1;  // ICNTL(7) = 1: given ordering in PERM_IN (position of each variable)
   id.perm_in = perm_in.data();
   id.icntl[13] = 50;  // ICNTL(14): 50% more working space than estimated
   id.job = 1;
@@ -152,9 +152,9 @@ RefResult run_mumps(const SparseMatrix& a, const std::vector<index_t>& perm,
 
 int main(int argc, char** argv) {
   CLI::App app{"strata factorization benchmark (vs CHOLMOD and MUMPS, same permutation)"};
-  std::vector<std::string> problems = {"bcsstk09", "bcsstk13", "bcsstk16", "ccx_segmenttet_K",
-                                       "ccx_cubef2f3_K", "lap3d-40", "lap3d-60", "elast3d-20",
-                                       "elast3d-30"};
+  std::vector<std::string> problems = {"bcsstk09",         "bcsstk13",       "bcsstk16",
+                                       "ccx_segmenttet_K", "ccx_cubef2f3_K", "lap3d-40",
+                                       "lap3d-60",         "elast3d-20",     "elast3d-30"};
   int repeat = 3, threads = 2;
   bool no_mumps = false;
   index_t max_block = Options{}.max_block_size;
@@ -209,24 +209,32 @@ int main(int argc, char** argv) {
 #ifdef STRATA_BENCH_HAVE_MUMPS
     if (!no_mumps) m = run_mumps(p.a, s.permutation(), b, true, repeat);
 #endif
-    json row = {{"problem", name}, {"n", n}, {"nnz_l", an.nnz_l}, {"factor_flops", an.factor_flops},
-                {"strata", {{"seconds", ts}, {"first_factorize_seconds", first},
-                            {"gflops", gflops}, {"backward_error", be},
-                            {"refinement_steps", s.stats().solve.refinement_steps}}},
-                {"cholmod", {{"seconds", c.seconds}, {"nnz_l", c.lnz},
-                             {"backward_error", c.backward_error}, {"ok", c.ok}}}};
-    if (m.ok)
-      row["mumps"] = {{"seconds", m.seconds}, {"backward_error", m.backward_error}};
+    json row = {{"problem", name},
+                {"n", n},
+                {"nnz_l", an.nnz_l},
+                {"factor_flops", an.factor_flops},
+                {"strata",
+                 {{"seconds", ts},
+                  {"first_factorize_seconds", first},
+                  {"gflops", gflops},
+                  {"backward_error", be},
+                  {"refinement_steps", s.stats().solve.refinement_steps}}},
+                {"cholmod",
+                 {{"seconds", c.seconds},
+                  {"nnz_l", c.lnz},
+                  {"backward_error", c.backward_error},
+                  {"ok", c.ok}}}};
+    if (m.ok) row["mumps"] = {{"seconds", m.seconds}, {"backward_error", m.backward_error}};
     row["ratio_cholmod"] = ts / c.seconds;
     ratio_c.push_back(ts / c.seconds);
     if (m.ok) {
       row["ratio_mumps"] = ts / m.seconds;
       ratio_m.push_back(ts / m.seconds);
     }
-    fmt::print("{:<18} {:>8} {:>11} {:>9.4f} {:>8.2f} {:>9.4f} {:>9} {:>7.3f} {:>7} {:>9.1e} {:>9.1e}\n",
-               name, n, an.nnz_l, ts, gflops, c.seconds,
-               m.ok ? fmt::format("{:.4f}", m.seconds) : "-", ts / c.seconds,
-               m.ok ? fmt::format("{:.3f}", ts / m.seconds) : "-", be, c.backward_error);
+    fmt::print(
+        "{:<18} {:>8} {:>11} {:>9.4f} {:>8.2f} {:>9.4f} {:>9} {:>7.3f} {:>7} {:>9.1e} {:>9.1e}\n",
+        name, n, an.nnz_l, ts, gflops, c.seconds, m.ok ? fmt::format("{:.4f}", m.seconds) : "-",
+        ts / c.seconds, m.ok ? fmt::format("{:.3f}", ts / m.seconds) : "-", be, c.backward_error);
     std::fflush(stdout);
     out["rows"].push_back(row);
   }

@@ -7,11 +7,12 @@
 //
 // Exit status: 0 on success, 1 on a solver error (the message names the problem),
 // 2 on a usage error.
+#include <fmt/core.h>
+
 #include <CLI/CLI.hpp>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <fmt/core.h>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -23,12 +24,15 @@ namespace {
 using json = nlohmann::json;
 using namespace strata;
 
-const std::map<std::string, OrderingMethod> kOrderings = {
-    {"nd", OrderingMethod::nested_dissection}, {"metis", OrderingMethod::metis},
-    {"amd", OrderingMethod::amd}, {"natural", OrderingMethod::natural}};
+const std::map<std::string, OrderingMethod> kOrderings = {{"nd", OrderingMethod::nested_dissection},
+                                                          {"metis", OrderingMethod::metis},
+                                                          {"amd", OrderingMethod::amd},
+                                                          {"natural", OrderingMethod::natural}};
 const std::map<std::string, MatrixType> kTypes = {
-    {"auto", MatrixType::automatic}, {"spd", MatrixType::spd},
-    {"symmetric_indefinite", MatrixType::symmetric_indefinite}, {"general", MatrixType::general}};
+    {"auto", MatrixType::automatic},
+    {"spd", MatrixType::spd},
+    {"symmetric_indefinite", MatrixType::symmetric_indefinite},
+    {"general", MatrixType::general}};
 
 struct CommonArgs {
   std::string file;
@@ -45,7 +49,8 @@ void add_common(CLI::App* cmd, CommonArgs& a) {
       ->check(CLI::ExistingFile);
   cmd->add_option("--ordering", a.ordering, "fill-reducing ordering")
       ->check(CLI::IsMember({"nd", "metis", "amd", "natural"}));
-  cmd->add_option("--max-block-size", a.max_block_size, "most pivots per front (separator blocking)")
+  cmd->add_option("--max-block-size", a.max_block_size,
+                  "most pivots per front (separator blocking)")
       ->check(CLI::PositiveNumber);
   cmd->add_option("--device-memory-limit", a.device_memory_limit,
                   "memory budget of the batch plan in bytes (0: unlimited)");
@@ -65,8 +70,8 @@ Options options_from(const CommonArgs& a) {
 json analysis_json(const AnalysisStats& s) {
   json batches = json::array();
   for (const auto& b : s.batches)
-    batches.push_back({{"level", b.level}, {"fronts", b.end - b.begin}, {"bytes", b.bytes},
-                       {"tiled", b.tiled}});
+    batches.push_back(
+        {{"level", b.level}, {"fronts", b.end - b.begin}, {"bytes", b.bytes}, {"tiled", b.tiled}});
   return {{"n", s.n},
           {"nnz_a", s.nnz_a},
           {"nnz_l", s.nnz_l},
@@ -83,10 +88,11 @@ json analysis_json(const AnalysisStats& s) {
           {"batches", batches},
           {"type", to_string(s.type)},
           {"ordering", to_string(s.ordering)},
-          {"seconds", {{"ordering", s.ordering_seconds},
-                       {"symbolic", s.symbolic_seconds},
-                       {"plan", s.plan_seconds},
-                       {"total", s.total_seconds}}}};
+          {"seconds",
+           {{"ordering", s.ordering_seconds},
+            {"symbolic", s.symbolic_seconds},
+            {"plan", s.plan_seconds},
+            {"total", s.total_seconds}}}};
 }
 
 void print_analysis(const AnalysisStats& s, double read_seconds) {
@@ -114,15 +120,16 @@ void print_analysis(const AnalysisStats& s, double read_seconds) {
     tiled += b.tiled;
     maxb = std::max(maxb, b.bytes);
   }
-  fmt::print("batch plan            {} batches for {} levels, budget {}, largest batch {:.3f} MB, "
-             "{} tiled fronts\n",
-             s.batches.size(), s.tree_height,
-             s.memory_budget ? fmt::format("{:.3f} MB", s.memory_budget / 1e6) : "unlimited",
-             maxb / 1e6, tiled);
-  fmt::print("time [s]              read {:.3f}  ordering {:.3f}  symbolic {:.3f}  plan {:.3f}  "
-             "analysis total {:.3f}\n",
-             read_seconds, s.ordering_seconds, s.symbolic_seconds, s.plan_seconds,
-             s.total_seconds);
+  fmt::print(
+      "batch plan            {} batches for {} levels, budget {}, largest batch {:.3f} MB, "
+      "{} tiled fronts\n",
+      s.batches.size(), s.tree_height,
+      s.memory_budget ? fmt::format("{:.3f} MB", s.memory_budget / 1e6) : "unlimited", maxb / 1e6,
+      tiled);
+  fmt::print(
+      "time [s]              read {:.3f}  ordering {:.3f}  symbolic {:.3f}  plan {:.3f}  "
+      "analysis total {:.3f}\n",
+      read_seconds, s.ordering_seconds, s.symbolic_seconds, s.plan_seconds, s.total_seconds);
 }
 
 double seconds_since(std::chrono::steady_clock::time_point t0) {
@@ -196,8 +203,10 @@ int run_solve(const SolveArgs& a) {
     json j = analysis_json(st.analysis);
     j["file"] = a.common.file;
     j["seconds"]["read"] = read_seconds;
-    j["factor"] = {{"type", to_string(f.type)},      {"backend", f.backend},
-                   {"seconds", f.seconds},           {"gflops", f.gflops},
+    j["factor"] = {{"type", to_string(f.type)},
+                   {"backend", f.backend},
+                   {"seconds", f.seconds},
+                   {"gflops", f.gflops},
                    {"perturbed_pivots", f.perturbed_pivots},
                    {"two_by_two_pivots", f.two_by_two_pivots},
                    {"inertia", {f.inertia_positive, f.inertia_negative, f.inertia_zero}},
@@ -205,6 +214,7 @@ int run_solve(const SolveArgs& a) {
                    {"determinant_sign", f.determinant_sign}};
     j["solve"] = {{"seconds", st.solve.seconds},
                   {"refinement_steps", st.solve.refinement_steps},
+                  {"gmres_iterations", st.solve.gmres_iterations},
                   {"backward_error", st.solve.backward_error},
                   {"converged", st.solve.refinement_converged}};
     j["total_seconds"] = total;
@@ -219,9 +229,11 @@ int run_solve(const SolveArgs& a) {
                f.inertia_zero);
     fmt::print("log|det A|            {:.10g} (sign {})\n", f.log_abs_determinant,
                f.determinant_sign);
-    fmt::print("solve                 {:.3f} s, {} refinement steps, backward error {:.3e}{}\n",
-               st.solve.seconds, st.solve.refinement_steps, st.solve.backward_error,
-               st.solve.refinement_converged ? "" : " (above tolerance)");
+    fmt::print(
+        "solve                 {:.3f} s, {} refinement steps, {} GMRES iterations, "
+        "backward error {:.3e}{}\n",
+        st.solve.seconds, st.solve.refinement_steps, st.solve.gmres_iterations,
+        st.solve.backward_error, st.solve.refinement_converged ? "" : " (above tolerance)");
     fmt::print("total                 {:.3f} s (analyze + factorize + solve)\n", total);
     if (!a.out.empty()) fmt::print("solution written to   {}\n", a.out);
   }
@@ -234,7 +246,8 @@ int main(int argc, char** argv) {
   CLI::App app{"strata: a multifrontal sparse direct solver for CPU and GPU"};
   app.require_subcommand(1);
   CommonArgs analyze_args;
-  auto* analyze = app.add_subcommand("analyze", "ordering, assembly tree, level schedule, memory plan");
+  auto* analyze =
+      app.add_subcommand("analyze", "ordering, assembly tree, level schedule, memory plan");
   add_common(analyze, analyze_args);
   SolveArgs solve_args;
   auto* solve = app.add_subcommand("solve", "analyze, factorize and solve A x = b");

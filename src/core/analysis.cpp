@@ -239,8 +239,7 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts) {
   an.input_storage = a.storage;
   an.type = opts.type;
   if (an.type == MatrixType::automatic) {
-    const bool sym = a.storage != Storage::full ||
-                     (a.has_values() && is_numerically_symmetric(a));
+    const bool sym = a.storage != Storage::full || (a.has_values() && is_numerically_symmetric(a));
     an.type = sym ? MatrixType::automatic : MatrixType::general;
   }
   an.symmetric = an.type != MatrixType::general;

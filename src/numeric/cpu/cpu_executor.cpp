@@ -138,8 +138,8 @@ void CpuExecutor::process_front(const FactorContext& ctx, index_t f, Workspace& 
       break;
     }
     case MatrixType::symmetric_indefinite:
-      cpu::factor_front_ldlt(F, m, k, m, ctx.static_pivot, w.local_perm.data(),
-                             w.pivot_size.data(), ps);
+      cpu::factor_front_ldlt(F, m, k, m, ctx.static_pivot, w.local_perm.data(), w.pivot_size.data(),
+                             ps);
       break;
     case MatrixType::general:
       cpu::factor_front_lu(F, m, k, m, ctx.static_pivot, w.local_perm.data(), ps);
@@ -163,7 +163,8 @@ void CpuExecutor::process_front(const FactorContext& ctx, index_t f, Workspace& 
       fac.d_diag[p0 + i] = panel[i * m + i];
       panel[i * m + i] = 1.0;
       fac.pivot_size[p0 + i] = w.pivot_size[i] == 2 && (i == 0 || fac.pivot_size[p0 + i - 1] != 2)
-                                   ? 2 : (w.pivot_size[i] == 2 ? 0 : 1);
+                                   ? 2
+                                   : (w.pivot_size[i] == 2 ? 0 : 1);
       fac.d_off[p0 + i] = 0.0;
       if (fac.pivot_size[p0 + i] == 2) {
         fac.d_off[p0 + i] = panel[i * m + i + 1];
