@@ -629,8 +629,7 @@ class Report:
         self.w()
         chosen = [r for r in runs if r.kind == kind]
         if not chosen:
-            self.w(f"{NOT_MEASURED}: no `{kind}` results; {need}. No driver for it exists "
-                   f"yet.")
+            self.w(f"{NOT_MEASURED}: no `{kind}` results in the results folder; {need}.")
             self.w()
             return
         for r in chosen:

@@ -17,6 +17,7 @@ Exit status 1 with a list of failed checks if anything is off.
 import argparse
 import os
 import re
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -168,12 +169,16 @@ def main():
     check(e.count("Not measured yet") >= 7 and "| ---" not in e and "![" not in e,
           "empty results: sections not all 'not measured', or a table/plot was written")
 
+    for d in (out2, empty, out3):
+        shutil.rmtree(d, ignore_errors=True)
     if failures:
-        print(f"FAIL ({len(failures)} checks), report in {out}:")
+        print(f"FAIL ({len(failures)} checks), report kept in {out}:")
         for f in failures:
             print("  - " + f)
         return 1
-    print(f"ok: report generator checks passed (report in {out})")
+    if not args.keep:
+        shutil.rmtree(out, ignore_errors=True)
+    print("ok: report generator checks passed" + (f" (report in {out})" if args.keep else ""))
     return 0
 
 
