@@ -2,9 +2,11 @@
 //
 // For each problem: nnz(L), factor flops and analysis time of strata (its own nested
 // dissection by default) next to cholmod_l_analyze with the METIS ordering, in the same
-// run; the median of --repeat runs is reported. Results: bench/results/analysis-*.json.
+// run; the median of --repeat runs is reported. Results: bench/results/analysis-*.json
+// (analysis-<tag>-*.json with --tag).
 //
-//   bench_analysis [--problems a,b,...] [--repeat R] [--ordering nd|metis|amd]
+//   bench_analysis [--problems a,b,...] [--repeat R] [--ordering nd|metis|amd] [--no-cholmod]
+//                  [--tag NAME] [--results-dir DIR]
 #include <cholmod.h>
 #include <fmt/core.h>
 #include <sys/resource.h>
@@ -88,10 +90,17 @@ int main(int argc, char** argv) {
   app.add_option("--repeat", repeat, "runs per measurement (median reported)");
   app.add_option("--ordering", ordering)->check(CLI::IsMember({"nd", "metis", "amd"}));
   app.add_flag("--no-cholmod", no_cholmod, "skip the CHOLMOD reference (e.g. for huge problems)");
+  std::string tag, results_dir;
+  app.add_option("--tag", tag,
+                 "label stored in the results (\"tag\") and added to the file name, e.g. mbs-64")
+      ->check(bench::check_tag);
+  app.add_option("--results-dir", results_dir,
+                 "folder for the results file (default bench/results)");
   CLI11_PARSE(app, argc, argv);
 
   json out = bench::run_metadata(argc, argv);
   out["benchmark"] = "analysis";
+  out["tag"] = tag;
   out["rows"] = json::array();
   fmt::print("{:<18} {:>9} {:>12} {:>12} {:>6} {:>10} {:>10} {:>8} {:>8} {:>6}\n", "problem", "n",
              "nnzL strata", "nnzL cholmod", "ratio", "flops s", "flops c", "t strata", "t chol",
@@ -155,6 +164,7 @@ int main(int argc, char** argv) {
                bench::geometric_mean(lnz_ratios), bench::geometric_mean(time_ratios));
   }
   fmt::print("peak RSS {:.1f} MB\n", ru.ru_maxrss / 1024.0);
-  fmt::print("results: {}\n", bench::write_result(out, "analysis"));
+  const std::string stem = tag.empty() ? "analysis" : "analysis-" + tag;
+  fmt::print("results: {}\n", bench::write_result(out, stem, results_dir));
   return 0;
 }

@@ -5,9 +5,11 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <ctime>
+#include <filesystem>
 #include <fstream>
 #include <thread>
 
@@ -84,8 +86,13 @@ nlohmann::json run_metadata(int argc, char** argv) {
                     "nvidia-smi --query-gpu=name --format=csv,noheader 2>/dev/null | head -1")}}}};
 }
 
-std::string write_result(const nlohmann::json& j, const std::string& stem) {
-  const std::string dir = std::string(STRATA_SOURCE_DIR) + "/bench/results";
+std::string write_result(const nlohmann::json& j, const std::string& stem,
+                         const std::string& results_dir) {
+  const std::string dir =
+      results_dir.empty() ? std::string(STRATA_SOURCE_DIR) + "/bench/results" : results_dir;
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (ec) throw Error("cannot create " + dir + ": " + ec.message());
   const std::string path = dir + "/" + stem + "-" + utc_now("%Y%m%dT%H%M%SZ") + ".json";
   const std::string tmp = path + ".tmp";
   {
@@ -101,6 +108,13 @@ std::string write_result(const nlohmann::json& j, const std::string& stem) {
     throw Error("cannot rename " + tmp + " to " + path);
   }
   return path;
+}
+
+std::string check_tag(const std::string& tag) {
+  for (char c : tag)
+    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '_' || c == '-'))
+      return "tag '" + tag + "' may hold only letters, digits, '.', '_' and '-'";
+  return {};
 }
 
 double geometric_mean(const std::vector<double>& v) {

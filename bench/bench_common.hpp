@@ -22,9 +22,15 @@ Problem load_problem(const std::string& name);
 /// Machine, date, git commit and the exact command line of this run.
 nlohmann::json run_metadata(int argc, char** argv);
 
-/// Writes `j` to bench/results/<stem>-<UTC date-time>.json atomically (temporary file,
-/// then rename) and returns the path.
-std::string write_result(const nlohmann::json& j, const std::string& stem);
+/// Writes `j` to <dir>/<stem>-<UTC date-time>.json atomically (temporary file, then
+/// rename) and returns the path. An empty `dir` means bench/results of the source tree;
+/// the folder is created if missing.
+std::string write_result(const nlohmann::json& j, const std::string& stem,
+                         const std::string& dir = "");
+
+/// Checks a --tag value: letters, digits, '.', '_' and '-' only (it goes into a file name).
+/// Returns an error message, empty when the tag is valid (CLI11 validator signature).
+std::string check_tag(const std::string& tag);
 
 /// Geometric mean of positive values (0 for an empty list).
 double geometric_mean(const std::vector<double>& v);

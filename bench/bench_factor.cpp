@@ -6,9 +6,10 @@
 // medians over --repeat factorizations (strata: refactorize, which is what the multibody
 // loop calls; CHOLMOD: cholmod_l_factorize on the same symbolic object; MUMPS: JOB=2).
 // All three use the same OpenBLAS with --threads threads.
-// Results: bench/results/factor-*.json.
+// Results: bench/results/factor-*.json (factor-<tag>-*.json with --tag).
 //
-//   bench_factor [--problems a,b,...] [--repeat R] [--threads T] [--no-mumps]
+//   bench_factor [--problems a,b,...] [--repeat R] [--threads T] [--max-block-size N]
+//                [--no-mumps] [--tag NAME] [--results-dir DIR]
 #include <cholmod.h>
 #include <fmt/core.h>
 
@@ -163,12 +164,20 @@ int main(int argc, char** argv) {
   app.add_option("--threads", threads, "threads for every solver (OpenBLAS and strata)");
   app.add_option("--max-block-size", max_block, "strata's maximum block size");
   app.add_flag("--no-mumps", no_mumps, "skip MUMPS");
+  std::string tag, results_dir;
+  app.add_option("--tag", tag,
+                 "label stored in the results (\"tag\") and added to the file name, e.g. mbs-64")
+      ->check(bench::check_tag);
+  app.add_option("--results-dir", results_dir,
+                 "folder for the results file (default bench/results)");
   CLI11_PARSE(app, argc, argv);
   openblas_set_num_threads(threads);
 
   json out = bench::run_metadata(argc, argv);
   out["benchmark"] = "factor";
+  out["tag"] = tag;
   out["threads"] = threads;
+  out["max_block_size"] = max_block;
   out["rows"] = json::array();
   fmt::print("{:<18} {:>8} {:>11} {:>9} {:>8} {:>9} {:>9} {:>7} {:>7} {:>9} {:>9}\n", "problem",
              "n", "nnz(L)", "strata s", "GFLOP/s", "cholmod s", "mumps s", "s/chol", "s/mumps",
@@ -245,6 +254,7 @@ int main(int argc, char** argv) {
   if (!ratio_m.empty())
     fmt::print("geometric mean of strata/MUMPS factorization time:   {:.3f}\n",
                bench::geometric_mean(ratio_m));
-  fmt::print("results: {}\n", bench::write_result(out, "factor"));
+  const std::string stem = tag.empty() ? "factor" : "factor-" + tag;
+  fmt::print("results: {}\n", bench::write_result(out, stem, results_dir));
   return 0;
 }
