@@ -11,7 +11,8 @@ namespace strata::bench {
 
 /// A benchmark problem: a shared SuiteSparse matrix by name ("bcsstk16"), or a generated
 /// one: "lap3d-N" (7-point Laplacian N³), "elast3d-N" (3-dof 27-point stencil N³),
-/// "lap2d-N". Symmetric problems come as Storage::lower.
+/// "lap2d-N", "uelast3d-N" (elasticity pattern, unsymmetric values). Symmetric problems
+/// come as Storage::lower.
 struct Problem {
   std::string name;
   SparseMatrix a;
@@ -31,6 +32,21 @@ std::string write_result(const nlohmann::json& j, const std::string& stem,
 /// Checks a --tag value: letters, digits, '.', '_' and '-' only (it goes into a file name).
 /// Returns an error message, empty when the tag is valid (CLI11 validator signature).
 std::string check_tag(const std::string& tag);
+
+/// Result of a reference solver run: median factorization seconds, nnz(L), backward
+/// error of its solution of A x = b.
+struct RefResult {
+  double seconds = 0, lnz = 0, backward_error = 0;
+  bool ok = false;
+};
+
+/// Normwise backward error ‖b − A x‖∞ / (‖A‖∞‖x‖∞ + ‖b‖∞) (A in any storage).
+double berr(const SparseMatrix& a, const std::vector<double>& x, const std::vector<double>& b);
+
+/// CHOLMOD supernodal Cholesky of the SPD matrix `a` (lower storage) with the given
+/// permutation (new to old): median of `repeat` cholmod_l_factorize calls, then a solve.
+RefResult run_cholmod(const SparseMatrix& a, const std::vector<index_t>& perm,
+                      const std::vector<double>& b, int repeat);
 
 /// Geometric mean of positive values (0 for an empty list).
 double geometric_mean(const std::vector<double>& v);

@@ -30,66 +30,9 @@ using json = nlohmann::json;
 
 namespace {
 
-struct RefResult {
-  double seconds = 0, lnz = 0, backward_error = 0;
-  bool ok = false;
-};
-
-double berr(const SparseMatrix& a, const std::vector<double>& x, const std::vector<double>& b) {
-  std::vector<double> ax(b.size());
-  multiply(a, x.data(), ax.data());
-  std::vector<double> row(a.n_rows, 0.0);
-  for (index_t j = 0; j < a.n_cols; ++j)
-    for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p) {
-      row[a.indices[p]] += std::abs(a.values[p]);
-      if (a.storage != Storage::full && a.indices[p] != j) row[j] += std::abs(a.values[p]);
-    }
-  double an = 0, rn = 0, xn = 0, bn = 0;
-  for (std::size_t i = 0; i < b.size(); ++i) {
-    an = std::max(an, row[i]);
-    rn = std::max(rn, std::abs(b[i] - ax[i]));
-    xn = std::max(xn, std::abs(x[i]));
-    bn = std::max(bn, std::abs(b[i]));
-  }
-  return rn / (an * xn + bn);
-}
-
-RefResult run_cholmod(const SparseMatrix& a, const std::vector<index_t>& perm,
-                      const std::vector<double>& b, int repeat) {
-  RefResult r;
-  cholmod_common cc;
-  cholmod_l_start(&cc);
-  cc.nmethods = 1;
-  cc.method[0].ordering = CHOLMOD_GIVEN;
-  cc.supernodal = CHOLMOD_SUPERNODAL;
-  const index_t n = a.n_rows;
-  cholmod_sparse* A = cholmod_l_allocate_sparse(n, n, a.nnz(), 1, 1, -1, CHOLMOD_REAL, &cc);
-  std::copy(a.offsets.begin(), a.offsets.end(), static_cast<SuiteSparse_long*>(A->p));
-  std::copy(a.indices.begin(), a.indices.end(), static_cast<SuiteSparse_long*>(A->i));
-  std::copy(a.values.begin(), a.values.end(), static_cast<double*>(A->x));
-  std::vector<SuiteSparse_long> p(perm.begin(), perm.end());
-  cholmod_factor* L = cholmod_l_analyze_p(A, p.data(), nullptr, 0, &cc);
-  std::vector<double> times;
-  for (int k = 0; k < repeat; ++k) {
-    Timer t;
-    cholmod_l_factorize(A, L, &cc);
-    times.push_back(t.seconds());
-  }
-  r.ok = cc.status == CHOLMOD_OK;
-  r.seconds = bench::median(times);
-  r.lnz = cc.lnz;
-  cholmod_dense* B = cholmod_l_allocate_dense(n, 1, n, CHOLMOD_REAL, &cc);
-  std::copy(b.begin(), b.end(), static_cast<double*>(B->x));
-  cholmod_dense* X = cholmod_l_solve(CHOLMOD_A, L, B, &cc);
-  std::vector<double> x(static_cast<double*>(X->x), static_cast<double*>(X->x) + n);
-  r.backward_error = berr(a, x, b);
-  cholmod_l_free_dense(&X, &cc);
-  cholmod_l_free_dense(&B, &cc);
-  cholmod_l_free_factor(&L, &cc);
-  cholmod_l_free_sparse(&A, &cc);
-  cholmod_l_finish(&cc);
-  return r;
-}
+using bench::RefResult;
+using bench::berr;
+using bench::run_cholmod;
 
 #ifdef STRATA_BENCH_HAVE_MUMPS
 RefResult run_mumps(const SparseMatrix& a, const std::vector<index_t>& perm,
