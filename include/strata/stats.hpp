@@ -41,10 +41,10 @@ struct AnalysisStats {
   std::vector<BatchInfo> batches;         ///< the memory plan
   MatrixType type = MatrixType::automatic;  ///< type the analysis was made for
   /// symmetric_indefinite: pivot groups of the symmetric matching kept together in one
-  /// front (Duff & Pralet 2005): pairs, and triples (an odd cycle's small singleton joined
-  /// to a pair).
+  /// front (Duff & Pralet 2005): pairs, and short odd cycles of the matching kept whole
+  /// (when even their best singleton has a small diagonal).
   index_t pairs = 0;
-  index_t triples = 0;
+  index_t odd_cycles = 0;
   OrderingMethod ordering = OrderingMethod::nested_dissection;
   double ordering_seconds = 0;
   double symbolic_seconds = 0;

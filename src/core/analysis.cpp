@@ -328,7 +328,7 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts) {
       ++links[group_of[u]];
     }
     for (index_t g = 0; g < gr.n_groups(); ++g)
-      if (links[g] == gr.size(g) - 1) ++(gr.size(g) == 2 ? an.stats.pairs : an.stats.triples);
+      if (links[g] == gr.size(g) - 1) ++(gr.size(g) == 2 ? an.stats.pairs : an.stats.odd_cycles);
   }
   symbolic::SymbolicFactorization sym = symbolic::analyze_pattern(permuted, ao);
   // the tree is in the postordered numbering: pivot k is permuted column post[k]

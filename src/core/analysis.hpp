@@ -60,7 +60,7 @@ struct Analysis {
   std::vector<double> row_scaling;
   std::vector<double> col_scaling;
   /// symmetric_indefinite: the kept pivot groups of the symmetric matching (pairs, and
-  /// triples; ordering/pairing.hpp), original numbering, members in elimination order.
+  /// short odd cycles; ordering/pairing.hpp), original numbering, members in elimination order.
   /// Consecutive members that the ordering placed side by side (all of them, except under
   /// the natural and user orderings) are consecutive in perm and pivots of one front.
   /// Empty when no pairing was computed.

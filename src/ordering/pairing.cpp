@@ -40,15 +40,20 @@
 //    singular matching may contain non-entries; splittings with fewer such pairs are
 //    preferred and such pairs are dropped.
 //
-// 2b. Triples (our addition; the paper leaves the singleton of an odd cycle alone). When
-//    even the best singleton of an odd cycle has a small scaled diagonal (say a 3-cycle of
-//    three zero-diagonal unknowns, [[0 a b]; [a 0 c]; [b c 0]], which is nonsingular), it is
-//    exactly the unknown static pivoting would have to perturb if it were eliminated on its
-//    own. It is then joined to the pair that follows it in the cycle (coupled to it by its
-//    matched entry), or to the one before it, into a group of three kept in one front,
-//    whose fully summed block Bunch–Kaufman can then pivot within. The triple is listed
-//    singleton first, then the pair member it is coupled to, then the other, so that each
-//    member is coupled to the next by an entry (which the symbolic phase needs).
+// 2b. Odd cycles kept whole (our addition; the paper leaves an odd cycle's singleton
+//    alone). When even the best singleton of an odd cycle has a small scaled diagonal, it
+//    is exactly the unknown static pivoting would have to perturb if it were eliminated
+//    on its own, and joining it to one neighbouring pair does not help in general: with
+//    zero diagonals, any 3 consecutive members of a longer cycle form the singular block
+//    [[0 a 0]; [a 0 b]; [0 b 0]]. The whole cycle does: the weighted adjacency matrix of
+//    an odd cycle has determinant 2·Π(edges) ≠ 0 (the two rotations are the only
+//    permutations along its edges), so a zero-diagonal odd cycle is a nonsingular block.
+//    Such a cycle of length k ≤ kMaxCycleGroup (a 3-cycle [[0 a b]; [a 0 c]; [b c 0]]
+//    above all) is therefore kept as one group, listed in cycle order from the singleton
+//    on, so that each member is coupled to the next by a matched entry (which the
+//    symbolic phase needs); Bunch–Kaufman then pivots within it in one front. Longer ones
+//    are split as above (a group is a dense block of one front, and such cycles were not
+//    seen in practice).
 //
 // 3. Useful pairs only. A pair whose two scaled diagonal entries are both large gives two
 //    good 1×1 pivots on its own, and constraining the ordering for it only costs fill, so
@@ -79,6 +84,9 @@
 
 namespace strata::ordering {
 namespace {
+
+// Longest odd cycle kept whole when its best singleton has a small diagonal (step 2b).
+constexpr std::size_t kMaxCycleGroup = 64;
 
 // |a_ij| from a full canonical CSC (sorted rows): binary search in column j; 0 if absent.
 double abs_entry(const SparseMatrix& full, index_t i, index_t j) {
@@ -180,34 +188,18 @@ SymmetricPairing symmetric_matching_pairing(const SparseMatrix& a, double thresh
       Split cand = make_split(cycle, s, odd);
       if (better(cand, best, k)) best = std::move(cand);
     }
-    // Odd cycle whose singleton is small: join it to the pair that follows it in the cycle
-    // (coupled by the matched entry a(single, next)), or else to the pair before it
-    // (coupled through a(prev, single)); the triple lists the singleton first, then the
-    // pair member it is coupled to, then the other (step 2b of the file header).
-    std::pair<index_t, index_t> joined{-1, -1};
-    if (odd) {
-      const index_t single = cycle[best.first];
-      const index_t next = cycle[(best.first + 1) % k], after = cycle[(best.first + 2) % k];
-      const index_t prev = cycle[(best.first + k - 1) % k],
-                    before = cycle[(best.first + k - 2) % k];
-      auto is_pair = [&](index_t u, index_t v) {
-        for (const auto& pr : best.pairs)
-          if ((pr.first == u && pr.second == v) || (pr.first == v && pr.second == u)) return true;
-        return false;
-      };
-      if (small(single)) {
-        if (scaled(single, next) > 0 && is_pair(next, after)) {
-          add_group({single, next, after});
-          joined = {next, after};
-        } else if (scaled(single, prev) > 0 && is_pair(prev, before)) {
-          add_group({single, prev, before});
-          joined = {prev, before};
-        }
+    // An odd cycle whose best singleton is small is kept whole (step 2b).
+    if (odd && small(cycle[best.first]) && k <= kMaxCycleGroup) {
+      bool coupled = true;
+      for (std::size_t t = 0; t < k; ++t)
+        coupled = coupled && scaled(cycle[t], cycle[(t + 1) % k]) > 0;
+      if (coupled) {
+        for (std::size_t t = 0; t < k; ++t) r.groups.members.push_back(cycle[(best.first + t) % k]);
+        r.groups.ptr.push_back(static_cast<index_t>(r.groups.members.size()));
+        continue;
       }
     }
     for (const auto& [u, v] : best.pairs) {
-      if ((u == joined.first && v == joined.second) || (u == joined.second && v == joined.first))
-        continue;
       if (!small(u) && !small(v)) continue;  // two good 1×1 pivots: not worth a constraint
       const bool u_first = sd[u] < sd[v] || (sd[u] == sd[v] && u < v);
       if (u_first) {

@@ -21,10 +21,10 @@ struct SymmetricPairing {
   /// The maximum product matching σ: row i is matched to column matching[i] (the
   /// column_permutation of maximum_product_matching).
   std::vector<index_t> matching;
-  /// The kept pivot groups: pairs, and triples (an odd cycle's singleton with a small
-  /// diagonal joined to a neighbouring pair; see pairing.cpp). Each group lists its members
-  /// in the order they are to be eliminated; consecutive members are coupled by a nonzero
-  /// entry. Unknowns in no group (singletons) are not listed.
+  /// The kept pivot groups: pairs, and short odd cycles kept whole (when even the best
+  /// singleton of the cycle has a small diagonal; see pairing.cpp). Each group lists its
+  /// members in the order they are to be eliminated; consecutive members are coupled by a
+  /// nonzero entry. Unknowns in no group (singletons) are not listed.
   VertexGroups groups;
   /// Scaled |diagonal| |d_i a_ii d_i| (0 where the diagonal is structurally zero).
   std::vector<double> scaled_diagonal;
@@ -36,8 +36,8 @@ struct SymmetricPairing {
 /// required). Computes the maximum product matching of the whole matrix, the symmetric
 /// scaling D = sqrt(Dr·Dc), decomposes the matching into cycles and splits them into pairs
 /// and singletons, keeping a pair only when one of its scaled diagonal entries has
-/// magnitude below `threshold` (structurally zero counts as 0), and joining an odd
-/// cycle's singleton whose scaled diagonal is below `threshold` to a neighbouring pair.
+/// magnitude below `threshold` (structurally zero counts as 0), and keeping a short odd
+/// cycle whole when its singleton's scaled diagonal would be below `threshold`.
 /// Throws InvalidInput if `a` is not square or has no values.
 SymmetricPairing symmetric_matching_pairing(const SparseMatrix& a, double threshold);
 

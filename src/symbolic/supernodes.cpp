@@ -37,7 +37,9 @@
 //    ordinary relaxed amalgamation (s+1's rows are added to s's columns as explicit
 //    zeros). Relaxed amalgamation makes that merge unconditionally (its zeros count in
 //    the fractions of later merges), and separator blocking moves a piece boundary that
-//    would fall between j and j+1 one column down (up when a piece has one column).
+//    would fall between j and j+1 down below the chain of flagged columns it cuts (up
+//    past it, making a piece longer than max_block_size, when that would leave the piece
+//    empty).
 //  * Row structures: the rows of a front are its pivots, then every row i beyond them
 //    whose row subtree passes through the front. They are found by walking, for every
 //    original entry A(i, j), j < i, from the front of j up the assembly tree to the front

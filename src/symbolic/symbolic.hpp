@@ -84,9 +84,10 @@ struct AmalgamationOptions {
   /// analyze_pattern: keep_with_next[j] != 0 asks that columns j and j+1 be pivots of the
   /// same front. (j+1, j) must then be an entry of the pattern, which makes j+1 the etree
   /// parent of j and puts j right before j+1 in the postorder; amalgamation then always
-  /// merges across that boundary and separator blocking never cuts there (a piece may end
-  /// one column early, or hold max_block_size+1 columns when max_block_size is 1). Flags
-  /// on two consecutive columns chain them (j, j+1, j+2 in one front).
+  /// merges across that boundary and separator blocking never cuts there: a piece ends
+  /// early instead, or, when a chain of flagged columns (flags on consecutive columns chain
+  /// them: j, j+1, j+2, ... in one front) is longer than max_block_size, holds the chain
+  /// whole and exceeds max_block_size.
   std::vector<char> keep_with_next;
 };
 
