@@ -97,24 +97,42 @@ double abs_entry(const SparseMatrix& full, index_t i, index_t j) {
   return std::abs(full.values[it - full.indices.data()]);
 }
 
-// One way of splitting a cycle into pairs (and a singleton), with its score.
-struct Split {
-  std::size_t first = 0;  // offset of the split in the cycle (odd: the singleton)
-  std::vector<std::pair<index_t, index_t>> pairs;  // coupled pairs, in cycle order
-  index_t missing = 0;                             // pairs not coupled by an entry
-  double log_product = 0;                          // Σ log (scaled |a_ij|) over the coupled pairs
-  index_t useful = 0;                              // coupled pairs with a small diagonal
+// Score of one way of splitting a cycle into pairs (and a singleton).
+struct Score {
+  index_t missing = 0;     // pairs not coupled by an entry
+  double log_product = 0;  // Σ log (scaled |a_ij|) over the coupled pairs
+  index_t useful = 0;      // coupled pairs with a small diagonal
   double singleton_diag = std::numeric_limits<double>::infinity();  // odd cycles
 };
 
 // True when split a is strictly better than b (see the file header, step 2).
-bool better(const Split& a, const Split& b, std::size_t k) {
+bool better(const Score& a, const Score& b, std::size_t k) {
   if (a.missing != b.missing) return a.missing < b.missing;
   const double tol = 1e-8 * static_cast<double>(k);
   if (std::abs(a.log_product - b.log_product) > tol) return a.log_product > b.log_product;
   if (a.useful != b.useful) return a.useful > b.useful;
   return a.singleton_diag > b.singleton_diag;
 }
+
+// Sums over every other edge of a cycle, in O(1) per query after O(k) set-up, so that
+// choosing among the k splittings of an odd cycle costs O(k), not O(k²). Edge t joins
+// members t and t+1 (mod k); the edges are laid out twice (t < 2k) so that a run of
+// alternate edges never wraps, and S[t] = value[t] + S[t−2].
+class AlternateSums {
+ public:
+  template <class Value>
+  AlternateSums(std::size_t k, const Value& value) : s_(2 * k) {
+    for (std::size_t t = 0; t < 2 * k; ++t) s_[t] = value(t % k) + (t >= 2 ? s_[t - 2] : 0.0);
+  }
+  // value[a] + value[a+2] + ... (m terms), a + 2(m−1) < 2k.
+  double sum(std::size_t a, std::size_t m) const {
+    if (m == 0) return 0.0;
+    return s_[a + 2 * (m - 1)] - (a >= 2 ? s_[a - 2] : 0.0);
+  }
+
+ private:
+  std::vector<double> s_;
+};
 
 }  // namespace
 
@@ -142,36 +160,16 @@ SymmetricPairing symmetric_matching_pairing(const SparseMatrix& a, double thresh
   for (index_t i = 0; i < n; ++i) r.scaled_diagonal[i] = scaled(i, i);
   const std::vector<double>& sd = r.scaled_diagonal;
   auto small = [&](index_t i) { return sd[i] < threshold; };
-
-  // Split of cycle c starting at offset `first`: for odd length, c[first] is the
-  // singleton and the pairs follow it; for even length the pairs start at c[first].
-  auto make_split = [&](const std::vector<index_t>& c, std::size_t first, bool odd) {
-    const std::size_t k = c.size();
-    Split s;
-    s.first = first;
-    if (odd) s.singleton_diag = sd[c[first]];
-    const std::size_t start = odd ? first + 1 : first;
-    const std::size_t members = odd ? k - 1 : k;  // paired members, from `start` on
-    for (std::size_t t = 0; t + 1 < members; t += 2) {
-      const index_t u = c[(start + t) % k], v = c[(start + t + 1) % k];
-      const double w = scaled(u, v);
-      if (w == 0.0) {
-        ++s.missing;
-        continue;
-      }
-      s.log_product += std::log(w);
-      if (small(u) || small(v)) ++s.useful;
-      s.pairs.push_back({u, v});
-    }
-    return s;
-  };
-  auto add_group = [&](std::initializer_list<index_t> members) {
-    for (const index_t v : members) r.groups.members.push_back(v);
+  auto add_pair = [&](index_t u, index_t v) {  // the smaller diagonal first (step 4)
+    if (!(sd[u] < sd[v] || (sd[u] == sd[v] && u < v))) std::swap(u, v);
+    r.groups.members.push_back(u);
+    r.groups.members.push_back(v);
     r.groups.ptr.push_back(static_cast<index_t>(r.groups.members.size()));
   };
 
   std::vector<char> seen(n, 0);
   std::vector<index_t> cycle;
+  std::vector<double> w;  // w[t]: scaled |a| of edge t, joining cycle[t] and cycle[t+1]
   for (index_t i0 = 0; i0 < n; ++i0) {
     if (seen[i0]) continue;
     cycle.clear();
@@ -181,32 +179,49 @@ SymmetricPairing symmetric_matching_pairing(const SparseMatrix& a, double thresh
     }
     const std::size_t k = cycle.size();
     if (k < 2) continue;
+    if (k == 2) {  // a 2-cycle: matched both ways, so coupled
+      if (small(cycle[0]) || small(cycle[1])) add_pair(cycle[0], cycle[1]);
+      continue;
+    }
+    w.resize(k);
+    for (std::size_t t = 0; t < k; ++t) w[t] = scaled(cycle[t], cycle[(t + 1) % k]);
+    const AlternateSums missing(k, [&](std::size_t t) { return w[t] == 0.0 ? 1.0 : 0.0; });
+    const AlternateSums logw(k, [&](std::size_t t) { return w[t] > 0.0 ? std::log(w[t]) : 0.0; });
+    const AlternateSums useful(k, [&](std::size_t t) {
+      return w[t] > 0.0 && (small(cycle[t]) || small(cycle[(t + 1) % k])) ? 1.0 : 0.0;
+    });
+    // Splitting at offset s: for odd k, cycle[s] is the singleton and the pairs are the
+    // edges s+1, s+3, ..., s+k−2; for even k the pairs are the edges s, s+2, ..., s+k−2.
     const bool odd = k % 2 == 1;
-    Split best = make_split(cycle, 0, odd);
-    const std::size_t candidates = odd ? k : (k == 2 ? 1 : 2);
-    for (std::size_t s = 1; s < candidates; ++s) {
-      Split cand = make_split(cycle, s, odd);
-      if (better(cand, best, k)) best = std::move(cand);
+    const std::size_t npairs = k / 2;
+    auto score = [&](std::size_t s) {
+      const std::size_t first_edge = odd ? s + 1 : s;
+      Score sc;
+      sc.missing = static_cast<index_t>(std::lround(missing.sum(first_edge, npairs)));
+      sc.log_product = logw.sum(first_edge, npairs);
+      sc.useful = static_cast<index_t>(std::lround(useful.sum(first_edge, npairs)));
+      if (odd) sc.singleton_diag = sd[cycle[s]];
+      return sc;
+    };
+    std::size_t best = 0;
+    Score best_score = score(0);
+    for (std::size_t s = 1; s < (odd ? k : 2); ++s) {
+      const Score sc = score(s);
+      if (better(sc, best_score, k)) best = s, best_score = sc;
     }
     // An odd cycle whose best singleton is small is kept whole (step 2b).
-    if (odd && small(cycle[best.first]) && k <= kMaxCycleGroup) {
-      bool coupled = true;
-      for (std::size_t t = 0; t < k; ++t)
-        coupled = coupled && scaled(cycle[t], cycle[(t + 1) % k]) > 0;
-      if (coupled) {
-        for (std::size_t t = 0; t < k; ++t) r.groups.members.push_back(cycle[(best.first + t) % k]);
-        r.groups.ptr.push_back(static_cast<index_t>(r.groups.members.size()));
-        continue;
-      }
+    if (odd && small(cycle[best]) && k <= kMaxCycleGroup &&
+        std::find(w.begin(), w.end(), 0.0) == w.end()) {
+      for (std::size_t t = 0; t < k; ++t) r.groups.members.push_back(cycle[(best + t) % k]);
+      r.groups.ptr.push_back(static_cast<index_t>(r.groups.members.size()));
+      continue;
     }
-    for (const auto& [u, v] : best.pairs) {
+    for (std::size_t p = 0; p < npairs; ++p) {
+      const std::size_t t = ((odd ? best + 1 : best) + 2 * p) % k;  // the pair's edge
+      const index_t u = cycle[t], v = cycle[(t + 1) % k];
+      if (w[t] == 0.0) continue;             // not coupled: no pair
       if (!small(u) && !small(v)) continue;  // two good 1×1 pivots: not worth a constraint
-      const bool u_first = sd[u] < sd[v] || (sd[u] == sd[v] && u < v);
-      if (u_first) {
-        add_group({u, v});
-      } else {
-        add_group({v, u});
-      }
+      add_pair(u, v);
     }
   }
   return r;

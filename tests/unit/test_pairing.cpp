@@ -270,6 +270,37 @@ TEST(Pairing, ZeroDiagonalOddCycleIsKeptWhole) {
               1e-12);
 }
 
+// One odd cycle of 100001 zero-diagonal unknowns (the matching of an odd cycle graph is a
+// rotation): too long to keep whole, it is split into 50000 pairs and a singleton, in
+// time linear in its length (choosing among its 100001 splittings naively is quadratic).
+TEST(Pairing, LongOddCycleIsSplitInLinearTime) {
+  const index_t n = 100001;
+  auto rng = test::fresh_rng();
+  std::uniform_real_distribution<double> u(0.5, 2.0);
+  SparseMatrix a;
+  a.n_rows = a.n_cols = n;
+  a.storage = Storage::lower;
+  a.offsets.assign(1, 0);
+  for (index_t j = 0; j < n; ++j) {  // lower triangle of the cycle 0-1-...-(n-1)-0
+    if (j + 1 < n) {
+      a.indices.push_back(j + 1);
+      a.values.push_back(u(rng));
+    }
+    if (j == 0) {
+      a.indices.push_back(n - 1);
+      a.values.push_back(u(rng));
+    }
+    a.offsets.push_back(static_cast<index_t>(a.indices.size()));
+  }
+  const auto sp = ordering::symmetric_matching_pairing(a, 0.01);
+  std::vector<char> seen(n, 0);
+  index_t k = 0;
+  for (index_t i = 0; !seen[i]; i = sp.matching[i]) seen[i] = 1, ++k;
+  ASSERT_EQ(k, n) << "the matching is one cycle";
+  EXPECT_EQ(sp.groups.n_groups(), (n - 1) / 2);
+  for (index_t q = 0; q < sp.groups.n_groups(); ++q) EXPECT_EQ(sp.groups.size(q), 2);
+}
+
 // ---------------------------------------------------------------------------------------
 // Groups and the orderings on the quotient graph
 
