@@ -98,6 +98,9 @@ SparseMatrix random_sparse(index_t n, index_t per_column, RandomKind kind, std::
     if (n == 1 && diag[j] == 0.0) diag[j] = 1.0;
   }
   a.offsets.assign(1, 0);
+  // where the matching uses the diagonal, the diagonal must be nonzero
+  for (index_t j = 0; j < n; ++j)
+    if (sigma[j] == j && diag[j] == 0.0) diag[j] = 1.0 + std::abs(val(rng));
   for (index_t j = 0; j < n; ++j) {
     // canonical: sorted rows; the diagonal goes in its sorted place
     std::vector<std::pair<index_t, double>> col;
