@@ -18,6 +18,12 @@
 
 namespace strata::symbolic {
 
+/// The full canonical CSC pattern of P A Pᵀ (values dropped) for a symmetric pattern A
+/// (a lower/upper matrix is expanded first) and perm new→old: row and column k of the
+/// result are row and column perm[k] of A. O(n + nnz). Throws InvalidInput for a
+/// non-square matrix or a perm that is not a permutation of 0..n-1.
+SparseMatrix permute_symmetric_pattern(const SparseMatrix& full, const std::vector<index_t>& perm);
+
 /// Elimination tree: parent[j] is the parent of column j, -1 for a root.
 std::vector<index_t> elimination_tree(const SparseMatrix& a);
 
@@ -77,6 +83,8 @@ struct AmalgamationOptions {
 
 /// Runs the whole symbolic phase: etree, postorder, column counts, fundamental
 /// supernodes, relaxed amalgamation, separator blocking, row structures of the fronts.
+/// Time and memory are near-linear in n + nnz(A) + Σ rows of the fronts. Throws InvalidInput when the pattern is not square
+/// or not symmetric (checked in O(nnz) on the canonical, sorted form).
 SymbolicFactorization analyze_pattern(const SparseMatrix& a, const AmalgamationOptions& opts);
 
 /// Factor flops of front f for Cholesky: Σ over its pivots of (number of rows below and

@@ -35,8 +35,11 @@ struct PivotStats {
   index_t positive = 0;     ///< inertia of D (LLᵀ: every pivot is positive)
   index_t negative = 0;
   index_t zero = 0;
-  double log_abs_det = 0;   ///< Σ log|pivot| (LU: of U11's diagonal)
-  int det_sign = 1;         ///< sign of the product of pivots, ignoring row swaps for LU
+  double log_abs_det = 0;   ///< Σ log|pivot| = log|det| of the eliminated pivot blocks
+                            ///< (LLᵀ: Σ log L_jj²; LDLᵀ: log|det D|; LU: of U11's diagonal)
+  int det_sign = 1;         ///< sign of det of the eliminated pivot blocks: sign of the
+                            ///< product of pivots, times the row-swap parity for LU (0 after
+                            ///< an exactly zero pivot)
   void merge(const PivotStats& o);
 };
 

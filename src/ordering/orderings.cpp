@@ -1,0 +1,154 @@
+// strata — whole-graph fill-reducing orderings and the ordering dispatcher
+// (see ordering.hpp).
+//
+// What: METIS_NodeND and SuiteSparse AMD applied to the whole graph, the natural and the
+// user orderings, the dispatcher compute_ordering, and permutation helpers. strata's own
+// nested dissection driver lives in nested_dissection.cpp.
+//
+// Why: nested dissection is the default because it keeps the separator tree the
+// multi-GPU schedule needs; METIS_NodeND is the reference it is measured against (and a
+// user choice), AMD is the best choice for small or very irregular problems, and the user
+// ordering lets a caller reuse a permutation computed elsewhere.
+//
+// Conventions: every permutation here is "new to old", perm[k] is the original index of
+// the k-th pivot (CHOLMOD's Perm). METIS_NodeND documents "row i of A' is row perm[i] of
+// A", so its `perm` output is new-to-old and its `iperm` old-to-new; AMD's P is
+// new-to-old ("row P[k] is the k-th pivot"). Both are checked by test_ordering.
+//
+// METIS 5.1 as packaged by Debian uses 32-bit idx_t: a graph whose order or number of
+// directed edges does not fit is rejected with InvalidInput rather than truncated.
+//
+// Sources: Amestoy, Davis & Duff, "An approximate minimum degree ordering algorithm",
+// SIAM J. Matrix Anal. Appl. 17 (1996); Karypis & Kumar, "A fast and high quality
+// multilevel scheme for partitioning irregular graphs", SIAM J. Sci. Comput. 20 (1998);
+// George, "Nested dissection of a regular finite element mesh", SIAM J. Numer. Anal. 10
+// (1973).
+#include <amd.h>
+#include <metis.h>
+
+#include <limits>
+#include <numeric>
+#include <string>
+#include <type_traits>
+
+#include "ordering/ordering.hpp"
+#include "strata/errors.hpp"
+
+namespace strata::ordering {
+
+std::vector<index_t> amd_ordering(const Graph& g) {
+  const index_t n = g.n;
+  if (n == 0) return {};
+  std::vector<index_t> perm(n);
+  if (g.n_edges_directed() == 0) {
+    std::iota(perm.begin(), perm.end(), index_t{0});
+    return perm;
+  }
+  double control[AMD_CONTROL], info[AMD_INFO];
+  amd_l_defaults(control);
+  static_assert(sizeof(SuiteSparse_long) == sizeof(index_t), "AMD long index must be 64-bit");
+  // index_t is int64_t; SuiteSparse_long is long (LP64): same representation.
+  const auto* ap = reinterpret_cast<const SuiteSparse_long*>(g.xadj.data());
+  const auto* ai = reinterpret_cast<const SuiteSparse_long*>(g.adjncy.data());
+  auto* p = reinterpret_cast<SuiteSparse_long*>(perm.data());
+  const SuiteSparse_long status = amd_l_order(n, ap, ai, p, control, info);
+  if (status == AMD_OUT_OF_MEMORY)
+    throw OutOfMemory(static_cast<std::size_t>(info[AMD_MEMORY]), "amd_l_order");
+  if (status != AMD_OK && status != AMD_OK_BUT_JUMBLED)
+    throw InvalidInput("amd_l_order rejected the graph (status " + std::to_string(status) + ")");
+  return perm;
+}
+
+std::vector<index_t> metis_ordering(const Graph& g) {
+  const index_t n = g.n;
+  if (n == 0) return {};
+  std::vector<index_t> perm(n);
+  if (g.n_edges_directed() == 0 || n <= 2) {  // every ordering has the same (zero) fill
+    std::iota(perm.begin(), perm.end(), index_t{0});
+    return perm;
+  }
+  constexpr index_t idx_max = std::numeric_limits<idx_t>::max();
+  if (n > idx_max || g.n_edges_directed() > idx_max)
+    throw InvalidInput("metis_ordering: the graph (" + std::to_string(n) + " vertices, " +
+                       std::to_string(g.n_edges_directed()) + " directed edges) exceeds METIS's " +
+                       std::to_string(IDXTYPEWIDTH) + "-bit index type");
+  std::vector<idx_t> xadj(g.xadj.begin(), g.xadj.end());
+  std::vector<idx_t> adjncy(g.adjncy.begin(), g.adjncy.end());
+  std::vector<idx_t> mperm(n), miperm(n);
+  idx_t nv = static_cast<idx_t>(n);
+  idx_t options[METIS_NOPTIONS];
+  METIS_SetDefaultOptions(options);
+  options[METIS_OPTION_NUMBERING] = 0;
+  const int status =
+      METIS_NodeND(&nv, xadj.data(), adjncy.data(), nullptr, options, mperm.data(), miperm.data());
+  if (status == METIS_ERROR_MEMORY) throw OutOfMemory(0, "METIS_NodeND");
+  if (status != METIS_OK)
+    throw InvalidInput("METIS_NodeND failed (status " + std::to_string(status) + ")");
+  for (index_t k = 0; k < n; ++k) perm[k] = mperm[k];  // METIS perm: new -> old
+  return perm;
+}
+
+OrderingResult compute_ordering(const Graph& g, const Options& opts) {
+  OrderingResult r;
+  const index_t n = g.n;
+  switch (opts.ordering) {
+    case OrderingMethod::nested_dissection: {
+      if (opts.nd_leaf_size < 1)
+        throw InvalidInput("Options::nd_leaf_size must be at least 1 (got " +
+                           std::to_string(opts.nd_leaf_size) + ")");
+      NestedDissectionOptions nd;
+      nd.leaf_size = opts.nd_leaf_size;
+      return nested_dissection(g, nd);
+    }
+    case OrderingMethod::metis:
+      r.perm = metis_ordering(g);
+      return r;
+    case OrderingMethod::amd:
+      r.perm = amd_ordering(g);
+      return r;
+    case OrderingMethod::natural:
+      r.perm.resize(n);
+      std::iota(r.perm.begin(), r.perm.end(), index_t{0});
+      return r;
+    case OrderingMethod::user: {
+      const auto& p = opts.user_permutation;
+      if (static_cast<index_t>(p.size()) != n)
+        throw InvalidInput("user_permutation has " + std::to_string(p.size()) +
+                           " entries, expected " + std::to_string(n));
+      std::vector<index_t> seen(n, -1);
+      for (index_t k = 0; k < n; ++k) {
+        const index_t v = p[k];
+        if (v < 0 || v >= n)
+          throw InvalidInput("user_permutation[" + std::to_string(k) + "] = " + std::to_string(v) +
+                             " is out of range [0, " + std::to_string(n) + ")");
+        if (seen[v] >= 0)
+          throw InvalidInput("user_permutation[" + std::to_string(k) + "] = " + std::to_string(v) +
+                             " repeats user_permutation[" + std::to_string(seen[v]) + "]");
+        seen[v] = k;
+      }
+      r.perm = p;
+      return r;
+    }
+  }
+  throw InvalidInput("compute_ordering: unknown ordering method");
+}
+
+std::vector<index_t> invert_permutation(const std::vector<index_t>& perm) {
+  const index_t n = static_cast<index_t>(perm.size());
+  if (!is_permutation(perm, n)) throw InvalidInput("invert_permutation: not a permutation");
+  std::vector<index_t> inv(n);
+  for (index_t k = 0; k < n; ++k) inv[perm[k]] = k;
+  return inv;
+}
+
+bool is_permutation(const std::vector<index_t>& perm, index_t n) {
+  if (n < 0 || static_cast<index_t>(perm.size()) != n) return false;
+  std::vector<char> seen(n, 0);
+  for (const index_t v : perm) {
+    if (v < 0 || v >= n || seen[v]) return false;
+    seen[v] = 1;
+  }
+  return true;
+}
+
+}  // namespace strata::ordering

@@ -1,0 +1,298 @@
+// strata — the assembly tree: fundamental supernodes, relaxed amalgamation, separator
+// blocking and the row structures of the fronts; analyze_pattern drives the whole
+// symbolic phase (see symbolic.hpp).
+//
+// Sources:
+//  * Fundamental supernodes: Liu, Ng & Peyton, "On finding supernodes for sparse matrix
+//    computations", SIAM J. Matrix Anal. Appl. 14(1), 1993. In a postordered etree,
+//    column j+1 continues the supernode of column j when j is the only child of j+1 and
+//    colcount[j] = colcount[j+1] + 1.
+//  * Relaxed amalgamation: Ashcraft & Grimes, "The influence of relaxed supernode
+//    partitions on the multifrontal method", ACM TOMS 15(4), 1989, with the rule CHOLMOD
+//    uses (Chen, Davis, Hager & Rajamanickam, ACM TOMS 35(3), 2008, the nrelax/zrelax
+//    parameters): supernodes are visited from the last to the first; supernode s is
+//    merged into its current parent only when that parent starts at s+1 (s is its last
+//    child), which keeps the pivot columns of every front contiguous in the postorder.
+//    The merged front has ns pivots and is stored as a lower trapezoid of
+//    ns(ns+1)/2 + ns·(rows below the pivots) entries; merging adds to each of s's columns
+//    the rows of the parent it does not have. They merge when ns <= relax_small, or when
+//    the fraction z of explicit zeros in the merged trapezoid is below relax_zeros_1 if
+//    ns <= relax_size_1, below relax_zeros_2 if ns <= relax_size_2, below relax_zeros_3
+//    otherwise (with decreasing thresholds, as the defaults are, this is CHOLMOD's
+//    rule). Two details follow CHOLMOD (cholmod_super_symbolic) exactly: a merge that
+//    adds no explicit zeros is always made, and the zeros added by a merge accepted for
+//    its size alone (ns <= relax_small) are not counted in the zero fractions of later
+//    merges. With the same parameters the fronts are then exactly CHOLMOD's relaxed
+//    supernodes (the tests check this). relax_small <= 1 with zero thresholds gives
+//    fronts without amalgamation zeros: the fundamental supernodes, plus last children
+//    that fit their parent exactly.
+//  * Separator blocking (Jung & Bae 2018, "separators divided into smaller blocks"): a
+//    front with more than max_block_size pivots becomes a chain of fronts: pieces of
+//    exactly max_block_size pivots from the bottom up, the remainder on top; each piece's
+//    parent is the next piece, the top piece keeps the front's parent.
+//  * Row structures: the rows of a front are its pivots, then every row i beyond them
+//    whose row subtree passes through the front. They are found by walking, for every
+//    original entry A(i, j), j < i, from the front of j up the assembly tree to the front
+//    of i, stopping at a front already marked for row i (the row-subtree traversal of
+//    Liu 1990 / Davis 2006 §4.2 on the contracted tree). Rows are visited in increasing
+//    order, so every front's list comes out sorted, and the work is O(nnz(A) + Σ rows):
+//    linear in the input plus the output. This is exactly the symbolic union of the
+//    children's contribution-block rows and the front's original entries.
+#include <algorithm>
+#include <string>
+
+#include "strata/errors.hpp"
+#include "symbolic/symbolic.hpp"
+
+namespace strata::symbolic {
+namespace {
+
+/// Supernodes as contiguous column ranges of the postordered tree.
+struct Partition {
+  std::vector<index_t> first;   ///< first column of each supernode, plus n at the end
+  std::vector<index_t> parent;  ///< parent supernode, -1 for a root
+};
+
+index_t count(const Partition& p) { return static_cast<index_t>(p.first.size()) - 1; }
+
+/// Maps each column to the supernode of `p` holding it.
+std::vector<index_t> owner_of_columns(const Partition& p, index_t n) {
+  std::vector<index_t> owner(n);
+  for (index_t s = 0; s < count(p); ++s)
+    for (index_t j = p.first[s]; j < p.first[s + 1]; ++j) owner[j] = s;
+  return owner;
+}
+
+/// Fundamental supernodes of a postordered etree `parent` (parent[j] > j) with column
+/// counts `cc`.
+Partition fundamental_supernodes(const std::vector<index_t>& parent,
+                                 const std::vector<index_t>& cc) {
+  const index_t n = static_cast<index_t>(parent.size());
+  std::vector<index_t> nchild(n, 0);
+  for (index_t j = 0; j < n; ++j)
+    if (parent[j] != -1) ++nchild[parent[j]];
+  Partition p;
+  for (index_t j = 0; j < n; ++j) {
+    const bool continues = j > 0 && parent[j - 1] == j && nchild[j] == 1 && cc[j - 1] == cc[j] + 1;
+    if (!continues) p.first.push_back(j);
+  }
+  p.first.push_back(n);
+  const std::vector<index_t> owner = owner_of_columns(p, n);
+  p.parent.resize(count(p));
+  for (index_t s = 0; s < count(p); ++s) {
+    const index_t top = p.first[s + 1] - 1;
+    p.parent[s] = parent[top] == -1 ? -1 : owner[parent[top]];
+  }
+  return p;
+}
+
+/// Relaxed amalgamation of the supernodes `fs` (see the file header). `cc` are the
+/// column counts of the postordered tree.
+Partition relaxed_amalgamation(const Partition& fs, const std::vector<index_t>& cc,
+                               const AmalgamationOptions& o, index_t n) {
+  const index_t ns_count = count(fs);
+  std::vector<index_t> ncols(ns_count), nrows(ns_count), merged(ns_count, -1);
+  std::vector<double> zeros(ns_count, 0.0);
+  for (index_t s = 0; s < ns_count; ++s) {
+    ncols[s] = fs.first[s + 1] - fs.first[s];
+    nrows[s] = cc[fs.first[s]];  // rows of the leading column
+  }
+  // merged[x] = y: supernode x was absorbed into the group named y (y < x, the lowest
+  // supernode of the group). Visited from the top, so a group grows downwards.
+  for (index_t s = ns_count - 2; s >= 0; --s) {
+    if (fs.parent[s] == -1) continue;
+    index_t cur = fs.parent[s];
+    while (merged[cur] != -1) cur = merged[cur];
+    for (index_t t = fs.parent[s]; merged[t] != -1;) {  // path compression
+      const index_t up = merged[t];
+      merged[t] = cur;
+      t = up;
+    }
+    if (cur != s + 1) continue;  // s is not the last child of its current parent
+
+    const index_t ns = ncols[s] + ncols[s + 1];
+    const double per_col_new = static_cast<double>(nrows[s + 1] + ncols[s] - nrows[s]);
+    const double total_zeros = zeros[s + 1] + static_cast<double>(ncols[s]) * per_col_new;
+    // Small merges are made unconditionally and, as in CHOLMOD, their zeros are not
+    // counted in later fractions; a merge that adds no explicit zeros is always made.
+    const bool small = ns <= o.relax_small;
+    bool merge = small || per_col_new == 0;
+    if (!merge) {
+      const double xns = static_cast<double>(ns);
+      const double size =
+          xns * (xns + 1) / 2 + xns * static_cast<double>(nrows[s + 1] - ncols[s + 1]);
+      const double z = total_zeros / size;
+      const double limit = ns <= o.relax_size_1   ? o.relax_zeros_1
+                           : ns <= o.relax_size_2 ? o.relax_zeros_2
+                                                  : o.relax_zeros_3;
+      merge = z < limit;
+    }
+    if (merge) {
+      zeros[s] = small ? zeros[s + 1] : total_zeros;
+      merged[s + 1] = s;
+      nrows[s] = ncols[s] + nrows[s + 1];
+      ncols[s] += ncols[s + 1];
+    }
+  }
+  Partition r;
+  for (index_t s = 0; s < ns_count; ++s)
+    if (merged[s] == -1) r.first.push_back(fs.first[s]);
+  r.first.push_back(n);
+  return r;  // parents are filled in by the caller, from the etree
+}
+
+/// Splits every range of more than `max_block` columns into a chain (see the header).
+/// Returns the new ranges; chain_next[f] is true when front f's parent is front f+1.
+Partition block_separators(const Partition& p, index_t max_block, std::vector<char>& chain_next) {
+  Partition r;
+  chain_next.clear();
+  for (index_t s = 0; s < count(p); ++s) {
+    const index_t b = p.first[s], e = p.first[s + 1];
+    index_t start = b;
+    if (max_block > 0)
+      while (e - start > max_block) {
+        r.first.push_back(start);
+        chain_next.push_back(1);
+        start += max_block;
+      }
+    r.first.push_back(start);
+    chain_next.push_back(0);
+  }
+  r.first.push_back(p.first.back());
+  return r;
+}
+
+/// Throws InvalidInput unless the canonical (sorted) CSC pattern `a` is symmetric. One
+/// sweep: columns are visited in increasing order, so the entries (j, i), j < i, of
+/// column i are met in the order they are stored; each entry A(i, j), i > j, must be the
+/// next unmatched one above the diagonal of column i. O(nnz), O(n) memory.
+void require_symmetric_pattern(const SparseMatrix& a) {
+  auto fail = [](index_t r, index_t c) {
+    throw InvalidInput("analyze_pattern: the pattern is not symmetric (or not sorted): entry (" +
+                       std::to_string(r) + ", " + std::to_string(c) + ") has no mirror entry");
+  };
+  const index_t n = a.n_cols;
+  std::vector<index_t> next(a.offsets.begin(), a.offsets.end() - 1);
+  for (index_t j = 0; j < n; ++j)
+    for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p) {
+      const index_t i = a.indices[p];
+      if (i < 0 || i >= n) throw InvalidInput("analyze_pattern: row index out of range");
+      if (i <= j) continue;
+      if (next[i] >= a.offsets[i + 1] || a.indices[next[i]] != j) fail(i, j);
+      ++next[i];
+    }
+  for (index_t i = 0; i < n; ++i)
+    if (next[i] < a.offsets[i + 1] && a.indices[next[i]] < i) fail(a.indices[next[i]], i);
+}
+
+}  // namespace
+
+// Flop convention: a pivot column with c entries (diagonal included) costs c² — about
+// c²/2 multiply-adds of its rank-one update of the trailing c−1 rows, counted as 2 flops
+// each, which dominates the c−1 divisions and the square root. Σ_j c_j² is the usual
+// Cholesky count (George & Liu 1981); CHOLMOD's Common->fl is the same sum over the
+// columns of L (the tests check both). LU on the same fronts costs about twice as much.
+double front_flops(const AssemblyTree& t, index_t f) {
+  const index_t np = t.n_pivots(f), nr = t.n_rows(f);
+  double flops = 0;
+  for (index_t k = 0; k < np; ++k) {
+    const double c = static_cast<double>(nr - k);
+    flops += c * c;
+  }
+  return flops;
+}
+
+SymbolicFactorization analyze_pattern(const SparseMatrix& a, const AmalgamationOptions& opts) {
+  if (a.layout != Layout::csc || a.n_rows != a.n_cols)
+    throw InvalidInput("analyze_pattern needs a square CSC pattern, got " +
+                       std::to_string(a.n_rows) + "x" + std::to_string(a.n_cols));
+  if (static_cast<index_t>(a.offsets.size()) != a.n_cols + 1)
+    throw InvalidInput("analyze_pattern: offsets has the wrong length");
+  require_symmetric_pattern(a);
+  const index_t n = a.n_cols;
+  SymbolicFactorization sf;
+  sf.parent = elimination_tree(a);
+  sf.post = postorder(sf.parent);
+  sf.colcount = column_counts(a, sf.parent, sf.post);
+  sf.nnz_l = 0;
+  for (index_t c : sf.colcount) sf.nnz_l += c;
+
+  // The etree and counts in the postordered numbering: parent[k] > k.
+  std::vector<index_t> ipost(n), par(n), cc(n);
+  for (index_t k = 0; k < n; ++k) ipost[sf.post[k]] = k;
+  for (index_t k = 0; k < n; ++k) {
+    const index_t p = sf.parent[sf.post[k]];
+    par[k] = p == -1 ? -1 : ipost[p];
+    cc[k] = sf.colcount[sf.post[k]];
+  }
+
+  const Partition fundamental = fundamental_supernodes(par, cc);
+  const Partition relaxed = relaxed_amalgamation(fundamental, cc, opts, n);
+  std::vector<char> chain_next;
+  const Partition fronts = block_separators(relaxed, opts.max_block_size, chain_next);
+
+  AssemblyTree& t = sf.tree;
+  t.n = n;
+  t.first_pivot = fronts.first;
+  const index_t nf = count(fronts);
+  t.front_of_column = owner_of_columns(fronts, n);
+  t.parent.assign(nf, -1);
+  for (index_t f = 0; f < nf; ++f) {
+    if (chain_next[f]) {
+      t.parent[f] = f + 1;
+    } else {
+      const index_t up = par[t.first_pivot[f + 1] - 1];
+      t.parent[f] = up == -1 ? -1 : t.front_of_column[up];
+    }
+  }
+
+  // Children, in increasing order (counting sort by parent).
+  t.child_offsets.assign(nf + 1, 0);
+  for (index_t f = 0; f < nf; ++f)
+    if (t.parent[f] != -1) ++t.child_offsets[t.parent[f] + 1];
+  for (index_t f = 0; f < nf; ++f) t.child_offsets[f + 1] += t.child_offsets[f];
+  t.children.resize(t.child_offsets[nf]);
+  {
+    std::vector<index_t> next(t.child_offsets.begin(), t.child_offsets.end() - 1);
+    for (index_t f = 0; f < nf; ++f)
+      if (t.parent[f] != -1) t.children[next[t.parent[f]]++] = f;
+  }
+
+  // Row structures by row-subtree walks on the assembly tree, two passes (count, fill).
+  // Row i of the tree is column post[i] of the input; its entries left of the diagonal
+  // are the entries of input column post[i] whose postordered index is below i.
+  std::vector<index_t> mark(nf, -1), extra(nf, 0);
+  auto walk = [&](auto&& visit) {
+    std::fill(mark.begin(), mark.end(), -1);
+    for (index_t i = 0; i < n; ++i) {
+      const index_t fi = t.front_of_column[i];
+      const index_t col = sf.post[i];
+      for (index_t p = a.offsets[col]; p < a.offsets[col + 1]; ++p) {
+        const index_t j = ipost[a.indices[p]];
+        if (j >= i) continue;
+        for (index_t f = t.front_of_column[j]; f != fi; f = t.parent[f]) {
+          // Only an unsymmetric pattern can leave the tree before reaching row i's front.
+          if (f == -1) throw InvalidInput("analyze_pattern: the pattern is not symmetric");
+          if (mark[f] == i) break;  // the rest of the path is already marked
+          mark[f] = i;
+          visit(f, i);
+        }
+      }
+    }
+  };
+  walk([&](index_t f, index_t) { ++extra[f]; });
+  t.row_offsets.assign(nf + 1, 0);
+  for (index_t f = 0; f < nf; ++f)
+    t.row_offsets[f + 1] = t.row_offsets[f] + t.n_pivots(f) + extra[f];
+  t.rows.resize(t.row_offsets[nf]);
+  std::vector<index_t> fill(nf);
+  for (index_t f = 0; f < nf; ++f) {
+    index_t w = t.row_offsets[f];
+    for (index_t j = t.first_pivot[f]; j < t.first_pivot[f + 1]; ++j) t.rows[w++] = j;
+    fill[f] = w;
+  }
+  walk([&](index_t f, index_t i) { t.rows[fill[f]++] = i; });
+  return sf;
+}
+
+}  // namespace strata::symbolic

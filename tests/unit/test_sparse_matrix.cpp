@@ -1,0 +1,159 @@
+// strata — tests of SparseMatrix validation, canonical forms and SpMV, against dense
+// copies built independently from the raw triplets.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "sparse/generators.hpp"
+#include "strata/errors.hpp"
+#include "strata/sparse_matrix.hpp"
+#include "support/test_support.hpp"
+
+namespace strata {
+namespace {
+
+// A random matrix with unsorted, duplicated entries in the given layout/storage, and the
+// dense matrix it represents (duplicates summed, symmetric storage mirrored).
+SparseMatrix messy(index_t m, index_t n, Layout layout, Storage storage, std::mt19937_64& rng,
+                   std::vector<double>& dense) {
+  dense.assign(m * n, 0.0);
+  SparseMatrix a;
+  a.n_rows = m;
+  a.n_cols = n;
+  a.layout = layout;
+  a.storage = storage;
+  const index_t nmaj = layout == Layout::csc ? n : m;
+  const index_t nmin = layout == Layout::csc ? m : n;
+  std::uniform_int_distribution<index_t> pick(0, std::max<index_t>(nmin - 1, 0));
+  std::uniform_int_distribution<int> cnt(0, 4);
+  std::uniform_real_distribution<double> val(-1, 1);
+  a.offsets.assign(1, 0);
+  for (index_t j = 0; j < nmaj; ++j) {
+    const int c = nmin ? cnt(rng) : 0;
+    for (int t = 0; t < c; ++t) {
+      index_t i = pick(rng);
+      index_t r = layout == Layout::csc ? i : j, col = layout == Layout::csc ? j : i;
+      if (storage == Storage::lower && r < col) std::swap(r, col);
+      if (storage == Storage::upper && r > col) std::swap(r, col);
+      const double v = val(rng);
+      a.indices.push_back(layout == Layout::csc ? r : col);
+      // keep the major index consistent after a swap: re-derive
+      if ((layout == Layout::csc ? col : r) != j) {
+        a.indices.pop_back();
+        continue;
+      }
+      a.values.push_back(v);
+      dense[r + col * m] += v;
+      if (storage != Storage::full && r != col) dense[col + r * m] += v;
+    }
+    a.offsets.push_back(static_cast<index_t>(a.indices.size()));
+  }
+  return a;
+}
+
+TEST(SparseMatrix, CanonicalizeAndExpandMatchDense) {
+  auto rng = test::fresh_rng();
+  for (index_t n : {0, 1, 2, 3, 5, 733})
+    for (Layout layout : {Layout::csc, Layout::csr})
+      for (Storage storage : {Storage::full, Storage::lower, Storage::upper}) {
+        std::vector<double> dense;
+        SparseMatrix a = messy(n, n, layout, storage, rng, dense);
+        SparseMatrix c = canonicalize(a);
+        EXPECT_EQ(c.layout, Layout::csc);
+        EXPECT_EQ(c.storage, storage);
+        for (index_t j = 0; j < n; ++j)
+          for (index_t p = c.offsets[j] + 1; p < c.offsets[j + 1]; ++p)
+            EXPECT_LT(c.indices[p - 1], c.indices[p]) << "not sorted or duplicated";
+        EXPECT_EQ(test::to_dense(c), test::to_dense(a));
+        SparseMatrix e = expand_symmetric(a);
+        EXPECT_EQ(e.storage, Storage::full);
+        std::vector<double> de = test::to_dense(e);
+        for (index_t k = 0; k < n * n; ++k) EXPECT_NEAR(de[k], dense[k], 1e-15);
+        // SpMV against the dense product
+        std::vector<double> x(n), y(n);
+        std::uniform_real_distribution<double> u(-1, 1);
+        for (double& v : x) v = u(rng);
+        multiply(a, x.data(), y.data());
+        for (index_t i = 0; i < n; ++i) {
+          double s = 0;
+          for (index_t j = 0; j < n; ++j) s += dense[i + j * n] * x[j];
+          EXPECT_NEAR(y[i], s, 1e-13);
+        }
+      }
+}
+
+TEST(SparseMatrix, RectangularCanonicalize) {
+  auto rng = test::fresh_rng();
+  std::vector<double> dense;
+  SparseMatrix a = messy(7, 3, Layout::csr, Storage::full, rng, dense);
+  SparseMatrix c = canonicalize(a);
+  EXPECT_EQ(test::to_dense(c), test::to_dense(a));
+}
+
+TEST(SparseMatrix, ValidateNamesTheProblem) {
+  SparseMatrix a;
+  a.n_rows = a.n_cols = 3;
+  a.offsets = {0, 1, 2, 3};
+  a.indices = {0, 5, 2};
+  a.values = {1, 2, 3};
+  try {
+    validate(a);
+    FAIL();
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("indices[1] = 5"), std::string::npos) << e.what();
+  }
+  a.indices = {0, 1, 2};
+  a.values[2] = std::nan("");
+  EXPECT_THROW(validate(a), InvalidInput);
+  a.values[2] = 3;
+  a.offsets = {0, 2, 1, 3};
+  EXPECT_THROW(validate(a), InvalidInput);
+  a.offsets = {0, 1, 2, 3};
+  a.storage = Storage::lower;
+  a.indices = {0, 0, 2};  // (0,1) is above the diagonal
+  EXPECT_THROW(validate(a), InvalidInput);
+  a.indices = {0, 1, 2};
+  EXPECT_NO_THROW(validate(a));
+  a.values.resize(2);
+  EXPECT_THROW(validate(a), InvalidInput);
+}
+
+TEST(SparseMatrix, NumericalSymmetry) {
+  auto rng = test::fresh_rng();
+  SparseMatrix s = test::random_sparse(50, 3, test::RandomKind::spd, rng);
+  SparseMatrix full = expand_symmetric(s);
+  EXPECT_TRUE(is_numerically_symmetric(full));
+  SparseMatrix g = test::random_sparse(50, 3, test::RandomKind::general, rng);
+  EXPECT_FALSE(is_numerically_symmetric(g));
+}
+
+TEST(Generators, GridLaplaciansAndElasticityAreSpdStencils) {
+  SparseMatrix l2 = generators::laplacian_2d(4, 3);
+  EXPECT_NO_THROW(validate(l2));
+  EXPECT_EQ(l2.n_rows, 12);
+  // 2D 5-point: nnz(lower) = n + edges = 12 + (3*3 + 4*2)
+  EXPECT_EQ(l2.nnz(), 12 + 9 + 8);
+  SparseMatrix l3 = generators::laplacian_3d(3, 3, 3);
+  EXPECT_EQ(l3.nnz(), 27 + 3 * 18);
+  std::vector<double> ones(27, 1.0), y(27);
+  multiply(l3, ones.data(), y.data());
+  EXPECT_EQ(y[13], 0.0);  // interior row sums to zero
+  SparseMatrix e = generators::elasticity_3d(3, 3, 3);
+  EXPECT_NO_THROW(validate(e));
+  EXPECT_EQ(e.n_rows, 81);
+  // strict diagonal dominance (hence SPD)
+  std::vector<double> d = test::to_dense(e);
+  for (index_t i = 0; i < 81; ++i) {
+    double off = 0;
+    for (index_t j = 0; j < 81; ++j)
+      if (j != i) off += std::abs(d[i + j * 81]);
+    EXPECT_GT(d[i + i * 81], off);
+  }
+  // the center node couples with all 26 neighbours: 27 nodes × 3 dofs per row
+  index_t row_nnz = 0;
+  for (index_t j = 0; j < 81; ++j) row_nnz += d[3 * 13 + j * 81] != 0;
+  EXPECT_EQ(row_nnz, 81);
+}
+
+}  // namespace
+}  // namespace strata
