@@ -267,8 +267,9 @@ bool Integrator::try_step(double h, StepInfo& info) {
   res_.resize(N);
   dx_.resize(N);
   rhs_.resize(N);
-  double err_prev = 0;
-  bool refresh = false;
+  double err_first = 0;
+  int since_jac = 0;  // iterations since the factor was last refreshed
+  bool refresh = false, converged = false, fresh = false;
   const bool dump = opts_.dump_step == step_ + 1 && !opts_.dump_dir.empty();
   for (int it = 1; it <= opts_.max_newton_iterations; ++it) {
     const bool need_jac = !factor_valid_ || refresh || !opts_.modified_newton || (dump && it == 1);
@@ -295,6 +296,8 @@ bool Integrator::try_step(double h, StepInfo& info) {
       }
       factor_beta_ = bdf.beta;
       refresh = false;
+      fresh = true;
+      since_jac = 0;
     }
     for (index_t i = 0; i < N; ++i) rhs_[i] = -res_[i];
     Timer ts;
@@ -322,7 +325,33 @@ bool Integrator::try_step(double h, StepInfo& info) {
       err = std::max(err, std::abs(dx_[n + i]) / (atol / h + rtol * std::abs(xv[i])));
       err = std::max(err, std::abs(dx_[2 * n + i]) / (atol + rtol * std::abs(xq[i])));
     }
-    if (err <= 1) {
+    // Convergence test (Brenan, Campbell & Petzold 1996, §5.2.2, as in DASSL): with the
+    // rate ρ = (‖δ_k‖/‖δ_1‖)^(1/(k−1)) since the last new Jacobian, the remaining error is
+    // about ρ/(1−ρ)‖δ_k‖. An update 1000 times below the tolerance is accepted as it is
+    // (rounding level: the rate is meaningless there).
+    ++since_jac;
+    if (since_jac == 1) {
+      err_first = err;
+      converged = err <= 1e-3;
+    } else {
+      const double rho = std::pow(err / err_first, 1.0 / (since_jac - 1));
+      if ((rho < 1 && rho / (1 - rho) * err <= 1) || err <= 1e-3) {
+        converged = true;
+      } else if (rho >= 0.9 && fresh && err <= 1) {
+        converged = true;  // stalled at rounding level within the tolerance
+      } else if (rho >= 0.9) {
+        if (fresh) {  // diverging or stalling with a Jacobian of this step: give up the step
+          factor_valid_ = false;
+          return false;
+        }
+        refresh = true;  // stale Jacobian: get a new one and restart the rate estimate
+        since_jac = 0;
+      } else if (rho > 0.5) {
+        refresh = true;
+      }
+    }
+    if (refresh) since_jac = 0;
+    if (converged) {
       slow_last_step_ = it > 3;
       q_.assign(xq, xq + n);
       v_.assign(xv, xv + n);
@@ -332,15 +361,6 @@ bool Integrator::try_step(double h, StepInfo& info) {
       info.order = p;
       return true;
     }
-    if (it > 1) {
-      const double theta = err / err_prev;
-      if (theta > 0.5) refresh = true;  // modified Newton converging slowly: new Jacobian
-      if (theta >= 1 && need_jac) {     // diverging with a fresh Jacobian
-        factor_valid_ = false;
-        return false;
-      }
-    }
-    err_prev = err;
   }
   factor_valid_ = false;
   return false;
