@@ -246,7 +246,10 @@ std::unique_ptr<Constraint> planar(K k, const Model& m, const JointSpec& s) {
   k.si = xy(s.fi.s);
   k.sj = xy(s.fj.s);
   k.ui = xy(s.fi.x);
-  return wrap_constraint<3, 6>(std::move(k), std::move(dofs), s.name);
+  auto c = wrap_constraint<3, 6>(std::move(k), std::move(dofs), s.name);
+  c->reaction_dim = 2;
+  c->reaction_local = refs[1].moving() ? refs[1].local : refs[0].local;
+  return c;
 }
 template <class K>
 std::unique_ptr<Constraint> spatial(K k, const Model& m, const JointSpec& s) {
@@ -256,7 +259,10 @@ std::unique_ptr<Constraint> spatial(K k, const Model& m, const JointSpec& s) {
   k.bj = refs[1];
   k.fi = s.fi;
   k.fj = s.fj;
-  return wrap_constraint<7, 14>(std::move(k), std::move(dofs), s.name);
+  auto c = wrap_constraint<7, 14>(std::move(k), std::move(dofs), s.name);
+  c->reaction_dim = 3;
+  c->reaction_local = refs[1].moving() ? refs[1].local : refs[0].local;
+  return c;
 }
 
 }  // namespace

@@ -40,6 +40,10 @@ class Constraint {
   std::string name;           ///< for messages, e.g. "joints[3] 'J4'"
   std::vector<index_t> dofs;  ///< global coordinate indices of the local vector z
   int rows = 0;               ///< number of equations
+  /// Local index of the translational coordinates of the body whose reaction force is
+  /// reported (body j of a joint, or body i when j does not move); -1: none.
+  int reaction_local = -1;
+  int reaction_dim = 0;  ///< 2 (planar) or 3
   /// Evaluates at local q, v, a (each dofs.size()) and time t. jacobian=false fills only
   /// phi, phid, phidd.
   virtual void evaluate(const double* q, const double* v, const double* a, double t, bool jacobian,
