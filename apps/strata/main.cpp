@@ -242,7 +242,7 @@ struct SimulateArgs {
   double t_end = 0, step = 0, output_interval = 0, newton_tol = 0;
   int order = 0, threads = 0;
   index_t dump_step = 1;
-  bool vtk = false, full_newton = false, quiet = false;
+  bool vtk = false, full_newton = false, quiet = false, verbose = false, dense = false;
 };
 
 // The default model: a tracked vehicle of a few hundred links (runs in well under a
@@ -281,6 +281,8 @@ int run_simulate(const SimulateArgs& a) {
   io.modified_newton = !a.full_newton;
   if (a.newton_tol > 0) io.newton_rtol = a.newton_tol;
   io.dump_dir = a.dump_dir;
+  io.verbose = a.verbose;
+  io.dense_solver = a.dense;
   io.dump_step = a.dump_dir.empty() ? -1 : a.dump_step;
   o.output_dir = a.output;
   o.output_interval = a.output_interval;
@@ -357,6 +359,9 @@ int main(int argc, char** argv) {
   simulate->add_option("--newton-tol", sim.newton_tol, "relative Newton tolerance (default 1e-8)");
   simulate->add_option("--threads", sim.threads, "host threads for strata (0: all)");
   simulate->add_flag("--quiet", sim.quiet, "no progress bar");
+  simulate->add_flag("--verbose", sim.verbose, "print every Newton iteration (stderr)");
+  simulate->add_flag("--dense-reference", sim.dense,
+                     "solve with dense LAPACK LU instead of strata (diagnosis; small models)");
   CLI11_PARSE(app, argc, argv);
   try {
     if (*analyze) return run_analyze(analyze_args);

@@ -235,12 +235,16 @@ struct Load {
 
 /// Normal force and regularised friction for penetration (c0 = δ, c1 = δ̇), unit normal
 /// n and slip velocity vt (already tangential). Returns false when not in contact.
+constexpr double kDampingDepth = 1e-3;  // m
 template <class S, int N>
 bool contact_force(const Jet1<S>& pen, const Vec<S, N>& n, const Vec<S, N>& vt, double k, double c,
                    double mu, double vs, Vec<S, N>& f) {
   using std::sqrt;
   if (value(pen.c0) <= 0) return false;
-  const S fn = pen.c0 * k + pen.c1 * c;
+  // the damping grows over the first kDampingDepth of penetration, so that the normal
+  // force is continuous at first contact (a jump there stalls Newton's method)
+  const S ramp = value(pen.c0) < kDampingDepth ? pen.c0 * (1.0 / kDampingDepth) : S(1.0);
+  const S fn = pen.c0 * k + pen.c1 * ramp * c;
   if (value(fn) <= 0) return false;
   const S ft = fn * mu / sqrt(dot(vt, vt) + vs * vs);
   f = n * fn - vt * ft;

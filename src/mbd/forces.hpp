@@ -127,7 +127,7 @@ struct ContactSpec {
   double slip_velocity = 1e-2;  ///< regularisation speed of the friction law (m/s)
 };
 /// Penalty contact of a sphere (planar: a disc) with the ground plane: normal force
-/// max(0, k δ + c δ̇), friction −μ f_n v_t/√(|v_t|² + v_s²) at the contact point.
+/// max(0, k δ + c s(δ) δ̇), s(δ) = min(1, δ / 1 mm) (continuous at first contact), friction −μ f_n v_t/√(|v_t|² + v_s²) at the contact point.
 std::unique_ptr<Force> make_ground_contact(const Model& model, const ContactSpec& spec);
 
 struct WheelContactSpec {

@@ -153,7 +153,156 @@ json pendulum_chain(int n, bool spatial) {
   return j;
 }
 
-json tracked_vehicle(int links) { throw InvalidInput("tracked vehicle: not yet implemented"); }
+// ----------------------------------------------------------------- tracked vehicle -----
+// A small tracked vehicle (x forward, y left, z up, ground z = 0). Per side: a driven
+// sprocket (front), an idler (rear) and five road wheels, all of radius R on revolute
+// joints to the chassis at the same height, so that the track loop is a "stadium" of two
+// half circles joined by straight runs; the lower run lies on the ground. The loop has
+// `links` links placed at equal arc length, joined by revolute joints (axis y) and
+// closed by one stiff bushing (a closed loop of parallel revolute joints has redundant
+// constraints). Contact: one sphere on the inner face of each link against every wheel
+// of its side (sphere–cylinder), two spheres on the outer face against the ground. The
+// sprocket turns by a rotation driver with a smooth speed ramp.
+json tracked_vehicle(int links) {
+  if (links < 8) throw InvalidInput("tracked vehicle: need at least 8 links per track");
+  const double R = 0.25, t = 0.04, D = 3.0, y_track = 0.9, width = 0.3;
+  const double zc = R + t / 2;  // wheel centre height: lower run of link centres at t/2
+  const double rc = R + t / 2;  // radius of the link-centre path around sprocket/idler
+  const double perimeter = 2 * D + 2 * M_PI * rc;
+  const double m_chassis = 1500, m_wheel = 40, m_track = 200;
+  const double m_link = m_track / links;
+  // a chord of the half circles passes closer to the wheel centre than its ends: make the
+  // contact cylinder that much smaller, so that nothing penetrates at the start
+  const double sag = rc * (1 - std::cos(0.5 * perimeter / links / rc));
+  const double k_ground = 1e6, c_ground = 2e3, k_wheel = 5e6, c_wheel = 2e3;
+  const double speed = 1.0, ramp = 0.5;  // m/s reached after `ramp` seconds
+  json j;
+  j["name"] = fmt::format("tracked vehicle, 2 x {} links", links);
+  j["type"] = "spatial";
+  j["gravity"] = vec3(0, 0, -9.81);
+  j["simulation"] = {{"t_end", 1.0}, {"step", 2e-3}, {"order", 2}};
+  auto box = [](double m, double a, double b, double c) {  // inertia of a box a×b×c
+    return vec3(m * (b * b + c * c) / 12, m * (a * a + c * c) / 12, m * (a * a + b * b) / 12);
+  };
+  j["bodies"].push_back({{"name", "chassis"},
+                         {"mass", m_chassis},
+                         {"inertia", box(m_chassis, D + 0.6, 2 * y_track, 0.8)},
+                         {"position", vec3(0, 0, zc)}});
+  const double wheel_x[7] = {D / 2, -D / 2, -D / 3, -D / 6, 0, D / 6, D / 3};
+  const char* wheel_kind[7] = {"sprocket", "idler", "wheel1", "wheel2", "wheel3", "wheel4", "wheel5"};
+  const double Iw = 0.5 * m_wheel * R * R, Iwt = m_wheel * (3 * R * R + width * width) / 12;
+  for (int side = 0; side < 2; ++side) {
+    const double y = side == 0 ? y_track : -y_track;
+    const std::string sname = side == 0 ? "left" : "right";
+    for (int w = 0; w < 7; ++w) {
+      const std::string wn = sname + "_" + wheel_kind[w];
+      j["bodies"].push_back({{"name", wn},
+                             {"mass", m_wheel},
+                             {"inertia", vec3(Iwt, Iw, Iwt)},
+                             {"position", vec3(wheel_x[w], y, zc)}});
+      j["joints"].push_back({{"name", wn + "_axle"},
+                             {"type", "revolute"},
+                             {"body_i", "chassis"},
+                             {"body_j", wn},
+                             {"point", vec3(wheel_x[w], y, zc)},
+                             {"axis", vec3(0, 1, 0)}});
+    }
+    j["joints"].push_back({{"name", sname + "_drive"},
+                           {"type", "rotation_driver"},
+                           {"body_i", "chassis"},
+                           {"body_j", sname + "_sprocket"},
+                           {"point", vec3(D / 2, y, zc)},
+                           {"axis", vec3(0, 1, 0)},
+                           {"motion", {{"ramp", {{"rate", speed / R}, {"ramp_time", ramp}}}}}});
+    // joint points on the stadium path at equal arc length, starting at the rear end of
+    // the lower run and running forward along it (the loop turns about +y)
+    auto path = [&](double s) {
+      s = std::fmod(s, perimeter);
+      const double half = M_PI * rc;
+      if (s < D) return std::array<double, 2>{-D / 2 + s, zc - rc};
+      s -= D;
+      if (s < half) {
+        const double a = -M_PI / 2 + s / rc;
+        return std::array<double, 2>{D / 2 + rc * std::cos(a), zc + rc * std::sin(a)};
+      }
+      s -= half;
+      if (s < D) return std::array<double, 2>{D / 2 - s, zc + rc};
+      s -= D;
+      const double a = M_PI / 2 + s / rc;
+      return std::array<double, 2>{-D / 2 + rc * std::cos(a), zc + rc * std::sin(a)};
+    };
+    std::vector<std::array<double, 2>> jp(links + 1);
+    for (int k = 0; k <= links; ++k) jp[k] = path(perimeter * k / links);
+    std::vector<double> len(links);
+    for (int k = 0; k < links; ++k) {
+      const double dx = jp[k + 1][0] - jp[k][0], dz = jp[k + 1][1] - jp[k][1];
+      len[k] = std::hypot(dx, dz);
+      const double cx = dx / len[k], cz = dz / len[k];
+      // link frame: x along the chord, y lateral, z = x × y (towards the wheels)
+      Mat3<double> A;
+      A(0, 0) = cx, A(1, 0) = 0, A(2, 0) = cz;
+      A(0, 1) = 0, A(1, 1) = 1, A(2, 1) = 0;
+      A(0, 2) = -cz, A(1, 2) = 0, A(2, 2) = cx;
+      const Vec4<double> p = euler_parameters(A);
+      const std::string ln = fmt::format("{}_link{}", sname, k);
+      j["bodies"].push_back({{"name", ln},
+                             {"mass", m_link},
+                             {"inertia", box(m_link, len[k], width, t)},
+                             {"position", vec3(0.5 * (jp[k][0] + jp[k + 1][0]), y,
+                                               0.5 * (jp[k][1] + jp[k + 1][1]))},
+                             {"orientation", json::array({p[0], p[1], p[2], p[3]})}});
+    }
+    for (int k = 0; k < links; ++k) {
+      const int k1 = (k + 1) % links;
+      json jt = {{"name", fmt::format("{}_pin{}", sname, k)},
+                 {"body_i", fmt::format("{}_link{}", sname, k)},
+                 {"body_j", fmt::format("{}_link{}", sname, k1)},
+                 {"point_i", vec3(len[k] / 2, 0, 0)},
+                 {"point_j", vec3(-len[k1] / 2, 0, 0)}};
+      if (k1 != 0) {
+        jt["type"] = "revolute";
+        jt["axis_i"] = vec3(0, 1, 0);
+        j["joints"].push_back(jt);
+      } else {  // loop closure: a stiff bushing, free in rotation about y
+        jt["type"] = "bushing";
+        jt["axis_i"] = vec3(0, 1, 0);
+        jt["stiffness"] = json::array({1e7, 1e7, 1e7, 1e5, 1e5, 0});
+        jt["damping"] = json::array({1e3, 1e3, 1e3, 10, 10, 0});
+        j["forces"].push_back(jt);
+      }
+    }
+    for (int k = 0; k < links; ++k) {
+      const std::string ln = fmt::format("{}_link{}", sname, k);
+      const double rs = 0.01;
+      for (int w = 0; w < 7; ++w)
+        j["forces"].push_back({{"name", fmt::format("{}_c{}", ln, w)},
+                               {"type", "wheel_contact"},
+                               {"wheel", sname + "_" + wheel_kind[w]},
+                               {"axis", vec3(0, 1, 0)},
+                               {"wheel_radius", R - sag - 1e-4},
+                               {"half_width", width / 2},
+                               {"body", ln},
+                               {"point", vec3(0, 0, t / 2 - rs)},
+                               {"radius", rs},
+                               {"stiffness", k_wheel},
+                               {"damping", c_wheel},
+                               {"friction", w == 0 ? 0.8 : 0.2},
+                               {"slip_velocity", 0.05}});
+      for (int g = 0; g < 2; ++g)
+        j["forces"].push_back({{"name", fmt::format("{}_g{}", ln, g)},
+                               {"type", "contact"},
+                               {"body", ln},
+                               {"point", vec3((g ? 0.3 : -0.3) * len[k], 0, -t / 2 + rs)},
+                               {"radius", rs},
+                               {"stiffness", k_ground},
+                               {"damping", c_ground},
+                               {"friction", 0.6},
+                               {"slip_velocity", 0.05}});
+    }
+  }
+  return j;
+}
+
 json bushing_lattice(int n) { throw InvalidInput("lattice: not yet implemented"); }
 json flexible_plate(int nx, int ny, int nz) { throw InvalidInput("flexible: not yet implemented"); }
 

@@ -206,7 +206,9 @@ void Integrator::constraint_violation(double* position, double* velocity) const 
 void Integrator::factorize(StepInfo& info) {
   Timer timer;
   const SparseMatrix& j = sys_.matrix();
+  bool fresh_analysis = false;
   if (pattern_changed_ || !solver_) {
+    fresh_analysis = true;
     if (!solver_) solver_ = new_solver();
     Timer ta;
     solver_->analyze(j);
@@ -217,6 +219,20 @@ void Integrator::factorize(StepInfo& info) {
     stats_.factor_nnz = solver_->factor_entries();
   }
   solver_->factorize(j);
+  if (solver_->perturbed_pivots() > 0 && !fresh_analysis) {
+    // The matching and scaling of the analysis were computed from older values (e.g.
+    // before contacts closed); with the current ones they may put tiny entries on the
+    // diagonal. Analyze again with the current values and refactorize.
+    Timer ta;
+    solver_->analyze(j);
+    stats_.analysis_seconds += ta.seconds();
+    ++stats_.analyses;
+    ++stats_.reanalyses;
+    stats_.factor_nnz = solver_->factor_entries();
+    solver_->factorize(j);
+    ++stats_.factorizations;
+  }
+  stats_.perturbed_pivots += solver_->perturbed_pivots();
   stats_.solver = solver_->describe();
   factor_valid_ = true;
   ++info.factorizations;
@@ -330,6 +346,12 @@ bool Integrator::try_step(double h, StepInfo& info) {
     // about ρ/(1−ρ)‖δ_k‖. An update 1000 times below the tolerance is accepted as it is
     // (rounding level: the rate is meaningless there).
     ++since_jac;
+    if (opts_.verbose)
+      fmt::print(stderr,
+                 "t = {:.9g} h = {:.3g} iteration {}{}: weighted update {:.3e}, backward error "
+                 "{:.1e}, perturbed pivots {}\n",
+                 tn, h, it, need_jac ? " (new Jacobian)" : "", err, solver_->backward_error(),
+                 solver_->perturbed_pivots());
     if (since_jac == 1) {
       err_first = err;
       converged = err <= 1e-3;

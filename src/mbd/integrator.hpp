@@ -38,9 +38,9 @@ struct IntegratorOptions {
   double step = 1e-3;           ///< nominal step h (s)
   int order = 2;                ///< BDF order k, 1..5
   bool modified_newton = true;  ///< keep the factor while Newton converges fast
-  int max_newton_iterations = 10;
-  double newton_rtol = 1e-8;             ///< relative tolerance of the Newton update
-  double newton_atol = 1e-10;            ///< absolute tolerance (q; divided by h for v, h² for a)
+  int max_newton_iterations = 25;
+  double newton_rtol = 1e-6;             ///< relative tolerance of the Newton update
+  double newton_atol = 1e-8;             ///< absolute tolerance (q; divided by h for v, h² for a)
   double partition_threshold = 0.25;     ///< relative pivot threshold of the partitioning
   double repartition_quality = 0.05;     ///< repartition when the partition's quality drops
   int partition_check_interval = 10;     ///< steps between partition quality checks
@@ -51,6 +51,7 @@ struct IntegratorOptions {
   bool dense_solver = false;             ///< LAPACK instead of strata (tests only)
   index_t dump_step = -1;                ///< write the Newton Jacobian of this step (1-based)
   std::string dump_dir;                  ///< ... into this folder (Matrix Market)
+  bool verbose = false;                  ///< print every Newton iteration to stderr
 };
 
 /// What happened in one accepted step.
@@ -69,6 +70,8 @@ struct StepInfo {
 struct IntegratorStats {
   index_t steps = 0, rejected = 0, newton_iterations = 0, factorizations = 0, analyses = 0,
           repartitions = 0, solves = 0;
+  index_t reanalyses = 0;        ///< analyses redone because pivots had to be perturbed
+  index_t perturbed_pivots = 0;  ///< static pivots over all factorizations
   double assembly_seconds = 0, solver_seconds = 0, analysis_seconds = 0, partition_seconds = 0,
          initial_conditions_seconds = 0;
   index_t jacobian_size = 0, jacobian_nnz = 0, factor_nnz = 0;

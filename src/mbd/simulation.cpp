@@ -228,8 +228,10 @@ std::string summary(const Model& model, const SimulationResult& r) {
   o += fmt::format("steps                 {} accepted, {} rejected\n", s.steps, s.rejected);
   o += fmt::format("Newton iterations     {} ({:.2f} per step)\n", s.newton_iterations,
                    s.steps ? double(s.newton_iterations) / s.steps : 0.0);
-  o += fmt::format("factorizations        {} (analyses {}, repartitions {})\n", s.factorizations,
-                   s.analyses, s.repartitions);
+  o += fmt::format(
+      "factorizations        {} (analyses {}: {} for new partitions, {} for perturbed pivots; "
+      "perturbed pivots left {})\n",
+      s.factorizations, s.analyses, s.repartitions + 1, s.reanalyses, s.perturbed_pivots);
   o += fmt::format("Newton matrix         {} x {}, nnz {}, nnz(L) {}\n", s.jacobian_size,
                    s.jacobian_size, s.jacobian_nnz, s.factor_nnz);
   o += fmt::format("linear solver         {}\n", s.solver);
