@@ -10,17 +10,17 @@
 //
 // Exit status: 0 on success, 1 on a solver error (the message names the problem),
 // 2 on a usage error.
+#include <fmt/core.h>
+#include <unistd.h>
+
 #include <CLI/CLI.hpp>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <fmt/core.h>
+#include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <string>
-
-#include <fstream>
-#include <unistd.h>
 
 #include "mbd/generators.hpp"
 #include "mbd/model_io.hpp"
@@ -32,12 +32,15 @@ namespace {
 using json = nlohmann::json;
 using namespace strata;
 
-const std::map<std::string, OrderingMethod> kOrderings = {
-    {"nd", OrderingMethod::nested_dissection}, {"metis", OrderingMethod::metis},
-    {"amd", OrderingMethod::amd}, {"natural", OrderingMethod::natural}};
+const std::map<std::string, OrderingMethod> kOrderings = {{"nd", OrderingMethod::nested_dissection},
+                                                          {"metis", OrderingMethod::metis},
+                                                          {"amd", OrderingMethod::amd},
+                                                          {"natural", OrderingMethod::natural}};
 const std::map<std::string, MatrixType> kTypes = {
-    {"auto", MatrixType::automatic}, {"spd", MatrixType::spd},
-    {"symmetric_indefinite", MatrixType::symmetric_indefinite}, {"general", MatrixType::general}};
+    {"auto", MatrixType::automatic},
+    {"spd", MatrixType::spd},
+    {"symmetric_indefinite", MatrixType::symmetric_indefinite},
+    {"general", MatrixType::general}};
 
 struct CommonArgs {
   std::string file;
@@ -54,7 +57,8 @@ void add_common(CLI::App* cmd, CommonArgs& a) {
       ->check(CLI::ExistingFile);
   cmd->add_option("--ordering", a.ordering, "fill-reducing ordering")
       ->check(CLI::IsMember({"nd", "metis", "amd", "natural"}));
-  cmd->add_option("--max-block-size", a.max_block_size, "most pivots per front (separator blocking)")
+  cmd->add_option("--max-block-size", a.max_block_size,
+                  "most pivots per front (separator blocking)")
       ->check(CLI::PositiveNumber);
   cmd->add_option("--device-memory-limit", a.device_memory_limit,
                   "memory budget of the batch plan in bytes (0: unlimited)");
@@ -74,8 +78,8 @@ Options options_from(const CommonArgs& a) {
 json analysis_json(const AnalysisStats& s) {
   json batches = json::array();
   for (const auto& b : s.batches)
-    batches.push_back({{"level", b.level}, {"fronts", b.end - b.begin}, {"bytes", b.bytes},
-                       {"tiled", b.tiled}});
+    batches.push_back(
+        {{"level", b.level}, {"fronts", b.end - b.begin}, {"bytes", b.bytes}, {"tiled", b.tiled}});
   return {{"n", s.n},
           {"nnz_a", s.nnz_a},
           {"nnz_l", s.nnz_l},
@@ -92,10 +96,11 @@ json analysis_json(const AnalysisStats& s) {
           {"batches", batches},
           {"type", to_string(s.type)},
           {"ordering", to_string(s.ordering)},
-          {"seconds", {{"ordering", s.ordering_seconds},
-                       {"symbolic", s.symbolic_seconds},
-                       {"plan", s.plan_seconds},
-                       {"total", s.total_seconds}}}};
+          {"seconds",
+           {{"ordering", s.ordering_seconds},
+            {"symbolic", s.symbolic_seconds},
+            {"plan", s.plan_seconds},
+            {"total", s.total_seconds}}}};
 }
 
 void print_analysis(const AnalysisStats& s, double read_seconds) {
@@ -123,15 +128,16 @@ void print_analysis(const AnalysisStats& s, double read_seconds) {
     tiled += b.tiled;
     maxb = std::max(maxb, b.bytes);
   }
-  fmt::print("batch plan            {} batches for {} levels, budget {}, largest batch {:.3f} MB, "
-             "{} tiled fronts\n",
-             s.batches.size(), s.tree_height,
-             s.memory_budget ? fmt::format("{:.3f} MB", s.memory_budget / 1e6) : "unlimited",
-             maxb / 1e6, tiled);
-  fmt::print("time [s]              read {:.3f}  ordering {:.3f}  symbolic {:.3f}  plan {:.3f}  "
-             "analysis total {:.3f}\n",
-             read_seconds, s.ordering_seconds, s.symbolic_seconds, s.plan_seconds,
-             s.total_seconds);
+  fmt::print(
+      "batch plan            {} batches for {} levels, budget {}, largest batch {:.3f} MB, "
+      "{} tiled fronts\n",
+      s.batches.size(), s.tree_height,
+      s.memory_budget ? fmt::format("{:.3f} MB", s.memory_budget / 1e6) : "unlimited", maxb / 1e6,
+      tiled);
+  fmt::print(
+      "time [s]              read {:.3f}  ordering {:.3f}  symbolic {:.3f}  plan {:.3f}  "
+      "analysis total {:.3f}\n",
+      read_seconds, s.ordering_seconds, s.symbolic_seconds, s.plan_seconds, s.total_seconds);
 }
 
 double seconds_since(std::chrono::steady_clock::time_point t0) {
@@ -205,8 +211,10 @@ int run_solve(const SolveArgs& a) {
     json j = analysis_json(st.analysis);
     j["file"] = a.common.file;
     j["seconds"]["read"] = read_seconds;
-    j["factor"] = {{"type", to_string(f.type)},      {"backend", f.backend},
-                   {"seconds", f.seconds},           {"gflops", f.gflops},
+    j["factor"] = {{"type", to_string(f.type)},
+                   {"backend", f.backend},
+                   {"seconds", f.seconds},
+                   {"gflops", f.gflops},
                    {"perturbed_pivots", f.perturbed_pivots},
                    {"two_by_two_pivots", f.two_by_two_pivots},
                    {"inertia", {f.inertia_positive, f.inertia_negative, f.inertia_zero}},
@@ -276,7 +284,9 @@ int run_simulate(const SimulateArgs& a) {
   io.t_end = a.t_end > 0 ? a.t_end : model.t_end;
   io.step = a.step > 0 ? a.step : model.step;
   io.order = a.order > 0 ? a.order : model.order;
-  io.backend = a.device == "cpu" ? Backend::cpu : a.device == "gpu" ? Backend::cuda : Backend::automatic;
+  io.backend = a.device == "cpu"   ? Backend::cpu
+               : a.device == "gpu" ? Backend::cuda
+                                   : Backend::automatic;
   io.threads = a.threads;
   io.modified_newton = !a.full_newton;
   if (a.newton_tol > 0) io.newton_rtol = a.newton_tol;
@@ -285,7 +295,7 @@ int run_simulate(const SimulateArgs& a) {
   io.dense_solver = a.dense;
   io.dump_step = a.dump_dir.empty() ? -1 : a.dump_step;
   o.output_dir = a.output;
-  o.output_interval = a.output_interval;
+  o.output_interval = a.output_interval > 0 ? a.output_interval : model.output_interval;
   o.vtk = a.vtk;
   o.progress = !a.quiet && isatty(fileno(stdout));
   o.progress_stream = stdout;
@@ -297,10 +307,11 @@ int run_simulate(const SimulateArgs& a) {
   fmt::print("{}", summary(model, r));
   fmt::print("model read/build      {:.3f} s\n", read_seconds);
   if (!o.output_dir.empty())
-    fmt::print("output                {}/ (positions, velocities, accelerations, reactions, "
-               "steps .csv{}{})\n",
-               o.output_dir, o.vtk ? ", vtk/series.pvd" : "",
-               r.complete ? "" : "; marked partial in status.json");
+    fmt::print(
+        "output                {}/ (positions, velocities, accelerations, reactions, "
+        "steps .csv{}{})\n",
+        o.output_dir, o.vtk ? ", vtk/series.pvd" : "",
+        r.complete ? "" : "; marked partial in status.json");
   if (io.dump_step > 0)
     fmt::print("Newton matrix         step {} written to {}/jacobian_step{}.mtx (+ rhs)\n",
                io.dump_step, io.dump_dir, io.dump_step);
@@ -318,7 +329,8 @@ int main(int argc, char** argv) {
   CLI::App app{"strata: a multifrontal sparse direct solver for CPU and GPU"};
   app.require_subcommand(1);
   CommonArgs analyze_args;
-  auto* analyze = app.add_subcommand("analyze", "ordering, assembly tree, level schedule, memory plan");
+  auto* analyze =
+      app.add_subcommand("analyze", "ordering, assembly tree, level schedule, memory plan");
   add_common(analyze, analyze_args);
   SolveArgs solve_args;
   auto* solve = app.add_subcommand("solve", "analyze, factorize and solve A x = b");

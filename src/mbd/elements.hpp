@@ -65,6 +65,13 @@ class Force {
   std::vector<index_t> dofs;
   bool uses_v = true;   ///< ∂g/∂v may be nonzero (structurally)
   bool uses_a = false;  ///< ∂g/∂a may be nonzero (inertia)
+  /// Contact: the force is often exactly zero. Such elements are left out of the values
+  /// the linear solver's analysis sees (its matching must not rely on them), and, when
+  /// `margin` > 0, they enter the Newton matrix only while proximity() < margin.
+  bool intermittent = false;
+  double margin = 0;  ///< m; 0: always part of the Newton matrix
+  /// Separation (m) of the contact surfaces at local q; negative when penetrating.
+  virtual double proximity(const double* q) const { return -1; }
   /// g(q, v, a, t) with local vectors; Jacobians when jacobian=true.
   virtual void evaluate(const double* q, const double* v, const double* a, double t, bool jacobian,
                         ForceEval& out) const = 0;

@@ -236,6 +236,7 @@ struct Load {
 /// Normal force and regularised friction for penetration (c0 = δ, c1 = δ̇), unit normal
 /// n and slip velocity vt (already tangential). Returns false when not in contact.
 constexpr double kDampingDepth = 1e-3;  // m
+constexpr double kOnsetDepth = 1e-4;    // m
 template <class S, int N>
 bool contact_force(const Jet1<S>& pen, const Vec<S, N>& n, const Vec<S, N>& vt, double k, double c,
                    double mu, double vs, Vec<S, N>& f) {
@@ -244,7 +245,10 @@ bool contact_force(const Jet1<S>& pen, const Vec<S, N>& n, const Vec<S, N>& vt, 
   // the damping grows over the first kDampingDepth of penetration, so that the normal
   // force is continuous at first contact (a jump there stalls Newton's method)
   const S ramp = value(pen.c0) < kDampingDepth ? pen.c0 * (1.0 / kDampingDepth) : S(1.0);
-  const S fn = pen.c0 * k + pen.c1 * ramp * c;
+  // elastic part with a quadratic onset over kOnsetDepth: C¹ at first contact
+  const S el = value(pen.c0) < kOnsetDepth ? pen.c0 * pen.c0 * (0.5 * k / kOnsetDepth)
+                                           : (pen.c0 - 0.5 * kOnsetDepth) * k;
+  const S fn = el + pen.c1 * ramp * c;
   if (value(fn) <= 0) return false;
   const S ft = fn * mu / sqrt(dot(vt, vt) + vs * vs);
   f = n * fn - vt * ft;
@@ -264,6 +268,7 @@ struct GroundContact {
     return dot(pose3(b, q).point(s), n) - h - r;
   }
   bool inactive(const double* q) const { return gap(q) >= 0; }
+  double proximity(const double* q) const { return gap(q); }
   template <class S>
   void generalized_force(const Jet1<S>* z, double, S* Q) const {
     using J = Jet1<S>;
@@ -317,6 +322,12 @@ struct WheelContact {
     double zax;
     geometry(q, C, a, zax, rho);
     return std::abs(zax) > hw || norm(rho) >= R + r;
+  }
+  double proximity(const double* q) const {
+    Vec3<double> C, a, rho;
+    double zax;
+    geometry(q, C, a, zax, rho);
+    return std::max(norm(rho) - (R + r), std::abs(zax) - hw);
   }
   template <class S>
   void generalized_force(const Jet1<S>* z, double, S* Q) const {
@@ -410,8 +421,10 @@ std::unique_ptr<Force> make_ground_contact(const Model& m, const ContactSpec& s)
   n = n * (1.0 / len);
   GroundContact k{m.planar, refs[0],     s.point,   n,          s.radius,
                   s.offset, s.stiffness, s.damping, s.friction, s.slip_velocity};
-  if (m.planar) return wrap_force<3>(k, std::move(dofs), s.name);
-  return wrap_force<7>(k, std::move(dofs), s.name);
+  auto f = m.planar ? wrap_force<3>(k, std::move(dofs), s.name)
+                    : wrap_force<7>(k, std::move(dofs), s.name);
+  f->intermittent = true;
+  return f;
 }
 
 std::unique_ptr<Force> make_wheel_contact(const Model& m, const WheelContactSpec& s) {
@@ -421,7 +434,10 @@ std::unique_ptr<Force> make_wheel_contact(const Model& m, const WheelContactSpec
   WheelContact k{refs[0],     refs[1],        s.centre,     s.axis * (1.0 / norm(s.axis)),
                  s.point,     s.wheel_radius, s.half_width, s.radius,
                  s.stiffness, s.damping,      s.friction,   s.slip_velocity};
-  return wrap_force<7, 14>(k, std::move(dofs), s.name);
+  auto f = wrap_force<7, 14>(k, std::move(dofs), s.name);
+  f->intermittent = true;
+  f->margin = s.margin;
+  return f;
 }
 
 }  // namespace strata::mbd

@@ -38,6 +38,12 @@ class ForceOf : public ForceT<ForceOf<K, NZ>, NZ> {
     else
       return false;
   }
+  double proximity(const double* q) const override {
+    if constexpr (requires { k_.proximity(q); })
+      return k_.proximity(q);
+    else
+      return -1;
+  }
   double potential_energy(const double* q, double t) const override {
     if constexpr (requires { k_.potential(q, t); })
       return k_.potential(q, t);
@@ -127,7 +133,9 @@ struct ContactSpec {
   double slip_velocity = 1e-2;  ///< regularisation speed of the friction law (m/s)
 };
 /// Penalty contact of a sphere (planar: a disc) with the ground plane: normal force
-/// max(0, k δ + c s(δ) δ̇), s(δ) = min(1, δ / 1 mm) (continuous at first contact), friction −μ f_n v_t/√(|v_t|² + v_s²) at the contact point.
+/// max(0, e(δ) + c s(δ) δ̇) with e(δ) = kδ (after a quadratic onset over the first 0.1 mm)
+/// and s(δ) = min(1, δ / 1 mm), so that the force is C¹/C⁰ at first contact; friction −μ f_n
+/// v_t/√(|v_t|² + v_s²) at the contact point.
 std::unique_ptr<Force> make_ground_contact(const Model& model, const ContactSpec& spec);
 
 struct WheelContactSpec {
@@ -139,6 +147,10 @@ struct WheelContactSpec {
   Vec3<double> point{};  ///< sphere centre on `body`
   double radius = 0;
   double stiffness = 0, damping = 0, friction = 0, slip_velocity = 1e-2;
+  /// The pair enters the Newton matrix only while the surfaces are closer than this (m);
+  /// 0: always. A positive margin keeps the matrix sparse when a body can touch many
+  /// wheels but touches few at a time (tracks).
+  double margin = 0;
 };
 /// Penalty contact of a sphere with the outer surface of a cylinder (a wheel) on another
 /// body (spatial only); same force law as make_ground_contact.

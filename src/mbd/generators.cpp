@@ -1,8 +1,9 @@
 // strata::mbd — model generators (see generators.hpp).
 #include "mbd/generators.hpp"
 
-#include <cmath>
 #include <fmt/core.h>
+
+#include <cmath>
 
 #include "mbd/linalg.hpp"
 #include "strata/errors.hpp"
@@ -49,8 +50,7 @@ constexpr double q0[7] = {-0.0617138900142764496358948458001, 0.,
 
 json andrews_squeezer() {
   using namespace andrews;
-  const double be = q0[0], th = q0[1], ga = q0[2], ph = q0[3], de = q0[4], om = q0[5],
-               ep = q0[6];
+  const double be = q0[0], th = q0[1], ga = q0[2], ph = q0[3], de = q0[4], om = q0[5], ep = q0[6];
   const double phi[7] = {be, be + th, ga, ph + de, de, om + ep, ep};
   auto R = [](double a, double x, double y) {
     return std::array<double, 2>{std::cos(a) * x - std::sin(a) * y,
@@ -174,13 +174,17 @@ json tracked_vehicle(int links) {
   // a chord of the half circles passes closer to the wheel centre than its ends: make the
   // contact cylinder that much smaller, so that nothing penetrates at the start
   const double sag = rc * (1 - std::cos(0.5 * perimeter / links / rc));
-  const double k_ground = 1e6, c_ground = 2e3, k_wheel = 5e6, c_wheel = 2e3;
+  // a link–wheel pair is part of the Newton matrix only while within `margin`
+  const double margin = std::max(0.05, 1.5 * perimeter / links);
+  // contact: stiff enough for millimetre penetrations, soft and smooth enough (friction
+  // regularised over 0.2 m/s) for Newton's method to converge in a few iterations
+  const double k_ground = 2e5, c_ground = 2e3, k_wheel = 1e6, c_wheel = 2e3, v_slip = 0.2;
   const double speed = 1.0, ramp = 0.5;  // m/s reached after `ramp` seconds
   json j;
   j["name"] = fmt::format("tracked vehicle, 2 x {} links", links);
   j["type"] = "spatial";
   j["gravity"] = vec3(0, 0, -9.81);
-  j["simulation"] = {{"t_end", 1.0}, {"step", 2e-3}, {"order", 2}};
+  j["simulation"] = {{"t_end", 1.0}, {"step", 1e-3}, {"order", 2}, {"output_interval", 0.01}};
   auto box = [](double m, double a, double b, double c) {  // inertia of a box a×b×c
     return vec3(m * (b * b + c * c) / 12, m * (a * a + c * c) / 12, m * (a * a + b * b) / 12);
   };
@@ -189,7 +193,8 @@ json tracked_vehicle(int links) {
                          {"inertia", box(m_chassis, D + 0.6, 2 * y_track, 0.8)},
                          {"position", vec3(0, 0, zc)}});
   const double wheel_x[7] = {D / 2, -D / 2, -D / 3, -D / 6, 0, D / 6, D / 3};
-  const char* wheel_kind[7] = {"sprocket", "idler", "wheel1", "wheel2", "wheel3", "wheel4", "wheel5"};
+  const char* wheel_kind[7] = {"sprocket", "idler",  "wheel1", "wheel2",
+                               "wheel3",   "wheel4", "wheel5"};
   const double Iw = 0.5 * m_wheel * R * R, Iwt = m_wheel * (3 * R * R + width * width) / 12;
   for (int side = 0; side < 2; ++side) {
     const double y = side == 0 ? y_track : -y_track;
@@ -245,12 +250,12 @@ json tracked_vehicle(int links) {
       A(0, 2) = -cz, A(1, 2) = 0, A(2, 2) = cx;
       const Vec4<double> p = euler_parameters(A);
       const std::string ln = fmt::format("{}_link{}", sname, k);
-      j["bodies"].push_back({{"name", ln},
-                             {"mass", m_link},
-                             {"inertia", box(m_link, len[k], width, t)},
-                             {"position", vec3(0.5 * (jp[k][0] + jp[k + 1][0]), y,
-                                               0.5 * (jp[k][1] + jp[k + 1][1]))},
-                             {"orientation", json::array({p[0], p[1], p[2], p[3]})}});
+      j["bodies"].push_back(
+          {{"name", ln},
+           {"mass", m_link},
+           {"inertia", box(m_link, len[k], width, t)},
+           {"position", vec3(0.5 * (jp[k][0] + jp[k + 1][0]), y, 0.5 * (jp[k][1] + jp[k + 1][1]))},
+           {"orientation", json::array({p[0], p[1], p[2], p[3]})}});
     }
     for (int k = 0; k < links; ++k) {
       const int k1 = (k + 1) % links;
@@ -287,7 +292,8 @@ json tracked_vehicle(int links) {
                                {"stiffness", k_wheel},
                                {"damping", c_wheel},
                                {"friction", w == 0 ? 0.8 : 0.2},
-                               {"slip_velocity", 0.05}});
+                               {"slip_velocity", v_slip},
+                               {"margin", margin}});
       for (int g = 0; g < 2; ++g)
         j["forces"].push_back({{"name", fmt::format("{}_g{}", ln, g)},
                                {"type", "contact"},
@@ -297,7 +303,7 @@ json tracked_vehicle(int links) {
                                {"stiffness", k_ground},
                                {"damping", c_ground},
                                {"friction", 0.6},
-                               {"slip_velocity", 0.05}});
+                               {"slip_velocity", v_slip}});
     }
   }
   return j;

@@ -2,6 +2,7 @@
 #include "mbd/integrator.hpp"
 
 #include <fmt/core.h>
+#include <omp.h>
 
 #include <algorithm>
 #include <cmath>
@@ -59,6 +60,11 @@ Integrator::Integrator(const Model& model, IntegratorOptions options)
   if (!(opts_.step > 0)) throw InvalidInput("the step must be positive");
   if (opts_.min_step <= 0) opts_.min_step = opts_.step * 1e-6;
   if (opts_.startup_levels < 0) opts_.startup_levels = 2 * (opts_.order - 1);
+  // Threads: small systems run faster on one (thread start-up costs more than the work).
+  const bool small = sys_.size() < 20000;
+  const std::size_t elements = model.forces.size() + model.constraints.size();
+  sys_.set_threads(opts_.threads > 0 ? opts_.threads : elements < 500 ? 1 : omp_get_max_threads());
+  if (opts_.threads == 0 && small) opts_.threads = 1;
 }
 
 std::unique_ptr<LinearSolver> Integrator::new_solver() const {
@@ -93,6 +99,7 @@ void Integrator::initialize() {
       for (int i = 3; i < 7; ++i) s += q_[b.offset + i] * q_[b.offset + i];
       for (int i = 3; i < 7; ++i) q_[b.offset + i] /= std::sqrt(s);
     }
+  sys_.update_candidates(q_.data());
   repartition(t_, q_.data());
   stats_.repartitions = 0;
 
@@ -203,35 +210,34 @@ void Integrator::constraint_violation(double* position, double* velocity) const 
   *velocity = max_abs(phid);
 }
 
-void Integrator::factorize(StepInfo& info) {
+void Integrator::analyze(const BdfTerms& bdf, double t) {
+  // The solver's matching and scaling are computed from the values it is given (the
+  // current Jacobian). Leaving the contact entries out of them would be wrong too: the
+  // scaling would then not see the contact stiffness.
+  Timer ta;
+  sys_.evaluate(x_.data(), t, bdf, true, res_.data());
+  if (!solver_) solver_ = new_solver();
+  solver_->analyze(sys_.matrix());
+  stats_.analysis_seconds += ta.seconds();
+  ++stats_.analyses;
+  pattern_changed_ = false;
+  stats_.jacobian_nnz = sys_.matrix().nnz();
+  stats_.factor_nnz = solver_->factor_entries();
+}
+
+void Integrator::factorize(StepInfo& info, const BdfTerms& bdf, double t) {
   Timer timer;
-  const SparseMatrix& j = sys_.matrix();
-  bool fresh_analysis = false;
-  if (pattern_changed_ || !solver_) {
-    fresh_analysis = true;
-    if (!solver_) solver_ = new_solver();
-    Timer ta;
-    solver_->analyze(j);
-    stats_.analysis_seconds += ta.seconds();
-    ++stats_.analyses;
-    pattern_changed_ = false;
-    stats_.jacobian_nnz = j.nnz();
-    stats_.factor_nnz = solver_->factor_entries();
-  }
-  solver_->factorize(j);
-  if (solver_->perturbed_pivots() > 0 && !fresh_analysis) {
-    // The matching and scaling of the analysis were computed from older values (e.g.
-    // before contacts closed); with the current ones they may put tiny entries on the
-    // diagonal. Analyze again with the current values and refactorize.
-    Timer ta;
-    solver_->analyze(j);
-    stats_.analysis_seconds += ta.seconds();
-    ++stats_.analyses;
+  solver_->factorize(sys_.matrix());
+  if (solver_->perturbed_pivots() > 0 && !fresh_analysis_) {
+    // The analysis was made for other values; with the current ones its matching may put
+    // tiny entries on the diagonal. Analyze again and refactorize.
     ++stats_.reanalyses;
-    stats_.factor_nnz = solver_->factor_entries();
-    solver_->factorize(j);
+    analyze(bdf, t);
+    sys_.evaluate(x_.data(), t, bdf, true, res_.data());
+    solver_->factorize(sys_.matrix());
     ++stats_.factorizations;
   }
+  fresh_analysis_ = false;
   stats_.perturbed_pivots += solver_->perturbed_pivots();
   stats_.solver = solver_->describe();
   factor_valid_ = true;
@@ -289,6 +295,14 @@ bool Integrator::try_step(double h, StepInfo& info) {
   const bool dump = opts_.dump_step == step_ + 1 && !opts_.dump_dir.empty();
   for (int it = 1; it <= opts_.max_newton_iterations; ++it) {
     const bool need_jac = !factor_valid_ || refresh || !opts_.modified_newton || (dump && it == 1);
+    if (need_jac && (pattern_changed_ || !solver_)) {
+      Timer tan;
+      analyze(bdf, tn);
+      fresh_analysis_ = true;
+      const double s = tan.seconds();
+      info.solver_seconds += s;
+      stats_.solver_seconds += s;
+    }
     Timer ta;
     sys_.evaluate(x_.data(), tn, bdf, need_jac, res_.data());
     const double s = ta.seconds();
@@ -305,7 +319,7 @@ bool Integrator::try_step(double h, StepInfo& info) {
                                   rhs_.data(), N, 1);
       }
       try {
-        factorize(info);
+        factorize(info, bdf, tn);
       } catch (const Error&) {
         factor_valid_ = false;
         return false;
@@ -373,6 +387,16 @@ bool Integrator::try_step(double h, StepInfo& info) {
       }
     }
     if (refresh) since_jac = 0;
+    if (converged && sys_.check_candidates(xq) == 2) {
+      // a contact pair outside the Newton matrix closed during the step: take it in and
+      // redo the step
+      sys_.update_candidates(xq);
+      ++stats_.contact_updates;
+      pattern_changed_ = true;
+      factor_valid_ = false;
+      retry_ = true;
+      return false;
+    }
     if (converged) {
       slow_last_step_ = it > 3;
       q_.assign(xq, xq + n);
@@ -395,6 +419,10 @@ StepInfo Integrator::advance() {
   const double remaining = opts_.t_end - t_;
   if (h > remaining * (1 - 1e-9)) h = remaining;
   while (!try_step(h, info)) {
+    if (retry_) {  // not a failure: the contact set changed
+      retry_ = false;
+      continue;
+    }
     ++info.rejected;
     ++stats_.rejected;
     slow_last_step_ = true;
@@ -415,6 +443,12 @@ StepInfo Integrator::advance() {
     h_ = h;
   else if (h_ < opts_.step)
     h_ = std::min(opts_.step, 2 * h_);
+  // contact pairs approaching: update the set in the Newton matrix
+  if (sys_.check_candidates(q_.data()) == 1 && sys_.update_candidates(q_.data())) {
+    ++stats_.contact_updates;
+    pattern_changed_ = true;
+    factor_valid_ = false;
+  }
   // partition still good?
   if (sys_.m() > 0 && opts_.partition_check_interval > 0 &&
       (step_ % opts_.partition_check_interval == 0 || info.rejected)) {

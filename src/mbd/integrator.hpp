@@ -47,11 +47,12 @@ struct IntegratorOptions {
   int startup_levels = -1;               ///< startup: first step h/2^levels (−1: automatic)
   double min_step = 0;                   ///< smallest step before giving up (0: step·1e-6)
   Backend backend = Backend::automatic;  ///< strata backend
-  int threads = 0;                       ///< strata CPU threads (0: all)
-  bool dense_solver = false;             ///< LAPACK instead of strata (tests only)
-  index_t dump_step = -1;                ///< write the Newton Jacobian of this step (1-based)
-  std::string dump_dir;                  ///< ... into this folder (Matrix Market)
-  bool verbose = false;                  ///< print every Newton iteration to stderr
+  int threads = 0;  ///< CPU threads for strata and the assembly (0: automatic — all, but one
+                    ///< for strata below 20000 unknowns)
+  bool dense_solver = false;  ///< LAPACK instead of strata (tests only)
+  index_t dump_step = -1;     ///< write the Newton Jacobian of this step (1-based)
+  std::string dump_dir;       ///< ... into this folder (Matrix Market)
+  bool verbose = false;       ///< print every Newton iteration to stderr
 };
 
 /// What happened in one accepted step.
@@ -71,6 +72,7 @@ struct IntegratorStats {
   index_t steps = 0, rejected = 0, newton_iterations = 0, factorizations = 0, analyses = 0,
           repartitions = 0, solves = 0;
   index_t reanalyses = 0;        ///< analyses redone because pivots had to be perturbed
+  index_t contact_updates = 0;   ///< changes of the set of contact pairs in the matrix
   index_t perturbed_pivots = 0;  ///< static pivots over all factorizations
   double assembly_seconds = 0, solver_seconds = 0, analysis_seconds = 0, partition_seconds = 0,
          initial_conditions_seconds = 0;
@@ -107,14 +109,15 @@ class Integrator {
   std::unique_ptr<LinearSolver> new_solver() const;
   void repartition(double t, const double* q);
   bool try_step(double h, StepInfo& info);
-  void factorize(StepInfo& info);
+  void analyze(const BdfTerms& bdf, double t);
+  void factorize(StepInfo& info, const BdfTerms& bdf, double t);
 
   const Model& model_;
   IntegratorOptions opts_;
   NewtonSystem sys_;
   std::unique_ptr<LinearSolver> solver_;
   Partition partition_;
-  bool pattern_changed_ = true, factor_valid_ = false;
+  bool pattern_changed_ = true, factor_valid_ = false, fresh_analysis_ = false, retry_ = false;
   double factor_beta_ = 0;
   bool slow_last_step_ = false;
   double t_ = 0, h_ = 0;

@@ -97,6 +97,7 @@ struct Model {
   /// line overrides them.
   double t_end = 1.0, step = 1e-3;
   int order = 2;
+  double output_interval = 0;  ///< s between rows of the large CSV files (0: every step)
 
   /// Total number of constraint equations m.
   index_t n_constraints() const;

@@ -137,7 +137,8 @@ class Reader {
     if (r.has("gravity")) m_.gravity = r.at("gravity").vec(dim_);
     if (r.has("simulation")) {
       const Node s = r.at("simulation");
-      s.keys({"t_end", "step", "order"});
+      s.keys({"t_end", "step", "order", "output_interval"});
+      m_.output_interval = s.nonnegative("output_interval", 0);
       m_.t_end = s.has("t_end") ? s.positive("t_end") : m_.t_end;
       m_.step = s.has("step") ? s.positive("step") : m_.step;
       if (s.has("order")) {
@@ -518,7 +519,7 @@ class Reader {
       m_.forces.push_back(make_ground_contact(m_, s));
     } else if (type == "wheel_contact") {
       n.keys({"type", "name", "wheel", "centre", "axis", "wheel_radius", "half_width", "body",
-              "point", "radius", "stiffness", "damping", "friction", "slip_velocity"});
+              "point", "radius", "stiffness", "damping", "friction", "slip_velocity", "margin"});
       WheelContactSpec s;
       s.name = name;
       s.wheel = body_ref(n.at("wheel"));
@@ -534,6 +535,7 @@ class Reader {
       s.damping = n.nonnegative("damping", 0);
       s.friction = n.nonnegative("friction", 0);
       s.slip_velocity = n.has("slip_velocity") ? n.positive("slip_velocity") : 1e-2;
+      s.margin = n.nonnegative("margin", 0);
       m_.forces.push_back(make_wheel_contact(m_, s));
     } else {
       n.at("type").fail("unknown force type '" + type +

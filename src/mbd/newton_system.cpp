@@ -42,7 +42,8 @@ SparseMatrix from_triplets(index_t n_rows, index_t n_cols, const std::vector<ind
   return a;
 }
 
-NewtonSystem::NewtonSystem(const Model& model) : model_(model), n_(model.n) {
+NewtonSystem::NewtonSystem(const Model& model)
+    : model_(model), n_(model.n), candidate_(model.forces.size(), 1) {
   for (const auto& c : model.constraints) {
     row0_.push_back(m_);
     m_ += c->rows;
@@ -65,6 +66,45 @@ void NewtonSystem::gather(const std::vector<index_t>& dofs, const double* src,
 
 void NewtonSystem::set_partition(const Partition& p) {
   independent_ = p.independent;
+  rebuild_pattern();
+}
+
+bool NewtonSystem::update_candidates(const double* q) {
+  bool changed = false;
+  std::vector<double> lq;
+  for (std::size_t e = 0; e < model_.forces.size(); ++e) {
+    const Force& f = *model_.forces[e];
+    if (f.margin <= 0) continue;
+    gather(f.dofs, q, lq);
+    const char c = f.proximity(lq.data()) < f.margin;
+    changed |= c != candidate_[e];
+    candidate_[e] = c;
+  }
+  if (changed && jac_.n_rows > 0) rebuild_pattern();
+  return changed;
+}
+
+int NewtonSystem::check_candidates(const double* q) const {
+  int status = 0;
+  std::vector<double> lq;
+  for (std::size_t e = 0; e < model_.forces.size(); ++e) {
+    const Force& f = *model_.forces[e];
+    if (f.margin <= 0 || candidate_[e]) continue;
+    gather(f.dofs, q, lq);
+    const double p = f.proximity(lq.data());
+    if (p < 0) return 2;
+    if (p < 0.5 * f.margin) status = 1;
+  }
+  return status;
+}
+
+index_t NewtonSystem::active_forces() const {
+  index_t k = 0;
+  for (char c : candidate_) k += c;
+  return k;
+}
+
+void NewtonSystem::rebuild_pattern() {
   const index_t n = n_, m = m_, N = size();
   const index_t A = 0, V = n, Q = 2 * n, L = 3 * n;                  // column blocks
   const index_t RA = n, RV = n + m, RP = n + 2 * m, RU = n + 3 * m;  // row blocks
@@ -79,6 +119,7 @@ void NewtonSystem::set_partition(const Partition& p) {
         pos->push_back(pb.find(r, c));
     };
     for (std::size_t e = 0; e < model_.forces.size(); ++e) {
+      if (!candidate_[e]) continue;
       const Force& f = *model_.forces[e];
       ForcePos& fp = fpos_[e];
       for (index_t i : f.dofs)
@@ -123,59 +164,93 @@ void NewtonSystem::set_partition(const Partition& p) {
 }
 
 void NewtonSystem::evaluate(const double* x, double t, const BdfTerms& bdf, bool jacobian,
-                            double* h) {
+                            double* h, bool skip_intermittent) {
   const index_t n = n_, m = m_;
   const double *a = x, *v = x + n, *q = x + 2 * n, *lam = x + 3 * n;
   double *hf = h, *ha = h + n, *hv = h + n + m, *hp = h + n + 2 * m, *hu = h + n + 3 * m;
   std::fill(h, h + size(), 0.0);
   double* J = jac_.values.data();
   if (jacobian) std::fill(jac_.values.begin(), jac_.values.end(), 0.0);
-  for (std::size_t e = 0; e < model_.forces.size(); ++e) {
-    const Force& f = *model_.forces[e];
-    gather(f.dofs, q, lq_);
-    gather(f.dofs, v, lv_);
-    gather(f.dofs, a, la_);
-    f.evaluate(lq_.data(), lv_.data(), la_.data(), t, jacobian, fe_);
-    const std::size_t nz = f.dofs.size();
-    for (std::size_t i = 0; i < nz; ++i) hf[f.dofs[i]] += fe_.g[i];
-    if (!jacobian) continue;
-    const ForcePos& fp = fpos_[e];
-    for (std::size_t k = 0; k < nz * nz; ++k) J[fp.q[k]] += fe_.dq[k];
-    if (f.uses_v)
-      for (std::size_t k = 0; k < nz * nz; ++k) J[fp.v[k]] += fe_.dv[k];
-    if (f.uses_a)
-      for (std::size_t k = 0; k < nz * nz; ++k) J[fp.a[k]] += fe_.da[k];
-  }
-  for (std::size_t e = 0; e < model_.constraints.size(); ++e) {
-    const Constraint& c = *model_.constraints[e];
-    const index_t r0 = row0_[e];
-    gather(c.dofs, q, lq_);
-    gather(c.dofs, v, lv_);
-    gather(c.dofs, a, la_);
-    // Φ_q is needed for Φ_qᵀλ even in a residual-only evaluation
-    c.evaluate(lq_.data(), lv_.data(), la_.data(), t, true, ce_);
-    const std::size_t nz = c.dofs.size();
-    const int nr = c.rows;
-    for (int r = 0; r < nr; ++r) {
-      ha[r0 + r] = ce_.phidd[r];
-      hv[r0 + r] = ce_.phid[r];
-      hp[r0 + r] = ce_.phi[r];
-      for (std::size_t i = 0; i < nz; ++i) hf[c.dofs[i]] += ce_.jq[r * nz + i] * lam[r0 + r];
+  // Elements are evaluated in parallel; entries that several elements share (the rows of
+  // the equations of motion) are added atomically, the constraint rows are each owned
+  // by one element.
+  const long nf = static_cast<long>(model_.forces.size());
+  const long nc = static_cast<long>(model_.constraints.size());
+#pragma omp parallel num_threads(threads_)
+  {
+    std::vector<double> lq, lv, la, hess;
+    ForceEval fe;
+    ConstraintEval ce;
+#pragma omp for schedule(dynamic, 32) nowait
+    for (long e = 0; e < nf; ++e) {
+      const Force& f = *model_.forces[e];
+      if (!candidate_[e] || (skip_intermittent && f.intermittent)) continue;
+      gather(f.dofs, q, lq);
+      gather(f.dofs, v, lv);
+      gather(f.dofs, a, la);
+      f.evaluate(lq.data(), lv.data(), la.data(), t, jacobian, fe);
+      const std::size_t nz = f.dofs.size();
+      for (std::size_t i = 0; i < nz; ++i) {
+#pragma omp atomic
+        hf[f.dofs[i]] += fe.g[i];
+      }
+      if (!jacobian) continue;
+      const ForcePos& fp = fpos_[e];
+      for (std::size_t k = 0; k < nz * nz; ++k) {
+#pragma omp atomic
+        J[fp.q[k]] += fe.dq[k];
+      }
+      if (f.uses_v)
+        for (std::size_t k = 0; k < nz * nz; ++k) {
+#pragma omp atomic
+          J[fp.v[k]] += fe.dv[k];
+        }
+      if (f.uses_a)
+        for (std::size_t k = 0; k < nz * nz; ++k) {
+#pragma omp atomic
+          J[fp.a[k]] += fe.da[k];
+        }
     }
-    if (!jacobian) continue;
-    const ConstraintPos& cp = cpos_[e];
-    hess_.resize(nz * nz);
-    c.hessian(lq_.data(), t, lam + r0, hess_.data());
-    for (std::size_t k = 0; k < nz * nz; ++k) J[cp.hq[k]] += hess_[k];
-    for (std::size_t i = 0; i < nz; ++i)
-      for (int r = 0; r < nr; ++r) J[cp.fl[i * nr + r]] += ce_.jq[r * nz + i];
-    for (std::size_t k = 0; k < nr * nz; ++k) {
-      J[cp.aa[k]] += ce_.jq[k];
-      J[cp.av[k]] += 2 * ce_.jvq[k];
-      J[cp.aq[k]] += ce_.jaq[k];
-      J[cp.vv[k]] += ce_.jq[k];
-      J[cp.vq[k]] += ce_.jvq[k];
-      J[cp.pq[k]] += ce_.jq[k];
+#pragma omp for schedule(dynamic, 32)
+    for (long e = 0; e < nc; ++e) {
+      const Constraint& c = *model_.constraints[e];
+      const index_t r0 = row0_[e];
+      gather(c.dofs, q, lq);
+      gather(c.dofs, v, lv);
+      gather(c.dofs, a, la);
+      // Φ_q is needed for Φ_qᵀλ even in a residual-only evaluation
+      c.evaluate(lq.data(), lv.data(), la.data(), t, true, ce);
+      const std::size_t nz = c.dofs.size();
+      const int nr = c.rows;
+      for (int r = 0; r < nr; ++r) {
+        ha[r0 + r] = ce.phidd[r];
+        hv[r0 + r] = ce.phid[r];
+        hp[r0 + r] = ce.phi[r];
+      }
+      for (std::size_t i = 0; i < nz; ++i) {
+        double s = 0;
+        for (int r = 0; r < nr; ++r) s += ce.jq[r * nz + i] * lam[r0 + r];
+#pragma omp atomic
+        hf[c.dofs[i]] += s;
+      }
+      if (!jacobian) continue;
+      const ConstraintPos& cp = cpos_[e];
+      hess.resize(nz * nz);
+      c.hessian(lq.data(), t, lam + r0, hess.data());
+      for (std::size_t k = 0; k < nz * nz; ++k) {
+#pragma omp atomic
+        J[cp.hq[k]] += hess[k];
+      }
+      for (std::size_t i = 0; i < nz; ++i)
+        for (int r = 0; r < nr; ++r) J[cp.fl[i * nr + r]] += ce.jq[r * nz + i];
+      for (std::size_t k = 0; k < nr * nz; ++k) {
+        J[cp.aa[k]] += ce.jq[k];
+        J[cp.av[k]] += 2 * ce.jvq[k];
+        J[cp.aq[k]] += ce.jaq[k];
+        J[cp.vv[k]] += ce.jq[k];
+        J[cp.vq[k]] += ce.jvq[k];
+        J[cp.pq[k]] += ce.jq[k];
+      }
     }
   }
   const index_t ni = static_cast<index_t>(independent_.size());

@@ -53,13 +53,28 @@ class NewtonSystem {
   index_t n() const { return n_; }
   index_t m() const { return m_; }
   index_t size() const { return 3 * n_ + m_; }
+  /// Threads for the assembly (OpenMP); default 1.
+  void set_threads(int threads) { threads_ = threads > 0 ? threads : 1; }
 
   /// Uses the partition's independent coordinates for U₁ = U₂ and rebuilds the pattern.
   void set_partition(const Partition& p);
+  /// Rebuilds the pattern (after a change of the partition or the candidate set).
+  void rebuild_pattern();
   const std::vector<index_t>& independent() const { return independent_; }
 
-  /// H(x) into h (size()), and the Jacobian values when `jacobian`.
-  void evaluate(const double* x, double t, const BdfTerms& bdf, bool jacobian, double* h);
+  /// H(x) into h (size()), and the Jacobian values when `jacobian`. With
+  /// skip_intermittent, contact elements are left out (values for the solver's analysis).
+  void evaluate(const double* x, double t, const BdfTerms& bdf, bool jacobian, double* h,
+                bool skip_intermittent = false);
+
+  /// Contact pairs with a margin enter the matrix only while closer than their margin.
+  /// Recomputes the set at q; rebuilds the pattern and returns true when it changed.
+  bool update_candidates(const double* q);
+  /// 0: the candidate set is fine at q; 1: a pair outside it came within half its margin
+  /// (update soon); 2: a pair outside it penetrates (the state is invalid).
+  int check_candidates(const double* q) const;
+  /// Number of force elements in the Newton matrix now.
+  index_t active_forces() const;
   /// The Jacobian H_x (pattern fixed between set_partition calls).
   const SparseMatrix& matrix() const { return jac_; }
 
@@ -87,6 +102,7 @@ class NewtonSystem {
   index_t n_ = 0, m_ = 0;
   std::vector<index_t> row0_;  // first constraint row of each constraint element
   std::vector<index_t> independent_;
+  std::vector<char> candidate_;  // per force: part of the Newton matrix
   SparseMatrix jac_;
   // value positions of element blocks
   struct ForcePos {
@@ -98,10 +114,7 @@ class NewtonSystem {
   std::vector<ForcePos> fpos_;
   std::vector<ConstraintPos> cpos_;
   std::vector<index_t> upos_;  // 4 per independent coordinate
-  // scratch
-  std::vector<double> lq_, lv_, la_, hess_;
-  ForceEval fe_;
-  ConstraintEval ce_;
+  int threads_ = 1;
 };
 
 /// A CSC matrix from triplets (duplicates summed).

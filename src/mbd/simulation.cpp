@@ -1,10 +1,11 @@
 // strata::mbd — the simulation loop and its output (see simulation.hpp).
 #include "mbd/simulation.hpp"
 
+#include <fmt/core.h>
+
 #include <chrono>
 #include <cmath>
 #include <filesystem>
-#include <fmt/core.h>
 #include <fstream>
 #include <memory>
 
@@ -163,9 +164,9 @@ SimulationResult simulate(const Model& model, const SimulationOptions& opts) {
     steps = std::make_unique<Csv>(
         opts.output_dir + "/steps.csv",
         std::vector<std::string>{"step", "time", "h", "order", "newton_iterations",
-                                 "factorizations", "rejected", "assembly_seconds",
-                                 "solver_seconds", "kinetic_energy", "potential_energy",
-                                 "total_energy", "position_violation", "velocity_violation"});
+                                 "factorizations", "rejected", "assembly_seconds", "solver_seconds",
+                                 "kinetic_energy", "potential_energy", "total_energy",
+                                 "position_violation", "velocity_violation"});
     if (opts.vtk) vtk = std::make_unique<VtkSeries>(model, opts.output_dir + "/vtk");
   }
   double kin = 0, pot = 0, pv = 0, vv = 0;
@@ -188,11 +189,11 @@ SimulationResult simulate(const Model& model, const SimulationOptions& opts) {
       res.max_velocity_violation = std::max(res.max_velocity_violation, vv);
       write_state(kin, pot);
       if (files) {
-        steps->raw(fmt::format("{},{:.17g},{:.6e},{},{},{},{},{:.6e},{:.6e},{:.17g},{:.17g},{:.17g},"
-                               "{:.6e},{:.6e}",
-                               s.step, s.t, s.h, s.order, s.newton_iterations, s.factorizations,
-                               s.rejected, s.assembly_seconds, s.solver_seconds, kin, pot,
-                               kin + pot, pv, vv));
+        steps->raw(fmt::format(
+            "{},{:.17g},{:.6e},{},{},{},{},{:.6e},{:.6e},{:.17g},{:.17g},{:.17g},"
+            "{:.6e},{:.6e}",
+            s.step, s.t, s.h, s.order, s.newton_iterations, s.factorizations, s.rejected,
+            s.assembly_seconds, s.solver_seconds, kin, pot, kin + pot, pv, vv));
       }
       bar.update(in.t(), in.stats().steps, in.stats().newton_iterations);
     }
@@ -218,10 +219,11 @@ SimulationResult simulate(const Model& model, const SimulationOptions& opts) {
 std::string summary(const Model& model, const SimulationResult& r) {
   const IntegratorStats& s = r.stats;
   std::string o;
-  o += fmt::format("model                 {} ({}; {} bodies, n = {} coordinates, m = {} "
-                   "constraint equations, {} force elements)\n",
-                   model.name, model.planar ? "planar" : "spatial", model.bodies.size() - 1,
-                   model.n, model.n_constraints(), model.forces.size());
+  o += fmt::format(
+      "model                 {} ({}; {} bodies, n = {} coordinates, m = {} "
+      "constraint equations, {} force elements)\n",
+      model.name, model.planar ? "planar" : "spatial", model.bodies.size() - 1, model.n,
+      model.n_constraints(), model.forces.size());
   o += fmt::format("result                {} at t = {:.6g} s\n",
                    r.complete ? "complete" : "PARTIAL (stopped early)", r.t_reached);
   if (!r.complete) o += fmt::format("reason                {}\n", r.message);
@@ -229,9 +231,10 @@ std::string summary(const Model& model, const SimulationResult& r) {
   o += fmt::format("Newton iterations     {} ({:.2f} per step)\n", s.newton_iterations,
                    s.steps ? double(s.newton_iterations) / s.steps : 0.0);
   o += fmt::format(
-      "factorizations        {} (analyses {}: {} for new partitions, {} for perturbed pivots; "
-      "perturbed pivots left {})\n",
-      s.factorizations, s.analyses, s.repartitions + 1, s.reanalyses, s.perturbed_pivots);
+      "factorizations        {} (analyses {}: first 1, new partitions {}, contact-set changes {}, "
+      "perturbed pivots {}; static pivots left {})\n",
+      s.factorizations, s.analyses, s.repartitions, s.contact_updates, s.reanalyses,
+      s.perturbed_pivots);
   o += fmt::format("Newton matrix         {} x {}, nnz {}, nnz(L) {}\n", s.jacobian_size,
                    s.jacobian_size, s.jacobian_nnz, s.factor_nnz);
   o += fmt::format("linear solver         {}\n", s.solver);

@@ -22,16 +22,16 @@ namespace strata::mbd {
 
 struct SimulationOptions {
   IntegratorOptions integrator;
-  std::string output_dir;        ///< empty: write nothing
-  double output_interval = 0;    ///< s between rows of the large CSV files (0: every step)
-  bool vtk = false;              ///< also write a ParaView series
-  bool progress = false;         ///< draw a progress bar on `progress_stream`
+  std::string output_dir;      ///< empty: write nothing
+  double output_interval = 0;  ///< s between rows of the large CSV files (0: every step)
+  bool vtk = false;            ///< also write a ParaView series
+  bool progress = false;       ///< draw a progress bar on `progress_stream`
   std::FILE* progress_stream = nullptr;
 };
 
 struct SimulationResult {
   bool complete = false;
-  std::string message;           ///< why the run stopped early (empty when complete)
+  std::string message;  ///< why the run stopped early (empty when complete)
   double t_reached = 0;
   double wall_seconds = 0;
   double output_seconds = 0;

@@ -1,10 +1,11 @@
 // strata::mbd — ParaView series writer (see vtk.hpp).
 #include "mbd/vtk.hpp"
 
+#include <fmt/core.h>
+
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
-#include <fmt/core.h>
 #include <fstream>
 #include <map>
 #include <set>
@@ -90,7 +91,8 @@ void VtkSeries::write(double t, const double* q) {
   out << "</DataArray>\n</Cells>\n<PointData>\n"
       << "<DataArray type=\"Float64\" Name=\"orientation\" NumberOfComponents=\"4\" "
          "format=\"ascii\">\n";
-  for (const auto& e : quat) out << fmt::format("{:.9g} {:.9g} {:.9g} {:.9g}\n", e[0], e[1], e[2], e[3]);
+  for (const auto& e : quat)
+    out << fmt::format("{:.9g} {:.9g} {:.9g} {:.9g}\n", e[0], e[1], e[2], e[3]);
   out << "</DataArray>\n</PointData>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>\n";
   frames_.emplace_back(t, name);
 }

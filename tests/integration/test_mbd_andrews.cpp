@@ -14,7 +14,7 @@ namespace strata::mbd {
 namespace {
 
 // Reference solution at t = 0.03 (test set, relative-angle coordinates).
-constexpr double kReference[7] = {15.81077119629904,  -15.75637105984298, 0.04082224013073101,
+constexpr double kReference[7] = {15.81077119629904,   -15.75637105984298, 0.04082224013073101,
                                   -0.5347301163226948, 0.5244099658805304, 0.5347301163226948,
                                   1.048080741042263};
 
@@ -38,9 +38,10 @@ double run(double h, int order, bool dense, std::array<double, 7>* angles = null
   while (!integ.done()) integ.advance();
   const auto& st = integ.stats();
   if (getenv("MBD_VERBOSE"))
-    std::printf("steps %ld rejected %ld newton %ld factorizations %ld analyses %ld repartitions %ld\n",
-                (long)st.steps, (long)st.rejected, (long)st.newton_iterations, (long)st.factorizations,
-                (long)st.analyses, (long)st.repartitions);
+    std::printf(
+        "steps %ld rejected %ld newton %ld factorizations %ld analyses %ld repartitions %ld\n",
+        (long)st.steps, (long)st.rejected, (long)st.newton_iterations, (long)st.factorizations,
+        (long)st.analyses, (long)st.repartitions);
   EXPECT_NEAR(integ.t(), 0.03, 1e-15);
   const auto rel = andrews_relative_angles(integ.q().data());
   if (angles) *angles = rel;
@@ -68,16 +69,22 @@ TEST(Andrews, DISABLED_ErrorTable) {
   for (int k = 1; k <= 5; ++k)
     for (double h : {4e-5, 2e-5, 1e-5, 5e-6, 2.5e-6}) {
       double e = 0;
-      try { e = run(h, k, getenv("MBD_DENSE") != nullptr, nullptr, getenv("MBD_FULL") == nullptr); } catch (const std::exception& ex) { std::printf("k=%d h=%g: %s\n", k, h, ex.what()); continue; }
+      try {
+        e = run(h, k, getenv("MBD_DENSE") != nullptr, nullptr, getenv("MBD_FULL") == nullptr);
+      } catch (const std::exception& ex) {
+        std::printf("k=%d h=%g: %s\n", k, h, ex.what());
+        continue;
+      }
       std::printf("k=%d h=%.2e err=%.3e\n", k, h, e);
     }
 }
-}
-}
+}  // namespace
+}  // namespace strata::mbd
 namespace strata::mbd {
 namespace {
 TEST(Andrews, DISABLED_One) {
-  std::printf("err %.3e\n", run(atof(getenv("H")), atoi(getenv("K")), false, nullptr, getenv("MBD_FULL") == nullptr));
+  std::printf("err %.3e\n", run(atof(getenv("H")), atoi(getenv("K")), false, nullptr,
+                                getenv("MBD_FULL") == nullptr));
 }
-}
-}
+}  // namespace
+}  // namespace strata::mbd

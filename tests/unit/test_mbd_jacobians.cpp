@@ -114,7 +114,8 @@ void check_model(const Model& m, std::mt19937_64& rng) {
     for (double& l : lam) l = u(rng);
     ConstraintEval e, ep, em;
     c->evaluate(q.data(), v.data(), a.data(), t, true, e);
-    std::vector<double> fq(e.jq.size()), fvq(e.jq.size()), faq(e.jq.size()), fh(nz * nz), h(nz * nz);
+    std::vector<double> fq(e.jq.size()), fvq(e.jq.size()), faq(e.jq.size()), fh(nz * nz),
+        h(nz * nz);
     const double eps = 1e-6;
     for (std::size_t k = 0; k < nz; ++k) {
       auto qp = q, qm = q;
