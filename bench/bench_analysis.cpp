@@ -2,14 +2,16 @@
 //
 // For each problem: nnz(L), factor flops and analysis time of strata (its own nested
 // dissection by default) next to cholmod_l_analyze with the METIS ordering, in the same
-// run; the median of --repeat runs is reported. Results: bench/results/analysis-*.json.
+// run; the median of --repeat runs is reported. Results: bench/results/analysis-*.json
+// (analysis-<tag>-*.json with --tag).
 //
-//   bench_analysis [--problems a,b,...] [--repeat R] [--ordering nd|metis|amd]
+//   bench_analysis [--problems a,b,...] [--repeat R] [--ordering nd|metis|amd] [--no-cholmod]
+//                  [--tag NAME] [--results-dir DIR]
 #include <cholmod.h>
+#include <fmt/core.h>
 #include <sys/resource.h>
 
 #include <CLI/CLI.hpp>
-#include <fmt/core.h>
 
 #include "bench_common.hpp"
 #include "core/timer.hpp"
@@ -77,9 +79,9 @@ CholmodAnalysis cholmod_analysis(const SparseMatrix& a, bool symmetric, int repe
 
 int main(int argc, char** argv) {
   CLI::App app{"strata analysis benchmark (vs CHOLMOD + METIS)"};
-  std::vector<std::string> problems = {"bcsstk09", "bcsstk13", "bcsstk16", "ccx_segmenttet_K",
-                                       "ccx_cubef2f3_K", "lap3d-60", "lap3d-80", "elast3d-30",
-                                       "elast3d-40"};
+  std::vector<std::string> problems = {"bcsstk09",         "bcsstk13",       "bcsstk16",
+                                       "ccx_segmenttet_K", "ccx_cubef2f3_K", "lap3d-60",
+                                       "lap3d-80",         "elast3d-30",     "elast3d-40"};
   int repeat = 3;
   std::string ordering = "nd";
   bool no_cholmod = false;
@@ -88,10 +90,17 @@ int main(int argc, char** argv) {
   app.add_option("--repeat", repeat, "runs per measurement (median reported)");
   app.add_option("--ordering", ordering)->check(CLI::IsMember({"nd", "metis", "amd"}));
   app.add_flag("--no-cholmod", no_cholmod, "skip the CHOLMOD reference (e.g. for huge problems)");
+  std::string tag, results_dir;
+  app.add_option("--tag", tag,
+                 "label stored in the results (\"tag\") and added to the file name, e.g. mbs-64")
+      ->check(bench::check_tag);
+  app.add_option("--results-dir", results_dir,
+                 "folder for the results file (default bench/results)");
   CLI11_PARSE(app, argc, argv);
 
   json out = bench::run_metadata(argc, argv);
   out["benchmark"] = "analysis";
+  out["tag"] = tag;
   out["rows"] = json::array();
   fmt::print("{:<18} {:>9} {:>12} {:>12} {:>6} {:>10} {:>10} {:>8} {:>8} {:>6}\n", "problem", "n",
              "nnzL strata", "nnzL cholmod", "ratio", "flops s", "flops c", "t strata", "t chol",
@@ -102,8 +111,9 @@ int main(int argc, char** argv) {
     Options o;
     o.type = p.symmetric ? MatrixType::spd : MatrixType::general;
     o.matching_and_scaling = false;  // pattern-only comparison
-    o.ordering = ordering == "nd" ? OrderingMethod::nested_dissection
-                 : ordering == "metis" ? OrderingMethod::metis : OrderingMethod::amd;
+    o.ordering = ordering == "nd"      ? OrderingMethod::nested_dissection
+                 : ordering == "metis" ? OrderingMethod::metis
+                                       : OrderingMethod::amd;
     std::vector<double> times;
     AnalysisStats st;
     for (int k = 0; k < repeat; ++k) {
@@ -114,12 +124,18 @@ int main(int argc, char** argv) {
       st = s.stats().analysis;
     }
     const double ts = bench::median(times);
-    json row = {{"problem", name}, {"n", st.n}, {"nnz_a", st.nnz_a},
-                {"strata", {{"nnz_l", st.nnz_l}, {"flops", st.factor_flops}, {"seconds", ts},
-                            {"ordering_seconds", st.ordering_seconds},
-                            {"symbolic_seconds", st.symbolic_seconds},
-                            {"plan_seconds", st.plan_seconds}, {"fronts", st.n_fronts},
-                            {"tree_height", st.tree_height}}}};
+    json row = {{"problem", name},
+                {"n", st.n},
+                {"nnz_a", st.nnz_a},
+                {"strata",
+                 {{"nnz_l", st.nnz_l},
+                  {"flops", st.factor_flops},
+                  {"seconds", ts},
+                  {"ordering_seconds", st.ordering_seconds},
+                  {"symbolic_seconds", st.symbolic_seconds},
+                  {"plan_seconds", st.plan_seconds},
+                  {"fronts", st.n_fronts},
+                  {"tree_height", st.tree_height}}}};
     if (!no_cholmod) {
       CholmodAnalysis c = cholmod_analysis(p.a, p.symmetric, repeat);
       row["cholmod_metis"] = {{"nnz_l", c.lnz}, {"flops", c.flops}, {"seconds", c.seconds}};
@@ -127,9 +143,10 @@ int main(int argc, char** argv) {
       row["time_ratio"] = ts / c.seconds;
       lnz_ratios.push_back(st.nnz_l / c.lnz);
       time_ratios.push_back(ts / c.seconds);
-      fmt::print("{:<18} {:>9} {:>12} {:>12.0f} {:>6.3f} {:>10.3g} {:>10.3g} {:>8.3f} {:>8.3f} {:>6.2f}\n",
-                 name, st.n, st.nnz_l, c.lnz, st.nnz_l / c.lnz, st.factor_flops, c.flops, ts,
-                 c.seconds, ts / c.seconds);
+      fmt::print(
+          "{:<18} {:>9} {:>12} {:>12.0f} {:>6.3f} {:>10.3g} {:>10.3g} {:>8.3f} {:>8.3f} {:>6.2f}\n",
+          name, st.n, st.nnz_l, c.lnz, st.nnz_l / c.lnz, st.factor_flops, c.flops, ts, c.seconds,
+          ts / c.seconds);
     } else {
       fmt::print("{:<18} {:>9} {:>12} {:>12} {:>6} {:>10.3g} {:>10} {:>8.3f}\n", name, st.n,
                  st.nnz_l, "-", "-", st.factor_flops, "-", ts);
@@ -147,6 +164,7 @@ int main(int argc, char** argv) {
                bench::geometric_mean(lnz_ratios), bench::geometric_mean(time_ratios));
   }
   fmt::print("peak RSS {:.1f} MB\n", ru.ru_maxrss / 1024.0);
-  fmt::print("results: {}\n", bench::write_result(out, "analysis"));
+  const std::string stem = tag.empty() ? "analysis" : "analysis-" + tag;
+  fmt::print("results: {}\n", bench::write_result(out, stem, results_dir));
   return 0;
 }

@@ -5,15 +5,19 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <ctime>
+#include <filesystem>
 #include <fstream>
 #include <thread>
 
 #include "sparse/generators.hpp"
 #include "strata/errors.hpp"
 #include "strata/matrix_market.hpp"
+#include "core/timer.hpp"
+#include <cholmod.h>
 
 namespace strata::bench {
 namespace {
@@ -45,10 +49,22 @@ Problem load_problem(const std::string& name) {
   if (dash != std::string::npos) {
     const std::string kind = name.substr(0, dash);
     const index_t k = std::stoll(name.substr(dash + 1));
-    if (kind == "lap3d") p.a = generators::laplacian_3d(k, k, k);
-    else if (kind == "lap2d") p.a = generators::laplacian_2d(k, k);
-    else if (kind == "elast3d") p.a = generators::elasticity_3d(k, k, k);
-    else throw InvalidInput("unknown generated problem " + name);
+    if (kind == "lap3d")
+      p.a = generators::laplacian_3d(k, k, k);
+    else if (kind == "lap2d")
+      p.a = generators::laplacian_2d(k, k);
+    else if (kind == "elast3d")
+      p.a = generators::elasticity_3d(k, k, k);
+    else if (kind == "uelast3d") {
+      // unsymmetric values on the elasticity pattern: entry (i, j) scaled by
+      // 1 + 0.3·sin(i + 2j), deterministic (the LU benchmark problem)
+      p.a = expand_symmetric(generators::elasticity_3d(k, k, k));
+      for (index_t j = 0; j < p.a.n_cols; ++j)
+        for (index_t q = p.a.offsets[j]; q < p.a.offsets[j + 1]; ++q)
+          p.a.values[q] *= 1.0 + 0.3 * std::sin(static_cast<double>(p.a.indices[q] + 2 * j));
+      p.symmetric = false;
+    } else
+      throw InvalidInput("unknown generated problem " + name);
     return p;
   }
   MMMatrix mm = read_matrix_market(std::string(STRATA_MATRIX_DIR) + "/" + name + ".mtx.gz");
@@ -64,18 +80,29 @@ nlohmann::json run_metadata(int argc, char** argv) {
   while (!cpu.empty() && cpu.front() == ' ') cpu.erase(cpu.begin());
   char host[256] = {0};
   gethostname(host, sizeof host - 1);
-  return {{"date", utc_now("%Y-%m-%dT%H:%M:%SZ")},
-          {"command", cmd},
-          {"git_commit", command_output("git -C " STRATA_SOURCE_DIR " rev-parse --short HEAD 2>/dev/null")},
-          {"git_dirty", !command_output("git -C " STRATA_SOURCE_DIR " status --porcelain --untracked-files=no 2>/dev/null").empty()},
-          {"machine", {{"host", host},
-                       {"cpu", cpu},
-                       {"hardware_threads", std::thread::hardware_concurrency()},
-                       {"gpu", command_output("nvidia-smi --query-gpu=name --format=csv,noheader 2>/dev/null | head -1")}}}};
+  return {
+      {"date", utc_now("%Y-%m-%dT%H:%M:%SZ")},
+      {"command", cmd},
+      {"git_commit",
+       command_output("git -C " STRATA_SOURCE_DIR " rev-parse --short HEAD 2>/dev/null")},
+      {"git_dirty", !command_output("git -C " STRATA_SOURCE_DIR
+                                    " status --porcelain --untracked-files=no 2>/dev/null")
+                         .empty()},
+      {"machine",
+       {{"host", host},
+        {"cpu", cpu},
+        {"hardware_threads", std::thread::hardware_concurrency()},
+        {"gpu", command_output(
+                    "nvidia-smi --query-gpu=name --format=csv,noheader 2>/dev/null | head -1")}}}};
 }
 
-std::string write_result(const nlohmann::json& j, const std::string& stem) {
-  const std::string dir = std::string(STRATA_SOURCE_DIR) + "/bench/results";
+std::string write_result(const nlohmann::json& j, const std::string& stem,
+                         const std::string& results_dir) {
+  const std::string dir =
+      results_dir.empty() ? std::string(STRATA_SOURCE_DIR) + "/bench/results" : results_dir;
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (ec) throw Error("cannot create " + dir + ": " + ec.message());
   const std::string path = dir + "/" + stem + "-" + utc_now("%Y%m%dT%H%M%SZ") + ".json";
   const std::string tmp = path + ".tmp";
   {
@@ -93,6 +120,13 @@ std::string write_result(const nlohmann::json& j, const std::string& stem) {
   return path;
 }
 
+std::string check_tag(const std::string& tag) {
+  for (char c : tag)
+    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '_' || c == '-'))
+      return "tag '" + tag + "' may hold only letters, digits, '.', '_' and '-'";
+  return {};
+}
+
 double geometric_mean(const std::vector<double>& v) {
   if (v.empty()) return 0;
   double s = 0;
@@ -105,5 +139,62 @@ double median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
   return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
 }
+
+double berr(const SparseMatrix& a, const std::vector<double>& x, const std::vector<double>& b) {
+  std::vector<double> ax(b.size());
+  multiply(a, x.data(), ax.data());
+  std::vector<double> row(a.n_rows, 0.0);
+  for (index_t j = 0; j < a.n_cols; ++j)
+    for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p) {
+      row[a.indices[p]] += std::abs(a.values[p]);
+      if (a.storage != Storage::full && a.indices[p] != j) row[j] += std::abs(a.values[p]);
+    }
+  double an = 0, rn = 0, xn = 0, bn = 0;
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    an = std::max(an, row[i]);
+    rn = std::max(rn, std::abs(b[i] - ax[i]));
+    xn = std::max(xn, std::abs(x[i]));
+    bn = std::max(bn, std::abs(b[i]));
+  }
+  return rn / (an * xn + bn);
+}
+
+RefResult run_cholmod(const SparseMatrix& a, const std::vector<index_t>& perm,
+                      const std::vector<double>& b, int repeat) {
+  RefResult r;
+  cholmod_common cc;
+  cholmod_l_start(&cc);
+  cc.nmethods = 1;
+  cc.method[0].ordering = CHOLMOD_GIVEN;
+  cc.supernodal = CHOLMOD_SUPERNODAL;
+  const index_t n = a.n_rows;
+  cholmod_sparse* A = cholmod_l_allocate_sparse(n, n, a.nnz(), 1, 1, -1, CHOLMOD_REAL, &cc);
+  std::copy(a.offsets.begin(), a.offsets.end(), static_cast<SuiteSparse_long*>(A->p));
+  std::copy(a.indices.begin(), a.indices.end(), static_cast<SuiteSparse_long*>(A->i));
+  std::copy(a.values.begin(), a.values.end(), static_cast<double*>(A->x));
+  std::vector<SuiteSparse_long> p(perm.begin(), perm.end());
+  cholmod_factor* L = cholmod_l_analyze_p(A, p.data(), nullptr, 0, &cc);
+  std::vector<double> times;
+  for (int k = 0; k < repeat; ++k) {
+    Timer t;
+    cholmod_l_factorize(A, L, &cc);
+    times.push_back(t.seconds());
+  }
+  r.ok = cc.status == CHOLMOD_OK;
+  r.seconds = bench::median(times);
+  r.lnz = cc.lnz;
+  cholmod_dense* B = cholmod_l_allocate_dense(n, 1, n, CHOLMOD_REAL, &cc);
+  std::copy(b.begin(), b.end(), static_cast<double*>(B->x));
+  cholmod_dense* X = cholmod_l_solve(CHOLMOD_A, L, B, &cc);
+  std::vector<double> x(static_cast<double*>(X->x), static_cast<double*>(X->x) + n);
+  r.backward_error = berr(a, x, b);
+  cholmod_l_free_dense(&X, &cc);
+  cholmod_l_free_dense(&B, &cc);
+  cholmod_l_free_factor(&L, &cc);
+  cholmod_l_free_sparse(&A, &cc);
+  cholmod_l_finish(&cc);
+  return r;
+}
+
 
 }  // namespace strata::bench

@@ -11,7 +11,8 @@ namespace strata::bench {
 
 /// A benchmark problem: a shared SuiteSparse matrix by name ("bcsstk16"), or a generated
 /// one: "lap3d-N" (7-point Laplacian N³), "elast3d-N" (3-dof 27-point stencil N³),
-/// "lap2d-N". Symmetric problems come as Storage::lower.
+/// "lap2d-N", "uelast3d-N" (elasticity pattern, unsymmetric values). Symmetric problems
+/// come as Storage::lower.
 struct Problem {
   std::string name;
   SparseMatrix a;
@@ -22,9 +23,30 @@ Problem load_problem(const std::string& name);
 /// Machine, date, git commit and the exact command line of this run.
 nlohmann::json run_metadata(int argc, char** argv);
 
-/// Writes `j` to bench/results/<stem>-<UTC date-time>.json atomically (temporary file,
-/// then rename) and returns the path.
-std::string write_result(const nlohmann::json& j, const std::string& stem);
+/// Writes `j` to <dir>/<stem>-<UTC date-time>.json atomically (temporary file, then
+/// rename) and returns the path. An empty `dir` means bench/results of the source tree;
+/// the folder is created if missing.
+std::string write_result(const nlohmann::json& j, const std::string& stem,
+                         const std::string& dir = "");
+
+/// Checks a --tag value: letters, digits, '.', '_' and '-' only (it goes into a file name).
+/// Returns an error message, empty when the tag is valid (CLI11 validator signature).
+std::string check_tag(const std::string& tag);
+
+/// Result of a reference solver run: median factorization seconds, nnz(L), backward
+/// error of its solution of A x = b.
+struct RefResult {
+  double seconds = 0, lnz = 0, backward_error = 0;
+  bool ok = false;
+};
+
+/// Normwise backward error ‖b − A x‖∞ / (‖A‖∞‖x‖∞ + ‖b‖∞) (A in any storage).
+double berr(const SparseMatrix& a, const std::vector<double>& x, const std::vector<double>& b);
+
+/// CHOLMOD supernodal Cholesky of the SPD matrix `a` (lower storage) with the given
+/// permutation (new to old): median of `repeat` cholmod_l_factorize calls, then a solve.
+RefResult run_cholmod(const SparseMatrix& a, const std::vector<index_t>& perm,
+                      const std::vector<double>& b, int repeat);
 
 /// Geometric mean of positive values (0 for an empty list).
 double geometric_mean(const std::vector<double>& v);

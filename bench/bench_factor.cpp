@@ -6,14 +6,15 @@
 // medians over --repeat factorizations (strata: refactorize, which is what the multibody
 // loop calls; CHOLMOD: cholmod_l_factorize on the same symbolic object; MUMPS: JOB=2).
 // All three use the same OpenBLAS with --threads threads.
-// Results: bench/results/factor-*.json.
+// Results: bench/results/factor-*.json (factor-<tag>-*.json with --tag).
 //
-//   bench_factor [--problems a,b,...] [--repeat R] [--threads T] [--no-mumps]
+//   bench_factor [--problems a,b,...] [--repeat R] [--threads T] [--max-block-size N]
+//                [--no-mumps] [--tag NAME] [--results-dir DIR]
 #include <cholmod.h>
+#include <fmt/core.h>
 
 #include <CLI/CLI.hpp>
 #include <cmath>
-#include <fmt/core.h>
 
 #ifdef STRATA_BENCH_HAVE_MUMPS
 #include <dmumps_c.h>
@@ -29,66 +30,9 @@ using json = nlohmann::json;
 
 namespace {
 
-struct RefResult {
-  double seconds = 0, lnz = 0, backward_error = 0;
-  bool ok = false;
-};
-
-double berr(const SparseMatrix& a, const std::vector<double>& x, const std::vector<double>& b) {
-  std::vector<double> ax(b.size());
-  multiply(a, x.data(), ax.data());
-  std::vector<double> row(a.n_rows, 0.0);
-  for (index_t j = 0; j < a.n_cols; ++j)
-    for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p) {
-      row[a.indices[p]] += std::abs(a.values[p]);
-      if (a.storage != Storage::full && a.indices[p] != j) row[j] += std::abs(a.values[p]);
-    }
-  double an = 0, rn = 0, xn = 0, bn = 0;
-  for (std::size_t i = 0; i < b.size(); ++i) {
-    an = std::max(an, row[i]);
-    rn = std::max(rn, std::abs(b[i] - ax[i]));
-    xn = std::max(xn, std::abs(x[i]));
-    bn = std::max(bn, std::abs(b[i]));
-  }
-  return rn / (an * xn + bn);
-}
-
-RefResult run_cholmod(const SparseMatrix& a, const std::vector<index_t>& perm,
-                      const std::vector<double>& b, int repeat) {
-  RefResult r;
-  cholmod_common cc;
-  cholmod_l_start(&cc);
-  cc.nmethods = 1;
-  cc.method[0].ordering = CHOLMOD_GIVEN;
-  cc.supernodal = CHOLMOD_SUPERNODAL;
-  const index_t n = a.n_rows;
-  cholmod_sparse* A = cholmod_l_allocate_sparse(n, n, a.nnz(), 1, 1, -1, CHOLMOD_REAL, &cc);
-  std::copy(a.offsets.begin(), a.offsets.end(), static_cast<SuiteSparse_long*>(A->p));
-  std::copy(a.indices.begin(), a.indices.end(), static_cast<SuiteSparse_long*>(A->i));
-  std::copy(a.values.begin(), a.values.end(), static_cast<double*>(A->x));
-  std::vector<SuiteSparse_long> p(perm.begin(), perm.end());
-  cholmod_factor* L = cholmod_l_analyze_p(A, p.data(), nullptr, 0, &cc);
-  std::vector<double> times;
-  for (int k = 0; k < repeat; ++k) {
-    Timer t;
-    cholmod_l_factorize(A, L, &cc);
-    times.push_back(t.seconds());
-  }
-  r.ok = cc.status == CHOLMOD_OK;
-  r.seconds = bench::median(times);
-  r.lnz = cc.lnz;
-  cholmod_dense* B = cholmod_l_allocate_dense(n, 1, n, CHOLMOD_REAL, &cc);
-  std::copy(b.begin(), b.end(), static_cast<double*>(B->x));
-  cholmod_dense* X = cholmod_l_solve(CHOLMOD_A, L, B, &cc);
-  std::vector<double> x(static_cast<double*>(X->x), static_cast<double*>(X->x) + n);
-  r.backward_error = berr(a, x, b);
-  cholmod_l_free_dense(&X, &cc);
-  cholmod_l_free_dense(&B, &cc);
-  cholmod_l_free_factor(&L, &cc);
-  cholmod_l_free_sparse(&A, &cc);
-  cholmod_l_finish(&cc);
-  return r;
-}
+using bench::RefResult;
+using bench::berr;
+using bench::run_cholmod;
 
 #ifdef STRATA_BENCH_HAVE_MUMPS
 RefResult run_mumps(const SparseMatrix& a, const std::vector<index_t>& perm,
@@ -120,7 +64,7 @@ RefResult run_mumps(const SparseMatrix& a, const std::vector<index_t>& perm,
   id.icntl[1] = -1;
   id.icntl[2] = -1;
   id.icntl[3] = 0;
-  id.icntl[6] = 1;   // ICNTL(7) = 1: given ordering in PERM_IN (position of each variable)
+  id.icntl[6] = 1;  // ICNTL(7) = 1: given ordering in PERM_IN (position of each variable)
   id.perm_in = perm_in.data();
   id.icntl[13] = 50;  // ICNTL(14): 50% more working space than estimated
   id.job = 1;
@@ -152,9 +96,9 @@ RefResult run_mumps(const SparseMatrix& a, const std::vector<index_t>& perm,
 
 int main(int argc, char** argv) {
   CLI::App app{"strata factorization benchmark (vs CHOLMOD and MUMPS, same permutation)"};
-  std::vector<std::string> problems = {"bcsstk09", "bcsstk13", "bcsstk16", "ccx_segmenttet_K",
-                                       "ccx_cubef2f3_K", "lap3d-40", "lap3d-60", "elast3d-20",
-                                       "elast3d-30"};
+  std::vector<std::string> problems = {"bcsstk09",         "bcsstk13",       "bcsstk16",
+                                       "ccx_segmenttet_K", "ccx_cubef2f3_K", "lap3d-40",
+                                       "lap3d-60",         "elast3d-20",     "elast3d-30"};
   int repeat = 3, threads = 2;
   bool no_mumps = false;
   index_t max_block = Options{}.max_block_size;
@@ -163,12 +107,20 @@ int main(int argc, char** argv) {
   app.add_option("--threads", threads, "threads for every solver (OpenBLAS and strata)");
   app.add_option("--max-block-size", max_block, "strata's maximum block size");
   app.add_flag("--no-mumps", no_mumps, "skip MUMPS");
+  std::string tag, results_dir;
+  app.add_option("--tag", tag,
+                 "label stored in the results (\"tag\") and added to the file name, e.g. mbs-64")
+      ->check(bench::check_tag);
+  app.add_option("--results-dir", results_dir,
+                 "folder for the results file (default bench/results)");
   CLI11_PARSE(app, argc, argv);
   openblas_set_num_threads(threads);
 
   json out = bench::run_metadata(argc, argv);
   out["benchmark"] = "factor";
+  out["tag"] = tag;
   out["threads"] = threads;
+  out["max_block_size"] = max_block;
   out["rows"] = json::array();
   fmt::print("{:<18} {:>8} {:>11} {:>9} {:>8} {:>9} {:>9} {:>7} {:>7} {:>9} {:>9}\n", "problem",
              "n", "nnz(L)", "strata s", "GFLOP/s", "cholmod s", "mumps s", "s/chol", "s/mumps",
@@ -209,24 +161,32 @@ int main(int argc, char** argv) {
 #ifdef STRATA_BENCH_HAVE_MUMPS
     if (!no_mumps) m = run_mumps(p.a, s.permutation(), b, true, repeat);
 #endif
-    json row = {{"problem", name}, {"n", n}, {"nnz_l", an.nnz_l}, {"factor_flops", an.factor_flops},
-                {"strata", {{"seconds", ts}, {"first_factorize_seconds", first},
-                            {"gflops", gflops}, {"backward_error", be},
-                            {"refinement_steps", s.stats().solve.refinement_steps}}},
-                {"cholmod", {{"seconds", c.seconds}, {"nnz_l", c.lnz},
-                             {"backward_error", c.backward_error}, {"ok", c.ok}}}};
-    if (m.ok)
-      row["mumps"] = {{"seconds", m.seconds}, {"backward_error", m.backward_error}};
+    json row = {{"problem", name},
+                {"n", n},
+                {"nnz_l", an.nnz_l},
+                {"factor_flops", an.factor_flops},
+                {"strata",
+                 {{"seconds", ts},
+                  {"first_factorize_seconds", first},
+                  {"gflops", gflops},
+                  {"backward_error", be},
+                  {"refinement_steps", s.stats().solve.refinement_steps}}},
+                {"cholmod",
+                 {{"seconds", c.seconds},
+                  {"nnz_l", c.lnz},
+                  {"backward_error", c.backward_error},
+                  {"ok", c.ok}}}};
+    if (m.ok) row["mumps"] = {{"seconds", m.seconds}, {"backward_error", m.backward_error}};
     row["ratio_cholmod"] = ts / c.seconds;
     ratio_c.push_back(ts / c.seconds);
     if (m.ok) {
       row["ratio_mumps"] = ts / m.seconds;
       ratio_m.push_back(ts / m.seconds);
     }
-    fmt::print("{:<18} {:>8} {:>11} {:>9.4f} {:>8.2f} {:>9.4f} {:>9} {:>7.3f} {:>7} {:>9.1e} {:>9.1e}\n",
-               name, n, an.nnz_l, ts, gflops, c.seconds,
-               m.ok ? fmt::format("{:.4f}", m.seconds) : "-", ts / c.seconds,
-               m.ok ? fmt::format("{:.3f}", ts / m.seconds) : "-", be, c.backward_error);
+    fmt::print(
+        "{:<18} {:>8} {:>11} {:>9.4f} {:>8.2f} {:>9.4f} {:>9} {:>7.3f} {:>7} {:>9.1e} {:>9.1e}\n",
+        name, n, an.nnz_l, ts, gflops, c.seconds, m.ok ? fmt::format("{:.4f}", m.seconds) : "-",
+        ts / c.seconds, m.ok ? fmt::format("{:.3f}", ts / m.seconds) : "-", be, c.backward_error);
     std::fflush(stdout);
     out["rows"].push_back(row);
   }
@@ -237,6 +197,7 @@ int main(int argc, char** argv) {
   if (!ratio_m.empty())
     fmt::print("geometric mean of strata/MUMPS factorization time:   {:.3f}\n",
                bench::geometric_mean(ratio_m));
-  fmt::print("results: {}\n", bench::write_result(out, "factor"));
+  const std::string stem = tag.empty() ? "factor" : "factor-" + tag;
+  fmt::print("results: {}\n", bench::write_result(out, stem, results_dir));
   return 0;
 }

@@ -6,7 +6,7 @@ set -euo pipefail
 pkgs=(
   build-essential cmake ninja-build pkg-config
   libopenblas-dev liblapack-dev libmetis-dev libsuitesparse-dev
-  libcli11-dev nlohmann-json3-dev libfmt-dev zlib1g-dev
+  libcli11-dev nlohmann-json3-dev libfmt-dev zlib1g-dev libtbb-dev
   libgtest-dev libgmock-dev libbenchmark-dev libmumps-seq-dev
   python3-matplotlib
 )

@@ -222,6 +222,7 @@ int run_solve(const SolveArgs& a) {
                    {"determinant_sign", f.determinant_sign}};
     j["solve"] = {{"seconds", st.solve.seconds},
                   {"refinement_steps", st.solve.refinement_steps},
+                  {"gmres_iterations", st.solve.gmres_iterations},
                   {"backward_error", st.solve.backward_error},
                   {"converged", st.solve.refinement_converged}};
     j["total_seconds"] = total;
@@ -236,9 +237,11 @@ int run_solve(const SolveArgs& a) {
                f.inertia_zero);
     fmt::print("log|det A|            {:.10g} (sign {})\n", f.log_abs_determinant,
                f.determinant_sign);
-    fmt::print("solve                 {:.3f} s, {} refinement steps, backward error {:.3e}{}\n",
-               st.solve.seconds, st.solve.refinement_steps, st.solve.backward_error,
-               st.solve.refinement_converged ? "" : " (above tolerance)");
+    fmt::print(
+        "solve                 {:.3f} s, {} refinement steps, {} GMRES iterations, "
+        "backward error {:.3e}{}\n",
+        st.solve.seconds, st.solve.refinement_steps, st.solve.gmres_iterations,
+        st.solve.backward_error, st.solve.refinement_converged ? "" : " (above tolerance)");
     fmt::print("total                 {:.3f} s (analyze + factorize + solve)\n", total);
     if (!a.out.empty()) fmt::print("solution written to   {}\n", a.out);
   }

@@ -35,8 +35,7 @@ MMMatrix read_matrix_market(const std::string& path);
 
 /// Reads a dense `array` (or a coordinate file, densified) into a column-major
 /// rows×cols array. Throws ParseError.
-std::vector<double> read_dense_matrix_market(const std::string& path, index_t* rows,
-                                             index_t* cols);
+std::vector<double> read_dense_matrix_market(const std::string& path, index_t* rows, index_t* cols);
 
 /// Writes A as `coordinate real general` (or `symmetric` when A.storage is lower or
 /// upper; an upper-stored matrix is written as its transpose's lower triangle).

@@ -77,8 +77,9 @@ struct Options {
   /// matching and scale rows and columns (MC64-style, Duff & Koster 2001). Default on.
   bool matching_and_scaling = true;
   /// Static pivoting: a pivot with |d| < static_pivot_epsilon · ‖A‖₁ (after scaling) is
-  /// replaced by ±static_pivot_epsilon · ‖A‖₁ and counted in FactorStats (default 1e-10).
-  double static_pivot_epsilon = 1e-10;
+  /// replaced by ±static_pivot_epsilon · ‖A‖₁ and counted in FactorStats (default 1e-8 ≈ √ε, as in
+  /// SuperLU_DIST and MUMPS).
+  double static_pivot_epsilon = 1e-8;
 
   // --- solve ---
   /// Most iterative refinement steps after the first solve (default 10; 0 disables).
@@ -86,6 +87,10 @@ struct Options {
   /// Refinement stops once the backward error ‖b−Ax‖∞ / (‖A‖∞‖x‖∞ + ‖b‖∞) is at or below
   /// this value, or stops decreasing by at least half per step (default 1e-15).
   double refinement_tolerance = 1e-15;
+  /// When refinement stalls above the tolerance (typically after perturbed pivots), GMRES
+  /// right-preconditioned by the factorization continues for at most this many iterations
+  /// (restarted every 50; default 200; 0 disables).
+  int gmres_max_iterations = 200;
 };
 
 }  // namespace strata

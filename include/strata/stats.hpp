@@ -26,19 +26,19 @@ struct BatchInfo {
 /// Results of the analysis phase (pattern only).
 struct AnalysisStats {
   index_t n = 0;
-  index_t nnz_a = 0;              ///< entries of the full (both triangles) matrix A
-  index_t nnz_l = 0;              ///< exact nnz(L), diagonal included (no amalgamation)
-  index_t nnz_l_fronts = 0;       ///< entries of L as stored in fronts (with amalgamation zeros)
-  double factor_flops = 0;        ///< flops of a Cholesky of the fronts (LU: about 2×)
+  index_t nnz_a = 0;         ///< entries of the full (both triangles) matrix A
+  index_t nnz_l = 0;         ///< exact nnz(L), diagonal included (no amalgamation)
+  index_t nnz_l_fronts = 0;  ///< entries of L as stored in fronts (with amalgamation zeros)
+  double factor_flops = 0;   ///< flops of a Cholesky of the fronts (LU: about 2×)
   index_t n_fronts = 0;
-  index_t largest_front_rows = 0;     ///< rows of the largest front
-  index_t largest_front_pivots = 0;   ///< most pivots in one front
-  index_t tree_height = 0;            ///< levels in the assembly tree
-  std::vector<index_t> fronts_per_level;  ///< level 0 is processed first (deepest)
-  std::size_t peak_working_bytes = 0;     ///< in-core multifrontal working memory peak
-  std::size_t factor_bytes = 0;           ///< bytes of the factor as stored in fronts
-  std::size_t memory_budget = 0;          ///< budget the plan was made for (0: unlimited)
-  std::vector<BatchInfo> batches;         ///< the memory plan
+  index_t largest_front_rows = 0;           ///< rows of the largest front
+  index_t largest_front_pivots = 0;         ///< most pivots in one front
+  index_t tree_height = 0;                  ///< levels in the assembly tree
+  std::vector<index_t> fronts_per_level;    ///< level 0 is processed first (deepest)
+  std::size_t peak_working_bytes = 0;       ///< in-core multifrontal working memory peak
+  std::size_t factor_bytes = 0;             ///< bytes of the factor as stored in fronts
+  std::size_t memory_budget = 0;            ///< budget the plan was made for (0: unlimited)
+  std::vector<BatchInfo> batches;           ///< the memory plan
   MatrixType type = MatrixType::automatic;  ///< type the analysis was made for
   OrderingMethod ordering = OrderingMethod::nested_dissection;
   double ordering_seconds = 0;
@@ -52,21 +52,22 @@ struct FactorStats {
   MatrixType type = MatrixType::automatic;  ///< the factorization actually computed
   std::string backend;                      ///< "cpu" or "cuda"
   double seconds = 0;
-  double gflops = 0;                   ///< AnalysisStats::factor_flops (×2 for LU) / seconds
-  index_t perturbed_pivots = 0;        ///< tiny pivots replaced by ±ε‖A‖ (static pivoting)
-  index_t two_by_two_pivots = 0;       ///< LDLᵀ: number of 2×2 pivot blocks
-  index_t inertia_positive = 0;        ///< LDLᵀ/LLᵀ: eigenvalue signs of D (after perturbation)
+  double gflops = 0;              ///< AnalysisStats::factor_flops (×2 for LU) / seconds
+  index_t perturbed_pivots = 0;   ///< tiny pivots replaced by ±ε‖A‖ (static pivoting)
+  index_t two_by_two_pivots = 0;  ///< LDLᵀ: number of 2×2 pivot blocks
+  index_t inertia_positive = 0;   ///< LDLᵀ/LLᵀ: eigenvalue signs of D (after perturbation)
   index_t inertia_negative = 0;
   index_t inertia_zero = 0;
-  double log_abs_determinant = 0;      ///< log|det A| (spd, LDLᵀ and LU)
-  int determinant_sign = 0;            ///< sign of det A: -1, 0 or 1
-  double matrix_norm = 0;              ///< ‖A‖₁ used for static pivoting (after scaling)
+  double log_abs_determinant = 0;  ///< log|det A| (spd, LDLᵀ and LU)
+  int determinant_sign = 0;        ///< sign of det A: -1, 0 or 1
+  double matrix_norm = 0;          ///< ‖A‖₁ used for static pivoting (after scaling)
 };
 
 /// Results of the last solve.
 struct SolveStats {
   double seconds = 0;
   int refinement_steps = 0;
+  int gmres_iterations = 0;  ///< total over right-hand sides (0 when refinement sufficed)
   double backward_error = 0;  ///< max over right-hand sides of ‖b−Ax‖∞/(‖A‖∞‖x‖∞+‖b‖∞)
   bool refinement_converged = false;  ///< reached Options::refinement_tolerance
 };

@@ -15,6 +15,7 @@
 #include "core/analysis.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <map>
 
 #include "core/timer.hpp"
@@ -234,13 +235,14 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts) {
                        std::to_string(a.n_cols));
   if (opts.max_block_size < 1) throw InvalidInput("max_block_size must be at least 1");
   if (opts.nd_leaf_size < 1) throw InvalidInput("nd_leaf_size must be at least 1");
+  static std::atomic<std::uint64_t> next_id{1};
   Analysis an;
+  an.id = next_id++;
   an.n = a.n_rows;
   an.input_storage = a.storage;
   an.type = opts.type;
   if (an.type == MatrixType::automatic) {
-    const bool sym = a.storage != Storage::full ||
-                     (a.has_values() && is_numerically_symmetric(a));
+    const bool sym = a.storage != Storage::full || (a.has_values() && is_numerically_symmetric(a));
     an.type = sym ? MatrixType::automatic : MatrixType::general;
   }
   an.symmetric = an.type != MatrixType::general;

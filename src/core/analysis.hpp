@@ -3,6 +3,7 @@
 // from the values given at analysis and reused by every refactorization).
 #pragma once
 
+#include <cstdint>
 #include <vector>
 
 #include "ordering/ordering.hpp"
@@ -42,6 +43,7 @@ struct FactorLayout {
 };
 
 struct Analysis {
+  std::uint64_t id = 0;  ///< unique per analysis, so executors can cache what they uploaded
   index_t n = 0;
   MatrixType type = MatrixType::automatic;  ///< spd, symmetric_indefinite or general;
                                             ///< automatic here means "symmetric, try spd"

@@ -11,13 +11,12 @@ ParseError::ParseError(std::string file, index_t line, const std::string& messag
       line_(line) {}
 
 OutOfMemory::OutOfMemory(std::size_t bytes_requested, const std::string& where)
-    : Error("out of memory: " + where + " asked for " + std::to_string(bytes_requested) +
-            " bytes"),
+    : Error("out of memory: " + where + " asked for " + std::to_string(bytes_requested) + " bytes"),
       bytes_(bytes_requested) {}
 
 NotPositiveDefinite::NotPositiveDefinite(index_t column, double pivot)
-    : Error("matrix is not positive definite: pivot " + std::to_string(pivot) +
-            " at column " + std::to_string(column) + " (0-based, original numbering)"),
+    : Error("matrix is not positive definite: pivot " + std::to_string(pivot) + " at column " +
+            std::to_string(column) + " (0-based, original numbering)"),
       column_(column),
       pivot_(pivot) {}
 

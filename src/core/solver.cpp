@@ -9,6 +9,8 @@
 // Algorithms", ch. 12): x ← x + A⁻¹(b − A x) with the residual in working precision,
 // stopping at the normwise backward error ‖b−Ax‖∞ / (‖A‖∞‖x‖∞ + ‖b‖∞) ≤ tolerance, or
 // when a step fails to halve it.
+#include "strata/solver.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <optional>
@@ -16,7 +18,7 @@
 #include "core/analysis.hpp"
 #include "core/timer.hpp"
 #include "numeric/factor.hpp"
-#include "strata/solver.hpp"
+#include "solve/gmres.hpp"
 
 namespace strata {
 namespace detail {
@@ -24,13 +26,13 @@ namespace detail {
 struct SolverState {
   Options options;
   std::optional<Analysis> analysis;
-  SparseMatrix values;               // canonical input values of the factorized matrix
-  std::vector<double> scaled;        // values as assembled (scaled for general)
+  SparseMatrix values;         // canonical input values of the factorized matrix
+  std::vector<double> scaled;  // values as assembled (scaled for general)
   std::vector<double> cb_arena;
   numeric::NumericFactor factor;
   std::unique_ptr<numeric::Executor> executor;
   MatrixType resolved = MatrixType::automatic;
-  double norm_inf = 0;               // ‖A‖∞ of the input
+  double norm_inf = 0;  // ‖A‖∞ of the input
   Stats stats;
 };
 
@@ -73,7 +75,10 @@ int parity(const std::vector<index_t>& p) {
 void run_factorization(SolverState& s, const SparseMatrix& a) {
   Timer timer;
   const Analysis& an = *s.analysis;
-  s.values = canonical_values(an, a);
+  // Validate before touching the current factor: bad input leaves the solver usable.
+  SparseMatrix checked = canonical_values(an, a);
+  s.factor.valid = false;
+  s.values = std::move(checked);
   s.norm_inf = norm_inf(s.values);
   // scaled values: general matrices use Dr·A·Dc from the matching
   const SparseMatrix& c = s.values;
@@ -186,13 +191,11 @@ void Solver::analyze(const SparseMatrix& a) {
 
 void Solver::factorize(const SparseMatrix& a) {
   if (!state_->analysis) analyze(a);
-  state_->factor.valid = false;
   run_factorization(*state_, a);
 }
 
 void Solver::refactorize(const SparseMatrix& a) {
   if (!state_->analysis) throw InvalidState("refactorize called before analyze");
-  state_->factor.valid = false;
   run_factorization(*state_, a);
 }
 
@@ -262,7 +265,26 @@ void Solver::solve(const double* b, double* x, index_t nrhs) {
       break;
     }
   }
+  // refinement stalled: GMRES preconditioned by the factorization (see solve/gmres.hpp)
+  int gmres_iterations = 0;
+  if (o.gmres_max_iterations > 0) {
+    std::vector<double> bc(n), tmp;
+    const solve::Operator op_a = [&](const double* in, double* out) {
+      multiply(s.values, in, out);
+    };
+    const solve::Operator op_m = [&](const double* in, double* out) {
+      apply_inverse(s, in, out, 1, tmp);
+    };
+    for (index_t c = 0; c < nrhs; ++c) {
+      if (berr[c] <= o.refinement_tolerance) continue;
+      const solve::GmresResult g = solve::gmres(n, op_a, op_m, s.norm_inf, b + c * n, x + c * n, 50,
+                                                o.gmres_max_iterations, o.refinement_tolerance);
+      gmres_iterations += g.iterations;
+      berr[c] = std::min(berr[c], g.backward_error);
+    }
+  }
   SolveStats& ss = s.stats.solve;
+  ss.gmres_iterations = gmres_iterations;
   ss.refinement_steps = steps;
   ss.backward_error = 0;
   for (index_t c = 0; c < nrhs; ++c) ss.backward_error = std::max(ss.backward_error, berr[c]);
@@ -271,10 +293,13 @@ void Solver::solve(const double* b, double* x, index_t nrhs) {
 }
 
 std::vector<double> Solver::solve(const std::vector<double>& b) {
+  if (!state_->analysis || !state_->factor.valid)
+    throw InvalidState("solve called before factorize");
   const index_t n = size();
   if (n == 0) {
-    if (!b.empty()) throw InvalidInput("right-hand side has " + std::to_string(b.size()) +
-                                       " entries for a 0x0 matrix");
+    if (!b.empty())
+      throw InvalidInput("right-hand side has " + std::to_string(b.size()) +
+                         " entries for a 0x0 matrix");
     return {};
   }
   if (b.empty() || static_cast<index_t>(b.size()) % n != 0)
@@ -296,28 +321,40 @@ const std::vector<index_t>& Solver::permutation() const {
 
 const char* to_string(MatrixType t) {
   switch (t) {
-    case MatrixType::automatic: return "auto";
-    case MatrixType::spd: return "spd";
-    case MatrixType::symmetric_indefinite: return "symmetric_indefinite";
-    case MatrixType::general: return "general";
+    case MatrixType::automatic:
+      return "auto";
+    case MatrixType::spd:
+      return "spd";
+    case MatrixType::symmetric_indefinite:
+      return "symmetric_indefinite";
+    case MatrixType::general:
+      return "general";
   }
   return "?";
 }
 const char* to_string(OrderingMethod o) {
   switch (o) {
-    case OrderingMethod::nested_dissection: return "nd";
-    case OrderingMethod::metis: return "metis";
-    case OrderingMethod::amd: return "amd";
-    case OrderingMethod::natural: return "natural";
-    case OrderingMethod::user: return "user";
+    case OrderingMethod::nested_dissection:
+      return "nd";
+    case OrderingMethod::metis:
+      return "metis";
+    case OrderingMethod::amd:
+      return "amd";
+    case OrderingMethod::natural:
+      return "natural";
+    case OrderingMethod::user:
+      return "user";
   }
   return "?";
 }
 const char* to_string(Backend b) {
   switch (b) {
-    case Backend::cpu: return "cpu";
-    case Backend::cuda: return "cuda";
-    case Backend::automatic: return "auto";
+    case Backend::cpu:
+      return "cpu";
+    case Backend::cuda:
+      return "cuda";
+    case Backend::automatic:
+      return "auto";
   }
   return "?";
 }

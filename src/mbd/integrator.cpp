@@ -2,11 +2,11 @@
 #include "mbd/integrator.hpp"
 
 #include <fmt/core.h>
-#include <omp.h>
 
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <thread>
 
 #include "core/timer.hpp"
 #include "strata/matrix_market.hpp"
@@ -63,7 +63,10 @@ Integrator::Integrator(const Model& model, IntegratorOptions options)
   // Threads: small systems run faster on one (thread start-up costs more than the work).
   const bool small = sys_.size() < 20000;
   const std::size_t elements = model.forces.size() + model.constraints.size();
-  sys_.set_threads(opts_.threads > 0 ? opts_.threads : elements < 500 ? 1 : omp_get_max_threads());
+  sys_.set_threads(opts_.threads > 0 ? opts_.threads
+                   : elements < 500
+                       ? 1
+                       : static_cast<int>(std::max(1u, std::thread::hardware_concurrency())));
   if (opts_.threads == 0 && small) opts_.threads = 1;
 }
 

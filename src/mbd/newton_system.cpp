@@ -1,7 +1,12 @@
 // strata::mbd — residual and Jacobian assembly of the BDF Newton system (see the header).
 #include "mbd/newton_system.hpp"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
 #include <algorithm>
+#include <atomic>
 #include <stdexcept>
 
 namespace strata::mbd {
@@ -171,18 +176,14 @@ void NewtonSystem::evaluate(const double* x, double t, const BdfTerms& bdf, bool
   std::fill(h, h + size(), 0.0);
   double* J = jac_.values.data();
   if (jacobian) std::fill(jac_.values.begin(), jac_.values.end(), 0.0);
-  // Elements are evaluated in parallel; entries that several elements share (the rows of
-  // the equations of motion) are added atomically, the constraint rows are each owned
-  // by one element.
-  const long nf = static_cast<long>(model_.forces.size());
-  const long nc = static_cast<long>(model_.constraints.size());
-#pragma omp parallel num_threads(threads_)
-  {
-    std::vector<double> lq, lv, la, hess;
+  const std::size_t nf = model_.forces.size(), nc = model_.constraints.size();
+  auto add = [](double& target, double value) {
+    std::atomic_ref<double>(target).fetch_add(value, std::memory_order_relaxed);
+  };
+  auto forces = [&](std::size_t begin, std::size_t end) {
+    std::vector<double> lq, lv, la;
     ForceEval fe;
-    ConstraintEval ce;
-#pragma omp for schedule(dynamic, 32) nowait
-    for (long e = 0; e < nf; ++e) {
+    for (std::size_t e = begin; e < end; ++e) {
       const Force& f = *model_.forces[e];
       if (!candidate_[e] || (skip_intermittent && f.intermittent)) continue;
       gather(f.dofs, q, lq);
@@ -190,29 +191,20 @@ void NewtonSystem::evaluate(const double* x, double t, const BdfTerms& bdf, bool
       gather(f.dofs, a, la);
       f.evaluate(lq.data(), lv.data(), la.data(), t, jacobian, fe);
       const std::size_t nz = f.dofs.size();
-      for (std::size_t i = 0; i < nz; ++i) {
-#pragma omp atomic
-        hf[f.dofs[i]] += fe.g[i];
-      }
+      for (std::size_t i = 0; i < nz; ++i) add(hf[f.dofs[i]], fe.g[i]);
       if (!jacobian) continue;
       const ForcePos& fp = fpos_[e];
-      for (std::size_t k = 0; k < nz * nz; ++k) {
-#pragma omp atomic
-        J[fp.q[k]] += fe.dq[k];
-      }
+      for (std::size_t k = 0; k < nz * nz; ++k) add(J[fp.q[k]], fe.dq[k]);
       if (f.uses_v)
-        for (std::size_t k = 0; k < nz * nz; ++k) {
-#pragma omp atomic
-          J[fp.v[k]] += fe.dv[k];
-        }
+        for (std::size_t k = 0; k < nz * nz; ++k) add(J[fp.v[k]], fe.dv[k]);
       if (f.uses_a)
-        for (std::size_t k = 0; k < nz * nz; ++k) {
-#pragma omp atomic
-          J[fp.a[k]] += fe.da[k];
-        }
+        for (std::size_t k = 0; k < nz * nz; ++k) add(J[fp.a[k]], fe.da[k]);
     }
-#pragma omp for schedule(dynamic, 32)
-    for (long e = 0; e < nc; ++e) {
+  };
+  auto constraints = [&](std::size_t begin, std::size_t end) {
+    std::vector<double> lq, lv, la, hess;
+    ConstraintEval ce;
+    for (std::size_t e = begin; e < end; ++e) {
       const Constraint& c = *model_.constraints[e];
       const index_t r0 = row0_[e];
       gather(c.dofs, q, lq);
@@ -230,17 +222,14 @@ void NewtonSystem::evaluate(const double* x, double t, const BdfTerms& bdf, bool
       for (std::size_t i = 0; i < nz; ++i) {
         double s = 0;
         for (int r = 0; r < nr; ++r) s += ce.jq[r * nz + i] * lam[r0 + r];
-#pragma omp atomic
-        hf[c.dofs[i]] += s;
+        add(hf[c.dofs[i]], s);
       }
       if (!jacobian) continue;
       const ConstraintPos& cp = cpos_[e];
       hess.resize(nz * nz);
       c.hessian(lq.data(), t, lam + r0, hess.data());
-      for (std::size_t k = 0; k < nz * nz; ++k) {
-#pragma omp atomic
-        J[cp.hq[k]] += hess[k];
-      }
+      for (std::size_t k = 0; k < nz * nz; ++k) add(J[cp.hq[k]], hess[k]);
+      // the constraint's own rows and multiplier column: no other element writes there
       for (std::size_t i = 0; i < nz; ++i)
         for (int r = 0; r < nr; ++r) J[cp.fl[i * nr + r]] += ce.jq[r * nz + i];
       for (std::size_t k = 0; k < nr * nz; ++k) {
@@ -252,6 +241,20 @@ void NewtonSystem::evaluate(const double* x, double t, const BdfTerms& bdf, bool
         J[cp.pq[k]] += ce.jq[k];
       }
     }
+  };
+  // Elements are evaluated in parallel (oneTBB, as strata's CPU executor); entries shared
+  // by several elements (rows of the equations of motion) are added atomically.
+  if (threads_ <= 1) {
+    forces(0, nf);
+    constraints(0, nc);
+  } else {
+    tbb::task_arena arena(threads_);
+    arena.execute([&] {
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nf, 64),
+                        [&](const auto& r) { forces(r.begin(), r.end()); });
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nc, 64),
+                        [&](const auto& r) { constraints(r.begin(), r.end()); });
+    });
   }
   const index_t ni = static_cast<index_t>(independent_.size());
   for (index_t k = 0; k < ni; ++k) {

@@ -1,5 +1,7 @@
-// strata — backend selection. The CUDA executor is not part of this version: asking for
-// it is a clear NotSupported error, in builds with and without CUDA alike.
+// strata — backend selection in a build without CUDA: asking for the GPU backend is a
+// clear NotSupported error. (A CUDA build compiles numeric/cuda/cuda_executor.cu, which
+// defines these two functions instead.)
+#ifndef STRATA_HAVE_CUDA
 #include "numeric/factor.hpp"
 #include "strata/errors.hpp"
 
@@ -8,11 +10,8 @@ namespace strata::numeric {
 bool cuda_available() { return false; }
 
 std::unique_ptr<Executor> make_cuda_executor(const Options&) {
-#ifdef STRATA_HAVE_CUDA
-  throw NotSupported("the CUDA backend is not implemented in this version of strata yet");
-#else
   throw NotSupported("this build of strata has no CUDA backend (nvcc was not found at build time)");
-#endif
 }
 
 }  // namespace strata::numeric
+#endif

@@ -42,7 +42,7 @@ struct FactorContext {
   const Analysis* analysis = nullptr;
   const double* values = nullptr;  ///< scaled values of the canonical input (entry order)
   MatrixType type = MatrixType::spd;
-  double static_pivot = 0;         ///< absolute threshold / replacement for tiny pivots
+  double static_pivot = 0;  ///< absolute threshold / replacement for tiny pivots
   NumericFactor* factor = nullptr;
   std::vector<double>* cb_arena = nullptr;  ///< contribution blocks (CbLayout)
 };

@@ -42,8 +42,8 @@ void solve_in_place(const Analysis& an, const NumericFactor& fac, double* x, ind
     const int mi = static_cast<int>(m), ki = static_cast<int>(k), mk = mi - ki;
     dtrsm_("L", "L", "N", (lu || ldlt) ? "U" : "N", &ki, &nr, &one, panel, &mi, w.data(), &mi);
     if (mk > 0)
-      dgemm_("N", "N", &mk, &nr, &ki, &minus_one, panel + k, &mi, w.data(), &mi, &one,
-             w.data() + k, &mi);
+      dgemm_("N", "N", &mk, &nr, &ki, &minus_one, panel + k, &mi, w.data(), &mi, &one, w.data() + k,
+             &mi);
     const index_t* out = lu ? crow : prow;
     for (index_t r = 0; r < nrhs; ++r) {
       for (index_t i = 0; i < k; ++i) x[out[i] + r * n] = w[i + r * m];

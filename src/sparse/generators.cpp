@@ -37,9 +37,18 @@ SparseMatrix laplacian_3d(index_t nx, index_t ny, index_t nz) {
         const index_t j = x + nx * (y + ny * z);
         a.indices.push_back(j);
         a.values.push_back(diag);
-        if (x + 1 < nx) { a.indices.push_back(j + 1); a.values.push_back(-1.0); }
-        if (y + 1 < ny) { a.indices.push_back(j + nx); a.values.push_back(-1.0); }
-        if (z + 1 < nz) { a.indices.push_back(j + nx * ny); a.values.push_back(-1.0); }
+        if (x + 1 < nx) {
+          a.indices.push_back(j + 1);
+          a.values.push_back(-1.0);
+        }
+        if (y + 1 < ny) {
+          a.indices.push_back(j + nx);
+          a.values.push_back(-1.0);
+        }
+        if (z + 1 < nz) {
+          a.indices.push_back(j + nx * ny);
+          a.values.push_back(-1.0);
+        }
         a.offsets.push_back(static_cast<index_t>(a.indices.size()));
       }
   return a;

@@ -134,14 +134,14 @@ void validate(const SparseMatrix& a) {
   if (static_cast<index_t>(a.offsets.size()) != nmaj + 1)
     throw InvalidInput("offsets has " + std::to_string(a.offsets.size()) + " entries, expected " +
                        std::to_string(nmaj + 1));
-  if (a.offsets[0] != 0) throw InvalidInput("offsets[0] is " + std::to_string(a.offsets[0]) + ", not 0");
+  if (a.offsets[0] != 0)
+    throw InvalidInput("offsets[0] is " + std::to_string(a.offsets[0]) + ", not 0");
   for (index_t j = 0; j < nmaj; ++j)
-    if (a.offsets[j + 1] < a.offsets[j])
-      throw InvalidInput(at("offsets", j + 1) + " decreases");
+    if (a.offsets[j + 1] < a.offsets[j]) throw InvalidInput(at("offsets", j + 1) + " decreases");
   const index_t nnz = a.offsets[nmaj];
   if (static_cast<index_t>(a.indices.size()) != nnz)
-    throw InvalidInput("indices has " + std::to_string(a.indices.size()) + " entries, offsets say " +
-                       std::to_string(nnz));
+    throw InvalidInput("indices has " + std::to_string(a.indices.size()) +
+                       " entries, offsets say " + std::to_string(nnz));
   if (!a.values.empty() && static_cast<index_t>(a.values.size()) != nnz)
     throw InvalidInput("values has " + std::to_string(a.values.size()) + " entries, offsets say " +
                        std::to_string(nnz));

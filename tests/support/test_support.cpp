@@ -38,12 +38,28 @@ SparseMatrix random_sparse(index_t n, index_t per_column, RandomKind kind, std::
   std::uniform_int_distribution<index_t> row(0, std::max<index_t>(n - 1, 0));
   const bool symmetric = kind != RandomKind::general;
   std::vector<std::set<index_t>> cols(n);
+  // A random perfect matching (entries (sigma(j), j)) makes every matrix structurally
+  // nonsingular even with zero diagonal entries; random values then make it nonsingular
+  // with probability one.
+  std::vector<index_t> sigma(n);
+  for (index_t j = 0; j < n; ++j) sigma[j] = j;
+  std::shuffle(sigma.begin(), sigma.end(), rng);
+  for (index_t j = 0; j < n; ++j) {
+    const index_t i = sigma[j];
+    if (i == j) continue;
+    if (symmetric)
+      cols[std::min(i, j)].insert(std::max(i, j));
+    else
+      cols[j].insert(i);
+  }
   for (index_t j = 0; j < n; ++j)
     for (index_t t = 0; t < per_column; ++t) {
       index_t i = row(rng);
       if (i == j) continue;
-      if (symmetric) cols[std::min(i, j)].insert(std::max(i, j));  // lower: row > col
-      else cols[j].insert(i);
+      if (symmetric)
+        cols[std::min(i, j)].insert(std::max(i, j));  // lower: row > col
+      else
+        cols[j].insert(i);
     }
   // Diagonal: spd dominant; indefinite mixed signs with ~1/4 zero diagonals; general
   // with ~1/4 zero diagonals (made nonsingular by the random off-diagonal entries).
@@ -51,11 +67,15 @@ SparseMatrix random_sparse(index_t n, index_t per_column, RandomKind kind, std::
   std::uniform_int_distribution<int> coin(0, 3);
   for (index_t j = 0; j < n; ++j) {
     switch (kind) {
-      case RandomKind::spd: diag[j] = 0; break;  // set below from row sums
+      case RandomKind::spd:
+        diag[j] = 0;
+        break;  // set below from row sums
       case RandomKind::symmetric_indefinite:
         diag[j] = coin(rng) == 0 ? 0.0 : (coin(rng) < 2 ? 1.0 : -1.0) * (0.5 + std::abs(val(rng)));
         break;
-      case RandomKind::general: diag[j] = coin(rng) == 0 ? 0.0 : 2.0 * val(rng); break;
+      case RandomKind::general:
+        diag[j] = coin(rng) == 0 ? 0.0 : 2.0 * val(rng);
+        break;
     }
   }
   SparseMatrix a;

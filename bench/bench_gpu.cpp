@@ -1,0 +1,137 @@
+// strata benchmark — the CUDA backend against the CPU backend and CHOLMOD on the same
+// machine, same permutation, in one run (issue 5 / experiment 2 of the report).
+//
+// For each problem: strata's analysis once; GPU factorization (median of --repeat
+// refactorizations, which is what the multibody loop calls), CPU factorization with each
+// thread count of --threads (strata's CPU executor and, for SPD problems, CHOLMOD
+// supernodal with strata's permutation), solve time and backward error. The fastest CPU
+// thread count is the baseline of the reported ratio, and every count is kept in the
+// JSON. Results: <results-dir>/gpu-*.json with "backend": "cuda".
+//
+//   bench_gpu [--problems a,b,...] [--repeat R] [--threads 4,16] [--results-dir DIR]
+#include <CLI/CLI.hpp>
+#include <fmt/core.h>
+
+#include "bench_common.hpp"
+#include "core/blas.hpp"
+#include "core/timer.hpp"
+#include "numeric/factor.hpp"
+#include "strata/strata.hpp"
+
+using namespace strata;
+using json = nlohmann::json;
+
+namespace {
+
+struct Timing {
+  double factor = 0, solve = 0, backward_error = 0;
+  double gflops = 0;
+};
+
+Timing time_strata(const bench::Problem& p, Options o, int repeat,
+                   std::vector<index_t>* perm = nullptr) {
+  Solver s(o);
+  s.analyze(p.a);
+  s.factorize(p.a);
+  std::vector<double> times;
+  for (int k = 0; k < repeat; ++k) {
+    Timer t;
+    s.refactorize(p.a);
+    times.push_back(t.seconds());
+  }
+  const index_t n = p.a.n_rows;
+  std::vector<double> ones(n, 1.0), b(n);
+  multiply(p.a, ones.data(), b.data());
+  Timer ts;
+  auto x = s.solve(b);
+  Timing r;
+  r.solve = ts.seconds();
+  r.factor = bench::median(times);
+  r.backward_error = bench::berr(p.a, x, b);
+  const double flops = s.stats().analysis.factor_flops * (o.type == MatrixType::general ? 2 : 1);
+  r.gflops = flops / r.factor * 1e-9;
+  if (perm) *perm = s.permutation();
+  return r;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"strata GPU benchmark (CUDA backend vs CPU backend and CHOLMOD)"};
+  std::vector<std::string> problems = {"bcsstk16", "ccx_cubef2f3_K", "lap3d-60", "lap3d-80",
+                                       "elast3d-30", "elast3d-40", "uelast3d-20", "uelast3d-30"};
+  std::vector<int> threads = {4, 16};
+  int repeat = 3;
+  std::string results_dir;
+  app.add_option("--problems", problems, "problems")->delimiter(',');
+  app.add_option("--threads", threads, "CPU thread counts to measure")->delimiter(',');
+  app.add_option("--repeat", repeat, "factorizations per measurement (median)");
+  app.add_option("--results-dir", results_dir, "where to write the JSON (default bench/results)");
+  CLI11_PARSE(app, argc, argv);
+  if (!numeric::cuda_available()) {
+    fmt::print(stderr, "bench_gpu: no CUDA GPU present (or no CUDA backend in this build)\n");
+    return 3;
+  }
+  json out = bench::run_metadata(argc, argv);
+  out["benchmark"] = "factor";
+  out["backend"] = "cuda";
+  out["rows"] = json::array();
+  fmt::print("{:<14} {:>8} {:>11} {:>9} {:>8} {:>9} {:>4} {:>9} {:>7} {:>7} {:>9}\n", "problem", "n",
+             "nnz(L)", "gpu s", "GFLOP/s", "cpu s", "thr", "chol s", "cpu/gpu", "chol/gpu",
+             "berr gpu");
+  for (const std::string& name : problems) {
+    bench::Problem p = bench::load_problem(name);
+    Options o;
+    o.type = p.symmetric ? MatrixType::spd : MatrixType::general;
+    Options og = o;
+    og.backend = Backend::cuda;
+    std::vector<index_t> perm;
+    Timing g = time_strata(p, og, repeat, &perm);
+    Solver probe(o);
+    probe.analyze(p.a);
+    const AnalysisStats an = probe.stats().analysis;
+    json row = {{"problem", name},
+                {"n", p.a.n_rows},
+                {"nnz_l", an.nnz_l},
+                {"factor_flops", an.factor_flops},
+                {"type", to_string(o.type)},
+                {"strata_gpu", {{"seconds", g.factor}, {"gflops", g.gflops},
+                                {"solve_seconds", g.solve}, {"backward_error", g.backward_error}}},
+                {"cpu", json::array()}};
+    double best_cpu = 1e300, best_chol = 1e300;
+    int best_threads = 0;
+    std::vector<double> ones(p.a.n_rows, 1.0), b(p.a.n_rows);
+    multiply(p.a, ones.data(), b.data());
+    for (int t : threads) {
+      Options oc = o;
+      oc.num_threads = t;
+      Timing c = time_strata(p, oc, repeat);
+      json cj = {{"threads", t}, {"strata_seconds", c.factor}, {"strata_gflops", c.gflops},
+                 {"strata_solve_seconds", c.solve}, {"strata_backward_error", c.backward_error}};
+      if (p.symmetric) {
+        openblas_set_num_threads(t);
+        bench::RefResult ch = bench::run_cholmod(p.a, perm, b, repeat);
+        cj["cholmod_seconds"] = ch.seconds;
+        cj["cholmod_backward_error"] = ch.backward_error;
+        best_chol = std::min(best_chol, ch.seconds);
+      }
+      row["cpu"].push_back(cj);
+      if (c.factor < best_cpu) {
+        best_cpu = c.factor;
+        best_threads = t;
+      }
+    }
+    row["best_cpu_seconds"] = best_cpu;
+    row["best_cpu_threads"] = best_threads;
+    row["ratio_cpu_over_gpu"] = best_cpu / g.factor;
+    if (p.symmetric) row["ratio_cholmod_over_gpu"] = best_chol / g.factor;
+    fmt::print("{:<14} {:>8} {:>11} {:>9.4f} {:>8.1f} {:>9.4f} {:>4} {:>9} {:>7.2f} {:>7} {:>9.1e}\n",
+               name, p.a.n_rows, an.nnz_l, g.factor, g.gflops, best_cpu, best_threads,
+               p.symmetric ? fmt::format("{:.4f}", best_chol) : "-", best_cpu / g.factor,
+               p.symmetric ? fmt::format("{:.2f}", best_chol / g.factor) : "-", g.backward_error);
+    std::fflush(stdout);
+    out["rows"].push_back(row);
+  }
+  fmt::print("results: {}\n", bench::write_result(out, "gpu", results_dir));
+  return 0;
+}

@@ -1,0 +1,713 @@
+#!/usr/bin/env python3
+"""strata benchmark report: turns every bench/results/*.json into bench/REPORT.md.
+
+    python3 bench/report.py [--results DIR] [--out DIR]
+
+Reads every results file the benchmark drivers wrote (bench_analysis, bench_factor, and
+the GPU drivers to come), keeps the newest run per (benchmark kind, machine, tag), and
+writes OUT/REPORT.md with tables and OUT/plots/*.png (matplotlib, Agg backend). Every
+table and plot is captioned with the command, machine, date and git commit of the run it
+shows and the name of its results file; every number in the report is either copied from
+a results file or computed from one (ratios, geometric means: the caption says which).
+Sections whose results do not exist say so instead of showing numbers.
+
+What a results file must hold (bench/bench_common.cpp writes it): "benchmark" (the kind),
+"date" (ISO 8601 UTC), "command", "git_commit", "machine" {"cpu", "hardware_threads",
+"gpu", "host"}, "rows" (a list of objects), and optionally "tag" (default "") and
+"backend" (default "cpu"; GPU drivers must write "cuda").
+
+How results map to the five experiments of the benchmark issue:
+  1. max block size sweep   benchmark "factor", tag "mbs-N" (one run per block size N);
+                            backend "cpu" -> CPU part, any other backend -> GPU part
+  2. other solvers          benchmark "analysis" (vs CHOLMOD+METIS) and "factor", tag ""
+                            (vs CHOLMOD and MUMPS with the same permutation; a row's
+                            "cudss" object, from a GPU driver, becomes a cuDSS column)
+  3. GPU count 1, 2, 4      benchmark "multigpu"
+  4. solvability            benchmark "solvability"
+  5. end to end simulate    benchmark "simulate"
+Results of any other kind or tag are shown as plain tables under "Other results", so
+nothing measured is dropped silently.
+
+Only the Python standard library and matplotlib are used.
+"""
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import math
+import os
+import re
+import sys
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SWEEP_TAG = re.compile(r"^mbs-(\d+)$")
+NOT_MEASURED = "**Not measured yet**"
+
+
+# --------------------------------------------------------------------------- results
+
+
+class Run:
+    """One results file."""
+
+    def __init__(self, path: str, data: dict):
+        self.path = path
+        self.name = os.path.basename(path)
+        self.data = data
+        self.kind = data["benchmark"]
+        self.tag = data.get("tag") or ""
+        self.backend = data.get("backend") or "cpu"
+        self.date = data["date"]
+        self.rows = data["rows"]
+        m = data["machine"]
+        self.machine = (str(m.get("cpu", "")), int(m.get("hardware_threads", 0) or 0),
+                        str(m.get("gpu", "") or ""))
+
+    def get(self, key, default=None):
+        return self.data.get(key, default)
+
+
+def load_runs(results_dir: str) -> tuple[list[Run], list[tuple[str, str]]]:
+    """All well-formed results files in results_dir, and (file, reason) for the others."""
+    runs, skipped = [], []
+    if not os.path.isdir(results_dir):
+        return runs, skipped
+    for name in sorted(os.listdir(results_dir)):
+        if not name.endswith(".json"):
+            continue
+        path = os.path.join(results_dir, name)
+        try:
+            with open(path, encoding="utf-8") as f:
+                data = json.load(f)
+        except (OSError, ValueError) as e:
+            skipped.append((name, f"cannot be read as JSON ({e.__class__.__name__})"))
+            continue
+        if not isinstance(data, dict):
+            skipped.append((name, "not a JSON object"))
+            continue
+        missing = [k for k in ("benchmark", "date", "command", "git_commit", "machine", "rows")
+                   if k not in data]
+        if missing:
+            skipped.append((name, "missing " + ", ".join(missing)))
+            continue
+        if not isinstance(data["rows"], list) or not isinstance(data["machine"], dict):
+            skipped.append((name, "'rows' is not a list or 'machine' is not an object"))
+            continue
+        runs.append(Run(path, data))
+    return runs, skipped
+
+
+def newest_runs(runs: list[Run]) -> list[Run]:
+    """The newest run per (kind, machine, tag, backend); ties broken by file name."""
+    best: dict[tuple, Run] = {}
+    for r in runs:
+        key = (r.kind, r.machine, r.tag, r.backend)
+        if key not in best or (r.date, r.name) > (best[key].date, best[key].name):
+            best[key] = r
+    return sorted(best.values(), key=lambda r: (r.kind, r.machine, r.backend, r.tag))
+
+
+def machine_label(machine: tuple) -> str:
+    cpu, threads, gpu = machine
+    s = f"{cpu or 'unknown CPU'}, {threads} hardware threads"
+    return s + (f", GPU {gpu}" if gpu else ", no GPU")
+
+
+def machine_slug(machine: tuple) -> str:
+    return hashlib.sha1(repr(machine).encode()).hexdigest()[:8]
+
+
+def by_machine(runs: list[Run]) -> dict[tuple, list[Run]]:
+    out: dict[tuple, list[Run]] = {}
+    for r in runs:
+        out.setdefault(r.machine, []).append(r)
+    return out
+
+
+# --------------------------------------------------------------------------- numbers
+
+
+def num(x):
+    """x as a float when it is a finite number, else None."""
+    if isinstance(x, bool) or not isinstance(x, (int, float)):
+        return None
+    return float(x) if math.isfinite(x) else None
+
+
+def dig(d, *keys):
+    for k in keys:
+        if not isinstance(d, dict) or k not in d:
+            return None
+        d = d[k]
+    return d
+
+
+def geomean(v: list[float]) -> float | None:
+    v = [x for x in v if x is not None and x > 0]
+    return math.exp(sum(math.log(x) for x in v) / len(v)) if v else None
+
+
+def ratio(a, b):
+    a, b = num(a), num(b)
+    return a / b if a is not None and b is not None and b > 0 else None
+
+
+def f_ratio(x) -> str:
+    return "–" if x is None else f"{x:.3f}"
+
+
+def f_sec(x) -> str:
+    x = num(x)
+    return "–" if x is None else f"{x:.4g}"
+
+
+def f_int(x) -> str:
+    x = num(x)
+    return "–" if x is None else f"{int(round(x)):,}"
+
+
+def f_g(x) -> str:
+    x = num(x)
+    return "–" if x is None else f"{x:.3g}"
+
+
+def f_e(x) -> str:
+    x = num(x)
+    return "–" if x is None else f"{x:.1e}"
+
+
+def table(header: list[str], rows: list[list[str]], right_from: int = 1) -> str:
+    align = ["---" if i < right_from else "---:" for i in range(len(header))]
+    lines = ["| " + " | ".join(header) + " |", "| " + " | ".join(align) + " |"]
+    lines += ["| " + " | ".join(r) + " |" for r in rows]
+    return "\n".join(lines) + "\n"
+
+
+# --------------------------------------------------------------------------- report
+
+
+class Report:
+    def __init__(self, results_dir: str, out_dir: str):
+        self.results_dir = os.path.abspath(results_dir)
+        self.out_dir = os.path.abspath(out_dir)
+        self.plot_dir = os.path.join(self.out_dir, "plots")
+        self.parts: list[str] = []
+        self.plots: list[str] = []
+        self.used: set[str] = set()
+        import matplotlib  # noqa: PLC0415 (imported here so --help works without it)
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt  # noqa: PLC0415
+
+        self.plt = plt
+
+    # ---- helpers
+
+    def w(self, text: str = "") -> None:
+        self.parts.append(text + "\n")
+
+    def rel(self, path: str) -> str:
+        return os.path.relpath(path, self.out_dir)
+
+    def source(self, run: Run) -> str:
+        """The caption line: how it was measured and where the numbers are."""
+        self.used.add(run.path)
+        commit = str(run.get("git_commit") or "unknown")
+        if run.get("git_dirty"):
+            commit += " (with uncommitted changes)"
+        host = dig(run.data, "machine", "host")
+        host = f" (host {host})" if host else ""
+        return (f"`{run.get('command')}` on {machine_label(run.machine)}{host}, "
+                f"{run.date}, commit {commit}; results file "
+                f"[`{run.name}`]({self.rel(run.path)})")
+
+    def caption(self, what: str, runs: list[Run]) -> None:
+        if len(runs) == 1:
+            self.w(f"*{what} Measured with {self.source(runs[0])}.*")
+        else:
+            self.w(f"*{what} Measured with:*")
+            self.w()
+            for r in runs:
+                self.w(f"- {self.source(r)}")
+        self.w()
+
+    def savefig(self, fig, stem: str, alt: str, what: str, runs: list[Run]) -> None:
+        os.makedirs(self.plot_dir, exist_ok=True)
+        name = stem + ".png"
+        fig.tight_layout()
+        fig.savefig(os.path.join(self.plot_dir, name), dpi=100, metadata={"Software": None})
+        self.plt.close(fig)
+        self.plots.append(name)
+        self.w(f"![{alt}](plots/{name})")
+        self.w()
+        self.caption(what, runs)
+
+    # ---- the report
+
+    def build(self) -> str:
+        all_runs, skipped = load_runs(self.results_dir)
+        runs = newest_runs(all_runs)
+        self.consumed: set[str] = set()
+        body_start = len(self.parts)
+        self.sweep(runs)
+        self.comparison(runs)
+        self.simple_section(runs, "3. GPU count 1, 2, 4 (with ablation)", "multigpu",
+                            "factorization time with 1, 2 and 4 GPUs, with and without the "
+                            "balanced bisection, additional subtrees and work stealing",
+                            "needs a lent multi-GPU machine (`bench/run multigpu`)")
+        self.simple_section(runs, "4. Solvability: time vs factor size / device budget",
+                            "solvability",
+                            "factorization time as the device memory budget shrinks below "
+                            "the size of the factor",
+                            "needs a lent GPU machine (`bench/run gpu`)")
+        self.simple_section(runs, "5. End to end: `strata simulate`, CPU vs GPU", "simulate",
+                            "wall time of a multibody simulation (analysis once, a "
+                            "refactorization and solve per Newton step) on the CPU and on a GPU",
+                            "needs the `strata simulate` command and a lent GPU machine "
+                            "(`bench/run gpu`)")
+        self.others(runs)
+        if skipped:
+            self.w("## Results files skipped")
+            self.w()
+            for name, why in skipped:
+                self.w(f"- `{name}`: {why}")
+            self.w()
+        body = self.parts[body_start:]
+        self.parts = self.parts[:body_start]
+        self.header(all_runs, runs)
+        self.summary(runs)
+        self.parts += body
+        return "".join(self.parts)
+
+    def header(self, all_runs: list[Run], runs: list[Run]) -> None:
+        self.w("# strata benchmark report")
+        self.w()
+        self.w(f"Generated by `bench/report.py` from the results files in "
+               f"`{self.rel(self.results_dir)}/` ({len(all_runs)} files read; the newest run "
+               f"per benchmark kind, machine and tag is shown, {len(runs)} runs). Do not edit "
+               f"by hand. To measure on this machine and regenerate: `bench/run cpu`. To "
+               f"regenerate from the stored results only: `python3 bench/report.py`. The GPU "
+               f"sections are regenerated from results files that came back from lent GPU "
+               f"machines (`bench/run gpu`, `bench/run multigpu`) into `bench/results/`.")
+        self.w()
+        self.w("Every number below is copied from a results file or computed from one "
+               "(ratios and geometric means, as the captions say). Lower is better for every "
+               "ratio: a ratio above 1 means strata is behind the anchor.")
+        self.w()
+
+    # ---- summary
+
+    def summary(self, runs: list[Run]) -> None:
+        self.w("## Summary")
+        self.w()
+        lines, behind, ahead = [], [], []
+
+        def judge(label: str, machine: tuple, per_problem: list[tuple[str, float]]):
+            per_problem = [(p, x) for p, x in per_problem if x is not None]
+            g = geomean([x for _, x in per_problem])
+            if g is None:
+                return None
+            worse = [(p, x) for p, x in per_problem if x > 1]
+            where = f"on {machine_label(machine)}"
+            if g > 1:
+                worst = max(worse, key=lambda t: t[1])
+                behind.append(f"{label} {where}: geometric mean {f_ratio(g)}, behind on "
+                              f"{len(worse)} of {len(per_problem)} problems (worst: "
+                              f"{worst[0]}, {f_ratio(worst[1])})")
+            elif worse:
+                behind.append(f"{label} {where}: ahead in geometric mean ({f_ratio(g)}) but "
+                              f"behind on {len(worse)} of {len(per_problem)} problems: "
+                              + ", ".join(f"{p} ({f_ratio(x)})" for p, x in worse))
+            else:
+                ahead.append(f"{label} {where} (geometric mean {f_ratio(g)}, "
+                             f"{len(per_problem)} problems)")
+            return g
+
+        for r in runs:
+            if r.kind == "factor" and r.tag == "":
+                for key, name in (("cholmod", "CHOLMOD"), ("mumps", "MUMPS"), ("cudss", "cuDSS")):
+                    pp = [(row.get("problem"), self.factor_ratio(row, key)) for row in r.rows]
+                    label = f"factorization time strata/{name} (same permutation, {r.backend})"
+                    g = judge(label, r.machine, pp)
+                    if g is not None:
+                        lines.append(f"- Geometric mean of {label}: **{f_ratio(g)}** "
+                                     f"over {sum(1 for _, x in pp if x is not None)} problems "
+                                     f"on {machine_label(r.machine)} "
+                                     f"([`{r.name}`]({self.rel(r.path)})).")
+            if r.kind == "analysis" and r.tag == "":
+                for key, what in (("nnz_l", "nnz(L) strata/CHOLMOD+METIS"),
+                                  ("seconds", "analysis time strata/CHOLMOD+METIS")):
+                    pp = [(row.get("problem"),
+                           ratio(dig(row, "strata", key), dig(row, "cholmod_metis", key)))
+                          for row in r.rows]
+                    g = judge(what, r.machine, pp)
+                    if g is not None:
+                        lines.append(f"- Geometric mean of {what}: **{f_ratio(g)}** over "
+                                     f"{sum(1 for _, x in pp if x is not None)} problems on "
+                                     f"{machine_label(r.machine)} "
+                                     f"([`{r.name}`]({self.rel(r.path)})).")
+        if not lines:
+            self.w(f"{NOT_MEASURED}: no analysis or factorization results exist "
+                   f"(run `bench/run cpu`).")
+            self.w()
+            return
+        self.w("Key ratios (strata / anchor, each the geometric mean over the problems of "
+               "the newest run; computed by this generator from the rows of the results "
+               "file named):")
+        self.w()
+        for line in lines:
+            self.w(line)
+        self.w()
+        if behind:
+            self.w("**Where strata is behind an anchor (ratio > 1):**")
+            self.w()
+            for b in behind:
+                self.w(f"- {b}.")
+            self.w()
+        else:
+            self.w("In these measurements strata is not behind any anchor on any problem.")
+            self.w()
+        if ahead:
+            self.w("Not behind (ratio ≤ 1 on every problem): " + "; ".join(ahead) + ".")
+            self.w()
+        self.w("Not yet compared at all: everything marked *not measured yet* below.")
+        self.w()
+
+    @staticmethod
+    def factor_ratio(row: dict, anchor: str):
+        a = row.get(anchor)
+        if not isinstance(a, dict) or a.get("ok") is False:
+            return None
+        return ratio(dig(row, "strata", "seconds"), a.get("seconds"))
+
+    # ---- 1. block size sweep
+
+    def sweep(self, runs: list[Run]) -> None:
+        self.w("## 1. Maximum block size sweep")
+        self.w()
+        self.w("strata's factorization time as `max_block_size` (the widest pivot block a "
+               "separator front is split into) goes from 32 to 2048. Each block size is one "
+               "`bench_factor --max-block-size N --tag mbs-N` run; the CHOLMOD column is the "
+               "supernodal CHOLMOD factorization with the same permutation, measured in each "
+               "of those runs (its spread shows the run-to-run noise of the machine).")
+        self.w()
+        sweep_runs = [r for r in runs if r.kind == "factor" and SWEEP_TAG.match(r.tag)]
+        for part, pick in (("CPU", lambda r: r.backend == "cpu"),
+                           ("GPU", lambda r: r.backend != "cpu")):
+            self.w(f"### {part}")
+            self.w()
+            chosen = [r for r in sweep_runs if pick(r)]
+            if not chosen:
+                need = ("run `bench/run cpu`" if part == "CPU"
+                        else "needs a lent GPU machine: `bench/run gpu`")
+                self.w(f"{NOT_MEASURED}: no {part} block size sweep results ({need}).")
+                self.w()
+                continue
+            for machine, mruns in by_machine(chosen).items():
+                self.sweep_machine(part, machine, mruns)
+
+    def sweep_machine(self, part: str, machine: tuple, mruns: list[Run]) -> None:
+        self.consumed.update(r.path for r in mruns)
+
+        def block(r: Run) -> int:
+            v = num(r.get("max_block_size"))
+            return int(v) if v is not None else int(SWEEP_TAG.match(r.tag).group(1))
+
+        mruns = sorted(mruns, key=block)
+        sizes = [block(r) for r in mruns]
+        problems: list[str] = []
+        for r in mruns:
+            for row in r.rows:
+                if row.get("problem") not in problems:
+                    problems.append(row.get("problem"))
+        cell = {(block(r), row.get("problem")): row for r in mruns for row in r.rows}
+        rows = []
+        for p in problems:
+            times = {b: num(dig(cell.get((b, p)), "strata", "seconds")) for b in sizes}
+            known = {b: t for b, t in times.items() if t is not None}
+            best = min(known, key=known.get) if known else None
+            chol = [num(dig(cell.get((b, p)), "cholmod", "seconds")) for b in sizes]
+            chol = [c for c in chol if c is not None]
+            chol_s = ("–" if not chol else f_sec(chol[0]) if min(chol) == max(chol)
+                      else f"{f_sec(min(chol))}–{f_sec(max(chol))}")
+            rows.append([p] + [f_sec(times[b]) for b in sizes] +
+                        [str(best) if best is not None else "–", chol_s])
+        self.w(f"Factorization time in seconds (median of the run's repeats) on "
+               f"{machine_label(machine)}; *best* is the block size with the lowest time.")
+        self.w()
+        self.w(table(["problem"] + [f"{b}" for b in sizes] + ["best", "CHOLMOD s"], rows))
+        fig, ax = self.plt.subplots(figsize=(7, 4.5))
+        colors = self.plt.rcParams["axes.prop_cycle"].by_key()["color"]
+        for i, p in enumerate(problems):
+            pts = [(b, num(dig(cell.get((b, p)), "strata", "seconds"))) for b in sizes]
+            pts = [(b, t) for b, t in pts if t is not None]
+            c = colors[i % len(colors)]
+            if pts:
+                ax.plot([b for b, _ in pts], [t for _, t in pts], "o-", color=c, label=p)
+            cpts = [(b, num(dig(cell.get((b, p)), "cholmod", "seconds"))) for b in sizes]
+            cpts = [(b, t) for b, t in cpts if t is not None]
+            if cpts:
+                ax.plot([b for b, _ in cpts], [t for _, t in cpts], ":", color=c, alpha=0.7)
+        ax.set_xscale("log", base=2)
+        ax.set_yscale("log")
+        ax.set_xticks(sizes)
+        ax.set_xticklabels([str(b) for b in sizes])
+        ax.set_xlabel("max_block_size")
+        ax.set_ylabel("factorization time [s]")
+        ax.set_title(f"strata factorization time vs max_block_size ({part})\n"
+                     f"solid: strata, dotted: CHOLMOD same permutation", fontsize=10)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+        self.savefig(fig, f"block-size-sweep-{part.lower()}-{machine_slug(machine)}",
+                     f"factorization time vs max_block_size, {part}",
+                     "Table and plot: one run per block size, each the median of its repeats.",
+                     mruns)
+
+    # ---- 2. against other solvers
+
+    def comparison(self, runs: list[Run]) -> None:
+        self.w("## 2. Against other solvers")
+        self.w()
+        self.w("### Analysis: strata vs CHOLMOD with METIS")
+        self.w()
+        an = [r for r in runs if r.kind == "analysis" and r.tag == ""]
+        if not an:
+            self.w(f"{NOT_MEASURED}: no analysis results (run `bench/run cpu`).")
+            self.w()
+        for r in an:
+            self.analysis_run(r)
+        self.w("### Factorization: strata vs CHOLMOD and MUMPS (same permutation)")
+        self.w()
+        fa = [r for r in runs if r.kind == "factor" and r.tag == ""]
+        cpu = [r for r in fa if r.backend == "cpu"]
+        gpu = [r for r in fa if r.backend != "cpu"]
+        if not cpu:
+            self.w(f"{NOT_MEASURED}: no CPU factorization results (run `bench/run cpu`).")
+            self.w()
+        for r in cpu:
+            self.factor_run(r)
+        self.w("### GPU: strata vs cuDSS")
+        self.w()
+        if not gpu:
+            self.w(f"{NOT_MEASURED}: no GPU factorization results and no cuDSS comparison "
+                   f"(needs a lent GPU machine: `bench/run gpu`).")
+            self.w()
+        for r in gpu:
+            self.factor_run(r)
+
+    def analysis_run(self, r: Run) -> None:
+        self.consumed.add(r.path)
+        rows, nr, tr = [], [], []
+        for row in r.rows:
+            s, c = row.get("strata", {}), row.get("cholmod_metis", {})
+            n_r, t_r = ratio(dig(s, "nnz_l"), dig(c, "nnz_l")), ratio(dig(s, "seconds"),
+                                                                        dig(c, "seconds"))
+            nr.append((row.get("problem"), n_r))
+            tr.append((row.get("problem"), t_r))
+            rows.append([str(row.get("problem")), f_int(row.get("n")), f_int(row.get("nnz_a")),
+                         f_int(dig(s, "nnz_l")), f_int(dig(c, "nnz_l")), f_ratio(n_r),
+                         f_g(dig(s, "flops")), f_g(dig(c, "flops")), f_sec(dig(s, "seconds")),
+                         f_sec(dig(c, "seconds")), f_ratio(t_r)])
+        rows.append(["**geometric mean**"] + [""] * 4 + [f_ratio(geomean([x for _, x in nr]))]
+                    + [""] * 4 + [f_ratio(geomean([x for _, x in tr]))])
+        self.w(f"On {machine_label(r.machine)}. nnz(L) and flops as each analysis predicts "
+               f"them; time: median of the run's repeats, in seconds. Ratios are strata / "
+               f"CHOLMOD.")
+        self.w()
+        self.w(table(["problem", "n", "nnz(A)", "nnz(L) strata", "nnz(L) CHOLMOD",
+                      "nnz(L) ratio", "flops strata", "flops CHOLMOD", "time strata",
+                      "time CHOLMOD", "time ratio"], rows))
+        rss = num(r.get("peak_rss_bytes"))
+        if rss is not None:
+            self.w(f"Peak resident memory of the whole run (both solvers, all problems): "
+                   f"{rss / 2**20:.1f} MiB.")
+            self.w()
+        fig, axes = self.plt.subplots(1, 2, figsize=(10, 4.2))
+        for ax, data, title in ((axes[0], nr, "nnz(L) strata / CHOLMOD+METIS"),
+                                (axes[1], tr, "analysis time strata / CHOLMOD+METIS")):
+            pts = [(p, x) for p, x in data if x is not None]
+            ax.bar(range(len(pts)), [x for _, x in pts],
+                   color=["tab:red" if x > 1 else "tab:green" for _, x in pts])
+            ax.axhline(1.0, color="black", lw=0.8)
+            ax.set_xticks(range(len(pts)))
+            ax.set_xticklabels([p for p, _ in pts], rotation=45, ha="right", fontsize=8)
+            ax.set_title(title + " (lower is better)", fontsize=10)
+            ax.grid(True, axis="y", alpha=0.3)
+        self.savefig(fig, f"analysis-vs-cholmod-{r.backend}-{machine_slug(r.machine)}",
+                     "analysis ratios strata / CHOLMOD+METIS",
+                     "Table and plot: ratios computed by this generator from the rows.", [r])
+
+    def factor_run(self, r: Run) -> None:
+        self.consumed.add(r.path)
+        anchors = [(k, n) for k, n in (("cholmod", "CHOLMOD"), ("mumps", "MUMPS"),
+                                       ("cudss", "cuDSS"))
+                   if any(isinstance(row.get(k), dict) for row in r.rows)]
+        header = ["problem", "n", "nnz(L)", "flops", "strata s", "GFLOP/s"]
+        header += [f"{n} s" for _, n in anchors] + [f"strata/{n}" for _, n in anchors]
+        header += ["berr strata"] + [f"berr {n}" for _, n in anchors] + ["refinement steps"]
+        rows, ratios = [], {k: [] for k, _ in anchors}
+        for row in r.rows:
+            s = row.get("strata", {})
+            line = [str(row.get("problem")), f_int(row.get("n")), f_int(row.get("nnz_l")),
+                    f_g(row.get("factor_flops")), f_sec(s.get("seconds")), f_g(s.get("gflops"))]
+            for k, _ in anchors:
+                a = row.get(k)
+                failed = isinstance(a, dict) and a.get("ok") is False
+                line.append("failed" if failed else f_sec(dig(a, "seconds")))
+            for k, _ in anchors:
+                x = self.factor_ratio(row, k)
+                ratios[k].append((row.get("problem"), x))
+                line.append(f_ratio(x))
+            line.append(f_e(s.get("backward_error")))
+            line += [f_e(dig(row.get(k), "backward_error")) for k, _ in anchors]
+            line.append(f_int(s.get("refinement_steps")))
+            rows.append(line)
+        gm = ["**geometric mean**"] + [""] * (5 + len(anchors))
+        gm += [f_ratio(geomean([x for _, x in ratios[k]])) for k, _ in anchors]
+        gm += [""] * (2 + len(anchors))
+        rows.append(gm)
+        threads = r.get("threads")
+        mbs = r.get("max_block_size")
+        self.w(f"On {machine_label(r.machine)}, backend {r.backend}"
+               + (f", {threads} threads for every solver" if threads is not None else "")
+               + (f", strata max_block_size {mbs}" if mbs is not None else "")
+               + ". Times: median of the run's refactorizations, in seconds; nnz(L) and "
+               "flops are strata's; berr is the backward error ‖b−Ax‖∞/(‖A‖∞‖x‖∞+‖b‖∞) of "
+               "each solver's solution of A x = A·1 (strata with iterative refinement).")
+        self.w()
+        self.w(table(header, rows))
+        chol_nnz = [(row.get("problem"), ratio(row.get("nnz_l"), dig(row, "cholmod", "nnz_l")))
+                    for row in r.rows]
+        if any(x is not None for _, x in chol_nnz):
+            self.w("nnz(L) strata / CHOLMOD with the same permutation (relaxed amalgamation "
+                   "adds explicit zeros in both): "
+                   + ", ".join(f"{p} {f_ratio(x)}" for p, x in chol_nnz if x is not None) + ".")
+            self.w()
+        missing = []
+        if not any(num(dig(row, "strata", "solve_seconds")) is not None for row in r.rows):
+            missing.append("solve time")
+        if not any(num(dig(row, "strata", "total_seconds")) is not None for row in r.rows):
+            missing.append("total (analysis + factorization + solve) time")
+        if not any(num(dig(row, "strata", "peak_memory_bytes")) is not None for row in r.rows):
+            missing.append("memory")
+        if missing:
+            self.w(f"{NOT_MEASURED} in this run: " + ", ".join(missing)
+                   + " (the driver does not record them).")
+            self.w()
+        fig, ax = self.plt.subplots(figsize=(max(6, 1.1 * len(r.rows) + 2), 4.5))
+        series = [("strata", lambda row: dig(row, "strata", "seconds"))]
+        series += [(n, (lambda k: lambda row: None if self.factor_ratio(row, k) is None
+                        else dig(row, k, "seconds"))(k)) for k, n in anchors]
+        width = 0.8 / len(series)
+        for i, (label, get) in enumerate(series):
+            xs, ys = [], []
+            for j, row in enumerate(r.rows):
+                y = num(get(row))
+                if y is not None and y > 0:
+                    xs.append(j + (i - (len(series) - 1) / 2) * width)
+                    ys.append(y)
+            ax.bar(xs, ys, width, label=label)
+        ax.set_yscale("log")
+        ax.set_xticks(range(len(r.rows)))
+        ax.set_xticklabels([str(row.get("problem")) for row in r.rows], rotation=45,
+                           ha="right", fontsize=8)
+        ax.set_ylabel("factorization time [s]")
+        ax.set_title("factorization time, same permutation (lower is better)", fontsize=10)
+        ax.grid(True, axis="y", which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+        self.savefig(fig, f"factor-vs-anchors-{r.backend}-{machine_slug(r.machine)}",
+                     "factorization time per problem and solver",
+                     "Table and plot: ratios computed by this generator from the rows.", [r])
+
+    # ---- 3-5 and the rest
+
+    def simple_section(self, runs, title, kind, what, need) -> None:
+        self.w(f"## {title}")
+        self.w()
+        self.w(f"Measures {what}.")
+        self.w()
+        chosen = [r for r in runs if r.kind == kind]
+        if not chosen:
+            self.w(f"{NOT_MEASURED}: no `{kind}` results in the results folder; {need}.")
+            self.w()
+            return
+        for r in chosen:
+            self.generic_run(r)
+
+    def others(self, runs: list[Run]) -> None:
+        rest = [r for r in runs if r.path not in self.consumed]
+        if not rest:
+            return
+        self.w("## Other results")
+        self.w()
+        self.w("Results that none of the sections above shows (other kinds or tags), as "
+               "stored; this generator has no plot for them.")
+        self.w()
+        for r in rest:
+            self.w(f"### `{r.kind}`" + (f", tag `{r.tag}`" if r.tag else "")
+                   + f", backend {r.backend}")
+            self.w()
+            self.generic_run(r)
+
+    def generic_run(self, r: Run) -> None:
+        self.consumed.add(r.path)
+
+        def flat(d, prefix=""):
+            out = {}
+            for k, v in d.items():
+                if isinstance(v, dict):
+                    out.update(flat(v, f"{prefix}{k}."))
+                elif isinstance(v, (str, int, float, bool)) or v is None:
+                    out[prefix + k] = v
+            return out
+
+        rows = [flat(row) for row in r.rows if isinstance(row, dict)]
+        cols: list[str] = ["problem"] if any("problem" in row for row in rows) else []
+        for row in rows:
+            cols += [k for k in row if k not in cols]
+
+        def fmt(v):
+            if isinstance(v, bool) or v is None or isinstance(v, str):
+                return "–" if v is None else str(v).replace("|", "\\|")
+            return f"{v:.6g}" if isinstance(v, float) else str(v)
+
+        if rows:
+            self.w(table(cols, [[fmt(row.get(c)) for c in cols] for row in rows]))
+        else:
+            self.w("The run holds no rows.")
+            self.w()
+        self.caption("Table: the rows as stored.", [r])
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--results", default=os.path.join(REPO, "bench", "results"),
+                    help="folder of results files (default: bench/results)")
+    ap.add_argument("--out", default=os.path.join(REPO, "bench"),
+                    help="folder to write REPORT.md and plots/ into (default: bench)")
+    args = ap.parse_args(argv)
+    try:
+        rep = Report(args.results, args.out)
+    except ImportError:
+        print("report.py: matplotlib is missing; run scripts/setup.sh (Debian "
+              "python3-matplotlib, importable by /usr/bin/python3)", file=sys.stderr)
+        return 2
+    os.makedirs(args.out, exist_ok=True)
+    # The plots folder belongs to the generator: stale plots of earlier runs go.
+    if os.path.isdir(rep.plot_dir):
+        for name in os.listdir(rep.plot_dir):
+            if name.endswith(".png"):
+                os.remove(os.path.join(rep.plot_dir, name))
+    text = rep.build()
+    path = os.path.join(args.out, "REPORT.md")
+    tmp = path + ".tmp"
+    with open(tmp, "w", encoding="utf-8") as f:
+        f.write(text)
+    os.replace(tmp, path)
+    print(f"report: {path} ({len(rep.used)} results files, {len(rep.plots)} plots)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

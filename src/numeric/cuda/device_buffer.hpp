@@ -1,0 +1,62 @@
+// strata — RAII device buffers (cudaMalloc/cudaFree) and pinned host buffers.
+#pragma once
+
+#include <cstddef>
+#include <utility>
+
+#include "numeric/cuda/cuda_check.hpp"
+
+namespace strata::cuda {
+
+/// Device array of T. Allocation failure throws OutOfMemory naming the bytes.
+template <class T>
+class DeviceBuffer {
+ public:
+  DeviceBuffer() = default;
+  explicit DeviceBuffer(std::size_t n) { resize(n); }
+  ~DeviceBuffer() { release(); }
+  DeviceBuffer(DeviceBuffer&& o) noexcept : p_(std::exchange(o.p_, nullptr)), n_(std::exchange(o.n_, 0)) {}
+  DeviceBuffer& operator=(DeviceBuffer&& o) noexcept {
+    if (this != &o) {
+      release();
+      p_ = std::exchange(o.p_, nullptr);
+      n_ = std::exchange(o.n_, 0);
+    }
+    return *this;
+  }
+  DeviceBuffer(const DeviceBuffer&) = delete;
+  DeviceBuffer& operator=(const DeviceBuffer&) = delete;
+
+  /// Makes room for n elements; keeps the allocation when it is already large enough
+  /// (contents are not preserved on growth).
+  void resize(std::size_t n) {
+    if (n <= n_) return;
+    release();
+    if (n == 0) return;
+    cudaError_t e = cudaMalloc(reinterpret_cast<void**>(&p_), n * sizeof(T));
+    if (e != cudaSuccess) {
+      p_ = nullptr;
+      (void)cudaGetLastError();
+      throw OutOfMemory(n * sizeof(T), "cudaMalloc (device memory)");
+    }
+    n_ = n;
+  }
+  void upload(const T* host, std::size_t n, cudaStream_t s) {
+    resize(n);
+    if (n) STRATA_CUDA(cudaMemcpyAsync(p_, host, n * sizeof(T), cudaMemcpyHostToDevice, s));
+  }
+  T* data() { return p_; }
+  const T* data() const { return p_; }
+  std::size_t size() const { return n_; }
+
+ private:
+  void release() {
+    if (p_) cudaFree(p_);
+    p_ = nullptr;
+    n_ = 0;
+  }
+  T* p_ = nullptr;
+  std::size_t n_ = 0;
+};
+
+}  // namespace strata::cuda

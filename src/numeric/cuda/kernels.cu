@@ -1,0 +1,239 @@
+// strata — CUDA kernels of the level-batched multifrontal factorization (see kernels.cuh).
+//
+// The small-front kernel is a right-looking unblocked factorization by one thread block,
+// the fronts of a batch side by side in one launch: the batched-small-front case that
+// vendor batched POTRF handles poorly (DESIGN.md §2). Partial pivoting for LU searches
+// only the fully summed rows (restricted pivoting) and replaces tiny pivots by
+// ±static_pivot, exactly as the CPU kernels do (numeric/cpu/dense_front.hpp).
+#include "numeric/cuda/kernels.cuh"
+
+#include <cfloat>
+
+#include "numeric/cuda/cuda_check.hpp"
+
+namespace strata::cuda {
+namespace {
+
+constexpr int kThreads = 256;
+
+__global__ void assemble_kernel(DeviceTree t, std::int64_t begin, const double* values,
+                                const double* arena, double* pool, bool symmetric) {
+  const std::int64_t pos = begin + blockIdx.x;
+  const std::int64_t f = t.fronts[pos];
+  const std::int64_t m = t.n_rows[f];
+  double* F = pool + t.pos_offset[pos];
+  for (std::int64_t i = threadIdx.x; i < m * m; i += blockDim.x) F[i] = 0.0;
+  __syncthreads();
+  for (std::int64_t e = t.entry_offsets[f] + threadIdx.x; e < t.entry_offsets[f + 1];
+       e += blockDim.x)
+    F[t.entry_dst[e]] += values[t.entry_src[e]];  // distinct destinations: no race
+  __syncthreads();
+  for (std::int64_t q = t.child_offsets[f]; q < t.child_offsets[f + 1]; ++q) {
+    const std::int64_t c = t.children[q];
+    const std::int64_t mc = t.n_rows[c] - t.n_pivots[c];
+    if (mc == 0) continue;
+    const double* cb = arena + t.cb_offset[c];
+    const std::int64_t* rel = t.rel + t.rel_offsets[c];
+    for (std::int64_t x = threadIdx.x; x < mc * mc; x += blockDim.x) {
+      const std::int64_t jj = x / mc, ii = x % mc;
+      if (symmetric && ii < jj) continue;
+      F[rel[jj] * m + rel[ii]] += cb[x];
+    }
+    __syncthreads();  // children are added one after another: no two writes collide
+  }
+}
+
+__global__ void store_cb_kernel(DeviceTree t, std::int64_t begin, const double* pool,
+                                double* arena, bool symmetric) {
+  const std::int64_t pos = begin + blockIdx.x;
+  const std::int64_t f = t.fronts[pos];
+  if (t.parent[f] < 0) return;
+  const std::int64_t m = t.n_rows[f], k = t.n_pivots[f], mc = m - k;
+  const double* F = pool + t.pos_offset[pos];
+  double* cb = arena + t.cb_offset[f];
+  for (std::int64_t x = threadIdx.x; x < mc * mc; x += blockDim.x) {
+    const std::int64_t jj = x / mc, ii = x % mc;
+    if (symmetric && ii < jj) continue;
+    cb[x] = F[(k + jj) * m + k + ii];
+  }
+}
+
+// Block-wide argmax of |F(i, j)| over rows [r0, r1). Returns the row (or r0 if empty).
+__device__ std::int64_t block_argmax(const double* col, std::int64_t r0, std::int64_t r1,
+                                     double* sval, std::int64_t* sidx) {
+  double best = -1.0;
+  std::int64_t arg = r0;
+  for (std::int64_t i = r0 + threadIdx.x; i < r1; i += blockDim.x) {
+    const double v = fabs(col[i]);
+    if (v > best) {
+      best = v;
+      arg = i;
+    }
+  }
+  sval[threadIdx.x] = best;
+  sidx[threadIdx.x] = arg;
+  __syncthreads();
+  for (int stride = blockDim.x / 2; stride > 0; stride /= 2) {
+    if (threadIdx.x < stride) {
+      const double o = sval[threadIdx.x + stride];
+      const std::int64_t oi = sidx[threadIdx.x + stride];
+      // ties go to the smaller row, as the CPU kernel (first maximum) does
+      if (o > sval[threadIdx.x] || (o == sval[threadIdx.x] && oi < sidx[threadIdx.x])) {
+        sval[threadIdx.x] = o;
+        sidx[threadIdx.x] = oi;
+      }
+    }
+    __syncthreads();
+  }
+  const std::int64_t r = sidx[0];
+  __syncthreads();
+  return r;
+}
+
+// Unblocked right-looking partial LU of columns [p0, p0+w) of the m×m front F, updating
+// columns up to `update_end` (m: whole front; p0+w: panel only). Row swaps among the
+// fully summed rows [j, k) move whole rows.
+__device__ void lu_columns(double* F, std::int64_t m, std::int64_t k, std::int64_t p0,
+                           std::int64_t w, std::int64_t update_end, double static_pivot,
+                           std::int64_t* perm, std::int64_t* perturbed) {
+  __shared__ double sval[kThreads];
+  __shared__ std::int64_t sidx[kThreads];
+  __shared__ double spiv;
+  for (std::int64_t j = p0; j < p0 + w; ++j) {
+    double* colj = F + j * m;
+    const std::int64_t r = block_argmax(colj, j, k, sval, sidx);
+    if (r != j) {
+      for (std::int64_t c = threadIdx.x; c < m; c += blockDim.x) {
+        const double tmp = F[c * m + j];
+        F[c * m + j] = F[c * m + r];
+        F[c * m + r] = tmp;
+      }
+    }
+    __syncthreads();
+    if (threadIdx.x == 0) {
+      if (r != j) {
+        const std::int64_t tp = perm[j];
+        perm[j] = perm[r];
+        perm[r] = tp;
+      }
+      double p = colj[j];
+      if (fabs(p) < static_pivot) {
+        p = p < 0 ? -static_pivot : static_pivot;
+        colj[j] = p;
+        ++*perturbed;
+      }
+      spiv = p;
+    }
+    __syncthreads();
+    const double inv = 1.0 / spiv;
+    for (std::int64_t i = j + 1 + threadIdx.x; i < m; i += blockDim.x) colj[i] *= inv;
+    __syncthreads();
+    const std::int64_t rows = m - j - 1, cols = update_end - j - 1;
+    for (std::int64_t x = threadIdx.x; x < rows * cols; x += blockDim.x) {
+      const std::int64_t i = j + 1 + x % rows, c = j + 1 + x / rows;
+      F[c * m + i] -= colj[i] * F[c * m + j];
+    }
+    __syncthreads();
+  }
+}
+
+// Unblocked right-looking partial Cholesky of a small front (lower triangle).
+__device__ void llt_front(double* F, std::int64_t m, std::int64_t k, std::int64_t* info) {
+  __shared__ double sdiag;
+  __shared__ int sfail;
+  if (threadIdx.x == 0) sfail = 0;
+  __syncthreads();
+  for (std::int64_t j = 0; j < k; ++j) {
+    double* colj = F + j * m;
+    if (threadIdx.x == 0) {
+      const double d = colj[j];
+      if (!(d > 0.0)) {
+        sfail = 1;
+        *info = j;
+      } else {
+        sdiag = sqrt(d);
+        colj[j] = sdiag;
+      }
+    }
+    __syncthreads();
+    if (sfail) return;
+    const double inv = 1.0 / sdiag;
+    for (std::int64_t i = j + 1 + threadIdx.x; i < m; i += blockDim.x) colj[i] *= inv;
+    __syncthreads();
+    const std::int64_t rows = m - j - 1;
+    // lower triangle of the trailing matrix: pairs (i, c) with i >= c > j
+    for (std::int64_t x = threadIdx.x; x < rows * rows; x += blockDim.x) {
+      const std::int64_t i = j + 1 + x % rows, c = j + 1 + x / rows;
+      if (i >= c) F[c * m + i] -= colj[i] * colj[c];
+    }
+    __syncthreads();
+  }
+}
+
+__global__ void factor_small_kernel(DeviceTree t, const std::int64_t* positions, double* pool,
+                                    bool lu, double static_pivot, std::int64_t* info,
+                                    std::int64_t* perturbed, std::int64_t* perm,
+                                    const std::int64_t* perm_offset) {
+  const std::int64_t i = blockIdx.x;
+  const std::int64_t pos = positions[i];
+  const std::int64_t f = t.fronts[pos];
+  const std::int64_t m = t.n_rows[f], k = t.n_pivots[f];
+  double* F = pool + t.pos_offset[pos];
+  if (threadIdx.x == 0) {
+    info[i] = -1;
+    perturbed[i] = 0;
+  }
+  if (lu) {
+    std::int64_t* p = perm + perm_offset[i];
+    for (std::int64_t r = threadIdx.x; r < k; r += blockDim.x) p[r] = r;
+    __syncthreads();
+    lu_columns(F, m, k, 0, k, m, static_pivot, p, perturbed + i);
+  } else {
+    __syncthreads();
+    llt_front(F, m, k, info + i);
+  }
+}
+
+__global__ void lu_panel_kernel(double* f, std::int64_t m, std::int64_t k, std::int64_t p0,
+                                std::int64_t w, double static_pivot, std::int64_t* perm,
+                                std::int64_t* perturbed) {
+  lu_columns(f, m, k, p0, w, p0 + w, static_pivot, perm, perturbed);
+}
+
+}  // namespace
+
+void launch_assemble(const DeviceTree& t, std::int64_t begin, std::int64_t count,
+                     const double* values, const double* cb_arena, double* pool, bool symmetric,
+                     cudaStream_t s) {
+  if (count == 0) return;
+  assemble_kernel<<<static_cast<unsigned>(count), kThreads, 0, s>>>(t, begin, values, cb_arena,
+                                                                    pool, symmetric);
+  STRATA_CUDA_LAUNCH();
+}
+
+void launch_store_cb(const DeviceTree& t, std::int64_t begin, std::int64_t count,
+                     const double* pool, double* cb_arena, bool symmetric, cudaStream_t s) {
+  if (count == 0) return;
+  store_cb_kernel<<<static_cast<unsigned>(count), kThreads, 0, s>>>(t, begin, pool, cb_arena,
+                                                                    symmetric);
+  STRATA_CUDA_LAUNCH();
+}
+
+void launch_factor_small(const DeviceTree& t, const std::int64_t* positions, std::int64_t count,
+                         double* pool, bool lu, double static_pivot, std::int64_t* info,
+                         std::int64_t* perturbed, std::int64_t* perm,
+                         const std::int64_t* perm_offset, cudaStream_t s) {
+  if (count == 0) return;
+  factor_small_kernel<<<static_cast<unsigned>(count), kThreads, 0, s>>>(
+      t, positions, pool, lu, static_pivot, info, perturbed, perm, perm_offset);
+  STRATA_CUDA_LAUNCH();
+}
+
+void launch_lu_panel(double* f, std::int64_t m, std::int64_t k, std::int64_t p0, std::int64_t w,
+                     double static_pivot, std::int64_t* perm, std::int64_t* perturbed,
+                     cudaStream_t s) {
+  lu_panel_kernel<<<1, kThreads, 0, s>>>(f, m, k, p0, w, static_pivot, perm, perturbed);
+  STRATA_CUDA_LAUNCH();
+}
+
+}  // namespace strata::cuda

@@ -1,0 +1,60 @@
+// strata — CUDA kernels of the level-batched multifrontal factorization.
+//
+// A batch's fronts live in one device pool: the front at batch position p starts at
+// pool + pos_offset[p] and is n_rows×n_rows, column-major (leading dimension n_rows).
+// Every kernel here is launched once per batch with one thread block per front — the
+// fronts of a level are independent, so one launch covers them all (DESIGN.md §2).
+#pragma once
+
+#include <cuda_runtime.h>
+
+#include <cstdint>
+
+namespace strata::cuda {
+
+/// Device copies of the analysis arrays the kernels read (all int64 unless noted).
+struct DeviceTree {
+  const std::int64_t* fronts;         ///< schedule.fronts (position -> front)
+  const std::int64_t* pos_offset;     ///< position -> offset of its front in the pool
+  const std::int64_t* n_rows;         ///< per front
+  const std::int64_t* n_pivots;       ///< per front
+  const std::int64_t* parent;         ///< per front
+  const std::int64_t* entry_offsets;  ///< assembly map
+  const std::int64_t* entry_src;
+  const std::int64_t* entry_dst;
+  const std::int64_t* child_offsets;
+  const std::int64_t* children;
+  const std::int64_t* cb_offset;      ///< per front, in the CB arena (doubles)
+  const std::int64_t* rel_offsets;    ///< per child: its CB rows' positions in the parent
+  const std::int64_t* rel;
+};
+
+/// Zeroes the batch's fronts, scatters the original entries and extend-adds the
+/// children's contribution blocks (lower triangle only when `symmetric`).
+void launch_assemble(const DeviceTree& t, std::int64_t begin, std::int64_t count,
+                     const double* values, const double* cb_arena, double* pool, bool symmetric,
+                     cudaStream_t s);
+
+/// Copies each front's contribution block F[k:m, k:m] into the CB arena (fronts with a
+/// parent only).
+void launch_store_cb(const DeviceTree& t, std::int64_t begin, std::int64_t count,
+                     const double* pool, double* cb_arena, bool symmetric, cudaStream_t s);
+
+/// Partial factorization of small fronts, one block each, in place in the pool.
+/// `positions` lists batch positions (device array of `count`). Per listed front i:
+/// info[i] = local index of a failed Cholesky pivot or -1; perturbed[i] = static pivots;
+/// perm (LU) receives the local row permutation at perm + first_pivot offsets given by
+/// perm_offset[i].
+void launch_factor_small(const DeviceTree& t, const std::int64_t* positions, std::int64_t count,
+                         double* pool, bool lu, double static_pivot, std::int64_t* info,
+                         std::int64_t* perturbed, std::int64_t* perm,
+                         const std::int64_t* perm_offset, cudaStream_t s);
+
+/// One LU panel of a large front: columns p0..p0+w-1 of the m×m front F (fully summed
+/// rows 0..k-1), with row interchanges among rows p0..k-1 applied to whole rows, static
+/// pivoting, and the update restricted to the panel's columns. One block.
+void launch_lu_panel(double* f, std::int64_t m, std::int64_t k, std::int64_t p0, std::int64_t w,
+                     double static_pivot, std::int64_t* perm, std::int64_t* perturbed,
+                     cudaStream_t s);
+
+}  // namespace strata::cuda

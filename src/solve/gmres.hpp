@@ -1,0 +1,32 @@
+// strata — restarted GMRES, right-preconditioned by the sparse factorization.
+//
+// When static pivoting perturbed pivots, the factor M is that of a nearby matrix and
+// A M⁻¹ = I + (a perturbation of rank ≈ the number of perturbed pivots); iterative
+// refinement may then stall, while GMRES converges in about that many iterations.
+// (Arioli, Duff, Gratton & Pralet, "A note on GMRES preconditioned by a perturbed LDLᵀ
+// decomposition with static pivoting", SIAM J. Sci. Comput. 29(5), 2007; Saad & Schultz
+// 1986 for GMRES.)
+#pragma once
+
+#include <functional>
+
+#include "strata/types.hpp"
+
+namespace strata::solve {
+
+/// y = op(x) for vectors of length n.
+using Operator = std::function<void(const double* x, double* y)>;
+
+struct GmresResult {
+  int iterations = 0;
+  double backward_error = 0;  ///< normwise, of the returned x (true residual)
+};
+
+/// Solves A x = b for one right-hand side by GMRES(restart) with right preconditioning
+/// M⁻¹, starting from the given x, until the normwise backward error
+/// ‖b − A x‖∞ / (norm_a·‖x‖∞ + ‖b‖∞) ≤ tolerance or max_iterations iterations.
+/// x has n entries and is overwritten; never returns an iterate worse than the start.
+GmresResult gmres(index_t n, const Operator& a, const Operator& m_inv, double norm_a,
+                  const double* b, double* x, int restart, int max_iterations, double tolerance);
+
+}  // namespace strata::solve

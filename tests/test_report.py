@@ -1,0 +1,186 @@
+#!/usr/bin/env python3
+"""Test of bench/report.py on the fixture results in tests/data/bench_results/.
+
+    python3 tests/test_report.py [--keep DIR]
+
+The fixtures are shaped exactly like bench_analysis and bench_factor output and were
+made with round ratios, so the expected figures below are worked out by hand:
+  analysis  nnz(L) strata/CHOLMOD+METIS 1.21 and 1.0  -> geometric mean 1.100
+            time   strata/CHOLMOD+METIS 2.0 and 8.0   -> 4.000
+  factor    strata/CHOLMOD 1, 2, 4                    -> 2.000 (behind on 2 of 3)
+            strata/MUMPS   0.5, 0.5, 0.5              -> 0.500 (not behind)
+  an older factor run (marker 777) must not be shown; a run with an unknown tag (marker
+  654.321) must land in "Other results"; a truncated file must be listed as skipped;
+  experiments 3-5 and the GPU parts have no results and must say "Not measured yet".
+Exit status 1 with a list of failed checks if anything is off.
+"""
+import argparse
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+REPO = os.path.dirname(HERE)
+FIXTURES = os.path.join(HERE, "data", "bench_results")
+
+
+def sections(text):
+    """{'## heading': body} for every level-2 heading."""
+    out, cur = {}, None
+    for line in text.splitlines():
+        if line.startswith("## "):
+            cur = line
+            out[cur] = ""
+        elif cur:
+            out[cur] += line + "\n"
+    return out
+
+
+def section(secs, prefix):
+    hits = [body for head, body in secs.items() if head.startswith(prefix)]
+    return hits[0] if len(hits) == 1 else None
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--keep", help="write the report into this folder and keep it")
+    args = ap.parse_args()
+    out = args.keep or tempfile.mkdtemp(prefix="strata-report-test-")
+    proc = subprocess.run([sys.executable, os.path.join(REPO, "bench", "report.py"),
+                           "--results", FIXTURES, "--out", out],
+                          capture_output=True, text=True)
+    failures = []
+
+    def check(cond, what):
+        if not cond:
+            failures.append(what)
+
+    check(proc.returncode == 0, f"report.py exit status {proc.returncode}: {proc.stderr}")
+    path = os.path.join(out, "REPORT.md")
+    if not os.path.exists(path):
+        print("FAIL: no REPORT.md written\n" + proc.stdout + proc.stderr)
+        return 1
+    text = open(path, encoding="utf-8").read()
+    secs = sections(text)
+
+    # --- summary: the key ratios, computed from the fixtures' rows
+    summ = section(secs, "## Summary") or ""
+    check(summ, "no Summary section")
+    for what, value in (("nnz(L) strata/CHOLMOD+METIS", "1.100"),
+                        ("analysis time strata/CHOLMOD+METIS", "4.000"),
+                        ("factorization time strata/CHOLMOD", "2.000"),
+                        ("factorization time strata/MUMPS", "0.500")):
+        m = re.search(r"Geometric mean of " + re.escape(what) + r"[^*]*\*\*([0-9.]+)\*\*", summ)
+        check(m and m.group(1) == value,
+              f"summary: {what} should be {value}, found {m.group(1) if m else 'nothing'}")
+    behind = summ.split("**Where strata is behind an anchor", 1)
+    check(len(behind) == 2, "summary: no 'where strata is behind' statement")
+    if len(behind) == 2:
+        b = behind[1].split("Not behind", 1)[0]
+        check("strata/CHOLMOD (same permutation" in b and "behind on 2 of 3 problems" in b
+              and "elast3d-10, 4.000" in b,
+              "summary: behind CHOLMOD in factorization (2 of 3, worst elast3d-10 4.000) not stated")
+        check("analysis time strata/CHOLMOD+METIS" in b and "behind on 2 of 2" in b,
+              "summary: behind CHOLMOD+METIS in analysis time not stated")
+        check("nnz(L) strata/CHOLMOD+METIS" in b and "bcsstk16, 1.210" in b,
+              "summary: behind CHOLMOD+METIS in nnz(L) (worst bcsstk16 1.210) not stated")
+        check("strata/MUMPS" not in b, "summary: claims strata is behind MUMPS (it is not)")
+    check(re.search(r"Not behind[^\n]*strata/MUMPS", summ),
+          "summary: 'not behind MUMPS' not stated")
+
+    # --- experiment 1: the sweep table, CPU measured, GPU not
+    s1 = section(secs, "## 1.") or ""
+    check(s1, "no section 1")
+    check(re.search(r"\| problem \| 32 \| 256 \| 2048 \| best \| CHOLMOD s \|", s1),
+          "section 1: sweep table header wrong")
+    check(re.search(r"\| lap3d-20 \| 0\.9 \| 0\.5 \| 0\.6 \| 256 \| 0\.25–0\.26 \|", s1),
+          "section 1: lap3d-20 sweep row wrong")
+    check(re.search(r"\| elast3d-10 \| 2\.4 \| 1\.6 \| 1\.2 \| 2048 \| 0\.4 \|", s1),
+          "section 1: elast3d-10 sweep row wrong")
+    gpu1 = s1.split("### GPU", 1)
+    check(len(gpu1) == 2 and "Not measured yet" in gpu1[1], "section 1: GPU part not 'not measured'")
+    for mbs in (32, 256, 2048):
+        check(f"factor-mbs-{mbs}-2025" in s1, f"section 1: results file of mbs-{mbs} not named")
+
+    # --- experiment 2
+    s2 = section(secs, "## 2.") or ""
+    check(re.search(r"\| \*\*geometric mean\*\* \|(?: *\|){7} 2\.000 \| 0\.500 \|", s2),
+          "section 2: factor table geometric mean row wrong")
+    check(re.search(r"\| bcsstk16 \| 4,884 \| 147,631 \| 968,000 \| 800,000 \| 1\.210 \|", s2),
+          "section 2: analysis row bcsstk16 wrong")
+    check("factor-20250102T100000Z.json" in s2 and "analysis-20250102T090000Z.json" in s2,
+          "section 2: results files not named")
+    check("bench_factor --problems bcsstk16,lap3d-20,elast3d-10 --threads 2 --repeat 3" in s2,
+          "section 2: command of the factor run not in the caption")
+    check("commit f1x7e5a" in s2 and "2025-01-02T10:00:00Z" in s2,
+          "section 2: commit or date not in the caption")
+    gpu2 = s2.split("### GPU", 1)
+    check(len(gpu2) == 2 and "Not measured yet" in gpu2[1], "section 2: cuDSS part not 'not measured'")
+    check(re.search(r"Not measured yet\*\* in this run: solve time", s2),
+          "section 2: missing solve time not reported as not measured")
+
+    # --- experiments 3-5: no results, must say so and show no table
+    for n in (3, 4, 5):
+        s = section(secs, f"## {n}.")
+        check(s is not None, f"no section {n}")
+        if s is not None:
+            check("Not measured yet" in s, f"section {n}: not reported as not measured")
+            check("|" not in s and "![" not in s, f"section {n}: shows a table or plot without results")
+
+    # --- newest run only, unknown tags kept, broken files listed
+    check("777" not in text, "the older factor run (marker 777) is shown")
+    other = section(secs, "## Other results") or ""
+    check("654.321" in other and "threads-1" in other,
+          "the run with tag threads-1 is not under 'Other results'")
+    skipped = section(secs, "## Results files skipped") or ""
+    check("broken-20250101T000000Z.json" in skipped, "the truncated file is not listed as skipped")
+
+    # --- plots: every referenced PNG exists and is a PNG; each has a caption with a file
+    plots = re.findall(r"!\[[^\]]*\]\((plots/[^)]+\.png)\)", text)
+    check(len(plots) == 3, f"expected 3 plots (sweep, analysis, factor), found {len(plots)}")
+    for p in plots:
+        f = os.path.join(out, p)
+        ok = os.path.exists(f) and open(f, "rb").read(8) == b"\x89PNG\r\n\x1a\n"
+        check(ok, f"plot {p} missing or not a PNG")
+        after = text.split(p, 1)[1][:3000]
+        check("Measured with" in after and "results file" in after,
+              f"plot {p} has no caption saying how it was measured")
+    for link in re.findall(r"\]\(([^)]+\.json)\)", text):
+        check(os.path.exists(os.path.join(out, link)), f"link to results file {link} is broken")
+
+    # --- the same input gives the same report (no clock, no randomness)
+    out2 = tempfile.mkdtemp(prefix="strata-report-test-")
+    subprocess.run([sys.executable, os.path.join(REPO, "bench", "report.py"),
+                    "--results", FIXTURES, "--out", out2], capture_output=True, check=False)
+    again = os.path.join(out2, "REPORT.md")
+    check(os.path.exists(again) and open(again, encoding="utf-8").read() == text,
+          "two runs on the same results give different reports")
+
+    # --- an empty results folder: everything not measured, nothing invented
+    empty = tempfile.mkdtemp(prefix="strata-report-empty-")
+    out3 = tempfile.mkdtemp(prefix="strata-report-test-")
+    r3 = subprocess.run([sys.executable, os.path.join(REPO, "bench", "report.py"),
+                         "--results", empty, "--out", out3], capture_output=True, text=True)
+    check(r3.returncode == 0, f"report.py fails on an empty results folder: {r3.stderr}")
+    e = open(os.path.join(out3, "REPORT.md"), encoding="utf-8").read() if r3.returncode == 0 else ""
+    check(e.count("Not measured yet") >= 7 and "| ---" not in e and "![" not in e,
+          "empty results: sections not all 'not measured', or a table/plot was written")
+
+    for d in (out2, empty, out3):
+        shutil.rmtree(d, ignore_errors=True)
+    if failures:
+        print(f"FAIL ({len(failures)} checks), report kept in {out}:")
+        for f in failures:
+            print("  - " + f)
+        return 1
+    if not args.keep:
+        shutil.rmtree(out, ignore_errors=True)
+    print("ok: report generator checks passed" + (f" (report in {out})" if args.keep else ""))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
