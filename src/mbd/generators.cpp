@@ -309,8 +309,105 @@ json tracked_vehicle(int links) {
   return j;
 }
 
-json bushing_lattice(int n) { throw InvalidInput("lattice: not yet implemented"); }
-json flexible_plate(int nx, int ny, int nz) { throw InvalidInput("flexible: not yet implemented"); }
+// ------------------------------------------------------------------ bushing lattice -----
+// n³ rigid cubes on a cubic grid (spacing 0.2 m), each joined to its +x, +y and +z
+// neighbours by a bushing at the midpoint; the bottom layer is held to the ground by
+// bushings; gravity, and an initial shear velocity profile so that the lattice sways.
+json bushing_lattice(int n) {
+  if (n < 1) throw InvalidInput("lattice: need n >= 1");
+  const double d = 0.2, a = 0.1, mass = 1.0;
+  const double k = 2e4, kr = 2e2, c = 20, cr = 0.2;
+  json j;
+  j["name"] = fmt::format("bushing lattice {0}x{0}x{0}", n);
+  j["type"] = "spatial";
+  j["gravity"] = vec3(0, 0, -9.81);
+  j["simulation"] = {{"t_end", 0.5}, {"step", 2e-3}, {"order", 2}, {"output_interval", 0.01}};
+  auto name = [](int i, int jj, int kk) { return fmt::format("b{}_{}_{}", i, jj, kk); };
+  const double I = mass * a * a / 6;
+  for (int kk = 0; kk < n; ++kk)
+    for (int jj = 0; jj < n; ++jj)
+      for (int i = 0; i < n; ++i)
+        j["bodies"].push_back({{"name", name(i, jj, kk)},
+                               {"mass", mass},
+                               {"inertia", vec3(I, I, I)},
+                               {"position", vec3(i * d, jj * d, (kk + 1) * d)},
+                               {"velocity", vec3(0.2 * (kk + 1) / n, 0, 0)}});
+  const json stiff = json::array({k, k, k, kr, kr, kr});
+  const json damp = json::array({c, c, c, cr, cr, cr});
+  auto bushing = [&](const std::string& bi, const std::string& bj, json point) {
+    j["forces"].push_back({{"name", bi + "-" + bj},
+                           {"type", "bushing"},
+                           {"body_i", bi},
+                           {"body_j", bj},
+                           {"point", point},
+                           {"stiffness", stiff},
+                           {"damping", damp}});
+  };
+  for (int kk = 0; kk < n; ++kk)
+    for (int jj = 0; jj < n; ++jj)
+      for (int i = 0; i < n; ++i) {
+        const double x = i * d, y = jj * d, z = (kk + 1) * d;
+        if (i + 1 < n) bushing(name(i, jj, kk), name(i + 1, jj, kk), vec3(x + d / 2, y, z));
+        if (jj + 1 < n) bushing(name(i, jj, kk), name(i, jj + 1, kk), vec3(x, y + d / 2, z));
+        if (kk + 1 < n) bushing(name(i, jj, kk), name(i, jj, kk + 1), vec3(x, y, z + d / 2));
+        if (kk == 0) bushing("ground", name(i, jj, kk), vec3(x, y, z - d / 2));
+      }
+  return j;
+}
+
+// ------------------------------------------------------------------- flexible plate -----
+// A flexible plate (aluminium, 1 m × 0.1 m × 0.02 m) meshed with nx × ny × nz 8-node
+// hexahedra in absolute nodal coordinates, its root face attached to a rigid hub that a
+// rotation driver spins up about the vertical axis (the spin-up beam of Simo & Vu-Quoc
+// 1986, here as a 3D continuum), under gravity.
+json flexible_plate(int nx, int ny, int nz) {
+  if (nx < 1 || ny < 1 || nz < 1) throw InvalidInput("flexible plate: need nx, ny, nz >= 1");
+  const double L = 1.0, W = 0.1, T = 0.02, r_hub = 0.05;
+  json j;
+  j["name"] = fmt::format("flexible plate {}x{}x{} hexahedra", nx, ny, nz);
+  j["type"] = "spatial";
+  j["gravity"] = vec3(0, 0, -9.81);
+  j["simulation"] = {{"t_end", 0.5}, {"step", 1e-3}, {"order", 2}, {"output_interval", 0.01}};
+  j["bodies"].push_back({{"name", "hub"},
+                         {"mass", 5.0},
+                         {"inertia", vec3(0.01, 0.01, 0.01)},
+                         {"position", vec3(0, 0, 0)}});
+  j["joints"].push_back({{"name", "bearing"},
+                         {"type", "revolute"},
+                         {"body_i", "ground"},
+                         {"body_j", "hub"},
+                         {"point", vec3(0, 0, 0)},
+                         {"axis", vec3(0, 0, 1)}});
+  j["joints"].push_back({{"name", "motor"},
+                         {"type", "rotation_driver"},
+                         {"body_i", "ground"},
+                         {"body_j", "hub"},
+                         {"point", vec3(0, 0, 0)},
+                         {"axis", vec3(0, 0, 1)},
+                         {"motion", {{"ramp", {{"rate", 6.0}, {"ramp_time", 0.5}}}}}});
+  json nodes = json::array(), elements = json::array();
+  auto id = [&](int i, int jj, int kk) { return (kk * (ny + 1) + jj) * (nx + 1) + i; };
+  for (int kk = 0; kk <= nz; ++kk)
+    for (int jj = 0; jj <= ny; ++jj)
+      for (int i = 0; i <= nx; ++i)
+        nodes.push_back(vec3(r_hub + L * i / nx, -W / 2 + W * jj / ny, -T / 2 + T * kk / nz));
+  for (int kk = 0; kk < nz; ++kk)
+    for (int jj = 0; jj < ny; ++jj)
+      for (int i = 0; i < nx; ++i)
+        elements.push_back({id(i, jj, kk), id(i + 1, jj, kk), id(i + 1, jj + 1, kk),
+                            id(i, jj + 1, kk), id(i, jj, kk + 1), id(i + 1, jj, kk + 1),
+                            id(i + 1, jj + 1, kk + 1), id(i, jj + 1, kk + 1)});
+  json root = json::array();
+  for (int kk = 0; kk <= nz; ++kk)
+    for (int jj = 0; jj <= ny; ++jj) root.push_back(id(0, jj, kk));
+  j["flexible_bodies"].push_back(
+      {{"name", "plate"},
+       {"material", {{"density", 2700}, {"young", 7e10}, {"poisson", 0.3}, {"damping", 1e-4}}},
+       {"nodes", nodes},
+       {"elements", elements},
+       {"attachments", json::array({{{"nodes", root}, {"body", "hub"}}})}});
+  return j;
+}
 
 json generate(const std::string& spec) {
   const auto colon = spec.find(':');
