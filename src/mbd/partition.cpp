@@ -78,9 +78,6 @@ double reduce_row(const SparseRows& jac, index_t r, const std::vector<PivotRow>&
 Partition partition_coordinates(const SparseRows& jac, double threshold, double redundancy_tol,
                                 const std::function<std::string(index_t)>& row_name) {
   const index_t m = jac.n_rows(), n = jac.n_cols;
-  if (m > n)
-    throw RedundantConstraints("the model has more constraint equations (" + std::to_string(m) +
-                               ") than coordinates (" + std::to_string(n) + ")");
   std::vector<index_t> remaining(n, 0);  // rows not yet processed containing each column
   for (index_t c : jac.cols) ++remaining[c];
   std::vector<PivotRow> pivots;
@@ -111,7 +108,10 @@ Partition partition_coordinates(const SparseRows& jac, double threshold, double 
       }
       std::string msg = "redundant constraints: equation " + row_name(r) +
                         " is a linear combination of the others (singular constraint "
-                        "Jacobian); involved: ";
+                        "Jacobian";
+      if (m > n)
+        msg += "; " + std::to_string(m) + " equations for " + std::to_string(n) + " coordinates";
+      msg += "); involved: ";
       int shown = 0;
       for (index_t row : involved) {
         if (shown == 12) {

@@ -42,7 +42,8 @@ struct Partition {
 
 /// Chooses the dependent coordinates. `row_name(r)` describes row r for messages.
 /// Throws RedundantConstraints when a row is (relative to its original size, below
-/// `redundancy_tol`) a combination of earlier rows, or when m > n.
+/// `redundancy_tol`) a combination of earlier rows (always the case for some row when
+/// m > n).
 Partition partition_coordinates(const SparseRows& jac, double threshold, double redundancy_tol,
                                 const std::function<std::string(index_t)>& row_name);
 
