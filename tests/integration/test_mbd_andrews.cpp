@@ -22,7 +22,8 @@ constexpr double kReference[7] = {15.81077119629904,   -15.75637105984298, 0.040
 // set does: the relative error of each component against the reference.
 double run(double h, int order, bool dense, std::array<double, 7>* angles = nullptr,
            bool modified = true) {
-  Model model = build_model(andrews_squeezer(), "andrews");
+  // the bundled model file (written by the generator andrews_squeezer())
+  Model model = load_model(STRATA_MODELS_DIR "/andrews_squeezer.json");
   IntegratorOptions o;
   o.t_end = 0.03;
   o.step = h;
