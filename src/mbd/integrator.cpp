@@ -230,14 +230,18 @@ void Integrator::analyze(const BdfTerms& bdf, double t) {
 
 void Integrator::factorize(StepInfo& info, const BdfTerms& bdf, double t) {
   Timer timer;
+  Timer tf;
   solver_->factorize(sys_.matrix());
+  stats_.factor_seconds += tf.seconds();
   if (solver_->perturbed_pivots() > 0 && !fresh_analysis_) {
     // The analysis was made for other values; with the current ones its matching may put
     // tiny entries on the diagonal. Analyze again and refactorize.
     ++stats_.reanalyses;
     analyze(bdf, t);
     sys_.evaluate(x_.data(), t, bdf, true, res_.data());
+    Timer tf2;
     solver_->factorize(sys_.matrix());
+    stats_.factor_seconds += tf2.seconds();
     ++stats_.factorizations;
   }
   fresh_analysis_ = false;
@@ -341,6 +345,7 @@ bool Integrator::try_step(double h, StepInfo& info) {
       return false;
     }
     const double s2 = ts.seconds();
+    stats_.solve_seconds += s2;
     info.solver_seconds += s2;
     stats_.solver_seconds += s2;
     ++stats_.solves;

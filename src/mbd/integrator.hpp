@@ -74,6 +74,7 @@ struct IntegratorStats {
   index_t reanalyses = 0;        ///< analyses redone because pivots had to be perturbed
   index_t contact_updates = 0;   ///< changes of the set of contact pairs in the matrix
   index_t perturbed_pivots = 0;  ///< static pivots over all factorizations
+  double factor_seconds = 0, solve_seconds = 0;  ///< parts of solver_seconds
   double assembly_seconds = 0, solver_seconds = 0, analysis_seconds = 0, partition_seconds = 0,
          initial_conditions_seconds = 0;
   index_t jacobian_size = 0, jacobian_nnz = 0, factor_nnz = 0;

@@ -250,6 +250,12 @@ std::string summary(const Model& model, const SimulationResult& r) {
   if (s.steps)
     o += fmt::format("per step [ms]         solver {:.3f}, assembly {:.3f}\n",
                      1e3 * s.solver_seconds / s.steps, 1e3 * s.assembly_seconds / s.steps);
+  if (s.factorizations && s.solves && s.analyses)
+    o += fmt::format(
+        "strata [ms]           analysis {:.3f} each, factorization {:.3f} each, solve {:.3f} "
+        "each\n",
+        1e3 * s.analysis_seconds / s.analyses, 1e3 * s.factor_seconds / s.factorizations,
+        1e3 * s.solve_seconds / s.solves);
   o += fmt::format("energy [J]            initial {:.9g}, final {:.9g}\n", r.energy_initial,
                    r.energy_final);
   o += fmt::format("constraint violation  max |Phi| {:.3e}, max |dPhi/dt| {:.3e}\n",
