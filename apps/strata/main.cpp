@@ -250,10 +250,12 @@ int run_solve(const SolveArgs& a) {
 
 struct SimulateArgs {
   std::string model, generate, output = "out", dump_dir, write_model, device = "auto";
-  double t_end = 0, step = 0, output_interval = 0, newton_tol = 0;
+  double t_end = 0, step = 0, output_interval = 0, newton_tol = 0, rtol = 1e-4, atol = 1e-6,
+         max_step = 0;
   int order = 0, threads = 0;
   index_t dump_step = 1;
-  bool vtk = false, full_newton = false, quiet = false, verbose = false, dense = false;
+  bool vtk = false, full_newton = false, quiet = false, verbose = false, dense = false,
+       variable_step = false;
 };
 
 // The default model: a tracked vehicle of a few hundred links (runs in well under a
@@ -292,10 +294,16 @@ int run_simulate(const SimulateArgs& a) {
                                    : Backend::automatic;
   io.threads = a.threads;
   io.modified_newton = !a.full_newton;
+  if (model.newton_rtol > 0) io.newton_rtol = model.newton_rtol;
+  if (model.newton_atol > 0) io.newton_atol = model.newton_atol;
   if (a.newton_tol > 0) io.newton_rtol = a.newton_tol;
   io.dump_dir = a.dump_dir;
   io.verbose = a.verbose;
   io.dense_solver = a.dense;
+  io.variable_step = a.variable_step;
+  io.rtol = a.rtol;
+  io.atol = a.atol;
+  io.max_step = a.max_step;
   io.dump_step = a.dump_dir.empty() ? -1 : a.dump_step;
   o.output_dir = a.output;
   o.output_interval = a.output_interval > 0 ? a.output_interval : model.output_interval;
@@ -303,7 +311,10 @@ int run_simulate(const SimulateArgs& a) {
   o.progress = !a.quiet && isatty(fileno(stdout));
   o.progress_stream = stdout;
   fmt::print("strata simulate {}\n", source);
-  fmt::print("integrator            BDF{} with step {:g} s to t = {:g} s, {} Newton\n", io.order,
+  fmt::print("integrator            BDF{} with {} {:g} s to t = {:g} s, {} Newton\n", io.order,
+             io.variable_step
+                 ? fmt::format("variable step (rtol {:g}, atol {:g}) from", io.rtol, io.atol)
+                 : std::string("step"),
              io.step, io.t_end, io.modified_newton ? "modified" : "full");
   std::fflush(stdout);
   const SimulationResult r = simulate(model, o);
@@ -375,6 +386,11 @@ int main(int argc, char** argv) {
   simulate->add_option("--threads", sim.threads, "host threads for strata (0: all)");
   simulate->add_flag("--quiet", sim.quiet, "no progress bar");
   simulate->add_flag("--verbose", sim.verbose, "print every Newton iteration (stderr)");
+  simulate->add_flag("--variable-step", sim.variable_step,
+                     "variable step size with local error control (--step is the first step)");
+  simulate->add_option("--rtol", sim.rtol, "relative local error tolerance (default 1e-4)");
+  simulate->add_option("--atol", sim.atol, "absolute local error tolerance (default 1e-6)");
+  simulate->add_option("--max-step", sim.max_step, "largest variable step [s] (default t_end/10)");
   simulate->add_flag("--dense-reference", sim.dense,
                      "solve with dense LAPACK LU instead of strata (diagnosis; small models)");
   CLI11_PARSE(app, argc, argv);

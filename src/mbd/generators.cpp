@@ -184,7 +184,9 @@ json tracked_vehicle(int links) {
   j["name"] = fmt::format("tracked vehicle, 2 x {} links", links);
   j["type"] = "spatial";
   j["gravity"] = vec3(0, 0, -9.81);
-  j["simulation"] = {{"t_end", 1.0}, {"step", 1e-3}, {"order", 2}, {"output_interval", 0.01}};
+  j["simulation"] = {{"t_end", 1.0},        {"step", 1e-3},
+                     {"order", 2},          {"output_interval", 0.01},
+                     {"newton_rtol", 1e-5}, {"newton_atol", 1e-6}};
   auto box = [](double m, double a, double b, double c) {  // inertia of a box a×b×c
     return vec3(m * (b * b + c * c) / 12, m * (a * a + c * c) / 12, m * (a * a + b * b) / 12);
   };

@@ -288,6 +288,8 @@ bool Integrator::try_step(double h, StepInfo& info) {
       xv[i] += w[j] * history_[j].v[i];
     }
   for (index_t i = 0; i < n; ++i) xa[i] = (xv[i] + zeta1_[i]) / bdf.beta;
+  qpred_.assign(xq, xq + n);
+  vpred_.assign(xv, xv + n);
   std::copy(lambda_.begin(), lambda_.end(), xl);
 
   if (!opts_.modified_newton || slow_last_step_ ||
@@ -356,11 +358,19 @@ bool Integrator::try_step(double h, StepInfo& info) {
       return false;
     }
     double err = 0;
-    const double atol = opts_.newton_atol, rtol = opts_.newton_rtol;
+    // weights: atol + rtol|x| for q and v (so that the constraints hold to that level at
+    // both), atol·b0/h + rtol|a| for a (an error δa moves v by (h/b0)·δa); in variable-step
+    // mode at most a tenth of the local error tolerances
+    double atol = opts_.newton_atol, rtol = opts_.newton_rtol;
+    if (opts_.variable_step) {
+      atol = std::min(atol, 0.1 * opts_.atol);
+      rtol = std::min(rtol, 0.1 * opts_.rtol);
+    }
+    const double atol_a = atol / bdf.beta;
     for (index_t i = 0; i < N; ++i) x_[i] += dx_[i];
     for (index_t i = 0; i < n; ++i) {
-      err = std::max(err, std::abs(dx_[i]) / (atol / (h * h) + rtol * std::abs(xa[i])));
-      err = std::max(err, std::abs(dx_[n + i]) / (atol / h + rtol * std::abs(xv[i])));
+      err = std::max(err, std::abs(dx_[i]) / (atol_a + rtol * std::abs(xa[i])));
+      err = std::max(err, std::abs(dx_[n + i]) / (atol + rtol * std::abs(xv[i])));
       err = std::max(err, std::abs(dx_[2 * n + i]) / (atol + rtol * std::abs(xq[i])));
     }
     // Convergence test (Brenan, Campbell & Petzold 1996, §5.2.2, as in DASSL): with the
@@ -376,7 +386,7 @@ bool Integrator::try_step(double h, StepInfo& info) {
                  solver_->perturbed_pivots());
     if (since_jac == 1) {
       err_first = err;
-      converged = err <= 1e-3;
+      converged = fresh && err <= 1e-3;  // a stale Jacobian may understate a first update
     } else {
       const double rho = std::pow(err / err_first, 1.0 / (since_jac - 1));
       if ((rho < 1 && rho / (1 - rho) * err <= 1) || err <= 1e-3) {
@@ -405,6 +415,32 @@ bool Integrator::try_step(double h, StepInfo& info) {
       retry_ = true;
       return false;
     }
+    if (converged && opts_.variable_step && np > 1) {
+      // local error estimate: (x − x_pred)/(p + 2) for a predictor of the corrector's
+      // order (BDF error constant 1/(p+1), extrapolation error constant 1)
+      const double c = np == p + 1 ? 1.0 / (p + 2) : 1.0 / (np + 1);
+      double sum = 0, worst = 0;
+      index_t wi = 0;
+      for (index_t i = 0; i < n; ++i) {
+        const double eq = c * (xq[i] - qpred_[i]) / (opts_.atol + opts_.rtol * std::abs(xq[i]));
+        const double ev = c * (xv[i] - vpred_[i]) / (opts_.atol + opts_.rtol * std::abs(xv[i]));
+        sum += eq * eq + ev * ev;
+        if (eq * eq > worst) worst = eq * eq, wi = i;
+        if (ev * ev > worst) worst = ev * ev, wi = n + i;
+      }
+      const double est = std::sqrt(sum / (2.0 * n));
+      info.error_estimate = est;
+      if (opts_.verbose)
+        fmt::print(stderr,
+                   "t = {:.9g} h = {:.3g} order {}: local error estimate {:.3e} (largest: {} {})\n",
+                   tn, h, p, est, wi < n ? "q" : "v", wi % n);
+      const double factor = 0.9 * std::pow(std::max(est, 1e-10), -1.0 / (p + 1));
+      if (est > 1) {
+        lte_reject_h_ = h * std::clamp(factor, 0.2, 0.9);
+        return false;
+      }
+      next_h_ = h * std::clamp(factor, 0.5, 2.0);
+    }
     if (converged) {
       slow_last_step_ = it > 3;
       q_.assign(xq, xq + n);
@@ -431,6 +467,17 @@ StepInfo Integrator::advance() {
       retry_ = false;
       continue;
     }
+    if (lte_reject_h_ > 0) {  // converged, but the local error is too large
+      h = lte_reject_h_;
+      lte_reject_h_ = 0;
+      ++info.rejected;
+      ++stats_.rejected;
+      ++stats_.error_rejections;
+      if (h < opts_.min_step)
+        throw SimulationError(fmt::format(
+            "the local error test failed at t = {:.9g} s even with a step of {:.3g} s", t_, h));
+      continue;
+    }
     ++info.rejected;
     ++stats_.rejected;
     slow_last_step_ = true;
@@ -446,11 +493,18 @@ StepInfo Integrator::advance() {
   info.t = t_;
   history_.push_front({t_, q_, v_, a_});
   while (static_cast<int>(history_.size()) > opts_.order + 1) history_.pop_back();
-  // next step: grow back towards the nominal step (the startup ramp doubles each step)
-  if (info.rejected)
+  // next step: variable steps follow the error control; fixed steps grow back towards
+  // the nominal step (the startup ramp doubles each step)
+  if (opts_.variable_step) {
+    const double max_step = opts_.max_step > 0 ? opts_.max_step : opts_.t_end / 10;
+    h_ = std::min(max_step, next_h_ > 0 ? next_h_ : h);
+    if (info.rejected && !info.error_estimate) h_ = h;  // a Newton failure: keep the smaller step
+    next_h_ = 0;
+  } else if (info.rejected) {
     h_ = h;
-  else if (h_ < opts_.step)
+  } else if (h_ < opts_.step) {
     h_ = std::min(opts_.step, 2 * h_);
+  }
   // contact pairs approaching: update the set in the Newton matrix
   if (sys_.check_candidates(q_.data()) == 1 && sys_.update_candidates(q_.data())) {
     ++stats_.contact_updates;

@@ -40,7 +40,7 @@ struct IntegratorOptions {
   bool modified_newton = true;  ///< keep the factor while Newton converges fast
   int max_newton_iterations = 25;
   double newton_rtol = 1e-6;             ///< relative tolerance of the Newton update
-  double newton_atol = 1e-8;             ///< absolute tolerance (q; divided by h for v, h² for a)
+  double newton_atol = 1e-8;             ///< absolute tolerance (q, v; a: times b0/h)
   double partition_threshold = 0.25;     ///< relative pivot threshold of the partitioning
   double repartition_quality = 0.05;     ///< repartition when the partition's quality drops
   int partition_check_interval = 10;     ///< steps between partition quality checks
@@ -52,7 +52,14 @@ struct IntegratorOptions {
   bool dense_solver = false;  ///< LAPACK instead of strata (tests only)
   index_t dump_step = -1;     ///< write the Newton Jacobian of this step (1-based)
   std::string dump_dir;       ///< ... into this folder (Matrix Market)
-  bool verbose = false;       ///< print every Newton iteration to stderr
+  bool verbose = false;
+  /// Variable step size with local error control (order fixed at `order` after the
+  /// start): the local error of q and v is estimated from the difference between the
+  /// converged solution and the predictor (Milne's device) and kept below rtol/atol.
+  bool variable_step = false;
+  double rtol = 1e-4, atol = 1e-6;  ///< local error tolerances of variable steps
+  double max_step = 0;  ///< largest variable step (0: (t_end − 0)/10)       ///< print every Newton
+                        ///< iteration to stderr
 };
 
 /// What happened in one accepted step.
@@ -66,6 +73,7 @@ struct StepInfo {
   double assembly_seconds = 0;  ///< residual and Jacobian evaluation
   double solver_seconds = 0;    ///< strata analysis + factorization + solves
   bool repartitioned = false;
+  double error_estimate = 0;  ///< weighted local error estimate (variable step; ≤ 1)
 };
 
 struct IntegratorStats {
@@ -73,6 +81,7 @@ struct IntegratorStats {
           repartitions = 0, solves = 0;
   index_t reanalyses = 0;        ///< analyses redone because pivots had to be perturbed
   index_t contact_updates = 0;   ///< changes of the set of contact pairs in the matrix
+  index_t error_rejections = 0;  ///< variable step: steps rejected by the local error test
   index_t perturbed_pivots = 0;  ///< static pivots over all factorizations
   double factor_seconds = 0, solve_seconds = 0;  ///< parts of solver_seconds
   double assembly_seconds = 0, solver_seconds = 0, analysis_seconds = 0, partition_seconds = 0,
@@ -119,13 +128,15 @@ class Integrator {
   std::unique_ptr<LinearSolver> solver_;
   Partition partition_;
   bool pattern_changed_ = true, factor_valid_ = false, fresh_analysis_ = false, retry_ = false;
+  double lte_reject_h_ = 0;  // > 0: the step was rejected by the error test; retry with this
+  double next_h_ = 0;        // step proposed by the error control
   double factor_beta_ = 0;
   bool slow_last_step_ = false;
   double t_ = 0, h_ = 0;
   std::vector<double> q_, v_, a_, lambda_;
   std::deque<Point> history_;
   IntegratorStats stats_;
-  std::vector<double> x_, res_, dx_, rhs_, zeta1_, zeta2_;
+  std::vector<double> x_, res_, dx_, rhs_, zeta1_, zeta2_, qpred_, vpred_;
   index_t step_ = 0;
 };
 

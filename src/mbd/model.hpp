@@ -98,6 +98,7 @@ struct Model {
   double t_end = 1.0, step = 1e-3;
   int order = 2;
   double output_interval = 0;  ///< s between rows of the large CSV files (0: every step)
+  double newton_rtol = 0, newton_atol = 0;  ///< Newton tolerances (0: the integrator's)
 
   /// Total number of constraint equations m.
   index_t n_constraints() const;

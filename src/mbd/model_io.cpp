@@ -137,8 +137,10 @@ class Reader {
     if (r.has("gravity")) m_.gravity = r.at("gravity").vec(dim_);
     if (r.has("simulation")) {
       const Node s = r.at("simulation");
-      s.keys({"t_end", "step", "order", "output_interval"});
+      s.keys({"t_end", "step", "order", "output_interval", "newton_rtol", "newton_atol"});
       m_.output_interval = s.nonnegative("output_interval", 0);
+      m_.newton_rtol = s.nonnegative("newton_rtol", 0);
+      m_.newton_atol = s.nonnegative("newton_atol", 0);
       m_.t_end = s.has("t_end") ? s.positive("t_end") : m_.t_end;
       m_.step = s.has("step") ? s.positive("step") : m_.step;
       if (s.has("order")) {

@@ -227,7 +227,8 @@ std::string summary(const Model& model, const SimulationResult& r) {
   o += fmt::format("result                {} at t = {:.6g} s\n",
                    r.complete ? "complete" : "PARTIAL (stopped early)", r.t_reached);
   if (!r.complete) o += fmt::format("reason                {}\n", r.message);
-  o += fmt::format("steps                 {} accepted, {} rejected\n", s.steps, s.rejected);
+  o += fmt::format("steps                 {} accepted, {} rejected ({} by the local error test)\n",
+                   s.steps, s.rejected, s.error_rejections);
   o += fmt::format("Newton iterations     {} ({:.2f} per step)\n", s.newton_iterations,
                    s.steps ? double(s.newton_iterations) / s.steps : 0.0);
   o += fmt::format(
