@@ -178,7 +178,11 @@ json tracked_vehicle(int links) {
   const double margin = std::max(0.05, 1.5 * perimeter / links);
   // contact: stiff enough for millimetre penetrations, soft and smooth enough (friction
   // regularised over 0.2 m/s) for Newton's method to converge in a few iterations
-  const double k_ground = 2e5, c_ground = 2e3, k_wheel = 1e6, c_wheel = 2e3, v_slip = 0.2;
+  // (values for 100 links per track; per contact they scale with 100/links, so that the
+  // whole track is as stiff and each link's contact frequency the same for every size)
+  const double scale = 100.0 / links;
+  const double k_ground = 2e5 * scale, c_ground = 2e3 * scale, k_wheel = 1e6 * scale,
+               c_wheel = 2e3 * scale, v_slip = 0.2;
   const double speed = 1.0, ramp = 0.5;  // m/s reached after `ramp` seconds
   json j;
   j["name"] = fmt::format("tracked vehicle, 2 x {} links", links);

@@ -1,7 +1,6 @@
 // strata::mbd — adapters from the LinearSolver interface to strata::Solver and LAPACK.
 #include "mbd/linear_solver.hpp"
 
-#include <cstdlib>
 #include <vector>
 
 #include "strata/errors.hpp"
@@ -25,9 +24,6 @@ class StrataLinearSolver : public LinearSolver {
     o.backend = backend;
     o.num_threads = threads;
     o.matching_and_scaling = true;
-    // Newton's method corrects the solution itself; one refinement step keeps solves
-    // cheap while still catching a poor factor (its backward error is reported).
-    o.refinement_max_steps = std::getenv("REFINE") ? std::atoi(std::getenv("REFINE")) : 10;
     return o;
   }
   void analyze(const SparseMatrix& a) override {
