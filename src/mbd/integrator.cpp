@@ -238,8 +238,8 @@ void Integrator::factorize(StepInfo& info, const BdfTerms& bdf, double t) {
     // tiny entries on the diagonal. Analyze again and refactorize.
     ++stats_.reanalyses;
     if (opts_.verbose)
-      fmt::print(stderr, "t = {:.9g} step {}: {} perturbed pivots; analyzing again\n", t,
-                 step_ + 1, solver_->perturbed_pivots());
+      fmt::print(stderr, "t = {:.9g} step {}: {} perturbed pivots; analyzing again\n", t, step_ + 1,
+                 solver_->perturbed_pivots());
     analyze(bdf, t);
     sys_.evaluate(x_.data(), t, bdf, true, res_.data());
     Timer tf2;
