@@ -10,6 +10,7 @@
 //
 //   bench_gpu [--problems a,b,...] [--repeat R] [--threads 4,16] [--results-dir DIR]
 #include <CLI/CLI.hpp>
+#include <cstdio>
 #include <fmt/core.h>
 
 #include "bench_common.hpp"
@@ -79,6 +80,7 @@ int main(int argc, char** argv) {
   fmt::print("{:<14} {:>8} {:>11} {:>9} {:>8} {:>9} {:>4} {:>9} {:>7} {:>7} {:>9}\n", "problem", "n",
              "nnz(L)", "gpu s", "GFLOP/s", "cpu s", "thr", "chol s", "cpu/gpu", "chol/gpu",
              "berr gpu");
+  std::string partial, previous;
   for (const std::string& name : problems) {
     bench::Problem p = bench::load_problem(name);
     Options o;
@@ -131,7 +133,14 @@ int main(int argc, char** argv) {
                p.symmetric ? fmt::format("{:.2f}", best_chol / g.factor) : "-", g.backward_error);
     std::fflush(stdout);
     out["rows"].push_back(row);
+    // keep what is measured so far, in case the run is cut off
+    out["partial"] = true;
+    partial = bench::write_result(out, "gpu-partial", results_dir);
+    if (!previous.empty() && previous != partial) std::remove(previous.c_str());
+    previous = partial;
   }
+  out.erase("partial");
   fmt::print("results: {}\n", bench::write_result(out, "gpu", results_dir));
+  if (!partial.empty()) std::remove(partial.c_str());
   return 0;
 }

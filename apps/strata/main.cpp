@@ -95,6 +95,8 @@ json analysis_json(const AnalysisStats& s) {
           {"memory_budget", s.memory_budget},
           {"batches", batches},
           {"type", to_string(s.type)},
+          {"pairs", s.pairs},
+          {"odd_cycles", s.odd_cycles},
           {"ordering", to_string(s.ordering)},
           {"seconds",
            {{"ordering", s.ordering_seconds},
@@ -109,6 +111,9 @@ void print_analysis(const AnalysisStats& s, double read_seconds) {
   fmt::print("nnz(L)                {} (in fronts: {})\n", s.nnz_l, s.nnz_l_fronts);
   fmt::print("factor flops          {:.4g}\n", s.factor_flops);
   fmt::print("fronts                {}\n", s.n_fronts);
+  if (s.pairs + s.odd_cycles > 0)
+    fmt::print("pivot groups          {} pairs, {} odd cycles (kept in one front each)\n", s.pairs,
+               s.odd_cycles);
   fmt::print("largest front         {} rows, {} pivots\n", s.largest_front_rows,
              s.largest_front_pivots);
   fmt::print("tree height           {} levels\n", s.tree_height);

@@ -12,7 +12,10 @@ namespace strata {
 /// The factorization a matrix gets.
 enum class MatrixType {
   automatic,             ///< spd if symmetric and a Cholesky attempt succeeds, else
-                         ///< symmetric_indefinite if symmetric, else general.
+                         ///< symmetric_indefinite if symmetric, else general. A symmetric
+                         ///< matrix with a diagonal entry that is missing or ≤ 0 (values
+                         ///< given at analysis) cannot be spd: it is resolved to
+                         ///< symmetric_indefinite by the analysis.
   spd,                   ///< symmetric positive definite: Cholesky L Lᵀ.
   symmetric_indefinite,  ///< symmetric: L D Lᵀ with Bunch–Kaufman 1×1/2×2 pivots.
   general,               ///< unsymmetric: L U on the pattern of A + Aᵀ.
@@ -74,8 +77,17 @@ struct Options {
   /// Host threads for the CPU backend; 0 means all hardware threads (default 0).
   int num_threads = 0;
   /// For `general`: permute large entries onto the diagonal by a maximum weighted
-  /// matching and scale rows and columns (MC64-style, Duff & Koster 2001). Default on.
+  /// matching and scale rows and columns (MC64-style, Duff & Koster 2001). For
+  /// `symmetric_indefinite`: the symmetric scaling D·A·D from the same matching and the
+  /// 2×2 pivot pairs it suggests, kept together by the ordering and in one front (Duff &
+  /// Pralet 2005). Computed from the values given at analysis and reused by every
+  /// refactorization. Default on.
   bool matching_and_scaling = true;
+  /// For `symmetric_indefinite` with matching_and_scaling: a pair (i, j) of the matching
+  /// is kept as a 2×2 pivot candidate only when one of its scaled diagonal entries has
+  /// magnitude below this (structurally zero counts as 0); ≤ 0 keeps no pair (scaling
+  /// only). Default 0.01.
+  double pairing_threshold = 0.01;
   /// Static pivoting: a pivot with |d| < static_pivot_epsilon · ‖A‖₁ (after scaling) is
   /// replaced by ±static_pivot_epsilon · ‖A‖₁ and counted in FactorStats (default 1e-8 ≈ √ε, as in
   /// SuperLU_DIST and MUMPS).

@@ -40,6 +40,11 @@ struct AnalysisStats {
   std::size_t memory_budget = 0;            ///< budget the plan was made for (0: unlimited)
   std::vector<BatchInfo> batches;           ///< the memory plan
   MatrixType type = MatrixType::automatic;  ///< type the analysis was made for
+  /// symmetric_indefinite: pivot groups of the symmetric matching kept together in one
+  /// front (Duff & Pralet 2005): pairs, and short odd cycles of the matching kept whole
+  /// (when even their best singleton has a small diagonal).
+  index_t pairs = 0;
+  index_t odd_cycles = 0;
   OrderingMethod ordering = OrderingMethod::nested_dissection;
   double ordering_seconds = 0;
   double symbolic_seconds = 0;

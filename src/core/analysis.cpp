@@ -3,11 +3,18 @@
 // Order of work:
 //   1. canonical pattern of the input (lower triangle for symmetric types, full for
 //      general), validated;
-//   2. general only: maximum product matching and scaling (Duff & Koster 2001), so that
+//   2. general: maximum product matching and scaling (Duff & Koster 2001), so that
 //      B = Dr·A(:,q)·Dc has a large diagonal and static pivoting is rarely needed;
-//   3. the fill-reducing ordering on the graph of B + Bᵀ (nested dissection by default);
+//      symmetric_indefinite (including `automatic` matrices resolved to it because a
+//      diagonal entry is missing or ≤ 0, which no SPD matrix has): the symmetric scaling
+//      B = D·A·D from the same matching and its 2×2 pivot pairs (Duff & Pralet 2005,
+//      ordering/pairing.cpp);
+//   3. the fill-reducing ordering on the graph of B + Bᵀ (nested dissection by default),
+//      on the quotient graph with one vertex per pair when there are pairs, so that the
+//      two members of a pair are consecutive;
 //   4. the symbolic phase on the permuted pattern: etree, postorder, column counts,
-//      supernodes, amalgamation, separator blocking — the assembly tree;
+//      supernodes, amalgamation, separator blocking — the assembly tree, with every pair
+//      in one front (AmalgamationOptions::keep_with_next);
 //   5. the level schedule and the memory plan for the device budget;
 //   6. layouts computed once and reused by every (re)factorization: where every input
 //      entry lands in its front (assembly map), where each contribution block lives in
@@ -20,6 +27,7 @@
 
 #include "core/timer.hpp"
 #include "ordering/matching.hpp"
+#include "ordering/pairing.hpp"
 #include "strata/errors.hpp"
 
 namespace strata {
@@ -94,6 +102,18 @@ SparseMatrix symmetric_pattern(const SparseMatrix& c, bool symmetric,
       if (i != j) mirrored.indices[cnt[i]++] = j;
     }
   return canonicalize(mirrored);  // sorts and removes the duplicates of B ∩ Bᵀ
+}
+
+// True when the lower-triangular canonical matrix `low` has a diagonal entry that is
+// structurally missing or (values given) ≤ 0: such a symmetric matrix is not SPD.
+bool has_nonpositive_diagonal(const SparseMatrix& low) {
+  const bool vals = !low.values.empty();
+  for (index_t j = 0; j < low.n_cols; ++j) {
+    const index_t p = low.offsets[j];
+    if (p == low.offsets[j + 1] || low.indices[p] != j) return true;  // sorted: diagonal first
+    if (vals && !(low.values[p] > 0.0)) return true;
+  }
+  return false;
 }
 
 // Local index of global row `row` in the sorted row list of front f (binary search).
@@ -249,6 +269,8 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts) {
   SparseMatrix c = an.symmetric ? lower_triangle(a) : expand_symmetric(a);
   an.pattern_offsets = c.offsets;
   an.pattern_indices = c.indices;
+  if (an.type == MatrixType::automatic && has_nonpositive_diagonal(c))
+    an.type = MatrixType::symmetric_indefinite;
 
   Timer step;
   std::vector<index_t> q_inv;
@@ -260,8 +282,21 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts) {
     an.structurally_singular = m.structurally_singular;
     q_inv = ordering::invert_permutation(an.matching_perm);
   }
+  if (an.type == MatrixType::symmetric_indefinite && opts.matching_and_scaling && an.n > 0 &&
+      !c.values.empty()) {
+    ordering::SymmetricPairing sp = ordering::symmetric_matching_pairing(c, opts.pairing_threshold);
+    an.row_scaling = sp.scaling;
+    an.col_scaling = std::move(sp.scaling);
+    an.structurally_singular = sp.structurally_singular;
+    an.pivot_groups = std::move(sp.groups);
+  }
+  const bool grouped = an.pivot_groups.n_groups() > 0;
   const SparseMatrix pattern = symmetric_pattern(c, an.symmetric, q_inv);
-  ordering::OrderingResult ord = ordering::compute_ordering(ordering::graph_of(pattern), opts);
+  const ordering::Graph graph = ordering::graph_of(pattern);
+  ordering::OrderingResult ord =
+      grouped ? ordering::compute_grouped_ordering(
+                    graph, ordering::complete_groups(an.n, an.pivot_groups), opts)
+              : ordering::compute_ordering(graph, opts);
   an.stats.ordering_seconds = step.seconds();
 
   step.reset();
@@ -274,6 +309,29 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts) {
   ao.relax_zeros_2 = opts.relax_zeros_2;
   ao.relax_zeros_3 = opts.relax_zeros_3;
   ao.max_block_size = opts.max_block_size;
+  if (grouped) {
+    // Consecutive members of a group that the ordering placed side by side (all of them,
+    // except under the natural and user orderings, which keep only what they happen to
+    // place so) become pivots of one front; they are coupled by an entry, as
+    // keep_with_next requires.
+    const auto& gr = an.pivot_groups;
+    std::vector<index_t> group_of(an.n, -1), pos(an.n, -1);
+    for (index_t g = 0; g < gr.n_groups(); ++g)
+      for (index_t p = gr.ptr[g]; p < gr.ptr[g + 1]; ++p) {
+        group_of[gr.members[p]] = g;
+        pos[gr.members[p]] = p;
+      }
+    ao.keep_with_next.assign(an.n, 0);
+    std::vector<index_t> links(gr.n_groups(), 0);
+    for (index_t k = 0; k + 1 < an.n; ++k) {
+      const index_t u = ord.perm[k], v = ord.perm[k + 1];
+      if (group_of[u] < 0 || group_of[u] != group_of[v] || pos[v] != pos[u] + 1) continue;
+      ao.keep_with_next[k] = 1;
+      ++links[group_of[u]];
+    }
+    for (index_t g = 0; g < gr.n_groups(); ++g)
+      if (links[g] == gr.size(g) - 1) ++(gr.size(g) == 2 ? an.stats.pairs : an.stats.odd_cycles);
+  }
   symbolic::SymbolicFactorization sym = symbolic::analyze_pattern(permuted, ao);
   // the tree is in the postordered numbering: pivot k is permuted column post[k]
   an.perm.resize(an.n);

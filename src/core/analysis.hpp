@@ -1,6 +1,7 @@
 // strata — the result of the analysis phase: everything the numeric phases need that
-// depends on the pattern alone (plus, for `general`, the matching and scaling computed
-// from the values given at analysis and reused by every refactorization).
+// depends on the pattern alone (plus, for `general` and `symmetric_indefinite`, the
+// matching-based scaling (and pairs) computed from the values given at analysis and reused
+// by every refactorization).
 #pragma once
 
 #include <cstdint>
@@ -53,10 +54,19 @@ struct Analysis {
   std::vector<index_t> pattern_offsets;
   std::vector<index_t> pattern_indices;
   Storage input_storage = Storage::full;
-  // general: matching and scaling (original numbering); empty when not used
+  // Matching and scaling (original numbering); empty when not used.
+  // general: B = Dr·A(:, q)·Dc with q = matching_perm (Duff & Koster 2001).
+  // symmetric_indefinite: B = D·A·D with row_scaling == col_scaling == D and no column
+  // permutation (matching_perm stays empty), plus the 2×2 pivot pairs (Duff & Pralet 2005).
   std::vector<index_t> matching_perm;  ///< column j of B is column matching_perm[j] of A
   std::vector<double> row_scaling;
   std::vector<double> col_scaling;
+  /// symmetric_indefinite: the kept pivot groups of the symmetric matching (pairs, and
+  /// short odd cycles; ordering/pairing.hpp), original numbering, members in elimination order.
+  /// Consecutive members that the ordering placed side by side (all of them, except under
+  /// the natural and user orderings) are consecutive in perm and pivots of one front.
+  /// Empty when no pairing was computed.
+  ordering::VertexGroups pivot_groups;
   bool structurally_singular = false;
   /// Pivot order: pivot k is column perm[k] of B (new to old); iperm is its inverse.
   std::vector<index_t> perm;

@@ -80,7 +80,9 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
   s.factor.valid = false;
   s.values = std::move(checked);
   s.norm_inf = norm_inf(s.values);
-  // scaled values: general matrices use Dr·A·Dc from the matching
+  // scaled values: general matrices use Dr·A(:,Q)·Dc from the matching, symmetric
+  // indefinite ones D·A·D (row_scaling == col_scaling == D, Q = I; the lower triangle
+  // scaled entrywise stays the lower triangle of D·A·D)
   const SparseMatrix& c = s.values;
   s.scaled.resize(c.nnz());
   const bool scale = !an.row_scaling.empty();
@@ -133,7 +135,7 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
   fs.inertia_negative = total.negative;
   fs.inertia_zero = total.zero;
   fs.matrix_norm = norm1;
-  // det A from det B = det(Dr) det(A) det(Q) det(Dc)
+  // det A from det B = det(Dr) det(A) det(Q) det(Dc) (symmetric: det(D)² det(A))
   double logdet = total.log_abs_det;
   int sign = total.det_sign;
   if (scale) {

@@ -30,6 +30,14 @@
 // be bisected: it compresses to fewer than 3 vertices (e.g. a clique), or METIS returns
 // an empty part.
 //
+// Groups (the overload with VertexGroups): the graph given is a quotient graph whose vertex
+// v stands for the members of group v (a 2×2 pivot pair of the symmetric matching, see
+// pairing.cpp). Everything above runs on that graph with vertex weights = group sizes
+// (compression adds the weights of the vertices it merges, METIS balances and minimises
+// weights, leaf sizes count members), and a vertex is expanded into its members, in the
+// group's order, wherever a vertex is numbered. AMD in the leaves orders the quotient
+// subgraph unweighted. Without groups every vertex is its own group of weight 1.
+//
 // Robustness: the recursion is an explicit stack of pending subgraphs (disjoint, so O(n)
 // memory in all), so a degenerate chain of bisections cannot overflow the call stack. A
 // bisection that leaves a part empty is not followed: the subgraph is ordered as one
@@ -160,13 +168,15 @@ struct Task {
 
 class Driver {
  public:
-  Driver(const Graph& g, const NestedDissectionOptions& opts) : g_(g), opts_(opts) {}
+  Driver(const Graph& g, const NestedDissectionOptions& opts, const VertexGroups* groups)
+      : g_(g), opts_(opts), groups_(groups) {}
 
   OrderingResult run() {
     OrderingResult r;
     const index_t n = g_.n;
     if (n == 0) return r;
-    perm_.assign(n, -1);
+    const index_t total = groups_ ? groups_->ptr.back() : n;  // pivots to number
+    perm_.assign(total, -1);
 
     cg_ = compress(g_);
     if (cg_.active) {
@@ -178,6 +188,16 @@ class Driver {
       cx_ = g_.xadj.data();
       ca_ = g_.adjncy.data();
     }
+    cweight_.resize(cn_);
+    for (index_t c = 0; c < cn_; ++c) {
+      if (!cg_.active) {
+        cweight_[c] = group_size(c);
+        continue;
+      }
+      cweight_[c] = 0;
+      for (index_t p = cg_.mptr[c]; p < cg_.mptr[c + 1]; ++p)
+        cweight_[c] += group_size(cg_.members[p]);
+    }
     // METIS_NodeND's rule: 2 separators per bisection when compression was effective.
     nseps_ = (cg_.active && static_cast<double>(n) > 1.5 * static_cast<double>(cn_)) ? 2 : 1;
     cloc_.assign(cn_, -1);
@@ -186,7 +206,7 @@ class Driver {
     Task root;
     root.verts.resize(cn_);
     std::iota(root.verts.begin(), root.verts.end(), index_t{0});
-    root.weight = n;
+    root.weight = total;
     stack_.push_back(std::move(root));
     while (!stack_.empty()) {
       Task t = std::move(stack_.back());
@@ -199,7 +219,22 @@ class Driver {
   }
 
  private:
-  index_t weight(index_t c) const { return cg_.active ? cg_.mptr[c + 1] - cg_.mptr[c] : 1; }
+  // Pivots that vertex v of g_ stands for (its group's size, 1 without groups).
+  index_t group_size(index_t v) const { return groups_ ? groups_->size(v) : 1; }
+
+  // Pivots that compressed vertex c stands for.
+  index_t weight(index_t c) const { return cweight_[c]; }
+
+  // Numbers the members of vertex v of g_ from pivot k on; returns the next pivot.
+  index_t number(index_t v, index_t k) {
+    if (!groups_) {
+      perm_[k] = v;
+      return k + 1;
+    }
+    for (index_t p = groups_->ptr[v]; p < groups_->ptr[v + 1]; ++p)
+      perm_[k++] = groups_->members[p];
+    return k;
+  }
 
   // Appends the original vertices of compressed vertex c to out.
   void expand(index_t c, std::vector<index_t>& out) const {
@@ -263,7 +298,7 @@ class Driver {
 
   // Orders the subgraph with AMD on its original vertices.
   void leaf(Task& t) {
-    std::vector<index_t> orig;
+    std::vector<index_t> orig;  // vertices of g_
     orig.reserve(t.weight);
     for (const index_t c : t.verts) expand(c, orig);
     std::sort(orig.begin(), orig.end());  // keeps the local adjacency sorted
@@ -282,8 +317,9 @@ class Driver {
     }
     for (const index_t v : orig) oloc_[v] = -1;
     const std::vector<index_t> p = (m <= 2) ? std::vector<index_t>{} : amd_ordering(s);
-    for (index_t k = 0; k < m; ++k) perm_[t.lo + k] = orig[p.empty() ? k : p[k]];
-    add_node(t.parent, t.lo, t.lo + m);
+    index_t next = t.lo;
+    for (index_t k = 0; k < m; ++k) next = number(orig[p.empty() ? k : p[k]], next);
+    add_node(t.parent, t.lo, t.lo + t.weight);
   }
 
   // Several components: a node with an empty separator whose children are the large
@@ -384,7 +420,7 @@ class Driver {
     for (const index_t v : sep) {
       orig.clear();
       expand(v, orig);
-      for (const index_t u : orig) perm_[k++] = u;
+      for (const index_t u : orig) k = number(u, k);
     }
     part[0].lo = t.lo;
     part[1].lo = t.lo + part[0].weight;
@@ -435,7 +471,9 @@ class Driver {
 
   const Graph& g_;
   const NestedDissectionOptions& opts_;
+  const VertexGroups* groups_;  // null: every vertex is its own group
   Compressed cg_;
+  std::vector<index_t> cweight_;  // pivots per compressed vertex
   index_t cn_ = 0;
   const index_t* cx_ = nullptr;
   const index_t* ca_ = nullptr;
@@ -447,7 +485,9 @@ class Driver {
 
 }  // namespace
 
-OrderingResult nested_dissection(const Graph& g, const NestedDissectionOptions& opts) {
+namespace {
+
+void check_nd_input(const Graph& g, const NestedDissectionOptions& opts) {
   if (opts.leaf_size < 1)
     throw InvalidInput("nested_dissection: leaf_size must be at least 1 (got " +
                        std::to_string(opts.leaf_size) + ")");
@@ -455,7 +495,25 @@ OrderingResult nested_dissection(const Graph& g, const NestedDissectionOptions& 
     throw InvalidInput("nested_dissection: malformed graph (xadj has " +
                        std::to_string(g.xadj.size()) + " entries for " + std::to_string(g.n) +
                        " vertices)");
-  Driver d(g, opts);
+}
+
+}  // namespace
+
+OrderingResult nested_dissection(const Graph& g, const NestedDissectionOptions& opts) {
+  check_nd_input(g, opts);
+  Driver d(g, opts, nullptr);
+  return d.run();
+}
+
+OrderingResult nested_dissection(const Graph& q, const NestedDissectionOptions& opts,
+                                 const VertexGroups& groups) {
+  check_nd_input(q, opts);
+  if (groups.n_groups() != q.n)
+    throw InvalidInput("nested_dissection: " + std::to_string(groups.n_groups()) +
+                       " groups for a graph of " + std::to_string(q.n) + " vertices");
+  for (index_t v = 0; v < q.n; ++v)
+    if (groups.size(v) < 1) throw InvalidInput("nested_dissection: an empty vertex group");
+  Driver d(q, opts, &groups);
   return d.run();
 }
 

@@ -34,6 +34,16 @@ struct NestedDissectionOptions {
   int seed = 1;              ///< METIS seed, for reproducibility
 };
 
+/// Vertices that an ordering keeps together and numbers consecutively: group g holds the
+/// vertices members[ptr[g] .. ptr[g+1]−1], numbered in that order. Every vertex is in
+/// exactly one group.
+struct VertexGroups {
+  std::vector<index_t> ptr{0};
+  std::vector<index_t> members;
+  index_t n_groups() const { return static_cast<index_t>(ptr.size()) - 1; }
+  index_t size(index_t g) const { return ptr[g + 1] - ptr[g]; }
+};
+
 /// Result of an ordering: perm[k] is the original index of the k-th pivot (new to old).
 struct OrderingResult {
   std::vector<index_t> perm;
@@ -46,8 +56,18 @@ struct OrderingResult {
 /// Method: George 1973 (nested dissection); Karypis & Kumar 1998 (METIS).
 OrderingResult nested_dissection(const Graph& g, const NestedDissectionOptions& opts);
 
-/// METIS_NodeND on the whole graph.
-std::vector<index_t> metis_ordering(const Graph& g);
+/// Nested dissection of a graph whose vertices stand for groups of pivots: vertex v of
+/// `q` is group v of `groups`, of weight groups.size(v). Bisection balances the weights;
+/// leaves are ordered by AMD on `q`. The result is a permutation of all the members
+/// (Σ group sizes), every group's members consecutive and in the group's order; the tree's
+/// pivot ranges count members. `groups` must have q.n groups.
+OrderingResult nested_dissection(const Graph& q, const NestedDissectionOptions& opts,
+                                 const VertexGroups& groups);
+
+/// METIS_NodeND on the whole graph; `vertex_weights` (empty, or one positive weight per
+/// vertex) are passed to METIS as vwgt.
+std::vector<index_t> metis_ordering(const Graph& g,
+                                    const std::vector<index_t>& vertex_weights = {});
 
 /// SuiteSparse AMD (Amestoy, Davis & Duff 1996) on the whole graph.
 std::vector<index_t> amd_ordering(const Graph& g);

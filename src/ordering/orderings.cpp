@@ -59,7 +59,7 @@ std::vector<index_t> amd_ordering(const Graph& g) {
   return perm;
 }
 
-std::vector<index_t> metis_ordering(const Graph& g) {
+std::vector<index_t> metis_ordering(const Graph& g, const std::vector<index_t>& vertex_weights) {
   const index_t n = g.n;
   if (n == 0) return {};
   std::vector<index_t> perm(n);
@@ -74,13 +74,29 @@ std::vector<index_t> metis_ordering(const Graph& g) {
                        std::to_string(IDXTYPEWIDTH) + "-bit index type");
   std::vector<idx_t> xadj(g.xadj.begin(), g.xadj.end());
   std::vector<idx_t> adjncy(g.adjncy.begin(), g.adjncy.end());
+  std::vector<idx_t> vwgt;
+  if (!vertex_weights.empty()) {
+    if (static_cast<index_t>(vertex_weights.size()) != n)
+      throw InvalidInput("metis_ordering: " + std::to_string(vertex_weights.size()) +
+                         " vertex weights for " + std::to_string(n) + " vertices");
+    index_t total = 0;
+    for (const index_t w : vertex_weights) {
+      if (w < 1) throw InvalidInput("metis_ordering: vertex weights must be positive");
+      total += w;
+    }
+    if (total > idx_max)
+      throw InvalidInput("metis_ordering: the total vertex weight exceeds METIS's " +
+                         std::to_string(IDXTYPEWIDTH) + "-bit index type");
+    vwgt.assign(vertex_weights.begin(), vertex_weights.end());
+  }
   std::vector<idx_t> mperm(n), miperm(n);
   idx_t nv = static_cast<idx_t>(n);
   idx_t options[METIS_NOPTIONS];
   METIS_SetDefaultOptions(options);
   options[METIS_OPTION_NUMBERING] = 0;
   const int status =
-      METIS_NodeND(&nv, xadj.data(), adjncy.data(), nullptr, options, mperm.data(), miperm.data());
+      METIS_NodeND(&nv, xadj.data(), adjncy.data(), vwgt.empty() ? nullptr : vwgt.data(), options,
+                   mperm.data(), miperm.data());
   if (status == METIS_ERROR_MEMORY) throw OutOfMemory(0, "METIS_NodeND");
   if (status != METIS_OK)
     throw InvalidInput("METIS_NodeND failed (status " + std::to_string(status) + ")");

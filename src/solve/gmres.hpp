@@ -22,7 +22,7 @@ struct GmresResult {
   double backward_error = 0;  ///< normwise, of the returned x (true residual)
 };
 
-/// Solves A x = b for one right-hand side by GMRES(restart) with right preconditioning
+/// Solves A x = b for one right-hand side by flexible GMRES(restart) with preconditioner
 /// M⁻¹, starting from the given x, until the normwise backward error
 /// ‖b − A x‖∞ / (norm_a·‖x‖∞ + ‖b‖∞) ≤ tolerance or max_iterations iterations.
 /// x has n entries and is overwritten; never returns an iterate worse than the start.

@@ -30,6 +30,16 @@
 //    front with more than max_block_size pivots becomes a chain of fronts: pieces of
 //    exactly max_block_size pivots from the bottom up, the remainder on top; each piece's
 //    parent is the next piece, the top piece keeps the front's parent.
+//  * Kept pairs (AmalgamationOptions::keep_with_next, for the 2×2 pivots of symmetric
+//    indefinite matrices; Duff & Pralet 2005): a flagged column j of the postordered tree
+//    has j+1 as its etree parent (checked), so it is the last column of some supernode s
+//    and j+1 the first of s+1, s is the last child of s+1, and merging s into s+1 is an
+//    ordinary relaxed amalgamation (s+1's rows are added to s's columns as explicit
+//    zeros). Relaxed amalgamation makes that merge unconditionally (its zeros count in
+//    the fractions of later merges), and separator blocking moves a piece boundary that
+//    would fall between j and j+1 down below the chain of flagged columns it cuts (up
+//    past it, making a piece longer than max_block_size, when that would leave the piece
+//    empty).
 //  * Row structures: the rows of a front are its pivots, then every row i beyond them
 //    whose row subtree passes through the front. They are found by walking, for every
 //    original entry A(i, j), j < i, from the front of j up the assembly tree to the front
@@ -89,7 +99,8 @@ Partition fundamental_supernodes(const std::vector<index_t>& parent,
 /// Relaxed amalgamation of the supernodes `fs` (see the file header). `cc` are the
 /// column counts of the postordered tree.
 Partition relaxed_amalgamation(const Partition& fs, const std::vector<index_t>& cc,
-                               const AmalgamationOptions& o, index_t n) {
+                               const AmalgamationOptions& o, const std::vector<char>& keep,
+                               index_t n) {
   const index_t ns_count = count(fs);
   std::vector<index_t> ncols(ns_count), nrows(ns_count), merged(ns_count, -1);
   std::vector<double> zeros(ns_count, 0.0);
@@ -116,7 +127,9 @@ Partition relaxed_amalgamation(const Partition& fs, const std::vector<index_t>& 
     // Small merges are made unconditionally and, as in CHOLMOD, their zeros are not
     // counted in later fractions; a merge that adds no explicit zeros is always made.
     const bool small = ns <= o.relax_small;
-    bool merge = small || per_col_new == 0;
+    // a kept pair across the boundary (keep[top of s]) forces the merge
+    const bool forced = !keep.empty() && keep[fs.first[s + 1] - 1];
+    bool merge = small || per_col_new == 0 || forced;
     if (!merge) {
       const double xns = static_cast<double>(ns);
       const double size =
@@ -143,17 +156,28 @@ Partition relaxed_amalgamation(const Partition& fs, const std::vector<index_t>& 
 
 /// Splits every range of more than `max_block` columns into a chain (see the header).
 /// Returns the new ranges; chain_next[f] is true when front f's parent is front f+1.
-Partition block_separators(const Partition& p, index_t max_block, std::vector<char>& chain_next) {
+/// A piece never ends at a column flagged in `keep` (empty: no flags).
+Partition block_separators(const Partition& p, index_t max_block, const std::vector<char>& keep,
+                           std::vector<char>& chain_next) {
   Partition r;
   chain_next.clear();
+  auto kept = [&](index_t j) { return !keep.empty() && keep[j]; };
   for (index_t s = 0; s < count(p); ++s) {
     const index_t b = p.first[s], e = p.first[s + 1];
     index_t start = b;
     if (max_block > 0)
       while (e - start > max_block) {
+        index_t next = start + max_block;
+        // move the boundary down past kept pairs; up when that would empty the piece
+        while (next > start && kept(next - 1)) --next;
+        if (next == start) {
+          next = start + max_block;
+          while (next < e && kept(next - 1)) ++next;
+          if (next == e) break;  // the rest is one chain of pairs: one piece
+        }
         r.first.push_back(start);
         chain_next.push_back(1);
-        start += max_block;
+        start = next;
       }
     r.first.push_back(start);
     chain_next.push_back(0);
@@ -226,16 +250,45 @@ SymbolicFactorization analyze_pattern(const SparseMatrix& a, const AmalgamationO
     cc[k] = sf.colcount[sf.post[k]];
   }
 
+  // Kept pairs in the postordered numbering (see the file header).
+  std::vector<char> keep;
+  if (!opts.keep_with_next.empty()) {
+    if (static_cast<index_t>(opts.keep_with_next.size()) != n)
+      throw InvalidInput("analyze_pattern: keep_with_next has " +
+                         std::to_string(opts.keep_with_next.size()) + " entries for " +
+                         std::to_string(n) + " columns");
+    keep.assign(n, 0);
+    for (index_t k = 0; k < n; ++k) {
+      const index_t j = sf.post[k];
+      if (!opts.keep_with_next[j]) continue;
+      if (j + 1 >= n || sf.parent[j] != j + 1)
+        throw InvalidInput("analyze_pattern: keep_with_next[" + std::to_string(j) +
+                           "] is set but column " + std::to_string(j + 1) +
+                           " is not the etree parent of column " + std::to_string(j) +
+                           " (is (j+1, j) an entry of the pattern?)");
+      // j+1's children are all below j+1, so j is its last child: the postorder visits
+      // j's subtree last among them, ending with j, and then j+1.
+      if (k + 1 >= n || sf.post[k + 1] != j + 1)
+        throw InvalidInput(
+            "analyze_pattern: internal error: a kept pair is not consecutive "
+            "in the postorder");
+      keep[k] = 1;
+    }
+  }
+
   const Partition fundamental = fundamental_supernodes(par, cc);
-  const Partition relaxed = relaxed_amalgamation(fundamental, cc, opts, n);
+  const Partition relaxed = relaxed_amalgamation(fundamental, cc, opts, keep, n);
   std::vector<char> chain_next;
-  const Partition fronts = block_separators(relaxed, opts.max_block_size, chain_next);
+  const Partition fronts = block_separators(relaxed, opts.max_block_size, keep, chain_next);
 
   AssemblyTree& t = sf.tree;
   t.n = n;
   t.first_pivot = fronts.first;
   const index_t nf = count(fronts);
   t.front_of_column = owner_of_columns(fronts, n);
+  for (index_t k = 0; k < n; ++k)
+    if (!keep.empty() && keep[k] && t.front_of_column[k] != t.front_of_column[k + 1])
+      throw InvalidInput("analyze_pattern: internal error: a kept pair was split across fronts");
   t.parent.assign(nf, -1);
   for (index_t f = 0; f < nf; ++f) {
     if (chain_next[f]) {

@@ -79,12 +79,24 @@ struct AmalgamationOptions {
   double relax_zeros_2 = 0.1;
   double relax_zeros_3 = 0.05;
   index_t max_block_size = 256;  ///< separator blocking; <= 0 disables
+  /// Columns that must share a front with the next one (2×2 pivot pairs, see
+  /// ordering/pairing.hpp). Empty, or one flag per column in the INPUT numbering of
+  /// analyze_pattern: keep_with_next[j] != 0 asks that columns j and j+1 be pivots of the
+  /// same front. (j+1, j) must then be an entry of the pattern, which makes j+1 the etree
+  /// parent of j and puts j right before j+1 in the postorder; amalgamation then always
+  /// merges across that boundary and separator blocking never cuts there: a piece ends
+  /// early instead, or, when a chain of flagged columns (flags on consecutive columns chain
+  /// them: j, j+1, j+2, ... in one front) is longer than max_block_size, holds the chain
+  /// whole and exceeds max_block_size.
+  std::vector<char> keep_with_next;
 };
 
 /// Runs the whole symbolic phase: etree, postorder, column counts, fundamental
 /// supernodes, relaxed amalgamation, separator blocking, row structures of the fronts.
-/// Time and memory are near-linear in n + nnz(A) + Σ rows of the fronts. Throws InvalidInput when the pattern is not square
-/// or not symmetric (checked in O(nnz) on the canonical, sorted form).
+/// Time and memory are near-linear in n + nnz(A) + Σ rows of the fronts. Throws
+/// InvalidInput when the pattern is not square or not symmetric (checked in O(nnz) on the
+/// canonical, sorted form), or when opts.keep_with_next has the wrong size or flags a
+/// column j whose etree parent is not j+1.
 SymbolicFactorization analyze_pattern(const SparseMatrix& a, const AmalgamationOptions& opts);
 
 /// Factor flops of front f for Cholesky: Σ over its pivots of (number of rows below and

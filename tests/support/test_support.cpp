@@ -4,7 +4,9 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <numeric>
 #include <set>
+#include <tuple>
 
 #include "core/blas.hpp"
 
@@ -96,6 +98,9 @@ SparseMatrix random_sparse(index_t n, index_t per_column, RandomKind kind, std::
     if (n == 1 && diag[j] == 0.0) diag[j] = 1.0;
   }
   a.offsets.assign(1, 0);
+  // where the matching uses the diagonal, the diagonal must be nonzero
+  for (index_t j = 0; j < n; ++j)
+    if (sigma[j] == j && diag[j] == 0.0) diag[j] = 1.0 + std::abs(val(rng));
   for (index_t j = 0; j < n; ++j) {
     // canonical: sorted rows; the diagonal goes in its sorted place
     std::vector<std::pair<index_t, double>> col;
@@ -108,6 +113,63 @@ SparseMatrix random_sparse(index_t n, index_t per_column, RandomKind kind, std::
       a.values.push_back(v);
     }
     a.offsets.push_back(static_cast<index_t>(a.indices.size()));
+  }
+  return a;
+}
+
+SparseMatrix random_kkt(index_t n, std::mt19937_64& rng, double decades,
+                        std::vector<char>* is_constraint) {
+  const index_t n2 = n / 3, n1 = n - n2;
+  // H: lower, canonical, diagonally dominant with a positive diagonal
+  const SparseMatrix h = random_sparse(n1, 3, RandomKind::spd, rng);
+  std::vector<std::tuple<index_t, index_t, double>> entries;  // (row, col) of K, row >= col
+  for (index_t j = 0; j < n1; ++j)
+    for (index_t p = h.offsets[j]; p < h.offsets[j + 1]; ++p)
+      entries.emplace_back(h.indices[p], j, h.values[p]);
+  // B: row k couples constraint n1 + k with variable q[k] (its own) and two random ones
+  std::vector<index_t> q(n1);
+  std::iota(q.begin(), q.end(), index_t{0});
+  std::shuffle(q.begin(), q.end(), rng);
+  std::uniform_real_distribution<double> mag(0.5, 1.5), val(-1.0, 1.0);
+  std::uniform_int_distribution<index_t> col(0, std::max<index_t>(n1 - 1, 0));
+  std::bernoulli_distribution sign(0.5);
+  for (index_t k = 0; k < n2; ++k) {
+    std::set<index_t> cols{q[k]};
+    entries.emplace_back(n1 + k, q[k], (sign(rng) ? 1.0 : -1.0) * mag(rng));
+    for (int t = 0; t < 2; ++t) {
+      const index_t c = col(rng);
+      if (cols.insert(c).second) entries.emplace_back(n1 + k, c, val(rng));
+    }
+  }
+  // random symmetric permutation: old index i becomes where[i]
+  std::vector<index_t> where(n);
+  std::iota(where.begin(), where.end(), index_t{0});
+  std::shuffle(where.begin(), where.end(), rng);
+  std::vector<double> scale(n, 1.0);
+  if (decades > 0) {
+    std::uniform_real_distribution<double> e(-decades, decades);
+    for (double& s : scale) s = std::pow(10.0, e(rng));
+  }
+  std::vector<std::vector<std::pair<index_t, double>>> cols(n);
+  for (const auto& [i, j, v] : entries) {
+    const index_t pi = where[i], pj = where[j];
+    cols[std::min(pi, pj)].push_back({std::max(pi, pj), v * scale[pi] * scale[pj]});
+  }
+  SparseMatrix a;
+  a.n_rows = a.n_cols = n;
+  a.storage = Storage::lower;
+  a.offsets.assign(1, 0);
+  for (index_t j = 0; j < n; ++j) {
+    std::sort(cols[j].begin(), cols[j].end());
+    for (const auto& [i, v] : cols[j]) {
+      a.indices.push_back(i);
+      a.values.push_back(v);
+    }
+    a.offsets.push_back(static_cast<index_t>(a.indices.size()));
+  }
+  if (is_constraint) {
+    is_constraint->assign(n, 0);
+    for (index_t k = 0; k < n2; ++k) (*is_constraint)[where[n1 + k]] = 1;
   }
   return a;
 }

@@ -31,6 +31,17 @@ enum class RandomKind { spd, symmetric_indefinite, general };
 /// (Storage::full). Canonical CSC.
 SparseMatrix random_sparse(index_t n, index_t per_column, RandomKind kind, std::mt19937_64& rng);
 
+/// A random KKT (saddle point) matrix K = P [[H, Bᵀ], [B, 0]] Pᵀ of order n, Storage::lower,
+/// canonical: n/3 constraints, H random sparse SPD (diagonally dominant) of order
+/// n − n/3, B random sparse of full row rank (each row has one entry of magnitude in
+/// [0.5, 1.5] in a column of its own, plus about two entries in [−1, 1]), and P a random
+/// permutation that interleaves constraints and variables. Its inertia is exactly
+/// (n − n/3, n/3, 0). With `decades` > 0 it is further scaled symmetrically by random
+/// powers of ten in [−decades, decades] (which keeps the inertia). `is_constraint`, when
+/// given, receives the flags of the constraint unknowns (zero diagonal).
+SparseMatrix random_kkt(index_t n, std::mt19937_64& rng, double decades = 0,
+                        std::vector<char>* is_constraint = nullptr);
+
 /// Dense column-major n_rows×n_cols copy of A (symmetric storage expanded).
 std::vector<double> to_dense(const SparseMatrix& a);
 

@@ -671,6 +671,87 @@ TEST(Symbolic, RejectsUnsymmetricPattern) {
   EXPECT_THROW(symbolic::analyze_pattern(a, {}), InvalidInput);
 }
 
+// AmalgamationOptions::keep_with_next (2×2 pivot pairs of symmetric indefinite matrices,
+// Duff & Pralet 2005): a flagged column j of the input has j+1 as its etree parent, comes
+// right before it in the postorder and shares its front, whatever the relaxation and the
+// block size; the tree keeps every invariant.
+TEST(Symbolic, KeepWithNextHoldsPairsInOneFront) {
+  unsigned long long seed = 0;
+  std::mt19937_64 rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  for (index_t n : {2, 9, 60, 700}) {
+    SCOPED_TRACE("n=" + std::to_string(n));
+    const SparseMatrix pattern =
+        symmetric_pattern(test::random_sparse(n, 3, test::RandomKind::spd, rng));
+    const SparseMatrix b = symbolic::permute_symmetric_pattern(pattern, random_order(n, rng));
+    // flag about half of the columns j with an entry (j+1, j); `chains` allows flags on
+    // consecutive columns (groups of 3 and more)
+    auto has_entry = [&](index_t i, index_t j) {
+      return std::binary_search(b.indices.begin() + b.offsets[j],
+                                b.indices.begin() + b.offsets[j + 1], i);
+    };
+    for (bool chains : {false, true}) {
+      std::vector<char> keep(n, 0);
+      std::bernoulli_distribution coin(0.5);
+      index_t flagged = 0;
+      for (index_t j = 0; j + 1 < n; ++j)
+        if (has_entry(j + 1, j) && coin(rng) && (chains || j == 0 || !keep[j - 1])) {
+          keep[j] = 1;
+          ++flagged;
+        }
+      if (n >= 60) EXPECT_GT(flagged, 0);
+      AmalgamationOptions none;
+      none.relax_small = 1;
+      none.relax_zeros_1 = none.relax_zeros_2 = none.relax_zeros_3 = 0;
+      none.max_block_size = 0;
+      for (index_t mbs : {index_t{0}, index_t{1}, index_t{2}, index_t{3}, index_t{8}}) {
+        for (bool relax : {false, true}) {
+          SCOPED_TRACE("chains " + std::to_string(chains) + " max_block_size " +
+                       std::to_string(mbs) + " relax " + std::to_string(relax));
+          AmalgamationOptions o = relax ? AmalgamationOptions{} : none;
+          o.max_block_size = mbs;
+          const SymbolicFactorization plain = symbolic::analyze_pattern(b, o);
+          o.keep_with_next = keep;
+          const SymbolicFactorization sf = symbolic::analyze_pattern(b, o);
+          EXPECT_EQ(sf.parent, plain.parent);
+          EXPECT_EQ(sf.post, plain.post);
+          EXPECT_EQ(sf.nnz_l, plain.nnz_l);
+          std::vector<index_t> ipost(n);
+          for (index_t k = 0; k < n; ++k) ipost[sf.post[k]] = k;
+          index_t longest_chain = 1, run = 1;
+          for (index_t j = 0; j + 1 < n; ++j) {
+            run = keep[j] ? run + 1 : 1;
+            longest_chain = std::max(longest_chain, run);
+            if (!keep[j]) continue;
+            ASSERT_EQ(sf.parent[j], j + 1);
+            ASSERT_EQ(ipost[j + 1], ipost[j] + 1);
+            EXPECT_EQ(sf.tree.front_of_column[ipost[j]], sf.tree.front_of_column[ipost[j + 1]])
+                << "pair (" << j << ", " << j + 1 << ") split across fronts";
+          }
+          // check_tree asserts n_pivots ≤ max_block_size: pieces may only exceed it to
+          // hold a chain longer than max_block_size
+          AmalgamationOptions bound = o;
+          if (mbs > 0) bound.max_block_size = std::max(mbs, longest_chain);
+          check_tree(b, sf, bound, nullptr, false);
+          check_schedule(sf.tree, symbolic::level_schedule(sf.tree));
+          if (!relax && mbs == 0) EXPECT_LE(sf.tree.n_fronts(), plain.tree.n_fronts());
+          if (HasFatalFailure()) return;
+        }
+      }
+    }
+  }
+  // A flag on a column whose parent is not the next column is rejected.
+  SparseMatrix diag;
+  diag.n_rows = diag.n_cols = 3;
+  diag.offsets = {0, 1, 2, 3};
+  diag.indices = {0, 1, 2};
+  AmalgamationOptions o;
+  o.keep_with_next = {1, 0, 0};
+  EXPECT_THROW(symbolic::analyze_pattern(diag, o), InvalidInput);
+  o.keep_with_next = {0, 0};
+  EXPECT_THROW(symbolic::analyze_pattern(diag, o), InvalidInput);
+}
+
 TEST(Symbolic, SharedMatricesAgainstCholmod) {
   const std::vector<std::string> names = test::shared_matrix_names();
   ASSERT_FALSE(names.empty());

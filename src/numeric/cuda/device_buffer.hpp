@@ -59,4 +59,35 @@ class DeviceBuffer {
   std::size_t n_ = 0;
 };
 
+/// Page-locked host array of T (cudaMallocHost), so device-to-host copies run at full
+/// bandwidth and asynchronously. Grows only; contents are not preserved on growth.
+template <class T>
+class PinnedBuffer {
+ public:
+  PinnedBuffer() = default;
+  ~PinnedBuffer() { release(); }
+  PinnedBuffer(const PinnedBuffer&) = delete;
+  PinnedBuffer& operator=(const PinnedBuffer&) = delete;
+  void resize(std::size_t n) {
+    if (n <= n_) return;
+    release();
+    if (cudaMallocHost(reinterpret_cast<void**>(&p_), n * sizeof(T)) != cudaSuccess) {
+      p_ = nullptr;
+      (void)cudaGetLastError();
+      throw OutOfMemory(n * sizeof(T), "cudaMallocHost (pinned host memory)");
+    }
+    n_ = n;
+  }
+  T* data() { return p_; }
+
+ private:
+  void release() {
+    if (p_) cudaFreeHost(p_);
+    p_ = nullptr;
+    n_ = 0;
+  }
+  T* p_ = nullptr;
+  std::size_t n_ = 0;
+};
+
 }  // namespace strata::cuda

@@ -58,6 +58,23 @@ __global__ void store_cb_kernel(DeviceTree t, std::int64_t begin, const double* 
   }
 }
 
+__global__ void pack_panels_kernel(DeviceTree t, std::int64_t begin, const double* pool,
+                                   const std::int64_t* staging_offset, double* staging, bool lu) {
+  const std::int64_t pos = begin + blockIdx.x;
+  const std::int64_t f = t.fronts[pos];
+  const std::int64_t m = t.n_rows[f], k = t.n_pivots[f];
+  const double* F = pool + t.pos_offset[pos];
+  double* dst = staging + staging_offset[blockIdx.x];
+  for (std::int64_t x = threadIdx.x; x < m * k; x += blockDim.x) dst[x] = F[x];
+  if (lu) {
+    double* u12 = dst + m * k;
+    for (std::int64_t x = threadIdx.x; x < k * (m - k); x += blockDim.x) {
+      const std::int64_t i = x % k, j = x / k;  // U12(i, j) = F(i, k + j)
+      u12[x] = F[(k + j) * m + i];
+    }
+  }
+}
+
 // Block-wide argmax of |F(i, j)| over rows [r0, r1). Returns the row (or r0 if empty).
 __device__ std::int64_t block_argmax(const double* col, std::int64_t r0, std::int64_t r1,
                                      double* sval, std::int64_t* sidx) {
@@ -216,6 +233,15 @@ void launch_store_cb(const DeviceTree& t, std::int64_t begin, std::int64_t count
   if (count == 0) return;
   store_cb_kernel<<<static_cast<unsigned>(count), kThreads, 0, s>>>(t, begin, pool, cb_arena,
                                                                     symmetric);
+  STRATA_CUDA_LAUNCH();
+}
+
+void launch_pack_panels(const DeviceTree& t, std::int64_t begin, std::int64_t count,
+                        const double* pool, const std::int64_t* staging_offset, double* staging,
+                        bool lu, cudaStream_t s) {
+  if (count == 0) return;
+  pack_panels_kernel<<<static_cast<unsigned>(count), kThreads, 0, s>>>(t, begin, pool,
+                                                                       staging_offset, staging, lu);
   STRATA_CUDA_LAUNCH();
 }
 

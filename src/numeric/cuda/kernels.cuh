@@ -40,6 +40,13 @@ void launch_assemble(const DeviceTree& t, std::int64_t begin, std::int64_t count
 void launch_store_cb(const DeviceTree& t, std::int64_t begin, std::int64_t count,
                      const double* pool, double* cb_arena, bool symmetric, cudaStream_t s);
 
+/// Packs each front's factor panel (its first k columns, m×k, contiguous in the front)
+/// and, for LU, its U12 block (k×(m−k), leading dimension k) into `staging` at
+/// staging_offset[position − begin], so the batch comes back in one copy.
+void launch_pack_panels(const DeviceTree& t, std::int64_t begin, std::int64_t count,
+                        const double* pool, const std::int64_t* staging_offset, double* staging,
+                        bool lu, cudaStream_t s);
+
 /// Partial factorization of small fronts, one block each, in place in the pool.
 /// `positions` lists batch positions (device array of `count`). Per listed front i:
 /// info[i] = local index of a failed Cholesky pivot or -1; perturbed[i] = static pivots;
