@@ -48,6 +48,9 @@ class Constraint {
   /// phi, phid, phidd.
   virtual void evaluate(const double* q, const double* v, const double* a, double t, bool jacobian,
                         ConstraintEval& out) const = 0;
+  /// Φ, Φ̇, Φ̈ and Φ_q only (for residuals: Φ_qᵀλ), cheaper than evaluate(…, true, …).
+  virtual void evaluate_gradient(const double* q, const double* v, const double* a, double t,
+                                 ConstraintEval& out) const = 0;
   /// H = Σ_i λ_i ∂²Φ_i/∂q² (nz × nz, row-major).
   virtual void hessian(const double* q, double t, const double* lambda, double* h) const = 0;
 };
@@ -122,6 +125,18 @@ class ConstraintT : public Constraint {
         out.jaq[r * NZ + k] = 2 * o[r].c2.d[k];
       }
     }
+  }
+  void evaluate_gradient(const double* q, const double* v, const double* a, double t,
+                         ConstraintEval& out) const override {
+    evaluate(q, v, a, t, false, out);  // values from Jet2<double>
+    constexpr int NR = D::NR;
+    using S = Dual<double, NZ>;
+    S z[NZ], o[NR];
+    for (int i = 0; i < NZ; ++i) z[i] = S(q[i], i);
+    static_cast<const D*>(this)->phi(z, S(t), o);
+    out.jq.resize(NR * NZ);
+    for (int r = 0; r < NR; ++r)
+      for (int k = 0; k < NZ; ++k) out.jq[r * NZ + k] = o[r].d[k];
   }
   void hessian(const double* q, double t, const double* lambda, double* h) const override {
     constexpr int NR = D::NR;

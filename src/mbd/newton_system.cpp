@@ -211,7 +211,10 @@ void NewtonSystem::evaluate(const double* x, double t, const BdfTerms& bdf, bool
       gather(c.dofs, v, lv);
       gather(c.dofs, a, la);
       // Φ_q is needed for Φ_qᵀλ even in a residual-only evaluation
-      c.evaluate(lq.data(), lv.data(), la.data(), t, true, ce);
+      if (jacobian)
+        c.evaluate(lq.data(), lv.data(), la.data(), t, true, ce);
+      else
+        c.evaluate_gradient(lq.data(), lv.data(), la.data(), t, ce);
       const std::size_t nz = c.dofs.size();
       const int nr = c.rows;
       for (int r = 0; r < nr; ++r) {
@@ -277,7 +280,7 @@ SparseRows NewtonSystem::constraint_jacobian(const double* q, double t) const {
   for (const auto& c : model_.constraints) {
     gather(c->dofs, q, lq);
     zero.assign(c->dofs.size(), 0.0);
-    c->evaluate(lq.data(), zero.data(), zero.data(), t, true, ce);
+    c->evaluate_gradient(lq.data(), zero.data(), zero.data(), t, ce);
     const std::size_t nz = c->dofs.size();
     for (int r = 0; r < c->rows; ++r) {
       for (std::size_t i = 0; i < nz; ++i)

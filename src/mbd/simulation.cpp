@@ -58,7 +58,7 @@ void reactions(const Model& m, const Integrator& in, std::vector<double>& out) {
       lq.resize(c->dofs.size());
       for (std::size_t i = 0; i < c->dofs.size(); ++i) lq[i] = q[c->dofs[i]];
       zero.assign(c->dofs.size(), 0.0);
-      c->evaluate(lq.data(), zero.data(), zero.data(), in.t(), true, ce);
+      c->evaluate_gradient(lq.data(), zero.data(), zero.data(), in.t(), ce);
       const std::size_t nz = c->dofs.size();
       for (int d = 0; d < c->reaction_dim; ++d) {
         double f = 0;

@@ -136,6 +136,12 @@ void check_model(const Model& m, std::mt19937_64& rng) {
       }
     }
     expect_close(e.jq, fq, "Phi_q");
+    {
+      ConstraintEval g;
+      c->evaluate_gradient(q.data(), v.data(), a.data(), t, g);
+      expect_close(g.jq, e.jq, "Phi_q of evaluate_gradient");
+      expect_close(g.phidd, e.phidd, "d2Phi/dt2 of evaluate_gradient");
+    }
     expect_close(e.jvq, fvq, "d(dPhi/dt)/dq");
     expect_close(e.jaq, faq, "d(d2Phi/dt2)/dq");
     c->hessian(q.data(), t, lam.data(), h.data());
