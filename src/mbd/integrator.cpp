@@ -332,7 +332,7 @@ bool Integrator::try_step(double h, StepInfo& info) {
       }
       try {
         factorize(info, bdf, tn);
-      } catch (const Error&) {
+      } catch (const InvalidInput&) {  // non-finite values: a numerical failure of the step
         factor_valid_ = false;
         return false;
       }
@@ -345,7 +345,7 @@ bool Integrator::try_step(double h, StepInfo& info) {
     Timer ts;
     try {
       solver_->solve(rhs_.data(), dx_.data());
-    } catch (const Error&) {
+    } catch (const InvalidInput&) {  // non-finite values: a numerical failure of the step
       factor_valid_ = false;
       return false;
     }
