@@ -7,6 +7,7 @@
 //   strata simulate [MODEL.json] [--generate KIND:SIZE] [--t-end T] [--step h] [--order k]
 //                   [--device cpu|gpu|auto] [--output DIR] [--vtk] [--dump-matrix DIR]
 //                   [--dump-step K] [--output-interval S] [--full-newton] [--write-model F]
+//                   [--variable-step [--rtol R] [--atol A] [--max-step H]] [--verbose]
 //
 // Exit status: 0 on success, 1 on a solver error (the message names the problem),
 // 2 on a usage error.
@@ -392,7 +393,8 @@ int main(int argc, char** argv) {
   simulate->add_flag("--quiet", sim.quiet, "no progress bar");
   simulate->add_flag("--verbose", sim.verbose, "print every Newton iteration (stderr)");
   simulate->add_flag("--variable-step", sim.variable_step,
-                     "variable step size with local error control (--step is the first step)");
+                     "variable step size and order (up to --order) with local error control "
+                     "(--step is the first step)");
   simulate->add_option("--rtol", sim.rtol, "relative local error tolerance (default 1e-4)");
   simulate->add_option("--atol", sim.atol, "absolute local error tolerance (default 1e-6)");
   simulate->add_option("--max-step", sim.max_step, "largest variable step [s] (default t_end/10)");

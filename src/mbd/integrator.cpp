@@ -199,6 +199,8 @@ void Integrator::initialize() {
   }
   history_.clear();
   history_.push_front({t_, q_, v_, a_});
+  order_ = opts_.variable_step ? 1 : opts_.order;
+  steps_at_order_ = 0;
   h_ = opts_.step * std::ldexp(1.0, -opts_.startup_levels);
   stats_.initial_conditions_seconds = timer.seconds();
   stats_.jacobian_size = sys_.size();
@@ -260,7 +262,8 @@ void Integrator::factorize(StepInfo& info, const BdfTerms& bdf, double t) {
 
 bool Integrator::try_step(double h, StepInfo& info) {
   const index_t n = sys_.n(), m = sys_.m(), N = sys_.size();
-  const int p = std::min<int>(opts_.order, static_cast<int>(history_.size()));
+  const int target = opts_.variable_step ? order_ : opts_.order;
+  const int p = std::min<int>(target, static_cast<int>(history_.size()));
   const double tn = t_ + h;
   std::vector<double> T{tn};
   for (int j = 0; j < p; ++j) T.push_back(history_[j].t);
@@ -443,6 +446,7 @@ bool Integrator::try_step(double h, StepInfo& info) {
         return false;
       }
       next_h_ = h * std::clamp(factor, 0.5, 2.0);
+      choose_order(h, p, tn, xq, xv, est);
     }
     if (converged) {
       slow_last_step_ = it > 3;
@@ -457,6 +461,56 @@ bool Integrator::try_step(double h, StepInfo& info) {
   }
   factor_valid_ = false;
   return false;
+}
+
+// Order selection of the variable-step mode (after Shampine & Reichelt 1997, and
+// Brenan, Campbell & Petzold §5.2.3): the local error of order k is about
+// h^{k+1} y^{(k+1)}/(k+1) ≈ h^{k+1} k! [y_n, …, y_{n−k−1}] (divided differences over the
+// actual time points). Every p+1 steps at least, the order k ∈ {p−1, p, p+1} that allows
+// the largest next step is taken (a higher order only when it gains 20 %).
+void Integrator::choose_order(double h, int p, double tn, const double* xq, const double* xv,
+                              double est_p) {
+  ++steps_at_order_;
+  if (steps_at_order_ < p + 1) return;
+  const index_t n = sys_.n();
+  const int avail = static_cast<int>(history_.size()) + 1;  // points incl. the new one
+  auto estimate = [&](int k) {  // weighted RMS of h^{k+1} k! DD_{k+1}; needs k+2 points
+    std::vector<double> T{tn};
+    for (int j = 0; j <= k; ++j) T.push_back(history_[j].t);
+    double fact = 1;
+    for (int j = 2; j <= k; ++j) fact *= j;
+    double sum = 0;
+    std::vector<double> dd(k + 2);
+    for (int which = 0; which < 2; ++which)
+      for (index_t i = 0; i < n; ++i) {
+        dd[0] = which ? xv[i] : xq[i];
+        for (int j = 0; j <= k; ++j) dd[j + 1] = which ? history_[j].v[i] : history_[j].q[i];
+        for (int level = 1; level <= k + 1; ++level)
+          for (int j = 0; j + level <= k + 1; ++j)
+            dd[j] = (dd[j] - dd[j + 1]) / (T[j] - T[j + level]);
+        const double x = which ? xv[i] : xq[i];
+        const double e =
+            std::pow(h, k + 1) * fact * dd[0] / (opts_.atol + opts_.rtol * std::abs(x));
+        sum += e * e;
+      }
+    return std::sqrt(sum / (2.0 * n));
+  };
+  auto gain = [](double e, int k) { return std::pow(std::max(e, 1e-12), -1.0 / (k + 1)); };
+  int best = p;
+  double best_gain = gain(est_p, p);
+  if (p > 1 && avail >= p + 1) {
+    const double g = gain(estimate(p - 1), p - 1);
+    if (g > best_gain) best = p - 1, best_gain = g;
+  }
+  if (p < opts_.order && avail >= p + 3) {
+    const double g = gain(estimate(p + 1), p + 1);
+    if (g > 1.2 * best_gain) best = p + 1, best_gain = g;
+  }
+  if (best != p) {
+    order_ = best;
+    steps_at_order_ = 0;
+    next_h_ = h * std::clamp(0.9 * best_gain, 0.5, 2.0);
+  }
 }
 
 StepInfo Integrator::advance() {
@@ -495,7 +549,7 @@ StepInfo Integrator::advance() {
   ++step_;
   info.t = t_;
   history_.push_front({t_, q_, v_, a_});
-  while (static_cast<int>(history_.size()) > opts_.order + 1) history_.pop_back();
+  while (static_cast<int>(history_.size()) > opts_.order + 2) history_.pop_back();
   // next step: variable steps follow the error control; fixed steps grow back towards
   // the nominal step (the startup ramp doubles each step)
   if (opts_.variable_step) {

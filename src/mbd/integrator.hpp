@@ -53,9 +53,10 @@ struct IntegratorOptions {
   index_t dump_step = -1;     ///< write the Newton Jacobian of this step (1-based)
   std::string dump_dir;       ///< ... into this folder (Matrix Market)
   bool verbose = false;
-  /// Variable step size with local error control (order fixed at `order` after the
-  /// start): the local error of q and v is estimated from the difference between the
-  /// converged solution and the predictor (Milne's device) and kept below rtol/atol.
+  /// Variable step size and order with local error control: the local error of q and v
+  /// is estimated from the difference between the converged solution and the predictor
+  /// (Milne's device) and kept below rtol/atol; the order (1..`order`) is chosen from
+  /// divided-difference error estimates of the neighbouring orders.
   bool variable_step = false;
   double rtol = 1e-4, atol = 1e-6;  ///< local error tolerances of variable steps
   double max_step = 0;  ///< largest variable step (0: (t_end − 0)/10)       ///< print every Newton
@@ -121,6 +122,7 @@ class Integrator {
   bool try_step(double h, StepInfo& info);
   void analyze(const BdfTerms& bdf, double t);
   void factorize(StepInfo& info, const BdfTerms& bdf, double t);
+  void choose_order(double h, int p, double tn, const double* xq, const double* xv, double est);
 
   const Model& model_;
   IntegratorOptions opts_;
@@ -130,6 +132,8 @@ class Integrator {
   bool pattern_changed_ = true, factor_valid_ = false, fresh_analysis_ = false, retry_ = false;
   double lte_reject_h_ = 0;  // > 0: the step was rejected by the error test; retry with this
   double next_h_ = 0;        // step proposed by the error control
+  int order_ = 1;            // current BDF order (variable-step mode selects it)
+  int steps_at_order_ = 0;
   double factor_beta_ = 0;
   bool slow_last_step_ = false;
   double t_ = 0, h_ = 0;

@@ -14,7 +14,7 @@ namespace strata::mbd {
 namespace {
 
 // Reference solution at t = 0.03 (test set, relative-angle coordinates β, Θ, γ, Φ, δ, Ω, ε).
-constexpr double kReference[7] = {15.81077119629904,  -15.75637105984298, 0.04082224013073101,
+constexpr double kReference[7] = {15.81077119629904,   -15.75637105984298, 0.04082224013073101,
                                   -0.5347301163226948, 0.5244099658805304, 0.5347301163226948,
                                   1.048080741042263};
 
@@ -61,7 +61,7 @@ TEST(Andrews, MatchesReferenceSolution) {
 
 TEST(Andrews, VariableStepMatchesReferenceSolution) {
   const double err = relative_error({1e-7, 4, true});
-  std::printf("variable step BDF4, rtol 1e-8: max relative error %.3e\n", err);
+  std::printf("variable step and order (BDF1..4), rtol 1e-8: max relative error %.3e\n", err);
   EXPECT_LT(err, 1e-5);
 }
 
