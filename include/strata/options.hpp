@@ -54,6 +54,10 @@ struct Options {
   /// Nested dissection stops bisecting a subgraph of at most this many vertices and
   /// orders it with AMD (default 128).
   index_t nd_leaf_size = 128;
+  /// Separators METIS computes (the best kept) at each of the top three bisection levels
+  /// of nested dissection. More costs analysis time for less fill: 3 gives about 5% less
+  /// nnz(L) on 3D grids for about 30% more ordering time (default 1).
+  int nd_top_separators = 1;
   /// Relaxed amalgamation: a child front is merged into its parent when the merged front
   /// has at most `relax_small` pivots, or when the share of explicit zeros it adds stays
   /// below relax_zeros_{1,2,3} for fronts of at most relax_size_{1,2} pivots / larger.
@@ -65,8 +69,9 @@ struct Options {
   double relax_zeros_2 = 0.1;
   double relax_zeros_3 = 0.05;
   /// Separator blocking: a front with more pivot columns than this is split into a chain
-  /// of fronts of at most this many pivots (the paper's maximum block size; default 256).
-  index_t max_block_size = 256;
+  /// of fronts of at most this many pivots (the paper's maximum block size; default 1024:
+  /// best or near-best on the CPU in the block-size sweep of bench/REPORT.md, 2026-11-21).
+  index_t max_block_size = 1024;
   /// Device memory budget for the memory plan, in bytes; 0 means "the whole device"
   /// (for the CPU backend: no limit). Default 0.
   std::size_t device_memory_limit = 0;

@@ -35,7 +35,25 @@ namespace {
 
 // Lower triangle (diagonal included) of a symmetric matrix given in any storage, as
 // canonical CSC. For `full` storage the upper entries are ignored.
+// True when a is already canonical lower CSC (sorted, no duplicates, no upper entry),
+// as the Matrix Market reader and the generators produce: then no pass is needed.
+bool is_canonical_lower(const SparseMatrix& a) {
+  if (a.layout != Layout::csc || a.storage != Storage::lower) return false;
+  for (index_t j = 0; j < a.n_cols; ++j) {
+    index_t prev = j - 1;
+    for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p) {
+      if (a.indices[p] <= prev) return false;
+      prev = a.indices[p];
+    }
+  }
+  return true;
+}
+
 SparseMatrix lower_triangle(const SparseMatrix& a) {
+  if (is_canonical_lower(a)) {  // validated by the caller or validate below
+    validate(a);
+    return a;
+  }
   SparseMatrix full = expand_symmetric(a);
   SparseMatrix low;
   low.n_rows = low.n_cols = full.n_cols;
@@ -57,13 +75,38 @@ SparseMatrix lower_triangle(const SparseMatrix& a) {
 // (q empty: B = A) for general matrices, or the expanded lower triangle for symmetric.
 SparseMatrix symmetric_pattern(const SparseMatrix& c, bool symmetric,
                                const std::vector<index_t>& q_inv) {
+  if (symmetric) {
+    // c is canonical lower: column j of the full pattern is row j of c (entries above the
+    // diagonal, in increasing column order by a bucket transpose) followed by column j
+    // of c — already sorted and disjoint, so no sort is needed.
+    const index_t n = c.n_cols;
+    SparseMatrix f;
+    f.n_rows = f.n_cols = n;
+    f.layout = Layout::csc;
+    f.storage = Storage::full;
+    std::vector<index_t> cnt(n + 1, 0);
+    for (index_t j = 0; j < n; ++j)
+      for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) {
+        ++cnt[j + 1];
+        if (c.indices[p] != j) ++cnt[c.indices[p] + 1];
+      }
+    for (index_t j = 0; j < n; ++j) cnt[j + 1] += cnt[j];
+    f.offsets = cnt;
+    f.indices.resize(cnt.back());
+    for (index_t j = 0; j < n; ++j)  // upper part first: (j, i) for i > j lands in column i
+      for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p)
+        if (c.indices[p] != j) f.indices[cnt[c.indices[p]]++] = j;
+    for (index_t j = 0; j < n; ++j)
+      for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) f.indices[cnt[j]++] = c.indices[p];
+    return f;
+  }
   SparseMatrix p;
   p.n_rows = p.n_cols = c.n_cols;
   p.layout = Layout::csc;
   p.storage = Storage::full;
   p.offsets = c.offsets;
   p.indices = c.indices;
-  if (!symmetric && !q_inv.empty()) {
+  if (!q_inv.empty()) {
     // B(:, q_inv[j]) = A(:, j): rebuild by columns of B.
     SparseMatrix b;
     b.n_rows = b.n_cols = c.n_cols;
@@ -116,47 +159,53 @@ bool has_nonpositive_diagonal(const SparseMatrix& low) {
   return false;
 }
 
-// Local index of global row `row` in the sorted row list of front f (binary search).
-index_t local_row(const symbolic::AssemblyTree& t, index_t f, index_t row) {
-  const index_t* r = t.rows_of(f);
-  const index_t m = t.n_rows(f);
-  const index_t* it = std::lower_bound(r, r + m, row);
-  return it - r;
-}
-
 AssemblyMap build_assembly_map(const SparseMatrix& c, const Analysis& an) {
   const auto& t = an.tree;
   const index_t nf = t.n_fronts();
   std::vector<index_t> q_inv;
   if (!an.matching_perm.empty()) q_inv = ordering::invert_permutation(an.matching_perm);
-  // (front, dst) for each entry, then bucket by front
-  std::vector<index_t> front_of(c.nnz()), dst(c.nnz());
-  std::vector<index_t> count(nf + 1, 0);
-  for (index_t j = 0; j < c.n_cols; ++j) {
-    const index_t bj = q_inv.empty() ? j : q_inv[j];
-    const index_t pj = an.iperm[bj];
+  // bucket the entries by front (the front of the smaller permuted index)
+  std::vector<index_t> count(nf + 1, 0), front_of(c.nnz());
+  auto permuted = [&](index_t j, index_t p, index_t& pi, index_t& pj) {
+    pj = an.iperm[q_inv.empty() ? j : q_inv[j]];
+    pi = an.iperm[c.indices[p]];
+  };
+  for (index_t j = 0; j < c.n_cols; ++j)
     for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) {
-      const index_t pi = an.iperm[c.indices[p]];
-      const index_t lo = std::min(pi, pj), hi = std::max(pi, pj);
-      const index_t f = t.front_of_column[lo];
-      const index_t m = t.n_rows(f);
-      const index_t lc = lo - t.first_pivot[f];  // pivot column of the front
-      const index_t lr = local_row(t, f, hi);
-      // symmetric: lower triangle (row hi, column lo); general: (pi, pj) as it stands
-      dst[p] = (an.symmetric || pi >= pj) ? lc * m + lr : lr * m + lc;
-      front_of[p] = f;
-      ++count[f + 1];
+      index_t pi, pj;
+      permuted(j, p, pi, pj);
+      front_of[p] = t.front_of_column[std::min(pi, pj)];
+      ++count[front_of[p] + 1];
     }
-  }
   for (index_t f = 0; f < nf; ++f) count[f + 1] += count[f];
   AssemblyMap map;
   map.entry_offsets = count;
   map.entry_src.resize(c.nnz());
   map.entry_dst.resize(c.nnz());
-  for (index_t p = 0; p < c.nnz(); ++p) {
-    const index_t k = count[front_of[p]]++;
-    map.entry_src[k] = p;
-    map.entry_dst[k] = dst[p];
+  std::vector<index_t> column_of(c.nnz());  // original column of each entry, for the dst pass
+  for (index_t j = 0; j < c.n_cols; ++j)
+    for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) {
+      const index_t k = count[front_of[p]]++;
+      map.entry_src[k] = p;
+      column_of[k] = j;
+    }
+  // local positions through a row -> local index map set per front (linear in the fronts'
+  // rows plus the entries, no search)
+  std::vector<index_t> local(an.n, -1);
+  for (index_t f = 0; f < nf; ++f) {
+    const index_t* rows = t.rows_of(f);
+    const index_t m = t.n_rows(f);
+    for (index_t i = 0; i < m; ++i) local[rows[i]] = i;
+    for (index_t k = map.entry_offsets[f]; k < map.entry_offsets[f + 1]; ++k) {
+      index_t pi, pj;
+      permuted(column_of[k], map.entry_src[k], pi, pj);
+      const index_t lo = std::min(pi, pj), hi = std::max(pi, pj);
+      const index_t lc = lo - t.first_pivot[f];  // pivot column of the front
+      const index_t lr = local[hi];
+      // symmetric: lower triangle (row hi, column lo); general: (pi, pj) as it stands
+      map.entry_dst[k] = (an.symmetric || pi >= pj) ? lc * m + lr : lr * m + lc;
+    }
+    for (index_t i = 0; i < m; ++i) local[rows[i]] = -1;
   }
   return map;
 }
@@ -234,6 +283,38 @@ FactorLayout plan_factor_layout(const symbolic::AssemblyTree& t, bool lu) {
   return out;
 }
 
+// A matrix with an empty row or column is structurally singular: say which one.
+// (Empty lines are the common case; the matching finds the others for general and
+// symmetric indefinite matrices.)
+void check_no_empty_line(const SparseMatrix& c, bool symmetric) {
+  std::vector<char> row_seen(c.n_rows, 0);
+  for (index_t j = 0; j < c.n_cols; ++j)
+    for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) {
+      row_seen[c.indices[p]] = 1;
+      if (symmetric) row_seen[j] = 1;  // lower storage: column j is row j mirrored
+    }
+  for (index_t i = 0; i < c.n_rows; ++i)
+    if (!row_seen[i])
+      throw InvalidInput("the matrix is structurally singular: row " + std::to_string(i) +
+                         " (0-based) has no entry");
+  if (!symmetric)
+    for (index_t j = 0; j < c.n_cols; ++j)
+      if (c.offsets[j] == c.offsets[j + 1])
+        throw InvalidInput("the matrix is structurally singular: column " + std::to_string(j) +
+                           " (0-based) has no entry");
+}
+
+// The multi-GPU split's hook: the factor flops (Σ colcount² over its columns) of each
+// separator-tree node's subtree. Column counts are in the ordering's numbering, the one
+// the tree's ranges use. Left at 0 when the tree does not cover 0..n-1 (no ND).
+void fill_separator_work(ordering::SeparatorTree& tree, const std::vector<index_t>& colcount) {
+  if (tree.empty() || tree.nodes.back().end != static_cast<index_t>(colcount.size())) return;
+  std::vector<double> prefix(colcount.size() + 1, 0.0);
+  for (std::size_t j = 0; j < colcount.size(); ++j)
+    prefix[j + 1] = prefix[j] + static_cast<double>(colcount[j]) * colcount[j];
+  for (auto& node : tree.nodes) node.work = prefix[node.end] - prefix[node.subtree_begin];
+}
+
 }  // namespace
 
 SparseMatrix canonical_values(const Analysis& an, const SparseMatrix& a) {
@@ -271,6 +352,7 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts) {
   an.pattern_indices = c.indices;
   if (an.type == MatrixType::automatic && has_nonpositive_diagonal(c))
     an.type = MatrixType::symmetric_indefinite;
+  check_no_empty_line(c, an.symmetric);
 
   Timer step;
   std::vector<index_t> q_inv;
@@ -290,9 +372,12 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts) {
     an.structurally_singular = sp.structurally_singular;
     an.pivot_groups = std::move(sp.groups);
   }
+  if (an.structurally_singular)
+    throw InvalidInput("the matrix is structurally singular: no permutation puts nonzero "
+                       "entries on the whole diagonal (maximum matching, Duff & Koster 2001)");
   const bool grouped = an.pivot_groups.n_groups() > 0;
   const SparseMatrix pattern = symmetric_pattern(c, an.symmetric, q_inv);
-  const ordering::Graph graph = ordering::graph_of(pattern);
+  const ordering::Graph graph = ordering::graph_of_symmetric_pattern(pattern);
   ordering::OrderingResult ord =
       grouped ? ordering::compute_grouped_ordering(
                     graph, ordering::complete_groups(an.n, an.pivot_groups), opts)
@@ -338,6 +423,7 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts) {
   for (index_t k = 0; k < an.n; ++k) an.perm[k] = ord.perm[sym.post[k]];
   an.iperm = ordering::invert_permutation(an.perm);
   an.separator_tree = std::move(ord.tree);
+  fill_separator_work(an.separator_tree, sym.colcount);
   an.tree = std::move(sym.tree);
   an.schedule = symbolic::level_schedule(an.tree);
   an.stats.symbolic_seconds = step.seconds();

@@ -24,6 +24,21 @@
 
 namespace strata::ordering {
 
+Graph graph_of_symmetric_pattern(const SparseMatrix& full) {
+  Graph g;
+  g.n = full.n_cols;
+  g.xadj.assign(g.n + 1, 0);
+  g.adjncy.resize(full.nnz());
+  index_t out = 0;
+  for (index_t j = 0; j < g.n; ++j) {
+    for (index_t p = full.offsets[j]; p < full.offsets[j + 1]; ++p)
+      if (full.indices[p] != j) g.adjncy[out++] = full.indices[p];
+    g.xadj[j + 1] = out;
+  }
+  g.adjncy.resize(out);
+  return g;
+}
+
 Graph graph_of(const SparseMatrix& a) {
   if (a.n_rows != a.n_cols)
     throw InvalidInput("graph_of: the matrix is not square (" + std::to_string(a.n_rows) + "x" +

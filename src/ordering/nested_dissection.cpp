@@ -67,12 +67,11 @@ namespace {
 // METIS compresses when the compressed graph has fewer than this fraction of the vertices.
 constexpr double kCompressionFraction = 0.85;
 // The top separators dominate the fill (the root separator of a 3D grid alone becomes a
-// dense n^(2/3) block), so the first kTopLevels levels of bisection keep the best of
-// kTopSeparators METIS separators. Measured (nnz(L) ND/NodeND, CPU time): 7-point 60^3
-// 0.995 -> 0.93; 7-point 100^3 0.989 -> 0.949 for 11 s -> 14 s. Deeper levels use
-// METIS_NodeND's rule (below).
+// dense n^(2/3) block), so the first kTopLevels levels of bisection may keep the best of
+// NestedDissectionOptions::top_separators METIS separators. Measured (nnz(L) ND/NodeND,
+// CPU time) with 3: 7-point 60^3 0.995 -> 0.93; 7-point 100^3 0.989 -> 0.949 for
+// 11 s -> 14 s. Deeper levels use METIS_NodeND's rule (below).
 constexpr int kTopLevels = 3;
-constexpr int kTopSeparators = 3;
 
 // The graph with indistinguishable vertices (equal closed neighbourhoods) merged. Compressed
 // vertex c stands for the original vertices members[mptr[c] .. mptr[c+1]-1] and has weight
@@ -200,6 +199,7 @@ class Driver {
     }
     // METIS_NodeND's rule: 2 separators per bisection when compression was effective.
     nseps_ = (cg_.active && static_cast<double>(n) > 1.5 * static_cast<double>(cn_)) ? 2 : 1;
+    top_separators_ = std::max(1, opts_.top_separators);
     cloc_.assign(cn_, -1);
     oloc_.assign(n, -1);
 
@@ -388,7 +388,7 @@ class Driver {
     METIS_SetDefaultOptions(options);
     options[METIS_OPTION_NUMBERING] = 0;
     options[METIS_OPTION_SEED] = opts_.seed;
-    options[METIS_OPTION_NSEPS] = t.depth < kTopLevels ? std::max(nseps_, kTopSeparators) : nseps_;
+    options[METIS_OPTION_NSEPS] = t.depth < kTopLevels ? std::max(nseps_, top_separators_) : nseps_;
     idx_t nv = static_cast<idx_t>(m), sepsize = 0;
     const int status = METIS_ComputeVertexSeparator(&nv, xadj.data(), adjncy.data(), vwgt.data(),
                                                     options, &sepsize, where.data());
@@ -478,6 +478,7 @@ class Driver {
   const index_t* cx_ = nullptr;
   const index_t* ca_ = nullptr;
   int nseps_ = 1;
+  int top_separators_ = 1;
   std::vector<index_t> cloc_, oloc_, perm_;
   std::vector<SeparatorTree::Node> nodes_;
   std::vector<Task> stack_;

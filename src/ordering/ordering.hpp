@@ -32,6 +32,9 @@ struct SeparatorTree {
 struct NestedDissectionOptions {
   index_t leaf_size = 128;   ///< subgraphs of at most this many vertices are leaves (AMD)
   int seed = 1;              ///< METIS seed, for reproducibility
+  /// METIS separators tried (the best kept) at each of the top three bisection levels;
+  /// deeper levels use METIS_NodeND's own rule (see Options::nd_top_separators).
+  int top_separators = 1;
 };
 
 /// Vertices that an ordering keeps together and numbers consecutively: group g holds the

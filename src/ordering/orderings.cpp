@@ -114,6 +114,7 @@ OrderingResult compute_ordering(const Graph& g, const Options& opts) {
                            std::to_string(opts.nd_leaf_size) + ")");
       NestedDissectionOptions nd;
       nd.leaf_size = opts.nd_leaf_size;
+      nd.top_separators = opts.nd_top_separators;
       return nested_dissection(g, nd);
     }
     case OrderingMethod::metis:

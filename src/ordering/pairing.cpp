@@ -297,6 +297,7 @@ OrderingResult compute_grouped_ordering(const Graph& g, const VertexGroups& grou
                          std::to_string(opts.nd_leaf_size) + ")");
     NestedDissectionOptions nd;
     nd.leaf_size = opts.nd_leaf_size;
+    nd.top_separators = opts.nd_top_separators;
     return nested_dissection(q, nd, groups);
   }
   std::vector<index_t> qperm;
