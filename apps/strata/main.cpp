@@ -4,19 +4,28 @@
 //                       [--device-memory-limit BYTES] [--json]
 //   strata solve A.mtx [--rhs b.mtx] [--type spd|symmetric_indefinite|general|auto]
 //                      [--ordering ...] [--max-block-size N] [--out x.mtx] [--json]
+//   strata simulate [MODEL.json] [--generate KIND:SIZE] [--t-end T] [--step h] [--order k]
+//                   [--device cpu|gpu|auto] [--output DIR] [--vtk] [--dump-matrix DIR]
+//                   [--dump-step K] [--output-interval S] [--full-newton] [--write-model F]
+//                   [--variable-step [--rtol R] [--atol A] [--max-step H]] [--verbose]
 //
 // Exit status: 0 on success, 1 on a solver error (the message names the problem),
 // 2 on a usage error.
 #include <fmt/core.h>
+#include <unistd.h>
 
 #include <CLI/CLI.hpp>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "mbd/generators.hpp"
+#include "mbd/model_io.hpp"
+#include "mbd/simulation.hpp"
 #include "strata/strata.hpp"
 
 namespace {
@@ -245,6 +254,95 @@ int run_solve(const SolveArgs& a) {
   return 0;
 }
 
+struct SimulateArgs {
+  std::string model, generate, output = "out", dump_dir, write_model, device = "auto";
+  double t_end = 0, step = 0, output_interval = 0, newton_tol = 0, rtol = 1e-4, atol = 1e-6,
+         max_step = 0;
+  int order = 0, threads = 0;
+  index_t dump_step = 1;
+  bool vtk = false, full_newton = false, quiet = false, verbose = false, dense = false,
+       variable_step = false;
+};
+
+// The default model: a tracked vehicle of a few hundred links (runs in well under a
+// minute on two cores).
+constexpr const char* kDefaultModel = "tracked:100";
+
+int run_simulate(const SimulateArgs& a) {
+  using namespace strata::mbd;
+  auto t0 = std::chrono::steady_clock::now();
+  if (!a.model.empty() && !a.generate.empty())
+    throw InvalidInput("give either a model file or --generate, not both");
+  Model model;
+  std::string source;
+  if (!a.model.empty()) {
+    model = load_model(a.model);
+    source = a.model;
+  } else {
+    const std::string spec = a.generate.empty() ? kDefaultModel : a.generate;
+    const nlohmann::json doc = generate(spec);
+    if (!a.write_model.empty()) {
+      std::ofstream out(a.write_model);
+      if (!out) throw Error("cannot write " + a.write_model);
+      out << doc.dump(1) << "\n";
+    }
+    model = build_model(doc, spec);
+    source = "generated " + spec + (a.generate.empty() ? " (default model)" : "");
+  }
+  const double read_seconds = seconds_since(t0);
+  SimulationOptions o;
+  IntegratorOptions& io = o.integrator;
+  io.t_end = a.t_end > 0 ? a.t_end : model.t_end;
+  io.step = a.step > 0 ? a.step : model.step;
+  io.order = a.order > 0 ? a.order : model.order;
+  io.backend = a.device == "cpu"   ? Backend::cpu
+               : a.device == "gpu" ? Backend::cuda
+                                   : Backend::automatic;
+  io.threads = a.threads;
+  io.modified_newton = !a.full_newton;
+  if (model.newton_rtol > 0) io.newton_rtol = model.newton_rtol;
+  if (model.newton_atol > 0) io.newton_atol = model.newton_atol;
+  if (a.newton_tol > 0) io.newton_rtol = a.newton_tol;
+  io.dump_dir = a.dump_dir;
+  io.verbose = a.verbose;
+  io.dense_solver = a.dense;
+  io.variable_step = a.variable_step;
+  io.rtol = a.rtol;
+  io.atol = a.atol;
+  io.max_step = a.max_step;
+  io.dump_step = a.dump_dir.empty() ? -1 : a.dump_step;
+  o.output_dir = a.output;
+  o.output_interval = a.output_interval > 0 ? a.output_interval : model.output_interval;
+  o.vtk = a.vtk;
+  o.progress = !a.quiet && isatty(fileno(stdout));
+  o.progress_stream = stdout;
+  fmt::print("strata simulate {}\n", source);
+  fmt::print("integrator            BDF{} with {} {:g} s to t = {:g} s, {} Newton\n", io.order,
+             io.variable_step
+                 ? fmt::format("variable step (rtol {:g}, atol {:g}) from", io.rtol, io.atol)
+                 : std::string("step"),
+             io.step, io.t_end, io.modified_newton ? "modified" : "full");
+  std::fflush(stdout);
+  const SimulationResult r = simulate(model, o);
+  fmt::print("{}", summary(model, r));
+  fmt::print("model read/build      {:.3f} s\n", read_seconds);
+  if (!o.output_dir.empty())
+    fmt::print(
+        "output                {}/ (positions, velocities, accelerations, reactions, "
+        "steps .csv{}{})\n",
+        o.output_dir, o.vtk ? ", vtk/series.pvd" : "",
+        r.complete ? "" : "; marked partial in status.json");
+  if (io.dump_step > 0)
+    fmt::print("Newton matrix         step {} written to {}/jacobian_step{}.mtx (+ rhs)\n",
+               io.dump_step, io.dump_dir, io.dump_step);
+  if (!r.complete) {
+    std::fprintf(stderr, "strata: error: the simulation stopped at t = %.9g s: %s\n", r.t_reached,
+                 r.message.c_str());
+    return 1;
+  }
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -262,10 +360,51 @@ int main(int argc, char** argv) {
   solve->add_option("--type", solve_args.type, "factorization type")
       ->check(CLI::IsMember({"auto", "spd", "symmetric_indefinite", "general"}));
   solve->add_option("--out", solve_args.out, "write the solution here (Matrix Market array)");
+  SimulateArgs sim;
+  auto* simulate = app.add_subcommand(
+      "simulate", "implicit multibody dynamics (BDF + Newton, every step solved by strata)");
+  simulate->add_option("model", sim.model, "model file (JSON); default: a tracked vehicle")
+      ->check(CLI::ExistingFile);
+  simulate->add_option("--generate", sim.generate,
+                       "generated model: andrews, tracked:N, lattice:N, flexible:NXxNYxNZ, "
+                       "chain:N, chain2d:N");
+  simulate->add_option("--t-end", sim.t_end, "end time [s] (default: the model's)")
+      ->check(CLI::PositiveNumber);
+  simulate->add_option("--step", sim.step, "step size [s] (default: the model's)")
+      ->check(CLI::PositiveNumber);
+  simulate->add_option("--order", sim.order, "BDF order 1..5 (default: the model's)")
+      ->check(CLI::Range(1, 5));
+  simulate->add_option("--device", sim.device, "where strata factorizes")
+      ->check(CLI::IsMember({"cpu", "gpu", "auto"}));
+  simulate->add_option("--output", sim.output, "output folder (default: out)");
+  simulate->add_flag("--vtk", sim.vtk, "also write a ParaView series (output/vtk/series.pvd)");
+  simulate->add_option("--output-interval", sim.output_interval,
+                       "seconds between rows of the large CSV files (default: every step)");
+  simulate->add_option("--dump-matrix", sim.dump_dir,
+                       "write the Newton Jacobian and right-hand side of one step here (Matrix "
+                       "Market)");
+  simulate->add_option("--dump-step", sim.dump_step, "the step to dump (default 1)")
+      ->check(CLI::PositiveNumber);
+  simulate->add_option("--write-model", sim.write_model, "write the generated model (JSON)");
+  simulate->add_flag("--full-newton", sim.full_newton,
+                     "refactorize at every Newton iteration (default: modified Newton)");
+  simulate->add_option("--newton-tol", sim.newton_tol, "relative Newton tolerance (default 1e-8)");
+  simulate->add_option("--threads", sim.threads, "host threads for strata (0: all)");
+  simulate->add_flag("--quiet", sim.quiet, "no progress bar");
+  simulate->add_flag("--verbose", sim.verbose, "print every Newton iteration (stderr)");
+  simulate->add_flag("--variable-step", sim.variable_step,
+                     "variable step size and order (up to --order) with local error control "
+                     "(--step is the first step)");
+  simulate->add_option("--rtol", sim.rtol, "relative local error tolerance (default 1e-4)");
+  simulate->add_option("--atol", sim.atol, "absolute local error tolerance (default 1e-6)");
+  simulate->add_option("--max-step", sim.max_step, "largest variable step [s] (default t_end/10)");
+  simulate->add_flag("--dense-reference", sim.dense,
+                     "solve with dense LAPACK LU instead of strata (diagnosis; small models)");
   CLI11_PARSE(app, argc, argv);
   try {
     if (*analyze) return run_analyze(analyze_args);
     if (*solve) return run_solve(solve_args);
+    if (*simulate) return run_simulate(sim);
   } catch (const strata::Error& e) {
     std::fprintf(stderr, "strata: error: %s\n", e.what());
     return 1;

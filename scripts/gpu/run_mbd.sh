@@ -1,0 +1,24 @@
+#!/usr/bin/env bash
+# Runs `strata simulate` on the lent GPU machine over a staged .carry/ (the CUDA build's
+# strata binary in .carry/bin and its non-CUDA libraries in .carry/lib, as prepare.sh
+# stages them): the benchmark models on the CUDA backend and, for comparison, on the CPU.
+# Logs go to $OUT.
+set -uo pipefail
+for z in .carry/lib/*.xz; do [ -f "$z" ] && xz -d -f "$z"; done
+export LD_LIBRARY_PATH="$PWD/.carry/lib:${LD_LIBRARY_PATH:-}"
+OUT="${OUT:-/tmp/strata-out}"
+mkdir -p "$OUT"
+S=.carry/bin/strata
+nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv | tee "$OUT/gpu.txt"
+run() {  # name, args...
+  local name=$1
+  shift
+  echo "=== $name: strata simulate $*" | tee -a "$OUT/mbd.log"
+  timeout 100 $S simulate --quiet --output "" "$@" 2>&1 | grep -v "^model read" | tee -a "$OUT/mbd.log"
+}
+run tracked100-auto --generate tracked:100 --t-end 0.1 --device auto
+run lattice12-gpu --generate lattice:12 --t-end 0.02 --device gpu
+run lattice12-cpu --generate lattice:12 --t-end 0.02 --device cpu
+run tracked400-gpu --generate tracked:400 --t-end 0.01 --device gpu
+run tracked400-cpu --generate tracked:400 --t-end 0.01 --device cpu
+exit 0

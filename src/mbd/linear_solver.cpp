@@ -1,0 +1,98 @@
+// strata::mbd — adapters from the LinearSolver interface to strata::Solver and LAPACK.
+#include "mbd/linear_solver.hpp"
+
+#include <vector>
+
+#include "strata/errors.hpp"
+#include "strata/solver.hpp"
+
+extern "C" {
+void dgetrf_(const int* m, const int* n, double* a, const int* lda, int* ipiv, int* info);
+void dgetrs_(const char* trans, const int* n, const int* nrhs, const double* a, const int* lda,
+             const int* ipiv, double* b, const int* ldb, int* info);
+}
+
+namespace strata::mbd {
+namespace {
+
+class StrataLinearSolver : public LinearSolver {
+ public:
+  StrataLinearSolver(Backend backend, int threads) : solver_(options(backend, threads)) {}
+  static Options options(Backend backend, int threads) {
+    Options o;
+    o.type = MatrixType::general;
+    o.backend = backend;
+    o.num_threads = threads;
+    o.matching_and_scaling = true;
+    return o;
+  }
+  void analyze(const SparseMatrix& a) override {
+    solver_.analyze(a);
+    fresh_ = true;
+  }
+  void factorize(const SparseMatrix& a) override {
+    if (fresh_)
+      solver_.factorize(a);
+    else
+      solver_.refactorize(a);
+    fresh_ = false;
+  }
+  void solve(const double* b, double* x) override { solver_.solve(b, x, 1); }
+  index_t factor_entries() const override {
+    const auto& s = solver_.stats().analysis;
+    return s.nnz_l;
+  }
+  index_t perturbed_pivots() const override { return solver_.stats().factor.perturbed_pivots; }
+  double backward_error() const override { return solver_.stats().solve.backward_error; }
+  std::string describe() const override {
+    const std::string b = solver_.stats().factor.backend;
+    return "strata LU (matching + scaling) on " + (b.empty() ? std::string("cpu") : b);
+  }
+  const Stats* stats() const override { return &solver_.stats(); }
+
+ private:
+  Solver solver_;
+  bool fresh_ = true;
+};
+
+class DenseLinearSolver : public LinearSolver {
+ public:
+  void analyze(const SparseMatrix& a) override { n_ = static_cast<int>(a.n_rows); }
+  void factorize(const SparseMatrix& a) override {
+    n_ = static_cast<int>(a.n_rows);
+    lu_.assign(static_cast<std::size_t>(n_) * n_, 0.0);
+    for (index_t j = 0; j < a.n_cols; ++j)
+      for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p)
+        lu_[a.indices[p] + j * n_] += a.values[p];
+    piv_.resize(n_);
+    int info = 0;
+    dgetrf_(&n_, &n_, lu_.data(), &n_, piv_.data(), &info);
+    singular_ = info > 0 ? 1 : 0;
+    if (info < 0) throw Error("dgetrf: invalid argument");
+  }
+  void solve(const double* b, double* x) override {
+    std::copy(b, b + n_, x);
+    const int one = 1;
+    int info = 0;
+    dgetrs_("N", &n_, &one, lu_.data(), &n_, piv_.data(), x, &n_, &info);
+  }
+  index_t factor_entries() const override { return static_cast<index_t>(n_) * n_; }
+  index_t perturbed_pivots() const override { return singular_; }
+  double backward_error() const override { return 0; }
+  std::string describe() const override { return "dense LAPACK LU"; }
+
+ private:
+  int n_ = 0;
+  std::vector<double> lu_;
+  std::vector<int> piv_;
+  index_t singular_ = 0;
+};
+
+}  // namespace
+
+std::unique_ptr<LinearSolver> make_strata_solver(Backend backend, int threads) {
+  return std::make_unique<StrataLinearSolver>(backend, threads);
+}
+std::unique_ptr<LinearSolver> make_dense_solver() { return std::make_unique<DenseLinearSolver>(); }
+
+}  // namespace strata::mbd

@@ -1,0 +1,45 @@
+// strata::mbd — the sparse linear solver behind every Newton step.
+//
+// The engine talks to strata through this small interface: analyze once per pattern,
+// factorize (a refactorization after the first), solve. make_strata_solver is what the
+// engine uses; make_dense_solver (LAPACK dgetrf) exists as an independent reference for
+// tests and for comparing Newton behaviour on small models.
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include "strata/options.hpp"
+#include "strata/sparse_matrix.hpp"
+#include "strata/stats.hpp"
+
+namespace strata::mbd {
+
+class LinearSolver {
+ public:
+  virtual ~LinearSolver() = default;
+  /// Analysis of the pattern (and, for strata's matching and scaling, the values) of A.
+  virtual void analyze(const SparseMatrix& a) = 0;
+  /// Numeric factorization of A with the analyzed pattern.
+  virtual void factorize(const SparseMatrix& a) = 0;
+  /// x = A⁻¹ b (one right-hand side of length n).
+  virtual void solve(const double* b, double* x) = 0;
+  /// Entries of the factor (nnz(L) + nnz(U) for LU; 0 if unknown).
+  virtual index_t factor_entries() const = 0;
+  /// Pivots replaced by static pivoting in the last factorization.
+  virtual index_t perturbed_pivots() const = 0;
+  /// Backward error of the last solve (0 if unknown).
+  virtual double backward_error() const = 0;
+  /// "strata LU on cpu", "dense LAPACK", ...
+  virtual std::string describe() const = 0;
+  /// The strata statistics, when the solver is strata.
+  virtual const Stats* stats() const { return nullptr; }
+};
+
+/// strata's multifrontal LU (MatrixType::general with matching and scaling) on the
+/// given backend (Backend::automatic picks the GPU when the build and machine have one).
+std::unique_ptr<LinearSolver> make_strata_solver(Backend backend, int threads);
+/// Dense LU with partial pivoting (LAPACK); for tests and tiny models only.
+std::unique_ptr<LinearSolver> make_dense_solver();
+
+}  // namespace strata::mbd

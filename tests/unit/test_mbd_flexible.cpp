@@ -1,0 +1,97 @@
+// strata::mbd — the St. Venant–Kirchhoff hexahedron against closed forms: its mass, zero
+// elastic force under rigid motion, the face load of a homogeneous stretch
+// (P = F S, S = λ tr(E) I + 2μE), and its forces as the gradient of its strain energy.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "mbd/linalg.hpp"
+#include "mbd/model_io.hpp"
+
+namespace strata::mbd {
+namespace {
+
+using json = nlohmann::json;
+
+constexpr double kE = 2e6, kNu = 0.3, kRho = 1000;
+
+Model unit_cube(double gz = 0) {
+  json j = {{"type", "spatial"}, {"gravity", {0, 0, gz}}};
+  j["flexible_bodies"] = {
+      {{"name", "cube"},
+       {"material", {{"density", kRho}, {"young", kE}, {"poisson", kNu}}},
+       {"nodes",
+        {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}, {0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}}},
+       {"elements", {{0, 1, 2, 3, 4, 5, 6, 7}}}}};
+  return build_model(j, "cube");
+}
+
+// Elastic nodal forces (a = v = 0, no gravity) at positions x.
+std::vector<double> forces(const Model& m, const std::vector<double>& x) {
+  ForceEval e;
+  std::vector<double> zero(24, 0.0);
+  m.forces[0]->evaluate(x.data(), zero.data(), zero.data(), 0, false, e);
+  return e.g;
+}
+
+TEST(MbdFlexible, MassMatrixHasTheBodyMass) {
+  const Model m = unit_cube(-9.81);
+  ForceEval e;
+  std::vector<double> zero(24, 0.0), a(24, 0.0);
+  for (int n = 0; n < 8; ++n) a[3 * n] = 1.0;  // unit acceleration in x
+  m.forces[0]->evaluate(m.q0.data(), zero.data(), a.data(), 0, false, e);
+  double fx = 0, fz = 0;
+  for (int n = 0; n < 8; ++n) fx += e.g[3 * n], fz += e.g[3 * n + 2];
+  EXPECT_NEAR(fx, kRho * 1.0, 1e-9);   // Σ M a = m
+  EXPECT_NEAR(fz, kRho * 9.81, 1e-9);  // gravity: −(−m g)
+}
+
+TEST(MbdFlexible, RigidMotionGivesNoElasticForce) {
+  const Model m = unit_cube();
+  const Mat3<double> R = rot3(axis_angle({{1, 2, 3}}, 0.9));
+  std::vector<double> x(24);
+  for (int n = 0; n < 8; ++n) {
+    const Vec3<double> X{{m.q0[3 * n], m.q0[3 * n + 1], m.q0[3 * n + 2]}};
+    const Vec3<double> y = R * X;
+    for (int i = 0; i < 3; ++i) x[3 * n + i] = y[i] + 0.3 * (i + 1);
+  }
+  for (double f : forces(m, x)) EXPECT_NEAR(f, 0.0, 1e-7);
+}
+
+TEST(MbdFlexible, HomogeneousStretchGivesTheAnalyticFaceLoad) {
+  const Model m = unit_cube();
+  const double s = 1.1;  // x = diag(s, 1, 1) X
+  std::vector<double> x = m.q0;
+  for (int n = 0; n < 8; ++n) x[3 * n] *= s;
+  const auto f = forces(m, x);
+  const double lam = kE * kNu / ((1 + kNu) * (1 - 2 * kNu)), mu = kE / (2 * (1 + kNu));
+  const double E11 = 0.5 * (s * s - 1);
+  const double P11 = s * (lam + 2 * mu) * E11, P22 = lam * E11;
+  double fx = 0, fy = 0;  // nodes on the faces X = 1 and Y = 1
+  for (int n = 0; n < 8; ++n) {
+    if (m.q0[3 * n] == 1.0) fx += f[3 * n];
+    if (m.q0[3 * n + 1] == 1.0) fy += f[3 * n + 1];
+  }
+  EXPECT_NEAR(fx, P11, 1e-9 * P11);
+  EXPECT_NEAR(fy, P22, 1e-9 * std::abs(P22));
+}
+
+TEST(MbdFlexible, ForcesAreTheGradientOfTheStrainEnergy) {
+  const Model m = unit_cube();
+  std::vector<double> x = m.q0;
+  for (int i = 0; i < 24; ++i) x[i] += 0.05 * std::sin(1.7 * i);
+  const auto f = forces(m, x);
+  const double eps = 1e-6;
+  for (int i = 0; i < 24; ++i) {
+    auto xp = x, xm = x;
+    xp[i] += eps;
+    xm[i] -= eps;
+    const double dW = (m.forces[0]->potential_energy(xp.data(), 0) -
+                       m.forces[0]->potential_energy(xm.data(), 0)) /
+                      (2 * eps);
+    EXPECT_NEAR(f[i], dW, 1e-5 * (1 + std::abs(dW))) << "coordinate " << i;
+  }
+}
+
+}  // namespace
+}  // namespace strata::mbd
