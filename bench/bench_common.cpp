@@ -1,11 +1,12 @@
 // strata benchmarks — shared pieces (see bench_common.hpp).
 #include "bench_common.hpp"
 
+#include <cholmod.h>
 #include <unistd.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cctype>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <ctime>
@@ -13,11 +14,10 @@
 #include <fstream>
 #include <thread>
 
+#include "core/timer.hpp"
 #include "sparse/generators.hpp"
 #include "strata/errors.hpp"
 #include "strata/matrix_market.hpp"
-#include "core/timer.hpp"
-#include <cholmod.h>
 
 namespace strata::bench {
 namespace {
@@ -195,6 +195,5 @@ RefResult run_cholmod(const SparseMatrix& a, const std::vector<index_t>& perm,
   cholmod_l_finish(&cc);
   return r;
 }
-
 
 }  // namespace strata::bench

@@ -30,8 +30,8 @@ using json = nlohmann::json;
 
 namespace {
 
-using bench::RefResult;
 using bench::berr;
+using bench::RefResult;
 using bench::run_cholmod;
 
 #ifdef STRATA_BENCH_HAVE_MUMPS

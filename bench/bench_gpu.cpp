@@ -9,9 +9,10 @@
 // JSON. Results: <results-dir>/gpu-*.json with "backend": "cuda".
 //
 //   bench_gpu [--problems a,b,...] [--repeat R] [--threads 4,16] [--results-dir DIR]
+#include <fmt/core.h>
+
 #include <CLI/CLI.hpp>
 #include <cstdio>
-#include <fmt/core.h>
 
 #include "bench_common.hpp"
 #include "core/blas.hpp"
@@ -59,8 +60,9 @@ Timing time_strata(const bench::Problem& p, Options o, int repeat,
 
 int main(int argc, char** argv) {
   CLI::App app{"strata GPU benchmark (CUDA backend vs CPU backend and CHOLMOD)"};
-  std::vector<std::string> problems = {"bcsstk16", "ccx_cubef2f3_K", "lap3d-60", "lap3d-80",
-                                       "elast3d-30", "elast3d-40", "uelast3d-20", "uelast3d-30"};
+  std::vector<std::string> problems = {"bcsstk16",    "ccx_cubef2f3_K", "lap3d-60",
+                                       "lap3d-80",    "elast3d-30",     "elast3d-40",
+                                       "uelast3d-20", "uelast3d-30"};
   std::vector<int> threads = {4, 16};
   int repeat = 3;
   std::string results_dir;
@@ -77,8 +79,8 @@ int main(int argc, char** argv) {
   out["benchmark"] = "factor";
   out["backend"] = "cuda";
   out["rows"] = json::array();
-  fmt::print("{:<14} {:>8} {:>11} {:>9} {:>8} {:>9} {:>4} {:>9} {:>7} {:>7} {:>9}\n", "problem", "n",
-             "nnz(L)", "gpu s", "GFLOP/s", "cpu s", "thr", "chol s", "cpu/gpu", "chol/gpu",
+  fmt::print("{:<14} {:>8} {:>11} {:>9} {:>8} {:>9} {:>4} {:>9} {:>7} {:>7} {:>9}\n", "problem",
+             "n", "nnz(L)", "gpu s", "GFLOP/s", "cpu s", "thr", "chol s", "cpu/gpu", "chol/gpu",
              "berr gpu");
   std::string partial, previous;
   for (const std::string& name : problems) {
@@ -97,8 +99,11 @@ int main(int argc, char** argv) {
                 {"nnz_l", an.nnz_l},
                 {"factor_flops", an.factor_flops},
                 {"type", to_string(o.type)},
-                {"strata_gpu", {{"seconds", g.factor}, {"gflops", g.gflops},
-                                {"solve_seconds", g.solve}, {"backward_error", g.backward_error}}},
+                {"strata_gpu",
+                 {{"seconds", g.factor},
+                  {"gflops", g.gflops},
+                  {"solve_seconds", g.solve},
+                  {"backward_error", g.backward_error}}},
                 {"cpu", json::array()}};
     double best_cpu = 1e300, best_chol = 1e300;
     int best_threads = 0;
@@ -108,8 +113,11 @@ int main(int argc, char** argv) {
       Options oc = o;
       oc.num_threads = t;
       Timing c = time_strata(p, oc, repeat);
-      json cj = {{"threads", t}, {"strata_seconds", c.factor}, {"strata_gflops", c.gflops},
-                 {"strata_solve_seconds", c.solve}, {"strata_backward_error", c.backward_error}};
+      json cj = {{"threads", t},
+                 {"strata_seconds", c.factor},
+                 {"strata_gflops", c.gflops},
+                 {"strata_solve_seconds", c.solve},
+                 {"strata_backward_error", c.backward_error}};
       if (p.symmetric) {
         openblas_set_num_threads(t);
         bench::RefResult ch = bench::run_cholmod(p.a, perm, b, repeat);
@@ -127,10 +135,11 @@ int main(int argc, char** argv) {
     row["best_cpu_threads"] = best_threads;
     row["ratio_cpu_over_gpu"] = best_cpu / g.factor;
     if (p.symmetric) row["ratio_cholmod_over_gpu"] = best_chol / g.factor;
-    fmt::print("{:<14} {:>8} {:>11} {:>9.4f} {:>8.1f} {:>9.4f} {:>4} {:>9} {:>7.2f} {:>7} {:>9.1e}\n",
-               name, p.a.n_rows, an.nnz_l, g.factor, g.gflops, best_cpu, best_threads,
-               p.symmetric ? fmt::format("{:.4f}", best_chol) : "-", best_cpu / g.factor,
-               p.symmetric ? fmt::format("{:.2f}", best_chol / g.factor) : "-", g.backward_error);
+    fmt::print(
+        "{:<14} {:>8} {:>11} {:>9.4f} {:>8.1f} {:>9.4f} {:>4} {:>9} {:>7.2f} {:>7} {:>9.1e}\n",
+        name, p.a.n_rows, an.nnz_l, g.factor, g.gflops, best_cpu, best_threads,
+        p.symmetric ? fmt::format("{:.4f}", best_chol) : "-", best_cpu / g.factor,
+        p.symmetric ? fmt::format("{:.2f}", best_chol / g.factor) : "-", g.backward_error);
     std::fflush(stdout);
     out["rows"].push_back(row);
     // keep what is measured so far, in case the run is cut off

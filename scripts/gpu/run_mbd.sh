@@ -14,11 +14,9 @@ run() {  # name, args...
   local name=$1
   shift
   echo "=== $name: strata simulate $*" | tee -a "$OUT/mbd.log"
-  timeout 100 $S simulate --quiet --output "" "$@" 2>&1 | grep -v "^model read" | tee -a "$OUT/mbd.log"
+  timeout 50 $S simulate --quiet --output "" "$@" 2>&1 | grep -v "^model read" | tee -a "$OUT/mbd.log"
 }
 run tracked100-auto --generate tracked:100 --t-end 0.1 --device auto
 run lattice12-gpu --generate lattice:12 --t-end 0.02 --device gpu
 run lattice12-cpu --generate lattice:12 --t-end 0.02 --device cpu
-run tracked400-gpu --generate tracked:400 --t-end 0.01 --device gpu
-run tracked400-cpu --generate tracked:400 --t-end 0.01 --device cpu
 exit 0

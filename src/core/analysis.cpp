@@ -373,8 +373,9 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts) {
     an.pivot_groups = std::move(sp.groups);
   }
   if (an.structurally_singular)
-    throw InvalidInput("the matrix is structurally singular: no permutation puts nonzero "
-                       "entries on the whole diagonal (maximum matching, Duff & Koster 2001)");
+    throw InvalidInput(
+        "the matrix is structurally singular: no permutation puts nonzero "
+        "entries on the whole diagonal (maximum matching, Duff & Koster 2001)");
   const bool grouped = an.pivot_groups.n_groups() > 0;
   const SparseMatrix pattern = symmetric_pattern(c, an.symmetric, q_inv);
   const ordering::Graph graph = ordering::graph_of_symmetric_pattern(pattern);

@@ -217,20 +217,12 @@ void Solver::solve(const double* b, double* x, index_t nrhs) {
   apply_inverse(s, b, x, nrhs, work);
 
   // backward error of each column; refine the columns above the tolerance
+  const solve::Operator op_a = [&](const double* in, double* out) {
+    multiply(s.values, in, out);
+  };
   auto berr_of = [&](index_t col) {
-    const double* xc = x + col * n;
-    const double* bc = b + col * n;
-    double* rc = r.data() + col * n;
-    multiply(s.values, xc, rc);
-    double rn = 0, xn = 0, bn = 0;
-    for (index_t i = 0; i < n; ++i) {
-      rc[i] = bc[i] - rc[i];
-      rn = std::max(rn, std::abs(rc[i]));
-      xn = std::max(xn, std::abs(xc[i]));
-      bn = std::max(bn, std::abs(bc[i]));
-    }
-    const double den = s.norm_inf * xn + bn;
-    return den > 0 ? rn / den : rn;
+    return solve::backward_error(n, op_a, s.norm_inf, b + col * n, x + col * n,
+                                 r.data() + col * n);
   };
   std::vector<double> berr(nrhs), last(nrhs);
   std::vector<char> active(nrhs, 1);
@@ -270,10 +262,7 @@ void Solver::solve(const double* b, double* x, index_t nrhs) {
   // refinement stalled: GMRES preconditioned by the factorization (see solve/gmres.hpp)
   int gmres_iterations = 0;
   if (o.gmres_max_iterations > 0) {
-    std::vector<double> bc(n), tmp;
-    const solve::Operator op_a = [&](const double* in, double* out) {
-      multiply(s.values, in, out);
-    };
+    std::vector<double> tmp;
     const solve::Operator op_m = [&](const double* in, double* out) {
       apply_inverse(s, in, out, 1, tmp);
     };

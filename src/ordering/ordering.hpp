@@ -53,6 +53,10 @@ struct OrderingResult {
   SeparatorTree tree;  ///< empty unless nested_dissection
 };
 
+/// The nested-dissection options requested by `opts`; throws InvalidInput for a leaf
+/// size below 1.
+NestedDissectionOptions nd_options(const Options& opts);
+
 /// strata's nested dissection: recursive vertex-separator bisection with
 /// METIS_ComputeVertexSeparator, connected components split first, AMD inside leaves;
 /// numbering left part, right part, separator last. Records the separator tree.

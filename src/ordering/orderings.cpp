@@ -104,19 +104,22 @@ std::vector<index_t> metis_ordering(const Graph& g, const std::vector<index_t>& 
   return perm;
 }
 
+NestedDissectionOptions nd_options(const Options& opts) {
+  if (opts.nd_leaf_size < 1)
+    throw InvalidInput("Options::nd_leaf_size must be at least 1 (got " +
+                       std::to_string(opts.nd_leaf_size) + ")");
+  NestedDissectionOptions nd;
+  nd.leaf_size = opts.nd_leaf_size;
+  nd.top_separators = opts.nd_top_separators;
+  return nd;
+}
+
 OrderingResult compute_ordering(const Graph& g, const Options& opts) {
   OrderingResult r;
   const index_t n = g.n;
   switch (opts.ordering) {
-    case OrderingMethod::nested_dissection: {
-      if (opts.nd_leaf_size < 1)
-        throw InvalidInput("Options::nd_leaf_size must be at least 1 (got " +
-                           std::to_string(opts.nd_leaf_size) + ")");
-      NestedDissectionOptions nd;
-      nd.leaf_size = opts.nd_leaf_size;
-      nd.top_separators = opts.nd_top_separators;
-      return nested_dissection(g, nd);
-    }
+    case OrderingMethod::nested_dissection:
+      return nested_dissection(g, nd_options(opts));
     case OrderingMethod::metis:
       r.perm = metis_ordering(g);
       return r;

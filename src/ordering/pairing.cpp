@@ -291,15 +291,8 @@ OrderingResult compute_grouped_ordering(const Graph& g, const VertexGroups& grou
   if (opts.ordering == OrderingMethod::natural || opts.ordering == OrderingMethod::user)
     return compute_ordering(g, opts);
   const Graph q = quotient_graph(g, groups);
-  if (opts.ordering == OrderingMethod::nested_dissection) {
-    if (opts.nd_leaf_size < 1)
-      throw InvalidInput("Options::nd_leaf_size must be at least 1 (got " +
-                         std::to_string(opts.nd_leaf_size) + ")");
-    NestedDissectionOptions nd;
-    nd.leaf_size = opts.nd_leaf_size;
-    nd.top_separators = opts.nd_top_separators;
-    return nested_dissection(q, nd, groups);
-  }
+  if (opts.ordering == OrderingMethod::nested_dissection)
+    return nested_dissection(q, nd_options(opts), groups);
   std::vector<index_t> qperm;
   if (opts.ordering == OrderingMethod::metis) {
     std::vector<index_t> w(q.n);

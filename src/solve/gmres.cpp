@@ -21,9 +21,11 @@ double norm2(const std::vector<double>& v) {
   return std::sqrt(s);
 }
 
-double backward_error(index_t n, const Operator& a, double norm_a, const double* b, const double* x,
-                      std::vector<double>& r) {
-  a(x, r.data());
+}  // namespace
+
+double backward_error(index_t n, const Operator& a, double norm_a, const double* b,
+                      const double* x, double* r) {
+  a(x, r);
   double rn = 0, xn = 0, bn = 0;
   for (index_t i = 0; i < n; ++i) {
     r[i] = b[i] - r[i];
@@ -35,15 +37,13 @@ double backward_error(index_t n, const Operator& a, double norm_a, const double*
   return den > 0 ? rn / den : rn;
 }
 
-}  // namespace
-
 GmresResult gmres(index_t n, const Operator& a, const Operator& m_inv, double norm_a,
                   const double* b, double* x, int restart, int max_iterations, double tolerance) {
   GmresResult res;
   restart = std::max(1, restart);
   std::vector<double> r(n), w(n), z(n);
   std::vector<double> best(x, x + n);
-  double berr = backward_error(n, a, norm_a, b, x, r);
+  double berr = backward_error(n, a, norm_a, b, x, r.data());
   double best_berr = berr;
   std::vector<std::vector<double>> v(restart + 1, std::vector<double>(n));
   std::vector<std::vector<double>> zs(restart, std::vector<double>(n));
@@ -108,7 +108,7 @@ GmresResult gmres(index_t n, const Operator& a, const Operator& m_inv, double no
     for (int j = 0; j < k; ++j)
       for (index_t t = 0; t < n; ++t) x[t] += y[j] * zs[j][t];
     const double previous = berr;
-    berr = backward_error(n, a, norm_a, b, x, r);
+    berr = backward_error(n, a, norm_a, b, x, r.data());
     if (berr < best_berr) {
       best_berr = berr;
       std::copy(x, x + n, best.begin());

@@ -17,6 +17,11 @@ namespace strata::solve {
 /// y = op(x) for vectors of length n.
 using Operator = std::function<void(const double* x, double* y)>;
 
+/// Normwise backward error ‖b − A x‖∞ / (norm_a·‖x‖∞ + ‖b‖∞) of x, with r = b − A x
+/// (length n) left in `r`.
+double backward_error(index_t n, const Operator& a, double norm_a, const double* b,
+                      const double* x, double* r);
+
 struct GmresResult {
   int iterations = 0;
   double backward_error = 0;  ///< normwise, of the returned x (true residual)

@@ -44,8 +44,8 @@ TEST(Analysis, StructurallySingularMatricesAreRefused) {
     }
   }
   // no empty line, but columns 1 and 2 both have their only entry in row 0
-  SparseMatrix h =
-      from_triplets(3, Storage::full, {{0, 0, 1.0}, {1, 0, 1.0}, {2, 0, 1.0}, {0, 1, 2.0}, {0, 2, 3.0}});
+  SparseMatrix h = from_triplets(3, Storage::full,
+                                 {{0, 0, 1.0}, {1, 0, 1.0}, {2, 0, 1.0}, {0, 1, 2.0}, {0, 2, 3.0}});
   Options o;
   o.type = MatrixType::general;
   Solver s(o);

@@ -15,16 +15,16 @@
 //   3. partial factorization (dense_front.hpp),
 //   4. copy the first k columns (and U12 for LU) to the factor, the contribution block
 //      F[k:m, k:m] to the CB arena, and the permuted pivot rows to the factor's rows.
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <exception>
 #include <mutex>
 #include <thread>
-
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-#include <tbb/task_arena.h>
 
 #include "core/blas.hpp"
 #include "numeric/factor.hpp"

@@ -19,22 +19,23 @@ namespace strata::cuda {
 
 }  // namespace strata::cuda
 
-#define STRATA_CUDA(call)                                                            \
-  do {                                                                               \
-    cudaError_t strata_e_ = (call);                                                  \
-    if (strata_e_ != cudaSuccess) ::strata::cuda::throw_cuda(strata_e_, #call, __FILE__, __LINE__); \
+#define STRATA_CUDA(call)                                               \
+  do {                                                                  \
+    cudaError_t strata_e_ = (call);                                     \
+    if (strata_e_ != cudaSuccess)                                       \
+      ::strata::cuda::throw_cuda(strata_e_, #call, __FILE__, __LINE__); \
   } while (0)
-#define STRATA_CUBLAS(call)                                                          \
-  do {                                                                               \
-    cublasStatus_t strata_s_ = (call);                                               \
-    if (strata_s_ != CUBLAS_STATUS_SUCCESS)                                          \
-      ::strata::cuda::throw_cublas(strata_s_, #call, __FILE__, __LINE__);            \
+#define STRATA_CUBLAS(call)                                               \
+  do {                                                                    \
+    cublasStatus_t strata_s_ = (call);                                    \
+    if (strata_s_ != CUBLAS_STATUS_SUCCESS)                               \
+      ::strata::cuda::throw_cublas(strata_s_, #call, __FILE__, __LINE__); \
   } while (0)
-#define STRATA_CUSOLVER(call)                                                        \
-  do {                                                                               \
-    cusolverStatus_t strata_s_ = (call);                                             \
-    if (strata_s_ != CUSOLVER_STATUS_SUCCESS)                                        \
-      ::strata::cuda::throw_cusolver(strata_s_, #call, __FILE__, __LINE__);          \
+#define STRATA_CUSOLVER(call)                                               \
+  do {                                                                      \
+    cusolverStatus_t strata_s_ = (call);                                    \
+    if (strata_s_ != CUSOLVER_STATUS_SUCCESS)                               \
+      ::strata::cuda::throw_cusolver(strata_s_, #call, __FILE__, __LINE__); \
   } while (0)
 /// Checks the last kernel launch.
 #define STRATA_CUDA_LAUNCH() STRATA_CUDA(cudaGetLastError())

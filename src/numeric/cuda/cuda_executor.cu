@@ -36,8 +36,7 @@ namespace strata::cuda {
   throw DeviceError(std::string(call) + " failed at " + file + ":" + std::to_string(line) + ": " +
                     cublasGetStatusName(s) + " (" + cublasGetStatusString(s) + ")");
 }
-[[noreturn]] void throw_cusolver(cusolverStatus_t s, const char* call, const char* file,
-                                 int line) {
+[[noreturn]] void throw_cusolver(cusolverStatus_t s, const char* call, const char* file, int line) {
   throw DeviceError(std::string(call) + " failed at " + file + ":" + std::to_string(line) +
                     ": cusolver status " + std::to_string(static_cast<int>(s)));
 }
@@ -138,10 +137,13 @@ void CudaExecutor::upload_analysis(const Analysis& an) {
   }
   const std::size_t bytes = 8 * (an.cb_layout.arena_size + pool);
   if (limit_ > 0 && bytes > limit_)
-    throw NotSupported("the CUDA backend keeps the contribution-block arena and the largest "
-                       "batch on the device (" + std::to_string(bytes) + " bytes), over the "
-                       "device_memory_limit of " + std::to_string(limit_) +
-                       " bytes; streaming to the host is not implemented yet");
+    throw NotSupported(
+        "the CUDA backend keeps the contribution-block arena and the largest "
+        "batch on the device (" +
+        std::to_string(bytes) +
+        " bytes), over the "
+        "device_memory_limit of " +
+        std::to_string(limit_) + " bytes; streaming to the host is not implemented yet");
   upload(fronts_, s.fronts, stream_);
   upload(pos_offset_, pos_offset_host_, stream_);
   upload(n_rows_, n_rows, stream_);
@@ -158,10 +160,10 @@ void CudaExecutor::upload_analysis(const Analysis& an) {
   arena_.resize(std::max<std::size_t>(an.cb_layout.arena_size, 1));
   pool_.resize(std::max<std::size_t>(pool, 1));
   pattern_nnz_ = an.pattern_indices.size();
-  tree_ = DeviceTree{fronts_.data(),        pos_offset_.data(), n_rows_.data(),
-                     n_pivots_.data(),      parent_.data(),     entry_offsets_.data(),
-                     entry_src_.data(),     entry_dst_.data(),  child_offsets_.data(),
-                     children_.data(),      cb_offset_.data(),  rel_offsets_.data(),
+  tree_ = DeviceTree{fronts_.data(),    pos_offset_.data(), n_rows_.data(),
+                     n_pivots_.data(),  parent_.data(),     entry_offsets_.data(),
+                     entry_src_.data(), entry_dst_.data(),  child_offsets_.data(),
+                     children_.data(),  cb_offset_.data(),  rel_offsets_.data(),
                      rel_.data()};
   // cuSOLVER workspace for the largest pivot block of a large front
   int lwork = 0;
@@ -223,15 +225,14 @@ void CudaExecutor::factor_batch(const FactorContext& ctx, const BatchInfo& b) {
     double* F = pool_.data() + pos_offset_host_[p];
     big_perm_at.push_back(perm_at);
     if (!lu) {
-      STRATA_CUSOLVER(cusolverDnDpotrf(solver_, CUBLAS_FILL_MODE_LOWER, k, F, m,
-                                       potrf_work_.data(), static_cast<int>(potrf_work_.size()),
+      STRATA_CUSOLVER(cusolverDnDpotrf(solver_, CUBLAS_FILL_MODE_LOWER, k, F, m, potrf_work_.data(),
+                                       static_cast<int>(potrf_work_.size()),
                                        potrf_info_.data() + i));
       if (m > k) {
         STRATA_CUBLAS(cublasDtrsm(blas_, CUBLAS_SIDE_RIGHT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_T,
                                   CUBLAS_DIAG_NON_UNIT, m - k, k, &one, F, m, F + k, m));
-        STRATA_CUBLAS(cublasDsyrk(blas_, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N, m - k, k,
-                                  &minus_one, F + k, m, &one, F + static_cast<std::size_t>(k) * m + k,
-                                  m));
+        STRATA_CUBLAS(cublasDsyrk(blas_, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N, m - k, k, &minus_one,
+                                  F + k, m, &one, F + static_cast<std::size_t>(k) * m + k, m));
       }
     } else {
       std::vector<std::int64_t> iota(k);
@@ -264,8 +265,9 @@ void CudaExecutor::factor_batch(const FactorContext& ctx, const BatchInfo& b) {
   std::vector<std::int64_t> stage_off(count + 1, 0);
   for (std::int64_t i = 0; i < count; ++i) {
     const index_t f = s.fronts[b.begin + i];
-    stage_off[i + 1] = stage_off[i] + static_cast<std::int64_t>(an.factor_layout.panel_offset[f + 1] -
-                                                                an.factor_layout.panel_offset[f]);
+    stage_off[i + 1] =
+        stage_off[i] + static_cast<std::int64_t>(an.factor_layout.panel_offset[f + 1] -
+                                                 an.factor_layout.panel_offset[f]);
   }
   upload(stage_offset_, stage_off, stream_);
   staging_.resize(std::max<std::int64_t>(stage_off[count], 1));
@@ -279,9 +281,15 @@ void CudaExecutor::factor_batch(const FactorContext& ctx, const BatchInfo& b) {
   const std::size_t nall = ns + big.size();
   std::vector<std::int64_t> info(nall), perturbed(nall), perm(perm_at);
   std::vector<int> pinfo(big.size());
-  if (ns) STRATA_CUDA(cudaMemcpyAsync(info.data(), info_.data(), 8 * ns, cudaMemcpyDeviceToHost, stream_));
-  if (nall) STRATA_CUDA(cudaMemcpyAsync(perturbed.data(), perturbed_.data(), 8 * nall, cudaMemcpyDeviceToHost, stream_));
-  if (perm_at) STRATA_CUDA(cudaMemcpyAsync(perm.data(), perm_.data(), 8 * perm_at, cudaMemcpyDeviceToHost, stream_));
+  if (ns)
+    STRATA_CUDA(
+        cudaMemcpyAsync(info.data(), info_.data(), 8 * ns, cudaMemcpyDeviceToHost, stream_));
+  if (nall)
+    STRATA_CUDA(cudaMemcpyAsync(perturbed.data(), perturbed_.data(), 8 * nall,
+                                cudaMemcpyDeviceToHost, stream_));
+  if (perm_at)
+    STRATA_CUDA(
+        cudaMemcpyAsync(perm.data(), perm_.data(), 8 * perm_at, cudaMemcpyDeviceToHost, stream_));
   if (!big.empty() && !lu)
     STRATA_CUDA(cudaMemcpyAsync(pinfo.data(), potrf_info_.data(), sizeof(int) * big.size(),
                                 cudaMemcpyDeviceToHost, stream_));

@@ -5,11 +5,10 @@
 // vendor batched POTRF handles poorly (DESIGN.md §2). Partial pivoting for LU searches
 // only the fully summed rows (restricted pivoting) and replaces tiny pivots by
 // ±static_pivot, exactly as the CPU kernels do (numeric/cpu/dense_front.hpp).
-#include "numeric/cuda/kernels.cuh"
-
 #include <cfloat>
 
 #include "numeric/cuda/cuda_check.hpp"
+#include "numeric/cuda/kernels.cuh"
 
 namespace strata::cuda {
 namespace {
@@ -43,8 +42,8 @@ __global__ void assemble_kernel(DeviceTree t, std::int64_t begin, const double* 
   }
 }
 
-__global__ void store_cb_kernel(DeviceTree t, std::int64_t begin, const double* pool,
-                                double* arena, bool symmetric) {
+__global__ void store_cb_kernel(DeviceTree t, std::int64_t begin, const double* pool, double* arena,
+                                bool symmetric) {
   const std::int64_t pos = begin + blockIdx.x;
   const std::int64_t f = t.fronts[pos];
   if (t.parent[f] < 0) return;

@@ -24,8 +24,8 @@ struct DeviceTree {
   const std::int64_t* entry_dst;
   const std::int64_t* child_offsets;
   const std::int64_t* children;
-  const std::int64_t* cb_offset;      ///< per front, in the CB arena (doubles)
-  const std::int64_t* rel_offsets;    ///< per child: its CB rows' positions in the parent
+  const std::int64_t* cb_offset;    ///< per front, in the CB arena (doubles)
+  const std::int64_t* rel_offsets;  ///< per child: its CB rows' positions in the parent
   const std::int64_t* rel;
 };
 
