@@ -8,7 +8,7 @@ pkgs=(
   libopenblas-dev liblapack-dev libmetis-dev libsuitesparse-dev
   libcli11-dev nlohmann-json3-dev libfmt-dev zlib1g-dev libtbb-dev
   libgtest-dev libgmock-dev libbenchmark-dev libmumps-seq-dev
-  python3-matplotlib
+  python3-matplotlib python3-dev python3-pybind11 python3-numpy python3-scipy python3-pytest
 )
 missing=()
 for p in "${pkgs[@]}"; do

@@ -1,0 +1,285 @@
+"""strata: a multifrontal sparse direct solver (Cholesky, LDLᵀ, LU) on a CPU or a GPU.
+
+Solves A x = b for a square sparse matrix A given as any ``scipy.sparse`` matrix or
+array. The four phases of a direct solve are those of the C++ library:
+
+    >>> import numpy as np, scipy.sparse as sp, strata
+    >>> A = sp.random(100, 100, density=0.05, format="csr") + 10 * sp.eye(100)
+    >>> solver = strata.Solver(A)            # analysis + numeric factorization
+    >>> x = solver.solve(np.ones(100))       # triangular solves + iterative refinement
+    >>> solver.refactorize(2 * A)            # same pattern, new values: reuses the analysis
+    >>> solver.stats["nnz_l"], solver.stats["backward_error"]
+
+``strata.analyze(A)`` returns the statistics of the analysis alone (nnz(L), factor flops,
+fronts, tree height, memory) without factoring.
+
+Errors raise subclasses of :class:`strata.Error` (a ``RuntimeError``) carrying the
+solver's message: :class:`InvalidInputError` (also a ``ValueError``) for a non-square
+matrix, NaN/Inf values, wrong shapes or a changed pattern; :class:`NotPositiveDefiniteError`
+when ``type="spd"`` meets a non-positive pivot; :class:`InvalidStateError`,
+:class:`NotSupportedError`, :class:`DeviceError`, :class:`OutOfMemoryError` (also a
+``MemoryError``). Inputs of a dtype that is not real (complex, object, strings) raise
+``TypeError``.
+
+The GIL is released during analysis, factorization and solve, so several solvers can
+run in parallel Python threads (one solver must not be used by two threads at once).
+"""
+
+import numpy as _np
+import scipy.sparse as _sp
+
+from ._strata import (  # noqa: F401  (re-exported)
+    DeviceError,
+    Error,
+    InvalidInputError,
+    InvalidStateError,
+    NotPositiveDefiniteError,
+    NotSupportedError,
+    OutOfMemoryError,
+    __version__,
+    cuda_in_build,
+)
+from . import _strata
+
+__all__ = [
+    "Solver",
+    "analyze",
+    "solve",
+    "cuda_in_build",
+    "Error",
+    "InvalidInputError",
+    "InvalidStateError",
+    "NotPositiveDefiniteError",
+    "NotSupportedError",
+    "DeviceError",
+    "OutOfMemoryError",
+]
+
+_TYPES = ("auto", "spd", "symmetric_indefinite", "general")
+_ORDERINGS = ("nd", "metis", "amd", "natural")
+_DEVICES = ("auto", "cpu", "cuda", "gpu")
+_STORAGES = ("full", "lower", "upper")
+
+
+def _check_real_dtype(dtype, what):
+    if dtype.kind not in "biuf":
+        raise TypeError(
+            f"{what} must have a real numeric dtype (bool, integer or float; converted to "
+            f"float64), got {dtype}"
+        )
+
+
+def _to_matrix(A, storage="full", what="A"):
+    """A validated strata copy of the scipy.sparse matrix A (float64 values, int64
+    indices; CSR is kept, every other format goes through CSC)."""
+    if not _sp.issparse(A):
+        raise TypeError(
+            f"{what} must be a scipy.sparse matrix or array (e.g. scipy.sparse.csr_matrix), "
+            f"got {type(A).__name__}"
+        )
+    if storage not in _STORAGES:
+        raise InvalidInputError(f"storage must be one of {_STORAGES}, got {storage!r}")
+    if len(A.shape) != 2:
+        raise InvalidInputError(f"{what} must be 2-D, got shape {A.shape}")
+    n_rows, n_cols = A.shape
+    if n_rows != n_cols:
+        raise InvalidInputError(f"{what} must be square, got shape {n_rows}x{n_cols}")
+    _check_real_dtype(A.dtype, what)
+    if A.format == "csr":
+        layout = "csr"
+    else:
+        layout = "csc"
+        if A.format != "csc":
+            A = A.tocsc()
+    indptr = _np.asarray(A.indptr, dtype=_np.int64)
+    indices = _np.asarray(A.indices, dtype=_np.int64)
+    data = _np.asarray(A.data, dtype=_np.float64)
+    return _strata._Matrix(n_rows, n_cols, layout, storage, indptr, indices, data)
+
+
+def _make_core(type, ordering, device, max_block_size, num_threads, refinement_steps,
+               refinement_tolerance, device_memory_limit):
+    for name, value, allowed in (("type", type, _TYPES), ("ordering", ordering, _ORDERINGS),
+                                 ("device", device, _DEVICES)):
+        if value not in allowed:
+            raise InvalidInputError(f"{name} must be one of {allowed}, got {value!r}")
+    return _strata._Core(type, ordering, device, int(max_block_size), int(num_threads),
+                         int(refinement_steps), float(refinement_tolerance),
+                         int(device_memory_limit))
+
+
+class Solver:
+    """A factorization of a square sparse matrix A, for solving A x = b.
+
+    ``Solver(A)`` runs the analysis (fill-reducing ordering, assembly tree, level
+    schedule, memory plan) and the numeric factorization; ``solve`` then costs two
+    triangular solves plus iterative refinement per right-hand side, and
+    ``refactorize`` factors new values with the same pattern reusing the analysis.
+
+    Parameters
+    ----------
+    A : scipy.sparse matrix or array, shape (n, n)
+        The matrix; any format (CSR is used as is, others are converted to CSC), any
+        real dtype (converted to float64). Explicitly stored zeros are part of the
+        pattern. Duplicate entries are summed.
+    type : {"auto", "spd", "symmetric_indefinite", "general"}
+        Factorization: Cholesky LLᵀ, LDLᵀ with 1×1/2×2 pivots, or LU on the pattern of
+        A+Aᵀ. "auto" (default) uses LLᵀ for a symmetric matrix when it succeeds, else
+        LDLᵀ; LU for an unsymmetric one.
+    ordering : {"nd", "metis", "amd", "natural"}
+        Fill-reducing ordering (default "nd": strata's nested dissection).
+    device : {"auto", "cpu", "cuda"}
+        Where the factorization runs. "auto" (default) uses a GPU when the build and the
+        machine have one (LDLᵀ runs on the CPU); "cuda" raises NotSupportedError in a
+        build without CUDA.
+    storage : {"full", "lower", "upper"}
+        Which part of A is given: "lower"/"upper" mean A holds one triangle of a
+        symmetric matrix (diagonal included) and the other is implied. Default "full".
+    max_block_size : int
+        Most pivot columns per front; larger separators are split (default 1024).
+    num_threads : int
+        CPU threads; 0 (default) means all hardware threads.
+    refinement_steps : int
+        Most iterative refinement steps per solve (default 10; 0 disables).
+    refinement_tolerance : float
+        Refinement stops at this backward error (default 1e-15).
+    device_memory_limit : int
+        GPU memory budget in bytes for the memory plan (default 0: the whole device).
+
+    Raises
+    ------
+    TypeError
+        A is not a scipy.sparse matrix, or its dtype is not real.
+    InvalidInputError (a ValueError)
+        A is not square, has NaN/Inf values, or an option is invalid.
+    NotPositiveDefiniteError
+        type="spd" and A is not positive definite.
+    NotSupportedError, DeviceError, OutOfMemoryError
+    """
+
+    def __init__(self, A, type="auto", ordering="nd", device="auto", storage="full",
+                 max_block_size=1024, num_threads=0, refinement_steps=10,
+                 refinement_tolerance=1e-15, device_memory_limit=0):
+        self._storage = storage
+        self._core = _make_core(type, ordering, device, max_block_size, num_threads,
+                                refinement_steps, refinement_tolerance, device_memory_limit)
+        m = _to_matrix(A, storage)
+        self._shape = tuple(A.shape)
+        self._core.analyze(m)
+        self._core.factorize(m)
+
+    @property
+    def shape(self):
+        """(n, n): the shape of the factored matrix."""
+        return self._shape
+
+    @property
+    def n(self):
+        """n: the order of the factored matrix."""
+        return self._shape[0]
+
+    def solve(self, b):
+        """Solves A x = b.
+
+        Parameters
+        ----------
+        b : array_like, shape (n,) or (n, k)
+            One right-hand side, or k right-hand sides as columns; any real dtype
+            (converted to float64). Must be finite.
+
+        Returns
+        -------
+        x : numpy.ndarray of float64, the shape of b
+
+        Raises
+        ------
+        TypeError for a non-real dtype; InvalidInputError (a ValueError) for a wrong
+        shape or NaN/Inf entries; InvalidStateError when the last factorization failed.
+        """
+        if _sp.issparse(b):
+            b = b.toarray()
+        b = _np.asarray(b)
+        _check_real_dtype(b.dtype, "b")
+        n = self._shape[0]
+        if b.ndim == 1:
+            if b.shape[0] != n:
+                raise InvalidInputError(
+                    f"b has shape {b.shape}, expected ({n},) or ({n}, k) for a {n}x{n} matrix"
+                )
+            return self._core.solve(b.reshape(n, 1)).reshape(n)
+        if b.ndim == 2:
+            if b.shape[0] != n:
+                raise InvalidInputError(
+                    f"b has shape {b.shape}, expected ({n},) or ({n}, k) for a {n}x{n} matrix"
+                )
+            return _np.ascontiguousarray(self._core.solve(b))
+        raise InvalidInputError(f"b must be 1-D or 2-D, got {b.ndim}-D shape {b.shape}")
+
+    def refactorize(self, A):
+        """Factors new values with the analyzed pattern (same shape, same stored
+        entries, in the same `storage`), reusing the analysis and the workspace.
+
+        Raises InvalidInputError (a ValueError) for a different shape or pattern or
+        NaN/Inf values; the previous factorization is then kept. Returns self."""
+        if _sp.issparse(A) and tuple(A.shape) != self._shape:
+            raise InvalidInputError(
+                f"refactorize: A has shape {A.shape}, the solver was built for {self._shape}"
+            )
+        self._core.refactorize(_to_matrix(A, self._storage))
+        return self
+
+    @property
+    def stats(self):
+        """Statistics of the last analysis, factorization and solve, as a dict.
+
+        Analysis: n, nnz_a (entries of A, both triangles), nnz_l (exact nnz(L), diagonal
+        included), nnz_l_fronts, factor_flops (flops of a Cholesky of the fronts; LU
+        about twice), n_fronts, largest_front_rows, largest_front_pivots, tree_height,
+        fronts_per_level (list, deepest level first), peak_working_bytes, factor_bytes,
+        memory_budget, n_batches, analysis_type, ordering, pairs, odd_cycles and the times
+        ordering_seconds, symbolic_seconds, plan_seconds, analysis_seconds.
+        Factorization: type ("spd", "symmetric_indefinite", "general"), backend ("cpu" or
+        "cuda"), factor_seconds, factor_gflops, perturbed_pivots (static pivoting),
+        two_by_two_pivots, inertia (positive, negative, zero), log_abs_determinant,
+        determinant_sign, matrix_norm. After a solve: solve_seconds, refinement_steps,
+        gmres_iterations, backward_error (max over columns of
+        ‖b−Ax‖∞/(‖A‖∞‖x‖∞+‖b‖∞)), refinement_converged.
+        """
+        return self._core.stats()
+
+    @property
+    def permutation(self):
+        """The fill-reducing permutation (new to old): int64 array of length n whose
+        k-th entry is the original index of the k-th pivot."""
+        return self._core.permutation()
+
+    def __repr__(self):
+        st = self._core.stats()
+        return (f"<strata.Solver n={self._shape[0]} type={st.get('type', '?')} "
+                f"nnz_l={st.get('nnz_l', '?')} backend={st.get('backend', '?')}>")
+
+
+def analyze(A, type="auto", ordering="nd", storage="full", max_block_size=1024,
+            device_memory_limit=0):
+    """Runs the analysis phase of A only and returns its statistics as a dict.
+
+    A : scipy.sparse matrix or array, shape (n, n), real dtype (values, when present,
+    are used for scaling and type detection). Returns the analysis keys of
+    :attr:`Solver.stats`: n, nnz_a, nnz_l, nnz_l_fronts, factor_flops (flops),
+    n_fronts, largest_front_rows, largest_front_pivots, tree_height, fronts_per_level,
+    peak_working_bytes and factor_bytes (bytes), memory_budget, n_batches,
+    analysis_type, ordering, pairs, odd_cycles, and times in seconds. Raises as
+    :class:`Solver` does.
+    """
+    core = _make_core(type, ordering, "cpu", max_block_size, 0, 0, 0.0, device_memory_limit)
+    core.analyze(_to_matrix(A, storage))
+    st = core.stats()
+    for key in ("analyzed", "factorized", "solved"):
+        st.pop(key, None)
+    return st
+
+
+def solve(A, b, **options):
+    """x = A⁻¹ b in one call: ``Solver(A, **options).solve(b)``. b has shape (n,) or
+    (n, k); x has the shape of b."""
+    return Solver(A, **options).solve(b)
