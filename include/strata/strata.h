@@ -46,8 +46,8 @@ typedef enum strata_status {
    *  pointer, bad enum value, wrong index base, a pattern that differs from the
    *  analyzed one, a right-hand side with a NaN. */
   STRATA_ERROR_INVALID_INPUT = 1,
-  /** Valid request this build cannot do (e.g. the CUDA backend in a CPU-only build, or
-   *  LDLᵀ on the CUDA backend). */
+  /** Valid request this build or machine cannot do (e.g. the CUDA backend in a build
+   *  without CUDA or on a machine without a GPU, or LDLᵀ on the CUDA backend). */
   STRATA_ERROR_NOT_SUPPORTED = 2,
   /** An allocation failed. */
   STRATA_ERROR_OUT_OF_MEMORY = 3,
@@ -56,7 +56,7 @@ typedef enum strata_status {
   /** STRATA_TYPE_SPD was requested and Cholesky met a pivot that is not positive. */
   STRATA_ERROR_NOT_POSITIVE_DEFINITE = 5,
   /** Calls in the wrong order: solve before factorize, refactorize before analyze,
-   *  statistics of a phase that has not run. */
+   *  the permutation before analyze. */
   STRATA_ERROR_INVALID_STATE = 6,
   /** Anything else (a bug: please report the message). */
   STRATA_ERROR_INTERNAL = 7
@@ -110,7 +110,7 @@ typedef enum strata_ordering {
 /** Where the numeric phases run. */
 typedef enum strata_backend {
   STRATA_BACKEND_CPU = 0,  /**< BLAS/LAPACK on host threads (default) */
-  STRATA_BACKEND_CUDA = 1, /**< a CUDA GPU; NOT_SUPPORTED in a build without CUDA */
+  STRATA_BACKEND_CUDA = 1, /**< a CUDA GPU; NOT_SUPPORTED without CUDA or a GPU */
   STRATA_BACKEND_AUTO = 2  /**< the GPU when the build and the machine have one, else CPU */
 } strata_backend;
 

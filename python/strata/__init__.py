@@ -131,7 +131,7 @@ class Solver:
     device : {"auto", "cpu", "cuda"}
         Where the factorization runs. "auto" (default) uses a GPU when the build and the
         machine have one (LDLᵀ runs on the CPU); "cuda" raises NotSupportedError in a
-        build without CUDA.
+        build without CUDA or on a machine without a GPU.
     storage : {"full", "lower", "upper"}
         Which part of A is given: "lower"/"upper" mean A holds one triangle of a
         symmetric matrix (diagonal included) and the other is implied. Default "full".
