@@ -557,6 +557,42 @@ void row_swaps(double* a, index_t ld, const index_t* ipiv, index_t j0, index_t j
   }
 }
 
+// Unblocked right-looking LU (dgetf2-like) of columns [c0, c1): the pivot of column j is
+// the largest entry among the fully summed rows j..k−1 (restricted pivoting), replaced by
+// ±sp when tiny; row interchanges move columns [c0, c1); the multipliers are formed in
+// rows j+1..row_end−1. Both the recursive leaves (row_end = k, columns of the pivot block)
+// and whole small fronts (row_end = m, columns 0..m) use it, so the pivoting policy is
+// written once.
+void lu_unblocked(double* a, index_t k, index_t ld, index_t c0, index_t c1, index_t row_end,
+                  double sp, index_t* ipiv, int& parity, PivotStats& st) {
+  auto A = [&](index_t i, index_t j) -> double& { return a[i + j * ld]; };
+  for (index_t j = c0; j < std::min(c1, k); ++j) {
+    index_t p = j;
+    double vmax = std::abs(A(j, j));
+    for (index_t i = j + 1; i < k; ++i) {
+      const double v = std::abs(A(i, j));
+      if (v > vmax) vmax = v, p = i;
+    }
+    ipiv[j] = p;
+    if (p != j) {
+      for (index_t c = c0; c < c1; ++c) std::swap(A(j, c), A(p, c));
+      parity = -parity;
+    }
+    const double d = perturb(A(j, j), sp, st);
+    count_pivot(d, st, false);
+    A(j, j) = d;
+    const double inv = d != 0 ? 1.0 / d : 0.0;  // zero pivot: pseudo-inverse
+    double* lj = &A(0, j);
+    for (index_t i = j + 1; i < row_end; ++i) lj[i] *= inv;
+    for (index_t c = j + 1; c < c1; ++c) {
+      const double u = A(j, c);
+      if (u == 0.0) continue;
+      double* col = &A(0, c);
+      for (index_t i = j + 1; i < row_end; ++i) col[i] -= lj[i] * u;
+    }
+  }
+}
+
 // Recursive LU with partial pivoting of columns [c0, c1) of the k×k pivot block (rows
 // c0..k−1), those columns being already updated by the columns before c0. Interchanges
 // are applied to columns [c0, c1) only; the caller applies them elsewhere.
@@ -564,31 +600,7 @@ void lu_recursive(double* a, index_t k, index_t ld, index_t c0, index_t c1, doub
                   index_t* ipiv, int& parity, PivotStats& st) {
   auto A = [&](index_t i, index_t j) -> double& { return a[i + j * ld]; };
   if (c1 - c0 <= kLuLeaf) {
-    for (index_t j = c0; j < c1; ++j) {
-      index_t p = j;
-      double vmax = std::abs(A(j, j));
-      for (index_t i = j + 1; i < k; ++i) {
-        const double v = std::abs(A(i, j));
-        if (v > vmax) vmax = v, p = i;
-      }
-      ipiv[j] = p;
-      if (p != j) {
-        for (index_t c = c0; c < c1; ++c) std::swap(A(j, c), A(p, c));
-        parity = -parity;
-      }
-      const double d = perturb(A(j, j), sp, st);
-      count_pivot(d, st, false);
-      A(j, j) = d;
-      const double inv = d != 0 ? 1.0 / d : 0.0;  // zero pivot: pseudo-inverse
-      double* lj = &A(0, j);
-      for (index_t i = j + 1; i < k; ++i) lj[i] *= inv;
-      for (index_t c = j + 1; c < c1; ++c) {
-        const double u = A(j, c);
-        if (u == 0.0) continue;
-        double* col = &A(0, c);
-        for (index_t i = j + 1; i < k; ++i) col[i] -= lj[i] * u;
-      }
-    }
+    lu_unblocked(a, k, ld, c0, c1, k, sp, ipiv, parity, st);
     return;
   }
   index_t mid = c0 + ((c1 - c0) / 2 + kLuLeaf - 1) / kLuLeaf * kLuLeaf;
@@ -602,35 +614,10 @@ void lu_recursive(double* a, index_t k, index_t ld, index_t c0, index_t c1, doub
   row_swaps(a, ld, ipiv, mid, c1, c0, mid);
 }
 
-// Small fronts: right-looking dgetf2-like elimination of the whole front.
+// Small fronts: the unblocked elimination over the whole front (all m columns, all m rows).
 void lu_small(double* f, index_t m, index_t k, index_t ld, double sp, index_t* ipiv, int& parity,
               PivotStats& st) {
-  auto A = [&](index_t i, index_t j) -> double& { return f[i + j * ld]; };
-  for (index_t j = 0; j < k; ++j) {
-    index_t p = j;
-    double vmax = std::abs(A(j, j));
-    for (index_t i = j + 1; i < k; ++i) {
-      const double v = std::abs(A(i, j));
-      if (v > vmax) vmax = v, p = i;
-    }
-    ipiv[j] = p;
-    if (p != j) {
-      for (index_t c = 0; c < m; ++c) std::swap(A(j, c), A(p, c));
-      parity = -parity;
-    }
-    const double d = perturb(A(j, j), sp, st);
-    count_pivot(d, st, false);
-    A(j, j) = d;
-    const double inv = d != 0 ? 1.0 / d : 0.0;  // zero pivot: pseudo-inverse
-    double* lj = &A(0, j);
-    for (index_t i = j + 1; i < m; ++i) lj[i] *= inv;
-    for (index_t c = j + 1; c < m; ++c) {
-      const double u = A(j, c);
-      if (u == 0.0) continue;
-      double* col = &A(0, c);
-      for (index_t i = j + 1; i < m; ++i) col[i] -= lj[i] * u;
-    }
-  }
+  lu_unblocked(f, k, ld, 0, m, m, sp, ipiv, parity, st);
 }
 
 }  // namespace
