@@ -4,17 +4,18 @@
 //   1. one launch assembles every front of the batch in the device pool (zero, scatter
 //      original entries, extend-add children's contribution blocks from the CB arena);
 //   2. one launch factors all small fronts (one thread block each); large fronts go to
-//      cuSOLVER POTRF + cuBLAS TRSM/SYRK (LLᵀ) or a blocked LU with our panel kernel and
-//      cuBLAS TRSM/GEMM, both with pivoting restricted to the fully summed rows and the
-//      CPU backend's static pivoting;
+//      cuSOLVER POTRF + cuBLAS TRSM/SYRK (LLᵀ), a blocked LU with our panel kernel and
+//      cuBLAS TRSM/GEMM, or a blocked Bunch–Kaufman LDLᵀ with our panel kernel and cuBLAS
+//      SYRKX (kernels_ldlt.cuh), all with pivoting restricted to the fully summed rows
+//      and the CPU backend's static pivoting;
 //   3. one launch stores the contribution blocks in the device CB arena;
 //   4. the factor panels are copied to the host factor.
 // What stays on the device between batches: the analysis arrays, the scaled values and
 // the CB arena. Version 1 keeps the whole CB arena resident and fails with a clear
 // NotSupported error when the arena and the largest batch exceed device memory or the
 // budget; streaming contribution blocks to the host is the next step (issue 5).
-// LDLᵀ (Bunch–Kaufman) is not on the GPU yet: NotSupported, and Backend::automatic uses
-// the CPU for it.
+// LDLᵀ fronts come back in the CPU kernel's layout; D, pivot sizes, rows and statistics are
+// then filled by the same host code as the CPU executor's (store_ldlt_front).
 #include <cmath>
 #include <cstdint>
 #include <vector>
@@ -22,6 +23,7 @@
 #include "numeric/cuda/cuda_check.hpp"
 #include "numeric/cuda/device_buffer.hpp"
 #include "numeric/cuda/kernels.cuh"
+#include "numeric/cuda/kernels_ldlt.cuh"
 #include "numeric/factor.hpp"
 
 namespace strata::cuda {
@@ -69,8 +71,6 @@ class CudaExecutor final : public numeric::Executor {
   const char* name() const override { return "cuda"; }
 
   void begin(const FactorContext& ctx) override {
-    if (ctx.type == MatrixType::symmetric_indefinite)
-      throw NotSupported("LDLᵀ (symmetric_indefinite) is not implemented on the CUDA backend yet");
     const Analysis& an = *ctx.analysis;
     if (an.id != analysis_id_) upload_analysis(an);
     values_.upload(ctx.values, an.pattern_indices.size(), stream_);
@@ -96,6 +96,8 @@ class CudaExecutor final : public numeric::Executor {
   DeviceBuffer<std::int64_t> small_pos_, info_, perturbed_, perm_, perm_offset_, stage_offset_;
   DeviceBuffer<double> staging_;
   PinnedBuffer<double> host_staging_;
+  DeviceBuffer<int> pivot_size_;  // LDLᵀ: local pivot sizes, laid out as perm_
+  LdltLarge ldlt_large_;
 };
 
 void CudaExecutor::upload_analysis(const Analysis& an) {
@@ -188,6 +190,7 @@ void CudaExecutor::factor_batch(const FactorContext& ctx, const BatchInfo& b) {
   const auto& s = an.schedule;
   numeric::NumericFactor& fac = *ctx.factor;
   const bool lu = ctx.type == MatrixType::general;
+  const bool ldlt = ctx.type == MatrixType::symmetric_indefinite;
   const std::int64_t count = b.end - b.begin;
   launch_assemble(tree_, b.begin, count, values_.data(), arena_.data(), pool_.data(), !lu, stream_);
 
@@ -211,9 +214,15 @@ void CudaExecutor::factor_batch(const FactorContext& ctx, const BatchInfo& b) {
   for (std::int64_t p : big) big_perm += t.n_pivots(s.fronts[p]);
   perm_.resize(perm_off.back() + big_perm + 1);
   potrf_info_.resize(big.size() + 1);
-  launch_factor_small(tree_, small_pos_.data(), static_cast<std::int64_t>(ns), pool_.data(), lu,
-                      ctx.static_pivot, info_.data(), perturbed_.data(), perm_.data(),
+  pivot_size_.resize(perm_off.back() + big_perm + 1);
+  if (ldlt)
+    launch_ldlt_small(tree_, small_pos_.data(), static_cast<std::int64_t>(ns), pool_.data(),
+                      ctx.static_pivot, perturbed_.data(), perm_.data(), pivot_size_.data(),
                       perm_offset_.data(), stream_);
+  else
+    launch_factor_small(tree_, small_pos_.data(), static_cast<std::int64_t>(ns), pool_.data(), lu,
+                        ctx.static_pivot, info_.data(), perturbed_.data(), perm_.data(),
+                        perm_offset_.data(), stream_);
 
   // large fronts: library calls, one front after another on the stream
   const double one = 1.0, minus_one = -1.0;
@@ -224,7 +233,10 @@ void CudaExecutor::factor_batch(const FactorContext& ctx, const BatchInfo& b) {
     const int m = static_cast<int>(t.n_rows(f)), k = static_cast<int>(t.n_pivots(f));
     double* F = pool_.data() + pos_offset_host_[p];
     big_perm_at.push_back(perm_at);
-    if (!lu) {
+    if (ldlt) {
+      ldlt_large_.factor(blas_, stream_, F, m, k, ctx.static_pivot, perm_.data() + perm_at,
+                         pivot_size_.data() + perm_at, perturbed_.data() + ns + i);
+    } else if (!lu) {
       STRATA_CUSOLVER(cusolverDnDpotrf(solver_, CUBLAS_FILL_MODE_LOWER, k, F, m, potrf_work_.data(),
                                        static_cast<int>(potrf_work_.size()),
                                        potrf_info_.data() + i));
@@ -280,8 +292,8 @@ void CudaExecutor::factor_batch(const FactorContext& ctx, const BatchInfo& b) {
                                 stream_));
   const std::size_t nall = ns + big.size();
   std::vector<std::int64_t> info(nall), perturbed(nall), perm(perm_at);
-  std::vector<int> pinfo(big.size());
-  if (ns)
+  std::vector<int> pinfo(big.size()), psize(ldlt ? perm_at : 0);
+  if (ns && !ldlt)
     STRATA_CUDA(
         cudaMemcpyAsync(info.data(), info_.data(), 8 * ns, cudaMemcpyDeviceToHost, stream_));
   if (nall)
@@ -290,14 +302,32 @@ void CudaExecutor::factor_batch(const FactorContext& ctx, const BatchInfo& b) {
   if (perm_at)
     STRATA_CUDA(
         cudaMemcpyAsync(perm.data(), perm_.data(), 8 * perm_at, cudaMemcpyDeviceToHost, stream_));
-  if (!big.empty() && !lu)
+  if (!big.empty() && !lu && !ldlt)
     STRATA_CUDA(cudaMemcpyAsync(pinfo.data(), potrf_info_.data(), sizeof(int) * big.size(),
+                                cudaMemcpyDeviceToHost, stream_));
+  if (ldlt && perm_at)
+    STRATA_CUDA(cudaMemcpyAsync(psize.data(), pivot_size_.data(), sizeof(int) * perm_at,
                                 cudaMemcpyDeviceToHost, stream_));
   STRATA_CUDA(cudaStreamSynchronize(stream_));
   for (std::int64_t i = 0; i < count; ++i) {
     const index_t f = s.fronts[b.begin + i];
     std::copy(host_staging_.data() + stage_off[i], host_staging_.data() + stage_off[i + 1],
               fac.panels.data() + an.factor_layout.panel_offset[f]);
+  }
+
+  if (ldlt) {  // D out of the panels, pivot sizes, rows: the CPU executor's code; statistics
+    for (std::size_t i = 0; i < nall; ++i) {
+      const index_t f = s.fronts[i < ns ? small[i] : big[i - ns]];
+      const std::int64_t at = i < ns ? perm_off[i] : big_perm_at[i - ns];
+      numeric::store_ldlt_front(an, f, perm.data() + at, psize.data() + at, fac);
+      numeric::cpu::PivotStats& ps = fac.front_stats[f];
+      ps = numeric::cpu::PivotStats{};
+      const index_t p0 = t.first_pivot[f];
+      numeric::cpu::ldlt_stats_from_d(t.n_pivots(f), fac.d_diag.data() + p0, fac.d_off.data() + p0,
+                                      fac.pivot_size.data() + p0, ps);
+      ps.perturbed = perturbed[i];
+    }
+    return;
   }
 
   // host bookkeeping: failures, permuted rows, pivot statistics
