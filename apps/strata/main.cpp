@@ -4,8 +4,10 @@
 //                       [--device-memory-limit BYTES] [--json]
 //   strata solve A.mtx [--rhs b.mtx] [--type spd|symmetric_indefinite|general|auto]
 //                      [--ordering ...] [--max-block-size N] [--out x.mtx] [--json]
+//                      [--device cpu|gpu|auto] [--device-memory-limit BYTES]
 //   strata simulate [MODEL.json] [--generate KIND:SIZE] [--t-end T] [--step h] [--order k]
-//                   [--device cpu|gpu|auto] [--output DIR] [--vtk] [--dump-matrix DIR]
+//                   [--device cpu|gpu|auto] [--device-memory-limit BYTES] [--output DIR]
+//                   [--vtk] [--dump-matrix DIR]
 //                   [--dump-step K] [--output-interval S] [--full-newton] [--write-model F]
 //                   [--variable-step [--rtol R] [--atol A] [--max-step H]] [--verbose]
 //
@@ -48,9 +50,14 @@ struct CommonArgs {
   std::string ordering = "nd";
   index_t max_block_size = Options{}.max_block_size;
   std::size_t device_memory_limit = 0;
+  std::string device = "auto";
   int threads = 0;
   bool json = false;
 };
+
+Backend backend_of(const std::string& device) {
+  return device == "cpu" ? Backend::cpu : device == "gpu" ? Backend::cuda : Backend::automatic;
+}
 
 void add_common(CLI::App* cmd, CommonArgs& a) {
   cmd->add_option("file", a.file, "matrix in Matrix Market format (.mtx or .mtx.gz)")
@@ -62,7 +69,7 @@ void add_common(CLI::App* cmd, CommonArgs& a) {
                   "most pivots per front (separator blocking)")
       ->check(CLI::PositiveNumber);
   cmd->add_option("--device-memory-limit", a.device_memory_limit,
-                  "memory budget of the batch plan in bytes (0: unlimited)");
+                  "GPU memory budget in bytes (0: the whole device); also the batch plan's");
   cmd->add_option("--threads", a.threads, "host threads (0: all)");
   cmd->add_flag("--json", a.json, "print the report as JSON");
 }
@@ -73,6 +80,7 @@ Options options_from(const CommonArgs& a) {
   o.max_block_size = a.max_block_size;
   o.device_memory_limit = a.device_memory_limit;
   o.num_threads = a.threads;
+  o.backend = backend_of(a.device);
   return o;
 }
 
@@ -225,12 +233,21 @@ int run_solve(const SolveArgs& a) {
                    {"two_by_two_pivots", f.two_by_two_pivots},
                    {"inertia", {f.inertia_positive, f.inertia_negative, f.inertia_zero}},
                    {"log_abs_determinant", f.log_abs_determinant},
-                   {"determinant_sign", f.determinant_sign}};
+                   {"determinant_sign", f.determinant_sign},
+                   {"device_seconds", f.device_seconds},
+                   {"bytes_to_device", f.bytes_to_device},
+                   {"bytes_to_host", f.bytes_to_host},
+                   {"device_batches", f.device_batches},
+                   {"tiled_fronts", f.tiled_fronts},
+                   {"device_budget", f.device_budget},
+                   {"contribution_blocks_on_host", f.contribution_blocks_on_host},
+                   {"factor_resident", f.factor_resident}};
     j["solve"] = {{"seconds", st.solve.seconds},
                   {"refinement_steps", st.solve.refinement_steps},
                   {"gmres_iterations", st.solve.gmres_iterations},
                   {"backward_error", st.solve.backward_error},
-                  {"converged", st.solve.refinement_converged}};
+                  {"converged", st.solve.refinement_converged},
+                  {"on_device", st.solve.on_device}};
     j["total_seconds"] = total;
     fmt::print("{}\n", j.dump(2));
   } else {
@@ -238,6 +255,14 @@ int run_solve(const SolveArgs& a) {
     print_analysis(st.analysis, read_seconds);
     fmt::print("factorization         {} on {}: {:.3f} s, {:.2f} GFLOP/s\n", to_string(f.type),
                f.backend, f.seconds, f.gflops);
+    if (f.backend == "cuda")
+      fmt::print(
+          "GPU                   {:.3f} s on the device, {:.2f} TFLOP/s, {} launch groups, {} "
+          "tiled fronts; {:.1f} MB to the device, {:.1f} MB back; budget {:.1f} MB{}{}\n",
+          f.device_seconds, f.gflops * 1e-3, f.device_batches, f.tiled_fronts,
+          f.bytes_to_device * 1e-6, f.bytes_to_host * 1e-6, f.device_budget * 1e-6,
+          f.contribution_blocks_on_host ? ", contribution blocks spilled to host" : "",
+          f.factor_resident ? ", factor resident (solve on the GPU)" : "");
     fmt::print("pivots                {} perturbed, {} 2x2; inertia (+{}, -{}, 0:{})\n",
                f.perturbed_pivots, f.two_by_two_pivots, f.inertia_positive, f.inertia_negative,
                f.inertia_zero);
@@ -256,6 +281,7 @@ int run_solve(const SolveArgs& a) {
 
 struct SimulateArgs {
   std::string model, generate, output = "out", dump_dir, write_model, device = "auto";
+  std::size_t device_memory_limit = 0;
   double t_end = 0, step = 0, output_interval = 0, newton_tol = 0, rtol = 1e-4, atol = 1e-6,
          max_step = 0;
   int order = 0, threads = 0;
@@ -295,9 +321,8 @@ int run_simulate(const SimulateArgs& a) {
   io.t_end = a.t_end > 0 ? a.t_end : model.t_end;
   io.step = a.step > 0 ? a.step : model.step;
   io.order = a.order > 0 ? a.order : model.order;
-  io.backend = a.device == "cpu"   ? Backend::cpu
-               : a.device == "gpu" ? Backend::cuda
-                                   : Backend::automatic;
+  io.backend = backend_of(a.device);
+  io.device_memory_limit = a.device_memory_limit;
   io.threads = a.threads;
   io.modified_newton = !a.full_newton;
   if (model.newton_rtol > 0) io.newton_rtol = model.newton_rtol;
@@ -360,6 +385,10 @@ int main(int argc, char** argv) {
   solve->add_option("--type", solve_args.type, "factorization type")
       ->check(CLI::IsMember({"auto", "spd", "symmetric_indefinite", "general"}));
   solve->add_option("--out", solve_args.out, "write the solution here (Matrix Market array)");
+  solve
+      ->add_option("--device", solve_args.common.device,
+                   "where the factorization and solve run (auto: the GPU when present)")
+      ->check(CLI::IsMember({"cpu", "gpu", "auto"}));
   SimulateArgs sim;
   auto* simulate = app.add_subcommand(
       "simulate", "implicit multibody dynamics (BDF + Newton, every step solved by strata)");
@@ -376,6 +405,8 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 5));
   simulate->add_option("--device", sim.device, "where strata factorizes")
       ->check(CLI::IsMember({"cpu", "gpu", "auto"}));
+  simulate->add_option("--device-memory-limit", sim.device_memory_limit,
+                       "GPU memory budget in bytes (0: the whole device)");
   simulate->add_option("--output", sim.output, "output folder (default: out)");
   simulate->add_flag("--vtk", sim.vtk, "also write a ParaView series (output/vtk/series.pvd)");
   simulate->add_option("--output-interval", sim.output_interval,

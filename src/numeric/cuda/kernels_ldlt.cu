@@ -56,7 +56,31 @@ __global__ void ldlt_panel_kernel(double* F, std::int64_t m, std::int64_t k, std
   ldlt_device::ldlt_panel(F, m, k, j0, sp, W, perm, psize, perturbed, end);
 }
 
+// One block per front: unit diagonal, and the (j+1, j) entry of each 2×2 pivot zeroed (a
+// 2×2 pivot's columns both have local size 2, so the first of a pair is found by a scan).
+__global__ void ldlt_unit_panels_kernel(DeviceTree t, std::int64_t begin,
+                                        const std::int64_t* panel_offset, const int* pivot_size,
+                                        const std::int64_t* psize_at, double* panels) {
+  const std::int64_t f = t.fronts[begin + blockIdx.x];
+  const std::int64_t m = t.n_rows[f], k = t.n_pivots[f];
+  double* L = panels + panel_offset[blockIdx.x];
+  const int* ps = pivot_size + psize_at[blockIdx.x];
+  for (std::int64_t i = threadIdx.x; i < k; i += blockDim.x) L[i * m + i] = 1.0;
+  if (threadIdx.x == 0)
+    for (std::int64_t j = 0; j < k; j += ps[j] == 2 ? 2 : 1)
+      if (ps[j] == 2 && j + 1 < k) L[j * m + j + 1] = 0.0;
+}
+
 }  // namespace
+
+void launch_ldlt_unit_panels(const DeviceTree& t, std::int64_t begin, std::int64_t count,
+                             const std::int64_t* panel_offset, const int* pivot_size,
+                             const std::int64_t* psize_at, double* panels, cudaStream_t s) {
+  if (count == 0) return;
+  ldlt_unit_panels_kernel<<<static_cast<unsigned>(count), kLdltThreads, 0, s>>>(
+      t, begin, panel_offset, pivot_size, psize_at, panels);
+  STRATA_CUDA_LAUNCH();
+}
 
 void launch_ldlt_small(const DeviceTree& t, const std::int64_t* positions, std::int64_t count,
                        double* pool, double static_pivot, std::int64_t* perturbed,

@@ -31,6 +31,14 @@ void launch_ldlt_small(const DeviceTree& t, const std::int64_t* positions, std::
                        std::int64_t* perm, int* pivot_size, const std::int64_t* perm_offset,
                        cudaStream_t s);
 
+/// Gives the factor panels of the fronts at chunk positions [begin, begin+count) — in
+/// `panels` at panel_offset[i] — the layout store_ldlt_front gives the host factor: unit
+/// diagonal, and zeros in the (j+1, j) places of 2×2 pivots (D is kept apart). Their local
+/// pivot sizes are at pivot_size + psize_at[i]. For the resident device factor.
+void launch_ldlt_unit_panels(const DeviceTree& t, std::int64_t begin, std::int64_t count,
+                             const std::int64_t* panel_offset, const int* pivot_size,
+                             const std::int64_t* psize_at, double* panels, cudaStream_t s);
+
 /// Partial LDLᵀ of one large front, blocked: panels of 64 columns (ldlt_device.cuh's kLdltPanel)
 /// factored by one thread block (left-looking inside the panel, with pivot candidates from the
 /// whole fully summed block, as the CPU's blocked kernel), each followed by the trailing update
