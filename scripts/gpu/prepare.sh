@@ -11,9 +11,10 @@ cmake -S . -B build-gpu -G Ninja -DCMAKE_BUILD_TYPE=Release -DCMAKE_CUDA_ARCHITE
   -DSTRATA_MATRIX_DIR=.carry/matrices >/dev/null
 cmake --build build-gpu -j2
 rm -rf .carry && mkdir -p .carry/bin .carry/lib .carry/matrices
-cp build-gpu/strata build-gpu/tests/test_cuda_backend build-gpu/tests/test_solver \
-   build-gpu/bench/bench_factor .carry/bin/ 2>/dev/null || true
-[ -f build-gpu/bench/bench_gpu ] && cp build-gpu/bench/bench_gpu .carry/bin/
+cp build-gpu/strata build-gpu/tests/test_solver build-gpu/bench/bench_factor .carry/bin/
+# every gpu-labelled test binary (one per file in tests/gpu)
+for src in tests/gpu/*.cpp; do cp "build-gpu/tests/$(basename "$src" .cpp)" .carry/bin/; done
+for b in bench_gpu bench_gpu_memory; do [ -f build-gpu/bench/$b ] && cp build-gpu/bench/$b .carry/bin/; done
 cp ../shared/matrices/*.mtx.gz .carry/matrices/ 2>/dev/null || cp /work/shared/matrices/*.mtx.gz .carry/matrices/
 # every non-system, non-CUDA library the binaries load
 for b in .carry/bin/*; do
