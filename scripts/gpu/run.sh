@@ -1,10 +1,15 @@
 #!/usr/bin/env bash
 # Runs on the lent GPU machine over the staged .carry/ (see prepare.sh): the gpu-labelled
-# tests, then the GPU benchmarks asked for (--bench ARGS, --memory-bench ARGS). Logs and
+# tests, then the GPU benchmarks asked for (--bench ARGS, --memory-bench ARGS,
+# --cudss-bench ARGS). Logs and
 # results go to $OUT.
 set -uo pipefail
 for z in .carry/lib/*.xz; do [ -f "$z" ] && xz -d -f "$z"; done
-export LD_LIBRARY_PATH="$PWD/.carry/lib:${LD_LIBRARY_PATH:-}"
+# cuDSS, if its three parts were carried by earlier calls into build-cudss/ (prepare.sh)
+if [ -f build-cudss/part-ac ] && [ ! -f build-cudss/libcudss.so.1 ]; then
+  cat build-cudss/part-aa build-cudss/part-ab build-cudss/part-ac | xz -d -T8 >build-cudss/libcudss.so.1
+fi
+export LD_LIBRARY_PATH="$PWD/.carry/lib:$PWD/build-cudss:${LD_LIBRARY_PATH:-}"
 OUT="${OUT:-/tmp/strata-out}"
 mkdir -p "$OUT"
 nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv | tee "$OUT/gpu.txt"
@@ -22,6 +27,8 @@ while [ $# -gt 0 ]; do
       .carry/bin/bench_gpu --results-dir "$OUT" "${args[@]}" 2>&1 | tee "$OUT/bench_gpu.log" || rc=1 ;;
     --memory-bench) shift; args=(); while [ $# -gt 0 ] && [[ "$1" != --*-bench && "$1" != --bench ]]; do args+=("$1"); shift; done
       .carry/bin/bench_gpu_memory --results-dir "$OUT" "${args[@]}" 2>&1 | tee "$OUT/bench_gpu_memory.log" || rc=1 ;;
+    --cudss-bench) shift; args=(); while [ $# -gt 0 ] && [[ "$1" != --*-bench && "$1" != --bench ]]; do args+=("$1"); shift; done
+      .carry/bin/bench_cudss --results-dir "$OUT" "${args[@]}" 2>&1 | tee "$OUT/bench_cudss.log" || rc=1 ;;
     *) echo "run.sh: unknown argument $1"; exit 2 ;;
   esac
 done
