@@ -290,30 +290,29 @@ int run_simulate(const SimulateArgs& a) {
     source = "generated " + spec + (a.generate.empty() ? " (default model)" : "");
   }
   const double read_seconds = seconds_since(t0);
-  SimulationOptions o;
-  IntegratorOptions& io = o.integrator;
-  io.t_end = a.t_end > 0 ? a.t_end : model.t_end;
-  io.step = a.step > 0 ? a.step : model.step;
-  io.order = a.order > 0 ? a.order : model.order;
-  io.backend = a.device == "cpu"   ? Backend::cpu
+  RunSettings rs;
+  rs.t_end = a.t_end;
+  rs.step = a.step;
+  rs.order = a.order;
+  rs.backend = a.device == "cpu"   ? Backend::cpu
                : a.device == "gpu" ? Backend::cuda
                                    : Backend::automatic;
-  io.threads = a.threads;
-  io.modified_newton = !a.full_newton;
-  if (model.newton_rtol > 0) io.newton_rtol = model.newton_rtol;
-  if (model.newton_atol > 0) io.newton_atol = model.newton_atol;
-  if (a.newton_tol > 0) io.newton_rtol = a.newton_tol;
-  io.dump_dir = a.dump_dir;
-  io.verbose = a.verbose;
-  io.dense_solver = a.dense;
-  io.variable_step = a.variable_step;
-  io.rtol = a.rtol;
-  io.atol = a.atol;
-  io.max_step = a.max_step;
-  io.dump_step = a.dump_dir.empty() ? -1 : a.dump_step;
-  o.output_dir = a.output;
-  o.output_interval = a.output_interval > 0 ? a.output_interval : model.output_interval;
-  o.vtk = a.vtk;
+  rs.threads = a.threads;
+  rs.full_newton = a.full_newton;
+  rs.newton_tol = a.newton_tol;
+  rs.variable_step = a.variable_step;
+  rs.rtol = a.rtol;
+  rs.atol = a.atol;
+  rs.max_step = a.max_step;
+  rs.dense_reference = a.dense;
+  rs.verbose = a.verbose;
+  rs.output_dir = a.output;
+  rs.output_interval = a.output_interval;
+  rs.vtk = a.vtk;
+  rs.dump_dir = a.dump_dir;
+  rs.dump_step = a.dump_step;
+  SimulationOptions o = simulation_options(model, rs);
+  const IntegratorOptions& io = o.integrator;
   o.progress = !a.quiet && isatty(fileno(stdout));
   o.progress_stream = stdout;
   fmt::print("strata simulate {}\n", source);
