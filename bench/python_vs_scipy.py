@@ -92,6 +92,9 @@ def load(name, matrix_dir):
     if kind == "lap3d":
         return laplacian_3d(int(size)), f"generated: 7-point Laplacian {size}^3"
     path = os.path.join(matrix_dir, name + ".mtx.gz")
+    if not os.path.exists(path):
+        sys.exit(f"python_vs_scipy.py: {path} does not exist: pass --matrix-dir (or set "
+                 f"STRATA_MATRIX_DIR) to the folder of the shared matrices")
     A = sp.csc_matrix(scipy.io.mmread(path))
     return A, os.path.relpath(path, REPO) if path.startswith(REPO) else path
 
