@@ -674,10 +674,12 @@ class Report:
                              f_int(row.get("n")), f_sec(dig(row, "cli", "total_seconds")),
                              f_sec(dig(row, "python", "total_seconds")),
                              f_pct(row.get("overhead_vs_cli_percent")),
+                             f_pct(row.get("overhead_vs_cli_median_percent")),
                              f_pct(row.get("outside_phases_percent")),
                              f_sec(dig(row, "python", "full_storage_total_seconds"))])
             self.w(table(["problem", "size", "n", "CLI s", "Python s", "Python vs CLI",
-                          "outside the C++ phases", "Python, full storage s"], rows, 2))
+                          "same, medians", "outside the C++ phases",
+                          "Python, full storage s"], rows, 2))
             large = [row for row in over if row.get("size") == "large"]
             if goal is not None and large:
                 for row in large:
@@ -690,9 +692,18 @@ class Report:
                            f"command line, {f_pct(row.get('outside_phases_percent'))} outside "
                            f"the C++ phases of the same call).")
                     self.w()
+            load = r.get("load_average")
+            if isinstance(load, dict) and num(load.get("start")) is not None:
+                self.w(f"Load average of the machine (1 minute) at the start and end of the "
+                       f"run: {num(load['start']):.1f} and {num(load.get('end')) or 0:.1f} on "
+                       f"{r.machine[1]} hardware threads: other work on the machine makes the "
+                       f"two processes' times differ by chance; the column \"outside the C++ "
+                       f"phases\" (Python time over the phase times strata reports in the same "
+                       f"call) does not depend on that.")
+                self.w()
             self.caption("Table: copied from the rows (CLI and Python: analysis + "
-                         "factorization + one solve, best of the repeats; percentages as "
-                         "stored).", [r])
+                         "factorization + one solve, best of the repeats, and the ratio of "
+                         "the medians; percentages as stored).", [r])
         solv = [row for row in r.rows if row.get("part") == "solvers"]
         if solv:
             self.w(f"### strata, SuperLU and CHOLMOD from Python ({machine_label(r.machine)})")

@@ -134,8 +134,8 @@ def main():
 
     # --- the Python interface: overhead table, the goal, solver ratios
     sp_ = section(secs, "## Python interface") or ""
-    check(re.search(r"\| lap3d-45 \| large \| 91,125 \| 10 \| 10\.1 \| \+1\.00% \| \+0\.50% \| "
-                    r"10\.4 \|", sp_), "python: overhead row lap3d-45 wrong")
+    check(re.search(r"\| lap3d-45 \| large \| 91,125 \| 10 \| 10\.1 \| \+1\.00% \| \+2\.00% \| "
+                    r"\+0\.50% \| 10\.4 \|", sp_), "python: overhead row lap3d-45 wrong")
     check("Goal (Python layer under 5% on the large matrix, lap3d-45): met" in sp_,
           "python: the overhead goal is not judged on the large matrix")
     check(re.search(r"\| bcsstk16 \| 4,884 \| 1 \(2\.0e-16\) \| 4 \(3\.0e-16\) \| 8 \(3\.0e-16\) \| "
