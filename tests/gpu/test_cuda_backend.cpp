@@ -427,7 +427,9 @@ TEST_F(CudaBackend, AutomaticRunsLdltOnGpu) {
   const SparseMatrix kkt = test::random_kkt(500, rng);
   for (auto [a, negative] : {std::pair{&kkt, index_t{500 / 3}}, std::pair{&l.a, l.negative}}) {
     SCOPED_TRACE("n=" + std::to_string(a->n_rows));
-    Solver s{Options{}};
+    Options o;
+    o.backend = Backend::automatic;  // the default is the CPU
+    Solver s{o};
     s.factorize(*a);
     EXPECT_EQ(s.stats().factor.backend, "cuda");
     EXPECT_EQ(s.matrix_type(), MatrixType::symmetric_indefinite);

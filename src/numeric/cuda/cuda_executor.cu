@@ -327,7 +327,9 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
   const bool ldlt = ctx.type == MatrixType::symmetric_indefinite;
   const std::int64_t count = end - begin;
   ++chunks_;
-  launch_assemble(tree_, begin, count, values_.data(), pool_.data(), !lu, stream_);
+  index_t max_rows = 0;
+  for (index_t p = begin; p < end; ++p) max_rows = std::max(max_rows, t.n_rows(s.fronts[p]));
+  launch_assemble(tree_, begin, count, max_rows, values_.data(), pool_.data(), !lu, stream_);
 
   // small fronts: one launch for the whole chunk
   std::vector<std::int64_t> small, big, perm_off{0};
@@ -408,7 +410,7 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
     }
     perm_at += k;
   }
-  launch_store_cb(tree_, begin, count, pool_.data(), !lu, stream_);
+  launch_store_cb(tree_, begin, count, max_rows, pool_.data(), !lu, stream_);
 
   // factor panels: packed into the device factor (resident) or the chunk's staging
   // area, then to the host in one copy
@@ -422,8 +424,8 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
     total += panel_size(t, f, lu);
   }
   upload(stage_offset_, stage_off);
-  launch_pack_panels(tree_, begin, count, pool_.data(), stage_offset_.data(), panels_.data(), lu,
-                     stream_);
+  launch_pack_panels(tree_, begin, count, max_rows, pool_.data(), stage_offset_.data(),
+                     panels_.data(), lu, stream_);
   copy_panels_back(ctx, begin, end);
   const std::size_t nall = ns + big.size();
   std::vector<std::int64_t> info(nall), perturbed(nall), perm(perm_at);

@@ -5,6 +5,7 @@
 // vendor batched POTRF handles poorly (DESIGN.md §2). Partial pivoting for LU searches
 // only the fully summed rows (restricted pivoting) and replaces tiny pivots by
 // ±static_pivot, exactly as the CPU kernels do (numeric/cpu/dense_front.hpp).
+#include <algorithm>
 #include <cfloat>
 
 #include "numeric/cuda/cuda_check.hpp"
@@ -15,17 +16,41 @@ namespace {
 
 constexpr int kThreads = 256;
 
+// The per-front kernels below run on a 2-D grid: blockIdx.x is the front (its batch
+// position minus `begin`), blockIdx.y a slice of kSliceCols columns of it, so that a
+// large front is spread over many SMs instead of one. Slices write disjoint columns, and
+// within a slice children are added one after another: no two writes collide and the
+// order of additions is fixed (results do not depend on scheduling).
+constexpr std::int64_t kSliceCols = 64;
+
+// First child CB column whose parent column is at least c (rel is increasing).
+__device__ std::int64_t lower_bound(const std::int64_t* rel, std::int64_t n, std::int64_t c) {
+  std::int64_t lo = 0, hi = n;
+  while (lo < hi) {
+    const std::int64_t mid = (lo + hi) / 2;
+    if (rel[mid] < c)
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  return lo;
+}
+
 __global__ void assemble_kernel(DeviceTree t, std::int64_t begin, const double* values,
                                 double* pool, bool symmetric) {
   const std::int64_t pos = begin + blockIdx.x;
   const std::int64_t f = t.fronts[pos];
   const std::int64_t m = t.n_rows[f];
+  const std::int64_t c0 = blockIdx.y * kSliceCols, c1 = min(m, c0 + kSliceCols);
+  if (c0 >= m) return;
   double* F = pool + t.pos_offset[pos];
-  for (std::int64_t i = threadIdx.x; i < m * m; i += blockDim.x) F[i] = 0.0;
+  for (std::int64_t x = threadIdx.x; x < m * (c1 - c0); x += blockDim.x) F[c0 * m + x] = 0.0;
   __syncthreads();
   for (std::int64_t e = t.entry_offsets[f] + threadIdx.x; e < t.entry_offsets[f + 1];
-       e += blockDim.x)
-    F[t.entry_dst[e]] += values[t.entry_src[e]];  // distinct destinations: no race
+       e += blockDim.x) {
+    const std::int64_t d = t.entry_dst[e];
+    if (d >= c0 * m && d < c1 * m) F[d] += values[t.entry_src[e]];  // distinct destinations
+  }
   __syncthreads();
   for (std::int64_t q = t.child_offsets[f]; q < t.child_offsets[f + 1]; ++q) {
     const std::int64_t c = t.children[q];
@@ -33,10 +58,11 @@ __global__ void assemble_kernel(DeviceTree t, std::int64_t begin, const double* 
     if (mc == 0) continue;
     const double* cb = t.cb_ptr[c];
     const std::int64_t* rel = t.rel + t.rel_offsets[c];
-    for (std::int64_t x = threadIdx.x; x < mc * mc; x += blockDim.x) {
-      const std::int64_t jj = x / mc, ii = x % mc;
+    const std::int64_t j0 = lower_bound(rel, mc, c0), j1 = lower_bound(rel, mc, c1);
+    for (std::int64_t x = threadIdx.x; x < (j1 - j0) * mc; x += blockDim.x) {
+      const std::int64_t jj = j0 + x / mc, ii = x % mc;
       if (symmetric && ii < jj) continue;
-      F[rel[jj] * m + rel[ii]] += cb[x];
+      F[rel[jj] * m + rel[ii]] += cb[jj * mc + ii];
     }
     __syncthreads();  // children are added one after another: no two writes collide
   }
@@ -48,12 +74,14 @@ __global__ void store_cb_kernel(DeviceTree t, std::int64_t begin, const double* 
   const std::int64_t f = t.fronts[pos];
   if (t.parent[f] < 0) return;
   const std::int64_t m = t.n_rows[f], k = t.n_pivots[f], mc = m - k;
+  const std::int64_t c0 = blockIdx.y * kSliceCols, c1 = min(mc, c0 + kSliceCols);
+  if (c0 >= mc) return;
   const double* F = pool + t.pos_offset[pos];
   double* cb = t.cb_ptr[f];
-  for (std::int64_t x = threadIdx.x; x < mc * mc; x += blockDim.x) {
-    const std::int64_t jj = x / mc, ii = x % mc;
+  for (std::int64_t x = threadIdx.x; x < (c1 - c0) * mc; x += blockDim.x) {
+    const std::int64_t jj = c0 + x / mc, ii = x % mc;
     if (symmetric && ii < jj) continue;
-    cb[x] = F[(k + jj) * m + k + ii];
+    cb[jj * mc + ii] = F[(k + jj) * m + k + ii];
   }
 }
 
@@ -62,12 +90,17 @@ __global__ void pack_panels_kernel(DeviceTree t, std::int64_t begin, const doubl
   const std::int64_t pos = begin + blockIdx.x;
   const std::int64_t f = t.fronts[pos];
   const std::int64_t m = t.n_rows[f], k = t.n_pivots[f];
+  const std::int64_t c0 = blockIdx.y * kSliceCols;
   const double* F = pool + t.pos_offset[pos];
   double* dst = staging + staging_offset[blockIdx.x];
-  for (std::int64_t x = threadIdx.x; x < m * k; x += blockDim.x) dst[x] = F[x];
-  if (lu) {
+  if (c0 < k) {  // panel columns [c0, c1): contiguous in the front and in the panel
+    const std::int64_t c1 = min(k, c0 + kSliceCols);
+    for (std::int64_t x = c0 * m + threadIdx.x; x < c1 * m; x += blockDim.x) dst[x] = F[x];
+  }
+  if (lu && c0 < m - k) {  // U12 columns [c0, c1)
+    const std::int64_t c1 = min(m - k, c0 + kSliceCols);
     double* u12 = dst + m * k;
-    for (std::int64_t x = threadIdx.x; x < k * (m - k); x += blockDim.x) {
+    for (std::int64_t x = c0 * k + threadIdx.x; x < c1 * k; x += blockDim.x) {
       const std::int64_t i = x % k, j = x / k;  // U12(i, j) = F(i, k + j)
       u12[x] = F[(k + j) * m + i];
     }
@@ -225,26 +258,33 @@ __global__ void lu_slab_kernel(double* s, std::int64_t r, std::int64_t w, std::i
 
 }  // namespace
 
+dim3 sliced_grid(std::int64_t count, std::int64_t max_rows) {
+  const std::int64_t slices = std::max<std::int64_t>(1, (max_rows + kSliceCols - 1) / kSliceCols);
+  return dim3(static_cast<unsigned>(count), static_cast<unsigned>(slices));
+}
+
 void launch_assemble(const DeviceTree& t, std::int64_t begin, std::int64_t count,
-                     const double* values, double* pool, bool symmetric, cudaStream_t s) {
+                     std::int64_t max_rows, const double* values, double* pool, bool symmetric,
+                     cudaStream_t s) {
   if (count == 0) return;
-  assemble_kernel<<<static_cast<unsigned>(count), kThreads, 0, s>>>(t, begin, values, pool,
+  assemble_kernel<<<sliced_grid(count, max_rows), kThreads, 0, s>>>(t, begin, values, pool,
                                                                     symmetric);
   STRATA_CUDA_LAUNCH();
 }
 
 void launch_store_cb(const DeviceTree& t, std::int64_t begin, std::int64_t count,
-                     const double* pool, bool symmetric, cudaStream_t s) {
+                     std::int64_t max_rows, const double* pool, bool symmetric, cudaStream_t s) {
   if (count == 0) return;
-  store_cb_kernel<<<static_cast<unsigned>(count), kThreads, 0, s>>>(t, begin, pool, symmetric);
+  store_cb_kernel<<<sliced_grid(count, max_rows), kThreads, 0, s>>>(t, begin, pool, symmetric);
   STRATA_CUDA_LAUNCH();
 }
 
 void launch_pack_panels(const DeviceTree& t, std::int64_t begin, std::int64_t count,
-                        const double* pool, const std::int64_t* staging_offset, double* staging,
-                        bool lu, cudaStream_t s) {
+                        std::int64_t max_rows, const double* pool,
+                        const std::int64_t* staging_offset, double* staging, bool lu,
+                        cudaStream_t s) {
   if (count == 0) return;
-  pack_panels_kernel<<<static_cast<unsigned>(count), kThreads, 0, s>>>(t, begin, pool,
+  pack_panels_kernel<<<sliced_grid(count, max_rows), kThreads, 0, s>>>(t, begin, pool,
                                                                        staging_offset, staging, lu);
   STRATA_CUDA_LAUNCH();
 }

@@ -34,20 +34,23 @@ struct DeviceTree {
 /// Zeroes the batch's fronts, scatters the original entries and extend-adds the
 /// children's contribution blocks (lower triangle only when `symmetric`). `pool` may be
 /// mapped pinned host memory (a front factored tile by tile).
+/// `max_rows`: the most rows of a front in the launch (sizes the grid of column slices).
 void launch_assemble(const DeviceTree& t, std::int64_t begin, std::int64_t count,
-                     const double* values, double* pool, bool symmetric, cudaStream_t s);
+                     std::int64_t max_rows, const double* values, double* pool, bool symmetric,
+                     cudaStream_t s);
 
 /// Copies each front's contribution block F[k:m, k:m] to t.cb_ptr[f] (fronts with a
 /// parent only).
 void launch_store_cb(const DeviceTree& t, std::int64_t begin, std::int64_t count,
-                     const double* pool, bool symmetric, cudaStream_t s);
+                     std::int64_t max_rows, const double* pool, bool symmetric, cudaStream_t s);
 
 /// Packs each front's factor panel (its first k columns, m×k, contiguous in the front)
 /// and, for LU, its U12 block (k×(m−k), leading dimension k) into `staging` at
 /// staging_offset[position − begin], so the batch comes back in one copy.
 void launch_pack_panels(const DeviceTree& t, std::int64_t begin, std::int64_t count,
-                        const double* pool, const std::int64_t* staging_offset, double* staging,
-                        bool lu, cudaStream_t s);
+                        std::int64_t max_rows, const double* pool,
+                        const std::int64_t* staging_offset, double* staging, bool lu,
+                        cudaStream_t s);
 
 /// Partial factorization of small fronts, one block each, in place in the pool.
 /// `positions` lists batch positions (device array of `count`). Per listed front i:

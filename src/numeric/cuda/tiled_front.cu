@@ -67,7 +67,7 @@ void CudaExecutor::factor_tiled(const numeric::FactorContext& ctx, index_t pos) 
   ++chunks_;
   host_front_.resize(static_cast<std::size_t>(m) * m);
   double* H = host_front_.data();
-  launch_assemble(tree_, pos, 1, values_.data(), H, !lu, stream_);  // pos_offset[pos] is 0
+  launch_assemble(tree_, pos, 1, m, values_.data(), H, !lu, stream_);  // pos_offset[pos] is 0
   STRATA_CUDA(cudaStreamSynchronize(stream_));
 
   const std::int64_t w_max = std::max<std::int64_t>(
