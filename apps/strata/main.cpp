@@ -8,12 +8,16 @@
 //                   [--device cpu|gpu|auto] [--output DIR] [--vtk] [--dump-matrix DIR]
 //                   [--dump-step K] [--output-interval S] [--full-newton] [--write-model F]
 //                   [--variable-step [--rtol R] [--atol A] [--max-step H]] [--verbose]
+//                   [--checkpoint-every N [--checkpoint-dir DIR]]
+//   strata simulate --resume DIR [--t-end T] [--output DIR] [--checkpoint-every N] ...
 //
 // Exit status: 0 on success, 1 on a solver error (the message names the problem),
-// 2 on a usage error.
+// 2 on a usage error, 128 + the signal number when SIGINT/SIGTERM stopped a simulation
+// (its partial results and a checkpoint are kept).
 #include <fmt/core.h>
 #include <unistd.h>
 
+#include <csignal>
 #include <CLI/CLI.hpp>
 #include <chrono>
 #include <cmath>
@@ -23,6 +27,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "core/atomic_file.hpp"
 #include "mbd/generators.hpp"
 #include "mbd/model_io.hpp"
 #include "mbd/simulation.hpp"
@@ -256,6 +261,9 @@ int run_solve(const SolveArgs& a) {
 
 struct SimulateArgs {
   std::string model, generate, output = "out", dump_dir, write_model, device = "auto";
+  std::string checkpoint_dir, resume;
+  index_t checkpoint_every = 0;
+  std::vector<std::string> resume_conflicts;  // integration options given with --resume
   double t_end = 0, step = 0, output_interval = 0, newton_tol = 0, rtol = 1e-4, atol = 1e-6,
          max_step = 0;
   int order = 0, threads = 0;
@@ -268,6 +276,20 @@ struct SimulateArgs {
 // minute on two cores).
 constexpr const char* kDefaultModel = "tracked:100";
 
+// SIGINT/SIGTERM during a simulation: remembered here, read by the simulation loop between
+// steps (it stops, keeps its partial results, writes a checkpoint). SA_RESETHAND: a second
+// signal kills the process at once.
+volatile std::sig_atomic_t g_signal = 0;
+extern "C" void on_signal(int sig) { g_signal = sig; }
+void catch_interrupts() {
+  struct sigaction sa {};
+  sa.sa_handler = on_signal;
+  sigemptyset(&sa.sa_mask);
+  sa.sa_flags = SA_RESETHAND;
+  sigaction(SIGINT, &sa, nullptr);
+  sigaction(SIGTERM, &sa, nullptr);
+}
+
 int run_simulate(const SimulateArgs& a) {
   using namespace strata::mbd;
   auto t0 = std::chrono::steady_clock::now();
@@ -275,47 +297,81 @@ int run_simulate(const SimulateArgs& a) {
     throw InvalidInput("give either a model file or --generate, not both");
   Model model;
   std::string source;
-  if (!a.model.empty()) {
-    model = load_model(a.model);
+  nlohmann::json doc, checkpoint;
+  std::string model_name;
+  if (!a.resume.empty()) {
+    // the model and the integration options come from the checkpoint
+    if (!a.model.empty() || !a.generate.empty())
+      throw InvalidInput("--resume takes the model from the checkpoint: give no model file or "
+                         "--generate with it");
+    if (!a.resume_conflicts.empty())
+      throw InvalidInput("--resume continues with the options of the checkpointed run: " +
+                         a.resume_conflicts.front() + " cannot be changed");
+    checkpoint = read_checkpoint(a.resume);
+    const nlohmann::json& meta = checkpoint.at("meta");
+    if (!meta.contains("model"))
+      throw InvalidInput(a.resume + ": the checkpoint holds no model document");
+    doc = meta.at("model");
+    model_name = meta.value("model_name", std::string("model"));
+    model = build_model(doc, model_name);
+    source = fmt::format("{} (resumed from {} at step {}, t = {:.9g} s)",
+                         meta.value("source", model_name), a.resume,
+                         checkpoint.at("integrator").at("step").get<index_t>(),
+                         checkpoint.at("integrator").at("t").get<double>());
+  } else if (!a.model.empty()) {
+    doc = load_model_document(a.model);
+    model_name = model_file_name(a.model);
+    model = build_model(doc, model_name);
     source = a.model;
   } else {
     const std::string spec = a.generate.empty() ? kDefaultModel : a.generate;
-    const nlohmann::json doc = generate(spec);
-    if (!a.write_model.empty()) {
-      std::ofstream out(a.write_model);
-      if (!out) throw Error("cannot write " + a.write_model);
-      out << doc.dump(1) << "\n";
-    }
+    doc = generate(spec);
+    if (!a.write_model.empty()) write_file_atomically(a.write_model, doc.dump(1) + "\n");
+    model_name = spec;
     model = build_model(doc, spec);
     source = "generated " + spec + (a.generate.empty() ? " (default model)" : "");
   }
   const double read_seconds = seconds_since(t0);
   SimulationOptions o;
   IntegratorOptions& io = o.integrator;
-  io.t_end = a.t_end > 0 ? a.t_end : model.t_end;
-  io.step = a.step > 0 ? a.step : model.step;
-  io.order = a.order > 0 ? a.order : model.order;
-  io.backend = a.device == "cpu"   ? Backend::cpu
-               : a.device == "gpu" ? Backend::cuda
-                                   : Backend::automatic;
-  io.threads = a.threads;
-  io.modified_newton = !a.full_newton;
-  if (model.newton_rtol > 0) io.newton_rtol = model.newton_rtol;
-  if (model.newton_atol > 0) io.newton_atol = model.newton_atol;
-  if (a.newton_tol > 0) io.newton_rtol = a.newton_tol;
+  if (!a.resume.empty()) {
+    io = checkpoint_integrator_options(checkpoint);
+    if (a.t_end > 0) io.t_end = a.t_end;
+    o.output_interval = checkpoint.at("simulation").at("output_interval").get<double>();
+    o.vtk = checkpoint.at("simulation").at("vtk").get<bool>();
+    o.resume = &checkpoint;
+  } else {
+    io.t_end = a.t_end > 0 ? a.t_end : model.t_end;
+    io.step = a.step > 0 ? a.step : model.step;
+    io.order = a.order > 0 ? a.order : model.order;
+    io.backend = a.device == "cpu"   ? Backend::cpu
+                 : a.device == "gpu" ? Backend::cuda
+                                     : Backend::automatic;
+    io.threads = a.threads;
+    io.modified_newton = !a.full_newton;
+    if (model.newton_rtol > 0) io.newton_rtol = model.newton_rtol;
+    if (model.newton_atol > 0) io.newton_atol = model.newton_atol;
+    if (a.newton_tol > 0) io.newton_rtol = a.newton_tol;
+    io.dense_solver = a.dense;
+    io.variable_step = a.variable_step;
+    io.rtol = a.rtol;
+    io.atol = a.atol;
+    io.max_step = a.max_step;
+    o.output_interval = a.output_interval > 0 ? a.output_interval : model.output_interval;
+    o.vtk = a.vtk;
+  }
   io.dump_dir = a.dump_dir;
   io.verbose = a.verbose;
-  io.dense_solver = a.dense;
-  io.variable_step = a.variable_step;
-  io.rtol = a.rtol;
-  io.atol = a.atol;
-  io.max_step = a.max_step;
   io.dump_step = a.dump_dir.empty() ? -1 : a.dump_step;
   o.output_dir = a.output;
-  o.output_interval = a.output_interval > 0 ? a.output_interval : model.output_interval;
-  o.vtk = a.vtk;
   o.progress = !a.quiet && isatty(fileno(stdout));
   o.progress_stream = stdout;
+  o.checkpoint_every = a.checkpoint_every;
+  o.checkpoint_dir = a.checkpoint_dir.empty() ? a.output + "/checkpoint" : a.checkpoint_dir;
+  o.checkpoint_meta = {{"model", doc}, {"model_name", model_name}, {"source", source}};
+  if (!a.resume.empty()) o.checkpoint_meta["source"] = checkpoint.at("meta").value("source", source);
+  o.interrupt = &g_signal;
+  catch_interrupts();
   fmt::print("strata simulate {}\n", source);
   fmt::print("integrator            BDF{} with {} {:g} s to t = {:g} s, {} Newton\n", io.order,
              io.variable_step
@@ -331,10 +387,17 @@ int run_simulate(const SimulateArgs& a) {
         "output                {}/ (positions, velocities, accelerations, reactions, "
         "steps .csv{}{})\n",
         o.output_dir, o.vtk ? ", vtk/series.pvd" : "",
-        r.complete ? "" : "; marked partial in status.json");
+        r.complete ? "" : "; *.partial.csv, marked partial in status.json");
   if (io.dump_step > 0)
     fmt::print("Newton matrix         step {} written to {}/jacobian_step{}.mtx (+ rhs)\n",
                io.dump_step, io.dump_dir, io.dump_step);
+  if (r.checkpoint_step > 0 && o.checkpoint_every > 0)
+    fmt::print("checkpoint            step {} in {}/ (continue with --resume {})\n",
+               r.checkpoint_step, o.checkpoint_dir, o.checkpoint_dir);
+  if (r.state == "interrupted") {
+    std::fprintf(stderr, "strata: %s; partial results kept\n", r.message.c_str());
+    return 128 + static_cast<int>(g_signal);
+  }
   if (!r.complete) {
     std::fprintf(stderr, "strata: error: the simulation stopped at t = %.9g s: %s\n", r.t_reached,
                  r.message.c_str());
@@ -400,7 +463,21 @@ int main(int argc, char** argv) {
   simulate->add_option("--max-step", sim.max_step, "largest variable step [s] (default t_end/10)");
   simulate->add_flag("--dense-reference", sim.dense,
                      "solve with dense LAPACK LU instead of strata (diagnosis; small models)");
+  simulate->add_option("--checkpoint-every", sim.checkpoint_every,
+                       "write a restart point every N accepted steps (and when interrupted)")
+      ->check(CLI::PositiveNumber);
+  simulate->add_option("--checkpoint-dir", sim.checkpoint_dir,
+                       "folder of the restart point (default: OUTPUT/checkpoint)");
+  simulate->add_option("--resume", sim.resume,
+                       "continue the run checkpointed in this folder (model and options from "
+                       "the checkpoint; --t-end may extend it)")
+      ->check(CLI::ExistingDirectory);
   CLI11_PARSE(app, argc, argv);
+  for (const char* opt : {"--step", "--order", "--device", "--output-interval", "--vtk",
+                          "--full-newton", "--newton-tol", "--threads", "--variable-step",
+                          "--rtol", "--atol", "--max-step", "--dense-reference",
+                          "--write-model"})
+    if (simulate->count(opt) > 0) sim.resume_conflicts.push_back(opt);
   try {
     if (*analyze) return run_analyze(analyze_args);
     if (*solve) return run_solve(solve_args);

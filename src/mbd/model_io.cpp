@@ -646,7 +646,7 @@ Model build_model(const json& doc, const std::string& source) {
   }
 }
 
-Model load_model(const std::string& path) {
+nlohmann::json load_model_document(const std::string& path) {
   std::ifstream in(path);
   if (!in) throw ModelError(path + ": cannot open the model file");
   std::stringstream ss;
@@ -669,10 +669,16 @@ Model load_model(const std::string& path) {
     throw ModelError(path + ":" + std::to_string(line) + ":" + std::to_string(col) +
                      ": invalid JSON: " + e.what());
   }
-  std::string name = path;
-  const auto slash = name.find_last_of('/');
-  if (slash != std::string::npos) name = name.substr(slash + 1);
-  return build_model(doc, name);
+  return doc;
+}
+
+std::string model_file_name(const std::string& path) {
+  const auto slash = path.find_last_of('/');
+  return slash == std::string::npos ? path : path.substr(slash + 1);
+}
+
+Model load_model(const std::string& path) {
+  return build_model(load_model_document(path), model_file_name(path));
 }
 
 }  // namespace strata::mbd

@@ -26,6 +26,7 @@
 #include <mutex>
 #include <thread>
 
+#include "core/alloc.hpp"
 #include "core/blas.hpp"
 #include "numeric/factor.hpp"
 #include "strata/errors.hpp"
@@ -119,7 +120,7 @@ void CpuExecutor::process_front(const FactorContext& ctx, index_t f, Workspace& 
   const index_t m = t.n_rows(f), k = t.n_pivots(f);
   const index_t* rows = t.rows_of(f);
   const std::size_t mm = static_cast<std::size_t>(m) * m;
-  if (w.front.size() < mm) w.front.resize(mm);
+  if (w.front.size() < mm) sized_resize(w.front, mm, "factorize: dense front workspace");
   double* F = w.front.data();
   std::fill(F, F + mm, 0.0);
 
