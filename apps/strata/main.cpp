@@ -55,6 +55,7 @@ struct CommonArgs {
   std::size_t device_memory_limit = 0;
   int threads = 0;
   bool json = false;
+  bool reproducible = false;
 };
 
 void add_common(CLI::App* cmd, CommonArgs& a) {
@@ -70,6 +71,8 @@ void add_common(CLI::App* cmd, CommonArgs& a) {
                   "memory budget of the batch plan in bytes (0: unlimited)");
   cmd->add_option("--threads", a.threads, "host threads (0: all)");
   cmd->add_flag("--json", a.json, "print the report as JSON");
+  cmd->add_flag("--reproducible", a.reproducible,
+                "bitwise the same result for every --threads (large fronts on one BLAS thread)");
 }
 
 Options options_from(const CommonArgs& a) {
@@ -78,6 +81,7 @@ Options options_from(const CommonArgs& a) {
   o.max_block_size = a.max_block_size;
   o.device_memory_limit = a.device_memory_limit;
   o.num_threads = a.threads;
+  o.reproducible = a.reproducible;
   return o;
 }
 

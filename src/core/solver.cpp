@@ -106,7 +106,7 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
     const bool gpu = s.options.backend == Backend::cuda ||
                      (s.options.backend == Backend::automatic && numeric::cuda_available());
     s.executor = gpu ? numeric::make_cuda_executor(s.options)
-                     : numeric::make_cpu_executor(s.options.num_threads);
+                     : numeric::make_cpu_executor(s.options.num_threads, s.options.reproducible);
   }
 
   MatrixType type = an.type;

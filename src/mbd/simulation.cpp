@@ -244,7 +244,23 @@ nlohmann::json read_checkpoint(const std::string& dir) {
   return ck;
 }
 
+namespace {
+SimulationResult run(const Model& model, const SimulationOptions& opts);
+}  // namespace
+
 SimulationResult simulate(const Model& model, const SimulationOptions& opts) {
+  // an allocation failure outside the step loop (set-up, writing the final files): the
+  // histories keep their partial names and status.json, if written, says "running"
+  try {
+    return run(model, opts);
+  } catch (const std::bad_alloc&) {
+    throw OutOfMemory(0, "simulation (setting up or writing the results)");
+  }
+}
+
+namespace {
+
+SimulationResult run(const Model& model, const SimulationOptions& opts) {
   Timer wall;
   SimulationResult res;
   Integrator in(model, opts.integrator);
@@ -415,6 +431,8 @@ SimulationResult simulate(const Model& model, const SimulationOptions& opts) {
       res.complete = true;
       state = "complete";
     }
+  } catch (const OutOfMemory& e) {  // from the solver: say where in the run
+    res.message = fmt::format("step {} at t = {:.9g} s: {}", in.stats().steps + 1, in.t(), e.what());
   } catch (const Error& e) {
     res.message = e.what();
   } catch (const std::bad_alloc&) {
@@ -442,6 +460,8 @@ SimulationResult simulate(const Model& model, const SimulationOptions& opts) {
   res.wall_seconds = wall.seconds();
   return res;
 }
+
+}  // namespace
 
 std::string summary(const Model& model, const SimulationResult& r) {
   const IntegratorStats& s = r.stats;

@@ -10,10 +10,16 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
 #include <string>
 
 #include "alloc_hook/alloc_hook.hpp"
 #include "core/analysis.hpp"
+#include "mbd/generators.hpp"
+#include "mbd/model_io.hpp"
+#include "mbd/simulation.hpp"
 #include "strata/strata.h"
 #include "strata/strata.hpp"
 #include "support/test_support.hpp"
@@ -223,6 +229,85 @@ TEST(FaultInjection, CInterfaceReturnsOutOfMemory) {
     if (!fired) break;
   }
   EXPECT_GT(ooms, 10u);
+}
+
+std::string slurp(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+// A simulation whose allocations fail at sampled points: it either completes, or stops
+// with its reason "out of memory" and its files named partial, or (before the first step,
+// or while writing its final files) throws OutOfMemory — never another exception, never
+// a file that passes for a complete run.
+TEST(FaultInjection, SimulationStopsWithOutOfMemoryAndPartialFiles) {
+  using namespace mbd;
+  const Model model = build_model(generate("chain:3"), "chain:3");
+  SimulationOptions o;
+  o.integrator.t_end = 0.02;
+  o.integrator.step = 1e-3;
+  o.integrator.threads = 1;
+  o.output_dir = ::testing::TempDir() + "/fault_sim";
+  std::filesystem::remove_all(o.output_dir);
+  alloc::reset_count();
+  ASSERT_TRUE(simulate(model, o).complete);
+  const std::uint64_t total = alloc::count();
+  ASSERT_GT(total, 100u);
+  int stopped = 0, thrown = 0;
+  // the first 200 allocation points, then 300 spread over the whole run
+  std::vector<std::uint64_t> points;
+  for (std::uint64_t n = 1; n <= 200; ++n) points.push_back(n);
+  for (std::uint64_t k = 1; k <= 300; ++k) points.push_back(200 + k * (total - 200) / 300);
+  for (std::uint64_t n : points) {
+    SCOPED_TRACE("failing allocation " + std::to_string(n) + " of " + std::to_string(total));
+    std::filesystem::remove_all(o.output_dir);
+    SimulationResult r;
+    bool threw = false;
+    {
+      alloc::Armed armed(n);
+      try {
+        r = simulate(model, o);
+      } catch (const OutOfMemory& e) {
+        threw = true;
+        // the simulation's own set-up, or a solver phase of the initial conditions
+        const std::string msg = e.what();
+        EXPECT_TRUE(msg.find("simulation") != std::string::npos ||
+                    msg.find("analyze") != std::string::npos ||
+                    msg.find("factorize") != std::string::npos ||
+                    msg.find("solve") != std::string::npos)
+            << msg;
+      } catch (const std::exception& e) {
+        ADD_FAILURE() << "not OutOfMemory: " << typeid(e).name() << ": " << e.what();
+        continue;
+      }
+    }
+    const std::string status = slurp(o.output_dir + "/status.json");
+    if (threw) {
+      ++thrown;
+      EXPECT_FALSE(std::filesystem::exists(o.output_dir + "/positions.csv") &&
+                   status.find("\"complete\": true") != std::string::npos)
+          << "a failed run left files that pass for a complete one";
+      continue;
+    }
+    if (r.complete) {
+      EXPECT_NE(status.find("\"complete\": true"), std::string::npos) << status;
+      continue;
+    }
+    ++stopped;
+    EXPECT_NE(r.message.find("out of memory"), std::string::npos) << r.message;
+    EXPECT_EQ(r.state, "failed");
+    EXPECT_NE(status.find("\"partial\": true"), std::string::npos) << status;
+    EXPECT_NE(status.find("out of memory"), std::string::npos) << status;
+    EXPECT_FALSE(std::filesystem::exists(o.output_dir + "/positions.csv"));
+    EXPECT_TRUE(std::filesystem::exists(o.output_dir + "/positions.partial.csv"));
+    if (::testing::Test::HasFailure()) break;
+  }
+  std::printf("simulation: %llu allocations per run; %zu points tried: %d stopped partial, %d threw\n",
+              static_cast<unsigned long long>(total), points.size(), stopped, thrown);
+  EXPECT_GT(stopped, 0);
+  EXPECT_GT(thrown, 0);
 }
 
 }  // namespace
