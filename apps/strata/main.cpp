@@ -17,10 +17,10 @@
 #include <fmt/core.h>
 #include <unistd.h>
 
-#include <csignal>
 #include <CLI/CLI.hpp>
 #include <chrono>
 #include <cmath>
+#include <csignal>
 #include <cstdio>
 #include <fstream>
 #include <map>
@@ -306,8 +306,9 @@ int run_simulate(const SimulateArgs& a) {
   if (!a.resume.empty()) {
     // the model and the integration options come from the checkpoint
     if (!a.model.empty() || !a.generate.empty())
-      throw InvalidInput("--resume takes the model from the checkpoint: give no model file or "
-                         "--generate with it");
+      throw InvalidInput(
+          "--resume takes the model from the checkpoint: give no model file or "
+          "--generate with it");
     if (!a.resume_conflicts.empty())
       throw InvalidInput("--resume continues with the options of the checkpointed run: " +
                          a.resume_conflicts.front() + " cannot be changed");
@@ -341,6 +342,10 @@ int run_simulate(const SimulateArgs& a) {
   if (!a.resume.empty()) {
     io = checkpoint_integrator_options(checkpoint);
     if (a.t_end > 0) io.t_end = a.t_end;
+    const double t_ck = checkpoint.at("integrator").at("t").get<double>();
+    if (!(io.t_end > t_ck))
+      throw InvalidInput(fmt::format("--t-end {:g} s is not after the checkpoint's time {:.9g} s",
+                                     io.t_end, t_ck));
     o.output_interval = checkpoint.at("simulation").at("output_interval").get<double>();
     o.vtk = checkpoint.at("simulation").at("vtk").get<bool>();
     o.resume = &checkpoint;
@@ -373,7 +378,8 @@ int run_simulate(const SimulateArgs& a) {
   o.checkpoint_every = a.checkpoint_every;
   o.checkpoint_dir = a.checkpoint_dir.empty() ? a.output + "/checkpoint" : a.checkpoint_dir;
   o.checkpoint_meta = {{"model", doc}, {"model_name", model_name}, {"source", source}};
-  if (!a.resume.empty()) o.checkpoint_meta["source"] = checkpoint.at("meta").value("source", source);
+  if (!a.resume.empty())
+    o.checkpoint_meta["source"] = checkpoint.at("meta").value("source", source);
   o.interrupt = &g_signal;
   catch_interrupts();
   fmt::print("strata simulate {}\n", source);
@@ -467,20 +473,21 @@ int main(int argc, char** argv) {
   simulate->add_option("--max-step", sim.max_step, "largest variable step [s] (default t_end/10)");
   simulate->add_flag("--dense-reference", sim.dense,
                      "solve with dense LAPACK LU instead of strata (diagnosis; small models)");
-  simulate->add_option("--checkpoint-every", sim.checkpoint_every,
-                       "write a restart point every N accepted steps (and when interrupted)")
+  simulate
+      ->add_option("--checkpoint-every", sim.checkpoint_every,
+                   "write a restart point every N accepted steps (and when interrupted)")
       ->check(CLI::PositiveNumber);
   simulate->add_option("--checkpoint-dir", sim.checkpoint_dir,
                        "folder of the restart point (default: OUTPUT/checkpoint)");
-  simulate->add_option("--resume", sim.resume,
-                       "continue the run checkpointed in this folder (model and options from "
-                       "the checkpoint; --t-end may extend it)")
+  simulate
+      ->add_option("--resume", sim.resume,
+                   "continue the run checkpointed in this folder (model and options from "
+                   "the checkpoint; --t-end may extend it)")
       ->check(CLI::ExistingDirectory);
   CLI11_PARSE(app, argc, argv);
   for (const char* opt : {"--step", "--order", "--device", "--output-interval", "--vtk",
-                          "--full-newton", "--newton-tol", "--threads", "--variable-step",
-                          "--rtol", "--atol", "--max-step", "--dense-reference",
-                          "--write-model"})
+                          "--full-newton", "--newton-tol", "--threads", "--variable-step", "--rtol",
+                          "--atol", "--max-step", "--dense-reference", "--write-model"})
     if (simulate->count(opt) > 0) sim.resume_conflicts.push_back(opt);
   try {
     if (*analyze) return run_analyze(analyze_args);

@@ -11,7 +11,8 @@ cmake -S . -B build-gpu -G Ninja -DCMAKE_BUILD_TYPE=Release -DCMAKE_CUDA_ARCHITE
   -DSTRATA_MATRIX_DIR=.carry/matrices >/dev/null
 cmake --build build-gpu -j2
 rm -rf .carry && mkdir -p .carry/bin .carry/lib .carry/matrices
-cp build-gpu/strata build-gpu/tests/test_cuda_backend build-gpu/tests/test_solver \
+cp build-gpu/strata build-gpu/tests/test_cuda_backend build-gpu/tests/test_cuda_faults \
+   build-gpu/tests/test_solver \
    build-gpu/bench/bench_factor .carry/bin/ 2>/dev/null || true
 [ -f build-gpu/bench/bench_gpu ] && cp build-gpu/bench/bench_gpu .carry/bin/
 cp ../shared/matrices/*.mtx.gz .carry/matrices/ 2>/dev/null || cp /work/shared/matrices/*.mtx.gz .carry/matrices/

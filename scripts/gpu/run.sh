@@ -9,6 +9,9 @@ mkdir -p "$OUT"
 nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv | tee "$OUT/gpu.txt"
 rc=0
 .carry/bin/test_cuda_backend 2>&1 | tee "$OUT/test_cuda_backend.log" || rc=1
+if [ -x .carry/bin/test_cuda_faults ]; then
+  .carry/bin/test_cuda_faults 2>&1 | tee "$OUT/test_cuda_faults.log" || rc=1
+fi
 if [ -x .carry/bin/bench_gpu ]; then
   .carry/bin/bench_gpu --results-dir "$OUT" "$@" 2>&1 | tee "$OUT/bench_gpu.log" || rc=1
 fi

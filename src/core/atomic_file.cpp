@@ -20,8 +20,8 @@ void write_file_atomically(const std::string& path, std::string_view contents, b
                           std::to_string(counter++);
   auto fail = [&](const char* what, int err) {
     std::remove(tmp.c_str());
-    throw Error("cannot write " + path + ": " + what + " " + tmp + " failed: " +
-                std::strerror(err));
+    throw Error("cannot write " + path + ": " + what + " " + tmp +
+                " failed: " + std::strerror(err));
   };
   const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd < 0) fail("creating", errno);

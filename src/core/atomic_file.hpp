@@ -18,8 +18,7 @@ namespace strata {
 /// (survives a power loss too; false for many small files such as ParaView frames, which
 /// are then atomic against interruption and readers only). Throws Error naming `path` and
 /// the system's reason; the temporary is removed on failure.
-void write_file_atomically(const std::string& path, std::string_view contents,
-                           bool durable = true);
+void write_file_atomically(const std::string& path, std::string_view contents, bool durable = true);
 
 /// Renames `from` onto `to` (replacing it); throws Error naming both on failure.
 void rename_file(const std::string& from, const std::string& to);

@@ -257,12 +257,9 @@ static void solve_impl(SolverState& s, const double* b, double* x, index_t nrhs)
   apply_inverse(s, b, x, nrhs, work);
 
   // backward error of each column; refine the columns above the tolerance
-  const solve::Operator op_a = [&](const double* in, double* out) {
-    multiply(s.values, in, out);
-  };
+  const solve::Operator op_a = [&](const double* in, double* out) { multiply(s.values, in, out); };
   auto berr_of = [&](index_t col) {
-    return solve::backward_error(n, op_a, s.norm_inf, b + col * n, x + col * n,
-                                 r.data() + col * n);
+    return solve::backward_error(n, op_a, s.norm_inf, b + col * n, x + col * n, r.data() + col * n);
   };
   std::vector<double> berr(nrhs), last(nrhs);
   std::vector<char> active(nrhs, 1);

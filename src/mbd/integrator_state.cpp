@@ -114,8 +114,8 @@ json Integrator::save_state() const {
 void Integrator::restore_state(const json& j) {
   const index_t n = sys_.n(), m = sys_.m();
   if (j.at("n").get<index_t>() != n || j.at("m").get<index_t>() != m)
-    throw InvalidInput("checkpoint: it was written for a model with n = " +
-                       j.at("n").dump() + " coordinates and m = " + j.at("m").dump() +
+    throw InvalidInput("checkpoint: it was written for a model with n = " + j.at("n").dump() +
+                       " coordinates and m = " + j.at("m").dump() +
                        " constraint equations; this model has " + std::to_string(n) + " and " +
                        std::to_string(m));
   j.at("t").get_to(t_);

@@ -69,8 +69,7 @@ class Csv {
   std::ofstream out_;
 };
 
-const char* const kHistories[] = {"positions", "velocities", "accelerations", "reactions",
-                                  "steps"};
+const char* const kHistories[] = {"positions", "velocities", "accelerations", "reactions", "steps"};
 
 // Joint reaction forces (global, on body j) of every constraint that reports one.
 std::vector<std::string> reaction_names(const Model& m) {
@@ -239,7 +238,8 @@ nlohmann::json read_checkpoint(const std::string& dir) {
   if (!ck.is_object() || ck.value("format", "") != "strata-checkpoint")
     throw InvalidInput(path + ": not a strata checkpoint");
   if (ck.value("version", 0) != kCheckpointVersion)
-    throw InvalidInput(path + ": checkpoint version " + ck.value("version", nlohmann::json()).dump() +
+    throw InvalidInput(path + ": checkpoint version " +
+                       ck.value("version", nlohmann::json()).dump() +
                        ", this strata reads version " + std::to_string(kCheckpointVersion));
   return ck;
 }
@@ -272,8 +272,8 @@ SimulationResult run(const Model& model, const SimulationOptions& opts) {
       in.initialize();
     }
   } catch (const std::bad_alloc&) {
-    throw OutOfMemory(0, ck ? "simulation: restoring the checkpoint"
-                            : "simulation: initial conditions");
+    throw OutOfMemory(
+        0, ck ? "simulation: restoring the checkpoint" : "simulation: initial conditions");
   } catch (const nlohmann::json::exception& e) {
     throw InvalidInput(std::string("checkpoint: missing or malformed state: ") + e.what());
   }
@@ -319,10 +319,20 @@ SimulationResult run(const Model& model, const SimulationOptions& opts) {
     for (const auto& s : model.coordinate_names()) h.push_back(s);
     std::vector<std::string> rh{"time"};
     for (const auto& s : reaction_names(model)) rh.push_back(s);
-    const std::vector<std::string> sh{"step", "time", "h", "order", "newton_iterations",
-                                      "factorizations", "rejected", "assembly_seconds",
-                                      "solver_seconds", "kinetic_energy", "potential_energy",
-                                      "total_energy", "position_violation", "velocity_violation"};
+    const std::vector<std::string> sh{"step",
+                                      "time",
+                                      "h",
+                                      "order",
+                                      "newton_iterations",
+                                      "factorizations",
+                                      "rejected",
+                                      "assembly_seconds",
+                                      "solver_seconds",
+                                      "kinetic_energy",
+                                      "potential_energy",
+                                      "total_energy",
+                                      "position_violation",
+                                      "velocity_violation"};
     const std::vector<std::string>* headers[] = {&h, &h, &h, &rh, &sh};
     for (int k = 0; k < 5; ++k) {
       // a resumed run starts with the rows written before its checkpoint (a checkpoint of
@@ -388,9 +398,9 @@ SimulationResult run(const Model& model, const SimulationOptions& opts) {
     c["histories"] = h;
     std::filesystem::create_directories(opts.checkpoint_dir);
     const std::vector<std::uint8_t> bytes = nlohmann::json::to_cbor(c);
-    write_file_atomically(opts.checkpoint_dir + "/" + kCheckpointFile,
-                          std::string_view(reinterpret_cast<const char*>(bytes.data()),
-                                           bytes.size()));
+    write_file_atomically(
+        opts.checkpoint_dir + "/" + kCheckpointFile,
+        std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
     res.checkpoint_step = in.stats().steps;
     out_seconds += t.seconds();
   };
@@ -401,9 +411,12 @@ SimulationResult run(const Model& model, const SimulationOptions& opts) {
       if (opts.interrupt && *opts.interrupt != 0) {
         const int sig = *opts.interrupt;
         state = "interrupted";
-        res.message = fmt::format("interrupted by signal {} ({}) after step {} at t = {:.9g} s",
-                                  sig, sig == SIGINT ? "SIGINT" : sig == SIGTERM ? "SIGTERM" : "?",
-                                  in.stats().steps, in.t());
+        res.message =
+            fmt::format("interrupted by signal {} ({}) after step {} at t = {:.9g} s", sig,
+                        sig == SIGINT    ? "SIGINT"
+                        : sig == SIGTERM ? "SIGTERM"
+                                         : "?",
+                        in.stats().steps, in.t());
         checkpoint();
         break;
       }
@@ -422,8 +435,7 @@ SimulationResult run(const Model& model, const SimulationOptions& opts) {
       }
       // not after the last step: a restart from there would differ from a longer run
       // (the last step is shortened to end exactly at t_end)
-      if (opts.checkpoint_every > 0 && in.stats().steps % opts.checkpoint_every == 0 &&
-          !in.done())
+      if (opts.checkpoint_every > 0 && in.stats().steps % opts.checkpoint_every == 0 && !in.done())
         checkpoint();
       bar.update(in.t(), in.stats().steps, in.stats().newton_iterations);
     }
@@ -432,7 +444,8 @@ SimulationResult run(const Model& model, const SimulationOptions& opts) {
       state = "complete";
     }
   } catch (const OutOfMemory& e) {  // from the solver: say where in the run
-    res.message = fmt::format("step {} at t = {:.9g} s: {}", in.stats().steps + 1, in.t(), e.what());
+    res.message =
+        fmt::format("step {} at t = {:.9g} s: {}", in.stats().steps + 1, in.t(), e.what());
   } catch (const Error& e) {
     res.message = e.what();
   } catch (const std::bad_alloc&) {
@@ -472,7 +485,7 @@ std::string summary(const Model& model, const SimulationResult& r) {
       model.name, model.planar ? "planar" : "spatial", model.bodies.size() - 1, model.n,
       model.n_constraints(), model.forces.size());
   o += fmt::format("result                {} at t = {:.6g} s\n",
-                   r.complete                  ? "complete"
+                   r.complete                 ? "complete"
                    : r.state == "interrupted" ? "PARTIAL (interrupted)"
                                               : "PARTIAL (stopped early)",
                    r.t_reached);

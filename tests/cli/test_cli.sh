@@ -120,6 +120,7 @@ has "complete status" "$tmp/s_res/status.json" '"complete": true'
 no_tmp "no temporaries" "$tmp/s_res"
 no_file "complete run: no partial file" "$tmp/s_res/positions.partial.csv"
 # the options of a resumed run are those of the checkpoint
+check "resume before the checkpoint" 1 "is not after the checkpoint's time" "$strata" simulate --resume "$tmp/s_half/checkpoint" --t-end 0.001 --output "$tmp/s_bad"
 check "resume with --step" 1 "--step cannot be changed" "$strata" simulate --resume "$tmp/s_half/checkpoint" --step 1e-3 --output "$tmp/s_bad"
 mkdir -p "$tmp/bad_ck" && printf 'garbage' > "$tmp/bad_ck/checkpoint.cbor"
 check "corrupt checkpoint" 1 "not a readable strata checkpoint" "$strata" simulate --resume "$tmp/bad_ck" --output "$tmp/s_bad"

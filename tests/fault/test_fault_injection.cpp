@@ -56,10 +56,10 @@ struct Problem {
 std::vector<Problem> problems(std::mt19937_64& rng) {
   std::vector<Problem> p;
   p.push_back({"spd", test::random_sparse(40, 3, test::RandomKind::spd, rng), MatrixType::spd});
-  p.push_back({"symmetric_indefinite", test::random_kkt(45, rng),
-               MatrixType::symmetric_indefinite});
-  p.push_back({"general", test::random_sparse(40, 3, test::RandomKind::general, rng),
-               MatrixType::general});
+  p.push_back(
+      {"symmetric_indefinite", test::random_kkt(45, rng), MatrixType::symmetric_indefinite});
+  p.push_back(
+      {"general", test::random_sparse(40, 3, test::RandomKind::general, rng), MatrixType::general});
   // automatic on an indefinite matrix: a failed Cholesky attempt, then LDLᵀ
   p.push_back({"automatic", test::random_sparse(33, 3, test::RandomKind::symmetric_indefinite, rng),
                MatrixType::automatic});
@@ -101,8 +101,9 @@ std::string armed_run(Solver& s, const SparseMatrix& a, const std::vector<double
     return msg.empty() ? std::string("?") : msg;
   } catch (const std::exception& e) {
     alloc::disarm();
-    ADD_FAILURE() << "allocation " << n << " failed with something else than OutOfMemory: "
-                  << typeid(e).name() << ": " << e.what();
+    ADD_FAILURE() << "allocation " << n
+                  << " failed with something else than OutOfMemory: " << typeid(e).name() << ": "
+                  << e.what();
     return "other";
   }
   return "";
@@ -135,9 +136,10 @@ void sweep(const Problem& p, int threads, std::uint64_t stride) {
     if (!fired) break;  // no allocation point left
   }
   EXPECT_GT(failures, 10u) << "the sweep met almost no allocation";
-  std::printf("%s (threads %d): %llu allocation points tried, %llu OutOfMemory (%llu with a size)\n",
-              p.name, threads, static_cast<unsigned long long>(n),
-              static_cast<unsigned long long>(failures), static_cast<unsigned long long>(sized));
+  std::printf(
+      "%s (threads %d): %llu allocation points tried, %llu OutOfMemory (%llu with a size)\n",
+      p.name, threads, static_cast<unsigned long long>(n),
+      static_cast<unsigned long long>(failures), static_cast<unsigned long long>(sized));
 }
 
 TEST(FaultInjection, EveryAllocationOfEveryPhaseOneThread) {
@@ -304,8 +306,9 @@ TEST(FaultInjection, SimulationStopsWithOutOfMemoryAndPartialFiles) {
     EXPECT_TRUE(std::filesystem::exists(o.output_dir + "/positions.partial.csv"));
     if (::testing::Test::HasFailure()) break;
   }
-  std::printf("simulation: %llu allocations per run; %zu points tried: %d stopped partial, %d threw\n",
-              static_cast<unsigned long long>(total), points.size(), stopped, thrown);
+  std::printf(
+      "simulation: %llu allocations per run; %zu points tried: %d stopped partial, %d threw\n",
+      static_cast<unsigned long long>(total), points.size(), stopped, thrown);
   EXPECT_GT(stopped, 0);
   EXPECT_GT(thrown, 0);
 }

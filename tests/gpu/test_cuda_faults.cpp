@@ -31,10 +31,10 @@ TEST(CudaFaults, DeviceAllocationFailureIsOutOfMemoryAndRecoverable) {
     SparseMatrix a;
     MatrixType type;
   };
-  std::vector<Case> cases{{test::random_sparse(733, 3, test::RandomKind::spd, rng), MatrixType::spd},
-                          {test::random_sparse(300, 3, test::RandomKind::general, rng),
-                           MatrixType::general},
-                          {generators::laplacian_3d(16, 16, 16), MatrixType::spd}};
+  std::vector<Case> cases{
+      {test::random_sparse(733, 3, test::RandomKind::spd, rng), MatrixType::spd},
+      {test::random_sparse(300, 3, test::RandomKind::general, rng), MatrixType::general},
+      {generators::laplacian_3d(16, 16, 16), MatrixType::spd}};
   for (const Case& c : cases) {
     SCOPED_TRACE("n=" + std::to_string(c.a.n_rows));
     Options o;
