@@ -184,6 +184,7 @@ nlohmann::json integrator_options_json(const IntegratorOptions& o) {
           {"startup_levels", o.startup_levels},
           {"min_step", o.min_step},
           {"backend", static_cast<int>(o.backend)},
+          {"device_memory_limit", o.device_memory_limit},
           {"threads", o.threads},
           {"dense_solver", o.dense_solver},
           {"variable_step", o.variable_step},
@@ -213,6 +214,7 @@ IntegratorOptions checkpoint_integrator_options(const nlohmann::json& ck) {
   j.at("startup_levels").get_to(o.startup_levels);
   j.at("min_step").get_to(o.min_step);
   o.backend = static_cast<Backend>(j.at("backend").get<int>());
+  o.device_memory_limit = j.value("device_memory_limit", std::size_t{0});
   j.at("threads").get_to(o.threads);
   j.at("dense_solver").get_to(o.dense_solver);
   j.at("variable_step").get_to(o.variable_step);
@@ -242,6 +244,50 @@ nlohmann::json read_checkpoint(const std::string& dir) {
                        ck.value("version", nlohmann::json()).dump() +
                        ", this strata reads version " + std::to_string(kCheckpointVersion));
   return ck;
+}
+
+SimulationOptions simulation_options(const Model& model, const RunSettings& s) {
+  auto check = [](bool ok, const std::string& what) {
+    if (!ok) throw InvalidInput(what);
+  };
+  check(std::isfinite(s.t_end) && s.t_end >= 0,
+        fmt::format("t_end must be >= 0 s, got {}", s.t_end));
+  check(std::isfinite(s.step) && s.step >= 0, fmt::format("step must be >= 0 s, got {}", s.step));
+  check(s.order >= 0 && s.order <= 5, fmt::format("order must be 1..5, got {}", s.order));
+  check(s.threads >= 0, fmt::format("threads must be >= 0, got {}", s.threads));
+  check(std::isfinite(s.newton_tol) && s.newton_tol >= 0,
+        fmt::format("newton_tol must be >= 0, got {}", s.newton_tol));
+  check(std::isfinite(s.rtol) && s.rtol > 0, fmt::format("rtol must be > 0, got {}", s.rtol));
+  check(std::isfinite(s.atol) && s.atol > 0, fmt::format("atol must be > 0, got {}", s.atol));
+  check(std::isfinite(s.max_step) && s.max_step >= 0,
+        fmt::format("max_step must be >= 0 s, got {}", s.max_step));
+  check(std::isfinite(s.output_interval) && s.output_interval >= 0,
+        fmt::format("output_interval must be >= 0 s, got {}", s.output_interval));
+  check(s.dump_step >= 1, fmt::format("dump_step must be >= 1, got {}", s.dump_step));
+  SimulationOptions o;
+  IntegratorOptions& io = o.integrator;
+  io.t_end = s.t_end > 0 ? s.t_end : model.t_end;
+  io.step = s.step > 0 ? s.step : model.step;
+  io.order = s.order > 0 ? s.order : model.order;
+  io.backend = s.backend;
+  io.device_memory_limit = s.device_memory_limit;
+  io.threads = s.threads;
+  io.modified_newton = !s.full_newton;
+  if (model.newton_rtol > 0) io.newton_rtol = model.newton_rtol;
+  if (model.newton_atol > 0) io.newton_atol = model.newton_atol;
+  if (s.newton_tol > 0) io.newton_rtol = s.newton_tol;
+  io.dump_dir = s.dump_dir;
+  io.verbose = s.verbose;
+  io.dense_solver = s.dense_reference;
+  io.variable_step = s.variable_step;
+  io.rtol = s.rtol;
+  io.atol = s.atol;
+  io.max_step = s.max_step;
+  io.dump_step = s.dump_dir.empty() ? -1 : s.dump_step;
+  o.output_dir = s.output_dir;
+  o.output_interval = s.output_interval > 0 ? s.output_interval : model.output_interval;
+  o.vtk = s.vtk;
+  return o;
 }
 
 namespace {
@@ -285,17 +331,27 @@ SimulationResult run(const Model& model, const SimulationOptions& opts) {
   double next_output = 0;
   double out_seconds = 0;
   double kin = 0, pot = 0, pv = 0, vv = 0;
+  SimulationHistory* mem = opts.history;
   auto write_state = [&]() {
-    if (!files) return;
+    if (!files && !mem) return;
     Timer t;
     const double tt = in.t();
     if (opts.output_interval <= 0 || tt + 1e-12 >= next_output || in.done()) {
-      hist[0]->row(tt, in.q().data(), n);
-      hist[1]->row(tt, in.v().data(), n);
-      hist[2]->row(tt, in.a().data(), n);
       reactions(model, in, rbuf);
-      hist[3]->row(tt, rbuf.data(), rbuf.size());
-      if (vtk) vtk->write(tt, in.q().data());
+      if (files) {
+        hist[0]->row(tt, in.q().data(), n);
+        hist[1]->row(tt, in.v().data(), n);
+        hist[2]->row(tt, in.a().data(), n);
+        hist[3]->row(tt, rbuf.data(), rbuf.size());
+        if (vtk) vtk->write(tt, in.q().data());
+      }
+      if (mem) {
+        mem->time.push_back(tt);
+        mem->positions.insert(mem->positions.end(), in.q().begin(), in.q().end());
+        mem->velocities.insert(mem->velocities.end(), in.v().begin(), in.v().end());
+        mem->accelerations.insert(mem->accelerations.end(), in.a().begin(), in.a().end());
+        mem->reactions.insert(mem->reactions.end(), rbuf.begin(), rbuf.end());
+      }
       if (opts.output_interval > 0)
         next_output = (std::floor(tt / opts.output_interval + 1e-9) + 1) * opts.output_interval;
     }
@@ -307,6 +363,13 @@ SimulationResult run(const Model& model, const SimulationOptions& opts) {
     if (vtk) f.push_back("vtk/series.pvd");
     return f;
   };
+  if (mem) {
+    // (a resumed run's rows start at the restart point: the rows before it are in the
+    // checkpoint's CSV text only)
+    *mem = SimulationHistory{};
+    mem->coordinate_names = model.coordinate_names();
+    mem->reaction_names = reaction_names(model);
+  }
   if (files) {
     namespace fs = std::filesystem;
     fs::create_directories(opts.output_dir);
@@ -374,6 +437,15 @@ SimulationResult run(const Model& model, const SimulationOptions& opts) {
     if (files)
       hist[4]->raw(fmt::format("0,{:.17g},0,0,0,0,0,0,0,{:.17g},{:.17g},{:.17g},{:.6e},{:.6e}",
                                in.t(), kin, pot, kin + pot, pv, vv));
+    if (mem) {
+      StepRecord r0;
+      r0.t = in.t();
+      r0.kinetic_energy = kin;
+      r0.potential_energy = pot;
+      r0.position_violation = pv;
+      r0.velocity_violation = vv;
+      mem->steps.push_back(r0);
+    }
   }
   // A restart point: the integrator state, this loop's state, the histories so far.
   auto checkpoint = [&]() {
@@ -433,6 +505,10 @@ SimulationResult run(const Model& model, const SimulationOptions& opts) {
             s.step, s.t, s.h, s.order, s.newton_iterations, s.factorizations, s.rejected,
             s.assembly_seconds, s.solver_seconds, kin, pot, kin + pot, pv, vv));
       }
+      if (mem)
+        mem->steps.push_back(StepRecord{s.step, s.t, s.h, s.order, s.newton_iterations,
+                                        s.factorizations, s.rejected, s.assembly_seconds,
+                                        s.solver_seconds, kin, pot, pv, vv});
       // not after the last step: a restart from there would differ from a longer run
       // (the last step is shortened to end exactly at t_end)
       if (opts.checkpoint_every > 0 && in.stats().steps % opts.checkpoint_every == 0 && !in.done())

@@ -18,6 +18,9 @@
 // NAME.csv, and then writes status.json with "complete": true. Stale histories of an
 // earlier run in the same folder are removed at the start. status.json, the ParaView files
 // and the checkpoints are written whole (core/atomic_file.hpp).
+// The same rows can be kept in memory instead (or as well): SimulationHistory, filled
+// when SimulationOptions::history is set (the Python binding uses it); after a run that
+// stopped early it holds the rows up to the last accepted step, like the partial files.
 #pragma once
 
 #include <csignal>
@@ -29,6 +32,28 @@
 #include "mbd/model.hpp"
 
 namespace strata::mbd {
+
+/// One row of steps.csv: an accepted step (step 0 is the initial state).
+struct StepRecord {
+  index_t step = 0;
+  double t = 0, h = 0;  ///< s
+  int order = 0, newton_iterations = 0, factorizations = 0, rejected = 0;
+  double assembly_seconds = 0, solver_seconds = 0;
+  double kinetic_energy = 0, potential_energy = 0;        ///< J
+  double position_violation = 0, velocity_violation = 0;  ///< max |Φ|, max |Φ̇|
+};
+
+/// The time histories of a run in memory: the rows of positions/velocities/
+/// accelerations/reactions.csv and steps.csv, at full double precision. Matrices are
+/// row-major, one row per output time.
+struct SimulationHistory {
+  std::vector<std::string> coordinate_names;  ///< n names ("link3.e2")
+  std::vector<std::string> reaction_names;    ///< joint forces ("j1.Fx"), then multipliers
+  std::vector<double> time;                   ///< output times (s), rows
+  std::vector<double> positions, velocities, accelerations;  ///< rows × n (SI units)
+  std::vector<double> reactions;  ///< rows × reaction_names.size() (N; λ as solved)
+  std::vector<StepRecord> steps;  ///< every accepted step, the initial state first
+};
 
 struct SimulationOptions {
   IntegratorOptions integrator;
@@ -51,6 +76,9 @@ struct SimulationOptions {
   /// Set asynchronously (a signal handler) to a nonzero signal number: the run stops before
   /// the next step, keeps its partial results and writes a checkpoint if checkpointing.
   const volatile std::sig_atomic_t* interrupt = nullptr;
+  /// When set, cleared and filled with the same rows as the CSV files (at the same
+  /// output_interval), whether or not output_dir is set.
+  SimulationHistory* history = nullptr;
 };
 
 struct SimulationResult {
@@ -65,6 +93,33 @@ struct SimulationResult {
   IntegratorStats stats;
   index_t checkpoint_step = 0;  ///< step of the last checkpoint written (0: none)
 };
+
+/// The settings of a run as `strata simulate` takes them (and strata.simulate in
+/// Python): 0 means "the model's value" for t_end, step, order, output_interval and the
+/// Newton tolerance (model files carry these in their "simulation" object).
+struct RunSettings {
+  double t_end = 0, step = 0;  ///< s
+  int order = 0;               ///< BDF order 1..5
+  Backend backend = Backend::automatic;
+  std::size_t device_memory_limit = 0;  ///< GPU budget in bytes (0: the whole device)
+  int threads = 0;                      ///< host threads for strata and the assembly (0: automatic)
+  bool full_newton = false;             ///< refactorize at every Newton iteration
+  double newton_tol = 0;                ///< relative Newton tolerance
+  bool variable_step = false;           ///< variable step and order with local error control
+  double rtol = 1e-4, atol = 1e-6, max_step = 0;  ///< of variable steps (max_step 0: t_end/10)
+  bool dense_reference = false;                   ///< dense LAPACK instead of strata (diagnosis)
+  bool verbose = false;                           ///< every Newton iteration to stderr
+  std::string output_dir;                         ///< CSV files (and vtk/) here; empty: none
+  double output_interval = 0;                     ///< s between rows of the histories
+  bool vtk = false;
+  std::string dump_dir;  ///< write the Newton matrix of step dump_step here (Matrix Market)
+  index_t dump_step = 1;
+};
+
+/// The SimulationOptions of a run of `model` with `s`: the model's defaults where s
+/// leaves a value at 0. Throws InvalidInput for a negative time or step, an order outside
+/// 1..5, a non-positive tolerance or a dump step below 1.
+SimulationOptions simulation_options(const Model& model, const RunSettings& s);
 
 /// Runs the model to opts.integrator.t_end. Errors during the integration (including
 /// OutOfMemory and std::bad_alloc) and interruptions do not throw: the result is marked

@@ -60,6 +60,14 @@ class Executor {
   virtual void factor_batch(const FactorContext& ctx, const BatchInfo& batch) = 0;
   /// Called once after the last batch.
   virtual void end(const FactorContext& ctx) {}
+  /// Solves with `fac` where this executor keeps it (the CUDA executor, when the factor
+  /// stayed resident on the device): x as solve_in_place. Returns false when it cannot
+  /// (the caller then runs solve_in_place on the host); the default cannot.
+  virtual bool solve(const Analysis& an, const NumericFactor& fac, double* x, index_t nrhs) {
+    return false;
+  }
+  /// Adds backend figures of the last factorization (bytes moved, device time) to `fs`.
+  virtual void report(FactorStats& fs) const {}
 };
 
 /// The CPU executor; `threads` host threads (0: all hardware threads). `reproducible`:
@@ -71,6 +79,15 @@ std::unique_ptr<Executor> make_cuda_executor(const Options& opts);
 
 /// True when this build has the CUDA backend and a GPU is visible.
 bool cuda_available();
+
+/// LDLᵀ bookkeeping of front f once its partial factorization is in the factor (shared by
+/// the executors, so that a CPU and a GPU factor have one layout): moves D out of the
+/// front's panel (its diagonal to d_diag, the (j+1, j) entries of 2×2 pivots to d_off,
+/// leaving L11 unit lower with zeros there), sets pivot_size by global pivot position
+/// (first_pivot[f] + i: 1, or 2 then 0 for a 2×2 pivot) and the permuted pivot rows.
+/// local_perm[0..k) and local_pivot_size[0..k) are as factor_front_ldlt returns them.
+void store_ldlt_front(const Analysis& an, index_t f, const index_t* local_perm,
+                      const int* local_pivot_size, NumericFactor& factor);
 
 /// Runs the numeric factorization of the scaled canonical values with `exec`.
 /// Fills `factor`; throws as Executor::factor_batch.
