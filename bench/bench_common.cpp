@@ -14,6 +14,7 @@
 #include <fstream>
 #include <thread>
 
+#include "core/atomic_file.hpp"
 #include "core/timer.hpp"
 #include "sparse/generators.hpp"
 #include "strata/errors.hpp"
@@ -104,19 +105,9 @@ std::string write_result(const nlohmann::json& j, const std::string& stem,
   std::filesystem::create_directories(dir, ec);
   if (ec) throw Error("cannot create " + dir + ": " + ec.message());
   const std::string path = dir + "/" + stem + "-" + utc_now("%Y%m%dT%H%M%SZ") + ".json";
-  const std::string tmp = path + ".tmp";
-  {
-    std::ofstream f(tmp);
-    f << j.dump(2) << "\n";
-    if (!f) {
-      std::remove(tmp.c_str());
-      throw Error("cannot write " + tmp);
-    }
-  }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    std::remove(tmp.c_str());
-    throw Error("cannot rename " + tmp + " to " + path);
-  }
+  // temporary name in the same folder, fsync, rename (core/atomic_file.hpp): a reader or
+  // bench/report.py never sees a half-written result
+  write_file_atomically(path, j.dump(2) + "\n");
   return path;
 }
 

@@ -10,21 +10,27 @@
 //                   [--vtk] [--dump-matrix DIR]
 //                   [--dump-step K] [--output-interval S] [--full-newton] [--write-model F]
 //                   [--variable-step [--rtol R] [--atol A] [--max-step H]] [--verbose]
+//                   [--checkpoint-every N [--checkpoint-dir DIR]]
+//   strata simulate --resume DIR [--t-end T] [--output DIR] [--checkpoint-every N]
+//                   [--device-memory-limit BYTES] ...
 //
 // Exit status: 0 on success, 1 on a solver error (the message names the problem),
-// 2 on a usage error.
+// 2 on a usage error, 128 + the signal number when SIGINT/SIGTERM stopped a simulation
+// (its partial results and a checkpoint are kept).
 #include <fmt/core.h>
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
 #include <chrono>
 #include <cmath>
+#include <csignal>
 #include <cstdio>
 #include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "core/atomic_file.hpp"
 #include "mbd/generators.hpp"
 #include "mbd/model_io.hpp"
 #include "mbd/simulation.hpp"
@@ -53,6 +59,7 @@ struct CommonArgs {
   std::string device = "auto";
   int threads = 0;
   bool json = false;
+  bool reproducible = false;
 };
 
 Backend backend_of(const std::string& device) {
@@ -72,6 +79,8 @@ void add_common(CLI::App* cmd, CommonArgs& a) {
                   "GPU memory budget in bytes (0: the whole device); also the batch plan's");
   cmd->add_option("--threads", a.threads, "host threads (0: all)");
   cmd->add_flag("--json", a.json, "print the report as JSON");
+  cmd->add_flag("--reproducible", a.reproducible,
+                "bitwise the same result for every --threads (large fronts on one BLAS thread)");
 }
 
 Options options_from(const CommonArgs& a) {
@@ -80,6 +89,7 @@ Options options_from(const CommonArgs& a) {
   o.max_block_size = a.max_block_size;
   o.device_memory_limit = a.device_memory_limit;
   o.num_threads = a.threads;
+  o.reproducible = a.reproducible;
   o.backend = backend_of(a.device);
   return o;
 }
@@ -281,6 +291,9 @@ int run_solve(const SolveArgs& a) {
 
 struct SimulateArgs {
   std::string model, generate, output = "out", dump_dir, write_model, device = "auto";
+  std::string checkpoint_dir, resume;
+  index_t checkpoint_every = 0;
+  std::vector<std::string> resume_conflicts;  // integration options given with --resume
   std::size_t device_memory_limit = 0;
   double t_end = 0, step = 0, output_interval = 0, newton_tol = 0, rtol = 1e-4, atol = 1e-6,
          max_step = 0;
@@ -294,6 +307,20 @@ struct SimulateArgs {
 // minute on two cores).
 constexpr const char* kDefaultModel = "tracked:100";
 
+// SIGINT/SIGTERM during a simulation: remembered here, read by the simulation loop between
+// steps (it stops, keeps its partial results, writes a checkpoint). SA_RESETHAND: a second
+// signal kills the process at once.
+volatile std::sig_atomic_t g_signal = 0;
+extern "C" void on_signal(int sig) { g_signal = sig; }
+void catch_interrupts() {
+  struct sigaction sa {};
+  sa.sa_handler = on_signal;
+  sigemptyset(&sa.sa_mask);
+  sa.sa_flags = SA_RESETHAND;
+  sigaction(SIGINT, &sa, nullptr);
+  sigaction(SIGTERM, &sa, nullptr);
+}
+
 int run_simulate(const SimulateArgs& a) {
   using namespace strata::mbd;
   auto t0 = std::chrono::steady_clock::now();
@@ -301,45 +328,94 @@ int run_simulate(const SimulateArgs& a) {
     throw InvalidInput("give either a model file or --generate, not both");
   Model model;
   std::string source;
-  if (!a.model.empty()) {
-    model = load_model(a.model);
+  nlohmann::json doc, checkpoint;
+  std::string model_name;
+  if (!a.resume.empty()) {
+    // the model and the integration options come from the checkpoint
+    if (!a.model.empty() || !a.generate.empty())
+      throw InvalidInput(
+          "--resume takes the model from the checkpoint: give no model file or "
+          "--generate with it");
+    if (!a.resume_conflicts.empty())
+      throw InvalidInput("--resume continues with the options of the checkpointed run: " +
+                         a.resume_conflicts.front() + " cannot be changed");
+    checkpoint = read_checkpoint(a.resume);
+    const nlohmann::json& meta = checkpoint.at("meta");
+    if (!meta.contains("model"))
+      throw InvalidInput(a.resume + ": the checkpoint holds no model document");
+    doc = meta.at("model");
+    model_name = meta.value("model_name", std::string("model"));
+    model = build_model(doc, model_name);
+    source = fmt::format("{} (resumed from {} at step {}, t = {:.9g} s)",
+                         meta.value("source", model_name), a.resume,
+                         checkpoint.at("integrator").at("step").get<index_t>(),
+                         checkpoint.at("integrator").at("t").get<double>());
+  } else if (!a.model.empty()) {
+    doc = load_model_document(a.model);
+    model_name = model_file_name(a.model);
+    model = build_model(doc, model_name);
     source = a.model;
   } else {
     const std::string spec = a.generate.empty() ? kDefaultModel : a.generate;
-    const nlohmann::json doc = generate(spec);
-    if (!a.write_model.empty()) {
-      std::ofstream out(a.write_model);
-      if (!out) throw Error("cannot write " + a.write_model);
-      out << doc.dump(1) << "\n";
-    }
+    doc = generate(spec);
+    if (!a.write_model.empty()) write_file_atomically(a.write_model, doc.dump(1) + "\n");
+    model_name = spec;
     model = build_model(doc, spec);
     source = "generated " + spec + (a.generate.empty() ? " (default model)" : "");
   }
   const double read_seconds = seconds_since(t0);
-  RunSettings rs;
-  rs.t_end = a.t_end;
-  rs.step = a.step;
-  rs.order = a.order;
-  rs.backend = backend_of(a.device);
-  rs.device_memory_limit = a.device_memory_limit;
-  rs.threads = a.threads;
-  rs.full_newton = a.full_newton;
-  rs.newton_tol = a.newton_tol;
-  rs.variable_step = a.variable_step;
-  rs.rtol = a.rtol;
-  rs.atol = a.atol;
-  rs.max_step = a.max_step;
-  rs.dense_reference = a.dense;
-  rs.verbose = a.verbose;
-  rs.output_dir = a.output;
-  rs.output_interval = a.output_interval;
-  rs.vtk = a.vtk;
-  rs.dump_dir = a.dump_dir;
-  rs.dump_step = a.dump_step;
-  SimulationOptions o = simulation_options(model, rs);
+  SimulationOptions o;
+  if (!a.resume.empty()) {
+    // the integration options of the checkpointed run; --t-end may extend it, and the GPU
+    // budget may change (a restart on another device)
+    IntegratorOptions& io = o.integrator;
+    io = checkpoint_integrator_options(checkpoint);
+    if (a.t_end > 0) io.t_end = a.t_end;
+    const double t_ck = checkpoint.at("integrator").at("t").get<double>();
+    if (!(io.t_end > t_ck))
+      throw InvalidInput(fmt::format("--t-end {:g} s is not after the checkpoint's time {:.9g} s",
+                                     io.t_end, t_ck));
+    if (a.device_memory_limit > 0) io.device_memory_limit = a.device_memory_limit;
+    io.dump_dir = a.dump_dir;
+    io.verbose = a.verbose;
+    io.dump_step = a.dump_dir.empty() ? -1 : a.dump_step;
+    o.output_interval = checkpoint.at("simulation").at("output_interval").get<double>();
+    o.vtk = checkpoint.at("simulation").at("vtk").get<bool>();
+    o.output_dir = a.output;
+    o.resume = &checkpoint;
+  } else {
+    RunSettings rs;
+    rs.t_end = a.t_end;
+    rs.step = a.step;
+    rs.order = a.order;
+    rs.backend = backend_of(a.device);
+    rs.device_memory_limit = a.device_memory_limit;
+    rs.threads = a.threads;
+    rs.full_newton = a.full_newton;
+    rs.newton_tol = a.newton_tol;
+    rs.variable_step = a.variable_step;
+    rs.rtol = a.rtol;
+    rs.atol = a.atol;
+    rs.max_step = a.max_step;
+    rs.dense_reference = a.dense;
+    rs.verbose = a.verbose;
+    rs.output_dir = a.output;
+    rs.output_interval = a.output_interval;
+    rs.vtk = a.vtk;
+    rs.dump_dir = a.dump_dir;
+    rs.dump_step = a.dump_step;
+    o = simulation_options(model, rs);
+  }
   const IntegratorOptions& io = o.integrator;
   o.progress = !a.quiet && isatty(fileno(stdout));
   o.progress_stream = stdout;
+  o.checkpoint_every = a.checkpoint_every;
+  o.checkpoint_dir = a.checkpoint_dir.empty() ? a.output + "/checkpoint" : a.checkpoint_dir;
+  o.checkpoint_meta = {{"model", doc}, {"model_name", model_name}, {"source", source}};
+  if (!a.resume.empty())
+    o.checkpoint_meta["source"] = checkpoint.at("meta").value("source", source);
+  o.interrupt = &g_signal;
+  catch_interrupts();
   fmt::print("strata simulate {}\n", source);
   fmt::print("integrator            BDF{} with {} {:g} s to t = {:g} s, {} Newton\n", io.order,
              io.variable_step
@@ -355,10 +431,17 @@ int run_simulate(const SimulateArgs& a) {
         "output                {}/ (positions, velocities, accelerations, reactions, "
         "steps .csv{}{})\n",
         o.output_dir, o.vtk ? ", vtk/series.pvd" : "",
-        r.complete ? "" : "; marked partial in status.json");
+        r.complete ? "" : "; *.partial.csv, marked partial in status.json");
   if (io.dump_step > 0)
     fmt::print("Newton matrix         step {} written to {}/jacobian_step{}.mtx (+ rhs)\n",
                io.dump_step, io.dump_dir, io.dump_step);
+  if (r.checkpoint_step > 0 && o.checkpoint_every > 0)
+    fmt::print("checkpoint            step {} in {}/ (continue with --resume {})\n",
+               r.checkpoint_step, o.checkpoint_dir, o.checkpoint_dir);
+  if (r.state == "interrupted") {
+    std::fprintf(stderr, "strata: %s; partial results kept\n", r.message.c_str());
+    return 128 + static_cast<int>(g_signal);
+  }
   if (!r.complete) {
     std::fprintf(stderr, "strata: error: the simulation stopped at t = %.9g s: %s\n", r.t_reached,
                  r.message.c_str());
@@ -430,7 +513,22 @@ int main(int argc, char** argv) {
   simulate->add_option("--max-step", sim.max_step, "largest variable step [s] (default t_end/10)");
   simulate->add_flag("--dense-reference", sim.dense,
                      "solve with dense LAPACK LU instead of strata (diagnosis; small models)");
+  simulate
+      ->add_option("--checkpoint-every", sim.checkpoint_every,
+                   "write a restart point every N accepted steps (and when interrupted)")
+      ->check(CLI::PositiveNumber);
+  simulate->add_option("--checkpoint-dir", sim.checkpoint_dir,
+                       "folder of the restart point (default: OUTPUT/checkpoint)");
+  simulate
+      ->add_option("--resume", sim.resume,
+                   "continue the run checkpointed in this folder (model and options from "
+                   "the checkpoint; --t-end may extend it)")
+      ->check(CLI::ExistingDirectory);
   CLI11_PARSE(app, argc, argv);
+  for (const char* opt : {"--step", "--order", "--device", "--output-interval", "--vtk",
+                          "--full-newton", "--newton-tol", "--threads", "--variable-step", "--rtol",
+                          "--atol", "--max-step", "--dense-reference", "--write-model"})
+    if (simulate->count(opt) > 0) sim.resume_conflicts.push_back(opt);
   try {
     if (*analyze) return run_analyze(analyze_args);
     if (*solve) return run_solve(solve_args);

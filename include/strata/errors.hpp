@@ -48,7 +48,10 @@ class NotSupported : public Error {
   using Error::Error;
 };
 
-/// An allocation failed. bytes_requested() is the size of the allocation that failed.
+/// An allocation failed. what() names where (the phase, and the buffer when it is one of
+/// the solver's large ones) and the size; bytes_requested() is the size in bytes of the
+/// allocation that failed, or 0 when it is not known (an allocation deep inside other code,
+/// e.g. a std::bad_alloc translated at a phase boundary).
 class OutOfMemory : public Error {
  public:
   OutOfMemory(std::size_t bytes_requested, const std::string& where);

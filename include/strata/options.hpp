@@ -81,6 +81,15 @@ struct Options {
   Backend backend = Backend::cpu;
   /// Host threads for the CPU backend; 0 means all hardware threads (default 0).
   int num_threads = 0;
+  /// CPU backend: bitwise the same factor and solution for every num_threads. Fronts are
+  /// always factored one per thread in a schedule-independent way; what differs between
+  /// thread counts is only multithreaded OpenBLAS on the large fronts (more than 2e7
+  /// flops), which rounds differently for different thread counts. With this set, those
+  /// fronts run single-threaded BLAS too, giving up their parallelism. Without it, results
+  /// for a fixed num_threads are still bitwise repeatable run to run, and results for
+  /// different thread counts differ at the level of the unit roundoff. Default off.
+  /// (docs/reliability.md, "Determinism".)
+  bool reproducible = false;
   /// For `general`: permute large entries onto the diagonal by a maximum weighted
   /// matching and scale rows and columns (MC64-style, Duff & Koster 2001). For
   /// `symmetric_indefinite`: the symmetric scaling D·A·D from the same matching and the

@@ -40,13 +40,16 @@ class Solver {
   /// Analysis phase: validates A (square; see strata::validate), resolves the matrix type
   /// (MatrixType::automatic looks at symmetry here and tries Cholesky in factorize),
   /// computes the fill-reducing ordering, the assembly tree, the level schedule and the
-  /// memory plan. Only the pattern of A is used. Throws InvalidInput, NotSupported.
+  /// memory plan. Only the pattern of A is used. Throws InvalidInput, NotSupported,
+  /// OutOfMemory (the solver then holds no analysis and stays usable).
   void analyze(const SparseMatrix& a);
 
   /// Numeric factorization of A, whose pattern must be the analyzed one (analyzes first
   /// if analyze was not called). Throws NotPositiveDefinite for a failed Cholesky of a
   /// matrix declared spd, InvalidInput for a NaN/Inf value or a changed pattern,
-  /// OutOfMemory. Perturbed pivots and inertia go to stats().factor.
+  /// OutOfMemory (the factor, the workspaces and the device buffers are then released,
+  /// the analysis is kept: a later factorize can succeed once memory is available).
+  /// Perturbed pivots and inertia go to stats().factor.
   void factorize(const SparseMatrix& a);
 
   /// Factorization of new values with the analyzed pattern. Reuses the analysis and all
@@ -55,7 +58,8 @@ class Solver {
 
   /// Solves A X = B for nrhs right-hand sides. b and x are column-major n×nrhs arrays
   /// (leading dimension n); they may not alias. Iterative refinement follows
-  /// Options::refinement_*. Throws InvalidState before factorize.
+  /// Options::refinement_*. Throws InvalidState before factorize; OutOfMemory (the factor
+  /// is kept).
   void solve(const double* b, double* x, index_t nrhs = 1);
 
   /// Convenience overload: one or several right-hand sides stored column-major in b

@@ -7,8 +7,10 @@
 // simulation_options), so defaults and model overrides match `strata simulate`. The
 // model is built and integrated with the GIL released; the time histories come back as
 // NumPy arrays (copied once from the in-memory SimulationHistory) in a dict that the
-// Python layer wraps. A run that stops early returns complete=False and its message:
-// the Python layer raises SimulationError carrying the partial result.
+// Python layer wraps. A run that stops early returns complete=False, state "failed" and
+// its message: the Python layer raises SimulationError carrying the partial result (and
+// with output_dir, the files stay NAME.partial.csv with status.json marked partial, as
+// the command line leaves them).
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
@@ -168,6 +170,7 @@ py::dict run(const std::string& kind, const std::string& source, const std::stri
   const std::size_t rows = h.time.size();
   py::dict d;
   d["complete"] = r.complete;
+  d["state"] = r.state;  // "complete" or "failed" (no interrupt flag is passed here)
   d["message"] = r.message;
   d["t_reached"] = r.t_reached;
   d["model"] = py::dict(py::arg("name") = model.name, py::arg("planar") = model.planar,

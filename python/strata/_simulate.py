@@ -75,6 +75,9 @@ class SimulationResult:
     complete : bool
         True when the run reached t_end (always True for a returned result; a run that
         stops early raises SimulationError, whose ``result`` has complete=False).
+    state : str
+        "complete", or "failed" for the partial result of a run that stopped early (the
+        ``state`` of status.json).
     message : str
         Why the run stopped early ("" when complete).
     t_reached : float
@@ -96,6 +99,7 @@ class SimulationResult:
         self.model = dict(d["model"])
         self.settings = dict(d["settings"])
         self.complete = bool(d["complete"])
+        self.state = str(d["state"])
         self.message = str(d["message"])
         self.t_reached = float(d["t_reached"])
         self.summary = str(d["summary"])
@@ -170,7 +174,11 @@ def simulate(model=None, *, generate=None, t_end=None, step=None, order=None, de
     output_dir : str, optional
         Also write the CSV files of ``strata simulate --output`` (positions, velocities,
         accelerations, reactions, steps .csv, status.json) there; vtk=True adds the
-        ParaView series.
+        ParaView series. As with the command line, the histories are named
+        ``NAME.partial.csv`` while the run goes on and stay so when it stops early
+        (status.json then has ``"partial": true`` and ``"state": "failed"``); only a
+        complete run renames them ``NAME.csv``. Histories of an earlier run in the folder
+        are removed first.
     dump_matrix : str, optional
         Write the Newton matrix and right-hand side of step ``dump_step`` to this folder
         (Matrix Market).
@@ -195,7 +203,8 @@ def simulate(model=None, *, generate=None, t_end=None, step=None, order=None, de
     SimulationError (a strata.Error)
         The integration cannot go on (Newton fails at the minimum step, inconsistent
         initial conditions). When it stopped after some steps, ``err.result`` holds the
-        partial SimulationResult (complete=False).
+        partial SimulationResult (complete=False, state "failed"); with output_dir, the
+        same rows are in the ``NAME.partial.csv`` files there.
     TypeError
         model is neither a path nor a dict, or the dict holds a value JSON cannot hold.
     NotSupportedError

@@ -10,8 +10,13 @@ ParseError::ParseError(std::string file, index_t line, const std::string& messag
       file_(std::move(file)),
       line_(line) {}
 
+// bytes_requested == 0: the size is not known (an allocation deep inside other code,
+// translated at a phase boundary).
 OutOfMemory::OutOfMemory(std::size_t bytes_requested, const std::string& where)
-    : Error("out of memory: " + where + " asked for " + std::to_string(bytes_requested) + " bytes"),
+    : Error(bytes_requested > 0
+                ? "out of memory: " + where + " asked for " + std::to_string(bytes_requested) +
+                      " bytes"
+                : "out of memory: " + where + " (the size of the failed allocation is not known)"),
       bytes_(bytes_requested) {}
 
 NotPositiveDefinite::NotPositiveDefinite(index_t column, double pivot)

@@ -15,6 +15,7 @@
 #include <cmath>
 #include <optional>
 
+#include "core/alloc.hpp"
 #include "core/analysis.hpp"
 #include "core/timer.hpp"
 #include "numeric/factor.hpp"
@@ -84,7 +85,7 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
   // indefinite ones D·A·D (row_scaling == col_scaling == D, Q = I; the lower triangle
   // scaled entrywise stays the lower triangle of D·A·D)
   const SparseMatrix& c = s.values;
-  s.scaled.resize(c.nnz());
+  sized_resize(s.scaled, c.nnz(), "factorize: scaled values");
   const bool scale = !an.row_scaling.empty();
   double norm1 = 0;
   {
@@ -105,7 +106,7 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
     const bool gpu = s.options.backend == Backend::cuda ||
                      (s.options.backend == Backend::automatic && numeric::cuda_available());
     s.executor = gpu ? numeric::make_cuda_executor(s.options)
-                     : numeric::make_cpu_executor(s.options.num_threads);
+                     : numeric::make_cpu_executor(s.options.num_threads, s.options.reproducible);
   }
 
   MatrixType type = an.type;
@@ -175,6 +176,37 @@ bool apply_inverse(const SolverState& s, const double* b, double* x, index_t nrh
   return on_device;
 }
 
+// Runs one phase. A std::bad_alloc from anywhere inside it becomes OutOfMemory naming the
+// phase (its size is not known there); the large buffers already throw OutOfMemory with
+// their size (core/alloc.hpp), which passes through unchanged.
+template <class F>
+void phase(const char* name, F&& f) {
+  try {
+    f();
+  } catch (const std::bad_alloc&) {
+    throw OutOfMemory(0, name);
+  }
+}
+
+// After an allocation failure in a factorization: give back everything the factor and the
+// executor hold (panels, contribution blocks, front workspaces, device buffers), so that
+// the caller can free memory elsewhere and try again. The analysis is kept.
+void release_factor(SolverState& s) noexcept {
+  s.factor = numeric::NumericFactor{};
+  std::vector<double>().swap(s.cb_arena);
+  std::vector<double>().swap(s.scaled);
+  s.executor.reset();
+}
+
+void factor_phase(SolverState& s, const SparseMatrix& a) {
+  try {
+    phase("factorize", [&] { run_factorization(s, a); });
+  } catch (const OutOfMemory&) {
+    release_factor(s);
+    throw;
+  }
+}
+
 }  // namespace
 
 Solver::Solver(Options options) : state_(std::make_unique<detail::SolverState>()) {
@@ -185,28 +217,36 @@ Solver::Solver(Solver&&) noexcept = default;
 Solver& Solver::operator=(Solver&&) noexcept = default;
 
 void Solver::analyze(const SparseMatrix& a) {
-  validate(a);
-  state_->factor = numeric::NumericFactor{};
-  state_->cb_arena.clear();
-  state_->analysis.reset();
-  state_->analysis = analyze_matrix(a, state_->options);
-  state_->stats = Stats{};
-  state_->stats.analysis = state_->analysis->stats;
-  state_->resolved = MatrixType::automatic;
+  phase("analyze", [&] {
+    validate(a);
+    state_->factor = numeric::NumericFactor{};
+    state_->cb_arena.clear();
+    state_->analysis.reset();
+    state_->analysis = analyze_matrix(a, state_->options);
+    state_->stats = Stats{};
+    state_->stats.analysis = state_->analysis->stats;
+    state_->resolved = MatrixType::automatic;
+  });
 }
 
 void Solver::factorize(const SparseMatrix& a) {
   if (!state_->analysis) analyze(a);
-  run_factorization(*state_, a);
+  factor_phase(*state_, a);
 }
 
 void Solver::refactorize(const SparseMatrix& a) {
   if (!state_->analysis) throw InvalidState("refactorize called before analyze");
-  run_factorization(*state_, a);
+  factor_phase(*state_, a);
 }
 
+static void solve_impl(SolverState& s, const double* b, double* x, index_t nrhs);
+
 void Solver::solve(const double* b, double* x, index_t nrhs) {
-  SolverState& s = *state_;
+  phase("solve", [&] { solve_impl(*state_, b, x, nrhs); });
+}
+
+// The solve phase: one solve with the factor, iterative refinement, GMRES if it stalls.
+static void solve_impl(SolverState& s, const double* b, double* x, index_t nrhs) {
   if (!s.analysis || !s.factor.valid) throw InvalidState("solve called before factorize");
   if (nrhs < 0) throw InvalidInput("negative number of right-hand sides");
   Timer timer;
@@ -298,7 +338,8 @@ std::vector<double> Solver::solve(const std::vector<double>& b) {
   if (b.empty() || static_cast<index_t>(b.size()) % n != 0)
     throw InvalidInput("right-hand side has " + std::to_string(b.size()) +
                        " entries, not a multiple of n = " + std::to_string(n));
-  std::vector<double> x(b.size());
+  std::vector<double> x;
+  phase("solve", [&] { x.resize(b.size()); });
   solve(b.data(), x.data(), static_cast<index_t>(b.size()) / n);
   return x;
 }

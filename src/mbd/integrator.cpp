@@ -223,6 +223,7 @@ void Integrator::analyze(const BdfTerms& bdf, double t) {
   sys_.evaluate(x_.data(), t, bdf, true, res_.data());
   if (!solver_) solver_ = new_solver();
   solver_->analyze(sys_.matrix());
+  analysis_values_ = sys_.matrix().values;
   stats_.analysis_seconds += ta.seconds();
   ++stats_.analyses;
   pattern_changed_ = false;
@@ -234,6 +235,7 @@ void Integrator::factorize(StepInfo& info, const BdfTerms& bdf, double t) {
   Timer timer;
   Timer tf;
   solver_->factorize(sys_.matrix());
+  factor_values_ = sys_.matrix().values;
   stats_.factor_seconds += tf.seconds();
   if (solver_->perturbed_pivots() > 0 && !fresh_analysis_) {
     // The analysis was made for other values; with the current ones its matching may put
@@ -246,6 +248,7 @@ void Integrator::factorize(StepInfo& info, const BdfTerms& bdf, double t) {
     sys_.evaluate(x_.data(), t, bdf, true, res_.data());
     Timer tf2;
     solver_->factorize(sys_.matrix());
+    factor_values_ = sys_.matrix().values;
     stats_.factor_seconds += tf2.seconds();
     ++stats_.factorizations;
   }

@@ -15,6 +15,7 @@
 
 #include <deque>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
@@ -100,6 +101,17 @@ class Integrator {
   void initialize();
   /// Advances one step. Throws SimulationError when even the minimum step fails.
   StepInfo advance();
+  /// Everything the integrator needs to continue exactly as if it had not stopped, between
+  /// two steps (checkpoint/restart): time, step size, order and step-size controller state,
+  /// q, v, a, λ, the BDF history, the coordinate partition, the contact candidate set, the
+  /// Newton flags, the statistics, and the values of the Jacobians the solver's analysis
+  /// (matching, scaling) and its current factor were computed from — modified Newton may
+  /// reuse that factor in the next step, so a restart rebuilds it bitwise. Doubles are kept
+  /// as doubles (nlohmann::json stores them exactly in CBOR).
+  nlohmann::json save_state() const;
+  /// Instead of initialize(): restores a save_state() of an integrator of the same model
+  /// and options. Throws InvalidInput when the state does not fit the model.
+  void restore_state(const nlohmann::json& state);
   bool done() const;
 
   double t() const { return t_; }
@@ -143,6 +155,8 @@ class Integrator {
   IntegratorStats stats_;
   std::vector<double> x_, res_, dx_, rhs_, zeta1_, zeta2_, qpred_, vpred_;
   index_t step_ = 0;
+  // Jacobian values the solver's analysis and its current factor come from (restart)
+  std::vector<double> analysis_values_, factor_values_;
 };
 
 /// BDF coefficients α_0..α_p with ẏ(t₀) ≈ Σ α_j y(t_j), from the derivative of the

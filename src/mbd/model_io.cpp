@@ -646,18 +646,12 @@ Model build_model(const json& doc, const std::string& source) {
   }
 }
 
-Model load_model(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw ModelError(path + ": cannot open the model file");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return parse_model(ss.str(), path);
-}
+namespace {
 
-Model parse_model(const std::string& text, const std::string& source) {
-  json doc;
+// Parses JSON text; a syntax error becomes "source:L:C: invalid JSON: ...".
+json parse_document(const std::string& text, const std::string& source) {
   try {
-    doc = json::parse(text);
+    return json::parse(text);
   } catch (const json::parse_error& e) {
     // byte offset → line:column
     std::size_t line = 1, col = 1;
@@ -672,10 +666,29 @@ Model parse_model(const std::string& text, const std::string& source) {
     throw ModelError(source + ":" + std::to_string(line) + ":" + std::to_string(col) +
                      ": invalid JSON: " + e.what());
   }
-  std::string name = source;
-  const auto slash = name.find_last_of('/');
-  if (slash != std::string::npos) name = name.substr(slash + 1);
-  return build_model(doc, name);
+}
+
+}  // namespace
+
+nlohmann::json load_model_document(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw ModelError(path + ": cannot open the model file");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return parse_document(ss.str(), path);
+}
+
+std::string model_file_name(const std::string& path) {
+  const auto slash = path.find_last_of('/');
+  return slash == std::string::npos ? path : path.substr(slash + 1);
+}
+
+Model parse_model(const std::string& text, const std::string& source) {
+  return build_model(parse_document(text, source), model_file_name(source));
+}
+
+Model load_model(const std::string& path) {
+  return build_model(load_model_document(path), model_file_name(path));
 }
 
 }  // namespace strata::mbd

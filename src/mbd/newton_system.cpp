@@ -9,6 +9,8 @@
 #include <atomic>
 #include <stdexcept>
 
+#include "strata/errors.hpp"
+
 namespace strata::mbd {
 
 SparseMatrix PatternBuilder::finish() {
@@ -72,6 +74,14 @@ void NewtonSystem::gather(const std::vector<index_t>& dofs, const double* src,
 void NewtonSystem::set_partition(const Partition& p) {
   independent_ = p.independent;
   rebuild_pattern();
+}
+
+void NewtonSystem::set_candidates(const std::vector<char>& c) {
+  if (c.size() != candidate_.size())
+    throw InvalidInput("the saved contact candidate set has " + std::to_string(c.size()) +
+                       " entries, the model " + std::to_string(candidate_.size()) +
+                       " force elements");
+  candidate_ = c;
 }
 
 bool NewtonSystem::update_candidates(const double* q) {

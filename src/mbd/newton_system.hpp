@@ -73,6 +73,11 @@ class NewtonSystem {
   /// 0: the candidate set is fine at q; 1: a pair outside it came within half its margin
   /// (update soon); 2: a pair outside it penetrates (the state is invalid).
   int check_candidates(const double* q) const;
+  /// Per force element: 1 while it is part of the Newton matrix (the candidate set).
+  const std::vector<char>& candidates() const { return candidate_; }
+  /// Restores a candidate set saved from candidates() (checkpoint restart); the pattern is
+  /// rebuilt by the next set_partition.
+  void set_candidates(const std::vector<char>& c);
   /// Number of force elements in the Newton matrix now.
   index_t active_forces() const;
   /// The Jacobian H_x (pattern fixed between set_partition calls).

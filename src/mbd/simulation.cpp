@@ -5,21 +5,34 @@
 
 #include <chrono>
 #include <cmath>
+#include <csignal>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <new>
+#include <sstream>
 
+#include "core/atomic_file.hpp"
 #include "core/timer.hpp"
 #include "mbd/vtk.hpp"
 
 namespace strata::mbd {
 namespace {
 
-// A CSV file written row by row and flushed, so that a run that stops keeps its rows.
+// A CSV history written row by row to NAME.partial.csv (renamed to NAME.csv only when the
+// run completes), flushed at the end and at checkpoints, so that a run that stops keeps
+// its rows. A resumed run starts the file with the text saved in the checkpoint.
 class Csv {
  public:
-  Csv(const std::string& path, const std::vector<std::string>& header) : out_(path) {
-    if (!out_) throw Error("cannot write " + path);
+  Csv(const std::string& dir, const std::string& name, const std::vector<std::string>& header,
+      const std::string* resumed_text)
+      : dir_(dir), name_(name), out_(partial_path()) {
+    if (!out_) throw Error("cannot write " + partial_path());
+    if (resumed_text) {
+      out_ << *resumed_text;
+      return;
+    }
     for (std::size_t i = 0; i < header.size(); ++i) out_ << (i ? "," : "") << header[i];
     out_ << '\n';
   }
@@ -29,11 +42,34 @@ class Csv {
     out_ << '\n';
   }
   void raw(const std::string& line) { out_ << line << '\n'; }
-  void flush() { out_.flush(); }
+  void flush() {
+    out_.flush();
+    if (!out_) throw Error("cannot write " + partial_path());
+  }
+  // The whole file so far (for a checkpoint).
+  std::string text() {
+    flush();
+    std::ifstream in(partial_path(), std::ios::binary);
+    std::ostringstream ss;
+    ss << in.rdbuf();
+    if (!in) throw Error("cannot read back " + partial_path() + " for the checkpoint");
+    return ss.str();
+  }
+  // The run is complete: close and rename NAME.partial.csv to NAME.csv.
+  void complete() {
+    flush();
+    out_.close();
+    rename_file(partial_path(), dir_ + "/" + name_ + ".csv");
+  }
+  const std::string& name() const { return name_; }
+  std::string partial_path() const { return dir_ + "/" + name_ + ".partial.csv"; }
 
  private:
+  std::string dir_, name_;
   std::ofstream out_;
 };
+
+const char* const kHistories[] = {"positions", "velocities", "accelerations", "reactions", "steps"};
 
 // Joint reaction forces (global, on body j) of every constraint that reports one.
 std::vector<std::string> reaction_names(const Model& m) {
@@ -84,13 +120,20 @@ std::string json_escape(const std::string& s) {
   return r;
 }
 
-void write_status(const std::string& dir, const SimulationResult& r) {
-  std::ofstream out(dir + "/status.json");
-  out << "{\n  \"complete\": " << (r.complete ? "true" : "false") << ",\n"
-      << "  \"partial\": " << (r.complete ? "false" : "true") << ",\n"
-      << "  \"t_reached\": " << fmt::format("{:.17g}", r.t_reached) << ",\n"
-      << "  \"steps\": " << r.stats.steps << ",\n"
-      << "  \"message\": \"" << json_escape(r.message) << "\"\n}\n";
+// status.json, written whole (a reader never sees half of it).
+void write_status(const std::string& dir, const std::string& state, const SimulationResult& r,
+                  double t_end, index_t steps, const std::vector<std::string>& files) {
+  const bool complete = state == "complete";
+  std::string f;
+  for (std::size_t i = 0; i < files.size(); ++i)
+    f += (i ? ", \"" : "\"") + json_escape(files[i]) + "\"";
+  write_file_atomically(
+      dir + "/status.json",
+      fmt::format("{{\n  \"state\": \"{}\",\n  \"complete\": {},\n  \"partial\": {},\n"
+                  "  \"t_reached\": {:.17g},\n  \"t_end\": {:.17g},\n  \"steps\": {},\n"
+                  "  \"message\": \"{}\",\n  \"checkpoint_step\": {},\n  \"files\": [{}]\n}}\n",
+                  state, complete, !complete, r.t_reached, t_end, steps, json_escape(r.message),
+                  r.checkpoint_step, f));
 }
 
 class Progress {
@@ -122,6 +165,86 @@ class Progress {
 };
 
 }  // namespace
+
+namespace {
+
+nlohmann::json integrator_options_json(const IntegratorOptions& o) {
+  const double max_step =
+      o.variable_step && o.max_step <= 0 ? o.t_end / 10 : o.max_step;  // resolved default
+  return {{"t_end", o.t_end},
+          {"step", o.step},
+          {"order", o.order},
+          {"modified_newton", o.modified_newton},
+          {"max_newton_iterations", o.max_newton_iterations},
+          {"newton_rtol", o.newton_rtol},
+          {"newton_atol", o.newton_atol},
+          {"partition_threshold", o.partition_threshold},
+          {"repartition_quality", o.repartition_quality},
+          {"partition_check_interval", o.partition_check_interval},
+          {"startup_levels", o.startup_levels},
+          {"min_step", o.min_step},
+          {"backend", static_cast<int>(o.backend)},
+          {"device_memory_limit", o.device_memory_limit},
+          {"threads", o.threads},
+          {"dense_solver", o.dense_solver},
+          {"variable_step", o.variable_step},
+          {"rtol", o.rtol},
+          {"atol", o.atol},
+          {"max_step", max_step}};
+}
+
+constexpr const char* kCheckpointFile = "checkpoint.cbor";
+constexpr int kCheckpointVersion = 1;
+
+}  // namespace
+
+IntegratorOptions checkpoint_integrator_options(const nlohmann::json& ck) {
+  const nlohmann::json& j = ck.at("integrator_options");
+  IntegratorOptions o;
+  j.at("t_end").get_to(o.t_end);
+  j.at("step").get_to(o.step);
+  j.at("order").get_to(o.order);
+  j.at("modified_newton").get_to(o.modified_newton);
+  j.at("max_newton_iterations").get_to(o.max_newton_iterations);
+  j.at("newton_rtol").get_to(o.newton_rtol);
+  j.at("newton_atol").get_to(o.newton_atol);
+  j.at("partition_threshold").get_to(o.partition_threshold);
+  j.at("repartition_quality").get_to(o.repartition_quality);
+  j.at("partition_check_interval").get_to(o.partition_check_interval);
+  j.at("startup_levels").get_to(o.startup_levels);
+  j.at("min_step").get_to(o.min_step);
+  o.backend = static_cast<Backend>(j.at("backend").get<int>());
+  o.device_memory_limit = j.value("device_memory_limit", std::size_t{0});
+  j.at("threads").get_to(o.threads);
+  j.at("dense_solver").get_to(o.dense_solver);
+  j.at("variable_step").get_to(o.variable_step);
+  j.at("rtol").get_to(o.rtol);
+  j.at("atol").get_to(o.atol);
+  j.at("max_step").get_to(o.max_step);
+  return o;
+}
+
+nlohmann::json read_checkpoint(const std::string& dir) {
+  const std::string path = dir + "/" + kCheckpointFile;
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw InvalidInput(path + ": cannot open the checkpoint (" + std::strerror(errno) + ")");
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  const std::string bytes = ss.str();
+  nlohmann::json ck;
+  try {
+    ck = nlohmann::json::from_cbor(bytes);
+  } catch (const nlohmann::json::exception& e) {
+    throw InvalidInput(path + ": not a readable strata checkpoint: " + e.what());
+  }
+  if (!ck.is_object() || ck.value("format", "") != "strata-checkpoint")
+    throw InvalidInput(path + ": not a strata checkpoint");
+  if (ck.value("version", 0) != kCheckpointVersion)
+    throw InvalidInput(path + ": checkpoint version " +
+                       ck.value("version", nlohmann::json()).dump() +
+                       ", this strata reads version " + std::to_string(kCheckpointVersion));
+  return ck;
+}
 
 SimulationOptions simulation_options(const Model& model, const RunSettings& s) {
   auto check = [](bool ok, const std::string& what) {
@@ -167,126 +290,267 @@ SimulationOptions simulation_options(const Model& model, const RunSettings& s) {
   return o;
 }
 
+namespace {
+SimulationResult run(const Model& model, const SimulationOptions& opts);
+}  // namespace
+
 SimulationResult simulate(const Model& model, const SimulationOptions& opts) {
+  // an allocation failure outside the step loop (set-up, writing the final files): the
+  // histories keep their partial names and status.json, if written, says "running"
+  try {
+    return run(model, opts);
+  } catch (const std::bad_alloc&) {
+    throw OutOfMemory(0, "simulation (setting up or writing the results)");
+  }
+}
+
+namespace {
+
+SimulationResult run(const Model& model, const SimulationOptions& opts) {
   Timer wall;
   SimulationResult res;
   Integrator in(model, opts.integrator);
-  in.initialize();
+  const nlohmann::json* ck = opts.resume;
+  try {
+    if (ck) {
+      in.restore_state(ck->at("integrator"));
+    } else {
+      in.initialize();
+    }
+  } catch (const std::bad_alloc&) {
+    throw OutOfMemory(
+        0, ck ? "simulation: restoring the checkpoint" : "simulation: initial conditions");
+  } catch (const nlohmann::json::exception& e) {
+    throw InvalidInput(std::string("checkpoint: missing or malformed state: ") + e.what());
+  }
   const bool files = !opts.output_dir.empty();
-  std::unique_ptr<Csv> pos, vel, acc, rea, steps;
+  std::vector<std::unique_ptr<Csv>> hist;
   std::unique_ptr<VtkSeries> vtk;
   const index_t n = model.n;
   std::vector<double> rbuf;
   double next_output = 0;
   double out_seconds = 0;
-  SimulationHistory* hist = opts.history;
-  auto write_state = [&](double kin, double pot) {
-    if (!files && !hist) return;
+  double kin = 0, pot = 0, pv = 0, vv = 0;
+  SimulationHistory* mem = opts.history;
+  auto write_state = [&]() {
+    if (!files && !mem) return;
     Timer t;
     const double tt = in.t();
     if (opts.output_interval <= 0 || tt + 1e-12 >= next_output || in.done()) {
       reactions(model, in, rbuf);
       if (files) {
-        pos->row(tt, in.q().data(), n);
-        vel->row(tt, in.v().data(), n);
-        acc->row(tt, in.a().data(), n);
-        rea->row(tt, rbuf.data(), rbuf.size());
+        hist[0]->row(tt, in.q().data(), n);
+        hist[1]->row(tt, in.v().data(), n);
+        hist[2]->row(tt, in.a().data(), n);
+        hist[3]->row(tt, rbuf.data(), rbuf.size());
         if (vtk) vtk->write(tt, in.q().data());
       }
-      if (hist) {
-        hist->time.push_back(tt);
-        hist->positions.insert(hist->positions.end(), in.q().begin(), in.q().end());
-        hist->velocities.insert(hist->velocities.end(), in.v().begin(), in.v().end());
-        hist->accelerations.insert(hist->accelerations.end(), in.a().begin(), in.a().end());
-        hist->reactions.insert(hist->reactions.end(), rbuf.begin(), rbuf.end());
+      if (mem) {
+        mem->time.push_back(tt);
+        mem->positions.insert(mem->positions.end(), in.q().begin(), in.q().end());
+        mem->velocities.insert(mem->velocities.end(), in.v().begin(), in.v().end());
+        mem->accelerations.insert(mem->accelerations.end(), in.a().begin(), in.a().end());
+        mem->reactions.insert(mem->reactions.end(), rbuf.begin(), rbuf.end());
       }
       if (opts.output_interval > 0)
         next_output = (std::floor(tt / opts.output_interval + 1e-9) + 1) * opts.output_interval;
     }
     out_seconds += t.seconds();
   };
-  if (hist) {
-    *hist = SimulationHistory{};
-    hist->coordinate_names = model.coordinate_names();
-    hist->reaction_names = reaction_names(model);
+  auto file_list = [&](bool complete) {
+    std::vector<std::string> f;
+    for (const auto& c : hist) f.push_back(c->name() + (complete ? ".csv" : ".partial.csv"));
+    if (vtk) f.push_back("vtk/series.pvd");
+    return f;
+  };
+  if (mem) {
+    // (a resumed run's rows start at the restart point: the rows before it are in the
+    // checkpoint's CSV text only)
+    *mem = SimulationHistory{};
+    mem->coordinate_names = model.coordinate_names();
+    mem->reaction_names = reaction_names(model);
   }
   if (files) {
-    std::filesystem::create_directories(opts.output_dir);
+    namespace fs = std::filesystem;
+    fs::create_directories(opts.output_dir);
+    // stale results of an earlier run here must not pass for this run's
+    for (const char* name : kHistories)
+      for (const char* suffix : {".csv", ".partial.csv"})
+        fs::remove(opts.output_dir + "/" + name + suffix);
+    fs::remove(opts.output_dir + "/status.json");
     std::vector<std::string> h{"time"};
     for (const auto& s : model.coordinate_names()) h.push_back(s);
-    pos = std::make_unique<Csv>(opts.output_dir + "/positions.csv", h);
-    vel = std::make_unique<Csv>(opts.output_dir + "/velocities.csv", h);
-    acc = std::make_unique<Csv>(opts.output_dir + "/accelerations.csv", h);
     std::vector<std::string> rh{"time"};
     for (const auto& s : reaction_names(model)) rh.push_back(s);
-    rea = std::make_unique<Csv>(opts.output_dir + "/reactions.csv", rh);
-    steps = std::make_unique<Csv>(
-        opts.output_dir + "/steps.csv",
-        std::vector<std::string>{"step", "time", "h", "order", "newton_iterations",
-                                 "factorizations", "rejected", "assembly_seconds", "solver_seconds",
-                                 "kinetic_energy", "potential_energy", "total_energy",
-                                 "position_violation", "velocity_violation"});
-    if (opts.vtk) vtk = std::make_unique<VtkSeries>(model, opts.output_dir + "/vtk");
+    const std::vector<std::string> sh{"step",
+                                      "time",
+                                      "h",
+                                      "order",
+                                      "newton_iterations",
+                                      "factorizations",
+                                      "rejected",
+                                      "assembly_seconds",
+                                      "solver_seconds",
+                                      "kinetic_energy",
+                                      "potential_energy",
+                                      "total_energy",
+                                      "position_violation",
+                                      "velocity_violation"};
+    const std::vector<std::string>* headers[] = {&h, &h, &h, &rh, &sh};
+    for (int k = 0; k < 5; ++k) {
+      // a resumed run starts with the rows written before its checkpoint (a checkpoint of
+      // a run that wrote no files has none: the histories then start at the restart)
+      std::string saved;
+      const bool have = ck && ck->at("histories").contains(kHistories[k]);
+      if (have) saved = ck->at("histories").at(kHistories[k]).get<std::string>();
+      hist.push_back(std::make_unique<Csv>(opts.output_dir, kHistories[k], *headers[k],
+                                           have ? &saved : nullptr));
+    }
+    if (opts.vtk) {
+      vtk = std::make_unique<VtkSeries>(model, opts.output_dir + "/vtk");
+      if (ck && ck->at("simulation").contains("vtk_frames"))
+        vtk->restore_frames(ck->at("simulation")
+                                .at("vtk_frames")
+                                .get<std::vector<std::pair<double, std::string>>>());
+    }
+    res.t_reached = in.t();
+    res.message = "running";
+    write_status(opts.output_dir, "running", res, opts.integrator.t_end, in.stats().steps,
+                 file_list(false));
+    res.message.clear();
   }
-  double kin = 0, pot = 0, pv = 0, vv = 0;
-  in.system().energy(in.q().data(), in.v().data(), in.t(), &kin, &pot);
-  in.constraint_violation(&pv, &vv);
-  res.energy_initial = kin + pot;
-  res.max_position_violation = pv;
-  res.max_velocity_violation = vv;
-  write_state(kin, pot);
-  if (files)
-    steps->raw(fmt::format("0,{:.17g},0,0,0,0,0,0,0,{:.17g},{:.17g},{:.17g},{:.6e},{:.6e}", in.t(),
-                           kin, pot, kin + pot, pv, vv));
-  if (hist) {
-    StepRecord r0;
-    r0.t = in.t();
-    r0.kinetic_energy = kin;
-    r0.potential_energy = pot;
-    r0.position_violation = pv;
-    r0.velocity_violation = vv;
-    hist->steps.push_back(r0);
+  if (ck) {
+    const nlohmann::json& sj = ck->at("simulation");
+    next_output = sj.at("next_output").get<double>();
+    res.energy_initial = sj.at("energy_initial").get<double>();
+    res.max_position_violation = sj.at("max_position_violation").get<double>();
+    res.max_velocity_violation = sj.at("max_velocity_violation").get<double>();
+    res.checkpoint_step = in.stats().steps;
+    in.system().energy(in.q().data(), in.v().data(), in.t(), &kin, &pot);
+  } else {
+    in.system().energy(in.q().data(), in.v().data(), in.t(), &kin, &pot);
+    in.constraint_violation(&pv, &vv);
+    res.energy_initial = kin + pot;
+    res.max_position_violation = pv;
+    res.max_velocity_violation = vv;
+    write_state();
+    if (files)
+      hist[4]->raw(fmt::format("0,{:.17g},0,0,0,0,0,0,0,{:.17g},{:.17g},{:.17g},{:.6e},{:.6e}",
+                               in.t(), kin, pot, kin + pot, pv, vv));
+    if (mem) {
+      StepRecord r0;
+      r0.t = in.t();
+      r0.kinetic_energy = kin;
+      r0.potential_energy = pot;
+      r0.position_violation = pv;
+      r0.velocity_violation = vv;
+      mem->steps.push_back(r0);
+    }
   }
+  // A restart point: the integrator state, this loop's state, the histories so far.
+  auto checkpoint = [&]() {
+    if (opts.checkpoint_every <= 0 || opts.checkpoint_dir.empty()) return;
+    Timer t;
+    nlohmann::json c;
+    c["format"] = "strata-checkpoint";
+    c["version"] = kCheckpointVersion;
+    c["meta"] = opts.checkpoint_meta;
+    c["integrator_options"] = integrator_options_json(opts.integrator);
+    c["integrator"] = in.save_state();
+    nlohmann::json sj = {{"next_output", next_output},
+                         {"energy_initial", res.energy_initial},
+                         {"max_position_violation", res.max_position_violation},
+                         {"max_velocity_violation", res.max_velocity_violation},
+                         {"output_interval", opts.output_interval},
+                         {"vtk", opts.vtk}};
+    if (vtk) sj["vtk_frames"] = vtk->frames();
+    c["simulation"] = sj;
+    nlohmann::json h = nlohmann::json::object();
+    for (const auto& csv : hist) h[csv->name()] = csv->text();
+    c["histories"] = h;
+    std::filesystem::create_directories(opts.checkpoint_dir);
+    const std::vector<std::uint8_t> bytes = nlohmann::json::to_cbor(c);
+    write_file_atomically(
+        opts.checkpoint_dir + "/" + kCheckpointFile,
+        std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
+    res.checkpoint_step = in.stats().steps;
+    out_seconds += t.seconds();
+  };
   Progress bar(opts.progress ? opts.progress_stream : nullptr, opts.integrator.t_end);
+  std::string state = "failed";
   try {
     while (!in.done()) {
+      if (opts.interrupt && *opts.interrupt != 0) {
+        const int sig = *opts.interrupt;
+        state = "interrupted";
+        res.message =
+            fmt::format("interrupted by signal {} ({}) after step {} at t = {:.9g} s", sig,
+                        sig == SIGINT    ? "SIGINT"
+                        : sig == SIGTERM ? "SIGTERM"
+                                         : "?",
+                        in.stats().steps, in.t());
+        checkpoint();
+        break;
+      }
       const StepInfo s = in.advance();
       in.system().energy(in.q().data(), in.v().data(), in.t(), &kin, &pot);
       in.constraint_violation(&pv, &vv);
       res.max_position_violation = std::max(res.max_position_violation, pv);
       res.max_velocity_violation = std::max(res.max_velocity_violation, vv);
-      write_state(kin, pot);
+      write_state();
       if (files) {
-        steps->raw(fmt::format(
+        hist[4]->raw(fmt::format(
             "{},{:.17g},{:.6e},{},{},{},{},{:.6e},{:.6e},{:.17g},{:.17g},{:.17g},"
             "{:.6e},{:.6e}",
             s.step, s.t, s.h, s.order, s.newton_iterations, s.factorizations, s.rejected,
             s.assembly_seconds, s.solver_seconds, kin, pot, kin + pot, pv, vv));
       }
-      if (hist)
-        hist->steps.push_back(StepRecord{s.step, s.t, s.h, s.order, s.newton_iterations,
-                                         s.factorizations, s.rejected, s.assembly_seconds,
-                                         s.solver_seconds, kin, pot, pv, vv});
+      if (mem)
+        mem->steps.push_back(StepRecord{s.step, s.t, s.h, s.order, s.newton_iterations,
+                                        s.factorizations, s.rejected, s.assembly_seconds,
+                                        s.solver_seconds, kin, pot, pv, vv});
+      // not after the last step: a restart from there would differ from a longer run
+      // (the last step is shortened to end exactly at t_end)
+      if (opts.checkpoint_every > 0 && in.stats().steps % opts.checkpoint_every == 0 && !in.done())
+        checkpoint();
       bar.update(in.t(), in.stats().steps, in.stats().newton_iterations);
     }
-    res.complete = true;
+    if (state != "interrupted") {
+      res.complete = true;
+      state = "complete";
+    }
+  } catch (const OutOfMemory& e) {  // from the solver: say where in the run
+    res.message =
+        fmt::format("step {} at t = {:.9g} s: {}", in.stats().steps + 1, in.t(), e.what());
   } catch (const Error& e) {
     res.message = e.what();
+  } catch (const std::bad_alloc&) {
+    res.message = OutOfMemory(0, fmt::format("simulation step {} at t = {:.9g} s",
+                                             in.stats().steps + 1, in.t()))
+                      .what();
+  } catch (const std::exception& e) {
+    res.message = std::string("unexpected error: ") + e.what();
   }
+  res.state = state;
   bar.update(in.t(), in.stats().steps, in.stats().newton_iterations, true);
   bar.finish();
   res.energy_final = kin + pot;
   res.t_reached = in.t();
   res.stats = in.stats();
   if (files) {
-    for (Csv* c : {pos.get(), vel.get(), acc.get(), rea.get(), steps.get()}) c->flush();
+    for (const auto& c : hist) c->flush();
     if (vtk) vtk->finish();
-    write_status(opts.output_dir, res);
+    if (res.complete)
+      for (const auto& c : hist) c->complete();
+    write_status(opts.output_dir, state, res, opts.integrator.t_end, res.stats.steps,
+                 file_list(res.complete));
   }
   res.output_seconds = out_seconds;
   res.wall_seconds = wall.seconds();
   return res;
 }
+
+}  // namespace
 
 std::string summary(const Model& model, const SimulationResult& r) {
   const IntegratorStats& s = r.stats;
@@ -297,7 +561,10 @@ std::string summary(const Model& model, const SimulationResult& r) {
       model.name, model.planar ? "planar" : "spatial", model.bodies.size() - 1, model.n,
       model.n_constraints(), model.forces.size());
   o += fmt::format("result                {} at t = {:.6g} s\n",
-                   r.complete ? "complete" : "PARTIAL (stopped early)", r.t_reached);
+                   r.complete                 ? "complete"
+                   : r.state == "interrupted" ? "PARTIAL (interrupted)"
+                                              : "PARTIAL (stopped early)",
+                   r.t_reached);
   if (!r.complete) o += fmt::format("reason                {}\n", r.message);
   o += fmt::format("steps                 {} accepted, {} rejected ({} by the local error test)\n",
                    s.steps, s.rejected, s.error_rejections);

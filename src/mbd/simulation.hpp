@@ -1,5 +1,6 @@
 // strata::mbd — running a simulation: the integrator loop, time histories (CSV), the
-// ParaView series (VTK), a progress bar, partial results on failure, and the summary.
+// ParaView series (VTK), a progress bar, partial results on failure or interruption,
+// checkpoints (restart points) and restarts from them, and the summary.
 //
 // Files written to the output folder:
 //   positions.csv, velocities.csv, accelerations.csv  time + one column per coordinate
@@ -8,13 +9,23 @@
 //   steps.csv       per step: time, step size, order, Newton iterations, factorizations,
 //                   assembly and solver seconds, kinetic/potential/total energy (J),
 //                   max |Φ| and max |Φ̇| (constraint violation)
-//   status.json     "complete": true, or false with the reason (results are partial)
+//   status.json     "state": "running", "complete", "failed" or "interrupted"; "complete"
+//                   and "partial" booleans, the step and time reached, the reason, the files
 //   vtk/            with vtk: one .vtu per output time and series.pvd (ParaView)
+// Partial results cannot be mistaken for a whole run: while the run goes on, and after a
+// run that stopped early (a failure, an allocation failure, SIGINT/SIGTERM, a kill), the
+// histories are named NAME.partial.csv; only a run that reached t_end renames them to
+// NAME.csv, and then writes status.json with "complete": true. Stale histories of an
+// earlier run in the same folder are removed at the start. status.json, the ParaView files
+// and the checkpoints are written whole (core/atomic_file.hpp).
 // The same rows can be kept in memory instead (or as well): SimulationHistory, filled
-// when SimulationOptions::history is set (the Python binding uses it).
+// when SimulationOptions::history is set (the Python binding uses it); after a run that
+// stopped early it holds the rows up to the last accepted step, like the partial files.
 #pragma once
 
+#include <csignal>
 #include <cstdio>
+#include <nlohmann/json.hpp>
 #include <string>
 
 #include "mbd/integrator.hpp"
@@ -51,6 +62,20 @@ struct SimulationOptions {
   bool vtk = false;            ///< also write a ParaView series
   bool progress = false;       ///< draw a progress bar on `progress_stream`
   std::FILE* progress_stream = nullptr;
+  /// Write a checkpoint (restart point) to checkpoint_dir/checkpoint.cbor after every this
+  /// many accepted steps, except after the step that ends the run, and when the run is
+  /// interrupted (0: never). Each checkpoint replaces the previous one atomically.
+  index_t checkpoint_every = 0;
+  std::string checkpoint_dir;
+  /// Kept in every checkpoint as it is (the command line stores the model document there).
+  nlohmann::json checkpoint_meta;
+  /// Continue from this checkpoint (read_checkpoint) instead of the initial conditions.
+  /// The integrator options should be checkpoint_integrator_options(*resume) (t_end may be
+  /// larger); the histories written before the checkpoint are written out again first.
+  const nlohmann::json* resume = nullptr;
+  /// Set asynchronously (a signal handler) to a nonzero signal number: the run stops before
+  /// the next step, keeps its partial results and writes a checkpoint if checkpointing.
+  const volatile std::sig_atomic_t* interrupt = nullptr;
   /// When set, cleared and filled with the same rows as the CSV files (at the same
   /// output_interval), whether or not output_dir is set.
   SimulationHistory* history = nullptr;
@@ -58,6 +83,7 @@ struct SimulationOptions {
 
 struct SimulationResult {
   bool complete = false;
+  std::string state;    ///< "complete", "failed" or "interrupted"
   std::string message;  ///< why the run stopped early (empty when complete)
   double t_reached = 0;
   double wall_seconds = 0;
@@ -65,6 +91,7 @@ struct SimulationResult {
   double max_position_violation = 0, max_velocity_violation = 0;
   double energy_initial = 0, energy_final = 0;
   IntegratorStats stats;
+  index_t checkpoint_step = 0;  ///< step of the last checkpoint written (0: none)
 };
 
 /// The settings of a run as `strata simulate` takes them (and strata.simulate in
@@ -75,10 +102,10 @@ struct RunSettings {
   int order = 0;               ///< BDF order 1..5
   Backend backend = Backend::automatic;
   std::size_t device_memory_limit = 0;  ///< GPU budget in bytes (0: the whole device)
-  int threads = 0;             ///< host threads for strata and the assembly (0: automatic)
-  bool full_newton = false;    ///< refactorize at every Newton iteration
-  double newton_tol = 0;       ///< relative Newton tolerance
-  bool variable_step = false;  ///< variable step and order with local error control
+  int threads = 0;                      ///< host threads for strata and the assembly (0: automatic)
+  bool full_newton = false;             ///< refactorize at every Newton iteration
+  double newton_tol = 0;                ///< relative Newton tolerance
+  bool variable_step = false;           ///< variable step and order with local error control
   double rtol = 1e-4, atol = 1e-6, max_step = 0;  ///< of variable steps (max_step 0: t_end/10)
   bool dense_reference = false;                   ///< dense LAPACK instead of strata (diagnosis)
   bool verbose = false;                           ///< every Newton iteration to stderr
@@ -94,10 +121,20 @@ struct RunSettings {
 /// 1..5, a non-positive tolerance or a dump step below 1.
 SimulationOptions simulation_options(const Model& model, const RunSettings& s);
 
-/// Runs the model to opts.integrator.t_end. Errors during the integration do not
-/// throw: the result is marked incomplete and the files written so far are kept.
-/// Errors before the first step (model, initial conditions) throw.
+/// Runs the model to opts.integrator.t_end. Errors during the integration (including
+/// OutOfMemory and std::bad_alloc) and interruptions do not throw: the result is marked
+/// incomplete, with the reason, and the files written so far are kept, named partial.
+/// Errors before the first step (model, initial conditions, a checkpoint that does not fit
+/// the model) throw; an allocation failure there throws OutOfMemory.
 SimulationResult simulate(const Model& model, const SimulationOptions& opts);
+
+/// Reads DIR/checkpoint.cbor. Throws InvalidInput naming the file when it is missing or
+/// not a strata checkpoint.
+nlohmann::json read_checkpoint(const std::string& dir);
+
+/// The integrator options a checkpoint was written with (the variable-step default of
+/// max_step, t_end/10, is stored resolved, so that a longer t_end does not change it).
+IntegratorOptions checkpoint_integrator_options(const nlohmann::json& checkpoint);
 
 /// Human-readable summary (steps, Newton iterations, factorizations, solver vs assembly
 /// time, matrix sizes).

@@ -9,7 +9,9 @@
 #include <fstream>
 #include <map>
 #include <set>
+#include <sstream>
 
+#include "core/atomic_file.hpp"
 #include "strata/errors.hpp"
 
 namespace strata::mbd {
@@ -46,8 +48,7 @@ VtkSeries::VtkSeries(const Model& model, std::string dir) : model_(model), dir_(
 
 void VtkSeries::write(double t, const double* q) {
   const std::string name = fmt::format("frame_{:06d}.vtu", frames_.size());
-  std::ofstream out(dir_ + "/" + name);
-  if (!out) throw Error("cannot write " + dir_ + "/" + name);
+  std::ostringstream out;  // written whole (core/atomic_file.hpp) at the end
   const std::size_t np = bodies_.size();
   std::size_t nv = 0;
   for (int k : bodies_) nv += model_.bodies[k].kind != BodyKind::node;
@@ -94,15 +95,17 @@ void VtkSeries::write(double t, const double* q) {
   for (const auto& e : quat)
     out << fmt::format("{:.9g} {:.9g} {:.9g} {:.9g}\n", e[0], e[1], e[2], e[3]);
   out << "</DataArray>\n</PointData>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>\n";
+  write_file_atomically(dir_ + "/" + name, out.str(), false);
   frames_.emplace_back(t, name);
 }
 
 void VtkSeries::finish() {
-  std::ofstream out(dir_ + "/series.pvd");
+  std::ostringstream out;
   out << "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\">\n<Collection>\n";
   for (const auto& [t, f] : frames_)
     out << fmt::format("<DataSet timestep=\"{:.9g}\" part=\"0\" file=\"{}\"/>\n", t, f);
   out << "</Collection>\n</VTKFile>\n";
+  write_file_atomically(dir_ + "/series.pvd", out.str());
 }
 
 }  // namespace strata::mbd

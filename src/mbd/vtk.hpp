@@ -2,7 +2,7 @@
 // a series.pvd collection (VTK file formats, Kitware, "VTK User's Guide" 11th ed., ch. 19).
 // Rigid bodies are vertices at their centres of mass with an "orientation" quaternion
 // (glyph them in ParaView); bodies joined by a constraint are connected by a line;
-// flexible bodies are their hexahedra.
+// flexible bodies are their hexahedra. Each file is written whole (temporary + rename).
 #pragma once
 
 #include <string>
@@ -18,6 +18,12 @@ class VtkSeries {
   void write(double t, const double* q);
   /// Writes series.pvd listing every frame written.
   void finish();
+  /// (time, file name) of every frame written so far; restore_frames continues a series
+  /// whose first frames a checkpointed run wrote into the same folder.
+  const std::vector<std::pair<double, std::string>>& frames() const { return frames_; }
+  void restore_frames(std::vector<std::pair<double, std::string>> frames) {
+    frames_ = std::move(frames);
+  }
 
  private:
   const Model& model_;

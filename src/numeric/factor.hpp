@@ -70,8 +70,9 @@ class Executor {
   virtual void report(FactorStats& fs) const {}
 };
 
-/// The CPU executor; `threads` host threads (0: all hardware threads).
-std::unique_ptr<Executor> make_cpu_executor(int threads);
+/// The CPU executor; `threads` host threads (0: all hardware threads). `reproducible`:
+/// large fronts too run single-threaded BLAS (see Options::reproducible).
+std::unique_ptr<Executor> make_cpu_executor(int threads, bool reproducible = false);
 
 /// The CUDA executor; throws NotSupported in a build without CUDA or without a GPU.
 std::unique_ptr<Executor> make_cuda_executor(const Options& opts);

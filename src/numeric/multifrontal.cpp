@@ -9,6 +9,7 @@
 // depend on the thread count.
 #include <algorithm>
 
+#include "core/alloc.hpp"
 #include "numeric/factor.hpp"
 
 namespace strata::numeric {
@@ -20,15 +21,15 @@ void factorize(const Analysis& an, const std::vector<double>& scaled_values, Mat
   factor.type = type;
   factor.valid = false;
   // Storage is sized once; refactorization reuses it (resize is a no-op then).
-  factor.panels.resize(an.factor_layout.total);
-  factor.rows.resize(t.rows.size());
+  sized_resize(factor.panels, an.factor_layout.total, "factorize: factor panels");
+  sized_resize(factor.rows, t.rows.size(), "factorize: factor row indices");
   factor.front_stats.assign(t.n_fronts(), cpu::PivotStats{});
   if (type == MatrixType::symmetric_indefinite) {
     factor.d_diag.resize(an.n);
     factor.d_off.resize(an.n);
     factor.pivot_size.resize(an.n);
   }
-  cb_arena.resize(an.cb_layout.arena_size);
+  sized_resize(cb_arena, an.cb_layout.arena_size, "factorize: contribution-block arena");
 
   FactorContext ctx;
   ctx.analysis = &an;

@@ -87,5 +87,100 @@ else
 fi
 # a missing file is a usage error
 check "missing file" 105 "" "$strata" solve "$tmp/none.mtx"
+
+# a failed solve leaves an existing output file as it was (written via temporary + rename)
+cp "$tmp/x5.mtx" "$tmp/keep.mtx"
+check "failed solve keeps old output" 1 "not positive definite" "$strata" solve "$tmp/indef.mtx" --type spd --out "$tmp/keep.mtx"
+if cmp -s "$tmp/x5.mtx" "$tmp/keep.mtx"; then pass=$((pass + 1)); else fail=$((fail + 1)); echo "FAIL: old output changed"; fi
+
+# --- simulate: partial results, interruption, checkpoint and restart -----------------------
+same_histories() {  # name, dir1, dir2: positions/velocities/accelerations/reactions bitwise,
+  local name=$1 a=$2 b=$3 f ok=1  # steps.csv without its two timing columns
+  for f in positions velocities accelerations reactions; do
+    cmp -s "$a/$f.csv" "$b/$f.csv" || { ok=0; echo "FAIL $name: $f.csv differs"; }
+  done
+  cmp -s <(cut -d, -f1-7,10- "$a/steps.csv") <(cut -d, -f1-7,10- "$b/steps.csv") ||
+    { ok=0; echo "FAIL $name: steps.csv differs"; }
+  [[ -s $a/positions.csv ]] || { ok=0; echo "FAIL $name: $a/positions.csv missing or empty"; }
+  if [[ $ok -eq 1 ]]; then pass=$((pass + 1)); else fail=$((fail + 1)); fi
+}
+has() {  # name, file, substring
+  if grep -qF -- "$3" "$2" 2>/dev/null; then pass=$((pass + 1)); else fail=$((fail + 1)); echo "FAIL $1: no '$3' in $2"; cat "$2" 2>/dev/null; fi
+}
+no_tmp() {  # name, dir: no temporary file left behind
+  if find "$2" -name '*.tmp.*' | grep -q .; then fail=$((fail + 1)); echo "FAIL $1: temporaries left in $2"; else pass=$((pass + 1)); fi
+}
+sim=("$strata" simulate --generate andrews --step 1e-4 --quiet)
+# run to T; run to T/2 with checkpoints, resume to T: the same histories, bit for bit
+check "sim full" 0 "complete" "${sim[@]}" --t-end 0.02 --output "$tmp/s_full"
+check "sim half" 0 "checkpoint            step 90" "${sim[@]}" --t-end 0.01 --output "$tmp/s_half" --checkpoint-every 30
+check "sim resume" 0 "resumed from" "$strata" simulate --resume "$tmp/s_half/checkpoint" --t-end 0.02 --output "$tmp/s_res" --quiet
+same_histories "resume = uninterrupted" "$tmp/s_full" "$tmp/s_res"
+has "complete status" "$tmp/s_res/status.json" '"complete": true'
+no_tmp "no temporaries" "$tmp/s_res"
+no_file "complete run: no partial file" "$tmp/s_res/positions.partial.csv"
+# the options of a resumed run are those of the checkpoint
+check "resume before the checkpoint" 1 "is not after the checkpoint's time" "$strata" simulate --resume "$tmp/s_half/checkpoint" --t-end 0.001 --output "$tmp/s_bad"
+check "resume with --step" 1 "--step cannot be changed" "$strata" simulate --resume "$tmp/s_half/checkpoint" --step 1e-3 --output "$tmp/s_bad"
+mkdir -p "$tmp/bad_ck" && printf 'garbage' > "$tmp/bad_ck/checkpoint.cbor"
+check "corrupt checkpoint" 1 "not a readable strata checkpoint" "$strata" simulate --resume "$tmp/bad_ck" --output "$tmp/s_bad"
+
+# SIGINT mid-run: exit 130, histories named partial, status "interrupted" with the step,
+# a checkpoint from which the run ends exactly as an uninterrupted one
+long=("$strata" simulate --generate andrews --step 2e-5 --t-end 0.2 --quiet)
+"${long[@]}" --output "$tmp/i_run" --checkpoint-every 100000 > "$tmp/i_run.log" 2>&1 &
+pid=$!
+for _ in $(seq 600); do
+  [[ -f $tmp/i_run/steps.partial.csv && $(wc -l < "$tmp/i_run/steps.partial.csv") -gt 100 ]] && break
+  sleep 0.05
+done
+kill -INT $pid
+wait $pid
+rc=$?
+if [[ $rc -eq 130 ]]; then pass=$((pass + 1)); else fail=$((fail + 1)); echo "FAIL SIGINT: exit $rc (want 130)"; cat "$tmp/i_run.log"; fi
+has "SIGINT status" "$tmp/i_run/status.json" '"state": "interrupted"'
+has "SIGINT status partial" "$tmp/i_run/status.json" '"partial": true'
+has "SIGINT reason" "$tmp/i_run/status.json" 'SIGINT'
+no_file "SIGINT: no whole-run name" "$tmp/i_run/positions.csv"
+[[ -s $tmp/i_run/positions.partial.csv ]] && pass=$((pass + 1)) || { fail=$((fail + 1)); echo "FAIL SIGINT: no partial positions"; }
+no_tmp "SIGINT: no temporaries" "$tmp/i_run"
+check "SIGINT resume" 0 "complete" "$strata" simulate --resume "$tmp/i_run/checkpoint" --output "$tmp/i_res" --quiet
+check "long full" 0 "complete" "${long[@]}" --output "$tmp/i_full"
+same_histories "SIGINT + resume = uninterrupted" "$tmp/i_full" "$tmp/i_res"
+
+# SIGTERM: exit 143, partial
+"${long[@]}" --output "$tmp/t_run" > "$tmp/t_run.log" 2>&1 &
+pid=$!
+for _ in $(seq 600); do
+  [[ -f $tmp/t_run/steps.partial.csv && $(wc -l < "$tmp/t_run/steps.partial.csv") -gt 10 ]] && break
+  sleep 0.05
+done
+kill -TERM $pid
+wait $pid
+rc=$?
+if [[ $rc -eq 143 ]]; then pass=$((pass + 1)); else fail=$((fail + 1)); echo "FAIL SIGTERM: exit $rc (want 143)"; fi
+has "SIGTERM status" "$tmp/t_run/status.json" 'SIGTERM'
+
+# a Newton failure mid-run (a slider pushed beyond the reach of crank + rod): exit 1,
+# partial histories, status "failed" with the reason
+cat > "$tmp/slider.json" <<'J'
+{"type": "planar", "bodies": [
+  {"name": "crank", "mass": 1, "inertia": 0.1, "position": [0, 0], "angle": 0.9272952180016122},
+  {"name": "slider", "mass": 1, "inertia": 0.1, "position": [2.0, 0]}],
+ "joints": [
+  {"name": "pivot", "type": "revolute", "body_i": "ground", "body_j": "crank", "point": [0, 0]},
+  {"name": "guide", "type": "translational", "body_i": "ground", "body_j": "slider", "point": [2.0, 0], "axis": [1, 0]},
+  {"name": "rod", "type": "distance", "body_i": "crank", "body_j": "slider", "point_i": [1, 0], "point_j": [0, 0], "length": 1.5},
+  {"name": "push", "type": "translation_driver", "body_i": "ground", "body_j": "slider", "point": [2.0, 0], "axis": [1, 0],
+   "motion": {"polynomial": [0, 1]}}]}
+J
+check "Newton failure" 1 "did not converge" "$strata" simulate "$tmp/slider.json" --t-end 1 --step 0.01 --output "$tmp/f_run" --quiet
+has "failure status" "$tmp/f_run/status.json" '"state": "failed"'
+has "failure reason" "$tmp/f_run/status.json" 'did not converge'
+no_file "failure: no whole-run name" "$tmp/f_run/positions.csv"
+[[ $(wc -l < "$tmp/f_run/positions.partial.csv") -gt 20 ]] && pass=$((pass + 1)) || { fail=$((fail + 1)); echo "FAIL failure: partial rows missing"; }
+# a later complete run in the same folder replaces the partial files
+check "complete after failure" 0 "complete" "${sim[@]}" --t-end 0.001 --output "$tmp/f_run"
+no_file "stale partial removed" "$tmp/f_run/positions.partial.csv"
 echo "$pass passed, $fail failed"
 [[ $fail -eq 0 ]]

@@ -195,8 +195,11 @@ def test_output_dir_writes_the_cli_files(tmp_path):
     r = strata.simulate(generate="chain2d:2", t_end=0.005, output_dir=out)
     header, data = read_csv(out / "positions.csv")
     np.testing.assert_allclose(data[:, 1:], r.positions, rtol=1e-15, atol=0)
+    assert r.state == "complete"
+    assert not list(out.glob("*.partial.csv"))
     with open(out / "status.json") as f:
-        assert json.load(f)["complete"] is True
+        status = json.load(f)
+    assert status["complete"] is True and status["state"] == "complete"
 
 
 # ---------------------------------------------------------------------------------------
@@ -294,6 +297,29 @@ def test_failure_raises_with_the_partial_result():
     np.testing.assert_allclose(r.coordinate("slider.x"), 2 + r.time, atol=1e-6)
     with pytest.raises(KeyError, match="no coordinate"):
         r.coordinate("slider.z")
+
+
+def test_failure_leaves_partial_files_like_the_cli(tmp_path):
+    """A run that stops early with output_dir: NAME.partial.csv and a partial status.json,
+    no NAME.csv, and the partial files hold the rows of err.result."""
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "positions.csv").write_text("stale\n")  # an earlier run's: removed
+    with pytest.raises(strata.SimulationError) as err:
+        strata.simulate(slider_crank_beyond_reach(), t_end=1.0, step=1e-2, output_dir=out)
+    r = err.value.result
+    assert r.state == "failed" and not r.complete
+    for name in ("positions", "velocities", "accelerations", "reactions", "steps"):
+        assert (out / f"{name}.partial.csv").is_file()
+        assert not (out / f"{name}.csv").exists()
+    with open(out / "status.json") as f:
+        status = json.load(f)
+    assert status["state"] == "failed" and status["partial"] is True
+    assert status["complete"] is False
+    assert status["t_reached"] == pytest.approx(r.t_reached, rel=1e-15)
+    header, data = read_csv(out / "positions.partial.csv")
+    np.testing.assert_allclose(data[:, 1:], r.positions, rtol=1e-15, atol=0)
+    np.testing.assert_allclose(data[:, 0], r.time, rtol=1e-15, atol=0)
 
 
 def test_gpu_device_is_supported_or_a_clear_error():

@@ -157,7 +157,11 @@ TEST(MbdModelErrors, NewtonFailureStopsWithPartialResults) {
   std::stringstream status;
   status << std::ifstream(o.output_dir + "/status.json").rdbuf();
   EXPECT_NE(status.str().find("\"partial\": true"), std::string::npos) << status.str();
-  std::ifstream pos(o.output_dir + "/positions.csv");
+  EXPECT_NE(status.str().find("\"state\": \"failed\""), std::string::npos) << status.str();
+  EXPECT_NE(status.str().find("did not converge"), std::string::npos) << status.str();
+  // partial histories carry it in their names: no positions.csv that could pass for a run
+  EXPECT_FALSE(std::filesystem::exists(o.output_dir + "/positions.csv"));
+  std::ifstream pos(o.output_dir + "/positions.partial.csv");
   int lines = 0;
   for (std::string line; std::getline(pos, line);) ++lines;
   EXPECT_GT(lines, 20);  // the steps before the failure are kept

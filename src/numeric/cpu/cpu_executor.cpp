@@ -2,7 +2,12 @@
 //
 // Parallelism (no oversubscription): fronts whose factorization is large (more than
 // kBigFrontFlops) are processed one after another with multithreaded OpenBLAS; the others
-// are distributed over oneTBB worker threads with OpenBLAS restricted to one thread. TBB
+// are distributed over oneTBB worker threads with OpenBLAS restricted to one thread.
+// Determinism: every front is computed by one thread from inputs (children's contribution
+// blocks, summed in child order) that do not depend on the schedule, so the factor is
+// bitwise the same for any thread count — except that multithreaded OpenBLAS rounds
+// differently for different thread counts on the large fronts; Options::reproducible keeps
+// those single-threaded too (docs/reliability.md, "Determinism"). TBB
 // rather than OpenMP because idle OpenMP threads spin-wait (GOMP's default policy) and
 // starve OpenBLAS's own threads on small machines: measured on 2 cores, bcsstk09 took
 // 68 ms with OpenMP against 0.9 ms single-threaded. Each worker owns a dense front
@@ -26,6 +31,7 @@
 #include <mutex>
 #include <thread>
 
+#include "core/alloc.hpp"
 #include "core/blas.hpp"
 #include "numeric/factor.hpp"
 #include "strata/errors.hpp"
@@ -44,9 +50,10 @@ struct Workspace {
 
 class CpuExecutor final : public Executor {
  public:
-  explicit CpuExecutor(int threads)
+  CpuExecutor(int threads, bool reproducible)
       : threads_(threads > 0 ? threads
                              : std::max(1, static_cast<int>(std::thread::hardware_concurrency()))),
+        reproducible_(reproducible),
         arena_(threads_) {}
   const char* name() const override { return "cpu"; }
 
@@ -91,9 +98,10 @@ class CpuExecutor final : public Executor {
       }
       if (error) std::rethrow_exception(error);
     }
-    // big fronts: one at a time, all threads inside BLAS
+    // big fronts: one at a time, all threads inside BLAS — unless reproducible: OpenBLAS's
+    // threaded kernels round differently for different thread counts (docs/reliability.md)
     if (!big.empty()) {
-      set_blas_threads(threads_);
+      set_blas_threads(reproducible_ ? 1 : threads_);
       for (index_t f : big) process_front(ctx, f, ws_[threads_]);
     }
   }
@@ -106,6 +114,7 @@ class CpuExecutor final : public Executor {
     blas_threads_ = n;
   }
   int threads_;
+  bool reproducible_;
   int blas_threads_ = -1;
   tbb::task_arena arena_;
   std::vector<Workspace> ws_;
@@ -119,7 +128,7 @@ void CpuExecutor::process_front(const FactorContext& ctx, index_t f, Workspace& 
   const index_t m = t.n_rows(f), k = t.n_pivots(f);
   const index_t* rows = t.rows_of(f);
   const std::size_t mm = static_cast<std::size_t>(m) * m;
-  if (w.front.size() < mm) w.front.resize(mm);
+  if (w.front.size() < mm) sized_resize(w.front, mm, "factorize: dense front workspace");
   double* F = w.front.data();
   std::fill(F, F + mm, 0.0);
 
@@ -200,8 +209,8 @@ void CpuExecutor::process_front(const FactorContext& ctx, index_t f, Workspace& 
 
 }  // namespace
 
-std::unique_ptr<Executor> make_cpu_executor(int threads) {
-  return std::make_unique<CpuExecutor>(threads);
+std::unique_ptr<Executor> make_cpu_executor(int threads, bool reproducible) {
+  return std::make_unique<CpuExecutor>(threads, reproducible);
 }
 
 }  // namespace strata::numeric

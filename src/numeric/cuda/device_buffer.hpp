@@ -5,10 +5,12 @@
 #include <utility>
 
 #include "numeric/cuda/cuda_check.hpp"
+#include "numeric/device_cap.hpp"
 
 namespace strata::cuda {
 
-/// Device array of T. Allocation failure throws OutOfMemory naming the bytes.
+/// Device array of T. Allocation failure (or the test-only cap of numeric/device_cap.hpp)
+/// throws OutOfMemory naming the bytes; the buffer is then empty.
 template <class T>
 class DeviceBuffer {
  public:
@@ -34,6 +36,8 @@ class DeviceBuffer {
     if (n <= n_) return;
     release();
     if (n == 0) return;
+    // the test-only allocation cap (numeric/device_cap.hpp) fails here like cudaMalloc
+    numeric::charge_device_allocation(n * sizeof(T), "cudaMalloc (device memory)");
     cudaError_t e = cudaMalloc(reinterpret_cast<void**>(&p_), n * sizeof(T));
     if (e != cudaSuccess) {
       p_ = nullptr;

@@ -1,0 +1,184 @@
+// strata::mbd — saving and restoring the integrator between steps (checkpoint/restart).
+//
+// A restart must continue exactly as the uninterrupted run: the BDF formulas read the
+// history of past points, the step-size/order controller its own state, modified Newton
+// may keep the factor of an earlier step, and the solver's matching and scaling were
+// computed from the Jacobian values at its last analysis. So the state holds all of them;
+// the factor itself is not stored but rebuilt from the saved Jacobian values with the same
+// analysis (strata's factorization is deterministic for a fixed thread count:
+// docs/reliability.md, "Determinism"). Timing statistics are restored too (so that the
+// summary adds up) but are of course not reproducible.
+#include <string>
+
+#include "mbd/integrator.hpp"
+
+namespace strata::mbd {
+
+using nlohmann::json;
+
+namespace {
+
+json stats_to_json(const IntegratorStats& s) {
+  return {{"steps", s.steps},
+          {"rejected", s.rejected},
+          {"newton_iterations", s.newton_iterations},
+          {"factorizations", s.factorizations},
+          {"analyses", s.analyses},
+          {"repartitions", s.repartitions},
+          {"solves", s.solves},
+          {"reanalyses", s.reanalyses},
+          {"contact_updates", s.contact_updates},
+          {"error_rejections", s.error_rejections},
+          {"perturbed_pivots", s.perturbed_pivots},
+          {"factor_seconds", s.factor_seconds},
+          {"solve_seconds", s.solve_seconds},
+          {"assembly_seconds", s.assembly_seconds},
+          {"solver_seconds", s.solver_seconds},
+          {"analysis_seconds", s.analysis_seconds},
+          {"partition_seconds", s.partition_seconds},
+          {"initial_conditions_seconds", s.initial_conditions_seconds},
+          {"jacobian_size", s.jacobian_size},
+          {"jacobian_nnz", s.jacobian_nnz},
+          {"factor_nnz", s.factor_nnz},
+          {"solver", s.solver}};
+}
+
+IntegratorStats stats_from_json(const json& j) {
+  IntegratorStats s;
+  j.at("steps").get_to(s.steps);
+  j.at("rejected").get_to(s.rejected);
+  j.at("newton_iterations").get_to(s.newton_iterations);
+  j.at("factorizations").get_to(s.factorizations);
+  j.at("analyses").get_to(s.analyses);
+  j.at("repartitions").get_to(s.repartitions);
+  j.at("solves").get_to(s.solves);
+  j.at("reanalyses").get_to(s.reanalyses);
+  j.at("contact_updates").get_to(s.contact_updates);
+  j.at("error_rejections").get_to(s.error_rejections);
+  j.at("perturbed_pivots").get_to(s.perturbed_pivots);
+  j.at("factor_seconds").get_to(s.factor_seconds);
+  j.at("solve_seconds").get_to(s.solve_seconds);
+  j.at("assembly_seconds").get_to(s.assembly_seconds);
+  j.at("solver_seconds").get_to(s.solver_seconds);
+  j.at("analysis_seconds").get_to(s.analysis_seconds);
+  j.at("partition_seconds").get_to(s.partition_seconds);
+  j.at("initial_conditions_seconds").get_to(s.initial_conditions_seconds);
+  j.at("jacobian_size").get_to(s.jacobian_size);
+  j.at("jacobian_nnz").get_to(s.jacobian_nnz);
+  j.at("factor_nnz").get_to(s.factor_nnz);
+  j.at("solver").get_to(s.solver);
+  return s;
+}
+
+void expect_size(const std::vector<double>& v, std::size_t n, const char* what) {
+  if (v.size() != n)
+    throw InvalidInput(std::string("checkpoint: ") + what + " has " + std::to_string(v.size()) +
+                       " entries, the model needs " + std::to_string(n));
+}
+
+}  // namespace
+
+json Integrator::save_state() const {
+  json hist = json::array();
+  for (const Point& p : history_) hist.push_back({{"t", p.t}, {"q", p.q}, {"v", p.v}, {"a", p.a}});
+  std::vector<int> cand(sys_.candidates().begin(), sys_.candidates().end());
+  return {{"n", sys_.n()},
+          {"m", sys_.m()},
+          {"t", t_},
+          {"h", h_},
+          {"step", step_},
+          {"order", order_},
+          {"steps_at_order", steps_at_order_},
+          {"next_h", next_h_},
+          {"factor_beta", factor_beta_},
+          {"slow_last_step", slow_last_step_},
+          {"pattern_changed", pattern_changed_},
+          {"factor_valid", factor_valid_},
+          {"fresh_analysis", fresh_analysis_},
+          {"has_solver", solver_ != nullptr},
+          {"q", q_},
+          {"v", v_},
+          {"a", a_},
+          {"lambda", lambda_},
+          {"history", hist},
+          {"partition",
+           {{"dependent", partition_.dependent},
+            {"independent", partition_.independent},
+            {"quality", partition_.quality}}},
+          {"candidates", cand},
+          {"analysis_values", analysis_values_},
+          {"factor_values", factor_values_},
+          {"stats", stats_to_json(stats_)}};
+}
+
+void Integrator::restore_state(const json& j) {
+  const index_t n = sys_.n(), m = sys_.m();
+  if (j.at("n").get<index_t>() != n || j.at("m").get<index_t>() != m)
+    throw InvalidInput("checkpoint: it was written for a model with n = " + j.at("n").dump() +
+                       " coordinates and m = " + j.at("m").dump() +
+                       " constraint equations; this model has " + std::to_string(n) + " and " +
+                       std::to_string(m));
+  j.at("t").get_to(t_);
+  j.at("h").get_to(h_);
+  j.at("step").get_to(step_);
+  j.at("order").get_to(order_);
+  j.at("steps_at_order").get_to(steps_at_order_);
+  j.at("next_h").get_to(next_h_);
+  j.at("factor_beta").get_to(factor_beta_);
+  j.at("slow_last_step").get_to(slow_last_step_);
+  j.at("pattern_changed").get_to(pattern_changed_);
+  j.at("factor_valid").get_to(factor_valid_);
+  j.at("fresh_analysis").get_to(fresh_analysis_);
+  retry_ = false;
+  lte_reject_h_ = 0;
+  j.at("q").get_to(q_);
+  j.at("v").get_to(v_);
+  j.at("a").get_to(a_);
+  j.at("lambda").get_to(lambda_);
+  expect_size(q_, n, "q");
+  expect_size(v_, n, "v");
+  expect_size(a_, n, "a");
+  expect_size(lambda_, m, "lambda");
+  history_.clear();
+  for (const json& p : j.at("history")) {
+    Point pt;
+    p.at("t").get_to(pt.t);
+    p.at("q").get_to(pt.q);
+    p.at("v").get_to(pt.v);
+    p.at("a").get_to(pt.a);
+    expect_size(pt.q, n, "history q");
+    expect_size(pt.v, n, "history v");
+    expect_size(pt.a, n, "history a");
+    history_.push_back(std::move(pt));
+  }
+  if (history_.empty()) throw InvalidInput("checkpoint: the BDF history is empty");
+  const json& pj = j.at("partition");
+  pj.at("dependent").get_to(partition_.dependent);
+  pj.at("independent").get_to(partition_.independent);
+  pj.at("quality").get_to(partition_.quality);
+  const auto cand = j.at("candidates").get<std::vector<int>>();
+  sys_.set_candidates(std::vector<char>(cand.begin(), cand.end()));
+  sys_.set_partition(partition_);  // rebuilds the Newton matrix pattern
+  j.at("analysis_values").get_to(analysis_values_);
+  j.at("factor_values").get_to(factor_values_);
+  stats_ = stats_from_json(j.at("stats"));
+  // The solver as it was: same analysis (its matching and scaling come from the values it
+  // saw), same factor. With a pending pattern change the next step analyzes anew anyway.
+  solver_.reset();
+  if (j.at("has_solver").get<bool>() && !pattern_changed_) {
+    SparseMatrix a = sys_.matrix();
+    expect_size(analysis_values_, a.values.size(), "the analyzed Jacobian");
+    a.values = analysis_values_;
+    solver_ = new_solver();
+    solver_->analyze(a);
+    if (factor_valid_) {
+      expect_size(factor_values_, a.values.size(), "the factorized Jacobian");
+      a.values = factor_values_;
+      solver_->factorize(a);
+    }
+  } else {
+    factor_valid_ = false;
+  }
+}
+
+}  // namespace strata::mbd
