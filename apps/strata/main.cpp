@@ -1,9 +1,12 @@
 // strata — the command line.
 //
 //   strata analyze FILE [--ordering nd|metis|amd|natural] [--max-block-size N]
-//                       [--device-memory-limit BYTES] [--json]
+//                       [--device-memory-limit BYTES] [--json] [multi-GPU options]
 //   strata solve A.mtx [--rhs b.mtx] [--type spd|symmetric_indefinite|general|auto]
 //                      [--ordering ...] [--max-block-size N] [--out x.mtx] [--json]
+//                      [--backend cpu|cuda|auto] [multi-GPU options]
+//   multi-GPU options: [--num-gpus N] [--subtrees-per-gpu S] [--balance-by-work on|off]
+//                      [--work-stealing on|off]
 //   strata simulate [MODEL.json] [--generate KIND:SIZE] [--t-end T] [--step h] [--order k]
 //                   [--device cpu|gpu|auto] [--output DIR] [--vtk] [--dump-matrix DIR]
 //                   [--dump-step K] [--output-interval S] [--full-newton] [--write-model F]
@@ -50,6 +53,10 @@ struct CommonArgs {
   std::size_t device_memory_limit = 0;
   int threads = 0;
   bool json = false;
+  std::string backend = "cpu";
+  int num_gpus = Options{}.num_gpus;
+  int subtrees_per_gpu = Options{}.subtrees_per_gpu;
+  std::string balance_by_work = "on", work_stealing = "on";
 };
 
 void add_common(CLI::App* cmd, CommonArgs& a) {
@@ -65,6 +72,17 @@ void add_common(CLI::App* cmd, CommonArgs& a) {
                   "memory budget of the batch plan in bytes (0: unlimited)");
   cmd->add_option("--threads", a.threads, "host threads (0: all)");
   cmd->add_flag("--json", a.json, "print the report as JSON");
+  cmd->add_option("--backend", a.backend, "where the factorization runs (default cpu)")
+      ->check(CLI::IsMember({"cpu", "cuda", "auto"}));
+  cmd->add_option("--num-gpus", a.num_gpus, "GPUs for the CUDA backend (0: all visible)")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--subtrees-per-gpu", a.subtrees_per_gpu, "subtrees per GPU in the tree split")
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--balance-by-work", a.balance_by_work,
+                  "balance the top bisections by work with several GPUs")
+      ->check(CLI::IsMember({"on", "off"}));
+  cmd->add_option("--work-stealing", a.work_stealing, "idle GPUs take other GPUs' subtrees")
+      ->check(CLI::IsMember({"on", "off"}));
 }
 
 Options options_from(const CommonArgs& a) {
@@ -73,6 +91,13 @@ Options options_from(const CommonArgs& a) {
   o.max_block_size = a.max_block_size;
   o.device_memory_limit = a.device_memory_limit;
   o.num_threads = a.threads;
+  o.backend = a.backend == "cuda"   ? Backend::cuda
+              : a.backend == "auto" ? Backend::automatic
+                                    : Backend::cpu;
+  o.num_gpus = a.num_gpus;
+  o.subtrees_per_gpu = a.subtrees_per_gpu;
+  o.balance_by_work = a.balance_by_work == "on";
+  o.work_stealing = a.work_stealing == "on";
   return o;
 }
 
@@ -99,8 +124,14 @@ json analysis_json(const AnalysisStats& s) {
           {"pairs", s.pairs},
           {"odd_cycles", s.odd_cycles},
           {"ordering", to_string(s.ordering)},
+          {"workers", s.workers},
+          {"subtrees", s.subtrees},
+          {"subtree_balance", s.subtree_balance},
+          {"top_flops_fraction", s.top_flops_fraction},
+          {"nd_rebisections", s.nd_rebisections},
           {"seconds",
            {{"ordering", s.ordering_seconds},
+            {"nd_balance", s.nd_balance_seconds},
             {"symbolic", s.symbolic_seconds},
             {"plan", s.plan_seconds},
             {"total", s.total_seconds}}}};
@@ -140,6 +171,12 @@ void print_analysis(const AnalysisStats& s, double read_seconds) {
       s.batches.size(), s.tree_height,
       s.memory_budget ? fmt::format("{:.3f} MB", s.memory_budget / 1e6) : "unlimited", maxb / 1e6,
       tiled);
+  if (s.workers > 1)
+    fmt::print(
+        "tree split            {} workers: {} subtrees, balance {:.3f} (makespan / mean), "
+        "{:.1f}% of the flops in the top part; {} bisections rebalanced by work ({:.3f} s)\n",
+        s.workers, s.subtrees, s.subtree_balance, 100 * s.top_flops_fraction, s.nd_rebisections,
+        s.nd_balance_seconds);
   fmt::print(
       "time [s]              read {:.3f}  ordering {:.3f}  symbolic {:.3f}  plan {:.3f}  "
       "analysis total {:.3f}\n",
@@ -226,6 +263,17 @@ int run_solve(const SolveArgs& a) {
                    {"inertia", {f.inertia_positive, f.inertia_negative, f.inertia_zero}},
                    {"log_abs_determinant", f.log_abs_determinant},
                    {"determinant_sign", f.determinant_sign}};
+    json devices = json::array();
+    for (const DeviceStats& d : f.devices)
+      devices.push_back({{"worker", d.worker},
+                         {"device", d.device},
+                         {"busy_seconds", d.busy_seconds},
+                         {"idle_seconds", d.idle_seconds},
+                         {"subtrees_run", d.subtrees_run},
+                         {"subtrees_stolen", d.subtrees_stolen},
+                         {"bytes_transferred", d.bytes_transferred},
+                         {"flops", d.flops}});
+    j["factor"]["devices"] = devices;
     j["solve"] = {{"seconds", st.solve.seconds},
                   {"refinement_steps", st.solve.refinement_steps},
                   {"gmres_iterations", st.solve.gmres_iterations},
@@ -238,6 +286,12 @@ int run_solve(const SolveArgs& a) {
     print_analysis(st.analysis, read_seconds);
     fmt::print("factorization         {} on {}: {:.3f} s, {:.2f} GFLOP/s\n", to_string(f.type),
                f.backend, f.seconds, f.gflops);
+    for (const DeviceStats& d : f.devices)
+      fmt::print(
+          "  worker {} ({:<7})   busy {:.3f} s, idle {:.3f} s, {} subtrees ({} stolen), "
+          "{:.3f} MB transferred, {:.3g} flops\n",
+          d.worker, d.device, d.busy_seconds, d.idle_seconds, d.subtrees_run, d.subtrees_stolen,
+          d.bytes_transferred / 1e6, d.flops);
     fmt::print("pivots                {} perturbed, {} 2x2; inertia (+{}, -{}, 0:{})\n",
                f.perturbed_pivots, f.two_by_two_pivots, f.inertia_positive, f.inertia_negative,
                f.inertia_zero);

@@ -78,6 +78,17 @@ class CudaExecutor final : public numeric::Executor {
 
   void factor_batch(const FactorContext& ctx, const BatchInfo& b) override;
 
+  void begin_part(const FactorContext& ctx) override {
+    if (ctx.part->id != -1)
+      throw NotSupported("the CUDA executor does not factor parts of a split tree yet");
+  }
+  std::size_t export_cb(const FactorContext&, numeric::CbTransfer&) override {
+    throw NotSupported("the CUDA executor does not export contribution blocks yet");
+  }
+  std::size_t import_cb(const FactorContext&, const numeric::CbTransfer&) override {
+    throw NotSupported("the CUDA executor does not import contribution blocks yet");
+  }
+
  private:
   void upload_analysis(const Analysis& an);
 
@@ -358,9 +369,20 @@ namespace strata::numeric {
 
 bool cuda_available() { return cuda::device_present(); }
 
-std::unique_ptr<Executor> make_cuda_executor(const Options& opts) {
+int cuda_device_count() {
+  int count = 0;
+  if (cudaGetDeviceCount(&count) != cudaSuccess) {
+    (void)cudaGetLastError();
+    return 0;
+  }
+  return count;
+}
+
+std::unique_ptr<Executor> make_cuda_executor(const Options& opts, int device) {
   if (!cuda::device_present())
     throw NotSupported("the CUDA backend was asked for, but no CUDA GPU is visible");
+  if (device != 0)
+    throw NotSupported("the CUDA executor runs on device 0 only for now");
   return std::make_unique<cuda::CudaExecutor>(opts);
 }
 
