@@ -56,7 +56,8 @@ struct CommonArgs {
   std::string backend = "cpu";
   int num_gpus = Options{}.num_gpus;
   int subtrees_per_gpu = Options{}.subtrees_per_gpu;
-  std::string balance_by_work = "on", work_stealing = "on";
+  std::string balance_by_work = Options{}.balance_by_work ? "on" : "off";
+  std::string work_stealing = Options{}.work_stealing ? "on" : "off";
 };
 
 void add_common(CLI::App* cmd, CommonArgs& a) {

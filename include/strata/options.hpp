@@ -94,8 +94,11 @@ struct Options {
   int subtrees_per_gpu = 4;
   /// With several GPUs and nested dissection: balance the top ⌈log₂(GPUs × subtrees)⌉
   /// bisections by estimated factorization work instead of vertex count (the paper's
-  /// "balanced graph bisection"; costs ordering time, docs/multigpu.md; default on).
-  bool balance_by_work = true;
+  /// "balanced graph bisection"). Default off: measured on 3D Laplacians and elasticity
+  /// problems it balanced the bisections but not the subtrees the GPUs get (the split of
+  /// the assembly tree into several subtrees per GPU already does that) and cost 2-15× the
+  /// ordering time (docs/multigpu.md).
+  bool balance_by_work = false;
   /// With several GPUs: a GPU whose queue of subtrees is empty takes an unstarted subtree
   /// from the most loaded queue (default on).
   bool work_stealing = true;
