@@ -12,7 +12,8 @@ competitor. Best of --repeat runs.
         [--matrix-dir ../shared/matrices] [--threads 0]
 
 Prints a table; --json writes every figure (with machine and git commit) to OUT. Not part
-of bench/run or bench/REPORT.md (yet).
+of bench/run or bench/REPORT.md: bench/python_vs_scipy.py is the benchmark in the report
+(Python against the command line, strata against SuperLU and CHOLMOD).
 """
 
 import argparse

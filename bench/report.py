@@ -25,6 +25,9 @@ How results map to the five experiments of the benchmark issue:
   3. GPU count 1, 2, 4      benchmark "multigpu"
   4. solvability            benchmark "solvability"
   5. end to end simulate    benchmark "simulate"
+and, outside the five experiments, the Python interface (bench/python_vs_scipy.py):
+benchmark "python", tag "" (overhead against the command line; strata against scipy's
+spsolve and scikit-sparse's CHOLMOD).
 Results of any other kind or tag are shown as plain tables under "Other results", so
 nothing measured is dropped silently.
 
@@ -177,6 +180,11 @@ def f_e(x) -> str:
     return "–" if x is None else f"{x:.1e}"
 
 
+def f_pct(x) -> str:
+    x = num(x)
+    return "–" if x is None else f"{x:+.2f}%"
+
+
 def table(header: list[str], rows: list[list[str]], right_from: int = 1) -> str:
     align = ["---" if i < right_from else "---:" for i in range(len(header))]
     lines = ["| " + " | ".join(header) + " |", "| " + " | ".join(align) + " |"]
@@ -266,6 +274,7 @@ class Report:
                             "refactorization and solve per Newton step) on the CPU and on a GPU",
                             "needs the `strata simulate` command and a lent GPU machine "
                             "(`bench/run gpu`)")
+        self.python_section(runs)
         self.others(runs)
         if skipped:
             self.w("## Results files skipped")
@@ -634,6 +643,101 @@ class Report:
             return
         for r in chosen:
             self.generic_run(r)
+
+    def python_section(self, runs: list[Run]) -> None:
+        self.w("## Python interface: overhead, scipy and CHOLMOD")
+        self.w()
+        self.w("Measures the cost of the Python layer (strata.Solver + solve against `strata "
+               "solve` on the same matrix; goal: under 5% on the large one) and a complete "
+               "solve from Python (analysis, factorization, one right-hand side) by strata, "
+               "scipy's spsolve (SuperLU) and scikit-sparse's CHOLMOD on SPD matrices.")
+        self.w()
+        chosen = [r for r in runs if r.kind == "python" and not r.tag]
+        if not chosen:
+            self.w(f"{NOT_MEASURED}: no `python` results in the results folder; run "
+                   "`PYTHONPATH=build/python /usr/bin/python3 bench/python_vs_scipy.py`.")
+            self.w()
+            return
+        for r in chosen:
+            self.consumed.add(r.path)
+            self.python_run(r)
+
+    def python_run(self, r: Run) -> None:
+        over = [row for row in r.rows if row.get("part") == "overhead"]
+        goal = num(r.get("overhead_goal_percent"))
+        if over:
+            self.w(f"### Python layer vs the command line ({machine_label(r.machine)})")
+            self.w()
+            rows = []
+            for row in over:
+                rows.append([str(row.get("problem")), str(row.get("size", "")),
+                             f_int(row.get("n")), f_sec(dig(row, "cli", "total_seconds")),
+                             f_sec(dig(row, "python", "total_seconds")),
+                             f_pct(row.get("overhead_vs_cli_percent")),
+                             f_pct(row.get("overhead_vs_cli_median_percent")),
+                             f_pct(row.get("outside_phases_percent")),
+                             f_sec(dig(row, "python", "full_storage_total_seconds"))])
+            self.w(table(["problem", "size", "n", "CLI s", "Python s", "Python vs CLI",
+                          "same, medians", "outside the C++ phases",
+                          "Python, full storage s"], rows, 2))
+            large = [row for row in over if row.get("size") == "large"]
+            if goal is not None and large:
+                for row in large:
+                    o = num(row.get("overhead_vs_cli_percent"))
+                    if o is None:
+                        continue
+                    verdict = "met" if o < goal else "**not met**"
+                    self.w(f"Goal (Python layer under {goal:g}% on the large matrix, "
+                           f"{row.get('problem')}): {verdict} ({f_pct(o)} against the "
+                           f"command line, {f_pct(row.get('outside_phases_percent'))} outside "
+                           f"the C++ phases of the same call).")
+                    self.w()
+            load = r.get("load_average")
+            if isinstance(load, dict) and num(load.get("start")) is not None:
+                self.w(f"Load average of the machine (1 minute) at the start and end of the "
+                       f"run: {num(load['start']):.1f} and {num(load.get('end')) or 0:.1f} on "
+                       f"{r.machine[1]} hardware threads: other work on the machine makes the "
+                       f"two processes' times differ by chance; the column \"outside the C++ "
+                       f"phases\" (Python time over the phase times strata reports in the same "
+                       f"call) does not depend on that.")
+                self.w()
+            self.caption("Table: copied from the rows (CLI and Python: analysis + "
+                         "factorization + one solve, best of the repeats, and the ratio of "
+                         "the medians; percentages as stored).", [r])
+        solv = [row for row in r.rows if row.get("part") == "solvers"]
+        if solv:
+            self.w(f"### strata, SuperLU and CHOLMOD from Python ({machine_label(r.machine)})")
+            self.w()
+            keys = [("strata", "strata"), ("scipy_spsolve", "SuperLU (MMD on A+Aᵀ)"),
+                    ("scipy_spsolve_colamd", "SuperLU (COLAMD)"), ("cholmod", "CHOLMOD")]
+
+            def cell(row, k):
+                d = row.get(k) or {}
+                if "seconds" in d:
+                    return f"{f_sec(d['seconds'])} ({f_e(d.get('backward_error'))})"
+                return str(d.get("status", "–")).split(" (")[0]
+
+            rows, ratios_lu, ratios_ch = [], [], []
+            for row in solv:
+                r_lu = ratio(dig(row, "strata", "seconds"), dig(row, "scipy_spsolve", "seconds"))
+                r_ch = ratio(dig(row, "strata", "seconds"), dig(row, "cholmod", "seconds"))
+                ratios_lu.append(r_lu)
+                ratios_ch.append(r_ch)
+                rows.append([str(row.get("problem")), f_int(row.get("n"))]
+                            + [cell(row, k) for k, _ in keys] + [f_ratio(r_lu), f_ratio(r_ch)])
+            rows.append(["**geometric mean**", ""] + [""] * len(keys)
+                        + [f_ratio(geomean(ratios_lu)), f_ratio(geomean(ratios_ch))])
+            self.w(table(["problem", "n"] + [f"{n} s (backward error)" for _, n in keys]
+                         + ["strata/SuperLU", "strata/CHOLMOD"], rows))
+            missing = sorted({str(dig(row, "cholmod", "status")) for row in solv
+                              if dig(row, "cholmod", "status")})
+            if missing:
+                self.w(f"CHOLMOD: {', '.join(missing)} (scikit-sparse; scripts/setup.sh "
+                       f"tries to install it with pip).")
+                self.w()
+            self.caption("Table: times and backward errors copied from the rows; ratios "
+                         "(time of strata / time of the other solver, below 1: strata is "
+                         "faster) and their geometric means computed by this generator.", [r])
 
     def others(self, runs: list[Run]) -> None:
         rest = [r for r in runs if r.path not in self.consumed]

@@ -9,6 +9,7 @@ pkgs=(
   libcli11-dev nlohmann-json3-dev libfmt-dev zlib1g-dev libtbb-dev
   libgtest-dev libgmock-dev libbenchmark-dev libmumps-seq-dev
   python3-matplotlib python3-dev python3-pybind11 python3-numpy python3-scipy python3-pytest
+  python3-pip
 )
 missing=()
 for p in "${pkgs[@]}"; do
@@ -19,5 +20,21 @@ if ((${#missing[@]})); then
   [ "$(id -u)" -eq 0 ] || SUDO=sudo
   $SUDO apt-get update -qq
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+fi
+# scikit-sparse (CHOLMOD from Python) is only a reference in bench/python_vs_scipy.py and
+# has no Debian package: pip builds it against Debian's SuiteSparse (0.4.16 is the last
+# release that builds with SuiteSparse 5; it needs the network). Optional: when the build
+# fails, setup still succeeds and the benchmark says "not installed".
+if ! /usr/bin/python3 -c "import sksparse.cholmod" 2>/dev/null; then
+  SUDO=""
+  [ "$(id -u)" -eq 0 ] || SUDO=sudo
+  if $SUDO env SUITESPARSE_INCLUDE_DIR=/usr/include/suitesparse /usr/bin/python3 -m pip install \
+       -q --timeout 30 --retries 1 --break-system-packages --no-warn-script-location \
+       "scikit-sparse==0.4.16" >/tmp/strata-setup-sksparse.log 2>&1; then
+    echo "setup: scikit-sparse installed (pip)"
+  else
+    echo "setup: note: scikit-sparse could not be installed (see /tmp/strata-setup-sksparse.log);" \
+         "bench/python_vs_scipy.py will report CHOLMOD from Python as not installed"
+  fi
 fi
 echo "setup: all dependencies present"

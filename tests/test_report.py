@@ -12,6 +12,8 @@ made with round ratios, so the expected figures below are worked out by hand:
   an older factor run (marker 777) must not be shown; a run with an unknown tag (marker
   654.321) must land in "Other results"; a truncated file must be listed as skipped;
   experiments 3-5 and the GPU parts have no results and must say "Not measured yet".
+  python    overhead 1.00% on the large matrix (goal 5%: met); strata/SuperLU 0.25 and
+            1.0 -> 0.500, strata/CHOLMOD 2.0 and 0.5 -> 1.000
 Exit status 1 with a list of failed checks if anything is off.
 """
 import argparse
@@ -129,6 +131,21 @@ def main():
         if s is not None:
             check("Not measured yet" in s, f"section {n}: not reported as not measured")
             check("|" not in s and "![" not in s, f"section {n}: shows a table or plot without results")
+
+    # --- the Python interface: overhead table, the goal, solver ratios
+    sp_ = section(secs, "## Python interface") or ""
+    check(re.search(r"\| lap3d-45 \| large \| 91,125 \| 10 \| 10\.1 \| \+1\.00% \| \+2\.00% \| "
+                    r"\+0\.50% \| 10\.4 \|", sp_), "python: overhead row lap3d-45 wrong")
+    check("Goal (Python layer under 5% on the large matrix, lap3d-45): met" in sp_,
+          "python: the overhead goal is not judged on the large matrix")
+    check(re.search(r"\| bcsstk16 \| 4,884 \| 1 \(2\.0e-16\) \| 4 \(3\.0e-16\) \| 8 \(3\.0e-16\) \| "
+                    r"0\.5 \(1\.0e-16\) \| 0\.250 \| 2\.000 \|", sp_),
+          "python: solvers row bcsstk16 wrong")
+    check(re.search(r"\| lap3d-35 \| 42,875 \| .* \| not run \| .* \| 1\.000 \| 0\.500 \|", sp_),
+          "python: solvers row lap3d-35 wrong (COLAMD not run)")
+    check(re.search(r"\| \*\*geometric mean\*\* \|(?: *\|){5} 0\.500 \| 1\.000 \|", sp_),
+          "python: geometric means of the solver ratios wrong")
+    check("python-20250102T130000Z.json" in sp_, "python: results file not named")
 
     # --- newest run only, unknown tags kept, broken files listed
     check("777" not in text, "the older factor run (marker 777) is shown")

@@ -4,11 +4,12 @@
 //                       [--device-memory-limit BYTES] [--json] [multi-GPU options]
 //   strata solve A.mtx [--rhs b.mtx] [--type spd|symmetric_indefinite|general|auto]
 //                      [--ordering ...] [--max-block-size N] [--out x.mtx] [--json]
-//                      [--backend cpu|cuda|auto] [multi-GPU options]
-//   multi-GPU options: [--num-gpus N] [--subtrees-per-gpu S] [--balance-by-work on|off]
-//                      [--work-stealing on|off]
+//                      [--device cpu|gpu|auto] [--device-memory-limit BYTES]
+//   multi-GPU options (analyze, solve): [--num-gpus N] [--subtrees-per-gpu S]
+//                      [--balance-by-work on|off] [--work-stealing on|off]
 //   strata simulate [MODEL.json] [--generate KIND:SIZE] [--t-end T] [--step h] [--order k]
-//                   [--device cpu|gpu|auto] [--output DIR] [--vtk] [--dump-matrix DIR]
+//                   [--device cpu|gpu|auto] [--device-memory-limit BYTES] [--output DIR]
+//                   [--vtk] [--dump-matrix DIR]
 //                   [--dump-step K] [--output-interval S] [--full-newton] [--write-model F]
 //                   [--variable-step [--rtol R] [--atol A] [--max-step H]] [--verbose]
 //
@@ -51,14 +52,18 @@ struct CommonArgs {
   std::string ordering = "nd";
   index_t max_block_size = Options{}.max_block_size;
   std::size_t device_memory_limit = 0;
+  std::string device = "auto";
   int threads = 0;
   bool json = false;
-  std::string backend = "cpu";
   int num_gpus = Options{}.num_gpus;
   int subtrees_per_gpu = Options{}.subtrees_per_gpu;
   std::string balance_by_work = Options{}.balance_by_work ? "on" : "off";
   std::string work_stealing = Options{}.work_stealing ? "on" : "off";
 };
+
+Backend backend_of(const std::string& device) {
+  return device == "cpu" ? Backend::cpu : device == "gpu" ? Backend::cuda : Backend::automatic;
+}
 
 void add_common(CLI::App* cmd, CommonArgs& a) {
   cmd->add_option("file", a.file, "matrix in Matrix Market format (.mtx or .mtx.gz)")
@@ -70,11 +75,9 @@ void add_common(CLI::App* cmd, CommonArgs& a) {
                   "most pivots per front (separator blocking)")
       ->check(CLI::PositiveNumber);
   cmd->add_option("--device-memory-limit", a.device_memory_limit,
-                  "memory budget of the batch plan in bytes (0: unlimited)");
+                  "GPU memory budget in bytes (0: the whole device); also the batch plan's");
   cmd->add_option("--threads", a.threads, "host threads (0: all)");
   cmd->add_flag("--json", a.json, "print the report as JSON");
-  cmd->add_option("--backend", a.backend, "where the factorization runs (default cpu)")
-      ->check(CLI::IsMember({"cpu", "cuda", "auto"}));
   cmd->add_option("--num-gpus", a.num_gpus, "GPUs for the CUDA backend (0: all visible)")
       ->check(CLI::NonNegativeNumber);
   cmd->add_option("--subtrees-per-gpu", a.subtrees_per_gpu, "subtrees per GPU in the tree split")
@@ -92,9 +95,7 @@ Options options_from(const CommonArgs& a) {
   o.max_block_size = a.max_block_size;
   o.device_memory_limit = a.device_memory_limit;
   o.num_threads = a.threads;
-  o.backend = a.backend == "cuda"   ? Backend::cuda
-              : a.backend == "auto" ? Backend::automatic
-                                    : Backend::cpu;
+  o.backend = backend_of(a.device);
   o.num_gpus = a.num_gpus;
   o.subtrees_per_gpu = a.subtrees_per_gpu;
   o.balance_by_work = a.balance_by_work == "on";
@@ -263,7 +264,15 @@ int run_solve(const SolveArgs& a) {
                    {"two_by_two_pivots", f.two_by_two_pivots},
                    {"inertia", {f.inertia_positive, f.inertia_negative, f.inertia_zero}},
                    {"log_abs_determinant", f.log_abs_determinant},
-                   {"determinant_sign", f.determinant_sign}};
+                   {"determinant_sign", f.determinant_sign},
+                   {"device_seconds", f.device_seconds},
+                   {"bytes_to_device", f.bytes_to_device},
+                   {"bytes_to_host", f.bytes_to_host},
+                   {"device_batches", f.device_batches},
+                   {"tiled_fronts", f.tiled_fronts},
+                   {"device_budget", f.device_budget},
+                   {"contribution_blocks_on_host", f.contribution_blocks_on_host},
+                   {"factor_resident", f.factor_resident}};
     json devices = json::array();
     for (const DeviceStats& d : f.devices)
       devices.push_back({{"worker", d.worker},
@@ -279,7 +288,8 @@ int run_solve(const SolveArgs& a) {
                   {"refinement_steps", st.solve.refinement_steps},
                   {"gmres_iterations", st.solve.gmres_iterations},
                   {"backward_error", st.solve.backward_error},
-                  {"converged", st.solve.refinement_converged}};
+                  {"converged", st.solve.refinement_converged},
+                  {"on_device", st.solve.on_device}};
     j["total_seconds"] = total;
     fmt::print("{}\n", j.dump(2));
   } else {
@@ -287,6 +297,14 @@ int run_solve(const SolveArgs& a) {
     print_analysis(st.analysis, read_seconds);
     fmt::print("factorization         {} on {}: {:.3f} s, {:.2f} GFLOP/s\n", to_string(f.type),
                f.backend, f.seconds, f.gflops);
+    if (f.backend == "cuda")
+      fmt::print(
+          "GPU                   {:.3f} s on the device, {:.2f} TFLOP/s, {} launch groups, {} "
+          "tiled fronts; {:.1f} MB to the device, {:.1f} MB back; budget {:.1f} MB{}{}\n",
+          f.device_seconds, f.gflops * 1e-3, f.device_batches, f.tiled_fronts,
+          f.bytes_to_device * 1e-6, f.bytes_to_host * 1e-6, f.device_budget * 1e-6,
+          f.contribution_blocks_on_host ? ", contribution blocks spilled to host" : "",
+          f.factor_resident ? ", factor resident (solve on the GPU)" : "");
     for (const DeviceStats& d : f.devices)
       fmt::print(
           "  worker {} ({:<7})   busy {:.3f} s, idle {:.3f} s, {} subtrees ({} stolen), "
@@ -311,6 +329,7 @@ int run_solve(const SolveArgs& a) {
 
 struct SimulateArgs {
   std::string model, generate, output = "out", dump_dir, write_model, device = "auto";
+  std::size_t device_memory_limit = 0;
   double t_end = 0, step = 0, output_interval = 0, newton_tol = 0, rtol = 1e-4, atol = 1e-6,
          max_step = 0;
   int order = 0, threads = 0;
@@ -345,30 +364,28 @@ int run_simulate(const SimulateArgs& a) {
     source = "generated " + spec + (a.generate.empty() ? " (default model)" : "");
   }
   const double read_seconds = seconds_since(t0);
-  SimulationOptions o;
-  IntegratorOptions& io = o.integrator;
-  io.t_end = a.t_end > 0 ? a.t_end : model.t_end;
-  io.step = a.step > 0 ? a.step : model.step;
-  io.order = a.order > 0 ? a.order : model.order;
-  io.backend = a.device == "cpu"   ? Backend::cpu
-               : a.device == "gpu" ? Backend::cuda
-                                   : Backend::automatic;
-  io.threads = a.threads;
-  io.modified_newton = !a.full_newton;
-  if (model.newton_rtol > 0) io.newton_rtol = model.newton_rtol;
-  if (model.newton_atol > 0) io.newton_atol = model.newton_atol;
-  if (a.newton_tol > 0) io.newton_rtol = a.newton_tol;
-  io.dump_dir = a.dump_dir;
-  io.verbose = a.verbose;
-  io.dense_solver = a.dense;
-  io.variable_step = a.variable_step;
-  io.rtol = a.rtol;
-  io.atol = a.atol;
-  io.max_step = a.max_step;
-  io.dump_step = a.dump_dir.empty() ? -1 : a.dump_step;
-  o.output_dir = a.output;
-  o.output_interval = a.output_interval > 0 ? a.output_interval : model.output_interval;
-  o.vtk = a.vtk;
+  RunSettings rs;
+  rs.t_end = a.t_end;
+  rs.step = a.step;
+  rs.order = a.order;
+  rs.backend = backend_of(a.device);
+  rs.device_memory_limit = a.device_memory_limit;
+  rs.threads = a.threads;
+  rs.full_newton = a.full_newton;
+  rs.newton_tol = a.newton_tol;
+  rs.variable_step = a.variable_step;
+  rs.rtol = a.rtol;
+  rs.atol = a.atol;
+  rs.max_step = a.max_step;
+  rs.dense_reference = a.dense;
+  rs.verbose = a.verbose;
+  rs.output_dir = a.output;
+  rs.output_interval = a.output_interval;
+  rs.vtk = a.vtk;
+  rs.dump_dir = a.dump_dir;
+  rs.dump_step = a.dump_step;
+  SimulationOptions o = simulation_options(model, rs);
+  const IntegratorOptions& io = o.integrator;
   o.progress = !a.quiet && isatty(fileno(stdout));
   o.progress_stream = stdout;
   fmt::print("strata simulate {}\n", source);
@@ -415,6 +432,10 @@ int main(int argc, char** argv) {
   solve->add_option("--type", solve_args.type, "factorization type")
       ->check(CLI::IsMember({"auto", "spd", "symmetric_indefinite", "general"}));
   solve->add_option("--out", solve_args.out, "write the solution here (Matrix Market array)");
+  solve
+      ->add_option("--device", solve_args.common.device,
+                   "where the factorization and solve run (auto: the GPU when present)")
+      ->check(CLI::IsMember({"cpu", "gpu", "auto"}));
   SimulateArgs sim;
   auto* simulate = app.add_subcommand(
       "simulate", "implicit multibody dynamics (BDF + Newton, every step solved by strata)");
@@ -431,6 +452,8 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 5));
   simulate->add_option("--device", sim.device, "where strata factorizes")
       ->check(CLI::IsMember({"cpu", "gpu", "auto"}));
+  simulate->add_option("--device-memory-limit", sim.device_memory_limit,
+                       "GPU memory budget in bytes (0: the whole device)");
   simulate->add_option("--output", sim.output, "output folder (default: out)");
   simulate->add_flag("--vtk", sim.vtk, "also write a ParaView series (output/vtk/series.pvd)");
   simulate->add_option("--output-interval", sim.output_interval,

@@ -89,6 +89,16 @@ struct FactorStats {
   double log_abs_determinant = 0;  ///< log|det A| (spd, LDLᵀ and LU)
   int determinant_sign = 0;        ///< sign of det A: -1, 0 or 1
   double matrix_norm = 0;          ///< ‖A‖₁ used for static pivoting (after scaling)
+  // --- GPU backend (zero on the CPU) ---
+  double device_seconds = 0;        ///< time of the factorization's work on the GPU (events)
+  std::size_t bytes_to_device = 0;  ///< host→device bytes moved by the factorization
+  std::size_t bytes_to_host = 0;    ///< device→host bytes (factor panels, spilled blocks)
+  index_t device_batches = 0;       ///< launch groups run (memory-plan batches, split
+                                    ///< further when the device pool is smaller)
+  index_t tiled_fronts = 0;         ///< fronts over the device budget, factored by slabs
+  std::size_t device_budget = 0;    ///< bytes the numeric working memory was held to
+  bool contribution_blocks_on_host = false;  ///< some blocks spilled to pinned host memory
+  bool factor_resident = false;              ///< the factor stayed on the device: solve runs there
   /// Per worker, when several factored the tree (Options::num_gpus > 1); empty when one
   /// executor factored the whole tree.
   std::vector<DeviceStats> devices;
@@ -101,6 +111,7 @@ struct SolveStats {
   int gmres_iterations = 0;  ///< total over right-hand sides (0 when refinement sufficed)
   double backward_error = 0;  ///< max over right-hand sides of ‖b−Ax‖∞/(‖A‖∞‖x‖∞+‖b‖∞)
   bool refinement_converged = false;  ///< reached Options::refinement_tolerance
+  bool on_device = false;             ///< the triangular solves ran on the GPU (resident factor)
 };
 
 /// All statistics of a Solver.

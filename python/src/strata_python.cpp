@@ -4,7 +4,8 @@
 // dtype checks, docstrings) is python/strata/__init__.py. Here: arrays in, the phases
 // with the GIL released, statistics out as dicts, and strata's typed exceptions mapped
 // to a Python hierarchy rooted at strata.Error (a RuntimeError); InvalidInputError is
-// also a ValueError and OutOfMemoryError a MemoryError.
+// also a ValueError and OutOfMemoryError a MemoryError. The multibody engine's entry
+// point is in simulate.cpp.
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
@@ -16,6 +17,9 @@
 
 namespace py = pybind11;
 using strata::index_t;
+
+// simulate.cpp: strata.simulate's core and ModelError / SimulationError.
+void bind_simulate(py::module_& m, PyObject* invalid_input, PyObject* error);
 
 namespace {
 
@@ -329,5 +333,6 @@ PYBIND11_MODULE(_strata, m) {
 #endif
       },
       "True when this build has the CUDA backend.");
+  bind_simulate(m, exc_invalid_input, exc_error);
   m.attr("__version__") = "0.1.0";
 }

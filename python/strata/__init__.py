@@ -13,12 +13,20 @@ array. The four phases of a direct solve are those of the C++ library:
 ``strata.analyze(A)`` returns the statistics of the analysis alone (nnz(L), factor flops,
 fronts, tree height, memory) without factoring.
 
+``strata.simulate(model)`` runs the multibody engine (the command ``strata simulate``) on a
+model file or dict and returns the time histories as NumPy arrays:
+
+    >>> r = strata.simulate("models/pendulum_chain.json", t_end=0.1)
+    >>> r.time.shape, r.positions.shape       # (k,), (k, n)
+    >>> r.steps["newton_iterations"], r.stats["factorizations"]
+
 Errors raise subclasses of :class:`strata.Error` (a ``RuntimeError``) carrying the
 solver's message: :class:`InvalidInputError` (also a ``ValueError``) for a non-square
 matrix, NaN/Inf values, wrong shapes or a changed pattern; :class:`NotPositiveDefiniteError`
 when ``type="spd"`` meets a non-positive pivot; :class:`InvalidStateError`,
 :class:`NotSupportedError`, :class:`DeviceError`, :class:`OutOfMemoryError` (also a
-``MemoryError``). Inputs of a dtype that is not real (complex, object, strings) raise
+``MemoryError``), and from simulate :class:`ModelError` (an InvalidInputError) and
+:class:`SimulationError`. Inputs of a dtype that is not real (complex, object, strings) raise
 ``TypeError``.
 
 The GIL is released during analysis, factorization and solve, so several solvers can
@@ -33,18 +41,24 @@ from ._strata import (  # noqa: F401  (re-exported)
     Error,
     InvalidInputError,
     InvalidStateError,
+    ModelError,
     NotPositiveDefiniteError,
     NotSupportedError,
     OutOfMemoryError,
+    SimulationError,
     __version__,
     cuda_in_build,
 )
 from . import _strata
+from ._simulate import SimulationResult, generate_model, simulate  # noqa: F401
 
 __all__ = [
     "Solver",
     "analyze",
     "solve",
+    "simulate",
+    "generate_model",
+    "SimulationResult",
     "cuda_in_build",
     "Error",
     "InvalidInputError",
@@ -53,6 +67,8 @@ __all__ = [
     "NotSupportedError",
     "DeviceError",
     "OutOfMemoryError",
+    "ModelError",
+    "SimulationError",
 ]
 
 _TYPES = ("auto", "spd", "symmetric_indefinite", "general")

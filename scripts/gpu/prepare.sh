@@ -7,13 +7,20 @@
 #        command "bash scripts/gpu/run.sh"
 set -euo pipefail
 cd "$(dirname "$0")/../.."
+# NVIDIA cuDSS, the GPU anchor, from its PyPI wheel (bench_cudss links it; the library
+# travels separately, see cudss_parts below)
+if [ ! -f .whl/nvidia/cu13/lib/libcudss.so.1 ]; then
+  python3 -m pip download --no-deps -d .whl nvidia-cudss-cu13 >/dev/null
+  (cd .whl && python3 -m zipfile -e nvidia_cudss_cu13-*.whl .)
+fi
 cmake -S . -B build-gpu -G Ninja -DCMAKE_BUILD_TYPE=Release -DCMAKE_CUDA_ARCHITECTURES=90 \
-  -DSTRATA_MATRIX_DIR=.carry/matrices >/dev/null
+  -DSTRATA_MATRIX_DIR=.carry/matrices -DSTRATA_CUDSS_DIR="$PWD/.whl/nvidia/cu13" >/dev/null
 cmake --build build-gpu -j2
 rm -rf .carry && mkdir -p .carry/bin .carry/lib .carry/matrices
-cp build-gpu/strata build-gpu/tests/test_cuda_backend build-gpu/tests/test_solver \
-   build-gpu/bench/bench_factor .carry/bin/ 2>/dev/null || true
-[ -f build-gpu/bench/bench_gpu ] && cp build-gpu/bench/bench_gpu .carry/bin/
+cp build-gpu/strata build-gpu/tests/test_solver build-gpu/bench/bench_factor .carry/bin/
+# every gpu-labelled test binary (one per file in tests/gpu)
+for src in tests/gpu/*.cpp; do cp "build-gpu/tests/$(basename "$src" .cpp)" .carry/bin/; done
+for b in bench_gpu bench_gpu_memory bench_cudss; do [ -f build-gpu/bench/$b ] && cp build-gpu/bench/$b .carry/bin/; done
 cp ../shared/matrices/*.mtx.gz .carry/matrices/ 2>/dev/null || cp /work/shared/matrices/*.mtx.gz .carry/matrices/
 # every non-system, non-CUDA library the binaries load
 for b in .carry/bin/*; do
@@ -23,3 +30,11 @@ done | sort -u | grep -v -E '/(libc|libm|libdl|libpthread|librt|libgcc_s|libstdc
 # the large BLAS/LAPACK travel compressed (the tree that travels is limited to 64 MiB)
 xz -T2 -6 .carry/lib/libopenblas.so.0 .carry/lib/liblapack.so.3
 du -sh .carry
+# cuDSS's library is 167 MB (143 MB compressed), over what one call carries: it travels
+# in three parts, .cudss1..3, one per call, each copied to build-cudss/ on the device
+# (ignored paths there are kept while the machine stays warm); run.sh reassembles it.
+if [ -f .whl/nvidia/cu13/lib/libcudss.so.1 ] && [ ! -f .cudss3/part-ac ]; then
+  rm -rf .cudss1 .cudss2 .cudss3 && mkdir -p .cudss1 .cudss2 .cudss3
+  xz -T2 -6 -c .whl/nvidia/cu13/lib/libcudss.so.1 | split -b 48M - .cudss-part-
+  mv .cudss-part-aa .cudss1/part-aa && mv .cudss-part-ab .cudss2/part-ab && mv .cudss-part-ac .cudss3/part-ac
+fi

@@ -1,15 +1,35 @@
 #!/usr/bin/env bash
 # Runs on the lent GPU machine over the staged .carry/ (see prepare.sh): the gpu-labelled
-# tests, then the GPU benchmark if present. Logs and results go to $OUT.
+# tests, then the GPU benchmarks asked for (--bench ARGS, --memory-bench ARGS,
+# --cudss-bench ARGS). Logs and
+# results go to $OUT.
 set -uo pipefail
 for z in .carry/lib/*.xz; do [ -f "$z" ] && xz -d -f "$z"; done
-export LD_LIBRARY_PATH="$PWD/.carry/lib:${LD_LIBRARY_PATH:-}"
+# cuDSS, if its three parts were carried by earlier calls into build-cudss/ (prepare.sh)
+if [ -f build-cudss/part-ac ] && [ ! -f build-cudss/libcudss.so.1 ]; then
+  cat build-cudss/part-aa build-cudss/part-ab build-cudss/part-ac | xz -d -T8 >build-cudss/libcudss.so.1
+fi
+export LD_LIBRARY_PATH="$PWD/.carry/lib:$PWD/build-cudss:${LD_LIBRARY_PATH:-}"
 OUT="${OUT:-/tmp/strata-out}"
 mkdir -p "$OUT"
 nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv | tee "$OUT/gpu.txt"
 rc=0
-.carry/bin/test_cuda_backend 2>&1 | tee "$OUT/test_cuda_backend.log" || rc=1
-if [ -x .carry/bin/bench_gpu ]; then
-  .carry/bin/bench_gpu --results-dir "$OUT" "$@" 2>&1 | tee "$OUT/bench_gpu.log" || rc=1
-fi
+# the gpu-labelled tests (every binary built from tests/gpu)
+for t in $(ls tests/gpu/*.cpp | xargs -n1 basename | sed 's/\.cpp$//'); do
+  echo "=== $t" | tee -a "$OUT/gpu-tests.log"
+  .carry/bin/$t 2>&1 | tail -n 60 | tee -a "$OUT/gpu-tests.log"
+  [ "${PIPESTATUS[0]}" -eq 0 ] || rc=1
+done
+# the benchmarks, when asked for: run.sh [--bench ARGS...] [--memory-bench ARGS...]
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --bench) shift; args=(); while [ $# -gt 0 ] && [[ "$1" != --*-bench && "$1" != --bench ]]; do args+=("$1"); shift; done
+      .carry/bin/bench_gpu --results-dir "$OUT" "${args[@]}" 2>&1 | tee "$OUT/bench_gpu.log" || rc=1 ;;
+    --memory-bench) shift; args=(); while [ $# -gt 0 ] && [[ "$1" != --*-bench && "$1" != --bench ]]; do args+=("$1"); shift; done
+      .carry/bin/bench_gpu_memory --results-dir "$OUT" "${args[@]}" 2>&1 | tee "$OUT/bench_gpu_memory.log" || rc=1 ;;
+    --cudss-bench) shift; args=(); while [ $# -gt 0 ] && [[ "$1" != --*-bench && "$1" != --bench ]]; do args+=("$1"); shift; done
+      .carry/bin/bench_cudss --results-dir "$OUT" "${args[@]}" 2>&1 | tee "$OUT/bench_cudss.log" || rc=1 ;;
+    *) echo "run.sh: unknown argument $1"; exit 2 ;;
+  esac
+done
 exit $rc

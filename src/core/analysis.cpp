@@ -213,14 +213,19 @@ AssemblyMap build_assembly_map(const SparseMatrix& c, const Analysis& an) {
   return map;
 }
 
-FactorLayout plan_factor_layout(const symbolic::AssemblyTree& t, bool lu) {
+// Panels are laid out in schedule order, so that the panels of one batch are contiguous
+// and a GPU executor moves a batch's factor in one copy.
+FactorLayout plan_factor_layout(const symbolic::AssemblyTree& t, const symbolic::LevelSchedule& s,
+                                bool lu) {
   FactorLayout out;
   out.panel_offset.assign(t.n_fronts() + 1, 0);
-  for (index_t f = 0; f < t.n_fronts(); ++f) {
-    const std::size_t m = t.n_rows(f), k = t.n_pivots(f);
-    out.panel_offset[f + 1] = out.panel_offset[f] + m * k + (lu ? k * (m - k) : 0);
+  std::size_t at = 0;
+  for (index_t f : s.fronts) {
+    out.panel_offset[f] = at;
+    at += panel_size(t, f, lu);
   }
-  out.total = out.panel_offset.back();
+  out.panel_offset[t.n_fronts()] = at;
+  out.total = at;
   return out;
 }
 
@@ -397,7 +402,7 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers)
   an.plan = schedule::plan_memory(an.tree, an.schedule, opts.device_memory_limit, lu);
   an.assembly = build_assembly_map(c, an);
   an.cb_layout = schedule::plan_cb_layout(an.tree, an.schedule);
-  an.factor_layout = plan_factor_layout(an.tree, lu);
+  an.factor_layout = plan_factor_layout(an.tree, an.schedule, lu);
   if (workers > 1) {
     schedule::PartitionOptions po;
     po.workers = workers;

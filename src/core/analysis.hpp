@@ -32,11 +32,19 @@ using CbLayout = schedule::CbLayout;
 
 /// Factor storage layout: front f keeps its first k = n_pivots(f) columns (n_rows×k,
 /// L11 / U11 packed with L21) at panel_offset[f]; for LU also the k×(n_rows−k) block
-/// U12 right after it.
+/// U12 right after it (panel_size doubles in all). Panels are placed in level-schedule
+/// order (not front order), so each batch's panels are contiguous.
 struct FactorLayout {
-  std::vector<std::size_t> panel_offset;  ///< size n_fronts + 1
+  std::vector<std::size_t> panel_offset;  ///< size n_fronts + 1; the last entry is total
   std::size_t total = 0;                  ///< doubles
 };
+
+/// Doubles of front f's stored factor: n_rows·n_pivots, plus n_pivots·(n_rows−n_pivots)
+/// for LU.
+inline std::size_t panel_size(const symbolic::AssemblyTree& t, index_t f, bool lu) {
+  const std::size_t m = t.n_rows(f), k = t.n_pivots(f);
+  return m * k + (lu ? k * (m - k) : 0);
+}
 
 struct Analysis {
   std::uint64_t id = 0;  ///< unique per analysis, so executors can cache what they uploaded

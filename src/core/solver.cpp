@@ -182,10 +182,26 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
   fs.seconds = timer.seconds();
   const double flops = s.stats.analysis.factor_flops * (type == MatrixType::general ? 2.0 : 1.0);
   fs.gflops = fs.seconds > 0 ? flops / fs.seconds * 1e-9 : 0;
+  if (workers > 1) {  // device figures summed over the workers (the factor is on the host)
+    for (numeric::Executor* e : execs) {
+      FactorStats one;
+      e->report(one);
+      fs.device_seconds = std::max(fs.device_seconds, one.device_seconds);
+      fs.bytes_to_device += one.bytes_to_device;
+      fs.bytes_to_host += one.bytes_to_host;
+      fs.device_batches += one.device_batches;
+      fs.tiled_fronts += one.tiled_fronts;
+      fs.device_budget = std::max(fs.device_budget, one.device_budget);
+      fs.contribution_blocks_on_host |= one.contribution_blocks_on_host;
+    }
+  } else {
+    s.executor->report(fs);
+  }
 }
 
-// One solve with the factor: x = A⁻¹ b for nrhs columns (original numbering).
-void apply_inverse(const SolverState& s, const double* b, double* x, index_t nrhs,
+// One solve with the factor: x = A⁻¹ b for nrhs columns (original numbering). Returns
+// true when the triangular solves ran on the device that holds the factor.
+bool apply_inverse(const SolverState& s, const double* b, double* x, index_t nrhs,
                    std::vector<double>& work) {
   const Analysis& an = *s.analysis;
   const index_t n = an.n;
@@ -197,12 +213,14 @@ void apply_inverse(const SolverState& s, const double* b, double* x, index_t nrh
       const index_t i = an.perm[k];  // row of B is a row of A
       work[k + r * n] = b[i + r * n] * (scale ? an.row_scaling[i] : 1.0);
     }
-  numeric::solve_in_place(an, s.factor, work.data(), nrhs);
+  const bool on_device = s.executor && s.executor->solve(an, s.factor, work.data(), nrhs);
+  if (!on_device) numeric::solve_in_place(an, s.factor, work.data(), nrhs);
   for (index_t r = 0; r < nrhs; ++r)
     for (index_t k = 0; k < n; ++k) {
       const index_t col = match ? an.matching_perm[an.perm[k]] : an.perm[k];
       x[col + r * n] = work[k + r * n] * (scale ? an.col_scaling[col] : 1.0);
     }
+  return on_device;
 }
 
 }  // namespace
@@ -251,7 +269,7 @@ void Solver::solve(const double* b, double* x, index_t nrhs) {
                          " of column " + std::to_string(i / std::max<index_t>(n, 1)) +
                          " is not finite");
   std::vector<double> work, r(static_cast<std::size_t>(n) * nrhs), d(r.size());
-  apply_inverse(s, b, x, nrhs, work);
+  const bool on_device = apply_inverse(s, b, x, nrhs, work);
 
   // backward error of each column; refine the columns above the tolerance
   const solve::Operator op_a = [&](const double* in, double* out) { multiply(s.values, in, out); };
@@ -314,6 +332,7 @@ void Solver::solve(const double* b, double* x, index_t nrhs) {
   ss.backward_error = 0;
   for (index_t c = 0; c < nrhs; ++c) ss.backward_error = std::max(ss.backward_error, berr[c]);
   ss.refinement_converged = ss.backward_error <= o.refinement_tolerance;
+  ss.on_device = on_device;
   ss.seconds = timer.seconds();
 }
 
@@ -344,6 +363,7 @@ void detail::SolverAccess::use_host_workers(Solver& solver, int workers, int thr
   s.host_threads = threads_each;
   s.host_config = workers > 0 ? std::optional(std::move(config)) : std::nullopt;
   s.executors.clear();
+  s.executor.reset();
   s.analysis.reset();
   s.factor = numeric::NumericFactor{};
 }

@@ -72,7 +72,7 @@ Integrator::Integrator(const Model& model, IntegratorOptions options)
 
 std::unique_ptr<LinearSolver> Integrator::new_solver() const {
   if (opts_.dense_solver) return make_dense_solver();
-  return make_strata_solver(opts_.backend, opts_.threads);
+  return make_strata_solver(opts_.backend, opts_.threads, opts_.device_memory_limit);
 }
 
 void Integrator::repartition(double t, const double* q) {

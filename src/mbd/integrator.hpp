@@ -47,6 +47,7 @@ struct IntegratorOptions {
   int startup_levels = -1;               ///< startup: first step h/2^levels (−1: automatic)
   double min_step = 0;                   ///< smallest step before giving up (0: step·1e-6)
   Backend backend = Backend::automatic;  ///< strata backend
+  std::size_t device_memory_limit = 0;   ///< GPU budget in bytes (0: the whole device)
   int threads = 0;  ///< CPU threads for strata and the assembly (0: automatic — all, but one
                     ///< for strata below 20000 unknowns)
   bool dense_solver = false;  ///< LAPACK instead of strata (tests only)

@@ -17,12 +17,14 @@ namespace {
 
 class StrataLinearSolver : public LinearSolver {
  public:
-  StrataLinearSolver(Backend backend, int threads) : solver_(options(backend, threads)) {}
-  static Options options(Backend backend, int threads) {
+  StrataLinearSolver(Backend backend, int threads, std::size_t device_memory_limit)
+      : solver_(options(backend, threads, device_memory_limit)) {}
+  static Options options(Backend backend, int threads, std::size_t device_memory_limit) {
     Options o;
     o.type = MatrixType::general;
     o.backend = backend;
     o.num_threads = threads;
+    o.device_memory_limit = device_memory_limit;
     o.matching_and_scaling = true;
     return o;
   }
@@ -90,8 +92,9 @@ class DenseLinearSolver : public LinearSolver {
 
 }  // namespace
 
-std::unique_ptr<LinearSolver> make_strata_solver(Backend backend, int threads) {
-  return std::make_unique<StrataLinearSolver>(backend, threads);
+std::unique_ptr<LinearSolver> make_strata_solver(Backend backend, int threads,
+                                                 std::size_t device_memory_limit) {
+  return std::make_unique<StrataLinearSolver>(backend, threads, device_memory_limit);
 }
 std::unique_ptr<LinearSolver> make_dense_solver() { return std::make_unique<DenseLinearSolver>(); }
 

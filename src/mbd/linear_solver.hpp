@@ -37,8 +37,10 @@ class LinearSolver {
 };
 
 /// strata's multifrontal LU (MatrixType::general with matching and scaling) on the
-/// given backend (Backend::automatic picks the GPU when the build and machine have one).
-std::unique_ptr<LinearSolver> make_strata_solver(Backend backend, int threads);
+/// given backend (Backend::automatic picks the GPU when the build and machine have one);
+/// device_memory_limit as Options::device_memory_limit (bytes, 0: the whole device).
+std::unique_ptr<LinearSolver> make_strata_solver(Backend backend, int threads,
+                                                 std::size_t device_memory_limit = 0);
 /// Dense LU with partial pivoting (LAPACK); for tests and tiny models only.
 std::unique_ptr<LinearSolver> make_dense_solver();
 

@@ -651,7 +651,10 @@ Model load_model(const std::string& path) {
   if (!in) throw ModelError(path + ": cannot open the model file");
   std::stringstream ss;
   ss << in.rdbuf();
-  const std::string text = ss.str();
+  return parse_model(ss.str(), path);
+}
+
+Model parse_model(const std::string& text, const std::string& source) {
   json doc;
   try {
     doc = json::parse(text);
@@ -666,10 +669,10 @@ Model load_model(const std::string& path) {
         ++col;
       }
     }
-    throw ModelError(path + ":" + std::to_string(line) + ":" + std::to_string(col) +
+    throw ModelError(source + ":" + std::to_string(line) + ":" + std::to_string(col) +
                      ": invalid JSON: " + e.what());
   }
-  std::string name = path;
+  std::string name = source;
   const auto slash = name.find_last_of('/');
   if (slash != std::string::npos) name = name.substr(slash + 1);
   return build_model(doc, name);

@@ -15,6 +15,12 @@ namespace strata::mbd {
 /// Reads and builds the model in a JSON file. Throws ModelError.
 Model load_model(const std::string& path);
 
+/// Parses JSON text and builds the model, as load_model does for a file's contents:
+/// `source` (a file path, or e.g. "<dict>") prefixes every message — "source:L:C: invalid
+/// JSON: ..." for a syntax error, "name: joints[3].body_j: ..." for a model error, where
+/// name is source without its folder. Throws ModelError.
+Model parse_model(const std::string& text, const std::string& source);
+
 /// Builds a model from a parsed JSON document; `source` prefixes messages.
 Model build_model(const nlohmann::json& doc, const std::string& source = "model");
 

@@ -123,6 +123,50 @@ class Progress {
 
 }  // namespace
 
+SimulationOptions simulation_options(const Model& model, const RunSettings& s) {
+  auto check = [](bool ok, const std::string& what) {
+    if (!ok) throw InvalidInput(what);
+  };
+  check(std::isfinite(s.t_end) && s.t_end >= 0,
+        fmt::format("t_end must be >= 0 s, got {}", s.t_end));
+  check(std::isfinite(s.step) && s.step >= 0, fmt::format("step must be >= 0 s, got {}", s.step));
+  check(s.order >= 0 && s.order <= 5, fmt::format("order must be 1..5, got {}", s.order));
+  check(s.threads >= 0, fmt::format("threads must be >= 0, got {}", s.threads));
+  check(std::isfinite(s.newton_tol) && s.newton_tol >= 0,
+        fmt::format("newton_tol must be >= 0, got {}", s.newton_tol));
+  check(std::isfinite(s.rtol) && s.rtol > 0, fmt::format("rtol must be > 0, got {}", s.rtol));
+  check(std::isfinite(s.atol) && s.atol > 0, fmt::format("atol must be > 0, got {}", s.atol));
+  check(std::isfinite(s.max_step) && s.max_step >= 0,
+        fmt::format("max_step must be >= 0 s, got {}", s.max_step));
+  check(std::isfinite(s.output_interval) && s.output_interval >= 0,
+        fmt::format("output_interval must be >= 0 s, got {}", s.output_interval));
+  check(s.dump_step >= 1, fmt::format("dump_step must be >= 1, got {}", s.dump_step));
+  SimulationOptions o;
+  IntegratorOptions& io = o.integrator;
+  io.t_end = s.t_end > 0 ? s.t_end : model.t_end;
+  io.step = s.step > 0 ? s.step : model.step;
+  io.order = s.order > 0 ? s.order : model.order;
+  io.backend = s.backend;
+  io.device_memory_limit = s.device_memory_limit;
+  io.threads = s.threads;
+  io.modified_newton = !s.full_newton;
+  if (model.newton_rtol > 0) io.newton_rtol = model.newton_rtol;
+  if (model.newton_atol > 0) io.newton_atol = model.newton_atol;
+  if (s.newton_tol > 0) io.newton_rtol = s.newton_tol;
+  io.dump_dir = s.dump_dir;
+  io.verbose = s.verbose;
+  io.dense_solver = s.dense_reference;
+  io.variable_step = s.variable_step;
+  io.rtol = s.rtol;
+  io.atol = s.atol;
+  io.max_step = s.max_step;
+  io.dump_step = s.dump_dir.empty() ? -1 : s.dump_step;
+  o.output_dir = s.output_dir;
+  o.output_interval = s.output_interval > 0 ? s.output_interval : model.output_interval;
+  o.vtk = s.vtk;
+  return o;
+}
+
 SimulationResult simulate(const Model& model, const SimulationOptions& opts) {
   Timer wall;
   SimulationResult res;
@@ -135,22 +179,37 @@ SimulationResult simulate(const Model& model, const SimulationOptions& opts) {
   std::vector<double> rbuf;
   double next_output = 0;
   double out_seconds = 0;
+  SimulationHistory* hist = opts.history;
   auto write_state = [&](double kin, double pot) {
-    if (!files) return;
+    if (!files && !hist) return;
     Timer t;
     const double tt = in.t();
     if (opts.output_interval <= 0 || tt + 1e-12 >= next_output || in.done()) {
-      pos->row(tt, in.q().data(), n);
-      vel->row(tt, in.v().data(), n);
-      acc->row(tt, in.a().data(), n);
       reactions(model, in, rbuf);
-      rea->row(tt, rbuf.data(), rbuf.size());
-      if (vtk) vtk->write(tt, in.q().data());
+      if (files) {
+        pos->row(tt, in.q().data(), n);
+        vel->row(tt, in.v().data(), n);
+        acc->row(tt, in.a().data(), n);
+        rea->row(tt, rbuf.data(), rbuf.size());
+        if (vtk) vtk->write(tt, in.q().data());
+      }
+      if (hist) {
+        hist->time.push_back(tt);
+        hist->positions.insert(hist->positions.end(), in.q().begin(), in.q().end());
+        hist->velocities.insert(hist->velocities.end(), in.v().begin(), in.v().end());
+        hist->accelerations.insert(hist->accelerations.end(), in.a().begin(), in.a().end());
+        hist->reactions.insert(hist->reactions.end(), rbuf.begin(), rbuf.end());
+      }
       if (opts.output_interval > 0)
         next_output = (std::floor(tt / opts.output_interval + 1e-9) + 1) * opts.output_interval;
     }
     out_seconds += t.seconds();
   };
+  if (hist) {
+    *hist = SimulationHistory{};
+    hist->coordinate_names = model.coordinate_names();
+    hist->reaction_names = reaction_names(model);
+  }
   if (files) {
     std::filesystem::create_directories(opts.output_dir);
     std::vector<std::string> h{"time"};
@@ -179,6 +238,15 @@ SimulationResult simulate(const Model& model, const SimulationOptions& opts) {
   if (files)
     steps->raw(fmt::format("0,{:.17g},0,0,0,0,0,0,0,{:.17g},{:.17g},{:.17g},{:.6e},{:.6e}", in.t(),
                            kin, pot, kin + pot, pv, vv));
+  if (hist) {
+    StepRecord r0;
+    r0.t = in.t();
+    r0.kinetic_energy = kin;
+    r0.potential_energy = pot;
+    r0.position_violation = pv;
+    r0.velocity_violation = vv;
+    hist->steps.push_back(r0);
+  }
   Progress bar(opts.progress ? opts.progress_stream : nullptr, opts.integrator.t_end);
   try {
     while (!in.done()) {
@@ -195,6 +263,10 @@ SimulationResult simulate(const Model& model, const SimulationOptions& opts) {
             s.step, s.t, s.h, s.order, s.newton_iterations, s.factorizations, s.rejected,
             s.assembly_seconds, s.solver_seconds, kin, pot, kin + pot, pv, vv));
       }
+      if (hist)
+        hist->steps.push_back(StepRecord{s.step, s.t, s.h, s.order, s.newton_iterations,
+                                         s.factorizations, s.rejected, s.assembly_seconds,
+                                         s.solver_seconds, kin, pot, pv, vv});
       bar.update(in.t(), in.stats().steps, in.stats().newton_iterations);
     }
     res.complete = true;

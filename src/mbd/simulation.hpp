@@ -10,6 +10,8 @@
 //                   max |Φ| and max |Φ̇| (constraint violation)
 //   status.json     "complete": true, or false with the reason (results are partial)
 //   vtk/            with vtk: one .vtu per output time and series.pvd (ParaView)
+// The same rows can be kept in memory instead (or as well): SimulationHistory, filled
+// when SimulationOptions::history is set (the Python binding uses it).
 #pragma once
 
 #include <cstdio>
@@ -20,6 +22,28 @@
 
 namespace strata::mbd {
 
+/// One row of steps.csv: an accepted step (step 0 is the initial state).
+struct StepRecord {
+  index_t step = 0;
+  double t = 0, h = 0;  ///< s
+  int order = 0, newton_iterations = 0, factorizations = 0, rejected = 0;
+  double assembly_seconds = 0, solver_seconds = 0;
+  double kinetic_energy = 0, potential_energy = 0;        ///< J
+  double position_violation = 0, velocity_violation = 0;  ///< max |Φ|, max |Φ̇|
+};
+
+/// The time histories of a run in memory: the rows of positions/velocities/
+/// accelerations/reactions.csv and steps.csv, at full double precision. Matrices are
+/// row-major, one row per output time.
+struct SimulationHistory {
+  std::vector<std::string> coordinate_names;  ///< n names ("link3.e2")
+  std::vector<std::string> reaction_names;    ///< joint forces ("j1.Fx"), then multipliers
+  std::vector<double> time;                   ///< output times (s), rows
+  std::vector<double> positions, velocities, accelerations;  ///< rows × n (SI units)
+  std::vector<double> reactions;  ///< rows × reaction_names.size() (N; λ as solved)
+  std::vector<StepRecord> steps;  ///< every accepted step, the initial state first
+};
+
 struct SimulationOptions {
   IntegratorOptions integrator;
   std::string output_dir;      ///< empty: write nothing
@@ -27,6 +51,9 @@ struct SimulationOptions {
   bool vtk = false;            ///< also write a ParaView series
   bool progress = false;       ///< draw a progress bar on `progress_stream`
   std::FILE* progress_stream = nullptr;
+  /// When set, cleared and filled with the same rows as the CSV files (at the same
+  /// output_interval), whether or not output_dir is set.
+  SimulationHistory* history = nullptr;
 };
 
 struct SimulationResult {
@@ -39,6 +66,33 @@ struct SimulationResult {
   double energy_initial = 0, energy_final = 0;
   IntegratorStats stats;
 };
+
+/// The settings of a run as `strata simulate` takes them (and strata.simulate in
+/// Python): 0 means "the model's value" for t_end, step, order, output_interval and the
+/// Newton tolerance (model files carry these in their "simulation" object).
+struct RunSettings {
+  double t_end = 0, step = 0;  ///< s
+  int order = 0;               ///< BDF order 1..5
+  Backend backend = Backend::automatic;
+  std::size_t device_memory_limit = 0;  ///< GPU budget in bytes (0: the whole device)
+  int threads = 0;             ///< host threads for strata and the assembly (0: automatic)
+  bool full_newton = false;    ///< refactorize at every Newton iteration
+  double newton_tol = 0;       ///< relative Newton tolerance
+  bool variable_step = false;  ///< variable step and order with local error control
+  double rtol = 1e-4, atol = 1e-6, max_step = 0;  ///< of variable steps (max_step 0: t_end/10)
+  bool dense_reference = false;                   ///< dense LAPACK instead of strata (diagnosis)
+  bool verbose = false;                           ///< every Newton iteration to stderr
+  std::string output_dir;                         ///< CSV files (and vtk/) here; empty: none
+  double output_interval = 0;                     ///< s between rows of the histories
+  bool vtk = false;
+  std::string dump_dir;  ///< write the Newton matrix of step dump_step here (Matrix Market)
+  index_t dump_step = 1;
+};
+
+/// The SimulationOptions of a run of `model` with `s`: the model's defaults where s
+/// leaves a value at 0. Throws InvalidInput for a negative time or step, an order outside
+/// 1..5, a non-positive tolerance or a dump step below 1.
+SimulationOptions simulation_options(const Model& model, const RunSettings& s);
 
 /// Runs the model to opts.integrator.t_end. Errors during the integration do not
 /// throw: the result is marked incomplete and the files written so far are kept.

@@ -111,6 +111,14 @@ class Executor {
   virtual std::size_t import_cb(const FactorContext& ctx, const CbTransfer& t) = 0;
   /// Called once per factorization, after this executor's last part.
   virtual void end(const FactorContext& ctx) {}
+  /// Solves with `fac` where this executor keeps it (the CUDA executor, when the factor
+  /// stayed resident on the device): x as solve_in_place. Returns false when it cannot
+  /// (the caller then runs solve_in_place on the host); the default cannot.
+  virtual bool solve(const Analysis& an, const NumericFactor& fac, double* x, index_t nrhs) {
+    return false;
+  }
+  /// Adds backend figures of the last factorization (bytes moved, device time) to `fs`.
+  virtual void report(FactorStats& fs) const {}
 };
 
 /// The CPU executor; `threads` host threads (0: all hardware threads).

@@ -1,28 +1,45 @@
-// strata — the CUDA executor: level-batched multifrontal factorization on one GPU.
+// strata — the CUDA executor: level-batched multifrontal factorization on one GPU, with
+// any amount of device memory.
 //
-// Per batch of the memory plan (fronts of one level, DESIGN.md §2):
-//   1. one launch assembles every front of the batch in the device pool (zero, scatter
-//      original entries, extend-add children's contribution blocks from the CB arena);
+// Per batch of the memory plan (fronts of one level, DESIGN.md §2), cut further into
+// chunks whose fronts fit the device pool:
+//   1. one launch assembles every front of the chunk in the pool (zero, scatter original
+//      entries, extend-add children's contribution blocks);
 //   2. one launch factors all small fronts (one thread block each); large fronts go to
 //      cuSOLVER POTRF + cuBLAS TRSM/SYRK (LLᵀ) or a blocked LU with our panel kernel and
 //      cuBLAS TRSM/GEMM, both with pivoting restricted to the fully summed rows and the
 //      CPU backend's static pivoting;
-//   3. one launch stores the contribution blocks in the device CB arena;
-//   4. the factor panels are copied to the host factor.
-// What stays on the device between batches: the analysis arrays, the scaled values and
-// the CB arena. Version 1 keeps the whole CB arena resident and fails with a clear
-// NotSupported error when the arena and the largest batch exceed device memory or the
-// budget; streaming contribution blocks to the host is the next step (issue 5).
-// LDLᵀ (Bunch–Kaufman) is not on the GPU yet: NotSupported, and Backend::automatic uses
-// the CPU for it.
+//   3. one launch stores the contribution blocks where the plan put them;
+//   4. one launch packs the chunk's factor panels (contiguous in the factor layout) into
+//      the device factor, which is copied to the host factor in one transfer.
+// A front whose working set alone is over the budget is factored slab by slab from
+// pinned host memory (tiled_front.cu).
+//
+// Device memory (plan_device_memory): the budget is Options::device_memory_limit, or 90%
+// of the free device memory when it is 0. It holds, in this order of priority: the pool
+// of one chunk; the contribution-block arena (blocks that do not fit stay in mapped
+// pinned host memory, which the kernels read and write over the bus); the whole factor,
+// kept resident so that the solve runs on the device (cuda_solve.cu). The per-analysis
+// index arrays and the values (O(nnz(A))) are not counted in the budget.
+//
+// What stays on the device between factorizations of one analysis: the index arrays,
+// the pool, the arena and the resident factor — refactorization allocates nothing.
+//
+// Several GPUs (numeric/multi_device.cpp): one executor per GPU, every call made with its
+// device current. The executor then factors parts of the tree — subtrees and the top part
+// of an.partition — each with its own schedule, chunks and arena layout (PartDevice, all
+// planned and uploaded once per analysis, so any subtree can run on any GPU: stealing);
+// they share one pool and one arena, sized for the largest part. The factor always comes
+// back to the host then (no resident factor: each GPU holds only its parts). A subtree
+// root's contribution block is exported either to the driver's host buffer (device to
+// host), or — when the importing GPU can access this one's memory (cudaDeviceCanAccessPeer),
+// or is this one — to a device buffer here (the outbox) that the importer copies from
+// directly (cudaMemcpyPeerAsync); the outbox lives until the next factorization.
+#include <algorithm>
 #include <cmath>
-#include <cstdint>
-#include <vector>
+#include <cstring>
 
-#include "numeric/cuda/cuda_check.hpp"
-#include "numeric/cuda/device_buffer.hpp"
-#include "numeric/cuda/kernels.cuh"
-#include "numeric/factor.hpp"
+#include "numeric/cuda/cuda_executor.hpp"
 
 namespace strata::cuda {
 
@@ -42,94 +59,265 @@ namespace strata::cuda {
 }
 
 namespace {
-
-using numeric::FactorContext;
 constexpr std::int64_t kSmallFront = 256;  // fronts up to this many rows: one block each
 constexpr std::int64_t kLuPanel = 64;      // panel width of the blocked LU of large fronts
+constexpr std::int64_t kMinSlab = 16;      // narrowest slab worth a library call
+}  // namespace
 
-template <class T>
-void upload(DeviceBuffer<T>& d, const std::vector<T>& h, cudaStream_t s) {
-  d.upload(h.data(), h.size(), s);
+CudaExecutor::CudaExecutor(const Options& o, int device)
+    : device_(device), limit_(o.device_memory_limit) {
+  STRATA_CUDA(cudaSetDevice(device_));
+  STRATA_CUDA(cudaStreamCreate(&stream_));
+  STRATA_CUBLAS(cublasCreate(&blas_));
+  STRATA_CUBLAS(cublasSetStream(blas_, stream_));
+  STRATA_CUSOLVER(cusolverDnCreate(&solver_));
+  STRATA_CUSOLVER(cusolverDnSetStream(solver_, stream_));
+  STRATA_CUDA(cudaEventCreate(&start_));
+  STRATA_CUDA(cudaEventCreate(&stop_));
 }
 
-class CudaExecutor final : public numeric::Executor {
- public:
-  explicit CudaExecutor(const Options& o) : limit_(o.device_memory_limit) {
-    STRATA_CUDA(cudaStreamCreate(&stream_));
-    STRATA_CUBLAS(cublasCreate(&blas_));
-    STRATA_CUBLAS(cublasSetStream(blas_, stream_));
-    STRATA_CUSOLVER(cusolverDnCreate(&solver_));
-    STRATA_CUSOLVER(cusolverDnSetStream(solver_, stream_));
-  }
-  ~CudaExecutor() override {
-    cusolverDnDestroy(solver_);
-    cublasDestroy(blas_);
-    cudaStreamDestroy(stream_);
-  }
-  const char* name() const override { return "cuda"; }
+CudaExecutor::~CudaExecutor() {
+  cudaSetDevice(device_);
+  cudaEventDestroy(start_);
+  cudaEventDestroy(stop_);
+  cusolverDnDestroy(solver_);
+  cublasDestroy(blas_);
+  cudaStreamDestroy(stream_);
+}
 
-  void begin(const FactorContext& ctx) override {
-    if (ctx.type == MatrixType::symmetric_indefinite)
-      throw NotSupported("LDLᵀ (symmetric_indefinite) is not implemented on the CUDA backend yet");
+void CudaExecutor::begin(const numeric::FactorContext& ctx) {
+  STRATA_CUDA(cudaSetDevice(device_));
+  outbox_.clear();
+  if (ctx.type == MatrixType::symmetric_indefinite)
+    throw NotSupported("LDLᵀ (symmetric_indefinite) is not implemented on the CUDA backend yet");
+  const Analysis& an = *ctx.analysis;
+  bytes_h2d_ = bytes_d2h_ = 0;
+  chunks_ = tiled_count_ = 0;
+  resident_for_ = nullptr;
+  if (an.id != analysis_id_) upload_analysis(an);
+  STRATA_CUDA(cudaEventRecord(start_, stream_));
+  values_.upload(ctx.values, an.pattern_indices.size(), stream_);
+  count_h2d(an.pattern_indices.size() * sizeof(double));
+}
+
+void CudaExecutor::begin_part(const numeric::FactorContext& ctx) {
+  STRATA_CUDA(cudaSetDevice(device_));
+  const Analysis& an = *ctx.analysis;
+  const bool whole = ctx.part->id == -1;
+  if (whole && planned_ != 1) plan_parts(an, true);
+  if (!whole && planned_ != 2) {
+    if (an.partition.part_of.size() != static_cast<std::size_t>(an.tree.n_fronts()))
+      throw InvalidInput("internal: a part of an analysis that was not split");
+    plan_parts(an, false);
+  }
+  auto it = parts_.find(ctx.part->id);
+  if (it == parts_.end())
+    throw InvalidInput("internal: part " + std::to_string(ctx.part->id) + " was not planned");
+  cur_ = &it->second;
+  whole_ = whole;
+}
+
+std::size_t CudaExecutor::export_cb(const numeric::FactorContext& ctx, numeric::CbTransfer& t) {
+  STRATA_CUDA(cudaSetDevice(device_));
+  const double* src = cur_->cb_ptr_host[t.front];
+  const std::size_t bytes = sizeof(double) * t.size;
+  int peer = 0;
+  if (t.target_device >= 0 && t.target_device != device_)
+    STRATA_CUDA(cudaDeviceCanAccessPeer(&peer, t.target_device, device_));
+  if (t.target_device == device_ || peer) {  // stays on this GPU until the importer copies
+    DeviceBuffer<double>& box = outbox_[t.front];
+    box.resize(t.size);
+    STRATA_CUDA(cudaMemcpyAsync(box.data(), src, bytes, cudaMemcpyDefault, stream_));
+    STRATA_CUDA(cudaStreamSynchronize(stream_));
+    t.device = box.data();
+    t.device_ordinal = device_;
+    t.on_host = false;
+    return 0;  // nothing crossed the bus yet: the importer counts the copy
+  }
+  STRATA_CUDA(cudaMemcpyAsync(t.host, src, bytes, cudaMemcpyDefault, stream_));
+  STRATA_CUDA(cudaStreamSynchronize(stream_));
+  t.on_host = true;
+  bytes_d2h_ += bytes;
+  return bytes;
+}
+
+std::size_t CudaExecutor::import_cb(const numeric::FactorContext& ctx,
+                                    const numeric::CbTransfer& t) {
+  STRATA_CUDA(cudaSetDevice(device_));
+  double* dst = cur_->cb_ptr_host[t.front];
+  const std::size_t bytes = sizeof(double) * t.size;
+  const bool dst_on_device = dst >= arena_.data() && dst < arena_.data() + arena_.size();
+  if (t.on_host) {
+    STRATA_CUDA(cudaMemcpyAsync(dst, t.host, bytes, cudaMemcpyDefault, stream_));
+    bytes_h2d_ += bytes;
+  } else if (t.device_ordinal != device_ && dst_on_device) {
+    const cudaError_t e = cudaDeviceEnablePeerAccess(t.device_ordinal, 0);
+    if (e == cudaErrorPeerAccessAlreadyEnabled)
+      (void)cudaGetLastError();
+    else
+      STRATA_CUDA(e);
+    STRATA_CUDA(cudaMemcpyPeerAsync(dst, device_, t.device, t.device_ordinal, bytes, stream_));
+  } else {  // same GPU, or into mapped host memory: unified addressing finds the way
+    STRATA_CUDA(cudaMemcpyAsync(dst, t.device, bytes, cudaMemcpyDefault, stream_));
+  }
+  STRATA_CUDA(cudaStreamSynchronize(stream_));
+  return t.device_ordinal == device_ && !t.on_host ? 0 : bytes;
+}
+
+void CudaExecutor::end(const numeric::FactorContext& ctx) {
+  STRATA_CUDA(cudaSetDevice(device_));
+  STRATA_CUDA(cudaEventRecord(stop_, stream_));
+  STRATA_CUDA(cudaEventSynchronize(stop_));
+  float ms = 0;
+  STRATA_CUDA(cudaEventElapsedTime(&ms, start_, stop_));
+  device_seconds_ = ms * 1e-3;
+  if (keep_resident()) {
     const Analysis& an = *ctx.analysis;
-    if (an.id != analysis_id_) upload_analysis(an);
-    values_.upload(ctx.values, an.pattern_indices.size(), stream_);
+    const numeric::NumericFactor& fac = *ctx.factor;
+    const auto& t = an.tree;
+    // what the device solve needs besides the panels: the factored row order, where
+    // each pivot went in its front (LU, LDLᵀ), and D (LDLᵀ)
+    std::vector<std::int64_t> rows(fac.rows.begin(), fac.rows.end());
+    std::vector<std::int64_t> pivot_pos(an.n), pivot_row(an.n);
+    for (index_t f = 0; f < t.n_fronts(); ++f) {
+      const index_t fp = t.first_pivot[f];
+      const index_t* prow = fac.rows.data() + t.row_offsets[f];
+      for (index_t i = 0; i < t.n_pivots(f); ++i) {
+        pivot_pos[prow[i]] = i;  // prow[i] is a pivot of this front: fp ≤ prow[i] < fp + k
+        pivot_row[fp + i] = prow[i];
+      }
+    }
+    upload(s_rows_, rows);
+    upload(s_pivot_pos_, pivot_pos);
+    upload(s_pivot_row_, pivot_row);
+    if (ctx.type == MatrixType::symmetric_indefinite) {
+      upload(s_d_diag_, fac.d_diag);
+      upload(s_d_off_, fac.d_off);
+      upload(s_pivot_size_, fac.pivot_size);
+    }
+    STRATA_CUDA(cudaStreamSynchronize(stream_));
+    resident_for_ = ctx.factor;
+    resident_analysis_ = an.id;
   }
+}
 
-  void factor_batch(const FactorContext& ctx, const BatchInfo& b) override;
+void CudaExecutor::report(FactorStats& fs) const {
+  fs.device_seconds = device_seconds_;
+  fs.bytes_to_device = bytes_h2d_;
+  fs.bytes_to_host = bytes_d2h_;
+  fs.device_batches = chunks_;
+  fs.tiled_fronts = tiled_count_;
+  fs.device_budget = plan_.budget;
+  fs.contribution_blocks_on_host = plan_.arena_on_host;
+  fs.factor_resident = keep_resident();
+}
 
-  void begin_part(const FactorContext& ctx) override {
-    if (ctx.part->id != -1)
-      throw NotSupported("the CUDA executor does not factor parts of a split tree yet");
+// Decides what lives where (see the file header) and lays out the chunks of every part
+// in `views`: positions [p, chunk_end[p]) of one batch share the pool; tiled[p] marks a
+// front factored by slabs. The pool and the arena serve every part (largest of each).
+void CudaExecutor::plan_device_memory(const Analysis& an,
+                                      const std::vector<numeric::PartView>& views) {
+  const auto& t = an.tree;
+  std::size_t free_b = 0, total_b = 0;
+  STRATA_CUDA(cudaMemGetInfo(&free_b, &total_b));
+  DevicePlan p;
+  p.budget = limit_ > 0 ? limit_ : static_cast<std::size_t>(0.9 * static_cast<double>(free_b));
+  const std::size_t budget_d = p.budget / sizeof(double);
+  auto sq = [](index_t m) { return static_cast<std::size_t>(m) * static_cast<std::size_t>(m); };
+
+  // pool: the largest batch of fronts that are not tiled, capped (without a user limit)
+  // at half the budget so that the arena and the factor have room
+  std::size_t cap = limit_ > 0 ? budget_d : budget_d / 2;
+  std::size_t pool = 0;
+  index_t tiled_rows = 0;
+  for (const numeric::PartView& v : views) {
+    const auto& s = *v.schedule;
+    PartDevice& pd = parts_[v.id];
+    pd.tiled.assign(s.fronts.size(), 0);
+    for (const BatchInfo& b : *v.batches) {
+      std::size_t sum = 0;
+      for (index_t q = b.begin; q < b.end; ++q) {
+        const index_t f = s.fronts[q];
+        if (b.tiled || sq(t.n_rows(f)) > cap) {
+          pd.tiled[q] = 1;
+          tiled_rows = std::max(tiled_rows, t.n_rows(f));
+        } else {
+          sum += sq(t.n_rows(f));
+        }
+      }
+      pool = std::max(pool, std::min(sum, cap));
+    }
   }
-  std::size_t export_cb(const FactorContext&, numeric::CbTransfer&) override {
-    throw NotSupported("the CUDA executor does not export contribution blocks yet");
+  // a tiled front needs a slab and a column block of at least kMinSlab columns
+  if (tiled_rows > 0)
+    pool = std::max<std::size_t>(pool, 2 * static_cast<std::size_t>(tiled_rows) * kMinSlab);
+  if (limit_ > 0 && pool > budget_d)
+    throw OutOfMemory(pool * sizeof(double),
+                      "the device pool for the largest front (device_memory_limit is " +
+                          std::to_string(limit_) + " bytes)");
+  p.pool = std::max<std::size_t>(pool, 1);
+  // chunks: consecutive non-tiled positions of a batch whose fronts fit the pool
+  for (const numeric::PartView& v : views) {
+    const auto& s = *v.schedule;
+    PartDevice& pd = parts_[v.id];
+    pd.pos_offset_host.assign(s.fronts.size(), 0);
+    pd.chunk_end.assign(s.fronts.size(), 0);
+    for (const BatchInfo& b : *v.batches) {
+      index_t start = b.begin;
+      std::size_t off = 0;
+      for (index_t q = b.begin; q <= b.end; ++q) {
+        const bool flush = q == b.end || pd.tiled[q] || off + sq(t.n_rows(s.fronts[q])) > p.pool;
+        if (flush && q > start) {
+          pd.chunk_end[start] = q;
+          start = q;
+          off = 0;
+        }
+        if (q == b.end) break;
+        if (pd.tiled[q]) {
+          start = q + 1;
+          continue;
+        }
+        pd.pos_offset_host[q] = static_cast<std::int64_t>(off);
+        off += sq(t.n_rows(s.fronts[q]));
+      }
+    }
   }
-  std::size_t import_cb(const FactorContext&, const numeric::CbTransfer&) override {
-    throw NotSupported("the CUDA executor does not import contribution blocks yet");
+  // arena (the largest part's), then the resident factor (whole tree only), in what the
+  // pool leaves
+  std::size_t arena = 0;
+  bool whole = false;
+  for (const numeric::PartView& v : views) {
+    arena = std::max(arena, v.cb_layout->arena_size);
+    whole = whole || v.id == -1;
   }
-
- private:
-  void upload_analysis(const Analysis& an);
-
-  cudaStream_t stream_ = nullptr;
-  cublasHandle_t blas_ = nullptr;
-  cusolverDnHandle_t solver_ = nullptr;
-  std::size_t limit_ = 0;
-  std::uint64_t analysis_id_ = 0;
-  std::size_t pattern_nnz_ = 0;
-  DeviceBuffer<std::int64_t> fronts_, pos_offset_, n_rows_, n_pivots_, parent_, entry_offsets_,
-      entry_src_, entry_dst_, child_offsets_, children_, cb_offset_, rel_offsets_, rel_;
-  DeviceTree tree_{};
-  std::vector<std::int64_t> pos_offset_host_;
-  DeviceBuffer<double> values_, arena_, pool_, potrf_work_;
-  DeviceBuffer<int> potrf_info_;
-  DeviceBuffer<std::int64_t> small_pos_, info_, perturbed_, perm_, perm_offset_, stage_offset_;
-  DeviceBuffer<double> staging_;
-  PinnedBuffer<double> host_staging_;
-};
+  const std::size_t rest = budget_d > p.pool ? budget_d - p.pool : 0;
+  const std::size_t factor = an.factor_layout.total;
+  if (whole && rest >= arena + factor) {
+    p.arena_device = arena;
+    p.factor_resident = true;
+  } else {
+    p.arena_device = std::min(arena, rest);
+  }
+  p.arena_on_host = p.arena_device < arena;
+  plan_ = p;
+}
 
 void CudaExecutor::upload_analysis(const Analysis& an) {
   const auto& t = an.tree;
   const auto& s = an.schedule;
   const index_t nf = t.n_fronts();
-  std::vector<std::int64_t> n_rows(nf), n_piv(nf), cb_off(nf);
+  // free what the previous analysis held before measuring free memory
+  for (auto* b : {&pool_, &arena_, &panels_, &values_}) b->clear();
+  host_arena_.clear();
+  parts_.clear();
+  outbox_.clear();
+  cur_ = nullptr;
+  planned_ = 0;
+  analysis_id_ = 0;
+  std::vector<std::int64_t> n_rows(nf), n_piv(nf);
   for (index_t f = 0; f < nf; ++f) {
     n_rows[f] = t.n_rows(f);
     n_piv[f] = t.n_pivots(f);
-    cb_off[f] = static_cast<std::int64_t>(an.cb_layout.cb_offset[f]);
-  }
-  // positions of each batch's fronts in the pool, and the largest batch
-  pos_offset_host_.assign(s.fronts.size(), 0);
-  std::size_t pool = 0;
-  for (const BatchInfo& b : an.plan.batches) {
-    std::size_t off = 0;
-    for (index_t p = b.begin; p < b.end; ++p) {
-      pos_offset_host_[p] = static_cast<std::int64_t>(off);
-      const std::size_t m = static_cast<std::size_t>(n_rows[s.fronts[p]]);
-      off += m * m;
-    }
-    pool = std::max(pool, off);
   }
   // relative positions of each child's contribution rows in its parent
   std::vector<std::int64_t> rel_off(nf + 1, 0), rel;
@@ -146,65 +334,138 @@ void CudaExecutor::upload_analysis(const Analysis& an) {
     }
     for (index_t i = 0; i < t.n_rows(f); ++i) position[rows[i]] = -1;
   }
-  const std::size_t bytes = 8 * (an.cb_layout.arena_size + pool);
-  if (limit_ > 0 && bytes > limit_)
-    throw NotSupported(
-        "the CUDA backend keeps the contribution-block arena and the largest "
-        "batch on the device (" +
-        std::to_string(bytes) +
-        " bytes), over the "
-        "device_memory_limit of " +
-        std::to_string(limit_) + " bytes; streaming to the host is not implemented yet");
-  upload(fronts_, s.fronts, stream_);
-  upload(pos_offset_, pos_offset_host_, stream_);
-  upload(n_rows_, n_rows, stream_);
-  upload(n_pivots_, n_piv, stream_);
-  upload(parent_, t.parent, stream_);
-  upload(entry_offsets_, an.assembly.entry_offsets, stream_);
-  upload(entry_src_, an.assembly.entry_src, stream_);
-  upload(entry_dst_, an.assembly.entry_dst, stream_);
-  upload(child_offsets_, t.child_offsets, stream_);
-  upload(children_, t.children, stream_);
-  upload(cb_offset_, cb_off, stream_);
-  upload(rel_offsets_, rel_off, stream_);
-  upload(rel_, rel, stream_);
-  arena_.resize(std::max<std::size_t>(an.cb_layout.arena_size, 1));
-  pool_.resize(std::max<std::size_t>(pool, 1));
-  pattern_nnz_ = an.pattern_indices.size();
-  tree_ = DeviceTree{fronts_.data(),    pos_offset_.data(), n_rows_.data(),
-                     n_pivots_.data(),  parent_.data(),     entry_offsets_.data(),
-                     entry_src_.data(), entry_dst_.data(),  child_offsets_.data(),
-                     children_.data(),  cb_offset_.data(),  rel_offsets_.data(),
-                     rel_.data()};
-  // cuSOLVER workspace for the largest pivot block of a large front
-  int lwork = 0;
-  index_t kmax = 0, mmax = 1;
-  for (index_t f = 0; f < nf; ++f)
-    if (t.n_rows(f) > kSmallFront) {
-      kmax = std::max(kmax, t.n_pivots(f));
-      mmax = std::max(mmax, t.n_rows(f));
-    }
-  if (kmax > 0)
-    STRATA_CUSOLVER(cusolverDnDpotrf_bufferSize(solver_, CUBLAS_FILL_MODE_LOWER,
-                                                static_cast<int>(kmax), pool_.data(),
-                                                static_cast<int>(mmax), &lwork));
-  potrf_work_.resize(std::max(lwork, 1));
+  upload(fronts_, s.fronts);
+  upload(n_rows_, n_rows);
+  upload(n_pivots_, n_piv);
+  upload(parent_, t.parent);
+  upload(entry_offsets_, an.assembly.entry_offsets);
+  upload(entry_src_, an.assembly.entry_src);
+  upload(entry_dst_, an.assembly.entry_dst);
+  upload(child_offsets_, t.child_offsets);
+  upload(children_, t.children);
+  upload(rel_offsets_, rel_off);
+  upload(rel_, rel);
+  // solve arrays
+  std::vector<std::int64_t> u_off(nf + 1, 0);
+  for (index_t f = 0; f < nf; ++f) u_off[f + 1] = u_off[f] + t.cb_size(f);
+  u_offset_host_ = u_off;
+  upload(s_u_offset_, u_off);
+  upload(s_panel_offset_, std::vector<std::int64_t>(an.factor_layout.panel_offset.begin(),
+                                                    an.factor_layout.panel_offset.end()));
+  upload(s_row_offsets_, t.row_offsets);
+  upload(s_first_pivot_, t.first_pivot);
+  upload(s_level_offsets_, s.level_offsets);
+  values_.resize(std::max<std::size_t>(an.pattern_indices.size(), 1));
+  STRATA_CUDA(cudaStreamSynchronize(stream_));
+
   STRATA_CUDA(cudaStreamSynchronize(stream_));
   analysis_id_ = an.id;
 }
 
-void CudaExecutor::factor_batch(const FactorContext& ctx, const BatchInfo& b) {
+// Plans and uploads the parts a factorization will use: the whole tree, or every subtree
+// and the top part of an.partition (any GPU may run any subtree).
+void CudaExecutor::plan_parts(const Analysis& an, bool whole) {
+  const auto& t = an.tree;
+  for (auto* b : {&pool_, &arena_, &panels_}) b->clear();
+  host_arena_.clear();
+  parts_.clear();
+  cur_ = nullptr;
+  planned_ = 0;
+  std::vector<numeric::PartView> views;
+  if (whole) {
+    views.push_back(numeric::PartView::whole(an));
+  } else {
+    const auto& sub = an.partition.subtrees;
+    for (std::size_t i = 0; i < sub.size(); ++i)
+      views.push_back(numeric::PartView::of(sub[i], static_cast<int>(i)));
+    views.push_back(numeric::PartView::of(an.partition.top, static_cast<int>(sub.size())));
+  }
+  plan_device_memory(an, views);
+  pool_.resize(plan_.pool);
+  std::size_t arena = 1, chunk_panels = 1;
+  for (const numeric::PartView& v : views) {
+    arena = std::max(arena, v.cb_layout->arena_size);
+    const PartDevice& pd = parts_.at(v.id);
+    const auto& s = *v.schedule;
+    for (index_t q = 0; q < static_cast<index_t>(s.fronts.size()); ++q)
+      if (!pd.tiled[q] && pd.chunk_end[q] > q) {
+        std::size_t sum = 0;
+        for (index_t r = q; r < pd.chunk_end[q]; ++r)
+          sum += panel_size(t, s.fronts[r], !an.symmetric);
+        chunk_panels = std::max(chunk_panels, sum);
+      }
+  }
+  arena_.resize(std::max<std::size_t>(plan_.arena_device, 1));
+  if (plan_.arena_on_host) host_arena_.resize(arena);
+  // staging for the panels of one chunk, or the whole resident factor
+  panels_.resize(plan_.factor_resident ? std::max<std::size_t>(an.factor_layout.total, 1)
+                                       : chunk_panels);
+  host_staging_.resize(chunk_panels);
+  for (const numeric::PartView& v : views) upload_part(an, v);
+  STRATA_CUDA(cudaStreamSynchronize(stream_));
+  planned_ = whole ? 1 : 2;
+}
+
+// A part's schedule, pool offsets and block locations on the device.
+void CudaExecutor::upload_part(const Analysis& an, const numeric::PartView& v) {
+  const auto& t = an.tree;
+  const index_t nf = t.n_fronts();
+  PartDevice& pd = parts_.at(v.id);
+  upload(pd.fronts, v.schedule->fronts);
+  upload(pd.pos_offset, pd.pos_offset_host);
+  // where each contribution block the part writes or reads lives
+  pd.cb_ptr_host.assign(nf, nullptr);
+  auto place = [&](index_t f) {
+    const std::size_t cb = static_cast<std::size_t>(t.cb_size(f));
+    if (cb == 0 || t.parent[f] < 0) return;
+    const std::size_t off = v.cb_layout->cb_offset[f];
+    pd.cb_ptr_host[f] =
+        off + cb * cb <= plan_.arena_device ? arena_.data() + off : host_arena_.data() + off;
+  };
+  for (const index_t f : v.schedule->fronts) {
+    place(f);
+    for (index_t q = t.child_offsets[f]; q < t.child_offsets[f + 1]; ++q) place(t.children[q]);
+  }
+  upload(pd.cb_ptr, pd.cb_ptr_host);
+  pd.tree = DeviceTree{pd.fronts.data(),  pd.pos_offset.data(), n_rows_.data(),
+                       n_pivots_.data(),  parent_.data(),       entry_offsets_.data(),
+                       entry_src_.data(), entry_dst_.data(),    child_offsets_.data(),
+                       children_.data(),  pd.cb_ptr.data(),     rel_offsets_.data(),
+                       rel_.data()};
+}
+
+void CudaExecutor::factor_batch(const numeric::FactorContext& ctx, const BatchInfo& b) {
+  STRATA_CUDA(cudaSetDevice(device_));
+  for (index_t q = b.begin; q < b.end;) {
+    if (cur_->tiled[q]) {
+      factor_tiled(ctx, q);
+      ++q;
+    } else {
+      factor_chunk(ctx, q, cur_->chunk_end[q]);
+      q = cur_->chunk_end[q];
+    }
+  }
+}
+
+void grow_potrf_work(cusolverDnHandle_t h, DeviceBuffer<double>& work, double* a, int k, int ld) {
+  int lwork = 0;
+  STRATA_CUSOLVER(cusolverDnDpotrf_bufferSize(h, CUBLAS_FILL_MODE_LOWER, k, a, ld, &lwork));
+  work.resize(static_cast<std::size_t>(std::max(lwork, 1)));
+}
+
+void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin, index_t end) {
   const Analysis& an = *ctx.analysis;
   const auto& t = an.tree;
-  const auto& s = an.schedule;
-  numeric::NumericFactor& fac = *ctx.factor;
+  const auto& s = *ctx.part->schedule;
+  const DeviceTree& tree = cur_->tree;
   const bool lu = ctx.type == MatrixType::general;
-  const std::int64_t count = b.end - b.begin;
-  launch_assemble(tree_, b.begin, count, values_.data(), arena_.data(), pool_.data(), !lu, stream_);
+  const std::int64_t count = end - begin;
+  ++chunks_;
+  launch_assemble(tree, begin, count, values_.data(), pool_.data(), !lu, stream_);
 
-  // small fronts: one launch for the whole batch
+  // small fronts: one launch for the whole chunk
   std::vector<std::int64_t> small, big, perm_off{0};
-  for (index_t p = b.begin; p < b.end; ++p) {
+  for (index_t p = begin; p < end; ++p) {
     const index_t f = s.fronts[p];
     if (t.n_rows(f) <= kSmallFront) {
       small.push_back(p);
@@ -214,15 +475,15 @@ void CudaExecutor::factor_batch(const FactorContext& ctx, const BatchInfo& b) {
     }
   }
   const std::size_t ns = small.size();
-  upload(small_pos_, small, stream_);
-  upload(perm_offset_, perm_off, stream_);
+  upload(small_pos_, small);
+  upload(perm_offset_, perm_off);
   info_.resize(ns + big.size() + 1);
   perturbed_.resize(ns + big.size() + 1);
   std::int64_t big_perm = 0;
   for (std::int64_t p : big) big_perm += t.n_pivots(s.fronts[p]);
   perm_.resize(perm_off.back() + big_perm + 1);
   potrf_info_.resize(big.size() + 1);
-  launch_factor_small(tree_, small_pos_.data(), static_cast<std::int64_t>(ns), pool_.data(), lu,
+  launch_factor_small(tree, small_pos_.data(), static_cast<std::int64_t>(ns), pool_.data(), lu,
                       ctx.static_pivot, info_.data(), perturbed_.data(), perm_.data(),
                       perm_offset_.data(), stream_);
 
@@ -233,9 +494,10 @@ void CudaExecutor::factor_batch(const FactorContext& ctx, const BatchInfo& b) {
   for (std::size_t i = 0; i < big.size(); ++i) {
     const index_t p = big[i], f = s.fronts[p];
     const int m = static_cast<int>(t.n_rows(f)), k = static_cast<int>(t.n_pivots(f));
-    double* F = pool_.data() + pos_offset_host_[p];
+    double* F = pool_.data() + cur_->pos_offset_host[p];
     big_perm_at.push_back(perm_at);
     if (!lu) {
+      grow_potrf_work(solver_, potrf_work_, F, k, m);
       STRATA_CUSOLVER(cusolverDnDpotrf(solver_, CUBLAS_FILL_MODE_LOWER, k, F, m, potrf_work_.data(),
                                        static_cast<int>(potrf_work_.size()),
                                        potrf_info_.data() + i));
@@ -246,9 +508,13 @@ void CudaExecutor::factor_batch(const FactorContext& ctx, const BatchInfo& b) {
                                   F + k, m, &one, F + static_cast<std::size_t>(k) * m + k, m));
       }
     } else {
-      std::vector<std::int64_t> iota(k);
-      for (int r = 0; r < k; ++r) iota[r] = r;
-      STRATA_CUDA(cudaMemcpyAsync(perm_.data() + perm_at, iota.data(), sizeof(std::int64_t) * k,
+      // iota_ outlives the asynchronous copy (it is a member, only ever grown)
+      if (static_cast<int>(iota_.size()) < k) {
+        STRATA_CUDA(cudaStreamSynchronize(stream_));
+        iota_.resize(k);
+        for (int r = 0; r < k; ++r) iota_[r] = r;
+      }
+      STRATA_CUDA(cudaMemcpyAsync(perm_.data() + perm_at, iota_.data(), sizeof(std::int64_t) * k,
                                   cudaMemcpyHostToDevice, stream_));
       STRATA_CUDA(cudaMemsetAsync(perturbed_.data() + ns + i, 0, sizeof(std::int64_t), stream_));
       for (int p0 = 0; p0 < k; p0 += kLuPanel) {
@@ -264,31 +530,26 @@ void CudaExecutor::factor_batch(const FactorContext& ctx, const BatchInfo& b) {
                                     a11 + w, m, a12, m, &one, a12 + w, m));
         }
       }
-      // the iota upload must not outlive its host vector
-      STRATA_CUDA(cudaStreamSynchronize(stream_));
     }
     perm_at += k;
   }
-  launch_store_cb(tree_, b.begin, count, pool_.data(), arena_.data(), !lu, stream_);
+  launch_store_cb(tree, begin, count, pool_.data(), !lu, stream_);
 
-  // factor panels back to the host: packed on the device, one copy per batch into pinned
-  // memory, then placed in the factor (one transfer instead of one per front)
-  std::vector<std::int64_t> stage_off(count + 1, 0);
+  // factor panels: packed into the device factor (resident) or the chunk's staging
+  // area (in chunk order: for the whole tree that is the layout's order), then to the
+  // host in one copy
+  std::vector<std::int64_t> stage_off(count);
+  std::size_t total = 0;
   for (std::int64_t i = 0; i < count; ++i) {
-    const index_t f = s.fronts[b.begin + i];
-    stage_off[i + 1] =
-        stage_off[i] + static_cast<std::int64_t>(an.factor_layout.panel_offset[f + 1] -
-                                                 an.factor_layout.panel_offset[f]);
+    const index_t f = s.fronts[begin + i];
+    stage_off[i] =
+        static_cast<std::int64_t>(keep_resident() ? an.factor_layout.panel_offset[f] : total);
+    total += panel_size(t, f, lu);
   }
-  upload(stage_offset_, stage_off, stream_);
-  staging_.resize(std::max<std::int64_t>(stage_off[count], 1));
-  host_staging_.resize(static_cast<std::size_t>(stage_off[count]));
-  launch_pack_panels(tree_, b.begin, count, pool_.data(), stage_offset_.data(), staging_.data(), lu,
+  upload(stage_offset_, stage_off);
+  launch_pack_panels(tree, begin, count, pool_.data(), stage_offset_.data(), panels_.data(), lu,
                      stream_);
-  if (stage_off[count] > 0)
-    STRATA_CUDA(cudaMemcpyAsync(host_staging_.data(), staging_.data(),
-                                sizeof(double) * stage_off[count], cudaMemcpyDeviceToHost,
-                                stream_));
+  copy_panels_back(ctx, begin, end);
   const std::size_t nall = ns + big.size();
   std::vector<std::int64_t> info(nall), perturbed(nall), perm(perm_at);
   std::vector<int> pinfo(big.size());
@@ -305,54 +566,85 @@ void CudaExecutor::factor_batch(const FactorContext& ctx, const BatchInfo& b) {
     STRATA_CUDA(cudaMemcpyAsync(pinfo.data(), potrf_info_.data(), sizeof(int) * big.size(),
                                 cudaMemcpyDeviceToHost, stream_));
   STRATA_CUDA(cudaStreamSynchronize(stream_));
-  for (std::int64_t i = 0; i < count; ++i) {
-    const index_t f = s.fronts[b.begin + i];
-    std::copy(host_staging_.data() + stage_off[i], host_staging_.data() + stage_off[i + 1],
-              fac.panels.data() + an.factor_layout.panel_offset[f]);
-  }
-
-  // host bookkeeping: failures, permuted rows, pivot statistics
-  auto finish = [&](index_t f, std::int64_t bad, std::int64_t npert, const std::int64_t* lperm) {
-    const index_t m = t.n_rows(f), k = t.n_pivots(f);
-    const double* panel = fac.panels.data() + an.factor_layout.panel_offset[f];
-    if (bad >= 0) throw NotPositiveDefinite(an.perm[t.first_pivot[f] + bad], std::nan(""));
-    const index_t* rows = t.rows_of(f);
-    index_t* frows = fac.rows.data() + t.row_offsets[f];
-    numeric::cpu::PivotStats& ps = fac.front_stats[f];
-    ps = numeric::cpu::PivotStats{};
-    int sign = 1;
-    for (index_t i = 0; i < k; ++i) {
-      frows[i] = rows[lu ? lperm[i] : i];
-      const double d = panel[i * m + i];
-      ps.log_abs_det += lu ? std::log(std::abs(d)) : 2.0 * std::log(d);
-      if (d < 0) sign = -sign;
-    }
-    for (index_t i = k; i < m; ++i) frows[i] = rows[i];
-    if (lu) {  // parity of the local row permutation
-      std::vector<char> seen(k, 0);
-      for (index_t i = 0; i < k; ++i) {
-        if (seen[i]) continue;
-        index_t len = 0;
-        for (index_t j = i; !seen[j]; j = lperm[j]) {
-          seen[j] = 1;
-          ++len;
-        }
-        if (len % 2 == 0) sign = -sign;
-      }
-      ps.perturbed = npert;
-    } else {
-      ps.positive = k;
-    }
-    ps.det_sign = sign;
-  };
+  (void)total;
   for (std::size_t i = 0; i < ns; ++i)
-    finish(s.fronts[small[i]], lu ? -1 : info[i], perturbed[i], perm.data() + perm_off[i]);
+    finish_front(ctx, s.fronts[small[i]], lu ? -1 : info[i], perturbed[i],
+                 perm.data() + perm_off[i]);
   for (std::size_t i = 0; i < big.size(); ++i)
-    finish(s.fronts[big[i]], (!lu && pinfo[i] > 0) ? pinfo[i] - 1 : -1, perturbed[ns + i],
-           perm.data() + big_perm_at[i]);
+    finish_front(ctx, s.fronts[big[i]], (!lu && pinfo[i] > 0) ? pinfo[i] - 1 : -1,
+                 perturbed[ns + i], perm.data() + big_perm_at[i]);
 }
 
-}  // namespace
+// The panels of positions [begin, end) to the host factor through the pinned staging
+// buffer: for the whole tree they are contiguous in the factor layout (one copy); for a
+// part they are staged in chunk order and placed front by front.
+void CudaExecutor::copy_panels_back(const numeric::FactorContext& ctx, index_t begin, index_t end) {
+  const Analysis& an = *ctx.analysis;
+  const auto& t = an.tree;
+  const auto& s = *ctx.part->schedule;
+  const bool lu = !an.symmetric;
+  std::size_t total = 0;
+  for (index_t q = begin; q < end; ++q) total += panel_size(t, s.fronts[q], lu);
+  if (total == 0) return;
+  const std::size_t base = an.factor_layout.panel_offset[s.fronts[begin]];
+  const double* src = panels_.data() + (keep_resident() ? base : 0);
+  STRATA_CUDA(cudaMemcpyAsync(host_staging_.data(), src, sizeof(double) * total,
+                              cudaMemcpyDeviceToHost, stream_));
+  STRATA_CUDA(cudaStreamSynchronize(stream_));
+  if (whole_) {
+    std::memcpy(ctx.factor->panels.data() + base, host_staging_.data(), sizeof(double) * total);
+  } else {
+    std::size_t at = 0;
+    for (index_t q = begin; q < end; ++q) {
+      const index_t f = s.fronts[q];
+      const std::size_t sz = panel_size(t, f, lu);
+      std::memcpy(ctx.factor->panels.data() + an.factor_layout.panel_offset[f],
+                  host_staging_.data() + at, sizeof(double) * sz);
+      at += sz;
+    }
+  }
+  bytes_d2h_ += sizeof(double) * total;
+}
+
+// Host bookkeeping of one factored front: failure, permuted rows, pivot statistics.
+void CudaExecutor::finish_front(const numeric::FactorContext& ctx, index_t f, std::int64_t bad,
+                                std::int64_t npert, const std::int64_t* lperm) {
+  const Analysis& an = *ctx.analysis;
+  const auto& t = an.tree;
+  numeric::NumericFactor& fac = *ctx.factor;
+  const bool lu = ctx.type == MatrixType::general;
+  const index_t m = t.n_rows(f), k = t.n_pivots(f);
+  const double* panel = fac.panels.data() + an.factor_layout.panel_offset[f];
+  if (bad >= 0) throw NotPositiveDefinite(an.perm[t.first_pivot[f] + bad], std::nan(""));
+  const index_t* rows = t.rows_of(f);
+  index_t* frows = fac.rows.data() + t.row_offsets[f];
+  numeric::cpu::PivotStats& ps = fac.front_stats[f];
+  ps = numeric::cpu::PivotStats{};
+  int sign = 1;
+  for (index_t i = 0; i < k; ++i) {
+    frows[i] = rows[lu ? lperm[i] : i];
+    const double d = panel[i * m + i];
+    ps.log_abs_det += lu ? std::log(std::abs(d)) : 2.0 * std::log(d);
+    if (d < 0) sign = -sign;
+  }
+  for (index_t i = k; i < m; ++i) frows[i] = rows[i];
+  if (lu) {  // parity of the local row permutation
+    std::vector<char> seen(k, 0);
+    for (index_t i = 0; i < k; ++i) {
+      if (seen[i]) continue;
+      index_t len = 0;
+      for (index_t j = i; !seen[j]; j = lperm[j]) {
+        seen[j] = 1;
+        ++len;
+      }
+      if (len % 2 == 0) sign = -sign;
+    }
+    ps.perturbed = npert;
+  } else {
+    ps.positive = k;
+  }
+  ps.det_sign = sign;
+}
 
 bool device_present() {
   int count = 0;
@@ -381,9 +673,11 @@ int cuda_device_count() {
 std::unique_ptr<Executor> make_cuda_executor(const Options& opts, int device) {
   if (!cuda::device_present())
     throw NotSupported("the CUDA backend was asked for, but no CUDA GPU is visible");
-  if (device != 0)
-    throw NotSupported("the CUDA executor runs on device 0 only for now");
-  return std::make_unique<cuda::CudaExecutor>(opts);
+  const int count = cuda_device_count();
+  if (device < 0 || device >= count)
+    throw NotSupported("CUDA device " + std::to_string(device) + " was asked for, " +
+                       std::to_string(count) + " are visible");
+  return std::make_unique<cuda::CudaExecutor>(opts, device);
 }
 
 }  // namespace strata::numeric

@@ -49,6 +49,8 @@ class DeviceBuffer {
   T* data() { return p_; }
   const T* data() const { return p_; }
   std::size_t size() const { return n_; }
+  /// Frees the allocation (size becomes 0).
+  void clear() { release(); }
 
  private:
   void release() {
@@ -80,6 +82,9 @@ class PinnedBuffer {
     n_ = n;
   }
   T* data() { return p_; }
+  std::size_t size() const { return n_; }
+  /// Frees the allocation (size becomes 0).
+  void clear() { release(); }
 
  private:
   void release() {

@@ -16,7 +16,7 @@ namespace {
 constexpr int kThreads = 256;
 
 __global__ void assemble_kernel(DeviceTree t, std::int64_t begin, const double* values,
-                                const double* arena, double* pool, bool symmetric) {
+                                double* pool, bool symmetric) {
   const std::int64_t pos = begin + blockIdx.x;
   const std::int64_t f = t.fronts[pos];
   const std::int64_t m = t.n_rows[f];
@@ -31,7 +31,7 @@ __global__ void assemble_kernel(DeviceTree t, std::int64_t begin, const double* 
     const std::int64_t c = t.children[q];
     const std::int64_t mc = t.n_rows[c] - t.n_pivots[c];
     if (mc == 0) continue;
-    const double* cb = arena + t.cb_offset[c];
+    const double* cb = t.cb_ptr[c];
     const std::int64_t* rel = t.rel + t.rel_offsets[c];
     for (std::int64_t x = threadIdx.x; x < mc * mc; x += blockDim.x) {
       const std::int64_t jj = x / mc, ii = x % mc;
@@ -42,14 +42,14 @@ __global__ void assemble_kernel(DeviceTree t, std::int64_t begin, const double* 
   }
 }
 
-__global__ void store_cb_kernel(DeviceTree t, std::int64_t begin, const double* pool, double* arena,
+__global__ void store_cb_kernel(DeviceTree t, std::int64_t begin, const double* pool,
                                 bool symmetric) {
   const std::int64_t pos = begin + blockIdx.x;
   const std::int64_t f = t.fronts[pos];
   if (t.parent[f] < 0) return;
   const std::int64_t m = t.n_rows[f], k = t.n_pivots[f], mc = m - k;
   const double* F = pool + t.pos_offset[pos];
-  double* cb = arena + t.cb_offset[f];
+  double* cb = t.cb_ptr[f];
   for (std::int64_t x = threadIdx.x; x < mc * mc; x += blockDim.x) {
     const std::int64_t jj = x / mc, ii = x % mc;
     if (symmetric && ii < jj) continue;
@@ -106,23 +106,25 @@ __device__ std::int64_t block_argmax(const double* col, std::int64_t r0, std::in
   return r;
 }
 
-// Unblocked right-looking partial LU of columns [p0, p0+w) of the m×m front F, updating
-// columns up to `update_end` (m: whole front; p0+w: panel only). Row swaps among the
-// fully summed rows [j, k) move whole rows.
-__device__ void lu_columns(double* F, std::int64_t m, std::int64_t k, std::int64_t p0,
-                           std::int64_t w, std::int64_t update_end, double static_pivot,
-                           std::int64_t* perm, std::int64_t* perturbed) {
+// Unblocked right-looking partial LU of columns [p0, p0+w) of the m-row matrix F (leading
+// dimension ld), updating columns up to `update_end` (m: whole front; p0+w: panel only).
+// Row swaps among the fully summed rows [j, k) move the columns [0, swap_end) (the whole
+// row of an in-core front; the slab's own columns for a front factored tile by tile).
+__device__ void lu_columns(double* F, std::int64_t ld, std::int64_t m, std::int64_t k,
+                           std::int64_t p0, std::int64_t w, std::int64_t update_end,
+                           std::int64_t swap_end, double static_pivot, std::int64_t* perm,
+                           std::int64_t* perturbed) {
   __shared__ double sval[kThreads];
   __shared__ std::int64_t sidx[kThreads];
   __shared__ double spiv;
   for (std::int64_t j = p0; j < p0 + w; ++j) {
-    double* colj = F + j * m;
+    double* colj = F + j * ld;
     const std::int64_t r = block_argmax(colj, j, k, sval, sidx);
     if (r != j) {
-      for (std::int64_t c = threadIdx.x; c < m; c += blockDim.x) {
-        const double tmp = F[c * m + j];
-        F[c * m + j] = F[c * m + r];
-        F[c * m + r] = tmp;
+      for (std::int64_t c = threadIdx.x; c < swap_end; c += blockDim.x) {
+        const double tmp = F[c * ld + j];
+        F[c * ld + j] = F[c * ld + r];
+        F[c * ld + r] = tmp;
       }
     }
     __syncthreads();
@@ -147,7 +149,7 @@ __device__ void lu_columns(double* F, std::int64_t m, std::int64_t k, std::int64
     const std::int64_t rows = m - j - 1, cols = update_end - j - 1;
     for (std::int64_t x = threadIdx.x; x < rows * cols; x += blockDim.x) {
       const std::int64_t i = j + 1 + x % rows, c = j + 1 + x / rows;
-      F[c * m + i] -= colj[i] * F[c * m + j];
+      F[c * ld + i] -= colj[i] * F[c * ld + j];
     }
     __syncthreads();
   }
@@ -203,7 +205,7 @@ __global__ void factor_small_kernel(DeviceTree t, const std::int64_t* positions,
     std::int64_t* p = perm + perm_offset[i];
     for (std::int64_t r = threadIdx.x; r < k; r += blockDim.x) p[r] = r;
     __syncthreads();
-    lu_columns(F, m, k, 0, k, m, static_pivot, p, perturbed + i);
+    lu_columns(F, m, m, k, 0, k, m, m, static_pivot, p, perturbed + i);
   } else {
     __syncthreads();
     llt_front(F, m, k, info + i);
@@ -213,25 +215,28 @@ __global__ void factor_small_kernel(DeviceTree t, const std::int64_t* positions,
 __global__ void lu_panel_kernel(double* f, std::int64_t m, std::int64_t k, std::int64_t p0,
                                 std::int64_t w, double static_pivot, std::int64_t* perm,
                                 std::int64_t* perturbed) {
-  lu_columns(f, m, k, p0, w, p0 + w, static_pivot, perm, perturbed);
+  lu_columns(f, m, m, k, p0, w, p0 + w, m, static_pivot, perm, perturbed);
+}
+
+__global__ void lu_slab_kernel(double* s, std::int64_t r, std::int64_t w, std::int64_t kk,
+                               double static_pivot, std::int64_t* perm, std::int64_t* perturbed) {
+  lu_columns(s, r, r, kk, 0, w, w, w, static_pivot, perm, perturbed);
 }
 
 }  // namespace
 
 void launch_assemble(const DeviceTree& t, std::int64_t begin, std::int64_t count,
-                     const double* values, const double* cb_arena, double* pool, bool symmetric,
-                     cudaStream_t s) {
+                     const double* values, double* pool, bool symmetric, cudaStream_t s) {
   if (count == 0) return;
-  assemble_kernel<<<static_cast<unsigned>(count), kThreads, 0, s>>>(t, begin, values, cb_arena,
-                                                                    pool, symmetric);
+  assemble_kernel<<<static_cast<unsigned>(count), kThreads, 0, s>>>(t, begin, values, pool,
+                                                                    symmetric);
   STRATA_CUDA_LAUNCH();
 }
 
 void launch_store_cb(const DeviceTree& t, std::int64_t begin, std::int64_t count,
-                     const double* pool, double* cb_arena, bool symmetric, cudaStream_t s) {
+                     const double* pool, bool symmetric, cudaStream_t s) {
   if (count == 0) return;
-  store_cb_kernel<<<static_cast<unsigned>(count), kThreads, 0, s>>>(t, begin, pool, cb_arena,
-                                                                    symmetric);
+  store_cb_kernel<<<static_cast<unsigned>(count), kThreads, 0, s>>>(t, begin, pool, symmetric);
   STRATA_CUDA_LAUNCH();
 }
 
@@ -258,6 +263,13 @@ void launch_lu_panel(double* f, std::int64_t m, std::int64_t k, std::int64_t p0,
                      double static_pivot, std::int64_t* perm, std::int64_t* perturbed,
                      cudaStream_t s) {
   lu_panel_kernel<<<1, kThreads, 0, s>>>(f, m, k, p0, w, static_pivot, perm, perturbed);
+  STRATA_CUDA_LAUNCH();
+}
+
+void launch_lu_slab(double* s_, std::int64_t r, std::int64_t w, std::int64_t kk,
+                    double static_pivot, std::int64_t* perm, std::int64_t* perturbed,
+                    cudaStream_t s) {
+  lu_slab_kernel<<<1, kThreads, 0, s>>>(s_, r, w, kk, static_pivot, perm, perturbed);
   STRATA_CUDA_LAUNCH();
 }
 

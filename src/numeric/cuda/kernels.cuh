@@ -24,21 +24,23 @@ struct DeviceTree {
   const std::int64_t* entry_dst;
   const std::int64_t* child_offsets;
   const std::int64_t* children;
-  const std::int64_t* cb_offset;    ///< per front, in the CB arena (doubles)
+  double* const* cb_ptr;            ///< per front: where its contribution block lives
+                                    ///< (device memory, or mapped pinned host memory when
+                                    ///< the device budget is short; null: no block)
   const std::int64_t* rel_offsets;  ///< per child: its CB rows' positions in the parent
   const std::int64_t* rel;
 };
 
 /// Zeroes the batch's fronts, scatters the original entries and extend-adds the
-/// children's contribution blocks (lower triangle only when `symmetric`).
+/// children's contribution blocks (lower triangle only when `symmetric`). `pool` may be
+/// mapped pinned host memory (a front factored tile by tile).
 void launch_assemble(const DeviceTree& t, std::int64_t begin, std::int64_t count,
-                     const double* values, const double* cb_arena, double* pool, bool symmetric,
-                     cudaStream_t s);
+                     const double* values, double* pool, bool symmetric, cudaStream_t s);
 
-/// Copies each front's contribution block F[k:m, k:m] into the CB arena (fronts with a
+/// Copies each front's contribution block F[k:m, k:m] to t.cb_ptr[f] (fronts with a
 /// parent only).
 void launch_store_cb(const DeviceTree& t, std::int64_t begin, std::int64_t count,
-                     const double* pool, double* cb_arena, bool symmetric, cudaStream_t s);
+                     const double* pool, bool symmetric, cudaStream_t s);
 
 /// Packs each front's factor panel (its first k columns, m×k, contiguous in the front)
 /// and, for LU, its U12 block (k×(m−k), leading dimension k) into `staging` at
@@ -63,5 +65,14 @@ void launch_factor_small(const DeviceTree& t, const std::int64_t* positions, std
 void launch_lu_panel(double* f, std::int64_t m, std::int64_t k, std::int64_t p0, std::int64_t w,
                      double static_pivot, std::int64_t* perm, std::int64_t* perturbed,
                      cudaStream_t s);
+
+/// LU of a column slab S (r×w, leading dimension r) that alone is on the device: the
+/// columns p0..p0+w of a front factored tile by tile, rows p0..m. Pivot candidates for
+/// slab column j are slab rows [j, kk) (kk = k − p0: the fully summed rows); row swaps
+/// move the slab's w columns only and are recorded in perm (slab rows 0..kk, initialized
+/// by the caller) for the caller to apply to the front's other columns.
+void launch_lu_slab(double* s_, std::int64_t r, std::int64_t w, std::int64_t kk,
+                    double static_pivot, std::int64_t* perm, std::int64_t* perturbed,
+                    cudaStream_t s);
 
 }  // namespace strata::cuda

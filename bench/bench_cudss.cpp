@@ -1,0 +1,249 @@
+// strata benchmark — the CUDA backend against NVIDIA cuDSS on the same GPU, in one run
+// (issue 5's anchor; experiment 2 of the report, GPU part).
+//
+// For each problem: strata on the GPU (analysis, first factorization, median of --repeat
+// refactorizations, solve with refinement); cuDSS with its default reordering and with
+// strata's permutation given as CUDSS_DATA_USER_PERM (both directions of the permutation
+// are tried and the one with the smaller LU_NNZ kept, since the documentation does not say
+// which one it expects), each: analysis, factorization, median of --repeat
+// REFACTORIZATION, solve, backward error computed on the host, LU_NNZ.
+// cuDSS gets the upper triangle (CSR view of strata's lower CSC) for SPD matrices and the
+// whole matrix for unsymmetric ones; 32-bit indices. Results: <dir>/cudss-*.json.
+//
+//   bench_cudss [--problems a,b,...] [--repeat R] [--results-dir DIR]
+#include <cuda_runtime.h>
+#include <cudss.h>
+#include <fmt/core.h>
+
+#include <CLI/CLI.hpp>
+#include <cstdio>
+#include <stdexcept>
+
+#include "bench_common.hpp"
+#include "core/timer.hpp"
+#include "numeric/factor.hpp"
+#include "strata/strata.hpp"
+
+using namespace strata;
+using json = nlohmann::json;
+
+namespace {
+
+void ck(cudaError_t e, const char* what) {
+  if (e != cudaSuccess) throw std::runtime_error(std::string(what) + ": " + cudaGetErrorString(e));
+}
+void ck(cudssStatus_t s, const char* what) {
+  if (s != CUDSS_STATUS_SUCCESS)
+    throw std::runtime_error(std::string(what) + ": cuDSS status " + std::to_string(int(s)));
+}
+
+struct CudssResult {
+  double analysis = 0, factor = 0, refactor = 0, solve = 0, berr = 0;
+  std::int64_t lu_nnz = 0;
+  bool ok = false;
+  std::string error;
+};
+
+template <class T>
+T* to_device(const std::vector<T>& h) {
+  T* d = nullptr;
+  ck(cudaMalloc(&d, sizeof(T) * std::max<std::size_t>(h.size(), 1)), "cudaMalloc");
+  ck(cudaMemcpy(d, h.data(), sizeof(T) * h.size(), cudaMemcpyHostToDevice), "H2D");
+  return d;
+}
+
+// The matrix cuDSS gets, as CSR arrays: for SPD the upper triangle (the lower-triangle
+// CSC read as CSR), for a general matrix A itself (the CSC of Aᵀ read as CSR; Aᵀ's CSC is
+// A's CSC relabelled as CSR and canonicalized).
+SparseMatrix cudss_csr(const SparseMatrix& a, bool spd) {
+  SparseMatrix full = expand_symmetric(a);
+  if (!spd) {
+    full.layout = Layout::csr;  // the same arrays read by rows: Aᵀ
+    return canonicalize(full);  // CSC of Aᵀ = CSR of A
+  }
+  SparseMatrix low;
+  low.n_rows = low.n_cols = full.n_cols;
+  low.storage = Storage::lower;
+  low.offsets.assign(full.n_cols + 1, 0);
+  for (index_t j = 0; j < full.n_cols; ++j) {
+    for (index_t p = full.offsets[j]; p < full.offsets[j + 1]; ++p)
+      if (full.indices[p] >= j) {
+        low.indices.push_back(full.indices[p]);
+        low.values.push_back(full.values[p]);
+      }
+    low.offsets[j + 1] = static_cast<index_t>(low.indices.size());
+  }
+  return low;
+}
+
+CudssResult run_cudss(const SparseMatrix& a_input, bool spd, const std::vector<int>* perm,
+                      int repeat) {
+  CudssResult r;
+  const SparseMatrix csr = cudss_csr(a_input, spd);
+  const std::int64_t n = csr.n_rows, nnz = csr.nnz();
+  std::vector<int> rowptr(csr.offsets.begin(), csr.offsets.end());
+  std::vector<int> col(csr.indices.begin(), csr.indices.end());
+  std::vector<double> ones(n, 1.0), b(n), x(n);
+  multiply(a_input, ones.data(), b.data());
+  int* d_rowptr = to_device(rowptr);
+  int* d_col = to_device(col);
+  double* d_val = to_device(csr.values);
+  double* d_b = to_device(b);
+  double* d_x = to_device(x);
+  cudssHandle_t h;
+  cudssConfig_t cfg;
+  cudssData_t data;
+  cudssMatrix_t A, X, B;
+  try {
+    ck(cudssCreate(&h), "cudssCreate");
+    ck(cudssConfigCreate(&cfg), "cudssConfigCreate");
+    ck(cudssDataCreate(h, &data), "cudssDataCreate");
+    ck(cudssMatrixCreateCsr(&A, n, n, nnz, d_rowptr, nullptr, d_col, d_val, CUDA_R_32I, CUDA_R_32I,
+                            CUDA_R_64F, spd ? CUDSS_MTYPE_SPD : CUDSS_MTYPE_GENERAL,
+                            spd ? CUDSS_MVIEW_UPPER : CUDSS_MVIEW_FULL, CUDSS_BASE_ZERO),
+       "cudssMatrixCreateCsr");
+    ck(cudssMatrixCreateDn(&B, n, 1, n, d_b, CUDA_R_64F, CUDSS_LAYOUT_COL_MAJOR), "Dn b");
+    ck(cudssMatrixCreateDn(&X, n, 1, n, d_x, CUDA_R_64F, CUDSS_LAYOUT_COL_MAJOR), "Dn x");
+    if (perm)
+      ck(cudssDataSet(h, data, CUDSS_DATA_USER_PERM, perm->data(), sizeof(int) * n), "USER_PERM");
+    cudaDeviceSynchronize();
+    Timer t;
+    ck(cudssExecute(h, CUDSS_PHASE_ANALYSIS, cfg, data, A, X, B), "analysis");
+    cudaDeviceSynchronize();
+    r.analysis = t.seconds();
+    t.reset();
+    ck(cudssExecute(h, CUDSS_PHASE_FACTORIZATION, cfg, data, A, X, B), "factorization");
+    cudaDeviceSynchronize();
+    r.factor = t.seconds();
+    std::vector<double> times;
+    for (int k = 0; k < repeat; ++k) {
+      t.reset();
+      ck(cudssExecute(h, CUDSS_PHASE_REFACTORIZATION, cfg, data, A, X, B), "refactorization");
+      cudaDeviceSynchronize();
+      times.push_back(t.seconds());
+    }
+    r.refactor = bench::median(times);
+    t.reset();
+    ck(cudssExecute(h, CUDSS_PHASE_SOLVE, cfg, data, A, X, B), "solve");
+    cudaDeviceSynchronize();
+    r.solve = t.seconds();
+    std::size_t written = 0;
+    ck(cudssDataGet(h, data, CUDSS_DATA_LU_NNZ, &r.lu_nnz, sizeof(r.lu_nnz), &written), "LU_NNZ");
+    ck(cudaMemcpy(x.data(), d_x, sizeof(double) * n, cudaMemcpyDeviceToHost), "D2H x");
+    r.berr = bench::berr(a_input, x, b);
+    r.ok = true;
+    cudssMatrixDestroy(A);
+    cudssMatrixDestroy(B);
+    cudssMatrixDestroy(X);
+    cudssDataDestroy(h, data);
+    cudssConfigDestroy(cfg);
+    cudssDestroy(h);
+  } catch (const std::exception& e) {
+    r.error = e.what();
+  }
+  for (void* p : {(void*)d_rowptr, (void*)d_col, (void*)d_val, (void*)d_b, (void*)d_x}) cudaFree(p);
+  return r;
+}
+
+json to_json(const CudssResult& r) {
+  if (!r.ok) return {{"error", r.error}};
+  return {{"analysis_seconds", r.analysis}, {"factor_seconds", r.factor},
+          {"refactor_seconds", r.refactor}, {"solve_seconds", r.solve},
+          {"backward_error", r.berr},       {"lu_nnz", r.lu_nnz}};
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"strata vs NVIDIA cuDSS on one GPU"};
+  std::vector<std::string> problems = {"bcsstk16",   "ccx_cubef2f3_K", "lap3d-60",
+                                       "lap3d-80",   "lap3d-100",      "elast3d-30",
+                                       "elast3d-40", "uelast3d-20",    "uelast3d-30"};
+  int repeat = 3;
+  std::string results_dir;
+  app.add_option("--problems", problems, "problems")->delimiter(',');
+  app.add_option("--repeat", repeat, "refactorizations per measurement (median)");
+  app.add_option("--results-dir", results_dir, "where to write the JSON (default bench/results)");
+  CLI11_PARSE(app, argc, argv);
+  if (!numeric::cuda_available()) {
+    fmt::print(stderr, "bench_cudss: no CUDA GPU present\n");
+    return 3;
+  }
+  json out = bench::run_metadata(argc, argv);
+  out["benchmark"] = "cudss";
+  int ver[3] = {0, 0, 0};
+  cudssGetProperty(MAJOR_VERSION, &ver[0]);
+  cudssGetProperty(MINOR_VERSION, &ver[1]);
+  cudssGetProperty(PATCH_LEVEL, &ver[2]);
+  out["cudss_version"] = fmt::format("{}.{}.{}", ver[0], ver[1], ver[2]);
+  out["rows"] = json::array();
+  fmt::print("cuDSS {}.{}.{}\n", ver[0], ver[1], ver[2]);
+  fmt::print("{:<14} {:>8} {:>11} {:>9} {:>9} {:>9} {:>9} {:>9} {:>8} {:>8}\n", "problem", "n",
+             "nnz(L)", "strata f", "cudss f", "strata rf", "cudss rf", "cudss(p)", "rf ratio",
+             "f ratio");
+  for (const std::string& name : problems) {
+    bench::Problem p = bench::load_problem(name);
+    Options o;
+    o.type = p.symmetric ? MatrixType::spd : MatrixType::general;
+    o.backend = Backend::cuda;
+    Solver s(o);
+    Timer t;
+    s.analyze(p.a);
+    const double an_s = t.seconds();
+    t.reset();
+    s.factorize(p.a);
+    const double f_s = t.seconds();
+    std::vector<double> times;
+    for (int k = 0; k < repeat; ++k) {
+      t.reset();
+      s.refactorize(p.a);
+      times.push_back(t.seconds());
+    }
+    const double rf_s = bench::median(times);
+    std::vector<double> ones(p.a.n_rows, 1.0), b(p.a.n_rows);
+    multiply(p.a, ones.data(), b.data());
+    t.reset();
+    auto x = s.solve(b);
+    const double sol_s = t.seconds();
+    const double berr = bench::berr(p.a, x, b);
+    const AnalysisStats& an = s.stats().analysis;
+    // strata's pivot order (new to old) and its inverse, for cuDSS's user permutation
+    std::vector<int> perm(s.permutation().begin(), s.permutation().end()), iperm(perm.size());
+    for (std::size_t k = 0; k < perm.size(); ++k) iperm[perm[k]] = static_cast<int>(k);
+    const CudssResult def = run_cudss(p.a, p.symmetric, nullptr, repeat);
+    CudssResult up = run_cudss(p.a, p.symmetric, &perm, repeat);
+    CudssResult ui = run_cudss(p.a, p.symmetric, &iperm, repeat);
+    const bool use_inverse = ui.ok && (!up.ok || ui.lu_nnz < up.lu_nnz);
+    const CudssResult& same = use_inverse ? ui : up;
+    json row = {{"problem", name},
+                {"n", p.a.n_rows},
+                {"type", to_string(o.type)},
+                {"nnz_l", an.nnz_l},
+                {"nnz_l_fronts", an.nnz_l_fronts},
+                {"strata_gpu",
+                 {{"analysis_seconds", an_s},
+                  {"factor_seconds", f_s},
+                  {"refactor_seconds", rf_s},
+                  {"solve_seconds", sol_s},
+                  {"solve_on_device", s.stats().solve.on_device},
+                  {"backward_error", berr}}},
+                {"cudss_default", to_json(def)},
+                {"cudss_strata_perm", to_json(same)},
+                {"cudss_user_perm_direction", use_inverse ? "old-to-new" : "new-to-old"}};
+    const double best = std::min(def.ok ? def.refactor : 1e300, same.ok ? same.refactor : 1e300);
+    if (best < 1e300) row["ratio_strata_refactor_over_best_cudss_refactor"] = rf_s / best;
+    if (def.ok) row["ratio_strata_factor_over_cudss_default_factor"] = f_s / def.factor;
+    fmt::print(
+        "{:<14} {:>8} {:>11} {:>9.4f} {:>9.4f} {:>9.4f} {:>9.4f} {:>9.4f} {:>8.2f} {:>8.2f}\n",
+        name, p.a.n_rows, an.nnz_l, f_s, def.ok ? def.factor : -1.0, rf_s,
+        def.ok ? def.refactor : -1.0, same.ok ? same.refactor : -1.0,
+        best < 1e300 ? rf_s / best : -1.0, def.ok ? f_s / def.factor : -1.0);
+    if (!def.ok) fmt::print("  cuDSS default failed: {}\n", def.error);
+    if (!same.ok) fmt::print("  cuDSS with strata's permutation failed: {}\n", same.error);
+    std::fflush(stdout);
+    out["rows"].push_back(row);
+    bench::write_result(out, "cudss-partial", results_dir);
+  }
+  fmt::print("results: {}\n", bench::write_result(out, "cudss", results_dir));
+  return 0;
+}

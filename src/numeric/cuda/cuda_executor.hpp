@@ -1,0 +1,122 @@
+// strata — the CUDA executor's class (internal to src/numeric/cuda; nothing CUDA is in a
+// public header). The implementation is split by concern:
+//   cuda_executor.cu  device memory plan, analysis upload, in-core batches, bookkeeping;
+//   tiled_front.cu    fronts larger than the device budget, factored slab by slab;
+//   cuda_solve.cu     triangular solves on the device with a resident factor.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <vector>
+
+#include "numeric/cuda/cuda_check.hpp"
+#include "numeric/cuda/device_buffer.hpp"
+#include "numeric/cuda/kernels.cuh"
+#include "numeric/factor.hpp"
+
+namespace strata::cuda {
+
+/// Where the executor put things on the device for the current analysis (see
+/// CudaExecutor::plan_device_memory).
+struct DevicePlan {
+  std::size_t budget = 0;        ///< bytes the numeric working memory may use
+  std::size_t pool = 0;          ///< doubles: fronts of one in-core chunk
+  std::size_t arena_device = 0;  ///< doubles of the CB arena kept on the device
+  bool arena_on_host = false;    ///< some contribution blocks live in pinned host memory
+  bool factor_resident = false;  ///< the whole factor stays on the device (GPU solve)
+  std::int64_t slab = 0;         ///< slab width for fronts factored tile by tile
+};
+
+/// What the executor keeps on the device for one part of the tree (the whole tree, or a
+/// subtree / the top part of a multi-GPU split): the part's schedule, where each of its
+/// fronts sits in the pool, how its batches are cut into chunks, where each contribution
+/// block it reads or writes lives, and the kernels' view of all that.
+struct PartDevice {
+  DeviceBuffer<std::int64_t> fronts, pos_offset;
+  DeviceBuffer<double*> cb_ptr;
+  std::vector<std::int64_t> pos_offset_host;  ///< offset in the pool (current chunk)
+  std::vector<char> tiled;                    ///< per position: factored tile by tile
+  std::vector<index_t> chunk_end;             ///< per position starting a chunk: its end
+  std::vector<double*> cb_ptr_host;           ///< per front: where its block lives
+  DeviceTree tree{};
+};
+
+/// Grows `work` to cuSOLVER's workspace for a POTRF of order k, leading dimension ld.
+void grow_potrf_work(cusolverDnHandle_t h, DeviceBuffer<double>& work, double* a, int k, int ld);
+
+class CudaExecutor final : public numeric::Executor {
+ public:
+  /// `device`: CUDA device ordinal this executor runs on.
+  explicit CudaExecutor(const Options& o, int device = 0);
+  ~CudaExecutor() override;
+  const char* name() const override { return "cuda"; }
+  int device() const override { return device_; }
+  void begin(const numeric::FactorContext& ctx) override;
+  void begin_part(const numeric::FactorContext& ctx) override;
+  void factor_batch(const numeric::FactorContext& ctx, const BatchInfo& b) override;
+  std::size_t export_cb(const numeric::FactorContext& ctx, numeric::CbTransfer& t) override;
+  std::size_t import_cb(const numeric::FactorContext& ctx, const numeric::CbTransfer& t) override;
+  void end(const numeric::FactorContext& ctx) override;
+  bool solve(const Analysis& an, const numeric::NumericFactor& fac, double* x,
+             index_t nrhs) override;
+  void report(FactorStats& fs) const override;
+
+ private:
+  void upload_analysis(const Analysis& an);
+  void plan_parts(const Analysis& an, bool whole);
+  void plan_device_memory(const Analysis& an, const std::vector<numeric::PartView>& views);
+  void upload_part(const Analysis& an, const numeric::PartView& v);
+  /// The factor stays on the device only for a whole-tree factorization.
+  bool keep_resident() const { return plan_.factor_resident && whole_; }
+  void factor_chunk(const numeric::FactorContext& ctx, index_t begin, index_t end);
+  void factor_tiled(const numeric::FactorContext& ctx, index_t pos);
+  void finish_front(const numeric::FactorContext& ctx, index_t f, std::int64_t bad,
+                    std::int64_t npert, const std::int64_t* lperm);
+  void copy_panels_back(const numeric::FactorContext& ctx, index_t begin, index_t end);
+  void count_h2d(std::size_t bytes) { bytes_h2d_ += bytes; }
+  template <class T>
+  void upload(DeviceBuffer<T>& d, const std::vector<T>& h) {
+    d.upload(h.data(), h.size(), stream_);
+    bytes_h2d_ += h.size() * sizeof(T);
+  }
+
+  int device_ = 0;
+  cudaStream_t stream_ = nullptr;
+  cublasHandle_t blas_ = nullptr;
+  cusolverDnHandle_t solver_ = nullptr;
+  std::size_t limit_ = 0;
+  std::uint64_t analysis_id_ = 0;
+  DevicePlan plan_;
+  // analysis arrays (fronts_: the whole tree's schedule, for the device solve)
+  DeviceBuffer<std::int64_t> fronts_, n_rows_, n_pivots_, parent_, entry_offsets_, entry_src_,
+      entry_dst_, child_offsets_, children_, rel_offsets_, rel_;
+  std::map<int, PartDevice> parts_;  ///< by PartView::id: -1 whole tree, 0..P subtrees, top
+  PartDevice* cur_ = nullptr;        ///< the part being factored
+  bool whole_ = true;                ///< the last factorization was of the whole tree
+  int planned_ = 0;                  ///< parts_ planned for: 0 nothing, 1 whole, 2 split
+  /// Blocks of subtree roots exported for a peer copy (or the same device), kept until
+  /// the next factorization: the arena they came from is reused by the next subtree.
+  std::map<index_t, DeviceBuffer<double>> outbox_;
+  // numeric working memory
+  DeviceBuffer<double> values_, arena_, pool_, potrf_work_, panels_;
+  PinnedBuffer<double> host_arena_, host_front_, host_staging_;
+  DeviceBuffer<int> potrf_info_;
+  DeviceBuffer<std::int64_t> small_pos_, info_, perturbed_, perm_, perm_offset_, stage_offset_;
+  std::vector<std::int64_t> iota_;
+  // resident factor for the solve
+  const numeric::NumericFactor* resident_for_ = nullptr;
+  std::uint64_t resident_analysis_ = 0;
+  DeviceBuffer<std::int64_t> s_rows_, s_row_offsets_, s_first_pivot_, s_level_offsets_,
+      s_pivot_pos_, s_pivot_row_, s_u_offset_;
+  DeviceBuffer<int> s_pivot_size_;
+  DeviceBuffer<std::int64_t> s_panel_offset_;
+  DeviceBuffer<double> s_d_diag_, s_d_off_, s_x_, s_u_, s_scratch_;
+  std::vector<std::int64_t> u_offset_host_;
+  // statistics of the last factorization
+  std::size_t bytes_h2d_ = 0, bytes_d2h_ = 0;
+  index_t chunks_ = 0, tiled_count_ = 0;
+  double device_seconds_ = 0;
+  cudaEvent_t start_ = nullptr, stop_ = nullptr;
+};
+
+}  // namespace strata::cuda

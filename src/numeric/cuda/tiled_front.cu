@@ -1,0 +1,190 @@
+// strata — a front larger than the device budget, factored slab by slab (issue 5's
+// "any device memory").
+//
+// The front F (m×m, column-major) is assembled by the usual kernel straight into pinned
+// host memory, which the device reads and writes over the bus (mapped, unified
+// addressing). It is then factored right-looking by slabs of w columns, w chosen so that
+// a slab and one column block of the trailing matrix fit the device pool (2·m·w
+// doubles):
+//   for each slab p0 .. p0+w of the k pivot columns:
+//     upload the slab (rows p0..m) and factor it on the device —
+//       LLᵀ: POTRF of its w×w top, TRSM of the rows below;
+//       LU:  our panel kernel, pivot candidates the fully summed rows [j, k) as in-core,
+//            row swaps applied to the slab on the device and then to the front's other
+//            columns on the host, so the pivot sequence is the in-core one;
+//     download it; then for each column block jb of the trailing matrix: upload it,
+//       LLᵀ: SYRK on its diagonal part, GEMM below (lower triangle only);
+//       LU:  TRSM of its w rows by L11 (they become U12), GEMM below;
+//     and download it.
+// The contribution block F[k:m, k:m] is then copied where the device plan keeps it, and
+// the panels into the host factor (and the resident device factor, if any).
+// Traffic is about k·m²/w doubles each way: this is the slow, always-possible path; the
+// memory plan makes it the exception (a front whose working set alone exceeds the budget).
+//
+// Source: the right-looking blocked algorithms of Golub & Van Loan, "Matrix
+// Computations", 4th ed., §3.2.11 and §4.2.9, with the panel as the unit of transfer
+// (out-of-core dense factorization as in Toledo, "A survey of out-of-core algorithms in
+// numerical linear algebra", 1999).
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+
+#include "numeric/cuda/cuda_executor.hpp"
+
+namespace strata::cuda {
+
+namespace {
+
+// Copies rows [r0, r0+rows) of columns [c0, c0+cols) of the host matrix H (leading
+// dimension ldh) to the device matrix D (leading dimension rows), or back.
+void copy_block(cudaStream_t s, double* d, const double* h, std::int64_t ldh, std::int64_t r0,
+                std::int64_t c0, std::int64_t rows, std::int64_t cols, bool to_device) {
+  if (rows == 0 || cols == 0) return;
+  const double* src = h + c0 * ldh + r0;
+  if (to_device)
+    STRATA_CUDA(cudaMemcpy2DAsync(d, sizeof(double) * rows, src, sizeof(double) * ldh,
+                                  sizeof(double) * rows, cols, cudaMemcpyHostToDevice, s));
+  else
+    STRATA_CUDA(cudaMemcpy2DAsync(const_cast<double*>(src), sizeof(double) * ldh, d,
+                                  sizeof(double) * rows, sizeof(double) * rows, cols,
+                                  cudaMemcpyDeviceToHost, s));
+}
+
+}  // namespace
+
+void CudaExecutor::factor_tiled(const numeric::FactorContext& ctx, index_t pos) {
+  const Analysis& an = *ctx.analysis;
+  const auto& t = an.tree;
+  const index_t f = ctx.part->schedule->fronts[pos];
+  const bool lu = ctx.type == MatrixType::general;
+  const std::int64_t m = t.n_rows(f), k = t.n_pivots(f);
+  ++tiled_count_;
+  ++chunks_;
+  host_front_.resize(static_cast<std::size_t>(m) * m);
+  double* H = host_front_.data();
+  launch_assemble(cur_->tree, pos, 1, values_.data(), H, !lu, stream_);  // pos_offset[pos] is 0
+  STRATA_CUDA(cudaStreamSynchronize(stream_));
+
+  const std::int64_t w_max = std::max<std::int64_t>(
+      1, std::min<std::int64_t>(std::max<std::int64_t>(k, 1),
+                                static_cast<std::int64_t>(plan_.pool) / (2 * m)));
+  double* S = pool_.data();
+  double* C = pool_.data() + static_cast<std::size_t>(m) * w_max;
+  const double one = 1.0, minus_one = -1.0;
+  std::vector<std::int64_t> fperm(k), sperm(k);
+  for (std::int64_t i = 0; i < k; ++i) fperm[i] = i;
+  std::int64_t npert = 0;
+  if (lu) {
+    perm_.resize(static_cast<std::size_t>(k) + 1);
+    perturbed_.resize(1);
+    STRATA_CUDA(cudaMemsetAsync(perturbed_.data(), 0, sizeof(std::int64_t), stream_));
+  }
+  potrf_info_.resize(1);
+  for (std::int64_t p0 = 0; p0 < k; p0 += w_max) {
+    const std::int64_t w = std::min(w_max, k - p0), r = m - p0;
+    copy_block(stream_, S, H, m, p0, p0, r, w, true);
+    bytes_h2d_ += sizeof(double) * r * w;
+    if (!lu) {
+      grow_potrf_work(solver_, potrf_work_, S, static_cast<int>(w), static_cast<int>(r));
+      STRATA_CUSOLVER(cusolverDnDpotrf(solver_, CUBLAS_FILL_MODE_LOWER, static_cast<int>(w), S,
+                                       static_cast<int>(r), potrf_work_.data(),
+                                       static_cast<int>(potrf_work_.size()), potrf_info_.data()));
+      int info = 0;
+      STRATA_CUDA(
+          cudaMemcpyAsync(&info, potrf_info_.data(), sizeof(int), cudaMemcpyDeviceToHost, stream_));
+      STRATA_CUDA(cudaStreamSynchronize(stream_));
+      if (info > 0)
+        throw NotPositiveDefinite(an.perm[t.first_pivot[f] + p0 + info - 1], std::nan(""));
+      if (r > w)
+        STRATA_CUBLAS(cublasDtrsm(blas_, CUBLAS_SIDE_RIGHT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_T,
+                                  CUBLAS_DIAG_NON_UNIT, static_cast<int>(r - w),
+                                  static_cast<int>(w), &one, S, static_cast<int>(r), S + w,
+                                  static_cast<int>(r)));
+    } else {
+      const std::int64_t kk = k - p0;
+      if (static_cast<std::int64_t>(iota_.size()) < kk) {
+        iota_.resize(kk);
+        for (std::int64_t i = 0; i < kk; ++i) iota_[i] = i;
+      }
+      STRATA_CUDA(cudaMemcpyAsync(perm_.data(), iota_.data(), sizeof(std::int64_t) * kk,
+                                  cudaMemcpyHostToDevice, stream_));
+      launch_lu_slab(S, r, w, kk, ctx.static_pivot, perm_.data(), perturbed_.data(), stream_);
+      STRATA_CUDA(cudaMemcpyAsync(sperm.data(), perm_.data(), sizeof(std::int64_t) * kk,
+                                  cudaMemcpyDeviceToHost, stream_));
+      STRATA_CUDA(cudaStreamSynchronize(stream_));
+      // the slab's row swaps on the front's other columns (rows p0..k), and in the
+      // front's pivot order
+      for (std::int64_t c = 0; c < m; ++c) {
+        if (c >= p0 && c < p0 + w) continue;
+        double* colc = H + c * m + p0;
+        std::vector<double> tmp(colc, colc + kk);
+        for (std::int64_t i = 0; i < kk; ++i) colc[i] = tmp[sperm[i]];
+      }
+      std::vector<std::int64_t> old(fperm.begin() + p0, fperm.end());
+      for (std::int64_t i = 0; i < kk; ++i) fperm[p0 + i] = old[sperm[i]];
+    }
+    copy_block(stream_, S, H, m, p0, p0, r, w, false);
+    bytes_d2h_ += sizeof(double) * r * w;
+    // the trailing matrix, one column block at a time
+    for (std::int64_t jb = p0 + w; jb < m; jb += w_max) {
+      const std::int64_t wb = std::min(w_max, m - jb);
+      if (!lu) {
+        const std::int64_t rr = m - jb;  // lower triangle: rows jb..m
+        const double* Lj = S + (jb - p0);
+        copy_block(stream_, C, H, m, jb, jb, rr, wb, true);
+        STRATA_CUBLAS(cublasDsyrk(blas_, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N, static_cast<int>(wb),
+                                  static_cast<int>(w), &minus_one, Lj, static_cast<int>(r), &one, C,
+                                  static_cast<int>(rr)));
+        if (rr > wb)
+          STRATA_CUBLAS(cublasDgemm(blas_, CUBLAS_OP_N, CUBLAS_OP_T, static_cast<int>(rr - wb),
+                                    static_cast<int>(wb), static_cast<int>(w), &minus_one, Lj + wb,
+                                    static_cast<int>(r), Lj, static_cast<int>(r), &one, C + wb,
+                                    static_cast<int>(rr)));
+        copy_block(stream_, C, H, m, jb, jb, rr, wb, false);
+        bytes_h2d_ += sizeof(double) * rr * wb;
+        bytes_d2h_ += sizeof(double) * rr * wb;
+      } else {
+        copy_block(stream_, C, H, m, p0, jb, r, wb, true);
+        STRATA_CUBLAS(cublasDtrsm(blas_, CUBLAS_SIDE_LEFT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N,
+                                  CUBLAS_DIAG_UNIT, static_cast<int>(w), static_cast<int>(wb), &one,
+                                  S, static_cast<int>(r), C, static_cast<int>(r)));
+        if (r > w)
+          STRATA_CUBLAS(cublasDgemm(blas_, CUBLAS_OP_N, CUBLAS_OP_N, static_cast<int>(r - w),
+                                    static_cast<int>(wb), static_cast<int>(w), &minus_one, S + w,
+                                    static_cast<int>(r), C, static_cast<int>(r), &one, C + w,
+                                    static_cast<int>(r)));
+        copy_block(stream_, C, H, m, p0, jb, r, wb, false);
+        bytes_h2d_ += sizeof(double) * r * wb;
+        bytes_d2h_ += sizeof(double) * r * wb;
+      }
+    }
+    STRATA_CUDA(cudaStreamSynchronize(stream_));
+  }
+  if (lu) {
+    STRATA_CUDA(cudaMemcpyAsync(&npert, perturbed_.data(), sizeof(std::int64_t),
+                                cudaMemcpyDeviceToHost, stream_));
+    STRATA_CUDA(cudaStreamSynchronize(stream_));
+  }
+
+  // contribution block to where the plan keeps it; panels to the host factor
+  const std::int64_t mc = m - k;
+  if (mc > 0 && t.parent[f] >= 0)
+    STRATA_CUDA(cudaMemcpy2DAsync(cur_->cb_ptr_host[f], sizeof(double) * mc, H + k * m + k,
+                                  sizeof(double) * m, sizeof(double) * mc, mc, cudaMemcpyDefault,
+                                  stream_));
+  double* panel = ctx.factor->panels.data() + an.factor_layout.panel_offset[f];
+  std::memcpy(panel, H, sizeof(double) * m * k);
+  if (lu)
+    for (std::int64_t j = 0; j < mc; ++j)
+      for (std::int64_t i = 0; i < k; ++i) panel[m * k + j * k + i] = H[(k + j) * m + i];
+  if (keep_resident()) {
+    const std::size_t sz = panel_size(t, f, lu);
+    STRATA_CUDA(cudaMemcpyAsync(panels_.data() + an.factor_layout.panel_offset[f], panel,
+                                sizeof(double) * sz, cudaMemcpyHostToDevice, stream_));
+    bytes_h2d_ += sizeof(double) * sz;
+  }
+  STRATA_CUDA(cudaStreamSynchronize(stream_));
+  finish_front(ctx, f, -1, npert, fperm.data());
+}
+
+}  // namespace strata::cuda

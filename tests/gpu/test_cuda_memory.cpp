@@ -1,0 +1,177 @@
+// strata — GPU backend with any amount of device memory, and the solve on the device
+// (ctest label `gpu`). References: the CPU executor on the same analysis, and the
+// in-core GPU run. Skipped, with a message, where no CUDA GPU is present.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "core/analysis.hpp"
+#include "numeric/factor.hpp"
+#include "sparse/generators.hpp"
+#include "strata/strata.hpp"
+#include "support/test_support.hpp"
+
+namespace strata {
+namespace {
+
+class CudaMemory : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    if (!numeric::cuda_available())
+      GTEST_SKIP() << "no CUDA GPU present (or this build has no CUDA backend): GPU test skipped";
+  }
+};
+
+double max_relative_entry_difference(const std::vector<double>& a, const std::vector<double>& b) {
+  double num = 0, den = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    num = std::max(num, std::abs(a[i] - b[i]));
+    den = std::max(den, std::abs(b[i]));
+  }
+  return den > 0 ? num / den : num;
+}
+
+constexpr std::size_t MiB = 1024 * 1024;
+
+// Cholesky with the device budget far below the factor: contribution blocks spill to
+// host memory and the largest fronts are factored slab by slab; the factor equals the
+// CPU's entry by entry (no pivoting), as the in-core GPU run does.
+TEST_F(CudaMemory, CholeskyUnderATightBudgetEqualsInCore) {
+  const SparseMatrix a = generators::laplacian_3d(24, 24, 24);
+  for (std::size_t limit : {std::size_t{0}, 8 * MiB, 2 * MiB, MiB / 2}) {
+    SCOPED_TRACE("device_memory_limit " + std::to_string(limit));
+    Options o;
+    o.type = MatrixType::spd;
+    o.device_memory_limit = limit;
+    Analysis an = analyze_matrix(a, o);
+    SparseMatrix c = canonical_values(an, a);
+    numeric::NumericFactor cpu_f, gpu_f;
+    std::vector<double> arena;
+    auto cpu = numeric::make_cpu_executor(2);
+    auto gpu = numeric::make_cuda_executor(o);
+    numeric::factorize(an, c.values, MatrixType::spd, 0.0, *cpu, cpu_f, arena);
+    numeric::factorize(an, c.values, MatrixType::spd, 0.0, *gpu, gpu_f, arena);
+    FactorStats fs;
+    gpu->report(fs);
+    if (limit != 0) EXPECT_FALSE(fs.factor_resident);
+    if (limit != 0 && limit <= 2 * MiB) {
+      EXPECT_LT(static_cast<double>(limit), 0.2 * an.plan.factor_bytes);
+      EXPECT_GT(fs.tiled_fronts, 0);
+      EXPECT_TRUE(fs.contribution_blocks_on_host);
+    }
+    EXPECT_LT(max_relative_entry_difference(gpu_f.panels, cpu_f.panels), 1e-12);
+    EXPECT_EQ(cpu_f.rows, gpu_f.rows);
+  }
+}
+
+// LU under a tight budget: the slab path keeps the in-core pivot candidates, so the
+// solution equals the CPU's, with the same determinant.
+TEST_F(CudaMemory, LuUnderATightBudgetEqualsInCore) {
+  SparseMatrix a = expand_symmetric(generators::laplacian_3d(22, 22, 22));
+  auto rng = test::fresh_rng();
+  std::uniform_real_distribution<double> u(0.5, 1.5);
+  for (double& v : a.values) v *= u(rng);  // unsymmetric values
+  std::vector<double> b(a.n_rows);
+  std::uniform_real_distribution<double> ub(-1, 1);
+  for (double& v : b) v = ub(rng);
+  Options o;
+  o.type = MatrixType::general;
+  Solver cpu(o);
+  cpu.factorize(a);
+  const auto xc = cpu.solve(b);
+  for (std::size_t limit : {std::size_t{0}, 2 * MiB, MiB / 2}) {
+    SCOPED_TRACE("device_memory_limit " + std::to_string(limit));
+    Options g = o;
+    g.backend = Backend::cuda;
+    g.device_memory_limit = limit;
+    Solver gpu(g);
+    gpu.factorize(a);
+    if (limit != 0) EXPECT_GT(gpu.stats().factor.tiled_fronts, 0);
+    const auto xg = gpu.solve(b);
+    EXPECT_LT(test::backward_error(a, xg.data(), b.data()), 1e-14);
+    EXPECT_LT(test::relative_difference(xg, xc), 1e-8);
+    EXPECT_EQ(gpu.stats().factor.determinant_sign, cpu.stats().factor.determinant_sign);
+    EXPECT_NEAR(gpu.stats().factor.log_abs_determinant, cpu.stats().factor.log_abs_determinant,
+                1e-8 * std::abs(cpu.stats().factor.log_abs_determinant));
+    // refactorization under the same budget reuses the device plan and gives the same
+    gpu.refactorize(a);
+    EXPECT_EQ(gpu.solve(b), xg);
+  }
+}
+
+// With the factor resident, the triangular solves run on the device and agree with the
+// host solves on the same factor, for one and several right-hand sides.
+TEST_F(CudaMemory, DeviceSolveMatchesHostSolve) {
+  auto rng = test::fresh_rng();
+  for (auto [kind, type] : {std::pair{test::RandomKind::spd, MatrixType::spd},
+                            std::pair{test::RandomKind::general, MatrixType::general}})
+    for (index_t n : {1, 2, 3, 5, 733, 4000}) {
+      SCOPED_TRACE(std::string(to_string(type)) + " n=" + std::to_string(n));
+      SparseMatrix a = test::random_sparse(n, n > 1000 ? 8 : 3, kind, rng);
+      for (index_t nrhs : {1, 3}) {
+        std::vector<double> b(static_cast<std::size_t>(n) * nrhs);
+        std::uniform_real_distribution<double> u(-1, 1);
+        for (double& v : b) v = u(rng);
+        Options o;
+        o.type = type;
+        o.backend = Backend::cuda;
+        o.refinement_max_steps = 0;  // compare the plain solves
+        o.gmres_max_iterations = 0;
+        Solver gpu(o);
+        gpu.factorize(a);
+        ASSERT_TRUE(gpu.stats().factor.factor_resident);
+        std::vector<double> xg(b.size());
+        gpu.solve(b.data(), xg.data(), nrhs);
+        EXPECT_TRUE(gpu.stats().solve.on_device);
+        // the host solve on the same factor: the same solver with the factor off the
+        // device is not reachable from the API, so compare with the CPU backend's
+        // solution instead, and the residual
+        Options c = o;
+        c.backend = Backend::cpu;
+        Solver cpu(c);
+        cpu.factorize(a);
+        std::vector<double> xc(b.size());
+        cpu.solve(b.data(), xc.data(), nrhs);
+        EXPECT_FALSE(cpu.stats().solve.on_device);
+        EXPECT_LT(test::relative_difference(xg, xc), 1e-9);
+        for (index_t r = 0; r < nrhs; ++r)
+          EXPECT_LT(test::backward_error(a, xg.data() + r * n, b.data() + r * n), 1e-12);
+      }
+    }
+}
+
+// Large fronts (cuSOLVER/cuBLAS factorization path) solved on the device.
+TEST_F(CudaMemory, DeviceSolveWithLargeFronts) {
+  const SparseMatrix a = generators::elasticity_3d(12, 12, 12);
+  std::vector<double> ones(a.n_rows, 1.0), b(a.n_rows);
+  multiply(a, ones.data(), b.data());
+  Options o;
+  o.backend = Backend::cuda;
+  Solver gpu(o);
+  gpu.factorize(a);
+  ASSERT_GT(gpu.stats().analysis.largest_front_rows, 256);
+  const auto x = gpu.solve(b);
+  EXPECT_TRUE(gpu.stats().solve.on_device);
+  EXPECT_LT(test::relative_difference(x, ones), 1e-8);
+  EXPECT_LT(test::backward_error(a, x.data(), b.data()), 1e-14);
+}
+
+// A budget too small for even one slab of the largest front is refused with the bytes.
+TEST_F(CudaMemory, ImpossibleBudgetNamesTheBytes) {
+  const SparseMatrix a = generators::laplacian_3d(20, 20, 20);
+  Options o;
+  o.type = MatrixType::spd;
+  o.backend = Backend::cuda;
+  o.device_memory_limit = 4096;
+  Solver s(o);
+  try {
+    s.factorize(a);
+    FAIL() << "expected OutOfMemory";
+  } catch (const OutOfMemory& e) {
+    EXPECT_GT(e.bytes_requested(), 4096u);
+    EXPECT_NE(std::string(e.what()).find("device_memory_limit"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace strata
