@@ -47,7 +47,7 @@ typedef enum strata_status {
    *  analyzed one, a right-hand side with a NaN. */
   STRATA_ERROR_INVALID_INPUT = 1,
   /** Valid request this build or machine cannot do (e.g. the CUDA backend in a build
-   *  without CUDA or on a machine without a GPU, or LDLᵀ on the CUDA backend). */
+   *  without CUDA or on a machine without a GPU). */
   STRATA_ERROR_NOT_SUPPORTED = 2,
   /** An allocation failed. */
   STRATA_ERROR_OUT_OF_MEMORY = 3,

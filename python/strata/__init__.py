@@ -146,8 +146,8 @@ class Solver:
         Fill-reducing ordering (default "nd": strata's nested dissection).
     device : {"auto", "cpu", "cuda"}
         Where the factorization runs. "auto" (default) uses a GPU when the build and the
-        machine have one (LDLᵀ runs on the CPU); "cuda" raises NotSupportedError in a
-        build without CUDA or on a machine without a GPU.
+        machine have one (for LLᵀ, LDLᵀ and LU alike); "cuda" raises NotSupportedError in
+        a build without CUDA or on a machine without a GPU.
     storage : {"full", "lower", "upper"}
         Which part of A is given: "lower"/"upper" mean A holds one triangle of a
         symmetric matrix (diagonal included) and the other is implied. Default "full".

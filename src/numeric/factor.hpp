@@ -138,6 +138,15 @@ int cuda_device_count();
 /// reuses the storage) and marks it invalid.
 void prepare_factor(const Analysis& an, MatrixType type, NumericFactor& factor);
 
+/// LDLᵀ bookkeeping of front f once its partial factorization is in the factor (shared by
+/// the executors, so that a CPU and a GPU factor have one layout): moves D out of the
+/// front's panel (its diagonal to d_diag, the (j+1, j) entries of 2×2 pivots to d_off,
+/// leaving L11 unit lower with zeros there), sets pivot_size by global pivot position
+/// (first_pivot[f] + i: 1, or 2 then 0 for a 2×2 pivot) and the permuted pivot rows.
+/// local_perm[0..k) and local_pivot_size[0..k) are as factor_front_ldlt returns them.
+void store_ldlt_front(const Analysis& an, index_t f, const index_t* local_perm,
+                      const int* local_pivot_size, NumericFactor& factor);
+
 /// Runs the numeric factorization of the scaled canonical values with `exec` on the whole
 /// tree. Fills `factor`; throws as Executor::factor_batch.
 void factorize(const Analysis& an, const std::vector<double>& scaled_values, MatrixType type,

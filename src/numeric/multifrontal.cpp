@@ -71,4 +71,28 @@ void factorize(const Analysis& an, const std::vector<double>& scaled_values, Mat
   factor.valid = true;
 }
 
+void store_ldlt_front(const Analysis& an, index_t f, const index_t* local_perm,
+                      const int* local_pivot_size, NumericFactor& fac) {
+  const auto& t = an.tree;
+  const index_t m = t.n_rows(f), k = t.n_pivots(f), p0 = t.first_pivot[f];
+  const index_t* rows = t.rows_of(f);
+  index_t* frows = fac.rows.data() + t.row_offsets[f];
+  for (index_t i = 0; i < k; ++i) frows[i] = rows[local_perm[i]];
+  for (index_t i = k; i < m; ++i) frows[i] = rows[i];
+  double* panel = fac.panels.data() + an.factor_layout.panel_offset[f];
+  for (index_t i = 0; i < k; ++i) {
+    fac.d_diag[p0 + i] = panel[i * m + i];
+    panel[i * m + i] = 1.0;
+    // local sizes are 2, 2 on both columns of a 2×2 pivot: the first becomes 2, the second 0
+    fac.pivot_size[p0 + i] = local_pivot_size[i] == 2 && (i == 0 || fac.pivot_size[p0 + i - 1] != 2)
+                                 ? 2
+                                 : (local_pivot_size[i] == 2 ? 0 : 1);
+    fac.d_off[p0 + i] = 0.0;
+    if (fac.pivot_size[p0 + i] == 2) {
+      fac.d_off[p0 + i] = panel[i * m + i + 1];
+      panel[i * m + i + 1] = 0.0;
+    }
+  }
+}
+
 }  // namespace strata::numeric

@@ -3,7 +3,9 @@
 // no CUDA GPU is present or the build has no CUDA backend.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <numbers>
 
 #include "core/analysis.hpp"
 #include "numeric/factor.hpp"
@@ -113,9 +115,6 @@ TEST_F(CudaBackend, LargeLuFrontsMatchCpu) {
 TEST_F(CudaBackend, SharedMatrices) {
   for (const std::string& name : test::shared_matrix_names()) {
     MMMatrix mm = read_matrix_market(test::matrix_path(name));
-    if (mm.symmetry == MMSymmetry::symmetric && name.find("bcsstk") == std::string::npos &&
-        name.find("ccx") == std::string::npos && name != "494_bus" && name != "LFAT5")
-      continue;  // symmetric indefinite: LDLᵀ is CPU-only for now
     SCOPED_TRACE(name);
     const SparseMatrix& a = mm.matrix;
     std::vector<double> ones(a.n_rows, 1.0), b(a.n_rows);
@@ -131,6 +130,16 @@ TEST_F(CudaBackend, SharedMatrices) {
     const double bc = test::backward_error(a, xc.data(), b.data());
     const double bg = test::backward_error(a, xg.data(), b.data());
     EXPECT_LE(bg, std::max(1e-14, 10 * bc));
+    const FactorStats &fc = cpu.stats().factor, &fg = gpu.stats().factor;
+    EXPECT_EQ(fg.type, fc.type);
+    if (fc.type == MatrixType::symmetric_indefinite && fc.perturbed_pivots == 0) {
+      // the KKT matrices (hangGlider_2, reorientation_1, tumorAntiAngiogenesis_2)
+      EXPECT_EQ(fg.perturbed_pivots, 0);
+      EXPECT_EQ(fg.inertia_positive, fc.inertia_positive);
+      EXPECT_EQ(fg.inertia_negative, fc.inertia_negative);
+      EXPECT_EQ(fg.inertia_zero, fc.inertia_zero);
+      EXPECT_EQ(fg.determinant_sign, fc.determinant_sign);
+    }
   }
 }
 
@@ -149,15 +158,300 @@ TEST_F(CudaBackend, RefactorizationIsDeterministic) {
   EXPECT_EQ(s1.solve(b), s2.solve(b));
 }
 
-// What the GPU backend does not do yet fails clearly.
-TEST_F(CudaBackend, UnsupportedRequestsAreClear) {
+// --- LDLᵀ (symmetric_indefinite) ---------------------------------------------------------
+
+// A = laplacian_3d(n, n, n) − σ I. Its eigenvalues are known in closed form,
+// λ = Σ_d (2 − 2 cos(π j_d / (n+1))), j_d = 1..n, so the number of negative eigenvalues of A
+// is #{λ < σ}: an independent reference for the inertia. σ is drawn so that no λ is closer
+// than 1e-3 to it (A stays well away from singular).
+struct ShiftedLaplacian {
+  SparseMatrix a;
+  index_t negative = 0;
+};
+
+ShiftedLaplacian shifted_laplacian(index_t n, std::mt19937_64& rng) {
+  std::vector<double> ev1(n);
+  for (index_t j = 1; j <= n; ++j)
+    ev1[j - 1] = 2.0 - 2.0 * std::cos(std::numbers::pi * static_cast<double>(j) / (n + 1));
+  std::uniform_real_distribution<double> u(0.8, 1.6);
+  ShiftedLaplacian r;
+  double sigma = 0;
+  for (bool ok = false; !ok;) {
+    sigma = u(rng);
+    ok = true;
+    r.negative = 0;
+    for (double x : ev1)
+      for (double y : ev1)
+        for (double z : ev1) {
+          const double lambda = x + y + z;
+          if (std::abs(lambda - sigma) < 1e-3) ok = false;
+          if (lambda < sigma) ++r.negative;
+        }
+  }
+  r.a = generators::laplacian_3d(n, n, n);
+  for (index_t j = 0; j < r.a.n_cols; ++j) r.a.values[r.a.offsets[j]] -= sigma;  // diagonal first
+  return r;
+}
+
+// A KKT matrix [[H, Bᵀ], [B, 0]] from the elasticity stencil H = elasticity_3d(n, n, n)
+// (SPD) and a random constraint block B (n_con rows, each with one entry in [0.5, 1.5] in a
+// column of its own and two more in [−1, 1] on dofs of nearby nodes): full row rank with
+// probability 1, so the inertia is exactly (order(H), n_con, 0). Storage::lower.
+SparseMatrix elasticity_kkt(index_t n, index_t n_con, std::mt19937_64& rng) {
+  const SparseMatrix h = generators::elasticity_3d(n, n, n);
+  const index_t nh = h.n_rows, nt = nh + n_con;
+  std::vector<index_t> own(nh);
+  for (index_t i = 0; i < nh; ++i) own[i] = i;
+  std::shuffle(own.begin(), own.end(), rng);
+  std::uniform_real_distribution<double> big(0.5, 1.5), val(-1.0, 1.0);
+  std::uniform_int_distribution<index_t> near(-30, 30);
+  std::vector<std::vector<std::pair<index_t, double>>> extra(nh);  // column j: (row, value)
+  for (index_t r = 0; r < n_con; ++r) {
+    const index_t c0 = own[r];
+    extra[c0].push_back({nh + r, big(rng)});
+    for (int e = 0; e < 2; ++e) {
+      const index_t c = std::clamp<index_t>(c0 + near(rng), 0, nh - 1);
+      extra[c].push_back({nh + r, val(rng)});  // duplicates are summed by canonicalize
+    }
+  }
+  SparseMatrix a;
+  a.n_rows = a.n_cols = nt;
+  a.storage = Storage::lower;
+  a.offsets.assign(1, 0);
+  for (index_t j = 0; j < nt; ++j) {
+    if (j < nh) {
+      for (index_t p = h.offsets[j]; p < h.offsets[j + 1]; ++p) {
+        a.indices.push_back(h.indices[p]);
+        a.values.push_back(h.values[p]);
+      }
+      for (auto [i, v] : extra[j]) {
+        a.indices.push_back(i);
+        a.values.push_back(v);
+      }
+    }
+    a.offsets.push_back(static_cast<index_t>(a.indices.size()));
+  }
+  return canonicalize(a);
+}
+
+// max |x − y| / max |y| over two factor arrays of one length.
+double max_relative_gap(const std::vector<double>& x, const std::vector<double>& y) {
+  double num = 0, den = 0;
+  for (std::size_t i = 0; i < y.size(); ++i) {
+    num = std::max(num, std::abs(x[i] - y[i]));
+    den = std::max(den, std::abs(y[i]));
+  }
+  return den > 0 ? num / den : num;
+}
+
+// The GPU LDLᵀ factor equals the CPU's on the same analysis: same pivot sequence (pivot
+// sizes and permuted rows exactly), D and L to rounding, same statistics. The large-front
+// path chooses its pivots among the whole fully summed block, as the CPU does, so this
+// holds for fronts of every size on random values (no ties). Covers orders 1, 2, 3, 5,
+// random KKT matrices (zero diagonals: 2×2 pivots), matrices whose fronts exceed the
+// small-front limit of 256 rows, and a singular matrix with zero columns (static pivots).
+TEST_F(CudaBackend, LdltFactorMatchesCpu) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  struct Problem {
+    std::string name;
+    SparseMatrix a;
+    index_t zero_columns = 0;
+  };
+  std::vector<Problem> problems;
+  for (index_t n : {1, 2, 3, 5, 17, 733, 3000})
+    problems.push_back(
+        {"random " + std::to_string(n),
+         test::random_sparse(n, n > 1000 ? 6 : 3, test::RandomKind::symmetric_indefinite, rng)});
+  for (index_t n : {2, 3, 5, 60, 733, 3000})
+    problems.push_back({"kkt " + std::to_string(n), test::random_kkt(n, rng)});
+  {
+    Problem z{"zero columns",
+              test::random_sparse(300, 3, test::RandomKind::symmetric_indefinite, rng), 5};
+    // columns (and so rows) 10, 70, ... 250 of the lower triangle zeroed: exactly zero pivots
+    for (index_t j = 0; j < z.a.n_cols; ++j)
+      for (index_t p = z.a.offsets[j]; p < z.a.offsets[j + 1]; ++p)
+        if ((j % 60 == 10 && j < 300) || (z.a.indices[p] % 60 == 10)) z.a.values[p] = 0.0;
+    problems.push_back(std::move(z));
+  }
+  bool saw_large = false;
+  index_t two_by_two = 0;
+  for (const Problem& pr : problems) {
+    SCOPED_TRACE(pr.name);
+    Options o;
+    o.type = MatrixType::symmetric_indefinite;
+    o.matching_and_scaling = pr.zero_columns == 0;  // the matching rejects a singular matrix
+    Analysis an = analyze_matrix(pr.a, o);
+    SparseMatrix c = canonical_values(an, pr.a);
+    for (index_t f = 0; f < an.tree.n_fronts(); ++f) saw_large |= an.tree.n_rows(f) > 256;
+    numeric::NumericFactor cf, gf;
+    std::vector<double> arena;
+    auto cpu = numeric::make_cpu_executor(2);
+    auto gpu = numeric::make_cuda_executor(o);
+    const double sp = 1e-8;
+    numeric::factorize(an, c.values, MatrixType::symmetric_indefinite, sp, *cpu, cf, arena);
+    numeric::factorize(an, c.values, MatrixType::symmetric_indefinite, sp, *gpu, gf, arena);
+    ASSERT_EQ(cf.pivot_size, gf.pivot_size);
+    ASSERT_EQ(cf.rows, gf.rows);
+    EXPECT_LT(max_relative_gap(gf.panels, cf.panels), 1e-10);
+    EXPECT_LT(max_relative_gap(gf.d_diag, cf.d_diag), 1e-10);
+    EXPECT_LT(max_relative_gap(gf.d_off, cf.d_off), 1e-10);
+    numeric::cpu::PivotStats sc, sg;
+    for (const auto& ps : cf.front_stats) sc.merge(ps);
+    for (const auto& ps : gf.front_stats) sg.merge(ps);
+    EXPECT_EQ(sg.perturbed, sc.perturbed);
+    EXPECT_EQ(sg.two_by_two, sc.two_by_two);
+    EXPECT_EQ(sg.positive, sc.positive);
+    EXPECT_EQ(sg.negative, sc.negative);
+    EXPECT_EQ(sg.zero, sc.zero);
+    EXPECT_EQ(sg.det_sign, sc.det_sign);
+    EXPECT_NEAR(sg.log_abs_det, sc.log_abs_det, 1e-9 * std::max(1.0, std::abs(sc.log_abs_det)));
+    EXPECT_GE(sg.perturbed, pr.zero_columns);
+    two_by_two += sg.two_by_two;
+  }
+  EXPECT_TRUE(saw_large) << "no front above 256 rows: the large-front path went untested";
+  EXPECT_GT(two_by_two, 0) << "no 2×2 pivot: the 2×2 paths went untested";
+}
+
+// Solutions through the public API, GPU against CPU: backward error, solution, inertia,
+// determinant (random indefinite and KKT matrices of awkward orders).
+TEST_F(CudaBackend, LdltSolutionsMatchCpu) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  for (bool kkt : {false, true})
+    for (index_t n : {1, 2, 3, 5, 733, 3000}) {
+      if (kkt && n == 1) continue;  // a 1×1 KKT matrix is a zero
+      SCOPED_TRACE((kkt ? "kkt n=" : "random n=") + std::to_string(n));
+      SparseMatrix a = kkt ? test::random_kkt(n, rng, 2.0)
+                           : test::random_sparse(n, n > 1000 ? 6 : 3,
+                                                 test::RandomKind::symmetric_indefinite, rng);
+      std::vector<double> b(n);
+      std::uniform_real_distribution<double> u(-1, 1);
+      for (double& v : b) v = u(rng);
+      Options o;
+      o.type = MatrixType::symmetric_indefinite;
+      Solver cpu(o);
+      o.backend = Backend::cuda;
+      Solver gpu(o);
+      cpu.factorize(a);
+      gpu.factorize(a);
+      const FactorStats &fc = cpu.stats().factor, &fg = gpu.stats().factor;
+      EXPECT_EQ(fg.backend, "cuda");
+      auto xc = cpu.solve(b);
+      auto xg = gpu.solve(b);
+      const double bc = test::backward_error(a, xc.data(), b.data());
+      EXPECT_LE(test::backward_error(a, xg.data(), b.data()), std::max(1e-14, 10 * bc));
+      EXPECT_LT(test::relative_difference(xg, xc), 1e-8);
+      EXPECT_EQ(fg.perturbed_pivots, fc.perturbed_pivots);
+      EXPECT_EQ(fg.two_by_two_pivots, fc.two_by_two_pivots);
+      EXPECT_EQ(fg.inertia_positive, fc.inertia_positive);
+      EXPECT_EQ(fg.inertia_negative, fc.inertia_negative);
+      EXPECT_EQ(fg.inertia_zero, fc.inertia_zero);
+      EXPECT_EQ(fg.determinant_sign, fc.determinant_sign);
+      EXPECT_NEAR(fg.log_abs_determinant, fc.log_abs_determinant,
+                  1e-8 * std::max(1.0, std::abs(fc.log_abs_determinant)));
+      if (kkt) {  // exact inertia of a KKT matrix: (n − n/3, n/3, 0)
+        EXPECT_EQ(fg.inertia_positive, n - n / 3);
+        EXPECT_EQ(fg.inertia_negative, n / 3);
+      }
+    }
+}
+
+// Large fronts (blocked panel path) on structured problems, where equal values make pivot
+// ties that rounding may break differently on the two backends: solutions, backward error
+// and the exactly known inertia are compared, not the factor entries.
+TEST_F(CudaBackend, LdltLargeFronts) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  struct Problem {
+    std::string name;
+    SparseMatrix a;
+    index_t positive, negative;
+  };
+  std::vector<Problem> problems;
+  {
+    ShiftedLaplacian l = shifted_laplacian(20, rng);
+    const index_t n = l.a.n_rows;
+    problems.push_back({"laplacian_3d(20) - sigma I", std::move(l.a), n - l.negative, l.negative});
+  }
+  {
+    const index_t n_con = 200;
+    SparseMatrix a = elasticity_kkt(8, n_con, rng);
+    const index_t n = a.n_rows;
+    problems.push_back({"elasticity_3d(8) KKT", std::move(a), n - n_con, n_con});
+  }
+  for (const Problem& pr : problems) {
+    SCOPED_TRACE(pr.name);
+    const SparseMatrix& a = pr.a;
+    std::vector<double> b(a.n_rows);
+    std::uniform_real_distribution<double> u(-1, 1);
+    for (double& v : b) v = u(rng);
+    Options o;
+    o.type = MatrixType::symmetric_indefinite;
+    Solver cpu(o);
+    o.backend = Backend::cuda;
+    Solver gpu(o);
+    cpu.factorize(a);
+    gpu.factorize(a);
+    ASSERT_GT(gpu.stats().analysis.largest_front_rows, 256);
+    const FactorStats &fc = cpu.stats().factor, &fg = gpu.stats().factor;
+    auto xc = cpu.solve(b);
+    auto xg = gpu.solve(b);
+    const double bc = test::backward_error(a, xc.data(), b.data());
+    SCOPED_TRACE("perturbed cpu " + std::to_string(fc.perturbed_pivots) + " gpu " +
+                 std::to_string(fg.perturbed_pivots) + ", 2x2 cpu " +
+                 std::to_string(fc.two_by_two_pivots) + " gpu " +
+                 std::to_string(fg.two_by_two_pivots));
+    EXPECT_LE(test::backward_error(a, xg.data(), b.data()), std::max(1e-14, 10 * bc));
+    EXPECT_LT(test::relative_difference(xg, xc), 1e-8);
+    EXPECT_EQ(fg.perturbed_pivots, 0);
+    EXPECT_EQ(fg.inertia_positive, pr.positive);
+    EXPECT_EQ(fg.inertia_negative, pr.negative);
+    EXPECT_EQ(fg.inertia_zero, 0);
+    EXPECT_EQ(fc.inertia_negative, pr.negative);  // the reference itself, on the CPU
+    EXPECT_EQ(fg.determinant_sign, fc.determinant_sign);
+    EXPECT_NEAR(fg.log_abs_determinant, fc.log_abs_determinant,
+                1e-8 * std::max(1.0, std::abs(fc.log_abs_determinant)));
+  }
+}
+
+// Backend::automatic with an automatic type picks the GPU for LDLᵀ too: a KKT matrix (zero
+// diagonal: LDLᵀ chosen at analysis) and a shifted Laplacian (positive diagonal: Cholesky is
+// tried first, fails on the GPU, and the GPU refactors it as LDLᵀ).
+TEST_F(CudaBackend, AutomaticRunsLdltOnGpu) {
   auto rng = test::fresh_rng();
-  SparseMatrix a = test::random_sparse(50, 3, test::RandomKind::symmetric_indefinite, rng);
+  const ShiftedLaplacian l = shifted_laplacian(12, rng);
+  const SparseMatrix kkt = test::random_kkt(500, rng);
+  for (auto [a, negative] : {std::pair{&kkt, index_t{500 / 3}}, std::pair{&l.a, l.negative}}) {
+    SCOPED_TRACE("n=" + std::to_string(a->n_rows));
+    Solver s{Options{}};
+    s.factorize(*a);
+    EXPECT_EQ(s.stats().factor.backend, "cuda");
+    EXPECT_EQ(s.matrix_type(), MatrixType::symmetric_indefinite);
+    EXPECT_EQ(s.stats().factor.inertia_negative, negative);
+    std::vector<double> b(a->n_rows, 1.0);
+    auto x = s.solve(b);
+    EXPECT_LE(test::backward_error(*a, x.data(), b.data()), 1e-14);
+  }
+}
+
+// LDLᵀ refactorization on the GPU equals a fresh GPU factorization bitwise.
+TEST_F(CudaBackend, LdltRefactorizationIsDeterministic) {
+  auto rng = test::fresh_rng();
+  SparseMatrix a = shifted_laplacian(14, rng).a;
   Options o;
   o.type = MatrixType::symmetric_indefinite;
   o.backend = Backend::cuda;
-  Solver s(o);
-  EXPECT_THROW(s.factorize(a), NotSupported);
+  Solver s1(o), s2(o);
+  s1.factorize(a);
+  s1.refactorize(a);
+  s2.analyze(a);
+  s2.factorize(a);
+  std::vector<double> b(a.n_rows, 1.0);
+  EXPECT_EQ(s1.solve(b), s2.solve(b));
 }
 
 }  // namespace

@@ -103,8 +103,10 @@ TEST_F(CudaMemory, LuUnderATightBudgetEqualsInCore) {
 // host solves on the same factor, for one and several right-hand sides.
 TEST_F(CudaMemory, DeviceSolveMatchesHostSolve) {
   auto rng = test::fresh_rng();
-  for (auto [kind, type] : {std::pair{test::RandomKind::spd, MatrixType::spd},
-                            std::pair{test::RandomKind::general, MatrixType::general}})
+  for (auto [kind, type] :
+       {std::pair{test::RandomKind::spd, MatrixType::spd},
+        std::pair{test::RandomKind::general, MatrixType::general},
+        std::pair{test::RandomKind::symmetric_indefinite, MatrixType::symmetric_indefinite}})
     for (index_t n : {1, 2, 3, 5, 733, 4000}) {
       SCOPED_TRACE(std::string(to_string(type)) + " n=" + std::to_string(n));
       SparseMatrix a = test::random_sparse(n, n > 1000 ? 8 : 3, kind, rng);
@@ -154,6 +156,49 @@ TEST_F(CudaMemory, DeviceSolveWithLargeFronts) {
   EXPECT_TRUE(gpu.stats().solve.on_device);
   EXPECT_LT(test::relative_difference(x, ones), 1e-8);
   EXPECT_LT(test::backward_error(a, x.data(), b.data()), 1e-14);
+}
+
+// LDLᵀ under a budget that holds two of the largest front but not much more (chunks, and
+// typically contribution blocks in host memory and the solve on the host): same solution
+// and inertia as the CPU. A budget below the largest front would need slab-by-slab LDLᵀ,
+// which is refused with NotSupported.
+TEST_F(CudaMemory, LdltUnderABudget) {
+  auto rng = test::fresh_rng();
+  const SparseMatrix a = test::random_kkt(6000, rng);
+  std::vector<double> b(a.n_rows);
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (double& v : b) v = u(rng);
+  Options o;
+  o.type = MatrixType::symmetric_indefinite;
+  Solver cpu(o);
+  cpu.factorize(a);
+  const auto xc = cpu.solve(b);
+  const double largest = static_cast<double>(cpu.stats().analysis.largest_front_rows);
+  ASSERT_GT(largest, 256);
+  o.backend = Backend::cuda;
+  o.device_memory_limit = static_cast<std::size_t>(16 * largest * largest);  // 2 fronts' worth
+  Solver gpu(o);
+  gpu.factorize(a);
+  const FactorStats& fs = gpu.stats().factor;
+  EXPECT_EQ(fs.tiled_fronts, 0);
+  SCOPED_TRACE(std::string("blocks on host ") + (fs.contribution_blocks_on_host ? "yes" : "no") +
+               ", factor resident " + (fs.factor_resident ? "yes" : "no") + ", batches " +
+               std::to_string(fs.device_batches));
+  const auto xg = gpu.solve(b);
+  EXPECT_LT(test::backward_error(a, xg.data(), b.data()), 1e-14);
+  EXPECT_LT(test::relative_difference(xg, xc), 1e-8);
+  EXPECT_EQ(fs.inertia_positive, cpu.stats().factor.inertia_positive);
+  EXPECT_EQ(fs.inertia_negative, cpu.stats().factor.inertia_negative);
+  EXPECT_EQ(fs.perturbed_pivots, cpu.stats().factor.perturbed_pivots);
+
+  o.device_memory_limit = static_cast<std::size_t>(4 * largest * largest);  // half a front
+  Solver tight(o);
+  try {
+    tight.factorize(a);
+    FAIL() << "expected NotSupported";
+  } catch (const NotSupported& e) {
+    EXPECT_NE(std::string(e.what()).find("LDLᵀ"), std::string::npos) << e.what();
+  }
 }
 
 // A budget too small for even one slab of the largest front is refused with the bytes.

@@ -545,6 +545,50 @@ TEST(DenseFront, LdltKktInertia) {
   }
 }
 
+// ldlt_stats_from_d (used by the CUDA backend, whose kernels return D only) gives the
+// statistics factor_front_ldlt accumulates while factoring, bitwise, on fronts with 2×2,
+// static and zero pivots.
+TEST(DenseFront, LdltStatsFromD) {
+  Seeded s;
+  TRACE_SEED(s);
+  struct Case {
+    Mat f;
+    index_t k;
+    double sp;
+  };
+  std::vector<Case> cases;
+  for (auto [m, k] : std::vector<std::pair<index_t, index_t>>{{1, 1}, {5, 3}, {70, 70}, {300, 200}})
+    cases.push_back({random_front(m, Kind::indefinite, s.rng), k, 0.0});
+  cases.push_back({kkt_front(90, 20, 50, s.rng), 70, 0.0});
+  cases.push_back({kkt_front(300, 150, 100, s.rng), 250, 1e-8});
+  Mat z = random_front(40, Kind::indefinite, s.rng);
+  for (index_t i = 0; i < 40; ++i) z(i, 7) = z(7, i) = z(i, 20) = z(20, i) = 0.0;
+  cases.push_back({z, 30, 1e-8});  // two perturbed pivots
+  cases.push_back({z, 30, 0.0});   // two exactly zero pivots
+  EXPECT_EQ(factor_ldlt(z, 30, 1e-8).st.perturbed, 2);
+  EXPECT_EQ(factor_ldlt(z, 30, 0.0).st.zero, 2);
+  for (const Case& c : cases) {
+    SCOPED_TRACE(testing::Message() << "m=" << c.f.rows << " k=" << c.k << " sp=" << c.sp);
+    const LdltResult r = factor_ldlt(c.f, c.k, c.sp);
+    std::vector<double> dd(c.k), doff(c.k, 0.0);
+    std::vector<int> ps(c.k);
+    for (index_t j = 0; j < c.k; ++j) {
+      dd[j] = r.out(j, j);
+      ps[j] = r.psize[j] == 2 ? (j > 0 && ps[j - 1] == 2 ? 0 : 2) : 1;
+      if (ps[j] == 2) doff[j] = r.out(j + 1, j);
+    }
+    PivotStats st;
+    ldlt_stats_from_d(c.k, dd.data(), doff.data(), ps.data(), st);
+    EXPECT_EQ(st.two_by_two, r.st.two_by_two);
+    EXPECT_EQ(st.positive, r.st.positive);
+    EXPECT_EQ(st.negative, r.st.negative);
+    EXPECT_EQ(st.zero, r.st.zero);
+    EXPECT_EQ(st.det_sign, r.st.det_sign);
+    EXPECT_EQ(st.log_abs_det, r.st.log_abs_det);  // −∞ == −∞ after a zero pivot
+    EXPECT_EQ(st.perturbed, 0);
+  }
+}
+
 // Rows ≥ k never take part in pivoting, even when they hold by far the largest entries.
 TEST(DenseFront, PivotsStayInPivotBlock) {
   Seeded s;

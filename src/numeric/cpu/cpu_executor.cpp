@@ -199,23 +199,12 @@ void CpuExecutor::process_front(const FactorContext& ctx, index_t f, Workspace& 
   if (lu)
     for (index_t j = k; j < m; ++j)  // U12: rows 0..k-1 of columns k..m-1
       std::memcpy(panel + m * k + (j - k) * k, F + j * m, sizeof(double) * k);
-  index_t* frows = fac.rows.data() + t.row_offsets[f];
-  for (index_t i = 0; i < k; ++i) frows[i] = rows[w.local_perm[i]];
-  for (index_t i = k; i < m; ++i) frows[i] = rows[i];
   if (ctx.type == MatrixType::symmetric_indefinite) {
-    const index_t p0 = t.first_pivot[f];
-    for (index_t i = 0; i < k; ++i) {
-      fac.d_diag[p0 + i] = panel[i * m + i];
-      panel[i * m + i] = 1.0;
-      fac.pivot_size[p0 + i] = w.pivot_size[i] == 2 && (i == 0 || fac.pivot_size[p0 + i - 1] != 2)
-                                   ? 2
-                                   : (w.pivot_size[i] == 2 ? 0 : 1);
-      fac.d_off[p0 + i] = 0.0;
-      if (fac.pivot_size[p0 + i] == 2) {
-        fac.d_off[p0 + i] = panel[i * m + i + 1];
-        panel[i * m + i + 1] = 0.0;
-      }
-    }
+    store_ldlt_front(an, f, w.local_perm.data(), w.pivot_size.data(), fac);
+  } else {
+    index_t* frows = fac.rows.data() + t.row_offsets[f];
+    for (index_t i = 0; i < k; ++i) frows[i] = rows[w.local_perm[i]];
+    for (index_t i = k; i < m; ++i) frows[i] = rows[i];
   }
   const index_t mc = m - k;
   if (mc > 0 && t.parent[f] >= 0) {

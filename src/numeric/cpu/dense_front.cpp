@@ -686,6 +686,18 @@ void factor_front_ldlt(double* f, index_t m, index_t k, index_t ld, double stati
   for (const auto& [p, q] : piv.swaps) std::swap(local_perm[p], local_perm[q]);
 }
 
+void ldlt_stats_from_d(index_t k, const double* d_diag, const double* d_off, const int* pivot_size,
+                       PivotStats& stats) {
+  for (index_t j = 0; j < k; ++j) {
+    if (pivot_size[j] == 2 && j + 1 < k) {
+      count_2x2(pivot_2x2(d_diag[j], d_off[j], d_diag[j + 1]), stats);
+      ++j;
+    } else {
+      count_pivot(d_diag[j], stats, true);
+    }
+  }
+}
+
 void factor_front_lu(double* f, index_t m, index_t k, index_t ld, double static_pivot,
                      index_t* local_perm, PivotStats& stats) {
   check_front(m, k, ld);

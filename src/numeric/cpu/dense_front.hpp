@@ -54,6 +54,15 @@ index_t factor_front_llt(double* f, index_t m, index_t k, index_t ld, PivotStats
 void factor_front_ldlt(double* f, index_t m, index_t k, index_t ld, double static_pivot,
                        index_t* local_perm, int* pivot_size, PivotStats& stats);
 
+/// The LDLᵀ statistics of k pivots from D alone, in the factor's layout (by pivot
+/// position: d_diag, d_off and pivot_size 1, or 2 then 0 for a 2×2 pivot): inertia,
+/// two_by_two, log_abs_det, det_sign, computed exactly as factor_front_ldlt computes them
+/// while it factors (so the two agree bitwise). `perturbed` is left alone: D does not show
+/// which pivots were replaced. Used by executors whose kernels return D but no statistics
+/// (the CUDA backend).
+void ldlt_stats_from_d(index_t k, const double* d_diag, const double* d_off, const int* pivot_size,
+                       PivotStats& stats);
+
 /// LU partial factorization with partial pivoting restricted to the fully summed rows and
 /// static pivoting. On return local_perm[0..k) gives the row permutation of the pivot
 /// block: row i now holds original local row local_perm[i] (rows k..m are not moved).

@@ -6,14 +6,18 @@
 //   1. one launch assembles every front of the chunk in the pool (zero, scatter original
 //      entries, extend-add children's contribution blocks);
 //   2. one launch factors all small fronts (one thread block each); large fronts go to
-//      cuSOLVER POTRF + cuBLAS TRSM/SYRK (LLᵀ) or a blocked LU with our panel kernel and
-//      cuBLAS TRSM/GEMM, both with pivoting restricted to the fully summed rows and the
-//      CPU backend's static pivoting;
+//      cuSOLVER POTRF + cuBLAS TRSM/SYRK (LLᵀ), a blocked LU with our panel kernel and
+//      cuBLAS TRSM/GEMM, or a blocked Bunch–Kaufman LDLᵀ with our panel kernel and cuBLAS
+//      SYRKX (kernels_ldlt.cuh), all with pivoting restricted to the fully summed rows
+//      and the CPU backend's static pivoting;
 //   3. one launch stores the contribution blocks where the plan put them;
 //   4. one launch packs the chunk's factor panels (contiguous in the factor layout) into
 //      the device factor, which is copied to the host factor in one transfer.
 // A front whose working set alone is over the budget is factored slab by slab from
-// pinned host memory (tiled_front.cu).
+// pinned host memory (tiled_front.cu; LLᵀ and LU only).
+// LDLᵀ fronts come back in the CPU kernel's layout; D, pivot sizes, rows and statistics are
+// then filled by the same host code as the CPU executor's (store_ldlt_front), and the
+// resident device factor gets the same unit diagonal (launch_ldlt_unit_panels).
 //
 // Device memory (plan_device_memory): the budget is Options::device_memory_limit, or 90%
 // of the free device memory when it is 0. It holds, in this order of priority: the pool
@@ -88,8 +92,7 @@ CudaExecutor::~CudaExecutor() {
 void CudaExecutor::begin(const numeric::FactorContext& ctx) {
   STRATA_CUDA(cudaSetDevice(device_));
   outbox_.clear();
-  if (ctx.type == MatrixType::symmetric_indefinite)
-    throw NotSupported("LDLᵀ (symmetric_indefinite) is not implemented on the CUDA backend yet");
+  whole_ = false;  // until begin_part says which part: no resident factor from no part
   const Analysis& an = *ctx.analysis;
   bytes_h2d_ = bytes_d2h_ = 0;
   chunks_ = tiled_count_ = 0;
@@ -459,6 +462,7 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
   const auto& s = *ctx.part->schedule;
   const DeviceTree& tree = cur_->tree;
   const bool lu = ctx.type == MatrixType::general;
+  const bool ldlt = ctx.type == MatrixType::symmetric_indefinite;
   const std::int64_t count = end - begin;
   ++chunks_;
   launch_assemble(tree, begin, count, values_.data(), pool_.data(), !lu, stream_);
@@ -483,9 +487,15 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
   for (std::int64_t p : big) big_perm += t.n_pivots(s.fronts[p]);
   perm_.resize(perm_off.back() + big_perm + 1);
   potrf_info_.resize(big.size() + 1);
-  launch_factor_small(tree, small_pos_.data(), static_cast<std::int64_t>(ns), pool_.data(), lu,
-                      ctx.static_pivot, info_.data(), perturbed_.data(), perm_.data(),
+  pivot_size_.resize(perm_off.back() + big_perm + 1);
+  if (ldlt)
+    launch_ldlt_small(tree, small_pos_.data(), static_cast<std::int64_t>(ns), pool_.data(),
+                      ctx.static_pivot, perturbed_.data(), perm_.data(), pivot_size_.data(),
                       perm_offset_.data(), stream_);
+  else
+    launch_factor_small(tree, small_pos_.data(), static_cast<std::int64_t>(ns), pool_.data(), lu,
+                        ctx.static_pivot, info_.data(), perturbed_.data(), perm_.data(),
+                        perm_offset_.data(), stream_);
 
   // large fronts: library calls, one front after another on the stream
   const double one = 1.0, minus_one = -1.0;
@@ -496,7 +506,10 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
     const int m = static_cast<int>(t.n_rows(f)), k = static_cast<int>(t.n_pivots(f));
     double* F = pool_.data() + cur_->pos_offset_host[p];
     big_perm_at.push_back(perm_at);
-    if (!lu) {
+    if (ldlt) {
+      ldlt_large_.factor(blas_, stream_, F, m, k, ctx.static_pivot, perm_.data() + perm_at,
+                         pivot_size_.data() + perm_at, perturbed_.data() + ns + i);
+    } else if (!lu) {
       grow_potrf_work(solver_, potrf_work_, F, k, m);
       STRATA_CUSOLVER(cusolverDnDpotrf(solver_, CUBLAS_FILL_MODE_LOWER, k, F, m, potrf_work_.data(),
                                        static_cast<int>(potrf_work_.size()),
@@ -552,8 +565,8 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
   copy_panels_back(ctx, begin, end);
   const std::size_t nall = ns + big.size();
   std::vector<std::int64_t> info(nall), perturbed(nall), perm(perm_at);
-  std::vector<int> pinfo(big.size());
-  if (ns)
+  std::vector<int> pinfo(big.size()), psize(ldlt ? perm_at : 0);
+  if (ns && !ldlt)
     STRATA_CUDA(
         cudaMemcpyAsync(info.data(), info_.data(), 8 * ns, cudaMemcpyDeviceToHost, stream_));
   if (nall)
@@ -562,11 +575,36 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
   if (perm_at)
     STRATA_CUDA(
         cudaMemcpyAsync(perm.data(), perm_.data(), 8 * perm_at, cudaMemcpyDeviceToHost, stream_));
-  if (!big.empty() && !lu)
+  if (!big.empty() && !lu && !ldlt)
     STRATA_CUDA(cudaMemcpyAsync(pinfo.data(), potrf_info_.data(), sizeof(int) * big.size(),
+                                cudaMemcpyDeviceToHost, stream_));
+  if (ldlt && perm_at)
+    STRATA_CUDA(cudaMemcpyAsync(psize.data(), pivot_size_.data(), sizeof(int) * perm_at,
                                 cudaMemcpyDeviceToHost, stream_));
   STRATA_CUDA(cudaStreamSynchronize(stream_));
   (void)total;
+  if (ldlt) {  // D out of the panels, pivot sizes, rows: the CPU executor's code; statistics
+    std::vector<std::int64_t> psize_at(count);
+    for (std::size_t i = 0; i < nall; ++i) {
+      const index_t p = i < ns ? small[i] : big[i - ns], f = s.fronts[p];
+      const std::int64_t at = i < ns ? perm_off[i] : big_perm_at[i - ns];
+      psize_at[p - begin] = at;
+      numeric::store_ldlt_front(an, f, perm.data() + at, psize.data() + at, *ctx.factor);
+      numeric::cpu::PivotStats& ps = ctx.factor->front_stats[f];
+      ps = numeric::cpu::PivotStats{};
+      const index_t p0 = t.first_pivot[f];
+      numeric::cpu::ldlt_stats_from_d(t.n_pivots(f), ctx.factor->d_diag.data() + p0,
+                                      ctx.factor->d_off.data() + p0,
+                                      ctx.factor->pivot_size.data() + p0, ps);
+      ps.perturbed = perturbed[i];
+    }
+    if (keep_resident()) {  // the device copy of the panels still holds D
+      upload(psize_at_, psize_at);
+      launch_ldlt_unit_panels(tree, begin, count, stage_offset_.data(), pivot_size_.data(),
+                              psize_at_.data(), panels_.data(), stream_);
+    }
+    return;
+  }
   for (std::size_t i = 0; i < ns; ++i)
     finish_front(ctx, s.fronts[small[i]], lu ? -1 : info[i], perturbed[i],
                  perm.data() + perm_off[i]);

@@ -12,6 +12,7 @@
 #include "numeric/cuda/cuda_check.hpp"
 #include "numeric/cuda/device_buffer.hpp"
 #include "numeric/cuda/kernels.cuh"
+#include "numeric/cuda/kernels_ldlt.cuh"
 #include "numeric/factor.hpp"
 
 namespace strata::cuda {
@@ -103,6 +104,9 @@ class CudaExecutor final : public numeric::Executor {
   DeviceBuffer<int> potrf_info_;
   DeviceBuffer<std::int64_t> small_pos_, info_, perturbed_, perm_, perm_offset_, stage_offset_;
   std::vector<std::int64_t> iota_;
+  DeviceBuffer<int> pivot_size_;         // LDLᵀ: local pivot sizes, laid out as perm_
+  DeviceBuffer<std::int64_t> psize_at_;  // LDLᵀ: per chunk position, its offset in pivot_size_
+  LdltLarge ldlt_large_;
   // resident factor for the solve
   const numeric::NumericFactor* resident_for_ = nullptr;
   std::uint64_t resident_analysis_ = 0;

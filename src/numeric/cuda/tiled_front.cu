@@ -58,6 +58,11 @@ void CudaExecutor::factor_tiled(const numeric::FactorContext& ctx, index_t pos) 
   const index_t f = ctx.part->schedule->fronts[pos];
   const bool lu = ctx.type == MatrixType::general;
   const std::int64_t m = t.n_rows(f), k = t.n_pivots(f);
+  if (ctx.type == MatrixType::symmetric_indefinite)
+    throw NotSupported("a front of " + std::to_string(m) +
+                       " rows is over the device memory budget, and slab-by-slab LDLᵀ is not "
+                       "implemented on the CUDA backend: raise device_memory_limit or use the "
+                       "CPU backend");
   ++tiled_count_;
   ++chunks_;
   host_front_.resize(static_cast<std::size_t>(m) * m);
