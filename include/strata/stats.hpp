@@ -89,7 +89,8 @@ struct FactorStats {
   double log_abs_determinant = 0;  ///< log|det A| (spd, LDLᵀ and LU)
   int determinant_sign = 0;        ///< sign of det A: -1, 0 or 1
   double matrix_norm = 0;          ///< ‖A‖₁ used for static pivoting (after scaling)
-  // --- GPU backend (zero on the CPU) ---
+  // --- GPU backend (zero on the CPU; with several GPUs: bytes, batches and tiled fronts
+  // summed over them, device_seconds and device_budget the largest) ---
   double device_seconds = 0;        ///< time of the factorization's work on the GPU (events)
   std::size_t bytes_to_device = 0;  ///< host→device bytes moved by the factorization
   std::size_t bytes_to_host = 0;    ///< device→host bytes (factor panels, spilled blocks)

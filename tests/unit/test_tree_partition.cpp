@@ -219,6 +219,16 @@ TEST(TreePartition, OneWorkerAndBadArguments) {
   schedule::PartitionOptions po;
   po.workers = 0;
   EXPECT_THROW(schedule::partition_tree(an.tree, po), InvalidInput);
+  Options neg;
+  neg.num_gpus = -1;
+  Solver s(neg);
+  EXPECT_THROW(s.analyze(a), InvalidInput);
+  // the CPU backend ignores num_gpus: one worker, no split
+  Options cpu;
+  cpu.num_gpus = 3;
+  Solver c(cpu);
+  c.analyze(a);
+  EXPECT_EQ(c.stats().analysis.workers, 1);
 }
 
 // The subset schedule of every front is the whole-tree schedule.
