@@ -181,6 +181,7 @@ int main(int argc, char** argv) {
   fmt::print("{:<14} {:>8} {:>11} {:>9} {:>9} {:>9} {:>9} {:>9} {:>8} {:>8}\n", "problem", "n",
              "nnz(L)", "strata f", "cudss f", "strata rf", "cudss rf", "cudss(p)", "rf ratio",
              "f ratio");
+  std::string partial;
   for (const std::string& name : problems) {
     bench::Problem p = bench::load_problem(name);
     Options o;
@@ -242,8 +243,12 @@ int main(int argc, char** argv) {
     if (!same.ok) fmt::print("  cuDSS with strata's permutation failed: {}\n", same.error);
     std::fflush(stdout);
     out["rows"].push_back(row);
-    bench::write_result(out, "cudss-partial", results_dir);
+    // keep what is measured so far, in case the run is cut off (one partial file only)
+    const std::string now = bench::write_result(out, "cudss-partial", results_dir);
+    if (!partial.empty() && partial != now) std::remove(partial.c_str());
+    partial = now;
   }
   fmt::print("results: {}\n", bench::write_result(out, "cudss", results_dir));
+  if (!partial.empty()) std::remove(partial.c_str());
   return 0;
 }

@@ -149,6 +149,7 @@ int main(int argc, char** argv) {
   std::fflush(stdout);
 
   out["solvability"] = json::array();
+  std::string partial;
   fmt::print("{:<14} {:>6} {:>10} {:>9} {:>9} {:>9} {:>6} {:>7} {:>9} {:>8}\n", "problem", "ratio",
              "budget MB", "factor s", "floor s", "slowdown", "tiled", "spilled", "solve s", "berr");
   for (const std::string& name : problems) {
@@ -195,7 +196,9 @@ int main(int argc, char** argv) {
                                   {"factor_bytes", factor_bytes},
                                   {"type", to_string(o.type)},
                                   {"runs", rows}});
-    bench::write_result(out, "gpu-memory-partial", results_dir);
+    const std::string now = bench::write_result(out, "gpu-memory-partial", results_dir);
+    if (!partial.empty() && partial != now) std::remove(partial.c_str());
+    partial = now;
   }
 
   out["block_size"] = json::array();
@@ -220,5 +223,6 @@ int main(int argc, char** argv) {
     out["block_size"].push_back({{"problem", name}, {"n", p.a.n_rows}, {"runs", rows}});
   }
   fmt::print("results: {}\n", bench::write_result(out, "gpu-memory", results_dir));
+  if (!partial.empty()) std::remove(partial.c_str());
   return 0;
 }
