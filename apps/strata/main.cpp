@@ -1,10 +1,12 @@
 // strata — the command line.
 //
 //   strata analyze FILE [--ordering nd|metis|amd|natural] [--max-block-size N]
-//                       [--device-memory-limit BYTES] [--json]
+//                       [--device-memory-limit BYTES] [--json] [multi-GPU options]
 //   strata solve A.mtx [--rhs b.mtx] [--type spd|symmetric_indefinite|general|auto]
 //                      [--ordering ...] [--max-block-size N] [--out x.mtx] [--json]
 //                      [--device cpu|gpu|auto] [--device-memory-limit BYTES]
+//   multi-GPU options (analyze, solve): [--num-gpus N] [--subtrees-per-gpu S]
+//                      [--balance-by-work on|off] [--work-stealing on|off]
 //   strata simulate [MODEL.json] [--generate KIND:SIZE] [--t-end T] [--step h] [--order k]
 //                   [--device cpu|gpu|auto] [--device-memory-limit BYTES] [--output DIR]
 //                   [--vtk] [--dump-matrix DIR]
@@ -60,6 +62,10 @@ struct CommonArgs {
   int threads = 0;
   bool json = false;
   bool reproducible = false;
+  int num_gpus = Options{}.num_gpus;
+  int subtrees_per_gpu = Options{}.subtrees_per_gpu;
+  std::string balance_by_work = Options{}.balance_by_work ? "on" : "off";
+  std::string work_stealing = Options{}.work_stealing ? "on" : "off";
 };
 
 Backend backend_of(const std::string& device) {
@@ -81,6 +87,15 @@ void add_common(CLI::App* cmd, CommonArgs& a) {
   cmd->add_flag("--json", a.json, "print the report as JSON");
   cmd->add_flag("--reproducible", a.reproducible,
                 "bitwise the same result for every --threads (large fronts on one BLAS thread)");
+  cmd->add_option("--num-gpus", a.num_gpus, "GPUs for the CUDA backend (0: all visible)")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--subtrees-per-gpu", a.subtrees_per_gpu, "subtrees per GPU in the tree split")
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--balance-by-work", a.balance_by_work,
+                  "balance the top bisections by work with several GPUs")
+      ->check(CLI::IsMember({"on", "off"}));
+  cmd->add_option("--work-stealing", a.work_stealing, "idle GPUs take other GPUs' subtrees")
+      ->check(CLI::IsMember({"on", "off"}));
 }
 
 Options options_from(const CommonArgs& a) {
@@ -91,6 +106,10 @@ Options options_from(const CommonArgs& a) {
   o.num_threads = a.threads;
   o.reproducible = a.reproducible;
   o.backend = backend_of(a.device);
+  o.num_gpus = a.num_gpus;
+  o.subtrees_per_gpu = a.subtrees_per_gpu;
+  o.balance_by_work = a.balance_by_work == "on";
+  o.work_stealing = a.work_stealing == "on";
   return o;
 }
 
@@ -117,8 +136,14 @@ json analysis_json(const AnalysisStats& s) {
           {"pairs", s.pairs},
           {"odd_cycles", s.odd_cycles},
           {"ordering", to_string(s.ordering)},
+          {"workers", s.workers},
+          {"subtrees", s.subtrees},
+          {"subtree_balance", s.subtree_balance},
+          {"top_flops_fraction", s.top_flops_fraction},
+          {"nd_rebisections", s.nd_rebisections},
           {"seconds",
            {{"ordering", s.ordering_seconds},
+            {"nd_balance", s.nd_balance_seconds},
             {"symbolic", s.symbolic_seconds},
             {"plan", s.plan_seconds},
             {"total", s.total_seconds}}}};
@@ -158,6 +183,12 @@ void print_analysis(const AnalysisStats& s, double read_seconds) {
       s.batches.size(), s.tree_height,
       s.memory_budget ? fmt::format("{:.3f} MB", s.memory_budget / 1e6) : "unlimited", maxb / 1e6,
       tiled);
+  if (s.workers > 1)
+    fmt::print(
+        "tree split            {} workers: {} subtrees, balance {:.3f} (makespan / mean), "
+        "{:.1f}% of the flops in the top part; {} bisections rebalanced by work ({:.3f} s)\n",
+        s.workers, s.subtrees, s.subtree_balance, 100 * s.top_flops_fraction, s.nd_rebisections,
+        s.nd_balance_seconds);
   fmt::print(
       "time [s]              read {:.3f}  ordering {:.3f}  symbolic {:.3f}  plan {:.3f}  "
       "analysis total {:.3f}\n",
@@ -252,6 +283,17 @@ int run_solve(const SolveArgs& a) {
                    {"device_budget", f.device_budget},
                    {"contribution_blocks_on_host", f.contribution_blocks_on_host},
                    {"factor_resident", f.factor_resident}};
+    json devices = json::array();
+    for (const DeviceStats& d : f.devices)
+      devices.push_back({{"worker", d.worker},
+                         {"device", d.device},
+                         {"busy_seconds", d.busy_seconds},
+                         {"idle_seconds", d.idle_seconds},
+                         {"subtrees_run", d.subtrees_run},
+                         {"subtrees_stolen", d.subtrees_stolen},
+                         {"bytes_transferred", d.bytes_transferred},
+                         {"flops", d.flops}});
+    j["factor"]["devices"] = devices;
     j["solve"] = {{"seconds", st.solve.seconds},
                   {"refinement_steps", st.solve.refinement_steps},
                   {"gmres_iterations", st.solve.gmres_iterations},
@@ -273,6 +315,12 @@ int run_solve(const SolveArgs& a) {
           f.bytes_to_device * 1e-6, f.bytes_to_host * 1e-6, f.device_budget * 1e-6,
           f.contribution_blocks_on_host ? ", contribution blocks spilled to host" : "",
           f.factor_resident ? ", factor resident (solve on the GPU)" : "");
+    for (const DeviceStats& d : f.devices)
+      fmt::print(
+          "  worker {} ({:<7})   busy {:.3f} s, idle {:.3f} s, {} subtrees ({} stolen), "
+          "{:.3f} MB transferred, {:.3g} flops\n",
+          d.worker, d.device, d.busy_seconds, d.idle_seconds, d.subtrees_run, d.subtrees_stolen,
+          d.bytes_transferred / 1e6, d.flops);
     fmt::print("pivots                {} perturbed, {} 2x2; inertia (+{}, -{}, 0:{})\n",
                f.perturbed_pivots, f.two_by_two_pivots, f.inertia_positive, f.inertia_negative,
                f.inertia_zero);

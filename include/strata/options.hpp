@@ -90,6 +90,27 @@ struct Options {
   /// different thread counts differ at the level of the unit roundoff. Default off.
   /// (docs/reliability.md, "Determinism".)
   bool reproducible = false;
+
+  // --- several GPUs (docs/multigpu.md) ---
+  /// GPUs the CUDA backend factors on; 0 means every visible GPU (default 0). With more
+  /// than one, the assembly tree is split into subtrees that the GPUs factor concurrently,
+  /// then the top of the tree is factored on the first GPU. Asking for more GPUs than are
+  /// visible is an InvalidInput error at analyze. Ignored by the CPU backend.
+  int num_gpus = 0;
+  /// Subtrees per GPU in that split (the paper's "additional sub-trees"): more gives the
+  /// largest-first assignment and work stealing finer pieces to balance with, at the cost
+  /// of a larger top part (default 4, at least 1).
+  int subtrees_per_gpu = 4;
+  /// With several GPUs and nested dissection: balance the top ⌈log₂(GPUs × subtrees)⌉
+  /// bisections by estimated factorization work instead of vertex count (the paper's
+  /// "balanced graph bisection"). Default off: measured on 3D Laplacians and elasticity
+  /// problems it balanced the bisections but not the subtrees the GPUs get (the split of
+  /// the assembly tree into several subtrees per GPU already does that) and cost 2-15× the
+  /// ordering time (docs/multigpu.md).
+  bool balance_by_work = false;
+  /// With several GPUs: a GPU whose queue of subtrees is empty takes an unstarted subtree
+  /// from the most loaded queue (default on).
+  bool work_stealing = true;
   /// For `general`: permute large entries onto the diagonal by a maximum weighted
   /// matching and scale rows and columns (MC64-style, Duff & Koster 2001). For
   /// `symmetric_indefinite`: the symmetric scaling D·A·D from the same matching and the

@@ -24,7 +24,8 @@ namespace strata {
 
 namespace detail {
 struct SolverState;
-}
+struct SolverAccess;  // internal hooks for tests and benchmarks (src/core/solver_internal.hpp)
+}  // namespace detail
 
 /// A sparse direct solver for one matrix pattern. Not thread-safe: one Solver per thread.
 class Solver {
@@ -77,6 +78,7 @@ class Solver {
   const std::vector<index_t>& permutation() const;
 
  private:
+  friend struct detail::SolverAccess;
   std::unique_ptr<detail::SolverState> state_;
 };
 

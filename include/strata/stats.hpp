@@ -46,10 +46,33 @@ struct AnalysisStats {
   index_t pairs = 0;
   index_t odd_cycles = 0;
   OrderingMethod ordering = OrderingMethod::nested_dissection;
+  /// Several workers (GPUs): the split of the tree (docs/multigpu.md). workers is 1 and
+  /// the rest 0 when the analysis was made for one.
+  index_t workers = 1;
+  index_t subtrees = 0;           ///< disjoint subtrees the workers share
+  double subtree_balance = 0;     ///< LPT makespan / mean load over the subtrees (≥ 1)
+  double top_flops_fraction = 0;  ///< share of factor_flops in the top part (one worker)
+  /// Nested dissection balanced by work (Options::balance_by_work): top bisections redone
+  /// with weighted vertices, and the time spent estimating and redoing them (included in
+  /// ordering_seconds).
+  index_t nd_rebisections = 0;
+  double nd_balance_seconds = 0;
   double ordering_seconds = 0;
   double symbolic_seconds = 0;
   double plan_seconds = 0;
   double total_seconds = 0;
+};
+
+/// One worker (a GPU, or a host executor) of a multi-worker factorization.
+struct DeviceStats {
+  int worker = 0;
+  std::string device;                 ///< "cuda:0", "cuda:1", ... or "cpu"
+  double busy_seconds = 0;            ///< factoring subtrees and the top part, transfers
+  double idle_seconds = 0;            ///< the factorization's wall time minus busy
+  index_t subtrees_run = 0;           ///< subtrees this worker factored
+  index_t subtrees_stolen = 0;        ///< of those, taken from another worker's queue
+  std::size_t bytes_transferred = 0;  ///< contribution blocks exported and imported
+  double flops = 0;                   ///< Σ front flops (Cholesky count) it factored
 };
 
 /// Results of the last factorize/refactorize.
@@ -66,7 +89,8 @@ struct FactorStats {
   double log_abs_determinant = 0;  ///< log|det A| (spd, LDLᵀ and LU)
   int determinant_sign = 0;        ///< sign of det A: -1, 0 or 1
   double matrix_norm = 0;          ///< ‖A‖₁ used for static pivoting (after scaling)
-  // --- GPU backend (zero on the CPU) ---
+  // --- GPU backend (zero on the CPU; with several GPUs: bytes, batches and tiled fronts
+  // summed over them, device_seconds and device_budget the largest) ---
   double device_seconds = 0;        ///< time of the factorization's work on the GPU (events)
   std::size_t bytes_to_device = 0;  ///< host→device bytes moved by the factorization
   std::size_t bytes_to_host = 0;    ///< device→host bytes (factor panels, spilled blocks)
@@ -76,6 +100,9 @@ struct FactorStats {
   std::size_t device_budget = 0;    ///< bytes the numeric working memory was held to
   bool contribution_blocks_on_host = false;  ///< some blocks spilled to pinned host memory
   bool factor_resident = false;              ///< the factor stayed on the device: solve runs there
+  /// Per worker, when several factored the tree (Options::num_gpus > 1); empty when one
+  /// executor factored the whole tree.
+  std::vector<DeviceStats> devices;
 };
 
 /// Results of the last solve.

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Runs on the lent GPU machine over the staged .carry/ (see prepare.sh): the gpu-labelled
 # tests, then the GPU benchmarks asked for (--bench ARGS, --memory-bench ARGS,
-# --cudss-bench ARGS). Logs and
+# --cudss-bench ARGS, --multigpu-bench ARGS). Logs and
 # results go to $OUT.
 set -uo pipefail
 for z in .carry/lib/*.xz; do [ -f "$z" ] && xz -d -f "$z"; done
@@ -27,6 +27,8 @@ while [ $# -gt 0 ]; do
       .carry/bin/bench_gpu --results-dir "$OUT" "${args[@]}" 2>&1 | tee "$OUT/bench_gpu.log" || rc=1 ;;
     --memory-bench) shift; args=(); while [ $# -gt 0 ] && [[ "$1" != --*-bench && "$1" != --bench ]]; do args+=("$1"); shift; done
       .carry/bin/bench_gpu_memory --results-dir "$OUT" "${args[@]}" 2>&1 | tee "$OUT/bench_gpu_memory.log" || rc=1 ;;
+    --multigpu-bench) shift; args=(); while [ $# -gt 0 ] && [[ "$1" != --*-bench && "$1" != --bench ]]; do args+=("$1"); shift; done
+      .carry/bin/bench_multigpu --backend cuda --results-dir "$OUT" "${args[@]}" 2>&1 | tee "$OUT/bench_multigpu.log" || rc=1 ;;
     --cudss-bench) shift; args=(); while [ $# -gt 0 ] && [[ "$1" != --*-bench && "$1" != --bench ]]; do args+=("$1"); shift; done
       .carry/bin/bench_cudss --results-dir "$OUT" "${args[@]}" 2>&1 | tee "$OUT/bench_cudss.log" || rc=1 ;;
     *) echo "run.sh: unknown argument $1"; exit 2 ;;

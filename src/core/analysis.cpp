@@ -18,14 +18,17 @@
 //   5. the level schedule and the memory plan for the device budget;
 //   6. layouts computed once and reused by every (re)factorization: where every input
 //      entry lands in its front (assembly map), where each contribution block lives in
-//      the CB arena, and where each front's factor panel is stored.
+//      the CB arena, and where each front's factor panel is stored;
+//   7. for several workers (GPUs): the split of the tree into subtrees and a top part
+//      (schedule/tree_partition.hpp), each with its own schedule, plan and arena; the
+//      nested dissection of step 3 then also balances its top bisections by work.
 #include "core/analysis.hpp"
 
 #include <algorithm>
 #include <atomic>
-#include <map>
 
 #include "core/timer.hpp"
+#include "numeric/factor.hpp"
 #include "ordering/matching.hpp"
 #include "ordering/pairing.hpp"
 #include "strata/errors.hpp"
@@ -210,68 +213,6 @@ AssemblyMap build_assembly_map(const SparseMatrix& c, const Analysis& an) {
   return map;
 }
 
-// First-fit placement of contribution blocks in one arena, following the level order:
-// a level's blocks are allocated after its children's blocks are released.
-CbLayout plan_cb_layout(const symbolic::AssemblyTree& t, const symbolic::LevelSchedule& s) {
-  CbLayout out;
-  out.cb_offset.assign(t.n_fronts(), 0);
-  std::map<std::size_t, std::size_t> free_list;  // offset -> size
-  std::size_t top = 0;
-  auto release = [&](std::size_t off, std::size_t size) {
-    auto it = free_list.emplace(off, size).first;
-    auto next = std::next(it);
-    if (next != free_list.end() && it->first + it->second == next->first) {
-      it->second += next->second;
-      free_list.erase(next);
-    }
-    if (it != free_list.begin()) {
-      auto prev = std::prev(it);
-      if (prev->first + prev->second == it->first) {
-        prev->second += it->second;
-        free_list.erase(it);
-        it = prev;
-      }
-    }
-    if (it->first + it->second == top) {  // give the tail back
-      top = it->first;
-      free_list.erase(it);
-    }
-  };
-  auto allocate = [&](std::size_t size) -> std::size_t {
-    for (auto it = free_list.begin(); it != free_list.end(); ++it)
-      if (it->second >= size) {
-        const std::size_t off = it->first;
-        const std::size_t rest = it->second - size;
-        free_list.erase(it);
-        if (rest) free_list.emplace(off + size, rest);
-        return off;
-      }
-    const std::size_t off = top;
-    top += size;
-    out.arena_size = std::max(out.arena_size, top);
-    return off;
-  };
-  for (index_t l = 0; l < s.n_levels(); ++l) {
-    // children of this level's fronts are consumed by this level: the CB written by a
-    // front may not share memory with a CB read by another front of the same level, so
-    // all allocations of the level happen before its releases.
-    for (index_t p = s.level_offsets[l]; p < s.level_offsets[l + 1]; ++p) {
-      const index_t f = s.fronts[p];
-      const std::size_t cb = static_cast<std::size_t>(t.cb_size(f));
-      if (cb > 0 && t.parent[f] >= 0) out.cb_offset[f] = allocate(cb * cb);
-    }
-    for (index_t p = s.level_offsets[l]; p < s.level_offsets[l + 1]; ++p) {
-      const index_t f = s.fronts[p];
-      for (index_t k = t.child_offsets[f]; k < t.child_offsets[f + 1]; ++k) {
-        const index_t c = t.children[k];
-        const std::size_t cb = static_cast<std::size_t>(t.cb_size(c));
-        if (cb > 0) release(out.cb_offset[c], cb * cb);
-      }
-    }
-  }
-  return out;
-}
-
 // Panels are laid out in schedule order, so that the panels of one batch are contiguous
 // and a GPU executor moves a batch's factor in one copy.
 FactorLayout plan_factor_layout(const symbolic::AssemblyTree& t, const symbolic::LevelSchedule& s,
@@ -334,8 +275,28 @@ SparseMatrix canonical_values(const Analysis& an, const SparseMatrix& a) {
   return c;
 }
 
-Analysis analyze_matrix(const SparseMatrix& a, const Options& opts) {
+int resolve_workers(const Options& opts) {
+  if (opts.num_gpus < 0)
+    throw InvalidInput("Options::num_gpus must be at least 0 (got " +
+                       std::to_string(opts.num_gpus) + ")");
+  const bool gpu = opts.backend == Backend::cuda ||
+                   (opts.backend == Backend::automatic && numeric::cuda_available());
+  if (!gpu) return 1;
+  const int visible = numeric::cuda_device_count();
+  if (opts.num_gpus > visible)
+    throw InvalidInput("Options::num_gpus asks for " + std::to_string(opts.num_gpus) + " GPUs, " +
+                       std::to_string(visible) + " are visible");
+  return std::max(1, opts.num_gpus == 0 ? visible : opts.num_gpus);
+}
+
+Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers) {
   Timer total;
+  if (workers < 1)
+    throw InvalidInput("analyze_matrix: workers must be at least 1 (got " +
+                       std::to_string(workers) + ")");
+  if (opts.subtrees_per_gpu < 1)
+    throw InvalidInput("Options::subtrees_per_gpu must be at least 1 (got " +
+                       std::to_string(opts.subtrees_per_gpu) + ")");
   if (a.n_rows != a.n_cols)
     throw InvalidInput("matrix must be square, got " + std::to_string(a.n_rows) + "x" +
                        std::to_string(a.n_cols));
@@ -386,8 +347,10 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts) {
   const ordering::Graph graph = ordering::graph_of_symmetric_pattern(pattern);
   ordering::OrderingResult ord =
       grouped ? ordering::compute_grouped_ordering(
-                    graph, ordering::complete_groups(an.n, an.pivot_groups), opts)
-              : ordering::compute_ordering(graph, opts);
+                    graph, ordering::complete_groups(an.n, an.pivot_groups), opts, workers)
+              : ordering::compute_ordering(graph, opts, workers);
+  an.stats.nd_rebisections = ord.rebisections;
+  an.stats.nd_balance_seconds = ord.balance_seconds;
   an.stats.ordering_seconds = step.seconds();
 
   step.reset();
@@ -438,8 +401,16 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts) {
   const bool lu = !an.symmetric;
   an.plan = schedule::plan_memory(an.tree, an.schedule, opts.device_memory_limit, lu);
   an.assembly = build_assembly_map(c, an);
-  an.cb_layout = plan_cb_layout(an.tree, an.schedule);
+  an.cb_layout = schedule::plan_cb_layout(an.tree, an.schedule);
   an.factor_layout = plan_factor_layout(an.tree, an.schedule, lu);
+  if (workers > 1) {
+    schedule::PartitionOptions po;
+    po.workers = workers;
+    po.subtrees_per_worker = opts.subtrees_per_gpu;
+    po.budget = opts.device_memory_limit;
+    po.unsymmetric = lu;
+    an.partition = schedule::partition_tree(an.tree, po);
+  }
   an.stats.plan_seconds = step.seconds();
 
   // statistics
@@ -464,6 +435,13 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts) {
   st.factor_bytes = an.plan.factor_bytes;
   st.memory_budget = an.plan.budget;
   st.batches = an.plan.batches;
+  st.workers = workers;
+  if (workers > 1) {
+    const auto& p = an.partition;
+    st.subtrees = static_cast<index_t>(p.subtrees.size());
+    st.subtree_balance = p.balance;
+    st.top_flops_fraction = p.total_work > 0 ? p.top.work / p.total_work : 0.0;
+  }
   st.total_seconds = total.seconds();
   return an;
 }

@@ -9,6 +9,7 @@
 
 #include "ordering/ordering.hpp"
 #include "schedule/memory_plan.hpp"
+#include "schedule/tree_partition.hpp"
 #include "strata/options.hpp"
 #include "strata/sparse_matrix.hpp"
 #include "strata/stats.hpp"
@@ -26,14 +27,8 @@ struct AssemblyMap {
   std::vector<index_t> entry_dst;
 };
 
-/// Contribution blocks live in one arena whose layout is planned once: cb_offset[f] is
-/// where front f's contribution block (cb_size(f)² doubles, column-major) starts.
-/// The layout is a first-fit simulation of the level schedule, so blocks whose lifetimes
-/// overlap never overlap in memory.
-struct CbLayout {
-  std::vector<std::size_t> cb_offset;
-  std::size_t arena_size = 0;  ///< doubles
-};
+/// The contribution-block arena layout (schedule/memory_plan.hpp).
+using CbLayout = schedule::CbLayout;
 
 /// Factor storage layout: front f keeps its first k = n_pivots(f) columns (n_rows×k,
 /// L11 / U11 packed with L21) at panel_offset[f]; for LU also the k×(n_rows−k) block
@@ -86,11 +81,23 @@ struct Analysis {
   AssemblyMap assembly;
   CbLayout cb_layout;
   FactorLayout factor_layout;
+  /// The split into subtrees for several workers (schedule/tree_partition.hpp); made when
+  /// the analysis is asked for more than one worker, else empty (workers == 1).
+  schedule::TreePartition partition;
   AnalysisStats stats;
 };
 
-/// Runs the analysis phase (see Solver::analyze). `a` must be square.
-Analysis analyze_matrix(const SparseMatrix& a, const Options& opts);
+/// Runs the analysis phase (see Solver::analyze). `a` must be square. `workers` > 1 also
+/// splits the tree for that many workers (Options::subtrees_per_gpu subtrees each) and,
+/// with Options::balance_by_work and nested dissection, balances the top bisections by
+/// work. Throws InvalidInput for workers < 1.
+Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers = 1);
+
+/// The number of workers the numeric factorization will use under `opts`: the GPUs
+/// (Options::num_gpus, 0 meaning all visible) when the CUDA backend is chosen (or chosen
+/// by Backend::automatic), else 1. Throws InvalidInput when num_gpus is negative or asks
+/// for more GPUs than are visible.
+int resolve_workers(const Options& opts);
 
 /// The canonical form the numeric phases read values from: lower triangle (symmetric
 /// types, from any storage) or full (general), CSC, sorted, duplicates summed. Throws

@@ -9,6 +9,11 @@
 // Algorithms", ch. 12): x ← x + A⁻¹(b − A x) with the residual in working precision,
 // stopping at the normwise backward error ‖b−Ax‖∞ / (‖A‖∞‖x‖∞ + ‖b‖∞) ≤ tolerance, or
 // when a step fails to halve it.
+//
+// Several GPUs (Options::num_gpus resolving to more than one with the CUDA backend): the
+// analysis splits the tree for that many workers and the factorization runs on one CUDA
+// executor per GPU through numeric::factorize_multi; the factor still comes back to the
+// host, so the solve and refactorization are the same code.
 #include "strata/solver.hpp"
 
 #include <algorithm>
@@ -17,6 +22,7 @@
 
 #include "core/alloc.hpp"
 #include "core/analysis.hpp"
+#include "core/solver_internal.hpp"
 #include "core/timer.hpp"
 #include "numeric/factor.hpp"
 #include "solve/gmres.hpp"
@@ -32,6 +38,14 @@ struct SolverState {
   std::vector<double> cb_arena;
   numeric::NumericFactor factor;
   std::unique_ptr<numeric::Executor> executor;
+  // several workers: one executor and one host arena each
+  std::vector<std::unique_ptr<numeric::Executor>> executors;
+  std::vector<std::vector<double>> arenas;
+  std::vector<DeviceStats> devices;
+  // SolverAccess::use_host_workers: CPU executors as workers (tests, benchmarks)
+  int host_workers = 0;
+  int host_threads = 1;
+  std::optional<numeric::MultiWorkerConfig> host_config;
   MatrixType resolved = MatrixType::automatic;
   double norm_inf = 0;  // ‖A‖∞ of the input
   Stats stats;
@@ -102,32 +116,52 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
   }
   const double static_pivot = s.options.static_pivot_epsilon * (norm1 > 0 ? norm1 : 1.0);
 
-  if (!s.executor) {
+  const int workers = an.partition.workers;
+  std::vector<numeric::Executor*> execs;
+  if (workers > 1) {  // only the CUDA backend resolves to several workers (resolve_workers)
+    if (static_cast<int>(s.executors.size()) != workers) {
+      s.executors.clear();
+      for (int d = 0; d < workers; ++d)
+        s.executors.push_back(s.host_workers > 0 ? numeric::make_cpu_executor(s.host_threads)
+                                                 : numeric::make_cuda_executor(s.options, d));
+    }
+    for (auto& e : s.executors) execs.push_back(e.get());
+  } else if (!s.executor) {
     const bool gpu = s.options.backend == Backend::cuda ||
                      (s.options.backend == Backend::automatic && numeric::cuda_available());
     s.executor = gpu ? numeric::make_cuda_executor(s.options)
                      : numeric::make_cpu_executor(s.options.num_threads, s.options.reproducible);
   }
+  s.devices.clear();
+  numeric::MultiWorkerConfig config;
+  config.work_stealing = s.options.work_stealing;
+  if (s.host_config) config = *s.host_config;
+  auto run = [&](MatrixType t) {
+    if (workers > 1)
+      numeric::factorize_multi(an, s.scaled, t, static_pivot, execs, s.factor, s.arenas, config,
+                               &s.devices);
+    else
+      numeric::factorize(an, s.scaled, t, static_pivot, *s.executor, s.factor, s.cb_arena);
+  };
 
   MatrixType type = an.type;
   if (type == MatrixType::automatic) {
     // symmetric: try Cholesky, fall back to LDLᵀ on a non-positive pivot
     try {
-      numeric::factorize(an, s.scaled, MatrixType::spd, static_pivot, *s.executor, s.factor,
-                         s.cb_arena);
+      run(MatrixType::spd);
       type = MatrixType::spd;
     } catch (const NotPositiveDefinite&) {
       type = MatrixType::symmetric_indefinite;
     }
   }
-  if (type != MatrixType::spd || an.type != MatrixType::automatic)
-    numeric::factorize(an, s.scaled, type, static_pivot, *s.executor, s.factor, s.cb_arena);
+  if (type != MatrixType::spd || an.type != MatrixType::automatic) run(type);
   s.resolved = type;
 
   FactorStats& fs = s.stats.factor;
   fs = FactorStats{};
   fs.type = type;
-  fs.backend = s.executor->name();
+  fs.backend = workers > 1 ? execs[0]->name() : s.executor->name();
+  fs.devices = s.devices;
   numeric::cpu::PivotStats total;
   for (const auto& ps : s.factor.front_stats) total.merge(ps);
   fs.perturbed_pivots = total.perturbed;
@@ -149,7 +183,21 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
   fs.seconds = timer.seconds();
   const double flops = s.stats.analysis.factor_flops * (type == MatrixType::general ? 2.0 : 1.0);
   fs.gflops = fs.seconds > 0 ? flops / fs.seconds * 1e-9 : 0;
-  s.executor->report(fs);
+  if (workers > 1) {  // device figures summed over the workers (the factor is on the host)
+    for (numeric::Executor* e : execs) {
+      FactorStats one;
+      e->report(one);
+      fs.device_seconds = std::max(fs.device_seconds, one.device_seconds);
+      fs.bytes_to_device += one.bytes_to_device;
+      fs.bytes_to_host += one.bytes_to_host;
+      fs.device_batches += one.device_batches;
+      fs.tiled_fronts += one.tiled_fronts;
+      fs.device_budget = std::max(fs.device_budget, one.device_budget);
+      fs.contribution_blocks_on_host |= one.contribution_blocks_on_host;
+    }
+  } else {
+    s.executor->report(fs);
+  }
 }
 
 // One solve with the factor: x = A⁻¹ b for nrhs columns (original numbering). Returns
@@ -221,8 +269,11 @@ void Solver::analyze(const SparseMatrix& a) {
     validate(a);
     state_->factor = numeric::NumericFactor{};
     state_->cb_arena.clear();
+    state_->arenas.clear();
     state_->analysis.reset();
-    state_->analysis = analyze_matrix(a, state_->options);
+    const int workers =
+        state_->host_workers > 0 ? state_->host_workers : resolve_workers(state_->options);
+    state_->analysis = analyze_matrix(a, state_->options, workers);
     state_->stats = Stats{};
     state_->stats.analysis = state_->analysis->stats;
     state_->resolved = MatrixType::automatic;
@@ -342,6 +393,20 @@ std::vector<double> Solver::solve(const std::vector<double>& b) {
   phase("solve", [&] { x.resize(b.size()); });
   solve(b.data(), x.data(), static_cast<index_t>(b.size()) / n);
   return x;
+}
+
+void detail::SolverAccess::use_host_workers(Solver& solver, int workers, int threads_each,
+                                            numeric::MultiWorkerConfig config) {
+  if (workers < 0 || threads_each < 1)
+    throw InvalidInput("use_host_workers: workers must be at least 0 and threads at least 1");
+  SolverState& s = *solver.state_;
+  s.host_workers = workers;
+  s.host_threads = threads_each;
+  s.host_config = workers > 0 ? std::optional(std::move(config)) : std::nullopt;
+  s.executors.clear();
+  s.executor.reset();
+  s.analysis.reset();
+  s.factor = numeric::NumericFactor{};
 }
 
 index_t Solver::size() const { return state_->analysis ? state_->analysis->n : 0; }

@@ -9,7 +9,9 @@ namespace strata::numeric {
 
 bool cuda_available() { return false; }
 
-std::unique_ptr<Executor> make_cuda_executor(const Options&) {
+int cuda_device_count() { return 0; }
+
+std::unique_ptr<Executor> make_cuda_executor(const Options&, int) {
   throw NotSupported("this build of strata has no CUDA backend (nvcc was not found at build time)");
 }
 

@@ -6,6 +6,12 @@
 // on host threads with BLAS/LAPACK; the CUDA executor (numeric/cuda) runs them as
 // batched launches. Both fill the same NumericFactor, so the solve and every test can
 // compare them entry by entry.
+//
+// An executor always factors a *part* of the tree with the part's own level schedule,
+// batches and contribution-block arena: the whole tree (one executor), or one subtree or
+// the top part of a schedule::TreePartition (several executors, one per worker, driven by
+// numeric/multi_device.cpp). Contribution blocks cross from a subtree to the top part
+// through export_cb / import_cb.
 #pragma once
 
 #include <memory>
@@ -14,6 +20,7 @@
 #include "core/analysis.hpp"
 #include "numeric/cpu/dense_front.hpp"
 #include "strata/options.hpp"
+#include "strata/stats.hpp"
 
 namespace strata::numeric {
 
@@ -37,6 +44,20 @@ struct NumericFactor {
   bool valid = false;
 };
 
+/// The part of the tree an executor is factoring: its level schedule, the batches of its
+/// memory plan (positions index schedule->fronts) and its arena layout.
+struct PartView {
+  int id = -1;  ///< -1: the whole tree; 0..P-1: subtree of the partition; P: its top part
+  const symbolic::LevelSchedule* schedule = nullptr;
+  const std::vector<BatchInfo>* batches = nullptr;
+  const CbLayout* cb_layout = nullptr;
+
+  /// The whole tree: an.schedule, an.plan.batches, an.cb_layout.
+  static PartView whole(const Analysis& an);
+  /// A part of an.partition: subtree `id` (0 ≤ id < P) or the top part (id == P).
+  static PartView of(const schedule::FactorPart& p, int id);
+};
+
 /// Everything an executor needs to factor a batch.
 struct FactorContext {
   const Analysis* analysis = nullptr;
@@ -44,21 +65,51 @@ struct FactorContext {
   MatrixType type = MatrixType::spd;
   double static_pivot = 0;  ///< absolute threshold / replacement for tiny pivots
   NumericFactor* factor = nullptr;
-  std::vector<double>* cb_arena = nullptr;  ///< contribution blocks (CbLayout)
+  std::vector<double>* cb_arena = nullptr;  ///< host arena of the part (host executors)
+  const PartView* part = nullptr;           ///< set from begin_part to end_part
 };
+
+/// A contribution block on its way from the subtree that produced it to the top part.
+/// The driver provides `host` (size doubles); an exporter either fills it, or — a device
+/// executor whose importer can read its memory directly (peer access) — leaves the block
+/// in its own memory, valid until its end(), and sets `device` and `device_ordinal`.
+struct CbTransfer {
+  index_t front = -1;              ///< the subtree root whose block this is
+  std::size_t size = 0;            ///< doubles: cb_size(front)², column-major
+  double* host = nullptr;          ///< driver-owned host buffer of `size` doubles
+  bool on_host = false;            ///< the exporter filled `host`
+  const double* device = nullptr;  ///< or: the block in the exporter's device memory
+  int device_ordinal = -1;         ///< CUDA device holding `device`
+  int target_device = -1;          ///< CUDA device of the importer (-1: a host executor)
+};
+
+/// Statistics of one executor over a multi-worker factorization.
+using DeviceStats = strata::DeviceStats;
 
 /// A backend that factors batches of fronts. Implementations: CpuExecutor, CudaExecutor.
 class Executor {
  public:
   virtual ~Executor() = default;
   virtual const char* name() const = 0;
-  /// Called once before the first batch of a factorization.
+  /// The CUDA device this executor runs on; -1 for a host executor.
+  virtual int device() const { return -1; }
+  /// Called once per factorization, before this executor's first part (ctx.part unset).
   virtual void begin(const FactorContext& ctx) {}
+  /// Called before the batches of the part ctx.part.
+  virtual void begin_part(const FactorContext& ctx) {}
   /// Assembles (original entries + extend-add of children's contribution blocks),
-  /// factors and stores the fronts schedule.fronts[batch.begin .. batch.end). Throws
-  /// NotPositiveDefinite (original column) for a failed Cholesky pivot.
+  /// factors and stores the fronts ctx.part->schedule->fronts[batch.begin .. batch.end).
+  /// Throws NotPositiveDefinite (original column) for a failed Cholesky pivot.
   virtual void factor_batch(const FactorContext& ctx, const BatchInfo& batch) = 0;
-  /// Called once after the last batch.
+  /// Called after the last batch of the part ctx.part.
+  virtual void end_part(const FactorContext& ctx) {}
+  /// After the part's last batch and before end_part: hands out the contribution block of
+  /// the part's root t.front (see CbTransfer). Returns the bytes moved.
+  virtual std::size_t export_cb(const FactorContext& ctx, CbTransfer& t) = 0;
+  /// After begin_part of the part that consumes it, before its first batch: places the
+  /// block of child t.front (outside the part) in the part's arena. Returns the bytes moved.
+  virtual std::size_t import_cb(const FactorContext& ctx, const CbTransfer& t) = 0;
+  /// Called once per factorization, after this executor's last part.
   virtual void end(const FactorContext& ctx) {}
   /// Solves with `fac` where this executor keeps it (the CUDA executor, when the factor
   /// stayed resident on the device): x as solve_in_place. Returns false when it cannot
@@ -74,11 +125,19 @@ class Executor {
 /// large fronts too run single-threaded BLAS (see Options::reproducible).
 std::unique_ptr<Executor> make_cpu_executor(int threads, bool reproducible = false);
 
-/// The CUDA executor; throws NotSupported in a build without CUDA or without a GPU.
-std::unique_ptr<Executor> make_cuda_executor(const Options& opts);
+/// The CUDA executor on CUDA device `device` (0-based ordinal); throws NotSupported in a
+/// build without CUDA or when that device is not visible.
+std::unique_ptr<Executor> make_cuda_executor(const Options& opts, int device = 0);
 
 /// True when this build has the CUDA backend and a GPU is visible.
 bool cuda_available();
+
+/// Number of visible CUDA devices (0 in a build without CUDA).
+int cuda_device_count();
+
+/// Sizes `factor` for the analysis and type (a no-op when it already is: refactorization
+/// reuses the storage) and marks it invalid.
+void prepare_factor(const Analysis& an, MatrixType type, NumericFactor& factor);
 
 /// LDLᵀ bookkeeping of front f once its partial factorization is in the factor (shared by
 /// the executors, so that a CPU and a GPU factor have one layout): moves D out of the
@@ -89,11 +148,32 @@ bool cuda_available();
 void store_ldlt_front(const Analysis& an, index_t f, const index_t* local_perm,
                       const int* local_pivot_size, NumericFactor& factor);
 
-/// Runs the numeric factorization of the scaled canonical values with `exec`.
-/// Fills `factor`; throws as Executor::factor_batch.
+/// Runs the numeric factorization of the scaled canonical values with `exec` on the whole
+/// tree. Fills `factor`; throws as Executor::factor_batch.
 void factorize(const Analysis& an, const std::vector<double>& scaled_values, MatrixType type,
                double static_pivot, Executor& exec, NumericFactor& factor,
                std::vector<double>& cb_arena);
+
+/// Options of the multi-worker driver that are not user options.
+struct MultiWorkerConfig {
+  bool work_stealing = true;  ///< an idle worker takes an unstarted subtree of another
+  /// Test only: seconds each worker sleeps after taking a subtree and before factoring it
+  /// (empty, or one entry per worker): a slow device, to show stealing.
+  std::vector<double> injected_delay;
+};
+
+/// Runs the numeric factorization on several executors (one per worker, one host thread
+/// each) over an.partition, which must have been made for execs.size() workers: the
+/// subtrees from per-worker queues filled largest-first (an.partition.owner), stealing
+/// when config.work_stealing, then the top part on execs[0] with the subtree roots'
+/// contribution blocks handed in. `arenas` (one per worker) are sized here and reused
+/// across calls. Fills `factor` (the same entries as factorize) and, when given,
+/// `devices` (one per worker). The first exception of any worker is rethrown after all
+/// workers have stopped.
+void factorize_multi(const Analysis& an, const std::vector<double>& scaled_values, MatrixType type,
+                     double static_pivot, const std::vector<Executor*>& execs,
+                     NumericFactor& factor, std::vector<std::vector<double>>& arenas,
+                     const MultiWorkerConfig& config, std::vector<DeviceStats>* devices);
 
 /// Solves with the factor in place: x (tree numbering, n×nrhs column-major, leading
 /// dimension n) holds the right-hand sides on entry and the solutions on return.

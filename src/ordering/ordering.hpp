@@ -30,11 +30,18 @@ struct SeparatorTree {
 
 /// Options of the nested dissection driver.
 struct NestedDissectionOptions {
-  index_t leaf_size = 128;   ///< subgraphs of at most this many vertices are leaves (AMD)
-  int seed = 1;              ///< METIS seed, for reproducibility
+  index_t leaf_size = 128;  ///< subgraphs of at most this many vertices are leaves (AMD)
+  int seed = 1;             ///< METIS seed, for reproducibility
   /// METIS separators tried (the best kept) at each of the top three bisection levels;
   /// deeper levels use METIS_NodeND's own rule (see Options::nd_top_separators).
   int top_separators = 1;
+  /// Balance by work (several workers, Options::balance_by_work): the bisections of the
+  /// top `balance_levels` levels are redone with weighted vertices when the estimated
+  /// factorization work of their two sides differs by more than balance_tolerance
+  /// (max side / mean side − 1), at most balance_attempts times each; 0 levels: off.
+  int balance_levels = 0;
+  double balance_tolerance = 0.05;
+  int balance_attempts = 2;
 };
 
 /// Vertices that an ordering keeps together and numbers consecutively: group g holds the
@@ -50,12 +57,15 @@ struct VertexGroups {
 /// Result of an ordering: perm[k] is the original index of the k-th pivot (new to old).
 struct OrderingResult {
   std::vector<index_t> perm;
-  SeparatorTree tree;  ///< empty unless nested_dissection
+  SeparatorTree tree;          ///< empty unless nested_dissection
+  index_t rebisections = 0;    ///< bisections redone to balance work (balance_levels)
+  double balance_seconds = 0;  ///< time spent estimating work and redoing bisections
 };
 
-/// The nested-dissection options requested by `opts`; throws InvalidInput for a leaf
-/// size below 1.
-NestedDissectionOptions nd_options(const Options& opts);
+/// The nested-dissection options requested by `opts` for `workers` workers (balance
+/// levels ⌈log₂(workers × subtrees_per_gpu)⌉ when balance_by_work and workers > 1);
+/// throws InvalidInput for a leaf size below 1.
+NestedDissectionOptions nd_options(const Options& opts, int workers = 1);
 
 /// strata's nested dissection: recursive vertex-separator bisection with
 /// METIS_ComputeVertexSeparator, connected components split first, AMD inside leaves;
@@ -81,7 +91,7 @@ std::vector<index_t> amd_ordering(const Graph& g);
 
 /// Computes the ordering requested by `opts` (user_permutation is checked: throws
 /// InvalidInput naming the first repeated or out-of-range entry).
-OrderingResult compute_ordering(const Graph& g, const Options& opts);
+OrderingResult compute_ordering(const Graph& g, const Options& opts, int workers = 1);
 
 /// Inverse permutation: result[perm[k]] = k.
 std::vector<index_t> invert_permutation(const std::vector<index_t>& perm);

@@ -26,6 +26,7 @@
 #include <amd.h>
 #include <metis.h>
 
+#include <algorithm>
 #include <limits>
 #include <numeric>
 #include <string>
@@ -104,22 +105,26 @@ std::vector<index_t> metis_ordering(const Graph& g, const std::vector<index_t>& 
   return perm;
 }
 
-NestedDissectionOptions nd_options(const Options& opts) {
+NestedDissectionOptions nd_options(const Options& opts, int workers) {
   if (opts.nd_leaf_size < 1)
     throw InvalidInput("Options::nd_leaf_size must be at least 1 (got " +
                        std::to_string(opts.nd_leaf_size) + ")");
   NestedDissectionOptions nd;
   nd.leaf_size = opts.nd_leaf_size;
   nd.top_separators = opts.nd_top_separators;
+  if (opts.balance_by_work && workers > 1) {
+    const long parts = static_cast<long>(workers) * std::max(1, opts.subtrees_per_gpu);
+    while ((1L << nd.balance_levels) < parts) ++nd.balance_levels;  // ⌈log₂ parts⌉
+  }
   return nd;
 }
 
-OrderingResult compute_ordering(const Graph& g, const Options& opts) {
+OrderingResult compute_ordering(const Graph& g, const Options& opts, int workers) {
   OrderingResult r;
   const index_t n = g.n;
   switch (opts.ordering) {
     case OrderingMethod::nested_dissection:
-      return nested_dissection(g, nd_options(opts));
+      return nested_dissection(g, nd_options(opts, workers));
     case OrderingMethod::metis:
       r.perm = metis_ordering(g);
       return r;

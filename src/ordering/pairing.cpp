@@ -283,16 +283,16 @@ Graph quotient_graph(const Graph& g, const VertexGroups& groups) {
 }
 
 OrderingResult compute_grouped_ordering(const Graph& g, const VertexGroups& groups,
-                                        const Options& opts) {
+                                        const Options& opts, int workers) {
   if (groups.ptr.back() != g.n)
     throw InvalidInput("compute_grouped_ordering: the groups hold " +
                        std::to_string(groups.ptr.back()) + " vertices, the graph has " +
                        std::to_string(g.n));
   if (opts.ordering == OrderingMethod::natural || opts.ordering == OrderingMethod::user)
-    return compute_ordering(g, opts);
+    return compute_ordering(g, opts, workers);
   const Graph q = quotient_graph(g, groups);
   if (opts.ordering == OrderingMethod::nested_dissection)
-    return nested_dissection(q, nd_options(opts), groups);
+    return nested_dissection(q, nd_options(opts, workers), groups);
   std::vector<index_t> qperm;
   if (opts.ordering == OrderingMethod::metis) {
     std::vector<index_t> w(q.n);

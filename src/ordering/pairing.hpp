@@ -57,6 +57,6 @@ Graph quotient_graph(const Graph& g, const VertexGroups& groups);
 /// METIS); AMD orders the quotient graph unweighted. OrderingMethod::natural and ::user
 /// ignore the groups (they return exactly what compute_ordering returns).
 OrderingResult compute_grouped_ordering(const Graph& g, const VertexGroups& groups,
-                                        const Options& opts);
+                                        const Options& opts, int workers = 1);
 
 }  // namespace strata::ordering

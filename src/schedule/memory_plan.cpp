@@ -16,10 +16,17 @@
 // (excluding those this batch reads, which its working set already counts) plus the
 // batch's working set; afterwards the blocks it read are freed and the blocks it wrote
 // become pending. The peak is the maximum of that sum. Factor panels are not counted:
-// they stream out (DESIGN.md §2) and are reported as factor_bytes.
+// they stream out (DESIGN.md §2) and are reported as factor_bytes. For a part of the tree
+// the contribution blocks it imports from children outside it are pending from the start.
+//
+// The contribution-block arena layout (plan_cb_layout) is a first-fit allocator run over
+// the same schedule: free extents in an ordered map, adjacent free extents merged, the
+// tail given back to the top of the arena.
 #include "schedule/memory_plan.hpp"
 
 #include <algorithm>
+#include <iterator>
+#include <map>
 
 namespace strata::schedule {
 namespace {
@@ -69,6 +76,7 @@ MemoryPlan plan_memory(const symbolic::AssemblyTree& t, const symbolic::LevelSch
 
   // Peak in-core working memory (see the file header).
   std::size_t pending = 0, peak = 0;
+  for (const index_t c : imported_children(t, s)) pending += square_bytes(t.cb_size(c));
   for (const BatchInfo& b : plan.batches) {
     std::size_t read = 0, written = 0;
     for (index_t pos = b.begin; pos < b.end; ++pos) {
@@ -82,13 +90,87 @@ MemoryPlan plan_memory(const symbolic::AssemblyTree& t, const symbolic::LevelSch
   plan.peak_in_core_bytes = peak;
 
   std::size_t factor = 0;
-  for (index_t f = 0; f < t.n_fronts(); ++f) {
+  for (const index_t f : s.fronts) {
     const auto np = static_cast<std::size_t>(t.n_pivots(f));
     const auto nr = static_cast<std::size_t>(t.n_rows(f));
     factor += np * nr + (unsymmetric ? np * (nr - np) : 0);
   }
   plan.factor_bytes = factor * sizeof(double);
   return plan;
+}
+
+std::vector<index_t> imported_children(const symbolic::AssemblyTree& t,
+                                       const symbolic::LevelSchedule& s) {
+  std::vector<index_t> out;
+  if (static_cast<index_t>(s.fronts.size()) == t.n_fronts()) return out;  // whole tree
+  for (const index_t f : s.fronts)
+    for (index_t q = t.child_offsets[f]; q < t.child_offsets[f + 1]; ++q) {
+      const index_t c = t.children[q];
+      if (s.level_of[c] < 0 && t.cb_size(c) > 0) out.push_back(c);
+    }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+CbLayout plan_cb_layout(const symbolic::AssemblyTree& t, const symbolic::LevelSchedule& s) {
+  CbLayout out;
+  out.cb_offset.assign(t.n_fronts(), 0);
+  std::map<std::size_t, std::size_t> free_list;  // offset -> size
+  std::size_t top = 0;
+  auto release = [&](std::size_t off, std::size_t size) {
+    auto it = free_list.emplace(off, size).first;
+    auto next = std::next(it);
+    if (next != free_list.end() && it->first + it->second == next->first) {
+      it->second += next->second;
+      free_list.erase(next);
+    }
+    if (it != free_list.begin()) {
+      auto prev = std::prev(it);
+      if (prev->first + prev->second == it->first) {
+        prev->second += it->second;
+        free_list.erase(it);
+        it = prev;
+      }
+    }
+    if (it->first + it->second == top) {  // give the tail back
+      top = it->first;
+      free_list.erase(it);
+    }
+  };
+  auto allocate = [&](std::size_t size) -> std::size_t {
+    for (auto it = free_list.begin(); it != free_list.end(); ++it)
+      if (it->second >= size) {
+        const std::size_t off = it->first;
+        const std::size_t rest = it->second - size;
+        free_list.erase(it);
+        if (rest) free_list.emplace(off + size, rest);
+        return off;
+      }
+    const std::size_t off = top;
+    top += size;
+    out.arena_size = std::max(out.arena_size, top);
+    return off;
+  };
+  for (const index_t c : imported_children(t, s)) {
+    const auto cb = static_cast<std::size_t>(t.cb_size(c));
+    out.cb_offset[c] = allocate(cb * cb);
+  }
+  for (index_t l = 0; l < s.n_levels(); ++l) {
+    for (index_t p = s.level_offsets[l]; p < s.level_offsets[l + 1]; ++p) {
+      const index_t f = s.fronts[p];
+      const auto cb = static_cast<std::size_t>(t.cb_size(f));
+      if (cb > 0 && t.parent[f] >= 0) out.cb_offset[f] = allocate(cb * cb);
+    }
+    for (index_t p = s.level_offsets[l]; p < s.level_offsets[l + 1]; ++p) {
+      const index_t f = s.fronts[p];
+      for (index_t k = t.child_offsets[f]; k < t.child_offsets[f + 1]; ++k) {
+        const index_t c = t.children[k];
+        const auto cb = static_cast<std::size_t>(t.cb_size(c));
+        if (cb > 0) release(out.cb_offset[c], cb * cb);
+      }
+    }
+  }
+  return out;
 }
 
 }  // namespace strata::schedule

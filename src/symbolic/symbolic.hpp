@@ -43,11 +43,11 @@ std::vector<index_t> column_counts(const SparseMatrix& a, const std::vector<inde
 /// (children before parents), so first_pivot is increasing and covers 0..n.
 struct AssemblyTree {
   index_t n = 0;
-  std::vector<index_t> first_pivot{0};   ///< size n_fronts + 1
-  std::vector<index_t> row_offsets{0};   ///< size n_fronts + 1
+  std::vector<index_t> first_pivot{0};  ///< size n_fronts + 1
+  std::vector<index_t> row_offsets{0};  ///< size n_fronts + 1
   std::vector<index_t> rows;
-  std::vector<index_t> parent;           ///< parent front, -1 for a root
-  std::vector<index_t> child_offsets{0}; ///< children of f: children[child_offsets[f]..]
+  std::vector<index_t> parent;            ///< parent front, -1 for a root
+  std::vector<index_t> child_offsets{0};  ///< children of f: children[child_offsets[f]..]
   std::vector<index_t> children;
   std::vector<index_t> front_of_column;  ///< front that eliminates column j
 
@@ -114,5 +114,15 @@ struct LevelSchedule {
 };
 
 LevelSchedule level_schedule(const AssemblyTree& t);
+
+/// The level schedule of a subset of the fronts (a "part": a subtree, or the top of the
+/// tree above a set of subtrees), used by the multi-worker factorization. `fronts` lists
+/// the part's fronts in increasing order. Depth is counted within the part: a front whose
+/// parent is not in the part is at depth 0. Levels are numbered as above (deepest first,
+/// every child in the part one level below its parent), fronts within a level in
+/// increasing order; level_of is sized n_fronts and is −1 outside the part. With every
+/// front listed this is level_schedule(t). Throws InvalidInput when `fronts` is not
+/// strictly increasing or out of range.
+LevelSchedule level_schedule(const AssemblyTree& t, const std::vector<index_t>& fronts);
 
 }  // namespace strata::symbolic

@@ -20,6 +20,9 @@
 //   3. partial factorization (dense_front.hpp),
 //   4. copy the first k columns (and U12 for LU) to the factor, the contribution block
 //      F[k:m, k:m] to the CB arena, and the permuted pivot rows to the factor's rows.
+// The schedule and the arena layout are those of the part being factored (ctx.part): the
+// whole tree, or a subtree / the top part of a multi-worker factorization, whose
+// subtree-root blocks cross between arenas by plain copies (export_cb / import_cb).
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
@@ -64,9 +67,24 @@ class CpuExecutor final : public Executor {
     for (auto& w : ws_) w.position.assign(n, -1);
   }
 
+  std::size_t export_cb(const FactorContext& ctx, CbTransfer& t) override {
+    const double* src = ctx.cb_arena->data() + ctx.part->cb_layout->cb_offset[t.front];
+    std::memcpy(t.host, src, sizeof(double) * t.size);
+    t.on_host = true;
+    return sizeof(double) * t.size;
+  }
+
+  std::size_t import_cb(const FactorContext& ctx, const CbTransfer& t) override {
+    if (!t.on_host)
+      throw InvalidInput("internal: the CPU executor can only import a block from host memory");
+    double* dst = ctx.cb_arena->data() + ctx.part->cb_layout->cb_offset[t.front];
+    std::memcpy(dst, t.host, sizeof(double) * t.size);
+    return sizeof(double) * t.size;
+  }
+
   void factor_batch(const FactorContext& ctx, const BatchInfo& batch) override {
     const Analysis& an = *ctx.analysis;
-    const auto& s = an.schedule;
+    const auto& s = *ctx.part->schedule;
     std::vector<index_t> big, small;
     for (index_t p = batch.begin; p < batch.end; ++p) {
       const index_t f = s.fronts[p];
@@ -145,7 +163,7 @@ void CpuExecutor::process_front(const FactorContext& ctx, index_t f, Workspace& 
     const index_t mc = t.cb_size(c);
     if (mc == 0) continue;
     const index_t* crow = t.rows_of(c) + t.n_pivots(c);
-    const double* cb = arena.data() + an.cb_layout.cb_offset[c];
+    const double* cb = arena.data() + ctx.part->cb_layout->cb_offset[c];
     // local positions of the child's CB rows in f (increasing, since both are sorted)
     thread_local std::vector<index_t> rel;
     rel.resize(mc);
@@ -199,7 +217,7 @@ void CpuExecutor::process_front(const FactorContext& ctx, index_t f, Workspace& 
   }
   const index_t mc = m - k;
   if (mc > 0 && t.parent[f] >= 0) {
-    double* cb = ctx.cb_arena->data() + an.cb_layout.cb_offset[f];
+    double* cb = ctx.cb_arena->data() + ctx.part->cb_layout->cb_offset[f];
     for (index_t jj = 0; jj < mc; ++jj) {
       const index_t i0 = lu ? 0 : jj;
       std::memcpy(cb + jj * mc + i0, F + (k + jj) * m + k + i0, sizeof(double) * (mc - i0));

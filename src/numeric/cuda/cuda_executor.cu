@@ -28,6 +28,17 @@
 //
 // What stays on the device between factorizations of one analysis: the index arrays,
 // the pool, the arena and the resident factor — refactorization allocates nothing.
+//
+// Several GPUs (numeric/multi_device.cpp): one executor per GPU, every call made with its
+// device current. The executor then factors parts of the tree — subtrees and the top part
+// of an.partition — each with its own schedule, chunks and arena layout (PartDevice, all
+// planned and uploaded once per analysis, so any subtree can run on any GPU: stealing);
+// they share one pool and one arena, sized for the largest part. The factor always comes
+// back to the host then (no resident factor: each GPU holds only its parts). A subtree
+// root's contribution block is exported either to the driver's host buffer (device to
+// host), or — when the importing GPU can access this one's memory (cudaDeviceCanAccessPeer),
+// or is this one — to a device buffer here (the outbox) that the importer copies from
+// directly (cudaMemcpyPeerAsync); the outbox lives until the next factorization.
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -80,6 +91,8 @@ CudaExecutor::~CudaExecutor() {
 
 void CudaExecutor::begin(const numeric::FactorContext& ctx) {
   STRATA_CUDA(cudaSetDevice(device_));
+  outbox_.clear();
+  whole_ = false;  // until begin_part says which part: no resident factor from no part
   const Analysis& an = *ctx.analysis;
   bytes_h2d_ = bytes_d2h_ = 0;
   chunks_ = tiled_count_ = 0;
@@ -90,13 +103,78 @@ void CudaExecutor::begin(const numeric::FactorContext& ctx) {
   count_h2d(an.pattern_indices.size() * sizeof(double));
 }
 
+void CudaExecutor::begin_part(const numeric::FactorContext& ctx) {
+  STRATA_CUDA(cudaSetDevice(device_));
+  const Analysis& an = *ctx.analysis;
+  const bool whole = ctx.part->id == -1;
+  if (whole && planned_ != 1) plan_parts(an, true);
+  if (!whole && planned_ != 2) {
+    if (an.partition.part_of.size() != static_cast<std::size_t>(an.tree.n_fronts()))
+      throw InvalidInput("internal: a part of an analysis that was not split");
+    plan_parts(an, false);
+  }
+  auto it = parts_.find(ctx.part->id);
+  if (it == parts_.end())
+    throw InvalidInput("internal: part " + std::to_string(ctx.part->id) + " was not planned");
+  cur_ = &it->second;
+  whole_ = whole;
+}
+
+std::size_t CudaExecutor::export_cb(const numeric::FactorContext& ctx, numeric::CbTransfer& t) {
+  STRATA_CUDA(cudaSetDevice(device_));
+  const double* src = cur_->cb_ptr_host[t.front];
+  const std::size_t bytes = sizeof(double) * t.size;
+  int peer = 0;
+  if (t.target_device >= 0 && t.target_device != device_)
+    STRATA_CUDA(cudaDeviceCanAccessPeer(&peer, t.target_device, device_));
+  if (t.target_device == device_ || peer) {  // stays on this GPU until the importer copies
+    DeviceBuffer<double>& box = outbox_[t.front];
+    box.resize(t.size);
+    STRATA_CUDA(cudaMemcpyAsync(box.data(), src, bytes, cudaMemcpyDefault, stream_));
+    STRATA_CUDA(cudaStreamSynchronize(stream_));
+    t.device = box.data();
+    t.device_ordinal = device_;
+    t.on_host = false;
+    return 0;  // nothing crossed the bus yet: the importer counts the copy
+  }
+  STRATA_CUDA(cudaMemcpyAsync(t.host, src, bytes, cudaMemcpyDefault, stream_));
+  STRATA_CUDA(cudaStreamSynchronize(stream_));
+  t.on_host = true;
+  bytes_d2h_ += bytes;
+  return bytes;
+}
+
+std::size_t CudaExecutor::import_cb(const numeric::FactorContext& ctx,
+                                    const numeric::CbTransfer& t) {
+  STRATA_CUDA(cudaSetDevice(device_));
+  double* dst = cur_->cb_ptr_host[t.front];
+  const std::size_t bytes = sizeof(double) * t.size;
+  const bool dst_on_device = dst >= arena_.data() && dst < arena_.data() + arena_.size();
+  if (t.on_host) {
+    STRATA_CUDA(cudaMemcpyAsync(dst, t.host, bytes, cudaMemcpyDefault, stream_));
+    bytes_h2d_ += bytes;
+  } else if (t.device_ordinal != device_ && dst_on_device) {
+    const cudaError_t e = cudaDeviceEnablePeerAccess(t.device_ordinal, 0);
+    if (e == cudaErrorPeerAccessAlreadyEnabled)
+      (void)cudaGetLastError();
+    else
+      STRATA_CUDA(e);
+    STRATA_CUDA(cudaMemcpyPeerAsync(dst, device_, t.device, t.device_ordinal, bytes, stream_));
+  } else {  // same GPU, or into mapped host memory: unified addressing finds the way
+    STRATA_CUDA(cudaMemcpyAsync(dst, t.device, bytes, cudaMemcpyDefault, stream_));
+  }
+  STRATA_CUDA(cudaStreamSynchronize(stream_));
+  return t.device_ordinal == device_ && !t.on_host ? 0 : bytes;
+}
+
 void CudaExecutor::end(const numeric::FactorContext& ctx) {
+  STRATA_CUDA(cudaSetDevice(device_));
   STRATA_CUDA(cudaEventRecord(stop_, stream_));
   STRATA_CUDA(cudaEventSynchronize(stop_));
   float ms = 0;
   STRATA_CUDA(cudaEventElapsedTime(&ms, start_, stop_));
   device_seconds_ = ms * 1e-3;
-  if (plan_.factor_resident) {
+  if (keep_resident()) {
     const Analysis& an = *ctx.analysis;
     const numeric::NumericFactor& fac = *ctx.factor;
     const auto& t = an.tree;
@@ -134,16 +212,15 @@ void CudaExecutor::report(FactorStats& fs) const {
   fs.tiled_fronts = tiled_count_;
   fs.device_budget = plan_.budget;
   fs.contribution_blocks_on_host = plan_.arena_on_host;
-  fs.factor_resident = plan_.factor_resident;
+  fs.factor_resident = keep_resident();
 }
 
-// Decides what lives where (see the file header) and lays out the chunks: positions
-// [p, chunk_end_[p]) of one batch share the pool; tiled_[p] marks a front factored by
-// slabs.
-void CudaExecutor::plan_device_memory(const Analysis& an) {
+// Decides what lives where (see the file header) and lays out the chunks of every part
+// in `views`: positions [p, chunk_end[p]) of one batch share the pool; tiled[p] marks a
+// front factored by slabs. The pool and the arena serve every part (largest of each).
+void CudaExecutor::plan_device_memory(const Analysis& an,
+                                      const std::vector<numeric::PartView>& views) {
   const auto& t = an.tree;
-  const auto& s = an.schedule;
-  const bool lu = !an.symmetric;
   std::size_t free_b = 0, total_b = 0;
   STRATA_CUDA(cudaMemGetInfo(&free_b, &total_b));
   DevicePlan p;
@@ -154,21 +231,25 @@ void CudaExecutor::plan_device_memory(const Analysis& an) {
   // pool: the largest batch of fronts that are not tiled, capped (without a user limit)
   // at half the budget so that the arena and the factor have room
   std::size_t cap = limit_ > 0 ? budget_d : budget_d / 2;
-  tiled_.assign(s.fronts.size(), 0);
   std::size_t pool = 0;
   index_t tiled_rows = 0;
-  for (const BatchInfo& b : an.plan.batches) {
-    std::size_t sum = 0;
-    for (index_t q = b.begin; q < b.end; ++q) {
-      const index_t f = s.fronts[q];
-      if (b.tiled || sq(t.n_rows(f)) > cap) {
-        tiled_[q] = 1;
-        tiled_rows = std::max(tiled_rows, t.n_rows(f));
-      } else {
-        sum += sq(t.n_rows(f));
+  for (const numeric::PartView& v : views) {
+    const auto& s = *v.schedule;
+    PartDevice& pd = parts_[v.id];
+    pd.tiled.assign(s.fronts.size(), 0);
+    for (const BatchInfo& b : *v.batches) {
+      std::size_t sum = 0;
+      for (index_t q = b.begin; q < b.end; ++q) {
+        const index_t f = s.fronts[q];
+        if (b.tiled || sq(t.n_rows(f)) > cap) {
+          pd.tiled[q] = 1;
+          tiled_rows = std::max(tiled_rows, t.n_rows(f));
+        } else {
+          sum += sq(t.n_rows(f));
+        }
       }
+      pool = std::max(pool, std::min(sum, cap));
     }
-    pool = std::max(pool, std::min(sum, cap));
   }
   // a tiled front needs a slab and a column block of at least kMinSlab columns
   if (tiled_rows > 0)
@@ -179,38 +260,48 @@ void CudaExecutor::plan_device_memory(const Analysis& an) {
                           std::to_string(limit_) + " bytes)");
   p.pool = std::max<std::size_t>(pool, 1);
   // chunks: consecutive non-tiled positions of a batch whose fronts fit the pool
-  pos_offset_host_.assign(s.fronts.size(), 0);
-  chunk_end_.assign(s.fronts.size(), 0);
-  for (const BatchInfo& b : an.plan.batches) {
-    index_t start = b.begin;
-    std::size_t off = 0;
-    for (index_t q = b.begin; q <= b.end; ++q) {
-      const bool flush = q == b.end || tiled_[q] || off + sq(t.n_rows(s.fronts[q])) > p.pool;
-      if (flush && q > start) {
-        chunk_end_[start] = q;
-        start = q;
-        off = 0;
+  for (const numeric::PartView& v : views) {
+    const auto& s = *v.schedule;
+    PartDevice& pd = parts_[v.id];
+    pd.pos_offset_host.assign(s.fronts.size(), 0);
+    pd.chunk_end.assign(s.fronts.size(), 0);
+    for (const BatchInfo& b : *v.batches) {
+      index_t start = b.begin;
+      std::size_t off = 0;
+      for (index_t q = b.begin; q <= b.end; ++q) {
+        const bool flush = q == b.end || pd.tiled[q] || off + sq(t.n_rows(s.fronts[q])) > p.pool;
+        if (flush && q > start) {
+          pd.chunk_end[start] = q;
+          start = q;
+          off = 0;
+        }
+        if (q == b.end) break;
+        if (pd.tiled[q]) {
+          start = q + 1;
+          continue;
+        }
+        pd.pos_offset_host[q] = static_cast<std::int64_t>(off);
+        off += sq(t.n_rows(s.fronts[q]));
       }
-      if (q == b.end) break;
-      if (tiled_[q]) {
-        start = q + 1;
-        continue;
-      }
-      pos_offset_host_[q] = static_cast<std::int64_t>(off);
-      off += sq(t.n_rows(s.fronts[q]));
     }
   }
-  // arena, then the resident factor, in what the pool leaves
+  // arena (the largest part's), then the resident factor (whole tree only), in what the
+  // pool leaves
+  std::size_t arena = 0;
+  bool whole = false;
+  for (const numeric::PartView& v : views) {
+    arena = std::max(arena, v.cb_layout->arena_size);
+    whole = whole || v.id == -1;
+  }
   const std::size_t rest = budget_d > p.pool ? budget_d - p.pool : 0;
-  const std::size_t arena = an.cb_layout.arena_size, factor = an.factor_layout.total;
-  if (rest >= arena + factor) {
+  const std::size_t factor = an.factor_layout.total;
+  if (whole && rest >= arena + factor) {
     p.arena_device = arena;
     p.factor_resident = true;
   } else {
     p.arena_device = std::min(arena, rest);
   }
   p.arena_on_host = p.arena_device < arena;
-  (void)lu;
   plan_ = p;
 }
 
@@ -221,6 +312,10 @@ void CudaExecutor::upload_analysis(const Analysis& an) {
   // free what the previous analysis held before measuring free memory
   for (auto* b : {&pool_, &arena_, &panels_, &values_}) b->clear();
   host_arena_.clear();
+  parts_.clear();
+  outbox_.clear();
+  cur_ = nullptr;
+  planned_ = 0;
   analysis_id_ = 0;
   std::vector<std::int64_t> n_rows(nf), n_piv(nf);
   for (index_t f = 0; f < nf; ++f) {
@@ -266,49 +361,91 @@ void CudaExecutor::upload_analysis(const Analysis& an) {
   values_.resize(std::max<std::size_t>(an.pattern_indices.size(), 1));
   STRATA_CUDA(cudaStreamSynchronize(stream_));
 
-  plan_device_memory(an);
-  upload(pos_offset_, pos_offset_host_);
-  pool_.resize(plan_.pool);
-  arena_.resize(std::max<std::size_t>(plan_.arena_device, 1));
-  if (plan_.arena_on_host) host_arena_.resize(std::max<std::size_t>(an.cb_layout.arena_size, 1));
-  // staging for the panels of one chunk, or the whole resident factor
-  std::size_t chunk_panels = 1;
-  for (index_t q = 0; q < static_cast<index_t>(s.fronts.size()); ++q)
-    if (!tiled_[q] && chunk_end_[q] > q) {
-      std::size_t sum = 0;
-      for (index_t r = q; r < chunk_end_[q]; ++r) sum += panel_size(t, s.fronts[r], !an.symmetric);
-      chunk_panels = std::max(chunk_panels, sum);
-    }
-  panels_.resize(plan_.factor_resident ? std::max<std::size_t>(an.factor_layout.total, 1)
-                                       : chunk_panels);
-  host_staging_.resize(chunk_panels);
-  // where each contribution block lives
-  cb_ptr_host_.assign(nf, nullptr);
-  for (index_t f = 0; f < nf; ++f) {
-    const std::size_t cb = static_cast<std::size_t>(t.cb_size(f));
-    if (cb == 0 || t.parent[f] < 0) continue;
-    const std::size_t off = an.cb_layout.cb_offset[f];
-    cb_ptr_host_[f] =
-        off + cb * cb <= plan_.arena_device ? arena_.data() + off : host_arena_.data() + off;
-  }
-  upload(cb_ptr_, cb_ptr_host_);
-  tree_ = DeviceTree{fronts_.data(),    pos_offset_.data(), n_rows_.data(),
-                     n_pivots_.data(),  parent_.data(),     entry_offsets_.data(),
-                     entry_src_.data(), entry_dst_.data(),  child_offsets_.data(),
-                     children_.data(),  cb_ptr_.data(),     rel_offsets_.data(),
-                     rel_.data()};
   STRATA_CUDA(cudaStreamSynchronize(stream_));
   analysis_id_ = an.id;
 }
 
+// Plans and uploads the parts a factorization will use: the whole tree, or every subtree
+// and the top part of an.partition (any GPU may run any subtree).
+void CudaExecutor::plan_parts(const Analysis& an, bool whole) {
+  const auto& t = an.tree;
+  for (auto* b : {&pool_, &arena_, &panels_}) b->clear();
+  host_arena_.clear();
+  parts_.clear();
+  cur_ = nullptr;
+  planned_ = 0;
+  std::vector<numeric::PartView> views;
+  if (whole) {
+    views.push_back(numeric::PartView::whole(an));
+  } else {
+    const auto& sub = an.partition.subtrees;
+    for (std::size_t i = 0; i < sub.size(); ++i)
+      views.push_back(numeric::PartView::of(sub[i], static_cast<int>(i)));
+    views.push_back(numeric::PartView::of(an.partition.top, static_cast<int>(sub.size())));
+  }
+  plan_device_memory(an, views);
+  pool_.resize(plan_.pool);
+  std::size_t arena = 1, chunk_panels = 1;
+  for (const numeric::PartView& v : views) {
+    arena = std::max(arena, v.cb_layout->arena_size);
+    const PartDevice& pd = parts_.at(v.id);
+    const auto& s = *v.schedule;
+    for (index_t q = 0; q < static_cast<index_t>(s.fronts.size()); ++q)
+      if (!pd.tiled[q] && pd.chunk_end[q] > q) {
+        std::size_t sum = 0;
+        for (index_t r = q; r < pd.chunk_end[q]; ++r)
+          sum += panel_size(t, s.fronts[r], !an.symmetric);
+        chunk_panels = std::max(chunk_panels, sum);
+      }
+  }
+  arena_.resize(std::max<std::size_t>(plan_.arena_device, 1));
+  if (plan_.arena_on_host) host_arena_.resize(arena);
+  // staging for the panels of one chunk, or the whole resident factor
+  panels_.resize(plan_.factor_resident ? std::max<std::size_t>(an.factor_layout.total, 1)
+                                       : chunk_panels);
+  host_staging_.resize(chunk_panels);
+  for (const numeric::PartView& v : views) upload_part(an, v);
+  STRATA_CUDA(cudaStreamSynchronize(stream_));
+  planned_ = whole ? 1 : 2;
+}
+
+// A part's schedule, pool offsets and block locations on the device.
+void CudaExecutor::upload_part(const Analysis& an, const numeric::PartView& v) {
+  const auto& t = an.tree;
+  const index_t nf = t.n_fronts();
+  PartDevice& pd = parts_.at(v.id);
+  upload(pd.fronts, v.schedule->fronts);
+  upload(pd.pos_offset, pd.pos_offset_host);
+  // where each contribution block the part writes or reads lives
+  pd.cb_ptr_host.assign(nf, nullptr);
+  auto place = [&](index_t f) {
+    const std::size_t cb = static_cast<std::size_t>(t.cb_size(f));
+    if (cb == 0 || t.parent[f] < 0) return;
+    const std::size_t off = v.cb_layout->cb_offset[f];
+    pd.cb_ptr_host[f] =
+        off + cb * cb <= plan_.arena_device ? arena_.data() + off : host_arena_.data() + off;
+  };
+  for (const index_t f : v.schedule->fronts) {
+    place(f);
+    for (index_t q = t.child_offsets[f]; q < t.child_offsets[f + 1]; ++q) place(t.children[q]);
+  }
+  upload(pd.cb_ptr, pd.cb_ptr_host);
+  pd.tree = DeviceTree{pd.fronts.data(),  pd.pos_offset.data(), n_rows_.data(),
+                       n_pivots_.data(),  parent_.data(),       entry_offsets_.data(),
+                       entry_src_.data(), entry_dst_.data(),    child_offsets_.data(),
+                       children_.data(),  pd.cb_ptr.data(),     rel_offsets_.data(),
+                       rel_.data()};
+}
+
 void CudaExecutor::factor_batch(const numeric::FactorContext& ctx, const BatchInfo& b) {
+  STRATA_CUDA(cudaSetDevice(device_));
   for (index_t q = b.begin; q < b.end;) {
-    if (tiled_[q]) {
+    if (cur_->tiled[q]) {
       factor_tiled(ctx, q);
       ++q;
     } else {
-      factor_chunk(ctx, q, chunk_end_[q]);
-      q = chunk_end_[q];
+      factor_chunk(ctx, q, cur_->chunk_end[q]);
+      q = cur_->chunk_end[q];
     }
   }
 }
@@ -322,14 +459,15 @@ void grow_potrf_work(cusolverDnHandle_t h, DeviceBuffer<double>& work, double* a
 void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin, index_t end) {
   const Analysis& an = *ctx.analysis;
   const auto& t = an.tree;
-  const auto& s = an.schedule;
+  const auto& s = *ctx.part->schedule;
+  const DeviceTree& tree = cur_->tree;
   const bool lu = ctx.type == MatrixType::general;
   const bool ldlt = ctx.type == MatrixType::symmetric_indefinite;
   const std::int64_t count = end - begin;
   ++chunks_;
   index_t max_rows = 0;
   for (index_t p = begin; p < end; ++p) max_rows = std::max(max_rows, t.n_rows(s.fronts[p]));
-  launch_assemble(tree_, begin, count, max_rows, values_.data(), pool_.data(), !lu, stream_);
+  launch_assemble(tree, begin, count, max_rows, values_.data(), pool_.data(), !lu, stream_);
 
   // small fronts: one launch for the whole chunk
   std::vector<std::int64_t> small, big, perm_off{0};
@@ -353,11 +491,11 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
   potrf_info_.resize(big.size() + 1);
   pivot_size_.resize(perm_off.back() + big_perm + 1);
   if (ldlt)
-    launch_ldlt_small(tree_, small_pos_.data(), static_cast<std::int64_t>(ns), pool_.data(),
+    launch_ldlt_small(tree, small_pos_.data(), static_cast<std::int64_t>(ns), pool_.data(),
                       ctx.static_pivot, perturbed_.data(), perm_.data(), pivot_size_.data(),
                       perm_offset_.data(), stream_);
   else
-    launch_factor_small(tree_, small_pos_.data(), static_cast<std::int64_t>(ns), pool_.data(), lu,
+    launch_factor_small(tree, small_pos_.data(), static_cast<std::int64_t>(ns), pool_.data(), lu,
                         ctx.static_pivot, info_.data(), perturbed_.data(), perm_.data(),
                         perm_offset_.data(), stream_);
 
@@ -368,7 +506,7 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
   for (std::size_t i = 0; i < big.size(); ++i) {
     const index_t p = big[i], f = s.fronts[p];
     const int m = static_cast<int>(t.n_rows(f)), k = static_cast<int>(t.n_pivots(f));
-    double* F = pool_.data() + pos_offset_host_[p];
+    double* F = pool_.data() + cur_->pos_offset_host[p];
     big_perm_at.push_back(perm_at);
     if (ldlt) {
       ldlt_large_.factor(blas_, stream_, F, m, k, ctx.static_pivot, perm_.data() + perm_at,
@@ -410,21 +548,21 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
     }
     perm_at += k;
   }
-  launch_store_cb(tree_, begin, count, max_rows, pool_.data(), !lu, stream_);
+  launch_store_cb(tree, begin, count, max_rows, pool_.data(), !lu, stream_);
 
   // factor panels: packed into the device factor (resident) or the chunk's staging
-  // area, then to the host in one copy
-  const std::size_t base = an.factor_layout.panel_offset[s.fronts[begin]];
+  // area (in chunk order: for the whole tree that is the layout's order), then to the
+  // host in one copy
   std::vector<std::int64_t> stage_off(count);
   std::size_t total = 0;
   for (std::int64_t i = 0; i < count; ++i) {
     const index_t f = s.fronts[begin + i];
-    stage_off[i] = static_cast<std::int64_t>(an.factor_layout.panel_offset[f] -
-                                             (plan_.factor_resident ? 0 : base));
+    stage_off[i] =
+        static_cast<std::int64_t>(keep_resident() ? an.factor_layout.panel_offset[f] : total);
     total += panel_size(t, f, lu);
   }
   upload(stage_offset_, stage_off);
-  launch_pack_panels(tree_, begin, count, max_rows, pool_.data(), stage_offset_.data(),
+  launch_pack_panels(tree, begin, count, max_rows, pool_.data(), stage_offset_.data(),
                      panels_.data(), lu, stream_);
   copy_panels_back(ctx, begin, end);
   const std::size_t nall = ns + big.size();
@@ -462,9 +600,9 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
                                       ctx.factor->pivot_size.data() + p0, ps);
       ps.perturbed = perturbed[i];
     }
-    if (plan_.factor_resident) {  // the device copy of the panels still holds D
+    if (keep_resident()) {  // the device copy of the panels still holds D
       upload(psize_at_, psize_at);
-      launch_ldlt_unit_panels(tree_, begin, count, stage_offset_.data(), pivot_size_.data(),
+      launch_ldlt_unit_panels(tree, begin, count, stage_offset_.data(), pivot_size_.data(),
                               psize_at_.data(), panels_.data(), stream_);
     }
     return;
@@ -477,22 +615,34 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
                  perturbed[ns + i], perm.data() + big_perm_at[i]);
 }
 
-// The panels of positions [begin, end) — contiguous in the factor layout — to the host
-// factor through the pinned staging buffer.
+// The panels of positions [begin, end) to the host factor through the pinned staging
+// buffer: for the whole tree they are contiguous in the factor layout (one copy); for a
+// part they are staged in chunk order and placed front by front.
 void CudaExecutor::copy_panels_back(const numeric::FactorContext& ctx, index_t begin, index_t end) {
   const Analysis& an = *ctx.analysis;
   const auto& t = an.tree;
-  const auto& s = an.schedule;
+  const auto& s = *ctx.part->schedule;
   const bool lu = !an.symmetric;
-  const std::size_t base = an.factor_layout.panel_offset[s.fronts[begin]];
-  const index_t last = s.fronts[end - 1];
-  const std::size_t total = an.factor_layout.panel_offset[last] + panel_size(t, last, lu) - base;
+  std::size_t total = 0;
+  for (index_t q = begin; q < end; ++q) total += panel_size(t, s.fronts[q], lu);
   if (total == 0) return;
-  const double* src = panels_.data() + (plan_.factor_resident ? base : 0);
+  const std::size_t base = an.factor_layout.panel_offset[s.fronts[begin]];
+  const double* src = panels_.data() + (keep_resident() ? base : 0);
   STRATA_CUDA(cudaMemcpyAsync(host_staging_.data(), src, sizeof(double) * total,
                               cudaMemcpyDeviceToHost, stream_));
   STRATA_CUDA(cudaStreamSynchronize(stream_));
-  std::memcpy(ctx.factor->panels.data() + base, host_staging_.data(), sizeof(double) * total);
+  if (whole_) {
+    std::memcpy(ctx.factor->panels.data() + base, host_staging_.data(), sizeof(double) * total);
+  } else {
+    std::size_t at = 0;
+    for (index_t q = begin; q < end; ++q) {
+      const index_t f = s.fronts[q];
+      const std::size_t sz = panel_size(t, f, lu);
+      std::memcpy(ctx.factor->panels.data() + an.factor_layout.panel_offset[f],
+                  host_staging_.data() + at, sizeof(double) * sz);
+      at += sz;
+    }
+  }
   bytes_d2h_ += sizeof(double) * total;
 }
 
@@ -551,10 +701,23 @@ namespace strata::numeric {
 
 bool cuda_available() { return cuda::device_present(); }
 
-std::unique_ptr<Executor> make_cuda_executor(const Options& opts) {
+int cuda_device_count() {
+  int count = 0;
+  if (cudaGetDeviceCount(&count) != cudaSuccess) {
+    (void)cudaGetLastError();
+    return 0;
+  }
+  return count;
+}
+
+std::unique_ptr<Executor> make_cuda_executor(const Options& opts, int device) {
   if (!cuda::device_present())
     throw NotSupported("the CUDA backend was asked for, but no CUDA GPU is visible");
-  return std::make_unique<cuda::CudaExecutor>(opts);
+  const int count = cuda_device_count();
+  if (device < 0 || device >= count)
+    throw NotSupported("CUDA device " + std::to_string(device) + " was asked for, " +
+                       std::to_string(count) + " are visible");
+  return std::make_unique<cuda::CudaExecutor>(opts, device);
 }
 
 }  // namespace strata::numeric

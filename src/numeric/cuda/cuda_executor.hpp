@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cstdint>
+#include <map>
 #include <vector>
 
 #include "numeric/cuda/cuda_check.hpp"
@@ -27,6 +28,20 @@ struct DevicePlan {
   std::int64_t slab = 0;         ///< slab width for fronts factored tile by tile
 };
 
+/// What the executor keeps on the device for one part of the tree (the whole tree, or a
+/// subtree / the top part of a multi-GPU split): the part's schedule, where each of its
+/// fronts sits in the pool, how its batches are cut into chunks, where each contribution
+/// block it reads or writes lives, and the kernels' view of all that.
+struct PartDevice {
+  DeviceBuffer<std::int64_t> fronts, pos_offset;
+  DeviceBuffer<double*> cb_ptr;
+  std::vector<std::int64_t> pos_offset_host;  ///< offset in the pool (current chunk)
+  std::vector<char> tiled;                    ///< per position: factored tile by tile
+  std::vector<index_t> chunk_end;             ///< per position starting a chunk: its end
+  std::vector<double*> cb_ptr_host;           ///< per front: where its block lives
+  DeviceTree tree{};
+};
+
 /// Grows `work` to cuSOLVER's workspace for a POTRF of order k, leading dimension ld.
 void grow_potrf_work(cusolverDnHandle_t h, DeviceBuffer<double>& work, double* a, int k, int ld);
 
@@ -36,8 +51,12 @@ class CudaExecutor final : public numeric::Executor {
   explicit CudaExecutor(const Options& o, int device = 0);
   ~CudaExecutor() override;
   const char* name() const override { return "cuda"; }
+  int device() const override { return device_; }
   void begin(const numeric::FactorContext& ctx) override;
+  void begin_part(const numeric::FactorContext& ctx) override;
   void factor_batch(const numeric::FactorContext& ctx, const BatchInfo& b) override;
+  std::size_t export_cb(const numeric::FactorContext& ctx, numeric::CbTransfer& t) override;
+  std::size_t import_cb(const numeric::FactorContext& ctx, const numeric::CbTransfer& t) override;
   void end(const numeric::FactorContext& ctx) override;
   bool solve(const Analysis& an, const numeric::NumericFactor& fac, double* x,
              index_t nrhs) override;
@@ -45,7 +64,11 @@ class CudaExecutor final : public numeric::Executor {
 
  private:
   void upload_analysis(const Analysis& an);
-  void plan_device_memory(const Analysis& an);
+  void plan_parts(const Analysis& an, bool whole);
+  void plan_device_memory(const Analysis& an, const std::vector<numeric::PartView>& views);
+  void upload_part(const Analysis& an, const numeric::PartView& v);
+  /// The factor stays on the device only for a whole-tree factorization.
+  bool keep_resident() const { return plan_.factor_resident && whole_; }
   void factor_chunk(const numeric::FactorContext& ctx, index_t begin, index_t end);
   void factor_tiled(const numeric::FactorContext& ctx, index_t pos);
   void finish_front(const numeric::FactorContext& ctx, index_t f, std::int64_t bad,
@@ -65,15 +88,16 @@ class CudaExecutor final : public numeric::Executor {
   std::size_t limit_ = 0;
   std::uint64_t analysis_id_ = 0;
   DevicePlan plan_;
-  // analysis arrays
-  DeviceBuffer<std::int64_t> fronts_, pos_offset_, n_rows_, n_pivots_, parent_, entry_offsets_,
-      entry_src_, entry_dst_, child_offsets_, children_, rel_offsets_, rel_;
-  DeviceBuffer<double*> cb_ptr_;
-  DeviceTree tree_{};
-  std::vector<std::int64_t> pos_offset_host_;  ///< offset in the pool (current chunk)
-  std::vector<char> tiled_;                    ///< per position: factored tile by tile
-  std::vector<index_t> chunk_end_;             ///< per position starting a chunk: its end
-  std::vector<double*> cb_ptr_host_;           ///< per front: where its block lives
+  // analysis arrays (fronts_: the whole tree's schedule, for the device solve)
+  DeviceBuffer<std::int64_t> fronts_, n_rows_, n_pivots_, parent_, entry_offsets_, entry_src_,
+      entry_dst_, child_offsets_, children_, rel_offsets_, rel_;
+  std::map<int, PartDevice> parts_;  ///< by PartView::id: -1 whole tree, 0..P subtrees, top
+  PartDevice* cur_ = nullptr;        ///< the part being factored
+  bool whole_ = true;                ///< the last factorization was of the whole tree
+  int planned_ = 0;                  ///< parts_ planned for: 0 nothing, 1 whole, 2 split
+  /// Blocks of subtree roots exported for a peer copy (or the same device), kept until
+  /// the next factorization: the arena they came from is reused by the next subtree.
+  std::map<index_t, DeviceBuffer<double>> outbox_;
   // numeric working memory
   DeviceBuffer<double> values_, arena_, pool_, potrf_work_, panels_;
   PinnedBuffer<double> host_arena_, host_front_, host_staging_;

@@ -13,8 +13,8 @@ namespace strata::cuda {
 
 bool CudaExecutor::solve(const Analysis& an, const numeric::NumericFactor& fac, double* x,
                          index_t nrhs) {
-  if (!plan_.factor_resident || resident_for_ != &fac || resident_analysis_ != an.id ||
-      !fac.valid || an.id != analysis_id_)
+  if (!keep_resident() || resident_for_ != &fac || resident_analysis_ != an.id || !fac.valid ||
+      an.id != analysis_id_)
     return false;
   if (an.n == 0 || nrhs == 0) return true;
   STRATA_CUDA(cudaSetDevice(device_));

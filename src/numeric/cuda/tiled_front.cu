@@ -55,7 +55,7 @@ void copy_block(cudaStream_t s, double* d, const double* h, std::int64_t ldh, st
 void CudaExecutor::factor_tiled(const numeric::FactorContext& ctx, index_t pos) {
   const Analysis& an = *ctx.analysis;
   const auto& t = an.tree;
-  const index_t f = an.schedule.fronts[pos];
+  const index_t f = ctx.part->schedule->fronts[pos];
   const bool lu = ctx.type == MatrixType::general;
   const std::int64_t m = t.n_rows(f), k = t.n_pivots(f);
   if (ctx.type == MatrixType::symmetric_indefinite)
@@ -67,7 +67,7 @@ void CudaExecutor::factor_tiled(const numeric::FactorContext& ctx, index_t pos) 
   ++chunks_;
   host_front_.resize(static_cast<std::size_t>(m) * m);
   double* H = host_front_.data();
-  launch_assemble(tree_, pos, 1, m, values_.data(), H, !lu, stream_);  // pos_offset[pos] is 0
+  launch_assemble(cur_->tree, pos, 1, m, values_.data(), H, !lu, stream_);  // pos_offset[pos] is 0
   STRATA_CUDA(cudaStreamSynchronize(stream_));
 
   const std::int64_t w_max = std::max<std::int64_t>(
@@ -174,7 +174,7 @@ void CudaExecutor::factor_tiled(const numeric::FactorContext& ctx, index_t pos) 
   // contribution block to where the plan keeps it; panels to the host factor
   const std::int64_t mc = m - k;
   if (mc > 0 && t.parent[f] >= 0)
-    STRATA_CUDA(cudaMemcpy2DAsync(cb_ptr_host_[f], sizeof(double) * mc, H + k * m + k,
+    STRATA_CUDA(cudaMemcpy2DAsync(cur_->cb_ptr_host[f], sizeof(double) * mc, H + k * m + k,
                                   sizeof(double) * m, sizeof(double) * mc, mc, cudaMemcpyDefault,
                                   stream_));
   double* panel = ctx.factor->panels.data() + an.factor_layout.panel_offset[f];
@@ -182,7 +182,7 @@ void CudaExecutor::factor_tiled(const numeric::FactorContext& ctx, index_t pos) 
   if (lu)
     for (std::int64_t j = 0; j < mc; ++j)
       for (std::int64_t i = 0; i < k; ++i) panel[m * k + j * k + i] = H[(k + j) * m + i];
-  if (plan_.factor_resident) {
+  if (keep_resident()) {
     const std::size_t sz = panel_size(t, f, lu);
     STRATA_CUDA(cudaMemcpyAsync(panels_.data() + an.factor_layout.panel_offset[f], panel,
                                 sizeof(double) * sz, cudaMemcpyHostToDevice, stream_));

@@ -1,0 +1,144 @@
+// strata benchmark — the multi-worker factorization (experiment 3: GPU count 1, 2, 4,
+// with the ablation of balanced bisection, additional subtrees and work stealing).
+//
+// For each problem and each configuration (workers × subtrees per worker × balance by
+// work on/off × work stealing on/off): the analysis figures of the tree split (ordering
+// time, the part spent balancing the bisections by work, bisections redone, nnz(L),
+// flops, subtrees, LPT balance, share of the flops in the top part) and, unless
+// --no-factor, the median factorization time over --repeat runs, the backward error of
+// one solve and the per-worker statistics of the last run (busy, idle, subtrees run and
+// stolen, bytes transferred). --backend cuda runs on that many GPUs (the lent machines);
+// --backend cpu stands N host executors of --threads-per-worker threads each in for N
+// GPUs (the same driver, for machines without GPUs). Results: bench/results/multigpu-*.json.
+//
+//   bench_multigpu [--problems a,b,...] [--backend cpu|cuda] [--workers 1,2,4]
+//                  [--subtrees 4] [--balance on,off] [--stealing on,off] [--repeat R]
+//                  [--threads-per-worker T] [--no-factor] [--tag NAME] [--results-dir DIR]
+#include <fmt/core.h>
+
+#include <CLI/CLI.hpp>
+#include <algorithm>
+
+#include "bench_common.hpp"
+#include "core/solver_internal.hpp"
+#include "core/timer.hpp"
+#include "strata/strata.hpp"
+
+using namespace strata;
+using json = nlohmann::json;
+
+int main(int argc, char** argv) {
+  CLI::App app{"strata multi-worker factorization benchmark"};
+  std::vector<std::string> problems = {"lap3d-30", "elast3d-14"};
+  std::vector<int> workers = {1, 2, 4}, subtrees = {4};
+  std::vector<std::string> balance = {"on", "off"}, stealing = {"on"};
+  std::string backend = "cpu";
+  int repeat = 3, threads_per_worker = 1;
+  bool no_factor = false;
+  std::string tag, results_dir;
+  app.add_option("--problems", problems, "problems (shared matrix names, lap3d-N, elast3d-N, ...)")
+      ->delimiter(',');
+  app.add_option("--backend", backend, "cuda: GPUs; cpu: host executors standing in for GPUs")
+      ->check(CLI::IsMember({"cpu", "cuda"}));
+  app.add_option("--workers", workers, "worker (GPU) counts")->delimiter(',');
+  app.add_option("--subtrees", subtrees, "subtrees per worker")->delimiter(',');
+  app.add_option("--balance", balance, "balance the top bisections by work: on, off")
+      ->delimiter(',');
+  app.add_option("--stealing", stealing, "work stealing: on, off")->delimiter(',');
+  app.add_option("--repeat", repeat, "factorizations per measurement (median reported)");
+  app.add_option("--threads-per-worker", threads_per_worker, "host threads of each CPU worker");
+  app.add_flag("--no-factor", no_factor, "analysis figures only");
+  app.add_option("--tag", tag, "label stored in the results and the file name")
+      ->check(bench::check_tag);
+  app.add_option("--results-dir", results_dir, "folder for the results file");
+  CLI11_PARSE(app, argc, argv);
+
+  json out = bench::run_metadata(argc, argv);
+  out["benchmark"] = "multigpu";
+  out["backend"] = backend;
+  out["tag"] = tag;
+  out["rows"] = json::array();
+  fmt::print(
+      "{:<12} {:>2} {:>2} {:>3} {:>3} {:>8} {:>8} {:>5} {:>9} {:>4} {:>7} {:>6} {:>8} {:>8}\n",
+      "problem", "W", "s", "bal", "stl", "order s", "bal s", "rebis", "flops", "subt", "balance",
+      "top %", "factor s", "berr");
+  for (const std::string& name : problems) {
+    const bench::Problem p = bench::load_problem(name);
+    std::vector<double> b(p.a.n_rows);
+    {
+      std::vector<double> ones(p.a.n_rows, 1.0);
+      multiply(p.a, ones.data(), b.data());
+    }
+    for (int w : workers)
+      for (int s : subtrees)
+        for (const std::string& bal : balance)
+          for (const std::string& stl : stealing) {
+            Options o;
+            o.type = p.symmetric ? MatrixType::spd : MatrixType::general;
+            o.subtrees_per_gpu = s;
+            o.balance_by_work = bal == "on";
+            o.work_stealing = stl == "on";
+            o.num_threads = threads_per_worker;
+            if (backend == "cuda") {
+              o.backend = Backend::cuda;
+              o.num_gpus = w;
+            }
+            Solver solver(o);
+            if (backend == "cpu") {
+              numeric::MultiWorkerConfig cfg;
+              cfg.work_stealing = o.work_stealing;
+              detail::SolverAccess::use_host_workers(solver, w, threads_per_worker, cfg);
+            }
+            solver.analyze(p.a);
+            const AnalysisStats an = solver.stats().analysis;
+            json row = {{"problem", name},
+                        {"n", an.n},
+                        {"workers", w},
+                        {"subtrees_per_worker", s},
+                        {"balance_by_work", bal == "on"},
+                        {"work_stealing", stl == "on"},
+                        {"ordering_seconds", an.ordering_seconds},
+                        {"nd_balance_seconds", an.nd_balance_seconds},
+                        {"nd_rebisections", an.nd_rebisections},
+                        {"nnz_l", an.nnz_l},
+                        {"flops", an.factor_flops},
+                        {"subtrees", an.subtrees},
+                        {"subtree_balance", an.subtree_balance},
+                        {"top_flops_fraction", an.top_flops_fraction}};
+            double ts = 0, berr = 0;
+            if (!no_factor) {
+              std::vector<double> times;
+              for (int k = 0; k < repeat; ++k) {
+                Timer t;
+                solver.factorize(p.a);
+                times.push_back(t.seconds());
+              }
+              ts = bench::median(times);
+              const auto x = solver.solve(b);
+              berr = bench::berr(p.a, x, b);
+              json devices = json::array();
+              for (const DeviceStats& d : solver.stats().factor.devices)
+                devices.push_back({{"device", d.device},
+                                   {"busy_seconds", d.busy_seconds},
+                                   {"idle_seconds", d.idle_seconds},
+                                   {"subtrees_run", d.subtrees_run},
+                                   {"subtrees_stolen", d.subtrees_stolen},
+                                   {"bytes_transferred", d.bytes_transferred},
+                                   {"flops", d.flops}});
+              row["factor_seconds"] = ts;
+              row["backward_error"] = berr;
+              row["devices"] = devices;
+            }
+            out["rows"].push_back(row);
+            fmt::print(
+                "{:<12} {:>2} {:>2} {:>3} {:>3} {:>8.3f} {:>8.3f} {:>5} {:>9.3g} {:>4} {:>7.3f} "
+                "{:>6.1f} {:>8.3f} {:>8.1e}\n",
+                name, w, s, bal, stl, an.ordering_seconds, an.nd_balance_seconds,
+                an.nd_rebisections, an.factor_flops, an.subtrees, an.subtree_balance,
+                100 * an.top_flops_fraction, ts, berr);
+            std::fflush(stdout);
+          }
+  }
+  fmt::print("results: {}\n", bench::write_result(out, "multigpu", results_dir));
+  return 0;
+}

@@ -1,0 +1,188 @@
+// strata — the split of the assembly tree into subtrees for several workers
+// (see tree_partition.hpp).
+//
+// What: Geist & Ng's subtree-splitting heuristic ("Task scheduling for parallel sparse
+// Cholesky factorization", Int. J. Parallel Programming 18, 1989), the layer of
+// independent subtrees that MUMPS calls L0 (Amestoy, Duff, Koster & L'Excellent, SIAM J.
+// Matrix Anal. Appl. 23, 2001): keep a set of disjoint subtrees, initially the roots',
+// and split the heaviest into its children's subtrees until there are enough of them
+// and their largest-processing-time-first assignment (Graham, SIAM J. Appl. Math. 17,
+// 1969) onto the workers is balanced. The fronts of split subtrees' roots form the top
+// part.
+//
+// Why score every state: Geist & Ng stop at the first balanced state, which is what we do
+// when the tree allows it; but on a chain-like tree (separator blocking makes chains)
+// balance may only come after moving much of the work into the top part, which one worker
+// factors after all subtrees. Each state s gets the estimate T(s) = LPT makespan + top
+// work, and the best state with at least workers × subtrees_per_worker subtrees (or the
+// best of all when the tree never yields that many) is kept. The states form a sequence
+// of splits, so the kept one is rebuilt by replaying a prefix.
+//
+// Then each part gets its own level schedule, memory plan (same budget) and arena
+// layout, so that a worker can factor it alone: fronts are numbered in postorder, so a
+// subtree is the contiguous range first_descendant(root) .. root.
+#include "schedule/tree_partition.hpp"
+
+#include <algorithm>
+#include <queue>
+#include <string>
+
+#include "strata/errors.hpp"
+
+namespace strata::schedule {
+namespace {
+
+// Sum of `work` and the LPT makespan of the subtrees in `set` (sorted by decreasing work).
+struct Score {
+  double subtree_work = 0;
+  double makespan = 0;
+};
+
+Score score(const std::vector<index_t>& set, const std::vector<double>& w, int workers) {
+  std::vector<double> items;
+  items.reserve(set.size());
+  Score s;
+  for (const index_t r : set) {
+    items.push_back(w[r]);
+    s.subtree_work += w[r];
+  }
+  std::sort(items.begin(), items.end(), std::greater<>());
+  lpt_assign(items, workers, &s.makespan);
+  return s;
+}
+
+FactorPart make_part(const symbolic::AssemblyTree& t, index_t root, std::vector<index_t> fronts,
+                     const PartitionOptions& o) {
+  FactorPart p;
+  p.root = root;
+  p.fronts = std::move(fronts);
+  for (const index_t f : p.fronts) p.work += symbolic::front_flops(t, f);
+  p.schedule = symbolic::level_schedule(t, p.fronts);
+  p.plan = plan_memory(t, p.schedule, o.budget, o.unsymmetric);
+  p.cb_layout = plan_cb_layout(t, p.schedule);
+  p.imports = imported_children(t, p.schedule);
+  return p;
+}
+
+}  // namespace
+
+std::vector<int> lpt_assign(const std::vector<double>& work, int workers, double* makespan) {
+  std::vector<int> owner(work.size(), 0);
+  std::vector<double> load(std::max(workers, 1), 0.0);
+  for (std::size_t i = 0; i < work.size(); ++i) {
+    const auto k = std::min_element(load.begin(), load.end()) - load.begin();
+    owner[i] = static_cast<int>(k);
+    load[k] += work[i];
+  }
+  if (makespan) *makespan = *std::max_element(load.begin(), load.end());
+  return owner;
+}
+
+TreePartition partition_tree(const symbolic::AssemblyTree& t, const PartitionOptions& o) {
+  if (o.workers < 1 || o.subtrees_per_worker < 1)
+    throw InvalidInput("partition_tree: workers (" + std::to_string(o.workers) +
+                       ") and subtrees_per_worker (" + std::to_string(o.subtrees_per_worker) +
+                       ") must be at least 1");
+  const index_t nf = t.n_fronts();
+  TreePartition out;
+  out.workers = o.workers;
+  // subtree work and first descendant (postorder: children before parents)
+  std::vector<double> w(nf, 0.0);
+  std::vector<index_t> first(nf);
+  for (index_t f = 0; f < nf; ++f) {
+    w[f] += symbolic::front_flops(t, f);
+    first[f] = f;
+  }
+  for (index_t f = 0; f < nf; ++f)
+    if (t.parent[f] >= 0) {
+      w[t.parent[f]] += w[f];
+      first[t.parent[f]] = std::min(first[t.parent[f]], first[f]);
+    }
+  for (index_t f = 0; f < nf; ++f)
+    if (t.parent[f] < 0) out.total_work += w[f];
+
+  // the splitting sequence: heaviest first (ties: the larger front number, a fixed rule)
+  const auto heavier = [&](index_t a, index_t b) { return w[a] < w[b] || (w[a] == w[b] && a < b); };
+  std::priority_queue<index_t, std::vector<index_t>, decltype(heavier)> heap(heavier);
+  std::vector<index_t> set;
+  for (index_t f = 0; f < nf; ++f)
+    if (t.parent[f] < 0) {
+      heap.push(f);
+      set.push_back(f);
+    }
+  const auto target = static_cast<std::size_t>(o.workers) * o.subtrees_per_worker;
+  const std::size_t cap = 64 * target;  // bounds the search on degenerate trees
+  std::vector<index_t> sequence;        // the fronts split, in order
+  double top_work = 0;
+  auto estimate = [&](std::size_t count, double* makespan, double* mean) {
+    // the heap holds exactly the current set
+    std::vector<index_t> cur;
+    cur.reserve(count);
+    auto copy = heap;
+    while (!copy.empty()) {
+      cur.push_back(copy.top());
+      copy.pop();
+    }
+    const Score s = score(cur, w, o.workers);
+    *makespan = s.makespan;
+    *mean = s.subtree_work / o.workers;
+    return s.makespan + top_work;
+  };
+  std::size_t best_k = 0;
+  bool best_enough = false;
+  double best_time = 0;
+  for (std::size_t k = 0;; ++k) {
+    double makespan = 0, mean = 0;
+    const double time = estimate(heap.size(), &makespan, &mean);
+    const bool enough = heap.size() >= target;
+    if (k == 0 || (enough && !best_enough) || (enough == best_enough && time < best_time)) {
+      best_k = k;
+      best_time = time;
+      best_enough = enough;
+    }
+    if (heap.empty() || (enough && makespan <= (1 + o.tolerance) * mean) || heap.size() >= cap)
+      break;
+    const index_t h = heap.top();
+    if (t.child_offsets[h + 1] == t.child_offsets[h]) break;  // a single front: cannot split
+    heap.pop();
+    top_work += symbolic::front_flops(t, h);
+    for (index_t q = t.child_offsets[h]; q < t.child_offsets[h + 1]; ++q) heap.push(t.children[q]);
+    sequence.push_back(h);
+  }
+
+  // replay the kept prefix
+  std::vector<char> split(nf, 0);
+  for (std::size_t k = 0; k < best_k; ++k) split[sequence[k]] = 1;
+  std::vector<index_t> roots;
+  for (index_t f = nf - 1; f >= 0; --f) {
+    // f is a subtree root when it is not split and its parent is split or absent
+    const index_t p = t.parent[f];
+    if (!split[f] && (p < 0 || split[p])) roots.push_back(f);
+  }
+  std::sort(roots.begin(), roots.end(),
+            [&](index_t a, index_t b) { return w[a] > w[b] || (w[a] == w[b] && a < b); });
+  out.splits = static_cast<index_t>(best_k);
+  out.part_of.assign(nf, -1);
+  std::vector<double> items;
+  for (std::size_t i = 0; i < roots.size(); ++i) {
+    const index_t r = roots[i];
+    std::vector<index_t> fronts;
+    for (index_t f = first[r]; f <= r; ++f) {
+      fronts.push_back(f);
+      out.part_of[f] = static_cast<index_t>(i);
+    }
+    out.subtrees.push_back(make_part(t, r, std::move(fronts), o));
+    items.push_back(w[r]);
+  }
+  double makespan = 0, sum = 0;
+  out.owner = lpt_assign(items, o.workers, &makespan);
+  for (double x : items) sum += x;
+  out.balance = sum > 0 ? makespan / (sum / o.workers) : 1.0;
+  std::vector<index_t> top;
+  for (index_t f = 0; f < nf; ++f)
+    if (out.part_of[f] < 0) top.push_back(f);
+  out.top = make_part(t, -1, std::move(top), o);
+  return out;
+}
+
+}  // namespace strata::schedule

@@ -1,0 +1,260 @@
+// strata — multi-GPU tests (ctest label `gpu`): the tree split over 2 and 4 GPUs, one
+// CUDA executor per GPU (numeric/multi_device.cpp), checked against one GPU and the CPU on
+// the same analysis, through the Solver (solve, refactorization, per-GPU statistics),
+// with a slowed GPU whose subtrees are stolen, for spd, symmetric indefinite and general
+// matrices. Each test skips, with a message, where fewer GPUs are visible than it needs
+// (or the build has no CUDA backend).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <string>
+
+#include "core/analysis.hpp"
+#include "numeric/factor.hpp"
+#include "sparse/generators.hpp"
+#include "strata/strata.hpp"
+#include "support/test_support.hpp"
+
+namespace strata {
+namespace {
+
+#define REQUIRE_GPUS(k)                                                        \
+  if (numeric::cuda_device_count() < (k))                                      \
+  GTEST_SKIP() << (k) << " CUDA GPUs needed, " << numeric::cuda_device_count() \
+               << " visible (or this build has no CUDA backend): multi-GPU test skipped"
+
+struct Problem {
+  std::string name;
+  SparseMatrix a;
+  MatrixType type;
+};
+
+std::vector<Problem> problems(std::mt19937_64& rng) {
+  std::vector<Problem> p;
+  p.push_back({"lap3d 22", generators::laplacian_3d(22, 22, 22), MatrixType::spd});
+  p.push_back({"elasticity 10", generators::elasticity_3d(10, 10, 10), MatrixType::spd});
+  p.push_back(
+      {"bcsstk16", read_matrix_market(test::matrix_path("bcsstk16")).matrix, MatrixType::spd});
+  p.push_back(
+      {"random spd 733", test::random_sparse(733, 3, test::RandomKind::spd, rng), MatrixType::spd});
+  p.push_back({"hangGlider_2", read_matrix_market(test::matrix_path("hangGlider_2")).matrix,
+               MatrixType::symmetric_indefinite});
+  p.push_back({"random kkt 733", test::random_kkt(733, rng), MatrixType::symmetric_indefinite});
+  {  // shifted Laplacian: indefinite with a positive diagonal, large LDLᵀ fronts
+    SparseMatrix a = generators::laplacian_3d(18, 18, 18);
+    for (index_t j = 0; j < a.n_cols; ++j)
+      for (index_t q = a.offsets[j]; q < a.offsets[j + 1]; ++q)
+        if (a.indices[q] == j) a.values[q] -= 2.5;
+    p.push_back({"shifted lap3d 18", std::move(a), MatrixType::symmetric_indefinite});
+  }
+  {
+    SparseMatrix a = expand_symmetric(generators::elasticity_3d(8, 8, 8));
+    std::uniform_real_distribution<double> u(0.5, 1.5);
+    for (double& v : a.values) v *= u(rng);  // unsymmetric values: large LU fronts
+    p.push_back({"unsymmetric elasticity 8", std::move(a), MatrixType::general});
+  }
+  p.push_back(
+      {"watt_2", read_matrix_market(test::matrix_path("watt_2")).matrix, MatrixType::general});
+  p.push_back({"random general 1500", test::random_sparse(1500, 4, test::RandomKind::general, rng),
+               MatrixType::general});
+  return p;
+}
+
+std::vector<double> scaled_values(const Analysis& an, const SparseMatrix& a, double* pivot) {
+  const SparseMatrix c = canonical_values(an, a);
+  std::vector<double> v(c.nnz());
+  double mx = 0;
+  for (index_t j = 0; j < c.n_cols; ++j)
+    for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) {
+      const index_t i = c.indices[p];
+      v[p] = an.row_scaling.empty() ? c.values[p]
+                                    : c.values[p] * an.row_scaling[i] * an.col_scaling[j];
+      mx = std::max(mx, std::abs(v[p]));
+    }
+  *pivot = 1e-8 * std::max(mx, 1.0);
+  return v;
+}
+
+// max |x − y| / max |y| over the factor panels
+double panel_difference(const numeric::NumericFactor& x, const numeric::NumericFactor& y) {
+  double num = 0, den = 0;
+  for (std::size_t i = 0; i < y.panels.size(); ++i) {
+    num = std::max(num, std::abs(x.panels[i] - y.panels[i]));
+    den = std::max(den, std::abs(y.panels[i]));
+  }
+  return den > 0 ? num / den : num;
+}
+
+// x (tree numbering) = A⁻¹ b from a factor, without refinement: the scaling and
+// permutations the Solver applies, then solve_in_place.
+std::vector<double> solve_with(const Analysis& an, const numeric::NumericFactor& f,
+                               const std::vector<double>& b) {
+  const index_t n = an.n;
+  const bool scale = !an.row_scaling.empty(), match = !an.matching_perm.empty();
+  std::vector<double> w(n), x(n);
+  for (index_t k = 0; k < n; ++k) {
+    const index_t i = an.perm[k];
+    w[k] = b[i] * (scale ? an.row_scaling[i] : 1.0);
+  }
+  numeric::solve_in_place(an, f, w.data(), 1);
+  for (index_t k = 0; k < n; ++k) {
+    const index_t col = match ? an.matching_perm[an.perm[k]] : an.perm[k];
+    x[col] = w[k] * (scale ? an.col_scaling[col] : 1.0);
+  }
+  return x;
+}
+
+void factor_on_gpus(int gpus) {
+  auto rng = test::fresh_rng();
+  for (const Problem& pr : problems(rng)) {
+    SCOPED_TRACE(pr.name + ", " + std::to_string(gpus) + " GPUs");
+    Options o;
+    o.type = pr.type;
+    const Analysis an = analyze_matrix(pr.a, o, gpus);
+    ASSERT_EQ(an.partition.workers, gpus);
+    double pivot = 0;
+    const std::vector<double> v = scaled_values(an, pr.a, &pivot);
+    numeric::NumericFactor cpu_f, gpu1_f, multi_f;
+    std::vector<double> arena;
+    numeric::factorize(an, v, pr.type, pivot, *numeric::make_cpu_executor(2), cpu_f, arena);
+    numeric::factorize(an, v, pr.type, pivot, *numeric::make_cuda_executor(o, 0), gpu1_f, arena);
+    std::vector<std::unique_ptr<numeric::Executor>> ex;
+    std::vector<numeric::Executor*> execs;
+    for (int d = 0; d < gpus; ++d) {
+      ex.push_back(numeric::make_cuda_executor(o, d));
+      execs.push_back(ex.back().get());
+    }
+    std::vector<std::vector<double>> arenas;
+    std::vector<DeviceStats> dev;
+    numeric::factorize_multi(an, v, pr.type, pivot, execs, multi_f, arenas, {}, &dev);
+    // every front was factored by one GPU as on one GPU alone
+    EXPECT_LT(panel_difference(multi_f, gpu1_f), 1e-13);
+    EXPECT_EQ(multi_f.rows, gpu1_f.rows);
+    if (pr.type == MatrixType::spd) {  // no pivoting: entrywise against the CPU
+      EXPECT_LT(panel_difference(multi_f, cpu_f), 1e-12);
+      EXPECT_EQ(multi_f.rows, cpu_f.rows);
+    }
+    std::vector<double> b(pr.a.n_rows);
+    std::uniform_real_distribution<double> u(-1, 1);
+    for (double& x : b) x = u(rng);
+    const auto xm = solve_with(an, multi_f, b), xc = solve_with(an, cpu_f, b);
+    EXPECT_LT(test::relative_difference(xm, xc), 1e-8);
+    ASSERT_EQ(dev.size(), static_cast<std::size_t>(gpus));
+    index_t run = 0;
+    for (int d = 0; d < gpus; ++d) {
+      EXPECT_EQ(dev[d].device, "cuda:" + std::to_string(d));
+      run += dev[d].subtrees_run;
+    }
+    EXPECT_EQ(run, static_cast<index_t>(an.partition.subtrees.size()));
+  }
+}
+
+TEST(MultiGpu, TwoGpusMatchOneGpuAndCpu) {
+  REQUIRE_GPUS(2);
+  factor_on_gpus(2);
+}
+
+TEST(MultiGpu, FourGpusMatchOneGpuAndCpu) {
+  REQUIRE_GPUS(4);
+  factor_on_gpus(4);
+}
+
+// Through the Solver: num_gpus 2 and 4 against the CPU backend; refactorization with new
+// values agrees with a fresh factorization on the same analysis; per-GPU statistics.
+TEST(MultiGpu, SolverSolutionsAndRefactorization) {
+  REQUIRE_GPUS(2);
+  auto rng = test::fresh_rng();
+  std::uniform_real_distribution<double> u(-1, 1), scale(0.8, 1.2);
+  for (int gpus : {2, 4}) {
+    if (numeric::cuda_device_count() < gpus) continue;
+    for (const Problem& pr : problems(rng)) {
+      SCOPED_TRACE(pr.name + ", " + std::to_string(gpus) + " GPUs");
+      const SparseMatrix& a = pr.a;
+      std::vector<double> b(a.n_rows);
+      for (double& x : b) x = u(rng);
+      Options o;
+      o.type = pr.type;
+      Solver cpu(o);
+      o.backend = Backend::cuda;
+      o.num_gpus = gpus;
+      Solver gpu(o);
+      cpu.factorize(a);
+      gpu.factorize(a);
+      const auto xc = cpu.solve(b), xg = gpu.solve(b);
+      const Stats& st = gpu.stats();
+      EXPECT_EQ(st.analysis.workers, gpus);
+      EXPECT_EQ(st.factor.backend, "cuda");
+      EXPECT_FALSE(st.factor.factor_resident);
+      ASSERT_EQ(st.factor.devices.size(), static_cast<std::size_t>(gpus));
+      index_t run = 0;
+      for (const auto& d : st.factor.devices) run += d.subtrees_run;
+      EXPECT_EQ(run, st.analysis.subtrees);
+      EXPECT_LE(test::backward_error(a, xg.data(), b.data()), 1e-14);
+      EXPECT_LT(test::relative_difference(xg, xc), 1e-8);
+      SparseMatrix a2 = a;
+      std::vector<double> d(a.n_rows);
+      for (double& x : d) x = scale(rng);
+      for (index_t j = 0; j < a2.n_cols; ++j)
+        for (index_t p = a2.offsets[j]; p < a2.offsets[j + 1]; ++p)
+          a2.values[p] *= d[a2.indices[p]] * d[j];
+      gpu.refactorize(a2);
+      const auto x2 = gpu.solve(b);
+      Solver fresh(o);
+      fresh.analyze(a);
+      fresh.factorize(a2);
+      EXPECT_LT(test::relative_difference(x2, fresh.solve(b)), 1e-12);
+      EXPECT_LE(test::backward_error(a2, x2.data(), b.data()), 1e-14);
+    }
+  }
+}
+
+// GPU 0 slowed by an injected delay: the other GPUs steal its subtrees; same factor.
+TEST(MultiGpu, SlowGpuHasItsSubtreesStolen) {
+  REQUIRE_GPUS(2);
+  for (int gpus : {2, 4}) {
+    if (numeric::cuda_device_count() < gpus) continue;
+    SCOPED_TRACE(std::to_string(gpus) + " GPUs");
+    const SparseMatrix a = generators::laplacian_3d(24, 24, 24);
+    Options o;
+    o.type = MatrixType::spd;
+    const Analysis an = analyze_matrix(a, o, gpus);
+    std::vector<int> own(gpus, 0);
+    for (int w : an.partition.owner) ++own[w];
+    ASSERT_GE(own[0], 2);
+    double pivot = 0;
+    const std::vector<double> v = scaled_values(an, a, &pivot);
+    std::vector<std::unique_ptr<numeric::Executor>> ex;
+    std::vector<numeric::Executor*> execs;
+    for (int d = 0; d < gpus; ++d) {
+      ex.push_back(numeric::make_cuda_executor(o, d));
+      execs.push_back(ex.back().get());
+    }
+    numeric::NumericFactor plain, slowed;
+    std::vector<std::vector<double>> arenas;
+    std::vector<DeviceStats> dev;
+    numeric::factorize_multi(an, v, MatrixType::spd, pivot, execs, plain, arenas, {}, nullptr);
+    numeric::MultiWorkerConfig cfg;
+    cfg.injected_delay.assign(gpus, 0.0);
+    cfg.injected_delay[0] = 0.5;
+    numeric::factorize_multi(an, v, MatrixType::spd, pivot, execs, slowed, arenas, cfg, &dev);
+    index_t stolen = 0;
+    for (int d = 1; d < gpus; ++d) stolen += dev[d].subtrees_stolen;
+    EXPECT_GT(stolen, 0);
+    EXPECT_LT(dev[0].subtrees_run, own[0]);
+    EXPECT_LT(panel_difference(slowed, plain), 1e-13);
+  }
+}
+
+// Asking for more GPUs than are visible is refused clearly, at analyze.
+TEST(MultiGpu, TooManyGpusIsRefused) {
+  REQUIRE_GPUS(1);
+  const SparseMatrix a = generators::laplacian_3d(8, 8, 8);
+  Options o;
+  o.backend = Backend::cuda;
+  o.num_gpus = numeric::cuda_device_count() + 1;
+  Solver too_many(o);
+  EXPECT_THROW(too_many.analyze(a), InvalidInput);
+}
+
+}  // namespace
+}  // namespace strata

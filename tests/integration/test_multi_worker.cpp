@@ -1,0 +1,392 @@
+// strata tests — the multi-worker factorization (numeric/multi_device.cpp) on CPU
+// executors, as it runs on several GPUs: the factor is bitwise the one-worker factor on
+// the same analysis (every front is factored once, by the same code), solutions through
+// the Solver agree with the one-worker CPU solver and have backward error at the unit
+// roundoff for spd, symmetric indefinite and general matrices, refactorization works on
+// the distributed factor, a slowed worker has its subtrees stolen, and errors propagate.
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <cmath>
+#include <numeric>
+#include <string>
+
+#include "core/analysis.hpp"
+#include "core/solver_internal.hpp"
+#include "numeric/factor.hpp"
+#include "sparse/generators.hpp"
+#include "strata/strata.hpp"
+#include "support/test_support.hpp"
+
+namespace strata {
+namespace {
+
+using detail::SolverAccess;
+
+struct Problem {
+  std::string name;
+  SparseMatrix a;
+  MatrixType type;
+};
+
+// spd, symmetric indefinite and general problems: generated 3D grids, shared matrices,
+// random matrices of awkward sizes.
+std::vector<Problem> problems(std::mt19937_64& rng) {
+  std::vector<Problem> p;
+  auto shared = [](const char* name) { return read_matrix_market(test::matrix_path(name)).matrix; };
+  p.push_back({"lap3d 13", generators::laplacian_3d(13, 13, 13), MatrixType::spd});
+  p.push_back({"elasticity 6", generators::elasticity_3d(6, 6, 6), MatrixType::spd});
+  p.push_back({"bcsstk16", shared("bcsstk16"), MatrixType::spd});
+  for (index_t n : {1, 2, 5, 733})
+    p.push_back({"random spd " + std::to_string(n),
+                 test::random_sparse(n, 3, test::RandomKind::spd, rng), MatrixType::spd});
+  p.push_back({"hangGlider_2", shared("hangGlider_2"), MatrixType::symmetric_indefinite});
+  p.push_back({"random kkt 733", test::random_kkt(733, rng), MatrixType::symmetric_indefinite});
+  p.push_back({"random indefinite 1500",
+               test::random_sparse(1500, 4, test::RandomKind::symmetric_indefinite, rng),
+               MatrixType::symmetric_indefinite});
+  p.push_back({"random indefinite 3",
+               test::random_sparse(3, 2, test::RandomKind::symmetric_indefinite, rng),
+               MatrixType::symmetric_indefinite});
+  p.push_back({"watt_2", shared("watt_2"), MatrixType::general});
+  p.push_back({"nnc1374", shared("nnc1374"), MatrixType::general});
+  p.push_back({"random general 1500", test::random_sparse(1500, 4, test::RandomKind::general, rng),
+               MatrixType::general});
+  {  // a 3D grid with unsymmetric values: large LU fronts
+    SparseMatrix a = expand_symmetric(generators::laplacian_3d(11, 11, 11));
+    std::uniform_real_distribution<double> u(0.5, 1.5);
+    for (double& v : a.values) v *= u(rng);
+    p.push_back({"lap3d 11 unsymmetric", std::move(a), MatrixType::general});
+  }
+  return p;
+}
+
+// The values the numeric phase factors (scaled as the Solver scales them) and a static
+// pivot threshold of the Solver's kind.
+std::vector<double> scaled_values(const Analysis& an, const SparseMatrix& a, double* pivot) {
+  const SparseMatrix c = canonical_values(an, a);
+  std::vector<double> v(c.nnz());
+  double mx = 0;
+  for (index_t j = 0; j < c.n_cols; ++j)
+    for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) {
+      const index_t i = c.indices[p];
+      v[p] = an.row_scaling.empty() ? c.values[p]
+                                    : c.values[p] * an.row_scaling[i] * an.col_scaling[j];
+      mx = std::max(mx, std::abs(v[p]));
+    }
+  *pivot = 1e-8 * std::max(mx, 1.0);
+  return v;
+}
+
+// Forwards to a CPU executor, counting the fronts of every batch it factors, and throws a
+// DeviceError at the start of part `fail_part` (a subtree index, or P for the top part),
+// whichever worker runs it, when asked to.
+class Recording final : public numeric::Executor {
+ public:
+  Recording(index_t n_fronts, int fail_part = -2)
+      : inner_(numeric::make_cpu_executor(1)), count(n_fronts, 0), fail_part_(fail_part) {}
+  const char* name() const override { return "recording"; }
+  void begin(const numeric::FactorContext& c) override { inner_->begin(c); }
+  void begin_part(const numeric::FactorContext& c) override {
+    if (c.part->id == fail_part_) throw DeviceError("injected failure");
+    inner_->begin_part(c);
+  }
+  void factor_batch(const numeric::FactorContext& c, const BatchInfo& b) override {
+    for (index_t q = b.begin; q < b.end; ++q) ++count[c.part->schedule->fronts[q]];
+    inner_->factor_batch(c, b);
+  }
+  void end_part(const numeric::FactorContext& c) override { inner_->end_part(c); }
+  std::size_t export_cb(const numeric::FactorContext& c, numeric::CbTransfer& t) override {
+    return inner_->export_cb(c, t);
+  }
+  std::size_t import_cb(const numeric::FactorContext& c, const numeric::CbTransfer& t) override {
+    return inner_->import_cb(c, t);
+  }
+  void end(const numeric::FactorContext& c) override { inner_->end(c); }
+
+  std::unique_ptr<numeric::Executor> inner_;
+  std::vector<int> count;
+
+ private:
+  int fail_part_;
+};
+
+// An analysis split for `workers` workers (also for one: then split on demand).
+Analysis split_analysis(const SparseMatrix& a, MatrixType type, int workers) {
+  Options o;
+  o.type = type;
+  Analysis an = analyze_matrix(a, o, workers);
+  if (workers == 1) {
+    schedule::PartitionOptions po;
+    po.workers = 1;
+    po.subtrees_per_worker = o.subtrees_per_gpu;
+    po.unsymmetric = type == MatrixType::general;
+    an.partition = schedule::partition_tree(an.tree, po);
+  }
+  return an;
+}
+
+void expect_same_factor(const numeric::NumericFactor& x, const numeric::NumericFactor& y) {
+  EXPECT_TRUE(x.panels == y.panels) << "factor panels differ";
+  EXPECT_EQ(x.rows, y.rows);
+  EXPECT_TRUE(x.d_diag == y.d_diag);
+  EXPECT_TRUE(x.d_off == y.d_off);
+  EXPECT_EQ(x.pivot_size, y.pivot_size);
+  ASSERT_EQ(x.front_stats.size(), y.front_stats.size());
+  for (std::size_t f = 0; f < x.front_stats.size(); ++f) {
+    EXPECT_EQ(x.front_stats[f].perturbed, y.front_stats[f].perturbed);
+    EXPECT_EQ(x.front_stats[f].positive, y.front_stats[f].positive);
+    EXPECT_EQ(x.front_stats[f].negative, y.front_stats[f].negative);
+    EXPECT_EQ(x.front_stats[f].log_abs_det, y.front_stats[f].log_abs_det);
+  }
+}
+
+// 1, 2, 3 and 4 workers give bitwise the factor of one executor on the whole tree, and
+// every front is factored exactly once.
+TEST(MultiWorker, FactorBitwiseEqualsOneExecutorAndEveryFrontOnce) {
+  auto rng = test::fresh_rng();
+  for (const Problem& pr : problems(rng))
+    for (int workers : {1, 2, 3, 4}) {
+      SCOPED_TRACE(pr.name + ", " + std::to_string(workers) + " workers");
+      const Analysis an = split_analysis(pr.a, pr.type, workers);
+      double pivot = 0;
+      const std::vector<double> v = scaled_values(an, pr.a, &pivot);
+      numeric::NumericFactor one, many;
+      std::vector<double> arena;
+      auto cpu = numeric::make_cpu_executor(1);
+      numeric::factorize(an, v, pr.type, pivot, *cpu, one, arena);
+
+      std::vector<std::unique_ptr<Recording>> rec;
+      std::vector<numeric::Executor*> execs;
+      for (int w = 0; w < workers; ++w) {
+        rec.push_back(std::make_unique<Recording>(an.tree.n_fronts()));
+        execs.push_back(rec.back().get());
+      }
+      std::vector<std::vector<double>> arenas;
+      std::vector<DeviceStats> dev;
+      numeric::factorize_multi(an, v, pr.type, pivot, execs, many, arenas, {}, &dev);
+      EXPECT_TRUE(many.valid);
+      expect_same_factor(one, many);
+      for (index_t f = 0; f < an.tree.n_fronts(); ++f) {
+        int c = 0;
+        for (const auto& r : rec) c += r->count[f];
+        ASSERT_EQ(c, 1) << "front " << f << " factored " << c << " times";
+      }
+      ASSERT_EQ(dev.size(), static_cast<std::size_t>(workers));
+      index_t run = 0;
+      double flops = 0;
+      std::size_t bytes = 0;
+      for (const DeviceStats& d : dev) {
+        run += d.subtrees_run;
+        flops += d.flops;
+        bytes += d.bytes_transferred;
+        EXPECT_LE(d.subtrees_stolen, d.subtrees_run);
+        EXPECT_GE(d.busy_seconds, 0.0);
+        EXPECT_GE(d.idle_seconds, 0.0);
+      }
+      EXPECT_EQ(run, static_cast<index_t>(an.partition.subtrees.size()));
+      EXPECT_NEAR(flops, an.stats.factor_flops, 1e-9 * std::max(1.0, flops));
+      std::size_t expect_bytes = 0;  // every imported block crosses twice: out and in
+      for (index_t c : an.partition.top.imports)
+        expect_bytes += 2 * sizeof(double) * an.tree.cb_size(c) * an.tree.cb_size(c);
+      EXPECT_EQ(bytes, expect_bytes);
+    }
+}
+
+// Through the Solver (N CPU executors standing for N GPUs): solutions agree with the
+// one-worker CPU solver and the backward error is at the unit roundoff; refactorization
+// with new values gives bitwise the solution of a fresh factorization.
+TEST(MultiWorker, SolverSolutionsAndRefactorization) {
+  auto rng = test::fresh_rng();
+  std::uniform_real_distribution<double> u(-1, 1), scale(0.8, 1.2);
+  for (const Problem& pr : problems(rng)) {
+    const SparseMatrix& a = pr.a;
+    const index_t n = a.n_rows;
+    std::vector<double> b(n);
+    for (double& x : b) x = u(rng);
+    Options o;
+    o.type = pr.type;
+    Solver ref(o);
+    ref.factorize(a);
+    const std::vector<double> xr = ref.solve(b);
+    const double berr_ref = test::backward_error(a, xr.data(), b.data());
+    for (int workers : {2, 3, 4}) {
+      SCOPED_TRACE(pr.name + ", " + std::to_string(workers) + " workers");
+      Solver s(o);
+      SolverAccess::use_host_workers(s, workers, 1);
+      s.factorize(a);
+      const auto x = s.solve(b);
+      const Stats& st = s.stats();
+      EXPECT_EQ(st.analysis.workers, workers);
+      ASSERT_EQ(st.factor.devices.size(), static_cast<std::size_t>(workers));
+      index_t run = 0;
+      for (const auto& d : st.factor.devices) run += d.subtrees_run;
+      EXPECT_EQ(run, st.analysis.subtrees);
+      EXPECT_LE(test::backward_error(a, x.data(), b.data()), std::max(1e-14, 2 * berr_ref));
+      EXPECT_LT(test::relative_difference(x, xr), 1e-8);
+      EXPECT_EQ(s.stats().factor.inertia_negative, ref.stats().factor.inertia_negative);
+      if (ref.stats().factor.perturbed_pivots == 0 && st.factor.perturbed_pivots == 0)
+        EXPECT_NEAR(st.factor.log_abs_determinant, ref.stats().factor.log_abs_determinant,
+                    1e-8 * std::max(1.0, std::abs(ref.stats().factor.log_abs_determinant)));
+      // new values, same pattern (a symmetric scaling keeps the type)
+      SparseMatrix a2 = a;
+      std::vector<double> d(n);
+      for (double& x2 : d) x2 = scale(rng);
+      for (index_t j = 0; j < a2.n_cols; ++j)
+        for (index_t p = a2.offsets[j]; p < a2.offsets[j + 1]; ++p)
+          a2.values[p] *= d[a2.indices[p]] * d[j];
+      s.refactorize(a2);
+      const auto x2 = s.solve(b);
+      Solver fresh(o);  // same analysis (scaling and pairs come from the analyzed values)
+      SolverAccess::use_host_workers(fresh, workers, 1);
+      fresh.analyze(a);
+      fresh.factorize(a2);
+      EXPECT_TRUE(fresh.solve(b) == x2) << "refactorization differs from a fresh factorization";
+      EXPECT_LE(test::backward_error(a2, x2.data(), b.data()), std::max(1e-14, 4 * berr_ref));
+    }
+  }
+}
+
+// Small problems against a dense LAPACK solve; workers with two host threads each.
+TEST(MultiWorker, SmallProblemsMatchDenseAndThreadedWorkers) {
+  auto rng = test::fresh_rng();
+  for (auto [kind, type] :
+       {std::pair{test::RandomKind::spd, MatrixType::spd},
+        std::pair{test::RandomKind::symmetric_indefinite, MatrixType::symmetric_indefinite},
+        std::pair{test::RandomKind::general, MatrixType::general}})
+    for (index_t n : {1, 2, 3, 5, 200}) {
+      SCOPED_TRACE(std::string(to_string(type)) + " n=" + std::to_string(n));
+      const SparseMatrix a = test::random_sparse(n, 3, kind, rng);
+      std::vector<double> b(n);
+      std::uniform_real_distribution<double> u(-1, 1);
+      for (double& x : b) x = u(rng);
+      std::vector<double> xd = b;
+      ASSERT_TRUE(test::dense_solve(test::to_dense(a), n, xd, 1));
+      Options o;
+      o.type = type;
+      Solver s(o);
+      SolverAccess::use_host_workers(s, 2, 2);
+      s.factorize(a);
+      const auto x = s.solve(b);
+      EXPECT_LT(test::relative_difference(x, xd), 1e-8);
+      EXPECT_LE(test::backward_error(a, x.data(), b.data()), 1e-14);
+    }
+}
+
+// A slowed worker 0 (injected delay before each subtree): the other workers steal its
+// unstarted subtrees, and the factor is still bitwise the one-executor factor. Without
+// stealing every worker runs exactly its own queue.
+TEST(MultiWorker, SlowWorkerHasItsSubtreesStolen) {
+  auto rng = test::fresh_rng();
+  std::vector<Problem> ps;
+  const SparseMatrix lap = generators::laplacian_3d(16, 16, 16);
+  ps.push_back({"lap3d 16", lap, MatrixType::spd});
+  {  // shifted: indefinite with a positive diagonal
+    SparseMatrix s = lap;
+    for (index_t j = 0; j < s.n_cols; ++j)
+      for (index_t p = s.offsets[j]; p < s.offsets[j + 1]; ++p)
+        if (s.indices[p] == j) s.values[p] -= 2.5;
+    ps.push_back({"shifted lap3d 16", std::move(s), MatrixType::symmetric_indefinite});
+  }
+  {
+    SparseMatrix g = expand_symmetric(lap);
+    std::uniform_real_distribution<double> u(0.5, 1.5);
+    for (double& x : g.values) x *= u(rng);
+    ps.push_back({"unsymmetric lap3d 16", std::move(g), MatrixType::general});
+  }
+  for (const Problem& pr : ps)
+    for (int workers : {2, 4}) {
+      SCOPED_TRACE(pr.name + ", " + std::to_string(workers) + " workers");
+      const Analysis an = split_analysis(pr.a, pr.type, workers);
+      std::vector<int> own(workers, 0);
+      for (int w : an.partition.owner) ++own[w];
+      ASSERT_GE(own[0], 2) << "worker 0 needs a queue to steal from";
+      double pivot = 0;
+      const std::vector<double> v = scaled_values(an, pr.a, &pivot);
+      numeric::NumericFactor one;
+      std::vector<double> arena;
+      numeric::factorize(an, v, pr.type, pivot, *numeric::make_cpu_executor(1), one, arena);
+      for (bool stealing : {true, false}) {
+        SCOPED_TRACE(stealing ? "stealing" : "no stealing");
+        std::vector<std::unique_ptr<numeric::Executor>> ex;
+        std::vector<numeric::Executor*> execs;
+        for (int w = 0; w < workers; ++w) {
+          ex.push_back(numeric::make_cpu_executor(1));
+          execs.push_back(ex.back().get());
+        }
+        numeric::MultiWorkerConfig cfg;
+        cfg.work_stealing = stealing;
+        cfg.injected_delay.assign(workers, 0.0);
+        cfg.injected_delay[0] = stealing ? 0.5 : 0.05;
+        numeric::NumericFactor many;
+        std::vector<std::vector<double>> arenas;
+        std::vector<DeviceStats> dev;
+        numeric::factorize_multi(an, v, pr.type, pivot, execs, many, arenas, cfg, &dev);
+        expect_same_factor(one, many);
+        index_t stolen_by_others = 0;
+        for (int w = 1; w < workers; ++w) stolen_by_others += dev[w].subtrees_stolen;
+        if (stealing) {
+          EXPECT_GT(stolen_by_others, 0);
+          EXPECT_LT(dev[0].subtrees_run, own[0]);
+        } else {
+          for (int w = 0; w < workers; ++w) {
+            EXPECT_EQ(dev[w].subtrees_stolen, 0);
+            EXPECT_EQ(dev[w].subtrees_run, own[w]);
+          }
+        }
+      }
+    }
+}
+
+// A worker that fails stops the others, every thread is joined, and the first error
+// reaches the caller; a matrix declared spd that is not fails with NotPositiveDefinite
+// through the Solver, which stays usable.
+TEST(MultiWorker, ErrorsPropagate) {
+  const SparseMatrix a = generators::laplacian_3d(12, 12, 12);
+  const Analysis an = split_analysis(a, MatrixType::spd, 3);
+  const int n_sub = static_cast<int>(an.partition.subtrees.size());
+  ASSERT_GE(n_sub, 3);
+  for (int failing : {0, n_sub / 2, n_sub - 1, n_sub}) {  // n_sub: the top part
+    SCOPED_TRACE("failing part " + std::to_string(failing));
+    double pivot = 0;
+    const std::vector<double> v = scaled_values(an, a, &pivot);
+    std::vector<std::unique_ptr<Recording>> rec;
+    std::vector<numeric::Executor*> execs;
+    for (int w = 0; w < 3; ++w) {
+      rec.push_back(std::make_unique<Recording>(an.tree.n_fronts(), failing));
+      execs.push_back(rec.back().get());
+    }
+    numeric::NumericFactor f;
+    std::vector<std::vector<double>> arenas;
+    EXPECT_THROW(
+        numeric::factorize_multi(an, v, MatrixType::spd, pivot, execs, f, arenas, {}, nullptr),
+        DeviceError);
+    EXPECT_FALSE(f.valid);
+  }
+  // shifted Laplacian: positive diagonal, indefinite
+  SparseMatrix s = a;
+  for (index_t j = 0; j < s.n_cols; ++j)
+    for (index_t p = s.offsets[j]; p < s.offsets[j + 1]; ++p)
+      if (s.indices[p] == j) s.values[p] -= 3.0;
+  Options o;
+  o.type = MatrixType::spd;
+  Solver solver(o);
+  SolverAccess::use_host_workers(solver, 3, 1);
+  EXPECT_THROW(solver.factorize(s), NotPositiveDefinite);
+  solver.refactorize(a);
+  std::vector<double> b(a.n_rows, 1.0);
+  const auto x = solver.solve(b);
+  EXPECT_LE(test::backward_error(a, x.data(), b.data()), 1e-14);
+  // automatic: the Cholesky attempt fails on some worker, LDLᵀ follows
+  Options oa;
+  Solver auto_solver(oa);
+  SolverAccess::use_host_workers(auto_solver, 3, 1);
+  auto_solver.factorize(s);
+  EXPECT_EQ(auto_solver.matrix_type(), MatrixType::symmetric_indefinite);
+  const auto xs = auto_solver.solve(b);
+  EXPECT_LE(test::backward_error(s, xs.data(), b.data()), 1e-14);
+  EXPECT_GT(auto_solver.stats().factor.inertia_negative, 0);
+}
+
+}  // namespace
+}  // namespace strata
