@@ -187,6 +187,7 @@ int main(int argc, char** argv) {
     Options o;
     o.type = p.symmetric ? MatrixType::spd : MatrixType::general;
     o.backend = Backend::cuda;
+    o.num_gpus = 1;  // the single-GPU comparison, whatever the machine has
     Solver s(o);
     Timer t;
     s.analyze(p.a);

@@ -89,6 +89,7 @@ int main(int argc, char** argv) {
     o.type = p.symmetric ? MatrixType::spd : MatrixType::general;
     Options og = o;
     og.backend = Backend::cuda;
+    og.num_gpus = 1;  // the single-GPU comparison, whatever the machine has
     std::vector<index_t> perm;
     Timing g = time_strata(p, og, repeat, &perm);
     Solver probe(o);

@@ -157,6 +157,7 @@ int main(int argc, char** argv) {
     Options o;
     o.type = p.symmetric ? MatrixType::spd : MatrixType::general;
     o.backend = Backend::cuda;
+    o.num_gpus = 1;  // the single-GPU comparison, whatever the machine has
     Solver probe(o);
     probe.analyze(p.a);
     const std::size_t factor_bytes = probe.stats().analysis.factor_bytes;
@@ -210,6 +211,7 @@ int main(int argc, char** argv) {
       Options o;
       o.type = p.symmetric ? MatrixType::spd : MatrixType::general;
       o.backend = Backend::cuda;
+      o.num_gpus = 1;  // the single-GPU comparison, whatever the machine has
       o.max_block_size = bs;
       const Run r = run(p, o, repeat);
       const double flops = r.fs.gflops * r.fs.seconds;  // GFLOP of this factorization

@@ -35,6 +35,7 @@ TEST_F(CudaBackend, CholeskyFactorMatchesCpu) {
   for (const SparseMatrix& a : problems) {
     SCOPED_TRACE("n=" + std::to_string(a.n_rows));
     Options o;
+    o.num_gpus = 1;  // one GPU, whatever the machine has
     o.type = MatrixType::spd;
     Analysis an = analyze_matrix(a, o);
     SparseMatrix c = canonical_values(an, a);
@@ -67,6 +68,7 @@ TEST_F(CudaBackend, SolutionsMatchCpu) {
       std::uniform_real_distribution<double> u(-1, 1);
       for (double& v : b) v = u(rng);
       Options o;
+      o.num_gpus = 1;  // one GPU, whatever the machine has
       o.type = type;
       Solver cpu(o);
       o.backend = Backend::cuda;
@@ -98,6 +100,7 @@ TEST_F(CudaBackend, LargeLuFrontsMatchCpu) {
   for (double& v : a.values) v *= u(rng);  // unsymmetric values, symmetric pattern
   std::vector<double> b(a.n_rows, 1.0);
   Options o;
+  o.num_gpus = 1;  // one GPU, whatever the machine has
   o.type = MatrixType::general;
   Solver cpu(o);
   o.backend = Backend::cuda;
@@ -120,6 +123,7 @@ TEST_F(CudaBackend, SharedMatrices) {
     std::vector<double> ones(a.n_rows, 1.0), b(a.n_rows);
     multiply(a, ones.data(), b.data());
     Options o;
+    o.num_gpus = 1;  // one GPU, whatever the machine has
     Solver cpu(o);
     o.backend = Backend::cuda;
     Solver gpu(o);
@@ -147,6 +151,7 @@ TEST_F(CudaBackend, SharedMatrices) {
 TEST_F(CudaBackend, RefactorizationIsDeterministic) {
   SparseMatrix a = generators::laplacian_3d(16, 16, 16);
   Options o;
+  o.num_gpus = 1;  // one GPU, whatever the machine has
   o.type = MatrixType::spd;
   o.backend = Backend::cuda;
   Solver s1(o), s2(o);
@@ -280,6 +285,7 @@ TEST_F(CudaBackend, LdltFactorMatchesCpu) {
   for (const Problem& pr : problems) {
     SCOPED_TRACE(pr.name);
     Options o;
+    o.num_gpus = 1;  // one GPU, whatever the machine has
     o.type = MatrixType::symmetric_indefinite;
     o.matching_and_scaling = pr.zero_columns == 0;  // the matching rejects a singular matrix
     Analysis an = analyze_matrix(pr.a, o);
@@ -295,8 +301,12 @@ TEST_F(CudaBackend, LdltFactorMatchesCpu) {
     ASSERT_EQ(cf.pivot_size, gf.pivot_size);
     ASSERT_EQ(cf.rows, gf.rows);
     EXPECT_LT(max_relative_gap(gf.panels, cf.panels), 1e-10);
-    EXPECT_LT(max_relative_gap(gf.d_diag, cf.d_diag), 1e-10);
-    EXPECT_LT(max_relative_gap(gf.d_off, cf.d_off), 1e-10);
+    // Exactly singular columns: whether an update cancels to exactly zero or to a residue
+    // of rounding size depends on the summation order (cuBLAS vs OpenBLAS), and the static
+    // pivot (±1e-8) then replaces different tiny values — D agrees to the pivot's size.
+    const double d_tol = pr.zero_columns > 0 ? 1e-6 : 1e-10;
+    EXPECT_LT(max_relative_gap(gf.d_diag, cf.d_diag), d_tol);
+    EXPECT_LT(max_relative_gap(gf.d_off, cf.d_off), d_tol);
     numeric::cpu::PivotStats sc, sg;
     for (const auto& ps : cf.front_stats) sc.merge(ps);
     for (const auto& ps : gf.front_stats) sg.merge(ps);
@@ -306,7 +316,8 @@ TEST_F(CudaBackend, LdltFactorMatchesCpu) {
     EXPECT_EQ(sg.negative, sc.negative);
     EXPECT_EQ(sg.zero, sc.zero);
     EXPECT_EQ(sg.det_sign, sc.det_sign);
-    EXPECT_NEAR(sg.log_abs_det, sc.log_abs_det, 1e-9 * std::max(1.0, std::abs(sc.log_abs_det)));
+    EXPECT_NEAR(sg.log_abs_det, sc.log_abs_det,
+                (pr.zero_columns > 0 ? 1e-6 : 1e-9) * std::max(1.0, std::abs(sc.log_abs_det)));
     EXPECT_GE(sg.perturbed, pr.zero_columns);
     two_by_two += sg.two_by_two;
   }
@@ -331,6 +342,7 @@ TEST_F(CudaBackend, LdltSolutionsMatchCpu) {
       std::uniform_real_distribution<double> u(-1, 1);
       for (double& v : b) v = u(rng);
       Options o;
+      o.num_gpus = 1;  // one GPU, whatever the machine has
       o.type = MatrixType::symmetric_indefinite;
       Solver cpu(o);
       o.backend = Backend::cuda;
@@ -390,6 +402,7 @@ TEST_F(CudaBackend, LdltLargeFronts) {
     std::uniform_real_distribution<double> u(-1, 1);
     for (double& v : b) v = u(rng);
     Options o;
+    o.num_gpus = 1;  // one GPU, whatever the machine has
     o.type = MatrixType::symmetric_indefinite;
     Solver cpu(o);
     o.backend = Backend::cuda;
@@ -428,6 +441,7 @@ TEST_F(CudaBackend, AutomaticRunsLdltOnGpu) {
   for (auto [a, negative] : {std::pair{&kkt, index_t{500 / 3}}, std::pair{&l.a, l.negative}}) {
     SCOPED_TRACE("n=" + std::to_string(a->n_rows));
     Options o;
+    o.num_gpus = 1;  // one GPU, whatever the machine has
     o.backend = Backend::automatic;  // the default is the CPU
     Solver s{o};
     s.factorize(*a);
@@ -445,6 +459,7 @@ TEST_F(CudaBackend, LdltRefactorizationIsDeterministic) {
   auto rng = test::fresh_rng();
   SparseMatrix a = shifted_laplacian(14, rng).a;
   Options o;
+  o.num_gpus = 1;  // one GPU, whatever the machine has
   o.type = MatrixType::symmetric_indefinite;
   o.backend = Backend::cuda;
   Solver s1(o), s2(o);

@@ -41,6 +41,7 @@ TEST_F(CudaMemory, CholeskyUnderATightBudgetEqualsInCore) {
   for (std::size_t limit : {std::size_t{0}, 8 * MiB, 2 * MiB, MiB / 2}) {
     SCOPED_TRACE("device_memory_limit " + std::to_string(limit));
     Options o;
+    o.num_gpus = 1;  // one GPU, whatever the machine has
     o.type = MatrixType::spd;
     o.device_memory_limit = limit;
     Analysis an = analyze_matrix(a, o);
@@ -75,6 +76,7 @@ TEST_F(CudaMemory, LuUnderATightBudgetEqualsInCore) {
   std::uniform_real_distribution<double> ub(-1, 1);
   for (double& v : b) v = ub(rng);
   Options o;
+  o.num_gpus = 1;  // one GPU, whatever the machine has
   o.type = MatrixType::general;
   Solver cpu(o);
   cpu.factorize(a);
@@ -115,6 +117,7 @@ TEST_F(CudaMemory, DeviceSolveMatchesHostSolve) {
         std::uniform_real_distribution<double> u(-1, 1);
         for (double& v : b) v = u(rng);
         Options o;
+        o.num_gpus = 1;  // one GPU, whatever the machine has
         o.type = type;
         o.backend = Backend::cuda;
         o.refinement_max_steps = 0;  // compare the plain solves
@@ -148,6 +151,7 @@ TEST_F(CudaMemory, DeviceSolveWithLargeFronts) {
   std::vector<double> ones(a.n_rows, 1.0), b(a.n_rows);
   multiply(a, ones.data(), b.data());
   Options o;
+  o.num_gpus = 1;  // one GPU, whatever the machine has
   o.backend = Backend::cuda;
   Solver gpu(o);
   gpu.factorize(a);
@@ -169,6 +173,7 @@ TEST_F(CudaMemory, LdltUnderABudget) {
   std::uniform_real_distribution<double> u(-1, 1);
   for (double& v : b) v = u(rng);
   Options o;
+  o.num_gpus = 1;  // one GPU, whatever the machine has
   o.type = MatrixType::symmetric_indefinite;
   Solver cpu(o);
   cpu.factorize(a);
@@ -207,6 +212,7 @@ TEST_F(CudaMemory, LdltUnderABudget) {
 TEST_F(CudaMemory, ImpossibleBudgetNamesTheBytes) {
   const SparseMatrix a = generators::laplacian_3d(20, 20, 20);
   Options o;
+  o.num_gpus = 1;  // one GPU, whatever the machine has
   o.type = MatrixType::spd;
   o.backend = Backend::cuda;
   o.device_memory_limit = 4096;
