@@ -646,12 +646,12 @@ Model build_model(const json& doc, const std::string& source) {
   }
 }
 
-Model load_model(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw ModelError(path + ": cannot open the model file");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  const std::string text = ss.str();
+namespace {
+
+// JSON text → model. Invalid JSON is reported as "WHERE:LINE:COLUMN: invalid JSON: ...",
+// errors of the model under `source`.
+Model parse_and_build(const std::string& text, const std::string& where,
+                      const std::string& source) {
   json doc;
   try {
     doc = json::parse(text);
@@ -666,13 +666,27 @@ Model load_model(const std::string& path) {
         ++col;
       }
     }
-    throw ModelError(path + ":" + std::to_string(line) + ":" + std::to_string(col) +
+    throw ModelError(where + ":" + std::to_string(line) + ":" + std::to_string(col) +
                      ": invalid JSON: " + e.what());
   }
+  return build_model(doc, source);
+}
+
+}  // namespace
+
+Model parse_model(const std::string& text, const std::string& source) {
+  return parse_and_build(text, source, source);
+}
+
+Model load_model(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw ModelError(path + ": cannot open the model file");
+  std::stringstream ss;
+  ss << in.rdbuf();
   std::string name = path;
   const auto slash = name.find_last_of('/');
   if (slash != std::string::npos) name = name.substr(slash + 1);
-  return build_model(doc, name);
+  return parse_and_build(ss.str(), path, name);
 }
 
 }  // namespace strata::mbd

@@ -15,6 +15,11 @@ namespace strata::mbd {
 /// Reads and builds the model in a JSON file. Throws ModelError.
 Model load_model(const std::string& path);
 
+/// Parses JSON `text` and builds the model; `source` (a file name) prefixes messages,
+/// and invalid JSON is reported as "SOURCE:LINE:COLUMN: invalid JSON: ...". Throws
+/// ModelError. load_model is this on the contents of a file.
+Model parse_model(const std::string& text, const std::string& source = "model");
+
 /// Builds a model from a parsed JSON document; `source` prefixes messages.
 Model build_model(const nlohmann::json& doc, const std::string& source = "model");
 
