@@ -8,10 +8,12 @@
 //
 // Why these values. halt_on_error: the first finding stops the process with a nonzero
 // status, so it fails its test (the objects are also built with -fno-sanitize-recover=all).
-// detect_leaks: a leak is a finding too. No leak suppressions: the uninstrumented system
-// libraries (OpenBLAS, oneTBB, METIS, SuiteSparse) raised none in the whole CPU suite,
-// and a suppression naming libtbb would hide every leak of strata code that runs inside a
-// TBB task (LSan matches a suppression against any frame of the allocation's stack).
+// detect_leaks: a leak is a finding too. allocator_may_return_null: an allocation the
+// allocator cannot satisfy throws std::bad_alloc as in a normal build (strata turns it
+// into OutOfMemory, which tests check) instead of ASan aborting the process. No leak suppressions:
+// the uninstrumented system libraries (OpenBLAS, oneTBB, METIS, SuiteSparse) raised none in the
+// whole CPU suite, and a suppression naming libtbb would hide every leak of strata code that runs
+// inside a TBB task (LSan matches a suppression against any frame of the allocation's stack).
 // Source: the sanitizer runtime flags, https://github.com/google/sanitizers/wiki
 // (AddressSanitizerFlags, SanitizerCommonFlags) and the clang UBSan documentation.
 
@@ -20,7 +22,7 @@ extern "C" {
 // Read by the runtime before main: a string literal, nothing that allocates.
 const char* __asan_default_options() {
   return "halt_on_error=1:detect_leaks=1:check_initialization_order=1:strict_init_order=1:"
-         "print_summary=1";
+         "allocator_may_return_null=1:print_summary=1";
 }
 
 const char* __ubsan_default_options() { return "halt_on_error=1:print_stacktrace=1"; }

@@ -40,6 +40,9 @@ run_one() {
     >"$dir/fuzz-logs/$t.log" 2>&1
 }
 
+# A single allocation above 1.8 GB fails (std::bad_alloc, which strata reports as
+# OutOfMemory: a defined outcome) before libFuzzer's 2 GB malloc limit calls it a crash.
+export ASAN_OPTIONS=${ASAN_OPTIONS:-max_allocation_size_mb=1800}
 parallel=${STRATA_FUZZ_PARALLEL:-$(nproc)}
 declare -A pids
 failed=()

@@ -648,6 +648,22 @@ Model build_model(const json& doc, const std::string& source) {
 
 namespace {
 
+// "WHERE:LINE:COLUMN: invalid JSON: WHAT" for the 1-based byte offset `byte` of text.
+[[noreturn]] void throw_json_error(const std::string& text, std::size_t byte,
+                                   const std::string& where, const char* what) {
+  std::size_t line = 1, col = 1;
+  for (std::size_t i = 0; i + 1 < byte && i < text.size(); ++i) {
+    if (text[i] == '\n') {
+      ++line;
+      col = 1;
+    } else {
+      ++col;
+    }
+  }
+  throw ModelError(where + ":" + std::to_string(line) + ":" + std::to_string(col) +
+                   ": invalid JSON: " + what);
+}
+
 // JSON text → model. Invalid JSON is reported as "WHERE:LINE:COLUMN: invalid JSON: ...",
 // errors of the model under `source`.
 Model parse_and_build(const std::string& text, const std::string& where,
@@ -656,18 +672,19 @@ Model parse_and_build(const std::string& text, const std::string& where,
   try {
     doc = json::parse(text);
   } catch (const json::parse_error& e) {
-    // byte offset → line:column
-    std::size_t line = 1, col = 1;
-    for (std::size_t i = 0; i + 1 < e.byte && i < text.size(); ++i) {
-      if (text[i] == '\n') {
-        ++line;
-        col = 1;
-      } else {
-        ++col;
-      }
-    }
-    throw ModelError(where + ":" + std::to_string(line) + ":" + std::to_string(col) +
-                     ": invalid JSON: " + e.what());
+    throw_json_error(text, e.byte, where, e.what());
+  } catch (const json::exception& e) {
+    // Not only parse_error: a number beyond the double range is an out_of_range (406,
+    // "number overflow parsing '1e999'", found by fuzzing), without a position; locate
+    // the quoted token in the text.
+    const std::string what = e.what();
+    const auto close = what.rfind('\'');
+    const auto open =
+        close == std::string::npos || close == 0 ? std::string::npos : what.rfind('\'', close - 1);
+    std::size_t at = std::string::npos;
+    if (open != std::string::npos) at = text.find(what.substr(open + 1, close - open - 1));
+    if (at == std::string::npos) throw ModelError(where + ": invalid JSON: " + what);
+    throw_json_error(text, at + 1, where, e.what());
   }
   return build_model(doc, source);
 }

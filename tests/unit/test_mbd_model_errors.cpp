@@ -83,6 +83,22 @@ TEST(MbdModelErrors, InvalidJsonGivesLineAndColumn) {
   }
 }
 
+// Found by fuzzing (fuzz/fuzz_model_json.cpp): a number beyond the double range made
+// nlohmann::json throw its out_of_range (not a parse_error), which escaped the loader as
+// a foreign exception and terminated `strata simulate`. It is a ModelError at the number.
+TEST(MbdModelErrors, NumberOverflowIsAModelErrorAtTheNumber) {
+  const std::string text =
+      "{\"type\": \"planar\",\n \"bodies\": [{\"name\": \"a\", \"mass\": 2.1e964}]}";
+  try {
+    parse_model(text, "big.json");
+    FAIL() << "no error";
+  } catch (const ModelError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("big.json:2:35: invalid JSON"), std::string::npos) << what;
+    EXPECT_NE(what.find("number overflow parsing '2.1e964'"), std::string::npos) << what;
+  }
+}
+
 TEST(MbdModelErrors, RedundantConstraintsAreNamed) {
   // a second revolute joint at the pin duplicates the first
   json j = pendulum();
