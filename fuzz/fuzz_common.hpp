@@ -9,10 +9,12 @@
 
 #include <fcntl.h>
 #include <unistd.h>
+#include <zlib.h>
 
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <string>
 
 namespace strata::fuzz {
@@ -51,5 +53,41 @@ class ScratchFile {
   std::string path_;
   int fd_ = -1;
 };
+
+/// Largest row or column count a fuzz input may declare. A size line may legitimately
+/// declare any dimensions, and the reader then allocates dimension + 1 offsets whatever
+/// the entries; under ASan an allocation that cannot be satisfied aborts (operator new
+/// does not throw there) and libFuzzer counts > 2 GB of memory as a crash, so such
+/// inputs would be false findings. The OutOfMemory outcome is tested in the normal suite
+/// (MatrixMarketTest.HugeDeclaredDimensionsAreOutOfMemory).
+constexpr long long kMaxFuzzDimension = 1 << 20;
+
+/// False when the Matrix Market file at PATH (plain or gzip) declares more than
+/// kMaxFuzzDimension rows or columns on its size line: the first line after the banner
+/// that is neither blank nor a comment. Anything unparsable is left to the reader (true).
+inline bool small_dimensions(const std::string& path) {
+  gzFile f = gzopen(path.c_str(), "rb");
+  if (!f) return true;
+  char line[1 << 16];
+  bool ok = true, banner = true;
+  while (gzgets(f, line, sizeof line)) {
+    if (banner) {  // line 1, whatever it holds
+      banner = false;
+      continue;
+    }
+    const char* p = line + std::strspn(line, " \t\r\v\f");
+    if (*p == '\0' || *p == '\n' || *p == '%') continue;
+    for (int k = 0; k < 2 && ok; ++k) {
+      char* end = nullptr;
+      const long long v = std::strtoll(p, &end, 10);
+      if (end == p) break;
+      ok = v <= kMaxFuzzDimension;
+      p = end;
+    }
+    break;
+  }
+  gzclose(f);
+  return ok;
+}
 
 }  // namespace strata::fuzz

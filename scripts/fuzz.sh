@@ -16,9 +16,11 @@ shift || true
 targets=("$@")
 ((${#targets[@]})) || targets=(fuzz_matrix_market fuzz_matrix_market_gz fuzz_model_json fuzz_solver)
 dir=${STRATA_SANITIZE_BUILD:-build-sanitize}
+# the shared test matrices where the main build (./build) finds them
+matrix_dir=$(sed -n 's/^STRATA_MATRIX_DIR:PATH=//p' build/CMakeCache.txt 2>/dev/null || true)
 cmake -S . -B "$dir" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DCMAKE_C_COMPILER=clang -DCMAKE_CXX_COMPILER=clang++ \
-  -DSTRATA_FUZZ=ON -DSTRATA_BUILD_BENCH=OFF >/dev/null
+  -DSTRATA_FUZZ=ON -DSTRATA_BUILD_BENCH=OFF ${matrix_dir:+"-DSTRATA_MATRIX_DIR=$matrix_dir"} >/dev/null
 cmake --build "$dir" --target "${targets[@]}"
 
 # seeds, dictionary and largest input of each target

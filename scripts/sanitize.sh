@@ -8,9 +8,11 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 dir=${STRATA_SANITIZE_BUILD:-build-sanitize}
+# the shared test matrices where the main build (./build) finds them
+matrix_dir=$(sed -n 's/^STRATA_MATRIX_DIR:PATH=//p' build/CMakeCache.txt 2>/dev/null || true)
 cmake -S . -B "$dir" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DCMAKE_C_COMPILER=clang -DCMAKE_CXX_COMPILER=clang++ \
-  -DSTRATA_FUZZ=ON -DSTRATA_BUILD_BENCH=OFF "$@" >/dev/null
+  -DSTRATA_FUZZ=ON -DSTRATA_BUILD_BENCH=OFF ${matrix_dir:+"-DSTRATA_MATRIX_DIR=$matrix_dir"} "$@" >/dev/null
 cmake --build "$dir"
 start=$(date +%s)
 ctest --test-dir "$dir" -LE gpu --output-on-failure -j"$(nproc)" --timeout 1800
