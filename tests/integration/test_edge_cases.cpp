@@ -154,10 +154,19 @@ TEST(EdgeCases, OneByOne) {
   for (const TypeCase& c : kTypes)
     for (const Case& k : cases) {
       SCOPED_TRACE(std::string(c.name) + " a = " + std::to_string(k.a));
-      if (c.type == MatrixType::spd && k.a < 0) continue;
       const SparseMatrix a = from_triplets(
           1, c.type == MatrixType::general ? Storage::full : Storage::lower, {{0, 0, k.a}});
       Solver s(with_type(c.type));
+      if (c.type == MatrixType::spd && k.a < 0) {
+        try {
+          s.factorize(a);
+          FAIL() << "expected NotPositiveDefinite";
+        } catch (const NotPositiveDefinite& e) {
+          EXPECT_EQ(e.column(), 0);
+          EXPECT_EQ(e.pivot(), k.a);
+        }
+        continue;
+      }
       const std::vector<double> x = solve_with(s, a, {k.b});
       ASSERT_EQ(x.size(), 1u);
       EXPECT_NEAR(x[0], k.b / k.a, 4.5e-16 * std::abs(k.b / k.a));
