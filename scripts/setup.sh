@@ -10,6 +10,9 @@ pkgs=(
   libgtest-dev libgmock-dev libbenchmark-dev libmumps-seq-dev
   python3-matplotlib python3-dev python3-pybind11 python3-numpy python3-scipy python3-pytest
   python3-pip
+  # the sanitizer and fuzz builds (scripts/sanitize.sh, scripts/fuzz.sh): Debian's clang,
+  # its runtime libraries (ASan, UBSan, libFuzzer) and llvm-symbolizer for the reports
+  clang libclang-rt-dev llvm
 )
 missing=()
 for p in "${pkgs[@]}"; do

@@ -5,7 +5,9 @@
 // ".gz" are decompressed with zlib. Complex and Hermitian files are NotSupported.
 // Every malformed file raises ParseError naming the file and 1-based line: bad banner,
 // bad size line, wrong entry count, index out of range, non-numeric value, NaN/Inf,
-// truncated file.
+// truncated file; also duplicate entries whose sum overflows (line 0: no single line) and
+// dimensions above 2^60 - 1 (the most a std::vector of offsets can hold). A file whose
+// declared dimensions need more memory than there is raises OutOfMemory.
 #pragma once
 
 #include <string>
@@ -30,11 +32,11 @@ struct MMMatrix {
 };
 
 /// Reads a sparse coordinate matrix from PATH (".gz" decompressed). Throws ParseError,
-/// NotSupported.
+/// NotSupported, OutOfMemory.
 MMMatrix read_matrix_market(const std::string& path);
 
 /// Reads a dense `array` (or a coordinate file, densified) into a column-major
-/// rows×cols array. Throws ParseError.
+/// rows×cols array. Throws ParseError, NotSupported, OutOfMemory.
 std::vector<double> read_dense_matrix_market(const std::string& path, index_t* rows, index_t* cols);
 
 /// Writes A as `coordinate real general` (or `symmetric` when A.storage is lower or

@@ -41,16 +41,22 @@ class Solver {
   /// Analysis phase: validates A (square; see strata::validate), resolves the matrix type
   /// (MatrixType::automatic looks at symmetry here and tries Cholesky in factorize),
   /// computes the fill-reducing ordering, the assembly tree, the level schedule and the
-  /// memory plan. Only the pattern of A is used. Throws InvalidInput, NotSupported,
-  /// OutOfMemory (the solver then holds no analysis and stays usable).
+  /// memory plan. Uses the pattern of A, and its values only for the matching and
+  /// scaling of general and symmetric_indefinite matrices. Throws InvalidInput (also for a
+  /// structurally singular matrix: an empty row or column, or, for symmetric_indefinite
+  /// and general, no perfect matching on the nonzero values — the message names a row or
+  /// column), NotSupported, OutOfMemory (the solver then holds no analysis and stays
+  /// usable).
   void analyze(const SparseMatrix& a);
 
   /// Numeric factorization of A, whose pattern must be the analyzed one (analyzes first
   /// if analyze was not called). Throws NotPositiveDefinite for a failed Cholesky of a
-  /// matrix declared spd, InvalidInput for a NaN/Inf value or a changed pattern,
-  /// OutOfMemory (the factor, the workspaces and the device buffers are then released,
-  /// the analysis is kept: a later factorize can succeed once memory is available).
-  /// Perturbed pivots and inertia go to stats().factor.
+  /// matrix declared spd, InvalidInput for a NaN/Inf value, a changed pattern or values
+  /// whose row or column sums overflow the double range, OutOfMemory (the factor, the workspaces and the device
+  /// buffers are then released, the analysis is kept: a later factorize can succeed once
+  /// memory is available). Perturbed pivots
+  /// and inertia go to stats().factor. See docs/reliability.md for the outcome of each
+  /// kind of singular or badly scaled matrix.
   void factorize(const SparseMatrix& a);
 
   /// Factorization of new values with the analyzed pattern. Reuses the analysis and all
@@ -59,8 +65,11 @@ class Solver {
 
   /// Solves A X = B for nrhs right-hand sides. b and x are column-major n×nrhs arrays
   /// (leading dimension n); they may not alias. Iterative refinement follows
-  /// Options::refinement_*. Throws InvalidState before factorize; OutOfMemory (the factor
-  /// is kept).
+  /// Options::refinement_*. Throws InvalidState before factorize, InvalidInput for a
+  /// non-finite b, OutOfMemory (the factor is kept), or when the solution overflows the double range ("no representable
+  /// solution"; x is then unspecified). A singular matrix factorized with perturbed
+  /// pivots gives a finite x whose stats().solve.backward_error says whether it solves
+  /// the system (+inf when the residual overflows).
   void solve(const double* b, double* x, index_t nrhs = 1);
 
   /// Convenience overload: one or several right-hand sides stored column-major in b

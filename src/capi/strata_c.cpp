@@ -114,20 +114,34 @@ strata::SparseMatrix convert_typed(const strata_matrix& m, bool need_values) {
   return a;
 }
 
+// The value of an enum object that came from C. A C enum object may hold any int; in C++
+// loading a value that is not an enumerator is undefined behaviour (UBSan's enum check:
+// "load of value 7, which is not a valid value for type 'strata_layout'", found by the
+// sanitizer build on the C API test), so the bytes are copied out as an int instead.
+template <class E>
+int enum_value(const E& field) {
+  static_assert(sizeof(E) == sizeof(int), "C enums are int-sized");
+  int v = 0;
+  std::memcpy(&v, &field, sizeof v);
+  return v;
+}
+
 strata::SparseMatrix convert(const strata_matrix* m, bool need_values) {
   if (m == nullptr) throw strata::InvalidInput("matrix is NULL");
   if (m->n_rows < 0 || m->n_cols < 0)
     throw strata::InvalidInput("matrix has negative dimensions " + std::to_string(m->n_rows) + "x" +
                                std::to_string(m->n_cols));
-  if (m->layout != STRATA_CSR && m->layout != STRATA_CSC)
-    throw strata::InvalidInput("layout " + std::to_string(static_cast<int>(m->layout)) +
+  const int layout = enum_value(m->layout), storage = enum_value(m->storage),
+            index_type = enum_value(m->index_type);
+  if (layout != STRATA_CSR && layout != STRATA_CSC)
+    throw strata::InvalidInput("layout " + std::to_string(layout) +
                                " is neither STRATA_CSR nor STRATA_CSC");
-  if (m->storage != STRATA_STORAGE_FULL && m->storage != STRATA_STORAGE_LOWER &&
-      m->storage != STRATA_STORAGE_UPPER)
-    throw strata::InvalidInput("storage " + std::to_string(static_cast<int>(m->storage)) +
+  if (storage != STRATA_STORAGE_FULL && storage != STRATA_STORAGE_LOWER &&
+      storage != STRATA_STORAGE_UPPER)
+    throw strata::InvalidInput("storage " + std::to_string(storage) +
                                " is not a strata_storage value");
-  if (m->index_type != STRATA_INT32 && m->index_type != STRATA_INT64)
-    throw strata::InvalidInput("index_type " + std::to_string(static_cast<int>(m->index_type)) +
+  if (index_type != STRATA_INT32 && index_type != STRATA_INT64)
+    throw strata::InvalidInput("index_type " + std::to_string(index_type) +
                                " is neither STRATA_INT32 nor STRATA_INT64");
   if (m->index_base != 0 && m->index_base != 1)
     throw strata::InvalidInput("index_base is " + std::to_string(m->index_base) +
@@ -211,7 +225,7 @@ const char* strata_last_error(const strata_solver* solver) {
 strata_status strata_set_type(strata_solver* s, strata_matrix_type type) {
   STRATA_CHECK_SOLVER(s);
   return guarded(s, [&] {
-    switch (type) {
+    switch (enum_value(type)) {
       case STRATA_TYPE_AUTO:
         s->options.type = strata::MatrixType::automatic;
         return;
@@ -225,7 +239,7 @@ strata_status strata_set_type(strata_solver* s, strata_matrix_type type) {
         s->options.type = strata::MatrixType::general;
         return;
     }
-    throw strata::InvalidInput("matrix type " + std::to_string(static_cast<int>(type)) +
+    throw strata::InvalidInput("matrix type " + std::to_string(enum_value(type)) +
                                " is not a strata_matrix_type value");
   });
 }
@@ -233,7 +247,7 @@ strata_status strata_set_type(strata_solver* s, strata_matrix_type type) {
 strata_status strata_set_ordering(strata_solver* s, strata_ordering ordering) {
   STRATA_CHECK_SOLVER(s);
   return guarded(s, [&] {
-    switch (ordering) {
+    switch (enum_value(ordering)) {
       case STRATA_ORDERING_ND:
         s->options.ordering = strata::OrderingMethod::nested_dissection;
         return;
@@ -247,7 +261,7 @@ strata_status strata_set_ordering(strata_solver* s, strata_ordering ordering) {
         s->options.ordering = strata::OrderingMethod::natural;
         return;
     }
-    throw strata::InvalidInput("ordering " + std::to_string(static_cast<int>(ordering)) +
+    throw strata::InvalidInput("ordering " + std::to_string(enum_value(ordering)) +
                                " is not a strata_ordering value");
   });
 }
@@ -255,7 +269,7 @@ strata_status strata_set_ordering(strata_solver* s, strata_ordering ordering) {
 strata_status strata_set_backend(strata_solver* s, strata_backend backend) {
   STRATA_CHECK_SOLVER(s);
   return guarded(s, [&] {
-    switch (backend) {
+    switch (enum_value(backend)) {
       case STRATA_BACKEND_CPU:
         s->options.backend = strata::Backend::cpu;
         return;
@@ -266,7 +280,7 @@ strata_status strata_set_backend(strata_solver* s, strata_backend backend) {
         s->options.backend = strata::Backend::automatic;
         return;
     }
-    throw strata::InvalidInput("backend " + std::to_string(static_cast<int>(backend)) +
+    throw strata::InvalidInput("backend " + std::to_string(enum_value(backend)) +
                                " is not a strata_backend value");
   });
 }

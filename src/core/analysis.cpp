@@ -322,12 +322,14 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers)
 
   Timer step;
   std::vector<index_t> q_inv;
+  index_t unmatched_row = -1;
   if (!an.symmetric && opts.matching_and_scaling && an.n > 0 && !c.values.empty()) {
     ordering::Matching m = ordering::maximum_product_matching(c);
     an.matching_perm = std::move(m.column_permutation);
     an.row_scaling = std::move(m.row_scaling);
     an.col_scaling = std::move(m.column_scaling);
     an.structurally_singular = m.structurally_singular;
+    unmatched_row = m.first_unmatched_row;
     q_inv = ordering::invert_permutation(an.matching_perm);
   }
   if (an.type == MatrixType::symmetric_indefinite && opts.matching_and_scaling && an.n > 0 &&
@@ -336,12 +338,15 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers)
     an.row_scaling = sp.scaling;
     an.col_scaling = std::move(sp.scaling);
     an.structurally_singular = sp.structurally_singular;
+    unmatched_row = sp.first_unmatched_row;
     an.pivot_groups = std::move(sp.groups);
   }
   if (an.structurally_singular)
     throw InvalidInput(
         "the matrix is structurally singular: no permutation puts nonzero "
-        "entries on the whole diagonal (maximum matching, Duff & Koster 2001)");
+        "entries on the whole diagonal (maximum matching, Duff & Koster 2001); row " +
+        std::to_string(unmatched_row) +
+        " (0-based) is left unmatched (explicit zeros do not count as entries)");
   const bool grouped = an.pivot_groups.n_groups() > 0;
   const SparseMatrix pattern = symmetric_pattern(c, an.symmetric, q_inv);
   const ordering::Graph graph = ordering::graph_of_symmetric_pattern(pattern);

@@ -71,6 +71,46 @@ double norm_inf(const SparseMatrix& c) {
   return m;
 }
 
+// Refuses a matrix whose row or column magnitude sums overflow: ‖A‖∞ and ‖A‖₁ set the
+// static pivot threshold and the backward error, and an infinite norm would make every
+// pivot "tiny" and every backward error 0. (Each value is finite — validate checked —
+// but a few values near DBL_MAX can sum past it.)
+void check_norms(const SparseMatrix& c) {
+  std::vector<double> row(c.n_rows, 0.0), col(c.n_cols, 0.0);
+  for (index_t j = 0; j < c.n_cols; ++j)
+    for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) {
+      const double v = std::abs(c.values[p]);
+      row[c.indices[p]] += v;
+      col[j] += v;
+      if (c.storage != Storage::full && c.indices[p] != j) {
+        row[j] += v;
+        col[c.indices[p]] += v;
+      }
+    }
+  for (std::size_t k = 0; k < row.size() + col.size(); ++k) {
+    const bool is_row = k < row.size();
+    const double sum = is_row ? row[k] : col[k - row.size()];
+    if (!std::isfinite(sum))
+      throw InvalidInput("the matrix norm overflows: the magnitudes in " +
+                         std::string(is_row ? "row " : "column ") +
+                         std::to_string(is_row ? k : k - row.size()) +
+                         " (0-based) sum past the largest double (1.8e308); scale the matrix");
+  }
+}
+
+// Throws when a column of x is not finite: the solution (or the solve with the factor)
+// overflows the double range. Returning it would hand the caller Inf/NaN with nothing
+// in the statistics to say so.
+void check_solution_finite(const double* x, index_t n, index_t nrhs) {
+  for (index_t i = 0; i < n * nrhs; ++i)
+    if (!std::isfinite(x[i]))
+      throw InvalidInput("no representable solution: entry " + std::to_string(i % n) +
+                         " of solution column " + std::to_string(i / n) +
+                         " overflows the double range in the solve with the factorization "
+                         "(the matrix is singular to working precision, or A and b are too "
+                         "badly scaled for double precision)");
+}
+
 // Parity of a permutation: +1 even, -1 odd.
 int parity(const std::vector<index_t>& p) {
   std::vector<char> seen(p.size(), 0);
@@ -92,6 +132,7 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
   const Analysis& an = *s.analysis;
   // Validate before touching the current factor: bad input leaves the solver usable.
   SparseMatrix checked = canonical_values(an, a);
+  check_norms(checked);
   s.factor.valid = false;
   s.values = std::move(checked);
   s.norm_inf = norm_inf(s.values);
@@ -310,6 +351,7 @@ static void solve_impl(SolverState& s, const double* b, double* x, index_t nrhs)
                          " is not finite");
   std::vector<double> work, r(static_cast<std::size_t>(n) * nrhs), d(r.size());
   const bool on_device = apply_inverse(s, b, x, nrhs, work);
+  check_solution_finite(x, n, nrhs);
 
   // backward error of each column; refine the columns above the tolerance
   const solve::Operator op_a = [&](const double* in, double* out) { multiply(s.values, in, out); };
@@ -366,6 +408,7 @@ static void solve_impl(SolverState& s, const double* b, double* x, index_t nrhs)
       berr[c] = std::min(berr[c], g.backward_error);
     }
   }
+  check_solution_finite(x, n, nrhs);  // refinement keeps the better iterate: a safeguard
   SolveStats& ss = s.stats.solve;
   ss.gmres_iterations = gmres_iterations;
   ss.refinement_steps = steps;

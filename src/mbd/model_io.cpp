@@ -546,6 +546,16 @@ class Reader {
     }
   }
 
+  // A node index 0..count-1. Checked as a double before the conversion: casting an
+  // out-of-range double to int is undefined behaviour (1e10 was accepted, found with the
+  // fuzz harness under UBSan), and 0.5 would silently become node 0.
+  static int node_index(const Node& n, std::size_t count) {
+    const double v = n.number();
+    if (v != std::floor(v) || v < 0 || v >= static_cast<double>(count))
+      n.fail("node index " + n.j.dump() + " is not an integer in 0.." + std::to_string(count - 1));
+    return static_cast<int>(v);
+  }
+
   void flexible(const Node& n) {
     if (m_.planar) n.fail("flexible bodies exist only in spatial models");
     n.keys({"name", "material", "nodes", "elements", "attachments"});
@@ -578,9 +588,7 @@ class Reader {
       const auto ids = el.numbers(8);
       std::array<int, 8> local{}, bodies{};
       for (int k = 0; k < 8; ++k) {
-        if (ids[k] != std::floor(ids[k]) || ids[k] < 0 || ids[k] >= nodes.size())
-          el.at(k).fail("node index out of range (0.." + std::to_string(nodes.size() - 1) + ")");
-        local[k] = static_cast<int>(ids[k]);
+        local[k] = node_index(el.at(k), nodes.size());
         bodies[k] = mesh.node_bodies[local[k]];
       }
       mesh.hexahedra.push_back(local);
@@ -593,16 +601,13 @@ class Reader {
         const Node a = at.at(i);
         a.keys({"node", "nodes", "body", "point"});
         std::vector<int> list;
-        if (a.has("node")) list.push_back(static_cast<int>(a.at("node").number()));
+        if (a.has("node")) list.push_back(node_index(a.at("node"), nodes.size()));
         if (a.has("nodes")) {
           const Node ns = a.at("nodes");
           if (!ns.j.is_array()) ns.fail("expected an array of node indices");
           for (std::size_t k = 0; k < ns.size(); ++k)
-            list.push_back(static_cast<int>(ns.at(k).number()));
+            list.push_back(node_index(ns.at(k), nodes.size()));
         }
-        for (int nd : list)
-          if (nd < 0 || nd >= static_cast<int>(nodes.size()))
-            a.fail("node index " + std::to_string(nd) + " out of range");
         attachments_.push_back({a.path, {mesh.node_bodies, list, a}});
       }
     }
@@ -648,23 +653,40 @@ Model build_model(const json& doc, const std::string& source) {
 
 namespace {
 
+// "WHERE:LINE:COLUMN: invalid JSON: WHAT" for the 1-based byte offset `byte` of text.
+[[noreturn]] void throw_json_error(const std::string& text, std::size_t byte,
+                                   const std::string& where, const char* what) {
+  std::size_t line = 1, col = 1;
+  for (std::size_t i = 0; i + 1 < byte && i < text.size(); ++i) {
+    if (text[i] == '\n') {
+      ++line;
+      col = 1;
+    } else {
+      ++col;
+    }
+  }
+  throw ModelError(where + ":" + std::to_string(line) + ":" + std::to_string(col) +
+                   ": invalid JSON: " + what);
+}
+
 // Parses JSON text; a syntax error becomes "source:L:C: invalid JSON: ...".
 json parse_document(const std::string& text, const std::string& source) {
   try {
     return json::parse(text);
   } catch (const json::parse_error& e) {
-    // byte offset → line:column
-    std::size_t line = 1, col = 1;
-    for (std::size_t i = 0; i + 1 < e.byte && i < text.size(); ++i) {
-      if (text[i] == '\n') {
-        ++line;
-        col = 1;
-      } else {
-        ++col;
-      }
-    }
-    throw ModelError(source + ":" + std::to_string(line) + ":" + std::to_string(col) +
-                     ": invalid JSON: " + e.what());
+    throw_json_error(text, e.byte, source, e.what());
+  } catch (const json::exception& e) {
+    // Not only parse_error: a number beyond the double range is an out_of_range (406,
+    // "number overflow parsing '1e999'", found by fuzzing), without a position; locate
+    // the quoted token in the text.
+    const std::string what = e.what();
+    const auto close = what.rfind('\'');
+    const auto open =
+        close == std::string::npos || close == 0 ? std::string::npos : what.rfind('\'', close - 1);
+    std::size_t at = std::string::npos;
+    if (open != std::string::npos) at = text.find(what.substr(open + 1, close - open - 1));
+    if (at == std::string::npos) throw ModelError(source + ": invalid JSON: " + what);
+    throw_json_error(text, at + 1, source, e.what());
   }
 }
 

@@ -26,7 +26,7 @@ std::string model_file_name(const std::string& path);
 /// `source` (a file path, or e.g. "<dict>") prefixes every message — "source:L:C: invalid
 /// JSON: ..." for a syntax error, "name: joints[3].body_j: ..." for a model error, where
 /// name is source without its folder. Throws ModelError.
-Model parse_model(const std::string& text, const std::string& source);
+Model parse_model(const std::string& text, const std::string& source = "model");
 
 /// Builds a model from a parsed JSON document; `source` prefixes messages.
 Model build_model(const nlohmann::json& doc, const std::string& source = "model");

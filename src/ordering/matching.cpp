@@ -78,8 +78,12 @@
 // (Release, one core): n = 1e5 with 1.1e6 random entries spread over 8 decades (a hard
 // case: ~19% of columns need a search) ~3.5–4 s; a row-permuted 3D 7-point pattern with
 // n = 97k, nnz = 670k and random magnitudes ~1 s; all magnitudes equal ~0.2 s.
-// The scaling factors are exp of dual variables and may overflow for matrices whose entries
-// span more than ~300 decades; such inputs are outside what this solver targets.
+// The scaling factors are exp of dual variables. Their exponents are clamped to ±700
+// (factors in about [1e-304, 1e304]) so that they are always finite and nonzero: a column
+// whose largest magnitude is subnormal (below 1/DBL_MAX ≈ 5.6e-309) would otherwise get
+// the factor 1/a_j = inf, and entries spanning more than ~600 decades a factor that
+// overflows. Such a matrix is then not fully equilibrated, which costs accuracy (reported
+// through perturbed pivots and the backward error), never a NaN.
 #include "ordering/matching.hpp"
 
 #include <algorithm>
@@ -94,6 +98,8 @@ namespace {
 
 constexpr index_t kNone = -1;
 constexpr double kInf = std::numeric_limits<double>::infinity();
+// Largest |log| of a scaling factor (see the header comment): exp(±700) ≈ 1e±304.
+constexpr double kMaxLogScale = 700.0;
 
 // The bipartite graph of the nonzeros of A in compressed-column form, with the costs c_ij.
 struct CostGraph {
@@ -243,11 +249,17 @@ class Matcher {
     m.column_scaling.resize(n);
     for (index_t i = 0; i < n; ++i) {
       m.column_permutation[i] = rows_[i].col;
-      if (rows_[i].col != kNone) ++m.n_matched;
-      m.row_scaling[i] = std::exp(rows_[i].u);
+      if (rows_[i].col != kNone)
+        ++m.n_matched;
+      else if (m.first_unmatched_row < 0)
+        m.first_unmatched_row = i;
+      m.row_scaling[i] = std::exp(std::clamp(rows_[i].u, -kMaxLogScale, kMaxLogScale));
     }
     for (index_t j = 0; j < n; ++j)
-      m.column_scaling[j] = g_.matchable[j] ? std::exp(v_[j] - g_.log_colmax[j]) : 1.0;
+      m.column_scaling[j] =
+          g_.matchable[j]
+              ? std::exp(std::clamp(v_[j] - g_.log_colmax[j], -kMaxLogScale, kMaxLogScale))
+              : 1.0;
     m.structurally_singular = m.n_matched < n;
     if (m.structurally_singular) {
       // Complete into a permutation: unmatched columns, in increasing order, onto the

@@ -13,13 +13,16 @@ namespace strata::ordering {
 /// row_scaling / column_scaling (in ORIGINAL numbering) are exp(u_i), exp(v_j) of the
 /// dual variables, so that Dr·A·Dc has |entries| <= 1 and |matched entries| == 1.
 /// structurally_singular is true when no perfect matching exists; unmatched columns
-/// are then placed on unmatched rows arbitrarily and n_matched < n.
+/// are then placed on unmatched rows arbitrarily and n_matched < n, and
+/// first_unmatched_row is the smallest row the maximum matching leaves unmatched (a row
+/// of a set with fewer matchable columns than rows, e.g. a row of explicit zeros).
 struct Matching {
   std::vector<index_t> column_permutation;
   std::vector<double> row_scaling;
   std::vector<double> column_scaling;
   index_t n_matched = 0;
   bool structurally_singular = false;
+  index_t first_unmatched_row = -1;  ///< -1 when the matching is perfect
 };
 
 /// Maximum product transversal with scaling (Duff & Koster 2001, MC64 job 5): maximizes

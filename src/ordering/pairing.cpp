@@ -147,6 +147,7 @@ SymmetricPairing symmetric_matching_pairing(const SparseMatrix& a, double thresh
   SymmetricPairing r;
   const Matching m = maximum_product_matching(full);
   r.structurally_singular = m.structurally_singular;
+  r.first_unmatched_row = m.first_unmatched_row;
   r.matching = m.column_permutation;
   r.scaling.resize(n);
   for (index_t i = 0; i < n; ++i) {

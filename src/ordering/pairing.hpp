@@ -29,6 +29,7 @@ struct SymmetricPairing {
   /// Scaled |diagonal| |d_i a_ii d_i| (0 where the diagonal is structurally zero).
   std::vector<double> scaled_diagonal;
   bool structurally_singular = false;
+  index_t first_unmatched_row = -1;  ///< see Matching::first_unmatched_row
 };
 
 /// Duff & Pralet's symmetric scaling and pairing of a symmetric matrix `a` (any storage;

@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <vector>
 
 namespace strata::solve {
@@ -23,17 +24,22 @@ double norm2(const std::vector<double>& v) {
 
 }  // namespace
 
-double backward_error(index_t n, const Operator& a, double norm_a, const double* b,
-                      const double* x, double* r) {
+double backward_error(index_t n, const Operator& a, double norm_a, const double* b, const double* x,
+                      double* r) {
   a(x, r);
   double rn = 0, xn = 0, bn = 0;
+  bool finite = true;
   for (index_t i = 0; i < n; ++i) {
     r[i] = b[i] - r[i];
+    finite = finite && std::isfinite(r[i]) && std::isfinite(x[i]);
     rn = std::max(rn, std::abs(r[i]));
     xn = std::max(xn, std::abs(x[i]));
     bn = std::max(bn, std::abs(b[i]));
   }
+  if (!finite) return std::numeric_limits<double>::infinity();
   const double den = norm_a * xn + bn;
+  // norm_a·‖x‖∞ past DBL_MAX (both finite): ‖b‖∞ is negligible beside it
+  if (!std::isfinite(den)) return rn / xn / norm_a;
   return den > 0 ? rn / den : rn;
 }
 

@@ -47,6 +47,7 @@
 #include <cerrno>
 #include <charconv>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -255,6 +256,12 @@ class LineReader {
 // The parser: banner, size line, entries
 // ---------------------------------------------------------------------------------------
 
+// The largest row or column count accepted: the compressed offsets of a matrix hold
+// dimension + 1 index_t values, and a std::vector<index_t> holds at most about 2^60
+// (PTRDIFF_MAX / 8); below this bound dimension + 1 and the bucket counts never
+// overflow.
+constexpr index_t kMaxDimension = (index_t{1} << 60) - 1;
+
 enum class Format { coordinate, array };
 enum class Field { real, integer, pattern };
 
@@ -383,6 +390,10 @@ void parse_size_line(const std::string& path, LineReader& in, Contents& c) {
       throw ParseError(
           path, ln,
           "bad size line: negative " + std::string(names[k]) + " " + std::to_string(v[k]));
+    if (k < 2 && v[k] > kMaxDimension)
+      throw ParseError(path, ln,
+                       "bad size line: " + std::string(names[k]) + " " + std::to_string(v[k]) +
+                           " exceeds the largest supported dimension 2^60 - 1");
   }
   const std::string_view extra = next_token(p, e);
   if (!extra.empty()) throw ParseError(path, ln, "bad size line: unexpected text " + quoted(extra));
@@ -570,6 +581,21 @@ SparseMatrix coordinate_to_csc(const Contents& c) {
   return out;
 }
 
+// Duplicate entries (and, in symmetric files, an entry given in both triangles) are
+// summed; each value is finite, but their sum can overflow. Such a matrix is refused
+// like a file holding Inf; the message names the entry (no single line is to blame).
+[[noreturn]] void throw_sum_overflow(const std::string& path, index_t i, index_t j) {
+  throw ParseError(path, 0,
+                   "the entries at (" + std::to_string(i + 1) + ", " + std::to_string(j + 1) +
+                       ") (1-based) sum past the range of a double (duplicates are summed)");
+}
+
+void check_sums(const std::string& path, const SparseMatrix& a) {
+  for (index_t j = 0; j < a.n_cols; ++j)
+    for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p)
+      if (!std::isfinite(a.values[p])) throw_sum_overflow(path, a.indices[p], j);
+}
+
 // Calls f(i, j, v) for every entry of an array file, in file order (0-based i, j).
 template <class F>
 void for_each_array_value(const Contents& c, F&& f) {
@@ -631,6 +657,8 @@ std::vector<double> to_dense(const std::string& path, const Contents& c) {
     for (size_t k = 0; k < c.row.size(); ++k) put(c.row[k], c.col[k], 1.0, false);
   } else {
     for (size_t k = 0; k < c.row.size(); ++k) put(c.row[k], c.col[k], c.val[k], true);
+    for (index_t k = 0; k < size; ++k)
+      if (!std::isfinite(d[k])) throw_sum_overflow(path, k % ld, k / ld);
   }
   return d;
 }
@@ -733,7 +761,19 @@ MMMatrix read_matrix_market(const std::string& path) {
   MMMatrix out;
   out.symmetry = c.symmetry;
   out.pattern = c.field == Field::pattern;
-  out.matrix = c.format == Format::coordinate ? coordinate_to_csc(c) : array_to_csc(c);
+  try {
+    out.matrix = c.format == Format::coordinate ? coordinate_to_csc(c) : array_to_csc(c);
+  } catch (const std::bad_alloc&) {
+    // a size line may declare any dimensions up to kMaxDimension, and the compressed
+    // form needs dimension + 1 offsets whatever the entries: bytes of the CSC arrays
+    const double bytes = 8.0 * (static_cast<double>(c.rows) + static_cast<double>(c.cols) + 2) +
+                         16.0 * static_cast<double>(c.row.size());
+    throw OutOfMemory(bytes < 1.8e19 ? static_cast<size_t>(bytes) : SIZE_MAX,
+                      "read_matrix_market(" + path + "): a " + std::to_string(c.rows) + "x" +
+                          std::to_string(c.cols) + " matrix with " + std::to_string(c.row.size()) +
+                          " entries");
+  }
+  if (c.format == Format::coordinate && c.field != Field::pattern) check_sums(path, out.matrix);
   return out;
 }
 

@@ -131,9 +131,10 @@ void validate(const SparseMatrix& a) {
                        std::to_string(a.n_cols));
   const index_t nmaj = a.n_major();
   const index_t nmin = a.layout == Layout::csc ? a.n_rows : a.n_cols;
-  if (static_cast<index_t>(a.offsets.size()) != nmaj + 1)
+  // (compared as offsets.size() - 1 == nmaj: nmaj + 1 overflows for nmaj = INT64_MAX)
+  if (a.offsets.empty() || static_cast<index_t>(a.offsets.size() - 1) != nmaj)
     throw InvalidInput("offsets has " + std::to_string(a.offsets.size()) + " entries, expected " +
-                       std::to_string(nmaj + 1));
+                       std::to_string(static_cast<unsigned long long>(nmaj) + 1));
   if (a.offsets[0] != 0)
     throw InvalidInput("offsets[0] is " + std::to_string(a.offsets[0]) + ", not 0");
   for (index_t j = 0; j < nmaj; ++j)

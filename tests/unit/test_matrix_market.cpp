@@ -31,6 +31,16 @@
 #include "strata/sparse_matrix.hpp"
 #include "support/test_support.hpp"
 
+// AddressSanitizer builds (clang spells it __has_feature, gcc __SANITIZE_ADDRESS__)
+#if defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define STRATA_TEST_HAS_ASAN 1
+#endif
+#endif
+#ifndef STRATA_TEST_HAS_ASAN
+#define STRATA_TEST_HAS_ASAN 0
+#endif
+
 namespace strata {
 namespace {
 
@@ -656,6 +666,18 @@ TEST_F(MatrixMarketTest, MalformedFilesRaiseParseErrorAtTheLine) {
       {"array_nan", A + "1 1\nNaN\n", 3, "is NaN or Inf"},
       {"array_symmetric_not_square", "%%MatrixMarket matrix array real symmetric\n2 3\n", 2,
        "must be square"},
+      // found by fuzzing (docs/reliability.md): dimensions whose offsets cannot exist;
+      // INT64_MAX used to overflow `n + 1` (UBSan) on its way to a length_error
+      {"rows_int64_max", G + "9223372036854775807 1 0\n", 2,
+       "row count 9223372036854775807 exceeds the largest supported dimension"},
+      {"cols_2_60", G + "1 1152921504606846976 0\n", 2,
+       "column count 1152921504606846976 exceeds the largest supported dimension"},
+      // duplicates (or both triangles of a symmetric file) summing past DBL_MAX used to
+      // give a matrix holding Inf; no single line is to blame (line 0)
+      {"duplicates_overflow", G + "2 2 2\n1 1 1e308\n1 1 1e308\n", 0,
+       "entries at (1, 1) (1-based) sum past the range of a double"},
+      {"symmetric_both_triangles_overflow", S + "2 2 2\n2 1 -1.7e308\n1 2 -1.7e308\n", 0,
+       "entries at (2, 1) (1-based) sum past the range of a double"},
   };
   for (const BadCase& c : cases) {
     SCOPED_TRACE(c.name);
@@ -665,6 +687,25 @@ TEST_F(MatrixMarketTest, MalformedFilesRaiseParseErrorAtTheLine) {
   expect_parse_error(write_gz("nan.mtx.gz", G + "3 3 2\n1 1 1.0\n2 2 nan\n"), 4, "NaN or Inf");
   expect_parse_error(write_gz("short.mtx.gz", G + "3 3 3\n1 1 1.0\n"), 4,
                      "expected 3 entries, found 1");
+}
+
+// Found by fuzzing: a size line may declare dimensions whose compressed offsets alone
+// need more memory than any machine has (1e15 columns: 8 PB, beyond the address space).
+// The reader raises OutOfMemory naming the file, not std::bad_alloc.
+TEST_F(MatrixMarketTest, HugeDeclaredDimensionsAreOutOfMemory) {
+#if defined(__SANITIZE_ADDRESS__) || STRATA_TEST_HAS_ASAN
+  GTEST_SKIP() << "under AddressSanitizer, operator new aborts on an allocation it cannot "
+                  "satisfy instead of throwing std::bad_alloc";
+#endif
+  const std::string file = write_text(
+      "huge.mtx", "%%MatrixMarket matrix coordinate real general\n1 1000000000000000 0\n");
+  try {
+    read_matrix_market(file);
+    FAIL() << "expected OutOfMemory";
+  } catch (const OutOfMemory& e) {
+    EXPECT_NE(std::string(e.what()).find("huge.mtx"), std::string::npos) << e.what();
+    EXPECT_GE(e.bytes_requested(), size_t{8000000000000000});
+  }
 }
 
 TEST_F(MatrixMarketTest, MissingFileIsParseErrorAtLineZero) {

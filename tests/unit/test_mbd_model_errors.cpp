@@ -83,6 +83,56 @@ TEST(MbdModelErrors, InvalidJsonGivesLineAndColumn) {
   }
 }
 
+// Found by fuzzing (fuzz/fuzz_model_json.cpp): a number beyond the double range made
+// nlohmann::json throw its out_of_range (not a parse_error), which escaped the loader as
+// a foreign exception and terminated `strata simulate`. It is a ModelError at the number.
+TEST(MbdModelErrors, NumberOverflowIsAModelErrorAtTheNumber) {
+  const std::string text =
+      "{\"type\": \"planar\",\n \"bodies\": [{\"name\": \"a\", \"mass\": 2.1e964}]}";
+  try {
+    parse_model(text, "big.json");
+    FAIL() << "no error";
+  } catch (const ModelError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("big.json:2:35: invalid JSON"), std::string::npos) << what;
+    EXPECT_NE(what.find("number overflow parsing '2.1e964'"), std::string::npos) << what;
+  }
+}
+
+// Found with the fuzz harness under UBSan: an attachment node index of 1e10 was cast to
+// int (undefined behaviour), and 0.5 silently became node 0. Both, and the element
+// indices, are errors naming the JSON path.
+TEST(MbdModelErrors, NodeIndicesMustBeIntegersInRange) {
+  const json cube = json::parse(R"({"type": "spatial", "flexible_bodies": [
+    {"name": "cube", "material": {"density": 1000, "young": 1e6, "poisson": 0.3},
+     "nodes": [[0,0,0],[1,0,0],[1,1,0],[0,1,0],[0,0,1],[1,0,1],[1,1,1],[0,1,1]],
+     "elements": [[0,1,2,3,4,5,6,7]],
+     "attachments": [{"nodes": [0, 1, 2, 3], "body": "ground"}]}]})");
+  EXPECT_EQ(error_of(cube), "(no error)");
+  struct Case {
+    const char* pointer;
+    double value;
+    const char* path;
+  };
+  const Case cases[] = {
+      {"/flexible_bodies/0/attachments/0/nodes/1", 1e10, "attachments[0].nodes[1]"},
+      {"/flexible_bodies/0/attachments/0/nodes/2", 0.5, "attachments[0].nodes[2]"},
+      {"/flexible_bodies/0/attachments/0/nodes/0", -1, "attachments[0].nodes[0]"},
+      {"/flexible_bodies/0/elements/0/7", 8, "elements[0][7]"},
+      {"/flexible_bodies/0/elements/0/3", -2147483649.0, "elements[0][3]"}};
+  for (const Case& c : cases) {
+    json j = cube;
+    j[json::json_pointer(c.pointer)] = c.value;
+    const std::string what = error_of(j);
+    SCOPED_TRACE(what);
+    EXPECT_NE(what.find(c.path), std::string::npos);
+    EXPECT_NE(what.find("is not an integer in 0..7"), std::string::npos);
+  }
+  json j = cube;
+  j["flexible_bodies"][0]["attachments"][0] = {{"node", 1e300}, {"body", "ground"}};
+  EXPECT_NE(error_of(j).find("attachments[0].node: node index"), std::string::npos) << error_of(j);
+}
+
 TEST(MbdModelErrors, RedundantConstraintsAreNamed) {
   // a second revolute joint at the pin duplicates the first
   json j = pendulum();
