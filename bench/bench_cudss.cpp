@@ -222,6 +222,7 @@ int main(int argc, char** argv) {
                 {"type", to_string(o.type)},
                 {"nnz_l", an.nnz_l},
                 {"nnz_l_fronts", an.nnz_l_fronts},
+                {"factor_flops", an.factor_flops},
                 {"strata_gpu",
                  {{"analysis_seconds", an_s},
                   {"factor_seconds", f_s},

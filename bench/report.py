@@ -22,9 +22,13 @@ How results map to the five experiments of the benchmark issue:
   2. other solvers          benchmark "analysis" (vs CHOLMOD+METIS) and "factor", tag ""
                             (vs CHOLMOD and MUMPS with the same permutation; a row's
                             "cudss" object, from a GPU driver, becomes a cuDSS column)
-  3. GPU count 1, 2, 4      benchmark "multigpu"
-  4. solvability            benchmark "solvability"
-  5. end to end simulate    benchmark "simulate"
+                            (bench_gpu: rows with "strata_gpu", GPU vs CPU backend);
+                            benchmark "cudss" (bench_cudss: strata's GPU vs NVIDIA cuDSS)
+  3. GPU count 1, 2, 4      benchmark "multigpu" (backend cuda; cpu runs shown apart)
+  4. solvability            benchmark "gpu_memory" (its "solvability" and "device_figures";
+                            its "block_size" list is the GPU part of experiment 1)
+  5. end to end simulate    benchmark "simulate", else the newest results/logs/*mbd*.log
+                            (scripts/gpu/run_mbd.sh; see bench/report_e2e.py)
 and, outside the five experiments, the Python interface (bench/python_vs_scipy.py):
 benchmark "python", tag "" (overhead against the command line; strata against scipy's
 spsolve and scikit-sparse's CHOLMOD).
@@ -36,166 +40,24 @@ Only the Python standard library and matplotlib are used.
 from __future__ import annotations
 
 import argparse
-import hashlib
-import json
-import math
 import os
 import re
 import sys
 
+from report_common import (NOT_MEASURED, Run, by_machine, dig, f_e, f_g, f_int, f_pct,
+                           f_ratio, f_sec, geomean, load_runs, machine_label,
+                           machine_slug, newest_runs, num, ratio, table)
+from report_e2e import EndToEnd
+from report_gpu import GpuSections, is_bench_gpu
+
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SWEEP_TAG = re.compile(r"^mbs-(\d+)$")
-NOT_MEASURED = "**Not measured yet**"
-
-
-# --------------------------------------------------------------------------- results
-
-
-class Run:
-    """One results file."""
-
-    def __init__(self, path: str, data: dict):
-        self.path = path
-        self.name = os.path.basename(path)
-        self.data = data
-        self.kind = data["benchmark"]
-        self.tag = data.get("tag") or ""
-        self.backend = data.get("backend") or "cpu"
-        self.date = data["date"]
-        self.rows = data["rows"]
-        m = data["machine"]
-        self.machine = (str(m.get("cpu", "")), int(m.get("hardware_threads", 0) or 0),
-                        str(m.get("gpu", "") or ""))
-
-    def get(self, key, default=None):
-        return self.data.get(key, default)
-
-
-def load_runs(results_dir: str) -> tuple[list[Run], list[tuple[str, str]]]:
-    """All well-formed results files in results_dir, and (file, reason) for the others."""
-    runs, skipped = [], []
-    if not os.path.isdir(results_dir):
-        return runs, skipped
-    for name in sorted(os.listdir(results_dir)):
-        if not name.endswith(".json"):
-            continue
-        path = os.path.join(results_dir, name)
-        try:
-            with open(path, encoding="utf-8") as f:
-                data = json.load(f)
-        except (OSError, ValueError) as e:
-            skipped.append((name, f"cannot be read as JSON ({e.__class__.__name__})"))
-            continue
-        if not isinstance(data, dict):
-            skipped.append((name, "not a JSON object"))
-            continue
-        missing = [k for k in ("benchmark", "date", "command", "git_commit", "machine", "rows")
-                   if k not in data]
-        if missing:
-            skipped.append((name, "missing " + ", ".join(missing)))
-            continue
-        if not isinstance(data["rows"], list) or not isinstance(data["machine"], dict):
-            skipped.append((name, "'rows' is not a list or 'machine' is not an object"))
-            continue
-        runs.append(Run(path, data))
-    return runs, skipped
-
-
-def newest_runs(runs: list[Run]) -> list[Run]:
-    """The newest run per (kind, machine, tag, backend); ties broken by file name."""
-    best: dict[tuple, Run] = {}
-    for r in runs:
-        key = (r.kind, r.machine, r.tag, r.backend)
-        if key not in best or (r.date, r.name) > (best[key].date, best[key].name):
-            best[key] = r
-    return sorted(best.values(), key=lambda r: (r.kind, r.machine, r.backend, r.tag))
-
-
-def machine_label(machine: tuple) -> str:
-    cpu, threads, gpu = machine
-    s = f"{cpu or 'unknown CPU'}, {threads} hardware threads"
-    return s + (f", GPU {gpu}" if gpu else ", no GPU")
-
-
-def machine_slug(machine: tuple) -> str:
-    return hashlib.sha1(repr(machine).encode()).hexdigest()[:8]
-
-
-def by_machine(runs: list[Run]) -> dict[tuple, list[Run]]:
-    out: dict[tuple, list[Run]] = {}
-    for r in runs:
-        out.setdefault(r.machine, []).append(r)
-    return out
-
-
-# --------------------------------------------------------------------------- numbers
-
-
-def num(x):
-    """x as a float when it is a finite number, else None."""
-    if isinstance(x, bool) or not isinstance(x, (int, float)):
-        return None
-    return float(x) if math.isfinite(x) else None
-
-
-def dig(d, *keys):
-    for k in keys:
-        if not isinstance(d, dict) or k not in d:
-            return None
-        d = d[k]
-    return d
-
-
-def geomean(v: list[float]) -> float | None:
-    v = [x for x in v if x is not None and x > 0]
-    return math.exp(sum(math.log(x) for x in v) / len(v)) if v else None
-
-
-def ratio(a, b):
-    a, b = num(a), num(b)
-    return a / b if a is not None and b is not None and b > 0 else None
-
-
-def f_ratio(x) -> str:
-    return "–" if x is None else f"{x:.3f}"
-
-
-def f_sec(x) -> str:
-    x = num(x)
-    return "–" if x is None else f"{x:.4g}"
-
-
-def f_int(x) -> str:
-    x = num(x)
-    return "–" if x is None else f"{int(round(x)):,}"
-
-
-def f_g(x) -> str:
-    x = num(x)
-    return "–" if x is None else f"{x:.3g}"
-
-
-def f_e(x) -> str:
-    x = num(x)
-    return "–" if x is None else f"{x:.1e}"
-
-
-def f_pct(x) -> str:
-    x = num(x)
-    return "–" if x is None else f"{x:+.2f}%"
-
-
-def table(header: list[str], rows: list[list[str]], right_from: int = 1) -> str:
-    align = ["---" if i < right_from else "---:" for i in range(len(header))]
-    lines = ["| " + " | ".join(header) + " |", "| " + " | ".join(align) + " |"]
-    lines += ["| " + " | ".join(r) + " |" for r in rows]
-    return "\n".join(lines) + "\n"
 
 
 # --------------------------------------------------------------------------- report
 
 
-class Report:
+class Report(GpuSections, EndToEnd):
     def __init__(self, results_dir: str, out_dir: str):
         self.results_dir = os.path.abspath(results_dir)
         self.out_dir = os.path.abspath(out_dir)
@@ -256,24 +118,14 @@ class Report:
     def build(self) -> str:
         all_runs, skipped = load_runs(self.results_dir)
         runs = newest_runs(all_runs)
+        self.all_runs = all_runs
         self.consumed: set[str] = set()
         body_start = len(self.parts)
         self.sweep(runs)
         self.comparison(runs)
-        self.simple_section(runs, "3. GPU count 1, 2, 4 (with ablation)", "multigpu",
-                            "factorization time with 1, 2 and 4 GPUs, with and without the "
-                            "balanced bisection, additional subtrees and work stealing",
-                            "needs a lent multi-GPU machine (`bench/run multigpu`)")
-        self.simple_section(runs, "4. Solvability: time vs factor size / device budget",
-                            "solvability",
-                            "factorization time as the device memory budget shrinks below "
-                            "the size of the factor",
-                            "needs a lent GPU machine (`bench/run gpu`)")
-        self.simple_section(runs, "5. End to end: `strata simulate`, CPU vs GPU", "simulate",
-                            "wall time of a multibody simulation (analysis once, a "
-                            "refactorization and solve per Newton step) on the CPU and on a GPU",
-                            "needs the `strata simulate` command and a lent GPU machine "
-                            "(`bench/run gpu`)")
+        self.multigpu_section(runs)
+        self.solvability_section(runs)
+        self.e2e_section(runs)
         self.python_section(runs)
         self.others(runs)
         if skipped:
@@ -344,6 +196,21 @@ class Report:
                                      f"over {sum(1 for _, x in pp if x is not None)} problems "
                                      f"on {machine_label(r.machine)} "
                                      f"([`{r.name}`]({self.rel(r.path)})).")
+            if r.kind == "cudss":
+                for what, k, name in (("refactor_seconds", "cudss_default",
+                                       "refactorization time strata GPU/cuDSS (default "
+                                       "reordering)"),
+                                      ("refactor_seconds", "cudss_strata_perm",
+                                       "refactorization time strata GPU/cuDSS (strata's "
+                                       "permutation)")):
+                    pp = [(row.get("problem"), ratio(dig(row, "strata_gpu", what),
+                                                     dig(row, k, what))) for row in r.rows]
+                    g = judge(name, r.machine, pp)
+                    if g is not None:
+                        lines.append(f"- Geometric mean of {name}: **{f_ratio(g)}** over "
+                                     f"{sum(1 for _, x in pp if x is not None)} problems on "
+                                     f"{machine_label(r.machine)} "
+                                     f"([`{r.name}`]({self.rel(r.path)})).")
             if r.kind == "analysis" and r.tag == "":
                 for key, what in (("nnz_l", "nnz(L) strata/CHOLMOD+METIS"),
                                   ("seconds", "analysis time strata/CHOLMOD+METIS")):
@@ -407,6 +274,12 @@ class Report:
             self.w(f"### {part}")
             self.w()
             chosen = [r for r in sweep_runs if pick(r)]
+            gm = ([r for r in runs if r.kind == "gpu_memory" and r.get("block_size")]
+                  if part == "GPU" else [])
+            for r in gm:
+                self.gpu_block_sweep(r)
+            if not chosen and gm:
+                continue
             if not chosen:
                 need = ("run `bench/run cpu`" if part == "CPU"
                         else "needs a lent GPU machine: `bench/run gpu`")
@@ -496,14 +369,18 @@ class Report:
             self.w()
         for r in cpu:
             self.factor_run(r)
-        self.w("### GPU: strata vs cuDSS")
+        self.w("### GPU: strata's CUDA backend vs its CPU backend and CHOLMOD")
         self.w()
         if not gpu:
-            self.w(f"{NOT_MEASURED}: no GPU factorization results and no cuDSS comparison "
+            self.w(f"{NOT_MEASURED}: no GPU factorization results "
                    f"(needs a lent GPU machine: `bench/run gpu`).")
             self.w()
         for r in gpu:
-            self.factor_run(r)
+            if is_bench_gpu(r):
+                self.gpu_vs_cpu_run(r)
+            else:
+                self.factor_run(r)
+        self.cudss_section(runs)
 
     def analysis_run(self, r: Run) -> None:
         self.consumed.add(r.path)

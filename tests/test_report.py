@@ -11,7 +11,16 @@ made with round ratios, so the expected figures below are worked out by hand:
             strata/MUMPS   0.5, 0.5, 0.5              -> 0.500 (not behind)
   an older factor run (marker 777) must not be shown; a run with an unknown tag (marker
   654.321) must land in "Other results"; a truncated file must be listed as skipped;
-  experiments 3-5 and the GPU parts have no results and must say "Not measured yet".
+  the GPU factorization (bench_gpu) has no results and must say "Not measured yet".
+  gpu_memory  GPU block sweep 256/1024/2048: 2, 1, 0.8 s -> best 2048, 1024/best 1.250;
+            solvability slowdown up to 5.0 at 10x, time over the PCIe floor 100-500x;
+            DGEMM 50 TFLOP/s, best in-core 125 GFLOP/s -> 0.25% of the peak
+  cudss     refactor strata/cuDSS default 20 and 10 -> 14.142, strata perm. 4 and 5 -> 4.472;
+            1e12 flops / 2 s = 500 GFLOP/s = 1.00% of the peak; bcsstk16's flops come from
+            the factor fixture (same nnz(L)): 1.41e8 / 0.01 s = 14.1 GFLOP/s
+  multigpu  cuda: 8, 4.8, 4 s on 1, 2, 4 GPUs -> speedups 1.67, 2.00; ablation at 4 GPUs
+            1.200, 1.500, 1.100; a cpu-backend run (marker 0.0987) only under its own heading
+  mbd log   solver 20 ms/step on the GPU vs 50 on the CPU -> 2.50x; a failed run is listed
   python    overhead 1.00% on the large matrix (goal 5%: met); strata/SuperLU 0.25 and
             1.0 -> 0.500, strata/CHOLMOD 2.0 and 0.5 -> 1.000
 Exit status 1 with a list of failed checks if anything is off.
@@ -103,7 +112,11 @@ def main():
     check(re.search(r"\| elast3d-10 \| 2\.4 \| 1\.6 \| 1\.2 \| 2048 \| 0\.4 \|", s1),
           "section 1: elast3d-10 sweep row wrong")
     gpu1 = s1.split("### GPU", 1)
-    check(len(gpu1) == 2 and "Not measured yet" in gpu1[1], "section 1: GPU part not 'not measured'")
+    g1 = gpu1[1] if len(gpu1) == 2 else ""
+    check(re.search(r"\| lap3d-20 \| 8,000 \| 2 \| 1 \| 0\.8 \| 2048 \| 125 \| 1\.250 \|", g1),
+          "section 1: GPU block sweep row wrong")
+    check("chosen from the CPU sweep" in g1 and "gpu-memory-20250103T100000Z.json" in g1,
+          "section 1: GPU part does not say the default came from the CPU sweep, or no file")
     for mbs in (32, 256, 2048):
         check(f"factor-mbs-{mbs}-2025" in s1, f"section 1: results file of mbs-{mbs} not named")
 
@@ -119,18 +132,54 @@ def main():
           "section 2: command of the factor run not in the caption")
     check("commit f1x7e5a" in s2 and "2025-01-02T10:00:00Z" in s2,
           "section 2: commit or date not in the caption")
-    gpu2 = s2.split("### GPU", 1)
-    check(len(gpu2) == 2 and "Not measured yet" in gpu2[1], "section 2: cuDSS part not 'not measured'")
+    gpu2 = s2.split("### GPU: strata's CUDA backend", 1)
+    check(len(gpu2) == 2 and "Not measured yet" in gpu2[1].split("### GPU: strata vs NVIDIA")[0],
+          "section 2: bench_gpu part not 'not measured'")
+    cu = s2.split("### GPU: strata vs NVIDIA cuDSS", 1)
+    cu = cu[1] if len(cu) == 2 else ""
+    check(re.search(r"\| lap3d-big \| 20\.000 \| 4\.000 \| 20\.000 \| 4\.000 \|", cu),
+          "cuDSS: ratio row lap3d-big wrong")
+    check(re.search(r"\| \*\*geometric mean\*\* \| 10\.000 \| 11\.547 \| 14\.142 \| 4\.472 \|", cu),
+          "cuDSS: geometric mean row wrong")
+    check(re.search(r"\| lap3d-big \|.*\| 1e\+12 \| 500 \| 1\.00% \|", cu)
+          and re.search(r"\| bcsstk16 \|.*\| 1\.41e\+08 \| 14\.1 \| 0\.03% \|", cu),
+          "cuDSS: GFLOP/s or fraction of the DGEMM peak wrong")
+    check("**10.0–20.0× slower**" in cu and re.search(r"large problems[^\n]*\*\*not met\*\*", cu)
+          and re.search(r"40% of the DGEMM peak[^\n]*\*\*not met\*\*", cu),
+          "cuDSS: being behind or the targets not stated plainly")
+    check("cudss-20250103T110000Z.json" in cu and "commit 9a1b2c3" in cu,
+          "cuDSS: results file or commit not named")
     check(re.search(r"Not measured yet\*\* in this run: solve time", s2),
           "section 2: missing solve time not reported as not measured")
 
-    # --- experiments 3-5: no results, must say so and show no table
-    for n in (3, 4, 5):
-        s = section(secs, f"## {n}.")
-        check(s is not None, f"no section {n}")
-        if s is not None:
-            check("Not measured yet" in s, f"section {n}: not reported as not measured")
-            check("|" not in s and "![" not in s, f"section {n}: shows a table or plot without results")
+    # --- experiment 3: GPU runs are the experiment, CPU-backend runs apart
+    s3 = section(secs, "## 3.") or ""
+    g3, _, c3 = s3.partition("### CPU backend")
+    check(re.search(r"\| lap3d-20 \| 8,000 \| 4\.9e\+08 \| 8 \| 4\.8 \| 4 \| 1\.67 \| 2\.00 \| 83% \| 50% \|",
+                    g3), "section 3: speedup row wrong")
+    check(re.search(r"\| lap3d-20 \| 4 \| 4 \| 4 \| 4\.8 \(1\.200\) \| 6 \(1\.500\) \| 4\.4 \(1\.100\) \|",
+                    g3), "section 3: ablation row wrong")
+    check(re.search(r"\| lap3d-20 \| 2 \| 1 \| 3 \| 2 \| 60% \|", g3), "section 3: per-GPU row wrong")
+    check("0.0987" not in g3 and "0.0987" in c3 and "not the experiment" in c3,
+          "section 3: the CPU-backend run is mixed into the GPU experiment or not labelled")
+    # --- experiment 4
+    s4 = section(secs, "## 4.") or ""
+    check(re.search(r"\| lap3d-20 \| 10× \| 10 \| 5 \| 5\.00 \| 0\.05 \| 100\.000 \|", s4),
+          "section 4: solvability row at 10x wrong")
+    check("**5.0× slower than in core**" in s4 and "100–500× above the PCIe floor" in s4,
+          "section 4: slowdown or distance to the PCIe floor not stated")
+    check("host→device 50 GB/s, device→host 25 GB/s" in s4 and "**0.25% of the peak**" in s4,
+          "section 4: device figures or fraction of the DGEMM peak wrong")
+    # --- experiment 5: the mbd log
+    s5 = section(secs, "## 5.") or ""
+    check(re.search(r"\| lattice-gpu \| `--generate lattice:4 --t-end 0\.02` \| cuda \| 10 \|", s5)
+          and "(2.50×: the GPU is faster)" in s5 and "broken-run" in s5,
+          "section 5: log table, CPU vs GPU ratio or failed run wrong")
+    check("commit 9a1b2c3" in s5 and "mbd-gpu-20250103T130000Z.log" in s5,
+          "section 5: the log's commit or name not in the caption")
+    summ2 = section(secs, "## Summary") or ""
+    check(re.search(r"refactorization time strata GPU/cuDSS \(default reordering\): \*\*14\.142\*\*",
+                    summ2), "summary: cuDSS refactorization ratio missing")
 
     # --- the Python interface: overhead table, the goal, solver ratios
     sp_ = section(secs, "## Python interface") or ""
@@ -157,7 +206,8 @@ def main():
 
     # --- plots: every referenced PNG exists and is a PNG; each has a caption with a file
     plots = re.findall(r"!\[[^\]]*\]\((plots/[^)]+\.png)\)", text)
-    check(len(plots) == 3, f"expected 3 plots (sweep, analysis, factor), found {len(plots)}")
+    check(len(plots) == 9, f"expected 9 plots (sweep CPU and GPU, analysis, factor, cuDSS, "
+          f"multigpu GPU and CPU, solvability, simulate), found {len(plots)}")
     for p in plots:
         f = os.path.join(out, p)
         ok = os.path.exists(f) and open(f, "rb").read(8) == b"\x89PNG\r\n\x1a\n"
@@ -165,7 +215,7 @@ def main():
         after = text.split(p, 1)[1][:3000]
         check("Measured with" in after and "results file" in after,
               f"plot {p} has no caption saying how it was measured")
-    for link in re.findall(r"\]\(([^)]+\.json)\)", text):
+    for link in re.findall(r"\]\(([^)]+\.(?:json|log))\)", text):
         check(os.path.exists(os.path.join(out, link)), f"link to results file {link} is broken")
 
     # --- the same input gives the same report (no clock, no randomness)
@@ -183,7 +233,7 @@ def main():
                          "--results", empty, "--out", out3], capture_output=True, text=True)
     check(r3.returncode == 0, f"report.py fails on an empty results folder: {r3.stderr}")
     e = open(os.path.join(out3, "REPORT.md"), encoding="utf-8").read() if r3.returncode == 0 else ""
-    check(e.count("Not measured yet") >= 7 and "| ---" not in e and "![" not in e,
+    check(e.count("Not measured yet") >= 10 and "| ---" not in e and "![" not in e,
           "empty results: sections not all 'not measured', or a table/plot was written")
 
     for d in (out2, empty, out3):

@@ -17,6 +17,8 @@ cmake -S . -B build-gpu -G Ninja -DCMAKE_BUILD_TYPE=Release -DCMAKE_CUDA_ARCHITE
   -DSTRATA_MATRIX_DIR=.carry/matrices -DSTRATA_CUDSS_DIR="$PWD/.whl/nvidia/cu13" >/dev/null
 cmake --build build-gpu -j2
 rm -rf .carry && mkdir -p .carry/bin .carry/lib .carry/matrices
+# the commit the binaries were built from (logs on the device name it; it has no .git)
+echo "$(git rev-parse --short HEAD)$(git diff --quiet HEAD -- . || echo ' with uncommitted changes')" >.carry/COMMIT
 cp build-gpu/strata build-gpu/tests/test_solver build-gpu/bench/bench_factor .carry/bin/
 # every gpu-labelled test binary (one per file in tests/gpu)
 for src in tests/gpu/*.cpp; do cp "build-gpu/tests/$(basename "$src" .cpp)" .carry/bin/; done

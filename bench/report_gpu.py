@@ -1,0 +1,616 @@
+"""GPU sections of the strata benchmark report (used by bench/report.py).
+
+What each results kind holds and how it becomes a section:
+  gpu_memory  bench/bench_gpu_memory.cpp: "device_figures" (pinned host<->device bandwidth,
+              cuBLAS DGEMM rate), "solvability" (per problem the factorization in core and
+              under a device budget of factor bytes / ratio) -> experiment 4; "block_size"
+              (in-core GPU factorization per max_block_size) -> experiment 1, GPU part.
+  factor, backend cuda, rows with "strata_gpu"  bench/bench_gpu.cpp: the CUDA backend
+              against the CPU backend and CHOLMOD -> experiment 2, GPU vs CPU.
+  cudss       bench/bench_cudss.cpp: strata's CUDA backend against NVIDIA cuDSS (default
+              reordering, and strata's permutation) -> experiment 2, GPU part.
+  multigpu    bench/bench_multigpu.cpp: factorization with 1, 2, 4 workers and the
+              ablation -> experiment 3 (backend cuda only; backend cpu is shown apart).
+  simulate    a JSON of that kind if a driver ever writes one; otherwise the newest
+              bench/results/logs/*mbd*.log written by scripts/gpu/run_mbd.sh (the text
+              summary `strata simulate` prints) -> experiment 5.
+Every number is copied from those files or computed from them (ratios, rates, geometric
+means), as the captions say.
+"""
+from __future__ import annotations
+
+from report_common import (NOT_MEASURED, Run, dig, f_e, f_g, f_int, f_ratio,
+                           f_sec, geomean, machine_label, machine_slug, num, ratio, table)
+
+# Problems with at least this many entries in L count as "large" for the cuDSS target
+# (the issue names no size; this is the generator's choice and the report says so).
+LARGE_NNZ_L = 5e7
+PEAK_TARGET = 0.40  # the issue's target: at least 40% of the DGEMM peak
+DEFAULT_BLOCK = 1024  # include/strata/options.hpp, chosen from the CPU sweep
+
+
+def is_bench_gpu(r: Run) -> bool:
+    """A bench_gpu run (CUDA backend vs CPU backend and CHOLMOD)."""
+    return r.kind == "factor" and any(isinstance(row.get("strata_gpu"), dict) for row in r.rows)
+
+
+def ratio_label(x) -> str:
+    x = num(x)
+    return "in-core" if not x else f"{x:g}×"
+
+
+class GpuSections:
+    """Mixin of Report: the sections fed by the GPU drivers."""
+
+    # ---- shared look-ups
+
+    def device_figures(self, machine: tuple) -> tuple[dict | None, Run | None]:
+        """The newest gpu_memory device figures measured on the same GPU model."""
+        best = None
+        for r in self.all_runs:
+            if r.kind == "gpu_memory" and r.machine[2] == machine[2] and machine[2]:
+                if isinstance(r.get("device_figures"), dict):
+                    if best is None or (r.date, r.name) > (best.date, best.name):
+                        best = r
+        return (best.get("device_figures"), best) if best else (None, None)
+
+    def flops_for(self, problem: str, nnz_l) -> tuple[float | None, Run | None]:
+        """strata's factor flop count for (problem, nnz(L)) from any results file whose
+        row has the same problem and the same nnz(L) (so the same analysis)."""
+        nnz_l = num(nnz_l)
+        if nnz_l is None:
+            return None, None
+        for r in sorted(self.all_runs, key=lambda r: (r.date, r.name), reverse=True):
+            for row in r.rows:
+                if not isinstance(row, dict) or row.get("problem") != problem:
+                    continue
+                for nz, fl in ((row.get("nnz_l"), row.get("factor_flops")),
+                               (row.get("nnz_l"), row.get("flops")),
+                               (dig(row, "strata", "nnz_l"), dig(row, "strata", "flops"))):
+                    if num(nz) == nnz_l and num(fl) is not None:
+                        return num(fl), r
+        return None, None
+
+    # ---- experiment 1, GPU part
+
+    def gpu_block_sweep(self, r: Run) -> None:
+        self.consumed.add(r.path)
+        probs = [p for p in r.get("block_size") or [] if isinstance(p, dict)]
+        sizes = sorted({int(num(x.get("max_block_size")))
+                        for p in probs for x in p.get("runs", [])
+                        if num(x.get("max_block_size")) is not None})
+        rows, verdicts = [], []
+        for p in probs:
+            t = {int(num(x["max_block_size"])): num(x.get("factor_seconds"))
+                 for x in p.get("runs", []) if num(x.get("max_block_size")) is not None}
+            g = {int(num(x["max_block_size"])): num(x.get("gflops")) for x in p.get("runs", [])
+                 if num(x.get("max_block_size")) is not None}
+            known = {b: v for b, v in t.items() if v is not None}
+            best = min(known, key=known.get) if known else None
+            d_over_b = ratio(known.get(DEFAULT_BLOCK), known.get(best)) if best else None
+            rows.append([str(p.get("problem")), f_int(p.get("n"))]
+                        + [f_sec(t.get(b)) for b in sizes]
+                        + [str(best) if best else "–", f_g(g.get(best)) if best else "–",
+                           f_ratio(d_over_b)])
+            if best is not None:
+                verdicts.append((p.get("problem"), best, d_over_b))
+        self.w(f"In-core factorization on the GPU ({machine_label(r.machine)}), seconds "
+               f"(median of the run's repeats) per `max_block_size`; *best* is the fastest "
+               f"block size, *GFLOP/s* its rate as the driver stores it, *{DEFAULT_BLOCK}/best* "
+               f"the time at the default block size over the best time.")
+        self.w()
+        self.w(table(["problem", "n"] + [str(b) for b in sizes]
+                     + ["best", "GFLOP/s at best", f"{DEFAULT_BLOCK}/best"], rows, 1))
+        if verdicts:
+            bests = sorted({b for _, b, _ in verdicts})
+            self.w("Best block size on the GPU: "
+                   + ", ".join(f"{p} {b}" for p, b, _ in verdicts) + ". "
+                   + (f"The largest block size tried ({max(sizes)}) is best on "
+                      f"{sum(1 for _, b, _ in verdicts if b == max(sizes))} of "
+                      f"{len(verdicts)} problems. " if sizes else "")
+                   + f"The default max_block_size ({DEFAULT_BLOCK}, include/strata/options.hpp) "
+                   f"was chosen from the CPU sweep above, not from this one; on the GPU it "
+                   f"costs " + ", ".join(f"{p} {f_ratio(x)}×" for p, _, x in verdicts
+                                         if x is not None)
+                   + " of the best time." + (" A larger default would suit the GPU."
+                                             if bests and min(bests) > DEFAULT_BLOCK else ""))
+            self.w()
+        fig, ax = self.plt.subplots(figsize=(7, 4.5))
+        for p in probs:
+            pts = [(num(x.get("max_block_size")), num(x.get("factor_seconds")))
+                   for x in p.get("runs", [])]
+            pts = sorted((b, v) for b, v in pts if b is not None and v is not None)
+            if pts:
+                ax.plot([b for b, _ in pts], [v for _, v in pts], "o-", label=p.get("problem"))
+        ax.axvline(DEFAULT_BLOCK, color="grey", ls="--", lw=0.8, label=f"default {DEFAULT_BLOCK}")
+        ax.set_xscale("log", base=2)
+        ax.set_yscale("log")
+        if sizes:
+            ax.set_xticks(sizes)
+            ax.set_xticklabels([str(b) for b in sizes])
+        ax.set_xlabel("max_block_size")
+        ax.set_ylabel("factorization time [s]")
+        ax.set_title("strata GPU factorization time vs max_block_size (in core)", fontsize=10)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+        self.savefig(fig, f"block-size-sweep-gpu-{machine_slug(r.machine)}",
+                     "GPU factorization time vs max_block_size",
+                     "Table and plot: copied from the run's `block_size` rows; ratios computed "
+                     "by this generator.", [r])
+
+    # ---- experiment 2: bench_gpu (GPU vs CPU)
+
+    def gpu_vs_cpu_run(self, r: Run) -> None:
+        self.consumed.add(r.path)
+        rows = []
+        for row in r.rows:
+            g = row.get("strata_gpu") or {}
+            cpu = [c for c in row.get("cpu", []) if isinstance(c, dict)]
+            chol = [num(c.get("cholmod_seconds")) for c in cpu]
+            chol = min([c for c in chol if c is not None], default=None)
+            best = num(row.get("best_cpu_seconds"))
+            rows.append([str(row.get("problem")), str(row.get("type", "")), f_int(row.get("n")),
+                         f_int(row.get("nnz_l")), f_g(row.get("factor_flops")),
+                         f_sec(g.get("seconds")), f_g(g.get("gflops")),
+                         f_sec(best) + (f" ({row.get('best_cpu_threads')} thr.)"
+                                        if row.get("best_cpu_threads") else ""),
+                         f_sec(chol), f_ratio(ratio(best, g.get("seconds"))),
+                         f_ratio(ratio(chol, g.get("seconds"))), f_e(g.get("backward_error"))])
+        self.w(f"strata's CUDA backend against its CPU backend and CHOLMOD (same permutation) "
+               f"on {machine_label(r.machine)}. Seconds: median of the run's "
+               f"factorizations; *CPU/GPU* is the best CPU time over the GPU time (above 1: "
+               f"the GPU is faster). " + (str(r.get("note")) if r.get("note") else ""))
+        self.w()
+        self.w(table(["problem", "type", "n", "nnz(L)", "flops", "GPU s", "GPU GFLOP/s",
+                      "best CPU s", "CHOLMOD s", "CPU/GPU", "CHOLMOD/GPU", "berr GPU"], rows, 2))
+        self.caption("Table: copied from the rows (`strata_gpu`, `cpu`); ratios computed by "
+                     "this generator.", [r])
+
+    # ---- experiment 2: cuDSS
+
+    def cudss_section(self, runs: list[Run]) -> None:
+        self.w("### GPU: strata vs NVIDIA cuDSS")
+        self.w()
+        chosen = [r for r in runs if r.kind == "cudss"]
+        if not chosen:
+            self.w(f"{NOT_MEASURED}: no `cudss` results (bench_cudss on a lent GPU machine: "
+                   f"`scripts/gpu/run.sh --cudss-bench ...`).")
+            self.w()
+        for r in chosen:
+            self.cudss_run(r)
+
+    def cudss_run(self, r: Run) -> None:
+        self.consumed.add(r.path)
+        figs, fig_run = self.device_figures(r.machine)
+        peak = num(dig(figs, "dgemm_flops_per_second"))
+        keys = (("strata_gpu", "strata"), ("cudss_default", "cuDSS default"),
+                ("cudss_strata_perm", "cuDSS strata perm."))
+
+        def ok(row, k):
+            d = row.get(k)
+            return isinstance(d, dict) and d.get("ok") is not False and "error" not in d
+
+        def sec(row, k, what):
+            return num(dig(row, k, what)) if ok(row, k) else None
+
+        times, ratios_rows, nnz_rows = [], [], []
+        col = {c: [] for c in ("fd", "fp", "rd", "rp", "sd", "sp", "ad", "ap")}
+        flop_src: set[str] = set()
+        rates = []
+        for row in r.rows:
+            p = str(row.get("problem"))
+            line = [p, str(row.get("type", "")), f_int(row.get("n"))]
+            for what in ("analysis_seconds", "factor_seconds", "refactor_seconds",
+                         "solve_seconds"):
+                line += [f_sec(sec(row, k, what)) if ok(row, k) else "failed" for k, _ in keys]
+            times.append(line)
+            rl = [p]
+            for c, what, k in (("fd", "factor_seconds", "cudss_default"),
+                               ("fp", "factor_seconds", "cudss_strata_perm"),
+                               ("rd", "refactor_seconds", "cudss_default"),
+                               ("rp", "refactor_seconds", "cudss_strata_perm"),
+                               ("sd", "solve_seconds", "cudss_default"),
+                               ("sp", "solve_seconds", "cudss_strata_perm"),
+                               ("ad", "analysis_seconds", "cudss_default"),
+                               ("ap", "analysis_seconds", "cudss_strata_perm")):
+                x = ratio(sec(row, "strata_gpu", what), sec(row, k, what))
+                col[c].append((p, x))
+                rl.append(f_ratio(x))
+            ratios_rows.append(rl)
+            flops = num(row.get("factor_flops"))
+            src = "its own factor_flops" if flops is not None else None
+            if flops is None:
+                flops, fr = self.flops_for(p, row.get("nnz_l"))
+                if fr is not None:
+                    src = fr.name
+                    self.used.add(fr.path)
+            if flops is not None and row.get("type") == "general":
+                flops *= 2  # LU: twice the Cholesky count of the same pattern (as bench_gpu)
+            if src:
+                flop_src.add(src)
+            rf = sec(row, "strata_gpu", "refactor_seconds")
+            rate = flops / rf if flops is not None and rf else None
+            cd = sec(row, "cudss_default", "refactor_seconds")
+            rate_c = flops / cd if flops is not None and cd else None
+            rates.append((p, num(row.get("nnz_l")), rate))
+            nnz_rows.append([p, f_int(row.get("nnz_l")),
+                             f_int(dig(row, "cudss_default", "lu_nnz")),
+                             f_int(dig(row, "cudss_strata_perm", "lu_nnz")),
+                             f_ratio(ratio(row.get("nnz_l"), dig(row, "cudss_default", "lu_nnz"))),
+                             f_e(dig(row, "strata_gpu", "backward_error")),
+                             f_e(dig(row, "cudss_default", "backward_error")),
+                             f_e(dig(row, "cudss_strata_perm", "backward_error")),
+                             f_g(flops), f_g(rate * 1e-9) if rate else "–",
+                             (f"{100 * rate / peak:.2f}%" if rate and peak else "–"),
+                             f_g(rate_c * 1e-9) if rate_c else "–"])
+        n_gm = ["**geometric mean**"] + [f_ratio(geomean([x for _, x in col[c]])) for c in col]
+        ratios_rows.append(n_gm)
+        version = r.get("cudss_version", "(version not recorded)")
+        self.w(f"On {machine_label(r.machine)}, cuDSS {version}. strata: analysis, first factorization, median of the "
+               f"refactorizations, one solve with refinement (CUDA backend). cuDSS, with its "
+               f"default reordering (*default*) and with strata's permutation as "
+               f"CUDSS_DATA_USER_PERM (*strata perm.*): analysis, factorization, median of "
+               f"the REFACTORIZATION phase, solve. Seconds.")
+        self.w()
+        hdr = ["problem", "type", "n"]
+        for what in ("analysis", "factor", "refactor", "solve"):
+            hdr += [f"{what} {n}" for _, n in keys]
+        self.w(table(hdr, times, 2))
+        self.w("Ratios strata / cuDSS (above 1: strata is slower; *def.*: cuDSS default "
+               "reordering, *perm.*: cuDSS with strata's permutation):")
+        self.w()
+        self.w(table(["problem", "factor/def.", "factor/perm.", "refactor/def.",
+                      "refactor/perm.", "solve/def.", "solve/perm.", "analysis/def.",
+                      "analysis/perm."], ratios_rows))
+        general = any(row.get("type") == "general" for row in r.rows)
+        self.w("Fill and accuracy: strata's nnz(L) (of L alone, also for LU) against cuDSS's "
+               "LU_NNZ" + ("; for the general (LU) problems LU_NNZ is about twice strata's "
+                           "nnz(L), so it evidently counts L and U and that ratio is not like "
+                           "for like" if general else "") + ". berr: "
+               "‖b−Ax‖∞/(‖A‖∞‖x‖∞+‖b‖∞) for b = A·1. *GFLOP/s*: strata's factor flop count "
+               "(LU: twice the Cholesky count of the pattern, as bench_gpu counts it) over "
+               "the refactorization time; *cuDSS-equiv.* is the same flop count over cuDSS's "
+               "default refactorization time (cuDSS's own count with its ordering differs).")
+        self.w()
+        self.w(table(["problem", "nnz(L) strata", "LU_NNZ def.", "LU_NNZ perm.",
+                      "nnz(L)/LU_NNZ def.", "berr strata", "berr def.", "berr perm.",
+                      "flops", "strata GFLOP/s", "% of DGEMM peak", "cuDSS-equiv. GFLOP/s"],
+                     nnz_rows))
+        srcs = sorted(flop_src)
+        self.w("Flop counts from: " + (", ".join(s if s.startswith("its own") else f"`{s}`"
+                                                for s in srcs) if srcs else
+                                       "nowhere (not computable: no results file holds "
+                                       "strata's flops for these analyses)")
+               + " (a row of the same problem with the same nnz(L), i.e. the same analysis). "
+               + (f"DGEMM peak: cuBLAS DGEMM n = {f_int(dig(figs, 'dgemm_n'))}, "
+                  f"{peak * 1e-12:.1f} TFLOP/s, measured on the same GPU model in "
+                  f"[`{fig_run.name}`]({self.rel(fig_run.path)})." if peak else
+                  "DGEMM peak: not measured on this GPU model (no gpu_memory results), so the "
+                  "fraction of peak is not computable."))
+        self.w()
+        if fig_run is not None:
+            self.used.add(fig_run.path)
+        self.cudss_targets(r, col, rates, peak)
+        self.cudss_plot(r, keys)
+
+    def cudss_targets(self, r, col, rates, peak) -> None:
+        rd = [(p, x) for p, x in col["rd"] if x is not None]
+        rp = [(p, x) for p, x in col["rp"] if x is not None]
+        fd = [(p, x) for p, x in col["fd"] if x is not None]
+        nnz = {p: n for p, n, _ in rates}
+        large = [p for p, n in nnz.items() if n is not None and n >= LARGE_NNZ_L]
+        lines = []
+        if rd:
+            lo, hi = min(x for _, x in rd), max(x for _, x in rd)
+            lines.append(f"strata's GPU refactorization is **{lo:.1f}–{hi:.1f}× slower** than "
+                         f"cuDSS's with its default reordering (geometric mean "
+                         f"{f_ratio(geomean([x for _, x in rd]))}; slowest: "
+                         f"{max(rd, key=lambda t: t[1])[0]}) and "
+                         + (f"{min(x for _, x in rp):.1f}–{max(x for _, x in rp):.1f}× slower "
+                            f"than cuDSS's with strata's own permutation" if rp else
+                            "not compared with strata's permutation") + ".")
+        if fd:
+            lines.append(f"First factorization: {min(x for _, x in fd):.1f}–{max(x for _, x in fd):.1f}× "
+                         f"cuDSS's.")
+        if large:
+            lr = [(p, x) for p, x in rd if p in large]
+            lf = [(p, x) for p, x in fd if p in large]
+            met = all(x <= 1 for _, x in lr) and all(x <= 1 for _, x in lf) and lr
+            lines.append(f"Target (issue): factorization ≤ 1.0× cuDSS on the large problems "
+                         f"(here: nnz(L) ≥ {LARGE_NNZ_L:.0e}, this generator's threshold: "
+                         f"{', '.join(large)}): **{'met' if met else 'not met'}** "
+                         f"(refactorization " + ", ".join(f"{p} {x:.1f}×" for p, x in lr)
+                         + ").")
+        good = [(p, x) for p, _, x in rates if x is not None]
+        if good and peak:
+            bp, bx = max(good, key=lambda t: t[1])
+            lines.append(f"Target (issue): ≥ {PEAK_TARGET:.0%} of the DGEMM peak "
+                         f"({peak * 1e-12:.1f} TFLOP/s): **"
+                         f"{'met' if bx >= PEAK_TARGET * peak else 'not met'}**; the best "
+                         f"strata refactorization reaches {bx * 1e-9:.0f} GFLOP/s ({bp}), "
+                         f"{100 * bx / peak:.2f}% of the peak.")
+        elif good:
+            lines.append(f"Target (issue): ≥ {PEAK_TARGET:.0%} of the DGEMM peak: not "
+                         f"computable (no DGEMM peak measured on this GPU model).")
+        else:
+            lines.append(f"Target (issue): ≥ {PEAK_TARGET:.0%} of the DGEMM peak: not "
+                         f"computable (no flop counts for these analyses).")
+        self.w("**Where strata is behind cuDSS:**")
+        self.w()
+        for line in lines:
+            self.w(f"- {line}")
+        self.w()
+
+    def cudss_plot(self, r: Run, keys) -> None:
+        probs = [str(row.get("problem")) for row in r.rows]
+        fig, axes = self.plt.subplots(1, 2, figsize=(max(9, 1.4 * len(probs) + 3), 4.5))
+        for ax, what, title in ((axes[0], "factor_seconds", "first factorization"),
+                                (axes[1], "refactor_seconds", "refactorization")):
+            width = 0.8 / len(keys)
+            for i, (k, name) in enumerate(keys):
+                xs, ys = [], []
+                for j, row in enumerate(r.rows):
+                    y = num(dig(row, k, what))
+                    if y is not None and y > 0:
+                        xs.append(j + (i - (len(keys) - 1) / 2) * width)
+                        ys.append(y)
+                ax.bar(xs, ys, width, label=name)
+            ax.set_yscale("log")
+            ax.set_xticks(range(len(probs)))
+            ax.set_xticklabels(probs, rotation=45, ha="right", fontsize=8)
+            ax.set_ylabel("seconds")
+            ax.set_title(f"{title} (lower is better)", fontsize=10)
+            ax.grid(True, axis="y", which="both", alpha=0.3)
+            ax.legend(fontsize=8)
+        self.savefig(fig, f"cudss-{machine_slug(r.machine)}",
+                     "strata vs cuDSS factorization and refactorization time",
+                     "Tables and plot: times copied from the rows; ratios, rates and the "
+                     "fraction of peak computed by this generator.", [r])
+
+    # ---- experiment 3
+
+    def multigpu_section(self, runs: list[Run]) -> None:
+        self.w("## 3. GPU count 1, 2, 4 (with ablation)")
+        self.w()
+        self.w("Factorization time with 1, 2 and 4 GPUs (bench_multigpu: the tree split into "
+               "subtrees per GPU, a top part shared), the speedup over 1 GPU, and the "
+               "ablation: *all on* (bisections balanced by work, the most subtrees per GPU "
+               "in the run, work stealing) against the same with each one off: no work "
+               "balance, no extra subtrees (subtrees_per_gpu 1), no stealing.")
+        self.w()
+        mg = [r for r in runs if r.kind == "multigpu"]
+        groups: dict[tuple, list[Run]] = {}
+        for r in mg:
+            groups.setdefault((r.backend, r.machine), []).append(r)
+        gpu = {k: v for k, v in groups.items() if k[0] != "cpu"}
+        cpu = {k: v for k, v in groups.items() if k[0] == "cpu"}
+        if not gpu:
+            self.w(f"{NOT_MEASURED}: no GPU (backend cuda) `multigpu` results; needs a lent "
+                   f"2- or 4-GPU machine (`bench/run multigpu`, or `scripts/gpu/run.sh "
+                   f"--multigpu-bench --workers 1,2,4 --subtrees 1,4 --balance on,off "
+                   f"--stealing on,off`).")
+            self.w()
+        for (_, machine), rs in gpu.items():
+            self.multigpu_group(rs, machine, "GPU")
+        if cpu:
+            self.w("### CPU backend (host executors standing in for GPUs; not the experiment)")
+            self.w()
+            self.w("The same driver with `--backend cpu`: N host executors stand in for N "
+                   "GPUs. These runs test the multi-worker path; their times say nothing "
+                   "about GPUs and do not count as experiment 3.")
+            self.w()
+            for (_, machine), rs in cpu.items():
+                self.multigpu_group(rs, machine, "CPU worker")
+
+    def multigpu_group(self, rs: list[Run], machine: tuple, unit: str) -> None:
+        self.consumed.update(r.path for r in rs)
+        cfg: dict[tuple, dict] = {}
+        for r in sorted(rs, key=lambda r: (r.date, r.name)):  # newer runs override
+            for row in r.rows:
+                if isinstance(row, dict) and num(row.get("workers")) is not None:
+                    cfg[(row.get("problem"), int(row["workers"]),
+                         int(num(row.get("subtrees_per_worker")) or 0),
+                         bool(row.get("balance_by_work")), bool(row.get("work_stealing")))] = row
+        problems = list(dict.fromkeys(k[0] for k in cfg))
+        workers = sorted({k[1] for k in cfg})
+        s_max = {p: max(k[2] for k in cfg if k[0] == p) for p in problems}
+
+        def t(p, w, s, bal, stl):
+            return num(dig(cfg.get((p, w, s, bal, stl)), "factor_seconds"))
+
+        speed_rows, abl_rows, dev_rows, curves = [], [], [], {}
+        for p in problems:
+            s = s_max[p]
+            base = t(p, 1, s, True, True)
+            any_row = next(v for k, v in cfg.items() if k[0] == p)
+            line = [str(p), f_int(any_row.get("n")), f_g(any_row.get("flops"))]
+            line += [f_sec(t(p, w, s, True, True)) for w in workers]
+            sp = [(w, ratio(base, t(p, w, s, True, True))) for w in workers]
+            line += [f"{x:.2f}" if x is not None else "–" for w, x in sp if w > 1]
+            line += [f"{x / w:.0%}" if x is not None else "–" for w, x in sp if w > 1]
+            curves[p] = [(w, x) for w, x in sp if x is not None]
+            speed_rows.append(line)
+            for w in workers:
+                on = t(p, w, s, True, True)
+                cells = [str(p), str(w), str(s), f_sec(on)]
+                for alt in ((s, False, True), (1, True, True), (s, True, False)):
+                    x = t(p, w, *alt) if alt != (s, True, True) else None
+                    cells.append("–" if x is None else f"{f_sec(x)} ({f_ratio(ratio(x, on))})")
+                abl_rows.append(cells)
+                row = cfg.get((p, w, s, True, True)) or {}
+                for i, d in enumerate(row.get("devices") or []):
+                    busy, idle = num(d.get("busy_seconds")), num(d.get("idle_seconds"))
+                    share = ratio(busy, (busy or 0) + (idle or 0))
+                    dev_rows.append([str(p), str(w), str(i), f_sec(busy), f_sec(idle),
+                                     f"{share:.0%}" if share is not None else "–",
+                                     f_int(d.get("subtrees_run")), f_int(d.get("subtrees_stolen")),
+                                     f_int(d.get("bytes_transferred")), f_g(d.get("flops"))])
+        self.w(f"On {machine_label(machine)}; seconds: median of the run's factorizations "
+               f"with every feature on; speedup: time with 1 {unit} over time with W; "
+               f"efficiency: speedup / W.")
+        self.w()
+        self.w(table(["problem", "n", "flops"] + [f"{w} {unit} s" for w in workers]
+                     + [f"speedup {w}" for w in workers if w > 1]
+                     + [f"efficiency {w}" for w in workers if w > 1],
+                     speed_rows))
+        behind = [(p, w, x) for p, c in curves.items() for w, x in c if w > 1 and x < 0.8 * w]
+        if behind:
+            self.w("Below 80% parallel efficiency: " + ", ".join(
+                f"{p} with {w} ({x:.2f}× of the ideal {w}×)" for p, w, x in behind) + ".")
+            self.w()
+        self.w("Ablation: time with each feature off, seconds (in brackets: over *all on*; "
+               "above 1, the feature helps). – where the run did not include that "
+               "configuration (the driver runs the product of its `--subtrees`, `--balance` "
+               "and `--stealing` lists).")
+        self.w()
+        self.w(table(["problem", "workers", "subtrees per worker", "all on s",
+                      "no work balance", "subtrees 1", "no stealing"], abl_rows, 2))
+        if dev_rows:
+            self.w(f"Per {unit} (all on, last factorization of the run): busy and idle "
+                   f"seconds, busy share, subtrees run and stolen, bytes moved, flops.")
+            self.w()
+            self.w(table(["problem", "workers", unit, "busy s", "idle s", "busy share",
+                          "subtrees run", "stolen", "bytes moved", "flops"], dev_rows, 3))
+        fig, ax = self.plt.subplots(figsize=(6.5, 4.5))
+        for p, c in curves.items():
+            if c:
+                ax.plot([w for w, _ in c], [x for _, x in c], "o-", label=p)
+        ax.plot(workers, workers, "k:", lw=0.8, label="ideal")
+        ax.set_xticks(workers)
+        ax.set_xlabel(f"{unit}s")
+        ax.set_ylabel(f"speedup over 1 {unit}")
+        ax.set_title(f"factorization speedup, all features on ({unit}s)", fontsize=10)
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=8)
+        self.savefig(fig, f"multigpu-{unit.split()[0].lower()}-{machine_slug(machine)}",
+                     f"speedup over 1 {unit}",
+                     "Tables and plot: times copied from the rows (newest run wins where runs "
+                     "overlap); speedups and ratios computed by this generator.",
+                     sorted(rs, key=lambda r: r.name))
+
+    # ---- experiment 4
+
+    def solvability_section(self, runs: list[Run]) -> None:
+        self.w("## 4. Solvability: time vs factor size / device budget")
+        self.w()
+        self.w("The GPU factorization as the device memory budget shrinks below the size of "
+               "the factor: in core (no budget) and with the budget set to factor bytes / "
+               "ratio. The anchor is the PCIe floor: the time the transfers alone need at the "
+               "measured pinned bandwidth (the larger of bytes to the device / H2D and bytes "
+               "to the host / D2H).")
+        self.w()
+        chosen = [r for r in runs if r.kind == "gpu_memory" and r.get("solvability")]
+        if not chosen:
+            self.w(f"{NOT_MEASURED}: no `gpu_memory` results with a solvability part "
+                   f"(bench_gpu_memory on a lent GPU machine: `scripts/gpu/run.sh "
+                   f"--memory-bench`).")
+            self.w()
+        for r in chosen:
+            self.solvability_run(r)
+
+    def device_table(self, r: Run) -> None:
+        f = r.get("device_figures")
+        if not isinstance(f, dict):
+            return
+        self.w(f"Device figures ({machine_label(r.machine)}): pinned host→device "
+               f"{f_g(num(f.get('h2d_bytes_per_second')) and f['h2d_bytes_per_second'] * 1e-9)} "
+               f"GB/s, device→host "
+               f"{f_g(num(f.get('d2h_bytes_per_second')) and f['d2h_bytes_per_second'] * 1e-9)} "
+               f"GB/s (median of 5 copies of 256 MiB); cuBLAS DGEMM "
+               f"(n = {f_int(f.get('dgemm_n'))}, best of 5) "
+               f"{f_g(num(f.get('dgemm_flops_per_second')) and f['dgemm_flops_per_second'] * 1e-12)}"
+               f" TFLOP/s.")
+        self.w()
+        peak = num(f.get("dgemm_flops_per_second"))
+        bs = [(p.get("problem"), num(x.get("gflops")), x.get("max_block_size"))
+              for p in r.get("block_size") or [] for x in p.get("runs", [])]
+        bs = [b for b in bs if b[1] is not None]
+        if peak and bs:
+            p, g, b = max(bs, key=lambda t: t[1])
+            self.w(f"Fraction of the DGEMM peak: the fastest in-core factorization of this "
+                   f"run ({p}, max_block_size {b}) reaches {g:.0f} GFLOP/s, "
+                   f"**{100 * g * 1e9 / peak:.2f}% of the peak** (target ≥ "
+                   f"{PEAK_TARGET:.0%}: **{'met' if g * 1e9 >= PEAK_TARGET * peak else 'not met'}**).")
+            self.w()
+
+    def solvability_run(self, r: Run) -> None:
+        self.consumed.add(r.path)
+        self.device_table(r)
+        probs = [p for p in r.get("solvability") or [] if isinstance(p, dict)]
+        rows, worst = [], []
+        for p in probs:
+            for x in p.get("runs", []):
+                fl = num(x.get("transfer_floor_seconds"))
+                ft = num(x.get("factor_seconds"))
+                rows.append([str(p.get("problem")), ratio_label(x.get("ratio")),
+                             f_g(num(x.get("budget_bytes")) and x["budget_bytes"] / 1e6)
+                             if num(x.get("ratio")) else "–",
+                             f_sec(ft), f"{num(x.get('slowdown_vs_in_core')) or 0:.2f}",
+                             f_sec(fl), f_ratio(ratio(ft, fl)),
+                             f_g(num(x.get("bytes_to_device")) and x["bytes_to_device"] / 1e6),
+                             f_g(num(x.get("bytes_to_host")) and x["bytes_to_host"] / 1e6),
+                             f_int(x.get("device_batches")), f_int(x.get("tiled_fronts")),
+                             "yes" if x.get("contribution_blocks_on_host") else "no",
+                             "yes" if x.get("factor_resident") else "no",
+                             f_sec(x.get("solve_seconds")), f_e(x.get("backward_error"))])
+                if num(x.get("ratio")):
+                    worst.append((p.get("problem"), x.get("ratio"),
+                                  num(x.get("slowdown_vs_in_core")), ratio(ft, fl)))
+        self.w("Per problem (factor bytes in MB: "
+               + ", ".join(f"{p.get('problem')} {f_g(num(p.get('factor_bytes')) and p['factor_bytes'] / 1e6)}"
+                           for p in probs)
+               + "): the budget, the factorization time (median of the run's repeats), the "
+               "slowdown against in core, the PCIe floor and the time over it, megabytes "
+               "moved each way, device batches, fronts tiled because they do not fit, "
+               "whether contribution blocks were spilled to the host, whether the factor "
+               "stayed on the device, the solve time and the backward error.")
+        self.w()
+        self.w(table(["problem", "factor/budget", "budget MB", "factor s", "slowdown",
+                      "PCIe floor s", "time/floor", "MB to device", "MB to host", "batches",
+                      "tiled fronts", "CBs spilled", "factor on device", "solve s", "berr"],
+                     rows, 2))
+        berrs = [num(x.get("backward_error")) for p in probs for x in p.get("runs", [])]
+        solved = bool(berrs) and all(b is not None and b <= 1e-12 for b in berrs)
+        if worst:
+            p, rt, sl, tf = max(worst, key=lambda t: t[2] or 0)
+            self.w(("Every budget was solved (backward error ≤ 1e-12 in every run). "
+                    if solved else "**Not every budget was solved to a backward error of "
+                    "1e-12** (see the table). ") + "The cost: up to "
+                   f"**{sl:.1f}× slower than in core** ({p} at {ratio_label(rt)}), and the "
+                   f"time stays {min(t for *_, t in worst if t):.0f}–"
+                   f"{max(t for *_, t in worst if t):.0f}× above the PCIe floor: the bytes moved, "
+                   f"at the measured pinned bandwidth, are not what bounds the time.")
+            self.w()
+        fig, ax = self.plt.subplots(figsize=(7.5, 4.8))
+        colors = self.plt.rcParams["axes.prop_cycle"].by_key()["color"]
+        for i, p in enumerate(probs):
+            c = colors[i % len(colors)]
+            pts = sorted((num(x.get("ratio")), num(x.get("factor_seconds")),
+                          num(x.get("transfer_floor_seconds"))) for x in p.get("runs", [])
+                         if num(x.get("ratio")))
+            core = [num(x.get("factor_seconds")) for x in p.get("runs", [])
+                    if not num(x.get("ratio"))]
+            if pts:
+                ax.plot([a for a, _, _ in pts], [b for _, b, _ in pts], "o-", color=c,
+                        label=f"{p.get('problem')}")
+                ax.plot([a for a, _, _ in pts], [f for _, _, f in pts], "x:", color=c,
+                        label=f"{p.get('problem')} PCIe floor")
+            if core and core[0]:
+                ax.axhline(core[0], color=c, ls="--", lw=0.8, alpha=0.7)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ticks = sorted({num(x.get("ratio")) for p in probs for x in p.get("runs", [])
+                        if num(x.get("ratio"))})
+        if ticks:
+            ax.set_xticks(ticks)
+            ax.set_xticklabels([f"{t:g}×" for t in ticks])
+        ax.set_xlabel("factor bytes / device budget")
+        ax.set_ylabel("seconds")
+        ax.set_title("GPU factorization time under a device budget\nsolid: factorization, "
+                     "dotted: PCIe floor, dashed: in core", fontsize=10)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7, ncol=2)
+        self.savefig(fig, f"solvability-{machine_slug(r.machine)}",
+                     "factorization time vs factor bytes / device budget",
+                     "Table and plot: copied from the run's `solvability` rows; time/floor "
+                     "computed by this generator.", [r])
