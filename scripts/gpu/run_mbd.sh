@@ -23,9 +23,10 @@ run() {  # name, args...
   local name=$1
   shift
   echo "=== $name: strata simulate $*" | tee -a "$OUT/mbd.log"
-  timeout 50 $S simulate --quiet --output "" "$@" 2>&1 | grep -v "^model read" | tee -a "$OUT/mbd.log"
+  timeout 40 $S simulate --quiet --output "" "$@" 2>&1 | grep -v "^model read" | tee -a "$OUT/mbd.log"
 }
-run tracked100-auto --generate tracked:100 --t-end 0.1 --device auto
 run lattice12-gpu --generate lattice:12 --t-end 0.02 --device gpu
-run lattice12-cpu --generate lattice:12 --t-end 0.02 --device cpu
+run lattice12-cpu --generate lattice:12 --t-end 0.02 --device cpu --threads 8
+run tracked1000-gpu --generate tracked:1000 --t-end 0.05 --device gpu
+run tracked1000-cpu --generate tracked:1000 --t-end 0.05 --device cpu --threads 8
 exit 0
