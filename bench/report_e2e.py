@@ -53,7 +53,7 @@ def parse_mbd_log(text: str) -> tuple[dict, list[dict]]:
 
 def model_of(args: str) -> str:
     """The run's arguments without --device: runs with equal models are compared."""
-    return re.sub(r"\s*--device \S+", "", args).strip()
+    return re.sub(r"\s*--(device|threads) \S+", "", args).strip()
 
 
 class EndToEnd:

@@ -252,6 +252,9 @@ class GpuSections:
                f"CUDSS_DATA_USER_PERM (*strata perm.*): analysis, factorization, median of "
                f"the REFACTORIZATION phase, solve. Seconds.")
         self.w()
+        if r.get("note"):
+            self.w(f"**Note on this run:** {r.get('note')}")
+            self.w()
         hdr = ["problem", "type", "n"]
         for what in ("analysis", "factor", "refactor", "solve"):
             hdr += [f"{what} {n}" for _, n in keys]
@@ -374,9 +377,11 @@ class GpuSections:
         self.w()
         self.w("Factorization time with 1, 2 and 4 GPUs (bench_multigpu: the tree split into "
                "subtrees per GPU, a top part shared), the speedup over 1 GPU, and the "
-               "ablation: *all on* (bisections balanced by work, the most subtrees per GPU "
-               "in the run, work stealing) against the same with each one off: no work "
-               "balance, no extra subtrees (subtrees_per_gpu 1), no stealing.")
+               "ablation: the *default* configuration (the most subtrees per GPU in the run, "
+               "work stealing on, balance by work off — off by default because it did not "
+               "balance the subtrees the GPUs get, docs/multigpu.md) against the same with one "
+               "feature changed: balance by work on, no extra subtrees (subtrees_per_gpu 1), no "
+               "stealing.")
         self.w()
         mg = [r for r in runs if r.kind == "multigpu"]
         groups: dict[tuple, list[Run]] = {}
@@ -421,23 +426,23 @@ class GpuSections:
         speed_rows, abl_rows, dev_rows, curves = [], [], [], {}
         for p in problems:
             s = s_max[p]
-            base = t(p, 1, s, True, True)
+            base = t(p, 1, s, False, True)
             any_row = next(v for k, v in cfg.items() if k[0] == p)
             line = [str(p), f_int(any_row.get("n")), f_g(any_row.get("flops"))]
-            line += [f_sec(t(p, w, s, True, True)) for w in workers]
-            sp = [(w, ratio(base, t(p, w, s, True, True))) for w in workers]
+            line += [f_sec(t(p, w, s, False, True)) for w in workers]
+            sp = [(w, ratio(base, t(p, w, s, False, True))) for w in workers]
             line += [f"{x:.2f}" if x is not None else "–" for w, x in sp if w > 1]
             line += [f"{x / w:.0%}" if x is not None else "–" for w, x in sp if w > 1]
             curves[p] = [(w, x) for w, x in sp if x is not None]
             speed_rows.append(line)
             for w in workers:
-                on = t(p, w, s, True, True)
+                on = t(p, w, s, False, True)
                 cells = [str(p), str(w), str(s), f_sec(on)]
-                for alt in ((s, False, True), (1, True, True), (s, True, False)):
-                    x = t(p, w, *alt) if alt != (s, True, True) else None
+                for alt in ((s, True, True), (1, False, True), (s, False, False)):
+                    x = t(p, w, *alt) if alt != (s, False, True) else None
                     cells.append("–" if x is None else f"{f_sec(x)} ({f_ratio(ratio(x, on))})")
                 abl_rows.append(cells)
-                row = cfg.get((p, w, s, True, True)) or {}
+                row = cfg.get((p, w, s, False, True)) or {}
                 for i, d in enumerate(row.get("devices") or []):
                     busy, idle = num(d.get("busy_seconds")), num(d.get("idle_seconds"))
                     share = ratio(busy, (busy or 0) + (idle or 0))
@@ -446,7 +451,8 @@ class GpuSections:
                                      f_int(d.get("subtrees_run")), f_int(d.get("subtrees_stolen")),
                                      f_int(d.get("bytes_transferred")), f_g(d.get("flops"))])
         self.w(f"On {machine_label(machine)}; seconds: median of the run's factorizations "
-               f"with every feature on; speedup: time with 1 {unit} over time with W; "
+               f"with the default configuration (the most subtrees per {unit} in the run, work "
+               f"stealing on, work-balanced bisection off — Options' defaults); speedup: time with 1 {unit} over time with W; "
                f"efficiency: speedup / W.")
         self.w()
         self.w(table(["problem", "n", "flops"] + [f"{w} {unit} s" for w in workers]
@@ -458,15 +464,16 @@ class GpuSections:
             self.w("Below 80% parallel efficiency: " + ", ".join(
                 f"{p} with {w} ({x:.2f}× of the ideal {w}×)" for p, w, x in behind) + ".")
             self.w()
-        self.w("Ablation: time with each feature off, seconds (in brackets: over *all on*; "
-               "above 1, the feature helps). – where the run did not include that "
-               "configuration (the driver runs the product of its `--subtrees`, `--balance` "
-               "and `--stealing` lists).")
+        self.w("Ablation: time of the defaults (*default*: subtrees per GPU as in the run, "
+               "stealing on, balance by work off) and with one feature changed, seconds (in "
+               "brackets: over *default*; below 1, the change helps). – where the run did not "
+               "include that configuration (the driver runs the product of its `--subtrees`, "
+               "`--balance` and `--stealing` lists).")
         self.w()
-        self.w(table(["problem", "workers", "subtrees per worker", "all on s",
-                      "no work balance", "subtrees 1", "no stealing"], abl_rows, 2))
+        self.w(table(["problem", "workers", "subtrees per worker", "default s",
+                      "balance by work on", "subtrees 1", "no stealing"], abl_rows, 2))
         if dev_rows:
-            self.w(f"Per {unit} (all on, last factorization of the run): busy and idle "
+            self.w(f"Per {unit} (default configuration, last factorization of the run): busy and idle "
                    f"seconds, busy share, subtrees run and stolen, bytes moved, flops.")
             self.w()
             self.w(table(["problem", "workers", unit, "busy s", "idle s", "busy share",
@@ -479,7 +486,7 @@ class GpuSections:
         ax.set_xticks(workers)
         ax.set_xlabel(f"{unit}s")
         ax.set_ylabel(f"speedup over 1 {unit}")
-        ax.set_title(f"factorization speedup, all features on ({unit}s)", fontsize=10)
+        ax.set_title(f"factorization speedup, default configuration ({unit}s)", fontsize=10)
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=8)
         self.savefig(fig, f"multigpu-{unit.split()[0].lower()}-{machine_slug(machine)}",
