@@ -95,7 +95,8 @@ struct Options {
   /// GPUs the CUDA backend factors on; 0 means every visible GPU (default 0). With more
   /// than one, the assembly tree is split into subtrees that the GPUs factor concurrently,
   /// then the top of the tree is factored on the first GPU. Asking for more GPUs than are
-  /// visible is an InvalidInput error at analyze. Ignored by the CPU backend.
+  /// visible is an InvalidInput error at analyze (with no GPU at all, the factorization
+  /// raises NotSupported instead). Ignored by the CPU backend.
   int num_gpus = 0;
   /// Subtrees per GPU in that split (the paper's "additional sub-trees"): more gives the
   /// largest-first assignment and work stealing finer pieces to balance with, at the cost

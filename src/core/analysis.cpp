@@ -283,6 +283,9 @@ int resolve_workers(const Options& opts) {
                    (opts.backend == Backend::automatic && numeric::cuda_available());
   if (!gpu) return 1;
   const int visible = numeric::cuda_device_count();
+  // No GPU at all: the CUDA executor says so (NotSupported) when the factorization asks
+  // for it; the analysis itself does not need one.
+  if (visible == 0) return 1;
   if (opts.num_gpus > visible)
     throw InvalidInput("Options::num_gpus asks for " + std::to_string(opts.num_gpus) + " GPUs, " +
                        std::to_string(visible) + " are visible");
