@@ -239,16 +239,6 @@ SparseMatrix elasticity_kkt(index_t n, index_t n_con, std::mt19937_64& rng) {
   return canonicalize(a);
 }
 
-// max |x − y| / max |y| over two factor arrays of one length.
-double max_relative_gap(const std::vector<double>& x, const std::vector<double>& y) {
-  double num = 0, den = 0;
-  for (std::size_t i = 0; i < y.size(); ++i) {
-    num = std::max(num, std::abs(x[i] - y[i]));
-    den = std::max(den, std::abs(y[i]));
-  }
-  return den > 0 ? num / den : num;
-}
-
 // The GPU LDLᵀ factor equals the CPU's on the same analysis: same pivot sequence (pivot
 // sizes and permuted rows exactly), D and L to rounding, same statistics. The large-front
 // path chooses its pivots among the whole fully summed block, as the CPU does, so this
@@ -300,13 +290,13 @@ TEST_F(CudaBackend, LdltFactorMatchesCpu) {
     numeric::factorize(an, c.values, MatrixType::symmetric_indefinite, sp, *gpu, gf, arena);
     ASSERT_EQ(cf.pivot_size, gf.pivot_size);
     ASSERT_EQ(cf.rows, gf.rows);
-    EXPECT_LT(max_relative_gap(gf.panels, cf.panels), 1e-10);
+    EXPECT_LT(test::relative_difference(gf.panels, cf.panels), 1e-10);
     // Exactly singular columns: whether an update cancels to exactly zero or to a residue
     // of rounding size depends on the summation order (cuBLAS vs OpenBLAS), and the static
     // pivot (±1e-8) then replaces different tiny values — D agrees to the pivot's size.
     const double d_tol = pr.zero_columns > 0 ? 1e-6 : 1e-10;
-    EXPECT_LT(max_relative_gap(gf.d_diag, cf.d_diag), d_tol);
-    EXPECT_LT(max_relative_gap(gf.d_off, cf.d_off), d_tol);
+    EXPECT_LT(test::relative_difference(gf.d_diag, cf.d_diag), d_tol);
+    EXPECT_LT(test::relative_difference(gf.d_off, cf.d_off), d_tol);
     numeric::cpu::PivotStats sc, sg;
     for (const auto& ps : cf.front_stats) sc.merge(ps);
     for (const auto& ps : gf.front_stats) sg.merge(ps);
@@ -441,7 +431,7 @@ TEST_F(CudaBackend, AutomaticRunsLdltOnGpu) {
   for (auto [a, negative] : {std::pair{&kkt, index_t{500 / 3}}, std::pair{&l.a, l.negative}}) {
     SCOPED_TRACE("n=" + std::to_string(a->n_rows));
     Options o;
-    o.num_gpus = 1;  // one GPU, whatever the machine has
+    o.num_gpus = 1;                  // one GPU, whatever the machine has
     o.backend = Backend::automatic;  // the default is the CPU
     Solver s{o};
     s.factorize(*a);

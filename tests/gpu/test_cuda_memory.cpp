@@ -22,15 +22,6 @@ class CudaMemory : public ::testing::Test {
   }
 };
 
-double max_relative_entry_difference(const std::vector<double>& a, const std::vector<double>& b) {
-  double num = 0, den = 0;
-  for (std::size_t i = 0; i < a.size(); ++i) {
-    num = std::max(num, std::abs(a[i] - b[i]));
-    den = std::max(den, std::abs(b[i]));
-  }
-  return den > 0 ? num / den : num;
-}
-
 constexpr std::size_t MiB = 1024 * 1024;
 
 // Cholesky with the device budget far below the factor: contribution blocks spill to
@@ -60,7 +51,7 @@ TEST_F(CudaMemory, CholeskyUnderATightBudgetEqualsInCore) {
       EXPECT_GT(fs.tiled_fronts, 0);
       EXPECT_TRUE(fs.contribution_blocks_on_host);
     }
-    EXPECT_LT(max_relative_entry_difference(gpu_f.panels, cpu_f.panels), 1e-12);
+    EXPECT_LT(test::relative_difference(gpu_f.panels, cpu_f.panels), 1e-12);
     EXPECT_EQ(cpu_f.rows, gpu_f.rows);
   }
 }

@@ -7,7 +7,6 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
-
 #include <cmath>
 #include <string>
 
@@ -62,31 +61,6 @@ std::vector<Problem> problems(std::mt19937_64& rng) {
   return p;
 }
 
-std::vector<double> scaled_values(const Analysis& an, const SparseMatrix& a, double* pivot) {
-  const SparseMatrix c = canonical_values(an, a);
-  std::vector<double> v(c.nnz());
-  double mx = 0;
-  for (index_t j = 0; j < c.n_cols; ++j)
-    for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) {
-      const index_t i = c.indices[p];
-      v[p] = an.row_scaling.empty() ? c.values[p]
-                                    : c.values[p] * an.row_scaling[i] * an.col_scaling[j];
-      mx = std::max(mx, std::abs(v[p]));
-    }
-  *pivot = 1e-8 * std::max(mx, 1.0);
-  return v;
-}
-
-// max |x − y| / max |y| over the factor panels
-double panel_difference(const numeric::NumericFactor& x, const numeric::NumericFactor& y) {
-  double num = 0, den = 0;
-  for (std::size_t i = 0; i < y.panels.size(); ++i) {
-    num = std::max(num, std::abs(x.panels[i] - y.panels[i]));
-    den = std::max(den, std::abs(y.panels[i]));
-  }
-  return den > 0 ? num / den : num;
-}
-
 // x (tree numbering) = A⁻¹ b from a factor, without refinement: the scaling and
 // permutations the Solver applies, then solve_in_place.
 std::vector<double> solve_with(const Analysis& an, const numeric::NumericFactor& f,
@@ -115,7 +89,7 @@ void factor_on_gpus(int gpus) {
     const Analysis an = analyze_matrix(pr.a, o, gpus);
     ASSERT_EQ(an.partition.workers, gpus);
     double pivot = 0;
-    const std::vector<double> v = scaled_values(an, pr.a, &pivot);
+    const std::vector<double> v = test::scaled_values(an, pr.a, &pivot);
     numeric::NumericFactor cpu_f, gpu1_f, multi_f;
     std::vector<double> arena;
     numeric::factorize(an, v, pr.type, pivot, *numeric::make_cpu_executor(2), cpu_f, arena);
@@ -130,10 +104,10 @@ void factor_on_gpus(int gpus) {
     std::vector<DeviceStats> dev;
     numeric::factorize_multi(an, v, pr.type, pivot, execs, multi_f, arenas, {}, &dev);
     // every front was factored by one GPU as on one GPU alone
-    EXPECT_LT(panel_difference(multi_f, gpu1_f), 1e-13);
+    EXPECT_LT(test::relative_difference(multi_f.panels, gpu1_f.panels), 1e-13);
     EXPECT_EQ(multi_f.rows, gpu1_f.rows);
     if (pr.type == MatrixType::spd) {  // no pivoting: entrywise against the CPU
-      EXPECT_LT(panel_difference(multi_f, cpu_f), 1e-12);
+      EXPECT_LT(test::relative_difference(multi_f.panels, cpu_f.panels), 1e-12);
       EXPECT_EQ(multi_f.rows, cpu_f.rows);
     }
     std::vector<double> b(pr.a.n_rows);
@@ -226,7 +200,7 @@ TEST(MultiGpu, SlowGpuHasItsSubtreesStolen) {
     const int slow = static_cast<int>(std::max_element(own.begin(), own.end()) - own.begin());
     ASSERT_GE(own[slow], 2);
     double pivot = 0;
-    const std::vector<double> v = scaled_values(an, a, &pivot);
+    const std::vector<double> v = test::scaled_values(an, a, &pivot);
     std::vector<std::unique_ptr<numeric::Executor>> ex;
     std::vector<numeric::Executor*> execs;
     for (int d = 0; d < gpus; ++d) {
@@ -246,7 +220,7 @@ TEST(MultiGpu, SlowGpuHasItsSubtreesStolen) {
       if (d != slow) stolen += dev[d].subtrees_stolen;
     EXPECT_GT(stolen, 0);
     EXPECT_LT(dev[slow].subtrees_run, own[slow]);
-    EXPECT_LT(panel_difference(slowed, plain), 1e-13);
+    EXPECT_LT(test::relative_difference(slowed.panels, plain.panels), 1e-13);
   }
 }
 

@@ -61,23 +61,6 @@ std::vector<Problem> problems(std::mt19937_64& rng) {
   return p;
 }
 
-// The values the numeric phase factors (scaled as the Solver scales them) and a static
-// pivot threshold of the Solver's kind.
-std::vector<double> scaled_values(const Analysis& an, const SparseMatrix& a, double* pivot) {
-  const SparseMatrix c = canonical_values(an, a);
-  std::vector<double> v(c.nnz());
-  double mx = 0;
-  for (index_t j = 0; j < c.n_cols; ++j)
-    for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) {
-      const index_t i = c.indices[p];
-      v[p] = an.row_scaling.empty() ? c.values[p]
-                                    : c.values[p] * an.row_scaling[i] * an.col_scaling[j];
-      mx = std::max(mx, std::abs(v[p]));
-    }
-  *pivot = 1e-8 * std::max(mx, 1.0);
-  return v;
-}
-
 // Forwards to a CPU executor, counting the fronts of every batch it factors, and throws a
 // DeviceError at the start of part `fail_part` (a subtree index, or P for the top part),
 // whichever worker runs it, when asked to.
@@ -150,7 +133,7 @@ TEST(MultiWorker, FactorBitwiseEqualsOneExecutorAndEveryFrontOnce) {
       SCOPED_TRACE(pr.name + ", " + std::to_string(workers) + " workers");
       const Analysis an = split_analysis(pr.a, pr.type, workers);
       double pivot = 0;
-      const std::vector<double> v = scaled_values(an, pr.a, &pivot);
+      const std::vector<double> v = test::scaled_values(an, pr.a, &pivot);
       numeric::NumericFactor one, many;
       std::vector<double> arena;
       auto cpu = numeric::make_cpu_executor(1);
@@ -302,7 +285,7 @@ TEST(MultiWorker, SlowWorkerHasItsSubtreesStolen) {
       for (int w : an.partition.owner) ++own[w];
       ASSERT_GE(own[0], 2) << "worker 0 needs a queue to steal from";
       double pivot = 0;
-      const std::vector<double> v = scaled_values(an, pr.a, &pivot);
+      const std::vector<double> v = test::scaled_values(an, pr.a, &pivot);
       numeric::NumericFactor one;
       std::vector<double> arena;
       numeric::factorize(an, v, pr.type, pivot, *numeric::make_cpu_executor(1), one, arena);
@@ -349,7 +332,7 @@ TEST(MultiWorker, ErrorsPropagate) {
   for (int failing : {0, n_sub / 2, n_sub - 1, n_sub}) {  // n_sub: the top part
     SCOPED_TRACE("failing part " + std::to_string(failing));
     double pivot = 0;
-    const std::vector<double> v = scaled_values(an, a, &pivot);
+    const std::vector<double> v = test::scaled_values(an, a, &pivot);
     std::vector<std::unique_ptr<Recording>> rec;
     std::vector<numeric::Executor*> execs;
     for (int w = 0; w < 3; ++w) {

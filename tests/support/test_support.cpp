@@ -8,6 +8,7 @@
 #include <set>
 #include <tuple>
 
+#include "core/analysis.hpp"
 #include "core/blas.hpp"
 
 namespace strata::test {
@@ -226,6 +227,21 @@ double relative_difference(const std::vector<double>& x, const std::vector<doubl
     den = std::max(den, std::abs(y[i]));
   }
   return den == 0 ? num : num / den;
+}
+
+std::vector<double> scaled_values(const Analysis& an, const SparseMatrix& a, double* pivot) {
+  const SparseMatrix c = canonical_values(an, a);
+  std::vector<double> v(c.nnz());
+  double mx = 0;
+  for (index_t j = 0; j < c.n_cols; ++j)
+    for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) {
+      const index_t i = c.indices[p];
+      v[p] = an.row_scaling.empty() ? c.values[p]
+                                    : c.values[p] * an.row_scaling[i] * an.col_scaling[j];
+      mx = std::max(mx, std::abs(v[p]));
+    }
+  *pivot = 1e-8 * std::max(mx, 1.0);
+  return v;
 }
 
 }  // namespace strata::test

@@ -8,6 +8,10 @@
 
 #include "strata/sparse_matrix.hpp"
 
+namespace strata {
+struct Analysis;
+}
+
 namespace strata::test {
 
 /// Path of a shared SuiteSparse matrix, e.g. matrix_path("bcsstk09") → ".../bcsstk09.mtx.gz".
@@ -54,5 +58,10 @@ double backward_error(const SparseMatrix& a, const double* x, const double* b);
 
 /// Max-norm relative difference ‖x − y‖∞ / ‖y‖∞ (or the absolute one when y is 0).
 double relative_difference(const std::vector<double>& x, const std::vector<double>& y);
+
+/// The values the numeric phase factors for `an` (A's canonical values with the
+/// analysis's row/column scaling applied, in entry order), and in *pivot a static pivot
+/// threshold of the Solver's kind: 1e-8 · max(max |value|, 1).
+std::vector<double> scaled_values(const Analysis& an, const SparseMatrix& a, double* pivot);
 
 }  // namespace strata::test

@@ -119,10 +119,11 @@ void CudaExecutor::factor_tiled(const numeric::FactorContext& ctx, index_t pos) 
       STRATA_CUDA(cudaStreamSynchronize(stream_));
       // the slab's row swaps on the front's other columns (rows p0..k), and in the
       // front's pivot order
+      std::vector<double> tmp(kk);  // one buffer for all m columns
       for (std::int64_t c = 0; c < m; ++c) {
         if (c >= p0 && c < p0 + w) continue;
         double* colc = H + c * m + p0;
-        std::vector<double> tmp(colc, colc + kk);
+        std::copy(colc, colc + kk, tmp.begin());
         for (std::int64_t i = 0; i < kk; ++i) colc[i] = tmp[sperm[i]];
       }
       std::vector<std::int64_t> old(fperm.begin() + p0, fperm.end());
