@@ -15,7 +15,11 @@
 
 #include <cstdint>
 
+// Internal linkage (the unnamed namespace): nvcc emits a host stub for every __device__
+// function, which would otherwise be a strong external symbol of libstrata and win over
+// the host build of these functions in the emulation test (which then called exit(1)).
 namespace strata::cuda::ldlt_device {
+namespace {
 
 constexpr int kLdltThreads = 256;  // threads per block: a power of two (the reductions halve it)
 constexpr std::int64_t kLdltPanel = 64;  // panel width of large fronts (+1 for a 2×2 at its end)
@@ -343,4 +347,5 @@ __device__ void ldlt_panel(double* F, std::int64_t m, std::int64_t k, std::int64
   if (threadIdx.x == 0) *end = kk;
 }
 
+}  // namespace
 }  // namespace strata::cuda::ldlt_device
