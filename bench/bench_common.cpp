@@ -187,4 +187,23 @@ RefResult run_cholmod(const SparseMatrix& a, const std::vector<index_t>& perm,
   return r;
 }
 
+nlohmann::json device_figures(const FactorStats& fs) {
+  const auto& d = fs.device_phases;
+  return {{"seconds", fs.seconds},
+          {"gflops", fs.gflops},
+          {"device_seconds", fs.device_seconds},
+          {"bytes_to_device", fs.bytes_to_device},
+          {"bytes_to_host", fs.bytes_to_host},
+          {"device_batches", fs.device_batches},
+          {"tiled_fronts", fs.tiled_fronts},
+          {"factor_resident", fs.factor_resident},
+          {"phases",
+           {{"assembly", d.assembly},
+            {"small_fronts", d.small_fronts},
+            {"large_fronts", d.large_fronts},
+            {"store", d.store},
+            {"tiled_fronts", d.tiled_fronts},
+            {"host", d.host}}}};
+}
+
 }  // namespace strata::bench

@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "strata/sparse_matrix.hpp"
+#include "strata/stats.hpp"
 
 namespace strata::bench {
 
@@ -53,5 +54,9 @@ double geometric_mean(const std::vector<double>& v);
 
 /// Median of the values (they are copied).
 double median(std::vector<double> v);
+
+/// The GPU figures of a factorization (FactorStats' device fields, the per-phase GPU
+/// time included) as a JSON object, for the benchmarks' result files.
+nlohmann::json device_figures(const FactorStats& fs);
 
 }  // namespace strata::bench

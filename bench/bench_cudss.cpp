@@ -202,6 +202,7 @@ int main(int argc, char** argv) {
       times.push_back(t.seconds());
     }
     const double rf_s = bench::median(times);
+    const FactorStats refactor_stats = s.stats().factor;  // the last refactorization's
     std::vector<double> ones(p.a.n_rows, 1.0), b(p.a.n_rows);
     multiply(p.a, ones.data(), b.data());
     t.reset();
@@ -229,7 +230,8 @@ int main(int argc, char** argv) {
                   {"refactor_seconds", rf_s},
                   {"solve_seconds", sol_s},
                   {"solve_on_device", s.stats().solve.on_device},
-                  {"backward_error", berr}}},
+                  {"backward_error", berr},
+                  {"last_refactor", bench::device_figures(refactor_stats)}}},
                 {"cudss_default", to_json(def)},
                 {"cudss_strata_perm", to_json(same)},
                 {"cudss_user_perm_direction", use_inverse ? "old-to-new" : "new-to-old"}};

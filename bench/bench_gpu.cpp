@@ -28,6 +28,7 @@ namespace {
 struct Timing {
   double factor = 0, solve = 0, backward_error = 0;
   double gflops = 0;
+  FactorStats last;  ///< the last refactorization's statistics
 };
 
 Timing time_strata(const bench::Problem& p, Options o, int repeat,
@@ -49,6 +50,7 @@ Timing time_strata(const bench::Problem& p, Options o, int repeat,
   Timing r;
   r.solve = ts.seconds();
   r.factor = bench::median(times);
+  r.last = s.stats().factor;
   r.backward_error = bench::berr(p.a, x, b);
   const double flops = s.stats().analysis.factor_flops * (o.type == MatrixType::general ? 2 : 1);
   r.gflops = flops / r.factor * 1e-9;
@@ -69,8 +71,12 @@ int main(int argc, char** argv) {
   app.add_option("--problems", problems, "problems")->delimiter(',');
   app.add_option("--threads", threads, "CPU thread counts to measure")->delimiter(',');
   app.add_option("--repeat", repeat, "factorizations per measurement (median)");
+  bool gpu_only = false;
+  app.add_flag("--gpu-only", gpu_only,
+               "time the GPU only (no CPU or CHOLMOD columns: a profile of the GPU phases)");
   app.add_option("--results-dir", results_dir, "where to write the JSON (default bench/results)");
   CLI11_PARSE(app, argc, argv);
+  if (gpu_only) threads.clear();
   if (!numeric::cuda_available()) {
     fmt::print(stderr, "bench_gpu: no CUDA GPU present (or no CUDA backend in this build)\n");
     return 3;
@@ -104,7 +110,8 @@ int main(int argc, char** argv) {
                  {{"seconds", g.factor},
                   {"gflops", g.gflops},
                   {"solve_seconds", g.solve},
-                  {"backward_error", g.backward_error}}},
+                  {"backward_error", g.backward_error},
+                  {"last_refactor", bench::device_figures(g.last)}}},
                 {"cpu", json::array()}};
     double best_cpu = 1e300, best_chol = 1e300;
     int best_threads = 0;
@@ -132,10 +139,12 @@ int main(int argc, char** argv) {
         best_threads = t;
       }
     }
-    row["best_cpu_seconds"] = best_cpu;
-    row["best_cpu_threads"] = best_threads;
-    row["ratio_cpu_over_gpu"] = best_cpu / g.factor;
-    if (p.symmetric) row["ratio_cholmod_over_gpu"] = best_chol / g.factor;
+    if (!threads.empty()) {
+      row["best_cpu_seconds"] = best_cpu;
+      row["best_cpu_threads"] = best_threads;
+      row["ratio_cpu_over_gpu"] = best_cpu / g.factor;
+      if (p.symmetric) row["ratio_cholmod_over_gpu"] = best_chol / g.factor;
+    }
     fmt::print(
         "{:<14} {:>8} {:>11} {:>9.4f} {:>8.1f} {:>9.4f} {:>4} {:>9} {:>7.2f} {:>7} {:>9.1e}\n",
         name, p.a.n_rows, an.nnz_l, g.factor, g.gflops, best_cpu, best_threads,

@@ -282,7 +282,14 @@ int run_solve(const SolveArgs& a) {
                    {"tiled_fronts", f.tiled_fronts},
                    {"device_budget", f.device_budget},
                    {"contribution_blocks_on_host", f.contribution_blocks_on_host},
-                   {"factor_resident", f.factor_resident}};
+                   {"factor_resident", f.factor_resident},
+                   {"device_phases",
+                    {{"assembly", f.device_phases.assembly},
+                     {"small_fronts", f.device_phases.small_fronts},
+                     {"large_fronts", f.device_phases.large_fronts},
+                     {"store", f.device_phases.store},
+                     {"tiled_fronts", f.device_phases.tiled_fronts},
+                     {"host", f.device_phases.host}}}};
     json devices = json::array();
     for (const DeviceStats& d : f.devices)
       devices.push_back({{"worker", d.worker},
@@ -315,6 +322,13 @@ int run_solve(const SolveArgs& a) {
           f.bytes_to_device * 1e-6, f.bytes_to_host * 1e-6, f.device_budget * 1e-6,
           f.contribution_blocks_on_host ? ", contribution blocks spilled to host" : "",
           f.factor_resident ? ", factor resident (solve on the GPU)" : "");
+    if (f.backend == "cuda") {
+      const auto& ph = f.device_phases;
+      fmt::print(
+          "  GPU phases          assembly {:.3f} s, small fronts {:.3f} s, large fronts {:.3f} "
+          "s, stores {:.3f} s, tiled fronts {:.3f} s; host after each group {:.3f} s\n",
+          ph.assembly, ph.small_fronts, ph.large_fronts, ph.store, ph.tiled_fronts, ph.host);
+    }
     for (const DeviceStats& d : f.devices)
       fmt::print(
           "  worker {} ({:<7})   busy {:.3f} s, idle {:.3f} s, {} subtrees ({} stolen), "

@@ -100,6 +100,18 @@ struct FactorStats {
   std::size_t device_budget = 0;    ///< bytes the numeric working memory was held to
   bool contribution_blocks_on_host = false;  ///< some blocks spilled to pinned host memory
   bool factor_resident = false;              ///< the factor stayed on the device: solve runs there
+  /// Where the GPU time went (seconds, from CUDA events around each in-core launch group;
+  /// summed over groups and, with several GPUs, over the GPUs). `host` is the wall time
+  /// after each group's GPU work: copying its panels to the host factor (unless the
+  /// factor stays on the device only) and per-front bookkeeping.
+  struct DevicePhases {
+    double assembly = 0;      ///< zeroing fronts, scattering A, extend-add of children
+    double small_fronts = 0;  ///< the one-block-per-front kernel of small fronts
+    double large_fronts = 0;  ///< library calls (POTRF/GETRF/TRSM/SYRK/GEMM) and panels
+    double store = 0;         ///< contribution blocks stored, panels packed
+    double tiled_fronts = 0;  ///< fronts over the budget, slab by slab (wall time)
+    double host = 0;          ///< see above
+  } device_phases;
   /// Per worker, when several factored the tree (Options::num_gpus > 1); empty when one
   /// executor factored the whole tree.
   std::vector<DeviceStats> devices;

@@ -235,6 +235,14 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
       fs.tiled_fronts += one.tiled_fronts;
       fs.device_budget = std::max(fs.device_budget, one.device_budget);
       fs.contribution_blocks_on_host |= one.contribution_blocks_on_host;
+      auto& d = fs.device_phases;
+      const auto& o = one.device_phases;
+      d.assembly += o.assembly;
+      d.small_fronts += o.small_fronts;
+      d.large_fronts += o.large_fronts;
+      d.store += o.store;
+      d.tiled_fronts += o.tiled_fronts;
+      d.host += o.host;
     }
   } else {
     s.executor->report(fs);
@@ -243,7 +251,7 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
 
 // One solve with the factor: x = A⁻¹ b for nrhs columns (original numbering). Returns
 // true when the triangular solves ran on the device that holds the factor.
-bool apply_inverse(const SolverState& s, const double* b, double* x, index_t nrhs,
+bool apply_inverse(SolverState& s, const double* b, double* x, index_t nrhs,
                    std::vector<double>& work) {
   const Analysis& an = *s.analysis;
   const index_t n = an.n;
@@ -256,7 +264,10 @@ bool apply_inverse(const SolverState& s, const double* b, double* x, index_t nrh
       work[k + r * n] = b[i + r * n] * (scale ? an.row_scaling[i] : 1.0);
     }
   const bool on_device = s.executor && s.executor->solve(an, s.factor, work.data(), nrhs);
-  if (!on_device) numeric::solve_in_place(an, s.factor, work.data(), nrhs);
+  if (!on_device) {
+    if (!s.factor.panels_on_host) numeric::fetch_panels(an, *s.executor, s.factor);
+    numeric::solve_in_place(an, s.factor, work.data(), nrhs);
+  }
   for (index_t r = 0; r < nrhs; ++r)
     for (index_t k = 0; k < n; ++k) {
       const index_t col = match ? an.matching_perm[an.perm[k]] : an.perm[k];

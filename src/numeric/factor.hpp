@@ -19,6 +19,7 @@
 
 #include "core/analysis.hpp"
 #include "numeric/cpu/dense_front.hpp"
+#include "strata/errors.hpp"
 #include "strata/options.hpp"
 #include "strata/stats.hpp"
 
@@ -33,9 +34,13 @@ namespace strata::numeric {
 ///               the first k (same offsets as AssemblyTree::rows).
 ///   d_diag, d_off: LDLᵀ only, by pivot position: D(j,j) and, for the first column of a
 ///               2×2 pivot, D(j+1,j) (pivot_size[j] == 2 there, 0 on the second column).
+///   panels_on_host: false when the executor kept the panels in its own (device) memory
+///               only — Executor::keeps_panels; `panels` is then empty until
+///               fetch_panels copies them.
 struct NumericFactor {
   MatrixType type = MatrixType::automatic;
   std::vector<double> panels;
+  bool panels_on_host = true;
   std::vector<index_t> rows;
   std::vector<double> d_diag;
   std::vector<double> d_off;
@@ -117,6 +122,15 @@ class Executor {
   virtual bool solve(const Analysis& an, const NumericFactor& fac, double* x, index_t nrhs) {
     return false;
   }
+  /// After begin_part of a whole-tree factorization: true when this factorization's panels
+  /// will stay in the executor's memory only (the driver then leaves factor.panels
+  /// empty and sets panels_on_host = false). The default keeps them on the host.
+  virtual bool keeps_panels(const FactorContext& ctx) const { return false; }
+  /// Copies the panels of the factor this executor kept (keeps_panels) into fac.panels
+  /// (sized here); throws InvalidState when it holds no factor for `an`.
+  virtual void download_panels(const Analysis& an, NumericFactor& fac) {
+    throw InvalidState("download_panels: this executor holds no factor panels");
+  }
   /// Adds backend figures of the last factorization (bytes moved, device time) to `fs`.
   virtual void report(FactorStats& fs) const {}
 };
@@ -136,8 +150,13 @@ bool cuda_available();
 int cuda_device_count();
 
 /// Sizes `factor` for the analysis and type (a no-op when it already is: refactorization
-/// reuses the storage) and marks it invalid.
-void prepare_factor(const Analysis& an, MatrixType type, NumericFactor& factor);
+/// reuses the storage) and marks it invalid; the panels only when `host_panels`.
+void prepare_factor(const Analysis& an, MatrixType type, NumericFactor& factor,
+                    bool host_panels = true);
+
+/// Makes fac.panels hold the panels: a no-op when they are on the host, else
+/// exec.download_panels (exec must be the executor that factored `fac`).
+void fetch_panels(const Analysis& an, Executor& exec, NumericFactor& fac);
 
 /// LDLᵀ bookkeeping of front f once its partial factorization is in the factor (shared by
 /// the executors, so that a CPU and a GPU factor have one layout): moves D out of the

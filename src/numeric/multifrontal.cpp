@@ -33,12 +33,15 @@ PartView PartView::of(const schedule::FactorPart& p, int id) {
   return v;
 }
 
-void prepare_factor(const Analysis& an, MatrixType type, NumericFactor& factor) {
+void prepare_factor(const Analysis& an, MatrixType type, NumericFactor& factor, bool host_panels) {
   const auto& t = an.tree;
   factor.type = type;
   factor.valid = false;
   // Storage is sized once; refactorization reuses it (resize is a no-op then).
-  sized_resize(factor.panels, an.factor_layout.total, "factorize: factor panels");
+  if (host_panels) {
+    sized_resize(factor.panels, an.factor_layout.total, "factorize: factor panels");
+    factor.panels_on_host = true;
+  }
   sized_resize(factor.rows, t.rows.size(), "factorize: factor row indices");
   factor.front_stats.assign(t.n_fronts(), cpu::PivotStats{});
   if (type == MatrixType::symmetric_indefinite) {
@@ -51,7 +54,7 @@ void prepare_factor(const Analysis& an, MatrixType type, NumericFactor& factor) 
 void factorize(const Analysis& an, const std::vector<double>& scaled_values, MatrixType type,
                double static_pivot, Executor& exec, NumericFactor& factor,
                std::vector<double>& cb_arena) {
-  prepare_factor(an, type, factor);
+  prepare_factor(an, type, factor, false);
   sized_resize(cb_arena, an.cb_layout.arena_size, "factorize: contribution-block arena");
 
   const PartView whole = PartView::whole(an);
@@ -65,11 +68,27 @@ void factorize(const Analysis& an, const std::vector<double>& scaled_values, Mat
   exec.begin(ctx);
   ctx.part = &whole;
   exec.begin_part(ctx);
+  // The panels go to the host unless the executor keeps them (a resident GPU factor):
+  // then the host holds no copy at all — for a large factor that copy cost more than the
+  // factorization (pinned staging, a host memcpy, and sizing the vector the first time).
+  if (exec.keeps_panels(ctx)) {
+    std::vector<double>().swap(factor.panels);
+    factor.panels_on_host = false;
+  } else {
+    sized_resize(factor.panels, an.factor_layout.total, "factorize: factor panels");
+    factor.panels_on_host = true;
+  }
   for (const BatchInfo& b : an.plan.batches) exec.factor_batch(ctx, b);
   exec.end_part(ctx);
   ctx.part = nullptr;
   exec.end(ctx);
   factor.valid = true;
+}
+
+void fetch_panels(const Analysis& an, Executor& exec, NumericFactor& fac) {
+  if (fac.panels_on_host) return;
+  exec.download_panels(an, fac);
+  fac.panels_on_host = true;
 }
 
 void store_ldlt_front(const Analysis& an, index_t f, const index_t* local_perm,

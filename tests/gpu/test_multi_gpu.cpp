@@ -93,7 +93,9 @@ void factor_on_gpus(int gpus) {
     numeric::NumericFactor cpu_f, gpu1_f, multi_f;
     std::vector<double> arena;
     numeric::factorize(an, v, pr.type, pivot, *numeric::make_cpu_executor(2), cpu_f, arena);
-    numeric::factorize(an, v, pr.type, pivot, *numeric::make_cuda_executor(o, 0), gpu1_f, arena);
+    auto gpu1 = numeric::make_cuda_executor(o, 0);
+    numeric::factorize(an, v, pr.type, pivot, *gpu1, gpu1_f, arena);
+    numeric::fetch_panels(an, *gpu1, gpu1_f);
     std::vector<std::unique_ptr<numeric::Executor>> ex;
     std::vector<numeric::Executor*> execs;
     for (int d = 0; d < gpus; ++d) {

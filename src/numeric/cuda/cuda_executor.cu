@@ -6,13 +6,19 @@
 //   1. one launch assembles every front of the chunk in the pool (zero, scatter original
 //      entries, extend-add children's contribution blocks);
 //   2. one launch factors all small fronts (one thread block each); large fronts go to
-//      cuSOLVER POTRF + cuBLAS TRSM/SYRK (LLᵀ), a blocked LU with our panel kernel and
-//      cuBLAS TRSM/GEMM, or a blocked Bunch–Kaufman LDLᵀ with our panel kernel and cuBLAS
-//      SYRKX (kernels_ldlt.cuh), all with pivoting restricted to the fully summed rows
-//      and the CPU backend's static pivoting;
+//      cuSOLVER POTRF + cuBLAS TRSM/SYRK (LLᵀ), cuSOLVER GETRF on the fully summed block +
+//      TRSMs + GEMM (LU; a blocked LU with our panel kernel when a pivot needs static
+//      pivoting, kernels_lu.cu), or a blocked Bunch–Kaufman LDLᵀ with our panel kernel and
+//      cuBLAS SYRKX (kernels_ldlt.cuh), all with pivoting restricted to the fully summed
+//      rows and the CPU backend's static pivoting. The large fronts of a chunk run side by
+//      side on kLanes streams (each with its own handles), joined before step 3;
 //   3. one launch stores the contribution blocks where the plan put them;
 //   4. one launch packs the chunk's factor panels (contiguous in the factor layout) into
-//      the device factor, which is copied to the host factor in one transfer.
+//      the device factor, which is copied to the host factor in one transfer — unless
+//      the factor stays resident for an LLᵀ or LU: then the panels stay on the device
+//      only (NumericFactor::panels_on_host is false; download_panels on demand) and
+//      only the pivots' diagonal entries come back for the host bookkeeping.
+// CUDA events between the steps give FactorStats::device_phases.
 // A front whose working set alone is over the budget is factored slab by slab from
 // pinned host memory (tiled_front.cu; LLᵀ and LU only).
 // LDLᵀ fronts come back in the CPU kernel's layout; D, pivot sizes, rows and statistics are
@@ -40,9 +46,11 @@
 // or is this one — to a device buffer here (the outbox) that the importer copies from
 // directly (cudaMemcpyPeerAsync); the outbox lives until the next factorization.
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 
+#include "core/alloc.hpp"
 #include "numeric/cuda/cuda_executor.hpp"
 
 namespace strata::cuda {
@@ -66,6 +74,11 @@ namespace {
 constexpr std::int64_t kSmallFront = 256;  // fronts up to this many rows: one block each
 constexpr std::int64_t kLuPanel = 64;      // panel width of the blocked LU of large fronts
 constexpr std::int64_t kMinSlab = 16;      // narrowest slab worth a library call
+// Streams for the large fronts of one chunk. The fronts of a level below the top few are
+// many and medium-sized (hundreds to a few thousand rows): one after another on one
+// stream, each library call leaves most of the GPU idle. Eight lanes fill it without
+// many handles (each cuBLAS handle holds its own workspace).
+constexpr std::size_t kLanes = 8;
 }  // namespace
 
 CudaExecutor::CudaExecutor(const Options& o, int device)
@@ -78,12 +91,23 @@ CudaExecutor::CudaExecutor(const Options& o, int device)
   STRATA_CUSOLVER(cusolverDnSetStream(solver_, stream_));
   STRATA_CUDA(cudaEventCreate(&start_));
   STRATA_CUDA(cudaEventCreate(&stop_));
+  for (cudaEvent_t& e : phase_ev_) STRATA_CUDA(cudaEventCreate(&e));
 }
 
 CudaExecutor::~CudaExecutor() {
   cudaSetDevice(device_);
+  for (auto& lp : lanes_) {
+    Lane& l = *lp;
+    if (l.done) cudaEventDestroy(l.done);
+    if (!l.owned) continue;
+    cusolverDnDestroy(l.solver);
+    cublasDestroy(l.blas);
+    cudaStreamDestroy(l.stream);
+  }
+  lanes_.clear();
   cudaEventDestroy(start_);
   cudaEventDestroy(stop_);
+  for (cudaEvent_t e : phase_ev_) cudaEventDestroy(e);
   cusolverDnDestroy(solver_);
   cublasDestroy(blas_);
   cudaStreamDestroy(stream_);
@@ -96,6 +120,7 @@ void CudaExecutor::begin(const numeric::FactorContext& ctx) {
   const Analysis& an = *ctx.analysis;
   bytes_h2d_ = bytes_d2h_ = 0;
   chunks_ = tiled_count_ = 0;
+  phases_ = FactorStats::DevicePhases{};
   resident_for_ = nullptr;
   if (an.id != analysis_id_) upload_analysis(an);
   STRATA_CUDA(cudaEventRecord(start_, stream_));
@@ -118,6 +143,43 @@ void CudaExecutor::begin_part(const numeric::FactorContext& ctx) {
     throw InvalidInput("internal: part " + std::to_string(ctx.part->id) + " was not planned");
   cur_ = &it->second;
   whole_ = whole;
+  // LDLᵀ keeps the host copy: its D and pivot bookkeeping are done on the host panels
+  // (store_ldlt_front); a tiled front goes through host memory anyway
+  device_only_ = keep_resident() && ctx.type != MatrixType::symmetric_indefinite &&
+                 std::none_of(cur_->tiled.begin(), cur_->tiled.end(), [](char c) { return c; });
+}
+
+std::vector<std::unique_ptr<Lane>>& CudaExecutor::lanes() {
+  if (!lanes_.empty()) return lanes_;
+  for (std::size_t i = 0; i < kLanes; ++i) {
+    lanes_.push_back(std::make_unique<Lane>());
+    Lane& l = *lanes_.back();
+    STRATA_CUDA(cudaEventCreateWithFlags(&l.done, cudaEventDisableTiming));
+    if (i == 0) {
+      l.stream = stream_;
+      l.blas = blas_;
+      l.solver = solver_;
+      continue;
+    }
+    l.owned = true;
+    STRATA_CUDA(cudaStreamCreateWithFlags(&l.stream, cudaStreamNonBlocking));
+    STRATA_CUBLAS(cublasCreate(&l.blas));
+    STRATA_CUBLAS(cublasSetStream(l.blas, l.stream));
+    STRATA_CUSOLVER(cusolverDnCreate(&l.solver));
+    STRATA_CUSOLVER(cusolverDnSetStream(l.solver, l.stream));
+  }
+  return lanes_;
+}
+
+void CudaExecutor::download_panels(const Analysis& an, numeric::NumericFactor& fac) {
+  if (!keep_resident() || resident_for_ != &fac || resident_analysis_ != an.id)
+    throw InvalidState("download_panels: the device holds no factor for this analysis");
+  STRATA_CUDA(cudaSetDevice(device_));
+  sized_resize(fac.panels, an.factor_layout.total, "download_panels: factor panels");
+  STRATA_CUDA(cudaMemcpyAsync(fac.panels.data(), panels_.data(),
+                              sizeof(double) * an.factor_layout.total, cudaMemcpyDeviceToHost,
+                              stream_));
+  STRATA_CUDA(cudaStreamSynchronize(stream_));
 }
 
 std::size_t CudaExecutor::export_cb(const numeric::FactorContext& ctx, numeric::CbTransfer& t) {
@@ -213,6 +275,7 @@ void CudaExecutor::report(FactorStats& fs) const {
   fs.device_budget = plan_.budget;
   fs.contribution_blocks_on_host = plan_.arena_on_host;
   fs.factor_resident = keep_resident();
+  fs.device_phases = phases_;
 }
 
 // Decides what lives where (see the file header) and lays out the chunks of every part
@@ -403,7 +466,6 @@ void CudaExecutor::plan_parts(const Analysis& an, bool whole) {
   // staging for the panels of one chunk, or the whole resident factor
   panels_.resize(plan_.factor_resident ? std::max<std::size_t>(an.factor_layout.total, 1)
                                        : chunk_panels);
-  host_staging_.resize(chunk_panels);
   for (const numeric::PartView& v : views) upload_part(an, v);
   STRATA_CUDA(cudaStreamSynchronize(stream_));
   planned_ = whole ? 1 : 2;
@@ -467,7 +529,9 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
   ++chunks_;
   index_t max_rows = 0;
   for (index_t p = begin; p < end; ++p) max_rows = std::max(max_rows, t.n_rows(s.fronts[p]));
+  STRATA_CUDA(cudaEventRecord(phase_ev_[0], stream_));
   launch_assemble(tree, begin, count, max_rows, values_.data(), pool_.data(), !lu, stream_);
+  STRATA_CUDA(cudaEventRecord(phase_ev_[1], stream_));
 
   // small fronts: one launch for the whole chunk
   std::vector<std::int64_t> small, big, perm_off{0};
@@ -498,73 +562,80 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
     launch_factor_small(tree, small_pos_.data(), static_cast<std::int64_t>(ns), pool_.data(), lu,
                         ctx.static_pivot, info_.data(), perturbed_.data(), perm_.data(),
                         perm_offset_.data(), stream_);
+  STRATA_CUDA(cudaEventRecord(phase_ev_[2], stream_));
 
-  // large fronts: library calls, one front after another on the stream
+  // large fronts: library calls, each front on one lane, the lanes side by side (the
+  // least-loaded lane takes the next front; LDLᵀ's panel workspace is single: one lane)
   const double one = 1.0, minus_one = -1.0;
   std::int64_t perm_at = perm_off.back();
   std::vector<std::int64_t> big_perm_at;
+  std::vector<std::unique_ptr<Lane>>& lane = lanes();
+  const std::size_t n_lanes = ldlt ? 1 : std::min(lane.size(), big.size());
+  for (std::size_t l = 0; l < n_lanes; ++l) {
+    lane[l]->load = 0;
+    if (l > 0) STRATA_CUDA(cudaStreamWaitEvent(lane[l]->stream, phase_ev_[2], 0));
+  }
   for (std::size_t i = 0; i < big.size(); ++i) {
     const index_t p = big[i], f = s.fronts[p];
     const int m = static_cast<int>(t.n_rows(f)), k = static_cast<int>(t.n_pivots(f));
     double* F = pool_.data() + cur_->pos_offset_host[p];
     big_perm_at.push_back(perm_at);
+    Lane* ln = lane[0].get();
+    for (std::size_t l = 1; l < n_lanes; ++l)
+      if (lane[l]->load < ln->load) ln = lane[l].get();
+    ln->load += static_cast<double>(m) * m * k;
     if (ldlt) {
       ldlt_large_.factor(blas_, stream_, F, m, k, ctx.static_pivot, perm_.data() + perm_at,
                          pivot_size_.data() + perm_at, perturbed_.data() + ns + i);
     } else if (!lu) {
-      grow_potrf_work(solver_, potrf_work_, F, k, m);
-      STRATA_CUSOLVER(cusolverDnDpotrf(solver_, CUBLAS_FILL_MODE_LOWER, k, F, m, potrf_work_.data(),
-                                       static_cast<int>(potrf_work_.size()),
-                                       potrf_info_.data() + i));
+      grow_potrf_work(ln->solver, ln->potrf_work, F, k, m);
+      STRATA_CUSOLVER(
+          cusolverDnDpotrf(ln->solver, CUBLAS_FILL_MODE_LOWER, k, F, m, ln->potrf_work.data(),
+                           static_cast<int>(ln->potrf_work.size()), potrf_info_.data() + i));
       if (m > k) {
-        STRATA_CUBLAS(cublasDtrsm(blas_, CUBLAS_SIDE_RIGHT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_T,
+        STRATA_CUBLAS(cublasDtrsm(ln->blas, CUBLAS_SIDE_RIGHT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_T,
                                   CUBLAS_DIAG_NON_UNIT, m - k, k, &one, F, m, F + k, m));
-        STRATA_CUBLAS(cublasDsyrk(blas_, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N, m - k, k, &minus_one,
-                                  F + k, m, &one, F + static_cast<std::size_t>(k) * m + k, m));
+        STRATA_CUBLAS(cublasDsyrk(ln->blas, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N, m - k, k,
+                                  &minus_one, F + k, m, &one,
+                                  F + static_cast<std::size_t>(k) * m + k, m));
       }
     } else {
-      // iota_ outlives the asynchronous copy (it is a member, only ever grown)
-      if (static_cast<int>(iota_.size()) < k) {
-        STRATA_CUDA(cudaStreamSynchronize(stream_));
-        iota_.resize(k);
-        for (int r = 0; r < k; ++r) iota_[r] = r;
-      }
-      STRATA_CUDA(cudaMemcpyAsync(perm_.data() + perm_at, iota_.data(), sizeof(std::int64_t) * k,
-                                  cudaMemcpyHostToDevice, stream_));
-      STRATA_CUDA(cudaMemsetAsync(perturbed_.data() + ns + i, 0, sizeof(std::int64_t), stream_));
-      for (int p0 = 0; p0 < k; p0 += kLuPanel) {
-        const int w = std::min<int>(kLuPanel, k - p0), rest = m - p0 - w;
-        launch_lu_panel(F, m, k, p0, w, ctx.static_pivot, perm_.data() + perm_at,
-                        perturbed_.data() + ns + i, stream_);
-        if (rest > 0) {
-          double* a11 = F + static_cast<std::size_t>(p0) * m + p0;
-          double* a12 = F + static_cast<std::size_t>(p0 + w) * m + p0;
-          STRATA_CUBLAS(cublasDtrsm(blas_, CUBLAS_SIDE_LEFT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N,
-                                    CUBLAS_DIAG_UNIT, w, rest, &one, a11, m, a12, m));
-          STRATA_CUBLAS(cublasDgemm(blas_, CUBLAS_OP_N, CUBLAS_OP_N, rest, rest, w, &minus_one,
-                                    a11 + w, m, a12, m, &one, a12 + w, m));
-        }
-      }
+      factor_large_lu(*ln, F, m, k, ctx.static_pivot, perm_.data() + perm_at,
+                      perturbed_.data() + ns + i);
     }
     perm_at += k;
   }
+  for (std::size_t l = 1; l < n_lanes; ++l) {  // join: the stores read every front
+    STRATA_CUDA(cudaEventRecord(lane[l]->done, lane[l]->stream));
+    STRATA_CUDA(cudaStreamWaitEvent(stream_, lane[l]->done, 0));
+  }
+  STRATA_CUDA(cudaEventRecord(phase_ev_[3], stream_));
   launch_store_cb(tree, begin, count, max_rows, pool_.data(), !lu, stream_);
 
   // factor panels: packed into the device factor (resident) or the chunk's staging
-  // area (in chunk order: for the whole tree that is the layout's order), then to the
-  // host in one copy
-  std::vector<std::int64_t> stage_off(count);
+  // area (in chunk order: for the whole tree that is the layout's order)
+  std::vector<std::int64_t> stage_off(count), diag_off(count + 1, 0);
   std::size_t total = 0;
   for (std::int64_t i = 0; i < count; ++i) {
     const index_t f = s.fronts[begin + i];
     stage_off[i] =
         static_cast<std::int64_t>(keep_resident() ? an.factor_layout.panel_offset[f] : total);
     total += panel_size(t, f, lu);
+    diag_off[i + 1] = diag_off[i] + t.n_pivots(f);
   }
   upload(stage_offset_, stage_off);
   launch_pack_panels(tree, begin, count, max_rows, pool_.data(), stage_offset_.data(),
                      panels_.data(), lu, stream_);
-  copy_panels_back(ctx, begin, end);
+  // device-only panels: the host bookkeeping needs only the pivots' diagonal entries
+  std::vector<double> diag;
+  if (device_only_) {
+    upload(diag_offset_, diag_off);
+    diag_.resize(static_cast<std::size_t>(diag_off[count]) + 1);
+    launch_gather_diagonals(tree, begin, count, stage_offset_.data(), panels_.data(),
+                            diag_offset_.data(), diag_.data(), stream_);
+    diag.resize(diag_off[count]);
+  }
+  STRATA_CUDA(cudaEventRecord(phase_ev_[4], stream_));
   const std::size_t nall = ns + big.size();
   std::vector<std::int64_t> info(nall), perturbed(nall), perm(perm_at);
   std::vector<int> pinfo(big.size()), psize(ldlt ? perm_at : 0);
@@ -583,8 +654,26 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
   if (ldlt && perm_at)
     STRATA_CUDA(cudaMemcpyAsync(psize.data(), pivot_size_.data(), sizeof(int) * perm_at,
                                 cudaMemcpyDeviceToHost, stream_));
+  if (!diag.empty())
+    STRATA_CUDA(cudaMemcpyAsync(diag.data(), diag_.data(), sizeof(double) * diag.size(),
+                                cudaMemcpyDeviceToHost, stream_));
   STRATA_CUDA(cudaStreamSynchronize(stream_));
-  (void)total;
+  float ms[4] = {};
+  for (int e = 0; e < 4; ++e)
+    STRATA_CUDA(cudaEventElapsedTime(&ms[e], phase_ev_[e], phase_ev_[e + 1]));
+  phases_.assembly += 1e-3 * ms[0];
+  phases_.small_fronts += 1e-3 * ms[1];
+  phases_.large_fronts += 1e-3 * ms[2];
+  phases_.store += 1e-3 * ms[3];
+  const auto host_start = std::chrono::steady_clock::now();
+  struct HostTime {  // adds the host part's wall time on every way out
+    FactorStats::DevicePhases& ph;
+    std::chrono::steady_clock::time_point t0;
+    ~HostTime() {
+      ph.host += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    }
+  } host_time{phases_, host_start};
+  if (!device_only_) copy_panels_back(ctx, begin, end);
   if (ldlt) {  // D out of the panels, pivot sizes, rows: the CPU executor's code; statistics
     std::vector<std::int64_t> psize_at(count);
     for (std::size_t i = 0; i < nall; ++i) {
@@ -607,12 +696,88 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
     }
     return;
   }
+  // the diagonal of each front's panel: gathered on the device, or read in the host copy
+  auto diag_of = [&](index_t p) -> const double* {
+    const index_t f = s.fronts[p];
+    if (device_only_) return diag.data() + diag_off[p - begin];
+    const index_t m = t.n_rows(f), k = t.n_pivots(f);
+    const double* panel = ctx.factor->panels.data() + an.factor_layout.panel_offset[f];
+    diag.resize(k);
+    for (index_t i = 0; i < k; ++i) diag[i] = panel[i * m + i];
+    return diag.data();
+  };
   for (std::size_t i = 0; i < ns; ++i)
     finish_front(ctx, s.fronts[small[i]], lu ? -1 : info[i], perturbed[i],
-                 perm.data() + perm_off[i]);
+                 perm.data() + perm_off[i], diag_of(small[i]));
   for (std::size_t i = 0; i < big.size(); ++i)
     finish_front(ctx, s.fronts[big[i]], (!lu && pinfo[i] > 0) ? pinfo[i] - 1 : -1,
-                 perturbed[ns + i], perm.data() + big_perm_at[i]);
+                 perturbed[ns + i], perm.data() + big_perm_at[i], diag_of(big[i]));
+}
+
+// LU of a large front in the pool (see kernels_lu.cu for why this shape): GETRF on the
+// fully summed block; if its pivots pass the static-pivot check, the interchanges go to
+// A12 and two TRSMs and a GEMM finish the front; otherwise A11 is restored and the
+// blocked path with our panel kernel (static pivoting) factors the front. One host
+// synchronization per front (the check's flag).
+void CudaExecutor::factor_large_lu(Lane& lane, double* F, int m, int k, double static_pivot,
+                                   std::int64_t* perm, std::int64_t* perturbed) {
+  const cudaStream_t stream = lane.stream;
+  const double one = 1.0, minus_one = -1.0;
+  const std::size_t ld = static_cast<std::size_t>(m);
+  lane.lu_save.resize(static_cast<std::size_t>(k) * k);
+  STRATA_CUDA(cudaMemcpy2DAsync(lane.lu_save.data(), sizeof(double) * k, F, sizeof(double) * ld,
+                                sizeof(double) * k, k, cudaMemcpyDeviceToDevice, stream));
+  int lwork = 0;
+  STRATA_CUSOLVER(cusolverDnDgetrf_bufferSize(lane.solver, k, k, F, m, &lwork));
+  lane.getrf_work.resize(static_cast<std::size_t>(std::max(lwork, 1)));
+  lane.ipiv.resize(static_cast<std::size_t>(k));
+  lane.getrf_info.resize(1);
+  lane.lu_bad.resize(1);
+  lane.lu_bad_host.resize(1);
+  STRATA_CUSOLVER(cusolverDnDgetrf(lane.solver, k, k, F, m, lane.getrf_work.data(),
+                                   lane.ipiv.data(), lane.getrf_info.data()));
+  launch_lu_check(F, m, k, static_pivot, lane.getrf_info.data(), lane.lu_bad.data(), stream);
+  STRATA_CUDA(cudaMemcpyAsync(lane.lu_bad_host.data(), lane.lu_bad.data(), sizeof(int),
+                              cudaMemcpyDeviceToHost, stream));
+  STRATA_CUDA(cudaStreamSynchronize(stream));
+  STRATA_CUDA(cudaMemsetAsync(perturbed, 0, sizeof(std::int64_t), stream));
+  if (!lane.lu_bad_host.data()[0]) {
+    launch_ipiv_to_perm(lane.ipiv.data(), k, perm, stream);
+    if (m > k) {
+      double* a12 = F + static_cast<std::size_t>(k) * ld;
+      launch_laswp(a12, m, m - k, lane.ipiv.data(), k, stream);
+      STRATA_CUBLAS(cublasDtrsm(lane.blas, CUBLAS_SIDE_RIGHT, CUBLAS_FILL_MODE_UPPER, CUBLAS_OP_N,
+                                CUBLAS_DIAG_NON_UNIT, m - k, k, &one, F, m, F + k, m));
+      STRATA_CUBLAS(cublasDtrsm(lane.blas, CUBLAS_SIDE_LEFT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N,
+                                CUBLAS_DIAG_UNIT, k, m - k, &one, F, m, a12, m));
+      STRATA_CUBLAS(cublasDgemm(lane.blas, CUBLAS_OP_N, CUBLAS_OP_N, m - k, m - k, k, &minus_one,
+                                F + k, m, a12, m, &one, a12 + k, m));
+    }
+    return;
+  }
+  // a pivot needs static pivoting: restore A11 and take the panel-kernel path
+  STRATA_CUDA(cudaMemcpy2DAsync(F, sizeof(double) * ld, lane.lu_save.data(), sizeof(double) * k,
+                                sizeof(double) * k, k, cudaMemcpyDeviceToDevice, stream));
+  // iota_ outlives the asynchronous copy (it is a member, only ever grown)
+  if (static_cast<int>(iota_.size()) < k) {
+    STRATA_CUDA(cudaStreamSynchronize(stream));
+    iota_.resize(k);
+    for (int r = 0; r < k; ++r) iota_[r] = r;
+  }
+  STRATA_CUDA(cudaMemcpyAsync(perm, iota_.data(), sizeof(std::int64_t) * k, cudaMemcpyHostToDevice,
+                              stream));
+  for (int p0 = 0; p0 < k; p0 += kLuPanel) {
+    const int w = std::min<int>(kLuPanel, k - p0), rest = m - p0 - w;
+    launch_lu_panel(F, m, k, p0, w, static_pivot, perm, perturbed, stream);
+    if (rest > 0) {
+      double* a11 = F + static_cast<std::size_t>(p0) * ld + p0;
+      double* a12 = F + static_cast<std::size_t>(p0 + w) * ld + p0;
+      STRATA_CUBLAS(cublasDtrsm(lane.blas, CUBLAS_SIDE_LEFT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N,
+                                CUBLAS_DIAG_UNIT, w, rest, &one, a11, m, a12, m));
+      STRATA_CUBLAS(cublasDgemm(lane.blas, CUBLAS_OP_N, CUBLAS_OP_N, rest, rest, w, &minus_one,
+                                a11 + w, m, a12, m, &one, a12 + w, m));
+    }
+  }
 }
 
 // The panels of positions [begin, end) to the host factor through the pinned staging
@@ -626,6 +791,7 @@ void CudaExecutor::copy_panels_back(const numeric::FactorContext& ctx, index_t b
   std::size_t total = 0;
   for (index_t q = begin; q < end; ++q) total += panel_size(t, s.fronts[q], lu);
   if (total == 0) return;
+  host_staging_.resize(total);  // grown on first use: a device-only factor never needs it
   const std::size_t base = an.factor_layout.panel_offset[s.fronts[begin]];
   const double* src = panels_.data() + (keep_resident() ? base : 0);
   STRATA_CUDA(cudaMemcpyAsync(host_staging_.data(), src, sizeof(double) * total,
@@ -648,13 +814,12 @@ void CudaExecutor::copy_panels_back(const numeric::FactorContext& ctx, index_t b
 
 // Host bookkeeping of one factored front: failure, permuted rows, pivot statistics.
 void CudaExecutor::finish_front(const numeric::FactorContext& ctx, index_t f, std::int64_t bad,
-                                std::int64_t npert, const std::int64_t* lperm) {
+                                std::int64_t npert, const std::int64_t* lperm, const double* diag) {
   const Analysis& an = *ctx.analysis;
   const auto& t = an.tree;
   numeric::NumericFactor& fac = *ctx.factor;
   const bool lu = ctx.type == MatrixType::general;
   const index_t m = t.n_rows(f), k = t.n_pivots(f);
-  const double* panel = fac.panels.data() + an.factor_layout.panel_offset[f];
   if (bad >= 0) throw NotPositiveDefinite(an.perm[t.first_pivot[f] + bad], std::nan(""));
   const index_t* rows = t.rows_of(f);
   index_t* frows = fac.rows.data() + t.row_offsets[f];
@@ -663,7 +828,7 @@ void CudaExecutor::finish_front(const numeric::FactorContext& ctx, index_t f, st
   int sign = 1;
   for (index_t i = 0; i < k; ++i) {
     frows[i] = rows[lu ? lperm[i] : i];
-    const double d = panel[i * m + i];
+    const double d = diag[i];
     ps.log_abs_det += lu ? std::log(std::abs(d)) : 2.0 * std::log(d);
     if (d < 0) sign = -sign;
   }

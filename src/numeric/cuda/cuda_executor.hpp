@@ -7,6 +7,7 @@
 
 #include <cstdint>
 #include <map>
+#include <memory>
 #include <vector>
 
 #include "numeric/cuda/cuda_check.hpp"
@@ -42,6 +43,21 @@ struct PartDevice {
   DeviceTree tree{};
 };
 
+/// A stream with its own library handles and workspaces, on which the large fronts of a
+/// chunk run side by side (a front's calls all go to one lane; lanes are joined before
+/// the chunk's stores). Lane 0 is the executor's main stream.
+struct Lane {
+  cudaStream_t stream = nullptr;
+  cublasHandle_t blas = nullptr;
+  cusolverDnHandle_t solver = nullptr;
+  cudaEvent_t done = nullptr;
+  bool owned = false;  ///< created for this lane (lane 0 borrows the executor's)
+  DeviceBuffer<double> potrf_work, lu_save, getrf_work;
+  DeviceBuffer<int> ipiv, getrf_info, lu_bad;
+  PinnedBuffer<int> lu_bad_host;
+  double load = 0;  ///< flops given to it in the current chunk
+};
+
 /// Grows `work` to cuSOLVER's workspace for a POTRF of order k, leading dimension ld.
 void grow_potrf_work(cusolverDnHandle_t h, DeviceBuffer<double>& work, double* a, int k, int ld);
 
@@ -60,6 +76,8 @@ class CudaExecutor final : public numeric::Executor {
   void end(const numeric::FactorContext& ctx) override;
   bool solve(const Analysis& an, const numeric::NumericFactor& fac, double* x,
              index_t nrhs) override;
+  bool keeps_panels(const numeric::FactorContext& ctx) const override { return device_only_; }
+  void download_panels(const Analysis& an, numeric::NumericFactor& fac) override;
   void report(FactorStats& fs) const override;
 
  private:
@@ -71,8 +89,15 @@ class CudaExecutor final : public numeric::Executor {
   bool keep_resident() const { return plan_.factor_resident && whole_; }
   void factor_chunk(const numeric::FactorContext& ctx, index_t begin, index_t end);
   void factor_tiled(const numeric::FactorContext& ctx, index_t pos);
+  /// LU of the large front F (m×m, k pivots) in the pool: GETRF + TRSMs + GEMM, or the
+  /// blocked panel-kernel path when GETRF's pivots need static pivoting (kernels_lu.cu).
+  void factor_large_lu(Lane& lane, double* F, int m, int k, double static_pivot, std::int64_t* perm,
+                       std::int64_t* perturbed);
+  /// The lanes, created on first use (kLanes of them).
+  std::vector<std::unique_ptr<Lane>>& lanes();
+  /// Host bookkeeping of factored front f: `diag` holds its k pivots' diagonal entries.
   void finish_front(const numeric::FactorContext& ctx, index_t f, std::int64_t bad,
-                    std::int64_t npert, const std::int64_t* lperm);
+                    std::int64_t npert, const std::int64_t* lperm, const double* diag);
   void copy_panels_back(const numeric::FactorContext& ctx, index_t begin, index_t end);
   void count_h2d(std::size_t bytes) { bytes_h2d_ += bytes; }
   template <class T>
@@ -94,7 +119,10 @@ class CudaExecutor final : public numeric::Executor {
   std::map<int, PartDevice> parts_;  ///< by PartView::id: -1 whole tree, 0..P subtrees, top
   PartDevice* cur_ = nullptr;        ///< the part being factored
   bool whole_ = true;                ///< the last factorization was of the whole tree
-  int planned_ = 0;                  ///< parts_ planned for: 0 nothing, 1 whole, 2 split
+  /// The panels of this factorization stay on the device only (resident factor, LLᵀ or
+  /// LU, no front factored tile by tile): no copy to the host factor unless asked.
+  bool device_only_ = false;
+  int planned_ = 0;  ///< parts_ planned for: 0 nothing, 1 whole, 2 split
   /// Blocks of subtree roots exported for a peer copy (or the same device), kept until
   /// the next factorization: the arena they came from is reused by the next subtree.
   std::map<index_t, DeviceBuffer<double>> outbox_;
@@ -106,6 +134,10 @@ class CudaExecutor final : public numeric::Executor {
   std::vector<std::int64_t> iota_;
   DeviceBuffer<int> pivot_size_;         // LDLᵀ: local pivot sizes, laid out as perm_
   DeviceBuffer<std::int64_t> psize_at_;  // LDLᵀ: per chunk position, its offset in pivot_size_
+  // the diagonals of device-only panels
+  DeviceBuffer<double> diag_;
+  DeviceBuffer<std::int64_t> diag_offset_;
+  std::vector<std::unique_ptr<Lane>> lanes_;  ///< large fronts of a chunk, side by side
   LdltLarge ldlt_large_;
   // resident factor for the solve
   const numeric::NumericFactor* resident_for_ = nullptr;
@@ -121,6 +153,10 @@ class CudaExecutor final : public numeric::Executor {
   index_t chunks_ = 0, tiled_count_ = 0;
   double device_seconds_ = 0;
   cudaEvent_t start_ = nullptr, stop_ = nullptr;
+  /// Per in-core chunk, events between its phases: before assembly, after assembly,
+  /// after the small fronts, after the large fronts, after the stores and packs.
+  cudaEvent_t phase_ev_[5] = {};
+  FactorStats::DevicePhases phases_;  ///< summed over the chunks of the factorization
 };
 
 }  // namespace strata::cuda

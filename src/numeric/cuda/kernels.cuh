@@ -78,4 +78,25 @@ void launch_lu_slab(double* s_, std::int64_t r, std::int64_t w, std::int64_t kk,
                     double static_pivot, std::int64_t* perm, std::int64_t* perturbed,
                     cudaStream_t s);
 
+/// Large-front LU glue (kernels_lu.cu). After cuSOLVER GETRF of the k×k block A11 (column-
+/// major, leading dimension ld): *bad = 1 when *getrf_info ≠ 0 or a pivot |A11(j,j)| is
+/// below static_pivot or not finite (the front then goes to the panel-kernel path), else 0.
+void launch_lu_check(const double* a, std::int64_t ld, std::int64_t k, double static_pivot,
+                     const int* getrf_info, int* bad, cudaStream_t s);
+
+/// The row permutation of GETRF's interchanges: perm[i] = the local row (0-based) that
+/// ended in position i, for ipiv (1-based, LAPACK) of length k. One thread.
+void launch_ipiv_to_perm(const int* ipiv, std::int64_t k, std::int64_t* perm, cudaStream_t s);
+
+/// Applies the interchanges ipiv[0..k) (1-based, in order) to the rows of the ncols
+/// columns of a (leading dimension ld), as LAPACK's DLASWP with increment 1.
+void launch_laswp(double* a, std::int64_t ld, std::int64_t ncols, const int* ipiv, std::int64_t k,
+                  cudaStream_t s);
+
+/// For fronts at positions begin..begin+count of t: diag[diag_offset[i] + j] = the j-th
+/// diagonal entry (j < k) of the front's packed panel at panels + panel_offset[i].
+void launch_gather_diagonals(const DeviceTree& t, std::int64_t begin, std::int64_t count,
+                             const std::int64_t* panel_offset, const double* panels,
+                             const std::int64_t* diag_offset, double* diag, cudaStream_t s);
+
 }  // namespace strata::cuda

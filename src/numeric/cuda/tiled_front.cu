@@ -26,6 +26,7 @@
 // (out-of-core dense factorization as in Toledo, "A survey of out-of-core algorithms in
 // numerical linear algebra", 1999).
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 
@@ -53,6 +54,7 @@ void copy_block(cudaStream_t s, double* d, const double* h, std::int64_t ldh, st
 }  // namespace
 
 void CudaExecutor::factor_tiled(const numeric::FactorContext& ctx, index_t pos) {
+  const auto wall_start = std::chrono::steady_clock::now();
   const Analysis& an = *ctx.analysis;
   const auto& t = an.tree;
   const index_t f = ctx.part->schedule->fronts[pos];
@@ -190,7 +192,11 @@ void CudaExecutor::factor_tiled(const numeric::FactorContext& ctx, index_t pos) 
     bytes_h2d_ += sizeof(double) * sz;
   }
   STRATA_CUDA(cudaStreamSynchronize(stream_));
-  finish_front(ctx, f, -1, npert, fperm.data());
+  std::vector<double> diag(k);
+  for (std::int64_t i = 0; i < k; ++i) diag[i] = panel[i * m + i];
+  finish_front(ctx, f, -1, npert, fperm.data(), diag.data());
+  phases_.tiled_fronts +=
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();
 }
 
 }  // namespace strata::cuda

@@ -1,0 +1,112 @@
+// strata — CUDA kernels around the library LU of a large front (see kernels_lu.cuh).
+//
+// A large LU front is factored by whole-block library calls (cuda_executor.cu,
+// factor_large_lu): cuSOLVER GETRF on the k×k fully summed block A11 — partial pivoting
+// over the fully summed rows only, which is exactly the restricted pivoting of the CPU
+// kernel — then the row interchanges applied to A12, two TRSMs and one GEMM. GETRF does
+// no static pivoting, so the pivots it chose are checked afterwards: when one is below
+// the static-pivot threshold (or GETRF met an exact zero, or anything is not finite),
+// the front is restored and refactored by the blocked path with our panel kernel, which
+// perturbs tiny pivots as the CPU does. With no tiny pivot both paths make the same
+// pivot choices (largest magnitude, first on ties), so the result is the CPU's within
+// rounding either way.
+//
+// The kernels here are the glue: the pivot check, the conversion of GETRF's interchange
+// list (LAPACK's ipiv, 1-based) into the row permutation the factor records, the
+// interchanges on A12 (one thread per column, in order), and the gather of the pivots'
+// diagonal entries that the host bookkeeping reads when the panels stay on the device.
+#include <cfloat>
+
+#include "numeric/cuda/cuda_check.hpp"
+#include "numeric/cuda/kernels.cuh"
+
+namespace strata::cuda {
+namespace {
+
+constexpr int kThreads = 256;
+
+__global__ void lu_check_kernel(const double* a, std::int64_t ld, std::int64_t k,
+                                double static_pivot, const int* getrf_info, int* bad) {
+  __shared__ int sbad;
+  if (threadIdx.x == 0) sbad = *getrf_info != 0;
+  __syncthreads();
+  for (std::int64_t j = threadIdx.x; j < k; j += blockDim.x) {
+    const double d = a[j * ld + j];
+    // !(|d| >= sp) also catches NaN; an infinite pivot means growth we do not accept
+    if (!(fabs(d) >= static_pivot) || !(fabs(d) <= DBL_MAX)) sbad = 1;
+  }
+  __syncthreads();
+  if (threadIdx.x == 0) *bad = sbad;
+}
+
+__global__ void ipiv_to_perm_kernel(const int* ipiv, std::int64_t k, std::int64_t* perm) {
+  if (threadIdx.x != 0) return;
+  for (std::int64_t j = 0; j < k; ++j) perm[j] = j;
+  for (std::int64_t j = 0; j < k; ++j) {
+    const std::int64_t r = ipiv[j] - 1;
+    if (r != j) {
+      const std::int64_t t = perm[j];
+      perm[j] = perm[r];
+      perm[r] = t;
+    }
+  }
+}
+
+__global__ void laswp_kernel(double* a, std::int64_t ld, std::int64_t ncols, const int* ipiv,
+                             std::int64_t k) {
+  const std::int64_t c = blockIdx.x * static_cast<std::int64_t>(blockDim.x) + threadIdx.x;
+  if (c >= ncols) return;
+  double* col = a + c * ld;
+  for (std::int64_t j = 0; j < k; ++j) {
+    const std::int64_t r = ipiv[j] - 1;
+    if (r != j) {
+      const double t = col[j];
+      col[j] = col[r];
+      col[r] = t;
+    }
+  }
+}
+
+__global__ void gather_diagonals_kernel(DeviceTree t, std::int64_t begin,
+                                        const std::int64_t* panel_offset, const double* panels,
+                                        const std::int64_t* diag_offset, double* diag) {
+  const std::int64_t pos = begin + blockIdx.x;
+  const std::int64_t f = t.fronts[pos];
+  const std::int64_t m = t.n_rows[f], k = t.n_pivots[f];
+  const double* p = panels + panel_offset[blockIdx.x];
+  double* d = diag + diag_offset[blockIdx.x];
+  for (std::int64_t i = threadIdx.x; i < k; i += blockDim.x) d[i] = p[i * m + i];
+}
+
+}  // namespace
+
+void launch_lu_check(const double* a, std::int64_t ld, std::int64_t k, double static_pivot,
+                     const int* getrf_info, int* bad, cudaStream_t s) {
+  lu_check_kernel<<<1, kThreads, 0, s>>>(a, ld, k, static_pivot, getrf_info, bad);
+  STRATA_CUDA_LAUNCH();
+}
+
+void launch_ipiv_to_perm(const int* ipiv, std::int64_t k, std::int64_t* perm, cudaStream_t s) {
+  if (k == 0) return;
+  ipiv_to_perm_kernel<<<1, 32, 0, s>>>(ipiv, k, perm);
+  STRATA_CUDA_LAUNCH();
+}
+
+void launch_laswp(double* a, std::int64_t ld, std::int64_t ncols, const int* ipiv, std::int64_t k,
+                  cudaStream_t s) {
+  if (ncols == 0 || k == 0) return;
+  const std::int64_t blocks = (ncols + kThreads - 1) / kThreads;
+  laswp_kernel<<<static_cast<unsigned>(blocks), kThreads, 0, s>>>(a, ld, ncols, ipiv, k);
+  STRATA_CUDA_LAUNCH();
+}
+
+void launch_gather_diagonals(const DeviceTree& t, std::int64_t begin, std::int64_t count,
+                             const std::int64_t* panel_offset, const double* panels,
+                             const std::int64_t* diag_offset, double* diag, cudaStream_t s) {
+  if (count == 0) return;
+  gather_diagonals_kernel<<<static_cast<unsigned>(count), kThreads, 0, s>>>(
+      t, begin, panel_offset, panels, diag_offset, diag);
+  STRATA_CUDA_LAUNCH();
+}
+
+}  // namespace strata::cuda
