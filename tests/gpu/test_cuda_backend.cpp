@@ -510,6 +510,78 @@ TEST_F(CudaBackend, AutomaticRunsLdltOnGpu) {
   }
 }
 
+// The device solve (factor resident) against the CPU solve with the same factor, without
+// iterative refinement to hide a wrong answer: LLᵀ, LDLᵀ with 2×2 pivots, LU with row
+// pivoting; 1, 2 and 5 right-hand sides; awkward orders (small fronts, block path) and
+// 3D problems whose top fronts go to cuBLAS (a 24³ Laplacian: root front of 576 pivots).
+TEST_F(CudaBackend, DeviceSolveMatchesCpuSolve) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  struct Problem {
+    std::string name;
+    SparseMatrix a;
+    MatrixType type;
+  };
+  std::vector<Problem> problems;
+  for (index_t n : {1, 2, 3, 5, 733}) {
+    problems.push_back({"spd random " + std::to_string(n),
+                        test::random_sparse(n, 3, test::RandomKind::spd, rng), MatrixType::spd});
+    problems.push_back({"general random " + std::to_string(n),
+                        test::random_sparse(n, 3, test::RandomKind::general, rng),
+                        MatrixType::general});
+  }
+  for (index_t n : {2, 5, 733, 3000})
+    problems.push_back(
+        {"kkt " + std::to_string(n), test::random_kkt(n, rng), MatrixType::symmetric_indefinite});
+  problems.push_back({"laplacian 24^3", generators::laplacian_3d(24, 24, 24), MatrixType::spd});
+  {
+    ShiftedLaplacian l = shifted_laplacian(18, rng);
+    problems.push_back(
+        {"laplacian 18^3 - sigma I", std::move(l.a), MatrixType::symmetric_indefinite});
+  }
+  problems.push_back(
+      {"elasticity KKT", elasticity_kkt(8, 200, rng), MatrixType::symmetric_indefinite});
+  {
+    SparseMatrix a = expand_symmetric(generators::laplacian_3d(20, 20, 20));
+    std::uniform_real_distribution<double> u(0.5, 1.5);
+    for (index_t j = 0; j < a.n_cols; ++j)  // unsymmetric values, small diagonal: row pivoting
+      for (index_t q = a.offsets[j]; q < a.offsets[j + 1]; ++q)
+        a.values[q] *= a.indices[q] == j ? 0.1 : u(rng);
+    problems.push_back({"general laplacian 20^3", std::move(a), MatrixType::general});
+  }
+  bool saw_large = false;
+  for (const Problem& pr : problems) {
+    SCOPED_TRACE(pr.name);
+    Options o;
+    o.num_gpus = 1;  // one GPU, whatever the machine has
+    o.type = pr.type;
+    Analysis an = analyze_matrix(pr.a, o);
+    for (index_t f = 0; f < an.tree.n_fronts(); ++f)
+      saw_large |= an.tree.n_rows(f) * an.tree.n_pivots(f) > 200000;
+    double pivot = 0;
+    const std::vector<double> values = test::scaled_values(an, pr.a, &pivot);
+    numeric::NumericFactor gf;
+    std::vector<double> arena;
+    auto gpu = numeric::make_cuda_executor(o);
+    numeric::factorize(an, values, pr.type, pivot, *gpu, gf, arena);
+    std::uniform_real_distribution<double> u(-1, 1);
+    for (index_t nrhs : {1, 2, 5}) {
+      SCOPED_TRACE("nrhs " + std::to_string(nrhs));
+      std::vector<double> b(static_cast<std::size_t>(an.n * nrhs));
+      for (double& v : b) v = u(rng);
+      std::vector<double> xc = b, xg = b;
+      numeric::solve_in_place(an, gf, xc.data(), nrhs);
+      ASSERT_TRUE(gpu->solve(an, gf, xg.data(), nrhs)) << "the factor did not stay resident";
+      EXPECT_LT(test::relative_difference(xg, xc), 1e-9);
+      std::vector<double> again = b;  // a second solve reuses the plan and the workspaces
+      ASSERT_TRUE(gpu->solve(an, gf, again.data(), nrhs));
+      EXPECT_EQ(again, xg);
+    }
+  }
+  EXPECT_TRUE(saw_large) << "no front large enough for the cuBLAS path";
+}
+
 // LDLᵀ refactorization on the GPU equals a fresh GPU factorization bitwise.
 TEST_F(CudaBackend, LdltRefactorizationIsDeterministic) {
   auto rng = test::fresh_rng();

@@ -14,6 +14,7 @@
 #include "numeric/cuda/device_buffer.hpp"
 #include "numeric/cuda/kernels.cuh"
 #include "numeric/cuda/kernels_ldlt.cuh"
+#include "numeric/cuda/solve_plan.hpp"
 #include "numeric/factor.hpp"
 
 namespace strata::cuda {
@@ -87,6 +88,7 @@ class CudaExecutor final : public numeric::Executor {
   void upload_part(const Analysis& an, const numeric::PartView& v);
   /// The factor stays on the device only for a whole-tree factorization.
   bool keep_resident() const { return plan_.factor_resident && whole_; }
+  void prepare_solve_plan(const Analysis& an);  // cuda_solve.cu
   void factor_chunk(const numeric::FactorContext& ctx, index_t begin, index_t end);
   void factor_tiled(const numeric::FactorContext& ctx, index_t pos);
   /// LU of the large front F (m×m, k pivots) in the pool: GETRF + TRSMs + GEMM, or the
@@ -148,6 +150,9 @@ class CudaExecutor final : public numeric::Executor {
   DeviceBuffer<std::int64_t> s_panel_offset_;
   DeviceBuffer<double> s_d_diag_, s_d_off_, s_x_, s_u_, s_scratch_;
   std::vector<std::int64_t> u_offset_host_;
+  SolvePlan s_plan_;  // the device solve's plan (cuda_solve.cu), per analysis, and its copy
+  DeviceBuffer<std::int64_t> s_plan_u_offset_, s_inv_offsets_, s_inv_src_, s_chunk_front_,
+      s_chunk_row_, s_small_fronts_;
   // statistics of the last factorization
   std::size_t bytes_h2d_ = 0, bytes_d2h_ = 0;
   index_t chunks_ = 0, tiled_count_ = 0;

@@ -1,15 +1,75 @@
 // strata — the triangular solves on the device, when the factor stayed resident after
 // the factorization (CudaExecutor::plan_device_memory decides; FactorStats::
 // factor_resident says). The right-hand sides go up once, the level-parallel forward
-// and backward sweeps of solve_kernels.cu run, the solutions come back once; iterative
-// refinement calls this again per step, so each step moves only 2·n·nrhs doubles.
-// When the factor is not resident the executor declines and the host solve runs.
+// and backward sweeps run, the solutions come back once; iterative refinement calls this
+// again per step, so each step moves only 2·n·nrhs doubles. When the factor is not
+// resident the executor declines and the host solve runs.
+//
+// Per level (solve_kernels.cuh): one gather launch, one launch for the level's many
+// small fronts (a thread block each), cuBLAS for its few large ones (TRSV/GEMV for one
+// right-hand side, TRSM/GEMM for several, all right-hand sides at once), one scatter
+// launch. Which front takes which path is the plan's choice (solve_plan.hpp), made once
+// per analysis for this device's number of SMs. Everything runs on the executor's stream
+// without a host synchronization until the solution is copied back; the workspaces are
+// members, grown when the analysis or nrhs needs more, so a solve allocates nothing after
+// the first.
 #include <algorithm>
 
 #include "numeric/cuda/cuda_executor.hpp"
 #include "numeric/cuda/solve_kernels.cuh"
 
 namespace strata::cuda {
+namespace {
+
+// large_front_forward/backward's BLAS on the device (host pointer mode: the scalars are
+// read before the call returns).
+struct CublasOps {
+  cublasHandle_t h;
+  static cublasFillMode_t fill(bool upper) {
+    return upper ? CUBLAS_FILL_MODE_UPPER : CUBLAS_FILL_MODE_LOWER;
+  }
+  static cublasOperation_t op(bool trans) { return trans ? CUBLAS_OP_T : CUBLAS_OP_N; }
+  static cublasDiagType_t diag(bool unit) { return unit ? CUBLAS_DIAG_UNIT : CUBLAS_DIAG_NON_UNIT; }
+  void trsv(bool upper, bool trans, bool unit, int n, const double* a, int lda, double* x) {
+    STRATA_CUBLAS(cublasDtrsv(h, fill(upper), op(trans), diag(unit), n, a, lda, x, 1));
+  }
+  void trsm(bool upper, bool trans, bool unit, int n, int nrhs, const double* a, int lda, double* b,
+            int ldb) {
+    const double one = 1.0;
+    STRATA_CUBLAS(cublasDtrsm(h, CUBLAS_SIDE_LEFT, fill(upper), op(trans), diag(unit), n, nrhs,
+                              &one, a, lda, b, ldb));
+  }
+  void gemv(bool trans, int rows, int cols, double alpha, const double* a, int lda, const double* x,
+            double beta, double* y) {
+    STRATA_CUBLAS(cublasDgemv(h, op(trans), rows, cols, &alpha, a, lda, x, 1, &beta, y, 1));
+  }
+  void gemm(bool trans_a, int m, int n, int k, double alpha, const double* a, int lda,
+            const double* b, int ldb, double beta, double* c, int ldc) {
+    STRATA_CUBLAS(
+        cublasDgemm(h, op(trans_a), CUBLAS_OP_N, m, n, k, &alpha, a, lda, b, ldb, &beta, c, ldc));
+  }
+};
+
+}  // namespace
+
+// The solve plan of the current analysis and its device copy (once per analysis).
+void CudaExecutor::prepare_solve_plan(const Analysis& an) {
+  if (s_plan_.analysis == an.id && s_plan_.analysis != 0) return;
+  int n_sm = 0;
+  STRATA_CUDA(cudaDeviceGetAttribute(&n_sm, cudaDevAttrMultiProcessorCount, device_));
+  s_plan_ = make_solve_plan(an.tree, an.schedule, n_sm);
+  s_plan_.analysis = an.id;
+  // not upload(): these bytes belong to no factorization's statistics
+  auto up = [&](DeviceBuffer<std::int64_t>& d, const std::vector<std::int64_t>& h) {
+    d.upload(h.data(), h.size(), stream_);
+  };
+  up(s_plan_u_offset_, s_plan_.u_offset);
+  up(s_inv_offsets_, s_plan_.inv_offsets);
+  up(s_inv_src_, s_plan_.inv_src);
+  up(s_chunk_front_, s_plan_.chunk_front);
+  up(s_chunk_row_, s_plan_.chunk_row);
+  up(s_small_fronts_, s_plan_.small_fronts);
+}
 
 bool CudaExecutor::solve(const Analysis& an, const numeric::NumericFactor& fac, double* x,
                          index_t nrhs) {
@@ -18,45 +78,68 @@ bool CudaExecutor::solve(const Analysis& an, const numeric::NumericFactor& fac, 
     return false;
   if (an.n == 0 || nrhs == 0) return true;
   STRATA_CUDA(cudaSetDevice(device_));
+  prepare_solve_plan(an);
   const auto& t = an.tree;
-  const auto& s = an.schedule;
+  const SolvePlan& p = s_plan_;
   const bool lu = fac.type == MatrixType::general;
   const bool ldlt = fac.type == MatrixType::symmetric_indefinite;
+  const bool unit = lu || ldlt;
   const std::size_t nx = static_cast<std::size_t>(an.n) * nrhs;
   s_x_.upload(x, nx, stream_);
-  const std::int64_t u_total = u_offset_host_.back();
+  const std::int64_t u_total = p.u_offset.back();
   s_u_.resize(std::max<std::size_t>(static_cast<std::size_t>(u_total) * nrhs, 1));
-  s_scratch_.resize(std::max<std::size_t>(t.rows.size(), 1));
-  DeviceBuffer<std::int64_t>& u_off = s_u_offset_;
-  SolveTree st{fronts_.data(),
-               n_rows_.data(),
+  s_scratch_.resize(std::max<std::size_t>(t.rows.size() * nrhs, 1));
+  SolveTree st{n_rows_.data(),
                n_pivots_.data(),
                s_row_offsets_.data(),
                s_first_pivot_.data(),
                s_rows_.data(),
-               child_offsets_.data(),
-               children_.data(),
-               rel_offsets_.data(),
-               rel_.data(),
-               s_pivot_pos_.data(),
-               s_pivot_row_.data(),
-               u_off.data(),
+               s_inv_offsets_.data(),
+               s_inv_src_.data(),
+               s_plan_u_offset_.data(),
                s_panel_offset_.data(),
                panels_.data(),
+               s_pivot_row_.data(),
                an.n,
                u_total};
-  const bool unit = lu || ldlt;
-  for (index_t l = 0; l < s.n_levels(); ++l)
-    launch_solve_forward(st, s.level_offsets[l], s.level_offsets[l + 1] - s.level_offsets[l],
-                         s_x_.data(), s_u_.data(), s_scratch_.data(), nrhs, lu, unit, stream_);
+  const SolveChunks chunks{s_chunk_front_.data(), s_chunk_row_.data()};
+  double* X = s_x_.data();
+  double* U = s_u_.data();
+  double* S = s_scratch_.data();
+  CublasOps ops{blas_};
+  const int nr = static_cast<int>(nrhs);
+  // a library-solved front's block W and panel
+  auto large = [&](std::int64_t f, auto&& run) {
+    run(panels_.data() + an.factor_layout.panel_offset[f], static_cast<int>(t.n_rows(f)),
+        static_cast<int>(t.n_pivots(f)), S + t.row_offsets[f] * nrhs);
+  };
+  const index_t levels = an.schedule.n_levels();
+  for (index_t l = 0; l < levels; ++l) {
+    const std::int64_t c0 = p.chunk_offsets[l], nc = p.chunk_offsets[l + 1] - c0;
+    const std::int64_t s0 = p.small_offsets[l], ns = p.small_offsets[l + 1] - s0;
+    launch_gather_forward(st, chunks, c0, nc, X, U, S, nrhs, stream_);
+    launch_sweep_forward(st, s_small_fronts_.data(), s0, ns, S, nrhs, unit, stream_);
+    for (std::int64_t q = p.large_offsets[l]; q < p.large_offsets[l + 1]; ++q)
+      large(p.large_fronts[q], [&](const double* L, int m, int k, double* W) {
+        large_front_forward(ops, L, m, k, nr, unit, W);
+      });
+    launch_scatter_forward(st, chunks, c0, nc, X, U, S, nrhs, lu, stream_);
+  }
   if (ldlt)
-    launch_solve_diagonal(st, s_d_diag_.data(), s_d_off_.data(), s_pivot_size_.data(), s_x_.data(),
-                          nrhs, stream_);
-  for (index_t l = s.n_levels() - 1; l >= 0; --l)
-    launch_solve_backward(st, s.level_offsets[l], s.level_offsets[l + 1] - s.level_offsets[l],
-                          s_x_.data(), s_scratch_.data(), nrhs, lu, unit, stream_);
-  STRATA_CUDA(
-      cudaMemcpyAsync(x, s_x_.data(), sizeof(double) * nx, cudaMemcpyDeviceToHost, stream_));
+    launch_solve_diagonal(st, s_d_diag_.data(), s_d_off_.data(), s_pivot_size_.data(), X, nrhs,
+                          stream_);
+  for (index_t l = levels - 1; l >= 0; --l) {
+    const std::int64_t c0 = p.chunk_offsets[l], nc = p.chunk_offsets[l + 1] - c0;
+    const std::int64_t s0 = p.small_offsets[l], ns = p.small_offsets[l + 1] - s0;
+    launch_gather_backward(st, chunks, c0, nc, X, S, nrhs, lu, stream_);
+    launch_sweep_backward(st, s_small_fronts_.data(), s0, ns, S, nrhs, lu, unit, stream_);
+    for (std::int64_t q = p.large_offsets[l]; q < p.large_offsets[l + 1]; ++q)
+      large(p.large_fronts[q], [&](const double* L, int m, int k, double* W) {
+        large_front_backward(ops, L, m, k, nr, lu, unit, W);
+      });
+    launch_scatter_backward(st, chunks, c0, nc, X, S, nrhs, lu, stream_);
+  }
+  STRATA_CUDA(cudaMemcpyAsync(x, X, sizeof(double) * nx, cudaMemcpyDeviceToHost, stream_));
   STRATA_CUDA(cudaStreamSynchronize(stream_));
   return true;
 }

@@ -1,0 +1,449 @@
+// The device solve of the CUDA backend, emulated on the host: the device code
+// (src/numeric/cuda/solve_device.cuh) compiled for the host and run with one fiber per CUDA
+// thread, the plan (solve_plan.hpp) and the large-front BLAS sequence
+// (large_front_forward/backward) run with the host BLAS — driven level by level in the
+// order of cuda_solve.cu — on factors made by the CPU executor, and compared with the CPU
+// solve (solve_in_place) on the same factor, for LLᵀ, LDLᵀ with 2×2 pivots and LU with row
+// pivoting, 1, 2 and 5 right-hand sides, every front on the block path, every front on the
+// library path, and the planner's split. This runs in CI without a GPU: it checks the
+// index arithmetic (gather by inverse extend-add lists, permuted pivot rows, scatter
+// targets, the LU U12 layout, leading dimensions and offsets of the BLAS calls), that
+// every thread reaches every barrier and every lane every shuffle (a divergent one leaves
+// the others waiting: the emulated barrier then aborts with a message). What only a GPU
+// shows (memory model, cuBLAS itself) is left to tests/gpu/test_cuda_backend.cpp.
+//
+// The emulation (below): a block's threads are fibers; __syncthreads() is a barrier of the
+// block's threads; __shfl_sync/__shfl_down_sync exchange through a per-warp slot array
+// between two barriers of the warp's 32 threads.
+#include <gtest/gtest.h>
+#include <ucontext.h>
+
+#include <algorithm>
+#include <array>
+#include <cstdio>
+#include <cstdlib>
+#include <memory>
+#include <random>
+#include <vector>
+
+#include "core/analysis.hpp"
+#include "core/blas.hpp"
+#include "numeric/factor.hpp"
+#include "sparse/generators.hpp"
+#include "strata/strata.hpp"
+#include "support/test_support.hpp"
+
+// --- host stand-ins for the CUDA names the device code uses -----------------------------
+//
+// A block's threads are fibers (ucontext) on the calling OS thread, run round-robin: a
+// fiber runs until it waits at a barrier, and a barrier opens when every thread it
+// counts (the block's, or the warp's) has arrived. When no fiber can run while some are
+// still waiting, a barrier is not reached by every thread that should reach it: the test
+// then aborts with a message. Cheap (a context switch per wait), and deterministic.
+
+namespace {
+
+struct EmuDim {
+  unsigned x = 0;
+};
+EmuDim threadIdx;
+EmuDim blockDim;
+
+constexpr unsigned kEmuWarp = 32;
+constexpr std::size_t kFiberStack = 256 * 1024;
+
+struct EmuGate {  // a barrier: who has arrived in the current generation
+  unsigned arrived = 0, count = 0;
+  unsigned long long generation = 0;
+};
+
+struct Fiber {
+  ucontext_t ctx{};
+  std::vector<char> stack;
+  EmuGate* waiting_on = nullptr;
+  unsigned long long waiting_gen = 0;
+  bool done = false;
+};
+
+ucontext_t scheduler_ctx;
+std::vector<Fiber> fibers;
+EmuGate block_gate;
+std::vector<EmuGate> warp_gates;
+std::vector<double> warp_slots;  // kEmuWarp doubles per warp
+const void* fiber_body = nullptr;
+void (*fiber_call)(const void*) = nullptr;
+
+void arrive(EmuGate& g) {
+  Fiber& me = fibers[threadIdx.x];
+  if (++g.arrived == g.count) {  // the last one opens the gate and goes on
+    g.arrived = 0;
+    ++g.generation;
+    return;
+  }
+  me.waiting_on = &g;
+  me.waiting_gen = g.generation;
+  swapcontext(&me.ctx, &scheduler_ctx);
+}
+
+void __syncthreads() { arrive(block_gate); }
+
+template <class Pick>
+double warp_exchange(double v, Pick pick) {
+  const unsigned w = threadIdx.x / kEmuWarp, lane = threadIdx.x % kEmuWarp;
+  double* slot = warp_slots.data() + w * kEmuWarp;
+  slot[lane] = v;
+  arrive(warp_gates[w]);
+  const double r = slot[pick(lane)];
+  arrive(warp_gates[w]);
+  return r;
+}
+double __shfl_sync(unsigned, double v, int src) {
+  return warp_exchange(v, [src](unsigned) { return static_cast<unsigned>(src) % kEmuWarp; });
+}
+double __shfl_down_sync(unsigned, double v, unsigned delta) {
+  return warp_exchange(
+      v, [delta](unsigned lane) { return lane + delta < kEmuWarp ? lane + delta : lane; });
+}
+
+void fiber_entry() {
+  fiber_call(fiber_body);
+  fibers[threadIdx.x].done = true;
+  swapcontext(&fibers[threadIdx.x].ctx, &scheduler_ctx);
+}
+
+// Runs body() as one block of `threads` threads (whole warps: the sweeps shuffle).
+template <class Body>
+void run_block(unsigned threads, const Body& body) {
+  blockDim.x = threads;
+  block_gate = EmuGate{0, threads, 0};
+  const unsigned nw = (threads + kEmuWarp - 1) / kEmuWarp;
+  warp_gates.assign(nw, EmuGate{0, kEmuWarp, 0});
+  warp_slots.assign(nw * kEmuWarp, 0.0);
+  fiber_body = &body;
+  fiber_call = [](const void* b) { (*static_cast<const Body*>(b))(); };
+  fibers.resize(threads);
+  for (unsigned t = 0; t < threads; ++t) {
+    Fiber& f = fibers[t];
+    f.stack.resize(kFiberStack);
+    f.waiting_on = nullptr;
+    f.done = false;
+    getcontext(&f.ctx);
+    f.ctx.uc_stack.ss_sp = f.stack.data();
+    f.ctx.uc_stack.ss_size = f.stack.size();
+    f.ctx.uc_link = nullptr;
+    makecontext(&f.ctx, fiber_entry, 0);
+  }
+  for (unsigned finished = 0; finished < threads;) {
+    bool progress = false;
+    finished = 0;
+    for (unsigned t = 0; t < threads; ++t) {
+      Fiber& f = fibers[t];
+      if (f.done) {
+        ++finished;
+        continue;
+      }
+      if (f.waiting_on && f.waiting_on->generation == f.waiting_gen) continue;
+      f.waiting_on = nullptr;
+      threadIdx.x = t;
+      swapcontext(&scheduler_ctx, &f.ctx);
+      progress = true;
+    }
+    if (!progress && finished < threads) {
+      std::fprintf(stderr,
+                   "emulated block of %u threads: %u finished, the others wait at a barrier or "
+                   "shuffle that not every thread reaches\n",
+                   threads, finished);
+      std::abort();
+    }
+  }
+}
+
+}  // namespace
+
+#define __device__ inline
+#include "numeric/cuda/solve_device.cuh"
+#undef __device__
+
+namespace strata {
+namespace {
+
+using cuda::SolvePath;
+using cuda::SolvePlan;
+using cuda::SolveTree;
+
+// large_front_forward/backward's BLAS on the host (the reference BLAS interface).
+struct HostOps {
+  static const char* uplo(bool upper) { return upper ? "U" : "L"; }
+  static const char* tr(bool trans) { return trans ? "T" : "N"; }
+  static const char* diag(bool unit) { return unit ? "U" : "N"; }
+  int calls = 0;
+  void trsv(bool upper, bool trans, bool unit, int n, const double* a, int lda, double* x) {
+    const int inc = 1;
+    dtrsv_(uplo(upper), tr(trans), diag(unit), &n, a, &lda, x, &inc);
+    ++calls;
+  }
+  void trsm(bool upper, bool trans, bool unit, int n, int nrhs, const double* a, int lda, double* b,
+            int ldb) {
+    const double one = 1.0;
+    dtrsm_("L", uplo(upper), tr(trans), diag(unit), &n, &nrhs, &one, a, &lda, b, &ldb);
+    ++calls;
+  }
+  void gemv(bool trans, int rows, int cols, double alpha, const double* a, int lda, const double* x,
+            double beta, double* y) {
+    const int inc = 1;
+    dgemv_(tr(trans), &rows, &cols, &alpha, a, &lda, x, &inc, &beta, y, &inc);
+    ++calls;
+  }
+  void gemm(bool trans_a, int m, int n, int k, double alpha, const double* a, int lda,
+            const double* b, int ldb, double beta, double* c, int ldc) {
+    dgemm_(tr(trans_a), "N", &m, &n, &k, &alpha, a, &lda, b, &ldb, &beta, c, &ldc);
+    ++calls;
+  }
+};
+
+struct EmulationCounts {
+  index_t block_fronts = 0, library_fronts = 0;
+};
+
+// The device solve of cuda_solve.cu, step for step, on the host. x: n×nrhs.
+void emulate_device_solve(const Analysis& an, const numeric::NumericFactor& fac, const SolvePlan& p,
+                          std::vector<double>& x, index_t nrhs, unsigned sweep_threads,
+                          EmulationCounts& counts) {
+  const auto& t = an.tree;
+  const index_t nf = t.n_fronts();
+  const bool lu = fac.type == MatrixType::general;
+  const bool ldlt = fac.type == MatrixType::symmetric_indefinite;
+  const bool unit = lu || ldlt;
+  std::vector<std::int64_t> n_rows(nf), n_piv(nf), panel_offset(nf), pivot_row(an.n);
+  for (index_t f = 0; f < nf; ++f) {
+    n_rows[f] = t.n_rows(f);
+    n_piv[f] = t.n_pivots(f);
+    panel_offset[f] = static_cast<std::int64_t>(an.factor_layout.panel_offset[f]);
+    for (index_t i = 0; i < t.n_pivots(f); ++i)
+      pivot_row[t.first_pivot[f] + i] = fac.rows[t.row_offsets[f] + i];
+  }
+  const std::int64_t u_total = p.u_offset.back();
+  SolveTree st{n_rows.data(),
+               n_piv.data(),
+               t.row_offsets.data(),
+               t.first_pivot.data(),
+               fac.rows.data(),
+               p.inv_offsets.data(),
+               p.inv_src.data(),
+               p.u_offset.data(),
+               panel_offset.data(),
+               fac.panels.data(),
+               pivot_row.data(),
+               an.n,
+               u_total};
+  std::vector<double> u(static_cast<std::size_t>(u_total * nrhs) + 1, 0.0),
+      scratch(t.rows.size() * nrhs + 1, 0.0);
+  double* X = x.data();
+  double* U = u.data();
+  double* S = scratch.data();
+  HostOps ops;
+  const int nr = static_cast<int>(nrhs);
+  // the gather/scatter use no barrier or shuffle: the calling thread plays a block of 3
+  auto chunks = [&](index_t l, auto&& body) {
+    for (std::int64_t c = p.chunk_offsets[l]; c < p.chunk_offsets[l + 1]; ++c) {
+      const std::int64_t f = p.chunk_front[c], i0 = p.chunk_row[c];
+      const std::int64_t i1 = std::min(i0 + cuda::kChunkRows, n_rows[f]);
+      blockDim.x = 3;
+      for (unsigned th = 0; th < blockDim.x; ++th) {
+        threadIdx.x = th;
+        body(f, i0, i1);
+      }
+    }
+  };
+  auto large = [&](std::int64_t f, auto&& run) {
+    run(fac.panels.data() + panel_offset[f], static_cast<int>(n_rows[f]),
+        static_cast<int>(n_piv[f]), S + t.row_offsets[f] * nrhs);
+  };
+  namespace dev = cuda::solve_device;
+  for (index_t l = 0; l < an.schedule.n_levels(); ++l) {
+    chunks(l, [&](std::int64_t f, std::int64_t i0, std::int64_t i1) {
+      dev::gather_forward(st, f, i0, i1, X, U, S, nrhs);
+    });
+    for (std::int64_t q = p.small_offsets[l]; q < p.small_offsets[l + 1]; ++q) {
+      run_block(sweep_threads, [&] { dev::sweep_forward(st, p.small_fronts[q], S, nrhs, unit); });
+      ++counts.block_fronts;
+    }
+    for (std::int64_t q = p.large_offsets[l]; q < p.large_offsets[l + 1]; ++q) {
+      large(p.large_fronts[q], [&](const double* L, int m, int k, double* W) {
+        cuda::large_front_forward(ops, L, m, k, nr, unit, W);
+      });
+      ++counts.library_fronts;
+    }
+    chunks(l, [&](std::int64_t f, std::int64_t i0, std::int64_t i1) {
+      dev::scatter_forward(st, f, i0, i1, X, U, S, nrhs, lu);
+    });
+  }
+  if (ldlt)
+    for (index_t q = 0; q < an.n; ++q)
+      dev::diagonal(st, q, fac.d_diag.data(), fac.d_off.data(), fac.pivot_size.data(), X, nrhs);
+  for (index_t l = an.schedule.n_levels() - 1; l >= 0; --l) {
+    chunks(l, [&](std::int64_t f, std::int64_t i0, std::int64_t i1) {
+      dev::gather_backward(st, f, i0, i1, X, S, nrhs, lu);
+    });
+    for (std::int64_t q = p.small_offsets[l]; q < p.small_offsets[l + 1]; ++q)
+      run_block(sweep_threads,
+                [&] { dev::sweep_backward(st, p.small_fronts[q], S, nrhs, lu, unit); });
+    for (std::int64_t q = p.large_offsets[l]; q < p.large_offsets[l + 1]; ++q)
+      large(p.large_fronts[q], [&](const double* L, int m, int k, double* W) {
+        cuda::large_front_backward(ops, L, m, k, nr, lu, unit, W);
+      });
+    chunks(l, [&](std::int64_t f, std::int64_t i0, std::int64_t i1) {
+      dev::scatter_backward(st, f, i0, i1, X, S, nrhs, lu);
+    });
+  }
+}
+
+struct Problem {
+  std::string name;
+  SparseMatrix a;
+  MatrixType type;
+};
+
+// Factors a on the CPU, then solves random right-hand sides both ways and compares.
+void check_problem(const Problem& pr, std::mt19937_64& rng, std::initializer_list<SolvePath> paths,
+                   unsigned sweep_threads, int n_sm, EmulationCounts& counts) {
+  SCOPED_TRACE(pr.name);
+  Options o;
+  o.type = pr.type;
+  Analysis an = analyze_matrix(pr.a, o);
+  double pivot = 0;
+  const std::vector<double> values = test::scaled_values(an, pr.a, &pivot);
+  numeric::NumericFactor fac;
+  std::vector<double> arena;
+  auto cpu = numeric::make_cpu_executor(1);
+  numeric::factorize(an, values, pr.type, pivot, *cpu, fac, arena);
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (const SolvePath path : paths) {
+    const SolvePlan plan = cuda::make_solve_plan(an.tree, an.schedule, n_sm, path);
+    for (index_t nrhs : {1, 2, 5}) {
+      SCOPED_TRACE("path " + std::to_string(static_cast<int>(path)) + " nrhs " +
+                   std::to_string(nrhs));
+      std::vector<double> b(static_cast<std::size_t>(an.n * nrhs));
+      for (double& v : b) v = u(rng);
+      std::vector<double> ref = b, got = b;
+      numeric::solve_in_place(an, fac, ref.data(), nrhs);
+      emulate_device_solve(an, fac, plan, got, nrhs, sweep_threads, counts);
+      EXPECT_LT(test::relative_difference(got, ref), 1e-10);
+    }
+  }
+}
+
+MatrixType kTypes[] = {MatrixType::spd, MatrixType::symmetric_indefinite, MatrixType::general};
+
+test::RandomKind kind_of(MatrixType type) {
+  return type == MatrixType::spd                    ? test::RandomKind::spd
+         : type == MatrixType::symmetric_indefinite ? test::RandomKind::symmetric_indefinite
+                                                    : test::RandomKind::general;
+}
+
+// Awkward orders and every path, one warp per block (the warp and block barriers coincide).
+TEST(SolveKernelEmulation, SmallProblemsEveryPath) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  EmulationCounts counts;
+  for (MatrixType type : kTypes)
+    for (index_t n : {1, 2, 3, 5, 40, 97}) {
+      Problem pr{std::string(to_string(type)) + " random n=" + std::to_string(n),
+                 test::random_sparse(n, 3, kind_of(type), rng), type};
+      check_problem(pr, rng, {SolvePath::all_block, SolvePath::all_library, SolvePath::model}, 32,
+                    132, counts);
+    }
+  EXPECT_GT(counts.block_fronts, 0);
+  EXPECT_GT(counts.library_fronts, 0);
+}
+
+// LDLᵀ with 2×2 pivots (KKT matrices) and LU with row pivoting on fronts of more than one
+// tile (k > 32), blocks of several warps (64 and 256 threads: the warps split the
+// right-hand sides and the backward dot products).
+TEST(SolveKernelEmulation, MultiTileFrontsSeveralWarps) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  EmulationCounts counts;
+  std::vector<Problem> problems;
+  problems.push_back({"kkt 150", test::random_kkt(150, rng), MatrixType::symmetric_indefinite});
+  // a 3D Laplacian (root front of 30 pivots and more: several tiles), made indefinite by
+  // a shift of the diagonal, or unsymmetric with a small diagonal (row pivoting)
+  std::uniform_real_distribution<double> scale(0.5, 1.5);
+  for (MatrixType type : kTypes) {
+    SparseMatrix a = generators::laplacian_3d(7, 6, 5);
+    if (type == MatrixType::symmetric_indefinite)
+      for (index_t j = 0; j < a.n_cols; ++j) a.values[a.offsets[j]] -= 1.3;  // diagonal first
+    if (type == MatrixType::general) {
+      a = expand_symmetric(a);
+      for (index_t j = 0; j < a.n_cols; ++j)
+        for (index_t q = a.offsets[j]; q < a.offsets[j + 1]; ++q)
+          a.values[q] *= a.indices[q] == j ? 0.1 : scale(rng);
+    }
+    problems.push_back({std::string(to_string(type)) + " laplacian 7x6x5", std::move(a), type});
+  }
+  for (const Problem& pr : problems) {
+    check_problem(pr, rng, {SolvePath::all_block, SolvePath::model}, 64, 4, counts);
+    check_problem(pr, rng, {SolvePath::all_block}, 256, 4, counts);  // the device's block size
+  }
+  EXPECT_GT(counts.block_fronts, 0);
+}
+
+// The library path (no threads, so larger problems): every front through the BLAS
+// sequence, several thousand unknowns, a root front of hundreds of rows.
+TEST(SolveKernelEmulation, LibraryPathLargeFronts) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  EmulationCounts counts;
+  std::vector<Problem> problems;
+  problems.push_back({"laplacian 14^3", generators::laplacian_3d(14, 14, 14), MatrixType::spd});
+  problems.push_back({"kkt 733", test::random_kkt(733, rng), MatrixType::symmetric_indefinite});
+  problems.push_back({"general 733", test::random_sparse(733, 4, test::RandomKind::general, rng),
+                      MatrixType::general});
+  for (const Problem& pr : problems)
+    check_problem(pr, rng, {SolvePath::all_library}, 32, 132, counts);
+  EXPECT_GT(counts.library_fronts, 0);
+}
+
+// The planner: every front on exactly one path per level; the model puts a lone large
+// root front on the library and a level of many tiny fronts on the block path.
+TEST(SolveKernelEmulation, PlanCoversEveryFrontOnce) {
+  SparseMatrix a = generators::laplacian_3d(16, 16, 16);
+  Options o;
+  o.type = MatrixType::spd;
+  Analysis an = analyze_matrix(a, o);
+  const auto& t = an.tree;
+  const auto& s = an.schedule;
+  for (int n_sm : {1, 132}) {
+    const SolvePlan p = cuda::make_solve_plan(t, s, n_sm);
+    ASSERT_EQ(p.small_offsets.size(), static_cast<std::size_t>(s.n_levels() + 1));
+    for (index_t l = 0; l < s.n_levels(); ++l) {
+      std::vector<std::int64_t> got(p.small_fronts.begin() + p.small_offsets[l],
+                                    p.small_fronts.begin() + p.small_offsets[l + 1]);
+      got.insert(got.end(), p.large_fronts.begin() + p.large_offsets[l],
+                 p.large_fronts.begin() + p.large_offsets[l + 1]);
+      std::sort(got.begin(), got.end());
+      std::vector<std::int64_t> want(s.fronts.begin() + s.level_offsets[l],
+                                     s.fronts.begin() + s.level_offsets[l + 1]);
+      std::sort(want.begin(), want.end());
+      EXPECT_EQ(got, want) << "level " << l;
+      // chunks cover every row of every front of the level once
+      std::int64_t rows = 0, chunk_rows = 0;
+      for (std::int64_t f : want) rows += t.n_rows(f);
+      for (std::int64_t c = p.chunk_offsets[l]; c < p.chunk_offsets[l + 1]; ++c)
+        chunk_rows += std::min(cuda::kChunkRows, t.n_rows(p.chunk_front[c]) - p.chunk_row[c]);
+      EXPECT_EQ(chunk_rows, rows) << "level " << l;
+    }
+    const index_t root_level = s.n_levels() - 1;
+    ASSERT_EQ(s.level_offsets[root_level + 1] - s.level_offsets[root_level], 1);
+    const index_t root = s.fronts[s.level_offsets[root_level]];
+    ASSERT_GE(t.n_rows(root) * t.n_pivots(root), 30000);
+    EXPECT_EQ(p.large_offsets[root_level + 1] - p.large_offsets[root_level], 1);
+    EXPECT_EQ(p.small_offsets[1] - p.small_offsets[0], s.level_offsets[1]);  // deepest level
+  }
+}
+
+}  // namespace
+}  // namespace strata
