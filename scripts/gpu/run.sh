@@ -13,6 +13,10 @@ export LD_LIBRARY_PATH="$PWD/.carry/lib:$PWD/build-cudss:${LD_LIBRARY_PATH:-}"
 OUT="${OUT:-/tmp/strata-out}"
 mkdir -p "$OUT"
 nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv | tee "$OUT/gpu.txt"
+# what the machine offers for the distributed runs (MPI, NCCL), recorded with the GPUs
+{ echo "mpirun: $(command -v mpirun || echo none)  mpiexec: $(command -v mpiexec || echo none)"
+  python3 -c 'import nvidia.nccl, os; print("nccl wheel:", os.path.dirname(nvidia.nccl.__file__ or list(nvidia.nccl.__path__)[0]))' 2>&1 | tail -1
+  ls /usr/lib/x86_64-linux-gnu 2>/dev/null | grep -E "libmpi|libnccl" | head -5; } >>"$OUT/gpu.txt" 2>&1
 rc=0
 # the gpu-labelled tests (every binary built from tests/gpu)
 for t in $(ls tests/gpu/*.cpp | xargs -n1 basename | sed 's/\.cpp$//'); do
