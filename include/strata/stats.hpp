@@ -120,6 +120,10 @@ struct FactorStats {
 /// Results of the last solve.
 struct SolveStats {
   double seconds = 0;
+  /// Seconds of the first application of the factor alone (permutation and scaling, the
+  /// forward and backward triangular solves, and on the GPU the transfers of b and x):
+  /// what a solver without refinement reports as its solve phase.
+  double first_solve_seconds = 0;
   int refinement_steps = 0;
   int gmres_iterations = 0;  ///< total over right-hand sides (0 when refinement sufficed)
   double backward_error = 0;  ///< max over right-hand sides of ‖b−Ax‖∞/(‖A‖∞‖x‖∞+‖b‖∞)

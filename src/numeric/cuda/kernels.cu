@@ -17,11 +17,20 @@ namespace {
 constexpr int kThreads = 256;
 
 // The per-front kernels below run on a 2-D grid: blockIdx.x is the front (its batch
-// position minus `begin`), blockIdx.y a slice of kSliceCols columns of it, so that a
-// large front is spread over many SMs instead of one. Slices write disjoint columns, and
-// within a slice children are added one after another: no two writes collide and the
-// order of additions is fixed (results do not depend on scheduling).
-constexpr std::int64_t kSliceCols = 64;
+// position minus `begin`), blockIdx.y a slice of `slice` columns of it, so that a large
+// front is spread over many SMs instead of one. Slices write disjoint columns, and within
+// a slice children are added one after another: no two writes collide and the order of
+// additions is fixed (results do not depend on scheduling). The host picks the slice
+// width (slice_width) so that a launch has enough blocks to fill the GPU: a level of one
+// or two large fronts gets narrow slices, a level of many fronts wide ones.
+//
+// Inside a block each warp takes whole columns and its lanes walk down a column: loads
+// and stores are coalesced, and there is no 64-bit division per element (index
+// arithmetic x / mc, x % mc cost more than the memory traffic it addressed).
+constexpr std::int64_t kMaxSliceCols = 64;
+constexpr std::int64_t kMinSliceCols = 8;
+constexpr std::int64_t kTargetBlocks = 2048;  // ≈ 16 blocks of 256 threads per H100 SM
+constexpr int kWarp = 32;
 
 // First child CB column whose parent column is at least c (rel is increasing).
 __device__ std::int64_t lower_bound(const std::int64_t* rel, std::int64_t n, std::int64_t c) {
@@ -36,12 +45,12 @@ __device__ std::int64_t lower_bound(const std::int64_t* rel, std::int64_t n, std
   return lo;
 }
 
-__global__ void assemble_kernel(DeviceTree t, std::int64_t begin, const double* values,
-                                double* pool, bool symmetric) {
+__global__ void assemble_kernel(DeviceTree t, std::int64_t begin, std::int64_t slice,
+                                const double* values, double* pool, bool symmetric) {
   const std::int64_t pos = begin + blockIdx.x;
   const std::int64_t f = t.fronts[pos];
   const std::int64_t m = t.n_rows[f];
-  const std::int64_t c0 = blockIdx.y * kSliceCols, c1 = min(m, c0 + kSliceCols);
+  const std::int64_t c0 = blockIdx.y * slice, c1 = min(m, c0 + slice);
   if (c0 >= m) return;
   double* F = pool + t.pos_offset[pos];
   for (std::int64_t x = threadIdx.x; x < m * (c1 - c0); x += blockDim.x) F[c0 * m + x] = 0.0;
@@ -52,6 +61,8 @@ __global__ void assemble_kernel(DeviceTree t, std::int64_t begin, const double* 
     if (d >= c0 * m && d < c1 * m) F[d] += values[t.entry_src[e]];  // distinct destinations
   }
   __syncthreads();
+  const int warp = threadIdx.x / kWarp, lane = threadIdx.x % kWarp;
+  const int warps = blockDim.x / kWarp;
   for (std::int64_t q = t.child_offsets[f]; q < t.child_offsets[f + 1]; ++q) {
     const std::int64_t c = t.children[q];
     const std::int64_t mc = t.n_rows[c] - t.n_pivots[c];
@@ -59,51 +70,53 @@ __global__ void assemble_kernel(DeviceTree t, std::int64_t begin, const double* 
     const double* cb = t.cb_ptr[c];
     const std::int64_t* rel = t.rel + t.rel_offsets[c];
     const std::int64_t j0 = lower_bound(rel, mc, c0), j1 = lower_bound(rel, mc, c1);
-    for (std::int64_t x = threadIdx.x; x < (j1 - j0) * mc; x += blockDim.x) {
-      const std::int64_t jj = j0 + x / mc, ii = x % mc;
-      if (symmetric && ii < jj) continue;
-      F[rel[jj] * m + rel[ii]] += cb[jj * mc + ii];
+    for (std::int64_t jj = j0 + warp; jj < j1; jj += warps) {
+      double* fcol = F + rel[jj] * m;
+      const double* src = cb + jj * mc;
+      for (std::int64_t ii = (symmetric ? jj : 0) + lane; ii < mc; ii += kWarp)
+        fcol[rel[ii]] += src[ii];
     }
     __syncthreads();  // children are added one after another: no two writes collide
   }
 }
 
-__global__ void store_cb_kernel(DeviceTree t, std::int64_t begin, const double* pool,
-                                bool symmetric) {
+__global__ void store_cb_kernel(DeviceTree t, std::int64_t begin, std::int64_t slice,
+                                const double* pool, bool symmetric) {
   const std::int64_t pos = begin + blockIdx.x;
   const std::int64_t f = t.fronts[pos];
   if (t.parent[f] < 0) return;
   const std::int64_t m = t.n_rows[f], k = t.n_pivots[f], mc = m - k;
-  const std::int64_t c0 = blockIdx.y * kSliceCols, c1 = min(mc, c0 + kSliceCols);
+  const std::int64_t c0 = blockIdx.y * slice, c1 = min(mc, c0 + slice);
   if (c0 >= mc) return;
   const double* F = pool + t.pos_offset[pos];
   double* cb = t.cb_ptr[f];
-  for (std::int64_t x = threadIdx.x; x < (c1 - c0) * mc; x += blockDim.x) {
-    const std::int64_t jj = c0 + x / mc, ii = x % mc;
-    if (symmetric && ii < jj) continue;
-    cb[jj * mc + ii] = F[(k + jj) * m + k + ii];
+  const int warp = threadIdx.x / kWarp, lane = threadIdx.x % kWarp;
+  for (std::int64_t jj = c0 + warp; jj < c1; jj += blockDim.x / kWarp) {
+    const double* src = F + (k + jj) * m + k;
+    double* dst = cb + jj * mc;
+    for (std::int64_t ii = (symmetric ? jj : 0) + lane; ii < mc; ii += kWarp) dst[ii] = src[ii];
   }
 }
 
-__global__ void pack_panels_kernel(DeviceTree t, std::int64_t begin, const double* pool,
-                                   const std::int64_t* staging_offset, double* staging, bool lu) {
+__global__ void pack_panels_kernel(DeviceTree t, std::int64_t begin, std::int64_t slice,
+                                   const double* pool, const std::int64_t* staging_offset,
+                                   double* staging, bool lu) {
   const std::int64_t pos = begin + blockIdx.x;
   const std::int64_t f = t.fronts[pos];
   const std::int64_t m = t.n_rows[f], k = t.n_pivots[f];
-  const std::int64_t c0 = blockIdx.y * kSliceCols;
+  const std::int64_t c0 = blockIdx.y * slice;
   const double* F = pool + t.pos_offset[pos];
   double* dst = staging + staging_offset[blockIdx.x];
   if (c0 < k) {  // panel columns [c0, c1): contiguous in the front and in the panel
-    const std::int64_t c1 = min(k, c0 + kSliceCols);
+    const std::int64_t c1 = min(k, c0 + slice);
     for (std::int64_t x = c0 * m + threadIdx.x; x < c1 * m; x += blockDim.x) dst[x] = F[x];
   }
-  if (lu && c0 < m - k) {  // U12 columns [c0, c1)
-    const std::int64_t c1 = min(m - k, c0 + kSliceCols);
+  if (lu && c0 < m - k) {  // U12 columns [c0, c1): U12(i, j) = F(i, k + j), i < k
+    const std::int64_t c1 = min(m - k, c0 + slice);
     double* u12 = dst + m * k;
-    for (std::int64_t x = c0 * k + threadIdx.x; x < c1 * k; x += blockDim.x) {
-      const std::int64_t i = x % k, j = x / k;  // U12(i, j) = F(i, k + j)
-      u12[x] = F[(k + j) * m + i];
-    }
+    const int warp = threadIdx.x / kWarp, lane = threadIdx.x % kWarp;
+    for (std::int64_t j = c0 + warp; j < c1; j += blockDim.x / kWarp)
+      for (std::int64_t i = lane; i < k; i += kWarp) u12[j * k + i] = F[(k + j) * m + i];
   }
 }
 
@@ -258,8 +271,16 @@ __global__ void lu_slab_kernel(double* s, std::int64_t r, std::int64_t w, std::i
 
 }  // namespace
 
-dim3 sliced_grid(std::int64_t count, std::int64_t max_rows) {
-  const std::int64_t slices = std::max<std::int64_t>(1, (max_rows + kSliceCols - 1) / kSliceCols);
+// Columns per slice: the widest (kMaxSliceCols) that still gives the launch about
+// kTargetBlocks blocks, and never below kMinSliceCols.
+std::int64_t slice_width(std::int64_t count, std::int64_t max_rows) {
+  std::int64_t w = kMaxSliceCols;
+  while (w > kMinSliceCols && count * ((max_rows + w - 1) / w) < kTargetBlocks) w /= 2;
+  return w;
+}
+
+dim3 sliced_grid(std::int64_t count, std::int64_t max_rows, std::int64_t slice) {
+  const std::int64_t slices = std::max<std::int64_t>(1, (max_rows + slice - 1) / slice);
   return dim3(static_cast<unsigned>(count), static_cast<unsigned>(slices));
 }
 
@@ -267,15 +288,18 @@ void launch_assemble(const DeviceTree& t, std::int64_t begin, std::int64_t count
                      std::int64_t max_rows, const double* values, double* pool, bool symmetric,
                      cudaStream_t s) {
   if (count == 0) return;
-  assemble_kernel<<<sliced_grid(count, max_rows), kThreads, 0, s>>>(t, begin, values, pool,
-                                                                    symmetric);
+  const std::int64_t w = slice_width(count, max_rows);
+  assemble_kernel<<<sliced_grid(count, max_rows, w), kThreads, 0, s>>>(t, begin, w, values, pool,
+                                                                       symmetric);
   STRATA_CUDA_LAUNCH();
 }
 
 void launch_store_cb(const DeviceTree& t, std::int64_t begin, std::int64_t count,
                      std::int64_t max_rows, const double* pool, bool symmetric, cudaStream_t s) {
   if (count == 0) return;
-  store_cb_kernel<<<sliced_grid(count, max_rows), kThreads, 0, s>>>(t, begin, pool, symmetric);
+  const std::int64_t w = slice_width(count, max_rows);
+  store_cb_kernel<<<sliced_grid(count, max_rows, w), kThreads, 0, s>>>(t, begin, w, pool,
+                                                                       symmetric);
   STRATA_CUDA_LAUNCH();
 }
 
@@ -284,8 +308,9 @@ void launch_pack_panels(const DeviceTree& t, std::int64_t begin, std::int64_t co
                         const std::int64_t* staging_offset, double* staging, bool lu,
                         cudaStream_t s) {
   if (count == 0) return;
-  pack_panels_kernel<<<sliced_grid(count, max_rows), kThreads, 0, s>>>(t, begin, pool,
-                                                                       staging_offset, staging, lu);
+  const std::int64_t w = slice_width(count, max_rows);
+  pack_panels_kernel<<<sliced_grid(count, max_rows, w), kThreads, 0, s>>>(
+      t, begin, w, pool, staging_offset, staging, lu);
   STRATA_CUDA_LAUNCH();
 }
 
