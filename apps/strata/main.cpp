@@ -27,8 +27,8 @@
 #include <cmath>
 #include <csignal>
 #include <cstdio>
-#include <fstream>
 #include <exception>
+#include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <optional>
@@ -241,31 +241,31 @@ int run_solve(const SolveArgs& a, const Communicator& comm) {
   Options o = options_from(a.common);
   std::exception_ptr failed;
   if (root) try {
-  mm = read_matrix_market(a.common.file);
-  read_seconds = seconds_since(t0);
-  n = mm.matrix.n_rows;
-  if (mm.matrix.n_rows != mm.matrix.n_cols)
-    throw InvalidInput(a.common.file + ": matrix is " + std::to_string(mm.matrix.n_rows) + "x" +
-                       std::to_string(mm.matrix.n_cols) + ", not square");
-  if (!a.rhs.empty()) {
-    index_t rows = 0, cols = 0;
-    b = read_dense_matrix_market(a.rhs, &rows, &cols);
-    if (rows != n)
-      throw InvalidInput(a.rhs + ": right-hand side has " + std::to_string(rows) +
-                         " rows, the matrix has " + std::to_string(n));
-    nrhs = cols;
-  } else {  // b = A·1
-    std::vector<double> ones(n, 1.0);
-    b.resize(n);
-    multiply(mm.matrix, ones.data(), b.data());
-  }
-  o.type = kTypes.at(a.type);
-  if (o.type == MatrixType::automatic && mm.symmetry == MMSymmetry::general &&
-      !is_numerically_symmetric(mm.matrix))
-    o.type = MatrixType::general;
-  } catch (...) {
-    failed = std::current_exception();
-  }
+      mm = read_matrix_market(a.common.file);
+      read_seconds = seconds_since(t0);
+      n = mm.matrix.n_rows;
+      if (mm.matrix.n_rows != mm.matrix.n_cols)
+        throw InvalidInput(a.common.file + ": matrix is " + std::to_string(mm.matrix.n_rows) + "x" +
+                           std::to_string(mm.matrix.n_cols) + ", not square");
+      if (!a.rhs.empty()) {
+        index_t rows = 0, cols = 0;
+        b = read_dense_matrix_market(a.rhs, &rows, &cols);
+        if (rows != n)
+          throw InvalidInput(a.rhs + ": right-hand side has " + std::to_string(rows) +
+                             " rows, the matrix has " + std::to_string(n));
+        nrhs = cols;
+      } else {  // b = A·1
+        std::vector<double> ones(n, 1.0);
+        b.resize(n);
+        multiply(mm.matrix, ones.data(), b.data());
+      }
+      o.type = kTypes.at(a.type);
+      if (o.type == MatrixType::automatic && mm.symmetry == MMSymmetry::general &&
+          !is_numerically_symmetric(mm.matrix))
+        o.type = MatrixType::general;
+    } catch (...) {
+      failed = std::current_exception();
+    }
   if (!cli::all_ok(comm, !failed)) {
     if (failed) std::rethrow_exception(failed);
     return 1;  // rank 0 says why
@@ -362,9 +362,9 @@ int run_solve(const SolveArgs& a, const Communicator& comm) {
           d.worker, d.device, d.busy_seconds, d.idle_seconds, d.subtrees_run, d.subtrees_stolen,
           d.bytes_transferred / 1e6, d.flops);
     if (ds.ranks > 1) {
-      fmt::print("ranks                 {} x {} workers; analysis broadcast {:.1f} MB in {:.3f} s\n",
-                 ds.ranks, ds.workers_per_rank, ds.analysis_bytes * 1e-6,
-                 ds.analysis_broadcast_seconds);
+      fmt::print(
+          "ranks                 {} x {} workers; analysis broadcast {:.1f} MB in {:.3f} s\n",
+          ds.ranks, ds.workers_per_rank, ds.analysis_bytes * 1e-6, ds.analysis_broadcast_seconds);
       for (const RankStats& r : ds.per_rank)
         fmt::print(
             "  rank {:<3}            {} subtrees, {:.3g} flops, factor {:.3f} s, sent {:.3f} MB, "
