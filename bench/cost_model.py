@@ -273,7 +273,12 @@ def main():
                     help="JSON of scripts/gpu/run_mpi.sh: print measurements beside predictions")
     args = ap.parse_args()
     cal = calibrate()
-    out = {"assumed": ASSUMED, "calibration": cal, "benchmark_4gpu": [], "scaling": []}
+    import datetime
+    out = {"benchmark": "cost_model", "tag": "prediction",
+           "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
+           "machine": {"cpu": "model", "hardware_threads": 0, "gpu": ""},
+           "command": " ".join(sys.argv), "rows": [],
+           "assumed": ASSUMED, "calibration": cal, "benchmark_4gpu": [], "scaling": []}
     mpi_host = {"rank_bytes_per_s": ASSUMED["mpi_shm_bytes_per_s"], "via_host": True,
                 "nvlink": ASSUMED["nvlink_bytes_per_s"],
                 "ib_per_node": ASSUMED["ib_bytes_per_s_per_node"]}
