@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Installs every dependency strata needs from Debian packages. Idempotent; needs root
-# (or sudo). The CUDA toolkit is not installed here: CMake enables the CUDA backend
+# (or sudo). `--nccl` also installs NCCL (for the STRATA_NCCL build option). The CUDA toolkit is not installed here: CMake enables the CUDA backend
 # only when nvcc is found.
 set -euo pipefail
 pkgs=(
@@ -10,6 +10,9 @@ pkgs=(
   libgtest-dev libgmock-dev libbenchmark-dev libmumps-seq-dev
   python3-matplotlib python3-dev python3-pybind11 python3-numpy python3-scipy python3-pytest
   python3-pip
+  # the distributed solver (STRATA_MPI, docs/distributed.md): OpenMPI, and mpi4py built for
+  # it (strata.Solver(..., comm=) and its test)
+  openmpi-bin libopenmpi-dev python3-mpi4py
   # the sanitizer and fuzz builds (scripts/sanitize.sh, scripts/fuzz.sh): Debian's clang,
   # its runtime libraries (ASan, UBSan, libFuzzer) and llvm-symbolizer for the reports
   clang libclang-rt-dev llvm
@@ -38,6 +41,22 @@ if ! /usr/bin/python3 -c "import sksparse.cholmod" 2>/dev/null; then
   else
     echo "setup: note: scikit-sparse could not be installed (see /tmp/strata-setup-sksparse.log);" \
          "bench/python_vs_scipy.py will report CHOLMOD from Python as not installed"
+  fi
+fi
+# NCCL for STRATA_NCCL (GPU-to-GPU contribution blocks between ranks), only when asked:
+# `bash scripts/setup.sh --nccl`. The CUDA toolkit may ship it (nccl.h beside cuda.h);
+# otherwise NVIDIA's pip wheel nvidia-nccl-cu13 (what PyTorch uses; CMake finds it through
+# `import nvidia.nccl`).
+if [ "${1:-}" = "--nccl" ]; then
+  if ls /usr/local/cuda*/include/nccl.h >/dev/null 2>&1 || [ -e /usr/include/nccl.h ] ||
+     /usr/bin/python3 -c "import nvidia.nccl" 2>/dev/null; then
+    echo "setup: NCCL present"
+  else
+    SUDO=""
+    [ "$(id -u)" -eq 0 ] || SUDO=sudo
+    $SUDO /usr/bin/python3 -m pip install -q --break-system-packages --no-warn-script-location \
+      nvidia-nccl-cu13
+    echo "setup: NCCL installed (pip nvidia-nccl-cu13)"
   fi
 fi
 echo "setup: all dependencies present"

@@ -2,7 +2,7 @@
 //
 //   strata analyze FILE [--ordering nd|metis|amd|natural] [--max-block-size N]
 //                       [--device-memory-limit BYTES] [--json] [multi-GPU options]
-//   strata solve A.mtx [--rhs b.mtx] [--type spd|symmetric_indefinite|general|auto]
+//   [mpirun -n R] strata solve A.mtx [--rhs b.mtx] [--type spd|symmetric_indefinite|general|auto]
 //                      [--ordering ...] [--max-block-size N] [--out x.mtx] [--json]
 //                      [--device cpu|gpu|auto] [--device-memory-limit BYTES]
 //   multi-GPU options (analyze, solve): [--num-gpus N] [--subtrees-per-gpu S]
@@ -27,15 +27,19 @@
 #include <cmath>
 #include <csignal>
 #include <cstdio>
+#include <exception>
 #include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 
 #include "core/atomic_file.hpp"
+#include "launch.hpp"
 #include "mbd/generators.hpp"
 #include "mbd/model_io.hpp"
 #include "mbd/simulation.hpp"
+#include "strata/distributed.hpp"
 #include "strata/strata.hpp"
 
 namespace {
@@ -225,41 +229,57 @@ struct SolveArgs {
   std::string rhs, out, type = "auto";
 };
 
-int run_solve(const SolveArgs& a) {
+// Under `mpirun -n R` (R > 1) the ranks solve together (strata::DistributedSolver): rank
+// 0 reads the matrix and the right-hand side, prints and writes; the others stay silent.
+int run_solve(const SolveArgs& a, const Communicator& comm) {
+  const bool root = comm.rank() == 0;
   auto t0 = std::chrono::steady_clock::now();
-  MMMatrix mm = read_matrix_market(a.common.file);
-  const double read_seconds = seconds_since(t0);
-  const index_t n = mm.matrix.n_rows;
-  if (mm.matrix.n_rows != mm.matrix.n_cols)
-    throw InvalidInput(a.common.file + ": matrix is " + std::to_string(mm.matrix.n_rows) + "x" +
-                       std::to_string(mm.matrix.n_cols) + ", not square");
+  MMMatrix mm;
   std::vector<double> b;
-  index_t nrhs = 1;
-  if (!a.rhs.empty()) {
-    index_t rows = 0, cols = 0;
-    b = read_dense_matrix_market(a.rhs, &rows, &cols);
-    if (rows != n)
-      throw InvalidInput(a.rhs + ": right-hand side has " + std::to_string(rows) +
-                         " rows, the matrix has " + std::to_string(n));
-    nrhs = cols;
-  } else {  // b = A·1
-    std::vector<double> ones(n, 1.0);
-    b.resize(n);
-    multiply(mm.matrix, ones.data(), b.data());
-  }
+  index_t nrhs = 1, n = 0;
+  double read_seconds = 0;
   Options o = options_from(a.common);
-  o.type = kTypes.at(a.type);
-  if (o.type == MatrixType::automatic && mm.symmetry == MMSymmetry::general &&
-      !is_numerically_symmetric(mm.matrix))
-    o.type = MatrixType::general;
-  Solver solver(o);
+  std::exception_ptr failed;
+  if (root) try {
+      mm = read_matrix_market(a.common.file);
+      read_seconds = seconds_since(t0);
+      n = mm.matrix.n_rows;
+      if (mm.matrix.n_rows != mm.matrix.n_cols)
+        throw InvalidInput(a.common.file + ": matrix is " + std::to_string(mm.matrix.n_rows) + "x" +
+                           std::to_string(mm.matrix.n_cols) + ", not square");
+      if (!a.rhs.empty()) {
+        index_t rows = 0, cols = 0;
+        b = read_dense_matrix_market(a.rhs, &rows, &cols);
+        if (rows != n)
+          throw InvalidInput(a.rhs + ": right-hand side has " + std::to_string(rows) +
+                             " rows, the matrix has " + std::to_string(n));
+        nrhs = cols;
+      } else {  // b = A·1
+        std::vector<double> ones(n, 1.0);
+        b.resize(n);
+        multiply(mm.matrix, ones.data(), b.data());
+      }
+      o.type = kTypes.at(a.type);
+      if (o.type == MatrixType::automatic && mm.symmetry == MMSymmetry::general &&
+          !is_numerically_symmetric(mm.matrix))
+        o.type = MatrixType::general;
+    } catch (...) {
+      failed = std::current_exception();
+    }
+  if (!cli::all_ok(comm, !failed)) {
+    if (failed) std::rethrow_exception(failed);
+    return 1;  // rank 0 says why
+  }
+  DistributedSolver solver(comm, o);
   auto t1 = std::chrono::steady_clock::now();
   solver.analyze(mm.matrix);
   solver.factorize(mm.matrix);
   std::vector<double> x(b.size());
-  solver.solve(b.data(), x.data(), nrhs);
+  solver.solve(root ? b.data() : nullptr, root ? x.data() : nullptr, nrhs);
   const double total = seconds_since(t1);
+  if (!root) return 0;
   const Stats& st = solver.stats();
+  const DistributedStats& ds = solver.distributed_stats();
   if (!a.out.empty()) write_dense_matrix_market(a.out, x.data(), n, nrhs);
   const FactorStats& f = st.factor;
   if (a.common.json) {
@@ -301,6 +321,26 @@ int run_solve(const SolveArgs& a) {
                          {"bytes_transferred", d.bytes_transferred},
                          {"flops", d.flops}});
     j["factor"]["devices"] = devices;
+    if (ds.ranks > 1) {
+      json ranks = json::array();
+      for (const RankStats& r : ds.per_rank)
+        ranks.push_back({{"rank", r.rank},
+                         {"workers", r.workers},
+                         {"subtrees", r.subtrees},
+                         {"factor_flops", r.factor_flops},
+                         {"factor_seconds", r.factor_seconds},
+                         {"factor_bytes_sent", r.factor_bytes_sent},
+                         {"factor_bytes_received", r.factor_bytes_received},
+                         {"factor_bytes_held", r.factor_bytes_held},
+                         {"solve_seconds", r.solve_seconds},
+                         {"solve_bytes_sent", r.solve_bytes_sent},
+                         {"solve_bytes_received", r.solve_bytes_received}});
+      j["distributed"] = {{"ranks", ds.ranks},
+                          {"workers_per_rank", ds.workers_per_rank},
+                          {"analysis_bytes", ds.analysis_bytes},
+                          {"analysis_broadcast_seconds", ds.analysis_broadcast_seconds},
+                          {"per_rank", ranks}};
+    }
     j["solve"] = {{"seconds", st.solve.seconds},
                   {"refinement_steps", st.solve.refinement_steps},
                   {"gmres_iterations", st.solve.gmres_iterations},
@@ -335,6 +375,17 @@ int run_solve(const SolveArgs& a) {
           "{:.3f} MB transferred, {:.3g} flops\n",
           d.worker, d.device, d.busy_seconds, d.idle_seconds, d.subtrees_run, d.subtrees_stolen,
           d.bytes_transferred / 1e6, d.flops);
+    if (ds.ranks > 1) {
+      fmt::print(
+          "ranks                 {} x {} workers; analysis broadcast {:.1f} MB in {:.3f} s\n",
+          ds.ranks, ds.workers_per_rank, ds.analysis_bytes * 1e-6, ds.analysis_broadcast_seconds);
+      for (const RankStats& r : ds.per_rank)
+        fmt::print(
+            "  rank {:<3}            {} subtrees, {:.3g} flops, factor {:.3f} s, sent {:.3f} MB, "
+            "received {:.3f} MB, holds {:.1f} MB of the factor; solve {:.3f} s\n",
+            r.rank, r.subtrees, r.factor_flops, r.factor_seconds, r.factor_bytes_sent * 1e-6,
+            r.factor_bytes_received * 1e-6, r.factor_bytes_held * 1e-6, r.solve_seconds);
+    }
     fmt::print("pivots                {} perturbed, {} 2x2; inertia (+{}, -{}, 0:{})\n",
                f.perturbed_pivots, f.two_by_two_pivots, f.inertia_positive, f.inertia_negative,
                f.inertia_zero);
@@ -587,16 +638,27 @@ int main(int argc, char** argv) {
                    "the checkpoint; --t-end may extend it)")
       ->check(CLI::ExistingDirectory);
   CLI11_PARSE(app, argc, argv);
+  // mpirun -n R: `solve` runs on every rank; the other commands on rank 0 alone
+  std::optional<Communicator> comm(cli::launch(&argc, &argv));
+  const int rank = comm->rank();
+  struct Finish {
+    std::optional<Communicator>& c;
+    ~Finish() {
+      c.reset();
+      cli::finish();
+    }
+  } finish{comm};
+  if (rank != 0 && !*solve) return 0;
   for (const char* opt : {"--step", "--order", "--device", "--output-interval", "--vtk",
                           "--full-newton", "--newton-tol", "--threads", "--variable-step", "--rtol",
                           "--atol", "--max-step", "--dense-reference", "--write-model"})
     if (simulate->count(opt) > 0) sim.resume_conflicts.push_back(opt);
   try {
     if (*analyze) return run_analyze(analyze_args);
-    if (*solve) return run_solve(solve_args);
+    if (*solve) return run_solve(solve_args, *comm);
     if (*simulate) return run_simulate(sim);
   } catch (const strata::Error& e) {
-    std::fprintf(stderr, "strata: error: %s\n", e.what());
+    if (rank == 0) std::fprintf(stderr, "strata: error: %s\n", e.what());
     return 1;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "strata: unexpected error: %s\n", e.what());

@@ -13,7 +13,11 @@
 #include <memory>
 #include <string>
 
+#include "strata/distributed.hpp"
 #include "strata/strata.hpp"
+#ifdef STRATA_HAVE_MPI
+#include "strata/mpi.hpp"
+#endif
 
 namespace py = pybind11;
 using strata::index_t;
@@ -254,6 +258,97 @@ class Core {
   bool solved_ = false;
 };
 
+#ifdef STRATA_HAVE_MPI
+// One DistributedSolver over an mpi4py communicator (given by its Fortran handle,
+// comm.py2f(), so that no mpi4py header is needed). Every method is collective; the
+// matrix and b matter on rank 0 only.
+class DistCore {
+ public:
+  DistCore(long long comm_f, strata::Options o)
+      : solver_(strata::mpi_communicator(MPI_Comm_f2c(static_cast<MPI_Fint>(comm_f))),
+                std::move(o)) {}
+
+  void analyze(const strata::SparseMatrix& a) {
+    factorized_ = solved_ = false;
+    py::gil_scoped_release release;
+    solver_.analyze(a);
+  }
+  void factorize(const strata::SparseMatrix& a, bool refactor) {
+    {
+      py::gil_scoped_release release;
+      if (refactor)
+        solver_.refactorize(a);
+      else
+        solver_.factorize(a);
+    }
+    factorized_ = true;
+    solved_ = false;
+  }
+  // b: the right-hand sides flattened column-major (rank 0; empty elsewhere). Returns x
+  // flattened the same way on rank 0, None on the others.
+  py::object solve(const DoubleArray& b) {
+    std::vector<double> bv(b.data(), b.data() + b.size()), x;
+    {
+      py::gil_scoped_release release;
+      x = solver_.solve(bv);
+    }
+    solved_ = true;
+    if (solver_.communicator().rank() != 0) return py::none();
+    py::array_t<double> out(static_cast<py::ssize_t>(x.size()));
+    std::copy(x.begin(), x.end(), out.mutable_data());
+    return out;
+  }
+  index_t size() const { return solver_.size(); }
+  int rank() const { return solver_.communicator().rank(); }
+  py::dict stats() const {
+    const strata::Stats& st = solver_.stats();
+    py::dict d = analysis_dict(st.analysis);
+    d["factorized"] = factorized_;
+    d["solved"] = solved_;
+    if (factorized_) {
+      const strata::FactorStats& f = st.factor;
+      d["type"] = strata::to_string(f.type);
+      d["backend"] = f.backend;
+      d["factor_seconds"] = f.seconds;
+      d["perturbed_pivots"] = f.perturbed_pivots;
+      d["inertia"] = py::make_tuple(f.inertia_positive, f.inertia_negative, f.inertia_zero);
+      d["log_abs_determinant"] = f.log_abs_determinant;
+      d["determinant_sign"] = f.determinant_sign;
+    }
+    if (solved_) {
+      d["solve_seconds"] = st.solve.seconds;
+      d["refinement_steps"] = st.solve.refinement_steps;
+      d["backward_error"] = st.solve.backward_error;
+    }
+    const strata::DistributedStats& ds = solver_.distributed_stats();
+    d["ranks"] = ds.ranks;
+    d["workers_per_rank"] = ds.workers_per_rank;
+    py::list per_rank;
+    for (const strata::RankStats& r : ds.per_rank) {
+      py::dict e;
+      e["rank"] = r.rank;
+      e["subtrees"] = r.subtrees;
+      e["factor_flops"] = r.factor_flops;
+      e["factor_seconds"] = r.factor_seconds;
+      e["factor_bytes_sent"] = r.factor_bytes_sent;
+      e["factor_bytes_received"] = r.factor_bytes_received;
+      e["factor_bytes_held"] = r.factor_bytes_held;
+      e["solve_seconds"] = r.solve_seconds;
+      e["solve_bytes_sent"] = r.solve_bytes_sent;
+      e["solve_bytes_received"] = r.solve_bytes_received;
+      per_rank.append(e);
+    }
+    d["per_rank"] = per_rank;
+    return d;
+  }
+
+ private:
+  strata::DistributedSolver solver_;
+  bool factorized_ = false;
+  bool solved_ = false;
+};
+#endif
+
 }  // namespace
 
 PYBIND11_MODULE(_strata, m) {
@@ -323,6 +418,30 @@ PYBIND11_MODULE(_strata, m) {
       .def("stats", &Core::stats)
       .def("permutation", &Core::permutation);
 
+#ifdef STRATA_HAVE_MPI
+  py::class_<DistCore>(m, "_DistCore", "One strata::DistributedSolver (internal).")
+      .def(py::init([](long long comm_f, const std::string& type, const std::string& ordering,
+                       const std::string& device, index_t max_block_size, int num_threads,
+                       int refinement_steps, double refinement_tolerance,
+                       std::size_t device_memory_limit) {
+             return std::make_unique<DistCore>(
+                 comm_f, make_options(type, ordering, device, max_block_size, num_threads,
+                                      refinement_steps, refinement_tolerance, device_memory_limit));
+           }),
+           py::arg("comm_f"), py::arg("type"), py::arg("ordering"), py::arg("device"),
+           py::arg("max_block_size"), py::arg("num_threads"), py::arg("refinement_steps"),
+           py::arg("refinement_tolerance"), py::arg("device_memory_limit"))
+      .def("analyze", &DistCore::analyze, py::arg("a"))
+      .def("factorize", [](DistCore& c, const strata::SparseMatrix& a) { c.factorize(a, false); })
+      .def("refactorize", [](DistCore& c, const strata::SparseMatrix& a) { c.factorize(a, true); })
+      .def("solve", &DistCore::solve, py::arg("b"))
+      .def_property_readonly("n", &DistCore::size)
+      .def_property_readonly("rank", &DistCore::rank)
+      .def("stats", &DistCore::stats);
+#endif
+  m.def(
+      "mpi_in_build", [] { return strata::Communicator::mpi_available(); },
+      "True when this build has MPI support (strata.Solver accepts comm=).");
   m.def(
       "cuda_in_build",
       [] {

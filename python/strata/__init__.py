@@ -60,6 +60,7 @@ __all__ = [
     "generate_model",
     "SimulationResult",
     "cuda_in_build",
+    "mpi_in_build",
     "Error",
     "InvalidInputError",
     "InvalidStateError",
@@ -124,6 +125,36 @@ def _make_core(type, ordering, device, max_block_size, num_threads, refinement_s
                          int(device_memory_limit))
 
 
+def _make_dist_core(comm, type, ordering, device, max_block_size, num_threads,
+                    refinement_steps, refinement_tolerance, device_memory_limit):
+    if not _strata.mpi_in_build():
+        raise NotSupportedError("comm= needs a strata build with MPI (CMake option STRATA_MPI)")
+    if not hasattr(comm, "py2f"):
+        raise TypeError(f"comm must be an mpi4py communicator, got {_type_name(comm)}")
+    for name, value, allowed in (("type", type, _TYPES), ("ordering", ordering, _ORDERINGS),
+                                 ("device", device, _DEVICES)):
+        if value not in allowed:
+            raise InvalidInputError(f"{name} must be one of {allowed}, got {value!r}")
+    return _strata._DistCore(comm.py2f(), type, ordering, device, int(max_block_size),
+                             int(num_threads), int(refinement_steps),
+                             float(refinement_tolerance), int(device_memory_limit))
+
+
+def _type_name(x):
+    return x.__class__.__name__
+
+
+def _empty_matrix():
+    z = _np.zeros(1, dtype=_np.int64)
+    return _strata._Matrix(0, 0, "csc", "full", z, _np.zeros(0, dtype=_np.int64),
+                           _np.zeros(0))
+
+
+def mpi_in_build():
+    """True when this strata build can solve across MPI ranks (Solver(..., comm=))."""
+    return _strata.mpi_in_build()
+
+
 class Solver:
     """A factorization of a square sparse matrix A, for solving A x = b.
 
@@ -161,6 +192,12 @@ class Solver:
         Refinement stops at this backward error (default 1e-15).
     device_memory_limit : int
         GPU memory budget in bytes for the memory plan (default 0: the whole device).
+    comm : mpi4py.MPI.Comm, optional
+        Solve across the processes of this MPI communicator (``mpirun -n R python ...``;
+        docs/distributed.md). Every rank constructs the Solver and calls every method; A
+        and b are read on rank 0 only (pass None elsewhere), ``solve`` returns x on rank 0
+        and None on the others. Needs a build with MPI (``strata.mpi_in_build()``) and
+        mpi4py built for the same MPI (Debian's python3-mpi4py).
 
     Raises
     ------
@@ -175,8 +212,18 @@ class Solver:
 
     def __init__(self, A, type="auto", ordering="nd", device="auto", storage="full",
                  max_block_size=1024, num_threads=0, refinement_steps=10,
-                 refinement_tolerance=1e-15, device_memory_limit=0):
+                 refinement_tolerance=1e-15, device_memory_limit=0, comm=None):
         self._storage = storage
+        self._comm = comm
+        if comm is not None:
+            self._core = _make_dist_core(comm, type, ordering, device, max_block_size,
+                                         num_threads, refinement_steps, refinement_tolerance,
+                                         device_memory_limit)
+            m = _to_matrix(A, storage) if comm.Get_rank() == 0 else _empty_matrix()
+            self._core.analyze(m)
+            self._core.factorize(m)
+            self._shape = (self._core.n, self._core.n)
+            return
         self._core = _make_core(type, ordering, device, max_block_size, num_threads,
                                 refinement_steps, refinement_tolerance, device_memory_limit)
         m = _to_matrix(A, storage)
@@ -212,6 +259,8 @@ class Solver:
         TypeError for a non-real dtype; InvalidInputError (a ValueError) for a wrong
         shape or NaN/Inf entries; InvalidStateError when the last factorization failed.
         """
+        if self._comm is not None:
+            return self._solve_distributed(b)
         if _sp.issparse(b):
             b = b.toarray()
         b = _np.asarray(b)
@@ -231,6 +280,24 @@ class Solver:
             return _np.ascontiguousarray(self._core.solve(b))
         raise InvalidInputError(f"b must be 1-D or 2-D, got {b.ndim}-D shape {b.shape}")
 
+    def _solve_distributed(self, b):
+        # Collective: rank 0 passes b flattened column-major; a b of the wrong shape goes
+        # on as an empty array, so that the error is raised on every rank (a Python-side
+        # exception on rank 0 alone would leave the others waiting).
+        if self._comm.Get_rank() != 0:
+            self._core.solve(_np.zeros(0))
+            return None
+        if _sp.issparse(b):
+            b = b.toarray()
+        b = _np.asarray(b)
+        n = self._shape[0]
+        ok = (_np.issubdtype(b.dtype, _np.number) and not _np.iscomplexobj(b)
+              and b.ndim in (1, 2) and b.shape[0] == n and b.size > 0)
+        flat = (_np.asarray(b, dtype=_np.float64).reshape(-1, order="F") if ok
+                else _np.zeros(0))
+        x = self._core.solve(flat)
+        return x.reshape(b.shape, order="F") if b.ndim == 2 else x
+
     def refactorize(self, A):
         """Factors new values with the analyzed pattern (same shape, same stored
         entries, in the same `storage`), reusing the analysis and the workspace.
@@ -241,6 +308,9 @@ class Solver:
             raise InvalidInputError(
                 f"refactorize: A has shape {A.shape}, the solver was built for {self._shape}"
             )
+        if self._comm is not None and self._comm.Get_rank() != 0:
+            self._core.refactorize(_empty_matrix())
+            return self
         self._core.refactorize(_to_matrix(A, self._storage))
         return self
 
@@ -267,6 +337,9 @@ class Solver:
     def permutation(self):
         """The fill-reducing permutation (new to old): int64 array of length n whose
         k-th entry is the original index of the k-th pivot."""
+        if self._comm is not None:
+            raise NotSupportedError("permutation: not available with comm= (it is kept on "
+                                    "rank 0's analysis; use a Solver without comm)")
         return self._core.permutation()
 
     def __repr__(self):

@@ -46,6 +46,8 @@ struct SolverState {
   int host_workers = 0;
   int host_threads = 1;
   std::optional<numeric::MultiWorkerConfig> host_config;
+  // SolverAccess::set_external: the distributed solver's numeric phases (src/distributed)
+  detail::ExternalNumeric external;
   MatrixType resolved = MatrixType::automatic;
   double norm_inf = 0;  // ‖A‖∞ of the input
   Stats stats;
@@ -158,8 +160,11 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
   const double static_pivot = s.options.static_pivot_epsilon * (norm1 > 0 ? norm1 : 1.0);
 
   const int workers = an.partition.workers;
+  const bool external = static_cast<bool>(s.external.factor);
   std::vector<numeric::Executor*> execs;
-  if (workers > 1) {  // only the CUDA backend resolves to several workers (resolve_workers)
+  if (external) {
+    // the distributed solver brings its own executors
+  } else if (workers > 1) {  // only the CUDA backend resolves to several workers (resolve_workers)
     if (static_cast<int>(s.executors.size()) != workers) {
       s.executors.clear();
       for (int d = 0; d < workers; ++d)
@@ -178,7 +183,9 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
   config.work_stealing = s.options.work_stealing;
   if (s.host_config) config = *s.host_config;
   auto run = [&](MatrixType t) {
-    if (workers > 1)
+    if (external)
+      s.external.factor(an, s.scaled, t, static_pivot, s.factor);
+    else if (workers > 1)
       numeric::factorize_multi(an, s.scaled, t, static_pivot, execs, s.factor, s.arenas, config,
                                &s.devices);
     else
@@ -201,7 +208,7 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
   FactorStats& fs = s.stats.factor;
   fs = FactorStats{};
   fs.type = type;
-  fs.backend = workers > 1 ? execs[0]->name() : s.executor->name();
+  fs.backend = external ? s.external.backend : workers > 1 ? execs[0]->name() : s.executor->name();
   fs.devices = s.devices;
   numeric::cpu::PivotStats total;
   for (const auto& ps : s.factor.front_stats) total.merge(ps);
@@ -224,7 +231,9 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
   fs.seconds = timer.seconds();
   const double flops = s.stats.analysis.factor_flops * (type == MatrixType::general ? 2.0 : 1.0);
   fs.gflops = fs.seconds > 0 ? flops / fs.seconds * 1e-9 : 0;
-  if (workers > 1) {  // device figures summed over the workers (the factor is on the host)
+  if (external) {
+    if (s.external.report) s.external.report(fs);
+  } else if (workers > 1) {  // device figures summed over the workers (the factor is on the host)
     for (numeric::Executor* e : execs) {
       FactorStats one;
       e->report(one);
@@ -263,8 +272,11 @@ bool apply_inverse(SolverState& s, const double* b, double* x, index_t nrhs,
       const index_t i = an.perm[k];  // row of B is a row of A
       work[k + r * n] = b[i + r * n] * (scale ? an.row_scaling[i] : 1.0);
     }
-  const bool on_device = s.executor && s.executor->solve(an, s.factor, work.data(), nrhs);
-  if (!on_device) {
+  const bool on_device =
+      !s.external.solve && s.executor && s.executor->solve(an, s.factor, work.data(), nrhs);
+  if (s.external.solve) {
+    s.external.solve(an, s.factor, work.data(), nrhs);
+  } else if (!on_device) {
     if (!s.factor.panels_on_host) numeric::fetch_panels(an, *s.executor, s.factor);
     numeric::solve_in_place(an, s.factor, work.data(), nrhs);
   }
@@ -323,8 +335,9 @@ void Solver::analyze(const SparseMatrix& a) {
     state_->cb_arena.clear();
     state_->arenas.clear();
     state_->analysis.reset();
-    const int workers =
-        state_->host_workers > 0 ? state_->host_workers : resolve_workers(state_->options);
+    const int workers = state_->external.workers > 0 ? state_->external.workers
+                        : state_->host_workers > 0   ? state_->host_workers
+                                                     : resolve_workers(state_->options);
     state_->analysis = analyze_matrix(a, state_->options, workers);
     state_->stats = Stats{};
     state_->stats.analysis = state_->analysis->stats;
@@ -464,6 +477,20 @@ void detail::SolverAccess::use_host_workers(Solver& solver, int workers, int thr
   s.executor.reset();
   s.analysis.reset();
   s.factor = numeric::NumericFactor{};
+}
+
+void detail::SolverAccess::set_external(Solver& solver, ExternalNumeric external) {
+  SolverState& s = *solver.state_;
+  s.external = std::move(external);
+  s.executors.clear();
+  s.executor.reset();
+  s.analysis.reset();
+  s.factor = numeric::NumericFactor{};
+}
+
+Analysis* detail::SolverAccess::analysis(Solver& solver) {
+  auto& a = solver.state_->analysis;
+  return a ? &*a : nullptr;
 }
 
 index_t Solver::size() const { return state_->analysis ? state_->analysis->n : 0; }

@@ -14,6 +14,8 @@
 // through export_cb / import_cb.
 #pragma once
 
+#include <exception>
+#include <functional>
 #include <memory>
 #include <vector>
 
@@ -179,6 +181,21 @@ struct MultiWorkerConfig {
   /// Test only: seconds each worker sleeps after taking a subtree and before factoring it
   /// (empty, or one entry per worker): a slow device, to show stealing.
   std::vector<double> injected_delay;
+  /// Distributed factorization (src/distributed): the partition was made for more workers
+  /// than this process runs; its executors are the global workers first_worker ..
+  /// first_worker + execs.size() − 1, and it factors only the subtrees they own (stealing
+  /// among them). Once those are done — or one of them failed (`failed`) — `exchange` is
+  /// called with the transfers of every subtree (and the first error of this process's
+  /// workers, or null): the blocks this process exported are in
+  /// their host buffers (or, with remote_blocks_on_device, in the exporter's device
+  /// memory); a process that factors the top fills the others' before returning. It runs
+  /// on every process whatever happened, so it can agree on failure (and throw).
+  int first_worker = 0;
+  std::function<void(std::vector<CbTransfer>& transfers, std::exception_ptr failed)> exchange;
+  /// Whether this process factors the top part (false: it stops after `exchange`).
+  bool factor_top = true;
+  /// With factor_top false: ask exporters to leave the blocks in device memory (NCCL).
+  bool remote_blocks_on_device = false;
 };
 
 /// Runs the numeric factorization on several executors (one per worker, one host thread
@@ -197,5 +214,17 @@ void factorize_multi(const Analysis& an, const std::vector<double>& scaled_value
 /// Solves with the factor in place: x (tree numbering, n×nrhs column-major, leading
 /// dimension n) holds the right-hand sides on entry and the solutions on return.
 void solve_in_place(const Analysis& an, const NumericFactor& factor, double* x, index_t nrhs);
+
+/// The pieces of solve_in_place for one front f (x as there; w a workspace): the forward
+/// step (reads and writes x at f's rows), the diagonal step (LDLᵀ; a no-op otherwise; f's
+/// pivot rows) and the backward step (reads f's rows, writes its pivot rows).
+/// solve_in_place = forward over f = 0, 1, …, diagonal over every f, backward over
+/// f = n_fronts − 1, …, 0. The caller sets the BLAS threads (solve_in_place uses one).
+void forward_front(const Analysis& an, const NumericFactor& factor, index_t f, double* x,
+                   index_t nrhs, std::vector<double>& w);
+void diagonal_front(const Analysis& an, const NumericFactor& factor, index_t f, double* x,
+                    index_t nrhs);
+void backward_front(const Analysis& an, const NumericFactor& factor, index_t f, double* x,
+                    index_t nrhs, std::vector<double>& w);
 
 }  // namespace strata::numeric

@@ -24,6 +24,11 @@
 // Not yet: the top part runs on worker 0 alone; splitting its large fronts across the
 // devices by tiles (the paper's treatment of the top separators) is a later step.
 //
+// Several processes (src/distributed, docs/distributed.md): MultiWorkerConfig names the
+// global workers this process runs; it factors their subtrees, then hands every transfer
+// to config.exchange (which moves the blocks between processes), and only the process
+// that owns the top part goes on to it.
+//
 // Errors: a worker that throws records the first exception and stops the others from
 // taking new subtrees; all threads are joined and the first exception is rethrown.
 #include <algorithm>
@@ -45,11 +50,14 @@ namespace {
 // The per-worker queues of subtree indices, under one mutex.
 class Queues {
  public:
-  Queues(const schedule::TreePartition& p, int workers, bool stealing)
+  // Only the subtrees of workers first .. first + workers − 1 (distributed: this process's).
+  Queues(const schedule::TreePartition& p, int workers, bool stealing, int first)
       : part_(p), queue_(workers), load_(workers, 0.0), stealing_(stealing) {
     for (std::size_t i = 0; i < p.subtrees.size(); ++i) {  // decreasing work: largest first
-      queue_[p.owner[i]].push_back(static_cast<int>(i));
-      load_[p.owner[i]] += p.subtrees[i].work;
+      const int w = p.owner[i] - first;
+      if (w < 0 || w >= workers) continue;
+      queue_[w].push_back(static_cast<int>(i));
+      load_[w] += p.subtrees[i].work;
     }
   }
 
@@ -105,10 +113,13 @@ void factorize_multi(const Analysis& an, const std::vector<double>& scaled_value
                      const MultiWorkerConfig& config, std::vector<DeviceStats>* devices) {
   const schedule::TreePartition& part = an.partition;
   const int workers = static_cast<int>(execs.size());
-  if (workers < 1 || part.workers != workers)
+  const int first = config.first_worker;  // > 0, or fewer executors: distributed
+  if (workers < 1 || first < 0 || part.workers < first + workers ||
+      (!config.exchange && part.workers != workers))
     throw InvalidInput("internal: the analysis was split for " + std::to_string(part.workers) +
                        " workers, the factorization was given " + std::to_string(workers) +
-                       " executors");
+                       " executors from worker " + std::to_string(first));
+  auto mine = [&](int i) { return part.owner[i] >= first && part.owner[i] < first + workers; };
   Timer wall;
   prepare_factor(an, type, factor);
   arenas.resize(workers);
@@ -124,6 +135,7 @@ void factorize_multi(const Analysis& an, const std::vector<double>& scaled_value
     x.front = r;
     x.target_device = execs[0]->device();
     if (t.parent[r] < 0 || t.cb_size(r) == 0) continue;  // nothing to hand over
+    if (!config.factor_top && !mine(i)) continue;        // neither made nor used here
     x.size = static_cast<std::size_t>(t.cb_size(r)) * static_cast<std::size_t>(t.cb_size(r));
     staging[i].resize(x.size);
     x.host = staging[i].data();
@@ -138,12 +150,12 @@ void factorize_multi(const Analysis& an, const std::vector<double>& scaled_value
 
   std::vector<DeviceStats> st(workers);
   for (int w = 0; w < workers; ++w) {
-    st[w].worker = w;
+    st[w].worker = first + w;
     const int d = execs[w]->device();
     st[w].device = d >= 0 ? std::string(execs[w]->name()) + ":" + std::to_string(d)
                           : std::string(execs[w]->name());
   }
-  Queues queues(part, workers, config.work_stealing);
+  Queues queues(part, workers, config.work_stealing, first);
   std::mutex error_mutex;
   std::exception_ptr error;
 
@@ -168,6 +180,8 @@ void factorize_multi(const Analysis& an, const std::vector<double>& scaled_value
         ctx.part = &view;
         ex.begin_part(ctx);
         run_batches(ex, ctx);
+        if (config.remote_blocks_on_device && !config.factor_top)
+          transfer[i].target_device = ex.device();
         if (transfer[i].host) st[w].bytes_transferred += ex.export_cb(ctx, transfer[i]);
         ex.end_part(ctx);
         ctx.part = nullptr;
@@ -195,10 +209,11 @@ void factorize_multi(const Analysis& an, const std::vector<double>& scaled_value
     worker(0);  // worker 0 on the calling thread, which then factors the top part
     for (auto& th : threads) th.join();
   }
+  if (config.exchange) config.exchange(transfer, error);
   if (error) std::rethrow_exception(error);
 
   // the top part on worker 0, with the subtree roots' blocks handed in
-  {
+  if (config.factor_top) {
     Executor& ex = *execs[0];
     Timer busy;
     const int top_id = n_sub;

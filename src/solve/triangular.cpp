@@ -3,7 +3,9 @@
 // Forward substitution visits the fronts children-first (front order is a postorder),
 // backward substitution parents-first. For each front the right-hand sides of its rows
 // are gathered into a dense m×nrhs block, so every front costs one TRSM and one GEMM
-// whatever the number of right-hand sides.
+// whatever the number of right-hand sides. The three passes are exposed front by front
+// so that the distributed solve (src/distributed) runs them over the fronts each rank
+// holds.
 //
 //   LLᵀ / LDLᵀ:  forward  y_P = L11⁻¹ x_P,  x_R −= L21 y_P     (P: pivot rows, R: the rest)
 //                diagonal y = D⁻¹ y (LDLᵀ; 1×1 and 2×2 blocks)
@@ -19,89 +21,99 @@
 
 namespace strata::numeric {
 
-void solve_in_place(const Analysis& an, const NumericFactor& fac, double* x, index_t nrhs) {
+void forward_front(const Analysis& an, const NumericFactor& fac, index_t f, double* x, index_t nrhs,
+                   std::vector<double>& w) {
   const auto& t = an.tree;
   const index_t n = an.n;
   const bool lu = fac.type == MatrixType::general;
   const bool ldlt = fac.type == MatrixType::symmetric_indefinite;
   const int nr = static_cast<int>(nrhs);
-  const double one = 1.0, minus_one = -1.0, zero = 0.0;
-  std::vector<double> w;
-  openblas_set_num_threads(1);
-
-  // forward
-  for (index_t f = 0; f < t.n_fronts(); ++f) {
-    const index_t m = t.n_rows(f), k = t.n_pivots(f);
-    if (k == 0) continue;
-    const index_t* prow = fac.rows.data() + t.row_offsets[f];  // pivot rows as factored
-    const index_t* crow = t.rows_of(f);                        // column order
-    const double* panel = fac.panels.data() + an.factor_layout.panel_offset[f];
-    w.resize(static_cast<std::size_t>(m) * nrhs);
-    for (index_t r = 0; r < nrhs; ++r)
-      for (index_t i = 0; i < m; ++i) w[i + r * m] = x[prow[i] + r * n];
-    const int mi = static_cast<int>(m), ki = static_cast<int>(k), mk = mi - ki;
-    dtrsm_("L", "L", "N", (lu || ldlt) ? "U" : "N", &ki, &nr, &one, panel, &mi, w.data(), &mi);
-    if (mk > 0)
-      dgemm_("N", "N", &mk, &nr, &ki, &minus_one, panel + k, &mi, w.data(), &mi, &one, w.data() + k,
-             &mi);
-    const index_t* out = lu ? crow : prow;
-    for (index_t r = 0; r < nrhs; ++r) {
-      for (index_t i = 0; i < k; ++i) x[out[i] + r * n] = w[i + r * m];
-      for (index_t i = k; i < m; ++i) x[prow[i] + r * n] = w[i + r * m];
-    }
+  const double one = 1.0, minus_one = -1.0;
+  const index_t m = t.n_rows(f), k = t.n_pivots(f);
+  if (k == 0) return;
+  const index_t* prow = fac.rows.data() + t.row_offsets[f];  // pivot rows as factored
+  const index_t* crow = t.rows_of(f);                        // column order
+  const double* panel = fac.panels.data() + an.factor_layout.panel_offset[f];
+  w.resize(static_cast<std::size_t>(m) * nrhs);
+  for (index_t r = 0; r < nrhs; ++r)
+    for (index_t i = 0; i < m; ++i) w[i + r * m] = x[prow[i] + r * n];
+  const int mi = static_cast<int>(m), ki = static_cast<int>(k), mk = mi - ki;
+  dtrsm_("L", "L", "N", (lu || ldlt) ? "U" : "N", &ki, &nr, &one, panel, &mi, w.data(), &mi);
+  if (mk > 0)
+    dgemm_("N", "N", &mk, &nr, &ki, &minus_one, panel + k, &mi, w.data(), &mi, &one, w.data() + k,
+           &mi);
+  const index_t* out = lu ? crow : prow;
+  for (index_t r = 0; r < nrhs; ++r) {
+    for (index_t i = 0; i < k; ++i) x[out[i] + r * n] = w[i + r * m];
+    for (index_t i = k; i < m; ++i) x[prow[i] + r * n] = w[i + r * m];
   }
+}
 
-  // diagonal (LDLᵀ)
-  if (ldlt) {
-    for (index_t f = 0; f < t.n_fronts(); ++f) {
-      const index_t k = t.n_pivots(f), p0 = t.first_pivot[f];
-      const index_t* prow = fac.rows.data() + t.row_offsets[f];
-      for (index_t i = 0; i < k; ++i) {
-        const index_t p = p0 + i;
-        if (fac.pivot_size[p] == 1) {
-          for (index_t r = 0; r < nrhs; ++r) x[prow[i] + r * n] /= fac.d_diag[p];
-        } else if (fac.pivot_size[p] == 2) {
-          const double a = fac.d_diag[p], b = fac.d_off[p], d = fac.d_diag[p + 1];
-          const double det = a * d - b * b;
-          for (index_t r = 0; r < nrhs; ++r) {
-            double& u = x[prow[i] + r * n];
-            double& v = x[prow[i + 1] + r * n];
-            const double uu = (d * u - b * v) / det, vv = (a * v - b * u) / det;
-            u = uu;
-            v = vv;
-          }
-        }
+void diagonal_front(const Analysis& an, const NumericFactor& fac, index_t f, double* x,
+                    index_t nrhs) {
+  if (fac.type != MatrixType::symmetric_indefinite) return;
+  const auto& t = an.tree;
+  const index_t n = an.n;
+  const index_t k = t.n_pivots(f), p0 = t.first_pivot[f];
+  const index_t* prow = fac.rows.data() + t.row_offsets[f];
+  for (index_t i = 0; i < k; ++i) {
+    const index_t p = p0 + i;
+    if (fac.pivot_size[p] == 1) {
+      for (index_t r = 0; r < nrhs; ++r) x[prow[i] + r * n] /= fac.d_diag[p];
+    } else if (fac.pivot_size[p] == 2) {
+      const double a = fac.d_diag[p], b = fac.d_off[p], d = fac.d_diag[p + 1];
+      const double det = a * d - b * b;
+      for (index_t r = 0; r < nrhs; ++r) {
+        double& u = x[prow[i] + r * n];
+        double& v = x[prow[i + 1] + r * n];
+        const double uu = (d * u - b * v) / det, vv = (a * v - b * u) / det;
+        u = uu;
+        v = vv;
       }
     }
   }
+}
 
-  // backward
-  for (index_t f = t.n_fronts() - 1; f >= 0; --f) {
-    const index_t m = t.n_rows(f), k = t.n_pivots(f);
-    if (k == 0) continue;
-    const index_t* prow = fac.rows.data() + t.row_offsets[f];
-    const index_t* crow = t.rows_of(f);
-    const index_t* col = lu ? crow : prow;
-    const double* panel = fac.panels.data() + an.factor_layout.panel_offset[f];
-    w.resize(static_cast<std::size_t>(m) * nrhs);
-    for (index_t r = 0; r < nrhs; ++r)
-      for (index_t i = 0; i < m; ++i) w[i + r * m] = x[col[i] + r * n];
-    const int mi = static_cast<int>(m), ki = static_cast<int>(k), mk = mi - ki;
-    if (lu) {
-      if (mk > 0)  // y −= U12 x_R, U12 is k×(m−k) with leading dimension k
-        dgemm_("N", "N", &ki, &nr, &mk, &minus_one, panel + m * k, &ki, w.data() + k, &mi, &one,
-               w.data(), &mi);
-      dtrsm_("L", "U", "N", "N", &ki, &nr, &one, panel, &mi, w.data(), &mi);
-    } else {
-      if (mk > 0)
-        dgemm_("T", "N", &ki, &nr, &mk, &minus_one, panel + k, &mi, w.data() + k, &mi, &one,
-               w.data(), &mi);
-      dtrsm_("L", "L", "T", ldlt ? "U" : "N", &ki, &nr, &one, panel, &mi, w.data(), &mi);
-    }
-    for (index_t r = 0; r < nrhs; ++r)
-      for (index_t i = 0; i < k; ++i) x[col[i] + r * n] = w[i + r * m];
+void backward_front(const Analysis& an, const NumericFactor& fac, index_t f, double* x,
+                    index_t nrhs, std::vector<double>& w) {
+  const auto& t = an.tree;
+  const index_t n = an.n;
+  const bool lu = fac.type == MatrixType::general;
+  const bool ldlt = fac.type == MatrixType::symmetric_indefinite;
+  const int nr = static_cast<int>(nrhs);
+  const double one = 1.0, minus_one = -1.0;
+  const index_t m = t.n_rows(f), k = t.n_pivots(f);
+  if (k == 0) return;
+  const index_t* prow = fac.rows.data() + t.row_offsets[f];
+  const index_t* crow = t.rows_of(f);
+  const index_t* col = lu ? crow : prow;
+  const double* panel = fac.panels.data() + an.factor_layout.panel_offset[f];
+  w.resize(static_cast<std::size_t>(m) * nrhs);
+  for (index_t r = 0; r < nrhs; ++r)
+    for (index_t i = 0; i < m; ++i) w[i + r * m] = x[col[i] + r * n];
+  const int mi = static_cast<int>(m), ki = static_cast<int>(k), mk = mi - ki;
+  if (lu) {
+    if (mk > 0)  // y −= U12 x_R, U12 is k×(m−k) with leading dimension k
+      dgemm_("N", "N", &ki, &nr, &mk, &minus_one, panel + m * k, &ki, w.data() + k, &mi, &one,
+             w.data(), &mi);
+    dtrsm_("L", "U", "N", "N", &ki, &nr, &one, panel, &mi, w.data(), &mi);
+  } else {
+    if (mk > 0)
+      dgemm_("T", "N", &ki, &nr, &mk, &minus_one, panel + k, &mi, w.data() + k, &mi, &one, w.data(),
+             &mi);
+    dtrsm_("L", "L", "T", ldlt ? "U" : "N", &ki, &nr, &one, panel, &mi, w.data(), &mi);
   }
-  (void)zero;
+  for (index_t r = 0; r < nrhs; ++r)
+    for (index_t i = 0; i < k; ++i) x[col[i] + r * n] = w[i + r * m];
+}
+
+void solve_in_place(const Analysis& an, const NumericFactor& fac, double* x, index_t nrhs) {
+  const auto& t = an.tree;
+  std::vector<double> w;
+  openblas_set_num_threads(1);
+  for (index_t f = 0; f < t.n_fronts(); ++f) forward_front(an, fac, f, x, nrhs, w);
+  for (index_t f = 0; f < t.n_fronts(); ++f) diagonal_front(an, fac, f, x, nrhs);
+  for (index_t f = t.n_fronts() - 1; f >= 0; --f) backward_front(an, fac, f, x, nrhs, w);
 }
 
 }  // namespace strata::numeric

@@ -1,0 +1,163 @@
+// strata benchmark — the distributed factorization over MPI ranks (docs/distributed.md):
+// one configuration per run, R ranks (mpirun -n R) × G workers per rank (GPUs with
+// --backend cuda, CPU executors with --backend cpu), on generated or shared problems.
+// Rank 0 builds the problem; every rank takes part. Per problem: the analysis, then
+// --repeat factorizations (the first a factorize, the rest refactorizations; the median
+// is reported, and the first, which includes setting up the executors, separately), one
+// solve, and each rank's figures of the last factorization: its subtrees, flops, time,
+// bytes sent and received (values broadcast, contribution blocks, pivot statistics).
+// Writes bench/results/distributed-<date>.json (or --results-dir) on rank 0.
+//
+//   mpirun -n R bench_distributed [--problems lap3d-80,elast3d-40] [--backend cuda|cpu]
+//          [--gpus-per-rank G] [--repeat 3] [--tag T] [--results-dir DIR]
+#include <mpi.h>
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include "bench_common.hpp"
+#include "core/timer.hpp"
+#include "distributed/distributed_internal.hpp"
+#include "strata/distributed.hpp"
+#include "strata/mpi.hpp"
+#include "strata/strata.hpp"
+
+using namespace strata;
+using json = nlohmann::json;
+
+namespace {
+
+int run(int argc, char** argv) {
+  CLI::App app{"strata distributed factorization benchmark (run under mpirun)"};
+  std::vector<std::string> problems = {"lap3d-30"};
+  std::string backend = "cpu", tag, results_dir;
+  int per_rank = 1, repeat = 3, threads = 1;
+  app.add_option("--problems", problems, "problems (shared matrix names, lap3d-N, elast3d-N)")
+      ->delimiter(',');
+  app.add_option("--backend", backend, "cuda: GPUs; cpu: CPU executors standing in for GPUs")
+      ->check(CLI::IsMember({"cpu", "cuda"}));
+  app.add_option("--gpus-per-rank", per_rank, "workers (GPUs) per rank")->check(CLI::PositiveNumber);
+  app.add_option("--repeat", repeat, "factorizations per problem (median reported)")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--threads", threads, "host threads of each CPU executor");
+  app.add_option("--tag", tag, "label stored in the results and the file name")
+      ->check(bench::check_tag);
+  app.add_option("--results-dir", results_dir, "folder for the results file");
+  CLI11_PARSE(app, argc, argv);
+
+  Communicator comm = mpi_communicator(MPI_COMM_WORLD);
+  const int rank = comm.rank(), ranks = comm.size();
+  json out = bench::run_metadata(argc, argv);
+  out["benchmark"] = "distributed";
+  out["backend"] = backend;
+  out["tag"] = tag;
+  out["ranks"] = ranks;
+  out["gpus_per_rank"] = per_rank;
+  out["rows"] = json::array();
+  for (const std::string& name : problems) {
+    bench::Problem p;
+    std::vector<double> b;
+    if (rank == 0) {
+      p = bench::load_problem(name);
+      b.resize(p.a.n_rows);
+      std::vector<double> ones(p.a.n_rows, 1.0);
+      multiply(p.a, ones.data(), b.data());
+    }
+    int symmetric = p.symmetric ? 1 : 0;
+    MPI_Bcast(&symmetric, 1, MPI_INT, 0, MPI_COMM_WORLD);
+    Options o;
+    o.type = symmetric ? MatrixType::spd : MatrixType::general;
+    o.num_threads = threads;
+    if (backend == "cuda") {
+      o.backend = Backend::cuda;
+      o.num_gpus = per_rank;
+    }
+    DistributedSolver solver(comm, o);
+    if (backend == "cpu") detail::DistributedAccess::use_host_workers(solver, per_rank);
+    Timer t;
+    solver.analyze(p.a);
+    const double analysis_seconds = t.seconds();
+    std::vector<double> times;
+    for (int k = 0; k < repeat; ++k) {
+      t.reset();
+      if (k == 0)
+        solver.factorize(p.a);
+      else
+        solver.refactorize(p.a);
+      times.push_back(t.seconds());
+    }
+    std::vector<double> x = solver.solve(b);
+    if (rank != 0) continue;
+    const Stats& st = solver.stats();
+    const DistributedStats& ds = solver.distributed_stats();
+    std::size_t between = 0;
+    json per = json::array();
+    for (const RankStats& r : ds.per_rank) {
+      between += r.factor_bytes_sent;
+      per.push_back({{"rank", r.rank},
+                     {"workers", r.workers},
+                     {"subtrees", r.subtrees},
+                     {"factor_flops", r.factor_flops},
+                     {"factor_seconds", r.factor_seconds},
+                     {"factor_bytes_sent", r.factor_bytes_sent},
+                     {"factor_bytes_received", r.factor_bytes_received},
+                     {"factor_bytes_held", r.factor_bytes_held},
+                     {"solve_seconds", r.solve_seconds},
+                     {"solve_bytes_sent", r.solve_bytes_sent},
+                     {"solve_bytes_received", r.solve_bytes_received}});
+    }
+    json devices = json::array();
+    for (const DeviceStats& d : st.factor.devices)
+      devices.push_back({{"device", d.device},
+                         {"busy_seconds", d.busy_seconds},
+                         {"idle_seconds", d.idle_seconds},
+                         {"subtrees_run", d.subtrees_run},
+                         {"bytes_transferred", d.bytes_transferred},
+                         {"flops", d.flops}});
+    const std::size_t values_bytes =
+        sizeof(double) * static_cast<std::size_t>(p.a.nnz()) * static_cast<std::size_t>(ranks - 1);
+    json row = {{"problem", name},
+                {"n", st.analysis.n},
+                {"ranks", ranks},
+                {"gpus_per_rank", ds.workers_per_rank},
+                {"flops", st.analysis.factor_flops},
+                {"subtrees", st.analysis.subtrees},
+                {"top_flops_fraction", st.analysis.top_flops_fraction},
+                {"subtree_balance", st.analysis.subtree_balance},
+                {"analysis_seconds", analysis_seconds},
+                {"analysis_bytes", ds.analysis_bytes},
+                {"first_factor_seconds", times.front()},
+                {"factor_seconds", bench::median(times)},
+                {"bytes_between_ranks", between},
+                {"values_bytes_between_ranks", values_bytes},
+                {"solve_seconds", st.solve.seconds},
+                {"backward_error", bench::berr(p.a, x, b)},
+                {"per_rank", per},
+                {"devices", devices}};
+    out["rows"].push_back(row);
+    std::printf("%-12s %dx%d  factor %.3f s (first %.3f s), %.1f MB between ranks, berr %.1e\n",
+                name.c_str(), ranks, ds.workers_per_rank, bench::median(times), times.front(),
+                between * 1e-6, row["backward_error"].get<double>());
+    std::fflush(stdout);
+  }
+  if (rank == 0) {
+    const std::string stem = tag.empty() ? "distributed" : "distributed-" + tag;
+    std::printf("written: %s\n", bench::write_result(out, stem, results_dir).c_str());
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  int provided = 0;
+  MPI_Init_thread(&argc, &argv, MPI_THREAD_SERIALIZED, &provided);
+  int rc = 1;
+  try {
+    rc = run(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bench_distributed: %s\n", e.what());
+  }
+  MPI_Finalize();
+  return rc;
+}

@@ -1,0 +1,351 @@
+#!/usr/bin/env python3
+"""strata — cost model of the distributed factorization (docs/distributed.md §4).
+
+What: predicts the factorization time of a 3D grid problem (7-point Laplacian, or 3D
+elasticity with 3 unknowns per node) on R ranks × G GPUs, from
+
+  * the fronts of geometric nested dissection of the grid: a box is cut by the plane
+    across its longest side; the separator's front has the plane's unknowns as pivots and
+    the box's faces that border earlier separators as its contribution block (the classic
+    picture: separators ~ n^(2/3) unknowns; George 1973, Liu 1992 §3);
+  * rates and bandwidths measured on one machine (the files below), and link figures
+    for several machines that are assumptions, stated in ASSUMED;
+  * the split of the tree that strata makes: ~4 subtrees per worker, the separators above
+    them the top part.
+
+Two schedules are modelled:
+  current  — what strata does now: subtrees on every GPU, their roots' contribution blocks
+             to rank 0 (host buffers through MPI, or NCCL), the whole top part on rank
+             0's first GPU;
+  tiled    — the design of docs/distributed.md §1: the top separators' fronts split into
+             1024×1024 tiles over the GPUs of the subtree below them (subtree-to-subcube
+             mapping), 2D block-cyclic, panels broadcast along the grid rows and columns.
+
+Calibration (cite: bench/results/…):
+  multigpu-20261121T190423Z.json (4 H200, lap3d-80 and elast3d-40, 1/2/4 GPUs): per-GPU
+    rate on subtrees (flops / busy seconds of workers 1-3), rate of the top part on GPU 0,
+    the host-side time of a factorization outside the numeric driver, the subtree-root
+    contribution-block bytes;
+  gpu-memory-20261121T180221Z.json (H100): pinned PCIe 54.9 GB/s, DGEMM 64.5 TFLOP/s;
+  cudss-20261121T192152Z.json (H100): lap3d-100 and elast3d-50 factor flops.
+
+Usage: python3 bench/cost_model.py [--json OUT.json] [--measured RUN.json ...]
+(--measured: JSON files of scripts/gpu/run_mpi.sh; each measurement is printed next to
+its prediction.)
+"""
+import argparse
+import heapq
+import json
+import math
+import os
+import sys
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+RESULTS = os.path.join(HERE, "results")
+
+# Link figures not measured here: stated assumptions (docs/distributed.md §4).
+ASSUMED = {
+    "nvlink_bytes_per_s": 150e9,  # H100/H200 NVLink 4, effective GPU-to-GPU (900 GB/s peak bidirectional)
+    "mpi_shm_bytes_per_s": 8e9,  # OpenMPI shared-memory single-copy (CMA) between processes
+    "ib_bytes_per_s_per_node": 50e9,  # one NDR 400 Gb/s port per node
+    "message_latency_s": 5e-6,  # per message, inter-node
+    "gpus_per_node": 8,
+    "tile": 1024,  # tile order of the distributed top fronts (= max_block_size)
+    "subtrees_per_worker": 4,
+}
+
+
+def load(name):
+    with open(os.path.join(RESULTS, name)) as f:
+        return json.load(f)
+
+
+def calibrate():
+    """Rates and overheads from the measured single-machine files."""
+    mg = load("multigpu-20261121T190423Z.json")
+    mem = load("gpu-memory-20261121T180221Z.json")
+    cal = {"pcie_bytes_per_s": mem["device_figures"]["h2d_bytes_per_second"],
+           "dgemm_flops_per_s": mem["device_figures"]["dgemm_flops_per_second"],
+           "problems": {}}
+    for prob in ("lap3d-80", "elast3d-40"):
+        rows = {r["workers"]: r for r in mg["rows"] if r["problem"] == prob}
+        one, four = rows[1], rows[4]
+        devs = four["devices"]
+        # workers 1..3 ran subtrees only: their rate is the subtree rate
+        sub_rate = sum(d["flops"] for d in devs[1:]) / sum(d["busy_seconds"] for d in devs[1:])
+        top_flops = four["top_flops_fraction"] * four["flops"]
+        w0_sub_flops = devs[0]["flops"] - top_flops
+        top_seconds = max(devs[0]["busy_seconds"] - w0_sub_flops / sub_rate, 1e-3)
+        wall = devs[0]["busy_seconds"] + devs[0]["idle_seconds"]
+        cal["problems"][prob] = {
+            "flops": one["flops"],
+            "one_gpu_seconds": one["factor_seconds"],
+            "subtree_rate": sub_rate,
+            "top_rate": top_flops / top_seconds,
+            # factorization time outside the multi-worker driver (scaling, set-up)
+            "host_seconds": four["factor_seconds"] - wall,
+            "four_gpu_seconds": four["factor_seconds"],
+            "subtree_cb_bytes_w4": sum(d["bytes_transferred"] for d in devs) / 2,
+            "top_fraction_w4": four["top_flops_fraction"],
+            "balance_w4": four["subtree_balance"],
+            # entries of the lower triangle: 7-point (4 per row) / 27-point × 3×3 (41 per row)
+            "nnz_lower": one["n"] * (4 if prob.startswith("lap") else 41),
+        }
+    return cal
+
+
+# ---- geometric nested dissection ------------------------------------------------------
+
+def front_flops(k, m):
+    """strata's count: sum over the k pivots of (rows at and below the pivot)^2."""
+    s = lambda t: t * (t + 1) * (2 * t + 1) / 6.0
+    return s(m) - s(m - k)
+
+
+def nd_tree(nx, ny, nz, dof, leaf=64):
+    """Fronts of geometric ND of an nx×ny×nz grid: list of dicts (depth, pivots, cb,
+    flops, subtree_flops), and the tree as children lists. Box faces: 1 when the face
+    borders an earlier separator (its nodes are rows of the fronts inside)."""
+    fronts = []
+
+    def box(dims, faces, depth):
+        a, b, c = dims
+        area = (b * c, b * c, a * c, a * c, a * b, a * b)
+        cb = dof * sum(ar for ar, f in zip(area, faces) if f)
+        nodes = a * b * c
+        if nodes <= leaf or max(dims) < 3:
+            k = dof * nodes
+            fl = front_flops(k, k + cb)
+            fronts.append({"depth": depth, "pivots": k, "cb": cb, "flops": fl,
+                           "subtree_flops": fl, "children": []})
+            return len(fronts) - 1
+        axis = max(range(3), key=lambda i: dims[i])
+        h = dims[axis] // 2
+        left, right = list(dims), list(dims)
+        left[axis], right[axis] = h, dims[axis] - h - 1
+        fl_faces, fr_faces = list(faces), list(faces)
+        fl_faces[2 * axis + 1] = 1
+        fr_faces[2 * axis] = 1
+        kids = [box(tuple(left), fl_faces, depth + 1), box(tuple(right), fr_faces, depth + 1)]
+        k = dof * nodes // dims[axis]
+        fl = front_flops(k, k + cb)
+        fronts.append({"depth": depth, "pivots": k, "cb": cb, "flops": fl,
+                       "subtree_flops": fl + sum(fronts[i]["subtree_flops"] for i in kids),
+                       "children": kids})
+        return len(fronts) - 1
+
+    root = box((nx, ny, nz), (0, 0, 0, 0, 0, 0), 0)
+    return fronts, root
+
+
+def split(fronts, root, workers, per_worker, max_steps=4096):
+    """strata's split (schedule/tree_partition.cpp, Geist & Ng 1989): split the heaviest
+    subtree into its children, score every state by LPT makespan + top work, keep the
+    best state with at least workers × per_worker subtrees. Returns (subtree roots,
+    top fronts)."""
+    subs, top = [root], []
+    best_enough = best_any = None
+    for step in range(max_steps):
+        enough = len(subs) >= workers * per_worker
+        if enough or step % 32 == 0:  # (states short of enough: sampled, for speed)
+            load = lpt_makespan([fronts[f]["subtree_flops"] for f in subs], workers)
+            score = load + sum(fronts[f]["flops"] for f in top)
+            state = (score, list(subs), list(top))
+            if best_any is None or score < best_any[0]:
+                best_any = state
+            if enough and (best_enough is None or score < best_enough[0]):
+                best_enough = state
+        f = max(subs, key=lambda q: fronts[q]["subtree_flops"])
+        if not fronts[f]["children"]:
+            break
+        subs.remove(f)
+        top.append(f)
+        subs.extend(fronts[f]["children"])
+    best = best_enough or best_any
+    return best[1], best[2]
+
+
+def lpt_makespan(works, workers):
+    """Largest load of the LPT assignment (Graham 1969), with a heap."""
+    heap = [0.0] * workers
+    for w in sorted(works, reverse=True):
+        heapq.heapreplace(heap, heap[0] + w)
+    return max(heap)
+
+
+def lpt(works, workers):
+    load = [0.0] * workers
+    owner = []
+    for w in sorted(range(len(works)), key=lambda i: -works[i]):
+        j = min(range(workers), key=lambda q: load[q])
+        load[j] += works[w]
+        owner.append((w, j))
+    return load, dict(owner)
+
+
+# ---- time of one factorization ---------------------------------------------------------
+
+def predict(fronts, root, ranks, gpus, cal, link, schedule="current", flops_scale=1.0):
+    """Seconds of one factorization on ranks × gpus, with the parts that add up to it.
+    link: bytes/s between two ranks (ingress of rank 0), transfers through host
+    memory when link is the MPI path (then two PCIe crossings are added)."""
+    W = ranks * gpus
+    subs, top = split(fronts, root, W, ASSUMED["subtrees_per_worker"])
+    sub_flops = [fronts[s]["subtree_flops"] * flops_scale for s in subs]
+    load, owner = lpt(sub_flops, W)
+    t_sub = max(load) / cal["subtree_rate"]
+    top_flops = sum(fronts[f]["flops"] for f in top) * flops_scale
+    # contribution blocks of subtree roots that leave their rank (rank of worker w: w // gpus)
+    remote = sum(8.0 * fronts[subs[i]]["cb"] ** 2 for i in range(len(subs))
+                 if owner[i] // gpus != 0)
+    local = sum(8.0 * fronts[subs[i]]["cb"] ** 2 for i in range(len(subs))
+                if owner[i] // gpus == 0)
+    pcie = cal["pcie_bytes_per_s"]
+    t_cb = remote / link["rank_bytes_per_s"] + (2 * remote / pcie if link["via_host"] else 0)
+    t_cb += 2 * local / pcie if gpus > 1 else 0  # within rank 0: through host, as measured
+    if schedule == "current":
+        t_top = top_flops / cal["top_rate"]
+        t_top_comm = 0.0
+    else:
+        # subtree-to-subcube: a top front at depth d gets W / 2^d GPUs, tiles 2D cyclic
+        t_top = t_top_comm = 0.0
+        for f in top:
+            fr = fronts[f]
+            P = max(1, W >> fr["depth"])
+            t_top += fr["flops"] * flops_scale / (P * cal["top_rate"])
+            m = fr["pivots"] + fr["cb"]
+            per_gpu = 8.0 * m * m / math.sqrt(P) if P > 1 else 0.0
+            bw = link["nvlink"] if P <= ASSUMED["gpus_per_node"] else \
+                link["ib_per_node"] / ASSUMED["gpus_per_node"]
+            steps = math.ceil(fr["pivots"] / ASSUMED["tile"])
+            lat = steps * 2 * math.log2(P) * ASSUMED["message_latency_s"] if P > 1 else 0
+            t_top_comm += per_gpu / bw + lat
+    return {
+        "ranks": ranks, "gpus_per_rank": gpus, "schedule": schedule,
+        "subtrees": len(subs), "top_flops_fraction": top_flops / (top_flops + sum(sub_flops)),
+        "subtree_seconds": t_sub, "cb_bytes_between_ranks": remote, "cb_seconds": t_cb,
+        "top_seconds": t_top, "top_comm_seconds": t_top_comm,
+        "host_seconds": cal["host_seconds"],
+        "total_seconds": cal["host_seconds"] + t_sub + t_cb + t_top + t_top_comm,
+    }
+
+
+def predict_benchmark(c, ranks, gpus, pcie):
+    """The 4-GPU benchmark, from the measured 4-worker split (same tree and subtrees for
+    1×4, 2×2, 4×1: the analysis is made for 4 workers): subtrees at the measured subtree
+    rate and balance, the top part at the measured top rate on rank 0's GPU, the subtree
+    roots' blocks of the other ranks' workers ((R−1)/R of them, by LPT's even spread)
+    through host memory and MPI (two PCIe crossings plus the shared-memory copy), the
+    values broadcast, and the rest ("host") calibrated so that 1 × 4 is the measured
+    4-GPU time of multigpu-20261121T190423Z.json."""
+    W = ranks * gpus
+    f = c["top_fraction_w4"]
+    t_sub = (1 - f) * c["flops"] / W * c["balance_w4"] / c["subtree_rate"]
+    t_top = f * c["flops"] / c["top_rate"]
+    cb = c["subtree_cb_bytes_w4"]
+    remote = cb * (ranks - 1) / ranks
+    t_cb = remote / ASSUMED["mpi_shm_bytes_per_s"] + 2 * remote / pcie + 2 * (cb - remote) / pcie
+    values = 8.0 * c["nnz_lower"] * (ranks - 1)
+    t_values = values / ASSUMED["mpi_shm_bytes_per_s"]
+    # everything the parts above leave out (scaling, set-up, host buffers, threads) is
+    # taken from the 1 × 4 measurement, and assumed the same for 2 × 2 and 4 × 1
+    base = t_sub + t_top + 2 * cb / pcie
+    other = c["four_gpu_seconds"] - base
+    return {"ranks": ranks, "gpus_per_rank": gpus, "top_flops_fraction": f,
+            "subtree_seconds": t_sub, "top_seconds": t_top, "cb_bytes_between_ranks": remote,
+            "cb_seconds": t_cb, "values_bytes": values, "values_seconds": t_values,
+            "bytes_between_ranks": remote + values,
+            "host_seconds": other,
+            "total_seconds": other + t_sub + t_top + t_cb + t_values}
+
+
+def problem_tree(name):
+    kind, k = name.rsplit("-", 1)
+    k = int(k)
+    dof = 3 if kind.startswith("elast") else 1
+    return nd_tree(k, k, k, dof)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--json", help="write every prediction here")
+    ap.add_argument("--measured", nargs="*", default=[],
+                    help="JSON of scripts/gpu/run_mpi.sh: print measurements beside predictions")
+    args = ap.parse_args()
+    cal = calibrate()
+    import datetime
+    out = {"benchmark": "cost_model", "tag": "prediction",
+           "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
+           "machine": {"cpu": "model", "hardware_threads": 0, "gpu": ""},
+           "command": " ".join(sys.argv), "rows": [],
+           "assumed": ASSUMED, "calibration": cal, "benchmark_4gpu": [], "scaling": []}
+    mpi_host = {"rank_bytes_per_s": ASSUMED["mpi_shm_bytes_per_s"], "via_host": True,
+                "nvlink": ASSUMED["nvlink_bytes_per_s"],
+                "ib_per_node": ASSUMED["ib_bytes_per_s_per_node"]}
+    measured = []
+    for path in args.measured:
+        with open(path) as f:
+            measured.extend(json.load(f).get("rows", []))
+
+    print("# The 4-GPU benchmark (one H200 machine; MPI through host memory between ranks)")
+    print(f"{'problem':<11} {'R x G':<6} {'top %':>6} {'subtree s':>9} {'CB MB':>8} "
+          f"{'CB s':>6} {'vals s':>6} {'top s':>6} {'host s':>6} {'pred s':>7} {'meas s':>7} "
+          f"{'pred MB':>8} {'meas MB':>8}")
+    for prob in ("lap3d-80", "elast3d-40"):
+        c = cal["problems"][prob]
+        for R, G in ((1, 4), (2, 2), (4, 1)):
+            p = predict_benchmark(c, R, G, cal["pcie_bytes_per_s"])
+            p["problem"] = prob
+            m = next((r for r in measured if r.get("problem") == prob and r.get("ranks") == R
+                      and r.get("gpus_per_rank") == G), None)
+            p["measured_seconds"] = m.get("factor_seconds") if m else None
+            p["measured_bytes_between_ranks"] = m.get("bytes_between_ranks") if m else None
+            out["benchmark_4gpu"].append(p)
+            ms = f"{p['measured_seconds']:.3f}" if p["measured_seconds"] else "-"
+            mb = (f"{p['measured_bytes_between_ranks'] / 1e6:.1f}"
+                  if p["measured_bytes_between_ranks"] is not None else "-")
+            print(f"{prob:<11} {R}x{G:<4} {100 * p['top_flops_fraction']:>5.1f}% "
+                  f"{p['subtree_seconds']:>9.3f} {p['cb_bytes_between_ranks'] / 1e6:>8.1f} "
+                  f"{p['cb_seconds']:>6.3f} {p['values_seconds']:>6.3f} {p['top_seconds']:>6.3f} "
+                  f"{p['host_seconds']:>6.2f} {p['total_seconds']:>7.3f} {ms:>7} "
+                  f"{p['bytes_between_ranks'] / 1e6:>8.1f} {mb:>8}")
+
+    print("\n# 8, 64, 512 GPUs (8 GPUs and one rank per node; inter-node "
+          f"{ASSUMED['ib_bytes_per_s_per_node'] / 1e9:.0f} GB/s per node, NCCL)")
+    ib = {"rank_bytes_per_s": ASSUMED["ib_bytes_per_s_per_node"], "via_host": False,
+          "nvlink": ASSUMED["nvlink_bytes_per_s"],
+          "ib_per_node": ASSUMED["ib_bytes_per_s_per_node"]}
+    print(f"{'problem':<12} {'GPUs':>5} {'schedule':<8} {'top %':>6} {'subtree s':>9} "
+          f"{'CB GB':>7} {'CB s':>6} {'top s':>7} {'top comm s':>10} {'numeric s':>9} "
+          f"{'speed-up':>8}")
+    for prob, base in (("lap3d-100", "lap3d-80"), ("elast3d-50", "elast3d-40"),
+                       ("lap3d-200", "lap3d-80"), ("elast3d-100", "elast3d-40")):
+        c = dict(cal["problems"][base])
+        c["pcie_bytes_per_s"] = cal["pcie_bytes_per_s"]
+        c["host_seconds"] = 0.0  # numeric part only: the host time is per machine, not per GPU
+        fronts, root = problem_tree(prob)
+        bf, br = problem_tree(base)
+        scale = c["flops"] / bf[br]["subtree_flops"]
+        one = fronts[root]["subtree_flops"] * scale / c["subtree_rate"]
+        for W in (8, 64, 512):
+            R, G = max(1, W // ASSUMED["gpus_per_node"]), min(W, ASSUMED["gpus_per_node"])
+            for sched in ("current", "tiled"):
+                p = predict(fronts, root, R, G, c, ib, sched, scale)
+                p["problem"] = prob
+                p["gpus"] = W
+                p["one_gpu_numeric_seconds"] = one
+                num = p["total_seconds"]
+                p["speedup_vs_one_gpu"] = one / num
+                out["scaling"].append(p)
+                print(f"{prob:<12} {W:>5} {sched:<8} {100 * p['top_flops_fraction']:>5.1f}% "
+                      f"{p['subtree_seconds']:>9.4f} {p['cb_bytes_between_ranks'] / 1e9:>7.2f} "
+                      f"{p['cb_seconds']:>6.3f} {p['top_seconds']:>7.3f} "
+                      f"{p['top_comm_seconds']:>10.3f} {num:>9.3f} {one / num:>8.1f}")
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(out, f, indent=1)
+        print(f"\nwritten: {args.json}")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,55 @@
+#!/usr/bin/env bash
+# The distributed benchmark on a lent 4-GPU machine (docs/distributed.md §5): on the
+# largest generated problems that fit (lap3d-80 and elast3d-40, as bench_multigpu), the
+# factorization on 1 rank × 4 GPUs, 2 ranks × 2 GPUs and 4 ranks × 1 GPU, each rank's time
+# and bytes moved between ranks, then the cost model's prediction beside each measurement.
+# Results (distributed-*.json, cost-model.json, run_mpi.log) go to $OUT (default
+# bench/results). Needs mpirun: the machine's, or the OpenMPI staged by
+# scripts/gpu/prepare_mpi.sh in .carry-mpi/ (carried with .carry/).
+# Usage: bash scripts/gpu/run_mpi.sh [PROBLEMS] (default lap3d-80,elast3d-40)
+set -uo pipefail
+cd "$(dirname "$0")/../.."
+OUT=${OUT:-bench/results}
+mkdir -p "$OUT"
+problems=${1:-lap3d-80,elast3d-40}
+log="$OUT/run_mpi.log"
+exec > >(tee -a "$log") 2>&1
+if [ -f .carry/lib/libopenblas.so.0.xz ] && [ ! -f .carry/lib/libopenblas.so.0 ]; then
+  xz -dk .carry/lib/*.xz
+fi
+export LD_LIBRARY_PATH="$PWD/.carry/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+# NCCL (for a STRATA_NCCL build) from PyTorch's nvidia-nccl wheel when present
+nccl_lib=$(python3 -c 'import nvidia.nccl, os; print(os.path.join(os.path.dirname(nvidia.nccl.__file__), "lib"))' 2>/dev/null || true)
+[ -n "$nccl_lib" ] && export LD_LIBRARY_PATH="$nccl_lib:$LD_LIBRARY_PATH"
+if ! command -v mpirun >/dev/null 2>&1; then
+  if [ -f .carry-mpi/openmpi.tar.xz ]; then
+    root="$PWD/.carry-mpi/root"
+    mkdir -p "$root" && tar -C "$root" -xJf .carry-mpi/openmpi.tar.xz
+    export OPAL_PREFIX="$root/usr" PATH="$root/usr/bin:$PATH"
+    export LD_LIBRARY_PATH="$root/usr/lib/x86_64-linux-gnu:$root/usr/lib/x86_64-linux-gnu/openmpi/lib:$LD_LIBRARY_PATH"
+    export PMIX_INSTALL_PREFIX="$root/usr" OMPI_MCA_mca_base_component_show_load_errors=0
+    echo "run_mpi: using the OpenMPI staged in .carry-mpi ($root)"
+  else
+    echo "run_mpi: NO MPIRUN ON THIS MACHINE and no staged OpenMPI (.carry-mpi/openmpi.tar.xz):"
+    echo "run_mpi: run scripts/gpu/prepare_mpi.sh on the build machine and carry .carry-mpi"
+    exit 2
+  fi
+fi
+bench=.carry-mpi/bin/bench_distributed
+[ -x "$bench" ] || bench=.carry/bin/bench_distributed
+[ -x "$bench" ] || bench=build/bench/bench_distributed
+[ -x "$bench" ] || { echo "run_mpi: no bench_distributed binary"; exit 2; }
+export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
+nvidia-smi -L || true
+mpirun --version | head -1
+status=0
+for cfg in 1x4 2x2 4x1; do
+  r=${cfg%x*} g=${cfg#*x}
+  echo "=== $r rank(s) x $g GPU(s): $problems"
+  # --bind-to none: each rank drives its GPUs from several host threads
+  mpirun -n "$r" --bind-to none --oversubscribe -x LD_LIBRARY_PATH -x PATH \
+    "$bench" --backend cuda --gpus-per-rank "$g" --problems "$problems" --repeat 3 \
+    --tag "${r}x${g}" --results-dir "$OUT" || status=1
+done
+python3 bench/cost_model.py --json "$OUT/cost-model.json" --measured "$OUT"/distributed-*.json || status=1
+exit $status

@@ -1,0 +1,120 @@
+// strata — internals of the distributed solver (docs/distributed.md): who owns which part
+// of the tree, the command protocol between rank 0 and the other ranks, the numeric
+// factorization and the triangular solves across ranks, and the hooks tests use.
+#pragma once
+
+#include <cstdint>
+#include <exception>
+#include <memory>
+#include <optional>
+#include <vector>
+
+#include "core/analysis.hpp"
+#include "distributed/comm.hpp"
+#include "numeric/factor.hpp"
+#include "strata/distributed.hpp"
+#include "strata/solver.hpp"
+
+namespace strata::distributed {
+
+/// Which rank holds what, for an analysis split for ranks × workers_per_rank workers:
+/// global worker w runs on rank w / workers_per_rank, so subtree i (partition owner
+/// o) is factored on rank o / workers_per_rank; the top part on rank 0.
+struct RankLayout {
+  int ranks = 1;
+  int rank = 0;
+  int workers_per_rank = 1;
+  std::vector<int> subtree_rank;              ///< per subtree
+  std::vector<std::vector<int>> subtrees_of;  ///< per rank, increasing subtree index
+  std::vector<index_t> my_fronts;             ///< fronts of this rank's subtrees, increasing
+  std::vector<index_t> top_cols;              ///< pivot columns of the top part, increasing
+  std::vector<index_t> col_begin, col_end;    ///< pivot columns of subtree i: [begin, end)
+};
+
+/// The layout of `an` (split for ranks × workers_per_rank workers) seen from `rank`.
+RankLayout make_layout(const Analysis& an, int ranks, int rank, int workers_per_rank);
+
+/// Gives `an` a factor layout holding only the panels of the rank's fronts (its subtrees,
+/// each in its part's schedule order, then the top part on rank 0); the other fronts'
+/// offsets point at the end (they are never read or written on this rank). So each rank
+/// stores its share of the factor, not all of it.
+void localize_factor_layout(Analysis& an, const RankLayout& layout);
+
+/// Commands rank 0 broadcasts to the others (they follow them in follow()).
+enum class Command : std::int32_t { analysis = 1, factor = 2, apply = 3, end = 4, error = 5 };
+
+struct Header {
+  Command command = Command::end;
+  std::int32_t a = 0;         ///< analysis: workers per rank; factor: MatrixType; error: kind
+  std::int64_t b = 0;         ///< apply: nrhs; error: column / bytes
+  double c = 0;               ///< factor: static pivot; error: pivot
+  std::uint64_t payload = 0;  ///< bytes that follow
+};
+
+/// Rank 0: broadcasts a command and its payload.
+void send_command(detail::CommImpl& comm, Header h, const void* payload = nullptr);
+/// The other ranks: receives the next command; its payload goes to `payload`.
+Header receive_command(detail::CommImpl& comm, std::vector<char>& payload);
+
+/// The error `e` as a command (type, message and the fields of NotPositiveDefinite and
+/// OutOfMemory), and back: throws the exception it describes.
+Header error_header(std::exception_ptr e, std::vector<char>& message);
+[[noreturn]] void throw_error(const Header& h, const std::vector<char>& message);
+
+/// Collective: when any rank passes an error, every rank throws the error of the lowest
+/// such rank (same type and message, prefixed by the rank). Returns when none failed.
+void agree(detail::CommImpl& comm, std::exception_ptr mine);
+
+struct NcclContext;  // nccl_blocks.cpp (STRATA_NCCL)
+
+/// What every rank keeps for the numeric phases.
+struct NumericState {
+  RankLayout layout;
+  std::vector<std::unique_ptr<numeric::Executor>> executors;  ///< this rank's workers
+  std::vector<std::vector<double>> arenas;
+  std::vector<DeviceStats> devices;
+  RankStats stats;    ///< this rank's figures of the current phases
+  bool nccl = false;  ///< contribution blocks between GPUs through NCCL
+  std::shared_ptr<NcclContext> nccl_context;
+};
+
+/// Collective: this rank's part of the factorization of the scaled values: its subtrees
+/// on its executors, the subtree roots' contribution blocks and pivot statistics to rank
+/// 0, and there the top part. Throws on every rank what failed on any (agree()); the top
+/// part's errors only on rank 0.
+void factor_part(detail::CommImpl& comm, NumericState& ns, const Analysis& an,
+                 const std::vector<double>& values, MatrixType type, double static_pivot,
+                 bool work_stealing, numeric::NumericFactor& factor);
+
+/// Collective: one solve with the distributed factor. x (tree numbering, n×nrhs) holds b
+/// on rank 0 on entry and the solution there on return; on the other ranks it is n×nrhs
+/// scratch.
+void solve_part(detail::CommImpl& comm, NumericState& ns, const Analysis& an,
+                const numeric::NumericFactor& factor, double* x, index_t nrhs);
+
+}  // namespace strata::distributed
+
+namespace strata::detail {
+
+struct DistributedState {
+  Communicator comm;
+  Options options;
+  int host_workers = 0;           ///< DistributedAccess::use_host_workers
+  std::optional<Solver> solver;   ///< rank 0 (and the one-rank case)
+  std::optional<Analysis> copy;   ///< the other ranks: the broadcast analysis
+  Analysis* analysis = nullptr;   ///< rank 0: the Solver's; others: &*copy
+  numeric::NumericFactor factor;  ///< the other ranks' share of the factor
+  std::vector<double> values;     ///< the other ranks: the broadcast scaled values
+  distributed::NumericState numeric;
+  Stats stats;  ///< the other ranks: analysis figures only
+  DistributedStats dstats;
+};
+
+/// Test hooks.
+struct DistributedAccess {
+  /// Every rank runs `per_rank` CPU executors (one host thread each) as its workers, as
+  /// it would run that many GPUs. Call before analyze on every rank.
+  static void use_host_workers(DistributedSolver& s, int per_rank);
+};
+
+}  // namespace strata::detail

@@ -1,0 +1,359 @@
+// strata — DistributedSolver: the Solver over the ranks of a Communicator
+// (docs/distributed.md).
+//
+// Rank 0 holds an ordinary Solver whose numeric phases are replaced (SolverAccess::
+// set_external) by the collective ones of numeric.cpp, so that validation, type
+// resolution (Cholesky first, LDLᵀ on failure), scaling, static pivoting, statistics and
+// iterative refinement are exactly the Solver's. The other ranks wait in the same public
+// call and follow rank 0's commands (protocol.cpp): the analysis, computed once on rank 0
+// and broadcast; the scaled values, broadcast at every (re)factorization; one command per
+// solve with the factor (refinement and GMRES make several). Each phase ends with `end`
+// and a gather of every rank's figures onto rank 0, or with `error`, which every rank
+// throws. With one rank the Solver runs alone.
+#include <cstring>
+
+#include "core/solver_internal.hpp"
+#include "core/timer.hpp"
+#include "distributed/distributed_internal.hpp"
+#include "distributed/serialize.hpp"
+
+namespace strata {
+
+using detail::DistributedState;
+using namespace distributed;
+
+namespace {
+
+bool wants_gpu(const DistributedState& s) {
+  return s.host_workers == 0 &&
+         (s.options.backend == Backend::cuda ||
+          (s.options.backend == Backend::automatic && numeric::cuda_available()));
+}
+
+// Rank 0: the workers each rank runs (the GPUs of a rank, or one CPU executor).
+int workers_per_rank(const DistributedState& s) {
+  if (s.host_workers > 0) return s.host_workers;
+  if (!wants_gpu(s)) return 1;
+  if (s.options.num_gpus < 0)
+    throw InvalidInput("Options::num_gpus must be at least 0 (got " +
+                       std::to_string(s.options.num_gpus) + ")");
+  if (s.options.num_gpus > 0) return s.options.num_gpus;
+  const int visible = numeric::cuda_device_count();
+  return std::max(1, visible / std::max(1, s.comm.impl()->local_size()));
+}
+
+// Bytes this rank moved between two points, added to a pair of counters.
+class ByteCount {
+ public:
+  explicit ByteCount(const detail::CommImpl& c)
+      : c_(c), sent_(c.bytes_sent), received_(c.bytes_received) {}
+  void add_to(std::size_t& sent, std::size_t& received) const {
+    sent += c_.bytes_sent - sent_;
+    received += c_.bytes_received - received_;
+  }
+
+ private:
+  const detail::CommImpl& c_;
+  std::size_t sent_, received_;
+};
+
+// Every rank, after the analysis is known: who owns what, this rank's share of the
+// factor, and its executors (their creation can fail on one rank: agreed).
+void setup_numeric(DistributedState& s, Analysis& an, int per_rank) {
+  detail::CommImpl& comm = *s.comm.impl();
+  NumericState& ns = s.numeric;
+  std::exception_ptr failed;
+  try {
+    ns.layout = make_layout(an, comm.size(), comm.rank(), per_rank);
+    localize_factor_layout(an, ns.layout);
+    ns.executors.clear();
+    ns.arenas.clear();
+    const bool gpu = wants_gpu(s);
+    const int visible = gpu ? numeric::cuda_device_count() : 0;
+    for (int g = 0; g < per_rank; ++g) {
+      if (!gpu) {
+        ns.executors.push_back(numeric::make_cpu_executor(
+            s.host_workers > 0 ? 1 : s.options.num_threads, s.options.reproducible));
+      } else {
+        const int device = visible > 0 ? (comm.local_rank() * per_rank + g) % visible : g;
+        ns.executors.push_back(numeric::make_cuda_executor(s.options, device));
+      }
+    }
+#ifdef STRATA_HAVE_NCCL
+    ns.nccl = gpu && comm.size() > 1;
+#endif
+  } catch (...) {
+    failed = std::current_exception();
+  }
+  agree(comm, failed);
+}
+
+// Every rank: this rank's factorization; an error is thrown on every rank by agree()
+// inside, except the top part's (rank 0 only).
+void run_factor(DistributedState& s, const Analysis& an, const std::vector<double>& values,
+                MatrixType type, double pivot, numeric::NumericFactor& factor) {
+  factor_part(*s.comm.impl(), s.numeric, an, values, type, pivot, s.options.work_stealing, factor);
+}
+
+// Rank 0's replacement of the Solver's numeric phases.
+detail::ExternalNumeric hooks(DistributedState& s, int per_rank) {
+  detail::ExternalNumeric ext;
+  ext.workers = s.comm.size() * per_rank;
+  ext.backend = wants_gpu(s) ? "cuda" : "cpu";
+  ext.factor = [&s](const Analysis& an, const std::vector<double>& values, MatrixType type,
+                    double pivot, numeric::NumericFactor& factor) {
+    detail::CommImpl& comm = *s.comm.impl();
+    ByteCount bytes(comm);
+    Header h;
+    h.command = Command::factor;
+    h.a = static_cast<std::int32_t>(type);
+    h.c = pivot;
+    h.payload = sizeof(double) * values.size();
+    try {
+      send_command(comm, h, values.data());
+      run_factor(s, an, values, type, pivot, factor);
+    } catch (...) {
+      bytes.add_to(s.numeric.stats.factor_bytes_sent, s.numeric.stats.factor_bytes_received);
+      throw;
+    }
+    bytes.add_to(s.numeric.stats.factor_bytes_sent, s.numeric.stats.factor_bytes_received);
+  };
+  ext.solve = [&s](const Analysis& an, const numeric::NumericFactor& factor, double* x,
+                   index_t nrhs) {
+    detail::CommImpl& comm = *s.comm.impl();
+    ByteCount bytes(comm);
+    Header h;
+    h.command = Command::apply;
+    h.b = nrhs;
+    send_command(comm, h);
+    solve_part(comm, s.numeric, an, factor, x, nrhs);
+    bytes.add_to(s.numeric.stats.solve_bytes_sent, s.numeric.stats.solve_bytes_received);
+  };
+  ext.report = [&s](FactorStats& fs) {
+    fs.devices = s.numeric.devices;
+    for (const auto& e : s.numeric.executors) {
+      FactorStats one;
+      e->report(one);
+      fs.device_seconds = std::max(fs.device_seconds, one.device_seconds);
+      fs.bytes_to_device += one.bytes_to_device;
+      fs.bytes_to_host += one.bytes_to_host;
+      fs.device_batches += one.device_batches;
+      fs.tiled_fronts += one.tiled_fronts;
+      fs.device_budget = std::max(fs.device_budget, one.device_budget);
+      fs.contribution_blocks_on_host |= one.contribution_blocks_on_host;
+    }
+  };
+  return ext;
+}
+
+// Every rank at the end of a phase: every rank's figures onto rank 0.
+void gather_stats(DistributedState& s) {
+  detail::CommImpl& comm = *s.comm.impl();
+  RankStats mine = s.numeric.stats;
+  mine.rank = comm.rank();
+  std::vector<char> bytes(sizeof mine);
+  std::memcpy(bytes.data(), &mine, sizeof mine);
+  std::vector<std::vector<char>> all;
+  comm.gather(bytes, all, 0);
+  s.dstats.ranks = comm.size();
+  s.dstats.per_rank.clear();
+  if (comm.rank() != 0) {
+    s.dstats.per_rank.push_back(mine);
+    return;
+  }
+  for (const auto& b : all) {
+    RankStats r;
+    if (b.size() != sizeof r) throw InvalidInput("internal: rank statistics of the wrong size");
+    std::memcpy(&r, b.data(), sizeof r);
+    s.dstats.per_rank.push_back(r);
+  }
+}
+
+// Rank 0: the analysis broadcast and the numeric setup, after Solver::analyze.
+void lead_analysis(DistributedState& s, const SparseMatrix& a) {
+  detail::CommImpl& comm = *s.comm.impl();
+  s.analysis = nullptr;
+  const int per_rank = workers_per_rank(s);
+  detail::SolverAccess::set_external(*s.solver, hooks(s, per_rank));
+  s.solver->analyze(a);
+  Analysis& an = *detail::SolverAccess::analysis(*s.solver);
+  Timer timer;
+  const std::vector<char> bytes = serialize(an);
+  Header h;
+  h.command = Command::analysis;
+  h.a = per_rank;
+  h.payload = bytes.size();
+  send_command(comm, h, bytes.data());
+  s.dstats.analysis_bytes = bytes.size();
+  s.dstats.analysis_broadcast_seconds = timer.seconds();
+  s.dstats.workers_per_rank = per_rank;
+  s.numeric.stats = RankStats{};
+  try {
+    setup_numeric(s, an, per_rank);
+  } catch (...) {  // no usable analysis: a later factorize analyzes again
+    detail::SolverAccess::set_external(*s.solver, hooks(s, per_rank));
+    throw;
+  }
+  s.analysis = &an;
+}
+
+// Rank 0: runs one public phase; ends it with `end` and the figures, or `error`.
+template <class F>
+void lead(DistributedState& s, F&& f) {
+  detail::CommImpl& comm = *s.comm.impl();
+  try {
+    f();
+  } catch (...) {
+    std::vector<char> message;
+    const Header h = error_header(std::current_exception(), message);
+    send_command(comm, h, message.data());
+    throw;
+  }
+  Header h;
+  h.command = Command::end;
+  send_command(comm, h);
+  gather_stats(s);
+}
+
+// The other ranks: follows rank 0's commands until the phase ends.
+void follow(DistributedState& s) {
+  detail::CommImpl& comm = *s.comm.impl();
+  std::vector<char> payload;
+  RankStats& st = s.numeric.stats;
+  for (;;) {
+    ByteCount bytes(comm);
+    const Header h = receive_command(comm, payload);
+    switch (h.command) {
+      case Command::analysis: {
+        s.analysis = nullptr;
+        s.factor = numeric::NumericFactor{};
+        s.copy = deserialize(payload);
+        s.analysis = &*s.copy;
+        s.stats = Stats{};
+        s.stats.analysis = s.copy->stats;
+        s.dstats.analysis_bytes = payload.size();
+        s.dstats.workers_per_rank = h.a;
+        st = RankStats{};
+        setup_numeric(s, *s.copy, h.a);
+        break;
+      }
+      case Command::factor: {
+        if (!s.analysis) throw InvalidState("internal: factor command before the analysis");
+        s.values.resize(payload.size() / sizeof(double));
+        std::memcpy(s.values.data(), payload.data(), payload.size());
+        try {
+          run_factor(s, *s.analysis, s.values, static_cast<MatrixType>(h.a), h.c, s.factor);
+        } catch (...) {
+          // agreed with every rank inside factor_part: rank 0 decides what follows (the
+          // LDLᵀ retry of an automatic type, or an `error` command)
+        }
+        bytes.add_to(st.factor_bytes_sent, st.factor_bytes_received);
+        break;
+      }
+      case Command::apply: {
+        if (!s.analysis || !s.factor.valid)
+          throw InvalidState("internal: solve command without a factor");
+        std::vector<double> x(static_cast<std::size_t>(s.analysis->n) * h.b);
+        solve_part(comm, s.numeric, *s.analysis, s.factor, x.data(), h.b);
+        bytes.add_to(st.solve_bytes_sent, st.solve_bytes_received);
+        break;
+      }
+      case Command::end:
+        gather_stats(s);
+        return;
+      case Command::error:
+        throw_error(h, payload);
+    }
+  }
+}
+
+void reset_factor_stats(RankStats& st) {
+  st.factor_seconds = 0;
+  st.factor_bytes_sent = st.factor_bytes_received = 0;
+}
+void reset_solve_stats(RankStats& st) {
+  st.solve_seconds = 0;
+  st.solve_bytes_sent = st.solve_bytes_received = 0;
+}
+
+}  // namespace
+
+DistributedSolver::DistributedSolver(Communicator comm, Options options)
+    : state_(std::make_unique<DistributedState>()) {
+  state_->comm = std::move(comm);
+  state_->options = std::move(options);
+  if (state_->comm.rank() == 0) state_->solver.emplace(state_->options);
+  state_->dstats.ranks = state_->comm.size();
+}
+DistributedSolver::~DistributedSolver() = default;
+DistributedSolver::DistributedSolver(DistributedSolver&&) noexcept = default;
+DistributedSolver& DistributedSolver::operator=(DistributedSolver&&) noexcept = default;
+
+void DistributedSolver::analyze(const SparseMatrix& a) {
+  DistributedState& s = *state_;
+  if (s.comm.size() == 1) return s.solver->analyze(a);
+  if (s.comm.rank() != 0) return follow(s);
+  lead(s, [&] { lead_analysis(s, a); });
+}
+
+void DistributedSolver::factorize(const SparseMatrix& a) {
+  DistributedState& s = *state_;
+  if (s.comm.size() == 1) return s.solver->factorize(a);
+  reset_factor_stats(s.numeric.stats);
+  if (s.comm.rank() != 0) return follow(s);
+  lead(s, [&] {
+    if (!s.analysis) lead_analysis(s, a);
+    s.solver->factorize(a);
+  });
+}
+
+void DistributedSolver::refactorize(const SparseMatrix& a) {
+  DistributedState& s = *state_;
+  if (s.comm.size() == 1) return s.solver->refactorize(a);
+  reset_factor_stats(s.numeric.stats);
+  if (s.comm.rank() != 0) return follow(s);
+  lead(s, [&] { s.solver->refactorize(a); });
+}
+
+void DistributedSolver::solve(const double* b, double* x, index_t nrhs) {
+  DistributedState& s = *state_;
+  if (s.comm.size() == 1) return s.solver->solve(b, x, nrhs);
+  reset_solve_stats(s.numeric.stats);
+  if (s.comm.rank() != 0) return follow(s);
+  lead(s, [&] { s.solver->solve(b, x, nrhs); });
+}
+
+std::vector<double> DistributedSolver::solve(const std::vector<double>& b) {
+  DistributedState& s = *state_;
+  if (s.comm.size() == 1) return s.solver->solve(b);
+  reset_solve_stats(s.numeric.stats);
+  if (s.comm.rank() != 0) {
+    follow(s);
+    return {};
+  }
+  std::vector<double> x;
+  lead(s, [&] { x = s.solver->solve(b); });
+  return x;
+}
+
+index_t DistributedSolver::size() const {
+  const DistributedState& s = *state_;
+  if (s.solver) return s.solver->size();
+  return s.analysis ? s.analysis->n : 0;
+}
+
+const Stats& DistributedSolver::stats() const {
+  return state_->solver ? state_->solver->stats() : state_->stats;
+}
+const DistributedStats& DistributedSolver::distributed_stats() const { return state_->dstats; }
+const Communicator& DistributedSolver::communicator() const { return state_->comm; }
+
+void detail::DistributedAccess::use_host_workers(DistributedSolver& solver, int per_rank) {
+  if (per_rank < 0) throw InvalidInput("use_host_workers: per_rank must be at least 0");
+  DistributedState& s = *solver.state_;
+  s.host_workers = per_rank;
+  if (s.comm.size() == 1 && s.solver)
+    detail::SolverAccess::use_host_workers(*s.solver, per_rank, 1);
+}
+
+}  // namespace strata

@@ -1,0 +1,276 @@
+// strata tests — the distributed solver over MPI ranks (src/distributed), run by ctest
+// under `mpiexec -n 2` and `-n 4` on the CPU backend. Every rank runs every test; the
+// matrices and right-hand sides exist on rank 0 only (the others pass empty ones), and
+// rank 0 checks the distributed solution against the one-process Solver on the same
+// matrix, against a dense LAPACK solve where the matrix is small, and its backward error;
+// the pivot statistics (inertia, perturbed pivots, log|det|), which rank 0 assembles from
+// every rank's fronts, against the one-process figures. Also: refactorization with new
+// values, several right-hand sides, R ranks × 2 CPU workers each, and an error raised on
+// some rank thrown on every rank.
+#include <gtest/gtest.h>
+#include <mpi.h>
+
+#include <cmath>
+#include <string>
+
+#include "distributed/distributed_internal.hpp"
+#include "sparse/generators.hpp"
+#include "strata/distributed.hpp"
+#include "strata/mpi.hpp"
+#include "strata/strata.hpp"
+#include "support/test_support.hpp"
+
+namespace strata {
+namespace {
+
+int world_rank() {
+  int r = 0;
+  MPI_Comm_rank(MPI_COMM_WORLD, &r);
+  return r;
+}
+int world_size() {
+  int r = 0;
+  MPI_Comm_size(MPI_COMM_WORLD, &r);
+  return r;
+}
+
+struct Problem {
+  std::string name;
+  SparseMatrix a;  // empty on ranks other than 0
+  MatrixType type;
+};
+
+// spd, symmetric indefinite and general problems (built on rank 0 only): generated 3D
+// grids, shared matrices, random matrices of awkward sizes.
+std::vector<Problem> problems() {
+  const bool root = world_rank() == 0;
+  auto rng = test::fresh_rng();
+  std::vector<Problem> p;
+  auto on_root = [&](auto make) { return root ? make() : SparseMatrix{}; };
+  auto shared = [&](const char* name) {
+    return on_root([&] { return read_matrix_market(test::matrix_path(name)).matrix; });
+  };
+  p.push_back(
+      {"lap3d 12", on_root([] { return generators::laplacian_3d(12, 12, 12); }), MatrixType::spd});
+  p.push_back({"elasticity 5", on_root([] { return generators::elasticity_3d(5, 5, 5); }),
+               MatrixType::spd});
+  p.push_back({"bcsstk16", shared("bcsstk16"), MatrixType::spd});
+  for (index_t n : {1, 2, 5, 733})
+    p.push_back({"random spd " + std::to_string(n),
+                 on_root([&] { return test::random_sparse(n, 3, test::RandomKind::spd, rng); }),
+                 MatrixType::spd});
+  p.push_back({"hangGlider_2", shared("hangGlider_2"), MatrixType::symmetric_indefinite});
+  p.push_back({"random kkt 733", on_root([&] { return test::random_kkt(733, rng); }),
+               MatrixType::symmetric_indefinite});
+  p.push_back({"random indefinite 3", on_root([&] {
+                 return test::random_sparse(3, 2, test::RandomKind::symmetric_indefinite, rng);
+               }),
+               MatrixType::symmetric_indefinite});
+  p.push_back({"random indefinite 1500 (automatic)", on_root([&] {
+                 return test::random_sparse(1500, 4, test::RandomKind::symmetric_indefinite, rng);
+               }),
+               MatrixType::automatic});
+  p.push_back({"watt_2", shared("watt_2"), MatrixType::general});
+  p.push_back({"nnc1374", shared("nnc1374"), MatrixType::general});
+  p.push_back({"random general 5",
+               on_root([&] { return test::random_sparse(5, 2, test::RandomKind::general, rng); }),
+               MatrixType::general});
+  p.push_back({"random general 1500", on_root([&] {
+                 return test::random_sparse(1500, 4, test::RandomKind::general, rng);
+               }),
+               MatrixType::general});
+  return p;
+}
+
+Options options_for(MatrixType type) {
+  Options o;
+  o.type = type;
+  o.num_threads = 1;  // several ranks share the machine's cores
+  return o;
+}
+
+// Rank 0: the distributed run against the one-process Solver and a dense solve.
+void check_against_one_process(const Problem& pr, const DistributedSolver& ds,
+                               const std::vector<double>& b, const std::vector<double>& x,
+                               index_t nrhs) {
+  const SparseMatrix& a = pr.a;
+  const index_t n = a.n_rows;
+  Solver ref(options_for(pr.type));
+  ref.factorize(a);
+  std::vector<double> xr(b.size());
+  ref.solve(b.data(), xr.data(), nrhs);
+  const FactorStats& f = ds.stats().factor;
+  const FactorStats& fr = ref.stats().factor;
+  EXPECT_EQ(f.type, fr.type);
+  EXPECT_EQ(f.inertia_positive, fr.inertia_positive);
+  EXPECT_EQ(f.inertia_negative, fr.inertia_negative);
+  EXPECT_EQ(f.inertia_zero, fr.inertia_zero);
+  if (f.perturbed_pivots == 0 && fr.perturbed_pivots == 0) {
+    EXPECT_EQ(f.determinant_sign, fr.determinant_sign);
+    EXPECT_NEAR(f.log_abs_determinant, fr.log_abs_determinant,
+                1e-8 * std::max(1.0, std::abs(fr.log_abs_determinant)));
+  }
+  for (index_t c = 0; c < nrhs; ++c) {
+    const double berr = test::backward_error(a, x.data() + c * n, b.data() + c * n);
+    const double berr_ref = test::backward_error(a, xr.data() + c * n, b.data() + c * n);
+    EXPECT_LE(berr, std::max(1e-14, 2 * berr_ref)) << "column " << c;
+    const std::vector<double> xc(x.begin() + c * n, x.begin() + (c + 1) * n);
+    const std::vector<double> xrc(xr.begin() + c * n, xr.begin() + (c + 1) * n);
+    EXPECT_LT(test::relative_difference(xc, xrc), 1e-8) << "column " << c;
+  }
+  if (n <= 1500) {  // an independent reference: dense LAPACK LU
+    std::vector<double> xd = b;
+    ASSERT_TRUE(test::dense_solve(test::to_dense(a), n, xd, nrhs));
+    EXPECT_LT(test::relative_difference(x, xd), 1e-7);
+  }
+}
+
+// Every problem, every type: the distributed solution agrees with the one-process one;
+// every rank factored its subtrees and rank 0 gathered every rank's figures.
+void run_all(int workers_per_rank) {
+  const int rank = world_rank(), ranks = world_size();
+  std::uniform_real_distribution<double> u(-1, 1);
+  auto rng = test::fresh_rng();
+  for (const Problem& pr : problems()) {
+    SCOPED_TRACE(pr.name + ", " + std::to_string(ranks) + " ranks x " +
+                 std::to_string(workers_per_rank));
+    DistributedSolver ds(mpi_communicator(MPI_COMM_WORLD), options_for(pr.type));
+    if (workers_per_rank > 1) detail::DistributedAccess::use_host_workers(ds, workers_per_rank);
+    const index_t nrhs = pr.name == "bcsstk16" ? 3 : 1;
+    const index_t n = pr.a.n_rows;
+    std::vector<double> b(static_cast<std::size_t>(n) * nrhs);
+    for (double& v : b) v = u(rng);
+    std::vector<double> x(b.size());
+    ds.analyze(pr.a);
+    ds.factorize(pr.a);
+    ds.solve(rank == 0 ? b.data() : nullptr, rank == 0 ? x.data() : nullptr, nrhs);
+    const DistributedStats& st = ds.distributed_stats();
+    if (rank != 0) {
+      ASSERT_EQ(st.per_rank.size(), 1u);
+      continue;
+    }
+    EXPECT_EQ(ds.stats().analysis.workers, ranks * workers_per_rank);
+    ASSERT_EQ(st.per_rank.size(), static_cast<std::size_t>(ranks));
+    index_t subtrees = 0;
+    std::size_t held = 0;
+    for (int r = 0; r < ranks; ++r) {
+      EXPECT_EQ(st.per_rank[r].rank, r);
+      subtrees += st.per_rank[r].subtrees;
+      held += st.per_rank[r].factor_bytes_held;
+    }
+    EXPECT_EQ(subtrees, ds.stats().analysis.subtrees);
+    EXPECT_EQ(held, ds.stats().analysis.factor_bytes)
+        << "the ranks' shares of the factor do not add up to the factor";
+    check_against_one_process(pr, ds, b, x, nrhs);
+  }
+}
+
+TEST(Distributed, SameSolutionAsOneProcessAllTypes) { run_all(1); }
+
+TEST(Distributed, TwoWorkersPerRank) {
+  // rank × 2 CPU executors, as ranks × 2 GPUs: work stealing within a rank
+  const int rank = world_rank();
+  auto rng = test::fresh_rng();
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (auto [kind, type] :
+       {std::pair{test::RandomKind::spd, MatrixType::spd},
+        std::pair{test::RandomKind::symmetric_indefinite, MatrixType::symmetric_indefinite},
+        std::pair{test::RandomKind::general, MatrixType::general}}) {
+    SCOPED_TRACE(to_string(type));
+    Problem pr{"random 733", rank == 0 ? test::random_sparse(733, 3, kind, rng) : SparseMatrix{},
+               type};
+    DistributedSolver ds(mpi_communicator(MPI_COMM_WORLD), options_for(type));
+    detail::DistributedAccess::use_host_workers(ds, 2);
+    std::vector<double> b(733);
+    for (double& v : b) v = u(rng);
+    ds.factorize(pr.a);  // analyzes first
+    const std::vector<double> x = ds.solve(rank == 0 ? b : std::vector<double>{});
+    if (rank != 0) {
+      EXPECT_TRUE(x.empty());
+      continue;
+    }
+    EXPECT_EQ(ds.distributed_stats().workers_per_rank, 2);
+    EXPECT_EQ(ds.stats().analysis.workers, 2 * world_size());
+    check_against_one_process(pr, ds, b, x, 1);
+  }
+}
+
+// New values with the analyzed pattern: the solution of a fresh one-process solver.
+TEST(Distributed, Refactorization) {
+  const int rank = world_rank();
+  auto rng = test::fresh_rng();
+  std::uniform_real_distribution<double> u(-1, 1), scale(0.8, 1.2);
+  for (auto [kind, type] :
+       {std::pair{test::RandomKind::spd, MatrixType::spd},
+        std::pair{test::RandomKind::symmetric_indefinite, MatrixType::symmetric_indefinite},
+        std::pair{test::RandomKind::general, MatrixType::general}}) {
+    SCOPED_TRACE(to_string(type));
+    const index_t n = 900;
+    Problem pr{"random 900", rank == 0 ? test::random_sparse(n, 3, kind, rng) : SparseMatrix{},
+               type};
+    DistributedSolver ds(mpi_communicator(MPI_COMM_WORLD), options_for(type));
+    ds.analyze(pr.a);
+    ds.factorize(pr.a);
+    std::vector<double> b(n);
+    for (double& v : b) v = u(rng);
+    SparseMatrix a2 = pr.a;
+    if (rank == 0) {
+      std::vector<double> d(n);
+      for (double& v : d) v = scale(rng);
+      for (index_t j = 0; j < a2.n_cols; ++j)
+        for (index_t p = a2.offsets[j]; p < a2.offsets[j + 1]; ++p)
+          a2.values[p] *= d[a2.indices[p]] * d[j];
+    }
+    ds.refactorize(a2);
+    std::vector<double> x(n);
+    ds.solve(rank == 0 ? b.data() : nullptr, rank == 0 ? x.data() : nullptr, 1);
+    if (rank != 0) continue;
+    Problem p2{pr.name, a2, type};
+    check_against_one_process(p2, ds, b, x, 1);
+  }
+}
+
+// Errors: a matrix declared spd that is not (its failing pivot may be on any rank) gives
+// NotPositiveDefinite on every rank; a bad right-hand side on rank 0 gives InvalidInput on
+// every rank; and the solver stays usable.
+TEST(Distributed, ErrorsReachEveryRank) {
+  const int rank = world_rank();
+  SparseMatrix a;
+  if (rank == 0) {
+    a = generators::laplacian_3d(10, 10, 10);
+    for (index_t j = 0; j < a.n_cols; ++j)
+      for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p)
+        if (a.indices[p] == j) a.values[p] -= 4.0;  // indefinite
+  }
+  DistributedSolver ds(mpi_communicator(MPI_COMM_WORLD), options_for(MatrixType::spd));
+  ds.analyze(a);
+  EXPECT_THROW(ds.factorize(a), NotPositiveDefinite);
+  DistributedSolver dsi(mpi_communicator(MPI_COMM_WORLD),
+                        options_for(MatrixType::symmetric_indefinite));
+  dsi.factorize(a);
+  std::vector<double> b(rank == 0 ? 1000 : 0, 1.0);
+  if (rank == 0) b[3] = std::nan("");
+  std::vector<double> x(b.size());
+  EXPECT_THROW(dsi.solve(rank == 0 ? b.data() : nullptr, rank == 0 ? x.data() : nullptr, 1),
+               InvalidInput);
+  if (rank == 0) b[3] = 1.0;
+  dsi.solve(rank == 0 ? b.data() : nullptr, rank == 0 ? x.data() : nullptr, 1);
+  if (rank == 0) {
+    EXPECT_LE(test::backward_error(a, x.data(), b.data()), 1e-14);
+    EXPECT_GT(dsi.stats().factor.inertia_negative, 0);
+  }
+}
+
+}  // namespace
+}  // namespace strata
+
+int main(int argc, char** argv) {
+  int provided = 0;
+  MPI_Init_thread(&argc, &argv, MPI_THREAD_SERIALIZED, &provided);
+  ::testing::InitGoogleTest(&argc, argv);
+  const int rc = RUN_ALL_TESTS();
+  int worst = 0;
+  MPI_Allreduce(&rc, &worst, 1, MPI_INT, MPI_MAX, MPI_COMM_WORLD);
+  MPI_Finalize();
+  return worst;
+}

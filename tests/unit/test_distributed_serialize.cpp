@@ -1,0 +1,174 @@
+// strata tests — the pieces of the distributed solver that run without MPI: the analysis
+// survives the round trip through bytes that rank 0 broadcasts (every field compared);
+// cut or padded bytes are refused; the rank layout covers every pivot once and the ranks'
+// factor shares add up to the factor; DistributedSolver on the one-process communicator
+// is the Solver (solutions against a dense LAPACK solve).
+#include <gtest/gtest.h>
+
+#include "core/analysis.hpp"
+#include "distributed/distributed_internal.hpp"
+#include "distributed/serialize.hpp"
+#include "sparse/generators.hpp"
+#include "strata/distributed.hpp"
+#include "strata/strata.hpp"
+#include "support/test_support.hpp"
+
+namespace strata {
+namespace {
+
+void expect_same_part(const schedule::FactorPart& x, const schedule::FactorPart& y) {
+  EXPECT_EQ(x.root, y.root);
+  EXPECT_EQ(x.work, y.work);
+  EXPECT_EQ(x.fronts, y.fronts);
+  EXPECT_EQ(x.schedule.level_offsets, y.schedule.level_offsets);
+  EXPECT_EQ(x.schedule.fronts, y.schedule.fronts);
+  EXPECT_EQ(x.schedule.level_of, y.schedule.level_of);
+  EXPECT_EQ(x.plan.budget, y.plan.budget);
+  ASSERT_EQ(x.plan.batches.size(), y.plan.batches.size());
+  for (std::size_t i = 0; i < x.plan.batches.size(); ++i) {
+    EXPECT_EQ(x.plan.batches[i].begin, y.plan.batches[i].begin);
+    EXPECT_EQ(x.plan.batches[i].end, y.plan.batches[i].end);
+    EXPECT_EQ(x.plan.batches[i].bytes, y.plan.batches[i].bytes);
+  }
+  EXPECT_EQ(x.plan.peak_in_core_bytes, y.plan.peak_in_core_bytes);
+  EXPECT_EQ(x.cb_layout.cb_offset, y.cb_layout.cb_offset);
+  EXPECT_EQ(x.cb_layout.arena_size, y.cb_layout.arena_size);
+  EXPECT_EQ(x.imports, y.imports);
+}
+
+void expect_same(const Analysis& x, const Analysis& y) {
+  EXPECT_EQ(x.id, y.id);
+  EXPECT_EQ(x.n, y.n);
+  EXPECT_EQ(x.type, y.type);
+  EXPECT_EQ(x.symmetric, y.symmetric);
+  EXPECT_EQ(x.pattern_offsets, y.pattern_offsets);
+  EXPECT_EQ(x.pattern_indices, y.pattern_indices);
+  EXPECT_EQ(x.input_storage, y.input_storage);
+  EXPECT_EQ(x.matching_perm, y.matching_perm);
+  EXPECT_EQ(x.row_scaling, y.row_scaling);
+  EXPECT_EQ(x.col_scaling, y.col_scaling);
+  EXPECT_EQ(x.pivot_groups.ptr, y.pivot_groups.ptr);
+  EXPECT_EQ(x.pivot_groups.members, y.pivot_groups.members);
+  EXPECT_EQ(x.perm, y.perm);
+  EXPECT_EQ(x.iperm, y.iperm);
+  ASSERT_EQ(x.separator_tree.nodes.size(), y.separator_tree.nodes.size());
+  for (std::size_t i = 0; i < x.separator_tree.nodes.size(); ++i) {
+    EXPECT_EQ(x.separator_tree.nodes[i].begin, y.separator_tree.nodes[i].begin);
+    EXPECT_EQ(x.separator_tree.nodes[i].children, y.separator_tree.nodes[i].children);
+    EXPECT_EQ(x.separator_tree.nodes[i].work, y.separator_tree.nodes[i].work);
+  }
+  EXPECT_EQ(x.tree.first_pivot, y.tree.first_pivot);
+  EXPECT_EQ(x.tree.row_offsets, y.tree.row_offsets);
+  EXPECT_EQ(x.tree.rows, y.tree.rows);
+  EXPECT_EQ(x.tree.parent, y.tree.parent);
+  EXPECT_EQ(x.tree.children, y.tree.children);
+  EXPECT_EQ(x.tree.front_of_column, y.tree.front_of_column);
+  EXPECT_EQ(x.schedule.fronts, y.schedule.fronts);
+  EXPECT_EQ(x.plan.batches.size(), y.plan.batches.size());
+  EXPECT_EQ(x.assembly.entry_offsets, y.assembly.entry_offsets);
+  EXPECT_EQ(x.assembly.entry_src, y.assembly.entry_src);
+  EXPECT_EQ(x.assembly.entry_dst, y.assembly.entry_dst);
+  EXPECT_EQ(x.cb_layout.cb_offset, y.cb_layout.cb_offset);
+  EXPECT_EQ(x.factor_layout.panel_offset, y.factor_layout.panel_offset);
+  EXPECT_EQ(x.factor_layout.total, y.factor_layout.total);
+  EXPECT_EQ(x.partition.workers, y.partition.workers);
+  ASSERT_EQ(x.partition.subtrees.size(), y.partition.subtrees.size());
+  for (std::size_t i = 0; i < x.partition.subtrees.size(); ++i)
+    expect_same_part(x.partition.subtrees[i], y.partition.subtrees[i]);
+  expect_same_part(x.partition.top, y.partition.top);
+  EXPECT_EQ(x.partition.part_of, y.partition.part_of);
+  EXPECT_EQ(x.partition.owner, y.partition.owner);
+  EXPECT_EQ(x.partition.balance, y.partition.balance);
+  EXPECT_EQ(x.stats.nnz_l, y.stats.nnz_l);
+  EXPECT_EQ(x.stats.factor_flops, y.stats.factor_flops);
+  EXPECT_EQ(x.stats.fronts_per_level, y.stats.fronts_per_level);
+  EXPECT_EQ(x.stats.subtrees, y.stats.subtrees);
+  EXPECT_EQ(x.stats.total_seconds, y.stats.total_seconds);
+}
+
+TEST(DistributedSerialize, RoundTripEveryType) {
+  auto rng = test::fresh_rng();
+  struct Case {
+    SparseMatrix a;
+    MatrixType type;
+    int workers;
+  };
+  std::vector<Case> cases;
+  cases.push_back({generators::laplacian_3d(9, 9, 9), MatrixType::spd, 4});
+  cases.push_back({test::random_kkt(301, rng), MatrixType::symmetric_indefinite, 3});
+  cases.push_back(
+      {test::random_sparse(257, 3, test::RandomKind::general, rng), MatrixType::general, 2});
+  cases.push_back({test::random_sparse(1, 1, test::RandomKind::spd, rng), MatrixType::spd, 2});
+  for (const Case& c : cases) {
+    Options o;
+    o.type = c.type;
+    const Analysis an = analyze_matrix(c.a, o, c.workers);
+    const std::vector<char> bytes = distributed::serialize(an);
+    const Analysis back = distributed::deserialize(bytes);
+    expect_same(an, back);
+    std::vector<char> cut(bytes.begin(), bytes.end() - 1), longer = bytes;
+    longer.push_back(0);
+    EXPECT_THROW(distributed::deserialize(cut), InvalidInput);
+    EXPECT_THROW(distributed::deserialize(longer), InvalidInput);
+  }
+}
+
+// For R ranks × G workers: every pivot column is in exactly one subtree or the top part,
+// and the ranks' local factor layouts add up to the whole factor.
+TEST(DistributedSerialize, RankLayoutsCoverTheFactor) {
+  auto rng = test::fresh_rng();
+  const SparseMatrix a = generators::laplacian_3d(11, 11, 11);
+  for (auto [ranks, per_rank] : {std::pair{2, 1}, std::pair{4, 1}, std::pair{2, 2}}) {
+    SCOPED_TRACE(std::to_string(ranks) + " x " + std::to_string(per_rank));
+    Options o;
+    o.type = MatrixType::spd;
+    const Analysis an = analyze_matrix(a, o, ranks * per_rank);
+    std::vector<int> seen(an.n, 0);
+    std::size_t total = 0;
+    for (int r = 0; r < ranks; ++r) {
+      const distributed::RankLayout l = distributed::make_layout(an, ranks, r, per_rank);
+      if (r == 0)
+        for (index_t c : l.top_cols) ++seen[c];
+      for (int i : l.subtrees_of[r])
+        for (index_t c = l.col_begin[i]; c < l.col_end[i]; ++c) ++seen[c];
+      Analysis mine = an;
+      distributed::localize_factor_layout(mine, l);
+      total += mine.factor_layout.total;
+      for (index_t f : l.my_fronts)  // my panels fit in my share
+        EXPECT_LE(mine.factor_layout.panel_offset[f] + panel_size(an.tree, f, false),
+                  mine.factor_layout.total);
+    }
+    for (index_t c = 0; c < an.n; ++c) ASSERT_EQ(seen[c], 1) << "column " << c;
+    EXPECT_EQ(total, an.factor_layout.total);
+  }
+}
+
+// One process: DistributedSolver is the Solver, for every type, against dense LAPACK.
+TEST(DistributedSerialize, OneProcessSolverMatchesDense) {
+  auto rng = test::fresh_rng();
+  EXPECT_EQ(Communicator().size(), 1);
+  EXPECT_EQ(Communicator().rank(), 0);
+  for (auto [kind, type] :
+       {std::pair{test::RandomKind::spd, MatrixType::spd},
+        std::pair{test::RandomKind::symmetric_indefinite, MatrixType::symmetric_indefinite},
+        std::pair{test::RandomKind::general, MatrixType::general}})
+    for (index_t n : {1, 3, 200}) {
+      const SparseMatrix a = test::random_sparse(n, 3, kind, rng);
+      std::vector<double> b(n);
+      std::uniform_real_distribution<double> u(-1, 1);
+      for (double& v : b) v = u(rng);
+      Options o;
+      o.type = type;
+      DistributedSolver ds(Communicator(), o);
+      ds.factorize(a);
+      const std::vector<double> x = ds.solve(b);
+      std::vector<double> xd = b;
+      ASSERT_TRUE(test::dense_solve(test::to_dense(a), n, xd, 1));
+      EXPECT_LT(test::relative_difference(x, xd), 1e-8);
+      EXPECT_EQ(ds.size(), n);
+      EXPECT_EQ(ds.distributed_stats().ranks, 1);
+    }
+}
+
+}  // namespace
+}  // namespace strata
