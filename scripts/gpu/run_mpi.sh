@@ -21,6 +21,19 @@ export LD_LIBRARY_PATH="$PWD/.carry/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
 # NCCL (for a STRATA_NCCL build) from PyTorch's nvidia-nccl wheel when present
 nccl_lib=$(python3 -c 'import nvidia.nccl, os; print(os.path.join(os.path.dirname(nvidia.nccl.__file__), "lib"))' 2>/dev/null || true)
 [ -n "$nccl_lib" ] && export LD_LIBRARY_PATH="$nccl_lib:$LD_LIBRARY_PATH"
+# A machine with its own OpenMPI: use its libraries with its mpirun (its MCA components
+# match them, not the Debian copies prepare.sh put in .carry/lib next to our libraries)
+if command -v mpirun >/dev/null 2>&1; then
+  mkdir -p .carry/lib-sysmpi
+  for l in .carry/lib/*; do
+    case "$(basename "$l")" in
+      libmpi*|libopen-rte*|libopen-pal*|libpmix*|libhwloc*|libevent*|libfabric*|libuc[pmst]*|libpsm*|libibverbs*|librdmacm*|libnl-*|libefa*|libmunge*) ;;
+      *) ln -sf "$PWD/$l" .carry/lib-sysmpi/ ;;
+    esac
+  done
+  export LD_LIBRARY_PATH="$PWD/.carry/lib-sysmpi${nccl_lib:+:$nccl_lib}"
+  echo "run_mpi: using this machine's mpirun and OpenMPI libraries"
+fi
 if ! command -v mpirun >/dev/null 2>&1; then
   if [ -f .carry-mpi/openmpi.tar.xz ]; then
     root="$PWD/.carry-mpi/root"

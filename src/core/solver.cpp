@@ -129,15 +129,72 @@ int parity(const std::vector<index_t>& p) {
   return sign;
 }
 
+// True when `a` is stored exactly as the analysis' canonical pattern (CSC, sorted, no
+// duplicates; the lower triangle when symmetric): its values can be used as they are.
+bool has_analyzed_pattern(const Analysis& an, const SparseMatrix& a) {
+  return a.n_rows == an.n && a.n_cols == an.n && a.layout == Layout::csc &&
+         a.storage != Storage::upper && a.values.size() == a.indices.size() &&
+         a.offsets == an.pattern_offsets && a.indices == an.pattern_indices;
+}
+
+// For `a` with the analyzed pattern (symmetric: its lower triangle): throws InvalidInput as
+// validate and check_norms do (a value not finite; a row or column magnitude sum past the largest
+// double), in one pass. Returns ‖A‖∞ (symmetric storage expanded).
+double check_values(const SparseMatrix& a, bool symmetric) {
+  const bool sym = symmetric;
+  std::vector<double> row(a.n_rows, 0.0), col(a.n_cols, 0.0);
+  for (index_t j = 0; j < a.n_cols; ++j)
+    for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p) {
+      const index_t i = a.indices[p];
+      if (!std::isfinite(a.values[p]))
+        throw InvalidInput("values[" + std::to_string(p) + "] is not finite (row " +
+                           std::to_string(i) + ", column " + std::to_string(j) + ")");
+      const double v = std::abs(a.values[p]);
+      row[i] += v;
+      col[j] += v;
+      if (sym && i != j) {
+        row[j] += v;
+        col[i] += v;
+      }
+    }
+  double norm = 0;
+  for (std::size_t k = 0; k < row.size() + col.size(); ++k) {
+    const bool is_row = k < row.size();
+    const double sum = is_row ? row[k] : col[k - row.size()];
+    if (!std::isfinite(sum))
+      throw InvalidInput("the matrix norm overflows: the magnitudes in " +
+                         std::string(is_row ? "row " : "column ") +
+                         std::to_string(is_row ? k : k - row.size()) +
+                         " (0-based) sum past the largest double (1.8e308); scale the matrix");
+    if (is_row) norm = std::max(norm, sum);
+  }
+  return norm;
+}
+
 void run_factorization(SolverState& s, const SparseMatrix& a) {
   Timer timer;
   const Analysis& an = *s.analysis;
   // Validate before touching the current factor: bad input leaves the solver usable.
-  SparseMatrix checked = canonical_values(an, a);
-  check_norms(checked);
-  s.factor.valid = false;
-  s.values = std::move(checked);
-  s.norm_inf = norm_inf(s.values);
+  if (has_analyzed_pattern(an, a)) {
+    // Refactorization with the analyzed pattern (a Newton loop, a benchmark): one pass
+    // checks the values and the norms, then only the values are copied. The general path
+    // below makes several passes and copies the pattern; on a large matrix that host work
+    // was of the order of the GPU refactorization itself.
+    s.norm_inf = check_values(a, an.symmetric);
+    s.factor.valid = false;
+    if (s.values.offsets != an.pattern_offsets || s.values.indices != an.pattern_indices) {
+      s.values = a;
+      s.values.storage = an.symmetric ? Storage::lower : Storage::full;
+    } else {
+      s.values.values = a.values;
+    }
+  } else {
+    SparseMatrix checked = canonical_values(an, a);
+    check_norms(checked);
+    s.factor.valid = false;
+    s.values = std::move(checked);
+    s.norm_inf = norm_inf(s.values);
+  }
   // scaled values: general matrices use Dr·A(:,Q)·Dc from the matching, symmetric
   // indefinite ones D·A·D (row_scaling == col_scaling == D, Q = I; the lower triangle
   // scaled entrywise stays the lower triangle of D·A·D)

@@ -236,7 +236,14 @@ void CudaExecutor::end(const numeric::FactorContext& ctx) {
   float ms = 0;
   STRATA_CUDA(cudaEventElapsedTime(&ms, start_, stop_));
   device_seconds_ = ms * 1e-3;
-  if (keep_resident()) {
+  // LLᵀ has no pivoting: the solve's row arrays of the previous factorization of this
+  // analysis still hold (a refactorization uploads nothing here)
+  const bool rows_current = rows_analysis_ == ctx.analysis->id && rows_type_ == MatrixType::spd &&
+                            ctx.type == MatrixType::spd;
+  if (keep_resident() && rows_current) {
+    resident_for_ = ctx.factor;
+    resident_analysis_ = ctx.analysis->id;
+  } else if (keep_resident()) {
     const Analysis& an = *ctx.analysis;
     const numeric::NumericFactor& fac = *ctx.factor;
     const auto& t = an.tree;
@@ -263,6 +270,8 @@ void CudaExecutor::end(const numeric::FactorContext& ctx) {
     STRATA_CUDA(cudaStreamSynchronize(stream_));
     resident_for_ = ctx.factor;
     resident_analysis_ = an.id;
+    rows_analysis_ = an.id;
+    rows_type_ = ctx.type;
   }
 }
 

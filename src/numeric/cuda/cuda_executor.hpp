@@ -144,6 +144,8 @@ class CudaExecutor final : public numeric::Executor {
   // resident factor for the solve
   const numeric::NumericFactor* resident_for_ = nullptr;
   std::uint64_t resident_analysis_ = 0;
+  std::uint64_t rows_analysis_ = 0;               ///< the analysis and type the solve's rows were
+  MatrixType rows_type_ = MatrixType::automatic;  ///< uploaded for (end())
   DeviceBuffer<std::int64_t> s_rows_, s_row_offsets_, s_first_pivot_, s_level_offsets_,
       s_pivot_pos_, s_pivot_row_, s_u_offset_;
   DeviceBuffer<int> s_pivot_size_;
