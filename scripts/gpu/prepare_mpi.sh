@@ -18,9 +18,12 @@ pkgs="openmpi-bin libopenmpi3 openmpi-common libpmix2 libhwloc15 libhwloc-plugin
 for p in $pkgs; do
   dpkg -L "$p" 2>/dev/null || true
 done | grep -v -E '/share/(doc|man|lintian)/' | sort -u | while read -r f; do
-  if [ -f "$f" ] || [ -L "$f" ]; then
-    mkdir -p ".carry-mpi/stage$(dirname "$f")"
-    cp -a "$f" ".carry-mpi/stage$f"
+  # files and file symlinks only, under their real directory (merged /usr: /lib is a
+  # symlink to usr/lib, and dpkg lists both spellings)
+  if [ -f "$f" ] || { [ -L "$f" ] && [ ! -d "$f" ]; }; then
+    d=$(readlink -f "$(dirname "$f")")
+    mkdir -p ".carry-mpi/stage$d"
+    cp -a "$f" ".carry-mpi/stage$d/"
   fi
 done
 # the alternatives symlinks (mpirun -> /etc/alternatives/mpirun) point outside: replace
