@@ -95,9 +95,12 @@ void factor_part(detail::CommImpl& comm, NumericState& ns, const Analysis& an,
         if (x.size == 0 || owner == 0) continue;  // no block, or made on rank 0
         const std::size_t bytes = sizeof(double) * x.size;
         if (rank == 0) {
-          recvs.push_back({owner, kTagBlock + i, x.host, bytes});
+          recvs.push_back({owner, kTagBlock + i, x.host_buffer(), bytes});
           x.on_host = true;
         } else if (owner == rank) {
+          if (!x.on_host)
+            throw InvalidInput("internal: the block of subtree " + std::to_string(i) +
+                               " was not exported to host memory for MPI");
           sends.push_back({0, kTagBlock + i, x.host, bytes});
         }
       }

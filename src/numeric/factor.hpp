@@ -77,17 +77,29 @@ struct FactorContext {
 };
 
 /// A contribution block on its way from the subtree that produced it to the top part.
-/// The driver provides `host` (size doubles); an exporter either fills it, or — a device
+/// The driver provides host_buffer() (size doubles); an exporter either fills it, or — a device
 /// executor whose importer can read its memory directly (peer access) — leaves the block
 /// in its own memory, valid until its end(), and sets `device` and `device_ordinal`.
 struct CbTransfer {
   index_t front = -1;              ///< the subtree root whose block this is
-  std::size_t size = 0;            ///< doubles: cb_size(front)², column-major
-  double* host = nullptr;          ///< driver-owned host buffer of `size` doubles
+  std::size_t size = 0;            ///< doubles: cb_size(front)², column-major (0: no block)
+  double* host = nullptr;          ///< the host buffer of `size` doubles, once host_buffer()
   bool on_host = false;            ///< the exporter filled `host`
   const double* device = nullptr;  ///< or: the block in the exporter's device memory
   int device_ordinal = -1;         ///< CUDA device holding `device`
   int target_device = -1;          ///< CUDA device of the importer (-1: a host executor)
+  std::unique_ptr<double[]> host_storage;
+
+  /// The host buffer (`size` doubles, uninitialized), allocated on first use: a block
+  /// that goes device to device never needs one — allocating (and zeroing) every subtree
+  /// root's block up front cost more than the multi-GPU factorization itself.
+  double* host_buffer() {
+    if (!host) {
+      host_storage.reset(new double[size]);
+      host = host_storage.get();
+    }
+    return host;
+  }
 };
 
 /// Statistics of one executor over a multi-worker factorization.

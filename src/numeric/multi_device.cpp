@@ -126,19 +126,18 @@ void factorize_multi(const Analysis& an, const std::vector<double>& scaled_value
   const auto& t = an.tree;
   const int n_sub = static_cast<int>(part.subtrees.size());
 
-  // host buffers of the subtree roots' contribution blocks
-  std::vector<std::vector<double>> staging(n_sub);
+  // the subtree roots' contribution blocks (host buffers allocated when used)
   std::vector<CbTransfer> transfer(n_sub);
   for (int i = 0; i < n_sub; ++i) {
     const index_t r = part.subtrees[i].root;
     CbTransfer& x = transfer[i];
     x.front = r;
-    x.target_device = execs[0]->device();
+    // the importer: worker 0's device here; a process that does not factor the top sends
+    // its blocks on through host memory (MPI), unless they are to stay on the device
+    x.target_device = config.factor_top || config.remote_blocks_on_device ? execs[0]->device() : -1;
     if (t.parent[r] < 0 || t.cb_size(r) == 0) continue;  // nothing to hand over
     if (!config.factor_top && !mine(i)) continue;        // neither made nor used here
     x.size = static_cast<std::size_t>(t.cb_size(r)) * static_cast<std::size_t>(t.cb_size(r));
-    staging[i].resize(x.size);
-    x.host = staging[i].data();
   }
 
   FactorContext base;
@@ -182,7 +181,7 @@ void factorize_multi(const Analysis& an, const std::vector<double>& scaled_value
         run_batches(ex, ctx);
         if (config.remote_blocks_on_device && !config.factor_top)
           transfer[i].target_device = ex.device();
-        if (transfer[i].host) st[w].bytes_transferred += ex.export_cb(ctx, transfer[i]);
+        if (transfer[i].size) st[w].bytes_transferred += ex.export_cb(ctx, transfer[i]);
         ex.end_part(ctx);
         ctx.part = nullptr;
         st[w].busy_seconds += busy.seconds();

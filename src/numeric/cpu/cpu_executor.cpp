@@ -69,7 +69,7 @@ class CpuExecutor final : public Executor {
 
   std::size_t export_cb(const FactorContext& ctx, CbTransfer& t) override {
     const double* src = ctx.cb_arena->data() + ctx.part->cb_layout->cb_offset[t.front];
-    std::memcpy(t.host, src, sizeof(double) * t.size);
+    std::memcpy(t.host_buffer(), src, sizeof(double) * t.size);
     t.on_host = true;
     return sizeof(double) * t.size;
   }

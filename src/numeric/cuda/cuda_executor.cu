@@ -199,7 +199,7 @@ std::size_t CudaExecutor::export_cb(const numeric::FactorContext& ctx, numeric::
     t.on_host = false;
     return 0;  // nothing crossed the bus yet: the importer counts the copy
   }
-  STRATA_CUDA(cudaMemcpyAsync(t.host, src, bytes, cudaMemcpyDefault, stream_));
+  STRATA_CUDA(cudaMemcpyAsync(t.host_buffer(), src, bytes, cudaMemcpyDefault, stream_));
   STRATA_CUDA(cudaStreamSynchronize(stream_));
   t.on_host = true;
   bytes_d2h_ += bytes;
