@@ -579,6 +579,7 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
   std::int64_t perm_at = perm_off.back();
   std::vector<std::int64_t> big_perm_at;
   std::vector<std::unique_ptr<Lane>>& lane = lanes();
+  std::vector<LuFront> lu_fronts;
   const std::size_t n_lanes = ldlt ? 1 : std::min(lane.size(), big.size());
   for (std::size_t l = 0; l < n_lanes; ++l) {
     lane[l]->load = 0;
@@ -608,12 +609,12 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
                                   &minus_one, F + k, m, &one,
                                   F + static_cast<std::size_t>(k) * m + k, m));
       }
-    } else {
-      factor_large_lu(*ln, F, m, k, ctx.static_pivot, perm_.data() + perm_at,
-                      perturbed_.data() + ns + i);
+    } else {  // first pass: GETRF and its pivot check; the rest after one wait below
+      lu_fronts.push_back({ln, F, m, k, perm_.data() + perm_at, perturbed_.data() + ns + i});
     }
     perm_at += k;
   }
+  if (!lu_fronts.empty()) lu_large_fronts(lu_fronts, ctx.static_pivot);
   for (std::size_t l = 1; l < n_lanes; ++l) {  // join: the stores read every front
     STRATA_CUDA(cudaEventRecord(lane[l]->done, lane[l]->stream));
     STRATA_CUDA(cudaStreamWaitEvent(stream_, lane[l]->done, 0));
@@ -723,68 +724,94 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
                  perturbed[ns + i], perm.data() + big_perm_at[i], diag_of(big[i]));
 }
 
-// LU of a large front in the pool (see kernels_lu.cu for why this shape): GETRF on the
-// fully summed block; if its pivots pass the static-pivot check, the interchanges go to
-// A12 and two TRSMs and a GEMM finish the front; otherwise A11 is restored and the
-// blocked path with our panel kernel (static pivoting) factors the front. One host
-// synchronization per front (the check's flag).
-void CudaExecutor::factor_large_lu(Lane& lane, double* F, int m, int k, double static_pivot,
-                                   std::int64_t* perm, std::int64_t* perturbed) {
-  const cudaStream_t stream = lane.stream;
+// LU of the large fronts of a chunk (see kernels_lu.cu for why this shape), in two
+// passes so that the lanes keep running side by side: first, per front on its lane, A11
+// saved, GETRF on the fully summed block and the static-pivot check; one wait for all of
+// them; then per front, if its pivots passed, the interchanges to A12, two TRSMs and a
+// GEMM, and otherwise A11 restored and the blocked path with our panel kernel (static
+// pivoting). (One wait per front instead held the host, and so every lane, on each front.)
+void CudaExecutor::lu_large_fronts(const std::vector<LuFront>& fronts, double static_pivot) {
   const double one = 1.0, minus_one = -1.0;
-  const std::size_t ld = static_cast<std::size_t>(m);
-  lane.lu_save.resize(static_cast<std::size_t>(k) * k);
-  STRATA_CUDA(cudaMemcpy2DAsync(lane.lu_save.data(), sizeof(double) * k, F, sizeof(double) * ld,
-                                sizeof(double) * k, k, cudaMemcpyDeviceToDevice, stream));
-  int lwork = 0;
-  STRATA_CUSOLVER(cusolverDnDgetrf_bufferSize(lane.solver, k, k, F, m, &lwork));
-  lane.getrf_work.resize(static_cast<std::size_t>(std::max(lwork, 1)));
-  lane.ipiv.resize(static_cast<std::size_t>(k));
-  lane.getrf_info.resize(1);
-  lane.lu_bad.resize(1);
-  lane.lu_bad_host.resize(1);
-  STRATA_CUSOLVER(cusolverDnDgetrf(lane.solver, k, k, F, m, lane.getrf_work.data(),
-                                   lane.ipiv.data(), lane.getrf_info.data()));
-  launch_lu_check(F, m, k, static_pivot, lane.getrf_info.data(), lane.lu_bad.data(), stream);
-  STRATA_CUDA(cudaMemcpyAsync(lane.lu_bad_host.data(), lane.lu_bad.data(), sizeof(int),
-                              cudaMemcpyDeviceToHost, stream));
-  STRATA_CUDA(cudaStreamSynchronize(stream));
-  STRATA_CUDA(cudaMemsetAsync(perturbed, 0, sizeof(std::int64_t), stream));
-  if (!lane.lu_bad_host.data()[0]) {
-    launch_ipiv_to_perm(lane.ipiv.data(), k, perm, stream);
-    if (m > k) {
-      double* a12 = F + static_cast<std::size_t>(k) * ld;
-      launch_laswp(a12, m, m - k, lane.ipiv.data(), k, stream);
-      STRATA_CUBLAS(cublasDtrsm(lane.blas, CUBLAS_SIDE_RIGHT, CUBLAS_FILL_MODE_UPPER, CUBLAS_OP_N,
-                                CUBLAS_DIAG_NON_UNIT, m - k, k, &one, F, m, F + k, m));
-      STRATA_CUBLAS(cublasDtrsm(lane.blas, CUBLAS_SIDE_LEFT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N,
-                                CUBLAS_DIAG_UNIT, k, m - k, &one, F, m, a12, m));
-      STRATA_CUBLAS(cublasDgemm(lane.blas, CUBLAS_OP_N, CUBLAS_OP_N, m - k, m - k, k, &minus_one,
-                                F + k, m, a12, m, &one, a12 + k, m));
+  const std::size_t n = fronts.size();
+  std::vector<std::size_t> save_at(n + 1, 0), ipiv_at(n + 1, 0);
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::size_t k = static_cast<std::size_t>(fronts[i].k);
+    save_at[i + 1] = save_at[i] + k * k;
+    ipiv_at[i + 1] = ipiv_at[i] + k;
+  }
+  // growing a buffer frees the old one: wait for the lanes first (cudaFree would too)
+  if (lu_save_.size() < save_at[n] || lu_ipiv_.size() < ipiv_at[n] || lu_bad_.size() < n)
+    STRATA_CUDA(cudaDeviceSynchronize());
+  lu_save_.resize(std::max<std::size_t>(save_at[n], 1));
+  lu_ipiv_.resize(std::max<std::size_t>(ipiv_at[n], 1));
+  lu_info_.resize(n);
+  lu_bad_.resize(n);
+  lu_bad_host_.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const LuFront& fr = fronts[i];
+    Lane& lane = *fr.lane;
+    const int m = fr.m, k = fr.k;
+    int lwork = 0;
+    STRATA_CUSOLVER(cusolverDnDgetrf_bufferSize(lane.solver, k, k, fr.F, m, &lwork));
+    if (lane.getrf_work.size() < static_cast<std::size_t>(std::max(lwork, 1))) {
+      STRATA_CUDA(cudaStreamSynchronize(lane.stream));
+      lane.getrf_work.resize(static_cast<std::size_t>(std::max(lwork, 1)));
     }
-    return;
+    STRATA_CUDA(cudaMemcpy2DAsync(lu_save_.data() + save_at[i], sizeof(double) * k, fr.F,
+                                  sizeof(double) * m, sizeof(double) * k, k,
+                                  cudaMemcpyDeviceToDevice, lane.stream));
+    STRATA_CUSOLVER(cusolverDnDgetrf(lane.solver, k, k, fr.F, m, lane.getrf_work.data(),
+                                     lu_ipiv_.data() + ipiv_at[i], lu_info_.data() + i));
+    launch_lu_check(fr.F, m, k, static_pivot, lu_info_.data() + i, lu_bad_.data() + i, lane.stream);
   }
-  // a pivot needs static pivoting: restore A11 and take the panel-kernel path
-  STRATA_CUDA(cudaMemcpy2DAsync(F, sizeof(double) * ld, lane.lu_save.data(), sizeof(double) * k,
-                                sizeof(double) * k, k, cudaMemcpyDeviceToDevice, stream));
-  // iota_ outlives the asynchronous copy (it is a member, only ever grown)
-  if (static_cast<int>(iota_.size()) < k) {
-    STRATA_CUDA(cudaStreamSynchronize(stream));
-    iota_.resize(k);
-    for (int r = 0; r < k; ++r) iota_[r] = r;
-  }
-  STRATA_CUDA(cudaMemcpyAsync(perm, iota_.data(), sizeof(std::int64_t) * k, cudaMemcpyHostToDevice,
-                              stream));
-  for (int p0 = 0; p0 < k; p0 += kLuPanel) {
-    const int w = std::min<int>(kLuPanel, k - p0), rest = m - p0 - w;
-    launch_lu_panel(F, m, k, p0, w, static_pivot, perm, perturbed, stream);
-    if (rest > 0) {
-      double* a11 = F + static_cast<std::size_t>(p0) * ld + p0;
-      double* a12 = F + static_cast<std::size_t>(p0 + w) * ld + p0;
-      STRATA_CUBLAS(cublasDtrsm(lane.blas, CUBLAS_SIDE_LEFT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N,
-                                CUBLAS_DIAG_UNIT, w, rest, &one, a11, m, a12, m));
-      STRATA_CUBLAS(cublasDgemm(lane.blas, CUBLAS_OP_N, CUBLAS_OP_N, rest, rest, w, &minus_one,
-                                a11 + w, m, a12, m, &one, a12 + w, m));
+  for (const auto& l : lanes_) STRATA_CUDA(cudaStreamSynchronize(l->stream));
+  STRATA_CUDA(
+      cudaMemcpy(lu_bad_host_.data(), lu_bad_.data(), sizeof(int) * n, cudaMemcpyDeviceToHost));
+  for (std::size_t i = 0; i < n; ++i) {
+    const LuFront& fr = fronts[i];
+    Lane& lane = *fr.lane;
+    const cudaStream_t stream = lane.stream;
+    const int m = fr.m, k = fr.k;
+    const std::size_t ld = static_cast<std::size_t>(m);
+    const int* ipiv = lu_ipiv_.data() + ipiv_at[i];
+    STRATA_CUDA(cudaMemsetAsync(fr.perturbed, 0, sizeof(std::int64_t), stream));
+    if (!lu_bad_host_.data()[i]) {
+      launch_ipiv_to_perm(ipiv, k, fr.perm, stream);
+      if (m > k) {
+        double* a12 = fr.F + static_cast<std::size_t>(k) * ld;
+        launch_laswp(a12, m, m - k, ipiv, k, stream);
+        STRATA_CUBLAS(cublasDtrsm(lane.blas, CUBLAS_SIDE_RIGHT, CUBLAS_FILL_MODE_UPPER, CUBLAS_OP_N,
+                                  CUBLAS_DIAG_NON_UNIT, m - k, k, &one, fr.F, m, fr.F + k, m));
+        STRATA_CUBLAS(cublasDtrsm(lane.blas, CUBLAS_SIDE_LEFT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N,
+                                  CUBLAS_DIAG_UNIT, k, m - k, &one, fr.F, m, a12, m));
+        STRATA_CUBLAS(cublasDgemm(lane.blas, CUBLAS_OP_N, CUBLAS_OP_N, m - k, m - k, k, &minus_one,
+                                  fr.F + k, m, a12, m, &one, a12 + k, m));
+      }
+      continue;
+    }
+    // a pivot needs static pivoting: restore A11 and take the panel-kernel path
+    STRATA_CUDA(cudaMemcpy2DAsync(fr.F, sizeof(double) * ld, lu_save_.data() + save_at[i],
+                                  sizeof(double) * k, sizeof(double) * k, k,
+                                  cudaMemcpyDeviceToDevice, stream));
+    // iota_ outlives the asynchronous copy (it is a member, only ever grown)
+    if (static_cast<int>(iota_.size()) < k) {
+      STRATA_CUDA(cudaDeviceSynchronize());
+      iota_.resize(k);
+      for (int r = 0; r < k; ++r) iota_[r] = r;
+    }
+    STRATA_CUDA(cudaMemcpyAsync(fr.perm, iota_.data(), sizeof(std::int64_t) * k,
+                                cudaMemcpyHostToDevice, stream));
+    for (int p0 = 0; p0 < k; p0 += kLuPanel) {
+      const int w = std::min<int>(kLuPanel, k - p0), rest = m - p0 - w;
+      launch_lu_panel(fr.F, m, k, p0, w, static_pivot, fr.perm, fr.perturbed, stream);
+      if (rest > 0) {
+        double* a11 = fr.F + static_cast<std::size_t>(p0) * ld + p0;
+        double* a12 = fr.F + static_cast<std::size_t>(p0 + w) * ld + p0;
+        STRATA_CUBLAS(cublasDtrsm(lane.blas, CUBLAS_SIDE_LEFT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N,
+                                  CUBLAS_DIAG_UNIT, w, rest, &one, a11, m, a12, m));
+        STRATA_CUBLAS(cublasDgemm(lane.blas, CUBLAS_OP_N, CUBLAS_OP_N, rest, rest, w, &minus_one,
+                                  a11 + w, m, a12, m, &one, a12 + w, m));
+      }
     }
   }
 }

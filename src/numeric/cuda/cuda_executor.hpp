@@ -53,9 +53,7 @@ struct Lane {
   cusolverDnHandle_t solver = nullptr;
   cudaEvent_t done = nullptr;
   bool owned = false;  ///< created for this lane (lane 0 borrows the executor's)
-  DeviceBuffer<double> potrf_work, lu_save, getrf_work;
-  DeviceBuffer<int> ipiv, getrf_info, lu_bad;
-  PinnedBuffer<int> lu_bad_host;
+  DeviceBuffer<double> potrf_work, getrf_work;
   double load = 0;  ///< flops given to it in the current chunk
 };
 
@@ -91,10 +89,18 @@ class CudaExecutor final : public numeric::Executor {
   void prepare_solve_plan(const Analysis& an);  // cuda_solve.cu
   void factor_chunk(const numeric::FactorContext& ctx, index_t begin, index_t end);
   void factor_tiled(const numeric::FactorContext& ctx, index_t pos);
-  /// LU of the large front F (m×m, k pivots) in the pool: GETRF + TRSMs + GEMM, or the
-  /// blocked panel-kernel path when GETRF's pivots need static pivoting (kernels_lu.cu).
-  void factor_large_lu(Lane& lane, double* F, int m, int k, double static_pivot, std::int64_t* perm,
-                       std::int64_t* perturbed);
+  /// A large LU front of the current chunk: its lane, the front in the pool (m×m, k
+  /// pivots), where its local row permutation and perturbed-pivot count go.
+  struct LuFront {
+    Lane* lane;
+    double* F;
+    int m, k;
+    std::int64_t* perm;
+    std::int64_t* perturbed;
+  };
+  /// LU of the chunk's large fronts: GETRF + TRSMs + GEMM, or the blocked panel-kernel
+  /// path for a front whose GETRF pivots need static pivoting (kernels_lu.cu).
+  void lu_large_fronts(const std::vector<LuFront>& fronts, double static_pivot);
   /// The lanes, created on first use (kLanes of them).
   std::vector<std::unique_ptr<Lane>>& lanes();
   /// Host bookkeeping of factored front f: `diag` holds its k pivots' diagonal entries.
@@ -136,8 +142,10 @@ class CudaExecutor final : public numeric::Executor {
   std::vector<std::int64_t> iota_;
   DeviceBuffer<int> pivot_size_;         // LDLᵀ: local pivot sizes, laid out as perm_
   DeviceBuffer<std::int64_t> psize_at_;  // LDLᵀ: per chunk position, its offset in pivot_size_
-  // the diagonals of device-only panels
-  DeviceBuffer<double> diag_;
+  // the diagonals of device-only panels; the chunk's large LU fronts (lu_large_fronts)
+  DeviceBuffer<double> diag_, lu_save_;
+  DeviceBuffer<int> lu_ipiv_, lu_info_, lu_bad_;
+  PinnedBuffer<int> lu_bad_host_;
   DeviceBuffer<std::int64_t> diag_offset_;
   std::vector<std::unique_ptr<Lane>> lanes_;  ///< large fronts of a chunk, side by side
   LdltLarge ldlt_large_;

@@ -1,7 +1,7 @@
 // strata — CUDA kernels around the library LU of a large front (see kernels_lu.cuh).
 //
 // A large LU front is factored by whole-block library calls (cuda_executor.cu,
-// factor_large_lu): cuSOLVER GETRF on the k×k fully summed block A11 — partial pivoting
+// lu_large_fronts): cuSOLVER GETRF on the k×k fully summed block A11 — partial pivoting
 // over the fully summed rows only, which is exactly the restricted pivoting of the CPU
 // kernel — then the row interchanges applied to A12, two TRSMs and one GEMM. GETRF does
 // no static pivoting, so the pivots it chose are checked afterwards: when one is below
