@@ -147,7 +147,7 @@ class Distributed:
             if x > 1:
                 self.behind_notes.append(
                     f"distributed factorization on {machine_label(machine)}: {p} on {rk} "
-                    f"ranks × {g} GPUs is {x:.2f}× slower than 1 rank × {w} GPUs")
+                    f"ranks × {g} GPU{'s' if g > 1 else ''} is {x:.2f}× slower than 1 rank × {w} GPUs")
         off = [(k, ratio(num(meas[k][1].get("factor_seconds")),
                          num((pred.get(k) or {}).get("total_seconds")))) for k in keys]
         off = [(k, x) for k, x in off if x is not None and (x > 1.5 or x < 1 / 1.5)]

@@ -251,7 +251,7 @@ class GpuSections:
         self.w()
         self.w(table(["problem", "last refactor s", "device s"] + [n for _, n in self.PHASES]
                      + ["sum of phases", "largest phase", "GFLOP/s", "MB to device",
-                        "batches", "tiled fronts"]
+                        "batches", "fronts tiled (count)"]
                      + (["cuDSS refactor s", "strata/cuDSS", "largest phase/cuDSS"]
                         if anchor else []), rows, 1))
         for p, x, name, v, c, over in behind:
@@ -707,9 +707,8 @@ class GpuSections:
                 f"{p} with {w} ({x:.2f}× of the ideal {w}×)" for p, w, x in behind) + ".")
             self.w()
         if first_rows:
-            self.w(f"First factorization (which sets the executors up: device buffers, "
-                   f"streams, host threads) against the refactorizations after it (the "
-                   f"times above), default configuration:")
+            self.w(f"First factorization (which sets the executors up) against the "
+                   f"refactorizations after it (the times above), default configuration:")
             self.w()
             self.w(table(["problem", unit + "s", "first factorization s",
                           "refactorization s", "set-up (difference) s", "first/refactor"],
