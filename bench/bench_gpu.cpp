@@ -179,8 +179,7 @@ int main(int argc, char** argv) {
     previous = partial;
   }
   out.erase("partial");
-  fmt::print("results: {}\n",
-             bench::write_result(out, stem, results_dir));
+  fmt::print("results: {}\n", bench::write_result(out, stem, results_dir));
   if (!partial.empty()) std::remove(partial.c_str());
   return 0;
 }
