@@ -8,7 +8,10 @@
 // thread count is the baseline of the reported ratio, and every count is kept in the
 // JSON. Results: <results-dir>/gpu-*.json with "backend": "cuda".
 //
-//   bench_gpu [--problems a,b,...] [--repeat R] [--threads 4,16] [--results-dir DIR]
+//   bench_gpu [--problems a,b,...] [--repeat R] [--threads 4,16] [--gpu-only] [--tag T]
+//             [--results-dir DIR]
+// --tag T: stored in the results and in the file name (gpu-T-*.json), so that runs over
+// different problem sets (bench/run gpu splits them) are kept apart by the report.
 #include <fmt/core.h>
 
 #include <CLI/CLI.hpp>
@@ -72,13 +75,15 @@ int main(int argc, char** argv) {
                                        "uelast3d-20", "uelast3d-30"};
   std::vector<int> threads = {4, 16};
   int repeat = 3;
-  std::string results_dir;
+  std::string results_dir, tag;
   app.add_option("--problems", problems, "problems")->delimiter(',');
   app.add_option("--threads", threads, "CPU thread counts to measure")->delimiter(',');
   app.add_option("--repeat", repeat, "factorizations per measurement (median)");
   bool gpu_only = false;
   app.add_flag("--gpu-only", gpu_only,
                "time the GPU only (no CPU or CHOLMOD columns: a profile of the GPU phases)");
+  app.add_option("--tag", tag, "label stored in the results and the file name")
+      ->check(bench::check_tag);
   app.add_option("--results-dir", results_dir, "where to write the JSON (default bench/results)");
   CLI11_PARSE(app, argc, argv);
   if (gpu_only) threads.clear();
@@ -89,10 +94,13 @@ int main(int argc, char** argv) {
   json out = bench::run_metadata(argc, argv);
   out["benchmark"] = threads.empty() ? "gpu-profile" : "factor";  // a profile: not in the report
   out["backend"] = "cuda";
+  if (!tag.empty()) out["tag"] = tag;
   out["rows"] = json::array();
   fmt::print("{:<14} {:>8} {:>11} {:>9} {:>8} {:>9} {:>4} {:>9} {:>7} {:>7} {:>9}\n", "problem",
              "n", "nnz(L)", "gpu s", "GFLOP/s", "cpu s", "thr", "chol s", "cpu/gpu", "chol/gpu",
              "berr gpu");
+  const std::string stem =
+      std::string(threads.empty() ? "gpu-profile" : "gpu") + (tag.empty() ? "" : "-" + tag);
   std::string partial, previous;
   for (const std::string& name : problems) {
     bench::Problem p = bench::load_problem(name);
@@ -166,13 +174,12 @@ int main(int argc, char** argv) {
     out["rows"].push_back(row);
     // keep what is measured so far, in case the run is cut off
     out["partial"] = true;
-    partial = bench::write_result(out, "gpu-partial", results_dir);
+    partial = bench::write_result(out, stem + "-partial", results_dir);
     if (!previous.empty() && previous != partial) std::remove(previous.c_str());
     previous = partial;
   }
   out.erase("partial");
-  fmt::print("results: {}\n",
-             bench::write_result(out, threads.empty() ? "gpu-profile" : "gpu", results_dir));
+  fmt::print("results: {}\n", bench::write_result(out, stem, results_dir));
   if (!partial.empty()) std::remove(partial.c_str());
   return 0;
 }

@@ -285,7 +285,14 @@ def main():
     measured = []
     for path in args.measured:
         with open(path) as f:
-            measured.extend(json.load(f).get("rows", []))
+            run = json.load(f)
+        for row in run.get("rows", []):
+            # the configuration the driver ran with is the file's (a 1-rank row's own
+            # gpus_per_rank has read 1 for 1 x 4)
+            for k in ("ranks", "gpus_per_rank"):
+                if k in run:
+                    row[k] = run[k]
+            measured.append(row)
 
     print("# The 4-GPU benchmark (one H200 machine; MPI through host memory between ranks)")
     print(f"{'problem':<11} {'R x G':<6} {'top %':>6} {'subtree s':>9} {'CB MB':>8} "

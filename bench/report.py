@@ -23,8 +23,14 @@ How results map to the five experiments of the benchmark issue:
                             (vs CHOLMOD and MUMPS with the same permutation; a row's
                             "cudss" object, from a GPU driver, becomes a cuDSS column)
                             (bench_gpu: rows with "strata_gpu", GPU vs CPU backend);
-                            benchmark "cudss" (bench_cudss: strata's GPU vs NVIDIA cuDSS)
-  3. GPU count 1, 2, 4      benchmark "multigpu" (backend cuda; cpu runs shown apart)
+                            benchmark "cudss" (bench_cudss: strata's GPU vs NVIDIA cuDSS;
+                            "last_refactor" phases, "first_solve_seconds");
+                            benchmark "gpu-profile" (bench_gpu --gpu-only): phases only
+  3. GPU count 1, 2, 4      benchmark "multigpu" (backend cuda; cpu runs shown apart;
+                            rows with "first_factor_seconds" supersede older files)
+  3b. MPI ranks             benchmark "distributed" (bench_distributed via
+                            scripts/gpu/run_mpi.sh) beside the newest "cost_model"
+                            prediction (cost-model.json of bench/cost_model.py)
   4. solvability            benchmark "gpu_memory" (its "solvability" and "device_figures";
                             its "block_size" list is the GPU part of experiment 1)
   5. end to end simulate    benchmark "simulate", else the newest results/logs/*mbd*.log
@@ -48,6 +54,7 @@ from report_common import (NOT_MEASURED, Run, by_machine, dig, f_e, f_g, f_int, 
                            f_ratio, f_sec, geomean, load_runs, machine_label,
                            machine_slug, newest_runs, num, ratio, table)
 from report_e2e import EndToEnd
+from report_dist import Distributed
 from report_gpu import GpuSections, is_bench_gpu
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -57,7 +64,7 @@ SWEEP_TAG = re.compile(r"^mbs-(\d+)$")
 # --------------------------------------------------------------------------- report
 
 
-class Report(GpuSections, EndToEnd):
+class Report(GpuSections, Distributed, EndToEnd):
     def __init__(self, results_dir: str, out_dir: str):
         self.results_dir = os.path.abspath(results_dir)
         self.out_dir = os.path.abspath(out_dir)
@@ -120,10 +127,12 @@ class Report(GpuSections, EndToEnd):
         runs = newest_runs(all_runs)
         self.all_runs = all_runs
         self.consumed: set[str] = set()
+        self.behind_notes: list[str] = []  # sections add "strata is behind" statements
         body_start = len(self.parts)
         self.sweep(runs)
         self.comparison(runs)
         self.multigpu_section(runs)
+        self.distributed_section(runs)
         self.solvability_section(runs)
         self.e2e_section(runs)
         self.python_section(runs)
@@ -211,6 +220,18 @@ class Report(GpuSections, EndToEnd):
                                      f"{sum(1 for _, x in pp if x is not None)} problems on "
                                      f"{machine_label(r.machine)} "
                                      f"([`{r.name}`]({self.rel(r.path)})).")
+            if r.kind == "cudss":
+                pp = [(row.get("problem"), ratio(dig(row, "strata_gpu", "first_solve_seconds"),
+                                                 dig(row, "cudss_default", "solve_seconds")))
+                      for row in r.rows]
+                name = ("solve time strata GPU first solve (one application of the factor, "
+                        "no refinement)/cuDSS solve (default reordering)")
+                g = judge(name, r.machine, pp)
+                if g is not None:
+                    lines.append(f"- Geometric mean of {name}: **{f_ratio(g)}** over "
+                                 f"{sum(1 for _, x in pp if x is not None)} problems on "
+                                 f"{machine_label(r.machine)} "
+                                 f"([`{r.name}`]({self.rel(r.path)})).")
             if r.kind == "analysis" and r.tag == "":
                 for key, what in (("nnz_l", "nnz(L) strata/CHOLMOD+METIS"),
                                   ("seconds", "analysis time strata/CHOLMOD+METIS")):
@@ -223,6 +244,7 @@ class Report(GpuSections, EndToEnd):
                                      f"{sum(1 for _, x in pp if x is not None)} problems on "
                                      f"{machine_label(r.machine)} "
                                      f"([`{r.name}`]({self.rel(r.path)})).")
+        behind += getattr(self, "behind_notes", [])
         if not lines:
             self.w(f"{NOT_MEASURED}: no analysis or factorization results exist "
                    f"(run `bench/run cpu`).")
@@ -363,7 +385,9 @@ class Report(GpuSections, EndToEnd):
         self.w()
         fa = [r for r in runs if r.kind == "factor" and r.tag == ""]
         cpu = [r for r in fa if r.backend == "cpu"]
-        gpu = [r for r in fa if r.backend != "cpu"]
+        # bench_gpu runs of any tag (bench/run gpu splits them: "" and "large")
+        gpu = [r for r in runs if r.kind == "factor" and r.backend != "cpu"
+               and (r.tag == "" or is_bench_gpu(r))]
         if not cpu:
             self.w(f"{NOT_MEASURED}: no CPU factorization results (run `bench/run cpu`).")
             self.w()
@@ -380,6 +404,7 @@ class Report(GpuSections, EndToEnd):
                 self.gpu_vs_cpu_run(r)
             else:
                 self.factor_run(r)
+        self.gpu_profile_section(runs)
         self.cudss_section(runs)
 
     def analysis_run(self, r: Run) -> None:

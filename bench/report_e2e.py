@@ -70,8 +70,11 @@ class EndToEnd:
         for r in js:
             self.generic_run(r)
         logs_dir = os.path.join(self.results_dir, "logs")
-        logs = sorted(n for n in os.listdir(logs_dir)
-                      if "mbd" in n and n.endswith(".log")) if os.path.isdir(logs_dir) else []
+        # run_mbd.sh's logs (mbd-*.log), newest by the UTC time stamp in the name
+        logs = sorted((n for n in os.listdir(logs_dir)
+                       if n.startswith("mbd") and n.endswith(".log")),
+                      key=lambda n: (re.findall(r"\d{8}T\d{4,6}Z?", n) or [""])[-1] + n
+                      ) if os.path.isdir(logs_dir) else []
         if not logs and not js:
             self.w(f"{NOT_MEASURED}: no `simulate` results and no `logs/*mbd*.log`; on a lent "
                    f"GPU machine, `scripts/gpu/prepare.sh` here, then `bash "
@@ -104,14 +107,18 @@ class EndToEnd:
             asm = r.get("assembly", ("–", "–"))
             ps = r.get("per_step", ("–", "–"))
             st = r.get("strata", ("–",) * 3)
-            rows.append([r["name"], f"`{model_of(r['args'])}`", r.get("device", ("?",))[0],
+            thr = re.search(r"--threads (\d+)", r["args"])
+            dev = r.get("device", ("?",))[0]
+            rows.append([r["name"], f"`{model_of(r['args'])}`",
+                         dev + (f" ({thr.group(1)} threads)" if thr and dev == "cpu" else ""),
                          r.get("steps", ("–",))[0], f"{int(n):,}" if n != "–" else n,
                          f"{int(nnzl):,}" if nnzl != "–" else nnzl, tot, f"{sol} ({share}%)",
                          f"{asm[0]} ({asm[1]}%)", ps[0], ps[1], " / ".join(st),
                          r.get("result", ("–",))[0]])
         self.w(f"From {link}, the text summaries of `strata simulate --quiet --output \"\"` "
                f"(scripts/gpu/run_mbd.sh), parsed by this generator. *ran on*: the device "
-               f"strata reports (`--device auto` picks it); per step: averages over the "
+               f"strata reports (`--device auto` picks it), with the CPU runs' thread "
+               f"count; per step: averages over the "
                f"accepted steps, start-up included; strata: milliseconds per call.")
         self.w()
         self.w(table(["run", "model and arguments", "ran on", "steps", "Newton matrix n",
@@ -127,8 +134,10 @@ class EndToEnd:
             sc, sg = float(c["per_step"][0]), float(g["per_step"][0])
             fc, fg = float(c["strata"][1]), float(g["strata"][1])
             verdict = ("faster" if sg < sc else "**slower**")
+            thr = re.search(r"--threads (\d+)", c["args"])
+            thr = f" with {thr.group(1)} threads" if thr else ""
             self.w(f"`{m}`: the solver takes {sg:g} ms per step on the GPU against {sc:g} on "
-                   f"the CPU ({sc / sg:.2f}×: the GPU is {verdict}); one factorization "
+                   f"the CPU{thr} ({sc / sg:.2f}×: the GPU is {verdict}); one factorization "
                    f"{fg:g} ms against {fc:g} ms ({fc / fg:.2f}×); whole run "
                    f"{g['time'][0]} s against {c['time'][0]} s.")
             self.w()

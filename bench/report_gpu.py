@@ -142,29 +142,162 @@ class GpuSections:
 
     def gpu_vs_cpu_run(self, r: Run) -> None:
         self.consumed.add(r.path)
-        rows = []
+        rows, counts = [], set()
+        new_solve = any(num(dig(row, "strata_gpu", "first_solve_seconds")) is not None
+                        for row in r.rows)
         for row in r.rows:
             g = row.get("strata_gpu") or {}
             cpu = [c for c in row.get("cpu", []) if isinstance(c, dict)]
-            chol = [num(c.get("cholmod_seconds")) for c in cpu]
-            chol = min([c for c in chol if c is not None], default=None)
+            counts.update(int(num(c.get("threads"))) for c in cpu
+                          if num(c.get("threads")) is not None)
+            chol = [(num(c.get("cholmod_seconds")), c.get("threads")) for c in cpu]
+            chol = min([c for c in chol if c[0] is not None], default=(None, None))
             best = num(row.get("best_cpu_seconds"))
-            rows.append([str(row.get("problem")), str(row.get("type", "")), f_int(row.get("n")),
-                         f_int(row.get("nnz_l")), f_g(row.get("factor_flops")),
-                         f_sec(g.get("seconds")), f_g(g.get("gflops")),
-                         f_sec(best) + (f" ({row.get('best_cpu_threads')} thr.)"
-                                        if row.get("best_cpu_threads") else ""),
-                         f_sec(chol), f_ratio(ratio(best, g.get("seconds"))),
-                         f_ratio(ratio(chol, g.get("seconds"))), f_e(g.get("backward_error"))])
+            line = [str(row.get("problem")), str(row.get("type", "")), f_int(row.get("n")),
+                    f_int(row.get("nnz_l")), f_g(row.get("factor_flops")),
+                    f_sec(g.get("seconds")), f_g(g.get("gflops")),
+                    f_sec(best) + (f" ({row.get('best_cpu_threads')} thr.)"
+                                   if row.get("best_cpu_threads") else ""),
+                    f_sec(chol[0]) + (f" ({chol[1]} thr.)" if chol[1] is not None and
+                                      chol[0] is not None else ""),
+                    f_ratio(ratio(best, g.get("seconds"))),
+                    f_ratio(ratio(chol[0], g.get("seconds")))]
+            if new_solve:
+                line += [f_sec(g.get("first_solve_seconds")), f_sec(g.get("solve_seconds")),
+                         f_int(g.get("refinement_steps"))]
+            line.append(f_e(g.get("backward_error")))
+            rows.append(line)
+        tag = f" (tag `{r.tag}`)" if r.tag else ""
         self.w(f"strata's CUDA backend against its CPU backend and CHOLMOD (same permutation) "
-               f"on {machine_label(r.machine)}. Seconds: median of the run's "
-               f"factorizations; *CPU/GPU* is the best CPU time over the GPU time (above 1: "
-               f"the GPU is faster). " + (str(r.get("note")) if r.get("note") else ""))
+               f"on {machine_label(r.machine)}{tag}. Seconds: median of the run's "
+               f"refactorizations; *CPU/GPU* is the best CPU time over the GPU time (above 1: "
+               f"the GPU is faster; below 1: **the GPU is slower**). "
+               + (f"CPU thread counts measured: {', '.join(str(c) for c in sorted(counts))}; "
+                  f"each CPU column is the best of them (the count in brackets)"
+                  f" — more threads are not always faster, notably for CHOLMOD's OpenBLAS. "
+                  if counts else "")
+               + ("*first solve*: one application of the factor (no refinement); *solve*: "
+                  "the full solve with iterative refinement. " if new_solve else "")
+               + (str(r.get("note")) if r.get("note") else ""))
         self.w()
+        if r.get("partial"):
+            self.w("**This run was cut off** (the driver's partial file): only the problems "
+                   "below were measured.")
+            self.w()
         self.w(table(["problem", "type", "n", "nnz(L)", "flops", "GPU s", "GPU GFLOP/s",
-                      "best CPU s", "CHOLMOD s", "CPU/GPU", "CHOLMOD/GPU", "berr GPU"], rows, 2))
+                      "best CPU s", "CHOLMOD s", "CPU/GPU", "CHOLMOD/GPU"]
+                     + (["first solve s", "solve s", "refinement steps"] if new_solve else [])
+                     + ["berr GPU"], rows, 2))
+        slower = [(str(row.get("problem")), x) for row in r.rows
+                  for x in [ratio(row.get("best_cpu_seconds"), dig(row, "strata_gpu", "seconds"))]
+                  if x is not None and x < 1]
+        if slower:
+            self.behind_notes.append(
+                f"strata's GPU backend slower than its CPU backend on {machine_label(r.machine)}: "
+                + ", ".join(f"{p} (CPU/GPU {f_ratio(x)})" for p, x in slower))
+            self.w("**The GPU is slower than the CPU backend** on "
+                   + ", ".join(f"{p} (CPU/GPU {f_ratio(x)})" for p, x in slower) + ".")
+            self.w()
         self.caption("Table: copied from the rows (`strata_gpu`, `cpu`); ratios computed by "
                      "this generator.", [r])
+        self.phase_table(r, [(str(row.get("problem")), dig(row, "strata_gpu", "last_refactor"),
+                              None) for row in r.rows], "bench_gpu")
+
+    # ---- where the GPU refactorization time goes (last_refactor.phases)
+
+    PHASES = (("assembly", "assembly"), ("small_fronts", "small fronts"),
+              ("large_fronts", "large fronts"), ("tiled_fronts", "tiled fronts"),
+              ("store", "store"), ("host", "host"))
+
+    def phase_table(self, r: Run, items, what: str) -> None:
+        """items: (problem, last_refactor dict or None, cuDSS refactor seconds or None).
+        Writes nothing when no item has phases (results files of older drivers)."""
+        items = [(p, lr, c) for p, lr, c in items
+                 if isinstance(lr, dict) and isinstance(lr.get("phases"), dict)]
+        if not items:
+            return
+        anchor = any(c is not None for _, _, c in items)
+        rows, behind = [], []
+        for p, lr, c in items:
+            ph = lr["phases"]
+            tot = num(lr.get("seconds"))
+            vals = [(k, num(ph.get(k))) for k, _ in self.PHASES]
+            cells = []
+            for _, v in vals:
+                share = ratio(v, tot)
+                cells.append("–" if v is None else f_sec(v) + (f" ({share:.0%})"
+                                                               if share is not None else ""))
+            known = [(k, v) for k, v in vals if v is not None]
+            big = max(known, key=lambda t: t[1]) if known else None
+            line = [p, f_sec(tot), f_sec(lr.get("device_seconds"))] + cells
+            line.append(f_sec(sum(v for _, v in known)) if known else "–")
+            line.append(dict(self.PHASES)[big[0]] if big else "–")
+            line += [f_g(lr.get("gflops")),
+                     f_g(num(lr.get("bytes_to_device")) and lr["bytes_to_device"] / 1e6),
+                     f_int(lr.get("device_batches")), f_int(lr.get("tiled_fronts"))]
+            if anchor:
+                line += [f_sec(c), f_ratio(ratio(tot, c)),
+                         f_ratio(ratio(big[1], c)) if big else "–"]
+                if big and c and ratio(tot, c) and ratio(tot, c) > 1:
+                    behind.append((p, tot / c, dict(self.PHASES)[big[0]], big[1], c,
+                                   [(dict(self.PHASES)[k], v) for k, v in known if v > c]))
+            rows.append(line)
+        self.w(f"Where strata's GPU refactorization time goes ({what}, "
+               f"{machine_label(r.machine)}): the phases of the **last** refactorization of "
+               f"the run as the driver stores them (`last_refactor.phases`, GPU time per "
+               f"phase in seconds; in brackets the share of that refactorization's time)"
+               + ("; beside it cuDSS's refactorization (default reordering, median)"
+                  if anchor else "") + ".")
+        self.w()
+        self.w(table(["problem", "last refactor s", "device s"] + [n for _, n in self.PHASES]
+                     + ["sum of phases", "largest phase", "GFLOP/s", "MB to device",
+                        "batches", "fronts tiled (count)"]
+                     + (["cuDSS refactor s", "strata/cuDSS", "largest phase/cuDSS"]
+                        if anchor else []), rows, 1))
+        for p, x, name, v, c, over in behind:
+            self.w(f"{p}: strata's last refactorization is **{x:.2f}× cuDSS's**; its largest "
+                   f"phase, {name}, takes {f_sec(v)} s"
+                   + (f" — {', '.join(f'{n} ({f_sec(t)} s)' for n, t in over)} alone "
+                      f"{'takes' if len(over) == 1 else 'take'} longer than cuDSS's whole "
+                      f"refactorization ({f_sec(c)} s)" if over else
+                      f" (cuDSS's whole refactorization: {f_sec(c)} s)") + ".")
+            self.w()
+        fig, ax = self.plt.subplots(figsize=(max(6, 1.3 * len(items) + 3), 4.5))
+        bottom = [0.0] * len(items)
+        w = 0.4 if anchor else 0.6
+        xs = [i - (w / 2 if anchor else 0) for i in range(len(items))]
+        for k, name in self.PHASES:
+            ys = [num(lr["phases"].get(k)) or 0.0 for _, lr, _ in items]
+            if any(ys):
+                ax.bar(xs, ys, w, bottom=bottom, label=f"strata: {name}")
+                bottom = [b + y for b, y in zip(bottom, ys)]
+        if anchor:
+            ax.bar([i + w / 2 for i in range(len(items))], [c or 0 for _, _, c in items], w,
+                   color="black", alpha=0.6, label="cuDSS refactorization")
+        ax.set_xticks(range(len(items)))
+        ax.set_xticklabels([p for p, _, _ in items], rotation=30, ha="right", fontsize=8)
+        ax.set_ylabel("seconds")
+        ax.set_title("GPU refactorization by phase (last refactorization; lower is better)",
+                     fontsize=10)
+        ax.grid(True, axis="y", alpha=0.3)
+        ax.legend(fontsize=7)
+        self.savefig(fig, f"gpu-phases-{what.replace('_', '-')}-{r.tag or 'main'}-"
+                     f"{machine_slug(r.machine)}", "GPU refactorization time by phase",
+                     "Table and plot: phases copied from `last_refactor` of each row; shares "
+                     "and ratios computed by this generator.", [r])
+
+    def gpu_profile_section(self, runs: list[Run]) -> None:
+        """bench_gpu --gpu-only (benchmark "gpu-profile"): only its phase table."""
+        for r in [r for r in runs if r.kind == "gpu-profile"]:
+            self.consumed.add(r.path)
+            med = ", ".join(f"{row.get('problem')} {f_sec(dig(row, 'strata_gpu', 'seconds'))} s"
+                            for row in r.rows)
+            self.w(f"GPU-only profile (`bench_gpu --gpu-only`: no CPU columns), median "
+                   f"refactorization: {med}.")
+            self.w()
+            self.phase_table(r, [(str(row.get("problem")),
+                                  dig(row, "strata_gpu", "last_refactor"), None)
+                                 for row in r.rows], "gpu_profile")
 
     # ---- experiment 2: cuDSS
 
@@ -293,10 +426,55 @@ class GpuSections:
         self.w()
         if fig_run is not None:
             self.used.add(fig_run.path)
-        self.cudss_targets(r, col, rates, peak)
+        solve = self.cudss_solve(r, sec)
+        self.cudss_targets(r, col, rates, peak, solve)
         self.cudss_plot(r, keys)
+        self.phase_table(r, [(str(row.get("problem")), dig(row, "strata_gpu", "last_refactor"),
+                              sec(row, "cudss_default", "refactor_seconds"))
+                             for row in r.rows], "bench_cudss")
 
-    def cudss_targets(self, r, col, rates, peak) -> None:
+    def cudss_solve(self, r: Run, sec) -> list:
+        """The solve comparison: strata's first application of the factor (no refinement,
+        like cuDSS's SOLVE phase) and its full solve with refinement, against cuDSS's solve.
+        Returns [(problem, first/def., full/def.)]; [] for runs without first_solve_seconds."""
+        if not any(num(dig(row, "strata_gpu", "first_solve_seconds")) is not None
+                   for row in r.rows):
+            return []
+        rows, out = [], []
+        for row in r.rows:
+            p = str(row.get("problem"))
+            first = sec(row, "strata_gpu", "first_solve_seconds")
+            full = sec(row, "strata_gpu", "solve_seconds")
+            d, q = sec(row, "cudss_default", "solve_seconds"), sec(row, "cudss_strata_perm",
+                                                                  "solve_seconds")
+            out.append((p, ratio(first, d), ratio(full, d)))
+            rows.append([p, f_sec(first), f_sec(full),
+                         f_int(dig(row, "strata_gpu", "refinement_steps")), f_sec(d), f_sec(q),
+                         f_ratio(ratio(first, d)), f_ratio(ratio(first, q)),
+                         f_ratio(ratio(full, d)), f_ratio(ratio(full, q))])
+        rows.append(["**geometric mean**", "", "", "", "", ""]
+                    + [f_ratio(geomean([x for x in col if x is not None]))
+                       for col in zip(*[(ratio(sec(row, "strata_gpu", "first_solve_seconds"),
+                                              sec(row, "cudss_default", "solve_seconds")),
+                                        ratio(sec(row, "strata_gpu", "first_solve_seconds"),
+                                              sec(row, "cudss_strata_perm", "solve_seconds")),
+                                        ratio(sec(row, "strata_gpu", "solve_seconds"),
+                                              sec(row, "cudss_default", "solve_seconds")),
+                                        ratio(sec(row, "strata_gpu", "solve_seconds"),
+                                              sec(row, "cudss_strata_perm", "solve_seconds")))
+                                       for row in r.rows])])
+        self.w("Solve, like for like: strata's *first solve* is one application of the factor "
+               "(forward and backward substitution, no refinement: what cuDSS's SOLVE phase "
+               "does); strata's *full solve* adds iterative refinement (its steps counted) and "
+               "is what `Solver::solve` returns. cuDSS: its SOLVE phase. Seconds; ratios "
+               "strata / cuDSS (above 1: strata is slower).")
+        self.w()
+        self.w(table(["problem", "strata first solve s", "strata full solve s",
+                      "refinement steps", "cuDSS def. solve s", "cuDSS perm. solve s",
+                      "first/def.", "first/perm.", "full/def.", "full/perm."], rows, 1))
+        return out
+
+    def cudss_targets(self, r, col, rates, peak, solve=()) -> None:
         rd = [(p, x) for p, x in col["rd"] if x is not None]
         rp = [(p, x) for p, x in col["rp"] if x is not None]
         fd = [(p, x) for p, x in col["fd"] if x is not None]
@@ -312,6 +490,16 @@ class GpuSections:
                          + (f"{min(x for _, x in rp):.1f}–{max(x for _, x in rp):.1f}× slower "
                             f"than cuDSS's with strata's own permutation" if rp else
                             "not compared with strata's permutation") + ".")
+        fs = [(p, x) for p, x, _ in solve if x is not None]
+        if fs:
+            slow = [(p, x) for p, x in fs if x > 1]
+            lines.append(("One application of strata's factor (first solve, no refinement) "
+                          f"takes {min(x for _, x in fs):.2f}–{max(x for _, x in fs):.2f}× "
+                          f"cuDSS's solve (default reordering)"
+                          + (f": **slower on {len(slow)} of {len(fs)} problems**" if slow
+                             else ": not slower on any problem") + "; the full solve with "
+                          "refinement: " + ", ".join(f"{p} {f_ratio(x)}×" for p, _, x in solve
+                                                     if x is not None) + "."))
         if fd:
             lines.append(f"First factorization: {min(x for _, x in fd):.1f}–{max(x for _, x in fd):.1f}× "
                          f"cuDSS's.")
@@ -396,6 +584,7 @@ class GpuSections:
                    f"--stealing on,off`).")
             self.w()
         for (_, machine), rs in gpu.items():
+            rs = self.multigpu_current(rs)
             self.multigpu_group(rs, machine, "GPU")
         if cpu:
             self.w("### CPU backend (host executors standing in for GPUs; not the experiment)")
@@ -406,6 +595,36 @@ class GpuSections:
             self.w()
             for (_, machine), rs in cpu.items():
                 self.multigpu_group(rs, machine, "CPU worker")
+
+    @staticmethod
+    def is_new_multigpu(r: Run) -> bool:
+        """Rows with first_factor_seconds: factor_seconds is the median of the
+        refactorizations after the first (set-up excluded). Older files' factor_seconds is
+        the median over all factorizations, the first (which sets the executors up)
+        included."""
+        return any(isinstance(row, dict) and "first_factor_seconds" in row for row in r.rows)
+
+    def multigpu_current(self, rs: list[Run]) -> list[Run]:
+        """Of one machine's runs: the new-format ones when there are any (older files are
+        named as superseded), else the older ones with a warning."""
+        new = [r for r in rs if self.is_new_multigpu(r)]
+        old = [r for r in rs if not self.is_new_multigpu(r)]
+        if new and old:
+            self.consumed.update(r.path for r in old)
+            self.w("Older results on this machine, superseded by the files below and not "
+                   "shown: " + ", ".join(f"[`{r.name}`]({self.rel(r.path)})" for r in old)
+                   + " (their factor times include the first factorization, which sets the "
+                   "executors up).")
+            self.w()
+            return new
+        if old:
+            self.w("**Caution: these results files are of the older format**: their *factor "
+                   "s* is the median over all of the run's factorizations, the first included "
+                   "— and the first sets the executors up — so set-up cost is mixed into every "
+                   "time below, more so with more GPUs. Newer runs (`bench/run multigpu`) "
+                   "report the first factorization apart.")
+            self.w()
+        return rs
 
     def multigpu_group(self, rs: list[Run], machine: tuple, unit: str) -> None:
         self.consumed.update(r.path for r in rs)
@@ -424,6 +643,7 @@ class GpuSections:
             return num(dig(cfg.get((p, w, s, bal, stl)), "factor_seconds"))
 
         speed_rows, abl_rows, dev_rows, curves = [], [], [], {}
+        first_rows, phase_rows = [], []
         for p in problems:
             s = s_max[p]
             base = t(p, 1, s, False, True)
@@ -435,6 +655,17 @@ class GpuSections:
             line += [f"{x / w:.0%}" if x is not None else "–" for w, x in sp if w > 1]
             curves[p] = [(w, x) for w, x in sp if x is not None]
             speed_rows.append(line)
+            for w in workers:
+                row = cfg.get((p, w, s, False, True)) or {}
+                ff, rf = num(row.get("first_factor_seconds")), num(row.get("factor_seconds"))
+                if ff is not None:
+                    first_rows.append([str(p), str(w), f_sec(ff), f_sec(rf),
+                                       f_sec(ff - rf) if rf is not None else "–",
+                                       f_ratio(ratio(ff, rf))])
+                ph = row.get("factor_phases")
+                if isinstance(ph, dict):
+                    phase_rows.append([str(p), str(w)] + [f_sec(ph.get(k)) for k, _ in
+                                                          self.PHASES])
             for w in workers:
                 on = t(p, w, s, False, True)
                 cells = [str(p), str(w), str(s), f_sec(on)]
@@ -459,11 +690,34 @@ class GpuSections:
                      + [f"speedup {w}" for w in workers if w > 1]
                      + [f"efficiency {w}" for w in workers if w > 1],
                      speed_rows))
+        slower = [(p, w, x) for p, c in curves.items() for w, x in c if w > 1 and x < 1]
+        if slower and unit == "GPU":
+            self.behind_notes.append(
+                f"multi-GPU factorization on {machine_label(machine)}: slower with more GPUs "
+                f"than with one — " + ", ".join(f"{p} on {w} GPUs {1 / x:.2f}× the 1-GPU time"
+                                                for p, w, x in slower))
+        if slower:
+            self.w(f"**Slower with more {unit}s than with one:** " + ", ".join(
+                f"{p} on {w} {unit}s takes {1 / x:.2f}× the 1-{unit} time" for p, w, x in slower)
+                + ".")
+            self.w()
         behind = [(p, w, x) for p, c in curves.items() for w, x in c if w > 1 and x < 0.8 * w]
         if behind:
             self.w("Below 80% parallel efficiency: " + ", ".join(
                 f"{p} with {w} ({x:.2f}× of the ideal {w}×)" for p, w, x in behind) + ".")
             self.w()
+        if first_rows:
+            self.w(f"First factorization (which sets the executors up) against the "
+                   f"refactorizations after it (the times above), default configuration:")
+            self.w()
+            self.w(table(["problem", unit + "s", "first factorization s",
+                          "refactorization s", "set-up (difference) s", "first/refactor"],
+                         first_rows, 1))
+        if phase_rows:
+            self.w("GPU time per phase of the last refactorization (`factor_phases`, seconds, "
+                   "as the driver stores them), default configuration:")
+            self.w()
+            self.w(table(["problem", unit + "s"] + [n for _, n in self.PHASES], phase_rows, 1))
         self.w("Ablation: time of the defaults (*default*: subtrees per GPU as in the run, "
                "stealing on, balance by work off) and with one feature changed, seconds (in "
                "brackets: over *default*; below 1, the change helps). – where the run did not "

@@ -20,7 +20,19 @@ made with round ratios, so the expected figures below are worked out by hand:
             the factor fixture (same nnz(L)): 1.41e8 / 0.01 s = 14.1 GFLOP/s
   multigpu  cuda: 8, 4.8, 4 s on 1, 2, 4 GPUs -> speedups 1.67, 2.00; ablation at 4 GPUs
             1.200, 1.500, 1.100; a cpu-backend run (marker 0.0987) only under its own heading
-  mbd log   solver 20 ms/step on the GPU vs 50 on the CPU -> 2.50x; a failed run is listed
+  mbd log   solver 20 ms/step on the GPU vs 50 on the CPU (8 threads) -> 2.50x; a failed
+            run is listed
+  new-format fixtures (synthetic, machine "Fixture GPU 141GB"; the files say so):
+  bench_gpu GPU 0.8 s, CPU best 4 s at 16 threads (8 at 4), CHOLMOD best 6 s at 4 threads
+            -> CPU/GPU 5.000, CHOLMOD/GPU 7.500; tag "large": CPU/GPU 0.750 (GPU slower);
+            phases 0.2/0.1/0.3/0/0.05/0.15 of 0.8 s -> largest: large fronts (37%)
+  cudss     refactor 0.8 vs 0.2 -> 4.000; first solve 0.06 vs 0.03 / 0.02 -> 2.000 / 3.000,
+            full solve 0.3 -> 10.000 / 15.000; large fronts 0.3 s > cuDSS's 0.2 -> 1.500
+  multigpu  refactor 1, 1.25, 1.6 s on 1, 2, 4 GPUs (slower with more), first 5, 6, 7;
+            an older file (marker 9.99) is superseded; ablation file 1.250, 0.750, 1.100
+  distrib.  1x4, 2x2, 4x1: 1, 1.5, 2 s vs predicted 2, 2.5, 2.5 -> 0.500, 0.600, 0.800;
+            bytes 400/800 MB vs 200/400 -> 2.000; the 1x4 row says gpus_per_rank 1 (the
+            file's 4 counts)
   python    overhead 1.00% on the large matrix (goal 5%: met); strata/SuperLU 0.25 and
             1.0 -> 0.500, strata/CHOLMOD 2.0 and 0.5 -> 1.000
 Exit status 1 with a list of failed checks if anything is off.
@@ -133,8 +145,22 @@ def main():
     check("commit f1x7e5a" in s2 and "2025-01-02T10:00:00Z" in s2,
           "section 2: commit or date not in the caption")
     gpu2 = s2.split("### GPU: strata's CUDA backend", 1)
-    check(len(gpu2) == 2 and "Not measured yet" in gpu2[1].split("### GPU: strata vs NVIDIA")[0],
-          "section 2: bench_gpu part not 'not measured'")
+    bg = gpu2[1].split("### GPU: strata vs NVIDIA")[0] if len(gpu2) == 2 else ""
+    # bench_gpu (new fields): best CPU of the thread counts 4 and 16, first solve, phases
+    check(re.search(r"\| lap3d-new \| spd \| 512,000 \| 80,000,000 \| 1e\+12 \| 0\.8 \| "
+                    r"1\.25e\+03 \| 4 \(16 thr\.\) \| 6 \(4 thr\.\) \| 5\.000 \| 7\.500 \| "
+                    r"0\.06 \| 0\.3 \| 2 \|", bg) and "thread counts measured: 4, 16" in bg,
+          "bench_gpu: row with thread counts / first solve wrong")
+    check(re.search(r"\| lap3d-huge \|.*\| 0\.750 \| 1\.500 \|", bg)
+          and "**The GPU is slower than the CPU backend** on lap3d-huge" in bg
+          and "gpu-large-20250104T100500Z.json" in bg,
+          "bench_gpu: the tagged run (GPU slower than CPU) is not shown or not stated")
+    check(re.search(r"\| lap3d-new \| 0\.8 \| 0\.7 \| 0\.2 \(25%\) \| 0\.1 \(12%\) \| "
+                    r"0\.3 \(37%\) \| 0 \(0%\) \| 0\.05 \(6%\) \| 0\.15 \(19%\) \| 0\.8 \| "
+                    r"large fronts \|", bg), "bench_gpu: phase table row wrong")
+    check("GPU-only profile" in bg and "gpu-profile-20250104T101000Z.json" in bg
+          and re.search(r"\| lap3d-new \| 0\.75 \|.*\| assembly \|", bg),
+          "gpu-profile: not shown as a phase table")
     cu = s2.split("### GPU: strata vs NVIDIA cuDSS", 1)
     cu = cu[1] if len(cu) == 2 else ""
     check(re.search(r"\| lap3d-big \| 20\.000 \| 4\.000 \| 20\.000 \| 4\.000 \|", cu),
@@ -149,6 +175,17 @@ def main():
           "cuDSS: being behind or the targets not stated plainly")
     check("cudss-20250103T110000Z.json" in cu and "commit 9a1b2c3" in cu,
           "cuDSS: results file or commit not named")
+    # cuDSS, new fields: first solve vs cuDSS solve, full solve apart, phases beside cuDSS
+    check(re.search(r"\| lap3d-new \| 0\.06 \| 0\.3 \| 2 \| 0\.03 \| 0\.02 \| 2\.000 \| "
+                    r"3\.000 \| 10\.000 \| 15\.000 \|", cu), "cuDSS: solve comparison row wrong")
+    check("takes 2.00–2.00× cuDSS's solve (default reordering): **slower on 1 of 1 problems**"
+          in cu, "cuDSS: first solve behind cuDSS not stated")
+    check(re.search(r"\| lap3d-new \| 0\.8 \|.*\| large fronts \|.*\| 0\.2 \| 4\.000 \| "
+                    r"1\.500 \|", cu) and "strata's last refactorization is **4.00× cuDSS's**" in cu
+          and "large fronts (0.3 s) alone takes longer than cuDSS's whole refactorization" in cu,
+          "cuDSS: phase breakdown beside cuDSS's refactorization wrong")
+    check(re.search(r"\| lap3d-new \| 10\.000 \| 6\.000 \| 4\.000 \| 2\.000 \|", cu),
+          "cuDSS: new-format ratio row wrong")
     check(re.search(r"Not measured yet\*\* in this run: solve time", s2),
           "section 2: missing solve time not reported as not measured")
 
@@ -162,6 +199,39 @@ def main():
     check(re.search(r"\| lap3d-20 \| 2 \| 1 \| 3 \| 2 \| 60% \|", g3), "section 3: per-GPU row wrong")
     check("0.0987" not in g3 and "0.0987" in c3 and "not the experiment" in c3,
           "section 3: the CPU-backend run is mixed into the GPU experiment or not labelled")
+    # new-format multigpu (first factorization apart) on another machine; old file superseded
+    check("9.99" not in s3 and "multigpu-20250104T115000Z.json" in g3
+          and "superseded" in g3, "section 3: the superseded old-format file is shown or not named")
+    check("**Caution: these results files are of the older format**" in g3,
+          "section 3: old-format multigpu results not flagged")
+    check(re.search(r"\| lap3d-new \| 512,000 \| 1\.25e\+12 \| 1 \| 1\.25 \| 1\.6 \| 0\.80 \| "
+                    r"0\.62 \|", g3) and "lap3d-new on 4 GPUs takes 1.60× the 1-GPU time" in g3,
+          "section 3: new scaling row or 'slower with more GPUs' wrong")
+    check(re.search(r"\| lap3d-new \| 4 \| 7 \| 1\.6 \| 5\.4 \| 4\.375 \|", g3),
+          "section 3: first factorization vs refactorization row wrong")
+    check(re.search(r"\| lap3d-abl \| 4 \| 4 \| 1\.6 \| 2 \(1\.250\) \| 1\.2 \(0\.750\) \| "
+                    r"1\.76 \(1\.100\) \|", g3), "section 3: ablation from the ablation file wrong")
+    # --- experiment 3b: distributed vs the cost model
+    s3b = section(secs, "## 3b.") or ""
+    check(re.search(r"\| lap3d-new \| 1 × 4 \| 5 \| 1 \| – \| 2 \| 0\.500 \| 0 \| 0 \| – \|", s3b)
+          and re.search(r"\| lap3d-new \| 2 × 2 \| 6 \| 1\.5 \| 1\.5 \| 2\.5 \| 0\.600 \| 400 \| "
+                        r"200 \| 2\.000 \|", s3b)
+          and re.search(r"\| lap3d-new \| 4 × 1 \| 7 \| 2 \| 2 \| 2\.5 \| 0\.800 \| 800 \| 400 \| "
+                        r"2\.000 \|", s3b),
+          "section 3b: measured vs predicted rows wrong (1x4 must come from the file's "
+          "gpus_per_rank, not the row's)")
+    check("4 ranks × 1 GPU takes 2.00× the time of 1 rank × 4 GPUs (**slower**" in s3b
+          and "**The cost model is off by more than 1.5×** on lap3d-new 1 × 4" in s3b
+          and "predictions, nothing measured" in s3b and "0.4321" in s3b
+          and "cost-model.json" in s3b and "distributed-2x2-20250104T130100Z.json" in s3b,
+          "section 3b: slower than one process, model error, model-only table or files missing")
+    summ3 = section(secs, "## Summary") or ""
+    check("lap3d-new on 4 ranks × 1 GPU is 2.00× slower than 1 rank × 4 GPUs" in summ3
+          and "lap3d-new on 4 GPUs 1.60× the 1-GPU time" in summ3
+          and "lap3d-huge (CPU/GPU 0.750)" in summ3
+          and re.search(r"first solve \(one application of the factor, no refinement\)/cuDSS "
+                        r"solve \(default reordering\): \*\*2\.000\*\*", summ3),
+          "summary: multi-GPU, distributed, GPU-vs-CPU or first-solve behind statements missing")
     # --- experiment 4
     s4 = section(secs, "## 4.") or ""
     check(re.search(r"\| lap3d-20 \| 10× \| 10 \| 5 \| 5\.00 \| 0\.05 \| 100\.000 \|", s4),
@@ -173,7 +243,8 @@ def main():
     # --- experiment 5: the mbd log
     s5 = section(secs, "## 5.") or ""
     check(re.search(r"\| lattice-gpu \| `--generate lattice:4 --t-end 0\.02` \| cuda \| 10 \|", s5)
-          and "(2.50×: the GPU is faster)" in s5 and "broken-run" in s5,
+          and "(2.50×: the GPU is faster)" in s5 and "broken-run" in s5
+          and "| cpu (8 threads) |" in s5 and "on the CPU with 8 threads" in s5,
           "section 5: log table, CPU vs GPU ratio or failed run wrong")
     check("commit 9a1b2c3" in s5 and "mbd-gpu-20250103T130000Z.log" in s5,
           "section 5: the log's commit or name not in the caption")
@@ -201,13 +272,16 @@ def main():
     other = section(secs, "## Other results") or ""
     check("654.321" in other and "threads-1" in other,
           "the run with tag threads-1 is not under 'Other results'")
+    check("gpu-profile" not in other and "cost_model" not in other and "distributed" not in other,
+          "a gpu-profile, cost-model or distributed file landed in 'Other results'")
     skipped = section(secs, "## Results files skipped") or ""
     check("broken-20250101T000000Z.json" in skipped, "the truncated file is not listed as skipped")
 
     # --- plots: every referenced PNG exists and is a PNG; each has a caption with a file
     plots = re.findall(r"!\[[^\]]*\]\((plots/[^)]+\.png)\)", text)
-    check(len(plots) == 9, f"expected 9 plots (sweep CPU and GPU, analysis, factor, cuDSS, "
-          f"multigpu GPU and CPU, solvability, simulate), found {len(plots)}")
+    check(len(plots) == 16, f"expected 16 plots (sweep CPU and GPU, analysis, factor, 2 cuDSS, "
+          f"4 GPU phase plots, multigpu GPU (2 machines) and CPU, distributed, solvability, "
+          f"simulate), found {len(plots)}")
     for p in plots:
         f = os.path.join(out, p)
         ok = os.path.exists(f) and open(f, "rb").read(8) == b"\x89PNG\r\n\x1a\n"

@@ -13,6 +13,8 @@ OUT=${OUT:-bench/results}
 mkdir -p "$OUT"
 problems=${1:-lap3d-80,elast3d-40}
 log="$OUT/run_mpi.log"
+# under bench/run (STRATA_RESULTS_DIR set) the console output is logged by bench/run
+[ -n "${STRATA_RESULTS_DIR:-}" ] && log=/dev/null
 exec > >(tee -a "$log") 2>&1
 if [ -f .carry/lib/libopenblas.so.0.xz ] && [ ! -f .carry/lib/libopenblas.so.0 ]; then
   xz -dk .carry/lib/*.xz
@@ -49,6 +51,8 @@ if ! command -v mpirun >/dev/null 2>&1; then
   fi
 fi
 bench=.carry-mpi/bin/bench_distributed
+[ -n "${STRATA_BIN_DIR:-}" ] && [ -x "$STRATA_BIN_DIR/bench_distributed" ] && [ ! -x "$bench" ] &&
+  bench=$STRATA_BIN_DIR/bench_distributed
 [ -x "$bench" ] || bench=.carry/bin/bench_distributed
 [ -x "$bench" ] || bench=build/bench/bench_distributed
 [ -x "$bench" ] || { echo "run_mpi: no bench_distributed binary"; exit 2; }
@@ -56,6 +60,7 @@ export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 nvidia-smi -L || true
 mpirun --version | head -1
 status=0
+started=$(mktemp)
 for cfg in 1x4 2x2 4x1; do
   r=${cfg%x*} g=${cfg#*x}
   echo "=== $r rank(s) x $g GPU(s): $problems"
@@ -64,5 +69,8 @@ for cfg in 1x4 2x2 4x1; do
     "$bench" --backend cuda --gpus-per-rank "$g" --problems "$problems" --repeat 3 \
     --tag "${r}x${g}" --results-dir "$OUT" || status=1
 done
-python3 bench/cost_model.py --json "$OUT/cost-model.json" --measured "$OUT"/distributed-*.json || status=1
+# the prediction beside this session's measurements (files newer than the start of this script)
+measured=$(find "$OUT" -maxdepth 1 -name 'distributed-*.json' -newer "$started" | sort)
+python3 bench/cost_model.py --json "$OUT/cost-model.json" --measured $measured || status=1
+rm -f "$started"
 exit $status
