@@ -278,6 +278,9 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
   s.devices.clear();
   numeric::MultiWorkerConfig config;
   config.work_stealing = s.options.work_stealing;
+  // GPUs keep their parts' panels: the host copy is what made several GPUs slower than one
+  // (it is fetched only when a host solve needs it)
+  config.keep_panels_on_devices = true;
   if (s.host_config) config = *s.host_config;
   auto run = [&](MatrixType t) {
     if (external)
@@ -374,7 +377,13 @@ bool apply_inverse(SolverState& s, const double* b, double* x, index_t nrhs,
   if (s.external.solve) {
     s.external.solve(an, s.factor, work.data(), nrhs);
   } else if (!on_device) {
-    if (!s.factor.panels_on_host) numeric::fetch_panels(an, *s.executor, s.factor);
+    if (!s.factor.panels_on_host && s.executor) {
+      numeric::fetch_panels(an, *s.executor, s.factor);
+    } else if (!s.factor.panels_on_host) {  // several GPUs, each holding its parts' panels
+      std::vector<numeric::Executor*> execs;
+      for (auto& e : s.executors) execs.push_back(e.get());
+      numeric::fetch_panels(an, execs, s.factor);
+    }
     numeric::solve_in_place(an, s.factor, work.data(), nrhs);
   }
   for (index_t r = 0; r < nrhs; ++r)

@@ -74,6 +74,9 @@ struct FactorContext {
   NumericFactor* factor = nullptr;
   std::vector<double>* cb_arena = nullptr;  ///< host arena of the part (host executors)
   const PartView* part = nullptr;           ///< set from begin_part to end_part
+  /// Several workers: an executor may keep the panels of the parts it factors in its own
+  /// memory (Executor::holds_part_panels; fetch_panels brings them to the host).
+  bool keep_part_panels = false;
 };
 
 /// A contribution block on its way from the subtree that produced it to the top part.
@@ -145,6 +148,10 @@ class Executor {
   virtual void download_panels(const Analysis& an, NumericFactor& fac) {
     throw InvalidState("download_panels: this executor holds no factor panels");
   }
+  /// After a multi-worker factorization with FactorContext::keep_part_panels: true when
+  /// this executor kept the panels of some of its parts in its own memory only (their
+  /// place in factor.panels is then stale until download_panels).
+  virtual bool holds_part_panels() const { return false; }
   /// Adds backend figures of the last factorization (bytes moved, device time) to `fs`.
   virtual void report(FactorStats& fs) const {}
 };
@@ -171,6 +178,9 @@ void prepare_factor(const Analysis& an, MatrixType type, NumericFactor& factor,
 /// Makes fac.panels hold the panels: a no-op when they are on the host, else
 /// exec.download_panels (exec must be the executor that factored `fac`).
 void fetch_panels(const Analysis& an, Executor& exec, NumericFactor& fac);
+/// The same after a multi-worker factorization: every executor that holds part panels
+/// copies them into fac.panels.
+void fetch_panels(const Analysis& an, const std::vector<Executor*>& execs, NumericFactor& fac);
 
 /// LDLᵀ bookkeeping of front f once its partial factorization is in the factor (shared by
 /// the executors, so that a CPU and a GPU factor have one layout): moves D out of the
@@ -208,6 +218,10 @@ struct MultiWorkerConfig {
   bool factor_top = true;
   /// With factor_top false: ask exporters to leave the blocks in device memory (NCCL).
   bool remote_blocks_on_device = false;
+  /// Executors may keep their parts' panels in device memory (FactorContext::
+  /// keep_part_panels); the factor is then marked panels_on_host = false and the caller
+  /// fetches them (fetch_panels with every executor) before a host solve.
+  bool keep_panels_on_devices = false;
 };
 
 /// Runs the numeric factorization on several executors (one per worker, one host thread

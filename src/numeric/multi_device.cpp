@@ -146,6 +146,7 @@ void factorize_multi(const Analysis& an, const std::vector<double>& scaled_value
   base.type = type;
   base.static_pivot = static_pivot;
   base.factor = &factor;
+  base.keep_part_panels = config.keep_panels_on_devices;
 
   std::vector<DeviceStats> st(workers);
   for (int w = 0; w < workers; ++w) {
@@ -239,6 +240,9 @@ void factorize_multi(const Analysis& an, const std::vector<double>& scaled_value
   }
   const double total = wall.seconds();
   for (auto& d : st) d.idle_seconds = std::max(0.0, total - d.busy_seconds);
+  factor.panels_on_host = true;
+  for (Executor* e : execs)
+    if (e->holds_part_panels()) factor.panels_on_host = false;
   factor.valid = true;
   if (devices) *devices = std::move(st);
 }

@@ -91,6 +91,13 @@ void fetch_panels(const Analysis& an, Executor& exec, NumericFactor& fac) {
   fac.panels_on_host = true;
 }
 
+void fetch_panels(const Analysis& an, const std::vector<Executor*>& execs, NumericFactor& fac) {
+  if (fac.panels_on_host) return;
+  for (Executor* e : execs)
+    if (e->holds_part_panels()) e->download_panels(an, fac);
+  fac.panels_on_host = true;
+}
+
 void store_ldlt_front(const Analysis& an, index_t f, const index_t* local_perm,
                       const int* local_pivot_size, NumericFactor& fac) {
   const auto& t = an.tree;

@@ -107,6 +107,19 @@ void factor_on_gpus(int gpus) {
     numeric::factorize_multi(an, v, pr.type, pivot, execs, multi_f, arenas, {}, &dev);
     // every front was factored by one GPU as on one GPU alone
     EXPECT_LT(test::relative_difference(multi_f.panels, gpu1_f.panels), 1e-13);
+    {  // the parts' panels kept on the GPUs, then fetched: the same factor
+      numeric::NumericFactor kept_f;
+      numeric::MultiWorkerConfig keep;
+      keep.keep_panels_on_devices = true;
+      numeric::factorize_multi(an, v, pr.type, pivot, execs, kept_f, arenas, keep, nullptr);
+      bool held = false;
+      for (numeric::Executor* e : execs) held = held || e->holds_part_panels();
+      EXPECT_EQ(kept_f.panels_on_host, !held);
+      if (pr.type != MatrixType::symmetric_indefinite) EXPECT_TRUE(held);
+      numeric::fetch_panels(an, execs, kept_f);
+      EXPECT_LT(test::relative_difference(kept_f.panels, gpu1_f.panels), 1e-13);
+      EXPECT_EQ(kept_f.rows, multi_f.rows);
+    }
     EXPECT_EQ(multi_f.rows, gpu1_f.rows);
     if (pr.type == MatrixType::spd) {  // no pivoting: entrywise against the CPU
       EXPECT_LT(test::relative_difference(multi_f.panels, cpu_f.panels), 1e-12);

@@ -39,8 +39,11 @@
 // device current. The executor then factors parts of the tree — subtrees and the top part
 // of an.partition — each with its own schedule, chunks and arena layout (PartDevice, all
 // planned and uploaded once per analysis, so any subtree can run on any GPU: stealing);
-// they share one pool and one arena, sized for the largest part. The factor always comes
-// back to the host then (no resident factor: each GPU holds only its parts). A subtree
+// they share one pool and one arena, sized for the largest part. There is no resident
+// factor then (each GPU holds only its parts); with FactorContext::keep_part_panels (the
+// Solver sets it) each part's panels stay in a buffer of the GPU that factored it, and
+// download_panels copies them to the host factor when a host solve needs them — the copy
+// after every chunk was what made several GPUs slower than one. A subtree
 // root's contribution block is exported either to the driver's host buffer (device to
 // host), or — when the importing GPU can access this one's memory (cudaDeviceCanAccessPeer),
 // or is this one — to a device buffer here (the outbox) that the importer copies from
@@ -121,6 +124,7 @@ void CudaExecutor::begin(const numeric::FactorContext& ctx) {
   bytes_h2d_ = bytes_d2h_ = 0;
   chunks_ = tiled_count_ = 0;
   phases_ = FactorStats::DevicePhases{};
+  held_parts_.clear();
   resident_for_ = nullptr;
   if (an.id != analysis_id_) upload_analysis(an);
   STRATA_CUDA(cudaEventRecord(start_, stream_));
@@ -145,8 +149,24 @@ void CudaExecutor::begin_part(const numeric::FactorContext& ctx) {
   whole_ = whole;
   // LDLᵀ keeps the host copy: its D and pivot bookkeeping are done on the host panels
   // (store_ldlt_front); a tiled front goes through host memory anyway
-  device_only_ = keep_resident() && ctx.type != MatrixType::symmetric_indefinite &&
-                 std::none_of(cur_->tiled.begin(), cur_->tiled.end(), [](char c) { return c; });
+  const bool untiled =
+      std::none_of(cur_->tiled.begin(), cur_->tiled.end(), [](char c) { return c; });
+  device_only_ = keep_resident() && ctx.type != MatrixType::symmetric_indefinite && untiled;
+  part_device_only_ = false;
+  if (!whole && ctx.keep_part_panels && limit_ == 0 &&
+      ctx.type != MatrixType::symmetric_indefinite && untiled) {
+    try {  // no room: this part's panels go to the host as before
+      part_panels_[ctx.part->id].resize(std::max<std::size_t>(cur_->panel_total, 1));
+      part_device_only_ = true;
+    } catch (const OutOfMemory&) {
+      part_panels_.erase(ctx.part->id);
+    }
+  }
+}
+
+void CudaExecutor::end_part(const numeric::FactorContext& ctx) {
+  if (part_device_only_) held_parts_.push_back(ctx.part->id);
+  part_device_only_ = false;
 }
 
 std::vector<std::unique_ptr<Lane>>& CudaExecutor::lanes() {
@@ -172,9 +192,28 @@ std::vector<std::unique_ptr<Lane>>& CudaExecutor::lanes() {
 }
 
 void CudaExecutor::download_panels(const Analysis& an, numeric::NumericFactor& fac) {
+  STRATA_CUDA(cudaSetDevice(device_));
+  if (!held_parts_.empty()) {  // parts of a multi-GPU split: each part's buffer, front by front
+    if (an.id != analysis_id_)
+      throw InvalidState("download_panels: the device holds no factor for this analysis");
+    const bool lu = !an.symmetric;
+    std::vector<double> host;
+    for (const int id : held_parts_) {
+      const PartDevice& pd = parts_.at(id);
+      host.resize(pd.panel_total);
+      STRATA_CUDA(cudaMemcpy(host.data(), part_panels_.at(id).data(),
+                             sizeof(double) * pd.panel_total, cudaMemcpyDeviceToHost));
+      for (std::size_t q = 0; q < pd.fronts_host.size(); ++q) {
+        const index_t f = pd.fronts_host[q];
+        std::memcpy(fac.panels.data() + an.factor_layout.panel_offset[f],
+                    host.data() + pd.panel_off_host[q],
+                    sizeof(double) * panel_size(an.tree, f, lu));
+      }
+    }
+    return;
+  }
   if (!keep_resident() || resident_for_ != &fac || resident_analysis_ != an.id)
     throw InvalidState("download_panels: the device holds no factor for this analysis");
-  STRATA_CUDA(cudaSetDevice(device_));
   sized_resize(fac.panels, an.factor_layout.total, "download_panels: factor panels");
   STRATA_CUDA(cudaMemcpyAsync(fac.panels.data(), panels_.data(),
                               sizeof(double) * an.factor_layout.total, cudaMemcpyDeviceToHost,
@@ -233,6 +272,12 @@ void CudaExecutor::end(const numeric::FactorContext& ctx) {
   STRATA_CUDA(cudaSetDevice(device_));
   STRATA_CUDA(cudaEventRecord(stop_, stream_));
   STRATA_CUDA(cudaEventSynchronize(stop_));
+  // panels of parts another GPU factored this time (stealing moves subtrees): give back
+  for (auto it = part_panels_.begin(); it != part_panels_.end();)
+    if (std::find(held_parts_.begin(), held_parts_.end(), it->first) == held_parts_.end())
+      it = part_panels_.erase(it);
+    else
+      ++it;
   float ms = 0;
   STRATA_CUDA(cudaEventElapsedTime(&ms, start_, stop_));
   device_seconds_ = ms * 1e-3;
@@ -444,6 +489,8 @@ void CudaExecutor::plan_parts(const Analysis& an, bool whole) {
   for (auto* b : {&pool_, &arena_, &panels_}) b->clear();
   host_arena_.clear();
   parts_.clear();
+  part_panels_.clear();
+  held_parts_.clear();
   cur_ = nullptr;
   planned_ = 0;
   std::vector<numeric::PartView> views;
@@ -486,6 +533,13 @@ void CudaExecutor::upload_part(const Analysis& an, const numeric::PartView& v) {
   const index_t nf = t.n_fronts();
   PartDevice& pd = parts_.at(v.id);
   upload(pd.fronts, v.schedule->fronts);
+  pd.fronts_host.assign(v.schedule->fronts.begin(), v.schedule->fronts.end());
+  pd.panel_off_host.assign(pd.fronts_host.size(), 0);
+  pd.panel_total = 0;
+  for (std::size_t q = 0; q < pd.fronts_host.size(); ++q) {
+    pd.panel_off_host[q] = static_cast<std::int64_t>(pd.panel_total);
+    pd.panel_total += panel_size(t, pd.fronts_host[q], !an.symmetric);
+  }
   upload(pd.pos_offset, pd.pos_offset_host);
   // where each contribution block the part writes or reads lives
   pd.cb_ptr_host.assign(nf, nullptr);
@@ -622,27 +676,31 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
   STRATA_CUDA(cudaEventRecord(phase_ev_[3], stream_));
   launch_store_cb(tree, begin, count, max_rows, pool_.data(), !lu, stream_);
 
-  // factor panels: packed into the device factor (resident) or the chunk's staging
-  // area (in chunk order: for the whole tree that is the layout's order)
+  // factor panels: packed into the device factor (resident), the part's own buffer (a
+  // part whose panels stay on this device), or the chunk's staging area (in chunk order:
+  // for the whole tree that is the layout's order)
+  const bool dev_only = device_only_ || part_device_only_;
+  double* const pack_to = part_device_only_ ? part_panels_.at(ctx.part->id).data() : panels_.data();
   std::vector<std::int64_t> stage_off(count), diag_off(count + 1, 0);
   std::size_t total = 0;
   for (std::int64_t i = 0; i < count; ++i) {
     const index_t f = s.fronts[begin + i];
-    stage_off[i] =
-        static_cast<std::int64_t>(keep_resident() ? an.factor_layout.panel_offset[f] : total);
+    stage_off[i] = keep_resident()     ? static_cast<std::int64_t>(an.factor_layout.panel_offset[f])
+                   : part_device_only_ ? cur_->panel_off_host[begin + i]
+                                       : static_cast<std::int64_t>(total);
     total += panel_size(t, f, lu);
     diag_off[i + 1] = diag_off[i] + t.n_pivots(f);
   }
   upload(stage_offset_, stage_off);
-  launch_pack_panels(tree, begin, count, max_rows, pool_.data(), stage_offset_.data(),
-                     panels_.data(), lu, stream_);
+  launch_pack_panels(tree, begin, count, max_rows, pool_.data(), stage_offset_.data(), pack_to, lu,
+                     stream_);
   // device-only panels: the host bookkeeping needs only the pivots' diagonal entries
   std::vector<double> diag;
-  if (device_only_) {
+  if (dev_only) {
     upload(diag_offset_, diag_off);
     diag_.resize(static_cast<std::size_t>(diag_off[count]) + 1);
-    launch_gather_diagonals(tree, begin, count, stage_offset_.data(), panels_.data(),
-                            diag_offset_.data(), diag_.data(), stream_);
+    launch_gather_diagonals(tree, begin, count, stage_offset_.data(), pack_to, diag_offset_.data(),
+                            diag_.data(), stream_);
     diag.resize(diag_off[count]);
   }
   STRATA_CUDA(cudaEventRecord(phase_ev_[4], stream_));
@@ -683,7 +741,7 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
       ph.host += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     }
   } host_time{phases_, host_start};
-  if (!device_only_) copy_panels_back(ctx, begin, end);
+  if (!dev_only) copy_panels_back(ctx, begin, end);
   if (ldlt) {  // D out of the panels, pivot sizes, rows: the CPU executor's code; statistics
     std::vector<std::int64_t> psize_at(count);
     for (std::size_t i = 0; i < nall; ++i) {
@@ -709,7 +767,7 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
   // the diagonal of each front's panel: gathered on the device, or read in the host copy
   auto diag_of = [&](index_t p) -> const double* {
     const index_t f = s.fronts[p];
-    if (device_only_) return diag.data() + diag_off[p - begin];
+    if (dev_only) return diag.data() + diag_off[p - begin];
     const index_t m = t.n_rows(f), k = t.n_pivots(f);
     const double* panel = ctx.factor->panels.data() + an.factor_layout.panel_offset[f];
     diag.resize(k);

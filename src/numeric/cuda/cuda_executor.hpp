@@ -40,7 +40,12 @@ struct PartDevice {
   std::vector<std::int64_t> pos_offset_host;  ///< offset in the pool (current chunk)
   std::vector<char> tiled;                    ///< per position: factored tile by tile
   std::vector<index_t> chunk_end;             ///< per position starting a chunk: its end
-  std::vector<double*> cb_ptr_host;           ///< per front: where its block lives
+  std::vector<index_t> fronts_host;           ///< the part's schedule order
+  /// Per position: where the front's panel sits in the part's own panel buffer (a part
+  /// of a multi-GPU split whose panels stay on this device), and that buffer's size.
+  std::vector<std::int64_t> panel_off_host;
+  std::size_t panel_total = 0;
+  std::vector<double*> cb_ptr_host;  ///< per front: where its block lives
   DeviceTree tree{};
 };
 
@@ -77,6 +82,8 @@ class CudaExecutor final : public numeric::Executor {
              index_t nrhs) override;
   bool keeps_panels(const numeric::FactorContext& ctx) const override { return device_only_; }
   void download_panels(const Analysis& an, numeric::NumericFactor& fac) override;
+  bool holds_part_panels() const override { return !held_parts_.empty(); }
+  void end_part(const numeric::FactorContext& ctx) override;
   void report(FactorStats& fs) const override;
 
  private:
@@ -130,7 +137,13 @@ class CudaExecutor final : public numeric::Executor {
   /// The panels of this factorization stay on the device only (resident factor, LLᵀ or
   /// LU, no front factored tile by tile): no copy to the host factor unless asked.
   bool device_only_ = false;
-  int planned_ = 0;  ///< parts_ planned for: 0 nothing, 1 whole, 2 split
+  /// A part of a multi-GPU split whose panels stay on this device (FactorContext::
+  /// keep_part_panels, no budget set, not LDLᵀ, nothing tiled): packed into
+  /// part_panels_[its id] instead of going to the host factor.
+  bool part_device_only_ = false;
+  std::map<int, DeviceBuffer<double>> part_panels_;
+  std::vector<int> held_parts_;  ///< parts of this factorization kept so
+  int planned_ = 0;              ///< parts_ planned for: 0 nothing, 1 whole, 2 split
   /// Blocks of subtree roots exported for a peer copy (or the same device), kept until
   /// the next factorization: the arena they came from is reused by the next subtree.
   std::map<index_t, DeviceBuffer<double>> outbox_;
