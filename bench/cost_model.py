@@ -22,12 +22,12 @@ Two schedules are modelled:
              mapping), 2D block-cyclic, panels broadcast along the grid rows and columns.
 
 Calibration (cite: bench/results/…):
-  multigpu-20261121T190423Z.json (4 H200, lap3d-80 and elast3d-40, 1/2/4 GPUs): per-GPU
+  multigpu-20261121T215148Z.json (4 H200, lap3d-80 and elast3d-40, 1/2/4 GPUs): per-GPU
     rate on subtrees (flops / busy seconds of workers 1-3), rate of the top part on GPU 0,
     the host-side time of a factorization outside the numeric driver, the subtree-root
     contribution-block bytes;
-  gpu-memory-20261121T180221Z.json (H100): pinned PCIe 54.9 GB/s, DGEMM 64.5 TFLOP/s;
-  cudss-20261121T192152Z.json (H100): lap3d-100 and elast3d-50 factor flops.
+  gpu-memory-20261121T213929Z.json (H100): pinned PCIe 54.9 GB/s, DGEMM 64.5 TFLOP/s;
+  strata's analysis (cudss-20261121T213723Z.json, H100): lap3d-100 and elast3d-50 factor flops.
 
 Usage: python3 bench/cost_model.py [--json OUT.json] [--measured RUN.json ...]
 (--measured: JSON files of scripts/gpu/run_mpi.sh; each measurement is printed next to
@@ -62,8 +62,8 @@ def load(name):
 
 def calibrate():
     """Rates and overheads from the measured single-machine files."""
-    mg = load("multigpu-20261121T190423Z.json")
-    mem = load("gpu-memory-20261121T180221Z.json")
+    mg = load("multigpu-20261121T215148Z.json")
+    mem = load("gpu-memory-20261121T213929Z.json")
     cal = {"pcie_bytes_per_s": mem["device_figures"]["h2d_bytes_per_second"],
            "dgemm_flops_per_s": mem["device_figures"]["dgemm_flops_per_second"],
            "problems": {}}
@@ -237,7 +237,7 @@ def predict_benchmark(c, ranks, gpus, pcie):
     roots' blocks of the other ranks' workers ((R−1)/R of them, by LPT's even spread)
     through host memory and MPI (two PCIe crossings plus the shared-memory copy), the
     values broadcast, and the rest ("host") calibrated so that 1 × 4 is the measured
-    4-GPU time of multigpu-20261121T190423Z.json."""
+    4-GPU time of multigpu-20261121T215148Z.json."""
     W = ranks * gpus
     f = c["top_fraction_w4"]
     t_sub = (1 - f) * c["flops"] / W * c["balance_w4"] / c["subtree_rate"]

@@ -240,7 +240,7 @@ void follow(DistributedState& s) {
       case Command::factor: {
         if (!s.analysis) throw InvalidState("internal: factor command before the analysis");
         s.values.resize(payload.size() / sizeof(double));
-        std::memcpy(s.values.data(), payload.data(), payload.size());
+        if (!payload.empty()) std::memcpy(s.values.data(), payload.data(), payload.size());
         try {
           run_factor(s, *s.analysis, s.values, static_cast<MatrixType>(h.a), h.c, s.factor);
         } catch (...) {

@@ -46,7 +46,7 @@ class Reader {
     value(n);
     if (n > (b_.size() - at_) / sizeof(T)) fail();
     v.resize(n);
-    std::memcpy(v.data(), b_.data() + at_, sizeof(T) * n);
+    if (n > 0) std::memcpy(v.data(), b_.data() + at_, sizeof(T) * n);  // data() may be null
     at_ += sizeof(T) * n;
   }
   void finish() const {
