@@ -128,10 +128,11 @@ class Distributed:
             if rk > 1 and base and t:
                 sp.append((p, rk, g, t / base, rk * g))
         self.w(f"On {machine_label(machine)}. *first*: the first factorization (it sets the "
-               f"executors up); *factor*: the driver's `factor_seconds`, the median over the "
-               f"run's factorizations — bench_distributed includes the first in that median "
-               f"(with --repeat 3 it is the slower of the two refactorizations when the first "
-               f"is the slowest); *slowest rank*: the largest per-rank factorization time. "
+               f"executors up); *factor*: the driver's `factor_seconds`, the median of the "
+               f"refactorizations after the first (files from 3da3a5a on; earlier files "
+               f"counted the first in that median); *slowest rank*: the largest per-rank "
+               f"factorization time. Transport: NCCL where the file says so, else MPI through "
+               f"host memory. "
                f"Configuration R × G from the file's `ranks` and `gpus_per_rank`. Bytes: "
                f"sent between ranks during the factorization (contribution blocks and values). "
                f"Predicted: {where or 'no prediction available'}.")
