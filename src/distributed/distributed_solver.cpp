@@ -80,7 +80,11 @@ void setup_numeric(DistributedState& s, Analysis& an, int per_rank) {
       }
     }
 #ifdef STRATA_HAVE_NCCL
-    ns.nccl = gpu && comm.size() > 1;
+    // NCCL only with one GPU per rank: the one run with two GPUs per rank (4 × H200,
+    // lap3d-80, 2 ranks × 2 GPUs) gave a factor that needed 29 s of refinement, where one
+    // GPU per rank was right (docs/distributed.md §5); until that is found, ranks with
+    // several GPUs send their blocks through host memory and MPI
+    ns.nccl = gpu && comm.size() > 1 && per_rank == 1;
 #endif
   } catch (...) {
     failed = std::current_exception();
