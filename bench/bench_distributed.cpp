@@ -16,6 +16,7 @@
 #include <nlohmann/json.hpp>
 
 #include "bench_common.hpp"
+#include "core/stats_json.hpp"
 #include "core/timer.hpp"
 #include "distributed/distributed_internal.hpp"
 #include "strata/distributed.hpp"
@@ -96,26 +97,9 @@ int run(int argc, char** argv) {
     json per = json::array();
     for (const RankStats& r : ds.per_rank) {
       between += r.factor_bytes_sent;
-      per.push_back({{"rank", r.rank},
-                     {"workers", r.workers},
-                     {"subtrees", r.subtrees},
-                     {"factor_flops", r.factor_flops},
-                     {"factor_seconds", r.factor_seconds},
-                     {"factor_bytes_sent", r.factor_bytes_sent},
-                     {"factor_bytes_received", r.factor_bytes_received},
-                     {"factor_bytes_held", r.factor_bytes_held},
-                     {"solve_seconds", r.solve_seconds},
-                     {"solve_bytes_sent", r.solve_bytes_sent},
-                     {"solve_bytes_received", r.solve_bytes_received}});
+      per.push_back(r);
     }
-    json devices = json::array();
-    for (const DeviceStats& d : st.factor.devices)
-      devices.push_back({{"device", d.device},
-                         {"busy_seconds", d.busy_seconds},
-                         {"idle_seconds", d.idle_seconds},
-                         {"subtrees_run", d.subtrees_run},
-                         {"bytes_transferred", d.bytes_transferred},
-                         {"flops", d.flops}});
+    const json devices = st.factor.devices;
     const std::size_t values_bytes =
         sizeof(double) * static_cast<std::size_t>(p.a.nnz()) * static_cast<std::size_t>(ranks - 1);
     json row = {{"problem", name},

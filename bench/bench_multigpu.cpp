@@ -22,6 +22,7 @@
 
 #include "bench_common.hpp"
 #include "core/solver_internal.hpp"
+#include "core/stats_json.hpp"
 #include "core/timer.hpp"
 #include "strata/strata.hpp"
 
@@ -123,18 +124,10 @@ int main(int argc, char** argv) {
               ts = bench::median(times);
               const auto x = solver.solve(b);
               berr = bench::berr(p.a, x, b);
-              json devices = json::array();
-              for (const DeviceStats& d : solver.stats().factor.devices)
-                devices.push_back({{"device", d.device},
-                                   {"busy_seconds", d.busy_seconds},
-                                   {"idle_seconds", d.idle_seconds},
-                                   {"subtrees_run", d.subtrees_run},
-                                   {"subtrees_stolen", d.subtrees_stolen},
-                                   {"bytes_transferred", d.bytes_transferred},
-                                   {"flops", d.flops}});
+              const json devices = solver.stats().factor.devices;
               row["factor_seconds"] = ts;
               row["first_factor_seconds"] = first;
-              row["factor_phases"] = bench::device_figures(solver.stats().factor)["phases"];
+              row["factor_phases"] = solver.stats().factor.device_phases;
               row["backward_error"] = berr;
               row["devices"] = devices;
             }

@@ -35,6 +35,7 @@
 #include <string>
 
 #include "core/atomic_file.hpp"
+#include "core/stats_json.hpp"
 #include "launch.hpp"
 #include "mbd/generators.hpp"
 #include "mbd/model_io.hpp"
@@ -303,38 +304,10 @@ int run_solve(const SolveArgs& a, const Communicator& comm) {
                    {"device_budget", f.device_budget},
                    {"contribution_blocks_on_host", f.contribution_blocks_on_host},
                    {"factor_resident", f.factor_resident},
-                   {"device_phases",
-                    {{"assembly", f.device_phases.assembly},
-                     {"small_fronts", f.device_phases.small_fronts},
-                     {"large_fronts", f.device_phases.large_fronts},
-                     {"store", f.device_phases.store},
-                     {"tiled_fronts", f.device_phases.tiled_fronts},
-                     {"host", f.device_phases.host}}}};
-    json devices = json::array();
-    for (const DeviceStats& d : f.devices)
-      devices.push_back({{"worker", d.worker},
-                         {"device", d.device},
-                         {"busy_seconds", d.busy_seconds},
-                         {"idle_seconds", d.idle_seconds},
-                         {"subtrees_run", d.subtrees_run},
-                         {"subtrees_stolen", d.subtrees_stolen},
-                         {"bytes_transferred", d.bytes_transferred},
-                         {"flops", d.flops}});
-    j["factor"]["devices"] = devices;
+                   {"device_phases", f.device_phases}};
+    j["factor"]["devices"] = f.devices;
     if (ds.ranks > 1) {
-      json ranks = json::array();
-      for (const RankStats& r : ds.per_rank)
-        ranks.push_back({{"rank", r.rank},
-                         {"workers", r.workers},
-                         {"subtrees", r.subtrees},
-                         {"factor_flops", r.factor_flops},
-                         {"factor_seconds", r.factor_seconds},
-                         {"factor_bytes_sent", r.factor_bytes_sent},
-                         {"factor_bytes_received", r.factor_bytes_received},
-                         {"factor_bytes_held", r.factor_bytes_held},
-                         {"solve_seconds", r.solve_seconds},
-                         {"solve_bytes_sent", r.solve_bytes_sent},
-                         {"solve_bytes_received", r.solve_bytes_received}});
+      const json ranks = ds.per_rank;
       j["distributed"] = {{"ranks", ds.ranks},
                           {"workers_per_rank", ds.workers_per_rank},
                           {"analysis_bytes", ds.analysis_bytes},

@@ -268,16 +268,6 @@ SparseMatrix canonical_values(const Analysis& an, const SparseMatrix& a) {
     throw InvalidInput("matrix is " + std::to_string(a.n_rows) + "x" + std::to_string(a.n_cols) +
                        ", the analysis was for " + std::to_string(an.n) + "x" +
                        std::to_string(an.n));
-  // Refactorization with the analyzed pattern itself (a Newton loop, a benchmark): equal
-  // CSC offsets and indices mean `a` is already canonical, so it needs validating but not
-  // sorting — canonicalize sorts and copies every column on each refactorization, host
-  // work of the order of a GPU refactorization. (lower_triangle has the same shortcut.)
-  if (!an.symmetric && a.layout == Layout::csc && a.storage == Storage::full &&
-      a.offsets == an.pattern_offsets && a.indices == an.pattern_indices) {
-    validate(a);
-    if (a.values.empty() && a.nnz() > 0) throw InvalidInput("the matrix has no values");
-    return a;
-  }
   SparseMatrix c = an.symmetric ? lower_triangle(a) : canonicalize(a);
   if (c.offsets != an.pattern_offsets || c.indices != an.pattern_indices)
     throw InvalidInput("the matrix pattern differs from the analyzed pattern; call analyze again");

@@ -80,6 +80,19 @@ double norm_inf(const SparseMatrix& c) {
 // static pivot threshold and the backward error, and an infinite norm would make every
 // pivot "tiny" and every backward error 0. (Each value is finite — validate checked —
 // but a few values near DBL_MAX can sum past it.)
+// Throws InvalidInput naming the first row, then column, whose magnitude sum is not finite.
+void throw_if_norm_overflows(const std::vector<double>& row, const std::vector<double>& col) {
+  for (std::size_t k = 0; k < row.size() + col.size(); ++k) {
+    const bool is_row = k < row.size();
+    const double sum = is_row ? row[k] : col[k - row.size()];
+    if (!std::isfinite(sum))
+      throw InvalidInput("the matrix norm overflows: the magnitudes in " +
+                         std::string(is_row ? "row " : "column ") +
+                         std::to_string(is_row ? k : k - row.size()) +
+                         " (0-based) sum past the largest double (1.8e308); scale the matrix");
+  }
+}
+
 void check_norms(const SparseMatrix& c) {
   std::vector<double> row(c.n_rows, 0.0), col(c.n_cols, 0.0);
   for (index_t j = 0; j < c.n_cols; ++j)
@@ -92,15 +105,7 @@ void check_norms(const SparseMatrix& c) {
         col[c.indices[p]] += v;
       }
     }
-  for (std::size_t k = 0; k < row.size() + col.size(); ++k) {
-    const bool is_row = k < row.size();
-    const double sum = is_row ? row[k] : col[k - row.size()];
-    if (!std::isfinite(sum))
-      throw InvalidInput("the matrix norm overflows: the magnitudes in " +
-                         std::string(is_row ? "row " : "column ") +
-                         std::to_string(is_row ? k : k - row.size()) +
-                         " (0-based) sum past the largest double (1.8e308); scale the matrix");
-  }
+  throw_if_norm_overflows(row, col);
 }
 
 // Throws when a column of x is not finite: the solution (or the solve with the factor)
@@ -196,17 +201,9 @@ double check_values(const SparseMatrix& a, bool symmetric, int threads) {
     if (symmetric && i != j) r[j] += v;
     if (!symmetric) col[j] += v;  // column j belongs to this range alone
   });
+  throw_if_norm_overflows(row, col);
   double norm = 0;
-  for (std::size_t k = 0; k < row.size() + col.size(); ++k) {
-    const bool is_row = k < row.size();
-    const double sum = is_row ? row[k] : col[k - row.size()];
-    if (!std::isfinite(sum))
-      throw InvalidInput("the matrix norm overflows: the magnitudes in " +
-                         std::string(is_row ? "row " : "column ") +
-                         std::to_string(is_row ? k : k - row.size()) +
-                         " (0-based) sum past the largest double (1.8e308); scale the matrix");
-    if (is_row) norm = std::max(norm, sum);
-  }
+  for (double r : row) norm = std::max(norm, r);
   return norm;
 }
 
@@ -333,25 +330,11 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
   fs.gflops = fs.seconds > 0 ? flops / fs.seconds * 1e-9 : 0;
   if (external) {
     if (s.external.report) s.external.report(fs);
-  } else if (workers > 1) {  // device figures summed over the workers (the factor is on the host)
+  } else if (workers > 1) {  // device figures summed over the workers
     for (numeric::Executor* e : execs) {
       FactorStats one;
       e->report(one);
-      fs.device_seconds = std::max(fs.device_seconds, one.device_seconds);
-      fs.bytes_to_device += one.bytes_to_device;
-      fs.bytes_to_host += one.bytes_to_host;
-      fs.device_batches += one.device_batches;
-      fs.tiled_fronts += one.tiled_fronts;
-      fs.device_budget = std::max(fs.device_budget, one.device_budget);
-      fs.contribution_blocks_on_host |= one.contribution_blocks_on_host;
-      auto& d = fs.device_phases;
-      const auto& o = one.device_phases;
-      d.assembly += o.assembly;
-      d.small_fronts += o.small_fronts;
-      d.large_fronts += o.large_fronts;
-      d.store += o.store;
-      d.tiled_fronts += o.tiled_fronts;
-      d.host += o.host;
+      numeric::merge_device_figures(fs, one);
     }
   } else {
     s.executor->report(fs);

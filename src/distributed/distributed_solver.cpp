@@ -138,13 +138,7 @@ detail::ExternalNumeric hooks(DistributedState& s, int per_rank) {
     for (const auto& e : s.numeric.executors) {
       FactorStats one;
       e->report(one);
-      fs.device_seconds = std::max(fs.device_seconds, one.device_seconds);
-      fs.bytes_to_device += one.bytes_to_device;
-      fs.bytes_to_host += one.bytes_to_host;
-      fs.device_batches += one.device_batches;
-      fs.tiled_fronts += one.tiled_fronts;
-      fs.device_budget = std::max(fs.device_budget, one.device_budget);
-      fs.contribution_blocks_on_host |= one.contribution_blocks_on_host;
+      numeric::merge_device_figures(fs, one);
     }
   };
   return ext;

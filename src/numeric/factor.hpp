@@ -175,6 +175,11 @@ int cuda_device_count();
 void prepare_factor(const Analysis& an, MatrixType type, NumericFactor& factor,
                     bool host_panels = true);
 
+/// Adds one executor's device figures (FactorStats' GPU fields, phases included) to those
+/// of a multi-worker factorization: bytes, launch groups, tiled fronts and phase times
+/// summed; device_seconds and device_budget the largest; spilled blocks if any spilled.
+void merge_device_figures(FactorStats& into, const FactorStats& one);
+
 /// Makes fac.panels hold the panels: a no-op when they are on the host, else
 /// exec.download_panels (exec must be the executor that factored `fac`).
 void fetch_panels(const Analysis& an, Executor& exec, NumericFactor& fac);

@@ -85,6 +85,24 @@ void factorize(const Analysis& an, const std::vector<double>& scaled_values, Mat
   factor.valid = true;
 }
 
+void merge_device_figures(FactorStats& into, const FactorStats& one) {
+  into.device_seconds = std::max(into.device_seconds, one.device_seconds);
+  into.bytes_to_device += one.bytes_to_device;
+  into.bytes_to_host += one.bytes_to_host;
+  into.device_batches += one.device_batches;
+  into.tiled_fronts += one.tiled_fronts;
+  into.device_budget = std::max(into.device_budget, one.device_budget);
+  into.contribution_blocks_on_host |= one.contribution_blocks_on_host;
+  auto& d = into.device_phases;
+  const auto& o = one.device_phases;
+  d.assembly += o.assembly;
+  d.small_fronts += o.small_fronts;
+  d.large_fronts += o.large_fronts;
+  d.store += o.store;
+  d.tiled_fronts += o.tiled_fronts;
+  d.host += o.host;
+}
+
 void fetch_panels(const Analysis& an, Executor& exec, NumericFactor& fac) {
   if (fac.panels_on_host) return;
   exec.download_panels(an, fac);
