@@ -119,6 +119,31 @@ TEST_F(CudaBackend, LargeLuFrontsMatchCpu) {
   EXPECT_LT(test::relative_difference(xg, xc), 1e-8);
 }
 
+// One analysis of `a` factored by the CPU executor and by the CUDA executor on one GPU,
+// with the static pivot `sp`, the matching off when `matching` is false (it rejects a
+// singular matrix). The GPU executor is kept: a resident factor's panels stay with it.
+namespace {
+struct CpuAndGpu {
+  Analysis an;
+  numeric::NumericFactor cpu, gpu;
+  std::unique_ptr<numeric::Executor> gpu_exec;
+};
+CpuAndGpu factor_on_cpu_and_gpu(const SparseMatrix& a, MatrixType type, bool matching, double sp) {
+  Options o;
+  o.num_gpus = 1;  // one GPU, whatever the machine has
+  o.type = type;
+  o.matching_and_scaling = matching;
+  CpuAndGpu r;
+  r.an = analyze_matrix(a, o);
+  const SparseMatrix c = canonical_values(r.an, a);
+  std::vector<double> arena;
+  numeric::factorize(r.an, c.values, type, sp, *numeric::make_cpu_executor(2), r.cpu, arena);
+  r.gpu_exec = numeric::make_cuda_executor(o);
+  numeric::factorize(r.an, c.values, type, sp, *r.gpu_exec, r.gpu, arena);
+  return r;
+}
+}  // namespace
+
 // The GPU LU factor equals the CPU's entry by entry, for large fronts on both of their
 // paths: GETRF + TRSM + GEMM when no pivot needs static pivoting, and the panel-kernel
 // path when one does (exactly zero columns inside large fronts). The factor is resident,
@@ -147,24 +172,14 @@ TEST_F(CudaBackend, LuFactorMatchesCpu) {
   problems.push_back(std::move(z));
   for (const Problem& pr : problems) {
     SCOPED_TRACE(pr.name);
-    Options o;
-    o.num_gpus = 1;
-    o.type = MatrixType::general;
-    o.matching_and_scaling = pr.zero_columns == 0;  // the matching rejects a singular matrix
-    Analysis an = analyze_matrix(pr.a, o);
-    SparseMatrix c = canonical_values(an, pr.a);
-    numeric::NumericFactor cf, gf;
-    std::vector<double> arena;
-    auto cpu = numeric::make_cpu_executor(2);
-    auto gpu = numeric::make_cuda_executor(o);
-    const double sp = 1e-8;
-    numeric::factorize(an, c.values, MatrixType::general, sp, *cpu, cf, arena);
-    numeric::factorize(an, c.values, MatrixType::general, sp, *gpu, gf, arena);
+    CpuAndGpu r = factor_on_cpu_and_gpu(pr.a, MatrixType::general, pr.zero_columns == 0, 1e-8);
+    const numeric::NumericFactor& cf = r.cpu;
+    numeric::NumericFactor& gf = r.gpu;
     FactorStats fs;
-    gpu->report(fs);
+    r.gpu_exec->report(fs);
     EXPECT_TRUE(fs.factor_resident);
     EXPECT_FALSE(gf.panels_on_host);
-    numeric::fetch_panels(an, *gpu, gf);
+    numeric::fetch_panels(r.an, *r.gpu_exec, gf);
     ASSERT_EQ(cf.rows, gf.rows);
     // zero columns: a residue of rounding size, replaced by the static pivot on one side
     // and not the other, changes entries at the pivot's size
@@ -340,20 +355,11 @@ TEST_F(CudaBackend, LdltFactorMatchesCpu) {
   index_t two_by_two = 0;
   for (const Problem& pr : problems) {
     SCOPED_TRACE(pr.name);
-    Options o;
-    o.num_gpus = 1;  // one GPU, whatever the machine has
-    o.type = MatrixType::symmetric_indefinite;
-    o.matching_and_scaling = pr.zero_columns == 0;  // the matching rejects a singular matrix
-    Analysis an = analyze_matrix(pr.a, o);
-    SparseMatrix c = canonical_values(an, pr.a);
+    const CpuAndGpu r =
+        factor_on_cpu_and_gpu(pr.a, MatrixType::symmetric_indefinite, pr.zero_columns == 0, 1e-8);
+    const Analysis& an = r.an;
+    const numeric::NumericFactor &cf = r.cpu, &gf = r.gpu;
     for (index_t f = 0; f < an.tree.n_fronts(); ++f) saw_large |= an.tree.n_rows(f) > 256;
-    numeric::NumericFactor cf, gf;
-    std::vector<double> arena;
-    auto cpu = numeric::make_cpu_executor(2);
-    auto gpu = numeric::make_cuda_executor(o);
-    const double sp = 1e-8;
-    numeric::factorize(an, c.values, MatrixType::symmetric_indefinite, sp, *cpu, cf, arena);
-    numeric::factorize(an, c.values, MatrixType::symmetric_indefinite, sp, *gpu, gf, arena);
     ASSERT_EQ(cf.pivot_size, gf.pivot_size);
     ASSERT_EQ(cf.rows, gf.rows);
     EXPECT_LT(test::relative_difference(gf.panels, cf.panels), 1e-10);
