@@ -52,7 +52,8 @@ struct SolverState {
   // SolverAccess::set_external: the distributed solver's numeric phases (src/distributed)
   detail::ExternalNumeric external;
   MatrixType resolved = MatrixType::automatic;
-  double norm_inf = 0;  // ‖A‖∞ of the input
+  double norm_inf = 0;                // ‖A‖∞ of the input
+  std::uint64_t values_analysis = 0;  // Analysis::id whose canonical pattern `values` holds
   Stats stats;
 };
 
@@ -218,17 +219,19 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
     // was of the order of the GPU refactorization itself.
     s.norm_inf = check_values(a, an.symmetric, s.options.num_threads);
     s.factor.valid = false;
-    if (s.values.offsets != an.pattern_offsets || s.values.indices != an.pattern_indices) {
+    if (s.values_analysis != an.id) {
       s.values = a;
       s.values.storage = an.symmetric ? Storage::lower : Storage::full;
+      s.values_analysis = an.id;
     } else {
-      s.values.values = a.values;
+      s.values.values = a.values;  // the pattern is already the analyzed one
     }
   } else {
     SparseMatrix checked = canonical_values(an, a);
     check_norms(checked);
     s.factor.valid = false;
     s.values = std::move(checked);
+    s.values_analysis = an.id;
     s.norm_inf = norm_inf(s.values);
   }
   // scaled values: general matrices use Dr·A(:,Q)·Dc from the matching, symmetric
