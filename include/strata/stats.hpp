@@ -111,6 +111,11 @@ struct FactorStats {
     double store = 0;         ///< contribution blocks stored, panels packed
     double tiled_fronts = 0;  ///< fronts over the budget, slab by slab (wall time)
     double host = 0;          ///< see above
+    /// Wall time preparing the device, not in the groups above: the analysis arrays
+    /// uploaded, the device memory planned and allocated, the library handles and streams
+    /// created, the solve's row arrays uploaded. A refactorization with the same analysis
+    /// reuses all of it (near zero); the first factorization pays it.
+    double setup = 0;
   } device_phases;
   /// Per worker, when several factored the tree (Options::num_gpus > 1); empty when one
   /// executor factored the whole tree.

@@ -259,6 +259,7 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
   const int workers = an.partition.workers;
   const bool external = static_cast<bool>(s.external.factor);
   std::vector<numeric::Executor*> execs;
+  const Timer creation;  // a new executor: device context, streams, library handles
   if (external) {
     // the distributed solver brings its own executors
   } else if (workers > 1) {  // only the CUDA backend resolves to several workers (resolve_workers)
@@ -275,6 +276,7 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
     s.executor = gpu ? numeric::make_cuda_executor(s.options)
                      : numeric::make_cpu_executor(s.options.num_threads, s.options.reproducible);
   }
+  const double creation_seconds = creation.seconds();
   s.devices.clear();
   numeric::MultiWorkerConfig config;
   config.work_stealing = s.options.work_stealing;
@@ -342,6 +344,7 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
   } else {
     s.executor->report(fs);
   }
+  if (fs.backend == "cuda") fs.device_phases.setup += creation_seconds;
 }
 
 // One solve with the factor: x = A⁻¹ b for nrhs columns (original numbering). Returns

@@ -14,7 +14,8 @@ namespace strata {
 /// GPU seconds per phase of a factorization (FactorStats::device_phases).
 inline void to_json(nlohmann::json& j, const FactorStats::DevicePhases& d) {
   j = {{"assembly", d.assembly}, {"small_fronts", d.small_fronts}, {"large_fronts", d.large_fronts},
-       {"store", d.store},       {"tiled_fronts", d.tiled_fronts}, {"host", d.host}};
+       {"store", d.store},       {"tiled_fronts", d.tiled_fronts}, {"host", d.host},
+       {"setup", d.setup}};
 }
 
 /// One worker (GPU) of a multi-worker factorization (FactorStats::devices).

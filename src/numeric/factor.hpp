@@ -115,6 +115,11 @@ class Executor {
   virtual const char* name() const = 0;
   /// The CUDA device this executor runs on; -1 for a host executor.
   virtual int device() const { return -1; }
+  /// Whether the driver must size FactorContext::cb_arena (host memory) for this executor.
+  /// A device executor keeps its contribution blocks in its own memory: sizing (and
+  /// zero-filling) a host arena of several GB for it cost seconds of the first
+  /// factorization and was never read.
+  virtual bool uses_host_arena() const { return true; }
   /// Called once per factorization, before this executor's first part (ctx.part unset).
   virtual void begin(const FactorContext& ctx) {}
   /// Called before the batches of the part ctx.part.

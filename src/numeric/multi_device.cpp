@@ -176,7 +176,8 @@ void factorize_multi(const Analysis& an, const std::vector<double>& scaled_value
           std::this_thread::sleep_for(std::chrono::duration<double>(config.injected_delay[w]));
         const schedule::FactorPart& sub = part.subtrees[i];
         const PartView view = PartView::of(sub, i);
-        if (arenas[w].size() < sub.cb_layout.arena_size) arenas[w].resize(sub.cb_layout.arena_size);
+        if (ex.uses_host_arena() && arenas[w].size() < sub.cb_layout.arena_size)
+          arenas[w].resize(sub.cb_layout.arena_size);
         ctx.part = &view;
         ex.begin_part(ctx);
         run_batches(ex, ctx);
@@ -220,7 +221,7 @@ void factorize_multi(const Analysis& an, const std::vector<double>& scaled_value
     const PartView view = PartView::of(part.top, top_id);
     FactorContext ctx = base;
     ctx.cb_arena = &arenas[0];
-    if (arenas[0].size() < part.top.cb_layout.arena_size)
+    if (ex.uses_host_arena() && arenas[0].size() < part.top.cb_layout.arena_size)
       arenas[0].resize(part.top.cb_layout.arena_size);
     ctx.part = &view;
     ex.begin_part(ctx);

@@ -55,7 +55,8 @@ void factorize(const Analysis& an, const std::vector<double>& scaled_values, Mat
                double static_pivot, Executor& exec, NumericFactor& factor,
                std::vector<double>& cb_arena) {
   prepare_factor(an, type, factor, false);
-  sized_resize(cb_arena, an.cb_layout.arena_size, "factorize: contribution-block arena");
+  if (exec.uses_host_arena())
+    sized_resize(cb_arena, an.cb_layout.arena_size, "factorize: contribution-block arena");
 
   const PartView whole = PartView::whole(an);
   FactorContext ctx;
@@ -101,6 +102,7 @@ void merge_device_figures(FactorStats& into, const FactorStats& one) {
   d.store += o.store;
   d.tiled_fronts += o.tiled_fronts;
   d.host += o.host;
+  d.setup += o.setup;
 }
 
 void fetch_panels(const Analysis& an, Executor& exec, NumericFactor& fac) {

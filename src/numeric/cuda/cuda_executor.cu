@@ -54,6 +54,7 @@
 #include <cstring>
 
 #include "core/alloc.hpp"
+#include "core/timer.hpp"
 #include "numeric/cuda/cuda_executor.hpp"
 
 namespace strata::cuda {
@@ -126,7 +127,11 @@ void CudaExecutor::begin(const numeric::FactorContext& ctx) {
   phases_ = FactorStats::DevicePhases{};
   held_parts_.clear();
   resident_for_ = nullptr;
-  if (an.id != analysis_id_) upload_analysis(an);
+  if (an.id != analysis_id_) {
+    const Timer setup;
+    upload_analysis(an);
+    phases_.setup += setup.seconds();
+  }
   STRATA_CUDA(cudaEventRecord(start_, stream_));
   values_.upload(ctx.values, an.pattern_indices.size(), stream_);
   count_h2d(an.pattern_indices.size() * sizeof(double));
@@ -136,12 +141,14 @@ void CudaExecutor::begin_part(const numeric::FactorContext& ctx) {
   STRATA_CUDA(cudaSetDevice(device_));
   const Analysis& an = *ctx.analysis;
   const bool whole = ctx.part->id == -1;
+  const Timer setup;
   if (whole && planned_ != 1) plan_parts(an, true);
   if (!whole && planned_ != 2) {
     if (an.partition.part_of.size() != static_cast<std::size_t>(an.tree.n_fronts()))
       throw InvalidInput("internal: a part of an analysis that was not split");
     plan_parts(an, false);
   }
+  if (lanes_.empty()) lanes();  // streams and library handles, created once
   auto it = parts_.find(ctx.part->id);
   if (it == parts_.end())
     throw InvalidInput("internal: part " + std::to_string(ctx.part->id) + " was not planned");
@@ -162,6 +169,7 @@ void CudaExecutor::begin_part(const numeric::FactorContext& ctx) {
       part_panels_.erase(ctx.part->id);
     }
   }
+  phases_.setup += setup.seconds();
 }
 
 void CudaExecutor::end_part(const numeric::FactorContext& ctx) {
@@ -298,6 +306,7 @@ void CudaExecutor::end(const numeric::FactorContext& ctx) {
     resident_for_ = ctx.factor;
     resident_analysis_ = ctx.analysis->id;
   } else if (keep_resident()) {
+    const Timer setup;
     const Analysis& an = *ctx.analysis;
     const numeric::NumericFactor& fac = *ctx.factor;
     const auto& t = an.tree;
@@ -326,6 +335,7 @@ void CudaExecutor::end(const numeric::FactorContext& ctx) {
     resident_analysis_ = an.id;
     rows_analysis_ = an.id;
     rows_type_ = ctx.type;
+    phases_.setup += setup.seconds();
   }
 }
 

@@ -72,6 +72,7 @@ class CudaExecutor final : public numeric::Executor {
   ~CudaExecutor() override;
   const char* name() const override { return "cuda"; }
   int device() const override { return device_; }
+  bool uses_host_arena() const override { return false; }
   void begin(const numeric::FactorContext& ctx) override;
   void begin_part(const numeric::FactorContext& ctx) override;
   void factor_batch(const numeric::FactorContext& ctx, const BatchInfo& b) override;
