@@ -95,7 +95,8 @@ CudaExecutor::CudaExecutor(const Options& o, int device)
   STRATA_CUSOLVER(cusolverDnSetStream(solver_, stream_));
   STRATA_CUDA(cudaEventCreate(&start_));
   STRATA_CUDA(cudaEventCreate(&stop_));
-  for (cudaEvent_t& e : phase_ev_) STRATA_CUDA(cudaEventCreate(&e));
+  for (ChunkRecord& c : chunk_)
+    for (cudaEvent_t& e : c.ev) STRATA_CUDA(cudaEventCreate(&e));
 }
 
 CudaExecutor::~CudaExecutor() {
@@ -111,7 +112,8 @@ CudaExecutor::~CudaExecutor() {
   lanes_.clear();
   cudaEventDestroy(start_);
   cudaEventDestroy(stop_);
-  for (cudaEvent_t e : phase_ev_) cudaEventDestroy(e);
+  for (ChunkRecord& c : chunk_)
+    for (cudaEvent_t e : c.ev) cudaEventDestroy(e);
   cusolverDnDestroy(solver_);
   cublasDestroy(blas_);
   cudaStreamDestroy(stream_);
@@ -127,6 +129,7 @@ void CudaExecutor::begin(const numeric::FactorContext& ctx) {
   phases_ = FactorStats::DevicePhases{};
   held_parts_.clear();
   resident_for_ = nullptr;
+  pending_ = nullptr;  // a chunk left by a factorization that failed
   if (an.id != analysis_id_) {
     const Timer setup;
     upload_analysis(an);
@@ -173,6 +176,7 @@ void CudaExecutor::begin_part(const numeric::FactorContext& ctx) {
 }
 
 void CudaExecutor::end_part(const numeric::FactorContext& ctx) {
+  flush_chunk(ctx);  // the last chunk's host part, while ctx.part is still this part
   if (part_device_only_) held_parts_.push_back(ctx.part->id);
   part_device_only_ = false;
 }
@@ -287,6 +291,7 @@ std::size_t CudaExecutor::import_cb(const numeric::FactorContext& ctx,
 
 void CudaExecutor::end(const numeric::FactorContext& ctx) {
   STRATA_CUDA(cudaSetDevice(device_));
+  flush_chunk(ctx);
   STRATA_CUDA(cudaEventRecord(stop_, stream_));
   STRATA_CUDA(cudaEventSynchronize(stop_));
   // panels of parts another GPU factored this time (stealing moves subtrees): give back
@@ -585,6 +590,7 @@ void CudaExecutor::factor_batch(const numeric::FactorContext& ctx, const BatchIn
   STRATA_CUDA(cudaSetDevice(device_));
   for (index_t q = b.begin; q < b.end;) {
     if (cur_->tiled[q]) {
+      flush_chunk(ctx);  // the tiled path syncs and works on the host
       factor_tiled(ctx, q);
       ++q;
     } else {
@@ -609,11 +615,14 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
   const bool ldlt = ctx.type == MatrixType::symmetric_indefinite;
   const std::int64_t count = end - begin;
   ++chunks_;
+  ChunkRecord& rec = chunk_[slot_];
+  slot_ ^= 1;
+  cudaEvent_t* const ev = rec.ev;
   index_t max_rows = 0;
   for (index_t p = begin; p < end; ++p) max_rows = std::max(max_rows, t.n_rows(s.fronts[p]));
-  STRATA_CUDA(cudaEventRecord(phase_ev_[0], stream_));
+  STRATA_CUDA(cudaEventRecord(ev[0], stream_));
   launch_assemble(tree, begin, count, max_rows, values_.data(), pool_.data(), !lu, stream_);
-  STRATA_CUDA(cudaEventRecord(phase_ev_[1], stream_));
+  STRATA_CUDA(cudaEventRecord(ev[1], stream_));
 
   // small fronts: one launch for the whole chunk
   std::vector<std::int64_t> small, big, perm_off{0};
@@ -644,7 +653,7 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
     launch_factor_small(tree, small_pos_.data(), static_cast<std::int64_t>(ns), pool_.data(), lu,
                         ctx.static_pivot, info_.data(), perturbed_.data(), perm_.data(),
                         perm_offset_.data(), stream_);
-  STRATA_CUDA(cudaEventRecord(phase_ev_[2], stream_));
+  STRATA_CUDA(cudaEventRecord(ev[2], stream_));
 
   // large fronts: library calls, each front on one lane, the lanes side by side (the
   // least-loaded lane takes the next front; LDLᵀ's panel workspace is single: one lane)
@@ -656,7 +665,7 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
   const std::size_t n_lanes = ldlt ? 1 : std::min(lane.size(), big.size());
   for (std::size_t l = 0; l < n_lanes; ++l) {
     lane[l]->load = 0;
-    if (l > 0) STRATA_CUDA(cudaStreamWaitEvent(lane[l]->stream, phase_ev_[2], 0));
+    if (l > 0) STRATA_CUDA(cudaStreamWaitEvent(lane[l]->stream, ev[2], 0));
   }
   for (std::size_t i = 0; i < big.size(); ++i) {
     const index_t p = big[i], f = s.fronts[p];
@@ -692,7 +701,7 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
     STRATA_CUDA(cudaEventRecord(lane[l]->done, lane[l]->stream));
     STRATA_CUDA(cudaStreamWaitEvent(stream_, lane[l]->done, 0));
   }
-  STRATA_CUDA(cudaEventRecord(phase_ev_[3], stream_));
+  STRATA_CUDA(cudaEventRecord(ev[3], stream_));
   launch_store_cb(tree, begin, count, max_rows, pool_.data(), !lu, stream_);
 
   // factor panels: packed into the device factor (resident), the part's own buffer (a
@@ -714,40 +723,99 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
   launch_pack_panels(tree, begin, count, max_rows, pool_.data(), stage_offset_.data(), pack_to, lu,
                      stream_);
   // device-only panels: the host bookkeeping needs only the pivots' diagonal entries
-  std::vector<double> diag;
   if (dev_only) {
     upload(diag_offset_, diag_off);
     diag_.resize(static_cast<std::size_t>(diag_off[count]) + 1);
     launch_gather_diagonals(tree, begin, count, stage_offset_.data(), pack_to, diag_offset_.data(),
                             diag_.data(), stream_);
-    diag.resize(diag_off[count]);
   }
-  STRATA_CUDA(cudaEventRecord(phase_ev_[4], stream_));
+  STRATA_CUDA(cudaEventRecord(ev[4], stream_));
+  // the results the host part needs, into this slot's pinned buffers (so that the copies
+  // do not hold the host): the host part runs after the next chunk is launched
   const std::size_t nall = ns + big.size();
-  std::vector<std::int64_t> info(nall), perturbed(nall), perm(perm_at);
-  std::vector<int> pinfo(big.size()), psize(ldlt ? perm_at : 0);
+  rec.info.resize(nall + 1);
+  rec.perturbed.resize(nall + 1);
+  rec.perm.resize(static_cast<std::size_t>(perm_at) + 1);
+  rec.pinfo.resize(big.size() + 1);
+  rec.psize.resize(static_cast<std::size_t>(perm_at) + 1);
+  rec.diag.resize(dev_only ? static_cast<std::size_t>(diag_off[count]) + 1 : 1);
   if (ns && !ldlt)
     STRATA_CUDA(
-        cudaMemcpyAsync(info.data(), info_.data(), 8 * ns, cudaMemcpyDeviceToHost, stream_));
+        cudaMemcpyAsync(rec.info.data(), info_.data(), 8 * ns, cudaMemcpyDeviceToHost, stream_));
   if (nall)
-    STRATA_CUDA(cudaMemcpyAsync(perturbed.data(), perturbed_.data(), 8 * nall,
+    STRATA_CUDA(cudaMemcpyAsync(rec.perturbed.data(), perturbed_.data(), 8 * nall,
                                 cudaMemcpyDeviceToHost, stream_));
   if (perm_at)
-    STRATA_CUDA(
-        cudaMemcpyAsync(perm.data(), perm_.data(), 8 * perm_at, cudaMemcpyDeviceToHost, stream_));
+    STRATA_CUDA(cudaMemcpyAsync(rec.perm.data(), perm_.data(), 8 * perm_at, cudaMemcpyDeviceToHost,
+                                stream_));
   if (!big.empty() && !lu && !ldlt)
-    STRATA_CUDA(cudaMemcpyAsync(pinfo.data(), potrf_info_.data(), sizeof(int) * big.size(),
+    STRATA_CUDA(cudaMemcpyAsync(rec.pinfo.data(), potrf_info_.data(), sizeof(int) * big.size(),
                                 cudaMemcpyDeviceToHost, stream_));
   if (ldlt && perm_at)
-    STRATA_CUDA(cudaMemcpyAsync(psize.data(), pivot_size_.data(), sizeof(int) * perm_at,
+    STRATA_CUDA(cudaMemcpyAsync(rec.psize.data(), pivot_size_.data(), sizeof(int) * perm_at,
                                 cudaMemcpyDeviceToHost, stream_));
-  if (!diag.empty())
-    STRATA_CUDA(cudaMemcpyAsync(diag.data(), diag_.data(), sizeof(double) * diag.size(),
+  if (dev_only && diag_off[count] > 0)
+    STRATA_CUDA(cudaMemcpyAsync(rec.diag.data(), diag_.data(), sizeof(double) * diag_off[count],
                                 cudaMemcpyDeviceToHost, stream_));
-  STRATA_CUDA(cudaStreamSynchronize(stream_));
+  STRATA_CUDA(cudaEventRecord(ev[5], stream_));
+  rec.begin = begin;
+  rec.end = end;
+  rec.lu = lu;
+  rec.ldlt = ldlt;
+  rec.dev_only = dev_only;
+  rec.small = std::move(small);
+  rec.big = std::move(big);
+  rec.perm_off = std::move(perm_off);
+  rec.big_perm_at = std::move(big_perm_at);
+  rec.diag_off = std::move(diag_off);
+  rec.perm_at = perm_at;
+  // the previous chunk's host part, while the GPU runs this one; this one's waits when it
+  // writes to the host factor (panels copied back, LDLᵀ): the next chunk's stores would
+  // overwrite the staging area it reads
+  flush_chunk(ctx);
+  pending_ = &rec;
+  if (!dev_only || ldlt) flush_chunk(ctx);
+}
+
+void CudaExecutor::flush_chunk(const numeric::FactorContext& ctx) {
+  if (!pending_) return;
+  ChunkRecord& c = *pending_;
+  pending_ = nullptr;
+  try {
+    finish_chunk(ctx, c);
+  } catch (...) {
+    // a later chunk may still run (on a failed pivot's NaNs): let it end before the
+    // buffers it uses can be freed or reused
+    (void)cudaDeviceSynchronize();
+    (void)cudaGetLastError();
+    throw;
+  }
+}
+
+// The host part of a launched chunk: its phase times, the panels copied back (unless
+// they stay on the device), per-front bookkeeping and pivot failures.
+void CudaExecutor::finish_chunk(const numeric::FactorContext& ctx, ChunkRecord& c) {
+  const Analysis& an = *ctx.analysis;
+  const auto& t = an.tree;
+  const auto& s = *ctx.part->schedule;
+  const DeviceTree& tree = cur_->tree;
+  const index_t begin = c.begin, end = c.end;
+  const std::int64_t count = end - begin;
+  const bool lu = c.lu, ldlt = c.ldlt, dev_only = c.dev_only;
+  const std::vector<std::int64_t>& small = c.small;
+  const std::vector<std::int64_t>& big = c.big;
+  const std::vector<std::int64_t>& perm_off = c.perm_off;
+  const std::vector<std::int64_t>& big_perm_at = c.big_perm_at;
+  const std::vector<std::int64_t>& diag_off = c.diag_off;
+  const std::size_t ns = small.size(), nall = ns + big.size();
+  const std::int64_t* info = c.info.data();
+  const std::int64_t* perturbed = c.perturbed.data();
+  const std::int64_t* perm = c.perm.data();
+  const int* pinfo = c.pinfo.data();
+  const int* psize = c.psize.data();
+  STRATA_CUDA(cudaEventSynchronize(c.ev[5]));
   float ms[4] = {};
-  for (int e = 0; e < 4; ++e)
-    STRATA_CUDA(cudaEventElapsedTime(&ms[e], phase_ev_[e], phase_ev_[e + 1]));
+  for (int e = 0; e < 4; ++e) STRATA_CUDA(cudaEventElapsedTime(&ms[e], c.ev[e], c.ev[e + 1]));
   phases_.assembly += 1e-3 * ms[0];
   phases_.small_fronts += 1e-3 * ms[1];
   phases_.large_fronts += 1e-3 * ms[2];
@@ -767,7 +835,7 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
       const index_t p = i < ns ? small[i] : big[i - ns], f = s.fronts[p];
       const std::int64_t at = i < ns ? perm_off[i] : big_perm_at[i - ns];
       psize_at[p - begin] = at;
-      numeric::store_ldlt_front(an, f, perm.data() + at, psize.data() + at, *ctx.factor);
+      numeric::store_ldlt_front(an, f, perm + at, psize + at, *ctx.factor);
       numeric::cpu::PivotStats& ps = ctx.factor->front_stats[f];
       ps = numeric::cpu::PivotStats{};
       const index_t p0 = t.first_pivot[f];
@@ -784,9 +852,10 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
     return;
   }
   // the diagonal of each front's panel: gathered on the device, or read in the host copy
+  std::vector<double> diag;
   auto diag_of = [&](index_t p) -> const double* {
     const index_t f = s.fronts[p];
-    if (dev_only) return diag.data() + diag_off[p - begin];
+    if (dev_only) return c.diag.data() + diag_off[p - begin];
     const index_t m = t.n_rows(f), k = t.n_pivots(f);
     const double* panel = ctx.factor->panels.data() + an.factor_layout.panel_offset[f];
     diag.resize(k);
@@ -794,11 +863,11 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
     return diag.data();
   };
   for (std::size_t i = 0; i < ns; ++i)
-    finish_front(ctx, s.fronts[small[i]], lu ? -1 : info[i], perturbed[i],
-                 perm.data() + perm_off[i], diag_of(small[i]));
+    finish_front(ctx, s.fronts[small[i]], lu ? -1 : info[i], perturbed[i], perm + perm_off[i],
+                 diag_of(small[i]));
   for (std::size_t i = 0; i < big.size(); ++i)
     finish_front(ctx, s.fronts[big[i]], (!lu && pinfo[i] > 0) ? pinfo[i] - 1 : -1,
-                 perturbed[ns + i], perm.data() + big_perm_at[i], diag_of(big[i]));
+                 perturbed[ns + i], perm + big_perm_at[i], diag_of(big[i]));
 }
 
 // LU of the large fronts of a chunk (see kernels_lu.cu for why this shape), in two

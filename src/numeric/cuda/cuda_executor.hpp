@@ -95,7 +95,28 @@ class CudaExecutor final : public numeric::Executor {
   /// The factor stays on the device only for a whole-tree factorization.
   bool keep_resident() const { return plan_.factor_resident && whole_; }
   void prepare_solve_plan(const Analysis& an);  // cuda_solve.cu
+  /// An in-core chunk whose work was launched and whose host part has not run yet (see
+  /// factor_chunk): what the host part needs, the pinned buffers its results come back
+  /// to, and its events (before assembly, after assembly, after the small fronts, after
+  /// the large fronts, after stores and packs, after the copies to the host).
+  struct ChunkRecord {
+    index_t begin = 0, end = 0;
+    bool lu = false, ldlt = false, dev_only = false;
+    std::vector<std::int64_t> small, big, perm_off, big_perm_at, diag_off;
+    std::int64_t perm_at = 0;
+    PinnedBuffer<std::int64_t> info, perturbed, perm;
+    PinnedBuffer<int> pinfo, psize;
+    PinnedBuffer<double> diag;
+    cudaEvent_t ev[6] = {};
+  };
+  /// Launches the chunk [begin, end) of the current part, then runs the previous chunk's
+  /// host part while the GPU works on this one (for a factor whose panels stay on the
+  /// device; otherwise this chunk's host part too, at once).
   void factor_chunk(const numeric::FactorContext& ctx, index_t begin, index_t end);
+  /// Runs the pending chunk's host part, if any (before anything that needs the host
+  /// factor complete: a tiled front, the end of a part or of the factorization).
+  void flush_chunk(const numeric::FactorContext& ctx);
+  void finish_chunk(const numeric::FactorContext& ctx, ChunkRecord& c);
   void factor_tiled(const numeric::FactorContext& ctx, index_t pos);
   /// A large LU front of the current chunk: its lane, the front in the pool (m×m, k
   /// pivots), where its local row permutation and perturbed-pivot count go.
@@ -182,9 +203,10 @@ class CudaExecutor final : public numeric::Executor {
   index_t chunks_ = 0, tiled_count_ = 0;
   double device_seconds_ = 0;
   cudaEvent_t start_ = nullptr, stop_ = nullptr;
-  /// Per in-core chunk, events between its phases: before assembly, after assembly,
-  /// after the small fronts, after the large fronts, after the stores and packs.
-  cudaEvent_t phase_ev_[5] = {};
+  /// Two chunk records used in turn: one launched, the previous one finishing on the host.
+  ChunkRecord chunk_[2];
+  int slot_ = 0;
+  ChunkRecord* pending_ = nullptr;
   FactorStats::DevicePhases phases_;  ///< summed over the chunks of the factorization
 };
 
