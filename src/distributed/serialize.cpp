@@ -136,6 +136,9 @@ void stats_io(IO& io, S& s) {
   io.value(s.subtrees);
   io.value(s.subtree_balance);
   io.value(s.top_flops_fraction);
+  io.value(s.upper_layers);
+  io.value(s.upper_parts);
+  io.value(s.upper_flops_fraction);
   io.value(s.nd_rebisections);
   io.value(s.nd_balance_seconds);
   io.value(s.ordering_seconds);
@@ -179,6 +182,10 @@ void write(Writer& w, const Analysis& an) {
   w.vec(an.factor_layout.panel_offset);
   w.value(an.factor_layout.total);
   const auto& p = an.partition;
+  // upper layers (Options::split_top) are not part of the distributed protocol: the
+  // distributed solver analyzes without them (distributed_solver.cpp)
+  if (!p.upper.empty())
+    throw InvalidInput("internal: an analysis with upper layers cannot be sent to other ranks");
   w.value(p.workers);
   w.value<std::uint64_t>(p.subtrees.size());
   for (const auto& s : p.subtrees) part_io(w, s);
@@ -188,6 +195,7 @@ void write(Writer& w, const Analysis& an) {
   w.value(p.total_work);
   w.value(p.balance);
   w.value(p.splits);
+  w.value(p.estimated_time);
   stats_io(w, an.stats);
 }
 
@@ -236,10 +244,18 @@ void read(Reader& r, Analysis& an) {
   for (std::uint64_t i = 0; i < subs; ++i) part_io(r, p.subtrees.emplace_back());
   part_io(r, p.top);
   r.vec(p.part_of);
+  // no upper layers (see write): every front outside the subtrees is in the top part
+  p.upper.clear();
+  p.upper_layer_offsets.assign(1, 0);
+  p.upper_owner.clear();
+  p.part_id.resize(p.part_of.size());
+  for (std::size_t f = 0; f < p.part_of.size(); ++f)
+    p.part_id[f] = p.part_of[f] >= 0 ? p.part_of[f] : static_cast<index_t>(p.subtrees.size());
   r.vec(p.owner);
   r.value(p.total_work);
   r.value(p.balance);
   r.value(p.splits);
+  r.value(p.estimated_time);
   stats_io(r, an.stats);
 }
 
