@@ -182,14 +182,17 @@ void write(Writer& w, const Analysis& an) {
   w.vec(an.factor_layout.panel_offset);
   w.value(an.factor_layout.total);
   const auto& p = an.partition;
-  // upper layers (Options::split_top) are not part of the distributed protocol: the
-  // distributed solver analyzes without them (distributed_solver.cpp)
-  if (!p.upper.empty())
-    throw InvalidInput("internal: an analysis with upper layers cannot be sent to other ranks");
   w.value(p.workers);
   w.value<std::uint64_t>(p.subtrees.size());
   for (const auto& s : p.subtrees) part_io(w, s);
   part_io(w, p.top);
+  // upper layers travel whole, though the distributed factorization does not use them
+  // (the distributed solver analyzes without them; make_layout refuses them)
+  w.value<std::uint64_t>(p.upper.size());
+  for (const auto& u : p.upper) part_io(w, u);
+  w.vec(p.upper_layer_offsets);
+  w.vec(p.upper_owner);
+  w.vec(p.part_id);
   w.vec(p.part_of);
   w.vec(p.owner);
   w.value(p.total_work);
@@ -243,14 +246,14 @@ void read(Reader& r, Analysis& an) {
   p.subtrees.clear();
   for (std::uint64_t i = 0; i < subs; ++i) part_io(r, p.subtrees.emplace_back());
   part_io(r, p.top);
-  r.vec(p.part_of);
-  // no upper layers (see write): every front outside the subtrees is in the top part
+  std::uint64_t uppers = 0;
+  r.value(uppers);
   p.upper.clear();
-  p.upper_layer_offsets.assign(1, 0);
-  p.upper_owner.clear();
-  p.part_id.resize(p.part_of.size());
-  for (std::size_t f = 0; f < p.part_of.size(); ++f)
-    p.part_id[f] = p.part_of[f] >= 0 ? p.part_of[f] : static_cast<index_t>(p.subtrees.size());
+  for (std::uint64_t i = 0; i < uppers; ++i) part_io(r, p.upper.emplace_back());
+  r.vec(p.upper_layer_offsets);
+  r.vec(p.upper_owner);
+  r.vec(p.part_id);
+  r.vec(p.part_of);
   r.vec(p.owner);
   r.value(p.total_work);
   r.value(p.balance);
