@@ -1,19 +1,22 @@
 // strata benchmark — the multi-worker factorization (experiment 3: GPU count 1, 2, 4,
-// with the ablation of balanced bisection, additional subtrees and work stealing).
+// with the ablation of balanced bisection, additional subtrees, work stealing and the
+// split of the top part into upper layers).
 //
 // For each problem and each configuration (workers × subtrees per worker × balance by
-// work on/off × work stealing on/off): the analysis figures of the tree split (ordering
-// time, the part spent balancing the bisections by work, bisections redone, nnz(L),
-// flops, subtrees, LPT balance, share of the flops in the top part) and, unless
+// work on/off × work stealing on/off × top split on/off): the analysis figures of the
+// tree split (ordering time, the part spent balancing the bisections by work, bisections
+// redone, nnz(L), flops, subtrees, LPT balance, upper layers and their parts, the share
+// of the flops in the upper layers and in the final top part) and, unless
 // --no-factor, one factorization (reported apart as first_factor_seconds), then the median of
 // --repeat refactorizations, the backward error of one solve and the per-worker statistics of the
-// last run (busy, idle, subtrees run and stolen, bytes transferred). --backend cuda runs on that
-// many GPUs (the lent machines);
+// last run (busy, idle, subtrees run and stolen, upper parts run, bytes transferred). --backend
+// cuda runs on that many GPUs (the lent machines);
 // --backend cpu stands N host executors of --threads-per-worker threads each in for N
 // GPUs (the same driver, for machines without GPUs). Results: bench/results/multigpu-*.json.
 //
 //   bench_multigpu [--problems a,b,...] [--backend cpu|cuda] [--workers 1,2,4]
-//                  [--subtrees 4] [--balance on,off] [--stealing on,off] [--repeat R]
+//                  [--subtrees 4] [--balance on,off] [--stealing on,off]
+//                  [--split-top on,off] [--repeat R]
 //                  [--threads-per-worker T] [--no-factor] [--tag NAME] [--results-dir DIR]
 #include <fmt/core.h>
 
@@ -33,7 +36,7 @@ int main(int argc, char** argv) {
   CLI::App app{"strata multi-worker factorization benchmark"};
   std::vector<std::string> problems = {"lap3d-30", "elast3d-14"};
   std::vector<int> workers = {1, 2, 4}, subtrees = {4};
-  std::vector<std::string> balance = {"on", "off"}, stealing = {"on"};
+  std::vector<std::string> balance = {"on", "off"}, stealing = {"on"}, split_top = {"on"};
   std::string backend = "cpu";
   int repeat = 3, threads_per_worker = 1;
   bool no_factor = false;
@@ -47,6 +50,8 @@ int main(int argc, char** argv) {
   app.add_option("--balance", balance, "balance the top bisections by work: on, off")
       ->delimiter(',');
   app.add_option("--stealing", stealing, "work stealing: on, off")->delimiter(',');
+  app.add_option("--split-top", split_top, "split the top part into upper layers: on, off")
+      ->delimiter(',');
   app.add_option("--repeat", repeat, "factorizations per measurement (median reported)");
   app.add_option("--threads-per-worker", threads_per_worker, "host threads of each CPU worker");
   app.add_flag("--no-factor", no_factor, "analysis figures only");
@@ -61,9 +66,10 @@ int main(int argc, char** argv) {
   out["tag"] = tag;
   out["rows"] = json::array();
   fmt::print(
-      "{:<12} {:>2} {:>2} {:>3} {:>3} {:>8} {:>8} {:>5} {:>9} {:>4} {:>7} {:>6} {:>8} {:>8}\n",
-      "problem", "W", "s", "bal", "stl", "order s", "bal s", "rebis", "flops", "subt", "balance",
-      "top %", "factor s", "berr");
+      "{:<12} {:>2} {:>2} {:>3} {:>3} {:>3} {:>8} {:>8} {:>5} {:>9} {:>4} {:>7} {:>5} {:>6} {:>6} "
+      "{:>8} {:>8}\n",
+      "problem", "W", "s", "bal", "stl", "top", "order s", "bal s", "rebis", "flops", "subt",
+      "balance", "layer", "upp %", "top %", "factor s", "berr");
   for (const std::string& name : problems) {
     const bench::Problem p = bench::load_problem(name);
     std::vector<double> b(p.a.n_rows);
@@ -74,72 +80,79 @@ int main(int argc, char** argv) {
     for (int w : workers)
       for (int s : subtrees)
         for (const std::string& bal : balance)
-          for (const std::string& stl : stealing) {
-            Options o;
-            o.type = p.symmetric ? MatrixType::spd : MatrixType::general;
-            o.subtrees_per_gpu = s;
-            o.balance_by_work = bal == "on";
-            o.work_stealing = stl == "on";
-            o.num_threads = threads_per_worker;
-            if (backend == "cuda") {
-              o.backend = Backend::cuda;
-              o.num_gpus = w;
-            }
-            Solver solver(o);
-            if (backend == "cpu") {
-              numeric::MultiWorkerConfig cfg;
-              cfg.work_stealing = o.work_stealing;
-              detail::SolverAccess::use_host_workers(solver, w, threads_per_worker, cfg);
-            }
-            solver.analyze(p.a);
-            const AnalysisStats an = solver.stats().analysis;
-            json row = {{"problem", name},
-                        {"n", an.n},
-                        {"workers", w},
-                        {"subtrees_per_worker", s},
-                        {"balance_by_work", bal == "on"},
-                        {"work_stealing", stl == "on"},
-                        {"ordering_seconds", an.ordering_seconds},
-                        {"nd_balance_seconds", an.nd_balance_seconds},
-                        {"nd_rebisections", an.nd_rebisections},
-                        {"nnz_l", an.nnz_l},
-                        {"flops", an.factor_flops},
-                        {"subtrees", an.subtrees},
-                        {"subtree_balance", an.subtree_balance},
-                        {"top_flops_fraction", an.top_flops_fraction}};
-            double ts = 0, berr = 0, first = 0;
-            if (!no_factor) {
-              // the first factorization sets the executors up (device buffers, pinned
-              // host memory, library handles): reported apart; the figure is the median
-              // of the refactorizations that follow, as bench_gpu and bench_cudss do
-              Timer t0;
-              solver.factorize(p.a);
-              first = t0.seconds();
-              std::vector<double> times;
-              for (int k = 0; k < repeat; ++k) {
-                Timer t;
-                solver.refactorize(p.a);
-                times.push_back(t.seconds());
+          for (const std::string& stl : stealing)
+            for (const std::string& split : split_top) {
+              Options o;
+              o.type = p.symmetric ? MatrixType::spd : MatrixType::general;
+              o.subtrees_per_gpu = s;
+              o.balance_by_work = bal == "on";
+              o.work_stealing = stl == "on";
+              o.split_top = split == "on";
+              o.num_threads = threads_per_worker;
+              if (backend == "cuda") {
+                o.backend = Backend::cuda;
+                o.num_gpus = w;
               }
-              ts = bench::median(times);
-              const auto x = solver.solve(b);
-              berr = bench::berr(p.a, x, b);
-              const json devices = solver.stats().factor.devices;
-              row["factor_seconds"] = ts;
-              row["first_factor_seconds"] = first;
-              row["factor_phases"] = solver.stats().factor.device_phases;
-              row["backward_error"] = berr;
-              row["devices"] = devices;
+              Solver solver(o);
+              if (backend == "cpu") {
+                numeric::MultiWorkerConfig cfg;
+                cfg.work_stealing = o.work_stealing;
+                detail::SolverAccess::use_host_workers(solver, w, threads_per_worker, cfg);
+              }
+              solver.analyze(p.a);
+              const AnalysisStats an = solver.stats().analysis;
+              json row = {{"problem", name},
+                          {"n", an.n},
+                          {"workers", w},
+                          {"subtrees_per_worker", s},
+                          {"balance_by_work", bal == "on"},
+                          {"work_stealing", stl == "on"},
+                          {"split_top", split == "on"},
+                          {"ordering_seconds", an.ordering_seconds},
+                          {"nd_balance_seconds", an.nd_balance_seconds},
+                          {"nd_rebisections", an.nd_rebisections},
+                          {"nnz_l", an.nnz_l},
+                          {"flops", an.factor_flops},
+                          {"subtrees", an.subtrees},
+                          {"subtree_balance", an.subtree_balance},
+                          {"upper_layers", an.upper_layers},
+                          {"upper_parts", an.upper_parts},
+                          {"upper_flops_fraction", an.upper_flops_fraction},
+                          {"top_flops_fraction", an.top_flops_fraction}};
+              double ts = 0, berr = 0, first = 0;
+              if (!no_factor) {
+                // the first factorization sets the executors up (device buffers, pinned
+                // host memory, library handles): reported apart; the figure is the median
+                // of the refactorizations that follow, as bench_gpu and bench_cudss do
+                Timer t0;
+                solver.factorize(p.a);
+                first = t0.seconds();
+                std::vector<double> times;
+                for (int k = 0; k < repeat; ++k) {
+                  Timer t;
+                  solver.refactorize(p.a);
+                  times.push_back(t.seconds());
+                }
+                ts = bench::median(times);
+                const auto x = solver.solve(b);
+                berr = bench::berr(p.a, x, b);
+                const json devices = solver.stats().factor.devices;
+                row["factor_seconds"] = ts;
+                row["first_factor_seconds"] = first;
+                row["factor_phases"] = solver.stats().factor.device_phases;
+                row["backward_error"] = berr;
+                row["devices"] = devices;
+              }
+              out["rows"].push_back(row);
+              fmt::print(
+                  "{:<12} {:>2} {:>2} {:>3} {:>3} {:>3} {:>8.3f} {:>8.3f} {:>5} {:>9.3g} {:>4} "
+                  "{:>7.3f} {:>5} {:>6.1f} {:>6.1f} {:>8.3f} {:>8.1e}\n",
+                  name, w, s, bal, stl, split, an.ordering_seconds, an.nd_balance_seconds,
+                  an.nd_rebisections, an.factor_flops, an.subtrees, an.subtree_balance,
+                  fmt::format("{}/{}", an.upper_layers, an.upper_parts),
+                  100 * an.upper_flops_fraction, 100 * an.top_flops_fraction, ts, berr);
+              std::fflush(stdout);
             }
-            out["rows"].push_back(row);
-            fmt::print(
-                "{:<12} {:>2} {:>2} {:>3} {:>3} {:>8.3f} {:>8.3f} {:>5} {:>9.3g} {:>4} {:>7.3f} "
-                "{:>6.1f} {:>8.3f} {:>8.1e}\n",
-                name, w, s, bal, stl, an.ordering_seconds, an.nd_balance_seconds,
-                an.nd_rebisections, an.factor_flops, an.subtrees, an.subtree_balance,
-                100 * an.top_flops_fraction, ts, berr);
-            std::fflush(stdout);
-          }
   }
   fmt::print("results: {}\n", bench::write_result(out, "multigpu", results_dir));
   return 0;

@@ -632,21 +632,26 @@ class GpuSections:
         for r in sorted(rs, key=lambda r: (r.date, r.name)):  # newer runs override
             for row in r.rows:
                 if isinstance(row, dict) and num(row.get("workers")) is not None:
+                    # rows without split_top predate the top split: they ran the
+                    # defaults of their time and count as the default here
                     cfg[(row.get("problem"), int(row["workers"]),
                          int(num(row.get("subtrees_per_worker")) or 0),
-                         bool(row.get("balance_by_work")), bool(row.get("work_stealing")))] = row
+                         bool(row.get("balance_by_work")), bool(row.get("work_stealing")),
+                         bool(row.get("split_top", True)))] = row
         problems = list(dict.fromkeys(k[0] for k in cfg))
         workers = sorted({k[1] for k in cfg})
         s_max = {p: max(k[2] for k in cfg if k[0] == p) for p in problems}
 
-        def t(p, w, s, bal, stl):
-            return num(dig(cfg.get((p, w, s, bal, stl)), "factor_seconds"))
+        def t(p, w, s, bal, stl, split=True):
+            return num(dig(cfg.get((p, w, s, bal, stl, split)), "factor_seconds"))
 
         speed_rows, abl_rows, dev_rows, curves = [], [], [], {}
         first_rows, phase_rows = [], []
         for p in problems:
             s = s_max[p]
             base = t(p, 1, s, False, True)
+            if base is None:  # one worker has no top part to split: either row will do
+                base = t(p, 1, s, False, True, False)
             any_row = next(v for k, v in cfg.items() if k[0] == p)
             line = [str(p), f_int(any_row.get("n")), f_g(any_row.get("flops"))]
             line += [f_sec(t(p, w, s, False, True)) for w in workers]
@@ -656,7 +661,7 @@ class GpuSections:
             curves[p] = [(w, x) for w, x in sp if x is not None]
             speed_rows.append(line)
             for w in workers:
-                row = cfg.get((p, w, s, False, True)) or {}
+                row = cfg.get((p, w, s, False, True, True)) or {}
                 ff, rf = num(row.get("first_factor_seconds")), num(row.get("factor_seconds"))
                 if ff is not None:
                     first_rows.append([str(p), str(w), f_sec(ff), f_sec(rf),
@@ -669,17 +674,24 @@ class GpuSections:
             for w in workers:
                 on = t(p, w, s, False, True)
                 cells = [str(p), str(w), str(s), f_sec(on)]
-                for alt in ((s, True, True), (1, False, True), (s, False, False)):
-                    x = t(p, w, *alt) if alt != (s, False, True) else None
+                for alt in ((s, True, True, True), (1, False, True, True), (s, False, False, True),
+                            (s, False, True, False)):
+                    x = t(p, w, *alt) if alt != (s, False, True, True) else None
                     cells.append("–" if x is None else f"{f_sec(x)} ({f_ratio(ratio(x, on))})")
+                row = cfg.get((p, w, s, False, True, True)) or {}
+                layers = num(row.get("upper_layers"))
+                cells.append("–" if layers is None else
+                             f"{int(layers)} / {f_int(row.get('upper_parts'))} / "
+                             f"{num(row.get('upper_flops_fraction')) or 0:.0%} / "
+                             f"{num(row.get('top_flops_fraction')) or 0:.0%}")
                 abl_rows.append(cells)
-                row = cfg.get((p, w, s, False, True)) or {}
                 for i, d in enumerate(row.get("devices") or []):
                     busy, idle = num(d.get("busy_seconds")), num(d.get("idle_seconds"))
                     share = ratio(busy, (busy or 0) + (idle or 0))
                     dev_rows.append([str(p), str(w), str(i), f_sec(busy), f_sec(idle),
                                      f"{share:.0%}" if share is not None else "–",
                                      f_int(d.get("subtrees_run")), f_int(d.get("subtrees_stolen")),
+                                     f_int(d.get("upper_parts_run")),
                                      f_int(d.get("bytes_transferred")), f_g(d.get("flops"))])
         self.w(f"On {machine_label(machine)}; seconds: median of the run's factorizations "
                f"with the default configuration (the most subtrees per {unit} in the run, work "
@@ -719,19 +731,25 @@ class GpuSections:
             self.w()
             self.w(table(["problem", unit + "s"] + [n for _, n in self.PHASES], phase_rows, 1))
         self.w("Ablation: time of the defaults (*default*: subtrees per GPU as in the run, "
-               "stealing on, balance by work off) and with one feature changed, seconds (in "
-               "brackets: over *default*; below 1, the change helps). – where the run did not "
-               "include that configuration (the driver runs the product of its `--subtrees`, "
-               "`--balance` and `--stealing` lists).")
+               "stealing on, balance by work off, top split into upper layers on) and with one "
+               "feature changed, seconds (in brackets: over *default*; below 1, the change "
+               "helps). – where the run did not include that configuration (the driver runs the "
+               "product of its `--subtrees`, `--balance`, `--stealing` and `--split-top` "
+               "lists). Rows of files without `split_top` predate the top split and count as "
+               "the default. *Top split* of the default: upper layers / their parts / share of "
+               "the flops in them / share left in the top part.")
         self.w()
         self.w(table(["problem", "workers", "subtrees per worker", "default s",
-                      "balance by work on", "subtrees 1", "no stealing"], abl_rows, 2))
+                      "balance by work on", "subtrees 1", "no stealing", "no top split",
+                      "top split"], abl_rows, 2))
         if dev_rows:
             self.w(f"Per {unit} (default configuration, last factorization of the run): busy and idle "
-                   f"seconds, busy share, subtrees run and stolen, bytes moved, flops.")
+                   f"seconds, busy share, subtrees run and stolen, upper-layer parts run, bytes "
+                   f"moved, flops.")
             self.w()
             self.w(table(["problem", "workers", unit, "busy s", "idle s", "busy share",
-                          "subtrees run", "stolen", "bytes moved", "flops"], dev_rows, 3))
+                          "subtrees run", "stolen", "upper parts", "bytes moved", "flops"],
+                         dev_rows, 3))
         fig, ax = self.plt.subplots(figsize=(6.5, 4.5))
         for p, c in curves.items():
             if c:

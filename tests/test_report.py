@@ -29,7 +29,9 @@ made with round ratios, so the expected figures below are worked out by hand:
   cudss     refactor 0.8 vs 0.2 -> 4.000; first solve 0.06 vs 0.03 / 0.02 -> 2.000 / 3.000,
             full solve 0.3 -> 10.000 / 15.000; large fronts 0.3 s > cuDSS's 0.2 -> 1.500
   multigpu  refactor 1, 1.25, 1.6 s on 1, 2, 4 GPUs (slower with more), first 5, 6, 7;
-            an older file (marker 9.99) is superseded; ablation file 1.250, 0.750, 1.100
+            an older file (marker 9.99) is superseded; ablation file 1.250, 0.750, 1.100;
+            ablation-split file: top split off 2.4 s -> 1.500, the default's split
+            2 layers / 6 parts / 25% / 15%
   distrib.  1x4, 2x2, 4x1: 1, 1.5, 2 s vs predicted 2, 2.5, 2.5 -> 0.500, 0.600, 0.800;
             bytes 400/800 MB vs 200/400 -> 2.000; the 1x4 row says gpus_per_rank 1 (the
             file's 4 counts)
@@ -210,7 +212,8 @@ def main():
     check(re.search(r"\| lap3d-new \| 4 \| 7 \| 1\.6 \| 5\.4 \| 4\.375 \|", g3),
           "section 3: first factorization vs refactorization row wrong")
     check(re.search(r"\| lap3d-abl \| 4 \| 4 \| 1\.6 \| 2 \(1\.250\) \| 1\.2 \(0\.750\) \| "
-                    r"1\.76 \(1\.100\) \|", g3), "section 3: ablation from the ablation file wrong")
+                    r"1\.76 \(1\.100\) \| 2\.4 \(1\.500\) \| 2 / 6 / 25% / 15% \|", g3),
+          "section 3: ablation from the ablation files (top split on/off) wrong")
     # --- experiment 3b: distributed vs the cost model
     s3b = section(secs, "## 3b.") or ""
     check(re.search(r"\| lap3d-new \| 1 × 4 \| 5 \| 1 \| – \| 2 \| 0\.500 \| 0 \| 0 \| – \|", s3b)

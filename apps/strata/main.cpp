@@ -7,6 +7,7 @@
 //                      [--device cpu|gpu|auto] [--device-memory-limit BYTES]
 //   multi-GPU options (analyze, solve): [--num-gpus N] [--subtrees-per-gpu S]
 //                      [--balance-by-work on|off] [--work-stealing on|off]
+//                      [--split-top on|off]
 //   strata simulate [MODEL.json] [--generate KIND:SIZE] [--t-end T] [--step h] [--order k]
 //                   [--device cpu|gpu|auto] [--device-memory-limit BYTES] [--output DIR]
 //                   [--vtk] [--dump-matrix DIR]
@@ -71,6 +72,7 @@ struct CommonArgs {
   int subtrees_per_gpu = Options{}.subtrees_per_gpu;
   std::string balance_by_work = Options{}.balance_by_work ? "on" : "off";
   std::string work_stealing = Options{}.work_stealing ? "on" : "off";
+  std::string split_top = Options{}.split_top ? "on" : "off";
 };
 
 Backend backend_of(const std::string& device) {
@@ -101,6 +103,9 @@ void add_common(CLI::App* cmd, CommonArgs& a) {
       ->check(CLI::IsMember({"on", "off"}));
   cmd->add_option("--work-stealing", a.work_stealing, "idle GPUs take other GPUs' subtrees")
       ->check(CLI::IsMember({"on", "off"}));
+  cmd->add_option("--split-top", a.split_top,
+                  "split the top part above the subtrees into layers over the GPUs")
+      ->check(CLI::IsMember({"on", "off"}));
 }
 
 Options options_from(const CommonArgs& a) {
@@ -115,6 +120,7 @@ Options options_from(const CommonArgs& a) {
   o.subtrees_per_gpu = a.subtrees_per_gpu;
   o.balance_by_work = a.balance_by_work == "on";
   o.work_stealing = a.work_stealing == "on";
+  o.split_top = a.split_top == "on";
   return o;
 }
 
@@ -145,6 +151,9 @@ json analysis_json(const AnalysisStats& s) {
           {"subtrees", s.subtrees},
           {"subtree_balance", s.subtree_balance},
           {"top_flops_fraction", s.top_flops_fraction},
+          {"upper_layers", s.upper_layers},
+          {"upper_parts", s.upper_parts},
+          {"upper_flops_fraction", s.upper_flops_fraction},
           {"nd_rebisections", s.nd_rebisections},
           {"seconds",
            {{"ordering", s.ordering_seconds},
@@ -190,9 +199,11 @@ void print_analysis(const AnalysisStats& s, double read_seconds) {
       tiled);
   if (s.workers > 1)
     fmt::print(
-        "tree split            {} workers: {} subtrees, balance {:.3f} (makespan / mean), "
-        "{:.1f}% of the flops in the top part; {} bisections rebalanced by work ({:.3f} s)\n",
-        s.workers, s.subtrees, s.subtree_balance, 100 * s.top_flops_fraction, s.nd_rebisections,
+        "tree split            {} workers: {} subtrees, balance {:.3f} (makespan / mean); {} "
+        "upper layers of {} parts with {:.1f}% of the flops; {:.1f}% of the flops in the top "
+        "part; {} bisections rebalanced by work ({:.3f} s)\n",
+        s.workers, s.subtrees, s.subtree_balance, s.upper_layers, s.upper_parts,
+        100 * s.upper_flops_fraction, 100 * s.top_flops_fraction, s.nd_rebisections,
         s.nd_balance_seconds);
   fmt::print(
       "time [s]              read {:.3f}  ordering {:.3f}  symbolic {:.3f}  plan {:.3f}  "
@@ -346,10 +357,10 @@ int run_solve(const SolveArgs& a, const Communicator& comm) {
     }
     for (const DeviceStats& d : f.devices)
       fmt::print(
-          "  worker {} ({:<7})   busy {:.3f} s, idle {:.3f} s, {} subtrees ({} stolen), "
-          "{:.3f} MB transferred, {:.3g} flops\n",
+          "  worker {} ({:<7})   busy {:.3f} s, idle {:.3f} s, {} subtrees ({} stolen), {} "
+          "upper parts, {:.3f} MB transferred, {:.3g} flops\n",
           d.worker, d.device, d.busy_seconds, d.idle_seconds, d.subtrees_run, d.subtrees_stolen,
-          d.bytes_transferred / 1e6, d.flops);
+          d.upper_parts_run, d.bytes_transferred / 1e6, d.flops);
     if (ds.ranks > 1) {
       fmt::print(
           "ranks                 {} x {} workers; analysis broadcast {:.1f} MB in {:.3f} s\n",

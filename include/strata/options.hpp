@@ -112,6 +112,11 @@ struct Options {
   /// With several GPUs: a GPU whose queue of subtrees is empty takes an unstarted subtree
   /// from the most loaded queue (default on).
   bool work_stealing = true;
+  /// With several GPUs: split the top part above the subtrees again into "upper layers"
+  /// of independent subtrees, each layer factored on all GPUs after the layers below it,
+  /// instead of factoring the whole top part on one GPU (default on; docs/multigpu.md).
+  /// The distributed solver (several MPI ranks) does not use upper layers.
+  bool split_top = true;
   /// For `general`: permute large entries onto the diagonal by a maximum weighted
   /// matching and scale rows and columns (MC64-style, Duff & Koster 2001). For
   /// `symmetric_indefinite`: the symmetric scaling D·A·D from the same matching and the

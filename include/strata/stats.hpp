@@ -52,6 +52,12 @@ struct AnalysisStats {
   index_t subtrees = 0;           ///< disjoint subtrees the workers share
   double subtree_balance = 0;     ///< LPT makespan / mean load over the subtrees (≥ 1)
   double top_flops_fraction = 0;  ///< share of factor_flops in the top part (one worker)
+  /// The top split again (Options::split_top): upper layers above the subtrees, their
+  /// parts (each factored by one worker, the parts of a layer side by side), and the
+  /// share of factor_flops in them. top_flops_fraction is then what is left above them.
+  index_t upper_layers = 0;
+  index_t upper_parts = 0;
+  double upper_flops_fraction = 0;
   /// Nested dissection balanced by work (Options::balance_by_work): top bisections redone
   /// with weighted vertices, and the time spent estimating and redoing them (included in
   /// ordering_seconds).
@@ -67,10 +73,11 @@ struct AnalysisStats {
 struct DeviceStats {
   int worker = 0;
   std::string device;                 ///< "cuda:0", "cuda:1", ... or "cpu"
-  double busy_seconds = 0;            ///< factoring subtrees and the top part, transfers
+  double busy_seconds = 0;            ///< factoring subtrees, upper parts, the top, transfers
   double idle_seconds = 0;            ///< the factorization's wall time minus busy
   index_t subtrees_run = 0;           ///< subtrees this worker factored
   index_t subtrees_stolen = 0;        ///< of those, taken from another worker's queue
+  index_t upper_parts_run = 0;        ///< parts of the upper layers it factored (not subtrees)
   std::size_t bytes_transferred = 0;  ///< contribution blocks exported and imported
   double flops = 0;                   ///< Σ front flops (Cholesky count) it factored
 };

@@ -19,8 +19,9 @@
 //   6. layouts computed once and reused by every (re)factorization: where every input
 //      entry lands in its front (assembly map), where each contribution block lives in
 //      the CB arena, and where each front's factor panel is stored;
-//   7. for several workers (GPUs): the split of the tree into subtrees and a top part
-//      (schedule/tree_partition.hpp), each with its own schedule, plan and arena; the
+//   7. for several workers (GPUs): the split of the tree into subtrees, upper layers
+//      (Options::split_top) and a top part (schedule/tree_partition.hpp), each part with
+//      its own schedule, plan and arena; the
 //      nested dissection of step 3 then also balances its top bisections by work.
 #include "core/analysis.hpp"
 
@@ -417,6 +418,7 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers)
     po.subtrees_per_worker = opts.subtrees_per_gpu;
     po.budget = opts.device_memory_limit;
     po.unsymmetric = lu;
+    po.upper_layers = opts.split_top;
     an.partition = schedule::partition_tree(an.tree, po);
   }
   an.stats.plan_seconds = step.seconds();
@@ -449,6 +451,11 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers)
     st.subtrees = static_cast<index_t>(p.subtrees.size());
     st.subtree_balance = p.balance;
     st.top_flops_fraction = p.total_work > 0 ? p.top.work / p.total_work : 0.0;
+    st.upper_layers = p.n_upper_layers();
+    st.upper_parts = static_cast<index_t>(p.upper.size());
+    double upper = 0;
+    for (const auto& u : p.upper) upper += u.work;
+    st.upper_flops_fraction = p.total_work > 0 ? upper / p.total_work : 0.0;
   }
   st.total_seconds = total.seconds();
   return an;

@@ -26,6 +26,7 @@ inline void to_json(nlohmann::json& j, const DeviceStats& d) {
        {"idle_seconds", d.idle_seconds},
        {"subtrees_run", d.subtrees_run},
        {"subtrees_stolen", d.subtrees_stolen},
+       {"upper_parts_run", d.upper_parts_run},
        {"bytes_transferred", d.bytes_transferred},
        {"flops", d.flops}};
 }

@@ -280,6 +280,10 @@ DistributedSolver::DistributedSolver(Communicator comm, Options options)
     : state_(std::make_unique<DistributedState>()) {
   state_->comm = std::move(comm);
   state_->options = std::move(options);
+  // upper layers (Options::split_top) are not part of the distributed protocol: with
+  // several ranks the top part above the subtrees is factored whole on rank 0
+  // (docs/distributed.md §1)
+  if (state_->comm.size() > 1) state_->options.split_top = false;
   if (state_->comm.rank() == 0) state_->solver.emplace(state_->options);
   state_->dstats.ranks = state_->comm.size();
 }

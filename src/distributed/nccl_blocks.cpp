@@ -72,7 +72,10 @@ void exchange_blocks_nccl(detail::CommImpl& comm, NumericState& ns, const RankLa
   NcclContext& c = *ns.nccl_context;
   c.blocks.clear();
   std::vector<DeviceBlock> staging;  // senders: blocks not on the NCCL device
-  const int n_sub = static_cast<int>(tr.size());
+  // tr is indexed by part id: the subtrees come first (the top part's entry follows)
+  const int n_sub = static_cast<int>(l.subtree_rank.size());
+  if (tr.size() < l.subtree_rank.size())
+    throw InvalidInput("internal: fewer block transfers than subtrees");
   // stage first (copies may not be inside the NCCL group)
   std::vector<const double*> src(n_sub, nullptr);
   for (int i = 0; i < n_sub; ++i) {

@@ -22,6 +22,12 @@ RankLayout make_layout(const Analysis& an, int ranks, int rank, int workers_per_
   l.workers_per_rank = workers_per_rank;
   const auto& p = an.partition;
   const auto& t = an.tree;
+  // the ranks hand blocks to rank 0's top part only: upper layers (Options::split_top)
+  // are not part of the protocol, and the distributed solver analyzes without them
+  if (!p.upper.empty())
+    throw InvalidInput(
+        "internal: an analysis with upper layers (Options::split_top) cannot be "
+        "factored across ranks");
   const int n_sub = static_cast<int>(p.subtrees.size());
   l.subtree_rank.resize(n_sub);
   l.subtrees_of.assign(ranks, {});

@@ -136,6 +136,9 @@ void stats_io(IO& io, S& s) {
   io.value(s.subtrees);
   io.value(s.subtree_balance);
   io.value(s.top_flops_fraction);
+  io.value(s.upper_layers);
+  io.value(s.upper_parts);
+  io.value(s.upper_flops_fraction);
   io.value(s.nd_rebisections);
   io.value(s.nd_balance_seconds);
   io.value(s.ordering_seconds);
@@ -183,11 +186,19 @@ void write(Writer& w, const Analysis& an) {
   w.value<std::uint64_t>(p.subtrees.size());
   for (const auto& s : p.subtrees) part_io(w, s);
   part_io(w, p.top);
+  // upper layers travel whole, though the distributed factorization does not use them
+  // (the distributed solver analyzes without them; make_layout refuses them)
+  w.value<std::uint64_t>(p.upper.size());
+  for (const auto& u : p.upper) part_io(w, u);
+  w.vec(p.upper_layer_offsets);
+  w.vec(p.upper_owner);
+  w.vec(p.part_id);
   w.vec(p.part_of);
   w.vec(p.owner);
   w.value(p.total_work);
   w.value(p.balance);
   w.value(p.splits);
+  w.value(p.estimated_time);
   stats_io(w, an.stats);
 }
 
@@ -235,11 +246,19 @@ void read(Reader& r, Analysis& an) {
   p.subtrees.clear();
   for (std::uint64_t i = 0; i < subs; ++i) part_io(r, p.subtrees.emplace_back());
   part_io(r, p.top);
+  std::uint64_t uppers = 0;
+  r.value(uppers);
+  p.upper.clear();
+  for (std::uint64_t i = 0; i < uppers; ++i) part_io(r, p.upper.emplace_back());
+  r.vec(p.upper_layer_offsets);
+  r.vec(p.upper_owner);
+  r.vec(p.part_id);
   r.vec(p.part_of);
   r.vec(p.owner);
   r.value(p.total_work);
   r.value(p.balance);
   r.value(p.splits);
+  r.value(p.estimated_time);
   stats_io(r, an.stats);
 }
 

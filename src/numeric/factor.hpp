@@ -9,9 +9,9 @@
 //
 // An executor always factors a *part* of the tree with the part's own level schedule,
 // batches and contribution-block arena: the whole tree (one executor), or one subtree or
-// the top part of a schedule::TreePartition (several executors, one per worker, driven by
-// numeric/multi_device.cpp). Contribution blocks cross from a subtree to the top part
-// through export_cb / import_cb.
+// an upper part or the top part of a schedule::TreePartition (several executors, one per
+// worker, driven by numeric/multi_device.cpp). Contribution blocks cross from one part
+// to the part of the root's parent through export_cb / import_cb.
 #pragma once
 
 #include <exception>
@@ -54,14 +54,16 @@ struct NumericFactor {
 /// The part of the tree an executor is factoring: its level schedule, the batches of its
 /// memory plan (positions index schedule->fronts) and its arena layout.
 struct PartView {
-  int id = -1;  ///< -1: the whole tree; 0..P-1: subtree of the partition; P: its top part
+  /// -1: the whole tree; else the part's id in an.partition (schedule::TreePartition):
+  /// 0..P-1 subtree, P the top part, P+1+k upper part k
+  int id = -1;
   const symbolic::LevelSchedule* schedule = nullptr;
   const std::vector<BatchInfo>* batches = nullptr;
   const CbLayout* cb_layout = nullptr;
 
   /// The whole tree: an.schedule, an.plan.batches, an.cb_layout.
   static PartView whole(const Analysis& an);
-  /// A part of an.partition: subtree `id` (0 ≤ id < P) or the top part (id == P).
+  /// A part of an.partition with id `id` (TreePartition::part(id)).
   static PartView of(const schedule::FactorPart& p, int id);
 };
 
@@ -79,12 +81,13 @@ struct FactorContext {
   bool keep_part_panels = false;
 };
 
-/// A contribution block on its way from the subtree that produced it to the top part.
+/// A contribution block on its way from the part that produced it (a subtree or an upper
+/// part) to the part of its parent (an upper part or the top part).
 /// The driver provides host_buffer() (size doubles); an exporter either fills it, or — a device
 /// executor whose importer can read its memory directly (peer access) — leaves the block
 /// in its own memory, valid until its end(), and sets `device` and `device_ordinal`.
 struct CbTransfer {
-  index_t front = -1;              ///< the subtree root whose block this is
+  index_t front = -1;              ///< the part root whose block this is
   std::size_t size = 0;            ///< doubles: cb_size(front)², column-major (0: no block)
   double* host = nullptr;          ///< the host buffer of `size` doubles, once host_buffer()
   bool on_host = false;            ///< the exporter filled `host`
@@ -217,7 +220,8 @@ struct MultiWorkerConfig {
   /// than this process runs; its executors are the global workers first_worker ..
   /// first_worker + execs.size() − 1, and it factors only the subtrees they own (stealing
   /// among them). Once those are done — or one of them failed (`failed`) — `exchange` is
-  /// called with the transfers of every subtree (and the first error of this process's
+  /// called with the transfers indexed by part id — those of the subtrees first, at their
+  /// index; upper layers are refused with an exchange — (and the first error of this process's
   /// workers, or null): the blocks this process exported are in
   /// their host buffers (or, with remote_blocks_on_device, in the exporter's device
   /// memory); a process that factors the top fills the others' before returning. It runs
@@ -237,8 +241,10 @@ struct MultiWorkerConfig {
 /// Runs the numeric factorization on several executors (one per worker, one host thread
 /// each) over an.partition, which must have been made for execs.size() workers: the
 /// subtrees from per-worker queues filled largest-first (an.partition.owner), stealing
-/// when config.work_stealing, then the top part on execs[0] with the subtree roots'
-/// contribution blocks handed in. `arenas` (one per worker) are sized here and reused
+/// when config.work_stealing; then each upper layer, every executor factoring its parts
+/// of it (an.partition.upper_owner) with their children's blocks handed in, a barrier
+/// after each layer; then the top part on execs[0] with its children's contribution
+/// blocks handed in. `arenas` (one per worker) are sized here and reused
 /// across calls. Fills `factor` (the same entries as factorize) and, when given,
 /// `devices` (one per worker). The first exception of any worker is rethrown after all
 /// workers have stopped.

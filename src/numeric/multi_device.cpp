@@ -1,36 +1,49 @@
 // strata — the multi-worker factorization driver: subtrees on several executors (GPUs),
-// then the top of the tree (DESIGN.md §3, docs/multigpu.md).
+// then the upper layers of the tree on all of them, then the top part
+// (DESIGN.md §3, docs/multigpu.md).
 //
-// What: the analysis splits the assembly tree into disjoint subtrees and a top part
-// (schedule/tree_partition.hpp). Each worker — one host thread driving one Executor — has
-// a queue of subtrees filled largest-first by the partition's LPT assignment and takes
-// them from the front; with work stealing, a worker whose queue is empty takes the last
-// (smallest) unstarted subtree of the queue with the most work left. A subtree is
-// factored by levels exactly as the whole tree is on one device — its own level
-// schedule, memory plan under the same budget, and contribution-block arena — and its
-// root's contribution block is exported to a host buffer (or, on GPUs that reach each
-// other, left in device memory for a peer copy). When every subtree is done, worker 0
-// imports those blocks into the top part's arena and factors the top part.
+// What: the analysis splits the assembly tree into disjoint subtrees (layer 0), upper
+// layers 1, 2, … of disjoint parts above them, and a top part (schedule/
+// tree_partition.hpp). Each worker — one host thread driving one Executor — has a queue
+// of subtrees filled largest-first by the partition's LPT assignment and takes them from
+// the front; with work stealing, a worker whose queue is empty takes the last (smallest)
+// unstarted subtree of the queue with the most work left. A part is factored by levels
+// exactly as the whole tree is on one device — its own level schedule, memory plan under
+// the same budget, and contribution-block arena — and its root's contribution block is
+// exported to a host buffer (or, on GPUs that reach each other, left in device memory for
+// a peer copy) for the worker that factors the parent's part. When every subtree is done,
+// each upper layer runs on every worker at once, each worker factoring the parts the
+// partition gave it (static owners: the exporter of a block knows its importer), with
+// the blocks of the parts' children in lower layers imported first; the layers are
+// separated by a barrier (all threads joined). Finally worker 0 imports the blocks of
+// the top part's children and factors it.
 //
 // Why this shape: subtrees of a nested-dissection tree are independent, so the workers
 // share nothing but the factor (each front's panel, rows, D and pivot statistics are
 // disjoint ranges written by exactly one worker) and the queues (one mutex). Largest
 // first is Graham's LPT rule; stealing covers what the work estimate gets wrong (a slower
 // device, a shared machine); stealing from the back leaves the victim its large items,
-// the usual work-stealing choice (Blumofe & Leiserson, J. ACM 46, 1999). Every front is
-// factored by the same executor code as on one worker, so with executors of the same kind
-// and thread count the factor is bitwise the one-worker factor.
+// the usual work-stealing choice (Blumofe & Leiserson, J. ACM 46, 1999). The parts of an
+// upper layer are independent for the same reason; there are few of them (about one per
+// worker), so they are not stolen. Every front is factored by the same executor code as
+// on one worker, so with executors of the same kind and thread count the factor is
+// bitwise the one-worker factor.
 //
-// Not yet: the top part runs on worker 0 alone; splitting its large fronts across the
-// devices by tiles (the paper's treatment of the top separators) is a later step.
+// Not yet: the top part — the root separators, the largest fronts — still runs on
+// worker 0 alone, and so does each upper part's root front on its worker; splitting one
+// front across the devices by tiles (the paper's treatment of the top separators) is a
+// later step.
 //
 // Several processes (src/distributed, docs/distributed.md): MultiWorkerConfig names the
 // global workers this process runs; it factors their subtrees, then hands every transfer
 // to config.exchange (which moves the blocks between processes), and only the process
-// that owns the top part goes on to it.
+// that owns the top part goes on to it. The transfers are indexed by part id (subtree i
+// at i), the exchange reads those of the subtrees. Upper layers are not supported there
+// (the distributed solver analyzes without them).
 //
 // Errors: a worker that throws records the first exception and stops the others from
-// taking new subtrees; all threads are joined and the first exception is rethrown.
+// taking new subtrees (or upper parts); all threads are joined and the first exception
+// is rethrown (no later layer starts).
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -119,24 +132,40 @@ void factorize_multi(const Analysis& an, const std::vector<double>& scaled_value
     throw InvalidInput("internal: the analysis was split for " + std::to_string(part.workers) +
                        " workers, the factorization was given " + std::to_string(workers) +
                        " executors from worker " + std::to_string(first));
+  if (config.exchange && !part.upper.empty())
+    throw InvalidInput(
+        "internal: upper layers (Options::split_top) are not supported across "
+        "processes");
+  if (part.part_id.size() != static_cast<std::size_t>(an.tree.n_fronts()))
+    throw InvalidInput("internal: the analysis was not split into parts");
   auto mine = [&](int i) { return part.owner[i] >= first && part.owner[i] < first + workers; };
   Timer wall;
   prepare_factor(an, type, factor);
   arenas.resize(workers);
   const auto& t = an.tree;
   const int n_sub = static_cast<int>(part.subtrees.size());
+  const int n_parts = part.n_parts();
 
-  // the subtree roots' contribution blocks (host buffers allocated when used)
-  std::vector<CbTransfer> transfer(n_sub);
-  for (int i = 0; i < n_sub; ++i) {
-    const index_t r = part.subtrees[i].root;
-    CbTransfer& x = transfer[i];
+  // the contribution block of each part's root, indexed by part id (the top part's root
+  // has no parent: no block); host buffers allocated when used
+  std::vector<CbTransfer> transfer(n_parts);
+  for (int id = 0; id < n_parts; ++id) {
+    if (id == n_sub) continue;
+    const index_t r = part.part(id).root;
+    CbTransfer& x = transfer[id];
     x.front = r;
-    // the importer: worker 0's device here; a process that does not factor the top sends
-    // its blocks on through host memory (MPI), unless they are to stay on the device
-    x.target_device = config.factor_top || config.remote_blocks_on_device ? execs[0]->device() : -1;
-    if (t.parent[r] < 0 || t.cb_size(r) == 0) continue;  // nothing to hand over
-    if (!config.factor_top && !mine(i)) continue;        // neither made nor used here
+    if (config.exchange) {
+      // distributed: the importer is worker 0's device here; a process that does not
+      // factor the top sends its blocks on through host memory (MPI), unless they are to
+      // stay on the device
+      x.target_device =
+          config.factor_top || config.remote_blocks_on_device ? execs[0]->device() : -1;
+    } else if (t.parent[r] >= 0) {  // the worker that factors the parent's part
+      x.target_device =
+          execs[part.worker_of(static_cast<int>(part.part_id[t.parent[r]]))]->device();
+    }
+    if (t.parent[r] < 0 || t.cb_size(r) == 0) continue;           // nothing to hand over
+    if (id < n_sub && !config.factor_top && !mine(id)) continue;  // neither made nor used here
     x.size = static_cast<std::size_t>(t.cb_size(r)) * static_cast<std::size_t>(t.cb_size(r));
   }
 
@@ -158,7 +187,36 @@ void factorize_multi(const Analysis& an, const std::vector<double>& scaled_value
   Queues queues(part, workers, config.work_stealing, first);
   std::mutex error_mutex;
   std::exception_ptr error;
+  std::atomic<bool> failed{false};
+  auto record_error = [&] {
+    failed = true;
+    queues.stop();
+    std::lock_guard<std::mutex> lock(error_mutex);
+    if (!error) error = std::current_exception();
+  };
 
+  // One part on worker w (its executor begun): begin_part, the blocks of its children in
+  // other parts imported, its batches, its root's block exported, end_part.
+  auto factor_one = [&](int w, int id, bool export_here) {
+    Executor& ex = *execs[w];
+    const schedule::FactorPart& fp = part.part(id);
+    const PartView view = PartView::of(fp, id);
+    FactorContext ctx = base;
+    ctx.cb_arena = &arenas[w];
+    if (ex.uses_host_arena() && arenas[w].size() < fp.cb_layout.arena_size)
+      arenas[w].resize(fp.cb_layout.arena_size);
+    ctx.part = &view;
+    ex.begin_part(ctx);
+    for (const index_t c : fp.imports)
+      st[w].bytes_transferred += ex.import_cb(ctx, transfer[part.part_id[c]]);
+    run_batches(ex, ctx);
+    if (export_here && transfer[id].size)
+      st[w].bytes_transferred += ex.export_cb(ctx, transfer[id]);
+    ex.end_part(ctx);
+    st[w].flops += fp.work;
+  };
+
+  // layer 0: the subtrees from the queues
   auto worker = [&](int w) {
     try {
       Executor& ex = *execs[w];
@@ -174,63 +232,66 @@ void factorize_multi(const Analysis& an, const std::vector<double>& scaled_value
         busy.reset();
         if (w < static_cast<int>(config.injected_delay.size()) && config.injected_delay[w] > 0)
           std::this_thread::sleep_for(std::chrono::duration<double>(config.injected_delay[w]));
-        const schedule::FactorPart& sub = part.subtrees[i];
-        const PartView view = PartView::of(sub, i);
-        if (ex.uses_host_arena() && arenas[w].size() < sub.cb_layout.arena_size)
-          arenas[w].resize(sub.cb_layout.arena_size);
-        ctx.part = &view;
-        ex.begin_part(ctx);
-        run_batches(ex, ctx);
         if (config.remote_blocks_on_device && !config.factor_top)
           transfer[i].target_device = ex.device();
-        if (transfer[i].size) st[w].bytes_transferred += ex.export_cb(ctx, transfer[i]);
-        ex.end_part(ctx);
-        ctx.part = nullptr;
+        factor_one(w, i, true);
         st[w].busy_seconds += busy.seconds();
-        st[w].flops += sub.work;
         ++st[w].subtrees_run;
         st[w].subtrees_stolen += stolen ? 1 : 0;
       }
     } catch (...) {
-      queues.stop();
-      std::lock_guard<std::mutex> lock(error_mutex);
-      if (!error) error = std::current_exception();
+      record_error();
     }
   };
 
-  {
+  // upper layer `layer`: worker w's parts of it, in their (decreasing work) order
+  auto upper_worker = [&](int w, int layer) {
+    try {
+      for (index_t k = part.upper_layer_offsets[layer - 1]; k < part.upper_layer_offsets[layer];
+           ++k) {
+        if (part.upper_owner[k] != w) continue;
+        if (failed) break;
+        Timer busy;
+        factor_one(w, n_sub + 1 + static_cast<int>(k), true);
+        st[w].busy_seconds += busy.seconds();
+        ++st[w].upper_parts_run;
+      }
+    } catch (...) {
+      record_error();
+    }
+  };
+
+  // runs f(w) for every worker, one thread each (worker 0 on the calling thread), and
+  // joins them: the barrier between layers
+  auto all_workers = [&](const auto& f) {
     std::vector<std::thread> threads;
     try {
-      for (int w = 1; w < workers; ++w) threads.emplace_back(worker, w);
+      for (int w = 1; w < workers; ++w) threads.emplace_back(f, w);
     } catch (...) {  // could not start a thread: stop and join the started ones
+      failed = true;
       queues.stop();
       for (auto& th : threads) th.join();
       throw;
     }
-    worker(0);  // worker 0 on the calling thread, which then factors the top part
+    f(0);
     for (auto& th : threads) th.join();
-  }
+  };
+
+  all_workers(worker);
   if (config.exchange) config.exchange(transfer, error);
   if (error) std::rethrow_exception(error);
 
-  // the top part on worker 0, with the subtree roots' blocks handed in
+  // the upper layers, one after another, each on every worker
+  for (int layer = 1; layer <= part.n_upper_layers(); ++layer) {
+    all_workers([&](int w) { upper_worker(w, layer); });
+    if (error) std::rethrow_exception(error);
+  }
+
+  // the top part on worker 0, with the blocks of its children in other parts handed in
   if (config.factor_top) {
-    Executor& ex = *execs[0];
     Timer busy;
-    const int top_id = n_sub;
-    const PartView view = PartView::of(part.top, top_id);
-    FactorContext ctx = base;
-    ctx.cb_arena = &arenas[0];
-    if (ex.uses_host_arena() && arenas[0].size() < part.top.cb_layout.arena_size)
-      arenas[0].resize(part.top.cb_layout.arena_size);
-    ctx.part = &view;
-    ex.begin_part(ctx);
-    for (const index_t c : part.top.imports)
-      st[0].bytes_transferred += ex.import_cb(ctx, transfer[part.part_of[c]]);
-    run_batches(ex, ctx);
-    ex.end_part(ctx);
+    factor_one(0, n_sub, false);
     st[0].busy_seconds += busy.seconds();
-    st[0].flops += part.top.work;
   }
   for (int w = 0; w < workers; ++w) {
     FactorContext ctx = base;

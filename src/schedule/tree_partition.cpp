@@ -18,9 +18,24 @@
 // best of all when the tree never yields that many) is kept. The states form a sequence
 // of splits, so the kept one is rebuilt by replaying a prefix.
 //
+// Upper layers: the top part above the subtrees holds the root separators, which on 3D
+// problems are a large share of the flops (42% for lap3d 80³ on 4 GPUs), and as one part
+// it runs on one worker while the others idle. But it is itself a tree, with the same
+// independence between its subtrees: the root's children's subtrees, and so on. So the
+// same split runs again on the fronts left in the top (T'), with a subtree's work counted
+// over its T' fronts, and its best state — if it has at least 2 parts and saves more than
+// the tolerance — becomes layer 1; then again on what is left (layer 2, …). This is
+// MUMPS's layered view of tree parallelism above L0 (Amestoy et al. 2001) in its simplest
+// static form: the parts of one layer are independent, each layer waits for the layers
+// below it (a barrier), and each part's owner is fixed by LPT within its layer (no
+// stealing), so that the worker exporting a block knows which worker will import it. The
+// estimate "makespan + work left" counts no transfers: a layer's parts read the blocks of
+// their children in lower layers, one block per such child, as the top part did.
+//
 // Then each part gets its own level schedule, memory plan (same budget) and arena
 // layout, so that a worker can factor it alone: fronts are numbered in postorder, so a
-// subtree is the contiguous range first_descendant(root) .. root.
+// subtree is the contiguous range first_descendant(root) .. root; an upper part is the
+// fronts of such a range that are still in the top.
 #include "schedule/tree_partition.hpp"
 
 #include <algorithm>
@@ -64,7 +79,87 @@ FactorPart make_part(const symbolic::AssemblyTree& t, index_t root, std::vector<
   return p;
 }
 
+// One upper layer chosen from the fronts with in_top set (a set closed under parents):
+// the roots of its parts (decreasing work, ties: increasing root), empty when no state
+// is worth a layer. *makespan receives the layer's LPT makespan.
+std::vector<index_t> choose_layer(const symbolic::AssemblyTree& t, const std::vector<char>& in_top,
+                                  const PartitionOptions& o, double* makespan) {
+  const index_t nf = t.n_fronts();
+  std::vector<double> w(nf, 0.0);  // work over T' fronts of each T' subtree
+  double top_work = 0;
+  for (index_t f = 0; f < nf; ++f) {
+    if (!in_top[f]) continue;
+    const double x = symbolic::front_flops(t, f);
+    w[f] += x;
+    top_work += x;
+    if (t.parent[f] >= 0) w[t.parent[f]] += w[f];  // the parent of a top front is in the top
+  }
+  if (top_work <= 0) return {};
+  const auto heavier = [&](index_t a, index_t b) { return w[a] < w[b] || (w[a] == w[b] && a < b); };
+  std::priority_queue<index_t, std::vector<index_t>, decltype(heavier)> heap(heavier);
+  for (index_t f = 0; f < nf; ++f)
+    if (in_top[f] && t.parent[f] < 0) heap.push(f);
+  const std::size_t cap = 64 * static_cast<std::size_t>(o.workers);
+  std::vector<index_t> sequence;
+  double left = 0;  // work of the fronts split so far: what stays in the top
+  std::size_t best_k = 0;
+  double best_time = 0, best_left = 0;
+  std::size_t best_count = 0;
+  for (std::size_t k = 0;; ++k) {
+    std::vector<index_t> cur;
+    for (auto copy = heap; !copy.empty(); copy.pop()) cur.push_back(copy.top());
+    const double time = score(cur, w, o.workers).makespan + left;
+    if (k == 0 || time < best_time) {
+      best_k = k;
+      best_time = time;
+      best_left = left;
+      best_count = cur.size();
+    }
+    if (heap.empty() || heap.size() >= cap) break;
+    const index_t h = heap.top();
+    std::vector<index_t> kids;
+    for (index_t q = t.child_offsets[h]; q < t.child_offsets[h + 1]; ++q)
+      if (in_top[t.children[q]]) kids.push_back(t.children[q]);
+    if (kids.empty()) break;  // a leaf of T': cannot split
+    heap.pop();
+    left += symbolic::front_flops(t, h);
+    for (const index_t c : kids) heap.push(c);
+    sequence.push_back(h);
+  }
+  if (best_count < 2 || best_time >= (1 - o.tolerance) * top_work) return {};
+  std::vector<char> split(nf, 0);
+  for (std::size_t k = 0; k < best_k; ++k) split[sequence[k]] = 1;
+  std::vector<index_t> roots;
+  for (index_t f = 0; f < nf; ++f) {
+    const index_t p = t.parent[f];
+    if (in_top[f] && !split[f] && (p < 0 || split[p])) roots.push_back(f);
+  }
+  std::sort(roots.begin(), roots.end(),
+            [&](index_t a, index_t b) { return w[a] > w[b] || (w[a] == w[b] && a < b); });
+  *makespan = best_time - best_left;
+  return roots;
+}
+
 }  // namespace
+
+const FactorPart& TreePartition::part(int id) const {
+  const int s = top_id();
+  if (id < 0 || id >= n_parts())
+    throw InvalidInput("TreePartition::part: id " + std::to_string(id) + " out of range [0, " +
+                       std::to_string(n_parts()) + ")");
+  if (id < s) return subtrees[id];
+  if (id == s) return top;
+  return upper[id - s - 1];
+}
+
+int TreePartition::worker_of(int id) const {
+  const int s = top_id();
+  if (id < 0 || id >= n_parts())
+    throw InvalidInput("TreePartition::worker_of: id " + std::to_string(id) + " out of range");
+  if (id < s) return owner[id];
+  if (id == s) return 0;
+  return upper_owner[id - s - 1];
+}
 
 std::vector<int> lpt_assign(const std::vector<double>& work, int workers, double* makespan) {
   std::vector<int> owner(work.size(), 0);
@@ -178,10 +273,49 @@ TreePartition partition_tree(const symbolic::AssemblyTree& t, const PartitionOpt
   out.owner = lpt_assign(items, o.workers, &makespan);
   for (double x : items) sum += x;
   out.balance = sum > 0 ? makespan / (sum / o.workers) : 1.0;
+  out.estimated_time = makespan;
+
+  // upper layers: the top split again while that pays
+  const index_t n_sub = static_cast<index_t>(out.subtrees.size());
+  out.part_id.assign(nf, n_sub);
+  for (index_t f = 0; f < nf; ++f)
+    if (out.part_of[f] >= 0) out.part_id[f] = out.part_of[f];
+  std::vector<char> in_top(nf, 0);
+  for (index_t f = 0; f < nf; ++f) in_top[f] = out.part_of[f] < 0;
+  for (int layer = 1; o.upper_layers && layer <= kMaxUpperLayers; ++layer) {
+    double layer_makespan = 0;
+    const std::vector<index_t> uroots = choose_layer(t, in_top, o, &layer_makespan);
+    if (uroots.empty()) break;
+    const index_t base = n_sub + 1 + static_cast<index_t>(out.upper.size());
+    // a front of the top below a root of this layer is in that root's part (the split
+    // fronts are ancestors of the roots): parents first, downwards
+    std::vector<index_t> in_part(nf, -1);
+    for (std::size_t i = 0; i < uroots.size(); ++i) in_part[uroots[i]] = static_cast<index_t>(i);
+    for (index_t f = nf - 1; f >= 0; --f)
+      if (in_top[f] && in_part[f] < 0 && t.parent[f] >= 0 && in_part[t.parent[f]] >= 0)
+        in_part[f] = in_part[t.parent[f]];
+    std::vector<std::vector<index_t>> fronts(uroots.size());
+    for (index_t f = 0; f < nf; ++f)
+      if (in_part[f] >= 0) {
+        fronts[in_part[f]].push_back(f);
+        out.part_id[f] = base + in_part[f];
+        in_top[f] = 0;
+      }
+    std::vector<double> work;
+    for (std::size_t i = 0; i < uroots.size(); ++i) {
+      out.upper.push_back(make_part(t, uroots[i], std::move(fronts[i]), o));
+      work.push_back(out.upper.back().work);
+    }
+    const std::vector<int> own = lpt_assign(work, o.workers);
+    out.upper_owner.insert(out.upper_owner.end(), own.begin(), own.end());
+    out.upper_layer_offsets.push_back(static_cast<index_t>(out.upper.size()));
+    out.estimated_time += layer_makespan;
+  }
   std::vector<index_t> top;
   for (index_t f = 0; f < nf; ++f)
-    if (out.part_of[f] < 0) top.push_back(f);
+    if (in_top[f]) top.push_back(f);
   out.top = make_part(t, -1, std::move(top), o);
+  out.estimated_time += out.top.work;
   return out;
 }
 

@@ -2,10 +2,15 @@
 // the largest-processing-time-first assignment of those subtrees to the workers.
 //
 // Multi-worker factorization (DESIGN.md §3, docs/multigpu.md): the tree is cut into
-// disjoint subtrees, each factored by one worker on its own (its own level schedule,
-// memory plan and contribution-block arena, in any order relative to the other subtrees),
-// and the "top" part above them, factored after all subtrees with the contribution
-// blocks of the subtree roots handed in.
+// disjoint subtrees (layer 0), each factored by one worker on its own (its own level
+// schedule, memory plan and contribution-block arena, in any order relative to the other
+// subtrees), and the "top" part above them. The top part is split again, layer by layer,
+// by the same heuristic ("upper layers" 1, 2, …: disjoint subtrees of what is left of the
+// top, each factored by one worker after every part of the layers below, with the
+// contribution blocks of its children in lower layers handed in); the final remainder is
+// the top part, factored by worker 0 after all layers. Its largest fronts (the root
+// separators) still run on one worker: splitting one front across workers by tiles is
+// later work.
 #pragma once
 
 #include <vector>
@@ -16,10 +21,11 @@
 namespace strata::schedule {
 
 /// A part of the assembly tree that one worker factors on its own: a subtree (all
-/// descendants of `root`, a contiguous range of front numbers ending at root) or the top
-/// part (every front in no subtree; closed under parents).
+/// descendants of `root`, a contiguous range of front numbers ending at root), an upper
+/// part (`root` and its descendants that are in no lower layer), or the top part (every
+/// front in no other part; closed under parents).
 struct FactorPart {
-  index_t root = -1;                 ///< the subtree's root front; -1 for the top part
+  index_t root = -1;                 ///< the subtree's or upper part's root; -1 for the top
   double work = 0;                   ///< Σ symbolic::front_flops over the part's fronts
   std::vector<index_t> fronts;       ///< the part's fronts, increasing
   symbolic::LevelSchedule schedule;  ///< the part's own levels (see level_schedule)
@@ -35,20 +41,53 @@ struct PartitionOptions {
   double tolerance = 0.05;      ///< accepted LPT makespan above the mean subtree load
   std::size_t budget = 0;       ///< device memory budget of each part's plan (0: none)
   bool unsymmetric = false;     ///< LU factor sizes in the plans
+  /// Split the top part into upper layers (see partition_tree); false: the top part is
+  /// everything above the subtrees, as before upper layers existed.
+  bool upper_layers = true;
 };
 
-/// The split of an assembly tree.
+/// The maximum number of upper layers partition_tree makes.
+inline constexpr int kMaxUpperLayers = 8;
+
+/// The split of an assembly tree. Parts are named by an id (numeric::PartView::id):
+/// subtree i is i (0 ≤ i < S = subtrees.size()), the top part is S, upper part k is
+/// S + 1 + k.
 struct TreePartition {
   int workers = 1;
-  std::vector<FactorPart> subtrees;  ///< disjoint; decreasing work (ties: increasing root)
-  FactorPart top;                    ///< the rest of the tree
-  std::vector<index_t> part_of;      ///< per front: index into subtrees, or -1 (top)
-  std::vector<int> owner;            ///< worker of each subtree under LPT
-  double total_work = 0;             ///< Σ front_flops over the tree
+  std::vector<FactorPart> subtrees;  ///< layer 0: disjoint; decreasing work (ties: increasing root)
+  /// Upper layers 1 .. L, all their parts in one list, layer by layer: layer l's parts are
+  /// upper[upper_layer_offsets[l − 1] .. upper_layer_offsets[l]), decreasing work (ties:
+  /// increasing root). Empty without upper layers.
+  std::vector<FactorPart> upper;
+  std::vector<index_t> upper_layer_offsets{0};  ///< size L + 1
+  /// Worker of each upper part: LPT within its layer. Static (no stealing), so that the
+  /// exporter of a block knows which worker imports it.
+  std::vector<int> upper_owner;
+  FactorPart top;                ///< the rest of the tree (worker 0, after every layer)
+  std::vector<index_t> part_of;  ///< per front: index into subtrees, or -1 (top or upper)
+  std::vector<index_t> part_id;  ///< per front: the id of its part (see above)
+  std::vector<int> owner;        ///< worker of each subtree under LPT
+  double total_work = 0;         ///< Σ front_flops over the tree
   /// LPT makespan over the subtrees divided by the mean load Σ subtree work / workers
   /// (≥ 1; 1 is a perfect balance; 1 when there is no subtree work).
   double balance = 1;
   index_t splits = 0;  ///< subtrees split into their children to get here
+  /// The estimate the split minimizes (flops): LPT makespan of the subtrees + LPT
+  /// makespan of each upper layer + the top part's work (layers one after another, no
+  /// transfers counted).
+  double estimated_time = 0;
+
+  /// Number of upper layers L.
+  int n_upper_layers() const { return static_cast<int>(upper_layer_offsets.size()) - 1; }
+  /// Id of the top part (S).
+  int top_id() const { return static_cast<int>(subtrees.size()); }
+  /// Number of part ids: S + 1 + upper.size().
+  int n_parts() const { return static_cast<int>(subtrees.size() + 1 + upper.size()); }
+  /// The part with this id; throws InvalidInput for an id out of range.
+  const FactorPart& part(int id) const;
+  /// The worker that factors part `id`: the LPT owner of a subtree (before any stealing),
+  /// the owner of an upper part, 0 for the top part.
+  int worker_of(int id) const;
 };
 
 /// Splits the tree in the manner of Geist & Ng, "Task scheduling for parallel sparse
@@ -61,6 +100,15 @@ struct TreePartition {
 /// factors after the subtrees — and the best-scoring state with enough subtrees (or the
 /// best of all, when the tree never yields enough) is kept, so splitting never trades a
 /// small gain in balance for a large sequential top. Work is symbolic::front_flops.
+///
+/// Upper layers (opts.upper_layers): the fronts left above the subtrees form a tree T'
+/// whose leaves read the subtree roots' blocks. The same splitting runs on T', with the
+/// work of a T' subtree counted over its T' fronts only: start from T''s roots, split the
+/// heaviest into its T' children (its root front stays in the top), score each state by
+/// LPT makespan + the work left in the top, and keep the best. When that best state has
+/// at least 2 parts and cuts the estimate by more than tolerance × the top's work, its
+/// parts become the next layer and the search runs again on what is left (at most
+/// kMaxUpperLayers layers); the final remainder is the top part.
 /// Throws InvalidInput for workers or subtrees_per_worker below 1.
 TreePartition partition_tree(const symbolic::AssemblyTree& t, const PartitionOptions& opts);
 

@@ -1,9 +1,10 @@
 // strata — multi-GPU tests (ctest label `gpu`): the tree split over 2 and 4 GPUs, one
 // CUDA executor per GPU (numeric/multi_device.cpp), checked against one GPU and the CPU on
 // the same analysis, through the Solver (solve, refactorization, per-GPU statistics),
-// with a slowed GPU whose subtrees are stolen, for spd, symmetric indefinite and general
-// matrices. Each test skips, with a message, where fewer GPUs are visible than it needs
-// (or the build has no CUDA backend).
+// with a slowed GPU whose subtrees are stolen, with the top part split into upper layers
+// (on by default; one test asserts it and compares with the split off), for spd,
+// symmetric indefinite and general matrices. Each test skips, with a message, where fewer GPUs are
+// visible than it needs (or the build has no CUDA backend).
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -131,12 +132,14 @@ void factor_on_gpus(int gpus) {
     const auto xm = solve_with(an, multi_f, b), xc = solve_with(an, cpu_f, b);
     EXPECT_LT(test::relative_difference(xm, xc), 1e-8);
     ASSERT_EQ(dev.size(), static_cast<std::size_t>(gpus));
-    index_t run = 0;
+    index_t run = 0, upper_run = 0;
     for (int d = 0; d < gpus; ++d) {
       EXPECT_EQ(dev[d].device, "cuda:" + std::to_string(d));
       run += dev[d].subtrees_run;
+      upper_run += dev[d].upper_parts_run;
     }
     EXPECT_EQ(run, static_cast<index_t>(an.partition.subtrees.size()));
+    EXPECT_EQ(upper_run, static_cast<index_t>(an.partition.upper.size()));
   }
 }
 
@@ -236,6 +239,102 @@ TEST(MultiGpu, SlowGpuHasItsSubtreesStolen) {
     EXPECT_GT(stolen, 0);
     EXPECT_LT(dev[slow].subtrees_run, own[slow]);
     EXPECT_LT(test::relative_difference(slowed.panels, plain.panels), 1e-13);
+  }
+}
+
+// The top part split into upper layers (asserted: lap3d 30 and its shifted and
+// unsymmetric forms have them) on 2 and 4 GPUs, where an upper part imports blocks from
+// several GPUs (peer copies or host memory): the factor agrees with one GPU on the same
+// analysis and with the split off, also with the panels kept on the GPUs and fetched, and
+// the solution with the CPU's; through the Solver, with split_top on and off.
+TEST(MultiGpu, UpperLayersMatchOneGpuAndCpu) {
+  REQUIRE_GPUS(2);
+  auto rng = test::fresh_rng();
+  std::vector<Problem> ps;
+  const SparseMatrix lap = generators::laplacian_3d(30, 30, 30);
+  ps.push_back({"lap3d 30", lap, MatrixType::spd});
+  {
+    SparseMatrix a = generators::laplacian_3d(20, 20, 20);
+    for (index_t j = 0; j < a.n_cols; ++j)
+      for (index_t q = a.offsets[j]; q < a.offsets[j + 1]; ++q)
+        if (a.indices[q] == j) a.values[q] -= 2.5;
+    ps.push_back({"shifted lap3d 20", std::move(a), MatrixType::symmetric_indefinite});
+  }
+  {
+    SparseMatrix a = expand_symmetric(generators::laplacian_3d(20, 20, 20));
+    std::uniform_real_distribution<double> u(0.5, 1.5);
+    for (double& v : a.values) v *= u(rng);
+    ps.push_back({"unsymmetric lap3d 20", std::move(a), MatrixType::general});
+  }
+  for (int gpus : {2, 4}) {
+    if (numeric::cuda_device_count() < gpus) continue;
+    for (const Problem& pr : ps) {
+      SCOPED_TRACE(pr.name + ", " + std::to_string(gpus) + " GPUs");
+      Options o;
+      o.type = pr.type;
+      const Analysis an = analyze_matrix(pr.a, o, gpus);
+      ASSERT_GE(an.partition.n_upper_layers(), 1) << "no upper layer: the test would be vacuous";
+      o.split_top = false;
+      const Analysis off = analyze_matrix(pr.a, o, gpus);
+      ASSERT_EQ(off.partition.n_upper_layers(), 0);
+      ASSERT_EQ(off.tree.parent, an.tree.parent);
+      double pivot = 0;
+      const std::vector<double> v = test::scaled_values(an, pr.a, &pivot);
+      numeric::NumericFactor cpu_f, gpu1_f, on_f, off_f, kept_f;
+      std::vector<double> arena;
+      numeric::factorize(an, v, pr.type, pivot, *numeric::make_cpu_executor(2), cpu_f, arena);
+      auto gpu1 = numeric::make_cuda_executor(o, 0);
+      numeric::factorize(an, v, pr.type, pivot, *gpu1, gpu1_f, arena);
+      numeric::fetch_panels(an, *gpu1, gpu1_f);
+      std::vector<std::unique_ptr<numeric::Executor>> ex;
+      std::vector<numeric::Executor*> execs;
+      for (int d = 0; d < gpus; ++d) {
+        ex.push_back(numeric::make_cuda_executor(o, d));
+        execs.push_back(ex.back().get());
+      }
+      std::vector<std::vector<double>> arenas;
+      std::vector<DeviceStats> dev;
+      numeric::factorize_multi(an, v, pr.type, pivot, execs, on_f, arenas, {}, &dev);
+      EXPECT_LT(test::relative_difference(on_f.panels, gpu1_f.panels), 1e-13);
+      EXPECT_EQ(on_f.rows, gpu1_f.rows);
+      index_t upper_run = 0;
+      for (int d = 0; d < gpus; ++d) {
+        index_t own = 0;
+        for (int w : an.partition.upper_owner) own += w == d;
+        EXPECT_EQ(dev[d].upper_parts_run, own);
+        upper_run += dev[d].upper_parts_run;
+      }
+      EXPECT_EQ(upper_run, static_cast<index_t>(an.partition.upper.size()));
+      numeric::MultiWorkerConfig keep;
+      keep.keep_panels_on_devices = true;
+      numeric::factorize_multi(an, v, pr.type, pivot, execs, kept_f, arenas, keep, nullptr);
+      numeric::fetch_panels(an, execs, kept_f);
+      EXPECT_LT(test::relative_difference(kept_f.panels, gpu1_f.panels), 1e-13);
+      // the executors re-plan their parts for the other analysis
+      numeric::factorize_multi(off, v, pr.type, pivot, execs, off_f, arenas, {}, nullptr);
+      EXPECT_LT(test::relative_difference(off_f.panels, gpu1_f.panels), 1e-13);
+      if (pr.type == MatrixType::spd)
+        EXPECT_LT(test::relative_difference(on_f.panels, cpu_f.panels), 1e-12);
+      std::vector<double> b(pr.a.n_rows);
+      std::uniform_real_distribution<double> u(-1, 1);
+      for (double& x : b) x = u(rng);
+      const auto xc = solve_with(an, cpu_f, b);
+      EXPECT_LT(test::relative_difference(solve_with(an, on_f, b), xc), 1e-8);
+      EXPECT_LT(test::relative_difference(solve_with(an, kept_f, b), xc), 1e-8);
+      for (bool split : {true, false}) {
+        Options so;
+        so.type = pr.type;
+        so.backend = Backend::cuda;
+        so.num_gpus = gpus;
+        so.split_top = split;
+        Solver s(so);
+        s.factorize(pr.a);
+        EXPECT_EQ(s.stats().analysis.upper_layers > 0, split);
+        const auto x = s.solve(b);
+        EXPECT_LE(test::backward_error(pr.a, x.data(), b.data()), 1e-14);
+        EXPECT_LT(test::relative_difference(x, solve_with(an, cpu_f, b)), 1e-8);
+      }
+    }
   }
 }
 

@@ -4,6 +4,8 @@
 // the Solver agree with the one-worker CPU solver and have backward error at the unit
 // roundoff for spd, symmetric indefinite and general matrices, refactorization works on
 // the distributed factor, a slowed worker has its subtrees stolen, and errors propagate.
+// The top part is split into upper layers by default (Options::split_top); a dedicated
+// test asserts that it is, and compares with the split off and a dense solve.
 #include <gtest/gtest.h>
 
 #include <atomic>
@@ -62,8 +64,8 @@ std::vector<Problem> problems(std::mt19937_64& rng) {
 }
 
 // Forwards to a CPU executor, counting the fronts of every batch it factors, and throws a
-// DeviceError at the start of part `fail_part` (a subtree index, or P for the top part),
-// whichever worker runs it, when asked to.
+// DeviceError at the start of part `fail_part` (a part id: subtree index, P for the top
+// part, above P the upper parts), whichever worker runs it, when asked to.
 class Recording final : public numeric::Executor {
  public:
   Recording(index_t n_fronts, int fail_part = -2)
@@ -128,6 +130,7 @@ void expect_same_factor(const numeric::NumericFactor& x, const numeric::NumericF
 // every front is factored exactly once.
 TEST(MultiWorker, FactorBitwiseEqualsOneExecutorAndEveryFrontOnce) {
   auto rng = test::fresh_rng();
+  int with_upper_layers = 0;  // runs whose top part was split (so the test covers them)
   for (const Problem& pr : problems(rng))
     for (int workers : {1, 2, 3, 4}) {
       SCOPED_TRACE(pr.name + ", " + std::to_string(workers) + " workers");
@@ -156,24 +159,126 @@ TEST(MultiWorker, FactorBitwiseEqualsOneExecutorAndEveryFrontOnce) {
         ASSERT_EQ(c, 1) << "front " << f << " factored " << c << " times";
       }
       ASSERT_EQ(dev.size(), static_cast<std::size_t>(workers));
-      index_t run = 0;
+      index_t run = 0, upper_run = 0;
       double flops = 0;
       std::size_t bytes = 0;
       for (const DeviceStats& d : dev) {
         run += d.subtrees_run;
+        upper_run += d.upper_parts_run;
         flops += d.flops;
         bytes += d.bytes_transferred;
         EXPECT_LE(d.subtrees_stolen, d.subtrees_run);
         EXPECT_GE(d.busy_seconds, 0.0);
         EXPECT_GE(d.idle_seconds, 0.0);
       }
-      EXPECT_EQ(run, static_cast<index_t>(an.partition.subtrees.size()));
+      const auto& part = an.partition;
+      EXPECT_EQ(run, static_cast<index_t>(part.subtrees.size()));
+      EXPECT_EQ(upper_run, static_cast<index_t>(part.upper.size()));
+      // each upper part on its owner
+      for (std::size_t k = 0; k < part.upper.size(); ++k)
+        for (index_t f : part.upper[k].fronts) EXPECT_EQ(rec[part.upper_owner[k]]->count[f], 1);
+      for (index_t f : part.top.fronts) EXPECT_EQ(rec[0]->count[f], 1);
+      with_upper_layers += part.n_upper_layers() > 0;
       EXPECT_NEAR(flops, an.stats.factor_flops, 1e-9 * std::max(1.0, flops));
       std::size_t expect_bytes = 0;  // every imported block crosses twice: out and in
-      for (index_t c : an.partition.top.imports)
-        expect_bytes += 2 * sizeof(double) * an.tree.cb_size(c) * an.tree.cb_size(c);
+      std::vector<const schedule::FactorPart*> importers{&part.top};
+      for (const auto& u : part.upper) importers.push_back(&u);
+      for (const auto* q : importers)
+        for (index_t c : q->imports)
+          expect_bytes += 2 * sizeof(double) * an.tree.cb_size(c) * an.tree.cb_size(c);
       EXPECT_EQ(bytes, expect_bytes);
     }
+  EXPECT_GT(with_upper_layers, 0) << "no problem had its top part split into upper layers";
+}
+
+// Problems whose top part is split into upper layers (asserted), all three types, with
+// 2, 3 and 4 workers: bitwise the one-executor factor, with the split on and off, each
+// upper part factored by its owner and exactly once; through the Solver the solution
+// agrees with a dense LAPACK solve.
+TEST(MultiWorker, UpperLayersGiveTheOneWorkerFactor) {
+  auto rng = test::fresh_rng();
+  std::vector<Problem> ps;
+  const SparseMatrix lap = generators::laplacian_3d(12, 12, 12);
+  ps.push_back({"lap3d 12", lap, MatrixType::spd});
+  {  // shifted: indefinite with a positive diagonal
+    SparseMatrix s = lap;
+    for (index_t j = 0; j < s.n_cols; ++j)
+      for (index_t p = s.offsets[j]; p < s.offsets[j + 1]; ++p)
+        if (s.indices[p] == j) s.values[p] -= 2.5;
+    ps.push_back({"shifted lap3d 12", std::move(s), MatrixType::symmetric_indefinite});
+  }
+  {
+    SparseMatrix g = expand_symmetric(lap);
+    std::uniform_real_distribution<double> u(0.5, 1.5);
+    for (double& x : g.values) x *= u(rng);
+    ps.push_back({"unsymmetric lap3d 12", std::move(g), MatrixType::general});
+  }
+  for (const Problem& pr : ps) {
+    const index_t n = pr.a.n_rows;
+    std::vector<double> b(n);
+    std::uniform_real_distribution<double> u(-1, 1);
+    for (double& x : b) x = u(rng);
+    std::vector<double> xd = b;
+    ASSERT_TRUE(test::dense_solve(test::to_dense(pr.a), n, xd, 1));
+    for (int workers : {2, 3, 4}) {
+      SCOPED_TRACE(pr.name + ", " + std::to_string(workers) + " workers");
+      Options o;
+      o.type = pr.type;
+      const Analysis an = analyze_matrix(pr.a, o, workers);
+      const auto& part = an.partition;
+      ASSERT_GE(part.n_upper_layers(), 1)
+          << "the top part was not split: the test would be vacuous";
+      double pivot = 0;
+      const std::vector<double> v = test::scaled_values(an, pr.a, &pivot);
+      numeric::NumericFactor one;
+      std::vector<double> arena;
+      numeric::factorize(an, v, pr.type, pivot, *numeric::make_cpu_executor(1), one, arena);
+      std::vector<std::unique_ptr<Recording>> rec;
+      std::vector<numeric::Executor*> execs;
+      for (int w = 0; w < workers; ++w) {
+        rec.push_back(std::make_unique<Recording>(an.tree.n_fronts()));
+        execs.push_back(rec.back().get());
+      }
+      numeric::NumericFactor many;
+      std::vector<std::vector<double>> arenas;
+      std::vector<DeviceStats> dev;
+      numeric::factorize_multi(an, v, pr.type, pivot, execs, many, arenas, {}, &dev);
+      expect_same_factor(one, many);
+      for (std::size_t k = 0; k < part.upper.size(); ++k)
+        for (index_t f : part.upper[k].fronts) EXPECT_EQ(rec[part.upper_owner[k]]->count[f], 1);
+      for (index_t f = 0; f < an.tree.n_fronts(); ++f) {
+        int c = 0;
+        for (const auto& r : rec) c += r->count[f];
+        ASSERT_EQ(c, 1) << "front " << f;
+      }
+      index_t upper_run = 0;
+      for (int w = 0; w < workers; ++w) {
+        index_t own = 0;
+        for (int x : part.upper_owner) own += x == w;
+        EXPECT_EQ(dev[w].upper_parts_run, own);
+        upper_run += dev[w].upper_parts_run;
+      }
+      EXPECT_EQ(upper_run, static_cast<index_t>(part.upper.size()));
+      // the same with the split off (same tree: the ordering does not depend on it)
+      o.split_top = false;
+      const Analysis off = analyze_matrix(pr.a, o, workers);
+      ASSERT_EQ(off.partition.n_upper_layers(), 0);
+      ASSERT_EQ(off.tree.parent, an.tree.parent);
+      numeric::NumericFactor many_off;
+      numeric::factorize_multi(off, v, pr.type, pivot, execs, many_off, arenas, {}, nullptr);
+      expect_same_factor(one, many_off);
+      // through the Solver, against the dense solve
+      Options so;
+      so.type = pr.type;
+      Solver s(so);
+      SolverAccess::use_host_workers(s, workers, 1);
+      s.factorize(pr.a);
+      EXPECT_GE(s.stats().analysis.upper_layers, 1);
+      const auto x = s.solve(b);
+      EXPECT_LT(test::relative_difference(x, xd), 1e-8);
+      EXPECT_LE(test::backward_error(pr.a, x.data(), b.data()), 1e-14);
+    }
+  }
 }
 
 // Through the Solver (N CPU executors standing for N GPUs): solutions agree with the
@@ -329,7 +434,10 @@ TEST(MultiWorker, ErrorsPropagate) {
   const Analysis an = split_analysis(a, MatrixType::spd, 3);
   const int n_sub = static_cast<int>(an.partition.subtrees.size());
   ASSERT_GE(n_sub, 3);
-  for (int failing : {0, n_sub / 2, n_sub - 1, n_sub}) {  // n_sub: the top part
+  ASSERT_GE(an.partition.upper.size(), 2u);
+  const int last = an.partition.n_parts() - 1;
+  // n_sub: the top part; n_sub + 1 ..: upper parts
+  for (int failing : {0, n_sub / 2, n_sub - 1, n_sub, n_sub + 1, last}) {
     SCOPED_TRACE("failing part " + std::to_string(failing));
     double pivot = 0;
     const std::vector<double> v = test::scaled_values(an, a, &pivot);

@@ -1,8 +1,9 @@
 // strata tests — the pieces of the distributed solver that run without MPI: the analysis
 // survives the round trip through bytes that rank 0 broadcasts (every field compared);
-// cut or padded bytes are refused; the rank layout covers every pivot once and the ranks'
-// factor shares add up to the factor; DistributedSolver on the one-process communicator
-// is the Solver (solutions against a dense LAPACK solve).
+// cut or padded bytes are refused (upper layers included); the rank layout covers every
+// pivot once and the ranks' factor shares add up to the factor (upper layers refused);
+// DistributedSolver on the one-process communicator is the Solver (solutions against a dense LAPACK
+// solve).
 #include <gtest/gtest.h>
 
 #include "core/analysis.hpp"
@@ -76,6 +77,13 @@ void expect_same(const Analysis& x, const Analysis& y) {
   for (std::size_t i = 0; i < x.partition.subtrees.size(); ++i)
     expect_same_part(x.partition.subtrees[i], y.partition.subtrees[i]);
   expect_same_part(x.partition.top, y.partition.top);
+  ASSERT_EQ(x.partition.upper.size(), y.partition.upper.size());
+  for (std::size_t i = 0; i < x.partition.upper.size(); ++i)
+    expect_same_part(x.partition.upper[i], y.partition.upper[i]);
+  EXPECT_EQ(x.partition.upper_layer_offsets, y.partition.upper_layer_offsets);
+  EXPECT_EQ(x.partition.upper_owner, y.partition.upper_owner);
+  EXPECT_EQ(x.partition.part_id, y.partition.part_id);
+  EXPECT_EQ(x.partition.estimated_time, y.partition.estimated_time);
   EXPECT_EQ(x.partition.part_of, y.partition.part_of);
   EXPECT_EQ(x.partition.owner, y.partition.owner);
   EXPECT_EQ(x.partition.balance, y.partition.balance);
@@ -83,6 +91,9 @@ void expect_same(const Analysis& x, const Analysis& y) {
   EXPECT_EQ(x.stats.factor_flops, y.stats.factor_flops);
   EXPECT_EQ(x.stats.fronts_per_level, y.stats.fronts_per_level);
   EXPECT_EQ(x.stats.subtrees, y.stats.subtrees);
+  EXPECT_EQ(x.stats.upper_layers, y.stats.upper_layers);
+  EXPECT_EQ(x.stats.upper_parts, y.stats.upper_parts);
+  EXPECT_EQ(x.stats.upper_flops_fraction, y.stats.upper_flops_fraction);
   EXPECT_EQ(x.stats.total_seconds, y.stats.total_seconds);
 }
 
@@ -94,7 +105,9 @@ TEST(DistributedSerialize, RoundTripEveryType) {
     int workers;
   };
   std::vector<Case> cases;
+  int upper_layers = 0;  // cases whose analysis has upper layers
   cases.push_back({generators::laplacian_3d(9, 9, 9), MatrixType::spd, 4});
+  cases.push_back({generators::laplacian_3d(16, 16, 16), MatrixType::spd, 4});  // upper layers
   cases.push_back({test::random_kkt(301, rng), MatrixType::symmetric_indefinite, 3});
   cases.push_back(
       {test::random_sparse(257, 3, test::RandomKind::general, rng), MatrixType::general, 2});
@@ -103,6 +116,7 @@ TEST(DistributedSerialize, RoundTripEveryType) {
     Options o;
     o.type = c.type;
     const Analysis an = analyze_matrix(c.a, o, c.workers);
+    upper_layers += an.partition.n_upper_layers() > 0;
     const std::vector<char> bytes = distributed::serialize(an);
     const Analysis back = distributed::deserialize(bytes);
     expect_same(an, back);
@@ -111,10 +125,12 @@ TEST(DistributedSerialize, RoundTripEveryType) {
     EXPECT_THROW(distributed::deserialize(cut), InvalidInput);
     EXPECT_THROW(distributed::deserialize(longer), InvalidInput);
   }
+  EXPECT_GT(upper_layers, 0) << "no case had upper layers to carry";
 }
 
 // For R ranks × G workers: every pivot column is in exactly one subtree or the top part,
-// and the ranks' local factor layouts add up to the whole factor.
+// and the ranks' local factor layouts add up to the whole factor. The analysis is made as
+// the distributed solver makes it, without upper layers; one with them is refused.
 TEST(DistributedSerialize, RankLayoutsCoverTheFactor) {
   auto rng = test::fresh_rng();
   const SparseMatrix a = generators::laplacian_3d(11, 11, 11);
@@ -122,6 +138,10 @@ TEST(DistributedSerialize, RankLayoutsCoverTheFactor) {
     SCOPED_TRACE(std::to_string(ranks) + " x " + std::to_string(per_rank));
     Options o;
     o.type = MatrixType::spd;
+    const Analysis layered = analyze_matrix(a, o, ranks * per_rank);
+    if (layered.partition.n_upper_layers() > 0)
+      EXPECT_THROW(distributed::make_layout(layered, ranks, 0, per_rank), InvalidInput);
+    o.split_top = false;
     const Analysis an = analyze_matrix(a, o, ranks * per_rank);
     std::vector<int> seen(an.n, 0);
     std::size_t total = 0;

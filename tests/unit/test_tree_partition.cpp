@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <numeric>
 #include <string>
 
@@ -90,6 +91,102 @@ void check_part(const AssemblyTree& t, const FactorPart& p) {
   }
 }
 
+// Layer of part `id`: 0 for a subtree, l for a part of upper layer l, L + 1 for the top.
+int layer_of(const schedule::TreePartition& p, index_t id) {
+  const index_t s = p.top_id();
+  if (id < s) return 0;
+  if (id == s) return p.n_upper_layers() + 1;
+  const index_t k = id - s - 1;
+  for (int l = 1; l <= p.n_upper_layers(); ++l)
+    if (k < p.upper_layer_offsets[l]) return l;
+  ADD_FAILURE() << "upper part " << k << " in no layer";
+  return -1;
+}
+
+// LPT makespan of `owners` over `workers` with these works.
+double makespan_of(const std::vector<double>& work, const std::vector<int>& owners, int workers) {
+  std::vector<double> load(workers, 0.0);
+  for (std::size_t i = 0; i < work.size(); ++i) load[owners[i]] += work[i];
+  return work.empty() ? 0.0 : *std::max_element(load.begin(), load.end());
+}
+
+// The upper layers: every part is its root and the root's descendants in no lower layer
+// (closed under its own fronts' parents up to the root), reads blocks only from strictly
+// lower layers, is listed in decreasing work within its layer, and has a valid owner;
+// part ids, part() and worker_of agree; estimated_time is recomputed here.
+void check_upper_layers(const AssemblyTree& t, const schedule::TreePartition& p, int workers) {
+  const index_t nf = t.n_fronts();
+  const index_t s = p.top_id();
+  ASSERT_EQ(static_cast<index_t>(p.part_id.size()), nf);
+  ASSERT_GE(p.upper_layer_offsets.size(), 1u);
+  EXPECT_EQ(p.upper_layer_offsets.front(), 0);
+  EXPECT_EQ(p.upper_layer_offsets.back(), static_cast<index_t>(p.upper.size()));
+  EXPECT_LE(p.n_upper_layers(), schedule::kMaxUpperLayers);
+  ASSERT_EQ(p.upper_owner.size(), p.upper.size());
+  EXPECT_EQ(p.n_parts(), static_cast<int>(p.subtrees.size() + 1 + p.upper.size()));
+  for (index_t f = 0; f < nf; ++f) {
+    const index_t id = p.part_id[f];
+    ASSERT_GE(id, 0);
+    ASSERT_LT(id, p.n_parts());
+    EXPECT_EQ(p.part_of[f], id < s ? id : -1) << "front " << f;
+    const auto& fr = p.part(static_cast<int>(id)).fronts;
+    EXPECT_TRUE(std::binary_search(fr.begin(), fr.end(), f)) << "front " << f;
+  }
+  EXPECT_EQ(&p.part(static_cast<int>(s)), &p.top);
+  EXPECT_EQ(p.worker_of(static_cast<int>(s)), 0);
+  EXPECT_THROW(p.part(p.n_parts()), InvalidInput);
+  EXPECT_THROW(p.part(-1), InvalidInput);
+  double estimate = 0;
+  {
+    std::vector<double> w;
+    for (const auto& sub : p.subtrees) w.push_back(sub.work);
+    estimate += makespan_of(w, p.owner, workers);
+  }
+  for (int l = 1; l <= p.n_upper_layers(); ++l) {
+    const index_t b = p.upper_layer_offsets[l - 1], e = p.upper_layer_offsets[l];
+    EXPECT_GE(e - b, 2) << "a layer of fewer than 2 parts";
+    std::vector<double> w;
+    std::vector<int> own;
+    for (index_t k = b; k < e; ++k) {
+      const FactorPart& u = p.upper[k];
+      const int id = static_cast<int>(s + 1 + k);
+      SCOPED_TRACE("upper layer " + std::to_string(l) + ", part " + std::to_string(k));
+      EXPECT_EQ(&p.part(id), &u);
+      ASSERT_GE(p.upper_owner[k], 0);
+      ASSERT_LT(p.upper_owner[k], workers);
+      EXPECT_EQ(p.worker_of(id), p.upper_owner[k]);
+      if (k > b) EXPECT_GE(p.upper[k - 1].work, u.work) << "not largest first";
+      ASSERT_GE(u.root, 0);
+      ASSERT_FALSE(u.fronts.empty());
+      EXPECT_EQ(u.fronts.back(), u.root) << "the root is the part's last front (postorder)";
+      double work = 0;
+      for (index_t f : u.fronts) {
+        EXPECT_EQ(p.part_id[f], id);
+        work += symbolic::front_flops(t, f);
+        // closed under parents up to the root
+        if (f != u.root) EXPECT_EQ(p.part_id[t.parent[f]], id) << "front " << f;
+        // complete: every child is in the part or in a strictly lower layer
+        for (index_t q = t.child_offsets[f]; q < t.child_offsets[f + 1]; ++q) {
+          const index_t c = t.children[q];
+          if (p.part_id[c] != id) EXPECT_LT(layer_of(p, p.part_id[c]), l) << "child " << c;
+        }
+      }
+      EXPECT_NEAR(u.work, work, 1e-9 * std::max(1.0, work));
+      // the root's parent is in a higher layer, or the top
+      if (t.parent[u.root] >= 0) EXPECT_GT(layer_of(p, p.part_id[t.parent[u.root]]), l);
+      for (index_t c : u.imports) EXPECT_LT(layer_of(p, p.part_id[c]), l) << "import " << c;
+      check_part(t, u);
+      w.push_back(u.work);
+      own.push_back(p.upper_owner[k]);
+    }
+    EXPECT_EQ(own, schedule::lpt_assign(w, workers));
+    estimate += makespan_of(w, own, workers);
+  }
+  for (index_t c : p.top.imports) EXPECT_LE(layer_of(p, p.part_id[c]), p.n_upper_layers());
+  estimate += p.top.work;
+  EXPECT_NEAR(p.estimated_time, estimate, 1e-9 * std::max(1.0, estimate));
+}
+
 void check_partition(const Analysis& an, int workers, int per_worker) {
   const AssemblyTree& t = an.tree;
   const auto& p = an.partition;
@@ -114,24 +211,33 @@ void check_partition(const Analysis& an, int workers, int per_worker) {
     }
     EXPECT_NEAR(sub.work, w, 1e-9 * std::max(1.0, w));
     if (i > 0) EXPECT_GE(p.subtrees[i - 1].work, sub.work) << "not largest first";
-    // the root's parent is in the top part (or absent)
+    // the root's parent is above the subtrees (an upper part or the top part), or absent
     if (t.parent[sub.root] >= 0) EXPECT_EQ(p.part_of[t.parent[sub.root]], -1);
+    EXPECT_TRUE(sub.imports.empty());
     check_part(t, sub);
     work += w;
   }
-  // the top part is the rest, closed under parents
+  // the upper parts and the top part are the rest; the top is closed under parents
+  double wupper = 0;
+  for (const FactorPart& u : p.upper) {
+    for (index_t f : u.fronts) ++seen[f];
+    wupper += u.work;
+  }
   double wtop = 0;
   for (index_t f : p.top.fronts) {
     ++seen[f];
     EXPECT_EQ(p.part_of[f], -1);
-    if (t.parent[f] >= 0) EXPECT_EQ(p.part_of[t.parent[f]], -1) << "top not closed under parents";
+    if (t.parent[f] >= 0) EXPECT_EQ(p.part_id[t.parent[f]], p.top_id()) << "top not closed";
     wtop += symbolic::front_flops(t, f);
   }
   check_part(t, p.top);
   for (index_t f = 0; f < nf; ++f) EXPECT_EQ(seen[f], 1) << "front " << f;
   EXPECT_NEAR(p.top.work, wtop, 1e-9 * std::max(1.0, wtop));
-  EXPECT_NEAR(p.total_work, work + wtop, 1e-9 * std::max(1.0, p.total_work));
+  EXPECT_NEAR(p.total_work, work + wupper + wtop, 1e-9 * std::max(1.0, p.total_work));
   EXPECT_NEAR(an.stats.factor_flops, p.total_work, 1e-9 * std::max(1.0, p.total_work));
+  EXPECT_EQ(an.stats.upper_layers, p.n_upper_layers());
+  EXPECT_EQ(an.stats.upper_parts, static_cast<index_t>(p.upper.size()));
+  check_upper_layers(t, p, workers);
   // the balance figure from the owners
   std::vector<double> load(workers, 0.0);
   ASSERT_EQ(p.owner.size(), p.subtrees.size());
@@ -191,6 +297,140 @@ TEST(TreePartition, UnsymmetricAndIndefiniteTypes) {
     SCOPED_TRACE(to_string(type));
     for (int workers : {2, 4}) check_partition(analyze(a, type, workers, 3), workers, 3);
   }
+}
+
+// A complete binary tree of `depth` levels, fronts numbered in postorder, as nested
+// dissection of a 3D grid makes it: the fronts at depth d have pivots[d] pivots, and
+// every ancestor's pivots as the rows of their contribution block. When `lopsided`, the
+// root's first child's subtree has one level more (an unbalanced tree).
+AssemblyTree binary_tree(int depth, const std::vector<index_t>& pivots, bool lopsided) {
+  AssemblyTree t;
+  std::vector<int> level;  // depth of each front
+  // postorder: children first; returns the front number
+  std::function<index_t(int, int)> build = [&](int d, int levels) -> index_t {
+    std::vector<index_t> kids;
+    if (d + 1 < levels) {
+      const bool deeper = lopsided && d == 0;
+      kids.push_back(build(d + 1, deeper ? levels + 1 : levels));
+      kids.push_back(build(d + 1, levels));
+    }
+    const index_t f = static_cast<index_t>(t.parent.size());
+    t.parent.push_back(-1);
+    level.push_back(d);
+    for (index_t c : kids) t.parent[c] = f;
+    return f;
+  };
+  build(0, depth);
+  const index_t nf = static_cast<index_t>(t.parent.size());
+  for (index_t f = 0; f < nf; ++f)
+    t.first_pivot.push_back(t.first_pivot.back() +
+                            pivots[std::min<std::size_t>(level[f], pivots.size() - 1)]);
+  t.n = t.first_pivot.back();
+  for (index_t f = 0; f < nf; ++f) {
+    for (index_t j = t.first_pivot[f]; j < t.first_pivot[f + 1]; ++j) {
+      t.rows.push_back(j);
+      t.front_of_column.push_back(f);
+    }
+    for (index_t a = t.parent[f]; a >= 0; a = t.parent[a])  // ancestors: larger columns
+      for (index_t j = t.first_pivot[a]; j < t.first_pivot[a + 1]; ++j) t.rows.push_back(j);
+    t.row_offsets.push_back(static_cast<index_t>(t.rows.size()));
+  }
+  std::vector<std::vector<index_t>> kids(nf);
+  for (index_t f = 0; f < nf; ++f)
+    if (t.parent[f] >= 0) kids[t.parent[f]].push_back(f);
+  for (index_t f = 0; f < nf; ++f) {
+    t.children.insert(t.children.end(), kids[f].begin(), kids[f].end());
+    t.child_offsets.push_back(static_cast<index_t>(t.children.size()));
+  }
+  return t;
+}
+
+// The same split with and without upper layers: layer 0 is the same (subtrees, owners,
+// balance), the top part without them is the upper parts and the top part with them,
+// and the estimate with them is no larger.
+void check_on_off(const schedule::TreePartition& on, const schedule::TreePartition& off,
+                  const AssemblyTree& t) {
+  ASSERT_EQ(on.subtrees.size(), off.subtrees.size());
+  for (std::size_t i = 0; i < on.subtrees.size(); ++i) {
+    EXPECT_EQ(on.subtrees[i].root, off.subtrees[i].root);
+    EXPECT_EQ(on.subtrees[i].fronts, off.subtrees[i].fronts);
+  }
+  EXPECT_EQ(on.owner, off.owner);
+  EXPECT_EQ(on.part_of, off.part_of);
+  EXPECT_EQ(on.balance, off.balance);
+  EXPECT_EQ(on.splits, off.splits);
+  EXPECT_TRUE(off.upper.empty());
+  EXPECT_EQ(off.n_upper_layers(), 0);
+  std::vector<index_t> above = on.top.fronts;
+  for (const FactorPart& u : on.upper) above.insert(above.end(), u.fronts.begin(), u.fronts.end());
+  std::sort(above.begin(), above.end());
+  EXPECT_EQ(above, off.top.fronts);
+  for (index_t f = 0; f < t.n_fronts(); ++f)
+    EXPECT_EQ(off.part_id[f], off.part_of[f] >= 0 ? off.part_of[f] : off.top_id());
+  // without upper layers: LPT makespan of the subtrees + the top part's work
+  std::vector<double> w;
+  for (const auto& sub : off.subtrees) w.push_back(sub.work);
+  const double off_time = makespan_of(w, off.owner, off.workers) + off.top.work;
+  EXPECT_NEAR(off.estimated_time, off_time, 1e-9 * off_time);
+  EXPECT_LE(on.estimated_time, off.estimated_time * (1 + 1e-12));
+  if (!on.upper.empty()) EXPECT_LT(on.estimated_time, off.estimated_time);
+}
+
+// Upper layers on nested-dissection trees from the analysis: on 3D grids the top part is
+// split (at least one layer with 2 or more workers and the default 4 subtrees per worker;
+// with 1 per worker the top can be a single chain of separator fronts), every invariant
+// holds, and the estimate drops; Options::split_top off gives the split without them.
+TEST(TreePartition, UpperLayersOnNestedDissectionTrees) {
+  for (const auto& [name, a] :
+       {std::pair{std::string("lap3d 20"), generators::laplacian_3d(20, 20, 20)},
+        std::pair{std::string("elasticity 10"), generators::elasticity_3d(10, 10, 10)}})
+    for (int workers : {2, 3, 4})
+      for (int per : {1, 4}) {
+        SCOPED_TRACE(name + ", " + std::to_string(workers) + " workers x " + std::to_string(per));
+        Options o;
+        o.type = MatrixType::spd;
+        o.subtrees_per_gpu = per;
+        const Analysis on = analyze_matrix(a, o, workers);
+        o.split_top = false;
+        const Analysis off = analyze_matrix(a, o, workers);
+        ASSERT_EQ(on.tree.parent, off.tree.parent);
+        check_partition(on, workers, per);
+        check_partition(off, workers, per);
+        if (per == 4) {  // the default; with 1 subtree per worker the top may be one chain
+          EXPECT_GE(on.partition.n_upper_layers(), 1) << "the top part of a 3D grid was not split";
+          EXPECT_GT(on.stats.upper_flops_fraction, 0.0);
+          EXPECT_LT(on.stats.top_flops_fraction, off.stats.top_flops_fraction);
+        }
+        EXPECT_NEAR(on.stats.upper_flops_fraction + on.stats.top_flops_fraction,
+                    off.stats.top_flops_fraction, 1e-12);
+        EXPECT_EQ(off.stats.upper_layers, 0);
+        check_on_off(on.partition, off.partition, on.tree);
+      }
+}
+
+// Upper layers on hand-built trees (balanced and lopsided binary trees with growing
+// separators), with tight and loose budgets; one worker never gets a layer.
+TEST(TreePartition, UpperLayersOnHandBuiltTrees) {
+  for (bool lopsided : {false, true})
+    for (int depth : {1, 2, 3, 6, 8})
+      for (int workers : {1, 2, 3, 4, 5}) {
+        SCOPED_TRACE(std::string(lopsided ? "lopsided" : "balanced") + " depth " +
+                     std::to_string(depth) + ", " + std::to_string(workers) + " workers");
+        const AssemblyTree t = binary_tree(depth, {40, 30, 24, 18, 12, 9, 6, 4, 3}, lopsided);
+        schedule::PartitionOptions po;
+        po.workers = workers;
+        po.subtrees_per_worker = 2;
+        po.budget = lopsided ? 1 << 20 : 0;
+        const auto on = schedule::partition_tree(t, po);
+        po.upper_layers = false;
+        const auto off = schedule::partition_tree(t, po);
+        check_upper_layers(t, on, workers);
+        check_upper_layers(t, off, workers);
+        check_on_off(on, off, t);
+        if (workers == 1) EXPECT_TRUE(on.upper.empty());
+        if (depth >= 6 && workers > 1) EXPECT_GE(on.n_upper_layers(), 1);
+        for (const FactorPart& u : on.upper) check_part(t, u);
+      }
 }
 
 // The memory budget applies to every part's plan as to the whole tree's.

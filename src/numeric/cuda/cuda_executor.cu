@@ -36,18 +36,21 @@
 // the pool, the arena and the resident factor — refactorization allocates nothing.
 //
 // Several GPUs (numeric/multi_device.cpp): one executor per GPU, every call made with its
-// device current. The executor then factors parts of the tree — subtrees and the top part
-// of an.partition — each with its own schedule, chunks and arena layout (PartDevice, all
-// planned and uploaded once per analysis, so any subtree can run on any GPU: stealing);
+// device current. The executor then factors parts of the tree — subtrees, upper-layer
+// parts and the top part of an.partition — each with its own schedule, chunks and arena
+// layout (PartDevice, all planned and uploaded once per analysis, so any subtree can run
+// on any GPU: stealing);
 // they share one pool and one arena, sized for the largest part. There is no resident
 // factor then (each GPU holds only its parts); with FactorContext::keep_part_panels (the
 // Solver sets it) each part's panels stay in a buffer of the GPU that factored it, and
 // download_panels copies them to the host factor when a host solve needs them — the copy
-// after every chunk was what made several GPUs slower than one. A subtree
+// after every chunk was what made several GPUs slower than one. A part
 // root's contribution block is exported either to the driver's host buffer (device to
 // host), or — when the importing GPU can access this one's memory (cudaDeviceCanAccessPeer),
-// or is this one — to a device buffer here (the outbox) that the importer copies from
-// directly (cudaMemcpyPeerAsync); the outbox lives until the next factorization.
+// or is this one — to a device buffer here (the outbox, one per exported root) that the
+// importer copies from directly (cudaMemcpyPeerAsync); the outbox lives until the next
+// factorization. An upper part may import blocks from several GPUs, each from its own
+// outbox (peer access enabled per source GPU on first use).
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -506,8 +509,8 @@ void CudaExecutor::upload_analysis(const Analysis& an) {
   analysis_id_ = an.id;
 }
 
-// Plans and uploads the parts a factorization will use: the whole tree, or every subtree
-// and the top part of an.partition (any GPU may run any subtree).
+// Plans and uploads the parts a factorization will use: the whole tree, or every part of
+// an.partition — subtrees, upper parts and the top part (any GPU may run any subtree).
 void CudaExecutor::plan_parts(const Analysis& an, bool whole) {
   const auto& t = an.tree;
   for (auto* b : {&pool_, &arena_, &panels_}) b->clear();
@@ -521,10 +524,9 @@ void CudaExecutor::plan_parts(const Analysis& an, bool whole) {
   if (whole) {
     views.push_back(numeric::PartView::whole(an));
   } else {
-    const auto& sub = an.partition.subtrees;
-    for (std::size_t i = 0; i < sub.size(); ++i)
-      views.push_back(numeric::PartView::of(sub[i], static_cast<int>(i)));
-    views.push_back(numeric::PartView::of(an.partition.top, static_cast<int>(sub.size())));
+    // every part by id: subtrees, the top part, the upper layers' parts
+    const auto& p = an.partition;
+    for (int id = 0; id < p.n_parts(); ++id) views.push_back(numeric::PartView::of(p.part(id), id));
   }
   plan_device_memory(an, views);
   pool_.resize(plan_.pool);
