@@ -251,7 +251,7 @@ TEST(FaultInjection, SimulationStopsWithOutOfMemoryAndPartialFiles) {
   o.integrator.t_end = 0.02;
   o.integrator.step = 1e-3;
   o.integrator.threads = 1;
-  o.output_dir = ::testing::TempDir() + "/fault_sim";
+  o.output_dir = strata::test::unique_temp_path("strata_fault_sim");
   std::filesystem::remove_all(o.output_dir);
   alloc::reset_count();
   ASSERT_TRUE(simulate(model, o).complete);
@@ -311,6 +311,7 @@ TEST(FaultInjection, SimulationStopsWithOutOfMemoryAndPartialFiles) {
       static_cast<unsigned long long>(total), points.size(), stopped, thrown);
   EXPECT_GT(stopped, 0);
   EXPECT_GT(thrown, 0);
+  std::filesystem::remove_all(o.output_dir);
 }
 
 }  // namespace

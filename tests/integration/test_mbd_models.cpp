@@ -9,6 +9,7 @@
 #include "mbd/model_io.hpp"
 #include "mbd/simulation.hpp"
 #include "strata/matrix_market.hpp"
+#include "support/test_support.hpp"
 
 namespace strata::mbd {
 namespace {
@@ -37,7 +38,7 @@ TEST(MbdModels, DumpMatrixWritesTheNewtonSystem) {
   o.integrator.t_end = 3 * m.step;
   o.integrator.step = m.step;
   o.integrator.dump_step = 2;
-  o.integrator.dump_dir = testing::TempDir() + "/mbd_dump";
+  o.integrator.dump_dir = strata::test::unique_temp_path("strata_mbd_dump");
   std::filesystem::remove_all(o.integrator.dump_dir);
   const SimulationResult r = simulate(m, o);
   ASSERT_TRUE(r.complete) << r.message;
@@ -50,6 +51,7 @@ TEST(MbdModels, DumpMatrixWritesTheNewtonSystem) {
   EXPECT_EQ(rows, size);
   EXPECT_EQ(cols, 1);
   EXPECT_EQ(a.matrix.nnz(), r.stats.jacobian_nnz);
+  std::filesystem::remove_all(o.integrator.dump_dir);
 }
 
 }  // namespace

@@ -1,6 +1,8 @@
 // strata tests — shared helpers (see test_support.hpp).
 #include "support/test_support.hpp"
 
+#include <unistd.h>
+
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
@@ -27,6 +29,13 @@ std::vector<std::string> shared_matrix_names() {
   }
   std::sort(names.begin(), names.end());
   return names;
+}
+
+std::string unique_temp_path(const std::string& name) {
+  std::random_device rd;
+  return (std::filesystem::temp_directory_path() /
+          (name + "." + std::to_string(::getpid()) + "." + std::to_string(rd())))
+      .string();
 }
 
 std::mt19937_64 fresh_rng(unsigned long long* seed_out) {

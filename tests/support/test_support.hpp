@@ -24,6 +24,11 @@ std::vector<std::string> shared_matrix_names();
 /// gtest's RecordProperty/SCOPED_TRACE by the caller when it matters.
 std::mt19937_64 fresh_rng(unsigned long long* seed_out = nullptr);
 
+/// A path under the system temporary folder that no other test process uses (name,
+/// process id and a random number): test binaries of several builds run side by side on
+/// one machine, and a fixed path let one delete the other's files. Not created.
+std::string unique_temp_path(const std::string& name);
+
 /// Kinds of random matrices.
 enum class RandomKind { spd, symmetric_indefinite, general };
 

@@ -12,6 +12,7 @@
 #include "mbd/model_io.hpp"
 #include "mbd/partition.hpp"
 #include "mbd/simulation.hpp"
+#include "support/test_support.hpp"
 
 namespace strata::mbd {
 namespace {
@@ -73,14 +74,17 @@ TEST(MbdModelErrors, UnknownBodyInAJointIsNamed) {
 }
 
 TEST(MbdModelErrors, InvalidJsonGivesLineAndColumn) {
-  const std::string path = testing::TempDir() + "/broken_model.json";
+  const std::string dir = strata::test::unique_temp_path("strata_model_errors");
+  std::filesystem::create_directories(dir);
+  const std::string path = dir + "/broken_model.json";
   std::ofstream(path) << "{\n  \"type\": \"planar\",\n  \"bodies\": [\n    {\"name\": \"a\",, }\n";
   try {
     load_model(path);
-    FAIL() << "no error";
+    ADD_FAILURE() << "no error";
   } catch (const ModelError& e) {
     EXPECT_NE(std::string(e.what()).find("broken_model.json:4:"), std::string::npos) << e.what();
   }
+  std::filesystem::remove_all(dir);
 }
 
 // Found by fuzzing (fuzz/fuzz_model_json.cpp): a number beyond the double range made
@@ -197,7 +201,7 @@ TEST(MbdModelErrors, NewtonFailureStopsWithPartialResults) {
   SimulationOptions o;
   o.integrator.t_end = 1.0;
   o.integrator.step = 1e-2;
-  o.output_dir = testing::TempDir() + "/mbd_partial";
+  o.output_dir = strata::test::unique_temp_path("strata_mbd_partial");
   std::filesystem::remove_all(o.output_dir);
   const SimulationResult r = simulate(m, o);
   EXPECT_FALSE(r.complete);
@@ -215,6 +219,7 @@ TEST(MbdModelErrors, NewtonFailureStopsWithPartialResults) {
   int lines = 0;
   for (std::string line; std::getline(pos, line);) ++lines;
   EXPECT_GT(lines, 20);  // the steps before the failure are kept
+  std::filesystem::remove_all(o.output_dir);
 }
 
 }  // namespace
