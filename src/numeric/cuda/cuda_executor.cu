@@ -179,6 +179,7 @@ void CudaExecutor::begin_part(const numeric::FactorContext& ctx) {
 }
 
 void CudaExecutor::end_part(const numeric::FactorContext& ctx) {
+  STRATA_CUDA(cudaSetDevice(device_));
   flush_chunk(ctx);  // the last chunk's host part, while ctx.part is still this part
   if (part_device_only_) held_parts_.push_back(ctx.part->id);
   part_device_only_ = false;
