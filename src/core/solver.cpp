@@ -16,10 +16,12 @@
 // host, so the solve and refactorization are the same code.
 #include "strata/solver.hpp"
 
+#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <optional>
 
@@ -36,8 +38,9 @@ namespace detail {
 struct SolverState {
   Options options;
   std::optional<Analysis> analysis;
-  SparseMatrix values;         // canonical input values of the factorized matrix
-  std::vector<double> scaled;  // values as assembled (scaled for general)
+  SparseMatrix values;             // canonical input values of the factorized matrix
+  std::vector<double> scaled;      // values as assembled (scaled for general)
+  std::vector<double> value_sums;  // per-range vectors of the blocked value passes, kept
   std::vector<double> cb_arena;
   numeric::NumericFactor factor;
   std::unique_ptr<numeric::Executor> executor;
@@ -154,71 +157,124 @@ bool has_analyzed_pattern(const Analysis& an, const SparseMatrix& a) {
 constexpr int kValueBlocks = 8;
 constexpr index_t kParallelValues = 200000;  // entries below which one thread does it
 
-// Calls visit(j, p, acc) for every stored entry p of column j, acc being the n-vector of
-// the entry's column range; returns the sum of those vectors.
+// Calls visit(j, p, acc) for every stored entry p of column j, acc[k] (k < sums) being the
+// n-vector of sum k for the entry's column range; returns the sums over the ranges, added
+// in range order. `work` keeps the per-range vectors from one call to the next (sizing
+// and zero-filling 8 fresh n-vectors per pass cost more than the pass on a large matrix).
+constexpr int kMaxSums = 2;
 template <class Visit>
-std::vector<double> blocked_sums(const SparseMatrix& a, int threads, Visit&& visit) {
-  const index_t n = a.n_cols;
-  std::vector<std::vector<double>> acc(kValueBlocks);
+std::vector<std::vector<double>> blocked_sums(const SparseMatrix& a, int sums, int threads,
+                                              std::vector<double>& work, Visit&& visit) {
+  const std::size_t n = static_cast<std::size_t>(a.n_cols);
+  const std::size_t per = static_cast<std::size_t>(sums) * n;
+  if (work.size() < kValueBlocks * per)
+    sized_resize(work, kValueBlocks * per, "factorize: value sums");
   auto range = [&](int blk) {
-    acc[blk].assign(static_cast<std::size_t>(n), 0.0);
-    double* sum = acc[blk].data();
+    double* base = work.data() + blk * per;
+    std::fill(base, base + per, 0.0);
+    double* acc[kMaxSums] = {};
+    for (int k = 0; k < sums; ++k) acc[k] = base + k * n;
     const index_t j0 = static_cast<index_t>(static_cast<std::int64_t>(n) * blk / kValueBlocks);
     const index_t j1 =
         static_cast<index_t>(static_cast<std::int64_t>(n) * (blk + 1) / kValueBlocks);
     for (index_t j = j0; j < j1; ++j)
-      for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p) visit(j, p, sum);
+      for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p) visit(j, p, acc);
+  };
+  std::vector<std::vector<double>> total(sums, std::vector<double>(n));
+  auto reduce = [&](std::size_t i0, std::size_t i1) {
+    for (int k = 0; k < sums; ++k)
+      for (std::size_t i = i0; i < i1; ++i) {
+        double t = 0;
+        for (int blk = 0; blk < kValueBlocks; ++blk) t += work[blk * per + k * n + i];
+        total[k][i] = t;
+      }
   };
   if (a.nnz() < kParallelValues) {  // small (a Newton step of a small model): no threads
     for (int blk = 0; blk < kValueBlocks; ++blk) range(blk);
+    reduce(0, n);
   } else {
     tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
-    arena.execute([&] { tbb::parallel_for(0, kValueBlocks, range); });
+    arena.execute([&] {
+      tbb::parallel_for(0, kValueBlocks, range);
+      tbb::parallel_for(
+          tbb::blocked_range<std::size_t>(0, n, 16384),
+          [&](const tbb::blocked_range<std::size_t>& r) { reduce(r.begin(), r.end()); });
+    });
   }
-  std::vector<double> total = std::move(acc[0]);
-  for (int blk = 1; blk < kValueBlocks; ++blk)
-    for (index_t i = 0; i < n; ++i) total[i] += acc[blk][i];
   return total;
 }
 
-// For `a` with the analyzed pattern (symmetric: its lower triangle): throws InvalidInput
-// as validate and check_norms do (the first value not finite; a row or column magnitude
-// sum past the largest double). Returns ‖A‖∞ (symmetric storage expanded).
-double check_values(const SparseMatrix& a, bool symmetric, int threads) {
+// Throws InvalidInput naming the first value of `a` that is not finite (there is one).
+[[noreturn]] void throw_first_not_finite(const SparseMatrix& a) {
   const std::size_t nnz = a.values.size();
-  for (std::size_t p = 0; p < nnz; ++p)
-    if (!std::isfinite(a.values[p])) {
-      const index_t j = static_cast<index_t>(
-          std::upper_bound(a.offsets.begin(), a.offsets.end(), static_cast<index_t>(p)) -
-          a.offsets.begin() - 1);
-      throw InvalidInput("values[" + std::to_string(p) + "] is not finite (row " +
-                         std::to_string(a.indices[p]) + ", column " + std::to_string(j) + ")");
-    }
-  std::vector<double> col(symmetric ? 0 : a.n_cols, 0.0);  // symmetric: equal to the rows
-  const std::vector<double> row = blocked_sums(a, threads, [&](index_t j, index_t p, double* r) {
-    const index_t i = a.indices[p];
-    const double v = std::abs(a.values[p]);
-    r[i] += v;
-    if (symmetric && i != j) r[j] += v;
-    if (!symmetric) col[j] += v;  // column j belongs to this range alone
-  });
-  throw_if_norm_overflows(row, col);
-  double norm = 0;
-  for (double r : row) norm = std::max(norm, r);
-  return norm;
+  std::size_t p = 0;
+  while (p + 1 < nnz && std::isfinite(a.values[p])) ++p;
+  const index_t j = static_cast<index_t>(
+      std::upper_bound(a.offsets.begin(), a.offsets.end(), static_cast<index_t>(p)) -
+      a.offsets.begin() - 1);
+  throw InvalidInput("values[" + std::to_string(p) + "] is not finite (row " +
+                     std::to_string(a.indices[p]) + ", column " + std::to_string(j) + ")");
+}
+
+// A refactorization's one pass over `a`, which has the analyzed pattern (symmetric: its
+// lower triangle): every value finite, no row or column magnitude sum past the largest
+// double (InvalidInput as validate and check_norms), the values as assembled written to
+// `scaled` (Dr·A·Dc with the analysis' scaling). Returns ‖A‖∞ and the ‖·‖₁ of the scaled
+// matrix (symmetric storage expanded). The checks, the norms and the scaling were three
+// passes, one of them serial: a third of a 4-GPU refactorization of lap3d 80³.
+struct ValueNorms {
+  double norm_inf = 0;
+  double scaled_norm1 = 0;
+};
+ValueNorms refactor_values(const Analysis& an, const SparseMatrix& a, int threads,
+                           std::vector<double>& work, std::vector<double>& scaled) {
+  const bool sym = an.symmetric, scale = !an.row_scaling.empty();
+  const index_t n = a.n_cols;
+  sized_resize(scaled, a.values.size(), "factorize: scaled values");
+  std::atomic<bool> not_finite{false};
+  // unsymmetric: column sums, each column within one range (no per-range vectors)
+  std::vector<double> col(sym ? 0 : n, 0.0), scol(sym ? 0 : n, 0.0);
+  const auto sums =
+      blocked_sums(a, sym ? 2 : 1, threads, work, [&](index_t j, index_t p, double* const* acc) {
+        const index_t i = a.indices[p];
+        const double x = a.values[p];
+        if (!std::isfinite(x)) not_finite.store(true, std::memory_order_relaxed);
+        const double v = std::abs(x);
+        const double y = scale ? x * an.row_scaling[i] * an.col_scaling[j] : x;
+        scaled[p] = y;
+        acc[0][i] += v;
+        if (sym) {
+          if (i != j) acc[0][j] += v;
+          acc[1][j] += std::abs(y);
+          if (i != j) acc[1][i] += std::abs(y);
+        } else {
+          col[j] += v;
+          scol[j] += std::abs(y);
+        }
+      });
+  if (not_finite) throw_first_not_finite(a);
+  throw_if_norm_overflows(sums[0], col);
+  ValueNorms r;
+  for (double x : sums[0]) r.norm_inf = std::max(r.norm_inf, x);
+  for (double x : sym ? sums[1] : scol) r.scaled_norm1 = std::max(r.scaled_norm1, x);
+  return r;
 }
 
 void run_factorization(SolverState& s, const SparseMatrix& a) {
   Timer timer;
   const Analysis& an = *s.analysis;
   // Validate before touching the current factor: bad input leaves the solver usable.
+  const bool scale = !an.row_scaling.empty();
+  double norm1 = 0;  // of the scaled matrix, for static pivoting
   if (has_analyzed_pattern(an, a)) {
-    // Refactorization with the analyzed pattern (a Newton loop, a benchmark): one pass
-    // checks the values and the norms, then only the values are copied. The general path
-    // below makes several passes and copies the pattern; on a large matrix that host work
-    // was of the order of the GPU refactorization itself.
-    s.norm_inf = check_values(a, an.symmetric, s.options.num_threads);
+    // Refactorization with the analyzed pattern (a Newton loop, a benchmark): one parallel
+    // pass checks the values and the norms and scales them (refactor_values), then only
+    // the values are copied. The general path below makes several passes and copies the
+    // pattern; on a large matrix that host work was of the order of the GPU refactorization.
+    const ValueNorms norms = refactor_values(an, a, s.options.num_threads, s.value_sums, s.scaled);
     s.factor.valid = false;
+    s.norm_inf = norms.norm_inf;
+    norm1 = norms.scaled_norm1;
     if (s.values_analysis != an.id) {
       s.values = a;
       s.values.storage = an.symmetric ? Storage::lower : Storage::full;
@@ -233,26 +289,22 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
     s.values = std::move(checked);
     s.values_analysis = an.id;
     s.norm_inf = norm_inf(s.values);
-  }
-  // scaled values: general matrices use Dr·A(:,Q)·Dc from the matching, symmetric
-  // indefinite ones D·A·D (row_scaling == col_scaling == D, Q = I; the lower triangle
-  // scaled entrywise stays the lower triangle of D·A·D)
-  const SparseMatrix& c = s.values;
-  sized_resize(s.scaled, c.nnz(), "factorize: scaled values");
-  const bool scale = !an.row_scaling.empty();
-  double norm1 = 0;
-  {
+    // scaled values: general matrices use Dr·A(:,Q)·Dc from the matching, symmetric
+    // indefinite ones D·A·D (row_scaling == col_scaling == D, Q = I; the lower triangle
+    // scaled entrywise stays the lower triangle of D·A·D)
+    const SparseMatrix& c = s.values;
+    sized_resize(s.scaled, c.nnz(), "factorize: scaled values");
     const bool sym = an.symmetric;
-    const std::vector<double> colsum =
-        blocked_sums(c, s.options.num_threads, [&](index_t j, index_t p, double* sum) {
+    const auto colsum = blocked_sums(
+        c, 1, s.options.num_threads, s.value_sums, [&](index_t j, index_t p, double* const* sum) {
           const index_t i = c.indices[p];
           const double v =
               scale ? c.values[p] * an.row_scaling[i] * an.col_scaling[j] : c.values[p];
           s.scaled[p] = v;
-          sum[j] += std::abs(v);
-          if (sym && i != j) sum[i] += std::abs(v);
+          sum[0][j] += std::abs(v);
+          if (sym && i != j) sum[0][i] += std::abs(v);
         });
-    for (double v : colsum) norm1 = std::max(norm1, v);
+    for (double v : colsum[0]) norm1 = std::max(norm1, v);
   }
   const double static_pivot = s.options.static_pivot_epsilon * (norm1 > 0 ? norm1 : 1.0);
 
@@ -402,6 +454,7 @@ void release_factor(SolverState& s) noexcept {
   s.factor = numeric::NumericFactor{};
   std::vector<double>().swap(s.cb_arena);
   std::vector<double>().swap(s.scaled);
+  std::vector<double>().swap(s.value_sums);
   s.executor.reset();
 }
 
