@@ -5,7 +5,9 @@
 // one factorization (it sets the executors up: reported apart), then the median of
 // --repeat refactorizations (as bench_multigpu, bench_gpu and bench_cudss report), one
 // solve, and each rank's figures of the last factorization: its subtrees, flops, time,
-// bytes sent and received (values broadcast, contribution blocks, pivot statistics).
+// bytes sent and received (scaled values, contribution blocks, pivot statistics). The
+// values are scattered (each rank is sent what its subtrees assemble): the row gives their
+// bytes and, beside them, what the broadcast of the whole array would have moved.
 // Writes bench/results/distributed-<date>.json (or --results-dir) on rank 0.
 //
 //   mpirun -n R bench_distributed [--problems lap3d-80,elast3d-40] [--backend cuda|cpu]
@@ -100,8 +102,17 @@ int run(int argc, char** argv) {
       per.push_back(r);
     }
     const json devices = st.factor.devices;
-    const std::size_t values_bytes =
-        sizeof(double) * static_cast<std::size_t>(p.a.nnz()) * static_cast<std::size_t>(ranks - 1);
+    // the values the factorization reads: one triangle (diagonal included) when symmetric
+    std::size_t nnz_values = static_cast<std::size_t>(p.a.nnz());
+    if (symmetric && p.a.storage == Storage::full) {
+      nnz_values = 0;
+      for (index_t j = 0; j < p.a.n_rows; ++j)  // CSR or CSC: one triangle either way
+        for (index_t q = p.a.offsets[j]; q < p.a.offsets[j + 1]; ++q)
+          nnz_values += p.a.indices[q] >= j ? 1 : 0;
+    }
+    const std::size_t values_broadcast =
+        sizeof(double) * nnz_values * static_cast<std::size_t>(ranks - 1);
+    const std::size_t values_scattered = ds.per_rank.empty() ? 0 : ds.per_rank[0].values_bytes;
     json row = {{"problem", name},
                 {"n", st.analysis.n},
                 {"ranks", ranks},
@@ -115,15 +126,18 @@ int run(int argc, char** argv) {
                 {"first_factor_seconds", first_factor},
                 {"factor_seconds", bench::median(times)},
                 {"bytes_between_ranks", between},
-                {"values_bytes_between_ranks", values_bytes},
+                {"values_bytes_between_ranks", values_scattered},
+                {"values_bytes_if_broadcast", values_broadcast},
                 {"solve_seconds", st.solve.seconds},
                 {"backward_error", bench::berr(p.a, x, b)},
                 {"per_rank", per},
                 {"devices", devices}};
     out["rows"].push_back(row);
-    std::printf("%-12s %dx%d  factor %.3f s (first %.3f s), %.1f MB between ranks, berr %.1e\n",
-                name.c_str(), ranks, per_rank, bench::median(times), first_factor, between * 1e-6,
-                row["backward_error"].get<double>());
+    std::printf(
+        "%-12s %dx%d  factor %.3f s (first %.3f s), %.1f MB between ranks (values %.1f MB, "
+        "%.1f MB if broadcast), berr %.1e\n",
+        name.c_str(), ranks, per_rank, bench::median(times), first_factor, between * 1e-6,
+        values_scattered * 1e-6, values_broadcast * 1e-6, row["backward_error"].get<double>());
     std::fflush(stdout);
   }
   if (rank == 0) {

@@ -90,8 +90,20 @@ def calibrate():
             "balance_w4": four["subtree_balance"],
             # entries of the lower triangle: 7-point (4 per row) / 27-point × 3×3 (41 per row)
             "nnz_lower": one["n"] * (4 if prob.startswith("lap") else 41),
+            # pivots of the top part at 4 workers, from the geometric tree: the share of the
+            # entries (about the same per pivot on a grid) that stays on rank 0
+            "top_pivot_fraction_w4": top_pivot_fraction(prob, 4),
         }
     return cal
+
+
+def top_pivot_fraction(prob, workers):
+    """Pivots in the top part of strata's split of the geometric ND tree of `prob`, as a
+    fraction of n."""
+    fronts, root = problem_tree(prob)
+    _, top = split(fronts, root, workers, ASSUMED["subtrees_per_worker"])
+    n = sum(f["pivots"] for f in fronts)
+    return sum(fronts[f]["pivots"] for f in top) / n
 
 
 # ---- geometric nested dissection ------------------------------------------------------
@@ -236,8 +248,10 @@ def predict_benchmark(c, ranks, gpus, pcie):
     rate and balance, the top part at the measured top rate on rank 0's GPU, the subtree
     roots' blocks of the other ranks' workers ((R−1)/R of them, by LPT's even spread)
     through host memory and MPI (two PCIe crossings plus the shared-memory copy), the
-    values broadcast, and the rest ("host") calibrated so that 1 × 4 is the measured
-    4-GPU time of multigpu-20261121T215148Z.json."""
+    scaled values scattered (each rank r > 0 is sent the entries its subtrees' fronts
+    assemble: the subtrees' share of the lower triangle, (R−1)/R of it off rank 0), and
+    the rest ("host") calibrated so that 1 × 4 is the measured 4-GPU time of
+    multigpu-20261121T215148Z.json."""
     W = ranks * gpus
     f = c["top_fraction_w4"]
     t_sub = (1 - f) * c["flops"] / W * c["balance_w4"] / c["subtree_rate"]
@@ -245,7 +259,7 @@ def predict_benchmark(c, ranks, gpus, pcie):
     cb = c["subtree_cb_bytes_w4"]
     remote = cb * (ranks - 1) / ranks
     t_cb = remote / ASSUMED["mpi_shm_bytes_per_s"] + 2 * remote / pcie + 2 * (cb - remote) / pcie
-    values = 8.0 * c["nnz_lower"] * (ranks - 1)
+    values = 8.0 * c["nnz_lower"] * (1 - c["top_pivot_fraction_w4"]) * (ranks - 1) / ranks
     t_values = values / ASSUMED["mpi_shm_bytes_per_s"]
     # everything the parts above leave out (scaling, set-up, host buffers, threads) is
     # taken from the 1 × 4 measurement, and assumed the same for 2 × 2 and 4 × 1

@@ -368,9 +368,11 @@ int run_solve(const SolveArgs& a, const Communicator& comm) {
       for (const RankStats& r : ds.per_rank)
         fmt::print(
             "  rank {:<3}            {} subtrees, {:.3g} flops, factor {:.3f} s, sent {:.3f} MB, "
-            "received {:.3f} MB, holds {:.1f} MB of the factor; solve {:.3f} s\n",
+            "received {:.3f} MB ({:.3f} MB of values), holds {:.1f} MB of the factor; solve "
+            "{:.3f} s\n",
             r.rank, r.subtrees, r.factor_flops, r.factor_seconds, r.factor_bytes_sent * 1e-6,
-            r.factor_bytes_received * 1e-6, r.factor_bytes_held * 1e-6, r.solve_seconds);
+            r.factor_bytes_received * 1e-6, r.values_bytes * 1e-6, r.factor_bytes_held * 1e-6,
+            r.solve_seconds);
     }
     fmt::print("pivots                {} perturbed, {} 2x2; inertia (+{}, -{}, 0:{})\n",
                f.perturbed_pivots, f.two_by_two_pivots, f.inertia_positive, f.inertia_negative,

@@ -65,8 +65,13 @@ struct RankStats {
   index_t subtrees = 0;                   ///< subtrees it factored
   double factor_flops = 0;                ///< Σ front flops (Cholesky count) it factored
   double factor_seconds = 0;              ///< its part of the factorization, wall time
-  std::size_t factor_bytes_sent = 0;      ///< contribution blocks, pivot statistics
-  std::size_t factor_bytes_received = 0;  ///< values of the matrix, blocks (rank 0)
+  std::size_t factor_bytes_sent = 0;      ///< values (rank 0), blocks, pivot statistics
+  std::size_t factor_bytes_received = 0;  ///< its scaled values, blocks (rank 0)
+  /// Bytes of scaled matrix values in the last factorize / refactorize call (part of the
+  /// two above): on a rank r > 0 those it received, 8 × (entries its subtrees' fronts
+  /// assemble); on rank 0 the sum it sent to the others. An automatic type that falls
+  /// back from Cholesky to LDLᵀ sends them twice.
+  std::size_t values_bytes = 0;
   double solve_seconds = 0;               ///< its part of the last solve (all refinement steps)
   std::size_t solve_bytes_sent = 0;
   std::size_t solve_bytes_received = 0;
@@ -105,7 +110,8 @@ class DistributedSolver {
   /// Collective. Rank 0 analyzes A (as Solver::analyze) and broadcasts the analysis; the
   /// other ranks' `a` is ignored (pass an empty SparseMatrix). Throws as Solver::analyze.
   void analyze(const SparseMatrix& a);
-  /// Collective. Rank 0 scales A's values and broadcasts them; every rank factors its
+  /// Collective. Rank 0 scales A's values and sends each rank the ones its subtrees
+  /// assemble (RankStats::values_bytes); every rank factors its
   /// subtrees; rank 0 factors the top part. A is read on rank 0 only. Throws as
   /// Solver::factorize.
   void factorize(const SparseMatrix& a);

@@ -332,6 +332,7 @@ class DistCore {
       e["factor_seconds"] = r.factor_seconds;
       e["factor_bytes_sent"] = r.factor_bytes_sent;
       e["factor_bytes_received"] = r.factor_bytes_received;
+      e["values_bytes"] = r.values_bytes;
       e["factor_bytes_held"] = r.factor_bytes_held;
       e["solve_seconds"] = r.solve_seconds;
       e["solve_bytes_sent"] = r.solve_bytes_sent;

@@ -40,6 +40,7 @@ inline void to_json(nlohmann::json& j, const RankStats& r) {
        {"factor_seconds", r.factor_seconds},
        {"factor_bytes_sent", r.factor_bytes_sent},
        {"factor_bytes_received", r.factor_bytes_received},
+       {"values_bytes", r.values_bytes},
        {"factor_bytes_held", r.factor_bytes_held},
        {"solve_seconds", r.solve_seconds},
        {"solve_bytes_sent", r.solve_bytes_sent},

@@ -46,7 +46,7 @@ enum class Command : std::int32_t { analysis = 1, factor = 2, apply = 3, end = 4
 struct Header {
   Command command = Command::end;
   std::int32_t a = 0;         ///< analysis: workers per rank; factor: MatrixType; error: kind
-  std::int64_t b = 0;         ///< apply: nrhs; error: column / bytes
+  std::int64_t b = 0;         ///< factor: nnz (values); apply: nrhs; error: column / bytes
   double c = 0;               ///< factor: static pivot; error: pivot
   std::uint64_t payload = 0;  ///< bytes that follow
 };
@@ -65,6 +65,13 @@ Header error_header(std::exception_ptr e, std::vector<char>& message);
 /// such rank (same type and message, prefixed by the rank). Returns when none failed.
 void agree(detail::CommImpl& comm, std::exception_ptr mine);
 
+/// Positions (indices into the canonical input's values, the order of an.pattern_indices)
+/// of the scaled values that the fronts of rank r's subtrees assemble: the entry_src of
+/// an.assembly over those fronts, increasing and distinct (an entry lands in exactly one
+/// front). Rank 0 needs every value (it also factors the top part); this is what a rank
+/// r > 0 is sent at each factorization (values.cpp).
+std::vector<index_t> value_positions(const Analysis& an, const RankLayout& l, int r);
+
 struct NcclContext;  // nccl_blocks.cpp (STRATA_NCCL)
 
 /// What every rank keeps for the numeric phases.
@@ -73,10 +80,23 @@ struct NumericState {
   std::vector<std::unique_ptr<numeric::Executor>> executors;  ///< this rank's workers
   std::vector<std::vector<double>> arenas;
   std::vector<DeviceStats> devices;
+  /// value_positions per rank, made once per analysis: rank 0 holds every rank's list
+  /// (its own empty: it has all values); a rank r > 0 only its own, at index r.
+  std::vector<std::vector<index_t>> value_positions;
   RankStats stats;    ///< this rank's figures of the current phases
   bool nccl = false;  ///< contribution blocks between GPUs through NCCL
   std::shared_ptr<NcclContext> nccl_context;
 };
+
+/// Collective with receive_values: rank 0 sends each rank r > 0 the scaled values at
+/// ns.value_positions[r], packed in that order (MPI point-to-point, one message per
+/// rank). `values`: all nnz scaled values. Adds the bytes sent to ns.stats.values_bytes.
+void send_values(detail::CommImpl& comm, NumericState& ns, const std::vector<double>& values);
+/// Ranks r > 0: receives this rank's scaled values into `values`, which is made nnz long
+/// (zero-filled) when it is not: only this rank's positions are written, the others are
+/// never read by its fronts. Adds the bytes received to ns.stats.values_bytes.
+void receive_values(detail::CommImpl& comm, NumericState& ns, std::size_t nnz,
+                    std::vector<double>& values);
 
 /// Collective: this rank's part of the factorization of the scaled values: its subtrees
 /// on its executors, the subtree roots' contribution blocks and pivot statistics to rank
@@ -104,7 +124,8 @@ struct DistributedState {
   std::optional<Analysis> copy;   ///< the other ranks: the broadcast analysis
   Analysis* analysis = nullptr;   ///< rank 0: the Solver's; others: &*copy
   numeric::NumericFactor factor;  ///< the other ranks' share of the factor
-  std::vector<double> values;     ///< the other ranks: the broadcast scaled values
+  std::vector<double> values;     ///< the other ranks: the scaled values of their subtrees'
+                                  ///< fronts (nnz long, receive_values)
   distributed::NumericState numeric;
   Stats stats;  ///< the other ranks: analysis figures only
   DistributedStats dstats;

@@ -6,8 +6,9 @@
 // resolution (Cholesky first, LDLᵀ on failure), scaling, static pivoting, statistics and
 // iterative refinement are exactly the Solver's. The other ranks wait in the same public
 // call and follow rank 0's commands (protocol.cpp): the analysis, computed once on rank 0
-// and broadcast; the scaled values, broadcast at every (re)factorization; one command per
-// solve with the factor (refinement and GMRES make several). Each phase ends with `end`
+// and broadcast; at every (re)factorization the scaled values, each rank sent only those its
+// subtrees assemble (values.cpp); one command per solve with the factor (refinement and
+// GMRES make several). Each phase ends with `end`
 // and a gather of every rank's figures onto rank 0, or with `error`, which every rank
 // throws. With one rank the Solver runs alone.
 #include <cstring>
@@ -65,6 +66,12 @@ void setup_numeric(DistributedState& s, Analysis& an, int per_rank) {
   std::exception_ptr failed;
   try {
     ns.layout = make_layout(an, comm.size(), comm.rank(), per_rank);
+    // the positions of the values each rank is sent, before the layout is localized (it
+    // does not depend on it): rank 0 every rank's, the others their own
+    ns.value_positions.assign(comm.size(), {});
+    for (int r = 1; r < comm.size(); ++r)
+      if (comm.rank() == 0 || comm.rank() == r)
+        ns.value_positions[r] = value_positions(an, ns.layout, r);
     localize_factor_layout(an, ns.layout);
     ns.executors.clear();
     ns.arenas.clear();
@@ -82,8 +89,9 @@ void setup_numeric(DistributedState& s, Analysis& an, int per_rank) {
 #ifdef STRATA_HAVE_NCCL
     // NCCL only with one GPU per rank: the one run with two GPUs per rank (4 × H200,
     // lap3d-80, 2 ranks × 2 GPUs) gave a factor that needed 29 s of refinement, where one
-    // GPU per rank was right (docs/distributed.md §5); until that is found, ranks with
-    // several GPUs send their blocks through host memory and MPI
+    // GPU per rank was right (docs/distributed.md §5). The likely cause, an unordered
+    // staging copy from the rank's second GPU, is fixed in nccl_blocks.cpp; until a GPU
+    // run confirms it, ranks with several GPUs send their blocks through host memory and MPI
     ns.nccl = gpu && comm.size() > 1 && per_rank == 1;
 #endif
   } catch (...) {
@@ -111,10 +119,11 @@ detail::ExternalNumeric hooks(DistributedState& s, int per_rank) {
     Header h;
     h.command = Command::factor;
     h.a = static_cast<std::int32_t>(type);
+    h.b = static_cast<std::int64_t>(values.size());
     h.c = pivot;
-    h.payload = sizeof(double) * values.size();
     try {
-      send_command(comm, h, values.data());
+      send_command(comm, h);
+      send_values(comm, s.numeric, values);
       run_factor(s, an, values, type, pivot, factor);
     } catch (...) {
       bytes.add_to(s.numeric.stats.factor_bytes_sent, s.numeric.stats.factor_bytes_received);
@@ -225,6 +234,7 @@ void follow(DistributedState& s) {
       case Command::analysis: {
         s.analysis = nullptr;
         s.factor = numeric::NumericFactor{};
+        s.values.clear();  // the next factorization makes it nnz long, zero off its positions
         s.copy = deserialize(payload);
         s.analysis = &*s.copy;
         s.stats = Stats{};
@@ -237,8 +247,11 @@ void follow(DistributedState& s) {
       }
       case Command::factor: {
         if (!s.analysis) throw InvalidState("internal: factor command before the analysis");
-        s.values.resize(payload.size() / sizeof(double));
-        if (!payload.empty()) std::memcpy(s.values.data(), payload.data(), payload.size());
+        const std::size_t nnz = s.analysis->pattern_indices.size();
+        if (h.b != static_cast<std::int64_t>(nnz))
+          throw InvalidState("internal: " + std::to_string(h.b) + " values for a pattern of " +
+                             std::to_string(nnz) + " entries");
+        receive_values(comm, s.numeric, nnz, s.values);
         try {
           run_factor(s, *s.analysis, s.values, static_cast<MatrixType>(h.a), h.c, s.factor);
         } catch (...) {
@@ -268,6 +281,7 @@ void follow(DistributedState& s) {
 void reset_factor_stats(RankStats& st) {
   st.factor_seconds = 0;
   st.factor_bytes_sent = st.factor_bytes_received = 0;
+  st.values_bytes = 0;
 }
 void reset_solve_stats(RankStats& st) {
   st.solve_seconds = 0;

@@ -6,6 +6,16 @@
 // (NCCL documentation, "Point-to-point communication"). The blocks of one factorization
 // are sent and received inside one ncclGroupStart/End, so that NCCL schedules them
 // together and a rank's sends cannot deadlock on each other.
+//
+// Staging (a rank with several GPUs, or a block in host memory): the block is copied onto
+// the NCCL GPU on the NCCL stream itself, so that stream order puts the copy before the
+// send. A plain cudaMemcpy is not enough: a device-to-device copy, and a copy from
+// pageable host memory, may return before the data has landed (CUDA Runtime API,
+// "API synchronization behavior"), and it runs on the legacy default stream, with which
+// the NCCL stream (cudaStreamNonBlocking) does not synchronize — so ncclSend could read
+// the staging buffer before the copy reached it: the likely cause of the wrong factor of
+// the 2 ranks × 2 GPUs run (docs/distributed.md §5; not yet confirmed on a GPU), as only
+// a rank's second GPU stages its blocks.
 #include "distributed/nccl_blocks.hpp"
 
 #include <cuda_runtime.h>
@@ -76,7 +86,7 @@ void exchange_blocks_nccl(detail::CommImpl& comm, NumericState& ns, const RankLa
   const int n_sub = static_cast<int>(l.subtree_rank.size());
   if (tr.size() < l.subtree_rank.size())
     throw InvalidInput("internal: fewer block transfers than subtrees");
-  // stage first (copies may not be inside the NCCL group)
+  // stage first (copies may not be inside the NCCL group), on the NCCL stream (see above)
   std::vector<const double*> src(n_sub, nullptr);
   for (int i = 0; i < n_sub; ++i) {
     numeric::CbTransfer& x = tr[i];
@@ -90,9 +100,15 @@ void exchange_blocks_nccl(detail::CommImpl& comm, NumericState& ns, const RankLa
         src[i] = x.device;
       } else {
         staging.emplace_back(x.size, device);
-        const void* from = x.on_host ? static_cast<const void*>(x.host) : x.device;
-        cuda_check(cudaMemcpy(staging.back().p, from, sizeof(double) * x.size, cudaMemcpyDefault),
-                   "cudaMemcpy (NCCL staging)");
+        const std::size_t bytes = sizeof(double) * x.size;
+        if (x.on_host)
+          cuda_check(
+              cudaMemcpyAsync(staging.back().p, x.host, bytes, cudaMemcpyHostToDevice, c.stream),
+              "cudaMemcpyAsync (NCCL staging)");
+        else  // another GPU of this rank: explicit devices, no peer access needed
+          cuda_check(cudaMemcpyPeerAsync(staging.back().p, device, x.device, x.device_ordinal,
+                                         bytes, c.stream),
+                     "cudaMemcpyPeerAsync (NCCL staging)");
         src[i] = staging.back().p;
       }
     }

@@ -4,9 +4,12 @@
 // rank 0 checks the distributed solution against the one-process Solver on the same
 // matrix, against a dense LAPACK solve where the matrix is small, and its backward error;
 // the pivot statistics (inertia, perturbed pivots, log|det|), which rank 0 assembles from
-// every rank's fronts, against the one-process figures. Also: refactorization with new
-// values, several right-hand sides, R ranks × 2 CPU workers each, and an error raised on
-// some rank thrown on every rank.
+// every rank's fronts, against the one-process figures; the scaled values scattered to
+// the ranks add up (each rank only its subtrees' entries: tests/unit/
+// test_distributed_serialize.cpp checks which). Also: refactorization with new values —
+// with refinement and, so that a stale or missing value on any rank shows in the answer,
+// without — several right-hand sides, R ranks × 2 CPU workers each, and an error raised
+// on some rank thrown on every rank.
 #include <gtest/gtest.h>
 #include <mpi.h>
 
@@ -152,12 +155,21 @@ void run_all(int workers_per_rank) {
     EXPECT_EQ(ds.stats().analysis.workers, ranks * workers_per_rank);
     ASSERT_EQ(st.per_rank.size(), static_cast<std::size_t>(ranks));
     index_t subtrees = 0;
-    std::size_t held = 0;
+    std::size_t held = 0, values_received = 0;
     for (int r = 0; r < ranks; ++r) {
       EXPECT_EQ(st.per_rank[r].rank, r);
       subtrees += st.per_rank[r].subtrees;
       held += st.per_rank[r].factor_bytes_held;
+      if (r > 0) {
+        values_received += st.per_rank[r].values_bytes;
+        EXPECT_LE(st.per_rank[r].values_bytes, st.per_rank[r].factor_bytes_received);
+      }
     }
+    // scattered, not broadcast: what rank 0 sent is what the others received, and (the
+    // ranks' entries being disjoint) at most the matrix once per factorization attempt
+    const std::size_t attempts = pr.type == MatrixType::automatic ? 2 : 1;
+    EXPECT_EQ(st.per_rank[0].values_bytes, values_received);
+    EXPECT_LE(values_received, attempts * sizeof(double) * static_cast<std::size_t>(pr.a.nnz()));
     EXPECT_EQ(subtrees, ds.stats().analysis.subtrees);
     EXPECT_EQ(held, ds.stats().analysis.factor_bytes)
         << "the ranks' shares of the factor do not add up to the factor";
@@ -228,6 +240,57 @@ TEST(Distributed, Refactorization) {
     Problem p2{pr.name, a2, type};
     check_against_one_process(p2, ds, b, x, 1);
   }
+}
+
+// Refactorization with values drawn afresh on the same pattern and no iterative
+// refinement (nor GMRES): the solution is the factor's alone, so a rank that factored a
+// stale value of the first factorization, or missed one, would change the answer. It
+// must equal the one-process solve of the new matrix with the same options, and a dense
+// LAPACK solve.
+TEST(Distributed, RefactorizationWithoutRefinementReadsTheNewValues) {
+  const int rank = world_rank();
+  auto rng = test::fresh_rng();
+  std::uniform_real_distribution<double> u(-1, 1), scale(0.5, 2.0);
+  for (auto [kind, type] :
+       {std::pair{test::RandomKind::spd, MatrixType::spd},
+        std::pair{test::RandomKind::symmetric_indefinite, MatrixType::symmetric_indefinite},
+        std::pair{test::RandomKind::general, MatrixType::general}})
+    for (const index_t n : {5, 733}) {
+      SCOPED_TRACE(std::string(to_string(type)) + ", n = " + std::to_string(n));
+      const SparseMatrix a = rank == 0 ? test::random_sparse(n, 3, kind, rng) : SparseMatrix{};
+      Options o = options_for(type);
+      o.refinement_max_steps = 0;
+      o.gmres_max_iterations = 0;
+      DistributedSolver ds(mpi_communicator(MPI_COMM_WORLD), o);
+      ds.factorize(a);
+      // new values: a two-sided diagonal scaling drawn afresh (symmetric for the symmetric
+      // types, so that the type still holds), which changes every entry
+      SparseMatrix a2 = a;
+      if (rank == 0) {
+        std::vector<double> dr(n), dc(n);
+        for (double& v : dr) v = scale(rng);
+        for (double& v : dc) v = scale(rng);
+        const std::vector<double>& right = type == MatrixType::general ? dc : dr;
+        for (index_t j = 0; j < a2.n_cols; ++j)
+          for (index_t p = a2.offsets[j]; p < a2.offsets[j + 1]; ++p)
+            a2.values[p] *= a2.layout == Layout::csc ? dr[a2.indices[p]] * right[j]
+                                                     : dr[j] * right[a2.indices[p]];
+      }
+      ds.refactorize(a2);
+      std::vector<double> b(n), x(n);
+      for (double& v : b) v = u(rng);
+      ds.solve(rank == 0 ? b.data() : nullptr, rank == 0 ? x.data() : nullptr, 1);
+      if (rank != 0) continue;
+      EXPECT_EQ(ds.stats().solve.refinement_steps, 0);
+      Solver ref(o);
+      ref.factorize(a2);
+      std::vector<double> xr(n);
+      ref.solve(b.data(), xr.data(), 1);
+      EXPECT_LT(test::relative_difference(x, xr), 1e-8);
+      std::vector<double> xd = b;
+      ASSERT_TRUE(test::dense_solve(test::to_dense(a2), n, xd, 1));
+      EXPECT_LT(test::relative_difference(x, xd), 1e-7);
+    }
 }
 
 // Errors: a matrix declared spd that is not (its failing pivot may be on any rank) gives

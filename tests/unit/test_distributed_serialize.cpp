@@ -1,14 +1,21 @@
 // strata tests — the pieces of the distributed solver that run without MPI: the analysis
 // survives the round trip through bytes that rank 0 broadcasts (every field compared);
 // cut or padded bytes are refused (upper layers included); the rank layout covers every
-// pivot once and the ranks' factor shares add up to the factor (upper layers refused);
-// DistributedSolver on the one-process communicator is the Solver (solutions against a dense LAPACK
-// solve).
+// pivot once and the ranks' factor shares add up to the factor (upper layers refused); the
+// scaled values a rank is sent (value_positions) are exactly the entries whose earlier
+// pivot lies in its subtrees, and with only those values (every other one NaN) a rank's
+// subtrees factor to bitwise the one-process panels; DistributedSolver on the one-process
+// communicator is the Solver (solutions against a dense LAPACK solve).
 #include <gtest/gtest.h>
+
+#include <cstring>
+#include <limits>
 
 #include "core/analysis.hpp"
 #include "distributed/distributed_internal.hpp"
 #include "distributed/serialize.hpp"
+#include "numeric/factor.hpp"
+#include "ordering/ordering.hpp"
 #include "sparse/generators.hpp"
 #include "strata/distributed.hpp"
 #include "strata/strata.hpp"
@@ -161,6 +168,125 @@ TEST(DistributedSerialize, RankLayoutsCoverTheFactor) {
     for (index_t c = 0; c < an.n; ++c) ASSERT_EQ(seen[c], 1) << "column " << c;
     EXPECT_EQ(total, an.factor_layout.total);
   }
+}
+
+struct ScatterCase {
+  std::string name;
+  SparseMatrix a;
+  MatrixType type;
+};
+
+// Every type (with the matching's column permutation for general), awkward sizes.
+std::vector<ScatterCase> scatter_cases(std::mt19937_64& rng) {
+  std::vector<ScatterCase> c;
+  c.push_back({"lap3d 9", generators::laplacian_3d(9, 9, 9), MatrixType::spd});
+  for (index_t n : {1, 2, 3, 5, 733})
+    c.push_back({"random spd " + std::to_string(n),
+                 test::random_sparse(n, 3, test::RandomKind::spd, rng), MatrixType::spd});
+  c.push_back({"random kkt 301", test::random_kkt(301, rng), MatrixType::symmetric_indefinite});
+  c.push_back({"random indefinite 5",
+               test::random_sparse(5, 2, test::RandomKind::symmetric_indefinite, rng),
+               MatrixType::symmetric_indefinite});
+  c.push_back({"random general 257", test::random_sparse(257, 3, test::RandomKind::general, rng),
+               MatrixType::general});
+  c.push_back({"random general 3", test::random_sparse(3, 2, test::RandomKind::general, rng),
+               MatrixType::general});
+  return c;
+}
+
+const std::pair<int, int> kRankShapes[] = {{2, 1}, {3, 1}, {4, 1}, {2, 2}};
+
+// The values each rank is sent are exactly the stored entries (i, j) of the canonical
+// input whose earlier pivot, min(position of row i, position of column j) (after the
+// matching's column permutation), lies in the pivot columns of one of its subtrees —
+// enumerated here from the ordering and the subtrees' column ranges, not from the
+// assembly map. Every entry goes to one rank at most; the rest are the top part's.
+TEST(DistributedSerialize, ValuePositionsAreTheSubtreesEntries) {
+  auto rng = test::fresh_rng();
+  for (const ScatterCase& c : scatter_cases(rng))
+    for (auto [ranks, per_rank] : kRankShapes) {
+      SCOPED_TRACE(c.name + ", " + std::to_string(ranks) + " x " + std::to_string(per_rank));
+      Options o;
+      o.type = c.type;
+      const Analysis an = analyze_matrix(c.a, o, ranks * per_rank);
+      const distributed::RankLayout l0 = distributed::make_layout(an, ranks, 0, per_rank);
+      std::vector<int> rank_of_pivot(an.n, -1);  // -1: the top part
+      for (std::size_t i = 0; i < l0.subtree_rank.size(); ++i)
+        for (index_t k = l0.col_begin[i]; k < l0.col_end[i]; ++k)
+          rank_of_pivot[k] = l0.subtree_rank[i];
+      std::vector<index_t> q_inv;
+      if (!an.matching_perm.empty()) q_inv = ordering::invert_permutation(an.matching_perm);
+      std::vector<std::vector<index_t>> expect(ranks);
+      std::size_t top = 0;
+      for (index_t j = 0; j < an.n; ++j)
+        for (index_t p = an.pattern_offsets[j]; p < an.pattern_offsets[j + 1]; ++p) {
+          const index_t pi = an.iperm[an.pattern_indices[p]];
+          const index_t pj = an.iperm[q_inv.empty() ? j : q_inv[j]];
+          const int r = rank_of_pivot[std::min(pi, pj)];
+          if (r >= 0)
+            expect[r].push_back(p);
+          else
+            ++top;
+        }
+      std::size_t sent = 0;
+      for (int r = 0; r < ranks; ++r) {
+        const distributed::RankLayout l = distributed::make_layout(an, ranks, r, per_rank);
+        const std::vector<index_t> got = distributed::value_positions(an, l, r);
+        EXPECT_EQ(got, expect[r]) << "rank " << r;
+        if (r > 0) sent += got.size();
+      }
+      EXPECT_EQ(sent + expect[0].size() + top, an.pattern_indices.size());
+    }
+}
+
+// A rank that has only the values value_positions names (every other entry NaN) factors
+// its subtrees to bitwise the panels of the one-process factorization with all values:
+// a value it needs and is not sent would leave a NaN (or a different number) in a panel.
+TEST(DistributedSerialize, SubtreesFactorFromTheirScatteredValues) {
+  auto rng = test::fresh_rng();
+  for (const ScatterCase& c : scatter_cases(rng))
+    for (auto [ranks, per_rank] : kRankShapes) {
+      SCOPED_TRACE(c.name + ", " + std::to_string(ranks) + " x " + std::to_string(per_rank));
+      Options o;
+      o.type = c.type;
+      const Analysis an = analyze_matrix(c.a, o, ranks * per_rank);
+      double pivot = 0;
+      const std::vector<double> v = test::scaled_values(an, c.a, &pivot);
+      numeric::NumericFactor one;
+      std::vector<double> arena;
+      auto cpu = numeric::make_cpu_executor(1);
+      numeric::factorize(an, v, c.type, pivot, *cpu, one, arena);
+      for (int r = 1; r < ranks; ++r) {
+        SCOPED_TRACE("rank " + std::to_string(r));
+        const distributed::RankLayout l = distributed::make_layout(an, ranks, r, per_rank);
+        std::vector<double> mine(v.size(), std::numeric_limits<double>::quiet_NaN());
+        for (const index_t p : distributed::value_positions(an, l, r)) mine[p] = v[p];
+        std::vector<std::unique_ptr<numeric::Executor>> own;
+        std::vector<numeric::Executor*> execs;
+        for (int g = 0; g < per_rank; ++g) {
+          own.push_back(numeric::make_cpu_executor(1));
+          execs.push_back(own.back().get());
+        }
+        numeric::MultiWorkerConfig cfg;  // as rank r runs it, without the top part
+        cfg.first_worker = r * per_rank;
+        cfg.factor_top = false;
+        cfg.exchange = [](std::vector<numeric::CbTransfer>&, std::exception_ptr failed) {
+          if (failed) std::rethrow_exception(failed);
+        };
+        numeric::NumericFactor part;
+        std::vector<std::vector<double>> arenas;
+        numeric::factorize_multi(an, mine, c.type, pivot, execs, part, arenas, cfg, nullptr);
+        for (const index_t f : l.my_fronts) {
+          const std::size_t at = an.factor_layout.panel_offset[f];
+          const std::size_t len = panel_size(an.tree, f, !an.symmetric);
+          std::size_t differ = 0;
+          for (std::size_t k = at; k < at + len; ++k)
+            differ += std::memcmp(&part.panels[k], &one.panels[k], sizeof(double)) != 0 ? 1 : 0;
+          ASSERT_EQ(differ, 0u) << "front " << f << ": " << differ << " of " << len
+                                << " panel entries differ from the one-process factor";
+        }
+      }
+    }
 }
 
 // One process: DistributedSolver is the Solver, for every type, against dense LAPACK.

@@ -1,0 +1,79 @@
+// strata — the scaled values of each (re)factorization, scattered from rank 0 to the ranks
+// that assemble them (docs/distributed.md §1.2 and §2).
+//
+// What: rank 0 holds the matrix and scales it (the Solver's code). A rank r > 0 assembles
+// only the fronts of its own subtrees, and front f reads the scaled values
+// entry_src[entry_offsets[f] .. entry_offsets[f + 1]) of the analysis's assembly map; so
+// rank 0 sends r exactly those, packed in increasing position order, one point-to-point
+// message per rank. Every rank derives the positions from the broadcast analysis and the
+// rank layout (value_positions), once per analysis: no index list travels, only values.
+// Volume per factorization: Σ over ranks r > 0 of the entries of r's subtrees' fronts
+// (each stored entry lands in exactly one front, so the lists are disjoint and their sum is
+// at most nnz(A)), where a broadcast of the whole array moved (R − 1)·nnz(A) doubles.
+//
+// Storage on the receiving ranks (a choice): a values array of the full length nnz(A),
+// with only the rank's positions written and the rest zero. The executors read
+// ctx.values[entry_src[k]] and the CUDA executor uploads the array whole, so nothing
+// downstream changes. The consequence: a rank r > 0 still allocates nnz(A) doubles of host
+// memory (and, with a GPU, the same on the device) whatever its share; the scatter cuts the
+// traffic and the copying, not that footprint. A compact array with a per-rank renumbered
+// entry_src (and an executor that uploads only the rank's share) would cut the memory too.
+#include <algorithm>
+#include <string>
+
+#include "distributed/distributed_internal.hpp"
+
+namespace strata::distributed {
+namespace {
+
+constexpr int kTagValues = 10;  // the scaled values (numeric.cpp uses 8, 9 and 100 + i)
+
+}  // namespace
+
+std::vector<index_t> value_positions(const Analysis& an, const RankLayout& l, int r) {
+  const AssemblyMap& am = an.assembly;
+  std::vector<index_t> out;
+  for (const int i : l.subtrees_of[r])
+    for (const index_t f : an.partition.subtrees[i].fronts)
+      out.insert(out.end(), am.entry_src.begin() + am.entry_offsets[f],
+                 am.entry_src.begin() + am.entry_offsets[f + 1]);
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
+}
+
+void send_values(detail::CommImpl& comm, NumericState& ns, const std::vector<double>& values) {
+  const int ranks = comm.size();
+  std::vector<std::vector<double>> packed(ranks);
+  std::vector<detail::Message> sends;
+  for (int r = 1; r < ranks; ++r) {
+    const std::vector<index_t>& pos = ns.value_positions.at(r);
+    if (pos.empty()) continue;
+    if (static_cast<std::size_t>(pos.back()) >= values.size())
+      throw InvalidInput("internal: rank " + std::to_string(r) + " needs value " +
+                         std::to_string(pos.back()) + " of " + std::to_string(values.size()));
+    packed[r].resize(pos.size());
+    for (std::size_t k = 0; k < pos.size(); ++k) packed[r][k] = values[pos[k]];
+    sends.push_back({r, kTagValues, packed[r].data(), sizeof(double) * pos.size()});
+    ns.stats.values_bytes += sizeof(double) * pos.size();
+  }
+  comm.exchange(sends, {});
+}
+
+void receive_values(detail::CommImpl& comm, NumericState& ns, std::size_t nnz,
+                    std::vector<double>& values) {
+  const int rank = comm.rank();
+  const std::vector<index_t>& pos = ns.value_positions.at(rank);
+  if (values.size() != nnz) values.assign(nnz, 0.0);
+  if (!pos.empty() && static_cast<std::size_t>(pos.back()) >= nnz)
+    throw InvalidInput("internal: rank " + std::to_string(rank) + " needs value " +
+                       std::to_string(pos.back()) + " of " + std::to_string(nnz));
+  std::vector<double> packed(pos.size());
+  std::vector<detail::Message> recvs;
+  if (!pos.empty()) recvs.push_back({0, kTagValues, packed.data(), sizeof(double) * pos.size()});
+  comm.exchange({}, recvs);
+  for (std::size_t k = 0; k < pos.size(); ++k) values[pos[k]] = packed[k];
+  ns.stats.values_bytes += sizeof(double) * pos.size();
+}
+
+}  // namespace strata::distributed
