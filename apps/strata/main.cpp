@@ -301,6 +301,7 @@ int run_solve(const SolveArgs& a, const Communicator& comm) {
     j["factor"] = {{"type", to_string(f.type)},
                    {"backend", f.backend},
                    {"seconds", f.seconds},
+                   {"input_seconds", f.input_seconds},
                    {"gflops", f.gflops},
                    {"perturbed_pivots", f.perturbed_pivots},
                    {"two_by_two_pivots", f.two_by_two_pivots},
@@ -336,8 +337,10 @@ int run_solve(const SolveArgs& a, const Communicator& comm) {
   } else {
     fmt::print("strata solve {}\n", a.common.file);
     print_analysis(st.analysis, read_seconds);
-    fmt::print("factorization         {} on {}: {:.3f} s, {:.2f} GFLOP/s\n", to_string(f.type),
-               f.backend, f.seconds, f.gflops);
+    fmt::print(
+        "factorization         {} on {}: {:.3f} s ({:.3f} s checking and scaling the input), "
+        "{:.2f} GFLOP/s\n",
+        to_string(f.type), f.backend, f.seconds, f.input_seconds, f.gflops);
     if (f.backend == "cuda")
       fmt::print(
           "GPU                   {:.3f} s on the device, {:.2f} TFLOP/s, {} launch groups, {} "

@@ -87,6 +87,10 @@ struct FactorStats {
   MatrixType type = MatrixType::automatic;  ///< the factorization actually computed
   std::string backend;                      ///< "cpu" or "cuda"
   double seconds = 0;
+  /// Of `seconds`, the host's work on the input before the numeric factorization: the
+  /// pattern compared with the analyzed one, the values checked (finite, norms), copied
+  /// and scaled.
+  double input_seconds = 0;
   double gflops = 0;              ///< AnalysisStats::factor_flops (×2 for LU) / seconds
   index_t perturbed_pivots = 0;   ///< tiny pivots replaced by ±ε‖A‖ (static pivoting)
   index_t two_by_two_pivots = 0;  ///< LDLᵀ: number of 2×2 pivot blocks

@@ -224,6 +224,7 @@ class Core {
       d["backend"] = f.backend;
       d["factor_seconds"] = f.seconds;
       d["factor_gflops"] = f.gflops;
+      d["factor_input_seconds"] = f.input_seconds;
       d["perturbed_pivots"] = f.perturbed_pivots;
       d["two_by_two_pivots"] = f.two_by_two_pivots;
       d["inertia"] = py::make_tuple(f.inertia_positive, f.inertia_negative, f.inertia_zero);

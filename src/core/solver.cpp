@@ -23,6 +23,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstring>
 #include <optional>
 
 #include "core/alloc.hpp"
@@ -143,10 +144,55 @@ int parity(const std::vector<index_t>& p) {
 
 // True when `a` is stored exactly as the analysis' canonical pattern (CSC, sorted, no
 // duplicates; the lower triangle when symmetric): its values can be used as they are.
-bool has_analyzed_pattern(const Analysis& an, const SparseMatrix& a) {
+// Large arrays are compared and copied in parallel chunks: one thread did a few ms of each
+// per refactorization of a matrix with millions of entries.
+constexpr std::size_t kParallelChunk = std::size_t{1} << 18;  // elements per task
+
+template <class F>
+void in_arena(int threads, F&& f) {
+  tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
+  arena.execute(f);
+}
+
+template <class T>
+bool equal_arrays(const std::vector<T>& x, const std::vector<T>& y, int threads) {
+  if (x.size() != y.size()) return false;
+  if (x.size() < 2 * kParallelChunk) return x == y;
+  std::atomic<bool> same{true};
+  in_arena(threads, [&] {
+    tbb::parallel_for(std::size_t{0}, (x.size() + kParallelChunk - 1) / kParallelChunk,
+                      [&](std::size_t c) {
+                        const std::size_t b = c * kParallelChunk;
+                        const std::size_t e = std::min(x.size(), b + kParallelChunk);
+                        if (same.load(std::memory_order_relaxed) &&
+                            std::memcmp(x.data() + b, y.data() + b, sizeof(T) * (e - b)) != 0)
+                          same.store(false, std::memory_order_relaxed);
+                      });
+  });
+  return same;
+}
+
+// to = from, for arrays of equal size
+void copy_values(std::vector<double>& to, const std::vector<double>& from, int threads) {
+  if (to.size() != from.size() || from.size() < 2 * kParallelChunk) {
+    to = from;
+    return;
+  }
+  in_arena(threads, [&] {
+    tbb::parallel_for(std::size_t{0}, (from.size() + kParallelChunk - 1) / kParallelChunk,
+                      [&](std::size_t c) {
+                        const std::size_t b = c * kParallelChunk;
+                        const std::size_t e = std::min(from.size(), b + kParallelChunk);
+                        std::memcpy(to.data() + b, from.data() + b, sizeof(double) * (e - b));
+                      });
+  });
+}
+
+bool has_analyzed_pattern(const Analysis& an, const SparseMatrix& a, int threads) {
   return a.n_rows == an.n && a.n_cols == an.n && a.layout == Layout::csc &&
          a.storage != Storage::upper && a.values.size() == a.indices.size() &&
-         a.offsets == an.pattern_offsets && a.indices == an.pattern_indices;
+         equal_arrays(a.offsets, an.pattern_offsets, threads) &&
+         equal_arrays(a.indices, an.pattern_indices, threads);
 }
 
 // The per-refactorization passes over the values run over kValueBlocks fixed column
@@ -266,7 +312,7 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
   // Validate before touching the current factor: bad input leaves the solver usable.
   const bool scale = !an.row_scaling.empty();
   double norm1 = 0;  // of the scaled matrix, for static pivoting
-  if (has_analyzed_pattern(an, a)) {
+  if (has_analyzed_pattern(an, a, s.options.num_threads)) {
     // Refactorization with the analyzed pattern (a Newton loop, a benchmark): one parallel
     // pass checks the values and the norms and scales them (refactor_values), then only
     // the values are copied. The general path below makes several passes and copies the
@@ -280,7 +326,7 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
       s.values.storage = an.symmetric ? Storage::lower : Storage::full;
       s.values_analysis = an.id;
     } else {
-      s.values.values = a.values;  // the pattern is already the analyzed one
+      copy_values(s.values.values, a.values, s.options.num_threads);  // pattern: the analyzed one
     }
   } else {
     SparseMatrix checked = canonical_values(an, a);
@@ -306,6 +352,7 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
         });
     for (double v : colsum[0]) norm1 = std::max(norm1, v);
   }
+  const double input_seconds = timer.seconds();
   const double static_pivot = s.options.static_pivot_epsilon * (norm1 > 0 ? norm1 : 1.0);
 
   const int workers = an.partition.workers;
@@ -362,6 +409,7 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
   FactorStats& fs = s.stats.factor;
   fs = FactorStats{};
   fs.type = type;
+  fs.input_seconds = input_seconds;
   fs.backend = external ? s.external.backend : workers > 1 ? execs[0]->name() : s.executor->name();
   fs.devices = s.devices;
   numeric::cpu::PivotStats total;
