@@ -138,8 +138,10 @@ int main(int argc, char** argv) {
                 berr = bench::berr(p.a, x, b);
                 const json devices = solver.stats().factor.devices;
                 row["factor_seconds"] = ts;
+                row["refactor_times"] = times;  // the spread behind the median
                 row["first_factor_seconds"] = first;
                 row["factor_phases"] = solver.stats().factor.device_phases;
+                row["input_seconds"] = solver.stats().factor.input_seconds;
                 row["backward_error"] = berr;
                 row["devices"] = devices;
               }
