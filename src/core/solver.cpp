@@ -42,6 +42,10 @@ struct SolverState {
   SparseMatrix values;             // canonical input values of the factorized matrix
   std::vector<double> scaled;      // values as assembled (scaled for general)
   std::vector<double> value_sums;  // per-range vectors of the blocked value passes, kept
+  // the host threads of those passes (Options::num_threads), kept: creating a task arena
+  // for each parallel loop cost milliseconds per refactorization on a 64-core host
+  std::unique_ptr<tbb::task_arena> arena;
+  int arena_threads = -1;
   std::vector<double> cb_arena;
   numeric::NumericFactor factor;
   std::unique_ptr<numeric::Executor> executor;
@@ -148,18 +152,23 @@ int parity(const std::vector<index_t>& p) {
 // per refactorization of a matrix with millions of entries.
 constexpr std::size_t kParallelChunk = std::size_t{1} << 18;  // elements per task
 
-template <class F>
-void in_arena(int threads, F&& f) {
-  tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
-  arena.execute(f);
+// The solver's host task arena for Options::num_threads (0: all hardware threads).
+tbb::task_arena& host_arena(SolverState& s) {
+  const int threads = s.options.num_threads;
+  if (!s.arena || s.arena_threads != threads) {
+    s.arena = std::make_unique<tbb::task_arena>(
+        threads > 0 ? threads : static_cast<int>(tbb::task_arena::automatic));
+    s.arena_threads = threads;
+  }
+  return *s.arena;
 }
 
 template <class T>
-bool equal_arrays(const std::vector<T>& x, const std::vector<T>& y, int threads) {
+bool equal_arrays(const std::vector<T>& x, const std::vector<T>& y, tbb::task_arena& arena) {
   if (x.size() != y.size()) return false;
   if (x.size() < 2 * kParallelChunk) return x == y;
   std::atomic<bool> same{true};
-  in_arena(threads, [&] {
+  arena.execute([&] {
     tbb::parallel_for(std::size_t{0}, (x.size() + kParallelChunk - 1) / kParallelChunk,
                       [&](std::size_t c) {
                         const std::size_t b = c * kParallelChunk;
@@ -173,12 +182,12 @@ bool equal_arrays(const std::vector<T>& x, const std::vector<T>& y, int threads)
 }
 
 // to = from, for arrays of equal size
-void copy_values(std::vector<double>& to, const std::vector<double>& from, int threads) {
+void copy_values(std::vector<double>& to, const std::vector<double>& from, tbb::task_arena& arena) {
   if (to.size() != from.size() || from.size() < 2 * kParallelChunk) {
     to = from;
     return;
   }
-  in_arena(threads, [&] {
+  arena.execute([&] {
     tbb::parallel_for(std::size_t{0}, (from.size() + kParallelChunk - 1) / kParallelChunk,
                       [&](std::size_t c) {
                         const std::size_t b = c * kParallelChunk;
@@ -188,11 +197,11 @@ void copy_values(std::vector<double>& to, const std::vector<double>& from, int t
   });
 }
 
-bool has_analyzed_pattern(const Analysis& an, const SparseMatrix& a, int threads) {
+bool has_analyzed_pattern(const Analysis& an, const SparseMatrix& a, tbb::task_arena& arena) {
   return a.n_rows == an.n && a.n_cols == an.n && a.layout == Layout::csc &&
          a.storage != Storage::upper && a.values.size() == a.indices.size() &&
-         equal_arrays(a.offsets, an.pattern_offsets, threads) &&
-         equal_arrays(a.indices, an.pattern_indices, threads);
+         equal_arrays(a.offsets, an.pattern_offsets, arena) &&
+         equal_arrays(a.indices, an.pattern_indices, arena);
 }
 
 // The per-refactorization passes over the values run over kValueBlocks fixed column
@@ -207,22 +216,28 @@ constexpr index_t kParallelValues = 200000;  // entries below which one thread d
 // n-vector of sum k for the entry's column range; returns the sums over the ranges, added
 // in range order. `work` keeps the per-range vectors from one call to the next (sizing
 // and zero-filling 8 fresh n-vectors per pass cost more than the pass on a large matrix).
+// `lower`: `a` holds a lower triangle and visit writes only rows i ≥ j, so the range
+// [j0, j1) leaves rows below j0 alone — neither zeroed nor added (they would be zeros).
 constexpr int kMaxSums = 2;
+index_t range_begin(std::size_t n, int blk) {
+  return static_cast<index_t>(static_cast<std::int64_t>(n) * blk / kValueBlocks);
+}
 template <class Visit>
-std::vector<std::vector<double>> blocked_sums(const SparseMatrix& a, int sums, int threads,
-                                              std::vector<double>& work, Visit&& visit) {
+std::vector<std::vector<double>> blocked_sums(const SparseMatrix& a, int sums, bool lower,
+                                              tbb::task_arena& arena, std::vector<double>& work,
+                                              Visit&& visit) {
   const std::size_t n = static_cast<std::size_t>(a.n_cols);
   const std::size_t per = static_cast<std::size_t>(sums) * n;
   if (work.size() < kValueBlocks * per)
     sized_resize(work, kValueBlocks * per, "factorize: value sums");
   auto range = [&](int blk) {
     double* base = work.data() + blk * per;
-    std::fill(base, base + per, 0.0);
+    const index_t j0 = range_begin(n, blk), j1 = range_begin(n, blk + 1);
     double* acc[kMaxSums] = {};
-    for (int k = 0; k < sums; ++k) acc[k] = base + k * n;
-    const index_t j0 = static_cast<index_t>(static_cast<std::int64_t>(n) * blk / kValueBlocks);
-    const index_t j1 =
-        static_cast<index_t>(static_cast<std::int64_t>(n) * (blk + 1) / kValueBlocks);
+    for (int k = 0; k < sums; ++k) {
+      acc[k] = base + k * n;
+      std::fill(acc[k] + (lower ? j0 : 0), acc[k] + n, 0.0);
+    }
     for (index_t j = j0; j < j1; ++j)
       for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p) visit(j, p, acc);
   };
@@ -231,7 +246,9 @@ std::vector<std::vector<double>> blocked_sums(const SparseMatrix& a, int sums, i
     for (int k = 0; k < sums; ++k)
       for (std::size_t i = i0; i < i1; ++i) {
         double t = 0;
-        for (int blk = 0; blk < kValueBlocks; ++blk) t += work[blk * per + k * n + i];
+        for (int blk = 0; blk < kValueBlocks; ++blk)
+          if (!lower || static_cast<std::size_t>(range_begin(n, blk)) <= i)
+            t += work[blk * per + k * n + i];
         total[k][i] = t;
       }
   };
@@ -239,7 +256,6 @@ std::vector<std::vector<double>> blocked_sums(const SparseMatrix& a, int sums, i
     for (int blk = 0; blk < kValueBlocks; ++blk) range(blk);
     reduce(0, n);
   } else {
-    tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
     arena.execute([&] {
       tbb::parallel_for(0, kValueBlocks, range);
       tbb::parallel_for(
@@ -272,7 +288,7 @@ struct ValueNorms {
   double norm_inf = 0;
   double scaled_norm1 = 0;
 };
-ValueNorms refactor_values(const Analysis& an, const SparseMatrix& a, int threads,
+ValueNorms refactor_values(const Analysis& an, const SparseMatrix& a, tbb::task_arena& arena,
                            std::vector<double>& work, std::vector<double>& scaled) {
   const bool sym = an.symmetric, scale = !an.row_scaling.empty();
   const index_t n = a.n_cols;
@@ -280,8 +296,10 @@ ValueNorms refactor_values(const Analysis& an, const SparseMatrix& a, int thread
   std::atomic<bool> not_finite{false};
   // unsymmetric: column sums, each column within one range (no per-range vectors)
   std::vector<double> col(sym ? 0 : n, 0.0), scol(sym ? 0 : n, 0.0);
+  // symmetric and unscaled: the scaled matrix is A, its ‖·‖₁ is ‖A‖∞ (one sum)
+  const int nsums = sym && scale ? 2 : 1;
   const auto sums =
-      blocked_sums(a, sym ? 2 : 1, threads, work, [&](index_t j, index_t p, double* const* acc) {
+      blocked_sums(a, nsums, sym, arena, work, [&](index_t j, index_t p, double* const* acc) {
         const index_t i = a.indices[p];
         const double x = a.values[p];
         if (!std::isfinite(x)) not_finite.store(true, std::memory_order_relaxed);
@@ -291,8 +309,10 @@ ValueNorms refactor_values(const Analysis& an, const SparseMatrix& a, int thread
         acc[0][i] += v;
         if (sym) {
           if (i != j) acc[0][j] += v;
-          acc[1][j] += std::abs(y);
-          if (i != j) acc[1][i] += std::abs(y);
+          if (scale) {
+            acc[1][j] += std::abs(y);
+            if (i != j) acc[1][i] += std::abs(y);
+          }
         } else {
           col[j] += v;
           scol[j] += std::abs(y);
@@ -302,7 +322,10 @@ ValueNorms refactor_values(const Analysis& an, const SparseMatrix& a, int thread
   throw_if_norm_overflows(sums[0], col);
   ValueNorms r;
   for (double x : sums[0]) r.norm_inf = std::max(r.norm_inf, x);
-  for (double x : sym ? sums[1] : scol) r.scaled_norm1 = std::max(r.scaled_norm1, x);
+  if (sym && !scale)
+    r.scaled_norm1 = r.norm_inf;
+  else
+    for (double x : sym ? sums[1] : scol) r.scaled_norm1 = std::max(r.scaled_norm1, x);
   return r;
 }
 
@@ -312,12 +335,13 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
   // Validate before touching the current factor: bad input leaves the solver usable.
   const bool scale = !an.row_scaling.empty();
   double norm1 = 0;  // of the scaled matrix, for static pivoting
-  if (has_analyzed_pattern(an, a, s.options.num_threads)) {
+  tbb::task_arena& arena = host_arena(s);
+  if (has_analyzed_pattern(an, a, arena)) {
     // Refactorization with the analyzed pattern (a Newton loop, a benchmark): one parallel
     // pass checks the values and the norms and scales them (refactor_values), then only
     // the values are copied. The general path below makes several passes and copies the
     // pattern; on a large matrix that host work was of the order of the GPU refactorization.
-    const ValueNorms norms = refactor_values(an, a, s.options.num_threads, s.value_sums, s.scaled);
+    const ValueNorms norms = refactor_values(an, a, arena, s.value_sums, s.scaled);
     s.factor.valid = false;
     s.norm_inf = norms.norm_inf;
     norm1 = norms.scaled_norm1;
@@ -326,7 +350,7 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
       s.values.storage = an.symmetric ? Storage::lower : Storage::full;
       s.values_analysis = an.id;
     } else {
-      copy_values(s.values.values, a.values, s.options.num_threads);  // pattern: the analyzed one
+      copy_values(s.values.values, a.values, arena);  // pattern: the analyzed one
     }
   } else {
     SparseMatrix checked = canonical_values(an, a);
@@ -341,15 +365,16 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
     const SparseMatrix& c = s.values;
     sized_resize(s.scaled, c.nnz(), "factorize: scaled values");
     const bool sym = an.symmetric;
-    const auto colsum = blocked_sums(
-        c, 1, s.options.num_threads, s.value_sums, [&](index_t j, index_t p, double* const* sum) {
-          const index_t i = c.indices[p];
-          const double v =
-              scale ? c.values[p] * an.row_scaling[i] * an.col_scaling[j] : c.values[p];
-          s.scaled[p] = v;
-          sum[0][j] += std::abs(v);
-          if (sym && i != j) sum[0][i] += std::abs(v);
-        });
+    const auto colsum =
+        blocked_sums(c, 1, c.storage == Storage::lower, arena, s.value_sums,
+                     [&](index_t j, index_t p, double* const* sum) {
+                       const index_t i = c.indices[p];
+                       const double v = scale ? c.values[p] * an.row_scaling[i] * an.col_scaling[j]
+                                              : c.values[p];
+                       s.scaled[p] = v;
+                       sum[0][j] += std::abs(v);
+                       if (sym && i != j) sum[0][i] += std::abs(v);
+                     });
     for (double v : colsum[0]) norm1 = std::max(norm1, v);
   }
   const double input_seconds = timer.seconds();
