@@ -88,7 +88,10 @@ int main(int argc, char** argv) {
               o.balance_by_work = bal == "on";
               o.work_stealing = stl == "on";
               o.split_top = split == "on";
-              o.num_threads = threads_per_worker;
+              // CPU workers: threads each; the CUDA backend keeps every host thread for the
+              // analysis and the input pass (one thread made that pass a third of an
+              // elasticity refactorization on the 4-GPU machine)
+              if (backend == "cpu") o.num_threads = threads_per_worker;
               if (backend == "cuda") {
                 o.backend = Backend::cuda;
                 o.num_gpus = w;
