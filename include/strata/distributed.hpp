@@ -72,7 +72,7 @@ struct RankStats {
   /// assemble); on rank 0 the sum it sent to the others. An automatic type that falls
   /// back from Cholesky to LDLᵀ sends them twice.
   std::size_t values_bytes = 0;
-  double solve_seconds = 0;               ///< its part of the last solve (all refinement steps)
+  double solve_seconds = 0;  ///< its part of the last solve (all refinement steps)
   std::size_t solve_bytes_sent = 0;
   std::size_t solve_bytes_received = 0;
   std::size_t factor_bytes_held = 0;  ///< doubles×8 of the factor panels stored on it
