@@ -52,6 +52,7 @@ struct SolverState {
   // several workers: one executor and one host arena each
   std::vector<std::unique_ptr<numeric::Executor>> executors;
   std::vector<std::vector<double>> arenas;
+  numeric::BlockBuffers blocks;  // host buffers of blocks between workers, kept
   std::vector<DeviceStats> devices;
   // SolverAccess::use_host_workers: CPU executors as workers (tests, benchmarks)
   int host_workers = 0;
@@ -408,6 +409,7 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
   // (it is fetched only when a host solve needs it)
   config.keep_panels_on_devices = true;
   if (s.host_config) config = *s.host_config;
+  config.block_buffers = &s.blocks;
   auto run = [&](MatrixType t) {
     if (external)
       s.external.factor(an, s.scaled, t, static_pivot, s.factor);
@@ -528,6 +530,7 @@ void release_factor(SolverState& s) noexcept {
   std::vector<double>().swap(s.cb_arena);
   std::vector<double>().swap(s.scaled);
   std::vector<double>().swap(s.value_sums);
+  s.blocks = numeric::BlockBuffers{};
   s.executor.reset();
 }
 
@@ -555,6 +558,7 @@ void Solver::analyze(const SparseMatrix& a) {
     state_->factor = numeric::NumericFactor{};
     state_->cb_arena.clear();
     state_->arenas.clear();
+    state_->blocks = numeric::BlockBuffers{};
     state_->analysis.reset();
     const int workers = state_->external.workers > 0 ? state_->external.workers
                         : state_->host_workers > 0   ? state_->host_workers

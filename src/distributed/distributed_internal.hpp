@@ -79,6 +79,7 @@ struct NumericState {
   RankLayout layout;
   std::vector<std::unique_ptr<numeric::Executor>> executors;  ///< this rank's workers
   std::vector<std::vector<double>> arenas;
+  numeric::BlockBuffers blocks;  ///< host buffers of the blocks sent and received, kept
   std::vector<DeviceStats> devices;
   /// value_positions per rank, made once per analysis: rank 0 holds every rank's list
   /// (its own empty: it has all values); a rank r > 0 only its own, at index r.

@@ -75,6 +75,7 @@ void setup_numeric(DistributedState& s, Analysis& an, int per_rank) {
     localize_factor_layout(an, ns.layout);
     ns.executors.clear();
     ns.arenas.clear();
+    ns.blocks = numeric::BlockBuffers{};
     const bool gpu = wants_gpu(s);
     const int visible = gpu ? numeric::cuda_device_count() : 0;
     for (int g = 0; g < per_rank; ++g) {

@@ -77,6 +77,11 @@ void factor_part(detail::CommImpl& comm, NumericState& ns, const Analysis& an,
   config.first_worker = rank * l.workers_per_rank;
   config.factor_top = rank == 0;
   config.remote_blocks_on_device = ns.nccl;
+  config.block_buffers = &ns.blocks;
+  // each GPU keeps its parts' panels during the factorization (no copy and wait after
+  // every launch group) and they come to the host in one copy per part at the end:
+  // the distributed solve works on host panels
+  config.keep_panels_on_devices = true;
   bool exchanged = false;
   config.exchange = [&](std::vector<numeric::CbTransfer>& tr, std::exception_ptr failed) {
     exchanged = true;
@@ -131,6 +136,7 @@ void factor_part(detail::CommImpl& comm, NumericState& ns, const Analysis& an,
   try {
     numeric::factorize_multi(an, values, type, static_pivot, execs, factor, ns.arenas, config,
                              &ns.devices);
+    numeric::fetch_panels(an, execs, factor);
   } catch (...) {
     // failed before the exchange (sizing the factor): the other ranks wait in agree()
     if (!exchanged) agree(comm, std::current_exception());

@@ -169,6 +169,33 @@ void factorize_multi(const Analysis& an, const std::vector<double>& scaled_value
     x.size = static_cast<std::size_t>(t.cb_size(r)) * static_cast<std::size_t>(t.cb_size(r));
   }
 
+  // host buffers of earlier factorizations handed to the transfers, and given back on
+  // every way out (with the ones allocated this time)
+  struct KeptBuffers {
+    std::vector<CbTransfer>& transfer;
+    BlockBuffers* keep;
+    std::vector<std::size_t> capacity;
+    ~KeptBuffers() {
+      if (!keep) return;
+      for (std::size_t id = 0; id < transfer.size(); ++id)
+        if (transfer[id].host_storage) {
+          keep->buffer[id] = std::move(transfer[id].host_storage);
+          keep->size[id] = std::max(capacity[id], transfer[id].size);
+        }
+    }
+  } kept{transfer, config.block_buffers, std::vector<std::size_t>(n_parts, 0)};
+  if (BlockBuffers* keep = config.block_buffers) {
+    keep->buffer.resize(n_parts);
+    keep->size.resize(n_parts, 0);
+    for (int id = 0; id < n_parts; ++id) {
+      CbTransfer& x = transfer[id];
+      if (x.size == 0 || !keep->buffer[id] || keep->size[id] < x.size) continue;
+      kept.capacity[id] = keep->size[id];
+      x.host_storage = std::move(keep->buffer[id]);
+      x.host = x.host_storage.get();  // stale contents: on_host says when it is filled
+    }
+  }
+
   FactorContext base;
   base.analysis = &an;
   base.values = scaled_values.data();
