@@ -164,20 +164,27 @@ tbb::task_arena& host_arena(SolverState& s) {
   return *s.arena;
 }
 
+// Runs f(b, e) over [0, size) in chunks of kParallelChunk elements, in parallel in `arena`.
+template <class F>
+void for_chunks(tbb::task_arena& arena, std::size_t size, F&& f) {
+  arena.execute([&] {
+    tbb::parallel_for(std::size_t{0}, (size + kParallelChunk - 1) / kParallelChunk,
+                      [&](std::size_t c) {
+                        const std::size_t b = c * kParallelChunk;
+                        f(b, std::min(size, b + kParallelChunk));
+                      });
+  });
+}
+
 template <class T>
 bool equal_arrays(const std::vector<T>& x, const std::vector<T>& y, tbb::task_arena& arena) {
   if (x.size() != y.size()) return false;
   if (x.size() < 2 * kParallelChunk) return x == y;
   std::atomic<bool> same{true};
-  arena.execute([&] {
-    tbb::parallel_for(std::size_t{0}, (x.size() + kParallelChunk - 1) / kParallelChunk,
-                      [&](std::size_t c) {
-                        const std::size_t b = c * kParallelChunk;
-                        const std::size_t e = std::min(x.size(), b + kParallelChunk);
-                        if (same.load(std::memory_order_relaxed) &&
-                            std::memcmp(x.data() + b, y.data() + b, sizeof(T) * (e - b)) != 0)
-                          same.store(false, std::memory_order_relaxed);
-                      });
+  for_chunks(arena, x.size(), [&](std::size_t b, std::size_t e) {
+    if (same.load(std::memory_order_relaxed) &&
+        std::memcmp(x.data() + b, y.data() + b, sizeof(T) * (e - b)) != 0)
+      same.store(false, std::memory_order_relaxed);
   });
   return same;
 }
@@ -188,13 +195,8 @@ void copy_values(std::vector<double>& to, const std::vector<double>& from, tbb::
     to = from;
     return;
   }
-  arena.execute([&] {
-    tbb::parallel_for(std::size_t{0}, (from.size() + kParallelChunk - 1) / kParallelChunk,
-                      [&](std::size_t c) {
-                        const std::size_t b = c * kParallelChunk;
-                        const std::size_t e = std::min(from.size(), b + kParallelChunk);
-                        std::memcpy(to.data() + b, from.data() + b, sizeof(double) * (e - b));
-                      });
+  for_chunks(arena, from.size(), [&](std::size_t b, std::size_t e) {
+    std::memcpy(to.data() + b, from.data() + b, sizeof(double) * (e - b));
   });
 }
 
@@ -243,13 +245,15 @@ std::vector<std::vector<double>> blocked_sums(const SparseMatrix& a, int sums, b
       for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p) visit(j, p, acc);
   };
   std::vector<std::vector<double>> total(sums, std::vector<double>(n));
+  std::size_t first_row[kValueBlocks];  // rows below it are not the range's (lower)
+  for (int blk = 0; blk < kValueBlocks; ++blk)
+    first_row[blk] = lower ? static_cast<std::size_t>(range_begin(n, blk)) : 0;
   auto reduce = [&](std::size_t i0, std::size_t i1) {
     for (int k = 0; k < sums; ++k)
       for (std::size_t i = i0; i < i1; ++i) {
         double t = 0;
         for (int blk = 0; blk < kValueBlocks; ++blk)
-          if (!lower || static_cast<std::size_t>(range_begin(n, blk)) <= i)
-            t += work[blk * per + k * n + i];
+          if (first_row[blk] <= i) t += work[blk * per + k * n + i];
         total[k][i] = t;
       }
   };

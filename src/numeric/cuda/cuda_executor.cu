@@ -771,7 +771,6 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
   rec.perm_off = std::move(perm_off);
   rec.big_perm_at = std::move(big_perm_at);
   rec.diag_off = std::move(diag_off);
-  rec.perm_at = perm_at;
   // the previous chunk's host part, while the GPU runs this one; this one's waits when it
   // writes to the host factor (panels copied back, LDLᵀ): the next chunk's stores would
   // overwrite the staging area it reads

@@ -103,7 +103,6 @@ class CudaExecutor final : public numeric::Executor {
     index_t begin = 0, end = 0;
     bool lu = false, ldlt = false, dev_only = false;
     std::vector<std::int64_t> small, big, perm_off, big_perm_at, diag_off;
-    std::int64_t perm_at = 0;
     PinnedBuffer<std::int64_t> info, perturbed, perm;
     PinnedBuffer<int> pinfo, psize;
     PinnedBuffer<double> diag;
