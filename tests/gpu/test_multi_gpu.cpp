@@ -25,10 +25,30 @@ namespace {
   GTEST_SKIP() << (k) << " CUDA GPUs needed, " << numeric::cuda_device_count() \
                << " visible (or this build has no CUDA backend): multi-GPU test skipped"
 
-struct Problem {
-  std::string name;
-  SparseMatrix a;
-  MatrixType type;
+using Problem = test::NamedMatrix;
+
+// The references of a multi-GPU factor of `an`: the CPU's (2 threads) and GPU 0's alone
+// (its panels fetched to the host).
+void reference_factors(const Analysis& an, const std::vector<double>& v, MatrixType type,
+                       double pivot, const Options& o, numeric::NumericFactor& cpu_f,
+                       numeric::NumericFactor& gpu1_f) {
+  std::vector<double> arena;
+  numeric::factorize(an, v, type, pivot, *numeric::make_cpu_executor(2), cpu_f, arena);
+  auto gpu1 = numeric::make_cuda_executor(o, 0);
+  numeric::factorize(an, v, type, pivot, *gpu1, gpu1_f, arena);
+  numeric::fetch_panels(an, *gpu1, gpu1_f);
+}
+
+// One CUDA executor on each of GPUs 0 .. gpus − 1.
+struct GpuExecutors {
+  std::vector<std::unique_ptr<numeric::Executor>> owned;
+  std::vector<numeric::Executor*> execs;
+  GpuExecutors(const Options& o, int gpus) {
+    for (int d = 0; d < gpus; ++d) {
+      owned.push_back(numeric::make_cuda_executor(o, d));
+      execs.push_back(owned.back().get());
+    }
+  }
 };
 
 std::vector<Problem> problems(std::mt19937_64& rng) {
@@ -92,17 +112,9 @@ void factor_on_gpus(int gpus) {
     double pivot = 0;
     const std::vector<double> v = test::scaled_values(an, pr.a, &pivot);
     numeric::NumericFactor cpu_f, gpu1_f, multi_f;
-    std::vector<double> arena;
-    numeric::factorize(an, v, pr.type, pivot, *numeric::make_cpu_executor(2), cpu_f, arena);
-    auto gpu1 = numeric::make_cuda_executor(o, 0);
-    numeric::factorize(an, v, pr.type, pivot, *gpu1, gpu1_f, arena);
-    numeric::fetch_panels(an, *gpu1, gpu1_f);
-    std::vector<std::unique_ptr<numeric::Executor>> ex;
-    std::vector<numeric::Executor*> execs;
-    for (int d = 0; d < gpus; ++d) {
-      ex.push_back(numeric::make_cuda_executor(o, d));
-      execs.push_back(ex.back().get());
-    }
+    reference_factors(an, v, pr.type, pivot, o, cpu_f, gpu1_f);
+    const GpuExecutors gpu(o, gpus);
+    const std::vector<numeric::Executor*>& execs = gpu.execs;
     std::vector<std::vector<double>> arenas;
     std::vector<DeviceStats> dev;
     numeric::factorize_multi(an, v, pr.type, pivot, execs, multi_f, arenas, {}, &dev);
@@ -219,12 +231,8 @@ TEST(MultiGpu, SlowGpuHasItsSubtreesStolen) {
     ASSERT_GE(own[slow], 2);
     double pivot = 0;
     const std::vector<double> v = test::scaled_values(an, a, &pivot);
-    std::vector<std::unique_ptr<numeric::Executor>> ex;
-    std::vector<numeric::Executor*> execs;
-    for (int d = 0; d < gpus; ++d) {
-      ex.push_back(numeric::make_cuda_executor(o, d));
-      execs.push_back(ex.back().get());
-    }
+    const GpuExecutors gpu(o, gpus);
+    const std::vector<numeric::Executor*>& execs = gpu.execs;
     numeric::NumericFactor plain, slowed;
     std::vector<std::vector<double>> arenas;
     std::vector<DeviceStats> dev;
@@ -281,17 +289,9 @@ TEST(MultiGpu, UpperLayersMatchOneGpuAndCpu) {
       double pivot = 0;
       const std::vector<double> v = test::scaled_values(an, pr.a, &pivot);
       numeric::NumericFactor cpu_f, gpu1_f, on_f, off_f, kept_f;
-      std::vector<double> arena;
-      numeric::factorize(an, v, pr.type, pivot, *numeric::make_cpu_executor(2), cpu_f, arena);
-      auto gpu1 = numeric::make_cuda_executor(o, 0);
-      numeric::factorize(an, v, pr.type, pivot, *gpu1, gpu1_f, arena);
-      numeric::fetch_panels(an, *gpu1, gpu1_f);
-      std::vector<std::unique_ptr<numeric::Executor>> ex;
-      std::vector<numeric::Executor*> execs;
-      for (int d = 0; d < gpus; ++d) {
-        ex.push_back(numeric::make_cuda_executor(o, d));
-        execs.push_back(ex.back().get());
-      }
+      reference_factors(an, v, pr.type, pivot, o, cpu_f, gpu1_f);
+      const GpuExecutors gpu(o, gpus);
+      const std::vector<numeric::Executor*>& execs = gpu.execs;
       std::vector<std::vector<double>> arenas;
       std::vector<DeviceStats> dev;
       numeric::factorize_multi(an, v, pr.type, pivot, execs, on_f, arenas, {}, &dev);

@@ -25,11 +25,7 @@ namespace {
 
 using detail::SolverAccess;
 
-struct Problem {
-  std::string name;
-  SparseMatrix a;
-  MatrixType type;
-};
+using Problem = test::NamedMatrix;
 
 // spd, symmetric indefinite and general problems: generated 3D grids, shared matrices,
 // random matrices of awkward sizes.

@@ -37,11 +37,7 @@ int world_size() {
   return r;
 }
 
-struct Problem {
-  std::string name;
-  SparseMatrix a;  // empty on ranks other than 0
-  MatrixType type;
-};
+using Problem = test::NamedMatrix;
 
 // spd, symmetric indefinite and general problems (built on rank 0 only): generated 3D
 // grids, shared matrices, random matrices of awkward sizes.

@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "strata/options.hpp"
 #include "strata/sparse_matrix.hpp"
 
 namespace strata {
@@ -23,6 +24,13 @@ std::vector<std::string> shared_matrix_names();
 /// A fresh random engine, seeded from std::random_device; the seed is printed through
 /// gtest's RecordProperty/SCOPED_TRACE by the caller when it matters.
 std::mt19937_64 fresh_rng(unsigned long long* seed_out = nullptr);
+
+/// A test matrix, its name in traces, and the factorization type it is given.
+struct NamedMatrix {
+  std::string name;
+  SparseMatrix a;  ///< (MPI tests: empty on ranks other than 0)
+  MatrixType type;
+};
 
 /// A path under the system temporary folder that no other test process uses (name,
 /// process id and a random number): test binaries of several builds run side by side on

@@ -170,11 +170,7 @@ TEST(DistributedSerialize, RankLayoutsCoverTheFactor) {
   }
 }
 
-struct ScatterCase {
-  std::string name;
-  SparseMatrix a;
-  MatrixType type;
-};
+using ScatterCase = test::NamedMatrix;
 
 // Every type (with the matching's column permutation for general), awkward sizes.
 std::vector<ScatterCase> scatter_cases(std::mt19937_64& rng) {

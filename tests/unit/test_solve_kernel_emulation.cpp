@@ -298,11 +298,7 @@ void emulate_device_solve(const Analysis& an, const numeric::NumericFactor& fac,
   }
 }
 
-struct Problem {
-  std::string name;
-  SparseMatrix a;
-  MatrixType type;
-};
+using Problem = test::NamedMatrix;
 
 // Factors a on the CPU, then solves random right-hand sides both ways and compares.
 void check_problem(const Problem& pr, std::mt19937_64& rng, std::initializer_list<SolvePath> paths,
