@@ -79,6 +79,57 @@ FactorPart make_part(const symbolic::AssemblyTree& t, index_t root, std::vector<
   return p;
 }
 
+// The splitting sequence shared by layer 0 and the upper layers: states k = 0, 1, … of a
+// set of disjoint subtrees, from `roots`; state k + 1 replaces state k's heaviest subtree
+// (by w; ties: the larger front number, a fixed rule) by its children's subtrees, the
+// children being the members that children(h, kids) appends. stop(set, left) sees each
+// state (set: its subtrees; left: Σ front_flops of the fronts split so far, which leave
+// the subtrees) and ends the sequence by returning true; it also ends at `cap` subtrees
+// or when the heaviest subtree is a single member front. Returns the fronts split, in order.
+template <class Children, class Stop>
+std::vector<index_t> split_sequence(const symbolic::AssemblyTree& t, const std::vector<double>& w,
+                                    const std::vector<index_t>& roots, std::size_t cap,
+                                    Children&& children, Stop&& stop) {
+  const auto heavier = [&](index_t a, index_t b) { return w[a] < w[b] || (w[a] == w[b] && a < b); };
+  std::priority_queue<index_t, std::vector<index_t>, decltype(heavier)> heap(heavier);
+  for (const index_t r : roots) heap.push(r);
+  std::vector<index_t> sequence, set, kids;
+  double left = 0;
+  for (;;) {
+    set.clear();
+    for (auto copy = heap; !copy.empty(); copy.pop()) set.push_back(copy.top());
+    if (stop(set, left) || heap.empty() || heap.size() >= cap) break;
+    const index_t h = heap.top();
+    kids.clear();
+    children(h, kids);
+    if (kids.empty()) break;
+    heap.pop();
+    left += symbolic::front_flops(t, h);
+    for (const index_t c : kids) heap.push(c);
+    sequence.push_back(h);
+  }
+  return sequence;
+}
+
+// The subtree roots of the state after the first `k` splits of `sequence`: the members
+// not split whose parent is split or absent, by decreasing w (ties: increasing front).
+template <class Member>
+std::vector<index_t> state_roots(const symbolic::AssemblyTree& t, const std::vector<double>& w,
+                                 const std::vector<index_t>& sequence, std::size_t k,
+                                 Member&& member) {
+  const index_t nf = t.n_fronts();
+  std::vector<char> split(nf, 0);
+  for (std::size_t i = 0; i < k; ++i) split[sequence[i]] = 1;
+  std::vector<index_t> roots;
+  for (index_t f = 0; f < nf; ++f) {
+    const index_t p = t.parent[f];
+    if (member(f) && !split[f] && (p < 0 || split[p])) roots.push_back(f);
+  }
+  std::sort(roots.begin(), roots.end(),
+            [&](index_t a, index_t b) { return w[a] > w[b] || (w[a] == w[b] && a < b); });
+  return roots;
+}
+
 // One upper layer chosen from the fronts with in_top set (a set closed under parents):
 // the roots of its parts (decreasing work, ties: increasing root), empty when no state
 // is worth a layer. *makespan receives the layer's LPT makespan.
@@ -95,47 +146,31 @@ std::vector<index_t> choose_layer(const symbolic::AssemblyTree& t, const std::ve
     if (t.parent[f] >= 0) w[t.parent[f]] += w[f];  // the parent of a top front is in the top
   }
   if (top_work <= 0) return {};
-  const auto heavier = [&](index_t a, index_t b) { return w[a] < w[b] || (w[a] == w[b] && a < b); };
-  std::priority_queue<index_t, std::vector<index_t>, decltype(heavier)> heap(heavier);
+  std::vector<index_t> t_roots;
   for (index_t f = 0; f < nf; ++f)
-    if (in_top[f] && t.parent[f] < 0) heap.push(f);
-  const std::size_t cap = 64 * static_cast<std::size_t>(o.workers);
-  std::vector<index_t> sequence;
-  double left = 0;  // work of the fronts split so far: what stays in the top
-  std::size_t best_k = 0;
+    if (in_top[f] && t.parent[f] < 0) t_roots.push_back(f);
+  std::size_t k = 0, best_k = 0, best_count = 0;
   double best_time = 0, best_left = 0;
-  std::size_t best_count = 0;
-  for (std::size_t k = 0;; ++k) {
-    std::vector<index_t> cur;
-    for (auto copy = heap; !copy.empty(); copy.pop()) cur.push_back(copy.top());
-    const double time = score(cur, w, o.workers).makespan + left;
-    if (k == 0 || time < best_time) {
-      best_k = k;
-      best_time = time;
-      best_left = left;
-      best_count = cur.size();
-    }
-    if (heap.empty() || heap.size() >= cap) break;
-    const index_t h = heap.top();
-    std::vector<index_t> kids;
-    for (index_t q = t.child_offsets[h]; q < t.child_offsets[h + 1]; ++q)
-      if (in_top[t.children[q]]) kids.push_back(t.children[q]);
-    if (kids.empty()) break;  // a leaf of T': cannot split
-    heap.pop();
-    left += symbolic::front_flops(t, h);
-    for (const index_t c : kids) heap.push(c);
-    sequence.push_back(h);
-  }
+  const std::vector<index_t> sequence = split_sequence(
+      t, w, t_roots, 64 * static_cast<std::size_t>(o.workers),
+      [&](index_t h, std::vector<index_t>& kids) {
+        for (index_t q = t.child_offsets[h]; q < t.child_offsets[h + 1]; ++q)
+          if (in_top[t.children[q]]) kids.push_back(t.children[q]);
+      },
+      [&](const std::vector<index_t>& set, double left) {
+        const double time = score(set, w, o.workers).makespan + left;
+        if (k == 0 || time < best_time) {
+          best_k = k;
+          best_time = time;
+          best_left = left;
+          best_count = set.size();
+        }
+        ++k;
+        return false;
+      });
   if (best_count < 2 || best_time >= (1 - o.tolerance) * top_work) return {};
-  std::vector<char> split(nf, 0);
-  for (std::size_t k = 0; k < best_k; ++k) split[sequence[k]] = 1;
-  std::vector<index_t> roots;
-  for (index_t f = 0; f < nf; ++f) {
-    const index_t p = t.parent[f];
-    if (in_top[f] && !split[f] && (p < 0 || split[p])) roots.push_back(f);
-  }
-  std::sort(roots.begin(), roots.end(),
-            [&](index_t a, index_t b) { return w[a] > w[b] || (w[a] == w[b] && a < b); });
+  const std::vector<index_t> roots =
+      state_roots(t, w, sequence, best_k, [&](index_t f) { return in_top[f] != 0; });
   *makespan = best_time - best_left;
   return roots;
 }
@@ -196,66 +231,35 @@ TreePartition partition_tree(const symbolic::AssemblyTree& t, const PartitionOpt
   for (index_t f = 0; f < nf; ++f)
     if (t.parent[f] < 0) out.total_work += w[f];
 
-  // the splitting sequence: heaviest first (ties: the larger front number, a fixed rule)
-  const auto heavier = [&](index_t a, index_t b) { return w[a] < w[b] || (w[a] == w[b] && a < b); };
-  std::priority_queue<index_t, std::vector<index_t>, decltype(heavier)> heap(heavier);
-  std::vector<index_t> set;
+  // the splitting sequence from the roots' subtrees; the kept state is the best with
+  // enough subtrees (or the best of all), found again by replaying a prefix
+  std::vector<index_t> tree_roots;
   for (index_t f = 0; f < nf; ++f)
-    if (t.parent[f] < 0) {
-      heap.push(f);
-      set.push_back(f);
-    }
+    if (t.parent[f] < 0) tree_roots.push_back(f);
   const auto target = static_cast<std::size_t>(o.workers) * o.subtrees_per_worker;
-  const std::size_t cap = 64 * target;  // bounds the search on degenerate trees
-  std::vector<index_t> sequence;        // the fronts split, in order
-  double top_work = 0;
-  auto estimate = [&](std::size_t count, double* makespan, double* mean) {
-    // the heap holds exactly the current set
-    std::vector<index_t> cur;
-    cur.reserve(count);
-    auto copy = heap;
-    while (!copy.empty()) {
-      cur.push_back(copy.top());
-      copy.pop();
-    }
-    const Score s = score(cur, w, o.workers);
-    *makespan = s.makespan;
-    *mean = s.subtree_work / o.workers;
-    return s.makespan + top_work;
-  };
-  std::size_t best_k = 0;
+  std::size_t k = 0, best_k = 0;
   bool best_enough = false;
   double best_time = 0;
-  for (std::size_t k = 0;; ++k) {
-    double makespan = 0, mean = 0;
-    const double time = estimate(heap.size(), &makespan, &mean);
-    const bool enough = heap.size() >= target;
-    if (k == 0 || (enough && !best_enough) || (enough == best_enough && time < best_time)) {
-      best_k = k;
-      best_time = time;
-      best_enough = enough;
-    }
-    if (heap.empty() || (enough && makespan <= (1 + o.tolerance) * mean) || heap.size() >= cap)
-      break;
-    const index_t h = heap.top();
-    if (t.child_offsets[h + 1] == t.child_offsets[h]) break;  // a single front: cannot split
-    heap.pop();
-    top_work += symbolic::front_flops(t, h);
-    for (index_t q = t.child_offsets[h]; q < t.child_offsets[h + 1]; ++q) heap.push(t.children[q]);
-    sequence.push_back(h);
-  }
-
-  // replay the kept prefix
-  std::vector<char> split(nf, 0);
-  for (std::size_t k = 0; k < best_k; ++k) split[sequence[k]] = 1;
-  std::vector<index_t> roots;
-  for (index_t f = nf - 1; f >= 0; --f) {
-    // f is a subtree root when it is not split and its parent is split or absent
-    const index_t p = t.parent[f];
-    if (!split[f] && (p < 0 || split[p])) roots.push_back(f);
-  }
-  std::sort(roots.begin(), roots.end(),
-            [&](index_t a, index_t b) { return w[a] > w[b] || (w[a] == w[b] && a < b); });
+  const std::vector<index_t> sequence = split_sequence(
+      t, w, tree_roots, 64 * target,  // the cap bounds the search on degenerate trees
+      [&](index_t h, std::vector<index_t>& kids) {
+        for (index_t q = t.child_offsets[h]; q < t.child_offsets[h + 1]; ++q)
+          kids.push_back(t.children[q]);
+      },
+      [&](const std::vector<index_t>& set, double left) {
+        const Score sc = score(set, w, o.workers);
+        const double time = sc.makespan + left;
+        const bool enough = set.size() >= target;
+        if (k == 0 || (enough && !best_enough) || (enough == best_enough && time < best_time)) {
+          best_k = k;
+          best_time = time;
+          best_enough = enough;
+        }
+        ++k;
+        return enough && sc.makespan <= (1 + o.tolerance) * (sc.subtree_work / o.workers);
+      });
+  const std::vector<index_t> roots =
+      state_roots(t, w, sequence, best_k, [](index_t) { return true; });
   out.splits = static_cast<index_t>(best_k);
   out.part_of.assign(nf, -1);
   std::vector<double> items;
