@@ -47,6 +47,17 @@ std::string utc_now(const char* fmt) {
 Problem load_problem(const std::string& name) {
   Problem p;
   p.name = name;
+  const auto ends_with = [&](const std::string& x) {
+    return name.size() >= x.size() && name.compare(name.size() - x.size(), x.size(), x) == 0;
+  };
+  if (name.find('/') != std::string::npos && (ends_with(".mtx") || ends_with(".mtx.gz"))) {
+    MMMatrix mm = read_matrix_market(name);
+    p.name = std::filesystem::path(name).filename().string();
+    p.name = p.name.substr(0, p.name.find(".mtx"));
+    p.symmetric = mm.symmetry != MMSymmetry::general;
+    p.a = std::move(mm.matrix);
+    return p;
+  }
   auto dash = name.find('-');
   if (dash != std::string::npos) {
     const std::string kind = name.substr(0, dash);

@@ -12,8 +12,12 @@ namespace strata::bench {
 
 /// A benchmark problem: a shared SuiteSparse matrix by name ("bcsstk16"), or a generated
 /// one: "lap3d-N" (7-point Laplacian N³), "elast3d-N" (3-dof 27-point stencil N³),
-/// "lap2d-N", "uelast3d-N" (elasticity pattern, unsymmetric values). Symmetric problems
-/// come as Storage::lower.
+/// "lap2d-N", "uelast3d-N" (elasticity pattern, unsymmetric values), or a Matrix Market
+/// file given by a path with a '/' ending in .mtx or .mtx.gz (e.g. a multibody Newton
+/// matrix written by `strata simulate --dump-matrix`): its name is then the file's name
+/// without the folder and the .mtx / .mtx.gz ending.
+/// Symmetric problems come as Storage::lower. Throws InvalidInput for an unknown name,
+/// the reader's errors for a file.
 struct Problem {
   std::string name;
   SparseMatrix a;

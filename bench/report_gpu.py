@@ -629,8 +629,13 @@ class GpuSections:
     def multigpu_group(self, rs: list[Run], machine: tuple, unit: str) -> None:
         self.consumed.update(r.path for r in rs)
         cfg: dict[tuple, dict] = {}
+        budget: dict[tuple, dict] = {}  # rows under a device budget (--budget-share), apart
         for r in sorted(rs, key=lambda r: (r.date, r.name)):  # newer runs override
             for row in r.rows:
+                if isinstance(row, dict) and (num(row.get("budget_share_ratio")) or 0) > 0:
+                    budget[(row.get("problem"), int(num(row.get("workers")) or 0),
+                            num(row.get("budget_share_ratio")))] = row
+                    continue
                 if isinstance(row, dict) and num(row.get("workers")) is not None:
                     # rows without split_top predate the top split: they ran the
                     # defaults of their time and count as the default here
@@ -742,6 +747,33 @@ class GpuSections:
         self.w(table(["problem", "workers", "subtrees per worker", "default s",
                       "balance by work on", "subtrees 1", "no stealing", "no top split",
                       "top split"], abl_rows, 2))
+        if budget:
+            brows = []
+            for (p, w, share), row in sorted(budget.items(), key=lambda kv: (str(kv[0][0]),
+                                                                            kv[0][1], kv[0][2])):
+                s = int(num(row.get("subtrees_per_worker")) or 0)
+                in_core = t(p, w, s, False, True) if p in s_max else None
+                fb = num(row.get("factor_bytes"))
+                brows.append([str(p), str(w), f"{share:g}",
+                              f_g(fb / w * 1e-6) if fb is not None else "–",
+                              f_g((num(row.get("device_memory_limit")) or 0) * 1e-6),
+                              f_sec(row.get("factor_seconds")), f_sec(in_core),
+                              f_ratio(ratio(num(row.get("factor_seconds")), in_core)),
+                              f_int(row.get("tiled_fronts")),
+                              "yes" if row.get("contribution_blocks_on_host") else "no",
+                              f_g((num(row.get("bytes_to_device")) or 0) * 1e-6),
+                              f_g((num(row.get("bytes_to_host")) or 0) * 1e-6),
+                              f_g(row.get("backward_error"))])
+            self.w(f"Under a device memory budget far below each {unit}'s share of the factor "
+                   f"(`--budget-share R`: budget = factor bytes / {unit}s / R): the "
+                   f"factorization completes; seconds against the same configuration in "
+                   f"core from the table above (– where the run had none), fronts factored "
+                   f"tile by tile, contribution blocks spilled to the host, megabytes moved "
+                   f"each way, backward error.")
+            self.w()
+            self.w(table(["problem", unit + "s", "share / budget", f"factor MB per {unit}",
+                          "budget MB", "factor s", "in core s", "slowdown", "tiled fronts",
+                          "CBs spilled", "MB to device", "MB to host", "berr"], brows, 2))
         if dev_rows:
             self.w(f"Per {unit} (default configuration, last factorization of the run): busy and idle "
                    f"seconds, busy share, subtrees run and stolen, upper-layer parts run, bytes "
@@ -786,6 +818,40 @@ class GpuSections:
             self.w()
         for r in chosen:
             self.solvability_run(r)
+        kernels = [r for r in runs if r.kind == "gpu_memory" and r.get("front_kernels")]
+        if kernels:
+            self.front_kernels_table(max(kernels, key=lambda r: (r.date, r.name)))
+
+    def front_kernels_table(self, r: Run) -> None:
+        """The dense kernels of a large front, by shape (bench_gpu_memory --parts kernels):
+        where the factorization's rate is lost against the DGEMM peak."""
+        self.consumed.add(r.path)
+        fk = r.get("front_kernels")
+        peak = num(fk.get("dgemm_flops_per_second"))
+        keys = [("potrf", "POTRF k×k"), ("trsm", "TRSM (m−k)×k"), ("syrk", "SYRK rank k"),
+                ("gemm_blocked_512", "GEMMs, 512-column blocks"),
+                ("gemm_blocked_1024", "GEMMs, 1024"), ("gemm_blocked_2048", "GEMMs, 2048"),
+                ("gemm_full", "one GEMM, full square")]
+        rows = []
+        for row in fk.get("rows") or []:
+            cells = [f_int(row.get("m")), f_int(row.get("k"))]
+            for k, _ in keys:
+                x = num(row.get(k + "_flops_per_second"))
+                cells.append("–" if x is None else
+                             f"{x * 1e-12:.1f}" + (f" ({x / peak:.0%})" if peak else ""))
+            rows.append(cells)
+        self.w("### Dense kernels at the shapes of large fronts")
+        self.w()
+        self.w(f"TFLOP/s (in brackets: of the DGEMM peak, {f_g(peak and peak * 1e-12)} TFLOP/s) "
+               f"that cuBLAS / cuSOLVER reach on one front of m rows and k pivots, each kernel "
+               f"alone, best of 3 ({machine_label(r.machine)}, {r.date}, commit "
+               f"{r.get('git_commit') or '?'}; `{r.get('command')}`): the factorization of "
+               f"the pivot block and the panel below it, then the rank-k update of the "
+               f"contribution block by DSYRK and by GEMMs over column blocks (credited with "
+               f"the update's (m−k)²·k flops) and by one GEMM of the full square (its own "
+               f"2·(m−k)²·k).")
+        self.w()
+        self.w(table(["m", "k"] + [n for _, n in keys], rows, 0))
 
     def device_table(self, r: Run) -> None:
         f = r.get("device_figures")

@@ -31,6 +31,13 @@
 // stealing), so that the worker exporting a block knows which worker will import it. The
 // estimate "makespan + work left" counts no transfers: a layer's parts read the blocks of
 // their children in lower layers, one block per such child, as the top part did.
+// Within a layer's choice, the work left above the candidate parts is not counted as
+// serial: later layers split it again, so it is estimated by Graham's lower bound for any
+// schedule of it, max(its critical path, its work / workers) — the critical path being the
+// heaviest root-to-leaf chain of its fronts (Graham, SIAM J. Appl. Math. 17, 1969). Counted
+// as serial, a deeper split always looked worse on 3D nested-dissection trees (splitting
+// a part moves its root separator, which outweighs a grandchild subtree, into "left"), and
+// lap3d 80³ on 4 workers got one layer of 2 parts with two workers idle.
 //
 // Then each part gets its own level schedule, memory plan (same budget) and arena
 // layout, so that a worker can factor it alone: fronts are numbered in postorder, so a
@@ -84,8 +91,9 @@ FactorPart make_part(const symbolic::AssemblyTree& t, index_t root, std::vector<
 // (by w; ties: the larger front number, a fixed rule) by its children's subtrees, the
 // children being the members that children(h, kids) appends. stop(set, left) sees each
 // state (set: its subtrees; left: Σ front_flops of the fronts split so far, which leave
-// the subtrees) and ends the sequence by returning true; it also ends at `cap` subtrees
-// or when the heaviest subtree is a single member front. Returns the fronts split, in order.
+// the subtrees; path: the heaviest chain of split fronts from a root down, by
+// front_flops) and ends the sequence by returning true; it also ends at `cap` subtrees or
+// when the heaviest subtree is a single member front. Returns the fronts split, in order.
 template <class Children, class Stop>
 std::vector<index_t> split_sequence(const symbolic::AssemblyTree& t, const std::vector<double>& w,
                                     const std::vector<index_t>& roots, std::size_t cap,
@@ -94,17 +102,23 @@ std::vector<index_t> split_sequence(const symbolic::AssemblyTree& t, const std::
   std::priority_queue<index_t, std::vector<index_t>, decltype(heavier)> heap(heavier);
   for (const index_t r : roots) heap.push(r);
   std::vector<index_t> sequence, set, kids;
-  double left = 0;
+  // chain[f]: the split fronts' work from a root down to f (a split front's parent is
+  // split or outside the members, so it is known when f is split)
+  std::vector<double> chain(t.n_fronts(), 0.0);
+  double left = 0, path = 0;
   for (;;) {
     set.clear();
     for (auto copy = heap; !copy.empty(); copy.pop()) set.push_back(copy.top());
-    if (stop(set, left) || heap.empty() || heap.size() >= cap) break;
+    if (stop(set, left, path) || heap.empty() || heap.size() >= cap) break;
     const index_t h = heap.top();
     kids.clear();
     children(h, kids);
     if (kids.empty()) break;
     heap.pop();
-    left += symbolic::front_flops(t, h);
+    const double x = symbolic::front_flops(t, h);
+    left += x;
+    chain[h] = x + (t.parent[h] >= 0 ? chain[t.parent[h]] : 0.0);
+    path = std::max(path, chain[h]);
     for (const index_t c : kids) heap.push(c);
     sequence.push_back(h);
   }
@@ -150,19 +164,21 @@ std::vector<index_t> choose_layer(const symbolic::AssemblyTree& t, const std::ve
   for (index_t f = 0; f < nf; ++f)
     if (in_top[f] && t.parent[f] < 0) t_roots.push_back(f);
   std::size_t k = 0, best_k = 0, best_count = 0;
-  double best_time = 0, best_left = 0;
+  double best_time = 0, best_above = 0;
   const std::vector<index_t> sequence = split_sequence(
       t, w, t_roots, 64 * static_cast<std::size_t>(o.workers),
       [&](index_t h, std::vector<index_t>& kids) {
         for (index_t q = t.child_offsets[h]; q < t.child_offsets[h + 1]; ++q)
           if (in_top[t.children[q]]) kids.push_back(t.children[q]);
       },
-      [&](const std::vector<index_t>& set, double left) {
-        const double time = score(set, w, o.workers).makespan + left;
+      [&](const std::vector<index_t>& set, double left, double path) {
+        // what later layers can make of the fronts left above: Graham's bound
+        const double above = std::max(path, left / o.workers);
+        const double time = score(set, w, o.workers).makespan + above;
         if (k == 0 || time < best_time) {
           best_k = k;
           best_time = time;
-          best_left = left;
+          best_above = above;
           best_count = set.size();
         }
         ++k;
@@ -171,7 +187,7 @@ std::vector<index_t> choose_layer(const symbolic::AssemblyTree& t, const std::ve
   if (best_count < 2 || best_time >= (1 - o.tolerance) * top_work) return {};
   const std::vector<index_t> roots =
       state_roots(t, w, sequence, best_k, [&](index_t f) { return in_top[f] != 0; });
-  *makespan = best_time - best_left;
+  *makespan = best_time - best_above;
   return roots;
 }
 
@@ -246,7 +262,7 @@ TreePartition partition_tree(const symbolic::AssemblyTree& t, const PartitionOpt
         for (index_t q = t.child_offsets[h]; q < t.child_offsets[h + 1]; ++q)
           kids.push_back(t.children[q]);
       },
-      [&](const std::vector<index_t>& set, double left) {
+      [&](const std::vector<index_t>& set, double left, double) {
         const Score sc = score(set, w, o.workers);
         const double time = sc.makespan + left;
         const bool enough = set.size() >= target;

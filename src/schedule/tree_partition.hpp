@@ -105,7 +105,8 @@ struct TreePartition {
 /// whose leaves read the subtree roots' blocks. The same splitting runs on T', with the
 /// work of a T' subtree counted over its T' fronts only: start from T''s roots, split the
 /// heaviest into its T' children (its root front stays in the top), score each state by
-/// LPT makespan + the work left in the top, and keep the best. When that best state has
+/// LPT makespan + the bound on what later layers can do with the fronts left above,
+/// max(their heaviest root-to-leaf chain, their work / workers), and keep the best. When that best state has
 /// at least 2 parts and cuts the estimate by more than tolerance × the top's work, its
 /// parts become the next layer and the search runs again on what is left (at most
 /// kMaxUpperLayers layers); the final remainder is the top part.
