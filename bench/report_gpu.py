@@ -828,7 +828,8 @@ class GpuSections:
         self.consumed.add(r.path)
         fk = r.get("front_kernels")
         peak = num(fk.get("dgemm_flops_per_second"))
-        keys = [("potrf", "POTRF k×k"), ("trsm", "TRSM (m−k)×k"), ("syrk", "SYRK rank k"),
+        keys = [("potrf", "POTRF k×k"), ("trsm", "TRSM (m−k)×k"), ("trtri", "TRTRI k×k"),
+                ("trsm_by_inverse", "TRSM as TRTRI + GEMM"), ("syrk", "SYRK rank k"),
                 ("gemm_blocked_512", "GEMMs, 512-column blocks"),
                 ("gemm_blocked_1024", "GEMMs, 1024"), ("gemm_blocked_2048", "GEMMs, 2048"),
                 ("gemm_full", "one GEMM, full square")]
@@ -844,7 +845,9 @@ class GpuSections:
         self.w()
         self.w(f"TFLOP/s (in brackets: of the DGEMM peak, {f_g(peak and peak * 1e-12)} TFLOP/s) "
                f"that cuBLAS / cuSOLVER reach on one front of m rows and k pivots, each kernel "
-               f"alone, best of 3 ({machine_label(r.machine)}, {r.date}, commit "
+               f"alone, best of 3; *TRSM as TRTRI + GEMM*: L11 copied, inverted by cuSOLVER "
+               f"Xtrtri, the panel multiplied by the inverse into a buffer and copied back, "
+               f"credited with TRSM's flops ({machine_label(r.machine)}, {r.date}, commit "
                f"{r.get('git_commit') or '?'}; `{r.get('command')}`): the factorization of "
                f"the pivot block and the panel below it, then the rank-k update of the "
                f"contribution block by DSYRK and by GEMMs over column blocks (credited with "
