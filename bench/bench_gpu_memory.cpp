@@ -28,6 +28,7 @@
 #include <cstdio>
 
 #include "bench_common.hpp"
+#include "core/stats_json.hpp"
 #include "core/timer.hpp"
 #include "numeric/factor.hpp"
 #include "strata/strata.hpp"
@@ -373,7 +374,8 @@ int main(int argc, char** argv) {
                       {"factor_resident", r.fs.factor_resident},
                       {"solve_seconds", r.solve_seconds},
                       {"solve_on_device", r.on_device},
-                      {"backward_error", r.berr}});
+                      {"backward_error", r.berr},
+                      {"factor_phases", r.fs.device_phases}});
       fmt::print(
           "{:<14} {:>6} {:>10.1f} {:>9.4f} {:>9.4f} {:>9.2f} {:>6} {:>7} {:>9.4f} {:>8.1e}\n", name,
           ratio > 0 ? fmt::format("{:g}", ratio) : "core", ob.device_memory_limit * 1e-6, r.seconds,

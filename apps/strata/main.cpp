@@ -353,10 +353,10 @@ int run_solve(const SolveArgs& a, const Communicator& comm) {
       const auto& ph = f.device_phases;
       fmt::print(
           "  GPU phases          assembly {:.3f} s, small fronts {:.3f} s, large fronts {:.3f} "
-          "s, stores {:.3f} s, tiled fronts {:.3f} s; host after each group {:.3f} s; device "
-          "set-up {:.3f} s\n",
-          ph.assembly, ph.small_fronts, ph.large_fronts, ph.store, ph.tiled_fronts, ph.host,
-          ph.setup);
+          "s, stores {:.3f} s, tiled fronts {:.3f} s (assembly {:.3f}, slabs {:.3f}, stores "
+          "{:.3f}); host after each group {:.3f} s; device set-up {:.3f} s\n",
+          ph.assembly, ph.small_fronts, ph.large_fronts, ph.store, ph.tiled_fronts,
+          ph.tiled_assembly, ph.tiled_slabs, ph.tiled_store, ph.host, ph.setup);
     }
     for (const DeviceStats& d : f.devices)
       fmt::print(

@@ -121,7 +121,14 @@ struct FactorStats {
     double large_fronts = 0;  ///< library calls (POTRF/GETRF/TRSM/SYRK/GEMM) and panels
     double store = 0;         ///< contribution blocks stored, panels packed
     double tiled_fronts = 0;  ///< fronts over the budget, slab by slab (wall time)
-    double host = 0;          ///< see above
+    /// Parts of tiled_fronts (wall time): the front assembled into pinned host memory by
+    /// the device over the bus (tiled_assembly), the slabs and trailing column blocks
+    /// moved and updated (tiled_slabs), the contribution block and the panels copied out
+    /// and the per-front bookkeeping (tiled_store).
+    double tiled_assembly = 0;
+    double tiled_slabs = 0;
+    double tiled_store = 0;
+    double host = 0;  ///< see above
     /// Wall time preparing the device, not in the groups above: the analysis arrays
     /// uploaded, the device memory planned and allocated, the library handles and streams
     /// created, the solve's row arrays uploaded. A refactorization with the same analysis

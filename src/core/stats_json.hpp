@@ -13,9 +13,16 @@ namespace strata {
 
 /// GPU seconds per phase of a factorization (FactorStats::device_phases).
 inline void to_json(nlohmann::json& j, const FactorStats::DevicePhases& d) {
-  j = {{"assembly", d.assembly}, {"small_fronts", d.small_fronts}, {"large_fronts", d.large_fronts},
-       {"store", d.store},       {"tiled_fronts", d.tiled_fronts}, {"host", d.host},
-       {"setup", d.setup}};
+  j = {{"assembly", d.assembly},
+       {"small_fronts", d.small_fronts},
+       {"large_fronts", d.large_fronts},
+       {"store", d.store},
+       {"tiled_fronts", d.tiled_fronts},
+       {"host", d.host},
+       {"setup", d.setup},
+       {"tiled_assembly", d.tiled_assembly},
+       {"tiled_slabs", d.tiled_slabs},
+       {"tiled_store", d.tiled_store}};
 }
 
 /// One worker (GPU) of a multi-worker factorization (FactorStats::devices).

@@ -101,6 +101,9 @@ void merge_device_figures(FactorStats& into, const FactorStats& one) {
   d.large_fronts += o.large_fronts;
   d.store += o.store;
   d.tiled_fronts += o.tiled_fronts;
+  d.tiled_assembly += o.tiled_assembly;
+  d.tiled_slabs += o.tiled_slabs;
+  d.tiled_store += o.tiled_store;
   d.host += o.host;
   d.setup += o.setup;
 }

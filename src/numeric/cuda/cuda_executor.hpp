@@ -2,6 +2,7 @@
 // public header). The implementation is split by concern:
 //   cuda_executor.cu  device memory plan, analysis upload, in-core batches, bookkeeping;
 //   tiled_front.cu    fronts larger than the device budget, factored slab by slab;
+//   tiled_host.cpp    their assembly on the host's threads;
 //   cuda_solve.cu     triangular solves on the device with a resident factor.
 #pragma once
 
@@ -117,6 +118,11 @@ class CudaExecutor final : public numeric::Executor {
   void flush_chunk(const numeric::FactorContext& ctx);
   void finish_chunk(const numeric::FactorContext& ctx, ChunkRecord& c);
   void factor_tiled(const numeric::FactorContext& ctx, index_t pos);
+  /// Front f (m × m) assembled on the host's threads into H: zeroed, the original
+  /// entries, then each child's block in child order (a block on the device copied to
+  /// host_staging_ first) — the device kernel's additions in its order, so H is bitwise
+  /// the front the kernel would make. LLᵀ and LDLᵀ add lower triangles only.
+  void assemble_on_host(const numeric::FactorContext& ctx, index_t f, double* H, bool symmetric);
   /// A large LU front of the current chunk: its lane, the front in the pool (m×m, k
   /// pivots), where its local row permutation and perturbed-pivot count go.
   struct LuFront {
@@ -152,6 +158,7 @@ class CudaExecutor final : public numeric::Executor {
   // analysis arrays (fronts_: the whole tree's schedule, for the device solve)
   DeviceBuffer<std::int64_t> fronts_, n_rows_, n_pivots_, parent_, entry_offsets_, entry_src_,
       entry_dst_, child_offsets_, children_, rel_offsets_, rel_;
+  std::vector<std::int64_t> rel_host_, rel_offsets_host_;  // host copies: assemble_on_host
   std::map<int, PartDevice> parts_;  ///< by PartView::id: -1 whole tree, 0..P subtrees, top
   PartDevice* cur_ = nullptr;        ///< the part being factored
   bool whole_ = true;                ///< the last factorization was of the whole tree

@@ -1,10 +1,10 @@
 // strata — a front larger than the device budget, factored slab by slab (issue 5's
 // "any device memory").
 //
-// The front F (m×m, column-major) is assembled by the usual kernel straight into pinned
-// host memory, which the device reads and writes over the bus (mapped, unified
-// addressing). It is then factored right-looking by slabs of w columns, w chosen so that
-// a slab and one column block of the trailing matrix fit the device pool (2·m·w
+// The front F (m×m, column-major) is assembled into pinned host memory by the host's
+// threads (tiled_host.cpp; the device kernel did it over the bus, slower). It is then
+// factored right-looking by slabs of w columns, w chosen so that
+// a slab and two column blocks of the trailing matrix fit the device pool (3·m·w
 // doubles):
 //   for each slab p0 .. p0+w of the k pivot columns:
 //     upload the slab (rows p0..m) and factor it on the device —
@@ -15,9 +15,12 @@
 //     download it; then for each column block jb of the trailing matrix: upload it,
 //       LLᵀ: SYRK on its diagonal part, GEMM below (lower triangle only);
 //       LU:  TRSM of its w rows by L11 (they become U12), GEMM below;
-//     and download it.
-// The contribution block F[k:m, k:m] is then copied where the device plan keeps it, and
-// the panels into the host factor (and the resident device factor, if any).
+//     and download it — the blocks alternate between two lanes (streams) with a buffer
+//     each, so that one block's transfers run while the other's update computes.
+// The contribution block F[k:m, k:m] is then copied where the device plan keeps it (by
+// the host's threads when that is the host arena: a 2-D cudaMemcpy between host buffers
+// was 60% of lap3d 100³'s factorization under a budget of 1/20 of its factor), and the
+// panels into the host factor (and the resident device factor, if any).
 // Traffic is about k·m²/w doubles each way: this is the slow, always-possible path; the
 // memory plan makes it the exception (a front whose working set alone exceeds the budget).
 //
@@ -30,6 +33,7 @@
 #include <cmath>
 #include <cstring>
 
+#include "core/host_copy.hpp"
 #include "numeric/cuda/cuda_executor.hpp"
 
 namespace strata::cuda {
@@ -69,14 +73,17 @@ void CudaExecutor::factor_tiled(const numeric::FactorContext& ctx, index_t pos) 
   ++chunks_;
   host_front_.resize(static_cast<std::size_t>(m) * m);
   double* H = host_front_.data();
-  launch_assemble(cur_->tree, pos, 1, m, values_.data(), H, !lu, stream_);  // pos_offset[pos] is 0
-  STRATA_CUDA(cudaStreamSynchronize(stream_));
+  assemble_on_host(ctx, f, H, !lu);  // tiled_host.cpp
+  const auto slabs_start = std::chrono::steady_clock::now();
+  phases_.tiled_assembly += std::chrono::duration<double>(slabs_start - wall_start).count();
 
   const std::int64_t w_max = std::max<std::int64_t>(
       1, std::min<std::int64_t>(std::max<std::int64_t>(k, 1),
-                                static_cast<std::int64_t>(plan_.pool) / (2 * m)));
+                                static_cast<std::int64_t>(plan_.pool) / (3 * m)));
   double* S = pool_.data();
-  double* C = pool_.data() + static_cast<std::size_t>(m) * w_max;
+  double* const Cbuf[2] = {pool_.data() + static_cast<std::size_t>(m) * w_max,
+                           pool_.data() + 2 * static_cast<std::size_t>(m) * w_max};
+  std::vector<std::unique_ptr<Lane>>& lane = lanes();  // lanes 1 and 2: the column blocks
   const double one = 1.0, minus_one = -1.0;
   std::vector<std::int64_t> fperm(k), sperm(k);
   for (std::int64_t i = 0; i < k; ++i) fperm[i] = i;
@@ -131,40 +138,53 @@ void CudaExecutor::factor_tiled(const numeric::FactorContext& ctx, index_t pos) 
       std::vector<std::int64_t> old(fperm.begin() + p0, fperm.end());
       for (std::int64_t i = 0; i < kk; ++i) fperm[p0 + i] = old[sperm[i]];
     }
+    // the lanes start when the slab is factored; its download overlaps their work
+    STRATA_CUDA(cudaEventRecord(lane[0]->done, stream_));
+    for (int l = 1; l <= 2; ++l)
+      STRATA_CUDA(cudaStreamWaitEvent(lane[l]->stream, lane[0]->done, 0));
     copy_block(stream_, S, H, m, p0, p0, r, w, false);
     bytes_d2h_ += sizeof(double) * r * w;
-    // the trailing matrix, one column block at a time
-    for (std::int64_t jb = p0 + w; jb < m; jb += w_max) {
+    // the trailing matrix, one column block at a time, on lanes 1 and 2 alternately
+    std::int64_t block = 0;
+    for (std::int64_t jb = p0 + w; jb < m; jb += w_max, ++block) {
       const std::int64_t wb = std::min(w_max, m - jb);
+      Lane& ln = *lane[1 + block % 2];
+      const cudaStream_t cs = ln.stream;
+      const cublasHandle_t cb = ln.blas;
+      double* const C = Cbuf[block % 2];
       if (!lu) {
         const std::int64_t rr = m - jb;  // lower triangle: rows jb..m
         const double* Lj = S + (jb - p0);
-        copy_block(stream_, C, H, m, jb, jb, rr, wb, true);
-        STRATA_CUBLAS(cublasDsyrk(blas_, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N, static_cast<int>(wb),
+        copy_block(cs, C, H, m, jb, jb, rr, wb, true);
+        STRATA_CUBLAS(cublasDsyrk(cb, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N, static_cast<int>(wb),
                                   static_cast<int>(w), &minus_one, Lj, static_cast<int>(r), &one, C,
                                   static_cast<int>(rr)));
         if (rr > wb)
-          STRATA_CUBLAS(cublasDgemm(blas_, CUBLAS_OP_N, CUBLAS_OP_T, static_cast<int>(rr - wb),
+          STRATA_CUBLAS(cublasDgemm(cb, CUBLAS_OP_N, CUBLAS_OP_T, static_cast<int>(rr - wb),
                                     static_cast<int>(wb), static_cast<int>(w), &minus_one, Lj + wb,
                                     static_cast<int>(r), Lj, static_cast<int>(r), &one, C + wb,
                                     static_cast<int>(rr)));
-        copy_block(stream_, C, H, m, jb, jb, rr, wb, false);
+        copy_block(cs, C, H, m, jb, jb, rr, wb, false);
         bytes_h2d_ += sizeof(double) * rr * wb;
         bytes_d2h_ += sizeof(double) * rr * wb;
       } else {
-        copy_block(stream_, C, H, m, p0, jb, r, wb, true);
-        STRATA_CUBLAS(cublasDtrsm(blas_, CUBLAS_SIDE_LEFT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N,
+        copy_block(cs, C, H, m, p0, jb, r, wb, true);
+        STRATA_CUBLAS(cublasDtrsm(cb, CUBLAS_SIDE_LEFT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N,
                                   CUBLAS_DIAG_UNIT, static_cast<int>(w), static_cast<int>(wb), &one,
                                   S, static_cast<int>(r), C, static_cast<int>(r)));
         if (r > w)
-          STRATA_CUBLAS(cublasDgemm(blas_, CUBLAS_OP_N, CUBLAS_OP_N, static_cast<int>(r - w),
+          STRATA_CUBLAS(cublasDgemm(cb, CUBLAS_OP_N, CUBLAS_OP_N, static_cast<int>(r - w),
                                     static_cast<int>(wb), static_cast<int>(w), &minus_one, S + w,
                                     static_cast<int>(r), C, static_cast<int>(r), &one, C + w,
                                     static_cast<int>(r)));
-        copy_block(stream_, C, H, m, p0, jb, r, wb, false);
+        copy_block(cs, C, H, m, p0, jb, r, wb, false);
         bytes_h2d_ += sizeof(double) * r * wb;
         bytes_d2h_ += sizeof(double) * r * wb;
       }
+    }
+    for (int l = 1; l <= 2; ++l) {  // the next slab reads what the lanes wrote to H
+      STRATA_CUDA(cudaEventRecord(lane[l]->done, lane[l]->stream));
+      STRATA_CUDA(cudaStreamWaitEvent(stream_, lane[l]->done, 0));
     }
     STRATA_CUDA(cudaStreamSynchronize(stream_));
   }
@@ -174,17 +194,23 @@ void CudaExecutor::factor_tiled(const numeric::FactorContext& ctx, index_t pos) 
     STRATA_CUDA(cudaStreamSynchronize(stream_));
   }
 
+  const auto store_start = std::chrono::steady_clock::now();
+  phases_.tiled_slabs += std::chrono::duration<double>(store_start - slabs_start).count();
   // contribution block to where the plan keeps it; panels to the host factor
   const std::int64_t mc = m - k;
-  if (mc > 0 && t.parent[f] >= 0)
-    STRATA_CUDA(cudaMemcpy2DAsync(cur_->cb_ptr_host[f], sizeof(double) * mc, H + k * m + k,
-                                  sizeof(double) * m, sizeof(double) * mc, mc, cudaMemcpyDefault,
-                                  stream_));
+  if (mc > 0 && t.parent[f] >= 0) {
+    double* const dst = cur_->cb_ptr_host[f];
+    const bool host_dst =
+        dst >= host_arena_.data() && dst < host_arena_.data() + host_arena_.size();
+    if (host_dst)
+      parallel_copy_2d(dst, mc, H + k * m + k, m, mc, mc);
+    else
+      STRATA_CUDA(cudaMemcpy2DAsync(dst, sizeof(double) * mc, H + k * m + k, sizeof(double) * m,
+                                    sizeof(double) * mc, mc, cudaMemcpyHostToDevice, stream_));
+  }
   double* panel = ctx.factor->panels.data() + an.factor_layout.panel_offset[f];
-  std::memcpy(panel, H, sizeof(double) * m * k);
-  if (lu)
-    for (std::int64_t j = 0; j < mc; ++j)
-      for (std::int64_t i = 0; i < k; ++i) panel[m * k + j * k + i] = H[(k + j) * m + i];
+  parallel_copy(panel, H, static_cast<std::size_t>(m) * k);
+  if (lu) parallel_copy_2d(panel + m * k, k, H + k * m, m, k, mc);  // U12, k × mc
   if (keep_resident()) {
     const std::size_t sz = panel_size(t, f, lu);
     STRATA_CUDA(cudaMemcpyAsync(panels_.data() + an.factor_layout.panel_offset[f], panel,
@@ -195,8 +221,9 @@ void CudaExecutor::factor_tiled(const numeric::FactorContext& ctx, index_t pos) 
   std::vector<double> diag(k);
   for (std::int64_t i = 0; i < k; ++i) diag[i] = panel[i * m + i];
   finish_front(ctx, f, -1, npert, fperm.data(), diag.data());
-  phases_.tiled_fronts +=
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();
+  const auto end = std::chrono::steady_clock::now();
+  phases_.tiled_store += std::chrono::duration<double>(end - store_start).count();
+  phases_.tiled_fronts += std::chrono::duration<double>(end - wall_start).count();
 }
 
 }  // namespace strata::cuda
