@@ -8,9 +8,11 @@
 // 12.8 s factorization of lap3d 100³ under 1/20 of its factor on the H100 (commit
 // 4c2899b, bench/results/gpu-memory-phases-20261122T024659Z.json). On the host the same
 // additions run at memory bandwidth; a child block that stayed on the device comes over in
-// one DMA copy. The order of the additions is the kernel's (entries, then children one
-// after another, each destination written once per child), so the front is bitwise the
-// same.
+// one DMA copy. The front is built by blocks of columns, in parallel, each block zeroed and
+// then given its entries and each child's columns that land in it while it is in cache
+// (the device kernel's slices, on the host). The order of the additions is the kernel's
+// (entries, then children one after another, each destination written once per child), so
+// the front is bitwise the same.
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -27,36 +29,67 @@ void CudaExecutor::assemble_on_host(const numeric::FactorContext& ctx, index_t f
   const std::int64_t m = t.n_rows(f);
   // the children's blocks were stored by kernels on stream_: they must have landed
   STRATA_CUDA(cudaStreamSynchronize(stream_));
-  tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, m, 64),
-                    [&](const auto& r) { std::fill(H + r.begin() * m, H + r.end() * m, 0.0); });
-  const auto& am = an.assembly;
-  for (index_t e = am.entry_offsets[f]; e < am.entry_offsets[f + 1]; ++e)
-    H[am.entry_dst[e]] += ctx.values[am.entry_src[e]];  // distinct destinations
+  // each child's block: in the host arena, or copied from the device into host_staging_
+  // (all such blocks one after another, one wait)
   const double* arena_begin = host_arena_.data();
   const double* arena_end = arena_begin + host_arena_.size();
-  for (index_t q = t.child_offsets[f]; q < t.child_offsets[f + 1]; ++q) {
-    const index_t c = t.children[q];
-    const std::int64_t mc = t.cb_size(c);
-    if (mc == 0) continue;
-    const double* cb = cur_->cb_ptr_host[c];
-    if (cb < arena_begin || cb >= arena_end) {  // on the device: one copy over
-      host_staging_.resize(static_cast<std::size_t>(mc) * mc);
-      STRATA_CUDA(cudaMemcpyAsync(host_staging_.data(), cb, sizeof(double) * mc * mc,
-                                  cudaMemcpyDeviceToHost, stream_));
-      STRATA_CUDA(cudaStreamSynchronize(stream_));
-      bytes_d2h_ += sizeof(double) * mc * mc;
-      cb = host_staging_.data();
-    }
-    const std::int64_t* rel = rel_host_.data() + rel_offsets_host_[c];
-    // the child's columns go to distinct front columns: no two tasks write one entry
-    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, mc, 16), [&](const auto& r) {
-      for (std::int64_t jj = r.begin(); jj < r.end(); ++jj) {
-        double* fcol = H + rel[jj] * m;
-        const double* src = cb + jj * mc;
-        for (std::int64_t ii = symmetric ? jj : 0; ii < mc; ++ii) fcol[rel[ii]] += src[ii];
-      }
-    });
+  const index_t q0 = t.child_offsets[f], q1 = t.child_offsets[f + 1];
+  std::vector<const double*> block(q1 - q0, nullptr);
+  std::size_t staged = 0;
+  for (index_t q = q0; q < q1; ++q) {
+    const double* cb = cur_->cb_ptr_host[t.children[q]];
+    const std::size_t mc = static_cast<std::size_t>(t.cb_size(t.children[q]));
+    if (mc > 0 && (cb < arena_begin || cb >= arena_end)) staged += mc * mc;
   }
+  if (staged > 0) host_staging_.resize(staged);
+  staged = 0;
+  for (index_t q = q0; q < q1; ++q) {
+    const index_t c = t.children[q];
+    const std::size_t mc = static_cast<std::size_t>(t.cb_size(c));
+    const double* cb = cur_->cb_ptr_host[c];
+    if (mc == 0) continue;
+    if (cb < arena_begin || cb >= arena_end) {  // on the device: copied over
+      STRATA_CUDA(cudaMemcpyAsync(host_staging_.data() + staged, cb, sizeof(double) * mc * mc,
+                                  cudaMemcpyDeviceToHost, stream_));
+      bytes_d2h_ += sizeof(double) * mc * mc;
+      cb = host_staging_.data() + staged;
+      staged += mc * mc;
+    }
+    block[q - q0] = cb;
+  }
+  if (staged > 0) STRATA_CUDA(cudaStreamSynchronize(stream_));
+  // by blocks of kCols columns, each zeroed, given its entries and then each child's
+  // columns that land in it, in child order: the block stays in cache through all of
+  // its additions, and every entry sees the kernel's order of additions
+  constexpr std::int64_t kCols = 32;
+  const auto& am = an.assembly;
+  const index_t e0 = am.entry_offsets[f], e1 = am.entry_offsets[f + 1];
+  const std::int64_t blocks = (m + kCols - 1) / kCols;
+  tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, blocks), [&](const auto& r) {
+    for (std::int64_t b = r.begin(); b < r.end(); ++b) {
+      const std::int64_t c0 = b * kCols, c1 = std::min(m, c0 + kCols);
+      std::fill(H + c0 * m, H + c1 * m, 0.0);
+      for (index_t e = e0; e < e1; ++e) {
+        const std::int64_t d = am.entry_dst[e];
+        if (d >= c0 * m && d < c1 * m) H[d] += ctx.values[am.entry_src[e]];  // distinct
+      }
+      for (index_t q = q0; q < q1; ++q) {
+        const double* cb = block[q - q0];
+        if (!cb) continue;
+        const index_t c = t.children[q];
+        const std::int64_t mc = t.cb_size(c);
+        const std::int64_t* rel = rel_host_.data() + rel_offsets_host_[c];
+        // rel is increasing: the child's columns that land in [c0, c1)
+        const std::int64_t j0 = std::lower_bound(rel, rel + mc, c0) - rel;
+        const std::int64_t j1 = std::lower_bound(rel, rel + mc, c1) - rel;
+        for (std::int64_t jj = j0; jj < j1; ++jj) {
+          double* fcol = H + rel[jj] * m;
+          const double* src = cb + jj * mc;
+          for (std::int64_t ii = symmetric ? jj : 0; ii < mc; ++ii) fcol[rel[ii]] += src[ii];
+        }
+      }
+    }
+  });
 }
 
 }  // namespace strata::cuda
