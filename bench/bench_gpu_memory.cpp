@@ -225,6 +225,79 @@ json front_kernels(int m, int k) {
   return row;
 }
 
+// Many fronts of one shape (m rows, k pivots) factored side by side — POTRF, TRSM, SYRK
+// each, the large-front sequence of the CUDA executor — on `streams` streams with a
+// cuBLAS and a cuSOLVER handle each, `per_stream` fronts per stream: the aggregate FLOP/s.
+// A level of the tree holds tens to hundreds of such fronts, and the executor runs them
+// on its lanes (8 streams): this says how much more streams would hide the latency of
+// the library calls on medium fronts.
+double concurrent_fronts(int m, int k, int streams, int per_stream) {
+  const int c = m - k;
+  const std::size_t n = static_cast<std::size_t>(m) * m;
+  std::vector<double> h(n);
+  for (int j = 0; j < m; ++j)
+    for (int i = 0; i < m; ++i)
+      h[static_cast<std::size_t>(j) * m + i] = i == j ? m : 1.0 / (1.0 + i + j);
+  double* F0 = nullptr;
+  check(cudaMalloc(&F0, sizeof(double) * n), "cudaMalloc");
+  check(cudaMemcpy(F0, h.data(), sizeof(double) * n, cudaMemcpyHostToDevice), "H2D");
+  struct Lane {
+    cudaStream_t s{};
+    cublasHandle_t blas{};
+    cusolverDnHandle_t sol{};
+    double* F = nullptr;
+    double* W = nullptr;
+    int* info = nullptr;
+    int lwork = 0;
+  };
+  std::vector<Lane> lanes(streams);
+  for (Lane& l : lanes) {
+    check(cudaStreamCreateWithFlags(&l.s, cudaStreamNonBlocking), "cudaStreamCreate");
+    cublasCreate(&l.blas);
+    cublasSetStream(l.blas, l.s);
+    cusolverDnCreate(&l.sol);
+    cusolverDnSetStream(l.sol, l.s);
+    check(cudaMalloc(&l.F, sizeof(double) * n), "cudaMalloc");
+    check(cudaMalloc(&l.info, sizeof(int)), "cudaMalloc");
+    cusolverDnDpotrf_bufferSize(l.sol, CUBLAS_FILL_MODE_LOWER, k, l.F, m, &l.lwork);
+    check(cudaMalloc(&l.W, sizeof(double) * std::max(l.lwork, 1)), "cudaMalloc");
+  }
+  const double one = 1.0, minus_one = -1.0;
+  auto round = [&] {
+    for (int r = 0; r < per_stream; ++r)
+      for (Lane& l : lanes) {
+        cudaMemcpyAsync(l.F, F0, sizeof(double) * n, cudaMemcpyDeviceToDevice, l.s);
+        cusolverDnDpotrf(l.sol, CUBLAS_FILL_MODE_LOWER, k, l.F, m, l.W, l.lwork, l.info);
+        if (c > 0) {
+          cublasDtrsm(l.blas, CUBLAS_SIDE_RIGHT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_T,
+                      CUBLAS_DIAG_NON_UNIT, c, k, &one, l.F, m, l.F + k, m);
+          cublasDsyrk(l.blas, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N, c, k, &minus_one, l.F + k, m,
+                      &one, l.F + static_cast<std::size_t>(k) * m + k, m);
+        }
+      }
+    check(cudaDeviceSynchronize(), "cudaDeviceSynchronize");
+  };
+  round();  // warm-up
+  double best = 1e300;
+  for (int rep = 0; rep < 3; ++rep) {
+    Timer t;
+    round();
+    best = std::min(best, t.seconds());
+  }
+  for (Lane& l : lanes) {
+    cudaFree(l.F);
+    cudaFree(l.W);
+    cudaFree(l.info);
+    cublasDestroy(l.blas);
+    cusolverDnDestroy(l.sol);
+    cudaStreamDestroy(l.s);
+  }
+  cudaFree(F0);
+  const double kd = k, cd = c;
+  const double flops = kd * kd * kd / 3 + cd * kd * kd + cd * cd * kd;
+  return flops * streams * per_stream / best;
+}
+
 struct Run {
   double seconds = 0, berr = 0;
   FactorStats fs;
@@ -333,6 +406,21 @@ int main(int argc, char** argv) {
                  tf("gemm_full_flops_per_second"));
       std::fflush(stdout);
       out["front_kernels"]["rows"].push_back(row);
+    }
+    // the same sequence on many fronts at once, by stream count (fronts: 32 in all)
+    out["front_kernels"]["concurrent"] = json::array();
+    fmt::print("{:>6} {:>6} {:>8}   aggregate TFLOP/s of 32 fronts on S streams\n", "m", "k", "S");
+    for (const std::string& shape : {std::string("1000:100"), std::string("2000:250"),
+                                     std::string("3000:500"), std::string("5000:1000")}) {
+      const auto colon = shape.find(':');
+      const int m = std::stoi(shape.substr(0, colon)), k = std::stoi(shape.substr(colon + 1));
+      for (int streams : {1, 4, 8, 16, 32}) {
+        const double rate = concurrent_fronts(m, k, streams, 32 / streams);
+        out["front_kernels"]["concurrent"].push_back(
+            {{"m", m}, {"k", k}, {"streams", streams}, {"fronts", 32}, {"flops_per_second", rate}});
+        fmt::print("{:>6} {:>6} {:>8} {:>8.1f}\n", m, k, streams, rate * 1e-12);
+        std::fflush(stdout);
+      }
     }
   }
 
