@@ -820,11 +820,18 @@ class GpuSections:
             self.solvability_run(r)
         kernels = [r for r in runs if r.kind == "gpu_memory" and r.get("front_kernels")]
         if kernels:
-            self.front_kernels_table(max(kernels, key=lambda r: (r.date, r.name)))
+            # the single-front table from the run with the most shapes (newest on ties), the
+            # concurrent one from the newest run that has it
+            full = max(kernels, key=lambda r: (len(r.get("front_kernels").get("rows") or []),
+                                               r.date, r.name))
+            conc = [r for r in kernels if r.get("front_kernels").get("concurrent")]
+            self.front_kernels_table(full, max(conc, key=lambda r: (r.date, r.name))
+                                     if conc else None)
 
-    def front_kernels_table(self, r: Run) -> None:
+    def front_kernels_table(self, r: Run, rc: Run | None) -> None:
         """The dense kernels of a large front, by shape (bench_gpu_memory --parts kernels):
-        where the factorization's rate is lost against the DGEMM peak."""
+        where the factorization's rate is lost against the DGEMM peak; and (from rc) the
+        large-front sequence on many fronts over several streams."""
         self.consumed.add(r.path)
         fk = r.get("front_kernels")
         peak = num(fk.get("dgemm_flops_per_second"))
@@ -855,6 +862,24 @@ class GpuSections:
                f"2·(m−k)²·k).")
         self.w()
         self.w(table(["m", "k"] + [n for _, n in keys], rows, 0))
+        conc = (rc.get("front_kernels").get("concurrent") or []) if rc else []
+        if conc:
+            self.consumed.add(rc.path)
+            shapes = list(dict.fromkeys((c.get("m"), c.get("k")) for c in conc))
+            streams = sorted({int(num(c.get("streams")) or 0) for c in conc})
+            crow = []
+            for m, k in shapes:
+                by = {int(num(c.get("streams")) or 0): num(c.get("flops_per_second"))
+                      for c in conc if (c.get("m"), c.get("k")) == (m, k)}
+                crow.append([f_int(m), f_int(k)] + [
+                    "–" if by.get(s) is None else f"{by[s] * 1e-12:.1f}" for s in streams])
+            self.w("The same sequence (POTRF, TRSM, SYRK) on 32 fronts of one shape side by "
+                   "side on S streams, each with its own handles: aggregate TFLOP/s (the "
+                   "executor runs a chunk's large fronts on 8 such lanes; "
+                   f"{machine_label(rc.machine)}, {rc.date}, commit "
+                   f"{rc.get('git_commit') or '?'}; `{rc.get('command')}`).")
+            self.w()
+            self.w(table(["m", "k"] + [f"S = {s}" for s in streams], crow, 0))
 
     def device_table(self, r: Run) -> None:
         f = r.get("device_figures")
