@@ -11,7 +11,10 @@
 //      pivoting, kernels_lu.cu), or a blocked Bunch–Kaufman LDLᵀ with our panel kernel and
 //      cuBLAS SYRKX (kernels_ldlt.cuh), all with pivoting restricted to the fully summed
 //      rows and the CPU backend's static pivoting. The large fronts of a chunk run side by
-//      side on kLanes streams (each with its own handles), joined before step 3;
+//      side on kLanes streams (each with its own handles), joined before step 3 — an LLᵀ
+//      front with at most kPanelMaxPivots pivots has its pivot block and panel done for
+//      the whole chunk by one launch of our kernel first (kernels_panel.cu) and only its
+//      SYRK on a lane;
 //   3. one launch stores the contribution blocks where the plan put them;
 //   4. one launch packs the chunk's factor panels (contiguous in the factor layout) into
 //      the device factor, which is copied to the host factor in one transfer — unless
@@ -99,6 +102,7 @@ CudaExecutor::CudaExecutor(const Options& o, int device)
   STRATA_CUSOLVER(cusolverDnSetStream(solver_, stream_));
   STRATA_CUDA(cudaEventCreate(&start_));
   STRATA_CUDA(cudaEventCreate(&stop_));
+  STRATA_CUDA(cudaEventCreateWithFlags(&panels_done_, cudaEventDisableTiming));
   for (ChunkRecord& c : chunk_)
     for (cudaEvent_t& e : c.ev) STRATA_CUDA(cudaEventCreate(&e));
 }
@@ -116,6 +120,7 @@ CudaExecutor::~CudaExecutor() {
   lanes_.clear();
   cudaEventDestroy(start_);
   cudaEventDestroy(stop_);
+  cudaEventDestroy(panels_done_);
   for (ChunkRecord& c : chunk_)
     for (cudaEvent_t e : c.ev) cudaEventDestroy(e);
   cusolverDnDestroy(solver_);
@@ -661,6 +666,27 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
                         perm_offset_.data(), stream_);
   STRATA_CUDA(cudaEventRecord(ev[2], stream_));
 
+  // LLᵀ fronts with few pivots: their pivot blocks and panels in one launch
+  // (kernels_panel.cu), so that only their SYRK is a library call below
+  const bool llt = !lu && !ldlt;
+  std::vector<std::int64_t> panel_items;
+  std::int64_t panel_rows = 0;
+  if (llt)
+    for (std::size_t i = 0; i < big.size(); ++i) {
+      const index_t f = s.fronts[big[i]];
+      if (t.n_pivots(f) > kPanelMaxPivots) continue;
+      panel_items.push_back(big[i]);
+      panel_items.push_back(static_cast<std::int64_t>(i));
+      panel_rows = std::max<std::int64_t>(panel_rows, t.n_rows(f));
+    }
+  if (!panel_items.empty()) {
+    upload(panel_items_, panel_items);
+    launch_llt_panel_small_k(tree, panel_items_.data(),
+                             static_cast<std::int64_t>(panel_items.size() / 2), panel_rows,
+                             pool_.data(), potrf_info_.data(), stream_);
+  }
+  STRATA_CUDA(cudaEventRecord(panels_done_, stream_));
+
   // large fronts: library calls, each front on one lane, the lanes side by side (the
   // least-loaded lane takes the next front; LDLᵀ's panel workspace is single: one lane)
   const double one = 1.0, minus_one = -1.0;
@@ -671,7 +697,7 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
   const std::size_t n_lanes = ldlt ? 1 : std::min(lane.size(), big.size());
   for (std::size_t l = 0; l < n_lanes; ++l) {
     lane[l]->load = 0;
-    if (l > 0) STRATA_CUDA(cudaStreamWaitEvent(lane[l]->stream, ev[2], 0));
+    if (l > 0) STRATA_CUDA(cudaStreamWaitEvent(lane[l]->stream, panels_done_, 0));
   }
   for (std::size_t i = 0; i < big.size(); ++i) {
     const index_t p = big[i], f = s.fronts[p];
@@ -685,6 +711,9 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
     if (ldlt) {
       ldlt_large_.factor(blas_, stream_, F, m, k, ctx.static_pivot, perm_.data() + perm_at,
                          pivot_size_.data() + perm_at, perturbed_.data() + ns + i);
+    } else if (!lu && k <= kPanelMaxPivots) {  // pivot block and panel done above
+      STRATA_CUBLAS(cublasDsyrk(ln->blas, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N, m - k, k, &minus_one,
+                                F + k, m, &one, F + static_cast<std::size_t>(k) * m + k, m));
     } else if (!lu) {
       grow_potrf_work(ln->solver, ln->potrf_work, F, k, m);
       STRATA_CUSOLVER(
