@@ -13,7 +13,7 @@
 //      rows and the CPU backend's static pivoting. The large fronts of a chunk run side by
 //      side on kLanes streams (each with its own handles), joined before step 3 — an LLᵀ
 //      front with at most kPanelMaxPivots pivots has its pivot block and panel done for
-//      the whole chunk by one launch of our kernel first (kernels_panel.cu) and only its
+//      the whole chunk by two launches of our kernels first (kernels_panel.cu) and only its
 //      SYRK on a lane;
 //   3. one launch stores the contribution blocks where the plan put them;
 //   4. one launch packs the chunk's factor panels (contiguous in the factor layout) into
@@ -666,7 +666,7 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
                         perm_offset_.data(), stream_);
   STRATA_CUDA(cudaEventRecord(ev[2], stream_));
 
-  // LLᵀ fronts with few pivots: their pivot blocks and panels in one launch
+  // LLᵀ fronts with few pivots: their pivot blocks and panels in two launches
   // (kernels_panel.cu), so that only their SYRK is a library call below
   const bool llt = !lu && !ldlt;
   std::vector<std::int64_t> panel_items;

@@ -66,7 +66,7 @@ void launch_factor_small(const DeviceTree& t, const std::int64_t* positions, std
 constexpr std::int64_t kPanelMaxPivots = 64;
 
 /// The pivot block and the panel of large LLᵀ fronts with k ≤ kPanelMaxPivots pivots, all
-/// in one launch (kernels_panel.cu): for item i, batch position items[2i] (its m×m front in
+/// in two launches (kernels_panel.cu): for item i, batch position items[2i] (its m×m front in
 /// the pool, leading dimension m) gets L11 (lower triangle of its k×k block) and
 /// L21 = A21·L11⁻ᵀ in place, and info[items[2i + 1]] = 0, or j + 1 for the first
 /// non-positive pivot j (cuSOLVER's convention; the panel is then left as it was).

@@ -1,14 +1,14 @@
 // strata — the pivot block and the panel of large Cholesky fronts with few pivots, for all
-// such fronts of a chunk in one launch (see kernels.cuh, launch_llt_panel_small_k).
+// such fronts of a chunk in two launches (see kernels.cuh, launch_llt_panel_small_k).
 //
-// Why: a front with many rows but few pivots (k ≤ 64; 2,800 of the 3,100 fronts over 256
-// rows in lap3d 100³) went through cuSOLVER POTRF on its k×k block and cuBLAS TRSM on the
-// (m−k)×k panel, two library calls of a few MFLOP each. Measured on the H100
+// Why: a front with many rows but few pivots (k ≤ 64; about 2,300 of the 3,100 fronts
+// over 256 rows in lap3d 100³) went through cuSOLVER POTRF on its k×k block and cuBLAS
+// TRSM on the (m−k)×k panel, two library calls of a few MFLOP each. Measured on the H100
 // (bench_gpu_memory --parts kernels, REPORT §4): POTRF reaches 0.0–0.2 TFLOP/s below
 // k = 500 and TRSM about 1 TFLOP/s at k = 250; 32 fronts of 1000 rows × 100 pivots, POTRF +
 // TRSM + SYRK each, reach 2 TFLOP/s in aggregate however many streams run them (it
-// saturates at 4–8). Here one launch does the POTRF and the TRSM of every such front of the
-// chunk; only the contribution-block update (SYRK, where the flops are) stays a library
+// saturates at 4–8). Here two launches do the POTRF and the TRSM of every such front of
+// the chunk; only the contribution-block update (SYRK, where the flops are) stays a library
 // call per front.
 //
 // How: two launches. First one block per front loads its k×k pivot block into shared
