@@ -28,6 +28,7 @@
 
 #include "core/alloc.hpp"
 #include "core/analysis.hpp"
+#include "core/host_copy.hpp"
 #include "core/solver_internal.hpp"
 #include "core/timer.hpp"
 #include "numeric/factor.hpp"
@@ -195,9 +196,7 @@ void copy_values(std::vector<double>& to, const std::vector<double>& from, tbb::
     to = from;
     return;
   }
-  for_chunks(arena, from.size(), [&](std::size_t b, std::size_t e) {
-    std::memcpy(to.data() + b, from.data() + b, sizeof(double) * (e - b));
-  });
+  arena.execute([&] { parallel_copy(to.data(), from.data(), from.size()); });
 }
 
 bool has_analyzed_pattern(const Analysis& an, const SparseMatrix& a, tbb::task_arena& arena) {

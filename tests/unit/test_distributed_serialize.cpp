@@ -192,6 +192,15 @@ std::vector<ScatterCase> scatter_cases(std::mt19937_64& rng) {
 
 const std::pair<int, int> kRankShapes[] = {{2, 1}, {3, 1}, {4, 1}, {2, 2}};
 
+// The analysis of a scatter case split for ranks × per_rank workers, without upper layers,
+// as the distributed solver analyzes.
+Analysis analyze_for_ranks(const ScatterCase& c, int ranks, int per_rank) {
+  Options o;
+  o.type = c.type;
+  o.split_top = false;
+  return analyze_matrix(c.a, o, ranks * per_rank);
+}
+
 // The values each rank is sent are exactly the stored entries (i, j) of the canonical
 // input whose earlier pivot, min(position of row i, position of column j) (after the
 // matching's column permutation), lies in the pivot columns of one of its subtrees —
@@ -202,10 +211,7 @@ TEST(DistributedSerialize, ValuePositionsAreTheSubtreesEntries) {
   for (const ScatterCase& c : scatter_cases(rng))
     for (auto [ranks, per_rank] : kRankShapes) {
       SCOPED_TRACE(c.name + ", " + std::to_string(ranks) + " x " + std::to_string(per_rank));
-      Options o;
-      o.type = c.type;
-      o.split_top = false;  // as the distributed solver analyzes
-      const Analysis an = analyze_matrix(c.a, o, ranks * per_rank);
+      const Analysis an = analyze_for_ranks(c, ranks, per_rank);
       const distributed::RankLayout l0 = distributed::make_layout(an, ranks, 0, per_rank);
       std::vector<int> rank_of_pivot(an.n, -1);  // -1: the top part
       for (std::size_t i = 0; i < l0.subtree_rank.size(); ++i)
@@ -244,10 +250,7 @@ TEST(DistributedSerialize, SubtreesFactorFromTheirScatteredValues) {
   for (const ScatterCase& c : scatter_cases(rng))
     for (auto [ranks, per_rank] : kRankShapes) {
       SCOPED_TRACE(c.name + ", " + std::to_string(ranks) + " x " + std::to_string(per_rank));
-      Options o;
-      o.type = c.type;
-      o.split_top = false;  // as the distributed solver analyzes
-      const Analysis an = analyze_matrix(c.a, o, ranks * per_rank);
+      const Analysis an = analyze_for_ranks(c, ranks, per_rank);
       double pivot = 0;
       const std::vector<double> v = test::scaled_values(an, c.a, &pivot);
       numeric::NumericFactor one;

@@ -36,6 +36,7 @@
 
 #include "core/alloc.hpp"
 #include "core/blas.hpp"
+#include "numeric/assembly.hpp"
 #include "numeric/factor.hpp"
 #include "strata/errors.hpp"
 
@@ -152,8 +153,8 @@ void CpuExecutor::process_front(const FactorContext& ctx, index_t f, Workspace& 
 
   // 1. original entries
   const auto& am = an.assembly;
-  for (index_t e = am.entry_offsets[f]; e < am.entry_offsets[f + 1]; ++e)
-    F[am.entry_dst[e]] += ctx.values[am.entry_src[e]];
+  add_entries(F, am.entry_dst.data(), am.entry_src.data(), ctx.values, am.entry_offsets[f],
+              am.entry_offsets[f + 1], 0, static_cast<std::int64_t>(mm));
 
   // 2. extend-add of the children's contribution blocks
   for (index_t i = 0; i < m; ++i) w.position[rows[i]] = i;
@@ -168,11 +169,7 @@ void CpuExecutor::process_front(const FactorContext& ctx, index_t f, Workspace& 
     thread_local std::vector<index_t> rel;
     rel.resize(mc);
     for (index_t i = 0; i < mc; ++i) rel[i] = w.position[crow[i]];
-    for (index_t jj = 0; jj < mc; ++jj) {
-      double* dst = F + rel[jj] * m;
-      const double* src = cb + jj * mc;
-      for (index_t ii = lu ? 0 : jj; ii < mc; ++ii) dst[rel[ii]] += src[ii];
-    }
+    extend_add(F, m, cb, mc, rel.data(), 0, mc, !lu);
   }
   for (index_t i = 0; i < m; ++i) w.position[rows[i]] = -1;
 

@@ -118,6 +118,11 @@ class CudaExecutor final : public numeric::Executor {
   void flush_chunk(const numeric::FactorContext& ctx);
   void finish_chunk(const numeric::FactorContext& ctx, ChunkRecord& c);
   void factor_tiled(const numeric::FactorContext& ctx, index_t pos);
+  /// Whether p points into the pinned host arena (a contribution block spilled to the host)
+  /// rather than device memory.
+  bool in_host_arena(const double* p) const {
+    return p >= host_arena_.data() && p < host_arena_.data() + host_arena_.size();
+  }
   /// Front f (m × m) assembled on the host's threads into H: zeroed, the original
   /// entries, then each child's block in child order (a block on the device copied to
   /// host_staging_ first) — the device kernel's additions in its order, so H is bitwise

@@ -86,6 +86,7 @@ class PinnedBuffer {
     n_ = n;
   }
   T* data() { return p_; }
+  const T* data() const { return p_; }
   std::size_t size() const { return n_; }
   /// Frees the allocation (size becomes 0).
   void clear() { release(); }

@@ -200,9 +200,7 @@ void CudaExecutor::factor_tiled(const numeric::FactorContext& ctx, index_t pos) 
   const std::int64_t mc = m - k;
   if (mc > 0 && t.parent[f] >= 0) {
     double* const dst = cur_->cb_ptr_host[f];
-    const bool host_dst =
-        dst >= host_arena_.data() && dst < host_arena_.data() + host_arena_.size();
-    if (host_dst)
+    if (in_host_arena(dst))
       parallel_copy_2d(dst, mc, H + k * m + k, m, mc, mc);
     else
       STRATA_CUDA(cudaMemcpy2DAsync(dst, sizeof(double) * mc, H + k * m + k, sizeof(double) * m,

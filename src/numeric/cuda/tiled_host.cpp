@@ -9,15 +9,18 @@
 // 4c2899b, bench/results/gpu-memory-phases-20261122T024659Z.json). On the host the same
 // additions run at memory bandwidth; a child block that stayed on the device comes over in
 // one DMA copy. The front is built by blocks of columns, in parallel, each block zeroed and
-// then given its entries and each child's columns that land in it while it is in cache
-// (the device kernel's slices, on the host). The order of the additions is the kernel's
-// (entries, then children one after another, each destination written once per child), so
-// the front is bitwise the same.
+// then given its entries and each child's columns that land in it (the device kernel's
+// slices, on the host; measured no faster than whole-front passes on lap3d 100³ — host
+// memory bandwidth bounds both — but one front's work spreads over the threads). The
+// additions themselves are numeric/assembly.hpp's, the CPU executor's. The order of the additions
+// is the kernel's (entries, then children one after another, each destination written once per
+// child), so the front is bitwise the same.
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
 
+#include "numeric/assembly.hpp"
 #include "numeric/cuda/cuda_executor.hpp"
 
 namespace strata::cuda {
@@ -31,15 +34,13 @@ void CudaExecutor::assemble_on_host(const numeric::FactorContext& ctx, index_t f
   STRATA_CUDA(cudaStreamSynchronize(stream_));
   // each child's block: in the host arena, or copied from the device into host_staging_
   // (all such blocks one after another, one wait)
-  const double* arena_begin = host_arena_.data();
-  const double* arena_end = arena_begin + host_arena_.size();
   const index_t q0 = t.child_offsets[f], q1 = t.child_offsets[f + 1];
   std::vector<const double*> block(q1 - q0, nullptr);
   std::size_t staged = 0;
   for (index_t q = q0; q < q1; ++q) {
     const double* cb = cur_->cb_ptr_host[t.children[q]];
     const std::size_t mc = static_cast<std::size_t>(t.cb_size(t.children[q]));
-    if (mc > 0 && (cb < arena_begin || cb >= arena_end)) staged += mc * mc;
+    if (mc > 0 && !in_host_arena(cb)) staged += mc * mc;
   }
   if (staged > 0) host_staging_.resize(staged);
   staged = 0;
@@ -48,7 +49,7 @@ void CudaExecutor::assemble_on_host(const numeric::FactorContext& ctx, index_t f
     const std::size_t mc = static_cast<std::size_t>(t.cb_size(c));
     const double* cb = cur_->cb_ptr_host[c];
     if (mc == 0) continue;
-    if (cb < arena_begin || cb >= arena_end) {  // on the device: copied over
+    if (!in_host_arena(cb)) {  // on the device: copied over
       STRATA_CUDA(cudaMemcpyAsync(host_staging_.data() + staged, cb, sizeof(double) * mc * mc,
                                   cudaMemcpyDeviceToHost, stream_));
       bytes_d2h_ += sizeof(double) * mc * mc;
@@ -69,10 +70,8 @@ void CudaExecutor::assemble_on_host(const numeric::FactorContext& ctx, index_t f
     for (std::int64_t b = r.begin(); b < r.end(); ++b) {
       const std::int64_t c0 = b * kCols, c1 = std::min(m, c0 + kCols);
       std::fill(H + c0 * m, H + c1 * m, 0.0);
-      for (index_t e = e0; e < e1; ++e) {
-        const std::int64_t d = am.entry_dst[e];
-        if (d >= c0 * m && d < c1 * m) H[d] += ctx.values[am.entry_src[e]];  // distinct
-      }
+      numeric::add_entries(H, am.entry_dst.data(), am.entry_src.data(), ctx.values, e0, e1, c0 * m,
+                           c1 * m);
       for (index_t q = q0; q < q1; ++q) {
         const double* cb = block[q - q0];
         if (!cb) continue;
@@ -82,11 +81,7 @@ void CudaExecutor::assemble_on_host(const numeric::FactorContext& ctx, index_t f
         // rel is increasing: the child's columns that land in [c0, c1)
         const std::int64_t j0 = std::lower_bound(rel, rel + mc, c0) - rel;
         const std::int64_t j1 = std::lower_bound(rel, rel + mc, c1) - rel;
-        for (std::int64_t jj = j0; jj < j1; ++jj) {
-          double* fcol = H + rel[jj] * m;
-          const double* src = cb + jj * mc;
-          for (std::int64_t ii = symmetric ? jj : 0; ii < mc; ++ii) fcol[rel[ii]] += src[ii];
-        }
+        numeric::extend_add(H, m, cb, mc, rel, j0, j1, symmetric);
       }
     }
   });

@@ -1,0 +1,39 @@
+// strata — the two additions that assemble a front, shared by the CPU executor
+// (cpu/cpu_executor.cpp, process_front) and the host assembly of the GPU's tiled fronts
+// (cuda/tiled_host.cpp), so that both add the same things in the same order.
+//
+// A front F is n_rows(f) × n_rows(f), column-major (leading dimension m). Its original
+// entries come from the AssemblyMap (core/analysis.hpp); a child's contribution block
+// (mc × mc, column-major) is added at the front rows and columns rel[0..mc), increasing
+// (the child's CB rows' positions in the front): the extend-add of the multifrontal
+// method (Duff & Reid, ACM TOMS 9, 1983; Liu, SIAM Review 34, 1992).
+#pragma once
+#include <cstdint>
+
+#include "strata/types.hpp"
+
+namespace strata::numeric {
+
+/// F[entry_dst[e]] += values[entry_src[e]] for e in [e0, e1) whose destination lies in
+/// [d0, d1) (whole front: 0, m·m). Destinations are distinct.
+inline void add_entries(double* F, const index_t* entry_dst, const index_t* entry_src,
+                        const double* values, index_t e0, index_t e1, std::int64_t d0,
+                        std::int64_t d1) {
+  for (index_t e = e0; e < e1; ++e) {
+    const std::int64_t d = entry_dst[e];
+    if (d >= d0 && d < d1) F[d] += values[entry_src[e]];
+  }
+}
+
+/// Columns jj in [j0, j1) of the child block cb (mc × mc) added into F at rows rel[ii] and
+/// column rel[jj]; `lower`: rows ii ≥ jj only (LLᵀ, LDLᵀ), else all rows (LU).
+inline void extend_add(double* F, std::int64_t m, const double* cb, std::int64_t mc,
+                       const index_t* rel, std::int64_t j0, std::int64_t j1, bool lower) {
+  for (std::int64_t jj = j0; jj < j1; ++jj) {
+    double* dst = F + rel[jj] * m;
+    const double* src = cb + jj * mc;
+    for (std::int64_t ii = lower ? jj : 0; ii < mc; ++ii) dst[rel[ii]] += src[ii];
+  }
+}
+
+}  // namespace strata::numeric
