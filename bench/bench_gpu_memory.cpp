@@ -15,8 +15,13 @@
 // the (m−k)×(m−k) contribution block by DSYRK and by GEMMs over column blocks), next to
 // the DGEMM peak: where the factorization loses the peak (issue 5's ≥ 40% target).
 //
-//   bench_gpu_memory [--parts devices,kernels,solvability,blocks] [--problems a,b]
+// Panel kernels: in-core Cholesky refactorization time for each value of
+// Options::gpu_panel_kernel_max_pivots (which fronts get our pivot-block and panel
+// kernels, kernels_panel.cu, instead of POTRF + TRSM).
+//
+//   bench_gpu_memory [--parts devices,kernels,solvability,blocks,panel] [--problems a,b]
 //                    [--ratios 1,5,20,50] [--block-sizes 256,...] [--block-problems a,b]
+//                    [--panel-problems a,b] [--panel-max-pivots 0,64,...]
 //                    [--fronts m:k,...] [--repeat R] [--tag NAME] [--results-dir DIR]
 #include <cublas_v2.h>
 #include <cuda_runtime.h>
@@ -25,11 +30,14 @@
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
+#include <tuple>
 
 #include "bench_common.hpp"
 #include "core/stats_json.hpp"
 #include "core/timer.hpp"
+#include "numeric/cuda/kernels.cuh"
 #include "numeric/factor.hpp"
 #include "strata/strata.hpp"
 
@@ -110,6 +118,55 @@ double device_seconds(F&& f) {
   return best;
 }
 
+// `count` fronts of m rows and k pivots at pool + p·m² as the DeviceTree and item list
+// that cuda::launch_llt_panel (kernels_panel.cu) reads, with its workspace.
+struct PanelFronts {
+  std::int64_t* arr = nullptr;  // fronts, pos_offset, n_rows, n_pivots, items (2 each)
+  double* work = nullptr;
+  int* info = nullptr;
+  cuda::DeviceTree t{};
+  std::vector<std::int64_t> rows, pivots;
+  PanelFronts(int m, int k, int count) : rows(count, m), pivots(count, k) {
+    std::vector<std::int64_t> h(6 * static_cast<std::size_t>(count));
+    for (int p = 0; p < count; ++p) {
+      h[p] = p;
+      h[count + p] = static_cast<std::int64_t>(p) * m * m;
+      h[2 * count + p] = m;
+      h[3 * count + p] = k;
+      h[4 * count + 2 * p] = p;
+      h[4 * count + 2 * p + 1] = p;
+    }
+    check(cudaMalloc(&arr, sizeof(std::int64_t) * h.size()), "cudaMalloc");
+    check(cudaMemcpy(arr, h.data(), sizeof(std::int64_t) * h.size(), cudaMemcpyHostToDevice),
+          "H2D");
+    check(cudaMalloc(&work, sizeof(double) * cuda::llt_panel_work_size(count)), "cudaMalloc");
+    check(cudaMalloc(&info, sizeof(int) * count), "cudaMalloc");
+    t.fronts = arr;
+    t.pos_offset = arr + count;
+    t.n_rows = arr + 2 * count;
+    t.n_pivots = arr + 3 * count;
+  }
+  ~PanelFronts() {
+    cudaFree(arr);
+    cudaFree(work);
+    cudaFree(info);
+  }
+  PanelFronts(const PanelFronts&) = delete;
+  PanelFronts& operator=(const PanelFronts&) = delete;
+  void run(double* pool) {
+    cuda::launch_llt_panel(t, arr + 4 * pivots.size(), rows, pivots, pool, work, info, nullptr);
+  }
+};
+
+// The first k columns (m×k) of the m×m front at F, to the host.
+std::vector<double> panel_to_host(const double* F, int m, int k) {
+  std::vector<double> h(static_cast<std::size_t>(m) * k);
+  check(cudaMemcpy(h.data(), F, sizeof(double) * h.size(), cudaMemcpyDeviceToHost), "D2H");
+  for (int j = 0; j < k; ++j)  // the strict upper triangle is not part of the factor
+    for (int i = 0; i < j; ++i) h[static_cast<std::size_t>(j) * m + i] = 0;
+  return h;
+}
+
 // The dense kernels of a front of m rows and k pivots (LLᵀ), each timed alone on a
 // well-conditioned SPD-like matrix (diagonal m, off-diagonal entries in [0, 1)): rates in
 // FLOP/s counted with the kernel's own flop count (the GEMM-blocked update is credited
@@ -155,12 +212,40 @@ json front_kernels(int m, int k) {
   // the copy inside the timed region, measured alone and taken off
   const double t_copy = device_seconds(reset);
   row["potrf_flops_per_second"] = kd * kd * kd / 3 / std::max(t_potrf - t_copy, 1e-9);
+  double t_trsm = 0;
   if (c > 0) {
-    const double t_trsm = device_seconds([&] {
+    t_trsm = device_seconds([&] {
       cublasDtrsm(blas, CUBLAS_SIDE_RIGHT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_T,
                   CUBLAS_DIAG_NON_UNIT, c, k, &one, F, m, L21, m);
     });
     row["trsm_flops_per_second"] = cd * kd * kd / t_trsm;
+  }
+  // our pivot-block and panel kernels (kernels_panel.cu) in place of POTRF + TRSM, and the
+  // largest difference between the two factors, relative to the largest entry
+  {
+    reset();
+    cusolverDnDpotrf(sol, CUBLAS_FILL_MODE_LOWER, k, F, m, W, lwork, info);
+    if (c > 0)
+      cublasDtrsm(blas, CUBLAS_SIDE_RIGHT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_T,
+                  CUBLAS_DIAG_NON_UNIT, c, k, &one, F, m, L21, m);
+    const std::vector<double> lib = panel_to_host(F, m, k);
+    PanelFronts one_front(m, k, 1);
+    const double t_ours = device_seconds([&] {
+      reset();
+      one_front.run(F);
+    });
+    const std::vector<double> ours = panel_to_host(F, m, k);
+    double diff = 0, big = 0;
+    for (std::size_t i = 0; i < lib.size(); ++i) {
+      diff = std::max(diff, std::abs(lib[i] - ours[i]));
+      big = std::max(big, std::abs(lib[i]));
+    }
+    const double flops = kd * kd * kd / 3 + cd * kd * kd;
+    row["potrf_trsm_flops_per_second"] = flops / std::max(t_potrf - t_copy + t_trsm, 1e-9);
+    row["panel_kernels_flops_per_second"] = flops / std::max(t_ours - t_copy, 1e-9);
+    row["panel_kernels_max_rel_diff"] = diff / big;
+  }
+  if (c > 0) {
     // the panel's TRSM by the explicit inverse: L11 copied and inverted (cuSOLVER
     // Xtrtri), then one GEMM into a buffer (GEMM cannot write over its input) and a copy
     // back — the variant the library kernels' rates above suggest for k ≲ 2000
@@ -298,6 +383,79 @@ double concurrent_fronts(int m, int k, int streams, int per_stream) {
   return flops * streams * per_stream / best;
 }
 
+// `count` fronts of one shape, their pivot blocks and panels only (POTRF + TRSM's work):
+// by cuSOLVER POTRF + cuBLAS TRSM per front on 8 streams (the executor's lanes), and by
+// our kernels in one go (launch_llt_panel) — the aggregate FLOP/s of each, in that order.
+std::pair<double, double> batched_panels(int m, int k, int count) {
+  const std::size_t n = static_cast<std::size_t>(m) * m;
+  std::vector<double> h(n);
+  for (int j = 0; j < m; ++j)
+    for (int i = 0; i < m; ++i)
+      h[static_cast<std::size_t>(j) * m + i] = i == j ? m : 1.0 / (1.0 + i + j);
+  double *F0 = nullptr, *pool = nullptr;
+  check(cudaMalloc(&F0, sizeof(double) * n), "cudaMalloc");
+  check(cudaMalloc(&pool, sizeof(double) * n * count), "cudaMalloc");
+  check(cudaMemcpy(F0, h.data(), sizeof(double) * n, cudaMemcpyHostToDevice), "H2D");
+  constexpr int streams = 8;
+  std::vector<cudaStream_t> st(streams);
+  std::vector<cublasHandle_t> blas(streams);
+  std::vector<cusolverDnHandle_t> sol(streams);
+  std::vector<double*> W(streams);
+  std::vector<int*> info(streams);
+  int lwork = 0;
+  for (int l = 0; l < streams; ++l) {
+    check(cudaStreamCreateWithFlags(&st[l], cudaStreamNonBlocking), "cudaStreamCreate");
+    cublasCreate(&blas[l]);
+    cublasSetStream(blas[l], st[l]);
+    cusolverDnCreate(&sol[l]);
+    cusolverDnSetStream(sol[l], st[l]);
+    cusolverDnDpotrf_bufferSize(sol[l], CUBLAS_FILL_MODE_LOWER, k, pool, m, &lwork);
+    check(cudaMalloc(&W[l], sizeof(double) * std::max(lwork, 1)), "cudaMalloc");
+    check(cudaMalloc(&info[l], sizeof(int)), "cudaMalloc");
+  }
+  auto reset = [&] {
+    for (int p = 0; p < count; ++p)
+      check(cudaMemcpyAsync(pool + n * p, F0, sizeof(double) * n, cudaMemcpyDeviceToDevice), "D2D");
+    check(cudaDeviceSynchronize(), "cudaDeviceSynchronize");
+  };
+  const double one = 1.0;
+  auto best_of_3 = [&](auto&& f) {
+    double best = 1e300;
+    for (int rep = 0; rep < 4; ++rep) {
+      reset();
+      Timer t;
+      f();
+      check(cudaDeviceSynchronize(), "cudaDeviceSynchronize");
+      if (rep > 0) best = std::min(best, t.seconds());
+    }
+    return best;
+  };
+  const double t_lib = best_of_3([&] {
+    for (int p = 0; p < count; ++p) {
+      const int l = p % streams;
+      double* F = pool + n * p;
+      cusolverDnDpotrf(sol[l], CUBLAS_FILL_MODE_LOWER, k, F, m, W[l], lwork, info[l]);
+      if (m > k)
+        cublasDtrsm(blas[l], CUBLAS_SIDE_RIGHT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_T,
+                    CUBLAS_DIAG_NON_UNIT, m - k, k, &one, F, m, F + k, m);
+    }
+  });
+  PanelFronts fronts(m, k, count);
+  const double t_ours = best_of_3([&] { fronts.run(pool); });
+  for (int l = 0; l < streams; ++l) {
+    cudaFree(W[l]);
+    cudaFree(info[l]);
+    cublasDestroy(blas[l]);
+    cusolverDnDestroy(sol[l]);
+    cudaStreamDestroy(st[l]);
+  }
+  cudaFree(F0);
+  cudaFree(pool);
+  const double kd = k, cd = m - k;
+  const double flops = (kd * kd * kd / 3 + cd * kd * kd) * count;
+  return {flops / t_lib, flops / t_ours};
+}
+
 struct Run {
   double seconds = 0, berr = 0;
   FactorStats fs;
@@ -338,13 +496,21 @@ int main(int argc, char** argv) {
   std::vector<double> ratios = {1, 5, 20, 50};
   std::vector<index_t> block_sizes = {128, 256, 512, 1024, 2048};
   std::vector<std::string> fronts = {"10000:10000", "12000:4000", "8000:4000", "6000:2000",
-                                     "4000:1000",   "3000:500",   "2000:250",  "1500:1000"};
+                                     "4000:1000",   "3000:500",   "2000:250",  "1500:1000",
+                                     "1000:100",    "600:64",     "733:65"};
   std::vector<std::string> parts = {"devices", "kernels", "solvability", "blocks"};
+  std::vector<std::string> panel_problems = {"lap3d-60", "lap3d-100", "elast3d-30", "elast3d-50"};
+  std::vector<index_t> panel_max_pivots = {0, 64, 128, 256, 512, 1024};
   int repeat = 3;
   std::string results_dir;
-  app.add_option("--parts", parts, "what to measure: devices, kernels, solvability, blocks")
+  app.add_option("--parts", parts, "what to measure: devices, kernels, solvability, blocks, panel")
       ->delimiter(',')
-      ->check(CLI::IsMember({"devices", "kernels", "solvability", "blocks"}));
+      ->check(CLI::IsMember({"devices", "kernels", "solvability", "blocks", "panel"}));
+  app.add_option("--panel-problems", panel_problems, "problems for the panel-kernel sweep")
+      ->delimiter(',');
+  app.add_option("--panel-max-pivots", panel_max_pivots,
+                 "gpu_panel_kernel_max_pivots values for the panel-kernel sweep")
+      ->delimiter(',');
   app.add_option("--fronts", fronts, "front shapes m:k for the dense-kernel table")->delimiter(',');
   app.add_option("--problems", problems, "problems for the budget sweep")->delimiter(',');
   app.add_option("--ratios", ratios, "factor bytes / device budget")->delimiter(',');
@@ -385,9 +551,12 @@ int main(int argc, char** argv) {
 
   if (want("kernels")) {
     out["front_kernels"] = {{"dgemm_flops_per_second", peak}, {"rows", json::array()}};
-    fmt::print("{:>6} {:>6} {:>7} {:>7} {:>7} {:>8} {:>8} {:>8} {:>8}   TFLOP/s (DGEMM {:.1f})\n",
-               "m", "k", "potrf", "trsm", "syrk", "gemm512", "gemm1k", "gemm2k", "gemm",
-               peak * 1e-12);
+    fmt::print(
+        "{:>6} {:>6} {:>7} {:>7} {:>7} {:>7} {:>9} {:>7} {:>8} {:>7} {:>8} {:>8}   TFLOP/s "
+        "(DGEMM {:.1f}; p+t: POTRF + TRSM, ours: kernels_panel.cu, diff: max |ours - p+t| / "
+        "max |L|)\n",
+        "m", "k", "potrf", "trsm", "p+t", "ours", "diff", "syrk", "gemm512", "gemm1k", "gemm2k",
+        "gemm", peak * 1e-12);
     for (const std::string& shape : fronts) {
       const auto colon = shape.find(':');
       if (colon == std::string::npos) throw InvalidInput("--fronts: " + shape + " is not m:k");
@@ -398,14 +567,31 @@ int main(int argc, char** argv) {
         return row.contains(key) ? fmt::format("{:.1f}", row[key].get<double>() * 1e-12)
                                  : std::string("-");
       };
-      fmt::print("{:>6} {:>6} {:>7} {:>7} {:>7} {:>8} {:>7} {:>8} {:>8} {:>8} {:>8}\n", m, k,
-                 tf("potrf_flops_per_second"), tf("trsm_flops_per_second"),
-                 tf("trtri_flops_per_second"), tf("trsm_by_inverse_flops_per_second"),
-                 tf("syrk_flops_per_second"), tf("gemm_blocked_512_flops_per_second"),
-                 tf("gemm_blocked_1024_flops_per_second"), tf("gemm_blocked_2048_flops_per_second"),
-                 tf("gemm_full_flops_per_second"));
+      fmt::print("{:>6} {:>6} {:>7} {:>7} {:>7} {:>7} {:>9.1e} {:>7} {:>8} {:>7} {:>8} {:>8}\n", m,
+                 k, tf("potrf_flops_per_second"), tf("trsm_flops_per_second"),
+                 tf("potrf_trsm_flops_per_second"), tf("panel_kernels_flops_per_second"),
+                 row["panel_kernels_max_rel_diff"].get<double>(), tf("syrk_flops_per_second"),
+                 tf("gemm_blocked_512_flops_per_second"), tf("gemm_blocked_1024_flops_per_second"),
+                 tf("gemm_blocked_2048_flops_per_second"), tf("gemm_full_flops_per_second"));
       std::fflush(stdout);
       out["front_kernels"]["rows"].push_back(row);
+    }
+    // pivot blocks and panels of many fronts at once: the library on 8 streams against
+    // our kernels
+    out["front_kernels"]["batched_panels"] = json::array();
+    fmt::print("{:>6} {:>6} {:>7} {:>9} {:>9}   aggregate TFLOP/s of POTRF + TRSM's work\n", "m",
+               "k", "fronts", "library", "ours");
+    for (auto [m, k, count] :
+         {std::tuple{600, 64, 256}, std::tuple{1000, 100, 128}, std::tuple{2000, 250, 64},
+          std::tuple{3000, 500, 32}, std::tuple{4000, 1000, 16}, std::tuple{2000, 1000, 32}}) {
+      const auto [lib, ours] = batched_panels(m, k, count);
+      out["front_kernels"]["batched_panels"].push_back({{"m", m},
+                                                        {"k", k},
+                                                        {"fronts", count},
+                                                        {"library_flops_per_second", lib},
+                                                        {"ours_flops_per_second", ours}});
+      fmt::print("{:>6} {:>6} {:>7} {:>9.2f} {:>9.2f}\n", m, k, count, lib * 1e-12, ours * 1e-12);
+      std::fflush(stdout);
     }
     // the same sequence on many fronts at once, by stream count (fronts: 32 in all)
     out["front_kernels"]["concurrent"] = json::array();
@@ -502,6 +688,36 @@ int main(int argc, char** argv) {
       std::fflush(stdout);
     }
     out["block_size"].push_back({{"problem", name}, {"n", p.a.n_rows}, {"runs", rows}});
+  }
+  // which Cholesky fronts go to the panel kernels (Options::gpu_panel_kernel_max_pivots):
+  // in-core refactorization time per threshold
+  out["panel_kernels"] = json::array();
+  if (!want("panel")) panel_problems.clear();
+  if (!panel_problems.empty())
+    fmt::print("{:<14} {:>9} {:>9} {:>9} {:>8}\n", "problem", "max k", "factor s", "GFLOP/s",
+               "berr");
+  for (const std::string& name : panel_problems) {
+    bench::Problem p = bench::load_problem(name);
+    if (!p.symmetric) continue;  // the panel kernels are Cholesky's
+    json rows = json::array();
+    for (index_t kmax : panel_max_pivots) {
+      Options o;
+      o.type = MatrixType::spd;
+      o.backend = Backend::cuda;
+      o.num_gpus = 1;  // the single-GPU comparison, whatever the machine has
+      o.gpu_panel_kernel_max_pivots = kmax;
+      const Run r = run(p, o, repeat);
+      const double flops = r.fs.gflops * r.fs.seconds;  // GFLOP of this factorization
+      rows.push_back({{"gpu_panel_kernel_max_pivots", kmax},
+                      {"factor_seconds", r.seconds},
+                      {"gflops", flops / r.seconds},
+                      {"backward_error", r.berr},
+                      {"factor_phases", r.fs.device_phases}});
+      fmt::print("{:<14} {:>9} {:>9.4f} {:>9.1f} {:>8.1e}\n", name, kmax, r.seconds,
+                 flops / r.seconds, r.berr);
+      std::fflush(stdout);
+    }
+    out["panel_kernels"].push_back({{"problem", name}, {"n", p.a.n_rows}, {"runs", rows}});
   }
   fmt::print("results: {}\n", bench::write_result(out, stem, results_dir));
   if (!partial.empty()) std::remove(partial.c_str());

@@ -91,6 +91,13 @@ struct Options {
   /// (docs/reliability.md, "Determinism".)
   bool reproducible = false;
 
+  /// CUDA backend, Cholesky: fronts over 256 rows with at most this many pivots get their
+  /// pivot block and panel from strata's batched kernels (all such fronts of a batch
+  /// together, 64 pivot columns per step); fronts with more pivots, from cuSOLVER POTRF and
+  /// cuBLAS TRSM one front at a time. 0 sends every front to the library. Measured on the
+  /// H100 (bench_gpu_memory --parts panel, bench/REPORT.md §4). Default 256.
+  index_t gpu_panel_kernel_max_pivots = 256;
+
   // --- several GPUs (docs/multigpu.md) ---
   /// GPUs the CUDA backend factors on; 0 means every visible GPU (default 0). With more
   /// than one, the assembly tree is split into subtrees that the GPUs factor concurrently,

@@ -298,6 +298,9 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers)
   if (workers < 1)
     throw InvalidInput("analyze_matrix: workers must be at least 1 (got " +
                        std::to_string(workers) + ")");
+  if (opts.gpu_panel_kernel_max_pivots < 0)
+    throw InvalidInput("Options::gpu_panel_kernel_max_pivots must be at least 0 (got " +
+                       std::to_string(opts.gpu_panel_kernel_max_pivots) + ")");
   if (opts.subtrees_per_gpu < 1)
     throw InvalidInput("Options::subtrees_per_gpu must be at least 1 (got " +
                        std::to_string(opts.subtrees_per_gpu) + ")");

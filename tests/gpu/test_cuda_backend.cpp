@@ -36,6 +36,9 @@ TEST_F(CudaBackend, CholeskyFactorMatchesCpu) {
   // the small-k panel launch (kernels_panel.cu; a race between its blocks showed only at
   // this scale)
   problems.push_back(generators::laplacian_3d(40, 40, 40));
+  // nearly dense: fronts of hundreds of pivots whose last 64-column step is partial
+  // (kernels_panel.cu), the root one with no rows below its pivots
+  problems.push_back(test::random_sparse(733, 120, test::RandomKind::spd, rng));
   for (const SparseMatrix& a : problems) {
     SCOPED_TRACE("n=" + std::to_string(a.n_rows));
     Options o;
@@ -43,26 +46,61 @@ TEST_F(CudaBackend, CholeskyFactorMatchesCpu) {
     o.type = MatrixType::spd;
     Analysis an = analyze_matrix(a, o);
     SparseMatrix c = canonical_values(an, a);
-    numeric::NumericFactor cpu_f, gpu_f;
+    numeric::NumericFactor cpu_f;
     std::vector<double> arena;
     auto cpu = numeric::make_cpu_executor(2);
-    auto gpu = numeric::make_cuda_executor(o);
     numeric::factorize(an, c.values, MatrixType::spd, 0.0, *cpu, cpu_f, arena);
-    numeric::factorize(an, c.values, MatrixType::spd, 0.0, *gpu, gpu_f, arena);
-    FactorStats fs;
-    gpu->report(fs);
-    // a resident LLᵀ factor stays on the device only; fetch_panels brings it over
-    EXPECT_EQ(gpu_f.panels_on_host, !fs.factor_resident);
-    numeric::fetch_panels(an, *gpu, gpu_f);
-    ASSERT_EQ(cpu_f.panels.size(), gpu_f.panels.size());
-    double num = 0, den = 0;
-    for (std::size_t i = 0; i < cpu_f.panels.size(); ++i) {
-      num = std::max(num, std::abs(cpu_f.panels[i] - gpu_f.panels[i]));
-      den = std::max(den, std::abs(cpu_f.panels[i]));
+    // every large front by POTRF + TRSM; every one with k ≤ 1024 by the panel kernels
+    // (kernels_panel.cu); the default split
+    for (index_t kmax : {index_t{0}, index_t{1024}, Options{}.gpu_panel_kernel_max_pivots}) {
+      SCOPED_TRACE("gpu_panel_kernel_max_pivots=" + std::to_string(kmax));
+      o.gpu_panel_kernel_max_pivots = kmax;
+      numeric::NumericFactor gpu_f;
+      auto gpu = numeric::make_cuda_executor(o);
+      numeric::factorize(an, c.values, MatrixType::spd, 0.0, *gpu, gpu_f, arena);
+      FactorStats fs;
+      gpu->report(fs);
+      // a resident LLᵀ factor stays on the device only; fetch_panels brings it over
+      EXPECT_EQ(gpu_f.panels_on_host, !fs.factor_resident);
+      numeric::fetch_panels(an, *gpu, gpu_f);
+      ASSERT_EQ(cpu_f.panels.size(), gpu_f.panels.size());
+      double num = 0, den = 0;
+      for (std::size_t i = 0; i < cpu_f.panels.size(); ++i) {
+        num = std::max(num, std::abs(cpu_f.panels[i] - gpu_f.panels[i]));
+        den = std::max(den, std::abs(cpu_f.panels[i]));
+      }
+      EXPECT_LT(num, 1e-12 * den);
+      EXPECT_EQ(cpu_f.rows, gpu_f.rows);
     }
-    EXPECT_LT(num, 1e-12 * den);
-    EXPECT_EQ(cpu_f.rows, gpu_f.rows);
   }
+}
+
+// A 3-D Laplacian shifted to have exactly one negative eigenvalue, declared spd: there is
+// one non-positive pivot in all, so the CPU and the GPU must fail at the same one whatever
+// their order of fronts — on the GPU inside the 400-pivot root front, after several
+// 64-column steps of the pivot-block kernels (kernels_panel.cu). Eigenvalues of the
+// Laplacian 20³: Σ_d (2 − 2 cos(π j_d / 21)), the two smallest 0.067 and 0.133.
+TEST_F(CudaBackend, CholeskyFailureNamesTheCpusColumn) {
+  SparseMatrix a = generators::laplacian_3d(20, 20, 20);
+  for (index_t j = 0; j < a.n_cols; ++j) a.values[a.offsets[j]] -= 0.1;  // diagonal first
+  index_t column[3] = {-1, -2, -3};  // CPU; GPU with the panel kernels; GPU without
+  for (int gpu = 0; gpu < 3; ++gpu) {
+    Options o;
+    o.num_gpus = 1;  // one GPU, whatever the machine has
+    o.type = MatrixType::spd;
+    o.backend = gpu ? Backend::cuda : Backend::cpu;
+    o.gpu_panel_kernel_max_pivots = gpu == 2 ? 0 : 1024;
+    Solver s(o);
+    try {
+      s.factorize(a);
+      ADD_FAILURE() << "expected NotPositiveDefinite, backend " << gpu;
+    } catch (const NotPositiveDefinite& e) {
+      column[gpu] = e.column();
+    }
+  }
+  EXPECT_EQ(column[0], column[1]);
+  EXPECT_EQ(column[0], column[2]);
+  EXPECT_GE(column[0], 0);
 }
 
 // Solutions through the public API: GPU and CPU backends, all GPU-supported types.

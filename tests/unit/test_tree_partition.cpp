@@ -463,6 +463,9 @@ TEST(TreePartition, OneWorkerAndBadArguments) {
   neg.num_gpus = -1;
   Solver s(neg);
   EXPECT_THROW(s.analyze(a), InvalidInput);
+  Options neg_panel;
+  neg_panel.gpu_panel_kernel_max_pivots = -1;
+  EXPECT_THROW(analyze_matrix(a, neg_panel), InvalidInput);
   // the CPU backend ignores num_gpus: one worker, no split
   Options cpu;
   cpu.num_gpus = 3;

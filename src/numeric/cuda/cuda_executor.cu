@@ -12,9 +12,9 @@
 //      cuBLAS SYRKX (kernels_ldlt.cuh), all with pivoting restricted to the fully summed
 //      rows and the CPU backend's static pivoting. The large fronts of a chunk run side by
 //      side on kLanes streams (each with its own handles), joined before step 3 — an LLᵀ
-//      front with at most kPanelMaxPivots pivots has its pivot block and panel done for
-//      the whole chunk by two launches of our kernels first (kernels_panel.cu) and only its
-//      SYRK on a lane;
+//      front with at most Options::gpu_panel_kernel_max_pivots pivots has its pivot block and panel
+//      done for the whole chunk by our kernels first (kernels_panel.cu, three launches per 64 pivot
+//      columns) and only its SYRK on a lane;
 //   3. one launch stores the contribution blocks where the plan put them;
 //   4. one launch packs the chunk's factor panels (contiguous in the factor layout) into
 //      the device factor, which is copied to the host factor in one transfer — unless
@@ -93,7 +93,9 @@ constexpr std::size_t kLanes = 8;
 }  // namespace
 
 CudaExecutor::CudaExecutor(const Options& o, int device)
-    : device_(device), limit_(o.device_memory_limit) {
+    : device_(device),
+      limit_(o.device_memory_limit),
+      panel_max_pivots_(o.gpu_panel_kernel_max_pivots) {
   STRATA_CUDA(cudaSetDevice(device_));
   STRATA_CUDA(cudaStreamCreate(&stream_));
   STRATA_CUBLAS(cublasCreate(&blas_));
@@ -666,71 +668,94 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
                         perm_offset_.data(), stream_);
   STRATA_CUDA(cudaEventRecord(ev[2], stream_));
 
-  // LLᵀ fronts with few pivots: their pivot blocks and panels in two launches
-  // (kernels_panel.cu), so that only their SYRK is a library call below
+  // LLᵀ fronts up to gpu_panel_kernel_max_pivots: their pivot blocks and panels by our
+  // kernels for all of them together (kernels_panel.cu), so that only their SYRK is a
+  // library call below
   const bool llt = !lu && !ldlt;
-  std::vector<std::int64_t> panel_items;
-  std::int64_t panel_rows = 0;
+  std::vector<std::size_t> panel_order;
   if (llt)
-    for (std::size_t i = 0; i < big.size(); ++i) {
+    for (std::size_t i = 0; i < big.size(); ++i)
+      if (t.n_pivots(s.fronts[big[i]]) <= panel_max_pivots_) panel_order.push_back(i);
+  if (!panel_order.empty()) {
+    // largest k first: the fronts still active at a step are then a prefix
+    std::stable_sort(panel_order.begin(), panel_order.end(), [&](std::size_t a, std::size_t b) {
+      return t.n_pivots(s.fronts[big[a]]) > t.n_pivots(s.fronts[big[b]]);
+    });
+    std::vector<std::int64_t> items, rows, pivots;
+    for (std::size_t i : panel_order) {
       const index_t f = s.fronts[big[i]];
-      if (t.n_pivots(f) > kPanelMaxPivots) continue;
-      panel_items.push_back(big[i]);
-      panel_items.push_back(static_cast<std::int64_t>(i));
-      panel_rows = std::max<std::int64_t>(panel_rows, t.n_rows(f));
+      items.push_back(big[i]);
+      items.push_back(static_cast<std::int64_t>(i));
+      rows.push_back(t.n_rows(f));
+      pivots.push_back(t.n_pivots(f));
     }
-  if (!panel_items.empty()) {
-    upload(panel_items_, panel_items);
-    launch_llt_panel_small_k(tree, panel_items_.data(),
-                             static_cast<std::int64_t>(panel_items.size() / 2), panel_rows,
-                             pool_.data(), potrf_info_.data(), stream_);
+    upload(panel_items_, items);
+    panel_work_.resize(llt_panel_work_size(static_cast<std::int64_t>(pivots.size())));
+    launch_llt_panel(tree, panel_items_.data(), rows, pivots, pool_.data(), panel_work_.data(),
+                     potrf_info_.data(), stream_);
   }
   STRATA_CUDA(cudaEventRecord(panels_done_, stream_));
 
   // large fronts: library calls, each front on one lane, the lanes side by side (the
-  // least-loaded lane takes the next front; LDLᵀ's panel workspace is single: one lane)
+  // least-loaded lane takes the next front; LDLᵀ's panel workspace is single: one lane).
+  // The fronts the panel kernels did not take go first, their lanes not waiting for those
+  // kernels (lane 0 is stream_ itself, behind them); then the SYRKs of the ones they took,
+  // each lane waiting once for panels_done_.
   const double one = 1.0, minus_one = -1.0;
   std::int64_t perm_at = perm_off.back();
-  std::vector<std::int64_t> big_perm_at;
+  std::vector<std::int64_t> big_perm_at(big.size());
+  for (std::size_t i = 0; i < big.size(); ++i) {
+    big_perm_at[i] = perm_at;
+    perm_at += t.n_pivots(s.fronts[big[i]]);
+  }
+  std::vector<char> by_kernels(big.size(), 0);
+  for (std::size_t i : panel_order) by_kernels[i] = 1;
   std::vector<std::unique_ptr<Lane>>& lane = lanes();
   std::vector<LuFront> lu_fronts;
   const std::size_t n_lanes = ldlt ? 1 : std::min(lane.size(), big.size());
+  std::vector<char> waited(n_lanes, 0);
   for (std::size_t l = 0; l < n_lanes; ++l) {
     lane[l]->load = 0;
-    if (l > 0) STRATA_CUDA(cudaStreamWaitEvent(lane[l]->stream, panels_done_, 0));
+    if (l > 0) STRATA_CUDA(cudaStreamWaitEvent(lane[l]->stream, ev[2], 0));
   }
-  for (std::size_t i = 0; i < big.size(); ++i) {
-    const index_t p = big[i], f = s.fronts[p];
-    const int m = static_cast<int>(t.n_rows(f)), k = static_cast<int>(t.n_pivots(f));
-    double* F = pool_.data() + cur_->pos_offset_host[p];
-    big_perm_at.push_back(perm_at);
-    Lane* ln = lane[0].get();
-    for (std::size_t l = 1; l < n_lanes; ++l)
-      if (lane[l]->load < ln->load) ln = lane[l].get();
-    ln->load += static_cast<double>(m) * m * k;
-    if (ldlt) {
-      ldlt_large_.factor(blas_, stream_, F, m, k, ctx.static_pivot, perm_.data() + perm_at,
-                         pivot_size_.data() + perm_at, perturbed_.data() + ns + i);
-    } else if (!lu && k <= kPanelMaxPivots) {  // pivot block and panel done above
-      STRATA_CUBLAS(cublasDsyrk(ln->blas, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N, m - k, k, &minus_one,
-                                F + k, m, &one, F + static_cast<std::size_t>(k) * m + k, m));
-    } else if (!lu) {
-      grow_potrf_work(ln->solver, ln->potrf_work, F, k, m);
-      STRATA_CUSOLVER(
-          cusolverDnDpotrf(ln->solver, CUBLAS_FILL_MODE_LOWER, k, F, m, ln->potrf_work.data(),
-                           static_cast<int>(ln->potrf_work.size()), potrf_info_.data() + i));
-      if (m > k) {
-        STRATA_CUBLAS(cublasDtrsm(ln->blas, CUBLAS_SIDE_RIGHT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_T,
-                                  CUBLAS_DIAG_NON_UNIT, m - k, k, &one, F, m, F + k, m));
+  for (int pass = 0; pass < 2; ++pass)
+    for (std::size_t i = 0; i < big.size(); ++i) {
+      if (by_kernels[i] != pass) continue;
+      const index_t p = big[i], f = s.fronts[p];
+      const int m = static_cast<int>(t.n_rows(f)), k = static_cast<int>(t.n_pivots(f));
+      double* F = pool_.data() + cur_->pos_offset_host[p];
+      std::size_t li = 0;
+      for (std::size_t l = 1; l < n_lanes; ++l)
+        if (lane[l]->load < lane[li]->load) li = l;
+      Lane* ln = lane[li].get();
+      ln->load += static_cast<double>(m) * m * k;
+      std::int64_t* const perm_f = perm_.data() + big_perm_at[i];
+      if (ldlt) {
+        ldlt_large_.factor(blas_, stream_, F, m, k, ctx.static_pivot, perm_f,
+                           pivot_size_.data() + big_perm_at[i], perturbed_.data() + ns + i);
+      } else if (by_kernels[i]) {  // pivot block and panel done by the kernels above
+        if (li > 0 && !waited[li]) STRATA_CUDA(cudaStreamWaitEvent(ln->stream, panels_done_, 0));
+        waited[li] = 1;
         STRATA_CUBLAS(cublasDsyrk(ln->blas, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N, m - k, k,
                                   &minus_one, F + k, m, &one,
                                   F + static_cast<std::size_t>(k) * m + k, m));
+      } else if (!lu) {
+        grow_potrf_work(ln->solver, ln->potrf_work, F, k, m);
+        STRATA_CUSOLVER(
+            cusolverDnDpotrf(ln->solver, CUBLAS_FILL_MODE_LOWER, k, F, m, ln->potrf_work.data(),
+                             static_cast<int>(ln->potrf_work.size()), potrf_info_.data() + i));
+        if (m > k) {
+          STRATA_CUBLAS(cublasDtrsm(ln->blas, CUBLAS_SIDE_RIGHT, CUBLAS_FILL_MODE_LOWER,
+                                    CUBLAS_OP_T, CUBLAS_DIAG_NON_UNIT, m - k, k, &one, F, m, F + k,
+                                    m));
+          STRATA_CUBLAS(cublasDsyrk(ln->blas, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N, m - k, k,
+                                    &minus_one, F + k, m, &one,
+                                    F + static_cast<std::size_t>(k) * m + k, m));
+        }
+      } else {  // first pass: GETRF and its pivot check; the rest after one wait below
+        lu_fronts.push_back({ln, F, m, k, perm_f, perturbed_.data() + ns + i});
       }
-    } else {  // first pass: GETRF and its pivot check; the rest after one wait below
-      lu_fronts.push_back({ln, F, m, k, perm_.data() + perm_at, perturbed_.data() + ns + i});
     }
-    perm_at += k;
-  }
   if (!lu_fronts.empty()) lu_large_fronts(lu_fronts, ctx.static_pivot);
   for (std::size_t l = 1; l < n_lanes; ++l) {  // join: the stores read every front
     STRATA_CUDA(cudaEventRecord(lane[l]->done, lane[l]->stream));

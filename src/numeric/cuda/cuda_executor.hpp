@@ -158,6 +158,7 @@ class CudaExecutor final : public numeric::Executor {
   cublasHandle_t blas_ = nullptr;
   cusolverDnHandle_t solver_ = nullptr;
   std::size_t limit_ = 0;
+  std::int64_t panel_max_pivots_ = 0;  ///< Options::gpu_panel_kernel_max_pivots
   std::uint64_t analysis_id_ = 0;
   DevicePlan plan_;
   // analysis arrays (fronts_: the whole tree's schedule, for the device solve)
@@ -184,7 +185,8 @@ class CudaExecutor final : public numeric::Executor {
   DeviceBuffer<double> values_, arena_, pool_, potrf_work_, panels_;
   PinnedBuffer<double> host_arena_, host_front_, host_staging_;
   DeviceBuffer<int> potrf_info_;
-  DeviceBuffer<std::int64_t> panel_items_;  // launch_llt_panel_small_k's (position, slot)
+  DeviceBuffer<std::int64_t> panel_items_;  // launch_llt_panel's (position, slot)
+  DeviceBuffer<double> panel_work_;         // launch_llt_panel's diagonal-block inverses
   DeviceBuffer<std::int64_t> small_pos_, info_, perturbed_, perm_, perm_offset_, stage_offset_;
   std::vector<std::int64_t> iota_;
   DeviceBuffer<int> pivot_size_;         // LDLᵀ: local pivot sizes, laid out as perm_
@@ -215,7 +217,7 @@ class CudaExecutor final : public numeric::Executor {
   index_t chunks_ = 0, tiled_count_ = 0;
   double device_seconds_ = 0;
   cudaEvent_t start_ = nullptr, stop_ = nullptr;
-  cudaEvent_t panels_done_ = nullptr;  // the chunk's small-k panels: the lanes wait for it
+  cudaEvent_t panels_done_ = nullptr;  // the chunk's launch_llt_panel: the lanes wait for it
   /// Two chunk records used in turn: one launched, the previous one finishing on the host.
   ChunkRecord chunk_[2];
   int slot_ = 0;

@@ -8,7 +8,9 @@
 
 #include <cuda_runtime.h>
 
+#include <cstddef>
 #include <cstdint>
+#include <vector>
 
 namespace strata::cuda {
 
@@ -62,18 +64,23 @@ void launch_factor_small(const DeviceTree& t, const std::int64_t* positions, std
                          std::int64_t* perturbed, std::int64_t* perm,
                          const std::int64_t* perm_offset, cudaStream_t s);
 
-/// Fronts with at most this many pivots take launch_llt_panel_small_k (LLᵀ).
-constexpr std::int64_t kPanelMaxPivots = 64;
+/// Doubles of workspace launch_llt_panel needs for `count` fronts (64×64 each).
+std::size_t llt_panel_work_size(std::int64_t count);
 
-/// The pivot block and the panel of large LLᵀ fronts with k ≤ kPanelMaxPivots pivots, all
-/// in two launches (kernels_panel.cu): for item i, batch position items[2i] (its m×m front in
-/// the pool, leading dimension m) gets L11 (lower triangle of its k×k block) and
-/// L21 = A21·L11⁻ᵀ in place, and info[items[2i + 1]] = 0, or j + 1 for the first
-/// non-positive pivot j (cuSOLVER's convention; the panel is then left as it was).
-/// The contribution-block update is the caller's. `max_rows`: the most rows of a front in
-/// the launch. Throws CudaError if the launch fails.
-void launch_llt_panel_small_k(const DeviceTree& t, const std::int64_t* items, std::int64_t count,
-                              std::int64_t max_rows, double* pool, int* info, cudaStream_t s);
+/// The pivot block and the panel of large LLᵀ fronts (any k; the executor sends those with
+/// k ≤ Options::gpu_panel_kernel_max_pivots), all fronts of
+/// the list together, three launches per 64 pivot columns (kernels_panel.cu): for item i,
+/// batch position items[2i] (its m×m front in the pool, leading dimension m) gets L11
+/// (lower triangle of its k×k block) and L21 = A21·L11⁻ᵀ in place, and info[items[2i + 1]]
+/// = 0, or j + 1 for the first non-positive pivot j (cuSOLVER's convention; the front is
+/// then left partly factored, to be reported as failed). `rows[i]`, `pivots[i]`: m and k of
+/// item i (host copies), sorted by pivots, largest first. `work`: llt_panel_work_size(count)
+/// doubles. The contribution-block update is the caller's. Throws CudaError if a launch
+/// fails.
+void launch_llt_panel(const DeviceTree& t, const std::int64_t* items,
+                      const std::vector<std::int64_t>& rows,
+                      const std::vector<std::int64_t>& pivots, double* pool, double* work,
+                      int* info, cudaStream_t s);
 
 /// One LU panel of a large front: columns p0..p0+w-1 of the m×m front F (fully summed
 /// rows 0..k-1), with row interchanges among rows p0..k-1 applied to whole rows, static

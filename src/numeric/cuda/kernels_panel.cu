@@ -1,29 +1,41 @@
-// strata — the pivot block and the panel of large Cholesky fronts with few pivots, for all
-// such fronts of a chunk in two launches (see kernels.cuh, launch_llt_panel_small_k).
+// strata — the pivot block and the panel of large Cholesky fronts (those with at most
+// Options::gpu_panel_kernel_max_pivots pivots), for all such fronts of a chunk at once:
+// three launches per 64-column step (see kernels.cuh, launch_llt_panel).
 //
-// Why: a front with many rows but few pivots (k ≤ 64; about 2,300 of the 3,100 fronts
-// over 256 rows in lap3d 100³) went through cuSOLVER POTRF on its k×k block and cuBLAS
-// TRSM on the (m−k)×k panel, two library calls of a few MFLOP each. Measured on the H100
-// (bench_gpu_memory --parts kernels, REPORT §4): POTRF reaches 0.0–0.2 TFLOP/s below
-// k = 500 and TRSM about 1 TFLOP/s at k = 250; 32 fronts of 1000 rows × 100 pivots, POTRF +
-// TRSM + SYRK each, reach 2 TFLOP/s in aggregate however many streams run them (it
-// saturates at 4–8). Here two launches do the POTRF and the TRSM of every such front of
-// the chunk; only the contribution-block update (SYRK, where the flops are) stays a library
-// call per front.
+// Why: cuSOLVER POTRF and cuBLAS TRSM are one library call per front, and at the shapes of
+// the large fronts of a multifrontal factorization they run far below the device's peak.
+// Measured on the H100 (bench_gpu_memory --parts kernels, REPORT §4): POTRF 0.05 / 0.2 /
+// 0.8 TFLOP/s at k = 250 / 500 / 1000 and TRSM 0.9 / 2.4 / 5.6 TFLOP/s at the same k, where
+// DGEMM reaches 64; 32 fronts side by side on 8 streams reach 2–24 TFLOP/s in aggregate.
+// In lap3d 100³ the POTRFs and TRSMs of fronts with k ≤ 2048 were about half the time of
+// the fronts over 256 rows.
 //
-// How: two launches. First one block per front loads its k×k pivot block into shared
-// memory, factors it there (unblocked right-looking Cholesky; k ≤ 64) and writes L11 back
-// (lower triangle; the strict upper one is left as it was, as POTRF leaves it) and the
-// info. (One launch in which every panel block factored its own copy raced: the block
-// writing L11 back could precede another block's load of A11 — lap3d 100³ then failed
-// with a NaN pivot on the H100.) Then block (i, y) reads L11 and rows k + 128·y … of front
-// i's panel; each thread owns one row a and solves x·L11ᵀ = a by forward substitution (x_j = (a_j −
-// Σ_{l<j} L11(j,l)·x_l) / L11(j,j)), the row kept in shared memory transposed so the 128 threads
-// touch 128 banks. A non-positive pivot j sets info = j + 1 (cuSOLVER's convention) and the panel
-// is left alone, the front then failing on the host as before. Source: the right-looking Cholesky
-// and the forward substitution of Golub & Van Loan, "Matrix Computations", 4th ed., §4.2.5 and
-// §3.1.
+// How: the right-looking blocked Cholesky of the front's first k columns (Golub & Van Loan,
+// "Matrix Computations", 4th ed., §4.2.9), in steps of kStep = 64 columns, each step one
+// launch of each kernel over every front still active (items sorted by k, largest first, so
+// the active fronts of a step are a prefix):
+//   1. pivot_block_kernel, one block per front: the w×w diagonal block (w ≤ 64) into shared
+//      memory, unblocked right-looking Cholesky there (one thread per row), L_jj written
+//      back (lower triangle; the strict upper one is left as it was, as POTRF leaves it)
+//      and its inverse L_jj⁻¹ (forward substitution on the identity, one thread per column)
+//      into the front's 64×64 slot of the workspace;
+//   2. panel_kernel, one block per 64-row tile below the diagonal block: L_ij = A_ij·L_jj⁻ᵀ,
+//      a 64×64×w product from shared memory, written in place (the tile is read whole
+//      before it is written);
+//   3. update_kernel, one block per 64×64 tile of the pivot columns right of the step:
+//      A_ic −= L_ij·L_cjᵀ (rows i ≥ c only inside the pivot block).
+// The contribution-block update (SYRK, where most flops are) stays a cuBLAS call per front.
+// The panel by the inverse of the diagonal block, not by substitution, is how MAGMA's GPU
+// TRSM works too (inverted diagonal blocks, then GEMMs); the error bound grows with
+// κ(L_jj) (Higham, "Accuracy and Stability of Numerical Algorithms", 2nd ed., §14.2),
+// which stays small for the 64×64 diagonal blocks of an SPD front. Both products run on the FP64
+// tensor cores (WMMA, m8n8k4 in FP64). A non-positive pivot at column j sets
+// info = j + 1 (cuSOLVER's convention) and every later launch leaves that front alone,
+// the front then failing on the host as before.
+#include <mma.h>
+
 #include <algorithm>
+#include <vector>
 
 #include "numeric/cuda/cuda_check.hpp"
 #include "numeric/cuda/kernels.cuh"
@@ -31,103 +43,226 @@
 namespace strata::cuda {
 namespace {
 
-constexpr int kRows = 128;  // panel rows per block, one per thread
-constexpr std::size_t kSmem =
-    sizeof(double) * (kPanelMaxPivots * kPanelMaxPivots + kPanelMaxPivots * kRows);
+constexpr int kStep = 64;       // columns per step, and the tile edge of the products
+constexpr int kChunk = 32;      // inner dimension staged in shared memory at a time
+constexpr int kThreads = 256;   // products: 8 warps, a 32×16 part of the tile each
+constexpr int kLd = kStep + 1;  // padded leading dimension (rows read across threads)
 
-// Launch 1: one block per front factors its k×k pivot block in shared memory and writes
-// L11 back (lower triangle) and the info.
-__global__ void pivot_block_kernel(DeviceTree t, const std::int64_t* items, double* pool,
-                                   int* info) {
-  extern __shared__ double L[];  // k × k, leading dimension k
-  __shared__ int sfail;
-  const std::int64_t pos = items[2 * blockIdx.x], slot = items[2 * blockIdx.x + 1];
-  const std::int64_t f = t.fronts[pos];
-  const std::int64_t m = t.n_rows[f], k = t.n_pivots[f];
-  double* F = pool + t.pos_offset[pos];
-  const int tid = threadIdx.x;
-  if (tid == 0) sfail = 0;
-  for (std::int64_t x = tid; x < k * k; x += blockDim.x) {
-    const std::int64_t i = x % k, j = x / k;
-    L[x] = i >= j ? F[j * m + i] : 0.0;
+// The 64×64 tile C = A·Bᵀ with A(r, t) = a[t·lda + r] for r < a_rows (zero beyond),
+// B(c, t) = b[t·ldb + c] for c < b_rows, t < w: the operands staged through shared
+// memory kChunk columns at a time, the products on the FP64 tensor cores (WMMA m8n8k4,
+// sm_80 and later). Returns C in shared memory, C(r, c) at [c·64 + r], valid until the
+// next call; every thread of the block must call it.
+__device__ const double* tile_nt(const double* a, std::int64_t lda, int a_rows, const double* b,
+                                 std::int64_t ldb, int b_rows, int w) {
+  using namespace nvcuda;
+  __shared__ __align__(32) double sm[2 * kChunk * kStep];  // A chunk, B chunk; then C
+  double* As = sm;                   // A(r, t) at [t·64 + r]: column-major, ld 64
+  double* Bs = sm + kChunk * kStep;  // B(c, t) at [t·64 + c]: Bᵀ row-major, ld 64
+  const int tid = threadIdx.x, warp = tid >> 5;
+  const int wr = (warp & 1) * 32, wc = (warp >> 1) * 16;  // this warp's part of C
+  wmma::fragment<wmma::accumulator, 8, 8, 4, double> acc[4][2];
+  for (auto& row : acc)
+    for (auto& f : row) wmma::fill_fragment(f, 0.0);
+  for (int t0 = 0; t0 < w; t0 += kChunk) {
+    for (int x = tid; x < kChunk * kStep; x += kThreads) {
+      const int tt = x >> 6, r = x & 63;
+      const bool in = t0 + tt < w;
+      As[x] = in && r < a_rows ? a[static_cast<std::int64_t>(t0 + tt) * lda + r] : 0.0;
+      Bs[x] = in && r < b_rows ? b[static_cast<std::int64_t>(t0 + tt) * ldb + r] : 0.0;
+    }
+    __syncthreads();
+    const int steps = min(kChunk, w - t0);
+    for (int tt = 0; tt < steps; tt += 4) {
+      wmma::fragment<wmma::matrix_a, 8, 8, 4, double, wmma::col_major> fa[4];
+      wmma::fragment<wmma::matrix_b, 8, 8, 4, double, wmma::row_major> fb[2];
+#pragma unroll
+      for (int i = 0; i < 4; ++i)
+        wmma::load_matrix_sync(fa[i], As + tt * kStep + wr + 8 * i, kStep);
+#pragma unroll
+      for (int j = 0; j < 2; ++j)
+        wmma::load_matrix_sync(fb[j], Bs + tt * kStep + wc + 8 * j, kStep);
+#pragma unroll
+      for (int i = 0; i < 4; ++i)
+#pragma unroll
+        for (int j = 0; j < 2; ++j) wmma::mma_sync(acc[i][j], fa[i], fb[j], acc[i][j]);
+    }
+    __syncthreads();
   }
+#pragma unroll
+  for (int i = 0; i < 4; ++i)
+#pragma unroll
+    for (int j = 0; j < 2; ++j)
+      wmma::store_matrix_sync(sm + (wc + 8 * j) * kStep + wr + 8 * i, acc[i][j], kStep,
+                              wmma::mem_col_major);
   __syncthreads();
-  for (std::int64_t j = 0; j < k; ++j) {
-    if (tid == 0) {
-      const double d = L[j * k + j];
-      if (!(d > 0.0))
-        sfail = static_cast<int>(j) + 1;
-      else
-        L[j * k + j] = sqrt(d);
+  return sm;
+}
+
+__device__ std::int64_t imin(std::int64_t a, std::int64_t b) { return a < b ? a : b; }
+
+struct Item {
+  std::int64_t m, k, slot;
+  double* F;
+};
+
+__device__ Item item(const DeviceTree& t, const std::int64_t* items, double* pool) {
+  const std::int64_t pos = items[2 * blockIdx.x];
+  const std::int64_t f = t.fronts[pos];
+  return {t.n_rows[f], t.n_pivots[f], items[2 * blockIdx.x + 1], pool + t.pos_offset[pos]};
+}
+
+// Launch 1 of a step: one block of 64 threads per front factors its w×w diagonal block at
+// (j0, j0), thread i holding row i in registers (the loops over columns unrolled, so that
+// the row stays in registers: this kernel is the serial part of a step, its latency is
+// what counts); writes L_jj back and L_jj⁻¹ to work[blockIdx.x] (64×64, entry (c, t) at
+// t·64 + c, zero outside the w×w lower triangle); info on a non-positive pivot.
+__global__ void __launch_bounds__(kStep)
+    pivot_block_kernel(DeviceTree t, const std::int64_t* items, double* pool, double* work,
+                       int* info, std::int64_t j0) {
+  __shared__ double col[kStep];       // column j of L, per step
+  __shared__ double rdiag[kStep];     // 1 / L(j, j)
+  __shared__ double Ls[kStep * kLd];  // L by rows, then L_jj⁻¹ by columns
+  __shared__ int sfail;
+  const Item it = item(t, items, pool);
+  if (j0 > 0 && info[it.slot] != 0) return;  // failed at an earlier step
+  const int w = static_cast<int>(imin(kStep, it.k - j0));
+  const std::int64_t m = it.m;
+  double* D = it.F + j0 * m + j0;  // the diagonal block, leading dimension m
+  const int i = threadIdx.x;
+  if (i == 0) sfail = 0;
+  double a[kStep];  // row i of the block, lower part
+#pragma unroll
+  for (int c = 0; c < kStep; ++c)
+    a[c] = c <= i && i < w ? D[static_cast<std::int64_t>(c) * m + i] : 0.0;
+  __syncthreads();
+#pragma unroll
+  for (int j = 0; j < kStep; ++j) {
+    if (j >= w) break;
+    if (i == j) {
+      const double d = a[j];
+      if (!(d > 0.0)) {
+        sfail = static_cast<int>(j0) + j + 1;
+      } else {
+        a[j] = sqrt(d);
+        rdiag[j] = 1.0 / a[j];
+      }
     }
     __syncthreads();
     if (sfail) break;
-    const double inv = 1.0 / L[j * k + j];
-    for (std::int64_t i = j + 1 + tid; i < k; i += blockDim.x) L[j * k + i] *= inv;
-    __syncthreads();
-    const std::int64_t rem = k - j - 1;  // trailing lower triangle: i >= c > j
-    for (std::int64_t x = tid; x < rem * rem; x += blockDim.x) {
-      const std::int64_t i = j + 1 + x % rem, c = j + 1 + x / rem;
-      if (i >= c) L[c * k + i] -= L[j * k + i] * L[j * k + c];
+    if (i > j) {
+      a[j] *= rdiag[j];
+      col[i] = a[j];
     }
     __syncthreads();
+    if (i > j) {
+#pragma unroll
+      for (int c = j + 1; c < kStep; ++c)
+        if (c <= i) a[c] -= a[j] * col[c];
+    }
   }
-  if (tid == 0) info[slot] = sfail;
+  if (i == 0 && (j0 == 0 || sfail)) info[it.slot] = sfail;
   if (sfail) return;
-  for (std::int64_t x = tid; x < k * k; x += blockDim.x) {
-    const std::int64_t i = x % k, j = x / k;
-    if (i >= j) F[j * m + i] = L[x];
+#pragma unroll
+  for (int c = 0; c < kStep; ++c) {
+    if (c <= i && i < w) D[static_cast<std::int64_t>(c) * m + i] = a[c];
+    Ls[i * kLd + c] = a[c];
+  }
+  __syncthreads();
+  // L_jj·X = I, thread i solving for column i by rows r in order (X(l, i) = 0 for l < i;
+  // every thread reads the same L(r, l): a broadcast)
+#pragma unroll
+  for (int r = 0; r < kStep; ++r) {
+    double x = r == i ? 1.0 : 0.0;
+#pragma unroll
+    for (int l = 0; l < r; ++l) x -= Ls[r * kLd + l] * a[l];
+    a[r] = r >= i && r < w ? x * rdiag[r] : 0.0;
+  }
+  __syncthreads();  // every thread done reading L
+#pragma unroll
+  for (int r = 0; r < kStep; ++r) Ls[i * kLd + r] = a[r];  // X(r, i)
+  __syncthreads();
+  double* W = work + static_cast<std::int64_t>(blockIdx.x) * kStep * kStep;
+  for (int x = i; x < kStep * kStep; x += kStep) {
+    const int tt = x >> 6, c = x & 63;
+    W[x] = Ls[tt * kLd + c];  // entry (c, t) of L_jj⁻¹ = X(c, t) at t·64 + c
   }
 }
 
-// Launch 2: block (i, y) solves rows k + kRows·y … of front i's panel against its L11
-// (read back from the front), one row per thread; a front whose pivot block failed is
-// left alone.
-__global__ void panel_rows_kernel(DeviceTree t, const std::int64_t* items, double* pool,
-                                  const int* info) {
-  extern __shared__ double smem[];
-  const std::int64_t pos = items[2 * blockIdx.x], slot = items[2 * blockIdx.x + 1];
-  const std::int64_t f = t.fronts[pos];
-  const std::int64_t m = t.n_rows[f], k = t.n_pivots[f];
-  const std::int64_t r0 = k + static_cast<std::int64_t>(blockIdx.y) * kRows;
-  if (r0 >= m || info[slot] != 0) return;  // the whole block leaves together
-  double* F = pool + t.pos_offset[pos];
-  double* L = smem;                                      // k × k, leading dimension k
-  double* B = smem + kPanelMaxPivots * kPanelMaxPivots;  // kRows × k, transposed
-  const int tid = threadIdx.x;
-  for (std::int64_t x = tid; x < k * k; x += blockDim.x) {
-    const std::int64_t i = x % k, j = x / k;
-    L[x] = i >= j ? F[j * m + i] : 0.0;
+// Launch 2 of a step: block (i, y) computes L_ij = A_ij·L_jj⁻ᵀ for rows j0 + w + 64y … of
+// front i's columns j0 … j0 + w, in place.
+__global__ void panel_kernel(DeviceTree t, const std::int64_t* items, double* pool,
+                             const double* work, const int* info, std::int64_t j0) {
+  const Item it = item(t, items, pool);
+  const std::int64_t w = imin(kStep, it.k - j0);
+  const std::int64_t r0 = j0 + w + static_cast<std::int64_t>(blockIdx.y) * kStep;
+  if (r0 >= it.m || info[it.slot] != 0) return;  // the whole block leaves together
+  const int rows = static_cast<int>(imin(kStep, it.m - r0));
+  double* A = it.F + j0 * it.m + r0;
+  const double* C =
+      tile_nt(A, it.m, rows, work + static_cast<std::int64_t>(blockIdx.x) * kStep * kStep, kStep,
+              kStep, static_cast<int>(w));
+  for (int x = threadIdx.x; x < kStep * kStep; x += kThreads) {
+    const int r = x & 63, c = x >> 6;
+    if (r < rows && c < w) A[static_cast<std::int64_t>(c) * it.m + r] = C[x];
   }
-  __syncthreads();
-  const std::int64_t row = r0 + tid;
-  if (row >= m) return;
-  for (std::int64_t j = 0; j < k; ++j) B[j * kRows + tid] = F[j * m + row];  // coalesced
-  for (std::int64_t j = 0; j < k; ++j) {
-    double x = B[j * kRows + tid];
-    for (std::int64_t l = 0; l < j; ++l) x -= B[l * kRows + tid] * L[l * k + j];
-    x /= L[j * k + j];
-    B[j * kRows + tid] = x;
-    F[j * m + row] = x;
+}
+
+// Launch 3 of a step: block (i, y, z) updates the 64×64 tile at rows j0 + w + 64y …,
+// columns j0 + w + 64z … (columns < k) of front i: A −= L_ij·L_cjᵀ, lower triangle only.
+__global__ void update_kernel(DeviceTree t, const std::int64_t* items, double* pool,
+                              const int* info, std::int64_t j0) {
+  const Item it = item(t, items, pool);
+  const std::int64_t w = imin(kStep, it.k - j0);
+  const std::int64_t r0 = j0 + w + static_cast<std::int64_t>(blockIdx.y) * kStep;
+  const std::int64_t c0 = j0 + w + static_cast<std::int64_t>(blockIdx.z) * kStep;
+  if (r0 >= it.m || c0 >= it.k || r0 + kStep <= c0 || info[it.slot] != 0) return;
+  const int rows = static_cast<int>(imin(kStep, it.m - r0));
+  const int cols = static_cast<int>(imin(kStep, it.k - c0));
+  const double* P = it.F + j0 * it.m;  // the step's panel columns
+  const double* T = tile_nt(P + r0, it.m, rows, P + c0, it.m, cols, static_cast<int>(w));
+  double* C = it.F + c0 * it.m + r0;
+  for (int x = threadIdx.x; x < kStep * kStep; x += kThreads) {
+    const int r = x & 63, c = x >> 6;
+    if (r < rows && c < cols && r0 + r >= c0 + c)
+      C[static_cast<std::int64_t>(c) * it.m + r] -= T[x];
   }
+}
+
+unsigned tiles(std::int64_t n) {
+  return static_cast<unsigned>(std::max<std::int64_t>(1, (n + kStep - 1) / kStep));
 }
 
 }  // namespace
 
-void launch_llt_panel_small_k(const DeviceTree& t, const std::int64_t* items, std::int64_t count,
-                              std::int64_t max_rows, double* pool, int* info, cudaStream_t s) {
+std::size_t llt_panel_work_size(std::int64_t count) {
+  return static_cast<std::size_t>(count) * kStep * kStep;
+}
+
+void launch_llt_panel(const DeviceTree& t, const std::int64_t* items,
+                      const std::vector<std::int64_t>& rows,
+                      const std::vector<std::int64_t>& pivots, double* pool, double* work,
+                      int* info, cudaStream_t s) {
+  const std::size_t count = pivots.size();
   if (count == 0) return;
-  constexpr std::size_t l_bytes = sizeof(double) * kPanelMaxPivots * kPanelMaxPivots;
-  // over the 48 KiB default; the attribute belongs to the current device, so it is set
-  // at every launch (several GPUs run this in one process)
-  STRATA_CUDA(cudaFuncSetAttribute(panel_rows_kernel, cudaFuncAttributeMaxDynamicSharedMemorySize,
-                                   static_cast<int>(kSmem)));
-  pivot_block_kernel<<<static_cast<unsigned>(count), kRows, l_bytes, s>>>(t, items, pool, info);
-  STRATA_CUDA_LAUNCH();
-  const dim3 grid(static_cast<unsigned>(count),
-                  static_cast<unsigned>(std::max<std::int64_t>(1, (max_rows + kRows - 1) / kRows)));
-  panel_rows_kernel<<<grid, kRows, kSmem, s>>>(t, items, pool, info);
-  STRATA_CUDA_LAUNCH();
+  // per step: the active prefix (k > j0) and its most rows
+  std::vector<std::int64_t> max_rows(count);
+  for (std::size_t i = 0; i < count; ++i) max_rows[i] = std::max(rows[i], i ? max_rows[i - 1] : 0);
+  std::size_t active = count;
+  for (std::int64_t j0 = 0; j0 < pivots[0]; j0 += kStep) {
+    while (active > 0 && pivots[active - 1] <= j0) --active;
+    const unsigned n = static_cast<unsigned>(active);
+    const std::int64_t below = max_rows[active - 1] - j0;  // rows at and below the step
+    pivot_block_kernel<<<n, kStep, 0, s>>>(t, items, pool, work, info, j0);
+    STRATA_CUDA_LAUNCH();
+    panel_kernel<<<dim3(n, tiles(below)), kThreads, 0, s>>>(t, items, pool, work, info, j0);
+    STRATA_CUDA_LAUNCH();
+    if (pivots[0] - j0 > kStep) {
+      update_kernel<<<dim3(n, tiles(below), tiles(pivots[0] - j0 - kStep)), kThreads, 0, s>>>(
+          t, items, pool, info, j0);
+      STRATA_CUDA_LAUNCH();
+    }
+  }
 }
 
 }  // namespace strata::cuda
