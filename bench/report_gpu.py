@@ -822,11 +822,64 @@ class GpuSections:
         if kernels:
             # the single-front table from the run with the most shapes (newest on ties), the
             # concurrent one from the newest run that has it
-            full = max(kernels, key=lambda r: (len(r.get("front_kernels").get("rows") or []),
+            # (runs with strata's own panel kernels first)
+            def has_ours(r):
+                return any("panel_kernels_flops_per_second" in x
+                           for x in r.get("front_kernels").get("rows") or [])
+            full = max(kernels, key=lambda r: (has_ours(r),
+                                               len(r.get("front_kernels").get("rows") or []),
                                                r.date, r.name))
             conc = [r for r in kernels if r.get("front_kernels").get("concurrent")]
             self.front_kernels_table(full, max(conc, key=lambda r: (r.date, r.name))
                                      if conc else None)
+            batched = [r for r in kernels if r.get("front_kernels").get("batched_panels")]
+            if batched:
+                self.batched_panels_table(max(batched, key=lambda r: (r.date, r.name)))
+        sweeps = [r for r in runs if r.kind == "gpu_memory" and r.get("panel_kernels")]
+        if sweeps:
+            self.panel_sweep_table(max(sweeps, key=lambda r: (r.date, r.name)))
+
+    def batched_panels_table(self, r: Run) -> None:
+        """Pivot blocks and panels of many fronts: library on 8 streams vs strata's kernels."""
+        self.consumed.add(r.path)
+        rows = [[f_int(x.get("m")), f_int(x.get("k")), f_int(x.get("fronts")),
+                 f_g(num(x.get("library_flops_per_second")) and
+                     x["library_flops_per_second"] * 1e-12),
+                 f_g(num(x.get("ours_flops_per_second")) and x["ours_flops_per_second"] * 1e-12)]
+                for x in r.get("front_kernels").get("batched_panels")]
+        self.w("The pivot blocks and panels (POTRF + TRSM's work, k³/3 + (m−k)·k² flops each) "
+               "of many fronts of one shape: cuSOLVER POTRF + cuBLAS TRSM per front on 8 "
+               "streams, against strata's panel kernels (kernels_panel.cu: all fronts in one "
+               "go, 64 pivot columns per step); aggregate TFLOP/s "
+               f"({machine_label(r.machine)}, {r.date}, commit {r.get('git_commit') or '?'}; "
+               f"`{r.get('command')}`).")
+        self.w()
+        self.w(table(["m", "k", "fronts", "library", "panel kernels"], rows, 0))
+
+    def panel_sweep_table(self, r: Run) -> None:
+        """In-core Cholesky refactorization per Options::gpu_panel_kernel_max_pivots."""
+        self.consumed.add(r.path)
+        sweep = r.get("panel_kernels")
+        values = sorted({int(num(x.get("gpu_panel_kernel_max_pivots")))
+                         for p in sweep for x in p.get("runs", [])})
+        rows = []
+        for p in sweep:
+            by = {int(num(x.get("gpu_panel_kernel_max_pivots"))): num(x.get("factor_seconds"))
+                  for x in p.get("runs", [])}
+            best = min((v for v in by.values() if v), default=None)
+            rows.append([p.get("problem")] + [
+                "–" if by.get(v) is None else
+                (f"**{by[v]:.4f}**" if by[v] == best else f"{by[v]:.4f}") for v in values])
+        self.w("### Which Cholesky fronts get the panel kernels")
+        self.w()
+        self.w("In-core refactorization time in seconds (median of the repeats) for each value "
+               "of `Options::gpu_panel_kernel_max_pivots`: fronts over 256 rows with at most "
+               "that many pivots get strata's pivot-block and panel kernels, the others "
+               "cuSOLVER POTRF + cuBLAS TRSM (0: all of them); the SYRK stays cuBLAS's. Best "
+               f"in bold ({machine_label(r.machine)}, {r.date}, commit "
+               f"{r.get('git_commit') or '?'}; `{r.get('command')}`).")
+        self.w()
+        self.w(table(["problem"] + [f"≤ {v}" for v in values], rows, 0))
 
     def front_kernels_table(self, r: Run, rc: Run | None) -> None:
         """The dense kernels of a large front, by shape (bench_gpu_memory --parts kernels):
@@ -835,7 +888,9 @@ class GpuSections:
         self.consumed.add(r.path)
         fk = r.get("front_kernels")
         peak = num(fk.get("dgemm_flops_per_second"))
-        keys = [("potrf", "POTRF k×k"), ("trsm", "TRSM (m−k)×k"), ("trtri", "TRTRI k×k"),
+        keys = [("potrf", "POTRF k×k"), ("trsm", "TRSM (m−k)×k"),
+                ("potrf_trsm", "POTRF + TRSM"), ("panel_kernels", "ours: panel kernels"),
+                ("trtri", "TRTRI k×k"),
                 ("trsm_by_inverse", "TRSM as TRTRI + GEMM"), ("syrk", "SYRK rank k"),
                 ("gemm_blocked_512", "GEMMs, 512-column blocks"),
                 ("gemm_blocked_1024", "GEMMs, 1024"), ("gemm_blocked_2048", "GEMMs, 2048"),
@@ -854,7 +909,9 @@ class GpuSections:
                f"that cuBLAS / cuSOLVER reach on one front of m rows and k pivots, each kernel "
                f"alone, best of 3; *TRSM as TRTRI + GEMM*: L11 copied, inverted by cuSOLVER "
                f"Xtrtri, the panel multiplied by the inverse into a buffer and copied back, "
-               f"credited with TRSM's flops ({machine_label(r.machine)}, {r.date}, commit "
+               f"credited with TRSM's flops; *ours*: strata's pivot-block and panel kernels "
+               f"(kernels_panel.cu) on the same front, credited with POTRF + TRSM's flops "
+               f"({machine_label(r.machine)}, {r.date}, commit "
                f"{r.get('git_commit') or '?'}; `{r.get('command')}`): the factorization of "
                f"the pivot block and the panel below it, then the rank-k update of the "
                f"contribution block by DSYRK and by GEMMs over column blocks (credited with "
