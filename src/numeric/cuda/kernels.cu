@@ -53,7 +53,19 @@ __global__ void assemble_kernel(DeviceTree t, std::int64_t begin, std::int64_t s
   const std::int64_t c0 = blockIdx.y * slice, c1 = min(m, c0 + slice);
   if (c0 >= m) return;
   double* F = pool + t.pos_offset[pos];
-  for (std::int64_t x = threadIdx.x; x < m * (c1 - c0); x += blockDim.x) F[c0 * m + x] = 0.0;
+  const int warp = threadIdx.x / kWarp, lane = threadIdx.x % kWarp;
+  const int warps = blockDim.x / kWarp;
+  if (symmetric) {
+    // nothing reads the strict upper triangle of the contribution block (the factor
+    // kernels, the block store and the panel pack use the lower one): it stays unwritten,
+    // about a third less to zero in a large front. The pivot columns are zeroed whole: the
+    // packed panel carries its k×k block's upper triangle as zeros, as the CPU's does.
+    const std::int64_t k = t.n_pivots[f];
+    for (std::int64_t c = c0 + warp; c < c1; c += warps)
+      for (std::int64_t i = (c < k ? 0 : c) + lane; i < m; i += kWarp) F[c * m + i] = 0.0;
+  } else {
+    for (std::int64_t x = threadIdx.x; x < m * (c1 - c0); x += blockDim.x) F[c0 * m + x] = 0.0;
+  }
   __syncthreads();
   for (std::int64_t e = t.entry_offsets[f] + threadIdx.x; e < t.entry_offsets[f + 1];
        e += blockDim.x) {
@@ -61,8 +73,6 @@ __global__ void assemble_kernel(DeviceTree t, std::int64_t begin, std::int64_t s
     if (d >= c0 * m && d < c1 * m) F[d] += values[t.entry_src[e]];  // distinct destinations
   }
   __syncthreads();
-  const int warp = threadIdx.x / kWarp, lane = threadIdx.x % kWarp;
-  const int warps = blockDim.x / kWarp;
   for (std::int64_t q = t.child_offsets[f]; q < t.child_offsets[f + 1]; ++q) {
     const std::int64_t c = t.children[q];
     const std::int64_t mc = t.n_rows[c] - t.n_pivots[c];
