@@ -667,58 +667,47 @@ int main(int argc, char** argv) {
     partial = now;
   }
 
-  out["block_size"] = json::array();
-  fmt::print("{:<14} {:>6} {:>9} {:>9}\n", "problem", "block", "factor s", "GFLOP/s");
-  for (const std::string& name : block_problems) {
-    bench::Problem p = bench::load_problem(name);
-    json rows = json::array();
-    for (index_t bs : block_sizes) {
-      Options o;
-      o.type = p.symmetric ? MatrixType::spd : MatrixType::general;
-      o.backend = Backend::cuda;
-      o.num_gpus = 1;  // the single-GPU comparison, whatever the machine has
-      o.max_block_size = bs;
-      const Run r = run(p, o, repeat);
-      const double flops = r.fs.gflops * r.fs.seconds;  // GFLOP of this factorization
-      rows.push_back({{"max_block_size", bs},
-                      {"factor_seconds", r.seconds},
-                      {"gflops", flops / r.seconds},
-                      {"backward_error", r.berr}});
-      fmt::print("{:<14} {:>6} {:>9.4f} {:>9.1f}\n", name, bs, r.seconds, flops / r.seconds);
-      std::fflush(stdout);
+  // One in-core run per value of one option, on each problem: the block-size sweep
+  // (max_block_size) and which Cholesky fronts go to the panel kernels
+  // (gpu_panel_kernel_max_pivots; Cholesky problems only).
+  auto sweep = [&](const std::vector<std::string>& names, const std::vector<index_t>& values,
+                   const char* key, auto set, bool cholesky_only) {
+    json all = json::array();
+    if (!names.empty())
+      fmt::print("{:<14} {:>9} {:>9} {:>9} {:>8}   ({})\n", "problem", "value", "factor s",
+                 "GFLOP/s", "berr", key);
+    for (const std::string& name : names) {
+      bench::Problem p = bench::load_problem(name);
+      if (cholesky_only && !p.symmetric) continue;
+      json rows = json::array();
+      for (index_t v : values) {
+        Options o;
+        o.type = p.symmetric ? MatrixType::spd : MatrixType::general;
+        o.backend = Backend::cuda;
+        o.num_gpus = 1;  // the single-GPU comparison, whatever the machine has
+        set(o, v);
+        const Run r = run(p, o, repeat);
+        const double flops = r.fs.gflops * r.fs.seconds;  // GFLOP of this factorization
+        rows.push_back({{key, v},
+                        {"factor_seconds", r.seconds},
+                        {"gflops", flops / r.seconds},
+                        {"backward_error", r.berr},
+                        {"factor_phases", r.fs.device_phases}});
+        fmt::print("{:<14} {:>9} {:>9.4f} {:>9.1f} {:>8.1e}\n", name, v, r.seconds,
+                   flops / r.seconds, r.berr);
+        std::fflush(stdout);
+      }
+      all.push_back({{"problem", name}, {"n", p.a.n_rows}, {"runs", rows}});
     }
-    out["block_size"].push_back({{"problem", name}, {"n", p.a.n_rows}, {"runs", rows}});
-  }
-  // which Cholesky fronts go to the panel kernels (Options::gpu_panel_kernel_max_pivots):
-  // in-core refactorization time per threshold
-  out["panel_kernels"] = json::array();
+    return all;
+  };
+  out["block_size"] = sweep(
+      block_problems, block_sizes, "max_block_size",
+      [](Options& o, index_t v) { o.max_block_size = v; }, false);
   if (!want("panel")) panel_problems.clear();
-  if (!panel_problems.empty())
-    fmt::print("{:<14} {:>9} {:>9} {:>9} {:>8}\n", "problem", "max k", "factor s", "GFLOP/s",
-               "berr");
-  for (const std::string& name : panel_problems) {
-    bench::Problem p = bench::load_problem(name);
-    if (!p.symmetric) continue;  // the panel kernels are Cholesky's
-    json rows = json::array();
-    for (index_t kmax : panel_max_pivots) {
-      Options o;
-      o.type = MatrixType::spd;
-      o.backend = Backend::cuda;
-      o.num_gpus = 1;  // the single-GPU comparison, whatever the machine has
-      o.gpu_panel_kernel_max_pivots = kmax;
-      const Run r = run(p, o, repeat);
-      const double flops = r.fs.gflops * r.fs.seconds;  // GFLOP of this factorization
-      rows.push_back({{"gpu_panel_kernel_max_pivots", kmax},
-                      {"factor_seconds", r.seconds},
-                      {"gflops", flops / r.seconds},
-                      {"backward_error", r.berr},
-                      {"factor_phases", r.fs.device_phases}});
-      fmt::print("{:<14} {:>9} {:>9.4f} {:>9.1f} {:>8.1e}\n", name, kmax, r.seconds,
-                 flops / r.seconds, r.berr);
-      std::fflush(stdout);
-    }
-    out["panel_kernels"].push_back({{"problem", name}, {"n", p.a.n_rows}, {"runs", rows}});
-  }
+  out["panel_kernels"] = sweep(
+      panel_problems, panel_max_pivots, "gpu_panel_kernel_max_pivots",
+      [](Options& o, index_t v) { o.gpu_panel_kernel_max_pivots = v; }, true);
   fmt::print("results: {}\n", bench::write_result(out, stem, results_dir));
   if (!partial.empty()) std::remove(partial.c_str());
   return 0;

@@ -14,8 +14,9 @@
 // "Matrix Computations", 4th ed., §4.2.9), in steps of kStep = 64 columns, each step one
 // launch of each kernel over every front still active (items sorted by k, largest first, so
 // the active fronts of a step are a prefix):
-//   1. pivot_block_kernel, one block per front: the w×w diagonal block (w ≤ 64) into shared
-//      memory, unblocked right-looking Cholesky there (one thread per row), L_jj written
+//   1. pivot_block_kernel, one block of 64 threads per front: the w×w diagonal block
+//      (w ≤ 64) into registers, one row per thread, unblocked right-looking Cholesky there
+//      (the pivot column shared through shared memory), L_jj written
 //      back (lower triangle; the strict upper one is left as it was, as POTRF leaves it)
 //      and its inverse L_jj⁻¹ (forward substitution on the identity, one thread per column)
 //      into the front's 64×64 slot of the workspace;
