@@ -837,7 +837,12 @@ class GpuSections:
                 self.batched_panels_table(max(batched, key=lambda r: (r.date, r.name)))
         sweeps = [r for r in runs if r.kind == "gpu_memory" and r.get("panel_kernels")]
         if sweeps:
-            self.panel_sweep_table(max(sweeps, key=lambda r: (r.date, r.name)))
+            def values(r):
+                return len({x.get("gpu_panel_kernel_max_pivots")
+                            for p in r.get("panel_kernels") for x in p.get("runs", [])})
+            full = max(sweeps, key=lambda r: (values(r), r.date, r.name))
+            self.panel_sweep_table(full)
+            self.panel_progress_table([r for r in sweeps if r is not full])
 
     def batched_panels_table(self, r: Run) -> None:
         """Pivot blocks and panels of many fronts: library on 8 streams vs strata's kernels."""
@@ -855,6 +860,30 @@ class GpuSections:
                f"`{r.get('command')}`).")
         self.w()
         self.w(table(["m", "k", "fronts", "library", "panel kernels"], rows, 0))
+
+    def panel_progress_table(self, rs: list[Run]) -> None:
+        """Later runs of the panel part at one setting: the in-core time commit by commit."""
+        if not rs:
+            return
+        rs = sorted(rs, key=lambda r: (r.date, r.name))
+        problems = list(dict.fromkeys(p.get("problem") for r in rs
+                                      for p in r.get("panel_kernels")))
+        rows = []
+        for r in rs:
+            self.consumed.add(r.path)
+            by = {}
+            for p in r.get("panel_kernels"):
+                for x in p.get("runs", []):
+                    by[p.get("problem")] = (num(x.get("factor_seconds")),
+                                            x.get("gpu_panel_kernel_max_pivots"))
+            rows.append([r.date, r.get("git_commit") or "?", r.get("tag") or ""] + [
+                "–" if by.get(q) is None or by[q][0] is None else
+                f"{by[q][0]:.4f} (≤ {by[q][1]})" for q in problems])
+        self.w("The same in-core refactorization in later runs, one setting each (the note in "
+               "each JSON says what the tree held; "
+               f"{machine_label(rs[-1].machine)}):")
+        self.w()
+        self.w(table(["date", "commit", "tag"] + problems, rows, 0))
 
     def panel_sweep_table(self, r: Run) -> None:
         """In-core Cholesky refactorization per Options::gpu_panel_kernel_max_pivots."""
