@@ -160,6 +160,7 @@ json analysis_json(const AnalysisStats& s) {
             {"nd_balance", s.nd_balance_seconds},
             {"symbolic", s.symbolic_seconds},
             {"plan", s.plan_seconds},
+            {"device_setup", s.device_setup_seconds},
             {"total", s.total_seconds}}}};
 }
 
@@ -207,8 +208,9 @@ void print_analysis(const AnalysisStats& s, double read_seconds) {
         s.nd_balance_seconds);
   fmt::print(
       "time [s]              read {:.3f}  ordering {:.3f}  symbolic {:.3f}  plan {:.3f}  "
-      "analysis total {:.3f}\n",
-      read_seconds, s.ordering_seconds, s.symbolic_seconds, s.plan_seconds, s.total_seconds);
+      "device set-up {:.3f}  analysis total {:.3f}\n",
+      read_seconds, s.ordering_seconds, s.symbolic_seconds, s.plan_seconds, s.device_setup_seconds,
+      s.total_seconds);
 }
 
 double seconds_since(std::chrono::steady_clock::time_point t0) {

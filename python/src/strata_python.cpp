@@ -148,6 +148,7 @@ py::dict analysis_dict(const strata::AnalysisStats& a) {
   d["ordering_seconds"] = a.ordering_seconds;
   d["symbolic_seconds"] = a.symbolic_seconds;
   d["plan_seconds"] = a.plan_seconds;
+  d["device_setup_seconds"] = a.device_setup_seconds;
   d["analysis_seconds"] = a.total_seconds;
   return d;
 }

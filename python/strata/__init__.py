@@ -323,7 +323,8 @@ class Solver:
         about twice), n_fronts, largest_front_rows, largest_front_pivots, tree_height,
         fronts_per_level (list, deepest level first), peak_working_bytes, factor_bytes,
         memory_budget, n_batches, analysis_type, ordering, pairs, odd_cycles and the times
-        ordering_seconds, symbolic_seconds, plan_seconds, analysis_seconds.
+        ordering_seconds, symbolic_seconds, plan_seconds, device_setup_seconds
+        (CUDA backend: device set-up done at analysis), analysis_seconds.
         Factorization: type ("spd", "symmetric_indefinite", "general"), backend ("cpu" or
         "cuda"), factor_seconds, factor_gflops, perturbed_pivots (static pivoting),
         two_by_two_pivots, inertia (positive, negative, zero), log_abs_determinant,

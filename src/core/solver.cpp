@@ -333,6 +333,53 @@ ValueNorms refactor_values(const Analysis& an, const SparseMatrix& a, tbb::task_
   return r;
 }
 
+// The executors a factorization with `workers` workers uses (created on first use and
+// kept): one per GPU when the CUDA backend splits the tree (only it resolves to several
+// workers, see resolve_workers), host workers when asked for, else one executor.
+std::vector<numeric::Executor*> ensure_executors(SolverState& s, int workers) {
+  std::vector<numeric::Executor*> execs;
+  if (workers > 1) {
+    if (static_cast<int>(s.executors.size()) != workers) {
+      s.executors.clear();
+      for (int d = 0; d < workers; ++d)
+        s.executors.push_back(s.host_workers > 0 ? numeric::make_cpu_executor(s.host_threads)
+                                                 : numeric::make_cuda_executor(s.options, d));
+    }
+    for (auto& e : s.executors) execs.push_back(e.get());
+    return execs;
+  }
+  if (!s.executor) {
+    const bool gpu = s.options.backend == Backend::cuda ||
+                     (s.options.backend == Backend::automatic && numeric::cuda_available());
+    s.executor = gpu ? numeric::make_cuda_executor(s.options)
+                     : numeric::make_cpu_executor(s.options.num_threads, s.options.reproducible);
+  }
+  return {s.executor.get()};
+}
+
+// The CUDA backend's device set-up at analysis (Executor::prepare: uploads, the device
+// memory plan, streams and library handles), as cuDSS's analysis phase prepares the
+// device; the first factorization is then numeric work only. Nothing for the CPU backend,
+// host workers or an external (distributed) numeric phase, or without a GPU (factorize
+// then reports that). A failure here is not reported: the factorization meets it again
+// and reports it with its context (its OutOfMemory releases what was allocated).
+// Returns the seconds spent.
+double prepare_devices(SolverState& s) {
+  const Backend b = s.options.backend;
+  if (s.external.factor || s.host_workers > 0 || b == Backend::cpu || !numeric::cuda_available())
+    return 0;
+  const Timer t;
+  try {
+    const Analysis& an = *s.analysis;
+    for (numeric::Executor* e : ensure_executors(s, an.partition.workers))
+      e->prepare(an, an.partition.workers);
+  } catch (const Error&) {
+    s.executors.clear();
+    s.executor.reset();
+  }
+  return t.seconds();
+}
+
 void run_factorization(SolverState& s, const SparseMatrix& a) {
   Timer timer;
   const Analysis& an = *s.analysis;
@@ -386,24 +433,9 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
 
   const int workers = an.partition.workers;
   const bool external = static_cast<bool>(s.external.factor);
-  std::vector<numeric::Executor*> execs;
   const Timer creation;  // a new executor: device context, streams, library handles
-  if (external) {
-    // the distributed solver brings its own executors
-  } else if (workers > 1) {  // only the CUDA backend resolves to several workers (resolve_workers)
-    if (static_cast<int>(s.executors.size()) != workers) {
-      s.executors.clear();
-      for (int d = 0; d < workers; ++d)
-        s.executors.push_back(s.host_workers > 0 ? numeric::make_cpu_executor(s.host_threads)
-                                                 : numeric::make_cuda_executor(s.options, d));
-    }
-    for (auto& e : s.executors) execs.push_back(e.get());
-  } else if (!s.executor) {
-    const bool gpu = s.options.backend == Backend::cuda ||
-                     (s.options.backend == Backend::automatic && numeric::cuda_available());
-    s.executor = gpu ? numeric::make_cuda_executor(s.options)
-                     : numeric::make_cpu_executor(s.options.num_threads, s.options.reproducible);
-  }
+  const std::vector<numeric::Executor*> execs =
+      external ? std::vector<numeric::Executor*>{} : ensure_executors(s, workers);
   const double creation_seconds = creation.seconds();
   s.devices.clear();
   numeric::MultiWorkerConfig config;
@@ -567,6 +599,9 @@ void Solver::analyze(const SparseMatrix& a) {
                         : state_->host_workers > 0   ? state_->host_workers
                                                      : resolve_workers(state_->options);
     state_->analysis = analyze_matrix(a, state_->options, workers);
+    const double setup = prepare_devices(*state_);
+    state_->analysis->stats.device_setup_seconds = setup;
+    state_->analysis->stats.total_seconds += setup;
     state_->stats = Stats{};
     state_->stats.analysis = state_->analysis->stats;
     state_->resolved = MatrixType::automatic;

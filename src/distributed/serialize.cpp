@@ -144,6 +144,7 @@ void stats_io(IO& io, S& s) {
   io.value(s.ordering_seconds);
   io.value(s.symbolic_seconds);
   io.value(s.plan_seconds);
+  io.value(s.device_setup_seconds);
   io.value(s.total_seconds);
 }
 

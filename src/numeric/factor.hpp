@@ -123,6 +123,13 @@ class Executor {
   /// zero-filling) a host arena of several GB for it cost seconds of the first
   /// factorization and was never read.
   virtual bool uses_host_arena() const { return true; }
+  /// Optional set-up for the analysis `an` ahead of its first factorization, for a
+  /// factorization by `workers` executors (1: the whole tree on this one): what a device
+  /// executor would otherwise do at the start of the first factorization (upload the
+  /// analysis arrays, plan and allocate its memory, create streams and library handles).
+  /// Solver::analyze calls it, as cuDSS's analysis phase prepares the device. Throws what
+  /// that set-up throws (OutOfMemory, DeviceError); the default does nothing.
+  virtual void prepare(const Analysis& an, int workers) {}
   /// Called once per factorization, before this executor's first part (ctx.part unset).
   virtual void begin(const FactorContext& ctx) {}
   /// Called before the batches of the part ctx.part.

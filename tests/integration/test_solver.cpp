@@ -7,6 +7,7 @@
 #include <cmath>
 
 #include "core/blas.hpp"
+#include "sparse/generators.hpp"
 #include "strata/strata.hpp"
 #include "support/test_support.hpp"
 
@@ -181,6 +182,13 @@ TEST(Solver, LogDeterminantMatchesDense) {
 }
 
 // Refactorization with new values equals a fresh factorization, bitwise.
+// The CPU backend has no device to prepare at analysis.
+TEST(Solver, CpuAnalysisHasNoDeviceSetup) {
+  Solver s;
+  s.analyze(generators::laplacian_3d(5, 5, 5));
+  EXPECT_EQ(s.stats().analysis.device_setup_seconds, 0.0);
+}
+
 TEST(Solver, RefactorizationEqualsFactorization) {
   auto rng = test::fresh_rng();
   for (const Case& c : kCases) {

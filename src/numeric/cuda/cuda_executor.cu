@@ -130,6 +130,19 @@ CudaExecutor::~CudaExecutor() {
   cudaStreamDestroy(stream_);
 }
 
+void CudaExecutor::prepare(const Analysis& an, int workers) {
+  STRATA_CUDA(cudaSetDevice(device_));
+  if (an.id != analysis_id_) upload_analysis(an);
+  // the same plans begin_part makes on first use: the whole tree, or every part of the
+  // split (any subtree may run on any GPU)
+  if (workers <= 1 && planned_ != 1) plan_parts(an, true);
+  if (workers > 1 && planned_ != 2 &&
+      an.partition.part_of.size() == static_cast<std::size_t>(an.tree.n_fronts()))
+    plan_parts(an, false);
+  if (lanes_.empty()) lanes();
+  STRATA_CUDA(cudaStreamSynchronize(stream_));
+}
+
 void CudaExecutor::begin(const numeric::FactorContext& ctx) {
   STRATA_CUDA(cudaSetDevice(device_));
   outbox_.clear();

@@ -74,6 +74,7 @@ class CudaExecutor final : public numeric::Executor {
   const char* name() const override { return "cuda"; }
   int device() const override { return device_; }
   bool uses_host_arena() const override { return false; }
+  void prepare(const Analysis& an, int workers) override;
   void begin(const numeric::FactorContext& ctx) override;
   void begin_part(const numeric::FactorContext& ctx) override;
   void factor_batch(const numeric::FactorContext& ctx, const BatchInfo& b) override;
