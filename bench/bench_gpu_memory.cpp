@@ -310,6 +310,82 @@ json front_kernels(int m, int k) {
   return row;
 }
 
+// A well-conditioned SPD m×m front on the device (diagonal m, entry (i, j) = 1/(1 + i + j)
+// elsewhere): the assembled front the many-front measurements below start from.
+double* device_front(int m) {
+  const std::size_t n = static_cast<std::size_t>(m) * m;
+  std::vector<double> h(n);
+  for (int j = 0; j < m; ++j)
+    for (int i = 0; i < m; ++i)
+      h[static_cast<std::size_t>(j) * m + i] = i == j ? m : 1.0 / (1.0 + i + j);
+  double* F0 = nullptr;
+  check(cudaMalloc(&F0, sizeof(double) * n), "cudaMalloc");
+  check(cudaMemcpy(F0, h.data(), sizeof(double) * n, cudaMemcpyHostToDevice), "H2D");
+  return F0;
+}
+
+// `count` streams, each with a cuBLAS and a cuSOLVER handle, a POTRF workspace for the k×k
+// block of an m×m front like `sample` and an info word: the executor's lanes, for the
+// library side of the many-front measurements.
+struct BenchLanes {
+  struct Lane {
+    cudaStream_t s{};
+    cublasHandle_t blas{};
+    cusolverDnHandle_t sol{};
+    double* W = nullptr;
+    int* info = nullptr;
+    int lwork = 0;
+  };
+  std::vector<Lane> lanes;
+  BenchLanes(int count, int m, int k, double* sample) : lanes(count) {
+    for (Lane& l : lanes) {
+      check(cudaStreamCreateWithFlags(&l.s, cudaStreamNonBlocking), "cudaStreamCreate");
+      cublasCreate(&l.blas);
+      cublasSetStream(l.blas, l.s);
+      cusolverDnCreate(&l.sol);
+      cusolverDnSetStream(l.sol, l.s);
+      cusolverDnDpotrf_bufferSize(l.sol, CUBLAS_FILL_MODE_LOWER, k, sample, m, &l.lwork);
+      check(cudaMalloc(&l.W, sizeof(double) * std::max(l.lwork, 1)), "cudaMalloc");
+      check(cudaMalloc(&l.info, sizeof(int)), "cudaMalloc");
+    }
+  }
+  ~BenchLanes() {
+    for (Lane& l : lanes) {
+      cudaFree(l.W);
+      cudaFree(l.info);
+      cublasDestroy(l.blas);
+      cusolverDnDestroy(l.sol);
+      cudaStreamDestroy(l.s);
+    }
+  }
+  BenchLanes(const BenchLanes&) = delete;
+  BenchLanes& operator=(const BenchLanes&) = delete;
+  // POTRF of the m×m front F's k×k block, then TRSM of its panel, on lane l
+  void potrf_trsm(int l, double* F, int m, int k) {
+    Lane& ln = lanes[l];
+    const double one = 1.0;
+    cusolverDnDpotrf(ln.sol, CUBLAS_FILL_MODE_LOWER, k, F, m, ln.W, ln.lwork, ln.info);
+    if (m > k)
+      cublasDtrsm(ln.blas, CUBLAS_SIDE_RIGHT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_T,
+                  CUBLAS_DIAG_NON_UNIT, m - k, k, &one, F, m, F + k, m);
+  }
+};
+
+// Best of 3 (after one warm-up) of f() with `reset` before each, in host seconds.
+template <class R, class F>
+double best_of_3(R&& reset, F&& f) {
+  double best = 1e300;
+  for (int rep = 0; rep < 4; ++rep) {
+    reset();
+    check(cudaDeviceSynchronize(), "cudaDeviceSynchronize");
+    Timer t;
+    f();
+    check(cudaDeviceSynchronize(), "cudaDeviceSynchronize");
+    if (rep > 0) best = std::min(best, t.seconds());
+  }
+  return best;
+}
+
 // Many fronts of one shape (m rows, k pivots) factored side by side — POTRF, TRSM, SYRK
 // each, the large-front sequence of the CUDA executor — on `streams` streams with a
 // cuBLAS and a cuSOLVER handle each, `per_stream` fronts per stream: the aggregate FLOP/s.
@@ -319,68 +395,29 @@ json front_kernels(int m, int k) {
 double concurrent_fronts(int m, int k, int streams, int per_stream) {
   const int c = m - k;
   const std::size_t n = static_cast<std::size_t>(m) * m;
-  std::vector<double> h(n);
-  for (int j = 0; j < m; ++j)
-    for (int i = 0; i < m; ++i)
-      h[static_cast<std::size_t>(j) * m + i] = i == j ? m : 1.0 / (1.0 + i + j);
-  double* F0 = nullptr;
-  check(cudaMalloc(&F0, sizeof(double) * n), "cudaMalloc");
-  check(cudaMemcpy(F0, h.data(), sizeof(double) * n, cudaMemcpyHostToDevice), "H2D");
-  struct Lane {
-    cudaStream_t s{};
-    cublasHandle_t blas{};
-    cusolverDnHandle_t sol{};
-    double* F = nullptr;
-    double* W = nullptr;
-    int* info = nullptr;
-    int lwork = 0;
-  };
-  std::vector<Lane> lanes(streams);
-  for (Lane& l : lanes) {
-    check(cudaStreamCreateWithFlags(&l.s, cudaStreamNonBlocking), "cudaStreamCreate");
-    cublasCreate(&l.blas);
-    cublasSetStream(l.blas, l.s);
-    cusolverDnCreate(&l.sol);
-    cusolverDnSetStream(l.sol, l.s);
-    check(cudaMalloc(&l.F, sizeof(double) * n), "cudaMalloc");
-    check(cudaMalloc(&l.info, sizeof(int)), "cudaMalloc");
-    cusolverDnDpotrf_bufferSize(l.sol, CUBLAS_FILL_MODE_LOWER, k, l.F, m, &l.lwork);
-    check(cudaMalloc(&l.W, sizeof(double) * std::max(l.lwork, 1)), "cudaMalloc");
-  }
-  const double one = 1.0, minus_one = -1.0;
-  auto round = [&] {
-    for (int r = 0; r < per_stream; ++r)
-      for (Lane& l : lanes) {
-        cudaMemcpyAsync(l.F, F0, sizeof(double) * n, cudaMemcpyDeviceToDevice, l.s);
-        cusolverDnDpotrf(l.sol, CUBLAS_FILL_MODE_LOWER, k, l.F, m, l.W, l.lwork, l.info);
-        if (c > 0) {
-          cublasDtrsm(l.blas, CUBLAS_SIDE_RIGHT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_T,
-                      CUBLAS_DIAG_NON_UNIT, c, k, &one, l.F, m, l.F + k, m);
-          cublasDsyrk(l.blas, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N, c, k, &minus_one, l.F + k, m,
-                      &one, l.F + static_cast<std::size_t>(k) * m + k, m);
-        }
-      }
-    check(cudaDeviceSynchronize(), "cudaDeviceSynchronize");
-  };
-  round();  // warm-up
-  double best = 1e300;
-  for (int rep = 0; rep < 3; ++rep) {
-    Timer t;
-    round();
-    best = std::min(best, t.seconds());
-  }
-  for (Lane& l : lanes) {
-    cudaFree(l.F);
-    cudaFree(l.W);
-    cudaFree(l.info);
-    cublasDestroy(l.blas);
-    cusolverDnDestroy(l.sol);
-    cudaStreamDestroy(l.s);
-  }
+  double* F0 = device_front(m);
+  BenchLanes lanes(streams, m, k, F0);
+  std::vector<double*> F(streams);
+  for (double*& f : F) check(cudaMalloc(&f, sizeof(double) * n), "cudaMalloc");
+  const double minus_one = -1.0, one = 1.0;
+  const double t = best_of_3(
+      [] {},
+      [&] {
+        for (int r = 0; r < per_stream; ++r)
+          for (int l = 0; l < streams; ++l) {
+            auto& ln = lanes.lanes[l];
+            cudaMemcpyAsync(F[l], F0, sizeof(double) * n, cudaMemcpyDeviceToDevice, ln.s);
+            lanes.potrf_trsm(l, F[l], m, k);
+            if (c > 0)
+              cublasDsyrk(ln.blas, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N, c, k, &minus_one, F[l] + k,
+                          m, &one, F[l] + static_cast<std::size_t>(k) * m + k, m);
+          }
+      });
+  for (double* f : F) cudaFree(f);
   cudaFree(F0);
   const double kd = k, cd = c;
   const double flops = kd * kd * kd / 3 + cd * kd * kd + cd * cd * kd;
-  return flops * streams * per_stream / best;
+  return flops * streams * per_stream / t;
 }
 
 // `count` fronts of one shape, their pivot blocks and panels only (POTRF + TRSM's work):
@@ -388,67 +425,20 @@ double concurrent_fronts(int m, int k, int streams, int per_stream) {
 // our kernels in one go (launch_llt_panel) — the aggregate FLOP/s of each, in that order.
 std::pair<double, double> batched_panels(int m, int k, int count) {
   const std::size_t n = static_cast<std::size_t>(m) * m;
-  std::vector<double> h(n);
-  for (int j = 0; j < m; ++j)
-    for (int i = 0; i < m; ++i)
-      h[static_cast<std::size_t>(j) * m + i] = i == j ? m : 1.0 / (1.0 + i + j);
-  double *F0 = nullptr, *pool = nullptr;
-  check(cudaMalloc(&F0, sizeof(double) * n), "cudaMalloc");
+  double* F0 = device_front(m);
+  double* pool = nullptr;
   check(cudaMalloc(&pool, sizeof(double) * n * count), "cudaMalloc");
-  check(cudaMemcpy(F0, h.data(), sizeof(double) * n, cudaMemcpyHostToDevice), "H2D");
   constexpr int streams = 8;
-  std::vector<cudaStream_t> st(streams);
-  std::vector<cublasHandle_t> blas(streams);
-  std::vector<cusolverDnHandle_t> sol(streams);
-  std::vector<double*> W(streams);
-  std::vector<int*> info(streams);
-  int lwork = 0;
-  for (int l = 0; l < streams; ++l) {
-    check(cudaStreamCreateWithFlags(&st[l], cudaStreamNonBlocking), "cudaStreamCreate");
-    cublasCreate(&blas[l]);
-    cublasSetStream(blas[l], st[l]);
-    cusolverDnCreate(&sol[l]);
-    cusolverDnSetStream(sol[l], st[l]);
-    cusolverDnDpotrf_bufferSize(sol[l], CUBLAS_FILL_MODE_LOWER, k, pool, m, &lwork);
-    check(cudaMalloc(&W[l], sizeof(double) * std::max(lwork, 1)), "cudaMalloc");
-    check(cudaMalloc(&info[l], sizeof(int)), "cudaMalloc");
-  }
+  BenchLanes lanes(streams, m, k, F0);
   auto reset = [&] {
     for (int p = 0; p < count; ++p)
       check(cudaMemcpyAsync(pool + n * p, F0, sizeof(double) * n, cudaMemcpyDeviceToDevice), "D2D");
-    check(cudaDeviceSynchronize(), "cudaDeviceSynchronize");
   };
-  const double one = 1.0;
-  auto best_of_3 = [&](auto&& f) {
-    double best = 1e300;
-    for (int rep = 0; rep < 4; ++rep) {
-      reset();
-      Timer t;
-      f();
-      check(cudaDeviceSynchronize(), "cudaDeviceSynchronize");
-      if (rep > 0) best = std::min(best, t.seconds());
-    }
-    return best;
-  };
-  const double t_lib = best_of_3([&] {
-    for (int p = 0; p < count; ++p) {
-      const int l = p % streams;
-      double* F = pool + n * p;
-      cusolverDnDpotrf(sol[l], CUBLAS_FILL_MODE_LOWER, k, F, m, W[l], lwork, info[l]);
-      if (m > k)
-        cublasDtrsm(blas[l], CUBLAS_SIDE_RIGHT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_T,
-                    CUBLAS_DIAG_NON_UNIT, m - k, k, &one, F, m, F + k, m);
-    }
+  const double t_lib = best_of_3(reset, [&] {
+    for (int p = 0; p < count; ++p) lanes.potrf_trsm(p % streams, pool + n * p, m, k);
   });
   PanelFronts fronts(m, k, count);
-  const double t_ours = best_of_3([&] { fronts.run(pool); });
-  for (int l = 0; l < streams; ++l) {
-    cudaFree(W[l]);
-    cudaFree(info[l]);
-    cublasDestroy(blas[l]);
-    cusolverDnDestroy(sol[l]);
-    cudaStreamDestroy(st[l]);
-  }
+  const double t_ours = best_of_3(reset, [&] { fronts.run(pool); });
   cudaFree(F0);
   cudaFree(pool);
   const double kd = k, cd = m - k;

@@ -24,6 +24,33 @@ class CudaBackend : public ::testing::Test {
   }
 };
 
+// One GPU (whatever the machine has), Cholesky.
+Options one_gpu_spd() {
+  Options o;
+  o.num_gpus = 1;
+  o.type = MatrixType::spd;
+  return o;
+}
+
+// The LLᵀ factor of `an` with canonical values `c` by a new CUDA executor with options o
+// (prepared for the analysis first when `prepare`), its panels fetched to the host.
+struct GpuLlt {
+  numeric::NumericFactor factor;
+  FactorStats stats;
+  bool panels_were_on_host = false;
+};
+GpuLlt gpu_llt(const Analysis& an, const SparseMatrix& c, const Options& o, bool prepare = false) {
+  GpuLlt r;
+  std::vector<double> arena;
+  auto gpu = numeric::make_cuda_executor(o);
+  if (prepare) gpu->prepare(an, 1);
+  numeric::factorize(an, c.values, MatrixType::spd, 0.0, *gpu, r.factor, arena);
+  gpu->report(r.stats);
+  r.panels_were_on_host = r.factor.panels_on_host;
+  numeric::fetch_panels(an, *gpu, r.factor);
+  return r;
+}
+
 // Factor panels of the GPU and the CPU executors agree (LLᵀ: no pivoting, so entrywise).
 TEST_F(CudaBackend, CholeskyFactorMatchesCpu) {
   auto rng = test::fresh_rng();
@@ -41,9 +68,7 @@ TEST_F(CudaBackend, CholeskyFactorMatchesCpu) {
   problems.push_back(test::random_sparse(733, 120, test::RandomKind::spd, rng));
   for (const SparseMatrix& a : problems) {
     SCOPED_TRACE("n=" + std::to_string(a.n_rows));
-    Options o;
-    o.num_gpus = 1;  // one GPU, whatever the machine has
-    o.type = MatrixType::spd;
+    Options o = one_gpu_spd();
     Analysis an = analyze_matrix(a, o);
     SparseMatrix c = canonical_values(an, a);
     numeric::NumericFactor cpu_f;
@@ -55,14 +80,10 @@ TEST_F(CudaBackend, CholeskyFactorMatchesCpu) {
     for (index_t kmax : {index_t{0}, index_t{1024}, Options{}.gpu_panel_kernel_max_pivots}) {
       SCOPED_TRACE("gpu_panel_kernel_max_pivots=" + std::to_string(kmax));
       o.gpu_panel_kernel_max_pivots = kmax;
-      numeric::NumericFactor gpu_f;
-      auto gpu = numeric::make_cuda_executor(o);
-      numeric::factorize(an, c.values, MatrixType::spd, 0.0, *gpu, gpu_f, arena);
-      FactorStats fs;
-      gpu->report(fs);
-      // a resident LLᵀ factor stays on the device only; fetch_panels brings it over
-      EXPECT_EQ(gpu_f.panels_on_host, !fs.factor_resident);
-      numeric::fetch_panels(an, *gpu, gpu_f);
+      const GpuLlt g = gpu_llt(an, c, o);
+      const numeric::NumericFactor& gpu_f = g.factor;
+      // a resident LLᵀ factor stays on the device only (fetch_panels brought it over)
+      EXPECT_EQ(g.panels_were_on_host, !g.stats.factor_resident);
       ASSERT_EQ(cpu_f.panels.size(), gpu_f.panels.size());
       double num = 0, den = 0;
       for (std::size_t i = 0; i < cpu_f.panels.size(); ++i) {
@@ -113,25 +134,12 @@ TEST_F(CudaBackend, PrepareAtAnalysis) {
   for (const SparseMatrix& a : {generators::laplacian_3d(14, 14, 14),
                                 test::random_sparse(733, 3, test::RandomKind::spd, rng)}) {
     SCOPED_TRACE("n=" + std::to_string(a.n_rows));
-    Options o;
-    o.num_gpus = 1;  // one GPU, whatever the machine has
-    o.type = MatrixType::spd;
+    Options o = one_gpu_spd();
     Analysis an = analyze_matrix(a, o);
     SparseMatrix c = canonical_values(an, a);
-    std::vector<double> arena;
-    numeric::NumericFactor f_late, f_early;
-    auto late = numeric::make_cuda_executor(o);
-    auto early = numeric::make_cuda_executor(o);
-    early->prepare(an, 1);
-    numeric::factorize(an, c.values, MatrixType::spd, 0.0, *late, f_late, arena);
-    numeric::factorize(an, c.values, MatrixType::spd, 0.0, *early, f_early, arena);
-    FactorStats s_late, s_early;
-    late->report(s_late);
-    early->report(s_early);
-    EXPECT_LT(s_early.bytes_to_device, s_late.bytes_to_device);
-    numeric::fetch_panels(an, *late, f_late);
-    numeric::fetch_panels(an, *early, f_early);
-    EXPECT_EQ(f_early.panels, f_late.panels);
+    const GpuLlt late = gpu_llt(an, c, o), early = gpu_llt(an, c, o, true);
+    EXPECT_LT(early.stats.bytes_to_device, late.stats.bytes_to_device);
+    EXPECT_EQ(early.factor.panels, late.factor.panels);
 
     o.backend = Backend::cuda;
     Solver two_phases(o), one_call(o);

@@ -73,17 +73,13 @@ __global__ void assemble_kernel(DeviceTree t, std::int64_t begin, std::int64_t s
   double* F = pool + t.pos_offset[pos];
   const int warp = threadIdx.x / kWarp, lane = threadIdx.x % kWarp;
   const int warps = blockDim.x / kWarp;
-  if (symmetric) {
-    // nothing reads the strict upper triangle of the contribution block (the factor
-    // kernels, the block store and the panel pack use the lower one): it stays unwritten,
-    // about a third less to zero in a large front. The pivot columns are zeroed whole: the
-    // packed panel carries its k×k block's upper triangle as zeros, as the CPU's does.
-    const std::int64_t k = t.n_pivots[f];
-    for (std::int64_t c = c0 + warp; c < c1; c += warps)
-      for (std::int64_t i = (c < k ? 0 : c) + lane; i < m; i += kWarp) F[c * m + i] = 0.0;
-  } else {
-    for (std::int64_t x = threadIdx.x; x < m * (c1 - c0); x += blockDim.x) F[c0 * m + x] = 0.0;
-  }
+  // nothing reads the strict upper triangle of a symmetric front's contribution block (the
+  // factor kernels, the block store and the panel pack use the lower one): it stays
+  // unwritten, about a third less to zero in a large front. The pivot columns are zeroed
+  // whole: the packed panel carries its k×k block's upper triangle as zeros, as the CPU's.
+  const std::int64_t whole_cols = symmetric ? t.n_pivots[f] : m;
+  for (std::int64_t c = c0 + warp; c < c1; c += warps)
+    for (std::int64_t i = (c < whole_cols ? 0 : c) + lane; i < m; i += kWarp) F[c * m + i] = 0.0;
   __syncthreads();
   for (std::int64_t e = t.entry_offsets[f] + threadIdx.x; e < t.entry_offsets[f + 1];
        e += blockDim.x) {
