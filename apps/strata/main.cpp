@@ -363,9 +363,10 @@ int run_solve(const SolveArgs& a, const Communicator& comm) {
     for (const DeviceStats& d : f.devices)
       fmt::print(
           "  worker {} ({:<7})   busy {:.3f} s, idle {:.3f} s, {} subtrees ({} stolen), {} "
-          "upper parts, {:.3f} MB transferred, {:.3g} flops\n",
+          "upper parts, {:.3f} MB transferred, {:.3g} flops, {} fronts split, {} strips "
+          "of others' fronts\n",
           d.worker, d.device, d.busy_seconds, d.idle_seconds, d.subtrees_run, d.subtrees_stolen,
-          d.upper_parts_run, d.bytes_transferred / 1e6, d.flops);
+          d.upper_parts_run, d.bytes_transferred / 1e6, d.flops, d.fronts_split, d.strips_helped);
     if (ds.ranks > 1) {
       fmt::print(
           "ranks                 {} x {} workers; analysis broadcast {:.1f} MB in {:.3f} s\n",

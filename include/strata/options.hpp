@@ -124,6 +124,16 @@ struct Options {
   /// instead of factoring the whole top part on one GPU (default on; docs/multigpu.md).
   /// The distributed solver (several MPI ranks) does not use upper layers.
   bool split_top = true;
+  /// With several GPUs: a front factored while other GPUs have no part of their own (a
+  /// front of the top part: all other GPUs; an upper layer with fewer parts than GPUs: the
+  /// GPUs without a part, shared out among the owners) whose contribution block has at
+  /// least this many rows has its update — the SYRK (LLᵀ) or GEMM (LU) where a large
+  /// front's flops are — split by column strips over its GPU and those idle GPUs; the
+  /// pivot block and panel stay on its GPU, and each strip travels to its GPU and back
+  /// (peer copies). 0 turns this off. LDLᵀ fronts, fronts of at most
+  /// gpu_panel_kernel_max_pivots pivots and fronts factored tile by tile are not split.
+  /// Default 2048 (docs/multigpu.md).
+  index_t split_front_min_cb = 2048;
   /// For `general`: permute large entries onto the diagonal by a maximum weighted
   /// matching and scale rows and columns (MC64-style, Duff & Koster 2001). For
   /// `symmetric_indefinite`: the symmetric scaling D·A·D from the same matching and the

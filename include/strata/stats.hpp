@@ -84,6 +84,11 @@ struct DeviceStats {
   index_t upper_parts_run = 0;        ///< parts of the upper layers it factored (not subtrees)
   std::size_t bytes_transferred = 0;  ///< contribution blocks exported and imported
   double flops = 0;                   ///< Σ front flops (Cholesky count) it factored
+  /// Fronts of its parts whose update it split over idle GPUs (Options::split_front_min_cb).
+  index_t fronts_split = 0;
+  /// Column strips of other GPUs' fronts it updated (not counted in busy_seconds; their
+  /// bytes, in and out, are in bytes_transferred).
+  index_t strips_helped = 0;
 };
 
 /// Results of the last factorize/refactorize.

@@ -301,6 +301,9 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers)
   if (opts.gpu_panel_kernel_max_pivots < 0)
     throw InvalidInput("Options::gpu_panel_kernel_max_pivots must be at least 0 (got " +
                        std::to_string(opts.gpu_panel_kernel_max_pivots) + ")");
+  if (opts.split_front_min_cb < 0)
+    throw InvalidInput("Options::split_front_min_cb must be at least 0 (got " +
+                       std::to_string(opts.split_front_min_cb) + ")");
   if (opts.subtrees_per_gpu < 1)
     throw InvalidInput("Options::subtrees_per_gpu must be at least 1 (got " +
                        std::to_string(opts.subtrees_per_gpu) + ")");

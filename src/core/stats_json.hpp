@@ -35,7 +35,9 @@ inline void to_json(nlohmann::json& j, const DeviceStats& d) {
        {"subtrees_stolen", d.subtrees_stolen},
        {"upper_parts_run", d.upper_parts_run},
        {"bytes_transferred", d.bytes_transferred},
-       {"flops", d.flops}};
+       {"flops", d.flops},
+       {"fronts_split", d.fronts_split},
+       {"strips_helped", d.strips_helped}};
 }
 
 /// One MPI rank of a distributed run (DistributedStats::per_rank).

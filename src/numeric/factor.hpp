@@ -67,6 +67,8 @@ struct PartView {
   static PartView of(const schedule::FactorPart& p, int id);
 };
 
+class Executor;
+
 /// Everything an executor needs to factor a batch.
 struct FactorContext {
   const Analysis* analysis = nullptr;
@@ -79,6 +81,12 @@ struct FactorContext {
   /// Several workers: an executor may keep the panels of the parts it factors in its own
   /// memory (Executor::holds_part_panels; fetch_panels brings them to the host).
   bool keep_part_panels = false;
+  /// Several workers: executors that have no part of their own while this part runs (the
+  /// top part: every other worker; an upper layer with fewer parts than workers: those
+  /// without one, shared out among the owners). The part's executor may use them for its
+  /// large fronts (the CUDA executor: the update split by column strips,
+  /// Options::split_front_min_cb) and must be done with them when end_part returns.
+  std::vector<Executor*> helpers;
 };
 
 /// A contribution block on its way from the part that produced it (a subtree or an upper
@@ -169,6 +177,10 @@ class Executor {
   virtual bool holds_part_panels() const { return false; }
   /// Adds backend figures of the last factorization (bytes moved, device time) to `fs`.
   virtual void report(FactorStats& fs) const {}
+  /// Adds this executor's per-worker figures of the last factorization that the driver
+  /// cannot see (fronts it split over helpers, strips it computed for others, their
+  /// bytes) to `d`.
+  virtual void report_worker(DeviceStats& d) const {}
 };
 
 /// The CPU executor; `threads` host threads (0: all hardware threads). `reproducible`:

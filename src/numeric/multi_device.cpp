@@ -29,10 +29,11 @@
 // on one worker, so with executors of the same kind and thread count the factor is
 // bitwise the one-worker factor.
 //
-// Not yet: the top part — the root separators, the largest fronts — still runs on
-// worker 0 alone, and so does each upper part's root front on its worker; splitting one
-// front across the devices by tiles (the paper's treatment of the top separators) is a
-// later step.
+// The top part — the root separators, the largest fronts — runs on worker 0, and each
+// upper part on its owner, but the workers idle meanwhile are handed to them as helpers
+// (FactorContext::helpers): the CUDA executor splits a large front's update by column
+// strips over them (Options::split_front_min_cb). The pivot blocks and panels of those
+// fronts stay on one GPU (a 2-D distribution of the top fronts is not done).
 //
 // Several processes (src/distributed, docs/distributed.md): MultiWorkerConfig names the
 // global workers this process runs; it factors their subtrees, then hands every transfer
@@ -112,6 +113,30 @@ class Queues {
   bool stopped_ = false;
   std::mutex mutex_;
 };
+
+// The helpers of each worker in upper layer `layer` (indexed by worker): the workers that
+// own no part of the layer, dealt out one at a time to the owners in decreasing order of
+// their work in it (the owner with the most work gets the first, and so on round).
+std::vector<std::vector<Executor*>> layer_helpers(const schedule::TreePartition& p, int layer,
+                                                  const std::vector<Executor*>& execs) {
+  const int workers = static_cast<int>(execs.size());
+  std::vector<double> load(workers, 0.0);
+  std::vector<char> owns(workers, 0);
+  for (index_t k = p.upper_layer_offsets[layer - 1]; k < p.upper_layer_offsets[layer]; ++k) {
+    const int w = p.upper_owner[k];
+    if (w < 0 || w >= workers) continue;
+    owns[w] = 1;
+    load[w] += p.upper[k].work;
+  }
+  std::vector<int> owners, idle;
+  for (int w = 0; w < workers; ++w) (owns[w] ? owners : idle).push_back(w);
+  std::stable_sort(owners.begin(), owners.end(), [&](int a, int b) { return load[a] > load[b]; });
+  std::vector<std::vector<Executor*>> team(workers);
+  if (owners.empty()) return team;
+  for (std::size_t i = 0; i < idle.size(); ++i)
+    team[owners[i % owners.size()]].push_back(execs[idle[i]]);
+  return team;
+}
 
 // Factors the batches of one part with `ex` (ctx.part already set, begin_part done).
 void run_batches(Executor& ex, const FactorContext& ctx) {
@@ -224,12 +249,13 @@ void factorize_multi(const Analysis& an, const std::vector<double>& scaled_value
 
   // One part on worker w (its executor begun): begin_part, the blocks of its children in
   // other parts imported, its batches, its root's block exported, end_part.
-  auto factor_one = [&](int w, int id, bool export_here) {
+  auto factor_one = [&](int w, int id, bool export_here, std::vector<Executor*> helpers = {}) {
     Executor& ex = *execs[w];
     const schedule::FactorPart& fp = part.part(id);
     const PartView view = PartView::of(fp, id);
     FactorContext ctx = base;
     ctx.cb_arena = &arenas[w];
+    ctx.helpers = std::move(helpers);
     if (ex.uses_host_arena() && arenas[w].size() < fp.cb_layout.arena_size)
       arenas[w].resize(fp.cb_layout.arena_size);
     ctx.part = &view;
@@ -271,15 +297,16 @@ void factorize_multi(const Analysis& an, const std::vector<double>& scaled_value
     }
   };
 
-  // upper layer `layer`: worker w's parts of it, in their (decreasing work) order
-  auto upper_worker = [&](int w, int layer) {
+  // upper layer `layer`: worker w's parts of it, in their (decreasing work) order, with
+  // the helpers `team` gave it
+  auto upper_worker = [&](int w, int layer, const std::vector<std::vector<Executor*>>& team) {
     try {
       for (index_t k = part.upper_layer_offsets[layer - 1]; k < part.upper_layer_offsets[layer];
            ++k) {
         if (part.upper_owner[k] != w) continue;
         if (failed) break;
         Timer busy;
-        factor_one(w, n_sub + 1 + static_cast<int>(k), true);
+        factor_one(w, n_sub + 1 + static_cast<int>(k), true, team[w]);
         st[w].busy_seconds += busy.seconds();
         ++st[w].upper_parts_run;
       }
@@ -308,16 +335,19 @@ void factorize_multi(const Analysis& an, const std::vector<double>& scaled_value
   if (config.exchange) config.exchange(transfer, error);
   if (error) std::rethrow_exception(error);
 
-  // the upper layers, one after another, each on every worker
+  // the upper layers, one after another, each on every worker; the workers without a
+  // part in a layer are helpers of those with one
   for (int layer = 1; layer <= part.n_upper_layers(); ++layer) {
-    all_workers([&](int w) { upper_worker(w, layer); });
+    const auto team = layer_helpers(part, layer, execs);
+    all_workers([&](int w) { upper_worker(w, layer, team); });
     if (error) std::rethrow_exception(error);
   }
 
-  // the top part on worker 0, with the blocks of its children in other parts handed in
+  // the top part on worker 0, with the blocks of its children in other parts handed in;
+  // every other worker of this process is idle then: its helpers
   if (config.factor_top) {
     Timer busy;
-    factor_one(0, n_sub, false);
+    factor_one(0, n_sub, false, std::vector<Executor*>(execs.begin() + 1, execs.end()));
     st[0].busy_seconds += busy.seconds();
   }
   for (int w = 0; w < workers; ++w) {
@@ -326,6 +356,7 @@ void factorize_multi(const Analysis& an, const std::vector<double>& scaled_value
     Timer busy;
     execs[w]->end(ctx);
     st[w].busy_seconds += busy.seconds();
+    execs[w]->report_worker(st[w]);
   }
   const double total = wall.seconds();
   for (auto& d : st) d.idle_seconds = std::max(0.0, total - d.busy_seconds);

@@ -3,7 +3,8 @@
 // the same analysis, through the Solver (solve, refactorization, per-GPU statistics),
 // with a slowed GPU whose subtrees are stolen, with the top part split into upper layers
 // (on by default; one test asserts it and compares with the split off), for spd,
-// symmetric indefinite and general matrices. Each test skips, with a message, where fewer GPUs are
+// symmetric indefinite and general matrices, and with large fronts' updates split over the
+// idle GPUs (forced onto small fronts). Each test skips, with a message, where fewer GPUs are
 // visible than it needs (or the build has no CUDA backend).
 #include <gtest/gtest.h>
 
@@ -334,6 +335,79 @@ TEST(MultiGpu, UpperLayersMatchOneGpuAndCpu) {
         EXPECT_LE(test::backward_error(pr.a, x.data(), b.data()), 1e-14);
         EXPECT_LT(test::relative_difference(x, solve_with(an, cpu_f, b)), 1e-8);
       }
+    }
+  }
+}
+
+// Fronts whose update is split by column strips over the idle GPUs (split_update.cu),
+// forced onto every eligible front (split_front_min_cb 1; panel kernels off, so every
+// LLᵀ front takes the library path): LLᵀ factors agree entrywise with one GPU and the
+// CPU, LU solutions with the CPU's; some fronts were split and helpers computed strips
+// (bytes counted); through the Solver the per-GPU statistics show it too.
+TEST(MultiGpu, SplitFrontUpdatesMatchOneGpuAndCpu) {
+  REQUIRE_GPUS(2);
+  auto rng = test::fresh_rng();
+  std::vector<Problem> ps;
+  ps.push_back({"lap3d 26", generators::laplacian_3d(26, 26, 26), MatrixType::spd});
+  ps.push_back({"elasticity 12", generators::elasticity_3d(12, 12, 12), MatrixType::spd});
+  {
+    SparseMatrix a = expand_symmetric(generators::elasticity_3d(12, 12, 12));
+    std::uniform_real_distribution<double> u(0.5, 1.5);
+    for (double& v : a.values) v *= u(rng);
+    ps.push_back({"unsymmetric elasticity 12", std::move(a), MatrixType::general});
+  }
+  ps.push_back({"random general 733", test::random_sparse(733, 6, test::RandomKind::general, rng),
+                MatrixType::general});
+  for (int gpus : {2, 3, 4}) {
+    if (numeric::cuda_device_count() < gpus) continue;
+    for (const Problem& pr : ps) {
+      SCOPED_TRACE(pr.name + ", " + std::to_string(gpus) + " GPUs");
+      Options o;
+      o.type = pr.type;
+      o.split_front_min_cb = 1;
+      o.gpu_panel_kernel_max_pivots = 0;
+      const Analysis an = analyze_matrix(pr.a, o, gpus);
+      double pivot = 0;
+      const std::vector<double> v = test::scaled_values(an, pr.a, &pivot);
+      numeric::NumericFactor cpu_f, gpu1_f, split_f;
+      reference_factors(an, v, pr.type, pivot, o, cpu_f, gpu1_f);
+      const GpuExecutors gpu(o, gpus);
+      std::vector<std::vector<double>> arenas;
+      std::vector<DeviceStats> dev;
+      numeric::factorize_multi(an, v, pr.type, pivot, gpu.execs, split_f, arenas, {}, &dev);
+      index_t split = 0, strips = 0;
+      std::size_t bytes = 0;
+      for (const DeviceStats& d : dev) {
+        split += d.fronts_split;
+        strips += d.strips_helped;
+        bytes += d.bytes_transferred;
+      }
+      EXPECT_GT(split, 0) << "no front was split: the test would be vacuous";
+      EXPECT_GT(strips, 0);
+      EXPECT_GT(bytes, 0u);
+      EXPECT_EQ(dev[0].strips_helped, 0) << "GPU 0 factors the top part: it helps nobody there";
+      if (pr.type == MatrixType::spd) {
+        EXPECT_LT(test::relative_difference(split_f.panels, gpu1_f.panels), 1e-13);
+        EXPECT_LT(test::relative_difference(split_f.panels, cpu_f.panels), 1e-12);
+        EXPECT_EQ(split_f.rows, cpu_f.rows);
+      }
+      std::vector<double> b(pr.a.n_rows);
+      std::uniform_real_distribution<double> u(-1, 1);
+      for (double& x : b) x = u(rng);
+      EXPECT_LT(test::relative_difference(solve_with(an, split_f, b), solve_with(an, cpu_f, b)),
+                1e-8);
+      // through the Solver, refactorization included
+      Options so = o;
+      so.backend = Backend::cuda;
+      so.num_gpus = gpus;
+      Solver s(so);
+      s.factorize(pr.a);
+      s.refactorize(pr.a);
+      index_t solver_split = 0;
+      for (const DeviceStats& d : s.stats().factor.devices) solver_split += d.fronts_split;
+      EXPECT_GT(solver_split, 0);
+      const auto x = s.solve(b);
+      EXPECT_LE(test::backward_error(pr.a, x.data(), b.data()), 1e-14);
     }
   }
 }

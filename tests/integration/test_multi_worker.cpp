@@ -5,11 +5,14 @@
 // roundoff for spd, symmetric indefinite and general matrices, refactorization works on
 // the distributed factor, a slowed worker has its subtrees stolen, and errors propagate.
 // The top part is split into upper layers by default (Options::split_top); a dedicated
-// test asserts that it is, and compares with the split off and a dense solve.
+// test asserts that it is, and compares with the split off and a dense solve; it also
+// checks which executors each part is lent as helpers (FactorContext::helpers).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <map>
 #include <numeric>
 #include <string>
 
@@ -70,6 +73,7 @@ class Recording final : public numeric::Executor {
   void begin(const numeric::FactorContext& c) override { inner_->begin(c); }
   void begin_part(const numeric::FactorContext& c) override {
     if (c.part->id == fail_part_) throw DeviceError("injected failure");
+    helpers_of[c.part->id] = c.helpers;
     inner_->begin_part(c);
   }
   void factor_batch(const numeric::FactorContext& c, const BatchInfo& b) override {
@@ -87,6 +91,7 @@ class Recording final : public numeric::Executor {
 
   std::unique_ptr<numeric::Executor> inner_;
   std::vector<int> count;
+  std::map<int, std::vector<numeric::Executor*>> helpers_of;  ///< part id → ctx.helpers
 
  private:
   int fail_part_;
@@ -255,6 +260,37 @@ TEST(MultiWorker, UpperLayersGiveTheOneWorkerFactor) {
         upper_run += dev[w].upper_parts_run;
       }
       EXPECT_EQ(upper_run, static_cast<index_t>(part.upper.size()));
+      // helpers (FactorContext::helpers): none in layer 0; in each upper layer the workers
+      // without a part there, each lent to exactly one owner; every other worker for the top
+      const int n_sub = static_cast<int>(part.subtrees.size());
+      for (int w = 0; w < workers; ++w)
+        for (const auto& [id, h] : rec[w]->helpers_of)
+          if (id < n_sub) EXPECT_TRUE(h.empty()) << "subtree " << id;
+      for (int layer = 1; layer <= part.n_upper_layers(); ++layer) {
+        std::vector<int> owns(workers, 0), lent(workers, 0);
+        for (index_t k = part.upper_layer_offsets[layer - 1]; k < part.upper_layer_offsets[layer];
+             ++k)
+          owns[part.upper_owner[k]] = 1;
+        for (index_t k = part.upper_layer_offsets[layer - 1]; k < part.upper_layer_offsets[layer];
+             ++k) {
+          const int owner = part.upper_owner[k];
+          const auto& h = rec[owner]->helpers_of.at(n_sub + 1 + static_cast<int>(k));
+          for (numeric::Executor* e : h) {
+            const int w =
+                static_cast<int>(std::find(execs.begin(), execs.end(), e) - execs.begin());
+            ASSERT_LT(w, workers);
+            EXPECT_FALSE(owns[w]) << "worker " << w << " owns a part of layer " << layer;
+            EXPECT_TRUE(lent[w] == 0 || lent[w] == owner + 1) << "worker " << w << " lent twice";
+            lent[w] = owner + 1;
+          }
+        }
+        for (int w = 0; w < workers; ++w)
+          EXPECT_EQ(lent[w] != 0, !owns[w]) << "layer " << layer << ", worker " << w;
+      }
+      {
+        const auto& top = rec[0]->helpers_of.at(n_sub);
+        EXPECT_EQ(top, std::vector<numeric::Executor*>(execs.begin() + 1, execs.end()));
+      }
       // the same with the split off (same tree: the ordering does not depend on it)
       o.split_top = false;
       const Analysis off = analyze_matrix(pr.a, o, workers);

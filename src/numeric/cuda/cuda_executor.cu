@@ -95,7 +95,8 @@ constexpr std::size_t kLanes = 8;
 CudaExecutor::CudaExecutor(const Options& o, int device)
     : device_(device),
       limit_(o.device_memory_limit),
-      panel_max_pivots_(o.gpu_panel_kernel_max_pivots) {
+      panel_max_pivots_(o.gpu_panel_kernel_max_pivots),
+      split_min_cb_(o.split_front_min_cb) {
   STRATA_CUDA(cudaSetDevice(device_));
   STRATA_CUDA(cudaStreamCreate(&stream_));
   STRATA_CUBLAS(cublasCreate(&blas_));
@@ -105,6 +106,8 @@ CudaExecutor::CudaExecutor(const Options& o, int device)
   STRATA_CUDA(cudaEventCreate(&start_));
   STRATA_CUDA(cudaEventCreate(&stop_));
   STRATA_CUDA(cudaEventCreateWithFlags(&panels_done_, cudaEventDisableTiming));
+  for (cudaEvent_t* e : {&split_ready_, &help_ready_, &help_done_})
+    STRATA_CUDA(cudaEventCreateWithFlags(e, cudaEventDisableTiming));
   for (ChunkRecord& c : chunk_)
     for (cudaEvent_t& e : c.ev) STRATA_CUDA(cudaEventCreate(&e));
 }
@@ -123,6 +126,7 @@ CudaExecutor::~CudaExecutor() {
   cudaEventDestroy(start_);
   cudaEventDestroy(stop_);
   cudaEventDestroy(panels_done_);
+  for (cudaEvent_t e : {split_ready_, help_ready_, help_done_}) cudaEventDestroy(e);
   for (ChunkRecord& c : chunk_)
     for (cudaEvent_t e : c.ev) cudaEventDestroy(e);
   cusolverDnDestroy(solver_);
@@ -154,6 +158,14 @@ void CudaExecutor::begin(const numeric::FactorContext& ctx) {
   held_parts_.clear();
   resident_for_ = nullptr;
   pending_ = nullptr;  // a chunk left by a factorization that failed
+  // strips of another executor's front still in flight (its factorization failed before
+  // its end_part): they write into this pool
+  if (helped_) STRATA_CUDA(cudaStreamSynchronize(help_lane().stream));
+  helped_ = false;
+  team_.clear();
+  team_used_.clear();
+  fronts_split_ = strips_helped_ = 0;
+  help_bytes_ = 0;
   if (an.id != analysis_id_) {
     const Timer setup;
     upload_analysis(an);
@@ -197,11 +209,13 @@ void CudaExecutor::begin_part(const numeric::FactorContext& ctx) {
     }
   }
   phases_.setup += setup.seconds();
+  set_team(ctx);
 }
 
 void CudaExecutor::end_part(const numeric::FactorContext& ctx) {
   STRATA_CUDA(cudaSetDevice(device_));
   flush_chunk(ctx);  // the last chunk's host part, while ctx.part is still this part
+  release_team();
   if (part_device_only_) held_parts_.push_back(ctx.part->id);
   part_device_only_ = false;
 }
@@ -761,19 +775,23 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
           STRATA_CUBLAS(cublasDtrsm(ln->blas, CUBLAS_SIDE_RIGHT, CUBLAS_FILL_MODE_LOWER,
                                     CUBLAS_OP_T, CUBLAS_DIAG_NON_UNIT, m - k, k, &one, F, m, F + k,
                                     m));
-          STRATA_CUBLAS(cublasDsyrk(ln->blas, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N, m - k, k,
-                                    &minus_one, F + k, m, &one,
-                                    F + static_cast<std::size_t>(k) * m + k, m));
+          if (split_front(m, k))
+            split_update(*ln, F, m, k, false, ev[1]);
+          else
+            STRATA_CUBLAS(cublasDsyrk(ln->blas, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N, m - k, k,
+                                      &minus_one, F + k, m, &one,
+                                      F + static_cast<std::size_t>(k) * m + k, m));
         }
       } else {  // first pass: GETRF and its pivot check; the rest after one wait below
         lu_fronts.push_back({ln, F, m, k, perm_f, perturbed_.data() + ns + i});
       }
     }
-  if (!lu_fronts.empty()) lu_large_fronts(lu_fronts, ctx.static_pivot);
+  if (!lu_fronts.empty()) lu_large_fronts(lu_fronts, ctx.static_pivot, ev[1]);
   for (std::size_t l = 1; l < n_lanes; ++l) {  // join: the stores read every front
     STRATA_CUDA(cudaEventRecord(lane[l]->done, lane[l]->stream));
     STRATA_CUDA(cudaStreamWaitEvent(stream_, lane[l]->done, 0));
   }
+  join_team();
   STRATA_CUDA(cudaEventRecord(ev[3], stream_));
   launch_store_cb(tree, begin, count, max_rows, pool_.data(), !lu, stream_);
 
@@ -948,7 +966,8 @@ void CudaExecutor::finish_chunk(const numeric::FactorContext& ctx, ChunkRecord& 
 // them; then per front, if its pivots passed, the interchanges to A12, two TRSMs and a
 // GEMM, and otherwise A11 restored and the blocked path with our panel kernel (static
 // pivoting). (One wait per front instead held the host, and so every lane, on each front.)
-void CudaExecutor::lu_large_fronts(const std::vector<LuFront>& fronts, double static_pivot) {
+void CudaExecutor::lu_large_fronts(const std::vector<LuFront>& fronts, double static_pivot,
+                                   cudaEvent_t assembled) {
   const double one = 1.0, minus_one = -1.0;
   const std::size_t n = fronts.size();
   std::vector<std::size_t> save_at(n + 1, 0), ipiv_at(n + 1, 0);
@@ -1002,8 +1021,11 @@ void CudaExecutor::lu_large_fronts(const std::vector<LuFront>& fronts, double st
                                   CUBLAS_DIAG_NON_UNIT, m - k, k, &one, fr.F, m, fr.F + k, m));
         STRATA_CUBLAS(cublasDtrsm(lane.blas, CUBLAS_SIDE_LEFT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N,
                                   CUBLAS_DIAG_UNIT, k, m - k, &one, fr.F, m, a12, m));
-        STRATA_CUBLAS(cublasDgemm(lane.blas, CUBLAS_OP_N, CUBLAS_OP_N, m - k, m - k, k, &minus_one,
-                                  fr.F + k, m, a12, m, &one, a12 + k, m));
+        if (split_front(m, k))
+          split_update(lane, fr.F, m, k, true, assembled);
+        else
+          STRATA_CUBLAS(cublasDgemm(lane.blas, CUBLAS_OP_N, CUBLAS_OP_N, m - k, m - k, k,
+                                    &minus_one, fr.F + k, m, a12, m, &one, a12 + k, m));
       }
       continue;
     }

@@ -3,7 +3,8 @@
 //   cuda_executor.cu  device memory plan, analysis upload, in-core batches, bookkeeping;
 //   tiled_front.cu    fronts larger than the device budget, factored slab by slab;
 //   tiled_host.cpp    their assembly on the host's threads;
-//   cuda_solve.cu     triangular solves on the device with a resident factor.
+//   cuda_solve.cu     triangular solves on the device with a resident factor;
+//   split_update.cu   a large front's update split over idle GPUs (several GPUs).
 #pragma once
 
 #include <cstdint>
@@ -88,6 +89,7 @@ class CudaExecutor final : public numeric::Executor {
   bool holds_part_panels() const override { return !held_parts_.empty(); }
   void end_part(const numeric::FactorContext& ctx) override;
   void report(FactorStats& fs) const override;
+  void report_worker(DeviceStats& d) const override;
 
  private:
   void upload_analysis(const Analysis& an);
@@ -138,15 +140,41 @@ class CudaExecutor final : public numeric::Executor {
     std::int64_t* perm;
     std::int64_t* perturbed;
   };
-  /// LU of the chunk's large fronts: GETRF + TRSMs + GEMM, or the blocked panel-kernel
-  /// path for a front whose GETRF pivots need static pivoting (kernels_lu.cu).
-  void lu_large_fronts(const std::vector<LuFront>& fronts, double static_pivot);
+  /// LU of the chunk's large fronts: GETRF + TRSMs + GEMM (the GEMM split over the team
+  /// for a large front, split_update; `assembled`: recorded after the chunk's assembly), or
+  /// the blocked panel-kernel path for a front whose GETRF pivots need static pivoting
+  /// (kernels_lu.cu).
+  void lu_large_fronts(const std::vector<LuFront>& fronts, double static_pivot,
+                       cudaEvent_t assembled);
   /// The lanes, created on first use (kLanes of them).
   std::vector<std::unique_ptr<Lane>>& lanes();
   /// Host bookkeeping of factored front f: `diag` holds its k pivots' diagonal entries.
   void finish_front(const numeric::FactorContext& ctx, index_t f, std::int64_t bad,
                     std::int64_t npert, const std::int64_t* lperm, const double* diag);
   void copy_panels_back(const numeric::FactorContext& ctx, index_t begin, index_t end);
+  // --- a large front's update split over helper GPUs (split_update.cu) ---
+  /// In begin_part: the helpers of ctx this executor can use (CUDA executors on other
+  /// GPUs that reach this one's memory and whose memory it reaches; peer access enabled),
+  /// each helper's lane made to wait for the work its own stream still has in flight.
+  void set_team(const numeric::FactorContext& ctx);
+  /// In end_part (and before any later use of a helper): waits for the helpers' lanes.
+  void release_team();
+  /// Whether a front of m rows and k pivots gets its update split over the team.
+  bool split_front(int m, int k) const {
+    return !team_.empty() && split_min_cb_ > 0 && m - k >= split_min_cb_;
+  }
+  /// Front F (m × m in the pool, k pivots), its pivot block and panel enqueued on `lane`:
+  /// the update C −= L₂₁L₂₁ᵀ (LLᵀ, lower triangle) or C −= L₂₁U₁₂ (LU) of its
+  /// contribution block C, split into column strips of about equal flops, the first
+  /// done here on `lane`, each other one by a helper (strip of C and the rows of the
+  /// panel it needs copied to the helper's pool, GEMM there, strip copied back). A
+  /// helper's copy of its strip of C waits only for `assembled`. The chunk's stores must
+  /// wait for the helpers (join_team).
+  void split_update(Lane& lane, double* F, int m, int k, bool lu, cudaEvent_t assembled);
+  /// Makes stream_ wait for the helpers used since the last call (the chunk's join).
+  void join_team();
+  /// The lane this executor lends to others (a lane of its own, idle while it helps).
+  Lane& help_lane();
   void count_h2d(std::size_t bytes) { bytes_h2d_ += bytes; }
   template <class T>
   void upload(DeviceBuffer<T>& d, const std::vector<T>& h) {
@@ -160,6 +188,7 @@ class CudaExecutor final : public numeric::Executor {
   cusolverDnHandle_t solver_ = nullptr;
   std::size_t limit_ = 0;
   std::int64_t panel_max_pivots_ = 0;  ///< Options::gpu_panel_kernel_max_pivots
+  std::int64_t split_min_cb_ = 0;      ///< Options::split_front_min_cb
   std::uint64_t analysis_id_ = 0;
   DevicePlan plan_;
   // analysis arrays (fronts_: the whole tree's schedule, for the device solve)
@@ -224,6 +253,14 @@ class CudaExecutor final : public numeric::Executor {
   int slot_ = 0;
   ChunkRecord* pending_ = nullptr;
   FactorStats::DevicePhases phases_;  ///< summed over the chunks of the factorization
+  // split updates: as the front's owner, the helpers of the current part and those the
+  // current chunk used; as a helper, the event its lane records after each strip
+  std::vector<CudaExecutor*> team_, team_used_;
+  cudaEvent_t split_ready_ = nullptr;  ///< on the owner's lane: pivot block and panel done
+  cudaEvent_t help_ready_ = nullptr, help_done_ = nullptr;
+  bool helped_ = false;  ///< its help lane has work of another executor in flight
+  index_t fronts_split_ = 0, strips_helped_ = 0;
+  std::size_t help_bytes_ = 0;
 };
 
 }  // namespace strata::cuda
