@@ -630,8 +630,19 @@ class GpuSections:
         self.consumed.update(r.path for r in rs)
         cfg: dict[tuple, dict] = {}
         budget: dict[tuple, dict] = {}  # rows under a device budget (--budget-share), apart
+        # rows with large fronts' updates split over idle GPUs (--split-fronts > 0), apart,
+        # each with the row of the same run, problem and GPUs without the split
+        split_rows: dict[tuple, tuple] = {}
         for r in sorted(rs, key=lambda r: (r.date, r.name)):  # newer runs override
             for row in r.rows:
+                if isinstance(row, dict) and (num(row.get("split_front_min_cb")) or 0) > 0:
+                    off = next((x for x in r.rows if isinstance(x, dict)
+                                and (num(x.get("split_front_min_cb")) or 0) == 0
+                                and x.get("problem") == row.get("problem")
+                                and x.get("workers") == row.get("workers")), None)
+                    split_rows[(row.get("problem"), int(num(row.get("workers")) or 0),
+                                int(num(row.get("split_front_min_cb"))))] = (row, off, r)
+                    continue
                 if isinstance(row, dict) and (num(row.get("budget_share_ratio")) or 0) > 0:
                     budget[(row.get("problem"), int(num(row.get("workers")) or 0),
                             num(row.get("budget_share_ratio")))] = row
@@ -774,6 +785,28 @@ class GpuSections:
             self.w(table(["problem", unit + "s", "share / budget", f"factor MB per {unit}",
                           "budget MB", "factor s", "in core s", "slowdown", "tiled fronts",
                           "CBs spilled", "MB to device", "MB to host", "berr"], brows, 2))
+        if split_rows:
+            srows = []
+            for (p, w, cb), (row, off, r) in sorted(split_rows.items(),
+                                                     key=lambda kv: (str(kv[0][0]), kv[0][1],
+                                                                     kv[0][2])):
+                devs = row.get("devices") or []
+                on_s = num(row.get("factor_seconds"))
+                off_s = num(dig(off, "factor_seconds"))
+                srows.append([str(p), str(w), str(cb), f_sec(on_s), f_sec(off_s),
+                              f_ratio(ratio(on_s, off_s)),
+                              f_int(sum(int(num(d.get("fronts_split")) or 0) for d in devs)),
+                              f_int(sum(int(num(d.get("strips_helped")) or 0) for d in devs)),
+                              f"[`{r.name}`]({self.rel(r.path)})"])
+            self.w(f"Large fronts' updates split by column strips over the {unit}s idle while "
+                   f"they are factored (`Options::split_front_min_cb`, `--split-fronts`: fronts "
+                   f"whose contribution block has at least that many rows; 0, the default, "
+                   f"splits none): seconds with the split and without it in the same run (in "
+                   f"brackets: with over without; below 1, the split helps), fronts split and "
+                   f"strips computed by helpers in the last factorization.")
+            self.w()
+            self.w(table(["problem", unit + "s", "min CB rows", "split s", "not split s",
+                          "ratio", "fronts split", "strips by helpers", "run"], srows, 3))
         if dev_rows:
             self.w(f"Per {unit} (default configuration, last factorization of the run): busy and idle "
                    f"seconds, busy share, subtrees run and stolen, upper-layer parts run, bytes "

@@ -132,8 +132,11 @@ struct Options {
   /// pivot block and panel stay on its GPU, and each strip travels to its GPU and back
   /// (peer copies). 0 turns this off. LDLᵀ fronts, fronts of at most
   /// gpu_panel_kernel_max_pivots pivots and fronts factored tile by tile are not split.
-  /// Default 2048 (docs/multigpu.md).
-  index_t split_front_min_cb = 2048;
+  /// Default 0 (off): on 4 H200s (lap3d 80³ and 100³, elasticity 40³) thresholds of 1024
+  /// to 4096 split 1–20 fronts and changed the factorization time by −2% to +7%,
+  /// since those fronts' time is mostly assembly, stores and the one-GPU pivot block and
+  /// panel, and the strips' copies cost about what they save (docs/multigpu.md).
+  index_t split_front_min_cb = 0;
   /// For `general`: permute large entries onto the diagonal by a maximum weighted
   /// matching and scale rows and columns (MC64-style, Duff & Koster 2001). For
   /// `symmetric_indefinite`: the symmetric scaling D·A·D from the same matching and the
