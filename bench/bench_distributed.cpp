@@ -129,15 +129,20 @@ int run(int argc, char** argv) {
                 {"values_bytes_between_ranks", values_scattered},
                 {"values_bytes_if_broadcast", values_broadcast},
                 {"solve_seconds", st.solve.seconds},
+                // a wrong factor shows here first (refinement hides it in the error)
+                {"refinement_steps", st.solve.refinement_steps},
+                {"gmres_iterations", st.solve.gmres_iterations},
                 {"backward_error", bench::berr(p.a, x, b)},
                 {"per_rank", per},
                 {"devices", devices}};
     out["rows"].push_back(row);
     std::printf(
         "%-12s %dx%d  factor %.3f s (first %.3f s), %.1f MB between ranks (values %.1f MB, "
-        "%.1f MB if broadcast), berr %.1e\n",
+        "%.1f MB if broadcast), solve %.3f s (%d refinement steps, %d GMRES iterations), "
+        "berr %.1e\n",
         name.c_str(), ranks, per_rank, bench::median(times), first_factor, between * 1e-6,
-        values_scattered * 1e-6, values_broadcast * 1e-6, row["backward_error"].get<double>());
+        values_scattered * 1e-6, values_broadcast * 1e-6, st.solve.seconds,
+        st.solve.refinement_steps, st.solve.gmres_iterations, row["backward_error"].get<double>());
     std::fflush(stdout);
   }
   if (rank == 0) {

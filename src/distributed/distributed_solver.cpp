@@ -88,12 +88,10 @@ void setup_numeric(DistributedState& s, Analysis& an, int per_rank) {
       }
     }
 #ifdef STRATA_HAVE_NCCL
-    // NCCL only with one GPU per rank: the one run with two GPUs per rank (4 × H200,
-    // lap3d-80, 2 ranks × 2 GPUs) gave a factor that needed 29 s of refinement, where one
-    // GPU per rank was right (docs/distributed.md §5). The likely cause, an unordered
-    // staging copy from the rank's second GPU, is fixed in nccl_blocks.cpp; until a GPU
-    // run confirms it, ranks with several GPUs send their blocks through host memory and MPI
-    ns.nccl = gpu && comm.size() > 1 && per_rank == 1;
+    // NCCL with any number of GPUs per rank: a rank's blocks from its other GPUs are
+    // staged onto its NCCL GPU on the NCCL stream (nccl_blocks.cpp; an unordered staging
+    // copy there once gave a wrong 2 × 2 factor, docs/distributed.md §5)
+    ns.nccl = gpu && comm.size() > 1;
 #endif
   } catch (...) {
     failed = std::current_exception();
