@@ -587,8 +587,84 @@ void CudaExecutor::plan_parts(const Analysis& an, bool whole) {
   panels_.resize(plan_.factor_resident ? std::max<std::size_t>(an.factor_layout.total, 1)
                                        : chunk_panels);
   for (const numeric::PartView& v : views) upload_part(an, v);
+  presize_chunk_buffers(an, views);
   STRATA_CUDA(cudaStreamSynchronize(stream_));
   planned_ = whole ? 1 : 2;
+}
+
+// Every buffer a chunk grows on demand, at the largest size any chunk of `views` needs.
+// Growing frees the old allocation, and cudaFree / cudaFreeHost wait for the whole
+// device: done during the first factorization, each growth stalled the chunk pipeline
+// (the first factorization of lap3d 100³ took 0.52–0.64 s against 0.37 s for the
+// refactorizations on an H200; loading the CUDA modules eagerly did not change that).
+// Done here, at analysis (prepare) or at the first begin_part, the factorizations
+// allocate nothing on the device.
+void CudaExecutor::presize_chunk_buffers(const Analysis& an,
+                                         const std::vector<numeric::PartView>& views) {
+  const auto& t = an.tree;
+  const bool lu = !an.symmetric;
+  std::size_t count = 1, big = 1, small = 1, pivots = 1, lu_save = 1;
+  int potrf = 1, getrf = 1;
+  std::vector<std::unique_ptr<Lane>>& lane = lanes();
+  for (const numeric::PartView& v : views) {
+    const PartDevice& pd = parts_.at(v.id);
+    const auto& s = *v.schedule;
+    for (index_t q = 0; q < static_cast<index_t>(s.fronts.size()); ++q) {
+      if (pd.tiled[q] || pd.chunk_end[q] <= q) continue;
+      std::size_t nb = 0, ns = 0, np = 0, save = 0;
+      for (index_t r = q; r < pd.chunk_end[q]; ++r) {
+        const index_t f = s.fronts[r];
+        const int m = static_cast<int>(t.n_rows(f)), k = static_cast<int>(t.n_pivots(f));
+        np += static_cast<std::size_t>(k);
+        if (m <= kSmallFront) {
+          ++ns;
+          continue;
+        }
+        ++nb;
+        save += static_cast<std::size_t>(k) * static_cast<std::size_t>(k);
+        int lwork = 0;
+        if (lu) {
+          STRATA_CUSOLVER(cusolverDnDgetrf_bufferSize(solver_, k, k, pool_.data(), m, &lwork));
+          getrf = std::max(getrf, lwork);
+        } else if (k > panel_max_pivots_) {
+          STRATA_CUSOLVER(cusolverDnDpotrf_bufferSize(solver_, CUBLAS_FILL_MODE_LOWER, k,
+                                                      pool_.data(), m, &lwork));
+          potrf = std::max(potrf, lwork);
+        }
+      }
+      count = std::max(count, static_cast<std::size_t>(pd.chunk_end[q] - q));
+      big = std::max(big, nb);
+      small = std::max(small, ns);
+      pivots = std::max(pivots, np);
+      lu_save = std::max(lu_save, save);
+    }
+  }
+  for (auto* b : {&info_, &perturbed_, &stage_offset_, &diag_offset_}) b->resize(count + 1);
+  small_pos_.resize(small);
+  perm_offset_.resize(small + 1);
+  potrf_info_.resize(big + 1);
+  panel_items_.resize(2 * big);
+  panel_work_.resize(llt_panel_work_size(static_cast<std::int64_t>(big)));
+  perm_.resize(pivots + 1);
+  pivot_size_.resize(pivots + 1);
+  diag_.resize(pivots + 1);
+  for (ChunkRecord& c : chunk_) {
+    c.info.resize(count + 1);
+    c.perturbed.resize(count + 1);
+    c.perm.resize(pivots + 1);
+    c.pinfo.resize(big + 1);
+    c.psize.resize(pivots + 1);
+    c.diag.resize(pivots + 1);
+  }
+  for (auto& l : lane) l->potrf_work.resize(static_cast<std::size_t>(potrf));
+  if (lu) {
+    lu_save_.resize(lu_save);
+    lu_ipiv_.resize(pivots);
+    lu_info_.resize(big);
+    lu_bad_.resize(big);
+    lu_bad_host_.resize(big);
+    for (auto& l : lane) l->getrf_work.resize(static_cast<std::size_t>(getrf));
+  }
 }
 
 // A part's schedule, pool offsets and block locations on the device.

@@ -96,6 +96,9 @@ class CudaExecutor final : public numeric::Executor {
   void plan_parts(const Analysis& an, bool whole);
   void plan_device_memory(const Analysis& an, const std::vector<numeric::PartView>& views);
   void upload_part(const Analysis& an, const numeric::PartView& v);
+  /// Grows the per-chunk buffers (device and pinned) to what the largest chunk of `views`
+  /// needs, so that no factorization allocates (cuda_executor.cu says why).
+  void presize_chunk_buffers(const Analysis& an, const std::vector<numeric::PartView>& views);
   /// The factor stays on the device only for a whole-tree factorization.
   bool keep_resident() const { return plan_.factor_resident && whole_; }
   void prepare_solve_plan(const Analysis& an);  // cuda_solve.cu
