@@ -17,9 +17,12 @@
 //
 // Panel kernels: in-core Cholesky refactorization time for each value of
 // Options::gpu_panel_kernel_max_pivots (which fronts get our pivot-block and panel
-// kernels, kernels_panel.cu, instead of POTRF + TRSM).
+// kernels, kernels_panel.cu, instead of POTRF + TRSM). POTRF blocks: the same for
+// Options::gpu_potrf_block_size (the larger fronts' pivot block and panel in column
+// blocks, llt_blocked.cu, or by one POTRF and one TRSM).
 //
-//   bench_gpu_memory [--parts devices,kernels,solvability,blocks,panel] [--problems a,b]
+//   bench_gpu_memory [--parts devices,kernels,solvability,blocks,panel,potrf-block]
+//                    [--problems a,b] [--potrf-blocks 0,128,...]
 //                    [--ratios 1,5,20,50] [--block-sizes 256,...] [--block-problems a,b]
 //                    [--panel-problems a,b] [--panel-max-pivots 0,64,...]
 //                    [--fronts m:k,...] [--repeat R] [--tag NAME] [--results-dir DIR]
@@ -37,6 +40,7 @@
 #include "bench_common.hpp"
 #include "core/stats_json.hpp"
 #include "core/timer.hpp"
+#include "numeric/cuda/cuda_executor.hpp"
 #include "numeric/cuda/kernels.cuh"
 #include "numeric/factor.hpp"
 #include "strata/strata.hpp"
@@ -244,6 +248,27 @@ json front_kernels(int m, int k) {
     row["potrf_trsm_flops_per_second"] = flops / std::max(t_potrf - t_copy + t_trsm, 1e-9);
     row["panel_kernels_flops_per_second"] = flops / std::max(t_ours - t_copy, 1e-9);
     row["panel_kernels_max_rel_diff"] = diff / big;
+    // the pivot block and panel in column blocks (llt_blocked.cu, what the executor runs for
+    // Options::gpu_potrf_block_size), against the same one POTRF + TRSM
+    for (int nb : {128, 256, 512}) {
+      if (nb >= k) continue;
+      cuda::Lane ln;  // the default stream and this function's handles
+      ln.blas = blas;
+      ln.solver = sol;
+      reset();
+      cuda::llt_pivot_block_and_panel(ln, F, m, k, nb, info);  // sizes its workspaces
+      const double t = device_seconds([&] {
+        reset();
+        cuda::llt_pivot_block_and_panel(ln, F, m, k, nb, info);
+      });
+      const std::vector<double> blocked = panel_to_host(F, m, k);
+      double bdiff = 0;
+      for (std::size_t i = 0; i < lib.size(); ++i)
+        bdiff = std::max(bdiff, std::abs(lib[i] - blocked[i]));
+      const std::string key = "blocked_" + std::to_string(nb) + "_potrf_trsm";
+      row[key + "_flops_per_second"] = flops / std::max(t - t_copy, 1e-9);
+      row[key + "_max_rel_diff"] = bdiff / big;
+    }
   }
   if (c > 0) {
     // the panel's TRSM by the explicit inverse: L11 copied and inverted (cuSOLVER
@@ -491,11 +516,17 @@ int main(int argc, char** argv) {
   std::vector<std::string> parts = {"devices", "kernels", "solvability", "blocks"};
   std::vector<std::string> panel_problems = {"lap3d-60", "lap3d-100", "elast3d-30", "elast3d-50"};
   std::vector<index_t> panel_max_pivots = {0, 64, 128, 256, 512, 1024};
+  std::vector<index_t> potrf_blocks = {0, 128, 256, 512};
   int repeat = 3;
   std::string results_dir;
-  app.add_option("--parts", parts, "what to measure: devices, kernels, solvability, blocks, panel")
+  app.add_option("--parts", parts,
+                 "what to measure: devices, kernels, solvability, blocks, panel, potrf-block")
       ->delimiter(',')
-      ->check(CLI::IsMember({"devices", "kernels", "solvability", "blocks", "panel"}));
+      ->check(
+          CLI::IsMember({"devices", "kernels", "solvability", "blocks", "panel", "potrf-block"}));
+  app.add_option("--potrf-blocks", potrf_blocks,
+                 "gpu_potrf_block_size values for the potrf-block sweep (on --panel-problems)")
+      ->delimiter(',');
   app.add_option("--panel-problems", panel_problems, "problems for the panel-kernel sweep")
       ->delimiter(',');
   app.add_option("--panel-max-pivots", panel_max_pivots,
@@ -542,11 +573,11 @@ int main(int argc, char** argv) {
   if (want("kernels")) {
     out["front_kernels"] = {{"dgemm_flops_per_second", peak}, {"rows", json::array()}};
     fmt::print(
-        "{:>6} {:>6} {:>7} {:>7} {:>7} {:>7} {:>9} {:>7} {:>8} {:>7} {:>8} {:>8}   TFLOP/s "
-        "(DGEMM {:.1f}; p+t: POTRF + TRSM, ours: kernels_panel.cu, diff: max |ours - p+t| / "
-        "max |L|)\n",
-        "m", "k", "potrf", "trsm", "p+t", "ours", "diff", "syrk", "gemm512", "gemm1k", "gemm2k",
-        "gemm", peak * 1e-12);
+        "{:>6} {:>6} {:>7} {:>7} {:>7} {:>7} {:>9} {:>7} {:>7} {:>7} {:>7} {:>8} {:>7} {:>8} "
+        "{:>8}   TFLOP/s (DGEMM {:.1f}; p+t: POTRF + TRSM, ours: kernels_panel.cu, diff: max "
+        "|ours - p+t| / max |L|, bNB: p+t in column blocks of NB, llt_blocked.cu)\n",
+        "m", "k", "potrf", "trsm", "p+t", "ours", "diff", "b128", "b256", "b512", "syrk", "gemm512",
+        "gemm1k", "gemm2k", "gemm", peak * 1e-12);
     for (const std::string& shape : fronts) {
       const auto colon = shape.find(':');
       if (colon == std::string::npos) throw InvalidInput("--fronts: " + shape + " is not m:k");
@@ -557,12 +588,17 @@ int main(int argc, char** argv) {
         return row.contains(key) ? fmt::format("{:.1f}", row[key].get<double>() * 1e-12)
                                  : std::string("-");
       };
-      fmt::print("{:>6} {:>6} {:>7} {:>7} {:>7} {:>7} {:>9.1e} {:>7} {:>8} {:>7} {:>8} {:>8}\n", m,
-                 k, tf("potrf_flops_per_second"), tf("trsm_flops_per_second"),
-                 tf("potrf_trsm_flops_per_second"), tf("panel_kernels_flops_per_second"),
-                 row["panel_kernels_max_rel_diff"].get<double>(), tf("syrk_flops_per_second"),
-                 tf("gemm_blocked_512_flops_per_second"), tf("gemm_blocked_1024_flops_per_second"),
-                 tf("gemm_blocked_2048_flops_per_second"), tf("gemm_full_flops_per_second"));
+      fmt::print(
+          "{:>6} {:>6} {:>7} {:>7} {:>7} {:>7} {:>9.1e} {:>7} {:>7} {:>7} {:>7} {:>8} "
+          "{:>7} {:>8} {:>8}\n",
+          m, k, tf("potrf_flops_per_second"), tf("trsm_flops_per_second"),
+          tf("potrf_trsm_flops_per_second"), tf("panel_kernels_flops_per_second"),
+          row["panel_kernels_max_rel_diff"].get<double>(),
+          tf("blocked_128_potrf_trsm_flops_per_second"),
+          tf("blocked_256_potrf_trsm_flops_per_second"),
+          tf("blocked_512_potrf_trsm_flops_per_second"), tf("syrk_flops_per_second"),
+          tf("gemm_blocked_512_flops_per_second"), tf("gemm_blocked_1024_flops_per_second"),
+          tf("gemm_blocked_2048_flops_per_second"), tf("gemm_full_flops_per_second"));
       std::fflush(stdout);
       out["front_kernels"]["rows"].push_back(row);
     }
@@ -694,10 +730,13 @@ int main(int argc, char** argv) {
   out["block_size"] = sweep(
       block_problems, block_sizes, "max_block_size",
       [](Options& o, index_t v) { o.max_block_size = v; }, false);
-  if (!want("panel")) panel_problems.clear();
+  const std::vector<std::string> none;
   out["panel_kernels"] = sweep(
-      panel_problems, panel_max_pivots, "gpu_panel_kernel_max_pivots",
+      want("panel") ? panel_problems : none, panel_max_pivots, "gpu_panel_kernel_max_pivots",
       [](Options& o, index_t v) { o.gpu_panel_kernel_max_pivots = v; }, true);
+  out["potrf_block"] = sweep(
+      want("potrf-block") ? panel_problems : none, potrf_blocks, "gpu_potrf_block_size",
+      [](Options& o, index_t v) { o.gpu_potrf_block_size = v; }, true);
   fmt::print("results: {}\n", bench::write_result(out, stem, results_dir));
   if (!partial.empty()) std::remove(partial.c_str());
   return 0;

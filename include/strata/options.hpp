@@ -97,6 +97,13 @@ struct Options {
   /// cuBLAS TRSM one front at a time. 0 sends every front to the library. Measured on the
   /// H100 (bench_gpu_memory --parts panel, bench/REPORT.md §4). Default 256.
   index_t gpu_panel_kernel_max_pivots = 256;
+  /// CUDA backend, Cholesky: a front with more pivots than gpu_panel_kernel_max_pivots
+  /// and than this gets its pivot block and panel in column blocks of this width (POTRF
+  /// of each diagonal block, TRSM of the rows below it, SYRK and GEMM of the remaining
+  /// pivot columns: most of the panel's flops in GEMM) instead of one POTRF and one TRSM
+  /// of all k pivots, which ran at 1–6 TFLOP/s on an H100 (src/numeric/cuda/
+  /// llt_blocked.cu). 0: one POTRF and one TRSM. Default 256.
+  index_t gpu_potrf_block_size = 256;
 
   // --- several GPUs (docs/multigpu.md) ---
   /// GPUs the CUDA backend factors on; 0 means every visible GPU (default 0). With more

@@ -301,6 +301,9 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers)
   if (opts.gpu_panel_kernel_max_pivots < 0)
     throw InvalidInput("Options::gpu_panel_kernel_max_pivots must be at least 0 (got " +
                        std::to_string(opts.gpu_panel_kernel_max_pivots) + ")");
+  if (opts.gpu_potrf_block_size < 0)
+    throw InvalidInput("Options::gpu_potrf_block_size must be at least 0 (got " +
+                       std::to_string(opts.gpu_potrf_block_size) + ")");
   if (opts.split_front_min_cb < 0)
     throw InvalidInput("Options::split_front_min_cb must be at least 0 (got " +
                        std::to_string(opts.split_front_min_cb) + ")");

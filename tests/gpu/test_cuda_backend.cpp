@@ -75,11 +75,20 @@ TEST_F(CudaBackend, CholeskyFactorMatchesCpu) {
     std::vector<double> arena;
     auto cpu = numeric::make_cpu_executor(2);
     numeric::factorize(an, c.values, MatrixType::spd, 0.0, *cpu, cpu_f, arena);
-    // every large front by POTRF + TRSM; every one with k ≤ 1024 by the panel kernels
+    // every large front by one POTRF + TRSM; by column blocks of an awkward width and of
+    // the default width (llt_blocked.cu); every one with k ≤ 1024 by the panel kernels
     // (kernels_panel.cu); the default split
-    for (index_t kmax : {index_t{0}, index_t{1024}, Options{}.gpu_panel_kernel_max_pivots}) {
-      SCOPED_TRACE("gpu_panel_kernel_max_pivots=" + std::to_string(kmax));
+    const Options defaults;
+    const index_t nb = defaults.gpu_potrf_block_size;
+    for (auto [kmax, block] : {std::pair<index_t, index_t>{0, 0},
+                               {0, 5},
+                               {0, nb},
+                               {1024, nb},
+                               {defaults.gpu_panel_kernel_max_pivots, nb}}) {
+      SCOPED_TRACE("gpu_panel_kernel_max_pivots=" + std::to_string(kmax) +
+                   " gpu_potrf_block_size=" + std::to_string(block));
       o.gpu_panel_kernel_max_pivots = kmax;
+      o.gpu_potrf_block_size = block;
       const GpuLlt g = gpu_llt(an, c, o);
       const numeric::NumericFactor& gpu_f = g.factor;
       // a resident LLᵀ factor stays on the device only (fetch_panels brought it over)
@@ -104,13 +113,16 @@ TEST_F(CudaBackend, CholeskyFactorMatchesCpu) {
 TEST_F(CudaBackend, CholeskyFailureNamesTheCpusColumn) {
   SparseMatrix a = generators::laplacian_3d(20, 20, 20);
   for (index_t j = 0; j < a.n_cols; ++j) a.values[a.offsets[j]] -= 0.1;  // diagonal first
-  index_t column[3] = {-1, -2, -3};  // CPU; GPU with the panel kernels; GPU without
-  for (int gpu = 0; gpu < 3; ++gpu) {
+  // CPU; GPU with the panel kernels; GPU with one POTRF per front; GPU with POTRFs of
+  // column blocks of 7 (the failing pivot deep in a later block of the root front)
+  index_t column[4] = {-1, -2, -3, -4};
+  for (int gpu = 0; gpu < 4; ++gpu) {
     Options o;
     o.num_gpus = 1;  // one GPU, whatever the machine has
     o.type = MatrixType::spd;
     o.backend = gpu ? Backend::cuda : Backend::cpu;
-    o.gpu_panel_kernel_max_pivots = gpu == 2 ? 0 : 1024;
+    o.gpu_panel_kernel_max_pivots = gpu >= 2 ? 0 : 1024;
+    o.gpu_potrf_block_size = gpu == 3 ? 7 : 0;
     Solver s(o);
     try {
       s.factorize(a);
@@ -121,6 +133,7 @@ TEST_F(CudaBackend, CholeskyFailureNamesTheCpusColumn) {
   }
   EXPECT_EQ(column[0], column[1]);
   EXPECT_EQ(column[0], column[2]);
+  EXPECT_EQ(column[0], column[3]);
   EXPECT_GE(column[0], 0);
 }
 
@@ -128,7 +141,8 @@ TEST_F(CudaBackend, CholeskyFailureNamesTheCpusColumn) {
 // set-up ahead of the first factorization: that factorization then moves fewer bytes to
 // the device (the analysis arrays went before), and its factor is bitwise the one of an
 // executor that set up inside the factorization. Through the Solver, analyze then factorize
-// and factorize alone give the same solution, and the analysis reports the set-up.
+// and factorize alone give the same solution, the analysis reports the set-up, and the
+// first factorization moves no more bytes than a refactorization.
 TEST_F(CudaBackend, PrepareAtAnalysis) {
   auto rng = test::fresh_rng();
   for (const SparseMatrix& a : {generators::laplacian_3d(14, 14, 14),
@@ -146,6 +160,11 @@ TEST_F(CudaBackend, PrepareAtAnalysis) {
     two_phases.analyze(a);
     EXPECT_GT(two_phases.stats().analysis.device_setup_seconds, 0.0);
     two_phases.factorize(a);
+    // a Cholesky factor's solve rows went at analysis too: the first factorization moves
+    // what every refactorization moves (the values), nothing more
+    const std::size_t first_bytes = two_phases.stats().factor.bytes_to_device;
+    two_phases.refactorize(a);
+    EXPECT_EQ(two_phases.stats().factor.bytes_to_device, first_bytes);
     one_call.factorize(a);
     std::vector<double> b(a.n_rows, 1.0);
     EXPECT_EQ(two_phases.solve(b), one_call.solve(b));

@@ -61,11 +61,20 @@ struct Lane {
   cudaEvent_t done = nullptr;
   bool owned = false;  ///< created for this lane (lane 0 borrows the executor's)
   DeviceBuffer<double> potrf_work, getrf_work;
-  double load = 0;  ///< flops given to it in the current chunk
+  DeviceBuffer<int> block_info;  ///< llt_pivot_block_and_panel: one status per column block
+  double load = 0;               ///< flops given to it in the current chunk
 };
 
 /// Grows `work` to cuSOLVER's workspace for a POTRF of order k, leading dimension ld.
 void grow_potrf_work(cusolverDnHandle_t h, DeviceBuffer<double>& work, double* a, int k, int ld);
+
+/// Cholesky pivot block and panel of front F (m × m, column-major, lower triangle, on the
+/// device) with k pivots, enqueued on `ln`: F₁₁ ← L₁₁ = chol(F₁₁), F₂₁ ← F₂₁ L₁₁⁻ᵀ; the
+/// contribution block is left alone. nb > 0 and nb < k: in column blocks of nb
+/// (llt_blocked.cu); else one cuSOLVER POTRF and one cuBLAS TRSM. `info` (device) gets
+/// what POTRF of order k reports: 0, or i > 0 when the leading minor of order i is not
+/// positive definite. Uses ln.potrf_work and ln.block_info (grown if short).
+void llt_pivot_block_and_panel(Lane& ln, double* F, int m, int k, int nb, int* info);
 
 class CudaExecutor final : public numeric::Executor {
  public:
@@ -102,6 +111,12 @@ class CudaExecutor final : public numeric::Executor {
   /// The factor stays on the device only for a whole-tree factorization.
   bool keep_resident() const { return plan_.factor_resident && whole_; }
   void prepare_solve_plan(const Analysis& an);  // cuda_solve.cu
+  /// Uploads the device solve's row arrays for a factor of `type` whose row indices are
+  /// `factor_rows` (laid out as an.tree.rows; index base 0): the rows, each pivot's
+  /// position in its front and the row each pivot position holds, and for LDLᵀ D and the
+  /// pivot sizes of `fac`. Records the analysis and type they hold.
+  void upload_solve_rows(const Analysis& an, const index_t* factor_rows, MatrixType type,
+                         const numeric::NumericFactor* fac);
   /// An in-core chunk whose work was launched and whose host part has not run yet (see
   /// factor_chunk): what the host part needs, the pinned buffers its results come back
   /// to, and its events (before assembly, after assembly, after the small fronts, after
@@ -192,6 +207,7 @@ class CudaExecutor final : public numeric::Executor {
   std::size_t limit_ = 0;
   std::int64_t panel_max_pivots_ = 0;  ///< Options::gpu_panel_kernel_max_pivots
   std::int64_t split_min_cb_ = 0;      ///< Options::split_front_min_cb
+  int potrf_block_ = 0;                ///< Options::gpu_potrf_block_size
   std::uint64_t analysis_id_ = 0;
   DevicePlan plan_;
   // analysis arrays (fronts_: the whole tree's schedule, for the device solve)
