@@ -100,10 +100,14 @@ struct Options {
   /// CUDA backend, Cholesky: a front with more pivots than gpu_panel_kernel_max_pivots
   /// and than this gets its pivot block and panel in column blocks of this width (POTRF
   /// of each diagonal block, TRSM of the rows below it, SYRK and GEMM of the remaining
-  /// pivot columns: most of the panel's flops in GEMM) instead of one POTRF and one TRSM
-  /// of all k pivots, which ran at 1–6 TFLOP/s on an H100 (src/numeric/cuda/
-  /// llt_blocked.cu). 0: one POTRF and one TRSM. Default 256.
-  index_t gpu_potrf_block_size = 256;
+  /// pivot columns, src/numeric/cuda/llt_blocked.cu) instead of one POTRF and one TRSM of
+  /// all k pivots. 0: one POTRF and one TRSM. Default 0: on the H100 the blocked form
+  /// was 0.9–1.0× as fast on single fronts (m 2,000–10,000, k 500–2,000; widths 128, 256,
+  /// 512) and changed lap3d 100³ / 60³ and elasticity 50³ / 30³ refactorizations by
+  /// −1% to +7%: cuSOLVER's POTRF time grows with k alone (0.42 ms at k = 1,000, 0.86 ms
+  /// at 2,000), so cutting it into blocks saves nothing, and TRSMs of nb columns are no
+  /// faster per flop than one of k (bench_gpu_memory --parts kernels,potrf-block).
+  index_t gpu_potrf_block_size = 0;
 
   // --- several GPUs (docs/multigpu.md) ---
   /// GPUs the CUDA backend factors on; 0 means every visible GPU (default 0). With more

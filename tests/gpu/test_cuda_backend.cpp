@@ -76,15 +76,15 @@ TEST_F(CudaBackend, CholeskyFactorMatchesCpu) {
     auto cpu = numeric::make_cpu_executor(2);
     numeric::factorize(an, c.values, MatrixType::spd, 0.0, *cpu, cpu_f, arena);
     // every large front by one POTRF + TRSM; by column blocks of an awkward width and of
-    // the default width (llt_blocked.cu); every one with k ≤ 1024 by the panel kernels
-    // (kernels_panel.cu); the default split
+    // 256 (llt_blocked.cu); every one with k ≤ 1024 by the panel kernels
+    // (kernels_panel.cu); the defaults
     const Options defaults;
-    const index_t nb = defaults.gpu_potrf_block_size;
-    for (auto [kmax, block] : {std::pair<index_t, index_t>{0, 0},
-                               {0, 5},
-                               {0, nb},
-                               {1024, nb},
-                               {defaults.gpu_panel_kernel_max_pivots, nb}}) {
+    for (auto [kmax, block] :
+         {std::pair<index_t, index_t>{0, 0},
+          {0, 5},
+          {0, 256},
+          {1024, 0},
+          {defaults.gpu_panel_kernel_max_pivots, defaults.gpu_potrf_block_size}}) {
       SCOPED_TRACE("gpu_panel_kernel_max_pivots=" + std::to_string(kmax) +
                    " gpu_potrf_block_size=" + std::to_string(block));
       o.gpu_panel_kernel_max_pivots = kmax;
