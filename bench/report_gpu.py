@@ -876,6 +876,62 @@ class GpuSections:
             full = max(sweeps, key=lambda r: (values(r), r.date, r.name))
             self.panel_sweep_table(full)
             self.panel_progress_table([r for r in sweeps if r is not full])
+        blocked = [r for r in runs if r.kind == "gpu_memory" and r.get("potrf_block")]
+        blocked_kernels = [r for r in kernels if any(
+            "blocked_256_potrf_trsm_flops_per_second" in x
+            for x in r.get("front_kernels").get("rows") or [])]
+        if blocked or blocked_kernels:
+            self.potrf_block_tables(
+                max(blocked, key=lambda r: (r.date, r.name)) if blocked else None,
+                max(blocked_kernels, key=lambda r: (r.date, r.name)) if blocked_kernels else None)
+
+    def potrf_block_tables(self, sweep: Run | None, kern: Run | None) -> None:
+        """Options::gpu_potrf_block_size: single fronts (kernel table) and whole problems."""
+        self.w("### Cholesky pivot block and panel in column blocks")
+        self.w()
+        self.w("`Options::gpu_potrf_block_size` (src/numeric/cuda/llt_blocked.cu): a large "
+               "front's pivot block and panel by POTRF of each nb-wide diagonal block, TRSM "
+               "of the rows below it and SYRK + GEMM of the remaining pivot columns, instead "
+               "of one cuSOLVER POTRF and one cuBLAS TRSM of all k pivots (0).")
+        self.w()
+        if kern is not None:
+            self.consumed.add(kern.path)
+            rows = []
+            for x in kern.get("front_kernels").get("rows") or []:
+                def tf(key):
+                    v = num(x.get(key))
+                    return "–" if v is None else f"{v * 1e-12:.1f}"
+                rows.append([f_int(x.get("m")), f_int(x.get("k")), tf("potrf_flops_per_second"),
+                             tf("potrf_trsm_flops_per_second")] +
+                            [tf(f"blocked_{nb}_potrf_trsm_flops_per_second")
+                             for nb in (128, 256, 512)])
+            self.w("One front, TFLOP/s of POTRF + TRSM's work (k³/3 + (m−k)·k² flops), best of "
+                   f"3 ({machine_label(kern.machine)}, {kern.date}, commit "
+                   f"{kern.get('git_commit') or '?'}; `{kern.get('command')}`):")
+            self.w()
+            self.w(table(["m", "k", "POTRF k×k alone", "POTRF + TRSM", "blocks of 128",
+                          "blocks of 256", "blocks of 512"], rows, 0))
+            self.w()
+        if sweep is not None:
+            self.consumed.add(sweep.path)
+            data = sweep.get("potrf_block")
+            values = sorted({int(num(x.get("gpu_potrf_block_size")))
+                             for p in data for x in p.get("runs", [])})
+            rows = []
+            for p in data:
+                by = {int(num(x.get("gpu_potrf_block_size"))): num(x.get("factor_seconds"))
+                      for x in p.get("runs", [])}
+                best = min((v for v in by.values() if v), default=None)
+                rows.append([p.get("problem")] + [
+                    "–" if by.get(v) is None else
+                    (f"**{by[v]:.4f}**" if by[v] == best else f"{by[v]:.4f}") for v in values])
+            self.w("In-core refactorization, seconds (median of the repeats), per "
+                   "`gpu_potrf_block_size` (0: one POTRF + TRSM per front); best in bold "
+                   f"({machine_label(sweep.machine)}, {sweep.date}, commit "
+                   f"{sweep.get('git_commit') or '?'}; `{sweep.get('command')}`).")
+            self.w()
+            self.w(table(["problem"] + [str(v) for v in values], rows, 0))
+            self.w()
 
     def batched_panels_table(self, r: Run) -> None:
         """Pivot blocks and panels of many fronts: library on 8 streams vs strata's kernels."""
