@@ -208,6 +208,8 @@ nlohmann::json device_figures(const FactorStats& fs) {
           {"bytes_to_host", fs.bytes_to_host},
           {"device_batches", fs.device_batches},
           {"tiled_fronts", fs.tiled_fronts},
+          {"lu_large_fronts", fs.lu_large_fronts},
+          {"lu_large_fronts_pivoted", fs.lu_large_fronts_pivoted},
           {"factor_resident", fs.factor_resident},
           {"phases", fs.device_phases}};
 }

@@ -216,6 +216,26 @@ json front_kernels(int m, int k) {
   // the copy inside the timed region, measured alone and taken off
   const double t_copy = device_seconds(reset);
   row["potrf_flops_per_second"] = kd * kd * kd / 3 / std::max(t_potrf - t_copy, 1e-9);
+  // an LU front's pivot block: cuSOLVER GETRF of k×k with partial pivoting and without
+  // (devIpiv null), credited with 2k³/3 flops (the executor's large LU fronts use the first)
+  {
+    int glwork = 0;
+    cusolverDnDgetrf_bufferSize(sol, k, k, F, m, &glwork);
+    double* GW = nullptr;
+    int* ipiv = nullptr;
+    check(cudaMalloc(&GW, sizeof(double) * std::max(glwork, 1)), "cudaMalloc");
+    check(cudaMalloc(&ipiv, sizeof(int) * k), "cudaMalloc");
+    for (const bool pivoting : {true, false}) {
+      const double t = device_seconds([&] {
+        reset();
+        cusolverDnDgetrf(sol, k, k, F, m, GW, pivoting ? ipiv : nullptr, info);
+      });
+      row[pivoting ? "getrf_flops_per_second" : "getrf_nopiv_flops_per_second"] =
+          2 * kd * kd * kd / 3 / std::max(t - t_copy, 1e-9);
+    }
+    cudaFree(GW);
+    cudaFree(ipiv);
+  }
   double t_trsm = 0;
   if (c > 0) {
     t_trsm = device_seconds([&] {
@@ -574,10 +594,11 @@ int main(int argc, char** argv) {
     out["front_kernels"] = {{"dgemm_flops_per_second", peak}, {"rows", json::array()}};
     fmt::print(
         "{:>6} {:>6} {:>7} {:>7} {:>7} {:>7} {:>9} {:>7} {:>7} {:>7} {:>7} {:>8} {:>7} {:>8} "
-        "{:>8}   TFLOP/s (DGEMM {:.1f}; p+t: POTRF + TRSM, ours: kernels_panel.cu, diff: max "
-        "|ours - p+t| / max |L|, bNB: p+t in column blocks of NB, llt_blocked.cu)\n",
+        "{:>8} {:>7} {:>8}   TFLOP/s (DGEMM {:.1f}; p+t: POTRF + TRSM, ours: kernels_panel.cu, "
+        "diff: max |ours - p+t| / max |L|, bNB: p+t in column blocks of NB, llt_blocked.cu; "
+        "getrf k×k, np: without pivoting)\n",
         "m", "k", "potrf", "trsm", "p+t", "ours", "diff", "b128", "b256", "b512", "syrk", "gemm512",
-        "gemm1k", "gemm2k", "gemm", peak * 1e-12);
+        "gemm1k", "gemm2k", "gemm", "getrf", "getrf-np", peak * 1e-12);
     for (const std::string& shape : fronts) {
       const auto colon = shape.find(':');
       if (colon == std::string::npos) throw InvalidInput("--fronts: " + shape + " is not m:k");
@@ -590,7 +611,7 @@ int main(int argc, char** argv) {
       };
       fmt::print(
           "{:>6} {:>6} {:>7} {:>7} {:>7} {:>7} {:>9.1e} {:>7} {:>7} {:>7} {:>7} {:>8} "
-          "{:>7} {:>8} {:>8}\n",
+          "{:>7} {:>8} {:>8} {:>7} {:>8}\n",
           m, k, tf("potrf_flops_per_second"), tf("trsm_flops_per_second"),
           tf("potrf_trsm_flops_per_second"), tf("panel_kernels_flops_per_second"),
           row["panel_kernels_max_rel_diff"].get<double>(),
@@ -598,7 +619,8 @@ int main(int argc, char** argv) {
           tf("blocked_256_potrf_trsm_flops_per_second"),
           tf("blocked_512_potrf_trsm_flops_per_second"), tf("syrk_flops_per_second"),
           tf("gemm_blocked_512_flops_per_second"), tf("gemm_blocked_1024_flops_per_second"),
-          tf("gemm_blocked_2048_flops_per_second"), tf("gemm_full_flops_per_second"));
+          tf("gemm_blocked_2048_flops_per_second"), tf("gemm_full_flops_per_second"),
+          tf("getrf_flops_per_second"), tf("getrf_nopiv_flops_per_second"));
       std::fflush(stdout);
       out["front_kernels"]["rows"].push_back(row);
     }

@@ -883,9 +883,9 @@ class GpuSections:
         if blocked or blocked_kernels:
             self.potrf_block_tables(
                 max(blocked, key=lambda r: (r.date, r.name)) if blocked else None,
-                max(blocked_kernels, key=lambda r: (r.date, r.name)) if blocked_kernels else None)
+                sorted(blocked_kernels, key=lambda r: (r.date, r.name)))
 
-    def potrf_block_tables(self, sweep: Run | None, kern: Run | None) -> None:
+    def potrf_block_tables(self, sweep: Run | None, kerns: list[Run]) -> None:
         """Options::gpu_potrf_block_size: single fronts (kernel table) and whole problems."""
         self.w("### Cholesky pivot block and panel in column blocks")
         self.w()
@@ -894,7 +894,7 @@ class GpuSections:
                "of the rows below it and SYRK + GEMM of the remaining pivot columns, instead "
                "of one cuSOLVER POTRF and one cuBLAS TRSM of all k pivots (0).")
         self.w()
-        if kern is not None:
+        for kern in kerns:
             self.consumed.add(kern.path)
             rows = []
             for x in kern.get("front_kernels").get("rows") or []:
@@ -904,13 +904,18 @@ class GpuSections:
                 rows.append([f_int(x.get("m")), f_int(x.get("k")), tf("potrf_flops_per_second"),
                              tf("potrf_trsm_flops_per_second")] +
                             [tf(f"blocked_{nb}_potrf_trsm_flops_per_second")
-                             for nb in (128, 256, 512)])
+                             for nb in (128, 256, 512)] +
+                            [tf("getrf_flops_per_second"), tf("getrf_nopiv_flops_per_second")])
             self.w("One front, TFLOP/s of POTRF + TRSM's work (k³/3 + (m−k)·k² flops), best of "
-                   f"3 ({machine_label(kern.machine)}, {kern.date}, commit "
+                   "3; beside it cuSOLVER GETRF of the k×k pivot block (2k³/3 flops) with "
+                   "partial pivoting and without (what an LU front's pivot block costs: large "
+                   "LU fronts run GETRF without pivoting first, CudaExecutor::lu_large_fronts) "
+                   f"({machine_label(kern.machine)}, {kern.date}, commit "
                    f"{kern.get('git_commit') or '?'}; `{kern.get('command')}`):")
             self.w()
             self.w(table(["m", "k", "POTRF k×k alone", "POTRF + TRSM", "blocks of 128",
-                          "blocks of 256", "blocks of 512"], rows, 0))
+                          "blocks of 256", "blocks of 512", "GETRF k×k", "GETRF unpivoted"],
+                         rows, 0))
             self.w()
         if sweep is not None:
             self.consumed.add(sweep.path)

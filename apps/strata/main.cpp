@@ -315,6 +315,8 @@ int run_solve(const SolveArgs& a, const Communicator& comm) {
                    {"bytes_to_host", f.bytes_to_host},
                    {"device_batches", f.device_batches},
                    {"tiled_fronts", f.tiled_fronts},
+                   {"lu_large_fronts", f.lu_large_fronts},
+                   {"lu_large_fronts_pivoted", f.lu_large_fronts_pivoted},
                    {"device_budget", f.device_budget},
                    {"contribution_blocks_on_host", f.contribution_blocks_on_host},
                    {"factor_resident", f.factor_resident},

@@ -92,6 +92,8 @@ void merge_device_figures(FactorStats& into, const FactorStats& one) {
   into.bytes_to_host += one.bytes_to_host;
   into.device_batches += one.device_batches;
   into.tiled_fronts += one.tiled_fronts;
+  into.lu_large_fronts += one.lu_large_fronts;
+  into.lu_large_fronts_pivoted += one.lu_large_fronts_pivoted;
   into.device_budget = std::max(into.device_budget, one.device_budget);
   into.contribution_blocks_on_host |= one.contribution_blocks_on_host;
   auto& d = into.device_phases;

@@ -162,6 +162,7 @@ void CudaExecutor::begin(const numeric::FactorContext& ctx) {
   const Analysis& an = *ctx.analysis;
   bytes_h2d_ = bytes_d2h_ = 0;
   chunks_ = tiled_count_ = 0;
+  lu_fronts_ = lu_fronts_pivoted_ = 0;
   phases_ = FactorStats::DevicePhases{};
   held_parts_.clear();
   resident_for_ = nullptr;
@@ -400,6 +401,8 @@ void CudaExecutor::report(FactorStats& fs) const {
   fs.bytes_to_host = bytes_d2h_;
   fs.device_batches = chunks_;
   fs.tiled_fronts = tiled_count_;
+  fs.lu_large_fronts = lu_fronts_;
+  fs.lu_large_fronts_pivoted = lu_fronts_pivoted_;
   fs.device_budget = plan_.budget;
   fs.contribution_blocks_on_host = plan_.arena_on_host;
   fs.factor_resident = keep_resident();
@@ -1084,13 +1087,37 @@ void CudaExecutor::lu_large_fronts(const std::vector<LuFront>& fronts, double st
     STRATA_CUDA(cudaMemcpy2DAsync(lu_save_.data() + save_at[i], sizeof(double) * k, fr.F,
                                   sizeof(double) * m, sizeof(double) * k, k,
                                   cudaMemcpyDeviceToDevice, lane.stream));
+    // without pivoting first (devIpiv null); kept only where partial pivoting would have
+    // interchanged nothing (kernels_lu.cu)
+    STRATA_CUSOLVER(cusolverDnDgetrf(lane.solver, k, k, fr.F, m, lane.getrf_work.data(), nullptr,
+                                     lu_info_.data() + i));
+    launch_lu_unpivoted_check(fr.F, m, k, static_pivot, lu_info_.data() + i,
+                              lu_ipiv_.data() + ipiv_at[i], lu_bad_.data() + i, lane.stream);
+  }
+  auto fetch_checks = [&] {
+    for (const auto& l : lanes_) STRATA_CUDA(cudaStreamSynchronize(l->stream));
+    STRATA_CUDA(
+        cudaMemcpy(lu_bad_host_.data(), lu_bad_.data(), sizeof(int) * n, cudaMemcpyDeviceToHost));
+  };
+  fetch_checks();
+  lu_fronts_ += static_cast<index_t>(n);
+  bool repivoted = false;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!lu_bad_host_.data()[i]) continue;
+    // rows must be interchanged (or a pivot is tiny): A11 again, GETRF with pivoting
+    const LuFront& fr = fronts[i];
+    Lane& lane = *fr.lane;
+    const int m = fr.m, k = fr.k;
+    STRATA_CUDA(cudaMemcpy2DAsync(fr.F, sizeof(double) * m, lu_save_.data() + save_at[i],
+                                  sizeof(double) * k, sizeof(double) * k, k,
+                                  cudaMemcpyDeviceToDevice, lane.stream));
     STRATA_CUSOLVER(cusolverDnDgetrf(lane.solver, k, k, fr.F, m, lane.getrf_work.data(),
                                      lu_ipiv_.data() + ipiv_at[i], lu_info_.data() + i));
     launch_lu_check(fr.F, m, k, static_pivot, lu_info_.data() + i, lu_bad_.data() + i, lane.stream);
+    ++lu_fronts_pivoted_;
+    repivoted = true;
   }
-  for (const auto& l : lanes_) STRATA_CUDA(cudaStreamSynchronize(l->stream));
-  STRATA_CUDA(
-      cudaMemcpy(lu_bad_host_.data(), lu_bad_.data(), sizeof(int) * n, cudaMemcpyDeviceToHost));
+  if (repivoted) fetch_checks();
   for (std::size_t i = 0; i < n; ++i) {
     const LuFront& fr = fronts[i];
     Lane& lane = *fr.lane;

@@ -158,7 +158,8 @@ class CudaExecutor final : public numeric::Executor {
     std::int64_t* perm;
     std::int64_t* perturbed;
   };
-  /// LU of the chunk's large fronts: GETRF + TRSMs + GEMM (the GEMM split over the team
+  /// LU of the chunk's large fronts: GETRF (unpivoted first, kept when no interchange was
+  /// due; kernels_lu.cu) + TRSMs + GEMM (the GEMM split over the team
   /// for a large front, split_update; `assembled`: recorded after the chunk's assembly), or
   /// the blocked panel-kernel path for a front whose GETRF pivots need static pivoting
   /// (kernels_lu.cu).
@@ -264,6 +265,7 @@ class CudaExecutor final : public numeric::Executor {
   // statistics of the last factorization
   std::size_t bytes_h2d_ = 0, bytes_d2h_ = 0;
   index_t chunks_ = 0, tiled_count_ = 0;
+  index_t lu_fronts_ = 0, lu_fronts_pivoted_ = 0;  ///< FactorStats::lu_large_fronts(_pivoted)
   double device_seconds_ = 0;
   cudaEvent_t start_ = nullptr, stop_ = nullptr;
   cudaEvent_t panels_done_ = nullptr;  // the chunk's launch_llt_panel: the lanes wait for it

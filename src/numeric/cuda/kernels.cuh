@@ -104,6 +104,15 @@ void launch_lu_slab(double* s_, std::int64_t r, std::int64_t w, std::int64_t kk,
 void launch_lu_check(const double* a, std::int64_t ld, std::int64_t k, double static_pivot,
                      const int* getrf_info, int* bad, cudaStream_t s);
 
+/// After cuSOLVER GETRF without pivoting of the k×k block A11 (leading dimension ld):
+/// *bad = 1 when *getrf_info ≠ 0, a pivot |U(j,j)| is below static_pivot or not finite,
+/// or a multiplier |L(i,j)| (i > j) is above 1 or not finite — that is, unless partial
+/// pivoting among these k rows would have interchanged no row — else 0; ipiv[j] = j + 1
+/// (no interchange, 1-based as GETRF's).
+void launch_lu_unpivoted_check(const double* a, std::int64_t ld, std::int64_t k,
+                               double static_pivot, const int* getrf_info, int* ipiv, int* bad,
+                               cudaStream_t s);
+
 /// The row permutation of GETRF's interchanges: perm[i] = the local row (0-based) that
 /// ended in position i, for ipiv (1-based, LAPACK) of length k. One thread.
 void launch_ipiv_to_perm(const int* ipiv, std::int64_t k, std::int64_t* perm, cudaStream_t s);

