@@ -265,6 +265,70 @@ __device__ void llt_front(double* F, std::int64_t m, std::int64_t k, std::int64_
   }
 }
 
+// Blocked right-looking partial Cholesky of a small front (m ≤ blockDim.x rows, lower
+// triangle), one row per thread: thread i keeps row i of the current panel of kSmallNb
+// pivot columns in registers, factors the panel there (each column's entries shared
+// through shared memory as they are finished), writes it back, and then updates the
+// trailing lower triangle by the rank-kSmallNb product of the panel with itself, reading
+// and writing each trailing entry once per panel. The unblocked kernel (llt_front) read and
+// wrote the whole trailing triangle in global memory once per pivot, with a 64-bit
+// division per entry: a small front of 200 pivots took 200 such passes. The arithmetic is
+// the unblocked one's in another order (same operations per entry, summed panel by panel).
+constexpr int kSmallNb = 16;
+__device__ void llt_front_blocked(double* F, std::int64_t m, std::int64_t k, std::int64_t* info) {
+  __shared__ double lsh[kSmallNb][kThreads];  // the panel's columns, L(row, j0 + p)
+  __shared__ int sfail;
+  const std::int64_t i = threadIdx.x;  // this thread's row
+  const bool row = i < m;
+  if (threadIdx.x == 0) sfail = 0;
+  __syncthreads();
+  for (std::int64_t j0 = 0; j0 < k; j0 += kSmallNb) {
+    const int w = static_cast<int>(k - j0 < kSmallNb ? k - j0 : kSmallNb);
+    double r[kSmallNb];
+#pragma unroll
+    for (int p = 0; p < kSmallNb; ++p)
+      r[p] = (p < w && row && i >= j0 + p) ? F[(j0 + p) * m + i] : 0.0;
+#pragma unroll
+    for (int p = 0; p < kSmallNb; ++p) {
+      if (p < w) {
+        const std::int64_t j = j0 + p;
+        if (i == j) {
+          if (!(r[p] > 0.0)) {
+            sfail = 1;
+            *info = j;
+          } else {
+            r[p] = sqrt(r[p]);
+          }
+          lsh[p][i] = r[p];
+        }
+        __syncthreads();
+        if (sfail) return;
+        if (i > j && row) r[p] /= lsh[p][j];
+        if (i > j) lsh[p][i] = row ? r[p] : 0.0;
+        __syncthreads();
+        // the panel's later columns: r[q] -= L(i, j) L(j0 + q, j) for rows at or below them
+#pragma unroll
+        for (int q = p + 1; q < kSmallNb; ++q)
+          if (q < w && row && i >= j0 + q) r[q] -= r[p] * lsh[p][j0 + q];
+      }
+    }
+#pragma unroll
+    for (int p = 0; p < kSmallNb; ++p)
+      if (p < w && row && i >= j0 + p) F[(j0 + p) * m + i] = r[p];
+    // trailing lower triangle: F(i, c) -= Σ_p L(i, j0 + p) L(c, j0 + p), c ≥ j0 + w
+    if (row && i >= j0 + w) {
+      for (std::int64_t c = j0 + w; c <= i; ++c) {
+        double acc = F[c * m + i];
+#pragma unroll
+        for (int p = 0; p < kSmallNb; ++p)
+          if (p < w) acc -= r[p] * lsh[p][c];
+        F[c * m + i] = acc;
+      }
+    }
+    __syncthreads();  // the next panel reads what this one wrote, and reuses lsh
+  }
+}
+
 __global__ void factor_small_kernel(DeviceTree t, const std::int64_t* positions, double* pool,
                                     bool lu, double static_pivot, std::int64_t* info,
                                     std::int64_t* perturbed, std::int64_t* perm,
@@ -285,7 +349,10 @@ __global__ void factor_small_kernel(DeviceTree t, const std::int64_t* positions,
     lu_columns(F, m, m, k, 0, k, m, m, static_pivot, p, perturbed + i);
   } else {
     __syncthreads();
-    llt_front(F, m, k, info + i);
+    if (m <= blockDim.x)
+      llt_front_blocked(F, m, k, info + i);
+    else
+      llt_front(F, m, k, info + i);
   }
 }
 
