@@ -1,8 +1,12 @@
 // strata — CUDA kernels of the level-batched multifrontal factorization (see kernels.cuh).
 //
-// The small-front kernel is a right-looking unblocked factorization by one thread block,
-// the fronts of a batch side by side in one launch: the batched-small-front case that
-// vendor batched POTRF handles poorly (DESIGN.md §2). Partial pivoting for LU searches
+// The small-front kernel factors each front of up to 256 rows by one thread block, the
+// fronts of a batch side by side in one launch: the batched-small-front case that vendor
+// batched POTRF handles poorly (DESIGN.md §2). It is blocked right-looking with one row
+// per thread (llt_front_blocked, lu_front_blocked: panels of 16 pivot columns in
+// registers, the trailing matrix updated once per panel); the unblocked one-pivot-at-a-
+// time forms (llt_front, lu_columns) remain for larger blocks (lu_columns also serves the
+// large LU fronts' static-pivoting path and the tiled slabs). Partial pivoting for LU searches
 // only the fully summed rows (restricted pivoting) and replaces tiny pivots by
 // ±static_pivot, exactly as the CPU kernels do (numeric/cpu/dense_front.hpp).
 #include <algorithm>
@@ -275,8 +279,9 @@ __device__ void llt_front(double* F, std::int64_t m, std::int64_t k, std::int64_
 // division per entry: a small front of 200 pivots took 200 such passes. The arithmetic is
 // the unblocked one's in another order (same operations per entry, summed panel by panel).
 constexpr int kSmallNb = 16;
-__device__ void llt_front_blocked(double* F, std::int64_t m, std::int64_t k, std::int64_t* info) {
-  __shared__ double lsh[kSmallNb][kThreads];  // the panel's columns, L(row, j0 + p)
+__device__ void llt_front_blocked(double* F, std::int64_t m, std::int64_t k, std::int64_t* info,
+                                  double (*lsh)[kThreads]) {
+  // lsh[p][row]: the panel's columns, L(row, j0 + p) (the kernel's shared buffer)
   __shared__ int sfail;
   const std::int64_t i = threadIdx.x;  // this thread's row
   const bool row = i < m;
@@ -329,6 +334,151 @@ __device__ void llt_front_blocked(double* F, std::int64_t m, std::int64_t k, std
   }
 }
 
+// Blocked right-looking partial LU of a small front (m ≤ blockDim.x rows, F full), one
+// row per thread as llt_front_blocked, with partial pivoting among the fully summed rows
+// [j, k) and static pivoting exactly as lu_columns (largest magnitude, first row on ties;
+// |pivot| < static_pivot replaced by ±static_pivot). For the panel of columns [j0, j0+w):
+// each pivot column's search is a block reduction over the registers; the interchange
+// swaps the two threads' panel registers through shared memory and the two rows of every
+// other column in global memory (all m columns move, as in lu_columns and LAPACK's
+// DGETRF); the multipliers and the panel's later columns are updated in registers. Then
+// each trailing column c ≥ j0+w gets its U rows by forward substitution with the panel's
+// unit L₁₁ (one thread per column) and the rows below by the rank-w product, each
+// trailing entry read and written once per panel (Golub & Van Loan, 4th ed., §3.4.7).
+__device__ void lu_front_blocked(double* F, std::int64_t m, std::int64_t k, double static_pivot,
+                                 std::int64_t* perm, std::int64_t* perturbed,
+                                 double (*ush)[kThreads]) {
+  __shared__ double l11[kSmallNb][kSmallNb];  // L(j0 + q, j0 + p), q > p
+  __shared__ double urow[kSmallNb];           // the pivot row's panel entries
+  __shared__ double xch[2][kSmallNb];         // the two interchanged rows' panel entries
+  __shared__ double sval[kThreads / kWarp];
+  __shared__ std::int64_t sidx[kThreads / kWarp];
+  __shared__ std::int64_t spivrow;
+  __shared__ double spiv;
+  const std::int64_t i = threadIdx.x;  // this thread's row (and, for the U rows, column)
+  const bool row = i < m;
+  for (std::int64_t j0 = 0; j0 < k; j0 += kSmallNb) {
+    const int w = static_cast<int>(k - j0 < kSmallNb ? k - j0 : kSmallNb);
+    double r[kSmallNb];
+#pragma unroll
+    for (int p = 0; p < kSmallNb; ++p) r[p] = (p < w && row) ? F[(j0 + p) * m + i] : 0.0;
+#pragma unroll
+    for (int p = 0; p < kSmallNb; ++p) {
+      if (p < w) {
+        const std::int64_t j = j0 + p;
+        // pivot search over rows [j, k): warp maxima, then the warps' (ties: lower row)
+        double v = (i >= j && i < k) ? fabs(r[p]) : -1.0;
+        if (!(v >= 0.0)) v = -1.0;  // a NaN is never chosen (block_argmax does the same)
+        std::int64_t at = i;
+        for (int off = kWarp / 2; off > 0; off /= 2) {
+          const double ov = __shfl_down_sync(0xffffffffu, v, off);
+          const std::int64_t oi = __shfl_down_sync(0xffffffffu, at, off);
+          if (ov > v || (ov == v && oi < at)) {
+            v = ov;
+            at = oi;
+          }
+        }
+        if (threadIdx.x % kWarp == 0) {
+          sval[threadIdx.x / kWarp] = v;
+          sidx[threadIdx.x / kWarp] = at;
+        }
+        __syncthreads();
+        if (threadIdx.x == 0) {
+          double bv = sval[0];
+          std::int64_t bi = sidx[0];
+          for (int q = 1; q < static_cast<int>(blockDim.x / kWarp); ++q)
+            if (sval[q] > bv || (sval[q] == bv && sidx[q] < bi)) {
+              bv = sval[q];
+              bi = sidx[q];
+            }
+          spivrow = bv < 0 ? j : bi;  // NaNs compare false: the column keeps its row
+        }
+        __syncthreads();
+        const std::int64_t pr = spivrow;
+        if (pr != j) {
+          if (i == j || i == pr) {
+#pragma unroll
+            for (int q = 0; q < kSmallNb; ++q) xch[i == j ? 0 : 1][q] = r[q];
+          }
+          if (threadIdx.x == 0) {
+            const std::int64_t tp = perm[j];
+            perm[j] = perm[pr];
+            perm[pr] = tp;
+          }
+          // the other columns' two entries (column c by thread c, c < m ≤ blockDim.x)
+          if (row && (i < j0 || i >= j0 + w)) {
+            const double t = F[i * m + j];
+            F[i * m + j] = F[i * m + pr];
+            F[i * m + pr] = t;
+          }
+          __syncthreads();
+          if (i == j || i == pr) {
+#pragma unroll
+            for (int q = 0; q < kSmallNb; ++q) r[q] = xch[i == j ? 1 : 0][q];
+          }
+        }
+        if (i == j) {
+          double d = r[p];
+          if (fabs(d) < static_pivot) {
+            d = d < 0 ? -static_pivot : static_pivot;
+            r[p] = d;
+            ++*perturbed;
+          }
+          spiv = d;
+#pragma unroll
+          for (int q = 0; q < kSmallNb; ++q) urow[q] = r[q];
+        }
+        __syncthreads();
+        if (row && i > j) {
+          r[p] /= spiv;
+#pragma unroll
+          for (int q = p + 1; q < kSmallNb; ++q)
+            if (q < w) r[q] -= r[p] * urow[q];
+        }
+        __syncthreads();
+      }
+    }
+    // the panel back to F, and L₁₁ to shared memory (only now: a later interchange in the
+    // panel moves rows' earlier multipliers too)
+#pragma unroll
+    for (int p = 0; p < kSmallNb; ++p) {
+      if (p < w && row) F[(j0 + p) * m + i] = r[p];
+      if (p < w && i > j0 + p && i < j0 + w) l11[i - j0][p] = r[p];
+    }
+    __syncthreads();
+    // the trailing columns' U rows: thread t solves L₁₁ u = F(j0:j0+w, c) for c = j0+w+t
+    const std::int64_t c = j0 + w + i;
+    if (c < m) {
+      double u[kSmallNb];
+#pragma unroll
+      for (int q = 0; q < kSmallNb; ++q) u[q] = q < w ? F[c * m + j0 + q] : 0.0;
+#pragma unroll
+      for (int q = 1; q < kSmallNb; ++q)
+#pragma unroll
+        for (int p = 0; p < q; ++p)
+          if (q < w) u[q] -= l11[q][p] * u[p];
+#pragma unroll
+      for (int q = 0; q < kSmallNb; ++q)
+        if (q < w) {
+          F[c * m + j0 + q] = u[q];
+          ush[q][c] = u[q];
+        }
+    }
+    __syncthreads();
+    // the rows below the panel: F(i, c) -= Σ_p L(i, j0 + p) U(j0 + p, c)
+    if (row && i >= j0 + w) {
+      for (std::int64_t cc = j0 + w; cc < m; ++cc) {
+        double acc = F[cc * m + i];
+#pragma unroll
+        for (int p = 0; p < kSmallNb; ++p)
+          if (p < w) acc -= r[p] * ush[p][cc];
+        F[cc * m + i] = acc;
+      }
+    }
+    __syncthreads();  // the next panel reads what this one wrote, and reuses the buffers
+  }
+}
+
 __global__ void factor_small_kernel(DeviceTree t, const std::int64_t* positions, double* pool,
                                     bool lu, double static_pivot, std::int64_t* info,
                                     std::int64_t* perturbed, std::int64_t* perm,
@@ -342,15 +492,19 @@ __global__ void factor_small_kernel(DeviceTree t, const std::int64_t* positions,
     info[i] = -1;
     perturbed[i] = 0;
   }
+  __shared__ double panel[kSmallNb][kThreads];  // the blocked kernels' panel buffer
   if (lu) {
     std::int64_t* p = perm + perm_offset[i];
     for (std::int64_t r = threadIdx.x; r < k; r += blockDim.x) p[r] = r;
     __syncthreads();
-    lu_columns(F, m, m, k, 0, k, m, m, static_pivot, p, perturbed + i);
+    if (m <= blockDim.x)
+      lu_front_blocked(F, m, k, static_pivot, p, perturbed + i, panel);
+    else
+      lu_columns(F, m, m, k, 0, k, m, m, static_pivot, p, perturbed + i);
   } else {
     __syncthreads();
     if (m <= blockDim.x)
-      llt_front_blocked(F, m, k, info + i);
+      llt_front_blocked(F, m, k, info + i, panel);
     else
       llt_front(F, m, k, info + i);
   }
