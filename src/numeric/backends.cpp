@@ -1,6 +1,6 @@
 // strata — backend selection in a build without CUDA: asking for the GPU backend is a
-// clear NotSupported error. (A CUDA build compiles numeric/cuda/cuda_executor.cu, which
-// defines these two functions instead.)
+// clear NotSupported error, and no host memory is pinned. (A CUDA build compiles
+// numeric/cuda/cuda_executor.cu, which defines these functions instead.)
 #ifndef STRATA_HAVE_CUDA
 #include "numeric/factor.hpp"
 #include "strata/errors.hpp"
@@ -14,6 +14,8 @@ int cuda_device_count() { return 0; }
 std::unique_ptr<Executor> make_cuda_executor(const Options&, int) {
   throw NotSupported("this build of strata has no CUDA backend (nvcc was not found at build time)");
 }
+
+std::unique_ptr<PinnedHostRange> pin_host_memory(void*, std::size_t) { return nullptr; }
 
 }  // namespace strata::numeric
 #endif

@@ -191,6 +191,28 @@ std::unique_ptr<Executor> make_cpu_executor(int threads, bool reproducible = fal
 /// build without CUDA or when that device is not visible.
 std::unique_ptr<Executor> make_cuda_executor(const Options& opts, int device = 0);
 
+/// Host memory page-locked for transfers to the GPUs while the handle lives (CUDA:
+/// cudaHostRegister with cudaHostRegisterPortable, undone by cudaHostUnregister). The
+/// memory must outlive the handle and must not be reallocated under it.
+class PinnedHostRange {
+ public:
+  PinnedHostRange(const void* p, std::size_t bytes) : p_(p), bytes_(bytes) {}
+  virtual ~PinnedHostRange() = default;
+  PinnedHostRange(const PinnedHostRange&) = delete;
+  PinnedHostRange& operator=(const PinnedHostRange&) = delete;
+  const void* data() const { return p_; }
+  std::size_t bytes() const { return bytes_; }
+
+ private:
+  const void* p_;
+  std::size_t bytes_;
+};
+
+/// Page-locks [p, p + bytes) (see PinnedHostRange). Returns nullptr in a build without
+/// CUDA, without a visible GPU, for an empty range, or when the driver refuses (the
+/// transfers then go from pageable memory, slower; nothing is reported).
+std::unique_ptr<PinnedHostRange> pin_host_memory(void* p, std::size_t bytes);
+
 /// True when this build has the CUDA backend and a GPU is visible.
 bool cuda_available();
 

@@ -1267,6 +1267,23 @@ int cuda_device_count() {
   return count;
 }
 
+namespace {
+class CudaPinnedRange final : public PinnedHostRange {
+ public:
+  using PinnedHostRange::PinnedHostRange;
+  ~CudaPinnedRange() override { cudaHostUnregister(const_cast<void*>(data())); }
+};
+}  // namespace
+
+std::unique_ptr<PinnedHostRange> pin_host_memory(void* p, std::size_t bytes) {
+  if (!p || bytes == 0 || !cuda::device_present()) return nullptr;
+  if (cudaHostRegister(p, bytes, cudaHostRegisterPortable) != cudaSuccess) {
+    (void)cudaGetLastError();
+    return nullptr;
+  }
+  return std::make_unique<CudaPinnedRange>(p, bytes);
+}
+
 std::unique_ptr<Executor> make_cuda_executor(const Options& opts, int device) {
   if (!cuda::device_present())
     throw NotSupported("the CUDA backend was asked for, but no CUDA GPU is visible");
