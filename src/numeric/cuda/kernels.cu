@@ -187,6 +187,14 @@ __device__ std::int64_t block_argmax(const double* col, std::int64_t r0, std::in
   return r;
 }
 
+// Static pivoting (numeric/cpu/dense_front.hpp): a pivot below static_pivot in magnitude
+// becomes ±static_pivot (sign(0) taken as +), counted in *perturbed.
+__device__ double static_pivoted(double p, double static_pivot, std::int64_t* perturbed) {
+  if (!(fabs(p) < static_pivot)) return p;
+  ++*perturbed;
+  return p < 0 ? -static_pivot : static_pivot;
+}
+
 // Unblocked right-looking partial LU of columns [p0, p0+w) of the m-row matrix F (leading
 // dimension ld), updating columns up to `update_end` (m: whole front; p0+w: panel only).
 // Row swaps among the fully summed rows [j, k) move the columns [0, swap_end) (the whole
@@ -215,13 +223,8 @@ __device__ void lu_columns(double* F, std::int64_t ld, std::int64_t m, std::int6
         perm[j] = perm[r];
         perm[r] = tp;
       }
-      double p = colj[j];
-      if (fabs(p) < static_pivot) {
-        p = p < 0 ? -static_pivot : static_pivot;
-        colj[j] = p;
-        ++*perturbed;
-      }
-      spiv = p;
+      colj[j] = static_pivoted(colj[j], static_pivot, perturbed);
+      spiv = colj[j];
     }
     __syncthreads();
     const double inv = 1.0 / spiv;
@@ -418,13 +421,8 @@ __device__ void lu_front_blocked(double* F, std::int64_t m, std::int64_t k, doub
           }
         }
         if (i == j) {
-          double d = r[p];
-          if (fabs(d) < static_pivot) {
-            d = d < 0 ? -static_pivot : static_pivot;
-            r[p] = d;
-            ++*perturbed;
-          }
-          spiv = d;
+          r[p] = static_pivoted(r[p], static_pivot, perturbed);
+          spiv = r[p];
 #pragma unroll
           for (int q = 0; q < kSmallNb; ++q) urow[q] = r[q];
         }
