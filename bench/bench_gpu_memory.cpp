@@ -19,9 +19,11 @@
 // Options::gpu_panel_kernel_max_pivots (which fronts get our pivot-block and panel
 // kernels, kernels_panel.cu, instead of POTRF + TRSM). POTRF blocks: the same for
 // Options::gpu_potrf_block_size (the larger fronts' pivot block and panel in column
-// blocks, llt_blocked.cu, or by one POTRF and one TRSM).
+// blocks, llt_blocked.cu, or by one POTRF and one TRSM). Recursive panel: the same for
+// Options::gpu_recursive_panel off and on (llt_recursive.cu).
 //
-//   bench_gpu_memory [--parts devices,kernels,solvability,blocks,panel,potrf-block]
+//   bench_gpu_memory [--parts devices,kernels,solvability,blocks,panel,potrf-block,
+//                             recursive-panel]
 //                    [--problems a,b] [--potrf-blocks 0,128,...]
 //                    [--ratios 1,5,20,50] [--block-sizes 256,...] [--block-problems a,b]
 //                    [--panel-problems a,b] [--panel-max-pivots 0,64,...]
@@ -289,6 +291,24 @@ json front_kernels(int m, int k) {
       row[key + "_flops_per_second"] = flops / std::max(t - t_copy, 1e-9);
       row[key + "_max_rel_diff"] = bdiff / big;
     }
+    // by recursion on the pivot columns (llt_recursive.cu, Options::gpu_recursive_panel)
+    {
+      cuda::Lane ln;  // the default stream and this function's handles
+      ln.blas = blas;
+      ln.solver = sol;
+      reset();
+      cuda::llt_pivot_block_and_panel_recursive(ln, F, m, k, info);  // sizes its workspace
+      const double t = device_seconds([&] {
+        reset();
+        cuda::llt_pivot_block_and_panel_recursive(ln, F, m, k, info);
+      });
+      const std::vector<double> rec = panel_to_host(F, m, k);
+      double rdiff = 0;
+      for (std::size_t i = 0; i < lib.size(); ++i)
+        rdiff = std::max(rdiff, std::abs(lib[i] - rec[i]));
+      row["recursive_potrf_trsm_flops_per_second"] = flops / std::max(t - t_copy, 1e-9);
+      row["recursive_potrf_trsm_max_rel_diff"] = rdiff / big;
+    }
   }
   if (c > 0) {
     // the panel's TRSM by the explicit inverse: L11 copied and inverted (cuSOLVER
@@ -540,10 +560,12 @@ int main(int argc, char** argv) {
   int repeat = 3;
   std::string results_dir;
   app.add_option("--parts", parts,
-                 "what to measure: devices, kernels, solvability, blocks, panel, potrf-block")
+                 "what to measure: devices, kernels, solvability, blocks, panel, potrf-block, "
+                 "recursive-panel")
       ->delimiter(',')
       ->check(
-          CLI::IsMember({"devices", "kernels", "solvability", "blocks", "panel", "potrf-block"}));
+          CLI::IsMember({"devices", "kernels", "solvability", "blocks", "panel", "potrf-block",
+                         "recursive-panel"}));
   app.add_option("--potrf-blocks", potrf_blocks,
                  "gpu_potrf_block_size values for the potrf-block sweep (on --panel-problems)")
       ->delimiter(',');
@@ -593,12 +615,13 @@ int main(int argc, char** argv) {
   if (want("kernels")) {
     out["front_kernels"] = {{"dgemm_flops_per_second", peak}, {"rows", json::array()}};
     fmt::print(
-        "{:>6} {:>6} {:>7} {:>7} {:>7} {:>7} {:>9} {:>7} {:>7} {:>7} {:>7} {:>8} {:>7} {:>8} "
-        "{:>8} {:>7} {:>8}   TFLOP/s (DGEMM {:.1f}; p+t: POTRF + TRSM, ours: kernels_panel.cu, "
-        "diff: max |ours - p+t| / max |L|, bNB: p+t in column blocks of NB, llt_blocked.cu; "
+        "{:>6} {:>6} {:>7} {:>7} {:>7} {:>7} {:>9} {:>7} {:>9} {:>7} {:>7} {:>7} {:>7} {:>8} "
+        "{:>7} {:>8} {:>8} {:>7} {:>8}   TFLOP/s (DGEMM {:.1f}; p+t: POTRF + TRSM, ours: "
+        "kernels_panel.cu, diff: max |ours - p+t| / max |L|, rec: p+t by recursion, "
+        "llt_recursive.cu, and its diff; bNB: p+t in column blocks of NB, llt_blocked.cu; "
         "getrf k×k, np: without pivoting)\n",
-        "m", "k", "potrf", "trsm", "p+t", "ours", "diff", "b128", "b256", "b512", "syrk", "gemm512",
-        "gemm1k", "gemm2k", "gemm", "getrf", "getrf-np", peak * 1e-12);
+        "m", "k", "potrf", "trsm", "p+t", "ours", "diff", "rec", "rec-diff", "b128", "b256", "b512",
+        "syrk", "gemm512", "gemm1k", "gemm2k", "gemm", "getrf", "getrf-np", peak * 1e-12);
     for (const std::string& shape : fronts) {
       const auto colon = shape.find(':');
       if (colon == std::string::npos) throw InvalidInput("--fronts: " + shape + " is not m:k");
@@ -610,11 +633,13 @@ int main(int argc, char** argv) {
                                  : std::string("-");
       };
       fmt::print(
-          "{:>6} {:>6} {:>7} {:>7} {:>7} {:>7} {:>9.1e} {:>7} {:>7} {:>7} {:>7} {:>8} "
-          "{:>7} {:>8} {:>8} {:>7} {:>8}\n",
+          "{:>6} {:>6} {:>7} {:>7} {:>7} {:>7} {:>9.1e} {:>7} {:>9.1e} {:>7} {:>7} {:>7} {:>7} "
+          "{:>8} {:>7} {:>8} {:>8} {:>7} {:>8}\n",
           m, k, tf("potrf_flops_per_second"), tf("trsm_flops_per_second"),
           tf("potrf_trsm_flops_per_second"), tf("panel_kernels_flops_per_second"),
           row["panel_kernels_max_rel_diff"].get<double>(),
+          tf("recursive_potrf_trsm_flops_per_second"),
+          row["recursive_potrf_trsm_max_rel_diff"].get<double>(),
           tf("blocked_128_potrf_trsm_flops_per_second"),
           tf("blocked_256_potrf_trsm_flops_per_second"),
           tf("blocked_512_potrf_trsm_flops_per_second"), tf("syrk_flops_per_second"),
@@ -759,6 +784,9 @@ int main(int argc, char** argv) {
   out["potrf_block"] = sweep(
       want("potrf-block") ? panel_problems : none, potrf_blocks, "gpu_potrf_block_size",
       [](Options& o, index_t v) { o.gpu_potrf_block_size = v; }, true);
+  out["recursive_panel"] = sweep(
+      want("recursive-panel") ? panel_problems : none, {0, 1}, "gpu_recursive_panel",
+      [](Options& o, index_t v) { o.gpu_recursive_panel = v != 0; }, true);
   fmt::print("results: {}\n", bench::write_result(out, stem, results_dir));
   if (!partial.empty()) std::remove(partial.c_str());
   return 0;

@@ -108,6 +108,13 @@ struct Options {
   /// at 2,000), so cutting it into blocks saves nothing, and TRSMs of nb columns are no
   /// faster per flop than one of k (bench_gpu_memory --parts kernels,potrf-block).
   index_t gpu_potrf_block_size = 0;
+  /// CUDA backend, Cholesky: a front with more pivots than gpu_panel_kernel_max_pivots
+  /// (and every slab of a front factored tile by tile) gets its pivot block and panel by
+  /// recursion on the pivot columns (src/numeric/cuda/llt_recursive.cu: 64-column base
+  /// cases of strata's own, everything else cuBLAS SYRK and GEMM; Gustavson & Jonsson,
+  /// IBM J. Res. Dev. 44(6), 2000) instead of cuSOLVER POTRF and cuBLAS TRSM (or the
+  /// column blocks of gpu_potrf_block_size, which it takes precedence over). Default on.
+  bool gpu_recursive_panel = true;
 
   // --- several GPUs (docs/multigpu.md) ---
   /// GPUs the CUDA backend factors on; 0 means every visible GPU (default 0). With more

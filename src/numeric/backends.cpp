@@ -17,5 +17,9 @@ std::unique_ptr<Executor> make_cuda_executor(const Options&, int) {
 
 std::unique_ptr<PinnedHostRange> pin_host_memory(void*, std::size_t) { return nullptr; }
 
+index_t cuda_llt_pivot_block_and_panel(double*, index_t, index_t) {
+  throw NotSupported("this build of strata has no CUDA backend (nvcc was not found at build time)");
+}
+
 }  // namespace strata::numeric
 #endif

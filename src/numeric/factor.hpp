@@ -216,6 +216,16 @@ std::unique_ptr<PinnedHostRange> pin_host_memory(void* p, std::size_t bytes);
 /// True when this build has the CUDA backend and a GPU is visible.
 bool cuda_available();
 
+/// The pivot block and panel of one Cholesky front on CUDA device 0, by the CUDA
+/// executor's recursive method (numeric/cuda/llt_recursive.cu), so that tests can check
+/// that kernel against the CPU's factor_front_llt: `f` (host) is m × m, column-major,
+/// leading dimension m, lower triangle; its first k columns become L₁₁ and L₂₁ with the
+/// strict upper triangle of the k × k pivot block set to zero (as the executor's fronts
+/// have it), the contribution block is left as it was. Returns -1,
+/// or the local index (0..k-1) of the first pivot that is not positive, as
+/// factor_front_llt does. Throws NotSupported in a build without CUDA.
+index_t cuda_llt_pivot_block_and_panel(double* f, index_t m, index_t k);
+
 /// Number of visible CUDA devices (0 in a build without CUDA).
 int cuda_device_count();
 

@@ -6,8 +6,11 @@
 #include <algorithm>
 #include <cmath>
 #include <numbers>
+#include <random>
+#include <tuple>
 
 #include "core/analysis.hpp"
+#include "numeric/cpu/dense_front.hpp"
 #include "numeric/factor.hpp"
 #include "sparse/generators.hpp"
 #include "strata/strata.hpp"
@@ -76,19 +79,23 @@ TEST_F(CudaBackend, CholeskyFactorMatchesCpu) {
     auto cpu = numeric::make_cpu_executor(2);
     numeric::factorize(an, c.values, MatrixType::spd, 0.0, *cpu, cpu_f, arena);
     // every large front by one POTRF + TRSM; by column blocks of an awkward width and of
-    // 256 (llt_blocked.cu); every one with k ≤ 1024 by the panel kernels
-    // (kernels_panel.cu); the defaults
+    // 256 (llt_blocked.cu); by recursion (llt_recursive.cu); every one with k ≤ 1024 by
+    // the panel kernels (kernels_panel.cu); the defaults
     const Options defaults;
-    for (auto [kmax, block] :
-         {std::pair<index_t, index_t>{0, 0},
-          {0, 5},
-          {0, 256},
-          {1024, 0},
-          {defaults.gpu_panel_kernel_max_pivots, defaults.gpu_potrf_block_size}}) {
+    for (auto [kmax, block, recursive] :
+         {std::tuple<index_t, index_t, bool>{0, 0, false},
+          {0, 5, false},
+          {0, 256, false},
+          {0, 0, true},
+          {1024, 0, false},
+          {defaults.gpu_panel_kernel_max_pivots, defaults.gpu_potrf_block_size,
+           defaults.gpu_recursive_panel}}) {
       SCOPED_TRACE("gpu_panel_kernel_max_pivots=" + std::to_string(kmax) +
-                   " gpu_potrf_block_size=" + std::to_string(block));
+                   " gpu_potrf_block_size=" + std::to_string(block) +
+                   " gpu_recursive_panel=" + std::to_string(recursive));
       o.gpu_panel_kernel_max_pivots = kmax;
       o.gpu_potrf_block_size = block;
+      o.gpu_recursive_panel = recursive;
       const GpuLlt g = gpu_llt(an, c, o);
       const numeric::NumericFactor& gpu_f = g.factor;
       // a resident LLᵀ factor stays on the device only (fetch_panels brought it over)
@@ -105,6 +112,60 @@ TEST_F(CudaBackend, CholeskyFactorMatchesCpu) {
   }
 }
 
+// The recursive pivot block and panel (llt_recursive.cu) of single dense fronts against
+// the CPU's partial Cholesky (numeric/cpu/dense_front.cpp: LAPACK POTRF + TRSM) of the
+// same front: sizes around the 64-column base case and the recursion's halves, and fronts
+// with no rows below the pivots; then fronts whose leading minor of order bad + 1 is the
+// first that is not positive definite, at the first column, at base-case boundaries and
+// inside a later base case.
+TEST_F(CudaBackend, RecursivePanelMatchesCpuFront) {
+  auto rng = test::fresh_rng();
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  // symmetric, diagonally dominant (diagonal m + 1 against row sums below m): SPD
+  auto front = [&](index_t m) {
+    std::vector<double> f(static_cast<std::size_t>(m) * m, 0.0);
+    for (index_t j = 0; j < m; ++j) {
+      f[j * m + j] = static_cast<double>(m) + 1.0;
+      for (index_t i = j + 1; i < m; ++i) f[j * m + i] = f[i * m + j] = u(rng);
+    }
+    return f;
+  };
+  for (auto [m, k] : std::vector<std::pair<index_t, index_t>>{
+           {1, 1}, {2, 2}, {3, 2}, {5, 5}, {5, 3}, {64, 64}, {65, 64}, {65, 65}, {130, 65},
+           {200, 129}, {733, 65}, {733, 300}, {733, 733}, {1000, 733}, {2000, 1024}}) {
+    SCOPED_TRACE("m=" + std::to_string(m) + " k=" + std::to_string(k));
+    const std::vector<double> cpu_in = front(m);
+    std::vector<double> cpu = cpu_in, gpu = cpu_in;
+    numeric::cpu::PivotStats st;
+    ASSERT_EQ(numeric::cpu::factor_front_llt(cpu.data(), m, k, m, st), -1);
+    ASSERT_EQ(numeric::cuda_llt_pivot_block_and_panel(gpu.data(), m, k), -1);
+    double num = 0, den = 0;
+    for (index_t j = 0; j < k; ++j)
+      for (index_t i = j; i < m; ++i) {
+        num = std::max(num, std::abs(cpu[j * m + i] - gpu[j * m + i]));
+        den = std::max(den, std::abs(cpu[j * m + i]));
+      }
+    EXPECT_LT(num, 1e-13 * den);
+    // the strict upper triangle of the pivot block zero, the contribution block untouched
+    for (index_t j = 0; j < k; ++j)
+      for (index_t i = 0; i < j; ++i) ASSERT_EQ(gpu[j * m + i], 0.0) << i << ", " << j;
+    for (index_t j = k; j < m; ++j)
+      for (index_t i = 0; i < m; ++i) ASSERT_EQ(gpu[j * m + i], cpu_in[j * m + i]);
+  }
+  for (auto [m, k, bad] : std::vector<std::tuple<index_t, index_t, index_t>>{
+           {1, 1, 0}, {300, 256, 0}, {300, 256, 63}, {300, 256, 64}, {300, 256, 200},
+           {1000, 733, 700}}) {
+    SCOPED_TRACE("m=" + std::to_string(m) + " k=" + std::to_string(k) +
+                 " bad=" + std::to_string(bad));
+    std::vector<double> cpu = front(m);
+    cpu[bad * m + bad] = -1.0;  // the leading bad × bad block stays SPD
+    std::vector<double> gpu = cpu;
+    numeric::cpu::PivotStats st;
+    EXPECT_EQ(numeric::cpu::factor_front_llt(cpu.data(), m, k, m, st), bad);
+    EXPECT_EQ(numeric::cuda_llt_pivot_block_and_panel(gpu.data(), m, k), bad);
+  }
+}
+
 // A 3-D Laplacian shifted to have exactly one negative eigenvalue, declared spd: there is
 // one non-positive pivot in all, so the CPU and the GPU must fail at the same one whatever
 // their order of fronts — on the GPU inside the 400-pivot root front, after several
@@ -114,15 +175,17 @@ TEST_F(CudaBackend, CholeskyFailureNamesTheCpusColumn) {
   SparseMatrix a = generators::laplacian_3d(20, 20, 20);
   for (index_t j = 0; j < a.n_cols; ++j) a.values[a.offsets[j]] -= 0.1;  // diagonal first
   // CPU; GPU with the panel kernels; GPU with one POTRF per front; GPU with POTRFs of
-  // column blocks of 7 (the failing pivot deep in a later block of the root front)
-  index_t column[4] = {-1, -2, -3, -4};
-  for (int gpu = 0; gpu < 4; ++gpu) {
+  // column blocks of 7 (the failing pivot deep in a later block of the root front); GPU
+  // by recursion (the failing pivot in a later base case of the root front)
+  index_t column[5] = {-1, -2, -3, -4, -5};
+  for (int gpu = 0; gpu < 5; ++gpu) {
     Options o;
     o.num_gpus = 1;  // one GPU, whatever the machine has
     o.type = MatrixType::spd;
     o.backend = gpu ? Backend::cuda : Backend::cpu;
     o.gpu_panel_kernel_max_pivots = gpu >= 2 ? 0 : 1024;
     o.gpu_potrf_block_size = gpu == 3 ? 7 : 0;
+    o.gpu_recursive_panel = gpu == 4;
     Solver s(o);
     try {
       s.factorize(a);
@@ -134,6 +197,7 @@ TEST_F(CudaBackend, CholeskyFailureNamesTheCpusColumn) {
   EXPECT_EQ(column[0], column[1]);
   EXPECT_EQ(column[0], column[2]);
   EXPECT_EQ(column[0], column[3]);
+  EXPECT_EQ(column[0], column[4]);
   EXPECT_GE(column[0], 0);
 }
 

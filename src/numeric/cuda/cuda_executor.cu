@@ -97,7 +97,8 @@ CudaExecutor::CudaExecutor(const Options& o, int device)
       limit_(o.device_memory_limit),
       panel_max_pivots_(o.gpu_panel_kernel_max_pivots),
       split_min_cb_(o.split_front_min_cb),
-      potrf_block_(static_cast<int>(o.gpu_potrf_block_size)) {
+      potrf_block_(static_cast<int>(o.gpu_potrf_block_size)),
+      recursive_panel_(o.gpu_recursive_panel) {
   STRATA_CUDA(cudaSetDevice(device_));
   STRATA_CUDA(cudaStreamCreate(&stream_));
   STRATA_CUBLAS(cublasCreate(&blas_));
@@ -107,6 +108,8 @@ CudaExecutor::CudaExecutor(const Options& o, int device)
   STRATA_CUDA(cudaEventCreate(&start_));
   STRATA_CUDA(cudaEventCreate(&stop_));
   STRATA_CUDA(cudaEventCreateWithFlags(&panels_done_, cudaEventDisableTiming));
+  STRATA_CUDA(cudaStreamCreateWithFlags(&copy_stream_, cudaStreamNonBlocking));
+  STRATA_CUDA(cudaEventCreateWithFlags(&panels_copied_, cudaEventDisableTiming));
   for (cudaEvent_t* e : {&split_ready_, &help_ready_, &help_done_})
     STRATA_CUDA(cudaEventCreateWithFlags(e, cudaEventDisableTiming));
   for (ChunkRecord& c : chunk_)
@@ -127,6 +130,8 @@ CudaExecutor::~CudaExecutor() {
   cudaEventDestroy(start_);
   cudaEventDestroy(stop_);
   cudaEventDestroy(panels_done_);
+  cudaEventDestroy(panels_copied_);
+  cudaStreamDestroy(copy_stream_);
   for (cudaEvent_t e : {split_ready_, help_ready_, help_done_}) cudaEventDestroy(e);
   for (ChunkRecord& c : chunk_)
     for (cudaEvent_t e : c.ev) cudaEventDestroy(e);
@@ -600,6 +605,9 @@ void CudaExecutor::plan_parts(const Analysis& an, bool whole) {
   // staging for the panels of one chunk, or the whole resident factor
   panels_.resize(plan_.factor_resident ? std::max<std::size_t>(an.factor_layout.total, 1)
                                        : chunk_panels);
+  // and their way to the host factor, one buffer per chunk slot (factor_chunk)
+  if (!plan_.factor_resident && an.type != MatrixType::symmetric_indefinite)
+    for (ChunkRecord& c : chunk_) c.panels.resize(chunk_panels);
   for (const numeric::PartView& v : views) upload_part(an, v);
   presize_chunk_buffers(an, views);
   STRATA_CUDA(cudaStreamSynchronize(stream_));
@@ -617,13 +625,19 @@ void CudaExecutor::presize_chunk_buffers(const Analysis& an,
                                          const std::vector<numeric::PartView>& views) {
   const auto& t = an.tree;
   const bool lu = !an.symmetric;
-  std::size_t count = 1, big = 1, small = 1, pivots = 1, lu_save = 1;
+  std::size_t count = 1, big = 1, small = 1, pivots = 1, lu_save = 1, diag = 1, diag_slab = 1;
   int potrf = 1, getrf = 1, blocks = 1;
   std::vector<std::unique_ptr<Lane>>& lane = lanes();
   for (const numeric::PartView& v : views) {
     const PartDevice& pd = parts_.at(v.id);
     const auto& s = *v.schedule;
     for (index_t q = 0; q < static_cast<index_t>(s.fronts.size()); ++q) {
+      if (pd.tiled[q] && !lu && recursive_panel_) {  // its slabs, on lane 0 (tiled_front.cu)
+        const std::int64_t m = t.n_rows(s.fronts[q]), k = t.n_pivots(s.fronts[q]);
+        const std::int64_t w = std::max<std::int64_t>(
+            1, std::min<std::int64_t>(k, static_cast<std::int64_t>(plan_.pool) / (3 * m)));
+        diag_slab = std::max(diag_slab, llt_recursive_work_size(w));
+      }
       if (pd.tiled[q] || pd.chunk_end[q] <= q) continue;
       std::size_t nb = 0, ns = 0, np = 0, save = 0;
       for (index_t r = q; r < pd.chunk_end[q]; ++r) {
@@ -640,6 +654,8 @@ void CudaExecutor::presize_chunk_buffers(const Analysis& an,
         if (lu) {
           STRATA_CUSOLVER(cusolverDnDgetrf_bufferSize(solver_, k, k, pool_.data(), m, &lwork));
           getrf = std::max(getrf, lwork);
+        } else if (k > panel_max_pivots_ && recursive_panel_) {
+          diag = std::max(diag, llt_recursive_work_size(k));
         } else if (k > panel_max_pivots_) {
           const bool blocked = potrf_block_ > 0 && potrf_block_ < k;
           STRATA_CUSOLVER(cusolverDnDpotrf_bufferSize(solver_, CUBLAS_FILL_MODE_LOWER,
@@ -676,6 +692,7 @@ void CudaExecutor::presize_chunk_buffers(const Analysis& an,
   for (auto& l : lane) {
     l->potrf_work.resize(static_cast<std::size_t>(potrf));
     l->block_info.resize(static_cast<std::size_t>(blocks));
+    l->diag_work.resize(l == lane.front() ? std::max(diag, diag_slab) : diag);
   }
   if (lu) {
     lu_save_.resize(lu_save);
@@ -863,7 +880,10 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
                                   &minus_one, F + k, m, &one,
                                   F + static_cast<std::size_t>(k) * m + k, m));
       } else if (!lu) {
-        llt_pivot_block_and_panel(*ln, F, m, k, potrf_block_, potrf_info_.data() + i);
+        if (recursive_panel_)
+          llt_pivot_block_and_panel_recursive(*ln, F, m, k, potrf_info_.data() + i);
+        else
+          llt_pivot_block_and_panel(*ln, F, m, k, potrf_block_, potrf_info_.data() + i);
         if (m > k) {
           if (split_front(m, k))
             split_update(*ln, F, m, k, false, ev[1]);
@@ -901,8 +921,27 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
     diag_off[i + 1] = diag_off[i] + t.n_pivots(f);
   }
   upload(stage_offset_, stage_off);
+  // the staging area is free once the previous chunk's panels are on their way out
+  if (copy_issued_) STRATA_CUDA(cudaStreamWaitEvent(stream_, panels_copied_, 0));
   launch_pack_panels(tree, begin, count, max_rows, pool_.data(), stage_offset_.data(), pack_to, lu,
                      stream_);
+  // panels for the host factor: copied on copy_stream_ while the next chunk computes; the
+  // host part (after the next chunk is launched) moves them into the factor
+  rec.panels_async = !dev_only && !ldlt;
+  if (rec.panels_async) {
+    STRATA_CUDA(cudaEventRecord(ev[6], stream_));
+    STRATA_CUDA(cudaStreamWaitEvent(copy_stream_, ev[6], 0));
+    rec.panels.resize(total);  // presized at planning
+    const std::size_t base = an.factor_layout.panel_offset[s.fronts[begin]];
+    const double* src = panels_.data() + (keep_resident() ? base : 0);
+    if (total)
+      STRATA_CUDA(cudaMemcpyAsync(rec.panels.data(), src, sizeof(double) * total,
+                                  cudaMemcpyDeviceToHost, copy_stream_));
+    STRATA_CUDA(cudaEventRecord(ev[7], copy_stream_));
+    STRATA_CUDA(cudaEventRecord(panels_copied_, copy_stream_));
+    copy_issued_ = true;
+    bytes_d2h_ += sizeof(double) * total;
+  }
   // device-only panels: the host bookkeeping needs only the pivots' diagonal entries
   if (dev_only) {
     upload(diag_offset_, diag_off);
@@ -954,7 +993,7 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
   // overwrite the staging area it reads
   flush_chunk(ctx);
   pending_ = &rec;
-  if (!dev_only || ldlt) flush_chunk(ctx);
+  if (ldlt && !dev_only) flush_chunk(ctx);
 }
 
 void CudaExecutor::flush_chunk(const numeric::FactorContext& ctx) {
@@ -994,6 +1033,7 @@ void CudaExecutor::finish_chunk(const numeric::FactorContext& ctx, ChunkRecord& 
   const int* pinfo = c.pinfo.data();
   const int* psize = c.psize.data();
   STRATA_CUDA(cudaEventSynchronize(c.ev[5]));
+  if (c.panels_async) STRATA_CUDA(cudaEventSynchronize(c.ev[7]));
   float ms[4] = {};
   for (int e = 0; e < 4; ++e) STRATA_CUDA(cudaEventElapsedTime(&ms[e], c.ev[e], c.ev[e + 1]));
   phases_.assembly += 1e-3 * ms[0];
@@ -1008,7 +1048,10 @@ void CudaExecutor::finish_chunk(const numeric::FactorContext& ctx, ChunkRecord& 
       ph.host += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     }
   } host_time{phases_, host_start};
-  if (!dev_only) copy_panels_back(ctx, begin, end);
+  if (c.panels_async)
+    store_staged_panels(ctx, begin, end, c.panels.data());
+  else if (!dev_only)
+    copy_panels_back(ctx, begin, end);
   if (ldlt) {  // D out of the panels, pivot sizes, rows: the CPU executor's code; statistics
     std::vector<std::int64_t> psize_at(count);
     for (std::size_t i = 0; i < nall; ++i) {
@@ -1187,21 +1230,32 @@ void CudaExecutor::copy_panels_back(const numeric::FactorContext& ctx, index_t b
   STRATA_CUDA(cudaMemcpyAsync(host_staging_.data(), src, sizeof(double) * total,
                               cudaMemcpyDeviceToHost, stream_));
   STRATA_CUDA(cudaStreamSynchronize(stream_));
+  store_staged_panels(ctx, begin, end, host_staging_.data());
+  bytes_d2h_ += sizeof(double) * total;
+}
+
+void CudaExecutor::store_staged_panels(const numeric::FactorContext& ctx, index_t begin,
+                                       index_t end, const double* staged) {
+  const Analysis& an = *ctx.analysis;
+  const auto& t = an.tree;
+  const auto& s = *ctx.part->schedule;
+  const bool lu = !an.symmetric;
   // on the host's threads: one thread's memcpy (≈ 6 GB/s) was half the factorization of
   // lap3d 100³ when its factor did not stay on the device (core/host_copy.hpp)
   if (whole_) {
-    parallel_copy(ctx.factor->panels.data() + base, host_staging_.data(), total);
+    std::size_t total = 0;
+    for (index_t q = begin; q < end; ++q) total += panel_size(t, s.fronts[q], lu);
+    const std::size_t base = an.factor_layout.panel_offset[s.fronts[begin]];
+    parallel_copy(ctx.factor->panels.data() + base, staged, total);
   } else {
     std::size_t at = 0;
     for (index_t q = begin; q < end; ++q) {
       const index_t f = s.fronts[q];
       const std::size_t sz = panel_size(t, f, lu);
-      parallel_copy(ctx.factor->panels.data() + an.factor_layout.panel_offset[f],
-                    host_staging_.data() + at, sz);
+      parallel_copy(ctx.factor->panels.data() + an.factor_layout.panel_offset[f], staged + at, sz);
       at += sz;
     }
   }
-  bytes_d2h_ += sizeof(double) * total;
 }
 
 // Host bookkeeping of one factored front: failure, permuted rows, pivot statistics.

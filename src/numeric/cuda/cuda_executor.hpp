@@ -62,6 +62,7 @@ struct Lane {
   bool owned = false;  ///< created for this lane (lane 0 borrows the executor's)
   DeviceBuffer<double> potrf_work, getrf_work;
   DeviceBuffer<int> block_info;  ///< llt_pivot_block_and_panel: one status per column block
+  DeviceBuffer<double> diag_work;  ///< llt_pivot_block_and_panel_recursive: L_jj slots
   double load = 0;               ///< flops given to it in the current chunk
 };
 
@@ -75,6 +76,17 @@ void grow_potrf_work(cusolverDnHandle_t h, DeviceBuffer<double>& work, double* a
 /// what POTRF of order k reports: 0, or i > 0 when the leading minor of order i is not
 /// positive definite. Uses ln.potrf_work and ln.block_info (grown if short).
 void llt_pivot_block_and_panel(Lane& ln, double* F, int m, int k, int nb, int* info);
+
+/// The same pivot block and panel by recursion on the pivot columns (llt_recursive.cu:
+/// 64-column base cases of our own, the rest cuBLAS GEMMs), enqueued on `ln`; F is
+/// m × m with leading dimension m, k ≥ 0 pivots; `info` as above. The strict upper
+/// triangle of the k × k pivot block is left zero (it is scratch meanwhile). Uses
+/// ln.diag_work (llt_recursive_work_size(k) doubles, grown if short).
+void llt_pivot_block_and_panel_recursive(Lane& ln, double* F, std::int64_t m, std::int64_t k,
+                                         int* info);
+
+/// Doubles of workspace llt_pivot_block_and_panel_recursive needs for k pivots.
+std::size_t llt_recursive_work_size(std::int64_t k);
 
 class CudaExecutor final : public numeric::Executor {
  public:
@@ -128,11 +140,18 @@ class CudaExecutor final : public numeric::Executor {
     PinnedBuffer<std::int64_t> info, perturbed, perm;
     PinnedBuffer<int> pinfo, psize;
     PinnedBuffer<double> diag;
-    cudaEvent_t ev[6] = {};
+    /// The chunk's panels on their way to the host factor (LLᵀ and LU whose panels do not
+    /// stay on the device): copied there on copy_stream_ while the next chunk computes,
+    /// then into the factor by the host part.
+    PinnedBuffer<double> panels;
+    bool panels_async = false;
+    /// 0–5: assembly, small fronts, large fronts, store, results copied (timed);
+    /// 6: panels packed; 7: panels copied to `panels`
+    cudaEvent_t ev[8] = {};
   };
   /// Launches the chunk [begin, end) of the current part, then runs the previous chunk's
-  /// host part while the GPU works on this one (for a factor whose panels stay on the
-  /// device; otherwise this chunk's host part too, at once).
+  /// host part while the GPU works on this one (LDLᵀ whose panels come back: this
+  /// chunk's host part too, at once).
   void factor_chunk(const numeric::FactorContext& ctx, index_t begin, index_t end);
   /// Runs the pending chunk's host part, if any (before anything that needs the host
   /// factor complete: a tiled front, the end of a part or of the factorization).
@@ -171,6 +190,10 @@ class CudaExecutor final : public numeric::Executor {
   void finish_front(const numeric::FactorContext& ctx, index_t f, std::int64_t bad,
                     std::int64_t npert, const std::int64_t* lperm, const double* diag);
   void copy_panels_back(const numeric::FactorContext& ctx, index_t begin, index_t end);
+  /// Copies the panels of chunk positions [begin, end), packed in chunk order at `staged`
+  /// (pinned host memory), into the host factor, on the host's threads.
+  void store_staged_panels(const numeric::FactorContext& ctx, index_t begin, index_t end,
+                           const double* staged);
   // --- a large front's update split over helper GPUs (split_update.cu) ---
   /// In begin_part: the helpers of ctx this executor can use (CUDA executors on other
   /// GPUs that reach this one's memory and whose memory it reaches; peer access enabled),
@@ -209,6 +232,7 @@ class CudaExecutor final : public numeric::Executor {
   std::int64_t panel_max_pivots_ = 0;  ///< Options::gpu_panel_kernel_max_pivots
   std::int64_t split_min_cb_ = 0;      ///< Options::split_front_min_cb
   int potrf_block_ = 0;                ///< Options::gpu_potrf_block_size
+  bool recursive_panel_ = true;        ///< Options::gpu_recursive_panel
   std::uint64_t analysis_id_ = 0;
   DevicePlan plan_;
   // analysis arrays (fronts_: the whole tree's schedule, for the device solve)
@@ -269,6 +293,11 @@ class CudaExecutor final : public numeric::Executor {
   double device_seconds_ = 0;
   cudaEvent_t start_ = nullptr, stop_ = nullptr;
   cudaEvent_t panels_done_ = nullptr;  // the chunk's launch_llt_panel: the lanes wait for it
+  /// The panels' copies to the host (ChunkRecord::panels), beside the compute, and the
+  /// last one issued: the next pack into the device staging area waits for it.
+  cudaStream_t copy_stream_ = nullptr;
+  cudaEvent_t panels_copied_ = nullptr;
+  bool copy_issued_ = false;
   /// Two chunk records used in turn: one launched, the previous one finishing on the host.
   ChunkRecord chunk_[2];
   int slot_ = 0;

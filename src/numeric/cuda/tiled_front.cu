@@ -99,17 +99,22 @@ void CudaExecutor::factor_tiled(const numeric::FactorContext& ctx, index_t pos) 
     copy_block(stream_, S, H, m, p0, p0, r, w, true);
     bytes_h2d_ += sizeof(double) * r * w;
     if (!lu) {
-      grow_potrf_work(solver_, potrf_work_, S, static_cast<int>(w), static_cast<int>(r));
-      STRATA_CUSOLVER(cusolverDnDpotrf(solver_, CUBLAS_FILL_MODE_LOWER, static_cast<int>(w), S,
-                                       static_cast<int>(r), potrf_work_.data(),
-                                       static_cast<int>(potrf_work_.size()), potrf_info_.data()));
+      if (recursive_panel_) {  // the slab is an r × r front's first w columns, ld r
+        llt_pivot_block_and_panel_recursive(*lane[0], S, r, w, potrf_info_.data());
+      } else {
+        grow_potrf_work(solver_, potrf_work_, S, static_cast<int>(w), static_cast<int>(r));
+        STRATA_CUSOLVER(cusolverDnDpotrf(solver_, CUBLAS_FILL_MODE_LOWER, static_cast<int>(w), S,
+                                         static_cast<int>(r), potrf_work_.data(),
+                                         static_cast<int>(potrf_work_.size()),
+                                         potrf_info_.data()));
+      }
       int info = 0;
       STRATA_CUDA(
           cudaMemcpyAsync(&info, potrf_info_.data(), sizeof(int), cudaMemcpyDeviceToHost, stream_));
       STRATA_CUDA(cudaStreamSynchronize(stream_));
       if (info > 0)
         throw NotPositiveDefinite(an.perm[t.first_pivot[f] + p0 + info - 1], std::nan(""));
-      if (r > w)
+      if (r > w && !recursive_panel_)
         STRATA_CUBLAS(cublasDtrsm(blas_, CUBLAS_SIDE_RIGHT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_T,
                                   CUBLAS_DIAG_NON_UNIT, static_cast<int>(r - w),
                                   static_cast<int>(w), &one, S, static_cast<int>(r), S + w,
