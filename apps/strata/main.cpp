@@ -86,8 +86,9 @@ void add_common(CLI::App* cmd, CommonArgs& a) {
   cmd->add_option("--ordering", a.ordering, "fill-reducing ordering")
       ->check(CLI::IsMember({"nd", "metis", "amd", "natural"}));
   cmd->add_option("--max-block-size", a.max_block_size,
-                  "most pivots per front (separator blocking)")
-      ->check(CLI::PositiveNumber);
+                  "most pivots per front (separator blocking); 0: by backend and type "
+                  "(4096 for Cholesky on the GPU, else 1024)")
+      ->check(CLI::NonNegativeNumber);
   cmd->add_option("--device-memory-limit", a.device_memory_limit,
                   "GPU memory budget in bytes (0: the whole device); also the batch plan's");
   cmd->add_option("--threads", a.threads, "host threads (0: all)");
@@ -137,6 +138,7 @@ json analysis_json(const AnalysisStats& s) {
           {"fronts", s.n_fronts},
           {"largest_front_rows", s.largest_front_rows},
           {"largest_front_pivots", s.largest_front_pivots},
+          {"max_block_size", s.max_block_size},
           {"tree_height", s.tree_height},
           {"fronts_per_level", s.fronts_per_level},
           {"peak_working_bytes", s.peak_working_bytes},
@@ -173,8 +175,8 @@ void print_analysis(const AnalysisStats& s, double read_seconds) {
   if (s.pairs + s.odd_cycles > 0)
     fmt::print("pivot groups          {} pairs, {} odd cycles (kept in one front each)\n", s.pairs,
                s.odd_cycles);
-  fmt::print("largest front         {} rows, {} pivots\n", s.largest_front_rows,
-             s.largest_front_pivots);
+  fmt::print("largest front         {} rows, {} pivots (separator blocks of at most {})\n",
+             s.largest_front_rows, s.largest_front_pivots, s.max_block_size);
   fmt::print("tree height           {} levels\n", s.tree_height);
   std::string per_level;
   for (std::size_t l = 0; l < s.fronts_per_level.size(); ++l) {

@@ -69,9 +69,16 @@ struct Options {
   double relax_zeros_2 = 0.1;
   double relax_zeros_3 = 0.05;
   /// Separator blocking: a front with more pivot columns than this is split into a chain
-  /// of fronts of at most this many pivots (the paper's maximum block size; default 1024:
-  /// best or near-best on the CPU in the block-size sweep of bench/REPORT.md, 2026-11-21).
-  index_t max_block_size = 1024;
+  /// of fronts of at most this many pivots (the paper's maximum block size). 0 (default)
+  /// picks it by backend and type (AnalysisStats::max_block_size says which was used):
+  /// 4096 for Cholesky (type spd) on the CUDA backend, whose large fronts' pivot blocks
+  /// are factored by recursion (gpu_recursive_panel), 1024 otherwise. Measured: 1024 was
+  /// best or near-best on the CPU (block-size sweep of bench/REPORT.md, 2026-11-21); on the
+  /// H100 4096 against 1024 took lap3d 100³ from 0.381 to 0.324 s, elasticity 50³ from
+  /// 0.213 to 0.194 s, with smaller problems within the runs' noise, while LU
+  /// (unsymmetric elasticity 30³) went from 0.089 to 0.110 s
+  /// (bench/results/gpu-memory-mbs-sweep-20261123T000157Z.json). Negative: InvalidInput.
+  index_t max_block_size = 0;
   /// Device memory budget for the memory plan, in bytes; 0 means "the whole device"
   /// (for the CPU backend: no limit). Default 0.
   std::size_t device_memory_limit = 0;

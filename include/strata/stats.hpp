@@ -33,6 +33,7 @@ struct AnalysisStats {
   index_t n_fronts = 0;
   index_t largest_front_rows = 0;           ///< rows of the largest front
   index_t largest_front_pivots = 0;         ///< most pivots in one front
+  index_t max_block_size = 0;  ///< separator block size used (Options::max_block_size resolved)
   index_t tree_height = 0;                  ///< levels in the assembly tree
   std::vector<index_t> fronts_per_level;    ///< level 0 is processed first (deepest)
   std::size_t peak_working_bytes = 0;       ///< in-core multifrontal working memory peak

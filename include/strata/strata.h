@@ -126,7 +126,7 @@ strata_status strata_set_ordering(strata_solver* solver, strata_ordering orderin
 /** Backend (default STRATA_BACKEND_CPU). */
 strata_status strata_set_backend(strata_solver* solver, strata_backend backend);
 /** Most pivot columns in one front; larger separators are split into a chain of
- *  blocks (≥ 1; default 1024). */
+ *  blocks (≥ 0; default 0: 4096 for Cholesky on the CUDA backend, else 1024). */
 strata_status strata_set_max_block_size(strata_solver* solver, int64_t max_block_size);
 /** Host threads of the CPU backend (≥ 0; 0 = all hardware threads, the default). */
 strata_status strata_set_num_threads(strata_solver* solver, int num_threads);

@@ -113,7 +113,8 @@ strata::Options make_options(const std::string& type, const std::string& orderin
   o.type = parse_type(type);
   o.ordering = parse_ordering(ordering);
   o.backend = parse_device(device);
-  if (max_block_size < 1) throw strata::InvalidInput("max_block_size must be at least 1");
+  if (max_block_size < 0)
+    throw strata::InvalidInput("max_block_size must be at least 0 (0: by backend and type)");
   if (num_threads < 0) throw strata::InvalidInput("num_threads must be >= 0");
   if (refinement_steps < 0) throw strata::InvalidInput("refinement_steps must be >= 0");
   if (!(refinement_tolerance >= 0)) throw strata::InvalidInput("refinement_tolerance must be >= 0");
@@ -135,6 +136,7 @@ py::dict analysis_dict(const strata::AnalysisStats& a) {
   d["n_fronts"] = a.n_fronts;
   d["largest_front_rows"] = a.largest_front_rows;
   d["largest_front_pivots"] = a.largest_front_pivots;
+  d["max_block_size"] = a.max_block_size;
   d["tree_height"] = a.tree_height;
   d["fronts_per_level"] = a.fronts_per_level;
   d["peak_working_bytes"] = a.peak_working_bytes;

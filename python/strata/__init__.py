@@ -183,7 +183,8 @@ class Solver:
         Which part of A is given: "lower"/"upper" mean A holds one triangle of a
         symmetric matrix (diagonal included) and the other is implied. Default "full".
     max_block_size : int
-        Most pivot columns per front; larger separators are split (default 1024).
+        Most pivot columns per front; larger separators are split (default 0: 4096
+        for Cholesky on the GPU, 1024 otherwise; stats["max_block_size"] says which).
     num_threads : int
         CPU threads; 0 (default) means all hardware threads.
     refinement_steps : int
@@ -211,7 +212,7 @@ class Solver:
     """
 
     def __init__(self, A, type="auto", ordering="nd", device="auto", storage="full",
-                 max_block_size=1024, num_threads=0, refinement_steps=10,
+                 max_block_size=0, num_threads=0, refinement_steps=10,
                  refinement_tolerance=1e-15, device_memory_limit=0, comm=None):
         self._storage = storage
         self._comm = comm
@@ -349,7 +350,7 @@ class Solver:
                 f"nnz_l={st.get('nnz_l', '?')} backend={st.get('backend', '?')}>")
 
 
-def analyze(A, type="auto", ordering="nd", storage="full", max_block_size=1024,
+def analyze(A, type="auto", ordering="nd", storage="full", max_block_size=0,
             device_memory_limit=0):
     """Runs the analysis phase of A only and returns its statistics as a dict.
 

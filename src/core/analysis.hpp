@@ -99,6 +99,10 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers 
 /// for more GPUs than are visible.
 int resolve_workers(const Options& opts);
 
+/// The separator block size the analysis uses for a matrix of (resolved) type `type`:
+/// Options::max_block_size, or when it is 0 the backend's and type's default (see there).
+index_t resolve_max_block_size(const Options& opts, MatrixType type);
+
 /// The canonical form the numeric phases read values from: lower triangle (symmetric
 /// types, from any storage) or full (general), CSC, sorted, duplicates summed. Throws
 /// InvalidInput if its pattern differs from the analyzed one.

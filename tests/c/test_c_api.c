@@ -511,7 +511,7 @@ static void test_errors(const double* spd, const double* kkt, int n, int n_kkt) 
   CHECK_STATUS(strata_set_type(s, (strata_matrix_type)42), STRATA_ERROR_INVALID_INPUT, s);
   CHECK_STATUS(strata_set_ordering(s, (strata_ordering)-1), STRATA_ERROR_INVALID_INPUT, s);
   CHECK_STATUS(strata_set_backend(s, (strata_backend)5), STRATA_ERROR_INVALID_INPUT, s);
-  CHECK_STATUS(strata_set_max_block_size(s, 0), STRATA_ERROR_INVALID_INPUT, s);
+  CHECK_STATUS(strata_set_max_block_size(s, -1), STRATA_ERROR_INVALID_INPUT, s);
   CHECK_STATUS(strata_set_num_threads(s, -2), STRATA_ERROR_INVALID_INPUT, s);
   CHECK_STATUS(strata_set_refinement_steps(s, -1), STRATA_ERROR_INVALID_INPUT, s);
   CHECK_STATUS(strata_set_refinement_tolerance(s, NAN), STRATA_ERROR_INVALID_INPUT, s);

@@ -331,7 +331,7 @@ def test_wrong_rhs_shapes_and_values():
 def test_bad_options():
     A = sp.eye(3, format="csr")
     for kwargs in ({"type": "cholesky"}, {"ordering": "rcm"}, {"device": "tpu"},
-                   {"storage": "diagonal"}, {"max_block_size": 0}, {"num_threads": -1},
+                   {"storage": "diagonal"}, {"max_block_size": -1}, {"num_threads": -1},
                    {"refinement_steps": -1}):
         with pytest.raises(ValueError):
             strata.Solver(A, **kwargs)

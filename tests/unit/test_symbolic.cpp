@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "core/analysis.hpp"
 #include "core/timer.hpp"
 #include "sparse/generators.hpp"
 #include "strata/errors.hpp"
@@ -828,6 +829,41 @@ void time_grid(index_t k) {
 }
 
 TEST(Symbolic, Timing40Cubed) { time_grid(40); }
+
+// Options::max_block_size 0 resolves by backend and type: 4096 for Cholesky on the CUDA
+// backend (its analysis needs no GPU), 1024 otherwise; a value given is used as is, and
+// a negative one is refused. A 3-D Laplacian 40³ has a top separator of about 1,600
+// pivots: split into chains at 1024, whole at 4096.
+TEST(Symbolic, MaxBlockSizeByBackendAndType) {
+  const SparseMatrix a = generators::laplacian_3d(40, 40, 40);
+  struct Case {
+    Backend backend;
+    MatrixType type;
+    index_t asked, used;
+  };
+  for (const Case& c : {Case{Backend::cpu, MatrixType::spd, 0, 1024},
+                        Case{Backend::cuda, MatrixType::spd, 0, 4096},
+                        Case{Backend::cuda, MatrixType::general, 0, 1024},
+                        Case{Backend::cuda, MatrixType::symmetric_indefinite, 0, 1024},
+                        Case{Backend::cuda, MatrixType::spd, 512, 512},
+                        Case{Backend::cpu, MatrixType::spd, 3000, 3000}}) {
+    SCOPED_TRACE("backend " + std::to_string(static_cast<int>(c.backend)) + " type " +
+                 std::to_string(static_cast<int>(c.type)) + " asked " + std::to_string(c.asked));
+    Options o;
+    o.backend = c.backend;
+    o.type = c.type;
+    o.max_block_size = c.asked;
+    o.num_gpus = 1;  // whatever the machine has
+    const Analysis an = analyze_matrix(a, o);
+    EXPECT_EQ(an.stats.max_block_size, c.used);
+    EXPECT_LE(an.stats.largest_front_pivots, c.used);
+    EXPECT_GT(an.stats.largest_front_pivots, std::min<index_t>(c.used, 1024) / 2);
+    if (c.used > 1024) EXPECT_GT(an.stats.largest_front_pivots, 1024);
+  }
+  Options bad;
+  bad.max_block_size = -1;
+  EXPECT_THROW(analyze_matrix(a, bad), InvalidInput);
+}
 TEST(Symbolic, DISABLED_Timing100Cubed) { time_grid(100); }
 
 }  // namespace
