@@ -570,8 +570,18 @@ TEST_F(CudaBackend, LdltFactorMatchesCpu) {
   for (index_t n : {2, 3, 5, 60, 733, 3000})
     problems.push_back({"kkt " + std::to_string(n), test::random_kkt(n, rng)});
   {
-    Problem z{"zero columns",
-              test::random_sparse(300, 3, test::RandomKind::symmetric_indefinite, rng), 5};
+    // A diagonally dominant matrix (random_sparse's spd kind) with the signs of its
+    // diagonal drawn at random: indefinite, and its only singular pivots are the zeroed
+    // columns below, exactly zero on both executors. (With the indefinite kind, zeroing
+    // rows left other columns numerically singular: their pivots were rounding residues
+    // whose sign, different under cuBLAS and OpenBLAS, set the static pivot's sign, and the
+    // factors differed by O(1) for about a third of the seeds; replayed with
+    // STRATA_TEST_SEED.)
+    Problem z{"zero columns", test::random_sparse(300, 3, test::RandomKind::spd, rng), 5};
+    std::bernoulli_distribution negative(0.5);
+    for (index_t j = 0; j < z.a.n_cols; ++j)
+      for (index_t p = z.a.offsets[j]; p < z.a.offsets[j + 1]; ++p)
+        if (z.a.indices[p] == j && negative(rng)) z.a.values[p] = -z.a.values[p];
     // columns (and so rows) 10, 70, ... 250 of the lower triangle zeroed: exactly zero pivots
     for (index_t j = 0; j < z.a.n_cols; ++j)
       for (index_t p = z.a.offsets[j]; p < z.a.offsets[j + 1]; ++p)
@@ -589,11 +599,14 @@ TEST_F(CudaBackend, LdltFactorMatchesCpu) {
     for (index_t f = 0; f < an.tree.n_fronts(); ++f) saw_large |= an.tree.n_rows(f) > 256;
     ASSERT_EQ(cf.pivot_size, gf.pivot_size);
     ASSERT_EQ(cf.rows, gf.rows);
-    EXPECT_LT(test::relative_difference(gf.panels, cf.panels), 1e-10);
-    // Exactly singular columns: whether an update cancels to exactly zero or to a residue
-    // of rounding size depends on the summation order (cuBLAS vs OpenBLAS), and the static
-    // pivot (±1e-8) then replaces different tiny values — D agrees to the pivot's size.
-    const double d_tol = pr.zero_columns > 0 ? 1e-6 : 1e-10;
+    // Rounding only (the pivot sequences are equal, asserted above), but amplified by the
+    // Bunch–Kaufman growth of these random indefinite matrices: 3.7e-10 seen on random
+    // 3000 (STRATA_TEST_SEED=4660620958987591335 on the H100); an error of the kernels is
+    // O(1) here.
+    EXPECT_LT(test::relative_difference(gf.panels, cf.panels), 1e-9);
+    // Exactly singular columns: their pivots are exactly zero on both executors and become
+    // +1e-8 (static pivoting), so D agrees as closely as for the other problems.
+    const double d_tol = 1e-10;
     EXPECT_LT(test::relative_difference(gf.d_diag, cf.d_diag), d_tol);
     EXPECT_LT(test::relative_difference(gf.d_off, cf.d_off), d_tol);
     numeric::cpu::PivotStats sc, sg;

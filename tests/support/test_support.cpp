@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
 #include <numeric>
 #include <set>
@@ -40,7 +41,9 @@ std::string unique_temp_path(const std::string& name) {
 
 std::mt19937_64 fresh_rng(unsigned long long* seed_out) {
   std::random_device rd;
-  const unsigned long long seed = (static_cast<unsigned long long>(rd()) << 32) ^ rd();
+  unsigned long long seed = (static_cast<unsigned long long>(rd()) << 32) ^ rd();
+  if (const char* fixed = std::getenv("STRATA_TEST_SEED"); fixed && *fixed)
+    seed = std::strtoull(fixed, nullptr, 10);
   if (seed_out) *seed_out = seed;
   return std::mt19937_64(seed);
 }

@@ -22,7 +22,9 @@ std::string matrix_path(const std::string& name);
 std::vector<std::string> shared_matrix_names();
 
 /// A fresh random engine, seeded from std::random_device; the seed is printed through
-/// gtest's RecordProperty/SCOPED_TRACE by the caller when it matters.
+/// gtest's RecordProperty/SCOPED_TRACE by the caller when it matters. To replay a failure,
+/// STRATA_TEST_SEED=<the printed seed> seeds it instead (tests only: the library reads
+/// no environment variable).
 std::mt19937_64 fresh_rng(unsigned long long* seed_out = nullptr);
 
 /// A test matrix, its name in traces, and the factorization type it is given.
