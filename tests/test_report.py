@@ -129,8 +129,9 @@ def main():
     g1 = gpu1[1] if len(gpu1) == 2 else ""
     check(re.search(r"\| lap3d-20 \| 8,000 \| 2 \| 1 \| 0\.8 \| 2048 \| 125 \| 1\.250 \|", g1),
           "section 1: GPU block sweep row wrong")
-    check("chosen from the CPU sweep" in g1 and "gpu-memory-20250103T100000Z.json" in g1,
-          "section 1: GPU part does not say the default came from the CPU sweep, or no file")
+    check("(the CPU's default) costs" in g1 and "4096 for Cholesky on the GPU" in g1
+          and "gpu-memory-20250103T100000Z.json" in g1,
+          "section 1: GPU part does not say which defaults the block sizes are, or no file")
     for mbs in (32, 256, 2048):
         check(f"factor-mbs-{mbs}-2025" in s1, f"section 1: results file of mbs-{mbs} not named")
 
