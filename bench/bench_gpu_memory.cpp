@@ -563,9 +563,8 @@ int main(int argc, char** argv) {
                  "what to measure: devices, kernels, solvability, blocks, panel, potrf-block, "
                  "recursive-panel")
       ->delimiter(',')
-      ->check(
-          CLI::IsMember({"devices", "kernels", "solvability", "blocks", "panel", "potrf-block",
-                         "recursive-panel"}));
+      ->check(CLI::IsMember({"devices", "kernels", "solvability", "blocks", "panel", "potrf-block",
+                             "recursive-panel"}));
   app.add_option("--potrf-blocks", potrf_blocks,
                  "gpu_potrf_block_size values for the potrf-block sweep (on --panel-problems)")
       ->delimiter(',');

@@ -31,10 +31,10 @@ struct AnalysisStats {
   index_t nnz_l_fronts = 0;  ///< entries of L as stored in fronts (with amalgamation zeros)
   double factor_flops = 0;   ///< flops of a Cholesky of the fronts (LU: about 2×)
   index_t n_fronts = 0;
-  index_t largest_front_rows = 0;           ///< rows of the largest front
-  index_t largest_front_pivots = 0;         ///< most pivots in one front
+  index_t largest_front_rows = 0;    ///< rows of the largest front
+  index_t largest_front_pivots = 0;  ///< most pivots in one front
   index_t max_block_size = 0;  ///< separator block size used (Options::max_block_size resolved)
-  index_t tree_height = 0;                  ///< levels in the assembly tree
+  index_t tree_height = 0;     ///< levels in the assembly tree
   std::vector<index_t> fronts_per_level;    ///< level 0 is processed first (deepest)
   std::size_t peak_working_bytes = 0;       ///< in-core multifrontal working memory peak
   std::size_t factor_bytes = 0;             ///< bytes of the factor as stored in fronts

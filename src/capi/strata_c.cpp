@@ -289,8 +289,9 @@ strata_status strata_set_max_block_size(strata_solver* s, int64_t max_block_size
   STRATA_CHECK_SOLVER(s);
   return guarded(s, [&] {
     if (max_block_size < 0)
-      throw strata::InvalidInput("max_block_size must be at least 0 (0: by backend and type), got " +
-                                 std::to_string(max_block_size));
+      throw strata::InvalidInput(
+          "max_block_size must be at least 0 (0: by backend and type), got " +
+          std::to_string(max_block_size));
     s->options.max_block_size = max_block_size;
   });
 }

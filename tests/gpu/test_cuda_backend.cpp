@@ -130,9 +130,21 @@ TEST_F(CudaBackend, RecursivePanelMatchesCpuFront) {
     }
     return f;
   };
-  for (auto [m, k] : std::vector<std::pair<index_t, index_t>>{
-           {1, 1}, {2, 2}, {3, 2}, {5, 5}, {5, 3}, {64, 64}, {65, 64}, {65, 65}, {130, 65},
-           {200, 129}, {733, 65}, {733, 300}, {733, 733}, {1000, 733}, {2000, 1024}}) {
+  for (auto [m, k] : std::vector<std::pair<index_t, index_t>>{{1, 1},
+                                                              {2, 2},
+                                                              {3, 2},
+                                                              {5, 5},
+                                                              {5, 3},
+                                                              {64, 64},
+                                                              {65, 64},
+                                                              {65, 65},
+                                                              {130, 65},
+                                                              {200, 129},
+                                                              {733, 65},
+                                                              {733, 300},
+                                                              {733, 733},
+                                                              {1000, 733},
+                                                              {2000, 1024}}) {
     SCOPED_TRACE("m=" + std::to_string(m) + " k=" + std::to_string(k));
     const std::vector<double> cpu_in = front(m);
     std::vector<double> cpu = cpu_in, gpu = cpu_in;
@@ -152,9 +164,12 @@ TEST_F(CudaBackend, RecursivePanelMatchesCpuFront) {
     for (index_t j = k; j < m; ++j)
       for (index_t i = 0; i < m; ++i) ASSERT_EQ(gpu[j * m + i], cpu_in[j * m + i]);
   }
-  for (auto [m, k, bad] : std::vector<std::tuple<index_t, index_t, index_t>>{
-           {1, 1, 0}, {300, 256, 0}, {300, 256, 63}, {300, 256, 64}, {300, 256, 200},
-           {1000, 733, 700}}) {
+  for (auto [m, k, bad] : std::vector<std::tuple<index_t, index_t, index_t>>{{1, 1, 0},
+                                                                             {300, 256, 0},
+                                                                             {300, 256, 63},
+                                                                             {300, 256, 64},
+                                                                             {300, 256, 200},
+                                                                             {1000, 733, 700}}) {
     SCOPED_TRACE("m=" + std::to_string(m) + " k=" + std::to_string(k) +
                  " bad=" + std::to_string(bad));
     std::vector<double> cpu = front(m);

@@ -841,12 +841,12 @@ TEST(Symbolic, MaxBlockSizeByBackendAndType) {
     MatrixType type;
     index_t asked, used;
   };
-  for (const Case& c : {Case{Backend::cpu, MatrixType::spd, 0, 1024},
-                        Case{Backend::cuda, MatrixType::spd, 0, 4096},
-                        Case{Backend::cuda, MatrixType::general, 0, 1024},
-                        Case{Backend::cuda, MatrixType::symmetric_indefinite, 0, 1024},
-                        Case{Backend::cuda, MatrixType::spd, 512, 512},
-                        Case{Backend::cpu, MatrixType::spd, 3000, 3000}}) {
+  for (const Case& c :
+       {Case{Backend::cpu, MatrixType::spd, 0, 1024}, Case{Backend::cuda, MatrixType::spd, 0, 4096},
+        Case{Backend::cuda, MatrixType::general, 0, 1024},
+        Case{Backend::cuda, MatrixType::symmetric_indefinite, 0, 1024},
+        Case{Backend::cuda, MatrixType::spd, 512, 512},
+        Case{Backend::cpu, MatrixType::spd, 3000, 3000}}) {
     SCOPED_TRACE("backend " + std::to_string(static_cast<int>(c.backend)) + " type " +
                  std::to_string(static_cast<int>(c.type)) + " asked " + std::to_string(c.asked));
     Options o;

@@ -61,9 +61,9 @@ struct Lane {
   cudaEvent_t done = nullptr;
   bool owned = false;  ///< created for this lane (lane 0 borrows the executor's)
   DeviceBuffer<double> potrf_work, getrf_work;
-  DeviceBuffer<int> block_info;  ///< llt_pivot_block_and_panel: one status per column block
+  DeviceBuffer<int> block_info;    ///< llt_pivot_block_and_panel: one status per column block
   DeviceBuffer<double> diag_work;  ///< llt_pivot_block_and_panel_recursive: L_jj slots
-  double load = 0;               ///< flops given to it in the current chunk
+  double load = 0;                 ///< flops given to it in the current chunk
 };
 
 /// Grows `work` to cuSOLVER's workspace for a POTRF of order k, leading dimension ld.

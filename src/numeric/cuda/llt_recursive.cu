@@ -75,7 +75,7 @@ constexpr int kLd = kBase + 1;  // padded leading dimension of the shared-memory
 __global__ void __launch_bounds__(kThreads)
     llt_base_kernel(double* P, std::int64_t ld, std::int64_t rows, int w, double* slot, int* info,
                     std::int64_t col0) {
-  __shared__ double col[2][kBase];  // the published column (factor), then x̃ (panel)
+  __shared__ double col[2][kBase];   // the published column (factor), then x̃ (panel)
   __shared__ double M[kBase * kLd];  // M(c2, c) = L(c2, c) / L(c, c) at [c·kLd + c2]
   __shared__ double rdiag[kBase];    // 1 / L(c, c)
   __shared__ double dpub[2];         // the diagonal entry before its square root
@@ -105,8 +105,10 @@ __global__ void __launch_bounds__(kThreads)
 #pragma unroll
         for (int r = 0; r < 4; ++r) {
           const int i = ti + 16 * r;
-          if (i > j) a[r][c] *= rs;
-          else if (i == j) a[r][c] = d * rs;
+          if (i > j)
+            a[r][c] *= rs;
+          else if (i == j)
+            a[r][c] = d * rs;
           buf[i] = a[r][c];
         }
         if (ti == jj) dpub[j & 1] = d, rdiag[j] = rs;
@@ -212,10 +214,10 @@ void recurse(const Lane& ln, double* P, std::int64_t ld, std::int64_t rows, std:
              std::int64_t col0, double* slots, int* info) {
   if (k <= kBase) {
     const std::int64_t below = rows - k;
-    const unsigned grid = static_cast<unsigned>(std::max<std::int64_t>(1, (below + kBase - 1) / kBase));
-    llt_base_kernel<<<grid, kThreads, 0, ln.stream>>>(P, ld, rows, static_cast<int>(k),
-                                                    slots + (col0 / kBase) * kBase * kBase, info,
-                                                    col0);
+    const unsigned grid =
+        static_cast<unsigned>(std::max<std::int64_t>(1, (below + kBase - 1) / kBase));
+    llt_base_kernel<<<grid, kThreads, 0, ln.stream>>>(
+        P, ld, rows, static_cast<int>(k), slots + (col0 / kBase) * kBase * kBase, info, col0);
     STRATA_CUDA_LAUNCH();
     return;
   }

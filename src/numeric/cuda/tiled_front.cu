@@ -105,8 +105,7 @@ void CudaExecutor::factor_tiled(const numeric::FactorContext& ctx, index_t pos) 
         grow_potrf_work(solver_, potrf_work_, S, static_cast<int>(w), static_cast<int>(r));
         STRATA_CUSOLVER(cusolverDnDpotrf(solver_, CUBLAS_FILL_MODE_LOWER, static_cast<int>(w), S,
                                          static_cast<int>(r), potrf_work_.data(),
-                                         static_cast<int>(potrf_work_.size()),
-                                         potrf_info_.data()));
+                                         static_cast<int>(potrf_work_.size()), potrf_info_.data()));
       }
       int info = 0;
       STRATA_CUDA(
