@@ -887,6 +887,32 @@ class GpuSections:
             self.potrf_block_tables(
                 max(blocked, key=lambda r: (r.date, r.name)) if blocked else None,
                 sorted(blocked_kernels, key=lambda r: (r.date, r.name)))
+        recursive = [r for r in runs if r.kind == "gpu_memory" and r.get("recursive_panel")]
+        if recursive:
+            self.w("### Cholesky pivot block and panel by recursion")
+            self.w()
+            for r in sorted(recursive, key=lambda r: (r.date, r.name)):
+                self.recursive_panel_table(r)
+
+    def recursive_panel_table(self, r: Run) -> None:
+        """Options::gpu_recursive_panel off and on, whole problems."""
+        self.consumed.add(r.path)
+        rows = []
+        for p in r.get("recursive_panel"):
+            by = {int(num(x.get("gpu_recursive_panel"))): num(x.get("factor_seconds"))
+                  for x in p.get("runs", [])}
+            rows.append([p.get("problem"), f_sec(by.get(0)), f_sec(by.get(1)),
+                         f_ratio(ratio(by.get(1), by.get(0)))])
+        self.w("`Options::gpu_recursive_panel` (src/numeric/cuda/llt_recursive.cu, on by "
+               "default): fronts with more pivots than `gpu_panel_kernel_max_pivots` get their "
+               "pivot block and panel by recursion on the pivot columns (64-column base cases, "
+               "one cuBLAS GEMM per level) instead of cuSOLVER POTRF + cuBLAS TRSM. In-core "
+               "refactorization, seconds (median of the repeats) "
+               f"({machine_label(r.machine)}, {r.date}, commit {r.get('git_commit') or '?'}; "
+               f"`{r.get('command')}`; the note in the JSON says what the tree held).")
+        self.w()
+        self.w(table(["problem", "off (POTRF + TRSM)", "on (recursion)", "on / off"], rows, 0))
+        self.w()
 
     def potrf_block_tables(self, sweep: Run | None, kerns: list[Run]) -> None:
         """Options::gpu_potrf_block_size: single fronts (kernel table) and whole problems."""
@@ -908,7 +934,8 @@ class GpuSections:
                              tf("potrf_trsm_flops_per_second")] +
                             [tf(f"blocked_{nb}_potrf_trsm_flops_per_second")
                              for nb in (128, 256, 512)] +
-                            [tf("getrf_flops_per_second"), tf("getrf_nopiv_flops_per_second")])
+                            [tf("recursive_potrf_trsm_flops_per_second"),
+                             tf("getrf_flops_per_second"), tf("getrf_nopiv_flops_per_second")])
             self.w("One front, TFLOP/s of POTRF + TRSM's work (k³/3 + (m−k)·k² flops), best of "
                    "3; beside it cuSOLVER GETRF of the k×k pivot block (2k³/3 flops) with "
                    "partial pivoting and without (what an LU front's pivot block costs: large "
@@ -917,8 +944,8 @@ class GpuSections:
                    f"{kern.get('git_commit') or '?'}; `{kern.get('command')}`):")
             self.w()
             self.w(table(["m", "k", "POTRF k×k alone", "POTRF + TRSM", "blocks of 128",
-                          "blocks of 256", "blocks of 512", "GETRF k×k", "GETRF unpivoted"],
-                         rows, 0))
+                          "blocks of 256", "blocks of 512", "recursion (llt_recursive.cu)",
+                          "GETRF k×k", "GETRF unpivoted"], rows, 0))
             self.w()
         if sweep is not None:
             self.consumed.add(sweep.path)
