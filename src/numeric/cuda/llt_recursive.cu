@@ -24,25 +24,19 @@
 // also writes the strict upper triangle of the pivot block's diagonal part (one GEMM is
 // faster than a SYRK and a GEMM, and nothing reads that triangle): the last launch sets
 // it to zero, as the executor's fronts (and the CPU's packed panels) have it.
-// The base case is one launch of 256-thread blocks, each working in shared memory:
-// every block factors the same w×w diagonal block (unblocked right-looking Cholesky, the
-// same operations in the same order in every block, so every block gets the same bits),
-// then solves its own 64 rows below it by forward substitution against L_jj (with the
-// columns of L_jj pre-scaled by 1/L(c,c), so one barrier per column). Doing the diagonal
-// block in every block trades 64³/3 redundant flops per block for a second launch and a
-// grid-wide wait. Because the blocks read the diagonal block while another would be
-// writing L_jj over it, block 0 writes L_jj to a workspace slot instead, and the last
-// launch copies every slot into place (nothing in between reads a factored diagonal
-// block: the updates read only the rows below it).
-// A first version kept each row of the diagonal block in registers with every loop
-// unrolled (as kernels_panel.cu's pivot-block kernel does): 255 registers, spills, and
-// 114 µs per base case on the H100 under Nsight Compute, 80% of the whole panel's time.
-// The result is the factor that POTRF + TRSM give, in another order of summation
-// (substitution, not an explicit inverse, so the error bound is TRSM's: Higham,
-// "Accuracy and Stability of Numerical Algorithms", 2nd ed., §8.1). A non-positive (or
-// NaN) pivot at column j sets info = j + 1 (POTRF's convention, the order of the first
-// leading minor that is not positive definite), and every later base case of the front
-// leaves it alone.
+// The base case is one launch of 256-thread blocks: every block factors the same w×w
+// diagonal block (unblocked right-looking Cholesky, the same operations in the same order
+// in every block, so every block gets the same bits) together with its own 64 rows below
+// it, which that elimination turns into rows of L₂₁. Doing the diagonal block in every
+// block trades 64³/3 redundant flops per block for a second launch and a grid-wide wait. Because
+// the blocks read the diagonal block while another would be writing L_jj over it, block 0 writes
+// L_jj to a workspace slot instead, and the last launch copies every slot into place (nothing in
+// between reads a factored diagonal block: the updates read only the rows below it). The result is
+// the factor that POTRF + TRSM give, in another order of summation (elimination, not an explicit
+// inverse, so the error bound is Cholesky's and TRSM's: Higham, "Accuracy and Stability of
+// Numerical Algorithms", 2nd ed., §8.1 and §10.1). A non-positive (or NaN) pivot at column j sets
+// info = j + 1 (POTRF's convention, the order of the first leading minor that is not positive
+// definite), and every later base case of the front leaves it alone.
 #include <algorithm>
 #include <string>
 
@@ -52,43 +46,49 @@
 namespace strata::cuda {
 namespace {
 
-constexpr int kBase = 64;       // columns of a base case, and panel rows per block
-constexpr int kThreads = 256;   // a 16 × 16 grid of threads, 4 × 4 entries each
-constexpr int kLd = kBase + 1;  // padded leading dimension of the shared-memory tile
+constexpr int kBase = 64;      // columns of a base case, and panel rows per block
+constexpr int kThreads = 256;  // a 16 × 16 grid of threads, 4 × 4 entries each
 
 // One base case: P points at the diagonal entry of the sub-panel (leading dimension ld),
 // `rows` rows from there down, w ≤ 64 columns; col0 is P's first column within the front
-// (for info). Block b solves rows w + 64b … of the sub-panel; block 0 also writes L_jj
-// (lower triangle, column-major 64×64) to `slot`.
-// Thread (ti, tj) = (t mod 16, t / 16) holds the entries of rows ti + 16r and columns
-// tj + 16c (r, c < 4) of the diagonal block, then of its 64-row panel tile, in registers:
-// the register indices are compile-time (the column loop runs over c in an unrolled outer
+// (for info). Block b factors the diagonal block together with rows w + 64b … of the
+// sub-panel below it; block 0 also writes L_jj (lower triangle, column-major 64×64) to
+// `slot`.
+// The block runs the right-looking Cholesky of the 128 × w matrix [A_jj; A_b] (the
+// diagonal block over its 64 panel rows): the panel rows come out as A_b·L_jj⁻ᵀ, the
+// forward substitution, with the same operations as the diagonal block's rows below the
+// diagonal. Thread (ti, tj) = (t mod 16, t / 16) holds, in registers, rows ti + 16r of
+// the diagonal block and of the panel tile (r < 4 each) in columns tj + 16c (c < 4): the
+// register indices are compile-time (the column loop runs over c in an unrolled outer
 // loop and tj in a runtime inner one), and every thread has work at every step.
-// Column j (right-looking, one barrier per column): the 16 threads holding column j (one
-// half-warp) take the diagonal entry d by a warp shuffle, finish the column
-// (L(r, j) = a(r, j)/√d) and publish it into one of two buffers; after the barrier every
-// thread updates its entries right of j, a(r, c) −= L(r, j)·L(c, j). The other buffer
-// takes column j + 1, so no second barrier is needed before it is written. Doing the
-// square root before the barrier keeps it off the other threads' path (an earlier
-// version published the column unscaled and divided after the barrier: 47 µs per base
-// case under Nsight Compute for 4,000 rows).
+// Column j (one barrier per column): the 16 threads holding column j (one half-warp) take
+// the diagonal entry d by a warp shuffle, finish the column (L(r, j) = a(r, j)/√d, its
+// panel rows too) and publish it into one of two buffers; after the barrier every thread
+// updates its entries right of j, a(r, c) −= L(r, j)·L(c, j). The other buffer takes
+// column j + 1, so no second barrier is needed before it is written. Doing the square
+// root before the barrier keeps it off the other threads' path.
+// Earlier versions, per base case of a 4,000-row sub-panel under Nsight Compute on the
+// H100: rows in registers with every loop unrolled, 255 registers and spills, 114 µs;
+// the diagonal block and the panel in shared memory, 47 µs; this scheme with the panel
+// solved in a second loop of 64 barriers (x·L_jjᵀ = a by columns), 43 µs.
 __global__ void __launch_bounds__(kThreads)
     llt_base_kernel(double* P, std::int64_t ld, std::int64_t rows, int w, double* slot, int* info,
                     std::int64_t col0) {
-  __shared__ double col[2][kBase];   // the published column (factor), then x̃ (panel)
-  __shared__ double M[kBase * kLd];  // M(c2, c) = L(c2, c) / L(c, c) at [c·kLd + c2]
-  __shared__ double rdiag[kBase];    // 1 / L(c, c)
-  __shared__ double dpub[2];         // the diagonal entry before its square root
+  __shared__ double col[2][2 * kBase];  // the published column: diagonal block, panel rows
+  __shared__ double dpub[2];            // the diagonal entry before its square root
   __shared__ int sfail;
   if (col0 > 0 && *info != 0) return;  // an earlier base case of this front failed
   const int ti = threadIdx.x & 15, tj = threadIdx.x >> 4;
-  double a[4][4];
+  const std::int64_t r0 = w + static_cast<std::int64_t>(blockIdx.x) * kBase;
+  const std::int64_t nr = rows - r0 < kBase ? rows - r0 : kBase;  // ≤ 0: no panel rows
+  double a[8][4];  // rows 0–3: the diagonal block's; rows 4–7: the panel tile's
 #pragma unroll
   for (int r = 0; r < 4; ++r)
 #pragma unroll
     for (int c = 0; c < 4; ++c) {
-      const int i = ti + 16 * r, j = tj + 16 * c;
-      a[r][c] = j <= i && i < w ? P[j * ld + i] : 0.0;
+      const int i = ti + 16 * r, k = tj + 16 * c;
+      a[r][c] = k <= i && i < w ? P[k * ld + i] : 0.0;
+      a[r + 4][c] = i < nr && k < w ? P[k * ld + r0 + i] : 0.0;
     }
   if (threadIdx.x == 0) sfail = 0;
   int j = 0;
@@ -110,8 +110,10 @@ __global__ void __launch_bounds__(kThreads)
           else if (i == j)
             a[r][c] = d * rs;
           buf[i] = a[r][c];
+          a[r + 4][c] *= rs;
+          buf[kBase + i] = a[r + 4][c];
         }
-        if (ti == jj) dpub[j & 1] = d, rdiag[j] = rs;
+        if (ti == jj) dpub[j & 1] = d;
       }
       __syncthreads();
       if (!(dpub[j & 1] > 0.0)) {
@@ -119,18 +121,24 @@ __global__ void __launch_bounds__(kThreads)
         failed = true;
         break;
       }
-      double lr[4], lc[4];
+      double lr[8], lc[4];
 #pragma unroll
-      for (int r = 0; r < 4; ++r) lr[r] = buf[ti + 16 * r];
+      for (int r = 0; r < 4; ++r) {
+        lr[r] = buf[ti + 16 * r];
+        lr[r + 4] = buf[kBase + ti + 16 * r];
+      }
 #pragma unroll
       for (int cc = 0; cc < 4; ++cc) lc[cc] = buf[tj + 16 * cc];
 #pragma unroll
-      for (int r = 0; r < 4; ++r)
+      for (int cc = 0; cc < 4; ++cc) {
+        const int k = tj + 16 * cc;
+        if (k <= j) continue;
 #pragma unroll
-        for (int cc = 0; cc < 4; ++cc) {
-          const int i = ti + 16 * r, k = tj + 16 * cc;
-          if (k > j && i >= k) a[r][cc] -= lr[r] * lc[cc];
+        for (int r = 0; r < 4; ++r) {
+          if (ti + 16 * r >= k) a[r][cc] -= lr[r] * lc[cc];
+          a[r + 4][cc] -= lr[r + 4] * lc[cc];
         }
+      }
     }
   }
   __syncthreads();
@@ -145,51 +153,7 @@ __global__ void __launch_bounds__(kThreads)
     for (int c = 0; c < 4; ++c) {
       const int i = ti + 16 * r, k = tj + 16 * c;
       if (blockIdx.x == 0) slot[k * kBase + i] = k <= i && i < w ? a[r][c] : 0.0;
-      if (k < i && k < w) M[k * kLd + i] = a[r][c] * rdiag[k];
-    }
-  const std::int64_t r0 = w + static_cast<std::int64_t>(blockIdx.x) * kBase;
-  if (r0 >= rows) return;  // block 0 of a sub-panel with no rows below (uniform)
-  const std::int64_t nr = rows - r0 < kBase ? rows - r0 : kBase;
-  // this block's rows: x·L_jjᵀ = t, by columns with the unscaled x̃_c = t_c − Σ x̃_c'·M(c, c')
-  // (c' < c) and x_c = x̃_c / L(c, c), the same publish-then-update order as above
-#pragma unroll
-  for (int r = 0; r < 4; ++r)
-#pragma unroll
-    for (int c = 0; c < 4; ++c) {
-      const int i = ti + 16 * r, k = tj + 16 * c;
-      a[r][c] = i < nr && k < w ? P[k * ld + r0 + i] : 0.0;
-    }
-  j = 0;
-#pragma unroll
-  for (int c = 0; c < 4; ++c) {
-    for (int jj = 0; jj < 16; ++jj, ++j) {
-      if (j >= w) break;
-      double* const buf = col[j & 1];
-      if (tj == jj) {
-#pragma unroll
-        for (int r = 0; r < 4; ++r) buf[ti + 16 * r] = a[r][c];
-      }
-      __syncthreads();  // (the first also orders M's writes before its reads)
-      double xr[4];
-#pragma unroll
-      for (int r = 0; r < 4; ++r) xr[r] = buf[ti + 16 * r];
-#pragma unroll
-      for (int cc = 0; cc < 4; ++cc) {
-        const int k = tj + 16 * cc;
-        if (k > j && k < w) {
-          const double m = M[j * kLd + k];
-#pragma unroll
-          for (int r = 0; r < 4; ++r) a[r][cc] -= xr[r] * m;
-        }
-      }
-    }
-  }
-#pragma unroll
-  for (int r = 0; r < 4; ++r)
-#pragma unroll
-    for (int c = 0; c < 4; ++c) {
-      const int i = ti + 16 * r, k = tj + 16 * c;
-      if (i < nr && k < w) P[k * ld + r0 + i] = a[r][c] * rdiag[k];
+      if (i < nr && k < w) P[k * ld + r0 + i] = a[r + 4][c];
     }
 }
 
