@@ -276,13 +276,19 @@ SparseMatrix canonical_values(const Analysis& an, const SparseMatrix& a) {
   return c;
 }
 
+namespace {
+// The options ask for the CUDA backend, or leave it to the machine and it has a GPU.
+bool wants_gpu(const Options& opts) {
+  return opts.backend == Backend::cuda ||
+         (opts.backend == Backend::automatic && numeric::cuda_available());
+}
+}  // namespace
+
 int resolve_workers(const Options& opts) {
   if (opts.num_gpus < 0)
     throw InvalidInput("Options::num_gpus must be at least 0 (got " +
                        std::to_string(opts.num_gpus) + ")");
-  const bool gpu = opts.backend == Backend::cuda ||
-                   (opts.backend == Backend::automatic && numeric::cuda_available());
-  if (!gpu) return 1;
+  if (!wants_gpu(opts)) return 1;
   const int visible = numeric::cuda_device_count();
   // No GPU at all: the CUDA executor says so (NotSupported) when the factorization asks
   // for it; the analysis itself does not need one.
@@ -295,10 +301,8 @@ int resolve_workers(const Options& opts) {
 
 index_t resolve_max_block_size(const Options& opts, MatrixType type) {
   if (opts.max_block_size > 0) return opts.max_block_size;
-  const bool gpu = opts.backend == Backend::cuda ||
-                   (opts.backend == Backend::automatic && numeric::cuda_available());
   // Options::max_block_size says why (measured on the H100 and the 2-core CPU)
-  return gpu && type == MatrixType::spd ? 4096 : 1024;
+  return wants_gpu(opts) && type == MatrixType::spd ? 4096 : 1024;
 }
 
 Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers) {

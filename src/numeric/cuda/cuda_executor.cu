@@ -633,10 +633,9 @@ void CudaExecutor::presize_chunk_buffers(const Analysis& an,
     const auto& s = *v.schedule;
     for (index_t q = 0; q < static_cast<index_t>(s.fronts.size()); ++q) {
       if (pd.tiled[q] && !lu && recursive_panel_) {  // its slabs, on lane 0 (tiled_front.cu)
-        const std::int64_t m = t.n_rows(s.fronts[q]), k = t.n_pivots(s.fronts[q]);
-        const std::int64_t w = std::max<std::int64_t>(
-            1, std::min<std::int64_t>(k, static_cast<std::int64_t>(plan_.pool) / (3 * m)));
-        diag_slab = std::max(diag_slab, llt_recursive_work_size(w));
+        const index_t f = s.fronts[q];
+        diag_slab =
+            std::max(diag_slab, llt_recursive_work_size(slab_width(t.n_rows(f), t.n_pivots(f))));
       }
       if (pd.tiled[q] || pd.chunk_end[q] <= q) continue;
       std::size_t nb = 0, ns = 0, np = 0, save = 0;

@@ -158,6 +158,9 @@ class CudaExecutor final : public numeric::Executor {
   void flush_chunk(const numeric::FactorContext& ctx);
   void finish_chunk(const numeric::FactorContext& ctx, ChunkRecord& c);
   void factor_tiled(const numeric::FactorContext& ctx, index_t pos);
+  /// Columns per slab of a tiled front (m rows, k pivots): a slab and two column blocks
+  /// of the trailing matrix fit the pool (3·m·w doubles), at least 1, at most k.
+  std::int64_t slab_width(std::int64_t m, std::int64_t k) const;
   /// Whether p points into the pinned host arena (a contribution block spilled to the host)
   /// rather than device memory.
   bool in_host_arena(const double* p) const {

@@ -57,6 +57,12 @@ void copy_block(cudaStream_t s, double* d, const double* h, std::int64_t ldh, st
 
 }  // namespace
 
+std::int64_t CudaExecutor::slab_width(std::int64_t m, std::int64_t k) const {
+  return std::max<std::int64_t>(
+      1, std::min<std::int64_t>(std::max<std::int64_t>(k, 1),
+                                static_cast<std::int64_t>(plan_.pool) / (3 * m)));
+}
+
 void CudaExecutor::factor_tiled(const numeric::FactorContext& ctx, index_t pos) {
   const auto wall_start = std::chrono::steady_clock::now();
   const Analysis& an = *ctx.analysis;
@@ -77,9 +83,7 @@ void CudaExecutor::factor_tiled(const numeric::FactorContext& ctx, index_t pos) 
   const auto slabs_start = std::chrono::steady_clock::now();
   phases_.tiled_assembly += std::chrono::duration<double>(slabs_start - wall_start).count();
 
-  const std::int64_t w_max = std::max<std::int64_t>(
-      1, std::min<std::int64_t>(std::max<std::int64_t>(k, 1),
-                                static_cast<std::int64_t>(plan_.pool) / (3 * m)));
+  const std::int64_t w_max = slab_width(m, k);
   double* S = pool_.data();
   double* const Cbuf[2] = {pool_.data() + static_cast<std::size_t>(m) * w_max,
                            pool_.data() + 2 * static_cast<std::size_t>(m) * w_max};
