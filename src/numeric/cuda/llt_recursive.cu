@@ -24,7 +24,7 @@
 // also writes the strict upper triangle of the pivot block's diagonal part (one GEMM is
 // faster than a SYRK and a GEMM, and nothing reads that triangle): the last launch sets
 // it to zero, as the executor's fronts (and the CPU's packed panels) have it.
-// The base case is one launch of 256-thread blocks: every block factors the same w×w
+// The base case is one launch of 128-thread blocks: every block factors the same w×w
 // diagonal block (unblocked right-looking Cholesky, the same operations in the same order
 // in every block, so every block gets the same bits) together with its own 64 rows below
 // it, which that elimination turns into rows of L₂₁. Doing the diagonal block in every
@@ -46,8 +46,8 @@
 namespace strata::cuda {
 namespace {
 
-constexpr int kBase = 64;      // columns of a base case, and panel rows per block
-constexpr int kThreads = 256;  // a 16 × 16 grid of threads, 4 × 4 entries each
+constexpr int kBase = 64;            // columns of a base case, and panel rows per block
+constexpr int kThreads = 2 * kBase;  // one row each: the diagonal block's, then the panel's
 
 // One base case: P points at the diagonal entry of the sub-panel (leading dimension ld),
 // `rows` rows from there down, w ≤ 64 columns; col0 is P's first column within the front
@@ -57,107 +57,78 @@ constexpr int kThreads = 256;  // a 16 × 16 grid of threads, 4 × 4 entries eac
 // The block runs the right-looking Cholesky of the 128 × w matrix [A_jj; A_b] (the
 // diagonal block over its 64 panel rows): the panel rows come out as A_b·L_jj⁻ᵀ, the
 // forward substitution, with the same operations as the diagonal block's rows below the
-// diagonal. Thread (ti, tj) = (t mod 16, t / 16) holds, in registers, rows ti + 16r of
-// the diagonal block and of the panel tile (r < 4 each) in columns tj + 16c (c < 4): the
-// register indices are compile-time (the column loop runs over c in an unrolled outer
-// loop and tj in a runtime inner one), and every thread has work at every step.
-// Column j (one barrier per column): the 16 threads holding column j (one half-warp) take
-// the diagonal entry d by a warp shuffle, finish the column (L(r, j) = a(r, j)/√d, its
-// panel rows too) and publish it into one of two buffers; after the barrier every thread
-// updates its entries right of j, a(r, c) −= L(r, j)·L(c, j). The other buffer takes
-// column j + 1, so no second barrier is needed before it is written. Doing the square
-// root before the barrier keeps it off the other threads' path.
-// Earlier versions, per base case of a 4,000-row sub-panel under Nsight Compute on the
-// H100: rows in registers with every loop unrolled, 255 registers and spills, 114 µs;
-// the diagonal block and the panel in shared memory, 75 µs; these register tiles with
-// the column published unscaled (the square root after the barrier) and the panel solved
-// in a second loop of 64 barriers, 47 µs; with the square root before the barrier, 43 µs.
-// (This version was measured by the kernel table, not Nsight: 4,000 × 1,000 at 5.4
-// TFLOP/s against 4.7 for the 43 µs one.)
+// diagonal. Thread t holds row t of that matrix in registers (threads 0–63 the diagonal
+// block's rows, 64–127 the panel rows); every loop is unrolled, so the register indices
+// are compile-time. Column j (one barrier per column): the diagonal block's threads publish
+// their entries of column j, not yet scaled, in column j of U (shared memory); after the
+// barrier every thread reads d = U(j, j), scales its own entry, l(t, j) = a(t, j)/√d, and
+// updates its entries right of j, a(t, c) −= l(t, j)·U(c, j)/√d; the diagonal block's
+// threads then publish column j + 1 into U's next column (no column is written twice, so
+// one barrier per column is enough).
+// Measured per base case on the H100 (a throwaway driver, 4,000 / 10,000 / 16,000 /
+// 30,000 rows, w = 64, including the launch): 24 / 24 / 24 / 53 µs, against 32 / 38 / 38 /
+// 70 µs for the version before (256 threads in a 16 × 16 grid of 4 × 4 register tiles:
+// its selects for the triangle and the owners' branch made ~118 instructions per column
+// and thread). Under Nsight Compute the limit of both is issue latency, not the FP64 pipe:
+// the fully unrolled code (~14,000 instructions for a blocked variant that was tried) stalls
+// on instruction fetch about 40% of the time and on the barrier about 30%; a variant with the
+// rows in shared memory and rolled loops was slower (44 µs), one with 32 columns per base
+// case 11–14 µs per 32 columns.
 __global__ void __launch_bounds__(kThreads)
     llt_base_kernel(double* P, std::int64_t ld, std::int64_t rows, int w, double* slot, int* info,
                     std::int64_t col0) {
-  __shared__ double col[2][2 * kBase];  // the published column: diagonal block, panel rows
-  __shared__ double dpub[2];            // the diagonal entry before its square root
-  __shared__ int sfail;
+  __shared__ double U[kBase * kBase];  // column j: the diagonal block's column j, unscaled
   if (col0 > 0 && *info != 0) return;  // an earlier base case of this front failed
-  const int ti = threadIdx.x & 15, tj = threadIdx.x >> 4;
-  const std::int64_t r0 = w + static_cast<std::int64_t>(blockIdx.x) * kBase;
-  const std::int64_t nr = rows - r0 < kBase ? rows - r0 : kBase;  // ≤ 0: no panel rows
-  double a[8][4];  // rows 0–3: the diagonal block's; rows 4–7: the panel tile's
+  const int t = threadIdx.x;
+  const bool diag = t < kBase;
+  const std::int64_t pr = w + static_cast<std::int64_t>(blockIdx.x) * kBase + (t - kBase);
+  double a[kBase];
+  if (diag) {
 #pragma unroll
-  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < kBase; ++c) a[c] = c <= t && t < w ? P[c * ld + t] : 0.0;
+  } else {
 #pragma unroll
-    for (int c = 0; c < 4; ++c) {
-      const int i = ti + 16 * r, k = tj + 16 * c;
-      a[r][c] = k <= i && i < w ? P[k * ld + i] : 0.0;
-      a[r + 4][c] = i < nr && k < w ? P[k * ld + r0 + i] : 0.0;
+    for (int c = 0; c < kBase; ++c) a[c] = pr < rows && c < w ? P[c * ld + pr] : 0.0;
+  }
+  if (diag) U[t] = a[0];
+  __syncthreads();
+  int fail = -1;  // the same in every thread (every thread reads the same d)
+#pragma unroll
+  for (int j = 0; j < kBase; ++j) {
+    if (j >= w) break;
+    const double d = U[j * kBase + j];
+    if (!(d > 0.0)) {
+      fail = j;
+      break;
     }
-  if (threadIdx.x == 0) sfail = 0;
-  int j = 0;
-  bool failed = false;  // the same in every thread (every thread reads the same d)
+    const double rs = rsqrt(d);
+    // the diagonal block's rows above j: zero (their entries right of the diagonal are
+    // never read, and the zero keeps them from growing)
+    const double l = diag ? (t > j ? a[j] * rs : (t == j ? d * rs : 0.0)) : a[j] * rs;
+    a[j] = l;
+    const double f = l * rs;
 #pragma unroll
-  for (int c = 0; c < 4; ++c) {
-    for (int jj = 0; jj < 16; ++jj, ++j) {
-      if (j >= w || failed) break;
-      double* const buf = col[j & 1];
-      // the diagonal entry (j, j) is a[c][c] of thread (jj, jj), in the owners' warp
-      const double d = __shfl_sync(0xffffffffu, a[c][c], (17 * jj) & 31);
-      if (tj == jj) {  // the owners finish column j and publish it
-        const double rs = rsqrt(d);
-#pragma unroll
-        for (int r = 0; r < 4; ++r) {
-          const int i = ti + 16 * r;
-          if (i > j)
-            a[r][c] *= rs;
-          else if (i == j)
-            a[r][c] = d * rs;
-          buf[i] = a[r][c];
-          a[r + 4][c] *= rs;
-          buf[kBase + i] = a[r + 4][c];
-        }
-        if (ti == jj) dpub[j & 1] = d;
-      }
+    for (int c = j + 1; c < kBase; ++c) a[c] -= f * U[j * kBase + c];
+    if (j + 1 < w) {
+      if (diag) U[(j + 1) * kBase + t] = a[j + 1];
       __syncthreads();
-      if (!(dpub[j & 1] > 0.0)) {
-        if (threadIdx.x == 0) sfail = static_cast<int>(col0) + j + 1;
-        failed = true;
-        break;
-      }
-      double lr[8], lc[4];
-#pragma unroll
-      for (int r = 0; r < 4; ++r) {
-        lr[r] = buf[ti + 16 * r];
-        lr[r + 4] = buf[kBase + ti + 16 * r];
-      }
-#pragma unroll
-      for (int cc = 0; cc < 4; ++cc) lc[cc] = buf[tj + 16 * cc];
-#pragma unroll
-      for (int cc = 0; cc < 4; ++cc) {
-        const int k = tj + 16 * cc;
-        if (k <= j) continue;
-#pragma unroll
-        for (int r = 0; r < 4; ++r) {
-          if (ti + 16 * r >= k) a[r][cc] -= lr[r] * lc[cc];
-          a[r + 4][cc] -= lr[r + 4] * lc[cc];
-        }
-      }
     }
   }
-  __syncthreads();
-  if (sfail) {
-    if (blockIdx.x == 0 && threadIdx.x == 0) *info = sfail;
+  if (fail >= 0) {
+    if (blockIdx.x == 0 && t == 0) *info = static_cast<int>(col0) + fail + 1;
     return;
   }
-  if (blockIdx.x == 0 && threadIdx.x == 0 && col0 == 0) *info = 0;
+  if (blockIdx.x == 0 && t == 0 && col0 == 0) *info = 0;
+  if (diag) {
+    if (blockIdx.x == 0) {
 #pragma unroll
-  for (int r = 0; r < 4; ++r)
-#pragma unroll
-    for (int c = 0; c < 4; ++c) {
-      const int i = ti + 16 * r, k = tj + 16 * c;
-      if (blockIdx.x == 0) slot[k * kBase + i] = k <= i && i < w ? a[r][c] : 0.0;
-      if (i < nr && k < w) P[k * ld + r0 + i] = a[r + 4][c];
+      for (int c = 0; c < kBase; ++c) slot[c * kBase + t] = c <= t && t < w ? a[c] : 0.0;
     }
+  } else if (pr < rows) {
+#pragma unroll
+    for (int c = 0; c < kBase; ++c)
+      if (c < w) P[c * ld + pr] = a[c];
+  }
 }
 
 // Block (b, y), y ≤ b, is the 64 × 64 tile of the k × k pivot block at rows 64y, columns
