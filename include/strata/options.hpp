@@ -121,10 +121,10 @@ struct Options {
   /// cases of strata's own, everything else cuBLAS SYRK and GEMM; Gustavson & Jonsson,
   /// IBM J. Res. Dev. 44(6), 2000) instead of cuSOLVER POTRF and cuBLAS TRSM (or the
   /// column blocks of gpu_potrf_block_size, which it takes precedence over). Default on:
-  /// on the H100 a 4,000 × 1,000 front's pivot block and panel ran at 5.4 TFLOP/s against
-  /// 3.4 for POTRF + TRSM, and the refactorizations of lap3d 60³ / 100³ and elasticity
-  /// 30³ / 50³ took 3–7% less time (bench/REPORT.md, "Cholesky pivot block and panel by
-  /// recursion").
+  /// on the H100 a 4,000 × 1,000 front's pivot block and panel ran at 6.6 TFLOP/s against
+  /// 3.5 for POTRF + TRSM (16,000 × 4,096: 34.2 against 27.1), and the refactorizations of
+  /// lap3d 60³ / 100³ and elasticity 30³ / 50³ took 3–7% less time than without it
+  /// (bench/REPORT.md, "Cholesky pivot block and panel by recursion").
   bool gpu_recursive_panel = true;
 
   // --- several GPUs (docs/multigpu.md) ---
