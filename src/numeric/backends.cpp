@@ -21,5 +21,9 @@ index_t cuda_llt_pivot_block_and_panel(double*, index_t, index_t) {
   throw NotSupported("this build of strata has no CUDA backend (nvcc was not found at build time)");
 }
 
+bool cuda_llt_update(double*, const double*, index_t, index_t) {
+  throw NotSupported("this build of strata has no CUDA backend (nvcc was not found at build time)");
+}
+
 }  // namespace strata::numeric
 #endif

@@ -226,6 +226,14 @@ bool cuda_available();
 /// factor_front_llt does. Throws NotSupported in a build without CUDA.
 index_t cuda_llt_pivot_block_and_panel(double* f, index_t m, index_t k);
 
+/// The CUDA executor's contribution-block update of a Cholesky front on device 0
+/// (numeric/cuda/llt_update.cu), so that tests can check it: `c` (host, n × n,
+/// column-major, leading dimension n) gets c −= l·lᵀ on its lower triangle, `l` (host) is
+/// n × k with leading dimension n; c's strict upper triangle is scratch afterwards.
+/// Returns whether the update was one DGEMM (else cuBLAS DSYRK). Throws InvalidInput for
+/// n < 1 or k < 1, NotSupported in a build without CUDA.
+bool cuda_llt_update(double* c, const double* l, index_t n, index_t k);
+
 /// Number of visible CUDA devices (0 in a build without CUDA).
 int cuda_device_count();
 

@@ -838,9 +838,8 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
   // large fronts: library calls, each front on one lane, the lanes side by side (the
   // least-loaded lane takes the next front; LDLᵀ's panel workspace is single: one lane).
   // The fronts the panel kernels did not take go first, their lanes not waiting for those
-  // kernels (lane 0 is stream_ itself, behind them); then the SYRKs of the ones they took,
+  // kernels (lane 0 is stream_ itself, behind them); then the updates of the ones they took,
   // each lane waiting once for panels_done_.
-  const double one = 1.0, minus_one = -1.0;
   std::int64_t perm_at = perm_off.back();
   std::vector<std::int64_t> big_perm_at(big.size());
   for (std::size_t i = 0; i < big.size(); ++i) {
@@ -875,9 +874,7 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
       } else if (by_kernels[i]) {  // pivot block and panel done by the kernels above
         if (li > 0 && !waited[li]) STRATA_CUDA(cudaStreamWaitEvent(ln->stream, panels_done_, 0));
         waited[li] = 1;
-        STRATA_CUBLAS(cublasDsyrk(ln->blas, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N, m - k, k,
-                                  &minus_one, F + k, m, &one,
-                                  F + static_cast<std::size_t>(k) * m + k, m));
+        llt_update(ln->blas, m - k, k, F + k, m, F + static_cast<std::size_t>(k) * m + k, m);
       } else if (!lu) {
         if (recursive_panel_)
           llt_pivot_block_and_panel_recursive(*ln, F, m, k, potrf_info_.data() + i);
@@ -887,9 +884,7 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
           if (split_front(m, k))
             split_update(*ln, F, m, k, false, ev[1]);
           else
-            STRATA_CUBLAS(cublasDsyrk(ln->blas, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N, m - k, k,
-                                      &minus_one, F + k, m, &one,
-                                      F + static_cast<std::size_t>(k) * m + k, m));
+            llt_update(ln->blas, m - k, k, F + k, m, F + static_cast<std::size_t>(k) * m + k, m);
         }
       } else {  // first pass: GETRF and its pivot check; the rest after one wait below
         lu_fronts.push_back({ln, F, m, k, perm_f, perturbed_.data() + ns + i});

@@ -88,6 +88,17 @@ void llt_pivot_block_and_panel_recursive(Lane& ln, double* F, std::int64_t m, st
 /// Doubles of workspace llt_pivot_block_and_panel_recursive needs for k pivots.
 std::size_t llt_recursive_work_size(std::int64_t k);
 
+/// The contribution-block update of a Cholesky front, C −= L·Lᵀ on the lower triangle of
+/// the n × n block C (leading dimension ldc) from the n × k block L (leading dimension
+/// ld), enqueued on `blas`'s stream: cuBLAS DSYRK, or one DGEMM of the whole square
+/// where llt_update_by_gemm(n, k) (llt_update.cu says why; the GEMM also writes C's
+/// strict upper triangle). Nothing for n or k ≤ 0.
+void llt_update(cublasHandle_t blas, std::int64_t n, std::int64_t k, const double* L,
+                std::int64_t ld, double* C, std::int64_t ldc);
+
+/// Whether llt_update takes the DGEMM for this shape (measured rule, llt_update.cu).
+bool llt_update_by_gemm(std::int64_t n, std::int64_t k);
+
 class CudaExecutor final : public numeric::Executor {
  public:
   /// `device`: CUDA device ordinal this executor runs on.
