@@ -117,6 +117,10 @@ void launch_lu_unpivoted_check(const double* a, std::int64_t ld, std::int64_t k,
 /// ended in position i, for ipiv (1-based, LAPACK) of length k. One thread.
 void launch_ipiv_to_perm(const int* ipiv, std::int64_t k, std::int64_t* perm, cudaStream_t s);
 
+/// perm[0..k) = 0, 1, …, k−1: the permutation of a front whose pivots needed no
+/// interchange (what launch_ipiv_to_perm makes of an identity ipiv, without its serial loop).
+void launch_identity_perm(std::int64_t k, std::int64_t* perm, cudaStream_t s);
+
 /// Applies the interchanges ipiv[0..k) (1-based, in order) to the rows of the ncols
 /// columns of a (leading dimension ld), as LAPACK's DLASWP with increment 1.
 void launch_laswp(double* a, std::int64_t ld, std::int64_t ncols, const int* ipiv, std::int64_t k,

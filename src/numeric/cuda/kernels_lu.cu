@@ -77,6 +77,11 @@ __global__ void ipiv_to_perm_kernel(const int* ipiv, std::int64_t k, std::int64_
   }
 }
 
+__global__ void identity_perm_kernel(std::int64_t k, std::int64_t* perm) {
+  const std::int64_t j = blockIdx.x * static_cast<std::int64_t>(blockDim.x) + threadIdx.x;
+  if (j < k) perm[j] = j;
+}
+
 __global__ void laswp_kernel(double* a, std::int64_t ld, std::int64_t ncols, const int* ipiv,
                              std::int64_t k) {
   const std::int64_t c = blockIdx.x * static_cast<std::int64_t>(blockDim.x) + threadIdx.x;
@@ -124,6 +129,13 @@ void launch_lu_unpivoted_check(const double* a, std::int64_t ld, std::int64_t k,
 void launch_ipiv_to_perm(const int* ipiv, std::int64_t k, std::int64_t* perm, cudaStream_t s) {
   if (k == 0) return;
   ipiv_to_perm_kernel<<<1, 32, 0, s>>>(ipiv, k, perm);
+  STRATA_CUDA_LAUNCH();
+}
+
+void launch_identity_perm(std::int64_t k, std::int64_t* perm, cudaStream_t s) {
+  if (k == 0) return;
+  identity_perm_kernel<<<static_cast<unsigned>((k + kThreads - 1) / kThreads), kThreads, 0, s>>>(
+      k, perm);
   STRATA_CUDA_LAUNCH();
 }
 
