@@ -16,6 +16,13 @@
 // pivot choices (largest magnitude, first on ties), so the result is the CPU's within
 // rounding either way.
 //
+// The two TRSMs (L₂₁ = A₂₁U₁₁⁻¹, U₁₂ = L₁₁⁻¹A₁₂) run at 0.1–0.5 TFLOP/s on separator-front
+// shapes (H100: m = 600 k = 100 0.11, m = 1,000 k = 256 0.46) and were 30% of unsymmetric
+// elasticity 30³'s GPU time under Nsight Compute. Splitting them by recursion into 64-wide
+// cuBLAS TRSMs and DGEMMs gave the same rates (cuBLAS already does that); base cases of our
+// own (one thread per row of B, the triangle in shared memory) took twice cuBLAS's kernel
+// time there, too few rows per call to fill the device, and no wall-clock gain (2026-11-23);
+// so they stay cuBLAS calls.
 // The kernels here are the glue: the pivot checks (after the unpivoted GETRF also the
 // multipliers'), the conversion of GETRF's interchange
 // list (LAPACK's ipiv, 1-based) into the row permutation the factor records, the
