@@ -6,7 +6,9 @@
 //   1. one launch assembles every front of the chunk in the pool (zero, scatter original
 //      entries, extend-add children's contribution blocks);
 //   2. one launch factors all small fronts (one thread block each); large fronts go to
-//      cuSOLVER POTRF + cuBLAS TRSM/SYRK (LLᵀ), cuSOLVER GETRF on the fully summed block +
+//      the recursive pivot block and panel (llt_recursive.cu) + the update of
+//      llt_update.cu (cuBLAS SYRK, or a GEMM where SYRK is slow) for LLᵀ (cuSOLVER POTRF +
+//      cuBLAS TRSM with gpu_recursive_panel off), cuSOLVER GETRF on the fully summed block +
 //      TRSMs + GEMM (LU; a blocked LU with our panel kernel when a pivot needs static
 //      pivoting, kernels_lu.cu), or a blocked Bunch–Kaufman LDLᵀ with our panel kernel and
 //      cuBLAS SYRKX (kernels_ldlt.cuh), all with pivoting restricted to the fully summed
@@ -14,7 +16,7 @@
 //      side on kLanes streams (each with its own handles), joined before step 3 — an LLᵀ
 //      front with at most Options::gpu_panel_kernel_max_pivots pivots has its pivot block and panel
 //      done for the whole chunk by our kernels first (kernels_panel.cu, three launches per 64 pivot
-//      columns) and only its SYRK on a lane;
+//      columns) and only its update on a lane;
 //   3. one launch stores the contribution blocks where the plan put them;
 //   4. one launch packs the chunk's factor panels (contiguous in the factor layout) into
 //      the device factor, which is copied to the host factor in one transfer — unless
