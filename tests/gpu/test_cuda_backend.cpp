@@ -112,12 +112,6 @@ TEST_F(CudaBackend, CholeskyFactorMatchesCpu) {
   }
 }
 
-// The recursive pivot block and panel (llt_recursive.cu) of single dense fronts against
-// the CPU's partial Cholesky (numeric/cpu/dense_front.cpp: LAPACK POTRF + TRSM) of the
-// same front: sizes around the 64-column base case and the recursion's halves, and fronts
-// with no rows below the pivots; then fronts whose leading minor of order bad + 1 is the
-// first that is not positive definite, at the first column, at base-case boundaries and
-// inside a later base case.
 // The contribution-block update C −= L·Lᵀ (lower triangle) that large Cholesky fronts get,
 // by cuBLAS DSYRK or one DGEMM depending on the shape (llt_update.cu), against a host
 // triple loop; shapes on both sides of the rule, awkward ones included.
@@ -159,6 +153,12 @@ TEST_F(CudaBackend, CbUpdateMatchesHostReference) {
   EXPECT_EQ(by_syrk, 6);
 }
 
+// The recursive pivot block and panel (llt_recursive.cu) of single dense fronts against
+// the CPU's partial Cholesky (numeric/cpu/dense_front.cpp: LAPACK POTRF + TRSM) of the
+// same front: sizes around the 64-column base case and the recursion's halves, and fronts
+// with no rows below the pivots; then fronts whose leading minor of order bad + 1 is the
+// first that is not positive definite, at the first column, at base-case boundaries and
+// inside a later base case.
 TEST_F(CudaBackend, RecursivePanelMatchesCpuFront) {
   auto rng = test::fresh_rng();
   std::uniform_real_distribution<double> u(-1.0, 1.0);
