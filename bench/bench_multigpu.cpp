@@ -23,7 +23,7 @@
 //   bench_multigpu [--problems a,b,...] [--backend cpu|cuda] [--workers 1,2,4]
 //                  [--subtrees 4] [--balance on,off] [--stealing on,off]
 //                  [--split-top on,off] [--split-fronts 2048,0] [--budget-share 0,20]
-//                  [--repeat R]
+//                  [--repeat R] [--max-block-size B]
 //                  [--threads-per-worker T] [--no-factor] [--tag NAME] [--results-dir DIR]
 #include <fmt/core.h>
 
@@ -48,6 +48,7 @@ int main(int argc, char** argv) {
   std::vector<double> budget_share = {0};
   std::vector<index_t> split_fronts = {Options{}.split_front_min_cb};
   std::string backend = "cpu";
+  index_t max_block_size = 0;
   int repeat = 3, threads_per_worker = 1;
   bool no_factor = false;
   std::string tag, results_dir;
@@ -70,6 +71,9 @@ int main(int argc, char** argv) {
                  "device budget = factor bytes / workers / R for each R (0: no budget)")
       ->delimiter(',')
       ->check(CLI::NonNegativeNumber);
+  app.add_option("--max-block-size", max_block_size,
+                 "Options::max_block_size (0: the backend's default; 4096 gives a CPU analysis "
+                 "the CUDA backend's Cholesky tree)");
   app.add_option("--repeat", repeat, "factorizations per measurement (median reported)");
   app.add_option("--threads-per-worker", threads_per_worker, "host threads of each CPU worker");
   app.add_flag("--no-factor", no_factor, "analysis figures only");
@@ -85,9 +89,9 @@ int main(int argc, char** argv) {
   out["rows"] = json::array();
   fmt::print(
       "{:<12} {:>2} {:>2} {:>3} {:>3} {:>3} {:>5} {:>8} {:>8} {:>5} {:>9} {:>4} {:>7} {:>5} {:>6} "
-      "{:>6} {:>8} {:>8} {:>9}\n",
+      "{:>6} {:>5} {:>8} {:>8} {:>9}\n",
       "problem", "W", "s", "bal", "stl", "top", "splcb", "order s", "bal s", "rebis", "flops",
-      "subt", "balance", "layer", "upp %", "top %", "factor s", "berr", "budget MB");
+      "subt", "balance", "layer", "upp %", "top %", "est x", "factor s", "berr", "budget MB");
   for (const std::string& name : problems) {
     const bench::Problem p = bench::load_problem(name);
     std::vector<double> b(p.a.n_rows);
@@ -109,6 +113,7 @@ int main(int argc, char** argv) {
                   o.work_stealing = stl == "on";
                   o.split_top = split == "on";
                   o.split_front_min_cb = split_cb;
+                  o.max_block_size = max_block_size;
                   // CPU workers: threads each; the CUDA backend keeps every host thread for the
                   // analysis and the input pass (one thread made that pass a third of an
                   // elasticity refactorization on the 4-GPU machine)
@@ -140,6 +145,7 @@ int main(int argc, char** argv) {
                   const AnalysisStats an = solver.stats().analysis;
                   json row = {{"problem", p.name},
                               {"n", an.n},
+                              {"max_block_size", an.max_block_size},
                               {"workers", w},
                               {"subtrees_per_worker", s},
                               {"balance_by_work", bal == "on"},
@@ -157,6 +163,7 @@ int main(int argc, char** argv) {
                               {"upper_parts", an.upper_parts},
                               {"upper_flops_fraction", an.upper_flops_fraction},
                               {"top_flops_fraction", an.top_flops_fraction},
+                              {"estimated_speedup", an.estimated_speedup},
                               {"budget_share_ratio", share},
                               {"device_memory_limit", o.device_memory_limit},
                               {"factor_bytes", an.factor_bytes}};
@@ -194,11 +201,12 @@ int main(int argc, char** argv) {
                   out["rows"].push_back(row);
                   fmt::print(
                       "{:<12} {:>2} {:>2} {:>3} {:>3} {:>3} {:>5} {:>8.3f} {:>8.3f} {:>5} {:>9.3g} "
-                      "{:>4} {:>7.3f} {:>5} {:>6.1f} {:>6.1f} {:>8.3f} {:>8.1e} {:>9}\n",
+                      "{:>4} {:>7.3f} {:>5} {:>6.1f} {:>6.1f} {:>5.2f} {:>8.3f} {:>8.1e} {:>9}\n",
                       p.name, w, s, bal, stl, split, split_cb, an.ordering_seconds,
                       an.nd_balance_seconds, an.nd_rebisections, an.factor_flops, an.subtrees,
                       an.subtree_balance, fmt::format("{}/{}", an.upper_layers, an.upper_parts),
-                      100 * an.upper_flops_fraction, 100 * an.top_flops_fraction, ts, berr,
+                      100 * an.upper_flops_fraction, 100 * an.top_flops_fraction,
+                      an.estimated_speedup, ts, berr,
                       share > 0 ? fmt::format("{:.1f}", o.device_memory_limit * 1e-6) : "-");
                   std::fflush(stdout);
                 }

@@ -156,6 +156,7 @@ json analysis_json(const AnalysisStats& s) {
           {"upper_layers", s.upper_layers},
           {"upper_parts", s.upper_parts},
           {"upper_flops_fraction", s.upper_flops_fraction},
+          {"estimated_speedup", s.estimated_speedup},
           {"nd_rebisections", s.nd_rebisections},
           {"seconds",
            {{"ordering", s.ordering_seconds},
@@ -204,10 +205,11 @@ void print_analysis(const AnalysisStats& s, double read_seconds) {
     fmt::print(
         "tree split            {} workers: {} subtrees, balance {:.3f} (makespan / mean); {} "
         "upper layers of {} parts with {:.1f}% of the flops; {:.1f}% of the flops in the top "
-        "part; {} bisections rebalanced by work ({:.3f} s)\n",
+        "part; estimated speedup {:.2f} (flops only); {} bisections rebalanced by work ({:.3f} "
+        "s)\n",
         s.workers, s.subtrees, s.subtree_balance, s.upper_layers, s.upper_parts,
-        100 * s.upper_flops_fraction, 100 * s.top_flops_fraction, s.nd_rebisections,
-        s.nd_balance_seconds);
+        100 * s.upper_flops_fraction, 100 * s.top_flops_fraction, s.estimated_speedup,
+        s.nd_rebisections, s.nd_balance_seconds);
   fmt::print(
       "time [s]              read {:.3f}  ordering {:.3f}  symbolic {:.3f}  plan {:.3f}  "
       "device set-up {:.3f}  analysis total {:.3f}\n",

@@ -149,13 +149,14 @@ struct Options {
   /// from the most loaded queue (default on).
   bool work_stealing = true;
   /// With several GPUs: split the top part above the subtrees again into "upper layers"
-  /// of independent subtrees, each layer factored on all GPUs after the layers below it,
-  /// instead of factoring the whole top part on one GPU (default on; docs/multigpu.md).
+  /// of independent subtrees, each part factored by the GPU that the analysis's list
+  /// schedule finishes it on first, as soon as the parts below it are done, instead of
+  /// factoring the whole top part on one GPU (default on; docs/multigpu.md).
   /// The distributed solver (several MPI ranks) does not use upper layers.
   bool split_top = true;
-  /// With several GPUs: a front factored while other GPUs have no part of their own (a
-  /// front of the top part: all other GPUs; an upper layer with fewer parts than GPUs: the
-  /// GPUs without a part, shared out among the owners) whose contribution block has at
+  /// With several GPUs: a front of the top part, factored by GPU 0 while the other GPUs
+  /// have nothing left to do (upper parts run while other GPUs may still work, so they
+  /// are not split), whose contribution block has at
   /// least this many rows has its update — the SYRK (LLᵀ) or GEMM (LU) where a large
   /// front's flops are — split by column strips over its GPU and those idle GPUs; the
   /// pivot block and panel stay on its GPU, and each strip travels to its GPU and back

@@ -59,6 +59,10 @@ struct AnalysisStats {
   index_t upper_layers = 0;
   index_t upper_parts = 0;
   double upper_flops_fraction = 0;
+  /// factor_flops / the split's estimated time (schedule::TreePartition::estimated_time:
+  /// the list schedule of the parts by flops, transfers not counted): the speedup the
+  /// split allows at best, ≤ workers. 0 for one worker.
+  double estimated_speedup = 0;
   /// Nested dissection balanced by work (Options::balance_by_work): top bisections redone
   /// with weighted vertices, and the time spent estimating and redoing them (included in
   /// ordering_seconds).

@@ -480,6 +480,7 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers)
     double upper = 0;
     for (const auto& u : p.upper) upper += u.work;
     st.upper_flops_fraction = p.total_work > 0 ? upper / p.total_work : 0.0;
+    st.estimated_speedup = p.estimated_time > 0 ? p.total_work / p.estimated_time : 0.0;
   }
   st.total_seconds = total.seconds();
   return an;

@@ -139,6 +139,7 @@ void stats_io(IO& io, S& s) {
   io.value(s.upper_layers);
   io.value(s.upper_parts);
   io.value(s.upper_flops_fraction);
+  io.value(s.estimated_speedup);
   io.value(s.nd_rebisections);
   io.value(s.nd_balance_seconds);
   io.value(s.ordering_seconds);

@@ -82,8 +82,8 @@ struct FactorContext {
   /// memory (Executor::holds_part_panels; fetch_panels brings them to the host).
   bool keep_part_panels = false;
   /// Several workers: executors that have no part of their own while this part runs (the
-  /// top part: every other worker; an upper layer with fewer parts than workers: those
-  /// without one, shared out among the owners). The part's executor may use them for its
+  /// top part: every other worker, all of whose parts are done; subtrees and upper parts
+  /// get none, since no worker is known to be idle then). The part's executor may use them for its
   /// large fronts (the CUDA executor: the update split by column strips,
   /// Options::split_front_min_cb) and must be done with them when end_part returns.
   std::vector<Executor*> helpers;
@@ -311,9 +311,10 @@ struct MultiWorkerConfig {
 /// Runs the numeric factorization on several executors (one per worker, one host thread
 /// each) over an.partition, which must have been made for execs.size() workers: the
 /// subtrees from per-worker queues filled largest-first (an.partition.owner), stealing
-/// when config.work_stealing; then each upper layer, every executor factoring its parts
-/// of it (an.partition.upper_owner) with their children's blocks handed in, a barrier
-/// after each layer; then the top part on execs[0] with its children's contribution
+/// when config.work_stealing; then each executor its upper parts (an.partition.upper_owner)
+/// in layer order, each as soon as the parts it reads from are done (no barrier between
+/// layers), their children's blocks handed in; then the top part on execs[0], all threads
+/// joined, with its children's contribution
 /// blocks handed in. `arenas` (one per worker) are sized here and reused
 /// across calls. Fills `factor` (the same entries as factorize) and, when given,
 /// `devices` (one per worker). The first exception of any worker is rethrown after all

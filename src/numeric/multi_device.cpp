@@ -1,6 +1,6 @@
 // strata — the multi-worker factorization driver: subtrees on several executors (GPUs),
-// then the upper layers of the tree on all of them, then the top part
-// (DESIGN.md §3, docs/multigpu.md).
+// then the upper parts of the tree as soon as the parts below them are done, then the
+// top part (DESIGN.md §3, docs/multigpu.md).
 //
 // What: the analysis splits the assembly tree into disjoint subtrees (layer 0), upper
 // layers 1, 2, … of disjoint parts above them, and a top part (schedule/
@@ -11,29 +11,34 @@
 // exactly as the whole tree is on one device — its own level schedule, memory plan under
 // the same budget, and contribution-block arena — and its root's contribution block is
 // exported to a host buffer (or, on GPUs that reach each other, left in device memory for
-// a peer copy) for the worker that factors the parent's part. When every subtree is done,
-// each upper layer runs on every worker at once, each worker factoring the parts the
-// partition gave it (static owners: the exporter of a block knows its importer), with
-// the blocks of the parts' children in lower layers imported first; the layers are
-// separated by a barrier (all threads joined). Finally worker 0 imports the blocks of
-// the top part's children and factors it.
+// a peer copy) for the worker that factors the parent's part. When its queues are empty,
+// each worker factors the upper parts the partition gave it (static owners: the exporter
+// of a block knows its importer), in layer order, each one as soon as the parts it
+// imports from are done (a wait on those parts, not a barrier between layers), with
+// their blocks imported first. Finally, all threads joined, worker 0 imports the blocks
+// of the top part's children and factors it.
 //
 // Why this shape: subtrees of a nested-dissection tree are independent, so the workers
 // share nothing but the factor (each front's panel, rows, D and pivot statistics are
-// disjoint ranges written by exactly one worker) and the queues (one mutex). Largest
-// first is Graham's LPT rule; stealing covers what the work estimate gets wrong (a slower
-// device, a shared machine); stealing from the back leaves the victim its large items,
-// the usual work-stealing choice (Blumofe & Leiserson, J. ACM 46, 1999). The parts of an
-// upper layer are independent for the same reason; there are few of them (about one per
-// worker), so they are not stolen. Every front is factored by the same executor code as
-// on one worker, so with executors of the same kind and thread count the factor is
-// bitwise the one-worker factor.
+// disjoint ranges written by exactly one worker), the queues (one mutex) and the set of
+// parts done (another). Largest first is Graham's LPT rule; stealing covers what the work
+// estimate gets wrong (a slower device, a shared machine); stealing from the back leaves
+// the victim its large items, the usual work-stealing choice (Blumofe & Leiserson, J. ACM
+// 46, 1999). Upper parts are not stolen: there are few of them, and their owners were
+// chosen (earliest finish in the partition's list schedule) where their inputs are ready
+// first. Without the barrier a worker whose subtrees are done goes on up its side of the
+// tree while another still factors a large subtree: lap3d 100³ on 2 workers had one
+// subtree of 44% of the flops on one worker while the other, after 31% in small subtrees,
+// idled until it was done (the estimate for that split was 1.46×, as measured). Every
+// front is factored by the same executor code as on one worker, so with executors of the
+// same kind and thread count the factor is bitwise the one-worker factor.
 //
-// The top part — the root separators, the largest fronts — runs on worker 0, and each
-// upper part on its owner, but the workers idle meanwhile are handed to them as helpers
-// (FactorContext::helpers): the CUDA executor splits a large front's update by column
-// strips over them (Options::split_front_min_cb). The pivot blocks and panels of those
-// fronts stay on one GPU (a 2-D distribution of the top fronts is not done).
+// The top part — the root separators, the largest fronts — runs on worker 0 while every
+// other worker is idle: they are handed to it as helpers (FactorContext::helpers), and the
+// CUDA executor splits a large front's update by column strips over them
+// (Options::split_front_min_cb). Upper parts get no helpers: no worker is known to be
+// idle while one runs. The pivot blocks and panels of those fronts stay on one GPU (a
+// 2-D distribution of the top fronts is not done).
 //
 // Several processes (src/distributed, docs/distributed.md): MultiWorkerConfig names the
 // global workers this process runs; it factors their subtrees, then hands every transfer
@@ -43,11 +48,12 @@
 // (the distributed solver analyzes without them).
 //
 // Errors: a worker that throws records the first exception and stops the others from
-// taking new subtrees (or upper parts); all threads are joined and the first exception
-// is rethrown (no later layer starts).
+// taking new subtrees or starting upper parts (a wait for a part's inputs ends too); all
+// threads are joined and the first exception is rethrown (the top part does not start).
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <condition_variable>
 #include <deque>
 #include <exception>
 #include <mutex>
@@ -113,30 +119,6 @@ class Queues {
   bool stopped_ = false;
   std::mutex mutex_;
 };
-
-// The helpers of each worker in upper layer `layer` (indexed by worker): the workers that
-// own no part of the layer, dealt out one at a time to the owners in decreasing order of
-// their work in it (the owner with the most work gets the first, and so on round).
-std::vector<std::vector<Executor*>> layer_helpers(const schedule::TreePartition& p, int layer,
-                                                  const std::vector<Executor*>& execs) {
-  const int workers = static_cast<int>(execs.size());
-  std::vector<double> load(workers, 0.0);
-  std::vector<char> owns(workers, 0);
-  for (index_t k = p.upper_layer_offsets[layer - 1]; k < p.upper_layer_offsets[layer]; ++k) {
-    const int w = p.upper_owner[k];
-    if (w < 0 || w >= workers) continue;
-    owns[w] = 1;
-    load[w] += p.upper[k].work;
-  }
-  std::vector<int> owners, idle;
-  for (int w = 0; w < workers; ++w) (owns[w] ? owners : idle).push_back(w);
-  std::stable_sort(owners.begin(), owners.end(), [&](int a, int b) { return load[a] > load[b]; });
-  std::vector<std::vector<Executor*>> team(workers);
-  if (owners.empty()) return team;
-  for (std::size_t i = 0; i < idle.size(); ++i)
-    team[owners[i % owners.size()]].push_back(execs[idle[i]]);
-  return team;
-}
 
 // Factors the batches of one part with `ex` (ctx.part already set, begin_part done).
 void run_batches(Executor& ex, const FactorContext& ctx) {
@@ -240,11 +222,38 @@ void factorize_multi(const Analysis& an, const std::vector<double>& scaled_value
   std::mutex error_mutex;
   std::exception_ptr error;
   std::atomic<bool> failed{false};
+  // parts done (their blocks exported): what an upper part waits for
+  std::mutex done_mutex;
+  std::condition_variable done_cv;
+  std::vector<char> done(n_parts, 0);
   auto record_error = [&] {
-    failed = true;
+    {
+      std::lock_guard<std::mutex> lock(done_mutex);
+      failed = true;
+    }
+    done_cv.notify_all();
     queues.stop();
     std::lock_guard<std::mutex> lock(error_mutex);
     if (!error) error = std::current_exception();
+  };
+  auto mark_done = [&](int id) {
+    {
+      std::lock_guard<std::mutex> lock(done_mutex);
+      done[id] = 1;
+    }
+    done_cv.notify_all();
+  };
+  // waits until every part that part `id` imports from is done; false after a failure
+  auto wait_for_imports = [&](int id) {
+    const schedule::FactorPart& fp = part.part(id);
+    std::unique_lock<std::mutex> lock(done_mutex);
+    done_cv.wait(lock, [&] {
+      if (failed) return true;
+      for (const index_t c : fp.imports)
+        if (!done[part.part_id[c]]) return false;
+      return true;
+    });
+    return !failed;
   };
 
   // One part on worker w (its executor begun): begin_part, the blocks of its children in
@@ -291,24 +300,19 @@ void factorize_multi(const Analysis& an, const std::vector<double>& scaled_value
         st[w].busy_seconds += busy.seconds();
         ++st[w].subtrees_run;
         st[w].subtrees_stolen += stolen ? 1 : 0;
+        mark_done(i);
       }
-    } catch (...) {
-      record_error();
-    }
-  };
-
-  // upper layer `layer`: worker w's parts of it, in their (decreasing work) order, with
-  // the helpers `team` gave it
-  auto upper_worker = [&](int w, int layer, const std::vector<std::vector<Executor*>>& team) {
-    try {
-      for (index_t k = part.upper_layer_offsets[layer - 1]; k < part.upper_layer_offsets[layer];
-           ++k) {
-        if (part.upper_owner[k] != w) continue;
-        if (failed) break;
-        Timer busy;
-        factor_one(w, n_sub + 1 + static_cast<int>(k), true, team[w]);
+      // then this worker's upper parts, in layer order (decreasing work within a layer),
+      // each as soon as the parts below it are done: no barrier between layers
+      for (std::size_t k = 0; k < part.upper.size(); ++k) {
+        if (part.upper_owner[k] != first + w) continue;
+        const int id = n_sub + 1 + static_cast<int>(k);
+        if (!wait_for_imports(id)) break;
+        busy.reset();
+        factor_one(w, id, true);
         st[w].busy_seconds += busy.seconds();
         ++st[w].upper_parts_run;
+        mark_done(id);
       }
     } catch (...) {
       record_error();
@@ -316,7 +320,7 @@ void factorize_multi(const Analysis& an, const std::vector<double>& scaled_value
   };
 
   // runs f(w) for every worker, one thread each (worker 0 on the calling thread), and
-  // joins them: the barrier between layers
+  // joins them
   auto all_workers = [&](const auto& f) {
     std::vector<std::thread> threads;
     try {
@@ -334,14 +338,6 @@ void factorize_multi(const Analysis& an, const std::vector<double>& scaled_value
   all_workers(worker);
   if (config.exchange) config.exchange(transfer, error);
   if (error) std::rethrow_exception(error);
-
-  // the upper layers, one after another, each on every worker; the workers without a
-  // part in a layer are helpers of those with one
-  for (int layer = 1; layer <= part.n_upper_layers(); ++layer) {
-    const auto team = layer_helpers(part, layer, execs);
-    all_workers([&](int w) { upper_worker(w, layer, team); });
-    if (error) std::rethrow_exception(error);
-  }
 
   // the top part on worker 0, with the blocks of its children in other parts handed in;
   // every other worker of this process is idle then: its helpers

@@ -6,9 +6,9 @@
 // schedule, memory plan and contribution-block arena, in any order relative to the other
 // subtrees), and the "top" part above them. The top part is split again, layer by layer,
 // by the same heuristic ("upper layers" 1, 2, …: disjoint subtrees of what is left of the
-// top, each factored by one worker after every part of the layers below, with the
+// top, each factored by one worker as soon as the parts below it are done, with the
 // contribution blocks of its children in lower layers handed in); the final remainder is
-// the top part, factored by worker 0 after all layers. Its largest fronts (the root
+// the top part, factored by worker 0 after all other parts. Its largest fronts (the root
 // separators) still run on one worker: splitting one front across workers by tiles is
 // later work.
 #pragma once
@@ -60,8 +60,9 @@ struct TreePartition {
   /// increasing root). Empty without upper layers.
   std::vector<FactorPart> upper;
   std::vector<index_t> upper_layer_offsets{0};  ///< size L + 1
-  /// Worker of each upper part: LPT within its layer. Static (no stealing), so that the
-  /// exporter of a block knows which worker imports it.
+  /// Worker of each upper part: the one that finishes it first in the list schedule
+  /// (estimated_time). Static (no stealing), so that the exporter of a block knows which
+  /// worker imports it.
   std::vector<int> upper_owner;
   FactorPart top;                ///< the rest of the tree (worker 0, after every layer)
   std::vector<index_t> part_of;  ///< per front: index into subtrees, or -1 (top or upper)
@@ -72,9 +73,11 @@ struct TreePartition {
   /// (≥ 1; 1 is a perfect balance; 1 when there is no subtree work).
   double balance = 1;
   index_t splits = 0;  ///< subtrees split into their children to get here
-  /// The estimate the split minimizes (flops): LPT makespan of the subtrees + LPT
-  /// makespan of each upper layer + the top part's work (layers one after another, no
-  /// transfers counted).
+  /// The estimate the split minimizes (flops): the end of the list schedule the driver
+  /// runs — each worker factors its subtrees in order, then its upper parts in order, an
+  /// upper part starting when its worker is free and the parts it imports from are done
+  /// — plus the top part's work (no transfers counted). Without upper layers: the LPT
+  /// makespan of the subtrees + the top part's work.
   double estimated_time = 0;
 
   /// Number of upper layers L.
@@ -95,21 +98,23 @@ struct TreePartition {
 /// subtrees; while there are fewer than workers × subtrees_per_worker of them, or their
 /// LPT assignment onto the workers has a makespan above (1 + tolerance) × the mean load,
 /// replace the heaviest subtree by its children's subtrees (its root front joins the top
-/// part), stopping when the heaviest is a single front. Every state of that sequence is
-/// scored by its estimated time — LPT makespan plus the top part's work, which one worker
-/// factors after the subtrees — and the best-scoring state with enough subtrees (or the
-/// best of all, when the tree never yields enough) is kept, so splitting never trades a
-/// small gain in balance for a large sequential top. Work is symbolic::front_flops.
+/// part), stopping when the heaviest is a single front. Every state of that sequence with
+/// enough subtrees (or every state, when the tree never yields enough) is scored by its
+/// estimated time (estimated_time, with its upper layers), and the best is kept, so
+/// splitting never trades a small gain in balance for a large sequential top. Work is
+/// symbolic::front_flops.
 ///
 /// Upper layers (opts.upper_layers): the fronts left above the subtrees form a tree T'
 /// whose leaves read the subtree roots' blocks. The same splitting runs on T', with the
 /// work of a T' subtree counted over its T' fronts only: start from T''s roots, split the
-/// heaviest into its T' children (its root front stays in the top), score each state by
-/// LPT makespan + the bound on what later layers can do with the fronts left above,
-/// max(their heaviest root-to-leaf chain, their work / workers), and keep the best. When that best state has
-/// at least 2 parts and cuts the estimate by more than tolerance × the top's work, its
-/// parts become the next layer and the search runs again on what is left (at most
-/// kMaxUpperLayers layers); the final remainder is the top part.
+/// heaviest into its T' children (its root front stays in the top); each state's parts
+/// go, largest first, to the worker that finishes them first in the list schedule of the
+/// parts placed so far, and the state is scored by that schedule's end + the bound on what
+/// later layers can do with the fronts left above, max(their heaviest root-to-leaf chain,
+/// their work / workers). When the best state (at least one split) cuts the estimate by
+/// more than tolerance × the top's work, its parts (one or more) become the next layer
+/// and the search runs again on what is left (at most kMaxUpperLayers layers); layers are
+/// kept as far as they lower estimated_time; the final remainder is the top part.
 /// Throws InvalidInput for workers or subtrees_per_worker below 1.
 TreePartition partition_tree(const symbolic::AssemblyTree& t, const PartitionOptions& opts);
 

@@ -101,6 +101,7 @@ void expect_same(const Analysis& x, const Analysis& y) {
   EXPECT_EQ(x.stats.upper_layers, y.stats.upper_layers);
   EXPECT_EQ(x.stats.upper_parts, y.stats.upper_parts);
   EXPECT_EQ(x.stats.upper_flops_fraction, y.stats.upper_flops_fraction);
+  EXPECT_EQ(x.stats.estimated_speedup, y.stats.estimated_speedup);
   EXPECT_EQ(x.stats.total_seconds, y.stats.total_seconds);
 }
 
