@@ -421,24 +421,42 @@ TreePartition partition_tree(const symbolic::AssemblyTree& t, const PartitionOpt
         return enough && sc.makespan <= (1 + o.tolerance) * (sc.subtree_work / o.workers);
       });
   const auto all = [](index_t) { return true; };
-  std::size_t best_k = 0;
-  std::vector<index_t> roots;
-  std::vector<int> owner;
-  UpperPlan plan;
-  for (std::size_t k = 0; k < n_states; ++k) {
-    std::vector<index_t> r = state_roots(t, w, sequence, k, all);
-    if (any_enough && r.size() < target) continue;
+  // every candidate's estimate and number of parts; then the fewest parts among those
+  // within fewer_parts_slack of the best estimate (ties: the better estimate, the earlier
+  // state), rebuilt
+  struct Candidate {
+    std::size_t k;
+    double estimate;
+    std::size_t parts;
+  };
+  std::vector<Candidate> candidates;
+  const auto state = [&](std::size_t k, std::vector<index_t>& r, std::vector<int>& own) {
+    r = state_roots(t, w, sequence, k, all);
     std::vector<double> items;
     for (const index_t x : r) items.push_back(w[x]);
-    std::vector<int> own = lpt_assign(items, o.workers);
-    UpperPlan p = plan_upper(t, r, own, w, first, o);
-    if (roots.empty() || p.estimate < plan.estimate) {
-      best_k = k;
-      roots = std::move(r);
-      owner = std::move(own);
-      plan = std::move(p);
-    }
+    own = lpt_assign(items, o.workers);
+    return plan_upper(t, r, own, w, first, o);
+  };
+  double best_estimate = 0;
+  for (std::size_t k = 0; k < n_states; ++k) {
+    std::vector<index_t> r;
+    std::vector<int> own;
+    if (any_enough && state_roots(t, w, sequence, k, all).size() < target) continue;
+    const UpperPlan p = state(k, r, own);
+    std::size_t parts = r.size();
+    for (const Layer& l : p.layers) parts += l.roots.size();
+    candidates.push_back({k, p.estimate, parts});
+    if (candidates.size() == 1 || p.estimate < best_estimate) best_estimate = p.estimate;
   }
+  const Candidate* pick = nullptr;
+  for (const Candidate& c : candidates)
+    if (c.estimate <= best_estimate * (1 + o.fewer_parts_slack) &&
+        (!pick || c.parts < pick->parts || (c.parts == pick->parts && c.estimate < pick->estimate)))
+      pick = &c;
+  const std::size_t best_k = pick ? pick->k : 0;
+  std::vector<index_t> roots;
+  std::vector<int> owner;
+  const UpperPlan plan = state(best_k, roots, owner);
   out.splits = static_cast<index_t>(best_k);
   out.owner = owner;
   out.part_of.assign(nf, -1);

@@ -44,6 +44,11 @@ struct PartitionOptions {
   /// Split the top part into upper layers (see partition_tree); false: the top part is
   /// everything above the subtrees, as before upper layers existed.
   bool upper_layers = true;
+  /// Of the splits whose estimated_time is within this fraction of the best, the one
+  /// with the fewest parts is kept: each part is factored by levels on its own, so many
+  /// small parts batch worse on a GPU than a few large ones, which the flop estimate does
+  /// not see.
+  double fewer_parts_slack = 0.02;
 };
 
 /// The maximum number of upper layers partition_tree makes.
