@@ -134,10 +134,15 @@ struct Options {
   /// visible is an InvalidInput error at analyze (with no GPU at all, the factorization
   /// raises NotSupported instead). Ignored by the CPU backend.
   int num_gpus = 0;
-  /// Subtrees per GPU in that split (the paper's "additional sub-trees"): more gives the
-  /// largest-first assignment and work stealing finer pieces to balance with, at the cost
-  /// of a larger top part (default 4, at least 1).
-  int subtrees_per_gpu = 4;
+  /// Subtrees per GPU in that split, at least (the paper's "additional sub-trees"): more
+  /// gives the largest-first assignment and work stealing finer pieces to balance with,
+  /// at the cost of a larger top part and of smaller parts, which batch worse on a GPU
+  /// (each part is factored by levels on its own). Default 1 (at least 1): measured on 2
+  /// H200s with the list-scheduled upper parts, 1 against 4 took lap3d 100³ from 0.191 to
+  /// 0.172 s, elasticity 40³ from 0.059 to 0.047 s, lap3d 80³ 0.072 / 0.071 s
+  /// (bench/results/multigpu-20261123T042755Z.json); the split then still has more
+  /// subtrees wherever that lowers its estimate.
+  int subtrees_per_gpu = 1;
   /// With several GPUs and nested dissection: balance the top ⌈log₂(GPUs × subtrees)⌉
   /// bisections by estimated factorization work instead of vertex count (the paper's
   /// "balanced graph bisection"). Default off: measured on 3D Laplacians and elasticity

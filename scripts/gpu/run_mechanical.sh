@@ -54,6 +54,6 @@ for m in "${models[@]}"; do
   files+=("$dir/$name.mtx")
 done
 list=$(IFS=,; echo "${files[*]}")
-"$BIN/bench_multigpu" --backend "$backend" --workers "$workers" --subtrees 4 --balance off \
+"$BIN/bench_multigpu" --backend "$backend" --workers "$workers" --subtrees 1 --balance off \
   --stealing on --repeat 2 --tag mechanical --problems "$list" --results-dir "$RESULTS"
 rm -rf "$WORK"

@@ -224,6 +224,7 @@ TEST(MultiGpu, SlowGpuHasItsSubtreesStolen) {
     const SparseMatrix a = generators::laplacian_3d(24, 24, 24);
     Options o;
     o.type = MatrixType::spd;
+    o.subtrees_per_gpu = 4;  // several subtrees per GPU, to steal
     const Analysis an = analyze_matrix(a, o, gpus);
     std::vector<int> own(gpus, 0);
     for (int w : an.partition.owner) ++own[w];
@@ -281,6 +282,7 @@ TEST(MultiGpu, UpperLayersMatchOneGpuAndCpu) {
       SCOPED_TRACE(pr.name + ", " + std::to_string(gpus) + " GPUs");
       Options o;
       o.type = pr.type;
+      o.subtrees_per_gpu = 4;  // upper layers on these grids (asserted)
       const Analysis an = analyze_matrix(pr.a, o, gpus);
       ASSERT_GE(an.partition.n_upper_layers(), 1) << "no upper layer: the test would be vacuous";
       o.split_top = false;
@@ -327,6 +329,7 @@ TEST(MultiGpu, UpperLayersMatchOneGpuAndCpu) {
         so.type = pr.type;
         so.backend = Backend::cuda;
         so.num_gpus = gpus;
+        so.subtrees_per_gpu = 4;
         so.split_top = split;
         Solver s(so);
         s.factorize(pr.a);
@@ -367,6 +370,10 @@ TEST(MultiGpu, SplitFrontUpdatesMatchOneGpuAndCpu) {
       // the separator blocks these problems were chosen for: with the GPU Cholesky default
       // (4096) elasticity 16 at 2 GPUs had no front to split through the Solver (H200x2)
       o.max_block_size = 1024;
+      // only the top part's fronts are split (upper parts run while other GPUs may be
+      // busy): without upper layers the whole top of the tree is the top part (with them,
+      // lap3d 26 on 2 GPUs left only the root front there, which has no update to split)
+      o.split_top = false;
       const Analysis an = analyze_matrix(pr.a, o, gpus);
       double pivot = 0;
       const std::vector<double> v = test::scaled_values(an, pr.a, &pivot);

@@ -107,10 +107,13 @@ class Recording final : public numeric::Executor {
   int fail_part_;
 };
 
-// An analysis split for `workers` workers (also for one: then split on demand).
+// An analysis split for `workers` workers (also for one: then split on demand), with 4
+// subtrees per worker at least (not the default 1): more parts, transfers between them
+// and subtrees to steal.
 Analysis split_analysis(const SparseMatrix& a, MatrixType type, int workers) {
   Options o;
   o.type = type;
+  o.subtrees_per_gpu = 4;
   Analysis an = analyze_matrix(a, o, workers);
   if (workers == 1) {
     schedule::PartitionOptions po;
@@ -235,6 +238,7 @@ TEST(MultiWorker, UpperLayersGiveTheOneWorkerFactor) {
       SCOPED_TRACE(pr.name + ", " + std::to_string(workers) + " workers");
       Options o;
       o.type = pr.type;
+      o.subtrees_per_gpu = 4;  // upper layers on these small grids (asserted)
       const Analysis an = analyze_matrix(pr.a, o, workers);
       const auto& part = an.partition;
       ASSERT_GE(part.n_upper_layers(), 1)
@@ -292,6 +296,7 @@ TEST(MultiWorker, UpperLayersGiveTheOneWorkerFactor) {
       // through the Solver, against the dense solve
       Options so;
       so.type = pr.type;
+      so.subtrees_per_gpu = 4;
       Solver s(so);
       SolverAccess::use_host_workers(s, workers, 1);
       s.factorize(pr.a);
@@ -315,6 +320,7 @@ TEST(MultiWorker, UpperPartsDoNotWaitForUnrelatedSubtrees) {
       const SparseMatrix a = generators::laplacian_3d(k, k, k);
       Options o;
       o.type = MatrixType::spd;
+      o.subtrees_per_gpu = 4;  // upper parts on these small grids
       const Analysis an = analyze_matrix(a, o, workers);
       const auto& part = an.partition;
       const int n_sub = static_cast<int>(part.subtrees.size());
