@@ -367,13 +367,15 @@ TEST(MultiGpu, SplitFrontUpdatesMatchOneGpuAndCpu) {
       o.type = pr.type;
       o.split_front_min_cb = 1;
       o.gpu_panel_kernel_max_pivots = 0;
-      // the separator blocks these problems were chosen for: with the GPU Cholesky default
-      // (4096) elasticity 16 at 2 GPUs had no front to split through the Solver (H200x2)
-      o.max_block_size = 1024;
-      // only the top part's fronts are split (upper parts run while other GPUs may be
-      // busy): without upper layers the whole top of the tree is the top part (with them,
-      // lap3d 26 on 2 GPUs left only the root front there, which has no update to split)
+      // Only the top part's fronts are split (upper parts run while other GPUs may be
+      // busy), and a root front has no update to split: the top part must hold a separator
+      // chain. Without upper layers it is all of the tree above the subtrees; with 512-pivot
+      // separator blocks the root separators of these problems are chains (with 1024, lap3d
+      // 26's and unsymmetric lap3d 24's root fronts have 10 and 8 children, enough subtrees,
+      // and the top part was the root front alone: checked on the analysis on the host).
+      o.max_block_size = 512;
       o.split_top = false;
+      o.subtrees_per_gpu = 4;
       const Analysis an = analyze_matrix(pr.a, o, gpus);
       double pivot = 0;
       const std::vector<double> v = test::scaled_values(an, pr.a, &pivot);
