@@ -43,8 +43,11 @@ using json = nlohmann::json;
 int main(int argc, char** argv) {
   CLI::App app{"strata multi-worker factorization benchmark"};
   std::vector<std::string> problems = {"lap3d-30", "elast3d-14"};
-  std::vector<int> workers = {1, 2, 4}, subtrees = {4};
-  std::vector<std::string> balance = {"on", "off"}, stealing = {"on"}, split_top = {"on"};
+  // defaults: the library's (an ablation names its values)
+  std::vector<int> workers = {1, 2, 4}, subtrees = {Options{}.subtrees_per_gpu};
+  std::vector<std::string> balance = {Options{}.balance_by_work ? "on" : "off"},
+                           stealing = {Options{}.work_stealing ? "on" : "off"},
+                           split_top = {Options{}.split_top ? "on" : "off"};
   std::vector<double> budget_share = {0};
   std::vector<index_t> split_fronts = {Options{}.split_front_min_cb};
   std::string backend = "cpu";
