@@ -568,10 +568,11 @@ class GpuSections:
         self.w()
         self.w("Factorization time with 1, 2 and 4 GPUs (bench_multigpu: the tree split into "
                "subtrees per GPU, a top part shared), the speedup over 1 GPU, and the "
-               "ablation: the *default* configuration (the most subtrees per GPU in the run, "
+               "ablation: the *default* configuration (the most subtrees per GPU in the "
+               "problem's newest run: 1 since 6403d1a, 4 before; "
                "work stealing on, balance by work off — off by default because it did not "
                "balance the subtrees the GPUs get, docs/multigpu.md) against the same with one "
-               "feature changed: balance by work on, no extra subtrees (subtrees_per_gpu 1), no "
+               "feature changed: balance by work on, another subtrees_per_gpu, no "
                "stealing.")
         self.w()
         mg = [r for r in runs if r.kind == "multigpu"]
@@ -636,7 +637,16 @@ class GpuSections:
         # rows with large fronts' updates split over idle GPUs (--split-fronts > 0), apart,
         # each with the row of the same run, problem and GPUs without the split
         split_rows: dict[tuple, tuple] = {}
+        newest_s: dict = {}  # problem → the most subtrees per worker in its newest run
         for r in sorted(rs, key=lambda r: (r.date, r.name)):  # newer runs override
+            run_s: dict = {}
+            for row in r.rows:
+                if (isinstance(row, dict) and (num(row.get("workers")) or 0) > 1
+                        and not (num(row.get("split_front_min_cb")) or 0) > 0
+                        and not (num(row.get("budget_share_ratio")) or 0) > 0):
+                    x = int(num(row.get("subtrees_per_worker")) or 0)
+                    run_s[row.get("problem")] = max(run_s.get(row.get("problem"), 0), x)
+            newest_s.update(run_s)
             for row in r.rows:
                 if isinstance(row, dict) and (num(row.get("split_front_min_cb")) or 0) > 0:
                     off = next((x for x in r.rows if isinstance(x, dict)
@@ -660,6 +670,10 @@ class GpuSections:
         problems = list(dict.fromkeys(k[0] for k in cfg))
         workers = sorted({k[1] for k in cfg})
         s_max = {p: max(k[2] for k in cfg if k[0] == p) for p in problems}
+        # the default subtrees per worker: the most in the newest run of the problem (a
+        # run's default is the most it has: an ablation adds fewer; the library's default
+        # was 4 until 6403d1a, 1 since, so an older run's 4 must not stand for a newer 1)
+        s_def = {p: newest_s.get(p, s_max[p]) for p in problems}
 
         def t(p, w, s, bal, stl, split=True):
             return num(dig(cfg.get((p, w, s, bal, stl, split)), "factor_seconds"))
@@ -667,7 +681,8 @@ class GpuSections:
         speed_rows, abl_rows, dev_rows, curves = [], [], [], {}
         first_rows, phase_rows = [], []
         for p in problems:
-            s = s_max[p]
+            s = s_def[p]
+            s_alt = s_max[p] if s_max[p] != s else 1  # the ablation's other count
             base = t(p, 1, s, False, True)
             if base is None:  # one worker has no top part to split: either row will do
                 base = t(p, 1, s, False, True, False)
@@ -693,10 +708,12 @@ class GpuSections:
             for w in workers:
                 on = t(p, w, s, False, True)
                 cells = [str(p), str(w), str(s), f_sec(on)]
-                for alt in ((s, True, True, True), (1, False, True, True), (s, False, False, True),
-                            (s, False, True, False)):
+                for alt in ((s, True, True, True), (s_alt, False, True, True),
+                            (s, False, False, True), (s, False, True, False)):
                     x = t(p, w, *alt) if alt != (s, False, True, True) else None
-                    cells.append("–" if x is None else f"{f_sec(x)} ({f_ratio(ratio(x, on))})")
+                    cells.append("–" if x is None else
+                                 f"{f_sec(x)} ({f_ratio(ratio(x, on))})"
+                                 + (f" [{s_alt}]" if alt[0] != s else ""))
                 row = cfg.get((p, w, s, False, True, True)) or {}
                 layers = num(row.get("upper_layers"))
                 cells.append("–" if layers is None else
@@ -713,7 +730,8 @@ class GpuSections:
                                      f_int(d.get("upper_parts_run")),
                                      f_int(d.get("bytes_transferred")), f_g(d.get("flops"))])
         self.w(f"On {machine_label(machine)}; seconds: median of the run's factorizations "
-               f"with the default configuration (the most subtrees per {unit} in the run, work "
+               f"with the default configuration (the most subtrees per {unit} in the problem's "
+               f"newest run — 1 since 6403d1a, 4 before; work "
                f"stealing on, work-balanced bisection off — Options' defaults); speedup: time with 1 {unit} over time with W; "
                f"efficiency: speedup / W.")
         self.w()
@@ -749,7 +767,8 @@ class GpuSections:
                    "as the driver stores them), default configuration:")
             self.w()
             self.w(table(["problem", unit + "s"] + [n for _, n in self.PHASES], phase_rows, 1))
-        self.w("Ablation: time of the defaults (*default*: subtrees per GPU as in the run, "
+        self.w("Ablation: time of the defaults (*default*: subtrees per GPU as in the speedup "
+               "table; *other subtrees*: the run's other count, in square brackets, "
                "stealing on, balance by work off, top split into upper layers on) and with one "
                "feature changed, seconds (in brackets: over *default*; below 1, the change "
                "helps). – where the run did not include that configuration (the driver runs the "
@@ -759,7 +778,7 @@ class GpuSections:
                "the flops in them / share left in the top part.")
         self.w()
         self.w(table(["problem", "workers", "subtrees per worker", "default s",
-                      "balance by work on", "subtrees 1", "no stealing", "no top split",
+                      "balance by work on", "other subtrees", "no stealing", "no top split",
                       "top split"], abl_rows, 2))
         if budget:
             brows = []
