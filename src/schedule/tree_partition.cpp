@@ -430,8 +430,8 @@ TreePartition partition_tree(const symbolic::AssemblyTree& t, const PartitionOpt
     std::size_t parts;
   };
   std::vector<Candidate> candidates;
-  const auto state = [&](std::size_t k, std::vector<index_t>& r, std::vector<int>& own) {
-    r = state_roots(t, w, sequence, k, all);
+  // the LPT owners of state roots r, and their upper layers
+  const auto plan_state = [&](const std::vector<index_t>& r, std::vector<int>& own) {
     std::vector<double> items;
     for (const index_t x : r) items.push_back(w[x]);
     own = lpt_assign(items, o.workers);
@@ -439,10 +439,10 @@ TreePartition partition_tree(const symbolic::AssemblyTree& t, const PartitionOpt
   };
   double best_estimate = 0;
   for (std::size_t k = 0; k < n_states; ++k) {
-    std::vector<index_t> r;
+    const std::vector<index_t> r = state_roots(t, w, sequence, k, all);
+    if (any_enough && r.size() < target) continue;
     std::vector<int> own;
-    if (any_enough && state_roots(t, w, sequence, k, all).size() < target) continue;
-    const UpperPlan p = state(k, r, own);
+    const UpperPlan p = plan_state(r, own);
     std::size_t parts = r.size();
     for (const Layer& l : p.layers) parts += l.roots.size();
     candidates.push_back({k, p.estimate, parts});
@@ -454,9 +454,9 @@ TreePartition partition_tree(const symbolic::AssemblyTree& t, const PartitionOpt
         (!pick || c.parts < pick->parts || (c.parts == pick->parts && c.estimate < pick->estimate)))
       pick = &c;
   const std::size_t best_k = pick ? pick->k : 0;
-  std::vector<index_t> roots;
+  const std::vector<index_t> roots = state_roots(t, w, sequence, best_k, all);
   std::vector<int> owner;
-  const UpperPlan plan = state(best_k, roots, owner);
+  const UpperPlan plan = plan_state(roots, owner);
   out.splits = static_cast<index_t>(best_k);
   out.owner = owner;
   out.part_of.assign(nf, -1);
