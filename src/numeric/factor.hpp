@@ -171,6 +171,12 @@ class Executor {
   virtual void download_panels(const Analysis& an, NumericFactor& fac) {
     throw InvalidState("download_panels: this executor holds no factor panels");
   }
+  /// After begin_part of a part of a multi-worker factorization: true when that part's
+  /// panels stay in the executor's memory only (FactorContext::keep_part_panels honoured;
+  /// their place in factor.panels is not written). The driver sizes factor.panels (the
+  /// whole factor, zero-filled: seconds for a factor of several GB) only before a part
+  /// whose panels do go there. The default: they go there.
+  virtual bool keeps_part_panels(const FactorContext& ctx) const { return false; }
   /// After a multi-worker factorization with FactorContext::keep_part_panels: true when
   /// this executor kept the panels of some of its parts in its own memory only (their
   /// place in factor.panels is then stale until download_panels).

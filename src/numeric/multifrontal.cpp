@@ -118,6 +118,8 @@ void fetch_panels(const Analysis& an, Executor& exec, NumericFactor& fac) {
 
 void fetch_panels(const Analysis& an, const std::vector<Executor*>& execs, NumericFactor& fac) {
   if (fac.panels_on_host) return;
+  // unsized when every part's panels stayed on the devices (factorize_multi)
+  sized_resize(fac.panels, an.factor_layout.total, "fetch_panels: factor panels");
   for (Executor* e : execs)
     if (e->holds_part_panels()) e->download_panels(an, fac);
   fac.panels_on_host = true;

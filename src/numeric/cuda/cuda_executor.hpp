@@ -117,6 +117,9 @@ class CudaExecutor final : public numeric::Executor {
   bool solve(const Analysis& an, const numeric::NumericFactor& fac, double* x,
              index_t nrhs) override;
   bool keeps_panels(const numeric::FactorContext& ctx) const override { return device_only_; }
+  bool keeps_part_panels(const numeric::FactorContext& ctx) const override {
+    return part_device_only_;
+  }
   void download_panels(const Analysis& an, numeric::NumericFactor& fac) override;
   bool holds_part_panels() const override { return !held_parts_.empty(); }
   void end_part(const numeric::FactorContext& ctx) override;
