@@ -6,7 +6,9 @@
 // the distributed factor, a slowed worker has its subtrees stolen, and errors propagate.
 // The top part is split into upper layers by default (Options::split_top); a dedicated
 // test asserts that it is, and compares with the split off and a dense solve; it also
-// checks which executors each part is lent as helpers (FactorContext::helpers).
+// checks which executors each part is lent as helpers (FactorContext::helpers). Upper
+// parts start without waiting for unrelated subtrees (no barrier between layers), and the
+// host panels are sized only when some part's panels go there.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -526,6 +528,64 @@ TEST(MultiWorker, SlowWorkerHasItsSubtreesStolen) {
         }
       }
     }
+}
+
+// Executors that keep every part's panels in their own memory (a stand-in for GPUs, which
+// factor nothing here) leave factor.panels unsized — sizing it zero-filled the whole
+// factor's host copy, seconds for a large one, that no one read — and fetch_panels sizes
+// it and fills it from them; one executor that does not keep its parts' panels (a CPU
+// executor) makes the driver size it before that part.
+class KeepsPanels final : public numeric::Executor {
+ public:
+  explicit KeepsPanels(double marker) : marker_(marker) {}
+  const char* name() const override { return "keeps-panels"; }
+  void factor_batch(const numeric::FactorContext&, const BatchInfo&) override {}
+  std::size_t export_cb(const numeric::FactorContext&, numeric::CbTransfer& t) override {
+    std::fill_n(t.host_buffer(), t.size, 0.0);  // a block for a host importer
+    t.on_host = true;
+    return 0;
+  }
+  std::size_t import_cb(const numeric::FactorContext&, const numeric::CbTransfer&) override {
+    return 0;
+  }
+  bool keeps_part_panels(const numeric::FactorContext&) const override { return true; }
+  bool holds_part_panels() const override { return true; }
+  void download_panels(const Analysis& an, numeric::NumericFactor& fac) override {
+    ASSERT_EQ(fac.panels.size(), static_cast<std::size_t>(an.factor_layout.total));
+    for (double& x : fac.panels) x += marker_;
+  }
+
+ private:
+  double marker_;
+};
+
+TEST(MultiWorker, HostPanelsSizedOnlyWhenAPartWritesThem) {
+  const SparseMatrix a = generators::laplacian_3d(10, 10, 10);
+  const Analysis an = split_analysis(a, MatrixType::spd, 2);
+  double pivot = 0;
+  const std::vector<double> v = test::scaled_values(an, a, &pivot);
+  const auto total = static_cast<std::size_t>(an.factor_layout.total);
+  ASSERT_GT(total, 0u);
+  KeepsPanels k0(1.0), k1(2.0);
+  std::vector<std::vector<double>> arenas;
+  {
+    numeric::NumericFactor f;
+    numeric::factorize_multi(an, v, MatrixType::spd, pivot, {&k0, &k1}, f, arenas, {}, nullptr);
+    EXPECT_TRUE(f.panels.empty()) << "host panels sized though every part kept its panels";
+    EXPECT_FALSE(f.panels_on_host);
+    numeric::fetch_panels(an, std::vector<numeric::Executor*>{&k0, &k1}, f);
+    ASSERT_EQ(f.panels.size(), total);
+    EXPECT_TRUE(f.panels_on_host);
+    for (double x : f.panels) ASSERT_EQ(x, 3.0);  // zero-filled by fetch, then both added
+  }
+  {  // one CPU executor: its parts' panels go to the host, sized before it writes them
+    const auto cpu = numeric::make_cpu_executor(1);
+    numeric::NumericFactor f;
+    numeric::factorize_multi(an, v, MatrixType::spd, pivot, {cpu.get(), &k1}, f, arenas, {},
+                             nullptr);
+    EXPECT_EQ(f.panels.size(), total);
+    EXPECT_FALSE(f.panels_on_host);  // k1 holds the panels of its parts
+  }
 }
 
 // A worker that fails stops the others, every thread is joined, and the first error
