@@ -678,7 +678,7 @@ class GpuSections:
         def t(p, w, s, bal, stl, split=True):
             return num(dig(cfg.get((p, w, s, bal, stl, split)), "factor_seconds"))
 
-        speed_rows, abl_rows, dev_rows, curves = [], [], [], {}
+        speed_rows, abl_rows, dev_rows, curves, est_cells = [], [], [], {}, []
         first_rows, phase_rows = [], []
         for p in problems:
             s = s_def[p]
@@ -693,6 +693,10 @@ class GpuSections:
             line += [f"{x:.2f}" if x is not None else "–" for w, x in sp if w > 1]
             line += [f"{x / w:.0%}" if x is not None else "–" for w, x in sp if w > 1]
             curves[p] = [(w, x) for w, x in sp if x is not None]
+            # the split's own estimate (flops only, AnalysisStats::estimated_speedup; rows
+            # since 5721ec8), beside the measured speedup
+            est_cells.append([num(dig(cfg.get((p, w, s, False, True, True)), "estimated_speedup"))
+                              for w in workers if w > 1])
             speed_rows.append(line)
             for w in workers:
                 row = cfg.get((p, w, s, False, True, True)) or {}
@@ -735,10 +739,21 @@ class GpuSections:
                f"stealing on, work-balanced bisection off — Options' defaults); speedup: time with 1 {unit} over time with W; "
                f"efficiency: speedup / W.")
         self.w()
+        est_head = []
+        if any(x is not None for cells in est_cells for x in cells):
+            est_head = [f"estimate {w}" for w in workers if w > 1]
+            for line, cells in zip(speed_rows, est_cells):
+                line += [f"{x:.2f}" if x is not None else "–" for x in cells]
         self.w(table(["problem", "n", "flops"] + [f"{w} {unit} s" for w in workers]
                      + [f"speedup {w}" for w in workers if w > 1]
-                     + [f"efficiency {w}" for w in workers if w > 1],
+                     + [f"efficiency {w}" for w in workers if w > 1] + est_head,
                      speed_rows))
+        if est_head:
+            self.w("*estimate W*: the speedup the tree split allows by flops alone "
+                   "(`AnalysisStats::estimated_speedup`: total flops over the list schedule's "
+                   "end + the top part's work; transfers and batching not counted), where the "
+                   "run recorded it.")
+            self.w()
         slower = [(p, w, x) for p, c in curves.items() for w, x in c if w > 1 and x < 1]
         if slower and unit == "GPU":
             self.behind_notes.append(
