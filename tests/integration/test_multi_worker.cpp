@@ -109,6 +109,19 @@ class Recording final : public numeric::Executor {
   int fail_part_;
 };
 
+// `workers` Recording executors (failing at part fail_part, see Recording) and the
+// executor pointers factorize_multi takes.
+struct Recorders {
+  Recorders(int workers, index_t n_fronts, int fail_part = -2) {
+    for (int w = 0; w < workers; ++w) {
+      rec.push_back(std::make_unique<Recording>(n_fronts, fail_part));
+      execs.push_back(rec.back().get());
+    }
+  }
+  std::vector<std::unique_ptr<Recording>> rec;
+  std::vector<numeric::Executor*> execs;
+};
+
 // An analysis split for `workers` workers (also for one: then split on demand), with 4
 // subtrees per worker at least (not the default 1): more parts, transfers between them
 // and subtrees to steal.
@@ -158,12 +171,9 @@ TEST(MultiWorker, FactorBitwiseEqualsOneExecutorAndEveryFrontOnce) {
       auto cpu = numeric::make_cpu_executor(1);
       numeric::factorize(an, v, pr.type, pivot, *cpu, one, arena);
 
-      std::vector<std::unique_ptr<Recording>> rec;
-      std::vector<numeric::Executor*> execs;
-      for (int w = 0; w < workers; ++w) {
-        rec.push_back(std::make_unique<Recording>(an.tree.n_fronts()));
-        execs.push_back(rec.back().get());
-      }
+      Recorders recorders(workers, an.tree.n_fronts());
+      auto& rec = recorders.rec;
+      const auto& execs = recorders.execs;
       std::vector<std::vector<double>> arenas;
       std::vector<DeviceStats> dev;
       numeric::factorize_multi(an, v, pr.type, pivot, execs, many, arenas, {}, &dev);
@@ -250,12 +260,9 @@ TEST(MultiWorker, UpperLayersGiveTheOneWorkerFactor) {
       numeric::NumericFactor one;
       std::vector<double> arena;
       numeric::factorize(an, v, pr.type, pivot, *numeric::make_cpu_executor(1), one, arena);
-      std::vector<std::unique_ptr<Recording>> rec;
-      std::vector<numeric::Executor*> execs;
-      for (int w = 0; w < workers; ++w) {
-        rec.push_back(std::make_unique<Recording>(an.tree.n_fronts()));
-        execs.push_back(rec.back().get());
-      }
+      Recorders recorders(workers, an.tree.n_fronts());
+      auto& rec = recorders.rec;
+      const auto& execs = recorders.execs;
       numeric::NumericFactor many;
       std::vector<std::vector<double>> arenas;
       std::vector<DeviceStats> dev;
@@ -360,12 +367,9 @@ TEST(MultiWorker, UpperPartsDoNotWaitForUnrelatedSubtrees) {
       numeric::NumericFactor one;
       std::vector<double> arena;
       numeric::factorize(an, v, MatrixType::spd, pivot, *numeric::make_cpu_executor(1), one, arena);
-      std::vector<std::unique_ptr<Recording>> rec;
-      std::vector<numeric::Executor*> execs;
-      for (int w = 0; w < workers; ++w) {
-        rec.push_back(std::make_unique<Recording>(an.tree.n_fronts()));
-        execs.push_back(rec.back().get());
-      }
+      Recorders recorders(workers, an.tree.n_fronts());
+      auto& rec = recorders.rec;
+      const auto& execs = recorders.execs;
       numeric::MultiWorkerConfig cfg;
       cfg.work_stealing = false;
       cfg.injected_delay.assign(workers, 0.0);
@@ -603,12 +607,8 @@ TEST(MultiWorker, ErrorsPropagate) {
     SCOPED_TRACE("failing part " + std::to_string(failing));
     double pivot = 0;
     const std::vector<double> v = test::scaled_values(an, a, &pivot);
-    std::vector<std::unique_ptr<Recording>> rec;
-    std::vector<numeric::Executor*> execs;
-    for (int w = 0; w < 3; ++w) {
-      rec.push_back(std::make_unique<Recording>(an.tree.n_fronts(), failing));
-      execs.push_back(rec.back().get());
-    }
+    Recorders recorders(3, an.tree.n_fronts(), failing);
+    const auto& execs = recorders.execs;
     numeric::NumericFactor f;
     std::vector<std::vector<double>> arenas;
     EXPECT_THROW(
