@@ -6,7 +6,9 @@
 //   * the compressed file reads exactly like the plain text (same matrix, or the same
 //     error message: both files have the same path);
 //   * when c < 128 the compressed file is cut to c/128 of its length: a truncated gzip
-//     file must be a ParseError, never a matrix (Z_BUF_ERROR detection in LineReader).
+//     file must be a ParseError, never a matrix (Z_BUF_ERROR detection in LineReader) —
+//     or the NotSupported the whole text gives, when the part that decompresses already
+//     names a kind the reader refuses (found by this target: a cut "hermitian" file).
 // Seeds: fuzz/corpus/matrix_market_gz (a leading byte 0xff, "do not cut", then a small
 // Matrix Market text).
 #include <zlib.h>
@@ -70,6 +72,13 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       (void)strata::read_matrix_market(input.write(z.data(), z.size()));
       finding("a truncated gzip file was read without error");
     } catch (const strata::ParseError&) {
+    } catch (const strata::NotSupported& e) {
+      // the part that decompresses can already name a kind the reader refuses (a
+      // "hermitian" header): the same refusal as the whole text's, before any truncation
+      // is reached, is right
+      if (plain_ok || plain_error != e.what())
+        finding(std::string("a truncated gzip file gave NotSupported unlike its text: ") +
+                e.what());
     } catch (const strata::Error& e) {
       finding(std::string("a truncated gzip file gave an error other than ParseError: ") +
               e.what());
