@@ -78,6 +78,24 @@ struct AnalysisStats {
   double total_seconds = 0;
 };
 
+/// One part of the tree split (AnalysisStats::subtrees, the upper parts, the top part)
+/// as a worker of a multi-worker factorization ran it (DeviceStats::parts): a timeline
+/// of the factorization, to see which worker waited for what.
+struct PartRun {
+  enum class Kind { subtree, upper, top };
+  Kind kind = Kind::subtree;
+  /// The part's index among its kind: subtree i (0-based, largest work first, as in the
+  /// analysis), upper part i (layer by layer), or 0 for the top part.
+  index_t index = 0;
+  bool stolen = false;  ///< a subtree taken from another worker's queue
+  /// Host-clock seconds from the start of the factorization: when the worker began the
+  /// part (after waiting for the parts it imports from; its imports included), and when
+  /// it was done (its last batch finished on the device, its root's block exported).
+  double start_seconds = 0;
+  double end_seconds = 0;
+  double flops = 0;  ///< Σ front flops of the part (Cholesky count)
+};
+
 /// One worker (a GPU, or a host executor) of a multi-worker factorization.
 struct DeviceStats {
   int worker = 0;
@@ -94,6 +112,7 @@ struct DeviceStats {
   /// Column strips of other GPUs' fronts it updated (not counted in busy_seconds; their
   /// bytes, in and out, are in bytes_transferred).
   index_t strips_helped = 0;
+  std::vector<PartRun> parts;  ///< the parts it factored, in the order it ran them
 };
 
 /// Results of the last factorize/refactorize.

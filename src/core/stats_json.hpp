@@ -25,6 +25,19 @@ inline void to_json(nlohmann::json& j, const FactorStats::DevicePhases& d) {
        {"tiled_store", d.tiled_store}};
 }
 
+/// One part a worker ran (DeviceStats::parts).
+inline void to_json(nlohmann::json& j, const PartRun& r) {
+  const char* kind = r.kind == PartRun::Kind::subtree ? "subtree"
+                     : r.kind == PartRun::Kind::upper ? "upper"
+                                                      : "top";
+  j = {{"kind", kind},
+       {"index", r.index},
+       {"stolen", r.stolen},
+       {"start_seconds", r.start_seconds},
+       {"end_seconds", r.end_seconds},
+       {"flops", r.flops}};
+}
+
 /// One worker (GPU) of a multi-worker factorization (FactorStats::devices).
 inline void to_json(nlohmann::json& j, const DeviceStats& d) {
   j = {{"worker", d.worker},
@@ -37,7 +50,8 @@ inline void to_json(nlohmann::json& j, const DeviceStats& d) {
        {"bytes_transferred", d.bytes_transferred},
        {"flops", d.flops},
        {"fronts_split", d.fronts_split},
-       {"strips_helped", d.strips_helped}};
+       {"strips_helped", d.strips_helped},
+       {"parts", d.parts}};
 }
 
 /// One MPI rank of a distributed run (DistributedStats::per_rank).

@@ -269,6 +269,11 @@ void factorize_multi(const Analysis& an, const std::vector<double>& scaled_value
   // One part on worker w (its executor begun): begin_part, the blocks of its children in
   // other parts imported, its batches, its root's block exported, end_part.
   auto factor_one = [&](int w, int id, bool export_here, std::vector<Executor*> helpers = {}) {
+    PartRun run;
+    run.kind = id < n_sub ? PartRun::Kind::subtree
+                          : (id == n_sub ? PartRun::Kind::top : PartRun::Kind::upper);
+    run.index = id < n_sub ? id : (id == n_sub ? 0 : id - n_sub - 1);
+    run.start_seconds = wall.seconds();
     Executor& ex = *execs[w];
     const schedule::FactorPart& fp = part.part(id);
     const PartView view = PartView::of(fp, id);
@@ -287,6 +292,9 @@ void factorize_multi(const Analysis& an, const std::vector<double>& scaled_value
       st[w].bytes_transferred += ex.export_cb(ctx, transfer[id]);
     ex.end_part(ctx);
     st[w].flops += fp.work;
+    run.end_seconds = wall.seconds();
+    run.flops = fp.work;
+    st[w].parts.push_back(run);
   };
 
   // layer 0: the subtrees from the queues
@@ -311,6 +319,7 @@ void factorize_multi(const Analysis& an, const std::vector<double>& scaled_value
         st[w].busy_seconds += busy.seconds();
         ++st[w].subtrees_run;
         st[w].subtrees_stolen += stolen ? 1 : 0;
+        st[w].parts.back().stolen = stolen;
         mark_done(i);
       }
       // then this worker's upper parts, in layer order (decreasing work within a layer),

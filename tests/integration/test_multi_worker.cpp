@@ -157,6 +157,47 @@ void expect_same_factor(const numeric::NumericFactor& x, const numeric::NumericF
 
 // 1, 2, 3 and 4 workers give bitwise the factor of one executor on the whole tree, and
 // every front is factored exactly once.
+// The workers' part logs (DeviceStats::parts): every part once, on the worker that ran
+// it (upper parts on their owners, the top on worker 0), with its work, in time order
+// per worker, and each part begun only after every part it imports from had ended.
+void expect_part_log(const schedule::TreePartition& part, const std::vector<DeviceStats>& dev) {
+  const int n_sub = static_cast<int>(part.subtrees.size());
+  std::vector<const PartRun*> by_id(part.n_parts(), nullptr);
+  std::vector<int> worker_of(part.n_parts(), -1);
+  for (std::size_t w = 0; w < dev.size(); ++w) {
+    double last_end = 0;
+    index_t stolen = 0;
+    for (const PartRun& r : dev[w].parts) {
+      const int id = r.kind == PartRun::Kind::subtree ? static_cast<int>(r.index)
+                     : r.kind == PartRun::Kind::top   ? n_sub
+                                                      : n_sub + 1 + static_cast<int>(r.index);
+      ASSERT_GE(id, 0);
+      ASSERT_LT(id, part.n_parts());
+      EXPECT_EQ(by_id[id], nullptr) << "part " << id << " logged twice";
+      by_id[id] = &r;
+      worker_of[id] = static_cast<int>(w);
+      EXPECT_NEAR(r.flops, part.part(id).work, 1e-9 * std::max(1.0, r.flops));
+      EXPECT_LE(last_end, r.start_seconds) << "worker " << w << " ran two parts at once";
+      EXPECT_LE(r.start_seconds, r.end_seconds);
+      last_end = r.end_seconds;
+      stolen += r.stolen ? 1 : 0;
+      if (r.stolen) EXPECT_EQ(r.kind, PartRun::Kind::subtree);
+    }
+    EXPECT_EQ(stolen, dev[w].subtrees_stolen);
+  }
+  for (int id = 0; id < part.n_parts(); ++id) {
+    ASSERT_NE(by_id[id], nullptr) << "part " << id << " not logged";
+    if (id == n_sub) EXPECT_EQ(worker_of[id], 0);
+    if (id > n_sub) EXPECT_EQ(worker_of[id], part.upper_owner[id - n_sub - 1]);
+    for (index_t c : part.part(id).imports) {
+      const PartRun* below = by_id[part.part_id[c]];
+      ASSERT_NE(below, nullptr);
+      EXPECT_LE(below->end_seconds, by_id[id]->start_seconds)
+          << "part " << id << " began before part " << part.part_id[c] << " had ended";
+    }
+  }
+}
+
 TEST(MultiWorker, FactorBitwiseEqualsOneExecutorAndEveryFrontOnce) {
   auto rng = test::fresh_rng();
   int with_upper_layers = 0;  // runs whose top part was split (so the test covers them)
@@ -200,6 +241,7 @@ TEST(MultiWorker, FactorBitwiseEqualsOneExecutorAndEveryFrontOnce) {
       const auto& part = an.partition;
       EXPECT_EQ(run, static_cast<index_t>(part.subtrees.size()));
       EXPECT_EQ(upper_run, static_cast<index_t>(part.upper.size()));
+      expect_part_log(part, dev);
       // each upper part on its owner
       for (std::size_t k = 0; k < part.upper.size(); ++k)
         for (index_t f : part.upper[k].fronts) EXPECT_EQ(rec[part.upper_owner[k]]->count[f], 1);
