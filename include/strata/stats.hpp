@@ -109,6 +109,9 @@ struct DeviceStats {
   double flops = 0;                   ///< Σ front flops (Cholesky count) it factored
   /// Fronts of its parts whose update it split over idle GPUs (Options::split_front_min_cb).
   index_t fronts_split = 0;
+  /// Fronts of its parts factored over it and the idle GPUs, columns distributed
+  /// (Options::distributed_front_min_rows).
+  index_t fronts_distributed = 0;
   /// Column strips of other GPUs' fronts it updated (not counted in busy_seconds; their
   /// bytes, in and out, are in bytes_transferred).
   index_t strips_helped = 0;

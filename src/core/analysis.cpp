@@ -316,6 +316,9 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers)
   if (opts.gpu_potrf_block_size < 0)
     throw InvalidInput("Options::gpu_potrf_block_size must be at least 0 (got " +
                        std::to_string(opts.gpu_potrf_block_size) + ")");
+  if (opts.distributed_front_min_rows < 0)
+    throw InvalidInput("Options::distributed_front_min_rows must be at least 0 (got " +
+                       std::to_string(opts.distributed_front_min_rows) + ")");
   if (opts.split_front_min_cb < 0)
     throw InvalidInput("Options::split_front_min_cb must be at least 0 (got " +
                        std::to_string(opts.split_front_min_cb) + ")");

@@ -50,6 +50,7 @@ inline void to_json(nlohmann::json& j, const DeviceStats& d) {
        {"bytes_transferred", d.bytes_transferred},
        {"flops", d.flops},
        {"fronts_split", d.fronts_split},
+       {"fronts_distributed", d.fronts_distributed},
        {"strips_helped", d.strips_helped},
        {"parts", d.parts}};
 }

@@ -3,9 +3,10 @@
 // the same analysis, through the Solver (solve, refactorization, per-GPU statistics),
 // with a slowed GPU whose subtrees are stolen, with the top part split into upper layers
 // (on by default; one test asserts it and compares with the split off), for spd,
-// symmetric indefinite and general matrices, and with large fronts' updates split over the
-// idle GPUs (forced onto small fronts). Each test skips, with a message, where fewer GPUs are
-// visible than it needs (or the build has no CUDA backend).
+// symmetric indefinite and general matrices, with large fronts' updates split over the
+// idle GPUs and with top fronts factored over all GPUs (both forced onto small fronts). Each test
+// skips, with a message, where fewer GPUs are visible than it needs (or the build has no CUDA
+// backend).
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -419,6 +420,117 @@ TEST(MultiGpu, SplitFrontUpdatesMatchOneGpuAndCpu) {
       const auto x = s.solve(b);
       EXPECT_LE(test::backward_error(pr.a, x.data(), b.data()), 1e-14);
     }
+  }
+}
+
+// Fronts factored whole over the idle GPUs, columns in blocks of 512 dealt out
+// cyclically (distributed_front.cu), forced onto every top-part front with enough columns
+// (distributed_front_min_rows 1; panel kernels off): the LLᵀ factor agrees entrywise with
+// one GPU's and the CPU's, on fronts of several pivot blocks (lap3d 40's root separator
+// has 1,600 pivots: 4 blocks, so the lookahead and every GPU's panels are exercised), in
+// random-valued SPD matrices of awkward sizes too; the Solver's refactorization and
+// statistics show it. A negative pivot placed in the root front's second block (held by
+// GPU 1) is reported at the same column as on the CPU: the per-block statuses gathered
+// from the GPUs give the front's status as one POTRF would.
+TEST(MultiGpu, DistributedFrontsMatchOneGpuAndCpu) {
+  REQUIRE_GPUS(2);
+  auto rng = test::fresh_rng();
+  std::vector<Problem> ps;
+  ps.push_back({"lap3d 40", generators::laplacian_3d(40, 40, 40), MatrixType::spd});
+  ps.push_back({"elasticity 15", generators::elasticity_3d(15, 15, 15), MatrixType::spd});
+  {  // random positive values on lap3d 33's pattern, made diagonally dominant
+    SparseMatrix a = generators::laplacian_3d(33, 33, 33);
+    std::uniform_real_distribution<double> u(0.5, 1.5);
+    for (index_t j = 0; j < a.n_cols; ++j)
+      for (index_t q = a.offsets[j]; q < a.offsets[j + 1]; ++q)
+        a.values[q] = a.indices[q] == j ? 7.0 + u(rng) : -u(rng);
+    ps.push_back({"random-valued lap3d 33", std::move(a), MatrixType::spd});
+  }
+  for (int gpus : {2, 3, 4}) {
+    if (numeric::cuda_device_count() < gpus) continue;
+    for (const Problem& pr : ps) {
+      SCOPED_TRACE(pr.name + ", " + std::to_string(gpus) + " GPUs");
+      Options o;
+      o.type = pr.type;
+      o.distributed_front_min_rows = 1;
+      o.gpu_panel_kernel_max_pivots = 0;
+      o.max_block_size = 4096;  // the CUDA backend's: separators of up to 4,096 pivots
+      o.split_top = false;
+      o.subtrees_per_gpu = 2;
+      const Analysis an = analyze_matrix(pr.a, o, gpus);
+      double pivot = 0;
+      const std::vector<double> v = test::scaled_values(an, pr.a, &pivot);
+      numeric::NumericFactor cpu_f, gpu1_f, dist_f;
+      reference_factors(an, v, pr.type, pivot, o, cpu_f, gpu1_f);
+      const GpuExecutors gpu(o, gpus);
+      std::vector<std::vector<double>> arenas;
+      std::vector<DeviceStats> dev;
+      numeric::factorize_multi(an, v, pr.type, pivot, gpu.execs, dist_f, arenas, {}, &dev);
+      index_t distributed = 0;
+      for (const DeviceStats& d : dev) distributed += d.fronts_distributed;
+      EXPECT_GT(distributed, 0) << "no front was distributed: the test would be vacuous";
+      EXPECT_EQ(dev[0].fronts_distributed, distributed) << "only GPU 0 owns top fronts";
+      EXPECT_GT(dev[1].bytes_transferred, 0u);
+      EXPECT_LT(test::relative_difference(dist_f.panels, gpu1_f.panels), 1e-12);
+      EXPECT_LT(test::relative_difference(dist_f.panels, cpu_f.panels), 1e-12);
+      EXPECT_EQ(dist_f.rows, cpu_f.rows);
+      std::vector<double> b(pr.a.n_rows);
+      std::uniform_real_distribution<double> u(-1, 1);
+      for (double& x : b) x = u(rng);
+      EXPECT_LT(test::relative_difference(solve_with(an, dist_f, b), solve_with(an, cpu_f, b)),
+                1e-10);
+      // through the Solver, refactorization included
+      Options so = o;
+      so.backend = Backend::cuda;
+      so.num_gpus = gpus;
+      Solver s(so);
+      s.factorize(pr.a);
+      s.refactorize(pr.a);
+      index_t solver_distributed = 0;
+      for (const DeviceStats& d : s.stats().factor.devices)
+        solver_distributed += d.fronts_distributed;
+      EXPECT_GT(solver_distributed, 0);
+      const auto x = s.solve(b);
+      EXPECT_LE(test::backward_error(pr.a, x.data(), b.data()), 1e-14);
+    }
+    // not positive definite in the root front's second column block
+    SCOPED_TRACE("negative pivot, " + std::to_string(gpus) + " GPUs");
+    SparseMatrix a = generators::laplacian_3d(40, 40, 40);
+    Options o;
+    o.type = MatrixType::spd;
+    o.distributed_front_min_rows = 1;
+    o.gpu_panel_kernel_max_pivots = 0;
+    o.max_block_size = 4096;
+    o.split_top = false;
+    o.subtrees_per_gpu = 2;
+    const Analysis an = analyze_matrix(a, o, gpus);  // the pattern's: values changed below
+    const index_t root = an.tree.n_fronts() - 1;
+    ASSERT_EQ(an.tree.parent[root], -1);
+    ASSERT_GT(an.tree.n_pivots(root), 600) << "the root front has no second block";
+    const index_t n = a.n_rows;
+    const index_t target = an.perm[n - an.tree.n_pivots(root) + 600];  // its 601st pivot
+    for (index_t q = a.offsets[target]; q < a.offsets[target + 1]; ++q)
+      if (a.indices[q] == target) a.values[q] = -100.0;
+    double pivot = 0;
+    const std::vector<double> v = test::scaled_values(an, a, &pivot);
+    index_t cpu_column = -1, gpu_column = -2;
+    try {
+      numeric::NumericFactor f;
+      std::vector<double> arena;
+      numeric::factorize(an, v, MatrixType::spd, pivot, *numeric::make_cpu_executor(2), f, arena);
+    } catch (const NotPositiveDefinite& e) {
+      cpu_column = e.column();
+    }
+    try {
+      const GpuExecutors gpu(o, gpus);
+      std::vector<std::vector<double>> arenas;
+      numeric::NumericFactor f;
+      numeric::factorize_multi(an, v, MatrixType::spd, pivot, gpu.execs, f, arenas, {}, nullptr);
+    } catch (const NotPositiveDefinite& e) {
+      gpu_column = e.column();
+    }
+    EXPECT_GE(cpu_column, 0) << "the CPU found no negative pivot";
+    EXPECT_EQ(gpu_column, cpu_column);
   }
 }
 

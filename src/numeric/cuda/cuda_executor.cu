@@ -99,6 +99,7 @@ CudaExecutor::CudaExecutor(const Options& o, int device)
       limit_(o.device_memory_limit),
       panel_max_pivots_(o.gpu_panel_kernel_max_pivots),
       split_min_cb_(o.split_front_min_cb),
+      dist_min_rows_(o.distributed_front_min_rows),
       potrf_block_(static_cast<int>(o.gpu_potrf_block_size)),
       recursive_panel_(o.gpu_recursive_panel) {
   STRATA_CUDA(cudaSetDevice(device_));
@@ -112,8 +113,9 @@ CudaExecutor::CudaExecutor(const Options& o, int device)
   STRATA_CUDA(cudaEventCreateWithFlags(&panels_done_, cudaEventDisableTiming));
   STRATA_CUDA(cudaStreamCreateWithFlags(&copy_stream_, cudaStreamNonBlocking));
   STRATA_CUDA(cudaEventCreateWithFlags(&panels_copied_, cudaEventDisableTiming));
-  for (cudaEvent_t* e : {&split_ready_, &help_ready_, &help_done_})
+  for (cudaEvent_t* e : {&split_ready_, &help_ready_, &help_done_, &dist_ready_, &dist_done_})
     STRATA_CUDA(cudaEventCreateWithFlags(e, cudaEventDisableTiming));
+  STRATA_CUDA(cudaStreamCreateWithFlags(&dist_copy_, cudaStreamNonBlocking));
   for (ChunkRecord& c : chunk_)
     for (cudaEvent_t& e : c.ev) STRATA_CUDA(cudaEventCreate(&e));
 }
@@ -134,7 +136,10 @@ CudaExecutor::~CudaExecutor() {
   cudaEventDestroy(panels_done_);
   cudaEventDestroy(panels_copied_);
   cudaStreamDestroy(copy_stream_);
-  for (cudaEvent_t e : {split_ready_, help_ready_, help_done_}) cudaEventDestroy(e);
+  for (cudaEvent_t e : {split_ready_, help_ready_, help_done_, dist_ready_, dist_done_})
+    cudaEventDestroy(e);
+  for (cudaEvent_t e : dist_events_) cudaEventDestroy(e);
+  cudaStreamDestroy(dist_copy_);
   for (ChunkRecord& c : chunk_)
     for (cudaEvent_t e : c.ev) cudaEventDestroy(e);
   cusolverDnDestroy(solver_);
@@ -176,11 +181,14 @@ void CudaExecutor::begin(const numeric::FactorContext& ctx) {
   pending_ = nullptr;  // a chunk left by a factorization that failed
   // strips of another executor's front still in flight (its factorization failed before
   // its end_part): they write into this pool
-  if (helped_) STRATA_CUDA(cudaStreamSynchronize(help_lane().stream));
+  if (helped_) {
+    STRATA_CUDA(cudaStreamSynchronize(help_lane().stream));
+    STRATA_CUDA(cudaStreamSynchronize(dist_copy_));
+  }
   helped_ = false;
   team_.clear();
   team_used_.clear();
-  fronts_split_ = strips_helped_ = 0;
+  fronts_split_ = strips_helped_ = fronts_distributed_ = 0;
   help_bytes_ = 0;
   if (an.id != analysis_id_) {
     const Timer setup;
@@ -877,6 +885,9 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
         if (li > 0 && !waited[li]) STRATA_CUDA(cudaStreamWaitEvent(ln->stream, panels_done_, 0));
         waited[li] = 1;
         llt_update(ln->blas, m - k, k, F + k, m, F + static_cast<std::size_t>(k) * m + k, m);
+      } else if (!lu && distribute_front(m) &&
+                 distributed_llt(*ln, F, m, k, potrf_info_.data() + i)) {
+        // pivot block, panel and update over the team (distributed_front.cu)
       } else if (!lu) {
         if (recursive_panel_)
           llt_pivot_block_and_panel_recursive(*ln, F, m, k, potrf_info_.data() + i);

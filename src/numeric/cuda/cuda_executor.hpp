@@ -85,6 +85,12 @@ void llt_pivot_block_and_panel(Lane& ln, double* F, int m, int k, int nb, int* i
 void llt_pivot_block_and_panel_recursive(Lane& ln, double* F, std::int64_t m, std::int64_t k,
                                          int* info);
 
+/// The same for a panel P of `rows` rows and k ≤ rows columns with leading dimension
+/// ld ≥ rows (its first k rows the pivot block): a column block of a front distributed
+/// over GPUs (distributed_front.cu).
+void llt_pivot_block_and_panel_recursive(Lane& ln, double* P, std::int64_t ld, std::int64_t rows,
+                                         std::int64_t k, int* info);
+
 /// Doubles of workspace llt_pivot_block_and_panel_recursive needs for k pivots.
 std::size_t llt_recursive_work_size(std::int64_t k);
 
@@ -232,6 +238,21 @@ class CudaExecutor final : public numeric::Executor {
   void split_update(Lane& lane, double* F, int m, int k, bool lu, cudaEvent_t assembled);
   /// Makes stream_ wait for the helpers used since the last call (the chunk's join).
   void join_team();
+  /// Whether an LLᵀ front of m rows is factored over the team (distributed_llt).
+  bool distribute_front(int m) const {
+    return !team_.empty() && dist_min_rows_ > 0 && m >= dist_min_rows_;
+  }
+  /// Front F (m × m in the pool, k pivots, assembled: all its work so far on `lane`)
+  /// factored whole — pivot block, panel and contribution-block update — over this GPU
+  /// and the team, its columns in blocks of kDistBlock dealt out cyclically
+  /// (distributed_front.cu); F ends as the one-GPU code leaves it, `info` (device) as
+  /// POTRF of order k reports. Everything is enqueued (lane.stream waits for the
+  /// helpers' last copies). False, with nothing enqueued, when a helper's pool cannot
+  /// hold its blocks or the front has fewer column blocks than GPUs.
+  bool distributed_llt(Lane& lane, double* F, int m, int k, int* info);
+  /// Columns per block of a distributed front: small enough that the serial chain of
+  /// pivot blocks is short, large enough for each block's DGEMM to run near peak.
+  static constexpr std::int64_t kDistBlock = 512;
   /// The lane this executor lends to others (a lane of its own, idle while it helps).
   Lane& help_lane();
   void count_h2d(std::size_t bytes) { bytes_h2d_ += bytes; }
@@ -248,6 +269,7 @@ class CudaExecutor final : public numeric::Executor {
   std::size_t limit_ = 0;
   std::int64_t panel_max_pivots_ = 0;  ///< Options::gpu_panel_kernel_max_pivots
   std::int64_t split_min_cb_ = 0;      ///< Options::split_front_min_cb
+  std::int64_t dist_min_rows_ = 0;     ///< Options::distributed_front_min_rows
   int potrf_block_ = 0;                ///< Options::gpu_potrf_block_size
   bool recursive_panel_ = true;        ///< Options::gpu_recursive_panel
   std::uint64_t analysis_id_ = 0;
@@ -327,6 +349,17 @@ class CudaExecutor final : public numeric::Executor {
   cudaEvent_t help_ready_ = nullptr, help_done_ = nullptr;
   bool helped_ = false;  ///< its help lane has work of another executor in flight
   index_t fronts_split_ = 0, strips_helped_ = 0;
+  // distributed fronts (distributed_front.cu): as the owner, the panels received from
+  // helpers (two slots), the per-block statuses gathered from every GPU, and events
+  // ordering one distributed front after the previous one; on every GPU the per-step
+  // events and the stream panels arrive on
+  DeviceBuffer<double> dist_panels_;
+  DeviceBuffer<int> dist_status_;
+  std::vector<cudaEvent_t> dist_events_;
+  cudaEvent_t dist_ready_ = nullptr, dist_done_ = nullptr;
+  cudaStream_t dist_copy_ = nullptr;
+  bool dist_done_recorded_ = false;
+  index_t fronts_distributed_ = 0;
   std::size_t help_bytes_ = 0;
 };
 

@@ -179,15 +179,20 @@ std::size_t llt_recursive_work_size(std::int64_t k) {
          kBase;
 }
 
-void llt_pivot_block_and_panel_recursive(Lane& ln, double* F, std::int64_t m, std::int64_t k,
-                                         int* info) {
+void llt_pivot_block_and_panel_recursive(Lane& ln, double* P, std::int64_t ld, std::int64_t rows,
+                                         std::int64_t k, int* info) {
   if (k <= 0) return;
   ln.diag_work.resize(llt_recursive_work_size(k));
-  recurse(ln, F, m, m, k, 0, ln.diag_work.data(), info);
+  recurse(ln, P, ld, rows, k, 0, ln.diag_work.data(), info);
   const unsigned blocks = static_cast<unsigned>((k + kBase - 1) / kBase);
   llt_place_diagonal_kernel<<<dim3(blocks, blocks), kThreads, 0, ln.stream>>>(
-      F, m, k, ln.diag_work.data(), info);
+      P, ld, k, ln.diag_work.data(), info);
   STRATA_CUDA_LAUNCH();
+}
+
+void llt_pivot_block_and_panel_recursive(Lane& ln, double* F, std::int64_t m, std::int64_t k,
+                                         int* info) {
+  llt_pivot_block_and_panel_recursive(ln, F, m, m, k, info);
 }
 
 }  // namespace strata::cuda

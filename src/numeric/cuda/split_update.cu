@@ -90,7 +90,8 @@ Lane& CudaExecutor::help_lane() { return *lanes()[1]; }
 void CudaExecutor::set_team(const numeric::FactorContext& ctx) {
   team_.clear();
   team_used_.clear();
-  if (split_min_cb_ <= 0 || ctx.helpers.empty() || ctx.type == MatrixType::symmetric_indefinite)
+  if ((split_min_cb_ <= 0 && dist_min_rows_ <= 0) || ctx.helpers.empty() ||
+      ctx.type == MatrixType::symmetric_indefinite)
     return;
   for (numeric::Executor* e : ctx.helpers) {
     auto* h = dynamic_cast<CudaExecutor*>(e);
@@ -204,6 +205,7 @@ void CudaExecutor::split_update(Lane& lane, double* F, int m, int k, bool lu,
 
 void CudaExecutor::report_worker(DeviceStats& d) const {
   d.fronts_split += fronts_split_;
+  d.fronts_distributed += fronts_distributed_;
   d.strips_helped += strips_helped_;
   d.bytes_transferred += help_bytes_;
 }

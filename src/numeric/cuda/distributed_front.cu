@@ -1,0 +1,258 @@
+// strata — a large Cholesky front factored over the GPU that owns it and the idle GPUs
+// of its team, its columns distributed 1-D block-cyclically (several GPUs; issue 6's
+// "large top fronts are split across GPUs by tiles", docs/multigpu.md).
+//
+// What: while GPU 0 factors the top part, every other GPU has nothing left to do (the
+// multi-worker driver hands them over as helpers, FactorContext::helpers). A front F
+// (m × m, lower triangle, k pivots) with at least Options::distributed_front_min_rows
+// rows is then cut into column blocks — the k pivot columns in blocks of kBlock, then the
+// m − k contribution-block columns in blocks of kBlock — and block j lives on GPU
+// j mod G (G: the owner and its helpers): the owner keeps its blocks in place in F, a
+// helper copies its blocks (rows from the block's first column down) into its pool. The
+// factorization is LAPACK's right-looking blocked Cholesky (DPOTRF; Golub & Van Loan,
+// Matrix Computations, 4th ed., §4.2.9) over that layout, as ScaLAPACK's PDPOTRF does on
+// a 1 × G process grid (Choi, Dongarra, Ostrouchov, Petitet, Walker & Whaley, "The
+// design and implementation of the ScaLAPACK LU, QR and Cholesky factorization routines",
+// Scientific Programming 5, 1996): for each pivot block p,
+//   1. its GPU factors it: the diagonal block and the rows below it, by the recursive
+//      pivot block and panel of llt_recursive.cu (the one-GPU code for large fronts);
+//   2. the factored block — the panel L[c_p:m, p] — is copied to every other GPU that
+//      holds a block right of it (peer copies, into one of two panel slots);
+//   3. every GPU updates each of its blocks j > p, A[c_j:m, j] −= L[c_j:m, p]·L[c_j:c_j+w_j, p]ᵀ
+//      (one DGEMM per block; it also writes the strict upper triangle of the block's
+//      diagonal part, which nothing reads: the next step 1 zeroes it for pivot blocks, and
+//      the contribution block is read as a lower triangle).
+// Lookahead of one step: the GPU holding block p + 1 updates that block first, factors
+// it and starts its copies before its other updates of step p, so the next panel is on
+// its way while every GPU is still busy with step p (the standard remedy for the serial
+// chain of panels; the panels are what ran slowly on one GPU: the recursive pivot block
+// and panel of a 4,096-pivot front reached about half the update's rate). At the end
+// each helper copies its blocks back into F, so the front leaves as the one-GPU code
+// leaves it — its contribution block stored, its panel packed, by the chunk as usual.
+//
+// Why whole columns and not strips of the update (split_update.cu): the pivot block and
+// panel, most of a top front's time on one GPU, are spread over the GPUs too, and what
+// moves per front is each helper's share of F twice plus every panel once — about
+// (m²/2·(G − 1)/G·2 + m·k)·8 bytes over NVLink against m·k²-order flops.
+//
+// Streams and events (all enqueued by the owner's host thread): each GPU g computes on
+// one stream W_g (the owner: the front's lane; a helper: its help lane) and receives
+// panels on a copy stream C_g. E_g[p] is recorded on W_g after block p's step 1; the
+// copy of panel p to GPU g waits for E[p] and for D_g[p − 2] (g done with the slot it
+// overwrites), then records R_g[p]; W_g waits for R_g[p] before its step-3 updates of p
+// and records D_g[p] after them. One stream per GPU for compute keeps the blocks' updates
+// in step order without more events.
+//
+// Results: every entry gets the same products as in the one-GPU factorization, in
+// another order of summation (blocks of kBlock columns), so the factor agrees with the
+// one-GPU factor to rounding; test_multi_gpu compares within 1e-12. A non-positive pivot
+// sets the front's status as one POTRF of order k would (the first failing block's
+// column plus its own status), gathered from the GPUs' per-block statuses.
+#include <algorithm>
+
+#include "numeric/cuda/cuda_executor.hpp"
+
+namespace strata::cuda {
+
+namespace {
+
+// The front's status from the per-block statuses: `all` holds G rows of P ints (row g:
+// GPU g's blocks; block p's status is in row p mod G); block p starts at column p·nb.
+__global__ void first_failed_block_kernel(const int* all, int P, int G, int nb, int* info) {
+  int r = 0;
+  for (int p = 0; p < P; ++p) {
+    const int v = all[(p % G) * P + p];
+    if (v != 0) {
+      r = v > 0 ? p * nb + v : v;
+      break;
+    }
+  }
+  *info = r;
+}
+
+// An event of `pool` (created on the current device when the pool is short).
+cudaEvent_t event_at(std::vector<cudaEvent_t>& pool, std::size_t i) {
+  while (pool.size() <= i) {
+    cudaEvent_t e = nullptr;
+    STRATA_CUDA(cudaEventCreateWithFlags(&e, cudaEventDisableTiming));
+    pool.push_back(e);
+  }
+  return pool[i];
+}
+
+}  // namespace
+
+bool CudaExecutor::distributed_llt(Lane& lane, double* F, int m, int k, int* info) {
+  const int G = static_cast<int>(team_.size()) + 1;
+  const std::int64_t nb = kDistBlock;
+  // column bounds: pivot blocks of nb up to k, then contribution-block blocks of nb
+  std::vector<std::int64_t> c{0};
+  while (c.back() < k) c.push_back(std::min<std::int64_t>(c.back() + nb, k));
+  const int P = static_cast<int>(c.size()) - 1;
+  while (c.back() < m) c.push_back(std::min<std::int64_t>(c.back() + nb, m));
+  const int NB = static_cast<int>(c.size()) - 1;
+  if (P < 1 || NB < G) return false;
+  auto owner = [G](int j) { return j % G; };
+  auto rows = [&](int j) { return m - c[j]; };
+  auto width = [&](int j) { return c[j + 1] - c[j]; };
+  const std::size_t slot = static_cast<std::size_t>(m) * static_cast<std::size_t>(nb);
+
+  // where each GPU keeps things: its blocks, two panel slots, its statuses
+  struct Gpu {
+    CudaExecutor* ex;
+    Lane* work;
+    cudaStream_t copy;
+    std::vector<double*> block;  // by block index, null when not held here
+    std::vector<std::int64_t> ld;
+    double* slots[2];
+    int* status;  // P ints, block p's at p
+  };
+  std::vector<Gpu> gpu(G);
+  for (int g = 0; g < G; ++g) {
+    CudaExecutor& x = g == 0 ? *this : *team_[g - 1];
+    Gpu& u = gpu[g];
+    u.ex = &x;
+    u.block.assign(NB, nullptr);
+    u.ld.assign(NB, 0);
+    std::size_t need = 2 * slot;
+    for (int j = g; j < NB; j += G) need += static_cast<std::size_t>(rows(j) * width(j));
+    STRATA_CUDA(cudaSetDevice(x.device_));
+    if (g == 0) {
+      dist_panels_.resize(2 * slot);  // grown once; refactorizations reuse it
+      u.slots[0] = dist_panels_.data();
+      u.slots[1] = u.slots[0] + slot;
+      for (int j = 0; j < NB; j += G) {
+        u.block[j] = F + c[j] * static_cast<std::int64_t>(m) + c[j];
+        u.ld[j] = m;
+      }
+    } else {
+      if (x.pool_.size() < need) {  // its pool is the helper's only room: not this front
+        STRATA_CUDA(cudaSetDevice(device_));
+        return false;
+      }
+      double* at = x.pool_.data();
+      for (int j = g; j < NB; j += G) {
+        u.block[j] = at;
+        u.ld[j] = rows(j);
+        at += rows(j) * width(j);
+      }
+      u.slots[0] = at;
+      u.slots[1] = at + slot;
+    }
+    x.dist_status_.resize(static_cast<std::size_t>(G) * P);
+    u.status = x.dist_status_.data();
+    u.work = g == 0 ? &lane : &x.help_lane();
+    u.copy = x.dist_copy_;
+    // a helper's copies land in its pool: after its own last work (set_team's event)
+    if (g > 0) STRATA_CUDA(cudaStreamWaitEvent(u.copy, x.help_ready_, 0));
+    u.work->diag_work.resize(llt_recursive_work_size(nb));  // no reallocation between steps
+    for (std::size_t e = x.dist_events_.size(); e < 3 * static_cast<std::size_t>(P); ++e)
+      event_at(x.dist_events_, e);
+  }
+  auto E = [&](int g, int p) { return gpu[g].ex->dist_events_[3 * p]; };
+  auto R = [&](int g, int p) { return gpu[g].ex->dist_events_[3 * p + 1]; };
+  auto D = [&](int g, int p) { return gpu[g].ex->dist_events_[3 * p + 2]; };
+  // whether GPU g holds a block right of block p (its first one after p)
+  auto holds_right_of = [&](int g, int p) { return p + 1 + ((g - p - 1) % G + G) % G < NB; };
+
+  // after the previous distributed front (another lane of this chunk may have had one:
+  // the helpers' pools and the panel slots are shared), the helpers' blocks copied out
+  // of F once it is assembled, on each helper's stream
+  STRATA_CUDA(cudaSetDevice(device_));
+  if (dist_done_recorded_) STRATA_CUDA(cudaStreamWaitEvent(lane.stream, dist_done_, 0));
+  STRATA_CUDA(cudaEventRecord(dist_ready_, lane.stream));
+  for (int g = 1; g < G; ++g) {
+    Gpu& u = gpu[g];
+    STRATA_CUDA(cudaSetDevice(u.ex->device_));
+    STRATA_CUDA(cudaStreamWaitEvent(u.work->stream, dist_ready_, 0));
+    for (int j = g; j < NB; j += G) {
+      const std::size_t rb = sizeof(double) * static_cast<std::size_t>(rows(j));
+      STRATA_CUDA(cudaMemcpy2DAsync(u.block[j], rb, F + c[j] * static_cast<std::int64_t>(m) + c[j],
+                                    sizeof(double) * m, rb, width(j), cudaMemcpyDefault,
+                                    u.work->stream));
+      u.ex->help_bytes_ += 2 * rb * static_cast<std::size_t>(width(j));  // out and back
+    }
+  }
+
+  const double one = 1.0, minus_one = -1.0;
+  // step 1 of block p on its GPU, then its copies to the GPUs that need it
+  auto panel = [&](int p) {
+    const int g = owner(p);
+    Gpu& u = gpu[g];
+    STRATA_CUDA(cudaSetDevice(u.ex->device_));
+    llt_pivot_block_and_panel_recursive(*u.work, u.block[p], u.ld[p], rows(p), width(p),
+                                        u.status + p);
+    STRATA_CUDA(cudaEventRecord(E(g, p), u.work->stream));
+    for (int h = 0; h < G; ++h) {
+      if (h == g || !holds_right_of(h, p)) continue;
+      Gpu& v = gpu[h];
+      STRATA_CUDA(cudaSetDevice(v.ex->device_));
+      STRATA_CUDA(cudaStreamWaitEvent(v.copy, E(g, p), 0));
+      if (p >= 2) STRATA_CUDA(cudaStreamWaitEvent(v.copy, D(h, p - 2), 0));
+      const std::size_t rb = sizeof(double) * static_cast<std::size_t>(rows(p));
+      STRATA_CUDA(cudaMemcpy2DAsync(v.slots[p % 2], rb, u.block[p], sizeof(double) * u.ld[p], rb,
+                                    width(p), cudaMemcpyDefault, v.copy));
+      STRATA_CUDA(cudaEventRecord(R(h, p), v.copy));
+      (h == 0 ? u.ex : v.ex)->help_bytes_ += rb * static_cast<std::size_t>(width(p));
+    }
+  };
+  // step 3: block j (on GPU g) updated by panel p
+  auto update = [&](int g, int j, int p) {
+    Gpu& u = gpu[g];
+    const bool here = owner(p) == g;
+    const double* L = here ? u.block[p] : u.slots[p % 2];
+    const std::int64_t ldl = here ? u.ld[p] : rows(p);
+    const double* Lj = L + (c[j] - c[p]);
+    STRATA_CUBLAS(cublasDgemm(u.work->blas, CUBLAS_OP_N, CUBLAS_OP_T, static_cast<int>(rows(j)),
+                              static_cast<int>(width(j)), static_cast<int>(width(p)), &minus_one,
+                              Lj, static_cast<int>(ldl), Lj, static_cast<int>(ldl), &one,
+                              u.block[j], static_cast<int>(u.ld[j])));
+  };
+
+  panel(0);
+  for (int p = 0; p < P; ++p)
+    for (int g = 0; g < G; ++g) {
+      if (!holds_right_of(g, p)) continue;
+      Gpu& u = gpu[g];
+      STRATA_CUDA(cudaSetDevice(u.ex->device_));
+      if (owner(p) != g) STRATA_CUDA(cudaStreamWaitEvent(u.work->stream, R(g, p), 0));
+      int first = p + 1;
+      if (p + 1 < P && owner(p + 1) == g) {  // lookahead: the next panel first
+        update(g, p + 1, p);
+        panel(p + 1);
+        STRATA_CUDA(cudaSetDevice(u.ex->device_));
+        first = p + 2;
+      }
+      for (int j = first; j < NB; ++j)
+        if (owner(j) == g) update(g, j, p);
+      STRATA_CUDA(cudaEventRecord(D(g, p), u.work->stream));
+    }
+
+  // the helpers' blocks and statuses back to the owner; the owner waits for them
+  for (int g = 1; g < G; ++g) {
+    Gpu& u = gpu[g];
+    STRATA_CUDA(cudaSetDevice(u.ex->device_));
+    for (int j = g; j < NB; j += G) {
+      const std::size_t rb = sizeof(double) * static_cast<std::size_t>(rows(j));
+      STRATA_CUDA(cudaMemcpy2DAsync(F + c[j] * static_cast<std::int64_t>(m) + c[j],
+                                    sizeof(double) * m, u.block[j], rb, rb, width(j),
+                                    cudaMemcpyDefault, u.work->stream));
+    }
+    STRATA_CUDA(cudaMemcpyAsync(gpu[0].status + static_cast<std::size_t>(g) * P, u.status,
+                                sizeof(int) * P, cudaMemcpyDefault, u.work->stream));
+    STRATA_CUDA(cudaEventRecord(u.ex->help_done_, u.work->stream));
+    u.ex->helped_ = true;
+    STRATA_CUDA(cudaSetDevice(device_));
+    STRATA_CUDA(cudaStreamWaitEvent(lane.stream, u.ex->help_done_, 0));
+  }
+  STRATA_CUDA(cudaSetDevice(device_));
+  first_failed_block_kernel<<<1, 1, 0, lane.stream>>>(gpu[0].status, P, G, static_cast<int>(nb),
+                                                      info);
+  STRATA_CUDA_LAUNCH();
+  STRATA_CUDA(cudaEventRecord(dist_done_, lane.stream));
+  dist_done_recorded_ = true;
+  ++fronts_distributed_;
+  return true;
+}
+
+}  // namespace strata::cuda
