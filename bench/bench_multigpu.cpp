@@ -52,6 +52,7 @@ int main(int argc, char** argv) {
   std::vector<double> budget_share = {0};
   std::vector<index_t> split_fronts = {Options{}.split_front_min_cb};
   std::vector<index_t> dist_fronts = {Options{}.distributed_front_min_rows};
+  std::vector<index_t> dist_blocks = {Options{}.distributed_front_block_size};
   std::string backend = "cpu";
   index_t max_block_size = 0;
   int repeat = 3, threads_per_worker = 1;
@@ -77,6 +78,10 @@ int main(int argc, char** argv) {
                  "idle GPUs)")
       ->delimiter(',')
       ->check(CLI::NonNegativeNumber);
+  app.add_option("--distributed-block", dist_blocks,
+                 "Options::distributed_front_block_size values (columns per block)")
+      ->delimiter(',')
+      ->check(CLI::PositiveNumber);
   app.add_option("--budget-share", budget_share,
                  "device budget = factor bytes / workers / R for each R (0: no budget)")
       ->delimiter(',')
@@ -98,10 +103,10 @@ int main(int argc, char** argv) {
   out["tag"] = tag;
   out["rows"] = json::array();
   fmt::print(
-      "{:<12} {:>2} {:>2} {:>3} {:>3} {:>3} {:>5} {:>5} {:>8} {:>8} {:>5} {:>9} {:>4} {:>7} {:>5} "
+      "{:<12} {:>2} {:>2} {:>3} {:>3} {:>3} {:>5} {:>9} {:>8} {:>8} {:>5} {:>9} {:>4} {:>7} {:>5} "
       "{:>6} "
       "{:>6} {:>5} {:>8} {:>8} {:>9}\n",
-      "problem", "W", "s", "bal", "stl", "top", "splcb", "dist", "order s", "bal s", "rebis",
+      "problem", "W", "s", "bal", "stl", "top", "splcb", "dist/blk", "order s", "bal s", "rebis",
       "flops", "subt", "balance", "layer", "upp %", "top %", "est x", "factor s", "berr",
       "budget MB");
   for (const std::string& name : problems) {
@@ -118,115 +123,122 @@ int main(int argc, char** argv) {
             for (const std::string& split : split_top)
               for (double share : budget_share)
                 for (const index_t split_cb : split_fronts)
-                  for (const index_t dist : dist_fronts) {
-                    Options o;
-                    o.type = p.symmetric ? MatrixType::spd : MatrixType::general;
-                    o.subtrees_per_gpu = s;
-                    o.balance_by_work = bal == "on";
-                    o.work_stealing = stl == "on";
-                    o.split_top = split == "on";
-                    o.split_front_min_cb = split_cb;
-                    o.distributed_front_min_rows = dist;
-                    o.max_block_size = max_block_size;
-                    // CPU workers: threads each; the CUDA backend keeps every host thread for the
-                    // analysis and the input pass (one thread made that pass a third of an
-                    // elasticity refactorization on the 4-GPU machine)
-                    if (backend == "cpu") o.num_threads = threads_per_worker;
-                    if (backend == "cuda") {
-                      o.backend = Backend::cuda;
-                      o.num_gpus = w;
-                    }
-                    auto make_solver = [&](const Options& opts) {
-                      auto solver = std::make_unique<Solver>(opts);
-                      if (backend == "cpu") {
-                        numeric::MultiWorkerConfig cfg;
-                        cfg.work_stealing = opts.work_stealing;
-                        detail::SolverAccess::use_host_workers(*solver, w, threads_per_worker, cfg);
+                  for (const index_t dist : dist_fronts)
+                    for (const index_t dist_block : dist_blocks) {
+                      Options o;
+                      o.type = p.symmetric ? MatrixType::spd : MatrixType::general;
+                      o.subtrees_per_gpu = s;
+                      o.balance_by_work = bal == "on";
+                      o.work_stealing = stl == "on";
+                      o.split_top = split == "on";
+                      o.split_front_min_cb = split_cb;
+                      o.distributed_front_min_rows = dist;
+                      o.distributed_front_block_size = dist_block;
+                      o.max_block_size = max_block_size;
+                      // CPU workers: threads each; the CUDA backend keeps every host thread for the
+                      // analysis and the input pass (one thread made that pass a third of an
+                      // elasticity refactorization on the 4-GPU machine)
+                      if (backend == "cpu") o.num_threads = threads_per_worker;
+                      if (backend == "cuda") {
+                        o.backend = Backend::cuda;
+                        o.num_gpus = w;
                       }
-                      return solver;
-                    };
-                    std::size_t factor_bytes = 0;
-                    if (share >
-                        0) {  // the budget is a share of the factor: one analysis to size it
-                      auto probe = make_solver(o);
-                      probe->analyze(p.a);
-                      factor_bytes = probe->stats().analysis.factor_bytes;
-                      o.device_memory_limit =
-                          static_cast<std::size_t>(static_cast<double>(factor_bytes) / w / share);
-                    }
-                    std::unique_ptr<Solver> owned = make_solver(o);
-                    Solver& solver = *owned;
-                    solver.analyze(p.a);
-                    const AnalysisStats an = solver.stats().analysis;
-                    json row = {{"problem", p.name},
-                                {"n", an.n},
-                                {"max_block_size", an.max_block_size},
-                                {"workers", w},
-                                {"subtrees_per_worker", s},
-                                {"balance_by_work", bal == "on"},
-                                {"work_stealing", stl == "on"},
-                                {"split_top", split == "on"},
-                                {"split_front_min_cb", split_cb},
-                                {"distributed_front_min_rows", dist},
-                                {"ordering_seconds", an.ordering_seconds},
-                                {"nd_balance_seconds", an.nd_balance_seconds},
-                                {"nd_rebisections", an.nd_rebisections},
-                                {"nnz_l", an.nnz_l},
-                                {"flops", an.factor_flops},
-                                {"subtrees", an.subtrees},
-                                {"subtree_balance", an.subtree_balance},
-                                {"upper_layers", an.upper_layers},
-                                {"upper_parts", an.upper_parts},
-                                {"upper_flops_fraction", an.upper_flops_fraction},
-                                {"top_flops_fraction", an.top_flops_fraction},
-                                {"estimated_speedup", an.estimated_speedup},
-                                {"budget_share_ratio", share},
-                                {"device_memory_limit", o.device_memory_limit},
-                                {"factor_bytes", an.factor_bytes}};
-                    double ts = 0, berr = 0, first = 0;
-                    if (!no_factor) {
-                      // the first factorization sets the executors up (device buffers, pinned
-                      // host memory, library handles): reported apart; the figure is the median
-                      // of the refactorizations that follow, as bench_gpu and bench_cudss do
-                      Timer t0;
-                      solver.factorize(p.a);
-                      first = t0.seconds();
-                      std::vector<double> times;
-                      for (int k = 0; k < repeat; ++k) {
-                        Timer t;
-                        solver.refactorize(p.a);
-                        times.push_back(t.seconds());
+                      auto make_solver = [&](const Options& opts) {
+                        auto solver = std::make_unique<Solver>(opts);
+                        if (backend == "cpu") {
+                          numeric::MultiWorkerConfig cfg;
+                          cfg.work_stealing = opts.work_stealing;
+                          detail::SolverAccess::use_host_workers(*solver, w, threads_per_worker,
+                                                                 cfg);
+                        }
+                        return solver;
+                      };
+                      std::size_t factor_bytes = 0;
+                      if (share >
+                          0) {  // the budget is a share of the factor: one analysis to size it
+                        auto probe = make_solver(o);
+                        probe->analyze(p.a);
+                        factor_bytes = probe->stats().analysis.factor_bytes;
+                        o.device_memory_limit =
+                            static_cast<std::size_t>(static_cast<double>(factor_bytes) / w / share);
                       }
-                      ts = bench::median(times);
-                      const auto x = solver.solve(b);
-                      berr = bench::berr(p.a, x, b);
-                      const json devices = solver.stats().factor.devices;
-                      row["factor_seconds"] = ts;
-                      row["refactor_times"] = times;  // the spread behind the median
-                      row["first_factor_seconds"] = first;
-                      row["factor_phases"] = solver.stats().factor.device_phases;
-                      row["input_seconds"] = solver.stats().factor.input_seconds;
-                      row["backward_error"] = berr;
-                      row["devices"] = devices;
-                      const FactorStats& fs = solver.stats().factor;
-                      row["tiled_fronts"] = fs.tiled_fronts;
-                      row["contribution_blocks_on_host"] = fs.contribution_blocks_on_host;
-                      row["bytes_to_device"] = fs.bytes_to_device;
-                      row["bytes_to_host"] = fs.bytes_to_host;
+                      std::unique_ptr<Solver> owned = make_solver(o);
+                      Solver& solver = *owned;
+                      solver.analyze(p.a);
+                      const AnalysisStats an = solver.stats().analysis;
+                      json row = {{"problem", p.name},
+                                  {"n", an.n},
+                                  {"max_block_size", an.max_block_size},
+                                  {"workers", w},
+                                  {"subtrees_per_worker", s},
+                                  {"balance_by_work", bal == "on"},
+                                  {"work_stealing", stl == "on"},
+                                  {"split_top", split == "on"},
+                                  {"split_front_min_cb", split_cb},
+                                  {"distributed_front_min_rows", dist},
+                                  {"distributed_front_block_size", dist_block},
+                                  {"ordering_seconds", an.ordering_seconds},
+                                  {"nd_balance_seconds", an.nd_balance_seconds},
+                                  {"nd_rebisections", an.nd_rebisections},
+                                  {"nnz_l", an.nnz_l},
+                                  {"flops", an.factor_flops},
+                                  {"subtrees", an.subtrees},
+                                  {"subtree_balance", an.subtree_balance},
+                                  {"upper_layers", an.upper_layers},
+                                  {"upper_parts", an.upper_parts},
+                                  {"upper_flops_fraction", an.upper_flops_fraction},
+                                  {"top_flops_fraction", an.top_flops_fraction},
+                                  {"estimated_speedup", an.estimated_speedup},
+                                  {"budget_share_ratio", share},
+                                  {"device_memory_limit", o.device_memory_limit},
+                                  {"factor_bytes", an.factor_bytes}};
+                      double ts = 0, berr = 0, first = 0;
+                      if (!no_factor) {
+                        // the first factorization sets the executors up (device buffers, pinned
+                        // host memory, library handles): reported apart; the figure is the median
+                        // of the refactorizations that follow, as bench_gpu and bench_cudss do
+                        Timer t0;
+                        solver.factorize(p.a);
+                        first = t0.seconds();
+                        std::vector<double> times;
+                        for (int k = 0; k < repeat; ++k) {
+                          Timer t;
+                          solver.refactorize(p.a);
+                          times.push_back(t.seconds());
+                        }
+                        ts = bench::median(times);
+                        const auto x = solver.solve(b);
+                        berr = bench::berr(p.a, x, b);
+                        const json devices = solver.stats().factor.devices;
+                        row["factor_seconds"] = ts;
+                        row["refactor_times"] = times;  // the spread behind the median
+                        row["first_factor_seconds"] = first;
+                        row["factor_phases"] = solver.stats().factor.device_phases;
+                        row["input_seconds"] = solver.stats().factor.input_seconds;
+                        row["backward_error"] = berr;
+                        row["devices"] = devices;
+                        const FactorStats& fs = solver.stats().factor;
+                        row["tiled_fronts"] = fs.tiled_fronts;
+                        row["contribution_blocks_on_host"] = fs.contribution_blocks_on_host;
+                        row["bytes_to_device"] = fs.bytes_to_device;
+                        row["bytes_to_host"] = fs.bytes_to_host;
+                      }
+                      out["rows"].push_back(row);
+                      fmt::print(
+                          "{:<12} {:>2} {:>2} {:>3} {:>3} {:>3} {:>5} {:>9} {:>8.3f} {:>8.3f} "
+                          "{:>5} "
+                          "{:>9.3g} "
+                          "{:>4} {:>7.3f} {:>5} {:>6.1f} {:>6.1f} {:>5.2f} {:>8.3f} {:>8.1e} "
+                          "{:>9}\n",
+                          p.name, w, s, bal, stl, split, split_cb,
+                          fmt::format("{}/{}", dist, dist_block), an.ordering_seconds,
+                          an.nd_balance_seconds, an.nd_rebisections, an.factor_flops, an.subtrees,
+                          an.subtree_balance, fmt::format("{}/{}", an.upper_layers, an.upper_parts),
+                          100 * an.upper_flops_fraction, 100 * an.top_flops_fraction,
+                          an.estimated_speedup, ts, berr,
+                          share > 0 ? fmt::format("{:.1f}", o.device_memory_limit * 1e-6) : "-");
+                      std::fflush(stdout);
                     }
-                    out["rows"].push_back(row);
-                    fmt::print(
-                        "{:<12} {:>2} {:>2} {:>3} {:>3} {:>3} {:>5} {:>5} {:>8.3f} {:>8.3f} {:>5} "
-                        "{:>9.3g} "
-                        "{:>4} {:>7.3f} {:>5} {:>6.1f} {:>6.1f} {:>5.2f} {:>8.3f} {:>8.1e} {:>9}\n",
-                        p.name, w, s, bal, stl, split, split_cb, dist, an.ordering_seconds,
-                        an.nd_balance_seconds, an.nd_rebisections, an.factor_flops, an.subtrees,
-                        an.subtree_balance, fmt::format("{}/{}", an.upper_layers, an.upper_parts),
-                        100 * an.upper_flops_fraction, 100 * an.top_flops_fraction,
-                        an.estimated_speedup, ts, berr,
-                        share > 0 ? fmt::format("{:.1f}", o.device_memory_limit * 1e-6) : "-");
-                    std::fflush(stdout);
-                  }
   }
   fmt::print("results: {}\n", bench::write_result(out, "multigpu", results_dir));
   return 0;

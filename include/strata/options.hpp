@@ -174,12 +174,16 @@ struct Options {
   index_t split_front_min_cb = 0;
   /// With several GPUs: a Cholesky front of the top part with at least this many rows is
   /// factored whole — pivot block, panel and update — by GPU 0 and the idle GPUs
-  /// together, its columns dealt out in blocks of 512 (1-D block-cyclic, right-looking
+  /// together, its columns dealt out in blocks of distributed_front_block_size (1-D
+  /// block-cyclic, right-looking
   /// with one step of lookahead; src/numeric/cuda/distributed_front.cu); it takes
   /// precedence over split_front_min_cb for the fronts it covers. LU and LDLᵀ fronts,
   /// fronts of at most gpu_panel_kernel_max_pivots pivots and fronts factored tile by tile
   /// are not distributed. 0 turns this off.
   index_t distributed_front_min_rows = 0;
+  /// Columns per block of a distributed front (distributed_front_min_rows): fewer make
+  /// the serial chain of pivot blocks shorter and the blocks' DGEMMs smaller. At least 64.
+  index_t distributed_front_block_size = 512;
   /// For `general`: permute large entries onto the diagonal by a maximum weighted
   /// matching and scale rows and columns (MC64-style, Duff & Koster 2001). For
   /// `symmetric_indefinite`: the symmetric scaling D·A·D from the same matching and the

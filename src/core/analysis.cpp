@@ -316,6 +316,9 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers)
   if (opts.gpu_potrf_block_size < 0)
     throw InvalidInput("Options::gpu_potrf_block_size must be at least 0 (got " +
                        std::to_string(opts.gpu_potrf_block_size) + ")");
+  if (opts.distributed_front_block_size < 64)
+    throw InvalidInput("Options::distributed_front_block_size must be at least 64 (got " +
+                       std::to_string(opts.distributed_front_block_size) + ")");
   if (opts.distributed_front_min_rows < 0)
     throw InvalidInput("Options::distributed_front_min_rows must be at least 0 (got " +
                        std::to_string(opts.distributed_front_min_rows) + ")");

@@ -100,6 +100,7 @@ CudaExecutor::CudaExecutor(const Options& o, int device)
       panel_max_pivots_(o.gpu_panel_kernel_max_pivots),
       split_min_cb_(o.split_front_min_cb),
       dist_min_rows_(o.distributed_front_min_rows),
+      dist_block_(std::max<index_t>(64, o.distributed_front_block_size)),
       potrf_block_(static_cast<int>(o.gpu_potrf_block_size)),
       recursive_panel_(o.gpu_recursive_panel) {
   STRATA_CUDA(cudaSetDevice(device_));

@@ -244,15 +244,12 @@ class CudaExecutor final : public numeric::Executor {
   }
   /// Front F (m × m in the pool, k pivots, assembled: all its work so far on `lane`)
   /// factored whole — pivot block, panel and contribution-block update — over this GPU
-  /// and the team, its columns in blocks of kDistBlock dealt out cyclically
+  /// and the team, its columns in blocks of dist_block_ dealt out cyclically
   /// (distributed_front.cu); F ends as the one-GPU code leaves it, `info` (device) as
   /// POTRF of order k reports. Everything is enqueued (lane.stream waits for the
   /// helpers' last copies). False, with nothing enqueued, when a helper's pool cannot
   /// hold its blocks or the front has fewer column blocks than GPUs.
   bool distributed_llt(Lane& lane, double* F, int m, int k, int* info);
-  /// Columns per block of a distributed front: small enough that the serial chain of
-  /// pivot blocks is short, large enough for each block's DGEMM to run near peak.
-  static constexpr std::int64_t kDistBlock = 512;
   /// The lane this executor lends to others (a lane of its own, idle while it helps).
   Lane& help_lane();
   void count_h2d(std::size_t bytes) { bytes_h2d_ += bytes; }
@@ -270,6 +267,7 @@ class CudaExecutor final : public numeric::Executor {
   std::int64_t panel_max_pivots_ = 0;  ///< Options::gpu_panel_kernel_max_pivots
   std::int64_t split_min_cb_ = 0;      ///< Options::split_front_min_cb
   std::int64_t dist_min_rows_ = 0;     ///< Options::distributed_front_min_rows
+  std::int64_t dist_block_ = 512;      ///< Options::distributed_front_block_size
   int potrf_block_ = 0;                ///< Options::gpu_potrf_block_size
   bool recursive_panel_ = true;        ///< Options::gpu_recursive_panel
   std::uint64_t analysis_id_ = 0;
@@ -349,10 +347,10 @@ class CudaExecutor final : public numeric::Executor {
   cudaEvent_t help_ready_ = nullptr, help_done_ = nullptr;
   bool helped_ = false;  ///< its help lane has work of another executor in flight
   index_t fronts_split_ = 0, strips_helped_ = 0;
-  // distributed fronts (distributed_front.cu): as the owner, the panels received from
-  // helpers (two slots), the per-block statuses gathered from every GPU, and events
-  // ordering one distributed front after the previous one; on every GPU the per-step
-  // events and the stream panels arrive on
+  // distributed fronts (distributed_front.cu): on every GPU the two slots panels of other
+  // GPUs arrive in, the per-block statuses (the owner's gathers every GPU's), the
+  // per-step events and the stream panels arrive on; as the owner, events ordering one
+  // distributed front after the previous one
   DeviceBuffer<double> dist_panels_;
   DeviceBuffer<int> dist_status_;
   std::vector<cudaEvent_t> dist_events_;

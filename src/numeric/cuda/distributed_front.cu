@@ -5,10 +5,13 @@
 // What: while GPU 0 factors the top part, every other GPU has nothing left to do (the
 // multi-worker driver hands them over as helpers, FactorContext::helpers). A front F
 // (m × m, lower triangle, k pivots) with at least Options::distributed_front_min_rows
-// rows is then cut into column blocks — the k pivot columns in blocks of kBlock, then the
-// m − k contribution-block columns in blocks of kBlock — and block j lives on GPU
+// rows is then cut into column blocks — the k pivot columns in blocks of nb
+// (Options::distributed_front_block_size), then the m − k contribution-block columns in
+// blocks of nb — and block j lives on GPU
 // j mod G (G: the owner and its helpers): the owner keeps its blocks in place in F, a
-// helper copies its blocks (rows from the block's first column down) into its pool. The
+// helper copies its blocks (rows from the block's first column down) into its pool (free:
+// its own parts are done; sized for the largest chunk of any part, so it holds a share of
+// any top front). The
 // factorization is LAPACK's right-looking blocked Cholesky (DPOTRF; Golub & Van Loan,
 // Matrix Computations, 4th ed., §4.2.9) over that layout, as ScaLAPACK's PDPOTRF does on
 // a 1 × G process grid (Choi, Dongarra, Ostrouchov, Petitet, Walker & Whaley, "The
@@ -44,7 +47,7 @@
 // in step order without more events.
 //
 // Results: every entry gets the same products as in the one-GPU factorization, in
-// another order of summation (blocks of kBlock columns), so the factor agrees with the
+// another order of summation (blocks of nb columns), so the factor agrees with the
 // one-GPU factor to rounding; test_multi_gpu compares within 1e-12. A non-positive pivot
 // sets the front's status as one POTRF of order k would (the first failing block's
 // column plus its own status), gathered from the GPUs' per-block statuses.
@@ -84,7 +87,7 @@ cudaEvent_t event_at(std::vector<cudaEvent_t>& pool, std::size_t i) {
 
 bool CudaExecutor::distributed_llt(Lane& lane, double* F, int m, int k, int* info) {
   const int G = static_cast<int>(team_.size()) + 1;
-  const std::int64_t nb = kDistBlock;
+  const std::int64_t nb = dist_block_;
   // column bounds: pivot blocks of nb up to k, then contribution-block blocks of nb
   std::vector<std::int64_t> c{0};
   while (c.back() < k) c.push_back(std::min<std::int64_t>(c.back() + nb, k));
@@ -114,30 +117,28 @@ bool CudaExecutor::distributed_llt(Lane& lane, double* F, int m, int k, int* inf
     u.ex = &x;
     u.block.assign(NB, nullptr);
     u.ld.assign(NB, 0);
-    std::size_t need = 2 * slot;
+    std::size_t need = 0;
     for (int j = g; j < NB; j += G) need += static_cast<std::size_t>(rows(j) * width(j));
     STRATA_CUDA(cudaSetDevice(x.device_));
+    if (g > 0 && x.pool_.size() < need) {  // its pool is the helper's room: not this front
+      STRATA_CUDA(cudaSetDevice(device_));
+      return false;
+    }
+    x.dist_panels_.resize(2 * slot);  // grown once; refactorizations reuse it
+    u.slots[0] = x.dist_panels_.data();
+    u.slots[1] = u.slots[0] + slot;
     if (g == 0) {
-      dist_panels_.resize(2 * slot);  // grown once; refactorizations reuse it
-      u.slots[0] = dist_panels_.data();
-      u.slots[1] = u.slots[0] + slot;
       for (int j = 0; j < NB; j += G) {
         u.block[j] = F + c[j] * static_cast<std::int64_t>(m) + c[j];
         u.ld[j] = m;
       }
     } else {
-      if (x.pool_.size() < need) {  // its pool is the helper's only room: not this front
-        STRATA_CUDA(cudaSetDevice(device_));
-        return false;
-      }
       double* at = x.pool_.data();
       for (int j = g; j < NB; j += G) {
         u.block[j] = at;
         u.ld[j] = rows(j);
         at += rows(j) * width(j);
       }
-      u.slots[0] = at;
-      u.slots[1] = at + slot;
     }
     x.dist_status_.resize(static_cast<std::size_t>(G) * P);
     u.status = x.dist_status_.data();
