@@ -630,6 +630,10 @@ class GpuSections:
             self.w()
         return rs
 
+    # Options::distributed_front_min_rows and distributed_front_block_size, the library's
+    # defaults (include/strata/options.hpp)
+    DIST_DEFAULT = (1024, 512)
+
     def multigpu_group(self, rs: list[Run], machine: tuple, unit: str) -> None:
         self.consumed.update(r.path for r in rs)
         cfg: dict[tuple, dict] = {}
@@ -637,6 +641,11 @@ class GpuSections:
         # rows with large fronts' updates split over idle GPUs (--split-fronts > 0), apart,
         # each with the row of the same run, problem and GPUs without the split
         split_rows: dict[tuple, tuple] = {}
+        # rows of several GPUs whose distributed-front setting is not the library's
+        # (Options::distributed_front_min_rows / _block_size, on since this session's
+        # measurements: 1024 / 512), apart, with the run they came from; rows without the
+        # key predate the option and ran with it off, which was then the default
+        dist_rows: dict[tuple, tuple] = {}
         newest_s: dict = {}  # problem → the most subtrees per worker in its newest run
         for r in sorted(rs, key=lambda r: (r.date, r.name)):  # newer runs override
             run_s: dict = {}
@@ -648,6 +657,16 @@ class GpuSections:
                     run_s[row.get("problem")] = max(run_s.get(row.get("problem"), 0), x)
             newest_s.update(run_s)
             for row in r.rows:
+                if (isinstance(row, dict) and "distributed_front_min_rows" in row
+                        and (num(row.get("workers")) or 0) > 1
+                        and (num(row.get("split_front_min_cb")) or 0) == 0
+                        and not (num(row.get("budget_share_ratio")) or 0) > 0):
+                    key = (int(num(row.get("distributed_front_min_rows")) or 0),
+                           int(num(row.get("distributed_front_block_size")) or 512))  # fixed at 512 before the option
+                    dist_rows[(row.get("problem"), int(num(row.get("workers")) or 0), key,
+                               r.date)] = (row, r)
+                    if key != self.DIST_DEFAULT:
+                        continue
                 if isinstance(row, dict) and (num(row.get("split_front_min_cb")) or 0) > 0:
                     off = next((x for x in r.rows if isinstance(x, dict)
                                 and (num(x.get("split_front_min_cb")) or 0) == 0
@@ -822,6 +841,37 @@ class GpuSections:
             self.w(table(["problem", unit + "s", "share / budget", f"factor MB per {unit}",
                           "budget MB", "factor s", "in core s", "slowdown", "tiled fronts",
                           "CBs spilled", "MB to device", "MB to host", "berr"], brows, 2))
+        if dist_rows:
+            drows = []
+            for (p, w, key, _), (row, r) in sorted(dist_rows.items(),
+                                                   key=lambda kv: (str(kv[0][0]), kv[0][1],
+                                                                   kv[0][3], kv[0][2])):
+                devs = row.get("devices") or []
+                off = next((x for x in r.rows if isinstance(x, dict)
+                            and x.get("problem") == p and x.get("workers") == row.get("workers")
+                            and int(num(x.get("distributed_front_min_rows")) or 0) == 0
+                            and (num(x.get("split_front_min_cb")) or 0) == 0), None)
+                top = [pr for d in devs for pr in (d.get("parts") or [])
+                       if isinstance(pr, dict) and pr.get("kind") == "top"]
+                top_s = (num(top[0].get("end_seconds")) - num(top[0].get("start_seconds"))
+                         if top else None)
+                on_s = num(row.get("factor_seconds"))
+                drows.append([str(p), str(w), f"{key[0]} / {key[1]}", f_sec(on_s),
+                              f_ratio(ratio(on_s, num(dig(off, "factor_seconds"))))
+                              if key[0] > 0 else "–",
+                              f_sec(top_s),
+                              f_int(sum(int(num(d.get("fronts_distributed")) or 0) for d in devs)),
+                              f"[`{r.name}`]({self.rel(r.path)})"])
+            self.w(f"Top fronts factored whole over all {unit}s, columns in blocks dealt out "
+                   f"cyclically (`Options::distributed_front_min_rows` / "
+                   f"`distributed_front_block_size`, `--distributed-fronts` / "
+                   f"`--distributed-block`; 0 rows: off; default {self.DIST_DEFAULT[0]} / "
+                   f"{self.DIST_DEFAULT[1]}): seconds, the ratio to the row of the same run with "
+                   f"it off (below 1, it helps), the top part's seconds from the part log, and "
+                   f"the fronts distributed in the last factorization.")
+            self.w()
+            self.w(table(["problem", unit + "s", "min rows / block", "factor s", "vs off",
+                          "top part s", "fronts distributed", "run"], drows, 3))
         if split_rows:
             srows = []
             for (p, w, cb), (row, off, r) in sorted(split_rows.items(),

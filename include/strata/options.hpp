@@ -179,8 +179,12 @@ struct Options {
   /// with one step of lookahead; src/numeric/cuda/distributed_front.cu); it takes
   /// precedence over split_front_min_cb for the fronts it covers. LU and LDLᵀ fronts,
   /// fronts of at most gpu_panel_kernel_max_pivots pivots and fronts factored tile by tile
-  /// are not distributed. 0 turns this off.
-  index_t distributed_front_min_rows = 0;
+  /// are not distributed. 0 turns this off. Default 1024: on 2 H200s the top part of
+  /// lap3d 100³ took 20.1 ms instead of 24.6 (factorization 0.172 s against 0.174 s),
+  /// lap3d 80³ 14.8 ms instead of 17.3 (0.067 against 0.070 s), elasticity 40³ 7.3
+  /// against 7.8 ms; 4096 gave the same, blocks of 1024 the same, of 256 less
+  /// (bench/results/multigpu-20261123T0658*.json, T0700*.json).
+  index_t distributed_front_min_rows = 1024;
   /// Columns per block of a distributed front (distributed_front_min_rows): fewer make
   /// the serial chain of pivot blocks shorter and the blocks' DGEMMs smaller. At least 64.
   index_t distributed_front_block_size = 512;
