@@ -35,10 +35,10 @@
 //
 // The top part — the root separators, the largest fronts — runs on worker 0 while every
 // other worker is idle: they are handed to it as helpers (FactorContext::helpers), and the
-// CUDA executor splits a large front's update by column strips over them
-// (Options::split_front_min_cb). Upper parts get no helpers: no worker is known to be
-// idle while one runs. The pivot blocks and panels of those fronts stay on one GPU (a
-// 2-D distribution of the top fronts is not done).
+// CUDA executor factors a large Cholesky front over all of them, its columns dealt out
+// in blocks (Options::distributed_front_min_rows, distributed_front.cu), or splits a
+// large front's update by column strips over them (Options::split_front_min_cb). Upper
+// parts get no helpers: no worker is known to be idle while one runs.
 //
 // Several processes (src/distributed, docs/distributed.md): MultiWorkerConfig names the
 // global workers this process runs; it factors their subtrees, then hands every transfer
