@@ -120,7 +120,8 @@ void factor_on_gpus(int gpus) {
     std::vector<std::vector<double>> arenas;
     std::vector<DeviceStats> dev;
     numeric::factorize_multi(an, v, pr.type, pivot, execs, multi_f, arenas, {}, &dev);
-    // every front was factored by one GPU as on one GPU alone
+    // every front was factored by one GPU as on one GPU alone, or (a top front of at
+    // least distributed_front_min_rows rows) over all of them, which sums in another order
     EXPECT_LT(test::relative_difference(multi_f.panels, gpu1_f.panels), 1e-13);
     {  // the parts' panels kept on the GPUs, then fetched: the same factor
       numeric::NumericFactor kept_f;
