@@ -175,18 +175,20 @@ struct Options {
   /// With several GPUs: a Cholesky front of the top part with at least this many rows is
   /// factored whole — pivot block, panel and update — by GPU 0 and the idle GPUs
   /// together, its columns dealt out in blocks of distributed_front_block_size (1-D
-  /// block-cyclic, right-looking
-  /// with one step of lookahead; src/numeric/cuda/distributed_front.cu); it takes
-  /// precedence over split_front_min_cb for the fronts it covers. LU and LDLᵀ fronts,
-  /// fronts of at most gpu_panel_kernel_max_pivots pivots and fronts factored tile by tile
-  /// are not distributed. 0 turns this off. Default 1024: on 2 H200s the top part of
-  /// lap3d 100³ took 20.1 ms instead of 24.6 (factorization 0.172 s against 0.174 s),
-  /// lap3d 80³ 14.8 ms instead of 17.3 (0.067 against 0.070 s), elasticity 40³ 7.3
-  /// against 7.8 ms; 4096 gave the same, blocks of 1024 the same, of 256 less
+  /// block-cyclic, right-looking with one step of lookahead;
+  /// src/numeric/cuda/distributed_front.cu); it takes precedence over split_front_min_cb
+  /// for the fronts it covers. Not distributed: LU and LDLᵀ fronts, fronts of at most
+  /// gpu_panel_kernel_max_pivots pivots, fronts factored tile by tile, and every front
+  /// under a device_memory_limit (the panel slots, 2 × rows × block doubles per GPU, would
+  /// be memory beside the budget). 0 turns this off. Default 1024: on 2 H200s the top
+  /// part of lap3d 100³ took 20.1 ms instead of 24.6 (factorization 0.172 s against
+  /// 0.174 s), lap3d 80³ 14.8 ms instead of 17.3 (0.067 against 0.070 s), elasticity 40³
+  /// 7.3 against 7.8 ms; 4096 gave the same, blocks of 1024 the same, of 256 less
   /// (bench/results/multigpu-20261123T0658*.json, T0700*.json).
   index_t distributed_front_min_rows = 1024;
-  /// Columns per block of a distributed front (distributed_front_min_rows): fewer make
-  /// the serial chain of pivot blocks shorter and the blocks' DGEMMs smaller. At least 64.
+  /// Columns per block of a distributed front (distributed_front_min_rows): smaller
+  /// blocks make each step's serial pivot block cheaper but add steps and shrink the
+  /// blocks' DGEMMs (on 2 H200s, 256 was slower than 512 and 1024). At least 64.
   index_t distributed_front_block_size = 512;
   /// For `general`: permute large entries onto the diagonal by a maximum weighted
   /// matching and scale rows and columns (MC64-style, Duff & Koster 2001). For

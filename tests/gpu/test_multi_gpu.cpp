@@ -41,6 +41,29 @@ void reference_factors(const Analysis& an, const std::vector<double>& v, MatrixT
   numeric::fetch_panels(an, *gpu1, gpu1_f);
 }
 
+// A right-hand side of n entries drawn afresh from U(−1, 1).
+std::vector<double> random_rhs(index_t n, std::mt19937_64& rng) {
+  std::vector<double> b(static_cast<std::size_t>(n));
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (double& x : b) x = u(rng);
+  return b;
+}
+
+// Through the Solver on `gpus` GPUs with options o: factorize, refactorize, then a solve
+// with b whose backward error must be at most 1e-14. Returns the per-GPU statistics of
+// the refactorization.
+std::vector<DeviceStats> refactorize_and_solve(const test::NamedMatrix& pr, Options o, int gpus,
+                                               const std::vector<double>& b) {
+  o.backend = Backend::cuda;
+  o.num_gpus = gpus;
+  Solver s(o);
+  s.factorize(pr.a);
+  s.refactorize(pr.a);
+  const auto x = s.solve(b);
+  EXPECT_LE(test::backward_error(pr.a, x.data(), b.data()), 1e-14);
+  return s.stats().factor.devices;
+}
+
 // One CUDA executor on each of GPUs 0 .. gpus − 1.
 struct GpuExecutors {
   std::vector<std::unique_ptr<numeric::Executor>> owned;
@@ -141,9 +164,7 @@ void factor_on_gpus(int gpus) {
       EXPECT_LT(test::relative_difference(multi_f.panels, cpu_f.panels), 1e-12);
       EXPECT_EQ(multi_f.rows, cpu_f.rows);
     }
-    std::vector<double> b(pr.a.n_rows);
-    std::uniform_real_distribution<double> u(-1, 1);
-    for (double& x : b) x = u(rng);
+    const std::vector<double> b = random_rhs(pr.a.n_rows, rng);
     const auto xm = solve_with(an, multi_f, b), xc = solve_with(an, cpu_f, b);
     EXPECT_LT(test::relative_difference(xm, xc), 1e-8);
     ASSERT_EQ(dev.size(), static_cast<std::size_t>(gpus));
@@ -320,9 +341,7 @@ TEST(MultiGpu, UpperLayersMatchOneGpuAndCpu) {
       EXPECT_LT(test::relative_difference(off_f.panels, gpu1_f.panels), 1e-13);
       if (pr.type == MatrixType::spd)
         EXPECT_LT(test::relative_difference(on_f.panels, cpu_f.panels), 1e-12);
-      std::vector<double> b(pr.a.n_rows);
-      std::uniform_real_distribution<double> u(-1, 1);
-      for (double& x : b) x = u(rng);
+      const std::vector<double> b = random_rhs(pr.a.n_rows, rng);
       const auto xc = solve_with(an, cpu_f, b);
       EXPECT_LT(test::relative_difference(solve_with(an, on_f, b), xc), 1e-8);
       EXPECT_LT(test::relative_difference(solve_with(an, kept_f, b), xc), 1e-8);
@@ -403,23 +422,14 @@ TEST(MultiGpu, SplitFrontUpdatesMatchOneGpuAndCpu) {
         EXPECT_LT(test::relative_difference(split_f.panels, cpu_f.panels), 1e-12);
         EXPECT_EQ(split_f.rows, cpu_f.rows);
       }
-      std::vector<double> b(pr.a.n_rows);
-      std::uniform_real_distribution<double> u(-1, 1);
-      for (double& x : b) x = u(rng);
+      const std::vector<double> b = random_rhs(pr.a.n_rows, rng);
       EXPECT_LT(test::relative_difference(solve_with(an, split_f, b), solve_with(an, cpu_f, b)),
                 1e-8);
       // through the Solver, refactorization included
-      Options so = o;
-      so.backend = Backend::cuda;
-      so.num_gpus = gpus;
-      Solver s(so);
-      s.factorize(pr.a);
-      s.refactorize(pr.a);
       index_t solver_split = 0;
-      for (const DeviceStats& d : s.stats().factor.devices) solver_split += d.fronts_split;
+      for (const DeviceStats& d : refactorize_and_solve(pr, o, gpus, b))
+        solver_split += d.fronts_split;
       EXPECT_GT(solver_split, 0);
-      const auto x = s.solve(b);
-      EXPECT_LE(test::backward_error(pr.a, x.data(), b.data()), 1e-14);
     }
   }
 }
@@ -475,24 +485,14 @@ TEST(MultiGpu, DistributedFrontsMatchOneGpuAndCpu) {
       EXPECT_LT(test::relative_difference(dist_f.panels, gpu1_f.panels), 1e-12);
       EXPECT_LT(test::relative_difference(dist_f.panels, cpu_f.panels), 1e-12);
       EXPECT_EQ(dist_f.rows, cpu_f.rows);
-      std::vector<double> b(pr.a.n_rows);
-      std::uniform_real_distribution<double> u(-1, 1);
-      for (double& x : b) x = u(rng);
+      const std::vector<double> b = random_rhs(pr.a.n_rows, rng);
       EXPECT_LT(test::relative_difference(solve_with(an, dist_f, b), solve_with(an, cpu_f, b)),
                 1e-10);
       // through the Solver, refactorization included
-      Options so = o;
-      so.backend = Backend::cuda;
-      so.num_gpus = gpus;
-      Solver s(so);
-      s.factorize(pr.a);
-      s.refactorize(pr.a);
       index_t solver_distributed = 0;
-      for (const DeviceStats& d : s.stats().factor.devices)
+      for (const DeviceStats& d : refactorize_and_solve(pr, o, gpus, b))
         solver_distributed += d.fronts_distributed;
       EXPECT_GT(solver_distributed, 0);
-      const auto x = s.solve(b);
-      EXPECT_LE(test::backward_error(pr.a, x.data(), b.data()), 1e-14);
     }
     // not positive definite in the root front's second column block
     SCOPED_TRACE("negative pivot, " + std::to_string(gpus) + " GPUs");

@@ -238,9 +238,10 @@ class CudaExecutor final : public numeric::Executor {
   void split_update(Lane& lane, double* F, int m, int k, bool lu, cudaEvent_t assembled);
   /// Makes stream_ wait for the helpers used since the last call (the chunk's join).
   void join_team();
-  /// Whether an LLᵀ front of m rows is factored over the team (distributed_llt).
+  /// Whether an LLᵀ front of m rows is factored over the team (distributed_llt). Not
+  /// under a device budget: the panel slots are memory beside the plan.
   bool distribute_front(int m) const {
-    return !team_.empty() && dist_min_rows_ > 0 && m >= dist_min_rows_;
+    return !team_.empty() && dist_min_rows_ > 0 && m >= dist_min_rows_ && limit_ == 0;
   }
   /// Front F (m × m in the pool, k pivots, assembled: all its work so far on `lane`)
   /// factored whole — pivot block, panel and contribution-block update — over this GPU
@@ -248,7 +249,8 @@ class CudaExecutor final : public numeric::Executor {
   /// (distributed_front.cu); F ends as the one-GPU code leaves it, `info` (device) as
   /// POTRF of order k reports. Everything is enqueued (lane.stream waits for the
   /// helpers' last copies). False, with nothing enqueued, when a helper's pool cannot
-  /// hold its blocks or the front has fewer column blocks than GPUs.
+  /// hold its blocks, a GPU has no room for the panel slots, or the front has fewer
+  /// column blocks than GPUs.
   bool distributed_llt(Lane& lane, double* F, int m, int k, int* info);
   /// The lane this executor lends to others (a lane of its own, idle while it helps).
   Lane& help_lane();

@@ -73,7 +73,7 @@ __global__ void first_failed_block_kernel(const int* all, int P, int G, int nb, 
   *info = r;
 }
 
-// An event of `pool` (created on the current device when the pool is short).
+// Event i of `pool`, the pool grown to it first (events created on the current device).
 cudaEvent_t event_at(std::vector<cudaEvent_t>& pool, std::size_t i) {
   while (pool.size() <= i) {
     cudaEvent_t e = nullptr;
@@ -124,7 +124,13 @@ bool CudaExecutor::distributed_llt(Lane& lane, double* F, int m, int k, int* inf
       STRATA_CUDA(cudaSetDevice(device_));
       return false;
     }
-    x.dist_panels_.resize(2 * slot);  // grown once; refactorizations reuse it
+    try {  // grown once (the chain's first front is its largest); refactorizations reuse it
+      x.dist_panels_.resize(2 * slot);
+      x.dist_status_.resize(static_cast<std::size_t>(G) * P);
+    } catch (const OutOfMemory&) {  // no room beside the plan: this front on one GPU
+      STRATA_CUDA(cudaSetDevice(device_));
+      return false;
+    }
     u.slots[0] = x.dist_panels_.data();
     u.slots[1] = u.slots[0] + slot;
     if (g == 0) {
@@ -140,15 +146,13 @@ bool CudaExecutor::distributed_llt(Lane& lane, double* F, int m, int k, int* inf
         at += rows(j) * width(j);
       }
     }
-    x.dist_status_.resize(static_cast<std::size_t>(G) * P);
     u.status = x.dist_status_.data();
     u.work = g == 0 ? &lane : &x.help_lane();
     u.copy = x.dist_copy_;
     // a helper's copies land in its pool: after its own last work (set_team's event)
     if (g > 0) STRATA_CUDA(cudaStreamWaitEvent(u.copy, x.help_ready_, 0));
-    u.work->diag_work.resize(llt_recursive_work_size(nb));  // no reallocation between steps
-    for (std::size_t e = x.dist_events_.size(); e < 3 * static_cast<std::size_t>(P); ++e)
-      event_at(x.dist_events_, e);
+    u.work->diag_work.resize(llt_recursive_work_size(nb));          // no reallocation between steps
+    event_at(x.dist_events_, 3 * static_cast<std::size_t>(P) - 1);  // E, R and D of every step
   }
   auto E = [&](int g, int p) { return gpu[g].ex->dist_events_[3 * p]; };
   auto R = [&](int g, int p) { return gpu[g].ex->dist_events_[3 * p + 1]; };
