@@ -210,6 +210,7 @@ nlohmann::json device_figures(const FactorStats& fs) {
           {"tiled_fronts", fs.tiled_fronts},
           {"lu_large_fronts", fs.lu_large_fronts},
           {"lu_large_fronts_pivoted", fs.lu_large_fronts_pivoted},
+          {"lu_large_fronts_batched", fs.lu_large_fronts_batched},
           {"factor_resident", fs.factor_resident},
           {"phases", fs.device_phases}};
 }

@@ -321,6 +321,7 @@ int run_solve(const SolveArgs& a, const Communicator& comm) {
                    {"tiled_fronts", f.tiled_fronts},
                    {"lu_large_fronts", f.lu_large_fronts},
                    {"lu_large_fronts_pivoted", f.lu_large_fronts_pivoted},
+                   {"lu_large_fronts_batched", f.lu_large_fronts_batched},
                    {"device_budget", f.device_budget},
                    {"contribution_blocks_on_host", f.contribution_blocks_on_host},
                    {"factor_resident", f.factor_resident},

@@ -144,11 +144,14 @@ struct FactorStats {
   index_t device_batches = 0;       ///< launch groups run (memory-plan batches, split
                                     ///< further when the device pool is smaller)
   index_t tiled_fronts = 0;         ///< fronts over the device budget, factored by slabs
-  /// LU: large fronts whose pivot block went to cuSOLVER GETRF, and of those the ones that
-  /// needed row interchanges (factored again with partial pivoting after the unpivoted
-  /// GETRF's check failed; see CudaExecutor::lu_large_fronts).
+  /// LU: large fronts (over 256 rows); of those the ones that needed row interchanges or
+  /// static pivots (factored again with partial pivoting after the check of their
+  /// elimination without interchanges failed), and the ones whose elimination without
+  /// interchanges ran in strata's batched kernels (Options::gpu_lu_panel_kernel_max_pivots)
+  /// rather than cuSOLVER GETRF; see CudaExecutor::lu_large_fronts.
   index_t lu_large_fronts = 0;
   index_t lu_large_fronts_pivoted = 0;
+  index_t lu_large_fronts_batched = 0;
   std::size_t device_budget = 0;             ///< bytes the numeric working memory was held to
   bool contribution_blocks_on_host = false;  ///< some blocks spilled to pinned host memory
   bool factor_resident = false;              ///< the factor stayed on the device: solve runs there

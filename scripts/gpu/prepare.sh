@@ -29,8 +29,9 @@ for b in .carry/bin/*; do
   ldd "$b" | awk '/=>/ {print $3}'
 done | sort -u | grep -v -E '/(libc|libm|libdl|libpthread|librt|libgcc_s|libstdc\+\+)\.so|cuda|libcu|libnv' |
   while read -r lib; do cp -L "$lib" .carry/lib/; done
-# the large BLAS/LAPACK travel compressed (the tree that travels is limited to 64 MiB)
-xz -T2 -6 .carry/lib/libopenblas.so.0 .carry/lib/liblapack.so.3
+# the large BLAS/LAPACK and the binaries travel compressed (the tree that travels is
+# limited to 64 MiB; the binaries alone were 39 MB); the run scripts unpack them
+xz -T2 -6 .carry/lib/libopenblas.so.0 .carry/lib/liblapack.so.3 .carry/bin/*
 du -sh .carry
 # cuDSS's library is 167 MB (143 MB compressed), over what one call carries: it travels
 # in three parts, .cudss1..3, one per call, each copied to build-cudss/ on the device

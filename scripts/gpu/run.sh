@@ -4,7 +4,7 @@
 # --cudss-bench ARGS, --multigpu-bench ARGS). Logs and
 # results go to $OUT.
 set -uo pipefail
-for z in .carry/lib/*.xz; do [ -f "$z" ] && xz -d -f "$z"; done
+for z in .carry/lib/*.xz .carry/bin/*.xz; do [ -f "$z" ] && xz -d -f "$z"; done
 # cuDSS, if its three parts were carried by earlier calls into build-cudss/ (prepare.sh)
 if [ -f build-cudss/part-ac ] && [ ! -f build-cudss/libcudss.so.1 ]; then
   cat build-cudss/part-aa build-cudss/part-ab build-cudss/part-ac | xz -d -T8 >build-cudss/libcudss.so.1

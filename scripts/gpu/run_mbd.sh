@@ -21,7 +21,7 @@
 set -uo pipefail
 cd "$(dirname "$0")/../.."
 if [ -d .carry/lib ]; then
-  for z in .carry/lib/*.xz; do [ -f "$z" ] && xz -d -f "$z"; done
+  for z in .carry/lib/*.xz .carry/bin/*.xz; do [ -f "$z" ] && xz -d -f "$z"; done
   export LD_LIBRARY_PATH="$PWD/.carry/lib:${LD_LIBRARY_PATH:-}"
 fi
 OUT="${OUT:-/tmp/strata-out}"

@@ -17,7 +17,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 if [ -d .carry/lib ]; then
-  for z in .carry/lib/*.xz; do [ -f "$z" ] && xz -d -f "$z"; done
+  for z in .carry/lib/*.xz .carry/bin/*.xz; do [ -f "$z" ] && xz -d -f "$z"; done
   export LD_LIBRARY_PATH="$PWD/.carry/lib:${LD_LIBRARY_PATH:-}"
 fi
 BIN=${STRATA_BIN_DIR:-.carry/bin}
@@ -41,19 +41,7 @@ if ((n == 0)); then  # no GPU (a smoke run): host executors stand in for 2 GPUs
   backend=cpu
   workers=1,2
 fi
-files=()
-for m in "${models[@]}"; do
-  IFS='|' read -r name spec <<<"$m"
-  dir="$WORK/$name"
-  rm -rf "$dir"
-  # one step of 1 ms: the Newton matrix of its first iteration
-  "$S" simulate --generate "$spec" --step 1e-3 --t-end 1e-3 --device auto --quiet \
-    --output "" --dump-matrix "$dir" | grep -E "^(model|strata \[ms\]|Newton matrix)" || true
-  [ -f "$dir/jacobian_step1.mtx" ] || { echo "run_mechanical: no matrix for $spec" >&2; exit 1; }
-  mv "$dir/jacobian_step1.mtx" "$dir/$name.mtx"
-  files+=("$dir/$name.mtx")
-done
-list=$(IFS=,; echo "${files[*]}")
+list=$(bash scripts/gpu/mechanical_matrices.sh "$S" "$WORK" "${models[@]}" | tail -n 1)
 "$BIN/bench_multigpu" --backend "$backend" --workers "$workers" --subtrees 1 --balance off \
   --stealing on --repeat 2 --tag mechanical --problems "$list" --results-dir "$RESULTS"
 rm -rf "$WORK"

@@ -94,6 +94,7 @@ void merge_device_figures(FactorStats& into, const FactorStats& one) {
   into.tiled_fronts += one.tiled_fronts;
   into.lu_large_fronts += one.lu_large_fronts;
   into.lu_large_fronts_pivoted += one.lu_large_fronts_pivoted;
+  into.lu_large_fronts_batched += one.lu_large_fronts_batched;
   into.device_budget = std::max(into.device_budget, one.device_budget);
   into.contribution_blocks_on_host |= one.contribution_blocks_on_host;
   auto& d = into.device_phases;

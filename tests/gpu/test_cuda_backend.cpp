@@ -222,6 +222,109 @@ TEST_F(CudaBackend, RecursivePanelMatchesCpuFront) {
   }
 }
 
+// The batched LU of large fronts without interchanges (kernels_lu_panel.cu) of many dense
+// fronts in one launch sequence, against the CPU's partial LU with restricted partial
+// pivoting (numeric/cpu/dense_front.cpp: recursive GETRF, TRSMs, GEMM) of the same fronts:
+// sizes around the 64-column steps and tiles, fronts with no rows below the pivots, all
+// together. Column diagonal dominance in the pivot block means partial pivoting interchanges
+// nothing, so the CPU factor is the one the GPU must give; then fronts where it would
+// interchange — a multiplier over 1 in the diagonal block, in a fully summed row below it
+// (a later tile), at a later step — or where a pivot is under the static-pivot threshold
+// are rejected, while a large entry in a row that is not fully summed is not a reason to.
+TEST_F(CudaBackend, LuBatchedPanelMatchesCpuFront) {
+  auto rng = test::fresh_rng();
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  // off-diagonal entries in (−1, 1), the pivot block's diagonal m + 1 (column sums of the
+  // rest below m): no interchange
+  auto front = [&](index_t m, index_t k) {
+    std::vector<double> f(static_cast<std::size_t>(m) * m);
+    for (double& x : f) x = u(rng);
+    for (index_t j = 0; j < k; ++j) f[j * m + j] = (u(rng) < 0 ? -1.0 : 1.0) * (m + 1.0);
+    return f;
+  };
+  const std::vector<std::pair<index_t, index_t>> shapes = {
+      {1, 1},    {2, 2},     {3, 2},     {5, 3},    {5, 5},     {64, 64},    {65, 64},    {65, 65},
+      {130, 65}, {200, 129}, {300, 256}, {733, 65}, {733, 300}, {1000, 733}, {2000, 1024}};
+  std::vector<std::vector<double>> in, gpu;
+  std::vector<index_t> ms, ks;
+  for (auto [m, k] : shapes) {
+    in.push_back(front(m, k));
+    ms.push_back(m);
+    ks.push_back(k);
+  }
+  gpu = in;
+  const std::vector<char> kept = numeric::cuda_lu_fronts_batched(gpu, ms, ks, 1e-8);
+  for (std::size_t i = 0; i < shapes.size(); ++i) {
+    const auto [m, k] = shapes[i];
+    SCOPED_TRACE("m=" + std::to_string(m) + " k=" + std::to_string(k));
+    ASSERT_TRUE(kept[i]);
+    std::vector<double> cpu = in[i];
+    std::vector<index_t> perm(k);
+    numeric::cpu::PivotStats st;
+    numeric::cpu::factor_front_lu(cpu.data(), m, k, m, 1e-8, perm.data(), st);
+    for (index_t j = 0; j < k; ++j) ASSERT_EQ(perm[j], j);  // no interchange on the CPU
+    EXPECT_EQ(st.perturbed, 0);
+    double num = 0, den = 0;
+    for (std::size_t x = 0; x < cpu.size(); ++x) {
+      num = std::max(num, std::abs(cpu[x] - gpu[i][x]));
+      den = std::max(den, std::abs(cpu[x]));
+    }
+    EXPECT_LT(num, 1e-13 * den);
+  }
+  // rejections: (m, k, row, column, value) written into a dominant front
+  struct Case {
+    index_t m, k, row, col;
+    double value;
+    bool kept;
+  };
+  const std::vector<Case> cases = {
+      {300, 256, 5, 2, 1e4, false},      // multiplier over 1 in the first diagonal block
+      {300, 256, 150, 10, 1e4, false},   // in a fully summed row of a later L-panel tile
+      {733, 300, 200, 130, 1e4, false},  // at the third step
+      {733, 300, 299, 0, 1e4, false},    // the last fully summed row
+      {733, 300, 300, 0, 1e4, true},     // the first row that is not fully summed: no reason
+      {733, 300, 700, 250, 1e4, true},
+      {300, 256, 70, 70, 1e-12, false},  // a pivot under the static-pivot threshold
+  };
+  std::vector<std::vector<double>> cf;
+  ms.clear();
+  ks.clear();
+  for (const Case& c : cases) {
+    cf.push_back(front(c.m, c.k));
+    if (c.row == c.col) {  // a tiny pivot: its row and column small too, so it stays tiny
+      for (index_t x = 0; x < c.m; ++x) {
+        cf.back()[c.col * c.m + x] *= 1e-13;
+        cf.back()[x * c.m + c.row] *= 1e-13;
+      }
+    }
+    cf.back()[c.col * c.m + c.row] = c.value;
+    ms.push_back(c.m);
+    ks.push_back(c.k);
+  }
+  std::vector<std::vector<double>> cg = cf;
+  const std::vector<char> ck = numeric::cuda_lu_fronts_batched(cg, ms, ks, 1e-8);
+  for (std::size_t i = 0; i < cases.size(); ++i) {
+    const Case& c = cases[i];
+    SCOPED_TRACE("case " + std::to_string(i));
+    EXPECT_EQ(static_cast<bool>(ck[i]), c.kept);
+    std::vector<index_t> perm(c.k);
+    numeric::cpu::PivotStats st;
+    std::vector<double> cpu = cf[i];
+    numeric::cpu::factor_front_lu(cpu.data(), c.m, c.k, c.m, 1e-8, perm.data(), st);
+    bool identity = st.perturbed == 0;
+    for (index_t j = 0; j < c.k; ++j) identity = identity && perm[j] == j;
+    EXPECT_EQ(identity, c.kept);  // the CPU agrees on what needs interchanges
+    if (c.kept) {
+      double num = 0, den = 0;
+      for (std::size_t x = 0; x < cpu.size(); ++x) {
+        num = std::max(num, std::abs(cpu[x] - cg[i][x]));
+        den = std::max(den, std::abs(cpu[x]));
+      }
+      EXPECT_LT(num, 1e-13 * den);
+    }
+  }
+}
+
 // A 3-D Laplacian shifted to have exactly one negative eigenvalue, declared spd: there is
 // one non-positive pivot in all, so the CPU and the GPU must fail at the same one whatever
 // their order of fronts — on the GPU inside the 400-pivot root front, after several
@@ -389,8 +492,8 @@ struct CpuAndGpu {
   numeric::NumericFactor cpu, gpu;
   std::unique_ptr<numeric::Executor> gpu_exec;
 };
-CpuAndGpu factor_on_cpu_and_gpu(const SparseMatrix& a, MatrixType type, bool matching, double sp) {
-  Options o;
+CpuAndGpu factor_on_cpu_and_gpu(const SparseMatrix& a, MatrixType type, bool matching, double sp,
+                                Options o = Options{}) {
   o.num_gpus = 1;  // one GPU, whatever the machine has
   o.type = type;
   o.matching_and_scaling = matching;
@@ -405,10 +508,13 @@ CpuAndGpu factor_on_cpu_and_gpu(const SparseMatrix& a, MatrixType type, bool mat
 }
 }  // namespace
 
-// The GPU LU factor equals the CPU's entry by entry, for large fronts on both of their
-// paths: GETRF + TRSM + GEMM when no pivot needs static pivoting, and the panel-kernel
-// path when one does (exactly zero columns inside large fronts). The factor is resident,
-// so this also checks that the panels kept on the device only come back intact.
+// The GPU LU factor equals the CPU's entry by entry, for large fronts on all of their
+// paths: the batched kernels without interchanges (gpu_lu_panel_kernel_max_pivots at its
+// default) or GETRF without pivoting + TRSMs (0), both kept when no interchange was due;
+// GETRF with pivoting after the front is assembled again when one was; and the
+// panel-kernel path when a pivot needs static pivoting (exactly zero columns inside large
+// fronts). The factor is resident, so this also checks that the panels kept on the device
+// only come back intact.
 TEST_F(CudaBackend, LuFactorMatchesCpu) {
   unsigned long long seed = 0;
   auto rng = test::fresh_rng(&seed);
@@ -442,39 +548,43 @@ TEST_F(CudaBackend, LuFactorMatchesCpu) {
     for (index_t p = rows.a.offsets[j]; p < rows.a.offsets[j + 1]; ++p)
       rows.a.values[p] *= row_scale[rows.a.indices[p]];
   problems.push_back(std::move(rows));
-  for (const Problem& pr : problems) {
-    SCOPED_TRACE(pr.name);
-    CpuAndGpu r =
-        factor_on_cpu_and_gpu(pr.a, MatrixType::general, pr.matching && pr.zero_columns == 0, 1e-8);
-    const numeric::NumericFactor& cf = r.cpu;
-    numeric::NumericFactor& gf = r.gpu;
-    FactorStats fs;
-    r.gpu_exec->report(fs);
-    EXPECT_TRUE(fs.factor_resident);
-    EXPECT_FALSE(gf.panels_on_host);
-    // elasticity 8 has large fronts (library GETRF): after the matching most of them need
-    // no interchange, so their unpivoted GETRF stands; with rows scaled and no matching
-    // some need interchanges, found by the check
-    if (pr.name == "elasticity 8") {
-      EXPECT_GT(fs.lu_large_fronts, fs.lu_large_fronts_pivoted);
+  for (const Problem& pr : problems)
+    for (index_t lu_max : {Options{}.gpu_lu_panel_kernel_max_pivots, index_t{0}}) {
+      SCOPED_TRACE(pr.name + ", gpu_lu_panel_kernel_max_pivots " + std::to_string(lu_max));
+      Options o;
+      o.gpu_lu_panel_kernel_max_pivots = lu_max;
+      CpuAndGpu r = factor_on_cpu_and_gpu(pr.a, MatrixType::general,
+                                          pr.matching && pr.zero_columns == 0, 1e-8, o);
+      const numeric::NumericFactor& cf = r.cpu;
+      numeric::NumericFactor& gf = r.gpu;
+      FactorStats fs;
+      r.gpu_exec->report(fs);
+      EXPECT_TRUE(fs.factor_resident);
+      EXPECT_FALSE(gf.panels_on_host);
+      // elasticity 8 has large fronts: after the matching most of them need no interchange,
+      // so their elimination without interchanges stands; with rows scaled and no matching
+      // some need interchanges, found by the check
+      if (pr.name == "elasticity 8") {
+        EXPECT_GT(fs.lu_large_fronts, fs.lu_large_fronts_pivoted);
+      }
+      EXPECT_EQ(fs.lu_large_fronts_batched, lu_max > 0 ? fs.lu_large_fronts : 0);
+      if (!pr.matching) {
+        EXPECT_GT(fs.lu_large_fronts_pivoted, 0);
+      }
+      numeric::fetch_panels(r.an, *r.gpu_exec, gf);
+      ASSERT_EQ(cf.rows, gf.rows);
+      // zero columns: a residue of rounding size, replaced by the static pivot on one side
+      // and not the other, changes entries at the pivot's size
+      EXPECT_LT(test::relative_difference(gf.panels, cf.panels), pr.zero_columns ? 1e-6 : 1e-10);
+      numeric::cpu::PivotStats sc, sg;
+      for (const auto& ps : cf.front_stats) sc.merge(ps);
+      for (const auto& ps : gf.front_stats) sg.merge(ps);
+      EXPECT_EQ(sg.perturbed, sc.perturbed);
+      EXPECT_GE(sg.perturbed, pr.zero_columns);
+      EXPECT_EQ(sg.det_sign, sc.det_sign);
+      EXPECT_NEAR(sg.log_abs_det, sc.log_abs_det,
+                  (pr.zero_columns ? 1e-6 : 1e-9) * std::max(1.0, std::abs(sc.log_abs_det)));
     }
-    if (!pr.matching) {
-      EXPECT_GT(fs.lu_large_fronts_pivoted, 0);
-    }
-    numeric::fetch_panels(r.an, *r.gpu_exec, gf);
-    ASSERT_EQ(cf.rows, gf.rows);
-    // zero columns: a residue of rounding size, replaced by the static pivot on one side
-    // and not the other, changes entries at the pivot's size
-    EXPECT_LT(test::relative_difference(gf.panels, cf.panels), pr.zero_columns ? 1e-6 : 1e-10);
-    numeric::cpu::PivotStats sc, sg;
-    for (const auto& ps : cf.front_stats) sc.merge(ps);
-    for (const auto& ps : gf.front_stats) sg.merge(ps);
-    EXPECT_EQ(sg.perturbed, sc.perturbed);
-    EXPECT_GE(sg.perturbed, pr.zero_columns);
-    EXPECT_EQ(sg.det_sign, sc.det_sign);
-    EXPECT_NEAR(sg.log_abs_det, sc.log_abs_det,
-                (pr.zero_columns ? 1e-6 : 1e-9) * std::max(1.0, std::abs(sc.log_abs_det)));
-  }
 }
 
 // Shared SPD and unsymmetric matrices solve on the GPU as accurately as on the CPU.

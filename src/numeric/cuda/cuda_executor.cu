@@ -8,9 +8,11 @@
 //   2. one launch factors all small fronts (one thread block each); large fronts go to
 //      the recursive pivot block and panel (llt_recursive.cu) + the update of
 //      llt_update.cu (cuBLAS SYRK, or a GEMM where SYRK is slow) for LLᵀ (cuSOLVER POTRF +
-//      cuBLAS TRSM with gpu_recursive_panel off), cuSOLVER GETRF on the fully summed block +
-//      TRSMs + GEMM (LU; a blocked LU with our panel kernel when a pivot needs static
-//      pivoting, kernels_lu.cu), or a blocked Bunch–Kaufman LDLᵀ with our panel kernel and
+//      cuBLAS TRSM with gpu_recursive_panel off), for LU the pivot block and both panels
+//      by our batched kernels without interchanges (kernels_lu_panel.cu; cuSOLVER GETRF on
+//      the fully summed block + TRSMs for fronts with more pivots) + the GEMM, the
+//      front redone with partial pivoting where interchanges were due (kernels_lu.cu), or
+//      a blocked Bunch–Kaufman LDLᵀ with our panel kernel and
 //      cuBLAS SYRKX (kernels_ldlt.cuh), all with pivoting restricted to the fully summed
 //      rows and the CPU backend's static pivoting. The large fronts of a chunk run side by
 //      side on kLanes streams (each with its own handles), joined before step 3 — an LLᵀ
@@ -98,6 +100,7 @@ CudaExecutor::CudaExecutor(const Options& o, int device)
     : device_(device),
       limit_(o.device_memory_limit),
       panel_max_pivots_(o.gpu_panel_kernel_max_pivots),
+      lu_panel_max_pivots_(o.gpu_lu_panel_kernel_max_pivots),
       split_min_cb_(o.split_front_min_cb),
       dist_min_rows_(o.distributed_front_min_rows),
       dist_block_(std::max<index_t>(64, o.distributed_front_block_size)),
@@ -175,7 +178,7 @@ void CudaExecutor::begin(const numeric::FactorContext& ctx) {
   const Analysis& an = *ctx.analysis;
   bytes_h2d_ = bytes_d2h_ = 0;
   chunks_ = tiled_count_ = 0;
-  lu_fronts_ = lu_fronts_pivoted_ = 0;
+  lu_fronts_ = lu_fronts_pivoted_ = lu_fronts_batched_ = 0;
   phases_ = FactorStats::DevicePhases{};
   held_parts_.clear();
   resident_for_ = nullptr;
@@ -419,6 +422,7 @@ void CudaExecutor::report(FactorStats& fs) const {
   fs.tiled_fronts = tiled_count_;
   fs.lu_large_fronts = lu_fronts_;
   fs.lu_large_fronts_pivoted = lu_fronts_pivoted_;
+  fs.lu_large_fronts_batched = lu_fronts_batched_;
   fs.device_budget = plan_.budget;
   fs.contribution_blocks_on_host = plan_.arena_on_host;
   fs.factor_resident = keep_resident();
@@ -636,7 +640,7 @@ void CudaExecutor::presize_chunk_buffers(const Analysis& an,
                                          const std::vector<numeric::PartView>& views) {
   const auto& t = an.tree;
   const bool lu = !an.symmetric;
-  std::size_t count = 1, big = 1, small = 1, pivots = 1, lu_save = 1, diag = 1, diag_slab = 1;
+  std::size_t count = 1, big = 1, small = 1, pivots = 1, diag = 1, diag_slab = 1;
   int potrf = 1, getrf = 1, blocks = 1;
   std::vector<std::unique_ptr<Lane>>& lane = lanes();
   for (const numeric::PartView& v : views) {
@@ -649,7 +653,7 @@ void CudaExecutor::presize_chunk_buffers(const Analysis& an,
             std::max(diag_slab, llt_recursive_work_size(slab_width(t.n_rows(f), t.n_pivots(f))));
       }
       if (pd.tiled[q] || pd.chunk_end[q] <= q) continue;
-      std::size_t nb = 0, ns = 0, np = 0, save = 0;
+      std::size_t nb = 0, ns = 0, np = 0;
       for (index_t r = q; r < pd.chunk_end[q]; ++r) {
         const index_t f = s.fronts[r];
         const int m = static_cast<int>(t.n_rows(f)), k = static_cast<int>(t.n_pivots(f));
@@ -659,7 +663,6 @@ void CudaExecutor::presize_chunk_buffers(const Analysis& an,
           continue;
         }
         ++nb;
-        save += static_cast<std::size_t>(k) * static_cast<std::size_t>(k);
         int lwork = 0;
         if (lu) {
           STRATA_CUSOLVER(cusolverDnDgetrf_bufferSize(solver_, k, k, pool_.data(), m, &lwork));
@@ -679,7 +682,6 @@ void CudaExecutor::presize_chunk_buffers(const Analysis& an,
       big = std::max(big, nb);
       small = std::max(small, ns);
       pivots = std::max(pivots, np);
-      lu_save = std::max(lu_save, save);
     }
   }
   for (auto* b : {&info_, &perturbed_, &stage_offset_, &diag_offset_}) b->resize(count + 1);
@@ -687,7 +689,7 @@ void CudaExecutor::presize_chunk_buffers(const Analysis& an,
   perm_offset_.resize(small + 1);
   potrf_info_.resize(big + 1);
   panel_items_.resize(2 * big);
-  panel_work_.resize(llt_panel_work_size(static_cast<std::int64_t>(big)));
+  if (!lu) panel_work_.resize(llt_panel_work_size(static_cast<std::int64_t>(big)));
   perm_.resize(pivots + 1);
   pivot_size_.resize(pivots + 1);
   diag_.resize(pivots + 1);
@@ -705,7 +707,8 @@ void CudaExecutor::presize_chunk_buffers(const Analysis& an,
     l->diag_work.resize(l == lane.front() ? std::max(diag, diag_slab) : diag);
   }
   if (lu) {
-    lu_save_.resize(lu_save);
+    lu_items_.resize(big);
+    lu_work_.resize(lu_panel_work_size(static_cast<std::int64_t>(big)));
     lu_ipiv_.resize(pivots);
     lu_info_.resize(big);
     lu_bad_.resize(big);
@@ -901,7 +904,7 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
             llt_update(ln->blas, m - k, k, F + k, m, F + static_cast<std::size_t>(k) * m + k, m);
         }
       } else {  // first pass: GETRF and its pivot check; the rest after one wait below
-        lu_fronts.push_back({ln, F, m, k, perm_f, perturbed_.data() + ns + i});
+        lu_fronts.push_back({ln, F, m, k, p, perm_f, perturbed_.data() + ns + i});
       }
     }
   if (!lu_fronts.empty()) lu_large_fronts(lu_fronts, ctx.static_pivot, ev[1]);
@@ -1101,49 +1104,80 @@ void CudaExecutor::finish_chunk(const numeric::FactorContext& ctx, ChunkRecord& 
                  perturbed[ns + i], perm + big_perm_at[i], diag_of(big[i]));
 }
 
-// LU of the large fronts of a chunk (see kernels_lu.cu for why this shape), in two
-// passes so that the lanes keep running side by side: first, per front on its lane, A11
-// saved, GETRF on the fully summed block and the static-pivot check; one wait for all of
-// them; then per front, if its pivots passed, the interchanges to A12, two TRSMs and a
-// GEMM, and otherwise A11 restored and the blocked path with our panel kernel (static
-// pivoting). (One wait per front instead held the host, and so every lane, on each front.)
+// LU of the large fronts of a chunk, in two passes so that the lanes keep running side by
+// side. First: the fronts with at most lu_panel_max_pivots_ pivots get their pivot block
+// and panels from the batched kernels on stream_ (kernels_lu_panel.cu), each other one
+// cuSOLVER GETRF without pivoting on its lane (kernels_lu.cu); both without row
+// interchanges, checked against what restricted partial pivoting would do. One wait for
+// all of them. Then per front: if its check passed, the update of its contribution block
+// (after the two TRSMs of the library path); if not, the front is assembled again — the
+// values and its children's contribution blocks are as the chunk's assembly read them,
+// since nothing stores a block before the chunk's fronts are all factored — and GETRF
+// with pivoting runs (one more wait, for its pivots); a pivot that still needs static
+// pivoting sends the front, assembled once more, to the blocked path with our panel
+// kernel. (One wait per front instead held the host, and so every lane, on each front.)
 void CudaExecutor::lu_large_fronts(const std::vector<LuFront>& fronts, double static_pivot,
                                    cudaEvent_t assembled) {
   const double one = 1.0, minus_one = -1.0;
   const std::size_t n = fronts.size();
-  std::vector<std::size_t> save_at(n + 1, 0), ipiv_at(n + 1, 0);
-  for (std::size_t i = 0; i < n; ++i) {
-    const std::size_t k = static_cast<std::size_t>(fronts[i].k);
-    save_at[i + 1] = save_at[i] + k * k;
-    ipiv_at[i + 1] = ipiv_at[i] + k;
+  // the batched fronts take the first check slots, largest k first (the kernels' order)
+  std::vector<std::size_t> order(n);
+  for (std::size_t i = 0; i < n; ++i) order[i] = i;
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+    const bool ba = fronts[a].k <= lu_panel_max_pivots_, bb = fronts[b].k <= lu_panel_max_pivots_;
+    return ba != bb ? ba : ba && fronts[a].k > fronts[b].k;
+  });
+  std::vector<std::size_t> slot(n);
+  std::size_t nb = 0;
+  for (std::size_t q = 0; q < n; ++q) {
+    slot[order[q]] = q;
+    if (fronts[order[q]].k <= lu_panel_max_pivots_) ++nb;
   }
+  std::vector<std::size_t> ipiv_at(n + 1, 0);
+  for (std::size_t i = 0; i < n; ++i)
+    ipiv_at[i + 1] = ipiv_at[i] + static_cast<std::size_t>(fronts[i].k);
   // growing a buffer frees the old one: wait for the lanes first (cudaFree would too)
-  if (lu_save_.size() < save_at[n] || lu_ipiv_.size() < ipiv_at[n] || lu_bad_.size() < n)
+  if (lu_ipiv_.size() < ipiv_at[n] || lu_bad_.size() < n || lu_items_.size() < nb ||
+      lu_work_.size() < lu_panel_work_size(static_cast<std::int64_t>(nb)))
     STRATA_CUDA(cudaDeviceSynchronize());
-  lu_save_.resize(std::max<std::size_t>(save_at[n], 1));
   lu_ipiv_.resize(std::max<std::size_t>(ipiv_at[n], 1));
   lu_info_.resize(n);
   lu_bad_.resize(n);
   lu_bad_host_.resize(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    const LuFront& fr = fronts[i];
-    Lane& lane = *fr.lane;
-    const int m = fr.m, k = fr.k;
+  if (nb > 0) {
+    std::vector<LuPanelItem> items(nb);
+    std::vector<std::int64_t> rows(nb), pivots(nb);
+    for (std::size_t q = 0; q < nb; ++q) {
+      const LuFront& fr = fronts[order[q]];
+      items[q] = {fr.F, fr.m, fr.k};
+      rows[q] = fr.m;
+      pivots[q] = fr.k;
+    }
+    lu_items_.upload(items.data(), nb, stream_);
+    count_h2d(nb * sizeof(LuPanelItem));
+    lu_work_.resize(lu_panel_work_size(static_cast<std::int64_t>(nb)));
+    launch_lu_panel_batched(lu_items_.data(), rows, pivots, lu_work_.data(), lu_bad_.data(),
+                            static_pivot, stream_);
+  }
+  auto getrf_work = [&](Lane& lane, const LuFront& fr) {
     int lwork = 0;
-    STRATA_CUSOLVER(cusolverDnDgetrf_bufferSize(lane.solver, k, k, fr.F, m, &lwork));
+    STRATA_CUSOLVER(cusolverDnDgetrf_bufferSize(lane.solver, fr.k, fr.k, fr.F, fr.m, &lwork));
     if (lane.getrf_work.size() < static_cast<std::size_t>(std::max(lwork, 1))) {
       STRATA_CUDA(cudaStreamSynchronize(lane.stream));
       lane.getrf_work.resize(static_cast<std::size_t>(std::max(lwork, 1)));
     }
-    STRATA_CUDA(cudaMemcpy2DAsync(lu_save_.data() + save_at[i], sizeof(double) * k, fr.F,
-                                  sizeof(double) * m, sizeof(double) * k, k,
-                                  cudaMemcpyDeviceToDevice, lane.stream));
+  };
+  for (std::size_t q = nb; q < n; ++q) {
+    const std::size_t i = order[q];
+    const LuFront& fr = fronts[i];
+    Lane& lane = *fr.lane;
+    getrf_work(lane, fr);
     // without pivoting first (devIpiv null); kept only where partial pivoting would have
     // interchanged nothing (kernels_lu.cu)
-    STRATA_CUSOLVER(cusolverDnDgetrf(lane.solver, k, k, fr.F, m, lane.getrf_work.data(), nullptr,
-                                     lu_info_.data() + i));
-    launch_lu_unpivoted_check(fr.F, m, k, static_pivot, lu_info_.data() + i,
-                              lu_ipiv_.data() + ipiv_at[i], lu_bad_.data() + i, lane.stream);
+    STRATA_CUSOLVER(cusolverDnDgetrf(lane.solver, fr.k, fr.k, fr.F, fr.m, lane.getrf_work.data(),
+                                     nullptr, lu_info_.data() + q));
+    launch_lu_unpivoted_check(fr.F, fr.m, fr.k, static_pivot, lu_info_.data() + q,
+                              lu_ipiv_.data() + ipiv_at[i], lu_bad_.data() + q, lane.stream);
   }
   auto fetch_checks = [&] {
     for (const auto& l : lanes_) STRATA_CUDA(cudaStreamSynchronize(l->stream));
@@ -1152,27 +1186,28 @@ void CudaExecutor::lu_large_fronts(const std::vector<LuFront>& fronts, double st
   };
   fetch_checks();
   lu_fronts_ += static_cast<index_t>(n);
-  bool repivoted = false;
-  // the fronts whose unpivoted GETRF stands: no interchange, so neither the serial
-  // ipiv-to-permutation kernel nor the interchanges on A12 (together about 20 µs a front)
-  std::vector<char> unpivoted(n);
-  for (std::size_t i = 0; i < n; ++i) unpivoted[i] = !lu_bad_host_.data()[i];
+  lu_fronts_batched_ += static_cast<index_t>(nb);
+  // the front at chunk position `pos` assembled again, on its lane
+  auto reassemble = [&](const LuFront& fr) {
+    launch_assemble(cur_->tree, fr.pos, 1, fr.m, values_.data(), pool_.data(), false,
+                    fr.lane->stream);
+  };
+  // rows must be interchanged (or a pivot is tiny): the front again, GETRF with pivoting
+  std::vector<char> pivoted(n, 0);
   for (std::size_t i = 0; i < n; ++i) {
-    if (!lu_bad_host_.data()[i]) continue;
-    // rows must be interchanged (or a pivot is tiny): A11 again, GETRF with pivoting
+    if (!lu_bad_host_.data()[slot[i]]) continue;
     const LuFront& fr = fronts[i];
     Lane& lane = *fr.lane;
-    const int m = fr.m, k = fr.k;
-    STRATA_CUDA(cudaMemcpy2DAsync(fr.F, sizeof(double) * m, lu_save_.data() + save_at[i],
-                                  sizeof(double) * k, sizeof(double) * k, k,
-                                  cudaMemcpyDeviceToDevice, lane.stream));
-    STRATA_CUSOLVER(cusolverDnDgetrf(lane.solver, k, k, fr.F, m, lane.getrf_work.data(),
-                                     lu_ipiv_.data() + ipiv_at[i], lu_info_.data() + i));
-    launch_lu_check(fr.F, m, k, static_pivot, lu_info_.data() + i, lu_bad_.data() + i, lane.stream);
+    reassemble(fr);
+    getrf_work(lane, fr);
+    STRATA_CUSOLVER(cusolverDnDgetrf(lane.solver, fr.k, fr.k, fr.F, fr.m, lane.getrf_work.data(),
+                                     lu_ipiv_.data() + ipiv_at[i], lu_info_.data() + slot[i]));
+    launch_lu_check(fr.F, fr.m, fr.k, static_pivot, lu_info_.data() + slot[i],
+                    lu_bad_.data() + slot[i], lane.stream);
     ++lu_fronts_pivoted_;
-    repivoted = true;
+    pivoted[i] = 1;
   }
-  if (repivoted) fetch_checks();
+  if (std::find(pivoted.begin(), pivoted.end(), 1) != pivoted.end()) fetch_checks();
   for (std::size_t i = 0; i < n; ++i) {
     const LuFront& fr = fronts[i];
     Lane& lane = *fr.lane;
@@ -1180,19 +1215,24 @@ void CudaExecutor::lu_large_fronts(const std::vector<LuFront>& fronts, double st
     const int m = fr.m, k = fr.k;
     const std::size_t ld = static_cast<std::size_t>(m);
     const int* ipiv = lu_ipiv_.data() + ipiv_at[i];
+    const bool batched = slot[i] < nb && !pivoted[i];  // L21 and U12 already there
     STRATA_CUDA(cudaMemsetAsync(fr.perturbed, 0, sizeof(std::int64_t), stream));
-    if (!lu_bad_host_.data()[i]) {
-      if (unpivoted[i])
-        launch_identity_perm(k, fr.perm, stream);
-      else
+    if (!lu_bad_host_.data()[slot[i]]) {
+      if (pivoted[i])
         launch_ipiv_to_perm(ipiv, k, fr.perm, stream);
+      else  // no interchange: neither the serial ipiv-to-permutation kernel nor DLASWP
+        launch_identity_perm(k, fr.perm, stream);
       if (m > k) {
         double* a12 = fr.F + static_cast<std::size_t>(k) * ld;
-        if (!unpivoted[i]) launch_laswp(a12, m, m - k, ipiv, k, stream);
-        STRATA_CUBLAS(cublasDtrsm(lane.blas, CUBLAS_SIDE_RIGHT, CUBLAS_FILL_MODE_UPPER, CUBLAS_OP_N,
-                                  CUBLAS_DIAG_NON_UNIT, m - k, k, &one, fr.F, m, fr.F + k, m));
-        STRATA_CUBLAS(cublasDtrsm(lane.blas, CUBLAS_SIDE_LEFT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N,
-                                  CUBLAS_DIAG_UNIT, k, m - k, &one, fr.F, m, a12, m));
+        if (!batched) {
+          if (pivoted[i]) launch_laswp(a12, m, m - k, ipiv, k, stream);
+          STRATA_CUBLAS(cublasDtrsm(lane.blas, CUBLAS_SIDE_RIGHT, CUBLAS_FILL_MODE_UPPER,
+                                    CUBLAS_OP_N, CUBLAS_DIAG_NON_UNIT, m - k, k, &one, fr.F, m,
+                                    fr.F + k, m));
+          STRATA_CUBLAS(cublasDtrsm(lane.blas, CUBLAS_SIDE_LEFT, CUBLAS_FILL_MODE_LOWER,
+                                    CUBLAS_OP_N, CUBLAS_DIAG_UNIT, k, m - k, &one, fr.F, m, a12,
+                                    m));
+        }
         if (split_front(m, k))
           split_update(lane, fr.F, m, k, true, assembled);
         else
@@ -1201,10 +1241,8 @@ void CudaExecutor::lu_large_fronts(const std::vector<LuFront>& fronts, double st
       }
       continue;
     }
-    // a pivot needs static pivoting: restore A11 and take the panel-kernel path
-    STRATA_CUDA(cudaMemcpy2DAsync(fr.F, sizeof(double) * ld, lu_save_.data() + save_at[i],
-                                  sizeof(double) * k, sizeof(double) * k, k,
-                                  cudaMemcpyDeviceToDevice, stream));
+    // a pivot needs static pivoting: the front again, and the panel-kernel path
+    reassemble(fr);
     // iota_ outlives the asynchronous copy (it is a member, only ever grown)
     if (static_cast<int>(iota_.size()) < k) {
       STRATA_CUDA(cudaDeviceSynchronize());

@@ -192,19 +192,22 @@ class CudaExecutor final : public numeric::Executor {
   /// the front the kernel would make. LLᵀ and LDLᵀ add lower triangles only.
   void assemble_on_host(const numeric::FactorContext& ctx, index_t f, double* H, bool symmetric);
   /// A large LU front of the current chunk: its lane, the front in the pool (m×m, k
-  /// pivots), where its local row permutation and perturbed-pivot count go.
+  /// pivots), its position, where its local row permutation and perturbed-pivot count go.
   struct LuFront {
     Lane* lane;
     double* F;
     int m, k;
+    index_t pos;  ///< its position in the part's schedule (to assemble it again)
     std::int64_t* perm;
     std::int64_t* perturbed;
   };
-  /// LU of the chunk's large fronts: GETRF (unpivoted first, kept when no interchange was
-  /// due; kernels_lu.cu) + TRSMs + GEMM (the GEMM split over the team
-  /// for a large front, split_update; `assembled`: recorded after the chunk's assembly), or
-  /// the blocked panel-kernel path for a front whose GETRF pivots need static pivoting
-  /// (kernels_lu.cu).
+  /// LU of the chunk's large fronts: the batched kernels without interchanges for those
+  /// with at most lu_panel_max_pivots_ pivots (kernels_lu_panel.cu), GETRF without
+  /// pivoting + TRSMs for the others, each kept when no interchange was due, then the
+  /// contribution-block GEMM (split over the team for a large front, split_update;
+  /// `assembled`: recorded after the chunk's assembly); a front whose check failed is
+  /// assembled again and factored by GETRF with pivoting, or by the blocked panel-kernel
+  /// path when a pivot needs static pivoting (kernels_lu.cu).
   void lu_large_fronts(const std::vector<LuFront>& fronts, double static_pivot,
                        cudaEvent_t assembled);
   /// The lanes, created on first use (kLanes of them).
@@ -266,12 +269,13 @@ class CudaExecutor final : public numeric::Executor {
   cublasHandle_t blas_ = nullptr;
   cusolverDnHandle_t solver_ = nullptr;
   std::size_t limit_ = 0;
-  std::int64_t panel_max_pivots_ = 0;  ///< Options::gpu_panel_kernel_max_pivots
-  std::int64_t split_min_cb_ = 0;      ///< Options::split_front_min_cb
-  std::int64_t dist_min_rows_ = 0;     ///< Options::distributed_front_min_rows
-  std::int64_t dist_block_ = 512;      ///< Options::distributed_front_block_size
-  int potrf_block_ = 0;                ///< Options::gpu_potrf_block_size
-  bool recursive_panel_ = true;        ///< Options::gpu_recursive_panel
+  std::int64_t panel_max_pivots_ = 0;     ///< Options::gpu_panel_kernel_max_pivots
+  std::int64_t lu_panel_max_pivots_ = 0;  ///< Options::gpu_lu_panel_kernel_max_pivots
+  std::int64_t split_min_cb_ = 0;         ///< Options::split_front_min_cb
+  std::int64_t dist_min_rows_ = 0;        ///< Options::distributed_front_min_rows
+  std::int64_t dist_block_ = 512;         ///< Options::distributed_front_block_size
+  int potrf_block_ = 0;                   ///< Options::gpu_potrf_block_size
+  bool recursive_panel_ = true;           ///< Options::gpu_recursive_panel
   std::uint64_t analysis_id_ = 0;
   DevicePlan plan_;
   // analysis arrays (fronts_: the whole tree's schedule, for the device solve)
@@ -305,7 +309,8 @@ class CudaExecutor final : public numeric::Executor {
   DeviceBuffer<int> pivot_size_;         // LDLᵀ: local pivot sizes, laid out as perm_
   DeviceBuffer<std::int64_t> psize_at_;  // LDLᵀ: per chunk position, its offset in pivot_size_
   // the diagonals of device-only panels; the chunk's large LU fronts (lu_large_fronts)
-  DeviceBuffer<double> diag_, lu_save_;
+  DeviceBuffer<double> diag_, lu_work_;
+  DeviceBuffer<LuPanelItem> lu_items_;
   DeviceBuffer<int> lu_ipiv_, lu_info_, lu_bad_;
   PinnedBuffer<int> lu_bad_host_;
   DeviceBuffer<std::int64_t> diag_offset_;
@@ -328,7 +333,8 @@ class CudaExecutor final : public numeric::Executor {
   // statistics of the last factorization
   std::size_t bytes_h2d_ = 0, bytes_d2h_ = 0;
   index_t chunks_ = 0, tiled_count_ = 0;
-  index_t lu_fronts_ = 0, lu_fronts_pivoted_ = 0;  ///< FactorStats::lu_large_fronts(_pivoted)
+  /// FactorStats::lu_large_fronts, lu_large_fronts_pivoted, lu_large_fronts_batched
+  index_t lu_fronts_ = 0, lu_fronts_pivoted_ = 0, lu_fronts_batched_ = 0;
   double device_seconds_ = 0;
   cudaEvent_t start_ = nullptr, stop_ = nullptr;
   cudaEvent_t panels_done_ = nullptr;  // the chunk's launch_llt_panel: the lanes wait for it

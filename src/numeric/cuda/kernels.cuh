@@ -82,6 +82,32 @@ void launch_llt_panel(const DeviceTree& t, const std::int64_t* items,
                       const std::vector<std::int64_t>& pivots, double* pool, double* work,
                       int* info, cudaStream_t s);
 
+/// A large LU front for launch_lu_panel_batched: F (device) is m × m, column-major, leading
+/// dimension m, its first k rows and columns fully summed.
+struct LuPanelItem {
+  double* F;
+  std::int64_t m, k;
+};
+
+/// Doubles of workspace launch_lu_panel_batched needs for `count` fronts (two 64×64
+/// inverses each).
+std::size_t lu_panel_work_size(std::int64_t count);
+
+/// The pivot block, L panel and U panel of large LU fronts without row interchanges, all
+/// fronts of the list together, three launches per 64 pivot columns on stream s
+/// (kernels_lu_panel.cu): item i (items: device array, sorted by k, largest first; `rows`,
+/// `pivots`: host copies of its m and k) gets L11 (unit lower, implicit diagonal) and U11
+/// in its k × k block, L21 = A21·U11⁻¹ below it and U12 = L11⁻¹·A12 right of it; the
+/// contribution block A22 is left for the caller's update A22 −= L21·U12. bad[i] (device,
+/// zeroed here) is set to 1, and the front left partly factored, when restricted partial
+/// pivoting would interchange rows (a multiplier |L(r, j)| > 1 in a fully summed row r <
+/// k) or a pivot is not finite or below `static_pivot` in magnitude: the caller then
+/// factors that front again from its assembled values. `work`: lu_panel_work_size(count)
+/// doubles. Throws DeviceError if a launch fails.
+void launch_lu_panel_batched(const LuPanelItem* items, const std::vector<std::int64_t>& rows,
+                             const std::vector<std::int64_t>& pivots, double* work, int* bad,
+                             double static_pivot, cudaStream_t s);
+
 /// One LU panel of a large front: columns p0..p0+w-1 of the m×m front F (fully summed
 /// rows 0..k-1), with row interchanges among rows p0..k-1 applied to whole rows, static
 /// pivoting, and the update restricted to the panel's columns. One block.

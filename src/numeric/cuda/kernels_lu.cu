@@ -1,17 +1,19 @@
 // strata — CUDA kernels around the library LU of a large front (see kernels_lu.cuh).
 //
-// A large LU front is factored by whole-block library calls (cuda_executor.cu,
-// lu_large_fronts): cuSOLVER GETRF on the k×k fully summed block A11 — partial pivoting
+// A large LU front with more than Options::gpu_lu_panel_kernel_max_pivots pivots (and
+// any front whose elimination without interchanges was rejected) is factored by
+// whole-block library calls (cuda_executor.cu, lu_large_fronts; the others by the batched
+// kernels of kernels_lu_panel.cu): cuSOLVER GETRF on the k×k fully summed block A11 — partial pivoting
 // over the fully summed rows only, which is exactly the restricted pivoting of the CPU
 // kernel — then the row interchanges applied to A12, two TRSMs and one GEMM. GETRF runs
 // first without pivoting (on the H100 six times faster at k = 1,024: partial pivoting's
 // search and swaps are what make GETRF slow there), and that factor is kept only when
 // partial pivoting would have chosen the same pivots, i.e. every multiplier |L(i,j)| is
-// at most 1 (largest magnitude, first on ties: the diagonal); otherwise A11 is restored
-// and GETRF runs again with pivoting. GETRF does
+// at most 1 (largest magnitude, first on ties: the diagonal); otherwise the front is
+// assembled again and GETRF runs with pivoting. GETRF does
 // no static pivoting, so the pivots it chose are checked afterwards: when one is below
 // the static-pivot threshold (or GETRF met an exact zero, or anything is not finite),
-// the front is restored and refactored by the blocked path with our panel kernel, which
+// the front is assembled again and refactored by the blocked path with our panel kernel, which
 // perturbs tiny pivots as the CPU does. With no tiny pivot both paths make the same
 // pivot choices (largest magnitude, first on ties), so the result is the CPU's within
 // rounding either way.

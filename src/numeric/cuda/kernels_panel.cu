@@ -33,72 +33,19 @@
 // tensor cores (WMMA, m8n8k4 in FP64). A non-positive pivot at column j sets
 // info = j + 1 (cuSOLVER's convention) and every later launch leaves that front alone,
 // the front then failing on the host as before.
-#include <mma.h>
-
 #include <algorithm>
 #include <vector>
 
 #include "numeric/cuda/cuda_check.hpp"
 #include "numeric/cuda/kernels.cuh"
+#include "numeric/cuda/tile_mma.cuh"
 
 namespace strata::cuda {
 namespace {
 
-constexpr int kStep = 64;       // columns per step, and the tile edge of the products
-constexpr int kChunk = 32;      // inner dimension staged in shared memory at a time
-constexpr int kThreads = 256;   // products: 8 warps, a 32×16 part of the tile each
-constexpr int kLd = kStep + 1;  // padded leading dimension (rows read across threads)
-
-// The 64×64 tile C = A·Bᵀ with A(r, t) = a[t·lda + r] for r < a_rows (zero beyond),
-// B(c, t) = b[t·ldb + c] for c < b_rows, t < w: the operands staged through shared
-// memory kChunk columns at a time, the products on the FP64 tensor cores (WMMA m8n8k4,
-// sm_80 and later). Returns C in shared memory, C(r, c) at [c·64 + r], valid until the
-// next call; every thread of the block must call it.
-__device__ const double* tile_nt(const double* a, std::int64_t lda, int a_rows, const double* b,
-                                 std::int64_t ldb, int b_rows, int w) {
-  using namespace nvcuda;
-  __shared__ __align__(32) double sm[2 * kChunk * kStep];  // A chunk, B chunk; then C
-  double* As = sm;                   // A(r, t) at [t·64 + r]: column-major, ld 64
-  double* Bs = sm + kChunk * kStep;  // B(c, t) at [t·64 + c]: Bᵀ row-major, ld 64
-  const int tid = threadIdx.x, warp = tid >> 5;
-  const int wr = (warp & 1) * 32, wc = (warp >> 1) * 16;  // this warp's part of C
-  wmma::fragment<wmma::accumulator, 8, 8, 4, double> acc[4][2];
-  for (auto& row : acc)
-    for (auto& f : row) wmma::fill_fragment(f, 0.0);
-  for (int t0 = 0; t0 < w; t0 += kChunk) {
-    for (int x = tid; x < kChunk * kStep; x += kThreads) {
-      const int tt = x >> 6, r = x & 63;
-      const bool in = t0 + tt < w;
-      As[x] = in && r < a_rows ? a[static_cast<std::int64_t>(t0 + tt) * lda + r] : 0.0;
-      Bs[x] = in && r < b_rows ? b[static_cast<std::int64_t>(t0 + tt) * ldb + r] : 0.0;
-    }
-    __syncthreads();
-    const int steps = min(kChunk, w - t0);
-    for (int tt = 0; tt < steps; tt += 4) {
-      wmma::fragment<wmma::matrix_a, 8, 8, 4, double, wmma::col_major> fa[4];
-      wmma::fragment<wmma::matrix_b, 8, 8, 4, double, wmma::row_major> fb[2];
-#pragma unroll
-      for (int i = 0; i < 4; ++i)
-        wmma::load_matrix_sync(fa[i], As + tt * kStep + wr + 8 * i, kStep);
-#pragma unroll
-      for (int j = 0; j < 2; ++j)
-        wmma::load_matrix_sync(fb[j], Bs + tt * kStep + wc + 8 * j, kStep);
-#pragma unroll
-      for (int i = 0; i < 4; ++i)
-#pragma unroll
-        for (int j = 0; j < 2; ++j) wmma::mma_sync(acc[i][j], fa[i], fb[j], acc[i][j]);
-    }
-    __syncthreads();
-  }
-#pragma unroll
-  for (int i = 0; i < 4; ++i)
-#pragma unroll
-    for (int j = 0; j < 2; ++j)
-      wmma::store_matrix_sync(sm + (wc + 8 * j) * kStep + wr + 8 * i, acc[i][j], kStep,
-                              wmma::mem_col_major);
-  __syncthreads();
-  return sm;
-}
+constexpr int kStep = tile::kEdge;        // columns per step, and the tile edge of the products
+constexpr int kThreads = tile::kThreads;  // products: 8 warps, a 32×16 part of the tile each
+constexpr int kLd = kStep + 1;            // padded leading dimension (rows read across threads)
 
 __device__ std::int64_t imin(std::int64_t a, std::int64_t b) { return a < b ? a : b; }
 
@@ -200,9 +147,10 @@ __global__ void panel_kernel(DeviceTree t, const std::int64_t* items, double* po
   if (r0 >= it.m || info[it.slot] != 0) return;  // the whole block leaves together
   const int rows = static_cast<int>(imin(kStep, it.m - r0));
   double* A = it.F + j0 * it.m + r0;
-  const double* C =
-      tile_nt(A, it.m, rows, work + static_cast<std::int64_t>(blockIdx.x) * kStep * kStep, kStep,
-              kStep, static_cast<int>(w));
+  __shared__ __align__(32) double sm[tile::kSharedDoubles];
+  const double* C = tile::product<tile::BLayout::kBRows>(
+      A, it.m, rows, work + static_cast<std::int64_t>(blockIdx.x) * kStep * kStep, kStep, kStep,
+      static_cast<int>(w), sm);
   for (int x = threadIdx.x; x < kStep * kStep; x += kThreads) {
     const int r = x & 63, c = x >> 6;
     if (r < rows && c < w) A[static_cast<std::int64_t>(c) * it.m + r] = C[x];
@@ -221,7 +169,9 @@ __global__ void update_kernel(DeviceTree t, const std::int64_t* items, double* p
   const int rows = static_cast<int>(imin(kStep, it.m - r0));
   const int cols = static_cast<int>(imin(kStep, it.k - c0));
   const double* P = it.F + j0 * it.m;  // the step's panel columns
-  const double* T = tile_nt(P + r0, it.m, rows, P + c0, it.m, cols, static_cast<int>(w));
+  __shared__ __align__(32) double sm[tile::kSharedDoubles];
+  const double* T = tile::product<tile::BLayout::kBRows>(P + r0, it.m, rows, P + c0, it.m, cols,
+                                                         static_cast<int>(w), sm);
   double* C = it.F + c0 * it.m + r0;
   for (int x = threadIdx.x; x < kStep * kStep; x += kThreads) {
     const int r = x & 63, c = x >> 6;

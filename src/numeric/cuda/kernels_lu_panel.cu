@@ -1,0 +1,339 @@
+// strata — the pivot block, the L panel and the U panel of large LU fronts (those with at
+// most Options::gpu_lu_panel_kernel_max_pivots pivots), for all such fronts of a chunk at
+// once, without row interchanges: three launches per 64-column step (see kernels.cuh,
+// launch_lu_panel_batched).
+//
+// Why: the library path (kernels_lu.cu) is one cuSOLVER GETRF of the k×k fully summed
+// block A11 and two cuBLAS TRSMs (L21 = A21·U11⁻¹, U12 = L11⁻¹·A12) per front, and at
+// the shapes of a multifrontal LU those run far below the device's rate: under Nsight
+// Compute (H100, unsymmetric elasticity 30³, bench/results/logs/
+// ncu-kernels-uelast3d-30-a74f275.txt) GETRF and the two TRSMs were 57% of the kernel
+// time and the contribution-block GEMM, where most flops are, about 12%.
+//
+// How: the right-looking blocked LU of the front's fully summed part without pivoting
+// (Golub & Van Loan, "Matrix Computations", 4th ed., §3.2.11), in steps of 64 columns,
+// each step one launch of each kernel over every front still active (items sorted by k,
+// largest first, so the active fronts of a step are a prefix):
+//   1. lu_pivot_block_kernel, one block of 64 threads per front: the w×w diagonal block
+//      (w ≤ 64) into registers, one row per thread, unblocked LU (row j published through
+//      shared memory, one barrier per column), the block written back (L unit lower, U
+//      upper), and the inverses L_jj⁻¹ and U_jj⁻¹ (substitution on the identity, one
+//      thread per column) into the front's two 64×64 slots of the workspace;
+//   2. lu_panels_kernel, one block per 64-row tile below the diagonal block, L_ij =
+//      A_ij·U_jj⁻¹, and one per 64-column tile right of it, U_jc = L_jj⁻¹·A_jc — the U
+//      panel over every column of the front, so that the last step leaves U12 complete;
+//   3. lu_update_kernel, one block per 64×64 tile of the trailing part of the L-shaped
+//      region the pivots touch: A_rc −= L_rj·U_jc where r < k or c < k (the contribution
+//      block itself, r ≥ k and c ≥ k, is the caller's one GEMM per front afterwards).
+// The products run on the FP64 tensor cores (tile_mma.cuh). Panels by the inverses of the
+// 64×64 diagonal blocks, as MAGMA's GPU TRSM does; the error bound grows with κ(U_jj) and
+// κ(L_jj) (Higham, "Accuracy and Stability of Numerical Algorithms", 2nd ed., §14.2),
+// which the check below keeps small: |L| ≤ 1 in the fully summed rows.
+//
+// Restricted partial pivoting (the CPU kernel's rule, numeric/cpu/dense_front.cpp) picks
+// the largest magnitude in column j among the fully summed rows j..k−1, the first on ties;
+// it interchanges nothing exactly when every multiplier L(i, j), j < i < k, has |L(i, j)|
+// ≤ 1. The kernels check that (and that every pivot is finite with |U(j, j)| at least the
+// static-pivot threshold) and set bad[item] on the first violation; every later launch
+// leaves that front alone, and the caller factors it again from its assembled values by
+// the pivoting path. So a front this path keeps is the one partial pivoting would have
+// produced, in another order of summation.
+#include <algorithm>
+#include <cfloat>
+#include <string>
+#include <vector>
+
+#include "numeric/cuda/cuda_check.hpp"
+#include "numeric/cuda/device_buffer.hpp"
+#include "numeric/cuda/kernels.cuh"
+#include "numeric/cuda/tile_mma.cuh"
+#include "numeric/factor.hpp"
+#include "strata/errors.hpp"
+
+namespace strata::cuda {
+namespace {
+
+constexpr int kStep = tile::kEdge;        // columns per step, and the tile edge
+constexpr int kSlot = kStep * kStep;      // one inverse in the workspace
+constexpr int kThreads = tile::kThreads;  // the product kernels
+
+__device__ std::int64_t imin(std::int64_t a, std::int64_t b) { return a < b ? a : b; }
+__host__ __device__ std::int64_t tiles_of(std::int64_t n) {
+  return n > 0 ? (n + kStep - 1) / kStep : 0;
+}
+
+// Launch 1 of a step: block b (64 threads) factors item b's w×w diagonal block at (j0, j0),
+// thread i holding row i in registers; writes the packed LU back, L_jj⁻¹ (column-major:
+// entry (r, c) at c·64 + r) to work[2b] and U_jj⁻¹ (row-major: entry (r, c) at r·64 + c,
+// the layout tile::product reads as kBRows) to work[2b + 1], both zero outside w×w.
+__global__ void __launch_bounds__(kStep)
+    lu_pivot_block_kernel(const LuPanelItem* items, double* work, int* bad, double static_pivot,
+                          std::int64_t j0) {
+  __shared__ double R[kStep * kStep];  // row j of the packed LU at [j·64 …], from step j on
+  __shared__ int sbad;
+  if (bad[blockIdx.x]) return;  // rejected at an earlier step
+  const LuPanelItem it = items[blockIdx.x];
+  const std::int64_t m = it.m;
+  const int w = static_cast<int>(imin(kStep, it.k - j0));
+  double* D = it.F + j0 * m + j0;
+  const int i = threadIdx.x;
+  if (i == 0) sbad = 0;
+  double a[kStep];
+#pragma unroll
+  for (int c = 0; c < kStep; ++c) a[c] = i < w && c < w ? D[c * m + i] : 0.0;
+  __syncthreads();
+#pragma unroll
+  for (int j = 0; j < kStep; ++j) {
+    if (j >= w) break;
+    if (i == j) {
+#pragma unroll
+      for (int c = 0; c < kStep; ++c) R[j * kStep + c] = a[c];
+    }
+    __syncthreads();
+    const double d = R[j * kStep + j];  // the same in every thread: a uniform break
+    if (!(fabs(d) >= static_pivot) || !(fabs(d) <= DBL_MAX)) {
+      if (i == 0) sbad = 1;
+      break;
+    }
+    if (i > j && i < w) {
+      const double l = a[j] / d;
+      if (!(fabs(l) <= 1.0)) sbad = 1;  // partial pivoting would interchange rows
+      a[j] = l;
+#pragma unroll
+      for (int c = j + 1; c < kStep; ++c) a[c] -= l * R[j * kStep + c];
+    }
+  }
+  __syncthreads();
+  if (sbad) {
+    if (i == 0) bad[blockIdx.x] = 1;
+    return;
+  }
+  if (i < w) {
+#pragma unroll
+    for (int c = 0; c < kStep; ++c)
+      if (c < w) D[c * m + i] = a[c];
+  }
+  double* WL = work + static_cast<std::int64_t>(blockIdx.x) * 2 * kSlot;
+  double* WU = WL + kSlot;
+  // L_jj·X = I, column i of X by rows in order (X(r, i) = 0 for r < i; every thread reads
+  // the same R entries: broadcasts)
+#pragma unroll
+  for (int r = 0; r < kStep; ++r) {
+    double x = r == i ? 1.0 : 0.0;
+#pragma unroll
+    for (int l = 0; l < r; ++l) x -= R[r * kStep + l] * a[l];
+    a[r] = r < w && i < w ? x : 0.0;
+  }
+#pragma unroll
+  for (int r = 0; r < kStep; ++r) WL[i * kStep + r] = a[r];
+    // U_jj·Y = I, column i of Y by rows in reverse (Y(r, i) = 0 for r > i)
+#pragma unroll
+  for (int r = kStep - 1; r >= 0; --r) {
+    double y = r == i ? 1.0 : 0.0;
+#pragma unroll
+    for (int l = r + 1; l < kStep; ++l) y -= R[r * kStep + l] * a[l];
+    a[r] = r <= i && r < w && i < w ? y / R[r * kStep + r] : 0.0;
+  }
+#pragma unroll
+  for (int r = 0; r < kStep; ++r) WU[r * kStep + i] = a[r];
+}
+
+// Launch 2 of a step: item blockIdx.x's T tiles of the L panel (rows j0 + w + 64y …,
+// columns j0 … j0 + w; T of them, to the last row), L = A·U_jj⁻¹ with the multipliers of
+// the fully summed rows checked, then its T tiles of the U panel (rows j0 … j0 + w,
+// columns j0 + w + 64y …), U = L_jj⁻¹·A; grid-stride over the 2T tiles (gridDim.y is
+// capped). In place: a tile is read whole before it is written, and no two tiles overlap.
+__global__ void lu_panels_kernel(const LuPanelItem* items, const double* work, int* bad,
+                                 std::int64_t j0) {
+  __shared__ __align__(32) double sm[tile::kSharedDoubles];
+  if (bad[blockIdx.x]) return;
+  const LuPanelItem it = items[blockIdx.x];
+  const std::int64_t m = it.m, k = it.k;
+  const int w = static_cast<int>(imin(kStep, k - j0));
+  const std::int64_t base = j0 + w, T = tiles_of(m - base);
+  const double* WL = work + static_cast<std::int64_t>(blockIdx.x) * 2 * kSlot;
+  const double* WU = WL + kSlot;
+  for (std::int64_t q = blockIdx.y; q < 2 * T; q += gridDim.y) {
+    const bool lpanel = q < T;
+    const std::int64_t x0 = base + (lpanel ? q : q - T) * kStep;
+    const int n = static_cast<int>(imin(kStep, m - x0));
+    if (lpanel) {
+      double* A = it.F + j0 * m + x0;
+      const double* C = tile::product<tile::BLayout::kBRows>(A, m, n, WU, kStep, w, w, sm);
+      bool over = false;
+      for (int x = threadIdx.x; x < kSlot; x += kThreads) {
+        const int r = x & (kStep - 1), c = x >> 6;
+        if (r < n && c < w) {
+          const double v = C[x];
+          A[static_cast<std::int64_t>(c) * m + r] = v;
+          if (x0 + r < k && !(fabs(v) <= 1.0)) over = true;
+        }
+      }
+      if (over) bad[blockIdx.x] = 1;  // every writer writes 1; the next launch reads it
+    } else {
+      double* A = it.F + x0 * m + j0;
+      const double* C = tile::product<tile::BLayout::kBCols>(WL, kStep, w, A, m, n, w, sm);
+      for (int x = threadIdx.x; x < kSlot; x += kThreads) {
+        const int r = x & (kStep - 1), c = x >> 6;
+        if (r < w && c < n) A[static_cast<std::int64_t>(c) * m + r] = C[x];
+      }
+    }
+    __syncthreads();  // C (in sm) read by every thread before the next tile's staging
+  }
+}
+
+// Launch 3 of a step: item blockIdx.x's tiles of the trailing L-shaped region, rows and
+// columns from j0 + w on in 64-tiles (T of them each way, the first Tk of which hold
+// fully summed rows/columns): the Tk·T tiles of the trailing pivot columns (all rows),
+// then the (T − Tk)·Tk tiles of the contribution block's columns in the fully summed
+// rows; A_rc −= L_rj·U_jc, entries with r ≥ k and c ≥ k left alone. Grid-stride over the
+// tiles (gridDim.y is capped).
+__global__ void lu_update_kernel(const LuPanelItem* items, const int* bad, std::int64_t j0) {
+  __shared__ __align__(32) double sm[tile::kSharedDoubles];
+  if (bad[blockIdx.x]) return;
+  const LuPanelItem it = items[blockIdx.x];
+  const std::int64_t m = it.m, k = it.k;
+  const int w = static_cast<int>(imin(kStep, k - j0));
+  const std::int64_t base = j0 + w;
+  const std::int64_t T = tiles_of(m - base), Tk = tiles_of(k - base);
+  const std::int64_t count = Tk * (2 * T - Tk);
+  for (std::int64_t q = blockIdx.y; q < count; q += gridDim.y) {
+    std::int64_t y, z;
+    if (q < Tk * T) {
+      z = q / T;
+      y = q % T;
+    } else {
+      y = (q - Tk * T) % Tk;
+      z = Tk + (q - Tk * T) / Tk;
+    }
+    const std::int64_t r0 = base + y * kStep, c0 = base + z * kStep;
+    const int rows = static_cast<int>(imin(kStep, m - r0));
+    const int cols = static_cast<int>(imin(kStep, m - c0));
+    const double* C = tile::product<tile::BLayout::kBCols>(it.F + j0 * m + r0, m, rows,
+                                                           it.F + c0 * m + j0, m, cols, w, sm);
+    double* A = it.F + c0 * m + r0;
+    for (int x = threadIdx.x; x < kSlot; x += kThreads) {
+      const int r = x & (kStep - 1), c = x >> 6;
+      if (r < rows && c < cols && (r0 + r < k || c0 + c < k))
+        A[static_cast<std::int64_t>(c) * m + r] -= C[x];
+    }
+    __syncthreads();  // C (in sm) read by every thread before the next tile's staging
+  }
+}
+
+constexpr std::int64_t kMaxGridY = 65535;
+
+unsigned grid_y(std::int64_t n) {
+  return static_cast<unsigned>(std::clamp<std::int64_t>(n, 1, kMaxGridY));
+}
+
+}  // namespace
+
+std::size_t lu_panel_work_size(std::int64_t count) {
+  return static_cast<std::size_t>(std::max<std::int64_t>(count, 1)) * 2 * kSlot;
+}
+
+void launch_lu_panel_batched(const LuPanelItem* items, const std::vector<std::int64_t>& rows,
+                             const std::vector<std::int64_t>& pivots, double* work, int* bad,
+                             double static_pivot, cudaStream_t s) {
+  const std::size_t count = pivots.size();
+  if (count == 0) return;
+  STRATA_CUDA(cudaMemsetAsync(bad, 0, sizeof(int) * count, s));
+  std::size_t active = count;
+  for (std::int64_t j0 = 0; j0 < pivots[0]; j0 += kStep) {
+    while (active > 0 && pivots[active - 1] <= j0) --active;
+    // per step: the most tiles of any active front below / right of its diagonal block,
+    // and the most update tiles
+    std::int64_t panel_tiles = 0, update_tiles = 0;
+    for (std::size_t i = 0; i < active; ++i) {
+      const std::int64_t base = j0 + std::min<std::int64_t>(kStep, pivots[i] - j0);
+      const std::int64_t T = tiles_of(rows[i] - base), Tk = tiles_of(pivots[i] - base);
+      panel_tiles = std::max(panel_tiles, T);
+      update_tiles = std::max(update_tiles, Tk * (2 * T - Tk));
+    }
+    const unsigned n = static_cast<unsigned>(active);
+    lu_pivot_block_kernel<<<n, kStep, 0, s>>>(items, work, bad, static_pivot, j0);
+    STRATA_CUDA_LAUNCH();
+    if (panel_tiles > 0) {
+      lu_panels_kernel<<<dim3(n, grid_y(2 * panel_tiles)), kThreads, 0, s>>>(items, work, bad, j0);
+      STRATA_CUDA_LAUNCH();
+    }
+    if (update_tiles > 0) {
+      lu_update_kernel<<<dim3(n, grid_y(update_tiles)), kThreads, 0, s>>>(items, bad, j0);
+      STRATA_CUDA_LAUNCH();
+    }
+  }
+}
+
+}  // namespace strata::cuda
+
+namespace strata::numeric {
+
+std::vector<char> cuda_lu_fronts_batched(std::vector<std::vector<double>>& fronts,
+                                         const std::vector<index_t>& m,
+                                         const std::vector<index_t>& k, double static_pivot) {
+  const std::size_t n = fronts.size();
+  if (m.size() != n || k.size() != n)
+    throw InvalidInput("cuda_lu_fronts_batched: " + std::to_string(n) + " fronts, " +
+                       std::to_string(m.size()) + " row counts, " + std::to_string(k.size()) +
+                       " pivot counts");
+  std::vector<std::size_t> offset(n + 1, 0);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (m[i] < 1 || k[i] < 1 || k[i] > m[i] ||
+        fronts[i].size() != static_cast<std::size_t>(m[i]) * static_cast<std::size_t>(m[i]))
+      throw InvalidInput("cuda_lu_fronts_batched: front " + std::to_string(i) +
+                         " needs 1 <= k <= m and m*m values (m = " + std::to_string(m[i]) +
+                         ", k = " + std::to_string(k[i]) + ")");
+    offset[i + 1] = offset[i] + fronts[i].size();
+  }
+  STRATA_CUDA(cudaSetDevice(0));
+  // the kernels take the fronts largest k first
+  std::vector<std::size_t> order(n);
+  for (std::size_t i = 0; i < n; ++i) order[i] = i;
+  std::stable_sort(order.begin(), order.end(), [&](auto a, auto b) { return k[a] > k[b]; });
+  cuda::DeviceBuffer<double> pool(std::max<std::size_t>(offset[n], 1));
+  cuda::DeviceBuffer<cuda::LuPanelItem> items(std::max<std::size_t>(n, 1));
+  cuda::DeviceBuffer<double> work(cuda::lu_panel_work_size(static_cast<std::int64_t>(n)));
+  cuda::DeviceBuffer<int> bad(std::max<std::size_t>(n, 1));
+  std::vector<cuda::LuPanelItem> host_items(n);
+  std::vector<std::int64_t> rows(n), pivots(n);
+  for (std::size_t q = 0; q < n; ++q) {
+    const std::size_t i = order[q];
+    STRATA_CUDA(cudaMemcpy(pool.data() + offset[i], fronts[i].data(),
+                           sizeof(double) * fronts[i].size(), cudaMemcpyHostToDevice));
+    host_items[q] = {pool.data() + offset[i], m[i], k[i]};
+    rows[q] = m[i];
+    pivots[q] = k[i];
+  }
+  STRATA_CUDA(cudaMemcpy(items.data(), host_items.data(), sizeof(cuda::LuPanelItem) * n,
+                         cudaMemcpyHostToDevice));
+  cuda::launch_lu_panel_batched(items.data(), rows, pivots, work.data(), bad.data(), static_pivot,
+                                nullptr);
+  std::vector<int> flags(n);
+  STRATA_CUDA(cudaMemcpy(flags.data(), bad.data(), sizeof(int) * n, cudaMemcpyDeviceToHost));
+  // the contribution-block update of the kept fronts, as the executor does it
+  cublasHandle_t blas = nullptr;
+  STRATA_CUBLAS(cublasCreate(&blas));
+  struct Handle {
+    cublasHandle_t h;
+    ~Handle() { cublasDestroy(h); }
+  } owned{blas};
+  const double one = 1.0, minus_one = -1.0;
+  std::vector<char> kept(n);
+  for (std::size_t q = 0; q < n; ++q) {
+    const std::size_t i = order[q];
+    kept[i] = flags[q] == 0;
+    const int mi = static_cast<int>(m[i]), ki = static_cast<int>(k[i]);
+    double* F = pool.data() + offset[i];
+    if (kept[i] && mi > ki)
+      STRATA_CUBLAS(cublasDgemm(blas, CUBLAS_OP_N, CUBLAS_OP_N, mi - ki, mi - ki, ki, &minus_one,
+                                F + ki, mi, F + static_cast<std::size_t>(ki) * mi, mi, &one,
+                                F + static_cast<std::size_t>(ki) * mi + ki, mi));
+  }
+  for (std::size_t i = 0; i < n; ++i)
+    STRATA_CUDA(cudaMemcpy(fronts[i].data(), pool.data() + offset[i],
+                           sizeof(double) * fronts[i].size(), cudaMemcpyDeviceToHost));
+  return kept;
+}
+
+}  // namespace strata::numeric
