@@ -21,16 +21,16 @@
 // Options::gpu_potrf_block_size (the larger fronts' pivot block and panel in column
 // blocks, llt_blocked.cu, or by one POTRF and one TRSM). Recursive panel: the same for
 // Options::gpu_recursive_panel off and on (llt_recursive.cu). LU panel: in-core LU
-// refactorization time for each value of Options::gpu_lu_panel_kernel_max_pivots (which
-// large LU fronts get our batched kernels without interchanges, kernels_lu_panel.cu,
-// instead of GETRF + TRSMs), on LU problems, with how many fronts each path took.
+// refactorization time for each value of Options::gpu_lu_strip_pivots (the strips in
+// which large LU fronts are eliminated by our batched kernels, lu_fronts.cu; 0: GETRF +
+// TRSMs instead), on LU problems, with how many fronts each path took.
 //
 //   bench_gpu_memory [--parts devices,kernels,solvability,blocks,panel,potrf-block,
 //                             recursive-panel,lu-panel]
 //                    [--problems a,b] [--potrf-blocks 0,128,...]
 //                    [--ratios 1,5,20,50] [--block-sizes 256,...] [--block-problems a,b]
 //                    [--panel-problems a,b] [--panel-max-pivots 0,64,...]
-//                    [--lu-panel-problems a,b] [--lu-panel-max-pivots 0,256,...]
+//                    [--lu-panel-problems a,b] [--lu-strip-pivots 0,256,...]
 //                    [--fronts m:k,...] [--repeat R] [--tag NAME] [--results-dir DIR]
 #include <cublas_v2.h>
 #include <cuda_runtime.h>
@@ -561,7 +561,7 @@ int main(int argc, char** argv) {
   std::vector<std::string> panel_problems = {"lap3d-60", "lap3d-100", "elast3d-30", "elast3d-50"};
   std::vector<index_t> panel_max_pivots = {0, 64, 128, 256, 512, 1024};
   std::vector<std::string> lu_panel_problems = {"uelast3d-20", "uelast3d-30"};
-  std::vector<index_t> lu_panel_max_pivots = {0, 256, 1024};
+  std::vector<index_t> lu_strip_pivots = {0, 64, 128, 256, 512};
   std::vector<index_t> potrf_blocks = {0, 128, 256, 512};
   int repeat = 3;
   std::string results_dir;
@@ -574,8 +574,8 @@ int main(int argc, char** argv) {
   app.add_option("--lu-panel-problems", lu_panel_problems,
                  "LU problems for the lu-panel sweep (generated names or .mtx paths)")
       ->delimiter(',');
-  app.add_option("--lu-panel-max-pivots", lu_panel_max_pivots,
-                 "gpu_lu_panel_kernel_max_pivots values for the lu-panel sweep")
+  app.add_option("--lu-strip-pivots", lu_strip_pivots,
+                 "gpu_lu_strip_pivots values for the lu-panel sweep")
       ->delimiter(',');
   app.add_option("--potrf-blocks", potrf_blocks,
                  "gpu_potrf_block_size values for the potrf-block sweep (on --panel-problems)")
@@ -754,7 +754,7 @@ int main(int argc, char** argv) {
   // One in-core run per value of one option, on each problem: the block-size sweep
   // (max_block_size), which Cholesky fronts go to the panel kernels
   // (gpu_panel_kernel_max_pivots; Cholesky problems only), which LU fronts go to the
-  // batched LU kernels (gpu_lu_panel_kernel_max_pivots; LU problems only).
+  // batched LU kernels (gpu_lu_strip_pivots; LU problems only).
   enum class Only { any, cholesky, lu };
   auto sweep = [&](const std::vector<std::string>& names, const std::vector<index_t>& values,
                    const char* key, auto set, Only only) {
@@ -782,8 +782,8 @@ int main(int argc, char** argv) {
                         {"lu_large_fronts_pivoted", r.fs.lu_large_fronts_pivoted},
                         {"lu_large_fronts_batched", r.fs.lu_large_fronts_batched},
                         {"factor_phases", r.fs.device_phases}});
-        fmt::print("{:<14} {:>9} {:>9.4f} {:>9.1f} {:>8.1e}", name, v, r.seconds,
-                   flops / r.seconds, r.berr);
+        fmt::print("{:<14} {:>9} {:>9.4f} {:>9.1f} {:>8.1e}", name, v, r.seconds, flops / r.seconds,
+                   r.berr);
         if (!p.symmetric)
           fmt::print("   LU large fronts {} (batched {}, pivoted {})", r.fs.lu_large_fronts,
                      r.fs.lu_large_fronts_batched, r.fs.lu_large_fronts_pivoted);
@@ -802,9 +802,8 @@ int main(int argc, char** argv) {
       want("panel") ? panel_problems : none, panel_max_pivots, "gpu_panel_kernel_max_pivots",
       [](Options& o, index_t v) { o.gpu_panel_kernel_max_pivots = v; }, Only::cholesky);
   out["lu_panel_kernels"] = sweep(
-      want("lu-panel") ? lu_panel_problems : none, lu_panel_max_pivots,
-      "gpu_lu_panel_kernel_max_pivots",
-      [](Options& o, index_t v) { o.gpu_lu_panel_kernel_max_pivots = v; }, Only::lu);
+      want("lu-panel") ? lu_panel_problems : none, lu_strip_pivots, "gpu_lu_strip_pivots",
+      [](Options& o, index_t v) { o.gpu_lu_strip_pivots = v; }, Only::lu);
   out["potrf_block"] = sweep(
       want("potrf-block") ? panel_problems : none, potrf_blocks, "gpu_potrf_block_size",
       [](Options& o, index_t v) { o.gpu_potrf_block_size = v; }, Only::cholesky);

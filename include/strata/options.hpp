@@ -104,16 +104,17 @@ struct Options {
   /// cuBLAS TRSM one front at a time. 0 sends every front to the library. Measured on the
   /// H100 (bench_gpu_memory --parts panel, bench/REPORT.md §4). Default 256.
   index_t gpu_panel_kernel_max_pivots = 256;
-  /// CUDA backend, LU: fronts over 256 rows with at most this many pivots get their pivot
-  /// block, L panel and U panel from strata's batched kernels without row interchanges
-  /// (all such fronts of a batch together, 64 pivot columns per step,
-  /// src/numeric/cuda/kernels_lu_panel.cu), kept where restricted partial pivoting would
-  /// have interchanged no row; a front where it would (or where a pivot needs static
-  /// pivoting) is assembled again and factored by cuSOLVER GETRF with pivoting. Fronts
-  /// with more pivots go to GETRF (without pivoting first) and two cuBLAS TRSMs, one front
-  /// at a time. 0 sends every front to the library. Default 1024 (every front of the
-  /// default LU tree, whose blocks have at most 1024 pivots).
-  index_t gpu_lu_panel_kernel_max_pivots = 1024;
+  /// CUDA backend, LU: fronts over 256 rows are eliminated without row interchanges by
+  /// the blocked right-looking LU in strips of this many pivot columns, each strip's pivot
+  /// block and panels from strata's batched kernels for all fronts of a batch together (64
+  /// pivot columns per step, src/numeric/cuda/kernels_lu_panel.cu), the rest by cuBLAS
+  /// GEMMs (src/numeric/cuda/lu_fronts.cu); a front is kept where restricted partial
+  /// pivoting would have interchanged no row and no pivot needs static pivoting, and is
+  /// otherwise assembled again and factored by cuSOLVER GETRF with pivoting. 0: every
+  /// front to cuSOLVER GETRF without pivoting first and two cuBLAS TRSMs, one front at a
+  /// time (the path before the batched kernels). Default 256 (measured on the H100 with
+  /// bench_gpu_memory --parts lu-panel, bench/REPORT.md).
+  index_t gpu_lu_strip_pivots = 256;
   /// CUDA backend, Cholesky: a front with more pivots than gpu_panel_kernel_max_pivots
   /// and than this gets its pivot block and panel in column blocks of this width (POTRF
   /// of each diagonal block, TRSM of the rows below it, SYRK and GEMM of the remaining

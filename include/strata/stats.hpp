@@ -147,7 +147,7 @@ struct FactorStats {
   /// LU: large fronts (over 256 rows); of those the ones that needed row interchanges or
   /// static pivots (factored again with partial pivoting after the check of their
   /// elimination without interchanges failed), and the ones whose elimination without
-  /// interchanges ran in strata's batched kernels (Options::gpu_lu_panel_kernel_max_pivots)
+  /// interchanges ran in strata's batched kernels (Options::gpu_lu_strip_pivots)
   /// rather than cuSOLVER GETRF; see CudaExecutor::lu_large_fronts.
   index_t lu_large_fronts = 0;
   index_t lu_large_fronts_pivoted = 0;

@@ -1,20 +1,20 @@
 #!/usr/bin/env bash
-# LU on one GPU: the large LU fronts by strata's batched kernels (kernels_lu_panel.cu)
+# LU on one GPU: the large LU fronts in strips by strata's batched kernels (lu_fronts.cu)
 # against the library path (cuSOLVER GETRF + cuBLAS TRSMs), as a sweep of
-# Options::gpu_lu_panel_kernel_max_pivots (0: every front to the library) in one run, on
+# Options::gpu_lu_strip_pivots (0: every front to the library) in one run, on
 # the generated unsymmetric elasticity problems and on the Newton matrices of two
 # multibody models (scripts/gpu/mechanical_matrices.sh; `strata simulate` factors them as
 # LU with matching and scaling). Runs over a staged .carry/ (scripts/gpu/prepare.sh);
 # results go to $OUT as gpu-memory-lu-panel-*.json, the log to $OUT/lu-panel.log.
 #   Usage: bash scripts/gpu/run_lu.sh [VALUES [PROBLEMS]]
-#   (defaults: VALUES 0,256,1024; PROBLEMS uelast3d-20,uelast3d-30 and the two models)
+#   (defaults: VALUES 0,64,128,256,512; PROBLEMS uelast3d-20,uelast3d-30 and the two models)
 set -uo pipefail
 cd "$(dirname "$0")/../.."
 for z in .carry/lib/*.xz .carry/bin/*.xz; do [ -f "$z" ] && xz -d -f "$z"; done
 export LD_LIBRARY_PATH="$PWD/.carry/lib:${LD_LIBRARY_PATH:-}"
 OUT="${OUT:-/tmp/strata-out}"
 mkdir -p "$OUT"
-values=${1:-0,256,1024}
+values=${1:-0,64,128,256,512}
 problems=${2:-}
 if [ -z "$problems" ]; then
   list=$(bash scripts/gpu/mechanical_matrices.sh .carry/bin/strata "${TMPDIR:-/tmp}/strata-lu" \
@@ -22,5 +22,5 @@ if [ -z "$problems" ]; then
   problems="uelast3d-20,uelast3d-30,$list"
 fi
 .carry/bin/bench_gpu_memory --parts lu-panel --lu-panel-problems "$problems" \
-  --lu-panel-max-pivots "$values" --repeat 5 --tag lu-panel --results-dir "$OUT" 2>&1 |
+  --lu-strip-pivots "$values" --repeat 5 --tag lu-panel --results-dir "$OUT" 2>&1 |
   tee "$OUT/lu-panel.log"

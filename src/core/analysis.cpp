@@ -313,9 +313,9 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers)
   if (opts.gpu_panel_kernel_max_pivots < 0)
     throw InvalidInput("Options::gpu_panel_kernel_max_pivots must be at least 0 (got " +
                        std::to_string(opts.gpu_panel_kernel_max_pivots) + ")");
-  if (opts.gpu_lu_panel_kernel_max_pivots < 0)
-    throw InvalidInput("Options::gpu_lu_panel_kernel_max_pivots must be at least 0 (got " +
-                       std::to_string(opts.gpu_lu_panel_kernel_max_pivots) + ")");
+  if (opts.gpu_lu_strip_pivots < 0)
+    throw InvalidInput("Options::gpu_lu_strip_pivots must be at least 0 (got " +
+                       std::to_string(opts.gpu_lu_strip_pivots) + ")");
   if (opts.gpu_potrf_block_size < 0)
     throw InvalidInput("Options::gpu_potrf_block_size must be at least 0 (got " +
                        std::to_string(opts.gpu_potrf_block_size) + ")");

@@ -241,19 +241,21 @@ index_t cuda_llt_pivot_block_and_panel(double* f, index_t m, index_t k);
 bool cuda_llt_update(double* c, const double* l, index_t n, index_t k);
 
 /// The CUDA executor's LU of large fronts without row interchanges on device 0
-/// (numeric/cuda/kernels_lu_panel.cu: pivot block, L and U panels by the batched kernels,
-/// all fronts in one launch sequence, then one cuBLAS DGEMM per front for the contribution
-/// block), so that tests can check it against the CPU's factor_front_lu. fronts[i] (host)
-/// is m[i] × m[i], column-major, leading dimension m[i], k[i] fully summed rows and
-/// columns (1 ≤ k[i] ≤ m[i]). Returns, per front, 1 when it was kept — restricted partial
-/// pivoting would interchange no row and every pivot is finite with magnitude at least
+/// (numeric/cuda/lu_fronts.cu, enqueue_lu_strips: strips of `strip` pivot columns whose
+/// pivot blocks and panels come from the batched kernels of kernels_lu_panel.cu, all fronts
+/// together, the rest of each strip's update and the contribution block's by cuBLAS DGEMM),
+/// so that tests can check it against the CPU's factor_front_lu. fronts[i] (host) is
+/// m[i] × m[i], column-major, leading dimension m[i], k[i] fully summed rows and columns
+/// (1 ≤ k[i] ≤ m[i]). Returns, per front, 1 when it was kept — restricted partial pivoting
+/// would interchange no row and every pivot is finite with magnitude at least
 /// static_pivot — and 0 when it was rejected. A kept front comes back as factor_front_lu
 /// leaves it with an identity permutation (L11 unit lower, U11, L21, U12, and the Schur
 /// complement in its contribution block); a rejected one is partly factored. Throws
-/// InvalidInput for inconsistent sizes, NotSupported in a build without CUDA.
+/// InvalidInput for inconsistent sizes or strip < 1, NotSupported in a build without CUDA.
 std::vector<char> cuda_lu_fronts_batched(std::vector<std::vector<double>>& fronts,
                                          const std::vector<index_t>& m,
-                                         const std::vector<index_t>& k, double static_pivot);
+                                         const std::vector<index_t>& k, index_t strip,
+                                         double static_pivot);
 
 /// Number of visible CUDA devices (0 in a build without CUDA).
 int cuda_device_count();

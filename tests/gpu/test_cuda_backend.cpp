@@ -222,54 +222,66 @@ TEST_F(CudaBackend, RecursivePanelMatchesCpuFront) {
   }
 }
 
-// The batched LU of large fronts without interchanges (kernels_lu_panel.cu) of many dense
-// fronts in one launch sequence, against the CPU's partial LU with restricted partial
-// pivoting (numeric/cpu/dense_front.cpp: recursive GETRF, TRSMs, GEMM) of the same fronts:
-// sizes around the 64-column steps and tiles, fronts with no rows below the pivots, all
-// together. Column diagonal dominance in the pivot block means partial pivoting interchanges
-// nothing, so the CPU factor is the one the GPU must give; then fronts where it would
-// interchange — a multiplier over 1 in the diagonal block, in a fully summed row below it
-// (a later tile), at a later step — or where a pivot is under the static-pivot threshold
-// are rejected, while a large entry in a row that is not fully summed is not a reason to.
-TEST_F(CudaBackend, LuBatchedPanelMatchesCpuFront) {
+// The LU of large fronts without interchanges by strips (lu_fronts.cu: each strip's pivot
+// block and panels by the batched kernels of kernels_lu_panel.cu, the rest by GEMMs) of
+// many dense fronts in one launch sequence, against the CPU's partial LU with restricted
+// partial pivoting (numeric/cpu/dense_front.cpp: recursive GETRF, TRSMs, GEMM) of the same
+// fronts: sizes around the 64-column steps and tiles, fronts with no rows below the
+// pivots, all together, for strips of one step, of several, not a multiple of 64, and
+// wider than every front. Column diagonal dominance in the pivot block means partial
+// pivoting interchanges nothing, so the CPU factor is the one the GPU must give; then
+// fronts where it would interchange — a multiplier over 1 in the diagonal block, in a fully
+// summed row below it (a later tile), at a later step or strip — or where a pivot is under
+// the static-pivot threshold are rejected, while a large entry in a row that is not fully
+// summed is not a reason to.
+TEST_F(CudaBackend, LuStripsMatchCpuFront) {
   auto rng = test::fresh_rng();
   std::uniform_real_distribution<double> u(-1.0, 1.0);
-  // off-diagonal entries in (−1, 1), the pivot block's diagonal m + 1 (column sums of the
-  // rest below m): no interchange
+  // off-diagonal entries in (−1, 1), the pivot block's diagonal ±(m + 1) (column sums of
+  // the rest below m): no interchange
   auto front = [&](index_t m, index_t k) {
     std::vector<double> f(static_cast<std::size_t>(m) * m);
     for (double& x : f) x = u(rng);
     for (index_t j = 0; j < k; ++j) f[j * m + j] = (u(rng) < 0 ? -1.0 : 1.0) * (m + 1.0);
     return f;
   };
+  // max |a − b| / max |a| over the whole front
+  auto difference = [](const std::vector<double>& a, const std::vector<double>& b) {
+    double num = 0, den = 0;
+    for (std::size_t x = 0; x < a.size(); ++x) {
+      num = std::max(num, std::abs(a[x] - b[x]));
+      den = std::max(den, std::abs(a[x]));
+    }
+    return num / den;
+  };
   const std::vector<std::pair<index_t, index_t>> shapes = {
       {1, 1},    {2, 2},     {3, 2},     {5, 3},    {5, 5},     {64, 64},    {65, 64},    {65, 65},
       {130, 65}, {200, 129}, {300, 256}, {733, 65}, {733, 300}, {1000, 733}, {2000, 1024}};
-  std::vector<std::vector<double>> in, gpu;
+  std::vector<std::vector<double>> in;
   std::vector<index_t> ms, ks;
   for (auto [m, k] : shapes) {
     in.push_back(front(m, k));
     ms.push_back(m);
     ks.push_back(k);
   }
-  gpu = in;
-  const std::vector<char> kept = numeric::cuda_lu_fronts_batched(gpu, ms, ks, 1e-8);
+  std::vector<std::vector<double>> cpu = in;
   for (std::size_t i = 0; i < shapes.size(); ++i) {
     const auto [m, k] = shapes[i];
-    SCOPED_TRACE("m=" + std::to_string(m) + " k=" + std::to_string(k));
-    ASSERT_TRUE(kept[i]);
-    std::vector<double> cpu = in[i];
     std::vector<index_t> perm(k);
     numeric::cpu::PivotStats st;
-    numeric::cpu::factor_front_lu(cpu.data(), m, k, m, 1e-8, perm.data(), st);
+    numeric::cpu::factor_front_lu(cpu[i].data(), m, k, m, 1e-8, perm.data(), st);
     for (index_t j = 0; j < k; ++j) ASSERT_EQ(perm[j], j);  // no interchange on the CPU
-    EXPECT_EQ(st.perturbed, 0);
-    double num = 0, den = 0;
-    for (std::size_t x = 0; x < cpu.size(); ++x) {
-      num = std::max(num, std::abs(cpu[x] - gpu[i][x]));
-      den = std::max(den, std::abs(cpu[x]));
+    ASSERT_EQ(st.perturbed, 0);
+  }
+  for (index_t strip : {64, 100, 256, 4096}) {
+    std::vector<std::vector<double>> gpu = in;
+    const std::vector<char> kept = numeric::cuda_lu_fronts_batched(gpu, ms, ks, strip, 1e-8);
+    for (std::size_t i = 0; i < shapes.size(); ++i) {
+      SCOPED_TRACE("strip " + std::to_string(strip) + ", m=" + std::to_string(shapes[i].first) +
+                   " k=" + std::to_string(shapes[i].second));
+      ASSERT_TRUE(kept[i]);
+      EXPECT_LT(difference(cpu[i], gpu[i]), 1e-13);
     }
-    EXPECT_LT(num, 1e-13 * den);
   }
   // rejections: (m, k, row, column, value) written into a dominant front
   struct Case {
@@ -280,8 +292,8 @@ TEST_F(CudaBackend, LuBatchedPanelMatchesCpuFront) {
   const std::vector<Case> cases = {
       {300, 256, 5, 2, 1e4, false},      // multiplier over 1 in the first diagonal block
       {300, 256, 150, 10, 1e4, false},   // in a fully summed row of a later L-panel tile
-      {733, 300, 200, 130, 1e4, false},  // at the third step
-      {733, 300, 299, 0, 1e4, false},    // the last fully summed row
+      {733, 300, 200, 130, 1e4, false},  // at the third step (the second or third strip)
+      {733, 300, 299, 280, 1e4, false},  // the last fully summed row, in the last step
       {733, 300, 300, 0, 1e4, true},     // the first row that is not fully summed: no reason
       {733, 300, 700, 250, 1e4, true},
       {300, 256, 70, 70, 1e-12, false},  // a pivot under the static-pivot threshold
@@ -301,26 +313,24 @@ TEST_F(CudaBackend, LuBatchedPanelMatchesCpuFront) {
     ms.push_back(c.m);
     ks.push_back(c.k);
   }
-  std::vector<std::vector<double>> cg = cf;
-  const std::vector<char> ck = numeric::cuda_lu_fronts_batched(cg, ms, ks, 1e-8);
+  std::vector<std::vector<double>> ccpu = cf;
+  std::vector<char> identity(cases.size());
   for (std::size_t i = 0; i < cases.size(); ++i) {
     const Case& c = cases[i];
-    SCOPED_TRACE("case " + std::to_string(i));
-    EXPECT_EQ(static_cast<bool>(ck[i]), c.kept);
     std::vector<index_t> perm(c.k);
     numeric::cpu::PivotStats st;
-    std::vector<double> cpu = cf[i];
-    numeric::cpu::factor_front_lu(cpu.data(), c.m, c.k, c.m, 1e-8, perm.data(), st);
-    bool identity = st.perturbed == 0;
-    for (index_t j = 0; j < c.k; ++j) identity = identity && perm[j] == j;
-    EXPECT_EQ(identity, c.kept);  // the CPU agrees on what needs interchanges
-    if (c.kept) {
-      double num = 0, den = 0;
-      for (std::size_t x = 0; x < cpu.size(); ++x) {
-        num = std::max(num, std::abs(cpu[x] - cg[i][x]));
-        den = std::max(den, std::abs(cpu[x]));
-      }
-      EXPECT_LT(num, 1e-13 * den);
+    numeric::cpu::factor_front_lu(ccpu[i].data(), c.m, c.k, c.m, 1e-8, perm.data(), st);
+    identity[i] = st.perturbed == 0;
+    for (index_t j = 0; j < c.k; ++j) identity[i] = identity[i] && perm[j] == j;
+    EXPECT_EQ(static_cast<bool>(identity[i]), c.kept) << "case " << i;  // the CPU agrees
+  }
+  for (index_t strip : {64, 256}) {
+    std::vector<std::vector<double>> cg = cf;
+    const std::vector<char> ck = numeric::cuda_lu_fronts_batched(cg, ms, ks, strip, 1e-8);
+    for (std::size_t i = 0; i < cases.size(); ++i) {
+      SCOPED_TRACE("strip " + std::to_string(strip) + ", case " + std::to_string(i));
+      EXPECT_EQ(static_cast<bool>(ck[i]), cases[i].kept);
+      if (cases[i].kept) EXPECT_LT(difference(ccpu[i], cg[i]), 1e-13);
     }
   }
 }
@@ -509,7 +519,7 @@ CpuAndGpu factor_on_cpu_and_gpu(const SparseMatrix& a, MatrixType type, bool mat
 }  // namespace
 
 // The GPU LU factor equals the CPU's entry by entry, for large fronts on all of their
-// paths: the batched kernels without interchanges (gpu_lu_panel_kernel_max_pivots at its
+// paths: the batched kernels without interchanges (gpu_lu_strip_pivots at its
 // default) or GETRF without pivoting + TRSMs (0), both kept when no interchange was due;
 // GETRF with pivoting after the front is assembled again when one was; and the
 // panel-kernel path when a pivot needs static pivoting (exactly zero columns inside large
@@ -549,10 +559,10 @@ TEST_F(CudaBackend, LuFactorMatchesCpu) {
       rows.a.values[p] *= row_scale[rows.a.indices[p]];
   problems.push_back(std::move(rows));
   for (const Problem& pr : problems)
-    for (index_t lu_max : {Options{}.gpu_lu_panel_kernel_max_pivots, index_t{0}}) {
-      SCOPED_TRACE(pr.name + ", gpu_lu_panel_kernel_max_pivots " + std::to_string(lu_max));
+    for (index_t lu_max : {Options{}.gpu_lu_strip_pivots, index_t{0}}) {
+      SCOPED_TRACE(pr.name + ", gpu_lu_strip_pivots " + std::to_string(lu_max));
       Options o;
-      o.gpu_lu_panel_kernel_max_pivots = lu_max;
+      o.gpu_lu_strip_pivots = lu_max;
       CpuAndGpu r = factor_on_cpu_and_gpu(pr.a, MatrixType::general,
                                           pr.matching && pr.zero_columns == 0, 1e-8, o);
       const numeric::NumericFactor& cf = r.cpu;

@@ -504,7 +504,7 @@ TEST(TreePartition, OneWorkerAndBadArguments) {
   neg_panel.gpu_panel_kernel_max_pivots = -1;
   EXPECT_THROW(analyze_matrix(a, neg_panel), InvalidInput);
   Options neg_lu_panel;
-  neg_lu_panel.gpu_lu_panel_kernel_max_pivots = -1;
+  neg_lu_panel.gpu_lu_strip_pivots = -1;
   EXPECT_THROW(analyze_matrix(a, neg_lu_panel), InvalidInput);
   // the CPU backend ignores num_gpus: one worker, no split
   Options cpu;

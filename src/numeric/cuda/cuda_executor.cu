@@ -87,7 +87,6 @@ namespace strata::cuda {
 
 namespace {
 constexpr std::int64_t kSmallFront = 256;  // fronts up to this many rows: one block each
-constexpr std::int64_t kLuPanel = 64;      // panel width of the blocked LU of large fronts
 constexpr std::int64_t kMinSlab = 16;      // narrowest slab worth a library call
 // Streams for the large fronts of one chunk. The fronts of a level below the top few are
 // many and medium-sized (hundreds to a few thousand rows): one after another on one
@@ -100,7 +99,7 @@ CudaExecutor::CudaExecutor(const Options& o, int device)
     : device_(device),
       limit_(o.device_memory_limit),
       panel_max_pivots_(o.gpu_panel_kernel_max_pivots),
-      lu_panel_max_pivots_(o.gpu_lu_panel_kernel_max_pivots),
+      lu_strip_pivots_(o.gpu_lu_strip_pivots),
       split_min_cb_(o.split_front_min_cb),
       dist_min_rows_(o.distributed_front_min_rows),
       dist_block_(std::max<index_t>(64, o.distributed_front_block_size)),
@@ -116,6 +115,8 @@ CudaExecutor::CudaExecutor(const Options& o, int device)
   STRATA_CUDA(cudaEventCreate(&stop_));
   STRATA_CUDA(cudaEventCreateWithFlags(&panels_done_, cudaEventDisableTiming));
   STRATA_CUDA(cudaStreamCreateWithFlags(&copy_stream_, cudaStreamNonBlocking));
+  STRATA_CUDA(cudaStreamCreateWithFlags(&check_stream_, cudaStreamNonBlocking));
+  STRATA_CUDA(cudaEventCreateWithFlags(&lu_strip_done_, cudaEventDisableTiming));
   STRATA_CUDA(cudaEventCreateWithFlags(&panels_copied_, cudaEventDisableTiming));
   for (cudaEvent_t* e : {&split_ready_, &help_ready_, &help_done_, &dist_ready_, &dist_done_})
     STRATA_CUDA(cudaEventCreateWithFlags(e, cudaEventDisableTiming));
@@ -140,6 +141,8 @@ CudaExecutor::~CudaExecutor() {
   cudaEventDestroy(panels_done_);
   cudaEventDestroy(panels_copied_);
   cudaStreamDestroy(copy_stream_);
+  cudaStreamDestroy(check_stream_);
+  cudaEventDestroy(lu_strip_done_);
   for (cudaEvent_t e : {split_ready_, help_ready_, help_done_, dist_ready_, dist_done_})
     cudaEventDestroy(e);
   for (cudaEvent_t e : dist_events_) cudaEventDestroy(e);
@@ -640,7 +643,7 @@ void CudaExecutor::presize_chunk_buffers(const Analysis& an,
                                          const std::vector<numeric::PartView>& views) {
   const auto& t = an.tree;
   const bool lu = !an.symmetric;
-  std::size_t count = 1, big = 1, small = 1, pivots = 1, diag = 1, diag_slab = 1;
+  std::size_t count = 1, big = 1, small = 1, pivots = 1, diag = 1, diag_slab = 1, strips = 1;
   int potrf = 1, getrf = 1, blocks = 1;
   std::vector<std::unique_ptr<Lane>>& lane = lanes();
   for (const numeric::PartView& v : views) {
@@ -653,7 +656,7 @@ void CudaExecutor::presize_chunk_buffers(const Analysis& an,
             std::max(diag_slab, llt_recursive_work_size(slab_width(t.n_rows(f), t.n_pivots(f))));
       }
       if (pd.tiled[q] || pd.chunk_end[q] <= q) continue;
-      std::size_t nb = 0, ns = 0, np = 0;
+      std::size_t nb = 0, ns = 0, np = 0, ni = 0;
       for (index_t r = q; r < pd.chunk_end[q]; ++r) {
         const index_t f = s.fronts[r];
         const int m = static_cast<int>(t.n_rows(f)), k = static_cast<int>(t.n_pivots(f));
@@ -663,6 +666,8 @@ void CudaExecutor::presize_chunk_buffers(const Analysis& an,
           continue;
         }
         ++nb;
+        if (lu_strip_pivots_ > 0)  // enqueue_lu_strips' items: one per strip
+          ni += static_cast<std::size_t>((k + lu_strip_pivots_ - 1) / lu_strip_pivots_);
         int lwork = 0;
         if (lu) {
           STRATA_CUSOLVER(cusolverDnDgetrf_bufferSize(solver_, k, k, pool_.data(), m, &lwork));
@@ -682,6 +687,7 @@ void CudaExecutor::presize_chunk_buffers(const Analysis& an,
       big = std::max(big, nb);
       small = std::max(small, ns);
       pivots = std::max(pivots, np);
+      strips = std::max(strips, ni);
     }
   }
   for (auto* b : {&info_, &perturbed_, &stage_offset_, &diag_offset_}) b->resize(count + 1);
@@ -707,8 +713,9 @@ void CudaExecutor::presize_chunk_buffers(const Analysis& an,
     l->diag_work.resize(l == lane.front() ? std::max(diag, diag_slab) : diag);
   }
   if (lu) {
-    lu_items_.resize(big);
+    lu_items_.resize(strips);
     lu_work_.resize(lu_panel_work_size(static_cast<std::int64_t>(big)));
+    lu_perm_offset_.resize(big + 1);
     lu_ipiv_.resize(pivots);
     lu_info_.resize(big);
     lu_bad_.resize(big);
@@ -1102,168 +1109,6 @@ void CudaExecutor::finish_chunk(const numeric::FactorContext& ctx, ChunkRecord& 
   for (std::size_t i = 0; i < big.size(); ++i)
     finish_front(ctx, s.fronts[big[i]], (!lu && pinfo[i] > 0) ? pinfo[i] - 1 : -1,
                  perturbed[ns + i], perm + big_perm_at[i], diag_of(big[i]));
-}
-
-// LU of the large fronts of a chunk, in two passes so that the lanes keep running side by
-// side. First: the fronts with at most lu_panel_max_pivots_ pivots get their pivot block
-// and panels from the batched kernels on stream_ (kernels_lu_panel.cu), each other one
-// cuSOLVER GETRF without pivoting on its lane (kernels_lu.cu); both without row
-// interchanges, checked against what restricted partial pivoting would do. One wait for
-// all of them. Then per front: if its check passed, the update of its contribution block
-// (after the two TRSMs of the library path); if not, the front is assembled again — the
-// values and its children's contribution blocks are as the chunk's assembly read them,
-// since nothing stores a block before the chunk's fronts are all factored — and GETRF
-// with pivoting runs (one more wait, for its pivots); a pivot that still needs static
-// pivoting sends the front, assembled once more, to the blocked path with our panel
-// kernel. (One wait per front instead held the host, and so every lane, on each front.)
-void CudaExecutor::lu_large_fronts(const std::vector<LuFront>& fronts, double static_pivot,
-                                   cudaEvent_t assembled) {
-  const double one = 1.0, minus_one = -1.0;
-  const std::size_t n = fronts.size();
-  // the batched fronts take the first check slots, largest k first (the kernels' order)
-  std::vector<std::size_t> order(n);
-  for (std::size_t i = 0; i < n; ++i) order[i] = i;
-  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
-    const bool ba = fronts[a].k <= lu_panel_max_pivots_, bb = fronts[b].k <= lu_panel_max_pivots_;
-    return ba != bb ? ba : ba && fronts[a].k > fronts[b].k;
-  });
-  std::vector<std::size_t> slot(n);
-  std::size_t nb = 0;
-  for (std::size_t q = 0; q < n; ++q) {
-    slot[order[q]] = q;
-    if (fronts[order[q]].k <= lu_panel_max_pivots_) ++nb;
-  }
-  std::vector<std::size_t> ipiv_at(n + 1, 0);
-  for (std::size_t i = 0; i < n; ++i)
-    ipiv_at[i + 1] = ipiv_at[i] + static_cast<std::size_t>(fronts[i].k);
-  // growing a buffer frees the old one: wait for the lanes first (cudaFree would too)
-  if (lu_ipiv_.size() < ipiv_at[n] || lu_bad_.size() < n || lu_items_.size() < nb ||
-      lu_work_.size() < lu_panel_work_size(static_cast<std::int64_t>(nb)))
-    STRATA_CUDA(cudaDeviceSynchronize());
-  lu_ipiv_.resize(std::max<std::size_t>(ipiv_at[n], 1));
-  lu_info_.resize(n);
-  lu_bad_.resize(n);
-  lu_bad_host_.resize(n);
-  if (nb > 0) {
-    std::vector<LuPanelItem> items(nb);
-    std::vector<std::int64_t> rows(nb), pivots(nb);
-    for (std::size_t q = 0; q < nb; ++q) {
-      const LuFront& fr = fronts[order[q]];
-      items[q] = {fr.F, fr.m, fr.k};
-      rows[q] = fr.m;
-      pivots[q] = fr.k;
-    }
-    lu_items_.upload(items.data(), nb, stream_);
-    count_h2d(nb * sizeof(LuPanelItem));
-    lu_work_.resize(lu_panel_work_size(static_cast<std::int64_t>(nb)));
-    launch_lu_panel_batched(lu_items_.data(), rows, pivots, lu_work_.data(), lu_bad_.data(),
-                            static_pivot, stream_);
-  }
-  auto getrf_work = [&](Lane& lane, const LuFront& fr) {
-    int lwork = 0;
-    STRATA_CUSOLVER(cusolverDnDgetrf_bufferSize(lane.solver, fr.k, fr.k, fr.F, fr.m, &lwork));
-    if (lane.getrf_work.size() < static_cast<std::size_t>(std::max(lwork, 1))) {
-      STRATA_CUDA(cudaStreamSynchronize(lane.stream));
-      lane.getrf_work.resize(static_cast<std::size_t>(std::max(lwork, 1)));
-    }
-  };
-  for (std::size_t q = nb; q < n; ++q) {
-    const std::size_t i = order[q];
-    const LuFront& fr = fronts[i];
-    Lane& lane = *fr.lane;
-    getrf_work(lane, fr);
-    // without pivoting first (devIpiv null); kept only where partial pivoting would have
-    // interchanged nothing (kernels_lu.cu)
-    STRATA_CUSOLVER(cusolverDnDgetrf(lane.solver, fr.k, fr.k, fr.F, fr.m, lane.getrf_work.data(),
-                                     nullptr, lu_info_.data() + q));
-    launch_lu_unpivoted_check(fr.F, fr.m, fr.k, static_pivot, lu_info_.data() + q,
-                              lu_ipiv_.data() + ipiv_at[i], lu_bad_.data() + q, lane.stream);
-  }
-  auto fetch_checks = [&] {
-    for (const auto& l : lanes_) STRATA_CUDA(cudaStreamSynchronize(l->stream));
-    STRATA_CUDA(
-        cudaMemcpy(lu_bad_host_.data(), lu_bad_.data(), sizeof(int) * n, cudaMemcpyDeviceToHost));
-  };
-  fetch_checks();
-  lu_fronts_ += static_cast<index_t>(n);
-  lu_fronts_batched_ += static_cast<index_t>(nb);
-  // the front at chunk position `pos` assembled again, on its lane
-  auto reassemble = [&](const LuFront& fr) {
-    launch_assemble(cur_->tree, fr.pos, 1, fr.m, values_.data(), pool_.data(), false,
-                    fr.lane->stream);
-  };
-  // rows must be interchanged (or a pivot is tiny): the front again, GETRF with pivoting
-  std::vector<char> pivoted(n, 0);
-  for (std::size_t i = 0; i < n; ++i) {
-    if (!lu_bad_host_.data()[slot[i]]) continue;
-    const LuFront& fr = fronts[i];
-    Lane& lane = *fr.lane;
-    reassemble(fr);
-    getrf_work(lane, fr);
-    STRATA_CUSOLVER(cusolverDnDgetrf(lane.solver, fr.k, fr.k, fr.F, fr.m, lane.getrf_work.data(),
-                                     lu_ipiv_.data() + ipiv_at[i], lu_info_.data() + slot[i]));
-    launch_lu_check(fr.F, fr.m, fr.k, static_pivot, lu_info_.data() + slot[i],
-                    lu_bad_.data() + slot[i], lane.stream);
-    ++lu_fronts_pivoted_;
-    pivoted[i] = 1;
-  }
-  if (std::find(pivoted.begin(), pivoted.end(), 1) != pivoted.end()) fetch_checks();
-  for (std::size_t i = 0; i < n; ++i) {
-    const LuFront& fr = fronts[i];
-    Lane& lane = *fr.lane;
-    const cudaStream_t stream = lane.stream;
-    const int m = fr.m, k = fr.k;
-    const std::size_t ld = static_cast<std::size_t>(m);
-    const int* ipiv = lu_ipiv_.data() + ipiv_at[i];
-    const bool batched = slot[i] < nb && !pivoted[i];  // L21 and U12 already there
-    STRATA_CUDA(cudaMemsetAsync(fr.perturbed, 0, sizeof(std::int64_t), stream));
-    if (!lu_bad_host_.data()[slot[i]]) {
-      if (pivoted[i])
-        launch_ipiv_to_perm(ipiv, k, fr.perm, stream);
-      else  // no interchange: neither the serial ipiv-to-permutation kernel nor DLASWP
-        launch_identity_perm(k, fr.perm, stream);
-      if (m > k) {
-        double* a12 = fr.F + static_cast<std::size_t>(k) * ld;
-        if (!batched) {
-          if (pivoted[i]) launch_laswp(a12, m, m - k, ipiv, k, stream);
-          STRATA_CUBLAS(cublasDtrsm(lane.blas, CUBLAS_SIDE_RIGHT, CUBLAS_FILL_MODE_UPPER,
-                                    CUBLAS_OP_N, CUBLAS_DIAG_NON_UNIT, m - k, k, &one, fr.F, m,
-                                    fr.F + k, m));
-          STRATA_CUBLAS(cublasDtrsm(lane.blas, CUBLAS_SIDE_LEFT, CUBLAS_FILL_MODE_LOWER,
-                                    CUBLAS_OP_N, CUBLAS_DIAG_UNIT, k, m - k, &one, fr.F, m, a12,
-                                    m));
-        }
-        if (split_front(m, k))
-          split_update(lane, fr.F, m, k, true, assembled);
-        else
-          STRATA_CUBLAS(cublasDgemm(lane.blas, CUBLAS_OP_N, CUBLAS_OP_N, m - k, m - k, k,
-                                    &minus_one, fr.F + k, m, a12, m, &one, a12 + k, m));
-      }
-      continue;
-    }
-    // a pivot needs static pivoting: the front again, and the panel-kernel path
-    reassemble(fr);
-    // iota_ outlives the asynchronous copy (it is a member, only ever grown)
-    if (static_cast<int>(iota_.size()) < k) {
-      STRATA_CUDA(cudaDeviceSynchronize());
-      iota_.resize(k);
-      for (int r = 0; r < k; ++r) iota_[r] = r;
-    }
-    STRATA_CUDA(cudaMemcpyAsync(fr.perm, iota_.data(), sizeof(std::int64_t) * k,
-                                cudaMemcpyHostToDevice, stream));
-    for (int p0 = 0; p0 < k; p0 += kLuPanel) {
-      const int w = std::min<int>(kLuPanel, k - p0), rest = m - p0 - w;
-      launch_lu_panel(fr.F, m, k, p0, w, static_pivot, fr.perm, fr.perturbed, stream);
-      if (rest > 0) {
-        double* a11 = fr.F + static_cast<std::size_t>(p0) * ld + p0;
-        double* a12 = fr.F + static_cast<std::size_t>(p0 + w) * ld + p0;
-        STRATA_CUBLAS(cublasDtrsm(lane.blas, CUBLAS_SIDE_LEFT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N,
-                                  CUBLAS_DIAG_UNIT, w, rest, &one, a11, m, a12, m));
-        STRATA_CUBLAS(cublasDgemm(lane.blas, CUBLAS_OP_N, CUBLAS_OP_N, rest, rest, w, &minus_one,
-                                  a11 + w, m, a12, m, &one, a12 + w, m));
-      }
-    }
-  }
 }
 
 // The panels of positions [begin, end) to the host factor through the pinned staging

@@ -8,6 +8,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <memory>
 #include <vector>
@@ -105,6 +106,27 @@ void llt_update(cublasHandle_t blas, std::int64_t n, std::int64_t k, const doubl
 /// Whether llt_update takes the DGEMM for this shape (measured rule, llt_update.cu).
 bool llt_update_by_gemm(std::int64_t n, std::int64_t k);
 
+/// The contribution-block update of front i of enqueue_lu_strips, enqueued on the lane given.
+using LuFinalUpdate = std::function<void(std::size_t i, Lane&)>;
+
+/// The elimination without row interchanges of large LU fronts by strips of nb pivot
+/// columns (lu_fronts.cu): `fronts` (F, leading dimension ld = m, m, k, kc = k; sorted by k,
+/// largest first) get L11\U11, L21 and U12 in place, the strips' pivot blocks and panels by
+/// launch_lu_panel_batched on lanes[0] for all fronts with pivots left in the strip, the
+/// rest of each strip's update of the pivot rows and columns by two cuBLAS GEMMs per front
+/// on the other lanes (lanes[0] waits for them before the next strip), and after a front's
+/// last strip `final_update(i, lane)` on a lane (lane_of[i] says which), which must update
+/// the contribution block (A22 −= L21·U12). bad[i] (device) as launch_lu_panel_batched's,
+/// zeroed here. `items` and `work` are grown as needed (Σ ⌈k/nb⌉ items; count fronts'
+/// inverses); `strip_done` is recorded on lanes[0] after each strip's kernels, last after
+/// the last one's. Everything is enqueued; nothing waits on the host. Throws InvalidInput
+/// for nb < 1.
+void enqueue_lu_strips(const std::vector<LuPanelItem>& fronts, std::int64_t nb,
+                       const std::vector<Lane*>& lanes, DeviceBuffer<LuPanelItem>& items,
+                       DeviceBuffer<double>& work, int* bad, double static_pivot,
+                       cudaEvent_t strip_done, const LuFinalUpdate& final_update,
+                       std::vector<Lane*>& lane_of);
+
 class CudaExecutor final : public numeric::Executor {
  public:
   /// `device`: CUDA device ordinal this executor runs on.
@@ -201,15 +223,30 @@ class CudaExecutor final : public numeric::Executor {
     std::int64_t* perm;
     std::int64_t* perturbed;
   };
-  /// LU of the chunk's large fronts: the batched kernels without interchanges for those
-  /// with at most lu_panel_max_pivots_ pivots (kernels_lu_panel.cu), GETRF without
-  /// pivoting + TRSMs for the others, each kept when no interchange was due, then the
-  /// contribution-block GEMM (split over the team for a large front, split_update;
-  /// `assembled`: recorded after the chunk's assembly); a front whose check failed is
-  /// assembled again and factored by GETRF with pivoting, or by the blocked panel-kernel
-  /// path when a pivot needs static pivoting (kernels_lu.cu).
-  void lu_large_fronts(const std::vector<LuFront>& fronts, double static_pivot,
-                       cudaEvent_t assembled);
+  /// LU of the chunk's large fronts (lu_fronts.cu): eliminated without interchanges by
+  /// strips of lu_strip_pivots_ pivots (the batched kernels, kernels_lu_panel.cu) or,
+  /// when that is 0, by GETRF without pivoting + TRSMs, each kept when no interchange was
+  /// due; the contribution-block GEMM (split over the team for a large front,
+  /// split_update; `assembled`: recorded after the chunk's assembly); a front whose check
+  /// failed assembled again and factored by lu_fronts_redo. The fronts' lanes are updated
+  /// to the ones their last work went to.
+  void lu_large_fronts(std::vector<LuFront>& fronts, double static_pivot, cudaEvent_t assembled);
+  /// The two ways of lu_large_fronts; each returns the indices of the fronts to factor
+  /// again.
+  std::vector<std::size_t> lu_fronts_by_strips(std::vector<LuFront>& fronts, double static_pivot,
+                                               cudaEvent_t assembled);
+  std::vector<std::size_t> lu_fronts_by_library(std::vector<LuFront>& fronts, double static_pivot,
+                                                cudaEvent_t assembled);
+  /// Fronts `redo` of `fronts` assembled again and factored with partial pivoting (GETRF),
+  /// or by the blocked panel-kernel path when a pivot needs static pivoting.
+  void lu_fronts_redo(std::vector<LuFront>& fronts, const std::vector<std::size_t>& redo,
+                      double static_pivot, cudaEvent_t assembled);
+  /// Identity local permutations and no perturbed pivot for `fronts`, on stream s.
+  void lu_unpivoted_results(const std::vector<LuFront>& fronts, cudaStream_t s);
+  /// Grows the lane's GETRF workspace for the front's k × k block.
+  void grow_getrf_work(Lane& lane, const LuFront& fr);
+  /// Waits for every lane, then copies lu_bad_[0, n) to lu_bad_host_.
+  void fetch_lu_checks(std::size_t n);
   /// The lanes, created on first use (kLanes of them).
   std::vector<std::unique_ptr<Lane>>& lanes();
   /// Host bookkeeping of factored front f: `diag` holds its k pivots' diagonal entries.
@@ -269,13 +306,13 @@ class CudaExecutor final : public numeric::Executor {
   cublasHandle_t blas_ = nullptr;
   cusolverDnHandle_t solver_ = nullptr;
   std::size_t limit_ = 0;
-  std::int64_t panel_max_pivots_ = 0;     ///< Options::gpu_panel_kernel_max_pivots
-  std::int64_t lu_panel_max_pivots_ = 0;  ///< Options::gpu_lu_panel_kernel_max_pivots
-  std::int64_t split_min_cb_ = 0;         ///< Options::split_front_min_cb
-  std::int64_t dist_min_rows_ = 0;        ///< Options::distributed_front_min_rows
-  std::int64_t dist_block_ = 512;         ///< Options::distributed_front_block_size
-  int potrf_block_ = 0;                   ///< Options::gpu_potrf_block_size
-  bool recursive_panel_ = true;           ///< Options::gpu_recursive_panel
+  std::int64_t panel_max_pivots_ = 0;  ///< Options::gpu_panel_kernel_max_pivots
+  std::int64_t lu_strip_pivots_ = 0;   ///< Options::gpu_lu_strip_pivots
+  std::int64_t split_min_cb_ = 0;      ///< Options::split_front_min_cb
+  std::int64_t dist_min_rows_ = 0;     ///< Options::distributed_front_min_rows
+  std::int64_t dist_block_ = 512;      ///< Options::distributed_front_block_size
+  int potrf_block_ = 0;                ///< Options::gpu_potrf_block_size
+  bool recursive_panel_ = true;        ///< Options::gpu_recursive_panel
   std::uint64_t analysis_id_ = 0;
   DevicePlan plan_;
   // analysis arrays (fronts_: the whole tree's schedule, for the device solve)
@@ -311,6 +348,9 @@ class CudaExecutor final : public numeric::Executor {
   // the diagonals of device-only panels; the chunk's large LU fronts (lu_large_fronts)
   DeviceBuffer<double> diag_, lu_work_;
   DeviceBuffer<LuPanelItem> lu_items_;
+  DeviceBuffer<std::int64_t> lu_perm_offset_;  // lu_unpivoted_results: the fronts' perm offsets
+  cudaEvent_t lu_strip_done_ = nullptr;        // enqueue_lu_strips' strip_done
+  cudaStream_t check_stream_ = nullptr;        // copies the LU checks beside the lanes' work
   DeviceBuffer<int> lu_ipiv_, lu_info_, lu_bad_;
   PinnedBuffer<int> lu_bad_host_;
   DeviceBuffer<std::int64_t> diag_offset_;

@@ -82,11 +82,13 @@ void launch_llt_panel(const DeviceTree& t, const std::int64_t* items,
                       const std::vector<std::int64_t>& pivots, double* pool, double* work,
                       int* info, cudaStream_t s);
 
-/// A large LU front for launch_lu_panel_batched: F (device) is m × m, column-major, leading
-/// dimension m, its first k rows and columns fully summed.
+/// A large LU front, or the part of one from its pivot b0 on, for launch_lu_panel_batched:
+/// F (device) points at entry (b0, b0) of the front, whose leading dimension is ld; the
+/// part has m rows and columns, its first k are the pivots to eliminate now (a strip), and
+/// its first kc ≥ k rows are fully summed (the rows whose multipliers the check covers).
 struct LuPanelItem {
   double* F;
-  std::int64_t m, k;
+  std::int64_t ld, m, k, kc;
 };
 
 /// Doubles of workspace launch_lu_panel_batched needs for `count` fronts (two 64×64
@@ -97,13 +99,13 @@ std::size_t lu_panel_work_size(std::int64_t count);
 /// fronts of the list together, three launches per 64 pivot columns on stream s
 /// (kernels_lu_panel.cu): item i (items: device array, sorted by k, largest first; `rows`,
 /// `pivots`: host copies of its m and k) gets L11 (unit lower, implicit diagonal) and U11
-/// in its k × k block, L21 = A21·U11⁻¹ below it and U12 = L11⁻¹·A12 right of it; the
-/// contribution block A22 is left for the caller's update A22 −= L21·U12. bad[i] (device,
-/// zeroed here) is set to 1, and the front left partly factored, when restricted partial
-/// pivoting would interchange rows (a multiplier |L(r, j)| > 1 in a fully summed row r <
-/// k) or a pivot is not finite or below `static_pivot` in magnitude: the caller then
-/// factors that front again from its assembled values. `work`: lu_panel_work_size(count)
-/// doubles. Throws DeviceError if a launch fails.
+/// in its k × k block, L21 = A21·U11⁻¹ below it (all m rows) and U12 = L11⁻¹·A12 right of it
+/// (all m columns); A22 is left for the caller's update A22 −= L21·U12. bad[i] (device,
+/// zeroed by the caller) is set to 1, and the item left partly factored, when restricted
+/// partial pivoting would interchange rows (a multiplier |L(r, j)| > 1 in a fully summed
+/// row r < kc) or a pivot is not finite or below `static_pivot` in magnitude; an item whose
+/// bad[i] is already set is left alone. `work`: lu_panel_work_size(count) doubles. Throws
+/// DeviceError if a launch fails.
 void launch_lu_panel_batched(const LuPanelItem* items, const std::vector<std::int64_t>& rows,
                              const std::vector<std::int64_t>& pivots, double* work, int* bad,
                              double static_pivot, cudaStream_t s);
@@ -146,6 +148,11 @@ void launch_ipiv_to_perm(const int* ipiv, std::int64_t k, std::int64_t* perm, cu
 /// perm[0..k) = 0, 1, …, k−1: the permutation of a front whose pivots needed no
 /// interchange (what launch_ipiv_to_perm makes of an identity ipiv, without its serial loop).
 void launch_identity_perm(std::int64_t k, std::int64_t* perm, cudaStream_t s);
+
+/// The same for `count` fronts at once: perm[offset[i] + j] = j for j < offset[i + 1] −
+/// offset[i] (offset: device array of count + 1).
+void launch_identity_perms(const std::int64_t* offset, std::int64_t count, std::int64_t* perm,
+                           cudaStream_t s);
 
 /// Applies the interchanges ipiv[0..k) (1-based, in order) to the rows of the ncols
 /// columns of a (leading dimension ld), as LAPACK's DLASWP with increment 1.

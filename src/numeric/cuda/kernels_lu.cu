@@ -1,10 +1,10 @@
 // strata — CUDA kernels around the library LU of a large front (see kernels_lu.cuh).
 //
-// A large LU front with more than Options::gpu_lu_panel_kernel_max_pivots pivots (and
+// A large LU front with more than Options::gpu_lu_strip_pivots pivots (and
 // any front whose elimination without interchanges was rejected) is factored by
 // whole-block library calls (cuda_executor.cu, lu_large_fronts; the others by the batched
-// kernels of kernels_lu_panel.cu): cuSOLVER GETRF on the k×k fully summed block A11 — partial pivoting
-// over the fully summed rows only, which is exactly the restricted pivoting of the CPU
+// kernels of kernels_lu_panel.cu): cuSOLVER GETRF on the k×k fully summed block A11 — partial
+// pivoting over the fully summed rows only, which is exactly the restricted pivoting of the CPU
 // kernel — then the row interchanges applied to A12, two TRSMs and one GEMM. GETRF runs
 // first without pivoting (on the H100 six times faster at k = 1,024: partial pivoting's
 // search and swaps are what make GETRF slow there), and that factor is kept only when
@@ -91,6 +91,12 @@ __global__ void identity_perm_kernel(std::int64_t k, std::int64_t* perm) {
   if (j < k) perm[j] = j;
 }
 
+// Block b fills the segment [offset[b], offset[b + 1]) of perm with 0, 1, ….
+__global__ void identity_perms_kernel(const std::int64_t* offset, std::int64_t* perm) {
+  const std::int64_t o = offset[blockIdx.x], k = offset[blockIdx.x + 1] - o;
+  for (std::int64_t j = threadIdx.x; j < k; j += blockDim.x) perm[o + j] = j;
+}
+
 __global__ void laswp_kernel(double* a, std::int64_t ld, std::int64_t ncols, const int* ipiv,
                              std::int64_t k) {
   const std::int64_t c = blockIdx.x * static_cast<std::int64_t>(blockDim.x) + threadIdx.x;
@@ -145,6 +151,13 @@ void launch_identity_perm(std::int64_t k, std::int64_t* perm, cudaStream_t s) {
   if (k == 0) return;
   identity_perm_kernel<<<static_cast<unsigned>((k + kThreads - 1) / kThreads), kThreads, 0, s>>>(
       k, perm);
+  STRATA_CUDA_LAUNCH();
+}
+
+void launch_identity_perms(const std::int64_t* offset, std::int64_t count, std::int64_t* perm,
+                           cudaStream_t s) {
+  if (count == 0) return;
+  identity_perms_kernel<<<static_cast<unsigned>(count), kThreads, 0, s>>>(offset, perm);
   STRATA_CUDA_LAUNCH();
 }
 

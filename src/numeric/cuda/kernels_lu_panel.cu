@@ -1,7 +1,7 @@
-// strata — the pivot block, the L panel and the U panel of large LU fronts (those with at
-// most Options::gpu_lu_panel_kernel_max_pivots pivots), for all such fronts of a chunk at
-// once, without row interchanges: three launches per 64-column step (see kernels.cuh,
-// launch_lu_panel_batched).
+// strata — the pivot block, the L panel and the U panel of a strip of large LU fronts
+// (Options::gpu_lu_strip_pivots pivot columns; lu_fronts.cu cuts the fronts into strips),
+// for all the chunk's fronts with pivots in that strip at once, without row interchanges:
+// three launches per 64-column step (see kernels.cuh, launch_lu_panel_batched).
 //
 // Why: the library path (kernels_lu.cu) is one cuSOLVER GETRF of the k×k fully summed
 // block A11 and two cuBLAS TRSMs (L21 = A21·U11⁻¹, U12 = L11⁻¹·A12) per front, and at
@@ -10,8 +10,8 @@
 // ncu-kernels-uelast3d-30-a74f275.txt) GETRF and the two TRSMs were 57% of the kernel
 // time and the contribution-block GEMM, where most flops are, about 12%.
 //
-// How: the right-looking blocked LU of the front's fully summed part without pivoting
-// (Golub & Van Loan, "Matrix Computations", 4th ed., §3.2.11), in steps of 64 columns,
+// How: the right-looking blocked LU of the strip without pivoting (Golub & Van Loan,
+// "Matrix Computations", 4th ed., §3.2.11), in steps of 64 columns,
 // each step one launch of each kernel over every front still active (items sorted by k,
 // largest first, so the active fronts of a step are a prefix):
 //   1. lu_pivot_block_kernel, one block of 64 threads per front: the w×w diagonal block
@@ -22,33 +22,29 @@
 //   2. lu_panels_kernel, one block per 64-row tile below the diagonal block, L_ij =
 //      A_ij·U_jj⁻¹, and one per 64-column tile right of it, U_jc = L_jj⁻¹·A_jc — the U
 //      panel over every column of the front, so that the last step leaves U12 complete;
-//   3. lu_update_kernel, one block per 64×64 tile of the trailing part of the L-shaped
-//      region the pivots touch: A_rc −= L_rj·U_jc where r < k or c < k (the contribution
-//      block itself, r ≥ k and c ≥ k, is the caller's one GEMM per front afterwards).
+//   3. lu_update_kernel, one block per 64×64 tile of the trailing part of the strip's
+//      L-shaped region: A_rc −= L_rj·U_jc where r < k or c < k, k the strip's pivots
+//      (the rest, r ≥ k and c ≥ k, is the caller's: GEMMs per front, lu_fronts.cu).
 // The products run on the FP64 tensor cores (tile_mma.cuh). Panels by the inverses of the
 // 64×64 diagonal blocks, as MAGMA's GPU TRSM does; the error bound grows with κ(U_jj) and
 // κ(L_jj) (Higham, "Accuracy and Stability of Numerical Algorithms", 2nd ed., §14.2),
 // which the check below keeps small: |L| ≤ 1 in the fully summed rows.
 //
 // Restricted partial pivoting (the CPU kernel's rule, numeric/cpu/dense_front.cpp) picks
-// the largest magnitude in column j among the fully summed rows j..k−1, the first on ties;
-// it interchanges nothing exactly when every multiplier L(i, j), j < i < k, has |L(i, j)|
-// ≤ 1. The kernels check that (and that every pivot is finite with |U(j, j)| at least the
+// the largest magnitude in column j among the fully summed rows j..kc−1, the first on
+// ties; it interchanges nothing exactly when every multiplier L(i, j), j < i < kc, has
+// |L(i, j)| ≤ 1. The kernels check that (and that every pivot is finite with |U(j, j)| at least the
 // static-pivot threshold) and set bad[item] on the first violation; every later launch
 // leaves that front alone, and the caller factors it again from its assembled values by
 // the pivoting path. So a front this path keeps is the one partial pivoting would have
 // produced, in another order of summation.
 #include <algorithm>
 #include <cfloat>
-#include <string>
 #include <vector>
 
 #include "numeric/cuda/cuda_check.hpp"
-#include "numeric/cuda/device_buffer.hpp"
 #include "numeric/cuda/kernels.cuh"
 #include "numeric/cuda/tile_mma.cuh"
-#include "numeric/factor.hpp"
-#include "strata/errors.hpp"
 
 namespace strata::cuda {
 namespace {
@@ -73,14 +69,14 @@ __global__ void __launch_bounds__(kStep)
   __shared__ int sbad;
   if (bad[blockIdx.x]) return;  // rejected at an earlier step
   const LuPanelItem it = items[blockIdx.x];
-  const std::int64_t m = it.m;
+  const std::int64_t ld = it.ld;
   const int w = static_cast<int>(imin(kStep, it.k - j0));
-  double* D = it.F + j0 * m + j0;
+  double* D = it.F + j0 * ld + j0;
   const int i = threadIdx.x;
   if (i == 0) sbad = 0;
   double a[kStep];
 #pragma unroll
-  for (int c = 0; c < kStep; ++c) a[c] = i < w && c < w ? D[c * m + i] : 0.0;
+  for (int c = 0; c < kStep; ++c) a[c] = i < w && c < w ? D[c * ld + i] : 0.0;
   __syncthreads();
 #pragma unroll
   for (int j = 0; j < kStep; ++j) {
@@ -111,7 +107,7 @@ __global__ void __launch_bounds__(kStep)
   if (i < w) {
 #pragma unroll
     for (int c = 0; c < kStep; ++c)
-      if (c < w) D[c * m + i] = a[c];
+      if (c < w) D[c * ld + i] = a[c];
   }
   double* WL = work + static_cast<std::int64_t>(blockIdx.x) * 2 * kSlot;
   double* WU = WL + kSlot;
@@ -148,8 +144,8 @@ __global__ void lu_panels_kernel(const LuPanelItem* items, const double* work, i
   __shared__ __align__(32) double sm[tile::kSharedDoubles];
   if (bad[blockIdx.x]) return;
   const LuPanelItem it = items[blockIdx.x];
-  const std::int64_t m = it.m, k = it.k;
-  const int w = static_cast<int>(imin(kStep, k - j0));
+  const std::int64_t m = it.m, ld = it.ld;
+  const int w = static_cast<int>(imin(kStep, it.k - j0));
   const std::int64_t base = j0 + w, T = tiles_of(m - base);
   const double* WL = work + static_cast<std::int64_t>(blockIdx.x) * 2 * kSlot;
   const double* WU = WL + kSlot;
@@ -158,24 +154,24 @@ __global__ void lu_panels_kernel(const LuPanelItem* items, const double* work, i
     const std::int64_t x0 = base + (lpanel ? q : q - T) * kStep;
     const int n = static_cast<int>(imin(kStep, m - x0));
     if (lpanel) {
-      double* A = it.F + j0 * m + x0;
-      const double* C = tile::product<tile::BLayout::kBRows>(A, m, n, WU, kStep, w, w, sm);
+      double* A = it.F + j0 * ld + x0;
+      const double* C = tile::product<tile::BLayout::kBRows>(A, ld, n, WU, kStep, w, w, sm);
       bool over = false;
       for (int x = threadIdx.x; x < kSlot; x += kThreads) {
         const int r = x & (kStep - 1), c = x >> 6;
         if (r < n && c < w) {
           const double v = C[x];
-          A[static_cast<std::int64_t>(c) * m + r] = v;
-          if (x0 + r < k && !(fabs(v) <= 1.0)) over = true;
+          A[static_cast<std::int64_t>(c) * ld + r] = v;
+          if (x0 + r < it.kc && !(fabs(v) <= 1.0)) over = true;
         }
       }
       if (over) bad[blockIdx.x] = 1;  // every writer writes 1; the next launch reads it
     } else {
-      double* A = it.F + x0 * m + j0;
-      const double* C = tile::product<tile::BLayout::kBCols>(WL, kStep, w, A, m, n, w, sm);
+      double* A = it.F + x0 * ld + j0;
+      const double* C = tile::product<tile::BLayout::kBCols>(WL, kStep, w, A, ld, n, w, sm);
       for (int x = threadIdx.x; x < kSlot; x += kThreads) {
         const int r = x & (kStep - 1), c = x >> 6;
-        if (r < w && c < n) A[static_cast<std::int64_t>(c) * m + r] = C[x];
+        if (r < w && c < n) A[static_cast<std::int64_t>(c) * ld + r] = C[x];
       }
     }
     __syncthreads();  // C (in sm) read by every thread before the next tile's staging
@@ -192,7 +188,7 @@ __global__ void lu_update_kernel(const LuPanelItem* items, const int* bad, std::
   __shared__ __align__(32) double sm[tile::kSharedDoubles];
   if (bad[blockIdx.x]) return;
   const LuPanelItem it = items[blockIdx.x];
-  const std::int64_t m = it.m, k = it.k;
+  const std::int64_t m = it.m, k = it.k, ld = it.ld;
   const int w = static_cast<int>(imin(kStep, k - j0));
   const std::int64_t base = j0 + w;
   const std::int64_t T = tiles_of(m - base), Tk = tiles_of(k - base);
@@ -209,13 +205,13 @@ __global__ void lu_update_kernel(const LuPanelItem* items, const int* bad, std::
     const std::int64_t r0 = base + y * kStep, c0 = base + z * kStep;
     const int rows = static_cast<int>(imin(kStep, m - r0));
     const int cols = static_cast<int>(imin(kStep, m - c0));
-    const double* C = tile::product<tile::BLayout::kBCols>(it.F + j0 * m + r0, m, rows,
-                                                           it.F + c0 * m + j0, m, cols, w, sm);
-    double* A = it.F + c0 * m + r0;
+    const double* C = tile::product<tile::BLayout::kBCols>(it.F + j0 * ld + r0, ld, rows,
+                                                           it.F + c0 * ld + j0, ld, cols, w, sm);
+    double* A = it.F + c0 * ld + r0;
     for (int x = threadIdx.x; x < kSlot; x += kThreads) {
       const int r = x & (kStep - 1), c = x >> 6;
       if (r < rows && c < cols && (r0 + r < k || c0 + c < k))
-        A[static_cast<std::int64_t>(c) * m + r] -= C[x];
+        A[static_cast<std::int64_t>(c) * ld + r] -= C[x];
     }
     __syncthreads();  // C (in sm) read by every thread before the next tile's staging
   }
@@ -238,7 +234,6 @@ void launch_lu_panel_batched(const LuPanelItem* items, const std::vector<std::in
                              double static_pivot, cudaStream_t s) {
   const std::size_t count = pivots.size();
   if (count == 0) return;
-  STRATA_CUDA(cudaMemsetAsync(bad, 0, sizeof(int) * count, s));
   std::size_t active = count;
   for (std::int64_t j0 = 0; j0 < pivots[0]; j0 += kStep) {
     while (active > 0 && pivots[active - 1] <= j0) --active;
@@ -266,74 +261,3 @@ void launch_lu_panel_batched(const LuPanelItem* items, const std::vector<std::in
 }
 
 }  // namespace strata::cuda
-
-namespace strata::numeric {
-
-std::vector<char> cuda_lu_fronts_batched(std::vector<std::vector<double>>& fronts,
-                                         const std::vector<index_t>& m,
-                                         const std::vector<index_t>& k, double static_pivot) {
-  const std::size_t n = fronts.size();
-  if (m.size() != n || k.size() != n)
-    throw InvalidInput("cuda_lu_fronts_batched: " + std::to_string(n) + " fronts, " +
-                       std::to_string(m.size()) + " row counts, " + std::to_string(k.size()) +
-                       " pivot counts");
-  std::vector<std::size_t> offset(n + 1, 0);
-  for (std::size_t i = 0; i < n; ++i) {
-    if (m[i] < 1 || k[i] < 1 || k[i] > m[i] ||
-        fronts[i].size() != static_cast<std::size_t>(m[i]) * static_cast<std::size_t>(m[i]))
-      throw InvalidInput("cuda_lu_fronts_batched: front " + std::to_string(i) +
-                         " needs 1 <= k <= m and m*m values (m = " + std::to_string(m[i]) +
-                         ", k = " + std::to_string(k[i]) + ")");
-    offset[i + 1] = offset[i] + fronts[i].size();
-  }
-  STRATA_CUDA(cudaSetDevice(0));
-  // the kernels take the fronts largest k first
-  std::vector<std::size_t> order(n);
-  for (std::size_t i = 0; i < n; ++i) order[i] = i;
-  std::stable_sort(order.begin(), order.end(), [&](auto a, auto b) { return k[a] > k[b]; });
-  cuda::DeviceBuffer<double> pool(std::max<std::size_t>(offset[n], 1));
-  cuda::DeviceBuffer<cuda::LuPanelItem> items(std::max<std::size_t>(n, 1));
-  cuda::DeviceBuffer<double> work(cuda::lu_panel_work_size(static_cast<std::int64_t>(n)));
-  cuda::DeviceBuffer<int> bad(std::max<std::size_t>(n, 1));
-  std::vector<cuda::LuPanelItem> host_items(n);
-  std::vector<std::int64_t> rows(n), pivots(n);
-  for (std::size_t q = 0; q < n; ++q) {
-    const std::size_t i = order[q];
-    STRATA_CUDA(cudaMemcpy(pool.data() + offset[i], fronts[i].data(),
-                           sizeof(double) * fronts[i].size(), cudaMemcpyHostToDevice));
-    host_items[q] = {pool.data() + offset[i], m[i], k[i]};
-    rows[q] = m[i];
-    pivots[q] = k[i];
-  }
-  STRATA_CUDA(cudaMemcpy(items.data(), host_items.data(), sizeof(cuda::LuPanelItem) * n,
-                         cudaMemcpyHostToDevice));
-  cuda::launch_lu_panel_batched(items.data(), rows, pivots, work.data(), bad.data(), static_pivot,
-                                nullptr);
-  std::vector<int> flags(n);
-  STRATA_CUDA(cudaMemcpy(flags.data(), bad.data(), sizeof(int) * n, cudaMemcpyDeviceToHost));
-  // the contribution-block update of the kept fronts, as the executor does it
-  cublasHandle_t blas = nullptr;
-  STRATA_CUBLAS(cublasCreate(&blas));
-  struct Handle {
-    cublasHandle_t h;
-    ~Handle() { cublasDestroy(h); }
-  } owned{blas};
-  const double one = 1.0, minus_one = -1.0;
-  std::vector<char> kept(n);
-  for (std::size_t q = 0; q < n; ++q) {
-    const std::size_t i = order[q];
-    kept[i] = flags[q] == 0;
-    const int mi = static_cast<int>(m[i]), ki = static_cast<int>(k[i]);
-    double* F = pool.data() + offset[i];
-    if (kept[i] && mi > ki)
-      STRATA_CUBLAS(cublasDgemm(blas, CUBLAS_OP_N, CUBLAS_OP_N, mi - ki, mi - ki, ki, &minus_one,
-                                F + ki, mi, F + static_cast<std::size_t>(ki) * mi, mi, &one,
-                                F + static_cast<std::size_t>(ki) * mi + ki, mi));
-  }
-  for (std::size_t i = 0; i < n; ++i)
-    STRATA_CUDA(cudaMemcpy(fronts[i].data(), pool.data() + offset[i],
-                           sizeof(double) * fronts[i].size(), cudaMemcpyDeviceToHost));
-  return kept;
-}
-
-}  // namespace strata::numeric

@@ -1,0 +1,444 @@
+// strata — the large LU fronts of a chunk on the CUDA executor (CudaExecutor::
+// lu_large_fronts): fronts over 256 rows, each m × m in the pool with k fully summed rows
+// and columns, to be left as the CPU's factor_front_lu leaves them (L11\U11, L21, U12, the
+// Schur complement in the contribution block, the local row permutation).
+//
+// Restricted partial pivoting (the CPU's rule: the largest magnitude among the fully summed
+// rows, the first on ties) interchanges no row in most fronts once the matching has put
+// large entries on the diagonal. So every front is first eliminated without interchanges
+// and kept when that was what partial pivoting would have done — every multiplier of a
+// fully summed row at most 1 in magnitude — and when no pivot needs static pivoting; the
+// others are factored again (lu_fronts_redo). Two ways to eliminate without interchanges:
+//
+//   by strips (Options::gpu_lu_strip_pivots = nb > 0, the default): the blocked
+//   right-looking LU (Golub & Van Loan, "Matrix Computations", 4th ed., §3.2.11) with
+//   blocks of nb pivot columns. A strip's pivot block and L and U panels come from the
+//   batched kernels of kernels_lu_panel.cu — for every front of the chunk with pivots left
+//   in that strip, in one launch sequence; the rest of the pivot rows and columns gets the
+//   strip's rank-nb update by two cuBLAS GEMMs per front, on the lanes; after a front's
+//   last strip its contribution block gets its one rank-k GEMM (or split_update over the
+//   team), on a lane, while the larger fronts go on with their strips. Nothing waits for
+//   the checks: they are read once, after the last strip's kernels, while the GEMMs run.
+//   A rejected front's speculative updates are wasted work and harmless, since that front
+//   is assembled again from scratch.
+//
+//   by the library (nb = 0): cuSOLVER GETRF without pivoting on A11 (six times faster
+//   than with pivoting at k = 1,024 on the H100) and its check, one wait, then two cuBLAS
+//   TRSMs and the GEMM — what ran before the batched kernels, kept for comparison
+//   (bench_gpu_memory --parts lu-panel).
+//
+// Factoring again (lu_fronts_redo): the front is assembled again — its original entries
+// and its children's contribution blocks are where the chunk's assembly read them, since
+// no block is stored before all the chunk's fronts are factored — then cuSOLVER GETRF with
+// partial pivoting on A11, the interchanges on A12, the TRSMs and the GEMM; a pivot GETRF
+// chose that is below the static-pivot threshold (or an exact zero, or not finite) sends
+// the front, assembled once more, to the blocked path with our panel kernel, which
+// perturbs tiny pivots as the CPU does (kernels_lu.cu).
+#include <algorithm>
+#include <string>
+
+#include "numeric/cuda/cuda_executor.hpp"
+#include "strata/errors.hpp"
+
+namespace strata::cuda {
+namespace {
+
+constexpr std::int64_t kLuPanel = 64;  // panel width of the blocked LU with static pivoting
+
+}  // namespace
+
+void enqueue_lu_strips(const std::vector<LuPanelItem>& fronts, std::int64_t nb,
+                       const std::vector<Lane*>& lanes, DeviceBuffer<LuPanelItem>& items,
+                       DeviceBuffer<double>& work, int* bad, double static_pivot,
+                       cudaEvent_t strip_done, const LuFinalUpdate& final_update,
+                       std::vector<Lane*>& lane_of) {
+  const std::size_t n = fronts.size();
+  lane_of.assign(n, nullptr);
+  if (n == 0) return;
+  if (nb < 1) throw InvalidInput("enqueue_lu_strips: strip width " + std::to_string(nb));
+  Lane& k0 = *lanes.front();
+  const std::int64_t strips = (fronts.front().k + nb - 1) / nb;
+  // every strip's items (the active fronts of a strip are a prefix), uploaded at once
+  std::vector<LuPanelItem> all;
+  std::vector<std::size_t> strip_at{0};
+  for (std::int64_t s = 0; s < strips; ++s) {
+    const std::int64_t b0 = s * nb;
+    for (std::size_t i = 0; i < n && fronts[i].k > b0; ++i) {
+      const LuPanelItem& f = fronts[i];
+      all.push_back({f.F + b0 * f.ld + b0, f.ld, f.m - b0, std::min(nb, f.k - b0), f.k - b0});
+    }
+    strip_at.push_back(all.size());
+  }
+  items.upload(all.data(), all.size(), k0.stream);
+  work.resize(lu_panel_work_size(static_cast<std::int64_t>(n)));
+  STRATA_CUDA(cudaMemsetAsync(bad, 0, sizeof(int) * n, k0.stream));
+  // the updates go to the lanes other than the kernels' own (when there are any), the
+  // least loaded first: those of the fronts that go on to lanes [1, L/2), the contribution
+  // blocks' to [L/2, L), so that the next strip never waits behind a contribution block
+  const std::size_t L = lanes.size();
+  const std::size_t go_on_end = L > 1 ? std::max<std::size_t>(2, L / 2) : 1;
+  const std::size_t cb_first = go_on_end < L ? go_on_end : (L > 1 ? 1 : 0);
+  std::vector<double> load(L, 0.0);
+  auto pick = [&](bool ending, double flops) {
+    const std::size_t lo = ending ? cb_first : (L > 1 ? 1 : 0), hi = ending ? L : go_on_end;
+    std::size_t l = lo;
+    for (std::size_t x = lo + 1; x < hi; ++x)
+      if (load[x] < load[l]) l = x;
+    load[l] += flops;
+    return l;
+  };
+  const double one = 1.0, minus_one = -1.0;
+  for (std::int64_t s = 0; s < strips; ++s) {
+    const std::int64_t b0 = s * nb, b1 = b0 + nb;
+    const std::size_t active = strip_at[s + 1] - strip_at[s];
+    std::vector<std::int64_t> rows(active), pivots(active);
+    for (std::size_t i = 0; i < active; ++i) {
+      rows[i] = all[strip_at[s] + i].m;
+      pivots[i] = all[strip_at[s] + i].k;
+    }
+    launch_lu_panel_batched(items.data() + strip_at[s], rows, pivots, work.data(), bad,
+                            static_pivot, k0.stream);
+    STRATA_CUDA(cudaEventRecord(strip_done, k0.stream));
+    std::vector<char> waited(lanes.size(), 0), continued(lanes.size(), 0);
+    // first the rest of the pivot rows and columns of the fronts that go on (the next
+    // strip's kernels wait for those), then the contribution blocks of those that end here
+    for (int ending = 0; ending < 2; ++ending) {
+      for (std::size_t i = 0; i < active; ++i) {
+        const LuPanelItem& f = fronts[i];
+        if ((f.k <= b1) != static_cast<bool>(ending)) continue;
+        const std::int64_t m = f.m, k = f.k, ld = f.ld;
+        const double flops = ending ? 2.0 * (m - k) * (m - k) * k
+                                    : 2.0 * nb * ((m - b1) * (k - b1) + (k - b1) * (m - k));
+        const std::size_t l = pick(ending, flops);
+        Lane& ln = *lanes[l];
+        if (l != 0 && !waited[l]) STRATA_CUDA(cudaStreamWaitEvent(ln.stream, strip_done, 0));
+        waited[l] = 1;
+        if (ending) {
+          lane_of[i] = &ln;
+          final_update(i, ln);
+          continue;
+        }
+        continued[l] = 1;
+        double* F = f.F;
+        // rows b1.. of the pivot columns b1..k, then rows b1..k of the columns k..m
+        STRATA_CUBLAS(cublasDgemm(
+            ln.blas, CUBLAS_OP_N, CUBLAS_OP_N, static_cast<int>(m - b1), static_cast<int>(k - b1),
+            static_cast<int>(nb), &minus_one, F + b0 * ld + b1, static_cast<int>(ld),
+            F + b1 * ld + b0, static_cast<int>(ld), &one, F + b1 * ld + b1, static_cast<int>(ld)));
+        if (m > k)
+          STRATA_CUBLAS(cublasDgemm(
+              ln.blas, CUBLAS_OP_N, CUBLAS_OP_N, static_cast<int>(k - b1), static_cast<int>(m - k),
+              static_cast<int>(nb), &minus_one, F + b0 * ld + b1, static_cast<int>(ld),
+              F + k * ld + b0, static_cast<int>(ld), &one, F + k * ld + b1, static_cast<int>(ld)));
+      }
+      if (!ending && s + 1 < strips)
+        for (std::size_t l = 1; l < lanes.size(); ++l)
+          if (continued[l]) {
+            STRATA_CUDA(cudaEventRecord(lanes[l]->done, lanes[l]->stream));
+            STRATA_CUDA(cudaStreamWaitEvent(k0.stream, lanes[l]->done, 0));
+          }
+    }
+  }
+}
+
+void CudaExecutor::lu_large_fronts(std::vector<LuFront>& fronts, double static_pivot,
+                                   cudaEvent_t assembled) {
+  const std::size_t n = fronts.size();
+  std::size_t sum_k = 0;
+  for (const LuFront& fr : fronts) sum_k += static_cast<std::size_t>(fr.k);
+  // growing a buffer frees the old one: wait for the lanes first (cudaFree would too)
+  if (lu_ipiv_.size() < sum_k || lu_bad_.size() < n) STRATA_CUDA(cudaDeviceSynchronize());
+  lu_ipiv_.resize(std::max<std::size_t>(sum_k, 1));
+  lu_info_.resize(n);
+  lu_bad_.resize(n);
+  lu_bad_host_.resize(n);
+  lu_fronts_ += static_cast<index_t>(n);
+  std::vector<std::size_t> redo = lu_strip_pivots_ > 0
+                                      ? lu_fronts_by_strips(fronts, static_pivot, assembled)
+                                      : lu_fronts_by_library(fronts, static_pivot, assembled);
+  if (!redo.empty()) lu_fronts_redo(fronts, redo, static_pivot, assembled);
+}
+
+// The identity as each front's local permutation and no perturbed pivot: one kernel and
+// one memset when the fronts' slots are consecutive (as factor_chunk lays them out).
+void CudaExecutor::lu_unpivoted_results(const std::vector<LuFront>& fronts, cudaStream_t s) {
+  if (fronts.empty()) return;
+  bool consecutive = true;
+  std::vector<std::int64_t> off{0};
+  for (std::size_t i = 0; i < fronts.size(); ++i) {
+    consecutive = consecutive && fronts[i].perm == fronts[0].perm + off.back() &&
+                  fronts[i].perturbed == fronts[0].perturbed + i;
+    off.push_back(off.back() + fronts[i].k);
+  }
+  if (!consecutive) {
+    for (const LuFront& fr : fronts) {
+      STRATA_CUDA(cudaMemsetAsync(fr.perturbed, 0, sizeof(std::int64_t), s));
+      launch_identity_perm(fr.k, fr.perm, s);
+    }
+    return;
+  }
+  lu_perm_offset_.upload(off.data(), off.size(), s);
+  count_h2d(off.size() * sizeof(std::int64_t));
+  launch_identity_perms(lu_perm_offset_.data(), static_cast<std::int64_t>(fronts.size()),
+                        fronts[0].perm, s);
+  STRATA_CUDA(cudaMemsetAsync(fronts[0].perturbed, 0, sizeof(std::int64_t) * fronts.size(), s));
+}
+
+std::vector<std::size_t> CudaExecutor::lu_fronts_by_strips(std::vector<LuFront>& fronts,
+                                                           double static_pivot,
+                                                           cudaEvent_t assembled) {
+  const std::size_t n = fronts.size();
+  lu_unpivoted_results(fronts, stream_);
+  std::vector<std::size_t> order(n);
+  for (std::size_t i = 0; i < n; ++i) order[i] = i;
+  std::stable_sort(order.begin(), order.end(),
+                   [&](std::size_t a, std::size_t b) { return fronts[a].k > fronts[b].k; });
+  std::vector<LuPanelItem> items(n);
+  for (std::size_t q = 0; q < n; ++q) {
+    const LuFront& fr = fronts[order[q]];
+    items[q] = {fr.F, fr.m, fr.m, fr.k, fr.k};
+  }
+  std::vector<Lane*> lanes;
+  for (auto& l : this->lanes()) lanes.push_back(l.get());
+  const double one = 1.0, minus_one = -1.0;
+  std::vector<Lane*> lane_of;
+  enqueue_lu_strips(
+      items, lu_strip_pivots_, lanes, lu_items_, lu_work_, lu_bad_.data(), static_pivot,
+      lu_strip_done_,
+      [&](std::size_t q, Lane& ln) {
+        const LuFront& fr = fronts[order[q]];
+        const int m = fr.m, k = fr.k;
+        if (m == k) return;
+        double* a12 = fr.F + static_cast<std::size_t>(k) * m;
+        if (split_front(m, k))
+          split_update(ln, fr.F, m, k, true, assembled);
+        else
+          STRATA_CUBLAS(cublasDgemm(ln.blas, CUBLAS_OP_N, CUBLAS_OP_N, m - k, m - k, k, &minus_one,
+                                    fr.F + k, m, a12, m, &one, a12 + k, m));
+      },
+      lane_of);
+  for (std::size_t q = 0; q < n; ++q) fronts[order[q]].lane = lane_of[q];
+  lu_fronts_batched_ += static_cast<index_t>(n);
+  // the checks, read once the last strip's kernels are done (the updates go on meanwhile)
+  STRATA_CUDA(cudaStreamWaitEvent(check_stream_, lu_strip_done_, 0));
+  STRATA_CUDA(cudaMemcpyAsync(lu_bad_host_.data(), lu_bad_.data(), sizeof(int) * n,
+                              cudaMemcpyDeviceToHost, check_stream_));
+  STRATA_CUDA(cudaStreamSynchronize(check_stream_));
+  std::vector<std::size_t> redo;
+  for (std::size_t q = 0; q < n; ++q)
+    if (lu_bad_host_.data()[q]) redo.push_back(order[q]);
+  return redo;
+}
+
+std::vector<std::size_t> CudaExecutor::lu_fronts_by_library(std::vector<LuFront>& fronts,
+                                                            double static_pivot,
+                                                            cudaEvent_t assembled) {
+  const double one = 1.0, minus_one = -1.0;
+  const std::size_t n = fronts.size();
+  std::size_t ipiv_at = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const LuFront& fr = fronts[i];
+    Lane& lane = *fr.lane;
+    grow_getrf_work(lane, fr);
+    // without pivoting (devIpiv null); kept only where partial pivoting would have
+    // interchanged nothing (kernels_lu.cu)
+    STRATA_CUSOLVER(cusolverDnDgetrf(lane.solver, fr.k, fr.k, fr.F, fr.m, lane.getrf_work.data(),
+                                     nullptr, lu_info_.data() + i));
+    launch_lu_unpivoted_check(fr.F, fr.m, fr.k, static_pivot, lu_info_.data() + i,
+                              lu_ipiv_.data() + ipiv_at, lu_bad_.data() + i, lane.stream);
+    ipiv_at += static_cast<std::size_t>(fr.k);
+  }
+  fetch_lu_checks(n);
+  std::vector<std::size_t> redo;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (lu_bad_host_.data()[i]) {
+      redo.push_back(i);
+      continue;
+    }
+    const LuFront& fr = fronts[i];
+    Lane& lane = *fr.lane;
+    const int m = fr.m, k = fr.k;
+    STRATA_CUDA(cudaMemsetAsync(fr.perturbed, 0, sizeof(std::int64_t), lane.stream));
+    // no interchange: neither the serial ipiv-to-permutation kernel nor DLASWP
+    launch_identity_perm(k, fr.perm, lane.stream);
+    if (m == k) continue;
+    double* a12 = fr.F + static_cast<std::size_t>(k) * m;
+    STRATA_CUBLAS(cublasDtrsm(lane.blas, CUBLAS_SIDE_RIGHT, CUBLAS_FILL_MODE_UPPER, CUBLAS_OP_N,
+                              CUBLAS_DIAG_NON_UNIT, m - k, k, &one, fr.F, m, fr.F + k, m));
+    STRATA_CUBLAS(cublasDtrsm(lane.blas, CUBLAS_SIDE_LEFT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N,
+                              CUBLAS_DIAG_UNIT, k, m - k, &one, fr.F, m, a12, m));
+    if (split_front(m, k))
+      split_update(lane, fr.F, m, k, true, assembled);
+    else
+      STRATA_CUBLAS(cublasDgemm(lane.blas, CUBLAS_OP_N, CUBLAS_OP_N, m - k, m - k, k, &minus_one,
+                                fr.F + k, m, a12, m, &one, a12 + k, m));
+  }
+  return redo;
+}
+
+void CudaExecutor::grow_getrf_work(Lane& lane, const LuFront& fr) {
+  int lwork = 0;
+  STRATA_CUSOLVER(cusolverDnDgetrf_bufferSize(lane.solver, fr.k, fr.k, fr.F, fr.m, &lwork));
+  if (lane.getrf_work.size() < static_cast<std::size_t>(std::max(lwork, 1))) {
+    STRATA_CUDA(cudaStreamSynchronize(lane.stream));
+    lane.getrf_work.resize(static_cast<std::size_t>(std::max(lwork, 1)));
+  }
+}
+
+void CudaExecutor::fetch_lu_checks(std::size_t n) {
+  for (const auto& l : lanes_) STRATA_CUDA(cudaStreamSynchronize(l->stream));
+  STRATA_CUDA(
+      cudaMemcpy(lu_bad_host_.data(), lu_bad_.data(), sizeof(int) * n, cudaMemcpyDeviceToHost));
+}
+
+void CudaExecutor::lu_fronts_redo(std::vector<LuFront>& fronts,
+                                  const std::vector<std::size_t>& redo, double static_pivot,
+                                  cudaEvent_t assembled) {
+  const double one = 1.0, minus_one = -1.0;
+  // nothing of the rejected fronts may still be in flight on a lane or a helper GPU
+  join_team();
+  for (const auto& l : lanes_) STRATA_CUDA(cudaStreamSynchronize(l->stream));
+  std::vector<std::size_t> ipiv_at(fronts.size() + 1, 0);
+  for (std::size_t i = 0; i < fronts.size(); ++i)
+    ipiv_at[i + 1] = ipiv_at[i] + static_cast<std::size_t>(fronts[i].k);
+  auto reassemble = [&](const LuFront& fr) {
+    launch_assemble(cur_->tree, fr.pos, 1, fr.m, values_.data(), pool_.data(), false,
+                    fr.lane->stream);
+  };
+  // GETRF with pivoting; its flags in the first redo.size() slots
+  for (std::size_t x = 0; x < redo.size(); ++x) {
+    const LuFront& fr = fronts[redo[x]];
+    Lane& lane = *fr.lane;
+    reassemble(fr);
+    grow_getrf_work(lane, fr);
+    STRATA_CUSOLVER(cusolverDnDgetrf(lane.solver, fr.k, fr.k, fr.F, fr.m, lane.getrf_work.data(),
+                                     lu_ipiv_.data() + ipiv_at[redo[x]], lu_info_.data() + x));
+    launch_lu_check(fr.F, fr.m, fr.k, static_pivot, lu_info_.data() + x, lu_bad_.data() + x,
+                    lane.stream);
+  }
+  lu_fronts_pivoted_ += static_cast<index_t>(redo.size());
+  fetch_lu_checks(redo.size());
+  for (std::size_t x = 0; x < redo.size(); ++x) {
+    const LuFront& fr = fronts[redo[x]];
+    Lane& lane = *fr.lane;
+    const cudaStream_t stream = lane.stream;
+    const int m = fr.m, k = fr.k;
+    const std::size_t ld = static_cast<std::size_t>(m);
+    const int* ipiv = lu_ipiv_.data() + ipiv_at[redo[x]];
+    STRATA_CUDA(cudaMemsetAsync(fr.perturbed, 0, sizeof(std::int64_t), stream));
+    if (!lu_bad_host_.data()[x]) {
+      launch_ipiv_to_perm(ipiv, k, fr.perm, stream);
+      if (m == k) continue;
+      double* a12 = fr.F + static_cast<std::size_t>(k) * ld;
+      launch_laswp(a12, m, m - k, ipiv, k, stream);
+      STRATA_CUBLAS(cublasDtrsm(lane.blas, CUBLAS_SIDE_RIGHT, CUBLAS_FILL_MODE_UPPER, CUBLAS_OP_N,
+                                CUBLAS_DIAG_NON_UNIT, m - k, k, &one, fr.F, m, fr.F + k, m));
+      STRATA_CUBLAS(cublasDtrsm(lane.blas, CUBLAS_SIDE_LEFT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N,
+                                CUBLAS_DIAG_UNIT, k, m - k, &one, fr.F, m, a12, m));
+      if (split_front(m, k))
+        split_update(lane, fr.F, m, k, true, assembled);
+      else
+        STRATA_CUBLAS(cublasDgemm(lane.blas, CUBLAS_OP_N, CUBLAS_OP_N, m - k, m - k, k, &minus_one,
+                                  fr.F + k, m, a12, m, &one, a12 + k, m));
+      continue;
+    }
+    // a pivot needs static pivoting: the front again, and the panel-kernel path
+    reassemble(fr);
+    // iota_ outlives the asynchronous copy (it is a member, only ever grown)
+    if (static_cast<int>(iota_.size()) < k) {
+      STRATA_CUDA(cudaDeviceSynchronize());
+      iota_.resize(k);
+      for (int r = 0; r < k; ++r) iota_[r] = r;
+    }
+    STRATA_CUDA(cudaMemcpyAsync(fr.perm, iota_.data(), sizeof(std::int64_t) * k,
+                                cudaMemcpyHostToDevice, stream));
+    for (int p0 = 0; p0 < k; p0 += kLuPanel) {
+      const int w = std::min<int>(kLuPanel, k - p0), rest = m - p0 - w;
+      launch_lu_panel(fr.F, m, k, p0, w, static_pivot, fr.perm, fr.perturbed, stream);
+      if (rest > 0) {
+        double* a11 = fr.F + static_cast<std::size_t>(p0) * ld + p0;
+        double* a12 = fr.F + static_cast<std::size_t>(p0 + w) * ld + p0;
+        STRATA_CUBLAS(cublasDtrsm(lane.blas, CUBLAS_SIDE_LEFT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N,
+                                  CUBLAS_DIAG_UNIT, w, rest, &one, a11, m, a12, m));
+        STRATA_CUBLAS(cublasDgemm(lane.blas, CUBLAS_OP_N, CUBLAS_OP_N, rest, rest, w, &minus_one,
+                                  a11 + w, m, a12, m, &one, a12 + w, m));
+      }
+    }
+  }
+}
+
+}  // namespace strata::cuda
+
+namespace strata::numeric {
+
+std::vector<char> cuda_lu_fronts_batched(std::vector<std::vector<double>>& fronts,
+                                         const std::vector<index_t>& m,
+                                         const std::vector<index_t>& k, index_t strip,
+                                         double static_pivot) {
+  const std::size_t n = fronts.size();
+  if (m.size() != n || k.size() != n || strip < 1)
+    throw InvalidInput("cuda_lu_fronts_batched: " + std::to_string(n) + " fronts, " +
+                       std::to_string(m.size()) + " row counts, " + std::to_string(k.size()) +
+                       " pivot counts, strip width " + std::to_string(strip));
+  std::vector<std::size_t> offset(n + 1, 0);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (m[i] < 1 || k[i] < 1 || k[i] > m[i] ||
+        fronts[i].size() != static_cast<std::size_t>(m[i]) * static_cast<std::size_t>(m[i]))
+      throw InvalidInput("cuda_lu_fronts_batched: front " + std::to_string(i) +
+                         " needs 1 <= k <= m and m*m values (m = " + std::to_string(m[i]) +
+                         ", k = " + std::to_string(k[i]) + ")");
+    offset[i + 1] = offset[i] + fronts[i].size();
+  }
+  STRATA_CUDA(cudaSetDevice(0));
+  // the strips take the fronts largest k first
+  std::vector<std::size_t> order(n);
+  for (std::size_t i = 0; i < n; ++i) order[i] = i;
+  std::stable_sort(order.begin(), order.end(), [&](auto a, auto b) { return k[a] > k[b]; });
+  cuda::DeviceBuffer<double> pool(std::max<std::size_t>(offset[n], 1)), work;
+  cuda::DeviceBuffer<cuda::LuPanelItem> items;
+  cuda::DeviceBuffer<int> bad(std::max<std::size_t>(n, 1));
+  std::vector<cuda::LuPanelItem> fr(n);
+  for (std::size_t q = 0; q < n; ++q) {
+    const std::size_t i = order[q];
+    STRATA_CUDA(cudaMemcpy(pool.data() + offset[i], fronts[i].data(),
+                           sizeof(double) * fronts[i].size(), cudaMemcpyHostToDevice));
+    fr[q] = {pool.data() + offset[i], m[i], m[i], k[i], k[i]};
+  }
+  cuda::Lane ln;  // the legacy default stream, with a handle of its own
+  STRATA_CUBLAS(cublasCreate(&ln.blas));
+  STRATA_CUDA(cudaEventCreateWithFlags(&ln.done, cudaEventDisableTiming));
+  cudaEvent_t strip_done = nullptr;
+  STRATA_CUDA(cudaEventCreateWithFlags(&strip_done, cudaEventDisableTiming));
+  struct Handles {
+    cublasHandle_t b;
+    cudaEvent_t e1, e2;
+    ~Handles() {
+      cublasDestroy(b);
+      cudaEventDestroy(e1);
+      cudaEventDestroy(e2);
+    }
+  } owned{ln.blas, ln.done, strip_done};
+  const double one = 1.0, minus_one = -1.0;
+  std::vector<cuda::Lane*> lane_of;
+  cuda::enqueue_lu_strips(
+      fr, strip, {&ln}, items, work, bad.data(), static_pivot, strip_done,
+      [&](std::size_t q, cuda::Lane& l) {
+        const int mi = static_cast<int>(fr[q].m), ki = static_cast<int>(fr[q].k);
+        double* F = fr[q].F;
+        if (mi > ki)
+          STRATA_CUBLAS(cublasDgemm(l.blas, CUBLAS_OP_N, CUBLAS_OP_N, mi - ki, mi - ki, ki,
+                                    &minus_one, F + ki, mi, F + static_cast<std::size_t>(ki) * mi,
+                                    mi, &one, F + static_cast<std::size_t>(ki) * mi + ki, mi));
+      },
+      lane_of);
+  std::vector<int> flags(n);
+  STRATA_CUDA(cudaMemcpy(flags.data(), bad.data(), sizeof(int) * n, cudaMemcpyDeviceToHost));
+  std::vector<char> kept(n);
+  for (std::size_t q = 0; q < n; ++q) kept[order[q]] = flags[q] == 0;
+  for (std::size_t i = 0; i < n; ++i)
+    STRATA_CUDA(cudaMemcpy(fronts[i].data(), pool.data() + offset[i],
+                           sizeof(double) * fronts[i].size(), cudaMemcpyDeviceToHost));
+  return kept;
+}
+
+}  // namespace strata::numeric
