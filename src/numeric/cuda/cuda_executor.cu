@@ -871,7 +871,11 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
   for (std::size_t i : panel_order) by_kernels[i] = 1;
   std::vector<std::unique_ptr<Lane>>& lane = lanes();
   std::vector<LuFront> lu_fronts;
-  const std::size_t n_lanes = ldlt ? 1 : std::min(lane.size(), big.size());
+  // the lanes this chunk may use, which the stores wait for below: LU by strips spreads its
+  // updates over every lane (lu_fronts.cu) however few the fronts
+  const bool lu_strips = lu && lu_strip_pivots_ > 0 && !big.empty();
+  const std::size_t n_lanes =
+      ldlt ? 1 : (lu_strips ? lane.size() : std::min(lane.size(), big.size()));
   std::vector<char> waited(n_lanes, 0);
   for (std::size_t l = 0; l < n_lanes; ++l) {
     lane[l]->load = 0;
