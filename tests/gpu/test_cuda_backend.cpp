@@ -233,7 +233,9 @@ TEST_F(CudaBackend, RecursivePanelMatchesCpuFront) {
 // fronts where it would interchange — a multiplier over 1 in the diagonal block, in a fully
 // summed row below it (a later tile), at a later step or strip — or where a pivot is under
 // the static-pivot threshold are rejected, while a large entry in a row that is not fully
-// summed is not a reason to.
+// summed is not a reason to. Last, fronts of one step (k ≤ 64) with random pivot blocks,
+// which the kernels factor with the interchanges: the CPU's permutation and factor, and a
+// rejection only for a pivot that needs static pivoting.
 TEST_F(CudaBackend, LuStripsMatchCpuFront) {
   auto rng = test::fresh_rng();
   std::uniform_real_distribution<double> u(-1.0, 1.0);
@@ -332,6 +334,39 @@ TEST_F(CudaBackend, LuStripsMatchCpuFront) {
       EXPECT_EQ(static_cast<bool>(ck[i]), cases[i].kept);
       if (cases[i].kept) EXPECT_LT(difference(ccpu[i], cg[i]), 1e-13);
     }
+  }  // one step: random values, interchanges due; a zero column among the fully summed rows
+  // of the last front (a pivot that needs static pivoting whatever the interchanges)
+  const std::vector<std::pair<index_t, index_t>> one_step = {
+      {1, 1},   {2, 2},    {3, 2},    {5, 5},    {64, 64},
+      {65, 64}, {300, 17}, {300, 64}, {733, 33}, {300, 40}};
+  std::vector<std::vector<double>> rf;
+  ms.clear();
+  ks.clear();
+  for (auto [m, k] : one_step) {
+    rf.emplace_back(static_cast<std::size_t>(m) * m);
+    for (double& x : rf.back()) x = u(rng);
+    ms.push_back(m);
+    ks.push_back(k);
+  }
+  for (index_t r = 0; r < 40; ++r) rf.back()[7 * 300 + r] = 0.0;
+  for (index_t strip : {64, 256}) {
+    std::vector<std::vector<double>> rg = rf;
+    std::vector<std::vector<index_t>> gperm;
+    const std::vector<char> rk = numeric::cuda_lu_fronts_batched(rg, ms, ks, strip, 1e-8, &gperm);
+    for (std::size_t i = 0; i < one_step.size(); ++i) {
+      const auto [m, k] = one_step[i];
+      SCOPED_TRACE("strip " + std::to_string(strip) + ", one step m=" + std::to_string(m) +
+                   " k=" + std::to_string(k));
+      std::vector<double> cpu1 = rf[i];
+      std::vector<index_t> perm(k);
+      numeric::cpu::PivotStats st;
+      numeric::cpu::factor_front_lu(cpu1.data(), m, k, m, 1e-8, perm.data(), st);
+      EXPECT_EQ(static_cast<bool>(rk[i]), st.perturbed == 0);
+      if (!rk[i]) continue;
+      EXPECT_EQ(gperm[i], perm);
+      EXPECT_LT(difference(cpu1, rg[i]), 1e-12);
+    }
+    EXPECT_FALSE(rk.back());  // the zero column
   }
 }
 
@@ -595,6 +630,59 @@ TEST_F(CudaBackend, LuFactorMatchesCpu) {
       EXPECT_NEAR(sg.log_abs_det, sc.log_abs_det,
                   (pr.zero_columns ? 1e-6 : 1e-9) * std::max(1.0, std::abs(sc.log_abs_det)));
     }
+}
+
+// LU refactorizations whose fronts pivot differently each time, solved on the device with
+// the resident factor: the device solve's row arrays follow every factorization's pivots
+// (after the first, only the fronts whose pivot rows moved are uploaded). Rows scaled by
+// powers of ten drawn afresh each round, no matching: partial pivoting interchanges rows
+// in different fronts each round, and the third round returns to the first round's values.
+TEST_F(CudaBackend, LuRefactorizationsWithOtherPivotsSolveOnDevice) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  const SparseMatrix base = expand_symmetric(generators::elasticity_3d(8, 8, 8));
+  std::uniform_real_distribution<double> u(0.5, 1.5), expo(-2, 2);
+  auto round_values = [&] {
+    SparseMatrix a = base;
+    std::vector<double> row_scale(a.n_rows);
+    for (double& r : row_scale) r = std::pow(10.0, expo(rng));
+    for (index_t j = 0; j < a.n_cols; ++j)
+      for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p)
+        a.values[p] *= u(rng) * row_scale[a.indices[p]];
+    return a;
+  };
+  const SparseMatrix first = round_values();
+  const std::vector<SparseMatrix> rounds = {first, round_values(), first};
+  Options o;
+  o.num_gpus = 1;  // one GPU, whatever the machine has
+  o.type = MatrixType::general;
+  o.matching_and_scaling = false;
+  Solver cpu(o);
+  o.backend = Backend::cuda;
+  Solver gpu(o);
+  std::vector<double> b(base.n_rows);
+  std::uniform_real_distribution<double> ub(-1, 1);
+  for (double& v : b) v = ub(rng);
+  for (std::size_t r = 0; r < rounds.size(); ++r) {
+    SCOPED_TRACE("round " + std::to_string(r));
+    if (r == 0) {
+      cpu.factorize(rounds[r]);
+      gpu.factorize(rounds[r]);
+    } else {
+      cpu.refactorize(rounds[r]);
+      gpu.refactorize(rounds[r]);
+    }
+    EXPECT_GT(gpu.stats().factor.lu_large_fronts_pivoted, 0);
+    const auto xc = cpu.solve(b);
+    const auto xg = gpu.solve(b);
+    EXPECT_TRUE(gpu.stats().solve.on_device);
+    // a wrong row in the device solve would leave refinement to GMRES, or to many steps
+    EXPECT_EQ(gpu.stats().solve.gmres_iterations, 0);
+    EXPECT_LE(gpu.stats().solve.refinement_steps, cpu.stats().solve.refinement_steps + 1);
+    EXPECT_LT(test::backward_error(rounds[r], xg.data(), b.data()), 1e-14);
+    EXPECT_LT(test::relative_difference(xg, xc), 1e-8);
+  }
 }
 
 // Shared SPD and unsymmetric matrices solve on the GPU as accurately as on the CPU.

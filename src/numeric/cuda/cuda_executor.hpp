@@ -110,13 +110,14 @@ bool llt_update_by_gemm(std::int64_t n, std::int64_t k);
 using LuFinalUpdate = std::function<void(std::size_t i, Lane&)>;
 
 /// The elimination without row interchanges of large LU fronts by strips of nb pivot
-/// columns (lu_fronts.cu): `fronts` (F, leading dimension ld = m, m, k, kc = k; sorted by k,
-/// largest first) get L11\U11, L21 and U12 in place, the strips' pivot blocks and panels by
-/// launch_lu_panel_batched on lanes[0] for all fronts with pivots left in the strip, the
-/// rest of each strip's update of the pivot rows and columns by two cuBLAS GEMMs per front
-/// on the other lanes (lanes[0] waits for them before the next strip), and after a front's
-/// last strip `final_update(i, lane)` on a lane (lane_of[i] says which), which must update
-/// the contribution block (A22 −= L21·U12). bad[i] (device) as launch_lu_panel_batched's,
+/// columns (lu_fronts.cu): `fronts` (F, leading dimension ld = m, m, k, kc = k, perm; sorted
+/// by k, largest first) get L11\U11, L21 and U12 in place — those of one step and one strip
+/// (k ≤ 64, k ≤ nb) with restricted partial pivoting, their permutations in their perm — the
+/// strips' pivot blocks and panels by launch_lu_panel_batched on lanes[0] for all fronts with
+/// pivots left in the strip, the rest of each strip's update of the pivot rows and columns by two
+/// cuBLAS GEMMs per front on the other lanes (lanes[0] waits for them before the next strip), and
+/// after a front's last strip `final_update(i, lane)` on a lane (lane_of[i] says which), which must
+/// update the contribution block (A22 −= L21·U12). bad[i] (device) as launch_lu_panel_batched's,
 /// zeroed here. `items` and `work` are grown as needed (Σ ⌈k/nb⌉ items; count fronts'
 /// inverses); `strip_done` is recorded on lanes[0] after each strip's kernels, last after
 /// the last one's. Everything is enqueued; nothing waits on the host. Throws InvalidInput
@@ -169,6 +170,8 @@ class CudaExecutor final : public numeric::Executor {
   /// `factor_rows` (laid out as an.tree.rows; index base 0): the rows, each pivot's
   /// position in its front and the row each pivot position holds, and for LDLᵀ D and the
   /// pivot sizes of `fac`. Records the analysis and type they hold.
+  /// For LU, after a first upload for the analysis, only the fronts whose pivot rows moved
+  /// since the last one are sent (host copies in s_rows_host_ and beside it).
   void upload_solve_rows(const Analysis& an, const index_t* factor_rows, MatrixType type,
                          const numeric::NumericFactor* fac);
   /// An in-core chunk whose work was launched and whose host part has not run yet (see
@@ -364,6 +367,9 @@ class CudaExecutor final : public numeric::Executor {
   DeviceBuffer<std::int64_t> s_rows_, s_row_offsets_, s_first_pivot_, s_level_offsets_,
       s_pivot_pos_, s_pivot_row_, s_u_offset_;
   DeviceBuffer<int> s_pivot_size_;
+  /// What s_rows_, s_pivot_pos_ and s_pivot_row_ hold (upload_solve_rows' incremental LU
+  /// uploads compare against it)
+  std::vector<std::int64_t> s_rows_host_, s_pivot_pos_host_, s_pivot_row_host_;
   DeviceBuffer<std::int64_t> s_panel_offset_;
   DeviceBuffer<double> s_d_diag_, s_d_off_, s_x_, s_u_, s_scratch_;
   std::vector<std::int64_t> u_offset_host_;

@@ -86,9 +86,13 @@ void launch_llt_panel(const DeviceTree& t, const std::int64_t* items,
 /// F (device) points at entry (b0, b0) of the front, whose leading dimension is ld; the
 /// part has m rows and columns, its first k are the pivots to eliminate now (a strip), and
 /// its first kc ≥ k rows are fully summed (the rows whose multipliers the check covers).
+/// perm (device, k entries) non-null: a whole front with k = kc ≤ 64 (one step) whose rows
+/// the kernels interchange by restricted partial pivoting, recording its local row
+/// permutation there (perm[i] = the local row now in position i).
 struct LuPanelItem {
   double* F;
   std::int64_t ld, m, k, kc;
+  std::int64_t* perm;
 };
 
 /// Doubles of workspace launch_lu_panel_batched needs for `count` fronts (two 64×64
@@ -104,8 +108,10 @@ std::size_t lu_panel_work_size(std::int64_t count);
 /// zeroed by the caller) is set to 1, and the item left partly factored, when restricted
 /// partial pivoting would interchange rows (a multiplier |L(r, j)| > 1 in a fully summed
 /// row r < kc) or a pivot is not finite or below `static_pivot` in magnitude; an item whose
-/// bad[i] is already set is left alone. `work`: lu_panel_work_size(count) doubles. Throws
-/// DeviceError if a launch fails.
+/// bad[i] is already set is left alone. An item with a perm (see LuPanelItem) is factored
+/// with the interchanges instead — P·A11 = L11·U11, U12 = L11⁻¹·P·A12, rows k.. not moved,
+/// as the CPU's factor_front_lu — and is bad only for a pivot that needs static pivoting. `work`:
+/// lu_panel_work_size(count) doubles. Throws DeviceError if a launch fails.
 void launch_lu_panel_batched(const LuPanelItem* items, const std::vector<std::int64_t>& rows,
                              const std::vector<std::int64_t>& pivots, double* work, int* bad,
                              double static_pivot, cudaStream_t s);

@@ -58,26 +58,12 @@ __host__ __device__ std::int64_t tiles_of(std::int64_t n) {
   return n > 0 ? (n + kStep - 1) / kStep : 0;
 }
 
-// Launch 1 of a step: block b (64 threads) factors item b's w×w diagonal block at (j0, j0),
-// thread i holding row i in registers; writes the packed LU back, L_jj⁻¹ (column-major:
-// entry (r, c) at c·64 + r) to work[2b] and U_jj⁻¹ (row-major: entry (r, c) at r·64 + c,
-// the layout tile::product reads as kBRows) to work[2b + 1], both zero outside w×w.
-__global__ void __launch_bounds__(kStep)
-    lu_pivot_block_kernel(const LuPanelItem* items, double* work, int* bad, double static_pivot,
-                          std::int64_t j0) {
-  __shared__ double R[kStep * kStep];  // row j of the packed LU at [j·64 …], from step j on
-  __shared__ int sbad;
-  if (bad[blockIdx.x]) return;  // rejected at an earlier step
-  const LuPanelItem it = items[blockIdx.x];
-  const std::int64_t ld = it.ld;
-  const int w = static_cast<int>(imin(kStep, it.k - j0));
-  double* D = it.F + j0 * ld + j0;
+// The unblocked LU of the w×w block held one row per thread in `a` (thread i: row i),
+// without interchanges: row j published to R[j·64 …] at column j, one barrier per column;
+// *sbad set when a pivot is not finite or under static_pivot, or a multiplier exceeds 1.
+__device__ __forceinline__ void eliminate(double (&a)[kStep], double* R, int* sbad, int w,
+                                          double static_pivot) {
   const int i = threadIdx.x;
-  if (i == 0) sbad = 0;
-  double a[kStep];
-#pragma unroll
-  for (int c = 0; c < kStep; ++c) a[c] = i < w && c < w ? D[c * ld + i] : 0.0;
-  __syncthreads();
 #pragma unroll
   for (int j = 0; j < kStep; ++j) {
     if (j >= w) break;
@@ -88,17 +74,113 @@ __global__ void __launch_bounds__(kStep)
     __syncthreads();
     const double d = R[j * kStep + j];  // the same in every thread: a uniform break
     if (!(fabs(d) >= static_pivot) || !(fabs(d) <= DBL_MAX)) {
-      if (i == 0) sbad = 1;
+      if (i == 0) *sbad = 1;
       break;
     }
     if (i > j && i < w) {
       const double l = a[j] / d;
-      if (!(fabs(l) <= 1.0)) sbad = 1;  // partial pivoting would interchange rows
+      if (!(fabs(l) <= 1.0)) *sbad = 1;  // partial pivoting would interchange rows
       a[j] = l;
 #pragma unroll
       for (int c = j + 1; c < kStep; ++c) a[c] -= l * R[j * kStep + c];
     }
   }
+}
+
+// The same with restricted partial pivoting among the block's w rows (a whole front's
+// fully summed rows): at column j the row with the largest |a(·, j)| among rows j … w−1,
+// the first on ties (LAPACK's IDAMAX, as the CPU kernel), is published as U's row j and
+// row j moves to its place (whole rows, the multipliers of earlier columns with them);
+// pos tracks which local row is where. Two barriers per column (the search's and the
+// interchange's); *sbad only for a pivot that is not finite or under static_pivot.
+__device__ __forceinline__ void eliminate_with_interchanges(double (&a)[kStep], double* R,
+                                                            double* S, int* pos, int* sbad, int w,
+                                                            double static_pivot) {
+  __shared__ double best_v[2];
+  __shared__ int best_i[2];
+  const int i = threadIdx.x, lane = i & 31, warp = i >> 5;
+#pragma unroll
+  for (int j = 0; j < kStep; ++j) {
+    if (j >= w) break;
+    double v = i >= j && i < w ? fabs(a[j]) : -1.0;
+    int at = i;
+#pragma unroll
+    for (int off = 16; off > 0; off >>= 1) {
+      const double ov = __shfl_down_sync(0xffffffffu, v, off);
+      const int oi = __shfl_down_sync(0xffffffffu, at, off);
+      if (ov > v || (ov == v && oi < at)) {
+        v = ov;
+        at = oi;
+      }
+    }
+    if (lane == 0) {
+      best_v[warp] = v;
+      best_i[warp] = at;
+    }
+    __syncthreads();
+    const int p = best_v[1] > best_v[0] ? best_i[1] : best_i[0];  // warp 0's rows come first
+    if (i == p) {
+#pragma unroll
+      for (int c = 0; c < kStep; ++c) R[j * kStep + c] = a[c];
+    } else if (i == j) {
+#pragma unroll
+      for (int c = 0; c < kStep; ++c) S[c] = a[c];
+    }
+    if (i == 0 && p != j) {
+      const int t = pos[j];
+      pos[j] = pos[p];
+      pos[p] = t;
+    }
+    __syncthreads();
+    if (p != j && i == p) {
+#pragma unroll
+      for (int c = 0; c < kStep; ++c) a[c] = S[c];
+    } else if (p != j && i == j) {
+#pragma unroll
+      for (int c = 0; c < kStep; ++c) a[c] = R[j * kStep + c];
+    }
+    const double d = R[j * kStep + j];
+    if (!(fabs(d) >= static_pivot) || !(fabs(d) <= DBL_MAX)) {
+      if (i == 0) *sbad = 1;
+      break;
+    }
+    if (i > j && i < w) {
+      const double l = a[j] / d;
+      a[j] = l;
+#pragma unroll
+      for (int c = j + 1; c < kStep; ++c) a[c] -= l * R[j * kStep + c];
+    }
+  }
+}
+
+// Launch 1 of a step: block b (64 threads) factors item b's w×w diagonal block at (j0, j0),
+// thread i holding row i in registers — with interchanges for an item with a perm, whose
+// permutation it writes; writes the packed LU back, L_jj⁻¹ (column-major: entry (r, c) at
+// c·64 + r) to work[2b] and U_jj⁻¹ (row-major: entry (r, c) at r·64 + c, the layout
+// tile::product reads as kBRows) to work[2b + 1], both zero outside w×w.
+__global__ void __launch_bounds__(kStep)
+    lu_pivot_block_kernel(const LuPanelItem* items, double* work, int* bad, double static_pivot,
+                          std::int64_t j0) {
+  __shared__ double R[kStep * kStep];  // row j of the packed LU at [j·64 …], from step j on
+  __shared__ double S[kStep];          // a row on its way to the pivot row's place
+  __shared__ int pos[kStep];           // the local row now in each position (interchanges)
+  __shared__ int sbad;
+  if (bad[blockIdx.x]) return;  // rejected at an earlier step
+  const LuPanelItem it = items[blockIdx.x];
+  const std::int64_t ld = it.ld;
+  const int w = static_cast<int>(imin(kStep, it.k - j0));
+  double* D = it.F + j0 * ld + j0;
+  const int i = threadIdx.x;
+  if (i == 0) sbad = 0;
+  pos[i] = i;
+  double a[kStep];
+#pragma unroll
+  for (int c = 0; c < kStep; ++c) a[c] = i < w && c < w ? D[c * ld + i] : 0.0;
+  __syncthreads();
+  if (it.perm)
+    eliminate_with_interchanges(a, R, S, pos, &sbad, w, static_pivot);
+  else
+    eliminate(a, R, &sbad, w, static_pivot);
   __syncthreads();
   if (sbad) {
     if (i == 0) bad[blockIdx.x] = 1;
@@ -108,6 +190,7 @@ __global__ void __launch_bounds__(kStep)
 #pragma unroll
     for (int c = 0; c < kStep; ++c)
       if (c < w) D[c * ld + i] = a[c];
+    if (it.perm) it.perm[i] = pos[i];
   }
   double* WL = work + static_cast<std::int64_t>(blockIdx.x) * 2 * kSlot;
   double* WU = WL + kSlot;
@@ -149,6 +232,10 @@ __global__ void lu_panels_kernel(const LuPanelItem* items, const double* work, i
   const std::int64_t base = j0 + w, T = tiles_of(m - base);
   const double* WL = work + static_cast<std::int64_t>(blockIdx.x) * 2 * kSlot;
   const double* WU = WL + kSlot;
+  // an item factored with interchanges: its U panel is L_jj⁻¹·P·A, the rows read through P
+  __shared__ int prow[kStep];
+  if (it.perm && threadIdx.x < w) prow[threadIdx.x] = static_cast<int>(it.perm[threadIdx.x]);
+  __syncthreads();
   for (std::int64_t q = blockIdx.y; q < 2 * T; q += gridDim.y) {
     const bool lpanel = q < T;
     const std::int64_t x0 = base + (lpanel ? q : q - T) * kStep;
@@ -168,7 +255,8 @@ __global__ void lu_panels_kernel(const LuPanelItem* items, const double* work, i
       if (over) bad[blockIdx.x] = 1;  // every writer writes 1; the next launch reads it
     } else {
       double* A = it.F + x0 * ld + j0;
-      const double* C = tile::product<tile::BLayout::kBCols>(WL, kStep, w, A, ld, n, w, sm);
+      const double* C = tile::product<tile::BLayout::kBCols>(WL, kStep, w, A, ld, n, w, sm,
+                                                             it.perm ? prow : nullptr);
       for (int x = threadIdx.x; x < kSlot; x += kThreads) {
         const int r = x & (kStep - 1), c = x >> 6;
         if (r < w && c < n) A[static_cast<std::int64_t>(c) * ld + r] = C[x];

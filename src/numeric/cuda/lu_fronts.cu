@@ -43,7 +43,8 @@
 namespace strata::cuda {
 namespace {
 
-constexpr std::int64_t kLuPanel = 64;  // panel width of the blocked LU with static pivoting
+constexpr std::int64_t kLuPanel = 64;     // panel width of the blocked LU with static pivoting
+constexpr std::int64_t kStepPivots = 64;  // pivot columns per step of the batched kernels
 
 }  // namespace
 
@@ -65,7 +66,10 @@ void enqueue_lu_strips(const std::vector<LuPanelItem>& fronts, std::int64_t nb,
     const std::int64_t b0 = s * nb;
     for (std::size_t i = 0; i < n && fronts[i].k > b0; ++i) {
       const LuPanelItem& f = fronts[i];
-      all.push_back({f.F + b0 * f.ld + b0, f.ld, f.m - b0, std::min(nb, f.k - b0), f.k - b0});
+      // a front of one step and one strip is factored with its interchanges by the kernels
+      const bool one_step = s == 0 && f.k <= std::min<std::int64_t>(nb, kStepPivots);
+      all.push_back({f.F + b0 * f.ld + b0, f.ld, f.m - b0, std::min(nb, f.k - b0), f.k - b0,
+                     one_step ? f.perm : nullptr});
     }
     strip_at.push_back(all.size());
   }
@@ -196,7 +200,7 @@ std::vector<std::size_t> CudaExecutor::lu_fronts_by_strips(std::vector<LuFront>&
   std::vector<LuPanelItem> items(n);
   for (std::size_t q = 0; q < n; ++q) {
     const LuFront& fr = fronts[order[q]];
-    items[q] = {fr.F, fr.m, fr.m, fr.k, fr.k};
+    items[q] = {fr.F, fr.m, fr.m, fr.k, fr.k, fr.perm};
   }
   std::vector<Lane*> lanes;
   for (auto& l : this->lanes()) lanes.push_back(l.get());
@@ -374,7 +378,8 @@ namespace strata::numeric {
 std::vector<char> cuda_lu_fronts_batched(std::vector<std::vector<double>>& fronts,
                                          const std::vector<index_t>& m,
                                          const std::vector<index_t>& k, index_t strip,
-                                         double static_pivot) {
+                                         double static_pivot,
+                                         std::vector<std::vector<index_t>>* perms) {
   const std::size_t n = fronts.size();
   if (m.size() != n || k.size() != n || strip < 1)
     throw InvalidInput("cuda_lu_fronts_batched: " + std::to_string(n) + " fronts, " +
@@ -397,12 +402,21 @@ std::vector<char> cuda_lu_fronts_batched(std::vector<std::vector<double>>& front
   cuda::DeviceBuffer<double> pool(std::max<std::size_t>(offset[n], 1)), work;
   cuda::DeviceBuffer<cuda::LuPanelItem> items;
   cuda::DeviceBuffer<int> bad(std::max<std::size_t>(n, 1));
+  // the local permutations, the identity unless the kernels interchange rows
+  std::vector<std::size_t> perm_at(n + 1, 0);
+  for (std::size_t i = 0; i < n; ++i) perm_at[i + 1] = perm_at[i] + static_cast<std::size_t>(k[i]);
+  std::vector<std::int64_t> perm(perm_at[n]);
+  for (std::size_t i = 0; i < n; ++i)
+    for (index_t r = 0; r < k[i]; ++r) perm[perm_at[i] + r] = r;
+  cuda::DeviceBuffer<std::int64_t> dperm(std::max<std::size_t>(perm.size(), 1));
+  STRATA_CUDA(cudaMemcpy(dperm.data(), perm.data(), sizeof(std::int64_t) * perm.size(),
+                         cudaMemcpyHostToDevice));
   std::vector<cuda::LuPanelItem> fr(n);
   for (std::size_t q = 0; q < n; ++q) {
     const std::size_t i = order[q];
     STRATA_CUDA(cudaMemcpy(pool.data() + offset[i], fronts[i].data(),
                            sizeof(double) * fronts[i].size(), cudaMemcpyHostToDevice));
-    fr[q] = {pool.data() + offset[i], m[i], m[i], k[i], k[i]};
+    fr[q] = {pool.data() + offset[i], m[i], m[i], k[i], k[i], dperm.data() + perm_at[i]};
   }
   cuda::Lane ln;  // the legacy default stream, with a handle of its own
   STRATA_CUBLAS(cublasCreate(&ln.blas));
@@ -438,6 +452,13 @@ std::vector<char> cuda_lu_fronts_batched(std::vector<std::vector<double>>& front
   for (std::size_t i = 0; i < n; ++i)
     STRATA_CUDA(cudaMemcpy(fronts[i].data(), pool.data() + offset[i],
                            sizeof(double) * fronts[i].size(), cudaMemcpyDeviceToHost));
+  if (perms) {
+    STRATA_CUDA(cudaMemcpy(perm.data(), dperm.data(), sizeof(std::int64_t) * perm.size(),
+                           cudaMemcpyDeviceToHost));
+    perms->assign(n, {});
+    for (std::size_t i = 0; i < n; ++i)
+      (*perms)[i].assign(perm.begin() + perm_at[i], perm.begin() + perm_at[i + 1]);
+  }
   return kept;
 }
 

@@ -30,12 +30,15 @@ constexpr int kSharedDoubles = 2 * kChunk * kEdge;
 enum class BLayout { kBRows, kBCols };
 
 /// The 64×64 tile C = A·Bᵀ with A(r, t) = a[t·lda + r] for r < a_rows (zero beyond) and
-/// B(c, t) as `L` says for c < b_rows (zero beyond), t < w. `sm`: kSharedDoubles of shared
-/// memory, 32-byte aligned, owned by the calling kernel. Returns C in `sm`, C(r, c) at
-/// [c·64 + r], valid until the next call. Every thread of the block (kThreads) must call it.
+/// B(c, t) as `L` says for c < b_rows (zero beyond), t < w; with kBCols and a row map
+/// `brow` (w entries, shared or global memory), B(c, t) = b[c·ldb + brow[t]] instead (the
+/// rows of a column block read in another order). `sm`: kSharedDoubles of shared memory,
+/// 32-byte aligned, owned by the calling kernel. Returns C in `sm`, C(r, c) at [c·64 + r],
+/// valid until the next call. Every thread of the block (kThreads) must call it.
 template <BLayout L>
 __device__ const double* product(const double* a, std::int64_t lda, int a_rows, const double* b,
-                                 std::int64_t ldb, int b_rows, int w, double* sm) {
+                                 std::int64_t ldb, int b_rows, int w, double* sm,
+                                 const int* brow = nullptr) {
   using namespace nvcuda;
   double* As = sm;                   // A(r, t) at [t·64 + r]: column-major, ld 64
   double* Bs = sm + kChunk * kEdge;  // kBRows: B(c, t) at [t·64 + c]; kBCols: at [c·32 + t]
@@ -54,7 +57,8 @@ __device__ const double* product(const double* a, std::int64_t lda, int a_rows, 
         Bs[x] = in && r < b_rows ? b[static_cast<std::int64_t>(t0 + tt) * ldb + r] : 0.0;
       } else {
         const int t = x & (kChunk - 1), c = x >> 5;
-        Bs[x] = t0 + t < w && c < b_rows ? b[static_cast<std::int64_t>(c) * ldb + t0 + t] : 0.0;
+        const int row = brow ? (t0 + t < w ? brow[t0 + t] : 0) : t0 + t;
+        Bs[x] = t0 + t < w && c < b_rows ? b[static_cast<std::int64_t>(c) * ldb + row] : 0.0;
       }
     }
     __syncthreads();
