@@ -220,7 +220,7 @@ int main(int argc, char** argv) {
     CudssResult ui = run_cudss(p.a, p.symmetric, &iperm, repeat);
     const bool use_inverse = ui.ok && (!up.ok || ui.lu_nnz < up.lu_nnz);
     const CudssResult& same = use_inverse ? ui : up;
-    json row = {{"problem", name},
+    json row = {{"problem", p.name},
                 {"n", p.a.n_rows},
                 {"type", to_string(o.type)},
                 {"nnz_l", an.nnz_l},
@@ -245,7 +245,7 @@ int main(int argc, char** argv) {
     if (def.ok) row["ratio_strata_factor_over_cudss_default_factor"] = f_s / def.factor;
     fmt::print(
         "{:<14} {:>8} {:>11} {:>9.4f} {:>9.4f} {:>9.4f} {:>9.4f} {:>9.4f} {:>8.2f} {:>8.2f}\n",
-        name, p.a.n_rows, an.nnz_l, f_s, def.ok ? def.factor : -1.0, rf_s,
+        p.name, p.a.n_rows, an.nnz_l, f_s, def.ok ? def.factor : -1.0, rf_s,
         def.ok ? def.refactor : -1.0, same.ok ? same.refactor : -1.0,
         best < 1e300 ? rf_s / best : -1.0, def.ok ? f_s / def.factor : -1.0);
     if (!def.ok) fmt::print("  cuDSS default failed: {}\n", def.error);

@@ -782,15 +782,15 @@ int main(int argc, char** argv) {
                         {"lu_large_fronts_pivoted", r.fs.lu_large_fronts_pivoted},
                         {"lu_large_fronts_batched", r.fs.lu_large_fronts_batched},
                         {"factor_phases", r.fs.device_phases}});
-        fmt::print("{:<14} {:>9} {:>9.4f} {:>9.1f} {:>8.1e}", name, v, r.seconds, flops / r.seconds,
-                   r.berr);
+        fmt::print("{:<14} {:>9} {:>9.4f} {:>9.1f} {:>8.1e}", p.name, v, r.seconds,
+                   flops / r.seconds, r.berr);
         if (!p.symmetric)
           fmt::print("   LU large fronts {} (batched {}, pivoted {})", r.fs.lu_large_fronts,
                      r.fs.lu_large_fronts_batched, r.fs.lu_large_fronts_pivoted);
         fmt::print("\n");
         std::fflush(stdout);
       }
-      all.push_back({{"problem", name}, {"n", p.a.n_rows}, {"runs", rows}});
+      all.push_back({{"problem", p.name}, {"n", p.a.n_rows}, {"runs", rows}});
     }
     return all;
   };

@@ -16,6 +16,20 @@ OTHER_LISTS = {"gpu_memory": ("solvability", "block_size")}
 # --------------------------------------------------------------------------- results
 
 
+def short_problem_names(node) -> None:
+    """Problems given to a driver as Matrix Market paths (the multibody Newton matrices
+    written on the device) are named by their file's stem, as the drivers name them now."""
+    if isinstance(node, dict):
+        p = node.get("problem")
+        if isinstance(p, str) and "/" in p:
+            node["problem"] = os.path.basename(p).split(".mtx")[0]
+        for v in node.values():
+            short_problem_names(v)
+    elif isinstance(node, list):
+        for v in node:
+            short_problem_names(v)
+
+
 class Run:
     """One results file."""
 
@@ -23,6 +37,7 @@ class Run:
         self.path = path
         self.name = os.path.basename(path)
         self.data = data
+        short_problem_names(data)
         self.kind = data["benchmark"]
         self.tag = data.get("tag") or ""
         self.backend = data.get("backend") or "cpu"

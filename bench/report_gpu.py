@@ -971,12 +971,47 @@ class GpuSections:
             self.potrf_block_tables(
                 max(blocked, key=lambda r: (r.date, r.name)) if blocked else None,
                 sorted(blocked_kernels, key=lambda r: (r.date, r.name)))
+        lu_strips = [r for r in runs if r.kind == "gpu_memory" and r.get("lu_panel_kernels")]
+        if lu_strips:
+            self.w("### LU fronts by strips of batched kernels")
+            self.w()
+            for r in sorted(lu_strips, key=lambda r: (r.date, r.name)):
+                self.lu_strip_table(r)
         recursive = [r for r in runs if r.kind == "gpu_memory" and r.get("recursive_panel")]
         if recursive:
             self.w("### Cholesky pivot block and panel by recursion")
             self.w()
             for r in sorted(recursive, key=lambda r: (r.date, r.name)):
                 self.recursive_panel_table(r)
+
+    def lu_strip_table(self, r: Run) -> None:
+        """Options::gpu_lu_strip_pivots sweep on LU problems (0: GETRF + TRSMs)."""
+        self.consumed.add(r.path)
+        values = sorted({int(num(x.get("gpu_lu_strip_pivots")))
+                         for p in r.get("lu_panel_kernels") for x in p.get("runs", [])})
+        rows = []
+        for p in r.get("lu_panel_kernels"):
+            by = {int(num(x.get("gpu_lu_strip_pivots"))): x for x in p.get("runs", [])}
+            secs = {v: num(x.get("factor_seconds")) for v, x in by.items()}
+            best = min((v for v in values if v > 0 and v in secs), key=lambda v: secs[v],
+                       default=None)
+            at = by.get(best) or {}
+            rows.append([p.get("problem")] + [f_sec(secs.get(v)) for v in values] +
+                        [f_ratio(ratio(secs.get(best), secs.get(0))),
+                         f"{at.get('lu_large_fronts', '–')} / {at.get('lu_large_fronts_pivoted', '–')}"])
+        self.w("`Options::gpu_lu_strip_pivots` (src/numeric/cuda/lu_fronts.cu, default 256): "
+               "large LU fronts eliminated without interchanges in strips of that many pivots, "
+               "each strip's pivot block and panels by the batched kernels of "
+               "kernels_lu_panel.cu for all fronts of a chunk, the rest by cuBLAS GEMMs; 0 is "
+               "the path before (cuSOLVER GETRF + two cuBLAS TRSMs per front). In-core "
+               "refactorization, seconds (median of the repeats), the best strip against 0, "
+               "and at that strip the large fronts and those factored again with GETRF "
+               f"({machine_label(r.machine)}, {r.date}, commit {r.get('git_commit') or '?'}; "
+               f"`{r.get('command')}`; the note in the JSON says what the tree held).")
+        self.w()
+        self.w(table(["problem"] + [f"{v}" for v in values] +
+                     ["best / 0", "large fronts / redone"], rows, 0))
+        self.w()
 
     def recursive_panel_table(self, r: Run) -> None:
         """Options::gpu_recursive_panel off and on, whole problems."""

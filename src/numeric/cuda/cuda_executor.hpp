@@ -370,6 +370,7 @@ class CudaExecutor final : public numeric::Executor {
   /// What s_rows_, s_pivot_pos_ and s_pivot_row_ hold (upload_solve_rows' incremental LU
   /// uploads compare against it)
   std::vector<std::int64_t> s_rows_host_, s_pivot_pos_host_, s_pivot_row_host_;
+  DeviceBuffer<std::int64_t> s_moved_rows_, s_moved_segments_;  // their moved rows, packed
   DeviceBuffer<std::int64_t> s_panel_offset_;
   DeviceBuffer<double> s_d_diag_, s_d_off_, s_x_, s_u_, s_scratch_;
   std::vector<std::int64_t> u_offset_host_;

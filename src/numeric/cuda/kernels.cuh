@@ -155,6 +155,11 @@ void launch_ipiv_to_perm(const int* ipiv, std::int64_t k, std::int64_t* perm, cu
 /// interchange (what launch_ipiv_to_perm makes of an identity ipiv, without its serial loop).
 void launch_identity_perm(std::int64_t k, std::int64_t* perm, cudaStream_t s);
 
+/// Segment copies on the device: for i < count, dst[seg[3i] + j] = src[seg[3i + 2] + j] for
+/// j < seg[3i + 1] (seg, src, dst: device arrays; one block per segment).
+void launch_scatter_segments(const std::int64_t* seg, std::int64_t count, const std::int64_t* src,
+                             std::int64_t* dst, cudaStream_t s);
+
 /// The same for `count` fronts at once: perm[offset[i] + j] = j for j < offset[i + 1] −
 /// offset[i] (offset: device array of count + 1).
 void launch_identity_perms(const std::int64_t* offset, std::int64_t count, std::int64_t* perm,

@@ -91,6 +91,13 @@ __global__ void identity_perm_kernel(std::int64_t k, std::int64_t* perm) {
   if (j < k) perm[j] = j;
 }
 
+// Block b copies segment b: dst[seg[3b] + j] = src[seg[3b + 2] + j] for j < seg[3b + 1].
+__global__ void scatter_segments_kernel(const std::int64_t* seg, const std::int64_t* src,
+                                        std::int64_t* dst) {
+  const std::int64_t* s = seg + 3 * static_cast<std::int64_t>(blockIdx.x);
+  for (std::int64_t j = threadIdx.x; j < s[1]; j += blockDim.x) dst[s[0] + j] = src[s[2] + j];
+}
+
 // Block b fills the segment [offset[b], offset[b + 1]) of perm with 0, 1, ….
 __global__ void identity_perms_kernel(const std::int64_t* offset, std::int64_t* perm) {
   const std::int64_t o = offset[blockIdx.x], k = offset[blockIdx.x + 1] - o;
@@ -151,6 +158,13 @@ void launch_identity_perm(std::int64_t k, std::int64_t* perm, cudaStream_t s) {
   if (k == 0) return;
   identity_perm_kernel<<<static_cast<unsigned>((k + kThreads - 1) / kThreads), kThreads, 0, s>>>(
       k, perm);
+  STRATA_CUDA_LAUNCH();
+}
+
+void launch_scatter_segments(const std::int64_t* seg, std::int64_t count, const std::int64_t* src,
+                             std::int64_t* dst, cudaStream_t s) {
+  if (count == 0) return;
+  scatter_segments_kernel<<<static_cast<unsigned>(count), 64, 0, s>>>(seg, src, dst);
   STRATA_CUDA_LAUNCH();
 }
 
