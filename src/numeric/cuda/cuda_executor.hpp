@@ -244,6 +244,10 @@ class CudaExecutor final : public numeric::Executor {
   /// or by the blocked panel-kernel path when a pivot needs static pivoting.
   void lu_fronts_redo(std::vector<LuFront>& fronts, const std::vector<std::size_t>& redo,
                       double static_pivot, cudaEvent_t assembled);
+  /// A front whose k × k block GETRF factored (with the interchanges `ipiv`, 1-based, or
+  /// none when null), on its lane: the interchanges applied to A12, L21 and U12 by cuBLAS
+  /// TRSMs, and the contribution block's update (GEMM, or split_update over the team).
+  void lu_panels_and_update(const LuFront& fr, const int* ipiv, cudaEvent_t assembled);
   /// Identity local permutations and no perturbed pivot for `fronts`, on stream s.
   void lu_unpivoted_results(const std::vector<LuFront>& fronts, cudaStream_t s);
   /// Grows the lane's GETRF workspace for the front's k × k block.

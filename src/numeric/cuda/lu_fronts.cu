@@ -237,7 +237,6 @@ std::vector<std::size_t> CudaExecutor::lu_fronts_by_strips(std::vector<LuFront>&
 std::vector<std::size_t> CudaExecutor::lu_fronts_by_library(std::vector<LuFront>& fronts,
                                                             double static_pivot,
                                                             cudaEvent_t assembled) {
-  const double one = 1.0, minus_one = -1.0;
   const std::size_t n = fronts.size();
   std::size_t ipiv_at = 0;
   for (std::size_t i = 0; i < n; ++i) {
@@ -261,23 +260,30 @@ std::vector<std::size_t> CudaExecutor::lu_fronts_by_library(std::vector<LuFront>
     }
     const LuFront& fr = fronts[i];
     Lane& lane = *fr.lane;
-    const int m = fr.m, k = fr.k;
     STRATA_CUDA(cudaMemsetAsync(fr.perturbed, 0, sizeof(std::int64_t), lane.stream));
     // no interchange: neither the serial ipiv-to-permutation kernel nor DLASWP
-    launch_identity_perm(k, fr.perm, lane.stream);
-    if (m == k) continue;
-    double* a12 = fr.F + static_cast<std::size_t>(k) * m;
-    STRATA_CUBLAS(cublasDtrsm(lane.blas, CUBLAS_SIDE_RIGHT, CUBLAS_FILL_MODE_UPPER, CUBLAS_OP_N,
-                              CUBLAS_DIAG_NON_UNIT, m - k, k, &one, fr.F, m, fr.F + k, m));
-    STRATA_CUBLAS(cublasDtrsm(lane.blas, CUBLAS_SIDE_LEFT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N,
-                              CUBLAS_DIAG_UNIT, k, m - k, &one, fr.F, m, a12, m));
-    if (split_front(m, k))
-      split_update(lane, fr.F, m, k, true, assembled);
-    else
-      STRATA_CUBLAS(cublasDgemm(lane.blas, CUBLAS_OP_N, CUBLAS_OP_N, m - k, m - k, k, &minus_one,
-                                fr.F + k, m, a12, m, &one, a12 + k, m));
+    launch_identity_perm(fr.k, fr.perm, lane.stream);
+    lu_panels_and_update(fr, nullptr, assembled);
   }
   return redo;
+}
+
+void CudaExecutor::lu_panels_and_update(const LuFront& fr, const int* ipiv, cudaEvent_t assembled) {
+  const double one = 1.0, minus_one = -1.0;
+  Lane& lane = *fr.lane;
+  const int m = fr.m, k = fr.k;
+  if (m == k) return;
+  double* a12 = fr.F + static_cast<std::size_t>(k) * m;
+  if (ipiv) launch_laswp(a12, m, m - k, ipiv, k, lane.stream);
+  STRATA_CUBLAS(cublasDtrsm(lane.blas, CUBLAS_SIDE_RIGHT, CUBLAS_FILL_MODE_UPPER, CUBLAS_OP_N,
+                            CUBLAS_DIAG_NON_UNIT, m - k, k, &one, fr.F, m, fr.F + k, m));
+  STRATA_CUBLAS(cublasDtrsm(lane.blas, CUBLAS_SIDE_LEFT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N,
+                            CUBLAS_DIAG_UNIT, k, m - k, &one, fr.F, m, a12, m));
+  if (split_front(m, k))
+    split_update(lane, fr.F, m, k, true, assembled);
+  else
+    STRATA_CUBLAS(cublasDgemm(lane.blas, CUBLAS_OP_N, CUBLAS_OP_N, m - k, m - k, k, &minus_one,
+                              fr.F + k, m, a12, m, &one, a12 + k, m));
 }
 
 void CudaExecutor::grow_getrf_work(Lane& lane, const LuFront& fr) {
@@ -332,18 +338,7 @@ void CudaExecutor::lu_fronts_redo(std::vector<LuFront>& fronts,
     STRATA_CUDA(cudaMemsetAsync(fr.perturbed, 0, sizeof(std::int64_t), stream));
     if (!lu_bad_host_.data()[x]) {
       launch_ipiv_to_perm(ipiv, k, fr.perm, stream);
-      if (m == k) continue;
-      double* a12 = fr.F + static_cast<std::size_t>(k) * ld;
-      launch_laswp(a12, m, m - k, ipiv, k, stream);
-      STRATA_CUBLAS(cublasDtrsm(lane.blas, CUBLAS_SIDE_RIGHT, CUBLAS_FILL_MODE_UPPER, CUBLAS_OP_N,
-                                CUBLAS_DIAG_NON_UNIT, m - k, k, &one, fr.F, m, fr.F + k, m));
-      STRATA_CUBLAS(cublasDtrsm(lane.blas, CUBLAS_SIDE_LEFT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N,
-                                CUBLAS_DIAG_UNIT, k, m - k, &one, fr.F, m, a12, m));
-      if (split_front(m, k))
-        split_update(lane, fr.F, m, k, true, assembled);
-      else
-        STRATA_CUBLAS(cublasDgemm(lane.blas, CUBLAS_OP_N, CUBLAS_OP_N, m - k, m - k, k, &minus_one,
-                                  fr.F + k, m, a12, m, &one, a12 + k, m));
+      lu_panels_and_update(fr, ipiv, assembled);
       continue;
     }
     // a pivot needs static pivoting: the front again, and the panel-kernel path
