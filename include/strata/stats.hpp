@@ -144,11 +144,12 @@ struct FactorStats {
   index_t device_batches = 0;       ///< launch groups run (memory-plan batches, split
                                     ///< further when the device pool is smaller)
   index_t tiled_fronts = 0;         ///< fronts over the device budget, factored by slabs
-  /// LU: large fronts (over 256 rows); of those the ones that needed row interchanges or
-  /// static pivots (factored again with partial pivoting after the check of their
-  /// elimination without interchanges failed), and the ones whose elimination without
-  /// interchanges ran in strata's batched kernels (Options::gpu_lu_strip_pivots)
-  /// rather than cuSOLVER GETRF; see CudaExecutor::lu_large_fronts.
+  /// LU: large fronts (over 256 rows); of those the ones factored again by cuSOLVER GETRF
+  /// with partial pivoting because their elimination without interchanges was rejected
+  /// (rows to interchange, or a pivot needing static pivoting), and the ones eliminated by
+  /// strata's batched kernels (Options::gpu_lu_strip_pivots > 0) rather than by GETRF
+  /// without pivoting. Fronts of one 64-column step interchange rows inside the batched
+  /// kernels and are not counted as factored again. See src/numeric/cuda/lu_fronts.cu.
   index_t lu_large_fronts = 0;
   index_t lu_large_fronts_pivoted = 0;
   index_t lu_large_fronts_batched = 0;
