@@ -14,23 +14,26 @@
 
 namespace strata::numeric {
 
-/// F[entry_dst[e]] += values[entry_src[e]] for e in [e0, e1) whose destination lies in
-/// [d0, d1) (whole front: 0, m·m). Destinations are distinct.
+/// F[entry_dst[e] − d0] += values[entry_src[e]] for e in [e0, e1) whose destination lies
+/// in [d0, d1) (whole front: 0, m·m): F points at the front's entry d0 (a block of whole
+/// columns when d0 is a multiple of m). Destinations are distinct.
 inline void add_entries(double* F, const index_t* entry_dst, const index_t* entry_src,
                         const double* values, index_t e0, index_t e1, std::int64_t d0,
                         std::int64_t d1) {
   for (index_t e = e0; e < e1; ++e) {
     const std::int64_t d = entry_dst[e];
-    if (d >= d0 && d < d1) F[d] += values[entry_src[e]];
+    if (d >= d0 && d < d1) F[d - d0] += values[entry_src[e]];
   }
 }
 
 /// Columns jj in [j0, j1) of the child block cb (mc × mc) added into F at rows rel[ii] and
-/// column rel[jj]; `lower`: rows ii ≥ jj only (LLᵀ, LDLᵀ), else all rows (LU).
+/// column rel[jj] − col0 (F: the front's columns from col0 on, leading dimension m);
+/// `lower`: rows ii ≥ jj only (LLᵀ, LDLᵀ), else all rows (LU).
 inline void extend_add(double* F, std::int64_t m, const double* cb, std::int64_t mc,
-                       const index_t* rel, std::int64_t j0, std::int64_t j1, bool lower) {
+                       const index_t* rel, std::int64_t j0, std::int64_t j1, bool lower,
+                       std::int64_t col0 = 0) {
   for (std::int64_t jj = j0; jj < j1; ++jj) {
-    double* dst = F + rel[jj] * m;
+    double* dst = F + (rel[jj] - col0) * m;
     const double* src = cb + jj * mc;
     for (std::int64_t ii = lower ? jj : 0; ii < mc; ++ii) dst[rel[ii]] += src[ii];
   }

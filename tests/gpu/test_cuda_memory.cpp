@@ -3,6 +3,7 @@
 // in-core GPU run. Skipped, with a message, where no CUDA GPU is present.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include "core/analysis.hpp"
@@ -55,6 +56,91 @@ TEST_F(CudaMemory, CholeskyUnderATightBudgetEqualsInCore) {
     EXPECT_LT(test::relative_difference(gpu_f.panels, cpu_f.panels), 1e-12);
     EXPECT_EQ(cpu_f.rows, gpu_f.rows);
   }
+}
+
+// Cholesky fronts over the budget (tiled_llt.cu: pivot columns left-looking by slabs,
+// the contribution block by square tiles) on random symmetric scalings D·A·D of a
+// Laplacian and of an elasticity stencil, budgets from a quarter of the largest front
+// down to a few slabs: the factor equals the CPU's entry by entry, and a refactorization
+// with other values under the same plan equals the CPU's on those.
+TEST_F(CudaMemory, TiledCholeskyFrontsMatchCpu) {
+  auto rng = test::fresh_rng();
+  std::uniform_real_distribution<double> u(0.5, 2.0);
+  for (const SparseMatrix& base :
+       {generators::laplacian_3d(22, 21, 20), generators::elasticity_3d(11, 12, 13)}) {
+    Options o;
+    o.num_gpus = 1;  // one GPU, whatever the machine has
+    o.type = MatrixType::spd;
+    Analysis an = analyze_matrix(base, o);
+    const double largest = static_cast<double>(an.stats.largest_front_rows);
+    for (double share : {0.25, 0.1, 0.04}) {
+      // at least a pool for three slabs of 16 columns of the largest front (below that
+      // the plan refuses the budget: ImpossibleBudgetNamesTheBytes)
+      const auto limit = static_cast<std::size_t>(
+          std::max(share * largest * largest, 64 * largest) * sizeof(double));
+      o.device_memory_limit = limit;
+      SCOPED_TRACE("n " + std::to_string(base.n_rows) + ", device_memory_limit " +
+                   std::to_string(limit));
+      Analysis ab = analyze_matrix(base, o);
+      auto gpu = numeric::make_cuda_executor(o);
+      auto cpu = numeric::make_cpu_executor(2);
+      for (int round = 0; round < 2; ++round) {  // a factorization, then a refactorization
+        SparseMatrix a = base;
+        std::vector<double> d(a.n_rows);
+        for (double& v : d) v = u(rng);
+        for (index_t j = 0; j < a.n_cols; ++j)
+          for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p)
+            a.values[p] *= d[j] * d[a.indices[p]];
+        SparseMatrix c = canonical_values(ab, a);
+        numeric::NumericFactor cpu_f, gpu_f;
+        std::vector<double> arena;
+        numeric::factorize(ab, c.values, MatrixType::spd, 0.0, *cpu, cpu_f, arena);
+        numeric::factorize(ab, c.values, MatrixType::spd, 0.0, *gpu, gpu_f, arena);
+        FactorStats fs;
+        gpu->report(fs);
+        numeric::fetch_panels(ab, *gpu, gpu_f);
+        SCOPED_TRACE(std::string("blocks on host ") +
+                     (fs.contribution_blocks_on_host ? "yes" : "no") + ", round " +
+                     std::to_string(round));
+        EXPECT_GT(fs.tiled_fronts, 0);
+        EXPECT_FALSE(fs.factor_resident);
+        EXPECT_LT(test::relative_difference(gpu_f.panels, cpu_f.panels), 1e-12);
+      }
+    }
+  }
+}
+
+// A Cholesky that fails inside a front over the budget (the Laplacian shifted to one
+// negative eigenvalue, as in test_cuda_backend): the failing column is the CPU's, with
+// the pivot found in a later slab of the root front, by recursion and by POTRF.
+TEST_F(CudaMemory, TiledCholeskyFailureNamesTheCpusColumn) {
+  SparseMatrix a = generators::laplacian_3d(20, 20, 20);
+  for (index_t j = 0; j < a.n_cols; ++j) a.values[a.offsets[j]] -= 0.1;  // diagonal first
+  Options o;
+  o.num_gpus = 1;  // one GPU, whatever the machine has
+  o.type = MatrixType::spd;
+  index_t cpu_column = -1;
+  try {
+    Solver(o).factorize(a);
+    FAIL() << "expected NotPositiveDefinite on the CPU";
+  } catch (const NotPositiveDefinite& e) {
+    cpu_column = e.column();
+  }
+  o.backend = Backend::cuda;
+  for (std::size_t limit : {256 * std::size_t{1024}, MiB})
+    for (bool recursive : {true, false}) {
+      SCOPED_TRACE("device_memory_limit " + std::to_string(limit) + ", recursive " +
+                   std::to_string(recursive));
+      o.device_memory_limit = limit;
+      o.gpu_recursive_panel = recursive;
+      Solver s(o);
+      try {
+        s.factorize(a);
+        ADD_FAILURE() << "expected NotPositiveDefinite";
+      } catch (const NotPositiveDefinite& e) {
+        EXPECT_EQ(e.column(), cpu_column);
+      }
+    }
 }
 
 // LU under a tight budget: the slab path keeps the in-core pivot candidates, so the

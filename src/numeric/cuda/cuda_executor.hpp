@@ -67,6 +67,12 @@ struct Lane {
   double load = 0;                 ///< flops given to it in the current chunk
 };
 
+/// Copies rows [r0, r0+rows) of columns [c0, c0+cols) of the column-major host matrix h
+/// (leading dimension ldh; pinned for the copy to be asynchronous) to the device matrix d
+/// (leading dimension rows), or back, enqueued on s (tiled_front.cu).
+void copy_host_block(cudaStream_t s, double* d, const double* h, std::int64_t ldh, std::int64_t r0,
+                     std::int64_t c0, std::int64_t rows, std::int64_t cols, bool to_device);
+
 /// Grows `work` to cuSOLVER's workspace for a POTRF of order k, leading dimension ld.
 void grow_potrf_work(cusolverDnHandle_t h, DeviceBuffer<double>& work, double* a, int k, int ld);
 
@@ -202,7 +208,10 @@ class CudaExecutor final : public numeric::Executor {
   /// factor complete: a tiled front, the end of a part or of the factorization).
   void flush_chunk(const numeric::FactorContext& ctx);
   void finish_chunk(const numeric::FactorContext& ctx, ChunkRecord& c);
+  /// A front over the budget, factored through the device in pieces: LLᵀ by
+  /// factor_tiled_llt (tiled_llt.cu), LU slab by slab right-looking (tiled_front.cu).
   void factor_tiled(const numeric::FactorContext& ctx, index_t pos);
+  void factor_tiled_llt(const numeric::FactorContext& ctx, index_t pos);
   /// Columns per slab of a tiled front (m rows, k pivots): a slab and two column blocks
   /// of the trailing matrix fit the pool (3·m·w doubles), at least 1, at most k.
   std::int64_t slab_width(std::int64_t m, std::int64_t k) const;
@@ -216,6 +225,13 @@ class CudaExecutor final : public numeric::Executor {
   /// host_staging_ first) — the device kernel's additions in its order, so H is bitwise
   /// the front the kernel would make. LLᵀ and LDLᵀ add lower triangles only.
   void assemble_on_host(const numeric::FactorContext& ctx, index_t f, double* H, bool symmetric);
+  /// The same for a Cholesky front, split: its k pivot columns into P (m × k, leading
+  /// dimension m) and, when C is not null, its contribution block's lower triangle into C
+  /// (mc × mc, leading dimension mc; the strict upper triangle is not written).
+  void assemble_llt_split(const numeric::FactorContext& ctx, index_t f, double* P, double* C);
+  /// Front f's children's contribution blocks on the host, in child order (null for an
+  /// empty one): in the host arena, or copied from the device into host_staging_.
+  std::vector<const double*> children_blocks_on_host(const numeric::FactorContext& ctx, index_t f);
   /// A large LU front of the current chunk: its lane, the front in the pool (m×m, k
   /// pivots), its position, where its local row permutation and perturbed-pivot count go.
   struct LuFront {

@@ -1,5 +1,5 @@
-// strata — a front larger than the device budget, factored slab by slab (issue 5's
-// "any device memory").
+// strata — an LU front larger than the device budget, factored slab by slab (issue 5's
+// "any device memory"; a Cholesky front goes through tiled_llt.cu instead).
 //
 // The front F (m×m, column-major) is assembled into pinned host memory by the host's
 // threads (tiled_host.cpp; the device kernel did it over the bus, slower). It is then
@@ -7,25 +7,25 @@
 // a slab and two column blocks of the trailing matrix fit the device pool (3·m·w
 // doubles):
 //   for each slab p0 .. p0+w of the k pivot columns:
-//     upload the slab (rows p0..m) and factor it on the device —
-//       LLᵀ: POTRF of its w×w top, TRSM of the rows below;
-//       LU:  our panel kernel, pivot candidates the fully summed rows [j, k) as in-core,
-//            row swaps applied to the slab on the device and then to the front's other
-//            columns on the host, so the pivot sequence is the in-core one;
+//     upload the slab (rows p0..m) and factor it on the device with our panel kernel,
+//     pivot candidates the fully summed rows [j, k) as in-core, row swaps applied to
+//     the slab on the device and then to the front's other columns on the host, so the
+//     pivot sequence is the in-core one;
 //     download it; then for each column block jb of the trailing matrix: upload it,
-//       LLᵀ: SYRK on its diagonal part, GEMM below (lower triangle only);
-//       LU:  TRSM of its w rows by L11 (they become U12), GEMM below;
-//     and download it — the blocks alternate between two lanes (streams) with a buffer
-//     each, so that one block's transfers run while the other's update computes.
+//     TRSM of its w rows by L11 (they become U12), GEMM below, and download it — the
+//     blocks alternate between two lanes (streams) with a buffer each, so that one
+//     block's transfers run while the other's update computes.
 // The contribution block F[k:m, k:m] is then copied where the device plan keeps it (by
 // the host's threads when that is the host arena: a 2-D cudaMemcpy between host buffers
 // was 60% of lap3d 100³'s factorization under a budget of 1/20 of its factor), and the
 // panels into the host factor (and the resident device factor, if any).
 // Traffic is about k·m²/w doubles each way: this is the slow, always-possible path; the
 // memory plan makes it the exception (a front whose working set alone exceeds the budget).
+// The left-looking, tiled scheme of tiled_llt.cu would move less here too; what LU adds
+// is the row interchanges of each slab, applied to the whole front.
 //
-// Source: the right-looking blocked algorithms of Golub & Van Loan, "Matrix
-// Computations", 4th ed., §3.2.11 and §4.2.9, with the panel as the unit of transfer
+// Source: the right-looking blocked algorithm of Golub & Van Loan, "Matrix
+// Computations", 4th ed., §3.2.11, with the panel as the unit of transfer
 // (out-of-core dense factorization as in Toledo, "A survey of out-of-core algorithms in
 // numerical linear algebra", 1999).
 #include <algorithm>
@@ -38,12 +38,8 @@
 
 namespace strata::cuda {
 
-namespace {
-
-// Copies rows [r0, r0+rows) of columns [c0, c0+cols) of the host matrix H (leading
-// dimension ldh) to the device matrix D (leading dimension rows), or back.
-void copy_block(cudaStream_t s, double* d, const double* h, std::int64_t ldh, std::int64_t r0,
-                std::int64_t c0, std::int64_t rows, std::int64_t cols, bool to_device) {
+void copy_host_block(cudaStream_t s, double* d, const double* h, std::int64_t ldh, std::int64_t r0,
+                     std::int64_t c0, std::int64_t rows, std::int64_t cols, bool to_device) {
   if (rows == 0 || cols == 0) return;
   const double* src = h + c0 * ldh + r0;
   if (to_device)
@@ -54,8 +50,6 @@ void copy_block(cudaStream_t s, double* d, const double* h, std::int64_t ldh, st
                                   sizeof(double) * rows, sizeof(double) * rows, cols,
                                   cudaMemcpyDeviceToHost, s));
 }
-
-}  // namespace
 
 std::int64_t CudaExecutor::slab_width(std::int64_t m, std::int64_t k) const {
   return std::max<std::int64_t>(
@@ -75,11 +69,15 @@ void CudaExecutor::factor_tiled(const numeric::FactorContext& ctx, index_t pos) 
                        " rows is over the device memory budget, and slab-by-slab LDLᵀ is not "
                        "implemented on the CUDA backend: raise device_memory_limit or use the "
                        "CPU backend");
+  if (!lu) {
+    factor_tiled_llt(ctx, pos);  // tiled_llt.cu
+    return;
+  }
   ++tiled_count_;
   ++chunks_;
   host_front_.resize(static_cast<std::size_t>(m) * m);
   double* H = host_front_.data();
-  assemble_on_host(ctx, f, H, !lu);  // tiled_host.cpp
+  assemble_on_host(ctx, f, H, false);  // tiled_host.cpp
   const auto slabs_start = std::chrono::steady_clock::now();
   phases_.tiled_assembly += std::chrono::duration<double>(slabs_start - wall_start).count();
 
@@ -92,37 +90,14 @@ void CudaExecutor::factor_tiled(const numeric::FactorContext& ctx, index_t pos) 
   std::vector<std::int64_t> fperm(k), sperm(k);
   for (std::int64_t i = 0; i < k; ++i) fperm[i] = i;
   std::int64_t npert = 0;
-  if (lu) {
-    perm_.resize(static_cast<std::size_t>(k) + 1);
-    perturbed_.resize(1);
-    STRATA_CUDA(cudaMemsetAsync(perturbed_.data(), 0, sizeof(std::int64_t), stream_));
-  }
-  potrf_info_.resize(1);
+  perm_.resize(static_cast<std::size_t>(k) + 1);
+  perturbed_.resize(1);
+  STRATA_CUDA(cudaMemsetAsync(perturbed_.data(), 0, sizeof(std::int64_t), stream_));
   for (std::int64_t p0 = 0; p0 < k; p0 += w_max) {
     const std::int64_t w = std::min(w_max, k - p0), r = m - p0;
-    copy_block(stream_, S, H, m, p0, p0, r, w, true);
+    copy_host_block(stream_, S, H, m, p0, p0, r, w, true);
     bytes_h2d_ += sizeof(double) * r * w;
-    if (!lu) {
-      if (recursive_panel_) {  // the slab is an r × r front's first w columns, ld r
-        llt_pivot_block_and_panel_recursive(*lane[0], S, r, w, potrf_info_.data());
-      } else {
-        grow_potrf_work(solver_, potrf_work_, S, static_cast<int>(w), static_cast<int>(r));
-        STRATA_CUSOLVER(cusolverDnDpotrf(solver_, CUBLAS_FILL_MODE_LOWER, static_cast<int>(w), S,
-                                         static_cast<int>(r), potrf_work_.data(),
-                                         static_cast<int>(potrf_work_.size()), potrf_info_.data()));
-      }
-      int info = 0;
-      STRATA_CUDA(
-          cudaMemcpyAsync(&info, potrf_info_.data(), sizeof(int), cudaMemcpyDeviceToHost, stream_));
-      STRATA_CUDA(cudaStreamSynchronize(stream_));
-      if (info > 0)
-        throw NotPositiveDefinite(an.perm[t.first_pivot[f] + p0 + info - 1], std::nan(""));
-      if (r > w && !recursive_panel_)
-        STRATA_CUBLAS(cublasDtrsm(blas_, CUBLAS_SIDE_RIGHT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_T,
-                                  CUBLAS_DIAG_NON_UNIT, static_cast<int>(r - w),
-                                  static_cast<int>(w), &one, S, static_cast<int>(r), S + w,
-                                  static_cast<int>(r)));
-    } else {
+    {
       const std::int64_t kk = k - p0;
       if (static_cast<std::int64_t>(iota_.size()) < kk) {
         iota_.resize(kk);
@@ -150,7 +125,7 @@ void CudaExecutor::factor_tiled(const numeric::FactorContext& ctx, index_t pos) 
     STRATA_CUDA(cudaEventRecord(lane[0]->done, stream_));
     for (int l = 1; l <= 2; ++l)
       STRATA_CUDA(cudaStreamWaitEvent(lane[l]->stream, lane[0]->done, 0));
-    copy_block(stream_, S, H, m, p0, p0, r, w, false);
+    copy_host_block(stream_, S, H, m, p0, p0, r, w, false);
     bytes_d2h_ += sizeof(double) * r * w;
     // the trailing matrix, one column block at a time, on lanes 1 and 2 alternately
     std::int64_t block = 0;
@@ -160,35 +135,18 @@ void CudaExecutor::factor_tiled(const numeric::FactorContext& ctx, index_t pos) 
       const cudaStream_t cs = ln.stream;
       const cublasHandle_t cb = ln.blas;
       double* const C = Cbuf[block % 2];
-      if (!lu) {
-        const std::int64_t rr = m - jb;  // lower triangle: rows jb..m
-        const double* Lj = S + (jb - p0);
-        copy_block(cs, C, H, m, jb, jb, rr, wb, true);
-        STRATA_CUBLAS(cublasDsyrk(cb, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N, static_cast<int>(wb),
-                                  static_cast<int>(w), &minus_one, Lj, static_cast<int>(r), &one, C,
-                                  static_cast<int>(rr)));
-        if (rr > wb)
-          STRATA_CUBLAS(cublasDgemm(cb, CUBLAS_OP_N, CUBLAS_OP_T, static_cast<int>(rr - wb),
-                                    static_cast<int>(wb), static_cast<int>(w), &minus_one, Lj + wb,
-                                    static_cast<int>(r), Lj, static_cast<int>(r), &one, C + wb,
-                                    static_cast<int>(rr)));
-        copy_block(cs, C, H, m, jb, jb, rr, wb, false);
-        bytes_h2d_ += sizeof(double) * rr * wb;
-        bytes_d2h_ += sizeof(double) * rr * wb;
-      } else {
-        copy_block(cs, C, H, m, p0, jb, r, wb, true);
-        STRATA_CUBLAS(cublasDtrsm(cb, CUBLAS_SIDE_LEFT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N,
-                                  CUBLAS_DIAG_UNIT, static_cast<int>(w), static_cast<int>(wb), &one,
-                                  S, static_cast<int>(r), C, static_cast<int>(r)));
-        if (r > w)
-          STRATA_CUBLAS(cublasDgemm(cb, CUBLAS_OP_N, CUBLAS_OP_N, static_cast<int>(r - w),
-                                    static_cast<int>(wb), static_cast<int>(w), &minus_one, S + w,
-                                    static_cast<int>(r), C, static_cast<int>(r), &one, C + w,
-                                    static_cast<int>(r)));
-        copy_block(cs, C, H, m, p0, jb, r, wb, false);
-        bytes_h2d_ += sizeof(double) * r * wb;
-        bytes_d2h_ += sizeof(double) * r * wb;
-      }
+      copy_host_block(cs, C, H, m, p0, jb, r, wb, true);
+      STRATA_CUBLAS(cublasDtrsm(cb, CUBLAS_SIDE_LEFT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N,
+                                CUBLAS_DIAG_UNIT, static_cast<int>(w), static_cast<int>(wb), &one,
+                                S, static_cast<int>(r), C, static_cast<int>(r)));
+      if (r > w)
+        STRATA_CUBLAS(cublasDgemm(cb, CUBLAS_OP_N, CUBLAS_OP_N, static_cast<int>(r - w),
+                                  static_cast<int>(wb), static_cast<int>(w), &minus_one, S + w,
+                                  static_cast<int>(r), C, static_cast<int>(r), &one, C + w,
+                                  static_cast<int>(r)));
+      copy_host_block(cs, C, H, m, p0, jb, r, wb, false);
+      bytes_h2d_ += sizeof(double) * r * wb;
+      bytes_d2h_ += sizeof(double) * r * wb;
     }
     for (int l = 1; l <= 2; ++l) {  // the next slab reads what the lanes wrote to H
       STRATA_CUDA(cudaEventRecord(lane[l]->done, lane[l]->stream));
@@ -196,11 +154,9 @@ void CudaExecutor::factor_tiled(const numeric::FactorContext& ctx, index_t pos) 
     }
     STRATA_CUDA(cudaStreamSynchronize(stream_));
   }
-  if (lu) {
-    STRATA_CUDA(cudaMemcpyAsync(&npert, perturbed_.data(), sizeof(std::int64_t),
-                                cudaMemcpyDeviceToHost, stream_));
-    STRATA_CUDA(cudaStreamSynchronize(stream_));
-  }
+  STRATA_CUDA(cudaMemcpyAsync(&npert, perturbed_.data(), sizeof(std::int64_t),
+                              cudaMemcpyDeviceToHost, stream_));
+  STRATA_CUDA(cudaStreamSynchronize(stream_));
 
   const auto store_start = std::chrono::steady_clock::now();
   phases_.tiled_slabs += std::chrono::duration<double>(store_start - slabs_start).count();
@@ -216,9 +172,9 @@ void CudaExecutor::factor_tiled(const numeric::FactorContext& ctx, index_t pos) 
   }
   double* panel = ctx.factor->panels.data() + an.factor_layout.panel_offset[f];
   parallel_copy(panel, H, static_cast<std::size_t>(m) * k);
-  if (lu) parallel_copy_2d(panel + m * k, k, H + k * m, m, k, mc);  // U12, k × mc
+  parallel_copy_2d(panel + m * k, k, H + k * m, m, k, mc);  // U12, k × mc
   if (keep_resident()) {
-    const std::size_t sz = panel_size(t, f, lu);
+    const std::size_t sz = panel_size(t, f, true);
     STRATA_CUDA(cudaMemcpyAsync(panels_.data() + an.factor_layout.panel_offset[f], panel,
                                 sizeof(double) * sz, cudaMemcpyHostToDevice, stream_));
     bytes_h2d_ += sizeof(double) * sz;

@@ -15,21 +15,27 @@
 // additions themselves are numeric/assembly.hpp's, the CPU executor's. The order of the additions
 // is the kernel's (entries, then children one after another, each destination written once per
 // child), so the front is bitwise the same.
+//
+// A Cholesky front is assembled split (assemble_llt_split): its k pivot columns in place in
+// the panel buffer (the front's own layout), its contribution block's lower triangle
+// straight into its destination (mc × mc, leading dimension mc: the host arena, where the
+// plan spilled it), so that the tiled factorization (tiled_llt.cu) never holds — or copies
+// — the m × m front. The memory plan never places a block over its children's blocks
+// (schedule/memory_plan.hpp), so writing it while they are read is safe.
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <vector>
 
 #include "numeric/assembly.hpp"
 #include "numeric/cuda/cuda_executor.hpp"
 
 namespace strata::cuda {
 
-void CudaExecutor::assemble_on_host(const numeric::FactorContext& ctx, index_t f, double* H,
-                                    bool symmetric) {
-  const Analysis& an = *ctx.analysis;
-  const auto& t = an.tree;
-  const std::int64_t m = t.n_rows(f);
+std::vector<const double*> CudaExecutor::children_blocks_on_host(const numeric::FactorContext& ctx,
+                                                                 index_t f) {
+  const auto& t = ctx.analysis->tree;
   // the children's blocks were stored by kernels on stream_: they must have landed
   STRATA_CUDA(cudaStreamSynchronize(stream_));
   // each child's block: in the host arena, or copied from the device into host_staging_
@@ -59,30 +65,83 @@ void CudaExecutor::assemble_on_host(const numeric::FactorContext& ctx, index_t f
     block[q - q0] = cb;
   }
   if (staged > 0) STRATA_CUDA(cudaStreamSynchronize(stream_));
-  // by blocks of kCols columns, each zeroed, given its entries and then each child's
-  // columns that land in it, in child order: the block stays in cache through all of
-  // its additions, and every entry sees the kernel's order of additions
-  constexpr std::int64_t kCols = 32;
+  return block;
+}
+
+namespace {
+
+constexpr std::int64_t kCols = 32;  // columns per block of the host assembly
+
+// Columns [c0, c1) of front f (m rows) assembled into W (leading dimension m, W's column 0
+// the front's column c0): zeroed, the original entries, then each child's columns that
+// land there, in child order — the block stays in cache through all of its additions, and
+// every entry sees the device kernel's order of additions.
+void assemble_columns(const Analysis& an, const numeric::FactorContext& ctx, index_t f,
+                      const std::vector<const double*>& block, const std::int64_t* rel_all,
+                      const std::int64_t* rel_offsets, bool symmetric, std::int64_t c0,
+                      std::int64_t c1, double* W) {
+  const auto& t = an.tree;
   const auto& am = an.assembly;
-  const index_t e0 = am.entry_offsets[f], e1 = am.entry_offsets[f + 1];
+  const std::int64_t m = t.n_rows(f);
+  std::fill(W, W + (c1 - c0) * m, 0.0);
+  numeric::add_entries(W, am.entry_dst.data(), am.entry_src.data(), ctx.values, am.entry_offsets[f],
+                       am.entry_offsets[f + 1], c0 * m, c1 * m);
+  const index_t q0 = t.child_offsets[f], q1 = t.child_offsets[f + 1];
+  for (index_t q = q0; q < q1; ++q) {
+    const double* cb = block[q - q0];
+    if (!cb) continue;
+    const index_t c = t.children[q];
+    const std::int64_t mc = t.cb_size(c);
+    const std::int64_t* rel = rel_all + rel_offsets[c];
+    // rel is increasing: the child's columns that land in [c0, c1)
+    const std::int64_t j0 = std::lower_bound(rel, rel + mc, c0) - rel;
+    const std::int64_t j1 = std::lower_bound(rel, rel + mc, c1) - rel;
+    numeric::extend_add(W, m, cb, mc, rel, j0, j1, symmetric, c0);
+  }
+}
+
+}  // namespace
+
+void CudaExecutor::assemble_on_host(const numeric::FactorContext& ctx, index_t f, double* H,
+                                    bool symmetric) {
+  const Analysis& an = *ctx.analysis;
+  const std::int64_t m = an.tree.n_rows(f);
+  const std::vector<const double*> block = children_blocks_on_host(ctx, f);
   const std::int64_t blocks = (m + kCols - 1) / kCols;
   tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, blocks), [&](const auto& r) {
     for (std::int64_t b = r.begin(); b < r.end(); ++b) {
       const std::int64_t c0 = b * kCols, c1 = std::min(m, c0 + kCols);
-      std::fill(H + c0 * m, H + c1 * m, 0.0);
-      numeric::add_entries(H, am.entry_dst.data(), am.entry_src.data(), ctx.values, e0, e1, c0 * m,
-                           c1 * m);
-      for (index_t q = q0; q < q1; ++q) {
-        const double* cb = block[q - q0];
-        if (!cb) continue;
-        const index_t c = t.children[q];
-        const std::int64_t mc = t.cb_size(c);
-        const std::int64_t* rel = rel_host_.data() + rel_offsets_host_[c];
-        // rel is increasing: the child's columns that land in [c0, c1)
-        const std::int64_t j0 = std::lower_bound(rel, rel + mc, c0) - rel;
-        const std::int64_t j1 = std::lower_bound(rel, rel + mc, c1) - rel;
-        numeric::extend_add(H, m, cb, mc, rel, j0, j1, symmetric);
+      assemble_columns(an, ctx, f, block, rel_host_.data(), rel_offsets_host_.data(), symmetric, c0,
+                       c1, H + c0 * m);
+    }
+  });
+}
+
+void CudaExecutor::assemble_llt_split(const numeric::FactorContext& ctx, index_t f, double* P,
+                                      double* C) {
+  const Analysis& an = *ctx.analysis;
+  const auto& t = an.tree;
+  const std::int64_t m = t.n_rows(f), k = t.n_pivots(f), mc = m - k;
+  const std::vector<const double*> block = children_blocks_on_host(ctx, f);
+  // blocks of the pivot columns, then (when C is wanted) of the contribution block's
+  const std::int64_t pb = (k + kCols - 1) / kCols;
+  const std::int64_t blocks = pb + (C ? (mc + kCols - 1) / kCols : 0);
+  tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, blocks), [&](const auto& r) {
+    std::vector<double> W;  // a block of the contribution block's columns, whole
+    for (std::int64_t b = r.begin(); b < r.end(); ++b) {
+      if (b < pb) {  // the panel has the front's layout: assembled in place
+        const std::int64_t c0 = b * kCols, c1 = std::min(k, c0 + kCols);
+        assemble_columns(an, ctx, f, block, rel_host_.data(), rel_offsets_host_.data(), true, c0,
+                         c1, P + c0 * m);
+        continue;
       }
+      const std::int64_t c0 = k + (b - pb) * kCols, c1 = std::min(m, c0 + kCols);
+      W.resize(static_cast<std::size_t>((c1 - c0) * m));
+      assemble_columns(an, ctx, f, block, rel_host_.data(), rel_offsets_host_.data(), true, c0, c1,
+                       W.data());
+      for (std::int64_t c = c0; c < c1; ++c)  // its lower triangle: rows c..m
+        std::copy(W.data() + (c - c0) * m + c, W.data() + (c - c0 + 1) * m,
+                  C + (c - k) * mc + (c - k));
     }
   });
 }

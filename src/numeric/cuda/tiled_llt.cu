@@ -1,0 +1,241 @@
+// strata — a Cholesky front larger than the device budget, factored through the device
+// in pieces (issue 5's "any device memory").
+//
+// The front F (m × m, k pivots, contribution block of mc = m − k rows) never exists
+// whole: its k pivot columns P = [L11; L21] (m × k, leading dimension m — the panel's
+// layout) are assembled into pinned host memory, its contribution block C (lower
+// triangle, mc × mc) straight into its destination, the pinned host arena or — when
+// the plan kept it on the device — a staging area uploaded once (tiled_host.cpp).
+//
+//   1. The pivot columns, left-looking by slabs of w columns (w: a slab and two more of
+//      m rows fit the pool, as slab_width says). For slab J (columns p0 .. p0+w, rows
+//      p0 .. m): upload it; for each earlier slab I, upload its rows p0 .. m on a copy
+//      lane (two lanes, two buffers: one's copy runs while the other's update computes)
+//      and subtract L_I·L_I[top]ᵀ (SYRK on the w × w top, GEMM below); factor the slab
+//      (POTRF and TRSM, or the recursive panel); download it. Nothing of the slab goes
+//      back to the host until it is final.
+//   2. The contribution block, C −= L21·L21ᵀ, by square tiles of b rows: for each tile
+//      row i, its rows of L21 (b × k) stay on the device while, for j ≤ i, the rows of
+//      tile j and the tile C_ij come in on a copy lane, one GEMM updates the tile (the
+//      whole square of a diagonal tile: the upper triangle of a block is never read),
+//      and it goes back. b is the largest with 3·b·k + 2·b² doubles in the pool (3·b·k
+//      when C is on the device: the tiles are updated in place there).
+//
+// Traffic, against the right-looking slab scheme this replaced (every slab read and
+// wrote the whole trailing lower triangle, about k·m²/(2w) doubles each way): step 1
+// reads about k²·m/(2w) and writes the panel once; step 2 reads about mc²·(k/b + 1)/2
+// and writes the lower triangle of C once — with w ≈ pool/(3m) and b ≈ √(pool/2) or
+// better, b ≫ w on a front that does not fit, so the contribution block, the bulk of a
+// top front, is read a few times instead of k/w times, and written once.
+//
+// Source: the left-looking (jki / "lazy") Cholesky of Golub & Van Loan, "Matrix
+// Computations", 4th ed., §4.2.8–4.2.9, with the slab as the unit of transfer, and the
+// tiled out-of-core product whose traffic falls as the square root of the memory, as in
+// Toledo, "A survey of out-of-core algorithms in numerical linear algebra" (1999) §2–3.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include "core/host_copy.hpp"
+#include "numeric/cuda/cuda_executor.hpp"
+
+namespace strata::cuda {
+
+namespace {
+
+// Two events, destroyed on every way out (a failed pivot throws mid-front).
+struct EventPair {
+  cudaEvent_t ev[2] = {};
+  EventPair() {
+    for (auto& e : ev) STRATA_CUDA(cudaEventCreateWithFlags(&e, cudaEventDisableTiming));
+  }
+  ~EventPair() {
+    for (auto& e : ev)
+      if (e) (void)cudaEventDestroy(e);
+  }
+  EventPair(const EventPair&) = delete;
+  EventPair& operator=(const EventPair&) = delete;
+};
+
+// The largest tile side b ≤ cap with 3·b·k + (c_tiles ? 2·b² : 0) ≤ pool, at least 1.
+std::int64_t tile_side(std::size_t pool, std::int64_t k, std::int64_t cap, bool c_tiles) {
+  const double p = static_cast<double>(pool), kk = static_cast<double>(k);
+  double b = c_tiles ? (std::sqrt(9 * kk * kk + 8 * p) - 3 * kk) / 4 : p / (3 * std::max(kk, 1.0));
+  auto need = [&](std::int64_t s) {
+    return 3 * static_cast<double>(s) * kk + (c_tiles ? 2 * static_cast<double>(s) * s : 0);
+  };
+  std::int64_t s = std::min<std::int64_t>(cap, static_cast<std::int64_t>(b));
+  while (s > 1 && need(s) > p) --s;
+  return std::max<std::int64_t>(s, 1);
+}
+
+}  // namespace
+
+void CudaExecutor::factor_tiled_llt(const numeric::FactorContext& ctx, index_t pos) {
+  const auto wall_start = std::chrono::steady_clock::now();
+  const Analysis& an = *ctx.analysis;
+  const auto& t = an.tree;
+  const index_t f = ctx.part->schedule->fronts[pos];
+  const std::int64_t m = t.n_rows(f), k = t.n_pivots(f), mc = m - k;
+  ++tiled_count_;
+  ++chunks_;
+  const bool has_cb = mc > 0 && t.parent[f] >= 0;  // a root's block is not needed
+  double* const dst = has_cb ? cur_->cb_ptr_host[f] : nullptr;
+  const bool cb_on_host = has_cb && in_host_arena(dst);
+  const std::size_t panel_doubles = static_cast<std::size_t>(m) * k;
+  host_front_.resize(panel_doubles +
+                     (has_cb && !cb_on_host ? static_cast<std::size_t>(mc) * mc : 0));
+  double* const P = host_front_.data();
+  double* const C = !has_cb ? nullptr : cb_on_host ? dst : P + panel_doubles;
+  assemble_llt_split(ctx, f, P, C);  // tiled_host.cpp
+  if (has_cb && !cb_on_host) {       // the block's place is on the device: it goes there once
+    STRATA_CUDA(cudaMemcpyAsync(dst, C, sizeof(double) * mc * mc, cudaMemcpyHostToDevice, stream_));
+    bytes_h2d_ += sizeof(double) * mc * mc;
+  }
+  const auto slabs_start = std::chrono::steady_clock::now();
+  phases_.tiled_assembly += std::chrono::duration<double>(slabs_start - wall_start).count();
+
+  std::vector<std::unique_ptr<Lane>>& lane = lanes();  // lanes 1 and 2 bring the operands
+  Lane& main = *lane[0];                               // stream_ and blas_: the arithmetic
+  EventPair computed;  // per buffer: the last update that read it was enqueued
+  for (cudaEvent_t e : computed.ev) STRATA_CUDA(cudaEventRecord(e, stream_));
+  // the copy lanes start after everything on stream_ so far (the slab or panel they read
+  // was downloaded there)
+  auto lanes_follow_main = [&] {
+    STRATA_CUDA(cudaEventRecord(main.done, stream_));
+    for (int l = 1; l <= 2; ++l) STRATA_CUDA(cudaStreamWaitEvent(lane[l]->stream, main.done, 0));
+  };
+  const double one = 1.0, minus_one = -1.0;
+
+  // 1. the pivot columns, left-looking by slabs
+  const std::int64_t w_max = slab_width(m, k);
+  double* const S = pool_.data();
+  double* const B[2] = {S + static_cast<std::size_t>(m) * w_max,
+                        S + 2 * static_cast<std::size_t>(m) * w_max};
+  potrf_info_.resize(1);
+  for (std::int64_t p0 = 0; p0 < k; p0 += w_max) {
+    const std::int64_t w = std::min(w_max, k - p0), r = m - p0;
+    copy_host_block(stream_, S, P, m, p0, p0, r, w, true);
+    bytes_h2d_ += sizeof(double) * r * w;
+    lanes_follow_main();
+    std::int64_t use = 0;
+    for (std::int64_t q0 = 0; q0 < p0; q0 += w_max, ++use) {
+      const std::int64_t wq = std::min(w_max, p0 - q0);
+      const int slot = static_cast<int>(use % 2);
+      Lane& ln = *lane[1 + slot];
+      STRATA_CUDA(cudaStreamWaitEvent(ln.stream, computed.ev[slot], 0));
+      copy_host_block(ln.stream, B[slot], P, m, p0, q0, r, wq, true);  // slab I, rows p0..m
+      bytes_h2d_ += sizeof(double) * r * wq;
+      STRATA_CUDA(cudaEventRecord(ln.done, ln.stream));
+      STRATA_CUDA(cudaStreamWaitEvent(stream_, ln.done, 0));
+      STRATA_CUBLAS(cublasDsyrk(main.blas, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N, static_cast<int>(w),
+                                static_cast<int>(wq), &minus_one, B[slot], static_cast<int>(r),
+                                &one, S, static_cast<int>(r)));
+      if (r > w)
+        STRATA_CUBLAS(cublasDgemm(main.blas, CUBLAS_OP_N, CUBLAS_OP_T, static_cast<int>(r - w),
+                                  static_cast<int>(w), static_cast<int>(wq), &minus_one,
+                                  B[slot] + w, static_cast<int>(r), B[slot], static_cast<int>(r),
+                                  &one, S + w, static_cast<int>(r)));
+      STRATA_CUDA(cudaEventRecord(computed.ev[slot], stream_));
+    }
+    if (recursive_panel_) {  // the slab is an r × r front's first w columns, ld r
+      llt_pivot_block_and_panel_recursive(main, S, r, w, potrf_info_.data());
+    } else {
+      grow_potrf_work(solver_, potrf_work_, S, static_cast<int>(w), static_cast<int>(r));
+      STRATA_CUSOLVER(cusolverDnDpotrf(solver_, CUBLAS_FILL_MODE_LOWER, static_cast<int>(w), S,
+                                       static_cast<int>(r), potrf_work_.data(),
+                                       static_cast<int>(potrf_work_.size()), potrf_info_.data()));
+      if (r > w)
+        STRATA_CUBLAS(cublasDtrsm(main.blas, CUBLAS_SIDE_RIGHT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_T,
+                                  CUBLAS_DIAG_NON_UNIT, static_cast<int>(r - w),
+                                  static_cast<int>(w), &one, S, static_cast<int>(r), S + w,
+                                  static_cast<int>(r)));
+    }
+    int info = 0;
+    STRATA_CUDA(
+        cudaMemcpyAsync(&info, potrf_info_.data(), sizeof(int), cudaMemcpyDeviceToHost, stream_));
+    STRATA_CUDA(cudaStreamSynchronize(stream_));
+    if (info > 0)
+      throw NotPositiveDefinite(an.perm[t.first_pivot[f] + p0 + info - 1], std::nan(""));
+    copy_host_block(stream_, S, P, m, p0, p0, r, w, false);
+    bytes_d2h_ += sizeof(double) * r * w;
+  }
+
+  // 2. the contribution block, C −= L21·L21ᵀ by tiles
+  if (has_cb && k > 0) {
+    const std::int64_t b = tile_side(plan_.pool, k, mc, cb_on_host);
+    const std::size_t bk = static_cast<std::size_t>(b) * k;
+    double* const Li = pool_.data();
+    double* const Lj[2] = {Li + bk, Li + 2 * bk};
+    double* const Ct[2] = {Li + 3 * bk, Li + 3 * bk + static_cast<std::size_t>(b) * b};
+    lanes_follow_main();  // the panel's last slab has been downloaded
+    std::int64_t use = 0;
+    for (std::int64_t ri = 0; ri < mc; ri += b) {
+      const std::int64_t bi = std::min(b, mc - ri);
+      // on stream_, after the previous tile row's updates that read it
+      copy_host_block(stream_, Li, P, m, k + ri, 0, bi, k, true);
+      bytes_h2d_ += sizeof(double) * bi * k;
+      for (std::int64_t rj = 0; rj <= ri; rj += b, ++use) {
+        const std::int64_t bj = std::min(b, mc - rj);
+        const int slot = static_cast<int>(use % 2);
+        Lane& ln = *lane[1 + slot];
+        STRATA_CUDA(cudaStreamWaitEvent(ln.stream, computed.ev[slot], 0));
+        const double* L = Li;
+        if (rj != ri) {
+          copy_host_block(ln.stream, Lj[slot], P, m, k + rj, 0, bj, k, true);
+          bytes_h2d_ += sizeof(double) * bj * k;
+          L = Lj[slot];
+        }
+        double* tile = dst + rj * mc + ri;  // in place on the device
+        std::int64_t ldt = mc;
+        if (cb_on_host) {
+          tile = Ct[slot];
+          ldt = bi;
+          copy_host_block(ln.stream, tile, C, mc, ri, rj, bi, bj, true);
+          bytes_h2d_ += sizeof(double) * bi * bj;
+        }
+        STRATA_CUDA(cudaEventRecord(ln.done, ln.stream));
+        STRATA_CUDA(cudaStreamWaitEvent(stream_, ln.done, 0));
+        STRATA_CUBLAS(cublasDgemm(main.blas, CUBLAS_OP_N, CUBLAS_OP_T, static_cast<int>(bi),
+                                  static_cast<int>(bj), static_cast<int>(k), &minus_one, Li,
+                                  static_cast<int>(bi), L, static_cast<int>(bj), &one, tile,
+                                  static_cast<int>(ldt)));
+        STRATA_CUDA(cudaEventRecord(computed.ev[slot], stream_));
+        if (cb_on_host) {  // back, on the lane, once updated
+          STRATA_CUDA(cudaStreamWaitEvent(ln.stream, computed.ev[slot], 0));
+          copy_host_block(ln.stream, tile, C, mc, ri, rj, bi, bj, false);
+          bytes_d2h_ += sizeof(double) * bi * bj;
+        }
+      }
+    }
+    for (int l = 1; l <= 2; ++l) {  // the tiles' downloads
+      STRATA_CUDA(cudaEventRecord(lane[l]->done, lane[l]->stream));
+      STRATA_CUDA(cudaStreamWaitEvent(stream_, lane[l]->done, 0));
+    }
+  }
+  STRATA_CUDA(cudaStreamSynchronize(stream_));
+
+  const auto store_start = std::chrono::steady_clock::now();
+  phases_.tiled_slabs += std::chrono::duration<double>(store_start - slabs_start).count();
+  // the panel to the host factor (and the resident device factor, if any)
+  double* panel = ctx.factor->panels.data() + an.factor_layout.panel_offset[f];
+  parallel_copy(panel, P, panel_doubles);
+  if (keep_resident()) {
+    STRATA_CUDA(cudaMemcpyAsync(panels_.data() + an.factor_layout.panel_offset[f], P,
+                                sizeof(double) * panel_doubles, cudaMemcpyHostToDevice, stream_));
+    bytes_h2d_ += sizeof(double) * panel_doubles;
+    STRATA_CUDA(cudaStreamSynchronize(stream_));
+  }
+  std::vector<std::int64_t> lperm(k);
+  std::vector<double> diag(k);
+  for (std::int64_t i = 0; i < k; ++i) {
+    lperm[i] = i;
+    diag[i] = P[i * m + i];
+  }
+  finish_front(ctx, f, -1, 0, lperm.data(), diag.data());
+  const auto end = std::chrono::steady_clock::now();
+  phases_.tiled_store += std::chrono::duration<double>(end - store_start).count();
+  phases_.tiled_fronts += std::chrono::duration<double>(end - wall_start).count();
+}
+
+}  // namespace strata::cuda
