@@ -588,6 +588,11 @@ int main(int argc, char** argv) {
   app.add_option("--fronts", fronts, "front shapes m:k for the dense-kernel table")->delimiter(',');
   app.add_option("--problems", problems, "problems for the budget sweep")->delimiter(',');
   app.add_option("--ratios", ratios, "factor bytes / device budget")->delimiter(',');
+  std::vector<double> tiled_pool_shares = {Options{}.gpu_tiled_pool_share};
+  app.add_option("--tiled-pool-shares", tiled_pool_shares,
+                 "gpu_tiled_pool_share values for each budget of the solvability runs (default: "
+                 "the library's)")
+      ->delimiter(',');
   app.add_option("--block-problems", block_problems, "problems for the block sweep")
       ->delimiter(',');
   app.add_option("--block-sizes", block_sizes, "max_block_size values")->delimiter(',');
@@ -713,34 +718,40 @@ int main(int argc, char** argv) {
     json rows = json::array();
     std::vector<double> all_ratios = {0};
     all_ratios.insert(all_ratios.end(), ratios.begin(), ratios.end());
-    for (double ratio : all_ratios) {
-      Options ob = o;
-      ob.device_memory_limit =
-          ratio > 0 ? static_cast<std::size_t>(static_cast<double>(factor_bytes) / ratio) : 0;
-      const Run r = ratio > 0 ? run(p, ob, repeat) : in_core;
-      const double floor = std::max(r.fs.bytes_to_device / h2d, r.fs.bytes_to_host / d2h);
-      rows.push_back({{"ratio", ratio},
-                      {"budget_bytes", ob.device_memory_limit},
-                      {"factor_seconds", r.seconds},
-                      {"transfer_floor_seconds", floor},
-                      {"slowdown_vs_in_core", r.seconds / in_core.seconds},
-                      {"bytes_to_device", r.fs.bytes_to_device},
-                      {"bytes_to_host", r.fs.bytes_to_host},
-                      {"device_batches", r.fs.device_batches},
-                      {"tiled_fronts", r.fs.tiled_fronts},
-                      {"contribution_blocks_on_host", r.fs.contribution_blocks_on_host},
-                      {"factor_resident", r.fs.factor_resident},
-                      {"solve_seconds", r.solve_seconds},
-                      {"solve_on_device", r.on_device},
-                      {"backward_error", r.berr},
-                      {"factor_phases", r.fs.device_phases}});
-      fmt::print(
-          "{:<14} {:>6} {:>10.1f} {:>9.4f} {:>9.4f} {:>9.2f} {:>6} {:>7} {:>9.4f} {:>8.1e}\n", name,
-          ratio > 0 ? fmt::format("{:g}", ratio) : "core", ob.device_memory_limit * 1e-6, r.seconds,
-          floor, r.seconds / in_core.seconds, r.fs.tiled_fronts,
-          r.fs.contribution_blocks_on_host ? "yes" : "no", r.solve_seconds, r.berr);
-      std::fflush(stdout);
-    }
+    for (double ratio : all_ratios)
+      for (double share :
+           ratio > 0 ? tiled_pool_shares : std::vector<double>{o.gpu_tiled_pool_share}) {
+        Options ob = o;
+        ob.device_memory_limit =
+            ratio > 0 ? static_cast<std::size_t>(static_cast<double>(factor_bytes) / ratio) : 0;
+        ob.gpu_tiled_pool_share = share;
+        const Run r = ratio > 0 ? run(p, ob, repeat) : in_core;
+        const double floor = std::max(r.fs.bytes_to_device / h2d, r.fs.bytes_to_host / d2h);
+        rows.push_back({{"ratio", ratio},
+                        {"budget_bytes", ob.device_memory_limit},
+                        {"tiled_pool_share", share},
+                        {"device_pool_bytes", r.fs.device_pool_bytes},
+                        {"factor_seconds", r.seconds},
+                        {"transfer_floor_seconds", floor},
+                        {"slowdown_vs_in_core", r.seconds / in_core.seconds},
+                        {"bytes_to_device", r.fs.bytes_to_device},
+                        {"bytes_to_host", r.fs.bytes_to_host},
+                        {"device_batches", r.fs.device_batches},
+                        {"tiled_fronts", r.fs.tiled_fronts},
+                        {"contribution_blocks_on_host", r.fs.contribution_blocks_on_host},
+                        {"factor_resident", r.fs.factor_resident},
+                        {"solve_seconds", r.solve_seconds},
+                        {"solve_on_device", r.on_device},
+                        {"backward_error", r.berr},
+                        {"factor_phases", r.fs.device_phases}});
+        fmt::print(
+            "{:<14} {:>6} {:>10.1f} {:>9.4f} {:>9.4f} {:>9.2f} {:>6} {:>7} {:>9.4f} {:>8.1e}\n",
+            name, ratio > 0 ? fmt::format("{:g}/{:g}", ratio, share) : "core",
+            ob.device_memory_limit * 1e-6, r.seconds, floor, r.seconds / in_core.seconds,
+            r.fs.tiled_fronts, r.fs.contribution_blocks_on_host ? "yes" : "no", r.solve_seconds,
+            r.berr);
+        std::fflush(stdout);
+      }
     out["solvability"].push_back({{"problem", name},
                                   {"n", p.a.n_rows},
                                   {"factor_bytes", factor_bytes},

@@ -323,6 +323,7 @@ int run_solve(const SolveArgs& a, const Communicator& comm) {
                    {"lu_large_fronts_pivoted", f.lu_large_fronts_pivoted},
                    {"lu_large_fronts_batched", f.lu_large_fronts_batched},
                    {"device_budget", f.device_budget},
+                   {"device_pool_bytes", f.device_pool_bytes},
                    {"contribution_blocks_on_host", f.contribution_blocks_on_host},
                    {"factor_resident", f.factor_resident},
                    {"device_phases", f.device_phases}};

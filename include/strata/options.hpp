@@ -115,6 +115,14 @@ struct Options {
   /// time (the path before the batched kernels). Default 256 (measured on the H100 with
   /// bench_gpu_memory --parts lu-panel, bench/REPORT.md).
   index_t gpu_lu_strip_pivots = 256;
+  /// CUDA backend under a device_memory_limit, when some front is over the budget and is
+  /// factored through the device in pieces (a "tiled" front): the device pool, where
+  /// fronts are factored, is made at least this share of the limit, in [0, 1). The pieces
+  /// of a tiled front grow with the pool — the traffic of its factorization falls about
+  /// as 1 / pool — while the rest of the limit holds contribution blocks, which spill to
+  /// pinned host memory when it is short. 0: the pool is the largest batch of fronts that
+  /// fit (the plan's own size). Outside [0, 1): InvalidInput.
+  double gpu_tiled_pool_share = 0.0;
   /// CUDA backend, Cholesky: a front with more pivots than gpu_panel_kernel_max_pivots
   /// and than this gets its pivot block and panel in column blocks of this width (POTRF
   /// of each diagonal block, TRSM of the rows below it, SYRK and GEMM of the remaining

@@ -154,6 +154,7 @@ struct FactorStats {
   index_t lu_large_fronts_pivoted = 0;
   index_t lu_large_fronts_batched = 0;
   std::size_t device_budget = 0;             ///< bytes the numeric working memory was held to
+  std::size_t device_pool_bytes = 0;         ///< of device_budget, the pool fronts are factored in
   bool contribution_blocks_on_host = false;  ///< some blocks spilled to pinned host memory
   bool factor_resident = false;              ///< the factor stayed on the device: solve runs there
   /// Where the GPU time went (seconds, from CUDA events around each in-core launch group;

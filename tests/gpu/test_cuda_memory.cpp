@@ -61,8 +61,8 @@ TEST_F(CudaMemory, CholeskyUnderATightBudgetEqualsInCore) {
 // Cholesky fronts over the budget (tiled_llt.cu: pivot columns left-looking by slabs,
 // the contribution block by square tiles) on random symmetric scalings D·A·D of a
 // Laplacian and of an elasticity stencil, budgets from a quarter of the largest front
-// down to a few slabs: the factor equals the CPU's entry by entry, and a refactorization
-// with other values under the same plan equals the CPU's on those.
+// down to a few slabs, the pool as planned and 60% of the budget: the factor equals the CPU's entry
+// by entry, and a refactorization with other values under the same plan equals the CPU's on those.
 TEST_F(CudaMemory, TiledCholeskyFrontsMatchCpu) {
   auto rng = test::fresh_rng();
   std::uniform_real_distribution<double> u(0.5, 2.0);
@@ -73,40 +73,43 @@ TEST_F(CudaMemory, TiledCholeskyFrontsMatchCpu) {
     o.type = MatrixType::spd;
     Analysis an = analyze_matrix(base, o);
     const double largest = static_cast<double>(an.stats.largest_front_rows);
-    for (double share : {0.25, 0.1, 0.04}) {
-      // at least a pool for three slabs of 16 columns of the largest front (below that
-      // the plan refuses the budget: ImpossibleBudgetNamesTheBytes)
-      const auto limit = static_cast<std::size_t>(
-          std::max(share * largest * largest, 64 * largest) * sizeof(double));
-      o.device_memory_limit = limit;
-      SCOPED_TRACE("n " + std::to_string(base.n_rows) + ", device_memory_limit " +
-                   std::to_string(limit));
-      Analysis ab = analyze_matrix(base, o);
-      auto gpu = numeric::make_cuda_executor(o);
-      auto cpu = numeric::make_cpu_executor(2);
-      for (int round = 0; round < 2; ++round) {  // a factorization, then a refactorization
-        SparseMatrix a = base;
-        std::vector<double> d(a.n_rows);
-        for (double& v : d) v = u(rng);
-        for (index_t j = 0; j < a.n_cols; ++j)
-          for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p)
-            a.values[p] *= d[j] * d[a.indices[p]];
-        SparseMatrix c = canonical_values(ab, a);
-        numeric::NumericFactor cpu_f, gpu_f;
-        std::vector<double> arena;
-        numeric::factorize(ab, c.values, MatrixType::spd, 0.0, *cpu, cpu_f, arena);
-        numeric::factorize(ab, c.values, MatrixType::spd, 0.0, *gpu, gpu_f, arena);
-        FactorStats fs;
-        gpu->report(fs);
-        numeric::fetch_panels(ab, *gpu, gpu_f);
-        SCOPED_TRACE(std::string("blocks on host ") +
-                     (fs.contribution_blocks_on_host ? "yes" : "no") + ", round " +
-                     std::to_string(round));
-        EXPECT_GT(fs.tiled_fronts, 0);
-        EXPECT_FALSE(fs.factor_resident);
-        EXPECT_LT(test::relative_difference(gpu_f.panels, cpu_f.panels), 1e-12);
+    for (double pool_share : {0.0, 0.6})
+      for (double share : {0.25, 0.1, 0.04}) {
+        // at least a pool for three slabs of 16 columns of the largest front (below that
+        // the plan refuses the budget: ImpossibleBudgetNamesTheBytes)
+        const auto limit = static_cast<std::size_t>(
+            std::max(share * largest * largest, 64 * largest) * sizeof(double));
+        o.device_memory_limit = limit;
+        o.gpu_tiled_pool_share = pool_share;
+        SCOPED_TRACE("n " + std::to_string(base.n_rows) + ", device_memory_limit " +
+                     std::to_string(limit) + ", gpu_tiled_pool_share " +
+                     std::to_string(pool_share));
+        Analysis ab = analyze_matrix(base, o);
+        auto gpu = numeric::make_cuda_executor(o);
+        auto cpu = numeric::make_cpu_executor(2);
+        for (int round = 0; round < 2; ++round) {  // a factorization, then a refactorization
+          SparseMatrix a = base;
+          std::vector<double> d(a.n_rows);
+          for (double& v : d) v = u(rng);
+          for (index_t j = 0; j < a.n_cols; ++j)
+            for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p)
+              a.values[p] *= d[j] * d[a.indices[p]];
+          SparseMatrix c = canonical_values(ab, a);
+          numeric::NumericFactor cpu_f, gpu_f;
+          std::vector<double> arena;
+          numeric::factorize(ab, c.values, MatrixType::spd, 0.0, *cpu, cpu_f, arena);
+          numeric::factorize(ab, c.values, MatrixType::spd, 0.0, *gpu, gpu_f, arena);
+          FactorStats fs;
+          gpu->report(fs);
+          numeric::fetch_panels(ab, *gpu, gpu_f);
+          SCOPED_TRACE(std::string("blocks on host ") +
+                       (fs.contribution_blocks_on_host ? "yes" : "no") + ", round " +
+                       std::to_string(round));
+          EXPECT_GT(fs.tiled_fronts, 0);
+          EXPECT_FALSE(fs.factor_resident);
+          EXPECT_LT(test::relative_difference(gpu_f.panels, cpu_f.panels), 1e-12);
+        }
       }
-    }
   }
 }
 

@@ -506,6 +506,11 @@ TEST(TreePartition, OneWorkerAndBadArguments) {
   Options neg_lu_panel;
   neg_lu_panel.gpu_lu_strip_pivots = -1;
   EXPECT_THROW(analyze_matrix(a, neg_lu_panel), InvalidInput);
+  for (double share : {-0.1, 1.0, std::nan("")}) {
+    Options bad_share;
+    bad_share.gpu_tiled_pool_share = share;
+    EXPECT_THROW(analyze_matrix(a, bad_share), InvalidInput) << share;
+  }
   // the CPU backend ignores num_gpus: one worker, no split
   Options cpu;
   cpu.num_gpus = 3;

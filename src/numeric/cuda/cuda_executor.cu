@@ -100,6 +100,7 @@ CudaExecutor::CudaExecutor(const Options& o, int device)
       limit_(o.device_memory_limit),
       panel_max_pivots_(o.gpu_panel_kernel_max_pivots),
       lu_strip_pivots_(o.gpu_lu_strip_pivots),
+      tiled_pool_share_(o.gpu_tiled_pool_share),
       split_min_cb_(o.split_front_min_cb),
       dist_min_rows_(o.distributed_front_min_rows),
       dist_block_(std::max<index_t>(64, o.distributed_front_block_size)),
@@ -464,6 +465,7 @@ void CudaExecutor::report(FactorStats& fs) const {
   fs.lu_large_fronts_pivoted = lu_fronts_pivoted_;
   fs.lu_large_fronts_batched = lu_fronts_batched_;
   fs.device_budget = plan_.budget;
+  fs.device_pool_bytes = plan_.pool * sizeof(double);
   fs.contribution_blocks_on_host = plan_.arena_on_host;
   fs.factor_resident = keep_resident();
   fs.device_phases = phases_;
@@ -506,8 +508,12 @@ void CudaExecutor::plan_device_memory(const Analysis& an,
     }
   }
   // a tiled front needs a slab and two column blocks of at least kMinSlab columns
-  if (tiled_rows > 0)
+  if (tiled_rows > 0) {
     pool = std::max<std::size_t>(pool, 3 * static_cast<std::size_t>(tiled_rows) * kMinSlab);
+    // a larger pool means larger pieces of the tiled fronts (Options::gpu_tiled_pool_share)
+    pool =
+        std::max(pool, static_cast<std::size_t>(tiled_pool_share_ * static_cast<double>(budget_d)));
+  }
   if (limit_ > 0 && pool > budget_d)
     throw OutOfMemory(pool * sizeof(double),
                       "the device pool for the largest front (device_memory_limit is " +

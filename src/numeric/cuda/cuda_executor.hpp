@@ -331,6 +331,7 @@ class CudaExecutor final : public numeric::Executor {
   std::size_t limit_ = 0;
   std::int64_t panel_max_pivots_ = 0;  ///< Options::gpu_panel_kernel_max_pivots
   std::int64_t lu_strip_pivots_ = 0;   ///< Options::gpu_lu_strip_pivots
+  double tiled_pool_share_ = 0;        ///< Options::gpu_tiled_pool_share
   std::int64_t split_min_cb_ = 0;      ///< Options::split_front_min_cb
   std::int64_t dist_min_rows_ = 0;     ///< Options::distributed_front_min_rows
   std::int64_t dist_block_ = 512;      ///< Options::distributed_front_block_size
