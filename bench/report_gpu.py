@@ -1245,9 +1245,11 @@ class GpuSections:
             for x in p.get("runs", []):
                 fl = num(x.get("transfer_floor_seconds"))
                 ft = num(x.get("factor_seconds"))
+                share = num(x.get("tiled_pool_share"))
                 rows.append([str(p.get("problem")), ratio_label(x.get("ratio")),
                              f_g(num(x.get("budget_bytes")) and x["budget_bytes"] / 1e6)
                              if num(x.get("ratio")) else "–",
+                             f"{share:g}" if share is not None and num(x.get("ratio")) else "–",
                              f_sec(ft), f"{num(x.get('slowdown_vs_in_core')) or 0:.2f}",
                              f_sec(fl), f_ratio(ratio(ft, fl)),
                              f_g(num(x.get("bytes_to_device")) and x["bytes_to_device"] / 1e6),
@@ -1262,13 +1264,16 @@ class GpuSections:
         self.w("Per problem (factor bytes in MB: "
                + ", ".join(f"{p.get('problem')} {f_g(num(p.get('factor_bytes')) and p['factor_bytes'] / 1e6)}"
                            for p in probs)
-               + "): the budget, the factorization time (median of the run's repeats), the "
+               + "): the budget, the device pool's share of it that the run asked for "
+               "(`gpu_tiled_pool_share`; 0 or – : the plan's own pool), the factorization "
+               "time (median of the run's repeats), the "
                "slowdown against in core, the PCIe floor and the time over it, megabytes "
                "moved each way, device batches, fronts tiled because they do not fit, "
                "whether contribution blocks were spilled to the host, whether the factor "
                "stayed on the device, the solve time and the backward error.")
         self.w()
-        self.w(table(["problem", "factor/budget", "budget MB", "factor s", "slowdown",
+        self.w(table(["problem", "factor/budget", "budget MB", "pool share", "factor s",
+                      "slowdown",
                       "PCIe floor s", "time/floor", "MB to device", "MB to host", "batches",
                       "tiled fronts", "CBs spilled", "factor on device", "solve s", "berr"],
                      rows, 2))
@@ -1288,16 +1293,21 @@ class GpuSections:
         colors = self.plt.rcParams["axes.prop_cycle"].by_key()["color"]
         for i, p in enumerate(probs):
             c = colors[i % len(colors)]
-            pts = sorted((num(x.get("ratio")), num(x.get("factor_seconds")),
-                          num(x.get("transfer_floor_seconds"))) for x in p.get("runs", [])
-                         if num(x.get("ratio")))
+            shares = sorted({num(x.get("tiled_pool_share")) or 0 for x in p.get("runs", [])
+                             if num(x.get("ratio"))})
+            for si, sh in enumerate(shares):  # one line per pool share asked for
+                pts = sorted((num(x.get("ratio")), num(x.get("factor_seconds")),
+                              num(x.get("transfer_floor_seconds"))) for x in p.get("runs", [])
+                             if num(x.get("ratio"))
+                             and (num(x.get("tiled_pool_share")) or 0) == sh)
+                tag = f" pool {sh:g}" if len(shares) > 1 else ""
+                style = ["o-", "s--", "^-."][si % 3]
+                ax.plot([a for a, _, _ in pts], [b for _, b, _ in pts], style, color=c,
+                        label=f"{p.get('problem')}{tag}")
+                ax.plot([a for a, _, _ in pts], [f for _, _, f in pts], "x:", color=c,
+                        label=f"{p.get('problem')}{tag} PCIe floor")
             core = [num(x.get("factor_seconds")) for x in p.get("runs", [])
                     if not num(x.get("ratio"))]
-            if pts:
-                ax.plot([a for a, _, _ in pts], [b for _, b, _ in pts], "o-", color=c,
-                        label=f"{p.get('problem')}")
-                ax.plot([a for a, _, _ in pts], [f for _, _, f in pts], "x:", color=c,
-                        label=f"{p.get('problem')} PCIe floor")
             if core and core[0]:
                 ax.axhline(core[0], color=c, ls="--", lw=0.8, alpha=0.7)
         ax.set_xscale("log")
