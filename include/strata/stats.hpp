@@ -173,6 +173,11 @@ struct FactorStats {
     /// and the per-front bookkeeping (tiled_store).
     double tiled_assembly = 0;
     double tiled_slabs = 0;
+    /// Of tiled_slabs, for Cholesky fronts (tiled_llt.cu): the pivot columns, left-looking
+    /// by slabs (tiled_pivot_columns), and the contribution block's update by tiles
+    /// (tiled_cb_update). Wall time; 0 for LU, whose slabs do both at once.
+    double tiled_pivot_columns = 0;
+    double tiled_cb_update = 0;
     double tiled_store = 0;
     double host = 0;  ///< see above
     /// Wall time preparing the device, not in the groups above: the analysis arrays

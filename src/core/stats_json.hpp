@@ -22,6 +22,8 @@ inline void to_json(nlohmann::json& j, const FactorStats::DevicePhases& d) {
        {"setup", d.setup},
        {"tiled_assembly", d.tiled_assembly},
        {"tiled_slabs", d.tiled_slabs},
+       {"tiled_pivot_columns", d.tiled_pivot_columns},
+       {"tiled_cb_update", d.tiled_cb_update},
        {"tiled_store", d.tiled_store}};
 }
 

@@ -107,6 +107,8 @@ void merge_device_figures(FactorStats& into, const FactorStats& one) {
   d.tiled_fronts += o.tiled_fronts;
   d.tiled_assembly += o.tiled_assembly;
   d.tiled_slabs += o.tiled_slabs;
+  d.tiled_pivot_columns += o.tiled_pivot_columns;
+  d.tiled_cb_update += o.tiled_cb_update;
   d.tiled_store += o.tiled_store;
   d.host += o.host;
   d.setup += o.setup;

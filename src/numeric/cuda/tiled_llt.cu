@@ -161,6 +161,11 @@ void CudaExecutor::factor_tiled_llt(const numeric::FactorContext& ctx, index_t p
     bytes_d2h_ += sizeof(double) * r * w;
   }
 
+  // (waits for the last slab's download: the split of tiled_slabs between the two steps)
+  STRATA_CUDA(cudaStreamSynchronize(stream_));
+  const auto update_start = std::chrono::steady_clock::now();
+  phases_.tiled_pivot_columns += std::chrono::duration<double>(update_start - slabs_start).count();
+
   // 2. the contribution block, C −= L21·L21ᵀ by tiles
   if (has_cb && k > 0) {
     const std::int64_t b = tile_side(plan_.pool, k, mc, cb_on_host);
@@ -216,6 +221,7 @@ void CudaExecutor::factor_tiled_llt(const numeric::FactorContext& ctx, index_t p
   STRATA_CUDA(cudaStreamSynchronize(stream_));
 
   const auto store_start = std::chrono::steady_clock::now();
+  phases_.tiled_cb_update += std::chrono::duration<double>(store_start - update_start).count();
   phases_.tiled_slabs += std::chrono::duration<double>(store_start - slabs_start).count();
   // the panel to the host factor (and the resident device factor, if any)
   double* panel = ctx.factor->panels.data() + an.factor_layout.panel_offset[f];
