@@ -1236,6 +1236,39 @@ class GpuSections:
                    f"{PEAK_TARGET:.0%}: **{'met' if g * 1e9 >= PEAK_TARGET * peak else 'not met'}**).")
             self.w()
 
+    def solvability_phases(self, probs: list) -> None:
+        """Where a budgeted run's time went (FactorStats::device_phases), when it tiled."""
+        rows = []
+        for p in probs:
+            for x in p.get("runs", []):
+                ph = x.get("factor_phases") or {}
+                if not num(x.get("ratio")) or not num(ph.get("tiled_fronts")):
+                    continue
+                chunks = sum(num(ph.get(k)) or 0
+                             for k in ("assembly", "small_fronts", "large_fronts", "store"))
+                split = ("tiled_pivot_columns" in ph)
+                share = num(x.get("tiled_pool_share"))
+                rows.append([str(p.get("problem")), ratio_label(x.get("ratio")),
+                             f"{share:g}" if share is not None else "–",
+                             f_sec(num(x.get("factor_seconds"))), f_sec(chunks),
+                             f_sec(num(ph.get("host"))), f_sec(num(ph.get("tiled_assembly"))),
+                             f_sec(num(ph.get("tiled_slabs"))),
+                             f_sec(num(ph.get("tiled_pivot_columns"))) if split else "–",
+                             f_sec(num(ph.get("tiled_cb_update"))) if split else "–",
+                             f_sec(num(ph.get("tiled_store")))])
+        if not rows:
+            return
+        self.w("Where the budgeted runs' time went (`FactorStats::device_phases`, seconds): the "
+               "launch groups of the fronts that fit (assembly, small and large fronts, stores; "
+               "GPU time), the host's part after each group, and the tiled fronts' wall time — "
+               "assembly on the host, slabs (for Cholesky since e45b480 split into the pivot "
+               "columns and the contribution block's update; – where the run predates the "
+               "split), the stores.")
+        self.w()
+        self.w(table(["problem", "factor/budget", "pool share", "factor s", "groups s", "host s",
+                      "tiled assembly s", "tiled slabs s", "pivot columns s", "CB update s",
+                      "tiled stores s"], rows, 2))
+
     def solvability_run(self, r: Run) -> None:
         self.consumed.add(r.path)
         self.device_table(r)
@@ -1289,6 +1322,7 @@ class GpuSections:
                    f"{max(t for *_, t in worst if t):.0f}× above the PCIe floor: the bytes moved, "
                    f"at the measured pinned bandwidth, are not what bounds the time.")
             self.w()
+        self.solvability_phases(probs)
         fig, ax = self.plt.subplots(figsize=(7.5, 4.8))
         colors = self.plt.rcParams["axes.prop_cycle"].by_key()["color"]
         for i, p in enumerate(probs):
