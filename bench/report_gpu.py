@@ -1248,8 +1248,10 @@ class GpuSections:
                              for k in ("assembly", "small_fronts", "large_fronts", "store"))
                 split = ("tiled_pivot_columns" in ph)
                 share = num(x.get("tiled_pool_share"))
+                cols = x.get("tiled_stream_columns")
                 rows.append([str(p.get("problem")), ratio_label(x.get("ratio")),
                              f"{share:g}" if share is not None else "–",
+                             f_int(cols) if cols is not None else "–",
                              f_sec(num(x.get("factor_seconds"))), f_sec(chunks),
                              f_sec(num(ph.get("host"))), f_sec(num(ph.get("tiled_assembly"))),
                              f_sec(num(ph.get("tiled_slabs"))),
@@ -1265,7 +1267,8 @@ class GpuSections:
                "columns and the contribution block's update; – where the run predates the "
                "split), the stores.")
         self.w()
-        self.w(table(["problem", "factor/budget", "pool share", "factor s", "groups s", "host s",
+        self.w(table(["problem", "factor/budget", "pool share", "stream cols", "factor s",
+                      "groups s", "host s",
                       "tiled assembly s", "tiled slabs s", "pivot columns s", "CB update s",
                       "tiled stores s"], rows, 2))
 
@@ -1283,6 +1286,9 @@ class GpuSections:
                              f_g(num(x.get("budget_bytes")) and x["budget_bytes"] / 1e6)
                              if num(x.get("ratio")) else "–",
                              f"{share:g}" if share is not None and num(x.get("ratio")) else "–",
+                             f_int(x.get("tiled_stream_columns"))
+                             if x.get("tiled_stream_columns") is not None and num(x.get("ratio"))
+                             else "–",
                              f_sec(ft), f"{num(x.get('slowdown_vs_in_core')) or 0:.2f}",
                              f_sec(fl), f_ratio(ratio(ft, fl)),
                              f_g(num(x.get("bytes_to_device")) and x["bytes_to_device"] / 1e6),
@@ -1298,14 +1304,17 @@ class GpuSections:
                + ", ".join(f"{p.get('problem')} {f_g(num(p.get('factor_bytes')) and p['factor_bytes'] / 1e6)}"
                            for p in probs)
                + "): the budget, the device pool's share of it that the run asked for "
-               "(`gpu_tiled_pool_share`; 0 or – : the plan's own pool), the factorization "
+               "(`gpu_tiled_pool_share`; 0 or – : the plan's own pool) and the width of the "
+               "pieces streamed through a tiled Cholesky front (`gpu_tiled_stream_columns`; "
+               "0 or –: a third of the pool), the factorization "
                "time (median of the run's repeats), the "
                "slowdown against in core, the PCIe floor and the time over it, megabytes "
                "moved each way, device batches, fronts tiled because they do not fit, "
                "whether contribution blocks were spilled to the host, whether the factor "
                "stayed on the device, the solve time and the backward error.")
         self.w()
-        self.w(table(["problem", "factor/budget", "budget MB", "pool share", "factor s",
+        self.w(table(["problem", "factor/budget", "budget MB", "pool share", "stream cols",
+                      "factor s",
                       "slowdown",
                       "PCIe floor s", "time/floor", "MB to device", "MB to host", "batches",
                       "tiled fronts", "CBs spilled", "factor on device", "solve s", "berr"],

@@ -123,6 +123,13 @@ struct Options {
   /// pinned host memory when it is short. 0: the pool is the largest batch of fronts that
   /// fit (the plan's own size). Outside [0, 1): InvalidInput.
   double gpu_tiled_pool_share = 0.0;
+  /// CUDA backend, a Cholesky front over the device budget (src/numeric/cuda/tiled_llt.cu):
+  /// the earlier pivot columns streamed against a slab, and another tile row's rows of L21
+  /// streamed against a tile, come in pieces of at most this many columns, so that the
+  /// slab and the tiles that stay on the device can be wider — fewer passes over the
+  /// front's columns, at the price of narrower products. 0: pieces as wide as the slab (a
+  /// third of the pool each) and whole rows of L21. Negative: InvalidInput. Default 0.
+  index_t gpu_tiled_stream_columns = 0;
   /// CUDA backend, Cholesky: a front with more pivots than gpu_panel_kernel_max_pivots
   /// and than this gets its pivot block and panel in column blocks of this width (POTRF
   /// of each diagonal block, TRSM of the rows below it, SYRK and GEMM of the remaining

@@ -316,6 +316,9 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers)
   if (!(opts.gpu_tiled_pool_share >= 0 && opts.gpu_tiled_pool_share < 1))
     throw InvalidInput("Options::gpu_tiled_pool_share must be in [0, 1) (got " +
                        std::to_string(opts.gpu_tiled_pool_share) + ")");
+  if (opts.gpu_tiled_stream_columns < 0)
+    throw InvalidInput("Options::gpu_tiled_stream_columns must be at least 0 (got " +
+                       std::to_string(opts.gpu_tiled_stream_columns) + ")");
   if (opts.gpu_lu_strip_pivots < 0)
     throw InvalidInput("Options::gpu_lu_strip_pivots must be at least 0 (got " +
                        std::to_string(opts.gpu_lu_strip_pivots) + ")");

@@ -61,7 +61,8 @@ TEST_F(CudaMemory, CholeskyUnderATightBudgetEqualsInCore) {
 // Cholesky fronts over the budget (tiled_llt.cu: pivot columns left-looking by slabs,
 // the contribution block by square tiles) on random symmetric scalings D·A·D of a
 // Laplacian and of an elasticity stencil, budgets from a quarter of the largest front
-// down to a few slabs, the pool as planned and 60% of the budget: the factor equals the CPU's entry
+// down to a few slabs, the pool as planned and 60% of the budget, earlier columns streamed
+// as wide as a slab and in pieces of 48: the factor equals the CPU's entry
 // by entry, and a refactorization with other values under the same plan equals the CPU's on those.
 TEST_F(CudaMemory, TiledCholeskyFrontsMatchCpu) {
   auto rng = test::fresh_rng();
@@ -73,7 +74,9 @@ TEST_F(CudaMemory, TiledCholeskyFrontsMatchCpu) {
     o.type = MatrixType::spd;
     Analysis an = analyze_matrix(base, o);
     const double largest = static_cast<double>(an.stats.largest_front_rows);
-    for (double pool_share : {0.0, 0.6})
+    // (pool share, streamed piece width): the plan's pool, a larger pool, narrow pieces
+    for (auto [pool_share, stream] :
+         {std::pair{0.0, index_t{0}}, std::pair{0.6, index_t{0}}, std::pair{0.0, index_t{48}}})
       for (double share : {0.25, 0.1, 0.04}) {
         // at least a pool for three slabs of 16 columns of the largest front (below that
         // the plan refuses the budget: ImpossibleBudgetNamesTheBytes)
@@ -81,9 +84,11 @@ TEST_F(CudaMemory, TiledCholeskyFrontsMatchCpu) {
             std::max(share * largest * largest, 64 * largest) * sizeof(double));
         o.device_memory_limit = limit;
         o.gpu_tiled_pool_share = pool_share;
+        o.gpu_tiled_stream_columns = stream;
         SCOPED_TRACE("n " + std::to_string(base.n_rows) + ", device_memory_limit " +
                      std::to_string(limit) + ", gpu_tiled_pool_share " +
-                     std::to_string(pool_share));
+                     std::to_string(pool_share) + ", gpu_tiled_stream_columns " +
+                     std::to_string(stream));
         Analysis ab = analyze_matrix(base, o);
         auto gpu = numeric::make_cuda_executor(o);
         auto cpu = numeric::make_cpu_executor(2);
@@ -131,11 +136,13 @@ TEST_F(CudaMemory, TiledCholeskyFailureNamesTheCpusColumn) {
   }
   o.backend = Backend::cuda;
   for (std::size_t limit : {256 * std::size_t{1024}, MiB})
-    for (bool recursive : {true, false}) {
+    for (auto [recursive, stream] : {std::pair{true, index_t{0}}, std::pair{false, index_t{0}},
+                                     std::pair{true, index_t{32}}}) {
       SCOPED_TRACE("device_memory_limit " + std::to_string(limit) + ", recursive " +
-                   std::to_string(recursive));
+                   std::to_string(recursive) + ", stream " + std::to_string(stream));
       o.device_memory_limit = limit;
       o.gpu_recursive_panel = recursive;
+      o.gpu_tiled_stream_columns = stream;
       Solver s(o);
       try {
         s.factorize(a);

@@ -506,6 +506,9 @@ TEST(TreePartition, OneWorkerAndBadArguments) {
   Options neg_lu_panel;
   neg_lu_panel.gpu_lu_strip_pivots = -1;
   EXPECT_THROW(analyze_matrix(a, neg_lu_panel), InvalidInput);
+  Options neg_stream;
+  neg_stream.gpu_tiled_stream_columns = -1;
+  EXPECT_THROW(analyze_matrix(a, neg_stream), InvalidInput);
   for (double share : {-0.1, 1.0, std::nan("")}) {
     Options bad_share;
     bad_share.gpu_tiled_pool_share = share;

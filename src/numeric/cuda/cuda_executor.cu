@@ -101,6 +101,7 @@ CudaExecutor::CudaExecutor(const Options& o, int device)
       panel_max_pivots_(o.gpu_panel_kernel_max_pivots),
       lu_strip_pivots_(o.gpu_lu_strip_pivots),
       tiled_pool_share_(o.gpu_tiled_pool_share),
+      tiled_stream_cols_(o.gpu_tiled_stream_columns),
       split_min_cb_(o.split_front_min_cb),
       dist_min_rows_(o.distributed_front_min_rows),
       dist_block_(std::max<index_t>(64, o.distributed_front_block_size)),
@@ -693,10 +694,10 @@ void CudaExecutor::presize_chunk_buffers(const Analysis& an,
     const PartDevice& pd = parts_.at(v.id);
     const auto& s = *v.schedule;
     for (index_t q = 0; q < static_cast<index_t>(s.fronts.size()); ++q) {
-      if (pd.tiled[q] && !lu && recursive_panel_) {  // its slabs, on lane 0 (tiled_front.cu)
+      if (pd.tiled[q] && !lu && recursive_panel_) {  // its slabs, on lane 0 (tiled_llt.cu)
         const index_t f = s.fronts[q];
-        diag_slab =
-            std::max(diag_slab, llt_recursive_work_size(slab_width(t.n_rows(f), t.n_pivots(f))));
+        diag_slab = std::max(
+            diag_slab, llt_recursive_work_size(tiled_llt_widths(t.n_rows(f), t.n_pivots(f)).slab));
       }
       if (pd.tiled[q] || pd.chunk_end[q] <= q) continue;
       std::size_t nb = 0, ns = 0, np = 0, ni = 0;

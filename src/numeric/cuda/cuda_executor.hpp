@@ -215,6 +215,13 @@ class CudaExecutor final : public numeric::Executor {
   /// Columns per slab of a tiled front (m rows, k pivots): a slab and two column blocks
   /// of the trailing matrix fit the pool (3·m·w doubles), at least 1, at most k.
   std::int64_t slab_width(std::int64_t m, std::int64_t k) const;
+  /// A tiled Cholesky front's slab (columns factored together) and the pieces of earlier
+  /// columns streamed against it (Options::gpu_tiled_stream_columns): a slab and two
+  /// pieces of m rows fit the pool; both slab_width when the option is 0.
+  struct TiledWidths {
+    std::int64_t slab = 1, stream = 1;
+  };
+  TiledWidths tiled_llt_widths(std::int64_t m, std::int64_t k) const;
   /// Whether p points into the pinned host arena (a contribution block spilled to the host)
   /// rather than device memory.
   bool in_host_arena(const double* p) const {
@@ -329,14 +336,15 @@ class CudaExecutor final : public numeric::Executor {
   cublasHandle_t blas_ = nullptr;
   cusolverDnHandle_t solver_ = nullptr;
   std::size_t limit_ = 0;
-  std::int64_t panel_max_pivots_ = 0;  ///< Options::gpu_panel_kernel_max_pivots
-  std::int64_t lu_strip_pivots_ = 0;   ///< Options::gpu_lu_strip_pivots
-  double tiled_pool_share_ = 0;        ///< Options::gpu_tiled_pool_share
-  std::int64_t split_min_cb_ = 0;      ///< Options::split_front_min_cb
-  std::int64_t dist_min_rows_ = 0;     ///< Options::distributed_front_min_rows
-  std::int64_t dist_block_ = 512;      ///< Options::distributed_front_block_size
-  int potrf_block_ = 0;                ///< Options::gpu_potrf_block_size
-  bool recursive_panel_ = true;        ///< Options::gpu_recursive_panel
+  std::int64_t panel_max_pivots_ = 0;   ///< Options::gpu_panel_kernel_max_pivots
+  std::int64_t lu_strip_pivots_ = 0;    ///< Options::gpu_lu_strip_pivots
+  double tiled_pool_share_ = 0;         ///< Options::gpu_tiled_pool_share
+  std::int64_t tiled_stream_cols_ = 0;  ///< Options::gpu_tiled_stream_columns
+  std::int64_t split_min_cb_ = 0;       ///< Options::split_front_min_cb
+  std::int64_t dist_min_rows_ = 0;      ///< Options::distributed_front_min_rows
+  std::int64_t dist_block_ = 512;       ///< Options::distributed_front_block_size
+  int potrf_block_ = 0;                 ///< Options::gpu_potrf_block_size
+  bool recursive_panel_ = true;         ///< Options::gpu_recursive_panel
   std::uint64_t analysis_id_ = 0;
   DevicePlan plan_;
   // analysis arrays (fronts_: the whole tree's schedule, for the device solve)

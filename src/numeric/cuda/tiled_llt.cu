@@ -7,26 +7,32 @@
 // triangle, mc × mc) straight into its destination, the pinned host arena or — when
 // the plan kept it on the device — a staging area uploaded once (tiled_host.cpp).
 //
-//   1. The pivot columns, left-looking by slabs of w columns (w: a slab and two more of
-//      m rows fit the pool, as slab_width says). For slab J (columns p0 .. p0+w, rows
-//      p0 .. m): upload it; for each earlier slab I, upload its rows p0 .. m on a copy
-//      lane (two lanes, two buffers: one's copy runs while the other's update computes)
-//      and subtract L_I·L_I[top]ᵀ (SYRK on the w × w top, GEMM below); factor the slab
-//      (POTRF and TRSM, or the recursive panel); download it. Nothing of the slab goes
-//      back to the host until it is final.
+//   1. The pivot columns, left-looking by slabs of w columns. For slab J (columns
+//      p0 .. p0+w, rows p0 .. m): upload it; for the earlier columns, piece by piece
+//      (pieces of wq columns), upload their rows p0 .. m on a copy lane (two lanes, two
+//      buffers: one's copy runs while the other's update computes) and subtract
+//      L_q·L_q[top]ᵀ (SYRK on the w × w top, GEMM below); factor the slab (POTRF and
+//      TRSM, or the recursive panel); download it. Nothing of the slab goes back to the
+//      host until it is final. w and wq: tiled_llt_widths — by default a third of the
+//      pool each (w = wq = pool / 3m); with Options::gpu_tiled_stream_columns = s > 0,
+//      wq ≤ s and the slab takes the rest (w ≈ pool/m − 2s).
 //   2. The contribution block, C −= L21·L21ᵀ, by square tiles of b rows: for each tile
-//      row i, its rows of L21 (b × k) stay on the device while, for j ≤ i, the rows of
-//      tile j and the tile C_ij come in on a copy lane, one GEMM updates the tile (the
-//      whole square of a diagonal tile: the upper triangle of a block is never read),
-//      and it goes back. b is the largest with 3·b·k + 2·b² doubles in the pool (3·b·k
-//      when C is on the device: the tiles are updated in place there).
+//      row i, its rows of L21 (b × k) stay on the device while, for j ≤ i, the tile C_ij
+//      comes in on a lane of its own (lanes 3 and 4) and the rows of tile row j in pieces
+//      of kc columns on the copy lanes (kc = k by default, ≤ s with the option), one GEMM
+//      per piece updates the tile (the whole square of a diagonal tile: the upper
+//      triangle of a block is never read), and it goes back. b is the largest with
+//      b·k + 2·b·kc + 2·b² doubles in the pool (without the 2·b² when C is on the
+//      device: the tiles are updated in place there).
 //
 // Traffic, against the right-looking slab scheme this replaced (every slab read and
 // wrote the whole trailing lower triangle, about k·m²/(2w) doubles each way): step 1
 // reads about k²·m/(2w) and writes the panel once; step 2 reads about mc²·(k/b + 1)/2
-// and writes the lower triangle of C once — with w ≈ pool/(3m) and b ≈ √(pool/2) or
-// better, b ≫ w on a front that does not fit, so the contribution block, the bulk of a
-// top front, is read a few times instead of k/w times, and written once.
+// and writes the lower triangle of C once — b ≫ w on a front that does not fit, so the
+// contribution block, the bulk of a top front, is read a few times instead of k/w times,
+// and written once. Narrow pieces (the option) make w and b larger still — up to 3× —
+// for products of depth s instead of w or k. Measured on the H100 (bench/REPORT.md §4):
+// lap3d 100³ under 1/20 of its factor 2.43 → 2.18 s with the default pieces.
 //
 // Source: the left-looking (jki / "lazy") Cholesky of Golub & Van Loan, "Matrix
 // Computations", 4th ed., §4.2.8–4.2.9, with the slab as the unit of transfer, and the
@@ -57,12 +63,15 @@ struct EventPair {
   EventPair& operator=(const EventPair&) = delete;
 };
 
-// The largest tile side b ≤ cap with 3·b·k + (c_tiles ? 2·b² : 0) ≤ pool, at least 1.
-std::int64_t tile_side(std::size_t pool, std::int64_t k, std::int64_t cap, bool c_tiles) {
-  const double p = static_cast<double>(pool), kk = static_cast<double>(k);
-  double b = c_tiles ? (std::sqrt(9 * kk * kk + 8 * p) - 3 * kk) / 4 : p / (3 * std::max(kk, 1.0));
+// The largest tile side b ≤ cap with b·k + 2·b·kc + (c_tiles ? 2·b² : 0) ≤ pool, at least
+// 1: the tile row's rows of L21 (b × k), two streamed pieces of another tile row's (b × kc)
+// and, when the block is on the host, two tiles of it.
+std::int64_t tile_side(std::size_t pool, std::int64_t k, std::int64_t kc, std::int64_t cap,
+                       bool c_tiles) {
+  const double p = static_cast<double>(pool), lin = static_cast<double>(k + 2 * kc);
+  const double b = c_tiles ? (std::sqrt(lin * lin + 8 * p) - lin) / 4 : p / std::max(lin, 1.0);
   auto need = [&](std::int64_t s) {
-    return 3 * static_cast<double>(s) * kk + (c_tiles ? 2 * static_cast<double>(s) * s : 0);
+    return static_cast<double>(s) * lin + (c_tiles ? 2 * static_cast<double>(s) * s : 0);
   };
   std::int64_t s = std::min<std::int64_t>(cap, static_cast<std::int64_t>(b));
   while (s > 1 && need(s) > p) --s;
@@ -70,6 +79,20 @@ std::int64_t tile_side(std::size_t pool, std::int64_t k, std::int64_t cap, bool 
 }
 
 }  // namespace
+
+CudaExecutor::TiledWidths CudaExecutor::tiled_llt_widths(std::int64_t m, std::int64_t k) const {
+  TiledWidths tw;
+  const std::int64_t third = slab_width(m, k);  // three pieces of m rows: at least 1, at most k
+  if (tiled_stream_cols_ <= 0) {
+    tw.slab = tw.stream = third;
+    return tw;
+  }
+  tw.stream = std::min<std::int64_t>(third, tiled_stream_cols_);
+  const std::int64_t rest = static_cast<std::int64_t>(plan_.pool) / m - 2 * tw.stream;
+  tw.slab =
+      std::max<std::int64_t>(tw.stream, std::min<std::int64_t>(std::max<std::int64_t>(k, 1), rest));
+  return tw;
+}
 
 void CudaExecutor::factor_tiled_llt(const numeric::FactorContext& ctx, index_t pos) {
   const auto wall_start = std::chrono::steady_clock::now();
@@ -95,23 +118,25 @@ void CudaExecutor::factor_tiled_llt(const numeric::FactorContext& ctx, index_t p
   const auto slabs_start = std::chrono::steady_clock::now();
   phases_.tiled_assembly += std::chrono::duration<double>(slabs_start - wall_start).count();
 
-  std::vector<std::unique_ptr<Lane>>& lane = lanes();  // lanes 1 and 2 bring the operands
-  Lane& main = *lane[0];                               // stream_ and blas_: the arithmetic
-  EventPair computed;  // per buffer: the last update that read it was enqueued
+  // lanes 1 and 2 bring the streamed operands, 3 and 4 the contribution block's tiles
+  std::vector<std::unique_ptr<Lane>>& lane = lanes();
+  Lane& main = *lane[0];  // stream_ and blas_: the arithmetic
+  EventPair computed;     // per buffer: the last update that read it was enqueued
   for (cudaEvent_t e : computed.ev) STRATA_CUDA(cudaEventRecord(e, stream_));
   // the copy lanes start after everything on stream_ so far (the slab or panel they read
   // was downloaded there)
   auto lanes_follow_main = [&] {
     STRATA_CUDA(cudaEventRecord(main.done, stream_));
-    for (int l = 1; l <= 2; ++l) STRATA_CUDA(cudaStreamWaitEvent(lane[l]->stream, main.done, 0));
+    for (int l = 1; l <= 4; ++l) STRATA_CUDA(cudaStreamWaitEvent(lane[l]->stream, main.done, 0));
   };
   const double one = 1.0, minus_one = -1.0;
 
   // 1. the pivot columns, left-looking by slabs
-  const std::int64_t w_max = slab_width(m, k);
+  const TiledWidths tw = tiled_llt_widths(m, k);
+  const std::int64_t w_max = tw.slab, wq_max = tw.stream;
   double* const S = pool_.data();
   double* const B[2] = {S + static_cast<std::size_t>(m) * w_max,
-                        S + 2 * static_cast<std::size_t>(m) * w_max};
+                        S + static_cast<std::size_t>(m) * (w_max + wq_max)};
   potrf_info_.resize(1);
   for (std::int64_t p0 = 0; p0 < k; p0 += w_max) {
     const std::int64_t w = std::min(w_max, k - p0), r = m - p0;
@@ -119,12 +144,12 @@ void CudaExecutor::factor_tiled_llt(const numeric::FactorContext& ctx, index_t p
     bytes_h2d_ += sizeof(double) * r * w;
     lanes_follow_main();
     std::int64_t use = 0;
-    for (std::int64_t q0 = 0; q0 < p0; q0 += w_max, ++use) {
-      const std::int64_t wq = std::min(w_max, p0 - q0);
+    for (std::int64_t q0 = 0; q0 < p0; q0 += wq_max, ++use) {  // earlier columns, by pieces
+      const std::int64_t wq = std::min(wq_max, p0 - q0);
       const int slot = static_cast<int>(use % 2);
       Lane& ln = *lane[1 + slot];
       STRATA_CUDA(cudaStreamWaitEvent(ln.stream, computed.ev[slot], 0));
-      copy_host_block(ln.stream, B[slot], P, m, p0, q0, r, wq, true);  // slab I, rows p0..m
+      copy_host_block(ln.stream, B[slot], P, m, p0, q0, r, wq, true);  // rows p0..m
       bytes_h2d_ += sizeof(double) * r * wq;
       STRATA_CUDA(cudaEventRecord(ln.done, ln.stream));
       STRATA_CUDA(cudaStreamWaitEvent(stream_, ln.done, 0));
@@ -168,52 +193,70 @@ void CudaExecutor::factor_tiled_llt(const numeric::FactorContext& ctx, index_t p
 
   // 2. the contribution block, C −= L21·L21ᵀ by tiles
   if (has_cb && k > 0) {
-    const std::int64_t b = tile_side(plan_.pool, k, mc, cb_on_host);
-    const std::size_t bk = static_cast<std::size_t>(b) * k;
+    // another tile row's rows of L21 come in pieces of kc columns (all k by default)
+    const std::int64_t kc = tiled_stream_cols_ > 0 ? std::min(k, tiled_stream_cols_) : k;
+    const std::int64_t b = tile_side(plan_.pool, k, kc, mc, cb_on_host);
+    const std::size_t bk = static_cast<std::size_t>(b) * k, bkc = static_cast<std::size_t>(b) * kc;
     double* const Li = pool_.data();
-    double* const Lj[2] = {Li + bk, Li + 2 * bk};
-    double* const Ct[2] = {Li + 3 * bk, Li + 3 * bk + static_cast<std::size_t>(b) * b};
+    double* const Lj[2] = {Li + bk, Li + bk + bkc};
+    double* const Ct[2] = {Li + bk + 2 * bkc, Li + bk + 2 * bkc + static_cast<std::size_t>(b) * b};
     lanes_follow_main();  // the panel's last slab has been downloaded
-    std::int64_t use = 0;
+    std::int64_t use = 0, tiles = 0;
     for (std::int64_t ri = 0; ri < mc; ri += b) {
       const std::int64_t bi = std::min(b, mc - ri);
       // on stream_, after the previous tile row's updates that read it
       copy_host_block(stream_, Li, P, m, k + ri, 0, bi, k, true);
       bytes_h2d_ += sizeof(double) * bi * k;
-      for (std::int64_t rj = 0; rj <= ri; rj += b, ++use) {
+      for (std::int64_t rj = 0; rj <= ri; rj += b, ++tiles) {
         const std::int64_t bj = std::min(b, mc - rj);
-        const int slot = static_cast<int>(use % 2);
-        Lane& ln = *lane[1 + slot];
-        STRATA_CUDA(cudaStreamWaitEvent(ln.stream, computed.ev[slot], 0));
-        const double* L = Li;
-        if (rj != ri) {
-          copy_host_block(ln.stream, Lj[slot], P, m, k + rj, 0, bj, k, true);
-          bytes_h2d_ += sizeof(double) * bj * k;
-          L = Lj[slot];
-        }
-        double* tile = dst + rj * mc + ri;  // in place on the device
+        // the tile: in place on the device, or brought over on a lane of its own (3, 4)
+        const int ts = static_cast<int>(tiles % 2);
+        Lane& tl = *lane[3 + ts];
+        double* tile = dst + rj * mc + ri;
         std::int64_t ldt = mc;
         if (cb_on_host) {
-          tile = Ct[slot];
+          tile = Ct[ts];
           ldt = bi;
-          copy_host_block(ln.stream, tile, C, mc, ri, rj, bi, bj, true);
+          copy_host_block(tl.stream, tile, C, mc, ri, rj, bi, bj, true);  // after its last use
           bytes_h2d_ += sizeof(double) * bi * bj;
+          STRATA_CUDA(cudaEventRecord(tl.done, tl.stream));
+          STRATA_CUDA(cudaStreamWaitEvent(stream_, tl.done, 0));
         }
-        STRATA_CUDA(cudaEventRecord(ln.done, ln.stream));
-        STRATA_CUDA(cudaStreamWaitEvent(stream_, ln.done, 0));
-        STRATA_CUBLAS(cublasDgemm(main.blas, CUBLAS_OP_N, CUBLAS_OP_T, static_cast<int>(bi),
-                                  static_cast<int>(bj), static_cast<int>(k), &minus_one, Li,
-                                  static_cast<int>(bi), L, static_cast<int>(bj), &one, tile,
-                                  static_cast<int>(ldt)));
-        STRATA_CUDA(cudaEventRecord(computed.ev[slot], stream_));
-        if (cb_on_host) {  // back, on the lane, once updated
-          STRATA_CUDA(cudaStreamWaitEvent(ln.stream, computed.ev[slot], 0));
-          copy_host_block(ln.stream, tile, C, mc, ri, rj, bi, bj, false);
+        for (std::int64_t c0 = 0; c0 < k; c0 += kc) {
+          const std::int64_t kcc = std::min(kc, k - c0);
+          const double* L = Li + c0 * bi;  // the diagonal tile: its own rows
+          std::int64_t ldl = bi;
+          if (rj != ri) {
+            const int slot = static_cast<int>(use++ % 2);
+            Lane& ln = *lane[1 + slot];
+            STRATA_CUDA(cudaStreamWaitEvent(ln.stream, computed.ev[slot], 0));
+            copy_host_block(ln.stream, Lj[slot], P, m, k + rj, c0, bj, kcc, true);
+            bytes_h2d_ += sizeof(double) * bj * kcc;
+            STRATA_CUDA(cudaEventRecord(ln.done, ln.stream));
+            STRATA_CUDA(cudaStreamWaitEvent(stream_, ln.done, 0));
+            L = Lj[slot];
+            ldl = bj;
+            STRATA_CUBLAS(cublasDgemm(main.blas, CUBLAS_OP_N, CUBLAS_OP_T, static_cast<int>(bi),
+                                      static_cast<int>(bj), static_cast<int>(kcc), &minus_one,
+                                      Li + c0 * bi, static_cast<int>(bi), L, static_cast<int>(ldl),
+                                      &one, tile, static_cast<int>(ldt)));
+            STRATA_CUDA(cudaEventRecord(computed.ev[slot], stream_));
+          } else {
+            STRATA_CUBLAS(cublasDgemm(main.blas, CUBLAS_OP_N, CUBLAS_OP_T, static_cast<int>(bi),
+                                      static_cast<int>(bj), static_cast<int>(kcc), &minus_one,
+                                      Li + c0 * bi, static_cast<int>(bi), L, static_cast<int>(ldl),
+                                      &one, tile, static_cast<int>(ldt)));
+          }
+        }
+        if (cb_on_host) {  // back, on its lane, once updated
+          STRATA_CUDA(cudaEventRecord(main.done, stream_));
+          STRATA_CUDA(cudaStreamWaitEvent(tl.stream, main.done, 0));
+          copy_host_block(tl.stream, tile, C, mc, ri, rj, bi, bj, false);
           bytes_d2h_ += sizeof(double) * bi * bj;
         }
       }
     }
-    for (int l = 1; l <= 2; ++l) {  // the tiles' downloads
+    for (int l = 1; l <= 4; ++l) {  // the pieces' and the tiles' copies
       STRATA_CUDA(cudaEventRecord(lane[l]->done, lane[l]->stream));
       STRATA_CUDA(cudaStreamWaitEvent(stream_, lane[l]->done, 0));
     }
