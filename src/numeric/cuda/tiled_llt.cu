@@ -226,8 +226,9 @@ void CudaExecutor::factor_tiled_llt(const numeric::FactorContext& ctx, index_t p
           const std::int64_t kcc = std::min(kc, k - c0);
           const double* L = Li + c0 * bi;  // the diagonal tile: its own rows
           std::int64_t ldl = bi;
-          if (rj != ri) {
-            const int slot = static_cast<int>(use++ % 2);
+          int slot = -1;
+          if (rj != ri) {  // tile row j's rows, this piece, on a copy lane
+            slot = static_cast<int>(use++ % 2);
             Lane& ln = *lane[1 + slot];
             STRATA_CUDA(cudaStreamWaitEvent(ln.stream, computed.ev[slot], 0));
             copy_host_block(ln.stream, Lj[slot], P, m, k + rj, c0, bj, kcc, true);
@@ -236,17 +237,12 @@ void CudaExecutor::factor_tiled_llt(const numeric::FactorContext& ctx, index_t p
             STRATA_CUDA(cudaStreamWaitEvent(stream_, ln.done, 0));
             L = Lj[slot];
             ldl = bj;
-            STRATA_CUBLAS(cublasDgemm(main.blas, CUBLAS_OP_N, CUBLAS_OP_T, static_cast<int>(bi),
-                                      static_cast<int>(bj), static_cast<int>(kcc), &minus_one,
-                                      Li + c0 * bi, static_cast<int>(bi), L, static_cast<int>(ldl),
-                                      &one, tile, static_cast<int>(ldt)));
-            STRATA_CUDA(cudaEventRecord(computed.ev[slot], stream_));
-          } else {
-            STRATA_CUBLAS(cublasDgemm(main.blas, CUBLAS_OP_N, CUBLAS_OP_T, static_cast<int>(bi),
-                                      static_cast<int>(bj), static_cast<int>(kcc), &minus_one,
-                                      Li + c0 * bi, static_cast<int>(bi), L, static_cast<int>(ldl),
-                                      &one, tile, static_cast<int>(ldt)));
           }
+          STRATA_CUBLAS(cublasDgemm(main.blas, CUBLAS_OP_N, CUBLAS_OP_T, static_cast<int>(bi),
+                                    static_cast<int>(bj), static_cast<int>(kcc), &minus_one,
+                                    Li + c0 * bi, static_cast<int>(bi), L, static_cast<int>(ldl),
+                                    &one, tile, static_cast<int>(ldt)));
+          if (slot >= 0) STRATA_CUDA(cudaEventRecord(computed.ev[slot], stream_));
         }
         if (cb_on_host) {  // back, on its lane, once updated
           STRATA_CUDA(cudaEventRecord(main.done, stream_));
