@@ -168,8 +168,8 @@ struct FactorStats {
     double store = 0;         ///< contribution blocks stored, panels packed
     double tiled_fronts = 0;  ///< fronts over the budget, slab by slab (wall time)
     /// Parts of tiled_fronts (wall time): the front assembled into pinned host memory by
-    /// the device over the bus (tiled_assembly), the slabs and trailing column blocks
-    /// moved and updated (tiled_slabs), the contribution block and the panels copied out
+    /// the host's threads (tiled_assembly), its pieces moved through the device and
+    /// updated (tiled_slabs), the panels (and, for LU, the contribution block) copied out
     /// and the per-front bookkeeping (tiled_store).
     double tiled_assembly = 0;
     double tiled_slabs = 0;
