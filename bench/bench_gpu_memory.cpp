@@ -9,8 +9,9 @@
 // blocks, backward error, and the transfer floor: the larger of (bytes to the device /
 // host→device bandwidth) and (bytes to the host / device→host bandwidth), with the
 // bandwidths measured here on pinned memory. Each budget runs once per pair of
-// --tiled-pool-shares and --tiled-stream-columns (Options::gpu_tiled_pool_share and
-// gpu_tiled_stream_columns; default: the library's), the in-core run once.
+// --tiled-pool-shares, --tiled-stream-columns and --tiled-prefetch
+// (Options::gpu_tiled_pool_share, gpu_tiled_stream_columns, gpu_tiled_prefetch; default:
+// the library's), the in-core run once.
 // Block size: the in-core GPU factorization time for each --block-sizes.
 // Dense kernels: the rates cuBLAS / cuSOLVER reach on the shapes of the large fronts
 // (a front of m rows and k pivots: POTRF of k×k, TRSM of (m−k)×k, the rank-k update of
@@ -31,7 +32,7 @@
 //                             recursive-panel,lu-panel]
 //                    [--problems a,b] [--potrf-blocks 0,128,...]
 //                    [--ratios 1,5,20,50] [--tiled-pool-shares 0,0.5,...]
-//                    [--tiled-stream-columns 0,256,...]
+//                    [--tiled-stream-columns 0,256,...] [--tiled-prefetch 0,1]
 //                    [--block-sizes 256,...] [--block-problems a,b]
 //                    [--panel-problems a,b] [--panel-max-pivots 0,64,...]
 //                    [--lu-panel-problems a,b] [--lu-strip-pivots 0,256,...]
@@ -579,6 +580,11 @@ int main(int argc, char** argv) {
                  "LU problems for the lu-panel sweep (generated names or .mtx paths)")
       ->delimiter(',');
   std::vector<index_t> tiled_stream_columns = {Options{}.gpu_tiled_stream_columns};
+  std::vector<int> tiled_prefetch = {Options{}.gpu_tiled_prefetch ? 1 : 0};
+  app.add_option("--tiled-prefetch", tiled_prefetch,
+                 "gpu_tiled_prefetch values (0, 1) for each budget of the solvability runs "
+                 "(default: the library's)")
+      ->delimiter(',');
   app.add_option("--tiled-stream-columns", tiled_stream_columns,
                  "gpu_tiled_stream_columns values for each budget of the solvability runs "
                  "(default: the library's)")
@@ -727,26 +733,36 @@ int main(int argc, char** argv) {
     json rows = json::array();
     std::vector<double> all_ratios = {0};
     all_ratios.insert(all_ratios.end(), ratios.begin(), ratios.end());
-    // every (pool share, streamed piece width) for each budget; in core once
-    std::vector<std::pair<double, index_t>> variants;
+    // every (pool share, streamed piece width, prefetch) for each budget; in core once
+    struct Variant {
+      double share;
+      index_t cols;
+      bool prefetch;
+    };
+    std::vector<Variant> variants;
     for (double share : tiled_pool_shares)
-      for (index_t cols : tiled_stream_columns) variants.emplace_back(share, cols);
+      for (index_t cols : tiled_stream_columns)
+        for (int pf : tiled_prefetch) variants.push_back({share, cols, pf != 0});
+    const std::vector<Variant> in_core_only = {
+        {o.gpu_tiled_pool_share, o.gpu_tiled_stream_columns, o.gpu_tiled_prefetch}};
     for (double ratio : all_ratios)
-      for (auto [share, cols] : ratio > 0
-                                    ? variants
-                                    : std::vector<std::pair<double, index_t>>{
-                                          {o.gpu_tiled_pool_share, o.gpu_tiled_stream_columns}}) {
+      for (const Variant& v : ratio > 0 ? variants : in_core_only) {
+        const double share = v.share;
+        const index_t cols = v.cols;
         Options ob = o;
         ob.device_memory_limit =
             ratio > 0 ? static_cast<std::size_t>(static_cast<double>(factor_bytes) / ratio) : 0;
         ob.gpu_tiled_pool_share = share;
         ob.gpu_tiled_stream_columns = cols;
+        ob.gpu_tiled_prefetch = v.prefetch;
         const Run r = ratio > 0 ? run(p, ob, repeat) : in_core;
         const double floor = std::max(r.fs.bytes_to_device / h2d, r.fs.bytes_to_host / d2h);
         rows.push_back({{"ratio", ratio},
                         {"budget_bytes", ob.device_memory_limit},
                         {"tiled_pool_share", share},
                         {"tiled_stream_columns", cols},
+                        {"tiled_prefetch", v.prefetch},
+                        {"tiled_fronts_prefetched", r.fs.tiled_fronts_prefetched},
                         {"device_pool_bytes", r.fs.device_pool_bytes},
                         {"factor_seconds", r.seconds},
                         {"transfer_floor_seconds", floor},
@@ -763,7 +779,9 @@ int main(int argc, char** argv) {
                         {"factor_phases", r.fs.device_phases}});
         fmt::print(
             "{:<14} {:>6} {:>10.1f} {:>9.4f} {:>9.4f} {:>9.2f} {:>6} {:>7} {:>9.4f} {:>8.1e}\n",
-            name, ratio > 0 ? fmt::format("{:g}/{:g}/{}", ratio, share, cols) : "core",
+            name,
+            ratio > 0 ? fmt::format("{:g}/{:g}/{}{}", ratio, share, cols, v.prefetch ? "p" : "")
+                      : "core",
             ob.device_memory_limit * 1e-6, r.seconds, floor, r.seconds / in_core.seconds,
             r.fs.tiled_fronts, r.fs.contribution_blocks_on_host ? "yes" : "no", r.solve_seconds,
             r.berr);

@@ -1251,7 +1251,8 @@ class GpuSections:
                 cols = x.get("tiled_stream_columns")
                 rows.append([str(p.get("problem")), ratio_label(x.get("ratio")),
                              f"{share:g}" if share is not None else "–",
-                             f_int(cols) if cols is not None else "–",
+                             (f_int(cols) + (" +prefetch" if x.get("tiled_prefetch") else ""))
+                             if cols is not None else "–",
                              f_sec(num(x.get("factor_seconds"))), f_sec(chunks),
                              f_sec(num(ph.get("host"))), f_sec(num(ph.get("tiled_assembly"))),
                              f_sec(num(ph.get("tiled_slabs"))),
@@ -1286,7 +1287,8 @@ class GpuSections:
                              f_g(num(x.get("budget_bytes")) and x["budget_bytes"] / 1e6)
                              if num(x.get("ratio")) else "–",
                              f"{share:g}" if share is not None and num(x.get("ratio")) else "–",
-                             f_int(x.get("tiled_stream_columns"))
+                             (f_int(x.get("tiled_stream_columns"))
+                              + (" +prefetch" if x.get("tiled_prefetch") else ""))
                              if x.get("tiled_stream_columns") is not None and num(x.get("ratio"))
                              else "–",
                              f_sec(ft), f"{num(x.get('slowdown_vs_in_core')) or 0:.2f}",
@@ -1306,7 +1308,8 @@ class GpuSections:
                + "): the budget, the device pool's share of it that the run asked for "
                "(`gpu_tiled_pool_share`; 0 or – : the plan's own pool) and the width of the "
                "pieces streamed through a tiled Cholesky front (`gpu_tiled_stream_columns`; "
-               "0 or –: a third of the pool), the factorization "
+               "0 or –: a third of the pool; +prefetch: `gpu_tiled_prefetch` on), the "
+               "factorization "
                "time (median of the run's repeats), the "
                "slowdown against in core, the PCIe floor and the time over it, megabytes "
                "moved each way, device batches, fronts tiled because they do not fit, "

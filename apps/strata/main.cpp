@@ -319,6 +319,7 @@ int run_solve(const SolveArgs& a, const Communicator& comm) {
                    {"bytes_to_host", f.bytes_to_host},
                    {"device_batches", f.device_batches},
                    {"tiled_fronts", f.tiled_fronts},
+                   {"tiled_fronts_prefetched", f.tiled_fronts_prefetched},
                    {"lu_large_fronts", f.lu_large_fronts},
                    {"lu_large_fronts_pivoted", f.lu_large_fronts_pivoted},
                    {"lu_large_fronts_batched", f.lu_large_fronts_batched},

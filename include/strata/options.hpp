@@ -130,6 +130,12 @@ struct Options {
   /// front's columns, at the price of narrower products. 0: pieces as wide as the slab (a
   /// third of the pool each) and whole rows of L21. Negative: InvalidInput. Default 0.
   index_t gpu_tiled_stream_columns = 0;
+  /// CUDA backend, Cholesky fronts over the device budget: the host assembles the next
+  /// such front (when the current one is not its child and the blocks it reads and
+  /// writes are in host memory) on a thread of its own while the device factors the
+  /// current one. Default off: not yet measured on a GPU (bench_gpu_memory
+  /// --tiled-prefetch 0,1 is the comparison to run).
+  bool gpu_tiled_prefetch = false;
   /// CUDA backend, Cholesky: a front with more pivots than gpu_panel_kernel_max_pivots
   /// and than this gets its pivot block and panel in column blocks of this width (POTRF
   /// of each diagonal block, TRSM of the rows below it, SYRK and GEMM of the remaining

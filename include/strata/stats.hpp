@@ -144,6 +144,9 @@ struct FactorStats {
   index_t device_batches = 0;       ///< launch groups run (memory-plan batches, split
                                     ///< further when the device pool is smaller)
   index_t tiled_fronts = 0;         ///< fronts over the device budget, factored by slabs
+  /// Of tiled_fronts, those assembled on the host beside the previous one's device work
+  /// (Options::gpu_tiled_prefetch).
+  index_t tiled_fronts_prefetched = 0;
   /// LU: large fronts (over 256 rows); of those the ones factored again by cuSOLVER GETRF
   /// with partial pivoting because their elimination without interchanges was rejected
   /// (rows to interchange, or a pivot needing static pivoting), and the ones eliminated by

@@ -61,9 +61,11 @@ TEST_F(CudaMemory, CholeskyUnderATightBudgetEqualsInCore) {
 // Cholesky fronts over the budget (tiled_llt.cu: pivot columns left-looking by slabs,
 // the contribution block by square tiles) on random symmetric scalings D·A·D of a
 // Laplacian and of an elasticity stencil, budgets from a quarter of the largest front
-// down to a few slabs, the pool as planned and 60% of the budget, earlier columns streamed
-// as wide as a slab and in pieces of 48: the factor equals the CPU's entry
-// by entry, and a refactorization with other values under the same plan equals the CPU's on those.
+// down to a few slabs, the pool as planned and 60% of the budget, earlier columns
+// streamed as wide as a slab and in pieces of 48, with and without the next front's host
+// assembly beside the device's work (which some fronts get): the factor equals the CPU's
+// entry by entry, and a refactorization with other values under the same plan equals the
+// CPU's on those.
 TEST_F(CudaMemory, TiledCholeskyFrontsMatchCpu) {
   auto rng = test::fresh_rng();
   std::uniform_real_distribution<double> u(0.5, 2.0);
@@ -74,21 +76,30 @@ TEST_F(CudaMemory, TiledCholeskyFrontsMatchCpu) {
     o.type = MatrixType::spd;
     Analysis an = analyze_matrix(base, o);
     const double largest = static_cast<double>(an.stats.largest_front_rows);
-    // (pool share, streamed piece width): the plan's pool, a larger pool, narrow pieces
-    for (auto [pool_share, stream] :
-         {std::pair{0.0, index_t{0}}, std::pair{0.6, index_t{0}}, std::pair{0.0, index_t{48}}})
+    index_t prefetched = 0;
+    // (pool share, streamed piece width, prefetch): the plan's pool, a larger pool, narrow
+    // pieces, the next front assembled beside the device's work
+    struct Config {
+      double pool_share;
+      index_t stream;
+      bool prefetch;
+    };
+    for (const Config cfg : {Config{0.0, 0, false}, Config{0.6, 0, false}, Config{0.0, 48, false},
+                             Config{0.0, 0, true}, Config{0.0, 48, true}})
       for (double share : {0.25, 0.1, 0.04}) {
         // at least a pool for three slabs of 16 columns of the largest front (below that
         // the plan refuses the budget: ImpossibleBudgetNamesTheBytes)
         const auto limit = static_cast<std::size_t>(
             std::max(share * largest * largest, 64 * largest) * sizeof(double));
         o.device_memory_limit = limit;
-        o.gpu_tiled_pool_share = pool_share;
-        o.gpu_tiled_stream_columns = stream;
+        o.gpu_tiled_pool_share = cfg.pool_share;
+        o.gpu_tiled_stream_columns = cfg.stream;
+        o.gpu_tiled_prefetch = cfg.prefetch;
         SCOPED_TRACE("n " + std::to_string(base.n_rows) + ", device_memory_limit " +
                      std::to_string(limit) + ", gpu_tiled_pool_share " +
-                     std::to_string(pool_share) + ", gpu_tiled_stream_columns " +
-                     std::to_string(stream));
+                     std::to_string(cfg.pool_share) + ", gpu_tiled_stream_columns " +
+                     std::to_string(cfg.stream) + ", gpu_tiled_prefetch " +
+                     std::to_string(cfg.prefetch));
         Analysis ab = analyze_matrix(base, o);
         auto gpu = numeric::make_cuda_executor(o);
         auto cpu = numeric::make_cpu_executor(2);
@@ -113,8 +124,11 @@ TEST_F(CudaMemory, TiledCholeskyFrontsMatchCpu) {
           EXPECT_GT(fs.tiled_fronts, 0);
           EXPECT_FALSE(fs.factor_resident);
           EXPECT_LT(test::relative_difference(gpu_f.panels, cpu_f.panels), 1e-12);
+          if (!cfg.prefetch) EXPECT_EQ(fs.tiled_fronts_prefetched, 0);
+          prefetched += fs.tiled_fronts_prefetched;
         }
       }
+    EXPECT_GT(prefetched, 0) << "no front was assembled beside the device's work";
   }
 }
 
@@ -137,12 +151,14 @@ TEST_F(CudaMemory, TiledCholeskyFailureNamesTheCpusColumn) {
   o.backend = Backend::cuda;
   for (std::size_t limit : {256 * std::size_t{1024}, MiB})
     for (auto [recursive, stream] : {std::pair{true, index_t{0}}, std::pair{false, index_t{0}},
-                                     std::pair{true, index_t{32}}}) {
+                                     std::pair{true, index_t{32}}, std::pair{true, index_t{-1}}}) {
       SCOPED_TRACE("device_memory_limit " + std::to_string(limit) + ", recursive " +
                    std::to_string(recursive) + ", stream " + std::to_string(stream));
       o.device_memory_limit = limit;
       o.gpu_recursive_panel = recursive;
-      o.gpu_tiled_stream_columns = stream;
+      // -1: pieces as wide as a slab and the next front prefetched (a failure must drop it)
+      o.gpu_tiled_stream_columns = std::max<index_t>(stream, 0);
+      o.gpu_tiled_prefetch = stream < 0;
       Solver s(o);
       try {
         s.factorize(a);

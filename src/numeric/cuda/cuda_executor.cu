@@ -102,6 +102,7 @@ CudaExecutor::CudaExecutor(const Options& o, int device)
       lu_strip_pivots_(o.gpu_lu_strip_pivots),
       tiled_pool_share_(o.gpu_tiled_pool_share),
       tiled_stream_cols_(o.gpu_tiled_stream_columns),
+      tiled_prefetch_(o.gpu_tiled_prefetch),
       split_min_cb_(o.split_front_min_cb),
       dist_min_rows_(o.distributed_front_min_rows),
       dist_block_(std::max<index_t>(64, o.distributed_front_block_size)),
@@ -128,6 +129,7 @@ CudaExecutor::CudaExecutor(const Options& o, int device)
 }
 
 CudaExecutor::~CudaExecutor() {
+  drop_tiled_prefetch();
   cudaSetDevice(device_);
   for (auto& lp : lanes_) {
     Lane& l = *lp;
@@ -185,7 +187,7 @@ void CudaExecutor::begin(const numeric::FactorContext& ctx) {
   whole_ = false;  // until begin_part says which part: no resident factor from no part
   const Analysis& an = *ctx.analysis;
   bytes_h2d_ = bytes_d2h_ = 0;
-  chunks_ = tiled_count_ = 0;
+  chunks_ = tiled_count_ = prefetched_count_ = 0;
   lu_fronts_ = lu_fronts_pivoted_ = lu_fronts_batched_ = 0;
   phases_ = FactorStats::DevicePhases{};
   held_parts_.clear();
@@ -214,6 +216,7 @@ void CudaExecutor::begin(const numeric::FactorContext& ctx) {
 
 void CudaExecutor::begin_part(const numeric::FactorContext& ctx) {
   STRATA_CUDA(cudaSetDevice(device_));
+  drop_tiled_prefetch();  // one left by a factorization that failed
   const Analysis& an = *ctx.analysis;
   const bool whole = ctx.part->id == -1;
   const Timer setup;
@@ -250,7 +253,8 @@ void CudaExecutor::begin_part(const numeric::FactorContext& ctx) {
 
 void CudaExecutor::end_part(const numeric::FactorContext& ctx) {
   STRATA_CUDA(cudaSetDevice(device_));
-  flush_chunk(ctx);  // the last chunk's host part, while ctx.part is still this part
+  drop_tiled_prefetch();  // none is left when the part ends well
+  flush_chunk(ctx);       // the last chunk's host part, while ctx.part is still this part
   release_team();
   if (part_device_only_) held_parts_.push_back(ctx.part->id);
   part_device_only_ = false;
@@ -462,6 +466,7 @@ void CudaExecutor::report(FactorStats& fs) const {
   fs.bytes_to_host = bytes_d2h_;
   fs.device_batches = chunks_;
   fs.tiled_fronts = tiled_count_;
+  fs.tiled_fronts_prefetched = prefetched_count_;
   fs.lu_large_fronts = lu_fronts_;
   fs.lu_large_fronts_pivoted = lu_fronts_pivoted_;
   fs.lu_large_fronts_batched = lu_fronts_batched_;
@@ -805,15 +810,22 @@ void CudaExecutor::upload_part(const Analysis& an, const numeric::PartView& v) {
 
 void CudaExecutor::factor_batch(const numeric::FactorContext& ctx, const BatchInfo& b) {
   STRATA_CUDA(cudaSetDevice(device_));
-  for (index_t q = b.begin; q < b.end;) {
-    if (cur_->tiled[q]) {
-      flush_chunk(ctx);  // the tiled path syncs and works on the host
-      factor_tiled(ctx, q);
-      ++q;
-    } else {
-      factor_chunk(ctx, q, cur_->chunk_end[q]);
-      q = cur_->chunk_end[q];
+  try {
+    for (index_t q = b.begin; q < b.end;) {
+      if (cur_->tiled[q]) {
+        flush_chunk(ctx);  // the tiled path syncs and works on the host
+        factor_tiled(ctx, q);
+        ++q;
+      } else {
+        factor_chunk(ctx, q, cur_->chunk_end[q]);
+        q = cur_->chunk_end[q];
+      }
     }
+  } catch (...) {
+    // a next front's host assembly must not outlive the factorization whose values and
+    // analysis it reads
+    drop_tiled_prefetch();
+    throw;
   }
 }
 

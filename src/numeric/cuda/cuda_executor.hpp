@@ -9,6 +9,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <future>
 #include <map>
 #include <memory>
 #include <vector>
@@ -236,6 +237,18 @@ class CudaExecutor final : public numeric::Executor {
   /// dimension m) and, when C is not null, its contribution block's lower triangle into C
   /// (mc × mc, leading dimension mc; the strict upper triangle is not written).
   void assemble_llt_split(const numeric::FactorContext& ctx, index_t f, double* P, double* C);
+  /// The same from the children's blocks already on the host (in child order, null for an
+  /// empty one); touches no stream, so it may run beside the device's work.
+  void assemble_llt_split_from(const Analysis& an, const double* values, index_t f, double* P,
+                               double* C, const std::vector<const double*>& block);
+  /// Starts, on a thread of its own, the host assembly of the tiled Cholesky front at
+  /// position `next` of the current part into host_front_next_, when
+  /// Options::gpu_tiled_prefetch is on and it can run beside the front `f` being
+  /// factored: `next` is tiled, f is not its child, its children's blocks and its own lie
+  /// in the host arena (tiled_llt.cu).
+  void start_tiled_prefetch(const numeric::FactorContext& ctx, index_t f, index_t next);
+  /// Waits for a pending prefetch and forgets it (a new part, a failed factorization).
+  void drop_tiled_prefetch();
   /// Front f's children's contribution blocks on the host, in child order (null for an
   /// empty one): in the host arena, or copied from the device into host_staging_.
   std::vector<const double*> children_blocks_on_host(const numeric::FactorContext& ctx, index_t f);
@@ -340,6 +353,7 @@ class CudaExecutor final : public numeric::Executor {
   std::int64_t lu_strip_pivots_ = 0;    ///< Options::gpu_lu_strip_pivots
   double tiled_pool_share_ = 0;         ///< Options::gpu_tiled_pool_share
   std::int64_t tiled_stream_cols_ = 0;  ///< Options::gpu_tiled_stream_columns
+  bool tiled_prefetch_ = false;         ///< Options::gpu_tiled_prefetch
   std::int64_t split_min_cb_ = 0;       ///< Options::split_front_min_cb
   std::int64_t dist_min_rows_ = 0;      ///< Options::distributed_front_min_rows
   std::int64_t dist_block_ = 512;       ///< Options::distributed_front_block_size
@@ -408,7 +422,7 @@ class CudaExecutor final : public numeric::Executor {
       s_chunk_row_, s_small_fronts_;
   // statistics of the last factorization
   std::size_t bytes_h2d_ = 0, bytes_d2h_ = 0;
-  index_t chunks_ = 0, tiled_count_ = 0;
+  index_t chunks_ = 0, tiled_count_ = 0, prefetched_count_ = 0;
   /// FactorStats::lu_large_fronts, lu_large_fronts_pivoted, lu_large_fronts_batched
   index_t lu_fronts_ = 0, lu_fronts_pivoted_ = 0, lu_fronts_batched_ = 0;
   double device_seconds_ = 0;
@@ -443,6 +457,14 @@ class CudaExecutor final : public numeric::Executor {
   bool dist_done_recorded_ = false;
   index_t fronts_distributed_ = 0;
   std::size_t help_bytes_ = 0;
+  // The next tiled Cholesky front's host assembly (start_tiled_prefetch): its buffer, and
+  // the part and position it is for. Last member: destroyed (joined) before the rest.
+  PinnedBuffer<double> host_front_next_;
+  struct TiledPrefetch {
+    std::future<void> done;
+    int part = -2;
+    index_t pos = -1;
+  } prefetch_;
 };
 
 }  // namespace strata::cuda

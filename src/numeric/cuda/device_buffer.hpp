@@ -90,6 +90,11 @@ class PinnedBuffer {
   std::size_t size() const { return n_; }
   /// Frees the allocation (size becomes 0).
   void clear() { release(); }
+  /// Exchanges the two allocations.
+  void swap(PinnedBuffer& o) noexcept {
+    std::swap(p_, o.p_);
+    std::swap(n_, o.n_);
+  }
 
  private:
   void release() {

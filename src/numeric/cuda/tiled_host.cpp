@@ -76,7 +76,7 @@ constexpr std::int64_t kCols = 32;  // columns per block of the host assembly
 // the front's column c0): zeroed, the original entries, then each child's columns that
 // land there, in child order — the block stays in cache through all of its additions, and
 // every entry sees the device kernel's order of additions.
-void assemble_columns(const Analysis& an, const numeric::FactorContext& ctx, index_t f,
+void assemble_columns(const Analysis& an, const double* values, index_t f,
                       const std::vector<const double*>& block, const std::int64_t* rel_all,
                       const std::int64_t* rel_offsets, bool symmetric, std::int64_t c0,
                       std::int64_t c1, double* W) {
@@ -84,7 +84,7 @@ void assemble_columns(const Analysis& an, const numeric::FactorContext& ctx, ind
   const auto& am = an.assembly;
   const std::int64_t m = t.n_rows(f);
   std::fill(W, W + (c1 - c0) * m, 0.0);
-  numeric::add_entries(W, am.entry_dst.data(), am.entry_src.data(), ctx.values, am.entry_offsets[f],
+  numeric::add_entries(W, am.entry_dst.data(), am.entry_src.data(), values, am.entry_offsets[f],
                        am.entry_offsets[f + 1], c0 * m, c1 * m);
   const index_t q0 = t.child_offsets[f], q1 = t.child_offsets[f + 1];
   for (index_t q = q0; q < q1; ++q) {
@@ -111,34 +111,38 @@ void CudaExecutor::assemble_on_host(const numeric::FactorContext& ctx, index_t f
   tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, blocks), [&](const auto& r) {
     for (std::int64_t b = r.begin(); b < r.end(); ++b) {
       const std::int64_t c0 = b * kCols, c1 = std::min(m, c0 + kCols);
-      assemble_columns(an, ctx, f, block, rel_host_.data(), rel_offsets_host_.data(), symmetric, c0,
-                       c1, H + c0 * m);
+      assemble_columns(an, ctx.values, f, block, rel_host_.data(), rel_offsets_host_.data(),
+                       symmetric, c0, c1, H + c0 * m);
     }
   });
 }
 
 void CudaExecutor::assemble_llt_split(const numeric::FactorContext& ctx, index_t f, double* P,
                                       double* C) {
-  const Analysis& an = *ctx.analysis;
+  assemble_llt_split_from(*ctx.analysis, ctx.values, f, P, C, children_blocks_on_host(ctx, f));
+}
+
+void CudaExecutor::assemble_llt_split_from(const Analysis& an, const double* values, index_t f,
+                                           double* P, double* C,
+                                           const std::vector<const double*>& block) {
   const auto& t = an.tree;
   const std::int64_t m = t.n_rows(f), k = t.n_pivots(f), mc = m - k;
-  const std::vector<const double*> block = children_blocks_on_host(ctx, f);
   // blocks of the pivot columns, then (when C is wanted) of the contribution block's
   const std::int64_t pb = (k + kCols - 1) / kCols;
   const std::int64_t blocks = pb + (C ? (mc + kCols - 1) / kCols : 0);
+  const std::int64_t* rel = rel_host_.data();
+  const std::int64_t* rel_off = rel_offsets_host_.data();
   tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, blocks), [&](const auto& r) {
     std::vector<double> W;  // a block of the contribution block's columns, whole
     for (std::int64_t b = r.begin(); b < r.end(); ++b) {
       if (b < pb) {  // the panel has the front's layout: assembled in place
         const std::int64_t c0 = b * kCols, c1 = std::min(k, c0 + kCols);
-        assemble_columns(an, ctx, f, block, rel_host_.data(), rel_offsets_host_.data(), true, c0,
-                         c1, P + c0 * m);
+        assemble_columns(an, values, f, block, rel, rel_off, true, c0, c1, P + c0 * m);
         continue;
       }
       const std::int64_t c0 = k + (b - pb) * kCols, c1 = std::min(m, c0 + kCols);
       W.resize(static_cast<std::size_t>((c1 - c0) * m));
-      assemble_columns(an, ctx, f, block, rel_host_.data(), rel_offsets_host_.data(), true, c0, c1,
-                       W.data());
+      assemble_columns(an, values, f, block, rel, rel_off, true, c0, c1, W.data());
       for (std::int64_t c = c0; c < c1; ++c)  // its lower triangle: rows c..m
         std::copy(W.data() + (c - c0) * m + c, W.data() + (c - c0 + 1) * m,
                   C + (c - k) * mc + (c - k));

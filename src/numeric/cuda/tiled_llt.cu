@@ -25,6 +25,13 @@
 //      b·k + 2·b·kc + 2·b² doubles in the pool (without the 2·b² when C is on the
 //      device: the tiles are updated in place there).
 //
+// With Options::gpu_tiled_prefetch, once a front is assembled the host starts assembling
+// the next tiled front on a thread of its own (start_tiled_prefetch) while this thread
+// drives the device through steps 1 and 2 — when the next front is not this one's parent
+// and every block it reads or writes is in the host arena, so that nothing it touches is
+// touched by this front's copies; a pending one is joined before any failure leaves the
+// executor (factor_batch) and at every part's start and end.
+//
 // Traffic, against the right-looking slab scheme this replaced (every slab read and
 // wrote the whole trailing lower triangle, about k·m²/(2w) doubles each way): step 1
 // reads about k²·m/(2w) and writes the panel once; step 2 reads about mc²·(k/b + 1)/2
@@ -41,6 +48,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <future>
 
 #include "core/host_copy.hpp"
 #include "numeric/cuda/cuda_executor.hpp"
@@ -94,6 +102,50 @@ CudaExecutor::TiledWidths CudaExecutor::tiled_llt_widths(std::int64_t m, std::in
   return tw;
 }
 
+void CudaExecutor::drop_tiled_prefetch() {
+  if (!prefetch_.done.valid()) return;
+  auto done = std::move(prefetch_.done);
+  prefetch_ = TiledPrefetch{};
+  try {
+    done.get();
+  } catch (...) {  // nothing uses what it made
+  }
+}
+
+void CudaExecutor::start_tiled_prefetch(const numeric::FactorContext& ctx, index_t f,
+                                        index_t next) {
+  if (!tiled_prefetch_ || ctx.type != MatrixType::spd) return;
+  const Analysis& an = *ctx.analysis;
+  const auto& t = an.tree;
+  const auto& s = *ctx.part->schedule;
+  if (next >= static_cast<index_t>(s.fronts.size()) || !cur_->tiled[next]) return;
+  const index_t g = s.fronts[next];
+  if (t.parent[f] == g) return;  // f's block is one of its inputs
+  // every input on the host and final: the children come before f in the schedule (their
+  // chunks flushed, their tiled fronts synchronized), f is not one of them
+  std::vector<const double*> block;
+  for (index_t q = t.child_offsets[g]; q < t.child_offsets[g + 1]; ++q) {
+    const index_t c = t.children[q];
+    const double* cb = t.cb_size(c) > 0 ? cur_->cb_ptr_host[c] : nullptr;
+    if (cb && !in_host_arena(cb)) return;
+    block.push_back(cb);
+  }
+  const std::int64_t m = t.n_rows(g), k = t.n_pivots(g), mc = m - k;
+  const bool has_cb = mc > 0 && t.parent[g] >= 0;
+  double* const C = has_cb ? cur_->cb_ptr_host[g] : nullptr;
+  // its block's place in the arena is disjoint from f's and from every block f reads:
+  // the memory plan keeps apart blocks that are live together (schedule/memory_plan.hpp)
+  if (has_cb && !in_host_arena(C)) return;
+  host_front_next_.resize(static_cast<std::size_t>(m) * k);
+  double* const P = host_front_next_.data();
+  const double* values = ctx.values;
+  prefetch_.part = ctx.part->id;
+  prefetch_.pos = next;
+  prefetch_.done = std::async(std::launch::async, [this, &an, values, g, P, C, block] {
+    assemble_llt_split_from(an, values, g, P, C, block);
+  });
+}
+
 void CudaExecutor::factor_tiled_llt(const numeric::FactorContext& ctx, index_t pos) {
   const auto wall_start = std::chrono::steady_clock::now();
   const Analysis& an = *ctx.analysis;
@@ -106,12 +158,26 @@ void CudaExecutor::factor_tiled_llt(const numeric::FactorContext& ctx, index_t p
   double* const dst = has_cb ? cur_->cb_ptr_host[f] : nullptr;
   const bool cb_on_host = has_cb && in_host_arena(dst);
   const std::size_t panel_doubles = static_cast<std::size_t>(m) * k;
+  // assembled already, beside the previous front's device work (start_tiled_prefetch)?
+  bool assembled = false;
+  if (prefetch_.done.valid()) {
+    const bool mine = prefetch_.part == ctx.part->id && prefetch_.pos == pos;
+    auto done = std::move(prefetch_.done);
+    prefetch_ = TiledPrefetch{};
+    done.get();  // its failure (an allocation) is this front's
+    if (mine) {
+      host_front_.swap(host_front_next_);
+      assembled = true;
+      ++prefetched_count_;
+    }
+  }
   host_front_.resize(panel_doubles +
                      (has_cb && !cb_on_host ? static_cast<std::size_t>(mc) * mc : 0));
   double* const P = host_front_.data();
   double* const C = !has_cb ? nullptr : cb_on_host ? dst : P + panel_doubles;
-  assemble_llt_split(ctx, f, P, C);  // tiled_host.cpp
-  if (has_cb && !cb_on_host) {       // the block's place is on the device: it goes there once
+  if (!assembled) assemble_llt_split(ctx, f, P, C);  // tiled_host.cpp
+  start_tiled_prefetch(ctx, f, pos + 1);             // the next front's, while this one's goes on
+  if (has_cb && !cb_on_host) {  // the block's place is on the device: it goes there once
     STRATA_CUDA(cudaMemcpyAsync(dst, C, sizeof(double) * mc * mc, cudaMemcpyHostToDevice, stream_));
     bytes_h2d_ += sizeof(double) * mc * mc;
   }
