@@ -136,7 +136,11 @@ void CudaExecutor::start_tiled_prefetch(const numeric::FactorContext& ctx, index
   // its block's place in the arena is disjoint from f's and from every block f reads:
   // the memory plan keeps apart blocks that are live together (schedule/memory_plan.hpp)
   if (has_cb && !in_host_arena(C)) return;
-  host_front_next_.resize(static_cast<std::size_t>(m) * k);
+  try {
+    host_front_next_.resize(static_cast<std::size_t>(m) * k);
+  } catch (const OutOfMemory&) {  // no room for a second panel buffer: no prefetch
+    return;
+  }
   double* const P = host_front_next_.data();
   const double* values = ctx.values;
   prefetch_.part = ctx.part->id;
