@@ -1236,6 +1236,18 @@ class GpuSections:
                    f"{PEAK_TARGET:.0%}: **{'met' if g * 1e9 >= PEAK_TARGET * peak else 'not met'}**).")
             self.w()
 
+    @staticmethod
+    def tiled_variant(x: dict) -> tuple[str, str]:
+        """A budgeted run's pool share and streamed-piece width (+prefetch) cells; – when
+        the run did not record them (or ran in core)."""
+        if not num(x.get("ratio")):
+            return "–", "–"
+        share = num(x.get("tiled_pool_share"))
+        cols = x.get("tiled_stream_columns")
+        return (f"{share:g}" if share is not None else "–",
+                (f_int(cols) + (" +prefetch" if x.get("tiled_prefetch") else ""))
+                if cols is not None else "–")
+
     def solvability_phases(self, probs: list) -> None:
         """Where a budgeted run's time went (FactorStats::device_phases), when it tiled."""
         rows = []
@@ -1247,12 +1259,8 @@ class GpuSections:
                 chunks = sum(num(ph.get(k)) or 0
                              for k in ("assembly", "small_fronts", "large_fronts", "store"))
                 split = ("tiled_pivot_columns" in ph)
-                share = num(x.get("tiled_pool_share"))
-                cols = x.get("tiled_stream_columns")
                 rows.append([str(p.get("problem")), ratio_label(x.get("ratio")),
-                             f"{share:g}" if share is not None else "–",
-                             (f_int(cols) + (" +prefetch" if x.get("tiled_prefetch") else ""))
-                             if cols is not None else "–",
+                             *self.tiled_variant(x),
                              f_sec(num(x.get("factor_seconds"))), f_sec(chunks),
                              f_sec(num(ph.get("host"))), f_sec(num(ph.get("tiled_assembly"))),
                              f_sec(num(ph.get("tiled_slabs"))),
@@ -1269,8 +1277,7 @@ class GpuSections:
                "split), the stores.")
         self.w()
         self.w(table(["problem", "factor/budget", "pool share", "stream cols", "factor s",
-                      "groups s", "host s",
-                      "tiled assembly s", "tiled slabs s", "pivot columns s", "CB update s",
+                      "groups s", "host s", "tiled assembly s", "tiled slabs s", "pivot columns s", "CB update s",
                       "tiled stores s"], rows, 2))
 
     def solvability_run(self, r: Run) -> None:
@@ -1282,15 +1289,10 @@ class GpuSections:
             for x in p.get("runs", []):
                 fl = num(x.get("transfer_floor_seconds"))
                 ft = num(x.get("factor_seconds"))
-                share = num(x.get("tiled_pool_share"))
                 rows.append([str(p.get("problem")), ratio_label(x.get("ratio")),
                              f_g(num(x.get("budget_bytes")) and x["budget_bytes"] / 1e6)
                              if num(x.get("ratio")) else "–",
-                             f"{share:g}" if share is not None and num(x.get("ratio")) else "–",
-                             (f_int(x.get("tiled_stream_columns"))
-                              + (" +prefetch" if x.get("tiled_prefetch") else ""))
-                             if x.get("tiled_stream_columns") is not None and num(x.get("ratio"))
-                             else "–",
+                             *self.tiled_variant(x),
                              f_sec(ft), f"{num(x.get('slowdown_vs_in_core')) or 0:.2f}",
                              f_sec(fl), f_ratio(ratio(ft, fl)),
                              f_g(num(x.get("bytes_to_device")) and x["bytes_to_device"] / 1e6),
@@ -1309,16 +1311,14 @@ class GpuSections:
                "(`gpu_tiled_pool_share`; 0 or – : the plan's own pool) and the width of the "
                "pieces streamed through a tiled Cholesky front (`gpu_tiled_stream_columns`; "
                "0 or –: a third of the pool; +prefetch: `gpu_tiled_prefetch` on), the "
-               "factorization "
-               "time (median of the run's repeats), the "
+               "factorization time (median of the run's repeats), the "
                "slowdown against in core, the PCIe floor and the time over it, megabytes "
                "moved each way, device batches, fronts tiled because they do not fit, "
                "whether contribution blocks were spilled to the host, whether the factor "
                "stayed on the device, the solve time and the backward error.")
         self.w()
         self.w(table(["problem", "factor/budget", "budget MB", "pool share", "stream cols",
-                      "factor s",
-                      "slowdown",
+                      "factor s", "slowdown",
                       "PCIe floor s", "time/floor", "MB to device", "MB to host", "batches",
                       "tiled fronts", "CBs spilled", "factor on device", "solve s", "berr"],
                      rows, 2))
@@ -1339,14 +1339,13 @@ class GpuSections:
         colors = self.plt.rcParams["axes.prop_cycle"].by_key()["color"]
         for i, p in enumerate(probs):
             c = colors[i % len(colors)]
-            shares = sorted({num(x.get("tiled_pool_share")) or 0 for x in p.get("runs", [])
-                             if num(x.get("ratio"))})
-            for si, sh in enumerate(shares):  # one line per pool share asked for
+            budgeted = [x for x in p.get("runs", []) if num(x.get("ratio"))]
+            variants = sorted({self.tiled_variant(x) for x in budgeted})
+            for si, v in enumerate(variants):  # one line per variant of the tiled fronts
                 pts = sorted((num(x.get("ratio")), num(x.get("factor_seconds")),
-                              num(x.get("transfer_floor_seconds"))) for x in p.get("runs", [])
-                             if num(x.get("ratio"))
-                             and (num(x.get("tiled_pool_share")) or 0) == sh)
-                tag = f" pool {sh:g}" if len(shares) > 1 else ""
+                              num(x.get("transfer_floor_seconds"))) for x in budgeted
+                             if self.tiled_variant(x) == v)
+                tag = f" pool {v[0]}, pieces {v[1]}" if len(variants) > 1 else ""
                 style = ["o-", "s--", "^-."][si % 3]
                 ax.plot([a for a, _, _ in pts], [b for _, b, _ in pts], style, color=c,
                         label=f"{p.get('problem')}{tag}")
