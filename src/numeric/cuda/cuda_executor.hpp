@@ -247,8 +247,11 @@ class CudaExecutor final : public numeric::Executor {
   /// factored: `next` is tiled, f is not its child, its children's blocks and its own lie
   /// in the host arena (tiled_llt.cu).
   void start_tiled_prefetch(const numeric::FactorContext& ctx, index_t f, index_t next);
-  /// Waits for a pending prefetch and forgets it (a new part, a failed factorization).
-  void drop_tiled_prefetch();
+  /// Waits for a pending prefetch and forgets it; true when it assembled the front at
+  /// position `pos` of part `part` (into host_front_next_).
+  bool take_tiled_prefetch(int part, index_t pos);
+  /// The same when nothing will use it (a new part, a failed factorization).
+  void drop_tiled_prefetch() { (void)take_tiled_prefetch(-3, -1); }
   /// Front f's children's contribution blocks on the host, in child order (null for an
   /// empty one): in the host arena, or copied from the device into host_staging_.
   std::vector<const double*> children_blocks_on_host(const numeric::FactorContext& ctx, index_t f);

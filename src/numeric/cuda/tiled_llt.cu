@@ -102,14 +102,17 @@ CudaExecutor::TiledWidths CudaExecutor::tiled_llt_widths(std::int64_t m, std::in
   return tw;
 }
 
-void CudaExecutor::drop_tiled_prefetch() {
-  if (!prefetch_.done.valid()) return;
+bool CudaExecutor::take_tiled_prefetch(int part, index_t pos) {
+  if (!prefetch_.done.valid()) return false;
+  const bool mine = prefetch_.part == part && prefetch_.pos == pos;
   auto done = std::move(prefetch_.done);
   prefetch_ = TiledPrefetch{};
   try {
     done.get();
-  } catch (...) {  // nothing uses what it made
+  } catch (...) {  // a failed assembly (an allocation): the front is assembled again
+    return false;
   }
+  return mine;
 }
 
 void CudaExecutor::start_tiled_prefetch(const numeric::FactorContext& ctx, index_t f,
@@ -163,17 +166,10 @@ void CudaExecutor::factor_tiled_llt(const numeric::FactorContext& ctx, index_t p
   const bool cb_on_host = has_cb && in_host_arena(dst);
   const std::size_t panel_doubles = static_cast<std::size_t>(m) * k;
   // assembled already, beside the previous front's device work (start_tiled_prefetch)?
-  bool assembled = false;
-  if (prefetch_.done.valid()) {
-    const bool mine = prefetch_.part == ctx.part->id && prefetch_.pos == pos;
-    auto done = std::move(prefetch_.done);
-    prefetch_ = TiledPrefetch{};
-    done.get();  // its failure (an allocation) is this front's
-    if (mine) {
-      host_front_.swap(host_front_next_);
-      assembled = true;
-      ++prefetched_count_;
-    }
+  const bool assembled = take_tiled_prefetch(ctx.part->id, pos);
+  if (assembled) {
+    host_front_.swap(host_front_next_);
+    ++prefetched_count_;
   }
   host_front_.resize(panel_doubles +
                      (has_cb && !cb_on_host ? static_cast<std::size_t>(mc) * mc : 0));
