@@ -128,14 +128,19 @@ struct Options {
   /// streamed against a tile, come in pieces of at most this many columns, so that the
   /// slab and the tiles that stay on the device can be wider — fewer passes over the
   /// front's columns, at the price of narrower products. 0: pieces as wide as the slab (a
-  /// third of the pool each) and whole rows of L21. Negative: InvalidInput. Default 0.
-  index_t gpu_tiled_stream_columns = 0;
+  /// third of the pool each) and whole rows of L21. Negative: InvalidInput. Default 256:
+  /// on the H100 (bench/results/gpu-memory-tiled-ab-20261123T145623Z.json) it took lap3d
+  /// 100³ under 1/20 and 1/50 of its factor from 2.12 to 2.02 s and 2.75 to 2.56 s,
+  /// elasticity 50³ from 1.39 to 1.36 s and 1.86 to 1.69 s, lap3d 60³ 0.285 / 0.396 to
+  /// 0.285 / 0.382 s (bytes to the device 35.2 → 29.8 GB on lap3d 100³ at 1/20).
+  index_t gpu_tiled_stream_columns = 256;
   /// CUDA backend, Cholesky fronts over the device budget: the host assembles the next
-  /// such front (when the current one is not its child and the blocks it reads and
-  /// writes are in host memory) on a thread of its own while the device factors the
-  /// current one. Default off: not yet measured on a GPU (bench_gpu_memory
-  /// --tiled-prefetch 0,1 is the comparison to run).
-  bool gpu_tiled_prefetch = false;
+  /// such front of the same level on a thread of its own while the device factors the
+  /// current one and the fronts between them (src/numeric/cuda/tiled_llt.cu). Costs a
+  /// second pinned buffer the size of the largest such front's panel. Default on
+  /// (bench_gpu_memory --tiled-prefetch 0,1 is the comparison; bench/REPORT.md §4 has
+  /// the runs).
+  bool gpu_tiled_prefetch = true;
   /// CUDA backend, Cholesky: a front with more pivots than gpu_panel_kernel_max_pivots
   /// and than this gets its pivot block and panel in column blocks of this width (POTRF
   /// of each diagonal block, TRSM of the rows below it, SYRK and GEMM of the remaining

@@ -63,7 +63,8 @@ TEST_F(CudaMemory, CholeskyUnderATightBudgetEqualsInCore) {
 // Laplacian and of an elasticity stencil, budgets from a quarter of the largest front
 // down to a few slabs, the pool as planned and 60% of the budget, earlier columns
 // streamed as wide as a slab and in pieces of 48, with and without the next front's host
-// assembly beside the device's work (which some fronts get): the factor equals the CPU's
+// assembly beside the device's work (which some fronts get), and the defaults: the factor
+// equals the CPU's
 // entry by entry, and a refactorization with other values under the same plan equals the
 // CPU's on those.
 TEST_F(CudaMemory, TiledCholeskyFrontsMatchCpu) {
@@ -84,8 +85,11 @@ TEST_F(CudaMemory, TiledCholeskyFrontsMatchCpu) {
       index_t stream;
       bool prefetch;
     };
-    for (const Config cfg : {Config{0.0, 0, false}, Config{0.6, 0, false}, Config{0.0, 48, false},
-                             Config{0.0, 0, true}, Config{0.0, 48, true}})
+    for (const Config cfg :
+         {Config{0.0, 0, false}, Config{0.6, 0, false}, Config{0.0, 48, false},
+          Config{0.0, 0, true}, Config{0.0, 48, true},
+          Config{Options{}.gpu_tiled_pool_share, Options{}.gpu_tiled_stream_columns,
+                 Options{}.gpu_tiled_prefetch}})
       for (double share : {0.25, 0.1, 0.04}) {
         // at least a pool for three slabs of 16 columns of the largest front (below that
         // the plan refuses the budget: ImpossibleBudgetNamesTheBytes)

@@ -693,12 +693,22 @@ void CudaExecutor::presize_chunk_buffers(const Analysis& an,
   const auto& t = an.tree;
   const bool lu = !an.symmetric;
   std::size_t count = 1, big = 1, small = 1, pivots = 1, diag = 1, diag_slab = 1, strips = 1;
+  std::size_t host_front = 0;  // pinned doubles for the largest tiled front's host side
   int potrf = 1, getrf = 1, blocks = 1;
   std::vector<std::unique_ptr<Lane>>& lane = lanes();
   for (const numeric::PartView& v : views) {
     const PartDevice& pd = parts_.at(v.id);
     const auto& s = *v.schedule;
     for (index_t q = 0; q < static_cast<index_t>(s.fronts.size()); ++q) {
+      if (pd.tiled[q]) {  // LU: the whole front (tiled_front.cu); LLᵀ: its panel, and its
+                          // block when that lives on the device (tiled_llt.cu)
+        const index_t f = s.fronts[q];
+        const std::size_t m = static_cast<std::size_t>(t.n_rows(f));
+        const std::size_t k = static_cast<std::size_t>(t.n_pivots(f)), mc = m - k;
+        const double* cb = pd.cb_ptr_host[f];
+        host_front =
+            std::max(host_front, lu ? m * m : m * k + (cb && !in_host_arena(cb) ? mc * mc : 0));
+      }
       if (pd.tiled[q] && !lu && recursive_panel_) {  // its slabs, on lane 0 (tiled_llt.cu)
         const index_t f = s.fronts[q];
         diag_slab = std::max(
@@ -740,6 +750,15 @@ void CudaExecutor::presize_chunk_buffers(const Analysis& an,
     }
   }
   for (auto* b : {&info_, &perturbed_, &stage_offset_, &diag_offset_}) b->resize(count + 1);
+  // the tiled fronts' pinned buffers: the prefetch's (LLᵀ) the same size, since the two
+  // trade places at every prefetched front and must not grow on the way
+  if (host_front > 0) {
+    host_front_.resize(host_front);
+    if (tiled_prefetch_ && !lu) try {
+        host_front_next_.resize(host_front);
+      } catch (const OutOfMemory&) {  // no room for the second: no prefetch (tiled_llt.cu)
+      }
+  }
   small_pos_.resize(small);
   perm_offset_.resize(small + 1);
   potrf_info_.resize(big + 1);

@@ -241,12 +241,11 @@ class CudaExecutor final : public numeric::Executor {
   /// empty one); touches no stream, so it may run beside the device's work.
   void assemble_llt_split_from(const Analysis& an, const double* values, index_t f, double* P,
                                double* C, const std::vector<const double*>& block);
-  /// Starts, on a thread of its own, the host assembly of the tiled Cholesky front at
-  /// position `next` of the current part into host_front_next_, when
-  /// Options::gpu_tiled_prefetch is on and it can run beside the front `f` being
-  /// factored: `next` is tiled, f is not its child, its children's blocks and its own lie
-  /// in the host arena (tiled_llt.cu).
-  void start_tiled_prefetch(const numeric::FactorContext& ctx, index_t f, index_t next);
+  /// Starts, on a thread of its own, the host assembly into host_front_next_ of the next
+  /// tiled Cholesky front of the level of the front `f` at position `pos` (the current
+  /// part's schedule), when Options::gpu_tiled_prefetch is on (its children's blocks on
+  /// the device are copied to host_staging_next_ first; tiled_llt.cu).
+  void start_tiled_prefetch(const numeric::FactorContext& ctx, index_t f, index_t pos);
   /// Waits for a pending prefetch and forgets it; true when it assembled the front at
   /// position `pos` of part `part` (into host_front_next_).
   bool take_tiled_prefetch(int part, index_t pos);
@@ -463,6 +462,7 @@ class CudaExecutor final : public numeric::Executor {
   // The next tiled Cholesky front's host assembly (start_tiled_prefetch): its buffer, and
   // the part and position it is for. Last member: destroyed (joined) before the rest.
   PinnedBuffer<double> host_front_next_;
+  PinnedBuffer<double> host_staging_next_;  ///< its children's blocks from the device
   struct TiledPrefetch {
     std::future<void> done;
     int part = -2;

@@ -26,11 +26,18 @@
 //      device: the tiles are updated in place there).
 //
 // With Options::gpu_tiled_prefetch, once a front is assembled the host starts assembling
-// the next tiled front on a thread of its own (start_tiled_prefetch) while this thread
-// drives the device through steps 1 and 2 — when the next front is not this one's parent
-// and every block it reads or writes is in the host arena, so that nothing it touches is
-// touched by this front's copies; a pending one is joined before any failure leaves the
-// executor (factor_batch) and at every part's start and end.
+// the next tiled front of the same level on a thread of its own (start_tiled_prefetch)
+// while this thread drives the device through steps 1 and 2 and the fronts between the
+// two: nothing it reads or writes is touched by them (the blocks of a level's children
+// and the blocks the level writes lie apart), its children's blocks that the device holds
+// are copied over before it starts, and a block whose place is on the device is assembled
+// into the panel buffer's tail like an unprefetched front's. A pending one is joined
+// before any failure leaves the executor (factor_batch) and at every part's start and end. Both
+// panel buffers are sized once, at the largest tiled front's need (presize_chunk_buffers): they
+// trade places at every prefetched front, and when each grew on demand the prefetch measured slower
+// than none (lap3d 60³ under 1/50 of its factor on the H100: tiled assembly 0.064 → 0.231 s for 5
+// prefetched fronts) — each growth is a cudaFreeHost, which waits for the device, and the pinning
+// of the pages again.
 //
 // Traffic, against the right-looking slab scheme this replaced (every slab read and
 // wrote the whole trailing lower triangle, about k·m²/(2w) doubles each way): step 1
@@ -115,36 +122,66 @@ bool CudaExecutor::take_tiled_prefetch(int part, index_t pos) {
   return mine;
 }
 
-void CudaExecutor::start_tiled_prefetch(const numeric::FactorContext& ctx, index_t f,
-                                        index_t next) {
+void CudaExecutor::start_tiled_prefetch(const numeric::FactorContext& ctx, index_t f, index_t pos) {
   if (!tiled_prefetch_ || ctx.type != MatrixType::spd) return;
   const Analysis& an = *ctx.analysis;
   const auto& t = an.tree;
   const auto& s = *ctx.part->schedule;
-  if (next >= static_cast<index_t>(s.fronts.size()) || !cur_->tiled[next]) return;
+  // the next tiled front of f's level: the fronts of a level are one another's inputs
+  // neither way, and its tiled fronts are most often apart, between fronts that are not
+  // tiled (lap3d 100³ under 1/20 of its factor: 52 tiled fronts, none next to another)
+  const index_t n = static_cast<index_t>(s.fronts.size()), level = s.level_of[f];
+  index_t next = pos + 1;
+  while (next < n && s.level_of[s.fronts[next]] == level && !cur_->tiled[next]) ++next;
+  if (next >= n || s.level_of[s.fronts[next]] != level) return;
   const index_t g = s.fronts[next];
-  if (t.parent[f] == g) return;  // f's block is one of its inputs
-  // every input on the host and final: the children come before f in the schedule (their
-  // chunks flushed, their tiled fronts synchronized), f is not one of them
-  std::vector<const double*> block;
-  for (index_t q = t.child_offsets[g]; q < t.child_offsets[g + 1]; ++q) {
-    const index_t c = t.children[q];
-    const double* cb = t.cb_size(c) > 0 ? cur_->cb_ptr_host[c] : nullptr;
-    if (cb && !in_host_arena(cb)) return;
-    block.push_back(cb);
-  }
+  // every input final: the children are a level below, enqueued on stream_ before the
+  // level's first tiled front, whose own assembly waited for stream_ (that front is never
+  // a prefetched one). What the fronts between f and g write (their blocks, their panels)
+  // and read (their children's blocks) lies apart from g's block and g's inputs: the
+  // arena layout keeps apart the blocks a level writes and every block it reads
+  // (schedule/memory_plan.hpp).
   const std::int64_t m = t.n_rows(g), k = t.n_pivots(g), mc = m - k;
   const bool has_cb = mc > 0 && t.parent[g] >= 0;
-  double* const C = has_cb ? cur_->cb_ptr_host[g] : nullptr;
-  // its block's place in the arena is disjoint from f's and from every block f reads:
-  // the memory plan keeps apart blocks that are live together (schedule/memory_plan.hpp)
-  if (has_cb && !in_host_arena(C)) return;
+  double* const dst = has_cb ? cur_->cb_ptr_host[g] : nullptr;
+  const bool cb_on_host = has_cb && in_host_arena(dst);
+  std::vector<const double*> block;
+  std::size_t staged = 0;  // children's blocks on the device: copied into host_staging_next_
+  for (index_t q = t.child_offsets[g]; q < t.child_offsets[g + 1]; ++q) {
+    const index_t c = t.children[q];
+    const std::size_t cm = static_cast<std::size_t>(t.cb_size(c));
+    const double* cb = cm > 0 ? cur_->cb_ptr_host[c] : nullptr;
+    if (cb && !in_host_arena(cb)) staged += cm * cm;
+    block.push_back(cb);
+  }
+  // the panel, and the block when its place is on the device (uploaded once at g's turn,
+  // from the same place as an unprefetched front's: factor_tiled_llt)
+  const std::size_t panel = static_cast<std::size_t>(m) * k;
   try {
-    host_front_next_.resize(static_cast<std::size_t>(m) * k);
+    host_front_next_.resize(panel +
+                            (has_cb && !cb_on_host ? static_cast<std::size_t>(mc) * mc : 0));
+    if (staged > 0) host_staging_next_.resize(staged);
   } catch (const OutOfMemory&) {  // no room for a second panel buffer: no prefetch
     return;
   }
   double* const P = host_front_next_.data();
+  double* const C = !has_cb ? nullptr : cb_on_host ? dst : P + panel;
+  if (staged > 0) {  // on stream_, after the level below; waited for here (they are small:
+                     // the device holds only the arena's first part)
+    staged = 0;
+    for (const double*& cb : block) {
+      if (!cb || in_host_arena(cb)) continue;
+      const index_t c = t.children[t.child_offsets[g] + (&cb - block.data())];
+      const std::size_t cm = static_cast<std::size_t>(t.cb_size(c));
+      double* to = host_staging_next_.data() + staged;
+      STRATA_CUDA(
+          cudaMemcpyAsync(to, cb, sizeof(double) * cm * cm, cudaMemcpyDeviceToHost, stream_));
+      bytes_d2h_ += sizeof(double) * cm * cm;
+      cb = to;
+      staged += cm * cm;
+    }
+    STRATA_CUDA(cudaStreamSynchronize(stream_));
+  }
   const double* values = ctx.values;
   prefetch_.part = ctx.part->id;
   prefetch_.pos = next;
@@ -176,8 +213,8 @@ void CudaExecutor::factor_tiled_llt(const numeric::FactorContext& ctx, index_t p
   double* const P = host_front_.data();
   double* const C = !has_cb ? nullptr : cb_on_host ? dst : P + panel_doubles;
   if (!assembled) assemble_llt_split(ctx, f, P, C);  // tiled_host.cpp
-  start_tiled_prefetch(ctx, f, pos + 1);             // the next front's, while this one's goes on
-  if (has_cb && !cb_on_host) {  // the block's place is on the device: it goes there once
+  start_tiled_prefetch(ctx, f, pos);  // the next tiled front's, while this one's goes on
+  if (has_cb && !cb_on_host) {        // the block's place is on the device: it goes there once
     STRATA_CUDA(cudaMemcpyAsync(dst, C, sizeof(double) * mc * mc, cudaMemcpyHostToDevice, stream_));
     bytes_h2d_ += sizeof(double) * mc * mc;
   }
