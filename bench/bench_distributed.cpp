@@ -20,6 +20,7 @@
 #include "bench_common.hpp"
 #include "core/stats_json.hpp"
 #include "core/timer.hpp"
+#include "crash_report.hpp"
 #include "distributed/distributed_internal.hpp"
 #include "strata/distributed.hpp"
 #include "strata/mpi.hpp"
@@ -155,6 +156,7 @@ int run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  bench::report_fatal_signals();  // a crash on a lent machine says where
   int provided = 0;
   MPI_Init_thread(&argc, &argv, MPI_THREAD_SERIALIZED, &provided);
   int rc = 1;

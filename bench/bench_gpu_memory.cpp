@@ -51,6 +51,7 @@
 #include "bench_common.hpp"
 #include "core/stats_json.hpp"
 #include "core/timer.hpp"
+#include "crash_report.hpp"
 #include "numeric/cuda/cuda_executor.hpp"
 #include "numeric/cuda/kernels.cuh"
 #include "numeric/factor.hpp"
@@ -553,6 +554,7 @@ Run run(const bench::Problem& p, Options o, int repeat) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  bench::report_fatal_signals();  // a crash on a lent machine says where
   CLI::App app{"strata GPU memory-budget, block-size and device benchmark"};
   std::vector<std::string> problems = {"lap3d-60", "elast3d-30", "uelast3d-20"};
   std::vector<std::string> block_problems = {"lap3d-60", "elast3d-30", "uelast3d-20",

@@ -36,12 +36,14 @@
 #include "core/solver_internal.hpp"
 #include "core/stats_json.hpp"
 #include "core/timer.hpp"
+#include "crash_report.hpp"
 #include "strata/strata.hpp"
 
 using namespace strata;
 using json = nlohmann::json;
 
 int main(int argc, char** argv) {
+  bench::report_fatal_signals();  // a crash on a lent machine says where
   CLI::App app{"strata multi-worker factorization benchmark"};
   std::vector<std::string> problems = {"lap3d-30", "elast3d-14"};
   // defaults: the library's (an ablation names its values)
