@@ -16,7 +16,15 @@
 namespace strata::bench {
 namespace {
 
-constexpr int kSignals[] = {SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT};
+// the signals reported, with what the report calls them
+constexpr struct {
+  int sig;
+  const char* name;
+} kSignals[] = {{SIGSEGV, "SIGSEGV"},
+                {SIGBUS, "SIGBUS"},
+                {SIGFPE, "SIGFPE"},
+                {SIGILL, "SIGILL"},
+                {SIGABRT, "SIGABRT"}};
 alignas(16) char alt_stack[1 << 16];
 
 void put(const char* s) {
@@ -30,20 +38,15 @@ void put(const char* s) {
 }
 
 void on_fatal(int sig) {
-  char num[16];
-  int len = 0;
-  for (int v = sig; v > 0 && len < 15; v /= 10) num[len++] = static_cast<char>('0' + v % 10);
-  char dec[16];
-  for (int i = 0; i < len; ++i) dec[i] = num[len - 1 - i];
-  dec[len] = '\0';
-  const char* name = sig == SIGSEGV   ? "SIGSEGV"
-                     : sig == SIGBUS  ? "SIGBUS"
-                     : sig == SIGFPE  ? "SIGFPE"
-                     : sig == SIGILL  ? "SIGILL"
-                     : sig == SIGABRT ? "SIGABRT"
-                                      : "?";
+  char num[12];  // the number, written without the (not async-signal-safe) printf family
+  char* p = num + sizeof(num) - 1;
+  *p = '\0';
+  for (int v = sig; v > 0 && p > num; v /= 10) *--p = static_cast<char>('0' + v % 10);
+  const char* name = "?";
+  for (const auto& s : kSignals)
+    if (s.sig == sig) name = s.name;
   put("\nfatal signal ");
-  put(dec);
+  put(p);
   put(" (");
   put(name);
   put("); backtrace (addr2line -f -C -e <binary> <offset> with the same build):\n");
@@ -68,7 +71,7 @@ void report_fatal_signals() {
   sa.sa_handler = on_fatal;
   sigemptyset(&sa.sa_mask);
   sa.sa_flags = SA_ONSTACK | SA_RESETHAND;
-  for (int sig : kSignals) (void)sigaction(sig, &sa, nullptr);
+  for (const auto& s : kSignals) (void)sigaction(s.sig, &sa, nullptr);
 }
 
 }  // namespace strata::bench

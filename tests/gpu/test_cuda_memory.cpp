@@ -64,9 +64,8 @@ TEST_F(CudaMemory, CholeskyUnderATightBudgetEqualsInCore) {
 // down to a few slabs, the pool as planned and 60% of the budget, earlier columns
 // streamed as wide as a slab and in pieces of 48, with and without the next front's host
 // assembly beside the device's work (which some fronts get), and the defaults: the factor
-// equals the CPU's
-// entry by entry, and a refactorization with other values under the same plan equals the
-// CPU's on those.
+// equals the CPU's entry by entry, and a refactorization with other values under the same
+// plan equals the CPU's on those.
 TEST_F(CudaMemory, TiledCholeskyFrontsMatchCpu) {
   auto rng = test::fresh_rng();
   std::uniform_real_distribution<double> u(0.5, 2.0);

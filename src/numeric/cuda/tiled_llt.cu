@@ -168,17 +168,16 @@ void CudaExecutor::start_tiled_prefetch(const numeric::FactorContext& ctx, index
   double* const C = !has_cb ? nullptr : cb_on_host ? dst : P + panel;
   if (staged > 0) {  // on stream_, after the level below; waited for here (they are small:
                      // the device holds only the arena's first part)
-    staged = 0;
-    for (const double*& cb : block) {
-      if (!cb || in_host_arena(cb)) continue;
-      const index_t c = t.children[t.child_offsets[g] + (&cb - block.data())];
-      const std::size_t cm = static_cast<std::size_t>(t.cb_size(c));
-      double* to = host_staging_next_.data() + staged;
+    double* to = host_staging_next_.data();
+    for (std::size_t i = 0; i < block.size(); ++i) {
+      if (!block[i] || in_host_arena(block[i])) continue;
+      const std::size_t cm =
+          static_cast<std::size_t>(t.cb_size(t.children[t.child_offsets[g] + i]));
       STRATA_CUDA(
-          cudaMemcpyAsync(to, cb, sizeof(double) * cm * cm, cudaMemcpyDeviceToHost, stream_));
+          cudaMemcpyAsync(to, block[i], sizeof(double) * cm * cm, cudaMemcpyDeviceToHost, stream_));
       bytes_d2h_ += sizeof(double) * cm * cm;
-      cb = to;
-      staged += cm * cm;
+      block[i] = to;
+      to += cm * cm;
     }
     STRATA_CUDA(cudaStreamSynchronize(stream_));
   }
