@@ -17,18 +17,21 @@
 //   strata simulate --resume DIR [--t-end T] [--output DIR] [--checkpoint-every N]
 //                   [--device-memory-limit BYTES] ...
 //
-// Exit status: 0 on success, 1 on a solver error (the message names the problem),
-// 2 on a usage error, 128 + the signal number when SIGINT/SIGTERM stopped a simulation
-// (its partial results and a checkpoint are kept).
+// Exit status (kExitStatus below, printed by --help): 0 on success, 1 on a solver or
+// input error, 2 on a usage error, 128 + the signal number (130, 143) when SIGINT/SIGTERM
+// stopped a simulation (its partial results and a checkpoint are kept). Every error line
+// starts with "strata: error:".
 #include <fmt/core.h>
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
+#include <cfloat>
 #include <chrono>
 #include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <exception>
+#include <filesystem>
 #include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>
@@ -75,6 +78,28 @@ struct CommonArgs {
   std::string split_top = Options{}.split_top ? "on" : "off";
 };
 
+// Value checks with readable messages (CLI11's own print the range's bound, 1.8e308, in
+// full). Each returns "" when the value is good.
+std::string bad_number(const std::string& v, bool integer, double least, bool strict) {
+  const std::string want = std::string(integer ? "a whole number " : "a number ") +
+                           (strict ? "greater than " : "of at least ") + fmt::format("{:g}", least);
+  char* end = nullptr;
+  errno = 0;
+  const double x = integer ? static_cast<double>(std::strtoll(v.c_str(), &end, 10))
+                           : std::strtod(v.c_str(), &end);
+  if (v.empty() || end != v.c_str() + v.size() || errno == ERANGE || !std::isfinite(x) ||
+      (strict ? !(x > least) : !(x >= least)))
+    return "must be " + want + ", got '" + v + "'";
+  return "";
+}
+const CLI::Validator kPositive([](std::string& v) { return bad_number(v, false, 0, true); },
+                               "NUMBER>0");
+const CLI::Validator kNonNegative([](std::string& v) { return bad_number(v, false, 0, false); },
+                                  "NUMBER>=0");
+const CLI::Validator kNonNegativeCount([](std::string& v) { return bad_number(v, true, 0, false); },
+                                       "N>=0");
+const CLI::Validator kCount([](std::string& v) { return bad_number(v, true, 1, false); }, "N>=1");
+
 Backend backend_of(const std::string& device) {
   return device == "cpu" ? Backend::cpu : device == "gpu" ? Backend::cuda : Backend::automatic;
 }
@@ -88,17 +113,17 @@ void add_common(CLI::App* cmd, CommonArgs& a) {
   cmd->add_option("--max-block-size", a.max_block_size,
                   "most pivots per front (separator blocking); 0: by backend and type "
                   "(4096 for Cholesky on the GPU, else 1024)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(kNonNegativeCount);
   cmd->add_option("--device-memory-limit", a.device_memory_limit,
                   "GPU memory budget in bytes (0: the whole device); also the batch plan's");
-  cmd->add_option("--threads", a.threads, "host threads (0: all)");
+  cmd->add_option("--threads", a.threads, "host threads (default: all)")->check(kCount);
   cmd->add_flag("--json", a.json, "print the report as JSON");
   cmd->add_flag("--reproducible", a.reproducible,
                 "bitwise the same result for every --threads (large fronts on one BLAS thread)");
   cmd->add_option("--num-gpus", a.num_gpus, "GPUs for the CUDA backend (0: all visible)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(kNonNegativeCount);
   cmd->add_option("--subtrees-per-gpu", a.subtrees_per_gpu, "subtrees per GPU in the tree split")
-      ->check(CLI::PositiveNumber);
+      ->check(kCount);
   cmd->add_option("--balance-by-work", a.balance_by_work,
                   "balance the top bisections by work with several GPUs")
       ->check(CLI::IsMember({"on", "off"}));
@@ -221,14 +246,27 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
+// Runs f, naming `file` in the message of the bad input it reports (a structurally
+// singular matrix found by the analysis, say), as the reader's own messages do.
+template <class F>
+void naming_file(const std::string& file, F&& f) {
+  try {
+    f();
+  } catch (const ParseError&) {
+    throw;
+  } catch (const InvalidInput& e) {
+    throw InvalidInput(file + ": " + e.what());
+  }
+}
+
 int run_analyze(const CommonArgs& a) {
   auto t0 = std::chrono::steady_clock::now();
-  MMMatrix mm = read_matrix_market(a.file);
+  MMMatrix mm = read_matrix_market(a.file, MMCheck::factorable);
   const double read_seconds = seconds_since(t0);
   Options o = options_from(a);
   o.type = mm.symmetry == MMSymmetry::symmetric ? MatrixType::automatic : MatrixType::general;
   Solver solver(o);
-  solver.analyze(mm.matrix);
+  naming_file(a.file, [&] { solver.analyze(mm.matrix); });
   const AnalysisStats& s = solver.stats().analysis;
   if (a.json) {
     json j = analysis_json(s);
@@ -259,12 +297,11 @@ int run_solve(const SolveArgs& a, const Communicator& comm) {
   Options o = options_from(a.common);
   std::exception_ptr failed;
   if (root) try {
-      mm = read_matrix_market(a.common.file);
+      // before any work: a solution that cannot be written is found now, not after the solve
+      if (!a.out.empty()) check_output_path(a.out);
+      mm = read_matrix_market(a.common.file, MMCheck::factorable);
       read_seconds = seconds_since(t0);
       n = mm.matrix.n_rows;
-      if (mm.matrix.n_rows != mm.matrix.n_cols)
-        throw InvalidInput(a.common.file + ": matrix is " + std::to_string(mm.matrix.n_rows) + "x" +
-                           std::to_string(mm.matrix.n_cols) + ", not square");
       if (!a.rhs.empty()) {
         index_t rows = 0, cols = 0;
         b = read_dense_matrix_market(a.rhs, &rows, &cols);
@@ -290,8 +327,10 @@ int run_solve(const SolveArgs& a, const Communicator& comm) {
   }
   DistributedSolver solver(comm, o);
   auto t1 = std::chrono::steady_clock::now();
-  solver.analyze(mm.matrix);
-  solver.factorize(mm.matrix);
+  naming_file(a.common.file, [&] {
+    solver.analyze(mm.matrix);
+    solver.factorize(mm.matrix);
+  });
   std::vector<double> x(b.size());
   solver.solve(root ? b.data() : nullptr, root ? x.data() : nullptr, nrhs);
   const double total = seconds_since(t1);
@@ -311,9 +350,7 @@ int run_solve(const SolveArgs& a, const Communicator& comm) {
                    {"gflops", f.gflops},
                    {"perturbed_pivots", f.perturbed_pivots},
                    {"two_by_two_pivots", f.two_by_two_pivots},
-                   {"inertia", {f.inertia_positive, f.inertia_negative, f.inertia_zero}},
-                   {"log_abs_determinant", f.log_abs_determinant},
-                   {"determinant_sign", f.determinant_sign},
+                   {"inertia_valid", f.inertia_valid},
                    {"device_seconds", f.device_seconds},
                    {"bytes_to_device", f.bytes_to_device},
                    {"bytes_to_host", f.bytes_to_host},
@@ -329,6 +366,11 @@ int run_solve(const SolveArgs& a, const Communicator& comm) {
                    {"factor_resident", f.factor_resident},
                    {"device_phases", f.device_phases}};
     j["factor"]["devices"] = f.devices;
+    // withheld (null) when pivots were perturbed: they would be the nearby matrix's, not A's
+    j["factor"]["inertia"] =
+        f.inertia_valid ? json{f.inertia_positive, f.inertia_negative, f.inertia_zero} : json();
+    j["factor"]["log_abs_determinant"] = f.inertia_valid ? json(f.log_abs_determinant) : json();
+    j["factor"]["determinant_sign"] = f.inertia_valid ? json(f.determinant_sign) : json();
     if (ds.ranks > 1) {
       const json ranks = ds.per_rank;
       j["distributed"] = {{"ranks", ds.ranks},
@@ -341,7 +383,10 @@ int run_solve(const SolveArgs& a, const Communicator& comm) {
                   {"refinement_steps", st.solve.refinement_steps},
                   {"gmres_iterations", st.solve.gmres_iterations},
                   {"backward_error", st.solve.backward_error},
+                  {"backward_error_floor", st.solve.backward_error_floor},
                   {"converged", st.solve.refinement_converged},
+                  {"relative_residual", st.solve.relative_residual},
+                  {"singular_consistent", st.solve.singular_consistent},
                   {"on_device", st.solve.on_device}};
     j["total_seconds"] = total;
     fmt::print("{}\n", j.dump(2));
@@ -389,16 +434,37 @@ int run_solve(const SolveArgs& a, const Communicator& comm) {
             r.factor_bytes_received * 1e-6, r.values_bytes * 1e-6, r.factor_bytes_held * 1e-6,
             r.solve_seconds);
     }
-    fmt::print("pivots                {} perturbed, {} 2x2; inertia (+{}, -{}, 0:{})\n",
-               f.perturbed_pivots, f.two_by_two_pivots, f.inertia_positive, f.inertia_negative,
-               f.inertia_zero);
-    fmt::print("log|det A|            {:.10g} (sign {})\n", f.log_abs_determinant,
-               f.determinant_sign);
+    if (f.inertia_valid) {
+      fmt::print("pivots                {} perturbed, {} 2x2; inertia (+{}, -{}, 0:{})\n",
+                 f.perturbed_pivots, f.two_by_two_pivots, f.inertia_positive, f.inertia_negative,
+                 f.inertia_zero);
+      fmt::print("log|det A|            {:.10g} (sign {})\n", f.log_abs_determinant,
+                 f.determinant_sign);
+    } else {
+      fmt::print(
+          "pivots                {} perturbed (A is numerically singular), {} 2x2; inertia and "
+          "log|det A| not shown: they would be those of the perturbed matrix, not A's\n",
+          f.perturbed_pivots, f.two_by_two_pivots);
+    }
+    const SolveStats& sv = st.solve;
+    std::string verdict;
+    if (sv.singular_consistent)
+      verdict = " (A is numerically singular and b is in its range: x is one of its solutions)";
+    else if (f.perturbed_pivots > 0 && sv.relative_residual > std::sqrt(DBL_EPSILON / 2))
+      verdict = fmt::format(
+          " (A is numerically singular and b is NOT in its range: ‖b−Ax‖/‖b‖ = {:.3e}; x "
+          "solves only the perturbed matrix)",
+          sv.relative_residual);
+    else if (!sv.refinement_converged)
+      verdict = fmt::format(" (ABOVE the tolerance {:.1e} and the rounding floor {:.3e}{})",
+                            Options{}.refinement_tolerance, sv.backward_error_floor,
+                            f.perturbed_pivots > 0 ? ": A is numerically singular and b may "
+                                                     "not be in its range"
+                                                   : "");
     fmt::print(
         "solve                 {:.3f} s, {} refinement steps, {} GMRES iterations, "
         "backward error {:.3e}{}\n",
-        st.solve.seconds, st.solve.refinement_steps, st.solve.gmres_iterations,
-        st.solve.backward_error, st.solve.refinement_converged ? "" : " (above tolerance)");
+        sv.seconds, sv.refinement_steps, sv.gmres_iterations, sv.backward_error, verdict);
     fmt::print("total                 {:.3f} s (analyze + factorize + solve)\n", total);
     if (!a.out.empty()) fmt::print("solution written to   {}\n", a.out);
   }
@@ -437,9 +503,40 @@ void catch_interrupts() {
   sigaction(SIGTERM, &sa, nullptr);
 }
 
+int run_simulate_checked(const SimulateArgs& a, bool& started);
+
+// A run that fails before its first step marks its output folder (status.json "failed"
+// with the reason, an earlier run's results removed) before the error is reported; a
+// folder that cannot be marked leaves the original error to be reported. (Once the
+// simulation has started, strata::mbd::simulate keeps the folder's status itself.)
 int run_simulate(const SimulateArgs& a) {
+  bool started = false;
+  try {
+    return run_simulate_checked(a, started);
+  } catch (const Error& e) {
+    if (!started) try {
+        strata::mbd::mark_failed_before_start(a.output, e.what());
+      } catch (const std::exception&) {
+      }
+    throw;
+  }
+}
+
+// The output folder exists (or is made) and files can be written there, checked before
+// the model is read and its initial conditions computed.
+void check_output_folder(const std::string& dir) {
+  if (dir.empty()) return;
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (ec) throw Error("cannot write to the output folder " + dir + ": " + ec.message());
+  check_output_path(dir + "/status.json");
+}
+
+int run_simulate_checked(const SimulateArgs& a, bool& started) {
   using namespace strata::mbd;
   auto t0 = std::chrono::steady_clock::now();
+  check_output_folder(a.output);
+  if (!a.write_model.empty()) check_output_path(a.write_model);
   if (!a.model.empty() && !a.generate.empty())
     throw InvalidInput("give either a model file or --generate, not both");
   Model model;
@@ -539,6 +636,7 @@ int run_simulate(const SimulateArgs& a) {
                  : std::string("step"),
              io.step, io.t_end, io.modified_newton ? "modified" : "full");
   std::fflush(stdout);
+  started = true;  // simulate() keeps the output folder's status from here on
   const SimulationResult r = simulate(model, o);
   fmt::print("{}", summary(model, r));
   fmt::print("model read/build      {:.3f} s\n", read_seconds);
@@ -568,6 +666,11 @@ int run_simulate(const SimulateArgs& a) {
 
 }  // namespace
 
+constexpr const char* kExitStatus =
+    "Exit status: 0 success; 1 solver or input error (the message, after \"strata: error:\", "
+    "names the problem); 2 usage error (unknown option, bad value, missing file); 130 or 143 "
+    "a simulation stopped by SIGINT or SIGTERM (partial results and a checkpoint kept).";
+
 int main(int argc, char** argv) {
   CLI::App app{"strata: a multifrontal sparse direct solver for CPU and GPU"};
   app.require_subcommand(1);
@@ -596,9 +699,9 @@ int main(int argc, char** argv) {
                        "generated model: andrews, tracked:N, lattice:N, flexible:NXxNYxNZ, "
                        "chain:N, chain2d:N");
   simulate->add_option("--t-end", sim.t_end, "end time [s] (default: the model's)")
-      ->check(CLI::PositiveNumber);
+      ->check(kPositive);
   simulate->add_option("--step", sim.step, "step size [s] (default: the model's)")
-      ->check(CLI::PositiveNumber);
+      ->check(kPositive);
   simulate->add_option("--order", sim.order, "BDF order 1..5 (default: the model's)")
       ->check(CLI::Range(1, 5));
   simulate->add_option("--device", sim.device, "where strata factorizes")
@@ -607,32 +710,38 @@ int main(int argc, char** argv) {
                        "GPU memory budget in bytes (0: the whole device)");
   simulate->add_option("--output", sim.output, "output folder (default: out)");
   simulate->add_flag("--vtk", sim.vtk, "also write a ParaView series (output/vtk/series.pvd)");
-  simulate->add_option("--output-interval", sim.output_interval,
-                       "seconds between rows of the large CSV files (default: every step)");
+  simulate
+      ->add_option("--output-interval", sim.output_interval,
+                   "seconds between rows of the large CSV files (default: every step)")
+      ->check(kNonNegative);
   simulate->add_option("--dump-matrix", sim.dump_dir,
                        "write the Newton Jacobian and right-hand side of one step here (Matrix "
                        "Market)");
-  simulate->add_option("--dump-step", sim.dump_step, "the step to dump (default 1)")
-      ->check(CLI::PositiveNumber);
+  simulate->add_option("--dump-step", sim.dump_step, "the step to dump (default 1)")->check(kCount);
   simulate->add_option("--write-model", sim.write_model, "write the generated model (JSON)");
   simulate->add_flag("--full-newton", sim.full_newton,
                      "refactorize at every Newton iteration (default: modified Newton)");
-  simulate->add_option("--newton-tol", sim.newton_tol, "relative Newton tolerance (default 1e-8)");
-  simulate->add_option("--threads", sim.threads, "host threads for strata (0: all)");
+  simulate->add_option("--newton-tol", sim.newton_tol, "relative Newton tolerance (default 1e-8)")
+      ->check(kPositive);
+  simulate->add_option("--threads", sim.threads, "host threads for strata (default: all)")
+      ->check(kCount);
   simulate->add_flag("--quiet", sim.quiet, "no progress bar");
   simulate->add_flag("--verbose", sim.verbose, "print every Newton iteration (stderr)");
   simulate->add_flag("--variable-step", sim.variable_step,
                      "variable step size and order (up to --order) with local error control "
                      "(--step is the first step)");
-  simulate->add_option("--rtol", sim.rtol, "relative local error tolerance (default 1e-4)");
-  simulate->add_option("--atol", sim.atol, "absolute local error tolerance (default 1e-6)");
-  simulate->add_option("--max-step", sim.max_step, "largest variable step [s] (default t_end/10)");
+  simulate->add_option("--rtol", sim.rtol, "relative local error tolerance (default 1e-4)")
+      ->check(kPositive);
+  simulate->add_option("--atol", sim.atol, "absolute local error tolerance (default 1e-6)")
+      ->check(kPositive);
+  simulate->add_option("--max-step", sim.max_step, "largest variable step [s] (default t_end/10)")
+      ->check(kPositive);
   simulate->add_flag("--dense-reference", sim.dense,
                      "solve with dense LAPACK LU instead of strata (diagnosis; small models)");
   simulate
       ->add_option("--checkpoint-every", sim.checkpoint_every,
                    "write a restart point every N accepted steps (and when interrupted)")
-      ->check(CLI::PositiveNumber);
+      ->check(kCount);
   simulate->add_option("--checkpoint-dir", sim.checkpoint_dir,
                        "folder of the restart point (default: OUTPUT/checkpoint)");
   simulate
@@ -640,7 +749,17 @@ int main(int argc, char** argv) {
                    "continue the run checkpointed in this folder (model and options from "
                    "the checkpoint; --t-end may extend it)")
       ->check(CLI::ExistingDirectory);
-  CLI11_PARSE(app, argc, argv);
+  for (CLI::App* cmd : {&app, analyze, solve, simulate}) cmd->footer(kExitStatus);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::Success& e) {  // --help
+    return app.exit(e);
+  } catch (const CLI::ParseError& e) {
+    std::fprintf(
+        stderr, "strata: error: %s\n(strata --help, or strata COMMAND --help, lists the options)\n",
+        e.what());
+    return 2;
+  }
   // mpirun -n R: `solve` runs on every rank; the other commands on rank 0 alone
   std::optional<Communicator> comm(cli::launch(&argc, &argv));
   const int rank = comm->rank();
@@ -663,8 +782,13 @@ int main(int argc, char** argv) {
   } catch (const strata::Error& e) {
     if (rank == 0) std::fprintf(stderr, "strata: error: %s\n", e.what());
     return 1;
+  } catch (const std::bad_alloc&) {
+    std::fprintf(stderr,
+                 "strata: error: out of memory (the size of the failed allocation is "
+                 "not known)\n");
+    return 1;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "strata: unexpected error: %s\n", e.what());
+    std::fprintf(stderr, "strata: error: internal error: %s\n", e.what());
     return 1;
   }
   return 2;

@@ -1,13 +1,14 @@
 // strata — Matrix Market input and output (NIST format, https://math.nist.gov/MatrixMarket).
 //
 // Read: `coordinate` real / integer / pattern with general / symmetric / skew-symmetric
-// symmetry, and `array` real / integer general (dense right-hand sides). Files ending in
-// ".gz" are decompressed with zlib. Complex and Hermitian files are NotSupported.
-// Every malformed file raises ParseError naming the file and 1-based line: bad banner,
-// bad size line, wrong entry count, index out of range, non-numeric value, NaN/Inf,
-// truncated file; also duplicate entries whose sum overflows (line 0: no single line) and
-// dimensions above 2^60 - 1 (the most a std::vector of offsets can hold). A file whose
-// declared dimensions need more memory than there is raises OutOfMemory.
+// symmetry, and `array` real / integer general (dense right-hand sides). gzip files
+// (any name; several members allowed, nothing after the last) are decompressed with zlib. Complex
+// and Hermitian files are NotSupported. Every malformed file raises ParseError naming the file and
+// 1-based line: bad banner, bad size line, wrong entry count, index out of range, non-numeric
+// value, NaN/Inf, truncated file, trailing data after a gzip stream; also duplicate entries whose
+// sum overflows (line 0: no single line) and dimensions above 2^60 - 1 (the most a std::vector of
+// offsets can hold). A file whose declared dimensions need more memory than there is raises
+// OutOfMemory.
 #pragma once
 
 #include <string>
@@ -31,9 +32,22 @@ struct MMMatrix {
   bool pattern = false;  ///< the file had no values
 };
 
-/// Reads a sparse coordinate matrix from PATH (".gz" decompressed). Throws ParseError,
-/// NotSupported, OutOfMemory.
-MMMatrix read_matrix_market(const std::string& path);
+/// What read_matrix_market checks beyond the format.
+enum class MMCheck {
+  none,  ///< any matrix the file holds (rectangular, empty rows and columns allowed)
+  /// A matrix to be factored: square, and every row and column holding an entry (a
+  /// matrix with an empty row or column is structurally singular). Checked from the
+  /// entries in O(entries) memory, before the O(rows + columns) compressed form is
+  /// allocated, so a small file declaring huge dimensions is refused at once.
+  factorable,
+};
+
+/// Reads a sparse coordinate matrix from PATH (gzip-compressed or plain, told by its
+/// first bytes). Throws ParseError, NotSupported, OutOfMemory (naming the bytes of the
+/// compressed form), and with MMCheck::factorable InvalidInput "PATH: matrix is RxC, not
+/// square" or "PATH: matrix is structurally singular: column J (1-based) has no entries"
+/// (or row I).
+MMMatrix read_matrix_market(const std::string& path, MMCheck check = MMCheck::none);
 
 /// Reads a dense `array` (or a coordinate file, densified) into a column-major
 /// rows×cols array. Throws ParseError, NotSupported, OutOfMemory.

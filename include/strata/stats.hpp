@@ -135,7 +135,12 @@ struct FactorStats {
   index_t inertia_zero = 0;
   double log_abs_determinant = 0;  ///< log|det A| (spd, LDLᵀ and LU)
   int determinant_sign = 0;        ///< sign of det A: -1, 0 or 1
-  double matrix_norm = 0;          ///< ‖A‖₁ used for static pivoting (after scaling)
+  /// True when the inertia and the determinant above are A's. False when static pivoting
+  /// perturbed pivots (perturbed_pivots > 0): they are then those of the nearby matrix
+  /// that was factored, not A's (a positive semidefinite A can show negative eigenvalues,
+  /// a singular one a finite log-determinant), and the outputs withhold or mark them.
+  bool inertia_valid = true;
+  double matrix_norm = 0;  ///< ‖A‖₁ used for static pivoting (after scaling)
   // --- GPU backend (zero on the CPU; with several GPUs: bytes, batches and tiled fronts
   // summed over them, device_seconds and device_budget the largest) ---
   double device_seconds = 0;        ///< time of the factorization's work on the GPU (events)
@@ -204,8 +209,23 @@ struct SolveStats {
   int refinement_steps = 0;
   int gmres_iterations = 0;  ///< total over right-hand sides (0 when refinement sufficed)
   double backward_error = 0;  ///< max over right-hand sides of ‖b−Ax‖∞/(‖A‖∞‖x‖∞+‖b‖∞)
-  bool refinement_converged = false;  ///< reached Options::refinement_tolerance
-  bool on_device = false;             ///< the triangular solves ran on the GPU (resident factor)
+  /// The rounding floor of the backward error, (m+1)·u for m the most entries in a row of
+  /// A and u the unit roundoff: the residual computed in working precision is uncertain by
+  /// about this much (Higham, Accuracy and Stability of Numerical Algorithms, §12.1).
+  double backward_error_floor = 0;
+  /// The backward error reached Options::refinement_tolerance, or the rounding floor when
+  /// that is larger (no method can verify less; GMRES is then not run).
+  bool refinement_converged = false;
+  /// When the factorization perturbed pivots (A numerically singular): max over
+  /// right-hand sides of ‖b − A x‖∞ / ‖b‖∞, at least b's distance from A's range (no x
+  /// does better); 0 when no pivot was perturbed (not computed).
+  double relative_residual = 0;
+  /// The factorization perturbed pivots (A is numerically singular), the solve converged
+  /// and relative_residual ≤ √u: b is in A's range to working precision and x is one of
+  /// A's solutions (not the only one). False with perturbed pivots and a larger
+  /// relative_residual: b is not in the range, and x solves only the perturbed matrix.
+  bool singular_consistent = false;
+  bool on_device = false;  ///< the triangular solves ran on the GPU (resident factor)
 };
 
 /// All statistics of a Solver.

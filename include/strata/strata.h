@@ -253,13 +253,23 @@ typedef struct strata_stats {
   int64_t inertia_zero;
   double log_abs_determinant; /**< log|det A| */
   int determinant_sign;       /**< sign of det A: -1, 0 or 1 */
+  int inertia_valid;          /**< 1 when inertia and determinant are A's; 0 when static
+                                   pivoting perturbed pivots (they are then those of the
+                                   nearby matrix factored, not A's) */
   /* solve */
   int solved; /**< 1 after a successful strata_solve */
   double solve_seconds;
   int refinement_steps; /**< refinement steps of the last solve */
   int gmres_iterations; /**< GMRES iterations after stalled refinement */
   double backward_error; /**< max over columns of ‖b−Ax‖∞/(‖A‖∞‖x‖∞+‖b‖∞) */
-  int refinement_converged; /**< 1 when the refinement tolerance was reached */
+  int refinement_converged; /**< 1 when the refinement tolerance, or the rounding floor
+                                 when larger, was reached */
+  double backward_error_floor; /**< (m+1)·u, m the most entries in a row of A */
+  double relative_residual; /**< with perturbed pivots: max ‖b−Ax‖∞/‖b‖∞, at least b's
+                                 distance from A's range (0 otherwise) */
+  int singular_consistent; /**< 1 when pivots were perturbed (A numerically singular), the
+                                solve converged and relative_residual ≤ √u: x is one of
+                                A's solutions */
 } strata_stats;
 
 /** Copies the statistics into *stats. Errors: INVALID_INPUT (NULL pointer). */

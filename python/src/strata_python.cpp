@@ -126,6 +126,21 @@ strata::Options make_options(const std::string& type, const std::string& orderin
   return o;
 }
 
+// inertia, log_abs_determinant and determinant_sign, withheld (None) when static
+// pivoting perturbed pivots: they would be those of the nearby matrix factored, not A's
+void put_inertia(py::dict& d, const strata::FactorStats& f) {
+  d["inertia_valid"] = f.inertia_valid;
+  if (!f.inertia_valid) {
+    d["inertia"] = py::none();
+    d["log_abs_determinant"] = py::none();
+    d["determinant_sign"] = py::none();
+    return;
+  }
+  d["inertia"] = py::make_tuple(f.inertia_positive, f.inertia_negative, f.inertia_zero);
+  d["log_abs_determinant"] = f.log_abs_determinant;
+  d["determinant_sign"] = f.determinant_sign;
+}
+
 py::dict analysis_dict(const strata::AnalysisStats& a) {
   py::dict d;
   d["n"] = a.n;
@@ -230,9 +245,7 @@ class Core {
       d["factor_input_seconds"] = f.input_seconds;
       d["perturbed_pivots"] = f.perturbed_pivots;
       d["two_by_two_pivots"] = f.two_by_two_pivots;
-      d["inertia"] = py::make_tuple(f.inertia_positive, f.inertia_negative, f.inertia_zero);
-      d["log_abs_determinant"] = f.log_abs_determinant;
-      d["determinant_sign"] = f.determinant_sign;
+      put_inertia(d, f);
       d["matrix_norm"] = f.matrix_norm;
     }
     if (solved_) {
@@ -242,6 +255,9 @@ class Core {
       d["gmres_iterations"] = s.gmres_iterations;
       d["backward_error"] = s.backward_error;
       d["refinement_converged"] = s.refinement_converged;
+      d["backward_error_floor"] = s.backward_error_floor;
+      d["relative_residual"] = s.relative_residual;
+      d["singular_consistent"] = s.singular_consistent;
     }
     return d;
   }
@@ -315,9 +331,7 @@ class DistCore {
       d["backend"] = f.backend;
       d["factor_seconds"] = f.seconds;
       d["perturbed_pivots"] = f.perturbed_pivots;
-      d["inertia"] = py::make_tuple(f.inertia_positive, f.inertia_negative, f.inertia_zero);
-      d["log_abs_determinant"] = f.log_abs_determinant;
-      d["determinant_sign"] = f.determinant_sign;
+      put_inertia(d, f);
     }
     if (solved_) {
       d["solve_seconds"] = st.solve.seconds;

@@ -329,9 +329,15 @@ class Solver:
         Factorization: type ("spd", "symmetric_indefinite", "general"), backend ("cpu" or
         "cuda"), factor_seconds, factor_gflops, perturbed_pivots (static pivoting),
         two_by_two_pivots, inertia (positive, negative, zero), log_abs_determinant,
-        determinant_sign, matrix_norm. After a solve: solve_seconds, refinement_steps,
-        gmres_iterations, backward_error (max over columns of
-        ‖b−Ax‖∞/(‖A‖∞‖x‖∞+‖b‖∞)), refinement_converged.
+        determinant_sign (these three None when inertia_valid is False: static pivoting
+        perturbed pivots, and they would describe the nearby matrix factored, not A),
+        matrix_norm. After a solve: solve_seconds, refinement_steps, gmres_iterations,
+        backward_error (max over columns of ‖b−Ax‖∞/(‖A‖∞‖x‖∞+‖b‖∞)),
+        backward_error_floor ((m+1)·u, m the most entries in a row), refinement_converged
+        (the tolerance, or the floor when larger, was reached), relative_residual (with
+        perturbed pivots: ‖b−Ax‖∞/‖b‖∞, at least b's distance from A's range),
+        singular_consistent (pivots perturbed, the solve converged and relative_residual
+        ≤ √u: x is one of A's solutions).
         """
         return self._core.stats()
 

@@ -445,6 +445,7 @@ strata_status strata_get_stats(const strata_solver* s, strata_stats* out) {
     out->inertia_zero = f.inertia_zero;
     out->log_abs_determinant = f.log_abs_determinant;
     out->determinant_sign = f.determinant_sign;
+    out->inertia_valid = f.inertia_valid ? 1 : 0;
   }
   if (s->solved) {
     const strata::SolveStats& so = st.solve;
@@ -454,6 +455,9 @@ strata_status strata_get_stats(const strata_solver* s, strata_stats* out) {
     out->gmres_iterations = so.gmres_iterations;
     out->backward_error = so.backward_error;
     out->refinement_converged = so.refinement_converged ? 1 : 0;
+    out->backward_error_floor = so.backward_error_floor;
+    out->relative_residual = so.relative_residual;
+    out->singular_consistent = so.singular_consistent ? 1 : 0;
   }
   return STRATA_OK;
 }

@@ -1,6 +1,7 @@
 // strata — typed exceptions (see include/strata/errors.hpp).
 #include "strata/errors.hpp"
 
+#include <cstdio>
 #include <string>
 
 namespace strata {
@@ -19,8 +20,18 @@ OutOfMemory::OutOfMemory(std::size_t bytes_requested, const std::string& where)
                 : "out of memory: " + where + " (the size of the failed allocation is not known)"),
       bytes_(bytes_requested) {}
 
+namespace {
+// A number for a message: %.3e keeps 4 significant digits whatever the magnitude
+// (std::to_string prints a pivot of -1e-9 as "-0.000000").
+std::string sci(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.3e", v);
+  return buf;
+}
+}  // namespace
+
 NotPositiveDefinite::NotPositiveDefinite(index_t column, double pivot)
-    : Error("matrix is not positive definite: pivot " + std::to_string(pivot) + " at column " +
+    : Error("matrix is not positive definite: pivot " + sci(pivot) + " at column " +
             std::to_string(column) + " (0-based, original numbering)"),
       column_(column),
       pivot_(pivot) {}

@@ -24,6 +24,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <optional>
 #include <string_view>
 
@@ -68,6 +69,10 @@ struct SolverState {
   MatrixType resolved = MatrixType::automatic;
   double norm_inf = 0;                // ‖A‖∞ of the input
   std::uint64_t values_analysis = 0;  // Analysis::id whose canonical pattern `values` holds
+  // the most entries in a row of `values` (symmetric storage expanded), for the rounding
+  // floor of the backward error; computed for the pattern of analysis `row_entries_of`
+  index_t max_row_entries = 0;
+  std::uint64_t row_entries_of = 0;
   Stats stats;
 };
 
@@ -538,6 +543,7 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
   fs.inertia_positive = total.positive;
   fs.inertia_negative = total.negative;
   fs.inertia_zero = total.zero;
+  fs.inertia_valid = total.perturbed == 0;
   fs.matrix_norm = norm1;
   // det A from det B = det(Dr) det(A) det(Q) det(Dc) (symmetric: det(D)² det(A))
   double logdet = total.log_abs_det;
@@ -683,6 +689,27 @@ void Solver::solve(const double* b, double* x, index_t nrhs) {
   phase("solve", [&] { solve_impl(*state_, b, x, nrhs); });
 }
 
+constexpr double kUnitRoundoff = 0.5 * std::numeric_limits<double>::epsilon();
+
+// (m+1)·u for the most entries m in a row of the factorized matrix (see solve_impl); m is
+// computed once per analyzed pattern.
+static double rounding_floor(SolverState& s) {
+  if (s.row_entries_of != s.values_analysis || s.max_row_entries == 0) {
+    const SparseMatrix& c = s.values;
+    std::vector<index_t> count(c.n_rows, 0);
+    for (index_t j = 0; j < c.n_cols; ++j)
+      for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) {
+        ++count[c.indices[p]];
+        if (c.storage != Storage::full && c.indices[p] != j) ++count[j];
+      }
+    index_t m = 0;
+    for (index_t k : count) m = std::max(m, k);
+    s.max_row_entries = std::max<index_t>(m, 1);
+    s.row_entries_of = s.values_analysis;
+  }
+  return static_cast<double>(s.max_row_entries + 1) * kUnitRoundoff;
+}
+
 // The solve phase: one solve with the factor, iterative refinement, GMRES if it stalls.
 static void solve_impl(SolverState& s, const double* b, double* x, index_t nrhs) {
   if (!s.analysis || !s.factor.valid) throw InvalidState("solve called before factorize");
@@ -741,6 +768,13 @@ static void solve_impl(SolverState& s, const double* b, double* x, index_t nrhs)
       break;
     }
   }
+  // The rounding floor of the backward error: b − A x computed in working precision is
+  // off by up to γ_{m+1}(|b| + |A||x|), m the most entries in a row (Higham, "Accuracy and
+  // Stability of Numerical Algorithms", §3.5 and §12.1), so a backward error below
+  // (m+1)·u cannot be told from zero. Refinement that stalls under it has converged as far
+  // as can be checked, and GMRES cannot do better: it is not run for those columns.
+  const double floor = rounding_floor(s);
+  const double enough = std::max(o.refinement_tolerance, floor);
   // refinement stalled: GMRES preconditioned by the factorization (see solve/gmres.hpp)
   int gmres_iterations = 0;
   if (o.gmres_max_iterations > 0) {
@@ -749,9 +783,9 @@ static void solve_impl(SolverState& s, const double* b, double* x, index_t nrhs)
       apply_inverse(s, in, out, 1, tmp);
     };
     for (index_t c = 0; c < nrhs; ++c) {
-      if (berr[c] <= o.refinement_tolerance) continue;
+      if (berr[c] <= enough) continue;
       const solve::GmresResult g = solve::gmres(n, op_a, op_m, s.norm_inf, b + c * n, x + c * n, 50,
-                                                o.gmres_max_iterations, o.refinement_tolerance);
+                                                o.gmres_max_iterations, enough);
       gmres_iterations += g.iterations;
       berr[c] = std::min(berr[c], g.backward_error);
     }
@@ -762,7 +796,28 @@ static void solve_impl(SolverState& s, const double* b, double* x, index_t nrhs)
   ss.refinement_steps = steps;
   ss.backward_error = 0;
   for (index_t c = 0; c < nrhs; ++c) ss.backward_error = std::max(ss.backward_error, berr[c]);
-  ss.refinement_converged = ss.backward_error <= o.refinement_tolerance;
+  ss.backward_error_floor = floor;
+  ss.refinement_converged = ss.backward_error <= enough;
+  // Pivots perturbed: A is numerically singular, and a small normwise backward error only
+  // says that x solves a nearby nonsingular matrix (x grows along A's near-null space as
+  // b's component there is divided by the static pivots). Whether b is in A's range shows
+  // in the residual relative to b alone: no x brings ‖b − A x‖ below b's distance from
+  // the range. Within √u·‖b‖ of it, x is one of A's solutions.
+  ss.relative_residual = 0;
+  ss.singular_consistent = false;
+  if (s.stats.factor.perturbed_pivots > 0) {
+    for (index_t c = 0; c < nrhs; ++c) {
+      solve::backward_error(n, op_a, s.norm_inf, b + c * n, x + c * n, r.data() + c * n);
+      double rn = 0, bn = 0;
+      for (index_t i = 0; i < n; ++i) {
+        rn = std::max(rn, std::abs(r[i + c * n]));
+        bn = std::max(bn, std::abs(b[i + c * n]));
+      }
+      ss.relative_residual = std::max(ss.relative_residual, bn > 0 ? rn / bn : rn > 0 ? 1.0 : 0.0);
+    }
+    ss.singular_consistent =
+        ss.refinement_converged && ss.relative_residual <= std::sqrt(kUnitRoundoff);
+  }
   ss.on_device = on_device;
   ss.first_solve_seconds = first_solve_seconds;
   ss.seconds = timer.seconds();

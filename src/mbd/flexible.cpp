@@ -1,6 +1,8 @@
 // strata::mbd — 8-node St. Venant–Kirchhoff hexahedron (see flexible.hpp).
 #include "mbd/flexible.hpp"
 
+#include <fmt/core.h>
+
 #include <cmath>
 
 namespace strata::mbd {
@@ -46,7 +48,7 @@ class Hexahedron : public Force {
                              J(0, 2) * (J(1, 0) * J(2, 1) - J(1, 1) * J(2, 0));
           if (!(det > 0))
             throw ModelError(name + ": inverted or degenerate hexahedron (det J = " +
-                             std::to_string(det) + "); nodes must follow the VTK order");
+                             fmt::format("{:.3e}", det) + "); nodes must follow the VTK order");
           Mat3<double> Ji;  // inverse
           Ji(0, 0) = (J(1, 1) * J(2, 2) - J(1, 2) * J(2, 1)) / det;
           Ji(0, 1) = (J(0, 2) * J(2, 1) - J(0, 1) * J(2, 2)) / det;

@@ -3,6 +3,8 @@
 // resolving global locations and axes to body coordinates at the initial pose.
 #include "mbd/model_io.hpp"
 
+#include <fmt/core.h>
+
 #include <cmath>
 #include <fstream>
 #include <set>
@@ -53,7 +55,7 @@ struct Node {
   double number(const char* key, double def) const { return has(key) ? at(key).number() : def; }
   double positive(const char* key) const {
     const double v = at(key).number();
-    if (!(v > 0)) at(key).fail("must be positive, got " + std::to_string(v));
+    if (!(v > 0)) at(key).fail(fmt::format("must be positive, got {:.3e}", v));
     return v;
   }
   double nonnegative(const char* key, double def) const {

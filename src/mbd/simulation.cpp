@@ -71,6 +71,16 @@ class Csv {
 
 const char* const kHistories[] = {"positions", "velocities", "accelerations", "reactions", "steps"};
 
+// Results of an earlier run in `dir` must not pass for this run's: its histories (whole
+// and partial), its ParaView series index and its status.json are removed.
+void clear_earlier_results(const std::string& dir) {
+  namespace fs = std::filesystem;
+  for (const char* name : kHistories)
+    for (const char* suffix : {".csv", ".partial.csv"}) fs::remove(dir + "/" + name + suffix);
+  fs::remove(dir + "/vtk/series.pvd");
+  fs::remove(dir + "/status.json");
+}
+
 // Joint reaction forces (global, on body j) of every constraint that reports one.
 std::vector<std::string> reaction_names(const Model& m) {
   std::vector<std::string> names;
@@ -309,20 +319,32 @@ namespace {
 SimulationResult run(const Model& model, const SimulationOptions& opts) {
   Timer wall;
   SimulationResult res;
-  Integrator in(model, opts.integrator);
   const nlohmann::json* ck = opts.resume;
+  std::unique_ptr<Integrator> integrator;
   try {
-    if (ck) {
-      in.restore_state(ck->at("integrator"));
-    } else {
-      in.initialize();
+    try {
+      integrator = std::make_unique<Integrator>(model, opts.integrator);
+      if (ck) {
+        integrator->restore_state(ck->at("integrator"));
+      } else {
+        integrator->initialize();
+      }
+    } catch (const std::bad_alloc&) {
+      throw OutOfMemory(
+          0, ck ? "simulation: restoring the checkpoint" : "simulation: initial conditions");
+    } catch (const nlohmann::json::exception& e) {
+      throw InvalidInput(std::string("checkpoint: missing or malformed state: ") + e.what());
     }
-  } catch (const std::bad_alloc&) {
-    throw OutOfMemory(
-        0, ck ? "simulation: restoring the checkpoint" : "simulation: initial conditions");
-  } catch (const nlohmann::json::exception& e) {
-    throw InvalidInput(std::string("checkpoint: missing or malformed state: ") + e.what());
+  } catch (const std::exception& e) {
+    // no step was taken: the output folder must not keep an earlier run's results (a
+    // folder that cannot be marked leaves the original error to be reported)
+    try {
+      mark_failed_before_start(opts.output_dir, e.what());
+    } catch (const std::exception&) {
+    }
+    throw;
   }
+  Integrator& in = *integrator;
   const bool files = !opts.output_dir.empty();
   std::vector<std::unique_ptr<Csv>> hist;
   std::unique_ptr<VtkSeries> vtk;
@@ -371,13 +393,8 @@ SimulationResult run(const Model& model, const SimulationOptions& opts) {
     mem->reaction_names = reaction_names(model);
   }
   if (files) {
-    namespace fs = std::filesystem;
-    fs::create_directories(opts.output_dir);
-    // stale results of an earlier run here must not pass for this run's
-    for (const char* name : kHistories)
-      for (const char* suffix : {".csv", ".partial.csv"})
-        fs::remove(opts.output_dir + "/" + name + suffix);
-    fs::remove(opts.output_dir + "/status.json");
+    std::filesystem::create_directories(opts.output_dir);
+    clear_earlier_results(opts.output_dir);
     std::vector<std::string> h{"time"};
     for (const auto& s : model.coordinate_names()) h.push_back(s);
     std::vector<std::string> rh{"time"};
@@ -551,6 +568,15 @@ SimulationResult run(const Model& model, const SimulationOptions& opts) {
 }
 
 }  // namespace
+
+void mark_failed_before_start(const std::string& dir, const std::string& reason) {
+  if (dir.empty()) return;
+  std::filesystem::create_directories(dir);
+  clear_earlier_results(dir);
+  SimulationResult r;
+  r.message = reason;
+  write_status(dir, "failed", r, 0, 0, {});
+}
 
 std::string summary(const Model& model, const SimulationResult& r) {
   const IntegratorStats& s = r.stats;

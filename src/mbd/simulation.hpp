@@ -94,6 +94,15 @@ struct SimulationResult {
   index_t checkpoint_step = 0;  ///< step of the last checkpoint written (0: none)
 };
 
+/// Marks the output folder `dir` of a run that failed before its first step (the model
+/// could not be read or built, no consistent initial conditions, a bad option): the
+/// results of an earlier run there are removed (histories, the ParaView series index,
+/// status.json) and status.json says "failed" with `reason`, no files and t_end 0, so that
+/// nothing in the folder passes for this run's. Creates `dir` if needed; an empty `dir`
+/// does nothing. Throws Error (std::filesystem errors included) when the folder cannot
+/// be written.
+void mark_failed_before_start(const std::string& dir, const std::string& reason);
+
 /// The settings of a run as `strata simulate` takes them (and strata.simulate in
 /// Python): 0 means "the model's value" for t_end, step, order, output_interval and the
 /// Newton tolerance (model files carry these in their "simulation" object).

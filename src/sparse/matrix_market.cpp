@@ -21,29 +21,39 @@
 // Why this shape. Every test matrix, every benchmark and the command line go through
 // this reader, so it has to be strict (a malformed file must never turn into a silently
 // wrong matrix: every problem is a ParseError naming the file and the 1-based line) and
-// fast (the largest shared matrix has 612k entries). Files are read through zlib's
-// gzread, which decompresses ".gz" files and passes plain files through unchanged, in
-// large blocks; lines are cut out of the block with memchr and numbers are parsed with
+// fast (the largest shared matrix has 612k entries). Files are read in large blocks,
+// through zlib's inflate when they start with the gzip magic bytes (any name) and
+// unchanged otherwise; lines are cut out of the block with memchr and numbers are parsed with
 // std::from_chars — no iostreams, no per-token allocation. The entries are collected as
 // triplets and turned into canonical CSC by one bucket pass plus strata::canonicalize
 // (sorts, sums duplicates, validates).
 //
-// A truncated ".gz" file is detected through zlib (gzerror reports Z_BUF_ERROR: the input
-// ended inside the compressed stream); the partial last line it decompressed to is
-// dropped, never parsed, and the file is reported as truncated.
+// A truncated ".gz" file (the input ends inside a gzip member) is detected; the partial
+// last line it decompressed to is dropped, never parsed, and the file is reported as
+// truncated. Several gzip members one after the other are read as one stream (RFC 1952);
+// any other bytes after the last member are an error (the file is corrupt or two files
+// were joined by mistake), where zlib's gzread would ignore them.
+//
+// Memory is bounded by the input: the size line may declare any dimensions, but nothing
+// of O(rows + columns) is allocated until the entries are read and, for a matrix that is
+// to be factored (MMRead::square_structurally_nonsingular), checked in O(entries) memory:
+// a square matrix with fewer distinct rows or columns than its dimension is structurally
+// singular and refused, naming the first empty column, before its compressed form exists.
 //
 // Writers produce `coordinate real|pattern general|symmetric` and `array real general`
-// with 17 significant digits (%.17g, so every double reads back bitwise). They write
-// PATH + ".tmp.<pid>.<k>" and std::rename it onto PATH once complete, so PATH is either
-// the old file or the complete new one, never a partial file; on failure the temporary
-// is removed and strata::Error names PATH. A PATH ending in ".gz" is written compressed.
+// with 17 significant digits (%.17g, so every double reads back bitwise). They follow the
+// output rules of core/atomic_file.hpp: a temporary beside the target renamed onto it once
+// complete, so the target is either the old file or the complete new one, never a partial
+// file (a symbolic link is followed, a device or FIFO written in place); on failure the
+// temporary is removed and strata::Error names PATH. A PATH ending in ".gz" is written
+// compressed.
 #include "strata/matrix_market.hpp"
 
+#include <fcntl.h>
 #include <unistd.h>
 #include <zlib.h>
 
 #include <algorithm>
-#include <atomic>
 #include <cerrno>
 #include <charconv>
 #include <cmath>
@@ -58,6 +68,7 @@
 #include <utility>
 #include <vector>
 
+#include "core/atomic_file.hpp"
 #include "strata/errors.hpp"
 
 namespace strata {
@@ -154,25 +165,134 @@ RealStatus parse_real(std::string_view tok, double& out) {
 // Line reader over zlib
 // ---------------------------------------------------------------------------------------
 
+// The bytes of a file, decompressed when it is gzip (RFC 1952: it starts with the magic
+// bytes 1f 8b), passed through unchanged otherwise. A gzip file may hold several members
+// one after the other (as `cat a.gz b.gz` makes); anything else after the last member is
+// an error (zlib's gzread would skip it silently), as is a stream that ends inside a
+// member (`truncated()`, reported by the caller with the line it stopped at).
+class ByteSource {
+ public:
+  explicit ByteSource(const std::string& path) : path_(path) {
+    errno = 0;
+    fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd_ < 0) {
+      const int err = errno;
+      throw ParseError(path, 0, std::string("cannot open file: ") + std::strerror(err));
+    }
+    in_.resize(1 << 18);
+    refill();
+    gzip_ = avail_ >= 2 && static_cast<unsigned char>(in_[0]) == 0x1f &&
+            static_cast<unsigned char>(in_[1]) == 0x8b;
+    if (gzip_) start_member();
+  }
+  ~ByteSource() {
+    if (inflating_) inflateEnd(&z_);
+    if (fd_ >= 0) ::close(fd_);
+  }
+  ByteSource(const ByteSource&) = delete;
+  ByteSource& operator=(const ByteSource&) = delete;
+
+  /// Up to `want` bytes into `out`; 0 at the end of the file. `line` (the number of the
+  /// line being read) goes into the messages of read errors and corrupt data.
+  std::size_t read(char* out, std::size_t want, index_t line) {
+    if (!gzip_) {
+      if (avail_ == 0 && !eof_) refill(line);
+      const std::size_t n = std::min(want, avail_);
+      std::memcpy(out, in_.data() + pos_, n);
+      pos_ += n;
+      avail_ -= n;
+      return n;
+    }
+    std::size_t got = 0;
+    while (got < want && !done_) {
+      if (avail_ == 0 && !eof_) refill(line);
+      if (avail_ == 0 && eof_) {  // the input ended inside a member
+        truncated_ = true;
+        done_ = true;
+        break;
+      }
+      z_.next_in = reinterpret_cast<Bytef*>(in_.data() + pos_);
+      z_.avail_in = static_cast<uInt>(avail_);
+      z_.next_out = reinterpret_cast<Bytef*>(out + got);
+      z_.avail_out = static_cast<uInt>(std::min<std::size_t>(want - got, 1u << 30));
+      const int rc = inflate(&z_, Z_NO_FLUSH);
+      got = static_cast<std::size_t>(reinterpret_cast<char*>(z_.next_out) - out);
+      pos_ = static_cast<std::size_t>(reinterpret_cast<char*>(z_.next_in) - in_.data());
+      avail_ = z_.avail_in;
+      if (rc == Z_STREAM_END) {
+        next_member(line);
+      } else if (rc == Z_DATA_ERROR || rc == Z_NEED_DICT) {
+        throw ParseError(
+            path_, line,
+            std::string("corrupt compressed data: ") + (z_.msg ? z_.msg : "invalid gzip stream"));
+      } else if (rc == Z_MEM_ERROR) {
+        throw OutOfMemory(0, "decompressing " + path_);
+      } else if (rc != Z_OK && rc != Z_BUF_ERROR) {
+        throw ParseError(path_, line,
+                         "corrupt compressed data (zlib error " + std::to_string(rc) + ")");
+      }
+    }
+    return got;
+  }
+
+  /// True when the compressed stream ended early (a truncated .gz file).
+  bool truncated() const { return truncated_; }
+
+ private:
+  void refill(index_t line = 0) {
+    if (avail_ > 0 && pos_ > 0) std::memmove(in_.data(), in_.data() + pos_, avail_);
+    pos_ = 0;
+    while (avail_ < in_.size()) {
+      const ssize_t r = ::read(fd_, in_.data() + avail_, in_.size() - avail_);
+      if (r < 0) {
+        if (errno == EINTR) continue;
+        const int err = errno;
+        throw ParseError(path_, line, std::string("read error: ") + std::strerror(err));
+      }
+      if (r == 0) {
+        eof_ = true;
+        break;
+      }
+      avail_ += static_cast<std::size_t>(r);
+      if (gzip_) break;  // inflate takes what there is
+    }
+  }
+  void start_member() {
+    z_ = z_stream{};
+    if (inflateInit2(&z_, 16 + MAX_WBITS) != Z_OK) throw OutOfMemory(0, "decompressing " + path_);
+    inflating_ = true;
+  }
+  // A member ended: another one follows, or nothing may.
+  void next_member(index_t line) {
+    if (avail_ < 2 && !eof_) refill(line);
+    if (avail_ == 0 && eof_) {
+      done_ = true;
+      return;
+    }
+    if (avail_ >= 2 && static_cast<unsigned char>(in_[pos_]) == 0x1f &&
+        static_cast<unsigned char>(in_[pos_ + 1]) == 0x8b) {
+      inflateReset(&z_);
+      return;
+    }
+    throw ParseError(path_, 0,
+                     "trailing data after the end of the compressed stream (" +
+                         std::to_string(avail_) + (eof_ ? "" : "+") +
+                         " bytes that are not a gzip member): the file is corrupt");
+  }
+
+  std::string path_;
+  int fd_ = -1;
+  std::vector<char> in_;
+  std::size_t pos_ = 0, avail_ = 0;
+  bool eof_ = false, gzip_ = false, inflating_ = false, done_ = false, truncated_ = false;
+  z_stream z_{};
+};
+
 // Hands out the lines of a (possibly gzip-compressed) file as string_views into an
 // internal block buffer, without the trailing "\n" or "\r\n". Counts lines from 1.
 class LineReader {
  public:
-  explicit LineReader(const std::string& path) : path_(path) {
-    errno = 0;
-    file_ = gzopen(path.c_str(), "rb");
-    if (!file_) {
-      const int err = errno;
-      throw ParseError(
-          path, 0,
-          std::string("cannot open file: ") + (err ? std::strerror(err) : "out of memory in zlib"));
-    }
-    gzbuffer(file_, 1 << 18);
-    buf_.resize(1 << 20);
-  }
-  ~LineReader() {
-    if (file_) gzclose(file_);
-  }
+  explicit LineReader(const std::string& path) : path_(path), src_(path) { buf_.resize(1 << 20); }
   LineReader(const LineReader&) = delete;
   LineReader& operator=(const LineReader&) = delete;
 
@@ -219,20 +339,10 @@ class LineReader {
     }
     if (end_ == buf_.size()) buf_.resize(buf_.size() * 2);
     const size_t want = std::min<size_t>(buf_.size() - end_, 1u << 30);
-    const int got = gzread(file_, buf_.data() + end_, static_cast<unsigned>(want));
-    if (got < 0) {
-      int errnum = 0;
-      const char* msg = gzerror(file_, &errnum);
-      throw ParseError(
-          path_, line_no_ + 1,
-          std::string(errnum == Z_DATA_ERROR ? "corrupt compressed data: " : "read error: ") +
-              (errnum == Z_ERRNO ? std::strerror(errno) : msg));
-    }
+    const size_t got = src_.read(buf_.data() + end_, want, line_no_ + 1);
     if (got == 0) {
       eof_ = true;
-      int errnum = 0;
-      gzerror(file_, &errnum);
-      if (errnum == Z_BUF_ERROR) {
+      if (src_.truncated()) {
         // The input ended inside the gzip stream: whatever follows the last complete
         // line is a fragment of a line (a number could be cut short), so drop it.
         truncated_ = true;
@@ -240,11 +350,11 @@ class LineReader {
       }
       return;
     }
-    end_ += static_cast<size_t>(got);
+    end_ += got;
   }
 
   std::string path_;
-  gzFile file_ = nullptr;
+  ByteSource src_;
   std::vector<char> buf_;
   size_t begin_ = 0, end_ = 0;
   index_t line_no_ = 0;
@@ -663,27 +773,85 @@ std::vector<double> to_dense(const std::string& path, const Contents& c) {
   return d;
 }
 
+// MMCheck::factorable: square, every row and column holding an entry. Works on the
+// entries alone (sorted copies of their indices, O(entries) memory), so that a file of a
+// few bytes declaring a 10^8 x 10^8 matrix is refused before 10^8 offsets are allocated.
+void check_factorable(const std::string& path, const Contents& c) {
+  if (c.rows != c.cols)
+    throw InvalidInput(path + ": matrix is " + std::to_string(c.rows) + "x" +
+                       std::to_string(c.cols) + ", not square");
+  const bool mirrored = c.symmetry != MMSymmetry::general;
+  // The first index in 0..n-1 missing from `seen` (n when none is).
+  auto first_missing = [&](std::vector<index_t>& seen) {
+    std::sort(seen.begin(), seen.end());
+    seen.erase(std::unique(seen.begin(), seen.end()), seen.end());
+    for (std::size_t k = 0; k < seen.size(); ++k)
+      if (seen[k] != static_cast<index_t>(k)) return static_cast<index_t>(k);
+    return static_cast<index_t>(seen.size());
+  };
+  auto refuse = [&](const char* what, index_t k) {
+    throw InvalidInput(path + ": matrix is structurally singular: " + what + " " +
+                       std::to_string(k + 1) + " (1-based) has no entries");
+  };
+  if (c.format == Format::array) {
+    // an array gives every value; only its nonzeros count as entries
+    std::vector<index_t> rows, cols;
+    for_each_array_value(c, [&](index_t i, index_t j, double v) {
+      if (v == 0.0) return;
+      rows.push_back(i);
+      cols.push_back(j);
+      if (mirrored) {
+        rows.push_back(j);
+        cols.push_back(i);
+      }
+    });
+    if (const index_t j = first_missing(cols); j < c.cols) refuse("column", j);
+    if (const index_t i = first_missing(rows); i < c.rows) refuse("row", i);
+    return;
+  }
+  std::vector<index_t> seen(c.col);
+  if (mirrored) seen.insert(seen.end(), c.row.begin(), c.row.end());
+  if (const index_t j = first_missing(seen); j < c.cols) refuse("column", j);
+  seen.assign(c.row.begin(), c.row.end());
+  if (mirrored) seen.insert(seen.end(), c.col.begin(), c.col.end());
+  if (const index_t i = first_missing(seen); i < c.rows) refuse("row", i);
+}
+
 // ---------------------------------------------------------------------------------------
 // Atomic writer
 // ---------------------------------------------------------------------------------------
 
-// Writes PATH through a temporary file in the same folder, renamed onto PATH by commit().
-// If commit() is not reached (an exception), the destructor removes the temporary.
+// Writes PATH by the rules of core/atomic_file.hpp: through a temporary file in the
+// target's folder, renamed onto the target by commit() (the final target of a symbolic
+// link; an existing device or FIFO is written in place instead). If commit() is not
+// reached (an exception), the destructor removes the temporary.
 class AtomicWriter {
  public:
   explicit AtomicWriter(std::string path) : path_(std::move(path)) {
-    static std::atomic<unsigned long> counter{0};
-    tmp_ = path_ + ".tmp." + std::to_string(static_cast<long>(::getpid())) + "." +
-           std::to_string(counter++);
+    const OutputTarget target = resolve_output(path_);
+    target_ = target.path;
+    through_ = target.write_through;
     // "T": plain (transparent) output; a ".gz" PATH is compressed.
+    const char* mode = ends_with(path_, ".gz") ? "wb6" : "wbT";
     errno = 0;
-    file_ = gzopen(tmp_.c_str(), ends_with(path_, ".gz") ? "wb6" : "wbT");
-    if (!file_) fail(std::string("cannot create ") + tmp_ + ": " + errno_text(errno));
+    if (through_) {
+      const int fd = ::open(target_.c_str(), O_WRONLY | O_CLOEXEC);
+      if (fd < 0) fail(std::string("cannot open ") + target_ + ": " + errno_text(errno));
+      file_ = gzdopen(fd, mode);
+      if (!file_) {
+        ::close(fd);
+        fail("cannot open " + target_ + ": out of memory in zlib");
+      }
+    } else {
+      tmp_ = temporary_name(target_);
+      file_ = gzopen(tmp_.c_str(), mode);
+      if (!file_) fail(std::string("cannot create ") + tmp_ + ": " + errno_text(errno));
+    }
     buf_.reserve(kFlushAt + 256);
   }
   ~AtomicWriter() {
     if (file_) gzclose(file_);
-    if (!committed_) std::remove(tmp_.c_str());
+    if (!committed_ && !through_) std::remove(tmp_.c_str());
   }
   AtomicWriter(const AtomicWriter&) = delete;
   AtomicWriter& operator=(const AtomicWriter&) = delete;
@@ -708,15 +876,16 @@ class AtomicWriter {
     if (buf_.size() >= kFlushAt) flush();
   }
 
-  /// Completes the file: flush, close, rename onto PATH.
+  /// Completes the file: flush, close, rename onto the target.
   void commit() {
     flush();
     const int rc = gzclose(file_);
     file_ = nullptr;
+    const std::string& name = through_ ? target_ : tmp_;
     if (rc != Z_OK)
-      fail("closing " + tmp_ + " failed" + (rc == Z_ERRNO ? ": " + errno_text(errno) : ""));
-    if (std::rename(tmp_.c_str(), path_.c_str()) != 0)
-      fail("cannot rename " + tmp_ + " onto it: " + errno_text(errno));
+      fail("closing " + name + " failed" + (rc == Z_ERRNO ? ": " + errno_text(errno) : ""));
+    if (!through_ && std::rename(tmp_.c_str(), target_.c_str()) != 0)
+      fail("cannot rename " + tmp_ + " onto " + target_ + ": " + errno_text(errno));
     committed_ = true;
   }
 
@@ -731,7 +900,8 @@ class AtomicWriter {
     if (wrote != static_cast<int>(buf_.size())) {
       int errnum = 0;
       const char* msg = gzerror(file_, &errnum);
-      fail("writing " + tmp_ + " failed: " + (errnum == Z_ERRNO ? errno_text(errno) : msg));
+      fail("writing " + (through_ ? target_ : tmp_) +
+           " failed: " + (errnum == Z_ERRNO ? errno_text(errno) : msg));
     }
     buf_.clear();
   }
@@ -739,12 +909,13 @@ class AtomicWriter {
   [[noreturn]] void fail(const std::string& why) {
     if (file_) gzclose(file_);
     file_ = nullptr;
-    std::remove(tmp_.c_str());
+    if (!through_) std::remove(tmp_.c_str());
     committed_ = true;  // nothing left to clean up
     throw Error("cannot write Matrix Market file " + path_ + ": " + why);
   }
 
-  std::string path_, tmp_;
+  std::string path_, target_, tmp_;
+  bool through_ = false;
   gzFile file_ = nullptr;
   std::string buf_;
   bool committed_ = false;
@@ -756,8 +927,9 @@ class AtomicWriter {
 // Public API
 // ---------------------------------------------------------------------------------------
 
-MMMatrix read_matrix_market(const std::string& path) {
+MMMatrix read_matrix_market(const std::string& path, MMCheck check) {
   const Contents c = parse_file(path);
+  if (check == MMCheck::factorable) check_factorable(path, c);
   MMMatrix out;
   out.symmetry = c.symmetry;
   out.pattern = c.field == Field::pattern;

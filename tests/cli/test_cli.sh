@@ -85,8 +85,60 @@ if "$strata" analyze "$tmp/good.mtx" --json | python3 -c 'import json,sys; j=jso
 else
   fail=$((fail + 1)); echo "FAIL analyze --json"
 fi
-# a missing file is a usage error
-check "missing file" 105 "" "$strata" solve "$tmp/none.mtx"
+# usage errors: exit 2 and "strata: error:" (the exit-status table is in --help)
+check "missing file" 2 "strata: error:" "$strata" solve "$tmp/none.mtx"
+check "directory as file" 2 "strata: error:" "$strata" solve "$tmp"
+check "missing rhs" 2 "strata: error:" "$strata" solve "$tmp/good.mtx" --rhs "$tmp/none.mtx"
+check "threads abc" 2 "strata: error: --threads: must be a whole number of at least 1, got 'abc'" "$strata" solve "$tmp/good.mtx" --threads abc
+check "threads -1" 2 "got '-1'" "$strata" solve "$tmp/good.mtx" --threads -1
+check "threads 0" 2 "got '0'" "$strata" solve "$tmp/good.mtx" --threads 0
+check "simulate threads 0" 2 "got '0'" "$strata" simulate --threads 0
+check "negative step" 2 "--step: must be a number greater than 0" "$strata" simulate --step -1
+check "unknown option" 2 "strata: error:" "$strata" solve "$tmp/good.mtx" --bogus
+check "no file" 2 "strata: error:" "$strata" solve
+check "no command" 2 "strata: error:" "$strata"
+check "help lists exit status" 0 "130 or 143" "$strata" solve --help
+
+# a pivot in a message is readable (%.3e, not std::to_string's "-0.000000")
+check "pivot format" 1 "pivot -3.500e+00 at column 1" "$strata" solve "$tmp/indef.mtx" --type spd
+
+# --out: never replace what is not a regular file; follow a symbolic link; check first
+mkfifo "$tmp/fifo"
+(timeout 60 cat "$tmp/fifo" > "$tmp/from_fifo") &
+reader=$!
+check "out to a FIFO" 0 "solution written to" timeout 60 "$strata" solve "$tmp/good.mtx" --out "$tmp/fifo"
+wait $reader
+if [[ -p $tmp/fifo ]] && grep -q '^3 1$' "$tmp/from_fifo"; then pass=$((pass + 1)); else fail=$((fail + 1)); echo "FAIL out to a FIFO: not a FIFO any more, or the reader got no solution"; fi
+echo "old contents" > "$tmp/target.mtx"
+ln -s target.mtx "$tmp/link.mtx"
+check "out to a symlink" 0 "solution written to" "$strata" solve "$tmp/good.mtx" --out "$tmp/link.mtx"
+if [[ -L $tmp/link.mtx ]] && grep -q '^3 1$' "$tmp/target.mtx"; then pass=$((pass + 1)); else fail=$((fail + 1)); echo "FAIL out to a symlink: the link was replaced or its target not written"; fi
+if find "$tmp" -name '*.tmp.*' | grep -q .; then fail=$((fail + 1)); echo "FAIL out to a symlink: temporaries left"; else pass=$((pass + 1)); fi
+check "out to a folder" 1 "is a directory" "$strata" solve "$tmp/good.mtx" --out "$tmp"
+check "out into a missing folder" 1 "does not exist" "$strata" solve "$tmp/good.mtx" --out "$tmp/no/such/x.mtx"
+if [[ -c /dev/full ]]; then
+  check "out to /dev/full" 1 "No space left on device" "$strata" solve "$tmp/good.mtx" --out /dev/full
+  [[ -c /dev/full ]] && pass=$((pass + 1)) || { fail=$((fail + 1)); echo "FAIL: /dev/full is no longer a device"; }
+fi
+
+# a 76-byte file declaring a 2e8 x 2e8 matrix: refused at once (no O(n) allocation)
+printf '%%%%MatrixMarket matrix coordinate real general\n200000000 200000000 1\n1 1 1.0\n' > "$tmp/huge.mtx"
+check "huge declared size" 1 "huge.mtx: matrix is structurally singular: column 2 (1-based) has no entries" timeout 20 "$strata" solve "$tmp/huge.mtx"
+check "huge declared size (analyze)" 1 "huge.mtx: matrix is structurally singular" timeout 20 "$strata" analyze "$tmp/huge.mtx"
+# the file is named in the analysis's structural messages too
+printf '%%%%MatrixMarket matrix coordinate real general\n2 3 2\n1 1 1.0\n2 2 1.0\n' > "$tmp/rect.mtx"
+check "not square (solve)" 1 "rect.mtx: matrix is 2x3, not square" "$strata" solve "$tmp/rect.mtx"
+check "not square (analyze)" 1 "rect.mtx: matrix is 2x3, not square" "$strata" analyze "$tmp/rect.mtx"
+printf '%%%%MatrixMarket matrix coordinate real general\n3 3 5\n1 1 1.0\n2 1 1.0\n3 1 1.0\n1 2 1.0\n1 3 1.0\n' > "$tmp/unmatched.mtx"
+check "structurally singular (matching, solve)" 1 "unmatched.mtx: the matrix is structurally singular" "$strata" solve "$tmp/unmatched.mtx"
+check "structurally singular (matching, analyze)" 1 "unmatched.mtx: the matrix is structurally singular" "$strata" analyze "$tmp/unmatched.mtx"
+
+# trailing data after a gzip stream is an error naming the file
+gzip -c "$tmp/good.mtx" > "$tmp/trail.mtx.gz"
+printf 'garbage' >> "$tmp/trail.mtx.gz"
+check "gzip trailing data" 1 "trail.mtx.gz:0: trailing data after the end of the compressed stream" "$strata" solve "$tmp/trail.mtx.gz"
+gzip -c "$tmp/good.mtx" > "$tmp/two.mtx.gz"
+check "gzip: one member" 0 "backward error" "$strata" solve "$tmp/two.mtx.gz"
 
 # a failed solve leaves an existing output file as it was (written via temporary + rename)
 cp "$tmp/x5.mtx" "$tmp/keep.mtx"
@@ -179,6 +231,14 @@ has "failure status" "$tmp/f_run/status.json" '"state": "failed"'
 has "failure reason" "$tmp/f_run/status.json" 'did not converge'
 no_file "failure: no whole-run name" "$tmp/f_run/positions.csv"
 [[ $(wc -l < "$tmp/f_run/positions.partial.csv") -gt 20 ]] && pass=$((pass + 1)) || { fail=$((fail + 1)); echo "FAIL failure: partial rows missing"; }
+# a run that fails before its first step marks the folder: no earlier results, status failed
+check "sim before failed start" 0 "complete" "${sim[@]}" --t-end 0.001 --output "$tmp/m_run" --vtk
+printf '{"type": "planar", "bodies": [' > "$tmp/broken.json"
+check "broken model" 1 "broken.json:1:" "$strata" simulate "$tmp/broken.json" --output "$tmp/m_run"
+has "broken model status" "$tmp/m_run/status.json" '"state": "failed"'
+has "broken model reason" "$tmp/m_run/status.json" 'invalid JSON'
+for f in positions.csv steps.csv reactions.csv vtk/series.pvd; do no_file "broken model: $f of the earlier run" "$tmp/m_run/$f"; done
+check "output folder not writable" 1 "cannot write" "$strata" simulate --generate andrews --output "$tmp/good.mtx/sub" --quiet
 # a later complete run in the same folder replaces the partial files
 check "complete after failure" 0 "complete" "${sim[@]}" --t-end 0.001 --output "$tmp/f_run"
 no_file "stale partial removed" "$tmp/f_run/positions.partial.csv"

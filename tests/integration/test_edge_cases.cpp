@@ -489,6 +489,77 @@ TEST(EdgeCases, SingularMatrix) {
   }
 }
 
+// A positive semidefinite finite-element mass matrix with a large null space: the
+// 8-node hexahedra of an ne³ mesh (3 displacement components per node) integrated at two
+// points, so each element's mass has rank 2 per component and most hourglass modes carry
+// no mass. LDLᵀ perturbs the pivots of the null space. For a consistent right-hand side
+// (b = A·x0) the solve converges — to the tolerance or the rounding floor — says that A is
+// singular and b in its range, and does not run GMRES to its limit; for an inconsistent
+// one (a unit vector: its null-space component is not zero) the residual relative to b
+// stays large (a small normwise backward error is possible there: x grows along the null
+// space and solves the perturbed matrix) and consistency is not claimed. The
+// inertia and log-determinant are those of the perturbed matrix: marked invalid. The
+// reference is the residual and the floor computed here from A.
+TEST(EdgeCases, ConsistentSingularSystem) {
+  auto rng = test::fresh_rng();
+  std::uniform_real_distribution<double> density(1.0, 1.5);
+  for (index_t ne : {1, 2, 3, 5}) {
+    SCOPED_TRACE("ne=" + std::to_string(ne));
+    const index_t nn = ne + 1, n = 3 * nn * nn * nn;
+    auto node = [&](index_t i, index_t j, index_t k) { return (i * nn + j) * nn + k; };
+    std::vector<Triplet> e;
+    for (index_t i = 0; i < ne; ++i)
+      for (index_t j = 0; j < ne; ++j)
+        for (index_t k = 0; k < ne; ++k) {
+          index_t nodes[8];
+          int c = 0;
+          for (index_t a : {0, 1})
+            for (index_t b : {0, 1})
+              for (index_t d : {0, 1}) nodes[c++] = node(i + a, j + b, k + d);
+          const double w = density(rng);
+          for (int q = 0; q < 2; ++q) {  // shape functions at two points
+            double shape[8];
+            for (int a = 0; a < 8; ++a) shape[a] = 0.125 + 0.025 * (q - 0.5) * (a % 2 ? -1 : 1);
+            for (int a = 0; a < 8; ++a)
+              for (int b = 0; b < 8; ++b)
+                for (index_t d = 0; d < 3; ++d)
+                  e.emplace_back(3 * nodes[a] + d, 3 * nodes[b] + d, w * shape[a] * shape[b]);
+          }
+        }
+    const SparseMatrix full = from_triplets(n, Storage::full, e);
+    Options o = with_type(MatrixType::symmetric_indefinite);
+    Solver s(o);
+    s.factorize(stored_for(full, MatrixType::symmetric_indefinite));
+    const FactorStats& f = s.stats().factor;
+    ASSERT_GT(f.perturbed_pivots, 0);
+    EXPECT_FALSE(f.inertia_valid);
+    // the rounding floor: (m+1)·u for the most entries m in a row
+    index_t most = 0;
+    std::vector<index_t> per_row(n, 0);
+    for (index_t p = 0; p < full.nnz(); ++p) most = std::max(most, ++per_row[full.indices[p]]);
+    const double floor = (most + 1) * 0.5 * DBL_EPSILON;
+    const double enough = std::max(o.refinement_tolerance, floor);
+
+    const std::vector<double> x0 = random_vector(n, rng);
+    std::vector<double> b(n);
+    multiply(full, x0.data(), b.data());
+    const std::vector<double> x = s.solve(b);
+    const SolveStats& st = s.stats().solve;
+    EXPECT_DOUBLE_EQ(st.backward_error_floor, floor);
+    EXPECT_TRUE(st.refinement_converged);
+    EXPECT_TRUE(st.singular_consistent);
+    EXPECT_LT(st.gmres_iterations, o.gmres_max_iterations);
+    EXPECT_LE(test::backward_error(full, x.data(), b.data()), 2 * enough);
+
+    std::vector<double> unit(n, 0.0);
+    unit[0] = 1;
+    s.solve(unit);
+    // the residual cannot fall below b's distance from the range
+    EXPECT_FALSE(s.stats().solve.singular_consistent);
+    EXPECT_GT(s.stats().solve.relative_residual, 1e-3);
+  }
+}
+
 // A nearly singular matrix (pivot 1e-12 of ‖A‖, condition ~1e12, beside a larger
 // well-conditioned block): LDLᵀ and LU perturb the tiny pivot and say so in the
 // statistics; refinement and GMRES then recover the solution to backward error ≤ 1e-14;

@@ -8,6 +8,8 @@
 // skew-symmetric expansion, pattern and integer files, dense arrays; the writers are
 // atomic and leave nothing behind when they fail.
 #include <gtest/gtest.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
 #include <unistd.h>
 #include <zlib.h>
 
@@ -768,6 +770,105 @@ TEST_F(MatrixMarketTest, CorruptGzipFile) {
   } catch (const ParseError& e) {
     EXPECT_NE(std::string(e.what()).find("corrupt compressed data"), std::string::npos) << e.what();
   }
+}
+
+// Several gzip members read as one stream (RFC 1952); anything else after the last
+// member is an error naming the file (zlib's gzread would skip it).
+TEST_F(MatrixMarketTest, GzipMembersAndTrailingData) {
+  const std::string head = "%%MatrixMarket matrix coordinate real general\n2 2 2\n";
+  const std::string a = write_gz("a.gz", head + "1 1 1.5\n");
+  const std::string b = write_gz("b.gz", "2 2 2.5\n");
+  const std::string both = path("both.mtx.gz");
+  write_bytes(both, read_bytes(a) + read_bytes(b));
+  const MMMatrix m = read_matrix_market(both);
+  ASSERT_EQ(m.matrix.nnz(), 2);
+  EXPECT_EQ(m.matrix.values[1], 2.5);
+  for (const std::string& tail :
+       {std::string("garbage"), std::string(4, '\0'), std::string("\x1f"), std::string("\n")}) {
+    SCOPED_TRACE("tail of " + std::to_string(tail.size()) + " bytes");
+    const std::string p = path("trail.mtx.gz");
+    write_bytes(p, read_bytes(both) + tail);
+    expect_parse_error(p, 0, "trailing data after the end of the compressed stream");
+  }
+  // a plain file is read as it is, whatever its name
+  const std::string plain = write_text("plain.mtx.gz", head + "1 1 1\n2 2 2\n");
+  EXPECT_EQ(read_matrix_market(plain).matrix.nnz(), 2);
+}
+
+// MMCheck::factorable: square, no empty row or column (named 1-based, the file named),
+// decided from the entries before the O(n) compressed form exists.
+TEST_F(MatrixMarketTest, FactorableCheck) {
+  auto refused = [&](const std::string& name, const std::string& text, const std::string& what) {
+    const std::string p = write_text(name, text);
+    EXPECT_NO_THROW((void)read_matrix_market(p));  // any matrix, unchecked
+    try {
+      (void)read_matrix_market(p, MMCheck::factorable);
+      ADD_FAILURE() << name << ": not refused";
+    } catch (const ParseError& e) {
+      ADD_FAILURE() << "not a parse error: " << e.what();
+    } catch (const InvalidInput& e) {
+      EXPECT_EQ(std::string(e.what()), p + ": " + what);
+    }
+  };
+  const std::string G = "%%MatrixMarket matrix coordinate real general\n";
+  const std::string S = "%%MatrixMarket matrix coordinate real symmetric\n";
+  refused("rect.mtx", G + "2 3 2\n1 1 1\n2 2 1\n", "matrix is 2x3, not square");
+  refused("col.mtx", G + "3 3 3\n1 1 1\n2 1 1\n3 3 1\n",
+          "matrix is structurally singular: column 2 (1-based) has no entries");
+  refused("row.mtx", G + "3 3 3\n1 1 1\n1 2 1\n3 3 1\n",
+          "matrix is structurally singular: row 2 (1-based) has no entries");
+  refused("sym.mtx", S + "4 4 2\n2 1 1\n4 4 1\n",
+          "matrix is structurally singular: column 3 (1-based) has no entries");
+  refused("arr.mtx", "%%MatrixMarket matrix array real general\n2 2\n1\n0\n0\n0\n",
+          "matrix is structurally singular: column 2 (1-based) has no entries");
+  // a symmetric entry covers its mirror: rows/columns 1 and 2 both have entries
+  const std::string ok = write_text("ok.mtx", S + "2 2 1\n2 1 1\n");
+  EXPECT_EQ(read_matrix_market(ok, MMCheck::factorable).matrix.nnz(), 1);
+  for (index_t n : {1, 2, 3, 5, 733}) {
+    std::string text =
+        G + std::to_string(n) + " " + std::to_string(n) + " " + std::to_string(n) + "\n";
+    for (index_t i = n; i >= 1; --i)  // an anti-diagonal: a permutation, nonsingular
+      text += std::to_string(i) + " " + std::to_string(n + 1 - i) + " 1\n";
+    EXPECT_EQ(read_matrix_market(write_text("perm.mtx", text), MMCheck::factorable).matrix.nnz(),
+              n);
+  }
+}
+
+// A file of a few bytes declaring a 2·10⁸ × 2·10⁸ matrix is refused at once, in O(entries)
+// memory: the growth of a child process's peak resident set (getrusage) stays far below
+// the 1.6 GB that 2·10⁸ offsets would take.
+TEST_F(MatrixMarketTest, HugeDeclaredSizeRefusedInSmallMemory) {
+  const std::string p =
+      write_text("huge.mtx",
+                 "%%MatrixMarket matrix coordinate real general\n200000000 200000000 1\n1 1 1.0\n");
+  auto resident_kb = [] {  // the current resident set, from /proc/self/statm
+    std::ifstream in("/proc/self/statm");
+    long size = 0, resident = 0;
+    in >> size >> resident;
+    return resident * (sysconf(_SC_PAGESIZE) / 1024);
+  };
+  const long before_kb = resident_kb();
+  const pid_t child = fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    int code = 3;
+    try {
+      (void)read_matrix_market(p, MMCheck::factorable);
+      code = 1;
+    } catch (const InvalidInput& e) {
+      code = std::string(e.what()).find("structurally singular") != std::string::npos ? 0 : 2;
+    } catch (...) {
+    }
+    _exit(code);
+  }
+  int status = 0;
+  struct rusage ru {};
+  ASSERT_EQ(wait4(child, &status, 0, &ru), child);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0) << "1: accepted, 2: another message, 3: another error";
+  const long growth_kb = ru.ru_maxrss - before_kb;
+  EXPECT_LT(growth_kb, 100 * 1024)
+      << "peak " << ru.ru_maxrss << " kB, " << before_kb << " kB before";
 }
 
 // ---------------------------------------------------------------------------------------
