@@ -522,8 +522,8 @@ int run_simulate(const SimulateArgs& a) {
   }
 }
 
-// The output folder exists (or is made) and files can be written there, checked before
-// the model is read and its initial conditions computed.
+// An output folder exists (or is made) and files can be written there, checked before
+// the model is read and its initial conditions computed (empty: none).
 void check_output_folder(const std::string& dir) {
   if (dir.empty()) return;
   std::error_code ec;
@@ -536,6 +536,9 @@ int run_simulate_checked(const SimulateArgs& a, bool& started) {
   using namespace strata::mbd;
   auto t0 = std::chrono::steady_clock::now();
   check_output_folder(a.output);
+  check_output_folder(a.dump_dir);
+  if (a.checkpoint_every > 0)
+    check_output_folder(a.checkpoint_dir.empty() ? a.output + "/checkpoint" : a.checkpoint_dir);
   if (!a.write_model.empty()) check_output_path(a.write_model);
   if (!a.model.empty() && !a.generate.empty())
     throw InvalidInput("give either a model file or --generate, not both");
