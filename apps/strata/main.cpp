@@ -384,6 +384,7 @@ int run_solve(const SolveArgs& a, const Communicator& comm) {
                   {"gmres_iterations", st.solve.gmres_iterations},
                   {"backward_error", st.solve.backward_error},
                   {"backward_error_floor", st.solve.backward_error_floor},
+                  {"condition_lower_bound", st.solve.condition_lower_bound},
                   {"converged", st.solve.refinement_converged},
                   {"relative_residual", st.solve.relative_residual},
                   {"singular_consistent", st.solve.singular_consistent},
@@ -465,6 +466,11 @@ int run_solve(const SolveArgs& a, const Communicator& comm) {
         "solve                 {:.3f} s, {} refinement steps, {} GMRES iterations, "
         "backward error {:.3e}{}\n",
         sv.seconds, sv.refinement_steps, sv.gmres_iterations, sv.backward_error, verdict);
+    if (sv.condition_lower_bound > 1e12)
+      fmt::print(
+          "warning               A is {} to working precision: κ∞(A) ≥ ‖A‖‖x‖/‖b‖ = {:.3e}\n",
+          sv.condition_lower_bound > 1e15 ? "singular" : "nearly singular",
+          sv.condition_lower_bound);
     fmt::print("total                 {:.3f} s (analyze + factorize + solve)\n", total);
     if (!a.out.empty()) fmt::print("solution written to   {}\n", a.out);
   }

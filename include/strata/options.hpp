@@ -38,6 +38,15 @@ enum class Backend {
   automatic,  ///< cuda when a GPU is present and the build has CUDA, else cpu.
 };
 
+/// How pivots that the analysis's fixed order cannot take are handled (LU; see
+/// Options::pivoting).
+enum class Pivoting {
+  fixed,      ///< static pivots only: a tiny pivot becomes ±static_pivot_epsilon·‖B‖₁.
+  automatic,  ///< the fixed order first; when it needs static pivots, delayed pivoting
+              ///< on the host (default).
+  delayed,    ///< delayed pivoting on the host for every factorization.
+};
+
 /// Options of every phase. Units: bytes for memory, seconds for time.
 struct Options {
   // --- structure ---
@@ -243,6 +252,20 @@ struct Options {
   /// replaced by ±static_pivot_epsilon · ‖A‖₁ and counted in FactorStats (default 1e-8 ≈ √ε, as in
   /// SuperLU_DIST and MUMPS).
   double static_pivot_epsilon = 1e-8;
+  /// Delayed pivoting (LU, MatrixType::general; numeric/delayed.hpp): fronts refuse pivots
+  /// below pivot_threshold times their column's largest entry and pass them to their
+  /// parent (MUMPS, MA57), so static pivots remain only where the matrix is numerically
+  /// singular. automatic (default) factors in the analysis's fixed order first and runs
+  /// the delayed factorization only when that needed static pivots; delayed always runs
+  /// it (a Newton loop whose values keep drifting from the analysis's); fixed never does.
+  /// Each choice depends on the values alone, never on earlier factorizations, so a run
+  /// restarted from a checkpoint repeats the uninterrupted one bit for bit. Delayed
+  /// pivoting runs on the host, one executor: with several workers or the distributed
+  /// solver the fixed order is used.
+  Pivoting pivoting = Pivoting::automatic;
+  /// The relative threshold u of delayed pivoting, in (0, 1]: a pivot is taken when it is
+  /// at least u times the largest entry of its column (|L| ≤ 1/u). Default 0.01.
+  double pivot_threshold = 0.01;
 
   // --- solve ---
   /// Most iterative refinement steps after the first solve (default 10; 0 disables).

@@ -127,8 +127,20 @@ struct FactorStats {
   /// pattern compared with the analyzed one, the values checked (finite, norms), copied
   /// and scaled.
   double input_seconds = 0;
-  double gflops = 0;              ///< AnalysisStats::factor_flops (×2 for LU) / seconds
-  index_t perturbed_pivots = 0;   ///< tiny pivots replaced by ±ε‖A‖ (static pivoting)
+  double gflops = 0;             ///< AnalysisStats::factor_flops (×2 for LU) / seconds
+  index_t perturbed_pivots = 0;  ///< tiny pivots replaced by ±ε‖A‖ (static pivoting)
+  /// Delayed pivoting (Options::pivoting) computed this factor: the analysis's fixed order
+  /// needed static pivots (Pivoting::automatic), or Pivoting::delayed asked for it.
+  bool delayed_pivoting = false;
+  /// With delayed_pivoting: pivots passed from a front to its parent (Σ over fronts; one
+  /// pivot delayed twice counts twice), the fronts that passed any, and the static pivots
+  /// the fixed order had needed (0 when it was not tried).
+  index_t delayed_pivots = 0;
+  index_t fronts_delaying = 0;
+  index_t fixed_order_perturbed_pivots = 0;
+  /// Equilibration sweeps applied on top of the analysis's scaling because the values had
+  /// moved far from those it was computed for (core/rescale.hpp); 0 when none was needed.
+  int rescaling_sweeps = 0;
   index_t two_by_two_pivots = 0;  ///< LDLᵀ: number of 2×2 pivot blocks
   index_t inertia_positive = 0;   ///< LDLᵀ/LLᵀ: eigenvalue signs of D (after perturbation)
   index_t inertia_negative = 0;
@@ -213,6 +225,10 @@ struct SolveStats {
   /// A and u the unit roundoff: the residual computed in working precision is uncertain by
   /// about this much (Higham, Accuracy and Stability of Numerical Algorithms, §12.1).
   double backward_error_floor = 0;
+  /// max over right-hand sides of ‖A‖∞‖x‖∞/‖b‖∞ (b ≠ 0): a lower bound on κ∞(A) that
+  /// every solution gives. Near 1/u (1e16) or above, A is singular to working precision
+  /// (x then holds an arbitrary null-space component), whether or not pivots were perturbed.
+  double condition_lower_bound = 0;
   /// The backward error reached Options::refinement_tolerance, or the rounding floor when
   /// that is larger (no method can verify less; GMRES is then not run).
   bool refinement_converged = false;

@@ -265,6 +265,8 @@ typedef struct strata_stats {
   int refinement_converged; /**< 1 when the refinement tolerance, or the rounding floor
                                  when larger, was reached */
   double backward_error_floor; /**< (m+1)·u, m the most entries in a row of A */
+  double condition_lower_bound; /**< max ‖A‖∞‖x‖∞/‖b‖∞ ≤ κ∞(A); ≥ ~1e15: A singular
+                                     to working precision */
   double relative_residual; /**< with perturbed pivots: max ‖b−Ax‖∞/‖b‖∞, at least b's
                                  distance from A's range (0 otherwise) */
   int singular_consistent; /**< 1 when pivots were perturbed (A numerically singular), the

@@ -244,6 +244,11 @@ class Core {
       d["factor_gflops"] = f.gflops;
       d["factor_input_seconds"] = f.input_seconds;
       d["perturbed_pivots"] = f.perturbed_pivots;
+      d["delayed_pivoting"] = f.delayed_pivoting;
+      d["delayed_pivots"] = f.delayed_pivots;
+      d["fronts_delaying"] = f.fronts_delaying;
+      d["fixed_order_perturbed_pivots"] = f.fixed_order_perturbed_pivots;
+      d["rescaling_sweeps"] = f.rescaling_sweeps;
       d["two_by_two_pivots"] = f.two_by_two_pivots;
       put_inertia(d, f);
       d["matrix_norm"] = f.matrix_norm;
@@ -256,6 +261,7 @@ class Core {
       d["backward_error"] = s.backward_error;
       d["refinement_converged"] = s.refinement_converged;
       d["backward_error_floor"] = s.backward_error_floor;
+      d["condition_lower_bound"] = s.condition_lower_bound;
       d["relative_residual"] = s.relative_residual;
       d["singular_consistent"] = s.singular_consistent;
     }

@@ -456,6 +456,7 @@ strata_status strata_get_stats(const strata_solver* s, strata_stats* out) {
     out->backward_error = so.backward_error;
     out->refinement_converged = so.refinement_converged ? 1 : 0;
     out->backward_error_floor = so.backward_error_floor;
+    out->condition_lower_bound = so.condition_lower_bound;
     out->relative_residual = so.relative_residual;
     out->singular_consistent = so.singular_consistent ? 1 : 0;
   }

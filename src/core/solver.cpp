@@ -31,8 +31,10 @@
 #include "core/alloc.hpp"
 #include "core/analysis.hpp"
 #include "core/host_copy.hpp"
+#include "core/rescale.hpp"
 #include "core/solver_internal.hpp"
 #include "core/timer.hpp"
+#include "numeric/delayed.hpp"
 #include "numeric/factor.hpp"
 #include "solve/gmres.hpp"
 
@@ -54,6 +56,11 @@ struct SolverState {
   int arena_threads = -1;
   std::vector<double> cb_arena;
   numeric::NumericFactor factor;
+  // the extra scaling of the last factorization (core/rescale.hpp), empty when none
+  Rescaling rescaling;
+  // the factor of delayed pivoting (Options::pivoting), valid instead of `factor`
+  numeric::DelayedFactor delayed;
+  numeric::DelayedWorkspace delayed_work;
   std::unique_ptr<numeric::Executor> executor;
   // several workers: one executor and one host arena each
   std::vector<std::unique_ptr<numeric::Executor>> executors;
@@ -346,6 +353,30 @@ ValueNorms refactor_values(const Analysis& an, const SparseMatrix& a, tbb::task_
   return r;
 }
 
+// Whether the analysis's matching scaling hit its clamp (ordering/matching.cpp: factors
+// within e^±700) for some row or column.
+bool scaling_clamped(const Analysis& an) {
+  constexpr double kNearClamp = 1e300;
+  for (const auto* v : {&an.row_scaling, &an.col_scaling})
+    for (double d : *v)
+      if (d > kNearClamp || d < 1 / kNearClamp) return true;
+  return false;
+}
+
+// ‖B‖₁ of the scaled values (entry order of the canonical `c`; symmetric: lower storage,
+// mirrored).
+double scaled_norm1(const SparseMatrix& c, bool symmetric, const std::vector<double>& scaled) {
+  std::vector<double> col(c.n_cols, 0.0);
+  for (index_t j = 0; j < c.n_cols; ++j)
+    for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) {
+      col[j] += std::abs(scaled[p]);
+      if (symmetric && c.indices[p] != j) col[c.indices[p]] += std::abs(scaled[p]);
+    }
+  double m = 0;
+  for (double v : col) m = std::max(m, v);
+  return m;
+}
+
 // The executors a factorization with `workers` workers uses (created on first use and
 // kept): one per GPU when the CUDA backend splits the tree (only it resolves to several
 // workers, see resolve_workers), host workers when asked for, else one executor.
@@ -455,6 +486,7 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
     resize_scaled(s, a.values.size(), "factorize: scaled values");
     const ValueNorms norms = refactor_values(an, a, arena, s.value_sums, s.scaled);
     s.factor.valid = false;
+    s.delayed.valid = false;
     s.norm_inf = norms.norm_inf;
     norm1 = norms.scaled_norm1;
     if (s.values_analysis != an.id) {
@@ -468,6 +500,7 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
     SparseMatrix checked = canonical_values(an, a);
     check_norms(checked);
     s.factor.valid = false;
+    s.delayed.valid = false;
     s.values = std::move(checked);
     s.values_analysis = an.id;
     s.norm_inf = norm_inf(s.values);
@@ -488,6 +521,15 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
                        if (sym && i != j) sum[0][i] += std::abs(v);
                      });
     for (double v : colsum[0]) norm1 = std::max(norm1, v);
+  }
+  // values far from the analysis's: equilibrate B again (a no-op within a factor 2). Not
+  // when the analysis's scaling was clamped at e^±700 (values near the ends of the double
+  // range): equilibrating further would only move the solve's intermediates toward the
+  // subnormal range.
+  s.rescaling = Rescaling{};
+  if (scale && !scaling_clamped(an)) {
+    s.rescaling = rescale_values(s.values, an.symmetric, s.scaled);
+    if (!s.rescaling.row.empty()) norm1 = scaled_norm1(s.values, an.symmetric, s.scaled);
   }
   const double input_seconds = timer.seconds();
   const double static_pivot = s.options.static_pivot_epsilon * (norm1 > 0 ? norm1 : 1.0);
@@ -527,7 +569,28 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
       type = MatrixType::symmetric_indefinite;
     }
   }
-  if (type != MatrixType::spd || an.type != MatrixType::automatic) run(type);
+  // Delayed pivoting (general, one executor; Options::pivoting): the fixed order first
+  // unless asked to delay always, the delayed factorization on the host when the fixed
+  // order needed static pivots.
+  s.delayed.valid = false;
+  const bool can_delay = s.options.pivoting != Pivoting::fixed && type == MatrixType::general &&
+                         !external && workers == 1;
+  const bool delay_directly = can_delay && s.options.pivoting == Pivoting::delayed;
+  index_t fixed_perturbed = 0;
+  if (delay_directly) {
+    s.factor.valid = false;
+  } else if (type != MatrixType::spd || an.type != MatrixType::automatic) {
+    run(type);
+    for (const auto& ps : s.factor.front_stats) fixed_perturbed += ps.perturbed;
+  }
+  if (can_delay && (delay_directly || fixed_perturbed > 0)) {
+    // a root takes every remaining pivot by partial pivoting over the whole remaining
+    // Schur complement (backward stable); only those at the rounding level of ‖B‖₁ are
+    // zeros of a numerically singular matrix and get static pivots
+    const double root_static = std::numeric_limits<double>::epsilon() * (norm1 > 0 ? norm1 : 1.0);
+    numeric::factorize_delayed(an, s.scaled.data(), type, s.options.pivot_threshold, root_static,
+                               s.delayed, s.delayed_work);
+  }
   s.resolved = type;
 
   FactorStats& fs = s.stats.factor;
@@ -537,7 +600,15 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
   fs.backend = external ? s.external.backend : workers > 1 ? execs[0]->name() : s.executor->name();
   fs.devices = s.devices;
   numeric::cpu::PivotStats total;
-  for (const auto& ps : s.factor.front_stats) total.merge(ps);
+  for (const auto& ps : s.delayed.valid ? s.delayed.front_stats : s.factor.front_stats)
+    total.merge(ps);
+  if (s.delayed.valid) {
+    fs.delayed_pivoting = true;
+    fs.delayed_pivots = s.delayed.delayed;
+    fs.fronts_delaying = s.delayed.fronts_delaying;
+    fs.fixed_order_perturbed_pivots = fixed_perturbed;
+    total.det_sign = numeric::delayed_determinant_sign(an, s.delayed);
+  }
   fs.perturbed_pivots = total.perturbed;
   fs.two_by_two_pivots = total.two_by_two;
   fs.inertia_positive = total.positive;
@@ -551,7 +622,10 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
   if (scale) {
     for (double r : an.row_scaling) logdet -= std::log(r);
     for (double v : an.col_scaling) logdet -= std::log(v);
+    for (double r : s.rescaling.row) logdet -= std::log(r);
+    for (double v : s.rescaling.col) logdet -= std::log(v);
   }
+  fs.rescaling_sweeps = s.rescaling.sweeps;
   if (!an.matching_perm.empty()) sign *= parity(an.matching_perm);
   fs.log_abs_determinant = logdet;
   fs.determinant_sign = sign;
@@ -572,6 +646,13 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
   if (fs.backend == "cuda") fs.device_phases.setup += creation_seconds;
 }
 
+// v·d·e for a scale factor d and a power of two e: one rounding, as v·d alone would have,
+// unless d·e leaves the normal range (then v·d·e: the product may still be representable).
+inline double scaled_by(double v, double d, double e) {
+  const double f = d * e;
+  return std::isnormal(f) ? v * f : v * d * e;
+}
+
 // One solve with the factor: x = A⁻¹ b for nrhs columns (original numbering). Returns
 // true when the triangular solves ran on the device that holds the factor.
 bool apply_inverse(SolverState& s, const double* b, double* x, index_t nrhs,
@@ -581,14 +662,18 @@ bool apply_inverse(SolverState& s, const double* b, double* x, index_t nrhs,
   work.resize(static_cast<std::size_t>(n) * nrhs);
   const bool scale = !an.row_scaling.empty();
   const bool match = !an.matching_perm.empty();
+  const bool rescale = !s.rescaling.row.empty();
   for (index_t r = 0; r < nrhs; ++r)
     for (index_t k = 0; k < n; ++k) {
       const index_t i = an.perm[k];  // row of B is a row of A
-      work[k + r * n] = b[i + r * n] * (scale ? an.row_scaling[i] : 1.0);
+      work[k + r * n] = scaled_by(b[i + r * n], scale ? an.row_scaling[i] : 1.0,
+                                  rescale ? s.rescaling.row[i] : 1.0);
     }
-  const bool on_device =
-      !s.external.solve && s.executor && s.executor->solve(an, s.factor, work.data(), nrhs);
-  if (s.external.solve) {
+  const bool on_device = !s.delayed.valid && !s.external.solve && s.executor &&
+                         s.executor->solve(an, s.factor, work.data(), nrhs);
+  if (s.delayed.valid) {
+    numeric::solve_delayed(an, s.delayed, work.data(), nrhs);
+  } else if (s.external.solve) {
     s.external.solve(an, s.factor, work.data(), nrhs);
   } else if (!on_device) {
     if (!s.factor.panels_on_host && s.executor) {
@@ -603,7 +688,8 @@ bool apply_inverse(SolverState& s, const double* b, double* x, index_t nrhs,
   for (index_t r = 0; r < nrhs; ++r)
     for (index_t k = 0; k < n; ++k) {
       const index_t col = match ? an.matching_perm[an.perm[k]] : an.perm[k];
-      x[col + r * n] = work[k + r * n] * (scale ? an.col_scaling[col] : 1.0);
+      x[col + r * n] = scaled_by(work[k + r * n], scale ? an.col_scaling[col] : 1.0,
+                                 rescale ? s.rescaling.col[col] : 1.0);
     }
   return on_device;
 }
@@ -625,6 +711,7 @@ void phase(const char* name, F&& f) {
 // the caller can free memory elsewhere and try again. The analysis is kept.
 void release_factor(SolverState& s) noexcept {
   s.factor = numeric::NumericFactor{};
+  s.delayed = numeric::DelayedFactor{};
   std::vector<double>().swap(s.cb_arena);
   s.scaled_pin.reset();
   std::vector<double>().swap(s.scaled);
@@ -655,6 +742,7 @@ void Solver::analyze(const SparseMatrix& a) {
   phase("analyze", [&] {
     validate(a);
     state_->factor = numeric::NumericFactor{};
+    state_->delayed = numeric::DelayedFactor{};
     state_->cb_arena.clear();
     state_->arenas.clear();
     state_->blocks = numeric::BlockBuffers{};
@@ -712,7 +800,8 @@ static double rounding_floor(SolverState& s) {
 
 // The solve phase: one solve with the factor, iterative refinement, GMRES if it stalls.
 static void solve_impl(SolverState& s, const double* b, double* x, index_t nrhs) {
-  if (!s.analysis || !s.factor.valid) throw InvalidState("solve called before factorize");
+  if (!s.analysis || !(s.factor.valid || s.delayed.valid))
+    throw InvalidState("solve called before factorize");
   if (nrhs < 0) throw InvalidInput("negative number of right-hand sides");
   Timer timer;
   const index_t n = s.analysis->n;
@@ -797,6 +886,18 @@ static void solve_impl(SolverState& s, const double* b, double* x, index_t nrhs)
   ss.backward_error = 0;
   for (index_t c = 0; c < nrhs; ++c) ss.backward_error = std::max(ss.backward_error, berr[c]);
   ss.backward_error_floor = floor;
+  // κ∞(A) ≥ ‖A‖∞‖x‖∞/‖b‖∞ for every solution: a singular or ill-conditioned A shows here
+  // even when no pivot was small enough to perturb (a rank deficiency spread over the
+  // off-diagonal of U)
+  ss.condition_lower_bound = 0;
+  for (index_t c = 0; c < nrhs; ++c) {
+    double xn = 0, bn = 0;
+    for (index_t i = 0; i < n; ++i) {
+      xn = std::max(xn, std::abs(x[i + c * n]));
+      bn = std::max(bn, std::abs(b[i + c * n]));
+    }
+    if (bn > 0) ss.condition_lower_bound = std::max(ss.condition_lower_bound, s.norm_inf * xn / bn);
+  }
   ss.refinement_converged = ss.backward_error <= enough;
   // Pivots perturbed: A is numerically singular, and a small normwise backward error only
   // says that x solves a nearby nonsingular matrix (x grows along A's near-null space as
@@ -824,7 +925,7 @@ static void solve_impl(SolverState& s, const double* b, double* x, index_t nrhs)
 }
 
 std::vector<double> Solver::solve(const std::vector<double>& b) {
-  if (!state_->analysis || !state_->factor.valid)
+  if (!state_->analysis || !(state_->factor.valid || state_->delayed.valid))
     throw InvalidState("solve called before factorize");
   const index_t n = size();
   if (n == 0) {
@@ -854,6 +955,7 @@ void detail::SolverAccess::use_host_workers(Solver& solver, int workers, int thr
   s.executor.reset();
   s.analysis.reset();
   s.factor = numeric::NumericFactor{};
+  s.delayed = numeric::DelayedFactor{};
 }
 
 void detail::SolverAccess::set_external(Solver& solver, ExternalNumeric external) {
@@ -863,6 +965,7 @@ void detail::SolverAccess::set_external(Solver& solver, ExternalNumeric external
   s.executor.reset();
   s.analysis.reset();
   s.factor = numeric::NumericFactor{};
+  s.delayed = numeric::DelayedFactor{};
 }
 
 Analysis* detail::SolverAccess::analysis(Solver& solver) {

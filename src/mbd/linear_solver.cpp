@@ -3,6 +3,7 @@
 
 #include <vector>
 
+#include "numeric/factor.hpp"
 #include "strata/errors.hpp"
 #include "strata/solver.hpp"
 
@@ -30,6 +31,13 @@ class StrataLinearSolver : public LinearSolver {
     // bench/results/multigpu-20261121T190423Z.json).
     o.num_gpus = 1;
     o.matching_and_scaling = true;
+    // The Newton matrix's values drift from those the analysis matched and scaled (step
+    // size, contacts, rotations): on the host every factorization delays the pivots the
+    // analysis's order cannot take (numeric/delayed.hpp); a GPU factors in that order
+    // first and delays on the host only when it needed static pivots.
+    const bool gpu =
+        backend == Backend::cuda || (backend == Backend::automatic && numeric::cuda_available());
+    o.pivoting = gpu ? Pivoting::automatic : Pivoting::delayed;
     return o;
   }
   void analyze(const SparseMatrix& a) override {
@@ -52,7 +60,10 @@ class StrataLinearSolver : public LinearSolver {
   double backward_error() const override { return solver_.stats().solve.backward_error; }
   std::string describe() const override {
     const std::string b = solver_.stats().factor.backend;
-    return "strata LU (matching + scaling) on " + (b.empty() ? std::string("cpu") : b);
+    const FactorStats& f = solver_.stats().factor;
+    return "strata LU (matching + scaling" +
+           std::string(f.delayed_pivoting ? ", delayed pivots" : "") + ") on " +
+           (b.empty() ? std::string("cpu") : b);
   }
   const Stats* stats() const override { return &solver_.stats(); }
 

@@ -255,7 +255,7 @@ TEST(Solver, NotPositiveDefiniteNamesColumn) {
 }
 
 // Every shared matrix solves to backward error ≤ 1e-14, except the singular ex6, which
-// must report perturbed pivots.
+// must be flagged (perturbed pivots, or a condition bound beyond 1e12).
 TEST(Solver, SharedMatrices) {
   for (const std::string& name : test::shared_matrix_names()) {
     SCOPED_TRACE(name);
@@ -268,7 +268,12 @@ TEST(Solver, SharedMatrices) {
     auto x = s.solve(b);
     const double berr = test::backward_error(a, x.data(), b.data());
     if (name == "ex6") {
-      EXPECT_GT(s.stats().factor.perturbed_pivots, 0) << "singular matrix not flagged";
+      // rank n − 1: static pivots in the analysis's order; delayed pivoting may find
+      // pivots of ordinary size, and the singularity then shows in the solution's size
+      const FactorStats& f = s.stats().factor;
+      EXPECT_GT(f.perturbed_pivots + f.fixed_order_perturbed_pivots, 0);
+      EXPECT_TRUE(f.perturbed_pivots > 0 || s.stats().solve.condition_lower_bound > 1e12)
+          << "singular matrix not flagged";
     } else {
       EXPECT_LE(berr, 1e-14) << "type " << to_string(s.matrix_type());
     }

@@ -87,7 +87,7 @@
 #include <utility>
 #include <vector>
 
-#include "core/blas.hpp"
+#include "numeric/cpu/dense_blas.hpp"
 #include "strata/errors.hpp"
 
 namespace strata::numeric::cpu {
@@ -125,37 +125,12 @@ constexpr index_t kLuLeaf = 8;
 // Below this many multiply-adds a GEMM/GEMV-shaped update is done by loops.
 constexpr index_t kLoopWork = 1024;
 
-int blas_int(index_t v) {
-  if (v < 0 || v > std::numeric_limits<int>::max())
-    throw NotSupported("dense front: dimension " + std::to_string(v) +
-                       " does not fit the 32-bit BLAS interface");
-  return static_cast<int>(v);
-}
-
 void check_front(index_t m, index_t k, index_t ld) {
   if (m < 0 || k < 0 || k > m || ld < m)
     throw InvalidInput("dense front: need 0 <= k <= m <= ld (m=" + std::to_string(m) +
                        ", k=" + std::to_string(k) + ", ld=" + std::to_string(ld) + ")");
   blas_int(m);
   blas_int(ld);
-}
-
-// --- thin BLAS wrappers (index_t in, nothing done for empty shapes) -------------------
-
-void gemm(char ta, char tb, index_t m, index_t n, index_t k, double alpha, const double* a,
-          index_t lda, const double* b, index_t ldb, double beta, double* c, index_t ldc) {
-  if (m <= 0 || n <= 0 || k <= 0) return;  // callers never rely on beta with k = 0
-  const int im = blas_int(m), in = blas_int(n), ik = blas_int(k);
-  const int ila = blas_int(lda), ilb = blas_int(ldb), ilc = blas_int(ldc);
-  dgemm_(&ta, &tb, &im, &in, &ik, &alpha, a, &ila, b, &ilb, &beta, c, &ilc);
-}
-
-void trsm(char side, char uplo, char ta, char diag, index_t m, index_t n, const double* a,
-          index_t lda, double* b, index_t ldb) {
-  if (m <= 0 || n <= 0) return;
-  const double one = 1.0;
-  const int im = blas_int(m), in = blas_int(n), ila = blas_int(lda), ilb = blas_int(ldb);
-  dtrsm_(&side, &uplo, &ta, &diag, &im, &in, &one, a, &ila, b, &ilb);
 }
 
 // y[0..m) −= A x, A m×n (lda), x with stride incx.

@@ -1,0 +1,54 @@
+// strata — partial factorization of one front with threshold pivoting and delayed pivots.
+//
+// The fixed-layout kernels of dense_front.hpp eliminate every fully summed pivot of a
+// front, replacing a tiny one by a static pivot. Here a pivot that fails a relative
+// threshold test is not taken: its row and column stay uneliminated and go to the parent
+// front with the contribution block (delayed pivoting: Duff & Reid, "The multifrontal
+// solution of indefinite sparse symmetric linear equations", ACM TOMS 9, 1983; MA57 and
+// MUMPS, Amestoy, Duff, L'Excellent & Koster, SIAM J. Matrix Anal. Appl. 23, 2001). At the
+// parent more rows are fully summed, so a good pivot is usually there; at a root every row
+// is fully summed and the only pivots still refused are those of a numerically singular
+// matrix, which are then replaced by static pivots (the last resort, counted).
+//
+// A front F is m×m, column-major (leading dimension ld); its first p rows and columns are
+// fully summed (the candidates). LU eliminates column by column (right-looking within
+// the p candidate columns): for the next candidate column j, the pivot is the largest
+// entry among the remaining fully summed rows, taken when it is at least `threshold` times
+// the largest entry of column j over all remaining rows, contribution-block rows included
+// (so |L21| ≤ 1/threshold: the growth bound of threshold partial pivoting), and larger
+// than `tiny`; otherwise column j is moved behind the remaining candidates and skipped.
+// Rows and columns permute independently, so the delayed rows and the delayed columns may
+// be different variables (MUMPS's unsymmetric fronts keep separate row and column lists
+// for the same reason).
+#pragma once
+
+#include "numeric/cpu/dense_front.hpp"
+#include "strata/types.hpp"
+
+namespace strata::numeric::cpu {
+
+/// Threshold pivoting settings of a front.
+struct DelayPolicy {
+  double threshold = 0.01;  ///< relative threshold u in (0, 1] (MUMPS CNTL(1)'s default)
+  double tiny = 0;        ///< a pivot of magnitude ≤ tiny is never taken while it may be delayed
+  bool may_delay = true;  ///< false at a root: every candidate is eliminated
+  double static_pivot = 0;  ///< with may_delay false: |pivot| < static_pivot becomes ±static_pivot
+};
+
+/// LU of the p fully summed columns of an m×m front with threshold partial pivoting and
+/// delayed pivots (see the header above). Returns the number of pivots eliminated, npiv
+/// (npiv = p when !policy.may_delay). On return, with the rows and columns of F permuted
+/// within the first p by row_perm[0..p) and col_perm[0..p) (position i holds original
+/// local row row_perm[i], column col_perm[i]; positions p..m unmoved):
+///   F[0:npiv, 0:npiv]   L11 (unit lower, not stored) and U11,
+///   F[npiv:m, 0:npiv]   L21 = F21 U11⁻¹,
+///   F[0:npiv, npiv:m]   U12 = L11⁻¹ F12 (delayed columns first),
+///   F[npiv:m, npiv:m]   the Schur complement; its first p − npiv rows and columns are the
+///                       delayed ones.
+/// stats counts the npiv pivots (sign and log|u_ii| of U11; the permutations' parity is
+/// the caller's) and the static pivots. Throws InvalidInput for inconsistent sizes.
+index_t factor_front_lu_delayed(double* f, index_t m, index_t p, index_t ld,
+                                const DelayPolicy& policy, index_t* row_perm, index_t* col_perm,
+                                PivotStats& stats);
+
+}  // namespace strata::numeric::cpu

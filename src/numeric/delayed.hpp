@@ -1,0 +1,77 @@
+// strata — the multifrontal factorization with delayed pivots, and its solve.
+//
+// The fixed-layout factorization (numeric/factor.hpp) sizes every front, panel and
+// contribution block at analysis, so a pivot the analysis's order cannot take must be
+// perturbed (static pivoting). When the values have drifted from those the analysis saw
+// (a Newton loop under contact and large rotations), that leaves many perturbed pivots.
+// This factorization takes the same assembly tree and lets each front refuse pivots that
+// fail a relative threshold test (numeric/cpu/delayed_front.hpp): their rows and columns
+// join the parent's front as extra fully summed rows and columns, so front sizes follow
+// the values. The factor owns its storage (sized as the fronts come) and its solve, in the
+// manner of SPRAL SSIDS's numeric subtrees. Fronts are visited in postorder with a stack
+// of contribution blocks (the children of a front are on top of the stack when it is
+// assembled), one host thread.
+//
+// LU only (MatrixType::general): rows and columns permute independently, so each front
+// keeps a row list and a column list. The factor is of B = the scaled, matched, ordered
+// matrix of the analysis, in tree numbering: L·U = B(σr, σc) for the row and column pivot
+// sequences σr, σc (each front's first k rows / columns, fronts in postorder).
+#pragma once
+
+#include <cstddef>
+#include <vector>
+
+#include "core/analysis.hpp"
+#include "numeric/cpu/delayed_front.hpp"
+
+namespace strata::numeric {
+
+/// The factor of one factorization with delayed pivots (see above). Per front f:
+/// m[f] rows and columns, k[f] pivots; its row and column lists (tree numbering) at
+/// index_offset[f] (m[f] each; the first k[f] are the pivot rows / columns in elimination
+/// order); its values at value_offset[f]: L (m×k column-major: U11 on and above the
+/// diagonal of the first k rows, unit L11 below it, then L21) followed by U12 (k×(m−k)).
+struct DelayedFactor {
+  MatrixType type = MatrixType::general;
+  std::vector<index_t> m, k;
+  std::vector<std::size_t> index_offset, value_offset;  ///< n_fronts + 1 entries each
+  std::vector<index_t> rows, cols;
+  std::vector<double> values;
+  std::vector<cpu::PivotStats> front_stats;  ///< per front
+  index_t delayed = 0;          ///< Σ over fronts of the pivots passed on to the parent
+  index_t fronts_delaying = 0;  ///< fronts that passed pivots on
+  index_t largest_front = 0;    ///< the largest m[f]
+  bool valid = false;
+};
+
+/// Reusable work arrays of factorize_delayed (kept from one factorization to the next).
+struct DelayedWorkspace {
+  std::vector<double> front, stack;
+  std::vector<index_t> row_pos, col_pos, row_perm, col_perm, stack_index;
+  struct Block {
+    std::size_t values = 0, indices = 0;  ///< offsets into stack and stack_index
+    index_t size = 0, delayed = 0;        ///< order of the block, delayed rows (= columns)
+  };
+  std::vector<Block> blocks;
+};
+
+/// Factors the scaled canonical values `scaled_values` (in the analysis's entry order,
+/// Analysis::assembly) of type `type` over an.tree with delayed pivots: threshold
+/// `threshold` in (0, 1]; a pivot no larger than static_pivot is not taken below a root;
+/// at a root the remaining candidates are eliminated with partial pivoting and pivots
+/// under static_pivot replaced by ±static_pivot (counted in front_stats' perturbed).
+/// Throws NotSupported for a type other than general, InvalidInput for a threshold outside
+/// (0, 1], OutOfMemory when the fronts grow beyond the memory.
+void factorize_delayed(const Analysis& an, const double* scaled_values, MatrixType type,
+                       double threshold, double static_pivot, DelayedFactor& factor,
+                       DelayedWorkspace& work);
+
+/// Solves with the factor: b (tree numbering of the rows, n × nrhs column-major) is
+/// overwritten by the solution (tree numbering of the columns).
+void solve_delayed(const Analysis& an, const DelayedFactor& factor, double* b, index_t nrhs);
+
+/// The sign of det(B) from the factor: the sign of Π u_ii times the parities of the row and
+/// column pivot sequences (0 when a pivot is zero); log|det B| is Σ front_stats' log_abs_det.
+int delayed_determinant_sign(const Analysis& an, const DelayedFactor& factor);
+
+}  // namespace strata::numeric

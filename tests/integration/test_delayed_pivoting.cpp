@@ -1,0 +1,235 @@
+// Delayed pivoting (Options::pivoting; numeric/delayed.hpp) through the Solver:
+// an analysis made for values whose matching is wrong for the values refactorized — the
+// Newton loop of a simulation whose contacts and rotations changed — must still factor
+// without static pivots, with the solution of dense LAPACK (dgesv) and log|det| and sign
+// of its LU (dgetrf), a backward error at the tolerance without GMRES, and the statistics
+// saying which mechanism was used. A numerically singular matrix is still reported as
+// such (static pivots at the root).
+#include <gtest/gtest.h>
+
+#include <cfloat>
+#include <cmath>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "core/blas.hpp"
+#include "strata/strata.hpp"
+#include "support/test_support.hpp"
+
+namespace strata {
+namespace {
+
+// A random n×n pattern: the diagonal, plus `per_column` random entries per column and
+// their transposes' positions (some of them), canonical CSC with values 0.
+SparseMatrix random_pattern(index_t n, index_t per_column, std::mt19937_64& rng) {
+  std::uniform_int_distribution<index_t> pick(0, n - 1);
+  std::vector<std::vector<index_t>> cols(n);
+  for (index_t j = 0; j < n; ++j) {
+    cols[j].push_back(j);
+    for (index_t q = 0; q < per_column && n > 1; ++q) {
+      const index_t i = pick(rng);
+      cols[j].push_back(i);
+      if (q % 2 == 0) cols[i].push_back(j);
+    }
+  }
+  SparseMatrix a;
+  a.n_rows = a.n_cols = n;
+  a.offsets.assign(n + 1, 0);
+  for (index_t j = 0; j < n; ++j) {
+    std::sort(cols[j].begin(), cols[j].end());
+    cols[j].erase(std::unique(cols[j].begin(), cols[j].end()), cols[j].end());
+    a.offsets[j + 1] = a.offsets[j] + static_cast<index_t>(cols[j].size());
+    a.indices.insert(a.indices.end(), cols[j].begin(), cols[j].end());
+  }
+  a.values.assign(a.indices.size(), 0.0);
+  return a;
+}
+
+// Values on `pattern`: off-diagonal entries uniform in [−1, 1], the diagonal `diag`.
+SparseMatrix with_values(const SparseMatrix& pattern, double diag, std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> u(-1, 1);
+  SparseMatrix a = pattern;
+  for (index_t j = 0; j < a.n_cols; ++j)
+    for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p)
+      a.values[p] = a.indices[p] == j ? diag : u(rng);
+  return a;
+}
+
+// log|det A| and its sign from LAPACK's dgetrf on the dense copy.
+void dense_logdet(const SparseMatrix& a, double* logdet, int* sign) {
+  std::vector<double> d = test::to_dense(a);
+  const int n = static_cast<int>(a.n_rows);
+  std::vector<int> ipiv(n);
+  int info = 0;
+  dgetrf_(&n, &n, d.data(), &n, ipiv.data(), &info);
+  *logdet = 0;
+  *sign = 1;
+  for (int i = 0; i < n; ++i) {
+    const double u = d[i + static_cast<std::size_t>(i) * n];
+    *logdet += std::log(std::abs(u));
+    if (u < 0) *sign = -*sign;
+    if (ipiv[i] != i + 1) *sign = -*sign;
+  }
+}
+
+// ‖A‖∞·‖x‖∞/‖b‖∞: a lower bound on κ∞(A) that sets the forward-error tolerance.
+double kappa_lower(const SparseMatrix& a, const std::vector<double>& x,
+                   const std::vector<double>& b) {
+  std::vector<double> row(a.n_rows, 0.0);
+  for (index_t j = 0; j < a.n_cols; ++j)
+    for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p)
+      row[a.indices[p]] += std::abs(a.values[p]);
+  double an = 0, xn = 0, bn = 0;
+  for (double v : row) an = std::max(an, v);
+  for (double v : x) xn = std::max(xn, std::abs(v));
+  for (double v : b) bn = std::max(bn, std::abs(v));
+  return an * xn / std::max(bn, 1e-300);
+}
+
+// The analysis is made for a dominant diagonal (the matching takes it); the values
+// refactorized have a zero diagonal, so every pivot of the analysis's order is zero.
+TEST(DelayedPivoting, StaleMatchingFactorsWithoutStaticPivots) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (index_t n : {2, 3, 5, 733}) {
+    SCOPED_TRACE("n=" + std::to_string(n));
+    const SparseMatrix pattern = random_pattern(n, 3, rng);
+    const SparseMatrix a1 = with_values(pattern, 20.0, rng);
+    SparseMatrix a2 = with_values(pattern, 0.0, rng);
+    Options o;
+    o.type = MatrixType::general;
+    o.backend = Backend::cpu;
+    // fundamental supernodes only: leaf fronts of one pivot, which the zero diagonal
+    // leaves without a pivot in the analysis's order
+    o.relax_small = 0;
+    o.relax_zeros_1 = o.relax_zeros_2 = o.relax_zeros_3 = 0;
+    Solver s(o);
+    s.factorize(a1);
+    EXPECT_FALSE(s.stats().factor.delayed_pivoting);
+    std::vector<double> b(n), ref;
+    for (double& v : b) v = u(rng);
+    ref = b;
+    if (!test::dense_solve(test::to_dense(a2), n, ref, 1)) continue;  // singular draw
+    s.refactorize(a2);
+    const FactorStats& f = s.stats().factor;
+    EXPECT_EQ(f.perturbed_pivots, 0);
+    // small matrices may be one front, where pivoting among its rows suffices
+    const bool delayed = f.delayed_pivoting;
+    if (n == 733) {
+      EXPECT_TRUE(f.delayed_pivoting);
+      EXPECT_GT(f.fixed_order_perturbed_pivots, 0);
+      EXPECT_GT(f.delayed_pivots, 0);
+    }
+    EXPECT_TRUE(f.inertia_valid);
+    double logdet = 0;
+    int sign = 0;
+    dense_logdet(a2, &logdet, &sign);
+    EXPECT_NEAR(f.log_abs_determinant, logdet, 1e-9 * std::max(1.0, std::abs(logdet)));
+    EXPECT_EQ(f.determinant_sign, sign);
+    const std::vector<double> x = s.solve(b);
+    EXPECT_LE(s.stats().solve.backward_error, 1e-14);
+    EXPECT_EQ(s.stats().solve.gmres_iterations, 0);
+    EXPECT_LE(test::relative_difference(x, ref),
+              std::max(1e-10, 1e-13 * std::sqrt(double(n)) * kappa_lower(a2, ref, b)));
+    // the same values again: the same factor, bit for bit (no state carried over)
+    s.refactorize(a2);
+    EXPECT_EQ(s.stats().factor.delayed_pivoting, delayed);
+    const std::vector<double> x2 = s.solve(b);
+    EXPECT_EQ(x2, x);
+    // Pivoting::delayed: the delayed factorization directly, the same solution
+    Options od = o;
+    od.pivoting = Pivoting::delayed;
+    Solver sd(od);
+    sd.analyze(a1);
+    sd.factorize(a2);
+    EXPECT_TRUE(sd.stats().factor.delayed_pivoting);
+    EXPECT_EQ(sd.stats().factor.fixed_order_perturbed_pivots, 0);
+    EXPECT_EQ(sd.stats().factor.perturbed_pivots, 0);
+    EXPECT_LE(test::relative_difference(sd.solve(b), ref),
+              std::max(1e-10, 1e-13 * std::sqrt(double(n)) * kappa_lower(a2, ref, b)));
+  }
+}
+
+// A contact-like sequence: between refactorizations, random rows are multiplied by 10^±6
+// (stiff contacts closing and opening). No static pivot, backward error at the tolerance.
+TEST(DelayedPivoting, ValuesChangingBySixDecadesBetweenRefactorizations) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  std::uniform_real_distribution<double> u(-1, 1);
+  std::uniform_int_distribution<int> coin(0, 9);
+  const index_t n = 733;
+  const SparseMatrix pattern = random_pattern(n, 4, rng);
+  SparseMatrix a = with_values(pattern, 10.0, rng);
+  Options o;
+  o.type = MatrixType::general;
+  o.backend = Backend::cpu;
+  Solver s(o);
+  s.factorize(a);
+  for (int step = 0; step < 6; ++step) {
+    SCOPED_TRACE("step " + std::to_string(step));
+    SparseMatrix b_mat = with_values(pattern, u(rng), rng);
+    std::vector<double> rs(n);
+    for (double& r : rs) r = coin(rng) == 0 ? 1e6 : coin(rng) == 0 ? 1e-6 : 1.0;
+    for (index_t j = 0; j < n; ++j)
+      for (index_t p = b_mat.offsets[j]; p < b_mat.offsets[j + 1]; ++p)
+        b_mat.values[p] *= rs[b_mat.indices[p]];
+    std::vector<double> rhs(n), ref;
+    for (double& v : rhs) v = u(rng);
+    ref = rhs;
+    if (!test::dense_solve(test::to_dense(b_mat), n, ref, 1)) continue;
+    s.refactorize(b_mat);
+    EXPECT_EQ(s.stats().factor.perturbed_pivots, 0);
+    const std::vector<double> x = s.solve(rhs);
+    EXPECT_LE(s.stats().solve.backward_error, 1e-14);
+    EXPECT_EQ(s.stats().solve.gmres_iterations, 0);
+  }
+}
+
+// Numerically singular: a row of zero values (its pattern kept). The root has nothing to
+// pivot on: a static pivot, counted, and the statistics say the matrix is singular.
+TEST(DelayedPivoting, SingularMatrixIsStillReported) {
+  auto rng = test::fresh_rng();
+  for (index_t n : {1, 2, 5, 733}) {
+    SCOPED_TRACE("n=" + std::to_string(n));
+    const SparseMatrix pattern = random_pattern(n, 3, rng);
+    Options o;
+    o.type = MatrixType::general;
+    o.backend = Backend::cpu;
+    o.relax_small = 0;
+    o.relax_zeros_1 = o.relax_zeros_2 = o.relax_zeros_3 = 0;
+    Solver s(o);
+    s.factorize(with_values(pattern, 20.0, rng));
+    SparseMatrix a2 = with_values(pattern, 0.0, rng);
+    const index_t dead = n / 2;
+    for (index_t j = 0; j < n; ++j)
+      for (index_t p = a2.offsets[j]; p < a2.offsets[j + 1]; ++p)
+        if (a2.indices[p] == dead) a2.values[p] = 0.0;
+    s.refactorize(a2);
+    EXPECT_GE(s.stats().factor.perturbed_pivots, 1);
+    EXPECT_FALSE(s.stats().factor.inertia_valid);
+  }
+}
+
+// Pivoting::fixed: static pivots as before.
+TEST(DelayedPivoting, OffKeepsStaticPivoting) {
+  auto rng = test::fresh_rng();
+  const SparseMatrix pattern = random_pattern(60, 3, rng);
+  Options o;
+  o.type = MatrixType::general;
+  o.backend = Backend::cpu;
+  o.relax_small = 0;
+  o.relax_zeros_1 = o.relax_zeros_2 = o.relax_zeros_3 = 0;
+  o.pivoting = Pivoting::fixed;
+  Solver s(o);
+  s.factorize(with_values(pattern, 20.0, rng));
+  s.refactorize(with_values(pattern, 0.0, rng));
+  EXPECT_FALSE(s.stats().factor.delayed_pivoting);
+  EXPECT_GT(s.stats().factor.perturbed_pivots, 0);
+}
+
+}  // namespace
+}  // namespace strata
