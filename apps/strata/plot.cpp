@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <cstdio>
 #include <cstdlib>
 #include <string>
 #include <vector>
@@ -49,6 +50,7 @@ std::vector<std::string> interpreters() {
 }  // namespace
 
 int run_plot(const std::string& folder, const std::string& coordinates, const std::string& title) {
+  std::fflush(stdout);  // what the command printed so far comes before the script's lines
   std::string tried;
   for (const std::string& python : interpreters()) {
     std::vector<std::string> args = {python, "-c", kPlotScript, folder};

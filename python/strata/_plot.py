@@ -143,7 +143,7 @@ def _summary(data, path):
     ax.semilogy(t0, _positive(s["position_violation"], floor), label="position max |Φ| [m, rad]")
     ax.semilogy(t0, _positive(s["velocity_violation"], floor),
                 label="velocity max |dΦ/dt| [m/s, rad/s]")
-    ax.set_ylabel("violation")
+    ax.set_ylabel("max |Φ|, max |dΦ/dt|")
     ax.legend(loc="best", fontsize=8)
     ax.set_title("Constraint violation (zeros drawn at 1e-18)", fontsize=10, loc="left")
 
@@ -161,16 +161,18 @@ def _summary(data, path):
     ax.set_title("Step size", fontsize=10, loc="left")
 
     ax = axes[3]
-    ax.step(t, s["newton_iterations"][1:], where="post", label="Newton iterations")
-    ax.step(t, s["factorizations"][1:], where="post", label="factorizations")
+    ax.step(t, s["newton_iterations"][1:], where="post", label="Newton iterations",
+            linewidth=0.8)
+    ax.step(t, s["factorizations"][1:], where="post", label="factorizations", linewidth=0.8)
     ax.set_ylabel("per step [count]")
     ax.set_ylim(bottom=0)
     ax.legend(loc="best", fontsize=8)
     ax.set_title("Newton iterations and factorizations per step", fontsize=10, loc="left")
 
     ax = axes[4]
-    ax.plot(t, [1e3 * v for v in s["solver_seconds"][1:]], label="strata (solver)")
-    ax.plot(t, [1e3 * v for v in s["assembly_seconds"][1:]], label="assembly")
+    ax.plot(t, [1e3 * v for v in s["solver_seconds"][1:]], label="strata (solver)",
+            linewidth=0.8)
+    ax.plot(t, [1e3 * v for v in s["assembly_seconds"][1:]], label="assembly", linewidth=0.8)
     ax.set_ylabel("wall time per step [ms]")
     ax.set_ylim(bottom=0)
     ax.legend(loc="best", fontsize=8)
