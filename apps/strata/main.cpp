@@ -566,9 +566,15 @@ int run_simulate(const SimulateArgs& a) {
   if (r.checkpoint_step > 0 && o.checkpoint_every > 0)
     fmt::print("checkpoint            step {} in {}/ (continue with --resume {})\n",
                r.checkpoint_step, o.checkpoint_dir, o.checkpoint_dir);
-  // plots of what was written, partial results included
-  const bool plot = (a.plot || !a.plot_coordinates.empty()) && !o.output_dir.empty();
-  const int plot_rc = plot ? cli::run_plot(o.output_dir, a.plot_coordinates, source) : 0;
+  // plots of what was written, partial results included; a plot that cannot be drawn
+  // does not hide how the run itself ended
+  int plot_rc = 0;
+  if ((a.plot || !a.plot_coordinates.empty()) && !o.output_dir.empty()) try {
+      plot_rc = cli::run_plot(o.output_dir, a.plot_coordinates, source);
+    } catch (const strata::Error& e) {
+      std::fprintf(stderr, "strata: error: %s\n", e.what());
+      plot_rc = 1;
+    }
   if (r.state == "interrupted") {
     std::fprintf(stderr, "strata: %s; partial results kept\n", r.message.c_str());
     return 128 + static_cast<int>(g_signal);
