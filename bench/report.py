@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """strata benchmark report: turns every bench/results/*.json into bench/REPORT.md.
 
-    python3 bench/report.py [--results DIR] [--out DIR]
+    python3 bench/report.py [--results DIR] [--out DIR] [--readme FILE] [--history FILE]
 
 Reads every results file the benchmark drivers wrote (bench_analysis, bench_factor, and
 the GPU drivers to come), keeps the newest run per (benchmark kind, machine, tag), and
@@ -9,7 +9,9 @@ writes OUT/REPORT.md with tables and OUT/plots/*.png (matplotlib, Agg backend). 
 table and plot is captioned with the command, machine, date and git commit of the run it
 shows and the name of its results file; every number in the report is either copied from
 a results file or computed from one (ratios, geometric means: the caption says which).
-Sections whose results do not exist say so instead of showing numbers.
+Sections whose results do not exist say so instead of showing numbers. The headline
+ratios also go into the performance table of README.md (between its marker lines), and
+the hand-written notes of bench/history.md are copied to the end (bench/report_readme.py).
 
 What a results file must hold (bench/bench_common.cpp writes it): "benchmark" (the kind),
 "date" (ISO 8601 UTC), "command", "git_commit", "machine" {"cpu", "hardware_threads",
@@ -56,6 +58,7 @@ from report_common import (NOT_MEASURED, Run, by_machine, dig, f_e, f_g, f_int, 
 from report_e2e import EndToEnd
 from report_dist import Distributed
 from report_gpu import GpuSections, is_bench_gpu
+from report_readme import history_section, readme_table, update_readme
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SWEEP_TAG = re.compile(r"^mbs-(\d+)$")
@@ -65,12 +68,14 @@ SWEEP_TAG = re.compile(r"^mbs-(\d+)$")
 
 
 class Report(GpuSections, Distributed, EndToEnd):
-    def __init__(self, results_dir: str, out_dir: str):
+    def __init__(self, results_dir: str, out_dir: str, history: str | None = None):
         self.results_dir = os.path.abspath(results_dir)
+        self.history = history
         self.out_dir = os.path.abspath(out_dir)
         self.plot_dir = os.path.join(self.out_dir, "plots")
         self.parts: list[str] = []
         self.plots: list[str] = []
+        self.key_ratios: list[dict] = []
         self.used: set[str] = set()
         import matplotlib  # noqa: PLC0415 (imported here so --help works without it)
 
@@ -80,6 +85,13 @@ class Report(GpuSections, Distributed, EndToEnd):
         self.plt = plt
 
     # ---- helpers
+
+    def key_ratio(self, what: str, g, per_problem: list, run: Run) -> None:
+        """Remembers a headline ratio (geometric mean g over the problems of a run, untagged
+        runs only) for the README's performance table (report_readme.py)."""
+        if g is not None and not run.tag:
+            n = sum(1 for _, x in per_problem if x is not None)
+            self.key_ratios.append({"what": what, "ratio": g, "problems": n, "run": run})
 
     def w(self, text: str = "") -> None:
         self.parts.append(text + "\n")
@@ -148,6 +160,8 @@ class Report(GpuSections, Distributed, EndToEnd):
         self.header(all_runs, runs)
         self.summary(runs)
         self.parts += body
+        if self.history:
+            self.parts.append(history_section(self.history))
         return "".join(self.parts)
 
     def header(self, all_runs: list[Run], runs: list[Run]) -> None:
@@ -200,6 +214,8 @@ class Report(GpuSections, Distributed, EndToEnd):
                     pp = [(row.get("problem"), self.factor_ratio(row, key)) for row in r.rows]
                     label = f"factorization time strata/{name} (same permutation, {r.backend})"
                     g = judge(label, r.machine, pp)
+                    self.key_ratio(f"factorization time, strata / {name} (same ordering, "
+                                   f"{r.backend.upper()})", g, pp, r)
                     if g is not None:
                         lines.append(f"- Geometric mean of {label}: **{f_ratio(g)}** "
                                      f"over {sum(1 for _, x in pp if x is not None)} problems "
@@ -215,6 +231,9 @@ class Report(GpuSections, Distributed, EndToEnd):
                     pp = [(row.get("problem"), ratio(dig(row, "strata_gpu", what),
                                                      dig(row, k, what))) for row in r.rows]
                     g = judge(name, r.machine, pp)
+                    self.key_ratio("GPU refactorization time, strata / cuDSS ("
+                                   + ("each its own ordering" if k == "cudss_default"
+                                      else "strata's ordering") + ")", g, pp, r)
                     if g is not None:
                         lines.append(f"- Geometric mean of {name}: **{f_ratio(g)}** over "
                                      f"{sum(1 for _, x in pp if x is not None)} problems on "
@@ -227,6 +246,8 @@ class Report(GpuSections, Distributed, EndToEnd):
                 name = ("solve time strata GPU first solve (one application of the factor, "
                         "no refinement)/cuDSS solve (default reordering)")
                 g = judge(name, r.machine, pp)
+                self.key_ratio("GPU solve time, strata / cuDSS (one right-hand side, no "
+                               "refinement)", g, pp, r)
                 if g is not None:
                     lines.append(f"- Geometric mean of {name}: **{f_ratio(g)}** over "
                                  f"{sum(1 for _, x in pp if x is not None)} problems on "
@@ -239,6 +260,7 @@ class Report(GpuSections, Distributed, EndToEnd):
                            ratio(dig(row, "strata", key), dig(row, "cholmod_metis", key)))
                           for row in r.rows]
                     g = judge(what, r.machine, pp)
+                    self.key_ratio(what.replace(" strata/", ", strata / "), g, pp, r)
                     if g is not None:
                         lines.append(f"- Geometric mean of {what}: **{f_ratio(g)}** over "
                                      f"{sum(1 for _, x in pp if x is not None)} problems on "
@@ -629,6 +651,11 @@ class Report(GpuSections, Distributed, EndToEnd):
                             + [cell(row, k) for k, _ in keys] + [f_ratio(r_lu), f_ratio(r_ch)])
             rows.append(["**geometric mean**", ""] + [""] * len(keys)
                         + [f_ratio(geomean(ratios_lu)), f_ratio(geomean(ratios_ch))])
+            probs = [row.get("problem") for row in solv]
+            self.key_ratio("solve from Python, strata / scipy's SuperLU", geomean(ratios_lu),
+                           list(zip(probs, ratios_lu)), r)
+            self.key_ratio("solve from Python, strata / CHOLMOD (scikit-sparse)",
+                           geomean(ratios_ch), list(zip(probs, ratios_ch)), r)
             self.w(table(["problem", "n"] + [f"{n} s (backward error)" for _, n in keys]
                          + ["strata/SuperLU", "strata/CHOLMOD"], rows))
             missing = sorted({str(dig(row, "cholmod", "status")) for row in solv
@@ -692,9 +719,18 @@ def main(argv=None) -> int:
                     help="folder of results files (default: bench/results)")
     ap.add_argument("--out", default=os.path.join(REPO, "bench"),
                     help="folder to write REPORT.md and plots/ into (default: bench)")
+    ap.add_argument("--readme", default=None,
+                    help="README whose performance table to rewrite (between its marker "
+                         "lines); default: the repository's README.md when --out is the "
+                         "default, else none")
+    ap.add_argument("--history", default=os.path.join(REPO, "bench", "history.md"),
+                    help="hand-written notes copied to the end of REPORT.md "
+                         "(default: bench/history.md)")
     args = ap.parse_args(argv)
+    default_out = os.path.abspath(args.out) == os.path.join(REPO, "bench")
+    readme = args.readme or (os.path.join(REPO, "README.md") if default_out else None)
     try:
-        rep = Report(args.results, args.out)
+        rep = Report(args.results, args.out, args.history)
     except ImportError:
         print("report.py: matplotlib is missing; run scripts/setup.sh (Debian "
               "python3-matplotlib, importable by /usr/bin/python3)", file=sys.stderr)
@@ -712,6 +748,13 @@ def main(argv=None) -> int:
         f.write(text)
     os.replace(tmp, path)
     print(f"report: {path} ({len(rep.used)} results files, {len(rep.plots)} plots)")
+    if readme:
+        block = readme_table(rep.key_ratios, os.path.dirname(os.path.abspath(readme)))
+        err = update_readme(readme, block)
+        if err:
+            print(f"report.py: {err}", file=sys.stderr)
+            return 1
+        print(f"report: performance table of {readme} ({len(rep.key_ratios)} ratios)")
     return 0
 
 

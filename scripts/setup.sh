@@ -10,6 +10,9 @@ pkgs=(
   libgtest-dev libgmock-dev libbenchmark-dev libmumps-seq-dev
   python3-matplotlib python3-dev python3-pybind11 python3-numpy python3-scipy python3-pytest
   python3-pip
+  # the Python package as pip builds it (pyproject.toml, test python_wheel_venv): venv,
+  # python -m build; meshio reads the ParaView series in tests/python/test_outputs.py
+  python3-venv python3-build python3-meshio
   # the distributed solver (STRATA_MPI, docs/distributed.md): OpenMPI, and mpi4py built for
   # it (strata.Solver(..., comm=) and its test)
   openmpi-bin libopenmpi-dev python3-mpi4py
@@ -26,6 +29,17 @@ if ((${#missing[@]})); then
   [ "$(id -u)" -eq 0 ] || SUDO=sudo
   $SUDO apt-get update -qq
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+fi
+# scikit-build-core (the build backend of pyproject.toml) has no Debian 12 package: pip
+# installs it from PyPI for /usr/bin/python3, so that `python3 -m build --no-isolation` and
+# the test python_wheel_venv build offline; `pip install .` with build isolation fetches
+# its own copy.
+if ! /usr/bin/python3 -c "import scikit_build_core" 2>/dev/null; then
+  SUDO=""
+  [ "$(id -u)" -eq 0 ] || SUDO=sudo
+  $SUDO /usr/bin/python3 -m pip install -q --timeout 30 --retries 2 --break-system-packages \
+    --no-warn-script-location "scikit-build-core>=0.10"
+  echo "setup: scikit-build-core installed (pip)"
 fi
 # scikit-sparse (CHOLMOD from Python) is only a reference in bench/python_vs_scipy.py and
 # has no Debian package: pip builds it against Debian's SuiteSparse (0.4.16 is the last

@@ -53,6 +53,8 @@ import tempfile
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(HERE)
 FIXTURES = os.path.join(HERE, "data", "bench_results")
+sys.path.insert(0, os.path.join(REPO, "bench"))
+from report_readme import BEGIN as README_BEGIN, END as README_END  # noqa: E402
 
 
 def sections(text):
@@ -77,8 +79,17 @@ def main():
     ap.add_argument("--keep", help="write the report into this folder and keep it")
     args = ap.parse_args()
     out = args.keep or tempfile.mkdtemp(prefix="strata-report-test-")
+    # a README with the performance table's markers, and hand-written history notes
+    readme = os.path.join(out, "README.md")
+    rm_before, rm_after = "# project\n\ntext before\n", "\ntext after\n"
+    with open(readme, "w", encoding="utf-8") as f:
+        f.write(rm_before + README_BEGIN + "\nstale table\n" + README_END + rm_after)
+    history = os.path.join(out, "history.md")
+    with open(history, "w", encoding="utf-8") as f:
+        f.write("# Benchmark history\n\nmarker 31337\n\n## A change\n\nit got faster\n")
     proc = subprocess.run([sys.executable, os.path.join(REPO, "bench", "report.py"),
-                           "--results", FIXTURES, "--out", out],
+                           "--results", FIXTURES, "--out", out, "--readme", readme,
+                           "--history", history],
                           capture_output=True, text=True)
     failures = []
 
@@ -311,10 +322,46 @@ def main():
     # --- the same input gives the same report (no clock, no randomness)
     out2 = tempfile.mkdtemp(prefix="strata-report-test-")
     subprocess.run([sys.executable, os.path.join(REPO, "bench", "report.py"),
-                    "--results", FIXTURES, "--out", out2], capture_output=True, check=False)
+                    "--results", FIXTURES, "--out", out2, "--history", history],
+                   capture_output=True, check=False)
     again = os.path.join(out2, "REPORT.md")
     check(os.path.exists(again) and open(again, encoding="utf-8").read() == text,
           "two runs on the same results give different reports")
+
+    # --- the README's performance table: the summary's ratios, between the markers only
+    rd = open(readme, encoding="utf-8").read()
+    check(rd.startswith(rm_before + README_BEGIN + "\n") and rd.endswith(README_END + rm_after)
+          and "stale table" not in rd, "README: text outside the markers changed, or the "
+          "old table is still there")
+    for what, value, n in (("factorization time, strata / CHOLMOD (same ordering, CPU)",
+                            "2.000", 3),
+                           ("factorization time, strata / MUMPS (same ordering, CPU)",
+                            "0.500", 3),
+                           ("analysis time, strata / CHOLMOD+METIS", "4.000", 2),
+                           ("nnz(L), strata / CHOLMOD+METIS", "1.100", 2)):
+        m = re.search(r"^\| " + re.escape(what) + r" \| \*\*([0-9.]+)\*\* \| (\d+) \|", rd,
+                      re.M)
+        check(m and m.group(1) == value and int(m.group(2)) == n,
+              f"README: row {what!r} should be {value} over {n}, found "
+              f"{m.groups() if m else 'nothing'}")
+    links = re.findall(r"\]\(([^)]+\.json)\)", rd)
+    check(links and all(os.path.isfile(os.path.join(out, p)) for p in links),
+          f"README: results files not linked, or linked wrongly: {links}")
+    check("marker 777" not in rd and "654.321" not in rd,
+          "README: an older or tagged run's figure in the table")
+    # --- the history notes at the end of REPORT.md, one heading level down
+    check(re.search(r"## History \(hand-written notes[^\n]*\n\nmarker 31337\n\n### A change\n"
+                    r"\nit got faster\n$", text),
+          "REPORT.md does not end with the history notes")
+    # --- a README without the markers: exit 1, says so
+    bad = os.path.join(out, "README-no-markers.md")
+    with open(bad, "w", encoding="utf-8") as f:
+        f.write("# no table here\n")
+    r4 = subprocess.run([sys.executable, os.path.join(REPO, "bench", "report.py"),
+                         "--results", FIXTURES, "--out", tempfile.mkdtemp(), "--readme", bad],
+                        capture_output=True, text=True)
+    check(r4.returncode == 1 and "no performance table markers" in r4.stderr,
+          f"README without markers: exit {r4.returncode}, {r4.stderr!r}")
 
     # --- an empty results folder: everything not measured, nothing invented
     empty = tempfile.mkdtemp(prefix="strata-report-empty-")

@@ -16,8 +16,11 @@
 //                   [--checkpoint-every N [--checkpoint-dir DIR]]
 //   strata simulate --resume DIR [--t-end T] [--output DIR] [--checkpoint-every N]
 //                   [--device-memory-limit BYTES] ...
+//   strata simulate ... --plot [--plot-coordinates NAME,...]
+//   strata plot DIR [--coordinates NAME,...] [--title T]
+//   strata --version | strata SUBCOMMAND --help
 //
-// Exit status (kExitStatus below, printed by --help): 0 on success, 1 on a solver or
+// Exit status (printed by --help): 0 on success, 1 on a solver or
 // input error, 2 on a usage error, 128 + the signal number (130, 143) when SIGINT/SIGTERM
 // stopped a simulation (its partial results and a checkpoint are kept). Every error line
 // starts with "strata: error:".
@@ -44,7 +47,9 @@
 #include "mbd/generators.hpp"
 #include "mbd/model_io.hpp"
 #include "mbd/simulation.hpp"
+#include "plot.hpp"
 #include "strata/distributed.hpp"
+#include "strata/strata.h"
 #include "strata/strata.hpp"
 
 namespace {
@@ -108,29 +113,35 @@ void add_common(CLI::App* cmd, CommonArgs& a) {
   cmd->add_option("file", a.file, "matrix in Matrix Market format (.mtx or .mtx.gz)")
       ->required()
       ->check(CLI::ExistingFile);
-  cmd->add_option("--ordering", a.ordering, "fill-reducing ordering")
+  cmd->add_option("--ordering", a.ordering, "fill-reducing ordering (default nd)")
       ->check(CLI::IsMember({"nd", "metis", "amd", "natural"}));
   cmd->add_option("--max-block-size", a.max_block_size,
                   "most pivots per front (separator blocking); 0: by backend and type "
                   "(4096 for Cholesky on the GPU, else 1024)")
       ->check(kNonNegativeCount);
   cmd->add_option("--device-memory-limit", a.device_memory_limit,
-                  "GPU memory budget in bytes (0: the whole device); also the batch plan's");
+                  "GPU memory budget [bytes] (default 0: 90% of the free device memory); "
+                  "also the batch plan's");
   cmd->add_option("--threads", a.threads, "host threads (default: all)")->check(kCount);
   cmd->add_flag("--json", a.json, "print the report as JSON");
   cmd->add_flag("--reproducible", a.reproducible,
                 "bitwise the same result for every --threads (large fronts on one BLAS thread)");
-  cmd->add_option("--num-gpus", a.num_gpus, "GPUs for the CUDA backend (0: all visible)")
+  cmd->add_option("--num-gpus", a.num_gpus, "GPUs for the CUDA backend (default 0: all visible)")
       ->check(kNonNegativeCount);
-  cmd->add_option("--subtrees-per-gpu", a.subtrees_per_gpu, "subtrees per GPU in the tree split")
+  cmd->add_option(
+         "--subtrees-per-gpu", a.subtrees_per_gpu,
+         fmt::format("subtrees per GPU in the tree split (default {})", Options{}.subtrees_per_gpu))
       ->check(kCount);
-  cmd->add_option("--balance-by-work", a.balance_by_work,
-                  "balance the top bisections by work with several GPUs")
+  cmd->add_option(
+         "--balance-by-work", a.balance_by_work,
+         "balance the top bisections by work with several GPUs (default " + a.balance_by_work + ")")
       ->check(CLI::IsMember({"on", "off"}));
-  cmd->add_option("--work-stealing", a.work_stealing, "idle GPUs take other GPUs' subtrees")
+  cmd->add_option("--work-stealing", a.work_stealing,
+                  "idle GPUs take other GPUs' subtrees (default " + a.work_stealing + ")")
       ->check(CLI::IsMember({"on", "off"}));
   cmd->add_option("--split-top", a.split_top,
-                  "split the top part above the subtrees into layers over the GPUs")
+                  "split the top part above the subtrees into layers over the GPUs (default " +
+                      a.split_top + ")")
       ->check(CLI::IsMember({"on", "off"}));
 }
 
@@ -488,7 +499,8 @@ struct SimulateArgs {
   int order = 0, threads = 0;
   index_t dump_step = 1;
   bool vtk = false, full_newton = false, quiet = false, verbose = false, dense = false,
-       variable_step = false;
+       variable_step = false, plot = false;
+  std::string plot_coordinates;  // comma-separated coordinate names (implies plot)
 };
 
 // The default model: a tracked vehicle of a few hundred links (runs in well under a
@@ -661,6 +673,15 @@ int run_simulate_checked(const SimulateArgs& a, bool& started) {
   if (r.checkpoint_step > 0 && o.checkpoint_every > 0)
     fmt::print("checkpoint            step {} in {}/ (continue with --resume {})\n",
                r.checkpoint_step, o.checkpoint_dir, o.checkpoint_dir);
+  // plots of what was written, partial results included; a plot that cannot be drawn
+  // does not hide how the run itself ended
+  int plot_rc = 0;
+  if ((a.plot || !a.plot_coordinates.empty()) && !o.output_dir.empty()) try {
+      plot_rc = cli::run_plot(o.output_dir, a.plot_coordinates, source);
+    } catch (const strata::Error& e) {
+      std::fprintf(stderr, "strata: error: %s\n", e.what());
+      plot_rc = 1;
+    }
   if (r.state == "interrupted") {
     std::fprintf(stderr, "strata: %s; partial results kept\n", r.message.c_str());
     return 128 + static_cast<int>(g_signal);
@@ -670,19 +691,21 @@ int run_simulate_checked(const SimulateArgs& a, bool& started) {
                  r.message.c_str());
     return 1;
   }
-  return 0;
+  return plot_rc;
 }
 
 }  // namespace
 
-constexpr const char* kExitStatus =
-    "Exit status: 0 success; 1 solver or input error (the message, after \"strata: error:\", "
-    "names the problem); 2 usage error (unknown option, bad value, missing file); 130 or 143 "
-    "a simulation stopped by SIGINT or SIGTERM (partial results and a checkpoint kept).";
-
 int main(int argc, char** argv) {
   CLI::App app{"strata: a multifrontal sparse direct solver for CPU and GPU"};
   app.require_subcommand(1);
+  app.set_version_flag("--version", fmt::format("strata {}", strata_version()));
+  // every --help ends with the exit statuses (README.md, "Exit status")
+  const std::string exit_codes =
+      "Exit status: 0 success; 1 solver or input error (\"strata: error: ...\"); 2 usage "
+      "error (bad option or argument, missing file); 128+signal (130 SIGINT, 143 SIGTERM) "
+      "when a simulation was interrupted (partial results and a checkpoint kept).";
+  app.footer(exit_codes);
   CommonArgs analyze_args;
   auto* analyze =
       app.add_subcommand("analyze", "ordering, assembly tree, level schedule, memory plan");
@@ -690,38 +713,50 @@ int main(int argc, char** argv) {
   SolveArgs solve_args;
   auto* solve = app.add_subcommand("solve", "analyze, factorize and solve A x = b");
   add_common(solve, solve_args.common);
-  solve->add_option("--rhs", solve_args.rhs, "right-hand side(s) in Matrix Market (default: A*1)")
+  solve->add_option("--rhs", solve_args.rhs, "right-hand side(s) in Matrix Market (default: A·1)")
       ->check(CLI::ExistingFile);
-  solve->add_option("--type", solve_args.type, "factorization type")
+  solve
+      ->add_option(
+          "--type", solve_args.type,
+          "factorization type (default auto: Cholesky when symmetric and it succeeds, else "
+          "LDLᵀ when symmetric, else LU)")
       ->check(CLI::IsMember({"auto", "spd", "symmetric_indefinite", "general"}));
-  solve->add_option("--out", solve_args.out, "write the solution here (Matrix Market array)");
+  solve->add_option("--out", solve_args.out,
+                    "write the solution here (Matrix Market array; default: not written)");
   solve
       ->add_option("--device", solve_args.common.device,
-                   "where the factorization and solve run (auto: the GPU when present)")
+                   "where the factorization and solve run (default auto: the GPU when the "
+                   "build and the machine have one)")
       ->check(CLI::IsMember({"cpu", "gpu", "auto"}));
   SimulateArgs sim;
   auto* simulate = app.add_subcommand(
       "simulate", "implicit multibody dynamics (BDF + Newton, every step solved by strata)");
-  simulate->add_option("model", sim.model, "model file (JSON); default: a tracked vehicle")
+  simulate
+      ->add_option("model", sim.model,
+                   "model file (JSON, docs/model-format.md; default: the tracked vehicle "
+                   "tracked:100)")
       ->check(CLI::ExistingFile);
   simulate->add_option("--generate", sim.generate,
                        "generated model: andrews, tracked:N, lattice:N, flexible:NXxNYxNZ, "
                        "chain:N, chain2d:N");
-  simulate->add_option("--t-end", sim.t_end, "end time [s] (default: the model's)")
+  simulate->add_option("--t-end", sim.t_end, "end time [s] (default: the model's, else 1 s)")
       ->check(kPositive);
-  simulate->add_option("--step", sim.step, "step size [s] (default: the model's)")
+  simulate->add_option("--step", sim.step, "step size [s] (default: the model's, else 1e-3 s)")
       ->check(kPositive);
-  simulate->add_option("--order", sim.order, "BDF order 1..5 (default: the model's)")
+  simulate->add_option("--order", sim.order, "BDF order 1..5 (default: the model's, else 2)")
       ->check(CLI::Range(1, 5));
-  simulate->add_option("--device", sim.device, "where strata factorizes")
+  simulate
+      ->add_option("--device", sim.device,
+                   "where strata factorizes (default auto: the GPU when present)")
       ->check(CLI::IsMember({"cpu", "gpu", "auto"}));
   simulate->add_option("--device-memory-limit", sim.device_memory_limit,
-                       "GPU memory budget in bytes (0: the whole device)");
+                       "GPU memory budget [bytes] (default 0: 90% of the free device memory)");
   simulate->add_option("--output", sim.output, "output folder (default: out)");
-  simulate->add_flag("--vtk", sim.vtk, "also write a ParaView series (output/vtk/series.pvd)");
+  simulate->add_flag("--vtk", sim.vtk, "also write a ParaView series (OUTPUT/vtk/series.pvd)");
   simulate
       ->add_option("--output-interval", sim.output_interval,
-                   "seconds between rows of the large CSV files (default: every step)")
+                   "time between rows of the large CSV files and VTK frames [s] "
+                   "(default: the model's, else every step)")
       ->check(kNonNegative);
   simulate->add_option("--dump-matrix", sim.dump_dir,
                        "write the Newton Jacobian and right-hand side of one step here (Matrix "
@@ -730,18 +765,25 @@ int main(int argc, char** argv) {
   simulate->add_option("--write-model", sim.write_model, "write the generated model (JSON)");
   simulate->add_flag("--full-newton", sim.full_newton,
                      "refactorize at every Newton iteration (default: modified Newton)");
-  simulate->add_option("--newton-tol", sim.newton_tol, "relative Newton tolerance (default 1e-8)")
+  simulate
+      ->add_option("--newton-tol", sim.newton_tol,
+                   "relative Newton tolerance (default: the model's, else 1e-6)")
       ->check(kPositive);
-  simulate->add_option("--threads", sim.threads, "host threads for strata (default: all)")
+  simulate
+      ->add_option("--threads", sim.threads,
+                   "host threads for strata and the assembly (default: all)")
       ->check(kCount);
   simulate->add_flag("--quiet", sim.quiet, "no progress bar");
   simulate->add_flag("--verbose", sim.verbose, "print every Newton iteration (stderr)");
   simulate->add_flag("--variable-step", sim.variable_step,
                      "variable step size and order (up to --order) with local error control "
                      "(--step is the first step)");
-  simulate->add_option("--rtol", sim.rtol, "relative local error tolerance (default 1e-4)")
+  simulate->add_option("--rtol", sim.rtol, "relative local error tolerance [1] (default 1e-4)")
       ->check(kPositive);
-  simulate->add_option("--atol", sim.atol, "absolute local error tolerance (default 1e-6)")
+  simulate
+      ->add_option("--atol", sim.atol,
+                   "absolute local error tolerance [m, rad: the coordinates' units] "
+                   "(default 1e-6)")
       ->check(kPositive);
   simulate->add_option("--max-step", sim.max_step, "largest variable step [s] (default t_end/10)")
       ->check(kPositive);
@@ -749,7 +791,8 @@ int main(int argc, char** argv) {
                      "solve with dense LAPACK LU instead of strata (diagnosis; small models)");
   simulate
       ->add_option("--checkpoint-every", sim.checkpoint_every,
-                   "write a restart point every N accepted steps (and when interrupted)")
+                   "write a restart point every N accepted steps (and when interrupted; "
+                   "default: none)")
       ->check(kCount);
   simulate->add_option("--checkpoint-dir", sim.checkpoint_dir,
                        "folder of the restart point (default: OUTPUT/checkpoint)");
@@ -758,10 +801,28 @@ int main(int argc, char** argv) {
                    "continue the run checkpointed in this folder (model and options from "
                    "the checkpoint; --t-end may extend it)")
       ->check(CLI::ExistingDirectory);
-  for (CLI::App* cmd : {&app, analyze, solve, simulate}) cmd->footer(kExitStatus);
+  simulate->add_flag("--plot", sim.plot,
+                     "draw OUTPUT/summary.png: energy [J], constraint violation, step size [s], "
+                     "Newton iterations and time per step [ms] against time [s] (Python 3 with "
+                     "matplotlib)");
+  simulate->add_option("--plot-coordinates", sim.plot_coordinates,
+                       "also draw OUTPUT/coordinates.png of these coordinates against time, "
+                       "e.g. chassis.x,chassis.z (m; .phi in rad; .e0-.e3 Euler parameters); "
+                       "implies --plot");
+  std::string plot_dir, plot_coordinates, plot_title;
+  auto* plot = app.add_subcommand(
+      "plot", "plots of an output folder of strata simulate (as simulate --plot)");
+  plot->add_option("dir", plot_dir, "output folder of strata simulate (steps.csv, positions.csv)")
+      ->required()
+      ->check(CLI::ExistingDirectory);
+  plot->add_option("--coordinates", plot_coordinates,
+                   "also draw DIR/coordinates.png of these coordinates, e.g. chassis.x,crank.phi "
+                   "(m; .phi in rad; .e0-.e3 Euler parameters; default: none)");
+  plot->add_option("--title", plot_title, "title of the figures (default: the folder's name)");
+  for (CLI::App* sub : {analyze, solve, simulate, plot}) sub->footer(exit_codes);
   try {
     app.parse(argc, argv);
-  } catch (const CLI::Success& e) {  // --help
+  } catch (const CLI::Success& e) {  // --help, --version
     return app.exit(e);
   } catch (const CLI::ParseError& e) {
     std::fprintf(
@@ -788,6 +849,7 @@ int main(int argc, char** argv) {
     if (*analyze) return run_analyze(analyze_args);
     if (*solve) return run_solve(solve_args, *comm);
     if (*simulate) return run_simulate(sim);
+    if (*plot) return cli::run_plot(plot_dir, plot_coordinates, plot_title);
   } catch (const strata::Error& e) {
     if (rank == 0) std::fprintf(stderr, "strata: error: %s\n", e.what());
     return 1;

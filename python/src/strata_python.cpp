@@ -14,6 +14,7 @@
 #include <string>
 
 #include "strata/distributed.hpp"
+#include "strata/strata.h"
 #include "strata/strata.hpp"
 #ifdef STRATA_HAVE_MPI
 #include "strata/mpi.hpp"
@@ -478,5 +479,5 @@ PYBIND11_MODULE(_strata, m) {
       },
       "True when this build has the CUDA backend.");
   bind_simulate(m, exc_invalid_input, exc_error);
-  m.attr("__version__") = "0.1.0";
+  m.attr("__version__") = strata_version();  // the project version (CMakeLists.txt)
 }

@@ -19,6 +19,7 @@ model file or dict and returns the time histories as NumPy arrays:
     >>> r = strata.simulate("models/pendulum_chain.json", t_end=0.1)
     >>> r.time.shape, r.positions.shape       # (k,), (k, n)
     >>> r.steps["newton_iterations"], r.stats["factorizations"]
+    >>> strata.plot(r, "plots", coordinates=["link1.x"])  # summary.png, coordinates.png
 
 Errors raise subclasses of :class:`strata.Error` (a ``RuntimeError``) carrying the
 solver's message: :class:`InvalidInputError` (also a ``ValueError``) for a non-square
@@ -51,6 +52,7 @@ from ._strata import (  # noqa: F401  (re-exported)
 )
 from . import _strata
 from ._simulate import SimulationResult, generate_model, simulate  # noqa: F401
+from ._plot import plot  # noqa: F401
 
 __all__ = [
     "Solver",
@@ -59,6 +61,7 @@ __all__ = [
     "simulate",
     "generate_model",
     "SimulationResult",
+    "plot",
     "cuda_in_build",
     "mpi_in_build",
     "Error",

@@ -205,7 +205,7 @@ const char* strata_status_string(strata_status status) {
   return "STRATA_ERROR_UNKNOWN";
 }
 
-const char* strata_version(void) { return "0.1.0"; }
+const char* strata_version(void) { return STRATA_VERSION; }
 
 strata_status strata_create(strata_solver** solver) {
   if (solver == nullptr) return STRATA_ERROR_INVALID_INPUT;

@@ -97,7 +97,7 @@ check "negative step" 2 "--step: must be a number greater than 0" "$strata" simu
 check "unknown option" 2 "strata: error:" "$strata" solve "$tmp/good.mtx" --bogus
 check "no file" 2 "strata: error:" "$strata" solve
 check "no command" 2 "strata: error:" "$strata"
-check "help lists exit status" 0 "130 or 143" "$strata" solve --help
+check "help lists exit status" 0 "130 SIGINT, 143 SIGTERM" "$strata" solve --help
 
 # a pivot in a message is readable (%.3e, not std::to_string's "-0.000000")
 check "pivot format" 1 "pivot -3.500e+00 at column 1" "$strata" solve "$tmp/indef.mtx" --type spd
