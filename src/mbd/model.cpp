@@ -9,6 +9,14 @@ index_t Model::n_constraints() const {
   return m;
 }
 
+bool Model::conservative() const {
+  for (const auto& f : forces)
+    if (!f->conservative) return false;
+  for (const auto& c : constraints)
+    if (c->rheonomic) return false;
+  return true;
+}
+
 int Model::find_body(const std::string& name) const {
   auto it = body_index.find(name);
   return it == body_index.end() ? -1 : it->second;

@@ -35,6 +35,14 @@ struct TimeFunction {
   double rate = 0, ramp_time = 1;  ///< smooth_ramp: slope `rate` reached at ramp_time (C²)
 
   static TimeFunction constant(double c) { return TimeFunction{Kind::polynomial, {c}}; }
+  /// Identically zero (the default of actuators).
+  bool is_zero() const {
+    if (kind == Kind::harmonic) return amplitude == 0 && offset == 0;
+    if (kind == Kind::smooth_ramp) return rate == 0 && offset == 0;
+    for (double c : coefficients)
+      if (c != 0) return false;
+    return true;
+  }
 
   template <class T>
   T operator()(const T& t) const {
@@ -102,6 +110,9 @@ struct Model {
 
   /// Total number of constraint equations m.
   index_t n_constraints() const;
+  /// Every force is conservative and no constraint depends on time: the total energy
+  /// (kinetic + potential) of the exact motion is constant.
+  bool conservative() const;
   /// Index of a body by name, or -1.
   int find_body(const std::string& name) const;
   /// Adds a body and assigns its coordinates; returns its index.
