@@ -218,10 +218,6 @@ int Integrator::newton(double h, StepInfo& info, const BdfTerms& bdf) {
   int since_jac = 0;  // iterations since the factor was last refreshed
   bool refresh = false, fresh = false;
   const bool dump = opts_.dump_step == step_ + 1 && !opts_.dump_dir.empty();
-  double tol_a = 0, tol_r = 0;
-  newton_tolerances(&tol_a, &tol_r);
-  const double stall_limit =
-      sys_.formulation() == Formulation::stabilized && tol_r < 1e-9 ? 100.0 : 1.0;
   for (int it = 1; it <= opts_.max_newton_iterations; ++it) {
     const bool need_jac = !factor_valid_ || refresh || !opts_.modified_newton || (dump && it == 1);
     if (need_jac && (pattern_changed_ || !solver_)) {
@@ -309,11 +305,8 @@ int Integrator::newton(double h, StepInfo& info, const BdfTerms& bdf) {
       const double rho = std::pow(err / err_first, 1.0 / (since_jac - 1));
       if ((rho < 1 && rho / (1 - rho) * err <= 1) || err <= 1e-3) {
         converged = true;
-      } else if (rho >= 0.9 && fresh && err <= stall_limit) {
-        // stalled at the rounding level of the solve: within the tolerance, or (stabilized
-        // formulation, near a singular configuration, where the Jacobian is ill conditioned)
-        // within 100 times a tolerance tighter than 1e-9
-        converged = true;
+      } else if (rho >= 0.9 && fresh && err <= 1) {
+        converged = true;  // stalled at the rounding level within the tolerance
       } else if (rho >= 0.9) {
         if (fresh) {  // diverging or stalling with a Jacobian of this step: give up the step
           factor_valid_ = false;
@@ -420,6 +413,7 @@ bool Integrator::try_step(double h, StepInfo& info) {
   if (r == 2) retry_ = true;
   if (r != 1) return false;
   double *xa = x_.data(), *xv = xa + n, *xq = xa + 2 * n, *xl = xa + 3 * n;
+  if (opts_.perturb_converged) opts_.perturb_converged(xq, xv);
   if (!constraints_hold(xq, xv, tn)) {
     ++stats_.residual_rejections;
     factor_valid_ = false;
@@ -654,7 +648,7 @@ void Integrator::partition_check(StepInfo& info) {
 }
 
 std::vector<std::string> Integrator::warnings() const {
-  std::vector<std::string> w;
+  std::vector<std::string> w = initial_warnings_;
   if (conservative_ && stats_.energy_drift > opts_.energy_tolerance * stats_.energy_scale &&
       stats_.energy_drift > 1e-12 * std::abs(energy0_))
     w.push_back(fmt::format(

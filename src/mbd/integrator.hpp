@@ -19,6 +19,7 @@
 #pragma once
 
 #include <deque>
+#include <functional>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -85,6 +86,10 @@ struct IntegratorOptions {
   /// A constraint equation is redundant when its column of Φ_qᵀ is, relative to the largest
   /// column norm, within this of the span of the earlier ones (rank-revealing QR).
   double redundancy_tolerance = 1e-9;
+  /// Tests only: called with the converged q and v (n each) of every step attempt, before
+  /// the acceptance checks (a test perturbs them to check that no step off the constraints
+  /// is accepted). Not saved in checkpoints.
+  std::function<void(double* q, double* v)> perturb_converged;
 };
 
 /// What happened in one accepted step.
@@ -186,6 +191,8 @@ class Integrator {
   void check_removed(const double* q, const double* v, double t, bool initial);
   void partition_check(StepInfo& info);
   void initial_positions();
+  void report_initial_change(const std::vector<double>& given, const std::vector<double>& now,
+                             const char* what, const char* unit);
   std::vector<double> solve_partitioned(const SparseRows& rows, const std::vector<double>& b,
                                         const char* what) const;
   std::vector<double> solve_once(const SparseMatrix& k, const std::vector<double>& b,
@@ -221,6 +228,7 @@ class Integrator {
   bool accept_jump_ = false;    // take the step despite the error test, then restart
   double reject_measure_ = 0;   // error estimate (or energy change / budget) of a rejection
   bool conservative_ = false;
+  std::vector<std::string> initial_warnings_;  // changes made by the initial analyses
   double energy0_ = 0, energy_last_ = 0;
   IntegratorStats stats_;
   std::vector<double> x_, res_, dx_, rhs_, zeta1_, zeta2_, qpred_, vpred_, lambda_step_;

@@ -187,6 +187,31 @@ std::vector<double> Integrator::solve_once(const SparseMatrix& k, const std::vec
   return x;
 }
 
+// The largest change of a body's centre between the model's values and the consistent
+// ones (positions or velocities), as a warning when it exceeds 1e-6 of the model's size.
+void Integrator::report_initial_change(const std::vector<double>& given,
+                                       const std::vector<double>& now, const char* what,
+                                       const char* unit) {
+  double worst = 0, scale = 1e-300;
+  std::string body;
+  for (const Body& b : model_.bodies) {
+    if (b.offset < 0) continue;
+    const int dim = b.kind == BodyKind::planar ? 2 : 3;
+    double d2 = 0, s2 = 0;
+    for (int i = 0; i < dim; ++i) {
+      d2 += (now[b.offset + i] - given[b.offset + i]) * (now[b.offset + i] - given[b.offset + i]);
+      s2 += given[b.offset + i] * given[b.offset + i];
+    }
+    scale = std::max(scale, std::sqrt(s2));
+    if (std::sqrt(d2) > worst) worst = std::sqrt(d2), body = b.name;
+  }
+  if (worst > 1e-6 * std::max(scale, 1.0))
+    initial_warnings_.push_back(
+        fmt::format("{} body '{}' by {:.3e} {} to satisfy the constraints (the model's initial "
+                    "{} do not fit its joints)",
+                    what, body, worst, unit, unit[2] ? "velocities" : "poses"));
+}
+
 void Integrator::initialize() {
   Timer timer;
   const index_t n = sys_.n();
@@ -201,6 +226,7 @@ void Integrator::initialize() {
       for (int i = 3; i < 7; ++i) s += q_[b.offset + i] * q_[b.offset + i];
       for (int i = 3; i < 7; ++i) q_[b.offset + i] /= std::sqrt(s);
     }
+  initial_warnings_.clear();
   sys_.update_candidates(q_.data());
   if (opts_.formulation == FormulationChoice::stabilized)
     sys_.set_formulation(Formulation::stabilized);
@@ -213,6 +239,7 @@ void Integrator::initialize() {
   }
   initial_positions();
   check_removed(q_.data(), nullptr, t_, true);
+  report_initial_change(model_.q0, q_, "position analysis moved", "m");
   repartition(t_, q_.data());
   stats_.repartitions = 0;
   const index_t m = sys_.m();
@@ -226,6 +253,7 @@ void Integrator::initialize() {
     b[m + k] = model_.v0[partition_.independent[k]];
   v_ = solve_partitioned(rows, b, "velocity");
   check_removed(q_.data(), v_.data(), t_, true);
+  report_initial_change(model_.v0, v_, "velocity analysis changed the velocity of", "m/s");
   // acceleration analysis: [M Φ_qᵀ; Φ_q 0][a; λ] = [−g(q, v, 0); −Φ̈(q, v, 0)]
   std::vector<index_t> ri, ci;
   std::vector<double> vals;

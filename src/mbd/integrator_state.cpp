@@ -110,6 +110,7 @@ json Integrator::save_state() const {
           {"conservative", conservative_},
           {"energy0", energy0_},
           {"energy_last", energy_last_},
+          {"initial_warnings", initial_warnings_},
           {"t", t_},
           {"h", h_},
           {"step", step_},
@@ -156,6 +157,7 @@ void Integrator::restore_state(const json& j) {
   j.at("conservative").get_to(conservative_);
   j.at("energy0").get_to(energy0_);
   j.at("energy_last").get_to(energy_last_);
+  j.at("initial_warnings").get_to(initial_warnings_);
   energy_reject_ = false;
   accept_jump_ = false;
   j.at("t").get_to(t_);

@@ -135,9 +135,11 @@ void write_status(const std::string& dir, const std::string& state, const Simula
       fmt::format("{{\n  \"state\": \"{}\",\n  \"complete\": {},\n  \"partial\": {},\n"
                   "  \"t_reached\": {:.17g},\n  \"t_end\": {:.17g},\n  \"steps\": {},\n"
                   "  \"message\": \"{}\",\n  \"checkpoint_step\": {},\n  \"files\": [{}],\n"
-                  "  \"warnings\": [{}],\n  \"removed_constraints\": [{}]\n}}\n",
+                  "  \"warnings\": [{}],\n  \"removed_constraints\": [{}],\n"
+                  "  \"reference_error\": {}\n}}\n",
                   state, complete, !complete, r.t_reached, t_end, steps, json_escape(r.message),
-                  r.checkpoint_step, f, list(r.warnings), list(r.removed_constraints)));
+                  r.checkpoint_step, f, list(r.warnings), list(r.removed_constraints),
+                  r.reference_error >= 0 ? fmt::format("{:.6e}", r.reference_error) : "null"));
 }
 
 class Progress {
@@ -532,7 +534,15 @@ SimulationResult run(const Model& model, const SimulationOptions& opts) {
         checkpoint();
         break;
       }
+      const double t_before = in.t();
       const StepInfo s = in.advance();
+      // the reference time inside this step: compare with the model's reference values
+      const double tr = model.reference.time;
+      if (tr >= 0 && res.reference_error < 0 && tr <= in.t() * (1 + 1e-12) && tr > t_before) {
+        std::vector<double> qr(n);
+        in.interpolate(std::min(tr, in.t()), qr.data(), nullptr, nullptr, nullptr);
+        res.reference_error = model.reference_error(qr.data(), &res.reference_worst);
+      }
       in.system().energy(in.q().data(), in.v().data(), in.t(), &kin, &pot);
       in.constraint_violation(&pv, &vv);
       res.max_position_violation = std::max(res.max_position_violation, pv);
@@ -578,6 +588,12 @@ SimulationResult run(const Model& model, const SimulationOptions& opts) {
   res.t_reached = in.t();
   res.stats = in.stats();
   res.warnings = in.warnings();
+  if (res.reference_error > model.reference.tolerance)
+    res.warnings.push_back(fmt::format(
+        "reference: at t = {:g} s the model deviates from its reference values by {:.3e} "
+        "({}), more than the reference's tolerance {:g}: use a smaller step or a higher "
+        "order",
+        model.reference.time, res.reference_error, res.reference_worst, model.reference.tolerance));
   res.removed_constraints = in.removed_equations();
   if (files) {
     for (const auto& c : hist) c->flush();
@@ -664,6 +680,10 @@ std::string summary(const Model& model, const SimulationResult& r) {
                    r.energy_final);
   o += fmt::format("constraint violation  max |Phi| {:.3e}, max |dPhi/dt| {:.3e}\n",
                    r.max_position_violation, r.max_velocity_violation);
+  if (r.reference_error >= 0)
+    o += fmt::format(
+        "reference             t = {:g} s: largest deviation {:.3e} ({}; tolerance {:g})\n",
+        model.reference.time, r.reference_error, r.reference_worst, model.reference.tolerance);
   for (const std::string& w : r.warnings) o += "WARNING               " + w + "\n";
   return o;
 }

@@ -103,6 +103,11 @@ struct SimulationResult {
   /// Redundant constraint equations switched off for the run (their names), also in
   /// status.json ("removed_constraints") and the summary.
   std::vector<std::string> removed_constraints;
+  /// Models with a "reference": the deviation at the reference time (Model::reference_error;
+  /// −1: the run did not get there) and which value deviated most. Beyond the reference's
+  /// tolerance it is also a warning.
+  double reference_error = -1;
+  std::string reference_worst;
 };
 
 /// The settings of a run as `strata simulate` takes them (and strata.simulate in
