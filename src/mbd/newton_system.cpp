@@ -393,7 +393,16 @@ void NewtonSystem::evaluate(const double* x, double t, const BdfTerms& bdf, bool
                         [&](const auto& r) { constraints(r.begin(), r.end()); });
     });
   }
-  const index_t nb = stab ? n : static_cast<index_t>(independent_.size());
+  add_bdf_rows(a, v, q, bdf, jacobian, hu);
+}
+
+// The BDF relations β a − v − ζ₁ and β v − q − ζ₂ of the independent coordinates
+// (partitioned) or of every coordinate (stabilized), added to hu and the Jacobian.
+void NewtonSystem::add_bdf_rows(const double* a, const double* v, const double* q,
+                                const BdfTerms& bdf, bool jacobian, double* hu) {
+  const bool stab = formulation_ == Formulation::stabilized;
+  const index_t nb = stab ? n_ : static_cast<index_t>(independent_.size());
+  double* J = jac_.values.data();
   for (index_t k = 0; k < nb; ++k) {
     const index_t j = stab ? k : independent_[k];
     hu[k] += bdf.beta * a[j] - v[j] - bdf.zeta1[j];

@@ -145,6 +145,8 @@ class NewtonSystem {
 
  private:
   void gather(const std::vector<index_t>& dofs, const double* src, std::vector<double>& dst) const;
+  void add_bdf_rows(const double* a, const double* v, const double* q, const BdfTerms& bdf,
+                    bool jacobian, double* hu);
   const Model& model_;
   index_t n_ = 0, m_ = 0;
   Formulation formulation_ = Formulation::partitioned;
