@@ -37,7 +37,8 @@ How results map to the five experiments of the benchmark issue:
                             its "block_size" list is the GPU part of experiment 1)
   5. end to end simulate    benchmark "simulate", else the newest results/logs/*mbd*.log
                             (scripts/gpu/run_mbd.sh; see bench/report_e2e.py)
-and, outside the five experiments, the Python interface (bench/python_vs_scipy.py):
+and, outside the five experiments, the IFToMM multibody benchmarks (bench/iftomm.py,
+benchmark "iftomm"; bench/report_iftomm.py) and the Python interface (bench/python_vs_scipy.py):
 benchmark "python", tag "" (overhead against the command line; strata against scipy's
 spsolve and scikit-sparse's CHOLMOD).
 Results of any other kind or tag are shown as plain tables under "Other results", so
@@ -59,6 +60,7 @@ from report_e2e import EndToEnd
 from report_dist import Distributed
 from report_gpu import GpuSections, is_bench_gpu
 from report_readme import history_section, readme_table, update_readme
+from report_iftomm import IftommSection
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SWEEP_TAG = re.compile(r"^mbs-(\d+)$")
@@ -67,7 +69,7 @@ SWEEP_TAG = re.compile(r"^mbs-(\d+)$")
 # --------------------------------------------------------------------------- report
 
 
-class Report(GpuSections, Distributed, EndToEnd):
+class Report(GpuSections, Distributed, EndToEnd, IftommSection):
     def __init__(self, results_dir: str, out_dir: str, history: str | None = None):
         self.results_dir = os.path.abspath(results_dir)
         self.history = history
@@ -147,6 +149,7 @@ class Report(GpuSections, Distributed, EndToEnd):
         self.distributed_section(runs)
         self.solvability_section(runs)
         self.e2e_section(runs)
+        self.iftomm_section(runs)
         self.python_section(runs)
         self.others(runs)
         if skipped:

@@ -13,6 +13,7 @@
 //                   [--vtk] [--dump-matrix DIR]
 //                   [--dump-step K] [--output-interval S] [--full-newton] [--write-model F]
 //                   [--variable-step [--rtol R] [--atol A] [--max-step H]] [--verbose]
+//                   [--formulation auto|partitioned|stabilized] [--energy-tol E]
 //                   [--checkpoint-every N [--checkpoint-dir DIR]]
 //   strata simulate --resume DIR [--t-end T] [--output DIR] [--checkpoint-every N]
 //                   [--device-memory-limit BYTES] ...
@@ -490,8 +491,9 @@ int run_solve(const SolveArgs& a, const Communicator& comm) {
 
 struct SimulateArgs {
   std::string model, generate, output = "out", dump_dir, write_model, device = "auto";
-  std::string checkpoint_dir, resume;
+  std::string checkpoint_dir, resume, formulation = "auto";
   index_t checkpoint_every = 0;
+  double energy_tol = -1;
   std::vector<std::string> resume_conflicts;  // integration options given with --resume
   std::size_t device_memory_limit = 0;
   double t_end = 0, step = 0, output_interval = 0, newton_tol = 0, rtol = 1e-4, atol = 1e-6,
@@ -632,6 +634,10 @@ int run_simulate_checked(const SimulateArgs& a, bool& started) {
     rs.atol = a.atol;
     rs.max_step = a.max_step;
     rs.dense_reference = a.dense;
+    rs.formulation = a.formulation == "partitioned"  ? FormulationChoice::partitioned
+                     : a.formulation == "stabilized" ? FormulationChoice::stabilized
+                                                     : FormulationChoice::automatic;
+    rs.energy_tolerance = a.energy_tol;
     rs.verbose = a.verbose;
     rs.output_dir = a.output;
     rs.output_interval = a.output_interval;
@@ -770,6 +776,16 @@ int main(int argc, char** argv) {
                    "relative Newton tolerance (default: the model's, else 1e-6)")
       ->check(kPositive);
   simulate
+      ->add_option("--formulation", sim.formulation,
+                   "auto: coordinate partitioning, stabilized from where no partition is well "
+                   "conditioned (singular configurations); or always one of them")
+      ->check(CLI::IsMember({"auto", "partitioned", "stabilized"}));
+  simulate
+      ->add_option("--energy-tol", sim.energy_tol,
+                   "conservative models: energy drift allowed, relative to the largest "
+                   "kinetic energy (default 1e-3; 0: not monitored)")
+      ->check(kNonNegative);
+  simulate
       ->add_option("--threads", sim.threads,
                    "host threads for strata and the assembly (default: all)")
       ->check(kCount);
@@ -841,9 +857,10 @@ int main(int argc, char** argv) {
     }
   } finish{comm};
   if (rank != 0 && !*solve) return 0;
-  for (const char* opt : {"--step", "--order", "--device", "--output-interval", "--vtk",
-                          "--full-newton", "--newton-tol", "--threads", "--variable-step", "--rtol",
-                          "--atol", "--max-step", "--dense-reference", "--write-model"})
+  for (const char* opt :
+       {"--step", "--order", "--device", "--output-interval", "--vtk", "--full-newton",
+        "--newton-tol", "--threads", "--variable-step", "--rtol", "--atol", "--max-step",
+        "--dense-reference", "--write-model", "--formulation", "--energy-tol"})
     if (simulate->count(opt) > 0) sim.resume_conflicts.push_back(opt);
   try {
     if (*analyze) return run_analyze(analyze_args);

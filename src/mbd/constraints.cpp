@@ -267,7 +267,18 @@ std::unique_ptr<Constraint> spatial(K k, const Model& m, const JointSpec& s) {
 
 }  // namespace
 
+namespace {
+std::unique_ptr<Constraint> make_joint_element(const Model& m, const JointSpec& s);
+}  // namespace
+
 std::unique_ptr<Constraint> make_joint(const Model& m, const JointSpec& s) {
+  auto c = make_joint_element(m, s);
+  c->rheonomic = s.type == JointType::rotation_driver || s.type == JointType::translation_driver;
+  return c;
+}
+
+namespace {
+std::unique_ptr<Constraint> make_joint_element(const Model& m, const JointSpec& s) {
   for (int b : {s.body_i, s.body_j})
     if (m.bodies[b].kind == BodyKind::node)
       throw ModelError(s.name + ": '" + m.bodies[b].name +
@@ -344,6 +355,7 @@ std::unique_ptr<Constraint> make_joint(const Model& m, const JointSpec& s) {
   }
   throw ModelError(s.name + ": unknown joint type");
 }
+}  // namespace
 
 std::unique_ptr<Constraint> make_normalization(const Model& m, int k) {
   std::vector<index_t> dofs;

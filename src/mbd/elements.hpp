@@ -44,6 +44,8 @@ class Constraint {
   /// reported (body j of a joint, or body i when j does not move); -1: none.
   int reaction_local = -1;
   int reaction_dim = 0;  ///< 2 (planar) or 3
+  /// Depends on time explicitly (a driver): it does work, so the energy is not conserved.
+  bool rheonomic = false;
   /// Evaluates at local q, v, a (each dofs.size()) and time t. jacobian=false fills only
   /// phi, phid, phidd.
   virtual void evaluate(const double* q, const double* v, const double* a, double t, bool jacobian,
@@ -73,6 +75,9 @@ class Force {
   /// `margin` > 0, they enter the Newton matrix only while proximity() < margin.
   bool intermittent = false;
   double margin = 0;  ///< m; 0: always part of the Newton matrix
+  /// Does no net work over a closed path and its potential_energy() accounts for it
+  /// (inertia with gravity, undamped springs without actuators): set by the factories.
+  bool conservative = false;
   /// Separation (m) of the contact surfaces at local q; negative when penetrating.
   virtual double proximity(const double* q) const { return -1; }
   /// g(q, v, a, t) with local vectors; Jacobians when jacobian=true.

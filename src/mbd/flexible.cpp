@@ -18,6 +18,7 @@ class Hexahedron : public Force {
       : mat_(mat) {
     uses_a = true;
     uses_v = mat.damping > 0;
+    conservative = mat.damping == 0;
     lambda_ = mat.young * mat.poisson / ((1 + mat.poisson) * (1 - 2 * mat.poisson));
     mu_ = mat.young / (2 * (1 + mat.poisson));
     const double gp = 1.0 / std::sqrt(3.0);

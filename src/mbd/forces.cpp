@@ -373,6 +373,7 @@ std::unique_ptr<Force> make_body_inertia(const Model& m, int k) {
     f = std::make_unique<InertiaOf<SpatialBody, 7>>(SpatialBody{b.mass, b.inertia3, m.gravity});
   f->dofs = std::move(dofs);
   f->name = "bodies '" + b.name + "' (inertia)";
+  f->conservative = true;
   return f;
 }
 
@@ -381,8 +382,10 @@ std::unique_ptr<Force> make_spring_damper(const Model& m, const SpringSpec& s) {
   auto refs = bind_bodies(m, {s.body_i, s.body_j}, dofs);
   Spring k{m.planar,    refs[0],   refs[1],       s.si,      s.sj,
            s.stiffness, s.damping, s.free_length, s.actuator};
-  if (m.planar) return wrap_force<3, 6>(k, std::move(dofs), s.name);
-  return wrap_force<7, 14>(k, std::move(dofs), s.name);
+  auto f = m.planar ? wrap_force<3, 6>(k, std::move(dofs), s.name)
+                    : wrap_force<7, 14>(k, std::move(dofs), s.name);
+  f->conservative = s.damping == 0 && s.actuator.is_zero();
+  return f;
 }
 
 std::unique_ptr<Force> make_rotational_spring_damper(const Model& m,
@@ -391,8 +394,10 @@ std::unique_ptr<Force> make_rotational_spring_damper(const Model& m,
   auto refs = bind_bodies(m, {s.body_i, s.body_j}, dofs);
   RotationalSpring k{m.planar,    refs[0],   refs[1],     s.fi,      s.fj,
                      s.stiffness, s.damping, s.reference, s.actuator};
-  if (m.planar) return wrap_force<3, 6>(k, std::move(dofs), s.name);
-  return wrap_force<7, 14>(k, std::move(dofs), s.name);
+  auto f = m.planar ? wrap_force<3, 6>(k, std::move(dofs), s.name)
+                    : wrap_force<7, 14>(k, std::move(dofs), s.name);
+  f->conservative = s.damping == 0 && s.actuator.is_zero();
+  return f;
 }
 
 std::unique_ptr<Force> make_bushing(const Model& m, const BushingSpec& s) {
@@ -400,7 +405,10 @@ std::unique_ptr<Force> make_bushing(const Model& m, const BushingSpec& s) {
   std::vector<index_t> dofs;
   auto refs = bind_bodies(m, {s.body_i, s.body_j}, dofs);
   Bushing k{refs[0], refs[1], s.fi, s.fj, s.stiffness, s.damping};
-  return wrap_force<7, 14>(k, std::move(dofs), s.name);
+  auto f = wrap_force<7, 14>(k, std::move(dofs), s.name);
+  f->conservative = true;
+  for (double c : s.damping) f->conservative &= c == 0;
+  return f;
 }
 
 std::unique_ptr<Force> make_load(const Model& m, const LoadSpec& s) {

@@ -59,7 +59,10 @@ Integrator::Integrator(const Model& model, IntegratorOptions options)
     throw InvalidInput("BDF order must be 1..5, got " + std::to_string(opts_.order));
   if (!(opts_.step > 0)) throw InvalidInput("the step must be positive");
   if (opts_.min_step <= 0) opts_.min_step = opts_.step * 1e-6;
-  if (opts_.startup_levels < 0) opts_.startup_levels = 3 * (opts_.order - 1);
+  // start-up (docs/formulation.md §6): h/4 for BDF2, h/2^{3(k−1)} above
+  if (opts_.startup_levels < 0)
+    opts_.startup_levels = opts_.order <= 2 ? 2 * (opts_.order - 1) : 3 * (opts_.order - 1);
+  if (opts_.formulation == FormulationChoice::partitioned) opts_.regularization = 0;
   // Threads: small systems run faster on one (thread start-up costs more than the work).
   const bool small = sys_.size() < 20000;
   const std::size_t elements = model.forces.size() + model.constraints.size();
@@ -75,6 +78,17 @@ std::unique_ptr<LinearSolver> Integrator::new_solver() const {
   return make_strata_solver(opts_.backend, opts_.threads, opts_.device_memory_limit);
 }
 
+void Integrator::use_stabilized(const char* why) {
+  if (sys_.formulation() == Formulation::stabilized) return;
+  sys_.set_formulation(Formulation::stabilized);
+  pattern_changed_ = true;
+  factor_valid_ = false;
+  stats_.stabilized_since = t_;
+  stats_.jacobian_size = sys_.size();
+  if (opts_.verbose)
+    fmt::print(stderr, "t = {:.9g}: {}; stabilized formulation from here on\n", t_, why);
+}
+
 void Integrator::repartition(double t, const double* q) {
   Timer timer;
   SparseRows rows = sys_.constraint_jacobian(q, t);
@@ -87,130 +101,11 @@ void Integrator::repartition(double t, const double* q) {
   stats_.partition_seconds += timer.seconds();
 }
 
-void Integrator::initialize() {
-  Timer timer;
-  const index_t n = sys_.n(), m = sys_.m();
-  q_ = model_.q0;
-  v_ = model_.v0;
-  a_.assign(n, 0.0);
-  lambda_.assign(m, 0.0);
-  t_ = 0;
-  step_ = 0;
-  for (const Body& b : model_.bodies)
-    if (b.kind == BodyKind::spatial && b.offset >= 0) {
-      double s = 0;
-      for (int i = 3; i < 7; ++i) s += q_[b.offset + i] * q_[b.offset + i];
-      for (int i = 3; i < 7; ++i) q_[b.offset + i] /= std::sqrt(s);
-    }
-  sys_.update_candidates(q_.data());
-  repartition(t_, q_.data());
-  stats_.repartitions = 0;
-
-  // [Φ_q; Uᵀ] for the position and velocity analyses.
-  auto partitioned = [&](const SparseRows& rows) {
-    std::vector<index_t> ri, ci;
-    std::vector<double> vals;
-    for (index_t r = 0; r < m; ++r)
-      for (index_t p = rows.ptr[r]; p < rows.ptr[r + 1]; ++p) {
-        ri.push_back(r);
-        ci.push_back(rows.cols[p]);
-        vals.push_back(rows.vals[p]);
-      }
-    const auto& ind = partition_.independent;
-    for (std::size_t k = 0; k < ind.size(); ++k) {
-      ri.push_back(m + static_cast<index_t>(k));
-      ci.push_back(ind[k]);
-      vals.push_back(1.0);
-    }
-    return from_triplets(n, n, ri, ci, vals);
-  };
-  auto solve = [&](const SparseMatrix& k, const std::vector<double>& b, const char* what) {
-    auto s = new_solver();
-    s->analyze(k);
-    s->factorize(k);
-    std::vector<double> x(b.size());
-    s->solve(b.data(), x.data());
-    if (!all_finite(x))
-      throw SimulationError(std::string("initial conditions: the ") + what +
-                            " analysis produced non-finite values");
-    return x;
-  };
-  std::vector<double> zero(n, 0.0), phi(m), phid(m), phidd(m), b(n);
-  // position analysis: Newton on Φ(q) = 0 with the independent coordinates held
-  bool converged = m == 0;
-  for (int it = 0; it < 50 && !converged; ++it) {
-    sys_.constraint_values(q_.data(), zero.data(), zero.data(), t_, phi.data(), nullptr, nullptr);
-    SparseRows rows = sys_.constraint_jacobian(q_.data(), t_);
-    std::fill(b.begin(), b.end(), 0.0);
-    for (index_t r = 0; r < m; ++r) b[r] = -phi[r];
-    const std::vector<double> dq = solve(partitioned(rows), b, "position");
-    double err = 0;
-    for (index_t i = 0; i < n; ++i) {
-      q_[i] += dq[i];
-      err = std::max(err,
-                     std::abs(dq[i]) / (opts_.newton_atol + opts_.newton_rtol * std::abs(q_[i])));
-    }
-    converged = err <= 1;
-  }
-  sys_.constraint_values(q_.data(), zero.data(), zero.data(), t_, phi.data(), nullptr, nullptr);
-  if (!converged || !(max_abs(phi) < 1e-6)) {
-    index_t worst = 0;
-    for (index_t r = 0; r < m; ++r)
-      if (std::abs(phi[r]) > std::abs(phi[worst])) worst = r;
-    throw SimulationError(fmt::format(
-        "initial conditions: the position analysis did not converge; the largest violation "
-        "({:.3e}) is in {}. Check the initial poses and joint locations.",
-        m ? phi[worst] : 0.0, m ? sys_.row_name(worst) : std::string("-")));
-  }
-  repartition(t_, q_.data());
-  stats_.repartitions = 0;
-  SparseRows rows = sys_.constraint_jacobian(q_.data(), t_);
-  const SparseMatrix kq = partitioned(rows);
-  // velocity analysis: Φ_q v = −Φ_t, independent velocities as given
-  sys_.constraint_values(q_.data(), zero.data(), zero.data(), t_, nullptr, phid.data(), nullptr);
-  std::fill(b.begin(), b.end(), 0.0);
-  for (index_t r = 0; r < m; ++r) b[r] = -phid[r];
-  for (std::size_t k = 0; k < partition_.independent.size(); ++k)
-    b[m + k] = model_.v0[partition_.independent[k]];
-  v_ = solve(kq, b, "velocity");
-  // acceleration analysis: [M Φ_qᵀ; Φ_q 0][a; λ] = [−g(q, v, 0); −Φ̈(q, v, 0)]
-  {
-    std::vector<index_t> ri, ci;
-    std::vector<double> vals;
-    sys_.mass_triplets(q_.data(), v_.data(), t_, ri, ci, vals);
-    for (index_t r = 0; r < m; ++r)
-      for (index_t p = rows.ptr[r]; p < rows.ptr[r + 1]; ++p) {
-        ri.push_back(n + r);
-        ci.push_back(rows.cols[p]);
-        vals.push_back(rows.vals[p]);
-        ri.push_back(rows.cols[p]);
-        ci.push_back(n + r);
-        vals.push_back(rows.vals[p]);
-      }
-    const SparseMatrix ka = from_triplets(n + m, n + m, ri, ci, vals);
-    std::vector<double> g(n), rhs(n + m);
-    sys_.force_values(q_.data(), v_.data(), zero.data(), t_, g.data());
-    sys_.constraint_values(q_.data(), v_.data(), zero.data(), t_, nullptr, nullptr, phidd.data());
-    for (index_t i = 0; i < n; ++i) rhs[i] = -g[i];
-    for (index_t r = 0; r < m; ++r) rhs[n + r] = -phidd[r];
-    const std::vector<double> al = solve(ka, rhs, "acceleration");
-    std::copy(al.begin(), al.begin() + n, a_.begin());
-    std::copy(al.begin() + n, al.end(), lambda_.begin());
-  }
-  history_.clear();
-  history_.push_front({t_, q_, v_, a_});
-  order_ = opts_.variable_step ? 1 : opts_.order;
-  steps_at_order_ = 0;
-  h_ = opts_.step * std::ldexp(1.0, -opts_.startup_levels);
-  stats_.initial_conditions_seconds = timer.seconds();
-  stats_.jacobian_size = sys_.size();
-}
-
 bool Integrator::done() const { return t_ >= opts_.t_end * (1 - 1e-12) - 1e-15; }
 
 void Integrator::constraint_violation(double* position, double* velocity) const {
-  std::vector<double> phi(sys_.m()), phid(sys_.m());
-  sys_.constraint_values(q_.data(), v_.data(), a_.data(), t_, phi.data(), phid.data(), nullptr);
+  std::vector<double> phi(sys_.model_m()), phid(sys_.model_m());
+  sys_.model_constraint_values(q_.data(), v_.data(), t_, phi.data(), phid.data());
   *position = max_abs(phi);
   *velocity = max_abs(phid);
 }
@@ -263,7 +158,10 @@ void Integrator::factorize(StepInfo& info, const BdfTerms& bdf, double t) {
   stats_.solver_seconds += s;
 }
 
-bool Integrator::try_step(double h, StepInfo& info) {
+// The BDF relation of a step to tn = t + h and the predictor (extrapolation through up to
+// p+1 past points; a from the BDF relation with the predicted v; λ from the last step, the
+// stabilizing multipliers μ, ν zero).
+void Integrator::predict(double h, BdfTerms& bdf) {
   const index_t n = sys_.n(), m = sys_.m(), N = sys_.size();
   const int target = opts_.variable_step ? order_ : opts_.order;
   const int p = std::min<int>(target, static_cast<int>(history_.size()));
@@ -271,7 +169,6 @@ bool Integrator::try_step(double h, StepInfo& info) {
   std::vector<double> T{tn};
   for (int j = 0; j < p; ++j) T.push_back(history_[j].t);
   const std::vector<double> al = bdf_coefficients(T);
-  BdfTerms bdf;
   bdf.beta = 1.0 / al[0];
   zeta1_.assign(n, 0.0);
   zeta2_.assign(n, 0.0);
@@ -284,7 +181,8 @@ bool Integrator::try_step(double h, StepInfo& info) {
   }
   bdf.zeta1 = zeta1_.data();
   bdf.zeta2 = zeta2_.data();
-  // predictor: extrapolation through up to p+1 past points
+  bdf.regularization = opts_.regularization;
+  bdf.lambda_prev = lambda_.data();
   const int np = std::min<int>(p + 1, static_cast<int>(history_.size()));
   std::vector<double> Tp;
   for (int j = 0; j < np; ++j) Tp.push_back(history_[j].t);
@@ -300,7 +198,16 @@ bool Integrator::try_step(double h, StepInfo& info) {
   qpred_.assign(xq, xq + n);
   vpred_.assign(xv, xv + n);
   std::copy(lambda_.begin(), lambda_.end(), xl);
+  (void)m;
+}
 
+// Newton's method on H(x) = 0 from the predictor in x_. Returns 1 when converged, 0 when
+// the iteration failed (the step is to be retried smaller), 2 when the contact set changed
+// (retry at once).
+int Integrator::newton(double h, StepInfo& info, const BdfTerms& bdf) {
+  const index_t n = sys_.n(), N = sys_.size();
+  const double tn = t_ + h;
+  double *xa = x_.data(), *xv = xa + n, *xq = xa + 2 * n;
   if (!opts_.modified_newton || slow_last_step_ ||
       std::abs(factor_beta_ - bdf.beta) > 0.2 * bdf.beta)
     factor_valid_ = false;
@@ -309,7 +216,7 @@ bool Integrator::try_step(double h, StepInfo& info) {
   rhs_.resize(N);
   double err_first = 0;
   int since_jac = 0;  // iterations since the factor was last refreshed
-  bool refresh = false, converged = false, fresh = false;
+  bool refresh = false, fresh = false;
   const bool dump = opts_.dump_step == step_ + 1 && !opts_.dump_dir.empty();
   for (int it = 1; it <= opts_.max_newton_iterations; ++it) {
     const bool need_jac = !factor_valid_ || refresh || !opts_.modified_newton || (dump && it == 1);
@@ -326,7 +233,7 @@ bool Integrator::try_step(double h, StepInfo& info) {
     const double s = ta.seconds();
     info.assembly_seconds += s;
     stats_.assembly_seconds += s;
-    if (!all_finite(res_)) return false;
+    if (!all_finite(res_)) return 0;
     if (need_jac) {
       if (dump && it == 1) {
         std::filesystem::create_directories(opts_.dump_dir);
@@ -340,7 +247,7 @@ bool Integrator::try_step(double h, StepInfo& info) {
         factorize(info, bdf, tn);
       } catch (const InvalidInput&) {  // non-finite values: a numerical failure of the step
         factor_valid_ = false;
-        return false;
+        return 0;
       }
       factor_beta_ = bdf.beta;
       refresh = false;
@@ -353,7 +260,7 @@ bool Integrator::try_step(double h, StepInfo& info) {
       solver_->solve(rhs_.data(), dx_.data());
     } catch (const InvalidInput&) {  // non-finite values: a numerical failure of the step
       factor_valid_ = false;
-      return false;
+      return 0;
     }
     const double s2 = ts.seconds();
     stats_.solve_seconds += s2;
@@ -364,19 +271,16 @@ bool Integrator::try_step(double h, StepInfo& info) {
     ++stats_.newton_iterations;
     if (!all_finite(dx_)) {
       factor_valid_ = false;
-      return false;
+      return 0;
     }
-    double err = 0;
     // weights: atol + rtol|x| for q and v (so that the constraints hold to that level at
     // both), atol·b0/h + rtol|a| for a (an error δa moves v by (h/b0)·δa); in variable-step
     // mode at most a tenth of the local error tolerances
-    double atol = opts_.newton_atol, rtol = opts_.newton_rtol;
-    if (opts_.variable_step) {
-      atol = std::min(atol, 0.1 * opts_.atol);
-      rtol = std::min(rtol, 0.1 * opts_.rtol);
-    }
+    double atol = 0, rtol = 0;
+    newton_tolerances(&atol, &rtol);
     const double atol_a = atol / bdf.beta;
     for (index_t i = 0; i < N; ++i) x_[i] += dx_[i];
+    double err = 0;
     for (index_t i = 0; i < n; ++i) {
       err = std::max(err, std::abs(dx_[i]) / (atol_a + rtol * std::abs(xa[i])));
       err = std::max(err, std::abs(dx_[n + i]) / (atol + rtol * std::abs(xv[i])));
@@ -393,6 +297,7 @@ bool Integrator::try_step(double h, StepInfo& info) {
                  "{:.1e}, perturbed pivots {}\n",
                  tn, h, it, need_jac ? " (new Jacobian)" : "", err, solver_->backward_error(),
                  solver_->perturbed_pivots());
+    bool converged = false;
     if (since_jac == 1) {
       err_first = err;
       converged = fresh && err <= 1e-3;  // a stale Jacobian may understate a first update
@@ -401,69 +306,157 @@ bool Integrator::try_step(double h, StepInfo& info) {
       if ((rho < 1 && rho / (1 - rho) * err <= 1) || err <= 1e-3) {
         converged = true;
       } else if (rho >= 0.9 && fresh && err <= 1) {
-        converged = true;  // stalled at rounding level within the tolerance
+        converged = true;  // stalled at the rounding level within the tolerance
       } else if (rho >= 0.9) {
         if (fresh) {  // diverging or stalling with a Jacobian of this step: give up the step
           factor_valid_ = false;
-          return false;
+          return 0;
         }
         refresh = true;  // stale Jacobian: get a new one and restart the rate estimate
-        since_jac = 0;
       } else if (rho > 0.5) {
         refresh = true;
       }
     }
     if (refresh) since_jac = 0;
-    if (converged && sys_.check_candidates(xq) == 2) {
+    if (!converged) continue;
+    if (sys_.check_candidates(xq) == 2) {
       // a contact pair outside the Newton matrix closed during the step: take it in and
       // redo the step
       sys_.update_candidates(xq);
       ++stats_.contact_updates;
       pattern_changed_ = true;
       factor_valid_ = false;
-      retry_ = true;
-      return false;
+      return 2;
     }
-    if (converged && opts_.variable_step && np > 1) {
-      // local error estimate: (x − x_pred)/(p + 2) for a predictor of the corrector's
-      // order (BDF error constant 1/(p+1), extrapolation error constant 1)
-      const double c = np == p + 1 ? 1.0 / (p + 2) : 1.0 / (np + 1);
-      double sum = 0, worst = 0;
-      index_t wi = 0;
-      for (index_t i = 0; i < n; ++i) {
-        const double eq = c * (xq[i] - qpred_[i]) / (opts_.atol + opts_.rtol * std::abs(xq[i]));
-        const double ev = c * (xv[i] - vpred_[i]) / (opts_.atol + opts_.rtol * std::abs(xv[i]));
-        sum += eq * eq + ev * ev;
-        if (eq * eq > worst) worst = eq * eq, wi = i;
-        if (ev * ev > worst) worst = ev * ev, wi = n + i;
-      }
-      const double est = std::sqrt(sum / (2.0 * n));
-      info.error_estimate = est;
-      if (opts_.verbose)
-        fmt::print(stderr,
-                   "t = {:.9g} h = {:.3g} order {}: local error estimate {:.3e} (largest: {} {})\n",
-                   tn, h, p, est, wi < n ? "q" : "v", wi % n);
-      const double factor = 0.9 * std::pow(std::max(est, 1e-10), -1.0 / (p + 1));
-      if (est > 1) {
-        lte_reject_h_ = h * std::clamp(factor, 0.2, 0.9);
-        return false;
-      }
-      next_h_ = h * std::clamp(factor, 0.5, 2.0);
-      choose_order(h, p, tn, xq, xv, est);
-    }
-    if (converged) {
-      slow_last_step_ = it > 3;
-      q_.assign(xq, xq + n);
-      v_.assign(xv, xv + n);
-      a_.assign(xa, xa + n);
-      lambda_.assign(xl, xl + m);
-      info.h = h;
-      info.order = p;
-      return true;
-    }
+    slow_last_step_ = it > 3;
+    return 1;
   }
   factor_valid_ = false;
+  return 0;
+}
+
+// The Newton tolerances of this run (variable steps: at most a tenth of the local error
+// tolerances).
+void Integrator::newton_tolerances(double* atol, double* rtol) const {
+  *atol = opts_.newton_atol;
+  *rtol = opts_.newton_rtol;
+  if (opts_.variable_step) {
+    *atol = std::min(*atol, 0.1 * opts_.atol);
+    *rtol = std::min(*rtol, 0.1 * opts_.rtol);
+  }
+}
+
+// A converged step is accepted only when every active constraint equation holds at the
+// position and velocity level to the accuracy of q and v: |Φ_r| ≤ 10 Σ_j |∂Φ_r/∂q_j| ·
+// (atol + rtol max_j |q_j|) over the row's coordinates j (and the same for Φ̇_r with v).
+// Removed (redundant) equations are checked at the partition checks instead.
+bool Integrator::constraints_hold(const double* q, const double* v, double t) const {
+  const index_t m = sys_.m();
+  if (m == 0) return true;
+  const index_t n = sys_.n();
+  std::vector<double> phi(m), phid(m), zero(n, 0.0);
+  sys_.constraint_values(q, v, zero.data(), t, phi.data(), phid.data(), nullptr);
+  const SparseRows rows = sys_.constraint_jacobian(q, t);
+  double atol = 0, rtol = 0;
+  newton_tolerances(&atol, &rtol);
+  for (index_t r = 0; r < m; ++r) {
+    double g = 0, qmax = 0, vmax = 0;
+    for (index_t p = rows.ptr[r]; p < rows.ptr[r + 1]; ++p) {
+      g += std::abs(rows.vals[p]);
+      qmax = std::max(qmax, std::abs(q[rows.cols[p]]));
+      vmax = std::max(vmax, std::abs(v[rows.cols[p]]));
+    }
+    const double tp = g * (atol + rtol * qmax), tv = g * (atol + rtol * vmax);
+    if (!(std::abs(phi[r]) <= 10 * tp + 1e-14) || !(std::abs(phid[r]) <= 10 * tv + 1e-14)) {
+      if (opts_.verbose)
+        fmt::print(stderr,
+                   "t = {:.9g}: step not accepted: {} violated (|Phi| {:.3e} > {:.3e} or "
+                   "|dPhi/dt| {:.3e} > {:.3e})\n",
+                   t, sys_.row_name(r), std::abs(phi[r]), 10 * tp, std::abs(phid[r]), 10 * tv);
+      return false;
+    }
+  }
+  return true;
+}
+
+// Variable step, conservative model: one step may change the energy by at most a tenth of
+// the whole run's budget, 0.1 · energy_tolerance · E_ref (E_ref the largest kinetic energy
+// so far); otherwise it is redone with h·(budget/ΔE)^{1/(p+1)}. (The slow drift of BDF's
+// numerical damping is not held per step: it is reported at the end, see warnings().)
+bool Integrator::energy_ok(double h, int p, const double* q, const double* v, double t) {
+  double kin = 0, pot = 0;
+  sys_.energy(q, v, t, &kin, &pot);
+  const double scale = std::max(stats_.energy_scale, kin);
+  const double de = std::abs(kin + pot - energy_last_);
+  const double budget =
+      0.1 * opts_.energy_tolerance * scale + 1e-12 * (std::abs(kin) + std::abs(pot));
+  if (!(de > budget)) return true;
+  reject_measure_ = de / budget;
+  const double f = 0.9 * std::pow(budget / de, 1.0 / (p + 1));
+  lte_reject_h_ = h * std::clamp(f, 0.2, 0.9);
+  energy_reject_ = true;
+  if (opts_.verbose)
+    fmt::print(stderr, "t = {:.9g} h = {:.3g}: energy change {:.3e} J over the budget {:.3e} J\n",
+               t, h, de, budget);
   return false;
+}
+
+bool Integrator::try_step(double h, StepInfo& info) {
+  const index_t n = sys_.n(), m = sys_.m();
+  BdfTerms bdf;
+  predict(h, bdf);
+  const int p =
+      std::min<int>(opts_.variable_step ? order_ : opts_.order, static_cast<int>(history_.size()));
+  const int np = std::min<int>(p + 1, static_cast<int>(history_.size()));
+  const double tn = t_ + h;
+  const int r = newton(h, info, bdf);
+  if (r == 2) retry_ = true;
+  if (r != 1) return false;
+  double *xa = x_.data(), *xv = xa + n, *xq = xa + 2 * n, *xl = xa + 3 * n;
+  if (opts_.perturb_converged) opts_.perturb_converged(xq, xv);
+  if (!constraints_hold(xq, xv, tn)) {
+    ++stats_.residual_rejections;
+    factor_valid_ = false;
+    return false;
+  }
+  if (opts_.variable_step && np > 1) {
+    // local error estimate: (x − x_pred)/(p + 2) for a predictor of the corrector's
+    // order (BDF error constant 1/(p+1), extrapolation error constant 1)
+    const double c = np == p + 1 ? 1.0 / (p + 2) : 1.0 / (np + 1);
+    double sum = 0, worst = 0;
+    index_t wi = 0;
+    for (index_t i = 0; i < n; ++i) {
+      const double eq = c * (xq[i] - qpred_[i]) / (opts_.atol + opts_.rtol * std::abs(xq[i]));
+      const double ev = c * (xv[i] - vpred_[i]) / (opts_.atol + opts_.rtol * std::abs(xv[i]));
+      sum += eq * eq + ev * ev;
+      if (eq * eq > worst) worst = eq * eq, wi = i;
+      if (ev * ev > worst) worst = ev * ev, wi = n + i;
+    }
+    const double est = std::sqrt(sum / (2.0 * n));
+    info.error_estimate = est;
+    if (opts_.verbose)
+      fmt::print(stderr,
+                 "t = {:.9g} h = {:.3g} order {}: local error estimate {:.3e} (largest: {} {})\n",
+                 tn, h, p, est, wi < n ? "q" : "v", wi % n);
+    const double factor = 0.9 * std::pow(std::max(est, 1e-10), -1.0 / (p + 1));
+    reject_measure_ = est;
+    if (est > 1 && !accept_jump_) {
+      lte_reject_h_ = h * std::clamp(factor, 0.2, 0.9);
+      return false;
+    }
+    if (conservative_ && !accept_jump_ && !energy_ok(h, p, xq, xv, tn)) return false;
+    next_h_ = h * std::clamp(factor, 0.5, 2.0);
+    choose_order(h, p, tn, xq, xv, est);
+  }
+  lambda_prev_ = lambda_;
+  q_.assign(xq, xq + n);
+  v_.assign(xv, xv + n);
+  a_.assign(xa, xa + n);
+  lambda_.assign(xl, xl + m);
+  info.h = h;
+  info.order = p;
+  info.stabilized = sys_.formulation() == Formulation::stabilized;
+  return true;
 }
 
 // Order selection of the variable-step mode (after Shampine & Reichelt 1997, and
@@ -521,38 +514,79 @@ StepInfo Integrator::advance() {
   info.step = step_ + 1;
   double h = h_;
   const double remaining = opts_.t_end - t_;
-  if (h > remaining * (1 - 1e-9)) h = remaining;
+  // the last step ends exactly at t_end (a step within 1e-6 of the remaining time is
+  // stretched to it rather than leaving a sliver)
+  if (remaining < h * (1 + 1e-6)) h = remaining;
+  const bool automatic = opts_.formulation == FormulationChoice::automatic;
+  double h_ref = h, est_ref = -1;  // a rejection the later ones compare with
+  accept_jump_ = false;
   while (!try_step(h, info)) {
     if (retry_) {  // not a failure: the contact set changed
       retry_ = false;
       continue;
     }
-    if (lte_reject_h_ > 0) {  // converged, but the local error is too large
-      h = lte_reject_h_;
-      lte_reject_h_ = 0;
-      ++info.rejected;
-      ++stats_.rejected;
-      ++stats_.error_rejections;
-      if (h < opts_.min_step)
-        throw SimulationError(fmt::format(
-            "the local error test failed at t = {:.9g} s even with a step of {:.3g} s", t_, h));
-      continue;
-    }
     ++info.rejected;
     ++stats_.rejected;
+    if (lte_reject_h_ > 0) {  // converged, but the local error or energy change is too large
+      h = lte_reject_h_;
+      lte_reject_h_ = 0;
+      if (energy_reject_)
+        ++stats_.energy_rejections;
+      else
+        ++stats_.error_rejections;
+      // A test that a step 100 times shorter fails as badly does not see the truncation
+      // error of a smooth solution but a jump of the numerical solution (near a singular
+      // configuration the velocity along the vanishing singular vector is only determined
+      // to the Newton tolerance over the singular value): take the step and restart the BDF
+      // history there (order 1), as at a discontinuity.
+      if (est_ref < 0 || reject_measure_ < 0.5 * est_ref) {
+        est_ref = reject_measure_;
+        h_ref = h;
+      } else if (h < 1e-2 * h_ref) {
+        accept_jump_ = true;
+      }
+      if (h < opts_.min_step)
+        throw SimulationError(
+            fmt::format("the {} test failed at t = {:.9g} s even with a step of {:.3g} s",
+                        energy_reject_ ? "energy" : "local error", t_, h));
+      energy_reject_ = false;
+      continue;
+    }
     slow_last_step_ = true;
+    if (automatic && sys_.formulation() == Formulation::partitioned && sys_.m() > 0) {
+      // the partitioned step failed: no partition may be good here (a singular
+      // configuration); retry the same step with the stabilized formulation
+      use_stabilized("a partitioned step failed");
+      continue;
+    }
     h *= 0.5;
     if (h < opts_.min_step)
       throw SimulationError(fmt::format(
-          "Newton's method did not converge at t = {:.9g} s even with a step of {:.3g} s "
-          "(nominal {:.3g} s); the model may be too stiff, badly scaled, or locked",
+          "Newton's method did not converge (or the constraints did not hold) at t = {:.9g} s "
+          "even with a step of {:.3g} s (nominal {:.3g} s); the model may be too stiff, badly "
+          "scaled, or locked",
           t_, h * 2, opts_.step));
   }
   t_ += h;
   ++step_;
   info.t = t_;
+  last_order_ = info.order;
+  if (accept_jump_) {  // restart: the history before the jump is not used
+    accept_jump_ = false;
+    history_.clear();
+    order_ = 1;
+    steps_at_order_ = 0;
+    next_h_ = h;
+    ++stats_.restarts;
+    if (opts_.verbose)
+      fmt::print(stderr,
+                 "t = {:.9g}: the error test did not improve with the step size; "
+                 "step accepted and the BDF history restarted\n",
+                 t_);
+  }
   history_.push_front({t_, q_, v_, a_});
   while (static_cast<int>(history_.size()) > opts_.order + 2) history_.pop_back();
+  if (info.stabilized) ++stats_.stabilized_steps;
   // next step: variable steps follow the error control; fixed steps grow back towards
   // the nominal step (the startup ramp doubles each step)
   if (opts_.variable_step) {
@@ -562,6 +596,9 @@ StepInfo Integrator::advance() {
     next_h_ = 0;
   } else if (info.rejected) {
     h_ = h;
+    ramp_repeat_ = false;
+  } else if (ramp_repeat_) {
+    ramp_repeat_ = false;  // orders 1–2: h/2^L twice, then doubling: the ramp ends at t = h
   } else if (h_ < opts_.step) {
     // the start-up ramp doubles the step at orders 1–2 and grows it gently at higher
     // orders, where variable-coefficient BDF tolerates only moderate step ratios
@@ -573,20 +610,54 @@ StepInfo Integrator::advance() {
     pattern_changed_ = true;
     factor_valid_ = false;
   }
-  // partition still good?
-  if (sys_.m() > 0 && opts_.partition_check_interval > 0 &&
-      (step_ % opts_.partition_check_interval == 0 || info.rejected)) {
-    Timer timer;
-    const double quality =
-        partition_quality(sys_.constraint_jacobian(q_.data(), t_), partition_.dependent);
-    stats_.partition_seconds += timer.seconds();
-    if (quality < opts_.repartition_quality) {
-      repartition(t_, q_.data());
-      info.repartitioned = true;
-    }
+  partition_check(info);
+  if (conservative_) {
+    double kin = 0, pot = 0;
+    sys_.energy(q_.data(), v_.data(), t_, &kin, &pot);
+    energy_last_ = kin + pot;
+    stats_.energy_scale = std::max(stats_.energy_scale, kin);
+    stats_.energy_drift = std::max(stats_.energy_drift, std::abs(energy_last_ - energy0_));
   }
   ++stats_.steps;
   return info;
+}
+
+// Is the coordinate partition still good, and do the removed (redundant) equations still
+// hold? Partitioned steps under the automatic choice are checked after every step (a
+// singular configuration can come within a few steps), others every
+// partition_check_interval steps and after a rejected step.
+void Integrator::partition_check(StepInfo& info) {
+  if (sys_.model_m() == 0 || opts_.partition_check_interval <= 0) return;
+  const bool stab = sys_.formulation() == Formulation::stabilized;
+  const bool every = !stab && opts_.formulation == FormulationChoice::automatic;
+  if (!every && step_ % opts_.partition_check_interval != 0 && !info.rejected) return;
+  if (step_ % opts_.partition_check_interval == 0 || info.rejected)
+    check_removed(q_.data(), v_.data(), t_, false);
+  if (stab || sys_.m() == 0) return;
+  Timer timer;
+  const double quality =
+      partition_quality(sys_.constraint_jacobian(q_.data(), t_), partition_.dependent);
+  stats_.partition_seconds += timer.seconds();
+  if (quality >= opts_.repartition_quality) return;
+  if (opts_.formulation == FormulationChoice::automatic) {
+    use_stabilized(fmt::format("partition quality {:.2e}", quality).c_str());
+  } else {
+    repartition(t_, q_.data());
+    info.repartitioned = true;
+  }
+}
+
+std::vector<std::string> Integrator::warnings() const {
+  std::vector<std::string> w = initial_warnings_;
+  if (conservative_ && stats_.energy_drift > opts_.energy_tolerance * stats_.energy_scale &&
+      stats_.energy_drift > 1e-12 * std::abs(energy0_))
+    w.push_back(fmt::format(
+        "energy drift: the model is conservative but its energy changed by up to {:.3e} J "
+        "({:.2e} of the largest kinetic energy, {:.4g} J; tolerance {:g}); the results are "
+        "inaccurate: use a smaller step, a higher order or --variable-step",
+        stats_.energy_drift, stats_.energy_drift / std::max(stats_.energy_scale, 1e-300),
+        stats_.energy_scale, opts_.energy_tolerance));
+  return w;
 }
 
 }  // namespace strata::mbd

@@ -1,5 +1,6 @@
 // strata::mbd — implicit BDF integration of the index-3 equations of motion with
-// coordinate partitioning (docs/formulation.md).
+// coordinate partitioning, or the stabilized formulation where no partition is well
+// conditioned (docs/formulation.md).
 //
 // Per step: BDF coefficients of order k on the actual (possibly non-uniform) time
 // points (Brenan, Campbell & Petzold, "Numerical Solution of Initial-Value Problems in
@@ -9,11 +10,16 @@
 // refactorizations; modified Newton keeps the factor while it converges fast). Before
 // the first step, consistent initial conditions: position analysis (Φ = 0 with the
 // independent coordinates held), velocity analysis, acceleration analysis (Haug 1989,
-// §6.5 and §11.5). A step whose Newton iteration fails is retried with half the step;
-// below the minimum step the integration stops with a SimulationError.
+// §6.5 and §11.5). Redundant constraint equations are found by a rank-revealing QR of
+// Φ_qᵀ (SuiteSparseQR) and switched off for the run. A step is accepted only when Newton
+// converged and the constraints hold to tolerance at the position and velocity level; a
+// step whose Newton iteration fails is retried with half the step; below the minimum step
+// the integration stops with a SimulationError. The energy of conservative models is
+// monitored (a warning for fixed steps, a rejected step for variable steps).
 #pragma once
 
 #include <deque>
+#include <functional>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -33,6 +39,12 @@ class SimulationError : public Error {
  public:
   using Error::Error;
 };
+
+/// Which formulation makes the BDF step square (docs/formulation.md §4–§5). automatic:
+/// partitioned while the coordinate partition is well conditioned, stabilized from the
+/// first step where it is not (a singular configuration, or a partition that would have to
+/// change) to the end of the run.
+enum class FormulationChoice { automatic, partitioned, stabilized };
 
 struct IntegratorOptions {
   double t_end = 1.0;           ///< s
@@ -61,8 +73,23 @@ struct IntegratorOptions {
   /// divided-difference error estimates of the neighbouring orders.
   bool variable_step = false;
   double rtol = 1e-4, atol = 1e-6;  ///< local error tolerances of variable steps
-  double max_step = 0;  ///< largest variable step (0: (t_end − 0)/10)       ///< print every Newton
-                        ///< iteration to stderr
+  double max_step = 0;              ///< largest variable step (0: (t_end − 0)/10)
+  FormulationChoice formulation = FormulationChoice::automatic;
+  /// ε of the stabilized formulation's regularisation (newton_system.hpp): constraint
+  /// directions whose singular value is below about √ε of the typical one are enforced
+  /// softly within a step (singular configurations).
+  double regularization = 1e-8;
+  /// Conservative models: largest energy drift, relative to the largest kinetic energy
+  /// seen (0: not monitored). Fixed step: a warning at the end; variable step: a step whose
+  /// energy change exceeds energy_tolerance · E_ref · h / t_end is redone with a smaller one.
+  double energy_tolerance = 1e-3;
+  /// A constraint equation is redundant when its column of Φ_qᵀ is, relative to the largest
+  /// column norm, within this of the span of the earlier ones (rank-revealing QR).
+  double redundancy_tolerance = 1e-9;
+  /// Tests only: called with the converged q and v (n each) of every step attempt, before
+  /// the acceptance checks (a test perturbs them to check that no step off the constraints
+  /// is accepted). Not saved in checkpoints.
+  std::function<void(double* q, double* v)> perturb_converged;
 };
 
 /// What happened in one accepted step.
@@ -77,15 +104,24 @@ struct StepInfo {
   double solver_seconds = 0;    ///< strata analysis + factorization + solves
   bool repartitioned = false;
   double error_estimate = 0;  ///< weighted local error estimate (variable step; ≤ 1)
+  bool stabilized = false;    ///< taken with the stabilized formulation
 };
 
 struct IntegratorStats {
   index_t steps = 0, rejected = 0, newton_iterations = 0, factorizations = 0, analyses = 0,
           repartitions = 0, solves = 0;
-  index_t reanalyses = 0;        ///< analyses redone because pivots had to be perturbed
-  index_t contact_updates = 0;   ///< changes of the set of contact pairs in the matrix
-  index_t error_rejections = 0;  ///< variable step: steps rejected by the local error test
-  index_t perturbed_pivots = 0;  ///< static pivots over all factorizations
+  index_t reanalyses = 0;           ///< analyses redone because pivots had to be perturbed
+  index_t contact_updates = 0;      ///< changes of the set of contact pairs in the matrix
+  index_t error_rejections = 0;     ///< variable step: steps rejected by the local error test
+  index_t perturbed_pivots = 0;     ///< static pivots over all factorizations
+  index_t residual_rejections = 0;  ///< steps redone: constraints violated after convergence
+  index_t energy_rejections = 0;    ///< variable step: steps redone for their energy change
+  index_t stabilized_steps = 0;     ///< steps taken with the stabilized formulation
+  double stabilized_since = -1;     ///< time the stabilized formulation began (−1: never)
+  index_t redundancy_checks = 0;    ///< rank-revealing factorizations of Φ_qᵀ
+  index_t restarts = 0;     ///< variable step: BDF history restarted after a jump of the solution
+  double energy_drift = 0;  ///< conservative models: max |E − E(0)| so far (J)
+  double energy_scale = 0;  ///< largest kinetic energy so far (J), the drift's reference
   double factor_seconds = 0, solve_seconds = 0;  ///< parts of solver_seconds
   double assembly_seconds = 0, solver_seconds = 0, analysis_seconds = 0, partition_seconds = 0,
          initial_conditions_seconds = 0;
@@ -97,7 +133,10 @@ class Integrator {
  public:
   /// The model must outlive the integrator.
   Integrator(const Model& model, IntegratorOptions options);
-  /// Consistent initial conditions at t = 0. Throws SimulationError, RedundantConstraints.
+  /// Consistent initial conditions at t = 0: redundant constraint equations switched off
+  /// (a consistent redundant set), then position, velocity and acceleration analyses.
+  /// Throws SimulationError, RedundantConstraints (an inconsistent set: no motion satisfies
+  /// it; the message names the equations).
   void initialize();
   /// Advances one step. Throws SimulationError when even the minimum step fails.
   StepInfo advance();
@@ -118,9 +157,24 @@ class Integrator {
   const std::vector<double>& q() const { return q_; }
   const std::vector<double>& v() const { return v_; }
   const std::vector<double>& a() const { return a_; }
+  /// Multipliers of the active constraint equations (system().m()).
   const std::vector<double>& lambda() const { return lambda_; }
-  /// max |Φ| and max |Φ̇| at the current state.
+  /// Multipliers of every model constraint row (model_m(); 0 for removed equations).
+  std::vector<double> model_lambda() const;
+  /// max |Φ| and max |Φ̇| at the current state (every model row, removed ones included).
   void constraint_violation(double* position, double* velocity) const;
+  /// Dense output: the state at a time t of the last step, [t − h, t], from the BDF
+  /// interpolation polynomial through the last k+1 points (k the step's order), each of
+  /// q, v, a (n) interpolated on its own values; λ (model_m()) linearly between the last
+  /// two steps. Any argument may be null.
+  void interpolate(double t, double* q, double* v, double* a, double* lambda) const;
+  /// Names of the redundant constraint equations switched off ("joints[5] 'P5' equation 4").
+  std::vector<std::string> removed_equations() const;
+  /// Conditions the user should know about (energy drift beyond energy_tolerance, ...).
+  std::vector<std::string> warnings() const;
+  /// Whether the model is conservative (energy monitored).
+  bool conservative() const { return conservative_; }
+  Formulation formulation() const { return sys_.formulation(); }
   const IntegratorStats& stats() const { return stats_; }
   NewtonSystem& system() { return sys_; }
   const IntegratorOptions& options() const { return opts_; }
@@ -132,7 +186,23 @@ class Integrator {
   };
   std::unique_ptr<LinearSolver> new_solver() const;
   void repartition(double t, const double* q);
+  void use_stabilized(const char* why);
+  void find_redundant(const double* q, double t, bool initial);
+  void check_removed(const double* q, const double* v, double t, bool initial);
+  void partition_check(StepInfo& info);
+  void initial_positions();
+  void report_initial_change(const std::vector<double>& given, const std::vector<double>& now,
+                             const char* what, const char* unit);
+  std::vector<double> solve_partitioned(const SparseRows& rows, const std::vector<double>& b,
+                                        const char* what) const;
+  std::vector<double> solve_once(const SparseMatrix& k, const std::vector<double>& b,
+                                 const char* what) const;
   bool try_step(double h, StepInfo& info);
+  void predict(double h, BdfTerms& bdf);
+  int newton(double h, StepInfo& info, const BdfTerms& bdf);
+  bool constraints_hold(const double* q, const double* v, double t) const;
+  void newton_tolerances(double* atol, double* rtol) const;
+  bool energy_ok(double h, int p, const double* q, const double* v, double t);
   void analyze(const BdfTerms& bdf, double t);
   void factorize(StepInfo& info, const BdfTerms& bdf, double t);
   void choose_order(double h, int p, double tn, const double* xq, const double* xv, double est);
@@ -150,10 +220,18 @@ class Integrator {
   double factor_beta_ = 0;
   bool slow_last_step_ = false;
   double t_ = 0, h_ = 0;
-  std::vector<double> q_, v_, a_, lambda_;
+  std::vector<double> q_, v_, a_, lambda_, lambda_prev_;
   std::deque<Point> history_;
+  int last_order_ = 1;          // order of the last accepted step (dense output)
+  bool ramp_repeat_ = false;    // fixed step, orders 1–2: the second step repeats the first
+  bool energy_reject_ = false;  // the last rejection was for the energy change
+  bool accept_jump_ = false;    // take the step despite the error test, then restart
+  double reject_measure_ = 0;   // error estimate (or energy change / budget) of a rejection
+  bool conservative_ = false;
+  std::vector<std::string> initial_warnings_;  // changes made by the initial analyses
+  double energy0_ = 0, energy_last_ = 0;
   IntegratorStats stats_;
-  std::vector<double> x_, res_, dx_, rhs_, zeta1_, zeta2_, qpred_, vpred_;
+  std::vector<double> x_, res_, dx_, rhs_, zeta1_, zeta2_, qpred_, vpred_, lambda_step_;
   index_t step_ = 0;
   // Jacobian values the solver's analysis and its current factor come from (restart)
   std::vector<double> analysis_values_, factor_values_;

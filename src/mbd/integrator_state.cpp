@@ -8,6 +8,7 @@
 // analysis (strata's factorization is deterministic for a fixed thread count:
 // docs/reliability.md, "Determinism"). Timing statistics are restored too (so that the
 // summary adds up) but are of course not reproducible.
+#include <algorithm>
 #include <string>
 
 #include "mbd/integrator.hpp"
@@ -30,6 +31,14 @@ json stats_to_json(const IntegratorStats& s) {
           {"contact_updates", s.contact_updates},
           {"error_rejections", s.error_rejections},
           {"perturbed_pivots", s.perturbed_pivots},
+          {"residual_rejections", s.residual_rejections},
+          {"energy_rejections", s.energy_rejections},
+          {"stabilized_steps", s.stabilized_steps},
+          {"stabilized_since", s.stabilized_since},
+          {"redundancy_checks", s.redundancy_checks},
+          {"restarts", s.restarts},
+          {"energy_drift", s.energy_drift},
+          {"energy_scale", s.energy_scale},
           {"factor_seconds", s.factor_seconds},
           {"solve_seconds", s.solve_seconds},
           {"assembly_seconds", s.assembly_seconds},
@@ -56,6 +65,14 @@ IntegratorStats stats_from_json(const json& j) {
   j.at("contact_updates").get_to(s.contact_updates);
   j.at("error_rejections").get_to(s.error_rejections);
   j.at("perturbed_pivots").get_to(s.perturbed_pivots);
+  j.at("residual_rejections").get_to(s.residual_rejections);
+  j.at("energy_rejections").get_to(s.energy_rejections);
+  j.at("stabilized_steps").get_to(s.stabilized_steps);
+  j.at("stabilized_since").get_to(s.stabilized_since);
+  j.at("redundancy_checks").get_to(s.redundancy_checks);
+  j.at("restarts").get_to(s.restarts);
+  j.at("energy_drift").get_to(s.energy_drift);
+  j.at("energy_scale").get_to(s.energy_scale);
   j.at("factor_seconds").get_to(s.factor_seconds);
   j.at("solve_seconds").get_to(s.solve_seconds);
   j.at("assembly_seconds").get_to(s.assembly_seconds);
@@ -82,8 +99,18 @@ json Integrator::save_state() const {
   json hist = json::array();
   for (const Point& p : history_) hist.push_back({{"t", p.t}, {"q", p.q}, {"v", p.v}, {"a", p.a}});
   std::vector<int> cand(sys_.candidates().begin(), sys_.candidates().end());
+  std::vector<int> active(sys_.active_rows().begin(), sys_.active_rows().end());
   return {{"n", sys_.n()},
-          {"m", sys_.m()},
+          {"m", sys_.model_m()},
+          {"active_rows", active},
+          {"stabilized", sys_.formulation() == Formulation::stabilized},
+          {"lambda_prev", lambda_prev_},
+          {"last_order", last_order_},
+          {"ramp_repeat", ramp_repeat_},
+          {"conservative", conservative_},
+          {"energy0", energy0_},
+          {"energy_last", energy_last_},
+          {"initial_warnings", initial_warnings_},
           {"t", t_},
           {"h", h_},
           {"step", step_},
@@ -112,12 +139,27 @@ json Integrator::save_state() const {
 }
 
 void Integrator::restore_state(const json& j) {
-  const index_t n = sys_.n(), m = sys_.m();
-  if (j.at("n").get<index_t>() != n || j.at("m").get<index_t>() != m)
+  const index_t n = sys_.n(), mm = sys_.model_m();
+  if (j.at("n").get<index_t>() != n || j.at("m").get<index_t>() != mm)
     throw InvalidInput("checkpoint: it was written for a model with n = " + j.at("n").dump() +
                        " coordinates and m = " + j.at("m").dump() +
                        " constraint equations; this model has " + std::to_string(n) + " and " +
-                       std::to_string(m));
+                       std::to_string(mm));
+  const auto active = j.at("active_rows").get<std::vector<int>>();
+  if (active.size() != static_cast<std::size_t>(mm))
+    throw InvalidInput("checkpoint: the active constraint rows do not fit the model");
+  sys_.set_active_rows(std::vector<char>(active.begin(), active.end()));
+  const index_t m = sys_.m();
+  if (j.at("stabilized").get<bool>()) sys_.set_formulation(Formulation::stabilized);
+  j.at("lambda_prev").get_to(lambda_prev_);
+  j.at("last_order").get_to(last_order_);
+  j.at("ramp_repeat").get_to(ramp_repeat_);
+  j.at("conservative").get_to(conservative_);
+  j.at("energy0").get_to(energy0_);
+  j.at("energy_last").get_to(energy_last_);
+  j.at("initial_warnings").get_to(initial_warnings_);
+  energy_reject_ = false;
+  accept_jump_ = false;
   j.at("t").get_to(t_);
   j.at("h").get_to(h_);
   j.at("step").get_to(step_);
@@ -139,6 +181,7 @@ void Integrator::restore_state(const json& j) {
   expect_size(v_, n, "v");
   expect_size(a_, n, "a");
   expect_size(lambda_, m, "lambda");
+  expect_size(lambda_prev_, m, "lambda_prev");
   history_.clear();
   for (const json& p : j.at("history")) {
     Point pt;
@@ -178,6 +221,35 @@ void Integrator::restore_state(const json& j) {
     }
   } else {
     factor_valid_ = false;
+  }
+}
+
+void Integrator::interpolate(double t, double* q, double* v, double* a, double* lambda) const {
+  const index_t n = sys_.n();
+  const int np = std::min<int>(last_order_ + 1, static_cast<int>(history_.size()));
+  std::vector<double> w(np, 1.0);  // Lagrange weights of the last np points at t
+  for (int j = 0; j < np; ++j)
+    for (int k = 0; k < np; ++k)
+      if (k != j) w[j] *= (t - history_[k].t) / (history_[j].t - history_[k].t);
+  auto mix = [&](double* out, std::vector<double> Point::*field) {
+    if (!out) return;
+    std::fill(out, out + n, 0.0);
+    for (int j = 0; j < np; ++j) {
+      const std::vector<double>& y = history_[j].*field;
+      for (index_t i = 0; i < n; ++i) out[i] += w[j] * y[i];
+    }
+  };
+  mix(q, &Point::q);
+  mix(v, &Point::v);
+  mix(a, &Point::a);
+  if (lambda) {
+    const std::vector<double> now = model_lambda();
+    std::vector<double> before(now.size(), 0.0);
+    if (lambda_prev_.size() == lambda_.size())
+      for (index_t r = 0; r < sys_.m(); ++r) before[sys_.model_row(r)] = lambda_prev_[r];
+    const double t0 = history_.size() > 1 ? history_[1].t : t_;
+    const double s = t_ > t0 ? (t - t0) / (t_ - t0) : 1.0;
+    for (std::size_t k = 0; k < now.size(); ++k) lambda[k] = before[k] + s * (now[k] - before[k]);
   }
 }
 

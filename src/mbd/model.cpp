@@ -1,12 +1,60 @@
 // strata::mbd — model bookkeeping: coordinates of bodies, element binding.
 #include "mbd/model.hpp"
 
+#include <cmath>
+
 namespace strata::mbd {
 
 index_t Model::n_constraints() const {
   index_t m = 0;
   for (const auto& c : constraints) m += c->rows;
   return m;
+}
+
+bool Model::conservative() const {
+  for (const auto& f : forces)
+    if (!f->conservative) return false;
+  for (const auto& c : constraints)
+    if (c->rheonomic) return false;
+  return true;
+}
+
+Vec3<double> Model::point_position(int k, const Vec3<double>& s, const double* q) const {
+  const Body& b = bodies[k];
+  if (b.kind == BodyKind::planar) {
+    const double x = b.offset >= 0 ? q[b.offset] : b.pose.r[0];
+    const double y = b.offset >= 0 ? q[b.offset + 1] : b.pose.r[1];
+    const double phi = b.offset >= 0 ? q[b.offset + 2] : b.pose.phi;
+    const double c = std::cos(phi), sn = std::sin(phi);
+    return {{x + c * s[0] - sn * s[1], y + sn * s[0] + c * s[1], 0.0}};
+  }
+  if (b.offset < 0) return b.pose.r + rot3(b.pose.p) * s;
+  const Vec3<double> r{{q[b.offset], q[b.offset + 1], q[b.offset + 2]}};
+  if (b.kind == BodyKind::node) return r;
+  const Vec4<double> p{{q[b.offset + 3], q[b.offset + 4], q[b.offset + 5], q[b.offset + 6]}};
+  return r + rot3(p) * s;
+}
+
+double Model::reference_error(const double* q, std::string* what) const {
+  double worst = 0;
+  for (const auto& p : reference.points) {
+    const Vec3<double> x = point_position(p.body, p.point, q);
+    double d2 = 0;
+    for (std::size_t i = 0; i < p.position.size(); ++i)
+      d2 += (x[i] - p.position[i]) * (x[i] - p.position[i]);
+    if (std::sqrt(d2) >= worst) {
+      worst = std::sqrt(d2);
+      if (what) *what = p.name;
+    }
+  }
+  for (std::size_t k = 0; k < reference.coordinates.size(); ++k) {
+    const auto& [i, v] = reference.coordinates[k];
+    if (std::abs(q[i] - v) >= worst) {
+      worst = std::abs(q[i] - v);
+      if (what) *what = reference.coordinate_names[k];
+    }
+  }
+  return worst;
 }
 
 int Model::find_body(const std::string& name) const {

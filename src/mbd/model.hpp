@@ -35,6 +35,14 @@ struct TimeFunction {
   double rate = 0, ramp_time = 1;  ///< smooth_ramp: slope `rate` reached at ramp_time (C²)
 
   static TimeFunction constant(double c) { return TimeFunction{Kind::polynomial, {c}}; }
+  /// Identically zero (the default of actuators).
+  bool is_zero() const {
+    if (kind == Kind::harmonic) return amplitude == 0 && offset == 0;
+    if (kind == Kind::smooth_ramp) return rate == 0 && offset == 0;
+    for (double c : coefficients)
+      if (c != 0) return false;
+    return true;
+  }
 
   template <class T>
   T operator()(const T& t) const {
@@ -81,6 +89,23 @@ struct FlexMesh {
   std::vector<std::array<int, 8>> hexahedra;  ///< local node numbers (VTK order)
 };
 
+/// A reference solution the model file carries ("reference" object): values of points and
+/// coordinates at one time, and how close a run should come (docs/model-format.md).
+struct ReferenceSolution {
+  double time = -1;  ///< s; < 0: the model has no reference
+  double tolerance = 1e-3;
+  std::string source;  ///< where the values come from (free text)
+  struct PointValue {
+    int body = 0;                  ///< body index
+    Vec3<double> point{};          ///< body coordinates (m)
+    std::vector<double> position;  ///< global position expected (2 or 3 numbers, m)
+    std::string name;              ///< "points[0] (crank0)" for messages
+  };
+  std::vector<PointValue> points;
+  std::vector<std::pair<index_t, double>> coordinates;  ///< (coordinate index, value)
+  std::vector<std::string> coordinate_names;
+};
+
 /// The model of a mechanical system: what the integrator needs.
 struct Model {
   std::string name;
@@ -99,11 +124,20 @@ struct Model {
   int order = 2;
   double output_interval = 0;  ///< s between rows of the large CSV files (0: every step)
   double newton_rtol = 0, newton_atol = 0;  ///< Newton tolerances (0: the integrator's)
+  ReferenceSolution reference;              ///< optional reference values (time < 0: none)
 
   /// Total number of constraint equations m.
   index_t n_constraints() const;
+  /// Every force is conservative and no constraint depends on time: the total energy
+  /// (kinetic + potential) of the exact motion is constant.
+  bool conservative() const;
   /// Index of a body by name, or -1.
   int find_body(const std::string& name) const;
+  /// Global position of the point s (body coordinates; planar: z ignored) of body k at q.
+  Vec3<double> point_position(int k, const Vec3<double>& s, const double* q) const;
+  /// Largest deviation from the reference values (m for points, the coordinate's unit for
+  /// coordinates) of the state q at reference.time; "what" names the worst entry.
+  double reference_error(const double* q, std::string* what = nullptr) const;
   /// Adds a body and assigns its coordinates; returns its index.
   int add_body(Body b);
   /// Per-coordinate names ("crank.x", "link3.e2", "beam.n17.z"), for output headers.

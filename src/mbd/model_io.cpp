@@ -5,6 +5,7 @@
 
 #include <fmt/core.h>
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <set>
@@ -129,7 +130,7 @@ class Reader {
     const Node& r = root_;
     if (!r.j.is_object()) throw ModelError("the model must be a JSON object");
     r.keys({"name", "type", "gravity", "simulation", "bodies", "joints", "forces",
-            "flexible_bodies", "description"});
+            "flexible_bodies", "description", "reference"});
     m_.name = r.string("name", "model");
     const std::string type = r.string("type", "spatial");
     if (type != "planar" && type != "spatial")
@@ -184,6 +185,7 @@ class Reader {
       for (std::size_t i = 0; i < fs.size(); ++i) force(fs.at(i));
     }
     for (const auto& [path, attach] : attachments_) attachment(path, attach);
+    if (r.has("reference")) reference(r.at("reference"));
     if (m_.n == 0) throw ModelError("the model has no moving bodies");
     return std::move(m_);
   }
@@ -397,6 +399,7 @@ class Reader {
     s.body_i = body_ref(n.at("body_i"));
     s.body_j = body_ref(n.at("body_j"));
     frames(n, s.body_i, s.body_j, s.fi, s.fj, s.type == JointType::universal);
+    check_geometry(n, s, type);
     if (s.type == JointType::rotation_driver || s.type == JointType::translation_driver)
       s.motion = time_function(n.at("motion"));
     else if (n.has("motion"))
@@ -423,6 +426,54 @@ class Reader {
     if (s.type != JointType::distance && n.has("length"))
       n.at("length").fail("only distance joints take a length");
     m_.constraints.push_back(make_joint(m_, s));
+  }
+
+  // The joint's equations must hold at the initial pose as given: points that should
+  // coincide do, axes that should be parallel are, a universal joint's pins are
+  // perpendicular (otherwise the position analysis would silently move the model).
+  void check_geometry(const Node& n, const JointSpec& s, const std::string& type) const {
+    const Vec3<double> pi = to_global(s.body_i, s.fi.s), pj = to_global(s.body_j, s.fj.s);
+    const Vec3<double> d = pj - pi;
+    double scale = 1;  // m: the size of the model around the joint
+    for (int k : {s.body_i, s.body_j}) scale = std::max(scale, norm(origin(k)));
+    const double tol = 1e-6 * scale;
+    const bool point = s.type == JointType::revolute || s.type == JointType::spherical ||
+                       s.type == JointType::universal || s.type == JointType::fixed;
+    const bool line = s.type == JointType::cylindrical || s.type == JointType::translational;
+    if (point && norm(d) > tol)
+      throw ModelError(s.name + ": " +
+                       fmt::format("point_i and point_j are {:.6g} m apart at the initial pose; a "
+                                   "{} joint needs them to "
+                                   "coincide (give one \"point\", or fix the body poses)",
+                                   norm(d), type));
+    if (m_.planar) return;
+    const Vec3<double> zi = rotation(s.body_i) * s.fi.z, zj = rotation(s.body_j) * s.fj.z;
+    if (line) {
+      const Vec3<double> off = d - zi * dot(d, zi);
+      if (norm(off) > tol)
+        throw ModelError(s.name + ": " +
+                         fmt::format("point_j lies {:.6g} m off the joint axis through point_i at "
+                                     "the initial pose; a {} "
+                                     "joint needs it on the axis",
+                                     norm(off), type));
+    }
+    const bool parallel = s.type == JointType::revolute || s.type == JointType::cylindrical ||
+                          s.type == JointType::translational;
+    const double deg = 180 / std::acos(-1.0);
+    if (parallel && norm(cross(zi, zj)) > 1e-6)
+      throw ModelError(
+          s.name + ": " +
+          fmt::format(
+              "axis_i and axis_j are {:.6g} deg apart at the initial pose; a {} joint needs them "
+              "parallel (give one \"axis\")",
+              std::asin(std::min(1.0, norm(cross(zi, zj)))) * deg, type));
+    if (s.type == JointType::universal && std::abs(dot(zi, zj)) > 1e-6)
+      throw ModelError(
+          s.name + ": " +
+          fmt::format(
+              "the pins axis_i and axis_j make {:.6g} deg at the initial pose; a universal joint "
+              "needs perpendicular pins",
+              std::acos(std::clamp(dot(zi, zj), -1.0, 1.0)) * deg));
   }
 
   void force(const Node& n) {
@@ -634,6 +685,48 @@ class Reader {
       m_.constraints.push_back(
           make_node_attachment(m_, nb, k, s, path + " node " + std::to_string(nd)));
     }
+  }
+
+  // "reference": {"time": T, "tolerance": e, "source": "...", "points": [{"body": B,
+  // "point": [..] (body coordinates), "position": [..] (global)}], "coordinates":
+  // {"crank.phi": value}}
+  void reference(const Node& n) {
+    n.keys({"time", "tolerance", "source", "points", "coordinates"});
+    ReferenceSolution& ref = m_.reference;
+    ref.time = n.at("time").number();
+    if (ref.time < 0) n.at("time").fail("must not be negative");
+    ref.tolerance = n.has("tolerance") ? n.positive("tolerance") : 1e-3;
+    ref.source = n.string("source", "");
+    if (n.has("points")) {
+      const Node ps = n.at("points");
+      if (!ps.j.is_array()) ps.fail("expected an array of {body, point, position}");
+      for (std::size_t i = 0; i < ps.size(); ++i) {
+        const Node p = ps.at(i);
+        p.keys({"body", "point", "position"});
+        ReferenceSolution::PointValue v;
+        v.body = body_ref(p.at("body"));
+        if (m_.bodies[v.body].offset < 0) p.at("body").fail("names a body that does not move");
+        v.point = p.has("point") ? p.at("point").vec(dim_) : Vec3<double>{};
+        const Vec3<double> x = p.at("position").vec(dim_);
+        v.position.assign(x.x.begin(), x.x.begin() + dim_);
+        v.name = p.path + " (" + m_.bodies[v.body].name + ")";
+        ref.points.push_back(v);
+      }
+    }
+    if (n.has("coordinates")) {
+      const Node cs = n.at("coordinates");
+      if (!cs.j.is_object()) cs.fail("expected an object {\"body.coordinate\": value}");
+      const std::vector<std::string> names = m_.coordinate_names();
+      for (const auto& [key, value] : cs.j.items()) {
+        const auto it = std::find(names.begin(), names.end(), key);
+        const Node c{value, cs.path + "." + key};
+        if (it == names.end()) c.fail("unknown coordinate (e.g. \"crank.phi\", \"link.e0\")");
+        ref.coordinates.emplace_back(it - names.begin(), c.number());
+        ref.coordinate_names.push_back(key);
+      }
+    }
+    if (ref.points.empty() && ref.coordinates.empty())
+      n.fail("needs \"points\" or \"coordinates\"");
   }
 
   Node root_;

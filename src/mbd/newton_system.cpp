@@ -51,18 +51,59 @@ SparseMatrix from_triplets(index_t n_rows, index_t n_cols, const std::vector<ind
 
 NewtonSystem::NewtonSystem(const Model& model)
     : model_(model), n_(model.n), candidate_(model.forces.size(), 1) {
+  index_t rows = 0;
   for (const auto& c : model.constraints) {
-    row0_.push_back(m_);
-    m_ += c->rows;
+    row0_.push_back(rows);
+    rows += c->rows;
+  }
+  active_.assign(rows, 1);
+  m_ = rows;
+  model_row_.resize(rows);
+  active_index_.resize(rows);
+  for (index_t k = 0; k < rows; ++k) model_row_[k] = active_index_[k] = k;
+  // mass scale of each constraint's coordinates (the regularisation of the stabilized
+  // formulation is relative to Φ_q M⁻¹ Φ_qᵀ): mean positive diagonal of ∂g/∂a at q0
+  std::vector<double> diag(n_, 0.0);
+  std::vector<index_t> ri, ci;
+  std::vector<double> vals;
+  const std::vector<double> zero(n_, 0.0);
+  mass_triplets(model.q0.data(), zero.data(), 0.0, ri, ci, vals);
+  for (std::size_t k = 0; k < ri.size(); ++k)
+    if (ri[k] == ci[k]) diag[ri[k]] += vals[k];
+  for (const auto& c : model.constraints) {
+    double s = 0;
+    int count = 0;
+    for (index_t i : c->dofs)
+      if (diag[i] > 0) s += diag[i], ++count;
+    mass_scale_.push_back(count ? s / count : 1.0);
   }
 }
 
-std::string NewtonSystem::row_name(index_t r) const {
-  const auto it = std::upper_bound(row0_.begin(), row0_.end(), r) - 1;
+std::string NewtonSystem::model_row_name(index_t k) const {
+  const auto it = std::upper_bound(row0_.begin(), row0_.end(), k) - 1;
   const std::size_t e = it - row0_.begin();
   const auto& c = model_.constraints[e];
   if (c->rows == 1) return c->name;
-  return c->name + " equation " + std::to_string(r - *it);
+  return c->name + " equation " + std::to_string(k - *it);
+}
+
+void NewtonSystem::set_formulation(Formulation f) {
+  formulation_ = f;
+  rebuild_pattern();
+}
+
+void NewtonSystem::set_active_rows(const std::vector<char>& active) {
+  if (active.size() != active_.size())
+    throw std::logic_error("NewtonSystem::set_active_rows: wrong size");
+  active_ = active;
+  model_row_.clear();
+  for (index_t k = 0; k < model_m(); ++k) {
+    active_index_[k] = active_[k] ? static_cast<index_t>(model_row_.size()) : -1;
+    if (active_[k]) model_row_.push_back(k);
+  }
+  m_ = static_cast<index_t>(model_row_.size());
+  independent_.clear();
+  jac_ = SparseMatrix{};
 }
 
 void NewtonSystem::gather(const std::vector<index_t>& dofs, const double* src,
@@ -121,9 +162,17 @@ index_t NewtonSystem::active_forces() const {
 
 void NewtonSystem::rebuild_pattern() {
   const index_t n = n_, m = m_, N = size();
-  const index_t A = 0, V = n, Q = 2 * n, L = 3 * n;                  // column blocks
-  const index_t RA = n, RV = n + m, RP = n + 2 * m, RU = n + 3 * m;  // row blocks
-  const index_t ni = static_cast<index_t>(independent_.size());
+  const bool stab = formulation_ == Formulation::stabilized;
+  const index_t A = 0, V = n, Q = 2 * n, L = 3 * n, NU = 3 * n + m;  // column blocks
+  // row blocks; the stabilized formulation has no acceleration constraints
+  const index_t RA = n, RV = stab ? n : n + m, RP = RV + m, RU = RP + m;
+  // BDF rows: the independent coordinates (partitioned) or all (stabilized)
+  std::vector<index_t> bdf_coords = independent_;
+  if (stab) {
+    bdf_coords.resize(n);
+    for (index_t i = 0; i < n; ++i) bdf_coords[i] = i;
+  }
+  const index_t nb = static_cast<index_t>(bdf_coords.size());
   PatternBuilder pb(N, N);
   // Enumerates every block: mode 0 collects, mode 1 records positions.
   auto visit = [&](int mode) {
@@ -149,25 +198,42 @@ void NewtonSystem::rebuild_pattern() {
       ConstraintPos& cp = cpos_[e];
       const index_t r0 = row0_[e];
       for (index_t i : c.dofs)
-        for (index_t j : c.dofs) put(i, Q + j, &cp.hq);
-      for (index_t i : c.dofs)
-        for (int r = 0; r < c.rows; ++r) put(i, L + r0 + r, &cp.fl);
-      for (int r = 0; r < c.rows; ++r)
         for (index_t j : c.dofs) {
-          put(RA + r0 + r, A + j, &cp.aa);
-          put(RA + r0 + r, V + j, &cp.av);
-          put(RA + r0 + r, Q + j, &cp.aq);
-          put(RV + r0 + r, V + j, &cp.vv);
-          put(RV + r0 + r, Q + j, &cp.vq);
-          put(RP + r0 + r, Q + j, &cp.pq);
+          put(i, Q + j, &cp.hq);
+          if (stab) put(RU + n + i, Q + j, &cp.nuq);
         }
+      for (index_t i : c.dofs)
+        for (int r = 0; r < c.rows; ++r) {
+          const index_t k = active_index_[r0 + r];
+          if (k < 0) continue;
+          put(i, L + k, &cp.fl);
+          if (stab) put(RU + n + i, NU + k, &cp.nu);
+        }
+      for (int r = 0; r < c.rows; ++r) {
+        const index_t k = active_index_[r0 + r];
+        if (k < 0) continue;
+        for (index_t j : c.dofs) {
+          if (!stab) {
+            put(RA + k, A + j, &cp.aa);
+            put(RA + k, V + j, &cp.av);
+            put(RA + k, Q + j, &cp.aq);
+          }
+          put(RV + k, V + j, &cp.vv);
+          put(RV + k, Q + j, &cp.vq);
+          put(RP + k, Q + j, &cp.pq);
+        }
+        if (stab) {
+          put(RV + k, L + k, &cp.reg);
+          put(RP + k, NU + k, &cp.reg);
+        }
+      }
     }
-    for (index_t k = 0; k < ni; ++k) {
-      const index_t j = independent_[k];
+    for (index_t k = 0; k < nb; ++k) {
+      const index_t j = bdf_coords[k];
       put(RU + k, A + j, &upos_);
       put(RU + k, V + j, &upos_);
-      put(RU + ni + k, V + j, &upos_);
-      put(RU + ni + k, Q + j, &upos_);
+      put(RU + nb + k, V + j, &upos_);
+      put(RU + nb + k, Q + j, &upos_);
     }
   };
   fpos_.assign(model_.forces.size(), {});
@@ -181,8 +247,13 @@ void NewtonSystem::rebuild_pattern() {
 void NewtonSystem::evaluate(const double* x, double t, const BdfTerms& bdf, bool jacobian,
                             double* h, bool skip_intermittent) {
   const index_t n = n_, m = m_;
+  const bool stab = formulation_ == Formulation::stabilized;
   const double *a = x, *v = x + n, *q = x + 2 * n, *lam = x + 3 * n;
-  double *hf = h, *ha = h + n, *hv = h + n + m, *hp = h + n + 2 * m, *hu = h + n + 3 * m;
+  const double* nu = stab ? x + 3 * n + m : nullptr;
+  double* hf = h;
+  double* ha = stab ? nullptr : h + n;  // the stabilized formulation has no Φ̈ rows
+  double* hv = stab ? h + n : h + n + m;
+  double *hp = hv + m, *hu = hp + m;
   std::fill(h, h + size(), 0.0);
   double* J = jac_.values.data();
   if (jacobian) std::fill(jac_.values.begin(), jac_.values.end(), 0.0);
@@ -212,11 +283,17 @@ void NewtonSystem::evaluate(const double* x, double t, const BdfTerms& bdf, bool
     }
   };
   auto constraints = [&](std::size_t begin, std::size_t end) {
-    std::vector<double> lq, lv, la, hess;
+    std::vector<double> lq, lv, la, hess, llam, lnu, eps_p, eps_a;
+    std::vector<index_t> act;
     ConstraintEval ce;
     for (std::size_t e = begin; e < end; ++e) {
       const Constraint& c = *model_.constraints[e];
       const index_t r0 = row0_[e];
+      const int nr = c.rows;
+      act.resize(nr);
+      bool any = false;
+      for (int r = 0; r < nr; ++r) any |= (act[r] = active_index_[r0 + r]) >= 0;
+      if (!any) continue;
       gather(c.dofs, q, lq);
       gather(c.dofs, v, lv);
       gather(c.dofs, a, la);
@@ -226,32 +303,79 @@ void NewtonSystem::evaluate(const double* x, double t, const BdfTerms& bdf, bool
       else
         c.evaluate_gradient(lq.data(), lv.data(), la.data(), t, ce);
       const std::size_t nz = c.dofs.size();
-      const int nr = c.rows;
+      llam.assign(nr, 0.0);
+      lnu.assign(nr, 0.0);
       for (int r = 0; r < nr; ++r) {
-        ha[r0 + r] = ce.phidd[r];
-        hv[r0 + r] = ce.phid[r];
-        hp[r0 + r] = ce.phi[r];
+        const index_t k = act[r];
+        if (k < 0) continue;
+        llam[r] = lam[k];
+        if (stab) lnu[r] = nu[k];
+        if (!stab) ha[k] = ce.phidd[r];
+        hv[k] = ce.phid[r];
+        hp[k] = ce.phi[r];
       }
       for (std::size_t i = 0; i < nz; ++i) {
-        double s = 0;
-        for (int r = 0; r < nr; ++r) s += ce.jq[r * nz + i] * lam[r0 + r];
+        double s = 0, snu = 0;
+        for (int r = 0; r < nr; ++r) {
+          if (act[r] < 0) continue;
+          s += ce.jq[r * nz + i] * lam[act[r]];
+          if (stab) snu += ce.jq[r * nz + i] * nu[act[r]];
+        }
         add(hf[c.dofs[i]], s);
+        if (stab) add(hu[n + c.dofs[i]], bdf.beta * snu);
       }
+      // regularisation of the stabilized formulation (rows owned by this element)
+      eps_p.assign(nr, 0.0);
+      eps_a.assign(nr, 0.0);
+      if (stab)
+        for (int r = 0; r < nr; ++r) {
+          const index_t k = act[r];
+          if (k < 0) continue;
+          double w = 0;
+          for (std::size_t i = 0; i < nz; ++i) w += ce.jq[r * nz + i] * ce.jq[r * nz + i];
+          eps_p[r] = bdf.regularization * bdf.beta * w;
+          eps_a[r] = bdf.regularization * bdf.beta * w / mass_scale_[e];
+          const double lam_prev = bdf.lambda_prev ? bdf.lambda_prev[k] : 0.0;
+          hv[k] -= eps_a[r] * (lam[k] - lam_prev);
+          hp[k] -= eps_p[r] * nu[k];
+        }
       if (!jacobian) continue;
       const ConstraintPos& cp = cpos_[e];
       hess.resize(nz * nz);
-      c.hessian(lq.data(), t, lam + r0, hess.data());
+      c.hessian(lq.data(), t, llam.data(), hess.data());
       for (std::size_t k = 0; k < nz * nz; ++k) add(J[cp.hq[k]], hess[k]);
-      // the constraint's own rows and multiplier column: no other element writes there
+      if (stab) {  // β(Φ_qᵀν)_q: ν is small except near singular configurations
+        c.hessian(lq.data(), t, lnu.data(), hess.data());
+        for (std::size_t k = 0; k < nz * nz; ++k) add(J[cp.nuq[k]], bdf.beta * hess[k]);
+      }
+      // the constraint's own rows and multiplier columns: no other element writes there
+      std::size_t p = 0;
       for (std::size_t i = 0; i < nz; ++i)
-        for (int r = 0; r < nr; ++r) J[cp.fl[i * nr + r]] += ce.jq[r * nz + i];
-      for (std::size_t k = 0; k < nr * nz; ++k) {
-        J[cp.aa[k]] += ce.jq[k];
-        J[cp.av[k]] += 2 * ce.jvq[k];
-        J[cp.aq[k]] += ce.jaq[k];
-        J[cp.vv[k]] += ce.jq[k];
-        J[cp.vq[k]] += ce.jvq[k];
-        J[cp.pq[k]] += ce.jq[k];
+        for (int r = 0; r < nr; ++r) {
+          if (act[r] < 0) continue;
+          J[cp.fl[p]] += ce.jq[r * nz + i];
+          if (stab) J[cp.nu[p]] += bdf.beta * ce.jq[r * nz + i];
+          ++p;
+        }
+      p = 0;
+      std::size_t preg = 0;
+      for (int r = 0; r < nr; ++r) {
+        if (act[r] < 0) continue;
+        for (std::size_t i = 0; i < nz; ++i, ++p) {
+          const std::size_t k = r * nz + i;
+          if (!stab) {
+            J[cp.aa[p]] += ce.jq[k];
+            J[cp.av[p]] += 2 * ce.jvq[k];
+            J[cp.aq[p]] += ce.jaq[k];
+          }
+          J[cp.vv[p]] += ce.jq[k];
+          J[cp.vq[p]] += ce.jvq[k];
+          J[cp.pq[p]] += ce.jq[k];
+        }
+        if (stab) {
+          J[cp.reg[preg++]] -= eps_a[r];
+          J[cp.reg[preg++]] -= eps_p[r];
+        }
       }
     }
   };
@@ -269,11 +393,20 @@ void NewtonSystem::evaluate(const double* x, double t, const BdfTerms& bdf, bool
                         [&](const auto& r) { constraints(r.begin(), r.end()); });
     });
   }
-  const index_t ni = static_cast<index_t>(independent_.size());
-  for (index_t k = 0; k < ni; ++k) {
-    const index_t j = independent_[k];
-    hu[k] = bdf.beta * a[j] - v[j] - bdf.zeta1[j];
-    hu[ni + k] = bdf.beta * v[j] - q[j] - bdf.zeta2[j];
+  add_bdf_rows(a, v, q, bdf, jacobian, hu);
+}
+
+// The BDF relations β a − v − ζ₁ and β v − q − ζ₂ of the independent coordinates
+// (partitioned) or of every coordinate (stabilized), added to hu and the Jacobian.
+void NewtonSystem::add_bdf_rows(const double* a, const double* v, const double* q,
+                                const BdfTerms& bdf, bool jacobian, double* hu) {
+  const bool stab = formulation_ == Formulation::stabilized;
+  const index_t nb = stab ? n_ : static_cast<index_t>(independent_.size());
+  double* J = jac_.values.data();
+  for (index_t k = 0; k < nb; ++k) {
+    const index_t j = stab ? k : independent_[k];
+    hu[k] += bdf.beta * a[j] - v[j] - bdf.zeta1[j];
+    hu[nb + k] += bdf.beta * v[j] - q[j] - bdf.zeta2[j];
     if (!jacobian) continue;
     J[upos_[4 * k]] += bdf.beta;
     J[upos_[4 * k + 1]] += -1.0;
@@ -282,17 +415,23 @@ void NewtonSystem::evaluate(const double* x, double t, const BdfTerms& bdf, bool
   }
 }
 
-SparseRows NewtonSystem::constraint_jacobian(const double* q, double t) const {
+namespace {
+// Rows of Φ_q of the constraint elements; `keep(k)` for model row k.
+template <class Keep, class Gather>
+SparseRows jacobian_rows(const Model& model, index_t n, const double* q, double t, Keep keep,
+                         const std::vector<index_t>& row0, Gather gather) {
   SparseRows rows;
-  rows.n_cols = n_;
+  rows.n_cols = n;
   std::vector<double> lq, zero;
   ConstraintEval ce;
-  for (const auto& c : model_.constraints) {
+  for (std::size_t e = 0; e < model.constraints.size(); ++e) {
+    const auto& c = model.constraints[e];
     gather(c->dofs, q, lq);
     zero.assign(c->dofs.size(), 0.0);
     c->evaluate_gradient(lq.data(), zero.data(), zero.data(), t, ce);
     const std::size_t nz = c->dofs.size();
     for (int r = 0; r < c->rows; ++r) {
+      if (!keep(row0[e] + r)) continue;
       for (std::size_t i = 0; i < nz; ++i)
         if (ce.jq[r * nz + i] != 0.0) {
           rows.cols.push_back(c->dofs[i]);
@@ -302,6 +441,23 @@ SparseRows NewtonSystem::constraint_jacobian(const double* q, double t) const {
     }
   }
   return rows;
+}
+}  // namespace
+
+SparseRows NewtonSystem::constraint_jacobian(const double* q, double t) const {
+  return jacobian_rows(
+      model_, n_, q, t, [&](index_t k) { return active_[k] != 0; }, row0_,
+      [&](const std::vector<index_t>& d, const double* s, std::vector<double>& o) {
+        gather(d, s, o);
+      });
+}
+
+SparseRows NewtonSystem::model_constraint_jacobian(const double* q, double t) const {
+  return jacobian_rows(
+      model_, n_, q, t, [](index_t) { return true; }, row0_,
+      [&](const std::vector<index_t>& d, const double* s, std::vector<double>& o) {
+        gather(d, s, o);
+      });
 }
 
 void NewtonSystem::constraint_values(const double* q, const double* v, const double* a, double t,
@@ -315,9 +471,31 @@ void NewtonSystem::constraint_values(const double* q, const double* v, const dou
     gather(c->dofs, a, la);
     c->evaluate(lq.data(), lv.data(), la.data(), t, false, ce);
     for (int r = 0; r < c->rows; ++r) {
+      const index_t k = active_index_[row0_[e] + r];
+      if (k < 0) continue;
+      if (phi) phi[k] = ce.phi[r];
+      if (phid) phid[k] = ce.phid[r];
+      if (phidd) phidd[k] = ce.phidd[r];
+    }
+  }
+}
+
+void NewtonSystem::model_constraint_values(const double* q, const double* v, double t, double* phi,
+                                           double* phid) const {
+  std::vector<double> lq, lv, la;
+  ConstraintEval ce;
+  for (std::size_t e = 0; e < model_.constraints.size(); ++e) {
+    const auto& c = model_.constraints[e];
+    gather(c->dofs, q, lq);
+    la.assign(c->dofs.size(), 0.0);
+    if (v)
+      gather(c->dofs, v, lv);
+    else
+      lv = la;
+    c->evaluate(lq.data(), lv.data(), la.data(), t, false, ce);
+    for (int r = 0; r < c->rows; ++r) {
       if (phi) phi[row0_[e] + r] = ce.phi[r];
       if (phid) phid[row0_[e] + r] = ce.phid[r];
-      if (phidd) phidd[row0_[e] + r] = ce.phidd[r];
     }
   }
 }

@@ -1,6 +1,7 @@
 // strata::mbd — the residual H(x) and Jacobian H_x of one implicit BDF step.
 //
-// Unknowns x = [a; v; q; λ] (n, n, n, m). Residual (docs/formulation.md):
+// Two formulations (docs/formulation.md §4 and §5). Partitioned: unknowns
+// x = [a; v; q; λ] (n, n, n, m) and the residual
 //   F  = Σ g(q, v, a, t) + Φ_qᵀλ                    n   equations of motion
 //   Φ̈  = Φ_q a + (Φ_q v)_q v + 2Φ_qt v + Φ_tt         m   acceleration constraints
 //   Φ̇  = Φ_q v + Φ_t                                m   velocity constraints
@@ -8,10 +9,23 @@
 //   U₁ᵀ(β a − v − ζ₁)                               n−m BDF relation v ↔ a, independent coords
 //   U₂ᵀ(β v − q − ζ₂)                               n−m BDF relation q ↔ v, independent coords
 // with β = h/b₀ the BDF coefficient and ζ₁, ζ₂ the BDF history terms. U₁ = U₂ select the
-// independent coordinates of a coordinate partitioning (partition.hpp). H_x is a square
-// sparse matrix of order 3n + m; its pattern is built once per partition and every
-// evaluation only rewrites the values (element blocks are scattered through
-// precomputed positions).
+// independent coordinates of a coordinate partitioning (partition.hpp); H_x has order
+// 3n + m. Stabilized (used where no partition is well conditioned: singular
+// configurations): the stabilized index-2 formulation of Gear, Gupta & Leimkuhler (1985),
+// x = [a; v; q; λ; ν] (3n + 2m), BDF on every coordinate, the velocity constraints
+// determining λ and the position constraints the multiplier ν that projects the BDF
+// relation of q back onto them, with a small regularisation of the constraint rows:
+//   F as above;  Φ̇ − ε_v(λ − λ*);  Φ − ε_p ν                 (m each)
+//   β a − v − ζ₁;  β v − q − ζ₂ + β Φ_qᵀν                    (n each)
+// with ε_p = ε β |∇Φ_r|², ε_v = ε β |∇Φ_r|²/m̄ per row (m̄ the mean mass of the row's
+// coordinates, ε BdfTerms::regularization: the sizes of the Schur complements these
+// rows see) and λ* the multipliers of the previous step. No acceleration constraint is
+// imposed: near a singular configuration Φ̈ = 0 amplifies velocity errors by the inverse
+// of the vanishing singular value of Φ_q.
+// Constraint equations may be switched off (redundant equations removed for the run): m
+// counts the active ones. The pattern is built once per formulation, partition and
+// active set; every evaluation only rewrites the values (element blocks are scattered
+// through precomputed positions).
 #pragma once
 
 #include <vector>
@@ -40,19 +54,40 @@ class PatternBuilder {
   SparseMatrix a_;
 };
 
-/// The BDF relation of the current step: β = h/b₀ and the history terms ζ₁, ζ₂ (n each).
+/// The BDF relation of the current step: β = h/b₀ and the history terms ζ₁, ζ₂ (n each);
+/// for the stabilized formulation also the regularisation ε (dimensionless, see the file
+/// comment) and λ* (m, the previous step's multipliers; null: zero).
 struct BdfTerms {
   double beta = 1;
   const double* zeta1 = nullptr;
   const double* zeta2 = nullptr;
+  double regularization = 0;
+  const double* lambda_prev = nullptr;
 };
+
+/// How the BDF step is made square (see the file comment).
+enum class Formulation { partitioned, stabilized };
 
 class NewtonSystem {
  public:
   explicit NewtonSystem(const Model& model);
   index_t n() const { return n_; }
+  /// Active constraint equations.
   index_t m() const { return m_; }
-  index_t size() const { return 3 * n_ + m_; }
+  /// All constraint equations of the model (active or not).
+  index_t model_m() const { return static_cast<index_t>(active_.size()); }
+  /// 3n + m (partitioned) or 3n + 2m (stabilized).
+  index_t size() const { return 3 * n_ + (formulation_ == Formulation::stabilized ? 2 : 1) * m_; }
+  Formulation formulation() const { return formulation_; }
+  /// Switches the formulation and rebuilds the pattern.
+  void set_formulation(Formulation f);
+  /// Per model constraint row (model_m()): 1 active, 0 removed (a redundant equation).
+  /// Rebuilds the pattern; the partition must then be set again (m changed).
+  void set_active_rows(const std::vector<char>& active);
+  const std::vector<char>& active_rows() const { return active_; }
+  /// Model row of active row r, and the active index of model row k (−1: removed).
+  index_t model_row(index_t r) const { return model_row_[r]; }
+  index_t active_index(index_t k) const { return active_index_[k]; }
   /// Threads for the assembly (OpenMP); default 1.
   void set_threads(int threads) { threads_ = threads > 0 ? threads : 1; }
 
@@ -85,9 +120,14 @@ class NewtonSystem {
 
   /// Rows of Φ_q at (q, t) (m rows, n columns), for partitioning and initial conditions.
   SparseRows constraint_jacobian(const double* q, double t) const;
-  /// Φ, Φ̇, Φ̈ at (q, v, a, t) without Jacobians (each m).
+  /// Φ, Φ̇, Φ̈ at (q, v, a, t) without Jacobians (each m, active rows).
   void constraint_values(const double* q, const double* v, const double* a, double t, double* phi,
                          double* phid, double* phidd) const;
+  /// Φ, Φ̇ of every model row, active or not (each model_m()); v may be null (zero).
+  void model_constraint_values(const double* q, const double* v, double t, double* phi,
+                               double* phid) const;
+  /// Rows of Φ_q of every model row (model_m() rows), for the redundancy analysis.
+  SparseRows model_constraint_jacobian(const double* q, double t) const;
   /// Σ g(q, v, a, t) (n), and optionally the mass matrix ∂g/∂a as triplets.
   void force_values(const double* q, const double* v, const double* a, double t, double* g) const;
   /// ∂g/∂a entries (row, col, value), for the initial acceleration analysis.
@@ -95,17 +135,25 @@ class NewtonSystem {
                      std::vector<index_t>& cols, std::vector<double>& vals) const;
   /// Kinetic and potential energy at (q, v, t).
   void energy(const double* q, const double* v, double t, double* kinetic, double* potential) const;
-  /// "joints[3] 'J4' equation 2" for constraint row r.
-  std::string row_name(index_t r) const;
+  /// "joints[3] 'J4' equation 2" for active constraint row r.
+  std::string row_name(index_t r) const { return model_row_name(model_row_[r]); }
+  /// The same for model row k.
+  std::string model_row_name(index_t k) const;
   /// First row of each constraint element.
   const std::vector<index_t>& constraint_rows() const { return row0_; }
   const Model& model() const { return model_; }
 
  private:
   void gather(const std::vector<index_t>& dofs, const double* src, std::vector<double>& dst) const;
+  void add_bdf_rows(const double* a, const double* v, const double* q, const BdfTerms& bdf,
+                    bool jacobian, double* hu);
   const Model& model_;
   index_t n_ = 0, m_ = 0;
-  std::vector<index_t> row0_;  // first constraint row of each constraint element
+  Formulation formulation_ = Formulation::partitioned;
+  std::vector<index_t> row0_;  // first model row of each constraint element
+  std::vector<char> active_;   // per model row
+  std::vector<index_t> model_row_, active_index_;
+  std::vector<double> mass_scale_;  // per constraint element: mean mass of its coordinates
   std::vector<index_t> independent_;
   std::vector<char> candidate_;  // per force: part of the Newton matrix
   SparseMatrix jac_;
@@ -113,12 +161,13 @@ class NewtonSystem {
   struct ForcePos {
     std::vector<index_t> q, v, a;
   };
+  // positions of the active rows only, in the order (row, dof) / (dof, row)
   struct ConstraintPos {
-    std::vector<index_t> hq, fl, aa, av, aq, vv, vq, pq;
+    std::vector<index_t> hq, fl, aa, av, aq, vv, vq, pq, nu, nuq, reg;
   };
   std::vector<ForcePos> fpos_;
   std::vector<ConstraintPos> cpos_;
-  std::vector<index_t> upos_;  // 4 per independent coordinate
+  std::vector<index_t> upos_;  // 4 per BDF coordinate (independent, or all when stabilized)
   int threads_ = 1;
 };
 

@@ -92,19 +92,19 @@ std::vector<std::string> reaction_names(const Model& m) {
       names.push_back(c->rows == 1 ? c->name + ".lambda" : fmt::format("{}.lambda{}", c->name, r));
   return names;
 }
-void reactions(const Model& m, const Integrator& in, std::vector<double>& out) {
+// (q, λ of every model row, t): the state of a row of the histories
+void reactions(const Model& m, const double* q, const std::vector<double>& lam, double t,
+               std::vector<double>& out) {
   out.clear();
   std::vector<double> lq, zero;
   ConstraintEval ce;
   index_t row = 0;
-  const auto& q = in.q();
-  const auto& lam = in.lambda();
   for (const auto& c : m.constraints) {
     if (c->reaction_dim > 0) {
       lq.resize(c->dofs.size());
       for (std::size_t i = 0; i < c->dofs.size(); ++i) lq[i] = q[c->dofs[i]];
       zero.assign(c->dofs.size(), 0.0);
-      c->evaluate_gradient(lq.data(), zero.data(), zero.data(), in.t(), ce);
+      c->evaluate_gradient(lq.data(), zero.data(), zero.data(), t, ce);
       const std::size_t nz = c->dofs.size();
       for (int d = 0; d < c->reaction_dim; ++d) {
         double f = 0;
@@ -134,16 +134,22 @@ std::string json_escape(const std::string& s) {
 void write_status(const std::string& dir, const std::string& state, const SimulationResult& r,
                   double t_end, index_t steps, const std::vector<std::string>& files) {
   const bool complete = state == "complete";
-  std::string f;
-  for (std::size_t i = 0; i < files.size(); ++i)
-    f += (i ? ", \"" : "\"") + json_escape(files[i]) + "\"";
+  auto list = [](const std::vector<std::string>& v) {
+    std::string f;
+    for (std::size_t i = 0; i < v.size(); ++i) f += (i ? ", \"" : "\"") + json_escape(v[i]) + "\"";
+    return f;
+  };
+  const std::string f = list(files);
   write_file_atomically(
       dir + "/status.json",
       fmt::format("{{\n  \"state\": \"{}\",\n  \"complete\": {},\n  \"partial\": {},\n"
                   "  \"t_reached\": {:.17g},\n  \"t_end\": {:.17g},\n  \"steps\": {},\n"
-                  "  \"message\": \"{}\",\n  \"checkpoint_step\": {},\n  \"files\": [{}]\n}}\n",
+                  "  \"message\": \"{}\",\n  \"checkpoint_step\": {},\n  \"files\": [{}],\n"
+                  "  \"warnings\": [{}],\n  \"removed_constraints\": [{}],\n"
+                  "  \"reference_error\": {}\n}}\n",
                   state, complete, !complete, r.t_reached, t_end, steps, json_escape(r.message),
-                  r.checkpoint_step, f));
+                  r.checkpoint_step, f, list(r.warnings), list(r.removed_constraints),
+                  r.reference_error >= 0 ? fmt::format("{:.6e}", r.reference_error) : "null"));
 }
 
 class Progress {
@@ -200,11 +206,15 @@ nlohmann::json integrator_options_json(const IntegratorOptions& o) {
           {"variable_step", o.variable_step},
           {"rtol", o.rtol},
           {"atol", o.atol},
-          {"max_step", max_step}};
+          {"max_step", max_step},
+          {"formulation", static_cast<int>(o.formulation)},
+          {"regularization", o.regularization},
+          {"energy_tolerance", o.energy_tolerance},
+          {"redundancy_tolerance", o.redundancy_tolerance}};
 }
 
 constexpr const char* kCheckpointFile = "checkpoint.cbor";
-constexpr int kCheckpointVersion = 1;
+constexpr int kCheckpointVersion = 2;  // 2: formulation, active rows, energy monitor
 
 }  // namespace
 
@@ -231,6 +241,10 @@ IntegratorOptions checkpoint_integrator_options(const nlohmann::json& ck) {
   j.at("rtol").get_to(o.rtol);
   j.at("atol").get_to(o.atol);
   j.at("max_step").get_to(o.max_step);
+  o.formulation = static_cast<FormulationChoice>(j.at("formulation").get<int>());
+  j.at("regularization").get_to(o.regularization);
+  j.at("energy_tolerance").get_to(o.energy_tolerance);
+  j.at("redundancy_tolerance").get_to(o.redundancy_tolerance);
   return o;
 }
 
@@ -274,6 +288,8 @@ SimulationOptions simulation_options(const Model& model, const RunSettings& s) {
   check(std::isfinite(s.output_interval) && s.output_interval >= 0,
         fmt::format("output_interval must be >= 0 s, got {}", s.output_interval));
   check(s.dump_step >= 1, fmt::format("dump_step must be >= 1, got {}", s.dump_step));
+  check(std::isfinite(s.energy_tolerance),
+        fmt::format("energy_tolerance must be finite, got {}", s.energy_tolerance));
   SimulationOptions o;
   IntegratorOptions& io = o.integrator;
   io.t_end = s.t_end > 0 ? s.t_end : model.t_end;
@@ -293,6 +309,8 @@ SimulationOptions simulation_options(const Model& model, const RunSettings& s) {
   io.rtol = s.rtol;
   io.atol = s.atol;
   io.max_step = s.max_step;
+  io.formulation = s.formulation;
+  if (s.energy_tolerance >= 0) io.energy_tolerance = s.energy_tolerance;
   io.dump_step = s.dump_dir.empty() ? -1 : s.dump_step;
   o.output_dir = s.output_dir;
   o.output_interval = s.output_interval > 0 ? s.output_interval : model.output_interval;
@@ -354,28 +372,52 @@ SimulationResult run(const Model& model, const SimulationOptions& opts) {
   double out_seconds = 0;
   double kin = 0, pot = 0, pv = 0, vv = 0;
   SimulationHistory* mem = opts.history;
+  // One row of the histories at time tt (the current state, or the dense output of the
+  // last step at an output time inside it).
+  std::vector<double> oq(n), ov(n), oa(n);
+  double last_row_t = -1;
+  auto write_row = [&](double tt, const double* q, const double* v, const double* a,
+                       const std::vector<double>& lam) {
+    reactions(model, q, lam, tt, rbuf);
+    if (files) {
+      hist[0]->row(tt, q, n);
+      hist[1]->row(tt, v, n);
+      hist[2]->row(tt, a, n);
+      hist[3]->row(tt, rbuf.data(), rbuf.size());
+      if (vtk) vtk->write(tt, q);
+    }
+    if (mem) {
+      mem->time.push_back(tt);
+      mem->positions.insert(mem->positions.end(), q, q + n);
+      mem->velocities.insert(mem->velocities.end(), v, v + n);
+      mem->accelerations.insert(mem->accelerations.end(), a, a + n);
+      mem->reactions.insert(mem->reactions.end(), rbuf.begin(), rbuf.end());
+    }
+    last_row_t = tt;
+  };
+  // Every step, or (output_interval Δ > 0) at t = 0, Δ, 2Δ, … from the BDF interpolation
+  // polynomial of the step that contains them (Integrator::interpolate), and at t_end.
   auto write_state = [&]() {
     if (!files && !mem) return;
     Timer t;
-    const double tt = in.t();
-    if (opts.output_interval <= 0 || tt + 1e-12 >= next_output || in.done()) {
-      reactions(model, in, rbuf);
-      if (files) {
-        hist[0]->row(tt, in.q().data(), n);
-        hist[1]->row(tt, in.v().data(), n);
-        hist[2]->row(tt, in.a().data(), n);
-        hist[3]->row(tt, rbuf.data(), rbuf.size());
-        if (vtk) vtk->write(tt, in.q().data());
+    const double tt = in.t(), dt = opts.output_interval;
+    if (dt <= 0) {
+      write_row(tt, in.q().data(), in.v().data(), in.a().data(), in.model_lambda());
+    } else {
+      const double eps = 1e-9 * dt;
+      for (double k = std::round(next_output / dt); k * dt <= tt + eps; k += 1) {
+        const double to = k * dt;
+        if (std::abs(to - tt) <= eps) {
+          write_row(tt, in.q().data(), in.v().data(), in.a().data(), in.model_lambda());
+        } else {
+          std::vector<double> lam(in.system().model_m());
+          in.interpolate(to, oq.data(), ov.data(), oa.data(), lam.data());
+          write_row(to, oq.data(), ov.data(), oa.data(), lam);
+        }
+        next_output = (k + 1) * dt;
       }
-      if (mem) {
-        mem->time.push_back(tt);
-        mem->positions.insert(mem->positions.end(), in.q().begin(), in.q().end());
-        mem->velocities.insert(mem->velocities.end(), in.v().begin(), in.v().end());
-        mem->accelerations.insert(mem->accelerations.end(), in.a().begin(), in.a().end());
-        mem->reactions.insert(mem->reactions.end(), rbuf.begin(), rbuf.end());
-      }
-      if (opts.output_interval > 0)
-        next_output = (std::floor(tt / opts.output_interval + 1e-9) + 1) * opts.output_interval;
+      if (in.done() && last_row_t < tt - eps)
+        write_row(tt, in.q().data(), in.v().data(), in.a().data(), in.model_lambda());
     }
     out_seconds += t.seconds();
   };
@@ -509,7 +551,15 @@ SimulationResult run(const Model& model, const SimulationOptions& opts) {
         checkpoint();
         break;
       }
+      const double t_before = in.t();
       const StepInfo s = in.advance();
+      // the reference time inside this step: compare with the model's reference values
+      const double tr = model.reference.time;
+      if (tr >= 0 && res.reference_error < 0 && tr <= in.t() * (1 + 1e-12) && tr > t_before) {
+        std::vector<double> qr(n);
+        in.interpolate(std::min(tr, in.t()), qr.data(), nullptr, nullptr, nullptr);
+        res.reference_error = model.reference_error(qr.data(), &res.reference_worst);
+      }
       in.system().energy(in.q().data(), in.v().data(), in.t(), &kin, &pot);
       in.constraint_violation(&pv, &vv);
       res.max_position_violation = std::max(res.max_position_violation, pv);
@@ -554,6 +604,14 @@ SimulationResult run(const Model& model, const SimulationOptions& opts) {
   res.energy_final = kin + pot;
   res.t_reached = in.t();
   res.stats = in.stats();
+  res.warnings = in.warnings();
+  if (res.reference_error > model.reference.tolerance)
+    res.warnings.push_back(fmt::format(
+        "reference: at t = {:g} s the model deviates from its reference values by {:.3e} "
+        "({}), more than the reference's tolerance {:g}: use a smaller step or a higher "
+        "order",
+        model.reference.time, res.reference_error, res.reference_worst, model.reference.tolerance));
+  res.removed_constraints = in.removed_equations();
   if (files) {
     for (const auto& c : hist) c->flush();
     if (vtk) vtk->finish();
@@ -622,10 +680,37 @@ std::string summary(const Model& model, const SimulationResult& r) {
         "each\n",
         1e3 * s.analysis_seconds / s.analyses, 1e3 * s.factor_seconds / s.factorizations,
         1e3 * s.solve_seconds / s.solves);
+  if (s.stabilized_since >= 0)
+    o += fmt::format(
+        "formulation           partitioned, stabilized from t = {:.6g} s ({} steps; no "
+        "partition was well conditioned there)\n",
+        s.stabilized_since, s.stabilized_steps);
+  if (s.residual_rejections || s.energy_rejections || s.restarts)
+    o += fmt::format(
+        "step checks           {} redone for constraint residuals, {} for the energy change, "
+        "{} BDF restarts after a jump\n",
+        s.residual_rejections, s.energy_rejections, s.restarts);
+  if (!r.removed_constraints.empty()) {
+    o += fmt::format("redundant equations   {} switched off for the run:",
+                     r.removed_constraints.size());
+    for (std::size_t k = 0; k < r.removed_constraints.size(); ++k) {
+      if (k == 20) {
+        o += fmt::format(" ... ({} more)", r.removed_constraints.size() - 20);
+        break;
+      }
+      o += (k ? ", " : " ") + r.removed_constraints[k];
+    }
+    o += "\n";
+  }
   o += fmt::format("energy [J]            initial {:.9g}, final {:.9g}\n", r.energy_initial,
                    r.energy_final);
   o += fmt::format("constraint violation  max |Phi| {:.3e}, max |dPhi/dt| {:.3e}\n",
                    r.max_position_violation, r.max_velocity_violation);
+  if (r.reference_error >= 0)
+    o += fmt::format(
+        "reference             t = {:g} s: largest deviation {:.3e} ({}; tolerance {:g})\n",
+        model.reference.time, r.reference_error, r.reference_worst, model.reference.tolerance);
+  for (const std::string& w : r.warnings) o += "WARNING               " + w + "\n";
   return o;
 }
 

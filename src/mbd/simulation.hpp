@@ -10,7 +10,8 @@
 //                   assembly and solver seconds, kinetic/potential/total energy (J),
 //                   max |Φ| and max |Φ̇| (constraint violation)
 //   status.json     "state": "running", "complete", "failed" or "interrupted"; "complete"
-//                   and "partial" booleans, the step and time reached, the reason, the files
+//                   and "partial" booleans, the step and time reached, the reason, the files,
+//                   "warnings" and "removed_constraints" (redundant equations switched off)
 //   vtk/            with vtk: one .vtu per output time and series.pvd (ParaView)
 // Partial results cannot be mistaken for a whole run: while the run goes on, and after a
 // run that stopped early (a failure, an allocation failure, SIGINT/SIGTERM, a kill), the
@@ -57,10 +58,13 @@ struct SimulationHistory {
 
 struct SimulationOptions {
   IntegratorOptions integrator;
-  std::string output_dir;      ///< empty: write nothing
-  double output_interval = 0;  ///< s between rows of the large CSV files (0: every step)
-  bool vtk = false;            ///< also write a ParaView series
-  bool progress = false;       ///< draw a progress bar on `progress_stream`
+  std::string output_dir;  ///< empty: write nothing
+  /// s between rows of the large CSV files (0: every step). Rows fall at t = 0, Δ, 2Δ, …
+  /// (dense output: the BDF interpolation polynomial of the step containing the time;
+  /// reactions there are interpolated linearly) and at t_end.
+  double output_interval = 0;
+  bool vtk = false;       ///< also write a ParaView series
+  bool progress = false;  ///< draw a progress bar on `progress_stream`
   std::FILE* progress_stream = nullptr;
   /// Write a checkpoint (restart point) to checkpoint_dir/checkpoint.cbor after every this
   /// many accepted steps, except after the step that ends the run, and when the run is
@@ -92,6 +96,18 @@ struct SimulationResult {
   double energy_initial = 0, energy_final = 0;
   IntegratorStats stats;
   index_t checkpoint_step = 0;  ///< step of the last checkpoint written (0: none)
+  /// Conditions that make the results doubtful although the run completed (energy drift
+  /// of a conservative model beyond IntegratorOptions::energy_tolerance); also in
+  /// status.json ("warnings") and the summary.
+  std::vector<std::string> warnings;
+  /// Redundant constraint equations switched off for the run (their names), also in
+  /// status.json ("removed_constraints") and the summary.
+  std::vector<std::string> removed_constraints;
+  /// Models with a "reference": the deviation at the reference time (Model::reference_error;
+  /// −1: the run did not get there) and which value deviated most. Beyond the reference's
+  /// tolerance it is also a warning.
+  double reference_error = -1;
+  std::string reference_worst;
 };
 
 /// Marks the output folder `dir` of a run that failed before its first step (the model
@@ -117,9 +133,11 @@ struct RunSettings {
   bool variable_step = false;           ///< variable step and order with local error control
   double rtol = 1e-4, atol = 1e-6, max_step = 0;  ///< of variable steps (max_step 0: t_end/10)
   bool dense_reference = false;                   ///< dense LAPACK instead of strata (diagnosis)
-  bool verbose = false;                           ///< every Newton iteration to stderr
-  std::string output_dir;                         ///< CSV files (and vtk/) here; empty: none
-  double output_interval = 0;                     ///< s between rows of the histories
+  FormulationChoice formulation = FormulationChoice::automatic;
+  double energy_tolerance = -1;  ///< relative energy drift allowed (< 0: the model's or 1e-3)
+  bool verbose = false;          ///< every Newton iteration to stderr
+  std::string output_dir;        ///< CSV files (and vtk/) here; empty: none
+  double output_interval = 0;    ///< s between rows of the histories
   bool vtk = false;
   std::string dump_dir;  ///< write the Newton matrix of step dump_step here (Matrix Market)
   index_t dump_step = 1;

@@ -56,6 +56,13 @@ json spatial_model() {
        "elements": [[0,1,2,3,4,5,6,7]],
        "attachments": [{"node": 0, "body": "b"}, {"nodes": [1, 2], "body": "ground"}]}]
   })");
+  // the universal joint's second pin (body b coordinates) perpendicular to the first at the
+  // initial pose, as the model reader requires
+  const Vec3<double> pin_i = rot3(axis_angle({{1, 2, 3}}, 0.4)) * Vec3<double>{{1, 0, 0}};
+  Vec3<double> w = cross(pin_i, Vec3<double>{{0, 0, 1}});
+  w = w * (1 / norm(w));
+  const Vec3<double> pin_j = tmul(rot3(axis_angle({{0, 1, 1}}, -0.3)), w);
+  j["joints"][2]["axis_j"] = {pin_j[0], pin_j[1], pin_j[2]};
   return j;
 }
 

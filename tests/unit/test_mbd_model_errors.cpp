@@ -137,8 +137,9 @@ TEST(MbdModelErrors, NodeIndicesMustBeIntegersInRange) {
   EXPECT_NE(error_of(j).find("attachments[0].node: node index"), std::string::npos) << error_of(j);
 }
 
-TEST(MbdModelErrors, RedundantConstraintsAreNamed) {
-  // a second revolute joint at the pin duplicates the first
+TEST(MbdModelErrors, ConsistentRedundantConstraintsAreRemovedAndNamed) {
+  // a second revolute joint at the pin duplicates the first: its two equations are
+  // switched off for the run, the first joint carries the reaction
   json j = pendulum();
   j["joints"].push_back({{"name", "pin2"},
                          {"type", "revolute"},
@@ -146,21 +147,55 @@ TEST(MbdModelErrors, RedundantConstraintsAreNamed) {
                          {"body_j", "arm"},
                          {"point", {0, 0}}});
   const Model m = build_model(j, "test");
+  IntegratorOptions o;
+  o.t_end = 0.05;
+  Integrator in(m, o);
+  in.initialize();
+  const std::vector<std::string> removed = in.removed_equations();
+  ASSERT_EQ(removed.size(), 2u);
+  EXPECT_EQ(removed[0], "joints[1] 'pin2' equation 0");
+  EXPECT_EQ(removed[1], "joints[1] 'pin2' equation 1");
+  while (!in.done()) in.advance();
+  const std::vector<double> lam = in.model_lambda();
+  ASSERT_EQ(lam.size(), 4u);
+  EXPECT_NE(lam[1], 0.0);  // the kept pin holds the arm up
+  EXPECT_EQ(lam[2], 0.0);
+  EXPECT_EQ(lam[3], 0.0);
+}
+
+TEST(MbdModelErrors, InconsistentRedundantConstraintsAreRefusedNamed) {
+  // two rotation drivers on the same pin: their equations are dependent and agree at
+  // t = 0, but one holds the arm still and the other turns it at 1 rad/s; no motion
+  // satisfies both, and the run is refused naming the second
+  json j = pendulum();
+  j["joints"].push_back({{"name", "hold"},
+                         {"type", "rotation_driver"},
+                         {"body_i", "ground"},
+                         {"body_j", "arm"},
+                         {"point", {0, 0}},
+                         {"motion", 0}});
+  j["joints"].push_back({{"name", "turn"},
+                         {"type", "rotation_driver"},
+                         {"body_i", "ground"},
+                         {"body_j", "arm"},
+                         {"point", {0, 0}},
+                         {"motion", {{"polynomial", {0, 1}}}}});
+  const Model m = build_model(j, "test");
   Integrator in(m, IntegratorOptions{});
   try {
     in.initialize();
     FAIL() << "no error";
   } catch (const RedundantConstraints& e) {
     const std::string msg = e.what();
-    EXPECT_NE(msg.find("redundant constraints"), std::string::npos) << msg;
-    EXPECT_NE(msg.find("joints[0] 'pin'"), std::string::npos) << msg;
-    EXPECT_NE(msg.find("joints[1] 'pin2'"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("inconsistent constraints: joints[2] 'turn'"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("velocity violation 1.000e+00"), std::string::npos) << msg;
   }
 }
 
-TEST(MbdModelErrors, ClosedLoopOfSpatialRevolutesIsReportedRedundant) {
+TEST(MbdModelErrors, ClosedLoopOfSpatialRevolutesRunsWithRedundantEquationsRemoved) {
   // a planar four-bar built from spatial revolute joints: 3 of its equations are redundant
-  json j = json::parse(R"({"type": "spatial", "bodies": [
+  // (the loop closes in a plane); they are the last joint's and are switched off
+  json j = json::parse(R"({"type": "spatial", "gravity": [0, -9.81, 0], "bodies": [
       {"name": "crank", "mass": 1, "inertia": [0.1, 0.1, 0.1], "position": [0, 0.5, 0]},
       {"name": "coupler", "mass": 1, "inertia": [0.1, 0.1, 0.1], "position": [1, 1, 0]},
       {"name": "rocker", "mass": 1, "inertia": [0.1, 0.1, 0.1], "position": [2, 0.5, 0]}],
@@ -169,17 +204,95 @@ TEST(MbdModelErrors, ClosedLoopOfSpatialRevolutesIsReportedRedundant) {
       {"name": "B", "type": "revolute", "body_i": "crank", "body_j": "coupler", "point": [0, 1, 0], "axis": [0, 0, 1]},
       {"name": "C", "type": "revolute", "body_i": "coupler", "body_j": "rocker", "point": [2, 1, 0], "axis": [0, 0, 1]},
       {"name": "D", "type": "revolute", "body_i": "rocker", "body_j": "ground", "point": [2, 0, 0], "axis": [0, 0, 1]}]})");
+  j["bodies"][0]["velocity"] = {-0.5, 0, 0};
+  j["bodies"][0]["angular_velocity"] = {0, 0, 1};
   const Model m = build_model(j, "fourbar");
-  Integrator in(m, IntegratorOptions{});
-  try {
-    in.initialize();
-    FAIL() << "no error";
-  } catch (const RedundantConstraints& e) {
-    const std::string msg = e.what();
-    EXPECT_NE(msg.find("joints[3] 'D'"), std::string::npos) << msg;
-    EXPECT_NE(msg.find("joints[0] 'A'"), std::string::npos) << msg;
-    EXPECT_EQ(msg.find("nan"), std::string::npos) << msg;
+  IntegratorOptions o;
+  o.t_end = 0.1;
+  Integrator in(m, o);
+  in.initialize();
+  const std::vector<std::string> removed = in.removed_equations();
+  ASSERT_EQ(removed.size(), 3u);
+  for (const std::string& r : removed) EXPECT_NE(r.find("joints[3] 'D'"), std::string::npos) << r;
+  while (!in.done()) in.advance();
+  double pv = 0, vv = 0;
+  in.constraint_violation(&pv, &vv);  // the removed equations hold too
+  EXPECT_LT(pv, 1e-9);
+  EXPECT_LT(vv, 1e-6);
+}
+
+// The joints' data must hold at the initial pose as given (issue: a universal joint with
+// non-perpendicular pins was accepted and the position analysis moved the slider from
+// x = +0.2 to −0.192): every class of bad joint geometry is refused with the joint named.
+TEST(MbdModelErrors, JointGeometryThatCannotHoldIsRefusedNamed) {
+  const json base = json::parse(R"({"type": "spatial", "bodies": [
+      {"name": "rod", "mass": 1, "inertia": [0.01, 0.1, 0.1], "position": [0.5, 0, 0]},
+      {"name": "slider", "mass": 1, "inertia": [0.01, 0.01, 0.01], "position": [1, 0, 0]}],
+    "joints": [
+      {"name": "pin", "type": "revolute", "body_i": "ground", "body_j": "rod", "point": [0, 0, 0], "axis": [0, 0, 1]},
+      {"name": "cardan", "type": "universal", "body_i": "slider", "body_j": "rod", "point": [1, 0, 0],
+       "axis_i": [1, 0, 0], "axis_j": [0, 1, 0]},
+      {"name": "guide", "type": "translational", "body_i": "ground", "body_j": "slider", "point": [1, 0, 0], "axis": [1, 0, 0]}]})");
+  EXPECT_EQ(error_of(base), "(no error)");
+  {  // a universal joint whose pins are not perpendicular
+    json j = base;
+    j["joints"][1]["axis_j"] = {0.3, 1, 0};
+    const std::string what = error_of(j);
+    EXPECT_NE(what.find("joints[1] 'cardan': the pins axis_i and axis_j make 73.3"),
+              std::string::npos)
+        << what;
+    EXPECT_NE(what.find("needs perpendicular pins"), std::string::npos) << what;
   }
+  {  // a revolute joint whose two points do not coincide
+    json j = base;
+    j["joints"][0].erase("point");
+    j["joints"][0]["point_i"] = {0, 0, 0};
+    j["joints"][0]["point_j"] = {-0.49, 0, 0};
+    const std::string what = error_of(j);
+    EXPECT_NE(what.find("joints[0] 'pin': point_i and point_j are 0.01 m apart"), std::string::npos)
+        << what;
+  }
+  {  // a revolute joint whose axes are not parallel
+    json j = base;
+    j["joints"][0].erase("axis");
+    j["joints"][0]["axis_i"] = {0, 0, 1};
+    j["joints"][0]["axis_j"] = {0, 0.1, 1};
+    const std::string what = error_of(j);
+    EXPECT_NE(what.find("joints[0] 'pin': axis_i and axis_j are"), std::string::npos) << what;
+    EXPECT_NE(what.find("needs them parallel"), std::string::npos) << what;
+  }
+  {  // a translational joint whose point_j lies off its axis
+    json j = base;
+    j["joints"][2].erase("point");
+    j["joints"][2]["point_i"] = {1, 0, 0};
+    j["joints"][2]["point_j"] = {0, 0.02, 0};
+    const std::string what = error_of(j);
+    EXPECT_NE(what.find("joints[2] 'guide': point_j lies 0.02 m off the joint axis"),
+              std::string::npos)
+        << what;
+  }
+}
+
+// Initial conditions that do not fit the joints are made consistent, and the summary says
+// how far the model was moved.
+TEST(MbdModelErrors, PositionAnalysisReportsHowFarItMovedTheModel) {
+  json j = pendulum();
+  j["joints"][0] = {{"name", "rod"},   {"type", "distance"}, {"body_i", "ground"},
+                    {"body_j", "arm"}, {"point_i", {0, 0}},  {"point_j", {0, 0}},
+                    {"length", 0.49}};
+  j["bodies"][0]["velocity"] = {0.3, 0};  // along the rod: not allowed
+  const Model m = build_model(j, "test");
+  SimulationOptions o;
+  o.integrator.t_end = 0.01;
+  const SimulationResult r = simulate(m, o);
+  ASSERT_TRUE(r.complete) << r.message;
+  std::string all;
+  for (const auto& w : r.warnings) all += w + "\n";
+  EXPECT_NE(all.find("position analysis moved body 'arm' by 1.000e-02 m"), std::string::npos)
+      << all;
+  EXPECT_NE(all.find("velocity analysis changed the velocity of body 'arm'"), std::string::npos)
+      << all;
+  EXPECT_NE(summary(m, r).find("WARNING"), std::string::npos);
 }
 
 TEST(MbdModelErrors, NewtonFailureStopsWithPartialResults) {
