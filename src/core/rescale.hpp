@@ -31,10 +31,11 @@ struct Rescaling {
 
 /// Equilibrates `values` (B's values in the entry order of `pattern`, canonical CSC; lower
 /// storage when `symmetric`, mirrored for the row and column maxima) in place: at most
-/// `max_sweeps` Ruiz sweeps with power-of-two factors, stopping once every nonempty row's
-/// and column's largest magnitude is in [1/2, 2]. Returns the scaling applied (empty when
+/// `max_sweeps` Ruiz sweeps with power-of-two factors (each halves the logarithm of every
+/// row's and column's distance from 1), stopping once every nonempty row's and column's
+/// largest magnitude is in [1/2, 2]. Returns the scaling applied (empty when
 /// none was needed). Rows and columns with no nonzero value keep factor 1.
 Rescaling rescale_values(const SparseMatrix& pattern, bool symmetric, std::vector<double>& values,
-                         int max_sweeps = 8);
+                         int max_sweeps = 3);
 
 }  // namespace strata

@@ -589,7 +589,7 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
     // zeros of a numerically singular matrix and get static pivots
     const double root_static = std::numeric_limits<double>::epsilon() * (norm1 > 0 ? norm1 : 1.0);
     numeric::factorize_delayed(an, s.scaled.data(), type, s.options.pivot_threshold, root_static,
-                               s.delayed, s.delayed_work);
+                               s.delayed, s.delayed_work, arena);
   }
   s.resolved = type;
 
@@ -600,8 +600,10 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
   fs.backend = external ? s.external.backend : workers > 1 ? execs[0]->name() : s.executor->name();
   fs.devices = s.devices;
   numeric::cpu::PivotStats total;
-  for (const auto& ps : s.delayed.valid ? s.delayed.front_stats : s.factor.front_stats)
-    total.merge(ps);
+  if (s.delayed.valid)
+    for (const auto& fr : s.delayed.fronts) total.merge(fr.stats);
+  else
+    for (const auto& ps : s.factor.front_stats) total.merge(ps);
   if (s.delayed.valid) {
     fs.delayed_pivoting = true;
     fs.delayed_pivots = s.delayed.delayed;

@@ -554,10 +554,29 @@ StepInfo Integrator::advance() {
     }
     slow_last_step_ = true;
     if (automatic && sys_.formulation() == Formulation::partitioned && sys_.m() > 0) {
-      // the partitioned step failed: no partition may be good here (a singular
-      // configuration); retry the same step with the stabilized formulation
-      use_stabilized("a partitioned step failed");
-      continue;
+      // The partitioned step failed. A step fails for other reasons too (a contact
+      // closing, a fast transient), so the formulation changes only when the partition is
+      // the cause: a partition gone bad gets a new one, and the stabilized formulation
+      // comes when no partition is good here (a singular configuration), or when steps
+      // 8 times shorter still fail (near one, before the partition's condition shows it).
+      Timer timer;
+      const auto quality_now = [&] {
+        return partition_quality(sys_.constraint_jacobian(q_.data(), t_), partition_.dependent);
+      };
+      double quality = quality_now();
+      if (quality < opts_.repartition_quality) {
+        repartition(t_, q_.data());
+        info.repartitioned = true;
+        quality = quality_now();
+      }
+      stats_.partition_seconds += timer.seconds();
+      if (quality < opts_.repartition_quality || h < 0.2 * h_ref) {
+        use_stabilized(quality < opts_.repartition_quality
+                           ? "a partitioned step failed and no partition is well conditioned"
+                           : "partitioned steps 8 times shorter failed");
+        continue;
+      }
+      if (info.repartitioned) continue;  // the same step with the new partition
     }
     h *= 0.5;
     if (h < opts_.min_step)

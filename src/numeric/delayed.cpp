@@ -16,18 +16,26 @@
 // parent (a root) may not delay: what is left there is singular to working precision and
 // gets static pivots.
 //
-// The stack of contribution blocks: fronts are numbered in postorder, so when f is
-// assembled its children's blocks are the top entries of the stack, in child order; they
-// are popped before f's own block is pushed. Its peak is the same quantity as the
-// fixed-layout arena's (Liu's stack depth), plus the delayed rows and columns.
+// Order and storage: the fronts of one level of the analysis's level schedule are
+// independent and are factored concurrently (oneTBB), levels deepest first. Each front
+// keeps its own factor and contribution block in vectors that keep their capacity for the
+// next factorization; a child's block is released (its size, not its capacity) once the
+// parent is assembled. Keeping the capacity trades memory (the blocks of every front, not
+// only of a stack's depth) for refactorizations that allocate nothing: the delayed path is
+// meant for the multibody Newton matrices, whose fronts are small.
 #include "numeric/delayed.hpp"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <cstring>
+#include <exception>
+#include <mutex>
 #include <new>
 #include <string>
 
-#include "core/alloc.hpp"
+#include "core/blas.hpp"
 #include "strata/errors.hpp"
 
 namespace strata::numeric {
@@ -51,216 +59,251 @@ int parity(const std::vector<index_t>& seq, std::vector<char>& seen) {
 }
 
 template <class T>
-void grow(std::vector<T>& v, std::size_t size, const char* what) {
-  if (size <= v.size()) return;
+void sized(std::vector<T>& v, std::size_t size, const char* what) {
   try {
-    v.resize(std::max(size, v.size() + v.size() / 2));
+    v.resize(size);
   } catch (const std::bad_alloc&) {
     throw OutOfMemory(size * sizeof(T), std::string("factorize (delayed pivots): ") + what);
+  }
+}
+
+// Assembles, factors and stores front f (see the header above); its children are done.
+void factor_front(const Analysis& an, const double* vals, const cpu::DelayPolicy& root_policy,
+                  index_t f, DelayedFactor& F, DelayedWorkspace::Thread& w) {
+  const auto& t = an.tree;
+  const auto& am = an.assembly;
+  const index_t msym = t.n_rows(f), ksym = t.n_pivots(f);
+  const index_t* sym = t.rows_of(f);
+  const index_t c0 = t.child_offsets[f], c1 = t.child_offsets[f + 1];
+  index_t d = 0;
+  for (index_t q = c0; q < c1; ++q) d += F.fronts[t.children[q]].delayed;
+  const index_t m = d + msym, p = d + ksym;
+  DelayedFront& fr = F.fronts[f];
+  fr.m = m;
+  sized(fr.rows, m, "row lists");
+  sized(fr.cols, m, "column lists");
+  index_t* R = fr.rows.data();
+  index_t* C = fr.cols.data();
+  index_t at = 0;
+  for (index_t q = c0; q < c1; ++q) {
+    const DelayedFront& ch = F.fronts[t.children[q]];
+    for (index_t i = 0; i < ch.delayed; ++i, ++at) {
+      R[at] = ch.rows[ch.k + i];
+      C[at] = ch.cols[ch.k + i];
+    }
+  }
+  for (index_t i = 0; i < msym; ++i) R[d + i] = C[d + i] = sym[i];
+  for (index_t i = 0; i < m; ++i) {
+    w.row_pos[R[i]] = i;
+    w.col_pos[C[i]] = i;
+  }
+
+  // assemble: original entries (shifted past the delayed rows and columns), children
+  const std::size_t mm = static_cast<std::size_t>(m) * m;
+  if (w.front.size() < mm) sized(w.front, mm, "front workspace");
+  double* A = w.front.data();
+  std::fill(A, A + mm, 0.0);
+  for (index_t e = am.entry_offsets[f]; e < am.entry_offsets[f + 1]; ++e) {
+    const index_t dst = am.entry_dst[e];
+    const index_t i = dst % msym, j = dst / msym;
+    A[(d + i) + static_cast<std::size_t>(d + j) * m] += vals[am.entry_src[e]];
+  }
+  for (index_t q = c0; q < c1; ++q) {
+    DelayedFront& ch = F.fronts[t.children[q]];
+    const index_t s = ch.m - ch.k;
+    const index_t* br = ch.rows.data() + ch.k;
+    const index_t* bc = ch.cols.data() + ch.k;
+    for (index_t c = 0; c < s; ++c) {
+      double* dst = A + static_cast<std::size_t>(w.col_pos[bc[c]]) * m;
+      const double* src = ch.cb.data() + static_cast<std::size_t>(c) * s;
+      for (index_t r = 0; r < s; ++r) dst[w.row_pos[br[r]]] += src[r];
+    }
+    ch.cb.clear();  // consumed (the capacity stays for the next factorization)
+  }
+  for (index_t i = 0; i < m; ++i) {
+    w.row_pos[R[i]] = -1;
+    w.col_pos[C[i]] = -1;
+  }
+
+  // factor, then the permuted lists (positions p..m are not moved)
+  sized(w.row_perm, p, "front permutation");
+  sized(w.col_perm, p, "front permutation");
+  cpu::DelayPolicy policy = root_policy;
+  policy.may_delay = t.parent[f] >= 0;
+  fr.stats = cpu::PivotStats{};
+  const index_t npiv = cpu::factor_front_lu_delayed(A, m, p, m, policy, w.row_perm.data(),
+                                                    w.col_perm.data(), fr.stats);
+  sized(w.scratch, 2 * static_cast<std::size_t>(p), "front permutation");
+  for (index_t i = 0; i < p; ++i) {
+    w.scratch[i] = R[w.row_perm[i]];
+    w.scratch[p + i] = C[w.col_perm[i]];
+  }
+  std::copy(w.scratch.begin(), w.scratch.begin() + p, R);
+  std::copy(w.scratch.begin() + p, w.scratch.begin() + 2 * p, C);
+  fr.k = npiv;
+  fr.delayed = p - npiv;
+
+  // store L (m × k) and U12 (k × (m − k)), and the contribution block
+  const std::size_t lsize = static_cast<std::size_t>(m) * npiv;
+  const std::size_t usize = static_cast<std::size_t>(npiv) * (m - npiv);
+  sized(fr.lu, lsize + usize, "factor values");
+  std::memcpy(fr.lu.data(), A, sizeof(double) * lsize);
+  double* U = fr.lu.data() + lsize;
+  for (index_t j = npiv; j < m; ++j)
+    std::memcpy(U + static_cast<std::size_t>(j - npiv) * npiv, A + static_cast<std::size_t>(j) * m,
+                sizeof(double) * npiv);
+  const std::size_t s = static_cast<std::size_t>(m - npiv);
+  if (t.parent[f] >= 0 && s > 0) {
+    sized(fr.cb, s * s, "contribution blocks");
+    for (std::size_t c = 0; c < s; ++c)
+      std::memcpy(fr.cb.data() + c * s, A + (npiv + c) * m + npiv, sizeof(double) * s);
   }
 }
 
 }  // namespace
 
 void factorize_delayed(const Analysis& an, const double* vals, MatrixType type, double threshold,
-                       double static_pivot, DelayedFactor& F, DelayedWorkspace& W) {
+                       double static_pivot, DelayedFactor& F, DelayedWorkspace& W,
+                       tbb::task_arena& arena) {
   if (type != MatrixType::general)
     throw NotSupported("delayed pivoting is implemented for LU (general matrices) only");
   if (!(threshold > 0 && threshold <= 1))
     throw InvalidInput("the pivot threshold must be in (0, 1], got " + std::to_string(threshold));
   const auto& t = an.tree;
-  const index_t nf = t.n_fronts();
+  const auto& sched = an.schedule;
   F.type = type;
   F.valid = false;
-  F.m.assign(nf, 0);
-  F.k.assign(nf, 0);
-  F.index_offset.assign(nf + 1, 0);
-  F.value_offset.assign(nf + 1, 0);
-  F.front_stats.assign(nf, cpu::PivotStats{});
-  F.delayed = F.fronts_delaying = F.largest_front = 0;
-  std::size_t nidx = 0, nval = 0;
-  grow(F.rows, t.rows.size(), "row lists");
-  grow(F.cols, t.rows.size(), "column lists");
-  grow(F.values, an.factor_layout.total, "factor values");
-  W.row_pos.assign(an.n, -1);
-  W.col_pos.assign(an.n, -1);
-  W.blocks.clear();
-  std::size_t stack_top = 0, index_top = 0;
-  const auto& am = an.assembly;
+  F.fronts.resize(t.n_fronts());
+  const int threads = std::max(1, arena.max_concurrency());
+  W.threads.resize(threads + 1);  // TBB slot indices are < threads; one spare
+  for (auto& w : W.threads)
+    if (static_cast<index_t>(w.row_pos.size()) != an.n) {
+      w.row_pos.assign(an.n, -1);
+      w.col_pos.assign(an.n, -1);
+    }
   cpu::DelayPolicy policy;
   policy.threshold = threshold;
   policy.tiny = static_pivot;
   policy.static_pivot = static_pivot;
-
-  for (index_t f = 0; f < nf; ++f) {
-    const index_t msym = t.n_rows(f), ksym = t.n_pivots(f);
-    const index_t* sym = t.rows_of(f);
-    const index_t nchild = t.child_offsets[f + 1] - t.child_offsets[f];
-    const std::size_t first_block = W.blocks.size() - static_cast<std::size_t>(nchild);
-    index_t d = 0;
-    for (std::size_t b = first_block; b < W.blocks.size(); ++b) d += W.blocks[b].delayed;
-    const index_t m = d + msym, p = d + ksym;
-    F.largest_front = std::max(F.largest_front, m);
-
-    // the front's row and column lists
-    grow(F.rows, nidx + m, "row lists");
-    grow(F.cols, nidx + m, "column lists");
-    index_t* R = F.rows.data() + nidx;
-    index_t* C = F.cols.data() + nidx;
-    index_t at = 0;
-    for (std::size_t b = first_block; b < W.blocks.size(); ++b) {
-      const auto& blk = W.blocks[b];
-      const index_t* br = W.stack_index.data() + blk.indices;
-      for (index_t i = 0; i < blk.delayed; ++i, ++at) {
-        R[at] = br[i];
-        C[at] = br[blk.size + i];
-      }
+  for (index_t l = 0; l < sched.n_levels(); ++l) {
+    const index_t b = sched.level_offsets[l], e = sched.level_offsets[l + 1];
+    if (e - b == 1 || threads == 1) {
+      openblas_set_num_threads(e - b == 1 ? threads : 1);
+      for (index_t q = b; q < e; ++q)
+        factor_front(an, vals, policy, sched.fronts[q], F, W.threads[threads]);
+      continue;
     }
-    for (index_t i = 0; i < msym; ++i) R[d + i] = C[d + i] = sym[i];
-    for (index_t i = 0; i < m; ++i) {
-      W.row_pos[R[i]] = i;
-      W.col_pos[C[i]] = i;
-    }
-
-    // assemble: original entries (shifted past the delayed rows and columns), children
-    const std::size_t mm = static_cast<std::size_t>(m) * m;
-    grow(W.front, mm, "front workspace");
-    double* A = W.front.data();
-    std::fill(A, A + mm, 0.0);
-    for (index_t e = am.entry_offsets[f]; e < am.entry_offsets[f + 1]; ++e) {
-      const index_t dst = am.entry_dst[e];
-      const index_t i = dst % msym, j = dst / msym;
-      A[(d + i) + static_cast<std::size_t>(d + j) * m] += vals[am.entry_src[e]];
-    }
-    for (std::size_t b = first_block; b < W.blocks.size(); ++b) {
-      const auto& blk = W.blocks[b];
-      const index_t s = blk.size;
-      const index_t* br = W.stack_index.data() + blk.indices;
-      const index_t* bc = br + s;
-      const double* v = W.stack.data() + blk.values;
-      for (index_t c = 0; c < s; ++c) {
-        double* dst = A + static_cast<std::size_t>(W.col_pos[bc[c]]) * m;
-        const double* src = v + static_cast<std::size_t>(c) * s;
-        for (index_t r = 0; r < s; ++r) dst[W.row_pos[br[r]]] += src[r];
-      }
-    }
-    if (nchild > 0) {  // pop the children's blocks
-      stack_top = W.blocks[first_block].values;
-      index_top = W.blocks[first_block].indices;
-      W.blocks.resize(first_block);
-    }
-
-    // factor
-    grow(W.row_perm, static_cast<std::size_t>(p), "front permutation");
-    grow(W.col_perm, static_cast<std::size_t>(p), "front permutation");
-    policy.may_delay = t.parent[f] >= 0;
-    const index_t npiv = cpu::factor_front_lu_delayed(A, m, p, m, policy, W.row_perm.data(),
-                                                      W.col_perm.data(), F.front_stats[f]);
-    for (index_t i = 0; i < m; ++i) {
-      W.row_pos[R[i]] = -1;
-      W.col_pos[C[i]] = -1;
-    }
-    {  // the permuted lists (positions p..m are not moved)
-      std::vector<index_t>& tmp = W.stack_index;  // scratch past its top
-      grow(tmp, index_top + 2 * static_cast<std::size_t>(p), "front permutation");
-      index_t* r0 = tmp.data() + index_top;
-      index_t* c0 = r0 + p;
-      for (index_t i = 0; i < p; ++i) {
-        r0[i] = R[W.row_perm[i]];
-        c0[i] = C[W.col_perm[i]];
-      }
-      std::copy(r0, r0 + p, R);
-      std::copy(c0, c0 + p, C);
-    }
-
-    // store L (m × npiv) and U12 (npiv × (m − npiv))
-    F.m[f] = m;
-    F.k[f] = npiv;
-    const std::size_t lsize = static_cast<std::size_t>(m) * npiv;
-    const std::size_t usize = static_cast<std::size_t>(npiv) * (m - npiv);
-    grow(F.values, nval + lsize + usize, "factor values");
-    double* L = F.values.data() + nval;
-    std::memcpy(L, A, sizeof(double) * lsize);
-    double* U = L + lsize;
-    for (index_t j = npiv; j < m; ++j)
-      std::memcpy(U + static_cast<std::size_t>(j - npiv) * npiv,
-                  A + static_cast<std::size_t>(j) * m, sizeof(double) * npiv);
-    nidx += m;
-    nval += lsize + usize;
-    F.index_offset[f + 1] = nidx;
-    F.value_offset[f + 1] = nval;
-    const index_t delays = p - npiv;
-    F.delayed += delays;
-    if (delays > 0) ++F.fronts_delaying;
-
-    // push the contribution block (delayed rows and columns first)
-    if (t.parent[f] >= 0) {
-      DelayedWorkspace::Block blk;
-      blk.size = m - npiv;
-      blk.delayed = delays;
-      blk.values = stack_top;
-      blk.indices = index_top;
-      const std::size_t s = static_cast<std::size_t>(blk.size);
-      grow(W.stack, stack_top + s * s, "contribution blocks");
-      grow(W.stack_index, index_top + 2 * s, "contribution blocks");
-      double* v = W.stack.data() + stack_top;
-      for (std::size_t c = 0; c < s; ++c)
-        std::memcpy(v + c * s, A + (npiv + c) * m + npiv, sizeof(double) * s);
-      std::copy(R + npiv, R + m, W.stack_index.data() + index_top);
-      std::copy(C + npiv, C + m, W.stack_index.data() + index_top + s);
-      stack_top += s * s;
-      index_top += 2 * s;
-      W.blocks.push_back(blk);
-    }
+    openblas_set_num_threads(1);
+    std::exception_ptr error;
+    std::mutex error_mutex;
+    arena.execute([&] {
+      tbb::parallel_for(tbb::blocked_range<index_t>(b, e, 1),
+                        [&](const tbb::blocked_range<index_t>& r) {
+                          const int slot = tbb::this_task_arena::current_thread_index();
+                          auto& w = W.threads[slot >= 0 && slot < threads ? slot : threads];
+                          for (index_t q = r.begin(); q != r.end(); ++q) try {
+                              factor_front(an, vals, policy, sched.fronts[q], F, w);
+                            } catch (...) {
+                              std::lock_guard<std::mutex> lock(error_mutex);
+                              if (!error) error = std::current_exception();
+                            }
+                        });
+    });
+    if (error) std::rethrow_exception(error);
   }
-  if (!W.blocks.empty())
-    throw InvalidState("internal: delayed factorization left contribution blocks unconsumed");
+  F.delayed = F.fronts_delaying = F.largest_front = 0;
+  for (const DelayedFront& fr : F.fronts) {
+    F.delayed += fr.delayed;
+    F.fronts_delaying += fr.delayed > 0;
+    F.largest_front = std::max(F.largest_front, fr.m);
+  }
   F.valid = true;
 }
 
 void solve_delayed(const Analysis& an, const DelayedFactor& F, double* b, index_t nrhs) {
-  const index_t n = an.n, nf = static_cast<index_t>(F.m.size());
-  std::vector<double> x(static_cast<std::size_t>(n) * nrhs, 0.0), w;
+  // Per front: gather, dense triangular solve and products on the gathered vectors
+  // (contiguous), scatter once; DGEMV/DTRSV for the larger ones.
+  constexpr index_t kLoops = 2048;  // below this many multiply-adds, plain loops
+  const index_t n = an.n, nf = static_cast<index_t>(F.fronts.size());
+  const int one = 1;
+  const double p1 = 1.0, m1 = -1.0, zero = 0.0;
+  std::vector<double> x(static_cast<std::size_t>(n) * nrhs, 0.0), w, g;
+  openblas_set_num_threads(1);  // products of a few thousand flops: one thread
   for (index_t r = 0; r < nrhs; ++r) {
     double* z = b + static_cast<std::size_t>(r) * n;
     double* xr = x.data() + static_cast<std::size_t>(r) * n;
     // forward: L y = z over the row pivot sequence
     for (index_t f = 0; f < nf; ++f) {
-      const index_t m = F.m[f], k = F.k[f];
-      const index_t* R = F.rows.data() + F.index_offset[f];
-      const double* L = F.values.data() + F.value_offset[f];
+      const DelayedFront& fr = F.fronts[f];
+      const index_t m = fr.m, k = fr.k, c = m - k;
+      if (k == 0) continue;
+      const index_t* R = fr.rows.data();
+      const double* L = fr.lu.data();
       w.resize(k);
       for (index_t i = 0; i < k; ++i) w[i] = z[R[i]];
-      for (index_t j = 0; j < k; ++j) {
-        const double wj = w[j];
-        if (wj == 0.0) continue;
-        const double* l = L + static_cast<std::size_t>(j) * m;
-        for (index_t i = j + 1; i < k; ++i) w[i] -= l[i] * wj;
-        for (index_t i = k; i < m; ++i) z[R[i]] -= l[i] * wj;
+      const int im = static_cast<int>(m), ik = static_cast<int>(k), ic = static_cast<int>(c);
+      if (k * k <= kLoops) {
+        for (index_t j = 0; j < k; ++j) {
+          const double wj = w[j];
+          const double* l = L + static_cast<std::size_t>(j) * m;
+          for (index_t i = j + 1; i < k; ++i) w[i] -= l[i] * wj;
+        }
+      } else {
+        dtrsv_("L", "N", "U", &ik, L, &im, w.data(), &one);
       }
       for (index_t i = 0; i < k; ++i) z[R[i]] = w[i];
+      if (c == 0) continue;
+      g.assign(c, 0.0);  // L21 w
+      if (c * k <= kLoops) {
+        for (index_t j = 0; j < k; ++j) {
+          const double wj = w[j];
+          if (wj == 0.0) continue;
+          const double* l = L + static_cast<std::size_t>(j) * m + k;
+          for (index_t i = 0; i < c; ++i) g[i] += l[i] * wj;
+        }
+      } else {
+        dgemv_("N", &ic, &ik, &p1, L + k, &im, w.data(), &one, &zero, g.data(), &one);
+      }
+      for (index_t i = 0; i < c; ++i) z[R[k + i]] -= g[i];
     }
     // backward: U x = y over the column pivot sequence
     for (index_t f = nf - 1; f >= 0; --f) {
-      const index_t m = F.m[f], k = F.k[f];
-      const index_t* R = F.rows.data() + F.index_offset[f];
-      const index_t* C = F.cols.data() + F.index_offset[f];
-      const double* L = F.values.data() + F.value_offset[f];
+      const DelayedFront& fr = F.fronts[f];
+      const index_t m = fr.m, k = fr.k, c = m - k;
+      if (k == 0) continue;
+      const index_t* R = fr.rows.data();
+      const index_t* C = fr.cols.data();
+      const double* L = fr.lu.data();
       const double* U = L + static_cast<std::size_t>(m) * k;
+      const int im = static_cast<int>(m), ik = static_cast<int>(k), ic = static_cast<int>(c);
       w.resize(k);
       for (index_t i = 0; i < k; ++i) w[i] = z[R[i]];
-      for (index_t j = k; j < m; ++j) {
-        const double xj = xr[C[j]];
-        if (xj == 0.0) continue;
-        const double* u = U + static_cast<std::size_t>(j - k) * k;
-        for (index_t i = 0; i < k; ++i) w[i] -= u[i] * xj;
+      if (c > 0) {
+        g.resize(c);
+        for (index_t j = 0; j < c; ++j) g[j] = xr[C[k + j]];
+        if (c * k <= kLoops) {
+          for (index_t j = 0; j < c; ++j) {
+            const double xj = g[j];
+            if (xj == 0.0) continue;
+            const double* u = U + static_cast<std::size_t>(j) * k;
+            for (index_t i = 0; i < k; ++i) w[i] -= u[i] * xj;
+          }
+        } else {
+          dgemv_("N", &ik, &ic, &m1, U, &ik, g.data(), &one, &p1, w.data(), &one);
+        }
       }
-      for (index_t j = k - 1; j >= 0; --j) {
-        const double* col = L + static_cast<std::size_t>(j) * m;
-        const double d = col[j];
-        w[j] = d != 0.0 ? w[j] / d : 0.0;
-        const double wj = w[j];
-        for (index_t i = 0; i < j; ++i) w[i] -= col[i] * wj;
+      bool zero_pivot = false;
+      for (index_t j = 0; j < k; ++j) zero_pivot |= L[static_cast<std::size_t>(j) * m + j] == 0.0;
+      if (k * k <= kLoops || zero_pivot) {
+        for (index_t j = k - 1; j >= 0; --j) {
+          const double* col = L + static_cast<std::size_t>(j) * m;
+          const double dj = col[j];
+          w[j] = dj != 0.0 ? w[j] / dj : 0.0;  // a zero pivot (static pivoting off) gives 0
+          const double wj = w[j];
+          for (index_t i = 0; i < j; ++i) w[i] -= col[i] * wj;
+        }
+      } else {
+        dtrsv_("U", "N", "N", &ik, L, &im, w.data(), &one);
       }
       for (index_t i = 0; i < k; ++i) xr[C[i]] = w[i];
     }
@@ -270,15 +313,15 @@ void solve_delayed(const Analysis& an, const DelayedFactor& F, double* b, index_
 
 int delayed_determinant_sign(const Analysis& an, const DelayedFactor& F) {
   int sign = 1;
-  for (const auto& s : F.front_stats) sign *= s.det_sign;
+  for (const auto& fr : F.fronts) sign *= fr.stats.det_sign;
   if (sign == 0) return 0;
   std::vector<index_t> rseq, cseq;
   rseq.reserve(an.n);
   cseq.reserve(an.n);
-  for (std::size_t f = 0; f < F.m.size(); ++f)
-    for (index_t i = 0; i < F.k[f]; ++i) {
-      rseq.push_back(F.rows[F.index_offset[f] + i]);
-      cseq.push_back(F.cols[F.index_offset[f] + i]);
+  for (const auto& fr : F.fronts)
+    for (index_t i = 0; i < fr.k; ++i) {
+      rseq.push_back(fr.rows[i]);
+      cseq.push_back(fr.cols[i]);
     }
   std::vector<char> seen;
   return sign * parity(rseq, seen) * parity(cseq, seen);

@@ -8,15 +8,17 @@
 // fail a relative threshold test (numeric/cpu/delayed_front.hpp): their rows and columns
 // join the parent's front as extra fully summed rows and columns, so front sizes follow
 // the values. The factor owns its storage (sized as the fronts come) and its solve, in the
-// manner of SPRAL SSIDS's numeric subtrees. Fronts are visited in postorder with a stack
-// of contribution blocks (the children of a front are on top of the stack when it is
-// assembled), one host thread.
+// manner of SPRAL SSIDS's numeric subtrees. Fronts are factored level by level of the
+// analysis's level schedule (deepest first), those of a level concurrently; each keeps its
+// contribution block until its parent has been assembled.
 //
 // LU only (MatrixType::general): rows and columns permute independently, so each front
 // keeps a row list and a column list. The factor is of B = the scaled, matched, ordered
 // matrix of the analysis, in tree numbering: L·U = B(σr, σc) for the row and column pivot
 // sequences σr, σc (each front's first k rows / columns, fronts in postorder).
 #pragma once
+
+#include <tbb/task_arena.h>
 
 #include <cstddef>
 #include <vector>
@@ -26,33 +28,38 @@
 
 namespace strata::numeric {
 
-/// The factor of one factorization with delayed pivots (see above). Per front f:
-/// m[f] rows and columns, k[f] pivots; its row and column lists (tree numbering) at
-/// index_offset[f] (m[f] each; the first k[f] are the pivot rows / columns in elimination
-/// order); its values at value_offset[f]: L (m×k column-major: U11 on and above the
-/// diagonal of the first k rows, unit L11 below it, then L21) followed by U12 (k×(m−k)).
+/// One front of a factorization with delayed pivots: m rows and columns, k pivots; its
+/// row and column lists (tree numbering; the first k are the pivot rows / columns in
+/// elimination order, the next `delayed` the rows and columns it passed to its parent);
+/// `lu`: L (m×k column-major: U11 on and above the diagonal of the first k rows, unit L11
+/// below it, then L21) followed by U12 (k×(m−k)); `cb`: the contribution block
+/// ((m−k)×(m−k), rows rows[k..m), columns cols[k..m)), kept until the parent is assembled.
+/// The vectors keep their capacity from one factorization to the next.
+struct DelayedFront {
+  index_t m = 0, k = 0, delayed = 0;
+  std::vector<index_t> rows, cols;
+  std::vector<double> lu, cb;
+  cpu::PivotStats stats;
+};
+
+/// The factor of one factorization with delayed pivots (see above), front by front in
+/// the assembly tree's (postorder) numbering.
 struct DelayedFactor {
   MatrixType type = MatrixType::general;
-  std::vector<index_t> m, k;
-  std::vector<std::size_t> index_offset, value_offset;  ///< n_fronts + 1 entries each
-  std::vector<index_t> rows, cols;
-  std::vector<double> values;
-  std::vector<cpu::PivotStats> front_stats;  ///< per front
+  std::vector<DelayedFront> fronts;
   index_t delayed = 0;          ///< Σ over fronts of the pivots passed on to the parent
   index_t fronts_delaying = 0;  ///< fronts that passed pivots on
-  index_t largest_front = 0;    ///< the largest m[f]
+  index_t largest_front = 0;    ///< the largest m
   bool valid = false;
 };
 
-/// Reusable work arrays of factorize_delayed (kept from one factorization to the next).
+/// Per-thread work arrays of factorize_delayed, kept from one factorization to the next.
 struct DelayedWorkspace {
-  std::vector<double> front, stack;
-  std::vector<index_t> row_pos, col_pos, row_perm, col_perm, stack_index;
-  struct Block {
-    std::size_t values = 0, indices = 0;  ///< offsets into stack and stack_index
-    index_t size = 0, delayed = 0;        ///< order of the block, delayed rows (= columns)
+  struct Thread {
+    std::vector<double> front;
+    std::vector<index_t> row_pos, col_pos, row_perm, col_perm, scratch;
   };
-  std::vector<Block> blocks;
+  std::vector<Thread> threads;
 };
 
 /// Factors the scaled canonical values `scaled_values` (in the analysis's entry order,
@@ -60,11 +67,15 @@ struct DelayedWorkspace {
 /// `threshold` in (0, 1]; a pivot no larger than static_pivot is not taken below a root;
 /// at a root the remaining candidates are eliminated with partial pivoting and pivots
 /// under static_pivot replaced by ±static_pivot (counted in front_stats' perturbed).
-/// Throws NotSupported for a type other than general, InvalidInput for a threshold outside
-/// (0, 1], OutOfMemory when the fronts grow beyond the memory.
+/// The fronts of a level of an.schedule are factored concurrently in `arena` (one BLAS
+/// thread each; a level of one front gets the arena's threads inside BLAS), each from its
+/// children's blocks in child order, so the factor does not depend on the thread count
+/// except through multithreaded BLAS on the lone fronts. Throws NotSupported for a type
+/// other than general, InvalidInput for a threshold outside (0, 1], OutOfMemory when the
+/// fronts grow beyond the memory.
 void factorize_delayed(const Analysis& an, const double* scaled_values, MatrixType type,
                        double threshold, double static_pivot, DelayedFactor& factor,
-                       DelayedWorkspace& work);
+                       DelayedWorkspace& work, tbb::task_arena& arena);
 
 /// Solves with the factor: b (tree numbering of the rows, n × nrhs column-major) is
 /// overwritten by the solution (tree numbering of the columns).
