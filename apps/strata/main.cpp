@@ -106,6 +106,10 @@ const CLI::Validator kNonNegativeCount([](std::string& v) { return bad_number(v,
                                        "N>=0");
 const CLI::Validator kCount([](std::string& v) { return bad_number(v, true, 1, false); }, "N>=1");
 
+Pivoting pivoting_of(const std::string& p) {
+  return p == "fixed" ? Pivoting::fixed : p == "delayed" ? Pivoting::delayed : Pivoting::automatic;
+}
+
 Backend backend_of(const std::string& device) {
   return device == "cpu" ? Backend::cpu : device == "gpu" ? Backend::cuda : Backend::automatic;
 }
@@ -491,7 +495,7 @@ int run_solve(const SolveArgs& a, const Communicator& comm) {
 
 struct SimulateArgs {
   std::string model, generate, output = "out", dump_dir, write_model, device = "auto";
-  std::string checkpoint_dir, resume, formulation = "auto";
+  std::string checkpoint_dir, resume, formulation = "auto", pivoting;
   index_t checkpoint_every = 0;
   double energy_tol = -1;
   std::vector<std::string> resume_conflicts;  // integration options given with --resume
@@ -626,6 +630,7 @@ int run_simulate_checked(const SimulateArgs& a, bool& started) {
     rs.order = a.order;
     rs.backend = backend_of(a.device);
     rs.device_memory_limit = a.device_memory_limit;
+    if (!a.pivoting.empty()) rs.pivoting = pivoting_of(a.pivoting);
     rs.threads = a.threads;
     rs.full_newton = a.full_newton;
     rs.newton_tol = a.newton_tol;
@@ -776,6 +781,13 @@ int main(int argc, char** argv) {
                    "relative Newton tolerance (default: the model's, else 1e-6)")
       ->check(kPositive);
   simulate
+      ->add_option("--pivoting", sim.pivoting,
+                   "pivots the analysis's order cannot take: fixed (static pivots), automatic "
+                   "(that order first, delayed pivoting on the host when it needs static "
+                   "pivots), delayed (always delayed pivoting, on the host) (default: delayed "
+                   "on the CPU, automatic on a GPU)")
+      ->check(CLI::IsMember({"fixed", "automatic", "delayed"}));
+  simulate
       ->add_option("--formulation", sim.formulation,
                    "auto: coordinate partitioning, stabilized from where no partition is well "
                    "conditioned (singular configurations); or always one of them")
@@ -860,7 +872,7 @@ int main(int argc, char** argv) {
   for (const char* opt :
        {"--step", "--order", "--device", "--output-interval", "--vtk", "--full-newton",
         "--newton-tol", "--threads", "--variable-step", "--rtol", "--atol", "--max-step",
-        "--dense-reference", "--write-model", "--formulation", "--energy-tol"})
+        "--dense-reference", "--write-model", "--formulation", "--energy-tol", "--pivoting"})
     if (simulate->count(opt) > 0) sim.resume_conflicts.push_back(opt);
   try {
     if (*analyze) return run_analyze(analyze_args);

@@ -75,7 +75,8 @@ Integrator::Integrator(const Model& model, IntegratorOptions options)
 
 std::unique_ptr<LinearSolver> Integrator::new_solver() const {
   if (opts_.dense_solver) return make_dense_solver();
-  return make_strata_solver(opts_.backend, opts_.threads, opts_.device_memory_limit);
+  return make_strata_solver(opts_.backend, opts_.threads, opts_.device_memory_limit,
+                            opts_.pivoting);
 }
 
 void Integrator::use_stabilized(const char* why) {

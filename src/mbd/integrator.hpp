@@ -22,6 +22,7 @@
 #include <functional>
 #include <memory>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -61,6 +62,9 @@ struct IntegratorOptions {
   double min_step = 0;                   ///< smallest step before giving up (0: step·1e-6)
   Backend backend = Backend::automatic;  ///< strata backend
   std::size_t device_memory_limit = 0;   ///< GPU budget in bytes (0: the whole device)
+  /// Options::pivoting of the solver; unset: delayed on the host, fixed order first
+  /// (Pivoting::automatic) on a GPU (make_strata_solver).
+  std::optional<Pivoting> pivoting;
   int threads = 0;  ///< CPU threads for strata and the assembly (0: automatic — all, but one
                     ///< for strata below 20000 unknowns)
   bool dense_solver = false;  ///< LAPACK instead of strata (tests only)

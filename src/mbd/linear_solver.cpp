@@ -18,9 +18,11 @@ namespace {
 
 class StrataLinearSolver : public LinearSolver {
  public:
-  StrataLinearSolver(Backend backend, int threads, std::size_t device_memory_limit)
-      : solver_(options(backend, threads, device_memory_limit)) {}
-  static Options options(Backend backend, int threads, std::size_t device_memory_limit) {
+  StrataLinearSolver(Backend backend, int threads, std::size_t device_memory_limit,
+                     std::optional<Pivoting> pivoting)
+      : solver_(options(backend, threads, device_memory_limit, pivoting)) {}
+  static Options options(Backend backend, int threads, std::size_t device_memory_limit,
+                         std::optional<Pivoting> pivoting) {
     Options o;
     o.type = MatrixType::general;
     o.backend = backend;
@@ -37,7 +39,7 @@ class StrataLinearSolver : public LinearSolver {
     // first and delays on the host only when it needed static pivots.
     const bool gpu =
         backend == Backend::cuda || (backend == Backend::automatic && numeric::cuda_available());
-    o.pivoting = gpu ? Pivoting::automatic : Pivoting::delayed;
+    o.pivoting = pivoting ? *pivoting : gpu ? Pivoting::automatic : Pivoting::delayed;
     return o;
   }
   void analyze(const SparseMatrix& a) override {
@@ -108,8 +110,9 @@ class DenseLinearSolver : public LinearSolver {
 }  // namespace
 
 std::unique_ptr<LinearSolver> make_strata_solver(Backend backend, int threads,
-                                                 std::size_t device_memory_limit) {
-  return std::make_unique<StrataLinearSolver>(backend, threads, device_memory_limit);
+                                                 std::size_t device_memory_limit,
+                                                 std::optional<Pivoting> pivoting) {
+  return std::make_unique<StrataLinearSolver>(backend, threads, device_memory_limit, pivoting);
 }
 std::unique_ptr<LinearSolver> make_dense_solver() { return std::make_unique<DenseLinearSolver>(); }
 

@@ -7,6 +7,7 @@
 #pragma once
 
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "strata/options.hpp"
@@ -38,9 +39,12 @@ class LinearSolver {
 
 /// strata's multifrontal LU (MatrixType::general with matching and scaling) on the
 /// given backend (Backend::automatic picks the GPU when the build and machine have one);
-/// device_memory_limit as Options::device_memory_limit (bytes, 0: the whole device).
+/// device_memory_limit as Options::device_memory_limit (bytes, 0: the whole device);
+/// pivoting as Options::pivoting, unset: Pivoting::delayed on the host, Pivoting::automatic
+/// on a GPU.
 std::unique_ptr<LinearSolver> make_strata_solver(Backend backend, int threads,
-                                                 std::size_t device_memory_limit = 0);
+                                                 std::size_t device_memory_limit = 0,
+                                                 std::optional<Pivoting> pivoting = {});
 /// Dense LU with partial pivoting (LAPACK); for tests and tiny models only.
 std::unique_ptr<LinearSolver> make_dense_solver();
 

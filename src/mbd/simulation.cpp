@@ -201,6 +201,7 @@ nlohmann::json integrator_options_json(const IntegratorOptions& o) {
           {"min_step", o.min_step},
           {"backend", static_cast<int>(o.backend)},
           {"device_memory_limit", o.device_memory_limit},
+          {"pivoting", o.pivoting ? static_cast<int>(*o.pivoting) : -1},
           {"threads", o.threads},
           {"dense_solver", o.dense_solver},
           {"variable_step", o.variable_step},
@@ -235,6 +236,7 @@ IntegratorOptions checkpoint_integrator_options(const nlohmann::json& ck) {
   j.at("min_step").get_to(o.min_step);
   o.backend = static_cast<Backend>(j.at("backend").get<int>());
   o.device_memory_limit = j.value("device_memory_limit", std::size_t{0});
+  if (const int p = j.value("pivoting", -1); p >= 0) o.pivoting = static_cast<Pivoting>(p);
   j.at("threads").get_to(o.threads);
   j.at("dense_solver").get_to(o.dense_solver);
   j.at("variable_step").get_to(o.variable_step);
@@ -297,6 +299,7 @@ SimulationOptions simulation_options(const Model& model, const RunSettings& s) {
   io.order = s.order > 0 ? s.order : model.order;
   io.backend = s.backend;
   io.device_memory_limit = s.device_memory_limit;
+  io.pivoting = s.pivoting;
   io.threads = s.threads;
   io.modified_newton = !s.full_newton;
   if (model.newton_rtol > 0) io.newton_rtol = model.newton_rtol;

@@ -27,6 +27,7 @@
 #include <csignal>
 #include <cstdio>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 
 #include "mbd/integrator.hpp"
@@ -127,6 +128,7 @@ struct RunSettings {
   int order = 0;               ///< BDF order 1..5
   Backend backend = Backend::automatic;
   std::size_t device_memory_limit = 0;  ///< GPU budget in bytes (0: the whole device)
+  std::optional<Pivoting> pivoting;     ///< IntegratorOptions::pivoting
   int threads = 0;                      ///< host threads for strata and the assembly (0: automatic)
   bool full_newton = false;             ///< refactorize at every Newton iteration
   double newton_tol = 0;                ///< relative Newton tolerance
