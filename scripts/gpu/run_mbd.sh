@@ -69,5 +69,13 @@ for m in "${models[@]}"; do
   run "$name-gpu" --generate "$spec" --t-end "$tend" --device gpu
   run "$name-cpu" --generate "$spec" --t-end "$tend" --device cpu --threads "$THREADS"
 done
+# the default model over its whole second, with each way of handling the pivots its
+# analysis's order cannot take (Options::pivoting; docs/formulation.md)
+if ((!quick)); then
+  for p in fixed automatic delayed; do
+    run "default-gpu-$p" --device gpu --pivoting "$p"
+  done
+  run "default-cpu" --device cpu --threads "$THREADS"
+fi
 echo "run_mbd: log in $log"
 exit 0
