@@ -1,28 +1,33 @@
 // strata — front factorization with threshold pivoting and delayed pivots (see
 // delayed_front.hpp).
 //
-// LU. The p candidate columns are eliminated right-looking, one at a time, over all m rows
-// (the column maximum of the threshold test must see the contribution-block rows as they
-// are after the earlier pivots): a rank-one update of the candidate columns per pivot,
-// BLAS-2 work of about m·p² flops. Whole rows are interchanged at once (the fully summed
-// rows' entries in the contribution-block columns are still the assembled ones, so the
-// interchange commutes with their later update). A refused column is swapped with the
-// last untried candidate and is updated with the others from then on, so that at the end
-// the delayed columns hold exactly what the pivots taken made of them. After the
-// candidates: U12 of the contribution-block columns by one TRSM, their Schur complement by
-// one GEMM — BLAS-3, with the delayed rows among the updated ones.
+// LU, blocked. Pivots are taken in panels of kPanel: inside a panel left-looking (the next
+// candidate column is brought up to date with the panel's earlier pivots, over all m rows,
+// since the threshold test's column maximum must see the contribution-block rows as they
+// are), after it right-looking (one TRSM for the U rows of every column behind the panel
+// and one GEMM for their Schur complement: BLAS-3, the delayed and contribution-block
+// rows and columns among them). The up-to-date column is built in a copy: a refused
+// column is swapped, as it was, with the last untried candidate, and gets the panel's
+// pivots with every other column behind the panel. Whole rows are interchanged at once:
+// the rows interchanged are both below the panel's earlier pivots, where every column
+// behind the panel is still waiting for the same update.
 #include "numeric/cpu/delayed_front.hpp"
 
 #include <algorithm>
 #include <cmath>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include "numeric/cpu/dense_blas.hpp"
 #include "strata/errors.hpp"
 
 namespace strata::numeric::cpu {
 namespace {
+
+// Pivots per panel: the BLAS-2 work inside a panel is about m·kPanel per column, the rest
+// goes to one TRSM and one GEMM per panel.
+constexpr index_t kPanel = 32;
 
 void count(double d, PivotStats& st) {
   if (d < 0) st.det_sign = -st.det_sign;
@@ -45,55 +50,66 @@ index_t factor_front_lu_delayed(double* f, index_t m, index_t p, index_t ld,
     throw InvalidInput("delayed front: the pivot threshold must be in (0, 1]");
   auto A = [&](index_t i, index_t j) -> double& { return f[i + j * ld]; };
   for (index_t i = 0; i < p; ++i) row_perm[i] = col_perm[i] = i;
+  std::vector<double> col;  // the candidate column brought up to date with the panel
   index_t npiv = 0;
   index_t last = p;  // candidates are columns npiv..last-1; last..p-1 were refused
   while (npiv < last) {
-    const index_t j = npiv;
-    // largest entry among the remaining fully summed rows, and over all remaining rows
-    index_t r = j;
-    double best = std::abs(A(j, j));
-    for (index_t i = j + 1; i < p; ++i)
-      if (std::abs(A(i, j)) > best) best = std::abs(A(i, j)), r = i;
-    double colmax = best;
-    for (index_t i = p; i < m; ++i) colmax = std::max(colmax, std::abs(A(i, j)));
-    const bool good = best > policy.tiny && best >= policy.threshold * colmax;
-    if (!good && policy.may_delay) {
-      // refuse column j: behind the remaining candidates
-      --last;
-      if (j != last) {
-        for (index_t i = 0; i < m; ++i) std::swap(A(i, j), A(i, last));
-        std::swap(col_perm[j], col_perm[last]);
+    // one panel: up to kPanel pivots taken from the candidates, left-looking inside it
+    const index_t j0 = npiv;
+    while (npiv < last && npiv - j0 < kPanel) {
+      const index_t j = npiv;
+      // column j with the panel's earlier pivots applied (the earlier panels' are in it
+      // already), in a copy: a refused column must stay without them, since the update
+      // after the panel applies them to every column behind it
+      col.assign(&A(j0, j), &A(j0, j) + (m - j0));
+      const index_t q = j - j0;          // pivots already taken in this panel
+      for (index_t c = 0; c < q; ++c) {  // unit lower solve on the panel's top rows
+        const double u = col[c];
+        if (u == 0.0) continue;
+        const double* l = &A(j0, j0 + c);
+        for (index_t i = c + 1; i < m - j0; ++i) col[i] -= l[i] * u;
       }
-      continue;
+      // largest entry among the remaining fully summed rows, and over all remaining rows
+      index_t r = j;
+      double best = std::abs(col[q]);
+      for (index_t i = j + 1; i < p; ++i)
+        if (std::abs(col[i - j0]) > best) best = std::abs(col[i - j0]), r = i;
+      double colmax = best;
+      for (index_t i = p; i < m; ++i) colmax = std::max(colmax, std::abs(col[i - j0]));
+      const bool good = best > policy.tiny && best >= policy.threshold * colmax;
+      if (!good && policy.may_delay) {
+        // refuse column j (as it was): behind the remaining candidates
+        --last;
+        if (j != last) {
+          for (index_t i = 0; i < m; ++i) std::swap(A(i, j), A(i, last));
+          std::swap(col_perm[j], col_perm[last]);
+        }
+        continue;
+      }
+      std::copy(col.begin(), col.end(), &A(j0, j));
+      if (r != j) {  // whole rows: the panel's L, the pending columns, the block's columns
+        for (index_t c = 0; c < m; ++c) std::swap(A(j, c), A(r, c));
+        std::swap(row_perm[j], row_perm[r]);
+      }
+      double d = A(j, j);
+      if (std::abs(d) < policy.static_pivot) {  // a root's last resort
+        d = d < 0 ? -policy.static_pivot : policy.static_pivot;
+        ++st.perturbed;
+      }
+      A(j, j) = d;
+      count(d, st);
+      const double inv = d != 0 ? 1.0 / d : 0.0;
+      for (index_t i = j + 1; i < m; ++i) A(i, j) *= inv;
+      ++npiv;
     }
-    if (r != j) {
-      for (index_t c = 0; c < m; ++c) std::swap(A(j, c), A(r, c));
-      std::swap(row_perm[j], row_perm[r]);
+    // the panel's pivots applied to every column behind it (the candidates left, the
+    // refused ones and the contribution block's): their U rows, then their Schur complement
+    const index_t np = npiv - j0, nrest = m - npiv;
+    if (np > 0 && nrest > 0) {
+      trsm('L', 'L', 'N', 'U', np, nrest, &A(j0, j0), ld, &A(j0, npiv), ld);
+      gemm('N', 'N', m - npiv, nrest, np, -1.0, &A(npiv, j0), ld, &A(j0, npiv), ld, 1.0,
+           &A(npiv, npiv), ld);
     }
-    double d = A(j, j);
-    if (std::abs(d) < policy.static_pivot) {  // a root's last resort
-      d = d < 0 ? -policy.static_pivot : policy.static_pivot;
-      ++st.perturbed;
-    }
-    A(j, j) = d;
-    count(d, st);
-    const double inv = d != 0 ? 1.0 / d : 0.0;
-    for (index_t i = j + 1; i < m; ++i) A(i, j) *= inv;
-    // update the other candidate columns and the refused ones (all rows below j)
-    for (index_t c = j + 1; c < p; ++c) {
-      const double u = A(j, c);
-      if (u == 0.0) continue;
-      double* col = &A(0, c);
-      const double* l = &A(0, j);
-      for (index_t i = j + 1; i < m; ++i) col[i] -= l[i] * u;
-    }
-    ++npiv;
-  }
-  const index_t n = m - p;
-  if (n > 0 && npiv > 0) {
-    // U12 of the contribution-block columns, then their Schur complement (delayed rows too)
-    trsm('L', 'L', 'N', 'U', npiv, n, f, ld, &A(0, p), ld);
-    gemm('N', 'N', m - npiv, n, npiv, -1.0, &A(npiv, 0), ld, &A(0, p), ld, 1.0, &A(npiv, p), ld);
   }
   return npiv;
 }
