@@ -785,7 +785,7 @@ int main(int argc, char** argv) {
                    "pivots the analysis's order cannot take: fixed (static pivots), automatic "
                    "(that order first, delayed pivoting on the host when it needs static "
                    "pivots), delayed (always delayed pivoting, on the host) (default: delayed "
-                   "on the CPU, automatic on a GPU)")
+                   "on the CPU, fixed on a GPU)")
       ->check(CLI::IsMember({"fixed", "automatic", "delayed"}));
   simulate
       ->add_option("--formulation", sim.formulation,

@@ -62,8 +62,8 @@ struct IntegratorOptions {
   double min_step = 0;                   ///< smallest step before giving up (0: step·1e-6)
   Backend backend = Backend::automatic;  ///< strata backend
   std::size_t device_memory_limit = 0;   ///< GPU budget in bytes (0: the whole device)
-  /// Options::pivoting of the solver; unset: delayed on the host, fixed order first
-  /// (Pivoting::automatic) on a GPU (make_strata_solver).
+  /// Options::pivoting of the solver; unset: delayed on the host, fixed on a GPU
+  /// (make_strata_solver).
   std::optional<Pivoting> pivoting;
   int threads = 0;  ///< CPU threads for strata and the assembly (0: automatic — all, but one
                     ///< for strata below 20000 unknowns)

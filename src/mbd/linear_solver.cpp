@@ -35,11 +35,13 @@ class StrataLinearSolver : public LinearSolver {
     o.matching_and_scaling = true;
     // The Newton matrix's values drift from those the analysis matched and scaled (step
     // size, contacts, rotations): on the host every factorization delays the pivots the
-    // analysis's order cannot take (numeric/delayed.hpp); a GPU factors in that order
-    // first and delays on the host only when it needed static pivots.
+    // analysis's order cannot take (numeric/delayed.hpp). A GPU keeps that order with static
+    // pivots (the integrator analyzes again when they appear): delayed pivoting runs on the
+    // host, and the host's delayed factorization after the device's costs more per step
+    // than the occasional new analysis (bench/REPORT.md).
     const bool gpu =
         backend == Backend::cuda || (backend == Backend::automatic && numeric::cuda_available());
-    o.pivoting = pivoting ? *pivoting : gpu ? Pivoting::automatic : Pivoting::delayed;
+    o.pivoting = pivoting ? *pivoting : gpu ? Pivoting::fixed : Pivoting::delayed;
     return o;
   }
   void analyze(const SparseMatrix& a) override {

@@ -40,8 +40,8 @@ class LinearSolver {
 /// strata's multifrontal LU (MatrixType::general with matching and scaling) on the
 /// given backend (Backend::automatic picks the GPU when the build and machine have one);
 /// device_memory_limit as Options::device_memory_limit (bytes, 0: the whole device);
-/// pivoting as Options::pivoting, unset: Pivoting::delayed on the host, Pivoting::automatic
-/// on a GPU.
+/// pivoting as Options::pivoting, unset: Pivoting::delayed on the host, Pivoting::fixed on
+/// a GPU.
 std::unique_ptr<LinearSolver> make_strata_solver(Backend backend, int threads,
                                                  std::size_t device_memory_limit = 0,
                                                  std::optional<Pivoting> pivoting = {});
