@@ -21,13 +21,14 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import re
 import shlex
 import subprocess
 import sys
 import tempfile
 import time
+
+from run_metadata import metadata
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -55,35 +56,6 @@ SUMMARY = {
     "stabilized": re.compile(r"^formulation\s+partitioned, stabilized from t = (\S+) s"),
     "removed": re.compile(r"^redundant equations\s+(\d+) switched off"),
 }
-
-
-def command_output(cmd):
-    try:
-        return subprocess.run(cmd, capture_output=True, text=True, cwd=REPO).stdout.strip()
-    except OSError:
-        return ""
-
-
-def metadata(argv):
-    cpu = ""
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    cpu = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    return {
-        "benchmark": "iftomm",
-        "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-        "command": " ".join(shlex.quote(a) for a in argv),
-        "git_commit": command_output(["git", "rev-parse", "--short", "HEAD"]),
-        "git_dirty": bool(command_output(["git", "status", "--porcelain",
-                                          "--untracked-files=no"])),
-        "machine": {"host": platform.node(), "cpu": cpu,
-                    "hardware_threads": os.cpu_count(), "gpu": ""},
-    }
 
 
 def run_one(cli, model, args, out):
@@ -125,7 +97,8 @@ def main(argv=None) -> int:
     ap.add_argument("--results-dir", default=os.path.join(REPO, "bench", "results"))
     ap.add_argument("--quick", action="store_true", help="the model files' settings only")
     args = ap.parse_args(argv)
-    data = metadata([sys.argv[0]] + (argv if argv is not None else sys.argv[1:]))
+    data = {"benchmark": "iftomm",
+            **metadata([sys.argv[0]] + (argv if argv is not None else sys.argv[1:]))}
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for name, settings in (QUICK if args.quick else SETTINGS).items():

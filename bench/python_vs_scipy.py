@@ -40,11 +40,12 @@ import json
 import multiprocessing
 import os
 import platform
-import shlex
 import subprocess
 import sys
 import tempfile
 import time
+
+from run_metadata import metadata
 
 import numpy as np
 import scipy
@@ -145,36 +146,6 @@ def limited(f, limit):
         if proc.is_alive():
             proc.kill()
         proc.join()
-
-
-def command_output(cmd):
-    try:
-        return subprocess.run(cmd, capture_output=True, text=True, cwd=REPO).stdout.strip()
-    except OSError:
-        return ""
-
-
-def metadata(argv):
-    cpu = ""
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    cpu = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    gpu = command_output(["sh", "-c", "nvidia-smi --query-gpu=name --format=csv,noheader "
-                          "2>/dev/null | head -1"])
-    return {
-        "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-        "command": " ".join(shlex.quote(a) for a in argv),
-        "git_commit": command_output(["git", "rev-parse", "--short", "HEAD"]),
-        "git_dirty": bool(command_output(["git", "status", "--porcelain",
-                                          "--untracked-files=no"])),
-        "machine": {"host": platform.node(), "cpu": cpu,
-                    "hardware_threads": os.cpu_count(), "gpu": gpu},
-    }
 
 
 # ------------------------------------------------------------------------------ part 1

@@ -56,6 +56,17 @@ SparseMatrix with_values(const SparseMatrix& pattern, double diag, std::mt19937_
   return a;
 }
 
+// LU on the CPU with fundamental supernodes only (no amalgamation): leaf fronts of one
+// pivot, which a zero diagonal leaves without a pivot in the analysis's order.
+Options leaf_fronts() {
+  Options o;
+  o.type = MatrixType::general;
+  o.backend = Backend::cpu;
+  o.relax_small = 0;
+  o.relax_zeros_1 = o.relax_zeros_2 = o.relax_zeros_3 = 0;
+  return o;
+}
+
 // log|det A| and its sign from LAPACK's dgetrf on the dense copy.
 void dense_logdet(const SparseMatrix& a, double* logdet, int* sign) {
   std::vector<double> d = test::to_dense(a);
@@ -99,13 +110,7 @@ TEST(DelayedPivoting, StaleMatchingFactorsWithoutStaticPivots) {
     const SparseMatrix pattern = random_pattern(n, 3, rng);
     const SparseMatrix a1 = with_values(pattern, 20.0, rng);
     SparseMatrix a2 = with_values(pattern, 0.0, rng);
-    Options o;
-    o.type = MatrixType::general;
-    o.backend = Backend::cpu;
-    // fundamental supernodes only: leaf fronts of one pivot, which the zero diagonal
-    // leaves without a pivot in the analysis's order
-    o.relax_small = 0;
-    o.relax_zeros_1 = o.relax_zeros_2 = o.relax_zeros_3 = 0;
+    const Options o = leaf_fronts();
     Solver s(o);
     s.factorize(a1);
     EXPECT_FALSE(s.stats().factor.delayed_pivoting);
@@ -196,12 +201,7 @@ TEST(DelayedPivoting, SingularMatrixIsStillReported) {
   for (index_t n : {1, 2, 5, 733}) {
     SCOPED_TRACE("n=" + std::to_string(n));
     const SparseMatrix pattern = random_pattern(n, 3, rng);
-    Options o;
-    o.type = MatrixType::general;
-    o.backend = Backend::cpu;
-    o.relax_small = 0;
-    o.relax_zeros_1 = o.relax_zeros_2 = o.relax_zeros_3 = 0;
-    Solver s(o);
+    Solver s(leaf_fronts());
     s.factorize(with_values(pattern, 20.0, rng));
     SparseMatrix a2 = with_values(pattern, 0.0, rng);
     const index_t dead = n / 2;
@@ -218,11 +218,7 @@ TEST(DelayedPivoting, SingularMatrixIsStillReported) {
 TEST(DelayedPivoting, OffKeepsStaticPivoting) {
   auto rng = test::fresh_rng();
   const SparseMatrix pattern = random_pattern(60, 3, rng);
-  Options o;
-  o.type = MatrixType::general;
-  o.backend = Backend::cpu;
-  o.relax_small = 0;
-  o.relax_zeros_1 = o.relax_zeros_2 = o.relax_zeros_3 = 0;
+  Options o = leaf_fronts();
   o.pivoting = Pivoting::fixed;
   Solver s(o);
   s.factorize(with_values(pattern, 20.0, rng));
