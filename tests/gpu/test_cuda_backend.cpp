@@ -1110,5 +1110,43 @@ TEST_F(CudaBackend, LdltRefactorizationIsDeterministic) {
   EXPECT_EQ(s1.solve(b), s2.solve(b));
 }
 
+// Pivoting::automatic on the CUDA backend: values whose matching is stale (a dominant
+// diagonal at analysis, a zero one refactorized) need static pivots in the analysis's
+// order; delayed pivoting then runs on the host. The factor, the statistics and the
+// solution equal the CPU backend's (the same host code after the same fixed-order check).
+TEST_F(CudaBackend, DelayedPivotingEqualsCpu) {
+  auto rng = test::fresh_rng();
+  std::uniform_real_distribution<double> u(-1, 1);
+  const SparseMatrix pattern = test::random_pattern_with_diagonal(733, 3, rng);
+  const SparseMatrix a1 = test::with_values(pattern, 20.0, rng);
+  const SparseMatrix a2 = test::with_values(pattern, 0.0, rng);
+  std::vector<double> b(733);
+  for (double& v : b) v = u(rng);
+  std::vector<double> x[2];
+  FactorStats f[2];
+  for (int gpu = 0; gpu < 2; ++gpu) {
+    Options o;
+    o.type = MatrixType::general;
+    o.backend = gpu ? Backend::cuda : Backend::cpu;
+    o.pivoting = Pivoting::automatic;
+    o.relax_small = 0;  // fundamental supernodes: one-pivot leaf fronts
+    o.relax_zeros_1 = o.relax_zeros_2 = o.relax_zeros_3 = 0;
+    Solver s(o);
+    s.factorize(a1);
+    s.refactorize(a2);
+    f[gpu] = s.stats().factor;
+    x[gpu] = s.solve(b);
+    EXPECT_LE(s.stats().solve.backward_error, 1e-14);
+  }
+  EXPECT_EQ(f[1].backend, "cuda");
+  EXPECT_TRUE(f[1].delayed_pivoting);
+  EXPECT_GT(f[1].fixed_order_perturbed_pivots, 0);
+  EXPECT_EQ(f[1].perturbed_pivots, 0);
+  EXPECT_EQ(f[1].delayed_pivots, f[0].delayed_pivots);
+  EXPECT_EQ(f[1].fronts_delaying, f[0].fronts_delaying);
+  EXPECT_EQ(f[1].log_abs_determinant, f[0].log_abs_determinant);
+  EXPECT_EQ(x[1], x[0]);
+}
+
 }  // namespace
 }  // namespace strata

@@ -20,42 +20,6 @@
 namespace strata {
 namespace {
 
-// A random n×n pattern: the diagonal, plus `per_column` random entries per column and
-// their transposes' positions (some of them), canonical CSC with values 0.
-SparseMatrix random_pattern(index_t n, index_t per_column, std::mt19937_64& rng) {
-  std::uniform_int_distribution<index_t> pick(0, n - 1);
-  std::vector<std::vector<index_t>> cols(n);
-  for (index_t j = 0; j < n; ++j) {
-    cols[j].push_back(j);
-    for (index_t q = 0; q < per_column && n > 1; ++q) {
-      const index_t i = pick(rng);
-      cols[j].push_back(i);
-      if (q % 2 == 0) cols[i].push_back(j);
-    }
-  }
-  SparseMatrix a;
-  a.n_rows = a.n_cols = n;
-  a.offsets.assign(n + 1, 0);
-  for (index_t j = 0; j < n; ++j) {
-    std::sort(cols[j].begin(), cols[j].end());
-    cols[j].erase(std::unique(cols[j].begin(), cols[j].end()), cols[j].end());
-    a.offsets[j + 1] = a.offsets[j] + static_cast<index_t>(cols[j].size());
-    a.indices.insert(a.indices.end(), cols[j].begin(), cols[j].end());
-  }
-  a.values.assign(a.indices.size(), 0.0);
-  return a;
-}
-
-// Values on `pattern`: off-diagonal entries uniform in [−1, 1], the diagonal `diag`.
-SparseMatrix with_values(const SparseMatrix& pattern, double diag, std::mt19937_64& rng) {
-  std::uniform_real_distribution<double> u(-1, 1);
-  SparseMatrix a = pattern;
-  for (index_t j = 0; j < a.n_cols; ++j)
-    for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p)
-      a.values[p] = a.indices[p] == j ? diag : u(rng);
-  return a;
-}
-
 // LU on the CPU with fundamental supernodes only (no amalgamation): leaf fronts of one
 // pivot, which a zero diagonal leaves without a pivot in the analysis's order.
 Options leaf_fronts() {
@@ -107,9 +71,9 @@ TEST(DelayedPivoting, StaleMatchingFactorsWithoutStaticPivots) {
   std::uniform_real_distribution<double> u(-1, 1);
   for (index_t n : {2, 3, 5, 733}) {
     SCOPED_TRACE("n=" + std::to_string(n));
-    const SparseMatrix pattern = random_pattern(n, 3, rng);
-    const SparseMatrix a1 = with_values(pattern, 20.0, rng);
-    SparseMatrix a2 = with_values(pattern, 0.0, rng);
+    const SparseMatrix pattern = test::random_pattern_with_diagonal(n, 3, rng);
+    const SparseMatrix a1 = test::with_values(pattern, 20.0, rng);
+    SparseMatrix a2 = test::with_values(pattern, 0.0, rng);
     const Options o = leaf_fronts();
     Solver s(o);
     s.factorize(a1);
@@ -167,8 +131,8 @@ TEST(DelayedPivoting, ValuesChangingBySixDecadesBetweenRefactorizations) {
   std::uniform_real_distribution<double> u(-1, 1);
   std::uniform_int_distribution<int> coin(0, 9);
   const index_t n = 733;
-  const SparseMatrix pattern = random_pattern(n, 4, rng);
-  SparseMatrix a = with_values(pattern, 10.0, rng);
+  const SparseMatrix pattern = test::random_pattern_with_diagonal(n, 4, rng);
+  SparseMatrix a = test::with_values(pattern, 10.0, rng);
   Options o;
   o.type = MatrixType::general;
   o.backend = Backend::cpu;
@@ -176,7 +140,7 @@ TEST(DelayedPivoting, ValuesChangingBySixDecadesBetweenRefactorizations) {
   s.factorize(a);
   for (int step = 0; step < 6; ++step) {
     SCOPED_TRACE("step " + std::to_string(step));
-    SparseMatrix b_mat = with_values(pattern, u(rng), rng);
+    SparseMatrix b_mat = test::with_values(pattern, u(rng), rng);
     std::vector<double> rs(n);
     for (double& r : rs) r = coin(rng) == 0 ? 1e6 : coin(rng) == 0 ? 1e-6 : 1.0;
     for (index_t j = 0; j < n; ++j)
@@ -200,10 +164,10 @@ TEST(DelayedPivoting, SingularMatrixIsStillReported) {
   auto rng = test::fresh_rng();
   for (index_t n : {1, 2, 5, 733}) {
     SCOPED_TRACE("n=" + std::to_string(n));
-    const SparseMatrix pattern = random_pattern(n, 3, rng);
+    const SparseMatrix pattern = test::random_pattern_with_diagonal(n, 3, rng);
     Solver s(leaf_fronts());
-    s.factorize(with_values(pattern, 20.0, rng));
-    SparseMatrix a2 = with_values(pattern, 0.0, rng);
+    s.factorize(test::with_values(pattern, 20.0, rng));
+    SparseMatrix a2 = test::with_values(pattern, 0.0, rng);
     const index_t dead = n / 2;
     for (index_t j = 0; j < n; ++j)
       for (index_t p = a2.offsets[j]; p < a2.offsets[j + 1]; ++p)
@@ -217,12 +181,12 @@ TEST(DelayedPivoting, SingularMatrixIsStillReported) {
 // Pivoting::fixed: static pivots as before.
 TEST(DelayedPivoting, OffKeepsStaticPivoting) {
   auto rng = test::fresh_rng();
-  const SparseMatrix pattern = random_pattern(60, 3, rng);
+  const SparseMatrix pattern = test::random_pattern_with_diagonal(60, 3, rng);
   Options o = leaf_fronts();
   o.pivoting = Pivoting::fixed;
   Solver s(o);
-  s.factorize(with_values(pattern, 20.0, rng));
-  s.refactorize(with_values(pattern, 0.0, rng));
+  s.factorize(test::with_values(pattern, 20.0, rng));
+  s.refactorize(test::with_values(pattern, 0.0, rng));
   EXPECT_FALSE(s.stats().factor.delayed_pivoting);
   EXPECT_GT(s.stats().factor.perturbed_pivots, 0);
 }

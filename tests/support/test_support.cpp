@@ -48,6 +48,39 @@ std::mt19937_64 fresh_rng(unsigned long long* seed_out) {
   return std::mt19937_64(seed);
 }
 
+SparseMatrix random_pattern_with_diagonal(index_t n, index_t per_column, std::mt19937_64& rng) {
+  std::uniform_int_distribution<index_t> pick(0, n - 1);
+  std::vector<std::vector<index_t>> cols(n);
+  for (index_t j = 0; j < n; ++j) {
+    cols[j].push_back(j);
+    for (index_t q = 0; q < per_column && n > 1; ++q) {
+      const index_t i = pick(rng);
+      cols[j].push_back(i);
+      if (q % 2 == 0) cols[i].push_back(j);
+    }
+  }
+  SparseMatrix a;
+  a.n_rows = a.n_cols = n;
+  a.offsets.assign(n + 1, 0);
+  for (index_t j = 0; j < n; ++j) {
+    std::sort(cols[j].begin(), cols[j].end());
+    cols[j].erase(std::unique(cols[j].begin(), cols[j].end()), cols[j].end());
+    a.offsets[j + 1] = a.offsets[j] + static_cast<index_t>(cols[j].size());
+    a.indices.insert(a.indices.end(), cols[j].begin(), cols[j].end());
+  }
+  a.values.assign(a.indices.size(), 0.0);
+  return a;
+}
+
+SparseMatrix with_values(const SparseMatrix& pattern, double diag, std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> u(-1, 1);
+  SparseMatrix a = pattern;
+  for (index_t j = 0; j < a.n_cols; ++j)
+    for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p)
+      a.values[p] = a.indices[p] == j ? diag : u(rng);
+  return a;
+}
+
 SparseMatrix random_sparse(index_t n, index_t per_column, RandomKind kind, std::mt19937_64& rng) {
   std::uniform_real_distribution<double> val(-1.0, 1.0);
   std::uniform_int_distribution<index_t> row(0, std::max<index_t>(n - 1, 0));

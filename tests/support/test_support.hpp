@@ -61,6 +61,13 @@ SparseMatrix random_sparse(index_t n, index_t per_column, RandomKind kind, std::
 SparseMatrix random_kkt(index_t n, std::mt19937_64& rng, double decades = 0,
                         std::vector<char>* is_constraint = nullptr);
 
+/// A random n×n pattern (canonical CSC, Storage::full, values 0): the diagonal, plus
+/// `per_column` random entries per column and the transposed positions of half of them.
+SparseMatrix random_pattern_with_diagonal(index_t n, index_t per_column, std::mt19937_64& rng);
+
+/// `pattern` with values: off-diagonal entries uniform in [−1, 1], the diagonal `diag`.
+SparseMatrix with_values(const SparseMatrix& pattern, double diag, std::mt19937_64& rng);
+
 /// Dense column-major n_rows×n_cols copy of A (symmetric storage expanded).
 std::vector<double> to_dense(const SparseMatrix& a);
 
