@@ -13,6 +13,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <string_view>
 
 #include "core/timer.hpp"
 #include "mbd/integrator.hpp"
@@ -206,10 +207,10 @@ void Integrator::report_initial_change(const std::vector<double>& given,
     if (std::sqrt(d2) > worst) worst = std::sqrt(d2), body = b.name;
   }
   if (worst > 1e-6 * std::max(scale, 1.0))
-    initial_warnings_.push_back(
-        fmt::format("{} body '{}' by {:.3e} {} to satisfy the constraints (the model's initial "
-                    "{} do not fit its joints)",
-                    what, body, worst, unit, unit[2] ? "velocities" : "poses"));
+    initial_warnings_.push_back(fmt::format(
+        "{} body '{}' by {:.3e} {} to satisfy the constraints (the model's initial "
+        "{} do not fit its joints)",
+        what, body, worst, unit, std::string_view(unit) == "m" ? "poses" : "velocities"));
 }
 
 void Integrator::initialize() {

@@ -147,11 +147,13 @@ void factor_front(const Analysis& an, const double* vals, const cpu::DelayPolicy
   const std::size_t lsize = static_cast<std::size_t>(m) * npiv;
   const std::size_t usize = static_cast<std::size_t>(npiv) * (m - npiv);
   sized(fr.lu, lsize + usize, "factor values");
-  std::memcpy(fr.lu.data(), A, sizeof(double) * lsize);
-  double* U = fr.lu.data() + lsize;
-  for (index_t j = npiv; j < m; ++j)
-    std::memcpy(U + static_cast<std::size_t>(j - npiv) * npiv, A + static_cast<std::size_t>(j) * m,
-                sizeof(double) * npiv);
+  if (npiv > 0) {  // (an empty vector's data() may be null, which memcpy may not get)
+    std::memcpy(fr.lu.data(), A, sizeof(double) * lsize);
+    double* U = fr.lu.data() + lsize;
+    for (index_t j = npiv; j < m; ++j)
+      std::memcpy(U + static_cast<std::size_t>(j - npiv) * npiv,
+                  A + static_cast<std::size_t>(j) * m, sizeof(double) * npiv);
+  }
   const std::size_t s = static_cast<std::size_t>(m - npiv);
   if (t.parent[f] >= 0 && s > 0) {
     sized(fr.cb, s * s, "contribution blocks");
