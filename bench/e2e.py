@@ -34,6 +34,7 @@ PATTERNS = {
     "analyses": (r"analyses (\d+):", int),
     "analyses_perturbed": (r"perturbed pivots (\d+);", int),
     "analyses_contacts": (r"contact-set changes (\d+)", int),
+    "analyses_order_kept": (r"order kept for (\d+)", int),
     "static_pivots_left": (r"static pivots left (\d+)", int),
     "rows": (r"^Newton matrix\s+(\d+) x", int),
     "total_s": (r"^time \[s\]\s+total ([\d.]+)", float),

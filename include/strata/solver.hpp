@@ -49,14 +49,24 @@ class Solver {
   /// usable).
   void analyze(const SparseMatrix& a);
 
+  /// Analysis of a pattern that contains the analyzed one (entries added, none removed:
+  /// in a Newton loop, a contact that closes adds a block) keeping the last analysis's
+  /// matching, scaling and fill-reducing order: only the symbolic phase is redone (assembly
+  /// tree, level schedule, memory plan), at a fraction of analyze's cost. The factor may
+  /// have more fill than a fresh ordering would give; the values' drift from the kept
+  /// scaling is corrected at each factorization (delayed pivoting and rescaling, as for a
+  /// refactorization). Follow it with factorize. The factor is discarded. Throws
+  /// InvalidState before analyze, InvalidInput when A is not square of the analyzed size or
+  /// an analyzed entry is missing (named; nothing changes then), OutOfMemory as analyze.
+  void analyze_keeping_order(const SparseMatrix& a);
+
   /// Numeric factorization of A, whose pattern must be the analyzed one (analyzes first
   /// if analyze was not called). Throws NotPositiveDefinite for a failed Cholesky of a
   /// matrix declared spd, InvalidInput for a NaN/Inf value, a changed pattern or values
-  /// whose row or column sums overflow the double range, OutOfMemory (the factor, the workspaces and the device
-  /// buffers are then released, the analysis is kept: a later factorize can succeed once
-  /// memory is available). Perturbed pivots
-  /// and inertia go to stats().factor. See docs/reliability.md for the outcome of each
-  /// kind of singular or badly scaled matrix.
+  /// whose row or column sums overflow the double range, OutOfMemory (the factor, the workspaces
+  /// and the device buffers are then released, the analysis is kept: a later factorize can succeed
+  /// once memory is available). Perturbed pivots and inertia go to stats().factor. See
+  /// docs/reliability.md for the outcome of each kind of singular or badly scaled matrix.
   void factorize(const SparseMatrix& a);
 
   /// Factorization of new values with the analyzed pattern. Reuses the analysis and all
@@ -66,9 +76,9 @@ class Solver {
   /// Solves A X = B for nrhs right-hand sides. b and x are column-major n×nrhs arrays
   /// (leading dimension n); they may not alias. Iterative refinement follows
   /// Options::refinement_*. Throws InvalidState before factorize, InvalidInput for a
-  /// non-finite b, OutOfMemory (the factor is kept), or when the solution overflows the double range ("no representable
-  /// solution"; x is then unspecified). A singular matrix factorized with perturbed
-  /// pivots gives a finite x whose stats().solve.backward_error says whether it solves
+  /// non-finite b, OutOfMemory (the factor is kept), or when the solution overflows the double
+  /// range ("no representable solution"; x is then unspecified). A singular matrix factorized with
+  /// perturbed pivots gives a finite x whose stats().solve.backward_error says whether it solves
   /// the system (+inf when the residual overflows).
   void solve(const double* b, double* x, index_t nrhs = 1);
 

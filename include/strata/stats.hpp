@@ -47,6 +47,10 @@ struct AnalysisStats {
   index_t pairs = 0;
   index_t odd_cycles = 0;
   OrderingMethod ordering = OrderingMethod::nested_dissection;
+  /// Solver::analyze_keeping_order: the matching, scaling and fill-reducing order of the
+  /// analysis before were kept for a pattern that contains its own (ordering_seconds is
+  /// then the time to form the permuted pattern).
+  bool order_kept = false;
   /// Several workers (GPUs): the split of the tree (docs/multigpu.md). workers is 1 and
   /// the rest 0 when the analysis was made for one.
   index_t workers = 1;

@@ -83,6 +83,8 @@ py::dict stats_dict(const strata::mbd::SimulationResult& r) {
   d["reanalyses"] = s.reanalyses;
   d["repartitions"] = s.repartitions;
   d["contact_updates"] = s.contact_updates;
+  d["kept_order_analyses"] = s.kept_order_analyses;
+  d["contact_analyses"] = s.contact_analyses;
   d["solves"] = s.solves;
   d["perturbed_pivots"] = s.perturbed_pivots;
   d["jacobian_size"] = s.jacobian_size;

@@ -262,6 +262,9 @@ void fill_separator_work(ordering::SeparatorTree& tree, const std::vector<index_
   for (auto& node : tree.nodes) node.work = prefix[node.end] - prefix[node.subtree_begin];
 }
 
+void finish_analysis(Analysis& an, const SparseMatrix& c, const SparseMatrix& pattern,
+                     ordering::OrderingResult ord, const Options& opts, int workers);
+
 }  // namespace
 
 SparseMatrix canonical_values(const Analysis& an, const SparseMatrix& a) {
@@ -399,8 +402,19 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers)
   an.stats.nd_rebisections = ord.rebisections;
   an.stats.nd_balance_seconds = ord.balance_seconds;
   an.stats.ordering_seconds = step.seconds();
+  finish_analysis(an, c, pattern, std::move(ord), opts, workers);
+  an.stats.total_seconds = total.seconds();
+  return an;
+}
 
-  step.reset();
+namespace {
+
+// Steps 4–7 of the file comment for an analysis whose matching, scaling and ordering are
+// made: `c` the canonical input, `pattern` the symmetric pattern of B that `ord` orders.
+void finish_analysis(Analysis& an, const SparseMatrix& c, const SparseMatrix& pattern,
+                     ordering::OrderingResult ord, const Options& opts, int workers) {
+  const bool grouped = an.pivot_groups.n_groups() > 0;
+  Timer step;
   const SparseMatrix permuted = symbolic::permute_symmetric_pattern(pattern, ord.perm);
   symbolic::AmalgamationOptions ao;
   ao.relax_small = opts.relax_small;
@@ -497,7 +511,62 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers)
     st.upper_flops_fraction = p.total_work > 0 ? upper / p.total_work : 0.0;
     st.estimated_speedup = p.estimated_time > 0 ? p.total_work / p.estimated_time : 0.0;
   }
-  st.total_seconds = total.seconds();
+}
+
+}  // namespace
+
+Analysis analyze_with_order(const SparseMatrix& a, const Analysis& previous, const Options& opts,
+                            int workers) {
+  Timer total;
+  if (workers < 1)
+    throw InvalidInput("analyze_with_order: workers must be at least 1 (got " +
+                       std::to_string(workers) + ")");
+  if (a.n_rows != a.n_cols || a.n_rows != previous.n)
+    throw InvalidInput("analyze_with_order: the matrix is " + std::to_string(a.n_rows) + "x" +
+                       std::to_string(a.n_cols) + ", the analysis whose order it keeps was for " +
+                       std::to_string(previous.n) + "x" + std::to_string(previous.n));
+  static std::atomic<std::uint64_t> next_id{1u << 31};
+  Analysis an;
+  an.id = next_id++;
+  an.n = previous.n;
+  an.input_storage = a.storage;
+  an.type = previous.type;
+  an.symmetric = previous.symmetric;
+  SparseMatrix c = an.symmetric ? lower_triangle(a) : expand_symmetric(a);
+  // every analyzed entry must still be there: the matching's entries are then entries of
+  // the new pattern, and B's diagonal keeps them
+  for (index_t j = 0; j < an.n; ++j) {
+    index_t p = c.offsets[j];
+    for (index_t q = previous.pattern_offsets[j]; q < previous.pattern_offsets[j + 1]; ++q) {
+      const index_t i = previous.pattern_indices[q];
+      while (p < c.offsets[j + 1] && c.indices[p] < i) ++p;
+      if (p == c.offsets[j + 1] || c.indices[p] != i)
+        throw InvalidInput("analyze_with_order: entry (" + std::to_string(i) + ", " +
+                           std::to_string(j) +
+                           ") of the analyzed pattern is missing from the new one; the order "
+                           "can only be kept for a pattern that contains the analyzed one");
+    }
+  }
+  an.pattern_offsets = c.offsets;
+  an.pattern_indices = c.indices;
+  an.matching_perm = previous.matching_perm;
+  an.row_scaling = previous.row_scaling;
+  an.col_scaling = previous.col_scaling;
+  an.pivot_groups = previous.pivot_groups;
+  std::vector<index_t> q_inv;
+  if (!an.matching_perm.empty()) q_inv = ordering::invert_permutation(an.matching_perm);
+  Timer step;
+  const SparseMatrix pattern = symmetric_pattern(c, an.symmetric, q_inv);
+  ordering::OrderingResult ord;
+  // the order of the analysis that computed one (postordered: as good a fill-reducing order
+  // as the one it came from)
+  ord.perm = previous.kept_order.empty() ? previous.perm : previous.kept_order;
+  an.kept_order = ord.perm;
+  an.stats.ordering_seconds = step.seconds();
+  an.stats.order_kept = true;
+  finish_analysis(an, c, pattern, std::move(ord), opts, workers);
+  an.stats.ordering = previous.stats.ordering;
+  an.stats.total_seconds = total.seconds();
   return an;
 }
 

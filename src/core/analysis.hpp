@@ -74,6 +74,10 @@ struct Analysis {
   /// Pivot order: pivot k is column perm[k] of B (new to old); iperm is its inverse.
   std::vector<index_t> perm;
   std::vector<index_t> iperm;
+  /// analyze_with_order: the order it kept, the perm of the last analysis that computed
+  /// one (so a chain of kept-order analyses depends only on that analysis and the last
+  /// pattern); empty for an analysis that computed its order.
+  std::vector<index_t> kept_order;
   ordering::SeparatorTree separator_tree;
   symbolic::AssemblyTree tree;
   symbolic::LevelSchedule schedule;
@@ -92,6 +96,16 @@ struct Analysis {
 /// with Options::balance_by_work and nested dissection, balances the top bisections by
 /// work. Throws InvalidInput for workers < 1.
 Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers = 1);
+
+/// The analysis of a pattern that contains previous's (entries added, none removed: a
+/// contact that closed in a Newton loop) with previous's matching, scaling, pivot groups
+/// and fill-reducing order kept: only steps 4–7 of analysis.cpp are redone (tree, level
+/// schedule, plan, layouts), so the cost is that of the symbolic phase, not of the
+/// ordering. The kept order stays a valid elimination order for any pattern; the new
+/// entries may only add fill. Throws InvalidInput when the size differs or an entry of
+/// previous's pattern is missing (naming it), or for workers < 1.
+Analysis analyze_with_order(const SparseMatrix& a, const Analysis& previous, const Options& opts,
+                            int workers = 1);
 
 /// The number of workers the numeric factorization will use under `opts`: the GPUs
 /// (Options::num_gpus, 0 meaning all visible) when the CUDA backend is chosen (or chosen

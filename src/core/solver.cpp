@@ -763,6 +763,29 @@ void Solver::analyze(const SparseMatrix& a) {
   });
 }
 
+void Solver::analyze_keeping_order(const SparseMatrix& a) {
+  if (!state_->analysis) throw InvalidState("analyze_keeping_order called before analyze");
+  phase("analyze", [&] {
+    validate(a);
+    const int workers = static_cast<int>(std::max<index_t>(1, state_->analysis->stats.workers));
+    // computed before anything is released: bad input leaves the solver as it was
+    Analysis next = analyze_with_order(a, *state_->analysis, state_->options, workers);
+    state_->factor = numeric::NumericFactor{};
+    state_->delayed = numeric::DelayedFactor{};
+    state_->cb_arena.clear();
+    state_->arenas.clear();
+    state_->blocks = numeric::BlockBuffers{};
+    state_->analysis = std::move(next);
+    keep_analyzed_input(*state_, a);
+    const double setup = prepare_devices(*state_);
+    state_->analysis->stats.device_setup_seconds = setup;
+    state_->analysis->stats.total_seconds += setup;
+    state_->stats = Stats{};
+    state_->stats.analysis = state_->analysis->stats;
+    state_->resolved = MatrixType::automatic;
+  });
+}
+
 void Solver::factorize(const SparseMatrix& a) {
   if (!state_->analysis) analyze(a);
   factor_phase(*state_, a);

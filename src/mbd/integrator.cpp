@@ -63,14 +63,18 @@ Integrator::Integrator(const Model& model, IntegratorOptions options)
   if (opts_.startup_levels < 0)
     opts_.startup_levels = opts_.order <= 2 ? 2 * (opts_.order - 1) : 3 * (opts_.order - 1);
   if (opts_.formulation == FormulationChoice::partitioned) opts_.regularization = 0;
-  // Threads: small systems run faster on one (thread start-up costs more than the work).
+  // Threads: a small assembly runs faster on one (thread start-up costs more than the
+  // work). The host factorization with delayed pivots factors the fronts of a level
+  // concurrently and gains from every thread; on a GPU the host only prepares the values,
+  // and a small system's values are prepared faster by one thread.
   const bool small = sys_.size() < 20000;
   const std::size_t elements = model.forces.size() + model.constraints.size();
   sys_.set_threads(opts_.threads > 0 ? opts_.threads
                    : elements < 500
                        ? 1
                        : static_cast<int>(std::max(1u, std::thread::hardware_concurrency())));
-  if (opts_.threads == 0 && small) opts_.threads = 1;
+  if (opts_.threads == 0 && small && !opts_.dense_solver && solver_on_gpu(opts_.backend))
+    opts_.threads = 1;
 }
 
 std::unique_ptr<LinearSolver> Integrator::new_solver() const {
@@ -116,15 +120,55 @@ void Integrator::analyze(const BdfTerms& bdf, double t) {
   // current Jacobian). Leaving the contact entries out of them would be wrong too: the
   // scaling would then not see the contact stiffness.
   Timer ta;
+  sys_.prune_pattern();  // contact pairs that left since the last analysis
   sys_.evaluate(x_.data(), t, bdf, true, res_.data());
   if (!solver_) solver_ = new_solver();
   solver_->analyze(sys_.matrix());
   analysis_values_ = sys_.matrix().values;
+  analysis_forces_ = sys_.pattern_forces();
+  analysis_factor_entries_ = solver_->factor_entries();
   stats_.analysis_seconds += ta.seconds();
   ++stats_.analyses;
   pattern_changed_ = false;
   stats_.jacobian_nnz = sys_.matrix().nnz();
   stats_.factor_nnz = solver_->factor_entries();
+}
+
+// After NewtonSystem::update_candidates returned `change`: a new Jacobian is needed; a
+// pair new to the pattern grew it, and the solver analyzes the grown pattern keeping its
+// order (the pattern contains the analyzed one: pairs that left stay in it until the next
+// analysis), unless a full analysis is pending anyway or the kept order's factor has grown
+// by more than a quarter, when the next Newton iteration analyzes afresh.
+void Integrator::contacts_changed(int change, StepInfo* info) {
+  if (change == 0) return;
+  ++stats_.contact_updates;
+  factor_valid_ = false;
+  if (change == 1) return;
+  if (!solver_ || pattern_changed_) {
+    pattern_changed_ = true;
+    return;
+  }
+  Timer timer;
+  solver_->analyze_keeping_order(sys_.matrix());
+  const double s = timer.seconds();
+  stats_.analysis_seconds += s;
+  stats_.solver_seconds += s;
+  if (info) info->solver_seconds += s;
+  ++stats_.kept_order_analyses;
+  stats_.jacobian_nnz = sys_.matrix().nnz();
+  stats_.factor_nnz = solver_->factor_entries();
+  const bool grown = stats_.factor_nnz > 1.25 * static_cast<double>(analysis_factor_entries_);
+  if (opts_.verbose)
+    fmt::print(stderr,
+               "t = {:.9g}: contact pairs new to the pattern; analysis keeping the order: "
+               "nnz(L) {} ({:.2f} times the last analysis's){}\n",
+               t_, stats_.factor_nnz,
+               stats_.factor_nnz / std::max(1.0, static_cast<double>(analysis_factor_entries_)),
+               grown ? "; a new analysis follows" : "");
+  if (grown) {
+    pattern_changed_ = true;
+    ++stats_.contact_analyses;
+  }
 }
 
 void Integrator::factorize(StepInfo& info, const BdfTerms& bdf, double t) {
@@ -233,6 +277,15 @@ int Integrator::newton(double h, StepInfo& info, const BdfTerms& bdf) {
     sys_.evaluate(x_.data(), tn, bdf, need_jac, res_.data());
     const double s = ta.seconds();
     info.assembly_seconds += s;
+    {
+      static double tj = 0, tr = 0;
+      static int nj = 0, nr = 0;
+      (need_jac ? tj : tr) += s;
+      (need_jac ? nj : nr)++;
+      if ((nj + nr) % 1000 == 0)
+        fmt::print(stderr, "JAC {} {:.3f} ms RES {} {:.3f} ms\n", nj, 1e3 * tj / nj, nr,
+                   1e3 * tr / std::max(nr, 1));
+    }
     stats_.assembly_seconds += s;
     if (!all_finite(res_)) return 0;
     if (need_jac) {
@@ -323,10 +376,7 @@ int Integrator::newton(double h, StepInfo& info, const BdfTerms& bdf) {
     if (sys_.check_candidates(xq) == 2) {
       // a contact pair outside the Newton matrix closed during the step: take it in and
       // redo the step
-      sys_.update_candidates(xq);
-      ++stats_.contact_updates;
-      pattern_changed_ = true;
-      factor_valid_ = false;
+      contacts_changed(sys_.update_candidates(xq), &info);
       return 2;
     }
     slow_last_step_ = it > 3;
@@ -625,11 +675,8 @@ StepInfo Integrator::advance() {
     h_ = std::min(opts_.step, (info.order <= 2 ? 2.0 : 1.25) * h_);
   }
   // contact pairs approaching: update the set in the Newton matrix
-  if (sys_.check_candidates(q_.data()) == 1 && sys_.update_candidates(q_.data())) {
-    ++stats_.contact_updates;
-    pattern_changed_ = true;
-    factor_valid_ = false;
-  }
+  if (sys_.check_candidates(q_.data()) == 1)
+    contacts_changed(sys_.update_candidates(q_.data()), &info);
   partition_check(info);
   if (conservative_) {
     double kin = 0, pot = 0;

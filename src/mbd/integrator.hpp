@@ -66,7 +66,7 @@ struct IntegratorOptions {
   /// (make_strata_solver).
   std::optional<Pivoting> pivoting;
   int threads = 0;  ///< CPU threads for strata and the assembly (0: automatic — all, but one
-                    ///< for strata below 20000 unknowns)
+                    ///< for strata on a GPU below 20000 unknowns)
   bool dense_solver = false;  ///< LAPACK instead of strata (tests only)
   index_t dump_step = -1;     ///< write the Newton Jacobian of this step (1-based)
   std::string dump_dir;       ///< ... into this folder (Matrix Market)
@@ -114,8 +114,14 @@ struct StepInfo {
 struct IntegratorStats {
   index_t steps = 0, rejected = 0, newton_iterations = 0, factorizations = 0, analyses = 0,
           repartitions = 0, solves = 0;
-  index_t reanalyses = 0;           ///< analyses redone because pivots had to be perturbed
-  index_t contact_updates = 0;      ///< changes of the set of contact pairs in the matrix
+  index_t reanalyses = 0;       ///< analyses redone because pivots had to be perturbed
+  index_t contact_updates = 0;  ///< changes of the set of contact pairs in the matrix
+  /// Analyses that kept the ordering of the analysis before (Solver::analyze_keeping_order)
+  /// because a contact pair new to the pattern entered: not counted in `analyses`.
+  index_t kept_order_analyses = 0;
+  /// Analyses (counted in `analyses`) made because the kept order's factor had grown past
+  /// 1.25 times the entries of the last analysis's.
+  index_t contact_analyses = 0;
   index_t error_rejections = 0;     ///< variable step: steps rejected by the local error test
   index_t perturbed_pivots = 0;     ///< static pivots over all factorizations
   index_t residual_rejections = 0;  ///< steps redone: constraints violated after convergence
@@ -208,6 +214,7 @@ class Integrator {
   void newton_tolerances(double* atol, double* rtol) const;
   bool energy_ok(double h, int p, const double* q, const double* v, double t);
   void analyze(const BdfTerms& bdf, double t);
+  void contacts_changed(int change, StepInfo* info);
   void factorize(StepInfo& info, const BdfTerms& bdf, double t);
   void choose_order(double h, int p, double tn, const double* xq, const double* xv, double est);
 
@@ -239,6 +246,9 @@ class Integrator {
   index_t step_ = 0;
   // Jacobian values the solver's analysis and its current factor come from (restart)
   std::vector<double> analysis_values_, factor_values_;
+  // the force elements in the pattern at the last analysis (restart), and its factor's size
+  std::vector<char> analysis_forces_;
+  index_t analysis_factor_entries_ = 0;
 };
 
 /// BDF coefficients α_0..α_p with ẏ(t₀) ≈ Σ α_j y(t_j), from the derivative of the

@@ -29,6 +29,8 @@ json stats_to_json(const IntegratorStats& s) {
           {"solves", s.solves},
           {"reanalyses", s.reanalyses},
           {"contact_updates", s.contact_updates},
+          {"kept_order_analyses", s.kept_order_analyses},
+          {"contact_analyses", s.contact_analyses},
           {"error_rejections", s.error_rejections},
           {"perturbed_pivots", s.perturbed_pivots},
           {"residual_rejections", s.residual_rejections},
@@ -63,6 +65,8 @@ IntegratorStats stats_from_json(const json& j) {
   j.at("solves").get_to(s.solves);
   j.at("reanalyses").get_to(s.reanalyses);
   j.at("contact_updates").get_to(s.contact_updates);
+  j.at("kept_order_analyses").get_to(s.kept_order_analyses);
+  j.at("contact_analyses").get_to(s.contact_analyses);
   j.at("error_rejections").get_to(s.error_rejections);
   j.at("perturbed_pivots").get_to(s.perturbed_pivots);
   j.at("residual_rejections").get_to(s.residual_rejections);
@@ -99,6 +103,8 @@ json Integrator::save_state() const {
   json hist = json::array();
   for (const Point& p : history_) hist.push_back({{"t", p.t}, {"q", p.q}, {"v", p.v}, {"a", p.a}});
   std::vector<int> cand(sys_.candidates().begin(), sys_.candidates().end());
+  std::vector<int> pattern(sys_.pattern_forces().begin(), sys_.pattern_forces().end());
+  std::vector<int> analyzed(analysis_forces_.begin(), analysis_forces_.end());
   std::vector<int> active(sys_.active_rows().begin(), sys_.active_rows().end());
   return {{"n", sys_.n()},
           {"m", sys_.model_m()},
@@ -133,6 +139,9 @@ json Integrator::save_state() const {
             {"independent", partition_.independent},
             {"quality", partition_.quality}}},
           {"candidates", cand},
+          {"pattern_forces", pattern},
+          {"analysis_forces", analyzed},
+          {"analysis_factor_entries", analysis_factor_entries_},
           {"analysis_values", analysis_values_},
           {"factor_values", factor_values_},
           {"stats", stats_to_json(stats_)}};
@@ -200,7 +209,16 @@ void Integrator::restore_state(const json& j) {
   pj.at("independent").get_to(partition_.independent);
   pj.at("quality").get_to(partition_.quality);
   const auto cand = j.at("candidates").get<std::vector<int>>();
+  const auto pattern = j.at("pattern_forces").get<std::vector<int>>();
+  const auto analyzed = j.at("analysis_forces").get<std::vector<int>>();
+  j.at("analysis_factor_entries").get_to(analysis_factor_entries_);
   sys_.set_candidates(std::vector<char>(cand.begin(), cand.end()));
+  analysis_forces_.assign(analyzed.begin(), analyzed.end());
+  const bool analyzed_pattern = !analysis_forces_.empty();
+  // the pattern of the last analysis first (its values are saved for it), then the one
+  // that grew from it by contact pairs with the analysis's order kept
+  sys_.set_pattern_forces(analyzed_pattern ? analysis_forces_
+                                           : std::vector<char>(pattern.begin(), pattern.end()));
   sys_.set_partition(partition_);  // rebuilds the Newton matrix pattern
   j.at("analysis_values").get_to(analysis_values_);
   j.at("factor_values").get_to(factor_values_);
@@ -208,18 +226,27 @@ void Integrator::restore_state(const json& j) {
   // The solver as it was: same analysis (its matching and scaling come from the values it
   // saw), same factor. With a pending pattern change the next step analyzes anew anyway.
   solver_.reset();
-  if (j.at("has_solver").get<bool>() && !pattern_changed_) {
+  const std::vector<char> now(pattern.begin(), pattern.end());
+  if (j.at("has_solver").get<bool>() && !pattern_changed_ && analyzed_pattern) {
     SparseMatrix a = sys_.matrix();
     expect_size(analysis_values_, a.values.size(), "the analyzed Jacobian");
     a.values = analysis_values_;
     solver_ = new_solver();
     solver_->analyze(a);
+    if (now != analysis_forces_) {
+      sys_.set_pattern_forces(now);
+      sys_.rebuild_pattern();
+      solver_->analyze_keeping_order(sys_.matrix());
+      a = sys_.matrix();
+    }
     if (factor_valid_) {
       expect_size(factor_values_, a.values.size(), "the factorized Jacobian");
       a.values = factor_values_;
       solver_->factorize(a);
     }
   } else {
+    sys_.set_pattern_forces(now);
+    sys_.rebuild_pattern();
     factor_valid_ = false;
   }
 }

@@ -39,13 +39,17 @@ class StrataLinearSolver : public LinearSolver {
     // pivots (the integrator analyzes again when they appear): delayed pivoting runs on the
     // host, and the host's delayed factorization after the device's costs more per step
     // than the occasional new analysis (bench/REPORT.md).
-    const bool gpu =
-        backend == Backend::cuda || (backend == Backend::automatic && numeric::cuda_available());
-    o.pivoting = pivoting ? *pivoting : gpu ? Pivoting::fixed : Pivoting::delayed;
+    o.pivoting = pivoting                 ? *pivoting
+                 : solver_on_gpu(backend) ? Pivoting::fixed
+                                          : Pivoting::delayed;
     return o;
   }
   void analyze(const SparseMatrix& a) override {
     solver_.analyze(a);
+    fresh_ = true;
+  }
+  void analyze_keeping_order(const SparseMatrix& a) override {
+    solver_.analyze_keeping_order(a);
     fresh_ = true;
   }
   void factorize(const SparseMatrix& a) override {
@@ -110,6 +114,10 @@ class DenseLinearSolver : public LinearSolver {
 };
 
 }  // namespace
+
+bool solver_on_gpu(Backend backend) {
+  return backend == Backend::cuda || (backend == Backend::automatic && numeric::cuda_available());
+}
 
 std::unique_ptr<LinearSolver> make_strata_solver(Backend backend, int threads,
                                                  std::size_t device_memory_limit,

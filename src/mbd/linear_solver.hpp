@@ -21,6 +21,9 @@ class LinearSolver {
   virtual ~LinearSolver() = default;
   /// Analysis of the pattern (and, for strata's matching and scaling, the values) of A.
   virtual void analyze(const SparseMatrix& a) = 0;
+  /// Analysis of a pattern that contains the analyzed one, keeping its ordering
+  /// (strata::Solver::analyze_keeping_order); a solver without that analyzes afresh.
+  virtual void analyze_keeping_order(const SparseMatrix& a) { analyze(a); }
   /// Numeric factorization of A with the analyzed pattern.
   virtual void factorize(const SparseMatrix& a) = 0;
   /// x = A⁻¹ b (one right-hand side of length n).
@@ -45,6 +48,9 @@ class LinearSolver {
 std::unique_ptr<LinearSolver> make_strata_solver(Backend backend, int threads,
                                                  std::size_t device_memory_limit = 0,
                                                  std::optional<Pivoting> pivoting = {});
+/// Whether make_strata_solver(backend, ...) factorizes on a GPU: Backend::cuda, or
+/// Backend::automatic in a build and on a machine with one.
+bool solver_on_gpu(Backend backend);
 /// Dense LU with partial pivoting (LAPACK); for tests and tiny models only.
 std::unique_ptr<LinearSolver> make_dense_solver();
 

@@ -50,7 +50,10 @@ SparseMatrix from_triplets(index_t n_rows, index_t n_cols, const std::vector<ind
 }
 
 NewtonSystem::NewtonSystem(const Model& model)
-    : model_(model), n_(model.n), candidate_(model.forces.size(), 1) {
+    : model_(model),
+      n_(model.n),
+      candidate_(model.forces.size(), 1),
+      in_pattern_(model.forces.size(), 1) {
   index_t rows = 0;
   for (const auto& c : model.constraints) {
     row0_.push_back(rows);
@@ -123,10 +126,19 @@ void NewtonSystem::set_candidates(const std::vector<char>& c) {
                        " entries, the model " + std::to_string(candidate_.size()) +
                        " force elements");
   candidate_ = c;
+  for (std::size_t e = 0; e < c.size(); ++e) in_pattern_[e] |= c[e];
 }
 
-bool NewtonSystem::update_candidates(const double* q) {
-  bool changed = false;
+void NewtonSystem::set_pattern_forces(const std::vector<char>& p) {
+  if (p.size() != in_pattern_.size())
+    throw InvalidInput("the saved pattern's force set has " + std::to_string(p.size()) +
+                       " entries, the model " + std::to_string(in_pattern_.size()) +
+                       " force elements");
+  in_pattern_ = p;
+}
+
+int NewtonSystem::update_candidates(const double* q) {
+  bool changed = false, grew = false;
   std::vector<double> lq;
   for (std::size_t e = 0; e < model_.forces.size(); ++e) {
     const Force& f = *model_.forces[e];
@@ -134,10 +146,19 @@ bool NewtonSystem::update_candidates(const double* q) {
     gather(f.dofs, q, lq);
     const char c = f.proximity(lq.data()) < f.margin;
     changed |= c != candidate_[e];
+    grew |= c && !in_pattern_[e];
     candidate_[e] = c;
+    in_pattern_[e] |= c;
   }
-  if (changed && jac_.n_rows > 0) rebuild_pattern();
-  return changed;
+  if (grew && jac_.n_rows > 0) rebuild_pattern();
+  return grew ? 2 : changed ? 1 : 0;
+}
+
+bool NewtonSystem::prune_pattern() {
+  if (in_pattern_ == candidate_) return false;
+  in_pattern_ = candidate_;
+  if (jac_.n_rows > 0) rebuild_pattern();
+  return true;
 }
 
 int NewtonSystem::check_candidates(const double* q) const {
@@ -183,7 +204,7 @@ void NewtonSystem::rebuild_pattern() {
         pos->push_back(pb.find(r, c));
     };
     for (std::size_t e = 0; e < model_.forces.size(); ++e) {
-      if (!candidate_[e]) continue;
+      if (!in_pattern_[e]) continue;
       const Force& f = *model_.forces[e];
       ForcePos& fp = fpos_[e];
       for (index_t i : f.dofs)

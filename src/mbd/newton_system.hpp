@@ -103,8 +103,14 @@ class NewtonSystem {
                 bool skip_intermittent = false);
 
   /// Contact pairs with a margin enter the matrix only while closer than their margin.
-  /// Recomputes the set at q; rebuilds the pattern and returns true when it changed.
-  bool update_candidates(const double* q);
+  /// Recomputes the set at q. A pair that leaves keeps its entries in the pattern (values
+  /// zero), so the pattern only grows until prune_pattern(): returns 0 when the set did
+  /// not change, 1 when it changed within the pattern, 2 when a pair new to the pattern
+  /// entered (the pattern was rebuilt, containing the one before).
+  int update_candidates(const double* q);
+  /// Drops from the pattern the pairs no longer in the candidate set; rebuilds the
+  /// pattern and returns true when there were any.
+  bool prune_pattern();
   /// 0: the candidate set is fine at q; 1: a pair outside it came within half its margin
   /// (update soon); 2: a pair outside it penetrates (the state is invalid).
   int check_candidates(const double* q) const;
@@ -113,6 +119,13 @@ class NewtonSystem {
   /// Restores a candidate set saved from candidates() (checkpoint restart); the pattern is
   /// rebuilt by the next set_partition.
   void set_candidates(const std::vector<char>& c);
+  /// Per force element: 1 while its entries are in the pattern (the candidates, and the
+  /// pairs that left since the last prune_pattern()).
+  const std::vector<char>& pattern_forces() const { return in_pattern_; }
+  /// Restores a set saved from pattern_forces() (checkpoint restart); the pattern is
+  /// rebuilt by the next set_partition or rebuild_pattern. It must contain the candidates
+  /// before the next evaluate.
+  void set_pattern_forces(const std::vector<char>& p);
   /// Number of force elements in the Newton matrix now.
   index_t active_forces() const;
   /// The Jacobian H_x (pattern fixed between set_partition calls).
@@ -155,7 +168,8 @@ class NewtonSystem {
   std::vector<index_t> model_row_, active_index_;
   std::vector<double> mass_scale_;  // per constraint element: mean mass of its coordinates
   std::vector<index_t> independent_;
-  std::vector<char> candidate_;  // per force: part of the Newton matrix
+  std::vector<char> candidate_;   // per force: evaluated into the Newton matrix
+  std::vector<char> in_pattern_;  // per force: entries in the pattern (⊇ candidate_)
   SparseMatrix jac_;
   // value positions of element blocks
   struct ForcePos {

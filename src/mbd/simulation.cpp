@@ -215,7 +215,8 @@ nlohmann::json integrator_options_json(const IntegratorOptions& o) {
 }
 
 constexpr const char* kCheckpointFile = "checkpoint.cbor";
-constexpr int kCheckpointVersion = 2;  // 2: formulation, active rows, energy monitor
+// 2: formulation, active rows, energy monitor; 3: the pattern's and the analysis's force sets
+constexpr int kCheckpointVersion = 3;
 
 }  // namespace
 
@@ -657,11 +658,16 @@ std::string summary(const Model& model, const SimulationResult& r) {
                    s.steps, s.rejected, s.error_rejections);
   o += fmt::format("Newton iterations     {} ({:.2f} per step)\n", s.newton_iterations,
                    s.steps ? double(s.newton_iterations) / s.steps : 0.0);
+  // analyses not caused by the first step, a partition, contacts or perturbed pivots: a
+  // new formulation or a new set of active constraint equations
+  const index_t other_analyses =
+      std::max<index_t>(0, s.analyses - 1 - s.repartitions - s.contact_analyses - s.reanalyses);
   o += fmt::format(
       "factorizations        {} (analyses {}: first 1, new partitions {}, contact-set changes {}, "
-      "perturbed pivots {}; static pivots left {})\n",
-      s.factorizations, s.analyses, s.repartitions, s.contact_updates, s.reanalyses,
-      s.perturbed_pivots);
+      "perturbed pivots {}, new formulation or constraint set {}; order kept for {} of {} "
+      "contact-set changes; static pivots left {})\n",
+      s.factorizations, s.analyses, s.repartitions, s.contact_analyses, s.reanalyses,
+      other_analyses, s.kept_order_analyses, s.contact_updates, s.perturbed_pivots);
   o += fmt::format("Newton matrix         {} x {}, nnz {}, nnz(L) {}\n", s.jacobian_size,
                    s.jacobian_size, s.jacobian_nnz, s.factor_nnz);
   o += fmt::format("linear solver         {}\n", s.solver);

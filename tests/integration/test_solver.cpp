@@ -5,6 +5,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <random>
+#include <utility>
 
 #include "core/blas.hpp"
 #include "sparse/generators.hpp"
@@ -210,6 +212,87 @@ TEST(Solver, RefactorizationEqualsFactorization) {
     EXPECT_EQ(x1, x2) << c.name;
     EXPECT_LT(test::backward_error(a2, x1.data(), b.data()), 1e-14);
   }
+}
+
+// A with `extra` more entries (random positions, values of a tenth of A's scale; for spd,
+// diagonal dominance kept by adding each new entry's magnitude to its two diagonals).
+SparseMatrix grown(const SparseMatrix& a, index_t extra, RandomKind kind, std::mt19937_64& rng) {
+  const index_t n = a.n_cols;
+  std::vector<std::vector<std::pair<index_t, double>>> cols(n);
+  for (index_t j = 0; j < n; ++j)
+    for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p)
+      cols[j].push_back({a.indices[p], a.values[p]});
+  std::uniform_int_distribution<index_t> pick(0, n - 1);
+  std::uniform_real_distribution<double> u(-0.1, 0.1);
+  for (index_t k = 0; k < extra; ++k) {
+    index_t i = pick(rng), j = pick(rng);
+    if (kind != RandomKind::general && i < j) std::swap(i, j);  // lower storage
+    const double v = u(rng);
+    cols[j].push_back({i, v});
+    if (kind == RandomKind::spd && i != j) {
+      cols[i].push_back({i, std::abs(v)});
+      cols[j].push_back({j, std::abs(v)});
+    }
+  }
+  SparseMatrix g;
+  g.n_rows = g.n_cols = n;
+  g.storage = a.storage;
+  g.offsets.assign(1, 0);
+  for (index_t j = 0; j < n; ++j) {
+    for (const auto& [i, v] : cols[j]) {
+      g.indices.push_back(i);
+      g.values.push_back(v);
+    }
+    g.offsets.push_back(static_cast<index_t>(g.indices.size()));
+  }
+  return canonicalize(g);  // duplicates summed
+}
+
+// An analysis keeping the order of the one before solves a grown pattern as a dense LU
+// does; a chain of such analyses gives what one from the first analysis gives; a pattern
+// that lost an analyzed entry is refused and the solver keeps its analysis.
+TEST(Solver, AnalysisKeepingOrderSolvesGrownPatterns) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  for (const Case& c : kCases)
+    for (index_t n : {1, 2, 3, 5, 733}) {
+      SCOPED_TRACE(std::string(c.name) + " n=" + std::to_string(n));
+      const SparseMatrix a = test::random_sparse(n, 3, c.kind, rng);
+      const SparseMatrix a1 = grown(a, std::max<index_t>(1, n / 50), c.kind, rng);
+      const SparseMatrix a2 = grown(a1, std::max<index_t>(1, n / 20), c.kind, rng);
+      std::vector<double> b(n);
+      std::uniform_real_distribution<double> u(-1, 1);
+      for (double& v : b) v = u(rng);
+      std::vector<double> ref = b;
+      ASSERT_TRUE(test::dense_solve(test::to_dense(a2), n, ref, 1));
+      Options o;
+      o.type = c.type;
+      Solver chain(o), direct(o);
+      chain.analyze(a);
+      direct.analyze(a);
+      chain.analyze_keeping_order(a1);
+      EXPECT_TRUE(chain.stats().analysis.order_kept);
+      chain.analyze_keeping_order(a2);
+      direct.analyze_keeping_order(a2);
+      EXPECT_EQ(chain.permutation(), direct.permutation());
+      chain.factorize(a2);
+      direct.factorize(a2);
+      const std::vector<double> x = chain.solve(b), y = direct.solve(b);
+      EXPECT_EQ(x, y);
+      EXPECT_LT(test::relative_difference(x, ref), 1e-8);
+      EXPECT_LT(test::backward_error(a2, x.data(), b.data()), 1e-14);
+      // a pattern without one of the analyzed entries: refused, the analysis of a2 kept
+      SparseMatrix lost = a2;
+      if (lost.nnz() > 0 && n > 1) {
+        lost.indices.erase(lost.indices.begin());
+        lost.values.erase(lost.values.begin());
+        for (index_t j = 1; j <= n; ++j) --lost.offsets[j];
+        EXPECT_THROW(chain.analyze_keeping_order(lost), InvalidInput);
+        chain.refactorize(a2);
+        EXPECT_EQ(chain.solve(b), x);
+      }
+    }
 }
 
 // A new pattern for refactorize is an error; so are wrong sizes and NaN values.
