@@ -16,6 +16,10 @@
 // Kernel sources (the constraint and force formulas) are cited in their files.
 #pragma once
 
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -55,6 +59,9 @@ class Constraint {
                                  ConstraintEval& out) const = 0;
   /// H = Σ_i λ_i ∂²Φ_i/∂q² (nz × nz, row-major).
   virtual void hessian(const double* q, double t, const double* lambda, double* h) const = 0;
+  /// How many local coordinates hessian() differentiates: those with a nonzero row of H
+  /// (known after the first call; dofs.size() before).
+  virtual int hessian_coordinates() const = 0;
 };
 
 /// Residual contribution g and its Jacobians (row-major nz × nz).
@@ -143,22 +150,82 @@ class ConstraintT : public Constraint {
     for (int r = 0; r < NR; ++r)
       for (int k = 0; k < NZ; ++k) out.jq[r * NZ + k] = o[r].d[k];
   }
+  /// Only the coordinates with a nonzero row in the Hessian are differentiated (positions
+  /// enter most joints linearly: a spatial revolute joint's 14 coordinates have 8 such, its
+  /// Euler parameters), in a nested dual number of that size; the others are constants
+  /// (their rows and, by symmetry, columns are zero). Which they are is found at the first
+  /// call from the full Hessian at two points near q with random multipliers (a row that
+  /// is zero there is zero everywhere for the polynomial and trigonometric kernels, barring
+  /// a cancellation of probability zero); a non-finite value there keeps every coordinate.
   void hessian(const double* q, double t, const double* lambda, double* h) const override {
+    std::call_once(hessian_once_, [&] { find_hessian_coordinates(q, t); });
+    if (hessian_n_ <= 4 && 4 < NZ)
+      hessian_over<4>(q, t, lambda, hessian_idx_.data(), hessian_n_, h);
+    else if (hessian_n_ <= 8 && 8 < NZ)
+      hessian_over<8>(q, t, lambda, hessian_idx_.data(), hessian_n_, h);
+    else
+      hessian_over<NZ>(q, t, lambda, all_coordinates().data(), NZ, h);
+  }
+  int hessian_coordinates() const override { return hessian_n_; }
+  D& self() { return *static_cast<D*>(this); }
+
+ private:
+  static const std::array<int, NZ>& all_coordinates() {
+    static const std::array<int, NZ> all = [] {
+      std::array<int, NZ> a{};
+      for (int i = 0; i < NZ; ++i) a[i] = i;
+      return a;
+    }();
+    return all;
+  }
+  // H over the nh coordinates idx[0..nh) (K ≥ nh), zero elsewhere.
+  template <int K>
+  void hessian_over(const double* q, double t, const double* lambda, const int* idx, int nh,
+                    double* h) const {
     constexpr int NR = D::NR;
-    using S1 = Dual<double, NZ>;
-    using S = Dual<S1, NZ>;
+    using S1 = Dual<double, K>;
+    using S = Dual<S1, K>;
     S z[NZ], o[NR];
-    for (int i = 0; i < NZ; ++i) {
-      z[i].v = S1(q[i], i);
-      z[i].d[i] = S1(1.0);
+    for (int i = 0; i < NZ; ++i) z[i] = S(q[i]);
+    for (int p = 0; p < nh; ++p) {
+      z[idx[p]].v = S1(q[idx[p]], p);
+      z[idx[p]].d[p] = S1(1.0);
     }
     static_cast<const D*>(this)->phi(z, S(t), o);
     for (int k = 0; k < NZ * NZ; ++k) h[k] = 0;
     for (int r = 0; r < NR; ++r)
-      for (int k = 0; k < NZ; ++k)
-        for (int l = 0; l < NZ; ++l) h[k * NZ + l] += lambda[r] * o[r].d[k].d[l];
+      for (int a = 0; a < nh; ++a)
+        for (int b = 0; b < nh; ++b) h[idx[a] * NZ + idx[b]] += lambda[r] * o[r].d[a].d[b];
   }
-  D& self() { return *static_cast<D*>(this); }
+  void find_hessian_coordinates(const double* q, double t) const {
+    constexpr int NR = D::NR;
+    std::array<char, NZ> used{};
+    std::array<double, NZ> qs{};
+    std::array<double, NR> lam{};
+    std::array<double, NZ * NZ> h{};
+    std::uint64_t x = 0x9E3779B97F4A7C15ull;  // fixed: the same set from every thread
+    auto uniform = [&x] {                     // in [−1, 1)
+      x = x * 6364136223846793005ull + 1442695040888963407ull;
+      return static_cast<double>(x >> 11) * 0x1.0p-52 - 1.0;
+    };
+    bool finite = true;
+    for (int sample = 0; sample < 2; ++sample) {
+      for (int i = 0; i < NZ; ++i) qs[i] = q[i] + 0.1 * (1 + std::abs(q[i])) * uniform();
+      for (int r = 0; r < NR; ++r) lam[r] = 1.5 + 0.5 * uniform();
+      hessian_over<NZ>(qs.data(), t, lam.data(), all_coordinates().data(), NZ, h.data());
+      for (int k = 0; k < NZ; ++k)
+        for (int l = 0; l < NZ; ++l) {
+          finite &= std::isfinite(h[k * NZ + l]);
+          if (h[k * NZ + l] != 0) used[k] = 1;
+        }
+    }
+    hessian_n_ = 0;
+    for (int k = 0; k < NZ; ++k)
+      if (used[k] || !finite) hessian_idx_[hessian_n_++] = k;
+  }
+  mutable std::once_flag hessian_once_;
+  mutable int hessian_n_ = NZ;
+  mutable std::array<int, NZ> hessian_idx_{};
 };
 
 /// Applied-force adaptor: D provides
