@@ -246,6 +246,9 @@ struct SolveStats {
   /// relative_residual: b is not in the range, and x solves only the perturbed matrix.
   bool singular_consistent = false;
   bool on_device = false;  ///< the triangular solves ran on the GPU (resident factor)
+  /// Host threads the triangular solves ran on: a factor with delayed pivots is solved by
+  /// disjoint subtrees, one group per thread, then the top of the tree (1: sequential).
+  int host_threads = 1;
 };
 
 /// All statistics of a Solver.

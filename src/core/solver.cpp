@@ -674,7 +674,7 @@ bool apply_inverse(SolverState& s, const double* b, double* x, index_t nrhs,
   const bool on_device = !s.delayed.valid && !s.external.solve && s.executor &&
                          s.executor->solve(an, s.factor, work.data(), nrhs);
   if (s.delayed.valid) {
-    numeric::solve_delayed(an, s.delayed, work.data(), nrhs);
+    numeric::solve_delayed(an, s.delayed, work.data(), nrhs, &host_arena(s));
   } else if (s.external.solve) {
     s.external.solve(an, s.factor, work.data(), nrhs);
   } else if (!on_device) {
@@ -945,6 +945,11 @@ static void solve_impl(SolverState& s, const double* b, double* x, index_t nrhs)
         ss.refinement_converged && ss.relative_residual <= std::sqrt(kUnitRoundoff);
   }
   ss.on_device = on_device;
+  ss.host_threads = 1;
+  if (s.delayed.valid && !s.delayed.solve_plan.bins.empty()) {
+    ss.host_threads = 0;
+    for (const auto& bin : s.delayed.solve_plan.bins) ss.host_threads += !bin.empty();
+  }
   ss.first_solve_seconds = first_solve_seconds;
   ss.seconds = timer.seconds();
 }

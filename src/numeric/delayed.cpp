@@ -219,96 +219,217 @@ void factorize_delayed(const Analysis& an, const double* vals, MatrixType type, 
     F.fronts_delaying += fr.delayed > 0;
     F.largest_front = std::max(F.largest_front, fr.m);
   }
+  plan_delayed_solve(an, threads, F);
   F.valid = true;
 }
 
-void solve_delayed(const Analysis& an, const DelayedFactor& F, double* b, index_t nrhs) {
+namespace {
+
+constexpr index_t kLoops = 2048;  // below this many multiply-adds, plain loops
+
+// Forward step of front fr: L11 w = z(R[0..k)) in place, then the update g = L21 w of the
+// rows R[k..m), which `sink(row, value)` subtracts.
+template <class Sink>
+void forward_front(const DelayedFront& fr, double* z, std::vector<double>& w,
+                   std::vector<double>& g, Sink&& sink) {
+  const index_t m = fr.m, k = fr.k, c = m - k;
+  if (k == 0) return;
+  const index_t* R = fr.rows.data();
+  const double* L = fr.lu.data();
+  const int one = 1;
+  const double p1 = 1.0, zero = 0.0;
+  w.resize(k);
+  for (index_t i = 0; i < k; ++i) w[i] = z[R[i]];
+  const int im = static_cast<int>(m), ik = static_cast<int>(k), ic = static_cast<int>(c);
+  if (k * k <= kLoops) {
+    for (index_t j = 0; j < k; ++j) {
+      const double wj = w[j];
+      const double* l = L + static_cast<std::size_t>(j) * m;
+      for (index_t i = j + 1; i < k; ++i) w[i] -= l[i] * wj;
+    }
+  } else {
+    dtrsv_("L", "N", "U", &ik, L, &im, w.data(), &one);
+  }
+  for (index_t i = 0; i < k; ++i) z[R[i]] = w[i];
+  if (c == 0) return;
+  g.assign(c, 0.0);  // L21 w
+  if (c * k <= kLoops) {
+    for (index_t j = 0; j < k; ++j) {
+      const double wj = w[j];
+      if (wj == 0.0) continue;
+      const double* l = L + static_cast<std::size_t>(j) * m + k;
+      for (index_t i = 0; i < c; ++i) g[i] += l[i] * wj;
+    }
+  } else {
+    dgemv_("N", &ic, &ik, &p1, L + k, &im, w.data(), &one, &zero, g.data(), &one);
+  }
+  for (index_t i = 0; i < c; ++i) sink(R[k + i], g[i]);
+}
+
+// Backward step of front fr: U11 x(C[0..k)) = z(R[0..k)) − U12 x(C[k..m)).
+void backward_front(const DelayedFront& fr, const double* z, double* x, std::vector<double>& w,
+                    std::vector<double>& g) {
+  const index_t m = fr.m, k = fr.k, c = m - k;
+  if (k == 0) return;
+  const index_t* R = fr.rows.data();
+  const index_t* C = fr.cols.data();
+  const double* L = fr.lu.data();
+  const double* U = L + static_cast<std::size_t>(m) * k;
+  const int one = 1;
+  const double p1 = 1.0, m1 = -1.0;
+  const int im = static_cast<int>(m), ik = static_cast<int>(k), ic = static_cast<int>(c);
+  w.resize(k);
+  for (index_t i = 0; i < k; ++i) w[i] = z[R[i]];
+  if (c > 0) {
+    g.resize(c);
+    for (index_t j = 0; j < c; ++j) g[j] = x[C[k + j]];
+    if (c * k <= kLoops) {
+      for (index_t j = 0; j < c; ++j) {
+        const double xj = g[j];
+        if (xj == 0.0) continue;
+        const double* u = U + static_cast<std::size_t>(j) * k;
+        for (index_t i = 0; i < k; ++i) w[i] -= u[i] * xj;
+      }
+    } else {
+      dgemv_("N", &ik, &ic, &m1, U, &ik, g.data(), &one, &p1, w.data(), &one);
+    }
+  }
+  bool zero_pivot = false;
+  for (index_t j = 0; j < k; ++j) zero_pivot |= L[static_cast<std::size_t>(j) * m + j] == 0.0;
+  if (k * k <= kLoops || zero_pivot) {
+    for (index_t j = k - 1; j >= 0; --j) {
+      const double* col = L + static_cast<std::size_t>(j) * m;
+      const double dj = col[j];
+      w[j] = dj != 0.0 ? w[j] / dj : 0.0;  // a zero pivot (static pivoting off) gives 0
+      const double wj = w[j];
+      for (index_t i = 0; i < j; ++i) w[i] -= col[i] * wj;
+    }
+  } else {
+    dtrsv_("U", "N", "N", &ik, L, &im, w.data(), &one);
+  }
+  for (index_t i = 0; i < k; ++i) x[C[i]] = w[i];
+}
+
+}  // namespace
+
+void plan_delayed_solve(const Analysis& an, int threads, DelayedFactor& F) {
+  DelayedSolvePlan& P = F.solve_plan;
+  const auto& t = an.tree;
+  const index_t nf = t.n_fronts();
+  if (P.analysis_id != an.id || P.threads != threads) {
+    P = DelayedSolvePlan{};
+    P.analysis_id = an.id;
+    P.threads = threads;
+    // subtree work (the solve reads each front's m·k factor entries twice) and ranges
+    std::vector<double> work(nf, 0.0);
+    std::vector<index_t> first(nf);
+    double total = 0;
+    for (index_t f = 0; f < nf; ++f) {  // postorder: children first
+      first[f] = f;
+      work[f] += static_cast<double>(t.n_rows(f)) * t.n_pivots(f);
+      for (index_t q = t.child_offsets[f]; q < t.child_offsets[f + 1]; ++q) {
+        const index_t ch = t.children[q];
+        work[f] += work[ch];
+        first[f] = std::min(first[f], first[ch]);
+      }
+      if (t.parent[f] < 0) total += work[f];
+    }
+    // split the heaviest subtree into its children until every subtree is at most a
+    // quarter of a thread's share (or 16 per thread); its root joins the top part
+    std::vector<index_t> cand, top;
+    for (index_t f = 0; f < nf; ++f)
+      if (t.parent[f] < 0) cand.push_back(f);
+    const double limit = total / (4.0 * std::max(threads, 1));
+    while (threads > 1 && !cand.empty() && cand.size() < static_cast<std::size_t>(16 * threads)) {
+      const auto heaviest = std::max_element(
+          cand.begin(), cand.end(), [&](index_t a, index_t b) { return work[a] < work[b]; });
+      const index_t f = *heaviest;
+      if (work[f] <= limit || t.child_offsets[f] == t.child_offsets[f + 1]) break;
+      cand.erase(heaviest);
+      top.push_back(f);
+      for (index_t q = t.child_offsets[f]; q < t.child_offsets[f + 1]; ++q)
+        cand.push_back(t.children[q]);
+    }
+    if (threads > 1 && cand.size() > 1) {
+      // largest first to the least loaded bin (ties: the lower front number first)
+      std::sort(cand.begin(), cand.end(), [&](index_t a, index_t b) {
+        return work[a] != work[b] ? work[a] > work[b] : a < b;
+      });
+      P.bins.resize(threads);
+      std::vector<double> load(threads, 0.0);
+      for (index_t f : cand) {
+        const int bin = static_cast<int>(std::min_element(load.begin(), load.end()) - load.begin());
+        load[bin] += work[f];
+        P.bins[bin].push_back({first[f], f});
+      }
+      std::sort(top.begin(), top.end());
+      P.top = std::move(top);
+    }
+  }
+  if (P.bins.empty()) return;
+  P.row_bin.assign(an.n, -1);
+  for (std::size_t b = 0; b < P.bins.size(); ++b)
+    for (const auto& [lo, hi] : P.bins[b])
+      for (index_t f = lo; f <= hi; ++f) {
+        const DelayedFront& fr = F.fronts[f];
+        for (index_t i = 0; i < fr.k; ++i) P.row_bin[fr.rows[i]] = static_cast<int>(b);
+      }
+  P.top_rows.clear();
+  for (index_t f : P.top)
+    for (index_t i = 0; i < F.fronts[f].k; ++i) P.top_rows.push_back(F.fronts[f].rows[i]);
+}
+
+void solve_delayed(const Analysis& an, const DelayedFactor& F, double* b, index_t nrhs,
+                   tbb::task_arena* arena) {
   // Per front: gather, dense triangular solve and products on the gathered vectors
   // (contiguous), scatter once; DGEMV/DTRSV for the larger ones.
-  constexpr index_t kLoops = 2048;  // below this many multiply-adds, plain loops
   const index_t n = an.n, nf = static_cast<index_t>(F.fronts.size());
-  const int one = 1;
-  const double p1 = 1.0, m1 = -1.0, zero = 0.0;
+  const DelayedSolvePlan& P = F.solve_plan;
+  const bool parallel = arena && !P.bins.empty() && P.analysis_id == an.id;
   std::vector<double> x(static_cast<std::size_t>(n) * nrhs, 0.0), w, g;
   openblas_set_num_threads(1);  // products of a few thousand flops: one thread
+  const int nb = static_cast<int>(P.bins.size());
+  std::vector<std::vector<double>> delta(parallel ? nb : 0);
+  for (auto& d : delta) d.assign(n, 0.0);
   for (index_t r = 0; r < nrhs; ++r) {
     double* z = b + static_cast<std::size_t>(r) * n;
     double* xr = x.data() + static_cast<std::size_t>(r) * n;
-    // forward: L y = z over the row pivot sequence
-    for (index_t f = 0; f < nf; ++f) {
-      const DelayedFront& fr = F.fronts[f];
-      const index_t m = fr.m, k = fr.k, c = m - k;
-      if (k == 0) continue;
-      const index_t* R = fr.rows.data();
-      const double* L = fr.lu.data();
-      w.resize(k);
-      for (index_t i = 0; i < k; ++i) w[i] = z[R[i]];
-      const int im = static_cast<int>(m), ik = static_cast<int>(k), ic = static_cast<int>(c);
-      if (k * k <= kLoops) {
-        for (index_t j = 0; j < k; ++j) {
-          const double wj = w[j];
-          const double* l = L + static_cast<std::size_t>(j) * m;
-          for (index_t i = j + 1; i < k; ++i) w[i] -= l[i] * wj;
-        }
-      } else {
-        dtrsv_("L", "N", "U", &ik, L, &im, w.data(), &one);
-      }
-      for (index_t i = 0; i < k; ++i) z[R[i]] = w[i];
-      if (c == 0) continue;
-      g.assign(c, 0.0);  // L21 w
-      if (c * k <= kLoops) {
-        for (index_t j = 0; j < k; ++j) {
-          const double wj = w[j];
-          if (wj == 0.0) continue;
-          const double* l = L + static_cast<std::size_t>(j) * m + k;
-          for (index_t i = 0; i < c; ++i) g[i] += l[i] * wj;
-        }
-      } else {
-        dgemv_("N", &ic, &ik, &p1, L + k, &im, w.data(), &one, &zero, g.data(), &one);
-      }
-      for (index_t i = 0; i < c; ++i) z[R[k + i]] -= g[i];
+    if (!parallel) {
+      // forward: L y = z over the row pivot sequence; backward: U x = y over the columns
+      for (index_t f = 0; f < nf; ++f)
+        forward_front(F.fronts[f], z, w, g, [&](index_t row, double v) { z[row] -= v; });
+      for (index_t f = nf - 1; f >= 0; --f) backward_front(F.fronts[f], z, xr, w, g);
+      continue;
     }
-    // backward: U x = y over the column pivot sequence
-    for (index_t f = nf - 1; f >= 0; --f) {
-      const DelayedFront& fr = F.fronts[f];
-      const index_t m = fr.m, k = fr.k, c = m - k;
-      if (k == 0) continue;
-      const index_t* R = fr.rows.data();
-      const index_t* C = fr.cols.data();
-      const double* L = fr.lu.data();
-      const double* U = L + static_cast<std::size_t>(m) * k;
-      const int im = static_cast<int>(m), ik = static_cast<int>(k), ic = static_cast<int>(c);
-      w.resize(k);
-      for (index_t i = 0; i < k; ++i) w[i] = z[R[i]];
-      if (c > 0) {
-        g.resize(c);
-        for (index_t j = 0; j < c; ++j) g[j] = xr[C[k + j]];
-        if (c * k <= kLoops) {
-          for (index_t j = 0; j < c; ++j) {
-            const double xj = g[j];
-            if (xj == 0.0) continue;
-            const double* u = U + static_cast<std::size_t>(j) * k;
-            for (index_t i = 0; i < k; ++i) w[i] -= u[i] * xj;
-          }
-        } else {
-          dgemv_("N", &ik, &ic, &m1, U, &ik, g.data(), &one, &p1, w.data(), &one);
-        }
+    arena->execute([&] {
+      tbb::parallel_for(0, nb, [&](int bin) {
+        std::vector<double> wb, gb;
+        double* d = delta[bin].data();
+        for (const auto& [lo, hi] : P.bins[bin])
+          for (index_t f = lo; f <= hi; ++f)
+            forward_front(F.fronts[f], z, wb, gb, [&](index_t row, double v) {
+              (P.row_bin[row] == bin ? z[row] : d[row]) -= v;
+            });
+      });
+    });
+    for (index_t row : P.top_rows)
+      for (int bin = 0; bin < nb; ++bin) {
+        z[row] += delta[bin][row];
+        delta[bin][row] = 0.0;
       }
-      bool zero_pivot = false;
-      for (index_t j = 0; j < k; ++j) zero_pivot |= L[static_cast<std::size_t>(j) * m + j] == 0.0;
-      if (k * k <= kLoops || zero_pivot) {
-        for (index_t j = k - 1; j >= 0; --j) {
-          const double* col = L + static_cast<std::size_t>(j) * m;
-          const double dj = col[j];
-          w[j] = dj != 0.0 ? w[j] / dj : 0.0;  // a zero pivot (static pivoting off) gives 0
-          const double wj = w[j];
-          for (index_t i = 0; i < j; ++i) w[i] -= col[i] * wj;
-        }
-      } else {
-        dtrsv_("U", "N", "N", &ik, L, &im, w.data(), &one);
-      }
-      for (index_t i = 0; i < k; ++i) xr[C[i]] = w[i];
-    }
+    for (index_t f : P.top)
+      forward_front(F.fronts[f], z, w, g, [&](index_t row, double v) { z[row] -= v; });
+    for (auto it = P.top.rbegin(); it != P.top.rend(); ++it)
+      backward_front(F.fronts[*it], z, xr, w, g);
+    arena->execute([&] {
+      tbb::parallel_for(0, nb, [&](int bin) {
+        std::vector<double> wb, gb;
+        const auto& ranges = P.bins[bin];
+        for (auto it = ranges.rbegin(); it != ranges.rend(); ++it)
+          for (index_t f = it->second; f >= it->first; --f)
+            backward_front(F.fronts[f], z, xr, wb, gb);
+      });
+    });
   }
   std::copy(x.begin(), x.end(), b);
 }

@@ -21,6 +21,8 @@
 #include <tbb/task_arena.h>
 
 #include <cstddef>
+#include <cstdint>
+#include <utility>
 #include <vector>
 
 #include "core/analysis.hpp"
@@ -42,6 +44,20 @@ struct DelayedFront {
   cpu::PivotStats stats;
 };
 
+/// How the solve spreads over threads: disjoint subtrees of the assembly tree (each a
+/// range [first, last] of front numbers, a front and its descendants in postorder) in one
+/// bin per thread, balanced by the fronts' sizes, and the top part above them. Made by
+/// factorize_delayed for its arena's threads; `row_bin` is per factorization (a delayed
+/// pivot moves up the tree).
+struct DelayedSolvePlan {
+  std::uint64_t analysis_id = 0;
+  int threads = 0;
+  std::vector<std::vector<std::pair<index_t, index_t>>> bins;
+  std::vector<index_t> top;       ///< fronts in no bin, increasing (closed under parents)
+  std::vector<int> row_bin;       ///< per row (tree numbering): bin of its pivot's front, -1: top
+  std::vector<index_t> top_rows;  ///< the rows pivoted in the top part
+};
+
 /// The factor of one factorization with delayed pivots (see above), front by front in
 /// the assembly tree's (postorder) numbering.
 struct DelayedFactor {
@@ -51,6 +67,7 @@ struct DelayedFactor {
   index_t fronts_delaying = 0;  ///< fronts that passed pivots on
   index_t largest_front = 0;    ///< the largest m
   bool valid = false;
+  DelayedSolvePlan solve_plan;
 };
 
 /// Per-thread work arrays of factorize_delayed, kept from one factorization to the next.
@@ -77,9 +94,18 @@ void factorize_delayed(const Analysis& an, const double* scaled_values, MatrixTy
                        double threshold, double static_pivot, DelayedFactor& factor,
                        DelayedWorkspace& work, tbb::task_arena& arena);
 
+/// The solve plan of `factor` (DelayedFactor::solve_plan) for `threads` threads: the
+/// subtree split when the analysis or the thread count changed, the rows' bins always.
+/// factorize_delayed calls it with its arena's thread count; one thread: no bins.
+void plan_delayed_solve(const Analysis& an, int threads, DelayedFactor& factor);
+
 /// Solves with the factor: b (tree numbering of the rows, n × nrhs column-major) is
-/// overwritten by the solution (tree numbering of the columns).
-void solve_delayed(const Analysis& an, const DelayedFactor& factor, double* b, index_t nrhs);
+/// overwritten by the solution (tree numbering of the columns). With `arena` and a solve
+/// plan of several bins, the bins' subtrees are solved concurrently (forward: their updates
+/// of the top part's rows gathered per bin and added in bin order; backward: no shared
+/// writes), so the result depends on the thread count but not on the schedule.
+void solve_delayed(const Analysis& an, const DelayedFactor& factor, double* b, index_t nrhs,
+                   tbb::task_arena* arena = nullptr);
 
 /// The sign of det(B) from the factor: the sign of Π u_ii times the parities of the row and
 /// column pivot sequences (0 when a pivot is zero); log|det B| is Σ front_stats' log_abs_det.
