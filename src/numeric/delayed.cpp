@@ -103,10 +103,15 @@ void factor_front(const Analysis& an, const double* vals, const cpu::DelayPolicy
   if (w.front.size() < mm) sized(w.front, mm, "front workspace");
   double* A = w.front.data();
   std::fill(A, A + mm, 0.0);
-  for (index_t e = am.entry_offsets[f]; e < am.entry_offsets[f + 1]; ++e) {
-    const index_t dst = am.entry_dst[e];
-    const index_t i = dst % msym, j = dst / msym;
-    A[(d + i) + static_cast<std::size_t>(d + j) * m] += vals[am.entry_src[e]];
+  if (d == 0) {  // no delayed rows: the symbolic front's own layout
+    for (index_t e = am.entry_offsets[f]; e < am.entry_offsets[f + 1]; ++e)
+      A[am.entry_dst[e]] += vals[am.entry_src[e]];
+  } else {
+    for (index_t e = am.entry_offsets[f]; e < am.entry_offsets[f + 1]; ++e) {
+      const index_t dst = am.entry_dst[e];
+      const index_t i = dst % msym, j = dst / msym;
+      A[(d + i) + static_cast<std::size_t>(d + j) * m] += vals[am.entry_src[e]];
+    }
   }
   for (index_t q = c0; q < c1; ++q) {
     DelayedFront& ch = F.fronts[t.children[q]];
