@@ -83,6 +83,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--strata", default=os.path.join(REPO, "build", "strata"))
     ap.add_argument("--baseline", help="another strata binary, run side by side")
+    ap.add_argument("--baseline-label", default="",
+                    help="what the baseline is (its commit), recorded in the results")
     ap.add_argument("--device", default="cpu", choices=["cpu", "gpu", "auto"])
     ap.add_argument("--threads", type=int, default=0, help="host threads (0: all)")
     ap.add_argument("--models", default=DEFAULT_MODELS,
@@ -93,7 +95,7 @@ def main(argv: list[str] | None = None) -> int:
     data = {"benchmark": "e2e", **metadata([sys.argv[0]] + (argv if argv is not None
                                                               else sys.argv[1:]))}
     data.update(device=args.device, threads=args.threads, baseline=args.baseline or "",
-                rows=[])
+                baseline_label=args.baseline_label, rows=[])
     binaries = [("current", args.strata)] + ([("baseline", args.baseline)] if args.baseline
                                              else [])
     for item in args.models.split(","):

@@ -19,6 +19,15 @@ def command_output(cmd: list[str]) -> str:
         return ""
 
 
+def carried_commit() -> str:
+    """The commit in .carry/COMMIT (scripts/gpu/prepare.sh), or ""."""
+    try:
+        with open(os.path.join(REPO, ".carry", "COMMIT")) as f:
+            return f.read().strip()
+    except OSError:
+        return ""
+
+
 def metadata(argv: list[str]) -> dict:
     """The run's metadata: date (UTC), command (argv quoted), git commit and dirtiness,
     machine (host, CPU model from /proc/cpuinfo, hardware threads, first GPU's name)."""
@@ -36,7 +45,9 @@ def metadata(argv: list[str]) -> dict:
     return {
         "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         "command": " ".join(shlex.quote(a) for a in argv),
-        "git_commit": command_output(["git", "rev-parse", "--short", "HEAD"]),
+        # a copy of the tree without .git (the lent GPU machine): the commit prepare.sh
+        # recorded next to the binaries it staged
+        "git_commit": command_output(["git", "rev-parse", "--short", "HEAD"]) or carried_commit(),
         "git_dirty": bool(command_output(["git", "status", "--porcelain",
                                           "--untracked-files=no"])),
         "machine": {"host": platform.node(), "cpu": cpu,
