@@ -229,6 +229,7 @@ void Integrator::initialize() {
     }
   initial_warnings_.clear();
   sys_.update_candidates(q_.data());
+  sys_.prune_pattern();  // the pattern starts with the pairs in the matrix now
   if (opts_.formulation == FormulationChoice::stabilized)
     sys_.set_formulation(Formulation::stabilized);
   try {

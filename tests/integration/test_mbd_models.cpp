@@ -3,9 +3,11 @@
 // Market pair of the Newton system's size.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <filesystem>
 
 #include "mbd/generators.hpp"
+#include "mbd/integrator.hpp"
 #include "mbd/model_io.hpp"
 #include "mbd/simulation.hpp"
 #include "strata/matrix_market.hpp"
@@ -30,6 +32,52 @@ TEST(MbdModels, BundledModelsRunAFewSteps) {
     ++count;
   }
   EXPECT_GE(count, 5);
+}
+
+// Contact pairs with a margin (track links against wheels): a pair that leaves keeps its
+// entries in the Newton matrix's pattern (only values change), one that comes back into
+// the pattern changes nothing either; after prune_pattern the pattern is smaller, and the
+// pair's return grows it back to a superset of the pruned one (the solver then analyzes it
+// keeping its order).
+TEST(MbdModels, ContactPairsThatLeaveStayInThePattern) {
+  const Model m = build_model(generate("tracked:100"), "tracked:100");
+  IntegratorOptions o;
+  o.t_end = 0.01;
+  Integrator in(m, o);
+  in.initialize();
+  NewtonSystem& sys = in.system();
+  std::vector<double> q = in.q(), away = q;
+  sys.update_candidates(q.data());
+  sys.prune_pattern();  // as the first analysis does
+  const SparseMatrix start = sys.matrix();
+  std::size_t pair = m.forces.size();
+  for (std::size_t e = 0; e < m.forces.size() && pair == m.forces.size(); ++e)
+    if (m.forces[e]->margin > 0 && sys.candidates()[e]) pair = e;
+  ASSERT_LT(pair, m.forces.size()) << "no contact pair with a margin in the matrix";
+  for (int i = 0; i < 3; ++i) away[m.forces[pair]->dofs[i]] += 100.0;  // one body far off
+  auto same_pattern = [](const SparseMatrix& a, const SparseMatrix& b) {
+    return a.offsets == b.offsets && a.indices == b.indices;
+  };
+  EXPECT_EQ(sys.update_candidates(away.data()), 1);
+  EXPECT_FALSE(sys.candidates()[pair]);
+  EXPECT_TRUE(sys.pattern_forces()[pair]);
+  EXPECT_TRUE(same_pattern(sys.matrix(), start));
+  EXPECT_EQ(sys.update_candidates(q.data()), 1);
+  EXPECT_TRUE(same_pattern(sys.matrix(), start));
+  EXPECT_EQ(sys.update_candidates(away.data()), 1);
+  EXPECT_TRUE(sys.prune_pattern());
+  EXPECT_FALSE(sys.pattern_forces()[pair]);
+  const SparseMatrix pruned = sys.matrix();
+  EXPECT_LT(pruned.nnz(), start.nnz());
+  EXPECT_EQ(sys.update_candidates(q.data()), 2);
+  EXPECT_TRUE(same_pattern(sys.matrix(), start));
+  // every entry of the pruned pattern is in the grown one (the kept order's requirement)
+  const SparseMatrix& grown = sys.matrix();
+  for (index_t j = 0; j < pruned.n_cols; ++j)
+    for (index_t p = pruned.offsets[j]; p < pruned.offsets[j + 1]; ++p)
+      EXPECT_TRUE(std::binary_search(grown.indices.begin() + grown.offsets[j],
+                                     grown.indices.begin() + grown.offsets[j + 1],
+                                     pruned.indices[p]));
 }
 
 TEST(MbdModels, DumpMatrixWritesTheNewtonSystem) {
