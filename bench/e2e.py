@@ -32,7 +32,7 @@ PATTERNS = {
     "steps": (r"^steps\s+(\d+) accepted", int),
     "factorizations": (r"^factorizations\s+(\d+)", int),
     "analyses": (r"analyses (\d+):", int),
-    "analyses_perturbed": (r"perturbed pivots (\d+);", int),
+    "analyses_perturbed": (r"perturbed pivots (\d+)[,;]", int),
     "analyses_contacts": (r"contact-set changes (\d+)", int),
     "analyses_order_kept": (r"order kept for (\d+)", int),
     "static_pivots_left": (r"static pivots left (\d+)", int),

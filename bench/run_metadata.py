@@ -45,9 +45,10 @@ def metadata(argv: list[str]) -> dict:
     return {
         "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         "command": " ".join(shlex.quote(a) for a in argv),
-        # a copy of the tree without .git (the lent GPU machine): the commit prepare.sh
-        # recorded next to the binaries it staged
-        "git_commit": command_output(["git", "rev-parse", "--short", "HEAD"]) or carried_commit(),
+        # STRATA_CARRIED=1 (scripts/gpu/run_e2e.sh on the lent GPU machine): the binaries
+        # are the staged ones, so their commit is the one prepare.sh recorded
+        "git_commit": (carried_commit() if os.environ.get("STRATA_CARRIED") == "1" else "")
+        or command_output(["git", "rev-parse", "--short", "HEAD"]),
         "git_dirty": bool(command_output(["git", "status", "--porcelain",
                                           "--untracked-files=no"])),
         "machine": {"host": platform.node(), "cpu": cpu,

@@ -15,5 +15,5 @@ args=(--strata .carry/bin/strata --results-dir "$OUT")
 if [ -x .carry/base/strata ]; then
   args+=(--baseline .carry/base/strata --baseline-label "$(cat .carry/base/COMMIT 2>/dev/null)")
 fi
-PYTHONUNBUFFERED=1 python3 bench/e2e.py "${args[@]}" "$@" 2>&1 |
+STRATA_CARRIED=1 PYTHONUNBUFFERED=1 python3 bench/e2e.py "${args[@]}" "$@" 2>&1 |
   tee -a "$OUT/e2e-$(date -u +%Y%m%dT%H%M%SZ).log"

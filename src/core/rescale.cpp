@@ -1,8 +1,12 @@
 // strata — power-of-two Ruiz equilibration of a refactorization's values (see rescale.hpp).
 #include "core/rescale.hpp"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 
 namespace strata {
 namespace {
@@ -14,6 +18,11 @@ double inverse_sqrt_pow2(double x) {
   return std::ldexp(1.0, -((e - 1) / 2));
 }
 
+// Entries from which the passes run in column blocks on the arena's threads, and the
+// number of blocks (fixed, so that the work array's size does not depend on the threads).
+constexpr index_t kParallelEntries = 1 << 16;
+constexpr int kBlocks = 8;
+
 bool within_factor_two(const std::vector<double>& maxima) {
   for (double v : maxima)
     if (v != 0 && (v < 0.5 || v > 2)) return false;
@@ -23,24 +32,54 @@ bool within_factor_two(const std::vector<double>& maxima) {
 }  // namespace
 
 Rescaling rescale_values(const SparseMatrix& c, bool symmetric, std::vector<double>& values,
-                         int max_sweeps) {
+                         int max_sweeps, tbb::task_arena* arena, std::vector<double>* work) {
   const index_t n = c.n_cols;
+  const std::size_t rows = static_cast<std::size_t>(c.n_rows);
   Rescaling out;
-  std::vector<double> rmax(c.n_rows), cmax(n);
-  auto maxima = [&] {
-    std::fill(rmax.begin(), rmax.end(), 0.0);
-    std::fill(cmax.begin(), cmax.end(), 0.0);
-    for (index_t j = 0; j < n; ++j)
+  std::vector<double> rmax(rows), cmax(n);
+  // Column blocks: each takes the maxima of its columns and, in a row array of its own,
+  // of its rows; the row arrays are then reduced by max, so the result does not depend
+  // on the threads (max is exact and commutative).
+  const bool parallel =
+      arena && work && c.nnz() >= kParallelEntries && rows == static_cast<std::size_t>(n);
+  const int blocks = parallel ? kBlocks : 1;
+  if (parallel && work->size() < blocks * rows) work->resize(blocks * rows);
+  auto block_range = [&](int b) {
+    return static_cast<index_t>(static_cast<std::int64_t>(n) * b / blocks);
+  };
+  auto block_maxima = [&](int b, double* r) {
+    std::fill(r, r + rows, 0.0);
+    for (index_t j = block_range(b); j < block_range(b + 1); ++j) {
+      double cm = 0;
       for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) {
         const index_t i = c.indices[p];
         const double v = std::abs(values[p]);
-        rmax[i] = std::max(rmax[i], v);
-        cmax[j] = std::max(cmax[j], v);
-        if (symmetric) {  // the mirrored entry (j, i)
-          rmax[j] = std::max(rmax[j], v);
-          cmax[i] = std::max(cmax[i], v);
-        }
+        r[i] = std::max(r[i], v);
+        cm = std::max(cm, v);
+        if (symmetric) r[j] = std::max(r[j], v);  // the mirrored entry (j, i): row j
       }
+      cmax[j] = cm;
+    }
+  };
+  auto maxima = [&] {
+    if (!parallel) {
+      block_maxima(0, rmax.data());
+    } else {
+      arena->execute([&] {
+        tbb::parallel_for(0, blocks, [&](int b) { block_maxima(b, work->data() + b * rows); });
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, rows, 8192),
+                          [&](const tbb::blocked_range<std::size_t>& r) {
+                            for (std::size_t i = r.begin(); i < r.end(); ++i) {
+                              double m = 0;
+                              for (int b = 0; b < blocks; ++b)
+                                m = std::max(m, (*work)[b * rows + i]);
+                              rmax[i] = m;
+                            }
+                          });
+      });
+    }
+    if (symmetric)  // the mirrored entries: column i's maximum is row i's
+      for (index_t j = 0; j < n; ++j) cmax[j] = rmax[j] = std::max(rmax[j], cmax[j]);
   };
   maxima();
   if (within_factor_two(rmax) && within_factor_two(cmax)) return out;
@@ -55,8 +94,17 @@ Rescaling rescale_values(const SparseMatrix& c, bool symmetric, std::vector<doub
     for (index_t i = 0; i < c.n_rows; ++i) r[i] = rmax[i] > 0 ? inverse_sqrt_pow2(rmax[i]) : 1.0;
     for (index_t j = 0; j < n; ++j) s[j] = cmax[j] > 0 ? inverse_sqrt_pow2(cmax[j]) : 1.0;
     // symmetric: the maxima are mirrored, so r == s and D·B·D stays symmetric
-    for (index_t j = 0; j < n; ++j)
-      for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) values[p] *= r[c.indices[p]] * s[j];
+    auto scale = [&](index_t j0, index_t j1) {
+      for (index_t j = j0; j < j1; ++j)
+        for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p)
+          values[p] *= r[c.indices[p]] * s[j];
+    };
+    if (!parallel)
+      scale(0, n);
+    else
+      arena->execute([&] {
+        tbb::parallel_for(0, blocks, [&](int b) { scale(block_range(b), block_range(b + 1)); });
+      });
     for (index_t i = 0; i < c.n_rows; ++i) out.row[i] *= r[i];
     for (index_t j = 0; j < n; ++j) out.col[j] *= s[j];
   }

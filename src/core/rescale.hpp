@@ -16,6 +16,8 @@
 // analysis: its scaling was computed from those values.)
 #pragma once
 
+#include <tbb/task_arena.h>
+
 #include <vector>
 
 #include "strata/sparse_matrix.hpp"
@@ -34,8 +36,11 @@ struct Rescaling {
 /// `max_sweeps` Ruiz sweeps with power-of-two factors (each halves the logarithm of every
 /// row's and column's distance from 1), stopping once every nonempty row's and column's
 /// largest magnitude is in [1/2, 2]. Returns the scaling applied (empty when
-/// none was needed). Rows and columns with no nonzero value keep factor 1.
+/// none was needed). Rows and columns with no nonzero value keep factor 1. With `arena`
+/// and `work` (scratch, resized as needed) a large matrix's passes run in column blocks on
+/// the arena's threads, with the same result.
 Rescaling rescale_values(const SparseMatrix& pattern, bool symmetric, std::vector<double>& values,
-                         int max_sweeps = 3);
+                         int max_sweeps = 3, tbb::task_arena* arena = nullptr,
+                         std::vector<double>* work = nullptr);
 
 }  // namespace strata

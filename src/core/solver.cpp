@@ -528,7 +528,7 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
   // subnormal range.
   s.rescaling = Rescaling{};
   if (scale && !scaling_clamped(an)) {
-    s.rescaling = rescale_values(s.values, an.symmetric, s.scaled);
+    s.rescaling = rescale_values(s.values, an.symmetric, s.scaled, 3, &arena, &s.value_sums);
     if (!s.rescaling.row.empty()) norm1 = scaled_norm1(s.values, an.symmetric, s.scaled);
   }
   const double input_seconds = timer.seconds();
