@@ -364,16 +364,17 @@ bool scaling_clamped(const Analysis& an) {
 }
 
 // ‖B‖₁ of the scaled values (entry order of the canonical `c`; symmetric: lower storage,
-// mirrored).
-double scaled_norm1(const SparseMatrix& c, bool symmetric, const std::vector<double>& scaled) {
-  std::vector<double> col(c.n_cols, 0.0);
-  for (index_t j = 0; j < c.n_cols; ++j)
-    for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) {
-      col[j] += std::abs(scaled[p]);
-      if (symmetric && c.indices[p] != j) col[c.indices[p]] += std::abs(scaled[p]);
-    }
+// mirrored), by blocked_sums on the arena (work: its scratch).
+double scaled_norm1(const SparseMatrix& c, bool symmetric, const std::vector<double>& scaled,
+                    tbb::task_arena& arena, std::vector<double>& work) {
+  const auto col = blocked_sums(c, 1, symmetric, arena, work,
+                                [&](index_t j, index_t p, double* const* sum) {
+                                  const double v = std::abs(scaled[p]);
+                                  sum[0][j] += v;
+                                  if (symmetric && c.indices[p] != j) sum[0][c.indices[p]] += v;
+                                });
   double m = 0;
-  for (double v : col) m = std::max(m, v);
+  for (double v : col[0]) m = std::max(m, v);
   return m;
 }
 
@@ -529,7 +530,8 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
   s.rescaling = Rescaling{};
   if (scale && !scaling_clamped(an)) {
     s.rescaling = rescale_values(s.values, an.symmetric, s.scaled, 3, &arena, &s.value_sums);
-    if (!s.rescaling.row.empty()) norm1 = scaled_norm1(s.values, an.symmetric, s.scaled);
+    if (!s.rescaling.row.empty())
+      norm1 = scaled_norm1(s.values, an.symmetric, s.scaled, arena, s.value_sums);
   }
   const double input_seconds = timer.seconds();
   const double static_pivot = s.options.static_pivot_epsilon * (norm1 > 0 ? norm1 : 1.0);
