@@ -47,10 +47,12 @@ def metadata(argv: list[str]) -> dict:
         "command": " ".join(shlex.quote(a) for a in argv),
         # STRATA_CARRIED=1 (scripts/gpu/run_e2e.sh on the lent GPU machine): the binaries
         # are the staged ones, so their commit is the one prepare.sh recorded
-        "git_commit": (carried_commit() if os.environ.get("STRATA_CARRIED") == "1" else "")
+        "git_commit": (carried_commit().split()[0] if os.environ.get("STRATA_CARRIED") == "1"
+                       and carried_commit() else "")
         or command_output(["git", "rev-parse", "--short", "HEAD"]),
-        "git_dirty": bool(command_output(["git", "status", "--porcelain",
-                                          "--untracked-files=no"])),
+        "git_dirty": ("uncommitted" in carried_commit())
+        if os.environ.get("STRATA_CARRIED") == "1"
+        else bool(command_output(["git", "status", "--porcelain", "--untracked-files=no"])),
         "machine": {"host": platform.node(), "cpu": cpu,
                     "hardware_threads": os.cpu_count(), "gpu": gpu},
     }

@@ -245,9 +245,28 @@ TEST_F(CudaMemory, DeviceSolveMatchesHostSolve) {
         std::vector<double> xc(b.size());
         cpu.solve(b.data(), xc.data(), nrhs);
         EXPECT_FALSE(cpu.stats().solve.on_device);
-        EXPECT_LT(test::relative_difference(xg, xc), 1e-9);
-        for (index_t r = 0; r < nrhs; ++r)
-          EXPECT_LT(test::backward_error(a, xg.data() + r * n, b.data() + r * n), 1e-12);
+        // Unrefined solves: their backward error follows the pivots' growth (Bunch–Kaufman
+        // LDLᵀ of a random indefinite matrix of 4000 reached 2.8e-12 once), so the device's
+        // is held to the CPU backend's on the same matrix (an index or ordering error gives
+        // O(1)), and the solutions to the condition: κ∞(A) ≥ ‖A‖∞‖x‖∞/‖b‖∞ (Higham §7.1).
+        std::vector<double> row(n, 0.0);
+        for (index_t j = 0; j < n; ++j)
+          for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p) {
+            row[a.indices[p]] += std::abs(a.values[p]);
+            if (a.storage == Storage::lower && a.indices[p] != j) row[j] += std::abs(a.values[p]);
+          }
+        double anorm = 0, xn = 0, bn = 0;
+        for (double v : row) anorm = std::max(anorm, v);
+        for (double v : xc) xn = std::max(xn, std::abs(v));
+        for (double v : b) bn = std::max(bn, std::abs(v));
+        const double kappa = anorm * xn / std::max(bn, 1e-300);
+        EXPECT_LT(test::relative_difference(xg, xc),
+                  std::max(1e-9, 1e-13 * std::sqrt(double(n)) * kappa));
+        for (index_t r = 0; r < nrhs; ++r) {
+          const double berr_cpu = test::backward_error(a, xc.data() + r * n, b.data() + r * n);
+          EXPECT_LT(test::backward_error(a, xg.data() + r * n, b.data() + r * n),
+                    std::max(1e-12, 10 * berr_cpu));
+        }
       }
     }
 }
