@@ -367,12 +367,12 @@ bool scaling_clamped(const Analysis& an) {
 // mirrored), by blocked_sums on the arena (work: its scratch).
 double scaled_norm1(const SparseMatrix& c, bool symmetric, const std::vector<double>& scaled,
                     tbb::task_arena& arena, std::vector<double>& work) {
-  const auto col = blocked_sums(c, 1, symmetric, arena, work,
-                                [&](index_t j, index_t p, double* const* sum) {
-                                  const double v = std::abs(scaled[p]);
-                                  sum[0][j] += v;
-                                  if (symmetric && c.indices[p] != j) sum[0][c.indices[p]] += v;
-                                });
+  const auto col =
+      blocked_sums(c, 1, symmetric, arena, work, [&](index_t j, index_t p, double* const* sum) {
+        const double v = std::abs(scaled[p]);
+        sum[0][j] += v;
+        if (symmetric && c.indices[p] != j) sum[0][c.indices[p]] += v;
+      });
   double m = 0;
   for (double v : col[0]) m = std::max(m, v);
   return m;
@@ -742,26 +742,41 @@ Solver::~Solver() = default;
 Solver::Solver(Solver&&) noexcept = default;
 Solver& Solver::operator=(Solver&&) noexcept = default;
 
+namespace {
+
+// The factor and the numeric workspaces of the analysis before go (a new analysis).
+void clear_numeric(SolverState& s) {
+  s.factor = numeric::NumericFactor{};
+  s.delayed = numeric::DelayedFactor{};
+  s.cb_arena.clear();
+  s.arenas.clear();
+  s.blocks = numeric::BlockBuffers{};
+}
+
+// Makes `an` (of A's pattern) the solver's analysis: the input kept for the first
+// factorization, the devices prepared, the statistics started anew.
+void adopt_analysis(SolverState& s, Analysis an, const SparseMatrix& a) {
+  s.analysis = std::move(an);
+  keep_analyzed_input(s, a);
+  const double setup = prepare_devices(s);
+  s.analysis->stats.device_setup_seconds = setup;
+  s.analysis->stats.total_seconds += setup;
+  s.stats = Stats{};
+  s.stats.analysis = s.analysis->stats;
+  s.resolved = MatrixType::automatic;
+}
+
+}  // namespace
+
 void Solver::analyze(const SparseMatrix& a) {
   phase("analyze", [&] {
     validate(a);
-    state_->factor = numeric::NumericFactor{};
-    state_->delayed = numeric::DelayedFactor{};
-    state_->cb_arena.clear();
-    state_->arenas.clear();
-    state_->blocks = numeric::BlockBuffers{};
+    clear_numeric(*state_);
     state_->analysis.reset();
     const int workers = state_->external.workers > 0 ? state_->external.workers
                         : state_->host_workers > 0   ? state_->host_workers
                                                      : resolve_workers(state_->options);
-    state_->analysis = analyze_matrix(a, state_->options, workers);
-    keep_analyzed_input(*state_, a);
-    const double setup = prepare_devices(*state_);
-    state_->analysis->stats.device_setup_seconds = setup;
-    state_->analysis->stats.total_seconds += setup;
-    state_->stats = Stats{};
-    state_->stats.analysis = state_->analysis->stats;
-    state_->resolved = MatrixType::automatic;
+    adopt_analysis(*state_, analyze_matrix(a, state_->options, workers), a);
   });
 }
 
@@ -772,19 +787,8 @@ void Solver::analyze_keeping_order(const SparseMatrix& a) {
     const int workers = static_cast<int>(std::max<index_t>(1, state_->analysis->stats.workers));
     // computed before anything is released: bad input leaves the solver as it was
     Analysis next = analyze_with_order(a, *state_->analysis, state_->options, workers);
-    state_->factor = numeric::NumericFactor{};
-    state_->delayed = numeric::DelayedFactor{};
-    state_->cb_arena.clear();
-    state_->arenas.clear();
-    state_->blocks = numeric::BlockBuffers{};
-    state_->analysis = std::move(next);
-    keep_analyzed_input(*state_, a);
-    const double setup = prepare_devices(*state_);
-    state_->analysis->stats.device_setup_seconds = setup;
-    state_->analysis->stats.total_seconds += setup;
-    state_->stats = Stats{};
-    state_->stats.analysis = state_->analysis->stats;
-    state_->resolved = MatrixType::automatic;
+    clear_numeric(*state_);
+    adopt_analysis(*state_, std::move(next), a);
   });
 }
 

@@ -120,20 +120,23 @@ void NewtonSystem::set_partition(const Partition& p) {
   rebuild_pattern();
 }
 
+namespace {
+// A saved per-force set (checkpoint) must have one entry per force element of the model.
+void expect_force_set(const std::vector<char>& set, std::size_t forces, const char* what) {
+  if (set.size() != forces)
+    throw InvalidInput(std::string("the saved ") + what + " has " + std::to_string(set.size()) +
+                       " entries, the model " + std::to_string(forces) + " force elements");
+}
+}  // namespace
+
 void NewtonSystem::set_candidates(const std::vector<char>& c) {
-  if (c.size() != candidate_.size())
-    throw InvalidInput("the saved contact candidate set has " + std::to_string(c.size()) +
-                       " entries, the model " + std::to_string(candidate_.size()) +
-                       " force elements");
+  expect_force_set(c, candidate_.size(), "contact candidate set");
   candidate_ = c;
   for (std::size_t e = 0; e < c.size(); ++e) in_pattern_[e] |= c[e];
 }
 
 void NewtonSystem::set_pattern_forces(const std::vector<char>& p) {
-  if (p.size() != in_pattern_.size())
-    throw InvalidInput("the saved pattern's force set has " + std::to_string(p.size()) +
-                       " entries, the model " + std::to_string(in_pattern_.size()) +
-                       " force elements");
+  expect_force_set(p, in_pattern_.size(), "pattern's force set");
   in_pattern_ = p;
 }
 
