@@ -277,15 +277,6 @@ int Integrator::newton(double h, StepInfo& info, const BdfTerms& bdf) {
     sys_.evaluate(x_.data(), tn, bdf, need_jac, res_.data());
     const double s = ta.seconds();
     info.assembly_seconds += s;
-    {
-      static double tj = 0, tr = 0;
-      static int nj = 0, nr = 0;
-      (need_jac ? tj : tr) += s;
-      (need_jac ? nj : nr)++;
-      if ((nj + nr) % 1000 == 0)
-        fmt::print(stderr, "JAC {} {:.3f} ms RES {} {:.3f} ms\n", nj, 1e3 * tj / nj, nr,
-                   1e3 * tr / std::max(nr, 1));
-    }
     stats_.assembly_seconds += s;
     if (!all_finite(res_)) return 0;
     if (need_jac) {
