@@ -265,6 +265,12 @@ void fill_separator_work(ordering::SeparatorTree& tree, const std::vector<index_
 void finish_analysis(Analysis& an, const SparseMatrix& c, const SparseMatrix& pattern,
                      ordering::OrderingResult ord, const Options& opts, int workers);
 
+// Analysis::id: unique over the process, whichever function made the analysis.
+std::uint64_t next_analysis_id() {
+  static std::atomic<std::uint64_t> next{1};
+  return next++;
+}
+
 }  // namespace
 
 SparseMatrix canonical_values(const Analysis& an, const SparseMatrix& a) {
@@ -347,9 +353,8 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers)
     throw InvalidInput("max_block_size must be at least 0 (0: by backend and type), got " +
                        std::to_string(opts.max_block_size));
   if (opts.nd_leaf_size < 1) throw InvalidInput("nd_leaf_size must be at least 1");
-  static std::atomic<std::uint64_t> next_id{1};
   Analysis an;
-  an.id = next_id++;
+  an.id = next_analysis_id();
   an.n = a.n_rows;
   an.input_storage = a.storage;
   an.type = opts.type;
@@ -525,9 +530,8 @@ Analysis analyze_with_order(const SparseMatrix& a, const Analysis& previous, con
     throw InvalidInput("analyze_with_order: the matrix is " + std::to_string(a.n_rows) + "x" +
                        std::to_string(a.n_cols) + ", the analysis whose order it keeps was for " +
                        std::to_string(previous.n) + "x" + std::to_string(previous.n));
-  static std::atomic<std::uint64_t> next_id{1u << 31};
   Analysis an;
-  an.id = next_id++;
+  an.id = next_analysis_id();
   an.n = previous.n;
   an.input_storage = a.storage;
   an.type = previous.type;

@@ -377,11 +377,15 @@ void plan_delayed_solve(const Analysis& an, int threads, DelayedFactor& F) {
     for (const auto& [lo, hi] : P.bins[b])
       for (index_t f = lo; f <= hi; ++f) {
         const DelayedFront& fr = F.fronts[f];
-        for (index_t i = 0; i < fr.k; ++i) P.row_bin[fr.rows[i]] = static_cast<int>(b);
+        for (index_t i = 0; i < fr.k; ++i) P.row_bin[fr.rows[i]] = static_cast<index_t>(b);
       }
   P.top_rows.clear();
   for (index_t f : P.top)
-    for (index_t i = 0; i < F.fronts[f].k; ++i) P.top_rows.push_back(F.fronts[f].rows[i]);
+    for (index_t i = 0; i < F.fronts[f].k; ++i) {
+      const index_t row = F.fronts[f].rows[i];
+      P.row_bin[row] = -1 - static_cast<index_t>(P.top_rows.size());
+      P.top_rows.push_back(row);
+    }
 }
 
 void solve_delayed(const Analysis& an, const DelayedFactor& F, double* b, index_t nrhs,
@@ -394,8 +398,9 @@ void solve_delayed(const Analysis& an, const DelayedFactor& F, double* b, index_
   std::vector<double> x(static_cast<std::size_t>(n) * nrhs, 0.0), w, g;
   openblas_set_num_threads(1);  // products of a few thousand flops: one thread
   const int nb = static_cast<int>(P.bins.size());
+  // per bin: its updates of the top part's rows (row_bin −1 − t: top_rows[t])
   std::vector<std::vector<double>> delta(parallel ? nb : 0);
-  for (auto& d : delta) d.assign(n, 0.0);
+  for (auto& d : delta) d.assign(P.top_rows.size(), 0.0);
   for (index_t r = 0; r < nrhs; ++r) {
     double* z = b + static_cast<std::size_t>(r) * n;
     double* xr = x.data() + static_cast<std::size_t>(r) * n;
@@ -413,14 +418,15 @@ void solve_delayed(const Analysis& an, const DelayedFactor& F, double* b, index_
         for (const auto& [lo, hi] : P.bins[bin])
           for (index_t f = lo; f <= hi; ++f)
             forward_front(F.fronts[f], z, wb, gb, [&](index_t row, double v) {
-              (P.row_bin[row] == bin ? z[row] : d[row]) -= v;
+              const index_t rb = P.row_bin[row];
+              (rb == bin ? z[row] : d[-1 - rb]) -= v;
             });
       });
     });
-    for (index_t row : P.top_rows)
+    for (std::size_t t = 0; t < P.top_rows.size(); ++t)
       for (int bin = 0; bin < nb; ++bin) {
-        z[row] += delta[bin][row];
-        delta[bin][row] = 0.0;
+        z[P.top_rows[t]] += delta[bin][t];
+        delta[bin][t] = 0.0;
       }
     for (index_t f : P.top)
       forward_front(F.fronts[f], z, w, g, [&](index_t row, double v) { z[row] -= v; });

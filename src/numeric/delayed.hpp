@@ -53,8 +53,10 @@ struct DelayedSolvePlan {
   std::uint64_t analysis_id = 0;
   int threads = 0;
   std::vector<std::vector<std::pair<index_t, index_t>>> bins;
-  std::vector<index_t> top;       ///< fronts in no bin, increasing (closed under parents)
-  std::vector<int> row_bin;       ///< per row (tree numbering): bin of its pivot's front, -1: top
+  std::vector<index_t> top;  ///< fronts in no bin, increasing (closed under parents)
+  /// Per row (tree numbering): the bin of its pivot's front, or −1 − t for the row
+  /// top_rows[t] pivoted in the top part.
+  std::vector<index_t> row_bin;
   std::vector<index_t> top_rows;  ///< the rows pivoted in the top part
 };
 
