@@ -9,7 +9,7 @@ solve_seconds); the difference is the cost of the interface. scipy.sparse.linalg
 competitor. Best of --repeat runs.
 
     PYTHONPATH=build/python /usr/bin/python3 bench/interfaces.py [--repeat 3] [--json OUT]
-        [--matrix-dir ../shared/matrices] [--threads 0]
+        [--matrix-dir data/matrices] [--threads 0]
 
 Prints a table; --json writes every figure (with machine and git commit) to OUT. Not part
 of bench/run or bench/REPORT.md: bench/python_vs_scipy.py is the benchmark in the report
@@ -62,7 +62,9 @@ def main():
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--json", default="")
     ap.add_argument("--threads", type=int, default=0)
-    ap.add_argument("--matrix-dir", default=os.environ.get("STRATA_MATRIX_DIR", ""))
+    ap.add_argument("--matrix-dir", default=os.environ.get(
+        "STRATA_MATRIX_DIR", os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                                          "data", "matrices")))
     args = ap.parse_args()
 
     problems = [("lap2d-200", laplacian_2d(200)), ("lap3d-25", laplacian_3d(25))]

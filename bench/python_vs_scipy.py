@@ -5,7 +5,7 @@ strata against scipy's spsolve (SuperLU) and scikit-sparse's CHOLMOD on SPD matr
     PYTHONPATH=build/python /usr/bin/python3 bench/python_vs_scipy.py
         [--cli build/strata] [--repeat 3] [--overhead-repeat 7] [--threads 0]
         [--results-dir bench/results]
-        [--matrix-dir ../shared/matrices] [--splu-limit 60] [--quick]
+        [--matrix-dir data/matrices] [--splu-limit 60] [--quick]
 
 Part 1, overhead (goal of issue 10: under 5% on the large matrix). The same matrix, in
 the same form (lower triangle, CSC: what `strata solve` reads from a symmetric Matrix
@@ -280,7 +280,7 @@ def main(argv=None):
                     help="seconds after which one SuperLU solve is stopped (default 60)")
     ap.add_argument("--results-dir", default=os.path.join(REPO, "bench", "results"))
     ap.add_argument("--matrix-dir", default=os.environ.get(
-        "STRATA_MATRIX_DIR", os.path.join(os.path.dirname(REPO), "shared", "matrices")))
+        "STRATA_MATRIX_DIR", os.path.join(REPO, "data", "matrices")))
     ap.add_argument("--quick", action="store_true",
                     help="tiny problems, one repeat, results to a temporary folder")
     args = ap.parse_args(argv)

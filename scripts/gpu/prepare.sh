@@ -23,7 +23,7 @@ cp build-gpu/strata build-gpu/tests/test_solver build-gpu/bench/bench_factor .ca
 # every gpu-labelled test binary (one per file in tests/gpu)
 for src in tests/gpu/*.cpp; do cp "build-gpu/tests/$(basename "$src" .cpp)" .carry/bin/; done
 for b in bench_gpu bench_gpu_memory bench_cudss bench_multigpu; do [ -f build-gpu/bench/$b ] && cp build-gpu/bench/$b .carry/bin/; done
-cp ../shared/matrices/*.mtx.gz .carry/matrices/ 2>/dev/null || cp /work/shared/matrices/*.mtx.gz .carry/matrices/
+cp data/matrices/*.mtx.gz data/matrices/README.md .carry/matrices/
 # every non-system, non-CUDA library the binaries load
 for b in .carry/bin/*; do
   ldd "$b" | awk '/=>/ {print $3}'

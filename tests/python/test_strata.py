@@ -2,7 +2,7 @@
 
 Run by ctest (test `python_api`) with PYTHONPATH=<build>/python and STRATA_MATRIX_DIR set
 to the shared SuiteSparse matrices; by hand:
-    PYTHONPATH=build/python STRATA_MATRIX_DIR=../shared/matrices /usr/bin/python3 -m pytest -q tests/python
+    PYTHONPATH=build/python STRATA_MATRIX_DIR=data/matrices /usr/bin/python3 -m pytest -q tests/python
 """
 
 import os
