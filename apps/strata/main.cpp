@@ -785,7 +785,8 @@ int main(int argc, char** argv) {
                    "pivots the analysis's order cannot take: fixed (static pivots), automatic "
                    "(that order first, delayed pivoting on the host when it needs static "
                    "pivots), delayed (always delayed pivoting, on the host) (default: delayed "
-                   "on the CPU, fixed on a GPU)")
+                   "on the CPU; on a GPU automatic, then delayed until the next analysis once "
+                   "it needed static pivots)")
       ->check(CLI::IsMember({"fixed", "automatic", "delayed"}));
   simulate
       ->add_option("--formulation", sim.formulation,

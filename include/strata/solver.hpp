@@ -93,6 +93,11 @@ class Solver {
   /// Statistics of the last call of each phase.
   const Stats& stats() const;
   const Options& options() const;
+  /// Sets Options::pivoting for the factorizations from the next one on; the analysis and
+  /// the current factor are kept. (A Newton loop whose values have left what the analysis's
+  /// order takes switches from Pivoting::automatic to Pivoting::delayed, saving the fixed
+  /// order's attempt at each refactorization.)
+  void set_pivoting(Pivoting pivoting);
   /// The fill-reducing permutation in use (new to old), after analyze.
   const std::vector<index_t>& permutation() const;
 

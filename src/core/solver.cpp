@@ -1013,6 +1013,7 @@ index_t Solver::size() const { return state_->analysis ? state_->analysis->n : 0
 MatrixType Solver::matrix_type() const { return state_->resolved; }
 const Stats& Solver::stats() const { return state_->stats; }
 const Options& Solver::options() const { return state_->options; }
+void Solver::set_pivoting(Pivoting pivoting) { state_->options.pivoting = pivoting; }
 const std::vector<index_t>& Solver::permutation() const {
   static const std::vector<index_t> empty;
   return state_->analysis ? state_->analysis->perm : empty;

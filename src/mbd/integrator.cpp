@@ -99,10 +99,11 @@ void Integrator::repartition(double t, const double* q) {
   SparseRows rows = sys_.constraint_jacobian(q, t);
   partition_ = partition_coordinates(rows, opts_.partition_threshold, 1e-9,
                                      [&](index_t r) { return sys_.row_name(r); });
-  sys_.set_partition(partition_);
-  pattern_changed_ = true;
   factor_valid_ = false;
-  ++stats_.repartitions;
+  if (sys_.set_partition(partition_)) {  // the same independent coordinates keep the pattern
+    pattern_changed_ = true;
+    ++stats_.repartitions;
+  }
   stats_.partition_seconds += timer.seconds();
 }
 
@@ -194,6 +195,10 @@ void Integrator::factorize(StepInfo& info, const BdfTerms& bdf, double t) {
   }
   fresh_analysis_ = false;
   stats_.perturbed_pivots += solver_->perturbed_pivots();
+  if (const Stats* ss = solver_->stats(); ss && ss->factor.delayed_pivoting) {
+    ++stats_.delayed_factorizations;
+    stats_.delayed_pivots += ss->factor.delayed_pivots;
+  }
   stats_.solver = solver_->describe();
   factor_valid_ = true;
   ++info.factorizations;
@@ -451,6 +456,10 @@ bool Integrator::try_step(double h, StepInfo& info) {
       std::min<int>(opts_.variable_step ? order_ : opts_.order, static_cast<int>(history_.size()));
   const int np = std::min<int>(p + 1, static_cast<int>(history_.size()));
   const double tn = t_ + h;
+  if (opts_.analyze_every_step) {  // the reference the analysis-reusing loop is tested against
+    pattern_changed_ = true;
+    factor_valid_ = false;
+  }
   const int r = newton(h, info, bdf);
   if (r == 2) retry_ = true;
   if (r != 1) return false;

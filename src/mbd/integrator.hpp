@@ -62,14 +62,18 @@ struct IntegratorOptions {
   double min_step = 0;                   ///< smallest step before giving up (0: step·1e-6)
   Backend backend = Backend::automatic;  ///< strata backend
   std::size_t device_memory_limit = 0;   ///< GPU budget in bytes (0: the whole device)
-  /// Options::pivoting of the solver; unset: delayed on the host, fixed on a GPU
+  /// Options::pivoting of the solver; unset: delayed on the host; on a GPU the fixed order
+  /// until it needs static pivots, delayed from then to the next analysis
   /// (make_strata_solver).
   std::optional<Pivoting> pivoting;
   int threads = 0;  ///< CPU threads for strata and the assembly (0: automatic — all, but one
                     ///< for strata on a GPU below 20000 unknowns)
   bool dense_solver = false;  ///< LAPACK instead of strata (tests only)
-  index_t dump_step = -1;     ///< write the Newton Jacobian of this step (1-based)
-  std::string dump_dir;       ///< ... into this folder (Matrix Market)
+  /// A fresh analysis of the Newton matrix at every step attempt, with the current
+  /// values (tests: the reference for the loop that reuses one analysis per pattern).
+  bool analyze_every_step = false;
+  index_t dump_step = -1;  ///< write the Newton Jacobian of this step (1-based)
+  std::string dump_dir;    ///< ... into this folder (Matrix Market)
   bool verbose = false;
   /// Variable step size and order with local error control: the local error of q and v
   /// is estimated from the difference between the converged solution and the predictor
@@ -122,8 +126,11 @@ struct IntegratorStats {
   /// Analyses (counted in `analyses`) made because the kept order's factor had grown past
   /// 1.25 times the entries of the last analysis's.
   index_t contact_analyses = 0;
-  index_t error_rejections = 0;     ///< variable step: steps rejected by the local error test
-  index_t perturbed_pivots = 0;     ///< static pivots over all factorizations
+  index_t error_rejections = 0;  ///< variable step: steps rejected by the local error test
+  index_t perturbed_pivots = 0;  ///< static pivots over all factorizations
+  /// Factorizations with delayed pivoting (strata's Options::pivoting) and the pivots they
+  /// passed from fronts to their parents (FactorStats::delayed_pivots, summed).
+  index_t delayed_factorizations = 0, delayed_pivots = 0;
   index_t residual_rejections = 0;  ///< steps redone: constraints violated after convergence
   index_t energy_rejections = 0;    ///< variable step: steps redone for their energy change
   index_t stabilized_steps = 0;     ///< steps taken with the stabilized formulation
@@ -133,6 +140,9 @@ struct IntegratorStats {
   double energy_drift = 0;  ///< conservative models: max |E − E(0)| so far (J)
   double energy_scale = 0;  ///< largest kinetic energy so far (J), the drift's reference
   double factor_seconds = 0, solve_seconds = 0;  ///< parts of solver_seconds
+  /// partition_seconds: coordinate partitionings and the partition and redundancy checks,
+  /// those of initialize() included (they are also part of initial_conditions_seconds,
+  /// which times all of initialize()).
   double assembly_seconds = 0, solver_seconds = 0, analysis_seconds = 0, partition_seconds = 0,
          initial_conditions_seconds = 0;
   index_t jacobian_size = 0, jacobian_nnz = 0, factor_nnz = 0;

@@ -33,6 +33,8 @@ json stats_to_json(const IntegratorStats& s) {
           {"contact_analyses", s.contact_analyses},
           {"error_rejections", s.error_rejections},
           {"perturbed_pivots", s.perturbed_pivots},
+          {"delayed_factorizations", s.delayed_factorizations},
+          {"delayed_pivots", s.delayed_pivots},
           {"residual_rejections", s.residual_rejections},
           {"energy_rejections", s.energy_rejections},
           {"stabilized_steps", s.stabilized_steps},
@@ -69,6 +71,8 @@ IntegratorStats stats_from_json(const json& j) {
   j.at("contact_analyses").get_to(s.contact_analyses);
   j.at("error_rejections").get_to(s.error_rejections);
   j.at("perturbed_pivots").get_to(s.perturbed_pivots);
+  j.at("delayed_factorizations").get_to(s.delayed_factorizations);
+  j.at("delayed_pivots").get_to(s.delayed_pivots);
   j.at("residual_rejections").get_to(s.residual_rejections);
   j.at("energy_rejections").get_to(s.energy_rejections);
   j.at("stabilized_steps").get_to(s.stabilized_steps);
@@ -129,6 +133,7 @@ json Integrator::save_state() const {
           {"factor_valid", factor_valid_},
           {"fresh_analysis", fresh_analysis_},
           {"has_solver", solver_ != nullptr},
+          {"solver_delaying", solver_ != nullptr && solver_->delaying()},
           {"q", q_},
           {"v", v_},
           {"a", a_},
@@ -239,6 +244,7 @@ void Integrator::restore_state(const json& j) {
       solver_->analyze_keeping_order(sys_.matrix());
       a = sys_.matrix();
     }
+    solver_->set_delaying(j.at("solver_delaying").get<bool>());
     if (factor_valid_) {
       expect_size(factor_values_, a.values.size(), "the factorized Jacobian");
       a.values = factor_values_;

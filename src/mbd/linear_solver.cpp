@@ -20,7 +20,8 @@ class StrataLinearSolver : public LinearSolver {
  public:
   StrataLinearSolver(Backend backend, int threads, std::size_t device_memory_limit,
                      std::optional<Pivoting> pivoting)
-      : solver_(options(backend, threads, device_memory_limit, pivoting)) {}
+      : solver_(options(backend, threads, device_memory_limit, pivoting)),
+        adaptive_(!pivoting && solver_on_gpu(backend)) {}
   static Options options(Backend backend, int threads, std::size_t device_memory_limit,
                          std::optional<Pivoting> pivoting) {
     Options o;
@@ -35,21 +36,22 @@ class StrataLinearSolver : public LinearSolver {
     o.matching_and_scaling = true;
     // The Newton matrix's values drift from those the analysis matched and scaled (step
     // size, contacts, rotations): on the host every factorization delays the pivots the
-    // analysis's order cannot take (numeric/delayed.hpp). A GPU keeps that order with static
-    // pivots (the integrator analyzes again when they appear): delayed pivoting runs on the
-    // host, and the host's delayed factorization after the device's costs more per step
-    // than the occasional new analysis (bench/REPORT.md).
+    // analysis's order cannot take (numeric/delayed.hpp). A GPU factors in that order until
+    // it needs static pivots; the delayed pivoting then runs on the host, directly for the
+    // later factorizations of the same analysis (adaptive_), so that no pivot is perturbed
+    // and no new analysis is needed for them.
     o.pivoting = pivoting                 ? *pivoting
-                 : solver_on_gpu(backend) ? Pivoting::fixed
+                 : solver_on_gpu(backend) ? Pivoting::automatic
                                           : Pivoting::delayed;
     return o;
   }
   void analyze(const SparseMatrix& a) override {
     solver_.analyze(a);
+    set_delaying(false);
     fresh_ = true;
   }
   void analyze_keeping_order(const SparseMatrix& a) override {
-    solver_.analyze_keeping_order(a);
+    solver_.analyze_keeping_order(a);  // the matching and scaling stay: so does delaying
     fresh_ = true;
   }
   void factorize(const SparseMatrix& a) override {
@@ -58,6 +60,13 @@ class StrataLinearSolver : public LinearSolver {
     else
       solver_.refactorize(a);
     fresh_ = false;
+    if (adaptive_ && solver_.stats().factor.fixed_order_perturbed_pivots > 0) set_delaying(true);
+  }
+  bool delaying() const override { return delaying_; }
+  void set_delaying(bool on) override {
+    if (!adaptive_) return;
+    delaying_ = on;
+    solver_.set_pivoting(on ? Pivoting::delayed : Pivoting::automatic);
   }
   void solve(const double* b, double* x) override { solver_.solve(b, x, 1); }
   index_t factor_entries() const override {
@@ -77,6 +86,8 @@ class StrataLinearSolver : public LinearSolver {
 
  private:
   Solver solver_;
+  bool adaptive_ = false;  // automatic pivoting until delaying_ (see options())
+  bool delaying_ = false;
   bool fresh_ = true;
 };
 

@@ -38,13 +38,20 @@ class LinearSolver {
   virtual std::string describe() const = 0;
   /// The strata statistics, when the solver is strata.
   virtual const Stats* stats() const { return nullptr; }
+  /// Adaptive pivoting (strata on a GPU without a pivoting choice): whether the
+  /// factorizations delay pivots directly, the analysis's fixed order having needed static
+  /// pivots since the last analyze. A checkpoint keeps it so that a restart factors as the
+  /// uninterrupted run did.
+  virtual bool delaying() const { return false; }
+  virtual void set_delaying(bool) {}
 };
 
 /// strata's multifrontal LU (MatrixType::general with matching and scaling) on the
 /// given backend (Backend::automatic picks the GPU when the build and machine have one);
 /// device_memory_limit as Options::device_memory_limit (bytes, 0: the whole device);
-/// pivoting as Options::pivoting, unset: Pivoting::delayed on the host, Pivoting::fixed on
-/// a GPU.
+/// pivoting as Options::pivoting; unset: Pivoting::delayed on the host, and on a GPU
+/// Pivoting::automatic until a factorization needs the delayed pivoting (run on the host),
+/// Pivoting::delayed from then until the next analyze (LinearSolver::delaying).
 std::unique_ptr<LinearSolver> make_strata_solver(Backend backend, int threads,
                                                  std::size_t device_memory_limit = 0,
                                                  std::optional<Pivoting> pivoting = {});

@@ -14,22 +14,34 @@
 namespace strata::mbd {
 
 SparseMatrix PatternBuilder::finish() {
-  std::sort(keys_.begin(), keys_.end());
-  keys_.erase(std::unique(keys_.begin(), keys_.end()), keys_.end());
+  // Counting sort by column (O(keys + columns)), then each column's rows sorted and
+  // duplicates dropped: columns hold a few dozen entries, far cheaper than sorting all keys.
   a_ = SparseMatrix{};
   a_.n_rows = rows_;
   a_.n_cols = cols_;
-  a_.offsets.assign(cols_ + 1, 0);
-  a_.indices.resize(keys_.size());
-  for (std::size_t k = 0; k < keys_.size(); ++k) {
-    const index_t c = static_cast<index_t>(keys_[k] / rows_);
-    a_.indices[k] = static_cast<index_t>(keys_[k] % rows_);
-    ++a_.offsets[c + 1];
+  std::vector<index_t> start(cols_ + 1, 0);
+  for (unsigned long long key : keys_) ++start[static_cast<index_t>(key / rows_) + 1];
+  for (index_t c = 0; c < cols_; ++c) start[c + 1] += start[c];
+  std::vector<index_t> rows(keys_.size());
+  {
+    std::vector<index_t> next(start.begin(), start.end() - 1);
+    for (unsigned long long key : keys_)
+      rows[next[key / rows_]++] = static_cast<index_t>(key % rows_);
   }
-  for (index_t c = 0; c < cols_; ++c) a_.offsets[c + 1] += a_.offsets[c];
-  a_.values.assign(keys_.size(), 0.0);
   keys_.clear();
   keys_.shrink_to_fit();
+  a_.offsets.assign(cols_ + 1, 0);
+  for (index_t c = 0; c < cols_; ++c) {
+    const auto b = rows.begin() + start[c], e = rows.begin() + start[c + 1];
+    std::sort(b, e);
+    a_.offsets[c + 1] = a_.offsets[c] + (std::unique(b, e) - b);
+  }
+  a_.indices.resize(a_.offsets[cols_]);
+  for (index_t c = 0; c < cols_; ++c)
+    std::copy(rows.begin() + start[c],
+              rows.begin() + start[c] + (a_.offsets[c + 1] - a_.offsets[c]),
+              a_.indices.begin() + a_.offsets[c]);
+  a_.values.assign(a_.indices.size(), 0.0);
   return a_;
 }
 
@@ -64,16 +76,21 @@ NewtonSystem::NewtonSystem(const Model& model)
   model_row_.resize(rows);
   active_index_.resize(rows);
   for (index_t k = 0; k < rows; ++k) model_row_[k] = active_index_[k] = k;
-  // mass scale of each constraint's coordinates (the regularisation of the stabilized
-  // formulation is relative to Φ_q M⁻¹ Φ_qᵀ): mean positive diagonal of ∂g/∂a at q0
+}
+
+// Mass scale of each constraint's coordinates (the regularisation of the stabilized
+// formulation is relative to Φ_q M⁻¹ Φ_qᵀ): mean positive diagonal of ∂g/∂a at q0.
+// Computed at the first stabilized evaluation, with the assembly's threads.
+void NewtonSystem::compute_mass_scale() {
   std::vector<double> diag(n_, 0.0);
   std::vector<index_t> ri, ci;
   std::vector<double> vals;
   const std::vector<double> zero(n_, 0.0);
-  mass_triplets(model.q0.data(), zero.data(), 0.0, ri, ci, vals);
+  mass_triplets(model_.q0.data(), zero.data(), 0.0, ri, ci, vals);
   for (std::size_t k = 0; k < ri.size(); ++k)
     if (ri[k] == ci[k]) diag[ri[k]] += vals[k];
-  for (const auto& c : model.constraints) {
+  mass_scale_.clear();
+  for (const auto& c : model_.constraints) {
     double s = 0;
     int count = 0;
     for (index_t i : c->dofs)
@@ -107,6 +124,7 @@ void NewtonSystem::set_active_rows(const std::vector<char>& active) {
   m_ = static_cast<index_t>(model_row_.size());
   independent_.clear();
   jac_ = SparseMatrix{};
+  pattern_current_ = false;
 }
 
 void NewtonSystem::gather(const std::vector<index_t>& dofs, const double* src,
@@ -115,9 +133,11 @@ void NewtonSystem::gather(const std::vector<index_t>& dofs, const double* src,
   for (std::size_t i = 0; i < dofs.size(); ++i) dst[i] = src[dofs[i]];
 }
 
-void NewtonSystem::set_partition(const Partition& p) {
+bool NewtonSystem::set_partition(const Partition& p) {
+  if (pattern_current_ && p.independent == independent_) return false;
   independent_ = p.independent;
   rebuild_pattern();
+  return true;
 }
 
 namespace {
@@ -132,11 +152,15 @@ void expect_force_set(const std::vector<char>& set, std::size_t forces, const ch
 void NewtonSystem::set_candidates(const std::vector<char>& c) {
   expect_force_set(c, candidate_.size(), "contact candidate set");
   candidate_ = c;
-  for (std::size_t e = 0; e < c.size(); ++e) in_pattern_[e] |= c[e];
+  for (std::size_t e = 0; e < c.size(); ++e) {
+    pattern_current_ &= in_pattern_[e] || !c[e];
+    in_pattern_[e] |= c[e];
+  }
 }
 
 void NewtonSystem::set_pattern_forces(const std::vector<char>& p) {
   expect_force_set(p, in_pattern_.size(), "pattern's force set");
+  pattern_current_ &= in_pattern_ == p;
   in_pattern_ = p;
 }
 
@@ -266,6 +290,7 @@ void NewtonSystem::rebuild_pattern() {
   visit(0);
   jac_ = pb.finish();
   visit(1);
+  pattern_current_ = true;
 }
 
 void NewtonSystem::evaluate(const double* x, double t, const BdfTerms& bdf, bool jacobian,
@@ -278,6 +303,7 @@ void NewtonSystem::evaluate(const double* x, double t, const BdfTerms& bdf, bool
   double* ha = stab ? nullptr : h + n;  // the stabilized formulation has no Φ̈ rows
   double* hv = stab ? h + n : h + n + m;
   double *hp = hv + m, *hu = hp + m;
+  if (stab && mass_scale_.size() != model_.constraints.size()) compute_mass_scale();
   std::fill(h, h + size(), 0.0);
   double* J = jac_.values.data();
   if (jacobian) std::fill(jac_.values.begin(), jac_.values.end(), 0.0);
@@ -541,21 +567,43 @@ void NewtonSystem::force_values(const double* q, const double* v, const double* 
 void NewtonSystem::mass_triplets(const double* q, const double* v, double t,
                                  std::vector<index_t>& rows, std::vector<index_t>& cols,
                                  std::vector<double>& vals) const {
-  std::vector<double> lq, lv, la;
-  ForceEval fe;
-  for (const auto& f : model_.forces) {
-    if (!f->uses_a) continue;
-    gather(f->dofs, q, lq);
-    gather(f->dofs, v, lv);
-    la.assign(f->dofs.size(), 0.0);
-    f->evaluate(lq.data(), lv.data(), la.data(), t, true, fe);
-    const std::size_t nz = f->dofs.size();
-    for (std::size_t i = 0; i < nz; ++i)
-      for (std::size_t j = 0; j < nz; ++j) {
-        rows.push_back(f->dofs[i]);
-        cols.push_back(f->dofs[j]);
-        vals.push_back(fe.da[i * nz + j]);
-      }
+  // each element's nz² block at its own offset, so elements are evaluated in parallel
+  const std::size_t nf = model_.forces.size(), base = rows.size();
+  std::vector<std::size_t> offset(nf + 1, base);
+  for (std::size_t e = 0; e < nf; ++e) {
+    const Force& f = *model_.forces[e];
+    offset[e + 1] = offset[e] + (f.uses_a ? f.dofs.size() * f.dofs.size() : 0);
+  }
+  rows.resize(offset[nf]);
+  cols.resize(offset[nf]);
+  vals.resize(offset[nf]);
+  auto blocks = [&](std::size_t begin, std::size_t end) {
+    std::vector<double> lq, lv, la;
+    ForceEval fe;
+    for (std::size_t e = begin; e < end; ++e) {
+      const Force& f = *model_.forces[e];
+      if (!f.uses_a) continue;
+      gather(f.dofs, q, lq);
+      gather(f.dofs, v, lv);
+      la.assign(f.dofs.size(), 0.0);
+      f.evaluate(lq.data(), lv.data(), la.data(), t, true, fe);
+      const std::size_t nz = f.dofs.size();
+      for (std::size_t i = 0, k = offset[e]; i < nz; ++i)
+        for (std::size_t j = 0; j < nz; ++j, ++k) {
+          rows[k] = f.dofs[i];
+          cols[k] = f.dofs[j];
+          vals[k] = fe.da[i * nz + j];
+        }
+    }
+  };
+  if (threads_ <= 1) {
+    blocks(0, nf);
+  } else {
+    tbb::task_arena arena(threads_);
+    arena.execute([&] {
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nf, 64),
+                        [&](const auto& r) { blocks(r.begin(), r.end()); });
+    });
   }
 }
 

@@ -91,8 +91,9 @@ class NewtonSystem {
   /// Threads for the assembly (OpenMP); default 1.
   void set_threads(int threads) { threads_ = threads > 0 ? threads : 1; }
 
-  /// Uses the partition's independent coordinates for U₁ = U₂ and rebuilds the pattern.
-  void set_partition(const Partition& p);
+  /// Uses the partition's independent coordinates for U₁ = U₂ and rebuilds the pattern;
+  /// returns false (and keeps the pattern) when they are those of the current pattern.
+  bool set_partition(const Partition& p);
   /// Rebuilds the pattern (after a change of the partition or the candidate set).
   void rebuild_pattern();
   const std::vector<index_t>& independent() const { return independent_; }
@@ -170,6 +171,8 @@ class NewtonSystem {
   std::vector<index_t> independent_;
   std::vector<char> candidate_;   // per force: evaluated into the Newton matrix
   std::vector<char> in_pattern_;  // per force: entries in the pattern (⊇ candidate_)
+  bool pattern_current_ = false;  // jac_ is the pattern of the state above
+  void compute_mass_scale();
   SparseMatrix jac_;
   // value positions of element blocks
   struct ForcePos {

@@ -216,7 +216,7 @@ nlohmann::json integrator_options_json(const IntegratorOptions& o) {
 
 constexpr const char* kCheckpointFile = "checkpoint.cbor";
 // 2: formulation, active rows, energy monitor; 3: the pattern's and the analysis's force sets
-constexpr int kCheckpointVersion = 3;
+constexpr int kCheckpointVersion = 4;
 
 }  // namespace
 
@@ -665,9 +665,11 @@ std::string summary(const Model& model, const SimulationResult& r) {
   o += fmt::format(
       "factorizations        {} (analyses {}: first 1, new partitions {}, contact-set changes {}, "
       "perturbed pivots {}, new formulation or constraint set {}; order kept for {} of {} "
-      "contact-set changes; static pivots left {})\n",
+      "contact-set changes; static pivots left {}; delayed pivoting in {} factorizations, "
+      "{} pivots delayed)\n",
       s.factorizations, s.analyses, s.repartitions, s.contact_analyses, s.reanalyses,
-      other_analyses, s.kept_order_analyses, s.contact_updates, s.perturbed_pivots);
+      other_analyses, s.kept_order_analyses, s.contact_updates, s.perturbed_pivots,
+      s.delayed_factorizations, s.delayed_pivots);
   o += fmt::format("Newton matrix         {} x {}, nnz {}, nnz(L) {}\n", s.jacobian_size,
                    s.jacobian_size, s.jacobian_nnz, s.factor_nnz);
   o += fmt::format("linear solver         {}\n", s.solver);

@@ -120,6 +120,14 @@ TEST(DelayedPivoting, StaleMatchingFactorsWithoutStaticPivots) {
     EXPECT_EQ(sd.stats().factor.perturbed_pivots, 0);
     EXPECT_LE(test::relative_difference(sd.solve(b), ref),
               std::max(1e-10, 1e-13 * std::sqrt(double(n)) * kappa_lower(a2, ref, b)));
+    // set_pivoting: the next factorizations use the new choice, the analysis stays
+    s.set_pivoting(Pivoting::delayed);
+    s.refactorize(a1);
+    EXPECT_TRUE(s.stats().factor.delayed_pivoting);
+    EXPECT_EQ(s.stats().factor.fixed_order_perturbed_pivots, 0);
+    s.set_pivoting(Pivoting::automatic);
+    s.refactorize(a1);
+    EXPECT_FALSE(s.stats().factor.delayed_pivoting);
   }
 }
 
