@@ -375,7 +375,10 @@ int Integrator::newton(double h, StepInfo& info, const BdfTerms& bdf) {
       contacts_changed(sys_.update_candidates(xq), &info);
       return 2;
     }
-    slow_last_step_ = it > 3;
+    // the next step starts with a new Jacobian only after a slow one: a Jacobian and its
+    // factorization cost as much as about ten iterations with the old factor (the
+    // engine's Newton matrices, bench/e2e.py), and a step of up to five keeps the old one
+    slow_last_step_ = it > 5;
     return 1;
   }
   factor_valid_ = false;
