@@ -65,16 +65,13 @@ Integrator::Integrator(const Model& model, IntegratorOptions options)
   if (opts_.formulation == FormulationChoice::partitioned) opts_.regularization = 0;
   // Threads: a small assembly runs faster on one (thread start-up costs more than the
   // work). The host factorization with delayed pivots factors the fronts of a level
-  // concurrently and gains from every thread; on a GPU the host only prepares the values,
-  // and a small system's values are prepared faster by one thread.
-  const bool small = sys_.size() < 20000;
+  // concurrently and gains from every thread, on a GPU too (the refactorizations delay
+  // pivots on the host once the analysis's order needs static pivots).
   const std::size_t elements = model.forces.size() + model.constraints.size();
   sys_.set_threads(opts_.threads > 0 ? opts_.threads
                    : elements < 500
                        ? 1
                        : static_cast<int>(std::max(1u, std::thread::hardware_concurrency())));
-  if (opts_.threads == 0 && small && !opts_.dense_solver && solver_on_gpu(opts_.backend))
-    opts_.threads = 1;
 }
 
 std::unique_ptr<LinearSolver> Integrator::new_solver() const {

@@ -66,8 +66,7 @@ struct IntegratorOptions {
   /// until it needs static pivots, delayed from then to the next analysis
   /// (make_strata_solver).
   std::optional<Pivoting> pivoting;
-  int threads = 0;  ///< CPU threads for strata and the assembly (0: automatic — all, but one
-                    ///< for strata on a GPU below 20000 unknowns)
+  int threads = 0;  ///< CPU threads for strata and the assembly (0: all)
   bool dense_solver = false;  ///< LAPACK instead of strata (tests only)
   /// A fresh analysis of the Newton matrix at every step attempt, with the current
   /// values (tests: the reference for the loop that reuses one analysis per pattern).
