@@ -79,7 +79,7 @@ CholmodAnalysis cholmod_analysis(const SparseMatrix& a, bool symmetric, int repe
 }  // namespace
 
 int main(int argc, char** argv) {
-  bench::report_fatal_signals();  // a crash on a lent machine says where
+  app::report_fatal_signals();  // a crash on a lent machine says where
   CLI::App app{"strata analysis benchmark (vs CHOLMOD + METIS)"};
   std::vector<std::string> problems = {"bcsstk09",         "bcsstk13",       "bcsstk16",
                                        "ccx_segmenttet_K", "ccx_cubef2f3_K", "lap3d-60",

@@ -156,7 +156,7 @@ json to_json(const CudssResult& r) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  bench::report_fatal_signals();  // a crash on a lent machine says where
+  app::report_fatal_signals();  // a crash on a lent machine says where
   CLI::App app{"strata vs NVIDIA cuDSS on one GPU"};
   std::vector<std::string> problems = {"bcsstk16",   "ccx_cubef2f3_K", "lap3d-60",
                                        "lap3d-80",   "lap3d-100",      "elast3d-30",

@@ -96,7 +96,7 @@ RefResult run_mumps(const SparseMatrix& a, const std::vector<index_t>& perm,
 }  // namespace
 
 int main(int argc, char** argv) {
-  bench::report_fatal_signals();  // a crash on a lent machine says where
+  app::report_fatal_signals();  // a crash on a lent machine says where
   CLI::App app{"strata factorization benchmark (vs CHOLMOD and MUMPS, same permutation)"};
   std::vector<std::string> problems = {"bcsstk09",         "bcsstk13",       "bcsstk16",
                                        "ccx_segmenttet_K", "ccx_cubef2f3_K", "lap3d-40",

@@ -70,7 +70,7 @@ Timing time_strata(const bench::Problem& p, Options o, int repeat,
 }  // namespace
 
 int main(int argc, char** argv) {
-  bench::report_fatal_signals();  // a crash on a lent machine says where
+  app::report_fatal_signals();  // a crash on a lent machine says where
   CLI::App app{"strata GPU benchmark (CUDA backend vs CPU backend and CHOLMOD)"};
   std::vector<std::string> problems = {"bcsstk16",    "ccx_cubef2f3_K", "lap3d-60",
                                        "lap3d-80",    "elast3d-30",     "elast3d-40",

@@ -554,7 +554,7 @@ Run run(const bench::Problem& p, Options o, int repeat) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  bench::report_fatal_signals();  // a crash on a lent machine says where
+  app::report_fatal_signals();  // a crash on a lent machine says where
   CLI::App app{"strata GPU memory-budget, block-size and device benchmark"};
   std::vector<std::string> problems = {"lap3d-60", "elast3d-30", "uelast3d-20"};
   std::vector<std::string> block_problems = {"lap3d-60", "elast3d-30", "uelast3d-20",

@@ -43,7 +43,7 @@ using namespace strata;
 using json = nlohmann::json;
 
 int main(int argc, char** argv) {
-  bench::report_fatal_signals();  // a crash on a lent machine says where
+  app::report_fatal_signals();  // a crash on a lent machine says where
   CLI::App app{"strata multi-worker factorization benchmark"};
   std::vector<std::string> problems = {"lap3d-30", "elast3d-14"};
   // defaults: the library's (an ablation names its values)

@@ -44,6 +44,7 @@
 
 #include "core/atomic_file.hpp"
 #include "core/stats_json.hpp"
+#include "crash_report.hpp"
 #include "launch.hpp"
 #include "mbd/generators.hpp"
 #include "mbd/model_io.hpp"
@@ -708,6 +709,7 @@ int run_simulate_checked(const SimulateArgs& a, bool& started) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  strata::app::report_fatal_signals();  // an internal crash says where, on stderr
   CLI::App app{"strata: a multifrontal sparse direct solver for CPU and GPU"};
   app.require_subcommand(1);
   app.set_version_flag("--version", fmt::format("strata {}", strata_version()));

@@ -127,6 +127,10 @@ void Integrator::analyze(const BdfTerms& bdf, double t) {
   analysis_factor_entries_ = solver_->factor_entries();
   stats_.analysis_seconds += ta.seconds();
   ++stats_.analyses;
+  if (opts_.verbose)
+    fmt::print(stderr,
+               "t = {:.9g}: analysis of the Newton matrix ({} rows, {} entries): {:.3f} s\n", t,
+               sys_.matrix().n_rows, sys_.matrix().nnz(), ta.seconds());
   pattern_changed_ = false;
   stats_.jacobian_nnz = sys_.matrix().nnz();
   stats_.factor_nnz = solver_->factor_entries();

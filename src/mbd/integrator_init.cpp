@@ -215,6 +215,14 @@ void Integrator::report_initial_change(const std::vector<double>& given,
 
 void Integrator::initialize() {
   Timer timer;
+  // --verbose: each phase of the set-up as it ends (large models take minutes here)
+  double last = 0;
+  auto phase_done = [&](const char* what) {
+    if (!opts_.verbose) return;
+    const double now = timer.seconds();
+    fmt::print(stderr, "initial conditions: {} {:.3f} s\n", what, now - last);
+    last = now;
+  };
   const index_t n = sys_.n();
   q_ = model_.q0;
   v_ = model_.v0;
@@ -239,11 +247,14 @@ void Integrator::initialize() {
     find_redundant(q_.data(), t_, true);
     repartition(t_, q_.data());
   }
+  phase_done("coordinate partitioning");
   initial_positions();
   check_removed(q_.data(), nullptr, t_, true);
   report_initial_change(model_.q0, q_, "position analysis moved", "m");
+  phase_done("position analysis");
   repartition(t_, q_.data());
   stats_.repartitions = 0;
+  phase_done("partitioning at the consistent positions");
   const index_t m = sys_.m();
   lambda_.assign(m, 0.0);
   // velocity analysis: Φ_q v = −Φ_t, independent velocities as given
@@ -256,6 +267,7 @@ void Integrator::initialize() {
   v_ = solve_partitioned(rows, b, "velocity");
   check_removed(q_.data(), v_.data(), t_, true);
   report_initial_change(model_.v0, v_, "velocity analysis changed the velocity of", "m/s");
+  phase_done("velocity analysis");
   // acceleration analysis: [M Φ_qᵀ; Φ_q 0][a; λ] = [−g(q, v, 0); −Φ̈(q, v, 0)]
   std::vector<index_t> ri, ci;
   std::vector<double> vals;
@@ -279,6 +291,7 @@ void Integrator::initialize() {
   std::copy(al.begin(), al.begin() + n, a_.begin());
   std::copy(al.begin() + n, al.end(), lambda_.begin());
   lambda_prev_ = lambda_;
+  phase_done("acceleration analysis");
   history_.clear();
   history_.push_front({t_, q_, v_, a_});
   order_ = opts_.variable_step ? 1 : opts_.order;

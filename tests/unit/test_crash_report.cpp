@@ -1,4 +1,4 @@
-// The benchmark drivers' fatal-signal report (bench/crash_report.hpp): a process that
+// The programs' fatal-signal report (apps/common/crash_report.hpp): a process that
 // dies of SIGSEGV or SIGABRT after report_fatal_signals() says which signal and prints
 // frames that name its binary, and still dies of that signal.
 #include <gtest/gtest.h>
@@ -11,7 +11,7 @@
 namespace {
 
 [[gnu::noinline]] void die_of(int sig) {
-  strata::bench::report_fatal_signals();
+  strata::app::report_fatal_signals();
   std::raise(sig);
 }
 
@@ -36,7 +36,7 @@ TEST(CrashReportDeathTest, StackOverflowIsReportedFromItsOwnStack) {
   };
   EXPECT_EXIT(
       {
-        strata::bench::report_fatal_signals();
+        strata::app::report_fatal_signals();
         (void)Deep::down(0);
       },
       testing::KilledBySignal(SIGSEGV), "fatal signal 11 \\(SIGSEGV\\)");

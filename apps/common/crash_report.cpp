@@ -1,4 +1,4 @@
-// strata benchmarks — the fatal-signal report (crash_report.hpp).
+// strata programs — the fatal-signal report (crash_report.hpp).
 //
 // Only async-signal-safe calls in the handler (write, backtrace_symbols_fd, signal,
 // raise), except backtrace(), whose first call may allocate while libgcc's unwinder
@@ -13,7 +13,7 @@
 #include <cstdio>
 #include <cstring>
 
-namespace strata::bench {
+namespace strata::app {
 namespace {
 
 // the signals reported, with what the report calls them
@@ -74,4 +74,4 @@ void report_fatal_signals() {
   for (const auto& s : kSignals) (void)sigaction(s.sig, &sa, nullptr);
 }
 
-}  // namespace strata::bench
+}  // namespace strata::app

@@ -1,7 +1,8 @@
-// strata benchmarks — what a driver that dies of a signal leaves behind.
+// strata programs (the CLI, the benchmark drivers) — what a process that dies of a signal
+// leaves behind.
 #pragma once
 
-namespace strata::bench {
+namespace strata::app {
 
 /// Makes a fatal signal in this process (SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT) print,
 /// on standard error, "fatal signal N (NAME)" and the call stack as glibc's
@@ -11,8 +12,8 @@ namespace strata::bench {
 /// it would have. The handlers run on a stack of their own, so a stack overflow is reported too.
 /// Also makes standard output line-buffered, so that the rows a driver printed before the crash
 /// reach a pipe (a benchmark on a lent GPU machine is read through one). Call once, at the start of
-/// main. Why: a driver that died of signal 11 on a lent machine (bench_gpu_memory, lap3d 140³,
-/// 2026-11-23) left nothing to say where, and no debugger or core file comes back.
+/// main. Why: a crash on a machine without a debugger, whose core files do not come back,
+/// must still say where it happened.
 void report_fatal_signals();
 
-}  // namespace strata::bench
+}  // namespace strata::app
