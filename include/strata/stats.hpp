@@ -79,6 +79,9 @@ struct AnalysisStats {
   /// memory planned and allocated, streams and library handles created), which the first
   /// factorization then skips; 0 for the CPU backend. Included in total_seconds.
   double device_setup_seconds = 0;
+  /// CUDA backend: why that set-up failed (the error's message), empty when it did not;
+  /// the first factorization sets the device up again and throws if it fails there too.
+  std::string device_setup_error;
   double total_seconds = 0;
 };
 

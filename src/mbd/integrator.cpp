@@ -127,10 +127,14 @@ void Integrator::analyze(const BdfTerms& bdf, double t) {
   analysis_factor_entries_ = solver_->factor_entries();
   stats_.analysis_seconds += ta.seconds();
   ++stats_.analyses;
-  if (opts_.verbose)
+  if (opts_.verbose) {
     fmt::print(stderr,
                "t = {:.9g}: analysis of the Newton matrix ({} rows, {} entries): {:.3f} s\n", t,
                sys_.matrix().n_rows, sys_.matrix().nnz(), ta.seconds());
+    if (const Stats* ss = solver_->stats(); ss && !ss->analysis.device_setup_error.empty())
+      fmt::print(stderr, "t = {:.9g}: the device set-up at analysis failed: {}\n", t,
+                 ss->analysis.device_setup_error);
+  }
   pattern_changed_ = false;
   stats_.jacobian_nnz = sys_.matrix().nnz();
   stats_.factor_nnz = solver_->factor_entries();

@@ -77,10 +77,14 @@ namespace strata::cuda {
                     cudaGetErrorName(e) + " (" + cudaGetErrorString(e) + ")");
 }
 [[noreturn]] void throw_cublas(cublasStatus_t s, const char* call, const char* file, int line) {
+  if (s == CUBLAS_STATUS_ALLOC_FAILED)
+    throw OutOfMemory(0, std::string(call) + " at " + file + ":" + std::to_string(line));
   throw DeviceError(std::string(call) + " failed at " + file + ":" + std::to_string(line) + ": " +
                     cublasGetStatusName(s) + " (" + cublasGetStatusString(s) + ")");
 }
 [[noreturn]] void throw_cusolver(cusolverStatus_t s, const char* call, const char* file, int line) {
+  if (s == CUSOLVER_STATUS_ALLOC_FAILED)
+    throw OutOfMemory(0, std::string(call) + " at " + file + ":" + std::to_string(line));
   throw DeviceError(std::string(call) + " failed at " + file + ":" + std::to_string(line) +
                     ": cusolver status " + std::to_string(static_cast<int>(s)));
 }
@@ -135,9 +139,10 @@ CudaExecutor::~CudaExecutor() {
     Lane& l = *lp;
     if (l.done) cudaEventDestroy(l.done);
     if (!l.owned) continue;
-    cusolverDnDestroy(l.solver);
-    cublasDestroy(l.blas);
-    cudaStreamDestroy(l.stream);
+    // a lane whose creation failed part way has null handles after the failed one
+    if (l.solver) cusolverDnDestroy(l.solver);
+    if (l.blas) cublasDestroy(l.blas);
+    if (l.stream) cudaStreamDestroy(l.stream);
   }
   lanes_.clear();
   cudaEventDestroy(start_);
@@ -153,13 +158,16 @@ CudaExecutor::~CudaExecutor() {
   cudaStreamDestroy(dist_copy_);
   for (ChunkRecord& c : chunk_)
     for (cudaEvent_t e : c.ev) cudaEventDestroy(e);
-  cusolverDnDestroy(solver_);
-  cublasDestroy(blas_);
-  cudaStreamDestroy(stream_);
+  if (solver_) cusolverDnDestroy(solver_);
+  if (blas_) cublasDestroy(blas_);
+  if (stream_) cudaStreamDestroy(stream_);
 }
 
 void CudaExecutor::prepare(const Analysis& an, int workers) {
   STRATA_CUDA(cudaSetDevice(device_));
+  // the lanes' library handles hold device workspace: created before the plan sizes its
+  // pools from the memory that is free
+  if (lanes_.empty()) lanes();
   if (an.id != analysis_id_) upload_analysis(an);
   // the same plans begin_part makes on first use: the whole tree, or every part of the
   // split (any subtree may run on any GPU)
@@ -167,7 +175,6 @@ void CudaExecutor::prepare(const Analysis& an, int workers) {
   if (workers > 1 && planned_ != 2 &&
       an.partition.part_of.size() == static_cast<std::size_t>(an.tree.n_fronts()))
     plan_parts(an, false);
-  if (lanes_.empty()) lanes();
   // A Cholesky factor keeps the analysis' row order (no pivoting): the device solve's row
   // arrays are known now, and uploading them here rather than at the end of the first
   // factorization took 0.04 s off a Laplacian 100³'s (end() finds them current).
