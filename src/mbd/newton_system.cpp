@@ -107,6 +107,23 @@ std::string NewtonSystem::model_row_name(index_t k) const {
   return c->name + " equation " + std::to_string(k - *it);
 }
 
+void NewtonSystem::set_threads(int threads) {
+  threads_ = threads > 0 ? threads : 1;
+  arena_ = threads_ > 1 ? std::make_unique<tbb::task_arena>(threads_) : nullptr;
+}
+
+template <class F>
+void NewtonSystem::for_element_ranges(std::size_t n, F&& f) const {
+  if (!arena_) {
+    f(std::size_t{0}, n);
+    return;
+  }
+  arena_->execute([&] {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 64),
+                      [&](const tbb::blocked_range<std::size_t>& r) { f(r.begin(), r.end()); });
+  });
+}
+
 void NewtonSystem::set_formulation(Formulation f) {
   formulation_ = f;
   rebuild_pattern();
@@ -431,18 +448,8 @@ void NewtonSystem::evaluate(const double* x, double t, const BdfTerms& bdf, bool
   };
   // Elements are evaluated in parallel (oneTBB, as strata's CPU executor); entries shared
   // by several elements (rows of the equations of motion) are added atomically.
-  if (threads_ <= 1) {
-    forces(0, nf);
-    constraints(0, nc);
-  } else {
-    tbb::task_arena arena(threads_);
-    arena.execute([&] {
-      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nf, 64),
-                        [&](const auto& r) { forces(r.begin(), r.end()); });
-      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nc, 64),
-                        [&](const auto& r) { constraints(r.begin(), r.end()); });
-    });
-  }
+  for_element_ranges(nf, forces);
+  for_element_ranges(nc, constraints);
   add_bdf_rows(a, v, q, bdf, jacobian, hu);
 }
 
@@ -596,15 +603,7 @@ void NewtonSystem::mass_triplets(const double* q, const double* v, double t,
         }
     }
   };
-  if (threads_ <= 1) {
-    blocks(0, nf);
-  } else {
-    tbb::task_arena arena(threads_);
-    arena.execute([&] {
-      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nf, 64),
-                        [&](const auto& r) { blocks(r.begin(), r.end()); });
-    });
-  }
+  for_element_ranges(nf, blocks);
 }
 
 void NewtonSystem::energy(const double* q, const double* v, double t, double* kinetic,

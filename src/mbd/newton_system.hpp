@@ -28,6 +28,9 @@
 // through precomputed positions).
 #pragma once
 
+#include <tbb/task_arena.h>
+
+#include <memory>
 #include <vector>
 
 #include "mbd/model.hpp"
@@ -88,8 +91,8 @@ class NewtonSystem {
   /// Model row of active row r, and the active index of model row k (−1: removed).
   index_t model_row(index_t r) const { return model_row_[r]; }
   index_t active_index(index_t k) const { return active_index_[k]; }
-  /// Threads for the assembly (OpenMP); default 1.
-  void set_threads(int threads) { threads_ = threads > 0 ? threads : 1; }
+  /// Threads for the assembly (oneTBB); default 1.
+  void set_threads(int threads);
 
   /// Uses the partition's independent coordinates for U₁ = U₂ and rebuilds the pattern;
   /// returns false (and keeps the pattern) when they are those of the current pattern.
@@ -186,6 +189,11 @@ class NewtonSystem {
   std::vector<ConstraintPos> cpos_;
   std::vector<index_t> upos_;  // 4 per BDF coordinate (independent, or all when stabilized)
   int threads_ = 1;
+  // the assembly's threads, kept: one arena for every evaluation
+  std::unique_ptr<tbb::task_arena> arena_;
+  // f(begin, end) over element ranges of [0, n), on the assembly's threads
+  template <class F>
+  void for_element_ranges(std::size_t n, F&& f) const;
 };
 
 /// A CSC matrix from triplets (duplicates summed).

@@ -5,14 +5,13 @@
 // at every refactorization).
 #include <gtest/gtest.h>
 
-#include <algorithm>
-#include <cmath>
-#include <cstdio>
+#include <string>
 
 #include "mbd/generators.hpp"
 #include "mbd/integrator.hpp"
 #include "mbd/model_io.hpp"
 #include "numeric/factor.hpp"
+#include "support/mbd_test_support.hpp"
 
 namespace strata::mbd {
 namespace {
@@ -29,27 +28,13 @@ TEST(CudaMbd, PerturbedPivotsAreDelayedAndTheTrajectoryEqualsTheCpus) {
   on_gpu.backend = Backend::cuda;
   on_cpu.backend = Backend::cpu;
   Integrator gpu(m, on_gpu), cpu(m, on_cpu);
-  gpu.initialize();
-  cpu.initialize();
   double worst = 0;
-  int steps = 0;
-  while (!gpu.done() && !cpu.done()) {
-    gpu.advance();
-    cpu.advance();
-    ++steps;
-    ASSERT_EQ(gpu.t(), cpu.t()) << "step " << steps;
-    for (std::size_t i = 0; i < gpu.q().size(); ++i)
-      worst = std::max(worst, std::abs(gpu.q()[i] - cpu.q()[i]));
-    ASSERT_LE(worst, 1e-8) << "step " << steps << " t = " << gpu.t();
-  }
-  EXPECT_TRUE(gpu.done() && cpu.done());
+  test::step_side_by_side(gpu, cpu, 1e-8, &worst);
   const IntegratorStats& s = gpu.stats();
   EXPECT_EQ(s.reanalyses, 0);
   EXPECT_EQ(s.perturbed_pivots, 0);
   EXPECT_NE(s.solver.find("cuda"), std::string::npos) << s.solver;
-  char text[32];
-  std::snprintf(text, sizeof text, "%.3e", worst);
-  RecordProperty("largest position difference", text);
+  RecordProperty("largest position difference", test::scientific(worst));
   RecordProperty("delayed factorizations", std::to_string(s.delayed_factorizations) + " of " +
                                                std::to_string(s.factorizations));
 }

@@ -5,7 +5,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
 #include <filesystem>
 #include <string>
 #include <utility>
@@ -16,6 +15,7 @@
 #include "mbd/model_io.hpp"
 #include "mbd/simulation.hpp"
 #include "strata/matrix_market.hpp"
+#include "support/mbd_test_support.hpp"
 #include "support/test_support.hpp"
 
 namespace strata::mbd {
@@ -108,26 +108,12 @@ TEST(MbdModels, TrajectoriesEqualAFreshAnalysisAtEveryStep) {
     IntegratorOptions fresh = o;
     fresh.analyze_every_step = true;
     Integrator reused(m, o), reference(m, fresh);
-    reused.initialize();
-    reference.initialize();
-    int steps = 0;
     double worst = 0;
-    while (!reused.done() && !reference.done()) {
-      reused.advance();
-      reference.advance();
-      ++steps;
-      ASSERT_EQ(reused.t(), reference.t()) << "step " << steps;
-      for (std::size_t i = 0; i < reused.q().size(); ++i)
-        worst = std::max(worst, std::abs(reused.q()[i] - reference.q()[i]));
-      ASSERT_LE(worst, 1e-8) << "step " << steps << " t = " << reused.t();
-    }
-    EXPECT_TRUE(reused.done() && reference.done());
+    const int steps = test::step_side_by_side(reused, reference, 1e-8, &worst);
     EXPECT_GE(reference.stats().analyses, steps);
     EXPECT_LT(reused.stats().analyses, reference.stats().analyses);
     EXPECT_EQ(reused.stats().perturbed_pivots, 0);
-    char text[32];
-    std::snprintf(text, sizeof text, "%.3e", worst);
-    RecordProperty(name + " largest position difference", text);
+    RecordProperty(name + " largest position difference", test::scientific(worst));
   }
 }
 
