@@ -882,6 +882,10 @@ int main(int argc, char** argv) {
     if (*solve) return run_solve(solve_args, *comm);
     if (*simulate) return run_simulate(sim);
     if (*plot) return cli::run_plot(plot_dir, plot_coordinates, plot_title);
+  } catch (const strata::InternalError& e) {
+    std::fprintf(stderr, "strata: %s (a bug in strata: please report it with the input)\n",
+                 e.what());
+    return 1;
   } catch (const strata::Error& e) {
     if (rank == 0) std::fprintf(stderr, "strata: error: %s\n", e.what());
     return 1;

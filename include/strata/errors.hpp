@@ -86,4 +86,16 @@ class InvalidState : public Error {
   using Error::Error;
 };
 
+/// An internal invariant of strata was broken: a bug in strata, not a problem of the
+/// input (please report it with the input that caused it). what() reads
+/// "internal error: " followed by what was found; detail() is the part after the prefix.
+class InternalError : public Error {
+ public:
+  explicit InternalError(const std::string& detail);
+  const std::string& detail() const noexcept { return detail_; }
+
+ private:
+  std::string detail_;
+};
+
 }  // namespace strata

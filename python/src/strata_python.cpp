@@ -35,6 +35,7 @@ PyObject* exc_out_of_memory = nullptr;
 PyObject* exc_device = nullptr;
 PyObject* exc_not_positive_definite = nullptr;
 PyObject* exc_invalid_state = nullptr;
+PyObject* exc_internal = nullptr;
 
 PyObject* make_exception(py::module_& m, const char* name, py::tuple bases, const char* doc) {
   const std::string full = std::string("strata.") + name;
@@ -399,6 +400,8 @@ PYBIND11_MODULE(_strata, m) {
                      "type='spd' was requested and Cholesky met a pivot that is not positive.");
   exc_invalid_state = make_exception(m, "InvalidStateError", py::make_tuple(base),
                                      "Phases called in the wrong order.");
+  exc_internal = make_exception(m, "InternalError", py::make_tuple(base),
+                                "A broken internal invariant: a bug in strata (please report).");
 
   py::register_exception_translator([](std::exception_ptr p) {
     try {
@@ -415,6 +418,8 @@ PYBIND11_MODULE(_strata, m) {
       PyErr_SetString(exc_not_positive_definite, e.what());
     } catch (const strata::InvalidState& e) {
       PyErr_SetString(exc_invalid_state, e.what());
+    } catch (const strata::InternalError& e) {
+      PyErr_SetString(exc_internal, e.what());
     } catch (const strata::Error& e) {
       PyErr_SetString(exc_error, e.what());
     }

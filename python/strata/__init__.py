@@ -26,7 +26,7 @@ solver's message: :class:`InvalidInputError` (also a ``ValueError``) for a non-s
 matrix, NaN/Inf values, wrong shapes or a changed pattern; :class:`NotPositiveDefiniteError`
 when ``type="spd"`` meets a non-positive pivot; :class:`InvalidStateError`,
 :class:`NotSupportedError`, :class:`DeviceError`, :class:`OutOfMemoryError` (also a
-``MemoryError``), and from simulate :class:`ModelError` (an InvalidInputError) and
+``MemoryError``), :class:`InternalError` (a bug in strata: please report it), and from simulate :class:`ModelError` (an InvalidInputError) and
 :class:`SimulationError`. Inputs of a dtype that is not real (complex, object, strings) raise
 ``TypeError``.
 
@@ -40,6 +40,7 @@ import scipy.sparse as _sp
 from ._strata import (  # noqa: F401  (re-exported)
     DeviceError,
     Error,
+    InternalError,
     InvalidInputError,
     InvalidStateError,
     ModelError,
@@ -65,6 +66,7 @@ __all__ = [
     "cuda_in_build",
     "mpi_in_build",
     "Error",
+    "InternalError",
     "InvalidInputError",
     "InvalidStateError",
     "NotPositiveDefiniteError",

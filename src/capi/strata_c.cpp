@@ -53,6 +53,9 @@ strata_status guarded(strata_solver* s, F&& f) {
   } catch (const strata::InvalidState& e) {
     st = STRATA_ERROR_INVALID_STATE;
     msg = e.what();
+  } catch (const strata::InternalError& e) {
+    st = STRATA_ERROR_INTERNAL;
+    msg = e.what();
   } catch (const std::bad_alloc&) {
     st = STRATA_ERROR_OUT_OF_MEMORY;
     msg = "out of memory";

@@ -30,6 +30,9 @@ std::string sci(double v) {
 }
 }  // namespace
 
+InternalError::InternalError(const std::string& detail)
+    : Error("internal error: " + detail), detail_(detail) {}
+
 NotPositiveDefinite::NotPositiveDefinite(index_t column, double pivot)
     : Error("matrix is not positive definite: pivot " + sci(pivot) + " at column " +
             std::to_string(column) + " (0-based, original numbering)"),

@@ -446,6 +446,8 @@ double prepare_devices(SolverState& s) {
     numeric::prepare_factor(an, an.type == MatrixType::automatic ? MatrixType::spd : an.type,
                             s.factor, false);
     pin_scaled(s);
+  } catch (const InternalError&) {
+    throw;  // a bug, not a device that could not be set up
   } catch (const Error& e) {
     s.analysis->stats.device_setup_error = e.what();
     s.executors.clear();

@@ -15,7 +15,7 @@ class SelfComm final : public CommImpl {
   void broadcast(void*, std::size_t, int) override {}
   void exchange(const std::vector<Message>& sends, const std::vector<Message>& recvs) override {
     if (!sends.empty() || !recvs.empty())
-      throw InvalidInput("internal: a one-process communicator has no peer to exchange with");
+      throw InternalError("a one-process communicator has no peer to exchange with");
   }
   void reduce_sum(double*, std::size_t, int) override {}
   void gather(const std::vector<char>& mine, std::vector<std::vector<char>>& out, int) override {

@@ -169,7 +169,7 @@ void gather_stats(DistributedState& s) {
   }
   for (const auto& b : all) {
     RankStats r;
-    if (b.size() != sizeof r) throw InvalidInput("internal: rank statistics of the wrong size");
+    if (b.size() != sizeof r) throw InternalError("rank statistics of the wrong size");
     std::memcpy(&r, b.data(), sizeof r);
     s.dstats.per_rank.push_back(r);
   }
@@ -245,11 +245,11 @@ void follow(DistributedState& s) {
         break;
       }
       case Command::factor: {
-        if (!s.analysis) throw InvalidState("internal: factor command before the analysis");
+        if (!s.analysis) throw InternalError("factor command before the analysis");
         const std::size_t nnz = s.analysis->pattern_indices.size();
         if (h.b != static_cast<std::int64_t>(nnz))
-          throw InvalidState("internal: " + std::to_string(h.b) + " values for a pattern of " +
-                             std::to_string(nnz) + " entries");
+          throw InternalError(std::to_string(h.b) + " values for a pattern of " +
+                              std::to_string(nnz) + " entries");
         receive_values(comm, s.numeric, nnz, s.values);
         try {
           run_factor(s, *s.analysis, s.values, static_cast<MatrixType>(h.a), h.c, s.factor);
@@ -261,8 +261,7 @@ void follow(DistributedState& s) {
         break;
       }
       case Command::apply: {
-        if (!s.analysis || !s.factor.valid)
-          throw InvalidState("internal: solve command without a factor");
+        if (!s.analysis || !s.factor.valid) throw InternalError("solve command without a factor");
         std::vector<double> x(static_cast<std::size_t>(s.analysis->n) * h.b);
         solve_part(comm, s.numeric, *s.analysis, s.factor, x.data(), h.b);
         bytes.add_to(st.solve_bytes_sent, st.solve_bytes_received);

@@ -84,8 +84,7 @@ void exchange_blocks_nccl(detail::CommImpl& comm, NumericState& ns, const RankLa
   std::vector<DeviceBlock> staging;  // senders: blocks not on the NCCL device
   // tr is indexed by part id: the subtrees come first (the top part's entry follows)
   const int n_sub = static_cast<int>(l.subtree_rank.size());
-  if (tr.size() < l.subtree_rank.size())
-    throw InvalidInput("internal: fewer block transfers than subtrees");
+  if (tr.size() < l.subtree_rank.size()) throw InternalError("fewer block transfers than subtrees");
   // stage first (copies may not be inside the NCCL group), on the NCCL stream (see above)
   std::vector<const double*> src(n_sub, nullptr);
   for (int i = 0; i < n_sub; ++i) {

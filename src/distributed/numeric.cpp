@@ -104,8 +104,8 @@ void factor_part(detail::CommImpl& comm, NumericState& ns, const Analysis& an,
           x.on_host = true;
         } else if (owner == rank) {
           if (!x.on_host)
-            throw InvalidInput("internal: the block of subtree " + std::to_string(i) +
-                               " was not exported to host memory for MPI");
+            throw InternalError("the block of subtree " + std::to_string(i) +
+                                " was not exported to host memory for MPI");
           sends.push_back({0, kTagBlock + i, x.host, bytes});
         }
       }
@@ -125,8 +125,8 @@ void factor_part(detail::CommImpl& comm, NumericState& ns, const Analysis& an,
       for (int r = 1; r < l.ranks; ++r) {
         const std::vector<index_t> fr = fronts_of_rank(an, l, r);
         if (all[r].size() != fr.size() * sizeof(numeric::cpu::PivotStats))
-          throw InvalidInput("internal: rank " + std::to_string(r) +
-                             " sent pivot statistics of the wrong size");
+          throw InternalError("rank " + std::to_string(r) +
+                              " sent pivot statistics of the wrong size");
         for (std::size_t k = 0; k < fr.size(); ++k)
           std::memcpy(&factor.front_stats[fr[k]],
                       all[r].data() + k * sizeof(numeric::cpu::PivotStats),

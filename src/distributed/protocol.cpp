@@ -25,8 +25,8 @@ RankLayout make_layout(const Analysis& an, int ranks, int rank, int workers_per_
   // the ranks hand blocks to rank 0's top part only: upper layers (Options::split_top)
   // are not part of the protocol, and the distributed solver analyzes without them
   if (!p.upper.empty())
-    throw InvalidInput(
-        "internal: an analysis with upper layers (Options::split_top) cannot be "
+    throw InternalError(
+        "an analysis with upper layers (Options::split_top) cannot be "
         "factored across ranks");
   const int n_sub = static_cast<int>(p.subtrees.size());
   l.subtree_rank.resize(n_sub);
@@ -37,9 +37,9 @@ RankLayout make_layout(const Analysis& an, int ranks, int rank, int workers_per_
   for (int i = 0; i < n_sub; ++i) {
     const int r = p.owner[i] / workers_per_rank;
     if (r < 0 || r >= ranks)
-      throw InvalidInput("internal: subtree " + std::to_string(i) + " belongs to worker " +
-                         std::to_string(p.owner[i]) + ", beyond " + std::to_string(ranks) +
-                         " ranks");
+      throw InternalError("subtree " + std::to_string(i) + " belongs to worker " +
+                          std::to_string(p.owner[i]) + ", beyond " + std::to_string(ranks) +
+                          " ranks");
     l.subtree_rank[i] = r;
     l.subtrees_of[r].push_back(i);
     const auto& fronts = p.subtrees[i].fronts;  // a contiguous range of fronts
@@ -100,6 +100,7 @@ enum ErrorKind : std::int32_t {
   kDeviceError,
   kNotPositiveDefinite,
   kInvalidState,
+  kInternal,
   kOther
 };
 
@@ -132,6 +133,9 @@ Header error_header(std::exception_ptr e, std::vector<char>& message) {
   } catch (const InvalidState& x) {
     h.a = kInvalidState;
     what = x.what();
+  } catch (const InternalError& x) {
+    h.a = kInternal;
+    what = x.detail();
   } catch (const Error& x) {
     h.a = kError;
     what = x.what();
@@ -171,6 +175,8 @@ void throw_error(const Header& h, const std::vector<char>& message) {
       throw DeviceError(what);
     case kInvalidState:
       throw InvalidState(what);
+    case kInternal:
+      throw InternalError(what);
     default:
       throw Error(what);
   }

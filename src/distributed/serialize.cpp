@@ -58,9 +58,8 @@ class Reader {
     if (b_.size() - at_ < k) fail();
   }
   [[noreturn]] void fail() const {
-    throw InvalidInput("internal: the broadcast analysis is malformed (" +
-                       std::to_string(b_.size()) + " bytes, read up to " + std::to_string(at_) +
-                       ")");
+    throw InternalError("the broadcast analysis is malformed (" + std::to_string(b_.size()) +
+                        " bytes, read up to " + std::to_string(at_) + ")");
   }
   const std::vector<char>& b_;
   std::size_t at_ = 0;

@@ -50,8 +50,8 @@ void send_values(detail::CommImpl& comm, NumericState& ns, const std::vector<dou
     const std::vector<index_t>& pos = ns.value_positions.at(r);
     if (pos.empty()) continue;
     if (static_cast<std::size_t>(pos.back()) >= values.size())
-      throw InvalidInput("internal: rank " + std::to_string(r) + " needs value " +
-                         std::to_string(pos.back()) + " of " + std::to_string(values.size()));
+      throw InternalError("rank " + std::to_string(r) + " needs value " +
+                          std::to_string(pos.back()) + " of " + std::to_string(values.size()));
     packed[r].resize(pos.size());
     for (std::size_t k = 0; k < pos.size(); ++k) packed[r][k] = values[pos[k]];
     sends.push_back({r, kTagValues, packed[r].data(), sizeof(double) * pos.size()});
@@ -66,8 +66,8 @@ void receive_values(detail::CommImpl& comm, NumericState& ns, std::size_t nnz,
   const std::vector<index_t>& pos = ns.value_positions.at(rank);
   if (values.size() != nnz) values.assign(nnz, 0.0);
   if (!pos.empty() && static_cast<std::size_t>(pos.back()) >= nnz)
-    throw InvalidInput("internal: rank " + std::to_string(rank) + " needs value " +
-                       std::to_string(pos.back()) + " of " + std::to_string(nnz));
+    throw InternalError("rank " + std::to_string(rank) + " needs value " +
+                        std::to_string(pos.back()) + " of " + std::to_string(nnz));
   std::vector<double> packed(pos.size());
   std::vector<detail::Message> recvs;
   if (!pos.empty()) recvs.push_back({0, kTagValues, packed.data(), sizeof(double) * pos.size()});

@@ -137,15 +137,15 @@ void factorize_multi(const Analysis& an, const std::vector<double>& scaled_value
   const int first = config.first_worker;  // > 0, or fewer executors: distributed
   if (workers < 1 || first < 0 || part.workers < first + workers ||
       (!config.exchange && part.workers != workers))
-    throw InvalidInput("internal: the analysis was split for " + std::to_string(part.workers) +
-                       " workers, the factorization was given " + std::to_string(workers) +
-                       " executors from worker " + std::to_string(first));
+    throw InternalError("the analysis was split for " + std::to_string(part.workers) +
+                        " workers, the factorization was given " + std::to_string(workers) +
+                        " executors from worker " + std::to_string(first));
   if (config.exchange && !part.upper.empty())
-    throw InvalidInput(
-        "internal: upper layers (Options::split_top) are not supported across "
+    throw InternalError(
+        "upper layers (Options::split_top) are not supported across "
         "processes");
   if (part.part_id.size() != static_cast<std::size_t>(an.tree.n_fronts()))
-    throw InvalidInput("internal: the analysis was not split into parts");
+    throw InternalError("the analysis was not split into parts");
   auto mine = [&](int i) { return part.owner[i] >= first && part.owner[i] < first + workers; };
   Timer wall;
   // the host panels are sized only when some part's panels go there (keeps_part_panels):

@@ -288,7 +288,7 @@ SymbolicFactorization analyze_pattern(const SparseMatrix& a, const AmalgamationO
   t.front_of_column = owner_of_columns(fronts, n);
   for (index_t k = 0; k < n; ++k)
     if (!keep.empty() && keep[k] && t.front_of_column[k] != t.front_of_column[k + 1])
-      throw InvalidInput("analyze_pattern: internal error: a kept pair was split across fronts");
+      throw InternalError("analyze_pattern: a kept pair was split across fronts");
   t.parent.assign(nf, -1);
   for (index_t f = 0; f < nf; ++f) {
     if (chain_next[f]) {

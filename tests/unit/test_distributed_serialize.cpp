@@ -5,7 +5,9 @@
 // scaled values a rank is sent (value_positions) are exactly the entries whose earlier
 // pivot lies in its subtrees, and with only those values (every other one NaN) a rank's
 // subtrees factor to bitwise the one-process panels; DistributedSolver on the one-process
-// communicator is the Solver (solutions against a dense LAPACK solve).
+// communicator is the Solver (solutions against a dense LAPACK solve); an error raised on
+// one rank reaches the others with its type, message and data (an InternalError stays a
+// bug report, not "bad input").
 #include <gtest/gtest.h>
 
 #include <cstring>
@@ -130,8 +132,8 @@ TEST(DistributedSerialize, RoundTripEveryType) {
     expect_same(an, back);
     std::vector<char> cut(bytes.begin(), bytes.end() - 1), longer = bytes;
     longer.push_back(0);
-    EXPECT_THROW(distributed::deserialize(cut), InvalidInput);
-    EXPECT_THROW(distributed::deserialize(longer), InvalidInput);
+    EXPECT_THROW(distributed::deserialize(cut), InternalError);
+    EXPECT_THROW(distributed::deserialize(longer), InternalError);
   }
   EXPECT_GT(upper_layers, 0) << "no case had upper layers to carry";
 }
@@ -148,7 +150,7 @@ TEST(DistributedSerialize, RankLayoutsCoverTheFactor) {
     o.type = MatrixType::spd;
     const Analysis layered = analyze_matrix(a, o, ranks * per_rank);
     if (layered.partition.n_upper_layers() > 0)
-      EXPECT_THROW(distributed::make_layout(layered, ranks, 0, per_rank), InvalidInput);
+      EXPECT_THROW(distributed::make_layout(layered, ranks, 0, per_rank), InternalError);
     o.split_top = false;
     const Analysis an = analyze_matrix(a, o, ranks * per_rank);
     std::vector<int> seen(an.n, 0);
@@ -316,6 +318,59 @@ TEST(DistributedSerialize, OneProcessSolverMatchesDense) {
       EXPECT_EQ(ds.size(), n);
       EXPECT_EQ(ds.distributed_stats().ranks, 1);
     }
+}
+
+// Every error type strata throws crosses the ranks as itself: the header and message one
+// rank sends (error_header) are thrown again on the others (throw_error) with the same
+// type, the same what() and the same data (bytes, column and pivot).
+TEST(DistributedErrors, ErrorsKeepTheirTypeAcrossRanks) {
+  auto round_trip = [](std::exception_ptr e) -> std::exception_ptr {
+    std::vector<char> message;
+    const distributed::Header h = distributed::error_header(e, message);
+    try {
+      distributed::throw_error(h, message);
+    } catch (...) {
+      return std::current_exception();
+    }
+    return nullptr;
+  };
+  auto check = [&](const auto& error) {
+    using E = std::decay_t<decltype(error)>;
+    const std::exception_ptr back = round_trip(std::make_exception_ptr(error));
+    try {
+      std::rethrow_exception(back);
+    } catch (const E& x) {
+      EXPECT_STREQ(x.what(), error.what());
+      return;
+    } catch (const std::exception& x) {
+      ADD_FAILURE() << "other type for \"" << error.what() << "\": " << x.what();
+    }
+  };
+  check(InvalidInput("column 3 is empty"));
+  check(NotSupported("no GPU"));
+  check(DeviceError("cudaMalloc: out of memory"));
+  check(InvalidState("solve before factorize"));
+  check(InternalError("a front made no progress"));
+  check(OutOfMemory(12345, "factorize: panels"));
+  check(OutOfMemory(0, "solve"));
+  check(NotPositiveDefinite(7, -2.5));
+  try {
+    std::rethrow_exception(round_trip(std::make_exception_ptr(OutOfMemory(777, "x"))));
+  } catch (const OutOfMemory& x) {
+    EXPECT_EQ(x.bytes_requested(), 777u);
+  }
+  try {
+    std::rethrow_exception(round_trip(std::make_exception_ptr(NotPositiveDefinite(7, -2.5))));
+  } catch (const NotPositiveDefinite& x) {
+    EXPECT_EQ(x.column(), 7);
+    EXPECT_EQ(x.pivot(), -2.5);
+  }
+  try {
+    std::rethrow_exception(round_trip(std::make_exception_ptr(InternalError("x"))));
+  } catch (const InternalError& x) {
+    EXPECT_EQ(x.detail(), "x");
+    EXPECT_STREQ(x.what(), "internal error: x");
+  }
 }
 
 }  // namespace

@@ -77,7 +77,7 @@ class CpuExecutor final : public Executor {
 
   std::size_t import_cb(const FactorContext& ctx, const CbTransfer& t) override {
     if (!t.on_host)
-      throw InvalidInput("internal: the CPU executor can only import a block from host memory");
+      throw InternalError("the CPU executor can only import a block from host memory");
     double* dst = ctx.cb_arena->data() + ctx.part->cb_layout->cb_offset[t.front];
     std::memcpy(dst, t.host, sizeof(double) * t.size);
     return sizeof(double) * t.size;
@@ -196,7 +196,7 @@ void CpuExecutor::process_front(const FactorContext& ctx, index_t f, Workspace& 
       cpu::factor_front_lu(F, m, k, m, ctx.static_pivot, w.local_perm.data(), ps);
       break;
     default:
-      throw InvalidInput("internal: unresolved matrix type in the CPU executor");
+      throw InternalError("unresolved matrix type in the CPU executor");
   }
 
   // 4. store the factor panel, the permuted pivot rows, D, and the contribution block

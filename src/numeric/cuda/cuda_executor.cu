@@ -230,13 +230,13 @@ void CudaExecutor::begin_part(const numeric::FactorContext& ctx) {
   if (whole && planned_ != 1) plan_parts(an, true);
   if (!whole && planned_ != 2) {
     if (an.partition.part_of.size() != static_cast<std::size_t>(an.tree.n_fronts()))
-      throw InvalidInput("internal: a part of an analysis that was not split");
+      throw InternalError("a part of an analysis that was not split");
     plan_parts(an, false);
   }
   if (lanes_.empty()) lanes();  // streams and library handles, created once
   auto it = parts_.find(ctx.part->id);
   if (it == parts_.end())
-    throw InvalidInput("internal: part " + std::to_string(ctx.part->id) + " was not planned");
+    throw InternalError("part " + std::to_string(ctx.part->id) + " was not planned");
   cur_ = &it->second;
   whole_ = whole;
   // LDLᵀ keeps the host copy: its D and pivot bookkeeping are done on the host panels

@@ -116,7 +116,7 @@ void LdltLarge::factor(cublasHandle_t blas, cudaStream_t s, double* f, std::int6
                                 cudaMemcpyDeviceToHost, s));
     STRATA_CUDA(cudaStreamSynchronize(s));
     const std::int64_t e = end_host_.data()[0];
-    if (e <= j0 || e > k) throw DeviceError("internal: LDLᵀ panel made no progress");
+    if (e <= j0 || e > k) throw InternalError("LDLᵀ panel made no progress");
     if (e < m) {
       // F[e:m, e:m] (lower) −= L(e:m, j0:e) · W(e:m, 0:e−j0)ᵀ  (= L D Lᵀ, symmetric)
       const int n = static_cast<int>(m - e), w = static_cast<int>(e - j0), ld = static_cast<int>(m);
