@@ -47,6 +47,12 @@ enum class Pivoting {
   delayed,    ///< delayed pivoting on the host for every factorization.
 };
 
+/// When a solve checks the solution it returns (see Options::solve_check).
+enum class SolveCheck {
+  always,                  ///< the backward error of every solution, refinement, GMRES
+  after_perturbed_pivots,  ///< only when the factorization perturbed pivots
+};
+
 /// Options of every phase. Units: bytes for memory, seconds for time.
 struct Options {
   // --- structure ---
@@ -268,6 +274,15 @@ struct Options {
   double pivot_threshold = 0.01;
 
   // --- solve ---
+  /// When the solve computes the backward error of its solution (one product with A per
+  /// right-hand side) and refines it. always (default): every solve.
+  /// after_perturbed_pivots: only after a factorization that perturbed pivots; otherwise
+  /// x is the factor's solution as it is (no product with A, no refinement) and
+  /// SolveStats::backward_error is NaN (not computed). For callers that check their
+  /// solutions themselves: a Newton iteration recomputes its residual at the next iterate
+  /// anyway (as MUMPS without ICNTL(10)/ICNTL(11), and cuDSS, which do not refine or
+  /// check unless asked).
+  SolveCheck solve_check = SolveCheck::always;
   /// Most iterative refinement steps after the first solve (default 10; 0 disables).
   int refinement_max_steps = 10;
   /// Refinement stops once the backward error ‖b−Ax‖∞ / (‖A‖∞‖x‖∞ + ‖b‖∞) is at or below

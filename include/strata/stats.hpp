@@ -227,7 +227,9 @@ struct SolveStats {
   double first_solve_seconds = 0;
   int refinement_steps = 0;
   int gmres_iterations = 0;  ///< total over right-hand sides (0 when refinement sufficed)
-  double backward_error = 0;  ///< max over right-hand sides of ‖b−Ax‖∞/(‖A‖∞‖x‖∞+‖b‖∞)
+  /// max over right-hand sides of ‖b−Ax‖∞/(‖A‖∞‖x‖∞+‖b‖∞); NaN when the solve did not
+  /// compute it (Options::solve_check)
+  double backward_error = 0;
   /// The rounding floor of the backward error, (m+1)·u for m the most entries in a row of
   /// A and u the unit roundoff: the residual computed in working precision is uncertain by
   /// about this much (Higham, Accuracy and Stability of Numerical Algorithms, §12.1).
@@ -237,7 +239,8 @@ struct SolveStats {
   /// (x then holds an arbitrary null-space component), whether or not pivots were perturbed.
   double condition_lower_bound = 0;
   /// The backward error reached Options::refinement_tolerance, or the rounding floor when
-  /// that is larger (no method can verify less; GMRES is then not run).
+  /// that is larger (no method can verify less; GMRES is then not run). False when the
+  /// backward error was not computed (Options::solve_check).
   bool refinement_converged = false;
   /// When the factorization perturbed pivots (A numerically singular): max over
   /// right-hand sides of ‖b − A x‖∞ / ‖b‖∞, at least b's distance from A's range (no x

@@ -845,7 +845,10 @@ static void solve_impl(SolverState& s, const double* b, double* x, index_t nrhs)
       throw InvalidInput("right-hand side entry " + std::to_string(i % std::max<index_t>(n, 1)) +
                          " of column " + std::to_string(i / std::max<index_t>(n, 1)) +
                          " is not finite");
-  std::vector<double> work, r(static_cast<std::size_t>(n) * nrhs), d(r.size());
+  // Options::solve_check: after a factorization without perturbed pivots the caller may
+  // take the factor's solution unchecked
+  const bool check = o.solve_check == SolveCheck::always || s.stats.factor.perturbed_pivots > 0;
+  std::vector<double> work, r(check ? static_cast<std::size_t>(n) * nrhs : 0), d(r.size());
   Timer first;
   const bool on_device = apply_inverse(s, b, x, nrhs, work);
   const double first_solve_seconds = first.seconds();
@@ -859,8 +862,9 @@ static void solve_impl(SolverState& s, const double* b, double* x, index_t nrhs)
   std::vector<double> berr(nrhs), last(nrhs);
   std::vector<char> active(nrhs, 1);
   int steps = 0;
-  for (index_t c = 0; c < nrhs; ++c) berr[c] = berr_of(c);
-  for (; steps < o.refinement_max_steps; ++steps) {
+  if (check)
+    for (index_t c = 0; c < nrhs; ++c) berr[c] = berr_of(c);
+  for (; check && steps < o.refinement_max_steps; ++steps) {
     bool any = false;
     for (index_t c = 0; c < nrhs; ++c) {
       if (active[c] && berr[c] <= o.refinement_tolerance) active[c] = 0;
@@ -900,7 +904,7 @@ static void solve_impl(SolverState& s, const double* b, double* x, index_t nrhs)
   const double enough = std::max(o.refinement_tolerance, floor);
   // refinement stalled: GMRES preconditioned by the factorization (see solve/gmres.hpp)
   int gmres_iterations = 0;
-  if (o.gmres_max_iterations > 0) {
+  if (check && o.gmres_max_iterations > 0) {
     std::vector<double> tmp;
     const solve::Operator op_m = [&](const double* in, double* out) {
       apply_inverse(s, in, out, 1, tmp);
@@ -919,6 +923,7 @@ static void solve_impl(SolverState& s, const double* b, double* x, index_t nrhs)
   ss.refinement_steps = steps;
   ss.backward_error = 0;
   for (index_t c = 0; c < nrhs; ++c) ss.backward_error = std::max(ss.backward_error, berr[c]);
+  if (!check) ss.backward_error = std::numeric_limits<double>::quiet_NaN();
   ss.backward_error_floor = floor;
   // κ∞(A) ≥ ‖A‖∞‖x‖∞/‖b‖∞ for every solution: a singular or ill-conditioned A shows here
   // even when no pivot was small enough to perturb (a rank deficiency spread over the

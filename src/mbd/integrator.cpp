@@ -346,12 +346,15 @@ int Integrator::newton(double h, StepInfo& info, const BdfTerms& bdf) {
     // about ρ/(1−ρ)‖δ_k‖. An update 1000 times below the tolerance is accepted as it is
     // (rounding level: the rate is meaningless there).
     ++since_jac;
-    if (opts_.verbose)
+    if (opts_.verbose) {
+      const double berr = solver_->backward_error();
       fmt::print(stderr,
                  "t = {:.9g} h = {:.3g} iteration {}{}: weighted update {:.3e}, backward error "
-                 "{:.1e}, perturbed pivots {}\n",
-                 tn, h, it, need_jac ? " (new Jacobian)" : "", err, solver_->backward_error(),
+                 "{}, perturbed pivots {}\n",
+                 tn, h, it, need_jac ? " (new Jacobian)" : "", err,
+                 std::isnan(berr) ? "not checked" : fmt::format("{:.1e}", berr),
                  solver_->perturbed_pivots());
+    }
     bool converged = false;
     if (since_jac == 1) {
       err_first = err;

@@ -43,6 +43,11 @@ class StrataLinearSolver : public LinearSolver {
     o.pivoting = pivoting                 ? *pivoting
                  : solver_on_gpu(backend) ? Pivoting::automatic
                                           : Pivoting::delayed;
+    // Newton's method computes the residual at every iterate and stops on the size of
+    // its updates: a solution from a factor without perturbed pivots needs no separate
+    // check (one product with the matrix per solve); after perturbed pivots the solver
+    // still refines.
+    o.solve_check = SolveCheck::after_perturbed_pivots;
     return o;
   }
   void analyze(const SparseMatrix& a) override {

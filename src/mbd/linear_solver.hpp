@@ -32,7 +32,8 @@ class LinearSolver {
   virtual index_t factor_entries() const = 0;
   /// Pivots replaced by static pivoting in the last factorization.
   virtual index_t perturbed_pivots() const = 0;
-  /// Backward error of the last solve (0 if unknown).
+  /// Backward error of the last solve (0 if unknown; NaN when the solve did not check its
+  /// solution: no perturbed pivot, see Options::solve_check).
   virtual double backward_error() const = 0;
   /// "strata LU on cpu", "dense LAPACK", ...
   virtual std::string describe() const = 0;

@@ -4,7 +4,8 @@
 // without static pivots, with the solution of dense LAPACK (dgesv) and log|det| and sign
 // of its LU (dgetrf), a backward error at the tolerance without GMRES, and the statistics
 // saying which mechanism was used. A numerically singular matrix is still reported as
-// such (static pivots at the root).
+// such (static pivots at the root). Options::solve_check skips the check of a solution
+// only when no pivot was perturbed.
 #include <gtest/gtest.h>
 
 #include <cfloat>
@@ -231,6 +232,65 @@ TEST(DelayedPivoting, SolveBySubtreesOnSeveralThreadsMatchesDenseLu) {
     }
     EXPECT_EQ(s.solve(b), x);
   }
+}
+
+// Options::solve_check = after_perturbed_pivots (the engine's Newton loop): a factor
+// without perturbed pivots gives the triangular solves' x unchecked (bit for bit the x of
+// a solve with refinement off, the backward error NaN, dense LAPACK's solution to the
+// conditioning); a factor with perturbed pivots is still checked and refined (the
+// backward error computed, as small as with the default).
+TEST(DelayedPivoting, SolveCheckAfterPerturbedPivotsOnly) {
+  auto rng = test::fresh_rng();
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (index_t n : {1, 2, 3, 5, 733}) {
+    SCOPED_TRACE("n=" + std::to_string(n));
+    const SparseMatrix pattern = test::random_pattern_with_diagonal(n, 3, rng);
+    const SparseMatrix a = test::with_values(pattern, 0.0, rng);
+    std::vector<double> b(n);
+    for (double& v : b) v = u(rng);
+    std::vector<double> ref = b;
+    if (!test::dense_solve(test::to_dense(a), n, ref, 1)) continue;  // singular draw
+    Options unchecked = leaf_fronts(), plain = leaf_fronts();
+    unchecked.pivoting = plain.pivoting = Pivoting::delayed;
+    unchecked.solve_check = SolveCheck::after_perturbed_pivots;
+    plain.refinement_max_steps = 0;
+    plain.gmres_max_iterations = 0;
+    Solver s(unchecked), p(plain);
+    s.factorize(a);
+    p.factorize(a);
+    if (s.stats().factor.perturbed_pivots > 0) continue;  // numerically singular draw
+    const std::vector<double> x = s.solve(b);
+    EXPECT_TRUE(std::isnan(s.stats().solve.backward_error));
+    EXPECT_EQ(s.stats().solve.refinement_steps, 0);
+    EXPECT_FALSE(s.stats().solve.refinement_converged);
+    EXPECT_EQ(x, p.solve(b));
+    EXPECT_LE(test::relative_difference(x, ref),
+              std::max(1e-12, 1e-14 * std::sqrt(double(n)) * kappa_lower(a, ref, b)));
+  }
+  // numerically singular (a row and column of explicit zeros; b in the range): checked
+  // and refined
+  const index_t n = 5;
+  const SparseMatrix pattern = test::random_pattern_with_diagonal(n, 3, rng);
+  const SparseMatrix healthy = test::with_values(pattern, 20.0, rng);
+  SparseMatrix a = healthy;
+  for (index_t j = 0; j < n; ++j)
+    for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p)
+      if (a.indices[p] == 2 || j == 2) a.values[p] = 0.0;
+  std::vector<double> x0(n, 1.0), b(n, 0.0);
+  x0[2] = 0.0;
+  for (index_t j = 0; j < n; ++j)
+    for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p)
+      b[a.indices[p]] += a.values[p] * x0[j];
+  Options o = leaf_fronts();
+  o.pivoting = Pivoting::delayed;
+  o.solve_check = SolveCheck::after_perturbed_pivots;
+  Solver s(o);
+  s.factorize(healthy);  // the analysis: a singular matrix is refused there
+  s.refactorize(a);
+  ASSERT_GE(s.stats().factor.perturbed_pivots, 1);
+  (void)s.solve(b);
+  EXPECT_FALSE(std::isnan(s.stats().solve.backward_error));
+  EXPECT_LE(s.stats().solve.backward_error, 1e-14);
 }
 
 // Pivoting::fixed: static pivots as before.
