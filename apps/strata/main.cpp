@@ -37,7 +37,6 @@
 #include <exception>
 #include <filesystem>
 #include <fstream>
-#include <map>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
@@ -58,16 +57,6 @@ namespace {
 
 using json = nlohmann::json;
 using namespace strata;
-
-const std::map<std::string, OrderingMethod> kOrderings = {{"nd", OrderingMethod::nested_dissection},
-                                                          {"metis", OrderingMethod::metis},
-                                                          {"amd", OrderingMethod::amd},
-                                                          {"natural", OrderingMethod::natural}};
-const std::map<std::string, MatrixType> kTypes = {
-    {"auto", MatrixType::automatic},
-    {"spd", MatrixType::spd},
-    {"symmetric_indefinite", MatrixType::symmetric_indefinite},
-    {"general", MatrixType::general}};
 
 struct CommonArgs {
   std::string file;
@@ -107,12 +96,35 @@ const CLI::Validator kNonNegativeCount([](std::string& v) { return bad_number(v,
                                        "N>=0");
 const CLI::Validator kCount([](std::string& v) { return bad_number(v, true, 1, false); }, "N>=1");
 
-Pivoting pivoting_of(const std::string& p) {
-  return p == "fixed" ? Pivoting::fixed : p == "delayed" ? Pivoting::delayed : Pivoting::automatic;
+// A value of one of the solver's enums, checked by the vocabulary every interface shares
+// (strata::parse): the same names and the same message as the C API, Python and the
+// engine. The choices shown are the canonical names.
+template <class E>
+CLI::Validator choice() {
+  std::string shown;
+  for (const std::string& name : option_names<E>()) {
+    E value{};
+    parse(name, &value);
+    if (to_string(value) == name) shown += (shown.empty() ? "" : ",") + name;
+  }
+  return CLI::Validator(
+      [](std::string& v) {
+        E value{};
+        try {
+          parse(v, &value);
+        } catch (const Error& e) {
+          return std::string(e.what());
+        }
+        return std::string();
+      },
+      "{" + shown + "}");
 }
 
-Backend backend_of(const std::string& device) {
-  return device == "cpu" ? Backend::cpu : device == "gpu" ? Backend::cuda : Backend::automatic;
+template <class E>
+E value_of(const std::string& name) {
+  E value{};
+  parse(name, &value);
+  return value;
 }
 
 void add_common(CLI::App* cmd, CommonArgs& a) {
@@ -120,7 +132,7 @@ void add_common(CLI::App* cmd, CommonArgs& a) {
       ->required()
       ->check(CLI::ExistingFile);
   cmd->add_option("--ordering", a.ordering, "fill-reducing ordering (default nd)")
-      ->check(CLI::IsMember({"nd", "metis", "amd", "natural"}));
+      ->check(choice<OrderingMethod>());
   cmd->add_option("--max-block-size", a.max_block_size,
                   "most pivots per front (separator blocking); 0: by backend and type "
                   "(4096 for Cholesky on the GPU, else 1024)")
@@ -153,12 +165,12 @@ void add_common(CLI::App* cmd, CommonArgs& a) {
 
 Options options_from(const CommonArgs& a) {
   Options o;
-  o.ordering = kOrderings.at(a.ordering);
+  o.ordering = value_of<OrderingMethod>(a.ordering);
   o.max_block_size = a.max_block_size;
   o.device_memory_limit = a.device_memory_limit;
   o.num_threads = a.threads;
   o.reproducible = a.reproducible;
-  o.backend = backend_of(a.device);
+  o.backend = value_of<Backend>(a.device);
   o.num_gpus = a.num_gpus;
   o.subtrees_per_gpu = a.subtrees_per_gpu;
   o.balance_by_work = a.balance_by_work == "on";
@@ -331,7 +343,7 @@ int run_solve(const SolveArgs& a, const Communicator& comm) {
         b.resize(n);
         multiply(mm.matrix, ones.data(), b.data());
       }
-      o.type = kTypes.at(a.type);
+      o.type = value_of<MatrixType>(a.type);
       if (o.type == MatrixType::automatic && mm.symmetry == MMSymmetry::general &&
           !is_numerically_symmetric(mm.matrix))
         o.type = MatrixType::general;
@@ -629,9 +641,9 @@ int run_simulate_checked(const SimulateArgs& a, bool& started) {
     rs.t_end = a.t_end;
     rs.step = a.step;
     rs.order = a.order;
-    rs.backend = backend_of(a.device);
+    rs.backend = value_of<Backend>(a.device);
     rs.device_memory_limit = a.device_memory_limit;
-    if (!a.pivoting.empty()) rs.pivoting = pivoting_of(a.pivoting);
+    if (!a.pivoting.empty()) rs.pivoting = value_of<Pivoting>(a.pivoting);
     rs.threads = a.threads;
     rs.full_newton = a.full_newton;
     rs.newton_tol = a.newton_tol;
@@ -733,14 +745,14 @@ int main(int argc, char** argv) {
           "--type", solve_args.type,
           "factorization type (default auto: Cholesky when symmetric and it succeeds, else "
           "LDLᵀ when symmetric, else LU)")
-      ->check(CLI::IsMember({"auto", "spd", "symmetric_indefinite", "general"}));
+      ->check(choice<MatrixType>());
   solve->add_option("--out", solve_args.out,
                     "write the solution here (Matrix Market array; default: not written)");
   solve
       ->add_option("--device", solve_args.common.device,
                    "where the factorization and solve run (default auto: the GPU when the "
                    "build and the machine have one)")
-      ->check(CLI::IsMember({"cpu", "gpu", "auto"}));
+      ->check(choice<Backend>());
   SimulateArgs sim;
   auto* simulate = app.add_subcommand(
       "simulate", "implicit multibody dynamics (BDF + Newton, every step solved by strata)");
@@ -761,7 +773,7 @@ int main(int argc, char** argv) {
   simulate
       ->add_option("--device", sim.device,
                    "where strata factorizes (default auto: the GPU when present)")
-      ->check(CLI::IsMember({"cpu", "gpu", "auto"}));
+      ->check(choice<Backend>());
   simulate->add_option("--device-memory-limit", sim.device_memory_limit,
                        "GPU memory budget [bytes] (default 0: 90% of the free device memory)");
   simulate->add_option("--output", sim.output, "output folder (default: out)");
@@ -789,7 +801,7 @@ int main(int argc, char** argv) {
                    "pivots), delayed (always delayed pivoting, on the host) (default: delayed "
                    "on the CPU; on a GPU automatic, then delayed until the next analysis once "
                    "it needed static pivots)")
-      ->check(CLI::IsMember({"fixed", "automatic", "delayed"}));
+      ->check(choice<Pivoting>());
   simulate
       ->add_option("--formulation", sim.formulation,
                    "auto: coordinate partitioning, stabilized from where no partition is well "

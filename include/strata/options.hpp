@@ -3,6 +3,8 @@
 #pragma once
 
 #include <cstddef>
+#include <string>
+#include <string_view>
 #include <vector>
 
 #include "strata/types.hpp"
@@ -293,5 +295,40 @@ struct Options {
   /// (restarted every 50; default 200; 0 disables).
   int gmres_max_iterations = 200;
 };
+
+// --- one vocabulary for every interface (CLI, C API, Python, model runs) ---
+
+/// The canonical name of a value (a static string): MatrixType "auto", "spd", "symmetric_indefinite",
+/// "general"; OrderingMethod "nd", "metis", "amd", "natural", "user"; Backend "auto",
+/// "cpu", "cuda"; Pivoting "fixed", "automatic", "delayed"; SolveCheck "always",
+/// "after_perturbed_pivots".
+const char* to_string(MatrixType value);
+const char* to_string(OrderingMethod value);
+const char* to_string(Backend value);
+const char* to_string(Pivoting value);
+const char* to_string(SolveCheck value);
+
+/// Parses a value's name into *out: the canonical names of to_string and the aliases
+/// "automatic" (MatrixType, Backend), "ldlt" and "sym" (symmetric_indefinite), "lu"
+/// (general), "nested_dissection" (nd), "gpu" (cuda), "auto" (Pivoting::automatic).
+/// OrderingMethod::user is set by giving Options::user_permutation, not by name. Throws
+/// InvalidInput naming the option ("type", "ordering", "device", "pivoting",
+/// "solve_check"), the names accepted and the text given; *out is then unchanged.
+void parse(std::string_view text, MatrixType* out);
+void parse(std::string_view text, OrderingMethod* out);
+void parse(std::string_view text, Backend* out);
+void parse(std::string_view text, Pivoting* out);
+void parse(std::string_view text, SolveCheck* out);
+
+/// The names parse accepts for E (canonical names first, then the aliases), e.g. for a
+/// command line's list of choices. E is one of the enums above.
+template <class E>
+std::vector<std::string> option_names();
+
+/// Checks every field against its documented range and throws InvalidInput naming the
+/// first field out of range ("Options::pivot_threshold must be in (0, 1] (got 0)"); the
+/// analysis calls it. Values that need the matrix (user_permutation, num_gpus against the
+/// GPUs visible) are checked at analysis.
+void validate(const Options& options);
 
 }  // namespace strata

@@ -106,9 +106,4 @@ class Solver {
   std::unique_ptr<detail::SolverState> state_;
 };
 
-/// Human-readable names of enum values (as used by the command line).
-const char* to_string(MatrixType t);
-const char* to_string(OrderingMethod o);
-const char* to_string(Backend b);
-
 }  // namespace strata

@@ -107,13 +107,6 @@ py::dict stats_dict(const strata::mbd::SimulationResult& r) {
   return d;
 }
 
-strata::Backend parse_backend(const std::string& s) {
-  if (s == "cpu") return strata::Backend::cpu;
-  if (s == "gpu" || s == "cuda") return strata::Backend::cuda;
-  if (s == "auto") return strata::Backend::automatic;
-  throw strata::InvalidInput("device must be 'cpu', 'gpu' (or 'cuda') or 'auto', got '" + s + "'");
-}
-
 // kind: "path", "json" or "generate"; source: the path, the JSON text or the spec.
 py::dict run(const std::string& kind, const std::string& source, const std::string& name,
              const py::dict& settings) {
@@ -136,7 +129,7 @@ py::dict run(const std::string& kind, const std::string& source, const std::stri
   integer("order", rs.order);
   std::string device = "auto";
   text("device", device);
-  rs.backend = parse_backend(device);
+  strata::parse(device, &rs.backend);
   integer("threads", rs.threads);
   flag("full_newton", rs.full_newton);
   num("newton_tol", rs.newton_tol);

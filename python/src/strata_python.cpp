@@ -82,49 +82,20 @@ strata::SparseMatrix to_matrix(index_t n_rows, index_t n_cols, const std::string
   return a;
 }
 
-strata::MatrixType parse_type(const std::string& s) {
-  if (s == "auto" || s == "automatic") return strata::MatrixType::automatic;
-  if (s == "spd") return strata::MatrixType::spd;
-  if (s == "symmetric_indefinite" || s == "sym" || s == "ldlt")
-    return strata::MatrixType::symmetric_indefinite;
-  if (s == "general" || s == "lu") return strata::MatrixType::general;
-  throw strata::InvalidInput(
-      "type must be 'auto', 'spd', 'symmetric_indefinite' or 'general', got '" + s + "'");
-}
-
-strata::OrderingMethod parse_ordering(const std::string& s) {
-  if (s == "nd" || s == "nested_dissection") return strata::OrderingMethod::nested_dissection;
-  if (s == "metis") return strata::OrderingMethod::metis;
-  if (s == "amd") return strata::OrderingMethod::amd;
-  if (s == "natural") return strata::OrderingMethod::natural;
-  throw strata::InvalidInput("ordering must be 'nd', 'metis', 'amd' or 'natural', got '" + s + "'");
-}
-
-strata::Backend parse_device(const std::string& s) {
-  if (s == "cpu") return strata::Backend::cpu;
-  if (s == "cuda" || s == "gpu") return strata::Backend::cuda;
-  if (s == "auto" || s == "automatic") return strata::Backend::automatic;
-  throw strata::InvalidInput("device must be 'cpu', 'cuda' (or 'gpu') or 'auto', got '" + s + "'");
-}
-
 strata::Options make_options(const std::string& type, const std::string& ordering,
                              const std::string& device, index_t max_block_size, int num_threads,
                              int refinement_steps, double refinement_tolerance,
                              std::size_t device_memory_limit) {
   strata::Options o;
-  o.type = parse_type(type);
-  o.ordering = parse_ordering(ordering);
-  o.backend = parse_device(device);
-  if (max_block_size < 0)
-    throw strata::InvalidInput("max_block_size must be at least 0 (0: by backend and type)");
-  if (num_threads < 0) throw strata::InvalidInput("num_threads must be >= 0");
-  if (refinement_steps < 0) throw strata::InvalidInput("refinement_steps must be >= 0");
-  if (!(refinement_tolerance >= 0)) throw strata::InvalidInput("refinement_tolerance must be >= 0");
+  strata::parse(type, &o.type);
+  strata::parse(ordering, &o.ordering);
+  strata::parse(device, &o.backend);
   o.max_block_size = max_block_size;
   o.num_threads = num_threads;
   o.refinement_max_steps = refinement_steps;
   o.refinement_tolerance = refinement_tolerance;
   o.device_memory_limit = device_memory_limit;
+  strata::validate(o);  // its messages name the fields of strata::Options
   return o;
 }
 

@@ -77,9 +77,14 @@ __all__ = [
     "SimulationError",
 ]
 
-_TYPES = ("auto", "spd", "symmetric_indefinite", "general")
-_ORDERINGS = ("nd", "metis", "amd", "natural")
-_DEVICES = ("auto", "cpu", "cuda", "gpu")
+
+
+def _check_names(**names):
+    """The option names must be strings; which strings is decided by the extension (the
+    vocabulary every interface shares: strata::parse), which raises InvalidInputError."""
+    for name, value in names.items():
+        if not isinstance(value, str):
+            raise InvalidInputError(f"{name} must be a string, got {value!r}")
 _STORAGES = ("full", "lower", "upper")
 
 
@@ -121,10 +126,7 @@ def _to_matrix(A, storage="full", what="A"):
 
 def _make_core(type, ordering, device, max_block_size, num_threads, refinement_steps,
                refinement_tolerance, device_memory_limit):
-    for name, value, allowed in (("type", type, _TYPES), ("ordering", ordering, _ORDERINGS),
-                                 ("device", device, _DEVICES)):
-        if value not in allowed:
-            raise InvalidInputError(f"{name} must be one of {allowed}, got {value!r}")
+    _check_names(type=type, ordering=ordering, device=device)
     return _strata._Core(type, ordering, device, int(max_block_size), int(num_threads),
                          int(refinement_steps), float(refinement_tolerance),
                          int(device_memory_limit))
@@ -136,10 +138,7 @@ def _make_dist_core(comm, type, ordering, device, max_block_size, num_threads,
         raise NotSupportedError("comm= needs a strata build with MPI (CMake option STRATA_MPI)")
     if not hasattr(comm, "py2f"):
         raise TypeError(f"comm must be an mpi4py communicator, got {_type_name(comm)}")
-    for name, value, allowed in (("type", type, _TYPES), ("ordering", ordering, _ORDERINGS),
-                                 ("device", device, _DEVICES)):
-        if value not in allowed:
-            raise InvalidInputError(f"{name} must be one of {allowed}, got {value!r}")
+    _check_names(type=type, ordering=ordering, device=device)
     return _strata._DistCore(comm.py2f(), type, ordering, device, int(max_block_size),
                              int(num_threads), int(refinement_steps),
                              float(refinement_tolerance), int(device_memory_limit))

@@ -184,6 +184,21 @@ constexpr const char* kNullSolver = "strata: the solver handle is NULL";
 
 }  // namespace
 
+namespace {
+
+// Sets one option on a copy, checks the copy with the vocabulary every interface shares
+// (strata::validate: the same ranges and messages as the C++ API, the CLI and Python) and
+// keeps it only when it passes: a refused value leaves the solver's options unchanged.
+template <class F>
+void set_checked(strata_solver* s, F&& set) {
+  strata::Options o = s->options;
+  set(o);
+  strata::validate(o);
+  s->options = std::move(o);
+}
+
+}  // namespace
+
 extern "C" {
 
 const char* strata_status_string(strata_status status) {
@@ -290,40 +305,26 @@ strata_status strata_set_backend(strata_solver* s, strata_backend backend) {
 
 strata_status strata_set_max_block_size(strata_solver* s, int64_t max_block_size) {
   STRATA_CHECK_SOLVER(s);
-  return guarded(s, [&] {
-    if (max_block_size < 0)
-      throw strata::InvalidInput(
-          "max_block_size must be at least 0 (0: by backend and type), got " +
-          std::to_string(max_block_size));
-    s->options.max_block_size = max_block_size;
-  });
+  return guarded(
+      s, [&] { set_checked(s, [&](strata::Options& o) { o.max_block_size = max_block_size; }); });
 }
 
 strata_status strata_set_num_threads(strata_solver* s, int num_threads) {
   STRATA_CHECK_SOLVER(s);
-  return guarded(s, [&] {
-    if (num_threads < 0)
-      throw strata::InvalidInput("num_threads must be >= 0, got " + std::to_string(num_threads));
-    s->options.num_threads = num_threads;
-  });
+  return guarded(s,
+                 [&] { set_checked(s, [&](strata::Options& o) { o.num_threads = num_threads; }); });
 }
 
 strata_status strata_set_refinement_steps(strata_solver* s, int max_steps) {
   STRATA_CHECK_SOLVER(s);
-  return guarded(s, [&] {
-    if (max_steps < 0)
-      throw strata::InvalidInput("refinement steps must be >= 0, got " + std::to_string(max_steps));
-    s->options.refinement_max_steps = max_steps;
-  });
+  return guarded(
+      s, [&] { set_checked(s, [&](strata::Options& o) { o.refinement_max_steps = max_steps; }); });
 }
 
 strata_status strata_set_refinement_tolerance(strata_solver* s, double tolerance) {
   STRATA_CHECK_SOLVER(s);
-  return guarded(s, [&] {
-    if (!(tolerance >= 0) || !std::isfinite(tolerance))
-      throw strata::InvalidInput("refinement tolerance must be finite and >= 0");
-    s->options.refinement_tolerance = tolerance;
-  });
+  return guarded(
+      s, [&] { set_checked(s, [&](strata::Options& o) { o.refinement_tolerance = tolerance; }); });
 }
 
 strata_status strata_set_device_memory_limit(strata_solver* s, uint64_t bytes) {

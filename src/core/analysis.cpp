@@ -319,40 +319,10 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers)
   if (workers < 1)
     throw InvalidInput("analyze_matrix: workers must be at least 1 (got " +
                        std::to_string(workers) + ")");
-  if (opts.gpu_panel_kernel_max_pivots < 0)
-    throw InvalidInput("Options::gpu_panel_kernel_max_pivots must be at least 0 (got " +
-                       std::to_string(opts.gpu_panel_kernel_max_pivots) + ")");
-  if (!(opts.gpu_tiled_pool_share >= 0 && opts.gpu_tiled_pool_share < 1))
-    throw InvalidInput("Options::gpu_tiled_pool_share must be in [0, 1) (got " +
-                       std::to_string(opts.gpu_tiled_pool_share) + ")");
-  if (opts.gpu_tiled_stream_columns < 0)
-    throw InvalidInput("Options::gpu_tiled_stream_columns must be at least 0 (got " +
-                       std::to_string(opts.gpu_tiled_stream_columns) + ")");
-  if (opts.gpu_lu_strip_pivots < 0)
-    throw InvalidInput("Options::gpu_lu_strip_pivots must be at least 0 (got " +
-                       std::to_string(opts.gpu_lu_strip_pivots) + ")");
-  if (opts.gpu_potrf_block_size < 0)
-    throw InvalidInput("Options::gpu_potrf_block_size must be at least 0 (got " +
-                       std::to_string(opts.gpu_potrf_block_size) + ")");
-  if (opts.distributed_front_block_size < 64)
-    throw InvalidInput("Options::distributed_front_block_size must be at least 64 (got " +
-                       std::to_string(opts.distributed_front_block_size) + ")");
-  if (opts.distributed_front_min_rows < 0)
-    throw InvalidInput("Options::distributed_front_min_rows must be at least 0 (got " +
-                       std::to_string(opts.distributed_front_min_rows) + ")");
-  if (opts.split_front_min_cb < 0)
-    throw InvalidInput("Options::split_front_min_cb must be at least 0 (got " +
-                       std::to_string(opts.split_front_min_cb) + ")");
-  if (opts.subtrees_per_gpu < 1)
-    throw InvalidInput("Options::subtrees_per_gpu must be at least 1 (got " +
-                       std::to_string(opts.subtrees_per_gpu) + ")");
+  validate(opts);
   if (a.n_rows != a.n_cols)
     throw InvalidInput("matrix must be square, got " + std::to_string(a.n_rows) + "x" +
                        std::to_string(a.n_cols));
-  if (opts.max_block_size < 0)
-    throw InvalidInput("max_block_size must be at least 0 (0: by backend and type), got " +
-                       std::to_string(opts.max_block_size));
-  if (opts.nd_leaf_size < 1) throw InvalidInput("nd_leaf_size must be at least 1");
   Analysis an;
   an.id = next_analysis_id();
   an.n = a.n_rows;

@@ -1027,44 +1027,4 @@ const std::vector<index_t>& Solver::permutation() const {
   return state_->analysis ? state_->analysis->perm : empty;
 }
 
-const char* to_string(MatrixType t) {
-  switch (t) {
-    case MatrixType::automatic:
-      return "auto";
-    case MatrixType::spd:
-      return "spd";
-    case MatrixType::symmetric_indefinite:
-      return "symmetric_indefinite";
-    case MatrixType::general:
-      return "general";
-  }
-  return "?";
-}
-const char* to_string(OrderingMethod o) {
-  switch (o) {
-    case OrderingMethod::nested_dissection:
-      return "nd";
-    case OrderingMethod::metis:
-      return "metis";
-    case OrderingMethod::amd:
-      return "amd";
-    case OrderingMethod::natural:
-      return "natural";
-    case OrderingMethod::user:
-      return "user";
-  }
-  return "?";
-}
-const char* to_string(Backend b) {
-  switch (b) {
-    case Backend::cpu:
-      return "cpu";
-    case Backend::cuda:
-      return "cuda";
-    case Backend::automatic:
-      return "auto";
-  }
-  return "?";
-}
-
 }  // namespace strata

@@ -95,6 +95,12 @@ check "threads 0" 2 "got '0'" "$strata" solve "$tmp/good.mtx" --threads 0
 check "simulate threads 0" 2 "got '0'" "$strata" simulate --threads 0
 check "negative step" 2 "--step: must be a number greater than 0" "$strata" simulate --step -1
 check "unknown option" 2 "strata: error:" "$strata" solve "$tmp/good.mtx" --bogus
+# the names of the solver's options: the vocabulary shared with the C API, Python and
+# the engine (strata::parse), aliases included
+check "unknown ordering" 2 "ordering must be 'nd', 'metis', 'amd' or 'natural' (aliases: nested_dissection = nd), got 'rcm'" "$strata" solve "$tmp/good.mtx" --ordering rcm
+check "unknown type" 2 "type must be 'auto', 'spd', 'symmetric_indefinite' or 'general'" "$strata" solve "$tmp/good.mtx" --type cholesky
+check "unknown pivoting" 2 "pivoting must be 'fixed', 'automatic' or 'delayed'" "$strata" simulate --pivoting partial
+check "type alias lu" 0 "general on cpu" "$strata" solve "$tmp/good.mtx" --type lu --device cpu
 check "no file" 2 "strata: error:" "$strata" solve
 check "no command" 2 "strata: error:" "$strata"
 check "help lists exit status" 0 "130 SIGINT, 143 SIGTERM" "$strata" solve --help

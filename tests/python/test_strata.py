@@ -335,6 +335,14 @@ def test_bad_options():
                    {"refinement_steps": -1}):
         with pytest.raises(ValueError):
             strata.Solver(A, **kwargs)
+    # the names come from the vocabulary every interface shares (strata::parse): the same
+    # message as the CLI's, and the same aliases
+    with pytest.raises(strata.InvalidInputError,
+                       match="ordering must be 'nd', 'metis', 'amd' or 'natural'.*got 'rcm'"):
+        strata.Solver(A, ordering="rcm")
+    with pytest.raises(strata.InvalidInputError, match="must be a string"):
+        strata.Solver(A, type=3)
+    assert strata.Solver(A, type="lu").stats["type"] == "general"
 
 
 def test_not_positive_definite():

@@ -1,0 +1,194 @@
+// strata tests — the options' vocabulary (strata/options.hpp, src/core/options.cpp), which
+// the CLI, the C API, Python and the engine share: every value's canonical name parses
+// back to the value, the aliases parse to theirs, an unknown name is refused with the
+// option's name, the names accepted and the text given (and the target left unchanged);
+// validate passes the defaults and names the field of every value out of range, and the
+// analysis refuses such options before it reads the matrix.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "sparse/generators.hpp"
+#include "strata/strata.hpp"
+
+namespace strata {
+namespace {
+
+template <class E>
+void expect_round_trip(const std::vector<E>& values) {
+  const std::vector<std::string> names = option_names<E>();
+  for (std::size_t k = 0; k < values.size(); ++k) {
+    const E v = values[k];
+    E back = values[(k + 1) % values.size()];
+    parse(to_string(v), &back);
+    EXPECT_EQ(back, v) << to_string(v);
+    EXPECT_EQ(names[k], to_string(v)) << "canonical names first, in the enum's order";
+  }
+  for (const std::string& name : names) {  // every name listed parses
+    E v{};
+    EXPECT_NO_THROW(parse(name, &v)) << name;
+  }
+}
+
+TEST(OptionNames, CanonicalNamesRoundTrip) {
+  expect_round_trip<MatrixType>({MatrixType::automatic, MatrixType::spd,
+                                 MatrixType::symmetric_indefinite, MatrixType::general});
+  expect_round_trip<OrderingMethod>({OrderingMethod::nested_dissection, OrderingMethod::metis,
+                                     OrderingMethod::amd, OrderingMethod::natural});
+  expect_round_trip<Backend>({Backend::automatic, Backend::cpu, Backend::cuda});
+  expect_round_trip<Pivoting>({Pivoting::fixed, Pivoting::automatic, Pivoting::delayed});
+  expect_round_trip<SolveCheck>({SolveCheck::always, SolveCheck::after_perturbed_pivots});
+  EXPECT_STREQ(to_string(OrderingMethod::user), "user");
+}
+
+TEST(OptionNames, AliasesParseToTheirValues) {
+  MatrixType t{};
+  parse("lu", &t);
+  EXPECT_EQ(t, MatrixType::general);
+  parse("ldlt", &t);
+  EXPECT_EQ(t, MatrixType::symmetric_indefinite);
+  parse("automatic", &t);
+  EXPECT_EQ(t, MatrixType::automatic);
+  Backend b{};
+  parse("gpu", &b);
+  EXPECT_EQ(b, Backend::cuda);
+  OrderingMethod o{};
+  parse("nested_dissection", &o);
+  EXPECT_EQ(o, OrderingMethod::nested_dissection);
+  Pivoting p{};
+  parse("auto", &p);
+  EXPECT_EQ(p, Pivoting::automatic);
+}
+
+TEST(OptionNames, UnknownNamesAreRefusedWithTheChoices) {
+  OrderingMethod o = OrderingMethod::amd;
+  try {
+    parse("rcm", &o);
+    FAIL() << "rcm was accepted";
+  } catch (const InvalidInput& e) {
+    EXPECT_STREQ(e.what(),
+                 "ordering must be 'nd', 'metis', 'amd' or 'natural' (aliases: "
+                 "nested_dissection = nd), got 'rcm'");
+  }
+  EXPECT_EQ(o, OrderingMethod::amd);  // unchanged
+  MatrixType t = MatrixType::spd;
+  EXPECT_THROW(parse("", &t), InvalidInput);
+  EXPECT_THROW(parse("SPD", &t), InvalidInput);   // names are case-sensitive
+  EXPECT_THROW(parse("user", &o), InvalidInput);  // set by giving a permutation
+  EXPECT_EQ(t, MatrixType::spd);
+  SolveCheck c{};
+  try {
+    parse("never", &c);
+    FAIL();
+  } catch (const InvalidInput& e) {
+    EXPECT_EQ(std::string(e.what()),
+              "solve_check must be 'always' or 'after_perturbed_pivots', got 'never'");
+  }
+}
+
+TEST(OptionsValidate, DefaultsPassAndEveryFieldOutOfRangeIsNamed) {
+  EXPECT_NO_THROW(validate(Options{}));
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const double inf = std::numeric_limits<double>::infinity();
+  struct Case {
+    const char* field;
+    void (*set)(Options&, double);
+    std::vector<double> bad, good;
+  };
+  const std::vector<Case> cases = {
+      {"nd_leaf_size",
+       [](Options& o, double v) { o.nd_leaf_size = index_t(v); },
+       {0, -3},
+       {1, 128}},
+      {"nd_top_separators",
+       [](Options& o, double v) { o.nd_top_separators = int(v); },
+       {0},
+       {1, 3}},
+      {"relax_small", [](Options& o, double v) { o.relax_small = index_t(v); }, {-1}, {0, 4}},
+      {"relax_zeros_1",
+       [](Options& o, double v) { o.relax_zeros_1 = v; },
+       {-0.1, 1.5, nan},
+       {0, 1}},
+      {"max_block_size",
+       [](Options& o, double v) { o.max_block_size = index_t(v); },
+       {-1},
+       {0, 64}},
+      {"num_threads", [](Options& o, double v) { o.num_threads = int(v); }, {-1}, {0, 2}},
+      {"gpu_tiled_pool_share",
+       [](Options& o, double v) { o.gpu_tiled_pool_share = v; },
+       {1, -0.5, nan},
+       {0, 0.5}},
+      {"num_gpus", [](Options& o, double v) { o.num_gpus = int(v); }, {-1}, {0}},
+      {"subtrees_per_gpu", [](Options& o, double v) { o.subtrees_per_gpu = int(v); }, {0}, {1}},
+      {"distributed_front_block_size",
+       [](Options& o, double v) { o.distributed_front_block_size = index_t(v); },
+       {63},
+       {64}},
+      {"pairing_threshold",
+       [](Options& o, double v) { o.pairing_threshold = v; },
+       {nan, inf},
+       {0, -1, 0.01}},
+      {"static_pivot_epsilon",
+       [](Options& o, double v) { o.static_pivot_epsilon = v; },
+       {-1e-8, inf, nan},
+       {0, 1e-8}},
+      {"pivot_threshold",
+       [](Options& o, double v) { o.pivot_threshold = v; },
+       {0, 1.01, nan},
+       {1, 0.01}},
+      {"refinement_max_steps",
+       [](Options& o, double v) { o.refinement_max_steps = int(v); },
+       {-1},
+       {0, 10}},
+      {"refinement_tolerance",
+       [](Options& o, double v) { o.refinement_tolerance = v; },
+       {-1, inf, nan},
+       {0, 1e-15}},
+      {"gmres_max_iterations",
+       [](Options& o, double v) { o.gmres_max_iterations = int(v); },
+       {-1},
+       {0}},
+  };
+  for (const Case& c : cases) {
+    for (double v : c.good) {
+      Options o;
+      c.set(o, v);
+      EXPECT_NO_THROW(validate(o)) << c.field << " = " << v;
+    }
+    for (double v : c.bad) {
+      Options o;
+      c.set(o, v);
+      try {
+        validate(o);
+        ADD_FAILURE() << c.field << " = " << v << " was accepted";
+      } catch (const InvalidInput& e) {
+        EXPECT_NE(std::string(e.what()).find(std::string("Options::") + c.field + " must be"),
+                  std::string::npos)
+            << e.what();
+      }
+    }
+  }
+  Options o;
+  o.pivoting = static_cast<Pivoting>(17);
+  EXPECT_THROW(validate(o), InvalidInput);
+}
+
+// The analysis checks the options first: a bad one is refused whatever the matrix.
+TEST(OptionsValidate, AnalysisRefusesBadOptions) {
+  const SparseMatrix a = generators::laplacian_2d(3, 3);
+  Options o;
+  o.pivot_threshold = 2;
+  Solver s(o);
+  try {
+    s.analyze(a);
+    FAIL() << "analysis accepted pivot_threshold 2";
+  } catch (const InvalidInput& e) {
+    EXPECT_STREQ(e.what(), "Options::pivot_threshold must be in (0, 1] (got 2)");
+  }
+}
+
+}  // namespace
+}  // namespace strata
