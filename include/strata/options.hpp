@@ -89,12 +89,8 @@ struct Options {
   /// of fronts of at most this many pivots (the paper's maximum block size). 0 (default)
   /// picks it by backend and type (AnalysisStats::max_block_size says which was used):
   /// 4096 for Cholesky (type spd) on the CUDA backend, whose large fronts' pivot blocks
-  /// are factored by recursion (gpu_recursive_panel), 1024 otherwise. Measured: 1024 was
-  /// best or near-best on the CPU (block-size sweep of bench/REPORT.md, 2026-11-21); on the
-  /// H100 4096 against 1024 took lap3d 100³ from 0.381 to 0.324 s, elasticity 50³ from
-  /// 0.213 to 0.194 s, with smaller problems within the runs' noise, while LU
-  /// (unsymmetric elasticity 30³) went from 0.089 to 0.110 s
-  /// (bench/results/gpu-memory-mbs-sweep-20261123T000157Z.json). Negative: InvalidInput.
+  /// are factored by recursion (gpu_recursive_panel), 1024 otherwise (bench/REPORT.md,
+  /// "Option defaults", has the measurements). At least 0.
   index_t max_block_size = 0;
   /// Device memory budget for the memory plan, in bytes; 0 means "the whole device"
   /// (for the CPU backend: no limit). Default 0.
@@ -118,8 +114,8 @@ struct Options {
   /// CUDA backend, Cholesky: fronts over 256 rows with at most this many pivots get their
   /// pivot block and panel from strata's batched kernels (all such fronts of a batch
   /// together, 64 pivot columns per step); fronts with more pivots, from cuSOLVER POTRF and
-  /// cuBLAS TRSM one front at a time. 0 sends every front to the library. Measured on the
-  /// H100 (bench_gpu_memory --parts panel, bench/REPORT.md §4). Default 256.
+  /// cuBLAS TRSM one front at a time. 0 sends every front to the library. Default 256; at
+  /// least 0.
   index_t gpu_panel_kernel_max_pivots = 256;
   /// CUDA backend, LU: fronts over 256 rows are eliminated without row interchanges by
   /// the blocked right-looking LU in strips of this many pivot columns, each strip's pivot
@@ -129,8 +125,7 @@ struct Options {
   /// pivoting would have interchanged no row and no pivot needs static pivoting, and is
   /// otherwise assembled again and factored by cuSOLVER GETRF with pivoting. 0: every
   /// front to cuSOLVER GETRF without pivoting first and two cuBLAS TRSMs, one front at a
-  /// time (the path before the batched kernels). Default 256 (measured on the H100 with
-  /// bench_gpu_memory --parts lu-panel, bench/REPORT.md).
+  /// time. Default 256; at least 0.
   index_t gpu_lu_strip_pivots = 256;
   /// CUDA backend under a device_memory_limit, when some front is over the budget and is
   /// factored through the device in pieces (a "tiled" front): the device pool, where
@@ -145,40 +140,25 @@ struct Options {
   /// streamed against a tile, come in pieces of at most this many columns, so that the
   /// slab and the tiles that stay on the device can be wider — fewer passes over the
   /// front's columns, at the price of narrower products. 0: pieces as wide as the slab (a
-  /// third of the pool each) and whole rows of L21. Negative: InvalidInput. Default 256:
-  /// on the H100 (bench/results/gpu-memory-tiled-ab-20261123T145623Z.json) it took lap3d
-  /// 100³ under 1/20 and 1/50 of its factor from 2.12 to 2.02 s and 2.75 to 2.56 s,
-  /// elasticity 50³ from 1.39 to 1.36 s and 1.86 to 1.69 s, lap3d 60³ 0.285 / 0.396 to
-  /// 0.285 / 0.382 s (bytes to the device 35.2 → 29.8 GB on lap3d 100³ at 1/20).
+  /// third of the pool each) and whole rows of L21. Default 256; at least 0.
   index_t gpu_tiled_stream_columns = 256;
   /// CUDA backend, Cholesky fronts over the device budget: the host assembles the next
   /// such front of the same level on a thread of its own while the device factors the
   /// current one and the fronts between them (src/numeric/cuda/tiled_llt.cu). Costs a
-  /// second pinned buffer the size of the largest such front's panel. Default on
-  /// (bench_gpu_memory --tiled-prefetch 0,1 is the comparison; bench/REPORT.md §4 has
-  /// the runs).
+  /// second pinned buffer the size of the largest such front's panel. Default on.
   bool gpu_tiled_prefetch = true;
   /// CUDA backend, Cholesky: a front with more pivots than gpu_panel_kernel_max_pivots
   /// and than this gets its pivot block and panel in column blocks of this width (POTRF
   /// of each diagonal block, TRSM of the rows below it, SYRK and GEMM of the remaining
   /// pivot columns, src/numeric/cuda/llt_blocked.cu) instead of one POTRF and one TRSM of
-  /// all k pivots. 0: one POTRF and one TRSM. Default 0: on the H100 the blocked form
-  /// was 0.9–1.0× as fast on single fronts (m 2,000–10,000, k 500–2,000; widths 128, 256,
-  /// 512) and changed lap3d 100³ / 60³ and elasticity 50³ / 30³ refactorizations by
-  /// −1% to +7%: cuSOLVER's POTRF time grows with k alone (0.42 ms at k = 1,000, 0.86 ms
-  /// at 2,000), so cutting it into blocks saves nothing, and TRSMs of nb columns are no
-  /// faster per flop than one of k (bench_gpu_memory --parts kernels,potrf-block).
+  /// all k pivots. 0: one POTRF and one TRSM. Default 0; at least 0.
   index_t gpu_potrf_block_size = 0;
   /// CUDA backend, Cholesky: a front with more pivots than gpu_panel_kernel_max_pivots
   /// (and every slab of a front factored tile by tile) gets its pivot block and panel by
   /// recursion on the pivot columns (src/numeric/cuda/llt_recursive.cu: 64-column base
   /// cases of strata's own, everything else cuBLAS SYRK and GEMM; Gustavson & Jonsson,
   /// IBM J. Res. Dev. 44(6), 2000) instead of cuSOLVER POTRF and cuBLAS TRSM (or the
-  /// column blocks of gpu_potrf_block_size, which it takes precedence over). Default on:
-  /// on the H100 a 4,000 × 1,000 front's pivot block and panel ran at 6.6 TFLOP/s against
-  /// 3.5 for POTRF + TRSM (16,000 × 4,096: 34.2 against 27.1), and the refactorizations of
-  /// lap3d 60³ / 100³ and elasticity 30³ / 50³ took 3–7% less time than without it
-  /// (bench/REPORT.md, "Cholesky pivot block and panel by recursion").
+  /// column blocks of gpu_potrf_block_size, which it takes precedence over). Default on.
   bool gpu_recursive_panel = true;
 
   // --- several GPUs (docs/multigpu.md) ---
@@ -191,18 +171,12 @@ struct Options {
   /// Subtrees per GPU in that split, at least (the paper's "additional sub-trees"): more
   /// gives the largest-first assignment and work stealing finer pieces to balance with,
   /// at the cost of a larger top part and of smaller parts, which batch worse on a GPU
-  /// (each part is factored by levels on its own). Default 1 (at least 1): measured on 2
-  /// H200s with the list-scheduled upper parts, 1 against 4 took lap3d 100³ from 0.191 to
-  /// 0.172 s, elasticity 40³ from 0.059 to 0.047 s, lap3d 80³ 0.072 / 0.071 s
-  /// (bench/results/multigpu-20261123T042755Z.json); the split then still has more
-  /// subtrees wherever that lowers its estimate.
+  /// (each part is factored by levels on its own); the split still makes more subtrees
+  /// wherever that lowers its estimate. Default 1; at least 1.
   int subtrees_per_gpu = 1;
   /// With several GPUs and nested dissection: balance the top ⌈log₂(GPUs × subtrees)⌉
   /// bisections by estimated factorization work instead of vertex count (the paper's
-  /// "balanced graph bisection"). Default off: measured on 3D Laplacians and elasticity
-  /// problems it balanced the bisections but not the subtrees the GPUs get (the split of
-  /// the assembly tree into several subtrees per GPU already does that) and cost 2-15× the
-  /// ordering time (docs/multigpu.md).
+  /// "balanced graph bisection"); it costs ordering time (docs/multigpu.md). Default off.
   bool balance_by_work = false;
   /// With several GPUs: a GPU whose queue of subtrees is empty takes an unstarted subtree
   /// from the most loaded queue (default on).
@@ -221,10 +195,7 @@ struct Options {
   /// pivot block and panel stay on its GPU, and each strip travels to its GPU and back
   /// (peer copies). 0 turns this off. LDLᵀ fronts, fronts of at most
   /// gpu_panel_kernel_max_pivots pivots and fronts factored tile by tile are not split.
-  /// Default 0 (off): on 4 H200s (lap3d 80³ and 100³, elasticity 40³) thresholds of 1024
-  /// to 4096 split 1–20 fronts and changed the factorization time by −2% to +7%,
-  /// since those fronts' time is mostly assembly, stores and the one-GPU pivot block and
-  /// panel, and the strips' copies cost about what they save (docs/multigpu.md).
+  /// Default 0 (off); at least 0.
   index_t split_front_min_cb = 0;
   /// With several GPUs: a Cholesky front of the top part with at least this many rows is
   /// factored whole — pivot block, panel and update — by GPU 0 and the idle GPUs
@@ -234,15 +205,11 @@ struct Options {
   /// for the fronts it covers. Not distributed: LU and LDLᵀ fronts, fronts of at most
   /// gpu_panel_kernel_max_pivots pivots, fronts factored tile by tile, and every front
   /// under a device_memory_limit (the panel slots, 2 × rows × block doubles per GPU, would
-  /// be memory beside the budget). 0 turns this off. Default 1024: on 2 H200s the top
-  /// part of lap3d 100³ took 20.1 ms instead of 24.6 (factorization 0.172 s against
-  /// 0.174 s), lap3d 80³ 14.8 ms instead of 17.3 (0.067 against 0.070 s), elasticity 40³
-  /// 7.3 against 7.8 ms; 4096 gave the same, blocks of 1024 the same, of 256 less
-  /// (bench/results/multigpu-20261123T0658*.json, T0700*.json).
+  /// be memory beside the budget). 0 turns this off. Default 1024; at least 0.
   index_t distributed_front_min_rows = 1024;
   /// Columns per block of a distributed front (distributed_front_min_rows): smaller
   /// blocks make each step's serial pivot block cheaper but add steps and shrink the
-  /// blocks' DGEMMs (on 2 H200s, 256 was slower than 512 and 1024). At least 64.
+  /// blocks' DGEMMs. Default 512; at least 64.
   index_t distributed_front_block_size = 512;
   /// For `general`: permute large entries onto the diagonal by a maximum weighted
   /// matching and scale rows and columns (MC64-style, Duff & Koster 2001). For

@@ -310,7 +310,7 @@ int resolve_workers(const Options& opts) {
 
 index_t resolve_max_block_size(const Options& opts, MatrixType type) {
   if (opts.max_block_size > 0) return opts.max_block_size;
-  // Options::max_block_size says why (measured on the H100 and the 2-core CPU)
+  // Options::max_block_size documents the choice (bench/history.md, "Option defaults")
   return wants_gpu(opts) && type == MatrixType::spd ? 4096 : 1024;
 }
 

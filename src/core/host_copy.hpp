@@ -2,13 +2,11 @@
 //
 // Why: the GPU backend moves factor panels and contribution blocks between pinned staging
 // buffers, the host factor and the host arena in blocks of hundreds of megabytes to
-// gigabytes. One thread's memcpy runs at about 6 GB/s, well below the PCIe transfers it
-// follows (55 GB/s measured on the lent H100): at commit 4c2899b the single-threaded
-// copies of the panels were half the time of a lap3d 100³ factorization whose factor did
-// not stay on the device, and the copies of a tiled front's contribution block (a 2-D
-// cudaMemcpy between host buffers) 60% of it under a budget of 1/20 of the factor. These
-// helpers split the copy over the calling thread's TBB arena in chunks of at least 1 MiB,
-// so a small copy stays on one thread.
+// gigabytes. One thread's memcpy runs at a fraction of the PCIe transfers it follows, so
+// single-threaded copies of panels and of tiled fronts' contribution blocks become a
+// large share of an out-of-core factorization (bench/history.md). These helpers split the
+// copy over the calling thread's TBB arena in chunks of at least 1 MiB, so a small copy
+// stays on one thread.
 #pragma once
 #include <cstddef>
 

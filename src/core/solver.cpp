@@ -228,10 +228,9 @@ bool has_analyzed_pattern(const Analysis& an, const SparseMatrix& a, tbb::task_a
 // number of threads. On a large matrix these host passes, one thread each, took a third of
 // a GPU refactorization.
 constexpr int kValueBlocks = 8;
-// Entries below which one thread does the pass. Was 200,000; on the 2-core development
-// machine the pass over bcsstk16's 147,000 stored entries took 0.33 ms on one thread (of a
-// 0.55 ms input step, with the pattern check and the copy of the values), and on the
-// GPU machine the input step was a quarter of that matrix's 3.6 ms refactorization.
+// Entries below which one thread does the pass: a pass over ~10⁵ entries is already a
+// sizeable share of a small matrix's refactorization on a GPU, so the threshold sits well
+// below that (bench/history.md has the measurements).
 constexpr index_t kParallelValues = 32768;
 
 // Calls visit(j, p, acc) for every stored entry p of column j, acc[k] (k < sums) being the

@@ -30,8 +30,7 @@ class StrataLinearSolver : public LinearSolver {
     o.num_threads = threads;
     o.device_memory_limit = device_memory_limit;
     // One GPU: the engine's Newton matrices are far too small for the tree split over
-    // several GPUs to pay (on 3D problems of 10⁶ unknowns it does not yet either:
-    // bench/results/multigpu-20261121T190423Z.json).
+    // several GPUs to pay.
     o.num_gpus = 1;
     o.matching_and_scaling = true;
     // The Newton matrix's values drift from those the analysis matched and scaled (step

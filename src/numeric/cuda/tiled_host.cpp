@@ -4,9 +4,8 @@
 // Why on the host: such a front does not fit the device budget, so it is assembled into
 // pinned host memory. The device kernel did that over the bus — zeroing m² doubles, then
 // a read-modify-write across PCIe for every original entry and every entry of each
-// child's contribution block (themselves mostly spilled to the host arena): 2.3 s of a
-// 12.8 s factorization of lap3d 100³ under 1/20 of its factor on the H100 (commit
-// 4c2899b, bench/results/gpu-memory-phases-20261122T024659Z.json). On the host the same
+// child's contribution block (themselves mostly spilled to the host arena), a large share
+// of an out-of-core factorization (bench/history.md). On the host the same
 // additions run at memory bandwidth; a child block that stayed on the device comes over in
 // one DMA copy. The front is built by blocks of columns, in parallel, each block zeroed and
 // then given its entries and each child's columns that land in it (the device kernel's
