@@ -373,7 +373,7 @@ int run_solve(const SolveArgs& a, const Communicator& comm) {
     j["file"] = a.common.file;
     j["seconds"]["read"] = read_seconds;
     j["factor"] = {{"type", to_string(f.type)},
-                   {"backend", f.backend},
+                   {"backend", to_string(f.backend)},
                    {"seconds", f.seconds},
                    {"input_seconds", f.input_seconds},
                    {"gflops", f.gflops},
@@ -426,8 +426,8 @@ int run_solve(const SolveArgs& a, const Communicator& comm) {
     fmt::print(
         "factorization         {} on {}: {:.3f} s ({:.3f} s checking and scaling the input), "
         "{:.2f} GFLOP/s\n",
-        to_string(f.type), f.backend, f.seconds, f.input_seconds, f.gflops);
-    if (f.backend == "cuda")
+        to_string(f.type), to_string(f.backend), f.seconds, f.input_seconds, f.gflops);
+    if (f.backend == Backend::cuda)
       fmt::print(
           "GPU                   {:.3f} s on the device, {:.2f} TFLOP/s, {} launch groups, {} "
           "tiled fronts; {:.1f} MB to the device, {:.1f} MB back; budget {:.1f} MB{}{}\n",
@@ -435,7 +435,7 @@ int run_solve(const SolveArgs& a, const Communicator& comm) {
           f.bytes_to_device * 1e-6, f.bytes_to_host * 1e-6, f.device_budget * 1e-6,
           f.contribution_blocks_on_host ? ", contribution blocks spilled to host" : "",
           f.factor_resident ? ", factor resident (solve on the GPU)" : "");
-    if (f.backend == "cuda") {
+    if (f.backend == Backend::cuda) {
       const auto& ph = f.device_phases;
       fmt::print(
           "  GPU phases          assembly {:.3f} s, small fronts {:.3f} s, large fronts {:.3f} "

@@ -128,7 +128,7 @@ struct DeviceStats {
 /// Results of the last factorize/refactorize.
 struct FactorStats {
   MatrixType type = MatrixType::automatic;  ///< the factorization actually computed
-  std::string backend;                      ///< "cpu" or "cuda"
+  Backend backend = Backend::cpu;           ///< where it ran: cpu or cuda (never automatic)
   double seconds = 0;
   /// Of `seconds`, the host's work on the input before the numeric factorization: the
   /// pattern compared with the analyzed one, the values checked (finite, norms), copied

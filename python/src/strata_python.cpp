@@ -212,7 +212,7 @@ class Core {
     if (factorized_) {
       const strata::FactorStats& f = st.factor;
       d["type"] = strata::to_string(f.type);
-      d["backend"] = f.backend;
+      d["backend"] = strata::to_string(f.backend);
       d["factor_seconds"] = f.seconds;
       d["factor_gflops"] = f.gflops;
       d["factor_input_seconds"] = f.input_seconds;
@@ -307,7 +307,7 @@ class DistCore {
     if (factorized_) {
       const strata::FactorStats& f = st.factor;
       d["type"] = strata::to_string(f.type);
-      d["backend"] = f.backend;
+      d["backend"] = strata::to_string(f.backend);
       d["factor_seconds"] = f.seconds;
       d["perturbed_pivots"] = f.perturbed_pivots;
       put_inertia(d, f);

@@ -439,7 +439,7 @@ strata_status strata_get_stats(const strata_solver* s, strata_stats* out) {
     const strata::FactorStats& f = st.factor;
     out->factorized = 1;
     out->type = to_c(f.type);
-    out->backend_is_cuda = f.backend == "cuda" ? 1 : 0;
+    out->backend_is_cuda = f.backend == strata::Backend::cuda ? 1 : 0;
     out->factor_seconds = f.seconds;
     out->factor_gflops = f.gflops;
     out->perturbed_pivots = f.perturbed_pivots;

@@ -420,7 +420,7 @@ void pin_scaled(SolverState& s) {
   const numeric::Executor* e = s.executor            ? s.executor.get()
                                : s.executors.empty() ? nullptr
                                                      : s.executors[0].get();
-  if (e && std::string_view(e->name()) == "cuda")
+  if (e && e->backend() == Backend::cuda)
     s.scaled_pin = numeric::pin_host_memory(s.scaled.data(), bytes);
 }
 
@@ -601,9 +601,11 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
   fs = FactorStats{};
   fs.type = type;
   fs.input_seconds = input_seconds;
-  fs.backend = external ? s.external.backend : workers > 1 ? execs[0]->name() : s.executor->name();
+  fs.backend = external      ? s.external.backend
+               : workers > 1 ? execs[0]->backend()
+                             : s.executor->backend();
   fs.devices = s.devices;
-  numeric::cpu::PivotStats total;
+  numeric::PivotStats total;
   if (s.delayed.valid)
     for (const auto& fr : s.delayed.fronts) total.merge(fr.stats);
   else
@@ -649,7 +651,7 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
   } else {
     s.executor->report(fs);
   }
-  if (fs.backend == "cuda") fs.device_phases.setup += creation_seconds;
+  if (fs.backend == Backend::cuda) fs.device_phases.setup += creation_seconds;
 }
 
 // v·d·e for a scale factor d and a power of two e: one rounding, as v·d alone would have,

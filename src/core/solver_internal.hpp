@@ -31,7 +31,7 @@ struct ExternalNumeric {
   std::function<void(const Analysis& an, const numeric::NumericFactor& factor, double* x,
                      index_t nrhs)>
       solve;
-  std::string backend = "cpu";  ///< FactorStats::backend
+  Backend backend = Backend::cpu;  ///< FactorStats::backend
   /// Adds backend figures to the statistics of a factorization (may be empty).
   std::function<void(FactorStats& fs)> report;
 };

@@ -110,7 +110,7 @@ void run_factor(DistributedState& s, const Analysis& an, const std::vector<doubl
 detail::ExternalNumeric hooks(DistributedState& s, int per_rank) {
   detail::ExternalNumeric ext;
   ext.workers = s.comm.size() * per_rank;
-  ext.backend = wants_gpu(s) ? "cuda" : "cpu";
+  ext.backend = wants_gpu(s) ? Backend::cuda : Backend::cpu;
   ext.factor = [&s](const Analysis& an, const std::vector<double>& values, MatrixType type,
                     double pivot, numeric::NumericFactor& factor) {
     detail::CommImpl& comm = *s.comm.impl();

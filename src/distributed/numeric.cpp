@@ -116,7 +116,7 @@ void factor_part(detail::CommImpl& comm, NumericState& ns, const Analysis& an,
     if (rank != 0) {
       for (const index_t f : l.my_fronts) {
         const char* p = reinterpret_cast<const char*>(&factor.front_stats[f]);
-        mine.insert(mine.end(), p, p + sizeof(numeric::cpu::PivotStats));
+        mine.insert(mine.end(), p, p + sizeof(numeric::PivotStats));
       }
     }
     std::vector<std::vector<char>> all;
@@ -124,13 +124,13 @@ void factor_part(detail::CommImpl& comm, NumericState& ns, const Analysis& an,
     if (rank == 0)
       for (int r = 1; r < l.ranks; ++r) {
         const std::vector<index_t> fr = fronts_of_rank(an, l, r);
-        if (all[r].size() != fr.size() * sizeof(numeric::cpu::PivotStats))
+        if (all[r].size() != fr.size() * sizeof(numeric::PivotStats))
           throw InternalError("rank " + std::to_string(r) +
                               " sent pivot statistics of the wrong size");
         for (std::size_t k = 0; k < fr.size(); ++k)
           std::memcpy(&factor.front_stats[fr[k]],
-                      all[r].data() + k * sizeof(numeric::cpu::PivotStats),
-                      sizeof(numeric::cpu::PivotStats));
+                      all[r].data() + k * sizeof(numeric::PivotStats),
+                      sizeof(numeric::PivotStats));
       }
   };
   try {

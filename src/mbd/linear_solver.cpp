@@ -80,11 +80,10 @@ class StrataLinearSolver : public LinearSolver {
   index_t perturbed_pivots() const override { return solver_.stats().factor.perturbed_pivots; }
   double backward_error() const override { return solver_.stats().solve.backward_error; }
   std::string describe() const override {
-    const std::string b = solver_.stats().factor.backend;
     const FactorStats& f = solver_.stats().factor;
     return "strata LU (matching + scaling" +
            std::string(f.delayed_pivoting ? ", delayed pivots" : "") + ") on " +
-           (b.empty() ? std::string("cpu") : b);
+           to_string(f.backend);
   }
   const Stats* stats() const override { return &solver_.stats(); }
 

@@ -2,6 +2,7 @@
 // clear NotSupported error, and no host memory is pinned. (A CUDA build compiles
 // numeric/cuda/cuda_executor.cu, which defines these functions instead.)
 #ifndef STRATA_HAVE_CUDA
+#include "numeric/cuda_testing.hpp"
 #include "numeric/factor.hpp"
 #include "strata/errors.hpp"
 

@@ -135,7 +135,7 @@ void factor_front(const Analysis& an, const double* vals, const cpu::DelayPolicy
   sized(w.col_perm, p, "front permutation");
   cpu::DelayPolicy policy = root_policy;
   policy.may_delay = t.parent[f] >= 0;
-  fr.stats = cpu::PivotStats{};
+  fr.stats = PivotStats{};
   const index_t npiv = cpu::factor_front_lu_delayed(A, m, p, m, policy, w.row_perm.data(),
                                                     w.col_perm.data(), fr.stats);
   sized(w.scratch, 2 * static_cast<std::size_t>(p), "front permutation");

@@ -41,7 +41,7 @@ struct DelayedFront {
   index_t m = 0, k = 0, delayed = 0;
   std::vector<index_t> rows, cols;
   std::vector<double> lu, cb;
-  cpu::PivotStats stats;
+  PivotStats stats;
 };
 
 /// How the solve spreads over threads: disjoint subtrees of the assembly tree (each a

@@ -20,7 +20,7 @@
 #include <vector>
 
 #include "core/analysis.hpp"
-#include "numeric/cpu/dense_front.hpp"
+#include "numeric/pivot_stats.hpp"
 #include "strata/errors.hpp"
 #include "strata/options.hpp"
 #include "strata/stats.hpp"
@@ -47,7 +47,7 @@ struct NumericFactor {
   std::vector<double> d_diag;
   std::vector<double> d_off;
   std::vector<int> pivot_size;
-  std::vector<cpu::PivotStats> front_stats;  ///< per front, merged in front order
+  std::vector<PivotStats> front_stats;  ///< per front, merged in front order
   bool valid = false;
 };
 
@@ -123,7 +123,10 @@ using DeviceStats = strata::DeviceStats;
 class Executor {
  public:
   virtual ~Executor() = default;
+  /// A name for reports ("cpu", "cuda", a test's own).
   virtual const char* name() const = 0;
+  /// The backend it is (FactorStats::backend): Backend::cuda for a device executor.
+  virtual Backend backend() const { return Backend::cpu; }
   /// The CUDA device this executor runs on; -1 for a host executor.
   virtual int device() const { return -1; }
   /// Whether the driver must size FactorContext::cb_arena (host memory) for this executor.
@@ -221,46 +224,6 @@ std::unique_ptr<PinnedHostRange> pin_host_memory(void* p, std::size_t bytes);
 
 /// True when this build has the CUDA backend and a GPU is visible.
 bool cuda_available();
-
-/// The pivot block and panel of one Cholesky front on CUDA device 0, by the CUDA
-/// executor's recursive method (numeric/cuda/llt_recursive.cu), so that tests can check
-/// that kernel against the CPU's factor_front_llt: `f` (host) is m × m, column-major,
-/// leading dimension m, lower triangle; its first k columns become L₁₁ and L₂₁ with the
-/// strict upper triangle of the k × k pivot block set to zero (as the executor's fronts
-/// have it), the contribution block is left as it was. Returns -1,
-/// or the local index (0..k-1) of the first pivot that is not positive, as
-/// factor_front_llt does. Throws NotSupported in a build without CUDA.
-index_t cuda_llt_pivot_block_and_panel(double* f, index_t m, index_t k);
-
-/// The CUDA executor's contribution-block update of a Cholesky front on device 0
-/// (numeric/cuda/llt_update.cu), so that tests can check it: `c` (host, n × n,
-/// column-major, leading dimension n) gets c −= l·lᵀ on its lower triangle, `l` (host) is
-/// n × k with leading dimension n; c's strict upper triangle is scratch afterwards.
-/// Returns whether the update was one DGEMM (else cuBLAS DSYRK). Throws InvalidInput for
-/// n < 1 or k < 1, NotSupported in a build without CUDA.
-bool cuda_llt_update(double* c, const double* l, index_t n, index_t k);
-
-/// The CUDA executor's LU of large fronts without row interchanges on device 0
-/// (numeric/cuda/lu_fronts.cu, enqueue_lu_strips: strips of `strip` pivot columns whose
-/// pivot blocks and panels come from the batched kernels of kernels_lu_panel.cu, all fronts
-/// together, the rest of each strip's update and the contribution block's by cuBLAS DGEMM),
-/// so that tests can check it against the CPU's factor_front_lu. fronts[i] (host) is
-/// m[i] × m[i], column-major, leading dimension m[i], k[i] fully summed rows and columns
-/// (1 ≤ k[i] ≤ m[i]). A front of one 64-column step and one strip (k ≤ 64, k ≤ strip) is
-/// factored with restricted partial pivoting by the kernels; the others without
-/// interchanges. Returns, per front, 1 when it was kept — every pivot finite with magnitude
-/// at least static_pivot and, without interchanges, restricted partial pivoting would have
-/// interchanged no row — and 0 when it was rejected. A kept front comes back as
-/// factor_front_lu leaves it (L11 unit lower, U11, L21, U12, the Schur complement in its
-/// contribution block), with its local permutation in (*perms)[i] when perms is given (the
-/// identity for a front factored without interchanges); a rejected one is partly factored.
-/// Throws InvalidInput for inconsistent sizes or strip < 1, NotSupported in a build
-/// without CUDA.
-std::vector<char> cuda_lu_fronts_batched(std::vector<std::vector<double>>& fronts,
-                                         const std::vector<index_t>& m,
-                                         const std::vector<index_t>& k, index_t strip,
-                                         double static_pivot,
-                                         std::vector<std::vector<index_t>>* perms = nullptr);
 
 /// Number of visible CUDA devices (0 in a build without CUDA).
 int cuda_device_count();

@@ -43,7 +43,7 @@ void prepare_factor(const Analysis& an, MatrixType type, NumericFactor& factor, 
     factor.panels_on_host = true;
   }
   sized_resize(factor.rows, t.rows.size(), "factorize: factor row indices");
-  factor.front_stats.assign(t.n_fronts(), cpu::PivotStats{});
+  factor.front_stats.assign(t.n_fronts(), PivotStats{});
   if (type == MatrixType::symmetric_indefinite) {
     factor.d_diag.resize(an.n);
     factor.d_off.resize(an.n);

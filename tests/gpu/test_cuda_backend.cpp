@@ -11,6 +11,7 @@
 
 #include "core/analysis.hpp"
 #include "numeric/cpu/dense_front.hpp"
+#include "numeric/cuda_testing.hpp"
 #include "numeric/factor.hpp"
 #include "sparse/generators.hpp"
 #include "strata/strata.hpp"
@@ -189,7 +190,7 @@ TEST_F(CudaBackend, RecursivePanelMatchesCpuFront) {
     SCOPED_TRACE("m=" + std::to_string(m) + " k=" + std::to_string(k));
     const std::vector<double> cpu_in = front(m);
     std::vector<double> cpu = cpu_in, gpu = cpu_in;
-    numeric::cpu::PivotStats st;
+    numeric::PivotStats st;
     ASSERT_EQ(numeric::cpu::factor_front_llt(cpu.data(), m, k, m, st), -1);
     ASSERT_EQ(numeric::cuda_llt_pivot_block_and_panel(gpu.data(), m, k), -1);
     double num = 0, den = 0;
@@ -216,7 +217,7 @@ TEST_F(CudaBackend, RecursivePanelMatchesCpuFront) {
     std::vector<double> cpu = front(m);
     cpu[bad * m + bad] = -1.0;  // the leading bad × bad block stays SPD
     std::vector<double> gpu = cpu;
-    numeric::cpu::PivotStats st;
+    numeric::PivotStats st;
     EXPECT_EQ(numeric::cpu::factor_front_llt(cpu.data(), m, k, m, st), bad);
     EXPECT_EQ(numeric::cuda_llt_pivot_block_and_panel(gpu.data(), m, k), bad);
   }
@@ -270,7 +271,7 @@ TEST_F(CudaBackend, LuStripsMatchCpuFront) {
   for (std::size_t i = 0; i < shapes.size(); ++i) {
     const auto [m, k] = shapes[i];
     std::vector<index_t> perm(k);
-    numeric::cpu::PivotStats st;
+    numeric::PivotStats st;
     numeric::cpu::factor_front_lu(cpu[i].data(), m, k, m, 1e-8, perm.data(), st);
     for (index_t j = 0; j < k; ++j) ASSERT_EQ(perm[j], j);  // no interchange on the CPU
     ASSERT_EQ(st.perturbed, 0);
@@ -320,7 +321,7 @@ TEST_F(CudaBackend, LuStripsMatchCpuFront) {
   for (std::size_t i = 0; i < cases.size(); ++i) {
     const Case& c = cases[i];
     std::vector<index_t> perm(c.k);
-    numeric::cpu::PivotStats st;
+    numeric::PivotStats st;
     numeric::cpu::factor_front_lu(ccpu[i].data(), c.m, c.k, c.m, 1e-8, perm.data(), st);
     identity[i] = st.perturbed == 0;
     for (index_t j = 0; j < c.k; ++j) identity[i] = identity[i] && perm[j] == j;
@@ -359,7 +360,7 @@ TEST_F(CudaBackend, LuStripsMatchCpuFront) {
                    " k=" + std::to_string(k));
       std::vector<double> cpu1 = rf[i];
       std::vector<index_t> perm(k);
-      numeric::cpu::PivotStats st;
+      numeric::PivotStats st;
       numeric::cpu::factor_front_lu(cpu1.data(), m, k, m, 1e-8, perm.data(), st);
       EXPECT_EQ(static_cast<bool>(rk[i]), st.perturbed == 0);
       if (!rk[i]) continue;
@@ -463,7 +464,7 @@ TEST_F(CudaBackend, ReanalysisAcrossSizes) {
     EXPECT_THROW(s.factorize(bad), InvalidInput);
     for (int round = 0; round < 2; ++round) {
       s.factorize(a);
-      EXPECT_EQ(s.stats().factor.backend, "cuda");
+      EXPECT_EQ(s.stats().factor.backend, Backend::cuda);
       const std::vector<double> x = s.solve(b);
       EXPECT_LT(test::backward_error(a, x.data(), b.data()), 1e-14);
     }
@@ -489,7 +490,7 @@ TEST_F(CudaBackend, SolutionsMatchCpu) {
       Solver gpu(o);
       cpu.factorize(a);
       gpu.factorize(a);
-      EXPECT_EQ(gpu.stats().factor.backend, "cuda");
+      EXPECT_EQ(gpu.stats().factor.backend, Backend::cuda);
       auto xc = cpu.solve(b);
       auto xg = gpu.solve(b);
       SCOPED_TRACE("perturbed pivots cpu " + std::to_string(cpu.stats().factor.perturbed_pivots) +
@@ -621,7 +622,7 @@ TEST_F(CudaBackend, LuFactorMatchesCpu) {
       // zero columns: a residue of rounding size, replaced by the static pivot on one side
       // and not the other, changes entries at the pivot's size
       EXPECT_LT(test::relative_difference(gf.panels, cf.panels), pr.zero_columns ? 1e-6 : 1e-10);
-      numeric::cpu::PivotStats sc, sg;
+      numeric::PivotStats sc, sg;
       for (const auto& ps : cf.front_stats) sc.merge(ps);
       for (const auto& ps : gf.front_stats) sg.merge(ps);
       EXPECT_EQ(sg.perturbed, sc.perturbed);
@@ -873,7 +874,7 @@ TEST_F(CudaBackend, LdltFactorMatchesCpu) {
     const double d_tol = 1e-10;
     EXPECT_LT(test::relative_difference(gf.d_diag, cf.d_diag), d_tol);
     EXPECT_LT(test::relative_difference(gf.d_off, cf.d_off), d_tol);
-    numeric::cpu::PivotStats sc, sg;
+    numeric::PivotStats sc, sg;
     for (const auto& ps : cf.front_stats) sc.merge(ps);
     for (const auto& ps : gf.front_stats) sg.merge(ps);
     EXPECT_EQ(sg.perturbed, sc.perturbed);
@@ -916,7 +917,7 @@ TEST_F(CudaBackend, LdltSolutionsMatchCpu) {
       cpu.factorize(a);
       gpu.factorize(a);
       const FactorStats &fc = cpu.stats().factor, &fg = gpu.stats().factor;
-      EXPECT_EQ(fg.backend, "cuda");
+      EXPECT_EQ(fg.backend, Backend::cuda);
       auto xc = cpu.solve(b);
       auto xg = gpu.solve(b);
       const double bc = test::backward_error(a, xc.data(), b.data());
@@ -1011,7 +1012,7 @@ TEST_F(CudaBackend, AutomaticRunsLdltOnGpu) {
     o.backend = Backend::automatic;  // the default is the CPU
     Solver s{o};
     s.factorize(*a);
-    EXPECT_EQ(s.stats().factor.backend, "cuda");
+    EXPECT_EQ(s.stats().factor.backend, Backend::cuda);
     EXPECT_EQ(s.matrix_type(), MatrixType::symmetric_indefinite);
     EXPECT_EQ(s.stats().factor.inertia_negative, negative);
     std::vector<double> b(a->n_rows, 1.0);
@@ -1138,7 +1139,7 @@ TEST_F(CudaBackend, DelayedPivotingEqualsCpu) {
     x[gpu] = s.solve(b);
     EXPECT_LE(s.stats().solve.backward_error, 1e-14);
   }
-  EXPECT_EQ(f[1].backend, "cuda");
+  EXPECT_EQ(f[1].backend, Backend::cuda);
   EXPECT_TRUE(f[1].delayed_pivoting);
   EXPECT_GT(f[1].fixed_order_perturbed_pivots, 0);
   EXPECT_EQ(f[1].perturbed_pivots, 0);

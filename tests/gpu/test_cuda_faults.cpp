@@ -84,7 +84,7 @@ TEST(CudaFaults, DeviceAllocationFailureIsOutOfMemoryAndRecoverable) {
       s.factorize(c.a);
       const std::vector<double> x = s.solve(b);
       EXPECT_LT(test::backward_error(c.a, x.data(), b.data()), 1e-12);
-      EXPECT_EQ(s.stats().factor.backend, "cuda");
+      EXPECT_EQ(s.stats().factor.backend, Backend::cuda);
     }
     EXPECT_EQ(failures, 17);
   }

@@ -213,7 +213,7 @@ TEST(MultiGpu, SolverSolutionsAndRefactorization) {
       const auto xc = cpu.solve(b), xg = gpu.solve(b);
       const Stats& st = gpu.stats();
       EXPECT_EQ(st.analysis.workers, gpus);
-      EXPECT_EQ(st.factor.backend, "cuda");
+      EXPECT_EQ(st.factor.backend, Backend::cuda);
       EXPECT_FALSE(st.factor.factor_resident);
       ASSERT_EQ(st.factor.devices.size(), static_cast<std::size_t>(gpus));
       index_t run = 0;

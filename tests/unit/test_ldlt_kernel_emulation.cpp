@@ -158,7 +158,7 @@ void zero_columns(Front& fr, const std::vector<index_t>& cols) {
 Front cpu_reference(Front fr, double sp) {
   fr.perm.assign(fr.k, -1);
   fr.psize.assign(fr.k, 0);
-  numeric::cpu::PivotStats st;
+  numeric::PivotStats st;
   numeric::cpu::factor_front_ldlt(fr.f.data(), fr.m, fr.k, fr.m, sp, fr.perm.data(),
                                   fr.psize.data(), st);
   fr.perturbed = st.perturbed;

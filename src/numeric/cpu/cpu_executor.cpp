@@ -37,6 +37,7 @@
 #include "core/alloc.hpp"
 #include "core/blas.hpp"
 #include "numeric/assembly.hpp"
+#include "numeric/cpu/dense_front.hpp"
 #include "numeric/factor.hpp"
 #include "strata/errors.hpp"
 
@@ -174,8 +175,8 @@ void CpuExecutor::process_front(const FactorContext& ctx, index_t f, Workspace& 
   for (index_t i = 0; i < m; ++i) w.position[rows[i]] = -1;
 
   // 3. partial factorization
-  cpu::PivotStats& ps = fac.front_stats[f];
-  ps = cpu::PivotStats{};
+  PivotStats& ps = fac.front_stats[f];
+  ps = PivotStats{};
   w.local_perm.resize(k);
   w.pivot_size.resize(k);
   switch (ctx.type) {

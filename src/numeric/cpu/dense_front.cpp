@@ -92,16 +92,6 @@
 
 namespace strata::numeric::cpu {
 
-void PivotStats::merge(const PivotStats& o) {
-  perturbed += o.perturbed;
-  two_by_two += o.two_by_two;
-  positive += o.positive;
-  negative += o.negative;
-  zero += o.zero;
-  log_abs_det += o.log_abs_det;
-  det_sign *= o.det_sign;
-}
-
 namespace {
 
 // Bunch–Kaufman's α = (1 + √17)/8, which minimises the element growth bound.

@@ -66,6 +66,7 @@
 #include "core/alloc.hpp"
 #include "core/host_copy.hpp"
 #include "core/timer.hpp"
+#include "numeric/cpu/dense_front.hpp"
 #include "numeric/cuda/cuda_executor.hpp"
 
 namespace strata::cuda {
@@ -1163,8 +1164,8 @@ void CudaExecutor::finish_chunk(const numeric::FactorContext& ctx, ChunkRecord& 
       const std::int64_t at = i < ns ? perm_off[i] : big_perm_at[i - ns];
       psize_at[p - begin] = at;
       numeric::store_ldlt_front(an, f, perm + at, psize + at, *ctx.factor);
-      numeric::cpu::PivotStats& ps = ctx.factor->front_stats[f];
-      ps = numeric::cpu::PivotStats{};
+      numeric::PivotStats& ps = ctx.factor->front_stats[f];
+      ps = numeric::PivotStats{};
       const index_t p0 = t.first_pivot[f];
       numeric::cpu::ldlt_stats_from_d(t.n_pivots(f), ctx.factor->d_diag.data() + p0,
                                       ctx.factor->d_off.data() + p0,
@@ -1253,8 +1254,8 @@ void CudaExecutor::finish_front(const numeric::FactorContext& ctx, index_t f, st
   if (bad >= 0) throw NotPositiveDefinite(an.perm[t.first_pivot[f] + bad], std::nan(""));
   const index_t* rows = t.rows_of(f);
   index_t* frows = fac.rows.data() + t.row_offsets[f];
-  numeric::cpu::PivotStats& ps = fac.front_stats[f];
-  ps = numeric::cpu::PivotStats{};
+  numeric::PivotStats& ps = fac.front_stats[f];
+  ps = numeric::PivotStats{};
   int sign = 1;
   for (index_t i = 0; i < k; ++i) {
     frows[i] = rows[lu ? lperm[i] : i];

@@ -141,6 +141,7 @@ class CudaExecutor final : public numeric::Executor {
   explicit CudaExecutor(const Options& o, int device = 0);
   ~CudaExecutor() override;
   const char* name() const override { return "cuda"; }
+  Backend backend() const override { return Backend::cuda; }
   int device() const override { return device_; }
   bool uses_host_arena() const override { return false; }
   void prepare(const Analysis& an, int workers) override;

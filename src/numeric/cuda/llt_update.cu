@@ -23,6 +23,7 @@
 #include <string>
 
 #include "numeric/cuda/cuda_executor.hpp"
+#include "numeric/cuda_testing.hpp"
 #include "numeric/factor.hpp"
 #include "strata/errors.hpp"
 

@@ -41,6 +41,7 @@
 #include <string>
 
 #include "numeric/cuda/cuda_executor.hpp"
+#include "numeric/cuda_testing.hpp"
 #include "strata/errors.hpp"
 
 namespace strata::cuda {
