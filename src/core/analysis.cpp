@@ -430,6 +430,7 @@ void finish_analysis(Analysis& an, const SparseMatrix& c, const SparseMatrix& pa
   an.separator_tree = std::move(ord.tree);
   fill_separator_work(an.separator_tree, sym.colcount);
   an.tree = std::move(sym.tree);
+  an.child_rows = symbolic::child_row_map(an.tree);
   an.schedule = symbolic::level_schedule(an.tree);
   an.stats.symbolic_seconds = step.seconds();
 

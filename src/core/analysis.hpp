@@ -80,6 +80,7 @@ struct Analysis {
   std::vector<index_t> kept_order;
   ordering::SeparatorTree separator_tree;
   symbolic::AssemblyTree tree;
+  symbolic::ChildRowMap child_rows;  ///< the tree's extend-add map (derived from tree)
   symbolic::LevelSchedule schedule;
   schedule::MemoryPlan plan;
   AssemblyMap assembly;

@@ -232,6 +232,7 @@ void read(Reader& r, Analysis& an) {
     r.value(node.work);
   }
   tree_io(r, an.tree);
+  an.child_rows = symbolic::child_row_map(an.tree);  // derived: not sent
   schedule_io(r, an.schedule);
   plan_io(r, an.plan);
   r.vec(an.assembly.entry_offsets);

@@ -59,6 +59,21 @@ struct AssemblyTree {
   const index_t* rows_of(index_t f) const { return rows.data() + row_offsets[f]; }
 };
 
+/// Where each front's contribution block lands in its parent (the extend-add map): for a
+/// front c with a parent p, rel[offsets[c] + i] is the position in p's rows (rows_of(p))
+/// of c's i-th contribution row, rows_of(c)[n_pivots(c) + i]; increasing in i, as both
+/// row lists are sorted. offsets has n_fronts + 1 entries, c's range holds cb_size(c)
+/// entries (-1 for a root's). Computed once per analysis (Analysis::child_rows) for the
+/// CPU and CUDA executors' assembly and the device solve's plan.
+struct ChildRowMap {
+  std::vector<index_t> offsets{0};
+  std::vector<index_t> rel;
+  const index_t* of(index_t c) const { return rel.data() + offsets[c]; }
+};
+
+/// The map of `t` (see ChildRowMap): O(Σ rows of the fronts) time, O(n) workspace.
+ChildRowMap child_row_map(const AssemblyTree& t);
+
 /// Everything the symbolic phase computes.
 struct SymbolicFactorization {
   std::vector<index_t> parent;    ///< elimination tree of the input pattern

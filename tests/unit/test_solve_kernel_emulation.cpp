@@ -323,7 +323,7 @@ void check_problem(const Problem& pr, std::mt19937_64& rng, std::initializer_lis
   std::uniform_real_distribution<double> u(-1, 1);
   const double bmax = max_abs(values);
   for (const SolvePath path : paths) {
-    const SolvePlan plan = cuda::make_solve_plan(an.tree, an.schedule, n_sm, path);
+    const SolvePlan plan = cuda::make_solve_plan(an.tree, an.child_rows, an.schedule, n_sm, path);
     for (index_t nrhs : {1, 2, 5}) {
       SCOPED_TRACE("path " + std::to_string(static_cast<int>(path)) + " nrhs " +
                    std::to_string(nrhs));
@@ -428,7 +428,7 @@ TEST(SolveKernelEmulation, PlanCoversEveryFrontOnce) {
   const auto& t = an.tree;
   const auto& s = an.schedule;
   for (int n_sm : {1, 132}) {
-    const SolvePlan p = cuda::make_solve_plan(t, s, n_sm);
+    const SolvePlan p = cuda::make_solve_plan(t, an.child_rows, s, n_sm);
     ASSERT_EQ(p.small_offsets.size(), static_cast<std::size_t>(s.n_levels() + 1));
     for (index_t l = 0; l < s.n_levels(); ++l) {
       std::vector<std::int64_t> got(p.small_fronts.begin() + p.small_offsets[l],

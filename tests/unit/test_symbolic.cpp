@@ -866,5 +866,39 @@ TEST(Symbolic, MaxBlockSizeByBackendAndType) {
 }
 TEST(Symbolic, DISABLED_Timing100Cubed) { time_grid(100); }
 
+// The extend-add map (symbolic::child_row_map, kept as Analysis::child_rows): every
+// contribution row of a front is found at the position the map gives in its parent's rows
+// (checked by searching the parent's list), positions increasing; LU (the pattern of
+// A+Aᵀ) and Cholesky trees, sizes 1 to 733.
+TEST(Symbolic, ChildRowMapPlacesEveryContributionRowInItsParent) {
+  auto rng = test::fresh_rng();
+  for (index_t n : {1, 2, 3, 5, 733}) {
+    for (MatrixType type : {MatrixType::spd, MatrixType::general}) {
+      SCOPED_TRACE("n=" + std::to_string(n) + " type " + std::to_string(static_cast<int>(type)));
+      const SparseMatrix a = test::random_sparse(
+          n, 4, type == MatrixType::spd ? test::RandomKind::spd : test::RandomKind::general, rng);
+      Options o;
+      o.type = type;
+      const Analysis an = analyze_matrix(a, o);
+      const auto& t = an.tree;
+      const symbolic::ChildRowMap& map = an.child_rows;
+      ASSERT_EQ(map.offsets.size(), static_cast<std::size_t>(t.n_fronts() + 1));
+      for (index_t c = 0; c < t.n_fronts(); ++c) {
+        ASSERT_EQ(map.offsets[c + 1] - map.offsets[c], t.cb_size(c));
+        const index_t p = t.parent[c];
+        if (p < 0) continue;
+        const index_t* prow = t.rows_of(p);
+        const index_t* crow = t.rows_of(c) + t.n_pivots(c);
+        for (index_t i = 0; i < t.cb_size(c); ++i) {
+          const index_t expect = std::find(prow, prow + t.n_rows(p), crow[i]) - prow;
+          ASSERT_LT(expect, t.n_rows(p)) << "row " << crow[i] << " not in the parent";
+          EXPECT_EQ(map.of(c)[i], expect);
+          if (i > 0) EXPECT_LT(map.of(c)[i - 1], map.of(c)[i]);
+        }
+      }
+    }
+  }
+}
+
 }  // namespace
 }  // namespace strata

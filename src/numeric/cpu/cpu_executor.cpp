@@ -11,12 +11,12 @@
 // rather than OpenMP because idle OpenMP threads spin-wait (GOMP's default policy) and
 // starve OpenBLAS's own threads on small machines: measured on 2 cores, bcsstk09 took
 // 68 ms with OpenMP against 0.9 ms single-threaded. Each worker owns a dense front
-// workspace and a row-position map of size n, reused from front to front and from
-// factorization to factorization.
+// workspace, reused from front to front and from factorization to factorization.
 //
 // Per front f with m rows and k pivots:
 //   1. zero the m×m workspace, scatter the original entries (assembly map),
-//   2. extend-add each child's contribution block (rows relative to f via the map),
+//   2. extend-add each child's contribution block (rows relative to f: the analysis's
+//      ChildRowMap),
 //   3. partial factorization (dense_front.hpp),
 //   4. copy the first k columns (and U12 for LU) to the factor, the contribution block
 //      F[k:m, k:m] to the CB arena, and the permuted pivot rows to the factor's rows.
@@ -48,7 +48,6 @@ constexpr double kBigFrontFlops = 2e7;
 
 struct Workspace {
   std::vector<double> front;
-  std::vector<index_t> position;  // global row -> local row in the current front, or -1
   std::vector<index_t> local_perm;
   std::vector<int> pivot_size;
 };
@@ -63,10 +62,8 @@ class CpuExecutor final : public Executor {
   const char* name() const override { return "cpu"; }
 
   void begin(const FactorContext& ctx) override {
-    const index_t n = ctx.analysis->n;
     ws_.resize(threads_ + 1);  // TBB slot indices are < threads_; one spare
     blas_threads_ = -1;        // others (the solve) may have changed it since
-    for (auto& w : ws_) w.position.assign(n, -1);
   }
 
   std::size_t export_cb(const FactorContext& ctx, CbTransfer& t) override {
@@ -157,22 +154,16 @@ void CpuExecutor::process_front(const FactorContext& ctx, index_t f, Workspace& 
   add_entries(F, am.entry_dst.data(), am.entry_src.data(), ctx.values, am.entry_offsets[f],
               am.entry_offsets[f + 1], 0, static_cast<std::int64_t>(mm));
 
-  // 2. extend-add of the children's contribution blocks
-  for (index_t i = 0; i < m; ++i) w.position[rows[i]] = i;
+  // 2. extend-add of the children's contribution blocks (Analysis::child_rows: the
+  // local positions of each child's contribution rows in f)
   const std::vector<double>& arena = *ctx.cb_arena;
   for (index_t q = t.child_offsets[f]; q < t.child_offsets[f + 1]; ++q) {
     const index_t c = t.children[q];
     const index_t mc = t.cb_size(c);
     if (mc == 0) continue;
-    const index_t* crow = t.rows_of(c) + t.n_pivots(c);
     const double* cb = arena.data() + ctx.part->cb_layout->cb_offset[c];
-    // local positions of the child's CB rows in f (increasing, since both are sorted)
-    thread_local std::vector<index_t> rel;
-    rel.resize(mc);
-    for (index_t i = 0; i < mc; ++i) rel[i] = w.position[crow[i]];
-    extend_add(F, m, cb, mc, rel.data(), 0, mc, !lu);
+    extend_add(F, m, cb, mc, an.child_rows.of(c), 0, mc, !lu);
   }
-  for (index_t i = 0; i < m; ++i) w.position[rows[i]] = -1;
 
   // 3. partial factorization
   PivotStats& ps = fac.front_stats[f];

@@ -596,21 +596,9 @@ void CudaExecutor::upload_analysis(const Analysis& an) {
     n_rows[f] = t.n_rows(f);
     n_piv[f] = t.n_pivots(f);
   }
-  // relative positions of each child's contribution rows in its parent
-  std::vector<std::int64_t> rel_off(nf + 1, 0), rel;
-  std::vector<index_t> position(an.n, -1);
-  for (index_t f = 0; f < nf; ++f) rel_off[f + 1] = rel_off[f] + t.cb_size(f);
-  rel.resize(rel_off[nf]);
-  for (index_t f = 0; f < nf; ++f) {
-    const index_t* rows = t.rows_of(f);
-    for (index_t i = 0; i < t.n_rows(f); ++i) position[rows[i]] = i;
-    for (index_t q = t.child_offsets[f]; q < t.child_offsets[f + 1]; ++q) {
-      const index_t c = t.children[q];
-      const index_t* crow = t.rows_of(c) + t.n_pivots(c);
-      for (index_t i = 0; i < t.cb_size(c); ++i) rel[rel_off[c] + i] = position[crow[i]];
-    }
-    for (index_t i = 0; i < t.n_rows(f); ++i) position[rows[i]] = -1;
-  }
+  // relative positions of each child's contribution rows in its parent: the analysis's
+  const std::vector<std::int64_t>& rel_off = an.child_rows.offsets;
+  const std::vector<std::int64_t>& rel = an.child_rows.rel;
   upload(fronts_, s.fronts);
   upload(n_rows_, n_rows);
   upload(n_pivots_, n_piv);
@@ -622,8 +610,6 @@ void CudaExecutor::upload_analysis(const Analysis& an) {
   upload(children_, t.children);
   upload(rel_offsets_, rel_off);
   upload(rel_, rel);
-  rel_offsets_host_ = std::move(rel_off);
-  rel_host_ = std::move(rel);
   // solve arrays
   std::vector<std::int64_t> u_off(nf + 1, 0);
   for (index_t f = 0; f < nf; ++f) u_off[f + 1] = u_off[f] + t.cb_size(f);

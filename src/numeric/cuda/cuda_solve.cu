@@ -57,7 +57,7 @@ void CudaExecutor::prepare_solve_plan(const Analysis& an) {
   if (s_plan_.analysis == an.id && s_plan_.analysis != 0) return;
   int n_sm = 0;
   STRATA_CUDA(cudaDeviceGetAttribute(&n_sm, cudaDevAttrMultiProcessorCount, device_));
-  s_plan_ = make_solve_plan(an.tree, an.schedule, n_sm);
+  s_plan_ = make_solve_plan(an.tree, an.child_rows, an.schedule, n_sm);
   s_plan_.analysis = an.id;
   // not upload(): these bytes belong to no factorization's statistics
   auto up = [&](DeviceBuffer<std::int64_t>& d, const std::vector<std::int64_t>& h) {

@@ -84,11 +84,14 @@ struct SolvePlan {
   std::vector<std::int64_t> large_offsets{0}, large_fronts;
 };
 
-/// Builds the plan for tree `t` and its level schedule `s` on a device of `n_sm`
-/// multiprocessors (≥ 1). `path` forces one path for every front (tests); `model` splits
-/// each level by the time model above. Deterministic.
-inline SolvePlan make_solve_plan(const symbolic::AssemblyTree& t, const symbolic::LevelSchedule& s,
-                                 int n_sm, SolvePath path = SolvePath::model) {
+/// Builds the plan for tree `t` (with its extend-add map `child_rows`, e.g.
+/// Analysis::child_rows) and its level schedule `s` on a device of `n_sm` multiprocessors
+/// (≥ 1). `path` forces one path for every front (tests); `model` splits each level by
+/// the time model above. Deterministic.
+inline SolvePlan make_solve_plan(const symbolic::AssemblyTree& t,
+                                 const symbolic::ChildRowMap& child_rows,
+                                 const symbolic::LevelSchedule& s, int n_sm,
+                                 SolvePath path = SolvePath::model) {
   const index_t nf = t.n_fronts();
   SolvePlan p;
   p.n_sm = std::max(n_sm, 1);
@@ -98,22 +101,17 @@ inline SolvePlan make_solve_plan(const symbolic::AssemblyTree& t, const symbolic
   // inverse extend-add map: for each parent row, the child entries adding into it, in
   // child order (a child contributes at most once to a row)
   const std::size_t nrows = t.rows.size();
-  std::vector<index_t> position(t.n, -1);
   std::vector<std::int64_t> count(nrows + 1, 0), target(p.u_offset[nf]);
-  for (index_t f = 0; f < nf; ++f) {
-    const index_t* rows = t.rows_of(f);
-    for (index_t i = 0; i < t.n_rows(f); ++i) position[rows[i]] = i;
+  for (index_t f = 0; f < nf; ++f)
     for (index_t q = t.child_offsets[f]; q < t.child_offsets[f + 1]; ++q) {
       const index_t c = t.children[q];
-      const index_t* crow = t.rows_of(c) + t.n_pivots(c);
+      const index_t* rel = child_rows.of(c);
       for (index_t e = 0; e < t.cb_size(c); ++e) {
-        const std::int64_t row = t.row_offsets[f] + position[crow[e]];
+        const std::int64_t row = t.row_offsets[f] + rel[e];
         target[p.u_offset[c] + e] = row;
         ++count[row + 1];
       }
     }
-    for (index_t i = 0; i < t.n_rows(f); ++i) position[rows[i]] = -1;
-  }
   p.inv_offsets.assign(nrows + 1, 0);
   std::partial_sum(count.begin(), count.end(), p.inv_offsets.begin());
   p.inv_src.assign(p.inv_offsets[nrows], 0);

@@ -110,8 +110,8 @@ void CudaExecutor::assemble_on_host(const numeric::FactorContext& ctx, index_t f
   tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, blocks), [&](const auto& r) {
     for (std::int64_t b = r.begin(); b < r.end(); ++b) {
       const std::int64_t c0 = b * kCols, c1 = std::min(m, c0 + kCols);
-      assemble_columns(an, ctx.values, f, block, rel_host_.data(), rel_offsets_host_.data(),
-                       symmetric, c0, c1, H + c0 * m);
+      assemble_columns(an, ctx.values, f, block, an.child_rows.rel.data(),
+                       an.child_rows.offsets.data(), symmetric, c0, c1, H + c0 * m);
     }
   });
 }
@@ -129,8 +129,8 @@ void CudaExecutor::assemble_llt_split_from(const Analysis& an, const double* val
   // blocks of the pivot columns, then (when C is wanted) of the contribution block's
   const std::int64_t pb = (k + kCols - 1) / kCols;
   const std::int64_t blocks = pb + (C ? (mc + kCols - 1) / kCols : 0);
-  const std::int64_t* rel = rel_host_.data();
-  const std::int64_t* rel_off = rel_offsets_host_.data();
+  const std::int64_t* rel = an.child_rows.rel.data();
+  const std::int64_t* rel_off = an.child_rows.offsets.data();
   tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, blocks), [&](const auto& r) {
     std::vector<double> W;  // a block of the contribution block's columns, whole
     for (std::int64_t b = r.begin(); b < r.end(); ++b) {
