@@ -1,14 +1,12 @@
-// strata — the Solver: phases, type resolution, scaling, and iterative refinement.
+// strata — the Solver: phases, type resolution, scaling, and the solve phase.
 //
 // The Solver keeps the Analysis (pattern), the canonical values of the last factorized
 // matrix (for residuals), the factor and the executor's workspaces. factorize and
 // refactorize run the same code: every buffer is sized by the analysis and reused, so a
 // refactorization gives bitwise the factor a fresh factorization would.
 //
-// Iterative refinement (Wilkinson; Higham, "Accuracy and Stability of Numerical
-// Algorithms", ch. 12): x ← x + A⁻¹(b − A x) with the residual in working precision,
-// stopping at the normwise backward error ‖b−Ax‖∞ / (‖A‖∞‖x‖∞ + ‖b‖∞) ≤ tolerance, or
-// when a step fails to halve it.
+// The solve applies the factor once, then (Options::solve_check) checks and refines the
+// solution with solve/refinement.hpp: iterative refinement, GMRES where it stalls.
 //
 // Several GPUs (Options::num_gpus resolving to more than one with the CUDA backend): the
 // analysis splits the tree for that many workers and the factorization runs on one CUDA
@@ -37,6 +35,7 @@
 #include "numeric/delayed.hpp"
 #include "numeric/factor.hpp"
 #include "solve/gmres.hpp"
+#include "solve/refinement.hpp"
 
 namespace strata {
 namespace detail {
@@ -849,81 +848,33 @@ static void solve_impl(SolverState& s, const double* b, double* x, index_t nrhs)
   // Options::solve_check: after a factorization without perturbed pivots the caller may
   // take the factor's solution unchecked
   const bool check = o.solve_check == SolveCheck::always || s.stats.factor.perturbed_pivots > 0;
-  std::vector<double> work, r(check ? static_cast<std::size_t>(n) * nrhs : 0), d(r.size());
+  std::vector<double> work;
   Timer first;
   const bool on_device = apply_inverse(s, b, x, nrhs, work);
   const double first_solve_seconds = first.seconds();
   check_solution_finite(x, n, nrhs);
 
-  // backward error of each column; refine the columns above the tolerance
+  // backward error of each column, refinement, GMRES where it stalls (solve/refinement.hpp)
   const solve::Operator op_a = [&](const double* in, double* out) { multiply(s.values, in, out); };
-  auto berr_of = [&](index_t col) {
-    return solve::backward_error(n, op_a, s.norm_inf, b + col * n, x + col * n, r.data() + col * n);
-  };
-  std::vector<double> berr(nrhs), last(nrhs);
-  std::vector<char> active(nrhs, 1);
-  int steps = 0;
-  if (check)
-    for (index_t c = 0; c < nrhs; ++c) berr[c] = berr_of(c);
-  for (; check && steps < o.refinement_max_steps; ++steps) {
-    bool any = false;
-    for (index_t c = 0; c < nrhs; ++c) {
-      if (active[c] && berr[c] <= o.refinement_tolerance) active[c] = 0;
-      any |= active[c] != 0;
-    }
-    if (!any) break;
-    apply_inverse(s, r.data(), d.data(), nrhs, work);
-    bool improved = false;
-    for (index_t c = 0; c < nrhs; ++c) {
-      if (!active[c]) continue;
-      std::vector<double> saved(x + c * n, x + (c + 1) * n);
-      for (index_t i = 0; i < n; ++i) x[i + c * n] += d[i + c * n];
-      last[c] = berr[c];
-      berr[c] = berr_of(c);
-      if (berr[c] > 0.5 * last[c]) {  // no longer converging: keep the better iterate
-        if (berr[c] > last[c]) {
-          std::copy(saved.begin(), saved.end(), x + c * n);
-          berr[c] = last[c];
-          berr_of(c);
-        }
-        active[c] = 0;
-      } else {
-        improved = true;
-      }
-    }
-    if (!improved) {
-      ++steps;
-      break;
-    }
-  }
-  // The rounding floor of the backward error: b − A x computed in working precision is
-  // off by up to γ_{m+1}(|b| + |A||x|), m the most entries in a row (Higham, "Accuracy and
-  // Stability of Numerical Algorithms", §3.5 and §12.1), so a backward error below
-  // (m+1)·u cannot be told from zero. Refinement that stalls under it has converged as far
-  // as can be checked, and GMRES cannot do better: it is not run for those columns.
   const double floor = rounding_floor(s);
   const double enough = std::max(o.refinement_tolerance, floor);
-  // refinement stalled: GMRES preconditioned by the factorization (see solve/gmres.hpp)
-  int gmres_iterations = 0;
-  if (check && o.gmres_max_iterations > 0) {
+  solve::RefinementResult refined;
+  if (check) {
     std::vector<double> tmp;
-    const solve::Operator op_m = [&](const double* in, double* out) {
-      apply_inverse(s, in, out, 1, tmp);
+    const solve::BlockOperator m_inv = [&](const double* in, double* out, index_t k) {
+      apply_inverse(s, in, out, k, tmp);
     };
-    for (index_t c = 0; c < nrhs; ++c) {
-      if (berr[c] <= enough) continue;
-      const solve::GmresResult g = solve::gmres(n, op_a, op_m, s.norm_inf, b + c * n, x + c * n, 50,
-                                                o.gmres_max_iterations, enough);
-      gmres_iterations += g.iterations;
-      berr[c] = std::min(berr[c], g.backward_error);
-    }
+    refined = solve::refine(
+        n, nrhs, op_a, m_inv, s.norm_inf, b, x,
+        {o.refinement_max_steps, o.refinement_tolerance, floor, o.gmres_max_iterations});
   }
+  const std::vector<double>& berr = refined.backward_error;
   check_solution_finite(x, n, nrhs);  // refinement keeps the better iterate: a safeguard
   SolveStats& ss = s.stats.solve;
-  ss.gmres_iterations = gmres_iterations;
-  ss.refinement_steps = steps;
+  ss.gmres_iterations = refined.gmres_iterations;
+  ss.refinement_steps = refined.steps;
   ss.backward_error = 0;
-  for (index_t c = 0; c < nrhs; ++c) ss.backward_error = std::max(ss.backward_error, berr[c]);
+  for (double e : berr) ss.backward_error = std::max(ss.backward_error, e);
   if (!check) ss.backward_error = std::numeric_limits<double>::quiet_NaN();
   ss.backward_error_floor = floor;
   // κ∞(A) ≥ ‖A‖∞‖x‖∞/‖b‖∞ for every solution: a singular or ill-conditioned A shows here
@@ -947,6 +898,7 @@ static void solve_impl(SolverState& s, const double* b, double* x, index_t nrhs)
   ss.relative_residual = 0;
   ss.singular_consistent = false;
   if (s.stats.factor.perturbed_pivots > 0) {
+    std::vector<double> r(static_cast<std::size_t>(n) * nrhs);
     for (index_t c = 0; c < nrhs; ++c) {
       solve::backward_error(n, op_a, s.norm_inf, b + c * n, x + c * n, r.data() + c * n);
       double rn = 0, bn = 0;
