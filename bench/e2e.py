@@ -101,12 +101,22 @@ def main(argv: list[str] | None = None) -> int:
                 baseline_label=args.baseline_label, rows=[])
     binaries = [("current", args.strata)] + ([("baseline", args.baseline)] if args.baseline
                                              else [])
+    models = []
     for item in args.models.split(","):
-        spec, t_end = item.rsplit(":", 1)
+        # SPEC:T_END; every generated model but andrews has an argument (tracked:100), so
+        # "tracked:100" alone would read as the model tracked to t = 100 s: refused
+        spec, _, t_end = item.rpartition(":")
+        if not spec or (":" not in spec and spec != "andrews"):
+            ap.error(f"--models: {item!r} is not SPEC:T_END (e.g. tracked:100:1.0)")
+        try:
+            models.append((spec, float(t_end)))
+        except ValueError:
+            ap.error(f"--models: the end time of {item!r} is not a number")
+    for spec, t_end in models:
         best = {}
         for _ in range(max(args.repeat, 1)):
             for name, binary in binaries:  # alternating, so both see the same machine
-                r = run(binary, spec, float(t_end), args.device, args.threads)
+                r = run(binary, spec, t_end, args.device, args.threads)
                 if name not in best or r["wall_s"] < best[name]["wall_s"]:
                     best[name] = r
         row = {"model": spec, **{name: best[name] for name, _ in binaries}}
