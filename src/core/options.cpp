@@ -5,7 +5,9 @@
 #include "strata/options.hpp"
 
 #include <cmath>
+#include <cstdio>
 #include <string>
+#include <type_traits>
 #include <utility>
 
 #include "strata/errors.hpp"
