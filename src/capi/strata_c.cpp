@@ -182,10 +182,6 @@ void factor_phase(strata_solver* s, F&& f) {
 
 constexpr const char* kNullSolver = "strata: the solver handle is NULL";
 
-}  // namespace
-
-namespace {
-
 // Sets one option on a copy, checks the copy with the vocabulary every interface shares
 // (strata::validate: the same ranges and messages as the C++ API, the CLI and Python) and
 // keeps it only when it passes: a refused value leaves the solver's options unchanged.
