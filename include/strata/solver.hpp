@@ -74,8 +74,8 @@ class Solver {
   void refactorize(const SparseMatrix& a);
 
   /// Solves A X = B for nrhs right-hand sides. b and x are column-major n×nrhs arrays
-  /// (leading dimension n); they may not alias. Iterative refinement follows
-  /// Options::refinement_*. Throws InvalidState before factorize, InvalidInput for a
+  /// (leading dimension n); they may not alias. The solution is checked and refined as
+  /// Options::solve_check and Options::refinement_* say (solve/refinement.hpp). Throws InvalidState before factorize, InvalidInput for a
   /// non-finite b, OutOfMemory (the factor is kept), or when the solution overflows the double
   /// range ("no representable solution"; x is then unspecified). A singular matrix factorized with
   /// perturbed pivots gives a finite x whose stats().solve.backward_error says whether it solves
