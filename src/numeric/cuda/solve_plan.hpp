@@ -95,8 +95,7 @@ inline SolvePlan make_solve_plan(const symbolic::AssemblyTree& t,
   const index_t nf = t.n_fronts();
   SolvePlan p;
   p.n_sm = std::max(n_sm, 1);
-  p.u_offset.assign(nf + 1, 0);
-  for (index_t f = 0; f < nf; ++f) p.u_offset[f + 1] = p.u_offset[f] + t.cb_size(f);
+  p.u_offset.assign(child_rows.offsets.begin(), child_rows.offsets.end());  // cb sizes' sums
 
   // inverse extend-add map: for each parent row, the child entries adding into it, in
   // child order (a child contributes at most once to a row)
