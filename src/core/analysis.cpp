@@ -125,30 +125,36 @@ SparseMatrix symmetric_pattern(const SparseMatrix& c, bool symmetric,
     p.offsets = std::move(b.offsets);
     p.indices = std::move(b.indices);
   }
-  // symmetrize: lower storage expands; a full unsymmetric pattern is mirrored too
-  // (expand_symmetric of a "lower"-declared matrix mirrors every off-diagonal entry,
-  // which for a full matrix gives B + Bᵀ with duplicates summed away).
-  SparseMatrix mirrored;
-  mirrored.n_rows = mirrored.n_cols = p.n_cols;
-  mirrored.layout = Layout::csc;
-  mirrored.storage = Storage::full;
-  // gather both (i,j) and (j,i)
-  std::vector<index_t> cnt(p.n_cols + 1, 0);
-  for (index_t j = 0; j < p.n_cols; ++j)
-    for (index_t k = p.offsets[j]; k < p.offsets[j + 1]; ++k) {
-      ++cnt[j + 1];
-      if (p.indices[k] != j) ++cnt[p.indices[k] + 1];
+  // B + Bᵀ: column j is the union of B(:, j) and row j of B. Both are sorted (the columns
+  // of the canonical c keep their order in B; a bucket transpose lists each row in
+  // increasing column order), so a merge gives the canonical union without a sort.
+  const index_t n = p.n_cols;
+  std::vector<index_t> tp(n + 1, 0);
+  for (index_t k = 0; k < p.nnz(); ++k) ++tp[p.indices[k] + 1];
+  for (index_t j = 0; j < n; ++j) tp[j + 1] += tp[j];
+  std::vector<index_t> ti(p.nnz()), next(tp.begin(), tp.end() - 1);
+  for (index_t j = 0; j < n; ++j)
+    for (index_t k = p.offsets[j]; k < p.offsets[j + 1]; ++k) ti[next[p.indices[k]]++] = j;
+  SparseMatrix u;
+  u.n_rows = u.n_cols = n;
+  u.layout = Layout::csc;
+  u.storage = Storage::full;
+  u.offsets.assign(n + 1, 0);
+  u.indices.resize(p.nnz() + ti.size());
+  index_t w = 0;
+  for (index_t j = 0; j < n; ++j) {
+    index_t a = p.offsets[j], ae = p.offsets[j + 1], b = tp[j], be = tp[j + 1];
+    while (a < ae || b < be) {
+      const index_t ia = a < ae ? p.indices[a] : n, ib = b < be ? ti[b] : n;
+      const index_t i = std::min(ia, ib);
+      a += ia == i;
+      b += ib == i;
+      u.indices[w++] = i;
     }
-  for (index_t j = 0; j < p.n_cols; ++j) cnt[j + 1] += cnt[j];
-  mirrored.offsets = cnt;
-  mirrored.indices.resize(cnt.back());
-  for (index_t j = 0; j < p.n_cols; ++j)
-    for (index_t k = p.offsets[j]; k < p.offsets[j + 1]; ++k) {
-      const index_t i = p.indices[k];
-      mirrored.indices[cnt[j]++] = i;
-      if (i != j) mirrored.indices[cnt[i]++] = j;
-    }
-  return canonicalize(mirrored);  // sorts and removes the duplicates of B ∩ Bᵀ
+    u.offsets[j + 1] = w;
+  }
+  u.indices.resize(w);
+  return u;
 }
 
 // True when the lower-triangular canonical matrix `low` has a diagonal entry that is

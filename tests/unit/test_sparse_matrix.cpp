@@ -65,8 +65,17 @@ TEST(SparseMatrix, CanonicalizeAndExpandMatchDense) {
           for (index_t p = c.offsets[j] + 1; p < c.offsets[j + 1]; ++p)
             EXPECT_LT(c.indices[p - 1], c.indices[p]) << "not sorted or duplicated";
         EXPECT_EQ(test::to_dense(c), test::to_dense(a));
+        // an already canonical matrix comes back unchanged (the copy, not a re-sort)
+        const SparseMatrix cc = canonicalize(c);
+        EXPECT_EQ(cc.offsets, c.offsets);
+        EXPECT_EQ(cc.indices, c.indices);
+        EXPECT_EQ(cc.values, c.values);
+        EXPECT_EQ(cc.storage, c.storage);
         SparseMatrix e = expand_symmetric(a);
         EXPECT_EQ(e.storage, Storage::full);
+        const SparseMatrix ee = expand_symmetric(e);
+        EXPECT_EQ(ee.indices, e.indices);
+        EXPECT_EQ(ee.values, e.values);
         std::vector<double> de = test::to_dense(e);
         for (index_t k = 0; k < n * n; ++k) EXPECT_NEAR(de[k], dense[k], 1e-15);
         // SpMV against the dense product
@@ -125,6 +134,46 @@ TEST(SparseMatrix, NumericalSymmetry) {
   EXPECT_TRUE(is_numerically_symmetric(full));
   SparseMatrix g = test::random_sparse(50, 3, test::RandomKind::general, rng);
   EXPECT_FALSE(is_numerically_symmetric(g));
+}
+
+// Against the dense definition A = Aᵀ: symmetric matrices, one value changed, and one entry
+// without its mirror (anywhere, the last entry of the last column included), in messy
+// (unsorted, duplicated) and canonical forms.
+TEST(SparseMatrix, NumericalSymmetryMatchesDense) {
+  auto rng = test::fresh_rng();
+  auto dense_symmetric = [](const SparseMatrix& a) {
+    const std::vector<double> d = test::to_dense(a);
+    const index_t n = a.n_rows;
+    for (index_t j = 0; j < n; ++j)
+      for (index_t i = 0; i < n; ++i)
+        if (d[i + j * n] != d[j + i * n]) return false;
+    return true;
+  };
+  for (index_t n : {1, 2, 3, 5, 733}) {
+    std::vector<double> dense;
+    SparseMatrix low = messy(n, n, Layout::csc, Storage::lower, rng, dense);
+    const SparseMatrix sym = expand_symmetric(low);  // full, symmetric by construction
+    EXPECT_TRUE(is_numerically_symmetric(sym)) << "n = " << n;
+    EXPECT_TRUE(dense_symmetric(sym));
+    std::uniform_int_distribution<index_t> pick(0, n - 1);
+    for (int trial = 0; trial < 20; ++trial) {
+      // one off-diagonal value changed
+      SparseMatrix v = sym;
+      if (v.nnz() > 0) {
+        std::uniform_int_distribution<index_t> entry(0, v.nnz() - 1);
+        v.values[entry(rng)] += 0.5;
+        EXPECT_EQ(is_numerically_symmetric(v), dense_symmetric(v)) << "n = " << n;
+      }
+      // one entry (i, j) added in messy form (appended to column j, unsorted)
+      SparseMatrix x = sym;
+      const index_t i = trial == 0 ? n - 1 : pick(rng), j = trial == 0 ? n - 1 : pick(rng);
+      x.indices.insert(x.indices.begin() + x.offsets[j + 1], i);
+      x.values.insert(x.values.begin() + x.offsets[j + 1], 1.0);
+      for (index_t k = j + 1; k <= n; ++k) ++x.offsets[k];
+      EXPECT_EQ(is_numerically_symmetric(x), dense_symmetric(x))
+          << "n = " << n << ", entry (" << i << ", " << j << ")";
+    }
+  }
 }
 
 TEST(Generators, GridLaplaciansAndElasticityAreSpdStencils) {
