@@ -515,7 +515,7 @@ struct SimulateArgs {
   std::size_t device_memory_limit = 0;
   double t_end = 0, step = 0, output_interval = 0, newton_tol = 0, rtol = 1e-4, atol = 1e-6,
          max_step = 0;
-  int order = 0, threads = 0;
+  int order = 0, threads = 0, anderson_depth = -1;
   index_t dump_step = 1;
   bool vtk = false, full_newton = false, quiet = false, verbose = false, dense = false,
        variable_step = false, plot = false;
@@ -646,6 +646,7 @@ int run_simulate_checked(const SimulateArgs& a, bool& started) {
     if (!a.pivoting.empty()) rs.pivoting = value_of<Pivoting>(a.pivoting);
     rs.threads = a.threads;
     rs.full_newton = a.full_newton;
+    rs.anderson_depth = a.anderson_depth;
     rs.newton_tol = a.newton_tol;
     rs.variable_step = a.variable_step;
     rs.rtol = a.rtol;
@@ -791,6 +792,11 @@ int main(int argc, char** argv) {
   simulate->add_flag("--full-newton", sim.full_newton,
                      "refactorize at every Newton iteration (default: modified Newton)");
   simulate
+      ->add_option("--anderson-depth", sim.anderson_depth,
+                   "modified Newton: Anderson acceleration over this many past updates while "
+                   "a factor is reused (default 3; 0: off)")
+      ->check(CLI::Range(0, 10));
+  simulate
       ->add_option("--newton-tol", sim.newton_tol,
                    "relative Newton tolerance (default: the model's, else 1e-6)")
       ->check(kPositive);
@@ -884,10 +890,10 @@ int main(int argc, char** argv) {
     }
   } finish{comm};
   if (rank != 0 && !*solve) return 0;
-  for (const char* opt :
-       {"--step", "--order", "--device", "--output-interval", "--vtk", "--full-newton",
-        "--newton-tol", "--threads", "--variable-step", "--rtol", "--atol", "--max-step",
-        "--dense-reference", "--write-model", "--formulation", "--energy-tol", "--pivoting"})
+  for (const char* opt : {"--step", "--order", "--device", "--output-interval", "--vtk",
+                          "--full-newton", "--anderson-depth", "--newton-tol", "--threads",
+                          "--variable-step", "--rtol", "--atol", "--max-step", "--dense-reference",
+                          "--write-model", "--formulation", "--energy-tol", "--pivoting"})
     if (simulate->count(opt) > 0) sim.resume_conflicts.push_back(opt);
   try {
     if (*analyze) return run_analyze(analyze_args);

@@ -132,6 +132,7 @@ py::dict run(const std::string& kind, const std::string& source, const std::stri
   strata::parse(device, &rs.backend);
   integer("threads", rs.threads);
   flag("full_newton", rs.full_newton);
+  integer("anderson_depth", rs.anderson_depth);
   num("newton_tol", rs.newton_tol);
   flag("variable_step", rs.variable_step);
   num("rtol", rs.rtol);
@@ -176,6 +177,7 @@ py::dict run(const std::string& kind, const std::string& source, const std::stri
       py::arg("t_end") = o.integrator.t_end, py::arg("step") = o.integrator.step,
       py::arg("order") = o.integrator.order, py::arg("variable_step") = o.integrator.variable_step,
       py::arg("modified_newton") = o.integrator.modified_newton,
+      py::arg("anderson_depth") = o.integrator.anderson_depth,
       py::arg("newton_rtol") = o.integrator.newton_rtol,
       py::arg("newton_atol") = o.integrator.newton_atol,
       py::arg("output_interval") = o.output_interval, py::arg("device") = device);

@@ -72,8 +72,8 @@ class SimulationResult:
         name, planar (bool), n (coordinates), m (constraint equations), bodies, forces.
     settings : dict
         The settings actually used (after the model's defaults): t_end, step, order,
-        variable_step, modified_newton, newton_rtol, newton_atol, output_interval,
-        device.
+        variable_step, modified_newton, anderson_depth, newton_rtol, newton_atol,
+        output_interval, device.
     complete : bool
         True when the run reached t_end (always True for a returned result; a run that
         stops early raises SimulationError, whose ``result`` has complete=False).
@@ -139,7 +139,8 @@ def generate_model(spec):
 
 
 def simulate(model=None, *, generate=None, t_end=None, step=None, order=None, device="auto",
-             threads=0, full_newton=False, newton_tol=None, variable_step=False, rtol=1e-4,
+             threads=0, full_newton=False, anderson_depth=None, newton_tol=None,
+             variable_step=False, rtol=1e-4,
              atol=1e-6, max_step=None, output_interval=None, output_dir=None, vtk=False,
              dump_matrix=None, dump_step=1, dense_reference=False):
     """Runs a multibody simulation and returns its time histories as NumPy arrays.
@@ -164,6 +165,9 @@ def simulate(model=None, *, generate=None, t_end=None, step=None, order=None, de
         Host threads for strata and the assembly (0: automatic).
     full_newton : bool
         Refactorize at every Newton iteration (default: modified Newton).
+    anderson_depth : int, optional
+        Modified Newton: Anderson acceleration over this many past updates while a factor
+        is reused, 0..10 (default 3; 0: off).
     newton_tol : float, optional
         Relative Newton tolerance (default: the model's, else 1e-6).
     variable_step : bool
@@ -239,6 +243,7 @@ def simulate(model=None, *, generate=None, t_end=None, step=None, order=None, de
     settings = {
         "t_end": float(t_end or 0), "step": float(step or 0), "order": int(order or 0),
         "device": device, "threads": int(threads), "full_newton": bool(full_newton),
+        "anderson_depth": -1 if anderson_depth is None else int(anderson_depth),
         "newton_tol": float(newton_tol or 0), "variable_step": bool(variable_step),
         "rtol": float(rtol), "atol": float(atol), "max_step": float(max_step or 0),
         "output_interval": float(output_interval or 0), "vtk": bool(vtk),

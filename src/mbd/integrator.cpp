@@ -54,7 +54,10 @@ bool all_finite(const std::vector<double>& x) {
 }  // namespace
 
 Integrator::Integrator(const Model& model, IntegratorOptions options)
-    : model_(model), opts_(std::move(options)), sys_(model) {
+    : model_(model), opts_(std::move(options)), sys_(model), anderson_(opts_.anderson_depth) {
+  if (opts_.anderson_depth < 0 || opts_.anderson_depth > 10)
+    throw InvalidInput("the Anderson depth must be 0..10, got " +
+                       std::to_string(opts_.anderson_depth));
   if (opts_.order < 1 || opts_.order > 5)
     throw InvalidInput("BDF order must be 1..5, got " + std::to_string(opts_.order));
   if (!(opts_.step > 0)) throw InvalidInput("the step must be positive");
@@ -268,6 +271,7 @@ int Integrator::newton(double h, StepInfo& info, const BdfTerms& bdf) {
     factor_valid_ = false;
   res_.resize(N);
   dx_.resize(N);
+  anderson_.reset();
   rhs_.resize(N);
   double err_first = 0;
   int since_jac = 0;  // iterations since the factor was last refreshed
@@ -305,6 +309,7 @@ int Integrator::newton(double h, StepInfo& info, const BdfTerms& bdf) {
         return 0;
       }
       factor_beta_ = bdf.beta;
+      anderson_.reset();  // a new map x − J⁻¹H(x)
       refresh = false;
       fresh = true;
       since_jac = 0;
@@ -334,13 +339,15 @@ int Integrator::newton(double h, StepInfo& info, const BdfTerms& bdf) {
     double atol = 0, rtol = 0;
     newton_tolerances(&atol, &rtol);
     const double atol_a = atol / bdf.beta;
-    for (index_t i = 0; i < N; ++i) x_[i] += dx_[i];
-    double err = 0;
+    // the weights of the update's error norm, at the updated x (λ is not measured)
+    weights_.assign(N, 0.0);
     for (index_t i = 0; i < n; ++i) {
-      err = std::max(err, std::abs(dx_[i]) / (atol_a + rtol * std::abs(xa[i])));
-      err = std::max(err, std::abs(dx_[n + i]) / (atol + rtol * std::abs(xv[i])));
-      err = std::max(err, std::abs(dx_[2 * n + i]) / (atol + rtol * std::abs(xq[i])));
+      weights_[i] = 1 / (atol_a + rtol * std::abs(xa[i] + dx_[i]));
+      weights_[n + i] = 1 / (atol + rtol * std::abs(xv[i] + dx_[n + i]));
+      weights_[2 * n + i] = 1 / (atol + rtol * std::abs(xq[i] + dx_[2 * n + i]));
     }
+    double err = 0;
+    for (index_t i = 0; i < 3 * n; ++i) err = std::max(err, std::abs(dx_[i]) * weights_[i]);
     // Convergence test (Brenan, Campbell & Petzold 1996, §5.2.2, as in DASSL): with the
     // rate ρ = (‖δ_k‖/‖δ_1‖)^(1/(k−1)) since the last new Jacobian, the remaining error is
     // about ρ/(1−ρ)‖δ_k‖. An update 1000 times below the tolerance is accepted as it is
@@ -376,6 +383,14 @@ int Integrator::newton(double h, StepInfo& info, const BdfTerms& bdf) {
       }
     }
     if (refresh) since_jac = 0;
+    // the next iterate: Anderson-accelerated while the same factor is used again, the
+    // plain Newton update when the iteration ends or a new Jacobian comes next
+    if (converged || refresh) {
+      for (index_t i = 0; i < N; ++i) x_[i] += dx_[i];
+      anderson_.reset();
+    } else {
+      anderson_.step(x_.data(), dx_.data(), weights_.data(), N);
+    }
     if (!converged) continue;
     if (sys_.check_candidates(xq) == 2) {
       // a contact pair outside the Newton matrix closed during the step: take it in and

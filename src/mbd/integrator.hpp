@@ -26,6 +26,7 @@
 #include <string>
 #include <vector>
 
+#include "mbd/anderson.hpp"
 #include "mbd/linear_solver.hpp"
 #include "mbd/model.hpp"
 #include "mbd/newton_system.hpp"
@@ -52,6 +53,9 @@ struct IntegratorOptions {
   double step = 1e-3;           ///< nominal step h (s)
   int order = 2;                ///< BDF order k, 1..5
   bool modified_newton = true;  ///< keep the factor while Newton converges fast
+  /// Anderson acceleration of the iterations that reuse a factor: the number of past
+  /// updates combined (anderson.hpp; 0: plain modified Newton).
+  int anderson_depth = 3;
   int max_newton_iterations = 25;
   double newton_rtol = 1e-6;             ///< relative tolerance of the Newton update
   double newton_atol = 1e-8;             ///< absolute tolerance (q, v; a: times b0/h)
@@ -66,7 +70,7 @@ struct IntegratorOptions {
   /// until it needs static pivots, delayed from then to the next analysis
   /// (make_strata_solver).
   std::optional<Pivoting> pivoting;
-  int threads = 0;  ///< CPU threads for strata and the assembly (0: all)
+  int threads = 0;            ///< CPU threads for strata and the assembly (0: all)
   bool dense_solver = false;  ///< LAPACK instead of strata (tests only)
   /// A fresh analysis of the Newton matrix at every step attempt, with the current
   /// values (tests: the reference for the loop that reuses one analysis per pattern).
@@ -230,6 +234,8 @@ class Integrator {
   const Model& model_;
   IntegratorOptions opts_;
   NewtonSystem sys_;
+  AndersonMixing anderson_;
+  std::vector<double> weights_;  // of the Newton update's error norm
   std::unique_ptr<LinearSolver> solver_;
   Partition partition_;
   bool pattern_changed_ = true, factor_valid_ = false, fresh_analysis_ = false, retry_ = false;

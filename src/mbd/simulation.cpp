@@ -191,6 +191,7 @@ nlohmann::json integrator_options_json(const IntegratorOptions& o) {
           {"step", o.step},
           {"order", o.order},
           {"modified_newton", o.modified_newton},
+          {"anderson_depth", o.anderson_depth},
           {"max_newton_iterations", o.max_newton_iterations},
           {"newton_rtol", o.newton_rtol},
           {"newton_atol", o.newton_atol},
@@ -227,6 +228,7 @@ IntegratorOptions checkpoint_integrator_options(const nlohmann::json& ck) {
   j.at("step").get_to(o.step);
   j.at("order").get_to(o.order);
   j.at("modified_newton").get_to(o.modified_newton);
+  o.anderson_depth = j.value("anderson_depth", 0);  // checkpoints written before it: plain
   j.at("max_newton_iterations").get_to(o.max_newton_iterations);
   j.at("newton_rtol").get_to(o.newton_rtol);
   j.at("newton_atol").get_to(o.newton_atol);
@@ -303,6 +305,7 @@ SimulationOptions simulation_options(const Model& model, const RunSettings& s) {
   io.pivoting = s.pivoting;
   io.threads = s.threads;
   io.modified_newton = !s.full_newton;
+  if (s.anderson_depth >= 0) io.anderson_depth = s.anderson_depth;
   if (model.newton_rtol > 0) io.newton_rtol = model.newton_rtol;
   if (model.newton_atol > 0) io.newton_atol = model.newton_atol;
   if (s.newton_tol > 0) io.newton_rtol = s.newton_tol;

@@ -131,6 +131,7 @@ struct RunSettings {
   std::optional<Pivoting> pivoting;     ///< IntegratorOptions::pivoting
   int threads = 0;                      ///< host threads for strata and the assembly (0: automatic)
   bool full_newton = false;             ///< refactorize at every Newton iteration
+  int anderson_depth = -1;              ///< IntegratorOptions::anderson_depth (< 0: its default)
   double newton_tol = 0;                ///< relative Newton tolerance
   bool variable_step = false;           ///< variable step and order with local error control
   double rtol = 1e-4, atol = 1e-6, max_step = 0;  ///< of variable steps (max_step 0: t_end/10)
