@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <ctime>
 #include <filesystem>
 #include <fstream>
@@ -86,7 +87,23 @@ Problem load_problem(const std::string& name) {
   return p;
 }
 
+// The commit prepare.sh recorded in .carry/COMMIT (the working directory is the
+// repository's root on the lent GPU machine), or "" when the run is not a carried one
+// (STRATA_CARRIED=1, set by the scripts/gpu run scripts): the binaries there were built
+// here, and the machine's own checkout says nothing about them.
+namespace {
+std::string carried_commit() {
+  const char* carried = std::getenv("STRATA_CARRIED");
+  if (!carried || std::string(carried) != "1") return "";
+  std::ifstream f(".carry/COMMIT");
+  std::string line;
+  std::getline(f, line);
+  return line;
+}
+}  // namespace
+
 nlohmann::json run_metadata(int argc, char** argv) {
+  const std::string carried = carried_commit();
   std::string cmd;
   for (int i = 0; i < argc; ++i) cmd += (i ? " " : "") + std::string(argv[i]);
   std::string cpu = command_output("grep -m1 'model name' /proc/cpuinfo | cut -d: -f2");
@@ -97,10 +114,14 @@ nlohmann::json run_metadata(int argc, char** argv) {
       {"date", utc_now("%Y-%m-%dT%H:%M:%SZ")},
       {"command", cmd},
       {"git_commit",
-       command_output("git -C " STRATA_SOURCE_DIR " rev-parse --short HEAD 2>/dev/null")},
-      {"git_dirty", !command_output("git -C " STRATA_SOURCE_DIR
-                                    " status --porcelain --untracked-files=no 2>/dev/null")
-                         .empty()},
+       !carried.empty()
+           ? carried.substr(0, carried.find(' '))
+           : command_output("git -C " STRATA_SOURCE_DIR " rev-parse --short HEAD 2>/dev/null")},
+      {"git_dirty", !carried.empty()
+                        ? carried.find("uncommitted") != std::string::npos
+                        : !command_output("git -C " STRATA_SOURCE_DIR
+                                          " status --porcelain --untracked-files=no 2>/dev/null")
+                               .empty()},
       {"machine",
        {{"host", host},
         {"cpu", cpu},

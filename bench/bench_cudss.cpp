@@ -10,7 +10,7 @@
 // cuDSS gets the upper triangle (CSR view of strata's lower CSC) for SPD matrices and the
 // whole matrix for unsymmetric ones; 32-bit indices. Results: <dir>/cudss-*.json.
 //
-//   bench_cudss [--problems a,b,...] [--repeat R] [--results-dir DIR]
+//   bench_cudss [--problems a,b,...] [--repeat R] [--tag NAME] [--results-dir DIR]
 #include <cuda_runtime.h>
 #include <cudss.h>
 #include <fmt/core.h>
@@ -162,10 +162,14 @@ int main(int argc, char** argv) {
                                        "lap3d-80",   "lap3d-100",      "elast3d-30",
                                        "elast3d-40", "uelast3d-20",    "uelast3d-30"};
   int repeat = 3;
-  std::string results_dir;
+  std::string results_dir, tag;
   app.add_option("--problems", problems, "problems")->delimiter(',');
   app.add_option("--repeat", repeat, "refactorizations per measurement (median)");
   app.add_option("--results-dir", results_dir, "where to write the JSON (default bench/results)");
+  app.add_option("--tag", tag,
+                 "label stored in the results (\"tag\") and added to the file name; \"mbd\" "
+                 "marks a run on the multibody Newton matrices (the report's own line)")
+      ->check(bench::check_tag);
   CLI11_PARSE(app, argc, argv);
   if (!numeric::cuda_available()) {
     fmt::print(stderr, "bench_cudss: no CUDA GPU present\n");
@@ -173,6 +177,7 @@ int main(int argc, char** argv) {
   }
   json out = bench::run_metadata(argc, argv);
   out["benchmark"] = "cudss";
+  out["tag"] = tag;
   int ver[3] = {0, 0, 0};
   cudssGetProperty(MAJOR_VERSION, &ver[0]);
   cudssGetProperty(MINOR_VERSION, &ver[1]);
@@ -255,11 +260,11 @@ int main(int argc, char** argv) {
     std::fflush(stdout);
     out["rows"].push_back(row);
     // keep what is measured so far, in case the run is cut off (one partial file only)
-    const std::string now = bench::write_result(out, "cudss-partial", results_dir);
+    const std::string now = bench::write_result(out, tag.empty() ? "cudss-partial" : "cudss-" + tag + "-partial", results_dir);
     if (!partial.empty() && partial != now) std::remove(partial.c_str());
     partial = now;
   }
-  fmt::print("results: {}\n", bench::write_result(out, "cudss", results_dir));
+  fmt::print("results: {}\n", bench::write_result(out, tag.empty() ? "cudss" : "cudss-" + tag, results_dir));
   if (!partial.empty()) std::remove(partial.c_str());
   return 0;
 }

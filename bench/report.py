@@ -69,6 +69,11 @@ SWEEP_TAG = re.compile(r"^mbs-(\d+)$")
 # --------------------------------------------------------------------------- report
 
 
+def mbd_label(run: Run) -> str:
+    """ ", multibody Newton matrices" for a cuDSS run tagged mbd (run_cudss_mbd.sh)."""
+    return ", multibody Newton matrices" if run.kind == "cudss" and run.tag == "mbd" else ""
+
+
 class Report(GpuSections, Distributed, EndToEnd, IftommSection):
     def __init__(self, results_dir: str, out_dir: str, history: str | None = None):
         self.results_dir = os.path.abspath(results_dir)
@@ -90,8 +95,9 @@ class Report(GpuSections, Distributed, EndToEnd, IftommSection):
 
     def key_ratio(self, what: str, g, per_problem: list, run: Run) -> None:
         """Remembers a headline ratio (geometric mean g over the problems of a run, untagged
-        runs only) for the README's performance table (report_readme.py)."""
-        if g is not None and not run.tag:
+        runs only, and cuDSS runs tagged "mbd": the multibody Newton matrices' own line)
+        for the README's performance table (report_readme.py)."""
+        if g is not None and (not run.tag or (run.kind == "cudss" and run.tag == "mbd")):
             n = sum(1 for _, x in per_problem if x is not None)
             self.key_ratios.append({"what": what, "ratio": g, "problems": n, "run": run})
 
@@ -234,11 +240,13 @@ class Report(GpuSections, Distributed, EndToEnd, IftommSection):
                     pp = [(row.get("problem"), ratio(dig(row, "strata_gpu", what),
                                                      dig(row, k, what))) for row in r.rows]
                     g = judge(name, r.machine, pp)
-                    self.key_ratio("GPU refactorization time, strata / cuDSS ("
-                                   + ("each its own ordering" if k == "cudss_default"
-                                      else "strata's ordering") + ")", g, pp, r)
+                    self.key_ratio("GPU refactorization time, strata / cuDSS"
+                                   + (", multibody Newton matrices" if r.tag == "mbd" else "")
+                                   + " (" + ("each its own ordering" if k == "cudss_default"
+                                             else "strata's ordering") + ")", g, pp, r)
                     if g is not None:
-                        lines.append(f"- Geometric mean of {name}: **{f_ratio(g)}** over "
+                        lines.append(f"- Geometric mean of {name}{mbd_label(r)}: "
+                                     f"**{f_ratio(g)}** over "
                                      f"{sum(1 for _, x in pp if x is not None)} problems on "
                                      f"{machine_label(r.machine)} "
                                      f"([`{r.name}`]({self.rel(r.path)})).")
@@ -249,10 +257,12 @@ class Report(GpuSections, Distributed, EndToEnd, IftommSection):
                 name = ("solve time strata GPU first solve (one application of the factor, "
                         "no refinement)/cuDSS solve (default reordering)")
                 g = judge(name, r.machine, pp)
-                self.key_ratio("GPU solve time, strata / cuDSS (one right-hand side, no "
-                               "refinement)", g, pp, r)
+                self.key_ratio("GPU solve time, strata / cuDSS"
+                               + (", multibody Newton matrices" if r.tag == "mbd" else "")
+                               + " (one right-hand side, no refinement)", g, pp, r)
                 if g is not None:
-                    lines.append(f"- Geometric mean of {name}: **{f_ratio(g)}** over "
+                    lines.append(f"- Geometric mean of {name}{mbd_label(r)}: "
+                                 f"**{f_ratio(g)}** over "
                                  f"{sum(1 for _, x in pp if x is not None)} problems on "
                                  f"{machine_label(r.machine)} "
                                  f"([`{r.name}`]({self.rel(r.path)})).")

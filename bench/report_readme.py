@@ -1,7 +1,8 @@
 """The README's performance table and the hand-written history, for bench/report.py.
 
 The README carries a short table of the headline ratios (strata against CHOLMOD, MUMPS,
-cuDSS, SuperLU), each the geometric mean over the problems of the newest untagged run,
+cuDSS, SuperLU), each the geometric mean over the problems of the newest untagged run
+(and, on its own lines, of the newest cuDSS run tagged "mbd": the multibody Newton matrices),
 with its machine, date and results file. bench/report.py computes the ratios (Report.
 key_ratio) and this module writes them between two marker lines of README.md, leaving the
 rest of the file as it is. bench/history.md (notes on what each change measured) is
@@ -20,7 +21,10 @@ END = "<!-- end of the performance table -->"
 # the rows' order: by the start of their description
 ORDER = ("factorization time, strata / CHOLMOD", "factorization time, strata / MUMPS",
          "analysis time", "nnz(L)", "GPU refactorization time, strata / cuDSS (each",
-         "GPU refactorization time, strata / cuDSS (strata", "GPU solve time",
+         "GPU refactorization time, strata / cuDSS (strata", "GPU solve time, strata / cuDSS (",
+         "GPU refactorization time, strata / cuDSS, multibody Newton matrices (each",
+         "GPU refactorization time, strata / cuDSS, multibody Newton matrices (strata",
+         "GPU solve time, strata / cuDSS, multibody",
          "solve from Python, strata / scipy", "solve from Python, strata / CHOLMOD")
 
 

@@ -10,6 +10,8 @@ if [ -f build-cudss/part-ac ] && [ ! -f build-cudss/libcudss.so.1 ]; then
   cat build-cudss/part-aa build-cudss/part-ab build-cudss/part-ac | xz -d -T8 >build-cudss/libcudss.so.1
 fi
 export LD_LIBRARY_PATH="$PWD/.carry/lib:$PWD/build-cudss:${LD_LIBRARY_PATH:-}"
+# the benchmarks record the staged binaries' commit (.carry/COMMIT), not the checkout's
+export STRATA_CARRIED=1
 OUT="${OUT:-/tmp/strata-out}"
 mkdir -p "$OUT"
 nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv | tee "$OUT/gpu.txt"

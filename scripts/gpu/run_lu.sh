@@ -12,6 +12,7 @@ set -uo pipefail
 cd "$(dirname "$0")/../.."
 for z in .carry/lib/*.xz .carry/bin/*.xz; do [ -f "$z" ] && xz -d -f "$z"; done
 export LD_LIBRARY_PATH="$PWD/.carry/lib:${LD_LIBRARY_PATH:-}"
+export STRATA_CARRIED=1  # the results name the staged binaries' commit
 OUT="${OUT:-/tmp/strata-out}"
 mkdir -p "$OUT"
 values=${1:-0,64,128,256,512}

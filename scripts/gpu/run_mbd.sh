@@ -23,6 +23,7 @@ cd "$(dirname "$0")/../.."
 if [ -d .carry/lib ]; then
   for z in .carry/lib/*.xz .carry/bin/*.xz; do [ -f "$z" ] && xz -d -f "$z"; done
   export LD_LIBRARY_PATH="$PWD/.carry/lib:${LD_LIBRARY_PATH:-}"
+  export STRATA_CARRIED=1  # the results name the staged binaries' commit
 fi
 OUT="${OUT:-/tmp/strata-out}"
 mkdir -p "$OUT"
