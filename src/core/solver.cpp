@@ -3,7 +3,9 @@
 // The Solver keeps the Analysis (pattern), the canonical values of the last factorized
 // matrix (for residuals), the factor and the executor's workspaces. factorize and
 // refactorize run the same code: every buffer is sized by the analysis and reused, so a
-// refactorization gives bitwise the factor a fresh factorization would.
+// refactorization gives bitwise the factor a fresh factorization would. The host passes
+// over the values (checks, norms, the matching's scaling) are in value_pass.hpp, the
+// equilibration of values far from the analysis's in rescale.hpp.
 //
 // The solve applies the factor once, then (Options::solve_check) checks and refines the
 // solution with solve/refinement.hpp: iterative refinement, GMRES where it stalls.
@@ -32,6 +34,7 @@
 #include "core/rescale.hpp"
 #include "core/solver_internal.hpp"
 #include "core/timer.hpp"
+#include "core/value_pass.hpp"
 #include "numeric/delayed.hpp"
 #include "numeric/factor.hpp"
 #include "solve/gmres.hpp"
@@ -86,53 +89,17 @@ struct SolverState {
 
 namespace {
 
+using detail::blocked_sums;
+using detail::check_norms;
+using detail::copy_values;
+using detail::has_analyzed_pattern;
+using detail::kValueBlocks;
+using detail::norm_inf;
+using detail::refactor_values;
+using detail::scaled_norm1;
+using detail::scaling_clamped;
 using detail::SolverState;
-
-// ‖A‖∞ (max row sum) of a canonical matrix with symmetric storage expanded.
-double norm_inf(const SparseMatrix& c) {
-  std::vector<double> row(c.n_rows, 0.0);
-  for (index_t j = 0; j < c.n_cols; ++j)
-    for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) {
-      const double v = std::abs(c.values[p]);
-      row[c.indices[p]] += v;
-      if (c.storage != Storage::full && c.indices[p] != j) row[j] += v;
-    }
-  double m = 0;
-  for (double r : row) m = std::max(m, r);
-  return m;
-}
-
-// Refuses a matrix whose row or column magnitude sums overflow: ‖A‖∞ and ‖A‖₁ set the
-// static pivot threshold and the backward error, and an infinite norm would make every
-// pivot "tiny" and every backward error 0. (Each value is finite — validate checked —
-// but a few values near DBL_MAX can sum past it.)
-// Throws InvalidInput naming the first row, then column, whose magnitude sum is not finite.
-void throw_if_norm_overflows(const std::vector<double>& row, const std::vector<double>& col) {
-  for (std::size_t k = 0; k < row.size() + col.size(); ++k) {
-    const bool is_row = k < row.size();
-    const double sum = is_row ? row[k] : col[k - row.size()];
-    if (!std::isfinite(sum))
-      throw InvalidInput("the matrix norm overflows: the magnitudes in " +
-                         std::string(is_row ? "row " : "column ") +
-                         std::to_string(is_row ? k : k - row.size()) +
-                         " (0-based) sum past the largest double (1.8e308); scale the matrix");
-  }
-}
-
-void check_norms(const SparseMatrix& c) {
-  std::vector<double> row(c.n_rows, 0.0), col(c.n_cols, 0.0);
-  for (index_t j = 0; j < c.n_cols; ++j)
-    for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) {
-      const double v = std::abs(c.values[p]);
-      row[c.indices[p]] += v;
-      col[j] += v;
-      if (c.storage != Storage::full && c.indices[p] != j) {
-        row[j] += v;
-        col[c.indices[p]] += v;
-      }
-    }
-  throw_if_norm_overflows(row, col);
-}
+using detail::ValueNorms;
 
 // Throws when a column of x is not finite: the solution (or the solve with the factor)
 // overflows the double range. Returning it would hand the caller Inf/NaN with nothing
@@ -163,12 +130,6 @@ int parity(const std::vector<index_t>& p) {
   return sign;
 }
 
-// True when `a` is stored exactly as the analysis' canonical pattern (CSC, sorted, no
-// duplicates; the lower triangle when symmetric): its values can be used as they are.
-// Large arrays are compared and copied in parallel chunks: one thread did a few ms of each
-// per refactorization of a matrix with millions of entries.
-constexpr std::size_t kParallelChunk = std::size_t{1} << 18;  // elements per task
-
 // The solver's host task arena for Options::num_threads (0: all hardware threads).
 tbb::task_arena& host_arena(SolverState& s) {
   const int threads = s.options.num_threads;
@@ -178,202 +139,6 @@ tbb::task_arena& host_arena(SolverState& s) {
     s.arena_threads = threads;
   }
   return *s.arena;
-}
-
-// Runs f(b, e) over [0, size) in chunks of kParallelChunk elements, in parallel in `arena`.
-template <class F>
-void for_chunks(tbb::task_arena& arena, std::size_t size, F&& f) {
-  arena.execute([&] {
-    tbb::parallel_for(std::size_t{0}, (size + kParallelChunk - 1) / kParallelChunk,
-                      [&](std::size_t c) {
-                        const std::size_t b = c * kParallelChunk;
-                        f(b, std::min(size, b + kParallelChunk));
-                      });
-  });
-}
-
-template <class T>
-bool equal_arrays(const std::vector<T>& x, const std::vector<T>& y, tbb::task_arena& arena) {
-  if (x.size() != y.size()) return false;
-  if (x.size() < 2 * kParallelChunk) return x == y;
-  std::atomic<bool> same{true};
-  for_chunks(arena, x.size(), [&](std::size_t b, std::size_t e) {
-    if (same.load(std::memory_order_relaxed) &&
-        std::memcmp(x.data() + b, y.data() + b, sizeof(T) * (e - b)) != 0)
-      same.store(false, std::memory_order_relaxed);
-  });
-  return same;
-}
-
-// to = from, for arrays of equal size
-void copy_values(std::vector<double>& to, const std::vector<double>& from, tbb::task_arena& arena) {
-  if (to.size() != from.size() || from.size() < 2 * kParallelChunk) {
-    to = from;
-    return;
-  }
-  arena.execute([&] { parallel_copy(to.data(), from.data(), from.size()); });
-}
-
-bool has_analyzed_pattern(const Analysis& an, const SparseMatrix& a, tbb::task_arena& arena) {
-  return a.n_rows == an.n && a.n_cols == an.n && a.layout == Layout::csc &&
-         a.storage != Storage::upper && a.values.size() == a.indices.size() &&
-         equal_arrays(a.offsets, an.pattern_offsets, arena) &&
-         equal_arrays(a.indices, an.pattern_indices, arena);
-}
-
-// The per-refactorization passes over the values run over kValueBlocks fixed column
-// ranges in parallel; sums that scatter (row sums, the mirrored half of a symmetric
-// matrix) go to one vector per range, added in range order: the same result whatever the
-// number of threads. On a large matrix these host passes, one thread each, took a third of
-// a GPU refactorization.
-constexpr int kValueBlocks = 8;
-// Entries below which one thread does the pass: a pass over ~10⁵ entries is already a
-// sizeable share of a small matrix's refactorization on a GPU, so the threshold sits well
-// below that (bench/history.md has the measurements).
-constexpr index_t kParallelValues = 32768;
-
-// Calls visit(j, p, acc) for every stored entry p of column j, acc[k] (k < sums) being the
-// n-vector of sum k for the entry's column range; returns the sums over the ranges, added
-// in range order. `work` keeps the per-range vectors from one call to the next (sizing
-// and zero-filling 8 fresh n-vectors per pass cost more than the pass on a large matrix).
-// `lower`: `a` holds a lower triangle and visit writes only rows i ≥ j, so the range
-// [j0, j1) leaves rows below j0 alone — neither zeroed nor added (they would be zeros).
-constexpr int kMaxSums = 2;
-index_t range_begin(std::size_t n, int blk) {
-  return static_cast<index_t>(static_cast<std::int64_t>(n) * blk / kValueBlocks);
-}
-template <class Visit>
-std::vector<std::vector<double>> blocked_sums(const SparseMatrix& a, int sums, bool lower,
-                                              tbb::task_arena& arena, std::vector<double>& work,
-                                              Visit&& visit) {
-  const std::size_t n = static_cast<std::size_t>(a.n_cols);
-  const std::size_t per = static_cast<std::size_t>(sums) * n;
-  if (work.size() < kValueBlocks * per)
-    sized_resize(work, kValueBlocks * per, "factorize: value sums");
-  auto range = [&](int blk) {
-    double* base = work.data() + blk * per;
-    const index_t j0 = range_begin(n, blk), j1 = range_begin(n, blk + 1);
-    double* acc[kMaxSums] = {};
-    for (int k = 0; k < sums; ++k) {
-      acc[k] = base + k * n;
-      std::fill(acc[k] + (lower ? j0 : 0), acc[k] + n, 0.0);
-    }
-    for (index_t j = j0; j < j1; ++j)
-      for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p) visit(j, p, acc);
-  };
-  std::vector<std::vector<double>> total(sums, std::vector<double>(n));
-  std::size_t first_row[kValueBlocks];  // rows below it are not the range's (lower)
-  for (int blk = 0; blk < kValueBlocks; ++blk)
-    first_row[blk] = lower ? static_cast<std::size_t>(range_begin(n, blk)) : 0;
-  auto reduce = [&](std::size_t i0, std::size_t i1) {
-    for (int k = 0; k < sums; ++k)
-      for (std::size_t i = i0; i < i1; ++i) {
-        double t = 0;
-        for (int blk = 0; blk < kValueBlocks; ++blk)
-          if (first_row[blk] <= i) t += work[blk * per + k * n + i];
-        total[k][i] = t;
-      }
-  };
-  if (a.nnz() < kParallelValues) {  // small (a Newton step of a small model): no threads
-    for (int blk = 0; blk < kValueBlocks; ++blk) range(blk);
-    reduce(0, n);
-  } else {
-    arena.execute([&] {
-      tbb::parallel_for(0, kValueBlocks, range);
-      tbb::parallel_for(
-          tbb::blocked_range<std::size_t>(0, n, 16384),
-          [&](const tbb::blocked_range<std::size_t>& r) { reduce(r.begin(), r.end()); });
-    });
-  }
-  return total;
-}
-
-// Throws InvalidInput naming the first value of `a` that is not finite (there is one).
-[[noreturn]] void throw_first_not_finite(const SparseMatrix& a) {
-  const std::size_t nnz = a.values.size();
-  std::size_t p = 0;
-  while (p + 1 < nnz && std::isfinite(a.values[p])) ++p;
-  const index_t j = static_cast<index_t>(
-      std::upper_bound(a.offsets.begin(), a.offsets.end(), static_cast<index_t>(p)) -
-      a.offsets.begin() - 1);
-  throw InvalidInput("values[" + std::to_string(p) + "] is not finite (row " +
-                     std::to_string(a.indices[p]) + ", column " + std::to_string(j) + ")");
-}
-
-// A refactorization's one pass over `a`, which has the analyzed pattern (symmetric: its
-// lower triangle): every value finite, no row or column magnitude sum past the largest
-// double (InvalidInput as validate and check_norms), the values as assembled written to
-// `scaled` (Dr·A·Dc with the analysis' scaling). Returns ‖A‖∞ and the ‖·‖₁ of the scaled
-// matrix (symmetric storage expanded). The checks, the norms and the scaling were three
-// passes, one of them serial: a third of a 4-GPU refactorization of lap3d 80³.
-struct ValueNorms {
-  double norm_inf = 0;
-  double scaled_norm1 = 0;
-};
-ValueNorms refactor_values(const Analysis& an, const SparseMatrix& a, tbb::task_arena& arena,
-                           std::vector<double>& work, std::vector<double>& scaled) {
-  const bool sym = an.symmetric, scale = !an.row_scaling.empty();
-  const index_t n = a.n_cols;
-  sized_resize(scaled, a.values.size(), "factorize: scaled values");
-  std::atomic<bool> not_finite{false};
-  // unsymmetric: column sums, each column within one range (no per-range vectors)
-  std::vector<double> col(sym ? 0 : n, 0.0), scol(sym ? 0 : n, 0.0);
-  // symmetric and unscaled: the scaled matrix is A, its ‖·‖₁ is ‖A‖∞ (one sum)
-  const int nsums = sym && scale ? 2 : 1;
-  const auto sums =
-      blocked_sums(a, nsums, sym, arena, work, [&](index_t j, index_t p, double* const* acc) {
-        const index_t i = a.indices[p];
-        const double x = a.values[p];
-        if (!std::isfinite(x)) not_finite.store(true, std::memory_order_relaxed);
-        const double v = std::abs(x);
-        const double y = scale ? x * an.row_scaling[i] * an.col_scaling[j] : x;
-        scaled[p] = y;
-        acc[0][i] += v;
-        if (sym) {
-          if (i != j) acc[0][j] += v;
-          if (scale) {
-            acc[1][j] += std::abs(y);
-            if (i != j) acc[1][i] += std::abs(y);
-          }
-        } else {
-          col[j] += v;
-          scol[j] += std::abs(y);
-        }
-      });
-  if (not_finite) throw_first_not_finite(a);
-  throw_if_norm_overflows(sums[0], col);
-  ValueNorms r;
-  for (double x : sums[0]) r.norm_inf = std::max(r.norm_inf, x);
-  if (sym && !scale)
-    r.scaled_norm1 = r.norm_inf;
-  else
-    for (double x : sym ? sums[1] : scol) r.scaled_norm1 = std::max(r.scaled_norm1, x);
-  return r;
-}
-
-// Whether the analysis's matching scaling hit its clamp (ordering/matching.cpp: factors
-// within e^±700) for some row or column.
-bool scaling_clamped(const Analysis& an) {
-  constexpr double kNearClamp = 1e300;
-  for (const auto* v : {&an.row_scaling, &an.col_scaling})
-    for (double d : *v)
-      if (d > kNearClamp || d < 1 / kNearClamp) return true;
-  return false;
-}
-
-// ‖B‖₁ of the scaled values (entry order of the canonical `c`; symmetric: lower storage,
-// mirrored), by blocked_sums on the arena (work: its scratch).
-double scaled_norm1(const SparseMatrix& c, bool symmetric, const std::vector<double>& scaled,
-                    tbb::task_arena& arena, std::vector<double>& work) {
-  const auto col =
-      blocked_sums(c, 1, symmetric, arena, work, [&](index_t j, index_t p, double* const* sum) {
-        const double v = std::abs(scaled[p]);
-        sum[0][j] += v;
-        if (symmetric && c.indices[p] != j) sum[0][c.indices[p]] += v;
-      });
-  double m = 0;
-  for (double v : col[0]) m = std::max(m, v);
-  return m;
 }
 
 // The executors a factorization with `workers` workers uses (created on first use and
