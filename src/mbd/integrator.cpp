@@ -259,6 +259,10 @@ void Integrator::predict(double h, BdfTerms& bdf) {
   (void)m;
 }
 
+// A converged step of more than this many Newton iterations makes the next step start
+// with a new Jacobian.
+constexpr int kSlowStepIterations = 8;
+
 // Newton's method on H(x) = 0 from the predictor in x_. Returns 1 when converged, 0 when
 // the iteration failed (the step is to be retried smaller), 2 when the contact set changed
 // (retry at once).
@@ -400,8 +404,9 @@ int Integrator::newton(double h, StepInfo& info, const BdfTerms& bdf) {
     }
     // the next step starts with a new Jacobian only after a slow one: a Jacobian and its
     // factorization cost as much as about ten iterations with the old factor (the
-    // engine's Newton matrices, bench/e2e.py), and a step of up to five keeps the old one
-    slow_last_step_ = it > 5;
+    // engine's Newton matrices, bench/e2e.py); with Anderson acceleration a few more
+    // iterations on a stale factor cost less than a new one (bench/history.md)
+    slow_last_step_ = it > kSlowStepIterations;
     return 1;
   }
   factor_valid_ = false;
