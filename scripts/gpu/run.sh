@@ -4,14 +4,8 @@
 # --cudss-bench ARGS, --multigpu-bench ARGS). Logs and
 # results go to $OUT.
 set -uo pipefail
-for z in .carry/lib/*.xz .carry/bin/*.xz; do [ -f "$z" ] && xz -d -f "$z"; done
-# cuDSS, if its three parts were carried by earlier calls into build-cudss/ (prepare.sh)
-if [ -f build-cudss/part-ac ] && [ ! -f build-cudss/libcudss.so.1 ]; then
-  cat build-cudss/part-aa build-cudss/part-ab build-cudss/part-ac | xz -d -T8 >build-cudss/libcudss.so.1
-fi
-export LD_LIBRARY_PATH="$PWD/.carry/lib:$PWD/build-cudss:${LD_LIBRARY_PATH:-}"
-# the benchmarks record the staged binaries' commit (.carry/COMMIT), not the checkout's
-export STRATA_CARRIED=1
+cd "$(dirname "$0")/../.."
+. scripts/gpu/carried.sh  # the staged .carry/ unpacked, cuDSS's parts joined, on LD_LIBRARY_PATH
 OUT="${OUT:-/tmp/strata-out}"
 mkdir -p "$OUT"
 nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv | tee "$OUT/gpu.txt"

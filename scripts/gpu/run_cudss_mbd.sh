@@ -9,14 +9,7 @@
 # go to $STRATA_RESULTS_DIR (bench/run sets it) or $OUT.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
-if [ -d .carry/lib ]; then
-  for z in .carry/lib/*.xz .carry/bin/*.xz; do [ -f "$z" ] && xz -d -f "$z"; done
-  export LD_LIBRARY_PATH="$PWD/.carry/lib:$PWD/build-cudss:${LD_LIBRARY_PATH:-}"
-  export STRATA_CARRIED=1  # the results name the staged binaries' commit
-fi
-if [ -f build-cudss/part-ac ] && [ ! -f build-cudss/libcudss.so.1 ]; then
-  cat build-cudss/part-aa build-cudss/part-ab build-cudss/part-ac | xz -d -T8 >build-cudss/libcudss.so.1
-fi
+. scripts/gpu/carried.sh  # a staged .carry/: unpacked, on LD_LIBRARY_PATH
 BIN=${STRATA_BIN_DIR:-.carry/bin}
 S=${STRATA_BIN:-$BIN/strata}
 RESULTS=${STRATA_RESULTS_DIR:-${OUT:-/tmp/strata-out}}

@@ -7,13 +7,12 @@
 #   Usage: bash scripts/gpu/run_e2e.sh [bench/e2e.py arguments, e.g. --device gpu --models ...]
 set -uo pipefail
 cd "$(dirname "$0")/../.."
-for z in .carry/lib/*.xz .carry/bin/*.xz .carry/base/*.xz; do [ -f "$z" ] && xz -d -f "$z"; done
-export LD_LIBRARY_PATH="$PWD/.carry/lib:${LD_LIBRARY_PATH:-}"
+. scripts/gpu/carried.sh  # a staged .carry/: unpacked, on LD_LIBRARY_PATH
 OUT="${OUT:-/tmp/strata-out}"
 mkdir -p "$OUT"
 args=(--strata .carry/bin/strata --results-dir "$OUT")
 if [ -x .carry/base/strata ]; then
   args+=(--baseline .carry/base/strata --baseline-label "$(cat .carry/base/COMMIT 2>/dev/null)")
 fi
-STRATA_CARRIED=1 PYTHONUNBUFFERED=1 python3 bench/e2e.py "${args[@]}" "$@" 2>&1 |
+PYTHONUNBUFFERED=1 python3 bench/e2e.py "${args[@]}" "$@" 2>&1 |
   tee -a "$OUT/e2e-$(date -u +%Y%m%dT%H%M%SZ).log"

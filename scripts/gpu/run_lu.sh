@@ -10,9 +10,7 @@
 #   (defaults: VALUES 0,64,128,256,512; PROBLEMS uelast3d-20,uelast3d-30 and the two models)
 set -uo pipefail
 cd "$(dirname "$0")/../.."
-for z in .carry/lib/*.xz .carry/bin/*.xz; do [ -f "$z" ] && xz -d -f "$z"; done
-export LD_LIBRARY_PATH="$PWD/.carry/lib:${LD_LIBRARY_PATH:-}"
-export STRATA_CARRIED=1  # the results name the staged binaries' commit
+. scripts/gpu/carried.sh  # a staged .carry/: unpacked, on LD_LIBRARY_PATH
 OUT="${OUT:-/tmp/strata-out}"
 mkdir -p "$OUT"
 values=${1:-0,64,128,256,512}

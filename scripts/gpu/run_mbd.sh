@@ -20,11 +20,7 @@
 #   Usage: bash scripts/gpu/run_mbd.sh [--quick]   (--quick: tiny models, a smoke run)
 set -uo pipefail
 cd "$(dirname "$0")/../.."
-if [ -d .carry/lib ]; then
-  for z in .carry/lib/*.xz .carry/bin/*.xz; do [ -f "$z" ] && xz -d -f "$z"; done
-  export LD_LIBRARY_PATH="$PWD/.carry/lib:${LD_LIBRARY_PATH:-}"
-  export STRATA_CARRIED=1  # the results name the staged binaries' commit
-fi
+. scripts/gpu/carried.sh  # a staged .carry/: unpacked, on LD_LIBRARY_PATH
 OUT="${OUT:-/tmp/strata-out}"
 mkdir -p "$OUT"
 S=${STRATA_BIN:-.carry/bin/strata}

@@ -16,11 +16,7 @@
 # or $OUT, as multigpu-mechanical-*.json.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
-if [ -d .carry/lib ]; then
-  for z in .carry/lib/*.xz .carry/bin/*.xz; do [ -f "$z" ] && xz -d -f "$z"; done
-  export LD_LIBRARY_PATH="$PWD/.carry/lib:${LD_LIBRARY_PATH:-}"
-  export STRATA_CARRIED=1  # the results name the staged binaries' commit
-fi
+. scripts/gpu/carried.sh  # a staged .carry/: unpacked, on LD_LIBRARY_PATH
 BIN=${STRATA_BIN_DIR:-.carry/bin}
 S=${STRATA_BIN:-$BIN/strata}
 RESULTS=${STRATA_RESULTS_DIR:-${OUT:-/tmp/strata-out}}

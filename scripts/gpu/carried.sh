@@ -1,0 +1,13 @@
+# Sourced (not run) by the scripts/gpu run scripts, from the repository's root: when a
+# staged .carry/ is there (scripts/gpu/prepare.sh), unpacks its binaries and libraries,
+# reassembles cuDSS from the three parts earlier calls left in build-cudss/, puts both on
+# LD_LIBRARY_PATH and sets STRATA_CARRIED=1, so that the results name the staged
+# binaries' commit (.carry/COMMIT) rather than the machine's checkout.
+if [ -d .carry/lib ]; then
+  for z in .carry/lib/*.xz .carry/bin/*.xz .carry/base/*.xz; do [ -f "$z" ] && xz -d -f "$z"; done
+  if [ -f build-cudss/part-ac ] && [ ! -f build-cudss/libcudss.so.1 ]; then
+    cat build-cudss/part-aa build-cudss/part-ab build-cudss/part-ac | xz -d -T8 >build-cudss/libcudss.so.1
+  fi
+  export LD_LIBRARY_PATH="$PWD/.carry/lib:$PWD/build-cudss:${LD_LIBRARY_PATH:-}"
+  export STRATA_CARRIED=1
+fi
