@@ -2,12 +2,19 @@
 # staged .carry/ is there (scripts/gpu/prepare.sh), unpacks its binaries and libraries,
 # reassembles cuDSS from the three parts earlier calls left in build-cudss/, puts both on
 # LD_LIBRARY_PATH and sets STRATA_CARRIED=1, so that the results name the staged
-# binaries' commit (.carry/COMMIT) rather than the machine's checkout.
+# binaries' commit (.carry/COMMIT) rather than the machine's checkout. Sets BIN (the
+# drivers' folder: $STRATA_BIN_DIR, else .carry/bin), S (the strata binary: $STRATA_BIN, else
+# $BIN/strata) and RESULTS (where results go: $STRATA_RESULTS_DIR, which bench/run sets,
+# else $OUT, else /tmp/strata-out).
 if [ -d .carry/lib ]; then
   for z in .carry/lib/*.xz .carry/bin/*.xz .carry/base/*.xz; do [ -f "$z" ] && xz -d -f "$z"; done
   if [ -f build-cudss/part-ac ] && [ ! -f build-cudss/libcudss.so.1 ]; then
     cat build-cudss/part-aa build-cudss/part-ab build-cudss/part-ac | xz -d -T8 >build-cudss/libcudss.so.1
   fi
   export LD_LIBRARY_PATH="$PWD/.carry/lib:$PWD/build-cudss:${LD_LIBRARY_PATH:-}"
-  export STRATA_CARRIED=1
+  # the staged binaries run (not others named by STRATA_BIN_DIR): their commit
+  if [ "${STRATA_BIN_DIR:-.carry/bin}" = .carry/bin ]; then export STRATA_CARRIED=1; fi
 fi
+BIN=${STRATA_BIN_DIR:-.carry/bin}
+S=${STRATA_BIN:-$BIN/strata}
+RESULTS=${STRATA_RESULTS_DIR:-${OUT:-/tmp/strata-out}}

@@ -9,10 +9,7 @@
 # go to $STRATA_RESULTS_DIR (bench/run sets it) or $OUT.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
-. scripts/gpu/carried.sh  # a staged .carry/: unpacked, on LD_LIBRARY_PATH
-BIN=${STRATA_BIN_DIR:-.carry/bin}
-S=${STRATA_BIN:-$BIN/strata}
-RESULTS=${STRATA_RESULTS_DIR:-${OUT:-/tmp/strata-out}}
+. scripts/gpu/carried.sh  # a staged .carry/ unpacked; BIN, S, RESULTS
 WORK=${TMPDIR:-/tmp}/strata-cudss-mbd
 mkdir -p "$RESULTS" "$WORK"
 models=("tracked-100|tracked:100" "tracked-1000|tracked:1000" "flexible-64x4x4|flexible:64x4x4"

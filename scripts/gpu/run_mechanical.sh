@@ -16,10 +16,7 @@
 # or $OUT, as multigpu-mechanical-*.json.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
-. scripts/gpu/carried.sh  # a staged .carry/: unpacked, on LD_LIBRARY_PATH
-BIN=${STRATA_BIN_DIR:-.carry/bin}
-S=${STRATA_BIN:-$BIN/strata}
-RESULTS=${STRATA_RESULTS_DIR:-${OUT:-/tmp/strata-out}}
+. scripts/gpu/carried.sh  # a staged .carry/ unpacked; BIN, S, RESULTS
 WORK=${TMPDIR:-/tmp}/strata-mechanical
 mkdir -p "$RESULTS" "$WORK"
 quick=0
