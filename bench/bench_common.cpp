@@ -113,10 +113,9 @@ nlohmann::json run_metadata(int argc, char** argv) {
   return {
       {"date", utc_now("%Y-%m-%dT%H:%M:%SZ")},
       {"command", cmd},
-      {"git_commit",
-       !carried.empty()
-           ? carried.substr(0, carried.find(' '))
-           : command_output("git -C " STRATA_SOURCE_DIR " rev-parse --short HEAD 2>/dev/null")},
+      {"git_commit", !carried.empty() ? carried.substr(0, carried.find(' '))
+                                      : command_output("git -C " STRATA_SOURCE_DIR
+                                                       " rev-parse --short HEAD 2>/dev/null")},
       {"git_dirty", !carried.empty()
                         ? carried.find("uncommitted") != std::string::npos
                         : !command_output("git -C " STRATA_SOURCE_DIR

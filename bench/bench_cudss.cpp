@@ -260,11 +260,13 @@ int main(int argc, char** argv) {
     std::fflush(stdout);
     out["rows"].push_back(row);
     // keep what is measured so far, in case the run is cut off (one partial file only)
-    const std::string now = bench::write_result(out, tag.empty() ? "cudss-partial" : "cudss-" + tag + "-partial", results_dir);
+    const std::string now = bench::write_result(
+        out, tag.empty() ? "cudss-partial" : "cudss-" + tag + "-partial", results_dir);
     if (!partial.empty() && partial != now) std::remove(partial.c_str());
     partial = now;
   }
-  fmt::print("results: {}\n", bench::write_result(out, tag.empty() ? "cudss" : "cudss-" + tag, results_dir));
+  fmt::print("results: {}\n",
+             bench::write_result(out, tag.empty() ? "cudss" : "cudss-" + tag, results_dir));
   if (!partial.empty()) std::remove(partial.c_str());
   return 0;
 }
