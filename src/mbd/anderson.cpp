@@ -7,6 +7,9 @@ namespace strata::mbd {
 
 void AndersonMixing::reset() {
   have_prev_ = false;
+  // keep the storage for the next iteration's differences
+  for (auto* h : {&df_, &dg_})
+    for (auto& v : *h) spare_.push_back(std::move(v));
   df_.clear();
   dg_.clear();
 }
@@ -18,17 +21,28 @@ int AndersonMixing::step(double* x, const double* f, const double* w, index_t n)
   }
   const auto un = static_cast<std::size_t>(n);
   if (have_prev_) {
-    std::vector<double> df(un), dg(un);
+    // the new differences reuse the oldest ones' storage once the history is full (no
+    // allocation per Newton iteration)
+    std::vector<double> df, dg;
+    if (static_cast<int>(df_.size()) == depth_) {
+      df = std::move(df_.front());
+      dg = std::move(dg_.front());
+      df_.pop_front();
+      dg_.pop_front();
+    } else if (spare_.size() >= 2) {
+      df = std::move(spare_.back());
+      spare_.pop_back();
+      dg = std::move(spare_.back());
+      spare_.pop_back();
+    }
+    df.resize(un);
+    dg.resize(un);
     for (index_t i = 0; i < n; ++i) {
       df[i] = f[i] - f_prev_[i];
       dg[i] = (x[i] + f[i]) - (x_prev_[i] + f_prev_[i]);
     }
     df_.push_back(std::move(df));
     dg_.push_back(std::move(dg));
-    if (static_cast<int>(df_.size()) > depth_) {
-      df_.pop_front();
-      dg_.pop_front();
-    }
   }
   x_prev_.assign(x, x + n);
   f_prev_.assign(f, f + n);
@@ -38,7 +52,7 @@ int AndersonMixing::step(double* x, const double* f, const double* w, index_t n)
   // newest first; a column (nearly) in the span of the newer ones ends the basis, and it
   // and the older ones are forgotten.
   const int m = static_cast<int>(df_.size());
-  q_.assign(un * m, 0.0);
+  q_.resize(un * m);  // every column is written before it is read
   r_.assign(static_cast<std::size_t>(m) * m, 0.0);
   int p = 0;  // columns kept
   for (int c = 0; c < m; ++c) {
@@ -65,6 +79,8 @@ int AndersonMixing::step(double* x, const double* f, const double* w, index_t n)
     p = c + 1;
   }
   while (static_cast<int>(df_.size()) > p) {  // the dependent column and the older ones
+    spare_.push_back(std::move(df_.front()));
+    spare_.push_back(std::move(dg_.front()));
     df_.pop_front();
     dg_.pop_front();
   }

@@ -48,7 +48,8 @@ class AndersonMixing {
   std::vector<double> x_prev_, f_prev_;
   bool have_prev_ = false;
   std::deque<std::vector<double>> df_, dg_;  // newest last
-  std::vector<double> q_, r_, gamma_, rhs_;
+  std::vector<std::vector<double>> spare_;   // storage of forgotten differences, reused
+  std::vector<double> q_, r_, gamma_;
 };
 
 }  // namespace strata::mbd
