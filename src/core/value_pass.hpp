@@ -6,9 +6,9 @@
 // a refactorization with the analyzed pattern (refactor_values); the pattern test and the
 // parallel copies that decide and serve that path; ‖B‖₁ after a rescaling (rescale.hpp).
 //
-// Why: on the GPU these passes run on the host before the device's factorization; for
-// the multibody Newton matrices (millions of entries, a few ms of device work) they were
-// the largest part of a refactorization, so each pass over the entries counts. Sums that
+// Why: on the GPU these passes run on the host before the device's factorization, and
+// for the multibody Newton matrices (millions of entries, a few ms of device work) they
+// are of the order of the device's work, so each pass over the entries counts. Sums that
 // scatter go to per-range vectors added in range order: the same result for every number
 // of threads.
 #pragma once
@@ -116,8 +116,8 @@ std::vector<std::vector<double>> blocked_sums(const SparseMatrix& a, int sums, b
 /// lower triangle): every value finite, no row or column magnitude sum past the largest
 /// double (InvalidInput as validate and check_norms), the values as assembled written to
 /// `scaled` (Dr·A·Dc with the analysis' scaling). Returns ‖A‖∞ and the ‖·‖₁ of the scaled
-/// matrix (symmetric storage expanded). The checks, the norms and the scaling were three
-/// passes, one of them serial: a third of a 4-GPU refactorization of lap3d 80³.
+/// matrix (symmetric storage expanded). The checks, the norms and the scaling share the
+/// pass: each would otherwise read every entry again.
 struct ValueNorms {
   double norm_inf = 0;
   double scaled_norm1 = 0;
