@@ -36,6 +36,7 @@
 #include <string>
 
 #include "core/blas.hpp"
+#include "numeric/cpu/small_dense.hpp"
 #include "strata/errors.hpp"
 
 namespace strata::numeric {
@@ -148,17 +149,53 @@ void factor_front(const Analysis& an, const double* vals, const cpu::DelayPolicy
   fr.k = npiv;
   fr.delayed = p - npiv;
 
-  // store L (m × k) and U12 (k × (m − k)), and the contribution block
-  const std::size_t lsize = static_cast<std::size_t>(m) * npiv;
-  const std::size_t usize = static_cast<std::size_t>(npiv) * (m - npiv);
-  sized(fr.lu, lsize + usize, "factor values");
-  if (npiv > 0) {  // (an empty vector's data() may be null, which memcpy may not get)
-    std::memcpy(fr.lu.data(), A, sizeof(double) * lsize);
-    double* U = fr.lu.data() + lsize;
-    for (index_t j = npiv; j < m; ++j)
-      std::memcpy(U + static_cast<std::size_t>(j - npiv) * npiv,
-                  A + static_cast<std::size_t>(j) * m, sizeof(double) * npiv);
+  // store the pivot block, then L21 without its zero rows and U12 without its zero columns:
+  // the solve reads only these, and a contact problem's Newton matrix leaves many (pairs in
+  // the pattern that are not in contact). NaN is not zero: it stays and reaches the solve.
+  const index_t k = npiv, c = m - npiv;
+  sized(w.nonzero, static_cast<std::size_t>(2 * c), "factor structure");
+  char* row_nz = w.nonzero.data();
+  char* col_nz = row_nz + c;
+  std::fill(row_nz, row_nz + 2 * c, char{0});
+  for (index_t j = 0; j < k; ++j) {
+    const double* col = A + static_cast<std::size_t>(j) * m + k;
+    for (index_t i = 0; i < c; ++i) row_nz[i] |= col[i] != 0.0;
   }
+  index_t cl = 0, cu = 0;
+  for (index_t j = 0; j < c; ++j) {
+    const double* col = A + static_cast<std::size_t>(k + j) * m;
+    bool any = false;
+    for (index_t i = 0; i < k; ++i) any |= col[i] != 0.0;
+    col_nz[j] = any;
+    cl += row_nz[j] != 0;
+    cu += any;
+  }
+  sized(w.kept, static_cast<std::size_t>(cl), "factor structure");
+  sized(fr.l21_rows, static_cast<std::size_t>(cl), "factor structure");
+  sized(fr.u12_cols, static_cast<std::size_t>(cu), "factor structure");
+  for (index_t i = 0, a = 0, b = 0; i < c; ++i) {
+    if (row_nz[i]) {
+      w.kept[a] = i;
+      fr.l21_rows[a++] = R[k + i];
+    }
+    if (col_nz[i]) fr.u12_cols[b++] = C[k + i];
+  }
+  const std::size_t kk = static_cast<std::size_t>(k) * k;
+  sized(fr.lu, kk + static_cast<std::size_t>(cl + cu) * k, "factor values");
+  double* P = fr.lu.data();
+  double* L21 = P + kk;
+  double* U12 = L21 + static_cast<std::size_t>(cl) * k;
+  for (index_t j = 0; j < k; ++j) {
+    const double* col = A + static_cast<std::size_t>(j) * m;
+    std::copy(col, col + k, P + static_cast<std::size_t>(j) * k);
+    double* dst = L21 + static_cast<std::size_t>(j) * cl;
+    for (index_t a = 0; a < cl; ++a) dst[a] = col[k + w.kept[a]];
+  }
+  for (index_t j = 0, b = 0; j < c; ++j)
+    if (col_nz[j]) {
+      const double* col = A + static_cast<std::size_t>(k + j) * m;
+      std::copy(col, col + k, U12 + static_cast<std::size_t>(b++) * k);
+    }
   const std::size_t s = static_cast<std::size_t>(m - npiv);
   if (t.parent[f] >= 0 && s > 0) {
     sized(fr.cb, s * s, "contribution blocks");
@@ -232,86 +269,70 @@ namespace {
 
 constexpr index_t kLoops = 2048;  // below this many multiply-adds, plain loops
 
-// Forward step of front fr: L11 w = z(R[0..k)) in place, then the update g = L21 w of the
-// rows R[k..m), which `sink(row, value)` subtracts.
+// Forward step of front fr: L11 w = z(R[0..k)) in place, then the update L21 w of the rows
+// l21_rows, which `sink(row, value)` subtracts.
 template <class Sink>
 void forward_front(const DelayedFront& fr, double* z, std::vector<double>& w,
                    std::vector<double>& g, Sink&& sink) {
-  const index_t m = fr.m, k = fr.k, c = m - k;
+  const index_t k = fr.k, cl = static_cast<index_t>(fr.l21_rows.size());
   if (k == 0) return;
   const index_t* R = fr.rows.data();
-  const double* L = fr.lu.data();
+  const double* P = fr.lu.data();
+  const double* L21 = P + static_cast<std::size_t>(k) * k;
   const int one = 1;
-  const double p1 = 1.0, zero = 0.0;
+  const double m1 = -1.0, zero = 0.0;
   w.resize(k);
   for (index_t i = 0; i < k; ++i) w[i] = z[R[i]];
-  const int im = static_cast<int>(m), ik = static_cast<int>(k), ic = static_cast<int>(c);
-  if (k * k <= kLoops) {
-    for (index_t j = 0; j < k; ++j) {
-      const double wj = w[j];
-      const double* l = L + static_cast<std::size_t>(j) * m;
-      for (index_t i = j + 1; i < k; ++i) w[i] -= l[i] * wj;
-    }
-  } else {
-    dtrsv_("L", "N", "U", &ik, L, &im, w.data(), &one);
-  }
+  const int ik = static_cast<int>(k), icl = static_cast<int>(cl);
+  if (k * k <= kLoops)
+    cpu::unit_lower_solve(k, P, k, w.data());
+  else
+    dtrsv_("L", "N", "U", &ik, P, &ik, w.data(), &one);
   for (index_t i = 0; i < k; ++i) z[R[i]] = w[i];
-  if (c == 0) return;
-  g.assign(c, 0.0);  // L21 w
-  if (c * k <= kLoops) {
-    for (index_t j = 0; j < k; ++j) {
-      const double wj = w[j];
-      if (wj == 0.0) continue;
-      const double* l = L + static_cast<std::size_t>(j) * m + k;
-      for (index_t i = 0; i < c; ++i) g[i] += l[i] * wj;
-    }
+  if (cl == 0) return;
+  if (cl * k <= kLoops) {
+    g.assign(cl, 0.0);  // −L21 w
+    cpu::gemv_subtract(cl, k, L21, cl, w.data(), g.data());
   } else {
-    dgemv_("N", &ic, &ik, &p1, L + k, &im, w.data(), &one, &zero, g.data(), &one);
+    g.resize(cl);
+    dgemv_("N", &icl, &ik, &m1, L21, &icl, w.data(), &one, &zero, g.data(), &one);
   }
-  for (index_t i = 0; i < c; ++i) sink(R[k + i], g[i]);
+  const index_t* rows = fr.l21_rows.data();
+  for (index_t i = 0; i < cl; ++i) sink(rows[i], -g[i]);
 }
 
-// Backward step of front fr: U11 x(C[0..k)) = z(R[0..k)) − U12 x(C[k..m)).
+// Backward step of front fr: U11 x(C[0..k)) = z(R[0..k)) − U12 x(the columns after k).
 void backward_front(const DelayedFront& fr, const double* z, double* x, std::vector<double>& w,
                     std::vector<double>& g) {
-  const index_t m = fr.m, k = fr.k, c = m - k;
+  const index_t k = fr.k, cu = static_cast<index_t>(fr.u12_cols.size());
   if (k == 0) return;
   const index_t* R = fr.rows.data();
   const index_t* C = fr.cols.data();
-  const double* L = fr.lu.data();
-  const double* U = L + static_cast<std::size_t>(m) * k;
+  const double* P = fr.lu.data();
+  const double* U12 = P + static_cast<std::size_t>(k) * k + fr.l21_rows.size() * k;
   const int one = 1;
   const double p1 = 1.0, m1 = -1.0;
-  const int im = static_cast<int>(m), ik = static_cast<int>(k), ic = static_cast<int>(c);
+  const int ik = static_cast<int>(k), icu = static_cast<int>(cu);
   w.resize(k);
   for (index_t i = 0; i < k; ++i) w[i] = z[R[i]];
-  if (c > 0) {
-    g.resize(c);
-    for (index_t j = 0; j < c; ++j) g[j] = x[C[k + j]];
-    if (c * k <= kLoops) {
-      for (index_t j = 0; j < c; ++j) {
-        const double xj = g[j];
-        if (xj == 0.0) continue;
-        const double* u = U + static_cast<std::size_t>(j) * k;
-        for (index_t i = 0; i < k; ++i) w[i] -= u[i] * xj;
-      }
-    } else {
-      dgemv_("N", &ik, &ic, &m1, U, &ik, g.data(), &one, &p1, w.data(), &one);
-    }
+  if (cu > 0) {
+    g.resize(cu);
+    const index_t* cols = fr.u12_cols.data();
+    for (index_t j = 0; j < cu; ++j) g[j] = x[cols[j]];
+    if (cu * k <= kLoops)
+      cpu::gemv_subtract(k, cu, U12, k, g.data(), w.data());
+    else
+      dgemv_("N", &ik, &icu, &m1, U12, &ik, g.data(), &one, &p1, w.data(), &one);
   }
+  // DTRSV would divide by a zero pivot (a root without static pivots); upper_solve gives 0
   bool zero_pivot = false;
-  for (index_t j = 0; j < k; ++j) zero_pivot |= L[static_cast<std::size_t>(j) * m + j] == 0.0;
-  if (k * k <= kLoops || zero_pivot) {
-    for (index_t j = k - 1; j >= 0; --j) {
-      const double* col = L + static_cast<std::size_t>(j) * m;
-      const double dj = col[j];
-      w[j] = dj != 0.0 ? w[j] / dj : 0.0;  // a zero pivot (static pivoting off) gives 0
-      const double wj = w[j];
-      for (index_t i = 0; i < j; ++i) w[i] -= col[i] * wj;
-    }
-  } else {
-    dtrsv_("U", "N", "N", &ik, L, &im, w.data(), &one);
-  }
+  if (k * k > kLoops)
+    for (index_t j = 0; j < k && !zero_pivot; ++j)
+      zero_pivot = P[static_cast<std::size_t>(j) * k + j] == 0.0;
+  if (k * k <= kLoops || zero_pivot)
+    cpu::upper_solve(k, P, k, w.data());
+  else
+    dtrsv_("U", "N", "N", &ik, P, &ik, w.data(), &one);
   for (index_t i = 0; i < k; ++i) x[C[i]] = w[i];
 }
 

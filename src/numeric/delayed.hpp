@@ -33,13 +33,17 @@ namespace strata::numeric {
 /// One front of a factorization with delayed pivots: m rows and columns, k pivots; its
 /// row and column lists (tree numbering; the first k are the pivot rows / columns in
 /// elimination order, the next `delayed` the rows and columns it passed to its parent);
-/// `lu`: L (m×k column-major: U11 on and above the diagonal of the first k rows, unit L11
-/// below it, then L21) followed by U12 (k×(m−k)); `cb`: the contribution block
-/// ((m−k)×(m−k), rows rows[k..m), columns cols[k..m)), kept until the parent is assembled.
-/// The vectors keep their capacity from one factorization to the next.
+/// `lu`, what the solve reads: the pivot block (k×k column-major: U11 on and above the
+/// diagonal, unit L11 below it), then L21 without its zero rows (l21_rows.size() × k,
+/// column-major) and U12 without its zero columns (k × u12_cols.size(), column-major);
+/// `l21_rows` / `u12_cols`: the rows / columns (tree numbering) of those kept rows of L21
+/// and columns of U12; `cb`: the contribution block ((m−k)×(m−k), rows rows[k..m), columns
+/// cols[k..m)), kept until the parent is assembled. The vectors keep their capacity from
+/// one factorization to the next.
 struct DelayedFront {
   index_t m = 0, k = 0, delayed = 0;
   std::vector<index_t> rows, cols;
+  std::vector<index_t> l21_rows, u12_cols;
   std::vector<double> lu, cb;
   PivotStats stats;
 };
@@ -76,7 +80,8 @@ struct DelayedFactor {
 struct DelayedWorkspace {
   struct Thread {
     std::vector<double> front;
-    std::vector<index_t> row_pos, col_pos, row_perm, col_perm, scratch;
+    std::vector<index_t> row_pos, col_pos, row_perm, col_perm, scratch, kept;
+    std::vector<char> nonzero;
   };
   std::vector<Thread> threads;
 };

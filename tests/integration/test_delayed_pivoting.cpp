@@ -234,6 +234,53 @@ TEST(DelayedPivoting, SolveBySubtreesOnSeveralThreadsMatchesDenseLu) {
   }
 }
 
+// Explicit zeros in the pattern (a contact problem's Newton matrix keeps the entries of
+// pairs not in contact, with value 0): the solve skips the factor's zero rows of L21 and
+// zero columns of U12, and must still give dense LAPACK's solution, for a dense and a
+// sparse right-hand side, with the stale matching of the first values.
+TEST(DelayedPivoting, ExplicitZerosSolveLikeDenseLu) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (index_t n : {1, 2, 3, 5, 733}) {
+    SCOPED_TRACE("n=" + std::to_string(n));
+    const SparseMatrix pattern = test::random_pattern_with_diagonal(n, 6, rng);
+    const SparseMatrix a1 = test::with_values(pattern, 10.0, rng);
+    SparseMatrix a2 = test::with_values(pattern, 0.0, rng);
+    index_t zeros = 0;
+    for (index_t j = 0; j < n; ++j)  // about two thirds of the off-diagonal entries zero
+      for (index_t p = a2.offsets[j]; p < a2.offsets[j + 1]; ++p)
+        if (a2.indices[p] == j) {
+          a2.values[p] = u(rng);  // no longer dominant: the first values' matching is stale
+        } else if (u(rng) < 0.33) {
+          a2.values[p] = 0.0;
+          ++zeros;
+        }
+    std::vector<double> b(2 * n, 0.0);
+    for (index_t i = 0; i < n; ++i) b[i] = u(rng);
+    b[n + (n - 1) / 2] = 1.0;  // sparse: one nonzero
+    std::vector<double> ref = b;
+    if (!test::dense_solve(test::to_dense(a2), n, ref, 2)) continue;  // singular draw
+    Options o = leaf_fronts();
+    o.pivoting = Pivoting::delayed;
+    o.refinement_max_steps = 0;  // the triangular solves alone
+    o.gmres_max_iterations = 0;
+    Solver s(o);
+    s.analyze(a1);
+    s.factorize(a2);
+    EXPECT_EQ(s.stats().factor.perturbed_pivots, 0);
+    const std::vector<double> x = s.solve(b);
+    for (int c = 0; c < 2; ++c) {
+      const std::vector<double> xc(x.begin() + c * n, x.begin() + (c + 1) * n);
+      const std::vector<double> rc(ref.begin() + c * n, ref.begin() + (c + 1) * n);
+      const std::vector<double> bc(b.begin() + c * n, b.begin() + (c + 1) * n);
+      const double tol = std::max(1e-10, 1e-13 * std::sqrt(double(n)) * kappa_lower(a2, rc, bc));
+      EXPECT_LE(test::relative_difference(xc, rc), tol) << zeros << " explicit zeros";
+    }
+  }
+}
+
 // Options::solve_check = after_perturbed_pivots (the engine's Newton loop): a factor
 // without perturbed pivots gives the triangular solves' x unchecked (bit for bit the x of
 // a solve with refinement off, the backward error NaN, dense LAPACK's solution to the
