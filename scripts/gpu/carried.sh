@@ -1,6 +1,7 @@
 # Sourced (not run) by the scripts/gpu run scripts, from the repository's root: when a
 # staged .carry/ is there (scripts/gpu/prepare.sh), unpacks its binaries and libraries,
-# reassembles cuDSS from the three parts earlier calls left in build-cudss/, puts both on
+# reassembles cuDSS from the parts earlier calls left in build-cudss/ (all of them: the
+# number in build-cudss/parts, see prepare.sh), puts both on
 # LD_LIBRARY_PATH and sets STRATA_CARRIED=1, so that the results name the staged
 # binaries' commit (.carry/COMMIT) rather than the machine's checkout. Sets BIN (the
 # drivers' folder: $STRATA_BIN_DIR, else .carry/bin), S (the strata binary: $STRATA_BIN, else
@@ -8,8 +9,9 @@
 # else $OUT, else /tmp/strata-out).
 if [ -d .carry/lib ]; then
   for z in .carry/lib/*.xz .carry/bin/*.xz .carry/base/*.xz; do [ -f "$z" ] && xz -d -f "$z"; done
-  if [ -f build-cudss/part-ac ] && [ ! -f build-cudss/libcudss.so.1 ]; then
-    cat build-cudss/part-aa build-cudss/part-ab build-cudss/part-ac | xz -d -T8 >build-cudss/libcudss.so.1
+  if [ -f build-cudss/parts ] && [ ! -f build-cudss/libcudss.so.1 ] &&
+    [ "$(ls build-cudss/part-* | wc -l)" -eq "$(cat build-cudss/parts)" ]; then
+    cat build-cudss/part-* | xz -d -T8 >build-cudss/libcudss.so.1
   fi
   export LD_LIBRARY_PATH="$PWD/.carry/lib:$PWD/build-cudss:${LD_LIBRARY_PATH:-}"
   # the staged binaries run (not others named by STRATA_BIN_DIR): their commit

@@ -20,7 +20,7 @@ if [ "${1:-}" = --quick ]; then
 fi
 if [ ! -x "$BIN/bench_cudss" ] || ldd "$BIN/bench_cudss" | grep -q "not found"; then
   echo "run_cudss_mbd: skipped: no loadable $BIN/bench_cudss (configure with STRATA_CUDSS_DIR;" \
-    "on a lent machine carry .cudss1..3, see scripts/gpu/prepare.sh)"
+    "on a lent machine carry .cudss1, .cudss2, ..., see scripts/gpu/prepare.sh)"
   exit 0
 fi
 list=$(bash scripts/gpu/mechanical_matrices.sh "$S" "$WORK" "${models[@]}" | tail -n 1)
