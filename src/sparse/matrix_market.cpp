@@ -21,18 +21,11 @@
 // Why this shape. Every test matrix, every benchmark and the command line go through
 // this reader, so it has to be strict (a malformed file must never turn into a silently
 // wrong matrix: every problem is a ParseError naming the file and the 1-based line) and
-// fast (the largest shared matrix has 612k entries). Files are read in large blocks,
-// through zlib's inflate when they start with the gzip magic bytes (any name) and
-// unchanged otherwise; lines are cut out of the block with memchr and numbers are parsed with
-// std::from_chars — no iostreams, no per-token allocation. The entries are collected as
-// triplets and turned into canonical CSC by one bucket pass plus strata::canonicalize
-// (sorts, sums duplicates, validates).
-//
-// A truncated ".gz" file (the input ends inside a gzip member) is detected; the partial
-// last line it decompressed to is dropped, never parsed, and the file is reported as
-// truncated. Several gzip members one after the other are read as one stream (RFC 1952);
-// any other bytes after the last member are an error (the file is corrupt or two files
-// were joined by mistake), where zlib's gzread would ignore them.
+// fast (the largest shared matrix has 612k entries). Lines come from
+// sparse/compressed_lines.hpp (large blocks, gzip or plain, a truncated ".gz" file
+// detected) as string_views and numbers are parsed with std::from_chars — no iostreams, no
+// per-token allocation. The entries are collected as triplets and turned into canonical
+// CSC by one bucket pass plus strata::canonicalize (sorts, sums duplicates, validates).
 //
 // Memory is bounded by the input: the size line may declare any dimensions, but nothing
 // of O(rows + columns) is allocated until the entries are read and, for a matrix that is
@@ -40,18 +33,8 @@
 // a square matrix with fewer distinct rows or columns than its dimension is structurally
 // singular and refused, naming the first empty column, before its compressed form exists.
 //
-// Writers produce `coordinate real|pattern general|symmetric` and `array real general`
-// with 17 significant digits (%.17g, so every double reads back bitwise). They follow the
-// output rules of core/atomic_file.hpp: a temporary beside the target renamed onto it once
-// complete, so the target is either the old file or the complete new one, never a partial
-// file (a symbolic link is followed, a device or FIFO written in place); on failure the
-// temporary is removed and strata::Error names PATH. A PATH ending in ".gz" is written
-// compressed.
+// The writers are in matrix_market_write.cpp.
 #include "strata/matrix_market.hpp"
-
-#include <fcntl.h>
-#include <unistd.h>
-#include <zlib.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -68,11 +51,13 @@
 #include <utility>
 #include <vector>
 
-#include "core/atomic_file.hpp"
+#include "sparse/compressed_lines.hpp"
 #include "strata/errors.hpp"
 
 namespace strata {
 namespace {
+
+using detail::LineReader;
 
 // ---------------------------------------------------------------------------------------
 // Small text helpers
@@ -160,207 +145,6 @@ RealStatus parse_real(std::string_view tok, double& out) {
   if (std::isinf(out)) return RealStatus::overflow;
   return RealStatus::ok;
 }
-
-// ---------------------------------------------------------------------------------------
-// Line reader over zlib
-// ---------------------------------------------------------------------------------------
-
-// The bytes of a file, decompressed when it is gzip (RFC 1952: it starts with the magic
-// bytes 1f 8b), passed through unchanged otherwise. A gzip file may hold several members
-// one after the other (as `cat a.gz b.gz` makes); anything else after the last member is
-// an error (zlib's gzread would skip it silently), as is a stream that ends inside a
-// member (`truncated()`, reported by the caller with the line it stopped at).
-class ByteSource {
- public:
-  explicit ByteSource(const std::string& path) : path_(path) {
-    errno = 0;
-    fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-    if (fd_ < 0) {
-      const int err = errno;
-      throw ParseError(path, 0, std::string("cannot open file: ") + std::strerror(err));
-    }
-    in_.resize(1 << 18);
-    refill();
-    gzip_ = avail_ >= 2 && static_cast<unsigned char>(in_[0]) == 0x1f &&
-            static_cast<unsigned char>(in_[1]) == 0x8b;
-    if (gzip_) start_member();
-  }
-  ~ByteSource() {
-    if (inflating_) inflateEnd(&z_);
-    if (fd_ >= 0) ::close(fd_);
-  }
-  ByteSource(const ByteSource&) = delete;
-  ByteSource& operator=(const ByteSource&) = delete;
-
-  /// Up to `want` bytes into `out`; 0 at the end of the file. `line` (the number of the
-  /// line being read) goes into the messages of read errors and corrupt data.
-  std::size_t read(char* out, std::size_t want, index_t line) {
-    if (!gzip_) {
-      if (avail_ == 0 && !eof_) refill(line);
-      const std::size_t n = std::min(want, avail_);
-      std::memcpy(out, in_.data() + pos_, n);
-      pos_ += n;
-      avail_ -= n;
-      return n;
-    }
-    std::size_t got = 0;
-    while (got < want && !done_) {
-      if (avail_ == 0 && !eof_) refill(line);
-      if (avail_ == 0 && eof_) {  // the input ended inside a member
-        truncated_ = true;
-        done_ = true;
-        break;
-      }
-      z_.next_in = reinterpret_cast<Bytef*>(in_.data() + pos_);
-      z_.avail_in = static_cast<uInt>(avail_);
-      z_.next_out = reinterpret_cast<Bytef*>(out + got);
-      z_.avail_out = static_cast<uInt>(std::min<std::size_t>(want - got, 1u << 30));
-      const int rc = inflate(&z_, Z_NO_FLUSH);
-      got = static_cast<std::size_t>(reinterpret_cast<char*>(z_.next_out) - out);
-      pos_ = static_cast<std::size_t>(reinterpret_cast<char*>(z_.next_in) - in_.data());
-      avail_ = z_.avail_in;
-      if (rc == Z_STREAM_END) {
-        next_member(line);
-      } else if (rc == Z_DATA_ERROR || rc == Z_NEED_DICT) {
-        throw ParseError(
-            path_, line,
-            std::string("corrupt compressed data: ") + (z_.msg ? z_.msg : "invalid gzip stream"));
-      } else if (rc == Z_MEM_ERROR) {
-        throw OutOfMemory(0, "decompressing " + path_);
-      } else if (rc != Z_OK && rc != Z_BUF_ERROR) {
-        throw ParseError(path_, line,
-                         "corrupt compressed data (zlib error " + std::to_string(rc) + ")");
-      }
-    }
-    return got;
-  }
-
-  /// True when the compressed stream ended early (a truncated .gz file).
-  bool truncated() const { return truncated_; }
-
- private:
-  void refill(index_t line = 0) {
-    if (avail_ > 0 && pos_ > 0) std::memmove(in_.data(), in_.data() + pos_, avail_);
-    pos_ = 0;
-    while (avail_ < in_.size()) {
-      const ssize_t r = ::read(fd_, in_.data() + avail_, in_.size() - avail_);
-      if (r < 0) {
-        if (errno == EINTR) continue;
-        const int err = errno;
-        throw ParseError(path_, line, std::string("read error: ") + std::strerror(err));
-      }
-      if (r == 0) {
-        eof_ = true;
-        break;
-      }
-      avail_ += static_cast<std::size_t>(r);
-      if (gzip_) break;  // inflate takes what there is
-    }
-  }
-  void start_member() {
-    z_ = z_stream{};
-    if (inflateInit2(&z_, 16 + MAX_WBITS) != Z_OK) throw OutOfMemory(0, "decompressing " + path_);
-    inflating_ = true;
-  }
-  // A member ended: another one follows, or nothing may.
-  void next_member(index_t line) {
-    if (avail_ < 2 && !eof_) refill(line);
-    if (avail_ == 0 && eof_) {
-      done_ = true;
-      return;
-    }
-    if (avail_ >= 2 && static_cast<unsigned char>(in_[pos_]) == 0x1f &&
-        static_cast<unsigned char>(in_[pos_ + 1]) == 0x8b) {
-      inflateReset(&z_);
-      return;
-    }
-    throw ParseError(path_, 0,
-                     "trailing data after the end of the compressed stream (" +
-                         std::to_string(avail_) + (eof_ ? "" : "+") +
-                         " bytes that are not a gzip member): the file is corrupt");
-  }
-
-  std::string path_;
-  int fd_ = -1;
-  std::vector<char> in_;
-  std::size_t pos_ = 0, avail_ = 0;
-  bool eof_ = false, gzip_ = false, inflating_ = false, done_ = false, truncated_ = false;
-  z_stream z_{};
-};
-
-// Hands out the lines of a (possibly gzip-compressed) file as string_views into an
-// internal block buffer, without the trailing "\n" or "\r\n". Counts lines from 1.
-class LineReader {
- public:
-  explicit LineReader(const std::string& path) : path_(path), src_(path) { buf_.resize(1 << 20); }
-  LineReader(const LineReader&) = delete;
-  LineReader& operator=(const LineReader&) = delete;
-
-  /// The next line, or false at the end of the file.
-  bool next(std::string_view& line) {
-    for (;;) {
-      const char* base = buf_.data();
-      if (const void* nl = std::memchr(base + begin_, '\n', end_ - begin_)) {
-        const size_t stop = static_cast<const char*>(nl) - base;
-        line = trim_cr(std::string_view(base + begin_, stop - begin_));
-        begin_ = stop + 1;
-        ++line_no_;
-        return true;
-      }
-      if (eof_) {
-        if (begin_ == end_) return false;
-        line = trim_cr(std::string_view(base + begin_, end_ - begin_));  // no final '\n'
-        begin_ = end_;
-        ++line_no_;
-        return true;
-      }
-      fill();
-    }
-  }
-
-  /// Number of the last line returned (0 before the first).
-  index_t line_no() const { return line_no_; }
-  /// True when the compressed stream ended early (a truncated .gz file).
-  bool truncated() const { return truncated_; }
-
- private:
-  static std::string_view trim_cr(std::string_view s) {
-    if (!s.empty() && s.back() == '\r') s.remove_suffix(1);
-    return s;
-  }
-
-  // Moves the unread tail to the front (growing the buffer if one line fills it) and
-  // reads the next block.
-  void fill() {
-    if (begin_ > 0) {
-      std::memmove(buf_.data(), buf_.data() + begin_, end_ - begin_);
-      end_ -= begin_;
-      begin_ = 0;
-    }
-    if (end_ == buf_.size()) buf_.resize(buf_.size() * 2);
-    const size_t want = std::min<size_t>(buf_.size() - end_, 1u << 30);
-    const size_t got = src_.read(buf_.data() + end_, want, line_no_ + 1);
-    if (got == 0) {
-      eof_ = true;
-      if (src_.truncated()) {
-        // The input ended inside the gzip stream: whatever follows the last complete
-        // line is a fragment of a line (a number could be cut short), so drop it.
-        truncated_ = true;
-        end_ = begin_;
-      }
-      return;
-    }
-    end_ += got;
-  }
-
-  std::string path_;
-  ByteSource src_;
-  std::vector<char> buf_;
-  size_t begin_ = 0, end_ = 0;
-  index_t line_no_ = 0;
-  bool eof_ = false;
-  bool truncated_ = false;
-};
 
 // ---------------------------------------------------------------------------------------
 // The parser: banner, size line, entries
@@ -817,110 +601,6 @@ void check_factorable(const std::string& path, const Contents& c) {
   if (const index_t i = first_missing(seen); i < c.rows) refuse("row", i);
 }
 
-// ---------------------------------------------------------------------------------------
-// Atomic writer
-// ---------------------------------------------------------------------------------------
-
-// Writes PATH by the rules of core/atomic_file.hpp: through a temporary file in the
-// target's folder, renamed onto the target by commit() (the final target of a symbolic
-// link; an existing device or FIFO is written in place instead). If commit() is not
-// reached (an exception), the destructor removes the temporary.
-class AtomicWriter {
- public:
-  explicit AtomicWriter(std::string path) : path_(std::move(path)) {
-    const OutputTarget target = resolve_output(path_);
-    target_ = target.path;
-    through_ = target.write_through;
-    // "T": plain (transparent) output; a ".gz" PATH is compressed.
-    const char* mode = ends_with(path_, ".gz") ? "wb6" : "wbT";
-    errno = 0;
-    if (through_) {
-      const int fd = ::open(target_.c_str(), O_WRONLY | O_CLOEXEC);
-      if (fd < 0) fail(std::string("cannot open ") + target_ + ": " + errno_text(errno));
-      file_ = gzdopen(fd, mode);
-      if (!file_) {
-        ::close(fd);
-        fail("cannot open " + target_ + ": out of memory in zlib");
-      }
-    } else {
-      tmp_ = temporary_name(target_);
-      file_ = gzopen(tmp_.c_str(), mode);
-      if (!file_) fail(std::string("cannot create ") + tmp_ + ": " + errno_text(errno));
-    }
-    buf_.reserve(kFlushAt + 256);
-  }
-  ~AtomicWriter() {
-    if (file_) gzclose(file_);
-    if (!committed_ && !through_) std::remove(tmp_.c_str());
-  }
-  AtomicWriter(const AtomicWriter&) = delete;
-  AtomicWriter& operator=(const AtomicWriter&) = delete;
-
-  void put(std::string_view s) {
-    buf_.append(s);
-    if (buf_.size() >= kFlushAt) flush();
-  }
-  void put_index(index_t k) {
-    char tmp[24];
-    const auto r = std::to_chars(tmp, tmp + sizeof tmp, k);
-    buf_.append(tmp, r.ptr);
-  }
-  // %.17g: 17 significant digits, enough for every double to read back bitwise.
-  void put_real(double v) {
-    char tmp[40];
-    const auto r = std::to_chars(tmp, tmp + sizeof tmp, v, std::chars_format::general, 17);
-    buf_.append(tmp, r.ptr);
-  }
-  void end_line() {
-    buf_.push_back('\n');
-    if (buf_.size() >= kFlushAt) flush();
-  }
-
-  /// Completes the file: flush, close, rename onto the target.
-  void commit() {
-    flush();
-    const int rc = gzclose(file_);
-    file_ = nullptr;
-    const std::string& name = through_ ? target_ : tmp_;
-    if (rc != Z_OK)
-      fail("closing " + name + " failed" + (rc == Z_ERRNO ? ": " + errno_text(errno) : ""));
-    if (!through_ && std::rename(tmp_.c_str(), target_.c_str()) != 0)
-      fail("cannot rename " + tmp_ + " onto " + target_ + ": " + errno_text(errno));
-    committed_ = true;
-  }
-
- private:
-  static constexpr size_t kFlushAt = 1 << 20;
-
-  static std::string errno_text(int err) { return err ? std::strerror(err) : "unknown error"; }
-
-  void flush() {
-    if (buf_.empty()) return;
-    const int wrote = gzwrite(file_, buf_.data(), static_cast<unsigned>(buf_.size()));
-    if (wrote != static_cast<int>(buf_.size())) {
-      int errnum = 0;
-      const char* msg = gzerror(file_, &errnum);
-      fail("writing " + (through_ ? target_ : tmp_) +
-           " failed: " + (errnum == Z_ERRNO ? errno_text(errno) : msg));
-    }
-    buf_.clear();
-  }
-
-  [[noreturn]] void fail(const std::string& why) {
-    if (file_) gzclose(file_);
-    file_ = nullptr;
-    if (!through_) std::remove(tmp_.c_str());
-    committed_ = true;  // nothing left to clean up
-    throw Error("cannot write Matrix Market file " + path_ + ": " + why);
-  }
-
-  std::string path_, target_, tmp_;
-  bool through_ = false;
-  gzFile file_ = nullptr;
-  std::string buf_;
-  bool committed_ = false;
-};
-
 }  // namespace
 
 // ---------------------------------------------------------------------------------------
@@ -958,81 +638,6 @@ std::vector<double> read_dense_matrix_market(const std::string& path, index_t* r
   *rows = c.rows;
   *cols = c.cols;
   return d;
-}
-
-void write_matrix_market(const std::string& path, const SparseMatrix& a) {
-  // Canonical CSC (validated, sorted, duplicates summed). An upper-stored matrix is
-  // written as the lower triangle of its transpose: read as CSR, CSC upper storage is
-  // the transpose in lower storage (and vice versa).
-  SparseMatrix c;
-  try {
-    if (a.storage == Storage::upper) {
-      SparseMatrix t = a;
-      t.layout = a.layout == Layout::csc ? Layout::csr : Layout::csc;
-      t.storage = Storage::lower;
-      std::swap(t.n_rows, t.n_cols);
-      c = canonicalize(t);
-    } else {
-      c = canonicalize(a);
-    }
-  } catch (const InvalidInput& e) {
-    throw InvalidInput("cannot write Matrix Market file " + path + ": " + e.what());
-  }
-  const bool pattern = c.values.empty() && c.nnz() > 0;
-  const bool sym = c.storage != Storage::full;
-
-  AtomicWriter w(path);
-  w.put("%%MatrixMarket matrix coordinate ");
-  w.put(pattern ? "pattern " : "real ");
-  w.put(sym ? "symmetric\n" : "general\n");
-  w.put("% written by strata\n");
-  w.put_index(c.n_rows);
-  w.put(" ");
-  w.put_index(c.n_cols);
-  w.put(" ");
-  w.put_index(c.nnz());
-  w.end_line();
-  for (index_t j = 0; j < c.n_cols; ++j)
-    for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) {
-      w.put_index(c.indices[p] + 1);
-      w.put(" ");
-      w.put_index(j + 1);
-      if (!pattern) {
-        w.put(" ");
-        w.put_real(c.values[p]);
-      }
-      w.end_line();
-    }
-  w.commit();
-}
-
-void write_dense_matrix_market(const std::string& path, const double* values, index_t rows,
-                               index_t cols) {
-  const std::string what = "cannot write Matrix Market file " + path + ": ";
-  if (rows < 0 || cols < 0)
-    throw InvalidInput(what + "negative dimensions " + std::to_string(rows) + "x" +
-                       std::to_string(cols));
-  index_t size = 0;
-  if (__builtin_mul_overflow(rows, cols, &size))
-    throw InvalidInput(what + "dimensions " + std::to_string(rows) + "x" + std::to_string(cols) +
-                       " overflow");
-  if (size > 0 && !values) throw InvalidInput(what + "values is null");
-  for (index_t k = 0; k < size; ++k)
-    if (!std::isfinite(values[k]))
-      throw InvalidInput(what + "value (" + std::to_string(k % rows) + ", " +
-                         std::to_string(k / rows) + ") is not finite");
-
-  AtomicWriter w(path);
-  w.put("%%MatrixMarket matrix array real general\n% written by strata\n");
-  w.put_index(rows);
-  w.put(" ");
-  w.put_index(cols);
-  w.end_line();
-  for (index_t k = 0; k < size; ++k) {
-    w.put_real(values[k]);
-    w.end_line();
-  }
-  w.commit();
 }
 
 }  // namespace strata
