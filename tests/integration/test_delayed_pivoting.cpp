@@ -33,6 +33,15 @@ Options leaf_fronts() {
   return o;
 }
 
+// Delayed pivoting with the triangular solves alone (no refinement, no GMRES).
+Options delayed_solves_only() {
+  Options o = leaf_fronts();
+  o.pivoting = Pivoting::delayed;
+  o.refinement_max_steps = 0;
+  o.gmres_max_iterations = 0;
+  return o;
+}
+
 // log|det A| and its sign from LAPACK's dgetrf on the dense copy.
 void dense_logdet(const SparseMatrix& a, double* logdet, int* sign) {
   std::vector<double> d = test::to_dense(a);
@@ -209,11 +218,8 @@ TEST(DelayedPivoting, SolveBySubtreesOnSeveralThreadsMatchesDenseLu) {
   std::vector<double> one_thread;
   for (int threads : {1, 2, 4}) {
     SCOPED_TRACE("threads " + std::to_string(threads));
-    Options o = leaf_fronts();
-    o.pivoting = Pivoting::delayed;
+    Options o = delayed_solves_only();
     o.num_threads = threads;
-    o.refinement_max_steps = 0;  // the triangular solves alone
-    o.gmres_max_iterations = 0;
     Solver s(o);
     s.analyze(a1);
     s.factorize(a2);
@@ -262,11 +268,7 @@ TEST(DelayedPivoting, ExplicitZerosSolveLikeDenseLu) {
     b[n + (n - 1) / 2] = 1.0;  // sparse: one nonzero
     std::vector<double> ref = b;
     if (!test::dense_solve(test::to_dense(a2), n, ref, 2)) continue;  // singular draw
-    Options o = leaf_fronts();
-    o.pivoting = Pivoting::delayed;
-    o.refinement_max_steps = 0;  // the triangular solves alone
-    o.gmres_max_iterations = 0;
-    Solver s(o);
+    Solver s(delayed_solves_only());
     s.analyze(a1);
     s.factorize(a2);
     EXPECT_EQ(s.stats().factor.perturbed_pivots, 0);
