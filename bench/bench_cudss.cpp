@@ -2,11 +2,12 @@
 // (issue 5's anchor; experiment 2 of the report, GPU part).
 //
 // For each problem: strata on the GPU (analysis, first factorization, median of --repeat
-// refactorizations, for LU also with Pivoting::fixed, solve with refinement); cuDSS with its default reordering and with
-// strata's permutation given as CUDSS_DATA_USER_PERM (both directions of the permutation
-// are tried and the one with the smaller LU_NNZ kept, since the documentation does not say
-// which one it expects), each: analysis, factorization, median of --repeat
-// REFACTORIZATION, solve, backward error computed on the host, LU_NNZ.
+// refactorizations, for LU also with Pivoting::fixed, solve with refinement); cuDSS with
+// its default reordering and with strata's permutation given as CUDSS_DATA_USER_PERM
+// (both directions of the permutation are tried and the one with the smaller LU_NNZ kept,
+// since the documentation does not say which one it expects), each: analysis,
+// factorization, median of --repeat REFACTORIZATION, solve, backward error computed on the
+// host, LU_NNZ.
 // cuDSS gets the upper triangle (CSR view of strata's lower CSC) for SPD matrices and the
 // whole matrix for unsymmetric ones; 32-bit indices. Results: <dir>/cudss-*.json.
 //
@@ -276,10 +277,11 @@ int main(int argc, char** argv) {
         def.ok ? def.refactor : -1.0, same.ok ? same.refactor : -1.0,
         best < 1e300 ? rf_s / best : -1.0, def.ok ? f_s / def.factor : -1.0);
     if (!fixed_order.is_null())
-      fmt::print("  strata in the analysis's order only (Pivoting::fixed): refactorization {:.4f} s, "
-                 "{} perturbed pivots\n",
-                 fixed_order["refactor_seconds"].get<double>(),
-                 fixed_order["perturbed_pivots"].get<long long>());
+      fmt::print(
+          "  strata in the analysis's order only (Pivoting::fixed): refactorization {:.4f} s, "
+          "{} perturbed pivots\n",
+          fixed_order["refactor_seconds"].get<double>(),
+          fixed_order["perturbed_pivots"].get<long long>());
     if (!def.ok) fmt::print("  cuDSS default failed: {}\n", def.error);
     if (!same.ok) fmt::print("  cuDSS with strata's permutation failed: {}\n", same.error);
     std::fflush(stdout);
