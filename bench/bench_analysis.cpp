@@ -14,7 +14,7 @@
 #include <CLI/CLI.hpp>
 
 #include "bench_common.hpp"
-#include "core/timer.hpp"
+#include "base/timer.hpp"
 #include "crash_report.hpp"
 #include "strata/strata.hpp"
 

@@ -15,9 +15,9 @@
 #include <fstream>
 #include <thread>
 
-#include "core/atomic_file.hpp"
+#include "base/atomic_file.hpp"
 #include "core/stats_json.hpp"
-#include "core/timer.hpp"
+#include "base/timer.hpp"
 #include "sparse/generators.hpp"
 #include "strata/errors.hpp"
 #include "strata/matrix_market.hpp"
@@ -137,7 +137,7 @@ std::string write_result(const nlohmann::json& j, const std::string& stem,
   std::filesystem::create_directories(dir, ec);
   if (ec) throw Error("cannot create " + dir + ": " + ec.message());
   const std::string path = dir + "/" + stem + "-" + utc_now("%Y%m%dT%H%M%SZ") + ".json";
-  // temporary name in the same folder, fsync, rename (core/atomic_file.hpp): a reader or
+  // temporary name in the same folder, fsync, rename (base/atomic_file.hpp): a reader or
   // bench/report.py never sees a half-written result
   write_file_atomically(path, j.dump(2) + "\n");
   return path;

@@ -21,7 +21,7 @@
 #include <stdexcept>
 
 #include "bench_common.hpp"
-#include "core/timer.hpp"
+#include "base/timer.hpp"
 #include "crash_report.hpp"
 #include "numeric/factor.hpp"
 #include "strata/strata.hpp"

@@ -19,7 +19,7 @@
 
 #include "bench_common.hpp"
 #include "core/stats_json.hpp"
-#include "core/timer.hpp"
+#include "base/timer.hpp"
 #include "crash_report.hpp"
 #include "distributed/distributed_internal.hpp"
 #include "strata/distributed.hpp"

@@ -21,8 +21,8 @@
 #endif
 
 #include "bench_common.hpp"
-#include "core/blas.hpp"
-#include "core/timer.hpp"
+#include "base/blas.hpp"
+#include "base/timer.hpp"
 #include "crash_report.hpp"
 #include "strata/strata.hpp"
 

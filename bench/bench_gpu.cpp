@@ -18,8 +18,8 @@
 #include <cstdio>
 
 #include "bench_common.hpp"
-#include "core/blas.hpp"
-#include "core/timer.hpp"
+#include "base/blas.hpp"
+#include "base/timer.hpp"
 #include "crash_report.hpp"
 #include "numeric/factor.hpp"
 #include "strata/strata.hpp"

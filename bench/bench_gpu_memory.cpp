@@ -50,7 +50,7 @@
 
 #include "bench_common.hpp"
 #include "core/stats_json.hpp"
-#include "core/timer.hpp"
+#include "base/timer.hpp"
 #include "crash_report.hpp"
 #include "numeric/cuda/cuda_executor.hpp"
 #include "numeric/cuda/kernels.cuh"

@@ -35,7 +35,7 @@
 #include "bench_common.hpp"
 #include "core/solver_internal.hpp"
 #include "core/stats_json.hpp"
-#include "core/timer.hpp"
+#include "base/timer.hpp"
 #include "crash_report.hpp"
 #include "strata/strata.hpp"
 

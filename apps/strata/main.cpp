@@ -41,7 +41,7 @@
 #include <optional>
 #include <string>
 
-#include "core/atomic_file.hpp"
+#include "base/atomic_file.hpp"
 #include "core/stats_json.hpp"
 #include "crash_report.hpp"
 #include "launch.hpp"

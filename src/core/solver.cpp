@@ -28,12 +28,12 @@
 #include <optional>
 #include <string_view>
 
-#include "core/alloc.hpp"
-#include "core/analysis.hpp"
-#include "core/host_copy.hpp"
+#include "analysis/analysis.hpp"
+#include "base/alloc.hpp"
+#include "base/host_copy.hpp"
+#include "base/timer.hpp"
 #include "core/rescale.hpp"
 #include "core/solver_internal.hpp"
-#include "core/timer.hpp"
 #include "core/value_pass.hpp"
 #include "numeric/delayed.hpp"
 #include "numeric/factor.hpp"
@@ -157,8 +157,7 @@ std::vector<numeric::Executor*> ensure_executors(SolverState& s, int workers) {
     return execs;
   }
   if (!s.executor) {
-    const bool gpu = s.options.backend == Backend::cuda ||
-                     (s.options.backend == Backend::automatic && numeric::cuda_available());
+    const bool gpu = numeric::uses_cuda(s.options.backend);
     s.executor = gpu ? numeric::make_cuda_executor(s.options)
                      : numeric::make_cpu_executor(s.options.num_threads, s.options.reproducible);
   }
@@ -238,10 +237,13 @@ void keep_analyzed_input(SolverState& s, const SparseMatrix& a) {
                "analyze: value sums");
 }
 
-void run_factorization(SolverState& s, const SparseMatrix& a) {
-  Timer timer;
+// The input stage of a factorization: the values checked (finite, the analyzed pattern
+// or a canonical form of a new one), their norms, the scaling of the analysis applied
+// into s.scaled and, for values far from the analysis's, equilibrated again
+// (s.rescaling). Returns ‖B‖₁ of the scaled matrix B. Throws InvalidInput before the
+// current factor is touched, so that bad input leaves the solver usable.
+double prepare_values(SolverState& s, const SparseMatrix& a) {
   const Analysis& an = *s.analysis;
-  // Validate before touching the current factor: bad input leaves the solver usable.
   const bool scale = !an.row_scaling.empty();
   double norm1 = 0;  // of the scaled matrix, for static pivoting
   tbb::task_arena& arena = host_arena(s);
@@ -299,9 +301,27 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
     if (!s.rescaling.row.empty())
       norm1 = scaled_norm1(s.values, an.symmetric, s.scaled, arena, s.value_sums);
   }
-  const double input_seconds = timer.seconds();
-  const double static_pivot = s.options.static_pivot_epsilon * (norm1 > 0 ? norm1 : 1.0);
+  return norm1;
+}
 
+// What the numeric stage did: the type factored (automatic resolved), the perturbed
+// pivots of the fixed order (before a delayed factorization), the executors and the
+// seconds their creation took.
+struct NumericRun {
+  MatrixType type = MatrixType::automatic;
+  index_t fixed_perturbed = 0;
+  std::vector<numeric::Executor*> execs;
+  double creation_seconds = 0;
+};
+
+// The numeric stage: the factor of s.scaled by the executors (one, several workers, or
+// the external driver), Cholesky tried first for an automatic symmetric type, then, for
+// a general matrix with delayed pivoting allowed, the delayed factorization on the host
+// when the fixed order needed static pivots (or always with Pivoting::delayed).
+NumericRun factor_values(SolverState& s, double norm1, double static_pivot) {
+  const Analysis& an = *s.analysis;
+  tbb::task_arena& arena = host_arena(s);
+  NumericRun r;
   const int workers = an.partition.workers;
   const bool external = static_cast<bool>(s.external.factor);
   const Timer creation;  // a new executor: device context, streams, library handles
@@ -361,6 +381,25 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
   }
   s.resolved = type;
 
+  r.type = type;
+  r.fixed_perturbed = fixed_perturbed;
+  r.execs = execs;
+  r.creation_seconds = creation_seconds;
+  return r;
+}
+
+// FactorStats of the factorization just made: pivots, inertia, determinant (of A, the
+// scaling undone), flop rate and the executors' device figures.
+void report_factorization(SolverState& s, const NumericRun& r, double norm1, double input_seconds,
+                          const Timer& timer) {
+  const Analysis& an = *s.analysis;
+  const bool scale = !an.row_scaling.empty();
+  const bool external = static_cast<bool>(s.external.factor);
+  const int workers = an.partition.workers;
+  const MatrixType type = r.type;
+  const index_t fixed_perturbed = r.fixed_perturbed;
+  const std::vector<numeric::Executor*>& execs = r.execs;
+  const double creation_seconds = r.creation_seconds;
   FactorStats& fs = s.stats.factor;
   fs = FactorStats{};
   fs.type = type;
@@ -418,6 +457,15 @@ void run_factorization(SolverState& s, const SparseMatrix& a) {
   if (fs.backend == Backend::cuda) fs.device_phases.setup += creation_seconds;
 }
 
+void run_factorization(SolverState& s, const SparseMatrix& a) {
+  Timer timer;
+  const double norm1 = prepare_values(s, a);
+  const double input_seconds = timer.seconds();
+  const double static_pivot = s.options.static_pivot_epsilon * (norm1 > 0 ? norm1 : 1.0);
+  const NumericRun r = factor_values(s, norm1, static_pivot);
+  report_factorization(s, r, norm1, input_seconds, timer);
+}
+
 // v·d·e for a scale factor d and a power of two e: one rounding, as v·d alone would have,
 // unless d·e leaves the normal range (then v·d·e: the product may still be representable).
 inline double scaled_by(double v, double d, double e) {
@@ -468,7 +516,7 @@ bool apply_inverse(SolverState& s, const double* b, double* x, index_t nrhs,
 
 // Runs one phase. A std::bad_alloc from anywhere inside it becomes OutOfMemory naming the
 // phase (its size is not known there); the large buffers already throw OutOfMemory with
-// their size (core/alloc.hpp), which passes through unchanged.
+// their size (base/alloc.hpp), which passes through unchanged.
 template <class F>
 void phase(const char* name, F&& f) {
   try {

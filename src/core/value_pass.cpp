@@ -7,7 +7,7 @@
 #include <cstring>
 #include <string>
 
-#include "core/host_copy.hpp"
+#include "base/host_copy.hpp"
 #include "strata/errors.hpp"
 
 namespace strata::detail {

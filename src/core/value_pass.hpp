@@ -19,8 +19,8 @@
 
 #include <vector>
 
-#include "core/alloc.hpp"
-#include "core/analysis.hpp"
+#include "base/alloc.hpp"
+#include "analysis/analysis.hpp"
 #include "strata/sparse_matrix.hpp"
 
 namespace strata::detail {

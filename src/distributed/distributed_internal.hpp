@@ -9,7 +9,7 @@
 #include <optional>
 #include <vector>
 
-#include "core/analysis.hpp"
+#include "analysis/analysis.hpp"
 #include "distributed/comm.hpp"
 #include "numeric/factor.hpp"
 #include "strata/distributed.hpp"

@@ -13,8 +13,8 @@
 // throws. With one rank the Solver runs alone.
 #include <cstring>
 
+#include "base/timer.hpp"
 #include "core/solver_internal.hpp"
-#include "core/timer.hpp"
 #include "distributed/distributed_internal.hpp"
 #include "distributed/serialize.hpp"
 
@@ -26,9 +26,7 @@ using namespace distributed;
 namespace {
 
 bool wants_gpu(const DistributedState& s) {
-  return s.host_workers == 0 &&
-         (s.options.backend == Backend::cuda ||
-          (s.options.backend == Backend::automatic && numeric::cuda_available()));
+  return s.host_workers == 0 && numeric::uses_cuda(s.options.backend);
 }
 
 // Rank 0: the workers each rank runs (the GPUs of a rank, or one CPU executor).

@@ -21,8 +21,8 @@
 #include <algorithm>
 #include <cstring>
 
-#include "core/blas.hpp"
-#include "core/timer.hpp"
+#include "base/blas.hpp"
+#include "base/timer.hpp"
 #include "distributed/distributed_internal.hpp"
 
 #ifdef STRATA_HAVE_NCCL

@@ -6,7 +6,7 @@
 
 #include <vector>
 
-#include "core/analysis.hpp"
+#include "analysis/analysis.hpp"
 
 namespace strata::distributed {
 

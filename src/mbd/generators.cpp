@@ -163,6 +163,25 @@ json pendulum_chain(int n, bool spatial) {
 // constraints). Contact: one sphere on the inner face of each link against every wheel
 // of its side (sphere–cylinder), two spheres on the outer face against the ground. The
 // sprocket turns by a rotation driver with a smooth speed ramp.
+// The point at arc length s (modulo the perimeter) of a "stadium" in the x–z plane: a
+// lower straight run of length D from x = −D/2 forward at height zc − rc, a half circle
+// of radius rc about (D/2, zc), the upper run back, the half circle about (−D/2, zc).
+std::array<double, 2> stadium_point(double s, double D, double rc, double zc) {
+  const double half = M_PI * rc;
+  s = std::fmod(s, 2 * D + 2 * half);
+  if (s < D) return {-D / 2 + s, zc - rc};
+  s -= D;
+  if (s < half) {
+    const double a = -M_PI / 2 + s / rc;
+    return {D / 2 + rc * std::cos(a), zc + rc * std::sin(a)};
+  }
+  s -= half;
+  if (s < D) return {D / 2 - s, zc + rc};
+  s -= D;
+  const double a = M_PI / 2 + s / rc;
+  return {-D / 2 + rc * std::cos(a), zc + rc * std::sin(a)};
+}
+
 json tracked_vehicle(int links) {
   if (links < 8) throw InvalidInput("tracked vehicle: need at least 8 links per track");
   const double R = 0.25, t = 0.04, D = 3.0, y_track = 0.9, width = 0.3;
@@ -227,23 +246,8 @@ json tracked_vehicle(int links) {
                            {"motion", {{"ramp", {{"rate", speed / R}, {"ramp_time", ramp}}}}}});
     // joint points on the stadium path at equal arc length, starting at the rear end of
     // the lower run and running forward along it (the loop turns about +y)
-    auto path = [&](double s) {
-      s = std::fmod(s, perimeter);
-      const double half = M_PI * rc;
-      if (s < D) return std::array<double, 2>{-D / 2 + s, zc - rc};
-      s -= D;
-      if (s < half) {
-        const double a = -M_PI / 2 + s / rc;
-        return std::array<double, 2>{D / 2 + rc * std::cos(a), zc + rc * std::sin(a)};
-      }
-      s -= half;
-      if (s < D) return std::array<double, 2>{D / 2 - s, zc + rc};
-      s -= D;
-      const double a = M_PI / 2 + s / rc;
-      return std::array<double, 2>{-D / 2 + rc * std::cos(a), zc + rc * std::sin(a)};
-    };
     std::vector<std::array<double, 2>> jp(links + 1);
-    for (int k = 0; k <= links; ++k) jp[k] = path(perimeter * k / links);
+    for (int k = 0; k <= links; ++k) jp[k] = stadium_point(perimeter * k / links, D, rc, zc);
     std::vector<double> len(links);
     for (int k = 0; k < links; ++k) {
       const double dx = jp[k + 1][0] - jp[k][0], dz = jp[k + 1][1] - jp[k][1];

@@ -8,7 +8,7 @@
 #include <filesystem>
 #include <thread>
 
-#include "core/timer.hpp"
+#include "base/timer.hpp"
 #include "strata/matrix_market.hpp"
 
 namespace strata::mbd {

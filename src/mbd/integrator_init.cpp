@@ -15,7 +15,7 @@
 #include <cmath>
 #include <string_view>
 
-#include "core/timer.hpp"
+#include "base/timer.hpp"
 #include "mbd/integrator.hpp"
 #include "mbd/redundancy.hpp"
 

@@ -3,7 +3,7 @@
 
 #include <vector>
 
-#include "numeric/factor.hpp"
+#include "base/device.hpp"
 #include "strata/errors.hpp"
 #include "strata/solver.hpp"
 
@@ -129,9 +129,7 @@ class DenseLinearSolver : public LinearSolver {
 
 }  // namespace
 
-bool solver_on_gpu(Backend backend) {
-  return backend == Backend::cuda || (backend == Backend::automatic && numeric::cuda_available());
-}
+bool solver_on_gpu(Backend backend) { return numeric::uses_cuda(backend); }
 
 std::unique_ptr<LinearSolver> make_strata_solver(Backend backend, int threads,
                                                  std::size_t device_memory_limit,

@@ -1,4 +1,5 @@
-// strata::mbd — the simulation loop and its output (see simulation.hpp).
+// strata::mbd — the simulation loop: start, steps, checkpoints, interrupts, the summary (see
+// simulation.hpp); what a run writes is in run_output.cpp.
 #include "mbd/simulation.hpp"
 
 #include <fmt/core.h>
@@ -13,144 +14,12 @@
 #include <new>
 #include <sstream>
 
-#include "core/atomic_file.hpp"
-#include "core/timer.hpp"
-#include "mbd/vtk.hpp"
+#include "base/atomic_file.hpp"
+#include "base/timer.hpp"
+#include "mbd/run_output.hpp"
 
 namespace strata::mbd {
 namespace {
-
-// A CSV history written row by row to NAME.partial.csv (renamed to NAME.csv only when the
-// run completes), flushed at the end and at checkpoints, so that a run that stops keeps
-// its rows. A resumed run starts the file with the text saved in the checkpoint.
-class Csv {
- public:
-  Csv(const std::string& dir, const std::string& name, const std::vector<std::string>& header,
-      const std::string* resumed_text)
-      : dir_(dir), name_(name), out_(partial_path()) {
-    if (!out_) throw Error("cannot write " + partial_path());
-    if (resumed_text) {
-      out_ << *resumed_text;
-      return;
-    }
-    for (std::size_t i = 0; i < header.size(); ++i) out_ << (i ? "," : "") << header[i];
-    out_ << '\n';
-  }
-  void row(double t, const double* x, std::size_t n) {
-    out_ << fmt::format("{:.17g}", t);
-    for (std::size_t i = 0; i < n; ++i) out_ << fmt::format(",{:.17g}", x[i]);
-    out_ << '\n';
-  }
-  void raw(const std::string& line) { out_ << line << '\n'; }
-  void flush() {
-    out_.flush();
-    if (!out_) throw Error("cannot write " + partial_path());
-  }
-  // The whole file so far (for a checkpoint).
-  std::string text() {
-    flush();
-    std::ifstream in(partial_path(), std::ios::binary);
-    std::ostringstream ss;
-    ss << in.rdbuf();
-    if (!in) throw Error("cannot read back " + partial_path() + " for the checkpoint");
-    return ss.str();
-  }
-  // The run is complete: close and rename NAME.partial.csv to NAME.csv.
-  void complete() {
-    flush();
-    out_.close();
-    rename_file(partial_path(), dir_ + "/" + name_ + ".csv");
-  }
-  const std::string& name() const { return name_; }
-  std::string partial_path() const { return dir_ + "/" + name_ + ".partial.csv"; }
-
- private:
-  std::string dir_, name_;
-  std::ofstream out_;
-};
-
-const char* const kHistories[] = {"positions", "velocities", "accelerations", "reactions", "steps"};
-
-// Results of an earlier run in `dir` must not pass for this run's: its histories (whole
-// and partial), its ParaView series index and its status.json are removed.
-void clear_earlier_results(const std::string& dir) {
-  namespace fs = std::filesystem;
-  for (const char* name : kHistories)
-    for (const char* suffix : {".csv", ".partial.csv"}) fs::remove(dir + "/" + name + suffix);
-  fs::remove(dir + "/vtk/series.pvd");
-  fs::remove(dir + "/status.json");
-}
-
-// Joint reaction forces (global, on body j) of every constraint that reports one.
-std::vector<std::string> reaction_names(const Model& m) {
-  std::vector<std::string> names;
-  static const char* axis[] = {"Fx", "Fy", "Fz"};
-  for (const auto& c : m.constraints)
-    for (int d = 0; d < c->reaction_dim; ++d) names.push_back(c->name + "." + axis[d]);
-  for (const auto& c : m.constraints)
-    for (int r = 0; r < c->rows; ++r)
-      names.push_back(c->rows == 1 ? c->name + ".lambda" : fmt::format("{}.lambda{}", c->name, r));
-  return names;
-}
-// (q, λ of every model row, t): the state of a row of the histories
-void reactions(const Model& m, const double* q, const std::vector<double>& lam, double t,
-               std::vector<double>& out) {
-  out.clear();
-  std::vector<double> lq, zero;
-  ConstraintEval ce;
-  index_t row = 0;
-  for (const auto& c : m.constraints) {
-    if (c->reaction_dim > 0) {
-      lq.resize(c->dofs.size());
-      for (std::size_t i = 0; i < c->dofs.size(); ++i) lq[i] = q[c->dofs[i]];
-      zero.assign(c->dofs.size(), 0.0);
-      c->evaluate_gradient(lq.data(), zero.data(), zero.data(), t, ce);
-      const std::size_t nz = c->dofs.size();
-      for (int d = 0; d < c->reaction_dim; ++d) {
-        double f = 0;
-        for (int r = 0; r < c->rows; ++r) f -= ce.jq[r * nz + c->reaction_local + d] * lam[row + r];
-        out.push_back(f);
-      }
-    }
-    row += c->rows;
-  }
-  out.insert(out.end(), lam.begin(), lam.end());
-}
-
-std::string json_escape(const std::string& s) {
-  std::string r;
-  for (char c : s) {
-    if (c == '"' || c == '\\') r += '\\';
-    if (c == '\n') {
-      r += "\\n";
-      continue;
-    }
-    r += c;
-  }
-  return r;
-}
-
-// status.json, written whole (a reader never sees half of it).
-void write_status(const std::string& dir, const std::string& state, const SimulationResult& r,
-                  double t_end, index_t steps, const std::vector<std::string>& files) {
-  const bool complete = state == "complete";
-  auto list = [](const std::vector<std::string>& v) {
-    std::string f;
-    for (std::size_t i = 0; i < v.size(); ++i) f += (i ? ", \"" : "\"") + json_escape(v[i]) + "\"";
-    return f;
-  };
-  const std::string f = list(files);
-  write_file_atomically(
-      dir + "/status.json",
-      fmt::format("{{\n  \"state\": \"{}\",\n  \"complete\": {},\n  \"partial\": {},\n"
-                  "  \"t_reached\": {:.17g},\n  \"t_end\": {:.17g},\n  \"steps\": {},\n"
-                  "  \"message\": \"{}\",\n  \"checkpoint_step\": {},\n  \"files\": [{}],\n"
-                  "  \"warnings\": [{}],\n  \"removed_constraints\": [{}],\n"
-                  "  \"reference_error\": {}\n}}\n",
-                  state, complete, !complete, r.t_reached, t_end, steps, json_escape(r.message),
-                  r.checkpoint_step, f, list(r.warnings), list(r.removed_constraints),
-                  r.reference_error >= 0 ? fmt::format("{:.6e}", r.reference_error) : "null"));
-}
 
 class Progress {
  public:
@@ -341,19 +210,19 @@ SimulationResult simulate(const Model& model, const SimulationOptions& opts) {
 
 namespace {
 
-SimulationResult run(const Model& model, const SimulationOptions& opts) {
-  Timer wall;
-  SimulationResult res;
+// The integrator at its initial conditions, or at the state a checkpoint saved. When
+// that fails no step was taken: the output folder must not keep an earlier run's
+// results (a folder that cannot be marked leaves the original error to be reported).
+std::unique_ptr<Integrator> start_integrator(const Model& model, const SimulationOptions& opts) {
   const nlohmann::json* ck = opts.resume;
-  std::unique_ptr<Integrator> integrator;
   try {
     try {
-      integrator = std::make_unique<Integrator>(model, opts.integrator);
-      if (ck) {
-        integrator->restore_state(ck->at("integrator"));
-      } else {
-        integrator->initialize();
-      }
+      auto in = std::make_unique<Integrator>(model, opts.integrator);
+      if (ck)
+        in->restore_state(ck->at("integrator"));
+      else
+        in->initialize();
+      return in;
     } catch (const std::bad_alloc&) {
       throw OutOfMemory(
           0, ck ? "simulation: restoring the checkpoint" : "simulation: initial conditions");
@@ -361,200 +230,118 @@ SimulationResult run(const Model& model, const SimulationOptions& opts) {
       throw InvalidInput(std::string("checkpoint: missing or malformed state: ") + e.what());
     }
   } catch (const std::exception& e) {
-    // no step was taken: the output folder must not keep an earlier run's results (a
-    // folder that cannot be marked leaves the original error to be reported)
     try {
       mark_failed_before_start(opts.output_dir, e.what());
     } catch (const std::exception&) {
     }
     throw;
   }
+}
+
+// A restart point: the integrator state, the loop's state in `res`, the outputs so far.
+void write_checkpoint(const SimulationOptions& opts, const Integrator& in,
+                      const detail::RunOutput& out, SimulationResult& res) {
+  nlohmann::json c;
+  c["format"] = "strata-checkpoint";
+  c["version"] = kCheckpointVersion;
+  c["meta"] = opts.checkpoint_meta;
+  c["integrator_options"] = integrator_options_json(opts.integrator);
+  c["integrator"] = in.save_state();
+  nlohmann::json sj = {{"next_output", out.next_output()},
+                       {"energy_initial", res.energy_initial},
+                       {"max_position_violation", res.max_position_violation},
+                       {"max_velocity_violation", res.max_velocity_violation},
+                       {"output_interval", opts.output_interval},
+                       {"vtk", opts.vtk}};
+  if (out.has_vtk()) sj["vtk_frames"] = out.vtk_frames();
+  c["simulation"] = sj;
+  c["histories"] = out.histories();
+  std::filesystem::create_directories(opts.checkpoint_dir);
+  const std::vector<std::uint8_t> bytes = nlohmann::json::to_cbor(c);
+  write_file_atomically(
+      opts.checkpoint_dir + "/" + kCheckpointFile,
+      std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
+  res.checkpoint_step = in.stats().steps;
+}
+
+// The state's energies and constraint violations, as a row of the steps history.
+StepRecord state_record(Integrator& in, const StepInfo& s) {
+  StepRecord r{s.step,
+               s.t,
+               s.h,
+               s.order,
+               s.newton_iterations,
+               s.factorizations,
+               s.rejected,
+               s.assembly_seconds,
+               s.solver_seconds};
+  in.system().energy(in.q().data(), in.v().data(), in.t(), &r.kinetic_energy, &r.potential_energy);
+  in.constraint_violation(&r.position_violation, &r.velocity_violation);
+  return r;
+}
+
+std::string interrupt_message(int sig, const Integrator& in) {
+  return fmt::format("interrupted by signal {} ({}) after step {} at t = {:.9g} s", sig,
+                     sig == SIGINT    ? "SIGINT"
+                     : sig == SIGTERM ? "SIGTERM"
+                                      : "?",
+                     in.stats().steps, in.t());
+}
+
+// The loop's end: the state reached, the statistics and warnings (the reference's
+// deviation among them), and the outputs closed.
+void finish_run(const Model& model, const Integrator& in, double energy_final,
+                detail::RunOutput& out, SimulationResult& res) {
+  res.energy_final = energy_final;
+  res.t_reached = in.t();
+  res.stats = in.stats();
+  res.warnings = in.warnings();
+  if (res.reference_error > model.reference.tolerance)
+    res.warnings.push_back(fmt::format(
+        "reference: at t = {:g} s the model deviates from its reference values by {:.3e} "
+        "({}), more than the reference's tolerance {:g}: use a smaller step or a higher "
+        "order",
+        model.reference.time, res.reference_error, res.reference_worst, model.reference.tolerance));
+  res.removed_constraints = in.removed_equations();
+  out.close(res.state, res);
+  res.output_seconds = out.seconds();
+}
+
+SimulationResult run(const Model& model, const SimulationOptions& opts) {
+  Timer wall;
+  SimulationResult res;
+  const nlohmann::json* ck = opts.resume;
+  const std::unique_ptr<Integrator> integrator = start_integrator(model, opts);
   Integrator& in = *integrator;
-  const bool files = !opts.output_dir.empty();
-  std::vector<std::unique_ptr<Csv>> hist;
-  std::unique_ptr<VtkSeries> vtk;
-  const index_t n = model.n;
-  std::vector<double> rbuf;
-  double next_output = 0;
-  double out_seconds = 0;
-  double kin = 0, pot = 0, pv = 0, vv = 0;
-  SimulationHistory* mem = opts.history;
-  // One row of the histories at time tt (the current state, or the dense output of the
-  // last step at an output time inside it).
-  std::vector<double> oq(n), ov(n), oa(n);
-  double last_row_t = -1;
-  auto write_row = [&](double tt, const double* q, const double* v, const double* a,
-                       const std::vector<double>& lam) {
-    reactions(model, q, lam, tt, rbuf);
-    if (files) {
-      hist[0]->row(tt, q, n);
-      hist[1]->row(tt, v, n);
-      hist[2]->row(tt, a, n);
-      hist[3]->row(tt, rbuf.data(), rbuf.size());
-      if (vtk) vtk->write(tt, q);
-    }
-    if (mem) {
-      mem->time.push_back(tt);
-      mem->positions.insert(mem->positions.end(), q, q + n);
-      mem->velocities.insert(mem->velocities.end(), v, v + n);
-      mem->accelerations.insert(mem->accelerations.end(), a, a + n);
-      mem->reactions.insert(mem->reactions.end(), rbuf.begin(), rbuf.end());
-    }
-    last_row_t = tt;
-  };
-  // Every step, or (output_interval Δ > 0) at t = 0, Δ, 2Δ, … from the BDF interpolation
-  // polynomial of the step that contains them (Integrator::interpolate), and at t_end.
-  auto write_state = [&]() {
-    if (!files && !mem) return;
-    Timer t;
-    const double tt = in.t(), dt = opts.output_interval;
-    if (dt <= 0) {
-      write_row(tt, in.q().data(), in.v().data(), in.a().data(), in.model_lambda());
-    } else {
-      const double eps = 1e-9 * dt;
-      for (double k = std::round(next_output / dt); k * dt <= tt + eps; k += 1) {
-        const double to = k * dt;
-        if (std::abs(to - tt) <= eps) {
-          write_row(tt, in.q().data(), in.v().data(), in.a().data(), in.model_lambda());
-        } else {
-          std::vector<double> lam(in.system().model_m());
-          in.interpolate(to, oq.data(), ov.data(), oa.data(), lam.data());
-          write_row(to, oq.data(), ov.data(), oa.data(), lam);
-        }
-        next_output = (k + 1) * dt;
-      }
-      if (in.done() && last_row_t < tt - eps)
-        write_row(tt, in.q().data(), in.v().data(), in.a().data(), in.model_lambda());
-    }
-    out_seconds += t.seconds();
-  };
-  auto file_list = [&](bool complete) {
-    std::vector<std::string> f;
-    for (const auto& c : hist) f.push_back(c->name() + (complete ? ".csv" : ".partial.csv"));
-    if (vtk) f.push_back("vtk/series.pvd");
-    return f;
-  };
-  if (mem) {
-    // (a resumed run's rows start at the restart point: the rows before it are in the
-    // checkpoint's CSV text only)
-    *mem = SimulationHistory{};
-    mem->coordinate_names = model.coordinate_names();
-    mem->reaction_names = reaction_names(model);
-  }
-  if (files) {
-    std::filesystem::create_directories(opts.output_dir);
-    clear_earlier_results(opts.output_dir);
-    std::vector<std::string> h{"time"};
-    for (const auto& s : model.coordinate_names()) h.push_back(s);
-    std::vector<std::string> rh{"time"};
-    for (const auto& s : reaction_names(model)) rh.push_back(s);
-    const std::vector<std::string> sh{"step",
-                                      "time",
-                                      "h",
-                                      "order",
-                                      "newton_iterations",
-                                      "factorizations",
-                                      "rejected",
-                                      "assembly_seconds",
-                                      "solver_seconds",
-                                      "kinetic_energy",
-                                      "potential_energy",
-                                      "total_energy",
-                                      "position_violation",
-                                      "velocity_violation"};
-    const std::vector<std::string>* headers[] = {&h, &h, &h, &rh, &sh};
-    for (int k = 0; k < 5; ++k) {
-      // a resumed run starts with the rows written before its checkpoint (a checkpoint of
-      // a run that wrote no files has none: the histories then start at the restart)
-      std::string saved;
-      const bool have = ck && ck->at("histories").contains(kHistories[k]);
-      if (have) saved = ck->at("histories").at(kHistories[k]).get<std::string>();
-      hist.push_back(std::make_unique<Csv>(opts.output_dir, kHistories[k], *headers[k],
-                                           have ? &saved : nullptr));
-    }
-    if (opts.vtk) {
-      vtk = std::make_unique<VtkSeries>(model, opts.output_dir + "/vtk");
-      if (ck && ck->at("simulation").contains("vtk_frames"))
-        vtk->restore_frames(ck->at("simulation")
-                                .at("vtk_frames")
-                                .get<std::vector<std::pair<double, std::string>>>());
-    }
-    res.t_reached = in.t();
-    res.message = "running";
-    write_status(opts.output_dir, "running", res, opts.integrator.t_end, in.stats().steps,
-                 file_list(false));
-    res.message.clear();
-  }
+  detail::RunOutput out(model, opts, in);
+  out.open(ck, res);
+  StepRecord last = state_record(in, StepInfo{0, in.t()});
   if (ck) {
     const nlohmann::json& sj = ck->at("simulation");
-    next_output = sj.at("next_output").get<double>();
     res.energy_initial = sj.at("energy_initial").get<double>();
     res.max_position_violation = sj.at("max_position_violation").get<double>();
     res.max_velocity_violation = sj.at("max_velocity_violation").get<double>();
     res.checkpoint_step = in.stats().steps;
-    in.system().energy(in.q().data(), in.v().data(), in.t(), &kin, &pot);
   } else {
-    in.system().energy(in.q().data(), in.v().data(), in.t(), &kin, &pot);
-    in.constraint_violation(&pv, &vv);
-    res.energy_initial = kin + pot;
-    res.max_position_violation = pv;
-    res.max_velocity_violation = vv;
-    write_state();
-    if (files)
-      hist[4]->raw(fmt::format("0,{:.17g},0,0,0,0,0,0,0,{:.17g},{:.17g},{:.17g},{:.6e},{:.6e}",
-                               in.t(), kin, pot, kin + pot, pv, vv));
-    if (mem) {
-      StepRecord r0;
-      r0.t = in.t();
-      r0.kinetic_energy = kin;
-      r0.potential_energy = pot;
-      r0.position_violation = pv;
-      r0.velocity_violation = vv;
-      mem->steps.push_back(r0);
-    }
+    res.energy_initial = last.kinetic_energy + last.potential_energy;
+    res.max_position_violation = last.position_violation;
+    res.max_velocity_violation = last.velocity_violation;
+    out.write_state();
+    out.write_initial_step(last);
   }
-  // A restart point: the integrator state, this loop's state, the histories so far.
   auto checkpoint = [&]() {
     if (opts.checkpoint_every <= 0 || opts.checkpoint_dir.empty()) return;
     Timer t;
-    nlohmann::json c;
-    c["format"] = "strata-checkpoint";
-    c["version"] = kCheckpointVersion;
-    c["meta"] = opts.checkpoint_meta;
-    c["integrator_options"] = integrator_options_json(opts.integrator);
-    c["integrator"] = in.save_state();
-    nlohmann::json sj = {{"next_output", next_output},
-                         {"energy_initial", res.energy_initial},
-                         {"max_position_violation", res.max_position_violation},
-                         {"max_velocity_violation", res.max_velocity_violation},
-                         {"output_interval", opts.output_interval},
-                         {"vtk", opts.vtk}};
-    if (vtk) sj["vtk_frames"] = vtk->frames();
-    c["simulation"] = sj;
-    nlohmann::json h = nlohmann::json::object();
-    for (const auto& csv : hist) h[csv->name()] = csv->text();
-    c["histories"] = h;
-    std::filesystem::create_directories(opts.checkpoint_dir);
-    const std::vector<std::uint8_t> bytes = nlohmann::json::to_cbor(c);
-    write_file_atomically(
-        opts.checkpoint_dir + "/" + kCheckpointFile,
-        std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
-    res.checkpoint_step = in.stats().steps;
-    out_seconds += t.seconds();
+    write_checkpoint(opts, in, out, res);
+    out.add_seconds(t.seconds());
   };
   Progress bar(opts.progress ? opts.progress_stream : nullptr, opts.integrator.t_end);
   std::string state = "failed";
   try {
     while (!in.done()) {
       if (opts.interrupt && *opts.interrupt != 0) {
-        const int sig = *opts.interrupt;
         state = "interrupted";
-        res.message =
-            fmt::format("interrupted by signal {} ({}) after step {} at t = {:.9g} s", sig,
-                        sig == SIGINT    ? "SIGINT"
-                        : sig == SIGTERM ? "SIGTERM"
-                                         : "?",
-                        in.stats().steps, in.t());
+        res.message = interrupt_message(*opts.interrupt, in);
         checkpoint();
         break;
       }
@@ -563,26 +350,15 @@ SimulationResult run(const Model& model, const SimulationOptions& opts) {
       // the reference time inside this step: compare with the model's reference values
       const double tr = model.reference.time;
       if (tr >= 0 && res.reference_error < 0 && tr <= in.t() * (1 + 1e-12) && tr > t_before) {
-        std::vector<double> qr(n);
+        std::vector<double> qr(model.n);
         in.interpolate(std::min(tr, in.t()), qr.data(), nullptr, nullptr, nullptr);
         res.reference_error = model.reference_error(qr.data(), &res.reference_worst);
       }
-      in.system().energy(in.q().data(), in.v().data(), in.t(), &kin, &pot);
-      in.constraint_violation(&pv, &vv);
-      res.max_position_violation = std::max(res.max_position_violation, pv);
-      res.max_velocity_violation = std::max(res.max_velocity_violation, vv);
-      write_state();
-      if (files) {
-        hist[4]->raw(fmt::format(
-            "{},{:.17g},{:.6e},{},{},{},{},{:.6e},{:.6e},{:.17g},{:.17g},{:.17g},"
-            "{:.6e},{:.6e}",
-            s.step, s.t, s.h, s.order, s.newton_iterations, s.factorizations, s.rejected,
-            s.assembly_seconds, s.solver_seconds, kin, pot, kin + pot, pv, vv));
-      }
-      if (mem)
-        mem->steps.push_back(StepRecord{s.step, s.t, s.h, s.order, s.newton_iterations,
-                                        s.factorizations, s.rejected, s.assembly_seconds,
-                                        s.solver_seconds, kin, pot, pv, vv});
+      last = state_record(in, s);
+      res.max_position_violation = std::max(res.max_position_violation, last.position_violation);
+      res.max_velocity_violation = std::max(res.max_velocity_violation, last.velocity_violation);
+      out.write_state();
+      out.write_step(last);
       // not after the last step: a restart from there would differ from a longer run
       // (the last step is shortened to end exactly at t_end)
       if (opts.checkpoint_every > 0 && in.stats().steps % opts.checkpoint_every == 0 && !in.done())
@@ -608,26 +384,7 @@ SimulationResult run(const Model& model, const SimulationOptions& opts) {
   res.state = state;
   bar.update(in.t(), in.stats().steps, in.stats().newton_iterations, true);
   bar.finish();
-  res.energy_final = kin + pot;
-  res.t_reached = in.t();
-  res.stats = in.stats();
-  res.warnings = in.warnings();
-  if (res.reference_error > model.reference.tolerance)
-    res.warnings.push_back(fmt::format(
-        "reference: at t = {:g} s the model deviates from its reference values by {:.3e} "
-        "({}), more than the reference's tolerance {:g}: use a smaller step or a higher "
-        "order",
-        model.reference.time, res.reference_error, res.reference_worst, model.reference.tolerance));
-  res.removed_constraints = in.removed_equations();
-  if (files) {
-    for (const auto& c : hist) c->flush();
-    if (vtk) vtk->finish();
-    if (res.complete)
-      for (const auto& c : hist) c->complete();
-    write_status(opts.output_dir, state, res, opts.integrator.t_end, res.stats.steps,
-                 file_list(res.complete));
-  }
-  res.output_seconds = out_seconds;
+  finish_run(model, in, last.kinetic_energy + last.potential_energy, out, res);
   res.wall_seconds = wall.seconds();
   return res;
 }
@@ -637,10 +394,10 @@ SimulationResult run(const Model& model, const SimulationOptions& opts) {
 void mark_failed_before_start(const std::string& dir, const std::string& reason) {
   if (dir.empty()) return;
   std::filesystem::create_directories(dir);
-  clear_earlier_results(dir);
+  detail::clear_earlier_results(dir);
   SimulationResult r;
   r.message = reason;
-  write_status(dir, "failed", r, 0, 0, {});
+  detail::write_status(dir, "failed", r, 0, 0, {});
 }
 
 std::string summary(const Model& model, const SimulationResult& r) {

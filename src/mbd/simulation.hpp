@@ -18,7 +18,7 @@
 // histories are named NAME.partial.csv; only a run that reached t_end renames them to
 // NAME.csv, and then writes status.json with "complete": true. Stale histories of an
 // earlier run in the same folder are removed at the start. status.json, the ParaView files
-// and the checkpoints are written whole (core/atomic_file.hpp).
+// and the checkpoints are written whole (base/atomic_file.hpp).
 // The same rows can be kept in memory instead (or as well): SimulationHistory, filled
 // when SimulationOptions::history is set (the Python binding uses it); after a run that
 // stopped early it holds the rows up to the last accepted step, like the partial files.

@@ -11,7 +11,7 @@
 #include <set>
 #include <sstream>
 
-#include "core/atomic_file.hpp"
+#include "base/atomic_file.hpp"
 #include "strata/errors.hpp"
 
 namespace strata::mbd {
@@ -48,7 +48,7 @@ VtkSeries::VtkSeries(const Model& model, std::string dir) : model_(model), dir_(
 
 void VtkSeries::write(double t, const double* q) {
   const std::string name = fmt::format("frame_{:06d}.vtu", frames_.size());
-  std::ostringstream out;  // written whole (core/atomic_file.hpp) at the end
+  std::ostringstream out;  // written whole (base/atomic_file.hpp) at the end
   const std::size_t np = bodies_.size();
   std::size_t nv = 0;
   for (int k : bodies_) nv += model_.bodies[k].kind != BodyKind::node;

@@ -3,7 +3,7 @@
 // (cuda/tiled_host.cpp), so that both add the same things in the same order.
 //
 // A front F is n_rows(f) × n_rows(f), column-major (leading dimension m). Its original
-// entries come from the AssemblyMap (core/analysis.hpp); a child's contribution block
+// entries come from the AssemblyMap (analysis/analysis.hpp); a child's contribution block
 // (mc × mc, column-major) is added at the front rows and columns rel[0..mc), increasing
 // (the child's CB rows' positions in the front): the extend-add of the multifrontal
 // method (Duff & Reid, ACM TOMS 9, 1983; Liu, SIAM Review 34, 1992).

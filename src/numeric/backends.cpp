@@ -1,6 +1,6 @@
 // strata — backend selection in a build without CUDA: asking for the GPU backend is a
 // clear NotSupported error, and no host memory is pinned. (A CUDA build compiles
-// numeric/cuda/cuda_executor.cu, which defines these functions instead.)
+// numeric/cuda/device_query.cu, which defines these functions instead.)
 #ifndef STRATA_HAVE_CUDA
 #include "numeric/cuda_testing.hpp"
 #include "numeric/factor.hpp"

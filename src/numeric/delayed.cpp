@@ -35,7 +35,7 @@
 #include <new>
 #include <string>
 
-#include "core/blas.hpp"
+#include "base/blas.hpp"
 #include "numeric/cpu/small_dense.hpp"
 #include "strata/errors.hpp"
 

@@ -25,7 +25,7 @@
 #include <utility>
 #include <vector>
 
-#include "core/analysis.hpp"
+#include "analysis/analysis.hpp"
 #include "numeric/cpu/delayed_front.hpp"
 
 namespace strata::numeric {

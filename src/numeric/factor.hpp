@@ -19,7 +19,8 @@
 #include <memory>
 #include <vector>
 
-#include "core/analysis.hpp"
+#include "analysis/analysis.hpp"
+#include "base/device.hpp"
 #include "numeric/pivot_stats.hpp"
 #include "strata/errors.hpp"
 #include "strata/options.hpp"
@@ -222,12 +223,6 @@ class PinnedHostRange {
 /// transfers then go from pageable memory, slower; nothing is reported).
 std::unique_ptr<PinnedHostRange> pin_host_memory(void* p, std::size_t bytes);
 
-/// True when this build has the CUDA backend and a GPU is visible.
-bool cuda_available();
-
-/// Number of visible CUDA devices (0 in a build without CUDA).
-int cuda_device_count();
-
 /// Sizes `factor` for the analysis and type (a no-op when it already is: refactorization
 /// reuses the storage) and marks it invalid; the panels only when `host_panels`.
 void prepare_factor(const Analysis& an, MatrixType type, NumericFactor& factor,
@@ -272,9 +267,10 @@ struct BlockBuffers {
 
 struct MultiWorkerConfig {
   bool work_stealing = true;  ///< an idle worker takes an unstarted subtree of another
-  /// Test only: seconds each worker sleeps after taking a subtree and before factoring it
-  /// (empty, or one entry per worker): a slow device, to show stealing.
-  std::vector<double> injected_delay;
+  /// Optional: called by worker w (0-based) after it takes subtree part i and before it
+  /// factors it, on that worker's thread (tracing; the tests make one worker slow with it
+  /// to show stealing). Must not throw.
+  std::function<void(int w, int part)> before_subtree;
   /// Distributed factorization (src/distributed): the partition was made for more workers
   /// than this process runs; its executors are the global workers first_worker ..
   /// first_worker + execs.size() − 1, and it factors only the subtrees they own (stealing

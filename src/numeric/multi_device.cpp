@@ -52,7 +52,6 @@
 // threads are joined and the first exception is rethrown (the top part does not start).
 #include <algorithm>
 #include <atomic>
-#include <chrono>
 #include <condition_variable>
 #include <deque>
 #include <exception>
@@ -60,8 +59,8 @@
 #include <string>
 #include <thread>
 
-#include "core/alloc.hpp"
-#include "core/timer.hpp"
+#include "base/alloc.hpp"
+#include "base/timer.hpp"
 #include "numeric/factor.hpp"
 #include "strata/errors.hpp"
 
@@ -126,6 +125,303 @@ void run_batches(Executor& ex, const FactorContext& ctx) {
   for (const BatchInfo& b : *ctx.part->batches) ex.factor_batch(ctx, b);
 }
 
+// Which parts are done (their blocks exported), which an upper part waits for, and the
+// first error of any worker, which stops the others.
+class PartProgress {
+ public:
+  PartProgress(int n_parts, Queues& queues) : done_(n_parts, 0), queues_(queues) {}
+
+  // Records the exception in flight (the first one is kept) and wakes every waiter.
+  void record_error() {
+    {
+      std::lock_guard<std::mutex> lock(done_mutex_);
+      failed_ = true;
+    }
+    done_cv_.notify_all();
+    queues_.stop();
+    std::lock_guard<std::mutex> lock(error_mutex_);
+    if (!error_) error_ = std::current_exception();
+  }
+  void mark_done(int id) {
+    {
+      std::lock_guard<std::mutex> lock(done_mutex_);
+      done_[id] = 1;
+    }
+    done_cv_.notify_all();
+  }
+  // Waits until every part that `fp` imports from is done; false after a failure.
+  bool wait_for_imports(const schedule::TreePartition& part, const schedule::FactorPart& fp) {
+    std::unique_lock<std::mutex> lock(done_mutex_);
+    done_cv_.wait(lock, [&] {
+      if (failed_) return true;
+      for (const index_t c : fp.imports)
+        if (!done_[part.part_id[c]]) return false;
+      return true;
+    });
+    return !failed_;
+  }
+  void fail() {
+    std::lock_guard<std::mutex> lock(done_mutex_);
+    failed_ = true;
+  }
+  std::exception_ptr error() const { return error_; }
+
+ private:
+  std::mutex done_mutex_, error_mutex_;
+  std::condition_variable done_cv_;
+  std::vector<char> done_;
+  bool failed_ = false;
+  std::exception_ptr error_;
+  Queues& queues_;
+};
+
+// Host buffers of earlier factorizations lent to the transfers (BlockBuffers), given back
+// on every way out, with the ones allocated this time.
+class KeptBuffers {
+ public:
+  KeptBuffers(std::vector<CbTransfer>& transfer, BlockBuffers* keep)
+      : transfer_(transfer), keep_(keep), capacity_(transfer.size(), 0) {
+    if (!keep_) return;
+    const std::size_t n = transfer_.size();
+    keep_->buffer.resize(n);
+    keep_->size.resize(n, 0);
+    for (std::size_t id = 0; id < n; ++id) {
+      CbTransfer& x = transfer_[id];
+      if (x.size == 0 || !keep_->buffer[id] || keep_->size[id] < x.size) continue;
+      capacity_[id] = keep_->size[id];
+      x.host_storage = std::move(keep_->buffer[id]);
+      x.host = x.host_storage.get();  // stale contents: on_host says when it is filled
+    }
+  }
+  ~KeptBuffers() {
+    if (!keep_) return;
+    for (std::size_t id = 0; id < transfer_.size(); ++id)
+      if (transfer_[id].host_storage) {
+        keep_->buffer[id] = std::move(transfer_[id].host_storage);
+        keep_->size[id] = std::max(capacity_[id], transfer_[id].size);
+      }
+  }
+  KeptBuffers(const KeptBuffers&) = delete;
+  KeptBuffers& operator=(const KeptBuffers&) = delete;
+
+ private:
+  std::vector<CbTransfer>& transfer_;
+  BlockBuffers* keep_;
+  std::vector<std::size_t> capacity_;
+};
+
+// One multi-worker factorization (factorize_multi): the shared state of the workers'
+// threads and the stages that use it.
+class MultiRun {
+ public:
+  MultiRun(const Analysis& an, const std::vector<double>& scaled_values, MatrixType type,
+           double static_pivot, const std::vector<Executor*>& execs, NumericFactor& factor,
+           std::vector<std::vector<double>>& arenas, const MultiWorkerConfig& config)
+      : an_(an),
+        part_(an.partition),
+        execs_(execs),
+        factor_(factor),
+        arenas_(arenas),
+        config_(config),
+        workers_(static_cast<int>(execs.size())),
+        first_(config.first_worker),
+        n_sub_(static_cast<int>(an.partition.subtrees.size())),
+        transfer_(plan_transfers()),
+        kept_(transfer_, config.block_buffers),
+        st_(workers_),
+        queues_(part_, workers_, config.work_stealing, first_),
+        progress_(part_.n_parts(), queues_) {
+    base_.analysis = &an;
+    base_.values = scaled_values.data();
+    base_.type = type;
+    base_.static_pivot = static_pivot;
+    base_.factor = &factor;
+    base_.keep_part_panels = config.keep_panels_on_devices;
+    arenas_.resize(workers_);
+    for (int w = 0; w < workers_; ++w) {
+      st_[w].worker = first_ + w;
+      const int d = execs_[w]->device();
+      st_[w].device = d >= 0 ? std::string(execs_[w]->name()) + ":" + std::to_string(d)
+                             : std::string(execs_[w]->name());
+    }
+  }
+
+  // The subtrees and upper parts on every worker, the exchange (distributed), the top
+  // part on worker 0, then every executor's end. Rethrows the first worker's error.
+  void run(std::vector<DeviceStats>* devices) {
+    all_workers([this](int w) { worker(w); });
+    if (config_.exchange) config_.exchange(transfer_, progress_.error());
+    if (progress_.error()) std::rethrow_exception(progress_.error());
+    // the top part on worker 0, with the blocks of its children in other parts handed in;
+    // every other worker of this process is idle then: its helpers
+    if (config_.factor_top) {
+      Timer busy;
+      factor_one(0, n_sub_, false, std::vector<Executor*>(execs_.begin() + 1, execs_.end()));
+      st_[0].busy_seconds += busy.seconds();
+    }
+    for (int w = 0; w < workers_; ++w) {
+      FactorContext ctx = base_;
+      ctx.cb_arena = &arenas_[w];
+      Timer busy;
+      execs_[w]->end(ctx);
+      st_[w].busy_seconds += busy.seconds();
+      execs_[w]->report_worker(st_[w]);
+    }
+    const double total = wall_.seconds();
+    for (auto& d : st_) d.idle_seconds = std::max(0.0, total - d.busy_seconds);
+    factor_.panels_on_host = true;
+    for (Executor* e : execs_)
+      if (e->holds_part_panels()) factor_.panels_on_host = false;
+    factor_.valid = true;
+    if (devices) *devices = std::move(st_);
+  }
+
+ private:
+  bool mine(int i) const { return part_.owner[i] >= first_ && part_.owner[i] < first_ + workers_; }
+
+  // The contribution block of each part's root, indexed by part id (the top part's root
+  // has no parent: no block), with the device that imports it; host buffers come later.
+  std::vector<CbTransfer> plan_transfers() const {
+    const auto& t = an_.tree;
+    const int n_parts = part_.n_parts();
+    std::vector<CbTransfer> transfer(n_parts);
+    for (int id = 0; id < n_parts; ++id) {
+      if (id == n_sub_) continue;
+      const index_t r = part_.part(id).root;
+      CbTransfer& x = transfer[id];
+      x.front = r;
+      if (config_.exchange) {
+        // distributed: the importer is worker 0's device here; a process that does not
+        // factor the top sends its blocks on through host memory (MPI), unless they are
+        // to stay on the device
+        x.target_device =
+            config_.factor_top || config_.remote_blocks_on_device ? execs_[0]->device() : -1;
+      } else if (t.parent[r] >= 0) {  // the worker that factors the parent's part
+        x.target_device =
+            execs_[part_.worker_of(static_cast<int>(part_.part_id[t.parent[r]]))]->device();
+      }
+      if (t.parent[r] < 0 || t.cb_size(r) == 0) continue;             // nothing to hand over
+      if (id < n_sub_ && !config_.factor_top && !mine(id)) continue;  // neither made nor used
+      x.size = static_cast<std::size_t>(t.cb_size(r)) * static_cast<std::size_t>(t.cb_size(r));
+    }
+    return transfer;
+  }
+
+  // The host panels are sized only when some part's panels go there (keeps_part_panels):
+  // with every part kept on its GPU, zero-filling the whole factor's host copy was work
+  // no one read.
+  void size_host_panels() {
+    std::call_once(panels_sized_, [&] {
+      sized_resize(factor_.panels, an_.factor_layout.total, "factorize: factor panels");
+    });
+  }
+
+  // One part on worker w (its executor begun): begin_part, the blocks of its children in
+  // other parts imported, its batches, its root's block exported, end_part.
+  void factor_one(int w, int id, bool export_here, std::vector<Executor*> helpers = {}) {
+    PartRun run;
+    run.kind = id < n_sub_ ? PartRun::Kind::subtree
+                           : (id == n_sub_ ? PartRun::Kind::top : PartRun::Kind::upper);
+    run.index = id < n_sub_ ? id : (id == n_sub_ ? 0 : id - n_sub_ - 1);
+    run.start_seconds = wall_.seconds();
+    Executor& ex = *execs_[w];
+    const schedule::FactorPart& fp = part_.part(id);
+    const PartView view = PartView::of(fp, id);
+    FactorContext ctx = base_;
+    ctx.cb_arena = &arenas_[w];
+    ctx.helpers = std::move(helpers);
+    if (ex.uses_host_arena() && arenas_[w].size() < fp.cb_layout.arena_size)
+      arenas_[w].resize(fp.cb_layout.arena_size);
+    ctx.part = &view;
+    ex.begin_part(ctx);
+    if (!ex.keeps_part_panels(ctx)) size_host_panels();
+    for (const index_t c : fp.imports)
+      st_[w].bytes_transferred += ex.import_cb(ctx, transfer_[part_.part_id[c]]);
+    run_batches(ex, ctx);
+    if (export_here && transfer_[id].size)
+      st_[w].bytes_transferred += ex.export_cb(ctx, transfer_[id]);
+    ex.end_part(ctx);
+    st_[w].flops += fp.work;
+    run.end_seconds = wall_.seconds();
+    run.flops = fp.work;
+    st_[w].parts.push_back(run);
+  }
+
+  // Worker w: the subtrees from the queues, then its upper parts in layer order
+  // (decreasing work within a layer), each as soon as the parts below it are done: no
+  // barrier between layers.
+  void worker(int w) {
+    try {
+      Executor& ex = *execs_[w];
+      FactorContext ctx = base_;
+      ctx.cb_arena = &arenas_[w];
+      Timer busy;
+      ex.begin(ctx);
+      st_[w].busy_seconds += busy.seconds();
+      for (;;) {
+        bool stolen = false;
+        const int i = queues_.take(w, stolen);
+        if (i < 0) break;
+        busy.reset();
+        if (config_.before_subtree) config_.before_subtree(w, i);
+        if (config_.remote_blocks_on_device && !config_.factor_top)
+          transfer_[i].target_device = ex.device();
+        factor_one(w, i, true);
+        st_[w].busy_seconds += busy.seconds();
+        ++st_[w].subtrees_run;
+        st_[w].subtrees_stolen += stolen ? 1 : 0;
+        st_[w].parts.back().stolen = stolen;
+        progress_.mark_done(i);
+      }
+      for (std::size_t k = 0; k < part_.upper.size(); ++k) {
+        if (part_.upper_owner[k] != first_ + w) continue;
+        const int id = n_sub_ + 1 + static_cast<int>(k);
+        if (!progress_.wait_for_imports(part_, part_.part(id))) break;
+        busy.reset();
+        factor_one(w, id, true);
+        st_[w].busy_seconds += busy.seconds();
+        ++st_[w].upper_parts_run;
+        progress_.mark_done(id);
+      }
+    } catch (...) {
+      progress_.record_error();
+    }
+  }
+
+  // Runs f(w) for every worker, one thread each (worker 0 on the calling thread), and
+  // joins them.
+  template <class F>
+  void all_workers(const F& f) {
+    std::vector<std::thread> threads;
+    try {
+      for (int w = 1; w < workers_; ++w) threads.emplace_back(f, w);
+    } catch (...) {  // could not start a thread: stop and join the started ones
+      progress_.fail();
+      queues_.stop();
+      for (auto& th : threads) th.join();
+      throw;
+    }
+    f(0);
+    for (auto& th : threads) th.join();
+  }
+
+  const Analysis& an_;
+  const schedule::TreePartition& part_;
+  const std::vector<Executor*>& execs_;
+  NumericFactor& factor_;
+  std::vector<std::vector<double>>& arenas_;
+  const MultiWorkerConfig& config_;
+  const int workers_, first_, n_sub_;
+  Timer wall_;
+  std::once_flag panels_sized_;
+  std::vector<CbTransfer> transfer_;
+  KeptBuffers kept_;
+  std::vector<DeviceStats> st_;
+  Queues queues_;
+  PartProgress progress_;
+  FactorContext base_;
+};
+
 }  // namespace
 
 void factorize_multi(const Analysis& an, const std::vector<double>& scaled_values, MatrixType type,
@@ -146,241 +442,8 @@ void factorize_multi(const Analysis& an, const std::vector<double>& scaled_value
         "processes");
   if (part.part_id.size() != static_cast<std::size_t>(an.tree.n_fronts()))
     throw InternalError("the analysis was not split into parts");
-  auto mine = [&](int i) { return part.owner[i] >= first && part.owner[i] < first + workers; };
-  Timer wall;
-  // the host panels are sized only when some part's panels go there (keeps_part_panels):
-  // with every part kept on its GPU, zero-filling the whole factor's host copy (7.1 GB
-  // for lap3d 100³) was work no one read
   prepare_factor(an, type, factor, false);
-  std::once_flag panels_sized;
-  auto size_host_panels = [&] {
-    std::call_once(panels_sized, [&] {
-      sized_resize(factor.panels, an.factor_layout.total, "factorize: factor panels");
-    });
-  };
-  arenas.resize(workers);
-  const auto& t = an.tree;
-  const int n_sub = static_cast<int>(part.subtrees.size());
-  const int n_parts = part.n_parts();
-
-  // the contribution block of each part's root, indexed by part id (the top part's root
-  // has no parent: no block); host buffers allocated when used
-  std::vector<CbTransfer> transfer(n_parts);
-  for (int id = 0; id < n_parts; ++id) {
-    if (id == n_sub) continue;
-    const index_t r = part.part(id).root;
-    CbTransfer& x = transfer[id];
-    x.front = r;
-    if (config.exchange) {
-      // distributed: the importer is worker 0's device here; a process that does not
-      // factor the top sends its blocks on through host memory (MPI), unless they are to
-      // stay on the device
-      x.target_device =
-          config.factor_top || config.remote_blocks_on_device ? execs[0]->device() : -1;
-    } else if (t.parent[r] >= 0) {  // the worker that factors the parent's part
-      x.target_device =
-          execs[part.worker_of(static_cast<int>(part.part_id[t.parent[r]]))]->device();
-    }
-    if (t.parent[r] < 0 || t.cb_size(r) == 0) continue;           // nothing to hand over
-    if (id < n_sub && !config.factor_top && !mine(id)) continue;  // neither made nor used here
-    x.size = static_cast<std::size_t>(t.cb_size(r)) * static_cast<std::size_t>(t.cb_size(r));
-  }
-
-  // host buffers of earlier factorizations handed to the transfers, and given back on
-  // every way out (with the ones allocated this time)
-  struct KeptBuffers {
-    std::vector<CbTransfer>& transfer;
-    BlockBuffers* keep;
-    std::vector<std::size_t> capacity;
-    ~KeptBuffers() {
-      if (!keep) return;
-      for (std::size_t id = 0; id < transfer.size(); ++id)
-        if (transfer[id].host_storage) {
-          keep->buffer[id] = std::move(transfer[id].host_storage);
-          keep->size[id] = std::max(capacity[id], transfer[id].size);
-        }
-    }
-  } kept{transfer, config.block_buffers, std::vector<std::size_t>(n_parts, 0)};
-  if (BlockBuffers* keep = config.block_buffers) {
-    keep->buffer.resize(n_parts);
-    keep->size.resize(n_parts, 0);
-    for (int id = 0; id < n_parts; ++id) {
-      CbTransfer& x = transfer[id];
-      if (x.size == 0 || !keep->buffer[id] || keep->size[id] < x.size) continue;
-      kept.capacity[id] = keep->size[id];
-      x.host_storage = std::move(keep->buffer[id]);
-      x.host = x.host_storage.get();  // stale contents: on_host says when it is filled
-    }
-  }
-
-  FactorContext base;
-  base.analysis = &an;
-  base.values = scaled_values.data();
-  base.type = type;
-  base.static_pivot = static_pivot;
-  base.factor = &factor;
-  base.keep_part_panels = config.keep_panels_on_devices;
-
-  std::vector<DeviceStats> st(workers);
-  for (int w = 0; w < workers; ++w) {
-    st[w].worker = first + w;
-    const int d = execs[w]->device();
-    st[w].device = d >= 0 ? std::string(execs[w]->name()) + ":" + std::to_string(d)
-                          : std::string(execs[w]->name());
-  }
-  Queues queues(part, workers, config.work_stealing, first);
-  std::mutex error_mutex;
-  std::exception_ptr error;
-  std::atomic<bool> failed{false};
-  // parts done (their blocks exported): what an upper part waits for
-  std::mutex done_mutex;
-  std::condition_variable done_cv;
-  std::vector<char> done(n_parts, 0);
-  auto record_error = [&] {
-    {
-      std::lock_guard<std::mutex> lock(done_mutex);
-      failed = true;
-    }
-    done_cv.notify_all();
-    queues.stop();
-    std::lock_guard<std::mutex> lock(error_mutex);
-    if (!error) error = std::current_exception();
-  };
-  auto mark_done = [&](int id) {
-    {
-      std::lock_guard<std::mutex> lock(done_mutex);
-      done[id] = 1;
-    }
-    done_cv.notify_all();
-  };
-  // waits until every part that part `id` imports from is done; false after a failure
-  auto wait_for_imports = [&](int id) {
-    const schedule::FactorPart& fp = part.part(id);
-    std::unique_lock<std::mutex> lock(done_mutex);
-    done_cv.wait(lock, [&] {
-      if (failed) return true;
-      for (const index_t c : fp.imports)
-        if (!done[part.part_id[c]]) return false;
-      return true;
-    });
-    return !failed;
-  };
-
-  // One part on worker w (its executor begun): begin_part, the blocks of its children in
-  // other parts imported, its batches, its root's block exported, end_part.
-  auto factor_one = [&](int w, int id, bool export_here, std::vector<Executor*> helpers = {}) {
-    PartRun run;
-    run.kind = id < n_sub ? PartRun::Kind::subtree
-                          : (id == n_sub ? PartRun::Kind::top : PartRun::Kind::upper);
-    run.index = id < n_sub ? id : (id == n_sub ? 0 : id - n_sub - 1);
-    run.start_seconds = wall.seconds();
-    Executor& ex = *execs[w];
-    const schedule::FactorPart& fp = part.part(id);
-    const PartView view = PartView::of(fp, id);
-    FactorContext ctx = base;
-    ctx.cb_arena = &arenas[w];
-    ctx.helpers = std::move(helpers);
-    if (ex.uses_host_arena() && arenas[w].size() < fp.cb_layout.arena_size)
-      arenas[w].resize(fp.cb_layout.arena_size);
-    ctx.part = &view;
-    ex.begin_part(ctx);
-    if (!ex.keeps_part_panels(ctx)) size_host_panels();
-    for (const index_t c : fp.imports)
-      st[w].bytes_transferred += ex.import_cb(ctx, transfer[part.part_id[c]]);
-    run_batches(ex, ctx);
-    if (export_here && transfer[id].size)
-      st[w].bytes_transferred += ex.export_cb(ctx, transfer[id]);
-    ex.end_part(ctx);
-    st[w].flops += fp.work;
-    run.end_seconds = wall.seconds();
-    run.flops = fp.work;
-    st[w].parts.push_back(run);
-  };
-
-  // layer 0: the subtrees from the queues
-  auto worker = [&](int w) {
-    try {
-      Executor& ex = *execs[w];
-      FactorContext ctx = base;
-      ctx.cb_arena = &arenas[w];
-      Timer busy;
-      ex.begin(ctx);
-      st[w].busy_seconds += busy.seconds();
-      for (;;) {
-        bool stolen = false;
-        const int i = queues.take(w, stolen);
-        if (i < 0) break;
-        busy.reset();
-        if (w < static_cast<int>(config.injected_delay.size()) && config.injected_delay[w] > 0)
-          std::this_thread::sleep_for(std::chrono::duration<double>(config.injected_delay[w]));
-        if (config.remote_blocks_on_device && !config.factor_top)
-          transfer[i].target_device = ex.device();
-        factor_one(w, i, true);
-        st[w].busy_seconds += busy.seconds();
-        ++st[w].subtrees_run;
-        st[w].subtrees_stolen += stolen ? 1 : 0;
-        st[w].parts.back().stolen = stolen;
-        mark_done(i);
-      }
-      // then this worker's upper parts, in layer order (decreasing work within a layer),
-      // each as soon as the parts below it are done: no barrier between layers
-      for (std::size_t k = 0; k < part.upper.size(); ++k) {
-        if (part.upper_owner[k] != first + w) continue;
-        const int id = n_sub + 1 + static_cast<int>(k);
-        if (!wait_for_imports(id)) break;
-        busy.reset();
-        factor_one(w, id, true);
-        st[w].busy_seconds += busy.seconds();
-        ++st[w].upper_parts_run;
-        mark_done(id);
-      }
-    } catch (...) {
-      record_error();
-    }
-  };
-
-  // runs f(w) for every worker, one thread each (worker 0 on the calling thread), and
-  // joins them
-  auto all_workers = [&](const auto& f) {
-    std::vector<std::thread> threads;
-    try {
-      for (int w = 1; w < workers; ++w) threads.emplace_back(f, w);
-    } catch (...) {  // could not start a thread: stop and join the started ones
-      failed = true;
-      queues.stop();
-      for (auto& th : threads) th.join();
-      throw;
-    }
-    f(0);
-    for (auto& th : threads) th.join();
-  };
-
-  all_workers(worker);
-  if (config.exchange) config.exchange(transfer, error);
-  if (error) std::rethrow_exception(error);
-
-  // the top part on worker 0, with the blocks of its children in other parts handed in;
-  // every other worker of this process is idle then: its helpers
-  if (config.factor_top) {
-    Timer busy;
-    factor_one(0, n_sub, false, std::vector<Executor*>(execs.begin() + 1, execs.end()));
-    st[0].busy_seconds += busy.seconds();
-  }
-  for (int w = 0; w < workers; ++w) {
-    FactorContext ctx = base;
-    ctx.cb_arena = &arenas[w];
-    Timer busy;
-    execs[w]->end(ctx);
-    st[w].busy_seconds += busy.seconds();
-    execs[w]->report_worker(st[w]);
-  }
-  const double total = wall.seconds();
-  for (auto& d : st) d.idle_seconds = std::max(0.0, total - d.busy_seconds);
-  factor.panels_on_host = true;
-  for (Executor* e : execs)
-    if (e->holds_part_panels()) factor.panels_on_host = false;
-  factor.valid = true;
-  if (devices) *devices = std::move(st);
+  MultiRun(an, scaled_values, type, static_pivot, execs, factor, arenas, config).run(devices);
 }
 
 }  // namespace strata::numeric

@@ -10,7 +10,7 @@
 // multi-worker driver (multi_device.cpp) runs the parts of a TreePartition on several.
 #include <algorithm>
 
-#include "core/alloc.hpp"
+#include "base/alloc.hpp"
 #include "numeric/factor.hpp"
 
 namespace strata::numeric {

@@ -3,7 +3,7 @@
 //
 // The writers produce `coordinate real|pattern general|symmetric` and `array real general`
 // with 17 significant digits (%.17g, so every double reads back bitwise). They follow the
-// output rules of core/atomic_file.hpp: a temporary beside the target renamed onto it once
+// output rules of base/atomic_file.hpp: a temporary beside the target renamed onto it once
 // complete, so the target is either the old file or the complete new one, never a partial
 // file (a symbolic link is followed, a device or FIFO written in place); on failure the
 // temporary is removed and strata::Error names PATH. A PATH ending in ".gz" is written
@@ -21,14 +21,14 @@
 #include <utility>
 #include <vector>
 
-#include "core/atomic_file.hpp"
+#include "base/atomic_file.hpp"
 #include "strata/errors.hpp"
 #include "strata/matrix_market.hpp"
 
 namespace strata {
 namespace {
 
-// Writes PATH by the rules of core/atomic_file.hpp: through a temporary file in the
+// Writes PATH by the rules of base/atomic_file.hpp: through a temporary file in the
 // target's folder, renamed onto the target by commit() (the final target of a symbolic
 // link; an existing device or FIFO is written in place instead). If commit() is not
 // reached (an exception), the destructor removes the temporary.

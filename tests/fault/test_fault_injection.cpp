@@ -16,7 +16,7 @@
 #include <string>
 
 #include "alloc_hook/alloc_hook.hpp"
-#include "core/analysis.hpp"
+#include "analysis/analysis.hpp"
 #include "mbd/generators.hpp"
 #include "mbd/model_io.hpp"
 #include "mbd/simulation.hpp"

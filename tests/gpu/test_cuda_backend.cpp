@@ -9,7 +9,7 @@
 #include <random>
 #include <tuple>
 
-#include "core/analysis.hpp"
+#include "analysis/analysis.hpp"
 #include "numeric/cpu/dense_front.hpp"
 #include "numeric/cuda_testing.hpp"
 #include "numeric/factor.hpp"

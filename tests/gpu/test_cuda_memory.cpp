@@ -6,7 +6,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "core/analysis.hpp"
+#include "analysis/analysis.hpp"
 #include "numeric/factor.hpp"
 #include "sparse/generators.hpp"
 #include "strata/strata.hpp"

@@ -13,7 +13,7 @@
 #include <cmath>
 #include <string>
 
-#include "core/analysis.hpp"
+#include "analysis/analysis.hpp"
 #include "numeric/factor.hpp"
 #include "sparse/generators.hpp"
 #include "strata/strata.hpp"
@@ -263,8 +263,7 @@ TEST(MultiGpu, SlowGpuHasItsSubtreesStolen) {
     std::vector<DeviceStats> dev;
     numeric::factorize_multi(an, v, MatrixType::spd, pivot, execs, plain, arenas, {}, nullptr);
     numeric::MultiWorkerConfig cfg;
-    cfg.injected_delay.assign(gpus, 0.0);
-    cfg.injected_delay[slow] = 0.5;
+    cfg.before_subtree = [slow](int w, int) { test::sleep_if(w == slow, 0.5); };
     numeric::factorize_multi(an, v, MatrixType::spd, pivot, execs, slowed, arenas, cfg, &dev);
     index_t stolen = 0;
     for (int d = 0; d < gpus; ++d)

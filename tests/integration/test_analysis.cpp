@@ -2,7 +2,7 @@
 // message naming the problem; the separator tree's work hook matches the column counts.
 #include <gtest/gtest.h>
 
-#include "core/analysis.hpp"
+#include "analysis/analysis.hpp"
 #include "sparse/generators.hpp"
 #include "strata/strata.hpp"
 #include "support/test_support.hpp"

@@ -14,7 +14,7 @@
 #include <string>
 #include <vector>
 
-#include "core/blas.hpp"
+#include "base/blas.hpp"
 #include "sparse/generators.hpp"
 #include "strata/strata.hpp"
 #include "support/test_support.hpp"

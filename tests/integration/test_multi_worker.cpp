@@ -18,7 +18,7 @@
 #include <numeric>
 #include <string>
 
-#include "core/analysis.hpp"
+#include "analysis/analysis.hpp"
 #include "core/solver_internal.hpp"
 #include "numeric/factor.hpp"
 #include "sparse/generators.hpp"
@@ -414,8 +414,7 @@ TEST(MultiWorker, UpperPartsDoNotWaitForUnrelatedSubtrees) {
       const auto& execs = recorders.execs;
       numeric::MultiWorkerConfig cfg;
       cfg.work_stealing = false;
-      cfg.injected_delay.assign(workers, 0.0);
-      cfg.injected_delay[slow] = 0.3;
+      cfg.before_subtree = [slow](int w, int) { test::sleep_if(w == slow, 0.3); };
       numeric::NumericFactor many;
       std::vector<std::vector<double>> arenas;
       numeric::factorize_multi(an, v, MatrixType::spd, pivot, execs, many, arenas, cfg, nullptr);
@@ -554,8 +553,9 @@ TEST(MultiWorker, SlowWorkerHasItsSubtreesStolen) {
         }
         numeric::MultiWorkerConfig cfg;
         cfg.work_stealing = stealing;
-        cfg.injected_delay.assign(workers, 0.0);
-        cfg.injected_delay[0] = stealing ? 0.5 : 0.05;
+        cfg.before_subtree = [stealing](int w, int) {
+          test::sleep_if(w == 0, stealing ? 0.5 : 0.05);
+        };
         numeric::NumericFactor many;
         std::vector<std::vector<double>> arenas;
         std::vector<DeviceStats> dev;

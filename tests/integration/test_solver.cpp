@@ -8,7 +8,7 @@
 #include <random>
 #include <utility>
 
-#include "core/blas.hpp"
+#include "base/blas.hpp"
 #include "sparse/generators.hpp"
 #include "strata/strata.hpp"
 #include "support/test_support.hpp"

@@ -4,15 +4,17 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <numeric>
 #include <set>
+#include <thread>
 #include <tuple>
 
-#include "core/analysis.hpp"
-#include "core/blas.hpp"
+#include "analysis/analysis.hpp"
+#include "base/blas.hpp"
 
 namespace strata::test {
 
@@ -287,6 +289,10 @@ std::vector<double> scaled_values(const Analysis& an, const SparseMatrix& a, dou
     }
   *pivot = 1e-8 * std::max(mx, 1.0);
   return v;
+}
+
+void sleep_if(bool slow, double seconds) {
+  if (slow) std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
 }
 
 }  // namespace strata::test

@@ -86,4 +86,8 @@ double relative_difference(const std::vector<double>& x, const std::vector<doubl
 /// threshold of the Solver's kind: 1e-8 · max(max |value|, 1).
 std::vector<double> scaled_values(const Analysis& an, const SparseMatrix& a, double* pivot);
 
+/// Sleeps `seconds` on the calling thread when `slow` (a slow worker, for the
+/// multi-worker factorization's MultiWorkerConfig::before_subtree).
+void sleep_if(bool slow, double seconds);
+
 }  // namespace strata::test

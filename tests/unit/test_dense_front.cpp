@@ -15,7 +15,7 @@
 #include <tuple>
 #include <vector>
 
-#include "core/blas.hpp"
+#include "base/blas.hpp"
 #include "numeric/cpu/dense_front.hpp"
 #include "support/test_support.hpp"
 

@@ -13,7 +13,7 @@
 #include <cstring>
 #include <limits>
 
-#include "core/analysis.hpp"
+#include "analysis/analysis.hpp"
 #include "distributed/distributed_internal.hpp"
 #include "distributed/serialize.hpp"
 #include "numeric/factor.hpp"

@@ -27,7 +27,7 @@
 #include <string>
 #include <vector>
 
-#include "core/timer.hpp"
+#include "base/timer.hpp"
 #include "strata/errors.hpp"
 #include "strata/matrix_market.hpp"
 #include "strata/sparse_matrix.hpp"

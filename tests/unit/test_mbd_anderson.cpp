@@ -8,7 +8,7 @@
 #include <random>
 #include <vector>
 
-#include "core/blas.hpp"
+#include "base/blas.hpp"
 #include "mbd/anderson.hpp"
 #include "support/test_support.hpp"
 

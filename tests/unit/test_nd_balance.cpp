@@ -8,7 +8,7 @@
 #include <cmath>
 #include <string>
 
-#include "core/analysis.hpp"
+#include "analysis/analysis.hpp"
 #include "core/solver_internal.hpp"
 #include "sparse/generators.hpp"
 #include "strata/strata.hpp"

@@ -1,4 +1,4 @@
-// Output files (core/atomic_file.hpp and the Matrix Market writers): a regular file is
+// Output files (base/atomic_file.hpp and the Matrix Market writers): a regular file is
 // replaced atomically, a symbolic link is followed (the link stays a link, its target is
 // written), a FIFO or a character device is written in place (it stays what it was), a
 // directory is refused, and check_output_path finds an impossible write before any work
@@ -19,7 +19,7 @@
 #include <string>
 #include <thread>
 
-#include "core/atomic_file.hpp"
+#include "base/atomic_file.hpp"
 #include "strata/errors.hpp"
 #include "strata/matrix_market.hpp"
 

@@ -16,7 +16,7 @@
 #include <set>
 #include <vector>
 
-#include "core/analysis.hpp"
+#include "analysis/analysis.hpp"
 #include "ordering/graph.hpp"
 #include "ordering/ordering.hpp"
 #include "ordering/pairing.hpp"

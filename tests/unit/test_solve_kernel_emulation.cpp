@@ -27,8 +27,8 @@
 #include <random>
 #include <vector>
 
-#include "core/analysis.hpp"
-#include "core/blas.hpp"
+#include "analysis/analysis.hpp"
+#include "base/blas.hpp"
 #include "numeric/factor.hpp"
 #include "sparse/generators.hpp"
 #include "strata/strata.hpp"

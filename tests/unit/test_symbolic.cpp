@@ -12,8 +12,8 @@
 #include <string>
 #include <vector>
 
-#include "core/analysis.hpp"
-#include "core/timer.hpp"
+#include "analysis/analysis.hpp"
+#include "base/timer.hpp"
 #include "sparse/generators.hpp"
 #include "strata/errors.hpp"
 #include "strata/matrix_market.hpp"

@@ -10,7 +10,7 @@
 #include <numeric>
 #include <string>
 
-#include "core/analysis.hpp"
+#include "analysis/analysis.hpp"
 #include "sparse/generators.hpp"
 #include "strata/strata.hpp"
 #include "support/test_support.hpp"

@@ -34,8 +34,8 @@
 #include <mutex>
 #include <thread>
 
-#include "core/alloc.hpp"
-#include "core/blas.hpp"
+#include "base/alloc.hpp"
+#include "base/blas.hpp"
 #include "numeric/assembly.hpp"
 #include "numeric/cpu/dense_front.hpp"
 #include "numeric/factor.hpp"

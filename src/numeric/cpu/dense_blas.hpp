@@ -6,7 +6,7 @@
 #include <limits>
 #include <string>
 
-#include "core/blas.hpp"
+#include "base/blas.hpp"
 #include "strata/errors.hpp"
 #include "strata/types.hpp"
 

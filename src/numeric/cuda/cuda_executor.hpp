@@ -1,10 +1,17 @@
 // strata — the CUDA executor's class (internal to src/numeric/cuda; nothing CUDA is in a
 // public header). The implementation is split by concern:
-//   cuda_executor.cu  device memory plan, analysis upload, in-core batches, bookkeeping;
+//   cuda_executor.cu  life cycle: set-up, parts, contribution-block export and import,
+//                     the end of a factorization, statistics;
+//   device_plan.cu    the device memory plan and the per-analysis uploads;
+//   factor_chunk.cu   in-core batches chunk by chunk, and the host bookkeeping of a chunk;
+//   lu_fronts.cu      LU's large fronts (strips, library calls, pivoted redo);
+//   device_query.cu   GPUs visible, host memory pinning, the executor's factory;
 //   tiled_front.cu    fronts larger than the device budget, factored slab by slab;
+//   tiled_llt.cu      a Cholesky front larger than the budget, streamed through in pieces;
 //   tiled_host.cpp    their assembly on the host's threads;
 //   cuda_solve.cu     triangular solves on the device with a resident factor;
-//   split_update.cu   a large front's update split over idle GPUs (several GPUs).
+//   split_update.cu   a large front's update split over idle GPUs (several GPUs);
+//   distributed_front.cu  a large Cholesky front's columns over a team of GPUs.
 #pragma once
 
 #include <cstdint>
@@ -22,6 +29,17 @@
 #include "numeric/factor.hpp"
 
 namespace strata::cuda {
+
+struct EventPair;  // tiled_llt.cu
+struct TeamGpu;    // distributed_front.cu
+
+inline constexpr std::int64_t kSmallFront = 256;  // fronts up to this many rows: one block each
+inline constexpr std::int64_t kMinSlab = 16;      // narrowest slab worth a library call
+// Streams for the large fronts of one chunk. The fronts of a level below the top few are
+// many and medium-sized (hundreds to a few thousand rows): one after another on one
+// stream, each library call leaves most of the GPU idle. Eight lanes fill it without
+// many handles (each cuBLAS handle holds its own workspace).
+inline constexpr std::size_t kLanes = 8;
 
 /// Where the executor put things on the device for the current analysis (see
 /// CudaExecutor::plan_device_memory).
@@ -169,7 +187,7 @@ class CudaExecutor final : public numeric::Executor {
   void plan_device_memory(const Analysis& an, const std::vector<numeric::PartView>& views);
   void upload_part(const Analysis& an, const numeric::PartView& v);
   /// Grows the per-chunk buffers (device and pinned) to what the largest chunk of `views`
-  /// needs, so that no factorization allocates (cuda_executor.cu says why).
+  /// needs, so that no factorization allocates (device_plan.cu says why).
   void presize_chunk_buffers(const Analysis& an, const std::vector<numeric::PartView>& views);
   /// The factor stays on the device only for a whole-tree factorization.
   bool keep_resident() const { return plan_.factor_resident && whole_; }
@@ -189,7 +207,9 @@ class CudaExecutor final : public numeric::Executor {
   struct ChunkRecord {
     index_t begin = 0, end = 0;
     bool lu = false, ldlt = false, dev_only = false;
+    index_t max_rows = 0;  ///< the chunk's largest front
     std::vector<std::int64_t> small, big, perm_off, big_perm_at, diag_off;
+    std::int64_t perm_total = 0;  ///< pivots of the chunk (small fronts' then large ones')
     PinnedBuffer<std::int64_t> info, perturbed, perm;
     PinnedBuffer<int> pinfo, psize;
     PinnedBuffer<double> diag;
@@ -206,6 +226,14 @@ class CudaExecutor final : public numeric::Executor {
   /// host part while the GPU works on this one (LDLᵀ whose panels come back: this
   /// chunk's host part too, at once).
   void factor_chunk(const numeric::FactorContext& ctx, index_t begin, index_t end);
+  /// factor_chunk's stages (factor_chunk.cu), in order, each enqueued on stream_ (and the
+  /// lanes): the small fronts, the large fronts (with the panel kernels' share), the
+  /// panels packed and copied back, the host part's results fetched into `rec`.
+  void chunk_small_fronts(const numeric::FactorContext& ctx, ChunkRecord& rec);
+  std::vector<char> chunk_panel_kernels(const numeric::FactorContext& ctx, const ChunkRecord& rec);
+  void chunk_large_fronts(const numeric::FactorContext& ctx, const ChunkRecord& rec);
+  void chunk_pack_panels(const numeric::FactorContext& ctx, ChunkRecord& rec);
+  void chunk_fetch_results(ChunkRecord& rec);
   /// Runs the pending chunk's host part, if any (before anything that needs the host
   /// factor complete: a tiled front, the end of a part or of the factorization).
   void flush_chunk(const numeric::FactorContext& ctx);
@@ -214,6 +242,12 @@ class CudaExecutor final : public numeric::Executor {
   /// factor_tiled_llt (tiled_llt.cu), LU slab by slab right-looking (tiled_front.cu).
   void factor_tiled(const numeric::FactorContext& ctx, index_t pos);
   void factor_tiled_llt(const numeric::FactorContext& ctx, index_t pos);
+  /// factor_tiled_llt's two steps (tiled_llt.cu): the pivot columns by slabs, then the
+  /// contribution block's update by tiles.
+  struct TiledLltFront;
+  void tiled_llt_pivot_columns(const numeric::FactorContext& ctx, const TiledLltFront& fr,
+                               EventPair& computed);
+  void tiled_llt_cb_update(const TiledLltFront& fr, EventPair& computed);
   /// Columns per slab of a tiled front (m rows, k pivots): a slab and two column blocks
   /// of the trailing matrix fit the pool (3·m·w doubles), at least 1, at most k.
   std::int64_t slab_width(std::int64_t m, std::int64_t k) const;
@@ -338,6 +372,10 @@ class CudaExecutor final : public numeric::Executor {
   /// hold its blocks, a GPU has no room for the panel slots, or the front has fewer
   /// column blocks than GPUs.
   bool distributed_llt(Lane& lane, double* F, int m, int k, int* info);
+  /// distributed_llt's layout of F's column blocks (bounds c, P pivot blocks) over the
+  /// team (distributed_front.cu); false when the front cannot be distributed.
+  bool team_layout(Lane& lane, double* F, std::int64_t m, const std::vector<std::int64_t>& c, int P,
+                   std::vector<TeamGpu>& gpu);
   /// The lane this executor lends to others (a lane of its own, idle while it helps).
   Lane& help_lane();
   void count_h2d(std::size_t bytes) { bytes_h2d_ += bytes; }

@@ -57,6 +57,20 @@
 
 namespace strata::cuda {
 
+// Where one GPU of a distributed front keeps things: its executor, its compute stream
+// (the owner: the front's lane; a helper: its help lane) and copy stream, its blocks (by
+// block index, null when not held here) with their leading dimensions, two panel slots
+// and its per-block statuses (P ints, block p's at p).
+struct TeamGpu {
+  CudaExecutor* ex;
+  Lane* work;
+  cudaStream_t copy;
+  std::vector<double*> block;
+  std::vector<std::int64_t> ld;
+  double* slots[2];
+  int* status;
+};
+
 namespace {
 
 // The front's status from the per-block statuses: `all` holds G rows of P ints (row g:
@@ -85,35 +99,23 @@ cudaEvent_t event_at(std::vector<cudaEvent_t>& pool, std::size_t i) {
 
 }  // namespace
 
-bool CudaExecutor::distributed_llt(Lane& lane, double* F, int m, int k, int* info) {
+// The distributed front's layout (distributed_llt): block j of F's columns c[j]..c[j+1]
+// on GPU j mod G, the owner's in place in F, a helper's packed in its pool; the panel
+// slots and statuses sized, the events made. False, with nothing changed that matters,
+// when a helper's pool cannot hold its share or the slots do not fit beside the plan.
+bool CudaExecutor::team_layout(Lane& lane, double* F, std::int64_t m,
+                               const std::vector<std::int64_t>& c, int P,
+                               std::vector<TeamGpu>& gpu) {
   const int G = static_cast<int>(team_.size()) + 1;
-  const std::int64_t nb = dist_block_;
-  // column bounds: pivot blocks of nb up to k, then contribution-block blocks of nb
-  std::vector<std::int64_t> c{0};
-  while (c.back() < k) c.push_back(std::min<std::int64_t>(c.back() + nb, k));
-  const int P = static_cast<int>(c.size()) - 1;
-  while (c.back() < m) c.push_back(std::min<std::int64_t>(c.back() + nb, m));
   const int NB = static_cast<int>(c.size()) - 1;
-  if (P < 1 || NB < G) return false;
-  auto owner = [G](int j) { return j % G; };
+  const std::int64_t nb = dist_block_;
   auto rows = [&](int j) { return m - c[j]; };
   auto width = [&](int j) { return c[j + 1] - c[j]; };
   const std::size_t slot = static_cast<std::size_t>(m) * static_cast<std::size_t>(nb);
-
-  // where each GPU keeps things: its blocks, two panel slots, its statuses
-  struct Gpu {
-    CudaExecutor* ex;
-    Lane* work;
-    cudaStream_t copy;
-    std::vector<double*> block;  // by block index, null when not held here
-    std::vector<std::int64_t> ld;
-    double* slots[2];
-    int* status;  // P ints, block p's at p
-  };
-  std::vector<Gpu> gpu(G);
+  gpu.assign(G, TeamGpu{});
   for (int g = 0; g < G; ++g) {
     CudaExecutor& x = g == 0 ? *this : *team_[g - 1];
-    Gpu& u = gpu[g];
+    TeamGpu& u = gpu[g];
     u.ex = &x;
     u.block.assign(NB, nullptr);
     u.ld.assign(NB, 0);
@@ -154,6 +156,26 @@ bool CudaExecutor::distributed_llt(Lane& lane, double* F, int m, int k, int* inf
     u.work->diag_work.resize(llt_recursive_work_size(nb));          // no reallocation between steps
     event_at(x.dist_events_, 3 * static_cast<std::size_t>(P) - 1);  // E, R and D of every step
   }
+  return true;
+}
+
+bool CudaExecutor::distributed_llt(Lane& lane, double* F, int m, int k, int* info) {
+  const int G = static_cast<int>(team_.size()) + 1;
+  const std::int64_t nb = dist_block_;
+  // column bounds: pivot blocks of nb up to k, then contribution-block blocks of nb
+  std::vector<std::int64_t> c{0};
+  while (c.back() < k) c.push_back(std::min<std::int64_t>(c.back() + nb, k));
+  const int P = static_cast<int>(c.size()) - 1;
+  while (c.back() < m) c.push_back(std::min<std::int64_t>(c.back() + nb, m));
+  const int NB = static_cast<int>(c.size()) - 1;
+  if (P < 1 || NB < G) return false;
+  auto owner = [G](int j) { return j % G; };
+  auto rows = [&](int j) { return m - c[j]; };
+  auto width = [&](int j) { return c[j + 1] - c[j]; };
+
+  // where each GPU keeps things
+  std::vector<TeamGpu> gpu;
+  if (!team_layout(lane, F, m, c, P, gpu)) return false;
   auto E = [&](int g, int p) { return gpu[g].ex->dist_events_[3 * p]; };
   auto R = [&](int g, int p) { return gpu[g].ex->dist_events_[3 * p + 1]; };
   auto D = [&](int g, int p) { return gpu[g].ex->dist_events_[3 * p + 2]; };
@@ -167,7 +189,7 @@ bool CudaExecutor::distributed_llt(Lane& lane, double* F, int m, int k, int* inf
   if (dist_done_recorded_) STRATA_CUDA(cudaStreamWaitEvent(lane.stream, dist_done_, 0));
   STRATA_CUDA(cudaEventRecord(dist_ready_, lane.stream));
   for (int g = 1; g < G; ++g) {
-    Gpu& u = gpu[g];
+    TeamGpu& u = gpu[g];
     STRATA_CUDA(cudaSetDevice(u.ex->device_));
     STRATA_CUDA(cudaStreamWaitEvent(u.work->stream, dist_ready_, 0));
     for (int j = g; j < NB; j += G) {
@@ -183,14 +205,14 @@ bool CudaExecutor::distributed_llt(Lane& lane, double* F, int m, int k, int* inf
   // step 1 of block p on its GPU, then its copies to the GPUs that need it
   auto panel = [&](int p) {
     const int g = owner(p);
-    Gpu& u = gpu[g];
+    TeamGpu& u = gpu[g];
     STRATA_CUDA(cudaSetDevice(u.ex->device_));
     llt_pivot_block_and_panel_recursive(*u.work, u.block[p], u.ld[p], rows(p), width(p),
                                         u.status + p);
     STRATA_CUDA(cudaEventRecord(E(g, p), u.work->stream));
     for (int h = 0; h < G; ++h) {
       if (h == g || !holds_right_of(h, p)) continue;
-      Gpu& v = gpu[h];
+      TeamGpu& v = gpu[h];
       STRATA_CUDA(cudaSetDevice(v.ex->device_));
       STRATA_CUDA(cudaStreamWaitEvent(v.copy, E(g, p), 0));
       if (p >= 2) STRATA_CUDA(cudaStreamWaitEvent(v.copy, D(h, p - 2), 0));
@@ -203,7 +225,7 @@ bool CudaExecutor::distributed_llt(Lane& lane, double* F, int m, int k, int* inf
   };
   // step 3: block j (on GPU g) updated by panel p
   auto update = [&](int g, int j, int p) {
-    Gpu& u = gpu[g];
+    TeamGpu& u = gpu[g];
     const bool here = owner(p) == g;
     const double* L = here ? u.block[p] : u.slots[p % 2];
     const std::int64_t ldl = here ? u.ld[p] : rows(p);
@@ -218,7 +240,7 @@ bool CudaExecutor::distributed_llt(Lane& lane, double* F, int m, int k, int* inf
   for (int p = 0; p < P; ++p)
     for (int g = 0; g < G; ++g) {
       if (!holds_right_of(g, p)) continue;
-      Gpu& u = gpu[g];
+      TeamGpu& u = gpu[g];
       STRATA_CUDA(cudaSetDevice(u.ex->device_));
       if (owner(p) != g) STRATA_CUDA(cudaStreamWaitEvent(u.work->stream, R(g, p), 0));
       int first = p + 1;
@@ -235,7 +257,7 @@ bool CudaExecutor::distributed_llt(Lane& lane, double* F, int m, int k, int* inf
 
   // the helpers' blocks and statuses back to the owner; the owner waits for them
   for (int g = 1; g < G; ++g) {
-    Gpu& u = gpu[g];
+    TeamGpu& u = gpu[g];
     STRATA_CUDA(cudaSetDevice(u.ex->device_));
     for (int j = g; j < NB; j += G) {
       const std::size_t rb = sizeof(double) * static_cast<std::size_t>(rows(j));

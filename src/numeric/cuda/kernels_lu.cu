@@ -2,7 +2,7 @@
 //
 // A large LU front with more than Options::gpu_lu_strip_pivots pivots (and
 // any front whose elimination without interchanges was rejected) is factored by
-// whole-block library calls (cuda_executor.cu, lu_large_fronts; the others by the batched
+// whole-block library calls (lu_fronts.cu, lu_large_fronts; the others by the batched
 // kernels of kernels_lu_panel.cu): cuSOLVER GETRF on the k×k fully summed block A11 — partial
 // pivoting over the fully summed rows only, which is exactly the restricted pivoting of the CPU
 // kernel — then the row interchanges applied to A12, two TRSMs and one GEMM. GETRF runs

@@ -33,7 +33,7 @@
 #include <cmath>
 #include <cstring>
 
-#include "core/host_copy.hpp"
+#include "base/host_copy.hpp"
 #include "numeric/cuda/cuda_executor.hpp"
 
 namespace strata::cuda {

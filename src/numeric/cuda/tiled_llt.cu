@@ -57,12 +57,10 @@
 #include <cmath>
 #include <future>
 
-#include "core/host_copy.hpp"
+#include "base/host_copy.hpp"
 #include "numeric/cuda/cuda_executor.hpp"
 
 namespace strata::cuda {
-
-namespace {
 
 // Two events, destroyed on every way out (a failed pivot throws mid-front).
 struct EventPair {
@@ -77,6 +75,27 @@ struct EventPair {
   EventPair(const EventPair&) = delete;
   EventPair& operator=(const EventPair&) = delete;
 };
+
+// The front factor_tiled_llt works on: front f (m rows, k pivots) assembled in the host
+// buffers P (its first k columns, m × k) and C (its contribution block, (m−k)², or null
+// for a root), C's place in the arena (dst) on the device or in host memory.
+struct CudaExecutor::TiledLltFront {
+  index_t f;
+  std::int64_t m, k;
+  double* P;
+  double* C;
+  double* dst;
+  bool cb_on_host;
+};
+
+namespace {
+
+// The copy lanes 1–4 start after everything on `main` so far (the slab or panel they
+// read was downloaded there).
+void follow_main_stream(std::vector<std::unique_ptr<Lane>>& lane, cudaStream_t main) {
+  STRATA_CUDA(cudaEventRecord(lane[0]->done, main));
+  for (int l = 1; l <= 4; ++l) STRATA_CUDA(cudaStreamWaitEvent(lane[l]->stream, lane[0]->done, 0));
+}
 
 // The largest tile side b ≤ cap with b·k + 2·b·kc + (c_tiles ? 2·b² : 0) ≤ pool, at least
 // 1: the tile row's rows of L21 (b × k), two streamed pieces of another tile row's (b × kc)
@@ -189,51 +208,20 @@ void CudaExecutor::start_tiled_prefetch(const numeric::FactorContext& ctx, index
   });
 }
 
-void CudaExecutor::factor_tiled_llt(const numeric::FactorContext& ctx, index_t pos) {
-  const auto wall_start = std::chrono::steady_clock::now();
+// Step 1 of a tiled Cholesky front: the pivot columns, left-looking by slabs: each slab
+// of w columns comes to the device, takes the updates of the earlier columns (streamed in
+// pieces on lanes 1 and 2, double-buffered), is factored (pivot block and panel) and goes
+// back to P. Throws NotPositiveDefinite naming the column.
+void CudaExecutor::tiled_llt_pivot_columns(const numeric::FactorContext& ctx,
+                                           const TiledLltFront& fr, EventPair& computed) {
   const Analysis& an = *ctx.analysis;
   const auto& t = an.tree;
-  const index_t f = ctx.part->schedule->fronts[pos];
-  const std::int64_t m = t.n_rows(f), k = t.n_pivots(f), mc = m - k;
-  ++tiled_count_;
-  ++chunks_;
-  const bool has_cb = mc > 0 && t.parent[f] >= 0;  // a root's block is not needed
-  double* const dst = has_cb ? cur_->cb_ptr_host[f] : nullptr;
-  const bool cb_on_host = has_cb && in_host_arena(dst);
-  const std::size_t panel_doubles = static_cast<std::size_t>(m) * k;
-  // assembled already, beside the previous front's device work (start_tiled_prefetch)?
-  const bool assembled = take_tiled_prefetch(ctx.part->id, pos);
-  if (assembled) {
-    host_front_.swap(host_front_next_);
-    ++prefetched_count_;
-  }
-  host_front_.resize(panel_doubles +
-                     (has_cb && !cb_on_host ? static_cast<std::size_t>(mc) * mc : 0));
-  double* const P = host_front_.data();
-  double* const C = !has_cb ? nullptr : cb_on_host ? dst : P + panel_doubles;
-  if (!assembled) assemble_llt_split(ctx, f, P, C);  // tiled_host.cpp
-  start_tiled_prefetch(ctx, f, pos);  // the next tiled front's, while this one's goes on
-  if (has_cb && !cb_on_host) {        // the block's place is on the device: it goes there once
-    STRATA_CUDA(cudaMemcpyAsync(dst, C, sizeof(double) * mc * mc, cudaMemcpyHostToDevice, stream_));
-    bytes_h2d_ += sizeof(double) * mc * mc;
-  }
-  const auto slabs_start = std::chrono::steady_clock::now();
-  phases_.tiled_assembly += std::chrono::duration<double>(slabs_start - wall_start).count();
-
-  // lanes 1 and 2 bring the streamed operands, 3 and 4 the contribution block's tiles
+  const index_t f = fr.f;
+  const std::int64_t m = fr.m, k = fr.k;
+  double* const P = fr.P;
   std::vector<std::unique_ptr<Lane>>& lane = lanes();
   Lane& main = *lane[0];  // stream_ and blas_: the arithmetic
-  EventPair computed;     // per buffer: the last update that read it was enqueued
-  for (cudaEvent_t e : computed.ev) STRATA_CUDA(cudaEventRecord(e, stream_));
-  // the copy lanes start after everything on stream_ so far (the slab or panel they read
-  // was downloaded there)
-  auto lanes_follow_main = [&] {
-    STRATA_CUDA(cudaEventRecord(main.done, stream_));
-    for (int l = 1; l <= 4; ++l) STRATA_CUDA(cudaStreamWaitEvent(lane[l]->stream, main.done, 0));
-  };
   const double one = 1.0, minus_one = -1.0;
-
-  // 1. the pivot columns, left-looking by slabs
   const TiledWidths tw = tiled_llt_widths(m, k);
   const std::int64_t w_max = tw.slab, wq_max = tw.stream;
   double* const S = pool_.data();
@@ -244,7 +232,7 @@ void CudaExecutor::factor_tiled_llt(const numeric::FactorContext& ctx, index_t p
     const std::int64_t w = std::min(w_max, k - p0), r = m - p0;
     copy_host_block(stream_, S, P, m, p0, p0, r, w, true);
     bytes_h2d_ += sizeof(double) * r * w;
-    lanes_follow_main();
+    follow_main_stream(lane, stream_);
     std::int64_t use = 0;
     for (std::int64_t q0 = 0; q0 < p0; q0 += wq_max, ++use) {  // earlier columns, by pieces
       const std::int64_t wq = std::min(wq_max, p0 - q0);
@@ -287,78 +275,128 @@ void CudaExecutor::factor_tiled_llt(const numeric::FactorContext& ctx, index_t p
     copy_host_block(stream_, S, P, m, p0, p0, r, w, false);
     bytes_d2h_ += sizeof(double) * r * w;
   }
+}
+
+// Step 2: the contribution block, C −= L21·L21ᵀ by tiles of the lower triangle: a tile
+// row's rows of L21 on stream_, the other tile row's in pieces on lanes 1 and 2, the
+// tile itself in place on the device or, for a block in host memory, brought over and
+// back on lanes 3 and 4.
+void CudaExecutor::tiled_llt_cb_update(const TiledLltFront& fr, EventPair& computed) {
+  const std::int64_t m = fr.m, k = fr.k, mc = fr.m - fr.k;
+  const bool cb_on_host = fr.cb_on_host;
+  double* const P = fr.P;
+  double* const C = fr.C;
+  double* const dst = fr.dst;
+  std::vector<std::unique_ptr<Lane>>& lane = lanes();
+  Lane& main = *lane[0];
+  const double one = 1.0, minus_one = -1.0;
+  // another tile row's rows of L21 come in pieces of kc columns (all k by default)
+  const std::int64_t kc = tiled_stream_cols_ > 0 ? std::min(k, tiled_stream_cols_) : k;
+  const std::int64_t b = tile_side(plan_.pool, k, kc, mc, cb_on_host);
+  const std::size_t bk = static_cast<std::size_t>(b) * k, bkc = static_cast<std::size_t>(b) * kc;
+  double* const Li = pool_.data();
+  double* const Lj[2] = {Li + bk, Li + bk + bkc};
+  double* const Ct[2] = {Li + bk + 2 * bkc, Li + bk + 2 * bkc + static_cast<std::size_t>(b) * b};
+  follow_main_stream(lane, stream_);  // the panel's last slab has been downloaded
+  std::int64_t use = 0, tiles = 0;
+  for (std::int64_t ri = 0; ri < mc; ri += b) {
+    const std::int64_t bi = std::min(b, mc - ri);
+    // on stream_, after the previous tile row's updates that read it
+    copy_host_block(stream_, Li, P, m, k + ri, 0, bi, k, true);
+    bytes_h2d_ += sizeof(double) * bi * k;
+    for (std::int64_t rj = 0; rj <= ri; rj += b, ++tiles) {
+      const std::int64_t bj = std::min(b, mc - rj);
+      // the tile: in place on the device, or brought over on a lane of its own (3, 4)
+      const int ts = static_cast<int>(tiles % 2);
+      Lane& tl = *lane[3 + ts];
+      double* tile = dst + rj * mc + ri;
+      std::int64_t ldt = mc;
+      if (cb_on_host) {
+        tile = Ct[ts];
+        ldt = bi;
+        copy_host_block(tl.stream, tile, C, mc, ri, rj, bi, bj, true);  // after its last use
+        bytes_h2d_ += sizeof(double) * bi * bj;
+        STRATA_CUDA(cudaEventRecord(tl.done, tl.stream));
+        STRATA_CUDA(cudaStreamWaitEvent(stream_, tl.done, 0));
+      }
+      for (std::int64_t c0 = 0; c0 < k; c0 += kc) {
+        const std::int64_t kcc = std::min(kc, k - c0);
+        const double* L = Li + c0 * bi;  // the diagonal tile: its own rows
+        std::int64_t ldl = bi;
+        int slot = -1;
+        if (rj != ri) {  // tile row j's rows, this piece, on a copy lane
+          slot = static_cast<int>(use++ % 2);
+          Lane& ln = *lane[1 + slot];
+          STRATA_CUDA(cudaStreamWaitEvent(ln.stream, computed.ev[slot], 0));
+          copy_host_block(ln.stream, Lj[slot], P, m, k + rj, c0, bj, kcc, true);
+          bytes_h2d_ += sizeof(double) * bj * kcc;
+          STRATA_CUDA(cudaEventRecord(ln.done, ln.stream));
+          STRATA_CUDA(cudaStreamWaitEvent(stream_, ln.done, 0));
+          L = Lj[slot];
+          ldl = bj;
+        }
+        STRATA_CUBLAS(cublasDgemm(main.blas, CUBLAS_OP_N, CUBLAS_OP_T, static_cast<int>(bi),
+                                  static_cast<int>(bj), static_cast<int>(kcc), &minus_one,
+                                  Li + c0 * bi, static_cast<int>(bi), L, static_cast<int>(ldl),
+                                  &one, tile, static_cast<int>(ldt)));
+        if (slot >= 0) STRATA_CUDA(cudaEventRecord(computed.ev[slot], stream_));
+      }
+      if (cb_on_host) {  // back, on its lane, once updated
+        STRATA_CUDA(cudaEventRecord(main.done, stream_));
+        STRATA_CUDA(cudaStreamWaitEvent(tl.stream, main.done, 0));
+        copy_host_block(tl.stream, tile, C, mc, ri, rj, bi, bj, false);
+        bytes_d2h_ += sizeof(double) * bi * bj;
+      }
+    }
+  }
+  for (int l = 1; l <= 4; ++l) {  // the pieces' and the tiles' copies
+    STRATA_CUDA(cudaEventRecord(lane[l]->done, lane[l]->stream));
+    STRATA_CUDA(cudaStreamWaitEvent(stream_, lane[l]->done, 0));
+  }
+}
+
+void CudaExecutor::factor_tiled_llt(const numeric::FactorContext& ctx, index_t pos) {
+  const auto wall_start = std::chrono::steady_clock::now();
+  const Analysis& an = *ctx.analysis;
+  const auto& t = an.tree;
+  const index_t f = ctx.part->schedule->fronts[pos];
+  const std::int64_t m = t.n_rows(f), k = t.n_pivots(f), mc = m - k;
+  ++tiled_count_;
+  ++chunks_;
+  const bool has_cb = mc > 0 && t.parent[f] >= 0;  // a root's block is not needed
+  double* const dst = has_cb ? cur_->cb_ptr_host[f] : nullptr;
+  const bool cb_on_host = has_cb && in_host_arena(dst);
+  const std::size_t panel_doubles = static_cast<std::size_t>(m) * k;
+  // assembled already, beside the previous front's device work (start_tiled_prefetch)?
+  const bool assembled = take_tiled_prefetch(ctx.part->id, pos);
+  if (assembled) {
+    host_front_.swap(host_front_next_);
+    ++prefetched_count_;
+  }
+  host_front_.resize(panel_doubles +
+                     (has_cb && !cb_on_host ? static_cast<std::size_t>(mc) * mc : 0));
+  double* const P = host_front_.data();
+  double* const C = !has_cb ? nullptr : cb_on_host ? dst : P + panel_doubles;
+  if (!assembled) assemble_llt_split(ctx, f, P, C);  // tiled_host.cpp
+  start_tiled_prefetch(ctx, f, pos);  // the next tiled front's, while this one's goes on
+  if (has_cb && !cb_on_host) {        // the block's place is on the device: it goes there once
+    STRATA_CUDA(cudaMemcpyAsync(dst, C, sizeof(double) * mc * mc, cudaMemcpyHostToDevice, stream_));
+    bytes_h2d_ += sizeof(double) * mc * mc;
+  }
+  const auto slabs_start = std::chrono::steady_clock::now();
+  phases_.tiled_assembly += std::chrono::duration<double>(slabs_start - wall_start).count();
+
+  TiledLltFront fr{f, m, k, P, C, dst, cb_on_host};
+  EventPair computed;  // per buffer: the last update that read it was enqueued
+  for (cudaEvent_t e : computed.ev) STRATA_CUDA(cudaEventRecord(e, stream_));
+  tiled_llt_pivot_columns(ctx, fr, computed);
 
   // (waits for the last slab's download: the split of tiled_slabs between the two steps)
   STRATA_CUDA(cudaStreamSynchronize(stream_));
   const auto update_start = std::chrono::steady_clock::now();
   phases_.tiled_pivot_columns += std::chrono::duration<double>(update_start - slabs_start).count();
 
-  // 2. the contribution block, C −= L21·L21ᵀ by tiles
-  if (has_cb && k > 0) {
-    // another tile row's rows of L21 come in pieces of kc columns (all k by default)
-    const std::int64_t kc = tiled_stream_cols_ > 0 ? std::min(k, tiled_stream_cols_) : k;
-    const std::int64_t b = tile_side(plan_.pool, k, kc, mc, cb_on_host);
-    const std::size_t bk = static_cast<std::size_t>(b) * k, bkc = static_cast<std::size_t>(b) * kc;
-    double* const Li = pool_.data();
-    double* const Lj[2] = {Li + bk, Li + bk + bkc};
-    double* const Ct[2] = {Li + bk + 2 * bkc, Li + bk + 2 * bkc + static_cast<std::size_t>(b) * b};
-    lanes_follow_main();  // the panel's last slab has been downloaded
-    std::int64_t use = 0, tiles = 0;
-    for (std::int64_t ri = 0; ri < mc; ri += b) {
-      const std::int64_t bi = std::min(b, mc - ri);
-      // on stream_, after the previous tile row's updates that read it
-      copy_host_block(stream_, Li, P, m, k + ri, 0, bi, k, true);
-      bytes_h2d_ += sizeof(double) * bi * k;
-      for (std::int64_t rj = 0; rj <= ri; rj += b, ++tiles) {
-        const std::int64_t bj = std::min(b, mc - rj);
-        // the tile: in place on the device, or brought over on a lane of its own (3, 4)
-        const int ts = static_cast<int>(tiles % 2);
-        Lane& tl = *lane[3 + ts];
-        double* tile = dst + rj * mc + ri;
-        std::int64_t ldt = mc;
-        if (cb_on_host) {
-          tile = Ct[ts];
-          ldt = bi;
-          copy_host_block(tl.stream, tile, C, mc, ri, rj, bi, bj, true);  // after its last use
-          bytes_h2d_ += sizeof(double) * bi * bj;
-          STRATA_CUDA(cudaEventRecord(tl.done, tl.stream));
-          STRATA_CUDA(cudaStreamWaitEvent(stream_, tl.done, 0));
-        }
-        for (std::int64_t c0 = 0; c0 < k; c0 += kc) {
-          const std::int64_t kcc = std::min(kc, k - c0);
-          const double* L = Li + c0 * bi;  // the diagonal tile: its own rows
-          std::int64_t ldl = bi;
-          int slot = -1;
-          if (rj != ri) {  // tile row j's rows, this piece, on a copy lane
-            slot = static_cast<int>(use++ % 2);
-            Lane& ln = *lane[1 + slot];
-            STRATA_CUDA(cudaStreamWaitEvent(ln.stream, computed.ev[slot], 0));
-            copy_host_block(ln.stream, Lj[slot], P, m, k + rj, c0, bj, kcc, true);
-            bytes_h2d_ += sizeof(double) * bj * kcc;
-            STRATA_CUDA(cudaEventRecord(ln.done, ln.stream));
-            STRATA_CUDA(cudaStreamWaitEvent(stream_, ln.done, 0));
-            L = Lj[slot];
-            ldl = bj;
-          }
-          STRATA_CUBLAS(cublasDgemm(main.blas, CUBLAS_OP_N, CUBLAS_OP_T, static_cast<int>(bi),
-                                    static_cast<int>(bj), static_cast<int>(kcc), &minus_one,
-                                    Li + c0 * bi, static_cast<int>(bi), L, static_cast<int>(ldl),
-                                    &one, tile, static_cast<int>(ldt)));
-          if (slot >= 0) STRATA_CUDA(cudaEventRecord(computed.ev[slot], stream_));
-        }
-        if (cb_on_host) {  // back, on its lane, once updated
-          STRATA_CUDA(cudaEventRecord(main.done, stream_));
-          STRATA_CUDA(cudaStreamWaitEvent(tl.stream, main.done, 0));
-          copy_host_block(tl.stream, tile, C, mc, ri, rj, bi, bj, false);
-          bytes_d2h_ += sizeof(double) * bi * bj;
-        }
-      }
-    }
-    for (int l = 1; l <= 4; ++l) {  // the pieces' and the tiles' copies
-      STRATA_CUDA(cudaEventRecord(lane[l]->done, lane[l]->stream));
-      STRATA_CUDA(cudaStreamWaitEvent(stream_, lane[l]->done, 0));
-    }
-  }
+  if (has_cb && k > 0) tiled_llt_cb_update(fr, computed);
   STRATA_CUDA(cudaStreamSynchronize(stream_));
 
   const auto store_start = std::chrono::steady_clock::now();

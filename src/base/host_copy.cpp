@@ -1,5 +1,5 @@
 // strata — copies between large host buffers on the host's threads (see host_copy.hpp).
-#include "core/host_copy.hpp"
+#include "base/host_copy.hpp"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>

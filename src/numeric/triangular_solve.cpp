@@ -16,7 +16,7 @@
 #include <algorithm>
 #include <vector>
 
-#include "core/blas.hpp"
+#include "base/blas.hpp"
 #include "numeric/factor.hpp"
 
 namespace strata::numeric {

@@ -23,13 +23,13 @@
 //      (Options::split_top) and a top part (schedule/tree_partition.hpp), each part with
 //      its own schedule, plan and arena; the
 //      nested dissection of step 3 then also balances its top bisections by work.
-#include "core/analysis.hpp"
+#include "analysis/analysis.hpp"
 
 #include <algorithm>
 #include <atomic>
 
-#include "core/timer.hpp"
-#include "numeric/factor.hpp"
+#include "base/device.hpp"
+#include "base/timer.hpp"
 #include "ordering/matching.hpp"
 #include "ordering/pairing.hpp"
 #include "strata/errors.hpp"
@@ -291,19 +291,11 @@ SparseMatrix canonical_values(const Analysis& an, const SparseMatrix& a) {
   return c;
 }
 
-namespace {
-// The options ask for the CUDA backend, or leave it to the machine and it has a GPU.
-bool wants_gpu(const Options& opts) {
-  return opts.backend == Backend::cuda ||
-         (opts.backend == Backend::automatic && numeric::cuda_available());
-}
-}  // namespace
-
 int resolve_workers(const Options& opts) {
   if (opts.num_gpus < 0)
     throw InvalidInput("Options::num_gpus must be at least 0 (got " +
                        std::to_string(opts.num_gpus) + ")");
-  if (!wants_gpu(opts)) return 1;
+  if (!numeric::uses_cuda(opts.backend)) return 1;
   const int visible = numeric::cuda_device_count();
   // No GPU at all: the CUDA executor says so (NotSupported) when the factorization asks
   // for it; the analysis itself does not need one.
@@ -317,7 +309,7 @@ int resolve_workers(const Options& opts) {
 index_t resolve_max_block_size(const Options& opts, MatrixType type) {
   if (opts.max_block_size > 0) return opts.max_block_size;
   // Options::max_block_size documents the choice (bench/history.md, "Option defaults")
-  return wants_gpu(opts) && type == MatrixType::spd ? 4096 : 1024;
+  return numeric::uses_cuda(opts.backend) && type == MatrixType::spd ? 4096 : 1024;
 }
 
 Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers) {

@@ -2,7 +2,7 @@
 // targets written through in place, regular ones replaced atomically by a temporary in the
 // same folder, fsync and rename(2) (POSIX guarantees that the rename replaces the target
 // atomically).
-#include "core/atomic_file.hpp"
+#include "base/atomic_file.hpp"
 
 #include <fcntl.h>
 #include <sys/stat.h>

@@ -1,0 +1,23 @@
+// strata — what the build and the machine offer in GPUs, for every layer that chooses a
+// backend (the analysis sizes fronts for it, the solvers and the engine pick executors).
+// Defined by the CUDA backend (numeric/cuda/device_query.cu) or, in a build without CUDA,
+// by numeric/backends.cpp, which answers "none".
+#pragma once
+
+#include "strata/options.hpp"
+
+namespace strata::numeric {
+
+/// True when this build has the CUDA backend and a GPU is visible.
+bool cuda_available();
+
+/// Number of visible CUDA devices (0 in a build without CUDA or when the driver fails).
+int cuda_device_count();
+
+/// Whether `backend` resolves to the CUDA executor on this machine: Backend::cuda, or
+/// Backend::automatic with a GPU visible.
+inline bool uses_cuda(Backend backend) {
+  return backend == Backend::cuda || (backend == Backend::automatic && cuda_available());
+}
+
+}  // namespace strata::numeric

@@ -1,0 +1,63 @@
+// strata — what the CUDA build offers: whether a GPU is visible and how many
+// (base/device.hpp), page-locking host memory for transfers, and the CUDA executor's
+// factory (numeric/factor.hpp). A build without CUDA has numeric/backends.cpp instead.
+#include <string>
+
+#include "numeric/cuda/cuda_executor.hpp"
+
+namespace strata::cuda {
+namespace {
+
+bool device_present() {
+  int count = 0;
+  if (cudaGetDeviceCount(&count) != cudaSuccess) {
+    (void)cudaGetLastError();
+    return false;
+  }
+  return count > 0;
+}
+
+}  // namespace
+}  // namespace strata::cuda
+
+namespace strata::numeric {
+
+bool cuda_available() { return cuda::device_present(); }
+
+int cuda_device_count() {
+  int count = 0;
+  if (cudaGetDeviceCount(&count) != cudaSuccess) {
+    (void)cudaGetLastError();
+    return 0;
+  }
+  return count;
+}
+
+namespace {
+class CudaPinnedRange final : public PinnedHostRange {
+ public:
+  using PinnedHostRange::PinnedHostRange;
+  ~CudaPinnedRange() override { cudaHostUnregister(const_cast<void*>(data())); }
+};
+}  // namespace
+
+std::unique_ptr<PinnedHostRange> pin_host_memory(void* p, std::size_t bytes) {
+  if (!p || bytes == 0 || !cuda::device_present()) return nullptr;
+  if (cudaHostRegister(p, bytes, cudaHostRegisterPortable) != cudaSuccess) {
+    (void)cudaGetLastError();
+    return nullptr;
+  }
+  return std::make_unique<CudaPinnedRange>(p, bytes);
+}
+
+std::unique_ptr<Executor> make_cuda_executor(const Options& opts, int device) {
+  if (!cuda::device_present())
+    throw NotSupported("the CUDA backend was asked for, but no CUDA GPU is visible");
+  const int count = cuda_device_count();
+  if (device < 0 || device >= count)
+    throw NotSupported("CUDA device " + std::to_string(device) + " was asked for, " +
+                       std::to_string(count) + " are visible");
+  return std::make_unique<cuda::CudaExecutor>(opts, device);
+}
+
+}  // namespace strata::numeric

@@ -1,0 +1,499 @@
+// strata — one chunk of fronts on the GPU (steps 1–4 of cuda_executor.cu's header):
+// the batch is walked chunk by chunk (a tiled front on its own, tiled_front.cu); a chunk
+// is assembled in one launch, its small fronts factored in one launch, its large fronts
+// on the lanes, its contribution blocks stored and its panels packed and copied back.
+// The host bookkeeping of a chunk (pivot checks, LDLᵀ's D and pivot sizes, the
+// statistics) runs while the next chunk computes (flush_chunk / finish_chunk).
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+
+#include "base/alloc.hpp"
+#include "base/host_copy.hpp"
+#include "base/timer.hpp"
+#include "numeric/cpu/dense_front.hpp"
+#include "numeric/cuda/cuda_executor.hpp"
+
+namespace strata::cuda {
+
+void CudaExecutor::factor_batch(const numeric::FactorContext& ctx, const BatchInfo& b) {
+  STRATA_CUDA(cudaSetDevice(device_));
+  try {
+    for (index_t q = b.begin; q < b.end;) {
+      if (cur_->tiled[q]) {
+        flush_chunk(ctx);  // the tiled path syncs and works on the host
+        factor_tiled(ctx, q);
+        ++q;
+      } else {
+        factor_chunk(ctx, q, cur_->chunk_end[q]);
+        q = cur_->chunk_end[q];
+      }
+    }
+  } catch (...) {
+    // a next front's host assembly must not outlive the factorization whose values and
+    // analysis it reads
+    drop_tiled_prefetch();
+    throw;
+  }
+}
+
+void grow_potrf_work(cusolverDnHandle_t h, DeviceBuffer<double>& work, double* a, int k, int ld) {
+  int lwork = 0;
+  STRATA_CUSOLVER(cusolverDnDpotrf_bufferSize(h, CUBLAS_FILL_MODE_LOWER, k, a, ld, &lwork));
+  work.resize(static_cast<std::size_t>(std::max(lwork, 1)));
+}
+
+void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin, index_t end) {
+  const Analysis& an = *ctx.analysis;
+  const auto& t = an.tree;
+  const auto& s = *ctx.part->schedule;
+  ++chunks_;
+  ChunkRecord& rec = chunk_[slot_];
+  slot_ ^= 1;
+  rec.begin = begin;
+  rec.end = end;
+  rec.lu = ctx.type == MatrixType::general;
+  rec.ldlt = ctx.type == MatrixType::symmetric_indefinite;
+  rec.dev_only = device_only_ || part_device_only_;
+  rec.max_rows = 0;
+  for (index_t p = begin; p < end; ++p)
+    rec.max_rows = std::max(rec.max_rows, t.n_rows(s.fronts[p]));
+  STRATA_CUDA(cudaEventRecord(rec.ev[0], stream_));
+  launch_assemble(cur_->tree, begin, end - begin, rec.max_rows, values_.data(), pool_.data(),
+                  !rec.lu, stream_);
+  STRATA_CUDA(cudaEventRecord(rec.ev[1], stream_));
+  chunk_small_fronts(ctx, rec);
+  chunk_large_fronts(ctx, rec);
+  STRATA_CUDA(cudaEventRecord(rec.ev[3], stream_));
+  launch_store_cb(cur_->tree, begin, end - begin, rec.max_rows, pool_.data(), !rec.lu, stream_);
+  chunk_pack_panels(ctx, rec);
+  STRATA_CUDA(cudaEventRecord(rec.ev[4], stream_));
+  chunk_fetch_results(rec);
+  STRATA_CUDA(cudaEventRecord(rec.ev[5], stream_));
+  // the previous chunk's host part, while the GPU runs this one; this one's waits when it
+  // writes to the host factor (panels copied back, LDLᵀ): the next chunk's stores would
+  // overwrite the staging area it reads
+  flush_chunk(ctx);
+  pending_ = &rec;
+  if (rec.ldlt && !rec.dev_only) flush_chunk(ctx);
+}
+
+// Step 2 for the small fronts: split the chunk into small fronts (one thread block each,
+// one launch for all) and large ones, lay out the pivot permutations (small fronts first,
+// then the large ones in order) and size the per-front result buffers.
+void CudaExecutor::chunk_small_fronts(const numeric::FactorContext& ctx, ChunkRecord& rec) {
+  const auto& t = ctx.analysis->tree;
+  const auto& s = *ctx.part->schedule;
+  rec.small.clear();
+  rec.big.clear();
+  rec.perm_off.assign(1, 0);
+  for (index_t p = rec.begin; p < rec.end; ++p) {
+    const index_t f = s.fronts[p];
+    if (t.n_rows(f) <= kSmallFront) {
+      rec.small.push_back(p);
+      rec.perm_off.push_back(rec.perm_off.back() + t.n_pivots(f));
+    } else {
+      rec.big.push_back(p);
+    }
+  }
+  const std::size_t ns = rec.small.size(), nb = rec.big.size();
+  rec.big_perm_at.resize(nb);
+  rec.perm_total = rec.perm_off.back();
+  for (std::size_t i = 0; i < nb; ++i) {
+    rec.big_perm_at[i] = rec.perm_total;
+    rec.perm_total += t.n_pivots(s.fronts[rec.big[i]]);
+  }
+  upload(small_pos_, rec.small);
+  upload(perm_offset_, rec.perm_off);
+  info_.resize(ns + nb + 1);
+  perturbed_.resize(ns + nb + 1);
+  perm_.resize(rec.perm_total + 1);
+  potrf_info_.resize(nb + 1);
+  pivot_size_.resize(rec.perm_total + 1);
+  const DeviceTree& tree = cur_->tree;
+  if (rec.ldlt)
+    launch_ldlt_small(tree, small_pos_.data(), static_cast<std::int64_t>(ns), pool_.data(),
+                      ctx.static_pivot, perturbed_.data(), perm_.data(), pivot_size_.data(),
+                      perm_offset_.data(), stream_);
+  else
+    launch_factor_small(tree, small_pos_.data(), static_cast<std::int64_t>(ns), pool_.data(),
+                        rec.lu, ctx.static_pivot, info_.data(), perturbed_.data(), perm_.data(),
+                        perm_offset_.data(), stream_);
+  STRATA_CUDA(cudaEventRecord(rec.ev[2], stream_));
+}
+
+// LLᵀ fronts up to gpu_panel_kernel_max_pivots: their pivot blocks and panels by our
+// kernels for all of them together (kernels_panel.cu), so that only their SYRK is a
+// library call on the lanes. Returns, per large front, whether the kernels took it.
+std::vector<char> CudaExecutor::chunk_panel_kernels(const numeric::FactorContext& ctx,
+                                                    const ChunkRecord& rec) {
+  const auto& t = ctx.analysis->tree;
+  const auto& s = *ctx.part->schedule;
+  const std::vector<std::int64_t>& big = rec.big;
+  std::vector<char> by_kernels(big.size(), 0);
+  std::vector<std::size_t> panel_order;
+  if (!rec.lu && !rec.ldlt)
+    for (std::size_t i = 0; i < big.size(); ++i)
+      if (t.n_pivots(s.fronts[big[i]]) <= panel_max_pivots_) panel_order.push_back(i);
+  if (!panel_order.empty()) {
+    // largest k first: the fronts still active at a step are then a prefix
+    std::stable_sort(panel_order.begin(), panel_order.end(), [&](std::size_t a, std::size_t b) {
+      return t.n_pivots(s.fronts[big[a]]) > t.n_pivots(s.fronts[big[b]]);
+    });
+    std::vector<std::int64_t> items, rows, pivots;
+    for (std::size_t i : panel_order) {
+      const index_t f = s.fronts[big[i]];
+      items.push_back(big[i]);
+      items.push_back(static_cast<std::int64_t>(i));
+      rows.push_back(t.n_rows(f));
+      pivots.push_back(t.n_pivots(f));
+      by_kernels[i] = 1;
+    }
+    upload(panel_items_, items);
+    panel_work_.resize(llt_panel_work_size(static_cast<std::int64_t>(pivots.size())));
+    launch_llt_panel(cur_->tree, panel_items_.data(), rows, pivots, pool_.data(),
+                     panel_work_.data(), potrf_info_.data(), stream_);
+  }
+  STRATA_CUDA(cudaEventRecord(panels_done_, stream_));
+  return by_kernels;
+}
+
+// Step 2 for the large fronts: library calls, each front on one lane, the lanes side by
+// side (the least-loaded lane takes the next front; LDLᵀ's panel workspace is single: one
+// lane). The fronts the panel kernels did not take go first, their lanes not waiting for
+// those kernels (lane 0 is stream_ itself, behind them); then the updates of the ones they
+// took, each lane waiting once for panels_done_. Ends with the lanes and the GPU team
+// joined on stream_: the stores read every front.
+void CudaExecutor::chunk_large_fronts(const numeric::FactorContext& ctx, const ChunkRecord& rec) {
+  const auto& t = ctx.analysis->tree;
+  const auto& s = *ctx.part->schedule;
+  const std::vector<std::int64_t>& big = rec.big;
+  const std::size_t ns = rec.small.size();
+  const bool lu = rec.lu, ldlt = rec.ldlt;
+  const std::vector<char> by_kernels = chunk_panel_kernels(ctx, rec);
+  std::vector<std::unique_ptr<Lane>>& lane = lanes();
+  std::vector<LuFront> lu_fronts;
+  // the lanes this chunk may use, which the stores wait for below: LU by strips spreads its
+  // updates over every lane (lu_fronts.cu) however few the fronts
+  const bool lu_strips = lu && lu_strip_pivots_ > 0 && !big.empty();
+  const std::size_t n_lanes =
+      ldlt ? 1 : (lu_strips ? lane.size() : std::min(lane.size(), big.size()));
+  std::vector<char> waited(n_lanes, 0);
+  for (std::size_t l = 0; l < n_lanes; ++l) {
+    lane[l]->load = 0;
+    if (l > 0) STRATA_CUDA(cudaStreamWaitEvent(lane[l]->stream, rec.ev[2], 0));
+  }
+  for (int pass = 0; pass < 2; ++pass)
+    for (std::size_t i = 0; i < big.size(); ++i) {
+      if (by_kernels[i] != pass) continue;
+      const index_t p = big[i], f = s.fronts[p];
+      const int m = static_cast<int>(t.n_rows(f)), k = static_cast<int>(t.n_pivots(f));
+      double* F = pool_.data() + cur_->pos_offset_host[p];
+      std::size_t li = 0;
+      for (std::size_t l = 1; l < n_lanes; ++l)
+        if (lane[l]->load < lane[li]->load) li = l;
+      Lane* ln = lane[li].get();
+      ln->load += static_cast<double>(m) * m * k;
+      std::int64_t* const perm_f = perm_.data() + rec.big_perm_at[i];
+      if (ldlt) {
+        ldlt_large_.factor(blas_, stream_, F, m, k, ctx.static_pivot, perm_f,
+                           pivot_size_.data() + rec.big_perm_at[i], perturbed_.data() + ns + i);
+      } else if (by_kernels[i]) {  // pivot block and panel done by the panel kernels
+        if (li > 0 && !waited[li]) STRATA_CUDA(cudaStreamWaitEvent(ln->stream, panels_done_, 0));
+        waited[li] = 1;
+        llt_update(ln->blas, m - k, k, F + k, m, F + static_cast<std::size_t>(k) * m + k, m);
+      } else if (!lu && distribute_front(m) &&
+                 distributed_llt(*ln, F, m, k, potrf_info_.data() + i)) {
+        // pivot block, panel and update over the team (distributed_front.cu)
+      } else if (!lu) {
+        if (recursive_panel_)
+          llt_pivot_block_and_panel_recursive(*ln, F, m, k, potrf_info_.data() + i);
+        else
+          llt_pivot_block_and_panel(*ln, F, m, k, potrf_block_, potrf_info_.data() + i);
+        if (m > k) {
+          if (split_front(m, k))
+            split_update(*ln, F, m, k, false, rec.ev[1]);
+          else
+            llt_update(ln->blas, m - k, k, F + k, m, F + static_cast<std::size_t>(k) * m + k, m);
+        }
+      } else {  // first pass: GETRF and its pivot check; the rest after one wait below
+        lu_fronts.push_back({ln, F, m, k, p, perm_f, perturbed_.data() + ns + i});
+      }
+    }
+  if (!lu_fronts.empty()) lu_large_fronts(lu_fronts, ctx.static_pivot, rec.ev[1]);
+  for (std::size_t l = 1; l < n_lanes; ++l) {
+    STRATA_CUDA(cudaEventRecord(lane[l]->done, lane[l]->stream));
+    STRATA_CUDA(cudaStreamWaitEvent(stream_, lane[l]->done, 0));
+  }
+  join_team();
+}
+
+// Step 4: the factor panels packed into the device factor (resident), the part's own
+// buffer (a part whose panels stay on this device), or the chunk's staging area (in chunk
+// order: for the whole tree that is the layout's order); panels for the host factor
+// copied on copy_stream_ while the next chunk computes (the host part, after the next
+// chunk is launched, moves them into the factor); device-only panels give the host only
+// the pivots' diagonal entries.
+void CudaExecutor::chunk_pack_panels(const numeric::FactorContext& ctx, ChunkRecord& rec) {
+  const Analysis& an = *ctx.analysis;
+  const auto& t = an.tree;
+  const auto& s = *ctx.part->schedule;
+  const index_t begin = rec.begin;
+  const std::int64_t count = rec.end - rec.begin;
+  double* const pack_to = part_device_only_ ? part_panels_.at(ctx.part->id).data() : panels_.data();
+  std::vector<std::int64_t> stage_off(count);
+  rec.diag_off.assign(count + 1, 0);
+  std::size_t total = 0;
+  for (std::int64_t i = 0; i < count; ++i) {
+    const index_t f = s.fronts[begin + i];
+    stage_off[i] = keep_resident()     ? static_cast<std::int64_t>(an.factor_layout.panel_offset[f])
+                   : part_device_only_ ? cur_->panel_off_host[begin + i]
+                                       : static_cast<std::int64_t>(total);
+    total += panel_size(t, f, rec.lu);
+    rec.diag_off[i + 1] = rec.diag_off[i] + t.n_pivots(f);
+  }
+  upload(stage_offset_, stage_off);
+  // the staging area is free once the previous chunk's panels are on their way out
+  if (copy_issued_) STRATA_CUDA(cudaStreamWaitEvent(stream_, panels_copied_, 0));
+  launch_pack_panels(cur_->tree, begin, count, rec.max_rows, pool_.data(), stage_offset_.data(),
+                     pack_to, rec.lu, stream_);
+  rec.panels_async = !rec.dev_only && !rec.ldlt;
+  if (rec.panels_async) {
+    STRATA_CUDA(cudaEventRecord(rec.ev[6], stream_));
+    STRATA_CUDA(cudaStreamWaitEvent(copy_stream_, rec.ev[6], 0));
+    rec.panels.resize(total);  // presized at planning
+    const std::size_t base = an.factor_layout.panel_offset[s.fronts[begin]];
+    const double* src = panels_.data() + (keep_resident() ? base : 0);
+    if (total)
+      STRATA_CUDA(cudaMemcpyAsync(rec.panels.data(), src, sizeof(double) * total,
+                                  cudaMemcpyDeviceToHost, copy_stream_));
+    STRATA_CUDA(cudaEventRecord(rec.ev[7], copy_stream_));
+    STRATA_CUDA(cudaEventRecord(panels_copied_, copy_stream_));
+    copy_issued_ = true;
+    bytes_d2h_ += sizeof(double) * total;
+  }
+  if (rec.dev_only) {
+    upload(diag_offset_, rec.diag_off);
+    diag_.resize(static_cast<std::size_t>(rec.diag_off[count]) + 1);
+    launch_gather_diagonals(cur_->tree, begin, count, stage_offset_.data(), pack_to,
+                            diag_offset_.data(), diag_.data(), stream_);
+  }
+}
+
+// The results the host part needs (pivot checks, permutations, LDLᵀ pivot sizes, the
+// diagonal of device-only panels), into the record's pinned buffers, so that the copies
+// do not hold the host: the host part runs after the next chunk is launched.
+void CudaExecutor::chunk_fetch_results(ChunkRecord& rec) {
+  const std::size_t ns = rec.small.size(), nb = rec.big.size(), nall = ns + nb;
+  const std::int64_t perm_at = rec.perm_total;
+  const std::int64_t n_diag = rec.diag_off.back();
+  const bool llt = !rec.lu && !rec.ldlt;
+  rec.info.resize(nall + 1);
+  rec.perturbed.resize(nall + 1);
+  rec.perm.resize(static_cast<std::size_t>(perm_at) + 1);
+  rec.pinfo.resize(nb + 1);
+  rec.psize.resize(static_cast<std::size_t>(perm_at) + 1);
+  rec.diag.resize(rec.dev_only ? static_cast<std::size_t>(n_diag) + 1 : 1);
+  if (ns && !rec.ldlt)
+    STRATA_CUDA(
+        cudaMemcpyAsync(rec.info.data(), info_.data(), 8 * ns, cudaMemcpyDeviceToHost, stream_));
+  if (nall)
+    STRATA_CUDA(cudaMemcpyAsync(rec.perturbed.data(), perturbed_.data(), 8 * nall,
+                                cudaMemcpyDeviceToHost, stream_));
+  if (perm_at)
+    STRATA_CUDA(cudaMemcpyAsync(rec.perm.data(), perm_.data(), 8 * perm_at, cudaMemcpyDeviceToHost,
+                                stream_));
+  if (nb && llt)
+    STRATA_CUDA(cudaMemcpyAsync(rec.pinfo.data(), potrf_info_.data(), sizeof(int) * nb,
+                                cudaMemcpyDeviceToHost, stream_));
+  if (rec.ldlt && perm_at)
+    STRATA_CUDA(cudaMemcpyAsync(rec.psize.data(), pivot_size_.data(), sizeof(int) * perm_at,
+                                cudaMemcpyDeviceToHost, stream_));
+  if (rec.dev_only && n_diag > 0)
+    STRATA_CUDA(cudaMemcpyAsync(rec.diag.data(), diag_.data(), sizeof(double) * n_diag,
+                                cudaMemcpyDeviceToHost, stream_));
+}
+
+void CudaExecutor::flush_chunk(const numeric::FactorContext& ctx) {
+  if (!pending_) return;
+  ChunkRecord& c = *pending_;
+  pending_ = nullptr;
+  try {
+    finish_chunk(ctx, c);
+  } catch (...) {
+    // a later chunk may still run (on a failed pivot's NaNs): let it end before the
+    // buffers it uses can be freed or reused
+    (void)cudaDeviceSynchronize();
+    (void)cudaGetLastError();
+    throw;
+  }
+}
+
+// The host part of a launched chunk: its phase times, the panels copied back (unless
+// they stay on the device), per-front bookkeeping and pivot failures.
+void CudaExecutor::finish_chunk(const numeric::FactorContext& ctx, ChunkRecord& c) {
+  const Analysis& an = *ctx.analysis;
+  const auto& t = an.tree;
+  const auto& s = *ctx.part->schedule;
+  const DeviceTree& tree = cur_->tree;
+  const index_t begin = c.begin, end = c.end;
+  const std::int64_t count = end - begin;
+  const bool lu = c.lu, ldlt = c.ldlt, dev_only = c.dev_only;
+  const std::vector<std::int64_t>& small = c.small;
+  const std::vector<std::int64_t>& big = c.big;
+  const std::vector<std::int64_t>& perm_off = c.perm_off;
+  const std::vector<std::int64_t>& big_perm_at = c.big_perm_at;
+  const std::vector<std::int64_t>& diag_off = c.diag_off;
+  const std::size_t ns = small.size(), nall = ns + big.size();
+  const std::int64_t* info = c.info.data();
+  const std::int64_t* perturbed = c.perturbed.data();
+  const std::int64_t* perm = c.perm.data();
+  const int* pinfo = c.pinfo.data();
+  const int* psize = c.psize.data();
+  STRATA_CUDA(cudaEventSynchronize(c.ev[5]));
+  if (c.panels_async) STRATA_CUDA(cudaEventSynchronize(c.ev[7]));
+  float ms[4] = {};
+  for (int e = 0; e < 4; ++e) STRATA_CUDA(cudaEventElapsedTime(&ms[e], c.ev[e], c.ev[e + 1]));
+  phases_.assembly += 1e-3 * ms[0];
+  phases_.small_fronts += 1e-3 * ms[1];
+  phases_.large_fronts += 1e-3 * ms[2];
+  phases_.store += 1e-3 * ms[3];
+  const auto host_start = std::chrono::steady_clock::now();
+  struct HostTime {  // adds the host part's wall time on every way out
+    FactorStats::DevicePhases& ph;
+    std::chrono::steady_clock::time_point t0;
+    ~HostTime() {
+      ph.host += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    }
+  } host_time{phases_, host_start};
+  if (c.panels_async)
+    store_staged_panels(ctx, begin, end, c.panels.data());
+  else if (!dev_only)
+    copy_panels_back(ctx, begin, end);
+  if (ldlt) {  // D out of the panels, pivot sizes, rows: the CPU executor's code; statistics
+    std::vector<std::int64_t> psize_at(count);
+    for (std::size_t i = 0; i < nall; ++i) {
+      const index_t p = i < ns ? small[i] : big[i - ns], f = s.fronts[p];
+      const std::int64_t at = i < ns ? perm_off[i] : big_perm_at[i - ns];
+      psize_at[p - begin] = at;
+      numeric::store_ldlt_front(an, f, perm + at, psize + at, *ctx.factor);
+      numeric::PivotStats& ps = ctx.factor->front_stats[f];
+      ps = numeric::PivotStats{};
+      const index_t p0 = t.first_pivot[f];
+      numeric::cpu::ldlt_stats_from_d(t.n_pivots(f), ctx.factor->d_diag.data() + p0,
+                                      ctx.factor->d_off.data() + p0,
+                                      ctx.factor->pivot_size.data() + p0, ps);
+      ps.perturbed = perturbed[i];
+    }
+    if (keep_resident()) {  // the device copy of the panels still holds D
+      upload(psize_at_, psize_at);
+      launch_ldlt_unit_panels(tree, begin, count, stage_offset_.data(), pivot_size_.data(),
+                              psize_at_.data(), panels_.data(), stream_);
+    }
+    return;
+  }
+  // the diagonal of each front's panel: gathered on the device, or read in the host copy
+  std::vector<double> diag;
+  auto diag_of = [&](index_t p) -> const double* {
+    const index_t f = s.fronts[p];
+    if (dev_only) return c.diag.data() + diag_off[p - begin];
+    const index_t m = t.n_rows(f), k = t.n_pivots(f);
+    const double* panel = ctx.factor->panels.data() + an.factor_layout.panel_offset[f];
+    diag.resize(k);
+    for (index_t i = 0; i < k; ++i) diag[i] = panel[i * m + i];
+    return diag.data();
+  };
+  for (std::size_t i = 0; i < ns; ++i)
+    finish_front(ctx, s.fronts[small[i]], lu ? -1 : info[i], perturbed[i], perm + perm_off[i],
+                 diag_of(small[i]));
+  for (std::size_t i = 0; i < big.size(); ++i)
+    finish_front(ctx, s.fronts[big[i]], (!lu && pinfo[i] > 0) ? pinfo[i] - 1 : -1,
+                 perturbed[ns + i], perm + big_perm_at[i], diag_of(big[i]));
+}
+
+// The panels of positions [begin, end) to the host factor through the pinned staging
+// buffer: for the whole tree they are contiguous in the factor layout (one copy); for a
+// part they are staged in chunk order and placed front by front.
+void CudaExecutor::copy_panels_back(const numeric::FactorContext& ctx, index_t begin, index_t end) {
+  const Analysis& an = *ctx.analysis;
+  const auto& t = an.tree;
+  const auto& s = *ctx.part->schedule;
+  const bool lu = !an.symmetric;
+  std::size_t total = 0;
+  for (index_t q = begin; q < end; ++q) total += panel_size(t, s.fronts[q], lu);
+  if (total == 0) return;
+  host_staging_.resize(total);  // grown on first use: a device-only factor never needs it
+  const std::size_t base = an.factor_layout.panel_offset[s.fronts[begin]];
+  const double* src = panels_.data() + (keep_resident() ? base : 0);
+  STRATA_CUDA(cudaMemcpyAsync(host_staging_.data(), src, sizeof(double) * total,
+                              cudaMemcpyDeviceToHost, stream_));
+  STRATA_CUDA(cudaStreamSynchronize(stream_));
+  store_staged_panels(ctx, begin, end, host_staging_.data());
+  bytes_d2h_ += sizeof(double) * total;
+}
+
+void CudaExecutor::store_staged_panels(const numeric::FactorContext& ctx, index_t begin,
+                                       index_t end, const double* staged) {
+  const Analysis& an = *ctx.analysis;
+  const auto& t = an.tree;
+  const auto& s = *ctx.part->schedule;
+  const bool lu = !an.symmetric;
+  // on the host's threads: one thread's memcpy (≈ 6 GB/s) was half the factorization of
+  // lap3d 100³ when its factor did not stay on the device (base/host_copy.hpp)
+  if (whole_) {
+    std::size_t total = 0;
+    for (index_t q = begin; q < end; ++q) total += panel_size(t, s.fronts[q], lu);
+    const std::size_t base = an.factor_layout.panel_offset[s.fronts[begin]];
+    parallel_copy(ctx.factor->panels.data() + base, staged, total);
+  } else {
+    std::size_t at = 0;
+    for (index_t q = begin; q < end; ++q) {
+      const index_t f = s.fronts[q];
+      const std::size_t sz = panel_size(t, f, lu);
+      parallel_copy(ctx.factor->panels.data() + an.factor_layout.panel_offset[f], staged + at, sz);
+      at += sz;
+    }
+  }
+}
+
+// Host bookkeeping of one factored front: failure, permuted rows, pivot statistics.
+void CudaExecutor::finish_front(const numeric::FactorContext& ctx, index_t f, std::int64_t bad,
+                                std::int64_t npert, const std::int64_t* lperm, const double* diag) {
+  const Analysis& an = *ctx.analysis;
+  const auto& t = an.tree;
+  numeric::NumericFactor& fac = *ctx.factor;
+  const bool lu = ctx.type == MatrixType::general;
+  const index_t m = t.n_rows(f), k = t.n_pivots(f);
+  if (bad >= 0) throw NotPositiveDefinite(an.perm[t.first_pivot[f] + bad], std::nan(""));
+  const index_t* rows = t.rows_of(f);
+  index_t* frows = fac.rows.data() + t.row_offsets[f];
+  numeric::PivotStats& ps = fac.front_stats[f];
+  ps = numeric::PivotStats{};
+  int sign = 1;
+  for (index_t i = 0; i < k; ++i) {
+    frows[i] = rows[lu ? lperm[i] : i];
+    const double d = diag[i];
+    ps.log_abs_det += lu ? std::log(std::abs(d)) : 2.0 * std::log(d);
+    if (d < 0) sign = -sign;
+  }
+  for (index_t i = k; i < m; ++i) frows[i] = rows[i];
+  if (lu) {  // parity of the local row permutation
+    std::vector<char> seen(k, 0);
+    for (index_t i = 0; i < k; ++i) {
+      if (seen[i]) continue;
+      index_t len = 0;
+      for (index_t j = i; !seen[j]; j = lperm[j]) {
+        seen[j] = 1;
+        ++len;
+      }
+      if (len % 2 == 0) sign = -sign;
+    }
+    ps.perturbed = npert;
+  } else {
+    ps.positive = k;
+  }
+  ps.det_sign = sign;
+}
+
+}  // namespace strata::cuda
