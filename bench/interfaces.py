@@ -3,8 +3,8 @@
 
 For each matrix: wall time in Python of strata.Solver(A) (conversion to int64/float64
 arrays + copy + analysis + factorization), of solve(b), and of refactorize(A), against
-the times the C++ phases report themselves (stats: analysis_seconds, factor_seconds,
-solve_seconds); the difference is the cost of the interface. scipy.sparse.linalg.splu
+the times the C++ phases report themselves (stats: seconds.total, factor.seconds,
+solve.seconds); the difference is the cost of the interface. scipy.sparse.linalg.splu
 (SuperLU, COLAMD) is timed on the same matrix as a reference point, not as a tuned
 competitor. Best of --repeat runs.
 
@@ -79,17 +79,17 @@ def main():
         b = np.ones(n)
         t_build, s, inner_build = best(
             lambda: strata.Solver(A, device="cpu", num_threads=args.threads), args.repeat,
-            lambda s: s.stats["analysis_seconds"] + s.stats["factor_seconds"])
+            lambda s: s.stats["seconds"]["total"] + s.stats["factor"]["seconds"])
         st = s.stats
         t_solve, x, (inner_solve, berr) = best(
             lambda: s.solve(b), args.repeat,
-            lambda _: (s.stats["solve_seconds"], s.stats["backward_error"]))
+            lambda _: (s.stats["solve"]["seconds"], s.stats["solve"]["backward_error"]))
         t_refac, _, inner_refac = best(lambda: s.refactorize(A), args.repeat,
-                                       lambda _: s.stats["factor_seconds"])
+                                       lambda _: s.stats["factor"]["seconds"])
         t_splu, lu = best(lambda: spla.splu(A), 1)
         t_splu_solve, _ = best(lambda: lu.solve(b), args.repeat)
         r = {
-            "matrix": name, "n": n, "nnz": int(A.nnz), "type": st["type"],
+            "matrix": name, "n": n, "nnz": int(A.nnz), "type": st["factor"]["type"],
             "solver_wall_s": t_build, "analysis_plus_factor_s": inner_build,
             "solve_wall_s": t_solve, "solve_inner_s": inner_solve,
             "refactorize_wall_s": t_refac, "refactorize_inner_s": inner_refac,

@@ -176,7 +176,7 @@ def overhead_row(name, size, A, cli, threads, repeat, tmp):
         x = s.solve(b)
         t2 = time.perf_counter()
         st = s.stats
-        inner = st["analysis_seconds"] + st["factor_seconds"] + st["solve_seconds"]
+        inner = st["seconds"]["total"] + st["factor"]["seconds"] + st["solve"]["seconds"]
         return {"total": t2 - t0, "solver": t1 - t0, "solve": t2 - t1, "inner": inner,
                 "x": x, "stats": st}
 
@@ -197,7 +197,7 @@ def overhead_row(name, size, A, cli, threads, repeat, tmp):
     cs = best_cli["seconds"]
     return {
         "problem": name, "size": size, "n": int(A.shape[0]), "nnz_a": int(A.nnz),
-        "type": best_py["stats"]["type"], "nnz_l": int(best_py["stats"]["nnz_l"]),
+        "type": best_py["stats"]["factor"]["type"], "nnz_l": int(best_py["stats"]["nnz_l"]),
         "cli": {"total_seconds": cli_total, "analysis_seconds": cs["total"],
                 "factor_seconds": best_cli["factor"]["seconds"],
                 "solve_seconds": best_cli["solve"]["seconds"],
@@ -205,9 +205,9 @@ def overhead_row(name, size, A, cli, threads, repeat, tmp):
         "python": {"total_seconds": best_py["total"], "solver_seconds": best_py["solver"],
                    "solve_seconds": best_py["solve"],
                    "phases_seconds": best_py["inner"],
-                   "analysis_seconds": best_py["stats"]["analysis_seconds"],
-                   "factor_seconds": best_py["stats"]["factor_seconds"],
-                   "solve_phase_seconds": best_py["stats"]["solve_seconds"],
+                   "analysis_seconds": best_py["stats"]["seconds"]["total"],
+                   "factor_seconds": best_py["stats"]["factor"]["seconds"],
+                   "solve_phase_seconds": best_py["stats"]["solve"]["seconds"],
                    "backward_error": backward_error(A_full, best_py["x"], b),
                    "full_storage_total_seconds": t_full},
         "runs": {"cli_total_seconds": cli_runs, "python_total_seconds": py_runs},
@@ -230,9 +230,9 @@ def solvers_row(name, size, A, source, threads, repeat, splu_limit):
     t, (x, st) = best_of(lambda: (lambda s: (s.solve(b), s.stats))(
         strata.Solver(A, type="spd", num_threads=threads)), repeat)
     row["strata"] = {"seconds": t, "backward_error": backward_error(A, x, b),
-                     "nnz_l": int(st["nnz_l"]), "analysis_seconds": st["analysis_seconds"],
-                     "factor_seconds": st["factor_seconds"],
-                     "solve_seconds": st["solve_seconds"]}
+                     "nnz_l": int(st["nnz_l"]), "analysis_seconds": st["seconds"]["total"],
+                     "factor_seconds": st["factor"]["seconds"],
+                     "solve_seconds": st["solve"]["seconds"]}
 
     A_csc = A.tocsc()
     splu_repeat = 1 if n > SPLU_ONCE_ABOVE else repeat

@@ -179,48 +179,6 @@ Options options_from(const CommonArgs& a) {
   return o;
 }
 
-json analysis_json(const AnalysisStats& s) {
-  json batches = json::array();
-  for (const auto& b : s.batches)
-    batches.push_back(
-        {{"level", b.level}, {"fronts", b.end - b.begin}, {"bytes", b.bytes}, {"tiled", b.tiled}});
-  return {{"n", s.n},
-          {"nnz_a", s.nnz_a},
-          {"nnz_l", s.nnz_l},
-          {"nnz_l_fronts", s.nnz_l_fronts},
-          {"factor_flops", s.factor_flops},
-          {"fronts", s.n_fronts},
-          {"largest_front_rows", s.largest_front_rows},
-          {"largest_front_pivots", s.largest_front_pivots},
-          {"max_block_size", s.max_block_size},
-          {"tree_height", s.tree_height},
-          {"fronts_per_level", s.fronts_per_level},
-          {"peak_working_bytes", s.peak_working_bytes},
-          {"factor_bytes", s.factor_bytes},
-          {"memory_budget", s.memory_budget},
-          {"batches", batches},
-          {"type", to_string(s.type)},
-          {"pairs", s.pairs},
-          {"odd_cycles", s.odd_cycles},
-          {"ordering", to_string(s.ordering)},
-          {"workers", s.workers},
-          {"subtrees", s.subtrees},
-          {"subtree_balance", s.subtree_balance},
-          {"top_flops_fraction", s.top_flops_fraction},
-          {"upper_layers", s.upper_layers},
-          {"upper_parts", s.upper_parts},
-          {"upper_flops_fraction", s.upper_flops_fraction},
-          {"estimated_speedup", s.estimated_speedup},
-          {"nd_rebisections", s.nd_rebisections},
-          {"seconds",
-           {{"ordering", s.ordering_seconds},
-            {"nd_balance", s.nd_balance_seconds},
-            {"symbolic", s.symbolic_seconds},
-            {"plan", s.plan_seconds},
-            {"device_setup", s.device_setup_seconds},
-            {"total", s.total_seconds}}}};
-}
-
 void print_analysis(const AnalysisStats& s, double read_seconds) {
   fmt::print("n                     {}\n", s.n);
   fmt::print("nnz(A)                {}\n", s.nnz_a);
@@ -298,7 +256,7 @@ int run_analyze(const CommonArgs& a) {
   naming_file(a.file, [&] { solver.analyze(mm.matrix); });
   const AnalysisStats& s = solver.stats().analysis;
   if (a.json) {
-    json j = analysis_json(s);
+    json j = s;
     j["file"] = a.file;
     j["seconds"]["read"] = read_seconds;
     fmt::print("{}\n", j.dump(2));
@@ -369,55 +327,10 @@ int run_solve(const SolveArgs& a, const Communicator& comm) {
   if (!a.out.empty()) write_dense_matrix_market(a.out, x.data(), n, nrhs);
   const FactorStats& f = st.factor;
   if (a.common.json) {
-    json j = analysis_json(st.analysis);
+    json j = stats_document(st, true, true);
     j["file"] = a.common.file;
     j["seconds"]["read"] = read_seconds;
-    j["factor"] = {{"type", to_string(f.type)},
-                   {"backend", to_string(f.backend)},
-                   {"seconds", f.seconds},
-                   {"input_seconds", f.input_seconds},
-                   {"gflops", f.gflops},
-                   {"perturbed_pivots", f.perturbed_pivots},
-                   {"two_by_two_pivots", f.two_by_two_pivots},
-                   {"inertia_valid", f.inertia_valid},
-                   {"device_seconds", f.device_seconds},
-                   {"bytes_to_device", f.bytes_to_device},
-                   {"bytes_to_host", f.bytes_to_host},
-                   {"device_batches", f.device_batches},
-                   {"tiled_fronts", f.tiled_fronts},
-                   {"tiled_fronts_prefetched", f.tiled_fronts_prefetched},
-                   {"lu_large_fronts", f.lu_large_fronts},
-                   {"lu_large_fronts_pivoted", f.lu_large_fronts_pivoted},
-                   {"lu_large_fronts_batched", f.lu_large_fronts_batched},
-                   {"device_budget", f.device_budget},
-                   {"device_pool_bytes", f.device_pool_bytes},
-                   {"contribution_blocks_on_host", f.contribution_blocks_on_host},
-                   {"factor_resident", f.factor_resident},
-                   {"device_phases", f.device_phases}};
-    j["factor"]["devices"] = f.devices;
-    // withheld (null) when pivots were perturbed: they would be the nearby matrix's, not A's
-    j["factor"]["inertia"] =
-        f.inertia_valid ? json{f.inertia_positive, f.inertia_negative, f.inertia_zero} : json();
-    j["factor"]["log_abs_determinant"] = f.inertia_valid ? json(f.log_abs_determinant) : json();
-    j["factor"]["determinant_sign"] = f.inertia_valid ? json(f.determinant_sign) : json();
-    if (ds.ranks > 1) {
-      const json ranks = ds.per_rank;
-      j["distributed"] = {{"ranks", ds.ranks},
-                          {"workers_per_rank", ds.workers_per_rank},
-                          {"analysis_bytes", ds.analysis_bytes},
-                          {"analysis_broadcast_seconds", ds.analysis_broadcast_seconds},
-                          {"per_rank", ranks}};
-    }
-    j["solve"] = {{"seconds", st.solve.seconds},
-                  {"refinement_steps", st.solve.refinement_steps},
-                  {"gmres_iterations", st.solve.gmres_iterations},
-                  {"backward_error", st.solve.backward_error},
-                  {"backward_error_floor", st.solve.backward_error_floor},
-                  {"condition_lower_bound", st.solve.condition_lower_bound},
-                  {"converged", st.solve.refinement_converged},
-                  {"relative_residual", st.solve.relative_residual},
-                  {"singular_consistent", st.solve.singular_consistent},
-                  {"on_device", st.solve.on_device}};
+    if (ds.ranks > 1) j["distributed"] = ds;
     j["total_seconds"] = total;
     fmt::print("{}\n", j.dump(2));
   } else {
@@ -519,8 +432,30 @@ struct SimulateArgs {
   index_t dump_step = 1;
   bool vtk = false, full_newton = false, quiet = false, verbose = false, dense = false,
        variable_step = false, plot = false;
-  std::string plot_coordinates;  // comma-separated coordinate names (implies plot)
+  std::string plot_coordinates;             // comma-separated coordinate names (implies plot)
+  std::vector<std::string> solver_options;  // NAME=VALUE, set_option's vocabulary
 };
+
+// --solver-option NAME=VALUE: a strata option by its field name (set_option), checked
+// when the command line is read.
+void set_solver_option(Options& o, const std::string& assignment) {
+  const std::size_t eq = assignment.find('=');
+  if (eq == std::string::npos || eq == 0)
+    throw InvalidInput("--solver-option takes NAME=VALUE, got '" + assignment + "'");
+  set_option(o, std::string_view(assignment).substr(0, eq),
+             std::string_view(assignment).substr(eq + 1));
+}
+const CLI::Validator kSolverOption(
+    [](std::string& v) {
+      Options scratch;
+      try {
+        set_solver_option(scratch, v);
+      } catch (const Error& e) {
+        return std::string(e.what());
+      }
+      return std::string();
+    },
+    "NAME=VALUE");
 
 // The default model: a tracked vehicle of a few hundred links (runs in well under a
 // minute on two cores).
@@ -628,7 +563,7 @@ int run_simulate_checked(const SimulateArgs& a, bool& started) {
     if (!(io.t_end > t_ck))
       throw InvalidInput(fmt::format("--t-end {:g} s is not after the checkpoint's time {:.9g} s",
                                      io.t_end, t_ck));
-    if (a.device_memory_limit > 0) io.device_memory_limit = a.device_memory_limit;
+    if (a.device_memory_limit > 0) io.solver.device_memory_limit = a.device_memory_limit;
     io.dump_dir = a.dump_dir;
     io.verbose = a.verbose;
     io.dump_step = a.dump_dir.empty() ? -1 : a.dump_step;
@@ -641,10 +576,11 @@ int run_simulate_checked(const SimulateArgs& a, bool& started) {
     rs.t_end = a.t_end;
     rs.step = a.step;
     rs.order = a.order;
-    rs.backend = value_of<Backend>(a.device);
-    rs.device_memory_limit = a.device_memory_limit;
-    if (!a.pivoting.empty()) rs.pivoting = value_of<Pivoting>(a.pivoting);
-    rs.threads = a.threads;
+    rs.solver.backend = value_of<Backend>(a.device);
+    rs.solver.device_memory_limit = a.device_memory_limit;
+    if (!a.pivoting.empty()) rs.solver.pivoting = value_of<Pivoting>(a.pivoting);
+    rs.solver.num_threads = a.threads;
+    for (const std::string& s : a.solver_options) set_solver_option(rs.solver, s);
     rs.full_newton = a.full_newton;
     rs.anderson_depth = a.anderson_depth;
     rs.newton_tol = a.newton_tol;
@@ -802,12 +738,17 @@ int main(int argc, char** argv) {
       ->check(kPositive);
   simulate
       ->add_option("--pivoting", sim.pivoting,
-                   "pivots the analysis's order cannot take: fixed (static pivots), automatic "
-                   "(that order first, delayed pivoting on the host when it needs static "
-                   "pivots), delayed (always delayed pivoting, on the host) (default: delayed "
-                   "on the CPU; on a GPU automatic, then delayed until the next analysis once "
-                   "it needed static pivots)")
+                   "pivots the analysis's order cannot take: fixed (static pivots), delayed "
+                   "(delayed pivoting, on the host), automatic (default: delayed on the CPU; "
+                   "on a GPU the fixed order, then delayed until the next analysis once it "
+                   "needed static pivots)")
       ->check(choice<Pivoting>());
+  simulate
+      ->add_option("--solver-option", sim.solver_options,
+                   "any strata option for the Newton matrices by its name, e.g. "
+                   "ordering=amd or pivot_threshold=0.1 (repeatable; the names are those of "
+                   "strata::Options, docs/cli.md)")
+      ->check(kSolverOption);
   simulate
       ->add_option("--formulation", sim.formulation,
                    "auto: coordinate partitioning, stabilized from where no partition is well "
@@ -890,10 +831,11 @@ int main(int argc, char** argv) {
     }
   } finish{comm};
   if (rank != 0 && !*solve) return 0;
-  for (const char* opt : {"--step", "--order", "--device", "--output-interval", "--vtk",
-                          "--full-newton", "--anderson-depth", "--newton-tol", "--threads",
-                          "--variable-step", "--rtol", "--atol", "--max-step", "--dense-reference",
-                          "--write-model", "--formulation", "--energy-tol", "--pivoting"})
+  for (const char* opt :
+       {"--step", "--order", "--device", "--output-interval", "--vtk", "--full-newton",
+        "--anderson-depth", "--newton-tol", "--threads", "--variable-step", "--rtol", "--atol",
+        "--max-step", "--dense-reference", "--write-model", "--formulation", "--energy-tol",
+        "--pivoting", "--solver-option"})
     if (simulate->count(opt) > 0) sim.resume_conflicts.push_back(opt);
   try {
     if (*analyze) return run_analyze(analyze_args);

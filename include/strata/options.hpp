@@ -265,9 +265,9 @@ struct Options {
 
 // --- one vocabulary for every interface (CLI, C API, Python, model runs) ---
 
-/// The canonical name of a value (a static string): MatrixType "auto", "spd", "symmetric_indefinite",
-/// "general"; OrderingMethod "nd", "metis", "amd", "natural", "user"; Backend "auto",
-/// "cpu", "cuda"; Pivoting "fixed", "automatic", "delayed"; SolveCheck "always",
+/// The canonical name of a value (a static string): MatrixType "auto", "spd",
+/// "symmetric_indefinite", "general"; OrderingMethod "nd", "metis", "amd", "natural", "user";
+/// Backend "auto", "cpu", "cuda"; Pivoting "fixed", "automatic", "delayed"; SolveCheck "always",
 /// "after_perturbed_pivots".
 const char* to_string(MatrixType value);
 const char* to_string(OrderingMethod value);
@@ -291,6 +291,23 @@ void parse(std::string_view text, SolveCheck* out);
 /// command line's list of choices. E is one of the enums above.
 template <class E>
 std::vector<std::string> option_names();
+
+/// Sets the field of `options` called `name` — its name in Options ("ordering",
+/// "pivot_threshold", "num_gpus", ...; "device" is an alias of "backend") — from text: an
+/// enum's name as parse takes it, a whole number, a number, or for a flag "true"/"false"
+/// ("on"/"off", "1"/"0"). user_permutation has no text form. Throws InvalidInput naming
+/// the option for an unknown name or a value that does not parse (options unchanged);
+/// ranges are validate's. The generic setter behind `strata simulate --solver-option`,
+/// strata.simulate(solver_options=...) and the C API's strata_set_option.
+void set_option(Options& options, std::string_view name, std::string_view value);
+
+/// The text of the field called `name` (as set_option reads it: enums by their canonical
+/// names, numbers in full precision, flags "true"/"false"). Throws InvalidInput for an
+/// unknown name.
+std::string get_option(const Options& options, std::string_view name);
+
+/// The names set_option knows, in the order of Options' fields.
+std::vector<std::string> option_fields();
 
 /// Checks every field against its documented range and throws InvalidInput naming the
 /// first field out of range ("Options::pivot_threshold must be in (0, 1] (got 0)"); the

@@ -137,6 +137,18 @@ strata_status strata_set_refinement_steps(strata_solver* solver, int max_steps);
 strata_status strata_set_refinement_tolerance(strata_solver* solver, double tolerance);
 /** Device memory budget in bytes for the memory plan (0 = the whole device; default 0). */
 strata_status strata_set_device_memory_limit(strata_solver* solver, uint64_t bytes);
+/** Any option by its name and text, as the C++ API's strata::set_option reads them:
+ *  the names of strata::Options' fields ("ordering", "pivot_threshold", "pivoting",
+ *  "num_gpus", ...; "device" for "backend"), values as text ("amd", "0.1", "true").
+ *  INVALID_INPUT for a NULL argument, an unknown name, a value that does not parse or is
+ *  out of range (the message names the option); the option is then unchanged. */
+strata_status strata_set_option(strata_solver* solver, const char* name, const char* value);
+/** The text of the option called `name`, as strata_set_option reads it, NUL-terminated
+ *  into buffer[0..size) and cut to fit (as snprintf; *needed, when not NULL, gets the
+ *  bytes the whole text needs). INVALID_INPUT for a NULL solver or name, an unknown name,
+ *  or a NULL buffer with size > 0. */
+strata_status strata_get_option(const strata_solver* solver, const char* name, char* buffer,
+                                size_t size, size_t* needed);
 
 /* ---------------------------------------------------------------------------------- */
 /* Matrices                                                                            */
@@ -262,20 +274,30 @@ typedef struct strata_stats {
   int refinement_steps; /**< refinement steps of the last solve */
   int gmres_iterations; /**< GMRES iterations after stalled refinement */
   double backward_error; /**< max over columns of ‖b−Ax‖∞/(‖A‖∞‖x‖∞+‖b‖∞) */
-  int refinement_converged; /**< 1 when the refinement tolerance, or the rounding floor
-                                 when larger, was reached */
+  int refinement_converged;    /**< 1 when the refinement tolerance, or the rounding floor
+                                    when larger, was reached */
   double backward_error_floor; /**< (m+1)·u, m the most entries in a row of A */
   double condition_lower_bound; /**< max ‖A‖∞‖x‖∞/‖b‖∞ ≤ κ∞(A); ≥ ~1e15: A singular
                                      to working precision */
   double relative_residual; /**< with perturbed pivots: max ‖b−Ax‖∞/‖b‖∞, at least b's
                                  distance from A's range (0 otherwise) */
-  int singular_consistent; /**< 1 when pivots were perturbed (A numerically singular), the
-                                solve converged and relative_residual ≤ √u: x is one of
-                                A's solutions */
+  int singular_consistent;  /**< 1 when pivots were perturbed (A numerically singular), the
+                                 solve converged and relative_residual ≤ √u: x is one of
+                                 A's solutions */
 } strata_stats;
 
 /** Copies the statistics into *stats. Errors: INVALID_INPUT (NULL pointer). */
 strata_status strata_get_stats(const strata_solver* solver, strata_stats* stats);
+
+/** The statistics as JSON text (UTF-8, NUL-terminated): the document `strata solve --json`
+ *  prints and Python's Solver.stats returns, with the same names (the analysis's figures
+ *  at the top level, "factor" after a factorization, "solve" after a solve; "{}" before
+ *  an analysis). As snprintf: at most `size` bytes are written to `buffer` (NULL allowed
+ *  when size is 0), cut and NUL-terminated when it is too small, and *needed (when not
+ *  NULL) gets the bytes the whole text needs, its NUL included. Errors: INVALID_INPUT
+ *  (NULL solver, or NULL buffer with size > 0). */
+strata_status strata_get_stats_json(const strata_solver* solver, char* buffer, size_t size,
+                                    size_t* needed);
 
 /** Copies the fill-reducing permutation (new to old, 0-based; perm[k] is the original
  *  index of the k-th pivot) into perm[0..n). Errors: INVALID_STATE before analyze,

@@ -129,8 +129,11 @@ py::dict run(const std::string& kind, const std::string& source, const std::stri
   integer("order", rs.order);
   std::string device = "auto";
   text("device", device);
-  strata::parse(device, &rs.backend);
-  integer("threads", rs.threads);
+  strata::parse(device, &rs.solver.backend);
+  integer("threads", rs.solver.num_threads);
+  if (settings.contains("solver_options"))
+    for (const auto& [name, value] : settings["solver_options"].cast<py::dict>())
+      strata::set_option(rs.solver, name.cast<std::string>(), value.cast<std::string>());
   flag("full_newton", rs.full_newton);
   integer("anderson_depth", rs.anderson_depth);
   num("newton_tol", rs.newton_tol);

@@ -10,9 +10,11 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <cstdint>
 #include <memory>
 #include <string>
 
+#include "core/stats_json.hpp"
 #include "strata/distributed.hpp"
 #include "strata/strata.h"
 #include "strata/strata.hpp"
@@ -99,48 +101,35 @@ strata::Options make_options(const std::string& type, const std::string& orderin
   return o;
 }
 
-// inertia, log_abs_determinant and determinant_sign, withheld (None) when static
-// pivoting perturbed pivots: they would be those of the nearby matrix factored, not A's
-void put_inertia(py::dict& d, const strata::FactorStats& f) {
-  d["inertia_valid"] = f.inertia_valid;
-  if (!f.inertia_valid) {
-    d["inertia"] = py::none();
-    d["log_abs_determinant"] = py::none();
-    d["determinant_sign"] = py::none();
-    return;
+// A JSON value as the Python object json.loads would give (dict, list, str, int, float,
+// bool, None): how the statistics document (core/stats_json.hpp) reaches Python.
+py::object to_python(const nlohmann::json& j) {
+  switch (j.type()) {
+    case nlohmann::json::value_t::null:
+      return py::none();
+    case nlohmann::json::value_t::boolean:
+      return py::bool_(j.get<bool>());
+    case nlohmann::json::value_t::number_integer:
+      return py::int_(j.get<std::int64_t>());
+    case nlohmann::json::value_t::number_unsigned:
+      return py::int_(j.get<std::uint64_t>());
+    case nlohmann::json::value_t::number_float:
+      return py::float_(j.get<double>());
+    case nlohmann::json::value_t::string:
+      return py::str(j.get_ref<const std::string&>());
+    case nlohmann::json::value_t::array: {
+      py::list l;
+      for (const auto& e : j) l.append(to_python(e));
+      return l;
+    }
+    case nlohmann::json::value_t::object: {
+      py::dict d;
+      for (const auto& [k, v] : j.items()) d[py::str(k)] = to_python(v);
+      return d;
+    }
+    default:
+      throw strata::InternalError("statistics: a JSON value of an unexpected type");
   }
-  d["inertia"] = py::make_tuple(f.inertia_positive, f.inertia_negative, f.inertia_zero);
-  d["log_abs_determinant"] = f.log_abs_determinant;
-  d["determinant_sign"] = f.determinant_sign;
-}
-
-py::dict analysis_dict(const strata::AnalysisStats& a) {
-  py::dict d;
-  d["n"] = a.n;
-  d["nnz_a"] = a.nnz_a;
-  d["nnz_l"] = a.nnz_l;
-  d["nnz_l_fronts"] = a.nnz_l_fronts;
-  d["factor_flops"] = a.factor_flops;
-  d["n_fronts"] = a.n_fronts;
-  d["largest_front_rows"] = a.largest_front_rows;
-  d["largest_front_pivots"] = a.largest_front_pivots;
-  d["max_block_size"] = a.max_block_size;
-  d["tree_height"] = a.tree_height;
-  d["fronts_per_level"] = a.fronts_per_level;
-  d["peak_working_bytes"] = a.peak_working_bytes;
-  d["factor_bytes"] = a.factor_bytes;
-  d["memory_budget"] = a.memory_budget;
-  d["n_batches"] = a.batches.size();
-  d["analysis_type"] = strata::to_string(a.type);
-  d["ordering"] = strata::to_string(a.ordering);
-  d["pairs"] = a.pairs;
-  d["odd_cycles"] = a.odd_cycles;
-  d["ordering_seconds"] = a.ordering_seconds;
-  d["symbolic_seconds"] = a.symbolic_seconds;
-  d["plan_seconds"] = a.plan_seconds;
-  d["device_setup_seconds"] = a.device_setup_seconds;
-  d["analysis_seconds"] = a.total_seconds;
-  return d;
 }
 
 // One Solver plus the phase flags the Python side needs.
@@ -202,43 +191,13 @@ class Core {
 
   index_t size() const { return analyzed_ ? solver_->size() : 0; }
 
-  py::dict stats() const {
+  py::object stats() const {
     if (!analyzed_) return py::dict();
-    const strata::Stats& st = solver_->stats();
-    py::dict d = analysis_dict(st.analysis);
-    d["analyzed"] = true;
-    d["factorized"] = factorized_;
-    d["solved"] = solved_;
-    if (factorized_) {
-      const strata::FactorStats& f = st.factor;
-      d["type"] = strata::to_string(f.type);
-      d["backend"] = strata::to_string(f.backend);
-      d["factor_seconds"] = f.seconds;
-      d["factor_gflops"] = f.gflops;
-      d["factor_input_seconds"] = f.input_seconds;
-      d["perturbed_pivots"] = f.perturbed_pivots;
-      d["delayed_pivoting"] = f.delayed_pivoting;
-      d["delayed_pivots"] = f.delayed_pivots;
-      d["fronts_delaying"] = f.fronts_delaying;
-      d["fixed_order_perturbed_pivots"] = f.fixed_order_perturbed_pivots;
-      d["rescaling_sweeps"] = f.rescaling_sweeps;
-      d["two_by_two_pivots"] = f.two_by_two_pivots;
-      put_inertia(d, f);
-      d["matrix_norm"] = f.matrix_norm;
-    }
-    if (solved_) {
-      const strata::SolveStats& s = st.solve;
-      d["solve_seconds"] = s.seconds;
-      d["refinement_steps"] = s.refinement_steps;
-      d["gmres_iterations"] = s.gmres_iterations;
-      d["backward_error"] = s.backward_error;
-      d["refinement_converged"] = s.refinement_converged;
-      d["backward_error_floor"] = s.backward_error_floor;
-      d["condition_lower_bound"] = s.condition_lower_bound;
-      d["relative_residual"] = s.relative_residual;
-      d["singular_consistent"] = s.singular_consistent;
-    }
-    return d;
+    nlohmann::json j = strata::stats_document(solver_->stats(), factorized_, solved_);
+    j["analyzed"] = true;
+    j["factorized"] = factorized_;
+    j["solved"] = solved_;
+    return to_python(j);
   }
 
   py::array_t<std::int64_t> permutation() const {
@@ -299,45 +258,12 @@ class DistCore {
   }
   index_t size() const { return solver_.size(); }
   int rank() const { return solver_.communicator().rank(); }
-  py::dict stats() const {
-    const strata::Stats& st = solver_.stats();
-    py::dict d = analysis_dict(st.analysis);
-    d["factorized"] = factorized_;
-    d["solved"] = solved_;
-    if (factorized_) {
-      const strata::FactorStats& f = st.factor;
-      d["type"] = strata::to_string(f.type);
-      d["backend"] = strata::to_string(f.backend);
-      d["factor_seconds"] = f.seconds;
-      d["perturbed_pivots"] = f.perturbed_pivots;
-      put_inertia(d, f);
-    }
-    if (solved_) {
-      d["solve_seconds"] = st.solve.seconds;
-      d["refinement_steps"] = st.solve.refinement_steps;
-      d["backward_error"] = st.solve.backward_error;
-    }
-    const strata::DistributedStats& ds = solver_.distributed_stats();
-    d["ranks"] = ds.ranks;
-    d["workers_per_rank"] = ds.workers_per_rank;
-    py::list per_rank;
-    for (const strata::RankStats& r : ds.per_rank) {
-      py::dict e;
-      e["rank"] = r.rank;
-      e["subtrees"] = r.subtrees;
-      e["factor_flops"] = r.factor_flops;
-      e["factor_seconds"] = r.factor_seconds;
-      e["factor_bytes_sent"] = r.factor_bytes_sent;
-      e["factor_bytes_received"] = r.factor_bytes_received;
-      e["values_bytes"] = r.values_bytes;
-      e["factor_bytes_held"] = r.factor_bytes_held;
-      e["solve_seconds"] = r.solve_seconds;
-      e["solve_bytes_sent"] = r.solve_bytes_sent;
-      e["solve_bytes_received"] = r.solve_bytes_received;
-      per_rank.append(e);
-    }
-    d["per_rank"] = per_rank;
-    return d;
+  py::object stats() const {
+    nlohmann::json j = strata::stats_document(solver_.stats(), factorized_, solved_);
+    j["factorized"] = factorized_;
+    j["solved"] = solved_;
+    j["distributed"] = solver_.distributed_stats();
+    return to_python(j);
   }
 
  private:

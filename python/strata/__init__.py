@@ -8,7 +8,7 @@ array. The four phases of a direct solve are those of the C++ library:
     >>> solver = strata.Solver(A)            # analysis + numeric factorization
     >>> x = solver.solve(np.ones(100))       # triangular solves + iterative refinement
     >>> solver.refactorize(2 * A)            # same pattern, new values: reuses the analysis
-    >>> solver.stats["nnz_l"], solver.stats["backward_error"]
+    >>> solver.stats["nnz_l"], solver.stats["solve"]["backward_error"]
 
 ``strata.analyze(A)`` returns the statistics of the analysis alone (nnz(L), factor flops,
 fronts, tree height, memory) without factoring.
@@ -321,27 +321,35 @@ class Solver:
 
     @property
     def stats(self):
-        """Statistics of the last analysis, factorization and solve, as a dict.
+        """Statistics of the last analysis, factorization and solve, as a dict: the
+        document ``strata solve --json`` prints and the C API's strata_get_stats_json
+        writes (one vocabulary, docs/python.md), with the flags analyzed, factorized and
+        solved.
 
-        Analysis: n, nnz_a (entries of A, both triangles), nnz_l (exact nnz(L), diagonal
-        included), nnz_l_fronts, factor_flops (flops of a Cholesky of the fronts; LU
-        about twice), n_fronts, largest_front_rows, largest_front_pivots, tree_height,
-        fronts_per_level (list, deepest level first), peak_working_bytes, factor_bytes,
-        memory_budget, n_batches, analysis_type, ordering, pairs, odd_cycles and the times
-        ordering_seconds, symbolic_seconds, plan_seconds, device_setup_seconds
-        (CUDA backend: device set-up done at analysis), analysis_seconds.
-        Factorization: type ("spd", "symmetric_indefinite", "general"), backend ("cpu" or
-        "cuda"), factor_seconds, factor_gflops, perturbed_pivots (static pivoting),
+        Analysis, at the top level: n, nnz_a (entries of A, both triangles), nnz_l (exact
+        nnz(L), diagonal included), nnz_l_fronts, factor_flops (flops of a Cholesky of the
+        fronts; LU about twice), fronts, largest_front_rows, largest_front_pivots,
+        max_block_size, tree_height, fronts_per_level (list, deepest level first),
+        peak_working_bytes, factor_bytes, memory_budget, batches (the memory plan), type
+        (the type analyzed for), ordering, pairs, odd_cycles, the multi-worker split
+        (workers, subtrees, ...) and seconds (a dict: ordering, nd_balance, symbolic,
+        plan, device_setup, total).
+        "factor" (after a factorization), a dict: type ("spd", "symmetric_indefinite",
+        "general"), backend ("cpu" or "cuda"), seconds, input_seconds, gflops,
+        perturbed_pivots (static pivoting), delayed_pivoting, delayed_pivots,
         two_by_two_pivots, inertia (positive, negative, zero), log_abs_determinant,
         determinant_sign (these three None when inertia_valid is False: static pivoting
         perturbed pivots, and they would describe the nearby matrix factored, not A),
-        matrix_norm. After a solve: solve_seconds, refinement_steps, gmres_iterations,
+        matrix_norm, and the GPU figures (device_seconds, bytes_to_device, device_phases,
+        devices, ...).
+        "solve" (after a solve), a dict: seconds, refinement_steps, gmres_iterations,
         backward_error (max over columns of ‖b−Ax‖∞/(‖A‖∞‖x‖∞+‖b‖∞)),
-        backward_error_floor ((m+1)·u, m the most entries in a row), refinement_converged
-        (the tolerance, or the floor when larger, was reached), relative_residual (with
+        backward_error_floor ((m+1)·u, m the most entries in a row), converged (the
+        tolerance, or the floor when larger, was reached), relative_residual (with
         perturbed pivots: ‖b−Ax‖∞/‖b‖∞, at least b's distance from A's range),
         singular_consistent (pivots perturbed, the solve converged and relative_residual
-        ≤ √u: x is one of A's solutions).
+        ≤ √u: x is one of A's solutions), on_device.
+        With comm=: "distributed", a dict: ranks, workers_per_rank, per_rank (a list).
         """
         return self._core.stats()
 
@@ -356,8 +364,9 @@ class Solver:
 
     def __repr__(self):
         st = self._core.stats()
-        return (f"<strata.Solver n={self._shape[0]} type={st.get('type', '?')} "
-                f"nnz_l={st.get('nnz_l', '?')} backend={st.get('backend', '?')}>")
+        factor = st.get("factor", {})
+        return (f"<strata.Solver n={self._shape[0]} type={factor.get('type', '?')} "
+                f"nnz_l={st.get('nnz_l', '?')} backend={factor.get('backend', '?')}>")
 
 
 def analyze(A, type="auto", ordering="nd", storage="full", max_block_size=0,
@@ -367,9 +376,9 @@ def analyze(A, type="auto", ordering="nd", storage="full", max_block_size=0,
     A : scipy.sparse matrix or array, shape (n, n), real dtype (values, when present,
     are used for scaling and type detection). Returns the analysis keys of
     :attr:`Solver.stats`: n, nnz_a, nnz_l, nnz_l_fronts, factor_flops (flops),
-    n_fronts, largest_front_rows, largest_front_pivots, tree_height, fronts_per_level,
-    peak_working_bytes and factor_bytes (bytes), memory_budget, n_batches,
-    analysis_type, ordering, pairs, odd_cycles, and times in seconds. Raises as
+    fronts, largest_front_rows, largest_front_pivots, tree_height, fronts_per_level,
+    peak_working_bytes and factor_bytes (bytes), memory_budget, batches, type,
+    ordering, pairs, odd_cycles, and seconds (a dict of phase times). Raises as
     :class:`Solver` does.
     """
     core = _make_core(type, ordering, "cpu", max_block_size, 0, 0, 0.0, device_memory_limit)

@@ -142,7 +142,7 @@ def simulate(model=None, *, generate=None, t_end=None, step=None, order=None, de
              threads=0, full_newton=False, anderson_depth=None, newton_tol=None,
              variable_step=False, rtol=1e-4,
              atol=1e-6, max_step=None, output_interval=None, output_dir=None, vtk=False,
-             dump_matrix=None, dump_step=1, dense_reference=False):
+             dump_matrix=None, dump_step=1, dense_reference=False, solver_options=None):
     """Runs a multibody simulation and returns its time histories as NumPy arrays.
 
     Parameters
@@ -190,6 +190,12 @@ def simulate(model=None, *, generate=None, t_end=None, step=None, order=None, de
         (Matrix Market).
     dense_reference : bool
         Solve with dense LAPACK LU instead of strata (diagnosis of small models).
+    solver_options : dict, optional
+        Any strata option for the Newton matrices by its name, as the command line's
+        ``--solver-option NAME=VALUE``: the names of ``strata::Options``' fields
+        (``{"ordering": "amd", "pivot_threshold": 0.1, "pivoting": "delayed"}``); values
+        are given as their text (booleans as true/false). A bad name or value raises
+        InvalidInputError naming the option.
 
     Returns
     -------
@@ -252,6 +258,12 @@ def simulate(model=None, *, generate=None, t_end=None, step=None, order=None, de
     for key, value in (("t_end", t_end), ("step", step), ("order", order)):
         if value is not None and not value > 0:
             raise InvalidInputError(f"{key} must be positive, got {value!r}")
+    if solver_options is not None:
+        if not isinstance(solver_options, dict):
+            raise TypeError(f"solver_options must be a dict, got {type(solver_options).__name__}")
+        settings["solver_options"] = {
+            str(k): ("true" if v else "false") if isinstance(v, bool) else str(v)
+            for k, v in solver_options.items()}
     if output_dir is not None:
         settings["output_dir"] = _os.fspath(output_dir)
     if dump_matrix is not None:

@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "core/stats_json.hpp"
 #include "strata/strata.h"
 #include "strata/strata.hpp"
 
@@ -30,7 +31,7 @@ using strata::index_t;
 
 // Runs f, mapping exceptions to status codes; sets the solver's message (or clears it).
 template <class F>
-strata_status guarded(strata_solver* s, F&& f) {
+strata_status guarded(const strata_solver* s, F&& f) {
   strata_status st = STRATA_OK;
   std::string msg;
   try {
@@ -182,6 +183,15 @@ void factor_phase(strata_solver* s, F&& f) {
 
 constexpr const char* kNullSolver = "strata: the solver handle is NULL";
 
+// Text out as snprintf: at most `size` bytes (cut, NUL-terminated), *needed the whole.
+void copy_text(const std::string& text, char* buffer, std::size_t size, std::size_t* needed) {
+  if (needed) *needed = text.size() + 1;
+  if (size == 0) return;
+  const std::size_t n = std::min(size - 1, text.size());
+  std::memcpy(buffer, text.data(), n);
+  buffer[n] = '\0';
+}
+
 // Sets one option on a copy, checks the copy with the vocabulary every interface shares
 // (strata::validate: the same ranges and messages as the C++ API, the CLI and Python) and
 // keeps it only when it passes: a refused value leaves the solver's options unchanged.
@@ -328,6 +338,26 @@ strata_status strata_set_device_memory_limit(strata_solver* s, uint64_t bytes) {
   return guarded(s, [&] { s->options.device_memory_limit = static_cast<std::size_t>(bytes); });
 }
 
+strata_status strata_set_option(strata_solver* s, const char* name, const char* value) {
+  STRATA_CHECK_SOLVER(s);
+  return guarded(s, [&] {
+    if (name == nullptr || value == nullptr)
+      throw strata::InvalidInput(name == nullptr ? "option name is NULL" : "option value is NULL");
+    set_checked(s, [&](strata::Options& o) { strata::set_option(o, name, value); });
+  });
+}
+
+strata_status strata_get_option(const strata_solver* s, const char* name, char* buffer, size_t size,
+                                size_t* needed) {
+  if (s == nullptr) return STRATA_ERROR_INVALID_INPUT;
+  return guarded(s, [&] {
+    if (name == nullptr) throw strata::InvalidInput("option name is NULL");
+    if (buffer == nullptr && size > 0)
+      throw strata::InvalidInput("buffer is NULL but size is " + std::to_string(size));
+    copy_text(strata::get_option(s->options, name), buffer, size, needed);
+  });
+}
+
 strata_status strata_analyze(strata_solver* s, const strata_matrix* a) {
   STRATA_CHECK_SOLVER(s);
   return guarded(s, [&] {
@@ -461,6 +491,21 @@ strata_status strata_get_stats(const strata_solver* s, strata_stats* out) {
     out->singular_consistent = so.singular_consistent ? 1 : 0;
   }
   return STRATA_OK;
+}
+
+strata_status strata_get_stats_json(const strata_solver* s, char* buffer, size_t size,
+                                    size_t* needed) {
+  if (s == nullptr) return STRATA_ERROR_INVALID_INPUT;
+  if (buffer == nullptr && size > 0) {
+    s->last_error = "buffer is NULL but size is " + std::to_string(size);
+    return STRATA_ERROR_INVALID_INPUT;
+  }
+  return guarded(s, [&] {
+    copy_text(s->analyzed
+                  ? strata::stats_document(s->solver->stats(), s->factorized, s->solved).dump()
+                  : std::string("{}"),
+              buffer, size, needed);
+  });
 }
 
 strata_status strata_get_permutation(const strata_solver* s, int64_t* perm) {

@@ -4,8 +4,12 @@
 // the same message for the same mistake.
 #include "strata/options.hpp"
 
+#include <cerrno>
+#include <charconv>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
+#include <functional>
 #include <string>
 #include <type_traits>
 #include <utility>
@@ -216,6 +220,146 @@ void validate(const Options& o) {
   if (!(o.refinement_tolerance >= 0 && std::isfinite(o.refinement_tolerance)))
     out_of_range("refinement_tolerance", "finite and at least 0", o.refinement_tolerance);
   at_least("gmres_max_iterations", o.gmres_max_iterations, 0);
+}
+
+namespace {
+
+// One settable field: its name and how to read and write it as text.
+struct Field {
+  const char* name;
+  std::function<void(Options&, std::string_view)> set;
+  std::function<std::string(const Options&)> get;
+};
+
+[[noreturn]] void not_a(const char* name, const char* what, std::string_view text) {
+  throw InvalidInput(std::string("option ") + name + " must be " + what + ", got '" +
+                     std::string(text) + "'");
+}
+
+template <class T>
+Field integer_field(const char* name, T Options::*member) {
+  return {name,
+          [name, member](Options& o, std::string_view text) {
+            T v{};
+            const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
+            if (ec != std::errc() || end != text.data() + text.size() || text.empty())
+              not_a(name,
+                    std::is_signed_v<T> ? "a whole number in range"
+                                        : "a whole number of at least 0, in range",
+                    text);
+            o.*member = v;
+          },
+          [member](const Options& o) { return std::to_string(o.*member); }};
+}
+
+Field number_field(const char* name, double Options::*member) {
+  return {name,
+          [name, member](Options& o, std::string_view text) {
+            const std::string t(text);
+            char* end = nullptr;
+            errno = 0;
+            const double v = std::strtod(t.c_str(), &end);
+            if (t.empty() || end != t.c_str() + t.size() || errno == ERANGE || !std::isfinite(v))
+              not_a(name, "a finite number", text);
+            o.*member = v;
+          },
+          [member](const Options& o) {
+            char buf[32];
+            std::snprintf(buf, sizeof buf, "%.17g", o.*member);
+            return std::string(buf);
+          }};
+}
+
+Field flag_field(const char* name, bool Options::*member) {
+  return {name,
+          [name, member](Options& o, std::string_view text) {
+            if (text == "true" || text == "on" || text == "1")
+              o.*member = true;
+            else if (text == "false" || text == "off" || text == "0")
+              o.*member = false;
+            else
+              not_a(name, "true or false (on/off, 1/0)", text);
+          },
+          [member](const Options& o) { return std::string(o.*member ? "true" : "false"); }};
+}
+
+template <class E>
+Field enum_field(const char* name, E Options::*member) {
+  return {name, [member](Options& o, std::string_view text) { parse(text, &(o.*member)); },
+          [member](const Options& o) { return std::string(to_string(o.*member)); }};
+}
+
+const std::vector<Field>& fields() {
+  using O = Options;
+  static const std::vector<Field> f = {
+      enum_field("type", &O::type),
+      {"ordering", [](Options& o, std::string_view text) { parse(text, &o.ordering); },
+       [](const Options& o) { return std::string(to_string(o.ordering)); }},
+      integer_field("nd_leaf_size", &O::nd_leaf_size),
+      integer_field("nd_top_separators", &O::nd_top_separators),
+      integer_field("relax_small", &O::relax_small),
+      integer_field("relax_size_1", &O::relax_size_1),
+      integer_field("relax_size_2", &O::relax_size_2),
+      number_field("relax_zeros_1", &O::relax_zeros_1),
+      number_field("relax_zeros_2", &O::relax_zeros_2),
+      number_field("relax_zeros_3", &O::relax_zeros_3),
+      integer_field("max_block_size", &O::max_block_size),
+      integer_field("device_memory_limit", &O::device_memory_limit),
+      enum_field("backend", &O::backend),
+      integer_field("num_threads", &O::num_threads),
+      flag_field("reproducible", &O::reproducible),
+      integer_field("gpu_panel_kernel_max_pivots", &O::gpu_panel_kernel_max_pivots),
+      integer_field("gpu_lu_strip_pivots", &O::gpu_lu_strip_pivots),
+      number_field("gpu_tiled_pool_share", &O::gpu_tiled_pool_share),
+      integer_field("gpu_tiled_stream_columns", &O::gpu_tiled_stream_columns),
+      flag_field("gpu_tiled_prefetch", &O::gpu_tiled_prefetch),
+      integer_field("gpu_potrf_block_size", &O::gpu_potrf_block_size),
+      flag_field("gpu_recursive_panel", &O::gpu_recursive_panel),
+      integer_field("num_gpus", &O::num_gpus),
+      integer_field("subtrees_per_gpu", &O::subtrees_per_gpu),
+      flag_field("balance_by_work", &O::balance_by_work),
+      flag_field("work_stealing", &O::work_stealing),
+      flag_field("split_top", &O::split_top),
+      integer_field("split_front_min_cb", &O::split_front_min_cb),
+      integer_field("distributed_front_min_rows", &O::distributed_front_min_rows),
+      integer_field("distributed_front_block_size", &O::distributed_front_block_size),
+      flag_field("matching_and_scaling", &O::matching_and_scaling),
+      number_field("pairing_threshold", &O::pairing_threshold),
+      number_field("static_pivot_epsilon", &O::static_pivot_epsilon),
+      enum_field("pivoting", &O::pivoting),
+      number_field("pivot_threshold", &O::pivot_threshold),
+      enum_field("solve_check", &O::solve_check),
+      integer_field("refinement_max_steps", &O::refinement_max_steps),
+      number_field("refinement_tolerance", &O::refinement_tolerance),
+      integer_field("gmres_max_iterations", &O::gmres_max_iterations)};
+  return f;
+}
+
+const Field& field(std::string_view name) {
+  if (name == "device") name = "backend";
+  for (const Field& f : fields())
+    if (name == f.name) return f;
+  throw InvalidInput("unknown option '" + std::string(name) +
+                     "' (the names are Options' fields, e.g. ordering, pivot_threshold, "
+                     "num_threads; user_permutation has no text form)");
+}
+
+}  // namespace
+
+void set_option(Options& options, std::string_view name, std::string_view value) {
+  Options changed = options;  // options unchanged when the value does not parse
+  field(name).set(changed, value);
+  options = std::move(changed);
+}
+
+std::string get_option(const Options& options, std::string_view name) {
+  return field(name).get(options);
+}
+
+std::vector<std::string> option_fields() {
+  std::vector<std::string> names;
+  for (const Field& f : fields()) names.emplace_back(f.name);
+  return names;
 }
 
 }  // namespace strata

@@ -71,7 +71,7 @@ Integrator::Integrator(const Model& model, IntegratorOptions options)
   // concurrently and gains from every thread, on a GPU too (the refactorizations delay
   // pivots on the host once the analysis's order needs static pivots).
   const std::size_t elements = model.forces.size() + model.constraints.size();
-  sys_.set_threads(opts_.threads > 0 ? opts_.threads
+  sys_.set_threads(opts_.solver.num_threads > 0 ? opts_.solver.num_threads
                    : elements < 500
                        ? 1
                        : static_cast<int>(std::max(1u, std::thread::hardware_concurrency())));
@@ -79,8 +79,7 @@ Integrator::Integrator(const Model& model, IntegratorOptions options)
 
 std::unique_ptr<LinearSolver> Integrator::new_solver() const {
   if (opts_.dense_solver) return make_dense_solver();
-  return make_strata_solver(opts_.backend, opts_.threads, opts_.device_memory_limit,
-                            opts_.pivoting);
+  return make_strata_solver(opts_.solver);
 }
 
 void Integrator::use_stabilized(const char* why) {

@@ -57,20 +57,17 @@ struct IntegratorOptions {
   /// updates combined (anderson.hpp; 0: plain modified Newton).
   int anderson_depth = 3;
   int max_newton_iterations = 25;
-  double newton_rtol = 1e-6;             ///< relative tolerance of the Newton update
-  double newton_atol = 1e-8;             ///< absolute tolerance (q, v; a: times b0/h)
-  double partition_threshold = 0.25;     ///< relative pivot threshold of the partitioning
-  double repartition_quality = 0.05;     ///< repartition when the partition's quality drops
-  int partition_check_interval = 10;     ///< steps between partition quality checks
-  int startup_levels = -1;               ///< startup: first step h/2^levels (−1: automatic)
-  double min_step = 0;                   ///< smallest step before giving up (0: step·1e-6)
-  Backend backend = Backend::automatic;  ///< strata backend
-  std::size_t device_memory_limit = 0;   ///< GPU budget in bytes (0: the whole device)
-  /// Options::pivoting of the solver; unset: delayed on the host; on a GPU the fixed order
-  /// until it needs static pivots, delayed from then to the next analysis
-  /// (make_strata_solver).
-  std::optional<Pivoting> pivoting;
-  int threads = 0;            ///< CPU threads for strata and the assembly (0: all)
+  double newton_rtol = 1e-6;          ///< relative tolerance of the Newton update
+  double newton_atol = 1e-8;          ///< absolute tolerance (q, v; a: times b0/h)
+  double partition_threshold = 0.25;  ///< relative pivot threshold of the partitioning
+  double repartition_quality = 0.05;  ///< repartition when the partition's quality drops
+  int partition_check_interval = 10;  ///< steps between partition quality checks
+  int startup_levels = -1;            ///< startup: first step h/2^levels (−1: automatic)
+  double min_step = 0;                ///< smallest step before giving up (0: step·1e-6)
+  /// strata's options for the Newton matrices (make_strata_solver): every field settable
+  /// (set_option); num_threads also sets the assembly's threads (0: one for a small model,
+  /// else all).
+  Options solver = engine_solver_options();
   bool dense_solver = false;  ///< LAPACK instead of strata (tests only)
   /// A fresh analysis of the Newton matrix at every step attempt, with the current
   /// values (tests: the reference for the loop that reuses one analysis per pattern).

@@ -18,35 +18,24 @@ namespace {
 
 class StrataLinearSolver : public LinearSolver {
  public:
-  StrataLinearSolver(Backend backend, int threads, std::size_t device_memory_limit,
-                     std::optional<Pivoting> pivoting)
-      : solver_(options(backend, threads, device_memory_limit, pivoting)),
-        adaptive_(!pivoting && solver_on_gpu(backend)) {}
-  static Options options(Backend backend, int threads, std::size_t device_memory_limit,
-                         std::optional<Pivoting> pivoting) {
-    Options o;
+  explicit StrataLinearSolver(const Options& o)
+      : solver_(options(o)),
+        adaptive_(o.pivoting == Pivoting::automatic && solver_on_gpu(o.backend)) {}
+  static Options options(Options o) {
+    if (o.type != MatrixType::automatic && o.type != MatrixType::general)
+      throw InvalidInput(std::string("the Newton matrix is unsymmetric: the solver's type must be "
+                                     "general, got ") +
+                         to_string(o.type));
+    validate(o);
     o.type = MatrixType::general;
-    o.backend = backend;
-    o.num_threads = threads;
-    o.device_memory_limit = device_memory_limit;
-    // One GPU: the engine's Newton matrices are far too small for the tree split over
-    // several GPUs to pay.
-    o.num_gpus = 1;
-    o.matching_and_scaling = true;
     // The Newton matrix's values drift from those the analysis matched and scaled (step
     // size, contacts, rotations): on the host every factorization delays the pivots the
     // analysis's order cannot take (numeric/delayed.hpp). A GPU factors in that order until
     // it needs static pivots; the delayed pivoting then runs on the host, directly for the
     // later factorizations of the same analysis (adaptive_), so that no pivot is perturbed
     // and no new analysis is needed for them.
-    o.pivoting = pivoting                 ? *pivoting
-                 : solver_on_gpu(backend) ? Pivoting::automatic
-                                          : Pivoting::delayed;
-    // Newton's method computes the residual at every iterate and stops on the size of
-    // its updates: a solution from a factor without perturbed pivots needs no separate
-    // check (one product with the matrix per solve); after perturbed pivots the solver
-    // still refines.
-    o.solve_check = SolveCheck::after_perturbed_pivots;
+    if (o.pivoting == Pivoting::automatic && !solver_on_gpu(o.backend))
+      o.pivoting = Pivoting::delayed;
     return o;
   }
   void analyze(const SparseMatrix& a) override {
@@ -131,10 +120,17 @@ class DenseLinearSolver : public LinearSolver {
 
 bool solver_on_gpu(Backend backend) { return numeric::uses_cuda(backend); }
 
-std::unique_ptr<LinearSolver> make_strata_solver(Backend backend, int threads,
-                                                 std::size_t device_memory_limit,
-                                                 std::optional<Pivoting> pivoting) {
-  return std::make_unique<StrataLinearSolver>(backend, threads, device_memory_limit, pivoting);
+Options engine_solver_options() {
+  Options o;
+  o.type = MatrixType::general;
+  o.backend = Backend::automatic;
+  o.num_gpus = 1;
+  o.solve_check = SolveCheck::after_perturbed_pivots;
+  return o;
+}
+
+std::unique_ptr<LinearSolver> make_strata_solver(const Options& o) {
+  return std::make_unique<StrataLinearSolver>(o);
 }
 std::unique_ptr<LinearSolver> make_dense_solver() { return std::make_unique<DenseLinearSolver>(); }
 

@@ -47,17 +47,24 @@ class LinearSolver {
   virtual void set_delaying(bool) {}
 };
 
-/// strata's multifrontal LU (MatrixType::general with matching and scaling) on the
-/// given backend (Backend::automatic picks the GPU when the build and machine have one);
-/// device_memory_limit as Options::device_memory_limit (bytes, 0: the whole device);
-/// pivoting as Options::pivoting; unset: Pivoting::delayed on the host, and on a GPU
-/// Pivoting::automatic until a factorization needs the delayed pivoting (run on the host),
-/// Pivoting::delayed from then until the next analyze (LinearSolver::delaying).
-std::unique_ptr<LinearSolver> make_strata_solver(Backend backend, int threads,
-                                                 std::size_t device_memory_limit = 0,
-                                                 std::optional<Pivoting> pivoting = {});
-/// Whether make_strata_solver(backend, ...) factorizes on a GPU: Backend::cuda, or
-/// Backend::automatic in a build and on a machine with one.
+/// The options of the engine's Newton matrices unless a run sets others: strata's
+/// defaults with the GPU when the build and machine have one (Backend::automatic), one GPU
+/// (the Newton matrices are far too small for the tree split over several to pay), and
+/// solves checked only after perturbed pivots (Newton computes the residual at every
+/// iterate and stops on the size of its updates: a factor without perturbed pivots needs
+/// no separate check).
+Options engine_solver_options();
+
+/// strata's multifrontal LU of the Newton matrix (MatrixType::general) with options `o`.
+/// Pivoting::automatic (the default) is the engine's choice: delayed pivoting on the host
+/// for every factorization, and on a GPU the fixed order until a factorization needs
+/// delayed pivoting (run on the host), delayed from then until the next analyze
+/// (LinearSolver::delaying); Pivoting::fixed and Pivoting::delayed as Options::pivoting
+/// says. Throws InvalidInput when o.type is neither automatic nor general (the Newton
+/// matrix is unsymmetric) or when validate(o) refuses a field.
+std::unique_ptr<LinearSolver> make_strata_solver(const Options& o);
+/// Whether make_strata_solver({.backend = backend, ...}) factorizes on a GPU: Backend::cuda,
+/// or Backend::automatic in a build and on a machine with one.
 bool solver_on_gpu(Backend backend);
 /// Dense LU with partial pivoting (LAPACK); for tests and tiny models only.
 std::unique_ptr<LinearSolver> make_dense_solver();

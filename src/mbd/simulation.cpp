@@ -53,6 +53,13 @@ class Progress {
 
 namespace {
 
+// Every solver option by its name and text (set_option's vocabulary).
+nlohmann::json solver_options_json(const Options& o) {
+  nlohmann::json j = nlohmann::json::object();
+  for (const std::string& name : option_fields()) j[name] = get_option(o, name);
+  return j;
+}
+
 nlohmann::json integrator_options_json(const IntegratorOptions& o) {
   const double max_step =
       o.variable_step && o.max_step <= 0 ? o.t_end / 10 : o.max_step;  // resolved default
@@ -69,10 +76,7 @@ nlohmann::json integrator_options_json(const IntegratorOptions& o) {
           {"partition_check_interval", o.partition_check_interval},
           {"startup_levels", o.startup_levels},
           {"min_step", o.min_step},
-          {"backend", static_cast<int>(o.backend)},
-          {"device_memory_limit", o.device_memory_limit},
-          {"pivoting", o.pivoting ? static_cast<int>(*o.pivoting) : -1},
-          {"threads", o.threads},
+          {"solver", solver_options_json(o.solver)},
           {"dense_solver", o.dense_solver},
           {"variable_step", o.variable_step},
           {"rtol", o.rtol},
@@ -85,8 +89,10 @@ nlohmann::json integrator_options_json(const IntegratorOptions& o) {
 }
 
 constexpr const char* kCheckpointFile = "checkpoint.cbor";
-// 2: formulation, active rows, energy monitor; 3: the pattern's and the analysis's force sets
-constexpr int kCheckpointVersion = 4;
+// 2: formulation, active rows, energy monitor; 3: the pattern's and the analysis's force
+// sets; 5: every solver option by name (version 4, still read: backend, device_memory_limit,
+// pivoting and threads only)
+constexpr int kCheckpointVersion = 5;
 
 }  // namespace
 
@@ -106,10 +112,15 @@ IntegratorOptions checkpoint_integrator_options(const nlohmann::json& ck) {
   j.at("partition_check_interval").get_to(o.partition_check_interval);
   j.at("startup_levels").get_to(o.startup_levels);
   j.at("min_step").get_to(o.min_step);
-  o.backend = static_cast<Backend>(j.at("backend").get<int>());
-  o.device_memory_limit = j.value("device_memory_limit", std::size_t{0});
-  if (const int p = j.value("pivoting", -1); p >= 0) o.pivoting = static_cast<Pivoting>(p);
-  j.at("threads").get_to(o.threads);
+  if (j.contains("solver")) {
+    for (const auto& [name, text] : j.at("solver").items())
+      set_option(o.solver, name, text.get<std::string>());
+  } else {  // version 4
+    o.solver.backend = static_cast<Backend>(j.at("backend").get<int>());
+    o.solver.device_memory_limit = j.value("device_memory_limit", std::size_t{0});
+    if (const int p = j.value("pivoting", -1); p >= 0) o.solver.pivoting = static_cast<Pivoting>(p);
+    j.at("threads").get_to(o.solver.num_threads);
+  }
   j.at("dense_solver").get_to(o.dense_solver);
   j.at("variable_step").get_to(o.variable_step);
   j.at("rtol").get_to(o.rtol);
@@ -137,10 +148,10 @@ nlohmann::json read_checkpoint(const std::string& dir) {
   }
   if (!ck.is_object() || ck.value("format", "") != "strata-checkpoint")
     throw InvalidInput(path + ": not a strata checkpoint");
-  if (ck.value("version", 0) != kCheckpointVersion)
+  if (const int v = ck.value("version", 0); v != kCheckpointVersion && v != 4)
     throw InvalidInput(path + ": checkpoint version " +
                        ck.value("version", nlohmann::json()).dump() +
-                       ", this strata reads version " + std::to_string(kCheckpointVersion));
+                       ", this strata reads versions 4 and " + std::to_string(kCheckpointVersion));
   return ck;
 }
 
@@ -152,7 +163,7 @@ SimulationOptions simulation_options(const Model& model, const RunSettings& s) {
         fmt::format("t_end must be >= 0 s, got {}", s.t_end));
   check(std::isfinite(s.step) && s.step >= 0, fmt::format("step must be >= 0 s, got {}", s.step));
   check(s.order >= 0 && s.order <= 5, fmt::format("order must be 1..5, got {}", s.order));
-  check(s.threads >= 0, fmt::format("threads must be >= 0, got {}", s.threads));
+  validate(s.solver);
   check(std::isfinite(s.newton_tol) && s.newton_tol >= 0,
         fmt::format("newton_tol must be >= 0, got {}", s.newton_tol));
   check(std::isfinite(s.rtol) && s.rtol > 0, fmt::format("rtol must be > 0, got {}", s.rtol));
@@ -169,10 +180,7 @@ SimulationOptions simulation_options(const Model& model, const RunSettings& s) {
   io.t_end = s.t_end > 0 ? s.t_end : model.t_end;
   io.step = s.step > 0 ? s.step : model.step;
   io.order = s.order > 0 ? s.order : model.order;
-  io.backend = s.backend;
-  io.device_memory_limit = s.device_memory_limit;
-  io.pivoting = s.pivoting;
-  io.threads = s.threads;
+  io.solver = s.solver;
   io.modified_newton = !s.full_newton;
   if (s.anderson_depth >= 0) io.anderson_depth = s.anderson_depth;
   if (model.newton_rtol > 0) io.newton_rtol = model.newton_rtol;

@@ -126,14 +126,13 @@ void mark_failed_before_start(const std::string& dir, const std::string& reason)
 struct RunSettings {
   double t_end = 0, step = 0;  ///< s
   int order = 0;               ///< BDF order 1..5
-  Backend backend = Backend::automatic;
-  std::size_t device_memory_limit = 0;  ///< GPU budget in bytes (0: the whole device)
-  std::optional<Pivoting> pivoting;     ///< IntegratorOptions::pivoting
-  int threads = 0;                      ///< host threads for strata and the assembly (0: automatic)
-  bool full_newton = false;             ///< refactorize at every Newton iteration
-  int anderson_depth = -1;              ///< IntegratorOptions::anderson_depth (< 0: its default)
-  double newton_tol = 0;                ///< relative Newton tolerance
-  bool variable_step = false;           ///< variable step and order with local error control
+  /// strata's options for the Newton matrices (IntegratorOptions::solver); checked by
+  /// validate.
+  Options solver = engine_solver_options();
+  bool full_newton = false;    ///< refactorize at every Newton iteration
+  int anderson_depth = -1;     ///< IntegratorOptions::anderson_depth (< 0: its default)
+  double newton_tol = 0;       ///< relative Newton tolerance
+  bool variable_step = false;  ///< variable step and order with local error control
   double rtol = 1e-4, atol = 1e-6, max_step = 0;  ///< of variable steps (max_step 0: t_end/10)
   bool dense_reference = false;                   ///< dense LAPACK instead of strata (diagnosis)
   FormulationChoice formulation = FormulationChoice::automatic;

@@ -244,6 +244,26 @@ static void run_case(const char* name, const double* a, int n, strata_layout lay
   CHECK(st.type == expect_type, "%s: type %d, expected %d", label, (int)st.type, (int)expect_type);
   CHECK(st.backward_error < 1e-13, "%s: stats.backward_error %.3g", label, st.backward_error);
   CHECK(st.refinement_steps >= 0, "%s: refinement steps", label);
+
+  /* the same figures as JSON: needed size, whole text, a cut copy */
+  size_t need = 0;
+  CHECK_STATUS(strata_get_stats_json(s, NULL, 0, &need), STRATA_OK, s);
+  char* text = malloc(need);
+  size_t again = 0;
+  CHECK_STATUS(strata_get_stats_json(s, text, need, &again), STRATA_OK, s);
+  CHECK(again == need && strlen(text) + 1 == need, "%s: JSON size %zu, %zu, text %zu", label, need,
+        again, strlen(text));
+  char expect_n[64];
+  snprintf(expect_n, sizeof expect_n, "\"n\":%lld,", (long long)n);
+  CHECK(text[0] == '{' && strstr(text, expect_n) && strstr(text, "\"factor\":{") &&
+            strstr(text, "\"solve\":{") && strstr(text, "\"backward_error\":"),
+        "%s: JSON %.120s", label, text);
+  char cut[8];
+  CHECK_STATUS(strata_get_stats_json(s, cut, sizeof cut, NULL), STRATA_OK, s);
+  CHECK(strlen(cut) == sizeof cut - 1 && strncmp(cut, text, sizeof cut - 1) == 0,
+        "%s: cut JSON '%s'", label, cut);
+  CHECK_STATUS(strata_get_stats_json(s, NULL, 4, NULL), STRATA_ERROR_INVALID_INPUT, s);
+  free(text);
   int sign = 0;
   const double ld = dense_logdet(a, n, &sign);
   CHECK(fabs(st.log_abs_determinant - ld) < 1e-8 * (1 + fabs(ld)),
@@ -333,6 +353,30 @@ static void test_options(const double* spd, const double* kkt, int n_spd, int n_
     double be = backward_error(spd, n_spd, x, b);
     CHECK(be < 1e-12, "ordering %d: backward error %.3g", o, be);
   }
+  /* any option by name: set, read back, refused names and values leave it unchanged, and
+     it reaches the analysis (natural ordering: the stats say so) */
+  char text[32];
+  size_t need = 0;
+  CHECK_STATUS(strata_set_option(s, "ordering", "natural"), STRATA_OK, s);
+  CHECK_STATUS(strata_set_option(s, "pivot_threshold", "0.25"), STRATA_OK, s);
+  CHECK_STATUS(strata_get_option(s, "pivot_threshold", text, sizeof text, &need), STRATA_OK, s);
+  CHECK(strcmp(text, "0.25") == 0 && need == 5, "pivot_threshold read back '%s'", text);
+  CHECK_STATUS(strata_set_option(s, "pivot_threshold", "2"), STRATA_ERROR_INVALID_INPUT, s);
+  CHECK(strstr(strata_last_error(s), "pivot_threshold") != NULL, "message: %s",
+        strata_last_error(s));
+  CHECK_STATUS(strata_get_option(s, "pivot_threshold", text, sizeof text, NULL), STRATA_OK, s);
+  CHECK(strcmp(text, "0.25") == 0, "pivot_threshold after a refused value '%s'", text);
+  CHECK_STATUS(strata_set_option(s, "pivot_treshold", "0.5"), STRATA_ERROR_INVALID_INPUT, s);
+  CHECK(strstr(strata_last_error(s), "unknown option 'pivot_treshold'") != NULL, "message: %s",
+        strata_last_error(s));
+  CHECK_STATUS(strata_set_option(s, "ordering", NULL), STRATA_ERROR_INVALID_INPUT, s);
+  CHECK_STATUS(strata_get_option(s, NULL, text, sizeof text, NULL), STRATA_ERROR_INVALID_INPUT, s);
+  CHECK_STATUS(strata_get_option(s, "ordering", text, sizeof text, NULL), STRATA_OK, s);
+  CHECK(strcmp(text, "natural") == 0, "ordering read back '%s'", text);
+  CHECK_STATUS(strata_analyze(s, &sp.m), STRATA_OK, s);
+  char doc[8192];
+  CHECK_STATUS(strata_get_stats_json(s, doc, sizeof doc, NULL), STRATA_OK, s);
+  CHECK(strstr(doc, "\"ordering\":\"natural\"") != NULL, "JSON ordering: %.200s", doc);
   free_sparse(&sp);
 
   /* the KKT matrix as general (LU) and as symmetric indefinite */
@@ -406,12 +450,23 @@ static void test_errors(const double* spd, const double* kkt, int n, int n_kkt) 
   CHECK_STATUS(strata_refactorize(s, &sp.m), STRATA_ERROR_INVALID_STATE, s);
   int64_t perm[64];
   CHECK_STATUS(strata_get_permutation(s, perm), STRATA_ERROR_INVALID_STATE, s);
+  char empty[8] = "xxxxxxx";
+  size_t empty_need = 0;
+  CHECK_STATUS(strata_get_stats_json(s, empty, sizeof empty, &empty_need), STRATA_OK, s);
+  CHECK(strcmp(empty, "{}") == 0 && empty_need == 3, "JSON before analyze: '%s' (%zu)", empty,
+        empty_need);
+  CHECK_STATUS(strata_get_stats_json(NULL, empty, sizeof empty, NULL), STRATA_ERROR_INVALID_INPUT,
+               s);
   CHECK_STATUS(strata_analyze(s, &sp.m), STRATA_OK, s);
   CHECK(strata_last_error(s)[0] == '\0', "message cleared after success: %s", strata_last_error(s));
   CHECK_STATUS(strata_solve(s, 1, b, x), STRATA_ERROR_INVALID_STATE, s);
   strata_stats st;
   CHECK_STATUS(strata_get_stats(s, &st), STRATA_OK, s);
   CHECK(st.analyzed == 1 && st.factorized == 0, "flags after analyze only");
+  char analysis_json[4096];
+  CHECK_STATUS(strata_get_stats_json(s, analysis_json, sizeof analysis_json, NULL), STRATA_OK, s);
+  CHECK(strstr(analysis_json, "\"nnz_l\":") && !strstr(analysis_json, "\"factor\":"),
+        "JSON after analyze only: %.120s", analysis_json);
   CHECK_STATUS(strata_factorize(s, &sp.m), STRATA_OK, s);
   CHECK_STATUS(strata_solve(s, 1, b, x), STRATA_OK, s);
   CHECK_STATUS(strata_solve(s, -1, b, x), STRATA_ERROR_INVALID_INPUT, s);

@@ -100,6 +100,12 @@ check "unknown option" 2 "strata: error:" "$strata" solve "$tmp/good.mtx" --bogu
 check "unknown ordering" 2 "ordering must be 'nd', 'metis', 'amd' or 'natural' (aliases: nested_dissection = nd), got 'rcm'" "$strata" solve "$tmp/good.mtx" --ordering rcm
 check "unknown type" 2 "type must be 'auto', 'spd', 'symmetric_indefinite' or 'general'" "$strata" solve "$tmp/good.mtx" --type cholesky
 check "unknown pivoting" 2 "pivoting must be 'fixed', 'automatic' or 'delayed'" "$strata" simulate --pivoting partial
+# any solver option of a simulation by its name (set_option's vocabulary)
+check "unknown solver option" 2 "unknown option 'bogus'" "$strata" simulate --solver-option bogus=1
+check "bad solver option value" 2 "option pivot_threshold must be a finite number, got 'x'" "$strata" simulate --solver-option pivot_threshold=x
+check "solver option without value" 2 "--solver-option takes NAME=VALUE, got 'ordering'" "$strata" simulate --solver-option ordering
+check "solver option out of range" 1 "Options::pivot_threshold must be in (0, 1]" "$strata" simulate --generate chain2d:2 --t-end 0.001 --quiet --output "$tmp/s_opt" --solver-option pivot_threshold=2
+check "solver options" 0 "complete" "$strata" simulate --generate chain2d:2 --t-end 0.002 --quiet --output "$tmp/s_opt" --solver-option ordering=amd --solver-option pivoting=delayed
 check "type alias lu" 0 "general on cpu" "$strata" solve "$tmp/good.mtx" --type lu --device cpu
 check "no file" 2 "strata: error:" "$strata" solve
 check "no command" 2 "strata: error:" "$strata"
@@ -179,6 +185,7 @@ no_tmp "no temporaries" "$tmp/s_res"
 no_file "complete run: no partial file" "$tmp/s_res/positions.partial.csv"
 # the options of a resumed run are those of the checkpoint
 check "resume before the checkpoint" 1 "is not after the checkpoint's time" "$strata" simulate --resume "$tmp/s_half/checkpoint" --t-end 0.001 --output "$tmp/s_bad"
+check "resume with --solver-option" 1 "--solver-option cannot be changed" "$strata" simulate --resume "$tmp/s_half/checkpoint" --solver-option ordering=amd --output "$tmp/s_bad"
 check "resume with --step" 1 "--step cannot be changed" "$strata" simulate --resume "$tmp/s_half/checkpoint" --step 1e-3 --output "$tmp/s_bad"
 mkdir -p "$tmp/bad_ck" && printf 'garbage' > "$tmp/bad_ck/checkpoint.cbor"
 check "corrupt checkpoint" 1 "not a readable strata checkpoint" "$strata" simulate --resume "$tmp/bad_ck" --output "$tmp/s_bad"

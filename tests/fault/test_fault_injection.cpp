@@ -250,7 +250,7 @@ TEST(FaultInjection, SimulationStopsWithOutOfMemoryAndPartialFiles) {
   SimulationOptions o;
   o.integrator.t_end = 0.02;
   o.integrator.step = 1e-3;
-  o.integrator.threads = 1;
+  o.integrator.solver.num_threads = 1;
   o.output_dir = strata::test::unique_temp_path("strata_fault_sim");
   std::filesystem::remove_all(o.output_dir);
   alloc::reset_count();

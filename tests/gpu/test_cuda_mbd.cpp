@@ -25,8 +25,8 @@ TEST(CudaMbd, PerturbedPivotsAreDelayedAndTheTrajectoryEqualsTheCpus) {
   o.newton_rtol = 1e-10;
   o.newton_atol = 1e-12;
   IntegratorOptions on_gpu = o, on_cpu = o;
-  on_gpu.backend = Backend::cuda;
-  on_cpu.backend = Backend::cpu;
+  on_gpu.solver.backend = Backend::cuda;
+  on_cpu.solver.backend = Backend::cpu;
   Integrator gpu(m, on_gpu), cpu(m, on_cpu);
   double worst = 0;
   test::step_side_by_side(gpu, cpu, 1e-8, &worst);

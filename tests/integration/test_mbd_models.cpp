@@ -139,5 +139,43 @@ TEST(MbdModels, DumpMatrixWritesTheNewtonSystem) {
   std::filesystem::remove_all(o.integrator.dump_dir);
 }
 
+// The engine carries a whole strata::Options: options set for a run reach the solver
+// (the analysis's ordering, the factorization's pivoting), a checkpoint keeps every one of
+// them, and a type other than general is refused (the Newton matrix is unsymmetric).
+TEST(MbdModels, SolverOptionsReachTheSolverAndTheCheckpoint) {
+  const Model m = build_model(generate("lattice:2"), "lattice");
+  SimulationOptions o;
+  o.integrator.t_end = 4 * m.step;
+  o.integrator.step = m.step;
+  set_option(o.integrator.solver, "ordering", "natural");
+  set_option(o.integrator.solver, "pivoting", "fixed");
+  set_option(o.integrator.solver, "pivot_threshold", "0.125");
+  set_option(o.integrator.solver, "num_threads", "1");
+  o.checkpoint_every = 2;
+  o.checkpoint_dir = strata::test::unique_temp_path("strata_mbd_solver_options");
+  std::filesystem::remove_all(o.checkpoint_dir);
+  const SimulationResult natural = simulate(m, o);
+  ASSERT_TRUE(natural.complete) << natural.message;
+  EXPECT_EQ(natural.stats.delayed_factorizations, 0);  // pivoting fixed: never delayed
+  const IntegratorOptions kept = checkpoint_integrator_options(read_checkpoint(o.checkpoint_dir));
+  for (const std::string& name : option_fields())
+    EXPECT_EQ(get_option(kept.solver, name), get_option(o.integrator.solver, name)) << name;
+  std::filesystem::remove_all(o.checkpoint_dir);
+
+  SimulationOptions nd = o;
+  nd.checkpoint_every = 0;
+  nd.integrator.solver = engine_solver_options();
+  const SimulationResult by_nd = simulate(m, nd);
+  ASSERT_TRUE(by_nd.complete) << by_nd.message;
+  EXPECT_NE(natural.stats.factor_nnz, by_nd.stats.factor_nnz);  // the ordering was used
+
+  Options spd = engine_solver_options();
+  spd.type = MatrixType::spd;
+  EXPECT_THROW(make_strata_solver(spd), InvalidInput);
+  Options bad = engine_solver_options();
+  bad.pivot_threshold = 0;
+  EXPECT_THROW(make_strata_solver(bad), InvalidInput);
+}
+
 }  // namespace
 }  // namespace strata::mbd

@@ -284,6 +284,24 @@ def test_bad_settings():
         strata.simulate(42)
 
 
+def test_solver_options_reach_the_solver():
+    """solver_options sets any strata option of the Newton matrices by name (the command
+    line's --solver-option): another ordering gives another factor, the same motion."""
+    a = strata.simulate(generate="lattice:2", t_end=0.004, threads=1,
+                        solver_options={"ordering": "natural", "reproducible": True})
+    b = strata.simulate(generate="lattice:2", t_end=0.004, threads=1)
+    assert a.stats["factor_nnz"] != b.stats["factor_nnz"]
+    np.testing.assert_allclose(a.positions, b.positions, rtol=1e-8, atol=1e-10)
+    with pytest.raises(strata.InvalidInputError, match="unknown option 'ordring'"):
+        strata.simulate(generate="chain2d:1", solver_options={"ordring": "amd"})
+    with pytest.raises(strata.InvalidInputError, match="reproducible must be true or false"):
+        strata.simulate(generate="chain2d:1", solver_options={"reproducible": "maybe"})
+    with pytest.raises(strata.InvalidInputError, match="pivot_threshold must be in"):
+        strata.simulate(generate="chain2d:1", solver_options={"pivot_threshold": 0})
+    with pytest.raises(TypeError, match="solver_options must be a dict"):
+        strata.simulate(generate="chain2d:1", solver_options=["ordering=amd"])
+
+
 def test_failure_raises_with_the_partial_result():
     with pytest.raises(strata.SimulationError, match=r"stopped at t = 0\.[345]\d* s: .*did not "
                        r"converge") as err:

@@ -3,7 +3,8 @@
 // back to the value, the aliases parse to theirs, an unknown name is refused with the
 // option's name, the names accepted and the text given (and the target left unchanged);
 // validate passes the defaults and names the field of every value out of range, and the
-// analysis refuses such options before it reads the matrix.
+// analysis refuses such options before it reads the matrix; the generic setter
+// (set_option / get_option) reads and writes every field by its name.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -188,6 +189,103 @@ TEST(OptionsValidate, AnalysisRefusesBadOptions) {
   } catch (const InvalidInput& e) {
     EXPECT_STREQ(e.what(), "Options::pivot_threshold must be in (0, 1] (got 2)");
   }
+}
+
+// Every field set_option knows reads back what was written, through a second Options:
+// a changed value of each field (the next enum value, a number + 1, the flag flipped) is
+// written as text into a default Options and compared field by field.
+TEST(SetOption, EveryFieldRoundTripsThroughText) {
+  const std::vector<std::string> names = option_fields();
+  EXPECT_EQ(names.size(), 39u);  // Options' fields but user_permutation
+  Options changed;
+  for (const std::string& name : names) {
+    const std::string before = get_option(changed, name);
+    std::string text;
+    if (before == "true" || before == "false") {
+      text = before == "true" ? "false" : "true";
+    } else if (name == "type") {
+      text = "lu";
+    } else if (name == "ordering") {
+      text = "amd";
+    } else if (name == "backend") {
+      text = "gpu";
+    } else if (name == "pivoting") {
+      text = "delayed";
+    } else if (name == "solve_check") {
+      text = "after_perturbed_pivots";
+    } else if (before.find_first_of(".e") != std::string::npos) {
+      text = std::to_string(std::stod(before) / 2);
+    } else {
+      text = std::to_string(std::stoll(before) + 1);
+    }
+    set_option(changed, name, text);
+    EXPECT_NE(get_option(changed, name), before) << name;
+  }
+  Options copy;
+  for (const std::string& name : names) set_option(copy, name, get_option(changed, name));
+  for (const std::string& name : names)
+    EXPECT_EQ(get_option(copy, name), get_option(changed, name)) << name;
+  // spot checks against the fields themselves
+  EXPECT_EQ(copy.type, MatrixType::general);
+  EXPECT_EQ(copy.ordering, OrderingMethod::amd);
+  EXPECT_EQ(copy.backend, Backend::cuda);
+  EXPECT_EQ(copy.pivoting, Pivoting::delayed);
+  EXPECT_EQ(copy.nd_leaf_size, Options{}.nd_leaf_size + 1);
+  EXPECT_EQ(copy.pivot_threshold, Options{}.pivot_threshold / 2);
+  EXPECT_EQ(copy.reproducible, !Options{}.reproducible);
+  EXPECT_EQ(copy.device_memory_limit, Options{}.device_memory_limit + 1);
+}
+
+TEST(SetOption, AliasesFlagsAndFullRanges) {
+  Options o;
+  set_option(o, "device", "cpu");
+  EXPECT_EQ(o.backend, Backend::cpu);
+  for (const char* on : {"true", "on", "1"}) {
+    o.split_top = false;
+    set_option(o, "split_top", on);
+    EXPECT_TRUE(o.split_top) << on;
+  }
+  for (const char* off : {"false", "off", "0"}) {
+    o.split_top = true;
+    set_option(o, "split_top", off);
+    EXPECT_FALSE(o.split_top) << off;
+  }
+  set_option(o, "device_memory_limit", "18446744073709551615");
+  EXPECT_EQ(o.device_memory_limit, std::numeric_limits<std::size_t>::max());
+  set_option(o, "static_pivot_epsilon", "1e-300");
+  EXPECT_EQ(o.static_pivot_epsilon, 1e-300);
+  EXPECT_EQ(get_option(o, "static_pivot_epsilon"), "1e-300");
+}
+
+TEST(SetOption, BadNamesAndValuesAreRefusedAndLeaveTheOptions) {
+  Options o;
+  o.num_threads = 3;
+  auto refused = [&](const char* name, const char* value, const char* says) {
+    const Options before = o;
+    try {
+      set_option(o, name, value);
+      ADD_FAILURE() << name << " = " << value << " was accepted";
+    } catch (const InvalidInput& e) {
+      EXPECT_NE(std::string(e.what()).find(says), std::string::npos) << e.what();
+    }
+    EXPECT_EQ(get_option(o, "num_threads"), get_option(before, "num_threads"));
+  };
+  refused("num_thread", "2", "unknown option 'num_thread'");
+  refused("user_permutation", "1", "unknown option");
+  refused("num_threads", "two", "option num_threads must be a whole number");
+  refused("num_threads", "2.5", "option num_threads must be a whole number");
+  refused("num_threads", "", "option num_threads must be a whole number");
+  refused("num_threads", "99999999999999999999", "in range");
+  refused("device_memory_limit", "-1", "of at least 0");
+  refused("pivot_threshold", "nan", "option pivot_threshold must be a finite number");
+  refused("pivot_threshold", "0.1x", "a finite number");
+  refused("pivot_threshold", "1e999", "a finite number");
+  refused("reproducible", "yes", "true or false");
+  refused("ordering", "colamd", "ordering must be");
+  EXPECT_EQ(o.num_threads, 3);
+  // ranges are validate's: a parsed value out of range is set, and validate names it
+  set_option(o, "pivot_threshold", "0");
+  EXPECT_THROW(validate(o), InvalidInput);
 }
 
 }  // namespace
