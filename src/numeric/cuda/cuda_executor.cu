@@ -112,12 +112,13 @@ CudaExecutor::CudaExecutor(const Options& o, int device)
   STRATA_CUDA(cudaEventCreate(&stop_));
   STRATA_CUDA(cudaEventCreateWithFlags(&panels_done_, cudaEventDisableTiming));
   STRATA_CUDA(cudaStreamCreateWithFlags(&copy_stream_, cudaStreamNonBlocking));
-  STRATA_CUDA(cudaStreamCreateWithFlags(&check_stream_, cudaStreamNonBlocking));
-  STRATA_CUDA(cudaEventCreateWithFlags(&lu_strip_done_, cudaEventDisableTiming));
+  STRATA_CUDA(cudaStreamCreateWithFlags(&lu_.check_stream, cudaStreamNonBlocking));
+  STRATA_CUDA(cudaEventCreateWithFlags(&lu_.strip_done, cudaEventDisableTiming));
   STRATA_CUDA(cudaEventCreateWithFlags(&panels_copied_, cudaEventDisableTiming));
-  for (cudaEvent_t* e : {&split_ready_, &help_ready_, &help_done_, &dist_ready_, &dist_done_})
+  for (cudaEvent_t* e : {&team_.split_ready, &team_.help_ready, &team_.help_done, &team_.dist_ready,
+                         &team_.dist_done})
     STRATA_CUDA(cudaEventCreateWithFlags(e, cudaEventDisableTiming));
-  STRATA_CUDA(cudaStreamCreateWithFlags(&dist_copy_, cudaStreamNonBlocking));
+  STRATA_CUDA(cudaStreamCreateWithFlags(&team_.dist_copy, cudaStreamNonBlocking));
   for (ChunkRecord& c : chunk_)
     for (cudaEvent_t& e : c.ev) STRATA_CUDA(cudaEventCreate(&e));
 }
@@ -140,12 +141,13 @@ CudaExecutor::~CudaExecutor() {
   cudaEventDestroy(panels_done_);
   cudaEventDestroy(panels_copied_);
   cudaStreamDestroy(copy_stream_);
-  cudaStreamDestroy(check_stream_);
-  cudaEventDestroy(lu_strip_done_);
-  for (cudaEvent_t e : {split_ready_, help_ready_, help_done_, dist_ready_, dist_done_})
+  cudaStreamDestroy(lu_.check_stream);
+  cudaEventDestroy(lu_.strip_done);
+  for (cudaEvent_t e :
+       {team_.split_ready, team_.help_ready, team_.help_done, team_.dist_ready, team_.dist_done})
     cudaEventDestroy(e);
-  for (cudaEvent_t e : dist_events_) cudaEventDestroy(e);
-  cudaStreamDestroy(dist_copy_);
+  for (cudaEvent_t e : team_.dist_events) cudaEventDestroy(e);
+  cudaStreamDestroy(team_.dist_copy);
   for (ChunkRecord& c : chunk_)
     for (cudaEvent_t e : c.ev) cudaEventDestroy(e);
   if (solver_) cusolverDnDestroy(solver_);
@@ -173,7 +175,7 @@ void CudaExecutor::prepare(const Analysis& an, int workers) {
   const bool cholesky = an.type == MatrixType::spd || an.type == MatrixType::automatic;
   const MatrixType rows_type = cholesky ? MatrixType::spd : an.type;
   if (workers <= 1 && plan_.factor_resident && (cholesky || an.type == MatrixType::general) &&
-      !(rows_analysis_ == an.id && rows_type_ == rows_type))
+      !(dsolve_.rows_analysis == an.id && dsolve_.rows_type == rows_type))
     upload_solve_rows(an, an.tree.rows.data(), rows_type, nullptr);
   STRATA_CUDA(cudaStreamSynchronize(stream_));
 }
@@ -185,22 +187,22 @@ void CudaExecutor::begin(const numeric::FactorContext& ctx) {
   const Analysis& an = *ctx.analysis;
   bytes_h2d_ = bytes_d2h_ = 0;
   chunks_ = tiled_count_ = prefetched_count_ = 0;
-  lu_fronts_ = lu_fronts_pivoted_ = lu_fronts_batched_ = 0;
+  lu_.fronts = lu_.fronts_pivoted = lu_.fronts_batched = 0;
   phases_ = FactorStats::DevicePhases{};
   held_parts_.clear();
-  resident_for_ = nullptr;
+  dsolve_.resident_for = nullptr;
   pending_ = nullptr;  // a chunk left by a factorization that failed
   // strips of another executor's front still in flight (its factorization failed before
   // its end_part): they write into this pool
-  if (helped_) {
+  if (team_.helped) {
     STRATA_CUDA(cudaStreamSynchronize(help_lane().stream));
-    STRATA_CUDA(cudaStreamSynchronize(dist_copy_));
+    STRATA_CUDA(cudaStreamSynchronize(team_.dist_copy));
   }
-  helped_ = false;
-  team_.clear();
-  team_used_.clear();
-  fronts_split_ = strips_helped_ = fronts_distributed_ = 0;
-  help_bytes_ = 0;
+  team_.helped = false;
+  team_.members.clear();
+  team_.used.clear();
+  team_.fronts_split = team_.strips_helped = team_.fronts_distributed = 0;
+  team_.help_bytes = 0;
   if (an.id != analysis_id_) {
     const Timer setup;
     upload_analysis(an);
@@ -309,7 +311,7 @@ void CudaExecutor::download_panels(const Analysis& an, numeric::NumericFactor& f
     }
     return;
   }
-  if (!keep_resident() || resident_for_ != &fac || resident_analysis_ != an.id)
+  if (!keep_resident() || dsolve_.resident_for != &fac || dsolve_.resident_analysis != an.id)
     throw InvalidState("download_panels: the device holds no factor for this analysis");
   sized_resize(fac.panels, an.factor_layout.total, "download_panels: factor panels");
   STRATA_CUDA(cudaMemcpyAsync(fac.panels.data(), panels_.data(),
@@ -381,16 +383,16 @@ void CudaExecutor::end(const numeric::FactorContext& ctx) {
   device_seconds_ = ms * 1e-3;
   // LLᵀ has no pivoting: the solve's row arrays of the previous factorization of this
   // analysis still hold (a refactorization uploads nothing here)
-  const bool rows_current = rows_analysis_ == ctx.analysis->id && rows_type_ == MatrixType::spd &&
-                            ctx.type == MatrixType::spd;
+  const bool rows_current = dsolve_.rows_analysis == ctx.analysis->id &&
+                            dsolve_.rows_type == MatrixType::spd && ctx.type == MatrixType::spd;
   if (keep_resident() && rows_current) {
-    resident_for_ = ctx.factor;
-    resident_analysis_ = ctx.analysis->id;
+    dsolve_.resident_for = ctx.factor;
+    dsolve_.resident_analysis = ctx.analysis->id;
   } else if (keep_resident()) {
     const Timer setup;
     upload_solve_rows(*ctx.analysis, ctx.factor->rows.data(), ctx.type, ctx.factor);
-    resident_for_ = ctx.factor;
-    resident_analysis_ = ctx.analysis->id;
+    dsolve_.resident_for = ctx.factor;
+    dsolve_.resident_analysis = ctx.analysis->id;
     phases_.setup += setup.seconds();
   }
 }
@@ -405,56 +407,58 @@ void CudaExecutor::upload_solve_rows(const Analysis& an, const index_t* factor_r
   // 0.175 s refactorization of the flexible plate's Newton matrix on the H100; one copy
   // per moved front took the tracked vehicle's (thousands of small fronts that pivot) from
   // 15 to 21 ms per factorization.
-  if (type == MatrixType::general && rows_analysis_ == an.id && rows_type_ == MatrixType::general &&
-      s_rows_host_.size() == t.rows.size()) {
+  if (type == MatrixType::general && dsolve_.rows_analysis == an.id &&
+      dsolve_.rows_type == MatrixType::general && dsolve_.rows_host.size() == t.rows.size()) {
     std::vector<std::int64_t> packed, seg;  // seg: destination, length, offset in packed
     for (index_t f = 0; f < t.n_fronts(); ++f) {
       const index_t fp = t.first_pivot[f], k = t.n_pivots(f), ro = t.row_offsets[f];
       const index_t* prow = factor_rows + ro;
-      std::int64_t* held = s_rows_host_.data() + ro;
+      std::int64_t* held = dsolve_.rows_host.data() + ro;
       if (std::equal(prow, prow + k, held)) continue;
       seg.insert(seg.end(), {ro, k, static_cast<std::int64_t>(packed.size())});
       packed.insert(packed.end(), prow, prow + k);
       for (index_t i = 0; i < k; ++i) {
         held[i] = prow[i];
-        s_pivot_pos_host_[prow[i]] = i;
-        s_pivot_row_host_[fp + i] = prow[i];
+        dsolve_.pivot_pos_host[prow[i]] = i;
+        dsolve_.pivot_row_host[fp + i] = prow[i];
       }
     }
     if (seg.empty()) return;
-    upload(s_moved_rows_, packed);
-    upload(s_moved_segments_, seg);
-    launch_scatter_segments(s_moved_segments_.data(), static_cast<std::int64_t>(seg.size() / 3),
-                            s_moved_rows_.data(), s_rows_.data(), stream_);
-    upload(s_pivot_pos_, s_pivot_pos_host_);
-    upload(s_pivot_row_, s_pivot_row_host_);
+    upload(dsolve_.moved_rows, packed);
+    upload(dsolve_.moved_segments, seg);
+    launch_scatter_segments(dsolve_.moved_segments.data(),
+                            static_cast<std::int64_t>(seg.size() / 3), dsolve_.moved_rows.data(),
+                            dsolve_.rows.data(), stream_);
+    upload(dsolve_.pivot_pos, dsolve_.pivot_pos_host);
+    upload(dsolve_.pivot_row, dsolve_.pivot_row_host);
     STRATA_CUDA(cudaStreamSynchronize(stream_));  // the copies read the host arrays
     return;
   }
   // what the device solve needs besides the panels: the factored row order, where each
   // pivot went in its front (LU, LDLᵀ), and D (LDLᵀ)
-  s_rows_host_.assign(factor_rows, factor_rows + t.rows.size());
-  s_pivot_pos_host_.assign(an.n, 0);
-  s_pivot_row_host_.assign(an.n, 0);
+  dsolve_.rows_host.assign(factor_rows, factor_rows + t.rows.size());
+  dsolve_.pivot_pos_host.assign(an.n, 0);
+  dsolve_.pivot_row_host.assign(an.n, 0);
   for (index_t f = 0; f < t.n_fronts(); ++f) {
     const index_t fp = t.first_pivot[f];
     const index_t* prow = factor_rows + t.row_offsets[f];
     for (index_t i = 0; i < t.n_pivots(f); ++i) {
-      s_pivot_pos_host_[prow[i]] = i;  // prow[i] is a pivot of this front: fp ≤ prow[i] < fp + k
-      s_pivot_row_host_[fp + i] = prow[i];
+      dsolve_.pivot_pos_host[prow[i]] =
+          i;  // prow[i] is a pivot of this front: fp ≤ prow[i] < fp + k
+      dsolve_.pivot_row_host[fp + i] = prow[i];
     }
   }
-  upload(s_rows_, s_rows_host_);
-  upload(s_pivot_pos_, s_pivot_pos_host_);
-  upload(s_pivot_row_, s_pivot_row_host_);
+  upload(dsolve_.rows, dsolve_.rows_host);
+  upload(dsolve_.pivot_pos, dsolve_.pivot_pos_host);
+  upload(dsolve_.pivot_row, dsolve_.pivot_row_host);
   if (type == MatrixType::symmetric_indefinite) {
-    upload(s_d_diag_, fac->d_diag);
-    upload(s_d_off_, fac->d_off);
-    upload(s_pivot_size_, fac->pivot_size);
+    upload(dsolve_.d_diag, fac->d_diag);
+    upload(dsolve_.d_off, fac->d_off);
+    upload(dsolve_.pivot_size, fac->pivot_size);
   }
   STRATA_CUDA(cudaStreamSynchronize(stream_));
-  rows_analysis_ = an.id;
-  rows_type_ = type;
+  dsolve_.rows_analysis = an.id;
+  dsolve_.rows_type = type;
 }
 
 void CudaExecutor::report(FactorStats& fs) const {
@@ -464,9 +468,9 @@ void CudaExecutor::report(FactorStats& fs) const {
   fs.device_batches = chunks_;
   fs.tiled_fronts = tiled_count_;
   fs.tiled_fronts_prefetched = prefetched_count_;
-  fs.lu_large_fronts = lu_fronts_;
-  fs.lu_large_fronts_pivoted = lu_fronts_pivoted_;
-  fs.lu_large_fronts_batched = lu_fronts_batched_;
+  fs.lu_large_fronts = lu_.fronts;
+  fs.lu_large_fronts_pivoted = lu_.fronts_pivoted;
+  fs.lu_large_fronts_batched = lu_.fronts_batched;
   fs.device_budget = plan_.budget;
   fs.device_pool_bytes = plan_.pool * sizeof(double);
   fs.contribution_blocks_on_host = plan_.arena_on_host;

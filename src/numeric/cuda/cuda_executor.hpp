@@ -197,7 +197,7 @@ class CudaExecutor final : public numeric::Executor {
   /// position in its front and the row each pivot position holds, and for LDLᵀ D and the
   /// pivot sizes of `fac`. Records the analysis and type they hold.
   /// For LU, after a first upload for the analysis, only the fronts whose pivot rows moved
-  /// since the last one are sent (host copies in s_rows_host_ and beside it).
+  /// since the last one are sent (host copies in dsolve_.rows_host and beside it).
   void upload_solve_rows(const Analysis& an, const index_t* factor_rows, MatrixType type,
                          const numeric::NumericFactor* fac);
   /// An in-core chunk whose work was launched and whose host part has not run yet (see
@@ -325,7 +325,7 @@ class CudaExecutor final : public numeric::Executor {
   void lu_unpivoted_results(const std::vector<LuFront>& fronts, cudaStream_t s);
   /// Grows the lane's GETRF workspace for the front's k × k block.
   void grow_getrf_work(Lane& lane, const LuFront& fr);
-  /// Waits for every lane, then copies lu_bad_[0, n) to lu_bad_host_.
+  /// Waits for every lane, then copies lu_.bad[0, n) to lu_.bad_host.
   void fetch_lu_checks(std::size_t n);
   /// The lanes, created on first use (kLanes of them).
   std::vector<std::unique_ptr<Lane>>& lanes();
@@ -346,7 +346,7 @@ class CudaExecutor final : public numeric::Executor {
   void release_team();
   /// Whether a front of m rows and k pivots gets its update split over the team.
   bool split_front(int m, int k) const {
-    return !team_.empty() && split_min_cb_ > 0 && m - k >= split_min_cb_;
+    return !team_.members.empty() && split_min_cb_ > 0 && m - k >= split_min_cb_;
   }
   /// Front F (m × m in the pool, k pivots), its pivot block and panel enqueued on `lane`:
   /// the update C −= L₂₁L₂₁ᵀ (LLᵀ, lower triangle) or C −= L₂₁U₁₂ (LU) of its
@@ -361,7 +361,7 @@ class CudaExecutor final : public numeric::Executor {
   /// Whether an LLᵀ front of m rows is factored over the team (distributed_llt). Not
   /// under a device budget: the panel slots are memory beside the plan.
   bool distribute_front(int m) const {
-    return !team_.empty() && dist_min_rows_ > 0 && m >= dist_min_rows_ && limit_ == 0;
+    return !team_.members.empty() && dist_min_rows_ > 0 && m >= dist_min_rows_ && limit_ == 0;
   }
   /// Front F (m × m in the pool, k pivots, assembled: all its work so far on `lane`)
   /// factored whole — pivot block, panel and contribution-block update — over this GPU
@@ -431,40 +431,49 @@ class CudaExecutor final : public numeric::Executor {
   std::vector<std::int64_t> iota_;
   DeviceBuffer<int> pivot_size_;         // LDLᵀ: local pivot sizes, laid out as perm_
   DeviceBuffer<std::int64_t> psize_at_;  // LDLᵀ: per chunk position, its offset in pivot_size_
-  // the diagonals of device-only panels; the chunk's large LU fronts (lu_large_fronts)
-  DeviceBuffer<double> diag_, lu_work_;
-  DeviceBuffer<LuPanelItem> lu_items_;
-  DeviceBuffer<std::int64_t> lu_perm_offset_;  // lu_unpivoted_results: the fronts' perm offsets
-  cudaEvent_t lu_strip_done_ = nullptr;        // enqueue_lu_strips' strip_done
-  cudaStream_t check_stream_ = nullptr;        // copies the LU checks beside the lanes' work
-  DeviceBuffer<int> lu_ipiv_, lu_info_, lu_bad_;
-  PinnedBuffer<int> lu_bad_host_;
+  // the diagonals of device-only panels
+  DeviceBuffer<double> diag_;
+  /// The chunk's large LU fronts (lu_fronts.cu): workspaces, the strips' items and event,
+  /// the pivot checks copied on their own stream, and the counts FactorStats reports
+  /// (lu_large_fronts, lu_large_fronts_pivoted, lu_large_fronts_batched).
+  struct LuLargeFronts {
+    DeviceBuffer<double> work;
+    DeviceBuffer<LuPanelItem> items;
+    DeviceBuffer<std::int64_t> perm_offset;  ///< lu_unpivoted_results: the fronts' perm offsets
+    cudaEvent_t strip_done = nullptr;        ///< enqueue_lu_strips' strip_done
+    cudaStream_t check_stream = nullptr;     ///< copies the LU checks beside the lanes' work
+    DeviceBuffer<int> ipiv, info, bad;
+    PinnedBuffer<int> bad_host;
+    index_t fronts = 0, fronts_pivoted = 0, fronts_batched = 0;
+  } lu_;
   DeviceBuffer<std::int64_t> diag_offset_;
   std::vector<std::unique_ptr<Lane>> lanes_;  ///< large fronts of a chunk, side by side
   LdltLarge ldlt_large_;
-  // resident factor for the solve
-  const numeric::NumericFactor* resident_for_ = nullptr;
-  std::uint64_t resident_analysis_ = 0;
-  std::uint64_t rows_analysis_ = 0;               ///< the analysis and type the solve's rows were
-  MatrixType rows_type_ = MatrixType::automatic;  ///< uploaded for (end())
-  DeviceBuffer<std::int64_t> s_rows_, s_row_offsets_, s_first_pivot_, s_level_offsets_,
-      s_pivot_pos_, s_pivot_row_, s_u_offset_;
-  DeviceBuffer<int> s_pivot_size_;
-  /// What s_rows_, s_pivot_pos_ and s_pivot_row_ hold (upload_solve_rows' incremental LU
-  /// uploads compare against it)
-  std::vector<std::int64_t> s_rows_host_, s_pivot_pos_host_, s_pivot_row_host_;
-  DeviceBuffer<std::int64_t> s_moved_rows_, s_moved_segments_;  // their moved rows, packed
-  DeviceBuffer<std::int64_t> s_panel_offset_;
-  DeviceBuffer<double> s_d_diag_, s_d_off_, s_x_, s_u_, s_scratch_;
-  std::vector<std::int64_t> u_offset_host_;
-  SolvePlan s_plan_;  // the device solve's plan (cuda_solve.cu), per analysis, and its copy
-  DeviceBuffer<std::int64_t> s_plan_u_offset_, s_inv_offsets_, s_inv_src_, s_chunk_front_,
-      s_chunk_row_, s_small_fronts_;
+  /// The device solve's state (cuda_solve.cu): the factor it holds resident and the
+  /// analysis and type its row arrays were uploaded for (end()), the solve plan and its
+  /// device copy, the row, pivot and offset arrays, and the solve's workspaces.
+  struct DeviceSolveState {
+    const numeric::NumericFactor* resident_for = nullptr;
+    std::uint64_t resident_analysis = 0;
+    std::uint64_t rows_analysis = 0;
+    MatrixType rows_type = MatrixType::automatic;
+    DeviceBuffer<std::int64_t> rows, row_offsets, first_pivot, level_offsets, pivot_pos, pivot_row,
+        u_offset;
+    DeviceBuffer<int> pivot_size;
+    /// What rows, pivot_pos and pivot_row hold (upload_solve_rows' incremental LU uploads
+    /// compare against it)
+    std::vector<std::int64_t> rows_host, pivot_pos_host, pivot_row_host;
+    DeviceBuffer<std::int64_t> moved_rows, moved_segments;  ///< their moved rows, packed
+    DeviceBuffer<std::int64_t> panel_offset;
+    DeviceBuffer<double> d_diag, d_off, x, u, scratch;
+    std::vector<std::int64_t> u_offset_host;
+    SolvePlan plan;  ///< per analysis, and its copy below
+    DeviceBuffer<std::int64_t> plan_u_offset, inv_offsets, inv_src, chunk_front, chunk_row,
+        small_fronts;
+  } dsolve_;
   // statistics of the last factorization
   std::size_t bytes_h2d_ = 0, bytes_d2h_ = 0;
   index_t chunks_ = 0, tiled_count_ = 0, prefetched_count_ = 0;
-  /// FactorStats::lu_large_fronts, lu_large_fronts_pivoted, lu_large_fronts_batched
-  index_t lu_fronts_ = 0, lu_fronts_pivoted_ = 0, lu_fronts_batched_ = 0;
   double device_seconds_ = 0;
   cudaEvent_t start_ = nullptr, stop_ = nullptr;
   cudaEvent_t panels_done_ = nullptr;  // the chunk's launch_llt_panel: the lanes wait for it
@@ -478,25 +487,28 @@ class CudaExecutor final : public numeric::Executor {
   int slot_ = 0;
   ChunkRecord* pending_ = nullptr;
   FactorStats::DevicePhases phases_;  ///< summed over the chunks of the factorization
-  // split updates: as the front's owner, the helpers of the current part and those the
-  // current chunk used; as a helper, the event its lane records after each strip
-  std::vector<CudaExecutor*> team_, team_used_;
-  cudaEvent_t split_ready_ = nullptr;  ///< on the owner's lane: pivot block and panel done
-  cudaEvent_t help_ready_ = nullptr, help_done_ = nullptr;
-  bool helped_ = false;  ///< its help lane has work of another executor in flight
-  index_t fronts_split_ = 0, strips_helped_ = 0;
-  // distributed fronts (distributed_front.cu): on every GPU the two slots panels of other
-  // GPUs arrive in, the per-block statuses (the owner's gathers every GPU's), the
-  // per-step events and the stream panels arrive on; as the owner, events ordering one
-  // distributed front after the previous one
-  DeviceBuffer<double> dist_panels_;
-  DeviceBuffer<int> dist_status_;
-  std::vector<cudaEvent_t> dist_events_;
-  cudaEvent_t dist_ready_ = nullptr, dist_done_ = nullptr;
-  cudaStream_t dist_copy_ = nullptr;
-  bool dist_done_recorded_ = false;
-  index_t fronts_distributed_ = 0;
-  std::size_t help_bytes_ = 0;
+  /// Several GPUs' help with one large front (split_update.cu, distributed_front.cu).
+  struct GpuTeam {
+    /// As the front's owner: the helpers of the current part and those the current chunk
+    /// used; as a helper, the events its help lane records.
+    std::vector<CudaExecutor*> members, used;
+    cudaEvent_t split_ready = nullptr;  ///< on the owner's lane: pivot block and panel done
+    cudaEvent_t help_ready = nullptr, help_done = nullptr;
+    bool helped = false;  ///< its help lane has work of another executor in flight
+    index_t fronts_split = 0, strips_helped = 0;
+    /// Distributed fronts: on every GPU the two slots panels of other GPUs arrive in, the
+    /// per-block statuses (the owner's gathers every GPU's), the per-step events and the
+    /// stream panels arrive on; as the owner, events ordering one distributed front after
+    /// the previous one.
+    DeviceBuffer<double> dist_panels;
+    DeviceBuffer<int> dist_status;
+    std::vector<cudaEvent_t> dist_events;
+    cudaEvent_t dist_ready = nullptr, dist_done = nullptr;
+    cudaStream_t dist_copy = nullptr;
+    bool dist_done_recorded = false;
+    index_t fronts_distributed = 0;
+    std::size_t help_bytes = 0;
+  } team_;
   // The next tiled Cholesky front's host assembly (start_tiled_prefetch): its buffer, and
   // the part and position it is for. Last member: destroyed (joined) before the rest.
   PinnedBuffer<double> host_front_next_;

@@ -54,58 +54,58 @@ struct CublasOps {
 
 // The solve plan of the current analysis and its device copy (once per analysis).
 void CudaExecutor::prepare_solve_plan(const Analysis& an) {
-  if (s_plan_.analysis == an.id && s_plan_.analysis != 0) return;
+  if (dsolve_.plan.analysis == an.id && dsolve_.plan.analysis != 0) return;
   int n_sm = 0;
   STRATA_CUDA(cudaDeviceGetAttribute(&n_sm, cudaDevAttrMultiProcessorCount, device_));
-  s_plan_ = make_solve_plan(an.tree, an.child_rows, an.schedule, n_sm);
-  s_plan_.analysis = an.id;
+  dsolve_.plan = make_solve_plan(an.tree, an.child_rows, an.schedule, n_sm);
+  dsolve_.plan.analysis = an.id;
   // not upload(): these bytes belong to no factorization's statistics
   auto up = [&](DeviceBuffer<std::int64_t>& d, const std::vector<std::int64_t>& h) {
     d.upload(h.data(), h.size(), stream_);
   };
-  up(s_plan_u_offset_, s_plan_.u_offset);
-  up(s_inv_offsets_, s_plan_.inv_offsets);
-  up(s_inv_src_, s_plan_.inv_src);
-  up(s_chunk_front_, s_plan_.chunk_front);
-  up(s_chunk_row_, s_plan_.chunk_row);
-  up(s_small_fronts_, s_plan_.small_fronts);
+  up(dsolve_.plan_u_offset, dsolve_.plan.u_offset);
+  up(dsolve_.inv_offsets, dsolve_.plan.inv_offsets);
+  up(dsolve_.inv_src, dsolve_.plan.inv_src);
+  up(dsolve_.chunk_front, dsolve_.plan.chunk_front);
+  up(dsolve_.chunk_row, dsolve_.plan.chunk_row);
+  up(dsolve_.small_fronts, dsolve_.plan.small_fronts);
 }
 
 bool CudaExecutor::solve(const Analysis& an, const numeric::NumericFactor& fac, double* x,
                          index_t nrhs) {
-  if (!keep_resident() || resident_for_ != &fac || resident_analysis_ != an.id || !fac.valid ||
-      an.id != analysis_id_)
+  if (!keep_resident() || dsolve_.resident_for != &fac || dsolve_.resident_analysis != an.id ||
+      !fac.valid || an.id != analysis_id_)
     return false;
   if (an.n == 0 || nrhs == 0) return true;
   STRATA_CUDA(cudaSetDevice(device_));
   prepare_solve_plan(an);
   const auto& t = an.tree;
-  const SolvePlan& p = s_plan_;
+  const SolvePlan& p = dsolve_.plan;
   const bool lu = fac.type == MatrixType::general;
   const bool ldlt = fac.type == MatrixType::symmetric_indefinite;
   const bool unit = lu || ldlt;
   const std::size_t nx = static_cast<std::size_t>(an.n) * nrhs;
-  s_x_.upload(x, nx, stream_);
+  dsolve_.x.upload(x, nx, stream_);
   const std::int64_t u_total = p.u_offset.back();
-  s_u_.resize(std::max<std::size_t>(static_cast<std::size_t>(u_total) * nrhs, 1));
-  s_scratch_.resize(std::max<std::size_t>(t.rows.size() * nrhs, 1));
+  dsolve_.u.resize(std::max<std::size_t>(static_cast<std::size_t>(u_total) * nrhs, 1));
+  dsolve_.scratch.resize(std::max<std::size_t>(t.rows.size() * nrhs, 1));
   SolveTree st{n_rows_.data(),
                n_pivots_.data(),
-               s_row_offsets_.data(),
-               s_first_pivot_.data(),
-               s_rows_.data(),
-               s_inv_offsets_.data(),
-               s_inv_src_.data(),
-               s_plan_u_offset_.data(),
-               s_panel_offset_.data(),
+               dsolve_.row_offsets.data(),
+               dsolve_.first_pivot.data(),
+               dsolve_.rows.data(),
+               dsolve_.inv_offsets.data(),
+               dsolve_.inv_src.data(),
+               dsolve_.plan_u_offset.data(),
+               dsolve_.panel_offset.data(),
                panels_.data(),
-               s_pivot_row_.data(),
+               dsolve_.pivot_row.data(),
                an.n,
                u_total};
-  const SolveChunks chunks{s_chunk_front_.data(), s_chunk_row_.data()};
-  double* X = s_x_.data();
-  double* U = s_u_.data();
-  double* S = s_scratch_.data();
+  const SolveChunks chunks{dsolve_.chunk_front.data(), dsolve_.chunk_row.data()};
+  double* X = dsolve_.x.data();
+  double* U = dsolve_.u.data();
+  double* S = dsolve_.scratch.data();
   CublasOps ops{blas_};
   const int nr = static_cast<int>(nrhs);
   // a library-solved front's block W and panel
@@ -118,7 +118,7 @@ bool CudaExecutor::solve(const Analysis& an, const numeric::NumericFactor& fac, 
     const std::int64_t c0 = p.chunk_offsets[l], nc = p.chunk_offsets[l + 1] - c0;
     const std::int64_t s0 = p.small_offsets[l], ns = p.small_offsets[l + 1] - s0;
     launch_gather_forward(st, chunks, c0, nc, X, U, S, nrhs, stream_);
-    launch_sweep_forward(st, s_small_fronts_.data(), s0, ns, S, nrhs, unit, stream_);
+    launch_sweep_forward(st, dsolve_.small_fronts.data(), s0, ns, S, nrhs, unit, stream_);
     for (std::int64_t q = p.large_offsets[l]; q < p.large_offsets[l + 1]; ++q)
       large(p.large_fronts[q], [&](const double* L, int m, int k, double* W) {
         large_front_forward(ops, L, m, k, nr, unit, W);
@@ -126,13 +126,13 @@ bool CudaExecutor::solve(const Analysis& an, const numeric::NumericFactor& fac, 
     launch_scatter_forward(st, chunks, c0, nc, X, U, S, nrhs, lu, stream_);
   }
   if (ldlt)
-    launch_solve_diagonal(st, s_d_diag_.data(), s_d_off_.data(), s_pivot_size_.data(), X, nrhs,
-                          stream_);
+    launch_solve_diagonal(st, dsolve_.d_diag.data(), dsolve_.d_off.data(),
+                          dsolve_.pivot_size.data(), X, nrhs, stream_);
   for (index_t l = levels - 1; l >= 0; --l) {
     const std::int64_t c0 = p.chunk_offsets[l], nc = p.chunk_offsets[l + 1] - c0;
     const std::int64_t s0 = p.small_offsets[l], ns = p.small_offsets[l + 1] - s0;
     launch_gather_backward(st, chunks, c0, nc, X, S, nrhs, lu, stream_);
-    launch_sweep_backward(st, s_small_fronts_.data(), s0, ns, S, nrhs, lu, unit, stream_);
+    launch_sweep_backward(st, dsolve_.small_fronts.data(), s0, ns, S, nrhs, lu, unit, stream_);
     for (std::int64_t q = p.large_offsets[l]; q < p.large_offsets[l + 1]; ++q)
       large(p.large_fronts[q], [&](const double* L, int m, int k, double* W) {
         large_front_backward(ops, L, m, k, nr, lu, unit, W);

@@ -144,13 +144,13 @@ void CudaExecutor::upload_analysis(const Analysis& an) {
   // solve arrays
   std::vector<std::int64_t> u_off(nf + 1, 0);
   for (index_t f = 0; f < nf; ++f) u_off[f + 1] = u_off[f] + t.cb_size(f);
-  u_offset_host_ = u_off;
-  upload(s_u_offset_, u_off);
-  upload(s_panel_offset_, std::vector<std::int64_t>(an.factor_layout.panel_offset.begin(),
-                                                    an.factor_layout.panel_offset.end()));
-  upload(s_row_offsets_, t.row_offsets);
-  upload(s_first_pivot_, t.first_pivot);
-  upload(s_level_offsets_, s.level_offsets);
+  dsolve_.u_offset_host = u_off;
+  upload(dsolve_.u_offset, u_off);
+  upload(dsolve_.panel_offset, std::vector<std::int64_t>(an.factor_layout.panel_offset.begin(),
+                                                         an.factor_layout.panel_offset.end()));
+  upload(dsolve_.row_offsets, t.row_offsets);
+  upload(dsolve_.first_pivot, t.first_pivot);
+  upload(dsolve_.level_offsets, s.level_offsets);
   values_.resize(std::max<std::size_t>(an.pattern_indices.size(), 1));
   STRATA_CUDA(cudaStreamSynchronize(stream_));
 
@@ -306,13 +306,13 @@ void CudaExecutor::presize_chunk_buffers(const Analysis& an,
     l->diag_work.resize(l == lane.front() ? std::max(diag, diag_slab) : diag);
   }
   if (lu) {
-    lu_items_.resize(strips);
-    lu_work_.resize(lu_panel_work_size(static_cast<std::int64_t>(big)));
-    lu_perm_offset_.resize(big + 1);
-    lu_ipiv_.resize(pivots);
-    lu_info_.resize(big);
-    lu_bad_.resize(big);
-    lu_bad_host_.resize(big);
+    lu_.items.resize(strips);
+    lu_.work.resize(lu_panel_work_size(static_cast<std::int64_t>(big)));
+    lu_.perm_offset.resize(big + 1);
+    lu_.ipiv.resize(pivots);
+    lu_.info.resize(big);
+    lu_.bad.resize(big);
+    lu_.bad_host.resize(big);
     for (auto& l : lane) l->getrf_work.resize(static_cast<std::size_t>(getrf));
   }
 }

@@ -106,7 +106,7 @@ cudaEvent_t event_at(std::vector<cudaEvent_t>& pool, std::size_t i) {
 bool CudaExecutor::team_layout(Lane& lane, double* F, std::int64_t m,
                                const std::vector<std::int64_t>& c, int P,
                                std::vector<TeamGpu>& gpu) {
-  const int G = static_cast<int>(team_.size()) + 1;
+  const int G = static_cast<int>(team_.members.size()) + 1;
   const int NB = static_cast<int>(c.size()) - 1;
   const std::int64_t nb = dist_block_;
   auto rows = [&](int j) { return m - c[j]; };
@@ -114,7 +114,7 @@ bool CudaExecutor::team_layout(Lane& lane, double* F, std::int64_t m,
   const std::size_t slot = static_cast<std::size_t>(m) * static_cast<std::size_t>(nb);
   gpu.assign(G, TeamGpu{});
   for (int g = 0; g < G; ++g) {
-    CudaExecutor& x = g == 0 ? *this : *team_[g - 1];
+    CudaExecutor& x = g == 0 ? *this : *team_.members[g - 1];
     TeamGpu& u = gpu[g];
     u.ex = &x;
     u.block.assign(NB, nullptr);
@@ -127,13 +127,13 @@ bool CudaExecutor::team_layout(Lane& lane, double* F, std::int64_t m,
       return false;
     }
     try {  // grown once (the chain's first front is its largest); refactorizations reuse it
-      x.dist_panels_.resize(2 * slot);
-      x.dist_status_.resize(static_cast<std::size_t>(G) * P);
+      x.team_.dist_panels.resize(2 * slot);
+      x.team_.dist_status.resize(static_cast<std::size_t>(G) * P);
     } catch (const OutOfMemory&) {  // no room beside the plan: this front on one GPU
       STRATA_CUDA(cudaSetDevice(device_));
       return false;
     }
-    u.slots[0] = x.dist_panels_.data();
+    u.slots[0] = x.team_.dist_panels.data();
     u.slots[1] = u.slots[0] + slot;
     if (g == 0) {
       for (int j = 0; j < NB; j += G) {
@@ -148,19 +148,19 @@ bool CudaExecutor::team_layout(Lane& lane, double* F, std::int64_t m,
         at += rows(j) * width(j);
       }
     }
-    u.status = x.dist_status_.data();
+    u.status = x.team_.dist_status.data();
     u.work = g == 0 ? &lane : &x.help_lane();
-    u.copy = x.dist_copy_;
+    u.copy = x.team_.dist_copy;
     // a helper's copies land in its pool: after its own last work (set_team's event)
-    if (g > 0) STRATA_CUDA(cudaStreamWaitEvent(u.copy, x.help_ready_, 0));
-    u.work->diag_work.resize(llt_recursive_work_size(nb));          // no reallocation between steps
-    event_at(x.dist_events_, 3 * static_cast<std::size_t>(P) - 1);  // E, R and D of every step
+    if (g > 0) STRATA_CUDA(cudaStreamWaitEvent(u.copy, x.team_.help_ready, 0));
+    u.work->diag_work.resize(llt_recursive_work_size(nb));  // no reallocation between steps
+    event_at(x.team_.dist_events, 3 * static_cast<std::size_t>(P) - 1);  // E, R and D of every step
   }
   return true;
 }
 
 bool CudaExecutor::distributed_llt(Lane& lane, double* F, int m, int k, int* info) {
-  const int G = static_cast<int>(team_.size()) + 1;
+  const int G = static_cast<int>(team_.members.size()) + 1;
   const std::int64_t nb = dist_block_;
   // column bounds: pivot blocks of nb up to k, then contribution-block blocks of nb
   std::vector<std::int64_t> c{0};
@@ -176,9 +176,9 @@ bool CudaExecutor::distributed_llt(Lane& lane, double* F, int m, int k, int* inf
   // where each GPU keeps things
   std::vector<TeamGpu> gpu;
   if (!team_layout(lane, F, m, c, P, gpu)) return false;
-  auto E = [&](int g, int p) { return gpu[g].ex->dist_events_[3 * p]; };
-  auto R = [&](int g, int p) { return gpu[g].ex->dist_events_[3 * p + 1]; };
-  auto D = [&](int g, int p) { return gpu[g].ex->dist_events_[3 * p + 2]; };
+  auto E = [&](int g, int p) { return gpu[g].ex->team_.dist_events[3 * p]; };
+  auto R = [&](int g, int p) { return gpu[g].ex->team_.dist_events[3 * p + 1]; };
+  auto D = [&](int g, int p) { return gpu[g].ex->team_.dist_events[3 * p + 2]; };
   // whether GPU g holds a block right of block p (its first one after p)
   auto holds_right_of = [&](int g, int p) { return p + 1 + ((g - p - 1) % G + G) % G < NB; };
 
@@ -186,18 +186,18 @@ bool CudaExecutor::distributed_llt(Lane& lane, double* F, int m, int k, int* inf
   // the helpers' pools and the panel slots are shared), the helpers' blocks copied out
   // of F once it is assembled, on each helper's stream
   STRATA_CUDA(cudaSetDevice(device_));
-  if (dist_done_recorded_) STRATA_CUDA(cudaStreamWaitEvent(lane.stream, dist_done_, 0));
-  STRATA_CUDA(cudaEventRecord(dist_ready_, lane.stream));
+  if (team_.dist_done_recorded) STRATA_CUDA(cudaStreamWaitEvent(lane.stream, team_.dist_done, 0));
+  STRATA_CUDA(cudaEventRecord(team_.dist_ready, lane.stream));
   for (int g = 1; g < G; ++g) {
     TeamGpu& u = gpu[g];
     STRATA_CUDA(cudaSetDevice(u.ex->device_));
-    STRATA_CUDA(cudaStreamWaitEvent(u.work->stream, dist_ready_, 0));
+    STRATA_CUDA(cudaStreamWaitEvent(u.work->stream, team_.dist_ready, 0));
     for (int j = g; j < NB; j += G) {
       const std::size_t rb = sizeof(double) * static_cast<std::size_t>(rows(j));
       STRATA_CUDA(cudaMemcpy2DAsync(u.block[j], rb, F + c[j] * static_cast<std::int64_t>(m) + c[j],
                                     sizeof(double) * m, rb, width(j), cudaMemcpyDefault,
                                     u.work->stream));
-      u.ex->help_bytes_ += 2 * rb * static_cast<std::size_t>(width(j));  // out and back
+      u.ex->team_.help_bytes += 2 * rb * static_cast<std::size_t>(width(j));  // out and back
     }
   }
 
@@ -220,7 +220,7 @@ bool CudaExecutor::distributed_llt(Lane& lane, double* F, int m, int k, int* inf
       STRATA_CUDA(cudaMemcpy2DAsync(v.slots[p % 2], rb, u.block[p], sizeof(double) * u.ld[p], rb,
                                     width(p), cudaMemcpyDefault, v.copy));
       STRATA_CUDA(cudaEventRecord(R(h, p), v.copy));
-      (h == 0 ? u.ex : v.ex)->help_bytes_ += rb * static_cast<std::size_t>(width(p));
+      (h == 0 ? u.ex : v.ex)->team_.help_bytes += rb * static_cast<std::size_t>(width(p));
     }
   };
   // step 3: block j (on GPU g) updated by panel p
@@ -267,18 +267,18 @@ bool CudaExecutor::distributed_llt(Lane& lane, double* F, int m, int k, int* inf
     }
     STRATA_CUDA(cudaMemcpyAsync(gpu[0].status + static_cast<std::size_t>(g) * P, u.status,
                                 sizeof(int) * P, cudaMemcpyDefault, u.work->stream));
-    STRATA_CUDA(cudaEventRecord(u.ex->help_done_, u.work->stream));
-    u.ex->helped_ = true;
+    STRATA_CUDA(cudaEventRecord(u.ex->team_.help_done, u.work->stream));
+    u.ex->team_.helped = true;
     STRATA_CUDA(cudaSetDevice(device_));
-    STRATA_CUDA(cudaStreamWaitEvent(lane.stream, u.ex->help_done_, 0));
+    STRATA_CUDA(cudaStreamWaitEvent(lane.stream, u.ex->team_.help_done, 0));
   }
   STRATA_CUDA(cudaSetDevice(device_));
   first_failed_block_kernel<<<1, 1, 0, lane.stream>>>(gpu[0].status, P, G, static_cast<int>(nb),
                                                       info);
   STRATA_CUDA_LAUNCH();
-  STRATA_CUDA(cudaEventRecord(dist_done_, lane.stream));
-  dist_done_recorded_ = true;
-  ++fronts_distributed_;
+  STRATA_CUDA(cudaEventRecord(team_.dist_done, lane.stream));
+  team_.dist_done_recorded = true;
+  ++team_.fronts_distributed;
   return true;
 }
 

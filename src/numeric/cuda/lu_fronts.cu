@@ -155,12 +155,12 @@ void CudaExecutor::lu_large_fronts(std::vector<LuFront>& fronts, double static_p
   std::size_t sum_k = 0;
   for (const LuFront& fr : fronts) sum_k += static_cast<std::size_t>(fr.k);
   // growing a buffer frees the old one: wait for the lanes first (cudaFree would too)
-  if (lu_ipiv_.size() < sum_k || lu_bad_.size() < n) STRATA_CUDA(cudaDeviceSynchronize());
-  lu_ipiv_.resize(std::max<std::size_t>(sum_k, 1));
-  lu_info_.resize(n);
-  lu_bad_.resize(n);
-  lu_bad_host_.resize(n);
-  lu_fronts_ += static_cast<index_t>(n);
+  if (lu_.ipiv.size() < sum_k || lu_.bad.size() < n) STRATA_CUDA(cudaDeviceSynchronize());
+  lu_.ipiv.resize(std::max<std::size_t>(sum_k, 1));
+  lu_.info.resize(n);
+  lu_.bad.resize(n);
+  lu_.bad_host.resize(n);
+  lu_.fronts += static_cast<index_t>(n);
   std::vector<std::size_t> redo = lu_strip_pivots_ > 0
                                       ? lu_fronts_by_strips(fronts, static_pivot, assembled)
                                       : lu_fronts_by_library(fronts, static_pivot, assembled);
@@ -185,9 +185,9 @@ void CudaExecutor::lu_unpivoted_results(const std::vector<LuFront>& fronts, cuda
     }
     return;
   }
-  lu_perm_offset_.upload(off.data(), off.size(), s);
+  lu_.perm_offset.upload(off.data(), off.size(), s);
   count_h2d(off.size() * sizeof(std::int64_t));
-  launch_identity_perms(lu_perm_offset_.data(), static_cast<std::int64_t>(fronts.size()),
+  launch_identity_perms(lu_.perm_offset.data(), static_cast<std::int64_t>(fronts.size()),
                         fronts[0].perm, s);
   STRATA_CUDA(cudaMemsetAsync(fronts[0].perturbed, 0, sizeof(std::int64_t) * fronts.size(), s));
 }
@@ -211,8 +211,8 @@ std::vector<std::size_t> CudaExecutor::lu_fronts_by_strips(std::vector<LuFront>&
   const double one = 1.0, minus_one = -1.0;
   std::vector<Lane*> lane_of;
   enqueue_lu_strips(
-      items, lu_strip_pivots_, lanes, lu_items_, lu_work_, lu_bad_.data(), static_pivot,
-      lu_strip_done_,
+      items, lu_strip_pivots_, lanes, lu_.items, lu_.work, lu_.bad.data(), static_pivot,
+      lu_.strip_done,
       [&](std::size_t q, Lane& ln) {
         const LuFront& fr = fronts[order[q]];
         const int m = fr.m, k = fr.k;
@@ -226,15 +226,15 @@ std::vector<std::size_t> CudaExecutor::lu_fronts_by_strips(std::vector<LuFront>&
       },
       lane_of);
   for (std::size_t q = 0; q < n; ++q) fronts[order[q]].lane = lane_of[q];
-  lu_fronts_batched_ += static_cast<index_t>(n);
+  lu_.fronts_batched += static_cast<index_t>(n);
   // the checks, read once the last strip's kernels are done (the updates go on meanwhile)
-  STRATA_CUDA(cudaStreamWaitEvent(check_stream_, lu_strip_done_, 0));
-  STRATA_CUDA(cudaMemcpyAsync(lu_bad_host_.data(), lu_bad_.data(), sizeof(int) * n,
-                              cudaMemcpyDeviceToHost, check_stream_));
-  STRATA_CUDA(cudaStreamSynchronize(check_stream_));
+  STRATA_CUDA(cudaStreamWaitEvent(lu_.check_stream, lu_.strip_done, 0));
+  STRATA_CUDA(cudaMemcpyAsync(lu_.bad_host.data(), lu_.bad.data(), sizeof(int) * n,
+                              cudaMemcpyDeviceToHost, lu_.check_stream));
+  STRATA_CUDA(cudaStreamSynchronize(lu_.check_stream));
   std::vector<std::size_t> redo;
   for (std::size_t q = 0; q < n; ++q)
-    if (lu_bad_host_.data()[q]) redo.push_back(order[q]);
+    if (lu_.bad_host.data()[q]) redo.push_back(order[q]);
   return redo;
 }
 
@@ -250,15 +250,15 @@ std::vector<std::size_t> CudaExecutor::lu_fronts_by_library(std::vector<LuFront>
     // without pivoting (devIpiv null); kept only where partial pivoting would have
     // interchanged nothing (kernels_lu.cu)
     STRATA_CUSOLVER(cusolverDnDgetrf(lane.solver, fr.k, fr.k, fr.F, fr.m, lane.getrf_work.data(),
-                                     nullptr, lu_info_.data() + i));
-    launch_lu_unpivoted_check(fr.F, fr.m, fr.k, static_pivot, lu_info_.data() + i,
-                              lu_ipiv_.data() + ipiv_at, lu_bad_.data() + i, lane.stream);
+                                     nullptr, lu_.info.data() + i));
+    launch_lu_unpivoted_check(fr.F, fr.m, fr.k, static_pivot, lu_.info.data() + i,
+                              lu_.ipiv.data() + ipiv_at, lu_.bad.data() + i, lane.stream);
     ipiv_at += static_cast<std::size_t>(fr.k);
   }
   fetch_lu_checks(n);
   std::vector<std::size_t> redo;
   for (std::size_t i = 0; i < n; ++i) {
-    if (lu_bad_host_.data()[i]) {
+    if (lu_.bad_host.data()[i]) {
       redo.push_back(i);
       continue;
     }
@@ -302,7 +302,7 @@ void CudaExecutor::grow_getrf_work(Lane& lane, const LuFront& fr) {
 void CudaExecutor::fetch_lu_checks(std::size_t n) {
   for (const auto& l : lanes_) STRATA_CUDA(cudaStreamSynchronize(l->stream));
   STRATA_CUDA(
-      cudaMemcpy(lu_bad_host_.data(), lu_bad_.data(), sizeof(int) * n, cudaMemcpyDeviceToHost));
+      cudaMemcpy(lu_.bad_host.data(), lu_.bad.data(), sizeof(int) * n, cudaMemcpyDeviceToHost));
 }
 
 void CudaExecutor::lu_fronts_redo(std::vector<LuFront>& fronts,
@@ -326,11 +326,11 @@ void CudaExecutor::lu_fronts_redo(std::vector<LuFront>& fronts,
     reassemble(fr);
     grow_getrf_work(lane, fr);
     STRATA_CUSOLVER(cusolverDnDgetrf(lane.solver, fr.k, fr.k, fr.F, fr.m, lane.getrf_work.data(),
-                                     lu_ipiv_.data() + ipiv_at[redo[x]], lu_info_.data() + x));
-    launch_lu_check(fr.F, fr.m, fr.k, static_pivot, lu_info_.data() + x, lu_bad_.data() + x,
+                                     lu_.ipiv.data() + ipiv_at[redo[x]], lu_.info.data() + x));
+    launch_lu_check(fr.F, fr.m, fr.k, static_pivot, lu_.info.data() + x, lu_.bad.data() + x,
                     lane.stream);
   }
-  lu_fronts_pivoted_ += static_cast<index_t>(redo.size());
+  lu_.fronts_pivoted += static_cast<index_t>(redo.size());
   fetch_lu_checks(redo.size());
   for (std::size_t x = 0; x < redo.size(); ++x) {
     const LuFront& fr = fronts[redo[x]];
@@ -338,9 +338,9 @@ void CudaExecutor::lu_fronts_redo(std::vector<LuFront>& fronts,
     const cudaStream_t stream = lane.stream;
     const int m = fr.m, k = fr.k;
     const std::size_t ld = static_cast<std::size_t>(m);
-    const int* ipiv = lu_ipiv_.data() + ipiv_at[redo[x]];
+    const int* ipiv = lu_.ipiv.data() + ipiv_at[redo[x]];
     STRATA_CUDA(cudaMemsetAsync(fr.perturbed, 0, sizeof(std::int64_t), stream));
-    if (!lu_bad_host_.data()[x]) {
+    if (!lu_.bad_host.data()[x]) {
       launch_ipiv_to_perm(ipiv, k, fr.perm, stream);
       lu_panels_and_update(fr, ipiv, assembled);
       continue;

@@ -31,12 +31,12 @@
 // and panel are still one GPU's, in sequence with the strips.
 //
 // Synchronization: the helper's lane waits for the owner's `assembled` event (before
-// copying C's strip) and for split_ready_, recorded on the owner's lane after the panel
+// copying C's strip) and for team_.split_ready, recorded on the owner's lane after the panel
 // (before copying the panel rows); the owner's stream waits for each used helper's
-// help_done_ before the chunk's stores (join_team). set_team makes each helper's lane
+// team_.help_done before the chunk's stores (join_team). set_team makes each helper's lane
 // wait for its own stream first (its last part's work may still be in flight), and
 // release_team (end_part) waits on the host for the helpers' lanes, so a helper's pool
-// is its own again when the driver moves on. One help_done_ per helper suffices: its
+// is its own again when the driver moves on. One team_.help_done per helper suffices: its
 // lane runs the strips in order and the owner waits for the last one.
 //
 // Results: the strips' GEMMs add the same k products per entry as the one-GPU SYRK/GEMM,
@@ -88,8 +88,8 @@ std::vector<std::int64_t> strip_bounds(std::int64_t n, int parts, bool lower) {
 Lane& CudaExecutor::help_lane() { return *lanes()[1]; }
 
 void CudaExecutor::set_team(const numeric::FactorContext& ctx) {
-  team_.clear();
-  team_used_.clear();
+  team_.members.clear();
+  team_.used.clear();
   if ((split_min_cb_ <= 0 && dist_min_rows_ <= 0) || ctx.helpers.empty() ||
       ctx.type == MatrixType::symmetric_indefinite)
     return;
@@ -104,28 +104,29 @@ void CudaExecutor::set_team(const numeric::FactorContext& ctx) {
     STRATA_CUDA(cudaSetDevice(h->device_));
     enable_peer_access(device_);
     Lane& hl = h->help_lane();
-    STRATA_CUDA(cudaEventRecord(h->help_ready_, h->stream_));
-    STRATA_CUDA(cudaStreamWaitEvent(hl.stream, h->help_ready_, 0));
+    STRATA_CUDA(cudaEventRecord(h->team_.help_ready, h->stream_));
+    STRATA_CUDA(cudaStreamWaitEvent(hl.stream, h->team_.help_ready, 0));
     STRATA_CUDA(cudaSetDevice(device_));
-    team_.push_back(h);
+    team_.members.push_back(h);
   }
 }
 
 void CudaExecutor::release_team() {
-  for (CudaExecutor* h : team_) {
-    if (!h->helped_) continue;
+  for (CudaExecutor* h : team_.members) {
+    if (!h->team_.helped) continue;
     STRATA_CUDA(cudaSetDevice(h->device_));
     STRATA_CUDA(cudaStreamSynchronize(h->help_lane().stream));
-    h->helped_ = false;
+    h->team_.helped = false;
   }
   STRATA_CUDA(cudaSetDevice(device_));
-  team_.clear();
-  team_used_.clear();
+  team_.members.clear();
+  team_.used.clear();
 }
 
 void CudaExecutor::join_team() {
-  for (CudaExecutor* h : team_used_) STRATA_CUDA(cudaStreamWaitEvent(stream_, h->help_done_, 0));
-  team_used_.clear();
+  for (CudaExecutor* h : team_.used)
+    STRATA_CUDA(cudaStreamWaitEvent(stream_, h->team_.help_done, 0));
+  team_.used.clear();
 }
 
 void CudaExecutor::split_update(Lane& lane, double* F, int m, int k, bool lu,
@@ -133,18 +134,18 @@ void CudaExecutor::split_update(Lane& lane, double* F, int m, int k, bool lu,
   const double one = 1.0, minus_one = -1.0;
   const std::int64_t n = m - k;
   const std::size_t ld = static_cast<std::size_t>(m);
-  const int parts = static_cast<int>(team_.size()) + 1;
+  const int parts = static_cast<int>(team_.members.size()) + 1;
   const std::vector<std::int64_t> c = strip_bounds(n, parts, !lu);
   double* const C = F + static_cast<std::size_t>(k) * ld + k;  // n × n, leading dimension m
   double* const L = F + k;                                     // n × k
-  STRATA_CUDA(cudaEventRecord(split_ready_, lane.stream));
+  STRATA_CUDA(cudaEventRecord(team_.split_ready, lane.stream));
   std::vector<int> mine{0};  // strips done here: the first, and any no helper could hold
   for (int j = 1; j < parts; ++j) {
     const std::int64_t a = c[j], w = c[j + 1] - c[j];
     if (w <= 0) continue;
     const std::int64_t r0 = lu ? 0 : a, h = n - r0;  // the strip's rows [r0, n)
     const std::size_t need = static_cast<std::size_t>(h * w + h * k + (lu ? k * w : 0));
-    CudaExecutor& x = *team_[j - 1];
+    CudaExecutor& x = *team_.members[j - 1];
     if (x.pool_.size() < need) {
       mine.push_back(j);
       continue;
@@ -159,7 +160,7 @@ void CudaExecutor::split_update(Lane& lane, double* F, int m, int k, bool lu,
     STRATA_CUDA(cudaStreamWaitEvent(hl.stream, assembled, 0));
     STRATA_CUDA(cudaMemcpy2DAsync(Cg, row_bytes, Cs, sizeof(double) * ld, row_bytes, w,
                                   cudaMemcpyDefault, hl.stream));
-    STRATA_CUDA(cudaStreamWaitEvent(hl.stream, split_ready_, 0));
+    STRATA_CUDA(cudaStreamWaitEvent(hl.stream, team_.split_ready, 0));
     STRATA_CUDA(cudaMemcpy2DAsync(Lg, row_bytes, L + r0, sizeof(double) * ld, row_bytes, k,
                                   cudaMemcpyDefault, hl.stream));
     if (lu) {  // U₁₂'s columns of the strip: rows 0..k of front columns k + a ..
@@ -175,12 +176,12 @@ void CudaExecutor::split_update(Lane& lane, double* F, int m, int k, bool lu,
     }
     STRATA_CUDA(cudaMemcpy2DAsync(Cs, sizeof(double) * ld, Cg, row_bytes, row_bytes, w,
                                   cudaMemcpyDefault, hl.stream));
-    STRATA_CUDA(cudaEventRecord(x.help_done_, hl.stream));
-    x.helped_ = true;
-    ++x.strips_helped_;
-    x.help_bytes_ += sizeof(double) * need + sizeof(double) * static_cast<std::size_t>(h * w);
-    if (std::find(team_used_.begin(), team_used_.end(), &x) == team_used_.end())
-      team_used_.push_back(&x);
+    STRATA_CUDA(cudaEventRecord(x.team_.help_done, hl.stream));
+    x.team_.helped = true;
+    ++x.team_.strips_helped;
+    x.team_.help_bytes += sizeof(double) * need + sizeof(double) * static_cast<std::size_t>(h * w);
+    if (std::find(team_.used.begin(), team_.used.end(), &x) == team_.used.end())
+      team_.used.push_back(&x);
   }
   STRATA_CUDA(cudaSetDevice(device_));
   for (const int j : mine) {
@@ -200,14 +201,14 @@ void CudaExecutor::split_update(Lane& lane, double* F, int m, int k, bool lu,
                                 static_cast<int>(w), k, &minus_one, L + a + w, m, L + a, m, &one,
                                 Cs + a + w, m));
   }
-  ++fronts_split_;
+  ++team_.fronts_split;
 }
 
 void CudaExecutor::report_worker(DeviceStats& d) const {
-  d.fronts_split += fronts_split_;
-  d.fronts_distributed += fronts_distributed_;
-  d.strips_helped += strips_helped_;
-  d.bytes_transferred += help_bytes_;
+  d.fronts_split += team_.fronts_split;
+  d.fronts_distributed += team_.fronts_distributed;
+  d.strips_helped += team_.strips_helped;
+  d.bytes_transferred += team_.help_bytes;
 }
 
 }  // namespace strata::cuda
