@@ -1,7 +1,8 @@
 // strata — the Solver: phases, type resolution, scaling, and the solve phase.
 //
 // The Solver keeps the Analysis (pattern), the canonical values of the last factorized
-// matrix (for residuals), the factor and the executor's workspaces. factorize and
+// matrix (for residuals), the factor and the numeric driver (numeric/driver.hpp) with
+// its executors and their workspaces. factorize and
 // refactorize run the same code: every buffer is sized by the analysis and reused, so a
 // refactorization gives bitwise the factor a fresh factorization would. The host passes
 // over the values (checks, norms, the matching's scaling) are in value_pass.hpp, the
@@ -11,9 +12,10 @@
 // solution with solve/refinement.hpp: iterative refinement, GMRES where it stalls.
 //
 // Several GPUs (Options::num_gpus resolving to more than one with the CUDA backend): the
-// analysis splits the tree for that many workers and the factorization runs on one CUDA
-// executor per GPU through numeric::factorize_multi; the factor still comes back to the
-// host, so the solve and refactorization are the same code.
+// analysis splits the tree for that many workers and the multi-worker driver factors on
+// one CUDA executor per GPU (numeric::factorize_multi); the solve fetches the parts'
+// panels to the host. The distributed solver sets a driver of its own
+// (SolverAccess::set_driver) whose phases are collective over MPI ranks.
 #include "strata/solver.hpp"
 
 #include <tbb/blocked_range.h>
@@ -36,6 +38,7 @@
 #include "core/solver_internal.hpp"
 #include "core/value_pass.hpp"
 #include "numeric/delayed.hpp"
+#include "numeric/driver.hpp"
 #include "numeric/factor.hpp"
 #include "solve/gmres.hpp"
 #include "solve/refinement.hpp"
@@ -56,25 +59,17 @@ struct SolverState {
   // for each parallel loop cost milliseconds per refactorization on a 64-core host
   std::unique_ptr<tbb::task_arena> arena;
   int arena_threads = -1;
-  std::vector<double> cb_arena;
   numeric::NumericFactor factor;
   // the extra scaling of the last factorization (core/rescale.hpp), empty when none
   Rescaling rescaling;
   // the factor of delayed pivoting (Options::pivoting), valid instead of `factor`
   numeric::DelayedFactor delayed;
   numeric::DelayedWorkspace delayed_work;
-  std::unique_ptr<numeric::Executor> executor;
-  // several workers: one executor and one host arena each
-  std::vector<std::unique_ptr<numeric::Executor>> executors;
-  std::vector<std::vector<double>> arenas;
-  numeric::BlockBuffers blocks;  // host buffers of blocks between workers, kept
-  std::vector<DeviceStats> devices;
-  // SolverAccess::use_host_workers: CPU executors as workers (tests, benchmarks)
-  int host_workers = 0;
-  int host_threads = 1;
-  std::optional<numeric::MultiWorkerConfig> host_config;
-  // SolverAccess::set_external: the distributed solver's numeric phases (src/distributed)
-  detail::ExternalNumeric external;
+  // the numeric phases (numeric/driver.hpp): chosen at analysis from the options (one
+  // executor, or one per GPU), or set by SolverAccess (host workers for tests and
+  // benchmarks, the distributed solver's collective phases): then `driver_set`
+  std::unique_ptr<numeric::NumericDriver> driver;
+  bool driver_set = false;
   MatrixType resolved = MatrixType::automatic;
   double norm_inf = 0;                // ‖A‖∞ of the input
   std::uint64_t values_analysis = 0;  // Analysis::id whose canonical pattern `values` holds
@@ -141,27 +136,21 @@ tbb::task_arena& host_arena(SolverState& s) {
   return *s.arena;
 }
 
-// The executors a factorization with `workers` workers uses (created on first use and
-// kept): one per GPU when the CUDA backend splits the tree (only it resolves to several
-// workers, see resolve_workers), host workers when asked for, else one executor.
-std::vector<numeric::Executor*> ensure_executors(SolverState& s, int workers) {
-  std::vector<numeric::Executor*> execs;
+// The driver of an analysis for `workers` workers (resolve_workers): kept while the
+// count stays, else one executor on the whole tree or one per GPU over the split tree.
+// A driver set through SolverAccess is kept as it is.
+void ensure_driver(SolverState& s, int workers) {
+  if (s.driver_set || (s.driver && s.driver->workers() == workers)) return;
   if (workers > 1) {
-    if (static_cast<int>(s.executors.size()) != workers) {
-      s.executors.clear();
-      for (int d = 0; d < workers; ++d)
-        s.executors.push_back(s.host_workers > 0 ? numeric::make_cpu_executor(s.host_threads)
-                                                 : numeric::make_cuda_executor(s.options, d));
-    }
-    for (auto& e : s.executors) execs.push_back(e.get());
-    return execs;
+    numeric::MultiWorkerConfig config;
+    config.work_stealing = s.options.work_stealing;
+    // GPUs keep their parts' panels: the host copy is what made several GPUs slower than
+    // one (it is fetched only when a host solve needs it)
+    config.keep_panels_on_devices = true;
+    s.driver = numeric::make_multi_worker_driver(s.options, workers, 0, std::move(config));
+  } else {
+    s.driver = numeric::make_tree_driver(s.options);
   }
-  if (!s.executor) {
-    const bool gpu = numeric::uses_cuda(s.options.backend);
-    s.executor = gpu ? numeric::make_cuda_executor(s.options)
-                     : numeric::make_cpu_executor(s.options.num_threads, s.options.reproducible);
-  }
-  return {s.executor.get()};
 }
 
 // Sizes the scaled values to n, first releasing their pinning if that may move them.
@@ -180,29 +169,23 @@ void pin_scaled(SolverState& s) {
   if (s.scaled_pin && s.scaled_pin->data() == s.scaled.data() && s.scaled_pin->bytes() == bytes)
     return;
   s.scaled_pin.reset();
-  const numeric::Executor* e = s.executor            ? s.executor.get()
-                               : s.executors.empty() ? nullptr
-                                                     : s.executors[0].get();
-  if (e && e->backend() == Backend::cuda)
+  if (s.driver && s.driver->uploads_values())
     s.scaled_pin = numeric::pin_host_memory(s.scaled.data(), bytes);
 }
 
 // The CUDA backend's device set-up at analysis (Executor::prepare: uploads, the device
 // memory plan, streams and library handles), as cuDSS's analysis phase prepares the
-// device; the first factorization is then numeric work only. Nothing for the CPU backend,
-// host workers or an external (distributed) numeric phase, or without a GPU (factorize
-// then reports that). A failure here is not reported: the factorization meets it again
-// and reports it with its context (its OutOfMemory releases what was allocated).
+// device; the first factorization is then numeric work only. Nothing for a driver that
+// does not upload values to a GPU (CPU backend, host workers, the distributed driver), or
+// without a GPU (factorize then reports that). A failure here is not reported: the factorization
+// meets it again and reports it with its context (its OutOfMemory releases what was allocated).
 // Returns the seconds spent.
 double prepare_devices(SolverState& s) {
-  const Backend b = s.options.backend;
-  if (s.external.factor || s.host_workers > 0 || b == Backend::cpu || !numeric::cuda_available())
-    return 0;
+  if (!s.driver->uploads_values() || !numeric::cuda_available()) return 0;
   const Timer t;
   try {
     const Analysis& an = *s.analysis;
-    for (numeric::Executor* e : ensure_executors(s, an.partition.workers))
-      e->prepare(an, an.partition.workers);
+    s.driver->prepare(an);
     // the factor's host arrays (its row indices: Σ rows of the fronts, 0.3 GB for a
     // Laplacian 100³) sized and first touched here, not in the first factorization
     numeric::prepare_factor(an, an.type == MatrixType::automatic ? MatrixType::spd : an.type,
@@ -212,8 +195,7 @@ double prepare_devices(SolverState& s) {
     throw;  // a bug, not a device that could not be set up
   } catch (const Error& e) {
     s.analysis->stats.device_setup_error = e.what();
-    s.executors.clear();
-    s.executor.reset();
+    s.driver->drop_executors();
   }
   return t.seconds();
 }
@@ -304,48 +286,23 @@ double prepare_values(SolverState& s, const SparseMatrix& a) {
   return norm1;
 }
 
-// What the numeric stage did: the type factored (automatic resolved), the perturbed
-// pivots of the fixed order (before a delayed factorization), the executors and the
-// seconds their creation took.
+// What the numeric stage did: the type factored (automatic resolved) and the perturbed
+// pivots of the fixed order (before a delayed factorization).
 struct NumericRun {
   MatrixType type = MatrixType::automatic;
   index_t fixed_perturbed = 0;
-  std::vector<numeric::Executor*> execs;
-  double creation_seconds = 0;
 };
 
-// The numeric stage: the factor of s.scaled by the executors (one, several workers, or
-// the external driver), Cholesky tried first for an automatic symmetric type, then, for
-// a general matrix with delayed pivoting allowed, the delayed factorization on the host
-// when the fixed order needed static pivots (or always with Pivoting::delayed).
+// The numeric stage: the factor of s.scaled by the driver (one executor, several
+// workers, or the distributed driver), Cholesky tried first for an automatic symmetric type, then,
+// for a general matrix with delayed pivoting allowed, the delayed factorization on the host when
+// the fixed order needed static pivots (or always with Pivoting::delayed).
 NumericRun factor_values(SolverState& s, double norm1, double static_pivot) {
   const Analysis& an = *s.analysis;
   tbb::task_arena& arena = host_arena(s);
   NumericRun r;
-  const int workers = an.partition.workers;
-  const bool external = static_cast<bool>(s.external.factor);
-  const Timer creation;  // a new executor: device context, streams, library handles
-  const std::vector<numeric::Executor*> execs =
-      external ? std::vector<numeric::Executor*>{} : ensure_executors(s, workers);
-  const double creation_seconds = creation.seconds();
-  if (!external) pin_scaled(s);
-  s.devices.clear();
-  numeric::MultiWorkerConfig config;
-  config.work_stealing = s.options.work_stealing;
-  // GPUs keep their parts' panels: the host copy is what made several GPUs slower than one
-  // (it is fetched only when a host solve needs it)
-  config.keep_panels_on_devices = true;
-  if (s.host_config) config = *s.host_config;
-  config.block_buffers = &s.blocks;
-  auto run = [&](MatrixType t) {
-    if (external)
-      s.external.factor(an, s.scaled, t, static_pivot, s.factor);
-    else if (workers > 1)
-      numeric::factorize_multi(an, s.scaled, t, static_pivot, execs, s.factor, s.arenas, config,
-                               &s.devices);
-    else
-      numeric::factorize(an, s.scaled, t, static_pivot, *s.executor, s.factor, s.cb_arena);
-  };
+  pin_scaled(s);
+  auto run = [&](MatrixType t) { s.driver->factorize(an, s.scaled, t, static_pivot, s.factor); };
 
   MatrixType type = an.type;
   if (type == MatrixType::automatic) {
@@ -362,7 +319,7 @@ NumericRun factor_values(SolverState& s, double norm1, double static_pivot) {
   // order needed static pivots.
   s.delayed.valid = false;
   const bool can_delay = s.options.pivoting != Pivoting::fixed && type == MatrixType::general &&
-                         !external && workers == 1;
+                         s.driver->whole_tree();
   const bool delay_directly = can_delay && s.options.pivoting == Pivoting::delayed;
   index_t fixed_perturbed = 0;
   if (delay_directly) {
@@ -383,8 +340,6 @@ NumericRun factor_values(SolverState& s, double norm1, double static_pivot) {
 
   r.type = type;
   r.fixed_perturbed = fixed_perturbed;
-  r.execs = execs;
-  r.creation_seconds = creation_seconds;
   return r;
 }
 
@@ -394,20 +349,13 @@ void report_factorization(SolverState& s, const NumericRun& r, double norm1, dou
                           const Timer& timer) {
   const Analysis& an = *s.analysis;
   const bool scale = !an.row_scaling.empty();
-  const bool external = static_cast<bool>(s.external.factor);
-  const int workers = an.partition.workers;
   const MatrixType type = r.type;
   const index_t fixed_perturbed = r.fixed_perturbed;
-  const std::vector<numeric::Executor*>& execs = r.execs;
-  const double creation_seconds = r.creation_seconds;
   FactorStats& fs = s.stats.factor;
   fs = FactorStats{};
   fs.type = type;
   fs.input_seconds = input_seconds;
-  fs.backend = external      ? s.external.backend
-               : workers > 1 ? execs[0]->backend()
-                             : s.executor->backend();
-  fs.devices = s.devices;
+  fs.backend = s.driver->backend();
   numeric::PivotStats total;
   if (s.delayed.valid)
     for (const auto& fr : s.delayed.fronts) total.merge(fr.stats);
@@ -443,18 +391,7 @@ void report_factorization(SolverState& s, const NumericRun& r, double norm1, dou
   fs.seconds = timer.seconds();
   const double flops = s.stats.analysis.factor_flops * (type == MatrixType::general ? 2.0 : 1.0);
   fs.gflops = fs.seconds > 0 ? flops / fs.seconds * 1e-9 : 0;
-  if (external) {
-    if (s.external.report) s.external.report(fs);
-  } else if (workers > 1) {  // device figures summed over the workers
-    for (numeric::Executor* e : execs) {
-      FactorStats one;
-      e->report(one);
-      numeric::merge_device_figures(fs, one);
-    }
-  } else {
-    s.executor->report(fs);
-  }
-  if (fs.backend == Backend::cuda) fs.device_phases.setup += creation_seconds;
+  s.driver->report(fs);
 }
 
 void run_factorization(SolverState& s, const SparseMatrix& a) {
@@ -489,22 +426,11 @@ bool apply_inverse(SolverState& s, const double* b, double* x, index_t nrhs,
       work[k + r * n] = scaled_by(b[i + r * n], scale ? an.row_scaling[i] : 1.0,
                                   rescale ? s.rescaling.row[i] : 1.0);
     }
-  const bool on_device = !s.delayed.valid && !s.external.solve && s.executor &&
-                         s.executor->solve(an, s.factor, work.data(), nrhs);
-  if (s.delayed.valid) {
+  bool on_device = false;
+  if (s.delayed.valid)
     numeric::solve_delayed(an, s.delayed, work.data(), nrhs, &host_arena(s));
-  } else if (s.external.solve) {
-    s.external.solve(an, s.factor, work.data(), nrhs);
-  } else if (!on_device) {
-    if (!s.factor.panels_on_host && s.executor) {
-      numeric::fetch_panels(an, *s.executor, s.factor);
-    } else if (!s.factor.panels_on_host) {  // several GPUs, each holding its parts' panels
-      std::vector<numeric::Executor*> execs;
-      for (auto& e : s.executors) execs.push_back(e.get());
-      numeric::fetch_panels(an, execs, s.factor);
-    }
-    numeric::solve_in_place(an, s.factor, work.data(), nrhs);
-  }
+  else
+    on_device = s.driver->solve(an, s.factor, work.data(), nrhs);
   for (index_t r = 0; r < nrhs; ++r)
     for (index_t k = 0; k < n; ++k) {
       const index_t col = match ? an.matching_perm[an.perm[k]] : an.perm[k];
@@ -532,12 +458,10 @@ void phase(const char* name, F&& f) {
 void release_factor(SolverState& s) noexcept {
   s.factor = numeric::NumericFactor{};
   s.delayed = numeric::DelayedFactor{};
-  std::vector<double>().swap(s.cb_arena);
   s.scaled_pin.reset();
   std::vector<double>().swap(s.scaled);
   std::vector<double>().swap(s.value_sums);
-  s.blocks = numeric::BlockBuffers{};
-  s.executor.reset();
+  if (s.driver) s.driver->release();
 }
 
 void factor_phase(SolverState& s, const SparseMatrix& a) {
@@ -564,9 +488,7 @@ namespace {
 void clear_numeric(SolverState& s) {
   s.factor = numeric::NumericFactor{};
   s.delayed = numeric::DelayedFactor{};
-  s.cb_arena.clear();
-  s.arenas.clear();
-  s.blocks = numeric::BlockBuffers{};
+  if (s.driver) s.driver->release_workspaces();
 }
 
 // Makes `an` (of A's pattern) the solver's analysis: the input kept for the first
@@ -589,9 +511,9 @@ void Solver::analyze(const SparseMatrix& a) {
     validate(a);
     clear_numeric(*state_);
     state_->analysis.reset();
-    const int workers = state_->external.workers > 0 ? state_->external.workers
-                        : state_->host_workers > 0   ? state_->host_workers
-                                                     : resolve_workers(state_->options);
+    const int workers =
+        state_->driver_set ? state_->driver->workers() : resolve_workers(state_->options);
+    ensure_driver(*state_, workers);
     adopt_analysis(*state_, analyze_matrix(a, state_->options, workers), a);
   });
 }
@@ -757,22 +679,16 @@ void detail::SolverAccess::use_host_workers(Solver& solver, int workers, int thr
                                             numeric::MultiWorkerConfig config) {
   if (workers < 0 || threads_each < 1)
     throw InvalidInput("use_host_workers: workers must be at least 0 and threads at least 1");
-  SolverState& s = *solver.state_;
-  s.host_workers = workers;
-  s.host_threads = threads_each;
-  s.host_config = workers > 0 ? std::optional(std::move(config)) : std::nullopt;
-  s.executors.clear();
-  s.executor.reset();
-  s.analysis.reset();
-  s.factor = numeric::NumericFactor{};
-  s.delayed = numeric::DelayedFactor{};
+  set_driver(solver, workers > 0 ? numeric::make_multi_worker_driver(
+                                       solver.options(), workers, threads_each, std::move(config))
+                                 : nullptr);
 }
 
-void detail::SolverAccess::set_external(Solver& solver, ExternalNumeric external) {
+void detail::SolverAccess::set_driver(Solver& solver,
+                                      std::unique_ptr<numeric::NumericDriver> driver) {
   SolverState& s = *solver.state_;
-  s.external = std::move(external);
-  s.executors.clear();
-  s.executor.reset();
+  s.driver_set = driver != nullptr;
+  s.driver = std::move(driver);
   s.analysis.reset();
   s.factor = numeric::NumericFactor{};
   s.delayed = numeric::DelayedFactor{};

@@ -7,46 +7,28 @@
 // as its workers, exactly as it would use N CUDA executors.
 #pragma once
 
-#include <functional>
+#include <memory>
 #include <string>
 
+#include "numeric/driver.hpp"
 #include "numeric/factor.hpp"
 #include "strata/solver.hpp"
 
 namespace strata::detail {
 
-/// The numeric phases of a Solver done elsewhere: the distributed solver (src/distributed)
-/// runs rank 0's Solver with these, so that type resolution, scaling, statistics and
-/// iterative refinement stay the Solver's, while the factorization and every solve with
-/// the factor are collective over the ranks.
-struct ExternalNumeric {
-  /// > 0: the analysis is split for this many workers (ranks × workers per rank).
-  int workers = 0;
-  /// Replaces the numeric factorization (factorize / factorize_multi): fills `factor` or
-  /// throws as they do.
-  std::function<void(const Analysis& an, const std::vector<double>& scaled_values, MatrixType type,
-                     double static_pivot, numeric::NumericFactor& factor)>
-      factor;
-  /// Replaces solve_in_place (x in tree numbering, n×nrhs).
-  std::function<void(const Analysis& an, const numeric::NumericFactor& factor, double* x,
-                     index_t nrhs)>
-      solve;
-  Backend backend = Backend::cpu;  ///< FactorStats::backend
-  /// Adds backend figures to the statistics of a factorization (may be empty).
-  std::function<void(FactorStats& fs)> report;
-};
-
 struct SolverAccess {
   /// Makes `s` analyze for `workers` workers and factor with that many CPU executors of
-  /// `threads_each` host threads each, with `config` (work stealing from
-  /// Options::work_stealing is overridden by config.work_stealing; the injected delay is
-  /// for tests). Call before analyze. workers == 0 restores the normal behaviour. Throws
-  /// InvalidInput for negative workers or threads_each < 1.
+  /// `threads_each` host threads each (a multi-worker driver, numeric/driver.hpp), with
+  /// `config` as it is given (its work_stealing, not Options::work_stealing; its
+  /// before_subtree hook for tests). Call before analyze. workers == 0 restores the normal
+  /// behaviour. Throws InvalidInput for negative workers or threads_each < 1.
   static void use_host_workers(Solver& s, int workers, int threads_each,
                                numeric::MultiWorkerConfig config = {});
-  /// Makes `s` run its numeric phases through `external` (see ExternalNumeric); drops
-  /// its analysis and factor. An empty ExternalNumeric restores the normal behaviour.
-  static void set_external(Solver& s, ExternalNumeric external);
+  /// Makes `s` run its numeric phases through `driver` (numeric/driver.hpp; the
+  /// distributed solver's collective phases, host workers), analyzing for its workers();
+  /// drops the analysis and factor. A null driver restores the normal choice (from the
+  /// options, at the next analyze).
+  static void set_driver(Solver& s, std::unique_ptr<numeric::NumericDriver> driver);
   /// The analysis of `s` (nullptr before analyze), for the distributed solver to
   /// broadcast and to give a rank-local factor layout.
   static Analysis* analysis(Solver& s);

@@ -1,8 +1,8 @@
 // strata — DistributedSolver: the Solver over the ranks of a Communicator
 // (docs/distributed.md).
 //
-// Rank 0 holds an ordinary Solver whose numeric phases are replaced (SolverAccess::
-// set_external) by the collective ones of numeric.cpp, so that validation, type
+// Rank 0 holds an ordinary Solver whose numeric driver (SolverAccess::set_driver,
+// numeric/driver.hpp) runs the collective phases of numeric.cpp, so that validation, type
 // resolution (Cholesky first, LDLᵀ on failure), scaling, static pivoting, statistics and
 // iterative refinement are exactly the Solver's. The other ranks wait in the same public
 // call and follow rank 0's commands (protocol.cpp): the analysis, computed once on rank 0
@@ -105,13 +105,18 @@ void run_factor(DistributedState& s, const Analysis& an, const std::vector<doubl
 }
 
 // Rank 0's replacement of the Solver's numeric phases.
-detail::ExternalNumeric hooks(DistributedState& s, int per_rank) {
-  detail::ExternalNumeric ext;
-  ext.workers = s.comm.size() * per_rank;
-  ext.backend = wants_gpu(s) ? Backend::cuda : Backend::cpu;
-  ext.factor = [&s](const Analysis& an, const std::vector<double>& values, MatrixType type,
-                    double pivot, numeric::NumericFactor& factor) {
-    detail::CommImpl& comm = *s.comm.impl();
+// Rank 0's numeric driver: its Solver's factorization and solves as collective commands
+// to every rank (numeric.cpp), so that validation, type resolution, scaling, statistics
+// and refinement stay the Solver's.
+class DistributedDriver final : public numeric::NumericDriver {
+ public:
+  DistributedDriver(DistributedState& s, int per_rank) : s_(s), per_rank_(per_rank) {}
+  int workers() const override { return s_.comm.size() * per_rank_; }
+  bool whole_tree() const override { return false; }
+  bool uploads_values() const override { return false; }
+  void factorize(const Analysis& an, const std::vector<double>& values, MatrixType type,
+                 double pivot, numeric::NumericFactor& factor) override {
+    detail::CommImpl& comm = *s_.comm.impl();
     ByteCount bytes(comm);
     Header h;
     h.command = Command::factor;
@@ -120,35 +125,39 @@ detail::ExternalNumeric hooks(DistributedState& s, int per_rank) {
     h.c = pivot;
     try {
       send_command(comm, h);
-      send_values(comm, s.numeric, values);
-      run_factor(s, an, values, type, pivot, factor);
+      send_values(comm, s_.numeric, values);
+      run_factor(s_, an, values, type, pivot, factor);
     } catch (...) {
-      bytes.add_to(s.numeric.stats.factor_bytes_sent, s.numeric.stats.factor_bytes_received);
+      bytes.add_to(s_.numeric.stats.factor_bytes_sent, s_.numeric.stats.factor_bytes_received);
       throw;
     }
-    bytes.add_to(s.numeric.stats.factor_bytes_sent, s.numeric.stats.factor_bytes_received);
-  };
-  ext.solve = [&s](const Analysis& an, const numeric::NumericFactor& factor, double* x,
-                   index_t nrhs) {
-    detail::CommImpl& comm = *s.comm.impl();
+    bytes.add_to(s_.numeric.stats.factor_bytes_sent, s_.numeric.stats.factor_bytes_received);
+  }
+  bool solve(const Analysis& an, numeric::NumericFactor& factor, double* x, index_t nrhs) override {
+    detail::CommImpl& comm = *s_.comm.impl();
     ByteCount bytes(comm);
     Header h;
     h.command = Command::apply;
     h.b = nrhs;
     send_command(comm, h);
-    solve_part(comm, s.numeric, an, factor, x, nrhs);
-    bytes.add_to(s.numeric.stats.solve_bytes_sent, s.numeric.stats.solve_bytes_received);
-  };
-  ext.report = [&s](FactorStats& fs) {
-    fs.devices = s.numeric.devices;
-    for (const auto& e : s.numeric.executors) {
+    solve_part(comm, s_.numeric, an, factor, x, nrhs);
+    bytes.add_to(s_.numeric.stats.solve_bytes_sent, s_.numeric.stats.solve_bytes_received);
+    return false;
+  }
+  Backend backend() const override { return wants_gpu(s_) ? Backend::cuda : Backend::cpu; }
+  void report(FactorStats& fs) const override {
+    fs.devices = s_.numeric.devices;
+    for (const auto& e : s_.numeric.executors) {
       FactorStats one;
       e->report(one);
       numeric::merge_device_figures(fs, one);
     }
-  };
-  return ext;
-}
+  }
+
+ private:
+  DistributedState& s_;
+  int per_rank_;
+};
 
 // Every rank at the end of a phase: every rank's figures onto rank 0.
 void gather_stats(DistributedState& s) {
@@ -178,7 +187,7 @@ void lead_analysis(DistributedState& s, const SparseMatrix& a) {
   detail::CommImpl& comm = *s.comm.impl();
   s.analysis = nullptr;
   const int per_rank = workers_per_rank(s);
-  detail::SolverAccess::set_external(*s.solver, hooks(s, per_rank));
+  detail::SolverAccess::set_driver(*s.solver, std::make_unique<DistributedDriver>(s, per_rank));
   s.solver->analyze(a);
   Analysis& an = *detail::SolverAccess::analysis(*s.solver);
   Timer timer;
@@ -195,7 +204,7 @@ void lead_analysis(DistributedState& s, const SparseMatrix& a) {
   try {
     setup_numeric(s, an, per_rank);
   } catch (...) {  // no usable analysis: a later factorize analyzes again
-    detail::SolverAccess::set_external(*s.solver, hooks(s, per_rank));
+    detail::SolverAccess::set_driver(*s.solver, std::make_unique<DistributedDriver>(s, per_rank));
     throw;
   }
   s.analysis = &an;

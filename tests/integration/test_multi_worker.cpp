@@ -20,6 +20,7 @@
 
 #include "analysis/analysis.hpp"
 #include "core/solver_internal.hpp"
+#include "numeric/driver.hpp"
 #include "numeric/factor.hpp"
 #include "sparse/generators.hpp"
 #include "strata/strata.hpp"
@@ -681,6 +682,49 @@ TEST(MultiWorker, ErrorsPropagate) {
   const auto xs = auto_solver.solve(b);
   EXPECT_LE(test::backward_error(s, xs.data(), b.data()), 1e-14);
   EXPECT_GT(auto_solver.stats().factor.inertia_negative, 0);
+}
+
+// The numeric drivers (numeric/driver.hpp) directly: the tree driver and the multi-worker
+// driver of CPU executors give the same factor on one analysis and the same solve with
+// it, bitwise (the factor itself is checked against the Solver and dense references by
+// the tests above); their kinds are reported as the Solver needs them; bad worker counts
+// are refused.
+TEST(NumericDrivers, TreeAndMultiWorkerDriversAgree) {
+  const SparseMatrix a = generators::laplacian_3d(9, 8, 7);
+  Options o;
+  o.type = MatrixType::spd;
+  const int workers = 3;
+  const Analysis an = analyze_matrix(a, o, workers);
+  double pivot = 0;
+  const std::vector<double> v = test::scaled_values(an, a, &pivot);
+  auto tree = numeric::make_tree_driver(o);
+  auto multi = numeric::make_multi_worker_driver(o, workers, 1, {});
+  EXPECT_EQ(tree->workers(), 1);
+  EXPECT_TRUE(tree->whole_tree());
+  EXPECT_FALSE(tree->uploads_values());
+  EXPECT_EQ(multi->workers(), workers);
+  EXPECT_FALSE(multi->whole_tree());
+  EXPECT_FALSE(multi->uploads_values());
+  numeric::NumericFactor one, many;
+  tree->factorize(an, v, MatrixType::spd, pivot, one);
+  multi->factorize(an, v, MatrixType::spd, pivot, many);
+  expect_same_factor(one, many);
+  EXPECT_EQ(tree->backend(), Backend::cpu);
+  EXPECT_EQ(multi->backend(), Backend::cpu);
+  FactorStats fs;
+  multi->report(fs);
+  ASSERT_EQ(fs.devices.size(), static_cast<std::size_t>(workers));
+  // solutions in tree numbering: the same right-hand side through both factors
+  std::mt19937_64 rng(std::random_device{}());
+  std::normal_distribution<double> g;
+  std::vector<double> x1(an.n), x2;
+  for (double& e : x1) e = g(rng);
+  x2 = x1;
+  EXPECT_FALSE(tree->solve(an, one, x1.data(), 1));
+  EXPECT_FALSE(multi->solve(an, many, x2.data(), 1));
+  EXPECT_EQ(x1, x2);
+  EXPECT_THROW(numeric::make_multi_worker_driver(o, 0, 1, {}), InvalidInput);
+  EXPECT_THROW(numeric::make_multi_worker_driver(o, 2, -1, {}), InvalidInput);
 }
 
 }  // namespace

@@ -1,0 +1,168 @@
+// strata — the tree and multi-worker drivers of the numeric phase (see driver.hpp).
+#include "numeric/driver.hpp"
+
+#include <string>
+
+#include "base/device.hpp"
+#include "base/timer.hpp"
+#include "strata/errors.hpp"
+
+namespace strata::numeric {
+namespace {
+
+// A solve on the host with the factor in host memory: the panels fetched from the
+// executors that kept them on their devices, then the multifrontal solve.
+void host_solve(const Analysis& an, const std::vector<Executor*>& execs, NumericFactor& factor,
+                double* x, index_t nrhs) {
+  if (!factor.panels_on_host) {
+    if (execs.size() == 1)
+      fetch_panels(an, *execs[0], factor);
+    else
+      fetch_panels(an, execs, factor);
+  }
+  solve_in_place(an, factor, x, nrhs);
+}
+
+class TreeDriver final : public NumericDriver {
+ public:
+  explicit TreeDriver(const Options& o) : options_(o), gpu_(uses_cuda(o.backend)) {}
+  int workers() const override { return 1; }
+  bool whole_tree() const override { return true; }
+  bool uploads_values() const override { return gpu_; }
+  void prepare(const Analysis& an) override {
+    if (!gpu_) return;
+    executor().prepare(an, 1);
+    creation_seconds_ = 0;  // part of the analysis's device set-up, not a factorization's
+  }
+  void factorize(const Analysis& an, const std::vector<double>& scaled_values, MatrixType type,
+                 double static_pivot, NumericFactor& factor) override {
+    numeric::factorize(an, scaled_values, type, static_pivot, executor(), factor, cb_arena_);
+  }
+  bool solve(const Analysis& an, NumericFactor& factor, double* x, index_t nrhs) override {
+    Executor& e = executor();
+    if (e.solve(an, factor, x, nrhs)) return true;
+    host_solve(an, {&e}, factor, x, nrhs);
+    return false;
+  }
+  Backend backend() const override {
+    return executor_ ? executor_->backend() : gpu_ ? Backend::cuda : Backend::cpu;
+  }
+  void report(FactorStats& fs) const override {
+    if (!executor_) return;
+    executor_->report(fs);
+    if (fs.backend == Backend::cuda) fs.device_phases.setup += creation_seconds_;
+    creation_seconds_ = 0;
+  }
+  void release_workspaces() noexcept override { cb_arena_.clear(); }
+  void release() noexcept override {
+    std::vector<double>().swap(cb_arena_);
+    executor_.reset();
+  }
+  void drop_executors() noexcept override { executor_.reset(); }
+
+ private:
+  Executor& executor() {
+    if (!executor_) {
+      const Timer t;  // a new CUDA executor: device context, streams, library handles
+      executor_ = gpu_ ? make_cuda_executor(options_)
+                       : make_cpu_executor(options_.num_threads, options_.reproducible);
+      creation_seconds_ += t.seconds();
+    }
+    return *executor_;
+  }
+
+  Options options_;
+  bool gpu_;
+  std::unique_ptr<Executor> executor_;
+  std::vector<double> cb_arena_;
+  mutable double creation_seconds_ = 0;  // reported once, with the next factorization
+};
+
+class MultiWorkerDriver final : public NumericDriver {
+ public:
+  MultiWorkerDriver(const Options& o, int workers, int cpu_threads, MultiWorkerConfig config)
+      : options_(o), workers_(workers), cpu_threads_(cpu_threads), config_(std::move(config)) {}
+  int workers() const override { return workers_; }
+  bool whole_tree() const override { return false; }
+  bool uploads_values() const override { return cpu_threads_ == 0; }
+  void prepare(const Analysis& an) override {
+    if (cpu_threads_ > 0) return;
+    for (Executor* e : executors()) e->prepare(an, workers_);
+    creation_seconds_ = 0;  // part of the analysis's device set-up
+  }
+  void factorize(const Analysis& an, const std::vector<double>& scaled_values, MatrixType type,
+                 double static_pivot, NumericFactor& factor) override {
+    const std::vector<Executor*> execs = executors();
+    MultiWorkerConfig config = config_;
+    config.block_buffers = &blocks_;
+    devices_.clear();
+    factorize_multi(an, scaled_values, type, static_pivot, execs, factor, arenas_, config,
+                    &devices_);
+  }
+  bool solve(const Analysis& an, NumericFactor& factor, double* x, index_t nrhs) override {
+    host_solve(an, executors(), factor, x, nrhs);
+    return false;
+  }
+  Backend backend() const override {
+    return !executors_.empty() ? executors_[0]->backend()
+           : cpu_threads_ > 0  ? Backend::cpu
+                               : Backend::cuda;
+  }
+  void report(FactorStats& fs) const override {
+    fs.devices = devices_;
+    for (const auto& e : executors_) {  // device figures summed over the workers
+      FactorStats one;
+      e->report(one);
+      merge_device_figures(fs, one);
+    }
+    if (fs.backend == Backend::cuda) fs.device_phases.setup += creation_seconds_;
+    creation_seconds_ = 0;
+  }
+  void release_workspaces() noexcept override {
+    arenas_.clear();
+    blocks_ = BlockBuffers{};
+  }
+  void release() noexcept override { release_workspaces(); }
+  void drop_executors() noexcept override { executors_.clear(); }
+
+ private:
+  std::vector<Executor*> executors() {
+    if (static_cast<int>(executors_.size()) != workers_) {
+      const Timer t;
+      executors_.clear();
+      for (int d = 0; d < workers_; ++d)
+        executors_.push_back(cpu_threads_ > 0 ? make_cpu_executor(cpu_threads_)
+                                              : make_cuda_executor(options_, d));
+      creation_seconds_ += t.seconds();
+    }
+    std::vector<Executor*> execs;
+    for (auto& e : executors_) execs.push_back(e.get());
+    return execs;
+  }
+
+  Options options_;
+  int workers_, cpu_threads_;
+  MultiWorkerConfig config_;
+  std::vector<std::unique_ptr<Executor>> executors_;
+  std::vector<std::vector<double>> arenas_;
+  BlockBuffers blocks_;
+  std::vector<DeviceStats> devices_;
+  mutable double creation_seconds_ = 0;
+};
+
+}  // namespace
+
+std::unique_ptr<NumericDriver> make_tree_driver(const Options& options) {
+  return std::make_unique<TreeDriver>(options);
+}
+
+std::unique_ptr<NumericDriver> make_multi_worker_driver(const Options& options, int workers,
+                                                        int cpu_threads, MultiWorkerConfig config) {
+  if (workers < 1 || cpu_threads < 0)
+    throw InvalidInput("multi-worker driver: workers must be at least 1 (got " +
+                       std::to_string(workers) + ") and threads at least 0 (got " +
+                       std::to_string(cpu_threads) + ")");
+  return std::make_unique<MultiWorkerDriver>(options, workers, cpu_threads, std::move(config));
+}
+
+}  // namespace strata::numeric

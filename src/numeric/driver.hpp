@@ -1,0 +1,81 @@
+// strata — the numeric phase's drivers: how a Solver's factorization and its solves with
+// the factor run over the analysis, as cuDSS's and SPRAL SSIDS's numeric-phase objects.
+//
+// The Solver (src/core) does what every driver shares — the values checked and scaled,
+// Cholesky tried before LDLᵀ, the delayed pivoting of a general matrix on the host, the
+// statistics, the refinement — and leaves the numeric work to one NumericDriver:
+//   - the tree driver: one executor (CPU, or CUDA on device 0) factors the whole tree
+//     (numeric::factorize, multifrontal.cpp) and solves with it, on the device when the
+//     factor stayed there;
+//   - the multi-worker driver: one executor per worker (GPUs, or CPU executors for tests
+//     and benchmarks) over the analysis's split tree (numeric::factorize_multi,
+//     multi_device.cpp), the parts' panels fetched to the host for the solve;
+//   - the distributed driver (src/distributed): the factorization and the solves are
+//     collective over MPI ranks.
+// The analysis is made for the driver's workers() (Analysis::partition).
+#pragma once
+
+#include <memory>
+#include <vector>
+
+#include "numeric/factor.hpp"
+
+namespace strata::numeric {
+
+/// The numeric phases of one Solver (see the file header). A driver keeps its executors
+/// and their memory from one factorization to the next (refactorization allocates
+/// nothing); it is not thread-safe.
+class NumericDriver {
+ public:
+  virtual ~NumericDriver() = default;
+  /// Workers the analysis is split for (Analysis::partition.workers); 1: the whole tree.
+  virtual int workers() const = 0;
+  /// Whether the factorization is one executor's on the whole tree in this process (a
+  /// host algorithm may then take over, as delayed pivoting does).
+  virtual bool whole_tree() const = 0;
+  /// Whether the executors copy the scaled values from host memory to a GPU at every
+  /// factorization (the Solver page-locks them then).
+  virtual bool uploads_values() const = 0;
+  /// The device set-up that depends on the analysis alone (Executor::prepare: uploads,
+  /// the device memory plan, streams and library handles), done at analysis as cuDSS's
+  /// analysis phase does; nothing for host executors. Throws as factorize.
+  virtual void prepare(const Analysis& an) {}
+  /// Factors the scaled values (the analysis's canonical entry order) as `type` with
+  /// static pivots of size `static_pivot` into `factor`. Throws NotPositiveDefinite,
+  /// OutOfMemory (with the bytes), DeviceError, as the executors do.
+  virtual void factorize(const Analysis& an, const std::vector<double>& scaled_values,
+                         MatrixType type, double static_pivot, NumericFactor& factor) = 0;
+  /// x ← F⁻¹ x with the factor of the last factorize: x in tree numbering, n × nrhs
+  /// column-major. Panels kept on devices are fetched to `factor` first when the solve
+  /// runs on the host. Returns whether it ran on a GPU.
+  virtual bool solve(const Analysis& an, NumericFactor& factor, double* x, index_t nrhs) = 0;
+  /// Where the last factorization ran (FactorStats::backend; never automatic).
+  virtual Backend backend() const = 0;
+  /// Adds the last factorization's own figures to `fs`: the device figures (summed over
+  /// the workers), FactorStats::devices, the executors' creation time in setup.
+  virtual void report(FactorStats& fs) const = 0;
+  /// Frees the workspaces kept between factorizations (contribution-block arenas, block
+  /// buffers); the executors stay. For a new analysis.
+  virtual void release_workspaces() noexcept {}
+  /// Frees everything it holds, executors included (device memory): after an allocation
+  /// failure, so that the caller can free memory and try again.
+  virtual void release() noexcept {}
+  /// Gives up the executors after a failed device set-up (prepare): the next
+  /// factorization makes them again and meets the failure with its context.
+  virtual void drop_executors() noexcept {}
+};
+
+/// One executor on the whole tree, made on first use: the CUDA executor on device 0 when
+/// options.backend resolves to CUDA (base/device.hpp uses_cuda), else the CPU executor
+/// with options.num_threads and options.reproducible.
+std::unique_ptr<NumericDriver> make_tree_driver(const Options& options);
+
+/// One executor per worker over the split tree (factorize_multi with `config`; the
+/// driver keeps the block buffers between factorizations): GPUs 0 .. workers − 1 with
+/// `options` when cpu_threads is 0, else `workers` CPU executors of cpu_threads threads
+/// each (tests and benchmarks run the multi-GPU path so). Throws InvalidInput for
+/// workers < 1 or cpu_threads < 0.
+std::unique_ptr<NumericDriver> make_multi_worker_driver(const Options& options, int workers,
+                                                        int cpu_threads, MultiWorkerConfig config);
+
+}  // namespace strata::numeric
