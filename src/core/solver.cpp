@@ -160,10 +160,9 @@ void resize_scaled(SolverState& s, std::size_t n, const char* what) {
   sized_resize(s.scaled, n, what);
 }
 
-// Pins the scaled values for the GPU uploads when a CUDA executor will read them (an
-// upload from pageable memory ran at about 10 GB/s: 12 ms of elasticity 50³'s 0.21 s
-// refactorization on the H100; pinned, the same bytes take a fifth of that). Kept while
-// the storage stays; nothing when pinning is refused.
+// Pins the scaled values for the GPU uploads when a CUDA executor will read them (a copy
+// from pageable memory goes through a staging buffer at a fraction of the pinned rate).
+// Kept while the storage stays; nothing when pinning is refused.
 void pin_scaled(SolverState& s) {
   const std::size_t bytes = s.scaled.size() * sizeof(double);
   if (s.scaled_pin && s.scaled_pin->data() == s.scaled.data() && s.scaled_pin->bytes() == bytes)
@@ -204,8 +203,8 @@ double prepare_devices(SolverState& s) {
 // pattern the solver keeps for the residuals, the scaled values' storage and the value
 // pass's per-range sums (64 MB for n = 10⁶, zero-filled the first time), made here
 // so that the first factorization copies only values, as every refactorization does (the
-// pattern copy and the first touch of these arrays were 0.2 s of elasticity 50³'s first
-// factorization, against 0.02 s of input work in a refactorization).
+// pattern copy and the first touch of these arrays are otherwise several times the input
+// work of a refactorization).
 void keep_analyzed_input(SolverState& s, const SparseMatrix& a) {
   const Analysis& an = *s.analysis;
   if (!has_analyzed_pattern(an, a, host_arena(s))) return;

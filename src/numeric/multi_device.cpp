@@ -27,9 +27,8 @@
 // 46, 1999). Upper parts are not stolen: there are few of them, and their owners were
 // chosen (earliest finish in the partition's list schedule) where their inputs are ready
 // first. Without the barrier a worker whose subtrees are done goes on up its side of the
-// tree while another still factors a large subtree: lap3d 100³ on 2 workers had one
-// subtree of 44% of the flops on one worker while the other, after 31% in small subtrees,
-// idled until it was done (the estimate for that split was 1.46×, as measured). Every
+// tree while another still factors a large subtree (with a barrier it idles until the
+// large subtree is done: schedule/tree_partition.cpp says when that matters). Every
 // front is factored by the same executor code as on one worker, so with executors of the
 // same kind and thread count the factor is bitwise the one-worker factor.
 //

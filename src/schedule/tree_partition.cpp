@@ -33,12 +33,11 @@
 // chosen for that schedule: a layer's parts, largest first, each go to the worker that
 // would finish it first (earliest finish time, as in list scheduling of task graphs:
 // Topcuoglu, Hariri & Wu, IEEE TPDS 13, 2002). Why not a barrier per layer with LPT
-// owners, as until this was measured: on lap3d 100³ with 2 workers (4096-pivot blocks)
-// one subtree holds 44% of the flops and the other worker's 29 small ones 31%; the
-// separator chain above those 29 (16%) could only start after the big subtree, so the
-// best split left 25% of the flops to a serial top (estimate 1.46×, measured 1.46× on 2
-// H200s); with the list schedule it runs beside the big subtree (estimate 1.78×). A layer
-// may now have a single part, for the same reason.
+// owners: when one subtree holds a large share of the flops, the separator chain above
+// the other worker's small subtrees could only start after the big one, and the top
+// left serial caps the speedup; with the list schedule that chain runs beside the big
+// subtree (bench/history.md has the lap3d 100³ case). A layer may have a single part,
+// for the same reason.
 // The estimate counts no transfers: a part reads the blocks of its children in lower
 // layers, one block per such child, as the top part did. Within a layer's choice, the
 // work left above the candidate parts is not counted as serial: later layers split it

@@ -9,8 +9,8 @@
 // differently for different thread counts on the large fronts; Options::reproducible keeps
 // those single-threaded too (docs/reliability.md, "Determinism"). TBB
 // rather than OpenMP because idle OpenMP threads spin-wait (GOMP's default policy) and
-// starve OpenBLAS's own threads on small machines: measured on 2 cores, bcsstk09 took
-// 68 ms with OpenMP against 0.9 ms single-threaded. Each worker owns a dense front
+// starve OpenBLAS's own threads on small machines (bench/history.md). Each worker owns a
+// dense front
 // workspace, reused from front to front and from factorization to factorization.
 //
 // Per front f with m rows and k pivots:

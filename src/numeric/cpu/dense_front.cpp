@@ -96,9 +96,8 @@ namespace {
 
 // Bunch–Kaufman's α = (1 + √17)/8, which minimises the element growth bound.
 constexpr double kBkAlpha = 0.6403882032022076;
-// Tuning constants below were measured with OpenBLAS 0.3.21 on one thread (both its
-// generic Prescott kernels and its SkylakeX kernels; the crossovers barely moved) on a
-// shared, noisy 2-core Xeon VM: treat them as reasonable, not optimal.
+// Tuning constants below were chosen on one OpenBLAS thread (its generic and its SkylakeX
+// kernels gave nearly the same crossovers): reasonable, not optimal.
 // Fronts of at most this order are factored by plain right-looking loops (no BLAS calls).
 constexpr index_t kSmallLlt = 24;
 constexpr index_t kSmallLu = 24;

@@ -168,8 +168,8 @@ void CudaExecutor::prepare(const Analysis& an, int workers) {
       an.partition.part_of.size() == static_cast<std::size_t>(an.tree.n_fronts()))
     plan_parts(an, false);
   // A Cholesky factor keeps the analysis' row order (no pivoting): the device solve's row
-  // arrays are known now, and uploading them here rather than at the end of the first
-  // factorization took 0.04 s off a Laplacian 100³'s (end() finds them current).
+  // arrays are known now, and are uploaded here rather than at the end of the first
+  // factorization (end() finds them current).
   // An LU factor's rows differ from the analysis' only where a front's pivots were
   // interchanged: uploaded now, its arrays need only those fronts after each factorization.
   const bool cholesky = an.type == MatrixType::spd || an.type == MatrixType::automatic;
@@ -290,9 +290,9 @@ void CudaExecutor::download_panels(const Analysis& an, numeric::NumericFactor& f
     std::vector<double> pageable;  // when pinned memory cannot be had
     for (const int id : held_parts_) {
       const PartDevice& pd = parts_.at(id);
-      // through pinned memory (with a pageable buffer, the first host solve after a 4-GPU
-      // factorization of lap3d 80³ took 2.4 s against 0.6 s when the panels came back
-      // during the factorization; the pinned path is not yet measured)
+      // through pinned memory (a pageable buffer made the first host solve after a
+      // multi-GPU factorization several times slower than copying the panels back during
+      // the factorization)
       double* host = nullptr;
       try {
         host_staging_.resize(pd.panel_total);
@@ -403,10 +403,9 @@ void CudaExecutor::upload_solve_rows(const Analysis& an, const index_t* factor_r
   // LU: a front's local permutation moves its pivot rows only (factor_front_lu), so once
   // this analysis' arrays are on the device only the pivot rows of the fronts whose pivots
   // moved since are sent, packed into one copy and scattered on the device, with the two
-  // n-long pivot arrays. Sending all the rows (Σ m over the fronts) took 0.035 s of a
-  // 0.175 s refactorization of the flexible plate's Newton matrix on the H100; one copy
-  // per moved front took the tracked vehicle's (thousands of small fronts that pivot) from
-  // 15 to 21 ms per factorization.
+  // n-long pivot arrays: sending all the rows (Σ m over the fronts), or one copy per
+  // moved front, costs a large share of a multibody refactorization (thousands of small
+  // fronts that pivot).
   if (type == MatrixType::general && dsolve_.rows_analysis == an.id &&
       dsolve_.rows_type == MatrixType::general && dsolve_.rows_host.size() == t.rows.size()) {
     std::vector<std::int64_t> packed, seg;  // seg: destination, length, offset in packed

@@ -209,8 +209,7 @@ void CudaExecutor::plan_parts(const Analysis& an, bool whole) {
 // Every buffer a chunk grows on demand, at the largest size any chunk of `views` needs.
 // Growing frees the old allocation, and cudaFree / cudaFreeHost wait for the whole
 // device: done during the first factorization, each growth stalled the chunk pipeline
-// (the first factorization of lap3d 100³ took 0.52–0.64 s against 0.37 s for the
-// refactorizations on an H200; loading the CUDA modules eagerly did not change that).
+// and made the first factorization markedly slower than the refactorizations.
 // Done here, at analysis (prepare) or at the first begin_part, the factorizations
 // allocate nothing on the device.
 void CudaExecutor::presize_chunk_buffers(const Analysis& an,

@@ -33,7 +33,7 @@ constexpr int kThreads = 256;
 // arithmetic x / mc, x % mc cost more than the memory traffic it addressed).
 constexpr std::int64_t kMaxSliceCols = 64;
 constexpr std::int64_t kMinSliceCols = 8;
-constexpr std::int64_t kTargetBlocks = 2048;  // ≈ 16 blocks of 256 threads per H100 SM
+constexpr std::int64_t kTargetBlocks = 2048;  // ≈ 16 blocks of 256 threads per Hopper SM
 constexpr int kWarp = 32;
 
 // First child CB column whose parent column is at least c (rel is increasing).
@@ -279,7 +279,7 @@ __device__ void llt_front(double* F, std::int64_t m, std::int64_t k, std::int64_
 // trailing lower triangle by the rank-kSmallNb product of the panel with itself, reading
 // and writing each trailing entry once per panel. The unblocked kernel (llt_front) read and
 // wrote the whole trailing triangle in global memory once per pivot, with a 64-bit
-// division per entry: a small front of 200 pivots took 200 such passes. The arithmetic is
+// division per entry: a small front of k pivots made k such passes. The arithmetic is
 // the unblocked one's in another order (same operations per entry, summed panel by panel).
 constexpr int kSmallNb = 16;
 __device__ void llt_front_blocked(double* F, std::int64_t m, std::int64_t k, std::int64_t* info,

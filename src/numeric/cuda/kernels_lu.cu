@@ -6,7 +6,7 @@
 // kernels of kernels_lu_panel.cu): cuSOLVER GETRF on the k×k fully summed block A11 — partial
 // pivoting over the fully summed rows only, which is exactly the restricted pivoting of the CPU
 // kernel — then the row interchanges applied to A12, two TRSMs and one GEMM. GETRF runs
-// first without pivoting (on the H100 six times faster at k = 1,024: partial pivoting's
+// first without pivoting (several times faster at the large fronts' k: partial pivoting's
 // search and swaps are what make GETRF slow there), and that factor is kept only when
 // partial pivoting would have chosen the same pivots, i.e. every multiplier |L(i,j)| is
 // at most 1 (largest magnitude, first on ties: the diagonal); otherwise the front is
@@ -18,9 +18,9 @@
 // pivot choices (largest magnitude, first on ties), so the result is the CPU's within
 // rounding either way.
 //
-// The two TRSMs (L₂₁ = A₂₁U₁₁⁻¹, U₁₂ = L₁₁⁻¹A₁₂) run at 0.1–0.5 TFLOP/s on separator-front
-// shapes (H100: m = 600 k = 100 0.11, m = 1,000 k = 256 0.46) and were 30% of unsymmetric
-// elasticity 30³'s GPU time under Nsight Compute. Splitting them by recursion into 64-wide
+// The two TRSMs (L₂₁ = A₂₁U₁₁⁻¹, U₁₂ = L₁₁⁻¹A₁₂) run far below the device's rate on
+// separator-front shapes and are a large share of an unsymmetric factorization's GPU time
+// (bench/history.md). Splitting them by recursion into 64-wide
 // cuBLAS TRSMs and DGEMMs gave the same rates (cuBLAS already does that); base cases of our
 // own (one thread per row of B, the triangle in shared memory) took twice cuBLAS's kernel
 // time there, too few rows per call to fill the device, and no wall-clock gain (2026-11-23);

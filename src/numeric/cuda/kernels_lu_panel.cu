@@ -6,9 +6,8 @@
 // Why: the library path (kernels_lu.cu) is one cuSOLVER GETRF of the k×k fully summed
 // block A11 and two cuBLAS TRSMs (L21 = A21·U11⁻¹, U12 = L11⁻¹·A12) per front, and at
 // the shapes of a multifrontal LU those run far below the device's rate: under Nsight
-// Compute (H100, unsymmetric elasticity 30³, bench/results/logs/
-// ncu-kernels-uelast3d-30-a74f275.txt) GETRF and the two TRSMs were 57% of the kernel
-// time and the contribution-block GEMM, where most flops are, about 12%.
+// Compute GETRF and the two TRSMs take most of the kernel time, the contribution-block
+// GEMM, where most flops are, a small share (bench/history.md has the profile).
 //
 // How: the right-looking blocked LU of the strip without pivoting (Golub & Van Loan,
 // "Matrix Computations", 4th ed., §3.2.11), in steps of 64 columns,

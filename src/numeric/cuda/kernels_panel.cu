@@ -3,12 +3,9 @@
 // three launches per 64-column step (see kernels.cuh, launch_llt_panel).
 //
 // Why: cuSOLVER POTRF and cuBLAS TRSM are one library call per front, and at the shapes of
-// the large fronts of a multifrontal factorization they run far below the device's peak.
-// Measured on the H100 (bench_gpu_memory --parts kernels, REPORT §4): POTRF 0.05 / 0.2 /
-// 0.8 TFLOP/s at k = 250 / 500 / 1000 and TRSM 0.9 / 2.4 / 5.6 TFLOP/s at the same k, where
-// DGEMM reaches 64; 32 fronts side by side on 8 streams reach 2–24 TFLOP/s in aggregate.
-// In lap3d 100³ the POTRFs and TRSMs of fronts with k ≤ 2048 were about half the time of
-// the fronts over 256 rows.
+// the large fronts of a multifrontal factorization they run far below the device's peak,
+// also side by side on several streams (bench_gpu_memory --parts kernels, bench/REPORT.md
+// §4), and they are a large share of the time of the fronts over 256 rows.
 //
 // How: the right-looking blocked Cholesky of the front's first k columns (Golub & Van Loan,
 // "Matrix Computations", 4th ed., §4.2.9), in steps of kStep = 64 columns, each step one

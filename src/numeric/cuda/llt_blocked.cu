@@ -3,10 +3,8 @@
 // A front F (m × m, column-major, lower triangle) with k pivots needs L₁₁ = chol(F₁₁)
 // and L₂₁ = F₂₁ L₁₁⁻ᵀ before the update of its contribution block. One cuSOLVER POTRF of
 // order k and one cuBLAS TRSM of (m−k) × k do that, but at the sizes of separator fronts
-// both run far below the GPU's DGEMM rate: on an H100, POTRF of order 1,000 reached 0.8
-// TFLOP/s and the TRSM of 3,000 × 1,000 5.6 TFLOP/s, while the SYRK of the same front's
-// update reached 40 (bench/REPORT.md, "Dense kernels at the shapes of large fronts") —
-// the pivot block and panel took four times the update's time.
+// both run far below the GPU's DGEMM rate, and the pivot block and panel take longer than
+// the update (bench/REPORT.md, "Dense kernels at the shapes of large fronts").
 //
 // Here the k pivot columns go in blocks of nb, right-looking (the blocked Cholesky of
 // LAPACK's DPOTRF, Golub & Van Loan, Matrix Computations, 4th ed., §4.2.9, applied to

@@ -3,12 +3,11 @@
 //
 // A front F (m × m, column-major, lower triangle) with k pivots needs L₁₁ = chol(F₁₁) and
 // L₂₁ = F₂₁ L₁₁⁻ᵀ before the update of its contribution block. cuSOLVER POTRF and cuBLAS
-// TRSM do that at a fraction of the device's rate at the shapes of separator fronts: on
-// an H100, POTRF of order 1,000 took 0.42 ms whatever m (0.8 TFLOP/s), the TRSM of
-// 3,000 × 1,000 ran at 5.6 TFLOP/s, and the pair took four times the SYRK of the same
-// front's update (bench/REPORT.md, "Dense kernels at the shapes of large fronts"). Cutting
-// the k columns into blocks and calling POTRF and TRSM per block did not help
-// (llt_blocked.cu): those calls cost about as much per block as for all k.
+// TRSM do that at a fraction of the device's rate at the shapes of separator fronts, the
+// pair slower than the SYRK of the same front's update (bench/REPORT.md, "Dense kernels at
+// the shapes of large fronts"). Cutting the k columns into blocks and calling POTRF and
+// TRSM per block does not help (llt_blocked.cu): those calls cost about as much per block
+// as for all k.
 //
 // Here the m × k panel P is factored by the recursive Cholesky of Gustavson & Jonsson
 // ("Minimal-storage high-performance Cholesky factorization via blocking and recursion",
@@ -66,15 +65,9 @@ constexpr int kThreads = 2 * kBase;  // one row each: the diagonal block's, then
 // updates its entries right of j, a(t, c) −= l(t, j)·U(c, j)/√d; the diagonal block's
 // threads then publish column j + 1 into U's next column (no column is written twice, so
 // one barrier per column is enough).
-// Measured per base case on the H100 (a throwaway driver, 4,000 / 10,000 / 16,000 /
-// 30,000 rows, w = 64, including the launch): 24 / 24 / 24 / 53 µs, against 32 / 38 / 38 /
-// 70 µs for the version before (256 threads in a 16 × 16 grid of 4 × 4 register tiles:
-// its selects for the triangle and the owners' branch made ~118 instructions per column
-// and thread). Under Nsight Compute the limit of both is issue latency, not the FP64 pipe:
-// the fully unrolled code (~14,000 instructions for a blocked variant that was tried) stalls
-// on instruction fetch about 40% of the time and on the barrier about 30%; a variant with the
-// rows in shared memory and rolled loops was slower (44 µs), one with 32 columns per base
-// case 11–14 µs per 32 columns.
+// The limit of this kernel is issue latency, not the FP64 pipe (Nsight Compute); the
+// variants measured against it (a 16 × 16 grid of register tiles, rows in shared memory
+// with rolled loops, 32 columns per base case) are in bench/history.md.
 __global__ void __launch_bounds__(kThreads)
     llt_base_kernel(double* P, std::int64_t ld, std::int64_t rows, int w, double* slot, int* info,
                     std::int64_t col0) {

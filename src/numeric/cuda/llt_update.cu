@@ -1,21 +1,14 @@
 // strata — the contribution-block update of one large Cholesky front on the GPU,
 // C −= L₂₁L₂₁ᵀ (lower triangle), by one cuBLAS call chosen by shape.
 //
-// cuBLAS DSYRK has two kinds of kernel on the H100: a tensor-core one (`sm90_xmma_syrk…`)
+// cuBLAS DSYRK has two kinds of kernel on Hopper: a tensor-core one (`sm90_xmma_syrk…`)
 // and a generic one (`syherk_kernel_core`). Which one runs depends on the shape, and the
-// generic one stays at 2–4 TFLOP/s whatever the size. Measured on the H100 (a throwaway
-// driver, C of order n below a panel of k columns, rates counting n²k flops; 2026-11-23):
-// the tensor-core kernel ran from about n·k ≥ 240,000 (n = 1,000 k = 256: 15.2 TFLOP/s;
-// n = 2,000 k = 128: 19.7; n = 4,000 k = 64: 9.2), the generic one below it (n = 1,000
-// k = 192: 3.7; n = 2,000 k = 96: 4.2; n = 3,000 k = 64: 4.0). There, one DGEMM of the
-// whole n × n square — twice the flops, on the tensor cores — took less time: n = 1,000
-// k = 192 15.2 TFLOP/s by the same count, n = 2,000 k = 96 12.9, n = 3,000 k = 64 6.5,
-// n = 1,200 k = 48 6.6 against 3.5; and it lost where SYRK's kernel is the tensor-core one
-// or the square is small (n = 400 k = 64: 0.97 against 1.37; n = 1,000 k = 32: 2.1
-// against 2.8). The rule below takes the GEMM inside the region where it won:
-// n·k < 240,000 and either n ≥ 1,000 with k ≥ 48, or n ≥ 400 with k ≥ 192.
-// In Nsight Compute's kernel times of a lap3d 80³ refactorization the generic SYRK kernel
-// was 13% of the GPU time (1,194 calls, the fronts whose panels our kernels factor).
+// generic one stays slow whatever the size: below about n·k = 240,000 (C of order n below
+// a panel of k columns) one DGEMM of the whole n × n square — twice the flops, on the
+// tensor cores — takes less time, except where the square is small. The rule below takes
+// the GEMM inside the region where it was measured faster (bench/history.md, "DSYRK
+// against DGEMM"): n·k < 240,000 and either n ≥ 1,000 with k ≥ 48, or n ≥ 400 with
+// k ≥ 192.
 //
 // The GEMM also writes C's strict upper triangle. Nothing reads it: the contribution
 // block is stored from its lower triangle (store_cb_kernel), the factor panels are the

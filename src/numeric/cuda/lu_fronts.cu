@@ -25,8 +25,8 @@
 //   with the interchanges themselves (the multibody Newton matrices have many such fronts:
 //   862 of the flexible plate's 1,051, whose rejections fell from 276 to 19).
 //
-//   by the library (nb = 0): cuSOLVER GETRF without pivoting on A11 (six times faster
-//   than with pivoting at k = 1,024 on the H100) and its check, one wait, then two cuBLAS
+//   by the library (nb = 0): cuSOLVER GETRF without pivoting on A11 (several times faster
+//   than with pivoting at the large fronts' k) and its check, one wait, then two cuBLAS
 //   TRSMs and the GEMM — what ran before the batched kernels, kept for comparison
 //   (bench_gpu_memory --parts lu-panel).
 //

@@ -51,8 +51,9 @@ struct SolveTree {
 /// Rows of one front handled by one block of the gather and scatter kernels.
 constexpr std::int64_t kChunkRows = 256;
 
-// The time model of the planner (seconds, bytes). Estimates for an H100, not measured
-// per front; they only need to be right within a factor of a few to pick the path.
+// The time model of the planner (seconds, bytes). Estimates for a Hopper GPU, not
+// measured per front; they only need to be right within a factor of a few to pick the
+// path.
 // One 256-thread block streaming a panel: the device's ~3 TB/s over 132 SMs is ~25 GB/s
 // per SM when all are busy.
 constexpr double kBlockBytesPerSecond = 20e9;

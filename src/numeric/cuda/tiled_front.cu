@@ -17,7 +17,7 @@
 //     block's transfers run while the other's update computes.
 // The contribution block F[k:m, k:m] is then copied where the device plan keeps it (by
 // the host's threads when that is the host arena: a 2-D cudaMemcpy between host buffers
-// was 60% of lap3d 100³'s factorization under a budget of 1/20 of its factor), and the
+// runs on one thread and dominated the factorization under a small budget), and the
 // panels into the host factor (and the resident device factor, if any).
 // Traffic is about k·m²/w doubles each way: this is the slow, always-possible path; the
 // memory plan makes it the exception (a front whose working set alone exceeds the budget).

@@ -9,8 +9,8 @@
 // additions run at memory bandwidth; a child block that stayed on the device comes over in
 // one DMA copy. The front is built by blocks of columns, in parallel, each block zeroed and
 // then given its entries and each child's columns that land in it (the device kernel's
-// slices, on the host; measured no faster than whole-front passes on lap3d 100³ — host
-// memory bandwidth bounds both — but one front's work spreads over the threads). The
+// slices, on the host; no faster than whole-front passes — host memory bandwidth bounds
+// both — but one front's work spreads over the threads). The
 // additions themselves are numeric/assembly.hpp's, the CPU executor's. The order of the additions
 // is the kernel's (entries, then children one after another, each destination written once per
 // child), so the front is bitwise the same.

@@ -34,10 +34,9 @@
 // into the panel buffer's tail like an unprefetched front's. A pending one is joined
 // before any failure leaves the executor (factor_batch) and at every part's start and end. Both
 // panel buffers are sized once, at the largest tiled front's need (presize_chunk_buffers): they
-// trade places at every prefetched front, and when each grew on demand the prefetch measured slower
-// than none (lap3d 60³ under 1/50 of its factor on the H100: tiled assembly 0.064 → 0.231 s for 5
-// prefetched fronts) — each growth is a cudaFreeHost, which waits for the device, and the pinning
-// of the pages again.
+// trade places at every prefetched front, and when each grew on demand the prefetch was slower
+// than none — each growth is a cudaFreeHost, which waits for the device, and the pinning of the
+// pages again.
 //
 // Traffic, against the right-looking slab scheme this replaced (every slab read and
 // wrote the whole trailing lower triangle, about k·m²/(2w) doubles each way): step 1
@@ -45,8 +44,8 @@
 // and writes the lower triangle of C once — b ≫ w on a front that does not fit, so the
 // contribution block, the bulk of a top front, is read a few times instead of k/w times,
 // and written once. Narrow pieces (the option) make w and b larger still — up to 3× —
-// for products of depth s instead of w or k. Measured on the H100 (bench/REPORT.md §4):
-// lap3d 100³ under 1/20 of its factor 2.43 → 2.18 s with the default pieces.
+// for products of depth s instead of w or k (bench/REPORT.md §4 measures the default
+// pieces).
 //
 // Source: the left-looking (jki / "lazy") Cholesky of Golub & Van Loan, "Matrix
 // Computations", 4th ed., §4.2.8–4.2.9, with the slab as the unit of transfer, and the
