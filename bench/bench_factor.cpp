@@ -6,23 +6,34 @@
 // medians over --repeat factorizations (strata: refactorize, which is what the multibody
 // loop calls; CHOLMOD: cholmod_l_factorize on the same symbolic object; MUMPS: JOB=2).
 // All three use the same OpenBLAS with --threads threads.
+// Memory: each solver's analysis and first factorization also run once in a fresh process
+// (this binary again, --measure-memory SOLVER) whose peak resident set (VmHWM) is
+// reported next to the times, with the same input in every process (the problem loaded,
+// CHOLMOD and MUMPS given strata's permutation from a file), so that the figures compare;
+// strata's is also set against the analysis's reported peak working memory plus the
+// input. --no-memory skips it.
 // Results: bench/results/factor-*.json (factor-<tag>-*.json with --tag).
 //
 //   bench_factor [--problems a,b,...] [--repeat R] [--threads T] [--max-block-size N]
-//                [--no-mumps] [--tag NAME] [--results-dir DIR]
+//                [--no-mumps] [--no-memory] [--tag NAME] [--results-dir DIR]
 #include <cholmod.h>
 #include <fmt/core.h>
+#include <unistd.h>
 
 #include <CLI/CLI.hpp>
 #include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <memory>
+#include <string>
 
 #ifdef STRATA_BENCH_HAVE_MUMPS
 #include <dmumps_c.h>
 #endif
 
-#include "bench_common.hpp"
 #include "base/blas.hpp"
 #include "base/timer.hpp"
+#include "bench_common.hpp"
 #include "crash_report.hpp"
 #include "strata/strata.hpp"
 
@@ -93,6 +104,83 @@ RefResult run_mumps(const SparseMatrix& a, const std::vector<index_t>& perm,
 }
 #endif
 
+// Peak resident set of this process so far (VmHWM in /proc/self/status), in bytes; 0
+// where it cannot be read.
+std::size_t peak_rss_bytes() {
+  std::ifstream in("/proc/self/status");
+  std::string line;
+  while (std::getline(in, line))
+    if (line.rfind("VmHWM:", 0) == 0) return std::stoull(line.substr(6)) * 1024;
+  return 0;
+}
+
+// --measure-memory SOLVER (a child process): loads the problem, runs SOLVER's analysis and
+// one factorization (CHOLMOD and MUMPS with the permutation in perm_file) and prints
+// {"input_rss_bytes": …, "peak_rss_bytes": …} on stdout. Returns the exit status.
+int measure_memory(const std::string& solver, const std::string& name, int threads,
+                   index_t max_block, const std::string& perm_file) {
+  openblas_set_num_threads(threads);
+  bench::Problem p = bench::load_problem(name);
+  const index_t n = p.a.n_rows;
+  std::vector<double> ones(n, 1.0), b(n);
+  multiply(p.a, ones.data(), b.data());
+  std::vector<index_t> perm;
+  if (solver != "strata") {
+    std::ifstream in(perm_file);
+    index_t v = 0;
+    while (in >> v) perm.push_back(v);
+    if (static_cast<index_t>(perm.size()) != n) {
+      fmt::print(stderr, "--measure-memory: {} holds {} entries, not n = {}\n", perm_file,
+                 perm.size(), n);
+      return 1;
+    }
+  }
+  const std::size_t input = peak_rss_bytes();
+  if (solver == "strata") {
+    Options o;
+    o.type = MatrixType::spd;
+    o.num_threads = threads;
+    o.max_block_size = max_block;
+    Solver s(o);
+    s.factorize(p.a);
+  } else if (solver == "cholmod") {
+    if (!run_cholmod(p.a, perm, b, 1).ok) return 1;
+#ifdef STRATA_BENCH_HAVE_MUMPS
+  } else if (solver == "mumps") {
+    if (!run_mumps(p.a, perm, b, true, 1).ok) return 1;
+#endif
+  } else {
+    fmt::print(stderr, "--measure-memory: unknown solver '{}'\n", solver);
+    return 2;
+  }
+  fmt::print("{}\n", json{{"input_rss_bytes", input}, {"peak_rss_bytes", peak_rss_bytes()}}.dump());
+  return 0;
+}
+
+// The peak resident set of `solver` on problem `name` in a fresh process (this binary with
+// --measure-memory); null when it could not be measured.
+json memory_of(const std::string& solver, const std::string& name, int threads, index_t max_block,
+               const std::string& perm_file) {
+  char self[4096];
+  const ssize_t len = readlink("/proc/self/exe", self, sizeof self - 1);
+  if (len <= 0) return json();
+  self[len] = '\0';
+  const std::string cmd = fmt::format(
+      "'{}' --measure-memory {} --problems '{}' --threads {} --max-block-size {} --perm-file '{}'",
+      self, solver, name, threads, max_block, perm_file);
+  std::unique_ptr<FILE, int (*)(FILE*)> pipe(popen(cmd.c_str(), "r"), pclose);
+  if (!pipe) return json();
+  std::string text;
+  char buf[256];
+  while (std::fgets(buf, sizeof buf, pipe.get())) text += buf;
+  if (pclose(pipe.release()) != 0) return json();
+  try {
+    return json::parse(text);
+  } catch (const json::exception&) {
+    return json();
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -109,6 +197,16 @@ int main(int argc, char** argv) {
   app.add_option("--threads", threads, "threads for every solver (OpenBLAS and strata)");
   app.add_option("--max-block-size", max_block, "strata's maximum block size");
   app.add_flag("--no-mumps", no_mumps, "skip MUMPS");
+  bool no_memory = false;
+  app.add_flag("--no-memory", no_memory,
+               "skip the peak resident set of each solver (measured in fresh processes)");
+  std::string measure, perm_file;
+  app.add_option("--measure-memory", measure,
+                 "internal: run this solver once on the one problem and print its peak "
+                 "resident set")
+      ->group("");
+  app.add_option("--perm-file", perm_file, "internal: the permutation for --measure-memory")
+      ->group("");
   std::string tag, results_dir;
   app.add_option("--tag", tag,
                  "label stored in the results (\"tag\") and added to the file name, e.g. mbs-64")
@@ -116,6 +214,13 @@ int main(int argc, char** argv) {
   app.add_option("--results-dir", results_dir,
                  "folder for the results file (default bench/results)");
   CLI11_PARSE(app, argc, argv);
+  if (!measure.empty()) {
+    if (problems.size() != 1) {
+      fmt::print(stderr, "--measure-memory takes one problem\n");
+      return 2;
+    }
+    return measure_memory(measure, problems[0], threads, max_block, perm_file);
+  }
   openblas_set_num_threads(threads);
 
   json out = bench::run_metadata(argc, argv);
@@ -179,6 +284,51 @@ int main(int argc, char** argv) {
                   {"backward_error", c.backward_error},
                   {"ok", c.ok}}}};
     if (m.ok) row["mumps"] = {{"seconds", m.seconds}, {"backward_error", m.backward_error}};
+    std::string rss = "";
+    if (!no_memory) {
+      const std::string pf = fmt::format("/tmp/strata-bench-perm-{}-{}.txt", getpid(), name);
+      {
+        std::ofstream f(pf);
+        for (index_t v : s.permutation()) f << v << '\n';
+      }
+      const json ms = memory_of("strata", name, threads, max_block, pf);
+      const json mc = memory_of("cholmod", name, threads, max_block, pf);
+      json mm;
+#ifdef STRATA_BENCH_HAVE_MUMPS
+      if (m.ok) mm = memory_of("mumps", name, threads, max_block, pf);
+#endif
+      std::remove(pf.c_str());
+      if (ms.is_object()) {
+        row["strata"]["peak_rss_bytes"] = ms["peak_rss_bytes"];
+        row["input_rss_bytes"] = ms["input_rss_bytes"];
+        // what the analysis said the factorization needs, beside the input
+        row["strata"]["reported_peak_bytes"] =
+            an.peak_working_bytes + ms["input_rss_bytes"].get<std::size_t>();
+      }
+      // a solver's own memory: its process's peak above what the process held with the
+      // input loaded (the libraries' and the input's pages, the same in every process)
+      auto own = [](const json& x) {
+        return x["peak_rss_bytes"].get<double>() - x["input_rss_bytes"].get<double>();
+      };
+      if (ms.is_object()) row["strata"]["rss_above_input_bytes"] = own(ms);
+      if (mc.is_object()) {
+        row["cholmod"]["peak_rss_bytes"] = mc["peak_rss_bytes"];
+        row["cholmod"]["rss_above_input_bytes"] = own(mc);
+      }
+      if (mm.is_object() && row.contains("mumps")) {
+        row["mumps"]["peak_rss_bytes"] = mm["peak_rss_bytes"];
+        row["mumps"]["rss_above_input_bytes"] = own(mm);
+      }
+      if (ms.is_object() && mc.is_object() && mc["peak_rss_bytes"].get<double>() > 0) {
+        const double r = ms["peak_rss_bytes"].get<double>() / mc["peak_rss_bytes"].get<double>();
+        row["rss_ratio_cholmod"] = r;
+        if (own(mc) > 0) row["rss_above_input_ratio_cholmod"] = own(ms) / own(mc);
+        rss = fmt::format(
+            "  peak RSS {:.0f} / {:.0f} MB ({:.2f}×; above the input {:.0f} / {:.0f} MB)",
+            ms["peak_rss_bytes"].get<double>() * 1e-6, mc["peak_rss_bytes"].get<double>() * 1e-6, r,
+            own(ms) * 1e-6, own(mc) * 1e-6);
+      }
+    }
     row["ratio_cholmod"] = ts / c.seconds;
     ratio_c.push_back(ts / c.seconds);
     if (m.ok) {
@@ -186,9 +336,10 @@ int main(int argc, char** argv) {
       ratio_m.push_back(ts / m.seconds);
     }
     fmt::print(
-        "{:<18} {:>8} {:>11} {:>9.4f} {:>8.2f} {:>9.4f} {:>9} {:>7.3f} {:>7} {:>9.1e} {:>9.1e}\n",
+        "{:<18} {:>8} {:>11} {:>9.4f} {:>8.2f} {:>9.4f} {:>9} {:>7.3f} {:>7} {:>9.1e} {:>9.1e}{}\n",
         name, n, an.nnz_l, ts, gflops, c.seconds, m.ok ? fmt::format("{:.4f}", m.seconds) : "-",
-        ts / c.seconds, m.ok ? fmt::format("{:.3f}", ts / m.seconds) : "-", be, c.backward_error);
+        ts / c.seconds, m.ok ? fmt::format("{:.3f}", ts / m.seconds) : "-", be, c.backward_error,
+        rss);
     std::fflush(stdout);
     out["rows"].push_back(row);
   }

@@ -492,7 +492,12 @@ class Report(GpuSections, Distributed, EndToEnd, IftommSection):
         header = ["problem", "n", "nnz(L)", "flops", "strata s", "GFLOP/s"]
         header += [f"{n} s" for _, n in anchors] + [f"strata/{n}" for _, n in anchors]
         header += ["berr strata"] + [f"berr {n}" for _, n in anchors] + ["refinement steps"]
+        memory = any(num(dig(row, "strata", "peak_rss_bytes")) is not None for row in r.rows)
+        if memory:
+            header += ["peak RSS strata MB", "peak RSS strata/CHOLMOD",
+                       "above input strata/CHOLMOD", "RSS / reported peak"]
         rows, ratios = [], {k: [] for k, _ in anchors}
+        rss_ratios = []
         for row in r.rows:
             s = row.get("strata", {})
             line = [str(row.get("problem")), f_int(row.get("n")), f_int(row.get("nnz_l")),
@@ -508,10 +513,20 @@ class Report(GpuSections, Distributed, EndToEnd, IftommSection):
             line.append(f_e(s.get("backward_error")))
             line += [f_e(dig(row.get(k), "backward_error")) for k, _ in anchors]
             line.append(f_int(s.get("refinement_steps")))
+            if memory:
+                rss = num(s.get("peak_rss_bytes"))
+                x = ratio(rss, dig(row, "cholmod", "peak_rss_bytes"))
+                rss_ratios.append((row.get("problem"), x))
+                line += [f_g(rss * 1e-6) if rss is not None else "–", f_ratio(x),
+                         f_ratio(ratio(s.get("rss_above_input_bytes"),
+                                       dig(row, "cholmod", "rss_above_input_bytes"))),
+                         f_ratio(ratio(rss, s.get("reported_peak_bytes")))]
             rows.append(line)
         gm = ["**geometric mean**"] + [""] * (5 + len(anchors))
         gm += [f_ratio(geomean([x for _, x in ratios[k]])) for k, _ in anchors]
         gm += [""] * (2 + len(anchors))
+        if memory:
+            gm += ["", f_ratio(geomean([x for _, x in rss_ratios])), "", ""]
         rows.append(gm)
         threads = r.get("threads")
         mbs = r.get("max_block_size")
@@ -520,7 +535,12 @@ class Report(GpuSections, Distributed, EndToEnd, IftommSection):
                + (f", strata max_block_size {mbs}" if mbs is not None else "")
                + ". Times: median of the run's refactorizations, in seconds; nnz(L) and "
                "flops are strata's; berr is the backward error ‖b−Ax‖∞/(‖A‖∞‖x‖∞+‖b‖∞) of "
-               "each solver's solution of A x = A·1 (strata with iterative refinement).")
+               "each solver's solution of A x = A·1 (strata with iterative refinement)."
+               + (" Peak RSS: the peak resident set of each solver's analysis and first "
+                  "factorization, each in a fresh process with the same input ('above "
+                  "input': the peak less what the process held with the input loaded); "
+                  "'reported peak' is the analysis's peak working memory plus that input."
+                  if memory else ""))
         self.w()
         self.w(table(header, rows))
         chol_nnz = [(row.get("problem"), ratio(row.get("nnz_l"), dig(row, "cholmod", "nnz_l")))
@@ -535,7 +555,7 @@ class Report(GpuSections, Distributed, EndToEnd, IftommSection):
             missing.append("solve time")
         if not any(num(dig(row, "strata", "total_seconds")) is not None for row in r.rows):
             missing.append("total (analysis + factorization + solve) time")
-        if not any(num(dig(row, "strata", "peak_memory_bytes")) is not None for row in r.rows):
+        if not memory:
             missing.append("memory")
         if missing:
             self.w(f"{NOT_MEASURED} in this run: " + ", ".join(missing)
