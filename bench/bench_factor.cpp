@@ -104,6 +104,15 @@ RefResult run_mumps(const SparseMatrix& a, const std::vector<index_t>& perm,
 }
 #endif
 
+// strata's options in this benchmark: Cholesky, the threads and block size asked for.
+Options strata_options(int threads, index_t max_block) {
+  Options o;
+  o.type = MatrixType::spd;
+  o.num_threads = threads;
+  o.max_block_size = max_block;
+  return o;
+}
+
 // Peak resident set of this process so far (VmHWM in /proc/self/status), in bytes; 0
 // where it cannot be read.
 std::size_t peak_rss_bytes() {
@@ -137,11 +146,7 @@ int measure_memory(const std::string& solver, const std::string& name, int threa
   }
   const std::size_t input = peak_rss_bytes();
   if (solver == "strata") {
-    Options o;
-    o.type = MatrixType::spd;
-    o.num_threads = threads;
-    o.max_block_size = max_block;
-    Solver s(o);
+    Solver s(strata_options(threads, max_block));
     s.factorize(p.a);
   } else if (solver == "cholmod") {
     if (!run_cholmod(p.a, perm, b, 1).ok) return 1;
@@ -242,11 +247,7 @@ int main(int argc, char** argv) {
     const index_t n = p.a.n_rows;
     std::vector<double> ones(n, 1.0), b(n);
     multiply(p.a, ones.data(), b.data());
-    Options o;
-    o.type = MatrixType::spd;
-    o.num_threads = threads;
-    o.max_block_size = max_block;
-    Solver s(o);
+    Solver s(strata_options(threads, max_block));
     s.analyze(p.a);
     Timer t0;
     s.factorize(p.a);
