@@ -10,8 +10,8 @@
 // (this binary again, --measure-memory SOLVER) whose peak resident set (VmHWM) is
 // reported next to the times, with the same input in every process (the problem loaded,
 // CHOLMOD and MUMPS given strata's permutation from a file), so that the figures compare;
-// strata's is also set against the analysis's reported peak working memory plus the
-// input. --no-memory skips it.
+// strata's is also set against what the analysis says a CPU factorization holds
+// (AnalysisStats::cpu_factorization_bytes) plus the input. --no-memory skips it.
 // Results: bench/results/factor-*.json (factor-<tag>-*.json with --tag).
 //
 //   bench_factor [--problems a,b,...] [--repeat R] [--threads T] [--max-block-size N]
@@ -304,7 +304,7 @@ int main(int argc, char** argv) {
         row["input_rss_bytes"] = ms["input_rss_bytes"];
         // what the analysis said the factorization needs, beside the input
         row["strata"]["reported_peak_bytes"] =
-            an.peak_working_bytes + ms["input_rss_bytes"].get<std::size_t>();
+            an.cpu_factorization_bytes + ms["input_rss_bytes"].get<std::size_t>();
       }
       // a solver's own memory: its process's peak above what the process held with the
       // input loaded (the libraries' and the input's pages, the same in every process)

@@ -539,7 +539,8 @@ class Report(GpuSections, Distributed, EndToEnd, IftommSection):
                + (" Peak RSS: the peak resident set of each solver's analysis and first "
                   "factorization, each in a fresh process with the same input ('above "
                   "input': the peak less what the process held with the input loaded); "
-                  "'reported peak' is the analysis's peak working memory plus that input."
+                  "'reported peak' is what the analysis says a CPU factorization holds "
+                  "(cpu_factorization_bytes) plus that input."
                   if memory else ""))
         self.w()
         self.w(table(header, rows))

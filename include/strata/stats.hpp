@@ -35,9 +35,15 @@ struct AnalysisStats {
   index_t largest_front_pivots = 0;  ///< most pivots in one front
   index_t max_block_size = 0;  ///< separator block size used (Options::max_block_size resolved)
   index_t tree_height = 0;     ///< levels in the assembly tree
-  std::vector<index_t> fronts_per_level;    ///< level 0 is processed first (deepest)
-  std::size_t peak_working_bytes = 0;       ///< in-core multifrontal working memory peak
-  std::size_t factor_bytes = 0;             ///< bytes of the factor as stored in fronts
+  std::vector<index_t> fronts_per_level;  ///< level 0 is processed first (deepest)
+  std::size_t peak_working_bytes = 0;     ///< in-core multifrontal working memory peak
+  std::size_t factor_bytes = 0;           ///< bytes of the factor as stored in fronts
+  /// Bytes a factorization on the CPU backend holds at its peak besides its input: the
+  /// factor (panels, row indices, LDLᵀ's D), the
+  /// contribution-block arena of the plan, and the dense front
+  /// workspaces of its host threads (at most Options::num_threads + 1, each sized by the
+  /// largest front it factors: bounded by the squares of that many largest fronts).
+  std::size_t cpu_factorization_bytes = 0;
   std::size_t memory_budget = 0;            ///< budget the plan was made for (0: unlimited)
   std::vector<BatchInfo> batches;           ///< the memory plan
   MatrixType type = MatrixType::automatic;  ///< type the analysis was made for

@@ -27,6 +27,8 @@
 
 #include <algorithm>
 #include <atomic>
+#include <functional>
+#include <thread>
 
 #include "base/device.hpp"
 #include "base/timer.hpp"
@@ -271,6 +273,32 @@ void fill_separator_work(ordering::SeparatorTree& tree, const std::vector<index_
 void finish_analysis(Analysis& an, const SparseMatrix& c, const SparseMatrix& pattern,
                      ordering::OrderingResult ord, const Options& opts, int workers);
 
+// AnalysisStats::cpu_factorization_bytes: the factor's panels and row indices, the
+// contribution-block arena, and the front workspaces of the CPU executor's threads (num_threads + 1
+// slots, each grown to the largest front it factors, so at most the squares of that many largest
+// fronts).
+std::size_t cpu_factorization_bytes(const Analysis& an, const Options& opts) {
+  const int threads = opts.num_threads > 0
+                          ? opts.num_threads
+                          : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  std::vector<std::size_t> squares;
+  for (index_t f = 0; f < an.tree.n_fronts(); ++f) {
+    const auto m = static_cast<std::size_t>(an.tree.n_rows(f));
+    squares.push_back(m * m);
+  }
+  const std::size_t slots = std::min(squares.size(), static_cast<std::size_t>(threads) + 1);
+  std::partial_sort(squares.begin(), squares.begin() + static_cast<std::ptrdiff_t>(slots),
+                    squares.end(), std::greater<>());
+  std::size_t doubles = an.factor_layout.total + an.cb_layout.arena_size;
+  for (std::size_t i = 0; i < slots; ++i) doubles += squares[i];
+  // the factor's row indices and LDLᵀ's D and pivot sizes (not its per-front pivot
+  // figures: a few dozen bytes per front)
+  std::size_t other = an.tree.rows.size() * sizeof(index_t);
+  if (an.type != MatrixType::spd && an.symmetric)
+    other += static_cast<std::size_t>(an.n) * (2 * sizeof(double) + sizeof(int));
+  return doubles * sizeof(double) + other;
+}
+
 // Analysis::id: unique over the process, whichever function made the analysis.
 std::uint64_t next_analysis_id() {
   static std::atomic<std::uint64_t> next{1};
@@ -470,6 +498,7 @@ void finish_analysis(Analysis& an, const SparseMatrix& c, const SparseMatrix& pa
     st.fronts_per_level.push_back(an.schedule.level_offsets[l + 1] - an.schedule.level_offsets[l]);
   st.peak_working_bytes = an.plan.peak_in_core_bytes;
   st.factor_bytes = an.plan.factor_bytes;
+  st.cpu_factorization_bytes = cpu_factorization_bytes(an, opts);
   st.memory_budget = an.plan.budget;
   st.batches = an.plan.batches;
   st.workers = workers;

@@ -99,6 +99,7 @@ inline void to_json(nlohmann::json& j, const AnalysisStats& s) {
        {"fronts_per_level", s.fronts_per_level},
        {"peak_working_bytes", s.peak_working_bytes},
        {"factor_bytes", s.factor_bytes},
+       {"cpu_factorization_bytes", s.cpu_factorization_bytes},
        {"memory_budget", s.memory_budget},
        {"batches", batches},
        {"type", to_string(s.type)},

@@ -1,6 +1,10 @@
 // strata — analysis-phase integration tests: structural singularity is refused with a
-// message naming the problem; the separator tree's work hook matches the column counts.
+// message naming the problem; the separator tree's work hook matches the column counts;
+// the CPU factorization's memory estimate bounds what it allocates.
 #include <gtest/gtest.h>
+#include <malloc.h>
+
+#include <tuple>
 
 #include "analysis/analysis.hpp"
 #include "sparse/generators.hpp"
@@ -79,4 +83,51 @@ TEST(Analysis, SeparatorTreeWorkIsSubtreeFlops) {
 }
 
 }  // namespace
+// AnalysisStats::cpu_factorization_bytes against what a CPU factorization allocates: the
+// heap in use (glibc's mallinfo2, mmapped blocks included) grows from after the analysis
+// to after the first factorization by the factor, the arena and the front workspaces the
+// Solver keeps; the estimate bounds that growth and is not far above it (with one thread
+// it counts a second workspace that may never be used).
+TEST(Analysis, CpuFactorizationBytesBoundWhatTheFactorizationAllocates) {
+#if defined(__SANITIZE_ADDRESS__)
+  GTEST_SKIP() << "the heap statistics are the sanitizer's under ASan: test skipped";
+#else
+  for (const auto& [name, a, type] :
+       {std::tuple{"lap3d 24", generators::laplacian_3d(24, 24, 24), MatrixType::spd},
+        std::tuple{"elasticity 8", generators::elasticity_3d(8, 8, 8), MatrixType::spd}}) {
+    SCOPED_TRACE(name);
+    // the lower triangle, the analysis's canonical form: the Solver then keeps its copies
+    // of the input at analysis, and the growth below is the factorization's alone
+    SparseMatrix low;
+    low.n_rows = low.n_cols = a.n_rows;
+    low.storage = Storage::lower;
+    low.offsets.assign(1, 0);
+    for (index_t j = 0; j < a.n_cols; ++j) {
+      for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p)
+        if (a.indices[p] >= j) {
+          low.indices.push_back(a.indices[p]);
+          low.values.push_back(a.values[p]);
+        }
+      low.offsets.push_back(static_cast<index_t>(low.indices.size()));
+    }
+    Options o;
+    o.type = type;
+    o.num_threads = 1;
+    Solver s(o);
+    s.analyze(low);
+    const auto in_use = [] {
+      const struct mallinfo2 m = mallinfo2();
+      return static_cast<double>(m.uordblks + m.hblkhd);
+    };
+    const double before = in_use();
+    s.factorize(low);
+    const double grown = in_use() - before;
+    const auto estimate = static_cast<double>(s.stats().analysis.cpu_factorization_bytes);
+    ASSERT_GT(estimate, 0);
+    EXPECT_LE(grown, 1.02 * estimate + (1 << 20)) << grown << " bytes grown, " << estimate;
+    EXPECT_GE(grown, 0.7 * estimate) << grown << " bytes grown, " << estimate;
+  }
+#endif
+}
+
 }  // namespace strata
