@@ -27,7 +27,6 @@
 #include <csignal>
 #include <cstdio>
 #include <nlohmann/json.hpp>
-#include <optional>
 #include <string>
 
 #include "mbd/integrator.hpp"

@@ -11,15 +11,6 @@
 #include "strata/strata.hpp"
 #include "support/test_support.hpp"
 
-#if defined(__has_feature)
-#if __has_feature(address_sanitizer)
-#define STRATA_TEST_HAS_ASAN 1
-#endif
-#endif
-#ifndef STRATA_TEST_HAS_ASAN
-#define STRATA_TEST_HAS_ASAN 0
-#endif
-
 namespace strata {
 namespace {
 
@@ -98,7 +89,7 @@ TEST(Analysis, SeparatorTreeWorkIsSubtreeFlops) {
 // Solver keeps; the estimate bounds that growth and is not far above it (with one thread
 // it counts a second workspace that may never be used).
 TEST(Analysis, CpuFactorizationBytesBoundWhatTheFactorizationAllocates) {
-#if defined(__SANITIZE_ADDRESS__) || STRATA_TEST_HAS_ASAN
+#if STRATA_TEST_HAS_ASAN
   GTEST_SKIP() << "the heap statistics are the sanitizer's under ASan: test skipped";
 #else
   for (const auto& [name, a, type] :

@@ -9,6 +9,19 @@
 #include "strata/options.hpp"
 #include "strata/sparse_matrix.hpp"
 
+// STRATA_TEST_HAS_ASAN: 1 in AddressSanitizer builds (gcc defines __SANITIZE_ADDRESS__,
+// clang answers __has_feature), for tests whose measurements ASan changes.
+#if defined(__SANITIZE_ADDRESS__)
+#define STRATA_TEST_HAS_ASAN 1
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define STRATA_TEST_HAS_ASAN 1
+#endif
+#endif
+#ifndef STRATA_TEST_HAS_ASAN
+#define STRATA_TEST_HAS_ASAN 0
+#endif
+
 namespace strata {
 struct Analysis;
 }

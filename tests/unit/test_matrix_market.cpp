@@ -33,16 +33,6 @@
 #include "strata/sparse_matrix.hpp"
 #include "support/test_support.hpp"
 
-// AddressSanitizer builds (clang spells it __has_feature, gcc __SANITIZE_ADDRESS__)
-#if defined(__has_feature)
-#if __has_feature(address_sanitizer)
-#define STRATA_TEST_HAS_ASAN 1
-#endif
-#endif
-#ifndef STRATA_TEST_HAS_ASAN
-#define STRATA_TEST_HAS_ASAN 0
-#endif
-
 namespace strata {
 namespace {
 
@@ -695,7 +685,7 @@ TEST_F(MatrixMarketTest, MalformedFilesRaiseParseErrorAtTheLine) {
 // need more memory than any machine has (1e15 columns: 8 PB, beyond the address space).
 // The reader raises OutOfMemory naming the file, not std::bad_alloc.
 TEST_F(MatrixMarketTest, HugeDeclaredDimensionsAreOutOfMemory) {
-#if defined(__SANITIZE_ADDRESS__) || STRATA_TEST_HAS_ASAN
+#if STRATA_TEST_HAS_ASAN
   GTEST_SKIP() << "under AddressSanitizer, operator new aborts on an allocation it cannot "
                   "satisfy instead of throwing std::bad_alloc";
 #endif
