@@ -39,10 +39,10 @@ struct AnalysisStats {
   std::size_t peak_working_bytes = 0;     ///< in-core multifrontal working memory peak
   std::size_t factor_bytes = 0;           ///< bytes of the factor as stored in fronts
   /// Bytes a factorization on the CPU backend holds at its peak besides its input: the
-  /// factor (panels, row indices, LDLᵀ's D), the
-  /// contribution-block arena of the plan, and the dense front
-  /// workspaces of its host threads (at most Options::num_threads + 1, each sized by the
-  /// largest front it factors: bounded by the squares of that many largest fronts).
+  /// factor (panels, row indices, LDLᵀ's D), the contribution-block stack of its
+  /// depth-first traversal (Options::num_threads threads), and the dense front workspaces
+  /// of the fronts that need one (LDLᵀ and LU fronts; Cholesky fronts are formed in the
+  /// factor and on the stack): one per thread, each sized by the largest front it factors.
   std::size_t cpu_factorization_bytes = 0;
   std::size_t memory_budget = 0;            ///< budget the plan was made for (0: unlimited)
   std::vector<BatchInfo> batches;           ///< the memory plan

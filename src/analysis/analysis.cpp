@@ -273,24 +273,29 @@ void fill_separator_work(ordering::SeparatorTree& tree, const std::vector<index_
 void finish_analysis(Analysis& an, const SparseMatrix& c, const SparseMatrix& pattern,
                      ordering::OrderingResult ord, const Options& opts, int workers);
 
+int cpu_threads(const Options& opts) {
+  return opts.num_threads > 0 ? opts.num_threads
+                              : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+}
+
 // AnalysisStats::cpu_factorization_bytes: the factor's panels and row indices, the
-// contribution-block arena, and the front workspaces of the CPU executor's threads (num_threads + 1
-// slots, each grown to the largest front it factors, so at most the squares of that many largest
-// fronts).
-std::size_t cpu_factorization_bytes(const Analysis& an, const Options& opts) {
-  const int threads = opts.num_threads > 0
-                          ? opts.num_threads
-                          : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
-  std::vector<std::size_t> squares;
-  for (index_t f = 0; f < an.tree.n_fronts(); ++f) {
-    const auto m = static_cast<std::size_t>(an.tree.n_rows(f));
-    squares.push_back(m * m);
+// contribution-block stack of the depth-first plan, and the dense front workspaces of the
+// fronts factored in one (all but the Cholesky fronts that pass a block on): the calling
+// thread's, grown to the largest such front, and with several threads one per thread,
+// grown to the largest such front of the small subtrees.
+std::size_t cpu_factorization_bytes(const Analysis& an) {
+  const auto& t = an.tree;
+  const auto& plan = an.stack_plan;
+  const bool cholesky = an.type == MatrixType::spd || an.type == MatrixType::automatic;
+  std::size_t any = 0, in_subtrees = 0;
+  for (index_t f = 0; f < t.n_fronts(); ++f) {
+    if (cholesky && (t.cb_size(f) == 0 || t.parent[f] >= 0)) continue;
+    const auto m = static_cast<std::size_t>(t.n_rows(f));
+    any = std::max(any, m * m);
+    if (plan.subtree_of[f] >= 0) in_subtrees = std::max(in_subtrees, m * m);
   }
-  const std::size_t slots = std::min(squares.size(), static_cast<std::size_t>(threads) + 1);
-  std::partial_sort(squares.begin(), squares.begin() + static_cast<std::ptrdiff_t>(slots),
-                    squares.end(), std::greater<>());
-  std::size_t doubles = an.factor_layout.total + an.cb_layout.arena_size;
-  for (std::size_t i = 0; i < slots; ++i) doubles += squares[i];
+  std::size_t doubles = an.factor_layout.total + plan.arena_size() + any;
+  if (plan.threads > 1) doubles += static_cast<std::size_t>(plan.threads) * in_subtrees;
   // the factor's row indices and LDLᵀ's D and pivot sizes (not its per-front pivot
   // figures: a few dozen bytes per front)
   std::size_t other = an.tree.rows.size() * sizeof(index_t);
@@ -465,6 +470,8 @@ void finish_analysis(Analysis& an, const SparseMatrix& c, const SparseMatrix& pa
   an.plan = schedule::plan_memory(an.tree, an.schedule, opts.device_memory_limit, lu);
   an.assembly = build_assembly_map(c, an);
   an.cb_layout = schedule::plan_cb_layout(an.tree, an.schedule);
+  an.stack_plan = schedule::plan_stack(
+      an.tree, cpu_threads(opts), an.type == MatrixType::spd || an.type == MatrixType::automatic);
   an.factor_layout = plan_factor_layout(an.tree, an.schedule, lu);
   if (workers > 1) {
     schedule::PartitionOptions po;
@@ -498,7 +505,7 @@ void finish_analysis(Analysis& an, const SparseMatrix& c, const SparseMatrix& pa
     st.fronts_per_level.push_back(an.schedule.level_offsets[l + 1] - an.schedule.level_offsets[l]);
   st.peak_working_bytes = an.plan.peak_in_core_bytes;
   st.factor_bytes = an.plan.factor_bytes;
-  st.cpu_factorization_bytes = cpu_factorization_bytes(an, opts);
+  st.cpu_factorization_bytes = cpu_factorization_bytes(an);
   st.memory_budget = an.plan.budget;
   st.batches = an.plan.batches;
   st.workers = workers;

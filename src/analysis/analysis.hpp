@@ -9,6 +9,7 @@
 
 #include "ordering/ordering.hpp"
 #include "schedule/memory_plan.hpp"
+#include "schedule/stack_plan.hpp"
 #include "schedule/tree_partition.hpp"
 #include "strata/options.hpp"
 #include "strata/sparse_matrix.hpp"
@@ -85,6 +86,9 @@ struct Analysis {
   schedule::MemoryPlan plan;
   AssemblyMap assembly;
   CbLayout cb_layout;
+  /// The CPU executor's depth-first traversal and contribution-block stack, for
+  /// Options::num_threads threads (an executor with another thread count makes its own).
+  schedule::StackPlan stack_plan;
   FactorLayout factor_layout;
   /// The split into subtrees for several workers (schedule/tree_partition.hpp); made when
   /// the analysis is asked for more than one worker, else empty (workers == 1).

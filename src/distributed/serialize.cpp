@@ -234,6 +234,7 @@ void read(Reader& r, Analysis& an) {
   }
   tree_io(r, an.tree);
   an.child_rows = symbolic::child_row_map(an.tree);  // derived: not sent
+  an.stack_plan = {};  // not sent: the executor plans for its own thread count
   schedule_io(r, an.schedule);
   plan_io(r, an.plan);
   r.vec(an.assembly.entry_offsets);

@@ -150,6 +150,12 @@ class Executor {
   /// factors and stores the fronts ctx.part->schedule->fronts[batch.begin .. batch.end).
   /// Throws NotPositiveDefinite (original column) for a failed Cholesky pivot.
   virtual void factor_batch(const FactorContext& ctx, const BatchInfo& batch) = 0;
+  /// After begin_part of a whole-tree factorization (ctx.part->id == -1): factors the
+  /// whole tree in an order of the executor's own and returns true, or returns false to be
+  /// handed the memory plan's batches (factor_batch). The CPU executor runs the tree
+  /// depth-first with its contribution blocks on a stack (schedule/stack_plan.hpp), sizing
+  /// ctx.cb_arena itself. Throws as factor_batch.
+  virtual bool factor_tree(const FactorContext& ctx) { return false; }
   /// Called after the last batch of the part ctx.part.
   virtual void end_part(const FactorContext& ctx) {}
   /// After the part's last batch and before end_part: hands out the contribution block of

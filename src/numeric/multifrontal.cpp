@@ -3,10 +3,11 @@
 // The fronts are processed in the order of the memory plan: batches of one level of
 // the paper's reverse-BFS level schedule (Jung & Bae 2018), deepest level first. All
 // fronts of a batch are independent, so an executor may run them concurrently (host
-// threads, or one batched GPU launch). The driver owns nothing backend-specific: it sizes
-// the factor storage once (reused by refactorization), hands batches to the executor,
-// and merges the per-front pivot statistics in front order so that the result does not
-// depend on the thread count. With one executor the whole tree is one part; the
+// threads, or one batched GPU launch). An executor may instead take the whole tree in an
+// order of its own (Executor::factor_tree: the CPU executor's depth-first traversal). The driver
+// owns nothing backend-specific: it sizes the factor storage once (reused by refactorization),
+// hands batches to the executor, and merges the per-front pivot statistics in front order so that
+// the result does not depend on the thread count. With one executor the whole tree is one part; the
 // multi-worker driver (multi_device.cpp) runs the parts of a TreePartition on several.
 #include <algorithm>
 
@@ -55,8 +56,6 @@ void factorize(const Analysis& an, const std::vector<double>& scaled_values, Mat
                double static_pivot, Executor& exec, NumericFactor& factor,
                std::vector<double>& cb_arena) {
   prepare_factor(an, type, factor, false);
-  if (exec.uses_host_arena())
-    sized_resize(cb_arena, an.cb_layout.arena_size, "factorize: contribution-block arena");
 
   const PartView whole = PartView::whole(an);
   FactorContext ctx;
@@ -79,7 +78,11 @@ void factorize(const Analysis& an, const std::vector<double>& scaled_values, Mat
     sized_resize(factor.panels, an.factor_layout.total, "factorize: factor panels");
     factor.panels_on_host = true;
   }
-  for (const BatchInfo& b : an.plan.batches) exec.factor_batch(ctx, b);
+  if (!exec.factor_tree(ctx)) {
+    if (exec.uses_host_arena() && cb_arena.size() < an.cb_layout.arena_size)
+      sized_resize(cb_arena, an.cb_layout.arena_size, "factorize: contribution-block arena");
+    for (const BatchInfo& b : an.plan.batches) exec.factor_batch(ctx, b);
+  }
   exec.end_part(ctx);
   ctx.part = nullptr;
   exec.end(ctx);

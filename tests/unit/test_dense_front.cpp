@@ -259,6 +259,57 @@ void run_llt(index_t m, index_t k, std::mt19937_64& rng) {
   EXPECT_EQ(st.det_sign, 1);
 }
 
+// The split LLᵀ (panel in one buffer, the contribution block in lower panels of `width`
+// columns): L against the whole-front kernel, S against the dense Schur complement, and
+// the storage's positions that hold no element left alone.
+void run_llt_split(index_t m, index_t k, index_t width, std::mt19937_64& rng) {
+  SCOPED_TRACE(testing::Message() << "split LLt m=" << m << " k=" << k << " width=" << width);
+  const Mat f = random_front(m, Kind::spd, rng);
+  const index_t n = m - k, ld = m + 2;
+  std::vector<double> panel(static_cast<std::size_t>(ld) * std::max<index_t>(k, 1), kSentinel);
+  for (index_t j = 0; j < k; ++j)
+    for (index_t i = 0; i < m; ++i) panel[i + j * ld] = i >= j ? f(i, j) : 0.0;
+  std::vector<double> store(LowerPanels::size(n, width) + 1, kSentinel);
+  const LowerPanels cb{store.data(), n, width, n};
+  std::vector<char> is_element(store.size(), 0);
+  for (index_t j = 0; j < n; ++j)
+    for (index_t i = j; i < n; ++i) {
+      double* e = cb.diag(j) + (i - j);
+      ASSERT_GE(e, store.data());
+      ASSERT_LT(e, store.data() + store.size() - 1) << "element (" << i << ", " << j << ")";
+      ASSERT_FALSE(is_element[e - store.data()]) << "two elements share a place";
+      is_element[e - store.data()] = 1;
+      *e = f(k + i, k + j);
+    }
+  PivotStats st;
+  ASSERT_EQ(factor_front_llt(panel.data(), m, k, ld, cb, st), -1);
+  for (std::size_t p = 0; p < store.size(); ++p)
+    if (!is_element[p]) ASSERT_EQ(store[p], kSentinel) << "place " << p << " written";
+
+  std::vector<double> whole = pack(f, m, true);
+  PivotStats st_whole;
+  ASSERT_EQ(factor_front_llt(whole.data(), m, k, m, st_whole), -1);
+  double lmax = 0, ldiff = 0;
+  for (index_t j = 0; j < k; ++j)
+    for (index_t i = j; i < m; ++i) {
+      lmax = std::max(lmax, std::abs(whole[i + j * m]));
+      ldiff = std::max(ldiff, std::abs(panel[i + j * ld] - whole[i + j * m]));
+    }
+  EXPECT_LE(ldiff, 64 * std::numeric_limits<double>::epsilon() * std::max(lmax, 1.0));
+  EXPECT_EQ(st.positive, st_whole.positive);
+  EXPECT_NEAR(st.log_abs_det, st_whole.log_abs_det,
+              1e-12 * std::max(1.0, std::abs(st.log_abs_det)));
+  if (n > 0) {
+    double scale = 0, schur_tol = 0;
+    const Mat s_ref = schur_reference(f, k, &scale, &schur_tol);
+    double worst = 0;
+    for (index_t j = 0; j < n; ++j)
+      for (index_t i = j; i < n; ++i)
+        worst = std::max(worst, std::abs(cb.diag(j)[i - j] - s_ref(i, j)));
+    EXPECT_LE(worst, schur_tol * scale);
+  }
+}
+
 // --- LDLᵀ ----------------------------------------------------------------------------------
 
 struct LdltResult {
@@ -515,6 +566,14 @@ TEST(DenseFront, LltGrid) {
   Seeded s;
   TRACE_SEED(s);
   for (auto [m, k] : kGrid) run_llt(m, k, s.rng);
+}
+
+TEST(DenseFront, LltSplitIntoLowerPanels) {
+  Seeded s;
+  TRACE_SEED(s);
+  for (auto [m, k] : kGrid)
+    for (index_t width : {index_t{1}, index_t{3}, index_t{5}, index_t{128}, m - k + 1})
+      run_llt_split(m, k, std::max<index_t>(width, 1), s.rng);
 }
 
 TEST(DenseFront, LdltGrid) {

@@ -590,8 +590,22 @@ void lu_small(double* f, index_t m, index_t k, index_t ld, double sp, index_t* i
 
 index_t factor_front_llt(double* f, index_t m, index_t k, index_t ld, PivotStats& stats) {
   check_front(m, k, ld);
+  LowerPanels cb;
+  cb.data = f + k + static_cast<std::size_t>(k) * ld;
+  cb.n = m - k;
+  cb.width = std::max<index_t>(m - k, 1);
+  cb.ld = ld;
+  return factor_front_llt(f, m, k, ld, cb, stats);
+}
+
+index_t factor_front_llt(double* panel, index_t m, index_t k, index_t ld, const LowerPanels& cb,
+                         PivotStats& stats) {
+  check_front(m, k, ld);
+  const index_t n = m - k;
+  if (cb.n != n || cb.width < 1 || (cb.width >= n && n > 0 && cb.ld < n))
+    throw InternalError("factor_front_llt: contribution block storage does not match the front");
   if (k == 0) return -1;
-  auto A = [&](index_t i, index_t j) -> double& { return f[i + j * ld]; };
+  auto A = [&](index_t i, index_t j) -> double& { return panel[i + j * ld]; };
   double log_det = 0;
   if (m <= kSmallLlt) {
     for (index_t j = 0; j < k; ++j) {
@@ -603,27 +617,43 @@ index_t factor_front_llt(double* f, index_t m, index_t k, index_t ld, PivotStats
       const double inv = 1.0 / l;
       double* lj = &A(0, j);
       for (index_t i = j + 1; i < m; ++i) lj[i] *= inv;
-      for (index_t c = j + 1; c < m; ++c) {
+      for (index_t c = j + 1; c < k; ++c) {  // the pivot columns still to come
         const double t = lj[c];
         if (t == 0.0) continue;
         double* col = &A(0, c);
         for (index_t i = c; i < m; ++i) col[i] -= lj[i] * t;
+      }
+      const double* l2 = lj + k;
+      for (index_t c = 0; c < n; ++c) {  // the contribution block (its lower triangle)
+        const double t = l2[c];
+        if (t == 0.0) continue;
+        double* d = cb.diag(c);  // d[i − c]: element (i, c), i ≥ c
+        for (index_t i = c; i < n; ++i) d[i - c] -= l2[i] * t;
       }
     }
   } else {
     const char lo = 'L';
     const int ik = blas_int(k), ild = blas_int(ld);
     int info = 0;
-    dpotrf_(&lo, &ik, f, &ild, &info);
+    dpotrf_(&lo, &ik, panel, &ild, &info);
     if (info > 0) return info - 1;
     for (index_t j = 0; j < k; ++j) log_det += 2.0 * std::log(A(j, j));
-    const index_t n = m - k;
     if (n > 0) {
-      trsm('R', 'L', 'T', 'N', n, k, f, ld, f + k, ld);
-      const char tn = 'N';
+      double* l21 = panel + k;
+      trsm('R', 'L', 'T', 'N', n, k, panel, ld, l21, ld);
+      const char tn = 'N', tt = 'T';
       const double minus_one = -1.0, one = 1.0;
-      const int in = blas_int(n);
-      dsyrk_(&lo, &tn, &in, &ik, &minus_one, f + k, &ild, &one, f + k + k * ld, &ild);
+      for (index_t p = 0; p < cb.panels(); ++p) {  // S = F22 − L21 L21ᵀ, panel by panel
+        const index_t j0 = cb.panel_first(p), w = cb.panel_columns(p), below = n - j0 - w;
+        double* c = cb.panel(p);
+        const int iw = blas_int(w), ildc = blas_int(cb.panel_ld(p));
+        dsyrk_(&lo, &tn, &iw, &ik, &minus_one, l21 + j0, &ild, &one, c, &ildc);
+        if (below > 0) {
+          const int ib = blas_int(below);
+          dgemm_(&tn, &tt, &ib, &iw, &ik, &minus_one, l21 + j0 + w, &ild, l21 + j0, &ild, &one,
+                 c + w, &ildc);
+        }
+      }
     }
   }
   stats.positive += k;

@@ -24,8 +24,8 @@
 // (blocked LDLᵀ) and §3.4 (blocked LU).
 #pragma once
 
+#include "base/lower_panels.hpp"
 #include "numeric/pivot_stats.hpp"
-
 #include "strata/types.hpp"
 
 namespace strata::numeric::cpu {
@@ -33,6 +33,15 @@ namespace strata::numeric::cpu {
 /// LLᵀ partial factorization (dpotrf, dtrsm, dsyrk). Returns -1 on success, or the local
 /// index (0..k-1) of the first pivot that is not positive (F is then partly overwritten).
 index_t factor_front_llt(double* f, index_t m, index_t k, index_t ld, PivotStats& stats);
+
+/// The same LLᵀ partial factorization with the front in two pieces: `panel` holds the
+/// first k columns (m × k, leading dimension ld ≥ m: L11 and L21 on return) and `cb` the
+/// lower triangle of F22 (order m − k, in column panels: base/lower_panels.hpp; S on
+/// return). Lets the CPU executor form the panel in the factor's storage and the
+/// contribution block on its stack, in about half a square, with no m × m workspace.
+/// Returns as above; throws InternalError when cb's order is not m − k.
+index_t factor_front_llt(double* panel, index_t m, index_t k, index_t ld, const LowerPanels& cb,
+                         PivotStats& stats);
 
 /// LDLᵀ partial factorization with restricted Bunch–Kaufman pivoting (α = (1+√17)/8) and
 /// static pivoting. On return local_perm[0..k) gives the symmetric permutation applied to
