@@ -85,11 +85,30 @@ struct FrontBlocks {
   }
 };
 
+// The memory-bound loops of a large front (zeroing, extend-add, block copies) split by
+// columns over the executor's threads, which would otherwise wait for the next BLAS call;
+// serial without an arena. Every element is still written by one thread in the same order
+// (children one after another), so the result does not depend on the split.
+struct ColumnSplit {
+  tbb::task_arena* arena = nullptr;
+  template <class Body>
+  void operator()(index_t n, const Body& body) const {
+    if (arena == nullptr || n < 256) {
+      body(index_t{0}, n);
+      return;
+    }
+    arena->execute([&] {
+      tbb::parallel_for(tbb::blocked_range<index_t>(0, n, 32),
+                        [&](const tbb::blocked_range<index_t>& r) { body(r.begin(), r.end()); });
+    });
+  }
+};
+
 // 1.–2. of the file header for the split Cholesky front: the original entries and the
 // children's blocks added into the panel (the factor's storage, m × k, leading dimension
 // m) and the contribution block (mc × mc, leading dimension mc; lower triangles only).
 void assemble_split(const FactorContext& ctx, index_t f, const FrontBlocks& blocks, double* panel,
-                    const LowerPanels& cb) {
+                    const LowerPanels& cb, const ColumnSplit& split) {
   const Analysis& an = *ctx.analysis;
   const auto& t = an.tree;
   const index_t m = t.n_rows(f), k = t.n_pivots(f);
@@ -110,17 +129,19 @@ void assemble_split(const FactorContext& ctx, index_t f, const FrontBlocks& bloc
     if (mcc == 0) continue;
     const LowerPanels src = blocks.block(t, c, blocks.child(c));
     const index_t* rel = an.child_rows.of(c);
-    for (index_t jj = 0; jj < mcc; ++jj) {
-      const double* col = src.diag(jj);  // col[ii − jj]: child element (ii, jj)
-      const index_t pc = rel[jj];
-      if (pc < k) {
-        double* dst = panel + static_cast<std::size_t>(pc) * m;
-        for (index_t ii = jj; ii < mcc; ++ii) dst[rel[ii]] += col[ii - jj];
-      } else {
-        double* dst = cb.diag(pc - k);  // dst[r − pc]: element (r − k, pc − k), r ≥ pc
-        for (index_t ii = jj; ii < mcc; ++ii) dst[rel[ii] - pc] += col[ii - jj];
+    split(mcc, [&](index_t j0, index_t j1) {
+      for (index_t jj = j0; jj < j1; ++jj) {
+        const double* col = src.diag(jj);  // col[ii − jj]: child element (ii, jj)
+        const index_t pc = rel[jj];
+        if (pc < k) {
+          double* dst = panel + static_cast<std::size_t>(pc) * m;
+          for (index_t ii = jj; ii < mcc; ++ii) dst[rel[ii]] += col[ii - jj];
+        } else {
+          double* dst = cb.diag(pc - k);  // dst[r − pc]: element (r − k, pc − k), r ≥ pc
+          for (index_t ii = jj; ii < mcc; ++ii) dst[rel[ii] - pc] += col[ii - jj];
+        }
       }
-    }
+    });
   }
 }
 
@@ -128,16 +149,21 @@ void assemble_split(const FactorContext& ctx, index_t f, const FrontBlocks& bloc
 // at `build` (the lower triangle of mc × mc doubles that overlap no block it reads), then
 // moved to `keep` (which may overlap the children's blocks, all read by then).
 void process_llt_split(const FactorContext& ctx, index_t f, const FrontBlocks& blocks,
-                       double* build, double* keep) {
+                       double* build, double* keep, const ColumnSplit& split) {
   const Analysis& an = *ctx.analysis;
   const auto& t = an.tree;
   NumericFactor& fac = *ctx.factor;
   const index_t m = t.n_rows(f), k = t.n_pivots(f), mc = m - k;
   double* panel = fac.panels.data() + an.factor_layout.panel_offset[f];
-  std::fill(panel, panel + static_cast<std::size_t>(m) * k, 0.0);
   const LowerPanels cb = blocks.block(t, f, build);
-  for (index_t j = 0; j < mc; ++j) std::fill(cb.diag(j), cb.diag(j) + (mc - j), 0.0);
-  assemble_split(ctx, f, blocks, panel, cb);
+  split(k, [&](index_t j0, index_t j1) {
+    std::fill(panel + static_cast<std::size_t>(j0) * m, panel + static_cast<std::size_t>(j1) * m,
+              0.0);
+  });
+  split(mc, [&](index_t j0, index_t j1) {
+    for (index_t j = j0; j < j1; ++j) std::fill(cb.diag(j), cb.diag(j) + (mc - j), 0.0);
+  });
+  assemble_split(ctx, f, blocks, panel, cb, split);
   PivotStats& ps = fac.front_stats[f];
   ps = PivotStats{};
   const index_t bad = cpu::factor_front_llt(panel, m, k, m, cb, ps);
@@ -147,15 +173,24 @@ void process_llt_split(const FactorContext& ctx, index_t f, const FrontBlocks& b
   }
   const index_t* rows = t.rows_of(f);
   std::copy(rows, rows + m, fac.rows.data() + t.row_offsets[f]);
-  if (mc > 0 && keep != build)
-    std::memmove(keep, build, sizeof(double) * LowerPanels::size(mc, cb.width));
+  const std::size_t size = mc > 0 ? LowerPanels::size(mc, cb.width) : 0;
+  if (size == 0 || keep == build) return;
+  if (keep + size > build) {  // overlapping: one ordered move
+    std::memmove(keep, build, sizeof(double) * size);
+    return;
+  }
+  const auto chunks = static_cast<index_t>(std::min<std::size_t>(size / 4096 + 1, 1 << 20));
+  split(chunks, [&](index_t c0, index_t c1) {
+    const std::size_t b = size * c0 / chunks, e = size * c1 / chunks;
+    std::memcpy(keep + b, build + b, sizeof(double) * (e - b));
+  });
 }
 
 // A front in a dense m × m workspace (LDLᵀ, LU, or a Cholesky front without a parent):
 // assembled, factored, its panel and rows stored, its contribution block copied to `cb`
 // (nullptr: the front has no parent, the block is dropped).
 void process_dense(const FactorContext& ctx, index_t f, const FrontBlocks& blocks, Workspace& w,
-                   double* cb) {
+                   double* cb, const ColumnSplit& split) {
   const Analysis& an = *ctx.analysis;
   const auto& t = an.tree;
   NumericFactor& fac = *ctx.factor;
@@ -165,7 +200,9 @@ void process_dense(const FactorContext& ctx, index_t f, const FrontBlocks& block
   const std::size_t mm = static_cast<std::size_t>(m) * m;
   if (w.front.size() < mm) sized_resize(w.front, mm, "factorize: dense front workspace");
   double* F = w.front.data();
-  std::fill(F, F + mm, 0.0);
+  split(m, [&](index_t j0, index_t j1) {
+    std::fill(F + static_cast<std::size_t>(j0) * m, F + static_cast<std::size_t>(j1) * m, 0.0);
+  });
 
   // 1. original entries
   const auto& am = an.assembly;
@@ -180,15 +217,18 @@ void process_dense(const FactorContext& ctx, index_t f, const FrontBlocks& block
     if (mc == 0) continue;
     const index_t* rel = an.child_rows.of(c);
     if (lu) {
-      extend_add(F, m, blocks.child(c), mc, rel, 0, mc, false);
+      const double* src = blocks.child(c);
+      split(mc, [&](index_t j0, index_t j1) { extend_add(F, m, src, mc, rel, j0, j1, false); });
       continue;
     }
     const LowerPanels src = blocks.block(t, c, blocks.child(c));  // lower triangle only
-    for (index_t jj = 0; jj < mc; ++jj) {
-      const double* col = src.diag(jj);
-      double* dst = F + static_cast<std::size_t>(rel[jj]) * m;
-      for (index_t ii = jj; ii < mc; ++ii) dst[rel[ii]] += col[ii - jj];
-    }
+    split(mc, [&](index_t j0, index_t j1) {
+      for (index_t jj = j0; jj < j1; ++jj) {
+        const double* col = src.diag(jj);
+        double* dst = F + static_cast<std::size_t>(rel[jj]) * m;
+        for (index_t ii = jj; ii < mc; ++ii) dst[rel[ii]] += col[ii - jj];
+      }
+    });
   }
 
   // 3. partial factorization
@@ -232,10 +272,13 @@ void process_dense(const FactorContext& ctx, index_t f, const FrontBlocks& block
   }
   const index_t mc = m - k;
   if (mc > 0 && cb) {
-    for (index_t jj = 0; jj < mc; ++jj) {
-      const index_t i0 = lu ? 0 : jj;
-      std::memcpy(cb + jj * mc + i0, F + (k + jj) * m + k + i0, sizeof(double) * (mc - i0));
-    }
+    split(mc, [&](index_t j0, index_t j1) {
+      for (index_t jj = j0; jj < j1; ++jj) {
+        const index_t i0 = lu ? 0 : jj;
+        std::memcpy(cb + static_cast<std::size_t>(jj) * mc + i0,
+                    F + static_cast<std::size_t>(k + jj) * m + k + i0, sizeof(double) * (mc - i0));
+      }
+    });
   }
 }
 
@@ -309,7 +352,7 @@ class CpuExecutor final : public Executor {
     // threaded kernels round differently for different thread counts (docs/reliability.md)
     if (!big.empty()) {
       set_blas_threads(reproducible_ ? 1 : threads_);
-      for (index_t f : big) process_front(ctx, f, blocks, ws_[threads_]);
+      for (index_t f : big) process_front(ctx, f, blocks, ws_[threads_], true);
     }
   }
 
@@ -332,14 +375,16 @@ class CpuExecutor final : public Executor {
       if (f < 0) continue;
       const bool large = symbolic::front_flops(an.tree, f) > schedule::kLargeFrontFlops;
       set_blas_threads(large && !reproducible_ ? threads_ : 1);
-      process_front(ctx, f, blocks, ws_[threads_]);
+      process_front(ctx, f, blocks, ws_[threads_], large);
     }
     return true;
   }
 
  private:
-  void process_front(const FactorContext& ctx, index_t f, const FrontBlocks& blocks,
-                     Workspace& w) const;
+  // `large`: a large front processed alone by the calling thread (its memory-bound loops
+  // split over the threads, ColumnSplit).
+  void process_front(const FactorContext& ctx, index_t f, const FrontBlocks& blocks, Workspace& w,
+                     bool large = false);
   const schedule::StackPlan& stack_plan(const Analysis& an, bool lower_panels);
   void run_subtrees(const FactorContext& ctx, const schedule::StackPlan& plan, const index_t* first,
                     const index_t* last);
@@ -359,15 +404,17 @@ class CpuExecutor final : public Executor {
 };
 
 void CpuExecutor::process_front(const FactorContext& ctx, index_t f, const FrontBlocks& blocks,
-                                Workspace& w) const {
+                                Workspace& w, bool large) {
+  ColumnSplit split;
+  if (large && threads_ > 1) split.arena = &arena_;
   const auto& t = ctx.analysis->tree;
   const bool has_cb = t.cb_size(f) > 0 && t.parent[f] >= 0;
   double* base = const_cast<double*>(blocks.arena->data());
   double* keep = has_cb ? base + blocks.place(f, false) : nullptr;
   if (ctx.type == MatrixType::spd && (has_cb || t.cb_size(f) == 0))
-    process_llt_split(ctx, f, blocks, has_cb ? base + blocks.place(f, true) : keep, keep);
+    process_llt_split(ctx, f, blocks, has_cb ? base + blocks.place(f, true) : keep, keep, split);
   else
-    process_dense(ctx, f, blocks, w, keep);
+    process_dense(ctx, f, blocks, w, keep, split);
 }
 
 const schedule::StackPlan& CpuExecutor::stack_plan(const Analysis& an, bool lower_panels) {
