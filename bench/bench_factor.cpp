@@ -11,7 +11,7 @@
 // reported next to the times, with the same input in every process (the problem loaded,
 // CHOLMOD and MUMPS given strata's permutation from a file), so that the figures compare;
 // strata's is also set against what the analysis says a CPU factorization holds
-// (AnalysisStats::cpu_factorization_bytes) plus the input. --no-memory skips it.
+// (AnalysisStats::analysis_bytes + cpu_factorization_bytes) plus the input. --no-memory skips it.
 // Results: bench/results/factor-*.json (factor-<tag>-*.json with --tag).
 //
 //   bench_factor [--problems a,b,...] [--repeat R] [--threads T] [--max-block-size N]
@@ -302,9 +302,9 @@ int main(int argc, char** argv) {
       if (ms.is_object()) {
         row["strata"]["peak_rss_bytes"] = ms["peak_rss_bytes"];
         row["input_rss_bytes"] = ms["input_rss_bytes"];
-        // what the analysis said the factorization needs, beside the input
-        row["strata"]["reported_peak_bytes"] =
-            an.cpu_factorization_bytes + ms["input_rss_bytes"].get<std::size_t>();
+        // what the analysis said its arrays and the factorization need, beside the input
+        row["strata"]["reported_peak_bytes"] = an.analysis_bytes + an.cpu_factorization_bytes +
+                                               ms["input_rss_bytes"].get<std::size_t>();
       }
       // a solver's own memory: its process's peak above what the process held with the
       // input loaded (the libraries' and the input's pages, the same in every process)

@@ -539,8 +539,10 @@ class Report(GpuSections, Distributed, EndToEnd, IftommSection):
                + (" Peak RSS: the peak resident set of each solver's analysis and first "
                   "factorization, each in a fresh process with the same input ('above "
                   "input': the peak less what the process held with the input loaded); "
-                  "'reported peak' is what the analysis says a CPU factorization holds "
-                  "(cpu_factorization_bytes) plus that input."
+                  "'reported peak' is what the analysis says its own arrays and a CPU "
+                  "factorization hold (analysis_bytes + cpu_factorization_bytes; results "
+                  "written before analysis_bytes existed count the factorization only) plus "
+                  "that input."
                   if memory else ""))
         self.w()
         self.w(table(header, rows))

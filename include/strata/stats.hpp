@@ -44,6 +44,10 @@ struct AnalysisStats {
   /// of the fronts that need one (LDLᵀ and LU fronts; Cholesky fronts are formed in the
   /// factor and on the stack): one per thread, each sized by the largest front it factors.
   std::size_t cpu_factorization_bytes = 0;
+  /// Bytes of the analysis's own arrays (the order, the assembly tree, the maps that assemble
+  /// the fronts, the schedules and layouts), which every factorization reads; with the input
+  /// and cpu_factorization_bytes, what a CPU factorization's process holds at its peak.
+  std::size_t analysis_bytes = 0;
   std::size_t memory_budget = 0;            ///< budget the plan was made for (0: unlimited)
   std::vector<BatchInfo> batches;           ///< the memory plan
   MatrixType type = MatrixType::automatic;  ///< type the analysis was made for

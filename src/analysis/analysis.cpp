@@ -304,6 +304,47 @@ std::size_t cpu_factorization_bytes(const Analysis& an) {
   return doubles * sizeof(double) + other;
 }
 
+template <class T>
+std::size_t vector_bytes(const std::vector<T>& v) {
+  return v.capacity() * sizeof(T);
+}
+
+// AnalysisStats::analysis_bytes: the arrays of the Analysis (the parts split for several
+// workers counted by their schedules and layouts).
+std::size_t analysis_bytes(const Analysis& an) {
+  std::size_t b = vector_bytes(an.pattern_offsets) + vector_bytes(an.pattern_indices) +
+                  vector_bytes(an.matching_perm) + vector_bytes(an.row_scaling) +
+                  vector_bytes(an.col_scaling) + vector_bytes(an.pivot_groups.ptr) +
+                  vector_bytes(an.pivot_groups.members) + vector_bytes(an.perm) +
+                  vector_bytes(an.iperm) + vector_bytes(an.kept_order);
+  for (const auto& node : an.separator_tree.nodes) b += sizeof(node) + vector_bytes(node.children);
+  const auto& t = an.tree;
+  b += vector_bytes(t.first_pivot) + vector_bytes(t.row_offsets) + vector_bytes(t.rows) +
+       vector_bytes(t.parent) + vector_bytes(t.child_offsets) + vector_bytes(t.children) +
+       vector_bytes(t.front_of_column);
+  b += vector_bytes(an.child_rows.offsets) + vector_bytes(an.child_rows.rel);
+  auto schedule_bytes = [](const symbolic::LevelSchedule& s) {
+    return vector_bytes(s.level_offsets) + vector_bytes(s.fronts) + vector_bytes(s.level_of);
+  };
+  b += schedule_bytes(an.schedule) + vector_bytes(an.plan.batches);
+  b += vector_bytes(an.assembly.entry_offsets) + vector_bytes(an.assembly.entry_src) +
+       vector_bytes(an.assembly.entry_dst);
+  b += vector_bytes(an.cb_layout.cb_offset) + vector_bytes(an.factor_layout.panel_offset);
+  const auto& sp = an.stack_plan;
+  b += vector_bytes(sp.subtree_first) + vector_bytes(sp.subtree_root) +
+       vector_bytes(sp.subtree_of) + vector_bytes(sp.step_front) + vector_bytes(sp.group_offsets) +
+       vector_bytes(sp.group) + vector_bytes(sp.cb_offset) + vector_bytes(sp.build_offset);
+  auto part_bytes = [&](const schedule::FactorPart& p) {
+    return vector_bytes(p.fronts) + schedule_bytes(p.schedule) + vector_bytes(p.plan.batches) +
+           vector_bytes(p.cb_layout.cb_offset) + vector_bytes(p.imports);
+  };
+  for (const auto& p : an.partition.subtrees) b += part_bytes(p);
+  for (const auto& p : an.partition.upper) b += part_bytes(p);
+  b += part_bytes(an.partition.top) + vector_bytes(an.partition.part_of) +
+       vector_bytes(an.partition.part_id) + vector_bytes(an.partition.owner);
+  return b;
+}
+
 // Analysis::id: unique over the process, whichever function made the analysis.
 std::uint64_t next_analysis_id() {
   static std::atomic<std::uint64_t> next{1};
@@ -521,6 +562,7 @@ void finish_analysis(Analysis& an, const SparseMatrix& c, const SparseMatrix& pa
     st.upper_flops_fraction = p.total_work > 0 ? upper / p.total_work : 0.0;
     st.estimated_speedup = p.estimated_time > 0 ? p.total_work / p.estimated_time : 0.0;
   }
+  st.analysis_bytes = analysis_bytes(an);
 }
 
 }  // namespace

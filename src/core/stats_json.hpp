@@ -100,6 +100,7 @@ inline void to_json(nlohmann::json& j, const AnalysisStats& s) {
        {"peak_working_bytes", s.peak_working_bytes},
        {"factor_bytes", s.factor_bytes},
        {"cpu_factorization_bytes", s.cpu_factorization_bytes},
+       {"analysis_bytes", s.analysis_bytes},
        {"memory_budget", s.memory_budget},
        {"batches", batches},
        {"type", to_string(s.type)},

@@ -126,6 +126,7 @@ void stats_io(IO& io, S& s) {
   io.value(s.peak_working_bytes);
   io.value(s.factor_bytes);
   io.value(s.cpu_factorization_bytes);
+  io.value(s.analysis_bytes);
   io.value(s.memory_budget);
   io.vec(s.batches);
   io.value(s.type);

@@ -83,6 +83,7 @@ TEST(Analysis, SeparatorTreeWorkIsSubtreeFlops) {
 }
 
 }  // namespace
+// AnalysisStats::analysis_bytes against what the analysis keeps, and
 // AnalysisStats::cpu_factorization_bytes against what a CPU factorization allocates: the
 // heap in use (glibc's mallinfo2, mmapped blocks included) grows from after the analysis
 // to after the first factorization by the factor, the arena and the front workspaces the
@@ -113,12 +114,21 @@ TEST(Analysis, CpuFactorizationBytesBoundWhatTheFactorizationAllocates) {
     Options o;
     o.type = type;
     o.num_threads = 1;
-    Solver s(o);
-    s.analyze(low);
     const auto in_use = [] {
       const struct mallinfo2 m = mallinfo2();
       return static_cast<double>(m.uordblks + m.hblkhd);
     };
+    const double before_analysis = in_use();
+    Solver s(o);
+    s.analyze(low);
+    // what the analysis keeps: its arrays (analysis_bytes), the Solver's copies of the
+    // input's values and pattern and its statistics (a few arrays of nnz entries) — a loose
+    // upper bound, and a lower one that fails when analysis_bytes counts what is not there
+    const double kept = in_use() - before_analysis;
+    const auto arrays = static_cast<double>(s.stats().analysis.analysis_bytes);
+    const double input = 8.0 * static_cast<double>(low.indices.size() + low.n_cols + 1);
+    EXPECT_GE(kept, 0.95 * arrays) << kept << " bytes kept, analysis_bytes " << arrays;
+    EXPECT_LE(kept, arrays + 4 * input + (2 << 20)) << kept << " bytes kept, " << arrays;
     const double before = in_use();
     s.factorize(low);
     const double grown = in_use() - before;
