@@ -4,14 +4,19 @@
 // sparse factorization", ACM TOMS 12 (1986) — the postorder traversal with the update
 // matrices on a stack; Geist & Ng, "Task scheduling for parallel sparse Cholesky
 // factorization", IJPP 18 (1989) — independent subtrees mapped to threads; the same two
-// ideas organize MUMPS's and SPRAL SSIDS's CPU factorizations.
+// ideas organize MUMPS's and SPRAL SSIDS's CPU factorizations; L'Excellent & Sid-Lakhdar,
+// "A study of shared-memory parallelism in a multifrontal solver", Parallel Computing 40
+// (2014) — the layer of subtrees below which each runs on one thread (MUMPS's "L0").
 //
 // 1. Subtrees. work(f) is the flops of f's subtree (symbolic::front_flops summed). A front
 //    is in a small subtree when its whole subtree consists of fronts under
 //    kLargeFrontFlops and its work is at most total / (4 · threads) (with one thread, no
 //    limit). The small subtrees are the maximal such subtrees; in the tree's postorder
 //    numbering each is a range of fronts ending at its root. Every other front belongs
-//    to the top.
+//    to the top. With kLayerThreads threads or more, the subtrees are instead the layer
+//    that minimizes an estimated time (subtree_layer below: the MUMPS "L0 layer" idea),
+//    large fronts included: they then run one BLAS thread each, all at once in one first
+//    step, where a large front alone on many BLAS threads uses them poorly.
 // 2. Steps. The top fronts are processed by the calling thread in increasing (post)order.
 //    Either each top front is preceded by a step that runs its small-subtree children
 //    concurrently ("per front": their roots' blocks are pushed on the stack right before
@@ -31,7 +36,9 @@
 #include "schedule/stack_plan.hpp"
 
 #include <algorithm>
+#include <functional>
 #include <limits>
+#include <queue>
 #include <string>
 
 #include "strata/errors.hpp"
@@ -145,6 +152,58 @@ void make_steps(const AssemblyTree& t, const std::vector<double>& work, StackPla
   }
 }
 
+// Step 1 with many threads: the layer of independent subtrees. From the roots down, the
+// subtree of most work is replaced by its children (its root joins the top) as long as
+// that may lower the estimated time: the layer's flops over the threads, largest first onto
+// the least loaded (one BLAS thread each), plus the top's flops at kTopEfficiency of the
+// threads' rate. Returns, per front, whether it lies in a layer subtree.
+std::vector<char> subtree_layer(const AssemblyTree& t, const std::vector<double>& work,
+                                int threads) {
+  const index_t n = t.n_fronts();
+  std::vector<index_t> cut, best;
+  for (index_t f = 0; f < n; ++f)
+    if (t.parent[f] < 0) cut.push_back(f);
+  auto makespan = [&](std::vector<double> w) {
+    std::sort(w.begin(), w.end(), std::greater<>());
+    std::priority_queue<double, std::vector<double>, std::greater<>> load;
+    for (int i = 0; i < threads; ++i) load.push(0.0);
+    for (const double x : w) {
+      const double l = load.top();
+      load.pop();
+      load.push(l + x);
+    }
+    double m = 0;
+    while (!load.empty()) {
+      m = load.top();
+      load.pop();
+    }
+    return m;
+  };
+  double top = 0, best_time = std::numeric_limits<double>::infinity();
+  const std::size_t max_cut = static_cast<std::size_t>(16) * static_cast<std::size_t>(threads);
+  while (!cut.empty() && cut.size() <= max_cut) {
+    std::vector<double> w;
+    for (const index_t r : cut) w.push_back(work[r]);
+    const double time = makespan(w) + top / (kTopEfficiency * threads);
+    if (time < best_time) {
+      best_time = time;
+      best = cut;
+    }
+    const auto largest = std::max_element(cut.begin(), cut.end(),
+                                          [&](index_t a, index_t b) { return work[a] < work[b]; });
+    const index_t r = *largest;
+    cut.erase(largest);
+    top += symbolic::front_flops(t, r);
+    for (index_t q = t.child_offsets[r]; q < t.child_offsets[r + 1]; ++q)
+      cut.push_back(t.children[q]);
+  }
+  std::vector<char> in(n, 0);
+  for (const index_t r : best) in[r] = 1;
+  for (index_t f = n - 1; f >= 0; --f)
+    if (t.parent[f] >= 0 && in[t.parent[f]]) in[f] = 1;
+  return in;
+}
+
 }  // namespace
 
 StackPlan plan_stack(const AssemblyTree& t, int threads, bool lower_panels) {
@@ -176,7 +235,11 @@ StackPlan plan_stack(const AssemblyTree& t, int threads, bool lower_panels) {
   }
   const double share =
       threads > 1 ? total / (4.0 * threads) : std::numeric_limits<double>::infinity();
-  auto small = [&](index_t f) { return all_small[f] && work[f] <= share; };
+  const std::vector<char> layer =
+      threads >= kLayerThreads ? subtree_layer(t, work, threads) : std::vector<char>();
+  auto small = [&](index_t f) {
+    return layer.empty() ? all_small[f] && work[f] <= share : layer[f] != 0;
+  };
   p.subtree_of.assign(n, -1);
   for (index_t f = n - 1; f >= 0; --f) {
     if (!small(f)) continue;
@@ -211,7 +274,11 @@ StackPlan plan_stack(const AssemblyTree& t, int threads, bool lower_panels) {
   p.subtrees_first = false;
   make_steps(t, work, p);
   layout_main(t, p);
-  if (threads > 1 && ns > 1) {
+  if (!layer.empty() && ns > 1) {  // the layer's subtrees run together
+    p.subtrees_first = true;
+    make_steps(t, work, p);
+    layout_main(t, p);
+  } else if (threads > 1 && ns > 1) {
     StackPlan q = p;
     q.subtrees_first = true;
     make_steps(t, work, q);

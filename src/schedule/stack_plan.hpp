@@ -22,6 +22,13 @@ namespace strata::schedule {
 /// all its threads inside BLAS; smaller fronts get one BLAS thread each.
 constexpr double kLargeFrontFlops = 2e7;
 
+/// From this many threads on, the plan runs a layer of independent subtrees (large fronts
+/// included) one BLAS thread each, rather than only the subtrees of small fronts.
+constexpr int kLayerThreads = 4;
+/// The share of `threads` × one thread's rate that the layer's choice expects the top's
+/// fronts to reach with all threads inside BLAS.
+constexpr double kTopEfficiency = 0.5;
+
 /// The plan (see the file header). Fronts are those of the AssemblyTree it was made for,
 /// whose numbering is a postorder: the subtree of front r is the range [r − size + 1, r].
 ///
@@ -34,8 +41,9 @@ constexpr double kLargeFrontFlops = 2e7;
 struct StackPlan {
   int threads = 1;            ///< the executor thread count the plan was made for
   bool lower_panels = false;  ///< blocks stored as lower triangles in panels (Cholesky)
-  /// Small subtrees (every front small, the subtree's work within the per-thread share):
-  /// subtree s is the range [subtree_first[s], subtree_root[s]] of the postorder.
+  /// Small subtrees (every front small, the subtree's work within the per-thread share; with
+  /// kLayerThreads threads or more, the subtrees of the chosen layer): subtree s is the
+  /// range [subtree_first[s], subtree_root[s]] of the postorder.
   std::vector<index_t> subtree_first;
   std::vector<index_t> subtree_root;
   /// Per front: its small subtree, or -1 for a front of the top (run by the calling

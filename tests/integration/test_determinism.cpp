@@ -1,7 +1,8 @@
 // Determinism of the CPU backend, on matrices whose top fronts are large enough for the
 // multithreaded-BLAS path of the CPU executor (more than 2e7 flops: a 20³ Laplacian, 3D
-// elasticity), in every factorization type, with Options::num_threads = 1, 2, 3
-// (oversubscribed on a 2-core machine, which is allowed):
+// elasticity), in every factorization type, with Options::num_threads = 1, 2, 3 and 5
+// (oversubscribed on a 2-core machine, which is allowed; 5 threads run the CPU plan's
+// layer of subtrees, schedule/stack_plan.hpp, with large fronts on one BLAS thread each):
 //  - Options::reproducible: bitwise the same factor and solution for every thread count;
 //  - default: bitwise the same from one run to the next for a fixed thread count, and
 //    between thread counts equal to the unit-roundoff level (multithreaded OpenBLAS on the
@@ -134,7 +135,7 @@ TEST(Determinism, ReproducibleIsBitwiseIdenticalForEveryThreadCount) {
     EXPECT_LT(test::backward_error(c.a, ref.x.data(), b.data()), 1e-14);
     // the reproducible single-thread run is the default single-thread run
     expect_identical(run(c.a, c.type, 1, b, false), ref);
-    for (int threads : {2, 3}) {
+    for (int threads : {2, 3, 5}) {
       SCOPED_TRACE("threads " + std::to_string(threads));
       expect_identical(run(c.a, c.type, threads, b, true), ref);
     }
@@ -147,7 +148,7 @@ TEST(Determinism, DefaultIsRepeatableAndAgreesToRoundoffAcrossThreadCounts) {
     SCOPED_TRACE(c.name);
     const std::vector<double> b = random_rhs(c.a.n_rows, rng);
     const Outcome one = run(c.a, c.type, 1, b, false);
-    for (int threads : {2, 3}) {
+    for (int threads : {2, 3, 5}) {
       SCOPED_TRACE("threads " + std::to_string(threads));
       const Outcome first = run(c.a, c.type, threads, b, false);
       expect_identical(run(c.a, c.type, threads, b, false), first);  // run to run
