@@ -155,8 +155,9 @@ void make_steps(const AssemblyTree& t, const std::vector<double>& work, StackPla
 // Step 1 with many threads: the layer of independent subtrees. From the roots down, the
 // subtree of most work is replaced by its children (its root joins the top) as long as
 // that may lower the estimated time: the layer's flops over the threads, largest first onto
-// the least loaded (one BLAS thread each), plus the top's flops at kTopEfficiency of the
-// threads' rate. Returns, per front, whether it lies in a layer subtree.
+// the least loaded (one BLAS thread each), plus the top's: its large fronts' flops at
+// kTopEfficiency of the threads' rate, its small ones' at one thread's (they run alone on
+// the calling thread). Returns, per front, whether it lies in a layer subtree.
 std::vector<char> subtree_layer(const AssemblyTree& t, const std::vector<double>& work,
                                 int threads) {
   const index_t n = t.n_fronts();
@@ -179,12 +180,14 @@ std::vector<char> subtree_layer(const AssemblyTree& t, const std::vector<double>
     }
     return m;
   };
+  // the top's time in one thread's flops: a large front on all threads at kTopEfficiency,
+  // a small one on the calling thread alone
   double top = 0, best_time = std::numeric_limits<double>::infinity();
   const std::size_t max_cut = static_cast<std::size_t>(16) * static_cast<std::size_t>(threads);
   while (!cut.empty() && cut.size() <= max_cut) {
     std::vector<double> w;
     for (const index_t r : cut) w.push_back(work[r]);
-    const double time = makespan(w) + top / (kTopEfficiency * threads);
+    const double time = makespan(w) + top;
     if (time < best_time) {
       best_time = time;
       best = cut;
@@ -193,7 +196,8 @@ std::vector<char> subtree_layer(const AssemblyTree& t, const std::vector<double>
                                           [&](index_t a, index_t b) { return work[a] < work[b]; });
     const index_t r = *largest;
     cut.erase(largest);
-    top += symbolic::front_flops(t, r);
+    const double flops = symbolic::front_flops(t, r);
+    top += flops > kLargeFrontFlops ? flops / (kTopEfficiency * threads) : flops;
     for (index_t q = t.child_offsets[r]; q < t.child_offsets[r + 1]; ++q)
       cut.push_back(t.children[q]);
   }
