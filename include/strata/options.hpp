@@ -99,7 +99,10 @@ struct Options {
   // --- numeric factorization ---
   /// Where factorize/solve run (default: cpu).
   Backend backend = Backend::cpu;
-  /// Host threads for the CPU backend; 0 means all hardware threads (default 0).
+  /// Host threads for the CPU backend; 0 means all hardware threads (default 0). The CPU
+  /// factorization's memory depends on it: with 4 threads or more independent subtrees run
+  /// at once, each with a contribution-block stack of its own
+  /// (AnalysisStats::cpu_factorization_bytes reports the bytes for this count).
   int num_threads = 0;
   /// CPU backend: bitwise the same factor and solution for every num_threads. Fronts are
   /// always factored one per thread in a schedule-independent way; what differs between
