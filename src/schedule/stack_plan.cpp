@@ -184,7 +184,9 @@ std::vector<char> subtree_layer(const AssemblyTree& t, const std::vector<double>
   // a small one on the calling thread alone
   double top = 0, best_time = std::numeric_limits<double>::infinity();
   const std::size_t max_cut = static_cast<std::size_t>(16) * static_cast<std::size_t>(threads);
-  while (!cut.empty() && cut.size() <= max_cut) {
+  // the top's time only grows: once it alone reaches the best estimate, stop (on a
+  // chain-like tree the cut stays small and would otherwise be walked to its end)
+  while (!cut.empty() && cut.size() <= max_cut && top < best_time) {
     std::vector<double> w;
     for (const index_t r : cut) w.push_back(work[r]);
     const double time = makespan(w) + top;
