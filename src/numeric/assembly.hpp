@@ -10,6 +10,7 @@
 #pragma once
 #include <cstdint>
 
+#include "base/lower_panels.hpp"
 #include "strata/types.hpp"
 
 namespace strata::numeric {
@@ -36,6 +37,18 @@ inline void extend_add(double* F, std::int64_t m, const double* cb, std::int64_t
     double* dst = F + (rel[jj] - col0) * m;
     const double* src = cb + jj * mc;
     for (std::int64_t ii = lower ? jj : 0; ii < mc; ++ii) dst[rel[ii]] += src[ii];
+  }
+}
+
+/// The same addition for a symmetric child block stored by its lower triangle in panels
+/// (base/lower_panels.hpp; a plain square is one panel): columns jj in [j0, j1), rows
+/// ii ≥ jj, added into F (leading dimension m) at rows and column rel[·].
+inline void extend_add_lower(double* F, std::int64_t m, const LowerPanels& cb, const index_t* rel,
+                             index_t j0, index_t j1) {
+  for (index_t jj = j0; jj < j1; ++jj) {
+    const double* col = cb.diag(jj);  // col[ii − jj]: element (ii, jj)
+    double* dst = F + static_cast<std::int64_t>(rel[jj]) * m;
+    for (index_t ii = jj; ii < cb.n; ++ii) dst[rel[ii]] += col[ii - jj];
   }
 }
 

@@ -258,15 +258,12 @@ StackPlan plan_stack(const AssemblyTree& t, int threads, bool lower_panels) {
       p.subtree_first.push_back(f - size[f] + 1);
     }
   }
-  // ids in increasing root order
+  // ids in increasing root order (the roots were found decreasing)
   const auto ns = static_cast<index_t>(p.subtree_root.size());
-  std::vector<index_t> order(ns), rank(ns);
-  for (index_t s = 0; s < ns; ++s) order[s] = ns - 1 - s;  // roots were found decreasing
-  for (index_t s = 0; s < ns; ++s) rank[order[s]] = s;
   std::reverse(p.subtree_root.begin(), p.subtree_root.end());
   std::reverse(p.subtree_first.begin(), p.subtree_first.end());
   for (index_t f = 0; f < n; ++f)
-    if (p.subtree_of[f] >= 0) p.subtree_of[f] = rank[p.subtree_of[f]];
+    if (p.subtree_of[f] >= 0) p.subtree_of[f] = ns - 1 - p.subtree_of[f];
   for (index_t s = 0; s < ns; ++s)
     for (index_t f = p.subtree_first[s]; f <= p.subtree_root[s]; ++f)
       if (f < 0 || p.subtree_of[f] != s)

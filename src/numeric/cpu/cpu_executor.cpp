@@ -222,13 +222,7 @@ void process_dense(const FactorContext& ctx, index_t f, const FrontBlocks& block
       continue;
     }
     const LowerPanels src = blocks.block(t, c, blocks.child(c));  // lower triangle only
-    split(mc, [&](index_t j0, index_t j1) {
-      for (index_t jj = j0; jj < j1; ++jj) {
-        const double* col = src.diag(jj);
-        double* dst = F + static_cast<std::size_t>(rel[jj]) * m;
-        for (index_t ii = jj; ii < mc; ++ii) dst[rel[ii]] += col[ii - jj];
-      }
-    });
+    split(mc, [&](index_t j0, index_t j1) { extend_add_lower(F, m, src, rel, j0, j1); });
   }
 
   // 3. partial factorization
