@@ -14,12 +14,7 @@ namespace {
 // executors that kept them on their devices, then the multifrontal solve.
 void host_solve(const Analysis& an, const std::vector<Executor*>& execs, NumericFactor& factor,
                 double* x, index_t nrhs) {
-  if (!factor.panels_on_host) {
-    if (execs.size() == 1)
-      fetch_panels(an, *execs[0], factor);
-    else
-      fetch_panels(an, execs, factor);
-  }
+  fetch_panels(an, execs, factor);
   solve_in_place(an, factor, x, nrhs);
 }
 

@@ -28,6 +28,15 @@
 
 namespace strata::numeric {
 
+/// A part of a factor held by the executor that computed it: the panels of the tree's
+/// part `part` (PartView::id: -1 the whole tree, else a part of an.partition) in the
+/// memory of worker `worker`'s executor (the index of that executor in the list the
+/// factorization ran with: 0 for a whole-tree factorization).
+struct HeldPanels {
+  int part = -1;
+  int worker = 0;
+};
+
 /// The factor of one matrix, in the tree numbering of its Analysis.
 ///   panels:     front f's first k columns (n_rows×k column-major: L11 or L11\U11 packed,
 ///               then L21) at factor_layout.panel_offset[f]; for LU the k×(n_rows−k) U12
@@ -37,13 +46,14 @@ namespace strata::numeric {
 ///               the first k (same offsets as AssemblyTree::rows).
 ///   d_diag, d_off: LDLᵀ only, by pivot position: D(j,j) and, for the first column of a
 ///               2×2 pivot, D(j+1,j) (pivot_size[j] == 2 there, 0 on the second column).
-///   panels_on_host: false when the executor kept the panels in its own (device) memory
-///               only — Executor::keeps_panels; `panels` is then empty until
-///               fetch_panels copies them.
+///   held:       the parts of the factor whose panels stayed in the memory of the executor
+///               that computed them (a GPU's, Executor::keeps_panels): their place in
+///               `panels` is not written — `panels` may be empty — until fetch_panels
+///               copies them there. Empty: every panel is in `panels`.
 struct NumericFactor {
   MatrixType type = MatrixType::automatic;
   std::vector<double> panels;
-  bool panels_on_host = true;
+  std::vector<HeldPanels> held;
   std::vector<index_t> rows;
   std::vector<double> d_diag;
   std::vector<double> d_off;
@@ -80,7 +90,8 @@ struct FactorContext {
   std::vector<double>* cb_arena = nullptr;  ///< host arena of the part (host executors)
   const PartView* part = nullptr;           ///< set from begin_part to end_part
   /// Several workers: an executor may keep the panels of the parts it factors in its own
-  /// memory (Executor::holds_part_panels; fetch_panels brings them to the host).
+  /// memory (Executor::keeps_panels; fetch_panels brings them to the host). A whole-tree
+  /// factorization leaves that choice to the executor.
   bool keep_part_panels = false;
   /// Several workers: executors that have no part of their own while this part runs (the
   /// top part: every other worker, all of whose parts are done; subtrees and upper parts
@@ -172,25 +183,19 @@ class Executor {
   virtual bool solve(const Analysis& an, const NumericFactor& fac, double* x, index_t nrhs) {
     return false;
   }
-  /// After begin_part of a whole-tree factorization: true when this factorization's panels
-  /// will stay in the executor's memory only (the driver then leaves factor.panels
-  /// empty and sets panels_on_host = false). The default keeps them on the host.
+  /// After begin_part: true when the panels of the part ctx.part will stay in the
+  /// executor's memory only (a resident GPU factor of the whole tree; a part's panels kept
+  /// on its GPU when FactorContext::keep_part_panels asks for it). The driver then records
+  /// the part in NumericFactor::held and does not write its place in factor.panels. The
+  /// default: the panels go to factor.panels.
   virtual bool keeps_panels(const FactorContext& ctx) const { return false; }
-  /// Copies the panels of the factor this executor kept (keeps_panels) into fac.panels
-  /// (sized here); throws InvalidState when it holds no factor for `an`.
-  virtual void download_panels(const Analysis& an, NumericFactor& fac) {
+  /// Copies the panels of part `part` (HeldPanels::part) that this executor kept into
+  /// their place in fac.panels, which the caller has sized to the whole factor. Throws
+  /// InvalidState when it holds no such part for `an` (a later factorization or analysis
+  /// replaced it).
+  virtual void download_panels(const Analysis& an, int part, NumericFactor& fac) {
     throw InvalidState("download_panels: this executor holds no factor panels");
   }
-  /// After begin_part of a part of a multi-worker factorization: true when that part's
-  /// panels stay in the executor's memory only (FactorContext::keep_part_panels honoured;
-  /// their place in factor.panels is not written). The driver sizes factor.panels (the
-  /// whole factor, zero-filled: seconds for a factor of several GB) only before a part
-  /// whose panels do go there. The default: they go there.
-  virtual bool keeps_part_panels(const FactorContext& ctx) const { return false; }
-  /// After a multi-worker factorization with FactorContext::keep_part_panels: true when
-  /// this executor kept the panels of some of its parts in its own memory only (their
-  /// place in factor.panels is then stale until download_panels).
-  virtual bool holds_part_panels() const { return false; }
   /// Adds backend figures of the last factorization (bytes moved, device time) to `fs`.
   virtual void report(FactorStats& fs) const {}
   /// Adds this executor's per-worker figures of the last factorization that the driver
@@ -239,12 +244,14 @@ void prepare_factor(const Analysis& an, MatrixType type, NumericFactor& factor,
 /// summed; device_seconds and device_budget the largest; spilled blocks if any spilled.
 void merge_device_figures(FactorStats& into, const FactorStats& one);
 
-/// Makes fac.panels hold the panels: a no-op when they are on the host, else
-/// exec.download_panels (exec must be the executor that factored `fac`).
-void fetch_panels(const Analysis& an, Executor& exec, NumericFactor& fac);
-/// The same after a multi-worker factorization: every executor that holds part panels
-/// copies them into fac.panels.
+/// Makes fac.panels hold every panel: sizes it and has each held part's executor
+/// (execs[HeldPanels::worker], the executors the factorization ran with, in that order)
+/// copy its panels there, then clears fac.held; a no-op when nothing is held. Throws
+/// InternalError when a held part names a worker outside execs, and what download_panels
+/// throws.
 void fetch_panels(const Analysis& an, const std::vector<Executor*>& execs, NumericFactor& fac);
+/// The same for a whole-tree factorization by `exec`.
+void fetch_panels(const Analysis& an, Executor& exec, NumericFactor& fac);
 
 /// LDLᵀ bookkeeping of front f once its partial factorization is in the factor (shared by
 /// the executors, so that a CPU and a GPU factor have one layout): moves D out of the
@@ -294,7 +301,7 @@ struct MultiWorkerConfig {
   /// With factor_top false: ask exporters to leave the blocks in device memory (NCCL).
   bool remote_blocks_on_device = false;
   /// Executors may keep their parts' panels in device memory (FactorContext::
-  /// keep_part_panels); the factor is then marked panels_on_host = false and the caller
+  /// keep_part_panels); those parts are listed in NumericFactor::held and the caller
   /// fetches them (fetch_panels with every executor) before a host solve.
   bool keep_panels_on_devices = false;
   /// Optional: where the transfers' host buffers are kept between factorizations.

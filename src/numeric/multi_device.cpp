@@ -268,9 +268,6 @@ class MultiRun {
     }
     const double total = wall_.seconds();
     for (auto& d : st_) d.idle_seconds = std::max(0.0, total - d.busy_seconds);
-    factor_.panels_on_host = true;
-    for (Executor* e : execs_)
-      if (e->holds_part_panels()) factor_.panels_on_host = false;
     factor_.valid = true;
     if (devices) *devices = std::move(st_);
   }
@@ -306,13 +303,22 @@ class MultiRun {
     return transfer;
   }
 
-  // The host panels are sized only when some part's panels go there (keeps_part_panels):
+  // The host panels are sized only when some part's panels go there (keeps_panels):
   // with every part kept on its GPU, zero-filling the whole factor's host copy was work
   // no one read.
   void size_host_panels() {
     std::call_once(panels_sized_, [&] {
       sized_resize(factor_.panels, an_.factor_layout.total, "factorize: factor panels");
     });
+  }
+
+  // Part `id`'s panels stay with worker w's executor (NumericFactor::held, in part order).
+  void hold_panels(int id, int w) {
+    const std::lock_guard<std::mutex> lock(held_mutex_);
+    auto& held = factor_.held;
+    const auto at =
+        std::find_if(held.begin(), held.end(), [id](const HeldPanels& h) { return h.part > id; });
+    held.insert(at, HeldPanels{id, w});
   }
 
   // One part on worker w (its executor begun): begin_part, the blocks of its children in
@@ -333,7 +339,10 @@ class MultiRun {
       arenas_[w].resize(fp.cb_layout.arena_size);
     ctx.part = &view;
     ex.begin_part(ctx);
-    if (!ex.keeps_part_panels(ctx)) size_host_panels();
+    if (ex.keeps_panels(ctx))
+      hold_panels(id, w);
+    else
+      size_host_panels();
     for (const index_t c : fp.imports)
       st_[w].bytes_transferred += ex.import_cb(ctx, transfer_[part_.part_id[c]]);
     run_batches(ex, ctx);
@@ -413,6 +422,7 @@ class MultiRun {
   const int workers_, first_, n_sub_;
   Timer wall_;
   std::once_flag panels_sized_;
+  std::mutex held_mutex_;  // NumericFactor::held, written by the workers
   std::vector<CbTransfer> transfer_;
   KeptBuffers kept_;
   std::vector<DeviceStats> st_;

@@ -10,6 +10,7 @@
 // the result does not depend on the thread count. With one executor the whole tree is one part; the
 // multi-worker driver (multi_device.cpp) runs the parts of a TreePartition on several.
 #include <algorithm>
+#include <string>
 
 #include "base/alloc.hpp"
 #include "numeric/factor.hpp"
@@ -39,10 +40,8 @@ void prepare_factor(const Analysis& an, MatrixType type, NumericFactor& factor, 
   factor.type = type;
   factor.valid = false;
   // Storage is sized once; refactorization reuses it (resize is a no-op then).
-  if (host_panels) {
-    sized_resize(factor.panels, an.factor_layout.total, "factorize: factor panels");
-    factor.panels_on_host = true;
-  }
+  factor.held.clear();
+  if (host_panels) sized_resize(factor.panels, an.factor_layout.total, "factorize: factor panels");
   sized_resize(factor.rows, t.rows.size(), "factorize: factor row indices");
   factor.front_stats.assign(t.n_fronts(), PivotStats{});
   if (type == MatrixType::symmetric_indefinite) {
@@ -73,10 +72,9 @@ void factorize(const Analysis& an, const std::vector<double>& scaled_values, Mat
   // factorization (pinned staging, a host memcpy, and sizing the vector the first time).
   if (exec.keeps_panels(ctx)) {
     std::vector<double>().swap(factor.panels);
-    factor.panels_on_host = false;
+    factor.held.push_back(HeldPanels{whole.id, 0});
   } else {
     sized_resize(factor.panels, an.factor_layout.total, "factorize: factor panels");
-    factor.panels_on_host = true;
   }
   if (!exec.factor_tree(ctx)) {
     if (exec.uses_host_arena() && cb_arena.size() < an.cb_layout.arena_size)
@@ -118,19 +116,21 @@ void merge_device_figures(FactorStats& into, const FactorStats& one) {
   d.setup += o.setup;
 }
 
-void fetch_panels(const Analysis& an, Executor& exec, NumericFactor& fac) {
-  if (fac.panels_on_host) return;
-  exec.download_panels(an, fac);
-  fac.panels_on_host = true;
+void fetch_panels(const Analysis& an, const std::vector<Executor*>& execs, NumericFactor& fac) {
+  if (fac.held.empty()) return;
+  // unsized when the panels of every part stayed with the executors
+  sized_resize(fac.panels, an.factor_layout.total, "fetch_panels: factor panels");
+  for (const HeldPanels& h : fac.held) {
+    if (h.worker < 0 || h.worker >= static_cast<int>(execs.size()))
+      throw InternalError("fetch_panels: part " + std::to_string(h.part) + " is held by worker " +
+                          std::to_string(h.worker) + " of " + std::to_string(execs.size()));
+    execs[h.worker]->download_panels(an, h.part, fac);
+  }
+  fac.held.clear();
 }
 
-void fetch_panels(const Analysis& an, const std::vector<Executor*>& execs, NumericFactor& fac) {
-  if (fac.panels_on_host) return;
-  // unsized when every part's panels stayed on the devices (factorize_multi)
-  sized_resize(fac.panels, an.factor_layout.total, "fetch_panels: factor panels");
-  for (Executor* e : execs)
-    if (e->holds_part_panels()) e->download_panels(an, fac);
-  fac.panels_on_host = true;
+void fetch_panels(const Analysis& an, Executor& exec, NumericFactor& fac) {
+  fetch_panels(an, std::vector<Executor*>{&exec}, fac);
 }
 
 void store_ldlt_front(const Analysis& an, index_t f, const index_t* local_perm,

@@ -50,7 +50,7 @@ GpuLlt gpu_llt(const Analysis& an, const SparseMatrix& c, const Options& o, bool
   if (prepare) gpu->prepare(an, 1);
   numeric::factorize(an, c.values, MatrixType::spd, 0.0, *gpu, r.factor, arena);
   gpu->report(r.stats);
-  r.panels_were_on_host = r.factor.panels_on_host;
+  r.panels_were_on_host = r.factor.held.empty();
   numeric::fetch_panels(an, *gpu, r.factor);
   return r;
 }
@@ -606,7 +606,8 @@ TEST_F(CudaBackend, LuFactorMatchesCpu) {
       FactorStats fs;
       r.gpu_exec->report(fs);
       EXPECT_TRUE(fs.factor_resident);
-      EXPECT_FALSE(gf.panels_on_host);
+      ASSERT_EQ(gf.held.size(), 1u);  // the whole tree, on the device only
+      EXPECT_EQ(gf.held[0].part, -1);
       // elasticity 8 has large fronts: after the matching most of them need no interchange,
       // so their elimination without interchanges stands; with rows scaled and no matching
       // some need interchanges, found by the check

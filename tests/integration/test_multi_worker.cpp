@@ -579,9 +579,10 @@ TEST(MultiWorker, SlowWorkerHasItsSubtreesStolen) {
 
 // Executors that keep every part's panels in their own memory (a stand-in for GPUs, which
 // factor nothing here) leave factor.panels unsized — sizing it zero-filled the whole
-// factor's host copy, seconds for a large one, that no one read — and fetch_panels sizes
-// it and fills it from them; one executor that does not keep its parts' panels (a CPU
-// executor) makes the driver size it before that part.
+// factor's host copy, seconds for a large one, that no one read — and list each part they
+// kept in factor.held; fetch_panels sizes the panels and has each part's holder fill that
+// part's fronts; one executor that does not keep its parts' panels (a CPU executor) makes
+// the driver size them before that part.
 class KeepsPanels final : public numeric::Executor {
  public:
   explicit KeepsPanels(double marker) : marker_(marker) {}
@@ -595,11 +596,14 @@ class KeepsPanels final : public numeric::Executor {
   std::size_t import_cb(const numeric::FactorContext&, const numeric::CbTransfer&) override {
     return 0;
   }
-  bool keeps_part_panels(const numeric::FactorContext&) const override { return true; }
-  bool holds_part_panels() const override { return true; }
-  void download_panels(const Analysis& an, numeric::NumericFactor& fac) override {
+  bool keeps_panels(const numeric::FactorContext&) const override { return true; }
+  void download_panels(const Analysis& an, int part, numeric::NumericFactor& fac) override {
     ASSERT_EQ(fac.panels.size(), static_cast<std::size_t>(an.factor_layout.total));
-    for (double& x : fac.panels) x += marker_;
+    for (index_t f = 0; f < an.tree.n_fronts(); ++f) {
+      if (an.partition.part_id[f] != part) continue;
+      double* p = fac.panels.data() + an.factor_layout.panel_offset[f];
+      for (std::size_t i = 0; i < panel_size(an.tree, f, false); ++i) p[i] += marker_;
+    }
   }
 
  private:
@@ -613,17 +617,36 @@ TEST(MultiWorker, HostPanelsSizedOnlyWhenAPartWritesThem) {
   const std::vector<double> v = test::scaled_values(an, a, &pivot);
   const auto total = static_cast<std::size_t>(an.factor_layout.total);
   ASSERT_GT(total, 0u);
+  const int n_parts = an.partition.n_parts();
   KeepsPanels k0(1.0), k1(2.0);
+  const std::vector<numeric::Executor*> execs{&k0, &k1};
   std::vector<std::vector<double>> arenas;
   {
     numeric::NumericFactor f;
-    numeric::factorize_multi(an, v, MatrixType::spd, pivot, {&k0, &k1}, f, arenas, {}, nullptr);
+    numeric::factorize_multi(an, v, MatrixType::spd, pivot, execs, f, arenas, {}, nullptr);
     EXPECT_TRUE(f.panels.empty()) << "host panels sized though every part kept its panels";
-    EXPECT_FALSE(f.panels_on_host);
-    numeric::fetch_panels(an, std::vector<numeric::Executor*>{&k0, &k1}, f);
+    // every part once, in part order, held by the worker that factored it
+    ASSERT_EQ(f.held.size(), static_cast<std::size_t>(n_parts));
+    std::vector<double> marker(n_parts);
+    for (int i = 0; i < n_parts; ++i) {
+      EXPECT_EQ(f.held[i].part, i);
+      ASSERT_TRUE(f.held[i].worker == 0 || f.held[i].worker == 1);
+      marker[i] = f.held[i].worker == 0 ? 1.0 : 2.0;
+    }
+    EXPECT_EQ(f.held[an.partition.subtrees.size()].worker, 0) << "the top part is worker 0's";
+    numeric::fetch_panels(an, execs, f);
     ASSERT_EQ(f.panels.size(), total);
-    EXPECT_TRUE(f.panels_on_host);
-    for (double x : f.panels) ASSERT_EQ(x, 3.0);  // zero-filled by fetch, then both added
+    EXPECT_TRUE(f.held.empty());
+    // zero-filled by fetch, then each front's panel filled by the holder of its part
+    for (index_t fr = 0; fr < an.tree.n_fronts(); ++fr) {
+      const double* p = f.panels.data() + an.factor_layout.panel_offset[fr];
+      for (std::size_t i = 0; i < panel_size(an.tree, fr, false); ++i)
+        ASSERT_EQ(p[i], marker[an.partition.part_id[fr]]) << "front " << fr;
+    }
+    numeric::fetch_panels(an, execs, f);  // nothing held: nothing added
+    EXPECT_EQ(f.panels[0], marker[an.partition.part_id[0]]);
+    f.held.push_back({0, 2});  // a worker the list does not have
+    EXPECT_THROW(numeric::fetch_panels(an, execs, f), InternalError);
   }
   {  // one CPU executor: its parts' panels go to the host, sized before it writes them
     const auto cpu = numeric::make_cpu_executor(1);
@@ -631,7 +654,8 @@ TEST(MultiWorker, HostPanelsSizedOnlyWhenAPartWritesThem) {
     numeric::factorize_multi(an, v, MatrixType::spd, pivot, {cpu.get(), &k1}, f, arenas, {},
                              nullptr);
     EXPECT_EQ(f.panels.size(), total);
-    EXPECT_FALSE(f.panels_on_host);  // k1 holds the panels of its parts
+    ASSERT_FALSE(f.held.empty());  // k1 holds the panels of its parts
+    for (const numeric::HeldPanels& h : f.held) EXPECT_EQ(h.worker, 1);
   }
 }
 

@@ -23,7 +23,7 @@
 //   4. one launch packs the chunk's factor panels (contiguous in the factor layout) into
 //      the device factor, which is copied to the host factor in one transfer — unless
 //      the factor stays resident for an LLᵀ or LU: then the panels stay on the device
-//      only (NumericFactor::panels_on_host is false; download_panels on demand) and
+//      only (NumericFactor::held names it; download_panels on demand) and
 //      only the pivots' diagonal entries come back for the host bookkeeping.
 // CUDA events between the steps give FactorStats::device_phases.
 // A front whose working set alone is over the budget is factored slab by slab from
@@ -61,8 +61,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <string>
 
-#include "base/alloc.hpp"
 #include "base/host_copy.hpp"
 #include "base/timer.hpp"
 #include "numeric/cpu/dense_front.hpp"
@@ -94,14 +94,14 @@ CudaExecutor::CudaExecutor(const Options& o, int device)
       limit_(o.device_memory_limit),
       panel_max_pivots_(o.gpu_panel_kernel_max_pivots),
       lu_strip_pivots_(o.gpu_lu_strip_pivots),
-      tiled_pool_share_(o.gpu_tiled_pool_share),
-      tiled_stream_cols_(o.gpu_tiled_stream_columns),
-      tiled_prefetch_(o.gpu_tiled_prefetch),
       split_min_cb_(o.split_front_min_cb),
       dist_min_rows_(o.distributed_front_min_rows),
       dist_block_(std::max<index_t>(64, o.distributed_front_block_size)),
       potrf_block_(static_cast<int>(o.gpu_potrf_block_size)),
       recursive_panel_(o.gpu_recursive_panel) {
+  tiled_.pool_share = o.gpu_tiled_pool_share;
+  tiled_.stream_cols = o.gpu_tiled_stream_columns;
+  tiled_.prefetch_on = o.gpu_tiled_prefetch;
   STRATA_CUDA(cudaSetDevice(device_));
   STRATA_CUDA(cudaStreamCreate(&stream_));
   STRATA_CUBLAS(cublasCreate(&blas_));
@@ -186,7 +186,7 @@ void CudaExecutor::begin(const numeric::FactorContext& ctx) {
   whole_ = false;  // until begin_part says which part: no resident factor from no part
   const Analysis& an = *ctx.analysis;
   bytes_h2d_ = bytes_d2h_ = 0;
-  chunks_ = tiled_count_ = prefetched_count_ = 0;
+  chunks_ = tiled_.count = tiled_.prefetched = 0;
   lu_.fronts = lu_.fronts_pivoted = lu_.fronts_batched = 0;
   phases_ = FactorStats::DevicePhases{};
   held_parts_.clear();
@@ -281,43 +281,45 @@ std::vector<std::unique_ptr<Lane>>& CudaExecutor::lanes() {
   return lanes_;
 }
 
-void CudaExecutor::download_panels(const Analysis& an, numeric::NumericFactor& fac) {
+void CudaExecutor::download_panels(const Analysis& an, int part, numeric::NumericFactor& fac) {
   STRATA_CUDA(cudaSetDevice(device_));
-  if (!held_parts_.empty()) {  // parts of a multi-GPU split: each part's buffer, front by front
-    if (an.id != analysis_id_)
+  if (fac.panels.size() != an.factor_layout.total)
+    throw InternalError("download_panels: the host factor is not sized for this analysis");
+  if (part == -1) {  // the resident factor of the whole tree
+    if (!keep_resident() || dsolve_.resident_for != &fac || dsolve_.resident_analysis != an.id)
       throw InvalidState("download_panels: the device holds no factor for this analysis");
-    const bool lu = !an.symmetric;
-    std::vector<double> pageable;  // when pinned memory cannot be had
-    for (const int id : held_parts_) {
-      const PartDevice& pd = parts_.at(id);
-      // through pinned memory (a pageable buffer made the first host solve after a
-      // multi-GPU factorization several times slower than copying the panels back during
-      // the factorization)
-      double* host = nullptr;
-      try {
-        host_staging_.resize(pd.panel_total);
-        host = host_staging_.data();
-      } catch (const OutOfMemory&) {
-        pageable.resize(pd.panel_total);
-        host = pageable.data();
-      }
-      STRATA_CUDA(cudaMemcpy(host, part_panels_.at(id).data(), sizeof(double) * pd.panel_total,
-                             cudaMemcpyDeviceToHost));
-      for (std::size_t q = 0; q < pd.fronts_host.size(); ++q) {
-        const index_t f = pd.fronts_host[q];
-        std::memcpy(fac.panels.data() + an.factor_layout.panel_offset[f],
-                    host + pd.panel_off_host[q], sizeof(double) * panel_size(an.tree, f, lu));
-      }
-    }
+    STRATA_CUDA(cudaMemcpyAsync(fac.panels.data(), panels_.data(),
+                                sizeof(double) * an.factor_layout.total, cudaMemcpyDeviceToHost,
+                                stream_));
+    STRATA_CUDA(cudaStreamSynchronize(stream_));
     return;
   }
-  if (!keep_resident() || dsolve_.resident_for != &fac || dsolve_.resident_analysis != an.id)
-    throw InvalidState("download_panels: the device holds no factor for this analysis");
-  sized_resize(fac.panels, an.factor_layout.total, "download_panels: factor panels");
-  STRATA_CUDA(cudaMemcpyAsync(fac.panels.data(), panels_.data(),
-                              sizeof(double) * an.factor_layout.total, cudaMemcpyDeviceToHost,
-                              stream_));
-  STRATA_CUDA(cudaStreamSynchronize(stream_));
+  // a part of a multi-GPU split: its buffer, front by front
+  if (an.id != analysis_id_ ||
+      std::find(held_parts_.begin(), held_parts_.end(), part) == held_parts_.end())
+    throw InvalidState("download_panels: the device holds no panels of part " +
+                       std::to_string(part) + " for this analysis");
+  const bool lu = !an.symmetric;
+  const PartDevice& pd = parts_.at(part);
+  // through pinned memory (a pageable buffer made the first host solve after a multi-GPU
+  // factorization several times slower than copying the panels back during the
+  // factorization); a pageable one when pinned memory cannot be had
+  std::vector<double> pageable;
+  double* host = nullptr;
+  try {
+    host_staging_.resize(pd.panel_total);
+    host = host_staging_.data();
+  } catch (const OutOfMemory&) {
+    pageable.resize(pd.panel_total);
+    host = pageable.data();
+  }
+  STRATA_CUDA(cudaMemcpy(host, part_panels_.at(part).data(), sizeof(double) * pd.panel_total,
+                         cudaMemcpyDeviceToHost));
+  for (std::size_t q = 0; q < pd.fronts_host.size(); ++q) {
+    const index_t f = pd.fronts_host[q];
+    std::memcpy(fac.panels.data() + an.factor_layout.panel_offset[f], host + pd.panel_off_host[q],
+                sizeof(double) * panel_size(an.tree, f, lu));
+  }
 }
 
 std::size_t CudaExecutor::export_cb(const numeric::FactorContext& ctx, numeric::CbTransfer& t) {
@@ -465,8 +467,8 @@ void CudaExecutor::report(FactorStats& fs) const {
   fs.bytes_to_device = bytes_h2d_;
   fs.bytes_to_host = bytes_d2h_;
   fs.device_batches = chunks_;
-  fs.tiled_fronts = tiled_count_;
-  fs.tiled_fronts_prefetched = prefetched_count_;
+  fs.tiled_fronts = tiled_.count;
+  fs.tiled_fronts_prefetched = tiled_.prefetched;
   fs.lu_large_fronts = lu_.fronts;
   fs.lu_large_fronts_pivoted = lu_.fronts_pivoted;
   fs.lu_large_fronts_batched = lu_.fronts_batched;

@@ -171,12 +171,10 @@ class CudaExecutor final : public numeric::Executor {
   void end(const numeric::FactorContext& ctx) override;
   bool solve(const Analysis& an, const numeric::NumericFactor& fac, double* x,
              index_t nrhs) override;
-  bool keeps_panels(const numeric::FactorContext& ctx) const override { return device_only_; }
-  bool keeps_part_panels(const numeric::FactorContext& ctx) const override {
-    return part_device_only_;
+  bool keeps_panels(const numeric::FactorContext& ctx) const override {
+    return ctx.part->id == -1 ? device_only_ : part_device_only_;
   }
-  void download_panels(const Analysis& an, numeric::NumericFactor& fac) override;
-  bool holds_part_panels() const override { return !held_parts_.empty(); }
+  void download_panels(const Analysis& an, int part, numeric::NumericFactor& fac) override;
   void end_part(const numeric::FactorContext& ctx) override;
   void report(FactorStats& fs) const override;
   void report_worker(DeviceStats& d) const override;
@@ -276,13 +274,13 @@ class CudaExecutor final : public numeric::Executor {
   /// empty one); touches no stream, so it may run beside the device's work.
   void assemble_llt_split_from(const Analysis& an, const double* values, index_t f, double* P,
                                double* C, const std::vector<const double*>& block);
-  /// Starts, on a thread of its own, the host assembly into host_front_next_ of the next
+  /// Starts, on a thread of its own, the host assembly into tiled_.front_next of the next
   /// tiled Cholesky front of the level of the front `f` at position `pos` (the current
   /// part's schedule), when Options::gpu_tiled_prefetch is on (its children's blocks on
-  /// the device are copied to host_staging_next_ first; tiled_llt.cu).
+  /// the device are copied to tiled_.staging_next first; tiled_llt.cu).
   void start_tiled_prefetch(const numeric::FactorContext& ctx, index_t f, index_t pos);
   /// Waits for a pending prefetch and forgets it; true when it assembled the front at
-  /// position `pos` of part `part` (into host_front_next_).
+  /// position `pos` of part `part` (into tiled_.front_next).
   bool take_tiled_prefetch(int part, index_t pos);
   /// The same when nothing will use it (a new part, a failed factorization).
   void drop_tiled_prefetch() { (void)take_tiled_prefetch(-3, -1); }
@@ -390,16 +388,13 @@ class CudaExecutor final : public numeric::Executor {
   cublasHandle_t blas_ = nullptr;
   cusolverDnHandle_t solver_ = nullptr;
   std::size_t limit_ = 0;
-  std::int64_t panel_max_pivots_ = 0;   ///< Options::gpu_panel_kernel_max_pivots
-  std::int64_t lu_strip_pivots_ = 0;    ///< Options::gpu_lu_strip_pivots
-  double tiled_pool_share_ = 0;         ///< Options::gpu_tiled_pool_share
-  std::int64_t tiled_stream_cols_ = 0;  ///< Options::gpu_tiled_stream_columns
-  bool tiled_prefetch_ = false;         ///< Options::gpu_tiled_prefetch
-  std::int64_t split_min_cb_ = 0;       ///< Options::split_front_min_cb
-  std::int64_t dist_min_rows_ = 0;      ///< Options::distributed_front_min_rows
-  std::int64_t dist_block_ = 512;       ///< Options::distributed_front_block_size
-  int potrf_block_ = 0;                 ///< Options::gpu_potrf_block_size
-  bool recursive_panel_ = true;         ///< Options::gpu_recursive_panel
+  std::int64_t panel_max_pivots_ = 0;  ///< Options::gpu_panel_kernel_max_pivots
+  std::int64_t lu_strip_pivots_ = 0;   ///< Options::gpu_lu_strip_pivots
+  std::int64_t split_min_cb_ = 0;      ///< Options::split_front_min_cb
+  std::int64_t dist_min_rows_ = 0;     ///< Options::distributed_front_min_rows
+  std::int64_t dist_block_ = 512;      ///< Options::distributed_front_block_size
+  int potrf_block_ = 0;                ///< Options::gpu_potrf_block_size
+  bool recursive_panel_ = true;        ///< Options::gpu_recursive_panel
   std::uint64_t analysis_id_ = 0;
   DevicePlan plan_;
   // analysis arrays (fronts_: the whole tree's schedule, for the device solve)
@@ -416,14 +411,14 @@ class CudaExecutor final : public numeric::Executor {
   /// part_panels_[its id] instead of going to the host factor.
   bool part_device_only_ = false;
   std::map<int, DeviceBuffer<double>> part_panels_;
-  std::vector<int> held_parts_;  ///< parts of this factorization kept so
+  std::vector<int> held_parts_;  ///< parts of this factorization kept so (the rest are freed)
   int planned_ = 0;              ///< parts_ planned for: 0 nothing, 1 whole, 2 split
   /// Blocks of subtree roots exported for a peer copy (or the same device), kept until
   /// the next factorization: the arena they came from is reused by the next subtree.
   std::map<index_t, DeviceBuffer<double>> outbox_;
   // numeric working memory
   DeviceBuffer<double> values_, arena_, pool_, potrf_work_, panels_;
-  PinnedBuffer<double> host_arena_, host_front_, host_staging_;
+  PinnedBuffer<double> host_arena_, host_staging_;
   DeviceBuffer<int> potrf_info_;
   DeviceBuffer<std::int64_t> panel_items_;  // launch_llt_panel's (position, slot)
   DeviceBuffer<double> panel_work_;         // launch_llt_panel's diagonal-block inverses
@@ -473,7 +468,7 @@ class CudaExecutor final : public numeric::Executor {
   } dsolve_;
   // statistics of the last factorization
   std::size_t bytes_h2d_ = 0, bytes_d2h_ = 0;
-  index_t chunks_ = 0, tiled_count_ = 0, prefetched_count_ = 0;
+  index_t chunks_ = 0;
   double device_seconds_ = 0;
   cudaEvent_t start_ = nullptr, stop_ = nullptr;
   cudaEvent_t panels_done_ = nullptr;  // the chunk's launch_llt_panel: the lanes wait for it
@@ -509,15 +504,24 @@ class CudaExecutor final : public numeric::Executor {
     index_t fronts_distributed = 0;
     std::size_t help_bytes = 0;
   } team_;
-  // The next tiled Cholesky front's host assembly (start_tiled_prefetch): its buffer, and
-  // the part and position it is for. Last member: destroyed (joined) before the rest.
-  PinnedBuffer<double> host_front_next_;
-  PinnedBuffer<double> host_staging_next_;  ///< its children's blocks from the device
-  struct TiledPrefetch {
-    std::future<void> done;
-    int part = -2;
-    index_t pos = -1;
-  } prefetch_;
+  /// Fronts over the budget, factored through the device in pieces (tiled_front.cu,
+  /// tiled_llt.cu): their options, the pinned host front they are assembled in, the next
+  /// tiled Cholesky front's host assembly (start_tiled_prefetch: its buffer, its
+  /// children's blocks from the device, the part and position it is for) and the counts
+  /// FactorStats reports (tiled_fronts, tiled_fronts_prefetched). Last member: its
+  /// prefetch is destroyed (joined) before the rest of the executor.
+  struct TiledFronts {
+    double pool_share = 0;         ///< Options::gpu_tiled_pool_share
+    std::int64_t stream_cols = 0;  ///< Options::gpu_tiled_stream_columns
+    bool prefetch_on = false;      ///< Options::gpu_tiled_prefetch
+    PinnedBuffer<double> front, front_next, staging_next;
+    index_t count = 0, prefetched = 0;
+    struct Prefetch {
+      std::future<void> done;
+      int part = -2;
+      index_t pos = -1;
+    } prefetch;  ///< last: joined before the buffers it writes are freed
+  } tiled_;
 };
 
 }  // namespace strata::cuda

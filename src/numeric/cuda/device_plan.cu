@@ -57,7 +57,7 @@ void CudaExecutor::plan_device_memory(const Analysis& an,
     pool = std::max<std::size_t>(pool, 3 * static_cast<std::size_t>(tiled_rows) * kMinSlab);
     // a larger pool means larger pieces of the tiled fronts (Options::gpu_tiled_pool_share)
     pool =
-        std::max(pool, static_cast<std::size_t>(tiled_pool_share_ * static_cast<double>(budget_d)));
+        std::max(pool, static_cast<std::size_t>(tiled_.pool_share * static_cast<double>(budget_d)));
   }
   if (limit_ > 0 && pool > budget_d)
     throw OutOfMemory(pool * sizeof(double),
@@ -277,9 +277,9 @@ void CudaExecutor::presize_chunk_buffers(const Analysis& an,
   // the tiled fronts' pinned buffers: the prefetch's (LLᵀ) the same size, since the two
   // trade places at every prefetched front and must not grow on the way
   if (host_front > 0) {
-    host_front_.resize(host_front);
-    if (tiled_prefetch_ && !lu) try {
-        host_front_next_.resize(host_front);
+    tiled_.front.resize(host_front);
+    if (tiled_.prefetch_on && !lu) try {
+        tiled_.front_next.resize(host_front);
       } catch (const OutOfMemory&) {  // no room for the second: no prefetch (tiled_llt.cu)
       }
   }

@@ -73,10 +73,10 @@ void CudaExecutor::factor_tiled(const numeric::FactorContext& ctx, index_t pos) 
     factor_tiled_llt(ctx, pos);  // tiled_llt.cu
     return;
   }
-  ++tiled_count_;
+  ++tiled_.count;
   ++chunks_;
-  host_front_.resize(static_cast<std::size_t>(m) * m);
-  double* H = host_front_.data();
+  tiled_.front.resize(static_cast<std::size_t>(m) * m);
+  double* H = tiled_.front.data();
   assemble_on_host(ctx, f, H, false);  // tiled_host.cpp
   const auto slabs_start = std::chrono::steady_clock::now();
   phases_.tiled_assembly += std::chrono::duration<double>(slabs_start - wall_start).count();

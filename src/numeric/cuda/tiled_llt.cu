@@ -116,11 +116,11 @@ std::int64_t tile_side(std::size_t pool, std::int64_t k, std::int64_t kc, std::i
 CudaExecutor::TiledWidths CudaExecutor::tiled_llt_widths(std::int64_t m, std::int64_t k) const {
   TiledWidths tw;
   const std::int64_t third = slab_width(m, k);  // three pieces of m rows: at least 1, at most k
-  if (tiled_stream_cols_ <= 0) {
+  if (tiled_.stream_cols <= 0) {
     tw.slab = tw.stream = third;
     return tw;
   }
-  tw.stream = std::min<std::int64_t>(third, tiled_stream_cols_);
+  tw.stream = std::min<std::int64_t>(third, tiled_.stream_cols);
   const std::int64_t rest = static_cast<std::int64_t>(plan_.pool) / m - 2 * tw.stream;
   tw.slab =
       std::max<std::int64_t>(tw.stream, std::min<std::int64_t>(std::max<std::int64_t>(k, 1), rest));
@@ -128,10 +128,10 @@ CudaExecutor::TiledWidths CudaExecutor::tiled_llt_widths(std::int64_t m, std::in
 }
 
 bool CudaExecutor::take_tiled_prefetch(int part, index_t pos) {
-  if (!prefetch_.done.valid()) return false;
-  const bool mine = prefetch_.part == part && prefetch_.pos == pos;
-  auto done = std::move(prefetch_.done);
-  prefetch_ = TiledPrefetch{};
+  if (!tiled_.prefetch.done.valid()) return false;
+  const bool mine = tiled_.prefetch.part == part && tiled_.prefetch.pos == pos;
+  auto done = std::move(tiled_.prefetch.done);
+  tiled_.prefetch = TiledFronts::Prefetch{};
   try {
     done.get();
   } catch (...) {  // a failed assembly (an allocation): the front is assembled again
@@ -141,7 +141,7 @@ bool CudaExecutor::take_tiled_prefetch(int part, index_t pos) {
 }
 
 void CudaExecutor::start_tiled_prefetch(const numeric::FactorContext& ctx, index_t f, index_t pos) {
-  if (!tiled_prefetch_ || ctx.type != MatrixType::spd) return;
+  if (!tiled_.prefetch_on || ctx.type != MatrixType::spd) return;
   const Analysis& an = *ctx.analysis;
   const auto& t = an.tree;
   const auto& s = *ctx.part->schedule;
@@ -164,7 +164,7 @@ void CudaExecutor::start_tiled_prefetch(const numeric::FactorContext& ctx, index
   double* const dst = has_cb ? cur_->cb_ptr_host[g] : nullptr;
   const bool cb_on_host = has_cb && in_host_arena(dst);
   std::vector<const double*> block;
-  std::size_t staged = 0;  // children's blocks on the device: copied into host_staging_next_
+  std::size_t staged = 0;  // children's blocks on the device: copied into tiled_.staging_next
   for (index_t q = t.child_offsets[g]; q < t.child_offsets[g + 1]; ++q) {
     const index_t c = t.children[q];
     const std::size_t cm = static_cast<std::size_t>(t.cb_size(c));
@@ -176,17 +176,17 @@ void CudaExecutor::start_tiled_prefetch(const numeric::FactorContext& ctx, index
   // from the same place as an unprefetched front's: factor_tiled_llt)
   const std::size_t panel = static_cast<std::size_t>(m) * k;
   try {
-    host_front_next_.resize(panel +
-                            (has_cb && !cb_on_host ? static_cast<std::size_t>(mc) * mc : 0));
-    if (staged > 0) host_staging_next_.resize(staged);
+    tiled_.front_next.resize(panel +
+                             (has_cb && !cb_on_host ? static_cast<std::size_t>(mc) * mc : 0));
+    if (staged > 0) tiled_.staging_next.resize(staged);
   } catch (const OutOfMemory&) {  // no room for a second panel buffer: no prefetch
     return;
   }
-  double* const P = host_front_next_.data();
+  double* const P = tiled_.front_next.data();
   double* const C = !has_cb ? nullptr : cb_on_host ? dst : P + panel;
   if (staged > 0) {  // on stream_, after the level below; waited for here (they are small:
                      // the device holds only the arena's first part)
-    double* to = host_staging_next_.data();
+    double* to = tiled_.staging_next.data();
     for (std::size_t i = 0; i < block.size(); ++i) {
       if (!block[i] || in_host_arena(block[i])) continue;
       const std::size_t cm =
@@ -200,9 +200,9 @@ void CudaExecutor::start_tiled_prefetch(const numeric::FactorContext& ctx, index
     STRATA_CUDA(cudaStreamSynchronize(stream_));
   }
   const double* values = ctx.values;
-  prefetch_.part = ctx.part->id;
-  prefetch_.pos = next;
-  prefetch_.done = std::async(std::launch::async, [this, &an, values, g, P, C, block] {
+  tiled_.prefetch.part = ctx.part->id;
+  tiled_.prefetch.pos = next;
+  tiled_.prefetch.done = std::async(std::launch::async, [this, &an, values, g, P, C, block] {
     assemble_llt_split_from(an, values, g, P, C, block);
   });
 }
@@ -290,7 +290,7 @@ void CudaExecutor::tiled_llt_cb_update(const TiledLltFront& fr, EventPair& compu
   Lane& main = *lane[0];
   const double one = 1.0, minus_one = -1.0;
   // another tile row's rows of L21 come in pieces of kc columns (all k by default)
-  const std::int64_t kc = tiled_stream_cols_ > 0 ? std::min(k, tiled_stream_cols_) : k;
+  const std::int64_t kc = tiled_.stream_cols > 0 ? std::min(k, tiled_.stream_cols) : k;
   const std::int64_t b = tile_side(plan_.pool, k, kc, mc, cb_on_host);
   const std::size_t bk = static_cast<std::size_t>(b) * k, bkc = static_cast<std::size_t>(b) * kc;
   double* const Li = pool_.data();
@@ -360,7 +360,7 @@ void CudaExecutor::factor_tiled_llt(const numeric::FactorContext& ctx, index_t p
   const auto& t = an.tree;
   const index_t f = ctx.part->schedule->fronts[pos];
   const std::int64_t m = t.n_rows(f), k = t.n_pivots(f), mc = m - k;
-  ++tiled_count_;
+  ++tiled_.count;
   ++chunks_;
   const bool has_cb = mc > 0 && t.parent[f] >= 0;  // a root's block is not needed
   double* const dst = has_cb ? cur_->cb_ptr_host[f] : nullptr;
@@ -369,12 +369,12 @@ void CudaExecutor::factor_tiled_llt(const numeric::FactorContext& ctx, index_t p
   // assembled already, beside the previous front's device work (start_tiled_prefetch)?
   const bool assembled = take_tiled_prefetch(ctx.part->id, pos);
   if (assembled) {
-    host_front_.swap(host_front_next_);
-    ++prefetched_count_;
+    tiled_.front.swap(tiled_.front_next);
+    ++tiled_.prefetched;
   }
-  host_front_.resize(panel_doubles +
-                     (has_cb && !cb_on_host ? static_cast<std::size_t>(mc) * mc : 0));
-  double* const P = host_front_.data();
+  tiled_.front.resize(panel_doubles +
+                      (has_cb && !cb_on_host ? static_cast<std::size_t>(mc) * mc : 0));
+  double* const P = tiled_.front.data();
   double* const C = !has_cb ? nullptr : cb_on_host ? dst : P + panel_doubles;
   if (!assembled) assemble_llt_split(ctx, f, P, C);  // tiled_host.cpp
   start_tiled_prefetch(ctx, f, pos);  // the next tiled front's, while this one's goes on
