@@ -42,6 +42,7 @@ std::string check_tag(const std::string& tag);
 /// error of its solution of A x = b.
 struct RefResult {
   double seconds = 0, lnz = 0, backward_error = 0;
+  double solve_seconds = 0;  ///< median of the solves of one right-hand side (0: not timed)
   bool ok = false;
 };
 
@@ -49,7 +50,8 @@ struct RefResult {
 double berr(const SparseMatrix& a, const std::vector<double>& x, const std::vector<double>& b);
 
 /// CHOLMOD supernodal Cholesky of the SPD matrix `a` (lower storage) with the given
-/// permutation (new to old): median of `repeat` cholmod_l_factorize calls, then a solve.
+/// permutation (new to old): median of `repeat` cholmod_l_factorize calls, then the
+/// median of `repeat` cholmod_l_solve calls with b.
 RefResult run_cholmod(const SparseMatrix& a, const std::vector<index_t>& perm,
                       const std::vector<double>& b, int repeat);
 

@@ -4,7 +4,8 @@
 // strata's permutation (nested dissection + etree postorder) is handed to CHOLMOD via
 // cholmod_l_analyze_p (CHOLMOD_GIVEN) and to MUMPS via ICNTL(7) = 1 (PERM_IN). Times are
 // medians over --repeat factorizations (strata: refactorize, which is what the multibody
-// loop calls; CHOLMOD: cholmod_l_factorize on the same symbolic object; MUMPS: JOB=2).
+// loop calls; CHOLMOD: cholmod_l_factorize on the same symbolic object; MUMPS: JOB=2),
+// and over as many solves of one right-hand side (strata and CHOLMOD).
 // All three use the same OpenBLAS with --threads threads.
 // Memory: each solver's analysis and first factorization also run once in a fresh process
 // (this binary again, --measure-memory SOLVER) whose peak resident set (VmHWM) is
@@ -261,6 +262,13 @@ int main(int argc, char** argv) {
     const double ts = bench::median(times);
     auto x = s.solve(b);
     const double be = berr(p.a, x, b);
+    times.clear();
+    for (int k = 0; k < repeat; ++k) {
+      Timer t;
+      x = s.solve(b);
+      times.push_back(t.seconds());
+    }
+    const double solve_s = bench::median(times);
     const AnalysisStats& an = s.stats().analysis;
     const double gflops = an.factor_flops / ts * 1e-9;
     openblas_set_num_threads(threads);
@@ -278,9 +286,11 @@ int main(int argc, char** argv) {
                   {"first_factorize_seconds", first},
                   {"gflops", gflops},
                   {"backward_error", be},
+                  {"solve_seconds", solve_s},
                   {"refinement_steps", s.stats().solve.refinement_steps}}},
                 {"cholmod",
                  {{"seconds", c.seconds},
+                  {"solve_seconds", c.solve_seconds},
                   {"nnz_l", c.lnz},
                   {"backward_error", c.backward_error},
                   {"ok", c.ok}}}};
@@ -332,6 +342,11 @@ int main(int argc, char** argv) {
     }
     row["ratio_cholmod"] = ts / c.seconds;
     ratio_c.push_back(ts / c.seconds);
+    if (c.solve_seconds > 0) {
+      row["solve_ratio_cholmod"] = solve_s / c.solve_seconds;
+      rss += fmt::format("  solve {:.4f} / {:.4f} s ({:.2f}×)", solve_s, c.solve_seconds,
+                         solve_s / c.solve_seconds);
+    }
     if (m.ok) {
       row["ratio_mumps"] = ts / m.seconds;
       ratio_m.push_back(ts / m.seconds);

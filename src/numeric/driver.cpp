@@ -5,22 +5,43 @@
 
 #include "base/device.hpp"
 #include "base/timer.hpp"
+#include "numeric/subtree_solve.hpp"
 #include "strata/errors.hpp"
 
 namespace strata::numeric {
 namespace {
 
-// A solve on the host with the factor in host memory: the panels fetched from the
-// executors that kept them on their devices, then the multifrontal solve.
-void host_solve(const Analysis& an, const std::vector<Executor*>& execs, NumericFactor& factor,
-                double* x, index_t nrhs) {
-  fetch_panels(an, execs, factor);
-  solve_in_place(an, factor, x, nrhs);
-}
+// The host solve's threads and plan, kept by a driver from one solve to the next: the
+// subtree cut of the analysis (numeric/subtree_solve.hpp), made at the first solve after
+// an analysis, and an arena of Options::num_threads threads (0: all).
+class HostSolve {
+ public:
+  explicit HostSolve(const Options& o)
+      : arena_(o.num_threads > 0 ? o.num_threads : tbb::task_arena::automatic),
+        reproducible_(o.reproducible) {}
+  // With the factor in host memory: the panels fetched from the executors that kept them
+  // on their devices, then the solve by subtrees.
+  void run(const Analysis& an, const std::vector<Executor*>& execs, NumericFactor& factor,
+           double* x, index_t nrhs) {
+    fetch_panels(an, execs, factor);
+    if (plan_.analysis_id != an.id || plan_.row_slot.size() != an.tree.rows.size())
+      plan_ = plan_subtree_solve(an);
+    // the top's large fronts with every thread in BLAS: bitwise the same result (OpenBLAS
+    // splits a product's rows over the threads), kept at one under Options::reproducible
+    const int blas = reproducible_ ? 1 : arena_.max_concurrency();
+    solve_by_subtrees(an, factor, plan_, x, nrhs, arena_, blas);
+  }
+  void release() noexcept { plan_ = SubtreeSolvePlan{}; }
+
+ private:
+  tbb::task_arena arena_;
+  bool reproducible_;
+  SubtreeSolvePlan plan_;
+};
 
 class TreeDriver final : public NumericDriver {
  public:
-  explicit TreeDriver(const Options& o) : options_(o), gpu_(uses_cuda(o.backend)) {}
+  explicit TreeDriver(const Options& o) : options_(o), gpu_(uses_cuda(o.backend)), host_solve_(o) {}
   int workers() const override { return 1; }
   bool whole_tree() const override { return true; }
   bool uploads_values() const override { return gpu_; }
@@ -36,7 +57,7 @@ class TreeDriver final : public NumericDriver {
   bool solve(const Analysis& an, NumericFactor& factor, double* x, index_t nrhs) override {
     Executor& e = executor();
     if (e.solve(an, factor, x, nrhs)) return true;
-    host_solve(an, {&e}, factor, x, nrhs);
+    host_solve_.run(an, {&e}, factor, x, nrhs);
     return false;
   }
   Backend backend() const override {
@@ -48,9 +69,13 @@ class TreeDriver final : public NumericDriver {
     if (fs.backend == Backend::cuda) fs.device_phases.setup += creation_seconds_;
     creation_seconds_ = 0;
   }
-  void release_workspaces() noexcept override { cb_arena_.clear(); }
+  void release_workspaces() noexcept override {
+    cb_arena_.clear();
+    host_solve_.release();
+  }
   void release() noexcept override {
     std::vector<double>().swap(cb_arena_);
+    host_solve_.release();
     executor_.reset();
   }
   void drop_executors() noexcept override { executor_.reset(); }
@@ -70,13 +95,18 @@ class TreeDriver final : public NumericDriver {
   bool gpu_;
   std::unique_ptr<Executor> executor_;
   std::vector<double> cb_arena_;
+  HostSolve host_solve_;
   mutable double creation_seconds_ = 0;  // reported once, with the next factorization
 };
 
 class MultiWorkerDriver final : public NumericDriver {
  public:
   MultiWorkerDriver(const Options& o, int workers, int cpu_threads, MultiWorkerConfig config)
-      : options_(o), workers_(workers), cpu_threads_(cpu_threads), config_(std::move(config)) {}
+      : options_(o),
+        workers_(workers),
+        cpu_threads_(cpu_threads),
+        config_(std::move(config)),
+        host_solve_(o) {}
   int workers() const override { return workers_; }
   bool whole_tree() const override { return false; }
   bool uploads_values() const override { return cpu_threads_ == 0; }
@@ -95,7 +125,7 @@ class MultiWorkerDriver final : public NumericDriver {
                     &devices_);
   }
   bool solve(const Analysis& an, NumericFactor& factor, double* x, index_t nrhs) override {
-    host_solve(an, executors(), factor, x, nrhs);
+    host_solve_.run(an, executors(), factor, x, nrhs);
     return false;
   }
   Backend backend() const override {
@@ -116,6 +146,7 @@ class MultiWorkerDriver final : public NumericDriver {
   void release_workspaces() noexcept override {
     arenas_.clear();
     blocks_ = BlockBuffers{};
+    host_solve_.release();
   }
   void release() noexcept override { release_workspaces(); }
   void drop_executors() noexcept override { executors_.clear(); }
@@ -142,6 +173,7 @@ class MultiWorkerDriver final : public NumericDriver {
   std::vector<std::vector<double>> arenas_;
   BlockBuffers blocks_;
   std::vector<DeviceStats> devices_;
+  HostSolve host_solve_;
   mutable double creation_seconds_ = 0;
 };
 

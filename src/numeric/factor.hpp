@@ -335,6 +335,13 @@ void solve_in_place(const Analysis& an, const NumericFactor& factor, double* x, 
 /// f = n_fronts − 1, …, 0. The caller sets the BLAS threads (solve_in_place uses one).
 void forward_front(const Analysis& an, const NumericFactor& factor, index_t f, double* x,
                    index_t nrhs, std::vector<double>& w);
+/// forward_front with some of f's update rows redirected: a row i ≥ k of f whose
+/// slots[i] is ≥ 0 is read from and written to delta[slots[i] + r·ld_delta] (right-hand
+/// side r) instead of x (slots: per row of f, as AssemblyTree::rows_of(f); the subtree
+/// solve's updates of rows outside a subtree, numeric/subtree_solve.hpp).
+void forward_front(const Analysis& an, const NumericFactor& factor, index_t f, double* x,
+                   index_t nrhs, std::vector<double>& w, const index_t* slots, double* delta,
+                   index_t ld_delta);
 void diagonal_front(const Analysis& an, const NumericFactor& factor, index_t f, double* x,
                     index_t nrhs);
 void backward_front(const Analysis& an, const NumericFactor& factor, index_t f, double* x,

@@ -23,6 +23,11 @@ namespace strata::numeric {
 
 void forward_front(const Analysis& an, const NumericFactor& fac, index_t f, double* x, index_t nrhs,
                    std::vector<double>& w) {
+  forward_front(an, fac, f, x, nrhs, w, nullptr, nullptr, 0);
+}
+
+void forward_front(const Analysis& an, const NumericFactor& fac, index_t f, double* x, index_t nrhs,
+                   std::vector<double>& w, const index_t* slots, double* delta, index_t ld_delta) {
   const auto& t = an.tree;
   const index_t n = an.n;
   const bool lu = fac.type == MatrixType::general;
@@ -35,8 +40,13 @@ void forward_front(const Analysis& an, const NumericFactor& fac, index_t f, doub
   const index_t* crow = t.rows_of(f);                        // column order
   const double* panel = fac.panels.data() + an.factor_layout.panel_offset[f];
   w.resize(static_cast<std::size_t>(m) * nrhs);
+  // a row whose slot is set lives in delta (a subtree's updates of rows outside it)
+  auto at = [&](index_t i, index_t r) -> double& {
+    const index_t s = slots && i >= k ? slots[i] : -1;
+    return s >= 0 ? delta[s + r * ld_delta] : x[prow[i] + r * n];
+  };
   for (index_t r = 0; r < nrhs; ++r)
-    for (index_t i = 0; i < m; ++i) w[i + r * m] = x[prow[i] + r * n];
+    for (index_t i = 0; i < m; ++i) w[i + r * m] = at(i, r);
   const int mi = static_cast<int>(m), ki = static_cast<int>(k), mk = mi - ki;
   dtrsm_("L", "L", "N", (lu || ldlt) ? "U" : "N", &ki, &nr, &one, panel, &mi, w.data(), &mi);
   if (mk > 0)
@@ -45,7 +55,7 @@ void forward_front(const Analysis& an, const NumericFactor& fac, index_t f, doub
   const index_t* out = lu ? crow : prow;
   for (index_t r = 0; r < nrhs; ++r) {
     for (index_t i = 0; i < k; ++i) x[out[i] + r * n] = w[i + r * m];
-    for (index_t i = k; i < m; ++i) x[prow[i] + r * n] = w[i + r * m];
+    for (index_t i = k; i < m; ++i) at(i, r) = w[i + r * m];
   }
 }
 
