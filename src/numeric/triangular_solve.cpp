@@ -3,7 +3,8 @@
 // Forward substitution visits the fronts children-first (front order is a postorder),
 // backward substitution parents-first. For each front the right-hand sides of its rows
 // are gathered into a dense m×nrhs block, so every front costs one TRSM and one GEMM
-// whatever the number of right-hand sides. The three passes are exposed front by front
+// whatever the number of right-hand sides (TRSV and GEMV for one, which read the panel
+// once where TRSM and GEMM first copy it into their blocked layout). The three passes are exposed front by front
 // so that the distributed solve (src/distributed) runs them over the fronts each rank
 // holds.
 //
@@ -47,11 +48,18 @@ void forward_front(const Analysis& an, const NumericFactor& fac, index_t f, doub
   };
   for (index_t r = 0; r < nrhs; ++r)
     for (index_t i = 0; i < m; ++i) w[i + r * m] = at(i, r);
-  const int mi = static_cast<int>(m), ki = static_cast<int>(k), mk = mi - ki;
-  dtrsm_("L", "L", "N", (lu || ldlt) ? "U" : "N", &ki, &nr, &one, panel, &mi, w.data(), &mi);
-  if (mk > 0)
-    dgemm_("N", "N", &mk, &nr, &ki, &minus_one, panel + k, &mi, w.data(), &mi, &one, w.data() + k,
-           &mi);
+  const int mi = static_cast<int>(m), ki = static_cast<int>(k), mk = mi - ki, inc = 1;
+  const char* diag = (lu || ldlt) ? "U" : "N";
+  if (nrhs == 1) {  // TRSV/GEMV read the panel once; TRSM/GEMM would copy it first
+    dtrsv_("L", "N", diag, &ki, panel, &mi, w.data(), &inc);
+    if (mk > 0)
+      dgemv_("N", &mk, &ki, &minus_one, panel + k, &mi, w.data(), &inc, &one, w.data() + k, &inc);
+  } else {
+    dtrsm_("L", "L", "N", diag, &ki, &nr, &one, panel, &mi, w.data(), &mi);
+    if (mk > 0)
+      dgemm_("N", "N", &mk, &nr, &ki, &minus_one, panel + k, &mi, w.data(), &mi, &one,
+             w.data() + k, &mi);
+  }
   const index_t* out = lu ? crow : prow;
   for (index_t r = 0; r < nrhs; ++r) {
     for (index_t i = 0; i < k; ++i) x[out[i] + r * n] = w[i + r * m];
@@ -101,17 +109,35 @@ void backward_front(const Analysis& an, const NumericFactor& fac, index_t f, dou
   w.resize(static_cast<std::size_t>(m) * nrhs);
   for (index_t r = 0; r < nrhs; ++r)
     for (index_t i = 0; i < m; ++i) w[i + r * m] = x[col[i] + r * n];
-  const int mi = static_cast<int>(m), ki = static_cast<int>(k), mk = mi - ki;
+  const int mi = static_cast<int>(m), ki = static_cast<int>(k), mk = mi - ki, inc = 1;
+  const bool one_rhs = nrhs == 1;  // TRSV/GEMV read the panel once; TRSM/GEMM copy it first
   if (lu) {
-    if (mk > 0)  // y −= U12 x_R, U12 is k×(m−k) with leading dimension k
-      dgemm_("N", "N", &ki, &nr, &mk, &minus_one, panel + m * k, &ki, w.data() + k, &mi, &one,
-             w.data(), &mi);
-    dtrsm_("L", "U", "N", "N", &ki, &nr, &one, panel, &mi, w.data(), &mi);
+    if (mk > 0) {  // y −= U12 x_R, U12 is k×(m−k) with leading dimension k
+      if (one_rhs)
+        dgemv_("N", &ki, &mk, &minus_one, panel + m * k, &ki, w.data() + k, &inc, &one, w.data(),
+               &inc);
+      else
+        dgemm_("N", "N", &ki, &nr, &mk, &minus_one, panel + m * k, &ki, w.data() + k, &mi, &one,
+               w.data(), &mi);
+    }
+    if (one_rhs)
+      dtrsv_("U", "N", "N", &ki, panel, &mi, w.data(), &inc);
+    else
+      dtrsm_("L", "U", "N", "N", &ki, &nr, &one, panel, &mi, w.data(), &mi);
   } else {
-    if (mk > 0)
-      dgemm_("T", "N", &ki, &nr, &mk, &minus_one, panel + k, &mi, w.data() + k, &mi, &one, w.data(),
-             &mi);
-    dtrsm_("L", "L", "T", ldlt ? "U" : "N", &ki, &nr, &one, panel, &mi, w.data(), &mi);
+    const char* diag = ldlt ? "U" : "N";
+    if (mk > 0) {
+      if (one_rhs)
+        dgemv_("T", &mk, &ki, &minus_one, panel + k, &mi, w.data() + k, &inc, &one, w.data(),
+               &inc);
+      else
+        dgemm_("T", "N", &ki, &nr, &mk, &minus_one, panel + k, &mi, w.data() + k, &mi, &one,
+               w.data(), &mi);
+    }
+    if (one_rhs)
+      dtrsv_("L", "T", diag, &ki, panel, &mi, w.data(), &inc);
+    else
+      dtrsm_("L", "L", "T", diag, &ki, &nr, &one, panel, &mi, w.data(), &mi);
   }
   for (index_t r = 0; r < nrhs; ++r)
     for (index_t i = 0; i < k; ++i) x[col[i] + r * n] = w[i + r * m];
