@@ -23,6 +23,12 @@ struct Problem {
   std::string name;
   SparseMatrix a;
   MatrixType type;
+  Options options() const {  // the CPU backend, the problem's type
+    Options o;
+    o.type = type;
+    o.backend = Backend::cpu;
+    return o;
+  }
 };
 
 std::vector<Problem> problems(std::mt19937_64& rng) {
@@ -47,9 +53,7 @@ TEST(SubtreeSolve, PlanCoversTheTreeOnce) {
   auto rng = test::fresh_rng();
   for (const Problem& pr : problems(rng)) {
     SCOPED_TRACE(pr.name);
-    Options o;
-    o.type = pr.type;
-    o.backend = Backend::cpu;
+    const Options o = pr.options();
     const Analysis an = analyze_matrix(pr.a, o);
     const auto& t = an.tree;
     const numeric::SubtreeSolvePlan p = numeric::plan_subtree_solve(an);
@@ -97,16 +101,14 @@ TEST(SubtreeSolve, PlanCoversTheTreeOnce) {
 
 // The factor of the CPU executor solved by subtrees on 1, 2, 3 and 8 threads (top fronts
 // with 1 and 3 BLAS threads), three right-hand sides: bitwise one result, equal to the
-// sequential solve to rounding; through the Solver, the solution of A x = b has a
-// backward error at rounding level and matches a dense LU's.
-TEST(SubtreeSolve, MatchesSequentialAndDenseForEveryThreadCount) {
+// sequential solve to rounding; through the Solver (a draw that dense LU finds singular
+// skipped), the solution of A x = b has a backward error at rounding level.
+TEST(SubtreeSolve, MatchesSequentialForEveryThreadCount) {
   auto rng = test::fresh_rng();
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   for (const Problem& pr : problems(rng)) {
     SCOPED_TRACE(pr.name);
-    Options o;
-    o.type = pr.type;
-    o.backend = Backend::cpu;
+    const Options o = pr.options();
     const Analysis an = analyze_matrix(pr.a, o);
     double pivot = 0;
     const std::vector<double> v = test::scaled_values(an, pr.a, &pivot);
