@@ -24,8 +24,7 @@ class HostSolve {
   void run(const Analysis& an, const std::vector<Executor*>& execs, NumericFactor& factor,
            double* x, index_t nrhs) {
     fetch_panels(an, execs, factor);
-    if (plan_.analysis_id != an.id || plan_.row_slot.size() != an.tree.rows.size())
-      plan_ = plan_subtree_solve(an);
+    if (plan_.analysis_id != an.id) plan_ = plan_subtree_solve(an);
     // the top's large fronts with every thread in BLAS: bitwise the same result (OpenBLAS
     // splits a product's rows over the threads), kept at one under Options::reproducible
     const int blas = reproducible_ ? 1 : arena_.max_concurrency();

@@ -4,9 +4,9 @@
 // backward substitution parents-first. For each front the right-hand sides of its rows
 // are gathered into a dense m×nrhs block, so every front costs one TRSM and one GEMM
 // whatever the number of right-hand sides (TRSV and GEMV for one, which read the panel
-// once where TRSM and GEMM first copy it into their blocked layout). The three passes are exposed front by front
-// so that the distributed solve (src/distributed) runs them over the fronts each rank
-// holds.
+// once where TRSM and GEMM first copy it into their blocked layout). The three passes are
+// exposed front by front so that the distributed solve (src/distributed) and the solve by
+// subtrees (subtree_solve.cpp) run them over the fronts of their own.
 //
 //   LLᵀ / LDLᵀ:  forward  y_P = L11⁻¹ x_P,  x_R −= L21 y_P     (P: pivot rows, R: the rest)
 //                diagonal y = D⁻¹ y (LDLᵀ; 1×1 and 2×2 blocks)
@@ -57,8 +57,8 @@ void forward_front(const Analysis& an, const NumericFactor& fac, index_t f, doub
   } else {
     dtrsm_("L", "L", "N", diag, &ki, &nr, &one, panel, &mi, w.data(), &mi);
     if (mk > 0)
-      dgemm_("N", "N", &mk, &nr, &ki, &minus_one, panel + k, &mi, w.data(), &mi, &one,
-             w.data() + k, &mi);
+      dgemm_("N", "N", &mk, &nr, &ki, &minus_one, panel + k, &mi, w.data(), &mi, &one, w.data() + k,
+             &mi);
   }
   const index_t* out = lu ? crow : prow;
   for (index_t r = 0; r < nrhs; ++r) {
@@ -128,8 +128,7 @@ void backward_front(const Analysis& an, const NumericFactor& fac, index_t f, dou
     const char* diag = ldlt ? "U" : "N";
     if (mk > 0) {
       if (one_rhs)
-        dgemv_("T", &mk, &ki, &minus_one, panel + k, &mi, w.data() + k, &inc, &one, w.data(),
-               &inc);
+        dgemv_("T", &mk, &ki, &minus_one, panel + k, &mi, w.data() + k, &inc, &one, w.data(), &inc);
       else
         dgemm_("T", "N", &ki, &nr, &mk, &minus_one, panel + k, &mi, w.data() + k, &mi, &one,
                w.data(), &mi);
