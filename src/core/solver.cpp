@@ -88,7 +88,6 @@ using detail::blocked_sums;
 using detail::check_norms;
 using detail::copy_values;
 using detail::has_analyzed_pattern;
-using detail::kValueBlocks;
 using detail::norm_inf;
 using detail::refactor_values;
 using detail::scaled_norm1;
@@ -212,9 +211,8 @@ void keep_analyzed_input(SolverState& s, const SparseMatrix& a) {
   s.values.storage = an.symmetric ? Storage::lower : Storage::full;
   s.values_analysis = an.id;
   resize_scaled(s, a.values.size(), "analyze: scaled values");
-  // refactor_values' per-range sums (blocked_sums): kValueBlocks n-vectors per sum
-  const std::size_t sums = an.symmetric && !an.row_scaling.empty() ? 2 : 1;
-  sized_resize(s.value_sums, kValueBlocks * sums * static_cast<std::size_t>(a.n_cols),
+  // refactor_values' per-range row arrays
+  sized_resize(s.value_sums, std::max(s.value_sums.size(), detail::refactor_work_size(an)),
                "analyze: value sums");
 }
 
@@ -226,7 +224,8 @@ void keep_analyzed_input(SolverState& s, const SparseMatrix& a) {
 double prepare_values(SolverState& s, const SparseMatrix& a) {
   const Analysis& an = *s.analysis;
   const bool scale = !an.row_scaling.empty();
-  double norm1 = 0;  // of the scaled matrix, for static pivoting
+  double norm1 = 0;           // of the scaled matrix, for static pivoting
+  bool equilibrated = false;  // B's row and column maxima known to be within a factor 2
   tbb::task_arena& arena = host_arena(s);
   if (has_analyzed_pattern(an, a, arena)) {
     // Refactorization with the analyzed pattern (a Newton loop, a benchmark): one parallel
@@ -239,6 +238,7 @@ double prepare_values(SolverState& s, const SparseMatrix& a) {
     s.delayed.valid = false;
     s.norm_inf = norms.norm_inf;
     norm1 = norms.scaled_norm1;
+    equilibrated = norms.equilibrated;
     if (s.values_analysis != an.id) {
       s.values = a;
       s.values.storage = an.symmetric ? Storage::lower : Storage::full;
@@ -275,9 +275,9 @@ double prepare_values(SolverState& s, const SparseMatrix& a) {
   // values far from the analysis's: equilibrate B again (a no-op within a factor 2). Not
   // when the analysis's scaling was clamped at e^±700 (values near the ends of the double
   // range): equilibrating further would only move the solve's intermediates toward the
-  // subnormal range.
+  // subnormal range. The refactorization's pass has already found whether B needs it.
   s.rescaling = Rescaling{};
-  if (scale && !scaling_clamped(an)) {
+  if (scale && !equilibrated && !scaling_clamped(an)) {
     s.rescaling = rescale_values(s.values, an.symmetric, s.scaled, 3, &arena, &s.value_sums);
     if (!s.rescaling.row.empty())
       norm1 = scaled_norm1(s.values, an.symmetric, s.scaled, arena, s.value_sums);

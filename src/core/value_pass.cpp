@@ -5,6 +5,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <string>
 
 #include "base/host_copy.hpp"
@@ -56,45 +57,151 @@ bool equal_arrays(const std::vector<T>& x, const std::vector<T>& y, tbb::task_ar
 
 }  // namespace
 
+namespace {
+
+// One column range [j0, j1) of refactor_values' pass (Sym: `a` holds a lower triangle,
+// each off-diagonal entry also counted in its mirrored row; Scale: B = Dr·A·Dc, else B =
+// A). Per range: row sums of |a| in rx, of |b| in ry (Sym && Scale), row maxima of |b| in
+// rm (Scale), all zero-filled here from row `first` on (rows below it are not written);
+// per column (unsymmetric): its sums of |a| and |b| and its maximum of |b|. Returns
+// whether some value is not finite. The loops keep every pointer and flag in registers:
+// the pass is a large share of a multibody refactorization on the GPU.
+template <bool Sym, bool Scale>
+bool value_range(const SparseMatrix& a, const double* rs, const double* cs, index_t j0, index_t j1,
+                 std::size_t first, double* scaled, double* rx, double* ry, double* rm, double* cx,
+                 double* cy, double* cm) {
+  const auto n = static_cast<std::size_t>(a.n_cols);
+  std::fill(rx + first, rx + n, 0.0);
+  if (Sym && Scale) std::fill(ry + first, ry + n, 0.0);
+  if (Scale) std::fill(rm + first, rm + n, 0.0);
+  const index_t* off = a.offsets.data();
+  const index_t* idx = a.indices.data();
+  const double* val = a.values.data();
+  bool bad = false;
+  for (index_t j = j0; j < j1; ++j) {
+    const double cj = Scale ? cs[j] : 1.0;
+    double sx = 0, sy = 0, my = 0;  // column j's |a| and |b| sums, its |b| maximum
+    for (index_t p = off[j]; p < off[j + 1]; ++p) {
+      const index_t i = idx[p];
+      const double x = val[p];
+      const double v = std::abs(x);
+      bad |= !(v <= std::numeric_limits<double>::max());  // NaN or ±inf
+      const double y = Scale ? x * rs[i] * cj : x;
+      scaled[p] = y;
+      const double w = std::abs(y);
+      rx[i] += v;
+      if (Scale) rm[i] = std::max(rm[i], w);
+      if (Sym) {                 // added entry by entry, in the order of blocked_sums' passes
+        if (i != j) rx[j] += v;  // the mirrored entry (j, i)
+        if (Scale) {
+          ry[j] += w;
+          if (i != j) {
+            ry[i] += w;
+            rm[j] = std::max(rm[j], w);
+          }
+        }
+      } else {
+        sx += v;
+        sy += w;
+        if (Scale) my = std::max(my, w);
+      }
+    }
+    if (!Sym) {
+      cx[j] = sx;
+      cy[j] = sy;
+      if (Scale) cm[j] = my;
+    }
+  }
+  return bad;
+}
+
+bool within_factor_two(const double* maxima, std::size_t n) {
+  for (std::size_t i = 0; i < n; ++i)
+    if (maxima[i] != 0 && (maxima[i] < 0.5 || maxima[i] > 2)) return false;
+  return true;
+}
+
+template <bool Sym, bool Scale>
+ValueNorms refactor_pass(const Analysis& an, const SparseMatrix& a, tbb::task_arena& arena,
+                         std::vector<double>& work, std::vector<double>& scaled) {
+  const std::size_t n = static_cast<std::size_t>(a.n_cols);
+  constexpr int kArrays = 1 + (Sym && Scale) + Scale;  // rx, ry, rm per range
+  if (work.size() < kValueBlocks * kArrays * n)
+    sized_resize(work, kValueBlocks * kArrays * n, "factorize: value sums");
+  std::vector<double> cx(Sym ? 0 : n), cy(Sym ? 0 : n), cm(Sym || !Scale ? 0 : n);
+  const double* rs = Scale ? an.row_scaling.data() : nullptr;
+  const double* cs = Scale ? an.col_scaling.data() : nullptr;
+  std::size_t first[kValueBlocks];  // Sym: rows below it are not the range's
+  bool bad[kValueBlocks] = {};
+  for (int blk = 0; blk < kValueBlocks; ++blk)
+    first[blk] = Sym ? static_cast<std::size_t>(range_begin(n, blk)) : 0;
+  auto array = [&](int blk, int k) { return work.data() + (blk * kArrays + k) * n; };
+  auto range = [&](int blk) {
+    double* rx = array(blk, 0);
+    double* ry = Sym && Scale ? array(blk, 1) : nullptr;
+    double* rm = Scale ? array(blk, kArrays - 1) : nullptr;
+    bad[blk] =
+        value_range<Sym, Scale>(a, rs, cs, range_begin(n, blk), range_begin(n, blk + 1), first[blk],
+                                scaled.data(), rx, ry, rm, cx.data(), cy.data(), cm.data());
+  };
+  // the ranges' rows added (maxima: taken) in range order, into range 0's arrays
+  auto reduce = [&](std::size_t i0, std::size_t i1) {
+    for (int k = 0; k < kArrays; ++k) {
+      const bool max = Scale && k == kArrays - 1;
+      for (std::size_t i = i0; i < i1; ++i) {
+        double t = array(0, k)[i];
+        for (int blk = 1; blk < kValueBlocks; ++blk)
+          if (first[blk] <= i) t = max ? std::max(t, array(blk, k)[i]) : t + array(blk, k)[i];
+        array(0, k)[i] = t;
+      }
+    }
+  };
+  if (a.nnz() < kParallelValues) {  // small (a Newton step of a small model): no threads
+    for (int blk = 0; blk < kValueBlocks; ++blk) range(blk);
+    reduce(0, n);
+  } else {
+    arena.execute([&] {
+      tbb::parallel_for(0, kValueBlocks, range);
+      tbb::parallel_for(
+          tbb::blocked_range<std::size_t>(0, n, 16384),
+          [&](const tbb::blocked_range<std::size_t>& r) { reduce(r.begin(), r.end()); });
+    });
+  }
+  if (std::any_of(bad, bad + kValueBlocks, [](bool b) { return b; })) throw_first_not_finite(a);
+  const double* rx = array(0, 0);
+  throw_if_norm_overflows(std::vector<double>(rx, rx + n), cx);
+  ValueNorms r;
+  for (std::size_t i = 0; i < n; ++i) r.norm_inf = std::max(r.norm_inf, rx[i]);
+  if (!Scale) {
+    r.scaled_norm1 = r.norm_inf;  // symmetric: ‖A‖₁ = ‖A‖∞
+    if (!Sym) r.scaled_norm1 = *std::max_element(cx.begin(), cx.end());
+    return r;
+  }
+  const double* ry = Sym ? array(0, 1) : cy.data();
+  for (std::size_t j = 0; j < n; ++j) r.scaled_norm1 = std::max(r.scaled_norm1, ry[j]);
+  r.equilibrated =
+      within_factor_two(array(0, kArrays - 1), n) && (Sym || within_factor_two(cm.data(), n));
+  return r;
+}
+
+}  // namespace
+
+std::size_t refactor_work_size(const Analysis& an) {
+  const bool scale = !an.row_scaling.empty();
+  const std::size_t arrays = 1 + (an.symmetric && scale) + scale;
+  return kValueBlocks * arrays * static_cast<std::size_t>(an.n);
+}
+
 ValueNorms refactor_values(const Analysis& an, const SparseMatrix& a, tbb::task_arena& arena,
                            std::vector<double>& work, std::vector<double>& scaled) {
-  const bool sym = an.symmetric, scale = !an.row_scaling.empty();
-  const index_t n = a.n_cols;
   sized_resize(scaled, a.values.size(), "factorize: scaled values");
-  std::atomic<bool> not_finite{false};
-  // unsymmetric: column sums, each column within one range (no per-range vectors)
-  std::vector<double> col(sym ? 0 : n, 0.0), scol(sym ? 0 : n, 0.0);
-  // symmetric and unscaled: the scaled matrix is A, its ‖·‖₁ is ‖A‖∞ (one sum)
-  const int nsums = sym && scale ? 2 : 1;
-  const auto sums =
-      blocked_sums(a, nsums, sym, arena, work, [&](index_t j, index_t p, double* const* acc) {
-        const index_t i = a.indices[p];
-        const double x = a.values[p];
-        if (!std::isfinite(x)) not_finite.store(true, std::memory_order_relaxed);
-        const double v = std::abs(x);
-        const double y = scale ? x * an.row_scaling[i] * an.col_scaling[j] : x;
-        scaled[p] = y;
-        acc[0][i] += v;
-        if (sym) {
-          if (i != j) acc[0][j] += v;
-          if (scale) {
-            acc[1][j] += std::abs(y);
-            if (i != j) acc[1][i] += std::abs(y);
-          }
-        } else {
-          col[j] += v;
-          scol[j] += std::abs(y);
-        }
-      });
-  if (not_finite) throw_first_not_finite(a);
-  throw_if_norm_overflows(sums[0], col);
-  ValueNorms r;
-  for (double x : sums[0]) r.norm_inf = std::max(r.norm_inf, x);
-  if (sym && !scale)
-    r.scaled_norm1 = r.norm_inf;
-  else
-    for (double x : sym ? sums[1] : scol) r.scaled_norm1 = std::max(r.scaled_norm1, x);
-  return r;
+  if (a.nnz() == 0) return {};
+  const bool scale = !an.row_scaling.empty();
+  if (an.symmetric)
+    return scale ? refactor_pass<true, true>(an, a, arena, work, scaled)
+                 : refactor_pass<true, false>(an, a, arena, work, scaled);
+  return scale ? refactor_pass<false, true>(an, a, arena, work, scaled)
+               : refactor_pass<false, false>(an, a, arena, work, scaled);
 }
 
 // ‖A‖∞ (max row sum) of a canonical matrix with symmetric storage expanded.

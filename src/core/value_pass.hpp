@@ -2,8 +2,9 @@
 //
 // What: the checks and norms of the values a factorization is given (every value finite,
 // no row or column magnitude sum past the largest double), their scaling by the analysis's
-// matching scaling (B = Dr·A(:,Q)·Dc, stored in A's entry order), in one parallel pass for
-// a refactorization with the analyzed pattern (refactor_values); the pattern test and the
+// matching scaling (B = Dr·A(:,Q)·Dc, stored in A's entry order) and whether B still needs
+// equilibrating (rescale.hpp), in one parallel pass for a refactorization with the
+// analyzed pattern (refactor_values); the pattern test and the
 // parallel copies that decide and serve that path; ‖B‖₁ after a rescaling (rescale.hpp).
 //
 // Why: on the GPU these passes run on the host before the device's factorization, and
@@ -19,8 +20,8 @@
 
 #include <vector>
 
-#include "base/alloc.hpp"
 #include "analysis/analysis.hpp"
+#include "base/alloc.hpp"
 #include "strata/sparse_matrix.hpp"
 
 namespace strata::detail {
@@ -121,11 +122,19 @@ std::vector<std::vector<double>> blocked_sums(const SparseMatrix& a, int sums, b
 struct ValueNorms {
   double norm_inf = 0;
   double scaled_norm1 = 0;
+  /// With the analysis's scaling: every nonzero row and column maximum of |B| is within
+  /// [1/2, 2], so rescale_values would leave B as it is (always false without a scaling).
+  bool equilibrated = false;
 };
 
-/// See ValueNorms. `work`: blocked_sums' scratch (kept from one call to the next).
+/// See ValueNorms. `work`: the pass's per-range row arrays (refactor_work_size doubles,
+/// kept from one call to the next). The sums are added in the order blocked_sums adds
+/// them, so the norms are those of the general path's passes, bitwise.
 ValueNorms refactor_values(const Analysis& an, const SparseMatrix& a, tbb::task_arena& arena,
                            std::vector<double>& work, std::vector<double>& scaled);
+
+/// The doubles of refactor_values' `work` for a matrix of analysis `an`.
+std::size_t refactor_work_size(const Analysis& an);
 
 /// Whether the analysis's matching scaling hit its clamp (ordering/matching.cpp: factors
 /// within e^±700) for some row or column.

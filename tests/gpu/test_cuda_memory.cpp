@@ -288,6 +288,73 @@ TEST_F(CudaMemory, DeviceSolveWithLargeFronts) {
   EXPECT_LT(test::backward_error(a, x.data(), b.data()), 1e-14);
 }
 
+// A budget with room for the factor, the contribution-block arena and the largest front,
+// but not for the factor beside a pool that holds the largest batch of fronts: the pool
+// shrinks, the factor stays on the device and the solves run there. The factor equals
+// the CPU executor's (Cholesky: no pivoting) and the solution solves A x = b to rounding.
+TEST_F(CudaMemory, FactorStaysResidentBesideASmallerPool) {
+  auto rng = test::fresh_rng();
+  std::uniform_real_distribution<double> u(0.5, 2.0);
+  for (const SparseMatrix& base :
+       {generators::laplacian_3d(20, 19, 18), generators::elasticity_3d(9, 10, 11)}) {
+    SparseMatrix a = base;  // a random symmetric scaling D·A·D, drawn afresh
+    std::vector<double> d(a.n_rows);
+    for (double& v : d) v = u(rng);
+    for (index_t j = 0; j < a.n_cols; ++j)
+      for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p)
+        a.values[p] *= d[j] * d[a.indices[p]];
+    Options o;
+    o.num_gpus = 1;  // one GPU, whatever the machine has
+    o.type = MatrixType::spd;
+    o.backend = Backend::cuda;
+    const Analysis unlimited = analyze_matrix(a, o);
+    const auto largest = static_cast<std::size_t>(unlimited.stats.largest_front_rows);
+    const std::size_t need = unlimited.factor_layout.total + unlimited.cb_layout.arena_size +
+                             largest * largest;  // doubles
+    o.device_memory_limit = need * sizeof(double) * 21 / 20;
+    SCOPED_TRACE("n " + std::to_string(a.n_rows) + ", device_memory_limit " +
+                 std::to_string(o.device_memory_limit));
+    const Analysis an = analyze_matrix(a, o);
+    ASSERT_EQ(an.factor_layout.total, unlimited.factor_layout.total);
+    // the premise: a pool for the largest batch would not leave room for the factor
+    std::size_t batch = 0;
+    for (const BatchInfo& bi : an.plan.batches) {
+      std::size_t sum = 0;
+      for (index_t q = bi.begin; q < bi.end; ++q) {
+        const auto m = static_cast<std::size_t>(an.tree.n_rows(an.schedule.fronts[q]));
+        sum += m * m;
+      }
+      batch = std::max(batch, sum);
+    }
+    ASSERT_GT(batch + an.factor_layout.total + an.cb_layout.arena_size,
+              o.device_memory_limit / sizeof(double));
+
+    SparseMatrix c = canonical_values(an, a);
+    numeric::NumericFactor cpu_f, gpu_f;
+    std::vector<double> arena;
+    auto cpu = numeric::make_cpu_executor(2);
+    auto gpu = numeric::make_cuda_executor(o);
+    numeric::factorize(an, c.values, MatrixType::spd, 0.0, *cpu, cpu_f, arena);
+    numeric::factorize(an, c.values, MatrixType::spd, 0.0, *gpu, gpu_f, arena);
+    FactorStats fs;
+    gpu->report(fs);
+    EXPECT_TRUE(fs.factor_resident);
+    EXPECT_EQ(fs.tiled_fronts, 0);
+    numeric::fetch_panels(an, *gpu, gpu_f);
+    EXPECT_LT(test::relative_difference(gpu_f.panels, cpu_f.panels), 1e-12);
+
+    Solver solver(o);
+    solver.factorize(a);
+    ASSERT_TRUE(solver.stats().factor.factor_resident);
+    std::vector<double> b(a.n_rows);
+    std::uniform_real_distribution<double> v(-1, 1);
+    for (double& x : b) x = v(rng);
+    const std::vector<double> x = solver.solve(b);
+    EXPECT_TRUE(solver.stats().solve.on_device);
+    EXPECT_LT(test::backward_error(a, x.data(), b.data()), 1e-14);
+  }
+}
+
 // LDLᵀ under a budget that holds two of the largest front but not much more (chunks, and
 // typically contribution blocks in host memory and the solve on the host): same solution
 // and inertia as the CPU. A budget below the largest front would need slab-by-slab LDLᵀ,

@@ -33,6 +33,7 @@ void CudaExecutor::plan_device_memory(const Analysis& an,
   // at half the budget so that the arena and the factor have room
   std::size_t cap = limit_ > 0 ? budget_d : budget_d / 2;
   std::size_t pool = 0;
+  std::size_t largest = 0;  // the largest front the pool holds alone
   index_t tiled_rows = 0;
   for (const numeric::PartView& v : views) {
     const auto& s = *v.schedule;
@@ -47,6 +48,7 @@ void CudaExecutor::plan_device_memory(const Analysis& an,
           tiled_rows = std::max(tiled_rows, t.n_rows(f));
         } else {
           sum += sq(t.n_rows(f));
+          largest = std::max(largest, sq(t.n_rows(f)));
         }
       }
       pool = std::max(pool, std::min(sum, cap));
@@ -59,6 +61,22 @@ void CudaExecutor::plan_device_memory(const Analysis& an,
     pool =
         std::max(pool, static_cast<std::size_t>(tiled_.pool_share * static_cast<double>(budget_d)));
   }
+  // the contribution-block arena (the largest part's) and, for the whole tree, the factor
+  std::size_t arena = 0;
+  bool whole = false;
+  for (const numeric::PartView& v : views) {
+    arena = std::max(arena, v.cb_layout->arena_size);
+    whole = whole || v.id == -1;
+  }
+  const std::size_t factor = an.factor_layout.total;
+  // A whole untiled tree whose factor and arena fit beside a smaller pool keeps its factor
+  // on the device, and its solves run there: the pool gives up its share down to the
+  // largest front it must hold alone (a smaller pool only cuts batches into more chunks,
+  // where the factor left behind would be copied to the host and solved there).
+  const std::size_t need = arena + factor;
+  if (whole && tiled_rows == 0 && budget_d > need && pool > budget_d - need &&
+      budget_d - need >= largest)
+    pool = budget_d - need;
   if (limit_ > 0 && pool > budget_d)
     throw OutOfMemory(pool * sizeof(double),
                       "the device pool for the largest front (device_memory_limit is " +
@@ -90,16 +108,8 @@ void CudaExecutor::plan_device_memory(const Analysis& an,
       }
     }
   }
-  // arena (the largest part's), then the resident factor (whole tree only), in what the
-  // pool leaves
-  std::size_t arena = 0;
-  bool whole = false;
-  for (const numeric::PartView& v : views) {
-    arena = std::max(arena, v.cb_layout->arena_size);
-    whole = whole || v.id == -1;
-  }
+  // the arena, then the resident factor (whole tree only), in what the pool leaves
   const std::size_t rest = budget_d > p.pool ? budget_d - p.pool : 0;
-  const std::size_t factor = an.factor_layout.total;
   if (whole && rest >= arena + factor) {
     p.arena_device = arena;
     p.factor_resident = true;
