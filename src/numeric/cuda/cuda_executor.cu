@@ -177,6 +177,19 @@ void CudaExecutor::prepare(const Analysis& an, int workers) {
   if (workers <= 1 && plan_.factor_resident && (cholesky || an.type == MatrixType::general) &&
       !(dsolve_.rows_analysis == an.id && dsolve_.rows_type == rows_type))
     upload_solve_rows(an, an.tree.rows.data(), rows_type, nullptr);
+  // the device solve's plan and its workspaces for one right-hand side, here at the
+  // analysis as cuDSS's analysis phase prepares its solve, not in the first solve (the
+  // plan's host pass over every front row is a large share of a first solve's time)
+  if (workers <= 1 && plan_.factor_resident) {
+    prepare_solve_plan(an);
+    try {  // without the room, the first solve asks again (and reports it)
+      dsolve_.x.resize(std::max<std::size_t>(static_cast<std::size_t>(an.n), 1));
+      dsolve_.u.resize(
+          std::max<std::size_t>(static_cast<std::size_t>(dsolve_.plan.u_offset.back()), 1));
+      dsolve_.scratch.resize(std::max<std::size_t>(an.tree.rows.size(), 1));
+    } catch (const OutOfMemory&) {
+    }
+  }
   STRATA_CUDA(cudaStreamSynchronize(stream_));
 }
 
