@@ -182,13 +182,10 @@ void CudaExecutor::prepare(const Analysis& an, int workers) {
   // plan's host pass over every front row is a large share of a first solve's time)
   if (workers <= 1 && plan_.factor_resident) {
     prepare_solve_plan(an);
-    try {  // without the room, the first solve asks again (and reports it)
-      dsolve_.x.resize(std::max<std::size_t>(static_cast<std::size_t>(an.n), 1));
-      dsolve_.u.resize(
-          std::max<std::size_t>(static_cast<std::size_t>(dsolve_.plan.u_offset.back()), 1));
-      dsolve_.scratch.resize(std::max<std::size_t>(an.tree.rows.size(), 1));
-    } catch (const OutOfMemory&) {
-    }
+    dsolve_.x.resize(std::max<std::size_t>(static_cast<std::size_t>(an.n), 1));
+    dsolve_.u.resize(
+        std::max<std::size_t>(static_cast<std::size_t>(dsolve_.plan.u_offset.back()), 1));
+    dsolve_.scratch.resize(std::max<std::size_t>(an.tree.rows.size(), 1));
   }
   STRATA_CUDA(cudaStreamSynchronize(stream_));
 }
