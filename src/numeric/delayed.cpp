@@ -119,10 +119,14 @@ void factor_front(const Analysis& an, const double* vals, const cpu::DelayPolicy
     const index_t s = ch.m - ch.k;
     const index_t* br = ch.rows.data() + ch.k;
     const index_t* bc = ch.cols.data() + ch.k;
+    // the block's rows' positions in this front, looked up once for all its columns
+    sized(w.rel, static_cast<std::size_t>(s), "front assembly");
+    index_t* rel = w.rel.data();
+    for (index_t r = 0; r < s; ++r) rel[r] = w.row_pos[br[r]];
     for (index_t c = 0; c < s; ++c) {
       double* dst = A + static_cast<std::size_t>(w.col_pos[bc[c]]) * m;
       const double* src = ch.cb.data() + static_cast<std::size_t>(c) * s;
-      for (index_t r = 0; r < s; ++r) dst[w.row_pos[br[r]]] += src[r];
+      for (index_t r = 0; r < s; ++r) dst[rel[r]] += src[r];
     }
     ch.cb.clear();  // consumed (the capacity stays for the next factorization)
   }

@@ -80,7 +80,7 @@ struct DelayedFactor {
 struct DelayedWorkspace {
   struct Thread {
     std::vector<double> front;
-    std::vector<index_t> row_pos, col_pos, row_perm, col_perm, scratch, kept;
+    std::vector<index_t> row_pos, col_pos, row_perm, col_perm, scratch, kept, rel;
     std::vector<char> nonzero;
   };
   std::vector<Thread> threads;
