@@ -36,8 +36,11 @@
 // of the free device memory when it is 0. It holds, in this order of priority: the pool
 // of one chunk; the contribution-block arena (blocks that do not fit stay in mapped
 // pinned host memory, which the kernels read and write over the bus); the whole factor,
-// kept resident so that the solve runs on the device (cuda_solve.cu). The per-analysis
-// index arrays and the values (O(nnz(A))) are not counted in the budget.
+// kept resident so that the solve runs on the device (cuda_solve.cu). The pool takes up to
+// half the budget, but gives that up, down to the largest front it must hold alone, when
+// a smaller pool lets the factor and the arena stay. The per-analysis index arrays, the
+// values (O(nnz(A))) and the device solve's plan and workspaces (made at set-up, with the
+// resident factor) are not counted in the budget.
 //
 // What stays on the device between factorizations of one analysis: the index arrays,
 // the pool, the arena and the resident factor — refactorization allocates nothing.
