@@ -156,17 +156,7 @@ ValueNorms refactor_pass(const Analysis& an, const SparseMatrix& a, tbb::task_ar
       }
     }
   };
-  if (a.nnz() < kParallelValues) {  // small (a Newton step of a small model): no threads
-    for (int blk = 0; blk < kValueBlocks; ++blk) range(blk);
-    reduce(0, n);
-  } else {
-    arena.execute([&] {
-      tbb::parallel_for(0, kValueBlocks, range);
-      tbb::parallel_for(
-          tbb::blocked_range<std::size_t>(0, n, 16384),
-          [&](const tbb::blocked_range<std::size_t>& r) { reduce(r.begin(), r.end()); });
-    });
-  }
+  for_value_ranges(static_cast<std::size_t>(a.nnz()), n, arena, range, reduce);
   if (std::any_of(bad, bad + kValueBlocks, [](bool b) { return b; })) throw_first_not_finite(a);
   const double* rx = array(0, 0);
   throw_if_norm_overflows(std::vector<double>(rx, rx + n), cx);

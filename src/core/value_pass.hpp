@@ -57,6 +57,25 @@ constexpr int kValueBlocks = 8;
 // below that (bench/history.md has the measurements).
 constexpr index_t kParallelValues = 32768;
 
+// Runs range(blk) for the kValueBlocks column ranges of a pass over `nnz` entries, then
+// reduce(i0, i1) over the rows [0, n) in pieces: on one thread below kParallelValues
+// entries (a Newton step of a small model), else on `arena`'s.
+template <class Range, class Reduce>
+void for_value_ranges(std::size_t nnz, std::size_t n, tbb::task_arena& arena, Range&& range,
+                      Reduce&& reduce) {
+  if (nnz < static_cast<std::size_t>(kParallelValues)) {
+    for (int blk = 0; blk < kValueBlocks; ++blk) range(blk);
+    reduce(std::size_t{0}, n);
+    return;
+  }
+  arena.execute([&] {
+    tbb::parallel_for(0, kValueBlocks, range);
+    tbb::parallel_for(
+        tbb::blocked_range<std::size_t>(0, n, 16384),
+        [&](const tbb::blocked_range<std::size_t>& r) { reduce(r.begin(), r.end()); });
+  });
+}
+
 // Calls visit(j, p, acc) for every stored entry p of column j, acc[k] (k < sums) being the
 // n-vector of sum k for the entry's column range; returns the sums over the ranges, added
 // in range order. `work` keeps the per-range vectors from one call to the next (sizing
@@ -99,17 +118,7 @@ std::vector<std::vector<double>> blocked_sums(const SparseMatrix& a, int sums, b
         total[k][i] = t;
       }
   };
-  if (a.nnz() < kParallelValues) {  // small (a Newton step of a small model): no threads
-    for (int blk = 0; blk < kValueBlocks; ++blk) range(blk);
-    reduce(0, n);
-  } else {
-    arena.execute([&] {
-      tbb::parallel_for(0, kValueBlocks, range);
-      tbb::parallel_for(
-          tbb::blocked_range<std::size_t>(0, n, 16384),
-          [&](const tbb::blocked_range<std::size_t>& r) { reduce(r.begin(), r.end()); });
-    });
-  }
+  for_value_ranges(static_cast<std::size_t>(a.nnz()), n, arena, range, reduce);
   return total;
 }
 

@@ -25,6 +25,23 @@ class CudaMemory : public ::testing::Test {
 
 constexpr std::size_t MiB = 1024 * 1024;
 
+// The Cholesky factor of `a` under analysis `an` by the CPU executor and by a CUDA
+// executor for `o`, whose panels are then fetched to the host; returns the CUDA
+// executor's statistics.
+FactorStats factor_on_cpu_and_gpu(const Analysis& an, const SparseMatrix& a, const Options& o,
+                                  numeric::NumericFactor& cpu_f, numeric::NumericFactor& gpu_f) {
+  const SparseMatrix c = canonical_values(an, a);
+  std::vector<double> arena;
+  auto cpu = numeric::make_cpu_executor(2);
+  auto gpu = numeric::make_cuda_executor(o);
+  numeric::factorize(an, c.values, MatrixType::spd, 0.0, *cpu, cpu_f, arena);
+  numeric::factorize(an, c.values, MatrixType::spd, 0.0, *gpu, gpu_f, arena);
+  FactorStats fs;
+  gpu->report(fs);
+  numeric::fetch_panels(an, *gpu, gpu_f);
+  return fs;
+}
+
 // Cholesky with the device budget far below the factor: contribution blocks spill to
 // host memory and the largest fronts are factored slab by slab; the factor equals the
 // CPU's entry by entry (no pivoting), as the in-core GPU run does.
@@ -37,16 +54,8 @@ TEST_F(CudaMemory, CholeskyUnderATightBudgetEqualsInCore) {
     o.type = MatrixType::spd;
     o.device_memory_limit = limit;
     Analysis an = analyze_matrix(a, o);
-    SparseMatrix c = canonical_values(an, a);
     numeric::NumericFactor cpu_f, gpu_f;
-    std::vector<double> arena;
-    auto cpu = numeric::make_cpu_executor(2);
-    auto gpu = numeric::make_cuda_executor(o);
-    numeric::factorize(an, c.values, MatrixType::spd, 0.0, *cpu, cpu_f, arena);
-    numeric::factorize(an, c.values, MatrixType::spd, 0.0, *gpu, gpu_f, arena);
-    FactorStats fs;
-    gpu->report(fs);
-    numeric::fetch_panels(an, *gpu, gpu_f);
+    const FactorStats fs = factor_on_cpu_and_gpu(an, a, o, cpu_f, gpu_f);
     if (limit != 0) EXPECT_FALSE(fs.factor_resident);
     if (limit != 0 && limit <= 2 * MiB) {
       EXPECT_LT(static_cast<double>(limit), 0.2 * an.plan.factor_bytes);
@@ -329,18 +338,10 @@ TEST_F(CudaMemory, FactorStaysResidentBesideASmallerPool) {
     ASSERT_GT(batch + an.factor_layout.total + an.cb_layout.arena_size,
               o.device_memory_limit / sizeof(double));
 
-    SparseMatrix c = canonical_values(an, a);
     numeric::NumericFactor cpu_f, gpu_f;
-    std::vector<double> arena;
-    auto cpu = numeric::make_cpu_executor(2);
-    auto gpu = numeric::make_cuda_executor(o);
-    numeric::factorize(an, c.values, MatrixType::spd, 0.0, *cpu, cpu_f, arena);
-    numeric::factorize(an, c.values, MatrixType::spd, 0.0, *gpu, gpu_f, arena);
-    FactorStats fs;
-    gpu->report(fs);
+    const FactorStats fs = factor_on_cpu_and_gpu(an, a, o, cpu_f, gpu_f);
     EXPECT_TRUE(fs.factor_resident);
     EXPECT_EQ(fs.tiled_fronts, 0);
-    numeric::fetch_panels(an, *gpu, gpu_f);
     EXPECT_LT(test::relative_difference(gpu_f.panels, cpu_f.panels), 1e-12);
 
     Solver solver(o);
