@@ -4,7 +4,8 @@
 // backward substitution parents-first. For each front the right-hand sides of its rows
 // are gathered into a dense m×nrhs block, so every front costs one TRSM and one GEMM
 // whatever the number of right-hand sides (TRSV and GEMV for one, which read the panel
-// once where TRSM and GEMM first copy it into their blocked layout). The three passes are
+// once where TRSM and GEMM first copy it into their blocked layout; a large pivot block's
+// TRSV by column blocks when BLAS has several threads, see trsv below). The three passes are
 // exposed front by front so that the distributed solve (src/distributed) and the solve by
 // subtrees (subtree_solve.cpp) run them over the fronts of their own.
 //
@@ -21,6 +22,52 @@
 #include "numeric/factor.hpp"
 
 namespace strata::numeric {
+namespace {
+
+// TRSV of a large pivot block by columns blocks of kTrsvBlock: OpenBLAS's DTRSV runs on
+// one thread whatever the number of BLAS threads, and on a large front (the top
+// separators of a 3D problem) it then holds the solve to one core's memory bandwidth. A
+// TRSV of each diagonal block and a GEMV for the rest of its block column (the GEMV on
+// every BLAS thread) streams the same bytes. Used with more than one BLAS thread only
+// (with one it is DTRSV's own blocking, no faster).
+constexpr int kTrsvBlock = 256;
+constexpr int kBlockedTrsvMin = 1024;  // pivots from which the blocked form is used
+
+// x ← op(A)⁻¹ x for the k×k triangle A (leading dimension lda): "L","N" (forward, right-
+// looking), "U","N" (backward, right-looking), "L","T" (backward, left-looking); `diag`
+// "U" for a unit diagonal.
+void trsv(const char* uplo, const char* trans, const char* diag, int k, const double* a, int lda,
+          double* x) {
+  const int inc = 1;
+  if (k < kBlockedTrsvMin || openblas_get_num_threads() <= 1) {
+    dtrsv_(uplo, trans, diag, &k, a, &lda, x, &inc);
+    return;
+  }
+  const double one = 1.0, minus_one = -1.0;
+  auto at = [&](int i, int j) { return a + static_cast<std::size_t>(j) * lda + i; };
+  if (*uplo == 'L' && *trans == 'N') {
+    for (int j = 0; j < k; j += kTrsvBlock) {
+      const int w = std::min(kTrsvBlock, k - j), rest = k - j - w;
+      dtrsv_("L", "N", diag, &w, at(j, j), &lda, x + j, &inc);
+      if (rest > 0)
+        dgemv_("N", &rest, &w, &minus_one, at(j + w, j), &lda, x + j, &inc, &one, x + j + w, &inc);
+    }
+    return;
+  }
+  for (int j = (k - 1) / kTrsvBlock * kTrsvBlock; j >= 0; j -= kTrsvBlock) {
+    const int w = std::min(kTrsvBlock, k - j), rest = k - j - w;
+    if (*uplo == 'U') {  // "U","N": solve the block, then the rows above it
+      dtrsv_("U", "N", diag, &w, at(j, j), &lda, x + j, &inc);
+      if (j > 0) dgemv_("N", &j, &w, &minus_one, at(0, j), &lda, x + j, &inc, &one, x, &inc);
+    } else {  // "L","T": the rows below the block first, then the block
+      if (rest > 0)
+        dgemv_("T", &rest, &w, &minus_one, at(j + w, j), &lda, x + j + w, &inc, &one, x + j, &inc);
+      dtrsv_("L", "T", diag, &w, at(j, j), &lda, x + j, &inc);
+    }
+  }
+}
+
+}  // namespace
 
 void forward_front(const Analysis& an, const NumericFactor& fac, index_t f, double* x, index_t nrhs,
                    std::vector<double>& w) {
@@ -51,7 +98,7 @@ void forward_front(const Analysis& an, const NumericFactor& fac, index_t f, doub
   const int mi = static_cast<int>(m), ki = static_cast<int>(k), mk = mi - ki, inc = 1;
   const char* diag = (lu || ldlt) ? "U" : "N";
   if (nrhs == 1) {  // TRSV/GEMV read the panel once; TRSM/GEMM would copy it first
-    dtrsv_("L", "N", diag, &ki, panel, &mi, w.data(), &inc);
+    trsv("L", "N", diag, ki, panel, mi, w.data());
     if (mk > 0)
       dgemv_("N", &mk, &ki, &minus_one, panel + k, &mi, w.data(), &inc, &one, w.data() + k, &inc);
   } else {
@@ -121,7 +168,7 @@ void backward_front(const Analysis& an, const NumericFactor& fac, index_t f, dou
                w.data(), &mi);
     }
     if (one_rhs)
-      dtrsv_("U", "N", "N", &ki, panel, &mi, w.data(), &inc);
+      trsv("U", "N", "N", ki, panel, mi, w.data());
     else
       dtrsm_("L", "U", "N", "N", &ki, &nr, &one, panel, &mi, w.data(), &mi);
   } else {
@@ -134,7 +181,7 @@ void backward_front(const Analysis& an, const NumericFactor& fac, index_t f, dou
                w.data(), &mi);
     }
     if (one_rhs)
-      dtrsv_("L", "T", diag, &ki, panel, &mi, w.data(), &inc);
+      trsv("L", "T", diag, ki, panel, mi, w.data());
     else
       dtrsm_("L", "L", "T", diag, &ki, &nr, &one, panel, &mi, w.data(), &mi);
   }
