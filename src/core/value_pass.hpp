@@ -137,8 +137,9 @@ struct ValueNorms {
 };
 
 /// See ValueNorms. `work`: the pass's per-range row arrays (refactor_work_size doubles,
-/// kept from one call to the next). The sums are added in the order blocked_sums adds
-/// them, so the norms are those of the general path's passes, bitwise.
+/// kept from one call to the next). The sums are added as blocked_sums adds them (each
+/// column range in entry order, the ranges in order), so the norms do not depend on the
+/// number of threads.
 ValueNorms refactor_values(const Analysis& an, const SparseMatrix& a, tbb::task_arena& arena,
                            std::vector<double>& work, std::vector<double>& scaled);
 
