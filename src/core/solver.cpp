@@ -589,9 +589,7 @@ static void solve_impl(SolverState& s, const double* b, double* x, index_t nrhs)
   check_solution_finite(x, n, nrhs);
 
   // backward error of each column, refinement, GMRES where it stalls (solve/refinement.hpp)
-  const solve::Operator op_a = [&](const double* in, double* out) {
-    detail::multiply_blocked(s.values, in, out, host_arena(s), s.value_sums);
-  };
+  const solve::Operator op_a = [&](const double* in, double* out) { multiply(s.values, in, out); };
   const double floor = rounding_floor(s);
   const double enough = std::max(o.refinement_tolerance, floor);
   solve::RefinementResult refined;

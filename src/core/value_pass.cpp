@@ -176,46 +176,6 @@ ValueNorms refactor_pass(const Analysis& an, const SparseMatrix& a, tbb::task_ar
 
 }  // namespace
 
-void multiply_blocked(const SparseMatrix& c, const double* x, double* y, tbb::task_arena& arena,
-                      std::vector<double>& work) {
-  if (c.nnz() < kParallelProduct || c.n_rows != c.n_cols || c.layout != Layout::csc) {
-    multiply(c, x, y);
-    return;
-  }
-  const auto n = static_cast<std::size_t>(c.n_cols);
-  const bool lower = c.storage != Storage::full;
-  if (work.size() < kValueBlocks * n) sized_resize(work, kValueBlocks * n, "solve: residual");
-  std::size_t first[kValueBlocks];  // lower: rows below it are not the range's
-  for (int blk = 0; blk < kValueBlocks; ++blk)
-    first[blk] = lower ? static_cast<std::size_t>(range_begin(n, blk)) : 0;
-  const index_t* off = c.offsets.data();
-  const index_t* idx = c.indices.data();
-  const double* val = c.values.data();
-  auto range = [&](int blk) {
-    double* r = work.data() + blk * n;
-    std::fill(r + first[blk], r + n, 0.0);
-    for (index_t j = range_begin(n, blk); j < range_begin(n, blk + 1); ++j) {
-      const double xj = x[j];
-      double sj = 0;  // lower: row j's share from column j's mirrored entries
-      for (index_t p = off[j]; p < off[j + 1]; ++p) {
-        const index_t i = idx[p];
-        r[i] += val[p] * xj;
-        if (lower && i != j) sj += val[p] * x[i];
-      }
-      if (lower) r[j] += sj;
-    }
-  };
-  auto reduce = [&](std::size_t i0, std::size_t i1) {
-    for (std::size_t i = i0; i < i1; ++i) {
-      double t = 0;
-      for (int blk = 0; blk < kValueBlocks; ++blk)
-        if (first[blk] <= i) t += work[blk * n + i];
-      y[i] = t;
-    }
-  };
-  for_value_ranges(static_cast<std::size_t>(c.nnz()), n, arena, range, reduce);
-}
-
 std::size_t refactor_work_size(const Analysis& an) {
   const bool scale = !an.row_scaling.empty();
   const std::size_t arrays = 1 + (an.symmetric && scale) + scale;

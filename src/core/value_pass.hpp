@@ -143,15 +143,6 @@ struct ValueNorms {
 ValueNorms refactor_values(const Analysis& an, const SparseMatrix& a, tbb::task_arena& arena,
                            std::vector<double>& work, std::vector<double>& scaled);
 
-/// y = A x for a canonical `c` (CSC; Storage::lower mirrored), n = c.n_rows. From
-/// kParallelProduct stored entries on, over kValueBlocks column ranges on `arena`, each
-/// into its own row vector in `work` (resized to kValueBlocks·n), added in range order:
-/// the same y for every number of threads, within rounding of multiply's. Below that,
-/// multiply itself. The residuals of iterative refinement on large matrices.
-void multiply_blocked(const SparseMatrix& c, const double* x, double* y, tbb::task_arena& arena,
-                      std::vector<double>& work);
-constexpr index_t kParallelProduct = index_t{1} << 20;
-
 /// The doubles of refactor_values' `work` for a matrix of analysis `an`.
 std::size_t refactor_work_size(const Analysis& an);
 

@@ -1,8 +1,7 @@
 // The refactorization's pass over the values (core/value_pass.hpp): B = Dr·A(:,Q)·Dc
 // written exactly, ‖A‖∞ and ‖B‖₁ against plain loops over the expanded matrix, whether B
 // needs rescaling against rescale_values' own decision, bitwise one result for 1, 2 and 3
-// threads, a value that is not finite named by its position, and the residual's product by
-// column ranges.
+// threads, and a value that is not finite named by its position.
 #include <gtest/gtest.h>
 #include <tbb/task_arena.h>
 
@@ -102,36 +101,6 @@ TEST(ValuePass, ScalesExactlyWithTheReferenceNormsOnEveryThreadCount) {
           EXPECT_EQ(r2.equilibrated, ref.equilibrated) << threads << " threads";
           EXPECT_EQ(b2, b) << threads << " threads";
         }
-      }
-    }
-}
-
-// The residual's product A x in column ranges: within rounding of multiply's, bitwise one
-// result for 1, 2 and 3 threads, and multiply's own below kParallelProduct entries.
-TEST(ValuePass, BlockedProductMatchesMultiplyOnEveryThreadCount) {
-  unsigned long long seed = 0;
-  auto rng = test::fresh_rng(&seed);
-  SCOPED_TRACE("seed " + std::to_string(seed));
-  std::uniform_real_distribution<double> u(-1, 1);
-  for (const auto kind : {test::RandomKind::general, test::RandomKind::symmetric_indefinite})
-    for (const index_t n : {733, 20000}) {  // 20000 × 60 entries: past kParallelProduct
-      SCOPED_TRACE(std::string(kind == test::RandomKind::general ? "general" : "symmetric") +
-                   " n=" + std::to_string(n));
-      const SparseMatrix a = canonicalize(test::random_sparse(n, n > 1000 ? 60 : 5, kind, rng));
-      std::vector<double> x(n), want(n), work;
-      for (double& v : x) v = u(rng);
-      multiply(a, x.data(), want.data());
-      std::vector<double> first;
-      for (int threads : {1, 2, 3}) {
-        tbb::task_arena arena(threads);
-        std::vector<double> y(n);
-        detail::multiply_blocked(a, x.data(), y.data(), arena, work);
-        if (a.nnz() < detail::kParallelProduct) EXPECT_EQ(y, want);
-        EXPECT_LT(test::relative_difference(y, want), 1e-13);
-        if (first.empty())
-          first = y;
-        else
-          EXPECT_EQ(y, first) << threads << " threads";
       }
     }
 }
