@@ -23,13 +23,13 @@ double inverse_sqrt_pow2(double x) {
 constexpr index_t kParallelEntries = 1 << 16;
 constexpr int kBlocks = 8;
 
-bool within_factor_two(const std::vector<double>& maxima) {
+}  // namespace
+
+bool within_factor_two(std::span<const double> maxima) {
   for (double v : maxima)
     if (v != 0 && (v < 0.5 || v > 2)) return false;
   return true;
 }
-
-}  // namespace
 
 Rescaling rescale_values(const SparseMatrix& c, bool symmetric, std::vector<double>& values,
                          int max_sweeps, tbb::task_arena* arena, std::vector<double>* work) {

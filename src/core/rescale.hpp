@@ -18,6 +18,7 @@
 
 #include <tbb/task_arena.h>
 
+#include <span>
 #include <vector>
 
 #include "strata/sparse_matrix.hpp"
@@ -39,6 +40,10 @@ struct Rescaling {
 /// none was needed). Rows and columns with no nonzero value keep factor 1. With `arena`
 /// and `work` (scratch, resized as needed) a large matrix's passes run in column blocks on
 /// the arena's threads, with the same result.
+/// rescale_values' stopping rule for the row or column maxima of |B|: every nonzero one in
+/// [1/2, 2].
+bool within_factor_two(std::span<const double> maxima);
+
 Rescaling rescale_values(const SparseMatrix& pattern, bool symmetric, std::vector<double>& values,
                          int max_sweeps = 3, tbb::task_arena* arena = nullptr,
                          std::vector<double>* work = nullptr);

@@ -9,6 +9,7 @@
 #include <string>
 
 #include "base/host_copy.hpp"
+#include "core/rescale.hpp"
 #include "strata/errors.hpp"
 
 namespace strata::detail {
@@ -115,12 +116,6 @@ bool value_range(const SparseMatrix& a, const double* rs, const double* cs, inde
   return bad;
 }
 
-bool within_factor_two(const double* maxima, std::size_t n) {
-  for (std::size_t i = 0; i < n; ++i)
-    if (maxima[i] != 0 && (maxima[i] < 0.5 || maxima[i] > 2)) return false;
-  return true;
-}
-
 template <bool Sym, bool Scale>
 ValueNorms refactor_pass(const Analysis& an, const SparseMatrix& a, tbb::task_arena& arena,
                          std::vector<double>& work, std::vector<double>& scaled) {
@@ -159,7 +154,7 @@ ValueNorms refactor_pass(const Analysis& an, const SparseMatrix& a, tbb::task_ar
   for_value_ranges(static_cast<std::size_t>(a.nnz()), n, arena, range, reduce);
   if (std::any_of(bad, bad + kValueBlocks, [](bool b) { return b; })) throw_first_not_finite(a);
   const double* rx = array(0, 0);
-  throw_if_norm_overflows(std::vector<double>(rx, rx + n), cx);
+  throw_if_norm_overflows({rx, n}, cx);
   ValueNorms r;
   for (std::size_t i = 0; i < n; ++i) r.norm_inf = std::max(r.norm_inf, rx[i]);
   if (!Scale) {
@@ -169,8 +164,7 @@ ValueNorms refactor_pass(const Analysis& an, const SparseMatrix& a, tbb::task_ar
   }
   const double* ry = Sym ? array(0, 1) : cy.data();
   for (std::size_t j = 0; j < n; ++j) r.scaled_norm1 = std::max(r.scaled_norm1, ry[j]);
-  r.equilibrated =
-      within_factor_two(array(0, kArrays - 1), n) && (Sym || within_factor_two(cm.data(), n));
+  r.equilibrated = within_factor_two({array(0, kArrays - 1), n}) && (Sym || within_factor_two(cm));
   return r;
 }
 
@@ -213,7 +207,7 @@ double norm_inf(const SparseMatrix& c) {
 // pivot "tiny" and every backward error 0. (Each value is finite — validate checked —
 // but a few values near DBL_MAX can sum past it.)
 // Throws InvalidInput naming the first row, then column, whose magnitude sum is not finite.
-void throw_if_norm_overflows(const std::vector<double>& row, const std::vector<double>& col) {
+void throw_if_norm_overflows(std::span<const double> row, std::span<const double> col) {
   for (std::size_t k = 0; k < row.size() + col.size(); ++k) {
     const bool is_row = k < row.size();
     const double sum = is_row ? row[k] : col[k - row.size()];

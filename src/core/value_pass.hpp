@@ -18,6 +18,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
+#include <span>
 #include <vector>
 
 #include "analysis/analysis.hpp"
@@ -33,7 +34,7 @@ double norm_inf(const SparseMatrix& c);
 /// static pivot threshold and the backward error, and an infinite norm would make every
 /// pivot "tiny" and every backward error 0. Throws InvalidInput naming the first row, then
 /// column, whose magnitude sum (row[i], col[j]) is not finite.
-void throw_if_norm_overflows(const std::vector<double>& row, const std::vector<double>& col);
+void throw_if_norm_overflows(std::span<const double> row, std::span<const double> col);
 
 /// throw_if_norm_overflows for the row and column sums of canonical c.
 void check_norms(const SparseMatrix& c);
