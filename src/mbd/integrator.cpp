@@ -641,14 +641,11 @@ StepInfo Integrator::advance() {
       // comes when no partition is good here (a singular configuration), or when steps
       // 8 times shorter still fail (near one, before the partition's condition shows it).
       Timer timer;
-      const auto quality_now = [&] {
-        return partition_quality(sys_.constraint_jacobian(q_.data(), t_), partition_.dependent);
-      };
-      double quality = quality_now();
+      double quality = current_partition_quality();
       if (quality < opts_.repartition_quality) {
         repartition(t_, q_.data());
         info.repartitioned = true;
-        quality = quality_now();
+        quality = current_partition_quality();
       }
       stats_.partition_seconds += timer.seconds();
       if (quality < opts_.repartition_quality || h < 0.2 * h_ref) {
@@ -732,8 +729,7 @@ void Integrator::partition_check(StepInfo& info) {
     check_removed(q_.data(), v_.data(), t_, false);
   if (stab || sys_.m() == 0) return;
   Timer timer;
-  const double quality =
-      partition_quality(sys_.constraint_jacobian(q_.data(), t_), partition_.dependent);
+  const double quality = current_partition_quality();
   stats_.partition_seconds += timer.seconds();
   if (quality >= opts_.repartition_quality) return;
   if (opts_.formulation == FormulationChoice::automatic) {
@@ -742,6 +738,16 @@ void Integrator::partition_check(StepInfo& info) {
     repartition(t_, q_.data());
     info.repartitioned = true;
   }
+}
+
+// partition_quality of the current partition at (q_, t_): Φ_q by the elements in parallel,
+// the elimination by the monitor, whose structure is remade only when the pattern (the
+// active rows) or the dependent columns changed.
+double Integrator::current_partition_quality() {
+  sys_.constraint_jacobian_full(q_.data(), t_, monitor_rows_);
+  if (!monitor_.matches(monitor_rows_, partition_.dependent))
+    monitor_ = PartitionMonitor(monitor_rows_, partition_.dependent);
+  return monitor_.quality(monitor_rows_);
 }
 
 std::vector<std::string> Integrator::warnings() const {

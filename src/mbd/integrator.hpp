@@ -209,6 +209,7 @@ class Integrator {
   void find_redundant(const double* q, double t, bool initial);
   void check_removed(const double* q, const double* v, double t, bool initial);
   void partition_check(StepInfo& info);
+  double current_partition_quality();
   void initial_positions();
   void report_initial_change(const std::vector<double>& given, const std::vector<double>& now,
                              const char* what, const char* unit);
@@ -234,6 +235,9 @@ class Integrator {
   std::vector<double> weights_;  // of the Newton update's error norm
   std::unique_ptr<LinearSolver> solver_;
   Partition partition_;
+  // the partition check's Φ_q (whole element pattern) and its elimination structure
+  SparseRows monitor_rows_;
+  PartitionMonitor monitor_;
   bool pattern_changed_ = true, factor_valid_ = false, fresh_analysis_ = false, retry_ = false;
   double lte_reject_h_ = 0;  // > 0: the step was rejected by the error test; retry with this
   double next_h_ = 0;        // step proposed by the error control

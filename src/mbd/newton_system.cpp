@@ -509,6 +509,43 @@ SparseRows NewtonSystem::constraint_jacobian(const double* q, double t) const {
       });
 }
 
+void NewtonSystem::constraint_jacobian_full(const double* q, double t, SparseRows& rows) const {
+  // the pattern: every coordinate of each active row, element by element
+  const std::size_t nc = model_.constraints.size();
+  std::vector<std::size_t> first(nc + 1, 0);  // first entry of each element
+  rows.n_cols = n_;
+  rows.ptr.assign(1, 0);
+  rows.cols.clear();
+  for (std::size_t e = 0; e < nc; ++e) {
+    const auto& c = model_.constraints[e];
+    for (int r = 0; r < c->rows; ++r) {
+      if (!active_[row0_[e] + r]) continue;
+      rows.cols.insert(rows.cols.end(), c->dofs.begin(), c->dofs.end());
+      rows.ptr.push_back(static_cast<index_t>(rows.cols.size()));
+    }
+    first[e + 1] = rows.cols.size();
+  }
+  rows.vals.resize(rows.cols.size());
+  for_element_ranges(nc, [&](std::size_t begin, std::size_t end) {
+    std::vector<double> lq, zero;
+    ConstraintEval ce;
+    for (std::size_t e = begin; e < end; ++e) {
+      if (first[e + 1] == first[e]) continue;
+      const auto& c = model_.constraints[e];
+      gather(c->dofs, q, lq);
+      zero.assign(c->dofs.size(), 0.0);
+      c->evaluate_gradient(lq.data(), zero.data(), zero.data(), t, ce);
+      const std::size_t nz = c->dofs.size();
+      double* out = rows.vals.data() + first[e];
+      for (int r = 0; r < c->rows; ++r) {
+        if (!active_[row0_[e] + r]) continue;
+        std::copy(ce.jq.begin() + r * nz, ce.jq.begin() + (r + 1) * nz, out);
+        out += nz;
+      }
+    }
+  });
+}
+
 SparseRows NewtonSystem::model_constraint_jacobian(const double* q, double t) const {
   return jacobian_rows(
       model_, n_, q, t, [](index_t) { return true; }, row0_,

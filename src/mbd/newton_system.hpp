@@ -137,6 +137,11 @@ class NewtonSystem {
 
   /// Rows of Φ_q at (q, t) (m rows, n columns), for partitioning and initial conditions.
   SparseRows constraint_jacobian(const double* q, double t) const;
+  /// Φ_q at (q, t) into `rows` with the elements' whole pattern: every coordinate of each
+  /// active row, exact zeros kept, so that the pattern depends on the active rows alone
+  /// (a PartitionMonitor built on it stays valid while they do). The elements are
+  /// evaluated on the assembly's threads; `rows` keeps its storage between calls.
+  void constraint_jacobian_full(const double* q, double t, SparseRows& rows) const;
   /// Φ, Φ̇, Φ̈ at (q, v, a, t) without Jacobians (each m, active rows).
   void constraint_values(const double* q, const double* v, const double* a, double t, double* phi,
                          double* phid, double* phidd) const;

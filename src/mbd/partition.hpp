@@ -48,7 +48,44 @@ Partition partition_coordinates(const SparseRows& jac, double threshold, double 
                                 const std::function<std::string(index_t)>& row_name);
 
 /// The quality (see Partition::quality) of a given choice of dependent columns at the
-/// current Jacobian; 0 if a forced pivot vanishes.
+/// current Jacobian; 0 if a forced pivot vanishes. One evaluation of a PartitionMonitor
+/// built for `jac`'s pattern.
 double partition_quality(const SparseRows& jac, const std::vector<index_t>& dependent);
+
+/// The quality of a fixed choice of dependent columns (`dependent[r]`: the pivot column of
+/// row r) for a fixed pattern of Φ_q, evaluated again as the values change (the partition
+/// check after every step). The elimination is that of partition_coordinates with the
+/// pivots forced: row r is reduced by the earlier pivot rows in increasing order, then
+/// |pivot| / max |reduced entry of an unpivoted column| is taken. Its structure — which
+/// pivot rows reach each row (through fill), in which order, and which columns each pivot
+/// row holds — depends on the pattern alone and is found once by the constructor; an
+/// evaluation is then the numeric elimination in flat arrays. Entries that are exactly
+/// zero, in the pattern or by cancellation, change no result: the quality is bitwise that
+/// of the elimination on the nonzeros alone (a pivot row meeting a zero is skipped there,
+/// and adds ±0 here).
+class PartitionMonitor {
+ public:
+  PartitionMonitor() = default;
+  /// The structure for `pattern` (its values are not read) and `dependent` (size
+  /// pattern.n_rows(), columns in [0, pattern.n_cols)). Throws InvalidInput on sizes or
+  /// columns out of range.
+  PartitionMonitor(const SparseRows& pattern, const std::vector<index_t>& dependent);
+  /// True when `rows` has the pattern and `dependent` the columns this was built for.
+  bool matches(const SparseRows& rows, const std::vector<index_t>& dependent) const;
+  /// The quality at `rows.vals` (rows with the pattern of the constructor; checked in
+  /// size only): in (0, 1], or 0 when a forced pivot vanishes or a row reduces to zero.
+  double quality(const SparseRows& rows);
+
+ private:
+  index_t n_ = 0;
+  std::vector<index_t> row_ptr_, row_cols_, dependent_;
+  // per row r: the pivot rows that reduce it, increasing (pivots_[pivot_ptr_[r]..]); the
+  // unpivoted columns it touches, in order of first touch (free_[free_ptr_[r]..]; the max
+  // is taken over them); of those, all but dependent_[r]: pivot row r's entries
+  // (entry_cols_[entry_ptr_[r]..], values entry_vals_ at the last evaluation)
+  std::vector<index_t> pivot_ptr_, pivots_, free_ptr_, free_, entry_ptr_, entry_cols_;
+  std::vector<double> entry_vals_, pivot_vals_, w_;
+  index_t zero_row_ = -1;  // first row whose pivot is structurally zero (quality 0)
+};
 
 }  // namespace strata::mbd
