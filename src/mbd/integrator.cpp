@@ -427,18 +427,19 @@ void Integrator::newton_tolerances(double* atol, double* rtol) const {
 // position and velocity level to the accuracy of q and v: |Φ_r| ≤ 10 Σ_j |∂Φ_r/∂q_j| ·
 // (atol + rtol max_j |q_j|) over the row's coordinates j (and the same for Φ̇_r with v).
 // Removed (redundant) equations are checked at the partition checks instead.
-bool Integrator::constraints_hold(const double* q, const double* v, double t) const {
+bool Integrator::constraints_hold(const double* q, const double* v, double t) {
   const index_t m = sys_.m();
   if (m == 0) return true;
   const index_t n = sys_.n();
   std::vector<double> phi(m), phid(m), zero(n, 0.0);
   sys_.constraint_values(q, v, zero.data(), t, phi.data(), phid.data(), nullptr);
-  const SparseRows rows = sys_.constraint_jacobian(q, t);
+  const SparseRows& rows = constraint_jacobian_at(q, t);
   double atol = 0, rtol = 0;
   newton_tolerances(&atol, &rtol);
   for (index_t r = 0; r < m; ++r) {
     double g = 0, qmax = 0, vmax = 0;
     for (index_t p = rows.ptr[r]; p < rows.ptr[r + 1]; ++p) {
+      if (rows.vals[p] == 0.0) continue;  // the coordinates Φ_r depends on
       g += std::abs(rows.vals[p]);
       qmax = std::max(qmax, std::abs(q[rows.cols[p]]));
       vmax = std::max(vmax, std::abs(v[rows.cols[p]]));
@@ -744,10 +745,25 @@ void Integrator::partition_check(StepInfo& info) {
 // the elimination by the monitor, whose structure is remade only when the pattern (the
 // active rows) or the dependent columns changed.
 double Integrator::current_partition_quality() {
-  sys_.constraint_jacobian_full(q_.data(), t_, monitor_rows_);
-  if (!monitor_.matches(monitor_rows_, partition_.dependent))
-    monitor_ = PartitionMonitor(monitor_rows_, partition_.dependent);
-  return monitor_.quality(monitor_rows_);
+  const SparseRows& rows = constraint_jacobian_at(q_.data(), t_);
+  if (!monitor_.matches(rows, partition_.dependent))
+    monitor_ = PartitionMonitor(rows, partition_.dependent);
+  return monitor_.quality(rows);
+}
+
+// Φ_q at (q, t) with the elements' whole pattern, evaluated once for a point: an accepted
+// step's constraint test and its partition check ask for the same one.
+const SparseRows& Integrator::constraint_jacobian_at(const double* q, double t) {
+  const index_t n = sys_.n();
+  const bool same = jacobian_t_ == t && jacobian_active_ == sys_.active_rows() &&
+                    std::equal(q, q + n, jacobian_q_.begin(), jacobian_q_.end());
+  if (!same) {
+    sys_.constraint_jacobian_full(q, t, monitor_rows_);
+    jacobian_t_ = t;
+    jacobian_q_.assign(q, q + n);
+    jacobian_active_ = sys_.active_rows();
+  }
+  return monitor_rows_;
 }
 
 std::vector<std::string> Integrator::warnings() const {

@@ -20,6 +20,7 @@
 
 #include <deque>
 #include <functional>
+#include <limits>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -210,6 +211,7 @@ class Integrator {
   void check_removed(const double* q, const double* v, double t, bool initial);
   void partition_check(StepInfo& info);
   double current_partition_quality();
+  const SparseRows& constraint_jacobian_at(const double* q, double t);
   void initial_positions();
   void report_initial_change(const std::vector<double>& given, const std::vector<double>& now,
                              const char* what, const char* unit);
@@ -220,7 +222,7 @@ class Integrator {
   bool try_step(double h, StepInfo& info);
   void predict(double h, BdfTerms& bdf);
   int newton(double h, StepInfo& info, const BdfTerms& bdf);
-  bool constraints_hold(const double* q, const double* v, double t) const;
+  bool constraints_hold(const double* q, const double* v, double t);
   void newton_tolerances(double* atol, double* rtol) const;
   bool energy_ok(double h, int p, const double* q, const double* v, double t);
   void analyze(const BdfTerms& bdf, double t);
@@ -238,6 +240,10 @@ class Integrator {
   // the partition check's Φ_q (whole element pattern) and its elimination structure
   SparseRows monitor_rows_;
   PartitionMonitor monitor_;
+  // the point monitor_rows_ was evaluated at (constraint_jacobian_at)
+  double jacobian_t_ = std::numeric_limits<double>::quiet_NaN();
+  std::vector<double> jacobian_q_;
+  std::vector<char> jacobian_active_;
   bool pattern_changed_ = true, factor_valid_ = false, fresh_analysis_ = false, retry_ = false;
   double lte_reject_h_ = 0;  // > 0: the step was rejected by the error test; retry with this
   double next_h_ = 0;        // step proposed by the error control

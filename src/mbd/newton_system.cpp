@@ -556,22 +556,25 @@ SparseRows NewtonSystem::model_constraint_jacobian(const double* q, double t) co
 
 void NewtonSystem::constraint_values(const double* q, const double* v, const double* a, double t,
                                      double* phi, double* phid, double* phidd) const {
-  std::vector<double> lq, lv, la;
-  ConstraintEval ce;
-  for (std::size_t e = 0; e < model_.constraints.size(); ++e) {
-    const auto& c = model_.constraints[e];
-    gather(c->dofs, q, lq);
-    gather(c->dofs, v, lv);
-    gather(c->dofs, a, la);
-    c->evaluate(lq.data(), lv.data(), la.data(), t, false, ce);
-    for (int r = 0; r < c->rows; ++r) {
-      const index_t k = active_index_[row0_[e] + r];
-      if (k < 0) continue;
-      if (phi) phi[k] = ce.phi[r];
-      if (phid) phid[k] = ce.phid[r];
-      if (phidd) phidd[k] = ce.phidd[r];
+  // each element writes its own rows: on the assembly's threads
+  for_element_ranges(model_.constraints.size(), [&](std::size_t begin, std::size_t end) {
+    std::vector<double> lq, lv, la;
+    ConstraintEval ce;
+    for (std::size_t e = begin; e < end; ++e) {
+      const auto& c = model_.constraints[e];
+      gather(c->dofs, q, lq);
+      gather(c->dofs, v, lv);
+      gather(c->dofs, a, la);
+      c->evaluate(lq.data(), lv.data(), la.data(), t, false, ce);
+      for (int r = 0; r < c->rows; ++r) {
+        const index_t k = active_index_[row0_[e] + r];
+        if (k < 0) continue;
+        if (phi) phi[k] = ce.phi[r];
+        if (phid) phid[k] = ce.phid[r];
+        if (phidd) phidd[k] = ce.phidd[r];
+      }
     }
-  }
+  });
 }
 
 void NewtonSystem::model_constraint_values(const double* q, const double* v, double t, double* phi,
