@@ -190,8 +190,13 @@ struct FactorStats {
   index_t lu_large_fronts = 0;
   index_t lu_large_fronts_pivoted = 0;
   index_t lu_large_fronts_batched = 0;
-  std::size_t device_budget = 0;             ///< bytes the numeric working memory was held to
-  std::size_t device_pool_bytes = 0;         ///< of device_budget, the pool fronts are factored in
+  std::size_t device_budget = 0;      ///< bytes the numeric working memory was held to
+  std::size_t device_pool_bytes = 0;  ///< of device_budget, the pool fronts are factored in
+  /// Bytes the numeric working memory holds on the device: the pool, the device part of
+  /// the contribution-block arena, and the staging of a chunk's panels on their way to the
+  /// host (or the whole factor when it stays). Within device_budget, except where a
+  /// device_memory_limit is below the pool and its staging together.
+  std::size_t device_working_bytes = 0;
   bool contribution_blocks_on_host = false;  ///< some blocks spilled to pinned host memory
   bool factor_resident = false;              ///< the factor stayed on the device: solve runs there
   /// Where the GPU time went (seconds, from CUDA events around each in-core launch group;

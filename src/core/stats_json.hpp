@@ -155,6 +155,7 @@ inline void to_json(nlohmann::json& j, const FactorStats& f) {
        {"lu_large_fronts_batched", f.lu_large_fronts_batched},
        {"device_budget", f.device_budget},
        {"device_pool_bytes", f.device_pool_bytes},
+       {"device_working_bytes", f.device_working_bytes},
        {"contribution_blocks_on_host", f.contribution_blocks_on_host},
        {"factor_resident", f.factor_resident},
        {"device_phases", f.device_phases},

@@ -402,6 +402,53 @@ TEST_F(CudaMemory, LdltUnderABudget) {
   }
 }
 
+// The device memory the numeric work holds (pool, the arena's device part, the staging of
+// a chunk's panels) stays within the budget whenever the pool leaves room for its own
+// staging (a chunk's panels are at most its fronts' entries): the arena gives up the
+// staging's share and spills that much more to the host. Budgets from twice the factor
+// down to a fraction of it, Cholesky and LU; the solutions stay those of the CPU.
+TEST_F(CudaMemory, WorkingMemoryStaysWithinTheBudget) {
+  int spilled_with_room = 0;
+  for (const MatrixType type : {MatrixType::spd, MatrixType::general}) {
+    SparseMatrix a = generators::laplacian_3d(22, 22, 22);
+    if (type == MatrixType::general) {
+      a = expand_symmetric(a);
+      auto rng = test::fresh_rng();
+      std::uniform_real_distribution<double> u(0.5, 1.5);
+      for (double& v : a.values) v *= u(rng);
+    }
+    Options o;
+    o.num_gpus = 1;  // one GPU, whatever the machine has
+    o.type = type;
+    Solver cpu(o);
+    cpu.factorize(a);
+    std::vector<double> b(a.n_rows, 1.0);
+    const auto xc = cpu.solve(b);
+    const auto factor_bytes = static_cast<double>(cpu.stats().analysis.factor_bytes);
+    for (const double share : {2.0, 0.9, 0.5, 0.3, 0.15}) {
+      const auto limit = static_cast<std::size_t>(share * factor_bytes);
+      SCOPED_TRACE(std::string(to_string(type)) + ", device_memory_limit " + std::to_string(limit));
+      Options g = o;
+      g.backend = Backend::cuda;
+      g.device_memory_limit = limit;
+      Solver gpu(g);
+      gpu.factorize(a);
+      const FactorStats& fs = gpu.stats().factor;
+      EXPECT_EQ(fs.device_budget, limit);
+      if (2 * fs.device_pool_bytes <= fs.device_budget) {
+        EXPECT_LE(fs.device_working_bytes, fs.device_budget)
+            << "pool " << fs.device_pool_bytes << ", factor resident " << fs.factor_resident;
+        spilled_with_room += fs.contribution_blocks_on_host && !fs.factor_resident;
+      }
+      const auto xg = gpu.solve(b);
+      EXPECT_LT(test::backward_error(a, xg.data(), b.data()), 1e-14);
+      EXPECT_LT(test::relative_difference(xg, xc), 1e-8);
+    }
+  }
+  // the case the accounting is for: blocks spilled beside a pool with room for its staging
+  EXPECT_GT(spilled_with_room, 0);
+}
+
 // A budget too small for even one slab of the largest front is refused with the bytes.
 TEST_F(CudaMemory, ImpossibleBudgetNamesTheBytes) {
   const SparseMatrix a = generators::laplacian_3d(20, 20, 20);

@@ -487,6 +487,7 @@ void CudaExecutor::report(FactorStats& fs) const {
   fs.lu_large_fronts_batched = lu_.fronts_batched;
   fs.device_budget = plan_.budget;
   fs.device_pool_bytes = plan_.pool * sizeof(double);
+  fs.device_working_bytes = (pool_.size() + arena_.size() + panels_.size()) * sizeof(double);
   fs.contribution_blocks_on_host = plan_.arena_on_host;
   fs.factor_resident = keep_resident();
   fs.device_phases = phases_;

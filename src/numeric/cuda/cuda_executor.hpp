@@ -50,6 +50,9 @@ struct DevicePlan {
   bool arena_on_host = false;    ///< some contribution blocks live in pinned host memory
   bool factor_resident = false;  ///< the whole factor stays on the device (GPU solve)
   std::int64_t slab = 0;         ///< slab width for fronts factored tile by tile
+  /// doubles: the panels of the largest chunk, staged on the device on their way to the
+  /// host factor (when the factor does not stay there); part of the budget
+  std::size_t staging = 1;
 };
 
 /// What the executor keeps on the device for one part of the tree (the whole tree, or a

@@ -108,13 +108,28 @@ void CudaExecutor::plan_device_memory(const Analysis& an,
       }
     }
   }
-  // the arena, then the resident factor (whole tree only), in what the pool leaves
+  // the panels of the largest chunk, staged on the device on their way to the host factor
+  // (each front's panels are at most its m² entries, so the staging is at most the pool)
+  for (const numeric::PartView& v : views) {
+    const auto& s = *v.schedule;
+    const PartDevice& pd = parts_[v.id];
+    for (index_t q = 0; q < static_cast<index_t>(s.fronts.size()); ++q)
+      if (!pd.tiled[q] && pd.chunk_end[q] > q) {
+        std::size_t sum = 0;
+        for (index_t r = q; r < pd.chunk_end[q]; ++r)
+          sum += panel_size(t, s.fronts[r], !an.symmetric);
+        p.staging = std::max(p.staging, sum);
+      }
+  }
+  // the arena, then the resident factor (whole tree only; its panels need no staging), in
+  // what the pool leaves; otherwise the arena's device part in what the pool and the
+  // staging leave (the rest of it in host memory)
   const std::size_t rest = budget_d > p.pool ? budget_d - p.pool : 0;
   if (whole && rest >= arena + factor) {
     p.arena_device = arena;
     p.factor_resident = true;
   } else {
-    p.arena_device = std::min(arena, rest);
+    p.arena_device = std::min(arena, rest > p.staging ? rest - p.staging : 0);
   }
   p.arena_on_host = p.arena_device < arena;
   plan_ = p;
@@ -171,7 +186,6 @@ void CudaExecutor::upload_analysis(const Analysis& an) {
 // Plans and uploads the parts a factorization will use: the whole tree, or every part of
 // an.partition — subtrees, upper parts and the top part (any GPU may run any subtree).
 void CudaExecutor::plan_parts(const Analysis& an, bool whole) {
-  const auto& t = an.tree;
   for (auto* b : {&pool_, &arena_, &panels_}) b->clear();
   host_arena_.clear();
   parts_.clear();
@@ -189,19 +203,9 @@ void CudaExecutor::plan_parts(const Analysis& an, bool whole) {
   }
   plan_device_memory(an, views);
   pool_.resize(plan_.pool);
-  std::size_t arena = 1, chunk_panels = 1;
-  for (const numeric::PartView& v : views) {
-    arena = std::max(arena, v.cb_layout->arena_size);
-    const PartDevice& pd = parts_.at(v.id);
-    const auto& s = *v.schedule;
-    for (index_t q = 0; q < static_cast<index_t>(s.fronts.size()); ++q)
-      if (!pd.tiled[q] && pd.chunk_end[q] > q) {
-        std::size_t sum = 0;
-        for (index_t r = q; r < pd.chunk_end[q]; ++r)
-          sum += panel_size(t, s.fronts[r], !an.symmetric);
-        chunk_panels = std::max(chunk_panels, sum);
-      }
-  }
+  std::size_t arena = 1;
+  for (const numeric::PartView& v : views) arena = std::max(arena, v.cb_layout->arena_size);
+  const std::size_t chunk_panels = plan_.staging;
   arena_.resize(std::max<std::size_t>(plan_.arena_device, 1));
   if (plan_.arena_on_host) host_arena_.resize(arena);
   // staging for the panels of one chunk, or the whole resident factor
