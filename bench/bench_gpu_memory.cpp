@@ -774,6 +774,7 @@ int main(int argc, char** argv) {
                         {"tiled_prefetch", v.prefetch},
                         {"tiled_fronts_prefetched", r.fs.tiled_fronts_prefetched},
                         {"device_pool_bytes", r.fs.device_pool_bytes},
+                        {"device_working_bytes", r.fs.device_working_bytes},
                         {"factor_seconds", r.seconds},
                         {"transfer_floor_seconds", floor},
                         {"slowdown_vs_in_core", r.seconds / in_core.seconds},
