@@ -25,11 +25,14 @@
 //      nested dissection of step 3 then also balances its top bisections by work.
 #include "analysis/analysis.hpp"
 
+#include <tbb/task_arena.h>
+
 #include <algorithm>
 #include <atomic>
 #include <functional>
 #include <thread>
 
+#include "analysis/patterns.hpp"
 #include "base/device.hpp"
 #include "base/timer.hpp"
 #include "ordering/matching.hpp"
@@ -77,88 +80,6 @@ SparseMatrix lower_triangle(const SparseMatrix& a) {
   return low;
 }
 
-// Pattern of B + Bᵀ as a full canonical CSC (values dropped), where B = A(:, q)
-// (q empty: B = A) for general matrices, or the expanded lower triangle for symmetric.
-SparseMatrix symmetric_pattern(const SparseMatrix& c, bool symmetric,
-                               const std::vector<index_t>& q_inv) {
-  if (symmetric) {
-    // c is canonical lower: column j of the full pattern is row j of c (entries above the
-    // diagonal, in increasing column order by a bucket transpose) followed by column j
-    // of c — already sorted and disjoint, so no sort is needed.
-    const index_t n = c.n_cols;
-    SparseMatrix f;
-    f.n_rows = f.n_cols = n;
-    f.layout = Layout::csc;
-    f.storage = Storage::full;
-    std::vector<index_t> cnt(n + 1, 0);
-    for (index_t j = 0; j < n; ++j)
-      for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) {
-        ++cnt[j + 1];
-        if (c.indices[p] != j) ++cnt[c.indices[p] + 1];
-      }
-    for (index_t j = 0; j < n; ++j) cnt[j + 1] += cnt[j];
-    f.offsets = cnt;
-    f.indices.resize(cnt.back());
-    for (index_t j = 0; j < n; ++j)  // upper part first: (j, i) for i > j lands in column i
-      for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p)
-        if (c.indices[p] != j) f.indices[cnt[c.indices[p]]++] = j;
-    for (index_t j = 0; j < n; ++j)
-      for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) f.indices[cnt[j]++] = c.indices[p];
-    return f;
-  }
-  SparseMatrix p;
-  p.n_rows = p.n_cols = c.n_cols;
-  p.layout = Layout::csc;
-  p.storage = Storage::full;
-  p.offsets = c.offsets;
-  p.indices = c.indices;
-  if (!q_inv.empty()) {
-    // B(:, q_inv[j]) = A(:, j): rebuild by columns of B.
-    SparseMatrix b;
-    b.n_rows = b.n_cols = c.n_cols;
-    std::vector<index_t> cnt(c.n_cols + 1, 0);
-    for (index_t j = 0; j < c.n_cols; ++j) cnt[q_inv[j] + 1] = c.offsets[j + 1] - c.offsets[j];
-    for (index_t j = 0; j < c.n_cols; ++j) cnt[j + 1] += cnt[j];
-    b.offsets = cnt;
-    b.indices.resize(c.nnz());
-    for (index_t j = 0; j < c.n_cols; ++j)
-      std::copy(c.indices.begin() + c.offsets[j], c.indices.begin() + c.offsets[j + 1],
-                b.indices.begin() + cnt[q_inv[j]]);
-    p.offsets = std::move(b.offsets);
-    p.indices = std::move(b.indices);
-  }
-  // B + Bᵀ: column j is the union of B(:, j) and row j of B. Both are sorted (the columns
-  // of the canonical c keep their order in B; a bucket transpose lists each row in
-  // increasing column order), so a merge gives the canonical union without a sort.
-  const index_t n = p.n_cols;
-  std::vector<index_t> tp(n + 1, 0);
-  for (index_t k = 0; k < p.nnz(); ++k) ++tp[p.indices[k] + 1];
-  for (index_t j = 0; j < n; ++j) tp[j + 1] += tp[j];
-  std::vector<index_t> ti(p.nnz()), next(tp.begin(), tp.end() - 1);
-  for (index_t j = 0; j < n; ++j)
-    for (index_t k = p.offsets[j]; k < p.offsets[j + 1]; ++k) ti[next[p.indices[k]]++] = j;
-  SparseMatrix u;
-  u.n_rows = u.n_cols = n;
-  u.layout = Layout::csc;
-  u.storage = Storage::full;
-  u.offsets.assign(n + 1, 0);
-  u.indices.resize(p.nnz() + ti.size());
-  index_t w = 0;
-  for (index_t j = 0; j < n; ++j) {
-    index_t a = p.offsets[j], ae = p.offsets[j + 1], b = tp[j], be = tp[j + 1];
-    while (a < ae || b < be) {
-      const index_t ia = a < ae ? p.indices[a] : n, ib = b < be ? ti[b] : n;
-      const index_t i = std::min(ia, ib);
-      a += ia == i;
-      b += ib == i;
-      u.indices[w++] = i;
-    }
-    u.offsets[j + 1] = w;
-  }
-  u.indices.resize(w);
-  return u;
-}
-
 // True when the lower-triangular canonical matrix `low` has a diagonal entry that is
 // structurally missing or (values given) ≤ 0: such a symmetric matrix is not SPD.
 bool has_nonpositive_diagonal(const SparseMatrix& low) {
@@ -169,57 +90,6 @@ bool has_nonpositive_diagonal(const SparseMatrix& low) {
     if (vals && !(low.values[p] > 0.0)) return true;
   }
   return false;
-}
-
-AssemblyMap build_assembly_map(const SparseMatrix& c, const Analysis& an) {
-  const auto& t = an.tree;
-  const index_t nf = t.n_fronts();
-  std::vector<index_t> q_inv;
-  if (!an.matching_perm.empty()) q_inv = ordering::invert_permutation(an.matching_perm);
-  // bucket the entries by front (the front of the smaller permuted index)
-  std::vector<index_t> count(nf + 1, 0), front_of(c.nnz());
-  auto permuted = [&](index_t j, index_t p, index_t& pi, index_t& pj) {
-    pj = an.iperm[q_inv.empty() ? j : q_inv[j]];
-    pi = an.iperm[c.indices[p]];
-  };
-  for (index_t j = 0; j < c.n_cols; ++j)
-    for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) {
-      index_t pi, pj;
-      permuted(j, p, pi, pj);
-      front_of[p] = t.front_of_column[std::min(pi, pj)];
-      ++count[front_of[p] + 1];
-    }
-  for (index_t f = 0; f < nf; ++f) count[f + 1] += count[f];
-  AssemblyMap map;
-  map.entry_offsets = count;
-  map.entry_src.resize(c.nnz());
-  map.entry_dst.resize(c.nnz());
-  std::vector<index_t> column_of(c.nnz());  // original column of each entry, for the dst pass
-  for (index_t j = 0; j < c.n_cols; ++j)
-    for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) {
-      const index_t k = count[front_of[p]]++;
-      map.entry_src[k] = p;
-      column_of[k] = j;
-    }
-  // local positions through a row -> local index map set per front (linear in the fronts'
-  // rows plus the entries, no search)
-  std::vector<index_t> local(an.n, -1);
-  for (index_t f = 0; f < nf; ++f) {
-    const index_t* rows = t.rows_of(f);
-    const index_t m = t.n_rows(f);
-    for (index_t i = 0; i < m; ++i) local[rows[i]] = i;
-    for (index_t k = map.entry_offsets[f]; k < map.entry_offsets[f + 1]; ++k) {
-      index_t pi, pj;
-      permuted(column_of[k], map.entry_src[k], pi, pj);
-      const index_t lo = std::min(pi, pj), hi = std::max(pi, pj);
-      const index_t lc = lo - t.first_pivot[f];  // pivot column of the front
-      const index_t lr = local[hi];
-      // symmetric: lower triangle (row hi, column lo); general: (pi, pj) as it stands
-      map.entry_dst[k] = (an.symmetric || pi >= pj) ? lc * m + lr : lr * m + lc;
-    }
-    for (index_t i = 0; i < m; ++i) local[rows[i]] = -1;
-  }
-  return map;
 }
 
 // Panels are laid out in schedule order, so that the panels of one batch are contiguous
@@ -386,7 +256,7 @@ index_t resolve_max_block_size(const Options& opts, MatrixType type) {
   return numeric::uses_cuda(opts.backend) && type == MatrixType::spd ? 4096 : 1024;
 }
 
-Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers) {
+static Analysis analyze_matrix_impl(const SparseMatrix& a, const Options& opts, int workers) {
   Timer total;
   if (workers < 1)
     throw InvalidInput("analyze_matrix: workers must be at least 1 (got " +
@@ -440,7 +310,7 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers)
         std::to_string(unmatched_row) +
         " (0-based) is left unmatched (explicit zeros do not count as entries)");
   const bool grouped = an.pivot_groups.n_groups() > 0;
-  const SparseMatrix pattern = symmetric_pattern(c, an.symmetric, q_inv);
+  const SparseMatrix pattern = detail::symmetric_pattern(c, an.symmetric, q_inv);
   const ordering::Graph graph = ordering::graph_of_symmetric_pattern(pattern);
   ordering::OrderingResult ord =
       grouped ? ordering::compute_grouped_ordering(
@@ -509,7 +379,7 @@ void finish_analysis(Analysis& an, const SparseMatrix& c, const SparseMatrix& pa
   step.reset();
   const bool lu = !an.symmetric;
   an.plan = schedule::plan_memory(an.tree, an.schedule, opts.device_memory_limit, lu);
-  an.assembly = build_assembly_map(c, an);
+  an.assembly = detail::build_assembly_map(c, an);
   an.cb_layout = schedule::plan_cb_layout(an.tree, an.schedule);
   an.stack_plan = schedule::plan_stack(
       an.tree, cpu_threads(opts), an.type == MatrixType::spd || an.type == MatrixType::automatic);
@@ -567,8 +437,8 @@ void finish_analysis(Analysis& an, const SparseMatrix& c, const SparseMatrix& pa
 
 }  // namespace
 
-Analysis analyze_with_order(const SparseMatrix& a, const Analysis& previous, const Options& opts,
-                            int workers) {
+static Analysis analyze_with_order_impl(const SparseMatrix& a, const Analysis& previous,
+                                        const Options& opts, int workers) {
   Timer total;
   if (workers < 1)
     throw InvalidInput("analyze_with_order: workers must be at least 1 (got " +
@@ -607,7 +477,7 @@ Analysis analyze_with_order(const SparseMatrix& a, const Analysis& previous, con
   std::vector<index_t> q_inv;
   if (!an.matching_perm.empty()) q_inv = ordering::invert_permutation(an.matching_perm);
   Timer step;
-  const SparseMatrix pattern = symmetric_pattern(c, an.symmetric, q_inv);
+  const SparseMatrix pattern = detail::symmetric_pattern(c, an.symmetric, q_inv);
   ordering::OrderingResult ord;
   // the order of the analysis that computed one (postordered: as good a fill-reducing order
   // as the one it came from)
@@ -619,6 +489,19 @@ Analysis analyze_with_order(const SparseMatrix& a, const Analysis& previous, con
   an.stats.ordering = previous.stats.ordering;
   an.stats.total_seconds = total.seconds();
   return an;
+}
+
+// The analysis's parallel passes (analysis/patterns.cpp) run on Options::num_threads
+// threads, as the factorization does.
+Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers) {
+  tbb::task_arena arena(cpu_threads(opts));
+  return arena.execute([&] { return analyze_matrix_impl(a, opts, workers); });
+}
+
+Analysis analyze_with_order(const SparseMatrix& a, const Analysis& previous, const Options& opts,
+                            int workers) {
+  tbb::task_arena arena(cpu_threads(opts));
+  return arena.execute([&] { return analyze_with_order_impl(a, previous, opts, workers); });
 }
 
 }  // namespace strata

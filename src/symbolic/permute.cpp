@@ -4,9 +4,13 @@
 // symmetric, row r of B has the same column indices as column r, which are
 // iperm[A(:, perm[r])]. Emitting the rows of B in increasing r into column buckets
 // therefore fills every column with sorted row indices: one counting pass and one fill
-// pass, O(n + nnz), no sort (the bucket transpose of Gustavson, ACM TOMS 4(3), 1978).
+// pass, O(n + nnz), no sort (the bucket transpose of Gustavson, ACM TOMS 4(3), 1978), in
+// chunks of rows over the calling arena's threads (sparse/bucket_entries.hpp; the same
+// result for every thread count).
 #include <string>
+#include <utility>
 
+#include "sparse/bucket_entries.hpp"
 #include "strata/errors.hpp"
 #include "symbolic/symbolic.hpp"
 
@@ -33,20 +37,17 @@ SparseMatrix permute_symmetric_pattern(const SparseMatrix& full, const std::vect
   b.n_rows = b.n_cols = n;
   b.layout = Layout::csc;
   b.storage = Storage::full;
-  b.offsets.assign(n + 1, 0);
-  for (index_t r = 0; r < n; ++r) {
-    const index_t col = perm[r];
-    for (index_t p = a.offsets[col]; p < a.offsets[col + 1]; ++p)
-      ++b.offsets[iperm[a.indices[p]] + 1];
-  }
-  for (index_t c = 0; c < n; ++c) b.offsets[c + 1] += b.offsets[c];
-  b.indices.resize(b.offsets[n]);
-  std::vector<index_t> next(b.offsets.begin(), b.offsets.end() - 1);
-  for (index_t r = 0; r < n; ++r) {
-    const index_t col = perm[r];
-    for (index_t p = a.offsets[col]; p < a.offsets[col + 1]; ++p)
-      b.indices[next[iperm[a.indices[p]]]++] = r;
-  }
+  b.indices.resize(a.nnz());
+  // row r of B (= column r, by symmetry) is iperm[A(:, perm[r])]: rows of B emitted in
+  // increasing r into column buckets, in parallel chunks of rows
+  index_t* out = b.indices.data();
+  b.offsets = detail::bucket_entries(
+      n, n,
+      [&](index_t r) {
+        return std::pair<index_t, index_t>{a.offsets[perm[r]], a.offsets[perm[r] + 1]};
+      },
+      [&](index_t, index_t p) { return iperm[a.indices[p]]; },
+      [&](index_t slot, index_t r, index_t) { out[slot] = r; });
   return b;
 }
 

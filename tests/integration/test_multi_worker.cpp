@@ -110,6 +110,36 @@ class Recording final : public numeric::Executor {
   int fail_part_;
 };
 
+// The factor of one CPU executor taking the level schedule batch by batch (a Recording
+// forwards no factor_tree): the kernels the multi-worker driver runs on each part, so the
+// multi-worker factor must equal it bitwise. A plain CPU executor factors the whole tree
+// depth-first instead, forming Cholesky fronts in column panels: the same factor to
+// rounding, bitwise only where the BLAS computes a product the same way whatever its
+// blocking (OpenBLAS's small-matrix kernels on AVX-512 do not) — see close_factors.
+numeric::NumericFactor level_factor(const Analysis& an, const std::vector<double>& v,
+                                    MatrixType type, double pivot) {
+  numeric::NumericFactor f;
+  std::vector<double> arena;
+  Recording one(an.tree.n_fronts());
+  numeric::factorize(an, v, type, pivot, one, f, arena);
+  return f;
+}
+
+// The depth-first factor x and the level-schedule factor y of the same values agree to
+// rounding: entries within 1e-10 of the largest (their pivots are those of one
+// factorization computed in two orders).
+void expect_close_factors(const numeric::NumericFactor& x, const numeric::NumericFactor& y) {
+  ASSERT_EQ(x.panels.size(), y.panels.size());
+  double scale = 0, diff = 0;
+  for (std::size_t i = 0; i < x.panels.size(); ++i) {
+    scale = std::max(scale, std::abs(y.panels[i]));
+    diff = std::max(diff, std::abs(x.panels[i] - y.panels[i]));
+  }
+  EXPECT_LE(diff, 1e-10 * scale);
+  EXPECT_EQ(x.rows, y.rows);
+  EXPECT_EQ(x.pivot_size, y.pivot_size);
+}
+
 // `workers` Recording executors (failing at part fail_part, see Recording) and the
 // executor pointers factorize_multi takes.
 struct Recorders {
@@ -208,10 +238,12 @@ TEST(MultiWorker, FactorBitwiseEqualsOneExecutorAndEveryFrontOnce) {
       const Analysis an = split_analysis(pr.a, pr.type, workers);
       double pivot = 0;
       const std::vector<double> v = test::scaled_values(an, pr.a, &pivot);
-      numeric::NumericFactor one, many;
+      numeric::NumericFactor depth_first, many;
       std::vector<double> arena;
       auto cpu = numeric::make_cpu_executor(1);
-      numeric::factorize(an, v, pr.type, pivot, *cpu, one, arena);
+      numeric::factorize(an, v, pr.type, pivot, *cpu, depth_first, arena);
+      const numeric::NumericFactor one = level_factor(an, v, pr.type, pivot);
+      expect_close_factors(depth_first, one);
 
       Recorders recorders(workers, an.tree.n_fronts());
       auto& rec = recorders.rec;
@@ -300,9 +332,7 @@ TEST(MultiWorker, UpperLayersGiveTheOneWorkerFactor) {
           << "the top part was not split: the test would be vacuous";
       double pivot = 0;
       const std::vector<double> v = test::scaled_values(an, pr.a, &pivot);
-      numeric::NumericFactor one;
-      std::vector<double> arena;
-      numeric::factorize(an, v, pr.type, pivot, *numeric::make_cpu_executor(1), one, arena);
+      const numeric::NumericFactor one = level_factor(an, v, pr.type, pivot);
       Recorders recorders(workers, an.tree.n_fronts());
       auto& rec = recorders.rec;
       const auto& execs = recorders.execs;
@@ -407,9 +437,7 @@ TEST(MultiWorker, UpperPartsDoNotWaitForUnrelatedSubtrees) {
       ++checked;
       double pivot = 0;
       const std::vector<double> v = test::scaled_values(an, a, &pivot);
-      numeric::NumericFactor one;
-      std::vector<double> arena;
-      numeric::factorize(an, v, MatrixType::spd, pivot, *numeric::make_cpu_executor(1), one, arena);
+      const numeric::NumericFactor one = level_factor(an, v, MatrixType::spd, pivot);
       Recorders recorders(workers, an.tree.n_fronts());
       auto& rec = recorders.rec;
       const auto& execs = recorders.execs;
@@ -541,9 +569,7 @@ TEST(MultiWorker, SlowWorkerHasItsSubtreesStolen) {
       ASSERT_GE(own[0], 2) << "worker 0 needs a queue to steal from";
       double pivot = 0;
       const std::vector<double> v = test::scaled_values(an, pr.a, &pivot);
-      numeric::NumericFactor one;
-      std::vector<double> arena;
-      numeric::factorize(an, v, pr.type, pivot, *numeric::make_cpu_executor(1), one, arena);
+      const numeric::NumericFactor one = level_factor(an, v, pr.type, pivot);
       for (bool stealing : {true, false}) {
         SCOPED_TRACE(stealing ? "stealing" : "no stealing");
         std::vector<std::unique_ptr<numeric::Executor>> ex;

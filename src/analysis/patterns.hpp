@@ -1,0 +1,29 @@
+// strata — the patterns the analysis derives from its input: the symmetric pattern that
+// the ordering works on and the assembly map of the input's entries into the fronts
+// (analysis/patterns.cpp). Internal to the analysis.
+#pragma once
+
+#include <vector>
+
+#include "analysis/analysis.hpp"
+#include "strata/sparse_matrix.hpp"
+
+namespace strata::detail {
+
+/// The pattern of B + Bᵀ as a full canonical CSC (values dropped; n × n, 0-based, sorted
+/// rows, no duplicates). For symmetric matrices `c` is the canonical lower triangle and
+/// B its symmetric expansion; for general ones `c` is canonical full CSC and
+/// B = A(:, q) with q the matching's column permutation given through its inverse q_inv
+/// (B(:, q_inv[j]) = A(:, j); empty: B = A). Runs on the threads of the calling arena,
+/// the same result for every thread count.
+SparseMatrix symmetric_pattern(const SparseMatrix& c, bool symmetric,
+                               const std::vector<index_t>& q_inv);
+
+/// Where every entry of the canonical input `c` lands: its front (the front of the
+/// smaller of its two permuted indices) and its position in that front's dense m × m
+/// column-major block (symmetric: the lower triangle). Needs an.tree, an.iperm and
+/// an.matching_perm. Runs on the threads of the calling arena, the same result for every
+/// thread count.
+AssemblyMap build_assembly_map(const SparseMatrix& c, const Analysis& an);
+
+}  // namespace strata::detail
