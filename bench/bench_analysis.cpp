@@ -5,16 +5,25 @@
 // run; the median of --repeat runs is reported. Results: bench/results/analysis-*.json
 // (analysis-<tag>-*.json with --tag).
 //
+// The multibody Newton matrices (files written by `strata simulate --dump-matrix`, given
+// by path) are unsymmetric and analyzed as the engine does: --matching keeps strata's
+// matching and scaling (the pattern-only comparison with CHOLMOD turns them off), and
+// --umfpack adds the time of UMFPACK's symbolic phase (umfpack_dl_symbolic with its
+// default strategy, the values given) on the same matrix.
+//
 //   bench_analysis [--problems a,b,...] [--repeat R] [--ordering nd|metis|amd] [--no-cholmod]
-//                  [--tag NAME] [--results-dir DIR]
+//                  [--matching] [--umfpack] [--threads N] [--tag NAME] [--results-dir DIR]
 #include <cholmod.h>
 #include <fmt/core.h>
 #include <sys/resource.h>
 
 #include <CLI/CLI.hpp>
+#ifdef STRATA_BENCH_HAVE_UMFPACK
+#include <umfpack.h>
+#endif
 
-#include "bench_common.hpp"
 #include "base/timer.hpp"
+#include "bench_common.hpp"
 #include "crash_report.hpp"
 #include "strata/strata.hpp"
 
@@ -76,6 +85,31 @@ CholmodAnalysis cholmod_analysis(const SparseMatrix& a, bool symmetric, int repe
   return r;
 }
 
+#ifdef STRATA_BENCH_HAVE_UMFPACK
+// Median time of umfpack_dl_symbolic (default control: its own choice of strategy and
+// ordering) on the full matrix a, values included (its strategy looks at them).
+double umfpack_symbolic_seconds(const SparseMatrix& a, int repeat) {
+  const SparseMatrix f = expand_symmetric(a);
+  const auto n = static_cast<SuiteSparse_long>(f.n_cols);
+  std::vector<SuiteSparse_long> ap(f.offsets.begin(), f.offsets.end()),
+      ai(f.indices.begin(), f.indices.end());
+  double control[UMFPACK_CONTROL], info[UMFPACK_INFO];
+  umfpack_dl_defaults(control);
+  std::vector<double> times;
+  for (int k = 0; k < repeat; ++k) {
+    void* symbolic = nullptr;
+    Timer t;
+    const SuiteSparse_long status =
+        umfpack_dl_symbolic(n, n, ap.data(), ai.data(), f.values.data(), &symbolic, control, info);
+    times.push_back(t.seconds());
+    if (status != UMFPACK_OK)
+      throw Error("umfpack_dl_symbolic failed with status " + std::to_string(status));
+    umfpack_dl_free_symbolic(&symbolic);
+  }
+  return bench::median(times);
+}
+#endif
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -92,6 +126,13 @@ int main(int argc, char** argv) {
   app.add_option("--repeat", repeat, "runs per measurement (median reported)");
   app.add_option("--ordering", ordering)->check(CLI::IsMember({"nd", "metis", "amd"}));
   app.add_flag("--no-cholmod", no_cholmod, "skip the CHOLMOD reference (e.g. for huge problems)");
+  bool matching = false, umfpack = false;
+  int threads = 0;
+  app.add_flag("--matching", matching,
+               "keep strata's matching and scaling (general matrices, as the engine analyzes)");
+  app.add_flag("--umfpack", umfpack, "add the time of UMFPACK's symbolic phase");
+  app.add_option("--threads", threads, "host threads of strata's analysis (default: all)")
+      ->check(CLI::NonNegativeNumber);
   std::string tag, results_dir;
   app.add_option("--tag", tag,
                  "label stored in the results (\"tag\") and added to the file name, e.g. mbs-64")
@@ -99,20 +140,29 @@ int main(int argc, char** argv) {
   app.add_option("--results-dir", results_dir,
                  "folder for the results file (default bench/results)");
   CLI11_PARSE(app, argc, argv);
+#ifndef STRATA_BENCH_HAVE_UMFPACK
+  if (umfpack) {
+    fmt::print(stderr, "bench_analysis: built without UMFPACK; --umfpack is not available\n");
+    return 2;
+  }
+#endif
 
   json out = bench::run_metadata(argc, argv);
   out["benchmark"] = "analysis";
+  out["matching"] = matching;
+  out["threads"] = threads;
   out["tag"] = tag;
   out["rows"] = json::array();
   fmt::print("{:<18} {:>9} {:>12} {:>12} {:>6} {:>10} {:>10} {:>8} {:>8} {:>6}\n", "problem", "n",
              "nnzL strata", "nnzL cholmod", "ratio", "flops s", "flops c", "t strata", "t chol",
              "ratio");
-  std::vector<double> lnz_ratios, time_ratios;
+  std::vector<double> lnz_ratios, time_ratios, umfpack_ratios;
   for (const std::string& name : problems) {
     bench::Problem p = bench::load_problem(name);
     Options o;
     o.type = p.symmetric ? MatrixType::spd : MatrixType::general;
-    o.matching_and_scaling = false;  // pattern-only comparison
+    o.matching_and_scaling = matching;  // off: the pattern-only comparison with CHOLMOD
+    o.num_threads = threads;
     o.ordering = ordering == "nd"      ? OrderingMethod::nested_dissection
                  : ordering == "metis" ? OrderingMethod::metis
                                        : OrderingMethod::amd;
@@ -138,6 +188,18 @@ int main(int argc, char** argv) {
                   {"plan_seconds", st.plan_seconds},
                   {"fronts", st.n_fronts},
                   {"tree_height", st.tree_height}}}};
+#ifdef STRATA_BENCH_HAVE_UMFPACK
+    if (umfpack) {
+      const double tu = umfpack_symbolic_seconds(p.a, repeat);
+      row["umfpack_symbolic_seconds"] = tu;
+      row["umfpack_time_ratio"] = ts / tu;
+      umfpack_ratios.push_back(ts / tu);
+      fmt::print(
+          "{:<18} strata analysis {:.4f} s (matching and ordering {:.4f}, symbolic {:.4f}, "
+          "plan {:.4f}), UMFPACK symbolic {:.4f} s, ratio {:.2f}\n",
+          name, ts, st.ordering_seconds, st.symbolic_seconds, st.plan_seconds, tu, ts / tu);
+    }
+#endif
     if (!no_cholmod) {
       CholmodAnalysis c = cholmod_analysis(p.a, p.symmetric, repeat);
       row["cholmod_metis"] = {{"nnz_l", c.lnz}, {"flops", c.flops}, {"seconds", c.seconds}};
@@ -164,6 +226,11 @@ int main(int argc, char** argv) {
     out["geomean_time_ratio"] = bench::geometric_mean(time_ratios);
     fmt::print("geometric mean: nnz(L) ratio {:.3f}, analysis time ratio {:.3f}\n",
                bench::geometric_mean(lnz_ratios), bench::geometric_mean(time_ratios));
+  }
+  if (!umfpack_ratios.empty()) {
+    out["geomean_umfpack_time_ratio"] = bench::geometric_mean(umfpack_ratios);
+    fmt::print("geometric mean: analysis time / UMFPACK symbolic {:.3f}\n",
+               bench::geometric_mean(umfpack_ratios));
   }
   fmt::print("peak RSS {:.1f} MB\n", ru.ru_maxrss / 1024.0);
   const std::string stem = tag.empty() ? "analysis" : "analysis-" + tag;
