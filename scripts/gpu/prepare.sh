@@ -22,7 +22,7 @@ echo "$(git rev-parse --short HEAD)$(git diff --quiet HEAD -- . || echo ' with u
 cp build-gpu/strata build-gpu/tests/test_solver build-gpu/bench/bench_factor .carry/bin/
 # every gpu-labelled test binary (one per file in tests/gpu)
 for src in tests/gpu/*.cpp; do cp "build-gpu/tests/$(basename "$src" .cpp)" .carry/bin/; done
-for b in bench_gpu bench_gpu_memory bench_cudss bench_multigpu; do [ -f build-gpu/bench/$b ] && cp build-gpu/bench/$b .carry/bin/; done
+for b in bench_gpu bench_gpu_memory bench_cudss bench_multigpu bench_analysis; do [ -f build-gpu/bench/$b ] && cp build-gpu/bench/$b .carry/bin/; done
 cp data/matrices/*.mtx.gz data/matrices/README.md .carry/matrices/
 # every non-system, non-CUDA library the binaries load
 for b in .carry/bin/*; do
