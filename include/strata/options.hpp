@@ -238,8 +238,8 @@ struct Options {
   /// it (a Newton loop whose values keep drifting from the analysis's); fixed never does.
   /// Each choice depends on the values alone, never on earlier factorizations, so a run
   /// restarted from a checkpoint repeats the uninterrupted one bit for bit. Delayed
-  /// pivoting runs on the host, one executor: with several workers or the distributed
-  /// solver the fixed order is used.
+  /// pivoting runs on the host, after the fixed-order factorization of one executor or of
+  /// several workers (GPUs) alike; the distributed solver keeps the fixed order.
   Pivoting pivoting = Pivoting::automatic;
   /// The relative threshold u of delayed pivoting, in (0, 1]: a pivot is taken when it is
   /// at least u times the largest entry of its column (|L| ≤ 1/u). Default 0.01.

@@ -313,12 +313,12 @@ NumericRun factor_values(SolverState& s, double norm1, double static_pivot) {
       type = MatrixType::symmetric_indefinite;
     }
   }
-  // Delayed pivoting (general, one executor; Options::pivoting): the fixed order first
-  // unless asked to delay always, the delayed factorization on the host when the fixed
-  // order needed static pivots.
+  // Delayed pivoting (general, the whole tree in this process; Options::pivoting): the fixed order
+  // first unless asked to delay always, the delayed factorization on the host when the fixed order
+  // needed static pivots.
   s.delayed.valid = false;
   const bool can_delay = s.options.pivoting != Pivoting::fixed && type == MatrixType::general &&
-                         s.driver->whole_tree();
+                         s.driver->in_one_process();
   const bool delay_directly = can_delay && s.options.pivoting == Pivoting::delayed;
   index_t fixed_perturbed = 0;
   if (delay_directly) {

@@ -112,7 +112,7 @@ class DistributedDriver final : public numeric::NumericDriver {
  public:
   DistributedDriver(DistributedState& s, int per_rank) : s_(s), per_rank_(per_rank) {}
   int workers() const override { return s_.comm.size() * per_rank_; }
-  bool whole_tree() const override { return false; }
+  bool in_one_process() const override { return false; }
   bool uploads_values() const override { return false; }
   void factorize(const Analysis& an, const std::vector<double>& values, MatrixType type,
                  double pivot, numeric::NumericFactor& factor) override {

@@ -42,7 +42,7 @@ class TreeDriver final : public NumericDriver {
  public:
   explicit TreeDriver(const Options& o) : options_(o), gpu_(uses_cuda(o.backend)), host_solve_(o) {}
   int workers() const override { return 1; }
-  bool whole_tree() const override { return true; }
+  bool in_one_process() const override { return true; }
   bool uploads_values() const override { return gpu_; }
   void prepare(const Analysis& an) override {
     if (!gpu_) return;
@@ -107,7 +107,7 @@ class MultiWorkerDriver final : public NumericDriver {
         config_(std::move(config)),
         host_solve_(o) {}
   int workers() const override { return workers_; }
-  bool whole_tree() const override { return false; }
+  bool in_one_process() const override { return true; }
   bool uploads_values() const override { return cpu_threads_ == 0; }
   void prepare(const Analysis& an) override {
     if (cpu_threads_ > 0) return;

@@ -30,9 +30,10 @@ class NumericDriver {
   virtual ~NumericDriver() = default;
   /// Workers the analysis is split for (Analysis::partition.workers); 1: the whole tree.
   virtual int workers() const = 0;
-  /// Whether the factorization is one executor's on the whole tree in this process (a
-  /// host algorithm may then take over, as delayed pivoting does).
-  virtual bool whole_tree() const = 0;
+  /// Whether the whole tree is factored in this process (one executor, or several workers
+  /// that share its memory), so that a host algorithm on the analysis and the scaled
+  /// values may take over, as delayed pivoting does; false for the distributed driver.
+  virtual bool in_one_process() const = 0;
   /// Whether the executors copy the scaled values from host memory to a GPU at every
   /// factorization (the Solver page-locks them then).
   virtual bool uploads_values() const = 0;

@@ -1130,6 +1130,7 @@ TEST_F(CudaBackend, DelayedPivotingEqualsCpu) {
     Options o;
     o.type = MatrixType::general;
     o.backend = gpu ? Backend::cuda : Backend::cpu;
+    o.num_gpus = 1;  // one GPU, whatever the machine has: the same analysis as the CPU's
     o.pivoting = Pivoting::automatic;
     o.relax_small = 0;  // fundamental supernodes: one-pivot leaf fronts
     o.relax_zeros_1 = o.relax_zeros_2 = o.relax_zeros_3 = 0;
