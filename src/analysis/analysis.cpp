@@ -283,7 +283,6 @@ static Analysis analyze_matrix_impl(const SparseMatrix& a, const Options& opts, 
   check_no_empty_line(c, an.symmetric);
 
   Timer step;
-  std::vector<index_t> q_inv;
   index_t unmatched_row = -1;
   if (!an.symmetric && opts.matching_and_scaling && an.n > 0 && !c.values.empty()) {
     ordering::Matching m = ordering::maximum_product_matching(c);
@@ -292,7 +291,6 @@ static Analysis analyze_matrix_impl(const SparseMatrix& a, const Options& opts, 
     an.col_scaling = std::move(m.column_scaling);
     an.structurally_singular = m.structurally_singular;
     unmatched_row = m.first_unmatched_row;
-    q_inv = ordering::invert_permutation(an.matching_perm);
   }
   if (an.type == MatrixType::symmetric_indefinite && opts.matching_and_scaling && an.n > 0 &&
       !c.values.empty()) {
@@ -310,7 +308,7 @@ static Analysis analyze_matrix_impl(const SparseMatrix& a, const Options& opts, 
         std::to_string(unmatched_row) +
         " (0-based) is left unmatched (explicit zeros do not count as entries)");
   const bool grouped = an.pivot_groups.n_groups() > 0;
-  const SparseMatrix pattern = detail::symmetric_pattern(c, an.symmetric, q_inv);
+  const SparseMatrix pattern = detail::symmetric_pattern(c, an.symmetric, an.matching_perm);
   const ordering::Graph graph = ordering::graph_of_symmetric_pattern(pattern);
   ordering::OrderingResult ord =
       grouped ? ordering::compute_grouped_ordering(
@@ -474,10 +472,8 @@ static Analysis analyze_with_order_impl(const SparseMatrix& a, const Analysis& p
   an.row_scaling = previous.row_scaling;
   an.col_scaling = previous.col_scaling;
   an.pivot_groups = previous.pivot_groups;
-  std::vector<index_t> q_inv;
-  if (!an.matching_perm.empty()) q_inv = ordering::invert_permutation(an.matching_perm);
   Timer step;
-  const SparseMatrix pattern = detail::symmetric_pattern(c, an.symmetric, q_inv);
+  const SparseMatrix pattern = detail::symmetric_pattern(c, an.symmetric, an.matching_perm);
   ordering::OrderingResult ord;
   // the order of the analysis that computed one (postordered: as good a fill-reducing order
   // as the one it came from)

@@ -9,9 +9,9 @@
 // front are stable bucket sorts (sparse/bucket_entries.hpp: Gustavson's bucket transpose,
 // split into chunks of lines); the other passes are independent per column or per front
 // (a union of two sorted lists, the copy of a column, the positions of a front's entries
-// through a row → local index map kept per thread). On the multibody Newton matrices these
-// passes — not only the ordering — were a large part of the analysis (bench/history.md),
-// and on a host with many cores they are what parallelizes.
+// through a row → local index map kept per thread). Why in parallel: these passes touch
+// every entry, as the ordering does, but unlike the nested dissection (METIS, sequential)
+// they split over a host's cores.
 //
 // B + Bᵀ, general: column j is the union of B(:, j) = A(:, q_j) and row j of B, both sorted
 // (a canonical column, and the transpose's rows listed in increasing column order), so a
@@ -32,7 +32,7 @@
 namespace strata::detail {
 namespace {
 
-// Runs body(j) for j in [0, n), in parallel once n is large enough to pay for it.
+// Runs body(j) for j in [0, n) over the calling arena's threads, in ranges of 256 or more.
 template <class Body>
 void for_each_index(index_t n, Body body) {
   tbb::parallel_for(tbb::blocked_range<index_t>(0, n, 256), [&](const auto& r) {
@@ -75,7 +75,7 @@ SparseMatrix full_csc(index_t n) {
 }  // namespace
 
 SparseMatrix symmetric_pattern(const SparseMatrix& c, bool symmetric,
-                               const std::vector<index_t>& q_inv) {
+                               const std::vector<index_t>& q) {
   const index_t n = c.n_cols;
   SparseMatrix u = full_csc(n);
   const index_t* ci = c.indices.data();
@@ -104,8 +104,6 @@ SparseMatrix symmetric_pattern(const SparseMatrix& c, bool symmetric,
     return u;
   }
   // column k of B is column q[k] of A
-  std::vector<index_t> q;
-  if (!q_inv.empty()) q = ordering::invert_permutation(q_inv);
   auto column_of_b = [&](index_t k) {
     const index_t j = q.empty() ? k : q[k];
     return std::pair<index_t, index_t>{co[j], co[j + 1]};

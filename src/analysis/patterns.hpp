@@ -13,11 +13,11 @@ namespace strata::detail {
 /// The pattern of B + Bᵀ as a full canonical CSC (values dropped; n × n, 0-based, sorted
 /// rows, no duplicates). For symmetric matrices `c` is the canonical lower triangle and
 /// B its symmetric expansion; for general ones `c` is canonical full CSC and
-/// B = A(:, q) with q the matching's column permutation given through its inverse q_inv
-/// (B(:, q_inv[j]) = A(:, j); empty: B = A). Runs on the threads of the calling arena,
-/// the same result for every thread count.
+/// B = A(:, q) with q the matching's column permutation (Analysis::matching_perm: column k
+/// of B is column q[k] of A; empty: B = A). Runs on the threads of the calling arena, the
+/// same result for every thread count.
 SparseMatrix symmetric_pattern(const SparseMatrix& c, bool symmetric,
-                               const std::vector<index_t>& q_inv);
+                               const std::vector<index_t>& q);
 
 /// Where every entry of the canonical input `c` lands: its front (the front of the
 /// smaller of its two permuted indices) and its position in that front's dense m × m
