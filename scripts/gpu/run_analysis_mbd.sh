@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# The analysis of the multibody Newton matrices on a lent machine's host cores, next to
+# The analysis of the multibody Newton matrices on this machine's cores (bench/run cpu) or
+# a lent machine's host (bench/run gpu, or by hand after prepare.sh), next to
 # UMFPACK's symbolic phase (bench_analysis --matching --umfpack, tagged
 # mbd-umfpack-t<threads>, as on the development machine: the report tells machines apart), at each thread count given; scripts/gpu/mechanical_matrices.sh
 # writes the matrices here (generated on the device, not carried). When a baseline build's
