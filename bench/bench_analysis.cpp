@@ -11,7 +11,7 @@
 // --umfpack adds the time of UMFPACK's symbolic phase (umfpack_dl_symbolic with its
 // default strategy, the values given) on the same matrix.
 //
-//   bench_analysis [--problems a,b,...] [--repeat R] [--ordering nd|metis|amd] [--no-cholmod]
+//   bench_analysis [--problems a,b,...] [--repeat R] [--ordering nd|metis|amd|auto] [--no-cholmod]
 //                  [--matching] [--umfpack] [--threads N] [--tag NAME] [--results-dir DIR]
 #include <cholmod.h>
 #include <fmt/core.h>
@@ -124,7 +124,7 @@ int main(int argc, char** argv) {
   app.add_option("--problems", problems, "problems (shared matrix names or lap3d-N, elast3d-N)")
       ->delimiter(',');
   app.add_option("--repeat", repeat, "runs per measurement (median reported)");
-  app.add_option("--ordering", ordering)->check(CLI::IsMember({"nd", "metis", "amd"}));
+  app.add_option("--ordering", ordering)->check(CLI::IsMember({"nd", "metis", "amd", "auto"}));
   app.add_flag("--no-cholmod", no_cholmod, "skip the CHOLMOD reference (e.g. for huge problems)");
   bool matching = false, umfpack = false;
   int threads = 0;
@@ -165,7 +165,8 @@ int main(int argc, char** argv) {
     o.num_threads = threads;
     o.ordering = ordering == "nd"      ? OrderingMethod::nested_dissection
                  : ordering == "metis" ? OrderingMethod::metis
-                                       : OrderingMethod::amd;
+                 : ordering == "amd"   ? OrderingMethod::amd
+                                       : OrderingMethod::automatic;
     std::vector<double> times;
     AnalysisStats st;
     for (int k = 0; k < repeat; ++k) {

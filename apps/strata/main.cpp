@@ -1,6 +1,6 @@
 // strata — the command line.
 //
-//   strata analyze FILE [--ordering nd|metis|amd|natural] [--max-block-size N]
+//   strata analyze FILE [--ordering nd|metis|amd|natural|auto] [--max-block-size N]
 //                       [--device-memory-limit BYTES] [--json] [multi-GPU options]
 //   [mpirun -n R] strata solve A.mtx [--rhs b.mtx] [--type spd|symmetric_indefinite|general|auto]
 //                      [--ordering ...] [--max-block-size N] [--out x.mtx] [--json]

@@ -31,6 +31,11 @@ enum class OrderingMethod {
   amd,                ///< SuiteSparse AMD on the whole graph.
   natural,            ///< identity permutation.
   user,               ///< Options::user_permutation.
+  /// AMD, kept when its factor is cheap for its size — flops / nnz(L) < 500 or
+  /// nnz(L) / nnz(tril(A)) < 5, AMD's own counts — else nested_dissection (CHOLMOD's rule
+  /// for its default orderings, cholmod_analyze with nmethods = 0); nested_dissection
+  /// whenever the tree is split over several workers. AnalysisStats::ordering says which.
+  automatic,
 };
 
 /// Where the numeric phases run.
@@ -269,9 +274,9 @@ struct Options {
 // --- one vocabulary for every interface (CLI, C API, Python, model runs) ---
 
 /// The canonical name of a value (a static string): MatrixType "auto", "spd",
-/// "symmetric_indefinite", "general"; OrderingMethod "nd", "metis", "amd", "natural", "user";
-/// Backend "auto", "cpu", "cuda"; Pivoting "fixed", "automatic", "delayed"; SolveCheck "always",
-/// "after_perturbed_pivots".
+/// "symmetric_indefinite", "general"; OrderingMethod "nd", "metis", "amd", "natural", "auto",
+/// "user"; Backend "auto", "cpu", "cuda"; Pivoting "fixed", "automatic", "delayed"; SolveCheck
+/// "always", "after_perturbed_pivots".
 const char* to_string(MatrixType value);
 const char* to_string(OrderingMethod value);
 const char* to_string(Backend value);

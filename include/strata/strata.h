@@ -101,10 +101,12 @@ typedef enum strata_matrix_type {
 
 /** Fill-reducing ordering. */
 typedef enum strata_ordering {
-  STRATA_ORDERING_ND = 0,     /**< strata's nested dissection (default) */
-  STRATA_ORDERING_METIS = 1,  /**< METIS_NodeND on the whole graph */
-  STRATA_ORDERING_AMD = 2,    /**< approximate minimum degree */
-  STRATA_ORDERING_NATURAL = 3 /**< identity permutation */
+  STRATA_ORDERING_ND = 0,      /**< strata's nested dissection (default) */
+  STRATA_ORDERING_METIS = 1,   /**< METIS_NodeND on the whole graph */
+  STRATA_ORDERING_AMD = 2,     /**< approximate minimum degree */
+  STRATA_ORDERING_NATURAL = 3, /**< identity permutation */
+  STRATA_ORDERING_AUTO = 4     /**< AMD when its factor is cheap, else nested dissection
+                                    (CHOLMOD's rule; strata::OrderingMethod::automatic) */
 } strata_ordering;
 
 /** Where the numeric phases run. */

@@ -177,8 +177,9 @@ class Solver:
         Factorization: Cholesky LLᵀ, LDLᵀ with 1×1/2×2 pivots, or LU on the pattern of
         A+Aᵀ. "auto" (default) uses LLᵀ for a symmetric matrix when it succeeds, else
         LDLᵀ; LU for an unsymmetric one.
-    ordering : {"nd", "metis", "amd", "natural"}
-        Fill-reducing ordering (default "nd": strata's nested dissection).
+    ordering : {"nd", "metis", "amd", "natural", "auto"}
+        Fill-reducing ordering (default "nd": strata's nested dissection; "auto": AMD when
+        its factor is cheap, else nested dissection, as CHOLMOD chooses).
     device : {"auto", "cpu", "cuda"}
         Where the factorization runs. "auto" (default) uses a GPU when the build and the
         machine have one (for LLᵀ, LDLᵀ and LU alike); "cuda" raises NotSupportedError in

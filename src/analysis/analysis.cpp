@@ -400,7 +400,7 @@ void finish_analysis(Analysis& an, const SparseMatrix& c, const SparseMatrix& pa
   st.nnz_l = sym.nnz_l;
   st.type = an.type;
   st.max_block_size = resolve_max_block_size(opts, an.type);
-  st.ordering = opts.ordering;
+  st.ordering = ord.method;
   st.n_fronts = an.tree.n_fronts();
   for (index_t f = 0; f < an.tree.n_fronts(); ++f) {
     const index_t m = an.tree.n_rows(f), k = an.tree.n_pivots(f);

@@ -284,6 +284,9 @@ strata_status strata_set_ordering(strata_solver* s, strata_ordering ordering) {
       case STRATA_ORDERING_NATURAL:
         s->options.ordering = strata::OrderingMethod::natural;
         return;
+      case STRATA_ORDERING_AUTO:
+        s->options.ordering = strata::OrderingMethod::automatic;
+        return;
     }
     throw strata::InvalidInput("ordering " + std::to_string(enum_value(ordering)) +
                                " is not a strata_ordering value");

@@ -50,7 +50,8 @@ struct Vocabulary<OrderingMethod> {
         {OrderingMethod::nested_dissection, {"nd", "nested_dissection"}},
         {OrderingMethod::metis, {"metis"}},
         {OrderingMethod::amd, {"amd"}},
-        {OrderingMethod::natural, {"natural"}}};
+        {OrderingMethod::natural, {"natural"}},
+        {OrderingMethod::automatic, {"auto", "automatic"}}};
     return v;
   }
 };

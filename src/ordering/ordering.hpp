@@ -57,6 +57,9 @@ struct VertexGroups {
 /// Result of an ordering: perm[k] is the original index of the k-th pivot (new to old).
 struct OrderingResult {
   std::vector<index_t> perm;
+  /// The method that made perm (OrderingMethod::automatic resolves to amd or
+  /// nested_dissection).
+  OrderingMethod method = OrderingMethod::nested_dissection;
   SeparatorTree tree;          ///< empty unless nested_dissection
   index_t rebisections = 0;    ///< bisections redone to balance work (balance_levels)
   double balance_seconds = 0;  ///< time spent estimating work and redoing bisections
@@ -88,6 +91,20 @@ std::vector<index_t> metis_ordering(const Graph& g,
 
 /// SuiteSparse AMD (Amestoy, Davis & Duff 1996) on the whole graph.
 std::vector<index_t> amd_ordering(const Graph& g);
+
+/// What AMD's ordering implies for a Cholesky factor of the graph's matrix (amd_l_order's
+/// Info, no symbolic factorization): nnz(L) with the diagonal, and the flops of an LDLᵀ
+/// factorization (divisions + 2 × multiply-subtract pairs).
+struct AmdCounts {
+  double nnz_l = 0;
+  double flops = 0;
+};
+std::vector<index_t> amd_ordering(const Graph& g, AmdCounts* counts);
+
+/// OrderingMethod::automatic's test of an AMD ordering (CHOLMOD's rule for its default
+/// orderings, cholmod_analyze with nmethods = 0): AMD is kept when flops / nnz(L) < 500 or
+/// nnz(L) / nnz(tril(A)) < 5, with nnz(tril(A)) = n + the graph's edges.
+bool amd_is_good_enough(const AmdCounts& counts, const Graph& g);
 
 /// Computes the ordering requested by `opts` (user_permutation is checked: throws
 /// InvalidInput naming the first repeated or out-of-range entry).

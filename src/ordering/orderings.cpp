@@ -37,12 +37,13 @@
 
 namespace strata::ordering {
 
-std::vector<index_t> amd_ordering(const Graph& g) {
+std::vector<index_t> amd_ordering(const Graph& g, AmdCounts* counts) {
   const index_t n = g.n;
   if (n == 0) return {};
   std::vector<index_t> perm(n);
   if (g.n_edges_directed() == 0) {
     std::iota(perm.begin(), perm.end(), index_t{0});
+    if (counts) *counts = {static_cast<double>(n), static_cast<double>(n)};
     return perm;
   }
   double control[AMD_CONTROL], info[AMD_INFO];
@@ -57,7 +58,20 @@ std::vector<index_t> amd_ordering(const Graph& g) {
     throw OutOfMemory(static_cast<std::size_t>(info[AMD_MEMORY]), "amd_l_order");
   if (status != AMD_OK && status != AMD_OK_BUT_JUMBLED)
     throw InvalidInput("amd_l_order rejected the graph (status " + std::to_string(status) + ")");
+  if (counts) {
+    counts->nnz_l = info[AMD_LNZ] + static_cast<double>(n);
+    counts->flops = info[AMD_NDIV] + 2 * info[AMD_NMULTSUBS_LDL];
+  }
   return perm;
+}
+
+std::vector<index_t> amd_ordering(const Graph& g) { return amd_ordering(g, nullptr); }
+
+bool amd_is_good_enough(const AmdCounts& counts, const Graph& g) {
+  if (g.n == 0) return true;
+  const double nnz_tril =
+      static_cast<double>(g.n) + 0.5 * static_cast<double>(g.n_edges_directed());
+  return counts.flops < 500 * counts.nnz_l || counts.nnz_l < 5 * nnz_tril;
 }
 
 std::vector<index_t> metis_ordering(const Graph& g, const std::vector<index_t>& vertex_weights) {
@@ -122,6 +136,7 @@ NestedDissectionOptions nd_options(const Options& opts, int workers) {
 OrderingResult compute_ordering(const Graph& g, const Options& opts, int workers) {
   OrderingResult r;
   const index_t n = g.n;
+  r.method = opts.ordering;
   switch (opts.ordering) {
     case OrderingMethod::nested_dissection:
       return nested_dissection(g, nd_options(opts, workers));
@@ -131,6 +146,16 @@ OrderingResult compute_ordering(const Graph& g, const Options& opts, int workers
     case OrderingMethod::amd:
       r.perm = amd_ordering(g);
       return r;
+    case OrderingMethod::automatic: {
+      // a tree split over several workers needs the separator tree
+      AmdCounts counts;
+      if (workers == 1) r.perm = amd_ordering(g, &counts);
+      if (workers == 1 && amd_is_good_enough(counts, g)) {
+        r.method = OrderingMethod::amd;
+        return r;
+      }
+      return nested_dissection(g, nd_options(opts, workers));
+    }
     case OrderingMethod::natural:
       r.perm.resize(n);
       std::iota(r.perm.begin(), r.perm.end(), index_t{0});

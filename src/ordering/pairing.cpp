@@ -292,17 +292,25 @@ OrderingResult compute_grouped_ordering(const Graph& g, const VertexGroups& grou
   if (opts.ordering == OrderingMethod::natural || opts.ordering == OrderingMethod::user)
     return compute_ordering(g, opts, workers);
   const Graph q = quotient_graph(g, groups);
-  if (opts.ordering == OrderingMethod::nested_dissection)
-    return nested_dissection(q, nd_options(opts, workers), groups);
+  OrderingResult r;
+  r.method = opts.ordering;
   std::vector<index_t> qperm;
+  if (opts.ordering == OrderingMethod::automatic && workers == 1) {
+    // CHOLMOD's rule (amd_is_good_enough) on the graph of the groups
+    AmdCounts counts;
+    qperm = amd_ordering(q, &counts);
+    r.method =
+        amd_is_good_enough(counts, q) ? OrderingMethod::amd : OrderingMethod::nested_dissection;
+  }
+  if (r.method == OrderingMethod::nested_dissection || r.method == OrderingMethod::automatic)
+    return nested_dissection(q, nd_options(opts, workers), groups);
   if (opts.ordering == OrderingMethod::metis) {
     std::vector<index_t> w(q.n);
     for (index_t v = 0; v < q.n; ++v) w[v] = groups.size(v);
     qperm = metis_ordering(q, w);
-  } else {
+  } else if (qperm.empty()) {
     qperm = amd_ordering(q);
   }
-  OrderingResult r;
   r.perm.reserve(g.n);
   for (const index_t v : qperm)
     for (index_t p = groups.ptr[v]; p < groups.ptr[v + 1]; ++p) r.perm.push_back(groups.members[p]);

@@ -55,7 +55,8 @@ Graph quotient_graph(const Graph& g, const VertexGroups& groups);
 /// The ordering requested by `opts`, computed on the quotient graph of `g` by `groups`
 /// and expanded so that the members of every group are consecutive, in the group's order.
 /// Group sizes are vertex weights where the method supports them (nested dissection,
-/// METIS); AMD orders the quotient graph unweighted. OrderingMethod::natural and ::user
+/// METIS); AMD orders the quotient graph unweighted, and OrderingMethod::automatic applies
+/// its rule to AMD's counts on the quotient graph. OrderingMethod::natural and ::user
 /// ignore the groups (they return exactly what compute_ordering returns).
 OrderingResult compute_grouped_ordering(const Graph& g, const VertexGroups& groups,
                                         const Options& opts, int workers = 1);

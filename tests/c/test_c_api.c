@@ -335,12 +335,13 @@ static void test_options(const double* spd, const double* kkt, int n_spd, int n_
   CHECK_STATUS(strata_create(&s), STRATA_OK, s);
   /* every ordering, explicit types, small blocks, no refinement */
   const strata_ordering orderings[] = {STRATA_ORDERING_ND, STRATA_ORDERING_METIS,
-                                       STRATA_ORDERING_AMD, STRATA_ORDERING_NATURAL};
+                                       STRATA_ORDERING_AMD, STRATA_ORDERING_NATURAL,
+                                       STRATA_ORDERING_AUTO};
   sparse sp = to_sparse(spd, n_spd, STRATA_CSC, STRATA_STORAGE_LOWER, STRATA_INT64, 0);
   double* b = malloc((size_t)n_kkt * sizeof(double));
   double* x = malloc((size_t)n_kkt * sizeof(double));
   for (int i = 0; i < n_kkt; ++i) b[i] = 1.0 + i;
-  for (int o = 0; o < 4; ++o) {
+  for (int o = 0; o < 5; ++o) {
     CHECK_STATUS(strata_set_ordering(s, orderings[o]), STRATA_OK, s);
     CHECK_STATUS(strata_set_type(s, STRATA_TYPE_SPD), STRATA_OK, s);
     CHECK_STATUS(strata_set_max_block_size(s, 4), STRATA_OK, s);

@@ -97,7 +97,7 @@ check "negative step" 2 "--step: must be a number greater than 0" "$strata" simu
 check "unknown option" 2 "strata: error:" "$strata" solve "$tmp/good.mtx" --bogus
 # the names of the solver's options: the vocabulary shared with the C API, Python and
 # the engine (strata::parse), aliases included
-check "unknown ordering" 2 "ordering must be 'nd', 'metis', 'amd' or 'natural' (aliases: nested_dissection = nd), got 'rcm'" "$strata" solve "$tmp/good.mtx" --ordering rcm
+check "unknown ordering" 2 "ordering must be 'nd', 'metis', 'amd', 'natural' or 'auto' (aliases: nested_dissection = nd, automatic = auto), got 'rcm'" "$strata" solve "$tmp/good.mtx" --ordering rcm
 check "unknown type" 2 "type must be 'auto', 'spd', 'symmetric_indefinite' or 'general'" "$strata" solve "$tmp/good.mtx" --type cholesky
 check "unknown pivoting" 2 "pivoting must be 'fixed', 'automatic' or 'delayed'" "$strata" simulate --pivoting partial
 # any solver option of a simulation by its name (set_option's vocabulary)

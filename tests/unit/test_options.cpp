@@ -71,8 +71,8 @@ TEST(OptionNames, UnknownNamesAreRefusedWithTheChoices) {
     FAIL() << "rcm was accepted";
   } catch (const InvalidInput& e) {
     EXPECT_STREQ(e.what(),
-                 "ordering must be 'nd', 'metis', 'amd' or 'natural' (aliases: "
-                 "nested_dissection = nd), got 'rcm'");
+                 "ordering must be 'nd', 'metis', 'amd', 'natural' or 'auto' (aliases: "
+                 "nested_dissection = nd, automatic = auto), got 'rcm'");
   }
   EXPECT_EQ(o, OrderingMethod::amd);  // unchanged
   MatrixType t = MatrixType::spd;

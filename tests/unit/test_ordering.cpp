@@ -23,6 +23,7 @@
 #include <string>
 #include <vector>
 
+#include "analysis/analysis.hpp"
 #include "ordering/graph.hpp"
 #include "ordering/ordering.hpp"
 #include "sparse/generators.hpp"
@@ -422,6 +423,94 @@ TEST(Orderings, IsolatedVerticesAndDisconnected) {
 
 // ---------------------------------------------------------------------------------------
 // permutation semantics: new to old
+
+// Column counts (off the diagonal) of the Cholesky factor of g's matrix ordered by perm,
+// as fill_nnz walks them.
+std::vector<index_t> column_counts(const Graph& g, const std::vector<index_t>& perm) {
+  const index_t n = g.n;
+  const std::vector<index_t> inv = invert_permutation(perm);
+  std::vector<index_t> parent(n, -1), ancestor(n, -1), flag(n, -1), count(n, 0);
+  for (index_t k = 0; k < n; ++k)
+    for (index_t p = g.xadj[perm[k]]; p < g.xadj[perm[k] + 1]; ++p)
+      for (index_t i = inv[g.adjncy[p]]; i != -1 && i < k;) {
+        const index_t next = ancestor[i];
+        ancestor[i] = k;
+        if (next == -1) parent[i] = k;
+        i = next;
+      }
+  for (index_t k = 0; k < n; ++k) {
+    flag[k] = k;
+    for (index_t p = g.xadj[perm[k]]; p < g.xadj[perm[k] + 1]; ++p)
+      for (index_t i = inv[g.adjncy[p]]; i < k && flag[i] != k; i = parent[i]) {
+        flag[i] = k;
+        ++count[i];
+      }
+  }
+  return count;
+}
+
+// OrderingMethod::automatic: AMD's own counts are those of its ordering (nnz(L), and the
+// LDLᵀ flops Σ c(c + 2) over the columns' off-diagonal counts c); AMD is kept exactly when
+// CHOLMOD's rule holds for them (a 2D grid, a random sparse graph, a path), nested
+// dissection is taken otherwise (a 3D grid) and whenever several workers split the tree;
+// the analysis reports the method used.
+TEST(Orderings, AutomaticKeepsAmdWhenItsFactorIsCheap) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed) + " (STRATA_TEST_SEED replays it)");
+  struct Case {
+    std::string name;
+    Graph g;
+  };
+  std::vector<Case> cases;
+  cases.push_back({"path 733", path_graph(733)});
+  cases.push_back({"2D 40x30", graph_of(generators::laplacian_2d(40, 30))});
+  cases.push_back({"random 733", random_graph(733, 3, rng)});
+  cases.push_back({"3D 24^3", graph_of(generators::laplacian_3d(24, 24, 24))});
+  int kept = 0, dissected = 0;
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    AmdCounts counts;
+    const std::vector<index_t> amd = amd_ordering(c.g, &counts);
+    EXPECT_EQ(amd, amd_ordering(c.g));
+    const std::vector<index_t> cc = column_counts(c.g, amd);
+    double lnz = static_cast<double>(c.g.n), flops = 0;
+    for (const index_t x : cc) {
+      lnz += static_cast<double>(x);
+      flops += static_cast<double>(x) * static_cast<double>(x + 2);
+    }
+    EXPECT_EQ(counts.nnz_l, lnz);
+    EXPECT_EQ(counts.nnz_l, static_cast<double>(fill_nnz(c.g, amd)));
+    EXPECT_EQ(counts.flops, flops);
+    const double tril =
+        static_cast<double>(c.g.n) + 0.5 * static_cast<double>(c.g.n_edges_directed());
+    const bool cheap = flops < 500 * lnz || lnz < 5 * tril;
+    EXPECT_EQ(amd_is_good_enough(counts, c.g), cheap);
+    const OrderingResult r = compute_ordering(c.g, with_method(OrderingMethod::automatic));
+    if (cheap) {
+      ++kept;
+      EXPECT_EQ(r.method, OrderingMethod::amd);
+      EXPECT_EQ(r.perm, amd);
+      EXPECT_TRUE(r.tree.empty());
+    } else {
+      ++dissected;
+      EXPECT_EQ(r.method, OrderingMethod::nested_dissection);
+      EXPECT_EQ(r.perm, compute_ordering(c.g, with_method(OrderingMethod::nested_dissection)).perm);
+      check_tree(c.g, r);
+    }
+    const OrderingResult split = compute_ordering(c.g, with_method(OrderingMethod::automatic), 2);
+    EXPECT_EQ(split.method, OrderingMethod::nested_dissection);
+    check_tree(c.g, split);
+  }
+  EXPECT_EQ(kept, 3) << "the path, the 2D grid and the random graph have cheap AMD factors";
+  EXPECT_EQ(dissected, 1) << "the 3D grid's AMD factor is not cheap";
+  // the analysis says which method it used
+  Options o = with_method(OrderingMethod::automatic);
+  EXPECT_EQ(analyze_matrix(generators::laplacian_2d(40, 30), o, 1).stats.ordering,
+            OrderingMethod::amd);
+  EXPECT_EQ(analyze_matrix(generators::laplacian_3d(24, 24, 24), o, 1).stats.ordering,
+            OrderingMethod::nested_dissection);
+}
 
 TEST(Orderings, PermutationIsNewToOld) {
   // On a star, every fill-reducing ordering eliminates the centre last: perm.back() is
