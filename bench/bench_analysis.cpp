@@ -188,6 +188,7 @@ int main(int argc, char** argv) {
                   {"symbolic_seconds", st.symbolic_seconds},
                   {"plan_seconds", st.plan_seconds},
                   {"fronts", st.n_fronts},
+                  {"ordering", to_string(st.ordering)},
                   {"tree_height", st.tree_height}}}};
 #ifdef STRATA_BENCH_HAVE_UMFPACK
     if (umfpack) {
