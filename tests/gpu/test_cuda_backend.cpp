@@ -1118,12 +1118,7 @@ TEST_F(CudaBackend, LdltRefactorizationIsDeterministic) {
 // solution equal the CPU backend's (the same host code after the same fixed-order check).
 TEST_F(CudaBackend, DelayedPivotingEqualsCpu) {
   auto rng = test::fresh_rng();
-  std::uniform_real_distribution<double> u(-1, 1);
-  const SparseMatrix pattern = test::random_pattern_with_diagonal(733, 3, rng);
-  const SparseMatrix a1 = test::with_values(pattern, 20.0, rng);
-  const SparseMatrix a2 = test::with_values(pattern, 0.0, rng);
-  std::vector<double> b(733);
-  for (double& v : b) v = u(rng);
+  const test::StaleAnalysis m = test::stale_analysis(733, rng);
   std::vector<double> x[2];
   FactorStats f[2];
   for (int gpu = 0; gpu < 2; ++gpu) {
@@ -1135,10 +1130,10 @@ TEST_F(CudaBackend, DelayedPivotingEqualsCpu) {
     o.relax_small = 0;  // fundamental supernodes: one-pivot leaf fronts
     o.relax_zeros_1 = o.relax_zeros_2 = o.relax_zeros_3 = 0;
     Solver s(o);
-    s.factorize(a1);
-    s.refactorize(a2);
+    s.factorize(m.analyzed);
+    s.refactorize(m.stale);
     f[gpu] = s.stats().factor;
-    x[gpu] = s.solve(b);
+    x[gpu] = s.solve(m.b);
     EXPECT_LE(s.stats().solve.backward_error, 1e-14);
   }
   EXPECT_EQ(f[1].backend, Backend::cuda);

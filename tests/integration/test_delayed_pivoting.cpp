@@ -27,32 +27,6 @@ extern "C" void dgecon_(const char* norm, const int* n, const double* a, const i
 namespace strata {
 namespace {
 
-// Whether the nonzero entries of a (explicit zeros left out) hold a perfect matching of rows
-// to columns (augmenting paths, Kuhn's algorithm): an independent check of structural
-// singularity for small random draws.
-bool structurally_nonsingular(const SparseMatrix& a) {
-  const index_t n = a.n_cols;
-  std::vector<index_t> row_match(n, -1);
-  std::vector<char> seen;
-  std::function<bool(index_t)> augment = [&](index_t j) {
-    for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p) {
-      const index_t i = a.indices[p];
-      if (a.values[p] == 0.0 || seen[i]) continue;
-      seen[i] = 1;
-      if (row_match[i] < 0 || augment(row_match[i])) {
-        row_match[i] = j;
-        return true;
-      }
-    }
-    return false;
-  };
-  for (index_t j = 0; j < n; ++j) {
-    seen.assign(n, 0);
-    if (!augment(j)) return false;
-  }
-  return true;
-}
-
 // LU on the CPU with fundamental supernodes only (no amalgamation): leaf fronts of one
 // pivot, which a zero diagonal leaves without a pivot in the analysis's order.
 Options leaf_fronts() {
@@ -147,7 +121,7 @@ TEST(DelayedPivoting, StaleMatchingFactorsWithoutStaticPivots) {
     for (double& v : b) v = u(rng);
     ref = b;
     if (!test::dense_solve(test::to_dense(a2), n, ref, 1)) continue;  // singular draw
-    if (!structurally_nonsingular(a2)) continue;  // singular exactly, whatever LU rounds to
+    if (!test::structurally_nonsingular(a2)) continue;  // singular exactly, whatever LU rounds to
     s.refactorize(a2);
     const FactorStats& f = s.stats().factor;
     EXPECT_EQ(f.perturbed_pivots, 0);
@@ -327,7 +301,7 @@ TEST(DelayedPivoting, ExplicitZerosSolveLikeDenseLu) {
     b[n + (n - 1) / 2] = 1.0;  // sparse: one nonzero
     std::vector<double> ref = b;
     if (!test::dense_solve(test::to_dense(a2), n, ref, 2)) continue;  // singular draw
-    if (!structurally_nonsingular(a2)) continue;  // singular exactly, whatever LU rounds to
+    if (!test::structurally_nonsingular(a2)) continue;  // singular exactly, whatever LU rounds to
     Solver s(delayed_solves_only());
     s.analyze(a1);
     s.factorize(a2);
@@ -367,7 +341,7 @@ TEST(DelayedPivoting, SolveCheckAfterPerturbedPivotsOnly) {
     Solver s(unchecked), p(plain);
     // a structurally singular draw (the zero diagonal leaves no perfect matching): singular
     // exactly, though the dense LU above may see only rounding-sized pivots
-    if (!structurally_nonsingular(a)) {
+    if (!test::structurally_nonsingular(a)) {
       EXPECT_THROW(s.factorize(a), InvalidInput);
       continue;
     }

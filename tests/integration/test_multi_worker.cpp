@@ -786,12 +786,7 @@ TEST(NumericDrivers, SeveralWorkersDelayPivotsOnTheHost) {
   unsigned long long seed = 0;
   auto rng = test::fresh_rng(&seed);
   SCOPED_TRACE("seed " + std::to_string(seed) + " (STRATA_TEST_SEED replays it)");
-  std::uniform_real_distribution<double> u(-1, 1);
-  const SparseMatrix pattern = test::random_pattern_with_diagonal(733, 3, rng);
-  const SparseMatrix a1 = test::with_values(pattern, 20.0, rng);
-  const SparseMatrix a2 = test::with_values(pattern, 0.0, rng);
-  std::vector<double> b(733);
-  for (double& v : b) v = u(rng);
+  const test::StaleAnalysis m = test::stale_analysis(733, rng);
   Options o;
   o.type = MatrixType::general;
   o.pivoting = Pivoting::automatic;
@@ -804,11 +799,11 @@ TEST(NumericDrivers, SeveralWorkersDelayPivotsOnTheHost) {
     SCOPED_TRACE(w ? "two workers" : "one executor");
     Solver s(o);
     if (w) detail::SolverAccess::set_driver(s, numeric::make_multi_worker_driver(o, 2, 1, {}));
-    s.factorize(a1);
+    s.factorize(m.analyzed);
     EXPECT_EQ(s.stats().analysis.workers, w ? 2 : 1);
-    s.refactorize(a2);
+    s.refactorize(m.stale);
     f[w] = s.stats().factor;
-    x[w] = s.solve(b);
+    x[w] = s.solve(m.b);
     perm[w] = detail::SolverAccess::analysis(s)->perm;
     EXPECT_LE(s.stats().solve.backward_error, 1e-14);
     EXPECT_TRUE(f[w].delayed_pivoting);

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
+#include <functional>
 #include <numeric>
 #include <set>
 #include <thread>
@@ -81,6 +82,41 @@ SparseMatrix with_values(const SparseMatrix& pattern, double diag, std::mt19937_
     for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p)
       a.values[p] = a.indices[p] == j ? diag : u(rng);
   return a;
+}
+
+bool structurally_nonsingular(const SparseMatrix& a) {
+  const index_t n = a.n_cols;
+  std::vector<index_t> row_match(n, -1);
+  std::vector<char> seen;
+  std::function<bool(index_t)> augment = [&](index_t j) {
+    for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p) {
+      const index_t i = a.indices[p];
+      if (a.values[p] == 0.0 || seen[i]) continue;
+      seen[i] = 1;
+      if (row_match[i] < 0 || augment(row_match[i])) {
+        row_match[i] = j;
+        return true;
+      }
+    }
+    return false;
+  };
+  for (index_t j = 0; j < n; ++j) {
+    seen.assign(n, 0);
+    if (!augment(j)) return false;
+  }
+  return true;
+}
+
+StaleAnalysis stale_analysis(index_t n, std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (;;) {
+    const SparseMatrix pattern = random_pattern_with_diagonal(n, 3, rng);
+    StaleAnalysis s{with_values(pattern, 20.0, rng), with_values(pattern, 0.0, rng), {}};
+    s.b.resize(n);
+    for (double& v : s.b) v = u(rng);
+    std::vector<double> x = s.b;
+    if (structurally_nonsingular(s.stale) && dense_solve(to_dense(s.stale), n, x, 1)) return s;
+  }
 }
 
 SparseMatrix random_sparse(index_t n, index_t per_column, RandomKind kind, std::mt19937_64& rng) {

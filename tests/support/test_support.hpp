@@ -81,6 +81,22 @@ SparseMatrix random_pattern_with_diagonal(index_t n, index_t per_column, std::mt
 /// `pattern` with values: off-diagonal entries uniform in [−1, 1], the diagonal `diag`.
 SparseMatrix with_values(const SparseMatrix& pattern, double diag, std::mt19937_64& rng);
 
+/// Whether the nonzero entries of a (explicit zeros left out) hold a perfect matching of
+/// rows to columns (augmenting paths, Kuhn's algorithm): an independent check of structural
+/// singularity for small random draws.
+bool structurally_nonsingular(const SparseMatrix& a);
+
+/// A refactorization whose analysis is stale: on one random general pattern with its
+/// diagonal (n × n, about 3 off-diagonal entries per column), `analyzed` has a dominant
+/// diagonal (20), `stale` a zero one and fresh off-diagonal values, so every pivot of the
+/// order made for `analyzed` is zero for `stale`; `b` is uniform in [−1, 1]. Drawn again
+/// until `stale` is structurally nonsingular and dense LU (dgesv) solves it.
+struct StaleAnalysis {
+  SparseMatrix analyzed, stale;
+  std::vector<double> b;
+};
+StaleAnalysis stale_analysis(index_t n, std::mt19937_64& rng);
+
 /// Dense column-major n_rows×n_cols copy of A (symmetric storage expanded).
 std::vector<double> to_dense(const SparseMatrix& a);
 
