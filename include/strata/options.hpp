@@ -104,7 +104,8 @@ struct Options {
   // --- numeric factorization ---
   /// Where factorize/solve run (default: cpu).
   Backend backend = Backend::cpu;
-  /// Host threads for the CPU backend; 0 means all hardware threads (default 0). The CPU
+  /// Host threads for the CPU backend and for the analysis's linear passes (whose result
+  /// does not depend on it); 0 means all hardware threads (default 0). The CPU
   /// factorization's memory depends on it: with 4 threads or more independent subtrees run
   /// at once, each with a contribution-block stack of its own
   /// (AnalysisStats::cpu_factorization_bytes reports the bytes for this count).
