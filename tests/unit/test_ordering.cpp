@@ -450,8 +450,8 @@ std::vector<index_t> column_counts(const Graph& g, const std::vector<index_t>& p
 }
 
 // OrderingMethod::automatic: AMD's own counts are those of its ordering (nnz(L), and the
-// LDLᵀ flops Σ c(c + 2) over the columns' off-diagonal counts c); AMD is kept exactly when
-// CHOLMOD's rule holds for them (a 2D grid, a random sparse graph, a path), nested
+// LDLᵀ flops Σ c(c + 2) over the columns' off-diagonal counts c) within 1 %; AMD is kept
+// exactly when CHOLMOD's rule holds for them (a 2D grid, a random sparse graph, a path), nested
 // dissection is taken otherwise (a 3D grid) and whenever several workers split the tree;
 // the analysis reports the method used.
 TEST(Orderings, AutomaticKeepsAmdWhenItsFactorIsCheap) {
@@ -479,12 +479,16 @@ TEST(Orderings, AutomaticKeepsAmdWhenItsFactorIsCheap) {
       lnz += static_cast<double>(x);
       flops += static_cast<double>(x) * static_cast<double>(x + 2);
     }
-    EXPECT_EQ(counts.nnz_l, lnz);
-    EXPECT_EQ(counts.nnz_l, static_cast<double>(fill_nnz(c.g, amd)));
-    EXPECT_EQ(counts.flops, flops);
+    // AMD's counts are those of its elimination, exact or (after aggressive absorption,
+    // with its approximate degrees) slightly above
+    EXPECT_EQ(lnz, static_cast<double>(fill_nnz(c.g, amd)));
+    EXPECT_GE(counts.nnz_l, lnz);
+    EXPECT_LE(counts.nnz_l, 1.01 * lnz);
+    EXPECT_GE(counts.flops, flops);
+    EXPECT_LE(counts.flops, 1.01 * flops);
     const double tril =
         static_cast<double>(c.g.n) + 0.5 * static_cast<double>(c.g.n_edges_directed());
-    const bool cheap = flops < 500 * lnz || lnz < 5 * tril;
+    const bool cheap = counts.flops < 500 * counts.nnz_l || counts.nnz_l < 5 * tril;
     EXPECT_EQ(amd_is_good_enough(counts, c.g), cheap);
     const OrderingResult r = compute_ordering(c.g, with_method(OrderingMethod::automatic));
     if (cheap) {
