@@ -94,7 +94,8 @@ std::vector<index_t> amd_ordering(const Graph& g);
 
 /// What AMD's ordering implies for a Cholesky factor of the graph's matrix (amd_l_order's
 /// Info, no symbolic factorization): nnz(L) with the diagonal, and the flops of an LDLᵀ
-/// factorization (divisions + 2 × multiply-subtract pairs).
+/// factorization (divisions + 2 × multiply-subtract pairs) — exact, or slightly above
+/// where AMD's aggressive absorption kept approximate degrees.
 struct AmdCounts {
   double nnz_l = 0;
   double flops = 0;
