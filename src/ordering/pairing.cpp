@@ -302,6 +302,8 @@ OrderingResult compute_grouped_ordering(const Graph& g, const VertexGroups& grou
     r.method =
         amd_is_good_enough(counts, q) ? OrderingMethod::amd : OrderingMethod::nested_dissection;
   }
+  // nested dissection asked for, chosen by the rule, or automatic with several workers
+  // (their split needs the separator tree)
   if (r.method == OrderingMethod::nested_dissection || r.method == OrderingMethod::automatic)
     return nested_dissection(q, nd_options(opts, workers), groups);
   if (opts.ordering == OrderingMethod::metis) {
