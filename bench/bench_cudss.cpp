@@ -2,7 +2,8 @@
 // (issue 5's anchor; experiment 2 of the report, GPU part).
 //
 // For each problem: strata on the GPU (analysis, first factorization, median of --repeat
-// refactorizations, for LU also with Pivoting::fixed, solve with refinement); cuDSS with
+// refactorizations, for LU also with Pivoting::fixed and, when the refactorization delayed
+// pivots, in their order (Solver::analyze_in_pivot_order), solve with refinement); cuDSS with
 // its default reordering and with strata's permutation given as CUDSS_DATA_USER_PERM
 // (both directions of the permutation are tried and the one with the smaller LU_NNZ kept,
 // since the documentation does not say which one it expects), each: analysis,
@@ -20,8 +21,8 @@
 #include <cstdio>
 #include <stdexcept>
 
-#include "bench_common.hpp"
 #include "base/timer.hpp"
+#include "bench_common.hpp"
 #include "crash_report.hpp"
 #include "numeric/factor.hpp"
 #include "strata/strata.hpp"
@@ -241,6 +242,32 @@ int main(int argc, char** argv) {
     // strata's pivot order (new to old) and its inverse, for cuDSS's user permutation
     std::vector<int> perm(s.permutation().begin(), s.permutation().end()), iperm(perm.size());
     for (std::size_t k = 0; k < perm.size(); ++k) iperm[perm[k]] = static_cast<int>(k);
+    // LU whose refactorization delayed pivots: the analysis redone in the order they were
+    // taken (Solver::analyze_in_pivot_order), then the refactorizations of the same values
+    // in that fixed order on the device (after the solve above: the row's other figures
+    // are the default's)
+    json pivot_order;
+    if (refactor_stats.delayed_pivoting) {
+      t.reset();
+      s.analyze_in_pivot_order();
+      const double pa = t.seconds();
+      s.factorize(p.a);
+      std::vector<double> pt;
+      for (int k = 0; k < repeat; ++k) {
+        t.reset();
+        s.refactorize(p.a);
+        pt.push_back(t.seconds());
+      }
+      const FactorStats& ps = s.stats().factor;
+      const auto px = s.solve(b);
+      pivot_order = {{"analysis_seconds", pa},
+                     {"nnz_l", s.stats().analysis.nnz_l},
+                     {"refactor_seconds", bench::median(pt)},
+                     {"delayed_pivoting", ps.delayed_pivoting},
+                     {"perturbed_pivots", ps.perturbed_pivots},
+                     {"backward_error", bench::berr(p.a, px, b)},
+                     {"last_refactor", bench::device_figures(ps)}};
+    }
     const CudssResult def = run_cudss(p.a, p.symmetric, nullptr, repeat);
     CudssResult up = run_cudss(p.a, p.symmetric, &perm, repeat);
     CudssResult ui = run_cudss(p.a, p.symmetric, &iperm, repeat);
@@ -264,13 +291,17 @@ int main(int argc, char** argv) {
                   {"first_factor", bench::device_figures(first_stats)},
                   {"last_refactor", bench::device_figures(refactor_stats)},
                   {"delayed_pivoting", refactor_stats.delayed_pivoting},
-                  {"fixed_order", fixed_order}}},
+                  {"fixed_order", fixed_order},
+                  {"pivot_order", pivot_order}}},
                 {"cudss_default", to_json(def)},
                 {"cudss_strata_perm", to_json(same)},
                 {"cudss_user_perm_direction", use_inverse ? "old-to-new" : "new-to-old"}};
     const double best = std::min(def.ok ? def.refactor : 1e300, same.ok ? same.refactor : 1e300);
     if (best < 1e300) row["ratio_strata_refactor_over_best_cudss_refactor"] = rf_s / best;
     if (def.ok) row["ratio_strata_factor_over_cudss_default_factor"] = f_s / def.factor;
+    if (best < 1e300 && !pivot_order.is_null())
+      row["ratio_strata_pivot_order_refactor_over_best_cudss_refactor"] =
+          pivot_order["refactor_seconds"].get<double>() / best;
     fmt::print(
         "{:<14} {:>8} {:>11} {:>9.4f} {:>9.4f} {:>9.4f} {:>9.4f} {:>9.4f} {:>8.2f} {:>8.2f}\n",
         p.name, p.a.n_rows, an.nnz_l, f_s, def.ok ? def.factor : -1.0, rf_s,
@@ -282,6 +313,15 @@ int main(int argc, char** argv) {
           "{} perturbed pivots\n",
           fixed_order["refactor_seconds"].get<double>(),
           fixed_order["perturbed_pivots"].get<long long>());
+    if (!pivot_order.is_null())
+      fmt::print(
+          "  strata in its delayed pivots' order (analyze_in_pivot_order {:.4f} s, nnz(L) {}): "
+          "refactorization {:.4f} s, delayed {}, {} perturbed pivots, backward error {:.1e}\n",
+          pivot_order["analysis_seconds"].get<double>(), pivot_order["nnz_l"].get<long long>(),
+          pivot_order["refactor_seconds"].get<double>(),
+          pivot_order["delayed_pivoting"].get<bool>() ? "yes" : "no",
+          pivot_order["perturbed_pivots"].get<long long>(),
+          pivot_order["backward_error"].get<double>());
     if (!def.ok) fmt::print("  cuDSS default failed: {}\n", def.error);
     if (!same.ok) fmt::print("  cuDSS with strata's permutation failed: {}\n", same.error);
     std::fflush(stdout);

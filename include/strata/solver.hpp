@@ -60,6 +60,24 @@ class Solver {
   /// an analyzed entry is missing (named; nothing changes then), OutOfMemory as analyze.
   void analyze_keeping_order(const SparseMatrix& a);
 
+  /// Analysis of the factorized pattern in the order in which the last factorization took
+  /// its pivots; that factorization must have delayed pivots (stats().factor.delayed_pivoting:
+  /// the analysis's order needed static pivots for its values, Options::pivoting). The
+  /// matching is changed so that those pivots lie on the diagonal of the scaled matrix B, in
+  /// that sequence (the scaling includes the factorization's rescaling); only the symbolic
+  /// phase is redone (assembly tree, level schedule, memory plan), at analyze_keeping_order's
+  /// cost. A fixed-order factorization of the same values then takes the same pivots
+  /// (LU without interchanges in a given order is unique), so it needs neither static nor
+  /// delayed pivots, and values close to them usually do not either: a matrix refactorized
+  /// many times with the same or slowly changing values then stays in the fixed order (on
+  /// the GPU too) instead of delaying pivots on the host at every factorization. Values that
+  /// change more (a multibody Newton loop across steps) soon need delayed pivots again.
+  /// The factor may have more entries than the fresh analysis's (delayed pivots move up
+  /// the tree: stats().analysis.nnz_l says). The factor is discarded: follow it with factorize or
+  /// refactorize. Throws InvalidState when the last factorization delayed no pivot (or there
+  /// is none), OutOfMemory as analyze (the solver then keeps its analysis and factor).
+  void analyze_in_pivot_order();
+
   /// Numeric factorization of A, whose pattern must be the analyzed one (analyzes first
   /// if analyze was not called). Throws NotPositiveDefinite for a failed Cholesky of a
   /// matrix declared spd, InvalidInput for a NaN/Inf value, a changed pattern or values
@@ -75,11 +93,12 @@ class Solver {
 
   /// Solves A X = B for nrhs right-hand sides. b and x are column-major n×nrhs arrays
   /// (leading dimension n); they may not alias. The solution is checked and refined as
-  /// Options::solve_check and Options::refinement_* say (solve/refinement.hpp). Throws InvalidState before factorize, InvalidInput for a
-  /// non-finite b, OutOfMemory (the factor is kept), or when the solution overflows the double
-  /// range ("no representable solution"; x is then unspecified). A singular matrix factorized with
-  /// perturbed pivots gives a finite x whose stats().solve.backward_error says whether it solves
-  /// the system (+inf when the residual overflows).
+  /// Options::solve_check and Options::refinement_* say (solve/refinement.hpp). Throws InvalidState
+  /// before factorize, InvalidInput for a non-finite b, OutOfMemory (the factor is kept), or when
+  /// the solution overflows the double range ("no representable solution"; x is then unspecified).
+  /// A singular matrix factorized with perturbed pivots gives a finite x whose
+  /// stats().solve.backward_error says whether it solves the system (+inf when the residual
+  /// overflows).
   void solve(const double* b, double* x, index_t nrhs = 1);
 
   /// Convenience overload: one or several right-hand sides stored column-major in b

@@ -61,6 +61,11 @@ struct AnalysisStats {
   /// analysis before were kept for a pattern that contains its own (ordering_seconds is
   /// then the time to form the permuted pattern).
   bool order_kept = false;
+  /// Solver::analyze_in_pivot_order: the matching and order are those in which the last
+  /// factorization with delayed pivots took its pivots (the pattern and the ordering
+  /// method reported are the analysis's before; ordering_seconds is the time to form the
+  /// new order).
+  bool order_from_pivots = false;
   /// Several workers (GPUs): the split of the tree (docs/multigpu.md). workers is 1 and
   /// the rest 0 when the analysis was made for one.
   index_t workers = 1;

@@ -487,6 +487,84 @@ static Analysis analyze_with_order_impl(const SparseMatrix& a, const Analysis& p
   return an;
 }
 
+// A factorization with delayed pivots found a pivot sequence for the values it saw; this
+// analysis makes that sequence the fixed order. With q the matching and π = perm, the
+// factor was L·U = B(π∘σr, π∘σc): the k-th pivot is entry (π[σr[k]], π[σc[k]]) of B,
+// i.e. row π[σr[k]] and column q[π[σc[k]]] of A. The new matching q' maps B' column
+// π[σr[k]] to that A column, q'[π[σr[k]]] = q[π[σc[k]]], so that B'(π', π') with
+// π'[k] = π[σr[k]] is B(π∘σr, π∘σc): the pivots are on B''s diagonal, in sequence.
+static Analysis analyze_with_pivot_sequence_impl(const Analysis& previous,
+                                                 const std::vector<index_t>& row_sequence,
+                                                 const std::vector<index_t>& col_sequence,
+                                                 const std::vector<double>& row_rescaling,
+                                                 const std::vector<double>& col_rescaling,
+                                                 const Options& opts, int workers) {
+  Timer total;
+  if (workers < 1)
+    throw InvalidInput("analyze_with_pivot_sequence: workers must be at least 1 (got " +
+                       std::to_string(workers) + ")");
+  const index_t n = previous.n;
+  if (previous.symmetric || previous.type != MatrixType::general)
+    throw InternalError("analyze_with_pivot_sequence: the analysis is not of a general matrix");
+  auto check_permutation = [n](const std::vector<index_t>& p, const char* what) {
+    if (static_cast<index_t>(p.size()) != n)
+      throw InternalError(std::string("analyze_with_pivot_sequence: the ") + what +
+                          " sequence has " + std::to_string(p.size()) + " entries, not " +
+                          std::to_string(n));
+    std::vector<char> seen(n, 0);
+    for (index_t v : p) {
+      if (v < 0 || v >= n || seen[v])
+        throw InternalError(std::string("analyze_with_pivot_sequence: the ") + what +
+                            " sequence is not a permutation (" + std::to_string(v) + ")");
+      seen[v] = 1;
+    }
+  };
+  check_permutation(row_sequence, "row");
+  check_permutation(col_sequence, "column");
+  const bool scaled = !previous.row_scaling.empty();
+  if ((!row_rescaling.empty() || !col_rescaling.empty()) &&
+      (!scaled || static_cast<index_t>(row_rescaling.size()) != n ||
+       static_cast<index_t>(col_rescaling.size()) != n))
+    throw InternalError("analyze_with_pivot_sequence: rescaling of the wrong size or unscaled");
+
+  Analysis an;
+  an.id = next_analysis_id();
+  an.n = n;
+  an.input_storage = previous.input_storage;
+  an.type = previous.type;
+  an.symmetric = false;
+  an.pattern_offsets = previous.pattern_offsets;
+  an.pattern_indices = previous.pattern_indices;
+  an.row_scaling = previous.row_scaling;
+  an.col_scaling = previous.col_scaling;
+  for (std::size_t i = 0; i < row_rescaling.size(); ++i) an.row_scaling[i] *= row_rescaling[i];
+  for (std::size_t j = 0; j < col_rescaling.size(); ++j) an.col_scaling[j] *= col_rescaling[j];
+  Timer step;
+  const std::vector<index_t>& pi = previous.perm;
+  const std::vector<index_t>& q = previous.matching_perm;
+  an.matching_perm.resize(n);
+  ordering::OrderingResult ord;
+  ord.perm.resize(n);
+  ord.method = previous.stats.ordering;
+  for (index_t k = 0; k < n; ++k) {
+    const index_t row = pi[row_sequence[k]], col = pi[col_sequence[k]];
+    an.matching_perm[row] = q.empty() ? col : q[col];
+    ord.perm[k] = row;
+  }
+  SparseMatrix c;
+  c.n_rows = c.n_cols = n;
+  c.storage = Storage::full;
+  c.offsets = an.pattern_offsets;
+  c.indices = an.pattern_indices;
+  const SparseMatrix pattern = detail::symmetric_pattern(c, false, an.matching_perm);
+  an.stats.ordering_seconds = step.seconds();
+  finish_analysis(an, c, pattern, std::move(ord), opts, workers);
+  an.stats.ordering = previous.stats.ordering;
+  an.stats.order_from_pivots = true;
+  an.stats.total_seconds = total.seconds();
+  return an;
+}
+
 // The analysis's parallel passes (analysis/patterns.cpp) run on Options::num_threads
 // threads, as the factorization does.
 Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers) {
@@ -498,6 +576,19 @@ Analysis analyze_with_order(const SparseMatrix& a, const Analysis& previous, con
                             int workers) {
   tbb::task_arena arena(cpu_threads(opts));
   return arena.execute([&] { return analyze_with_order_impl(a, previous, opts, workers); });
+}
+
+Analysis analyze_with_pivot_sequence(const Analysis& previous,
+                                     const std::vector<index_t>& row_sequence,
+                                     const std::vector<index_t>& col_sequence,
+                                     const std::vector<double>& row_rescaling,
+                                     const std::vector<double>& col_rescaling, const Options& opts,
+                                     int workers) {
+  tbb::task_arena arena(cpu_threads(opts));
+  return arena.execute([&] {
+    return analyze_with_pivot_sequence_impl(previous, row_sequence, col_sequence, row_rescaling,
+                                            col_rescaling, opts, workers);
+  });
 }
 
 }  // namespace strata

@@ -112,6 +112,27 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers 
 Analysis analyze_with_order(const SparseMatrix& a, const Analysis& previous, const Options& opts,
                             int workers = 1);
 
+/// The analysis of previous's pattern (a general matrix) in the pivot sequence that a
+/// factorization with delayed pivots took (numeric/delayed.hpp): row_sequence[k] and
+/// col_sequence[k] are the row and the column (previous's tree numbering: index t stands
+/// for row / column perm[t] of previous's B) of the k-th pivot, so that that factor is
+/// L·U = B(perm∘row_sequence, perm∘col_sequence). The new analysis's column matching
+/// puts those pivots on B's diagonal and its order takes them in that sequence, up to a
+/// postordering of the new elimination tree; its scaling is previous's times
+/// (row_rescaling, col_rescaling) (that factorization's extra equilibration, original
+/// numbering; empty: none). A fixed-order factorization of the same values then takes the
+/// same pivots (LU without interchanges in a given order is unique), all of which passed
+/// the delayed pivoting's threshold test; nearby values usually keep them. Only steps 4–7
+/// of analysis.cpp are run (as analyze_with_order). Throws InternalError when a sequence is
+/// not a permutation of 0..n−1 or previous is not of a general matrix, InvalidInput for
+/// workers < 1.
+Analysis analyze_with_pivot_sequence(const Analysis& previous,
+                                     const std::vector<index_t>& row_sequence,
+                                     const std::vector<index_t>& col_sequence,
+                                     const std::vector<double>& row_rescaling,
+                                     const std::vector<double>& col_rescaling, const Options& opts,
+                                     int workers = 1);
+
 /// The number of workers the numeric factorization will use under `opts`: the GPUs
 /// (Options::num_gpus, 0 meaning all visible) when the CUDA backend is chosen (or chosen
 /// by Backend::automatic), else 1. Throws InvalidInput when num_gpus is negative or asks

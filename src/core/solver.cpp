@@ -529,6 +529,26 @@ void Solver::analyze_keeping_order(const SparseMatrix& a) {
   });
 }
 
+void Solver::analyze_in_pivot_order() {
+  SolverState& s = *state_;
+  if (!s.analysis || !s.delayed.valid)
+    throw InvalidState(
+        "analyze_in_pivot_order: the last factorization delayed no pivot "
+        "(stats().factor.delayed_pivoting is false), so its order is the analysis's");
+  phase("analyze", [&] {
+    std::vector<index_t> rows, cols;
+    numeric::delayed_pivot_sequence(*s.analysis, s.delayed, rows, cols);
+    const int workers = static_cast<int>(std::max<index_t>(1, s.analysis->stats.workers));
+    // computed before anything is released: an allocation failure leaves the solver as it was
+    Analysis next = analyze_with_pivot_sequence(*s.analysis, rows, cols, s.rescaling.row,
+                                                s.rescaling.col, s.options, workers);
+    const SparseMatrix values = s.values;  // the factorized values, in the analyzed pattern
+    clear_numeric(s);
+    s.rescaling = Rescaling{};
+    adopt_analysis(s, std::move(next), values);
+  });
+}
+
 void Solver::factorize(const SparseMatrix& a) {
   if (!state_->analysis) analyze(a);
   factor_phase(*state_, a);

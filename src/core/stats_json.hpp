@@ -108,6 +108,7 @@ inline void to_json(nlohmann::json& j, const AnalysisStats& s) {
        {"odd_cycles", s.odd_cycles},
        {"ordering", to_string(s.ordering)},
        {"order_kept", s.order_kept},
+       {"order_from_pivots", s.order_from_pivots},
        {"workers", s.workers},
        {"subtrees", s.subtrees},
        {"subtree_balance", s.subtree_balance},

@@ -470,18 +470,25 @@ void solve_delayed(const Analysis& an, const DelayedFactor& F, double* b, index_
   std::copy(x.begin(), x.end(), b);
 }
 
+void delayed_pivot_sequence(const Analysis& an, const DelayedFactor& F, std::vector<index_t>& rows,
+                            std::vector<index_t>& cols) {
+  rows.clear();
+  cols.clear();
+  rows.reserve(an.n);
+  cols.reserve(an.n);
+  for (const auto& fr : F.fronts)
+    for (index_t i = 0; i < fr.k; ++i) {
+      rows.push_back(fr.rows[i]);
+      cols.push_back(fr.cols[i]);
+    }
+}
+
 int delayed_determinant_sign(const Analysis& an, const DelayedFactor& F) {
   int sign = 1;
   for (const auto& fr : F.fronts) sign *= fr.stats.det_sign;
   if (sign == 0) return 0;
   std::vector<index_t> rseq, cseq;
-  rseq.reserve(an.n);
-  cseq.reserve(an.n);
-  for (const auto& fr : F.fronts)
-    for (index_t i = 0; i < fr.k; ++i) {
-      rseq.push_back(fr.rows[i]);
-      cseq.push_back(fr.cols[i]);
-    }
+  delayed_pivot_sequence(an, F, rseq, cseq);
   std::vector<char> seen;
   return sign * parity(rseq, seen) * parity(cseq, seen);
 }

@@ -114,6 +114,11 @@ void plan_delayed_solve(const Analysis& an, int threads, DelayedFactor& factor);
 void solve_delayed(const Analysis& an, const DelayedFactor& factor, double* b, index_t nrhs,
                    tbb::task_arena* arena = nullptr);
 
+/// The factor's row and column pivot sequences σr, σc (tree numbering; L·U = B(σr, σc)):
+/// each front's first k rows and columns, fronts in postorder.
+void delayed_pivot_sequence(const Analysis& an, const DelayedFactor& factor,
+                            std::vector<index_t>& rows, std::vector<index_t>& cols);
+
 /// The sign of det(B) from the factor: the sign of Π u_ii times the parities of the row and
 /// column pivot sequences (0 when a pivot is zero); log|det B| is Σ front_stats' log_abs_det.
 int delayed_determinant_sign(const Analysis& an, const DelayedFactor& factor);
