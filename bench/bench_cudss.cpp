@@ -12,7 +12,8 @@
 // cuDSS gets the upper triangle (CSR view of strata's lower CSC) for SPD matrices and the
 // whole matrix for unsymmetric ones; 32-bit indices. Results: <dir>/cudss-*.json.
 //
-//   bench_cudss [--problems a,b,...] [--repeat R] [--tag NAME] [--results-dir DIR]
+//   bench_cudss [--problems a,b,...] [--repeat R] [--solver-option NAME=VALUE]... [--tag NAME]
+//               [--results-dir DIR]
 #include <cuda_runtime.h>
 #include <cudss.h>
 #include <fmt/core.h>
@@ -168,6 +169,10 @@ int main(int argc, char** argv) {
   app.add_option("--problems", problems, "problems")->delimiter(',');
   app.add_option("--repeat", repeat, "refactorizations per measurement (median)");
   app.add_option("--results-dir", results_dir, "where to write the JSON (default bench/results)");
+  std::vector<std::string> solver_options;
+  app.add_option("--solver-option", solver_options,
+                 "a strata option for every problem, NAME=VALUE (the names of strata::set_option, "
+                 "as strata simulate --solver-option); repeatable");
   app.add_option("--tag", tag,
                  "label stored in the results (\"tag\") and added to the file name; \"mbd\" "
                  "marks a run on the multibody Newton matrices (the report's own line)")
@@ -185,6 +190,7 @@ int main(int argc, char** argv) {
   cudssGetProperty(MINOR_VERSION, &ver[1]);
   cudssGetProperty(PATCH_LEVEL, &ver[2]);
   out["cudss_version"] = fmt::format("{}.{}.{}", ver[0], ver[1], ver[2]);
+  out["solver_options"] = solver_options;
   out["rows"] = json::array();
   fmt::print("cuDSS {}.{}.{}\n", ver[0], ver[1], ver[2]);
   fmt::print("{:<14} {:>8} {:>11} {:>9} {:>9} {:>9} {:>9} {:>9} {:>8} {:>8}\n", "problem", "n",
@@ -197,6 +203,15 @@ int main(int argc, char** argv) {
     o.type = p.symmetric ? MatrixType::spd : MatrixType::general;
     o.backend = Backend::cuda;
     o.num_gpus = 1;  // the single-GPU comparison, whatever the machine has
+    for (const std::string& so : solver_options) {
+      const std::size_t eq = so.find('=');
+      if (eq == std::string::npos) {
+        fmt::print(stderr, "bench_cudss: --solver-option takes NAME=VALUE, got '{}'\n", so);
+        return 2;
+      }
+      set_option(o, so.substr(0, eq), so.substr(eq + 1));
+    }
+    validate(o);
     Solver s(o);
     Timer t;
     s.analyze(p.a);
@@ -238,7 +253,9 @@ int main(int argc, char** argv) {
     auto x = s.solve(b);
     const double sol_s = t.seconds();
     const double berr = bench::berr(p.a, x, b);
-    const AnalysisStats& an = s.stats().analysis;
+    // copies: the pivot-order analysis below replaces the solver's statistics
+    const AnalysisStats an = s.stats().analysis;
+    const SolveStats solve_stats = s.stats().solve;
     // strata's pivot order (new to old) and its inverse, for cuDSS's user permutation
     std::vector<int> perm(s.permutation().begin(), s.permutation().end()), iperm(perm.size());
     for (std::size_t k = 0; k < perm.size(); ++k) iperm[perm[k]] = static_cast<int>(k);
@@ -284,9 +301,9 @@ int main(int argc, char** argv) {
                   {"factor_seconds", f_s},
                   {"refactor_seconds", rf_s},
                   {"solve_seconds", sol_s},
-                  {"solve_on_device", s.stats().solve.on_device},
-                  {"first_solve_seconds", s.stats().solve.first_solve_seconds},
-                  {"refinement_steps", s.stats().solve.refinement_steps},
+                  {"solve_on_device", solve_stats.on_device},
+                  {"first_solve_seconds", solve_stats.first_solve_seconds},
+                  {"refinement_steps", solve_stats.refinement_steps},
                   {"backward_error", berr},
                   {"first_factor", bench::device_figures(first_stats)},
                   {"last_refactor", bench::device_figures(refactor_stats)},

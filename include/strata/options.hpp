@@ -120,13 +120,20 @@ struct Options {
   /// (docs/reliability.md, "Determinism".)
   bool reproducible = false;
 
-  /// CUDA backend, Cholesky: fronts over 256 rows with at most this many pivots get their
+  /// CUDA backend: fronts of at most this many rows are factored each by one thread block of
+  /// one launch per batch (all such fronts of the batch together; their elimination is
+  /// serial within the block); larger fronts by the batched panel kernels and library
+  /// calls below, which spread one front over many blocks. In [1, 256]; default 256.
+  index_t gpu_small_front_rows = 256;
+  /// CUDA backend, Cholesky: fronts over gpu_small_front_rows rows with at most this many
+  /// pivots get their
   /// pivot block and panel from strata's batched kernels (all such fronts of a batch
   /// together, 64 pivot columns per step); fronts with more pivots, from cuSOLVER POTRF and
   /// cuBLAS TRSM one front at a time. 0 sends every front to the library. Default 256; at
   /// least 0.
   index_t gpu_panel_kernel_max_pivots = 256;
-  /// CUDA backend, LU: fronts over 256 rows are eliminated without row interchanges by
+  /// CUDA backend, LU: fronts over gpu_small_front_rows rows are eliminated without row
+  /// interchanges by
   /// the blocked right-looking LU in strips of this many pivot columns, each strip's pivot
   /// block and panels from strata's batched kernels for all fronts of a batch together (64
   /// pivot columns per step, src/numeric/cuda/kernels_lu_panel.cu), the rest by cuBLAS

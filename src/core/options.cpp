@@ -202,6 +202,8 @@ void validate(const Options& o) {
   fraction("relax_zeros_3", o.relax_zeros_3, true, true);
   at_least<index_t>("max_block_size", o.max_block_size, 0);
   at_least("num_threads", o.num_threads, 0);
+  if (o.gpu_small_front_rows < 1 || o.gpu_small_front_rows > 256)
+    out_of_range("gpu_small_front_rows", "in [1, 256]", o.gpu_small_front_rows);
   at_least<index_t>("gpu_panel_kernel_max_pivots", o.gpu_panel_kernel_max_pivots, 0);
   at_least<index_t>("gpu_lu_strip_pivots", o.gpu_lu_strip_pivots, 0);
   fraction("gpu_tiled_pool_share", o.gpu_tiled_pool_share, true, false);
@@ -309,6 +311,7 @@ const std::vector<Field>& fields() {
       enum_field("backend", &O::backend),
       integer_field("num_threads", &O::num_threads),
       flag_field("reproducible", &O::reproducible),
+      integer_field("gpu_small_front_rows", &O::gpu_small_front_rows),
       integer_field("gpu_panel_kernel_max_pivots", &O::gpu_panel_kernel_max_pivots),
       integer_field("gpu_lu_strip_pivots", &O::gpu_lu_strip_pivots),
       number_field("gpu_tiled_pool_share", &O::gpu_tiled_pool_share),

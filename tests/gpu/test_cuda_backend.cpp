@@ -81,19 +81,24 @@ TEST_F(CudaBackend, CholeskyFactorMatchesCpu) {
     numeric::factorize(an, c.values, MatrixType::spd, 0.0, *cpu, cpu_f, arena);
     // every large front by one POTRF + TRSM; by column blocks of an awkward width and of
     // 256 (llt_blocked.cu); by recursion (llt_recursive.cu); every one with k ≤ 1024 by
-    // the panel kernels (kernels_panel.cu); the defaults
+    // the panel kernels (kernels_panel.cu); the defaults; the defaults with every front
+    // over 16 rows on those paths (gpu_small_front_rows)
     const Options defaults;
-    for (auto [kmax, block, recursive] :
-         {std::tuple<index_t, index_t, bool>{0, 0, false},
-          {0, 5, false},
-          {0, 256, false},
-          {0, 0, true},
-          {1024, 0, false},
+    for (auto [kmax, block, recursive, small_rows] :
+         {std::tuple<index_t, index_t, bool, index_t>{0, 0, false, defaults.gpu_small_front_rows},
+          {0, 5, false, defaults.gpu_small_front_rows},
+          {0, 256, false, defaults.gpu_small_front_rows},
+          {0, 0, true, defaults.gpu_small_front_rows},
+          {1024, 0, false, defaults.gpu_small_front_rows},
           {defaults.gpu_panel_kernel_max_pivots, defaults.gpu_potrf_block_size,
-           defaults.gpu_recursive_panel}}) {
+           defaults.gpu_recursive_panel, defaults.gpu_small_front_rows},
+          {defaults.gpu_panel_kernel_max_pivots, defaults.gpu_potrf_block_size,
+           defaults.gpu_recursive_panel, 16}}) {
       SCOPED_TRACE("gpu_panel_kernel_max_pivots=" + std::to_string(kmax) +
                    " gpu_potrf_block_size=" + std::to_string(block) +
-                   " gpu_recursive_panel=" + std::to_string(recursive));
+                   " gpu_recursive_panel=" + std::to_string(recursive) +
+                   " gpu_small_front_rows=" + std::to_string(small_rows));
+      o.gpu_small_front_rows = small_rows;
       o.gpu_panel_kernel_max_pivots = kmax;
       o.gpu_potrf_block_size = block;
       o.gpu_recursive_panel = recursive;
@@ -594,11 +599,17 @@ TEST_F(CudaBackend, LuFactorMatchesCpu) {
     for (index_t p = rows.a.offsets[j]; p < rows.a.offsets[j + 1]; ++p)
       rows.a.values[p] *= row_scale[rows.a.indices[p]];
   problems.push_back(std::move(rows));
+  // every front over 16 rows on the large fronts' paths too (gpu_small_front_rows)
   for (const Problem& pr : problems)
-    for (index_t lu_max : {Options{}.gpu_lu_strip_pivots, index_t{0}}) {
-      SCOPED_TRACE(pr.name + ", gpu_lu_strip_pivots " + std::to_string(lu_max));
+    for (auto [lu_max, small_rows] : {std::pair{Options{}.gpu_lu_strip_pivots, index_t{256}},
+                                      std::pair{index_t{0}, index_t{256}},
+                                      std::pair{Options{}.gpu_lu_strip_pivots, index_t{16}},
+                                      std::pair{index_t{0}, index_t{16}}}) {
+      SCOPED_TRACE(pr.name + ", gpu_lu_strip_pivots " + std::to_string(lu_max) +
+                   ", gpu_small_front_rows " + std::to_string(small_rows));
       Options o;
       o.gpu_lu_strip_pivots = lu_max;
+      o.gpu_small_front_rows = small_rows;
       CpuAndGpu r = factor_on_cpu_and_gpu(pr.a, MatrixType::general,
                                           pr.matching && pr.zero_columns == 0, 1e-8, o);
       const numeric::NumericFactor& cf = r.cpu;

@@ -122,6 +122,10 @@ TEST(OptionsValidate, DefaultsPassAndEveryFieldOutOfRangeIsNamed) {
        [](Options& o, double v) { o.gpu_tiled_pool_share = v; },
        {1, -0.5, nan},
        {0, 0.5}},
+      {"gpu_small_front_rows",
+       [](Options& o, double v) { o.gpu_small_front_rows = index_t(v); },
+       {0, -1, 257},
+       {1, 64, 256}},
       {"num_gpus", [](Options& o, double v) { o.num_gpus = int(v); }, {-1}, {0}},
       {"subtrees_per_gpu", [](Options& o, double v) { o.subtrees_per_gpu = int(v); }, {0}, {1}},
       {"distributed_front_block_size",
@@ -196,7 +200,7 @@ TEST(OptionsValidate, AnalysisRefusesBadOptions) {
 // written as text into a default Options and compared field by field.
 TEST(SetOption, EveryFieldRoundTripsThroughText) {
   const std::vector<std::string> names = option_fields();
-  EXPECT_EQ(names.size(), 39u);  // Options' fields but user_permutation
+  EXPECT_EQ(names.size(), 40u);  // Options' fields but user_permutation
   Options changed;
   for (const std::string& name : names) {
     const std::string before = get_option(changed, name);

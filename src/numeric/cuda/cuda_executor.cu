@@ -95,6 +95,7 @@ namespace strata::cuda {
 CudaExecutor::CudaExecutor(const Options& o, int device)
     : device_(device),
       limit_(o.device_memory_limit),
+      small_front_rows_(std::min<std::int64_t>(o.gpu_small_front_rows, kSmallFront)),
       panel_max_pivots_(o.gpu_panel_kernel_max_pivots),
       lu_strip_pivots_(o.gpu_lu_strip_pivots),
       split_min_cb_(o.split_front_min_cb),

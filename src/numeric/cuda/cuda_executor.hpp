@@ -33,8 +33,10 @@ namespace strata::cuda {
 struct EventPair;  // tiled_llt.cu
 struct TeamGpu;    // distributed_front.cu
 
-inline constexpr std::int64_t kSmallFront = 256;  // fronts up to this many rows: one block each
-inline constexpr std::int64_t kMinSlab = 16;      // narrowest slab worth a library call
+// the most rows of a front factored by one thread block (Options::gpu_small_front_rows at
+// most): the kernels' block size
+inline constexpr std::int64_t kSmallFront = 256;
+inline constexpr std::int64_t kMinSlab = 16;  // narrowest slab worth a library call
 // Streams for the large fronts of one chunk. The fronts of a level below the top few are
 // many and medium-sized (hundreds to a few thousand rows): one after another on one
 // stream, each library call leaves most of the GPU idle. Eight lanes fill it without
@@ -391,13 +393,14 @@ class CudaExecutor final : public numeric::Executor {
   cublasHandle_t blas_ = nullptr;
   cusolverDnHandle_t solver_ = nullptr;
   std::size_t limit_ = 0;
-  std::int64_t panel_max_pivots_ = 0;  ///< Options::gpu_panel_kernel_max_pivots
-  std::int64_t lu_strip_pivots_ = 0;   ///< Options::gpu_lu_strip_pivots
-  std::int64_t split_min_cb_ = 0;      ///< Options::split_front_min_cb
-  std::int64_t dist_min_rows_ = 0;     ///< Options::distributed_front_min_rows
-  std::int64_t dist_block_ = 512;      ///< Options::distributed_front_block_size
-  int potrf_block_ = 0;                ///< Options::gpu_potrf_block_size
-  bool recursive_panel_ = true;        ///< Options::gpu_recursive_panel
+  std::int64_t small_front_rows_ = kSmallFront;  ///< Options::gpu_small_front_rows
+  std::int64_t panel_max_pivots_ = 0;            ///< Options::gpu_panel_kernel_max_pivots
+  std::int64_t lu_strip_pivots_ = 0;             ///< Options::gpu_lu_strip_pivots
+  std::int64_t split_min_cb_ = 0;                ///< Options::split_front_min_cb
+  std::int64_t dist_min_rows_ = 0;               ///< Options::distributed_front_min_rows
+  std::int64_t dist_block_ = 512;                ///< Options::distributed_front_block_size
+  int potrf_block_ = 0;                          ///< Options::gpu_potrf_block_size
+  bool recursive_panel_ = true;                  ///< Options::gpu_recursive_panel
   std::uint64_t analysis_id_ = 0;
   DevicePlan plan_;
   // analysis arrays (fronts_: the whole tree's schedule, for the device solve)

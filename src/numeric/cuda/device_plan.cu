@@ -258,7 +258,7 @@ void CudaExecutor::presize_chunk_buffers(const Analysis& an,
         const index_t f = s.fronts[r];
         const int m = static_cast<int>(t.n_rows(f)), k = static_cast<int>(t.n_pivots(f));
         np += static_cast<std::size_t>(k);
-        if (m <= kSmallFront) {
+        if (m <= small_front_rows_) {
           ++ns;
           continue;
         }

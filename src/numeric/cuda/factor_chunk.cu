@@ -90,7 +90,7 @@ void CudaExecutor::chunk_small_fronts(const numeric::FactorContext& ctx, ChunkRe
   rec.perm_off.assign(1, 0);
   for (index_t p = rec.begin; p < rec.end; ++p) {
     const index_t f = s.fronts[p];
-    if (t.n_rows(f) <= kSmallFront) {
+    if (t.n_rows(f) <= small_front_rows_) {
       rec.small.push_back(p);
       rec.perm_off.push_back(rec.perm_off.back() + t.n_pivots(f));
     } else {
