@@ -230,7 +230,7 @@ class Report(GpuSections, Distributed, EndToEnd, IftommSection):
                                      f"over {sum(1 for _, x in pp if x is not None)} problems "
                                      f"on {machine_label(r.machine)} "
                                      f"([`{r.name}`]({self.rel(r.path)})).")
-            if r.kind == "cudss":
+            if r.kind == "cudss" and not r.get("solver_options"):
                 for what, k, name in (("refactor_seconds", "cudss_default",
                                        "refactorization time strata GPU/cuDSS (default "
                                        "reordering)"),
@@ -250,7 +250,7 @@ class Report(GpuSections, Distributed, EndToEnd, IftommSection):
                                      f"{sum(1 for _, x in pp if x is not None)} problems on "
                                      f"{machine_label(r.machine)} "
                                      f"([`{r.name}`]({self.rel(r.path)})).")
-            if r.kind == "cudss":
+            if r.kind == "cudss" and not r.get("solver_options"):
                 pp = [(row.get("problem"), ratio(dig(row, "strata_gpu", "first_solve_seconds"),
                                                  dig(row, "cudss_default", "solve_seconds")))
                       for row in r.rows]

@@ -307,13 +307,46 @@ class GpuSections:
     def cudss_section(self, runs: list[Run]) -> None:
         self.w("### GPU: strata vs NVIDIA cuDSS")
         self.w()
-        chosen = [r for r in runs if r.kind == "cudss"]
+        chosen = [r for r in runs if r.kind == "cudss" and not r.get("solver_options")]
         if not chosen:
             self.w(f"{NOT_MEASURED}: no `cudss` results (bench_cudss on a lent GPU machine: "
                    f"`scripts/gpu/run.sh --cudss-bench ...`).")
             self.w()
         for r in chosen:
             self.cudss_run(r)
+        self.cudss_option_runs([r for r in runs if r.kind == "cudss" and r.get("solver_options")])
+
+    def cudss_option_runs(self, runs: list[Run]) -> None:
+        """bench_cudss runs with strata options set (--solver-option): one line each."""
+        if not runs:
+            return
+        self.w("#### strata options tried against cuDSS")
+        self.w()
+        self.w("Runs of `bench_cudss --solver-option NAME=VALUE`: refactorization time strata / "
+               "the better of cuDSS's two orderings, per problem, one line per run.")
+        self.w()
+        problems = []
+        for r in runs:
+            for row in r.rows:
+                if row.get("problem") not in problems:
+                    problems.append(row.get("problem"))
+        self.w("| options | machine | " + " | ".join(str(p) for p in problems) + " | file |")
+        self.w("| --- | --- | " + " | ".join("---:" for _ in problems) + " | --- |")
+        for r in sorted(runs, key=lambda r: (" ".join(r.get("solver_options")), r.date)):
+            self.consumed.add(r.path)
+            cells = []
+            for p in problems:
+                row = next((x for x in r.rows if x.get("problem") == p), None)
+                best = None
+                for k in ("cudss_default", "cudss_strata_perm"):
+                    v = num(dig(row, k, "refactor_seconds")) if row else None
+                    if v is not None and (best is None or v < best):
+                        best = v
+                cells.append(f_ratio(ratio(num(dig(row, "strata_gpu", "refactor_seconds")),
+                                           best)) if row else "")
+            self.w(f"| `{' '.join(r.get('solver_options'))}` | {machine_label(r.machine)} | "
+                   + " | ".join(cells) + f" | [`{r.name}`]({self.rel(r.path)}) |")
+        self.w()
 
     def cudss_run(self, r: Run) -> None:
         self.consumed.add(r.path)
