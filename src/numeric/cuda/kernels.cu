@@ -4,7 +4,8 @@
 // fronts of a batch side by side in one launch: the batched-small-front case that vendor
 // batched POTRF handles poorly (DESIGN.md §2). It is blocked right-looking with one row
 // per thread (llt_front_blocked, lu_front_blocked: panels of 16 pivot columns in
-// registers, the trailing matrix updated once per panel); the unblocked one-pivot-at-a-
+// registers, the trailing matrix updated once per panel, for LU by all the block's threads
+// whatever the number of trailing rows); the unblocked one-pivot-at-a-
 // time forms (llt_front, lu_columns) remain for larger blocks (lu_columns also serves the
 // large LU fronts' static-pivoting path and the tiled slabs). Partial pivoting for LU searches
 // only the fully summed rows (restricted pivoting) and replaces tiny pivots by
@@ -463,14 +464,43 @@ __device__ void lu_front_blocked(double* F, std::int64_t m, std::int64_t k, doub
         }
     }
     __syncthreads();
-    // the rows below the panel: F(i, c) -= Σ_p L(i, j0 + p) U(j0 + p, c)
-    if (row && i >= j0 + w) {
-      for (std::int64_t cc = j0 + w; cc < m; ++cc) {
-        double acc = F[cc * m + i];
+    // the rows below the panel: F(i, c) −= Σ_p L(i, j0 + p) U(j0 + p, c), by the whole
+    // block rather than one thread per row: the nr trailing rows times ⌊blockDim.x / nr⌋
+    // groups of columns (thread t: row c0 + t mod nr, columns c0 + t div nr + groups·q),
+    // four columns' loads in flight at once; L(i, ·) read back from F (stored above), U
+    // from shared memory. Each entry still takes its w products in the order p = 0, 1, …,
+    // as one thread per row did, so the result is bitwise the same.
+    const std::int64_t c0 = j0 + w, nr = m - c0;
+    if (nr > 0) {
+      // nr < m ≤ blockDim.x, so at least one group
+      const std::int64_t groups = blockDim.x / nr > 0 ? blockDim.x / nr : 1;
+      const std::int64_t t = threadIdx.x;
+      if (t < groups * nr) {
+        const std::int64_t ri = c0 + t % nr;
+        double l[kSmallNb];
 #pragma unroll
-        for (int p = 0; p < kSmallNb; ++p)
-          if (p < w) acc -= r[p] * ush[p][cc];
-        F[cc * m + i] = acc;
+        for (int p = 0; p < kSmallNb; ++p) l[p] = p < w ? F[(j0 + p) * m + ri] : 0.0;
+        std::int64_t cc = c0 + t / nr;
+        for (; cc + 3 * groups < m; cc += 4 * groups) {
+          double a[4];
+#pragma unroll
+          for (int q = 0; q < 4; ++q) a[q] = F[(cc + q * groups) * m + ri];
+#pragma unroll
+          for (int q = 0; q < 4; ++q) {
+#pragma unroll
+            for (int p = 0; p < kSmallNb; ++p)
+              if (p < w) a[q] -= l[p] * ush[p][cc + q * groups];
+          }
+#pragma unroll
+          for (int q = 0; q < 4; ++q) F[(cc + q * groups) * m + ri] = a[q];
+        }
+        for (; cc < m; cc += groups) {
+          double acc = F[cc * m + ri];
+#pragma unroll
+          for (int p = 0; p < kSmallNb; ++p)
+            if (p < w) acc -= l[p] * ush[p][cc];
+          F[cc * m + ri] = acc;
+        }
       }
     }
     __syncthreads();  // the next panel reads what this one wrote, and reuses the buffers
