@@ -4,7 +4,7 @@
 // fronts of a batch side by side in one launch: the batched-small-front case that vendor
 // batched POTRF handles poorly (DESIGN.md §2). It is blocked right-looking with one row
 // per thread (llt_front_blocked, lu_front_blocked: panels of 16 pivot columns in
-// registers, the trailing matrix updated once per panel, for LU by all the block's threads
+// registers, the trailing matrix updated once per panel by all the block's threads
 // whatever the number of trailing rows); the unblocked one-pivot-at-a-
 // time forms (llt_front, lu_columns) remain for larger blocks (lu_columns also serves the
 // large LU fronts' static-pivoting path and the tiled slabs). Partial pivoting for LU searches
@@ -277,8 +277,9 @@ __device__ void llt_front(double* F, std::int64_t m, std::int64_t k, std::int64_
 // triangle), one row per thread: thread i keeps row i of the current panel of kSmallNb
 // pivot columns in registers, factors the panel there (each column's entries shared
 // through shared memory as they are finished), writes it back, and then updates the
-// trailing lower triangle by the rank-kSmallNb product of the panel with itself, reading
-// and writing each trailing entry once per panel. The unblocked kernel (llt_front) read and
+// trailing lower triangle by the rank-kSmallNb product of the panel with itself (all the
+// block's threads, whatever the number of trailing rows), reading and writing each
+// trailing entry once per panel. The unblocked kernel (llt_front) read and
 // wrote the whole trailing triangle in global memory once per pivot, with a 64-bit
 // division per entry: a small front of k pivots made k such passes. The arithmetic is
 // the unblocked one's in another order (same operations per entry, summed panel by panel).
@@ -324,14 +325,41 @@ __device__ void llt_front_blocked(double* F, std::int64_t m, std::int64_t k, std
 #pragma unroll
     for (int p = 0; p < kSmallNb; ++p)
       if (p < w && row && i >= j0 + p) F[(j0 + p) * m + i] = r[p];
-    // trailing lower triangle: F(i, c) -= Σ_p L(i, j0 + p) L(c, j0 + p), c ≥ j0 + w
-    if (row && i >= j0 + w) {
-      for (std::int64_t c = j0 + w; c <= i; ++c) {
-        double acc = F[c * m + i];
+    // trailing lower triangle: F(i, c) −= Σ_p L(i, j0 + p) L(c, j0 + p), j0 + w ≤ c ≤ i, by
+    // the whole block as in lu_front_blocked (the nr trailing rows times ⌊blockDim.x / nr⌋
+    // groups of columns, four columns' loads in flight); L(i, ·) from lsh, which holds
+    // every row's panel by now. The products of each entry in the same order as before.
+    const std::int64_t c0 = j0 + w, nr = m - c0;
+    if (nr > 0) {
+      // nr < m ≤ blockDim.x, so at least one group
+      const std::int64_t groups = blockDim.x / nr > 0 ? blockDim.x / nr : 1;
+      const std::int64_t t = threadIdx.x;
+      if (t < groups * nr) {
+        const std::int64_t ri = c0 + t % nr;
+        double l[kSmallNb];
 #pragma unroll
-        for (int p = 0; p < kSmallNb; ++p)
-          if (p < w) acc -= r[p] * lsh[p][c];
-        F[c * m + i] = acc;
+        for (int p = 0; p < kSmallNb; ++p) l[p] = p < w ? lsh[p][ri] : 0.0;
+        std::int64_t c = c0 + t / nr;
+        for (; c + 3 * groups <= ri; c += 4 * groups) {
+          double a[4];
+#pragma unroll
+          for (int q = 0; q < 4; ++q) a[q] = F[(c + q * groups) * m + ri];
+#pragma unroll
+          for (int q = 0; q < 4; ++q) {
+#pragma unroll
+            for (int p = 0; p < kSmallNb; ++p)
+              if (p < w) a[q] -= l[p] * lsh[p][c + q * groups];
+          }
+#pragma unroll
+          for (int q = 0; q < 4; ++q) F[(c + q * groups) * m + ri] = a[q];
+        }
+        for (; c <= ri; c += groups) {
+          double acc = F[c * m + ri];
+#pragma unroll
+          for (int p = 0; p < kSmallNb; ++p)
+            if (p < w) acc -= l[p] * lsh[p][c];
+          F[c * m + ri] = acc;
+        }
       }
     }
     __syncthreads();  // the next panel reads what this one wrote, and reuses lsh
