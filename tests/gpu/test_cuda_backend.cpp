@@ -1123,6 +1123,20 @@ TEST_F(CudaBackend, LdltRefactorizationIsDeterministic) {
   EXPECT_EQ(s1.solve(b), s2.solve(b));
 }
 
+// LU on the CPU (gpu false) or one GPU, whatever the machine has (the same analysis as the
+// CPU's), with fundamental supernodes: one-pivot leaf fronts, which a zero diagonal leaves
+// without a pivot in the analysis's order.
+Options leaf_fronts_lu(bool gpu) {
+  Options o;
+  o.type = MatrixType::general;
+  o.backend = gpu ? Backend::cuda : Backend::cpu;
+  o.num_gpus = 1;
+  o.pivoting = Pivoting::automatic;
+  o.relax_small = 0;
+  o.relax_zeros_1 = o.relax_zeros_2 = o.relax_zeros_3 = 0;
+  return o;
+}
+
 // Pivoting::automatic on the CUDA backend: values whose matching is stale (a dominant
 // diagonal at analysis, a zero one refactorized) need static pivots in the analysis's
 // order; delayed pivoting then runs on the host. The factor, the statistics and the
@@ -1133,14 +1147,7 @@ TEST_F(CudaBackend, DelayedPivotingEqualsCpu) {
   std::vector<double> x[2];
   FactorStats f[2];
   for (int gpu = 0; gpu < 2; ++gpu) {
-    Options o;
-    o.type = MatrixType::general;
-    o.backend = gpu ? Backend::cuda : Backend::cpu;
-    o.num_gpus = 1;  // one GPU, whatever the machine has: the same analysis as the CPU's
-    o.pivoting = Pivoting::automatic;
-    o.relax_small = 0;  // fundamental supernodes: one-pivot leaf fronts
-    o.relax_zeros_1 = o.relax_zeros_2 = o.relax_zeros_3 = 0;
-    Solver s(o);
+    Solver s(leaf_fronts_lu(gpu != 0));
     s.factorize(m.analyzed);
     s.refactorize(m.stale);
     f[gpu] = s.stats().factor;
@@ -1168,12 +1175,7 @@ TEST_F(CudaBackend, AnalysisInThePivotOrderRefactorsOnTheDevice) {
   std::vector<double> x[2];
   FactorStats f[2];
   for (int gpu = 0; gpu < 2; ++gpu) {
-    Options o;
-    o.type = MatrixType::general;
-    o.backend = gpu ? Backend::cuda : Backend::cpu;
-    o.num_gpus = 1;
-    o.relax_small = 0;  // fundamental supernodes: one-pivot leaf fronts
-    o.relax_zeros_1 = o.relax_zeros_2 = o.relax_zeros_3 = 0;
+    Options o = leaf_fronts_lu(gpu != 0);
     o.refinement_max_steps = 0;
     o.gmres_max_iterations = 0;
     Solver s(o);

@@ -284,6 +284,50 @@ __device__ void llt_front(double* F, std::int64_t m, std::int64_t k, std::int64_
 // division per entry: a small front of k pivots made k such passes. The arithmetic is
 // the unblocked one's in another order (same operations per entry, summed panel by panel).
 constexpr int kSmallNb = 16;
+
+// The trailing update of the blocked small-front kernels after a panel of w ≤ kSmallNb
+// pivot columns ending at c0: F(i, c) −= Σ_{p<w} L(i, p) · V(p, c) for the rows i ∈ [c0, m)
+// and the columns c ∈ [c0, m) (lower: c ≤ i only), V(p, c) = v[p][c] in shared memory and
+// L(i, p) = row_l(i, p). By the whole block rather than one thread per row: the nr = m − c0
+// trailing rows times ⌊blockDim.x / nr⌋ groups of columns (thread t: row c0 + t mod nr,
+// columns c0 + t div nr + groups·q), four columns' loads in flight at once. Each entry takes
+// its w products in the order p = 0, 1, …, as one thread per row did: the same result bit
+// for bit. Needs m ≤ blockDim.x.
+template <class RowL>
+__device__ __forceinline__ void trailing_update(double* F, std::int64_t m, std::int64_t c0, int w,
+                                                double (*v)[kThreads], bool lower, RowL row_l) {
+  const std::int64_t nr = m - c0;
+  if (nr <= 0) return;
+  const std::int64_t groups = blockDim.x / nr;  // ≥ 1: nr < m ≤ blockDim.x
+  const std::int64_t t = threadIdx.x;
+  if (t >= groups * nr) return;
+  const std::int64_t ri = c0 + t % nr;
+  const std::int64_t end = lower ? ri + 1 : m;  // columns [c0, end) of row ri
+  double l[kSmallNb];
+#pragma unroll
+  for (int p = 0; p < kSmallNb; ++p) l[p] = p < w ? row_l(ri, p) : 0.0;
+  std::int64_t c = c0 + t / nr;
+  for (; c + 3 * groups < end; c += 4 * groups) {
+    double a[4];
+#pragma unroll
+    for (int q = 0; q < 4; ++q) a[q] = F[(c + q * groups) * m + ri];
+#pragma unroll
+    for (int q = 0; q < 4; ++q) {
+#pragma unroll
+      for (int p = 0; p < kSmallNb; ++p)
+        if (p < w) a[q] -= l[p] * v[p][c + q * groups];
+    }
+#pragma unroll
+    for (int q = 0; q < 4; ++q) F[(c + q * groups) * m + ri] = a[q];
+  }
+  for (; c < end; c += groups) {
+    double acc = F[c * m + ri];
+#pragma unroll
+    for (int p = 0; p < kSmallNb; ++p)
+      if (p < w) acc -= l[p] * v[p][c];
+    F[c * m + ri] = acc;
+  }
+}
 __device__ void llt_front_blocked(double* F, std::int64_t m, std::int64_t k, std::int64_t* info,
                                   double (*lsh)[kThreads]) {
   // lsh[p][row]: the panel's columns, L(row, j0 + p) (the kernel's shared buffer)
@@ -325,43 +369,9 @@ __device__ void llt_front_blocked(double* F, std::int64_t m, std::int64_t k, std
 #pragma unroll
     for (int p = 0; p < kSmallNb; ++p)
       if (p < w && row && i >= j0 + p) F[(j0 + p) * m + i] = r[p];
-    // trailing lower triangle: F(i, c) −= Σ_p L(i, j0 + p) L(c, j0 + p), j0 + w ≤ c ≤ i, by
-    // the whole block as in lu_front_blocked (the nr trailing rows times ⌊blockDim.x / nr⌋
-    // groups of columns, four columns' loads in flight); L(i, ·) from lsh, which holds
-    // every row's panel by now. The products of each entry in the same order as before.
-    const std::int64_t c0 = j0 + w, nr = m - c0;
-    if (nr > 0) {
-      // nr < m ≤ blockDim.x, so at least one group
-      const std::int64_t groups = blockDim.x / nr > 0 ? blockDim.x / nr : 1;
-      const std::int64_t t = threadIdx.x;
-      if (t < groups * nr) {
-        const std::int64_t ri = c0 + t % nr;
-        double l[kSmallNb];
-#pragma unroll
-        for (int p = 0; p < kSmallNb; ++p) l[p] = p < w ? lsh[p][ri] : 0.0;
-        std::int64_t c = c0 + t / nr;
-        for (; c + 3 * groups <= ri; c += 4 * groups) {
-          double a[4];
-#pragma unroll
-          for (int q = 0; q < 4; ++q) a[q] = F[(c + q * groups) * m + ri];
-#pragma unroll
-          for (int q = 0; q < 4; ++q) {
-#pragma unroll
-            for (int p = 0; p < kSmallNb; ++p)
-              if (p < w) a[q] -= l[p] * lsh[p][c + q * groups];
-          }
-#pragma unroll
-          for (int q = 0; q < 4; ++q) F[(c + q * groups) * m + ri] = a[q];
-        }
-        for (; c <= ri; c += groups) {
-          double acc = F[c * m + ri];
-#pragma unroll
-          for (int p = 0; p < kSmallNb; ++p)
-            if (p < w) acc -= l[p] * lsh[p][c];
-          F[c * m + ri] = acc;
-        }
-      }
-    }
+    // trailing lower triangle: F(i, c) −= Σ_p L(i, j0 + p) L(c, j0 + p), j0 + w ≤ c ≤ i;
+    // every row's panel is in lsh by now
+    trailing_update(F, m, j0 + w, w, lsh, true, [&](std::int64_t ri, int p) { return lsh[p][ri]; });
     __syncthreads();  // the next panel reads what this one wrote, and reuses lsh
   }
 }
@@ -492,45 +502,10 @@ __device__ void lu_front_blocked(double* F, std::int64_t m, std::int64_t k, doub
         }
     }
     __syncthreads();
-    // the rows below the panel: F(i, c) −= Σ_p L(i, j0 + p) U(j0 + p, c), by the whole
-    // block rather than one thread per row: the nr trailing rows times ⌊blockDim.x / nr⌋
-    // groups of columns (thread t: row c0 + t mod nr, columns c0 + t div nr + groups·q),
-    // four columns' loads in flight at once; L(i, ·) read back from F (stored above), U
-    // from shared memory. Each entry still takes its w products in the order p = 0, 1, …,
-    // as one thread per row did, so the result is bitwise the same.
-    const std::int64_t c0 = j0 + w, nr = m - c0;
-    if (nr > 0) {
-      // nr < m ≤ blockDim.x, so at least one group
-      const std::int64_t groups = blockDim.x / nr > 0 ? blockDim.x / nr : 1;
-      const std::int64_t t = threadIdx.x;
-      if (t < groups * nr) {
-        const std::int64_t ri = c0 + t % nr;
-        double l[kSmallNb];
-#pragma unroll
-        for (int p = 0; p < kSmallNb; ++p) l[p] = p < w ? F[(j0 + p) * m + ri] : 0.0;
-        std::int64_t cc = c0 + t / nr;
-        for (; cc + 3 * groups < m; cc += 4 * groups) {
-          double a[4];
-#pragma unroll
-          for (int q = 0; q < 4; ++q) a[q] = F[(cc + q * groups) * m + ri];
-#pragma unroll
-          for (int q = 0; q < 4; ++q) {
-#pragma unroll
-            for (int p = 0; p < kSmallNb; ++p)
-              if (p < w) a[q] -= l[p] * ush[p][cc + q * groups];
-          }
-#pragma unroll
-          for (int q = 0; q < 4; ++q) F[(cc + q * groups) * m + ri] = a[q];
-        }
-        for (; cc < m; cc += groups) {
-          double acc = F[cc * m + ri];
-#pragma unroll
-          for (int p = 0; p < kSmallNb; ++p)
-            if (p < w) acc -= l[p] * ush[p][cc];
-          F[cc * m + ri] = acc;
-        }
-      }
-    }
+    // the rows below the panel: F(i, c) −= Σ_p L(i, j0 + p) U(j0 + p, c), L(i, ·) read back
+    // from F (stored above)
+    trailing_update(F, m, j0 + w, w, ush, false,
+                    [&](std::int64_t ri, int p) { return F[(j0 + p) * m + ri]; });
     __syncthreads();  // the next panel reads what this one wrote, and reuses the buffers
   }
 }
