@@ -1,8 +1,8 @@
 // strata — CUDA kernels of the level-batched multifrontal factorization (see kernels.cuh).
 //
-// The small-front kernel factors each front of up to 256 rows by one thread block, the
-// fronts of a batch side by side in one launch: the batched-small-front case that vendor
-// batched POTRF handles poorly (DESIGN.md §2). It is blocked right-looking with one row
+// The small-front kernel factors each front of up to Options::gpu_small_front_rows (at most
+// 256) rows by one thread block, the fronts of a batch side by side in one launch: the
+// batched-small-front case that vendor batched POTRF handles poorly (DESIGN.md §2). It is blocked right-looking with one row
 // per thread (llt_front_blocked, lu_front_blocked: panels of 16 pivot columns in
 // registers, the trailing matrix updated once per panel by all the block's threads
 // whatever the number of trailing rows); the unblocked one-pivot-at-a-

@@ -5,7 +5,8 @@
 // Why: cuSOLVER POTRF and cuBLAS TRSM are one library call per front, and at the shapes of
 // the large fronts of a multifrontal factorization they run far below the device's peak,
 // also side by side on several streams (bench_gpu_memory --parts kernels, bench/REPORT.md
-// §4), and they are a large share of the time of the fronts over 256 rows.
+// §4), and they are a large share of the time of the fronts over gpu_small_front_rows
+// rows.
 //
 // How: the right-looking blocked Cholesky of the front's first k columns (Golub & Van Loan,
 // "Matrix Computations", 4th ed., §4.2.9), in steps of kStep = 64 columns, each step one

@@ -1,7 +1,8 @@
 // strata — the large LU fronts of a chunk on the CUDA executor (CudaExecutor::
-// lu_large_fronts): fronts over 256 rows, each m × m in the pool with k fully summed rows
-// and columns, to be left as the CPU's factor_front_lu leaves them (L11\U11, L21, U12, the
-// Schur complement in the contribution block, the local row permutation).
+// lu_large_fronts): fronts over Options::gpu_small_front_rows rows, each m × m in the pool
+// with k fully summed rows and columns, to be left as the CPU's factor_front_lu leaves them
+// (L11\U11, L21, U12, the Schur complement in the contribution block, the local row
+// permutation).
 //
 // Restricted partial pivoting (the CPU's rule: the largest magnitude among the fully summed
 // rows, the first on ties) interchanges no row in most fronts once the matching has put
