@@ -476,6 +476,20 @@ TEST(Matching, EdgeCasesAndLayouts) {
       EXPECT_NEAR(log_diag_product(fa, ma), log_diag_product(ft, mt), 1e-10 * a.n_cols);
     }
   }
+  // a full CSC matrix whose rows are not sorted within its columns is sorted first: the
+  // same result as the canonical one (which the matching reads as it is)
+  {
+    const SparseMatrix a = test::random_sparse(300, 4, test::RandomKind::general, rng);
+    SparseMatrix r = a;
+    for (index_t j = 0; j < r.n_cols; ++j) {
+      std::reverse(r.indices.begin() + r.offsets[j], r.indices.begin() + r.offsets[j + 1]);
+      std::reverse(r.values.begin() + r.offsets[j], r.values.begin() + r.offsets[j + 1]);
+    }
+    const Matching ma = maximum_product_matching(a), mr = maximum_product_matching(r);
+    EXPECT_EQ(mr.column_permutation, ma.column_permutation);
+    EXPECT_EQ(mr.row_scaling, ma.row_scaling);
+    EXPECT_EQ(mr.column_scaling, ma.column_scaling);
+  }
   // pattern only: a maximum cardinality matching
   {
     SparseMatrix a = test::random_sparse(300, 2, test::RandomKind::general, rng);
