@@ -398,57 +398,61 @@ TEST(DelayedPivoting, AnalysisInThePivotOrderFactorsInTheFixedOrder) {
     EXPECT_FALSE(s.stats().factor.delayed_pivoting);
     EXPECT_THROW(s.analyze_in_pivot_order(), InvalidState);
   }
-  for (index_t n : {2, 3, 5, 733}) {
-    SCOPED_TRACE("n=" + std::to_string(n));
-    const test::StaleAnalysis m = test::stale_analysis(n, rng);
-    Options o = leaf_fronts();
-    o.refinement_max_steps = 0;
-    o.gmres_max_iterations = 0;
-    Solver s(o);
-    s.factorize(m.analyzed);
-    EXPECT_THROW(s.analyze_in_pivot_order(), InvalidState);  // the analysis's order was taken
-    s.refactorize(m.stale);
-    std::vector<double> ref = m.b;
-    ASSERT_TRUE(test::dense_solve(test::to_dense(m.stale), n, ref, 1));
-    const double tol =
-        std::max(1e-10, 1e-13 * std::sqrt(double(n)) * kappa_lower(m.stale, ref, m.b));
-    if (!s.stats().factor.delayed_pivoting) {  // one front: pivoting among its rows sufficed
-      EXPECT_LT(n, 733);
+  // with the matching and scaling (the default) and without them (the new analysis then
+  // has a column permutation of its own and no scaling)
+  for (const bool matching : {true, false})
+    for (index_t n : {2, 3, 5, 733}) {
+      SCOPED_TRACE("n=" + std::to_string(n) + (matching ? "" : ", no matching"));
+      const test::StaleAnalysis m = test::stale_analysis(n, rng);
+      Options o = leaf_fronts();
+      o.matching_and_scaling = matching;
+      o.refinement_max_steps = 0;
+      o.gmres_max_iterations = 0;
+      Solver s(o);
+      s.factorize(m.analyzed);
+      EXPECT_THROW(s.analyze_in_pivot_order(), InvalidState);  // the analysis's order was taken
+      s.refactorize(m.stale);
+      std::vector<double> ref = m.b;
+      ASSERT_TRUE(test::dense_solve(test::to_dense(m.stale), n, ref, 1));
+      const double tol =
+          std::max(1e-10, 1e-13 * std::sqrt(double(n)) * kappa_lower(m.stale, ref, m.b));
+      if (!s.stats().factor.delayed_pivoting) {  // one front: pivoting among its rows sufficed
+        EXPECT_LT(n, 733);
+        EXPECT_THROW(s.analyze_in_pivot_order(), InvalidState);
+        continue;
+      }
+      s.analyze_in_pivot_order();
+      EXPECT_TRUE(s.stats().analysis.order_from_pivots);
+      EXPECT_FALSE(s.stats().analysis.order_kept);
+      EXPECT_EQ(s.size(), n);
+      EXPECT_GE(s.stats().analysis.nnz_l, n);
+      EXPECT_THROW(s.solve(m.b), InvalidState);  // the factor was discarded
       EXPECT_THROW(s.analyze_in_pivot_order(), InvalidState);
-      continue;
+      s.refactorize(m.stale);
+      const FactorStats& f = s.stats().factor;
+      EXPECT_FALSE(f.delayed_pivoting);
+      EXPECT_EQ(f.perturbed_pivots, 0);
+      EXPECT_TRUE(f.inertia_valid);
+      double logdet = 0;
+      int sign = 0;
+      dense_logdet(m.stale, &logdet, &sign);
+      EXPECT_NEAR(f.log_abs_determinant, logdet, 1e-9 * std::max(1.0, std::abs(logdet)));
+      EXPECT_EQ(f.determinant_sign, sign);
+      std::vector<double> x = s.solve(m.b);
+      EXPECT_LE(test::relative_difference(x, ref), tol);
+      // values near them (a Newton loop's next iterate): still the fixed order
+      SparseMatrix near = m.stale;
+      for (double& v : near.values) v *= 1 + 1e-9 * u(rng);
+      s.refactorize(near);
+      EXPECT_FALSE(s.stats().factor.delayed_pivoting);
+      EXPECT_EQ(s.stats().factor.perturbed_pivots, 0);
+      std::vector<double> near_ref = m.b;
+      ASSERT_TRUE(test::dense_solve(test::to_dense(near), n, near_ref, 1));
+      EXPECT_LE(test::relative_difference(s.solve(m.b), near_ref), tol);
+      // a fresh analysis makes its own order again
+      s.analyze(m.stale);
+      EXPECT_FALSE(s.stats().analysis.order_from_pivots);
     }
-    s.analyze_in_pivot_order();
-    EXPECT_TRUE(s.stats().analysis.order_from_pivots);
-    EXPECT_FALSE(s.stats().analysis.order_kept);
-    EXPECT_EQ(s.size(), n);
-    EXPECT_GE(s.stats().analysis.nnz_l, n);
-    EXPECT_THROW(s.solve(m.b), InvalidState);  // the factor was discarded
-    EXPECT_THROW(s.analyze_in_pivot_order(), InvalidState);
-    s.refactorize(m.stale);
-    const FactorStats& f = s.stats().factor;
-    EXPECT_FALSE(f.delayed_pivoting);
-    EXPECT_EQ(f.perturbed_pivots, 0);
-    EXPECT_TRUE(f.inertia_valid);
-    double logdet = 0;
-    int sign = 0;
-    dense_logdet(m.stale, &logdet, &sign);
-    EXPECT_NEAR(f.log_abs_determinant, logdet, 1e-9 * std::max(1.0, std::abs(logdet)));
-    EXPECT_EQ(f.determinant_sign, sign);
-    std::vector<double> x = s.solve(m.b);
-    EXPECT_LE(test::relative_difference(x, ref), tol);
-    // values near them (a Newton loop's next iterate): still the fixed order
-    SparseMatrix near = m.stale;
-    for (double& v : near.values) v *= 1 + 1e-9 * u(rng);
-    s.refactorize(near);
-    EXPECT_FALSE(s.stats().factor.delayed_pivoting);
-    EXPECT_EQ(s.stats().factor.perturbed_pivots, 0);
-    std::vector<double> near_ref = m.b;
-    ASSERT_TRUE(test::dense_solve(test::to_dense(near), n, near_ref, 1));
-    EXPECT_LE(test::relative_difference(s.solve(m.b), near_ref), tol);
-    // a fresh analysis makes its own order again
-    s.analyze(m.stale);
-    EXPECT_FALSE(s.stats().analysis.order_from_pivots);
-  }
 }
 
 // Pivoting::fixed: static pivots as before.
