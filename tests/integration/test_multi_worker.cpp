@@ -110,21 +110,6 @@ class Recording final : public numeric::Executor {
   int fail_part_;
 };
 
-// The factor of one CPU executor taking the level schedule batch by batch (a Recording
-// forwards no factor_tree): the kernels the multi-worker driver runs on each part, so the
-// multi-worker factor must equal it bitwise. A plain CPU executor factors the whole tree
-// depth-first instead, forming Cholesky fronts in column panels: the same factor to
-// rounding, bitwise only where the BLAS computes a product the same way whatever its
-// blocking (OpenBLAS's small-matrix kernels on AVX-512 do not) — see close_factors.
-numeric::NumericFactor level_factor(const Analysis& an, const std::vector<double>& v,
-                                    MatrixType type, double pivot) {
-  numeric::NumericFactor f;
-  std::vector<double> arena;
-  Recording one(an.tree.n_fronts());
-  numeric::factorize(an, v, type, pivot, one, f, arena);
-  return f;
-}
-
 // The depth-first factor x and the level-schedule factor y of the same values agree to
 // rounding: entries within 1e-10 of the largest (their pivots are those of one
 // factorization computed in two orders).
@@ -242,7 +227,7 @@ TEST(MultiWorker, FactorBitwiseEqualsOneExecutorAndEveryFrontOnce) {
       std::vector<double> arena;
       auto cpu = numeric::make_cpu_executor(1);
       numeric::factorize(an, v, pr.type, pivot, *cpu, depth_first, arena);
-      const numeric::NumericFactor one = level_factor(an, v, pr.type, pivot);
+      const numeric::NumericFactor one = test::level_schedule_factor(an, v, pr.type, pivot);
       expect_close_factors(depth_first, one);
 
       Recorders recorders(workers, an.tree.n_fronts());
@@ -332,7 +317,7 @@ TEST(MultiWorker, UpperLayersGiveTheOneWorkerFactor) {
           << "the top part was not split: the test would be vacuous";
       double pivot = 0;
       const std::vector<double> v = test::scaled_values(an, pr.a, &pivot);
-      const numeric::NumericFactor one = level_factor(an, v, pr.type, pivot);
+      const numeric::NumericFactor one = test::level_schedule_factor(an, v, pr.type, pivot);
       Recorders recorders(workers, an.tree.n_fronts());
       auto& rec = recorders.rec;
       const auto& execs = recorders.execs;
@@ -437,7 +422,7 @@ TEST(MultiWorker, UpperPartsDoNotWaitForUnrelatedSubtrees) {
       ++checked;
       double pivot = 0;
       const std::vector<double> v = test::scaled_values(an, a, &pivot);
-      const numeric::NumericFactor one = level_factor(an, v, MatrixType::spd, pivot);
+      const numeric::NumericFactor one = test::level_schedule_factor(an, v, MatrixType::spd, pivot);
       Recorders recorders(workers, an.tree.n_fronts());
       auto& rec = recorders.rec;
       const auto& execs = recorders.execs;
@@ -569,7 +554,7 @@ TEST(MultiWorker, SlowWorkerHasItsSubtreesStolen) {
       ASSERT_GE(own[0], 2) << "worker 0 needs a queue to steal from";
       double pivot = 0;
       const std::vector<double> v = test::scaled_values(an, pr.a, &pivot);
-      const numeric::NumericFactor one = level_factor(an, v, pr.type, pivot);
+      const numeric::NumericFactor one = test::level_schedule_factor(an, v, pr.type, pivot);
       for (bool stealing : {true, false}) {
         SCOPED_TRACE(stealing ? "stealing" : "no stealing");
         std::vector<std::unique_ptr<numeric::Executor>> ex;
@@ -756,9 +741,9 @@ TEST(NumericDrivers, TreeAndMultiWorkerDriversAgree) {
   EXPECT_TRUE(multi->in_one_process());
   EXPECT_FALSE(multi->uploads_values());
   numeric::NumericFactor one, many;
-  tree->factorize(an, v, MatrixType::spd, pivot, one);  // depth-first (see level_factor)
+  tree->factorize(an, v, MatrixType::spd, pivot, one);  // depth-first (see level_schedule_factor)
   multi->factorize(an, v, MatrixType::spd, pivot, many);
-  numeric::NumericFactor level = level_factor(an, v, MatrixType::spd, pivot);
+  numeric::NumericFactor level = test::level_schedule_factor(an, v, MatrixType::spd, pivot);
   expect_same_factor(level, many);
   expect_close_factors(one, many);
   EXPECT_EQ(tree->backend(), Backend::cpu);

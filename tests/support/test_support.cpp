@@ -16,6 +16,7 @@
 
 #include "analysis/analysis.hpp"
 #include "base/blas.hpp"
+#include "numeric/factor.hpp"
 
 namespace strata::test {
 
@@ -310,6 +311,42 @@ double relative_difference(const std::vector<double>& x, const std::vector<doubl
     den = std::max(den, std::abs(y[i]));
   }
   return den == 0 ? num : num / den;
+}
+
+namespace {
+
+// A single-threaded CPU executor without its whole-tree traversal (factor_tree): the
+// driver then runs the level schedule batch by batch (level_schedule_factor).
+class LevelScheduleExecutor final : public numeric::Executor {
+ public:
+  const char* name() const override { return "level schedule"; }
+  void begin(const numeric::FactorContext& c) override { inner_->begin(c); }
+  void begin_part(const numeric::FactorContext& c) override { inner_->begin_part(c); }
+  void factor_batch(const numeric::FactorContext& c, const BatchInfo& b) override {
+    inner_->factor_batch(c, b);
+  }
+  void end_part(const numeric::FactorContext& c) override { inner_->end_part(c); }
+  std::size_t export_cb(const numeric::FactorContext& c, numeric::CbTransfer& t) override {
+    return inner_->export_cb(c, t);
+  }
+  std::size_t import_cb(const numeric::FactorContext& c, const numeric::CbTransfer& t) override {
+    return inner_->import_cb(c, t);
+  }
+  void end(const numeric::FactorContext& c) override { inner_->end(c); }
+
+ private:
+  std::unique_ptr<numeric::Executor> inner_ = numeric::make_cpu_executor(1);
+};
+
+}  // namespace
+
+numeric::NumericFactor level_schedule_factor(const Analysis& an, const std::vector<double>& v,
+                                             MatrixType type, double pivot) {
+  numeric::NumericFactor f;
+  std::vector<double> arena;
+  LevelScheduleExecutor one;
+  numeric::factorize(an, v, type, pivot, one, f, arena);
+  return f;
 }
 
 std::vector<double> scaled_values(const Analysis& an, const SparseMatrix& a, double* pivot) {

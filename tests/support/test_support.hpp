@@ -24,7 +24,10 @@
 
 namespace strata {
 struct Analysis;
+namespace numeric {
+struct NumericFactor;
 }
+}  // namespace strata
 
 namespace strata::test {
 
@@ -114,6 +117,16 @@ double relative_difference(const std::vector<double>& x, const std::vector<doubl
 /// analysis's row/column scaling applied, in entry order), and in *pivot a static pivot
 /// threshold of the Solver's kind: 1e-8 · max(max |value|, 1).
 std::vector<double> scaled_values(const Analysis& an, const SparseMatrix& a, double* pivot);
+
+/// The factor of one single-threaded CPU executor taking an's level schedule batch by
+/// batch (the driver's path for an executor without a whole-tree traversal): the kernels
+/// the multi-worker and distributed drivers run on each part, so their factors must equal
+/// it bitwise. A plain CPU executor factors the whole tree depth-first, forming Cholesky
+/// fronts in column panels: the same factor to rounding, bitwise only where the BLAS
+/// computes a product the same way whatever its blocking (OpenBLAS's small-matrix kernels
+/// on AVX-512 do not).
+numeric::NumericFactor level_schedule_factor(const Analysis& an, const std::vector<double>& v,
+                                             MatrixType type, double pivot);
 
 /// Sleeps `seconds` on the calling thread when `slow` (a slow worker, for the
 /// multi-worker factorization's MultiWorkerConfig::before_subtree).

@@ -249,17 +249,17 @@ TEST(DistributedSerialize, ValuePositionsAreTheSubtreesEntries) {
 // its subtrees to bitwise the panels of the one-process factorization with all values:
 // a value it needs and is not sent would leave a NaN (or a different number) in a panel.
 TEST(DistributedSerialize, SubtreesFactorFromTheirScatteredValues) {
-  auto rng = test::fresh_rng();
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed) + " (STRATA_TEST_SEED replays it)");
   for (const ScatterCase& c : scatter_cases(rng))
     for (auto [ranks, per_rank] : kRankShapes) {
       SCOPED_TRACE(c.name + ", " + std::to_string(ranks) + " x " + std::to_string(per_rank));
       const Analysis an = analyze_for_ranks(c, ranks, per_rank);
       double pivot = 0;
       const std::vector<double> v = test::scaled_values(an, c.a, &pivot);
-      numeric::NumericFactor one;
-      std::vector<double> arena;
-      auto cpu = numeric::make_cpu_executor(1);
-      numeric::factorize(an, v, c.type, pivot, *cpu, one, arena);
+      // the level schedule's kernels, which each rank runs on its parts (test_support.hpp)
+      const numeric::NumericFactor one = test::level_schedule_factor(an, v, c.type, pivot);
       for (int r = 1; r < ranks; ++r) {
         SCOPED_TRACE("rank " + std::to_string(r));
         const distributed::RankLayout l = distributed::make_layout(an, ranks, r, per_rank);
