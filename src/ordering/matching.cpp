@@ -91,6 +91,7 @@
 #include <limits>
 #include <string>
 
+#include "sparse/canonical.hpp"
 #include "strata/errors.hpp"
 
 namespace strata::ordering {
@@ -488,39 +489,12 @@ class Matcher {
 
 }  // namespace
 
-namespace {
-
-// True when `a` is already what the matching reads: full storage, CSC, offsets from 0 to
-// nnz without decreasing, each column's rows strictly increasing within [0, n). The
-// analysis passes its canonical input so; copying it again cost several milliseconds on a
-// Newton matrix of two million entries.
-bool canonical_full(const SparseMatrix& a) {
-  if (a.layout != Layout::csc || a.storage != Storage::full) return false;
-  const index_t n = a.n_cols;
-  if (static_cast<index_t>(a.offsets.size()) != n + 1 || a.offsets[0] != 0 ||
-      static_cast<index_t>(a.indices.size()) != a.offsets[n] ||
-      (!a.values.empty() && a.values.size() != a.indices.size()))
-    return false;
-  for (index_t j = 0; j < n; ++j) {
-    if (a.offsets[j + 1] < a.offsets[j]) return false;
-    index_t prev = -1;
-    for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p) {
-      const index_t i = a.indices[p];
-      if (i <= prev || i >= a.n_rows) return false;
-      prev = i;
-    }
-  }
-  return true;
-}
-
-}  // namespace
-
 Matching maximum_product_matching(const SparseMatrix& a) {
   if (a.n_rows != a.n_cols)
     throw InvalidInput("maximum_product_matching: matrix is " + std::to_string(a.n_rows) + "x" +
                        std::to_string(a.n_cols) + ", not square");
   // canonical CSC, both triangles: the input itself when it is so already
-  const bool as_is = canonical_full(a);
+  const bool as_is = detail::is_canonical_full(a);
   SparseMatrix expanded;
   if (!as_is) expanded = expand_symmetric(a);
   const SparseMatrix& full = as_is ? a : expanded;

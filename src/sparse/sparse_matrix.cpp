@@ -7,6 +7,7 @@
 #include <cmath>
 #include <string>
 
+#include "sparse/canonical.hpp"
 #include "strata/errors.hpp"
 
 namespace strata {
@@ -187,9 +188,13 @@ SparseMatrix canonicalize(const SparseMatrix& a) {
   return sort_and_sum(gather_csc(a, false));
 }
 
-SparseMatrix expand_symmetric(const SparseMatrix& a) {
+bool detail::is_canonical_full(const SparseMatrix& a) {
   validate(a);
-  if (a.storage == Storage::full && sorted_csc(a)) return a;
+  return a.storage == Storage::full && sorted_csc(a);
+}
+
+SparseMatrix expand_symmetric(const SparseMatrix& a) {
+  if (detail::is_canonical_full(a)) return a;
   return sort_and_sum(gather_csc(a, a.storage != Storage::full));
 }
 
