@@ -2,10 +2,10 @@
 //
 // The small-front kernel factors each front of up to Options::gpu_small_front_rows (at most
 // 256) rows by one thread block, the fronts of a batch side by side in one launch: the
-// batched-small-front case that vendor batched POTRF handles poorly (DESIGN.md §2). It is blocked right-looking with one row
-// per thread (llt_front_blocked, lu_front_blocked: panels of 16 pivot columns in
-// registers, the trailing matrix updated once per panel by all the block's threads
-// whatever the number of trailing rows); the unblocked one-pivot-at-a-
+// batched-small-front case that vendor batched POTRF handles poorly (DESIGN.md §2). It is
+// blocked right-looking with one row per thread (llt_front_blocked, lu_front_blocked:
+// panels of 16 pivot columns in registers), the trailing matrix updated once per panel by
+// all the block's threads whatever the number of trailing rows; the unblocked one-pivot-at-a-
 // time forms (llt_front, lu_columns) remain for larger blocks (lu_columns also serves the
 // large LU fronts' static-pivoting path and the tiled slabs). Partial pivoting for LU searches
 // only the fully summed rows (restricted pivoting) and replaces tiny pivots by
