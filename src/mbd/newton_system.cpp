@@ -6,7 +6,6 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
-#include <atomic>
 #include <stdexcept>
 
 #include "strata/errors.hpp"
@@ -307,7 +306,80 @@ void NewtonSystem::rebuild_pattern() {
   visit(0);
   jac_ = pb.finish();
   visit(1);
+  build_slot_sums();
   pattern_current_ = true;
+}
+
+void NewtonSystem::build_slot_sums() {
+  const std::size_t nf = model_.forces.size(), nc = model_.constraints.size();
+  const bool stab = formulation_ == Formulation::stabilized;
+  // h's layout (evaluate): F (n), [Φ̈ (m)], Φ̇ (m), Φ (m), BDF rows; stabilized: the BDF
+  // relation of q, which Φ_qᵀν enters, starts n after the BDF rows
+  const index_t hu = stab ? n_ + 2 * m_ : n_ + 3 * m_;
+  force_rslot_.assign(nf + 1, 0);
+  force_jslot_.assign(nf + 1, 0);
+  for (std::size_t e = 0; e < nf; ++e) {
+    const ForcePos& fp = fpos_[e];
+    force_rslot_[e + 1] = force_rslot_[e] + model_.forces[e]->dofs.size();
+    force_jslot_[e + 1] = force_jslot_[e] + fp.q.size() + fp.v.size() + fp.a.size();
+  }
+  constraint_rslot_.assign(nc + 1, force_rslot_[nf]);
+  constraint_jslot_.assign(nc + 1, force_jslot_[nf]);
+  for (std::size_t e = 0; e < nc; ++e) {
+    const ConstraintPos& cp = cpos_[e];
+    constraint_rslot_[e + 1] =
+        constraint_rslot_[e] + (stab ? 2 : 1) * model_.constraints[e]->dofs.size();
+    constraint_jslot_[e + 1] = constraint_jslot_[e] + cp.hq.size() + cp.nuq.size();
+  }
+  rslots_.assign(constraint_rslot_[nc], 0.0);
+  jslots_.assign(constraint_jslot_[nc], 0.0);
+  // every slot's target, in slot order, then grouped by target keeping that order
+  // (a counting sort, stable)
+  auto group = [](const std::vector<index_t>& target_of, index_t targets, SlotSums& sums) {
+    std::vector<std::size_t> count(static_cast<std::size_t>(targets) + 1, 0);
+    for (index_t t : target_of) ++count[t + 1];
+    sums.target.clear();
+    sums.first.assign(1, 0);
+    std::vector<std::size_t> at(targets, 0);
+    for (index_t t = 0; t < targets; ++t)
+      if (count[t + 1] > 0) {
+        at[t] = sums.first.back();
+        sums.target.push_back(t);
+        sums.first.push_back(sums.first.back() + count[t + 1]);
+      }
+    sums.slot.resize(target_of.size());
+    for (std::size_t k = 0; k < target_of.size(); ++k) sums.slot[at[target_of[k]]++] = k;
+  };
+  std::vector<index_t> target_of;
+  target_of.reserve(rslots_.size());
+  for (std::size_t e = 0; e < nf; ++e)
+    target_of.insert(target_of.end(), model_.forces[e]->dofs.begin(), model_.forces[e]->dofs.end());
+  for (std::size_t e = 0; e < nc; ++e) {
+    const auto& dofs = model_.constraints[e]->dofs;
+    target_of.insert(target_of.end(), dofs.begin(), dofs.end());
+    if (stab)
+      for (index_t d : dofs) target_of.push_back(hu + n_ + d);
+  }
+  group(target_of, size(), rsums_);
+  target_of.clear();
+  target_of.reserve(jslots_.size());
+  for (const ForcePos& fp : fpos_)
+    for (const auto* pos : {&fp.q, &fp.v, &fp.a})
+      target_of.insert(target_of.end(), pos->begin(), pos->end());
+  for (const ConstraintPos& cp : cpos_)
+    for (const auto* pos : {&cp.hq, &cp.nuq})
+      target_of.insert(target_of.end(), pos->begin(), pos->end());
+  group(target_of, static_cast<index_t>(jac_.values.size()), jsums_);
+}
+
+void NewtonSystem::add_slot_sums(const SlotSums& sums, const double* slots, double* out) const {
+  for_element_ranges(sums.target.size(), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t t = begin; t < end; ++t) {
+      double s = 0;
+      for (std::size_t k = sums.first[t]; k < sums.first[t + 1]; ++k) s += slots[sums.slot[k]];
+      out[sums.target[t]] += s;
+    }
+  });
 }
 
 void NewtonSystem::evaluate(const double* x, double t, const BdfTerms& bdf, bool jacobian,
@@ -316,7 +388,8 @@ void NewtonSystem::evaluate(const double* x, double t, const BdfTerms& bdf, bool
   const bool stab = formulation_ == Formulation::stabilized;
   const double *a = x, *v = x + n, *q = x + 2 * n, *lam = x + 3 * n;
   const double* nu = stab ? x + 3 * n + m : nullptr;
-  double* hf = h;
+  if (!pattern_current_)
+    throw std::logic_error("NewtonSystem::evaluate: the pattern is not built for this state");
   double* ha = stab ? nullptr : h + n;  // the stabilized formulation has no Φ̈ rows
   double* hv = stab ? h + n : h + n + m;
   double *hp = hv + m, *hu = hp + m;
@@ -325,32 +398,37 @@ void NewtonSystem::evaluate(const double* x, double t, const BdfTerms& bdf, bool
   double* J = jac_.values.data();
   if (jacobian) std::fill(jac_.values.begin(), jac_.values.end(), 0.0);
   const std::size_t nf = model_.forces.size(), nc = model_.constraints.size();
-  auto add = [](double& target, double value) {
-    std::atomic_ref<double>(target).fetch_add(value, std::memory_order_relaxed);
-  };
+  double* rs = rslots_.data();  // contributions to shared entries (see the file comment)
+  double* js = jslots_.data();
   auto forces = [&](std::size_t begin, std::size_t end) {
     std::vector<double> lq, lv, la;
     ForceEval fe;
     for (std::size_t e = begin; e < end; ++e) {
       const Force& f = *model_.forces[e];
-      if (!candidate_[e] || (skip_intermittent && f.intermittent)) continue;
+      const std::size_t nz = f.dofs.size();
+      double* r = rs + force_rslot_[e];
+      double* j = js + force_jslot_[e];
+      double* const j_end = js + force_jslot_[e + 1];
+      if (!candidate_[e] || (skip_intermittent && f.intermittent)) {
+        std::fill(r, r + nz, 0.0);
+        if (jacobian) std::fill(j, j_end, 0.0);
+        continue;
+      }
+      if (jacobian && static_cast<std::size_t>(j_end - j) != nz * nz * (1 + f.uses_v + f.uses_a))
+        throw std::logic_error("NewtonSystem::evaluate: a force element outside the pattern");
       gather(f.dofs, q, lq);
       gather(f.dofs, v, lv);
       gather(f.dofs, a, la);
       f.evaluate(lq.data(), lv.data(), la.data(), t, jacobian, fe);
-      const std::size_t nz = f.dofs.size();
-      for (std::size_t i = 0; i < nz; ++i) add(hf[f.dofs[i]], fe.g[i]);
+      std::copy_n(fe.g.begin(), nz, r);
       if (!jacobian) continue;
-      const ForcePos& fp = fpos_[e];
-      for (std::size_t k = 0; k < nz * nz; ++k) add(J[fp.q[k]], fe.dq[k]);
-      if (f.uses_v)
-        for (std::size_t k = 0; k < nz * nz; ++k) add(J[fp.v[k]], fe.dv[k]);
-      if (f.uses_a)
-        for (std::size_t k = 0; k < nz * nz; ++k) add(J[fp.a[k]], fe.da[k]);
+      j = std::copy_n(fe.dq.begin(), nz * nz, j);
+      if (f.uses_v) j = std::copy_n(fe.dv.begin(), nz * nz, j);
+      if (f.uses_a) std::copy_n(fe.da.begin(), nz * nz, j);
     }
   };
   auto constraints = [&](std::size_t begin, std::size_t end) {
-    std::vector<double> lq, lv, la, hess, llam, lnu, eps_p, eps_a;
+    std::vector<double> lq, lv, la, llam, lnu, eps_p, eps_a;
     std::vector<index_t> act;
     ConstraintEval ce;
     for (std::size_t e = begin; e < end; ++e) {
@@ -360,7 +438,14 @@ void NewtonSystem::evaluate(const double* x, double t, const BdfTerms& bdf, bool
       act.resize(nr);
       bool any = false;
       for (int r = 0; r < nr; ++r) any |= (act[r] = active_index_[r0 + r]) >= 0;
-      if (!any) continue;
+      const std::size_t nz = c.dofs.size();
+      double* rslot = rs + constraint_rslot_[e];
+      double* jslot = js + constraint_jslot_[e];
+      if (!any) {
+        std::fill(rslot, rs + constraint_rslot_[e + 1], 0.0);
+        if (jacobian) std::fill(jslot, js + constraint_jslot_[e + 1], 0.0);
+        continue;
+      }
       gather(c.dofs, q, lq);
       gather(c.dofs, v, lv);
       gather(c.dofs, a, la);
@@ -369,7 +454,6 @@ void NewtonSystem::evaluate(const double* x, double t, const BdfTerms& bdf, bool
         c.evaluate(lq.data(), lv.data(), la.data(), t, true, ce);
       else
         c.evaluate_gradient(lq.data(), lv.data(), la.data(), t, ce);
-      const std::size_t nz = c.dofs.size();
       llam.assign(nr, 0.0);
       lnu.assign(nr, 0.0);
       for (int r = 0; r < nr; ++r) {
@@ -388,8 +472,8 @@ void NewtonSystem::evaluate(const double* x, double t, const BdfTerms& bdf, bool
           s += ce.jq[r * nz + i] * lam[act[r]];
           if (stab) snu += ce.jq[r * nz + i] * nu[act[r]];
         }
-        add(hf[c.dofs[i]], s);
-        if (stab) add(hu[n + c.dofs[i]], bdf.beta * snu);
+        rslot[i] = s;
+        if (stab) rslot[nz + i] = bdf.beta * snu;
       }
       // regularisation of the stabilized formulation (rows owned by this element)
       eps_p.assign(nr, 0.0);
@@ -408,12 +492,11 @@ void NewtonSystem::evaluate(const double* x, double t, const BdfTerms& bdf, bool
         }
       if (!jacobian) continue;
       const ConstraintPos& cp = cpos_[e];
-      hess.resize(nz * nz);
-      c.hessian(lq.data(), t, llam.data(), hess.data());
-      for (std::size_t k = 0; k < nz * nz; ++k) add(J[cp.hq[k]], hess[k]);
+      c.hessian(lq.data(), t, llam.data(), jslot);
       if (stab) {  // β(Φ_qᵀν)_q: ν is small except near singular configurations
-        c.hessian(lq.data(), t, lnu.data(), hess.data());
-        for (std::size_t k = 0; k < nz * nz; ++k) add(J[cp.nuq[k]], bdf.beta * hess[k]);
+        double* nuq = jslot + nz * nz;
+        c.hessian(lq.data(), t, lnu.data(), nuq);
+        for (std::size_t k = 0; k < nz * nz; ++k) nuq[k] *= bdf.beta;
       }
       // the constraint's own rows and multiplier columns: no other element writes there
       std::size_t p = 0;
@@ -446,10 +529,12 @@ void NewtonSystem::evaluate(const double* x, double t, const BdfTerms& bdf, bool
       }
     }
   };
-  // Elements are evaluated in parallel (oneTBB, as strata's CPU executor); entries shared
-  // by several elements (rows of the equations of motion) are added atomically.
+  // Elements are evaluated in parallel (oneTBB, as strata's CPU executor) into their
+  // slots, then each shared entry sums its slots in element order (the file comment).
   for_element_ranges(nf, forces);
   for_element_ranges(nc, constraints);
+  add_slot_sums(rsums_, rs, h);
+  if (jacobian) add_slot_sums(jsums_, js, J);
   add_bdf_rows(a, v, q, bdf, jacobian, hu);
 }
 

@@ -26,6 +26,14 @@
 // counts the active ones. The pattern is built once per formulation, partition and
 // active set; every evaluation only rewrites the values (element blocks are scattered
 // through precomputed positions).
+//
+// The evaluation is deterministic on any number of threads. Elements are evaluated in
+// parallel, each writing its contributions to entries that other elements share (the
+// equations of motion's residual and their rows of H_x) to its own slots; a second
+// parallel pass sums each shared entry's slots in element order (forces, then
+// constraints), so H(x) and H_x are bitwise the same for 1 or 64 threads and a restarted
+// run repeats the first one. Entries only one element writes (its constraint rows and
+// multiplier columns) are written directly.
 #pragma once
 
 #include <tbb/task_arena.h>
@@ -192,6 +200,19 @@ class NewtonSystem {
   };
   std::vector<ForcePos> fpos_;
   std::vector<ConstraintPos> cpos_;
+  // The shared entries' summation (see the file comment): each target (an index of H or
+  // of H_x's values) and its slots, in element order (CSR: slot[first[t] .. first[t+1])).
+  struct SlotSums {
+    std::vector<index_t> target;
+    std::vector<std::size_t> first, slot;
+  };
+  // first residual / Jacobian slot of each force element (nf + 1) and constraint element
+  // (nc + 1; constraints' slots follow the forces')
+  std::vector<std::size_t> force_rslot_, constraint_rslot_, force_jslot_, constraint_jslot_;
+  std::vector<double> rslots_, jslots_;
+  SlotSums rsums_, jsums_;
+  void build_slot_sums();
+  void add_slot_sums(const SlotSums& sums, const double* slots, double* out) const;
   std::vector<index_t> upos_;  // 4 per BDF coordinate (independent, or all when stabilized)
   int threads_ = 1;
   // the assembly's threads, kept: one arena for every evaluation
