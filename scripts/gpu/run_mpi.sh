@@ -1,17 +1,19 @@
 #!/usr/bin/env bash
-# The distributed benchmark on a lent 4-GPU machine (docs/distributed.md §5): on the
-# largest generated problems that fit (lap3d-80 and elast3d-40, as bench_multigpu), the
-# factorization on 1 rank × 4 GPUs, 2 ranks × 2 GPUs and 4 ranks × 1 GPU, each rank's time
-# and bytes moved between ranks, then the cost model's prediction beside each measurement.
+# The distributed benchmark on a lent multi-GPU machine (docs/distributed.md §5): on
+# lap3d-80, elast3d-40 (the cost model's calibrated problems), lap3d-100 and elast3d-50,
+# the factorization on 1 rank × 1 GPU, then for G visible GPUs
+# (2, 4 or 8) 1 rank × G GPUs, 2 ranks × G/2 GPUs and G ranks × 1 GPU (8 GPUs: also
+# 4 × 2), each rank's time and bytes moved between ranks, then the cost model's
+# prediction beside each measurement.
 # Results (distributed-*.json, cost-model.json, run_mpi.log) go to $OUT (default
 # bench/results). Needs mpirun: the machine's, or the OpenMPI staged by
 # scripts/gpu/prepare_mpi.sh in .carry-mpi/ (carried with .carry/).
-# Usage: bash scripts/gpu/run_mpi.sh [PROBLEMS] (default lap3d-80,elast3d-40)
+# Usage: bash scripts/gpu/run_mpi.sh [PROBLEMS] (default lap3d-80,elast3d-40,lap3d-100,elast3d-50)
 set -uo pipefail
 cd "$(dirname "$0")/../.."
 OUT=${OUT:-bench/results}
 mkdir -p "$OUT"
-problems=${1:-lap3d-80,elast3d-40}
+problems=${1:-lap3d-80,elast3d-40,lap3d-100,elast3d-50}
 log="$OUT/run_mpi.log"
 # under bench/run (STRATA_RESULTS_DIR set) the console output is logged by bench/run
 [ -n "${STRATA_RESULTS_DIR:-}" ] && log=/dev/null
@@ -62,7 +64,14 @@ nvidia-smi -L || true
 mpirun --version | head -1
 status=0
 started=$(mktemp)
-for cfg in 1x4 2x2 4x1; do
+ngpu=$( (nvidia-smi -L 2>/dev/null || true) | wc -l)
+case $ngpu in
+  0 | 1) configs="1x1" ;;
+  2 | 3) configs="1x1 1x2 2x1" ;;
+  4 | 5 | 6 | 7) configs="1x1 1x4 2x2 4x1" ;;
+  *) configs="1x1 1x8 2x4 4x2 8x1" ;;
+esac
+for cfg in $configs; do
   r=${cfg%x*} g=${cfg#*x}
   echo "=== $r rank(s) x $g GPU(s): $problems"
   # --bind-to none: each rank drives its GPUs from several host threads
