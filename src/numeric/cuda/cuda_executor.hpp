@@ -372,13 +372,14 @@ class CudaExecutor final : public numeric::Executor {
   /// (distributed_front.cu); F ends as the one-GPU code leaves it, `info` (device) as
   /// POTRF of order k reports. Everything is enqueued (lane.stream waits for the
   /// helpers' last copies). False, with nothing enqueued, when a helper's pool cannot
-  /// hold its blocks, a GPU has no room for the panel slots, or the front has fewer
-  /// column blocks than GPUs.
+  /// hold its blocks, a GPU has no room for the panel slots, or the front has a single
+  /// column block. A front of NB blocks is spread over min(NB, team size) GPUs.
   bool distributed_llt(Lane& lane, double* F, int m, int k, int* info);
-  /// distributed_llt's layout of F's column blocks (bounds c, P pivot blocks) over the
-  /// team (distributed_front.cu); false when the front cannot be distributed.
+  /// distributed_llt's layout of F's column blocks (bounds c, P pivot blocks) over this
+  /// GPU and the first G − 1 helpers of the team (distributed_front.cu); false when the
+  /// front cannot be distributed.
   bool team_layout(Lane& lane, double* F, std::int64_t m, const std::vector<std::int64_t>& c, int P,
-                   std::vector<TeamGpu>& gpu);
+                   int G, std::vector<TeamGpu>& gpu);
   /// The lane this executor lends to others (a lane of its own, idle while it helps).
   Lane& help_lane();
   void count_h2d(std::size_t bytes) { bytes_h2d_ += bytes; }

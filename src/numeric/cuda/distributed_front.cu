@@ -100,13 +100,13 @@ cudaEvent_t event_at(std::vector<cudaEvent_t>& pool, std::size_t i) {
 }  // namespace
 
 // The distributed front's layout (distributed_llt): block j of F's columns c[j]..c[j+1]
-// on GPU j mod G, the owner's in place in F, a helper's packed in its pool; the panel
-// slots and statuses sized, the events made. False, with nothing changed that matters,
-// when a helper's pool cannot hold its share or the slots do not fit beside the plan.
+// on GPU j mod G (the owner and the first G − 1 helpers), the owner's in place in F, a helper's
+// packed in its pool; the panel slots and statuses sized, the events made. False, with nothing
+// changed that matters, when a helper's pool cannot hold its share or the slots do not fit beside
+// the plan.
 bool CudaExecutor::team_layout(Lane& lane, double* F, std::int64_t m,
-                               const std::vector<std::int64_t>& c, int P,
+                               const std::vector<std::int64_t>& c, int P, int G,
                                std::vector<TeamGpu>& gpu) {
-  const int G = static_cast<int>(team_.members.size()) + 1;
   const int NB = static_cast<int>(c.size()) - 1;
   const std::int64_t nb = dist_block_;
   auto rows = [&](int j) { return m - c[j]; };
@@ -160,7 +160,6 @@ bool CudaExecutor::team_layout(Lane& lane, double* F, std::int64_t m,
 }
 
 bool CudaExecutor::distributed_llt(Lane& lane, double* F, int m, int k, int* info) {
-  const int G = static_cast<int>(team_.members.size()) + 1;
   const std::int64_t nb = dist_block_;
   // column bounds: pivot blocks of nb up to k, then contribution-block blocks of nb
   std::vector<std::int64_t> c{0};
@@ -168,14 +167,16 @@ bool CudaExecutor::distributed_llt(Lane& lane, double* F, int m, int k, int* inf
   const int P = static_cast<int>(c.size()) - 1;
   while (c.back() < m) c.push_back(std::min<std::int64_t>(c.back() + nb, m));
   const int NB = static_cast<int>(c.size()) - 1;
-  if (P < 1 || NB < G) return false;
+  // the owner and as many helpers as there are blocks beside its first one
+  const int G = std::min(static_cast<int>(team_.members.size()) + 1, NB);
+  if (P < 1 || G < 2) return false;
   auto owner = [G](int j) { return j % G; };
   auto rows = [&](int j) { return m - c[j]; };
   auto width = [&](int j) { return c[j + 1] - c[j]; };
 
   // where each GPU keeps things
   std::vector<TeamGpu> gpu;
-  if (!team_layout(lane, F, m, c, P, gpu)) return false;
+  if (!team_layout(lane, F, m, c, P, G, gpu)) return false;
   auto E = [&](int g, int p) { return gpu[g].ex->team_.dist_events[3 * p]; };
   auto R = [&](int g, int p) { return gpu[g].ex->team_.dist_events[3 * p + 1]; };
   auto D = [&](int g, int p) { return gpu[g].ex->team_.dist_events[3 * p + 2]; };
