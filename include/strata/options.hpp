@@ -176,6 +176,12 @@ struct Options {
   /// IBM J. Res. Dev. 44(6), 2000) instead of cuSOLVER POTRF and cuBLAS TRSM (or the
   /// column blocks of gpu_potrf_block_size, which it takes precedence over). Default on.
   bool gpu_recursive_panel = true;
+  /// CUDA backend: the device solve's sweeps (its gather, small-front, library and scatter
+  /// launches over every level) are recorded once as a CUDA graph per analysis and number
+  /// of right-hand sides and replayed with one launch per solve
+  /// (src/numeric/cuda/cuda_solve.cu); false launches them one by one at every solve.
+  /// The same bits either way. Default on.
+  bool gpu_solve_graph = true;
 
   // --- several GPUs (docs/multigpu.md) ---
   /// GPUs the CUDA backend factors on; 0 means every visible GPU (default 0). With more

@@ -1106,6 +1106,80 @@ TEST_F(CudaBackend, DeviceSolveMatchesCpuSolve) {
   EXPECT_TRUE(saw_large) << "no front large enough for the cuBLAS path";
 }
 
+// The device solve's sweeps recorded once as a CUDA graph and replayed
+// (Options::gpu_solve_graph, the default) give the same bits as the same launches made one
+// by one: on repeated solves, when the number of right-hand sides changes (a new
+// recording) and changes back, after refactorizations with new values (the graph reads
+// the new panels and, for LU, the rows the new pivots moved), and after a new analysis
+// on the same executor; each against the CPU's solve of the same factor.
+TEST_F(CudaBackend, DeviceSolveGraphEqualsTheLaunchesOneByOne) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  struct Problem {
+    std::string name;
+    SparseMatrix a;
+    MatrixType type;
+  };
+  std::vector<Problem> problems;
+  for (index_t n : {1, 2, 3, 5, 733})
+    problems.push_back({"general random " + std::to_string(n),
+                        test::random_sparse(n, 3, test::RandomKind::general, rng),
+                        MatrixType::general});
+  problems.push_back(
+      {"spd random 733", test::random_sparse(733, 3, test::RandomKind::spd, rng), MatrixType::spd});
+  problems.push_back({"kkt 733", test::random_kkt(733, rng), MatrixType::symmetric_indefinite});
+  problems.push_back({"laplacian 22^3", generators::laplacian_3d(22, 22, 22), MatrixType::spd});
+  {
+    SparseMatrix a = expand_symmetric(generators::laplacian_3d(16, 16, 16));
+    for (index_t j = 0; j < a.n_cols; ++j)  // small diagonal: the fronts pivot
+      for (index_t q = a.offsets[j]; q < a.offsets[j + 1]; ++q)
+        if (a.indices[q] == j) a.values[q] *= 0.1;
+    problems.push_back({"general laplacian 16^3", std::move(a), MatrixType::general});
+  }
+  std::uniform_real_distribution<double> u(-1, 1), scale(0.5, 1.5);
+  for (const Problem& pr : problems) {
+    SCOPED_TRACE(pr.name);
+    Options replayed;
+    replayed.num_gpus = 1;
+    replayed.type = pr.type;
+    Options one_by_one = replayed;
+    one_by_one.gpu_solve_graph = false;
+    auto graph_gpu = numeric::make_cuda_executor(replayed);
+    auto plain_gpu = numeric::make_cuda_executor(one_by_one);
+    SparseMatrix a = pr.a;
+    for (int analysis = 0; analysis < 2; ++analysis) {  // the second: a new analysis
+      SCOPED_TRACE("analysis " + std::to_string(analysis));
+      const Analysis an = analyze_matrix(a, replayed);
+      numeric::NumericFactor gf, pf;
+      std::vector<double> garena, parena;
+      for (int values = 0; values < 2; ++values) {  // the second: a refactorization
+        SCOPED_TRACE("values " + std::to_string(values));
+        double pivot = 0;
+        const std::vector<double> v = test::scaled_values(an, a, &pivot);
+        numeric::factorize(an, v, pr.type, pivot, *graph_gpu, gf, garena);
+        numeric::factorize(an, v, pr.type, pivot, *plain_gpu, pf, parena);
+        numeric::NumericFactor host = gf;
+        numeric::fetch_panels(an, *graph_gpu, host);
+        for (index_t nrhs : {1, 1, 3, 1}) {
+          SCOPED_TRACE("nrhs " + std::to_string(nrhs));
+          std::vector<double> b(static_cast<std::size_t>(an.n * nrhs));
+          for (double& x : b) x = u(rng);
+          std::vector<double> xg = b, xp = b, xc = b;
+          ASSERT_TRUE(graph_gpu->solve(an, gf, xg.data(), nrhs)) << "not resident";
+          ASSERT_TRUE(plain_gpu->solve(an, pf, xp.data(), nrhs)) << "not resident";
+          EXPECT_EQ(xg, xp) << "the replayed sweeps differ from the launches one by one";
+          numeric::solve_in_place(an, host, xc.data(), nrhs);
+          EXPECT_LT(test::relative_difference(xg, xc), 1e-9);
+        }
+        // new values, the same pattern (one factor for the SPD ones, which stay SPD)
+        const double common = scale(rng);
+        for (double& x : a.values) x *= pr.type == MatrixType::spd ? common : scale(rng);
+      }
+    }
+  }
+}
+
 // LDLᵀ refactorization on the GPU equals a fresh GPU factorization bitwise.
 TEST_F(CudaBackend, LdltRefactorizationIsDeterministic) {
   auto rng = test::fresh_rng();

@@ -102,7 +102,8 @@ CudaExecutor::CudaExecutor(const Options& o, int device)
       dist_min_rows_(o.distributed_front_min_rows),
       dist_block_(std::max<index_t>(64, o.distributed_front_block_size)),
       potrf_block_(static_cast<int>(o.gpu_potrf_block_size)),
-      recursive_panel_(o.gpu_recursive_panel) {
+      recursive_panel_(o.gpu_recursive_panel),
+      solve_graph_(o.gpu_solve_graph) {
   tiled_.pool_share = o.gpu_tiled_pool_share;
   tiled_.stream_cols = o.gpu_tiled_stream_columns;
   tiled_.prefetch_on = o.gpu_tiled_prefetch;
@@ -130,6 +131,7 @@ CudaExecutor::CudaExecutor(const Options& o, int device)
 CudaExecutor::~CudaExecutor() {
   drop_tiled_prefetch();
   cudaSetDevice(device_);
+  drop_solve_graph();
   for (auto& lp : lanes_) {
     Lane& l = *lp;
     if (l.done) cudaEventDestroy(l.done);

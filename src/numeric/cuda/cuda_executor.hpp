@@ -195,6 +195,15 @@ class CudaExecutor final : public numeric::Executor {
   /// The factor stays on the device only for a whole-tree factorization.
   bool keep_resident() const { return plan_.factor_resident && whole_; }
   void prepare_solve_plan(const Analysis& an);  // cuda_solve.cu
+  /// The device solve's sweeps over the resident factor (everything between the upload
+  /// of the right-hand sides into dsolve_.x and the download of the solutions), enqueued
+  /// on stream_ (cuda_solve.cu).
+  void enqueue_solve_sweeps(const Analysis& an, const numeric::NumericFactor& fac, index_t nrhs);
+  /// What a recorded solve graph read: the analysis, the right-hand sides' count, the
+  /// factor's type and every device buffer the sweeps use (cuda_solve.cu).
+  std::vector<std::uintptr_t> solve_graph_key(const Analysis& an, const numeric::NumericFactor& fac,
+                                              index_t nrhs) const;
+  void drop_solve_graph() noexcept;
   /// Uploads the device solve's row arrays for a factor of `type` whose row indices are
   /// `factor_rows` (laid out as an.tree.rows; index base 0): the rows, each pivot's
   /// position in its front and the row each pivot position holds, and for LDLᵀ D and the
@@ -402,6 +411,7 @@ class CudaExecutor final : public numeric::Executor {
   std::int64_t dist_block_ = 512;                ///< Options::distributed_front_block_size
   int potrf_block_ = 0;                          ///< Options::gpu_potrf_block_size
   bool recursive_panel_ = true;                  ///< Options::gpu_recursive_panel
+  bool solve_graph_ = true;                      ///< Options::gpu_solve_graph
   std::uint64_t analysis_id_ = 0;
   DevicePlan plan_;
   // analysis arrays (fronts_: the whole tree's schedule, for the device solve)
@@ -472,6 +482,10 @@ class CudaExecutor final : public numeric::Executor {
     SolvePlan plan;  ///< per analysis, and its copy below
     DeviceBuffer<std::int64_t> plan_u_offset, inv_offsets, inv_src, chunk_front, chunk_row,
         small_fronts;
+    /// The sweeps of a solve recorded as a CUDA graph (Options::gpu_solve_graph) and
+    /// replayed, one launch per solve, while graph_key (solve_graph_key) is unchanged.
+    cudaGraphExec_t graph = nullptr;
+    std::vector<std::uintptr_t> graph_key;
   } dsolve_;
   // statistics of the last factorization
   std::size_t bytes_h2d_ = 0, bytes_d2h_ = 0;

@@ -5,6 +5,17 @@
 // again per step, so each step moves only 2·n·nrhs doubles. When the factor is not
 // resident the executor declines and the host solve runs.
 //
+// The sweeps are a fixed sequence of launches for a given analysis and number of
+// right-hand sides (two levels' worth of gather, small-front and scatter launches per
+// level and a few library calls per large front, a few hundred on the multibody
+// matrices); with Options::gpu_solve_graph they are recorded once as a CUDA graph and
+// replayed with one launch per solve, which removes the host's cost per launch and the
+// gaps between them on the device (CUDA C++ Programming Guide, "CUDA Graphs"). The graph
+// holds the device pointers of the solve that recorded it: it is replayed only while the
+// analysis, nrhs, the factor's type and every buffer it reads are the same
+// (solve_graph_key), and recorded again otherwise. The values in those buffers (a new
+// factorization's panels, its rows after pivoting) are read when it runs.
+//
 // Per level (solve_kernels.cuh): one gather launch, one launch for the level's many
 // small fronts (a thread block each), cuBLAS for its few large ones (TRSV/GEMV for one
 // right-hand side, TRSM/GEMM for several, all right-hand sides at once), one scatter
@@ -79,16 +90,90 @@ bool CudaExecutor::solve(const Analysis& an, const numeric::NumericFactor& fac, 
   if (an.n == 0 || nrhs == 0) return true;
   STRATA_CUDA(cudaSetDevice(device_));
   prepare_solve_plan(an);
+  const std::size_t nx = static_cast<std::size_t>(an.n) * nrhs;
+  dsolve_.x.upload(x, nx, stream_);
+  const std::int64_t u_total = dsolve_.plan.u_offset.back();
+  dsolve_.u.resize(std::max<std::size_t>(static_cast<std::size_t>(u_total) * nrhs, 1));
+  dsolve_.scratch.resize(std::max<std::size_t>(an.tree.rows.size() * nrhs, 1));
+  if (!solve_graph_) {
+    enqueue_solve_sweeps(an, fac, nrhs);
+  } else {
+    std::vector<std::uintptr_t> key = solve_graph_key(an, fac, nrhs);
+    if (!dsolve_.graph || key != dsolve_.graph_key) {
+      drop_solve_graph();
+      // Recorded, not run: the kernels and library calls of the sweeps become the graph's
+      // nodes with the pointers and sizes of this solve, which the key lists. Relaxed
+      // capture mode: cuBLAS may set up its workspace in its first call. A failure ends the
+      // capture before it is reported, so the stream stays usable.
+      STRATA_CUDA(cudaStreamBeginCapture(stream_, cudaStreamCaptureModeRelaxed));
+      cudaGraph_t g = nullptr;
+      try {
+        enqueue_solve_sweeps(an, fac, nrhs);
+      } catch (...) {
+        if (cudaStreamEndCapture(stream_, &g) == cudaSuccess && g) cudaGraphDestroy(g);
+        (void)cudaGetLastError();
+        throw;
+      }
+      STRATA_CUDA(cudaStreamEndCapture(stream_, &g));
+      const cudaError_t e = cudaGraphInstantiate(&dsolve_.graph, g, 0);
+      cudaGraphDestroy(g);
+      if (e != cudaSuccess) {
+        dsolve_.graph = nullptr;
+        STRATA_CUDA(e);
+      }
+      dsolve_.graph_key = std::move(key);
+    }
+    STRATA_CUDA(cudaGraphLaunch(dsolve_.graph, stream_));
+  }
+  STRATA_CUDA(
+      cudaMemcpyAsync(x, dsolve_.x.data(), sizeof(double) * nx, cudaMemcpyDeviceToHost, stream_));
+  STRATA_CUDA(cudaStreamSynchronize(stream_));
+  return true;
+}
+
+std::vector<std::uintptr_t> CudaExecutor::solve_graph_key(const Analysis& an,
+                                                          const numeric::NumericFactor& fac,
+                                                          index_t nrhs) const {
+  auto ptr = [](const void* p) { return reinterpret_cast<std::uintptr_t>(p); };
+  return {static_cast<std::uintptr_t>(an.id),
+          static_cast<std::uintptr_t>(nrhs),
+          static_cast<std::uintptr_t>(fac.type),
+          ptr(n_rows_.data()),
+          ptr(n_pivots_.data()),
+          ptr(panels_.data()),
+          ptr(dsolve_.row_offsets.data()),
+          ptr(dsolve_.first_pivot.data()),
+          ptr(dsolve_.rows.data()),
+          ptr(dsolve_.pivot_row.data()),
+          ptr(dsolve_.panel_offset.data()),
+          ptr(dsolve_.pivot_size.data()),
+          ptr(dsolve_.d_diag.data()),
+          ptr(dsolve_.d_off.data()),
+          ptr(dsolve_.x.data()),
+          ptr(dsolve_.u.data()),
+          ptr(dsolve_.scratch.data()),
+          ptr(dsolve_.plan_u_offset.data()),
+          ptr(dsolve_.inv_offsets.data()),
+          ptr(dsolve_.inv_src.data()),
+          ptr(dsolve_.chunk_front.data()),
+          ptr(dsolve_.chunk_row.data()),
+          ptr(dsolve_.small_fronts.data())};
+}
+
+void CudaExecutor::drop_solve_graph() noexcept {
+  if (dsolve_.graph) cudaGraphExecDestroy(dsolve_.graph);
+  dsolve_.graph = nullptr;
+  dsolve_.graph_key.clear();
+}
+
+void CudaExecutor::enqueue_solve_sweeps(const Analysis& an, const numeric::NumericFactor& fac,
+                                        index_t nrhs) {
   const auto& t = an.tree;
   const SolvePlan& p = dsolve_.plan;
   const bool lu = fac.type == MatrixType::general;
   const bool ldlt = fac.type == MatrixType::symmetric_indefinite;
   const bool unit = lu || ldlt;
-  const std::size_t nx = static_cast<std::size_t>(an.n) * nrhs;
-  dsolve_.x.upload(x, nx, stream_);
   const std::int64_t u_total = p.u_offset.back();
-  dsolve_.u.resize(std::max<std::size_t>(static_cast<std::size_t>(u_total) * nrhs, 1));
-  dsolve_.scratch.resize(std::max<std::size_t>(t.rows.size() * nrhs, 1));
   SolveTree st{n_rows_.data(),
                n_pivots_.data(),
                dsolve_.row_offsets.data(),
@@ -139,9 +224,6 @@ bool CudaExecutor::solve(const Analysis& an, const numeric::NumericFactor& fac, 
       });
     launch_scatter_backward(st, chunks, c0, nc, X, S, nrhs, lu, stream_);
   }
-  STRATA_CUDA(cudaMemcpyAsync(x, X, sizeof(double) * nx, cudaMemcpyDeviceToHost, stream_));
-  STRATA_CUDA(cudaStreamSynchronize(stream_));
-  return true;
 }
 
 }  // namespace strata::cuda
