@@ -206,6 +206,74 @@ TEST(SubtreeSolve, LargePivotBlocksByColumnBlocksMatchTrsv) {
   }
 }
 
+// A plan of a set of whole subtrees (an MPI rank's, distributed/numeric.cpp): it covers
+// exactly the set, its forward and backward halves with the rest of the tree solved in
+// order around them (forward: the set, then the other fronts; backward: the other fronts,
+// then the set) equal the sequential solve to rounding and each other bitwise for every
+// thread count; a set that is not a union of subtrees, or of the wrong size, is refused.
+TEST(SubtreeSolve, PlanOfSomeSubtreesSolvesTheirFronts) {
+  auto rng = test::fresh_rng();
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (const Problem& pr : problems(rng)) {
+    SCOPED_TRACE(pr.name);
+    const Options o = pr.options();
+    const Analysis an = analyze_matrix(pr.a, o);
+    const auto& t = an.tree;
+    const index_t nf = t.n_fronts();
+    // the set: the subtrees of a random half of the fronts (each with its descendants)
+    std::vector<char> in(nf, 0);
+    std::bernoulli_distribution pick(0.5);
+    for (index_t f = nf - 1; f >= 0; --f)  // parents after children: mark downwards
+      if (pick(rng) || (t.parent[f] >= 0 && in[t.parent[f]])) in[f] = 1;
+    const numeric::SubtreeSolvePlan plan = numeric::plan_subtree_solve(an, &in);
+    std::vector<int> seen(nf, 0);
+    for (const auto& [lo, hi] : plan.subtrees)
+      for (index_t f = lo; f <= hi; ++f) ++seen[f];
+    for (const index_t f : plan.top) ++seen[f];
+    for (index_t f = 0; f < nf; ++f) EXPECT_EQ(seen[f], in[f] ? 1 : 0) << "front " << f;
+    double pivot = 0;
+    const std::vector<double> v = test::scaled_values(an, pr.a, &pivot);
+    const auto exec = numeric::make_cpu_executor(1);
+    numeric::NumericFactor fac;
+    std::vector<double> arena;
+    numeric::factorize(an, v, pr.type, pivot, *exec, fac, arena);
+    const index_t n = an.n, nrhs = 2;
+    std::vector<double> b(static_cast<std::size_t>(n) * nrhs);
+    for (double& x : b) x = u(rng);
+    std::vector<double> seq = b;
+    numeric::solve_in_place(an, fac, seq.data(), nrhs);
+    std::vector<double> first;
+    for (const int threads : {1, 2, 3}) {
+      tbb::task_arena ta(threads);
+      std::vector<double> x = b, w;
+      numeric::forward_by_subtrees(an, fac, plan, x.data(), nrhs, ta, 2);
+      for (index_t f = 0; f < nf; ++f)
+        if (!in[f]) numeric::forward_front(an, fac, f, x.data(), nrhs, w);
+      for (index_t f = 0; f < nf; ++f) numeric::diagonal_front(an, fac, f, x.data(), nrhs);
+      for (index_t f = nf - 1; f >= 0; --f)
+        if (!in[f]) numeric::backward_front(an, fac, f, x.data(), nrhs, w);
+      numeric::backward_by_subtrees(an, fac, plan, x.data(), nrhs, ta, 2);
+      if (first.empty()) {
+        first = x;
+        EXPECT_LT(test::relative_difference(x, seq), 1e-8);
+      } else {
+        EXPECT_EQ(x, first) << threads << " threads";
+      }
+    }
+    if (nf > 1) {  // a front in the set whose child is not
+      std::vector<char> broken(nf, 0);
+      for (index_t f = 0; f < nf; ++f)
+        if (t.parent[f] >= 0) {
+          broken[t.parent[f]] = 1;
+          break;
+        }
+      EXPECT_THROW(numeric::plan_subtree_solve(an, &broken), InternalError);
+    }
+    std::vector<char> short_set(nf + 1, 0);
+    EXPECT_THROW(numeric::plan_subtree_solve(an, &short_set), InternalError);
+  }
+}
+
 TEST(SubtreeSolve, RefusesThePlanOfAnotherAnalysis) {
   const SparseMatrix a = generators::laplacian_3d(6, 6, 6);
   Options o;
