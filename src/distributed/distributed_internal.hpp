@@ -12,7 +12,6 @@
 #include "analysis/analysis.hpp"
 #include "distributed/comm.hpp"
 #include "numeric/factor.hpp"
-#include "numeric/subtree_solve.hpp"
 #include "strata/distributed.hpp"
 #include "strata/solver.hpp"
 
@@ -87,14 +86,6 @@ struct NumericState {
   std::vector<std::vector<index_t>> value_positions;
   RankStats stats;    ///< this rank's figures of the current phases
   bool nccl = false;  ///< contribution blocks between GPUs through NCCL
-  /// The host solve (solve_part): this rank's subtrees cut for its threads, and on rank 0
-  /// the top part's fronts as a plan's top; made once per analysis. Threads:
-  /// Options::num_threads (0: all), BLAS threads of the large top fronts the same unless
-  /// Options::reproducible.
-  numeric::SubtreeSolvePlan solve_plan, top_plan;
-  int solve_threads = 1;
-  bool reproducible = false;
-  std::unique_ptr<tbb::task_arena> solve_arena;
   std::shared_ptr<NcclContext> nccl_context;
 };
 

@@ -73,11 +73,6 @@ void setup_numeric(DistributedState& s, Analysis& an, int per_rank) {
     localize_factor_layout(an, ns.layout);
     ns.executors.clear();
     ns.arenas.clear();
-    ns.solve_threads = s.options.num_threads;
-    ns.reproducible = s.options.reproducible;
-    ns.solve_arena.reset();
-    ns.solve_plan = numeric::SubtreeSolvePlan{};
-    ns.top_plan = numeric::SubtreeSolvePlan{};
     ns.blocks = numeric::BlockBuffers{};
     const bool gpu = wants_gpu(s);
     const int visible = gpu ? numeric::cuda_device_count() : 0;

@@ -15,13 +15,9 @@
 // update to them; the updates are summed onto rank 0 (one reduction over the top part's
 // rows), which runs forward, diagonal and backward substitution on the top part; the top
 // part's solution goes back to every rank (one broadcast), which finishes the backward
-// substitution on its fronts; the subtree pivots' solution is gathered on rank 0. Within
-// a rank its subtrees run over its threads as the one-process host solve does
-// (numeric/subtree_solve.hpp), the top part's large fronts with threaded BLAS. Volume
+// substitution on its fronts; the subtree pivots' solution is gathered on rank 0. Volume
 // per solve: n·nrhs doubles in the scatter and gather together, plus 2·(ranks − 1)·(top
 // rows)·nrhs in the reduction and the broadcast.
-#include <tbb/task_arena.h>
-
 #include <algorithm>
 #include <cstring>
 
@@ -132,7 +128,8 @@ void factor_part(detail::CommImpl& comm, NumericState& ns, const Analysis& an,
           throw InternalError("rank " + std::to_string(r) +
                               " sent pivot statistics of the wrong size");
         for (std::size_t k = 0; k < fr.size(); ++k)
-          std::memcpy(&factor.front_stats[fr[k]], all[r].data() + k * sizeof(numeric::PivotStats),
+          std::memcpy(&factor.front_stats[fr[k]],
+                      all[r].data() + k * sizeof(numeric::PivotStats),
                       sizeof(numeric::PivotStats));
       }
   };
@@ -160,24 +157,8 @@ void solve_part(detail::CommImpl& comm, NumericState& ns, const Analysis& an,
   const RankLayout& l = ns.layout;
   const int rank = comm.rank(), ranks = l.ranks;
   const index_t n = an.n;
-  const auto& tf = an.partition.top.fronts;
-  // this rank's subtrees over its threads, the top part's large fronts with BLAS threads
-  // (numeric/subtree_solve.hpp): made once per analysis
-  if (ns.solve_plan.analysis_id != an.id) {
-    std::vector<char> mine(an.tree.n_fronts(), 0);
-    for (const index_t f : l.my_fronts) mine[f] = 1;
-    ns.solve_plan = numeric::plan_subtree_solve(an, &mine);
-    ns.top_plan = numeric::SubtreeSolvePlan{};
-    ns.top_plan.analysis_id = an.id;
-    ns.top_plan.row_slot.assign(an.tree.rows.size(), -1);
-    if (rank == 0) ns.top_plan.top.assign(tf.begin(), tf.end());
-  }
-  if (!ns.solve_arena) {
-    const int threads = ns.solve_threads > 0 ? ns.solve_threads : tbb::task_arena::automatic;
-    ns.solve_arena = std::make_unique<tbb::task_arena>(threads);
-  }
-  tbb::task_arena& arena = *ns.solve_arena;
-  const int blas = ns.reproducible ? 1 : arena.max_concurrency();
+  std::vector<double> w;
+  openblas_set_num_threads(1);
 
   // 1. the right-hand side of each rank's subtree pivots to that rank
   {
@@ -205,7 +186,7 @@ void solve_part(detail::CommImpl& comm, NumericState& ns, const Analysis& an,
     }
   }
   // 2. forward substitution over this rank's fronts
-  numeric::forward_by_subtrees(an, factor, ns.solve_plan, x, nrhs, arena, blas);
+  for (const index_t f : l.my_fronts) numeric::forward_front(an, factor, f, x, nrhs, w);
   // 3. the updates to the top part's rows summed onto rank 0
   const std::size_t nt = l.top_cols.size();
   std::vector<double> top(nt * nrhs);
@@ -222,19 +203,20 @@ void solve_part(detail::CommImpl& comm, NumericState& ns, const Analysis& an,
   // 4. the top part on rank 0
   if (rank == 0) {
     unpack_top();
-    numeric::forward_by_subtrees(an, factor, ns.top_plan, x, nrhs, arena, blas);
-    if (factor.type == MatrixType::symmetric_indefinite)
-      for (const index_t f : tf) numeric::diagonal_front(an, factor, f, x, nrhs);
-    numeric::backward_by_subtrees(an, factor, ns.top_plan, x, nrhs, arena, blas);
+    const auto& tf = an.partition.top.fronts;
+    for (const index_t f : tf) numeric::forward_front(an, factor, f, x, nrhs, w);
+    for (const index_t f : tf) numeric::diagonal_front(an, factor, f, x, nrhs);
+    for (auto it = tf.rbegin(); it != tf.rend(); ++it)
+      numeric::backward_front(an, factor, *it, x, nrhs, w);
     pack_top();
   }
   // 5. the top part's solution to every rank
   comm.broadcast(top.data(), sizeof(double) * top.size(), 0);
   if (rank != 0) unpack_top();
   // 6. diagonal and backward substitution over this rank's fronts
-  if (factor.type == MatrixType::symmetric_indefinite)
-    for (const index_t f : l.my_fronts) numeric::diagonal_front(an, factor, f, x, nrhs);
-  numeric::backward_by_subtrees(an, factor, ns.solve_plan, x, nrhs, arena, blas);
+  for (const index_t f : l.my_fronts) numeric::diagonal_front(an, factor, f, x, nrhs);
+  for (auto it = l.my_fronts.rbegin(); it != l.my_fronts.rend(); ++it)
+    numeric::backward_front(an, factor, *it, x, nrhs, w);
   // 7. the subtree pivots' solution gathered on rank 0
   {
     std::vector<std::vector<double>> piece(ranks);

@@ -19,7 +19,7 @@ constexpr std::size_t kThreadedTopEntries = std::size_t{1} << 20;
 
 }  // namespace
 
-SubtreeSolvePlan plan_subtree_solve(const Analysis& an, const std::vector<char>* fronts) {
+SubtreeSolvePlan plan_subtree_solve(const Analysis& an) {
   const auto& t = an.tree;
   const index_t nf = t.n_fronts();
   const bool lu = !an.symmetric;
@@ -27,42 +27,30 @@ SubtreeSolvePlan plan_subtree_solve(const Analysis& an, const std::vector<char>*
   p.analysis_id = an.id;
   p.row_slot.assign(t.rows.size(), -1);
   if (nf == 0) return p;
-  if (fronts && fronts->size() != static_cast<std::size_t>(nf))
-    throw InternalError("plan_subtree_solve: the front set has " + std::to_string(fronts->size()) +
-                        " entries for " + std::to_string(nf) + " fronts");
-  auto in = [&](index_t f) { return !fronts || (*fronts)[f] != 0; };
   // work of each subtree (the panel entries the solve reads) and its first front
   std::vector<double> work(nf, 0.0);
   std::vector<index_t> first(nf);
   std::iota(first.begin(), first.end(), index_t{0});
   double total = 0;
   for (index_t f = 0; f < nf; ++f) {  // children come before their parent
-    if (!in(f)) continue;
     work[f] += static_cast<double>(panel_size(t, f, lu));
     total += static_cast<double>(panel_size(t, f, lu));
     const index_t q = t.parent[f];
-    if (q >= 0 && in(q)) {
+    if (q >= 0) {
       work[q] += work[f];
       first[q] = std::min(first[q], first[f]);
     }
   }
-  // a set of whole subtrees: every child of a front in it is in it
-  for (index_t f = 0; f < nf; ++f)
-    if (!in(f) && t.parent[f] >= 0 && in(t.parent[f]))
-      throw InternalError("plan_subtree_solve: front " + std::to_string(t.parent[f]) +
-                          " is in the set and its child " + std::to_string(f) + " is not");
   const double limit = total / kSolveSubtrees;
   std::vector<char> in_subtree(nf, 0);
   for (index_t f = 0; f < nf; ++f) {
-    if (!in(f)) continue;
     const index_t q = t.parent[f];
-    if (work[f] <= limit && (q < 0 || !in(q) || work[q] > limit))
-      p.subtrees.emplace_back(first[f], f);
+    if (work[f] <= limit && (q < 0 || work[q] > limit)) p.subtrees.emplace_back(first[f], f);
   }
   for (const auto& [lo, hi] : p.subtrees)
     std::fill(in_subtree.begin() + lo, in_subtree.begin() + hi + 1, 1);
   for (index_t f = 0; f < nf; ++f)
-    if (in(f) && !in_subtree[f]) p.top.push_back(f);
+    if (!in_subtree[f]) p.top.push_back(f);
   // each subtree's rows outside it (its pivots are the contiguous range of its fronts')
   std::vector<index_t> slot_of(an.n, -1), stamp(an.n, -1);
   for (std::size_t s = 0; s < p.subtrees.size(); ++s) {
@@ -94,31 +82,12 @@ SubtreeSolvePlan plan_subtree_solve(const Analysis& an, const std::vector<char>*
   return p;
 }
 
-namespace {
-
-void check_plan(const Analysis& an, const SubtreeSolvePlan& plan, const char* who) {
+void solve_by_subtrees(const Analysis& an, const NumericFactor& fac, const SubtreeSolvePlan& plan,
+                       double* x, index_t nrhs, tbb::task_arena& arena, int top_blas_threads) {
   if (plan.analysis_id != an.id || plan.row_slot.size() != an.tree.rows.size())
-    throw InternalError(std::string(who) + ": the plan was made for another analysis");
-}
-
-// Runs step(f) for a front of the plan's top, a large one with top_blas_threads BLAS
-// threads (the BLAS is at one thread around it).
-template <class Step>
-void top_front(const Analysis& an, const NumericFactor& fac, index_t f, int top_blas_threads,
-               Step&& step) {
-  const bool big = top_blas_threads > 1 &&
-                   panel_size(an.tree, f, fac.type == MatrixType::general) >= kThreadedTopEntries;
-  if (big) openblas_set_num_threads(top_blas_threads);
-  step(f);
-  if (big) openblas_set_num_threads(1);
-}
-
-}  // namespace
-
-void forward_by_subtrees(const Analysis& an, const NumericFactor& fac, const SubtreeSolvePlan& plan,
-                         double* x, index_t nrhs, tbb::task_arena& arena, int top_blas_threads) {
-  check_plan(an, plan, "forward_by_subtrees");
+    throw InternalError("solve_by_subtrees: the plan was made for another analysis");
   const auto& t = an.tree;
+  const bool lu = fac.type == MatrixType::general;
   const index_t n = an.n;
   const int ns = static_cast<int>(plan.subtrees.size());
   const std::size_t slots = plan.slot_row.size();
@@ -128,6 +97,12 @@ void forward_by_subtrees(const Analysis& an, const NumericFactor& fac, const Sub
     return delta.data() + static_cast<std::size_t>(plan.slot_offsets[s]) * nrhs;
   };
   openblas_set_num_threads(1);
+  auto top_front = [&](index_t f, auto&& step) {
+    const bool big = top_blas_threads > 1 && panel_size(t, f, lu) >= kThreadedTopEntries;
+    if (big) openblas_set_num_threads(top_blas_threads);
+    step(f);
+    if (big) openblas_set_num_threads(1);
+  };
   arena.execute([&] {
     tbb::parallel_for(0, ns, 1, [&](int s) {
       std::vector<double> w;
@@ -146,20 +121,11 @@ void forward_by_subtrees(const Analysis& an, const NumericFactor& fac, const Sub
   }
   std::vector<double> w;
   for (const index_t f : plan.top)
-    top_front(an, fac, f, top_blas_threads,
-              [&](index_t g) { forward_front(an, fac, g, x, nrhs, w); });
-}
-
-void backward_by_subtrees(const Analysis& an, const NumericFactor& fac,
-                          const SubtreeSolvePlan& plan, double* x, index_t nrhs,
-                          tbb::task_arena& arena, int top_blas_threads) {
-  check_plan(an, plan, "backward_by_subtrees");
-  openblas_set_num_threads(1);
-  std::vector<double> w;
+    top_front(f, [&](index_t g) { forward_front(an, fac, g, x, nrhs, w); });
+  if (fac.type == MatrixType::symmetric_indefinite)
+    for (index_t f = 0; f < t.n_fronts(); ++f) diagonal_front(an, fac, f, x, nrhs);
   for (auto it = plan.top.rbegin(); it != plan.top.rend(); ++it)
-    top_front(an, fac, *it, top_blas_threads,
-              [&](index_t g) { backward_front(an, fac, g, x, nrhs, w); });
-  const int ns = static_cast<int>(plan.subtrees.size());
+    top_front(*it, [&](index_t g) { backward_front(an, fac, g, x, nrhs, w); });
   arena.execute([&] {
     tbb::parallel_for(0, ns, 1, [&](int s) {
       std::vector<double> wb;
@@ -167,15 +133,6 @@ void backward_by_subtrees(const Analysis& an, const NumericFactor& fac,
       for (index_t f = hi; f >= lo; --f) backward_front(an, fac, f, x, nrhs, wb);
     });
   });
-}
-
-void solve_by_subtrees(const Analysis& an, const NumericFactor& fac, const SubtreeSolvePlan& plan,
-                       double* x, index_t nrhs, tbb::task_arena& arena, int top_blas_threads) {
-  check_plan(an, plan, "solve_by_subtrees");
-  forward_by_subtrees(an, fac, plan, x, nrhs, arena, top_blas_threads);
-  if (fac.type == MatrixType::symmetric_indefinite)
-    for (index_t f = 0; f < an.tree.n_fronts(); ++f) diagonal_front(an, fac, f, x, nrhs);
-  backward_by_subtrees(an, fac, plan, x, nrhs, arena, top_blas_threads);
 }
 
 }  // namespace strata::numeric

@@ -51,13 +51,8 @@ struct SubtreeSolvePlan {
   std::vector<index_t> row_slot;
 };
 
-/// The plan of `an` (see SubtreeSolvePlan). With `fronts` (per front, nonzero: in the
-/// set), the plan of that set alone, which must hold whole subtrees (every child of a
-/// front in it; an MPI rank's subtrees, distributed/numeric.cpp): the cut as above within
-/// it, `top` its fronts above the cut; the fronts outside are in no part of the plan.
-/// O(fronts + front rows) time and memory. InternalError for a set of another size or
-/// one that is not a union of subtrees.
-SubtreeSolvePlan plan_subtree_solve(const Analysis& an, const std::vector<char>* fronts = nullptr);
+/// The plan of `an` (see SubtreeSolvePlan). O(fronts + front rows) time and memory.
+SubtreeSolvePlan plan_subtree_solve(const Analysis& an);
 
 /// Solves with the factor as solve_in_place (x: tree numbering, n × nrhs column-major,
 /// the right-hand sides in and the solutions out), the subtrees of `plan` (made for `an`)
@@ -67,17 +62,5 @@ SubtreeSolvePlan plan_subtree_solve(const Analysis& an, const std::vector<char>*
 /// InternalError when the plan was made for another analysis.
 void solve_by_subtrees(const Analysis& an, const NumericFactor& fac, const SubtreeSolvePlan& plan,
                        double* x, index_t nrhs, tbb::task_arena& arena, int top_blas_threads);
-
-/// The forward half of solve_by_subtrees over the fronts of `plan` (the subtrees over the
-/// threads, their updates of the rows outside them added in subtree order, then the top
-/// fronts in order); x's rows outside the plan receive the updates of its fronts.
-void forward_by_subtrees(const Analysis& an, const NumericFactor& fac, const SubtreeSolvePlan& plan,
-                         double* x, index_t nrhs, tbb::task_arena& arena, int top_blas_threads);
-/// The backward half: the top fronts in reverse order, then the subtrees over the threads;
-/// reads x's rows outside the plan (solved before). For LDLᵀ the diagonal solve
-/// (diagonal_front) of the plan's fronts comes between the halves, by the caller.
-void backward_by_subtrees(const Analysis& an, const NumericFactor& fac,
-                          const SubtreeSolvePlan& plan, double* x, index_t nrhs,
-                          tbb::task_arena& arena, int top_blas_threads);
 
 }  // namespace strata::numeric
