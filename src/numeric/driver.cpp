@@ -117,9 +117,15 @@ class MultiWorkerDriver final : public NumericDriver {
   void factorize(const Analysis& an, const std::vector<double>& scaled_values, MatrixType type,
                  double static_pivot, NumericFactor& factor) override {
     const std::vector<Executor*> execs = executors();
+    devices_.clear();
+    if (execs.size() == 1 && an.partition.part_id.empty()) {
+      // an analysis for one worker is not split into parts: the whole tree on that worker
+      arenas_.resize(1);
+      numeric::factorize(an, scaled_values, type, static_pivot, *execs[0], factor, arenas_[0]);
+      return;
+    }
     MultiWorkerConfig config = config_;
     config.block_buffers = &blocks_;
-    devices_.clear();
     factorize_multi(an, scaled_values, type, static_pivot, execs, factor, arenas_, config,
                     &devices_);
   }

@@ -768,6 +768,47 @@ TEST(NumericDrivers, TreeAndMultiWorkerDriversAgree) {
   EXPECT_THROW(numeric::make_multi_worker_driver(o, 2, -1, {}), InvalidInput);
 }
 
+// One host worker (DistributedSolver's single rank with host workers, bench_distributed
+// --backend cpu under `mpirun -n 1`): the analysis for one worker is not split, and the
+// multi-worker driver factors the whole tree on its worker — the tree driver's factor
+// with an executor of the same threads, bitwise — for every type, through the Solver too,
+// against a dense solve. Sizes 1, 2, 3, 5, 733 and a 3D grid.
+TEST(NumericDrivers, OneHostWorkerFactorsTheWholeTree) {
+  auto rng = test::fresh_rng();
+  std::vector<std::pair<std::string, SparseMatrix>> ms;
+  for (const index_t n : {1, 2, 3, 5, 733})
+    ms.emplace_back("general " + std::to_string(n),
+                    test::random_sparse(n, 3, test::RandomKind::general, rng));
+  ms.emplace_back("lap3d 9x8x7", generators::laplacian_3d(9, 8, 7));
+  for (const auto& [name, a] : ms) {
+    SCOPED_TRACE(name);
+    const MatrixType type = a.storage == Storage::full ? MatrixType::general : MatrixType::spd;
+    Options o;
+    o.type = type;
+    o.num_threads = 2;
+    const Analysis an = analyze_matrix(a, o, 1);
+    ASSERT_TRUE(an.partition.part_id.empty());
+    double pivot = 0;
+    const std::vector<double> v = test::scaled_values(an, a, &pivot);
+    auto tree = numeric::make_tree_driver(o);
+    auto multi = numeric::make_multi_worker_driver(o, 1, 2, {});
+    numeric::NumericFactor one, many;
+    tree->factorize(an, v, type, pivot, one);
+    multi->factorize(an, v, type, pivot, many);
+    expect_same_factor(one, many);
+    Solver s(o);
+    SolverAccess::use_host_workers(s, 1, 2);
+    s.factorize(a);
+    std::vector<double> b(a.n_rows);
+    std::uniform_real_distribution<double> u(-1, 1);
+    for (double& e : b) e = u(rng);
+    const auto x = s.solve(b);
+    std::vector<double> xd = b;
+    if (!test::dense_solve(test::to_dense(a), a.n_rows, xd, 1)) continue;  // a singular draw
+    EXPECT_LE(test::backward_error(a, x.data(), b.data()), 1e-12);
+  }
+}
+
 // Pivoting::automatic with several workers in one process (GPUs, here CPU executors):
 // values whose matching is stale (a dominant diagonal at analysis, a zero one refactorized)
 // need static pivots in the analysis's order; the delayed factorization then takes over on
