@@ -1033,6 +1033,24 @@ TEST_F(CudaBackend, AutomaticRunsLdltOnGpu) {
   }
 }
 
+// A problem of the device-solve tests.
+struct SolveProblem {
+  std::string name;
+  SparseMatrix a;
+  MatrixType type;
+};
+
+// A k³ Laplacian with unsymmetric values (off-diagonals scaled by U(0.5, 1.5)) and its
+// diagonal at a tenth: an LU whose fronts interchange rows.
+SparseMatrix pivoting_laplacian(index_t k, std::mt19937_64& rng) {
+  SparseMatrix a = expand_symmetric(generators::laplacian_3d(k, k, k));
+  std::uniform_real_distribution<double> u(0.5, 1.5);
+  for (index_t j = 0; j < a.n_cols; ++j)
+    for (index_t q = a.offsets[j]; q < a.offsets[j + 1]; ++q)
+      a.values[q] *= a.indices[q] == j ? 0.1 : u(rng);
+  return a;
+}
+
 // The device solve (factor resident) against the CPU solve with the same factor, without
 // iterative refinement to hide a wrong answer: LLᵀ, LDLᵀ with 2×2 pivots, LU with row
 // pivoting; 1, 2 and 5 right-hand sides; awkward orders (small fronts, block path) and
@@ -1041,12 +1059,7 @@ TEST_F(CudaBackend, DeviceSolveMatchesCpuSolve) {
   unsigned long long seed = 0;
   auto rng = test::fresh_rng(&seed);
   SCOPED_TRACE("seed " + std::to_string(seed));
-  struct Problem {
-    std::string name;
-    SparseMatrix a;
-    MatrixType type;
-  };
-  std::vector<Problem> problems;
+  std::vector<SolveProblem> problems;
   for (index_t n : {1, 2, 3, 5, 733}) {
     problems.push_back({"spd random " + std::to_string(n),
                         test::random_sparse(n, 3, test::RandomKind::spd, rng), MatrixType::spd});
@@ -1065,16 +1078,9 @@ TEST_F(CudaBackend, DeviceSolveMatchesCpuSolve) {
   }
   problems.push_back(
       {"elasticity KKT", elasticity_kkt(8, 200, rng), MatrixType::symmetric_indefinite});
-  {
-    SparseMatrix a = expand_symmetric(generators::laplacian_3d(20, 20, 20));
-    std::uniform_real_distribution<double> u(0.5, 1.5);
-    for (index_t j = 0; j < a.n_cols; ++j)  // unsymmetric values, small diagonal: row pivoting
-      for (index_t q = a.offsets[j]; q < a.offsets[j + 1]; ++q)
-        a.values[q] *= a.indices[q] == j ? 0.1 : u(rng);
-    problems.push_back({"general laplacian 20^3", std::move(a), MatrixType::general});
-  }
+  problems.push_back({"general laplacian 20^3", pivoting_laplacian(20, rng), MatrixType::general});
   bool saw_large = false;
-  for (const Problem& pr : problems) {
+  for (const SolveProblem& pr : problems) {
     SCOPED_TRACE(pr.name);
     Options o;
     o.num_gpus = 1;  // one GPU, whatever the machine has
@@ -1116,12 +1122,7 @@ TEST_F(CudaBackend, DeviceSolveGraphEqualsTheLaunchesOneByOne) {
   unsigned long long seed = 0;
   auto rng = test::fresh_rng(&seed);
   SCOPED_TRACE("seed " + std::to_string(seed));
-  struct Problem {
-    std::string name;
-    SparseMatrix a;
-    MatrixType type;
-  };
-  std::vector<Problem> problems;
+  std::vector<SolveProblem> problems;
   for (index_t n : {1, 2, 3, 5, 733})
     problems.push_back({"general random " + std::to_string(n),
                         test::random_sparse(n, 3, test::RandomKind::general, rng),
@@ -1130,16 +1131,9 @@ TEST_F(CudaBackend, DeviceSolveGraphEqualsTheLaunchesOneByOne) {
       {"spd random 733", test::random_sparse(733, 3, test::RandomKind::spd, rng), MatrixType::spd});
   problems.push_back({"kkt 733", test::random_kkt(733, rng), MatrixType::symmetric_indefinite});
   problems.push_back({"laplacian 22^3", generators::laplacian_3d(22, 22, 22), MatrixType::spd});
-  {
-    SparseMatrix a = expand_symmetric(generators::laplacian_3d(16, 16, 16));
-    std::uniform_real_distribution<double> u(0.5, 1.5);
-    for (index_t j = 0; j < a.n_cols; ++j)  // unsymmetric values, small diagonal: row pivoting
-      for (index_t q = a.offsets[j]; q < a.offsets[j + 1]; ++q)
-        a.values[q] *= a.indices[q] == j ? 0.1 : u(rng);
-    problems.push_back({"general laplacian 16^3", std::move(a), MatrixType::general});
-  }
+  problems.push_back({"general laplacian 16^3", pivoting_laplacian(16, rng), MatrixType::general});
   std::uniform_real_distribution<double> u(-1, 1), scale(0.9, 1.1);
-  for (const Problem& pr : problems) {
+  for (const SolveProblem& pr : problems) {
     SCOPED_TRACE(pr.name);
     Options replayed;
     replayed.num_gpus = 1;
