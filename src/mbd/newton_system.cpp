@@ -336,16 +336,17 @@ void NewtonSystem::build_slot_sums() {
   // every slot's target, in slot order, then grouped by target keeping that order
   // (a counting sort, stable)
   auto group = [](const std::vector<index_t>& target_of, index_t targets, SlotSums& sums) {
-    std::vector<std::size_t> count(static_cast<std::size_t>(targets) + 1, 0);
-    for (index_t t : target_of) ++count[t + 1];
+    // each target's slot count, then (in place) where its slots start
+    std::vector<std::size_t> at(static_cast<std::size_t>(targets), 0);
+    for (index_t t : target_of) ++at[t];
     sums.target.clear();
     sums.first.assign(1, 0);
-    std::vector<std::size_t> at(targets, 0);
     for (index_t t = 0; t < targets; ++t)
-      if (count[t + 1] > 0) {
+      if (at[t] > 0) {
+        const std::size_t count = at[t];
         at[t] = sums.first.back();
         sums.target.push_back(t);
-        sums.first.push_back(sums.first.back() + count[t + 1]);
+        sums.first.push_back(sums.first.back() + count);
       }
     sums.slot.resize(target_of.size());
     for (std::size_t k = 0; k < target_of.size(); ++k) sums.slot[at[target_of[k]]++] = k;
