@@ -6,8 +6,8 @@
 // resident the executor declines and the host solve runs.
 //
 // The sweeps are a fixed sequence of launches for a given analysis and number of
-// right-hand sides (two levels' worth of gather, small-front and scatter launches per
-// level and a few library calls per large front, a few hundred on the multibody
+// right-hand sides (a gather, a small-front and a scatter launch per level in each
+// sweep, and a few library calls per large front: 50 to 200 on the multibody
 // matrices); with Options::gpu_solve_graph they are recorded once as a CUDA graph and
 // replayed with one launch per solve, which removes the host's cost per launch and the
 // gaps between them on the device (CUDA C++ Programming Guide, "CUDA Graphs"). The graph
