@@ -18,12 +18,13 @@ class DeviceBuffer {
   explicit DeviceBuffer(std::size_t n) { resize(n); }
   ~DeviceBuffer() { release(); }
   DeviceBuffer(DeviceBuffer&& o) noexcept
-      : p_(std::exchange(o.p_, nullptr)), n_(std::exchange(o.n_, 0)) {}
+      : p_(std::exchange(o.p_, nullptr)), n_(std::exchange(o.n_, 0)), device_(o.device_) {}
   DeviceBuffer& operator=(DeviceBuffer&& o) noexcept {
     if (this != &o) {
       release();
       p_ = std::exchange(o.p_, nullptr);
       n_ = std::exchange(o.n_, 0);
+      device_ = o.device_;
     }
     return *this;
   }
@@ -31,13 +32,18 @@ class DeviceBuffer {
   DeviceBuffer& operator=(const DeviceBuffer&) = delete;
 
   /// Makes room for n elements; keeps the allocation when it is already large enough
-  /// (contents are not preserved on growth).
+  /// (contents are not preserved on growth). Growth first waits for the device that holds
+  /// the old allocation: kernels and copies enqueued earlier, on any of its streams, may
+  /// still use it, and cudaFree need not wait for them. Throws DeviceError when that wait
+  /// reports an earlier asynchronous failure.
   void resize(std::size_t n) {
     if (n <= n_) return;
+    if (p_) wait_for_owner();
     release();
     if (n == 0) return;
     // the test-only allocation cap (numeric/device_cap.hpp) fails here like cudaMalloc
     numeric::charge_device_allocation(n * sizeof(T), "cudaMalloc (device memory)");
+    STRATA_CUDA(cudaGetDevice(&device_));
     cudaError_t e = cudaMalloc(reinterpret_cast<void**>(&p_), n * sizeof(T));
     if (e != cudaSuccess) {
       p_ = nullptr;
@@ -62,8 +68,18 @@ class DeviceBuffer {
     p_ = nullptr;
     n_ = 0;
   }
+  // Synchronizes device_ (the current device is left as it was).
+  void wait_for_owner() const {
+    int current = 0;
+    STRATA_CUDA(cudaGetDevice(&current));
+    if (current != device_) STRATA_CUDA(cudaSetDevice(device_));
+    const cudaError_t e = cudaDeviceSynchronize();
+    if (current != device_) STRATA_CUDA(cudaSetDevice(current));
+    STRATA_CUDA(e);
+  }
   T* p_ = nullptr;
   std::size_t n_ = 0;
+  int device_ = 0;  ///< the device current at the allocation
 };
 
 /// Page-locked host array of T (cudaMallocHost), so device-to-host copies run at full
