@@ -69,8 +69,10 @@ void sized(std::vector<T>& v, std::size_t size, const char* what) {
 }
 
 // Assembles, factors and stores front f (see the header above); its children are done.
+// With `arena`, the front's panel updates run on its threads.
 void factor_front(const Analysis& an, const double* vals, const cpu::DelayPolicy& root_policy,
-                  index_t f, DelayedFactor& F, DelayedWorkspace::Thread& w) {
+                  index_t f, DelayedFactor& F, DelayedWorkspace::Thread& w,
+                  tbb::task_arena* arena = nullptr) {
   const auto& t = an.tree;
   const auto& am = an.assembly;
   const index_t msym = t.n_rows(f), ksym = t.n_pivots(f);
@@ -142,7 +144,7 @@ void factor_front(const Analysis& an, const double* vals, const cpu::DelayPolicy
   policy.may_delay = t.parent[f] >= 0;
   fr.stats = PivotStats{};
   const index_t npiv = cpu::factor_front_lu_delayed(A, m, p, m, policy, w.row_perm.data(),
-                                                    w.col_perm.data(), fr.stats);
+                                                    w.col_perm.data(), fr.stats, arena);
   sized(w.scratch, 2 * static_cast<std::size_t>(p), "front permutation");
   for (index_t i = 0; i < p; ++i) {
     w.scratch[i] = R[w.row_perm[i]];
@@ -233,15 +235,18 @@ void factorize_delayed(const Analysis& an, const double* vals, MatrixType type, 
   policy.threshold = threshold;
   policy.tiny = static_pivot;
   policy.static_pivot = static_pivot;
+  // one BLAS thread throughout: a level of one front splits its panel updates over the
+  // arena's threads instead (the BLAS's own threads would spin on after each call, taking
+  // cores from the arena's threads)
+  openblas_set_num_threads(1);
   for (index_t l = 0; l < sched.n_levels(); ++l) {
     const index_t b = sched.level_offsets[l], e = sched.level_offsets[l + 1];
     if (e - b == 1 || threads == 1) {
-      openblas_set_num_threads(e - b == 1 ? threads : 1);
       for (index_t q = b; q < e; ++q)
-        factor_front(an, vals, policy, sched.fronts[q], F, W.threads[threads]);
+        factor_front(an, vals, policy, sched.fronts[q], F, W.threads[threads],
+                     e - b == 1 && threads > 1 ? &arena : nullptr);
       continue;
     }
-    openblas_set_num_threads(1);
     std::exception_ptr error;
     std::mutex error_mutex;
     arena.execute([&] {

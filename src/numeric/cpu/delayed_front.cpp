@@ -13,6 +13,8 @@
 // behind the panel is still waiting for the same update.
 #include "numeric/cpu/delayed_front.hpp"
 
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cmath>
 #include <string>
@@ -29,6 +31,10 @@ namespace {
 // goes to one TRSM and one GEMM per panel.
 constexpr index_t kPanel = 32;
 
+// Columns per block of a panel's update of the columns behind it: the blocks are the
+// tasks when the update runs on an arena's threads (one-thread BLAS in each).
+constexpr index_t kUpdateColumns = 128;
+
 void count(double d, PivotStats& st) {
   if (d < 0) st.det_sign = -st.det_sign;
   if (d == 0) {
@@ -42,7 +48,7 @@ void count(double d, PivotStats& st) {
 
 index_t factor_front_lu_delayed(double* f, index_t m, index_t p, index_t ld,
                                 const DelayPolicy& policy, index_t* row_perm, index_t* col_perm,
-                                PivotStats& st) {
+                                PivotStats& st, tbb::task_arena* arena) {
   if (m < 0 || p < 0 || p > m || ld < std::max<index_t>(m, 1))
     throw InvalidInput("delayed front: need 0 <= p <= m <= ld (m=" + std::to_string(m) +
                        ", p=" + std::to_string(p) + ", ld=" + std::to_string(ld) + ")");
@@ -106,9 +112,20 @@ index_t factor_front_lu_delayed(double* f, index_t m, index_t p, index_t ld,
     // refused ones and the contribution block's): their U rows, then their Schur complement
     const index_t np = npiv - j0, nrest = m - npiv;
     if (np > 0 && nrest > 0) {
-      trsm('L', 'L', 'N', 'U', np, nrest, &A(j0, j0), ld, &A(j0, npiv), ld);
-      gemm('N', 'N', m - npiv, nrest, np, -1.0, &A(npiv, j0), ld, &A(j0, npiv), ld, 1.0,
-           &A(npiv, npiv), ld);
+      // in blocks of kUpdateColumns columns, each independent of the others: the same
+      // calls, so the same bits, whether the blocks run one after another or on an arena
+      const index_t blocks = (nrest + kUpdateColumns - 1) / kUpdateColumns;
+      auto update = [&](index_t b) {
+        const index_t c0 = npiv + b * kUpdateColumns;
+        const index_t w = std::min(kUpdateColumns, m - c0);
+        trsm('L', 'L', 'N', 'U', np, w, &A(j0, j0), ld, &A(j0, c0), ld);
+        gemm('N', 'N', m - npiv, w, np, -1.0, &A(npiv, j0), ld, &A(j0, c0), ld, 1.0, &A(npiv, c0),
+             ld);
+      };
+      if (arena && blocks > 1 && arena->max_concurrency() > 1)
+        arena->execute([&] { tbb::parallel_for(index_t{0}, blocks, update); });
+      else
+        for (index_t b = 0; b < blocks; ++b) update(b);
     }
   }
   return npiv;

@@ -22,6 +22,8 @@
 // for the same reason).
 #pragma once
 
+#include <tbb/task_arena.h>
+
 #include "numeric/cpu/dense_front.hpp"
 #include "strata/types.hpp"
 
@@ -46,9 +48,14 @@ struct DelayPolicy {
 ///   F[npiv:m, npiv:m]   the Schur complement; its first p − npiv rows and columns are the
 ///                       delayed ones.
 /// stats counts the npiv pivots (sign and log|u_ii| of U11; the permutations' parity is
-/// the caller's) and the static pivots. Throws InvalidInput for inconsistent sizes.
+/// the caller's) and the static pivots. After each panel of pivots, the update of the
+/// columns behind it (TRSM and GEMM) is made in blocks of 128 columns; with `arena` (of
+/// more than one thread) the blocks run on its threads, each with the BLAS as the caller
+/// set it (one thread, for a parallel update without the BLAS's own threads). The factor
+/// is bitwise the same with or without an arena. Throws InvalidInput for inconsistent
+/// sizes.
 index_t factor_front_lu_delayed(double* f, index_t m, index_t p, index_t ld,
                                 const DelayPolicy& policy, index_t* row_perm, index_t* col_perm,
-                                PivotStats& stats);
+                                PivotStats& stats, tbb::task_arena* arena = nullptr);
 
 }  // namespace strata::numeric::cpu
