@@ -4,6 +4,9 @@
 // on the lanes, its contribution blocks stored and its panels packed and copied back.
 // The host bookkeeping of a chunk (pivot checks, LDLᵀ's D and pivot sizes, the
 // statistics) runs while the next chunk computes (flush_chunk / finish_chunk).
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -16,6 +19,11 @@
 #include "numeric/cuda/cuda_executor.hpp"
 
 namespace strata::cuda {
+
+namespace {
+// Fronts in a chunk from which their host bookkeeping runs over the host's threads.
+constexpr std::size_t kParallelFinishFronts = 64;
+}  // namespace
 
 void CudaExecutor::factor_batch(const numeric::FactorContext& ctx, const BatchInfo& b) {
   STRATA_CUDA(cudaSetDevice(device_));
@@ -394,22 +402,41 @@ void CudaExecutor::finish_chunk(const numeric::FactorContext& ctx, ChunkRecord& 
     return;
   }
   // the diagonal of each front's panel: gathered on the device, or read in the host copy
-  std::vector<double> diag;
-  auto diag_of = [&](index_t p) -> const double* {
+  // (into `buffer`)
+  auto diag_of = [&](index_t p, std::vector<double>& buffer) -> const double* {
     const index_t f = s.fronts[p];
     if (dev_only) return c.diag.data() + diag_off[p - begin];
     const index_t m = t.n_rows(f), k = t.n_pivots(f);
     const double* panel = ctx.factor->panels.data() + an.factor_layout.panel_offset[f];
-    diag.resize(k);
-    for (index_t i = 0; i < k; ++i) diag[i] = panel[i * m + i];
-    return diag.data();
+    buffer.resize(k);
+    for (index_t i = 0; i < k; ++i) buffer[i] = panel[i * m + i];
+    return buffer.data();
   };
-  for (std::size_t i = 0; i < ns; ++i)
-    finish_front(ctx, s.fronts[small[i]], lu ? -1 : info[i], perturbed[i], perm + perm_off[i],
-                 diag_of(small[i]));
-  for (std::size_t i = 0; i < big.size(); ++i)
-    finish_front(ctx, s.fronts[big[i]], (!lu && pinfo[i] > 0) ? pinfo[i] - 1 : -1,
-                 perturbed[ns + i], perm + big_perm_at[i], diag_of(big[i]));
+  // front i of the chunk: the small fronts, then the large ones
+  auto failed = [&](std::size_t i) -> std::int64_t {
+    if (lu) return -1;
+    return i < ns ? info[i] : (pinfo[i - ns] > 0 ? pinfo[i - ns] - 1 : -1);
+  };
+  auto finish = [&](std::size_t i, std::vector<double>& buffer) {
+    const std::int64_t p = i < ns ? small[i] : big[i - ns];
+    finish_front(ctx, s.fronts[p], failed(i), perturbed[i],
+                 perm + (i < ns ? perm_off[i] : big_perm_at[i - ns]), diag_of(p, buffer));
+  };
+  // Each front's bookkeeping is its own (its rows, its statistics), so a chunk of many
+  // fronts is done over the host's threads; a failed pivot is reported as the loop in
+  // order reports it (the first failed front's), from that loop.
+  bool any_failed = false;
+  for (std::size_t i = 0; i < nall && !any_failed; ++i) any_failed = failed(i) >= 0;
+  if (any_failed || nall < kParallelFinishFronts) {
+    std::vector<double> buffer;
+    for (std::size_t i = 0; i < nall; ++i) finish(i, buffer);
+    return;
+  }
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nall, kParallelFinishFronts / 2),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      std::vector<double> buffer;
+                      for (std::size_t i = r.begin(); i != r.end(); ++i) finish(i, buffer);
+                    });
 }
 
 // The panels of positions [begin, end) to the host factor through the pinned staging
