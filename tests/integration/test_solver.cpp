@@ -308,8 +308,17 @@ TEST(Solver, BadInputIsReported) {
   SparseMatrix nan = a;
   nan.values[3] = std::nan("");
   EXPECT_THROW(s.refactorize(nan), InvalidInput);
-  Solver fresh;
+  // refused after its pass has read every other value (2A, the last one NaN): the factor
+  // of A and A itself (the residual's matrix) are kept, so the solve still solves A x = b
+  SparseMatrix twice = a;
+  for (double& v : twice.values) v *= 2;
+  twice.values.back() = std::nan("");
+  EXPECT_THROW(s.refactorize(twice), InvalidInput);
   std::vector<double> b(50, 1.0);
+  const std::vector<double> x = s.solve(b);
+  EXPECT_LE(test::backward_error(a, x.data(), b.data()), 1e-14);
+  EXPECT_LE(s.stats().solve.backward_error, 1e-14);
+  Solver fresh;
   EXPECT_THROW(fresh.solve(b), InvalidState);
   SparseMatrix rect = a;
   rect.n_rows = 49;
