@@ -149,6 +149,10 @@ struct FactorStats {
   /// pattern compared with the analyzed one, the values checked (finite, norms), copied
   /// and scaled.
   double input_seconds = 0;
+  /// The values were checked, measured and scaled on the GPU (the CUDA backend, one GPU,
+  /// a refactorization with the analyzed pattern), not on the host; input_seconds then
+  /// includes their copy to the device.
+  bool values_scaled_on_device = false;
   double gflops = 0;             ///< AnalysisStats::factor_flops (×2 for LU) / seconds
   index_t perturbed_pivots = 0;  ///< tiny pivots replaced by ±ε‖A‖ (static pivoting)
   /// Delayed pivoting (Options::pivoting) computed this factor: the analysis's fixed order
@@ -187,9 +191,9 @@ struct FactorStats {
   /// (Options::gpu_tiled_prefetch).
   index_t tiled_fronts_prefetched = 0;
   /// LU: large fronts (over Options::gpu_small_front_rows rows); of those the ones factored
-  /// again by cuSOLVER GETRF with partial pivoting because their elimination without interchanges was rejected
-  /// (rows to interchange, or a pivot needing static pivoting), and the ones eliminated by
-  /// strata's batched kernels (Options::gpu_lu_strip_pivots > 0) rather than by GETRF
+  /// again by cuSOLVER GETRF with partial pivoting because their elimination without interchanges
+  /// was rejected (rows to interchange, or a pivot needing static pivoting), and the ones
+  /// eliminated by strata's batched kernels (Options::gpu_lu_strip_pivots > 0) rather than by GETRF
   /// without pivoting. Fronts of one 64-column step interchange rows inside the batched
   /// kernels and are not counted as factored again. See src/numeric/cuda/lu_fronts.cu.
   index_t lu_large_fronts = 0;

@@ -54,6 +54,14 @@ struct SolverState {
   // `scaled` page-locked while a GPU backend uploads it at every factorization (declared
   // after it: released first); released before `scaled` is resized (resize_scaled)
   std::unique_ptr<numeric::PinnedHostRange> scaled_pin;
+  // `values.values` page-locked: after a value pass on the GPU it and `scaled` trade
+  // buffers, each with its pin (reset before `values` is assigned anew)
+  std::unique_ptr<numeric::PinnedHostRange> values_pin;
+  // `scaled` holds the scaled values of `values`; false after a value pass on the GPU,
+  // which leaves them there (values_on_device) and `scaled` stale until a host algorithm
+  // needs them (host_scaled)
+  bool scaled_current = true;
+  bool values_on_device = false;
   std::vector<double> value_sums;  // per-range vectors of the blocked value passes, kept
   // the host threads of those passes (Options::num_threads), kept: creating a task arena
   // for each parallel loop cost milliseconds per refactorization on a 64-core host
@@ -207,6 +215,7 @@ double prepare_devices(SolverState& s) {
 void keep_analyzed_input(SolverState& s, const SparseMatrix& a) {
   const Analysis& an = *s.analysis;
   if (!has_analyzed_pattern(an, a, host_arena(s))) return;
+  s.values_pin.reset();
   s.values = a;
   s.values.storage = an.symmetric ? Storage::lower : Storage::full;
   s.values_analysis = an.id;
@@ -214,6 +223,50 @@ void keep_analyzed_input(SolverState& s, const SparseMatrix& a) {
   // refactor_values' per-range row arrays
   sized_resize(s.value_sums, std::max(s.value_sums.size(), detail::refactor_work_size(an)),
                "analyze: value sums");
+}
+
+// The input stage on the GPU (the tree driver's CUDA executor, numeric/cuda/value_pass.cu)
+// for values `a` in the kept pattern: staged in the page-locked `scaled`, checked, scaled
+// and measured on the device, which keeps the scaled values for the factorization. On
+// acceptance the staged values become the kept ones (the two buffers trade places, so
+// nothing is copied twice); refused values (not finite, overflowing sums) throw with the
+// kept values and the factor as they were. False, with nothing changed that matters,
+// where the driver has no such pass or B needs equilibrating again (the host then
+// rescales). Sets norm1 = ‖B‖₁.
+bool values_on_gpu(SolverState& s, const SparseMatrix& a, double& norm1) {
+  const Analysis& an = *s.analysis;
+  if (!s.driver->uploads_values() || a.nnz() == 0) return false;
+  tbb::task_arena& arena = host_arena(s);
+  resize_scaled(s, a.values.size(), "factorize: staged values");
+  pin_scaled(s);
+  copy_values(s.scaled, a.values, arena);
+  s.scaled_current = false;  // raw values now, whatever follows
+  numeric::DeviceValueNorms dn;
+  if (!s.driver->scale_values_on_device(an, s.scaled.data(), dn)) return false;
+  if (!dn.finite) detail::throw_first_not_finite(a);
+  if (!dn.sums_finite) {
+    check_norms(a);
+    throw InternalError("the device found a row or column sum that overflows; the host did not");
+  }
+  if (!an.row_scaling.empty() && !dn.equilibrated && !scaling_clamped(an)) return false;
+  s.factor.valid = false;
+  s.delayed.valid = false;
+  s.norm_inf = dn.norm_inf;
+  norm1 = dn.scaled_norm1;
+  std::swap(s.values.values, s.scaled);  // same size: the kept values are the staged ones
+  std::swap(s.values_pin, s.scaled_pin);
+  s.values_on_device = true;
+  s.rescaling = Rescaling{};
+  return true;
+}
+
+// The scaled values on the host for a host algorithm (the delayed factorization) after a
+// value pass on the GPU: recomputed from the kept values by the host's pass, which gives
+// the bits the device computed.
+void host_scaled(SolverState& s) {
+  if (s.scaled_current) return;
+  refactor_values(*s.analysis, s.values, host_arena(s), s.value_sums, s.scaled);
+  s.scaled_current = true;
 }
 
 // The input stage of a factorization: the values checked (finite, the analyzed pattern
@@ -227,7 +280,11 @@ double prepare_values(SolverState& s, const SparseMatrix& a) {
   double norm1 = 0;           // of the scaled matrix, for static pivoting
   bool equilibrated = false;  // B's row and column maxima known to be within a factor 2
   tbb::task_arena& arena = host_arena(s);
-  if (has_analyzed_pattern(an, a, arena)) {
+  s.values_on_device = false;
+  const bool analyzed_pattern = has_analyzed_pattern(an, a, arena);
+  if (analyzed_pattern && s.values_analysis == an.id && values_on_gpu(s, a, norm1)) return norm1;
+  s.scaled_current = true;  // every path below writes the scaled values
+  if (analyzed_pattern) {
     // Refactorization with the analyzed pattern (a Newton loop, a benchmark): one parallel
     // pass checks the values and the norms and scales them (refactor_values), then only
     // the values are copied. The general path below makes several passes and copies the
@@ -240,6 +297,7 @@ double prepare_values(SolverState& s, const SparseMatrix& a) {
     norm1 = norms.scaled_norm1;
     equilibrated = norms.equilibrated;
     if (s.values_analysis != an.id) {
+      s.values_pin.reset();
       s.values = a;
       s.values.storage = an.symmetric ? Storage::lower : Storage::full;
       s.values_analysis = an.id;
@@ -251,6 +309,7 @@ double prepare_values(SolverState& s, const SparseMatrix& a) {
     check_norms(checked);
     s.factor.valid = false;
     s.delayed.valid = false;
+    s.values_pin.reset();
     s.values = std::move(checked);
     s.values_analysis = an.id;
     s.norm_inf = norm_inf(s.values);
@@ -301,7 +360,9 @@ NumericRun factor_values(SolverState& s, double norm1, double static_pivot) {
   tbb::task_arena& arena = host_arena(s);
   NumericRun r;
   pin_scaled(s);
-  auto run = [&](MatrixType t) { s.driver->factorize(an, s.scaled, t, static_pivot, s.factor); };
+  auto run = [&](MatrixType t) {
+    s.driver->factorize(an, s.scaled, s.values_on_device, t, static_pivot, s.factor);
+  };
 
   MatrixType type = an.type;
   if (type == MatrixType::automatic) {
@@ -332,6 +393,7 @@ NumericRun factor_values(SolverState& s, double norm1, double static_pivot) {
     // Schur complement (backward stable); only those at the rounding level of ‖B‖₁ are
     // zeros of a numerically singular matrix and get static pivots
     const double root_static = std::numeric_limits<double>::epsilon() * (norm1 > 0 ? norm1 : 1.0);
+    host_scaled(s);
     numeric::factorize_delayed(an, s.scaled.data(), type, s.options.pivot_threshold, root_static,
                                s.delayed, s.delayed_work, arena);
   }
@@ -354,6 +416,7 @@ void report_factorization(SolverState& s, const NumericRun& r, double norm1, dou
   fs = FactorStats{};
   fs.type = type;
   fs.input_seconds = input_seconds;
+  fs.values_scaled_on_device = s.values_on_device;
   fs.backend = s.driver->backend();
   numeric::PivotStats total;
   if (s.delayed.valid)
@@ -459,6 +522,8 @@ void release_factor(SolverState& s) noexcept {
   s.delayed = numeric::DelayedFactor{};
   s.scaled_pin.reset();
   std::vector<double>().swap(s.scaled);
+  s.scaled_current = false;
+  s.values_on_device = false;
   std::vector<double>().swap(s.value_sums);
   if (s.driver) s.driver->release();
 }

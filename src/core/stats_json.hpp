@@ -135,6 +135,7 @@ inline void to_json(nlohmann::json& j, const FactorStats& f) {
        {"backend", to_string(f.backend)},
        {"seconds", f.seconds},
        {"input_seconds", f.input_seconds},
+       {"values_scaled_on_device", f.values_scaled_on_device},
        {"gflops", f.gflops},
        {"perturbed_pivots", f.perturbed_pivots},
        {"delayed_pivoting", f.delayed_pivoting},

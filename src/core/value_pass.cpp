@@ -44,8 +44,9 @@ bool equal_arrays(const std::vector<T>& x, const std::vector<T>& y, tbb::task_ar
   return same;
 }
 
-// Throws InvalidInput naming the first value of `a` that is not finite (there is one).
-[[noreturn]] void throw_first_not_finite(const SparseMatrix& a) {
+}  // namespace
+
+void throw_first_not_finite(const SparseMatrix& a) {
   const std::size_t nnz = a.values.size();
   std::size_t p = 0;
   while (p + 1 < nnz && std::isfinite(a.values[p])) ++p;
@@ -55,8 +56,6 @@ bool equal_arrays(const std::vector<T>& x, const std::vector<T>& y, tbb::task_ar
   throw InvalidInput("values[" + std::to_string(p) + "] is not finite (row " +
                      std::to_string(a.indices[p]) + ", column " + std::to_string(j) + ")");
 }
-
-}  // namespace
 
 namespace {
 

@@ -39,6 +39,10 @@ void throw_if_norm_overflows(std::span<const double> row, std::span<const double
 /// throw_if_norm_overflows for the row and column sums of canonical c.
 void check_norms(const SparseMatrix& c);
 
+/// Throws InvalidInput naming the first value of `a` that is not finite (its position,
+/// row and column), or the last value when all are finite (call it when one is not).
+[[noreturn]] void throw_first_not_finite(const SparseMatrix& a);
+
 /// True when `a` is stored exactly as the analysis's canonical pattern (CSC, sorted, no
 /// duplicates; the lower triangle when symmetric): its values can be used as they are.
 /// Large arrays are compared in parallel chunks on `arena`.

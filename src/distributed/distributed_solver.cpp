@@ -114,8 +114,10 @@ class DistributedDriver final : public numeric::NumericDriver {
   int workers() const override { return s_.comm.size() * per_rank_; }
   bool in_one_process() const override { return false; }
   bool uploads_values() const override { return false; }
-  void factorize(const Analysis& an, const std::vector<double>& values, MatrixType type,
-                 double pivot, numeric::NumericFactor& factor) override {
+  void factorize(const Analysis& an, const std::vector<double>& values, bool values_on_device,
+                 MatrixType type, double pivot, numeric::NumericFactor& factor) override {
+    if (values_on_device)
+      throw InternalError("the distributed driver has no value pass on a device");
     detail::CommImpl& comm = *s_.comm.impl();
     ByteCount bytes(comm);
     Header h;

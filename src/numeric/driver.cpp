@@ -49,9 +49,15 @@ class TreeDriver final : public NumericDriver {
     executor().prepare(an, 1);
     creation_seconds_ = 0;  // part of the analysis's device set-up, not a factorization's
   }
-  void factorize(const Analysis& an, const std::vector<double>& scaled_values, MatrixType type,
-                 double static_pivot, NumericFactor& factor) override {
-    numeric::factorize(an, scaled_values, type, static_pivot, executor(), factor, cb_arena_);
+  bool scale_values_on_device(const Analysis& an, const double* values,
+                              DeviceValueNorms& out) override {
+    return gpu_ && executor().scale_values_on_device(an, values, out);
+  }
+  void factorize(const Analysis& an, const std::vector<double>& scaled_values,
+                 bool values_on_device, MatrixType type, double static_pivot,
+                 NumericFactor& factor) override {
+    numeric::factorize(an, scaled_values, type, static_pivot, executor(), factor, cb_arena_,
+                       values_on_device);
   }
   bool solve(const Analysis& an, NumericFactor& factor, double* x, index_t nrhs) override {
     Executor& e = executor();
@@ -114,8 +120,11 @@ class MultiWorkerDriver final : public NumericDriver {
     for (Executor* e : executors()) e->prepare(an, workers_);
     creation_seconds_ = 0;  // part of the analysis's device set-up
   }
-  void factorize(const Analysis& an, const std::vector<double>& scaled_values, MatrixType type,
-                 double static_pivot, NumericFactor& factor) override {
+  void factorize(const Analysis& an, const std::vector<double>& scaled_values,
+                 bool values_on_device, MatrixType type, double static_pivot,
+                 NumericFactor& factor) override {
+    if (values_on_device)
+      throw InternalError("the multi-worker driver has no value pass on a device");
     const std::vector<Executor*> execs = executors();
     devices_.clear();
     if (execs.size() == 1 && an.partition.part_id.empty()) {

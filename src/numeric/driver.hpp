@@ -41,11 +41,22 @@ class NumericDriver {
   /// the device memory plan, streams and library handles), done at analysis as cuDSS's
   /// analysis phase does; nothing for host executors. Throws as factorize.
   virtual void prepare(const Analysis& an) {}
+  /// The value pass of the next factorizations on the GPU (Executor::scale_values_on_device
+  /// of the tree driver's CUDA executor): `values` (host, canonical entry order) checked,
+  /// scaled and measured on the device, `out` its findings. False, having done nothing,
+  /// for every other driver and where the executor has no such pass.
+  virtual bool scale_values_on_device(const Analysis& an, const double* values,
+                                      DeviceValueNorms& out) {
+    return false;
+  }
   /// Factors the scaled values (the analysis's canonical entry order) as `type` with
-  /// static pivots of size `static_pivot` into `factor`. Throws NotPositiveDefinite,
-  /// OutOfMemory (with the bytes), DeviceError, as the executors do.
+  /// static pivots of size `static_pivot` into `factor`; values_on_device: those the last
+  /// scale_values_on_device left on the GPU instead (scaled_values is not read). Throws
+  /// NotPositiveDefinite, OutOfMemory (with the bytes), DeviceError, as the executors do;
+  /// InternalError for values_on_device on a driver without that pass.
   virtual void factorize(const Analysis& an, const std::vector<double>& scaled_values,
-                         MatrixType type, double static_pivot, NumericFactor& factor) = 0;
+                         bool values_on_device, MatrixType type, double static_pivot,
+                         NumericFactor& factor) = 0;
   /// x ← F⁻¹ x with the factor of the last factorize: x in tree numbering, n × nrhs
   /// column-major. Panels kept on devices are fetched to `factor` first when the solve
   /// runs on the host. Returns whether it ran on a GPU.

@@ -80,10 +80,25 @@ struct PartView {
 
 class Executor;
 
+/// What a value pass on a device (Executor::scale_values_on_device) found: the figures a
+/// factorization needs before it starts, of the values as given (A) and as scaled by the
+/// analysis's matching scaling (B = Dr·A(:,Q)·Dc); the host's pass (core/value_pass.hpp)
+/// computes the same.
+struct DeviceValueNorms {
+  bool finite = true;         ///< every value is finite
+  bool sums_finite = true;    ///< every row and column magnitude sum of A is finite
+  double norm_inf = 0;        ///< ‖A‖∞ (max row sum of |a|, symmetric storage expanded)
+  double scaled_norm1 = 0;    ///< ‖B‖₁ (max column sum of |b|)
+  bool equilibrated = false;  ///< every row and column maximum of |b| is 0 or in [½, 2]
+};
+
 /// Everything an executor needs to factor a batch.
 struct FactorContext {
   const Analysis* analysis = nullptr;
   const double* values = nullptr;  ///< scaled values of the canonical input (entry order)
+  /// The executor's device already holds the scaled values (its scale_values_on_device
+  /// ran for this factorization): `values` is not read.
+  bool values_on_device = false;
   MatrixType type = MatrixType::spd;
   double static_pivot = 0;  ///< absolute threshold / replacement for tiny pivots
   NumericFactor* factor = nullptr;
@@ -153,6 +168,17 @@ class Executor {
   /// Solver::analyze calls it, as cuDSS's analysis phase prepares the device. Throws what
   /// that set-up throws (OutOfMemory, DeviceError); the default does nothing.
   virtual void prepare(const Analysis& an, int workers) {}
+  /// The value pass of a factorization on the executor's device: `values` (host, the
+  /// analysis's canonical entry order; page-locked for a fast copy) uploaded, checked,
+  /// scaled by the analysis's matching scaling and measured there (`out`), and kept for
+  /// the factorizations that follow with FactorContext::values_on_device, until the next
+  /// call or analysis. Returns false, having changed nothing, where the executor has no
+  /// such pass: host executors, or a plan whose fronts read the values on the host
+  /// (fronts factored tile by tile). Throws DeviceError, as factorize.
+  virtual bool scale_values_on_device(const Analysis& an, const double* values,
+                                      DeviceValueNorms& out) {
+    return false;
+  }
   /// Called once per factorization, before this executor's first part (ctx.part unset).
   virtual void begin(const FactorContext& ctx) {}
   /// Called before the batches of the part ctx.part.
@@ -263,10 +289,11 @@ void store_ldlt_front(const Analysis& an, index_t f, const index_t* local_perm,
                       const int* local_pivot_size, NumericFactor& factor);
 
 /// Runs the numeric factorization of the scaled canonical values with `exec` on the whole
-/// tree. Fills `factor`; throws as Executor::factor_batch.
+/// tree; values_on_device: those its scale_values_on_device left on its device instead
+/// (scaled_values is not read). Fills `factor`; throws as Executor::factor_batch.
 void factorize(const Analysis& an, const std::vector<double>& scaled_values, MatrixType type,
                double static_pivot, Executor& exec, NumericFactor& factor,
-               std::vector<double>& cb_arena);
+               std::vector<double>& cb_arena, bool values_on_device = false);
 
 /// Options of the multi-worker driver that are not user options.
 /// Host buffers of the contribution blocks that cross between parts through host memory,

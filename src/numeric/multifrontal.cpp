@@ -53,13 +53,14 @@ void prepare_factor(const Analysis& an, MatrixType type, NumericFactor& factor, 
 
 void factorize(const Analysis& an, const std::vector<double>& scaled_values, MatrixType type,
                double static_pivot, Executor& exec, NumericFactor& factor,
-               std::vector<double>& cb_arena) {
+               std::vector<double>& cb_arena, bool values_on_device) {
   prepare_factor(an, type, factor, false);
 
   const PartView whole = PartView::whole(an);
   FactorContext ctx;
   ctx.analysis = &an;
-  ctx.values = scaled_values.data();
+  ctx.values = values_on_device ? nullptr : scaled_values.data();
+  ctx.values_on_device = values_on_device;
   ctx.type = type;
   ctx.static_pivot = static_pivot;
   ctx.factor = &factor;

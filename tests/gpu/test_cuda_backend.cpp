@@ -1278,5 +1278,140 @@ TEST_F(CudaBackend, AnalysisInThePivotOrderRefactorsOnTheDevice) {
   EXPECT_LE(test::relative_difference(x[1], x[0]), std::max(1e-10, 1e-13 * 27 * kappa_lower));
 }
 
+// `a` with each column's entries in reverse order: the same matrix, not in the analyzed
+// (sorted) pattern, so that the Solver takes the host's value pass for it.
+SparseMatrix reversed_columns(SparseMatrix a) {
+  for (index_t j = 0; j < a.n_cols; ++j) {
+    std::reverse(a.indices.begin() + a.offsets[j], a.indices.begin() + a.offsets[j + 1]);
+    std::reverse(a.values.begin() + a.offsets[j], a.values.begin() + a.offsets[j + 1]);
+  }
+  return a;
+}
+
+// The value pass on the device (numeric/cuda/value_pass.cu) against the host's
+// (core/value_pass.hpp): for LU, LLᵀ/LDLᵀ (automatic) and LDLᵀ, sizes 1 to 733, a
+// factorization and a refactorization with other values in the analyzed pattern run the
+// pass on the GPU, the same values given in another order run it on the host; the scaled
+// values are the same bits, so are the factors (log |det|) and, without refinement, the
+// solutions. ‖B‖₁ agrees to rounding (the sums run in another order).
+TEST_F(CudaBackend, ValuePassOnTheDeviceGivesTheHostsFactor) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed) + " (STRATA_TEST_SEED replays it)");
+  std::uniform_real_distribution<double> wiggle(0.97, 1.03), rhs(-1.0, 1.0);
+  const std::tuple<test::RandomKind, MatrixType> kinds[] = {
+      {test::RandomKind::general, MatrixType::general},
+      {test::RandomKind::spd, MatrixType::automatic},
+      {test::RandomKind::symmetric_indefinite, MatrixType::symmetric_indefinite}};
+  for (const auto& [kind, type] : kinds)
+    for (index_t n : {1, 2, 3, 5, 733}) {
+      SCOPED_TRACE("type " + std::string(to_string(type)) + ", n = " + std::to_string(n));
+      const SparseMatrix a = test::random_sparse(n, 3, kind, rng);
+      SparseMatrix next = a;
+      for (double& v : next.values) v *= wiggle(rng);
+      std::vector<double> b(n);
+      for (double& v : b) v = rhs(rng);
+      Options o;
+      o.backend = Backend::cuda;
+      o.num_gpus = 1;
+      o.type = type;
+      o.refinement_max_steps = 0;
+      o.gmres_max_iterations = 0;
+      o.solve_check = SolveCheck::after_perturbed_pivots;
+      Solver dev(o), host(o);
+      dev.analyze(a);
+      host.analyze(a);
+      dev.factorize(a);
+      host.factorize(reversed_columns(a));
+      EXPECT_TRUE(dev.stats().factor.values_scaled_on_device);
+      EXPECT_FALSE(host.stats().factor.values_scaled_on_device);
+      EXPECT_EQ(dev.stats().factor.log_abs_determinant, host.stats().factor.log_abs_determinant);
+      dev.refactorize(next);
+      host.refactorize(reversed_columns(next));
+      const FactorStats& fd = dev.stats().factor;
+      const FactorStats& fh = host.stats().factor;
+      EXPECT_TRUE(fd.values_scaled_on_device);
+      EXPECT_FALSE(fh.values_scaled_on_device);
+      EXPECT_EQ(fd.backend, Backend::cuda);
+      EXPECT_EQ(fd.type, fh.type);
+      EXPECT_EQ(fd.perturbed_pivots, fh.perturbed_pivots);
+      EXPECT_EQ(fd.determinant_sign, fh.determinant_sign);
+      EXPECT_NEAR(fd.matrix_norm, fh.matrix_norm, 1e-14 * fh.matrix_norm);
+      const std::vector<double> xd = dev.solve(b), xh = host.solve(b);
+      if (fh.perturbed_pivots == 0) {
+        EXPECT_EQ(fd.log_abs_determinant, fh.log_abs_determinant);
+        EXPECT_EQ(xd, xh);
+        EXPECT_LE(test::backward_error(next, xd.data(), b.data()), 1e-12);
+      } else {  // static pivots of ε‖B‖₁: ‖B‖₁ to rounding, so are they
+        EXPECT_NEAR(fd.log_abs_determinant, fh.log_abs_determinant,
+                    1e-12 * std::max(1.0, std::abs(fh.log_abs_determinant)));
+      }
+    }
+}
+
+// Values the device's pass refuses are reported as the host's pass reports them (the
+// first value that is not finite with its row and column; a row whose magnitudes overflow),
+// and the factor and the matrix of the residuals stay those of the values before.
+TEST_F(CudaBackend, ValuesRefusedOnTheDeviceKeepTheFactor) {
+  auto rng = test::fresh_rng();
+  const SparseMatrix a = test::random_sparse(50, 3, test::RandomKind::general, rng);
+  Options o;
+  o.backend = Backend::cuda;
+  o.num_gpus = 1;
+  Solver s(o);
+  s.factorize(a);
+  ASSERT_TRUE(s.stats().factor.values_scaled_on_device);
+  const std::vector<double> b(50, 1.0);
+  const std::vector<double> x0 = s.solve(b);
+  SparseMatrix nan = a;
+  nan.values[3] = std::nan("");
+  try {
+    s.refactorize(nan);
+    ADD_FAILURE() << "a NaN value was accepted";
+  } catch (const InvalidInput& e) {
+    const std::string expect = "values[3] is not finite (row " + std::to_string(a.indices[3]);
+    EXPECT_NE(std::string(e.what()).find(expect), std::string::npos) << e.what();
+  }
+  SparseMatrix huge = a;  // column 0's magnitudes sum past the largest double
+  for (index_t p = huge.offsets[0]; p < huge.offsets[1]; ++p) huge.values[p] = 1.5e308;
+  ASSERT_GE(huge.offsets[1] - huge.offsets[0], 2);
+  try {
+    s.refactorize(huge);
+    ADD_FAILURE() << "an overflowing column was accepted";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("the matrix norm overflows"), std::string::npos)
+        << e.what();
+  }
+  const std::vector<double> x = s.solve(b);
+  EXPECT_EQ(x, x0);
+  EXPECT_LE(test::backward_error(a, x.data(), b.data()), 1e-14);
+  EXPECT_LE(s.stats().solve.backward_error, 1e-14);
+}
+
+// Values far from the analysis's (a column scaled by 10⁶) need equilibrating again, which
+// the host does: the factorization takes the host's pass and solves to full accuracy.
+TEST_F(CudaBackend, ValuesFarFromTheAnalysisAreEquilibratedOnTheHost) {
+  auto rng = test::fresh_rng();
+  const SparseMatrix a = test::random_sparse(200, 4, test::RandomKind::general, rng);
+  SparseMatrix far = a;
+  for (index_t p = far.offsets[7]; p < far.offsets[8]; ++p) far.values[p] *= 1e6;
+  Options o;
+  o.backend = Backend::cuda;
+  o.num_gpus = 1;
+  o.solve_check = SolveCheck::always;
+  Solver s(o);
+  s.factorize(a);
+  s.refactorize(far);
+  EXPECT_FALSE(s.stats().factor.values_scaled_on_device);
+  EXPECT_GT(s.stats().factor.rescaling_sweeps, 0);
+  const std::vector<double> b(200, 1.0);
+  const std::vector<double> x = s.solve(b);
+  EXPECT_LE(test::backward_error(far, x.data(), b.data()), 1e-14);
+  s.refactorize(a);  // near the analysis's values again: the device's pass
+  EXPECT_TRUE(s.stats().factor.values_scaled_on_device);
+  const std::vector<double> y = s.solve(b);
+  EXPECT_LE(test::backward_error(a, y.data(), b.data()), 1e-14);
+}
+
 }  // namespace
 }  // namespace strata

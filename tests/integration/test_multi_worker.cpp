@@ -743,8 +743,9 @@ TEST(NumericDrivers, TreeAndMultiWorkerDriversAgree) {
   EXPECT_TRUE(multi->in_one_process());
   EXPECT_FALSE(multi->uploads_values());
   numeric::NumericFactor one, many;
-  tree->factorize(an, v, MatrixType::spd, pivot, one);  // depth-first (see level_schedule_factor)
-  multi->factorize(an, v, MatrixType::spd, pivot, many);
+  tree->factorize(an, v, false, MatrixType::spd, pivot,
+                  one);  // depth-first (see level_schedule_factor)
+  multi->factorize(an, v, false, MatrixType::spd, pivot, many);
   numeric::NumericFactor level = test::level_schedule_factor(an, v, MatrixType::spd, pivot);
   expect_same_factor(level, many);
   expect_close_factors(one, many);
@@ -793,8 +794,8 @@ TEST(NumericDrivers, OneHostWorkerFactorsTheWholeTree) {
     auto tree = numeric::make_tree_driver(o);
     auto multi = numeric::make_multi_worker_driver(o, 1, 2, {});
     numeric::NumericFactor one, many;
-    tree->factorize(an, v, type, pivot, one);
-    multi->factorize(an, v, type, pivot, many);
+    tree->factorize(an, v, false, type, pivot, one);
+    multi->factorize(an, v, false, type, pivot, many);
     expect_same_factor(one, many);
     Solver s(o);
     SolverAccess::use_host_workers(s, 1, 2);

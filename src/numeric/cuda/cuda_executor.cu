@@ -167,6 +167,8 @@ void CudaExecutor::prepare(const Analysis& an, int workers) {
   // pools from the memory that is free
   if (lanes_.empty()) lanes();
   if (an.id != analysis_id_) upload_analysis(an);
+  // before the plan, which sizes the pools from the memory left
+  if (workers <= 1 && value_pass_.analysis != an.id) prepare_value_pass(an);
   // the same plans begin_part makes on first use: the whole tree, or every part of the
   // split (any subtree may run on any GPU)
   if (workers <= 1 && planned_ != 1) plan_parts(an, true);
@@ -225,6 +227,12 @@ void CudaExecutor::begin(const numeric::FactorContext& ctx) {
     phases_.setup += setup.seconds();
   }
   STRATA_CUDA(cudaEventRecord(start_, stream_));
+  if (ctx.values_on_device) {
+    if (value_pass_.analysis != an.id)
+      throw InternalError("values on the device from no value pass of this analysis");
+    count_h2d(an.pattern_indices.size() * sizeof(double));  // copied by the value pass
+    return;  // scale_values_on_device left them in values_
+  }
   values_.upload(ctx.values, an.pattern_indices.size(), stream_);
   count_h2d(an.pattern_indices.size() * sizeof(double));
 }

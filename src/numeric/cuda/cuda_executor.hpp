@@ -168,6 +168,8 @@ class CudaExecutor final : public numeric::Executor {
   int device() const override { return device_; }
   bool uses_host_arena() const override { return false; }
   void prepare(const Analysis& an, int workers) override;
+  bool scale_values_on_device(const Analysis& an, const double* values,
+                              numeric::DeviceValueNorms& out) override;  // value_pass.cu
   void begin(const numeric::FactorContext& ctx) override;
   void begin_part(const numeric::FactorContext& ctx) override;
   void factor_batch(const numeric::FactorContext& ctx, const BatchInfo& b) override;
@@ -186,6 +188,9 @@ class CudaExecutor final : public numeric::Executor {
 
  private:
   void upload_analysis(const Analysis& an);
+  /// The value pass's arrays for `an` (value_pass.cu): made and uploaded at prepare for a
+  /// whole-tree analysis; without room for them the host's pass serves.
+  void prepare_value_pass(const Analysis& an);
   void plan_parts(const Analysis& an, bool whole);
   void plan_device_memory(const Analysis& an, const std::vector<numeric::PartView>& views);
   void upload_part(const Analysis& an, const numeric::PartView& v);
@@ -433,6 +438,18 @@ class CudaExecutor final : public numeric::Executor {
   /// Blocks of subtree roots exported for a peer copy (or the same device), kept until
   /// the next factorization: the arena they came from is reused by the next subtree.
   std::map<index_t, DeviceBuffer<double>> outbox_;
+  /// The value pass on the device (value_pass.cu): the canonical pattern by columns
+  /// (col_ptr, col_row) and by rows (row_ptr; per entry of a row its position and
+  /// column), the matching scaling, the per-row and per-column figures (6n), the flag of a
+  /// value that is not finite and the five numbers for the host; `analysis`: the
+  /// Analysis::id they were made for (0: none).
+  struct ValuePass {
+    DeviceBuffer<std::int64_t> row_ptr, col_ptr;
+    DeviceBuffer<int> row_pos, row_col, col_row, bad;
+    DeviceBuffer<double> row_scaling, col_scaling, sums;
+    PinnedBuffer<double> out;
+    std::uint64_t analysis = 0;
+  } value_pass_;
   // numeric working memory
   DeviceBuffer<double> values_, arena_, pool_, potrf_work_, panels_;
   PinnedBuffer<double> host_arena_, host_staging_;

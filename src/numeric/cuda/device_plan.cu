@@ -141,6 +141,7 @@ void CudaExecutor::upload_analysis(const Analysis& an) {
   const index_t nf = t.n_fronts();
   // free what the previous analysis held before measuring free memory
   for (auto* b : {&pool_, &arena_, &panels_, &values_}) b->clear();
+  value_pass_.analysis = 0;  // its arrays are remade by prepare_value_pass
   host_arena_.clear();
   parts_.clear();
   outbox_.clear();

@@ -1,0 +1,251 @@
+// strata — the value pass of a factorization on the device.
+//
+// What: the checks, norms and scaling the host's value pass makes (core/value_pass.hpp:
+// every value finite, the row and column magnitude sums of A finite, ‖A‖∞, the scaled
+// values B = Dr·A(:,Q)·Dc in A's entry order, ‖B‖₁, and whether B's row and column
+// maxima are already within a factor 2 of 1), made on the GPU from the raw values of a
+// refactorization copied there once. The scaled values stay on the device, where the
+// assembly reads them (FactorContext::values_on_device); the host gets five numbers.
+//
+// How: two passes over the entries, one warp per row and one per column. The row pass
+// reads the entries of a row through a row-wise map of the canonical (column-wise)
+// pattern, made and uploaded once per analysis: per row i, the positions of its entries
+// and their columns. It sums |a| and |b| and takes the maximum of |b| over the row. The
+// column pass then does the same per column, writes b over a in place and flags a value
+// that is not finite. For symmetric storage (the lower triangle) a row of the full matrix
+// is its stored row plus the column of the same index below the diagonal, so the column
+// pass leaves the diagonal out there. A last single-block kernel combines the per-row and
+// per-column figures into the five numbers.
+//
+// Why: on the multibody Newton matrices the host pass was a third of a refactorization on
+// the GPU (bench/history.md). Each entry of B is computed as the host computes it,
+// (a·r_i)·c_j, so both give the same bits; every sum is taken in a fixed order (a lane's
+// entries in order, then a fixed shuffle tree), so the device's figures are the same from
+// run to run (they may differ from the host's in the last bits: a different order). Maxima
+// are exact in any order.
+#include <cfloat>
+#include <cmath>
+
+#include "numeric/cuda/cuda_executor.hpp"
+
+namespace strata::cuda {
+namespace {
+
+constexpr int kWarp = 32;
+constexpr int kThreads = 256;  // 8 warps: 8 rows (columns) per block
+
+struct Figures {
+  double a_sum, b_sum, b_max;
+};
+
+__device__ Figures warp_reduce(Figures f) {
+  for (int off = kWarp / 2; off > 0; off /= 2) {
+    f.a_sum += __shfl_xor_sync(0xffffffffu, f.a_sum, off);
+    f.b_sum += __shfl_xor_sync(0xffffffffu, f.b_sum, off);
+    f.b_max = fmax(f.b_max, __shfl_xor_sync(0xffffffffu, f.b_max, off));
+  }
+  return f;
+}
+
+// Per row i: the sums of |a| and |b| and the maximum of |b| over the row's stored entries
+// (row_ptr/row_pos/row_col: the row-wise map; rs, cs: the scaling, or null).
+__global__ void row_pass(std::int64_t n, const std::int64_t* row_ptr, const int* row_pos,
+                         const int* row_col, const double* a, const double* rs, const double* cs,
+                         double* ra, double* rb, double* rm) {
+  const std::int64_t i =
+      static_cast<std::int64_t>(blockIdx.x) * (kThreads / kWarp) + threadIdx.x / kWarp;
+  const int lane = threadIdx.x % kWarp;
+  if (i >= n) return;  // whole warps leave together
+  const double ri = rs ? rs[i] : 1.0;
+  Figures f{0, 0, 0};
+  for (std::int64_t q = row_ptr[i] + lane; q < row_ptr[i + 1]; q += kWarp) {
+    const double x = a[row_pos[q]];
+    const double b = cs ? x * ri * cs[row_col[q]] : x;
+    f.a_sum += fabs(x);
+    f.b_sum += fabs(b);
+    f.b_max = fmax(f.b_max, fabs(b));
+  }
+  f = warp_reduce(f);
+  if (lane == 0) {
+    ra[i] = f.a_sum;
+    rb[i] = f.b_sum;
+    rm[i] = f.b_max;
+  }
+}
+
+// Per column j: the same figures over its entries (symmetric storage: below the diagonal
+// only), b written over a, `bad` set when a value is not finite.
+__global__ void column_pass(std::int64_t n, const std::int64_t* col_ptr, const int* col_row,
+                            double* a, const double* rs, const double* cs, bool symmetric,
+                            double* ca, double* cb, double* cm, int* bad) {
+  const std::int64_t j =
+      static_cast<std::int64_t>(blockIdx.x) * (kThreads / kWarp) + threadIdx.x / kWarp;
+  const int lane = threadIdx.x % kWarp;
+  if (j >= n) return;
+  const double cj = cs ? cs[j] : 1.0;
+  Figures f{0, 0, 0};
+  bool not_finite = false;
+  for (std::int64_t p = col_ptr[j] + lane; p < col_ptr[j + 1]; p += kWarp) {
+    const int i = col_row[p];
+    const double x = a[p];
+    not_finite |= !(fabs(x) <= DBL_MAX);
+    const double b = rs ? x * rs[i] * cj : x;
+    a[p] = b;
+    if (symmetric && i == j) continue;
+    f.a_sum += fabs(x);
+    f.b_sum += fabs(b);
+    f.b_max = fmax(f.b_max, fabs(b));
+  }
+  f = warp_reduce(f);
+  if (__any_sync(0xffffffffu, not_finite) && lane == 0) atomicOr(bad, 1);
+  if (lane == 0) {
+    ca[j] = f.a_sum;
+    cb[j] = f.b_sum;
+    cm[j] = f.b_max;
+  }
+}
+
+__device__ bool outside_factor_two(double v) { return v != 0 && (v < 0.5 || v > 2); }
+
+// One block: out[0] ‖A‖∞, out[1] ‖B‖₁, out[2] 1 when a row or column sum of |a| is not
+// finite, out[3] 1 when a row or column maximum of |b| is outside {0} ∪ [½, 2], out[4]
+// 1 when a value was not finite (`bad`).
+__global__ void combine(std::int64_t n, bool symmetric, const double* ra, const double* rb,
+                        const double* rm, const double* ca, const double* cb, const double* cm,
+                        const int* bad, double* out) {
+  __shared__ double s_norm_inf[kThreads], s_norm1[kThreads];
+  __shared__ int s_overflow[kThreads], s_spread[kThreads];
+  double norm_inf = 0, norm1 = 0;
+  bool overflow = false, spread = false;
+  for (std::int64_t i = threadIdx.x; i < n; i += kThreads) {
+    if (symmetric) {
+      const double row_a = ra[i] + ca[i], row_b = rb[i] + cb[i];
+      norm_inf = fmax(norm_inf, row_a);
+      norm1 = fmax(norm1, row_b);
+      overflow |= !(row_a <= DBL_MAX);
+      spread |= outside_factor_two(fmax(rm[i], cm[i]));
+    } else {
+      norm_inf = fmax(norm_inf, ra[i]);
+      norm1 = fmax(norm1, cb[i]);
+      overflow |= !(ra[i] <= DBL_MAX) || !(ca[i] <= DBL_MAX);
+      spread |= outside_factor_two(rm[i]) || outside_factor_two(cm[i]);
+    }
+  }
+  s_norm_inf[threadIdx.x] = norm_inf;
+  s_norm1[threadIdx.x] = norm1;
+  s_overflow[threadIdx.x] = overflow;
+  s_spread[threadIdx.x] = spread;
+  __syncthreads();
+  for (int half = kThreads / 2; half > 0; half /= 2) {
+    if (threadIdx.x < half) {
+      s_norm_inf[threadIdx.x] = fmax(s_norm_inf[threadIdx.x], s_norm_inf[threadIdx.x + half]);
+      s_norm1[threadIdx.x] = fmax(s_norm1[threadIdx.x], s_norm1[threadIdx.x + half]);
+      s_overflow[threadIdx.x] |= s_overflow[threadIdx.x + half];
+      s_spread[threadIdx.x] |= s_spread[threadIdx.x + half];
+    }
+    __syncthreads();
+  }
+  if (threadIdx.x == 0) {
+    out[0] = s_norm_inf[0];
+    out[1] = s_norm1[0];
+    out[2] = s_overflow[0];
+    out[3] = s_spread[0];
+    out[4] = *bad != 0;
+  }
+}
+
+unsigned blocks_for(std::int64_t n) {
+  return static_cast<unsigned>((n + kThreads / kWarp - 1) / (kThreads / kWarp));
+}
+
+}  // namespace
+
+void CudaExecutor::prepare_value_pass(const Analysis& an) {
+  value_pass_.analysis = 0;
+  const auto n = static_cast<std::size_t>(an.n);
+  const std::size_t nnz = an.pattern_indices.size();
+  // positions and indices are stored in 32 bits; a pattern this large keeps the host pass
+  if (nnz >= static_cast<std::size_t>(INT32_MAX) || an.pattern_offsets.size() != n + 1) return;
+  // the row-wise map of the canonical pattern: a counting sort of the entries by row
+  std::vector<std::int64_t> row_ptr(n + 1, 0);
+  for (index_t i : an.pattern_indices) ++row_ptr[static_cast<std::size_t>(i) + 1];
+  for (std::size_t i = 0; i < n; ++i) row_ptr[i + 1] += row_ptr[i];
+  std::vector<int> row_pos(nnz), row_col(nnz), col_row(nnz);
+  std::vector<std::int64_t> next(row_ptr.begin(), row_ptr.end() - 1);
+  for (std::size_t j = 0; j < n; ++j)
+    for (index_t p = an.pattern_offsets[j]; p < an.pattern_offsets[j + 1]; ++p) {
+      const auto i = static_cast<std::size_t>(an.pattern_indices[p]);
+      const std::int64_t q = next[i]++;
+      row_pos[q] = static_cast<int>(p);
+      row_col[q] = static_cast<int>(j);
+      col_row[p] = static_cast<int>(i);
+    }
+  ValuePass& v = value_pass_;
+  try {
+    upload(v.row_ptr, row_ptr);
+    upload(v.col_ptr,
+           std::vector<std::int64_t>(an.pattern_offsets.begin(), an.pattern_offsets.end()));
+    upload(v.row_pos, row_pos);
+    upload(v.row_col, row_col);
+    upload(v.col_row, col_row);
+    if (!an.row_scaling.empty()) {
+      upload(v.row_scaling, an.row_scaling);
+      upload(v.col_scaling, an.col_scaling);
+    }
+    v.sums.resize(std::max<std::size_t>(6 * n, 1));
+    v.bad.resize(1);
+    v.out.resize(5);
+    values_.resize(std::max<std::size_t>(nnz, 1));
+    STRATA_CUDA(cudaStreamSynchronize(stream_));
+  } catch (const OutOfMemory&) {
+    // no room: the host pass serves; give back what was taken
+    for (auto* b : {&v.row_ptr, &v.col_ptr}) b->clear();
+    for (auto* b : {&v.row_pos, &v.row_col, &v.col_row}) b->clear();
+    for (auto* b : {&v.row_scaling, &v.col_scaling, &v.sums}) b->clear();
+    return;
+  }
+  v.analysis = an.id;
+}
+
+bool CudaExecutor::scale_values_on_device(const Analysis& an, const double* values,
+                                          numeric::DeviceValueNorms& out) {
+  STRATA_CUDA(cudaSetDevice(device_));
+  ValuePass& v = value_pass_;
+  if (v.analysis != an.id || an.id != analysis_id_ || planned_ != 1) return false;
+  const auto whole = parts_.find(-1);
+  if (whole == parts_.end()) return false;
+  for (char tiled : whole->second.tiled)
+    if (tiled) return false;  // tiled fronts assemble from the host's scaled values
+  const auto n = static_cast<std::int64_t>(an.n);
+  const std::size_t nnz = an.pattern_indices.size();
+  const bool scale = !an.row_scaling.empty();
+  values_.upload(values, nnz, stream_);  // counted by begin (FactorStats::bytes_to_device)
+  STRATA_CUDA(cudaMemsetAsync(v.bad.data(), 0, sizeof(int), stream_));
+  double* s = v.sums.data();
+  double *ra = s, *rb = s + n, *rm = s + 2 * n, *ca = s + 3 * n, *cb = s + 4 * n, *cm = s + 5 * n;
+  const double* rs = scale ? v.row_scaling.data() : nullptr;
+  const double* cs = scale ? v.col_scaling.data() : nullptr;
+  if (n > 0) {
+    row_pass<<<blocks_for(n), kThreads, 0, stream_>>>(n, v.row_ptr.data(), v.row_pos.data(),
+                                                      v.row_col.data(), values_.data(), rs, cs, ra,
+                                                      rb, rm);
+    STRATA_CUDA(cudaGetLastError());
+    column_pass<<<blocks_for(n), kThreads, 0, stream_>>>(n, v.col_ptr.data(), v.col_row.data(),
+                                                         values_.data(), rs, cs, an.symmetric, ca,
+                                                         cb, cm, v.bad.data());
+    STRATA_CUDA(cudaGetLastError());
+  }
+  combine<<<1, kThreads, 0, stream_>>>(n, an.symmetric, ra, rb, rm, ca, cb, cm, v.bad.data(),
+                                       v.out.data());
+  STRATA_CUDA(cudaGetLastError());
+  STRATA_CUDA(cudaStreamSynchronize(stream_));
+  const double* r = v.out.data();
+  out.norm_inf = r[0];
+  out.scaled_norm1 = r[1];
+  out.sums_finite = r[2] == 0;
+  out.equilibrated = r[3] == 0;
+  out.finite = r[4] == 0;
+  return true;
+}
+
+}  // namespace strata::cuda
