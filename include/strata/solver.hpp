@@ -13,6 +13,7 @@
 #pragma once
 
 #include <memory>
+#include <span>
 #include <vector>
 
 #include "strata/errors.hpp"
@@ -90,6 +91,16 @@ class Solver {
   /// Factorization of new values with the analyzed pattern. Reuses the analysis and all
   /// workspace; gives bitwise the same factor as a fresh factorize.
   void refactorize(const SparseMatrix& a);
+
+  /// refactorize for values alone, as cuDSS's cudssMatrixSetValues: values[p] is entry p
+  /// of the matrix in canonical form (CSC, row indices sorted within each column, no
+  /// duplicates; the lower triangle when symmetric, index base 0) whose pattern was
+  /// analyzed, i.e. its `values` array. The pattern is not compared (refactorize(A) does),
+  /// so a caller that assembles into a fixed pattern saves a pass over it. Throws
+  /// InvalidState before analyze, or when the analyzed matrix was not canonical and no
+  /// canonical one has been factorized since (the entries then have no order to follow);
+  /// InvalidInput when values.size() is not the number of entries, and as refactorize.
+  void refactorize(std::span<const double> values);
 
   /// Solves A X = B for nrhs right-hand sides. b and x are column-major n×nrhs arrays
   /// (leading dimension n); they may not alias. The solution is checked and refined as

@@ -28,6 +28,7 @@
 #include <cstring>
 #include <limits>
 #include <optional>
+#include <span>
 #include <string_view>
 
 #include "analysis/analysis.hpp"
@@ -226,26 +227,30 @@ void keep_analyzed_input(SolverState& s, const SparseMatrix& a) {
 }
 
 // The input stage on the GPU (the tree driver's CUDA executor, numeric/cuda/value_pass.cu)
-// for values `a` in the kept pattern: staged in the page-locked `scaled`, checked, scaled
-// and measured on the device, which keeps the scaled values for the factorization. On
-// acceptance the staged values become the kept ones (the two buffers trade places, so
-// nothing is copied twice); refused values (not finite, overflowing sums) throw with the
-// kept values and the factor as they were. False, with nothing changed that matters,
-// where the driver has no such pass or B needs equilibrating again (the host then
-// rescales). Sets norm1 = ‖B‖₁.
-bool values_on_gpu(SolverState& s, const SparseMatrix& a, double& norm1) {
+// for `values` in the entry order of `pattern`, the analyzed pattern: staged in the
+// page-locked `scaled`, checked, scaled and measured on the device, which keeps the scaled
+// values for the factorization. On acceptance the staged values become the kept ones (the
+// two buffers trade places, so nothing is copied twice); refused values (not finite,
+// overflowing sums) throw with the kept values and the factor as they were. False, with
+// nothing changed that matters, where the driver has no such pass or B needs
+// equilibrating again (the host then rescales). Sets norm1 = ‖B‖₁.
+bool values_on_gpu(SolverState& s, const SparseMatrix& pattern, std::span<const double> values,
+                   double& norm1) {
   const Analysis& an = *s.analysis;
-  if (!s.driver->uploads_values() || a.nnz() == 0) return false;
+  if (!s.driver->uploads_values() || values.empty()) return false;
   tbb::task_arena& arena = host_arena(s);
-  resize_scaled(s, a.values.size(), "factorize: staged values");
+  resize_scaled(s, values.size(), "factorize: staged values");
   pin_scaled(s);
-  copy_values(s.scaled, a.values, arena);
-  s.scaled_current = false;  // raw values now, whatever follows
+  double* staged = s.scaled.data();
+  const numeric::StageValues stage = [&](std::size_t b, std::size_t e) {
+    s.scaled_current = false;  // raw values now, whatever follows
+    detail::copy_range(staged + b, values.data() + b, e - b, arena);
+  };
   numeric::DeviceValueNorms dn;
-  if (!s.driver->scale_values_on_device(an, s.scaled.data(), dn)) return false;
-  if (!dn.finite) detail::throw_first_not_finite(a);
+  if (!s.driver->scale_values_on_device(an, staged, stage, dn)) return false;
+  if (!dn.finite) detail::throw_first_not_finite(pattern, values.data());
   if (!dn.sums_finite) {
-    check_norms(a);
+    check_norms(pattern, values.data());
     throw InternalError("the device found a row or column sum that overflows; the host did not");
   }
   if (!an.row_scaling.empty() && !dn.equilibrated && !scaling_clamped(an)) return false;
@@ -265,7 +270,8 @@ bool values_on_gpu(SolverState& s, const SparseMatrix& a, double& norm1) {
 // the bits the device computed.
 void host_scaled(SolverState& s) {
   if (s.scaled_current) return;
-  refactor_values(*s.analysis, s.values, host_arena(s), s.value_sums, s.scaled);
+  refactor_values(*s.analysis, s.values, s.values.values.data(), host_arena(s), s.value_sums,
+                  s.scaled);
   s.scaled_current = true;
 }
 
@@ -273,39 +279,44 @@ void host_scaled(SolverState& s) {
 // or a canonical form of a new one), their norms, the scaling of the analysis applied
 // into s.scaled and, for values far from the analysis's, equilibrated again
 // (s.rescaling). Returns ‖B‖₁ of the scaled matrix B. Throws InvalidInput before the
-// current factor is touched, so that bad input leaves the solver usable.
-double prepare_values(SolverState& s, const SparseMatrix& a) {
+// current factor is touched, so that bad input leaves the solver usable. The values are
+// those of `a`, or, with a == nullptr, `values` in the entry order of the kept pattern
+// (Solver::refactorize(span): the caller vouches for the pattern).
+double prepare_values(SolverState& s, const SparseMatrix* a, std::span<const double> values) {
   const Analysis& an = *s.analysis;
   const bool scale = !an.row_scaling.empty();
   double norm1 = 0;           // of the scaled matrix, for static pivoting
   bool equilibrated = false;  // B's row and column maxima known to be within a factor 2
   tbb::task_arena& arena = host_arena(s);
   s.values_on_device = false;
-  const bool analyzed_pattern = has_analyzed_pattern(an, a, arena);
-  if (analyzed_pattern && s.values_analysis == an.id && values_on_gpu(s, a, norm1)) return norm1;
+  const bool analyzed_pattern = a == nullptr || has_analyzed_pattern(an, *a, arena);
+  if (analyzed_pattern && a != nullptr && s.values_analysis != an.id) {
+    // the pattern kept from now on; no factor of this analysis exists that the values
+    // could still belong to
+    s.values_pin.reset();
+    s.values = *a;
+    s.values.storage = an.symmetric ? Storage::lower : Storage::full;
+    s.values_analysis = an.id;
+  }
+  if (analyzed_pattern && values_on_gpu(s, s.values, values, norm1)) return norm1;
   s.scaled_current = true;  // every path below writes the scaled values
   if (analyzed_pattern) {
     // Refactorization with the analyzed pattern (a Newton loop, a benchmark): one parallel
     // pass checks the values and the norms and scales them (refactor_values), then only
     // the values are copied. The general path below makes several passes and copies the
     // pattern; on a large matrix that host work was of the order of the GPU refactorization.
-    resize_scaled(s, a.values.size(), "factorize: scaled values");
-    const ValueNorms norms = refactor_values(an, a, arena, s.value_sums, s.scaled);
+    resize_scaled(s, values.size(), "factorize: scaled values");
+    const ValueNorms norms =
+        refactor_values(an, s.values, values.data(), arena, s.value_sums, s.scaled);
     s.factor.valid = false;
     s.delayed.valid = false;
     s.norm_inf = norms.norm_inf;
     norm1 = norms.scaled_norm1;
     equilibrated = norms.equilibrated;
-    if (s.values_analysis != an.id) {
-      s.values_pin.reset();
-      s.values = a;
-      s.values.storage = an.symmetric ? Storage::lower : Storage::full;
-      s.values_analysis = an.id;
-    } else {
-      copy_values(s.values.values, a.values, arena);  // pattern: the analyzed one
-    }
+    if (s.values.values.data() != values.data())
+      copy_values(s.values.values, values, arena);  // pattern: the analyzed one
   } else {
-    SparseMatrix checked = canonical_values(an, a);
+    SparseMatrix checked = canonical_values(an, *a);
     check_norms(checked);
     s.factor.valid = false;
     s.delayed.valid = false;
@@ -456,9 +467,9 @@ void report_factorization(SolverState& s, const NumericRun& r, double norm1, dou
   s.driver->report(fs);
 }
 
-void run_factorization(SolverState& s, const SparseMatrix& a) {
+void run_factorization(SolverState& s, const SparseMatrix* a, std::span<const double> values) {
   Timer timer;
-  const double norm1 = prepare_values(s, a);
+  const double norm1 = prepare_values(s, a, values);
   const double input_seconds = timer.seconds();
   const double static_pivot = s.options.static_pivot_epsilon * (norm1 > 0 ? norm1 : 1.0);
   const NumericRun r = factor_values(s, norm1, static_pivot);
@@ -528,9 +539,10 @@ void release_factor(SolverState& s) noexcept {
   if (s.driver) s.driver->release();
 }
 
-void factor_phase(SolverState& s, const SparseMatrix& a) {
+// The factorization of `a`, or (a == nullptr) of `values` in the kept pattern's order.
+void factor_phase(SolverState& s, const SparseMatrix* a, std::span<const double> values) {
   try {
-    phase("factorize", [&] { run_factorization(s, a); });
+    phase("factorize", [&] { run_factorization(s, a, values); });
   } catch (const OutOfMemory&) {
     release_factor(s);
     throw;
@@ -616,12 +628,28 @@ void Solver::analyze_in_pivot_order() {
 
 void Solver::factorize(const SparseMatrix& a) {
   if (!state_->analysis) analyze(a);
-  factor_phase(*state_, a);
+  factor_phase(*state_, &a, a.values);
 }
 
 void Solver::refactorize(const SparseMatrix& a) {
   if (!state_->analysis) throw InvalidState("refactorize called before analyze");
-  factor_phase(*state_, a);
+  factor_phase(*state_, &a, a.values);
+}
+
+void Solver::refactorize(std::span<const double> values) {
+  SolverState& s = *state_;
+  if (!s.analysis) throw InvalidState("refactorize called before analyze");
+  if (s.values_analysis != s.analysis->id)
+    throw InvalidState(
+        "refactorize(values): the matrix given to analyze was not in canonical form (CSC, row "
+        "indices sorted, no duplicates, the lower triangle when symmetric) and no matrix in "
+        "that form has been factorized since, so its entries have no order to take values "
+        "in; pass the matrix instead");
+  if (values.size() != s.values.values.size())
+    throw InvalidInput("refactorize(values): " + std::to_string(values.size()) +
+                       " values for a pattern of " + std::to_string(s.values.values.size()) +
+                       " entries");
+  factor_phase(s, nullptr, values);
 }
 
 static void solve_impl(SolverState& s, const double* b, double* x, index_t nrhs);

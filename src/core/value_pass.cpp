@@ -46,10 +46,10 @@ bool equal_arrays(const std::vector<T>& x, const std::vector<T>& y, tbb::task_ar
 
 }  // namespace
 
-void throw_first_not_finite(const SparseMatrix& a) {
-  const std::size_t nnz = a.values.size();
+void throw_first_not_finite(const SparseMatrix& a, const double* values) {
+  const std::size_t nnz = a.indices.size();
   std::size_t p = 0;
-  while (p + 1 < nnz && std::isfinite(a.values[p])) ++p;
+  while (p + 1 < nnz && std::isfinite(values[p])) ++p;
   const index_t j = static_cast<index_t>(
       std::upper_bound(a.offsets.begin(), a.offsets.end(), static_cast<index_t>(p)) -
       a.offsets.begin() - 1);
@@ -67,16 +67,15 @@ namespace {
 // whether some value is not finite. The loops keep every pointer and flag in registers:
 // the pass is a large share of a multibody refactorization on the GPU.
 template <bool Sym, bool Scale>
-bool value_range(const SparseMatrix& a, const double* rs, const double* cs, index_t j0, index_t j1,
-                 std::size_t first, double* scaled, double* rx, double* ry, double* rm, double* cx,
-                 double* cy, double* cm) {
+bool value_range(const SparseMatrix& a, const double* val, const double* rs, const double* cs,
+                 index_t j0, index_t j1, std::size_t first, double* scaled, double* rx, double* ry,
+                 double* rm, double* cx, double* cy, double* cm) {
   const auto n = static_cast<std::size_t>(a.n_cols);
   std::fill(rx + first, rx + n, 0.0);
   if (Sym && Scale) std::fill(ry + first, ry + n, 0.0);
   if (Scale) std::fill(rm + first, rm + n, 0.0);
   const index_t* off = a.offsets.data();
   const index_t* idx = a.indices.data();
-  const double* val = a.values.data();
   bool bad = false;
   for (index_t j = j0; j < j1; ++j) {
     const double cj = Scale ? cs[j] : 1.0;
@@ -116,8 +115,9 @@ bool value_range(const SparseMatrix& a, const double* rs, const double* cs, inde
 }
 
 template <bool Sym, bool Scale>
-ValueNorms refactor_pass(const Analysis& an, const SparseMatrix& a, tbb::task_arena& arena,
-                         std::vector<double>& work, std::vector<double>& scaled) {
+ValueNorms refactor_pass(const Analysis& an, const SparseMatrix& a, const double* values,
+                         tbb::task_arena& arena, std::vector<double>& work,
+                         std::vector<double>& scaled) {
   const std::size_t n = static_cast<std::size_t>(a.n_cols);
   constexpr int kArrays = 1 + (Sym && Scale) + Scale;  // rx, ry, rm per range
   if (work.size() < kValueBlocks * kArrays * n)
@@ -134,9 +134,9 @@ ValueNorms refactor_pass(const Analysis& an, const SparseMatrix& a, tbb::task_ar
     double* rx = array(blk, 0);
     double* ry = Sym && Scale ? array(blk, 1) : nullptr;
     double* rm = Scale ? array(blk, kArrays - 1) : nullptr;
-    bad[blk] =
-        value_range<Sym, Scale>(a, rs, cs, range_begin(n, blk), range_begin(n, blk + 1), first[blk],
-                                scaled.data(), rx, ry, rm, cx.data(), cy.data(), cm.data());
+    bad[blk] = value_range<Sym, Scale>(a, values, rs, cs, range_begin(n, blk),
+                                       range_begin(n, blk + 1), first[blk], scaled.data(), rx, ry,
+                                       rm, cx.data(), cy.data(), cm.data());
   };
   // the ranges' rows added (maxima: taken) in range order, into range 0's arrays
   auto reduce = [&](std::size_t i0, std::size_t i1) {
@@ -151,7 +151,8 @@ ValueNorms refactor_pass(const Analysis& an, const SparseMatrix& a, tbb::task_ar
     }
   };
   for_value_ranges(static_cast<std::size_t>(a.nnz()), n, arena, range, reduce);
-  if (std::any_of(bad, bad + kValueBlocks, [](bool b) { return b; })) throw_first_not_finite(a);
+  if (std::any_of(bad, bad + kValueBlocks, [](bool b) { return b; }))
+    throw_first_not_finite(a, values);
   const double* rx = array(0, 0);
   throw_if_norm_overflows({rx, n}, cx);
   ValueNorms r;
@@ -175,16 +176,17 @@ std::size_t refactor_work_size(const Analysis& an) {
   return kValueBlocks * arrays * static_cast<std::size_t>(an.n);
 }
 
-ValueNorms refactor_values(const Analysis& an, const SparseMatrix& a, tbb::task_arena& arena,
-                           std::vector<double>& work, std::vector<double>& scaled) {
-  sized_resize(scaled, a.values.size(), "factorize: scaled values");
-  if (a.nnz() == 0) return {};
+ValueNorms refactor_values(const Analysis& an, const SparseMatrix& a, const double* values,
+                           tbb::task_arena& arena, std::vector<double>& work,
+                           std::vector<double>& scaled) {
+  sized_resize(scaled, a.indices.size(), "factorize: scaled values");
+  if (a.indices.empty()) return {};
   const bool scale = !an.row_scaling.empty();
   if (an.symmetric)
-    return scale ? refactor_pass<true, true>(an, a, arena, work, scaled)
-                 : refactor_pass<true, false>(an, a, arena, work, scaled);
-  return scale ? refactor_pass<false, true>(an, a, arena, work, scaled)
-               : refactor_pass<false, false>(an, a, arena, work, scaled);
+    return scale ? refactor_pass<true, true>(an, a, values, arena, work, scaled)
+                 : refactor_pass<true, false>(an, a, values, arena, work, scaled);
+  return scale ? refactor_pass<false, true>(an, a, values, arena, work, scaled)
+               : refactor_pass<false, false>(an, a, values, arena, work, scaled);
 }
 
 // ‖A‖∞ (max row sum) of a canonical matrix with symmetric storage expanded.
@@ -218,11 +220,13 @@ void throw_if_norm_overflows(std::span<const double> row, std::span<const double
   }
 }
 
-void check_norms(const SparseMatrix& c) {
+void check_norms(const SparseMatrix& c) { check_norms(c, c.values.data()); }
+
+void check_norms(const SparseMatrix& c, const double* values) {
   std::vector<double> row(c.n_rows, 0.0), col(c.n_cols, 0.0);
   for (index_t j = 0; j < c.n_cols; ++j)
     for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) {
-      const double v = std::abs(c.values[p]);
+      const double v = std::abs(values[p]);
       row[c.indices[p]] += v;
       col[j] += v;
       if (c.storage != Storage::full && c.indices[p] != j) {
@@ -233,12 +237,20 @@ void check_norms(const SparseMatrix& c) {
   throw_if_norm_overflows(row, col);
 }
 
-void copy_values(std::vector<double>& to, const std::vector<double>& from, tbb::task_arena& arena) {
+void copy_values(std::vector<double>& to, std::span<const double> from, tbb::task_arena& arena) {
   if (to.size() != from.size() || from.size() < 2 * kParallelChunk) {
-    to = from;
+    to.assign(from.begin(), from.end());
     return;
   }
   arena.execute([&] { parallel_copy(to.data(), from.data(), from.size()); });
+}
+
+void copy_range(double* to, const double* from, std::size_t n, tbb::task_arena& arena) {
+  if (n < 2 * kParallelChunk) {
+    std::copy(from, from + n, to);
+    return;
+  }
+  arena.execute([&] { parallel_copy(to, from, n); });
 }
 
 bool has_analyzed_pattern(const Analysis& an, const SparseMatrix& a, tbb::task_arena& arena) {

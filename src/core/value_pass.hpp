@@ -36,12 +36,15 @@ double norm_inf(const SparseMatrix& c);
 /// column, whose magnitude sum (row[i], col[j]) is not finite.
 void throw_if_norm_overflows(std::span<const double> row, std::span<const double> col);
 
-/// throw_if_norm_overflows for the row and column sums of canonical c.
+/// throw_if_norm_overflows for the row and column sums of canonical c (with `values` in
+/// place of c.values: c.indices.size() of them).
 void check_norms(const SparseMatrix& c);
+void check_norms(const SparseMatrix& c, const double* values);
 
-/// Throws InvalidInput naming the first value of `a` that is not finite (its position,
-/// row and column), or the last value when all are finite (call it when one is not).
-[[noreturn]] void throw_first_not_finite(const SparseMatrix& a);
+/// Throws InvalidInput naming the first of `values` (a.indices.size() of them, in a's
+/// entry order) that is not finite: its position, row and column; the last value when
+/// all are finite (call it when one is not).
+[[noreturn]] void throw_first_not_finite(const SparseMatrix& a, const double* values);
 
 /// True when `a` is stored exactly as the analysis's canonical pattern (CSC, sorted, no
 /// duplicates; the lower triangle when symmetric): its values can be used as they are.
@@ -49,7 +52,10 @@ void check_norms(const SparseMatrix& c);
 bool has_analyzed_pattern(const Analysis& an, const SparseMatrix& a, tbb::task_arena& arena);
 
 /// to = from (parallel chunks on `arena` for large arrays of equal size).
-void copy_values(std::vector<double>& to, const std::vector<double>& from, tbb::task_arena& arena);
+void copy_values(std::vector<double>& to, std::span<const double> from, tbb::task_arena& arena);
+
+/// to[0, n) = from[0, n) (parallel chunks on `arena` when n is large).
+void copy_range(double* to, const double* from, std::size_t n, tbb::task_arena& arena);
 
 // The per-refactorization passes over the values run over kValueBlocks fixed column
 // ranges in parallel; sums that scatter (row sums, the mirrored half of a symmetric
@@ -141,12 +147,14 @@ struct ValueNorms {
   bool equilibrated = false;
 };
 
-/// See ValueNorms. `work`: the pass's per-range row arrays (refactor_work_size doubles,
-/// kept from one call to the next). The sums are added as blocked_sums adds them (each
-/// column range in entry order, the ranges in order), so the norms do not depend on the
-/// number of threads.
-ValueNorms refactor_values(const Analysis& an, const SparseMatrix& a, tbb::task_arena& arena,
-                           std::vector<double>& work, std::vector<double>& scaled);
+/// See ValueNorms: the pass over `values` (a.indices.size() of them, in the entry order
+/// of a, whose pattern is the analyzed one; a.values is not read) into `scaled`. `work`:
+/// the pass's per-range row arrays (refactor_work_size doubles, kept from one call to the
+/// next). The sums are added as blocked_sums adds them (each column range in entry order,
+/// the ranges in order), so the norms do not depend on the number of threads.
+ValueNorms refactor_values(const Analysis& an, const SparseMatrix& a, const double* values,
+                           tbb::task_arena& arena, std::vector<double>& work,
+                           std::vector<double>& scaled);
 
 /// The doubles of refactor_values' `work` for a matrix of analysis `an`.
 std::size_t refactor_work_size(const Analysis& an);

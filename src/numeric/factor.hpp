@@ -92,6 +92,10 @@ struct DeviceValueNorms {
   bool equilibrated = false;  ///< every row and column maximum of |b| is 0 or in [½, 2]
 };
 
+/// Fills entries [begin, end) of a value pass's staging buffer (Executor::
+/// scale_values_on_device).
+using StageValues = std::function<void(std::size_t begin, std::size_t end)>;
+
 /// Everything an executor needs to factor a batch.
 struct FactorContext {
   const Analysis* analysis = nullptr;
@@ -172,11 +176,14 @@ class Executor {
   /// analysis's canonical entry order; page-locked for a fast copy) uploaded, checked,
   /// scaled by the analysis's matching scaling and measured there (`out`), and kept for
   /// the factorizations that follow with FactorContext::values_on_device, until the next
-  /// call or analysis. Returns false, having changed nothing, where the executor has no
-  /// such pass: host executors, or a plan whose fronts read the values on the host
-  /// (fronts factored tile by tile). Throws DeviceError, as factorize.
+  /// call or analysis. The upload goes in pieces, each after stage(begin, end) has put
+  /// values[begin, end) in place (when `stage` is set), so that the caller's filling of
+  /// the buffer overlaps the copies. Returns false, having called nothing and changed
+  /// nothing, where the executor has no such pass: host executors, or a plan whose fronts
+  /// read the values on the host (fronts factored tile by tile). Throws DeviceError, as
+  /// factorize.
   virtual bool scale_values_on_device(const Analysis& an, const double* values,
-                                      DeviceValueNorms& out) {
+                                      const StageValues& stage, DeviceValueNorms& out) {
     return false;
   }
   /// Called once per factorization, before this executor's first part (ctx.part unset).

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <numbers>
 #include <random>
+#include <span>
 #include <tuple>
 
 #include "analysis/analysis.hpp"
@@ -1278,22 +1279,35 @@ TEST_F(CudaBackend, AnalysisInThePivotOrderRefactorsOnTheDevice) {
   EXPECT_LE(test::relative_difference(x[1], x[0]), std::max(1e-10, 1e-13 * 27 * kappa_lower));
 }
 
-// `a` with each column's entries in reverse order: the same matrix, not in the analyzed
-// (sorted) pattern, so that the Solver takes the host's value pass for it.
-SparseMatrix reversed_columns(SparseMatrix a) {
+// `a` with an explicit zero after each column's entries, repeating the column's first row:
+// the same matrix, not in the analyzed pattern (it has duplicates), so that the Solver
+// takes the host's value pass for it.
+SparseMatrix with_duplicate_zeros(const SparseMatrix& a) {
+  SparseMatrix d = a;
+  d.indices.clear();
+  d.values.clear();
   for (index_t j = 0; j < a.n_cols; ++j) {
-    std::reverse(a.indices.begin() + a.offsets[j], a.indices.begin() + a.offsets[j + 1]);
-    std::reverse(a.values.begin() + a.offsets[j], a.values.begin() + a.offsets[j + 1]);
+    d.offsets[j] = static_cast<index_t>(d.indices.size());
+    for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p) {
+      d.indices.push_back(a.indices[p]);
+      d.values.push_back(a.values[p]);
+    }
+    if (a.offsets[j + 1] > a.offsets[j]) {
+      d.indices.push_back(a.indices[a.offsets[j]]);
+      d.values.push_back(0.0);
+    }
   }
-  return a;
+  d.offsets[a.n_cols] = static_cast<index_t>(d.indices.size());
+  return d;
 }
 
 // The value pass on the device (numeric/cuda/value_pass.cu) against the host's
 // (core/value_pass.hpp): for LU, LLᵀ/LDLᵀ (automatic) and LDLᵀ, sizes 1 to 733, a
 // factorization and a refactorization with other values in the analyzed pattern run the
-// pass on the GPU, the same values given in another order run it on the host; the scaled
+// pass on the GPU, the same matrix given with explicit zeros runs it on the host; the scaled
 // values are the same bits, so are the factors (log |det|) and, without refinement, the
-// solutions. ‖B‖₁ agrees to rounding (the sums run in another order).
+// solutions. ‖B‖₁ agrees to rounding (the sums run in another order). The values alone
+// (Solver::refactorize(span)) take the device's pass too.
 TEST_F(CudaBackend, ValuePassOnTheDeviceGivesTheHostsFactor) {
   unsigned long long seed = 0;
   auto rng = test::fresh_rng(&seed);
@@ -1322,12 +1336,12 @@ TEST_F(CudaBackend, ValuePassOnTheDeviceGivesTheHostsFactor) {
       dev.analyze(a);
       host.analyze(a);
       dev.factorize(a);
-      host.factorize(reversed_columns(a));
+      host.factorize(with_duplicate_zeros(a));
       EXPECT_TRUE(dev.stats().factor.values_scaled_on_device);
       EXPECT_FALSE(host.stats().factor.values_scaled_on_device);
       EXPECT_EQ(dev.stats().factor.log_abs_determinant, host.stats().factor.log_abs_determinant);
       dev.refactorize(next);
-      host.refactorize(reversed_columns(next));
+      host.refactorize(with_duplicate_zeros(next));
       const FactorStats& fd = dev.stats().factor;
       const FactorStats& fh = host.stats().factor;
       EXPECT_TRUE(fd.values_scaled_on_device);
@@ -1337,7 +1351,15 @@ TEST_F(CudaBackend, ValuePassOnTheDeviceGivesTheHostsFactor) {
       EXPECT_EQ(fd.perturbed_pivots, fh.perturbed_pivots);
       EXPECT_EQ(fd.determinant_sign, fh.determinant_sign);
       EXPECT_NEAR(fd.matrix_norm, fh.matrix_norm, 1e-14 * fh.matrix_norm);
+      // the values alone (Solver::refactorize(span)): the same pass, the same factor
+      Solver by_values(o);
+      by_values.analyze(a);
+      by_values.factorize(a);
+      by_values.refactorize(std::span<const double>(next.values));
+      EXPECT_TRUE(by_values.stats().factor.values_scaled_on_device);
+      EXPECT_EQ(by_values.stats().factor.log_abs_determinant, fd.log_abs_determinant);
       const std::vector<double> xd = dev.solve(b), xh = host.solve(b);
+      EXPECT_EQ(by_values.solve(b), xd);
       if (fh.perturbed_pivots == 0) {
         EXPECT_EQ(fd.log_abs_determinant, fh.log_abs_determinant);
         EXPECT_EQ(xd, xh);

@@ -72,7 +72,8 @@ TEST(ValuePass, ScalesExactlyWithTheReferenceNormsOnEveryThreadCount) {
         tbb::task_arena one(1);
         ASSERT_TRUE(detail::has_analyzed_pattern(an, c, one));
         std::vector<double> work, b;
-        const detail::ValueNorms ref = detail::refactor_values(an, c, one, work, b);
+        const detail::ValueNorms ref =
+            detail::refactor_values(an, c, c.values.data(), one, work, b);
         // B entry by entry: (a_ij·dr_i)·dc_j, the analysis's scaling of A(:,Q)
         ASSERT_EQ(b.size(), c.values.size());
         for (index_t j = 0; j < n; ++j)
@@ -95,7 +96,8 @@ TEST(ValuePass, ScalesExactlyWithTheReferenceNormsOnEveryThreadCount) {
         for (int threads : {2, 3}) {
           tbb::task_arena arena(threads);
           std::vector<double> w2, b2;
-          const detail::ValueNorms r2 = detail::refactor_values(an, c, arena, w2, b2);
+          const detail::ValueNorms r2 =
+              detail::refactor_values(an, c, c.values.data(), arena, w2, b2);
           EXPECT_EQ(r2.norm_inf, ref.norm_inf) << threads << " threads";
           EXPECT_EQ(r2.scaled_norm1, ref.scaled_norm1) << threads << " threads";
           EXPECT_EQ(r2.equilibrated, ref.equilibrated) << threads << " threads";
@@ -120,7 +122,7 @@ TEST(ValuePass, NamesTheFirstValueThatIsNotFinite) {
     tbb::task_arena arena(2);
     std::vector<double> work, b;
     try {
-      detail::refactor_values(an, c, arena, work, b);
+      detail::refactor_values(an, c, c.values.data(), arena, work, b);
       ADD_FAILURE() << "no error for " << bad;
     } catch (const InvalidInput& e) {
       EXPECT_NE(std::string(e.what()).find("values[" + std::to_string(p) + "]"), std::string::npos)

@@ -169,6 +169,7 @@ class CudaExecutor final : public numeric::Executor {
   bool uses_host_arena() const override { return false; }
   void prepare(const Analysis& an, int workers) override;
   bool scale_values_on_device(const Analysis& an, const double* values,
+                              const numeric::StageValues& stage,
                               numeric::DeviceValueNorms& out) override;  // value_pass.cu
   void begin(const numeric::FactorContext& ctx) override;
   void begin_part(const numeric::FactorContext& ctx) override;

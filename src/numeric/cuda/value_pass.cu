@@ -23,6 +23,7 @@
 // entries in order, then a fixed shuffle tree), so the device's figures are the same from
 // run to run (they may differ from the host's in the last bits: a different order). Maxima
 // are exact in any order.
+#include <algorithm>
 #include <cfloat>
 #include <cmath>
 
@@ -33,6 +34,8 @@ namespace {
 
 constexpr int kWarp = 32;
 constexpr int kThreads = 256;  // 8 warps: 8 rows (columns) per block
+// values staged and copied per piece: 4 MB, a fraction of a millisecond each way
+constexpr std::size_t kStagePiece = std::size_t{1} << 19;
 
 struct Figures {
   double a_sum, b_sum, b_max;
@@ -208,6 +211,7 @@ void CudaExecutor::prepare_value_pass(const Analysis& an) {
 }
 
 bool CudaExecutor::scale_values_on_device(const Analysis& an, const double* values,
+                                          const numeric::StageValues& stage,
                                           numeric::DeviceValueNorms& out) {
   STRATA_CUDA(cudaSetDevice(device_));
   ValuePass& v = value_pass_;
@@ -219,7 +223,15 @@ bool CudaExecutor::scale_values_on_device(const Analysis& an, const double* valu
   const auto n = static_cast<std::int64_t>(an.n);
   const std::size_t nnz = an.pattern_indices.size();
   const bool scale = !an.row_scaling.empty();
-  values_.upload(values, nnz, stream_);  // counted by begin (FactorStats::bytes_to_device)
+  // in pieces, each copied while the caller stages the next (counted by begin, in
+  // FactorStats::bytes_to_device)
+  values_.resize(std::max<std::size_t>(nnz, 1));
+  for (std::size_t b = 0; b < nnz; b += kStagePiece) {
+    const std::size_t e = std::min(nnz, b + kStagePiece);
+    if (stage) stage(b, e);
+    STRATA_CUDA(cudaMemcpyAsync(values_.data() + b, values + b, (e - b) * sizeof(double),
+                                cudaMemcpyHostToDevice, stream_));
+  }
   STRATA_CUDA(cudaMemsetAsync(v.bad.data(), 0, sizeof(int), stream_));
   double* s = v.sums.data();
   double *ra = s, *rb = s + n, *rm = s + 2 * n, *ca = s + 3 * n, *cb = s + 4 * n, *cm = s + 5 * n;
