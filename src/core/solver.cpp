@@ -238,6 +238,11 @@ bool values_on_gpu(SolverState& s, const SparseMatrix& pattern, std::span<const 
                    double& norm1) {
   const Analysis& an = *s.analysis;
   if (!s.driver->uploads_values() || values.empty()) return false;
+  // a general matrix whose pivots are delayed straight away is factored on the host
+  // (factor_values), which needs the scaled values there
+  if (s.options.pivoting == Pivoting::delayed && an.type == MatrixType::general &&
+      s.driver->in_one_process())
+    return false;
   tbb::task_arena& arena = host_arena(s);
   resize_scaled(s, values.size(), "factorize: staged values");
   pin_scaled(s);

@@ -1435,5 +1435,24 @@ TEST_F(CudaBackend, ValuesFarFromTheAnalysisAreEquilibratedOnTheHost) {
   EXPECT_LE(test::backward_error(a, y.data(), b.data()), 1e-14);
 }
 
+// Pivoting::delayed on a general matrix factors on the host from the first pivot: the
+// value pass stays on the host too (no copy to the device and back).
+TEST_F(CudaBackend, PivotsDelayedStraightAwayKeepTheHostsValuePass) {
+  auto rng = test::fresh_rng();
+  const SparseMatrix a = test::random_sparse(200, 4, test::RandomKind::general, rng);
+  Options o;
+  o.backend = Backend::cuda;
+  o.num_gpus = 1;
+  o.pivoting = Pivoting::delayed;
+  Solver s(o);
+  s.factorize(a);
+  s.refactorize(std::span<const double>(a.values));
+  EXPECT_FALSE(s.stats().factor.values_scaled_on_device);
+  EXPECT_TRUE(s.stats().factor.delayed_pivoting);
+  const std::vector<double> b(200, 1.0);
+  const std::vector<double> x = s.solve(b);
+  EXPECT_LE(test::backward_error(a, x.data(), b.data()), 1e-14);
+}
+
 }  // namespace
 }  // namespace strata
