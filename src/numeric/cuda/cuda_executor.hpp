@@ -236,10 +236,6 @@ class CudaExecutor final : public numeric::Executor {
     /// then into the factor by the host part.
     PinnedBuffer<double> panels;
     bool panels_async = false;
-    /// The chunk's index arrays on their way to the device (upload_chunk_array): small
-    /// front positions, their permutations' offsets, the panels' staging offsets, the
-    /// diagonals' offsets.
-    PinnedBuffer<std::int64_t> staged[4];
     /// 0–5: assembly, small fronts, large fronts, store, results copied (timed);
     /// 6: panels packed; 7: panels copied to `panels`
     cudaEvent_t ev[8] = {};
@@ -402,12 +398,6 @@ class CudaExecutor final : public numeric::Executor {
   /// The lane this executor lends to others (a lane of its own, idle while it helps).
   Lane& help_lane();
   void count_h2d(std::size_t bytes) { bytes_h2d_ += bytes; }
-  /// d = h, copied on stream_ through `staging` (a chunk record's page-locked buffer):
-  /// a copy from pageable memory may first wait for the stream, which would leave the GPU
-  /// idle while the host prepares the chunk's next launch. `staging` is reused two chunks
-  /// later, when this chunk's copies are done (its events were waited for).
-  void upload_chunk_array(DeviceBuffer<std::int64_t>& d, const std::vector<std::int64_t>& h,
-                          PinnedBuffer<std::int64_t>& staging);
   template <class T>
   void upload(DeviceBuffer<T>& d, const std::vector<T>& h) {
     d.upload(h.data(), h.size(), stream_);

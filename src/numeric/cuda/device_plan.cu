@@ -313,10 +313,6 @@ void CudaExecutor::presize_chunk_buffers(const Analysis& an,
     c.pinfo.resize(big + 1);
     c.psize.resize(pivots + 1);
     c.diag.resize(pivots + 1);
-    c.staged[0].resize(small);
-    c.staged[1].resize(small + 1);
-    c.staged[2].resize(count + 1);
-    c.staged[3].resize(count + 1);
   }
   for (auto& l : lane) {
     l->potrf_work.resize(static_cast<std::size_t>(potrf));

@@ -52,18 +52,6 @@ void grow_potrf_work(cusolverDnHandle_t h, DeviceBuffer<double>& work, double* a
   work.resize(static_cast<std::size_t>(std::max(lwork, 1)));
 }
 
-void CudaExecutor::upload_chunk_array(DeviceBuffer<std::int64_t>& d,
-                                      const std::vector<std::int64_t>& h,
-                                      PinnedBuffer<std::int64_t>& staging) {
-  d.resize(std::max<std::size_t>(h.size(), 1));  // presized at planning: no growth here
-  if (h.empty()) return;
-  staging.resize(h.size());
-  std::copy(h.begin(), h.end(), staging.data());
-  STRATA_CUDA(cudaMemcpyAsync(d.data(), staging.data(), sizeof(std::int64_t) * h.size(),
-                              cudaMemcpyHostToDevice, stream_));
-  count_h2d(sizeof(std::int64_t) * h.size());
-}
-
 void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin, index_t end) {
   const Analysis& an = *ctx.analysis;
   const auto& t = an.tree;
@@ -124,8 +112,8 @@ void CudaExecutor::chunk_small_fronts(const numeric::FactorContext& ctx, ChunkRe
     rec.big_perm_at[i] = rec.perm_total;
     rec.perm_total += t.n_pivots(s.fronts[rec.big[i]]);
   }
-  upload_chunk_array(small_pos_, rec.small, rec.staged[0]);
-  upload_chunk_array(perm_offset_, rec.perm_off, rec.staged[1]);
+  upload(small_pos_, rec.small);
+  upload(perm_offset_, rec.perm_off);
   info_.resize(ns + nb + 1);
   perturbed_.resize(ns + nb + 1);
   perm_.resize(rec.perm_total + 1);
@@ -273,7 +261,7 @@ void CudaExecutor::chunk_pack_panels(const numeric::FactorContext& ctx, ChunkRec
     total += panel_size(t, f, rec.lu);
     rec.diag_off[i + 1] = rec.diag_off[i] + t.n_pivots(f);
   }
-  upload_chunk_array(stage_offset_, stage_off, rec.staged[2]);
+  upload(stage_offset_, stage_off);
   // the staging area is free once the previous chunk's panels are on their way out
   if (copy_issued_) STRATA_CUDA(cudaStreamWaitEvent(stream_, panels_copied_, 0));
   launch_pack_panels(cur_->tree, begin, count, rec.max_rows, pool_.data(), stage_offset_.data(),
@@ -294,7 +282,7 @@ void CudaExecutor::chunk_pack_panels(const numeric::FactorContext& ctx, ChunkRec
     bytes_d2h_ += sizeof(double) * total;
   }
   if (rec.dev_only) {
-    upload_chunk_array(diag_offset_, rec.diag_off, rec.staged[3]);
+    upload(diag_offset_, rec.diag_off);
     diag_.resize(static_cast<std::size_t>(rec.diag_off[count]) + 1);
     launch_gather_diagonals(cur_->tree, begin, count, stage_offset_.data(), pack_to,
                             diag_offset_.data(), diag_.data(), stream_);
