@@ -145,13 +145,13 @@ struct FactorStats {
   MatrixType type = MatrixType::automatic;  ///< the factorization actually computed
   Backend backend = Backend::cpu;           ///< where it ran: cpu or cuda (never automatic)
   double seconds = 0;
-  /// Of `seconds`, the host's work on the input before the numeric factorization: the
-  /// pattern compared with the analyzed one, the values checked (finite, norms), copied
-  /// and scaled.
+  /// Of `seconds`, the work on the input before the numeric factorization: the pattern
+  /// compared with the analyzed one (not for refactorize(values)), the values checked
+  /// (finite, norms), copied and scaled, on the host or, with values_scaled_on_device,
+  /// staged, copied to the GPU and checked and scaled there.
   double input_seconds = 0;
   /// The values were checked, measured and scaled on the GPU (the CUDA backend, one GPU,
-  /// a refactorization with the analyzed pattern), not on the host; input_seconds then
-  /// includes their copy to the device.
+  /// values in the analyzed pattern), not on the host.
   bool values_scaled_on_device = false;
   double gflops = 0;             ///< AnalysisStats::factor_flops (×2 for LU) / seconds
   index_t perturbed_pivots = 0;  ///< tiny pivots replaced by ±ε‖A‖ (static pivoting)
