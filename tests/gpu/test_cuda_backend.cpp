@@ -1279,6 +1279,15 @@ TEST_F(CudaBackend, AnalysisInThePivotOrderRefactorsOnTheDevice) {
   EXPECT_LE(test::relative_difference(x[1], x[0]), std::max(1e-10, 1e-13 * 27 * kappa_lower));
 }
 
+// The CUDA backend on one GPU, factoring as `type`.
+Options one_gpu(MatrixType type = MatrixType::automatic) {
+  Options o;
+  o.backend = Backend::cuda;
+  o.num_gpus = 1;
+  o.type = type;
+  return o;
+}
+
 // `a` with an explicit zero after each column's entries, repeating the column's first row:
 // the same matrix, not in the analyzed pattern (it has duplicates), so that the Solver
 // takes the host's value pass for it.
@@ -1312,63 +1321,55 @@ TEST_F(CudaBackend, ValuePassOnTheDeviceGivesTheHostsFactor) {
   unsigned long long seed = 0;
   auto rng = test::fresh_rng(&seed);
   SCOPED_TRACE("seed " + std::to_string(seed) + " (STRATA_TEST_SEED replays it)");
-  std::uniform_real_distribution<double> wiggle(0.97, 1.03), rhs(-1.0, 1.0);
-  const std::tuple<test::RandomKind, MatrixType> kinds[] = {
-      {test::RandomKind::general, MatrixType::general},
-      {test::RandomKind::spd, MatrixType::automatic},
-      {test::RandomKind::symmetric_indefinite, MatrixType::symmetric_indefinite}};
-  for (const auto& [kind, type] : kinds)
-    for (index_t n : {1, 2, 3, 5, 733}) {
-      SCOPED_TRACE("type " + std::string(to_string(type)) + ", n = " + std::to_string(n));
-      const SparseMatrix a = test::random_sparse(n, 3, kind, rng);
-      SparseMatrix next = a;
-      for (double& v : next.values) v *= wiggle(rng);
-      std::vector<double> b(n);
-      for (double& v : b) v = rhs(rng);
-      Options o;
-      o.backend = Backend::cuda;
-      o.num_gpus = 1;
-      o.type = type;
-      o.refinement_max_steps = 0;
-      o.gmres_max_iterations = 0;
-      o.solve_check = SolveCheck::after_perturbed_pivots;
-      Solver dev(o), host(o);
-      dev.analyze(a);
-      host.analyze(a);
-      dev.factorize(a);
-      host.factorize(with_duplicate_zeros(a));
-      EXPECT_TRUE(dev.stats().factor.values_scaled_on_device);
-      EXPECT_FALSE(host.stats().factor.values_scaled_on_device);
+  std::uniform_real_distribution<double> rhs(-1.0, 1.0);
+  for (const test::ValueChange& c : test::value_changes(rng)) {
+    SCOPED_TRACE("type " + std::string(to_string(c.type)) + ", n = " + std::to_string(c.n));
+    const SparseMatrix& a = c.a;
+    const SparseMatrix& next = c.next;
+    std::vector<double> b(c.n);
+    for (double& v : b) v = rhs(rng);
+    Options o = one_gpu(c.type);
+    o.refinement_max_steps = 0;
+    o.gmres_max_iterations = 0;
+    o.solve_check = SolveCheck::after_perturbed_pivots;
+    Solver dev(o), host(o);
+    dev.analyze(a);
+    host.analyze(a);
+    dev.factorize(a);
+    host.factorize(with_duplicate_zeros(a));
+    EXPECT_TRUE(dev.stats().factor.values_scaled_on_device);
+    EXPECT_FALSE(host.stats().factor.values_scaled_on_device);
+    if (host.stats().factor.perturbed_pivots == 0)  // else ε‖B‖₁ to rounding, as below
       EXPECT_EQ(dev.stats().factor.log_abs_determinant, host.stats().factor.log_abs_determinant);
-      dev.refactorize(next);
-      host.refactorize(with_duplicate_zeros(next));
-      const FactorStats& fd = dev.stats().factor;
-      const FactorStats& fh = host.stats().factor;
-      EXPECT_TRUE(fd.values_scaled_on_device);
-      EXPECT_FALSE(fh.values_scaled_on_device);
-      EXPECT_EQ(fd.backend, Backend::cuda);
-      EXPECT_EQ(fd.type, fh.type);
-      EXPECT_EQ(fd.perturbed_pivots, fh.perturbed_pivots);
-      EXPECT_EQ(fd.determinant_sign, fh.determinant_sign);
-      EXPECT_NEAR(fd.matrix_norm, fh.matrix_norm, 1e-14 * fh.matrix_norm);
-      // the values alone (Solver::refactorize(span)): the same pass, the same factor
-      Solver by_values(o);
-      by_values.analyze(a);
-      by_values.factorize(a);
-      by_values.refactorize(std::span<const double>(next.values));
-      EXPECT_TRUE(by_values.stats().factor.values_scaled_on_device);
-      EXPECT_EQ(by_values.stats().factor.log_abs_determinant, fd.log_abs_determinant);
-      const std::vector<double> xd = dev.solve(b), xh = host.solve(b);
-      EXPECT_EQ(by_values.solve(b), xd);
-      if (fh.perturbed_pivots == 0) {
-        EXPECT_EQ(fd.log_abs_determinant, fh.log_abs_determinant);
-        EXPECT_EQ(xd, xh);
-        EXPECT_LE(test::backward_error(next, xd.data(), b.data()), 1e-12);
-      } else {  // static pivots of ε‖B‖₁: ‖B‖₁ to rounding, so are they
-        EXPECT_NEAR(fd.log_abs_determinant, fh.log_abs_determinant,
-                    1e-12 * std::max(1.0, std::abs(fh.log_abs_determinant)));
-      }
+    dev.refactorize(next);
+    host.refactorize(with_duplicate_zeros(next));
+    const FactorStats& fd = dev.stats().factor;
+    const FactorStats& fh = host.stats().factor;
+    EXPECT_TRUE(fd.values_scaled_on_device);
+    EXPECT_FALSE(fh.values_scaled_on_device);
+    EXPECT_EQ(fd.backend, Backend::cuda);
+    EXPECT_EQ(fd.type, fh.type);
+    EXPECT_EQ(fd.perturbed_pivots, fh.perturbed_pivots);
+    EXPECT_EQ(fd.determinant_sign, fh.determinant_sign);
+    EXPECT_NEAR(fd.matrix_norm, fh.matrix_norm, 1e-14 * fh.matrix_norm);
+    // the values alone (Solver::refactorize(span)): the same pass, the same factor
+    Solver by_values(o);
+    by_values.analyze(a);
+    by_values.factorize(a);
+    by_values.refactorize(std::span<const double>(next.values));
+    EXPECT_TRUE(by_values.stats().factor.values_scaled_on_device);
+    EXPECT_EQ(by_values.stats().factor.log_abs_determinant, fd.log_abs_determinant);
+    const std::vector<double> xd = dev.solve(b), xh = host.solve(b);
+    EXPECT_EQ(by_values.solve(b), xd);
+    if (fh.perturbed_pivots == 0) {
+      EXPECT_EQ(fd.log_abs_determinant, fh.log_abs_determinant);
+      EXPECT_EQ(xd, xh);
+      EXPECT_LE(test::backward_error(next, xd.data(), b.data()), 1e-12);
+    } else {  // static pivots of ε‖B‖₁: ‖B‖₁ to rounding, so are they
+      EXPECT_NEAR(fd.log_abs_determinant, fh.log_abs_determinant,
+                  1e-12 * std::max(1.0, std::abs(fh.log_abs_determinant)));
     }
+  }
 }
 
 // Values the device's pass refuses are reported as the host's pass reports them (the
@@ -1377,10 +1378,7 @@ TEST_F(CudaBackend, ValuePassOnTheDeviceGivesTheHostsFactor) {
 TEST_F(CudaBackend, ValuesRefusedOnTheDeviceKeepTheFactor) {
   auto rng = test::fresh_rng();
   const SparseMatrix a = test::random_sparse(50, 3, test::RandomKind::general, rng);
-  Options o;
-  o.backend = Backend::cuda;
-  o.num_gpus = 1;
-  Solver s(o);
+  Solver s(one_gpu());
   s.factorize(a);
   ASSERT_TRUE(s.stats().factor.values_scaled_on_device);
   const std::vector<double> b(50, 1.0);
@@ -1417,9 +1415,7 @@ TEST_F(CudaBackend, ValuesFarFromTheAnalysisAreEquilibratedOnTheHost) {
   const SparseMatrix a = test::random_sparse(200, 4, test::RandomKind::general, rng);
   SparseMatrix far = a;
   for (index_t p = far.offsets[7]; p < far.offsets[8]; ++p) far.values[p] *= 1e6;
-  Options o;
-  o.backend = Backend::cuda;
-  o.num_gpus = 1;
+  Options o = one_gpu();
   o.solve_check = SolveCheck::always;
   Solver s(o);
   s.factorize(a);
@@ -1440,9 +1436,7 @@ TEST_F(CudaBackend, ValuesFarFromTheAnalysisAreEquilibratedOnTheHost) {
 TEST_F(CudaBackend, PivotsDelayedStraightAwayKeepTheHostsValuePass) {
   auto rng = test::fresh_rng();
   const SparseMatrix a = test::random_sparse(200, 4, test::RandomKind::general, rng);
-  Options o;
-  o.backend = Backend::cuda;
-  o.num_gpus = 1;
+  Options o = one_gpu();
   o.pivoting = Pivoting::delayed;
   Solver s(o);
   s.factorize(a);

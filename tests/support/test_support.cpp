@@ -120,6 +120,23 @@ StaleAnalysis stale_analysis(index_t n, std::mt19937_64& rng) {
   }
 }
 
+std::vector<ValueChange> value_changes(std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> wiggle(0.97, 1.03);
+  const std::pair<RandomKind, MatrixType> kinds[] = {
+      {RandomKind::general, MatrixType::general},
+      {RandomKind::spd, MatrixType::automatic},
+      {RandomKind::symmetric_indefinite, MatrixType::symmetric_indefinite}};
+  std::vector<ValueChange> out;
+  for (const auto& [kind, type] : kinds)
+    for (index_t n : {1, 2, 3, 5, 733}) {
+      ValueChange c{type, n, random_sparse(n, 3, kind, rng), {}};
+      c.next = c.a;
+      for (double& v : c.next.values) v *= wiggle(rng);
+      out.push_back(std::move(c));
+    }
+  return out;
+}
+
 SparseMatrix random_sparse(index_t n, index_t per_column, RandomKind kind, std::mt19937_64& rng) {
   std::uniform_real_distribution<double> val(-1.0, 1.0);
   std::uniform_int_distribution<index_t> row(0, std::max<index_t>(n - 1, 0));

@@ -66,6 +66,17 @@ enum class RandomKind { spd, symmetric_indefinite, general };
 /// (Storage::full). Canonical CSC.
 SparseMatrix random_sparse(index_t n, index_t per_column, RandomKind kind, std::mt19937_64& rng);
 
+/// A matrix and new values for its pattern: a random_sparse matrix `a` (3 entries per
+/// column) of each kind and size 1, 2, 3, 5 and 733, `next` the same with every value
+/// scaled by a factor drawn from [0.97, 1.03], and the type to factor them as (LU; LLᵀ
+/// trying first then LDLᵀ, MatrixType::automatic; LDLᵀ).
+struct ValueChange {
+  MatrixType type;
+  index_t n;
+  SparseMatrix a, next;
+};
+std::vector<ValueChange> value_changes(std::mt19937_64& rng);
+
 /// A random KKT (saddle point) matrix K = P [[H, Bᵀ], [B, 0]] Pᵀ of order n, Storage::lower,
 /// canonical: n/3 constraints, H random sparse SPD (diagonally dominant) of order
 /// n − n/3, B random sparse of full row rank (each row has one entry of magnitude in
