@@ -92,14 +92,15 @@ class Solver {
   /// workspace; gives bitwise the same factor as a fresh factorize.
   void refactorize(const SparseMatrix& a);
 
-  /// refactorize for values alone, as cuDSS's cudssMatrixSetValues: values[p] is entry p
-  /// of the matrix in canonical form (CSC, row indices sorted within each column, no
-  /// duplicates; the lower triangle when symmetric, index base 0) whose pattern was
-  /// analyzed, i.e. its `values` array. The pattern is not compared (refactorize(A) does),
-  /// so a caller that assembles into a fixed pattern saves a pass over it. Throws
-  /// InvalidState before analyze, or when the analyzed matrix was not canonical and no
-  /// canonical one has been factorized since (the entries then have no order to follow);
-  /// InvalidInput when values.size() is not the number of entries, and as refactorize.
+  /// refactorize for values alone, as cuDSS's cudssMatrixSetValues: values[p] is the
+  /// value of entry p of the matrix given to the last analysis (its `values` array: the
+  /// same layout, storage and entry order; duplicates are added; of a symmetric matrix
+  /// given in full storage only the lower triangle is read, as refactorize(A) reads it).
+  /// The pattern is not compared (refactorize(A) does), so a caller that assembles into a
+  /// fixed pattern saves a pass over it; a canonical matrix (CSC, row indices sorted, no
+  /// duplicates, the lower triangle when symmetric) is read in place, another is gathered
+  /// into that form first. Throws InvalidState before analyze, InvalidInput when
+  /// values.size() is not that matrix's number of entries, and as refactorize.
   void refactorize(std::span<const double> values);
 
   /// Solves A X = B for nrhs right-hand sides. b and x are column-major n×nrhs arrays

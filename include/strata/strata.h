@@ -10,6 +10,7 @@
  *   strata_factorize(s, &A);                        // values
  *   strata_solve(s, 1, b, x);                       // x = A⁻¹ b with iterative refinement
  *   strata_refactorize(s, &A2);                     // same pattern, new values
+ *   strata_refactorize_values(s, nnz, values);      // the same with the values alone
  *   strata_stats st; strata_get_stats(s, &st);      // nnz(L), flops, inertia, ...
  *   strata_destroy(s);
  *
@@ -218,6 +219,13 @@ strata_status strata_factorize(strata_solver* solver, const strata_matrix* a);
 /** Factorization of new values on the analyzed pattern, reusing the analysis and all
  *  workspace. Errors: INVALID_STATE (no analysis), and those of strata_factorize. */
 strata_status strata_refactorize(strata_solver* solver, const strata_matrix* a);
+
+/** strata_refactorize for values alone, as cuDSS's cudssMatrixSetValues: values[p] is the
+ *  value of entry p of the strata_matrix given to strata_analyze (its values array: the
+ *  same layout, storage and entry order; nnz of them). The pattern is not read again.
+ *  Errors: INVALID_STATE (no analysis), INVALID_INPUT (values NULL, nnz not that
+ *  matrix's number of entries, a value NaN/Inf), and those of strata_factorize. */
+strata_status strata_refactorize_values(strata_solver* solver, int64_t nnz, const double* values);
 
 /** Solves A X = B for nrhs ≥ 0 right-hand sides. b and x are column-major n×nrhs
  *  arrays with leading dimension n (n = strata_size). x may equal b (in place);

@@ -12,6 +12,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <string>
 
 #include "core/stats_json.hpp"
@@ -146,6 +147,25 @@ class Core {
     }
     solver_ = std::move(s);
     analyzed_ = true;
+  }
+
+  // Solver::refactorize(values): the values alone, in the analyzed matrix's entry order
+  void refactorize_values(const DoubleArray& values) {
+    if (!analyzed_) throw strata::InvalidState("refactorize called before analyze");
+    if (values.ndim() != 1)
+      throw strata::InvalidInput("refactorize_values: the values must be a 1-D array");
+    const std::span<const double> v(values.data(), static_cast<std::size_t>(values.size()));
+    try {
+      py::gil_scoped_release release;
+      solver_->refactorize(v);
+    } catch (const strata::InvalidInput&) {
+      throw;  // rejected input: the previous factor is kept
+    } catch (...) {
+      factorized_ = solved_ = false;
+      throw;
+    }
+    factorized_ = true;
+    solved_ = false;
   }
 
   void factorize(const strata::SparseMatrix& a, bool refactor) {
@@ -341,6 +361,7 @@ PYBIND11_MODULE(_strata, m) {
       .def("analyze", &Core::analyze, py::arg("a"))
       .def("factorize", [](Core& c, const strata::SparseMatrix& a) { c.factorize(a, false); })
       .def("refactorize", [](Core& c, const strata::SparseMatrix& a) { c.factorize(a, true); })
+      .def("refactorize_values", &Core::refactorize_values, py::arg("values"))
       .def("solve", &Core::solve, py::arg("b"))
       .def_property_readonly("n", &Core::size)
       .def("stats", &Core::stats)

@@ -320,6 +320,27 @@ class Solver:
         self._core.refactorize(_to_matrix(A, self._storage))
         return self
 
+    def refactorize_values(self, values):
+        """Factors new values given alone, as cuDSS's ``cudssMatrixSetValues``: in the
+        order of the stored entries of the matrix this solver analyzed (``A.data`` of a
+        CSR or CSC matrix; of another format, of ``A.tocsc()``). The pattern is neither
+        passed nor compared again. Raises InvalidInputError (a ValueError) for a wrong
+        number of values or NaN/Inf values, the previous factorization then kept;
+        NotSupportedError with ``comm=``. Returns self."""
+        if self._comm is not None:
+            raise NotSupportedError(
+                "refactorize_values: not with comm= (the distributed solver takes the matrix: "
+                "use refactorize)"
+            )
+        data = _np.asarray(values)
+        if data.ndim != 1 or not _np.issubdtype(data.dtype, _np.number) or _np.iscomplexobj(data):
+            raise InvalidInputError(
+                f"refactorize_values: values must be a 1-D real array, got shape {data.shape} "
+                f"of {data.dtype}"
+            )
+        self._core.refactorize_values(_np.ascontiguousarray(data, dtype=_np.float64))
+        return self
+
     @property
     def stats(self):
         """Statistics of the last analysis, factorization and solve, as a dict: the

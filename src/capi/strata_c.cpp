@@ -9,6 +9,7 @@
 #include <exception>
 #include <memory>
 #include <new>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -391,6 +392,17 @@ strata_status strata_refactorize(strata_solver* s, const strata_matrix* a) {
     if (!s->analyzed) throw strata::InvalidState("refactorize called before analyze");
     const strata::SparseMatrix m = convert(a, true);
     factor_phase(s, [&] { s->solver->refactorize(m); });
+  });
+}
+
+strata_status strata_refactorize_values(strata_solver* s, int64_t nnz, const double* values) {
+  STRATA_CHECK_SOLVER(s);
+  return guarded(s, [&] {
+    if (!s->analyzed) throw strata::InvalidState("refactorize called before analyze");
+    if (nnz < 0) throw strata::InvalidInput("nnz is negative (" + std::to_string(nnz) + ")");
+    if (values == nullptr && nnz > 0) throw strata::InvalidInput("values is NULL");
+    const std::span<const double> v(values, static_cast<std::size_t>(nnz));
+    factor_phase(s, [&] { s->solver->refactorize(v); });
   });
 }
 

@@ -82,6 +82,12 @@ struct SolverState {
   MatrixType resolved = MatrixType::automatic;
   double norm_inf = 0;                // ‖A‖∞ of the input
   std::uint64_t values_analysis = 0;  // Analysis::id whose canonical pattern `values` holds
+  // the analyzed matrix was not canonical: where its entries land in the canonical
+  // pattern (input_entry_map), for refactorize(values) in its own order, and the
+  // canonical values gathered from those
+  std::vector<index_t> input_map;
+  std::uint64_t input_map_analysis = 0;
+  std::vector<double> gathered;
   // the most entries in a row of `values` (symmetric storage expanded), for the rounding
   // floor of the backward error; computed for the pattern of analysis `row_entries_of`
   index_t max_row_entries = 0;
@@ -215,12 +221,26 @@ double prepare_devices(SolverState& s) {
 // work of a refactorization).
 void keep_analyzed_input(SolverState& s, const SparseMatrix& a) {
   const Analysis& an = *s.analysis;
-  if (!has_analyzed_pattern(an, a, host_arena(s))) return;
   s.values_pin.reset();
-  s.values = a;
+  s.input_map.clear();
+  s.input_map_analysis = 0;
+  if (has_analyzed_pattern(an, a, host_arena(s))) {
+    s.values = a;
+  } else {
+    // another form (CSR, duplicates, a symmetric matrix's full or upper storage): the
+    // analyzed pattern kept with zero values until a factorization, and where the input's
+    // entries land in it, so that refactorize(values) can take values in its order
+    s.input_map = detail::input_entry_map(an, a);
+    s.input_map_analysis = an.id;
+    s.values = SparseMatrix{};
+    s.values.n_rows = s.values.n_cols = an.n;
+    s.values.offsets = an.pattern_offsets;
+    s.values.indices = an.pattern_indices;
+    s.values.values.assign(an.pattern_indices.size(), 0.0);
+  }
   s.values.storage = an.symmetric ? Storage::lower : Storage::full;
   s.values_analysis = an.id;
-  resize_scaled(s, a.values.size(), "analyze: scaled values");
+  resize_scaled(s, s.values.values.size(), "analyze: scaled values");
   // refactor_values' per-range row arrays
   sized_resize(s.value_sums, std::max(s.value_sums.size(), detail::refactor_work_size(an)),
                "analyze: value sums");
@@ -625,9 +645,16 @@ void Solver::analyze_in_pivot_order() {
     Analysis next = analyze_with_pivot_sequence(*s.analysis, rows, cols, s.rescaling.row,
                                                 s.rescaling.col, s.options, workers);
     const SparseMatrix values = s.values;  // the factorized values, in the analyzed pattern
+    // the same pattern: refactorize(values) keeps taking the analyzed matrix's order
+    std::vector<index_t> input_map = s.input_map;
+    const bool mapped = s.input_map_analysis == s.analysis->id;
     clear_numeric(s);
     s.rescaling = Rescaling{};
     adopt_analysis(s, std::move(next), values);
+    if (mapped) {
+      s.input_map = std::move(input_map);
+      s.input_map_analysis = s.analysis->id;
+    }
   });
 }
 
@@ -644,17 +671,29 @@ void Solver::refactorize(const SparseMatrix& a) {
 void Solver::refactorize(std::span<const double> values) {
   SolverState& s = *state_;
   if (!s.analysis) throw InvalidState("refactorize called before analyze");
+  const bool mapped = s.input_map_analysis == s.analysis->id;
+  const std::size_t entries = mapped ? s.input_map.size() : s.values.values.size();
   if (s.values_analysis != s.analysis->id)
-    throw InvalidState(
-        "refactorize(values): the matrix given to analyze was not in canonical form (CSC, row "
-        "indices sorted, no duplicates, the lower triangle when symmetric) and no matrix in "
-        "that form has been factorized since, so its entries have no order to take values "
-        "in; pass the matrix instead");
-  if (values.size() != s.values.values.size())
+    throw InternalError("refactorize(values): the analyzed pattern was not kept");
+  if (values.size() != entries)
     throw InvalidInput("refactorize(values): " + std::to_string(values.size()) +
-                       " values for a pattern of " + std::to_string(s.values.values.size()) +
-                       " entries");
-  factor_phase(s, nullptr, values);
+                       " values for a matrix of " + std::to_string(entries) + " entries");
+  if (!mapped) {
+    factor_phase(s, nullptr, values);
+    return;
+  }
+  // the analyzed matrix's own order: its values gathered into the canonical pattern
+  // (duplicates added in its order; entries the analysis does not keep left out)
+  phase("factorize",
+        [&] { sized_resize(s.gathered, s.values.values.size(), "factorize: values"); });
+  // (every value checked, the ones left out too: refactorize(A) refuses them all)
+  std::fill(s.gathered.begin(), s.gathered.end(), 0.0);
+  for (std::size_t p = 0; p < values.size(); ++p) {
+    if (!std::isfinite(values[p]))
+      throw InvalidInput("values[" + std::to_string(p) + "] is not finite");
+    if (s.input_map[p] >= 0) s.gathered[static_cast<std::size_t>(s.input_map[p])] += values[p];
+  }
+  factor_phase(s, nullptr, s.gathered);
 }
 
 static void solve_impl(SolverState& s, const double* b, double* x, index_t nrhs);

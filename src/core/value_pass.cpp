@@ -245,6 +245,28 @@ void copy_values(std::vector<double>& to, std::span<const double> from, tbb::tas
   arena.execute([&] { parallel_copy(to.data(), from.data(), from.size()); });
 }
 
+std::vector<index_t> input_entry_map(const Analysis& an, const SparseMatrix& a) {
+  std::vector<index_t> map(a.indices.size(), -1);
+  const bool csc = a.layout == Layout::csc;
+  const index_t outer = csc ? a.n_cols : a.n_rows;
+  for (index_t o = 0; o < outer; ++o)
+    for (index_t p = a.offsets[o]; p < a.offsets[o + 1]; ++p) {
+      index_t r = csc ? a.indices[p] : o, c = csc ? o : a.indices[p];
+      if (an.symmetric) {
+        if (a.storage == Storage::upper) std::swap(r, c);
+        if (r < c) continue;  // full storage: the lower triangle is the one kept
+      }
+      const auto begin = an.pattern_indices.begin() + an.pattern_offsets[c];
+      const auto end = an.pattern_indices.begin() + an.pattern_offsets[c + 1];
+      const auto at = std::lower_bound(begin, end, r);
+      if (at == end || *at != r)
+        throw InternalError("input_entry_map: entry (" + std::to_string(r) + ", " +
+                            std::to_string(c) + ") is not in the analyzed pattern");
+      map[p] = static_cast<index_t>(at - an.pattern_indices.begin());
+    }
+  return map;
+}
+
 void copy_range(double* to, const double* from, std::size_t n, tbb::task_arena& arena) {
   if (n < 2 * kParallelChunk) {
     std::copy(from, from + n, to);

@@ -51,6 +51,13 @@ void check_norms(const SparseMatrix& c, const double* values);
 /// Large arrays are compared in parallel chunks on `arena`.
 bool has_analyzed_pattern(const Analysis& an, const SparseMatrix& a, tbb::task_arena& arena);
 
+/// Where each entry of `a` (the matrix given to the analysis `an`, in its own layout,
+/// storage and order) lands in the analysis's canonical pattern: position q of
+/// an.pattern_indices, or −1 for an entry the analysis does not keep (the strict upper
+/// triangle of a symmetric matrix given in full storage). Duplicates land on the same q.
+/// Throws InternalError for an entry outside the pattern (a was not the analyzed matrix).
+std::vector<index_t> input_entry_map(const Analysis& an, const SparseMatrix& a);
+
 /// to = from (parallel chunks on `arena` for large arrays of equal size).
 void copy_values(std::vector<double>& to, std::span<const double> from, tbb::task_arena& arena);
 

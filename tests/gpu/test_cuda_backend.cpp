@@ -1359,6 +1359,12 @@ TEST_F(CudaBackend, ValuePassOnTheDeviceGivesTheHostsFactor) {
     by_values.refactorize(std::span<const double>(next.values));
     EXPECT_TRUE(by_values.stats().factor.values_scaled_on_device);
     EXPECT_EQ(by_values.stats().factor.log_abs_determinant, fd.log_abs_determinant);
+    // analyzed in another form (duplicates): its values gathered, then the device's pass
+    Solver gathered(o);
+    gathered.analyze(with_duplicate_zeros(a));
+    gathered.refactorize(std::span<const double>(with_duplicate_zeros(next).values));
+    EXPECT_TRUE(gathered.stats().factor.values_scaled_on_device);
+    EXPECT_EQ(gathered.stats().factor.log_abs_determinant, fd.log_abs_determinant);
     const std::vector<double> xd = dev.solve(b), xh = host.solve(b);
     EXPECT_EQ(by_values.solve(b), xd);
     if (fh.perturbed_pivots == 0) {

@@ -327,10 +327,21 @@ TEST(Solver, BadInputIsReported) {
   EXPECT_THROW(fresh.analyze(rect), InvalidInput);
 }
 
-// Solver::refactorize(values): the values alone, in the canonical pattern's entry order,
+// Aᵀ in canonical CSC: A's CSC arrays read as CSR are Aᵀ (a stored triangle becomes the
+// other one).
+SparseMatrix transposed(const SparseMatrix& a) {
+  SparseMatrix t = a;
+  t.layout = Layout::csr;
+  if (a.storage != Storage::full)
+    t.storage = a.storage == Storage::lower ? Storage::upper : Storage::lower;
+  return canonicalize(t);
+}
+
+// Solver::refactorize(values): the values alone, in the analyzed matrix's own entry order,
 // give the factor and the solution refactorize(A) gives, for LU, LLᵀ and LDLᵀ and sizes
-// 1 to 733; a non-canonical analyzed matrix, a wrong count and a value that is not finite
-// are refused, leaving the factor as it was.
+// 1 to 733, and for matrices given in other forms (duplicates, CSR, a symmetric matrix's
+// full or upper storage); a wrong count and a value that is not finite are refused,
+// leaving the factor as it was.
 TEST(Solver, RefactorizeWithValuesAloneEqualsWithTheMatrix) {
   auto rng = test::fresh_rng();
   for (const test::ValueChange& c : test::value_changes(rng)) {
@@ -367,17 +378,41 @@ TEST(Solver, RefactorizeWithValuesAloneEqualsWithTheMatrix) {
     EXPECT_NE(std::string(e.what()).find("values[5] is not finite"), std::string::npos) << e.what();
   }
   EXPECT_EQ(s.solve(b), x0);
-  // analyzed as a matrix with duplicates: its entries have no order of their own
+  // analyzed in another form: the values in that form's own order (a duplicate entry, a
+  // CSR matrix, a symmetric matrix in full and in upper storage) give what the matrix gives
   SparseMatrix dup = a;
   dup.indices.insert(dup.indices.begin() + dup.offsets[1], dup.indices[dup.offsets[0]]);
   dup.values.insert(dup.values.begin() + dup.offsets[1], 0.0);
   for (index_t j = 1; j <= dup.n_cols; ++j) ++dup.offsets[j];
-  Solver d;
-  d.analyze(dup);
-  EXPECT_THROW(d.refactorize(std::span<const double>(a.values)), InvalidState);
-  d.factorize(a);  // a canonical matrix factorized: its order serves from now on
-  d.refactorize(std::span<const double>(a.values));
-  EXPECT_EQ(d.stats().factor.log_abs_determinant, s.stats().factor.log_abs_determinant);
+  const SparseMatrix spd = test::random_sparse(30, 3, RandomKind::spd, rng);
+  const SparseMatrix full = expand_symmetric(spd), upper = transposed(spd);
+  for (const SparseMatrix* m : {static_cast<const SparseMatrix*>(&dup), &full, &upper}) {
+    for (bool csr : {false, true}) {
+      SparseMatrix given = *m;
+      if (csr) {  // the same entries by rows: the transpose's arrays read as CSR
+        given = transposed(*m);
+        given.layout = Layout::csr;
+        given.storage = m->storage;
+      }
+      SCOPED_TRACE(std::string(csr ? "CSR" : "CSC") + ", storage " +
+                   std::to_string(static_cast<int>(given.storage)));
+      Options o;
+      o.type = m == &dup ? MatrixType::general : MatrixType::spd;
+      Solver by_matrix(o), by_values(o);
+      by_matrix.analyze(given);
+      by_values.analyze(given);
+      SparseMatrix twice = given;
+      for (double& v : twice.values) v *= 2;
+      by_matrix.refactorize(twice);
+      by_values.refactorize(std::span<const double>(twice.values));
+      EXPECT_EQ(by_values.stats().factor.log_abs_determinant,
+                by_matrix.stats().factor.log_abs_determinant);
+      const std::vector<double> ones(given.n_rows, 1.0);
+      EXPECT_EQ(by_values.solve(ones), by_matrix.solve(ones));
+      std::vector<double> short_values(twice.values.begin(), twice.values.end() - 1);
+      EXPECT_THROW(by_values.refactorize(std::span<const double>(short_values)), InvalidInput);
+    }
+  }
   Solver none;
   EXPECT_THROW(none.refactorize(std::span<const double>(a.values)), InvalidState);
 }

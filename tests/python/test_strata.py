@@ -219,6 +219,28 @@ def test_refactorize(kind):
     assert rel_diff(s.solve(b), x1) < 1e-12
 
 
+@pytest.mark.parametrize("kind", ["spd", "indefinite", "general"])
+@pytest.mark.parametrize("fmt", ["csr", "csc"])
+def test_refactorize_values_equals_refactorize(kind, fmt):
+    A = random_matrix(733, kind, seed=23).asformat(fmt)
+    A2 = A.copy()
+    A2.data = A2.data * 1.25
+    b = np.linspace(-1, 1, 733)
+    by_matrix, by_values = strata.Solver(A), strata.Solver(A)
+    by_matrix.refactorize(A2)
+    assert by_values.refactorize_values(A2.data) is by_values
+    x = by_values.solve(b)
+    assert np.array_equal(x, by_matrix.solve(b))
+    assert rel_diff(x, spla.spsolve(sp.csc_matrix(A2), b)) < 1e-9
+    with pytest.raises(ValueError, match="values"):
+        by_values.refactorize_values(A2.data[:-1])
+    bad = A2.data.copy()
+    bad[3] = np.nan
+    with pytest.raises(ValueError, match="finite"):
+        by_values.refactorize_values(bad)
+    assert np.array_equal(by_values.solve(b), x)  # the previous factor is kept
+
+
 def test_refactorize_rejects_other_pattern_and_keeps_factor():
     A = random_matrix(17, "general", seed=2)
     s = strata.Solver(A)
