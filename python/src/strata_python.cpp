@@ -155,17 +155,7 @@ class Core {
     if (values.ndim() != 1)
       throw strata::InvalidInput("refactorize_values: the values must be a 1-D array");
     const std::span<const double> v(values.data(), static_cast<std::size_t>(values.size()));
-    try {
-      py::gil_scoped_release release;
-      solver_->refactorize(v);
-    } catch (const strata::InvalidInput&) {
-      throw;  // rejected input: the previous factor is kept
-    } catch (...) {
-      factorized_ = solved_ = false;
-      throw;
-    }
-    factorized_ = true;
-    solved_ = false;
+    numeric_phase([&] { solver_->refactorize(v); });
   }
 
   void factorize(const strata::SparseMatrix& a, bool refactor) {
@@ -173,14 +163,23 @@ class Core {
       if (refactor) throw strata::InvalidState("refactorize called before analyze");
       analyze(a);
     }
-    try {
-      py::gil_scoped_release release;
+    numeric_phase([&] {
       if (refactor)
         solver_->refactorize(a);
       else
         solver_->factorize(a);
+    });
+  }
+
+  // A factorization without the GIL: rejected input keeps the previous factor, any other
+  // failure leaves none.
+  template <class F>
+  void numeric_phase(F&& f) {
+    try {
+      py::gil_scoped_release release;
+      f();
     } catch (const strata::InvalidInput&) {
-      throw;  // rejected input: the previous factor is kept
+      throw;
     } catch (...) {
       factorized_ = solved_ = false;
       throw;
