@@ -238,11 +238,11 @@ void check_norms(const SparseMatrix& c, const double* values) {
 }
 
 void copy_values(std::vector<double>& to, std::span<const double> from, tbb::task_arena& arena) {
-  if (to.size() != from.size() || from.size() < 2 * kParallelChunk) {
+  if (to.size() != from.size()) {
     to.assign(from.begin(), from.end());
     return;
   }
-  arena.execute([&] { parallel_copy(to.data(), from.data(), from.size()); });
+  copy_range(to.data(), from.data(), from.size(), arena);
 }
 
 std::vector<index_t> input_entry_map(const Analysis& an, const SparseMatrix& a) {
