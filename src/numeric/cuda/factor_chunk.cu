@@ -96,9 +96,11 @@ void CudaExecutor::chunk_small_fronts(const numeric::FactorContext& ctx, ChunkRe
   rec.small.clear();
   rec.big.clear();
   rec.perm_off.assign(1, 0);
+  std::int64_t small_rows = 0;
   for (index_t p = rec.begin; p < rec.end; ++p) {
     const index_t f = s.fronts[p];
     if (t.n_rows(f) <= small_front_rows_) {
+      small_rows = std::max<std::int64_t>(small_rows, t.n_rows(f));
       rec.small.push_back(p);
       rec.perm_off.push_back(rec.perm_off.back() + t.n_pivots(f));
     } else {
@@ -125,9 +127,9 @@ void CudaExecutor::chunk_small_fronts(const numeric::FactorContext& ctx, ChunkRe
                       ctx.static_pivot, perturbed_.data(), perm_.data(), pivot_size_.data(),
                       perm_offset_.data(), stream_);
   else
-    launch_factor_small(tree, small_pos_.data(), static_cast<std::int64_t>(ns), pool_.data(),
-                        rec.lu, ctx.static_pivot, info_.data(), perturbed_.data(), perm_.data(),
-                        perm_offset_.data(), stream_);
+    launch_factor_small(tree, small_pos_.data(), static_cast<std::int64_t>(ns), small_rows,
+                        pool_.data(), rec.lu, ctx.static_pivot, info_.data(), perturbed_.data(),
+                        perm_.data(), perm_offset_.data(), stream_);
   STRATA_CUDA(cudaEventRecord(rec.ev[2], stream_));
 }
 

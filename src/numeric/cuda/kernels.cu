@@ -379,100 +379,109 @@ __device__ void llt_front_blocked(double* F, std::int64_t m, std::int64_t k, std
 // Blocked right-looking partial LU of a small front (m ≤ blockDim.x rows, F full), one
 // row per thread as llt_front_blocked, with partial pivoting among the fully summed rows
 // [j, k) and static pivoting exactly as lu_columns (largest magnitude, first row on ties;
-// |pivot| < static_pivot replaced by ±static_pivot). For the panel of columns [j0, j0+w):
-// each pivot column's search is a block reduction over the registers; the interchange
-// swaps the two threads' panel registers through shared memory and the two rows of every
-// other column in global memory (all m columns move, as in lu_columns and LAPACK's
-// DGETRF); the multipliers and the panel's later columns are updated in registers. Then
-// each trailing column c ≥ j0+w gets its U rows by forward substitution with the panel's
-// unit L₁₁ (one thread per column) and the rows below by the rank-w product, each
-// trailing entry read and written once per panel (Golub & Van Loan, 4th ed., §3.4.7).
-__device__ void lu_front_blocked(double* F, std::int64_t m, std::int64_t k, double static_pivot,
-                                 std::int64_t* perm, std::int64_t* perturbed,
-                                 double (*ush)[kThreads]) {
+// |pivot| < static_pivot replaced by ±static_pivot). A front's time is the chain of its
+// pivot steps, so a step is two barriers and no global memory: the search is a shuffle
+// reduction in the warps that hold candidate rows, whose maxima every thread then reads;
+// the pivot row and row j trade their panel registers through shared memory, and the pivot
+// row is read there by all; the multipliers and the panel's later columns are updated in
+// registers. The interchanges of the columns outside the panel are made once per panel
+// (LAPACK's DLASWP after each panel of DGETRF): thread c takes column c, reads the rows the
+// panel moved from where they were (src, the panel's net row permutation), and, for a
+// trailing column, solves the panel's unit L₁₁ for its U rows in the same registers; then
+// the rows below the panel get the rank-w product, each trailing entry read and written
+// once per panel (Golub & Van Loan, 4th ed., §3.4.7). The operations on every entry are
+// those of the unblocked form in the same order, so the results do not change with the
+// blocking.
+__device__ void lu_front_blocked(double* F, int m, int k, double static_pivot, std::int64_t* perm,
+                                 std::int64_t* perturbed, double (*ush)[kThreads]) {
   __shared__ double l11[kSmallNb][kSmallNb];  // L(j0 + q, j0 + p), q > p
-  __shared__ double urow[kSmallNb];           // the pivot row's panel entries
-  __shared__ double xch[2][kSmallNb];         // the two interchanged rows' panel entries
+  __shared__ double xch[2][kSmallNb];         // [1]: the pivot row's panel entries; [0]: row j's
   __shared__ double sval[kThreads / kWarp];
-  __shared__ std::int64_t sidx[kThreads / kWarp];
-  __shared__ std::int64_t spivrow;
-  __shared__ double spiv;
-  const std::int64_t i = threadIdx.x;  // this thread's row (and, for the U rows, column)
+  __shared__ int sidx[kThreads / kWarp];
+  __shared__ int src[kThreads];   // rows [j0, k): the row that position r held at the panel's start
+  __shared__ int ipiv[kSmallNb];  // the panel's pivot rows
+  __shared__ int lperm[kThreads];  // the front's row permutation, rows [0, k)
+  const int i = threadIdx.x;       // this thread's row, and the column it swaps and solves
   const bool row = i < m;
-  for (std::int64_t j0 = 0; j0 < k; j0 += kSmallNb) {
-    const int w = static_cast<int>(k - j0 < kSmallNb ? k - j0 : kSmallNb);
+  const int wid = i / kWarp;
+  int npert = 0;  // static pivots (thread 0's count)
+  if (i < k) lperm[i] = i;
+  for (int j0 = 0; j0 < k; j0 += kSmallNb) {
+    const int w = k - j0 < kSmallNb ? k - j0 : kSmallNb;
     double r[kSmallNb];
 #pragma unroll
     for (int p = 0; p < kSmallNb; ++p) r[p] = (p < w && row) ? F[(j0 + p) * m + i] : 0.0;
+    if (i >= j0 && i < k) src[i] = i;
+    const int w_hi = (k - 1) / kWarp;  // the last warp with fully summed rows
 #pragma unroll
     for (int p = 0; p < kSmallNb; ++p) {
       if (p < w) {
-        const std::int64_t j = j0 + p;
-        // pivot search over rows [j, k): warp maxima, then the warps' (ties: lower row)
-        double v = (i >= j && i < k) ? fabs(r[p]) : -1.0;
-        if (!(v >= 0.0)) v = -1.0;  // a NaN is never chosen (block_argmax does the same)
-        std::int64_t at = i;
-        for (int off = kWarp / 2; off > 0; off /= 2) {
-          const double ov = __shfl_down_sync(0xffffffffu, v, off);
-          const std::int64_t oi = __shfl_down_sync(0xffffffffu, at, off);
-          if (ov > v || (ov == v && oi < at)) {
-            v = ov;
-            at = oi;
-          }
-        }
-        if (threadIdx.x % kWarp == 0) {
-          sval[threadIdx.x / kWarp] = v;
-          sidx[threadIdx.x / kWarp] = at;
-        }
-        __syncthreads();
-        if (threadIdx.x == 0) {
-          double bv = sval[0];
-          std::int64_t bi = sidx[0];
-          for (int q = 1; q < static_cast<int>(blockDim.x / kWarp); ++q)
-            if (sval[q] > bv || (sval[q] == bv && sidx[q] < bi)) {
-              bv = sval[q];
-              bi = sidx[q];
+        const int j = j0 + p;
+        const int w_lo = j / kWarp;  // warps [w_lo, w_hi] hold the candidates [j, k)
+        if (wid >= w_lo && wid <= w_hi) {
+          double v = (i >= j && i < k) ? fabs(r[p]) : -1.0;
+          if (!(v >= 0.0)) v = -1.0;  // a NaN is never chosen (block_argmax does the same)
+          int at = i;
+          for (int off = kWarp / 2; off > 0; off /= 2) {
+            const double ov = __shfl_down_sync(0xffffffffu, v, off);
+            const int oi = __shfl_down_sync(0xffffffffu, at, off);
+            if (ov > v || (ov == v && oi < at)) {
+              v = ov;
+              at = oi;
             }
-          spivrow = bv < 0 ? j : bi;  // NaNs compare false: the column keeps its row
+          }
+          if (i % kWarp == 0) {
+            sval[wid] = v;
+            sidx[wid] = at;
+          }
         }
         __syncthreads();
-        const std::int64_t pr = spivrow;
-        if (pr != j) {
-          if (i == j || i == pr) {
+        // every thread the same choice: later warps hold later rows, so a tie stays with
+        // the first
+        double bv = sval[w_lo];
+        int pr = sidx[w_lo];
+        for (int q = w_lo + 1; q <= w_hi; ++q)
+          if (sval[q] > bv) {
+            bv = sval[q];
+            pr = sidx[q];
+          }
+        if (bv < 0) pr = j;  // NaNs compare false: the column keeps its row
+        if (i == pr) {
 #pragma unroll
-            for (int q = 0; q < kSmallNb; ++q) xch[i == j ? 0 : 1][q] = r[q];
-          }
-          if (threadIdx.x == 0) {
-            const std::int64_t tp = perm[j];
-            perm[j] = perm[pr];
-            perm[pr] = tp;
-          }
-          // the other columns' two entries (column c by thread c, c < m ≤ blockDim.x)
-          if (row && (i < j0 || i >= j0 + w)) {
-            const double t = F[i * m + j];
-            F[i * m + j] = F[i * m + pr];
-            F[i * m + pr] = t;
-          }
-          __syncthreads();
-          if (i == j || i == pr) {
-#pragma unroll
-            for (int q = 0; q < kSmallNb; ++q) r[q] = xch[i == j ? 1 : 0][q];
-          }
+          for (int q = 0; q < kSmallNb; ++q) xch[1][q] = r[q];
         }
-        if (i == j) {
-          r[p] = static_pivoted(r[p], static_pivot, perturbed);
-          spiv = r[p];
+        if (i == j && pr != j) {
 #pragma unroll
-          for (int q = 0; q < kSmallNb; ++q) urow[q] = r[q];
+          for (int q = 0; q < kSmallNb; ++q) xch[0][q] = r[q];
+        }
+        if (i == 0) {
+          ipiv[p] = pr;
+          if (pr != j) {
+            const int tp = lperm[j];
+            lperm[j] = lperm[pr];
+            lperm[pr] = tp;
+            const int ts = src[j];
+            src[j] = src[pr];
+            src[pr] = ts;
+          }
         }
         __syncthreads();
+        if (pr != j && (i == j || i == pr)) {
+#pragma unroll
+          for (int q = 0; q < kSmallNb; ++q) r[q] = xch[i == j ? 1 : 0][q];
+        }
+        double piv = xch[1][p];
+        if (fabs(piv) < static_pivot) {  // static_pivoted, counted once
+          if (i == 0) ++npert;
+          piv = piv < 0 ? -static_pivot : static_pivot;
+        }
+        if (i == j) r[p] = piv;
         if (row && i > j) {
-          r[p] /= spiv;
+          r[p] /= piv;
 #pragma unroll
           for (int q = p + 1; q < kSmallNb; ++q)
-            if (q < w) r[q] -= r[p] * urow[q];
+            if (q < w) r[q] -= r[p] * xch[1][q];
         }
-        __syncthreads();
       }
     }
     // the panel back to F, and L₁₁ to shared memory (only now: a later interchange in the
@@ -483,23 +492,34 @@ __device__ void lu_front_blocked(double* F, std::int64_t m, std::int64_t k, doub
       if (p < w && i > j0 + p && i < j0 + w) l11[i - j0][p] = r[p];
     }
     __syncthreads();
-    // the trailing columns' U rows: thread t solves L₁₁ u = F(j0:j0+w, c) for c = j0+w+t
-    const std::int64_t c = j0 + w + i;
-    if (c < m) {
-      double u[kSmallNb];
+    // column c = i outside the panel: its moved rows, each read from where it was (all
+    // reads before any write), and for a trailing column its U rows by forward substitution
+    // with L₁₁
+    const int c = i;
+    if (c < m && (c < j0 || c >= j0 + w)) {
+      double* col = F + static_cast<std::int64_t>(c) * m;
+      double u[kSmallNb], below[kSmallNb];
 #pragma unroll
-      for (int q = 0; q < kSmallNb; ++q) u[q] = q < w ? F[c * m + j0 + q] : 0.0;
+      for (int q = 0; q < kSmallNb; ++q) u[q] = q < w ? col[src[j0 + q]] : 0.0;
 #pragma unroll
-      for (int q = 1; q < kSmallNb; ++q)
+      for (int p = 0; p < kSmallNb; ++p)
+        below[p] = (p < w && ipiv[p] >= j0 + w) ? col[src[ipiv[p]]] : 0.0;
+      if (c >= j0 + w) {
 #pragma unroll
-        for (int p = 0; p < q; ++p)
-          if (q < w) u[q] -= l11[q][p] * u[p];
+        for (int q = 1; q < kSmallNb; ++q)
+#pragma unroll
+          for (int p = 0; p < q; ++p)
+            if (q < w) u[q] -= l11[q][p] * u[p];
+      }
 #pragma unroll
       for (int q = 0; q < kSmallNb; ++q)
         if (q < w) {
-          F[c * m + j0 + q] = u[q];
-          ush[q][c] = u[q];
+          col[j0 + q] = u[q];
+          if (c >= j0 + w) ush[q][c] = u[q];
         }
+#pragma unroll
+      for (int p = 0; p < kSmallNb; ++p)
+        if (p < w && ipiv[p] >= j0 + w) col[ipiv[p]] = below[p];  // repeats write one value
     }
     __syncthreads();
     // the rows below the panel: F(i, c) −= Σ_p L(i, j0 + p) U(j0 + p, c), L(i, ·) read back
@@ -508,12 +528,16 @@ __device__ void lu_front_blocked(double* F, std::int64_t m, std::int64_t k, doub
                     [&](std::int64_t ri, int p) { return F[(j0 + p) * m + ri]; });
     __syncthreads();  // the next panel reads what this one wrote, and reuses the buffers
   }
+  if (i < k) perm[i] = lperm[i];
+  if (i == 0) *perturbed += npert;
 }
 
-__global__ void factor_small_kernel(DeviceTree t, const std::int64_t* positions, double* pool,
-                                    bool lu, double static_pivot, std::int64_t* info,
-                                    std::int64_t* perturbed, std::int64_t* perm,
-                                    const std::int64_t* perm_offset) {
+// Two blocks of kThreads per SM at least (a register cap of 128): a level of many small
+// fronts otherwise runs one block per SM, in waves.
+__global__ void __launch_bounds__(kThreads, 2)
+    factor_small_kernel(DeviceTree t, const std::int64_t* positions, double* pool, bool lu,
+                        double static_pivot, std::int64_t* info, std::int64_t* perturbed,
+                        std::int64_t* perm, const std::int64_t* perm_offset) {
   const std::int64_t i = blockIdx.x;
   const std::int64_t pos = positions[i];
   const std::int64_t f = t.fronts[pos];
@@ -529,7 +553,8 @@ __global__ void factor_small_kernel(DeviceTree t, const std::int64_t* positions,
     for (std::int64_t r = threadIdx.x; r < k; r += blockDim.x) p[r] = r;
     __syncthreads();
     if (m <= blockDim.x)
-      lu_front_blocked(F, m, k, static_pivot, p, perturbed + i, panel);
+      lu_front_blocked(F, static_cast<int>(m), static_cast<int>(k), static_pivot, p, perturbed + i,
+                       panel);
     else
       lu_columns(F, m, m, k, 0, k, m, m, static_pivot, p, perturbed + i);
   } else {
@@ -598,11 +623,15 @@ void launch_pack_panels(const DeviceTree& t, std::int64_t begin, std::int64_t co
 }
 
 void launch_factor_small(const DeviceTree& t, const std::int64_t* positions, std::int64_t count,
-                         double* pool, bool lu, double static_pivot, std::int64_t* info,
-                         std::int64_t* perturbed, std::int64_t* perm,
+                         std::int64_t max_rows, double* pool, bool lu, double static_pivot,
+                         std::int64_t* info, std::int64_t* perturbed, std::int64_t* perm,
                          const std::int64_t* perm_offset, cudaStream_t s) {
   if (count == 0) return;
-  factor_small_kernel<<<static_cast<unsigned>(count), kThreads, 0, s>>>(
+  // a row per thread, in the fewest warps that hold the largest front (a power of two, as
+  // block_argmax's tree needs): a pivot step's barriers then wait for fewer warps
+  unsigned threads = kWarp;
+  while (threads < kThreads && threads < max_rows) threads *= 2;
+  factor_small_kernel<<<static_cast<unsigned>(count), threads, 0, s>>>(
       t, positions, pool, lu, static_pivot, info, perturbed, perm, perm_offset);
   STRATA_CUDA_LAUNCH();
 }

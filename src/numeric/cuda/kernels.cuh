@@ -55,13 +55,13 @@ void launch_pack_panels(const DeviceTree& t, std::int64_t begin, std::int64_t co
                         cudaStream_t s);
 
 /// Partial factorization of small fronts, one block each, in place in the pool.
-/// `positions` lists batch positions (device array of `count`). Per listed front i:
-/// info[i] = local index of a failed Cholesky pivot or -1; perturbed[i] = static pivots;
-/// perm (LU) receives the local row permutation at perm + first_pivot offsets given by
-/// perm_offset[i].
+/// `positions` lists batch positions (device array of `count`); max_rows is the most rows
+/// of a listed front (it sizes the blocks). Per listed front i: info[i] = local index of a
+/// failed Cholesky pivot or -1; perturbed[i] = static pivots; perm (LU) receives the local
+/// row permutation at perm + first_pivot offsets given by perm_offset[i].
 void launch_factor_small(const DeviceTree& t, const std::int64_t* positions, std::int64_t count,
-                         double* pool, bool lu, double static_pivot, std::int64_t* info,
-                         std::int64_t* perturbed, std::int64_t* perm,
+                         std::int64_t max_rows, double* pool, bool lu, double static_pivot,
+                         std::int64_t* info, std::int64_t* perturbed, std::int64_t* perm,
                          const std::int64_t* perm_offset, cudaStream_t s);
 
 /// Doubles of workspace launch_llt_panel needs for `count` fronts (64×64 each).
