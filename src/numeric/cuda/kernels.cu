@@ -11,6 +11,7 @@
 // only the fully summed rows (restricted pivoting) and replaces tiny pivots by
 // ±static_pivot, exactly as the CPU kernels do (numeric/cpu/dense_front.hpp).
 #include <algorithm>
+#include <atomic>
 #include <cfloat>
 
 #include "numeric/cuda/cuda_check.hpp"
@@ -287,15 +288,16 @@ constexpr int kSmallNb = 16;
 
 // The trailing update of the blocked small-front kernels after a panel of w ≤ kSmallNb
 // pivot columns ending at c0: F(i, c) −= Σ_{p<w} L(i, p) · V(p, c) for the rows i ∈ [c0, m)
-// and the columns c ∈ [c0, m) (lower: c ≤ i only), V(p, c) = v[p][c] in shared memory and
-// L(i, p) = row_l(i, p). By the whole block rather than one thread per row: the nr = m − c0
-// trailing rows times ⌊blockDim.x / nr⌋ groups of columns (thread t: row c0 + t mod nr,
-// columns c0 + t div nr + groups·q), four columns' loads in flight at once. Each entry takes
-// its w products in the order p = 0, 1, …, as one thread per row did: the same result bit
-// for bit. Needs m ≤ blockDim.x.
-template <class RowL>
-__device__ __forceinline__ void trailing_update(double* F, std::int64_t m, std::int64_t c0, int w,
-                                                double (*v)[kThreads], bool lower, RowL row_l) {
+// and the columns c ∈ [c0, m) (lower: c ≤ i only) of F (leading dimension ld), V(p, c) =
+// col_v(p, c) and L(i, p) = row_l(i, p), both read from shared memory. By the whole block rather
+// than one thread per row: the nr = m − c0 trailing rows times ⌊blockDim.x / nr⌋ groups of columns
+// (thread t: row c0 + t mod nr, columns c0 + t div nr + groups·q), four columns' loads in flight at
+// once. Each entry takes its w products in the order p = 0, 1, …, as one thread per row did: the
+// same result bit for bit. Needs m ≤ blockDim.x.
+template <class ColV, class RowL>
+__device__ __forceinline__ void trailing_update(double* F, std::int64_t ld, std::int64_t m,
+                                                std::int64_t c0, int w, ColV col_v, bool lower,
+                                                RowL row_l) {
   const std::int64_t nr = m - c0;
   if (nr <= 0) return;
   const std::int64_t groups = blockDim.x / nr;  // ≥ 1: nr < m ≤ blockDim.x
@@ -310,22 +312,22 @@ __device__ __forceinline__ void trailing_update(double* F, std::int64_t m, std::
   for (; c + 3 * groups < end; c += 4 * groups) {
     double a[4];
 #pragma unroll
-    for (int q = 0; q < 4; ++q) a[q] = F[(c + q * groups) * m + ri];
+    for (int q = 0; q < 4; ++q) a[q] = F[(c + q * groups) * ld + ri];
 #pragma unroll
     for (int q = 0; q < 4; ++q) {
 #pragma unroll
       for (int p = 0; p < kSmallNb; ++p)
-        if (p < w) a[q] -= l[p] * v[p][c + q * groups];
+        if (p < w) a[q] -= l[p] * col_v(p, c + q * groups);
     }
 #pragma unroll
-    for (int q = 0; q < 4; ++q) F[(c + q * groups) * m + ri] = a[q];
+    for (int q = 0; q < 4; ++q) F[(c + q * groups) * ld + ri] = a[q];
   }
   for (; c < end; c += groups) {
-    double acc = F[c * m + ri];
+    double acc = F[c * ld + ri];
 #pragma unroll
     for (int p = 0; p < kSmallNb; ++p)
-      if (p < w) acc -= l[p] * v[p][c];
-    F[c * m + ri] = acc;
+      if (p < w) acc -= l[p] * col_v(p, c);
+    F[c * ld + ri] = acc;
   }
 }
 __device__ void llt_front_blocked(double* F, std::int64_t m, std::int64_t k, std::int64_t* info,
@@ -371,7 +373,9 @@ __device__ void llt_front_blocked(double* F, std::int64_t m, std::int64_t k, std
       if (p < w && row && i >= j0 + p) F[(j0 + p) * m + i] = r[p];
     // trailing lower triangle: F(i, c) −= Σ_p L(i, j0 + p) L(c, j0 + p), j0 + w ≤ c ≤ i;
     // every row's panel is in lsh by now
-    trailing_update(F, m, j0 + w, w, lsh, true, [&](std::int64_t ri, int p) { return lsh[p][ri]; });
+    trailing_update(
+        F, m, m, j0 + w, w, [&](int p, std::int64_t c) { return lsh[p][c]; }, true,
+        [&](std::int64_t ri, int p) { return lsh[p][ri]; });
     __syncthreads();  // the next panel reads what this one wrote, and reuses lsh
   }
 }
@@ -391,9 +395,13 @@ __device__ void llt_front_blocked(double* F, std::int64_t m, std::int64_t k, std
 // the rows below the panel get the rank-w product, each trailing entry read and written
 // once per panel (Golub & Van Loan, 4th ed., §3.4.7). The operations on every entry are
 // those of the unblocked form in the same order, so the results do not change with the
-// blocking.
-__device__ void lu_front_blocked(double* F, int m, int k, double static_pivot, std::int64_t* perm,
-                                 std::int64_t* perturbed, double (*ush)[kThreads]) {
+// blocking, nor with where the front is: in the pool (ld = m; the U rows for the update
+// also go to ush) or copied into shared memory by the caller (kShared: ld of the copy;
+// the update reads the U rows where they are, ush is not used).
+template <bool kShared>
+__device__ void lu_front_blocked(double* F, int ld, int m, int k, double static_pivot,
+                                 std::int64_t* perm, std::int64_t* perturbed,
+                                 double (*ush)[kThreads]) {
   __shared__ double l11[kSmallNb][kSmallNb];  // L(j0 + q, j0 + p), q > p
   __shared__ double xch[2][kSmallNb];         // [1]: the pivot row's panel entries; [0]: row j's
   __shared__ double sval[kThreads / kWarp];
@@ -410,7 +418,7 @@ __device__ void lu_front_blocked(double* F, int m, int k, double static_pivot, s
     const int w = k - j0 < kSmallNb ? k - j0 : kSmallNb;
     double r[kSmallNb];
 #pragma unroll
-    for (int p = 0; p < kSmallNb; ++p) r[p] = (p < w && row) ? F[(j0 + p) * m + i] : 0.0;
+    for (int p = 0; p < kSmallNb; ++p) r[p] = (p < w && row) ? F[(j0 + p) * ld + i] : 0.0;
     if (i >= j0 && i < k) src[i] = i;
     const int w_hi = (k - 1) / kWarp;  // the last warp with fully summed rows
 #pragma unroll
@@ -488,7 +496,7 @@ __device__ void lu_front_blocked(double* F, int m, int k, double static_pivot, s
     // panel moves rows' earlier multipliers too)
 #pragma unroll
     for (int p = 0; p < kSmallNb; ++p) {
-      if (p < w && row) F[(j0 + p) * m + i] = r[p];
+      if (p < w && row) F[(j0 + p) * ld + i] = r[p];
       if (p < w && i > j0 + p && i < j0 + w) l11[i - j0][p] = r[p];
     }
     __syncthreads();
@@ -497,7 +505,7 @@ __device__ void lu_front_blocked(double* F, int m, int k, double static_pivot, s
     // with L₁₁
     const int c = i;
     if (c < m && (c < j0 || c >= j0 + w)) {
-      double* col = F + static_cast<std::int64_t>(c) * m;
+      double* col = F + static_cast<std::int64_t>(c) * ld;
       double u[kSmallNb], below[kSmallNb];
 #pragma unroll
       for (int q = 0; q < kSmallNb; ++q) u[q] = q < w ? col[src[j0 + q]] : 0.0;
@@ -515,7 +523,7 @@ __device__ void lu_front_blocked(double* F, int m, int k, double static_pivot, s
       for (int q = 0; q < kSmallNb; ++q)
         if (q < w) {
           col[j0 + q] = u[q];
-          if (c >= j0 + w) ush[q][c] = u[q];
+          if (!kShared && c >= j0 + w) ush[q][c] = u[q];
         }
 #pragma unroll
       for (int p = 0; p < kSmallNb; ++p)
@@ -524,8 +532,14 @@ __device__ void lu_front_blocked(double* F, int m, int k, double static_pivot, s
     __syncthreads();
     // the rows below the panel: F(i, c) −= Σ_p L(i, j0 + p) U(j0 + p, c), L(i, ·) read back
     // from F (stored above)
-    trailing_update(F, m, j0 + w, w, ush, false,
-                    [&](std::int64_t ri, int p) { return F[(j0 + p) * m + ri]; });
+    if (kShared)
+      trailing_update(
+          F, ld, m, j0 + w, w, [&](int p, std::int64_t c) { return F[c * ld + j0 + p]; }, false,
+          [&](std::int64_t ri, int p) { return F[(j0 + p) * ld + ri]; });
+    else
+      trailing_update(
+          F, ld, m, j0 + w, w, [&](int p, std::int64_t c) { return ush[p][c]; }, false,
+          [&](std::int64_t ri, int p) { return F[(j0 + p) * ld + ri]; });
     __syncthreads();  // the next panel reads what this one wrote, and reuses the buffers
   }
   if (i < k) perm[i] = lperm[i];
@@ -553,8 +567,8 @@ __global__ void __launch_bounds__(kThreads, 2)
     for (std::int64_t r = threadIdx.x; r < k; r += blockDim.x) p[r] = r;
     __syncthreads();
     if (m <= blockDim.x)
-      lu_front_blocked(F, static_cast<int>(m), static_cast<int>(k), static_pivot, p, perturbed + i,
-                       panel);
+      lu_front_blocked<false>(F, static_cast<int>(m), static_cast<int>(m), static_cast<int>(k),
+                              static_pivot, p, perturbed + i, panel);
     else
       lu_columns(F, m, m, k, 0, k, m, m, static_pivot, p, perturbed + i);
   } else {
@@ -563,6 +577,57 @@ __global__ void __launch_bounds__(kThreads, 2)
       llt_front_blocked(F, m, k, info + i, panel);
     else
       llt_front(F, m, k, info + i);
+  }
+}
+
+// The leading dimension of a front's copy in shared memory: odd, so that the threads of a
+// warp reading along a row (a column each, the interchanges and U rows) hit different banks.
+__host__ __device__ constexpr int shared_ld(int m) { return m | 1; }
+
+// Small LU fronts each copied into shared memory, factored there (lu_front_blocked<true>)
+// and copied back: a pivot step and the trailing update then wait for shared memory, not
+// for global memory, many times per front. Dynamic shared memory of
+// shared_ld(max_rows) · max_rows doubles.
+__global__ void __launch_bounds__(kThreads, 2)
+    lu_small_shared_kernel(DeviceTree t, const std::int64_t* positions, double* pool,
+                           double static_pivot, std::int64_t* info, std::int64_t* perturbed,
+                           std::int64_t* perm, const std::int64_t* perm_offset) {
+  extern __shared__ double fs[];
+  const std::int64_t b = blockIdx.x;
+  const std::int64_t pos = positions[b];
+  const std::int64_t f = t.fronts[pos];
+  const int m = static_cast<int>(t.n_rows[f]), k = static_cast<int>(t.n_pivots[f]);
+  const int ld = shared_ld(m);
+  double* F = pool + t.pos_offset[pos];
+  if (threadIdx.x == 0) {
+    info[b] = -1;
+    perturbed[b] = 0;
+  }
+  // the front in and out in column-major order, eight loads in flight per thread
+  constexpr int kInFlight = 8;
+  const int total = m * m, step = static_cast<int>(blockDim.x);
+  for (int at = threadIdx.x; at < total; at += kInFlight * step) {
+    double v[kInFlight];
+#pragma unroll
+    for (int u = 0; u < kInFlight; ++u) {
+      const int x = at + u * step;
+      v[u] = x < total ? F[x] : 0.0;
+    }
+#pragma unroll
+    for (int u = 0; u < kInFlight; ++u) {
+      const int x = at + u * step;
+      if (x < total) {
+        const int c = x / m;
+        fs[c * ld + (x - c * m)] = v[u];
+      }
+    }
+  }
+  __syncthreads();
+  lu_front_blocked<true>(fs, ld, m, k, static_pivot, perm + perm_offset[b], perturbed + b, nullptr);
+  __syncthreads();
+  for (int x = threadIdx.x; x < total; x += step) {
+    const int c = x / m;
+    F[x] = fs[c * ld + (x - c * m)];
   }
 }
 
@@ -622,6 +687,34 @@ void launch_pack_panels(const DeviceTree& t, std::int64_t begin, std::int64_t co
   STRATA_CUDA_LAUNCH();
 }
 
+// The most rows of a front lu_small_shared_kernel takes on the current device: its copy
+// and the kernel's own shared memory within the device's opt-in limit per block (which the
+// kernel is allowed once per device). Devices of one process may differ, so per device.
+std::int64_t lu_shared_max_rows() {
+  constexpr int kDevices = 64;
+  static std::atomic<int> rows[kDevices];  // 0: not asked yet
+  int dev = 0;
+  STRATA_CUDA(cudaGetDevice(&dev));
+  if (dev < kDevices && rows[dev].load(std::memory_order_acquire) > 0) return rows[dev].load();
+  int optin = 0;
+  STRATA_CUDA(cudaDeviceGetAttribute(&optin, cudaDevAttrMaxSharedMemoryPerBlockOptin, dev));
+  cudaFuncAttributes attr{};
+  STRATA_CUDA(cudaFuncGetAttributes(&attr, lu_small_shared_kernel));
+  const std::size_t room = optin > static_cast<int>(attr.sharedSizeBytes)
+                               ? static_cast<std::size_t>(optin) - attr.sharedSizeBytes
+                               : 0;
+  int m = 0;
+  while (m < kThreads &&
+         sizeof(double) * static_cast<std::size_t>(m + 1) * shared_ld(m + 1) <= room)
+    ++m;
+  if (m > 0)
+    STRATA_CUDA(cudaFuncSetAttribute(lu_small_shared_kernel,
+                                     cudaFuncAttributeMaxDynamicSharedMemorySize,
+                                     static_cast<int>(sizeof(double) * m * shared_ld(m))));
+  if (dev < kDevices) rows[dev].store(m > 0 ? m : -1, std::memory_order_release);
+  return m;
+}
+
 void launch_factor_small(const DeviceTree& t, const std::int64_t* positions, std::int64_t count,
                          std::int64_t max_rows, double* pool, bool lu, double static_pivot,
                          std::int64_t* info, std::int64_t* perturbed, std::int64_t* perm,
@@ -631,6 +724,14 @@ void launch_factor_small(const DeviceTree& t, const std::int64_t* positions, std
   // block_argmax's tree needs): a pivot step's barriers then wait for fewer warps
   unsigned threads = kWarp;
   while (threads < kThreads && threads < max_rows) threads *= 2;
+  if (lu && max_rows <= lu_shared_max_rows()) {
+    const std::size_t bytes = sizeof(double) * static_cast<std::size_t>(max_rows) *
+                              static_cast<std::size_t>(shared_ld(static_cast<int>(max_rows)));
+    lu_small_shared_kernel<<<static_cast<unsigned>(count), threads, bytes, s>>>(
+        t, positions, pool, static_pivot, info, perturbed, perm, perm_offset);
+    STRATA_CUDA_LAUNCH();
+    return;
+  }
   factor_small_kernel<<<static_cast<unsigned>(count), threads, 0, s>>>(
       t, positions, pool, lu, static_pivot, info, perturbed, perm, perm_offset);
   STRATA_CUDA_LAUNCH();
