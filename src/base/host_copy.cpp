@@ -12,15 +12,14 @@ namespace {
 constexpr std::size_t kChunk = std::size_t{1} << 17;  // doubles: 1 MiB per task at least
 }
 
-void parallel_copy(double* dst, const double* src, std::size_t n, std::size_t chunk) {
-  chunk = std::max<std::size_t>(chunk, 1);
-  if (n <= chunk) {
+void parallel_copy(double* dst, const double* src, std::size_t n) {
+  if (n <= kChunk) {
     if (n) std::memcpy(dst, src, sizeof(double) * n);
     return;
   }
-  const std::size_t chunks = (n + chunk - 1) / chunk;
+  const std::size_t chunks = (n + kChunk - 1) / kChunk;
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks), [&](const auto& r) {
-    const std::size_t b = r.begin() * chunk, e = std::min(n, r.end() * chunk);
+    const std::size_t b = r.begin() * kChunk, e = std::min(n, r.end() * kChunk);
     std::memcpy(dst + b, src + b, sizeof(double) * (e - b));
   });
 }

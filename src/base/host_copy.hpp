@@ -12,10 +12,8 @@
 
 namespace strata {
 
-/// dst[0, n) = src[0, n); the ranges must not overlap. Tasks of at least `chunk` doubles
-/// (default 1 MiB; a copy of at most one chunk stays on the calling thread).
-void parallel_copy(double* dst, const double* src, std::size_t n,
-                   std::size_t chunk = std::size_t{1} << 17);
+/// dst[0, n) = src[0, n); the ranges must not overlap.
+void parallel_copy(double* dst, const double* src, std::size_t n);
 
 /// The rows × cols column-major block at src (leading dimension ld_src ≥ rows) into dst
 /// (leading dimension ld_dst ≥ rows), columns in parallel; the blocks must not overlap.

@@ -268,15 +268,11 @@ std::vector<index_t> input_entry_map(const Analysis& an, const SparseMatrix& a) 
 }
 
 void copy_range(double* to, const double* from, std::size_t n, tbb::task_arena& arena) {
-  // tasks of 256 KiB: a GPU's value pass stages 4 MB pieces one after another, each copied
-  // to the device while the next is staged, so a piece should take every thread (1 MiB
-  // tasks gave one piece four)
-  constexpr std::size_t kCopyChunk = std::size_t{1} << 15;
-  if (n < 2 * kCopyChunk) {
+  if (n < 2 * kParallelChunk) {
     std::copy(from, from + n, to);
     return;
   }
-  arena.execute([&] { parallel_copy(to, from, n, kCopyChunk); });
+  arena.execute([&] { parallel_copy(to, from, n); });
 }
 
 bool has_analyzed_pattern(const Analysis& an, const SparseMatrix& a, tbb::task_arena& arena) {
