@@ -202,9 +202,16 @@ void Integrator::factorize(StepInfo& info, const BdfTerms& bdf, double t) {
   }
   fresh_analysis_ = false;
   stats_.perturbed_pivots += solver_->perturbed_pivots();
-  if (const Stats* ss = solver_->stats(); ss && ss->factor.delayed_pivoting) {
-    ++stats_.delayed_factorizations;
-    stats_.delayed_pivots += ss->factor.delayed_pivots;
+  if (const Stats* ss = solver_->stats()) {
+    const FactorStats& f = ss->factor;
+    if (f.delayed_pivoting) {
+      ++stats_.delayed_factorizations;
+      stats_.delayed_pivots += f.delayed_pivots;
+    }
+    stats_.factor_input_seconds += f.input_seconds;
+    stats_.factor_device_seconds += f.device_seconds;
+    stats_.values_on_device_factorizations += f.values_scaled_on_device ? 1 : 0;
+    stats_.rescaled_factorizations += f.rescaling_sweeps > 0 ? 1 : 0;
   }
   stats_.solver = solver_->describe();
   factor_valid_ = true;

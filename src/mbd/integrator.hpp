@@ -140,6 +140,12 @@ struct IntegratorStats {
   double energy_drift = 0;  ///< conservative models: max |E − E(0)| so far (J)
   double energy_scale = 0;  ///< largest kinetic energy so far (J), the drift's reference
   double factor_seconds = 0, solve_seconds = 0;  ///< parts of solver_seconds
+  /// strata's own split of its factorizations (FactorStats, summed): value input (checks,
+  /// norms, scaling, the copy to a GPU) and the GPU's time; the factorizations whose values
+  /// were scaled on the GPU (FactorStats::values_scaled_on_device) and those whose values
+  /// were equilibrated again on the host, far from the analysis's (rescaling_sweeps > 0).
+  double factor_input_seconds = 0, factor_device_seconds = 0;
+  index_t values_on_device_factorizations = 0, rescaled_factorizations = 0;
   /// partition_seconds: coordinate partitionings and the partition and redundancy checks,
   /// those of initialize() included (they are also part of initial_conditions_seconds,
   /// which times all of initialize()).

@@ -44,6 +44,10 @@ json stats_to_json(const IntegratorStats& s) {
           {"energy_drift", s.energy_drift},
           {"energy_scale", s.energy_scale},
           {"factor_seconds", s.factor_seconds},
+          {"factor_input_seconds", s.factor_input_seconds},
+          {"factor_device_seconds", s.factor_device_seconds},
+          {"values_on_device_factorizations", s.values_on_device_factorizations},
+          {"rescaled_factorizations", s.rescaled_factorizations},
           {"solve_seconds", s.solve_seconds},
           {"assembly_seconds", s.assembly_seconds},
           {"solver_seconds", s.solver_seconds},
@@ -82,6 +86,11 @@ IntegratorStats stats_from_json(const json& j) {
   j.at("energy_drift").get_to(s.energy_drift);
   j.at("energy_scale").get_to(s.energy_scale);
   j.at("factor_seconds").get_to(s.factor_seconds);
+  // (checkpoints written before these figures existed have none)
+  s.factor_input_seconds = j.value("factor_input_seconds", 0.0);
+  s.factor_device_seconds = j.value("factor_device_seconds", 0.0);
+  s.values_on_device_factorizations = j.value("values_on_device_factorizations", index_t{0});
+  s.rescaled_factorizations = j.value("rescaled_factorizations", index_t{0});
   j.at("solve_seconds").get_to(s.solve_seconds);
   j.at("assembly_seconds").get_to(s.assembly_seconds);
   j.at("solver_seconds").get_to(s.solver_seconds);
