@@ -47,12 +47,16 @@ Rescaling rescale_values(const SparseMatrix& c, bool symmetric, std::vector<doub
   auto block_range = [&](int b) {
     return static_cast<index_t>(static_cast<std::int64_t>(n) * b / blocks);
   };
-  auto block_maxima = [&](int b, double* r) {
+  // the maxima of |B| of column block b (row maxima into r), after scaling B by
+  // diag(rs)·B·diag(cs) when rs is given (a sweep's scaling and the next sweep's maxima in
+  // one pass over the values)
+  auto block_maxima = [&](int b, double* r, const double* rs, const double* cs) {
     std::fill(r, r + rows, 0.0);
     for (index_t j = block_range(b); j < block_range(b + 1); ++j) {
       double cm = 0;
       for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) {
         const index_t i = c.indices[p];
+        if (rs) values[p] *= rs[i] * cs[j];
         const double v = std::abs(values[p]);
         r[i] = std::max(r[i], v);
         cm = std::max(cm, v);
@@ -61,12 +65,13 @@ Rescaling rescale_values(const SparseMatrix& c, bool symmetric, std::vector<doub
       cmax[j] = cm;
     }
   };
-  auto maxima = [&] {
+  auto maxima = [&](const double* rs, const double* cs) {
     if (!parallel) {
-      block_maxima(0, rmax.data());
+      block_maxima(0, rmax.data(), rs, cs);
     } else {
       arena->execute([&] {
-        tbb::parallel_for(0, blocks, [&](int b) { block_maxima(b, work->data() + b * rows); });
+        tbb::parallel_for(0, blocks,
+                          [&](int b) { block_maxima(b, work->data() + b * rows, rs, cs); });
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, rows, 8192),
                           [&](const tbb::blocked_range<std::size_t>& r) {
                             for (std::size_t i = r.begin(); i < r.end(); ++i) {
@@ -81,32 +86,34 @@ Rescaling rescale_values(const SparseMatrix& c, bool symmetric, std::vector<doub
     if (symmetric)  // the mirrored entries: column i's maximum is row i's
       for (index_t j = 0; j < n; ++j) cmax[j] = rmax[j] = std::max(rmax[j], cmax[j]);
   };
-  maxima();
+  maxima(nullptr, nullptr);
   if (within_factor_two(rmax) && within_factor_two(cmax)) return out;
   out.row.assign(c.n_rows, 1.0);
   out.col.assign(n, 1.0);
   std::vector<double> r(c.n_rows), s(n);
-  for (; out.sweeps < max_sweeps; ++out.sweeps) {
-    if (out.sweeps > 0) {
-      maxima();
-      if (within_factor_two(rmax) && within_factor_two(cmax)) break;
-    }
+  while (out.sweeps < max_sweeps) {
     for (index_t i = 0; i < c.n_rows; ++i) r[i] = rmax[i] > 0 ? inverse_sqrt_pow2(rmax[i]) : 1.0;
     for (index_t j = 0; j < n; ++j) s[j] = cmax[j] > 0 ? inverse_sqrt_pow2(cmax[j]) : 1.0;
-    // symmetric: the maxima are mirrored, so r == s and D·B·D stays symmetric
-    auto scale = [&](index_t j0, index_t j1) {
-      for (index_t j = j0; j < j1; ++j)
-        for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p)
-          values[p] *= r[c.indices[p]] * s[j];
-    };
-    if (!parallel)
-      scale(0, n);
-    else
-      arena->execute([&] {
-        tbb::parallel_for(0, blocks, [&](int b) { scale(block_range(b), block_range(b + 1)); });
-      });
     for (index_t i = 0; i < c.n_rows; ++i) out.row[i] *= r[i];
     for (index_t j = 0; j < n; ++j) out.col[j] *= s[j];
+    ++out.sweeps;
+    // symmetric: the maxima are mirrored, so r == s and D·B·D stays symmetric
+    if (out.sweeps == max_sweeps) {  // the last sweep: its scaling alone
+      auto scale = [&](index_t j0, index_t j1) {
+        for (index_t j = j0; j < j1; ++j)
+          for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p)
+            values[p] *= r[c.indices[p]] * s[j];
+      };
+      if (!parallel)
+        scale(0, n);
+      else
+        arena->execute([&] {
+          tbb::parallel_for(0, blocks, [&](int b) { scale(block_range(b), block_range(b + 1)); });
+        });
+      break;
+    }
+    maxima(r.data(), s.data());
+    if (within_factor_two(rmax) && within_factor_two(cmax)) break;
   }
   return out;
 }

@@ -84,5 +84,72 @@ TEST(Rescale, EquilibratesExactlyAndThreadsGiveTheSameBits) {
     }
 }
 
+// The documented iteration written plainly: at most `sweeps` Ruiz sweeps, each scaling
+// row i by the power of two nearest to 1/√(max_j |b_ij|) and column j likewise (frexp's
+// exponent e: 2^−⌊(e−1)/2⌋), stopping before a sweep once every nonempty row and column
+// maximum is in [1/2, 2].
+Rescaling ruiz_reference(const SparseMatrix& a, bool symmetric, std::vector<double>& v,
+                         int sweeps) {
+  const index_t n = a.n_cols;
+  auto pow2 = [](double x) {
+    int e = 0;
+    std::frexp(x, &e);
+    return std::ldexp(1.0, -((e - 1) / 2));
+  };
+  auto within = [](const std::vector<double>& m) {
+    for (double x : m)
+      if (x != 0 && (x < 0.5 || x > 2)) return false;
+    return true;
+  };
+  Rescaling out;
+  std::vector<double> rmax, cmax;
+  maxima(a, symmetric, v, rmax, cmax);
+  if (within(rmax) && within(cmax)) return out;
+  out.row.assign(n, 1.0);
+  out.col.assign(n, 1.0);
+  for (; out.sweeps < sweeps; ++out.sweeps) {
+    if (out.sweeps > 0) {
+      maxima(a, symmetric, v, rmax, cmax);
+      if (within(rmax) && within(cmax)) break;
+    }
+    std::vector<double> r(n), c(n);
+    for (index_t i = 0; i < n; ++i) r[i] = rmax[i] > 0 ? pow2(rmax[i]) : 1.0;
+    for (index_t j = 0; j < n; ++j) c[j] = cmax[j] > 0 ? pow2(cmax[j]) : 1.0;
+    for (index_t j = 0; j < n; ++j)
+      for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p) v[p] *= r[a.indices[p]] * c[j];
+    for (index_t i = 0; i < n; ++i) out.row[i] *= r[i];
+    for (index_t j = 0; j < n; ++j) out.col[j] *= c[j];
+  }
+  return out;
+}
+
+// A limited number of sweeps (the Solver makes at most 3): the same values, factors and
+// count as the plain iteration, sequential and in column blocks on two threads.
+TEST(Rescale, FewSweepsEqualThePlainIteration) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  tbb::task_arena arena(2);
+  for (const bool symmetric : {false, true})
+    for (index_t n : {1, 2, 3, 5, 733, 20000})
+      for (int sweeps : {0, 1, 2, 3}) {
+        SCOPED_TRACE(std::string(symmetric ? "symmetric" : "general") + " n=" + std::to_string(n) +
+                     " sweeps=" + std::to_string(sweeps));
+        const auto kind =
+            symmetric ? test::RandomKind::symmetric_indefinite : test::RandomKind::general;
+        const SparseMatrix a = badly_scaled(n, kind, 6, rng);
+        std::vector<double> ref = a.values, seq = a.values, par = a.values, work;
+        const Rescaling rr = ruiz_reference(a, symmetric, ref, sweeps);
+        const Rescaling rs = rescale_values(a, symmetric, seq, sweeps);
+        const Rescaling rp = rescale_values(a, symmetric, par, sweeps, &arena, &work);
+        EXPECT_EQ(seq, ref);
+        EXPECT_EQ(par, ref);
+        EXPECT_EQ(rs.row, rr.row);
+        EXPECT_EQ(rs.col, rr.col);
+        EXPECT_EQ(rs.sweeps, rr.sweeps);
+        EXPECT_EQ(rp.sweeps, rr.sweeps);
+      }
+}
+
 }  // namespace
 }  // namespace strata
