@@ -1454,5 +1454,23 @@ TEST_F(CudaBackend, PivotsDelayedStraightAwayKeepTheHostsValuePass) {
   EXPECT_LE(test::backward_error(a, x.data(), b.data()), 1e-14);
 }
 
+// A factorization that delays its pivots straight away runs on the host: its statistics
+// carry no device figures, not those of the GPU's previous factorization.
+TEST_F(CudaBackend, DelayedFactorizationOnTheHostReportsNoDeviceFigures) {
+  auto rng = test::fresh_rng();
+  const SparseMatrix a = test::random_sparse(200, 4, test::RandomKind::general, rng);
+  Solver s(one_gpu());
+  s.factorize(a);
+  ASSERT_FALSE(s.stats().factor.delayed_pivoting);  // the fixed order, on the GPU
+  EXPECT_GT(s.stats().factor.device_seconds, 0.0);
+  EXPECT_GT(s.stats().factor.bytes_to_device, 0u);
+  s.set_pivoting(Pivoting::delayed);
+  s.refactorize(std::span<const double>(a.values));
+  EXPECT_TRUE(s.stats().factor.delayed_pivoting);
+  EXPECT_EQ(s.stats().factor.device_seconds, 0.0);
+  EXPECT_EQ(s.stats().factor.bytes_to_device, 0u);
+  EXPECT_EQ(s.stats().factor.device_batches, 0);
+}
+
 }  // namespace
 }  // namespace strata
