@@ -179,8 +179,9 @@ struct FactorStats {
   /// a singular one a finite log-determinant), and the outputs withhold or mark them.
   bool inertia_valid = true;
   double matrix_norm = 0;  ///< ‖A‖₁ used for static pivoting (after scaling)
-  // --- GPU backend (zero on the CPU; with several GPUs: bytes, batches and tiled fronts
-  // summed over them, device_seconds and device_budget the largest) ---
+  // --- GPU backend (zero on the CPU, and for a factorization that delayed its pivots
+  // straight away on the host (Pivoting::delayed); with several GPUs: bytes, batches and
+  // tiled fronts summed over them, device_seconds and device_budget the largest) ---
   double device_seconds = 0;        ///< time of the factorization's work on the GPU (events)
   std::size_t bytes_to_device = 0;  ///< host→device bytes moved by the factorization
   std::size_t bytes_to_host = 0;    ///< device→host bytes (factor panels, spilled blocks)
