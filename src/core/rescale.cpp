@@ -32,7 +32,8 @@ bool within_factor_two(std::span<const double> maxima) {
 }
 
 Rescaling rescale_values(const SparseMatrix& c, bool symmetric, std::vector<double>& values,
-                         int max_sweeps, tbb::task_arena* arena, std::vector<double>* work) {
+                         int max_sweeps, tbb::task_arena* arena, std::vector<double>* work,
+                         std::span<const double> row_max, std::span<const double> col_max) {
   const index_t n = c.n_cols;
   const std::size_t rows = static_cast<std::size_t>(c.n_rows);
   Rescaling out;
@@ -86,7 +87,15 @@ Rescaling rescale_values(const SparseMatrix& c, bool symmetric, std::vector<doub
     if (symmetric)  // the mirrored entries: column i's maximum is row i's
       for (index_t j = 0; j < n; ++j) cmax[j] = rmax[j] = std::max(rmax[j], cmax[j]);
   };
-  maxima(nullptr, nullptr);
+  if (row_max.size() == rows && (symmetric || col_max.size() == static_cast<std::size_t>(n))) {
+    std::copy(row_max.begin(), row_max.end(), rmax.begin());
+    if (symmetric)
+      std::copy(row_max.begin(), row_max.end(), cmax.begin());
+    else
+      std::copy(col_max.begin(), col_max.end(), cmax.begin());
+  } else {
+    maxima(nullptr, nullptr);
+  }
   if (within_factor_two(rmax) && within_factor_two(cmax)) return out;
   out.row.assign(c.n_rows, 1.0);
   out.col.assign(n, 1.0);

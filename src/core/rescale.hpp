@@ -39,13 +39,16 @@ struct Rescaling {
 /// largest magnitude is in [1/2, 2]. Returns the scaling applied (empty when
 /// none was needed). Rows and columns with no nonzero value keep factor 1. With `arena`
 /// and `work` (scratch, resized as needed) a large matrix's passes run in column blocks on
-/// the arena's threads, with the same result.
+/// the arena's threads, with the same result. `row_max` and `col_max`, when given, are the
+/// row and column maxima of |B| as it is (symmetric: the full rows', col_max empty; for
+/// instance refactor_values'), and the pass that would find them is skipped.
+Rescaling rescale_values(const SparseMatrix& pattern, bool symmetric, std::vector<double>& values,
+                         int max_sweeps = 3, tbb::task_arena* arena = nullptr,
+                         std::vector<double>* work = nullptr, std::span<const double> row_max = {},
+                         std::span<const double> col_max = {});
+
 /// rescale_values' stopping rule for the row or column maxima of |B|: every nonzero one in
 /// [1/2, 2].
 bool within_factor_two(std::span<const double> maxima);
-
-Rescaling rescale_values(const SparseMatrix& pattern, bool symmetric, std::vector<double>& values,
-                         int max_sweeps = 3, tbb::task_arena* arena = nullptr,
-                         std::vector<double>* work = nullptr);
 
 }  // namespace strata

@@ -315,8 +315,9 @@ void host_scaled(SolverState& s) {
 double prepare_values(SolverState& s, const SparseMatrix* a, std::span<const double> values) {
   const Analysis& an = *s.analysis;
   const bool scale = !an.row_scaling.empty();
-  double norm1 = 0;           // of the scaled matrix, for static pivoting
-  bool equilibrated = false;  // B's row and column maxima known to be within a factor 2
+  double norm1 = 0;                      // of the scaled matrix, for static pivoting
+  bool equilibrated = false;             // B's row and column maxima known to be within a factor 2
+  std::vector<double> row_max, col_max;  // B's maxima when known and not equilibrated
   tbb::task_arena& arena = host_arena(s);
   s.values_on_device = false;
   const bool analyzed_pattern = a == nullptr || has_analyzed_pattern(an, *a, arena);
@@ -343,6 +344,8 @@ double prepare_values(SolverState& s, const SparseMatrix* a, std::span<const dou
     s.norm_inf = norms.norm_inf;
     norm1 = norms.scaled_norm1;
     equilibrated = norms.equilibrated;
+    row_max = std::move(norms.row_max);
+    col_max = std::move(norms.col_max);
     if (s.values.values.data() != values.data())
       copy_values(s.values.values, values, arena);  // pattern: the analyzed one
   } else {
@@ -378,7 +381,8 @@ double prepare_values(SolverState& s, const SparseMatrix* a, std::span<const dou
   // subnormal range. The refactorization's pass has already found whether B needs it.
   s.rescaling = Rescaling{};
   if (scale && !equilibrated && !scaling_clamped(an)) {
-    s.rescaling = rescale_values(s.values, an.symmetric, s.scaled, 3, &arena, &s.value_sums);
+    s.rescaling = rescale_values(s.values, an.symmetric, s.scaled, 3, &arena, &s.value_sums,
+                                 row_max, col_max);
     if (!s.rescaling.row.empty())
       norm1 = scaled_norm1(s.values, an.symmetric, s.scaled, arena, s.value_sums);
   }

@@ -165,6 +165,10 @@ ValueNorms refactor_pass(const Analysis& an, const SparseMatrix& a, const double
   const double* ry = Sym ? array(0, 1) : cy.data();
   for (std::size_t j = 0; j < n; ++j) r.scaled_norm1 = std::max(r.scaled_norm1, ry[j]);
   r.equilibrated = within_factor_two({array(0, kArrays - 1), n}) && (Sym || within_factor_two(cm));
+  if (!r.equilibrated) {  // for rescale_values, which would otherwise take them again
+    r.row_max.assign(array(0, kArrays - 1), array(0, kArrays - 1) + n);
+    if (!Sym) r.col_max = std::move(cm);
+  }
   return r;
 }
 

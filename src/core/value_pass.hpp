@@ -152,6 +152,10 @@ struct ValueNorms {
   /// With the analysis's scaling: every nonzero row and column maximum of |B| is within
   /// [1/2, 2], so rescale_values would leave B as it is (always false without a scaling).
   bool equilibrated = false;
+  /// With the analysis's scaling and not `equilibrated`: the row and column maxima of |B|
+  /// (n each; symmetric: row_max of the full rows and col_max empty), which rescale_values
+  /// takes instead of a first pass of its own. Empty otherwise.
+  std::vector<double> row_max, col_max;
 };
 
 /// See ValueNorms: the pass over `values` (a.indices.size() of them, in the entry order

@@ -93,6 +93,31 @@ TEST(ValuePass, ScalesExactlyWithTheReferenceNormsOnEveryThreadCount) {
         const Rescaling rs = rescale_values(c, symmetric, again, 3);
         EXPECT_EQ(ref.equilibrated, scaled && rs.sweeps == 0 && rs.row.empty());
         if (drift && scaled && n >= 733) EXPECT_FALSE(ref.equilibrated);
+        // B's maxima handed to rescale_values when it has work: the rows' and columns'
+        // largest |b| (symmetric: of the full rows), and the same rescaling from them
+        if (scaled && !ref.equilibrated) {
+          std::vector<double> rmax(n, 0.0), cmax(n, 0.0);
+          for (index_t j = 0; j < n; ++j)
+            for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) {
+              const index_t i = c.indices[p];
+              rmax[i] = std::max(rmax[i], std::abs(b[p]));
+              cmax[j] = std::max(cmax[j], std::abs(b[p]));
+              if (symmetric) rmax[j] = std::max(rmax[j], std::abs(b[p]));
+            }
+          EXPECT_EQ(ref.row_max, rmax);
+          if (!symmetric) EXPECT_EQ(ref.col_max, cmax);
+          if (symmetric) EXPECT_TRUE(ref.col_max.empty());
+          std::vector<double> handed = b;
+          const Rescaling rh =
+              rescale_values(c, symmetric, handed, 3, nullptr, nullptr, ref.row_max, ref.col_max);
+          EXPECT_EQ(handed, again);
+          EXPECT_EQ(rh.row, rs.row);
+          EXPECT_EQ(rh.col, rs.col);
+          EXPECT_EQ(rh.sweeps, rs.sweeps);
+        } else {
+          EXPECT_TRUE(ref.row_max.empty());
+          EXPECT_TRUE(ref.col_max.empty());
+        }
         for (int threads : {2, 3}) {
           tbb::task_arena arena(threads);
           std::vector<double> w2, b2;
@@ -101,6 +126,8 @@ TEST(ValuePass, ScalesExactlyWithTheReferenceNormsOnEveryThreadCount) {
           EXPECT_EQ(r2.norm_inf, ref.norm_inf) << threads << " threads";
           EXPECT_EQ(r2.scaled_norm1, ref.scaled_norm1) << threads << " threads";
           EXPECT_EQ(r2.equilibrated, ref.equilibrated) << threads << " threads";
+          EXPECT_EQ(r2.row_max, ref.row_max) << threads << " threads";
+          EXPECT_EQ(r2.col_max, ref.col_max) << threads << " threads";
           EXPECT_EQ(b2, b) << threads << " threads";
         }
       }
