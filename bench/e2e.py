@@ -46,6 +46,12 @@ PATTERNS = {
     "partitioning_s": (r"partitioning ([\d.]+)", float),
     "factorization_ms": (r"factorization ([\d.]+) each", float),
     "solve_ms": (r"solve ([\d.]+) each", float),
+    # strata's own split of a factorization (the line "factorization [ms]", printed when
+    # a GPU ran or values were equilibrated again)
+    "value_input_ms": (r"value input ([\d.]+) each", float),
+    "gpu_factorization_ms": (r"GPU ([\d.]+) each", float),
+    "values_on_device_factorizations": (r"values scaled on the GPU in (\d+) of", int),
+    "rescaled_factorizations": (r"equilibrated again on the host in (\d+)", int),
 }
 
 
