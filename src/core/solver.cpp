@@ -27,6 +27,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <numbers>
 #include <optional>
 #include <span>
 #include <string_view>
@@ -498,8 +499,11 @@ void report_factorization(SolverState& s, const NumericRun& r, double norm1, dou
   int sign = total.det_sign;
   if (scale) {
     logdet -= s.scaling_log_sum;
-    for (double r : s.rescaling.row) logdet -= std::log(r);
-    for (double v : s.rescaling.col) logdet -= std::log(v);
+    // the rescaling's factors are powers of two: Σ log = ln 2 · (Σ of their exponents)
+    std::int64_t exponents = 0;
+    for (double r : s.rescaling.row) exponents += std::ilogb(r);
+    for (double v : s.rescaling.col) exponents += std::ilogb(v);
+    logdet -= static_cast<double>(exponents) * std::numbers::ln2;
   }
   fs.rescaling_sweeps = s.rescaling.sweeps;
   sign *= s.matching_sign;

@@ -157,34 +157,58 @@ TEST(Solver, RandomKktExactInertiaWithoutPerturbation) {
 }
 
 // log|det| against the dense LU of the same matrix; one Solver analyzes each new matrix
-// (its scalings and matching differ: the determinant's terms of the analysis are redone).
+// (its scalings and matching differ: the determinant's terms of the analysis are redone),
+// then refactorizes it with rows and columns scaled by 10^±4, far from the analysis's
+// values (equilibrated again: the rescaling's factors enter the determinant).
 TEST(Solver, LogDeterminantMatchesDense) {
   unsigned long long seed = 0;
   auto rng = test::fresh_rng(&seed);
   SCOPED_TRACE("seed " + std::to_string(seed));
+  auto dense_logdet = [](const SparseMatrix& a, int* sign) {
+    const index_t n = a.n_rows;
+    std::vector<double> d = test::to_dense(a);
+    std::vector<int> ipiv(n);
+    int ni = n, info = 0;
+    dgetrf_(&ni, &ni, d.data(), &ni, ipiv.data(), &info);
+    double logdet = 0;
+    *sign = 1;
+    for (index_t i = 0; i < n; ++i) {
+      logdet += std::log(std::abs(d[i + i * n]));
+      if (d[i + i * n] < 0) *sign = -*sign;
+      if (ipiv[i] != i + 1) *sign = -*sign;
+    }
+    return logdet;
+  };
   for (const Case& c : kCases) {
     Options o;
     o.type = c.type;
     Solver s(o);
     for (index_t n : {40, 1, 2, 3, 5, 40}) {
-      SparseMatrix a = test::random_sparse(n, 3, c.kind, rng);
-      std::vector<double> d = test::to_dense(a);
-      std::vector<int> ipiv(n);
-      int ni = n, info = 0;
-      dgetrf_(&ni, &ni, d.data(), &ni, ipiv.data(), &info);
-      double logdet = 0;
-      int sign = 1;
-      for (index_t i = 0; i < n; ++i) {
-        logdet += std::log(std::abs(d[i + i * n]));
-        if (d[i + i * n] < 0) sign = -sign;
-        if (ipiv[i] != i + 1) sign = -sign;
-      }
+      const SparseMatrix a = test::random_sparse(n, 3, c.kind, rng);
+      int sign = 0;
+      double logdet = dense_logdet(a, &sign);
       s.analyze(a);
       s.factorize(a);
       EXPECT_NEAR(s.stats().factor.log_abs_determinant, logdet,
                   1e-9 * std::max(1.0, std::abs(logdet)))
           << c.name << ", n = " << n;
       EXPECT_EQ(s.stats().factor.determinant_sign, sign) << c.name << ", n = " << n;
+      // the same pattern, rows and columns i ≡ 0, 1 (mod 3) scaled by 10⁴ and 10⁻⁴
+      // (symmetrically: the symmetric kinds stay symmetric)
+      SparseMatrix far = a;
+      auto f = [](index_t i) { return i % 3 == 0 ? 1e4 : i % 3 == 1 ? 1e-4 : 1.0; };
+      for (index_t j = 0; j < n; ++j)
+        for (index_t p = far.offsets[j]; p < far.offsets[j + 1]; ++p)
+          far.values[p] *= f(far.indices[p]) * f(j);
+      logdet = dense_logdet(far, &sign);
+      s.refactorize(far);
+      if (c.type != MatrixType::spd && n >= 5)
+        EXPECT_GT(s.stats().factor.rescaling_sweeps, 0) << c.name << ", n = " << n;
+      EXPECT_NEAR(s.stats().factor.log_abs_determinant, logdet,
+                  1e-9 * std::max(1.0, std::abs(logdet)))
+          << c.name << ", n = " << n << ", values far from the analysis's";
+      EXPECT_EQ(s.stats().factor.determinant_sign, sign)
+          << c.name << ", n = " << n << ", values far from the analysis's";
     }
   }
 }
