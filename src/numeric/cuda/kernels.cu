@@ -7,7 +7,9 @@
 // panels of 16 pivot columns in registers), the trailing matrix updated once per panel by
 // all the block's threads whatever the number of trailing rows; the unblocked one-pivot-at-a-
 // time forms (llt_front, lu_columns) remain for larger blocks (lu_columns also serves the
-// large LU fronts' static-pivoting path and the tiled slabs). Partial pivoting for LU searches
+// large LU fronts' static-pivoting path and the tiled slabs). An LU batch whose fronts all
+// fit the device's shared memory per block (about 168 rows on an H100) copies each front
+// there and factors it in place (lu_small_shared_kernel). Partial pivoting for LU searches
 // only the fully summed rows (restricted pivoting) and replaces tiny pivots by
 // ±static_pivot, exactly as the CPU kernels do (numeric/cpu/dense_front.hpp).
 #include <algorithm>
@@ -289,11 +291,11 @@ constexpr int kSmallNb = 16;
 // The trailing update of the blocked small-front kernels after a panel of w ≤ kSmallNb
 // pivot columns ending at c0: F(i, c) −= Σ_{p<w} L(i, p) · V(p, c) for the rows i ∈ [c0, m)
 // and the columns c ∈ [c0, m) (lower: c ≤ i only) of F (leading dimension ld), V(p, c) =
-// col_v(p, c) and L(i, p) = row_l(i, p), both read from shared memory. By the whole block rather
-// than one thread per row: the nr = m − c0 trailing rows times ⌊blockDim.x / nr⌋ groups of columns
-// (thread t: row c0 + t mod nr, columns c0 + t div nr + groups·q), four columns' loads in flight at
-// once. Each entry takes its w products in the order p = 0, 1, …, as one thread per row did: the
-// same result bit for bit. Needs m ≤ blockDim.x.
+// col_v(p, c) and L(i, p) = row_l(i, p) (from shared memory, or from F in the pool). By the whole
+// block rather than one thread per row: the nr = m − c0 trailing rows times ⌊blockDim.x / nr⌋
+// groups of columns (thread t: row c0 + t mod nr, columns c0 + t div nr + groups·q), four columns'
+// loads in flight at once. Each entry takes its w products in the order p = 0, 1, …, as one thread
+// per row did: the same result bit for bit. Needs m ≤ blockDim.x.
 template <class ColV, class RowL>
 __device__ __forceinline__ void trailing_update(double* F, std::int64_t ld, std::int64_t m,
                                                 std::int64_t c0, int w, ColV col_v, bool lower,
