@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "base/blas.hpp"
+#include "numeric/cpu/small_dense.hpp"
 #include "numeric/factor.hpp"
 
 namespace strata::numeric {
@@ -32,6 +33,11 @@ namespace {
 // (with one it is DTRSV's own blocking, no faster).
 constexpr int kTrsvBlock = 256;
 constexpr int kBlockedTrsvMin = 1024;  // pivots from which the blocked form is used
+
+// Below this many multiply-adds an LU front's one-right-hand-side products and triangular
+// solves run as the plain loops of cpu/small_dense.hpp: a multibody Newton matrix has
+// thousands of fronts of a few dozen rows, where a BLAS call costs more than its arithmetic.
+constexpr index_t kLoops = 1 << 15;
 
 // x ← op(A)⁻¹ x for the k×k triangle A (leading dimension lda): "L","N" (forward, right-
 // looking), "U","N" (backward, right-looking), "L","T" (backward, left-looking); `diag`
@@ -97,7 +103,10 @@ void forward_front(const Analysis& an, const NumericFactor& fac, index_t f, doub
     for (index_t i = 0; i < m; ++i) w[i + r * m] = at(i, r);
   const int mi = static_cast<int>(m), ki = static_cast<int>(k), mk = mi - ki, inc = 1;
   const char* diag = (lu || ldlt) ? "U" : "N";
-  if (nrhs == 1) {  // TRSV/GEMV read the panel once; TRSM/GEMM would copy it first
+  if (nrhs == 1 && lu && k * k <= kLoops && (m - k) * k <= kLoops) {
+    cpu::unit_lower_solve(k, panel, m, w.data());
+    if (mk > 0) cpu::gemv_subtract(m - k, k, panel + k, m, w.data(), w.data() + k);
+  } else if (nrhs == 1) {  // TRSV/GEMV read the panel once; TRSM/GEMM would copy it first
     trsv("L", "N", diag, ki, panel, mi, w.data());
     if (mk > 0)
       dgemv_("N", &mk, &ki, &minus_one, panel + k, &mi, w.data(), &inc, &one, w.data() + k, &inc);
@@ -158,7 +167,14 @@ void backward_front(const Analysis& an, const NumericFactor& fac, index_t f, dou
     for (index_t i = 0; i < m; ++i) w[i + r * m] = x[col[i] + r * n];
   const int mi = static_cast<int>(m), ki = static_cast<int>(k), mk = mi - ki, inc = 1;
   const bool one_rhs = nrhs == 1;  // TRSV/GEMV read the panel once; TRSM/GEMM copy it first
-  if (lu) {
+  // the plain loops where the pivot block has no zero pivot (upper_solve gives 0 there, the
+  // BLAS an infinity, which the caller reports)
+  bool loops = one_rhs && lu && k * k <= kLoops && (m - k) * k <= kLoops;
+  for (index_t j = 0; loops && j < k; ++j) loops = panel[j * m + j] != 0.0;
+  if (loops) {
+    if (mk > 0) cpu::gemv_subtract(k, m - k, panel + m * k, k, w.data() + k, w.data());
+    cpu::upper_solve(k, panel, m, w.data());
+  } else if (lu) {
     if (mk > 0) {  // y −= U12 x_R, U12 is k×(m−k) with leading dimension k
       if (one_rhs)
         dgemv_("N", &ki, &mk, &minus_one, panel + m * k, &ki, w.data() + k, &inc, &one, w.data(),
