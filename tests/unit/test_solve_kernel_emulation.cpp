@@ -161,8 +161,12 @@ void run_block(unsigned threads, const Body& body) {
 
 }  // namespace
 
+// __shared__: a function-local static, one per function, which the fibers of the block
+// share (blocks run one after another)
 #define __device__ inline
+#define __shared__ static
 #include "numeric/cuda/solve_device.cuh"
+#undef __shared__
 #undef __device__
 
 namespace strata {
@@ -203,7 +207,7 @@ struct HostOps {
 };
 
 struct EmulationCounts {
-  index_t block_fronts = 0, library_fronts = 0;
+  index_t block_fronts = 0, library_fronts = 0, subtrees = 0, tall_fronts = 0;
 };
 
 // The device solve of cuda_solve.cu, step for step, on the host. x: n×nrhs.
@@ -261,13 +265,28 @@ void emulate_device_solve(const Analysis& an, const numeric::NumericFactor& fac,
         static_cast<int>(n_piv[f]), S + t.row_offsets[f] * nrhs);
   };
   namespace dev = cuda::solve_device;
+  const std::size_t n_subtrees = p.subtree_first.size();
+  for (std::size_t q = 0; q < n_subtrees; ++q) {
+    run_block(sweep_threads, [&] {
+      for (std::int64_t f = p.subtree_first[q]; f <= p.subtree_last[q]; ++f)
+        dev::front_forward(st, f, X, U, S, nrhs, unit, lu);
+    });
+    counts.block_fronts += p.subtree_last[q] - p.subtree_first[q] + 1;
+    ++counts.subtrees;
+  }
   for (index_t l = 0; l < an.schedule.n_levels(); ++l) {
+    for (std::int64_t q = p.small_offsets[l]; q < p.small_offsets[l + 1]; ++q) {
+      run_block(sweep_threads,
+                [&] { dev::front_forward(st, p.small_fronts[q], X, U, S, nrhs, unit, lu); });
+      ++counts.block_fronts;
+    }
     chunks(l, [&](std::int64_t f, std::int64_t i0, std::int64_t i1) {
       dev::gather_forward(st, f, i0, i1, X, U, S, nrhs);
     });
-    for (std::int64_t q = p.small_offsets[l]; q < p.small_offsets[l + 1]; ++q) {
-      run_block(sweep_threads, [&] { dev::sweep_forward(st, p.small_fronts[q], S, nrhs, unit); });
+    for (std::int64_t q = p.tall_offsets[l]; q < p.tall_offsets[l + 1]; ++q) {
+      run_block(sweep_threads, [&] { dev::sweep_forward(st, p.tall_fronts[q], S, nrhs, unit); });
       ++counts.block_fronts;
+      ++counts.tall_fronts;
     }
     for (std::int64_t q = p.large_offsets[l]; q < p.large_offsets[l + 1]; ++q) {
       large(p.large_fronts[q], [&](const double* L, int m, int k, double* W) {
@@ -283,12 +302,15 @@ void emulate_device_solve(const Analysis& an, const numeric::NumericFactor& fac,
     for (index_t q = 0; q < an.n; ++q)
       dev::diagonal(st, q, fac.d_diag.data(), fac.d_off.data(), fac.pivot_size.data(), X, nrhs);
   for (index_t l = an.schedule.n_levels() - 1; l >= 0; --l) {
+    for (std::int64_t q = p.small_offsets[l]; q < p.small_offsets[l + 1]; ++q)
+      run_block(sweep_threads,
+                [&] { dev::front_backward(st, p.small_fronts[q], X, S, nrhs, lu, unit); });
     chunks(l, [&](std::int64_t f, std::int64_t i0, std::int64_t i1) {
       dev::gather_backward(st, f, i0, i1, X, S, nrhs, lu);
     });
-    for (std::int64_t q = p.small_offsets[l]; q < p.small_offsets[l + 1]; ++q)
+    for (std::int64_t q = p.tall_offsets[l]; q < p.tall_offsets[l + 1]; ++q)
       run_block(sweep_threads,
-                [&] { dev::sweep_backward(st, p.small_fronts[q], S, nrhs, lu, unit); });
+                [&] { dev::sweep_backward(st, p.tall_fronts[q], S, nrhs, lu, unit); });
     for (std::int64_t q = p.large_offsets[l]; q < p.large_offsets[l + 1]; ++q)
       large(p.large_fronts[q], [&](const double* L, int m, int k, double* W) {
         cuda::large_front_backward(ops, L, m, k, nr, lu, unit, W);
@@ -297,6 +319,11 @@ void emulate_device_solve(const Analysis& an, const numeric::NumericFactor& fac,
       dev::scatter_backward(st, f, i0, i1, X, S, nrhs, lu);
     });
   }
+  for (std::size_t q = 0; q < n_subtrees; ++q)
+    run_block(sweep_threads, [&] {
+      for (std::int64_t f = p.subtree_last[q]; f >= p.subtree_first[q]; --f)
+        dev::front_backward(st, f, X, S, nrhs, lu, unit);
+    });
 }
 
 using Problem = test::NamedMatrix;
@@ -362,11 +389,14 @@ TEST(SolveKernelEmulation, SmallProblemsEveryPath) {
     for (index_t n : {1, 2, 3, 5, 40, 97}) {
       Problem pr{std::string(to_string(type)) + " random n=" + std::to_string(n),
                  test::random_sparse(n, 3, kind_of(type), rng), type};
-      check_problem(pr, rng, {SolvePath::all_block, SolvePath::all_library, SolvePath::model}, 32,
-                    132, counts);
+      check_problem(pr, rng,
+                    {SolvePath::all_block, SolvePath::all_library, SolvePath::model,
+                     SolvePath::block_subtrees},
+                    32, 132, counts);
     }
   EXPECT_GT(counts.block_fronts, 0);
   EXPECT_GT(counts.library_fronts, 0);
+  EXPECT_GT(counts.subtrees, 0);
 }
 
 // LDLᵀ with 2×2 pivots (KKT matrices) and LU with row pivoting on fronts of more than one
@@ -395,14 +425,18 @@ TEST(SolveKernelEmulation, MultiTileFrontsSeveralWarps) {
     problems.push_back({std::string(to_string(type)) + " laplacian 7x6x5", std::move(a), type});
   }
   for (const Problem& pr : problems) {
-    check_problem(pr, rng, {SolvePath::all_block, SolvePath::model}, 64, 4, counts);
-    check_problem(pr, rng, {SolvePath::all_block}, 256, 4, counts);  // the device's block size
+    check_problem(pr, rng, {SolvePath::all_block, SolvePath::model, SolvePath::block_subtrees}, 64,
+                  4, counts);
+    // the device's block size
+    check_problem(pr, rng, {SolvePath::all_block, SolvePath::block_subtrees}, 256, 4, counts);
   }
   EXPECT_GT(counts.block_fronts, 0);
+  EXPECT_GT(counts.subtrees, 0);
 }
 
 // The library path (no threads, so larger problems): every front through the BLAS
-// sequence, several thousand unknowns, a root front of hundreds of rows.
+// sequence, several thousand unknowns, a root front of hundreds of rows; and the same
+// Laplacian on the block path, whose fronts below the root are taller than kChunkRows.
 TEST(SolveKernelEmulation, LibraryPathLargeFronts) {
   unsigned long long seed = 0;
   auto rng = test::fresh_rng(&seed);
@@ -416,10 +450,16 @@ TEST(SolveKernelEmulation, LibraryPathLargeFronts) {
   for (const Problem& pr : problems)
     check_problem(pr, rng, {SolvePath::all_library}, 32, 132, counts);
   EXPECT_GT(counts.library_fronts, 0);
+  // the block path's fronts of more than kChunkRows rows: gathered and scattered by chunks,
+  // swept by one block
+  check_problem(problems[0], rng, {SolvePath::all_block}, 32, 132, counts);
+  EXPECT_GT(counts.tall_fronts, 0);
 }
 
-// The planner: every front on exactly one path per level; the model puts a lone large
-// root front on the library and a level of many tiny fronts on the block path.
+// The planner: every front solved exactly once, in a subtree (a front and all its
+// descendants) or on one path at its own level; the library's fronts' rows covered once by
+// the gather/scatter chunks; the model puts a lone large root front on the library and
+// solves the bottom of the tree by subtrees when launches would cost more.
 TEST(SolveKernelEmulation, PlanCoversEveryFrontOnce) {
   SparseMatrix a = generators::laplacian_3d(16, 16, 16);
   Options o;
@@ -427,33 +467,66 @@ TEST(SolveKernelEmulation, PlanCoversEveryFrontOnce) {
   Analysis an = analyze_matrix(a, o);
   const auto& t = an.tree;
   const auto& s = an.schedule;
-  for (int n_sm : {1, 132}) {
-    const SolvePlan p = cuda::make_solve_plan(t, an.child_rows, s, n_sm);
-    ASSERT_EQ(p.small_offsets.size(), static_cast<std::size_t>(s.n_levels() + 1));
-    for (index_t l = 0; l < s.n_levels(); ++l) {
-      std::vector<std::int64_t> got(p.small_fronts.begin() + p.small_offsets[l],
-                                    p.small_fronts.begin() + p.small_offsets[l + 1]);
-      got.insert(got.end(), p.large_fronts.begin() + p.large_offsets[l],
-                 p.large_fronts.begin() + p.large_offsets[l + 1]);
-      std::sort(got.begin(), got.end());
-      std::vector<std::int64_t> want(s.fronts.begin() + s.level_offsets[l],
-                                     s.fronts.begin() + s.level_offsets[l + 1]);
-      std::sort(want.begin(), want.end());
-      EXPECT_EQ(got, want) << "level " << l;
-      // chunks cover every row of every front of the level once
-      std::int64_t rows = 0, chunk_rows = 0;
-      for (std::int64_t f : want) rows += t.n_rows(f);
-      for (std::int64_t c = p.chunk_offsets[l]; c < p.chunk_offsets[l + 1]; ++c)
-        chunk_rows += std::min(cuda::kChunkRows, t.n_rows(p.chunk_front[c]) - p.chunk_row[c]);
-      EXPECT_EQ(chunk_rows, rows) << "level " << l;
+  const index_t nf = t.n_fronts();
+  for (SolvePath path : {SolvePath::model, SolvePath::block_subtrees, SolvePath::all_block})
+    for (int n_sm : {1, 132}) {
+      SCOPED_TRACE("path " + std::to_string(static_cast<int>(path)) + " SMs " +
+                   std::to_string(n_sm));
+      const SolvePlan p = cuda::make_solve_plan(t, an.child_rows, s, n_sm, path);
+      ASSERT_EQ(p.small_offsets.size(), static_cast<std::size_t>(s.n_levels() + 1));
+      ASSERT_EQ(p.subtree_first.size(), p.subtree_last.size());
+      std::vector<int> seen(nf, 0);
+      for (std::size_t q = 0; q < p.subtree_first.size(); ++q) {
+        const std::int64_t root = p.subtree_last[q];
+        for (std::int64_t f = p.subtree_first[q]; f <= root; ++f) {
+          ++seen[f];
+          EXPECT_LE(t.n_rows(f), cuda::kChunkRows);
+          std::int64_t g = f;  // f descends from the subtree's root
+          while (g >= 0 && g != root) g = t.parent[g];
+          EXPECT_EQ(g, root) << "front " << f;
+        }
+        for (index_t q2 = t.child_offsets[root]; q2 < t.child_offsets[root + 1]; ++q2)
+          EXPECT_GE(t.children[q2], p.subtree_first[q]);  // every child inside
+      }
+      for (index_t l = 0; l < s.n_levels(); ++l) {
+        std::int64_t large_rows = 0, chunk_rows = 0;
+        for (std::int64_t q = p.small_offsets[l]; q < p.small_offsets[l + 1]; ++q) {
+          EXPECT_EQ(s.level_of[p.small_fronts[q]], l);
+          ++seen[p.small_fronts[q]];
+        }
+        for (std::int64_t q = p.large_offsets[l]; q < p.large_offsets[l + 1]; ++q) {
+          EXPECT_EQ(s.level_of[p.large_fronts[q]], l);
+          ++seen[p.large_fronts[q]];
+          large_rows += t.n_rows(p.large_fronts[q]);
+        }
+        for (std::int64_t q = p.tall_offsets[l]; q < p.tall_offsets[l + 1]; ++q) {
+          EXPECT_EQ(s.level_of[p.tall_fronts[q]], l);
+          EXPECT_GT(t.n_rows(p.tall_fronts[q]), cuda::kChunkRows);
+          ++seen[p.tall_fronts[q]];
+          large_rows += t.n_rows(p.tall_fronts[q]);
+        }
+        for (std::int64_t q = p.small_offsets[l]; q < p.small_offsets[l + 1]; ++q)
+          EXPECT_LE(t.n_rows(p.small_fronts[q]), cuda::kChunkRows);
+        for (std::int64_t c = p.chunk_offsets[l]; c < p.chunk_offsets[l + 1]; ++c)
+          chunk_rows += std::min(cuda::kChunkRows, t.n_rows(p.chunk_front[c]) - p.chunk_row[c]);
+        EXPECT_EQ(chunk_rows, large_rows) << "level " << l;  // the tall and library fronts
+      }
+      for (index_t f = 0; f < nf; ++f) EXPECT_EQ(seen[f], 1) << "front " << f;
+      if (path == SolvePath::all_block) EXPECT_TRUE(p.subtree_first.empty());
+      if (path == SolvePath::block_subtrees) EXPECT_FALSE(p.subtree_first.empty());
+      if (path != SolvePath::model) EXPECT_TRUE(p.large_fronts.empty());
     }
-    const index_t root_level = s.n_levels() - 1;
-    ASSERT_EQ(s.level_offsets[root_level + 1] - s.level_offsets[root_level], 1);
-    const index_t root = s.fronts[s.level_offsets[root_level]];
-    ASSERT_GE(t.n_rows(root) * t.n_pivots(root), 30000);
-    EXPECT_EQ(p.large_offsets[root_level + 1] - p.large_offsets[root_level], 1);
-    EXPECT_EQ(p.small_offsets[1] - p.small_offsets[0], s.level_offsets[1]);  // deepest level
-  }
+  const index_t root_level = s.n_levels() - 1;
+  ASSERT_EQ(s.level_offsets[root_level + 1] - s.level_offsets[root_level], 1);
+  const index_t root = s.fronts[s.level_offsets[root_level]];
+  ASSERT_GE(t.n_rows(root) * t.n_pivots(root), 30000);
+  const SolvePlan p = cuda::make_solve_plan(t, an.child_rows, s, 132);
+  EXPECT_EQ(p.large_offsets[root_level + 1] - p.large_offsets[root_level], 1);
+  // a long thin grid: a deep tree of tiny fronts, whose launches cost more than solving
+  // most of it by subtrees
+  Analysis thin = analyze_matrix(generators::laplacian_3d(64, 2, 2), o);
+  const SolvePlan pt = cuda::make_solve_plan(thin.tree, thin.child_rows, thin.schedule, 132);
+  EXPECT_FALSE(pt.subtree_first.empty());
 }
 
 }  // namespace

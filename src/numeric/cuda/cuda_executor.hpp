@@ -499,7 +499,7 @@ class CudaExecutor final : public numeric::Executor {
     std::vector<std::int64_t> u_offset_host;
     SolvePlan plan;  ///< per analysis, and its copy below
     DeviceBuffer<std::int64_t> plan_u_offset, inv_offsets, inv_src, chunk_front, chunk_row,
-        small_fronts;
+        small_fronts, tall_fronts, subtree_first, subtree_last;
     /// The sweeps of a solve recorded as a CUDA graph (Options::gpu_solve_graph) and
     /// replayed, one launch per solve, while graph_key (solve_graph_key) is unchanged.
     cudaGraphExec_t graph = nullptr;

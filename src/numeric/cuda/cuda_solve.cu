@@ -6,9 +6,9 @@
 // resident the executor declines and the host solve runs.
 //
 // The sweeps are a fixed sequence of launches for a given analysis and number of
-// right-hand sides (a gather, a small-front and a scatter launch per level in each
-// sweep, and a few library calls per large front: 50 to 200 on the multibody
-// matrices); with Options::gpu_solve_graph they are recorded once as a CUDA graph and
+// right-hand sides (one for the plan's subtrees, one per level for its block-path fronts,
+// a gather, a sweep, a scatter and a few library calls per level with tall or library-path
+// fronts; in each sweep); with Options::gpu_solve_graph they are recorded once as a CUDA graph and
 // replayed with one launch per solve, which removes the host's cost per launch and the
 // gaps between them on the device (CUDA C++ Programming Guide, "CUDA Graphs"). The graph
 // holds the device pointers of the solve that recorded it: it is replayed only while the
@@ -16,11 +16,9 @@
 // (solve_graph_key), and recorded again otherwise. The values in those buffers (a new
 // factorization's panels, its rows after pivoting) are read when it runs.
 //
-// Per level (solve_kernels.cuh): one gather launch, one launch for the level's many
-// small fronts (a thread block each), cuBLAS for its few large ones (TRSV/GEMV for one
-// right-hand side, TRSM/GEMM for several, all right-hand sides at once), one scatter
-// launch. Which front takes which path is the plan's choice (solve_plan.hpp), made once
-// per analysis for this device's number of SMs. Everything runs on the executor's stream
+// solve_kernels.cuh describes the launches; which front takes which path is the plan's
+// choice (solve_plan.hpp), made once per analysis for this device's number of SMs.
+// Everything runs on the executor's stream
 // without a host synchronization until the solution is copied back; the workspaces are
 // members, grown when the analysis or nrhs needs more, so a solve allocates nothing after
 // the first.
@@ -80,6 +78,9 @@ void CudaExecutor::prepare_solve_plan(const Analysis& an) {
   up(dsolve_.chunk_front, dsolve_.plan.chunk_front);
   up(dsolve_.chunk_row, dsolve_.plan.chunk_row);
   up(dsolve_.small_fronts, dsolve_.plan.small_fronts);
+  up(dsolve_.tall_fronts, dsolve_.plan.tall_fronts);
+  up(dsolve_.subtree_first, dsolve_.plan.subtree_first);
+  up(dsolve_.subtree_last, dsolve_.plan.subtree_last);
 }
 
 bool CudaExecutor::solve(const Analysis& an, const numeric::NumericFactor& fac, double* x,
@@ -157,7 +158,10 @@ std::vector<std::uintptr_t> CudaExecutor::solve_graph_key(const Analysis& an,
           ptr(dsolve_.inv_src.data()),
           ptr(dsolve_.chunk_front.data()),
           ptr(dsolve_.chunk_row.data()),
-          ptr(dsolve_.small_fronts.data())};
+          ptr(dsolve_.small_fronts.data()),
+          ptr(dsolve_.tall_fronts.data()),
+          ptr(dsolve_.subtree_first.data()),
+          ptr(dsolve_.subtree_last.data())};
 }
 
 void CudaExecutor::drop_solve_graph() noexcept {
@@ -199,11 +203,18 @@ void CudaExecutor::enqueue_solve_sweeps(const Analysis& an, const numeric::Numer
         static_cast<int>(t.n_pivots(f)), S + t.row_offsets[f] * nrhs);
   };
   const index_t levels = an.schedule.n_levels();
+  const std::int64_t* small = dsolve_.small_fronts.data();
+  const std::int64_t* tall = dsolve_.tall_fronts.data();
+  const std::int64_t n_subtrees = static_cast<std::int64_t>(p.subtree_first.size());
+  launch_fronts_forward(st, dsolve_.subtree_first.data(), dsolve_.subtree_last.data(), 0,
+                        n_subtrees, X, U, S, nrhs, unit, lu, stream_);
   for (index_t l = 0; l < levels; ++l) {
     const std::int64_t c0 = p.chunk_offsets[l], nc = p.chunk_offsets[l + 1] - c0;
     const std::int64_t s0 = p.small_offsets[l], ns = p.small_offsets[l + 1] - s0;
+    const std::int64_t t0 = p.tall_offsets[l], nt = p.tall_offsets[l + 1] - t0;
+    launch_fronts_forward(st, small, small, s0, ns, X, U, S, nrhs, unit, lu, stream_);
     launch_gather_forward(st, chunks, c0, nc, X, U, S, nrhs, stream_);
-    launch_sweep_forward(st, dsolve_.small_fronts.data(), s0, ns, S, nrhs, unit, stream_);
+    launch_sweep_forward(st, tall, t0, nt, S, nrhs, unit, stream_);
     for (std::int64_t q = p.large_offsets[l]; q < p.large_offsets[l + 1]; ++q)
       large(p.large_fronts[q], [&](const double* L, int m, int k, double* W) {
         large_front_forward(ops, L, m, k, nr, unit, W);
@@ -216,14 +227,18 @@ void CudaExecutor::enqueue_solve_sweeps(const Analysis& an, const numeric::Numer
   for (index_t l = levels - 1; l >= 0; --l) {
     const std::int64_t c0 = p.chunk_offsets[l], nc = p.chunk_offsets[l + 1] - c0;
     const std::int64_t s0 = p.small_offsets[l], ns = p.small_offsets[l + 1] - s0;
+    const std::int64_t t0 = p.tall_offsets[l], nt = p.tall_offsets[l + 1] - t0;
+    launch_fronts_backward(st, small, small, s0, ns, X, S, nrhs, lu, unit, stream_);
     launch_gather_backward(st, chunks, c0, nc, X, S, nrhs, lu, stream_);
-    launch_sweep_backward(st, dsolve_.small_fronts.data(), s0, ns, S, nrhs, lu, unit, stream_);
+    launch_sweep_backward(st, tall, t0, nt, S, nrhs, lu, unit, stream_);
     for (std::int64_t q = p.large_offsets[l]; q < p.large_offsets[l + 1]; ++q)
       large(p.large_fronts[q], [&](const double* L, int m, int k, double* W) {
         large_front_backward(ops, L, m, k, nr, lu, unit, W);
       });
     launch_scatter_backward(st, chunks, c0, nc, X, S, nrhs, lu, stream_);
   }
+  launch_fronts_backward(st, dsolve_.subtree_first.data(), dsolve_.subtree_last.data(), 0,
+                         n_subtrees, X, S, nrhs, lu, unit, stream_);
 }
 
 }  // namespace strata::cuda

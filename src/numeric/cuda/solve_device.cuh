@@ -3,17 +3,19 @@
 // per CUDA thread (tests/unit/test_solve_kernel_emulation.cpp checks the index arithmetic,
 // the barrier placement and the warp exchanges in CI against the CPU solve). Only
 // solve_kernels.cu and that test include this file. It uses nothing from CUDA but
-// threadIdx/blockDim, __syncthreads, __shfl_sync, __shfl_down_sync and __device__.
+// threadIdx/blockDim, __syncthreads, __shfl_sync, __shfl_down_sync, __device__ and
+// __shared__ (the tile a warp solves).
 //
 // Per front (m rows, k pivots; panel L column-major m×k, leading dimension m; W the
 // front's block of the scratch, m×nrhs with leading dimension m, at row_offsets[f]·nrhs):
 //   gather (forward)   W(i) = x at the pivot row as factored (i < k; 0 below) + the
 //                      children's update entries at that row (SolvePlan::inv_*);
 //   sweep (forward)    W[0:k] ← L11⁻¹ W[0:k], W[k:m] −= L21 W[0:k] — by tiles of 32 pivot
-//                      columns: one warp solves a tile's triangle per right-hand side
-//                      (register shuffles, no block barrier), then every thread updates
-//                      the rows below the tile with a 32-wide dot product; two barriers
-//                      per tile instead of one or two per pivot;
+//                      columns: one warp solves a tile's triangle per right-hand side from
+//                      the tile's copy in shared memory (register shuffles between its
+//                      steps), then every thread updates the rows below the tile with a
+//                      32-wide dot product while the block copies the next tile; two
+//                      barriers per tile instead of one or two per pivot;
 //   scatter (forward)  W[0:k] → x (LU: at the column positions), W[k:m] → the front's
 //                      update vector;
 //   gather (backward)  W = x at the front's rows (col(i): LU pivots at their column
@@ -22,11 +24,14 @@
 //                      take the dot products of L(solved rows, j) with W (one warp per
 //                      column and right-hand side — coalesced reads of L's columns, L21ᵀ
 //                      included), then a warp solves the tile's L11ᵀ triangle; LU right-
-//                      looking: W[0:k] −= U12 W[k:m] (one thread per row, coalesced), then
+//                      looking: W[0:k] −= U12 W[k:m] (one thread per row, coalesced; a warp
+//                      per row when there are few rows and columns), then
 //                      per tile from the last a warp solves U11's triangle and every thread
 //                      updates the rows above;
 //   scatter (backward) W[0:k] → x;
 //   diagonal (LDLᵀ)    x ← D⁻¹ x, 1×1 and 2×2 blocks by pivot position.
+// front_forward / front_backward chain a front's three steps in one block (the fronts the
+// block path solves, alone or a whole subtree one after another in postorder).
 // Every thread of a block reaches every __syncthreads() (loop trip counts depend only on
 // m, k, nrhs); every lane of a warp reaches every shuffle (the loops around them are
 // uniform within a warp). blockDim.x must be a multiple of 32.
@@ -123,33 +128,67 @@ __device__ void scatter_backward(const SolveTree& t, std::int64_t f, std::int64_
   }
 }
 
-// One warp solves the w×w triangle T (leading dimension m) for right-hand sides
-// r = warp, warp + nwarps, ...: lower (forward, T(i,j) below the diagonal), or upper
-// stored as the transpose of a lower triangle (transposed: Tᵀ of L11), or upper as
-// stored (U11). Lane t holds W(j0 + t).
-__device__ void warp_triangle(const double* T, std::int64_t m, std::int64_t w, double* W0,
-                              std::int64_t nrhs, bool lower, bool transposed, bool unit) {
+constexpr int kTileLd = kWarp + 1;  // leading dimension of a tile in shared memory
+
+// The block copies the w×w triangle T (leading dimension m) to `tile` (kWarp × kWarp,
+// leading dimension kTileLd, zero outside w×w), transposed if asked (tile(i, j) = T(j, i)),
+// so that the warp that solves it reads shared memory, not global memory, in each of its
+// dependent steps. A barrier must follow before the tile is read.
+__device__ void load_tile(const double* T, std::int64_t m, std::int64_t w, double* tile,
+                          bool transposed) {
+  for (int e = threadIdx.x; e < kWarp * kWarp; e += blockDim.x) {
+    const int i = e % kWarp, j = e / kWarp;
+    tile[i + j * kTileLd] = i < w && j < w ? (transposed ? T[j + i * m] : T[i + j * m]) : 0.0;
+  }
+}
+
+// One warp solves the w×w triangle of `tile` (load_tile) for right-hand sides r = warp,
+// warp + nwarps, ... of W0 (leading dimension m): lower (forward; tile(i, j) below the
+// diagonal) or upper (tile(i, j) above it: U11, or L11ᵀ loaded transposed). Lane t holds
+// W(j0 + t). `unit`: the diagonal is 1 and not read; otherwise each lane multiplies by its
+// pivot's reciprocal, computed before the w dependent steps (a division in each step
+// would lengthen the chain). w ≤ kWarp is uniform across the warp, so every lane reaches
+// every shuffle.
+__device__ void warp_triangle(const double* tile, std::int64_t m, std::int64_t w, double* W0,
+                              std::int64_t nrhs, bool lower, bool unit) {
   const int lane = threadIdx.x % kWarp;
   const std::int64_t warp = threadIdx.x / kWarp, nwarps = blockDim.x / kWarp;
+  if (warp >= nrhs) return;         // uniform across the warp
+  const double* row = tile + lane;  // row[j · kTileLd] = tile(lane, j)
+  const double inv = unit || lane >= w ? 1.0 : 1.0 / row[lane * kTileLd];
   for (std::int64_t r = warp; r < nrhs; r += nwarps) {
     double* Wr = W0 + r * m;
     double v = lane < w ? Wr[lane] : 0.0;
     if (lower) {
       for (int j = 0; j < w; ++j) {
-        if (!unit && lane == j) v /= T[j + j * m];
+        if (lane == j) v *= inv;
         const double vj = __shfl_sync(kFullMask, v, j);
-        if (lane > j && lane < w) v -= T[lane + j * m] * vj;
+        if (lane > j) v -= row[j * kTileLd] * vj;  // 0 for lanes ≥ w
       }
     } else {
       for (int j = static_cast<int>(w) - 1; j >= 0; --j) {
-        if (!unit && lane == j) v /= T[j + j * m];
+        if (lane == j) v *= inv;
         const double vj = __shfl_sync(kFullMask, v, j);
-        // upper entry (lane, j): U11 as stored, or L11(j, lane) for L11ᵀ
-        if (lane < j) v -= (transposed ? T[j + lane * m] : T[lane + j * m]) * vj;
+        if (lane < j) v -= row[j * kTileLd] * vj;
       }
     }
     if (lane < w) Wr[lane] = v;
   }
+}
+
+// s = Σ_{j<w} A[j·lda]·x[j], four independent sums so that the loads of several columns
+// are in flight together.
+__device__ double tile_dot(const double* a, std::int64_t lda, const double* x, std::int64_t w) {
+  double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
+  std::int64_t j = 0;
+  for (; j + 4 <= w; j += 4) {
+    s0 += a[j * lda] * x[j];
+    s1 += a[(j + 1) * lda] * x[j + 1];
+    s2 += a[(j + 2) * lda] * x[j + 2];
+    s3 += a[(j + 3) * lda] * x[j + 3];
+  }
+  for (; j < w; ++j) s0 += a[j * lda] * x[j];
+  return (s0 + s1) + (s2 + s3);
 }
 
 /// Forward sweep of one front (W gathered). `unit`: L11 has a unit diagonal.
@@ -158,20 +197,20 @@ __device__ void sweep_forward(const SolveTree& t, std::int64_t f, double* scratc
   const std::int64_t m = t.n_rows[f], k = t.n_pivots[f];
   const double* L = t.panels + t.panel_offset[f];
   double* W = scratch + t.row_offsets[f] * nrhs;
+  __shared__ double tile[kWarp * kTileLd];
+  if (k > 0) load_tile(L, m, min64(kTile, k), tile, false);
+  __syncthreads();
   for (std::int64_t j0 = 0; j0 < k; j0 += kTile) {
     const std::int64_t w = min64(kTile, k - j0);
-    warp_triangle(L + j0 * m + j0, m, w, W + j0, nrhs, true, false, unit);
+    warp_triangle(tile, m, w, W + j0, nrhs, true, unit);
     __syncthreads();
-    // rows below the tile: W(i) −= L(i, tile)·W(tile)
+    // rows below the tile: W(i) −= L(i, tile)·W(tile); and the next tile into shared memory
     const std::int64_t i0 = j0 + w, below = m - i0;
     for (std::int64_t e = threadIdx.x; e < below * nrhs; e += blockDim.x) {
       const std::int64_t i = i0 + e % below, r = e / below;
-      const double* Wt = W + r * m + j0;
-      const double* Li = L + j0 * m + i;
-      double s = 0.0;
-      for (std::int64_t j = 0; j < w; ++j) s += Li[j * m] * Wt[j];
-      W[i + r * m] -= s;
+      W[i + r * m] -= tile_dot(L + j0 * m + i, m, W + r * m + j0, w);
     }
+    if (i0 < k) load_tile(L + i0 * m + i0, m, min64(kTile, k - i0), tile, false);
     __syncthreads();
   }
 }
@@ -187,34 +226,50 @@ __device__ void sweep_backward(const SolveTree& t, std::int64_t f, double* scrat
   const std::int64_t warp = threadIdx.x / kWarp, nwarps = blockDim.x / kWarp;
   if (lu) {
     // W[0:k] −= U12 W[k:m]; U12 is k×(m−k) with leading dimension k
+    // (few rows: a warp per row and right-hand side, its lanes over the columns; many: a
+    // thread each)
     const double* U12 = L + m * k;
-    const std::int64_t rest = m - k;
-    for (std::int64_t e = threadIdx.x; e < k * nrhs; e += blockDim.x) {
-      const std::int64_t i = e % k, r = e / k;
-      const double* Wr = W + r * m + k;
-      double s = 0.0;
-      for (std::int64_t j = 0; j < rest; ++j) s += U12[i + j * k] * Wr[j];
-      W[i + r * m] -= s;
+    const std::int64_t rest = m - k, items = k * nrhs;
+    if (2 * items <= static_cast<std::int64_t>(blockDim.x) && rest <= 8 * kWarp) {
+      for (std::int64_t q = warp; q < items; q += nwarps) {  // uniform across the warp
+        const std::int64_t i = q % k, r = q / k;
+        const double* Wr = W + r * m + k;
+        double s = 0.0;
+        for (std::int64_t j = lane; j < rest; j += kWarp) s += U12[i + j * k] * Wr[j];
+        for (int off = kWarp / 2; off > 0; off /= 2) s += __shfl_down_sync(kFullMask, s, off);
+        if (lane == 0) W[i + r * m] -= s;
+      }
+    } else {
+      for (std::int64_t e = threadIdx.x; e < items; e += blockDim.x) {
+        const std::int64_t i = e % k, r = e / k;
+        const double* Wr = W + r * m + k;
+        double s = 0.0;
+        for (std::int64_t j = 0; j < rest; ++j) s += U12[i + j * k] * Wr[j];
+        W[i + r * m] -= s;
+      }
     }
     __syncthreads();
   }
-  for (std::int64_t j0 = (k - 1) / kTile * kTile; j0 >= 0; j0 -= kTile) {
+  __shared__ double tile[kWarp * kTileLd];
+  const std::int64_t last = (k - 1) / kTile * kTile;
+  if (lu) load_tile(L + last * m + last, m, k - last, tile, false);
+  __syncthreads();
+  for (std::int64_t j0 = last; j0 >= 0; j0 -= kTile) {
     const std::int64_t w = min64(kTile, k - j0);
     if (lu) {
-      warp_triangle(L + j0 * m + j0, m, w, W + j0, nrhs, false, false, false);
+      warp_triangle(tile, m, w, W + j0, nrhs, false, false);
       __syncthreads();
-      // rows above the tile: W(i) −= U(i, tile)·W(tile)
+      // rows above the tile: W(i) −= U(i, tile)·W(tile); and the tile before into shared
+      // memory
       for (std::int64_t e = threadIdx.x; e < j0 * nrhs; e += blockDim.x) {
         const std::int64_t i = e % j0, r = e / j0;
-        const double* Wt = W + r * m + j0;
-        const double* Ui = L + j0 * m + i;
-        double s = 0.0;
-        for (std::int64_t j = 0; j < w; ++j) s += Ui[j * m] * Wt[j];
-        W[i + r * m] -= s;
+        W[i + r * m] -= tile_dot(L + j0 * m + i, m, W + r * m + j0, w);
       }
+      if (j0 > 0) load_tile(L + (j0 - kTile) * m + (j0 - kTile), m, kTile, tile, false);
       __syncthreads();
     } else {
-      // the tile's columns: W(j) −= L(i0:m, j)·W(i0:m), rows i0 = j0 + w on are solved
+      // the tile's columns: W(j) −= L(i0:m, j)·W(i0:m), rows i0 = j0 + w on are solved; and
+      // the tile's L11ᵀ into shared memory
       const std::int64_t i0 = j0 + w;
       for (std::int64_t q = warp; q < w * nrhs; q += nwarps) {
         const std::int64_t j = j0 + q % w, r = q / w;
@@ -225,11 +280,39 @@ __device__ void sweep_backward(const SolveTree& t, std::int64_t f, double* scrat
         for (int off = kWarp / 2; off > 0; off /= 2) s += __shfl_down_sync(kFullMask, s, off);
         if (lane == 0) Wr[j] -= s;
       }
+      load_tile(L + j0 * m + j0, m, w, tile, true);
       __syncthreads();
-      warp_triangle(L + j0 * m + j0, m, w, W + j0, nrhs, false, true, unit);
+      warp_triangle(tile, m, w, W + j0, nrhs, false, unit);
       __syncthreads();
     }
   }
+}
+
+/// The whole forward step of front f by one block: gather, sweep and scatter, with a
+/// barrier after each, the last so that the next front the block solves (a parent in the
+/// same subtree) reads the update vector this one wrote.
+__device__ void front_forward(const SolveTree& t, std::int64_t f, double* x, double* u,
+                              double* scratch, std::int64_t nrhs, bool unit, bool lu) {
+  const std::int64_t m = t.n_rows[f];
+  gather_forward(t, f, 0, m, x, u, scratch, nrhs);
+  __syncthreads();
+  sweep_forward(t, f, scratch, nrhs, unit);
+  __syncthreads();
+  scatter_forward(t, f, 0, m, x, u, scratch, nrhs, lu);
+  __syncthreads();
+}
+
+/// The whole backward step of front f by one block (gather, sweep, scatter; barriers as
+/// in front_forward: the next front of the block, a child, reads the pivots written here).
+__device__ void front_backward(const SolveTree& t, std::int64_t f, double* x, double* scratch,
+                               std::int64_t nrhs, bool lu, bool unit) {
+  const std::int64_t m = t.n_rows[f];
+  gather_backward(t, f, 0, m, x, scratch, nrhs, lu);
+  __syncthreads();
+  sweep_backward(t, f, scratch, nrhs, lu, unit);
+  __syncthreads();
+  scatter_backward(t, f, 0, m, x, scratch, nrhs, lu);
+  __syncthreads();
 }
 
 /// LDLᵀ: x ← D⁻¹ x at pivot position p (a 1×1 pivot, or the first of a 2×2 one; the

@@ -59,6 +59,26 @@ __global__ void sweep_backward_kernel(SolveTree t, const std::int64_t* fronts, s
   solve_device::sweep_backward(t, fronts[begin + blockIdx.x], scratch, nrhs, lu, unit);
 }
 
+// Block q solves fronts first[begin + q] .. last[begin + q] in that order (forward) or in
+// the reverse order (backward): one front per block for a level's fronts (first == last),
+// a subtree in postorder for the subtrees.
+__global__ void fronts_forward_kernel(SolveTree t, const std::int64_t* first,
+                                      const std::int64_t* last, std::int64_t begin, double* x,
+                                      double* u, double* scratch, std::int64_t nrhs, bool unit,
+                                      bool lu) {
+  const std::int64_t q = begin + blockIdx.x;
+  for (std::int64_t f = first[q]; f <= last[q]; ++f)
+    solve_device::front_forward(t, f, x, u, scratch, nrhs, unit, lu);
+}
+
+__global__ void fronts_backward_kernel(SolveTree t, const std::int64_t* first,
+                                       const std::int64_t* last, std::int64_t begin, double* x,
+                                       double* scratch, std::int64_t nrhs, bool lu, bool unit) {
+  const std::int64_t q = begin + blockIdx.x;
+  for (std::int64_t f = last[q]; f >= first[q]; --f)
+    solve_device::front_backward(t, f, x, scratch, nrhs, lu, unit);
+}
+
 __global__ void diagonal_kernel(SolveTree t, const double* d_diag, const double* d_off,
                                 const int* pivot_size, double* x, std::int64_t nrhs) {
   const std::int64_t p = blockIdx.x * static_cast<std::int64_t>(blockDim.x) + threadIdx.x;
@@ -94,6 +114,33 @@ void launch_sweep_forward(const SolveTree& t, const std::int64_t* fronts, std::i
   STRATA_CUDA_LAUNCH();
 }
 
+void launch_sweep_backward(const SolveTree& t, const std::int64_t* fronts, std::int64_t begin,
+                           std::int64_t count, double* scratch, std::int64_t nrhs, bool lu,
+                           bool unit, cudaStream_t s) {
+  if (count == 0) return;
+  sweep_backward_kernel<<<static_cast<unsigned>(count), kSweepThreads, 0, s>>>(
+      t, fronts, begin, scratch, nrhs, lu, unit);
+  STRATA_CUDA_LAUNCH();
+}
+
+void launch_fronts_forward(const SolveTree& t, const std::int64_t* first, const std::int64_t* last,
+                           std::int64_t begin, std::int64_t count, double* x, double* u,
+                           double* scratch, std::int64_t nrhs, bool unit, bool lu, cudaStream_t s) {
+  if (count == 0) return;
+  fronts_forward_kernel<<<static_cast<unsigned>(count), kSweepThreads, 0, s>>>(
+      t, first, last, begin, x, u, scratch, nrhs, unit, lu);
+  STRATA_CUDA_LAUNCH();
+}
+
+void launch_fronts_backward(const SolveTree& t, const std::int64_t* first, const std::int64_t* last,
+                            std::int64_t begin, std::int64_t count, double* x, double* scratch,
+                            std::int64_t nrhs, bool lu, bool unit, cudaStream_t s) {
+  if (count == 0) return;
+  fronts_backward_kernel<<<static_cast<unsigned>(count), kSweepThreads, 0, s>>>(
+      t, first, last, begin, x, scratch, nrhs, lu, unit);
+  STRATA_CUDA_LAUNCH();
+}
+
 void launch_solve_diagonal(const SolveTree& t, const double* d_diag, const double* d_off,
                            const int* pivot_size, double* x, std::int64_t nrhs, cudaStream_t s) {
   if (t.n == 0) return;
@@ -108,15 +155,6 @@ void launch_gather_backward(const SolveTree& t, SolveChunks c, std::int64_t begi
   if (count == 0) return;
   gather_backward_kernel<<<static_cast<unsigned>(count), kThreads, 0, s>>>(t, c, begin, x, scratch,
                                                                            nrhs, lu);
-  STRATA_CUDA_LAUNCH();
-}
-
-void launch_sweep_backward(const SolveTree& t, const std::int64_t* fronts, std::int64_t begin,
-                           std::int64_t count, double* scratch, std::int64_t nrhs, bool lu,
-                           bool unit, cudaStream_t s) {
-  if (count == 0) return;
-  sweep_backward_kernel<<<static_cast<unsigned>(count), kSweepThreads, 0, s>>>(
-      t, fronts, begin, scratch, nrhs, lu, unit);
   STRATA_CUDA_LAUNCH();
 }
 

@@ -1,16 +1,19 @@
 // strata — CUDA kernels of the triangular solves with a device-resident factor.
 //
-// Level-parallel multifrontal solves (Liu 1992, §6; the level schedule of the
-// factorization, DESIGN.md §2). Per level, forward (deepest level first):
-//   1. one launch gathers every front's block W (pivot rows' right-hand sides plus the
-//      children's update vectors, SolvePlan::inv_*), many blocks per large front;
-//   2. one launch sweeps the level's block-solved fronts, one thread block each
-//      (solve_device.cuh: tiles of 32 pivot columns, warp-level triangles);
-//   3. the level's library-solved fronts run through cuBLAS (cuda_solve.cu);
-//   4. one launch scatters: pivots to x, the rest to the fronts' update vectors.
-// Backward, root level first: gather W = x at the front's rows, sweep, scatter the pivots.
-// Fronts of a level write disjoint entries and every sum has a fixed order, so the solve
-// is deterministic. The planner (solve_plan.hpp) decides which fronts take which path.
+// Multifrontal solves (Liu 1992, §6) by subtrees and by the levels of the factorization's
+// schedule (DESIGN.md §2). Forward: first one launch solves the plan's subtrees, one thread
+// block each, the fronts of a subtree one after another in postorder (each front gathers
+// its block W — pivot rows' right-hand sides plus the children's update vectors,
+// SolvePlan::inv_* —, sweeps it with tiles of 32 pivot columns and warp-level triangles,
+// solve_device.cuh, and scatters pivots to x, the rest to its update vector). Then per
+// level, deepest first, the fronts outside the subtrees: one launch solves the block-path
+// fronts of at most kChunkRows rows the same way, one block each; the taller block-path
+// fronts and the library-path fronts are gathered (a block per kChunkRows rows), swept by a
+// block each or run through cuBLAS (cuda_solve.cu), and scattered. Backward, in the reverse
+// order: levels from the root, then the subtrees with their fronts in reverse postorder;
+// gather W = x at the front's rows, sweep, scatter the pivots. Fronts solved side by side
+// write disjoint entries and every sum has a fixed order, so the solve is deterministic.
+// The planner (solve_plan.hpp) decides which fronts take which path.
 #pragma once
 
 #include <cuda_runtime.h>
@@ -40,11 +43,29 @@ void launch_scatter_forward(const SolveTree& t, SolveChunks c, std::int64_t begi
                             std::int64_t count, double* x, double* u, const double* scratch,
                             std::int64_t nrhs, bool lu, cudaStream_t s);
 
-/// Forward sweep of the fronts fronts[begin..begin+count) (device array), one block each.
-/// `unit`: L11 has a unit diagonal (LDLᵀ, LU).
+/// Forward sweep of the gathered fronts fronts[begin..begin+count) (device array), one block
+/// each. `unit`: L11 has a unit diagonal (LDLᵀ, LU).
 void launch_sweep_forward(const SolveTree& t, const std::int64_t* fronts, std::int64_t begin,
                           std::int64_t count, double* scratch, std::int64_t nrhs, bool unit,
                           cudaStream_t s);
+
+/// Backward sweep of the gathered fronts fronts[begin..begin+count), one block each.
+void launch_sweep_backward(const SolveTree& t, const std::int64_t* fronts, std::int64_t begin,
+                           std::int64_t count, double* scratch, std::int64_t nrhs, bool lu,
+                           bool unit, cudaStream_t s);
+
+/// Forward solve (gather, sweep, scatter) by `count` blocks: block q solves the fronts
+/// first[begin+q] .. last[begin+q] (device arrays) in that order. `unit`: L11 has a unit
+/// diagonal (LDLᵀ, LU); `lu`: pivots go to x at their column positions.
+void launch_fronts_forward(const SolveTree& t, const std::int64_t* first, const std::int64_t* last,
+                           std::int64_t begin, std::int64_t count, double* x, double* u,
+                           double* scratch, std::int64_t nrhs, bool unit, bool lu, cudaStream_t s);
+
+/// Backward solve by `count` blocks: block q solves the fronts last[begin+q] down to
+/// first[begin+q].
+void launch_fronts_backward(const SolveTree& t, const std::int64_t* first, const std::int64_t* last,
+                            std::int64_t begin, std::int64_t count, double* x, double* scratch,
+                            std::int64_t nrhs, bool lu, bool unit, cudaStream_t s);
 
 /// x ← D⁻¹ x for LDLᵀ (1×1 and 2×2 blocks by pivot position).
 void launch_solve_diagonal(const SolveTree& t, const double* d_diag, const double* d_off,
@@ -54,11 +75,6 @@ void launch_solve_diagonal(const SolveTree& t, const double* d_diag, const doubl
 void launch_gather_backward(const SolveTree& t, SolveChunks c, std::int64_t begin,
                             std::int64_t count, const double* x, double* scratch, std::int64_t nrhs,
                             bool lu, cudaStream_t s);
-
-/// Backward sweep of the fronts fronts[begin..begin+count), one block each.
-void launch_sweep_backward(const SolveTree& t, const std::int64_t* fronts, std::int64_t begin,
-                           std::int64_t count, double* scratch, std::int64_t nrhs, bool lu,
-                           bool unit, cudaStream_t s);
 
 /// Backward scatter of chunks [begin, begin+count): the fronts' pivots to x.
 void launch_scatter_backward(const SolveTree& t, SolveChunks c, std::int64_t begin,

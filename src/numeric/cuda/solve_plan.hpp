@@ -2,20 +2,26 @@
 // code with no CUDA in it, so that the CPU tests can run it
 // (tests/unit/test_solve_kernel_emulation.cpp).
 //
-// What: for each level of the schedule, which fronts are solved by one thread block each
-// (solve_device.cuh) and which by cuBLAS calls, one front after another on the stream
-// (large_front_forward/backward below); the blocks of the level-wide gather and scatter
-// kernels; and, for every front row, the children's update-vector entries that add into it.
+// What: which subtrees at the bottom of the tree are solved one thread block each, their
+// fronts one after another (solve_device.cuh: front_forward/backward); then for each level
+// of the schedule, which of the other fronts are solved by one thread block each and which
+// by cuBLAS calls, one front after another on the stream (large_front_forward/backward
+// below); the blocks of the library fronts' gather and scatter kernels; and, for every
+// front row, the children's update-vector entries that add into it.
 //
-// Why: a thread block streams a panel at a small fraction of the device's bandwidth, so a
-// level whose work sits in a few large fronts (the top of a nested-dissection tree) is
-// limited by one SM per front; cuBLAS spreads one front over the whole device but costs a
-// few microseconds of launch per call, which a level of thousands of small fronts cannot
-// afford. The planner picks, per level, the split that minimizes a simple time model
-// (see kBlockBytesPerSecond etc.): the largest fronts go to the library as long as that
-// shortens the level. Gathering by parent row (the inverse of the children's relative
-// positions) lets every thread build its row alone — no ordering between children, no
-// atomics, the same summation order as the CPU solve's child-by-child extend-add.
+// Why: the multibody Newton matrices' trees are a few hundred small fronts on 15 to 40
+// levels, where a solve by levels is a chain of launches that each do a few microseconds of
+// work; a block that solves a whole subtree replaces all of that subtree's launches with
+// one, at the price of solving its fronts one after another. A thread block streams a panel
+// at a small fraction of the device's bandwidth, so a level whose work sits in a few large
+// fronts (the top of a nested-dissection tree) is limited by one SM per front; cuBLAS
+// spreads one front over the whole device but costs a few microseconds of launch per call,
+// which a level of thousands of small fronts cannot afford. The planner picks the subtrees
+// and, per level, the split that minimize a simple time model (see kBlockBytesPerSecond
+// etc.): the largest fronts go to the library as long as that shortens the level.
+// Gathering by parent row (the inverse of the children's relative positions) lets every
+// thread build its row alone — no ordering between children, no atomics, the same
+// summation order as the CPU solve's child-by-child extend-add.
 //
 // Source: the multifrontal solve of Liu (SIAM Review 34, 1992, §6) on the level schedule
 // of the factorization (DESIGN.md §1, §2).
@@ -23,6 +29,7 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <limits>
 #include <numeric>
 #include <vector>
 
@@ -60,6 +67,11 @@ constexpr double kBlockBytesPerSecond = 20e9;
 // Per tile of 32 pivot columns, a block's dependent steps (a warp's triangle, two
 // barriers): memory latency, not bandwidth.
 constexpr double kBlockTileSeconds = 2e-6;
+// Per front on a block: its gather, scatter and the barriers between them (dependent
+// loads of index arrays).
+constexpr double kBlockFrontSeconds = 2e-6;
+// Per kernel launched from the solve's graph: the launch and the drain before the next.
+constexpr double kLaunchSeconds = 3e-6;
 // cuBLAS over one front: most of the device's bandwidth...
 constexpr double kLibraryBytesPerSecond = 2e12;
 // ...after two library calls' launch and enqueue cost...
@@ -68,12 +80,19 @@ constexpr double kLibraryCallSeconds = 8e-6;
 constexpr double kLibraryPivotSeconds = 2e-8;
 
 /// Which path the planner may choose (the tests force each one).
-enum class SolvePath { model, all_block, all_library };
+/// block_subtrees: every front on the block path, the subtrees of at most a quarter of the
+/// largest subtree's block time solved one block each, the rest level by level.
+enum class SolvePath { model, all_block, all_library, block_subtrees };
 
-/// The solve plan of one analysis (see the file header). Per level l (schedule order,
-/// deepest first): gather/scatter blocks [chunk_offsets[l], chunk_offsets[l+1]) of
-/// chunk_front/chunk_row (front, first row); block-solved fronts
-/// small_fronts[small_offsets[l]..]; library-solved fronts large_fronts[large_offsets[l]..].
+/// The solve plan of one analysis (see the file header). First the subtrees solved one
+/// thread block each: subtree q is the fronts subtree_first[q]..subtree_last[q] (a front and
+/// its descendants, consecutive in postorder), solved in that order forward and in the
+/// reverse order backward. Then per level l (schedule order, deepest first), the fronts
+/// in no subtree: block-solved fronts of at most kChunkRows rows small_fronts[small_offsets
+/// [l]..] (gathered, swept and scattered by one block), taller block-solved fronts
+/// tall_fronts[tall_offsets[l]..] and library-solved fronts large_fronts[large_offsets[l]..],
+/// and the gather/scatter blocks of the tall and library fronts [chunk_offsets[l],
+/// chunk_offsets[l+1]) of chunk_front/chunk_row (front, first row).
 struct SolvePlan {
   std::uint64_t analysis = 0;             ///< Analysis::id it was made for
   int n_sm = 0;                           ///< streaming multiprocessors it was made for
@@ -83,12 +102,15 @@ struct SolvePlan {
   std::vector<std::int64_t> chunk_offsets{0}, chunk_front, chunk_row;
   std::vector<std::int64_t> small_offsets{0}, small_fronts;
   std::vector<std::int64_t> large_offsets{0}, large_fronts;
+  std::vector<std::int64_t> tall_offsets{0}, tall_fronts;
+  std::vector<std::int64_t> subtree_first, subtree_last;
 };
 
 /// Builds the plan for tree `t` (with its extend-add map `child_rows`, e.g.
 /// Analysis::child_rows) and its level schedule `s` on a device of `n_sm` multiprocessors
-/// (≥ 1). `path` forces one path for every front (tests); `model` splits each level by
-/// the time model above. Deterministic.
+/// (≥ 1). `path` forces the paths (tests); `model` picks by the time model above: the
+/// subtree limit (none, or 1 µs, 2 µs, … on one block) of least modelled sweep time, then
+/// each level's split between block and library. Deterministic.
 inline SolvePlan make_solve_plan(const symbolic::AssemblyTree& t,
                                  const symbolic::ChildRowMap& child_rows,
                                  const symbolic::LevelSchedule& s, int n_sm,
@@ -125,58 +147,139 @@ inline SolvePlan make_solve_plan(const symbolic::AssemblyTree& t,
       }
     }
 
-  // per level: gather/scatter chunks, and the split between block and library
+  // The time model of one front on the block path and on the library path.
   auto bytes = [&](index_t f) {
     return 8.0 * static_cast<double>(t.n_rows(f)) * static_cast<double>(t.n_pivots(f));
   };
   auto t_block = [&](index_t f) {
-    return bytes(f) / kBlockBytesPerSecond +
+    return kBlockFrontSeconds + bytes(f) / kBlockBytesPerSecond +
            static_cast<double>((t.n_pivots(f) + 31) / 32) * kBlockTileSeconds;
   };
   auto t_library = [&](index_t f) {
     return kLibraryCallSeconds + bytes(f) / kLibraryBytesPerSecond +
            static_cast<double>(t.n_pivots(f)) * kLibraryPivotSeconds;
   };
-  std::vector<index_t> order;
-  std::vector<double> tail;  // tail[q]: Σ t_block of order[q..]
+  // Each level's fronts, largest first, and the time of each subtree on one block (its
+  // fronts one after another) with its first front in postorder.
+  std::vector<std::vector<index_t>> by_size(s.n_levels());
   for (index_t l = 0; l < s.n_levels(); ++l) {
+    auto& order = by_size[l];
     order.assign(s.fronts.begin() + s.level_offsets[l], s.fronts.begin() + s.level_offsets[l + 1]);
-    for (const index_t f : order)
-      for (index_t i0 = 0; i0 < t.n_rows(f); i0 += kChunkRows) {
-        p.chunk_front.push_back(f);
-        p.chunk_row.push_back(i0);
-      }
-    p.chunk_offsets.push_back(static_cast<std::int64_t>(p.chunk_front.size()));
     std::stable_sort(order.begin(), order.end(),
                      [&](index_t a, index_t b) { return bytes(a) > bytes(b); });
-    const std::size_t nl = order.size();
+  }
+  std::vector<double> serial(nf, 0.0);
+  std::vector<index_t> first(nf);
+  std::iota(first.begin(), first.end(), index_t{0});
+  // a front of more than kChunkRows rows is gathered and scattered by several blocks, so it
+  // is in no subtree (nor is any front above it)
+  for (index_t f = 0; f < nf; ++f) {  // children come before their parent
+    serial[f] += t.n_rows(f) > kChunkRows ? std::numeric_limits<double>::infinity() : t_block(f);
+    if (t.parent[f] >= 0) {
+      serial[t.parent[f]] += serial[f];
+      first[t.parent[f]] = std::min(first[t.parent[f]], first[f]);
+    }
+  }
+  // A level's fronts outside the subtrees: the q largest on the library, the rest in one
+  // launch (its longest block, or its total spread over the SMs); the q of least time.
+  std::vector<index_t> rest;
+  std::vector<double> tail;  // tail[q]: Σ t_block of rest[q..]
+  auto split = [&](double* level_time) -> std::size_t {
+    const std::size_t nl = rest.size();
     tail.assign(nl + 1, 0.0);
-    for (std::size_t q = nl; q-- > 0;) tail[q] = tail[q + 1] + t_block(order[q]);
-    // level time with the q largest fronts on the library: those one after another, the
-    // rest in one launch (its longest block, or its total spread over the SMs)
+    for (std::size_t q = nl; q-- > 0;) tail[q] = tail[q + 1] + t_block(rest[q]);
     std::size_t best = 0;
+    double best_time = 0.0;
     if (path == SolvePath::all_library) {
       best = nl;
-    } else if (path == SolvePath::model) {
-      double lib = 0.0, best_time = 0.0;
+      for (index_t f : rest) best_time += t_library(f);
+    } else if (path != SolvePath::model) {
+      best_time = nl ? std::max(t_block(rest[0]), tail[0] / p.n_sm) : 0.0;
+    } else {
+      double lib = 0.0;
       for (std::size_t q = 0; q <= nl; ++q) {
-        const double blocks = q < nl ? std::max(t_block(order[q]), tail[q] / p.n_sm) : 0.0;
-        const double time = lib + blocks;
+        const double blocks =
+            q < nl ? kLaunchSeconds + std::max(t_block(rest[q]), tail[q] / p.n_sm) : 0.0;
+        const double time = lib + (q > 0 ? 2 * kLaunchSeconds : 0.0) + blocks;
         if (q == 0 || time < best_time) {
           best_time = time;
           best = q;
         }
-        if (q < nl) lib += t_library(order[q]);
+        if (q < nl) lib += t_library(rest[q]);
       }
     }
-    std::vector<index_t> large(order.begin(), order.begin() + best),
-        small(order.begin() + best, order.end());
+    if (level_time) *level_time = best_time;
+    return best;
+  };
+  // The subtrees of at most `limit` seconds on a block (closed under descendants: a
+  // subtree's time is at least its children's), and the modelled time of the whole sweep.
+  auto in_subtree = [&](index_t f, double limit) { return serial[f] <= limit; };
+  auto sweep_time = [&](double limit) {
+    double most = 0.0, sum = 0.0, total = 0.0;
+    bool any = false;
+    for (index_t f = 0; f < nf; ++f)
+      if (in_subtree(f, limit) && (t.parent[f] < 0 || !in_subtree(t.parent[f], limit))) {
+        most = std::max(most, serial[f]);
+        sum += serial[f];
+        any = true;
+      }
+    if (any) total += kLaunchSeconds + std::max(most, sum / p.n_sm);
+    for (index_t l = 0; l < s.n_levels(); ++l) {
+      rest.clear();
+      for (index_t f : by_size[l])
+        if (!in_subtree(f, limit)) rest.push_back(f);
+      double level_time = 0.0;
+      if (!rest.empty()) split(&level_time);
+      total += level_time;
+    }
+    return total;
+  };
+  double limit = -1.0;  // no subtree
+  if (path == SolvePath::block_subtrees) {
+    for (index_t f = 0; f < nf; ++f)
+      if (serial[f] < std::numeric_limits<double>::infinity())
+        limit = std::max(limit, serial[f] / 4);
+  } else if (path == SolvePath::model) {
+    double best = sweep_time(limit);
+    for (double cand = 1e-6; cand < 1e-1; cand *= 2) {
+      const double time = sweep_time(cand);
+      if (time < best) {
+        best = time;
+        limit = cand;
+      }
+    }
+  }
+  for (index_t f = 0; f < nf; ++f)
+    if (in_subtree(f, limit) && (t.parent[f] < 0 || !in_subtree(t.parent[f], limit))) {
+      p.subtree_first.push_back(first[f]);
+      p.subtree_last.push_back(f);
+    }
+  // per level: the fronts outside the subtrees, split between block and library; the
+  // library's fronts' gather/scatter chunks
+  for (index_t l = 0; l < s.n_levels(); ++l) {
+    rest.clear();
+    for (index_t f : by_size[l])
+      if (!in_subtree(f, limit)) rest.push_back(f);
+    const std::size_t best = split(nullptr);
+    std::vector<index_t> large(rest.begin(), rest.begin() + best), small, tall;
+    for (auto it = rest.begin() + best; it != rest.end(); ++it)
+      (t.n_rows(*it) > kChunkRows ? tall : small).push_back(*it);
     std::sort(large.begin(), large.end());
     std::sort(small.begin(), small.end());
+    std::sort(tall.begin(), tall.end());
+    for (const auto* fronts : {&tall, &large})
+      for (const index_t f : *fronts)
+        for (index_t i0 = 0; i0 < t.n_rows(f); i0 += kChunkRows) {
+          p.chunk_front.push_back(f);
+          p.chunk_row.push_back(i0);
+        }
+    p.chunk_offsets.push_back(static_cast<std::int64_t>(p.chunk_front.size()));
     p.large_fronts.insert(p.large_fronts.end(), large.begin(), large.end());
     p.small_fronts.insert(p.small_fronts.end(), small.begin(), small.end());
+    p.tall_fronts.insert(p.tall_fronts.end(), tall.begin(), tall.end());
     p.large_offsets.push_back(static_cast<std::int64_t>(p.large_fronts.size()));
     p.small_offsets.push_back(static_cast<std::int64_t>(p.small_fronts.size()));
+    p.tall_offsets.push_back(static_cast<std::int64_t>(p.tall_fronts.size()));
   }
   return p;
 }
