@@ -1,4 +1,4 @@
-// strata — the Solver: phases, type resolution, scaling, and the solve phase.
+// strata — the Solver: phases, type resolution, scaling (the solve phase: solve_phase.cpp).
 //
 // The Solver keeps the Analysis (pattern), the canonical values of the last factorized
 // matrix (for residuals), the factor and the numeric driver (numeric/driver.hpp) with
@@ -8,8 +8,9 @@
 // over the values (checks, norms, the matching's scaling) are in value_pass.hpp, the
 // equilibration of values far from the analysis's in rescale.hpp.
 //
-// The solve applies the factor once, then (Options::solve_check) checks and refines the
-// solution with solve/refinement.hpp: iterative refinement, GMRES where it stalls.
+// The solve (solve_phase.cpp) applies the factor once, then (Options::solve_check) checks
+// and refines the solution with solve/refinement.hpp: iterative refinement, GMRES where it
+// stalls. The state both files work on is core/solver_state.hpp.
 //
 // Several GPUs (Options::num_gpus resolving to more than one with the CUDA backend): the
 // analysis splits the tree for that many workers and the multi-worker driver factors on
@@ -38,70 +39,23 @@
 #include "base/timer.hpp"
 #include "core/rescale.hpp"
 #include "core/solver_internal.hpp"
+#include "core/solver_state.hpp"
 #include "core/value_pass.hpp"
 #include "numeric/delayed.hpp"
 #include "numeric/driver.hpp"
 #include "numeric/factor.hpp"
-#include "solve/gmres.hpp"
-#include "solve/refinement.hpp"
 
 namespace strata {
-namespace detail {
 
-struct SolverState {
-  Options options;
-  std::optional<Analysis> analysis;
-  SparseMatrix values;         // canonical input values of the factorized matrix
-  std::vector<double> scaled;  // values as assembled (scaled for general)
-  // `scaled` page-locked while a GPU backend uploads it at every factorization (declared
-  // after it: released first); released before `scaled` is resized (resize_scaled)
-  std::unique_ptr<numeric::PinnedHostRange> scaled_pin;
-  // `values.values` page-locked: after a value pass on the GPU it and `scaled` trade
-  // buffers, each with its pin (reset before `values` is assigned anew)
-  std::unique_ptr<numeric::PinnedHostRange> values_pin;
-  // `scaled` holds the scaled values of `values`; false after a value pass on the GPU,
-  // which leaves them there (values_on_device) and `scaled` stale until a host algorithm
-  // needs them (host_scaled)
-  bool scaled_current = true;
-  bool values_on_device = false;
-  std::vector<double> value_sums;  // per-range vectors of the blocked value passes, kept
-  // the host threads of those passes (Options::num_threads), kept: creating a task arena
-  // for each parallel loop cost milliseconds per refactorization on a 64-core host
-  std::unique_ptr<tbb::task_arena> arena;
-  int arena_threads = -1;
-  numeric::NumericFactor factor;
-  // the extra scaling of the last factorization (core/rescale.hpp), empty when none
-  Rescaling rescaling;
-  // the factor of delayed pivoting (Options::pivoting), valid instead of `factor`
-  numeric::DelayedFactor delayed;
-  numeric::DelayedWorkspace delayed_work;
-  // the numeric phases (numeric/driver.hpp): chosen at analysis from the options (one
-  // executor, or one per GPU), or set by SolverAccess (host workers for tests and
-  // benchmarks, the distributed solver's collective phases): then `driver_set`
-  std::unique_ptr<numeric::NumericDriver> driver;
-  bool driver_set = false;
-  MatrixType resolved = MatrixType::automatic;
-  double norm_inf = 0;                // ‖A‖∞ of the input
-  std::uint64_t values_analysis = 0;  // Analysis::id whose canonical pattern `values` holds
-  // the analyzed matrix was not canonical: where its entries land in the canonical
-  // pattern (input_entry_map), for refactorize(values) in its own order, and the
-  // canonical values gathered from those
-  std::vector<index_t> input_map;
-  std::uint64_t input_map_analysis = 0;
-  std::vector<double> gathered;
-  // the most entries in a row of `values` (symmetric storage expanded), for the rounding
-  // floor of the backward error; computed for the pattern of analysis `row_entries_of`
-  index_t max_row_entries = 0;
-  std::uint64_t row_entries_of = 0;
-  // the determinant's terms that depend on the analysis alone (computed once per analysis
-  // `det_terms_of`): Σ log of its row and column scalings, the matching's parity
-  double scaling_log_sum = 0;
-  int matching_sign = 1;
-  std::uint64_t det_terms_of = 0;
-  Stats stats;
-};
-
-}  // namespace detail
+tbb::task_arena& detail::host_arena(SolverState& s) {
+  const int threads = s.options.num_threads;
+  if (!s.arena || s.arena_threads != threads) {
+    s.arena = std::make_unique<tbb::task_arena>(
+        threads > 0 ? threads : static_cast<int>(tbb::task_arena::automatic));
+    s.arena_threads = threads;
+  }
+  return *s.arena;
+}
 
 namespace {
 
@@ -109,25 +63,14 @@ using detail::blocked_sums;
 using detail::check_norms;
 using detail::copy_values;
 using detail::has_analyzed_pattern;
+using detail::host_arena;
 using detail::norm_inf;
+using detail::phase;
 using detail::refactor_values;
 using detail::scaled_norm1;
 using detail::scaling_clamped;
 using detail::SolverState;
 using detail::ValueNorms;
-
-// Throws when a column of x is not finite: the solution (or the solve with the factor)
-// overflows the double range. Returning it would hand the caller Inf/NaN with nothing
-// in the statistics to say so.
-void check_solution_finite(const double* x, index_t n, index_t nrhs) {
-  for (index_t i = 0; i < n * nrhs; ++i)
-    if (!std::isfinite(x[i]))
-      throw InvalidInput("no representable solution: entry " + std::to_string(i % n) +
-                         " of solution column " + std::to_string(i / n) +
-                         " overflows the double range in the solve with the factorization "
-                         "(the matrix is singular to working precision, or A and b are too "
-                         "badly scaled for double precision)");
-}
 
 // Parity of a permutation: +1 even, -1 odd.
 int parity(const std::vector<index_t>& p) {
@@ -143,17 +86,6 @@ int parity(const std::vector<index_t>& p) {
     if (len % 2 == 0) sign = -sign;
   }
   return sign;
-}
-
-// The solver's host task arena for Options::num_threads (0: all hardware threads).
-tbb::task_arena& host_arena(SolverState& s) {
-  const int threads = s.options.num_threads;
-  if (!s.arena || s.arena_threads != threads) {
-    s.arena = std::make_unique<tbb::task_arena>(
-        threads > 0 ? threads : static_cast<int>(tbb::task_arena::automatic));
-    s.arena_threads = threads;
-  }
-  return *s.arena;
 }
 
 // The driver of an analysis for `workers` workers (resolve_workers): kept while the
@@ -526,55 +458,6 @@ void run_factorization(SolverState& s, const SparseMatrix* a, std::span<const do
   report_factorization(s, r, norm1, input_seconds, timer);
 }
 
-// v·d·e for a scale factor d and a power of two e: one rounding, as v·d alone would have,
-// unless d·e leaves the normal range (then v·d·e: the product may still be representable).
-inline double scaled_by(double v, double d, double e) {
-  const double f = d * e;
-  return std::isnormal(f) ? v * f : v * d * e;
-}
-
-// One solve with the factor: x = A⁻¹ b for nrhs columns (original numbering). Returns
-// true when the triangular solves ran on the device that holds the factor.
-bool apply_inverse(SolverState& s, const double* b, double* x, index_t nrhs,
-                   std::vector<double>& work) {
-  const Analysis& an = *s.analysis;
-  const index_t n = an.n;
-  work.resize(static_cast<std::size_t>(n) * nrhs);
-  const bool scale = !an.row_scaling.empty();
-  const bool match = !an.matching_perm.empty();
-  const bool rescale = !s.rescaling.row.empty();
-  for (index_t r = 0; r < nrhs; ++r)
-    for (index_t k = 0; k < n; ++k) {
-      const index_t i = an.perm[k];  // row of B is a row of A
-      work[k + r * n] = scaled_by(b[i + r * n], scale ? an.row_scaling[i] : 1.0,
-                                  rescale ? s.rescaling.row[i] : 1.0);
-    }
-  bool on_device = false;
-  if (s.delayed.valid)
-    numeric::solve_delayed(an, s.delayed, work.data(), nrhs, &host_arena(s));
-  else
-    on_device = s.driver->solve(an, s.factor, work.data(), nrhs);
-  for (index_t r = 0; r < nrhs; ++r)
-    for (index_t k = 0; k < n; ++k) {
-      const index_t col = match ? an.matching_perm[an.perm[k]] : an.perm[k];
-      x[col + r * n] = scaled_by(work[k + r * n], scale ? an.col_scaling[col] : 1.0,
-                                 rescale ? s.rescaling.col[col] : 1.0);
-    }
-  return on_device;
-}
-
-// Runs one phase. A std::bad_alloc from anywhere inside it becomes OutOfMemory naming the
-// phase (its size is not known there); the large buffers already throw OutOfMemory with
-// their size (base/alloc.hpp), which passes through unchanged.
-template <class F>
-void phase(const char* name, F&& f) {
-  try {
-    f();
-  } catch (const std::bad_alloc&) {
-    throw OutOfMemory(0, name);
-  }
-}
-
 // After an allocation failure in a factorization: give back everything the factor and the
 // executor hold (panels, contribution blocks, front workspaces, device buffers), so that
 // the caller can free memory elsewhere and try again. The analysis is kept.
@@ -721,120 +604,8 @@ void Solver::refactorize(std::span<const double> values) {
   factor_phase(s, nullptr, s.gathered);
 }
 
-static void solve_impl(SolverState& s, const double* b, double* x, index_t nrhs);
-
 void Solver::solve(const double* b, double* x, index_t nrhs) {
-  phase("solve", [&] { solve_impl(*state_, b, x, nrhs); });
-}
-
-constexpr double kUnitRoundoff = 0.5 * std::numeric_limits<double>::epsilon();
-
-// (m+1)·u for the most entries m in a row of the factorized matrix (see solve_impl); m is
-// computed once per analyzed pattern.
-static double rounding_floor(SolverState& s) {
-  if (s.row_entries_of != s.values_analysis || s.max_row_entries == 0) {
-    const SparseMatrix& c = s.values;
-    std::vector<index_t> count(c.n_rows, 0);
-    for (index_t j = 0; j < c.n_cols; ++j)
-      for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) {
-        ++count[c.indices[p]];
-        if (c.storage != Storage::full && c.indices[p] != j) ++count[j];
-      }
-    index_t m = 0;
-    for (index_t k : count) m = std::max(m, k);
-    s.max_row_entries = std::max<index_t>(m, 1);
-    s.row_entries_of = s.values_analysis;
-  }
-  return static_cast<double>(s.max_row_entries + 1) * kUnitRoundoff;
-}
-
-// The solve phase: one solve with the factor, iterative refinement, GMRES if it stalls.
-static void solve_impl(SolverState& s, const double* b, double* x, index_t nrhs) {
-  if (!s.analysis || !(s.factor.valid || s.delayed.valid))
-    throw InvalidState("solve called before factorize");
-  if (nrhs < 0) throw InvalidInput("negative number of right-hand sides");
-  Timer timer;
-  const index_t n = s.analysis->n;
-  const Options& o = s.options;
-  for (index_t i = 0; i < n * nrhs; ++i)
-    if (!std::isfinite(b[i]))
-      throw InvalidInput("right-hand side entry " + std::to_string(i % std::max<index_t>(n, 1)) +
-                         " of column " + std::to_string(i / std::max<index_t>(n, 1)) +
-                         " is not finite");
-  // Options::solve_check: after a factorization without perturbed pivots the caller may
-  // take the factor's solution unchecked
-  const bool check = o.solve_check == SolveCheck::always || s.stats.factor.perturbed_pivots > 0;
-  std::vector<double> work;
-  Timer first;
-  const bool on_device = apply_inverse(s, b, x, nrhs, work);
-  const double first_solve_seconds = first.seconds();
-  check_solution_finite(x, n, nrhs);
-
-  // backward error of each column, refinement, GMRES where it stalls (solve/refinement.hpp)
-  const solve::Operator op_a = [&](const double* in, double* out) { multiply(s.values, in, out); };
-  const double floor = rounding_floor(s);
-  const double enough = std::max(o.refinement_tolerance, floor);
-  solve::RefinementResult refined;
-  if (check) {
-    std::vector<double> tmp;
-    const solve::BlockOperator m_inv = [&](const double* in, double* out, index_t k) {
-      apply_inverse(s, in, out, k, tmp);
-    };
-    refined = solve::refine(
-        n, nrhs, op_a, m_inv, s.norm_inf, b, x,
-        {o.refinement_max_steps, o.refinement_tolerance, floor, o.gmres_max_iterations});
-  }
-  const std::vector<double>& berr = refined.backward_error;
-  check_solution_finite(x, n, nrhs);  // refinement keeps the better iterate: a safeguard
-  SolveStats& ss = s.stats.solve;
-  ss.gmres_iterations = refined.gmres_iterations;
-  ss.refinement_steps = refined.steps;
-  ss.backward_error = 0;
-  for (double e : berr) ss.backward_error = std::max(ss.backward_error, e);
-  if (!check) ss.backward_error = std::numeric_limits<double>::quiet_NaN();
-  ss.backward_error_floor = floor;
-  // κ∞(A) ≥ ‖A‖∞‖x‖∞/‖b‖∞ for every solution: a singular or ill-conditioned A shows here
-  // even when no pivot was small enough to perturb (a rank deficiency spread over the
-  // off-diagonal of U)
-  ss.condition_lower_bound = 0;
-  for (index_t c = 0; c < nrhs; ++c) {
-    double xn = 0, bn = 0;
-    for (index_t i = 0; i < n; ++i) {
-      xn = std::max(xn, std::abs(x[i + c * n]));
-      bn = std::max(bn, std::abs(b[i + c * n]));
-    }
-    if (bn > 0) ss.condition_lower_bound = std::max(ss.condition_lower_bound, s.norm_inf * xn / bn);
-  }
-  ss.refinement_converged = ss.backward_error <= enough;
-  // Pivots perturbed: A is numerically singular, and a small normwise backward error only
-  // says that x solves a nearby nonsingular matrix (x grows along A's near-null space as
-  // b's component there is divided by the static pivots). Whether b is in A's range shows
-  // in the residual relative to b alone: no x brings ‖b − A x‖ below b's distance from
-  // the range. Within √u·‖b‖ of it, x is one of A's solutions.
-  ss.relative_residual = 0;
-  ss.singular_consistent = false;
-  if (s.stats.factor.perturbed_pivots > 0) {
-    std::vector<double> r(static_cast<std::size_t>(n) * nrhs);
-    for (index_t c = 0; c < nrhs; ++c) {
-      solve::backward_error(n, op_a, s.norm_inf, b + c * n, x + c * n, r.data() + c * n);
-      double rn = 0, bn = 0;
-      for (index_t i = 0; i < n; ++i) {
-        rn = std::max(rn, std::abs(r[i + c * n]));
-        bn = std::max(bn, std::abs(b[i + c * n]));
-      }
-      ss.relative_residual = std::max(ss.relative_residual, bn > 0 ? rn / bn : rn > 0 ? 1.0 : 0.0);
-    }
-    ss.singular_consistent =
-        ss.refinement_converged && ss.relative_residual <= std::sqrt(kUnitRoundoff);
-  }
-  ss.on_device = on_device;
-  ss.host_threads = 1;
-  if (s.delayed.valid && !s.delayed.solve_plan.bins.empty()) {
-    ss.host_threads = 0;
-    for (const auto& bin : s.delayed.solve_plan.bins) ss.host_threads += !bin.empty();
-  }
-  ss.first_solve_seconds = first_solve_seconds;
-  ss.seconds = timer.seconds();
+  phase("solve", [&] { detail::solve_phase(*state_, b, x, nrhs); });
 }
 
 std::vector<double> Solver::solve(const std::vector<double>& b) {

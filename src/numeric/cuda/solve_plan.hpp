@@ -106,22 +106,13 @@ struct SolvePlan {
   std::vector<std::int64_t> subtree_first, subtree_last;
 };
 
-/// Builds the plan for tree `t` (with its extend-add map `child_rows`, e.g.
-/// Analysis::child_rows) and its level schedule `s` on a device of `n_sm` multiprocessors
-/// (≥ 1). `path` forces the paths (tests); `model` picks by the time model above: the
-/// subtree limit (none, or 1 µs, 2 µs, … on one block) of least modelled sweep time, then
-/// each level's split between block and library. Deterministic.
-inline SolvePlan make_solve_plan(const symbolic::AssemblyTree& t,
-                                 const symbolic::ChildRowMap& child_rows,
-                                 const symbolic::LevelSchedule& s, int n_sm,
-                                 SolvePath path = SolvePath::model) {
+/// The update vectors' offsets and the inverse extend-add map of `p` (SolvePlan::u_offset,
+/// inv_offsets, inv_src): for each parent row, the child entries adding into it, in child
+/// order (a child contributes at most once to a row).
+inline void plan_inverse_extend_add(const symbolic::AssemblyTree& t,
+                                    const symbolic::ChildRowMap& child_rows, SolvePlan& p) {
   const index_t nf = t.n_fronts();
-  SolvePlan p;
-  p.n_sm = std::max(n_sm, 1);
   p.u_offset.assign(child_rows.offsets.begin(), child_rows.offsets.end());  // cb sizes' sums
-
-  // inverse extend-add map: for each parent row, the child entries adding into it, in
-  // child order (a child contributes at most once to a row)
   const std::size_t nrows = t.rows.size();
   std::vector<std::int64_t> count(nrows + 1, 0), target(p.u_offset[nf]);
   for (index_t f = 0; f < nf; ++f)
@@ -146,6 +137,21 @@ inline SolvePlan make_solve_plan(const symbolic::AssemblyTree& t,
         p.inv_src[fill[target[u]]++] = u;
       }
     }
+}
+
+/// Builds the plan for tree `t` (with its extend-add map `child_rows`, e.g.
+/// Analysis::child_rows) and its level schedule `s` on a device of `n_sm` multiprocessors
+/// (≥ 1). `path` forces the paths (tests); `model` picks by the time model above: the
+/// subtree limit (none, or 1 µs, 2 µs, … on one block) of least modelled sweep time, then
+/// each level's split between block and library. Deterministic.
+inline SolvePlan make_solve_plan(const symbolic::AssemblyTree& t,
+                                 const symbolic::ChildRowMap& child_rows,
+                                 const symbolic::LevelSchedule& s, int n_sm,
+                                 SolvePath path = SolvePath::model) {
+  const index_t nf = t.n_fronts();
+  SolvePlan p;
+  p.n_sm = std::max(n_sm, 1);
+  plan_inverse_extend_add(t, child_rows, p);
 
   // The time model of one front on the block path and on the library path.
   auto bytes = [&](index_t f) {

@@ -1,0 +1,186 @@
+// strata — the Solver's solve phase: one solve with the factor, its backward error, and
+// iterative refinement with GMRES where it stalls (solve/refinement.hpp).
+//
+// One solve with the factor (apply_inverse) takes b to the analysis's numbering and
+// scaling (B = Dr·P·A·Q·Dc, with the extra rescaling of the last factorization when there
+// was one), solves with the factor where it lives (the host's delayed factor, the device's
+// resident factor, or the host's copy) and takes the solution back. Each column's
+// normwise backward error ‖b − A x‖∞ / (‖A‖∞‖x‖∞ + ‖b‖∞) (Rigal and Gaches; Higham,
+// Accuracy and Stability of Numerical Algorithms, 2nd ed., §7.1) is checked against
+// max(Options::refinement_tolerance, (m+1)·u) for m the most entries in a row of A (§3.5).
+#include <cmath>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "base/timer.hpp"
+#include "core/solver_state.hpp"
+#include "solve/refinement.hpp"
+#include "strata/solver.hpp"
+
+namespace strata::detail {
+namespace {
+
+// Throws when a column of x is not finite: the solution (or the solve with the factor)
+// overflows the double range. Returning it would hand the caller Inf/NaN with nothing
+// in the statistics to say so.
+void check_solution_finite(const double* x, index_t n, index_t nrhs) {
+  for (index_t i = 0; i < n * nrhs; ++i)
+    if (!std::isfinite(x[i]))
+      throw InvalidInput("no representable solution: entry " + std::to_string(i % n) +
+                         " of solution column " + std::to_string(i / n) +
+                         " overflows the double range in the solve with the factorization "
+                         "(the matrix is singular to working precision, or A and b are too "
+                         "badly scaled for double precision)");
+}
+
+// v·d·e for a scale factor d and a power of two e: one rounding, as v·d alone would have,
+// unless d·e leaves the normal range (then v·d·e: the product may still be representable).
+inline double scaled_by(double v, double d, double e) {
+  const double f = d * e;
+  return std::isnormal(f) ? v * f : v * d * e;
+}
+
+// One solve with the factor: x = A⁻¹ b for nrhs columns (original numbering). Returns
+// true when the triangular solves ran on the device that holds the factor.
+bool apply_inverse(SolverState& s, const double* b, double* x, index_t nrhs,
+                   std::vector<double>& work) {
+  const Analysis& an = *s.analysis;
+  const index_t n = an.n;
+  work.resize(static_cast<std::size_t>(n) * nrhs);
+  const bool scale = !an.row_scaling.empty();
+  const bool match = !an.matching_perm.empty();
+  const bool rescale = !s.rescaling.row.empty();
+  for (index_t r = 0; r < nrhs; ++r)
+    for (index_t k = 0; k < n; ++k) {
+      const index_t i = an.perm[k];  // row of B is a row of A
+      work[k + r * n] = scaled_by(b[i + r * n], scale ? an.row_scaling[i] : 1.0,
+                                  rescale ? s.rescaling.row[i] : 1.0);
+    }
+  bool on_device = false;
+  if (s.delayed.valid)
+    numeric::solve_delayed(an, s.delayed, work.data(), nrhs, &host_arena(s));
+  else
+    on_device = s.driver->solve(an, s.factor, work.data(), nrhs);
+  for (index_t r = 0; r < nrhs; ++r)
+    for (index_t k = 0; k < n; ++k) {
+      const index_t col = match ? an.matching_perm[an.perm[k]] : an.perm[k];
+      x[col + r * n] = scaled_by(work[k + r * n], scale ? an.col_scaling[col] : 1.0,
+                                 rescale ? s.rescaling.col[col] : 1.0);
+    }
+  return on_device;
+}
+
+constexpr double kUnitRoundoff = 0.5 * std::numeric_limits<double>::epsilon();
+
+// (m+1)·u for the most entries m in a row of the factorized matrix (see solve_phase); m is
+// computed once per analyzed pattern.
+double rounding_floor(SolverState& s) {
+  if (s.row_entries_of != s.values_analysis || s.max_row_entries == 0) {
+    const SparseMatrix& c = s.values;
+    std::vector<index_t> count(c.n_rows, 0);
+    for (index_t j = 0; j < c.n_cols; ++j)
+      for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) {
+        ++count[c.indices[p]];
+        if (c.storage != Storage::full && c.indices[p] != j) ++count[j];
+      }
+    index_t m = 0;
+    for (index_t k : count) m = std::max(m, k);
+    s.max_row_entries = std::max<index_t>(m, 1);
+    s.row_entries_of = s.values_analysis;
+  }
+  return static_cast<double>(s.max_row_entries + 1) * kUnitRoundoff;
+}
+
+}  // namespace
+
+// The solve phase: one solve with the factor, iterative refinement, GMRES if it stalls.
+void solve_phase(SolverState& s, const double* b, double* x, index_t nrhs) {
+  if (!s.analysis || !(s.factor.valid || s.delayed.valid))
+    throw InvalidState("solve called before factorize");
+  if (nrhs < 0) throw InvalidInput("negative number of right-hand sides");
+  Timer timer;
+  const index_t n = s.analysis->n;
+  const Options& o = s.options;
+  for (index_t i = 0; i < n * nrhs; ++i)
+    if (!std::isfinite(b[i]))
+      throw InvalidInput("right-hand side entry " + std::to_string(i % std::max<index_t>(n, 1)) +
+                         " of column " + std::to_string(i / std::max<index_t>(n, 1)) +
+                         " is not finite");
+  // Options::solve_check: after a factorization without perturbed pivots the caller may
+  // take the factor's solution unchecked
+  const bool check = o.solve_check == SolveCheck::always || s.stats.factor.perturbed_pivots > 0;
+  std::vector<double> work;
+  Timer first;
+  const bool on_device = apply_inverse(s, b, x, nrhs, work);
+  const double first_solve_seconds = first.seconds();
+  check_solution_finite(x, n, nrhs);
+
+  // backward error of each column, refinement, GMRES where it stalls (solve/refinement.hpp)
+  const solve::Operator op_a = [&](const double* in, double* out) { multiply(s.values, in, out); };
+  const double floor = rounding_floor(s);
+  const double enough = std::max(o.refinement_tolerance, floor);
+  solve::RefinementResult refined;
+  if (check) {
+    std::vector<double> tmp;
+    const solve::BlockOperator m_inv = [&](const double* in, double* out, index_t k) {
+      apply_inverse(s, in, out, k, tmp);
+    };
+    refined = solve::refine(
+        n, nrhs, op_a, m_inv, s.norm_inf, b, x,
+        {o.refinement_max_steps, o.refinement_tolerance, floor, o.gmres_max_iterations});
+  }
+  const std::vector<double>& berr = refined.backward_error;
+  check_solution_finite(x, n, nrhs);  // refinement keeps the better iterate: a safeguard
+  SolveStats& ss = s.stats.solve;
+  ss.gmres_iterations = refined.gmres_iterations;
+  ss.refinement_steps = refined.steps;
+  ss.backward_error = 0;
+  for (double e : berr) ss.backward_error = std::max(ss.backward_error, e);
+  if (!check) ss.backward_error = std::numeric_limits<double>::quiet_NaN();
+  ss.backward_error_floor = floor;
+  // κ∞(A) ≥ ‖A‖∞‖x‖∞/‖b‖∞ for every solution: a singular or ill-conditioned A shows here
+  // even when no pivot was small enough to perturb (a rank deficiency spread over the
+  // off-diagonal of U)
+  ss.condition_lower_bound = 0;
+  for (index_t c = 0; c < nrhs; ++c) {
+    double xn = 0, bn = 0;
+    for (index_t i = 0; i < n; ++i) {
+      xn = std::max(xn, std::abs(x[i + c * n]));
+      bn = std::max(bn, std::abs(b[i + c * n]));
+    }
+    if (bn > 0) ss.condition_lower_bound = std::max(ss.condition_lower_bound, s.norm_inf * xn / bn);
+  }
+  ss.refinement_converged = ss.backward_error <= enough;
+  // Pivots perturbed: A is numerically singular, and a small normwise backward error only
+  // says that x solves a nearby nonsingular matrix (x grows along A's near-null space as
+  // b's component there is divided by the static pivots). Whether b is in A's range shows
+  // in the residual relative to b alone: no x brings ‖b − A x‖ below b's distance from
+  // the range. Within √u·‖b‖ of it, x is one of A's solutions.
+  ss.relative_residual = 0;
+  ss.singular_consistent = false;
+  if (s.stats.factor.perturbed_pivots > 0) {
+    std::vector<double> r(static_cast<std::size_t>(n) * nrhs);
+    for (index_t c = 0; c < nrhs; ++c) {
+      solve::backward_error(n, op_a, s.norm_inf, b + c * n, x + c * n, r.data() + c * n);
+      double rn = 0, bn = 0;
+      for (index_t i = 0; i < n; ++i) {
+        rn = std::max(rn, std::abs(r[i + c * n]));
+        bn = std::max(bn, std::abs(b[i + c * n]));
+      }
+      ss.relative_residual = std::max(ss.relative_residual, bn > 0 ? rn / bn : rn > 0 ? 1.0 : 0.0);
+    }
+    ss.singular_consistent =
+        ss.refinement_converged && ss.relative_residual <= std::sqrt(kUnitRoundoff);
+  }
+  ss.on_device = on_device;
+  ss.host_threads = 1;
+  if (s.delayed.valid && !s.delayed.solve_plan.bins.empty()) {
+    ss.host_threads = 0;
+    for (const auto& bin : s.delayed.solve_plan.bins) ss.host_threads += !bin.empty();
+  }
+  ss.first_solve_seconds = first_solve_seconds;
+  ss.seconds = timer.seconds();
+}
+
+}  // namespace strata::detail

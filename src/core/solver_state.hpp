@@ -1,0 +1,102 @@
+// strata — the state behind strata::Solver and what its phases' files share (internal).
+//
+// solver.cpp holds the analysis and factorization phases and the public methods;
+// solve_phase.cpp the solve phase (one solve with the factor, the backward error,
+// iterative refinement). Both work on a SolverState.
+#pragma once
+
+#include <tbb/task_arena.h>
+
+#include <memory>
+#include <new>
+#include <optional>
+#include <vector>
+
+#include "analysis/analysis.hpp"
+#include "core/rescale.hpp"
+#include "numeric/delayed.hpp"
+#include "numeric/driver.hpp"
+#include "numeric/factor.hpp"
+#include "strata/errors.hpp"
+#include "strata/options.hpp"
+#include "strata/sparse_matrix.hpp"
+#include "strata/stats.hpp"
+
+namespace strata::detail {
+
+struct SolverState {
+  Options options;
+  std::optional<Analysis> analysis;
+  SparseMatrix values;         // canonical input values of the factorized matrix
+  std::vector<double> scaled;  // values as assembled (scaled for general)
+  // `scaled` page-locked while a GPU backend uploads it at every factorization (declared
+  // after it: released first); released before `scaled` is resized (resize_scaled)
+  std::unique_ptr<numeric::PinnedHostRange> scaled_pin;
+  // `values.values` page-locked: after a value pass on the GPU it and `scaled` trade
+  // buffers, each with its pin (reset before `values` is assigned anew)
+  std::unique_ptr<numeric::PinnedHostRange> values_pin;
+  // `scaled` holds the scaled values of `values`; false after a value pass on the GPU,
+  // which leaves them there (values_on_device) and `scaled` stale until a host algorithm
+  // needs them (host_scaled)
+  bool scaled_current = true;
+  bool values_on_device = false;
+  std::vector<double> value_sums;  // per-range vectors of the blocked value passes, kept
+  // the host threads of those passes (Options::num_threads), kept: creating a task arena
+  // for each parallel loop cost milliseconds per refactorization on a 64-core host
+  std::unique_ptr<tbb::task_arena> arena;
+  int arena_threads = -1;
+  numeric::NumericFactor factor;
+  // the extra scaling of the last factorization (core/rescale.hpp), empty when none
+  Rescaling rescaling;
+  // the factor of delayed pivoting (Options::pivoting), valid instead of `factor`
+  numeric::DelayedFactor delayed;
+  numeric::DelayedWorkspace delayed_work;
+  // the numeric phases (numeric/driver.hpp): chosen at analysis from the options (one
+  // executor, or one per GPU), or set by SolverAccess (host workers for tests and
+  // benchmarks, the distributed solver's collective phases): then `driver_set`
+  std::unique_ptr<numeric::NumericDriver> driver;
+  bool driver_set = false;
+  MatrixType resolved = MatrixType::automatic;
+  double norm_inf = 0;                // ‖A‖∞ of the input
+  std::uint64_t values_analysis = 0;  // Analysis::id whose canonical pattern `values` holds
+  // the analyzed matrix was not canonical: where its entries land in the canonical
+  // pattern (input_entry_map), for refactorize(values) in its own order, and the
+  // canonical values gathered from those
+  std::vector<index_t> input_map;
+  std::uint64_t input_map_analysis = 0;
+  std::vector<double> gathered;
+  // the most entries in a row of `values` (symmetric storage expanded), for the rounding
+  // floor of the backward error; computed for the pattern of analysis `row_entries_of`
+  index_t max_row_entries = 0;
+  std::uint64_t row_entries_of = 0;
+  // the determinant's terms that depend on the analysis alone (computed once per analysis
+  // `det_terms_of`): Σ log of its row and column scalings, the matching's parity
+  double scaling_log_sum = 0;
+  int matching_sign = 1;
+  std::uint64_t det_terms_of = 0;
+  Stats stats;
+};
+
+/// The solver's host task arena for Options::num_threads (0: all hardware threads), made
+/// on first use and when the option changes.
+tbb::task_arena& host_arena(SolverState& s);
+
+/// Runs one phase. A std::bad_alloc from anywhere inside it becomes OutOfMemory naming the
+/// phase (its size is not known there); the large buffers already throw OutOfMemory with
+/// their size (base/alloc.hpp), which passes through unchanged.
+template <class F>
+void phase(const char* name, F&& f) {
+  try {
+    f();
+  } catch (const std::bad_alloc&) {
+    throw OutOfMemory(0, name);
+  }
+}
+
+/// The solve phase (solve_phase.cpp): x = A⁻¹ b for nrhs columns of n = analysis->n
+/// entries each (column-major, original numbering), checked and refined as
+/// Options::solve_check says; fills stats.solve. Throws InvalidState before a
+/// factorization, InvalidInput for nrhs < 0, a non-finite b or a solution that overflows.
+void solve_phase(SolverState& s, const double* b, double* x, index_t nrhs);
+
+}  // namespace strata::detail
