@@ -492,42 +492,13 @@ void NewtonSystem::evaluate(const double* x, double t, const BdfTerms& bdf, bool
           hp[k] -= eps_p[r] * nu[k];
         }
       if (!jacobian) continue;
-      const ConstraintPos& cp = cpos_[e];
       c.hessian(lq.data(), t, llam.data(), jslot);
       if (stab) {  // β(Φ_qᵀν)_q: ν is small except near singular configurations
         double* nuq = jslot + nz * nz;
         c.hessian(lq.data(), t, lnu.data(), nuq);
         for (std::size_t k = 0; k < nz * nz; ++k) nuq[k] *= bdf.beta;
       }
-      // the constraint's own rows and multiplier columns: no other element writes there
-      std::size_t p = 0;
-      for (std::size_t i = 0; i < nz; ++i)
-        for (int r = 0; r < nr; ++r) {
-          if (act[r] < 0) continue;
-          J[cp.fl[p]] += ce.jq[r * nz + i];
-          if (stab) J[cp.nu[p]] += bdf.beta * ce.jq[r * nz + i];
-          ++p;
-        }
-      p = 0;
-      std::size_t preg = 0;
-      for (int r = 0; r < nr; ++r) {
-        if (act[r] < 0) continue;
-        for (std::size_t i = 0; i < nz; ++i, ++p) {
-          const std::size_t k = r * nz + i;
-          if (!stab) {
-            J[cp.aa[p]] += ce.jq[k];
-            J[cp.av[p]] += 2 * ce.jvq[k];
-            J[cp.aq[p]] += ce.jaq[k];
-          }
-          J[cp.vv[p]] += ce.jq[k];
-          J[cp.vq[p]] += ce.jvq[k];
-          J[cp.pq[p]] += ce.jq[k];
-        }
-        if (stab) {
-          J[cp.reg[preg++]] -= eps_a[r];
-          J[cp.reg[preg++]] -= eps_p[r];
-        }
-      }
+      write_constraint_jacobian(cpos_[e], nz, act, ce, eps_a, eps_p, bdf.beta, J);
     }
   };
   // Elements are evaluated in parallel (oneTBB, as strata's CPU executor) into their
@@ -537,6 +508,48 @@ void NewtonSystem::evaluate(const double* x, double t, const BdfTerms& bdf, bool
   add_slot_sums(rsums_, rs, h);
   if (jacobian) add_slot_sums(jsums_, js, J);
   add_bdf_rows(a, v, q, bdf, jacobian, hu);
+}
+
+// A constraint element's own rows and multiplier columns of the Jacobian (no other element
+// writes there): Φ_qᵀ in the equations of motion's λ columns (and β Φ_qᵀ in the ν columns,
+// stabilized), the rows of Φ̈ (partitioned), Φ̇ and Φ with respect to a, v and q, and the
+// stabilized formulation's regularisation on the diagonal.
+void NewtonSystem::write_constraint_jacobian(const ConstraintPos& cp, std::size_t nz,
+                                             const std::vector<index_t>& act,
+                                             const ConstraintEval& ce,
+                                             const std::vector<double>& eps_a,
+                                             const std::vector<double>& eps_p, double beta,
+                                             double* J) const {
+  const bool stab = formulation_ == Formulation::stabilized;
+  const int nr = static_cast<int>(act.size());
+  std::size_t p = 0;
+  for (std::size_t i = 0; i < nz; ++i)
+    for (int r = 0; r < nr; ++r) {
+      if (act[r] < 0) continue;
+      J[cp.fl[p]] += ce.jq[r * nz + i];
+      if (stab) J[cp.nu[p]] += beta * ce.jq[r * nz + i];
+      ++p;
+    }
+  p = 0;
+  std::size_t preg = 0;
+  for (int r = 0; r < nr; ++r) {
+    if (act[r] < 0) continue;
+    for (std::size_t i = 0; i < nz; ++i, ++p) {
+      const std::size_t k = r * nz + i;
+      if (!stab) {
+        J[cp.aa[p]] += ce.jq[k];
+        J[cp.av[p]] += 2 * ce.jvq[k];
+        J[cp.aq[p]] += ce.jaq[k];
+      }
+      J[cp.vv[p]] += ce.jq[k];
+      J[cp.vq[p]] += ce.jvq[k];
+      J[cp.pq[p]] += ce.jq[k];
+    }
+    if (stab) {
+      J[cp.reg[preg++]] -= eps_a[r];
+      J[cp.reg[preg++]] -= eps_p[r];
+    }
+  }
 }
 
 // The BDF relations β a − v − ζ₁ and β v − q − ζ₂ of the independent coordinates

@@ -200,6 +200,10 @@ class NewtonSystem {
   };
   std::vector<ForcePos> fpos_;
   std::vector<ConstraintPos> cpos_;
+  void write_constraint_jacobian(const ConstraintPos& cp, std::size_t nz,
+                                 const std::vector<index_t>& act, const ConstraintEval& ce,
+                                 const std::vector<double>& eps_a, const std::vector<double>& eps_p,
+                                 double beta, double* J) const;
   // The shared entries' summation (see the file comment): each target (an index of H or
   // of H_x's values) and its slots, in element order (CSR: slot[first[t] .. first[t+1])).
   struct SlotSums {

@@ -114,15 +114,6 @@ void launch_sweep_forward(const SolveTree& t, const std::int64_t* fronts, std::i
   STRATA_CUDA_LAUNCH();
 }
 
-void launch_sweep_backward(const SolveTree& t, const std::int64_t* fronts, std::int64_t begin,
-                           std::int64_t count, double* scratch, std::int64_t nrhs, bool lu,
-                           bool unit, cudaStream_t s) {
-  if (count == 0) return;
-  sweep_backward_kernel<<<static_cast<unsigned>(count), kSweepThreads, 0, s>>>(
-      t, fronts, begin, scratch, nrhs, lu, unit);
-  STRATA_CUDA_LAUNCH();
-}
-
 void launch_fronts_forward(const SolveTree& t, const std::int64_t* first, const std::int64_t* last,
                            std::int64_t begin, std::int64_t count, double* x, double* u,
                            double* scratch, std::int64_t nrhs, bool unit, bool lu, cudaStream_t s) {
@@ -155,6 +146,15 @@ void launch_gather_backward(const SolveTree& t, SolveChunks c, std::int64_t begi
   if (count == 0) return;
   gather_backward_kernel<<<static_cast<unsigned>(count), kThreads, 0, s>>>(t, c, begin, x, scratch,
                                                                            nrhs, lu);
+  STRATA_CUDA_LAUNCH();
+}
+
+void launch_sweep_backward(const SolveTree& t, const std::int64_t* fronts, std::int64_t begin,
+                           std::int64_t count, double* scratch, std::int64_t nrhs, bool lu,
+                           bool unit, cudaStream_t s) {
+  if (count == 0) return;
+  sweep_backward_kernel<<<static_cast<unsigned>(count), kSweepThreads, 0, s>>>(
+      t, fronts, begin, scratch, nrhs, lu, unit);
   STRATA_CUDA_LAUNCH();
 }
 
