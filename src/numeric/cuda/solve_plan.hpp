@@ -157,10 +157,11 @@ inline SolvePlan make_solve_plan(const symbolic::AssemblyTree& t,
   auto bytes = [&](index_t f) {
     return 8.0 * static_cast<double>(t.n_rows(f)) * static_cast<double>(t.n_pivots(f));
   };
-  auto t_block = [&](index_t f) {
-    return kBlockFrontSeconds + bytes(f) / kBlockBytesPerSecond +
-           static_cast<double>((t.n_pivots(f) + 31) / 32) * kBlockTileSeconds;
-  };
+  std::vector<double> block_seconds(nf);
+  for (index_t f = 0; f < nf; ++f)
+    block_seconds[f] = kBlockFrontSeconds + bytes(f) / kBlockBytesPerSecond +
+                       static_cast<double>((t.n_pivots(f) + 31) / 32) * kBlockTileSeconds;
+  auto t_block = [&](index_t f) { return block_seconds[f]; };
   auto t_library = [&](index_t f) {
     return kLibraryCallSeconds + bytes(f) / kLibraryBytesPerSecond +
            static_cast<double>(t.n_pivots(f)) * kLibraryPivotSeconds;
@@ -246,8 +247,12 @@ inline SolvePlan make_solve_plan(const symbolic::AssemblyTree& t,
       if (serial[f] < std::numeric_limits<double>::infinity())
         limit = std::max(limit, serial[f] / 4);
   } else if (path == SolvePath::model) {
+    double largest = 0.0;  // the largest finite subtree time: no larger limit changes the cut
+    for (index_t f = 0; f < nf; ++f)
+      if (serial[f] < std::numeric_limits<double>::infinity())
+        largest = std::max(largest, serial[f]);
     double best = sweep_time(limit);
-    for (double cand = 1e-6; cand < 1e-1; cand *= 2) {
+    for (double cand = 1e-6; cand < 1e-1 && cand < 2 * largest; cand *= 2) {
       const double time = sweep_time(cand);
       if (time < best) {
         best = time;
