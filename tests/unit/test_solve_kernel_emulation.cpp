@@ -240,9 +240,13 @@ void emulate_device_solve(const Analysis& an, const numeric::NumericFactor& fac,
                fac.panels.data(),
                pivot_row.data(),
                an.n,
-               u_total};
+               u_total,
+               p.part_offset.data(),
+               nullptr};
   std::vector<double> u(static_cast<std::size_t>(u_total * nrhs) + 1, 0.0),
-      scratch(t.rows.size() * nrhs + 1, 0.0);
+      scratch(t.rows.size() * nrhs + 1, 0.0),
+      part(static_cast<std::size_t>(p.part_total * nrhs) + 1, 0.0);
+  st.part = part.data();
   double* X = x.data();
   double* U = u.data();
   double* S = scratch.data();
@@ -308,6 +312,12 @@ void emulate_device_solve(const Analysis& an, const numeric::NumericFactor& fac,
     chunks(l, [&](std::int64_t f, std::int64_t i0, std::int64_t i1) {
       dev::gather_backward(st, f, i0, i1, X, S, nrhs, lu);
     });
+    // the tall fronts' partial products (warp shuffles: a whole block of OS threads)
+    for (std::int64_t c = p.chunk_offsets[l]; c < p.chunk_offsets[l + 1]; ++c) {
+      const std::int64_t f = p.chunk_front[c], i0 = p.chunk_row[c];
+      const std::int64_t i1 = std::min(i0 + cuda::kChunkRows, n_rows[f]);
+      run_block(sweep_threads, [&] { dev::backward_partials(st, f, i0, i1, X, nrhs, lu); });
+    }
     for (std::int64_t q = p.tall_offsets[l]; q < p.tall_offsets[l + 1]; ++q)
       run_block(sweep_threads,
                 [&] { dev::sweep_backward(st, p.tall_fronts[q], S, nrhs, lu, unit); });
@@ -450,10 +460,15 @@ TEST(SolveKernelEmulation, LibraryPathLargeFronts) {
   for (const Problem& pr : problems)
     check_problem(pr, rng, {SolvePath::all_library}, 32, 132, counts);
   EXPECT_GT(counts.library_fronts, 0);
-  // the block path's fronts of more than kChunkRows rows: gathered and scattered by chunks,
-  // swept by one block
-  check_problem(problems[0], rng, {SolvePath::all_block}, 32, 132, counts);
-  EXPECT_GT(counts.tall_fronts, 0);
+  // the block path's fronts of more than kChunkRows rows: gathered and scattered by chunks
+  // (their products with L21, L21ᵀ and U12 there), their triangles swept by one block; for
+  // each factor type
+  for (const Problem& pr : problems) {
+    SCOPED_TRACE(pr.name);
+    const index_t before = counts.tall_fronts;
+    check_problem(pr, rng, {SolvePath::all_block}, 32, 132, counts);
+    EXPECT_GT(counts.tall_fronts, before);
+  }
 }
 
 // The planner: every front solved exactly once, in a subtree (a front and all its
@@ -512,6 +527,22 @@ TEST(SolveKernelEmulation, PlanCoversEveryFrontOnce) {
         EXPECT_EQ(chunk_rows, large_rows) << "level " << l;  // the tall and library fronts
       }
       for (index_t f = 0; f < nf; ++f) EXPECT_EQ(seen[f], 1) << "front " << f;
+      // the tall fronts' partial products: a slot of product_chunks × k each, disjoint,
+      // within part_total; no slot for any other front
+      ASSERT_EQ(p.part_offset.size(), static_cast<std::size_t>(nf));
+      std::vector<char> is_tall(nf, 0), used(static_cast<std::size_t>(p.part_total), 0);
+      for (std::int64_t f : p.tall_fronts) is_tall[f] = 1;
+      for (index_t f = 0; f < nf; ++f) {
+        if (!is_tall[f]) {
+          EXPECT_EQ(p.part_offset[f], -1) << "front " << f;
+          continue;
+        }
+        const std::int64_t size = cuda::product_chunks(t.n_rows(f), t.n_pivots(f)) * t.n_pivots(f);
+        ASSERT_GE(p.part_offset[f], 0);
+        ASSERT_LE(p.part_offset[f] + size, p.part_total);
+        for (std::int64_t e = p.part_offset[f]; e < p.part_offset[f] + size; ++e)
+          EXPECT_EQ(used[e]++, 0) << "front " << f;
+      }
       if (path == SolvePath::all_block) EXPECT_TRUE(p.subtree_first.empty());
       if (path == SolvePath::block_subtrees) EXPECT_FALSE(p.subtree_first.empty());
       if (path != SolvePath::model) EXPECT_TRUE(p.large_fronts.empty());

@@ -194,6 +194,8 @@ void CudaExecutor::prepare(const Analysis& an, int workers) {
     dsolve_.u.resize(
         std::max<std::size_t>(static_cast<std::size_t>(dsolve_.plan.u_offset.back()), 1));
     dsolve_.scratch.resize(std::max<std::size_t>(an.tree.rows.size(), 1));
+    dsolve_.part.resize(
+        std::max<std::size_t>(static_cast<std::size_t>(dsolve_.plan.part_total), 1));
   }
   STRATA_CUDA(cudaStreamSynchronize(stream_));
 }

@@ -495,11 +495,11 @@ class CudaExecutor final : public numeric::Executor {
     std::vector<std::int64_t> rows_host, pivot_pos_host, pivot_row_host;
     DeviceBuffer<std::int64_t> moved_rows, moved_segments;  ///< their moved rows, packed
     DeviceBuffer<std::int64_t> panel_offset;
-    DeviceBuffer<double> d_diag, d_off, x, u, scratch;
+    DeviceBuffer<double> d_diag, d_off, x, u, scratch, part;
     std::vector<std::int64_t> u_offset_host;
     SolvePlan plan;  ///< per analysis, and its copy below
     DeviceBuffer<std::int64_t> plan_u_offset, inv_offsets, inv_src, chunk_front, chunk_row,
-        small_fronts, tall_fronts, subtree_first, subtree_last;
+        small_fronts, tall_fronts, subtree_first, subtree_last, part_offset;
     /// The sweeps of a solve recorded as a CUDA graph (Options::gpu_solve_graph) and
     /// replayed, one launch per solve, while graph_key (solve_graph_key) is unchanged.
     cudaGraphExec_t graph = nullptr;

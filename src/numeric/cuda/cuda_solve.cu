@@ -81,6 +81,7 @@ void CudaExecutor::prepare_solve_plan(const Analysis& an) {
   up(dsolve_.tall_fronts, dsolve_.plan.tall_fronts);
   up(dsolve_.subtree_first, dsolve_.plan.subtree_first);
   up(dsolve_.subtree_last, dsolve_.plan.subtree_last);
+  up(dsolve_.part_offset, dsolve_.plan.part_offset);
 }
 
 bool CudaExecutor::solve(const Analysis& an, const numeric::NumericFactor& fac, double* x,
@@ -96,6 +97,8 @@ bool CudaExecutor::solve(const Analysis& an, const numeric::NumericFactor& fac, 
   const std::int64_t u_total = dsolve_.plan.u_offset.back();
   dsolve_.u.resize(std::max<std::size_t>(static_cast<std::size_t>(u_total) * nrhs, 1));
   dsolve_.scratch.resize(std::max<std::size_t>(an.tree.rows.size() * nrhs, 1));
+  dsolve_.part.resize(
+      std::max<std::size_t>(static_cast<std::size_t>(dsolve_.plan.part_total) * nrhs, 1));
   if (!solve_graph_) {
     enqueue_solve_sweeps(an, fac, nrhs);
   } else {
@@ -161,7 +164,9 @@ std::vector<std::uintptr_t> CudaExecutor::solve_graph_key(const Analysis& an,
           ptr(dsolve_.small_fronts.data()),
           ptr(dsolve_.tall_fronts.data()),
           ptr(dsolve_.subtree_first.data()),
-          ptr(dsolve_.subtree_last.data())};
+          ptr(dsolve_.subtree_last.data()),
+          ptr(dsolve_.part_offset.data()),
+          ptr(dsolve_.part.data())};
 }
 
 void CudaExecutor::drop_solve_graph() noexcept {
@@ -190,7 +195,9 @@ void CudaExecutor::enqueue_solve_sweeps(const Analysis& an, const numeric::Numer
                panels_.data(),
                dsolve_.pivot_row.data(),
                an.n,
-               u_total};
+               u_total,
+               dsolve_.part_offset.data(),
+               dsolve_.part.data()};
   const SolveChunks chunks{dsolve_.chunk_front.data(), dsolve_.chunk_row.data()};
   double* X = dsolve_.x.data();
   double* U = dsolve_.u.data();

@@ -20,6 +20,14 @@
 //                      update vector;
 //   gather (backward)  W = x at the front's rows (col(i): LU pivots at their column
 //                      positions, otherwise the rows as factored);
+//   tall fronts        (more than kChunkRows rows, gathered and scattered by chunks of
+//                      rows, one block each): the sweeps do the pivot rows only; the
+//                      forward scatter's chunks subtract L21's rows times W[0:k] as they
+//                      write the update vector, and the backward gather's chunks write
+//                      partial products L21ᵀ W[k:m] or U12 W[k:m] of their rows
+//                      (backward_partials), which the backward sweep subtracts from W[0:k]
+//                      in chunk order — the products, most of a tall front's bytes, spread
+//                      over as many blocks as it has chunks;
 //   sweep (backward)   LLᵀ/LDLᵀ left-looking by tiles from the last: the tile's columns
 //                      take the dot products of L(solved rows, j) with W (one warp per
 //                      column and right-hand side — coalesced reads of L's columns, L21ᵀ
@@ -51,6 +59,21 @@ constexpr unsigned kFullMask = 0xffffffffu;
 
 __device__ std::int64_t min64(std::int64_t a, std::int64_t b) { return a < b ? a : b; }
 
+// s = Σ_{j<w} A[j·lda]·x[j], four independent sums so that the loads of several columns
+// are in flight together.
+__device__ double tile_dot(const double* a, std::int64_t lda, const double* x, std::int64_t w) {
+  double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
+  std::int64_t j = 0;
+  for (; j + 4 <= w; j += 4) {
+    s0 += a[j * lda] * x[j];
+    s1 += a[(j + 1) * lda] * x[j + 1];
+    s2 += a[(j + 2) * lda] * x[j + 2];
+    s3 += a[(j + 3) * lda] * x[j + 3];
+  }
+  for (; j < w; ++j) s0 += a[j * lda] * x[j];
+  return (s0 + s1) + (s2 + s3);
+}
+
 /// Forward gather of rows [i0, i1) of front f, all right-hand sides.
 __device__ void gather_forward(const SolveTree& t, std::int64_t f, std::int64_t i0, std::int64_t i1,
                                const double* x, const double* u, double* scratch,
@@ -80,14 +103,18 @@ __device__ void scatter_forward(const SolveTree& t, std::int64_t f, std::int64_t
   const std::int64_t ro = t.row_offsets[f];
   const std::int64_t* prow = t.rows + ro;
   const double* W = scratch + ro * nrhs;
+  const double* L = t.panels + t.panel_offset[f];
+  const bool tall = t.part_offset[f] >= 0;  // L21's product is this chunk's (see the plan)
   const std::int64_t len = i1 - i0;
   for (std::int64_t e = threadIdx.x; e < len * nrhs; e += blockDim.x) {
     const std::int64_t i = i0 + e % len, r = e / len;
-    const double v = W[i + r * m];
-    if (i < k)
+    double v = W[i + r * m];
+    if (i < k) {
       x[(lu ? fp + i : prow[i]) + r * t.n] = v;
-    else
+    } else {
+      if (tall) v -= tile_dot(L + i, m, W + r * m, k);
       u[t.u_offset[f] + i - k + r * t.u_total] = v;
+    }
   }
 }
 
@@ -109,6 +136,44 @@ __device__ void gather_backward(const SolveTree& t, std::int64_t f, std::int64_t
   for (std::int64_t e = threadIdx.x; e < len * nrhs; e += blockDim.x) {
     const std::int64_t i = i0 + e % len, r = e / len;
     W[i + r * m] = x[backward_col(prow, fp, k, i, lu) + r * t.n];
+  }
+}
+
+/// A tall front's partial product of rows [i0, i1) ∩ [k, m) for the backward sweep:
+/// P(j) = Σ_i A(j, i) x(i), j < k, with A = L21ᵀ (LLᵀ, LDLᵀ; a warp per j and right-hand
+/// side, coalesced down L's columns) or U12 (LU; a thread per j, coalesced along U12's
+/// columns), read from x (not W, which other threads of the block are writing), into the
+/// chunk's k × nrhs slot of t.part. Nothing for a front that is not tall or a chunk of
+/// pivot rows only.
+__device__ void backward_partials(const SolveTree& t, std::int64_t f, std::int64_t i0,
+                                  std::int64_t i1, const double* x, std::int64_t nrhs, bool lu) {
+  const std::int64_t m = t.n_rows[f], k = t.n_pivots[f];
+  if (t.part_offset[f] < 0 || i1 <= k || k == 0) return;  // uniform across the block
+  const std::int64_t* prow = t.rows + t.row_offsets[f];
+  const double* L = t.panels + t.panel_offset[f];
+  const std::int64_t lo = i0 > k ? i0 : k;
+  double* P = t.part + (t.part_offset[f] + (i0 / kChunkRows - k / kChunkRows) * k) * nrhs;
+  if (lu) {
+    const double* U12 = L + m * k;  // k × (m − k), leading dimension k
+    for (std::int64_t e = threadIdx.x; e < k * nrhs; e += blockDim.x) {
+      const std::int64_t j = e % k, r = e / k;
+      const double* xr = x + r * t.n;
+      double s = 0.0;
+      for (std::int64_t i = lo; i < i1; ++i) s += U12[j + (i - k) * k] * xr[prow[i]];
+      P[j + r * k] = s;
+    }
+  } else {
+    const int lane = threadIdx.x % kWarp;
+    const std::int64_t warp = threadIdx.x / kWarp, nwarps = blockDim.x / kWarp;
+    for (std::int64_t q = warp; q < k * nrhs; q += nwarps) {  // uniform across the warp
+      const std::int64_t j = q % k, r = q / k;
+      const double* Lj = L + j * m;
+      const double* xr = x + r * t.n;
+      double s = 0.0;
+      for (std::int64_t i = lo + lane; i < i1; i += kWarp) s += Lj[i] * xr[prow[i]];
+      for (int off = kWarp / 2; off > 0; off /= 2) s += __shfl_down_sync(kFullMask, s, off);
+      if (lane == 0) P[j + r * k] = s;
+    }
   }
 }
 
@@ -176,25 +241,12 @@ __device__ void warp_triangle(const double* tile, std::int64_t m, std::int64_t w
   }
 }
 
-// s = Σ_{j<w} A[j·lda]·x[j], four independent sums so that the loads of several columns
-// are in flight together.
-__device__ double tile_dot(const double* a, std::int64_t lda, const double* x, std::int64_t w) {
-  double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
-  std::int64_t j = 0;
-  for (; j + 4 <= w; j += 4) {
-    s0 += a[j * lda] * x[j];
-    s1 += a[(j + 1) * lda] * x[j + 1];
-    s2 += a[(j + 2) * lda] * x[j + 2];
-    s3 += a[(j + 3) * lda] * x[j + 3];
-  }
-  for (; j < w; ++j) s0 += a[j * lda] * x[j];
-  return (s0 + s1) + (s2 + s3);
-}
-
 /// Forward sweep of one front (W gathered). `unit`: L11 has a unit diagonal.
 __device__ void sweep_forward(const SolveTree& t, std::int64_t f, double* scratch,
                               std::int64_t nrhs, bool unit) {
   const std::int64_t m = t.n_rows[f], k = t.n_pivots[f];
+  // a tall front's rows below its pivots are its scatter chunks' (scatter_forward)
+  const std::int64_t row_end = t.part_offset[f] >= 0 ? k : m;
   const double* L = t.panels + t.panel_offset[f];
   double* W = scratch + t.row_offsets[f] * nrhs;
   __shared__ double tile[kWarp * kTileLd];
@@ -205,7 +257,7 @@ __device__ void sweep_forward(const SolveTree& t, std::int64_t f, double* scratc
     warp_triangle(tile, m, w, W + j0, nrhs, true, unit);
     __syncthreads();
     // rows below the tile: W(i) −= L(i, tile)·W(tile); and the next tile into shared memory
-    const std::int64_t i0 = j0 + w, below = m - i0;
+    const std::int64_t i0 = j0 + w, below = row_end - i0;
     for (std::int64_t e = threadIdx.x; e < below * nrhs; e += blockDim.x) {
       const std::int64_t i = i0 + e % below, r = e / below;
       W[i + r * m] -= tile_dot(L + j0 * m + i, m, W + r * m + j0, w);
@@ -224,7 +276,20 @@ __device__ void sweep_backward(const SolveTree& t, std::int64_t f, double* scrat
   double* W = scratch + t.row_offsets[f] * nrhs;
   const int lane = threadIdx.x % kWarp;
   const std::int64_t warp = threadIdx.x / kWarp, nwarps = blockDim.x / kWarp;
-  if (lu) {
+  const bool tall = t.part_offset[f] >= 0;
+  // a tall front: W[0:k] −= the partial products of its chunks (backward_partials), in
+  // chunk order; its rows below the pivots take no further part
+  const std::int64_t row_end = tall ? k : m;
+  if (tall) {
+    const std::int64_t np = (m + kChunkRows - 1) / kChunkRows - k / kChunkRows;  // product_chunks
+    const double* P = t.part + t.part_offset[f] * nrhs;
+    for (std::int64_t e = threadIdx.x; e < k * nrhs; e += blockDim.x) {
+      double s = 0.0;
+      for (std::int64_t c = 0; c < np; ++c) s += P[c * k * nrhs + e];
+      W[e % k + e / k * m] -= s;
+    }
+    __syncthreads();
+  } else if (lu) {
     // W[0:k] −= U12 W[k:m]; U12 is k×(m−k) with leading dimension k
     // (few rows: a warp per row and right-hand side, its lanes over the columns; many: a
     // thread each)
@@ -276,7 +341,7 @@ __device__ void sweep_backward(const SolveTree& t, std::int64_t f, double* scrat
         const double* Lj = L + j * m;
         double* Wr = W + r * m;
         double s = 0.0;
-        for (std::int64_t i = i0 + lane; i < m; i += kWarp) s += Lj[i] * Wr[i];
+        for (std::int64_t i = i0 + lane; i < row_end; i += kWarp) s += Lj[i] * Wr[i];
         for (int off = kWarp / 2; off > 0; off /= 2) s += __shfl_down_sync(kFullMask, s, off);
         if (lane == 0) Wr[j] -= s;
       }

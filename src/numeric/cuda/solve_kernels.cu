@@ -7,9 +7,10 @@
 namespace strata::cuda {
 namespace {
 
-constexpr int kThreads = 256;       // gather/scatter and the diagonal: one thread per row
+// gather/scatter and the diagonal: one thread per row (whole warps: backward_partials)
+constexpr int kThreads = 256;
 constexpr int kSweepThreads = 256;  // one front: 8 warps (a multiple of 32, solve_device.cuh)
-static_assert(kSweepThreads % 32 == 0, "the sweeps work in whole warps");
+static_assert(kSweepThreads % 32 == 0 && kThreads % 32 == 0, "the sweeps work in whole warps");
 
 __device__ void chunk_rows(const SolveTree& t, SolveChunks c, std::int64_t at, std::int64_t* f,
                            std::int64_t* i0, std::int64_t* i1) {
@@ -40,6 +41,7 @@ __global__ void gather_backward_kernel(SolveTree t, SolveChunks c, std::int64_t 
   std::int64_t f, i0, i1;
   chunk_rows(t, c, begin + blockIdx.x, &f, &i0, &i1);
   solve_device::gather_backward(t, f, i0, i1, x, scratch, nrhs, lu);
+  solve_device::backward_partials(t, f, i0, i1, x, nrhs, lu);
 }
 
 __global__ void scatter_backward_kernel(SolveTree t, SolveChunks c, std::int64_t begin, double* x,

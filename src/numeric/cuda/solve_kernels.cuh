@@ -9,7 +9,10 @@
 // level, deepest first, the fronts outside the subtrees: one launch solves the block-path
 // fronts of at most kChunkRows rows the same way, one block each; the taller block-path
 // fronts and the library-path fronts are gathered (a block per kChunkRows rows), swept by a
-// block each or run through cuBLAS (cuda_solve.cu), and scattered. Backward, in the reverse
+// block each or run through cuBLAS (cuda_solve.cu), and scattered. A taller block-path
+// front's block solves only its triangle: the products with L21 (forward) and L21ᵀ or U12
+// (backward) are done by its scatter and gather blocks, a chunk of rows each, the backward
+// ones as partial products the sweep then sums in chunk order. Backward, in the reverse
 // order: levels from the root, then the subtrees with their fronts in reverse postorder;
 // gather W = x at the front's rows, sweep, scatter the pivots. Fronts solved side by side
 // write disjoint entries and every sum has a fixed order, so the solve is deterministic.
@@ -38,18 +41,21 @@ void launch_gather_forward(const SolveTree& t, SolveChunks c, std::int64_t begin
                            std::int64_t nrhs, cudaStream_t s);
 
 /// Forward scatter of chunks [begin, begin+count): pivots to x (LU: at the column
-/// positions), the other rows to the fronts' update vectors in u.
+/// positions), the other rows to the fronts' update vectors in u (a tall front's less its
+/// L21 rows times the solved pivots).
 void launch_scatter_forward(const SolveTree& t, SolveChunks c, std::int64_t begin,
                             std::int64_t count, double* x, double* u, const double* scratch,
                             std::int64_t nrhs, bool lu, cudaStream_t s);
 
 /// Forward sweep of the gathered fronts fronts[begin..begin+count) (device array), one block
-/// each. `unit`: L11 has a unit diagonal (LDLᵀ, LU).
+/// each: a tall front's triangle only (its scatter does L21). `unit`: L11 has a unit
+/// diagonal (LDLᵀ, LU).
 void launch_sweep_forward(const SolveTree& t, const std::int64_t* fronts, std::int64_t begin,
                           std::int64_t count, double* scratch, std::int64_t nrhs, bool unit,
                           cudaStream_t s);
 
-/// Backward sweep of the gathered fronts fronts[begin..begin+count), one block each.
+/// Backward sweep of the gathered fronts fronts[begin..begin+count), one block each (a tall
+/// front: its chunks' partial products summed, then its triangle).
 void launch_sweep_backward(const SolveTree& t, const std::int64_t* fronts, std::int64_t begin,
                            std::int64_t count, double* scratch, std::int64_t nrhs, bool lu,
                            bool unit, cudaStream_t s);
@@ -71,7 +77,8 @@ void launch_fronts_backward(const SolveTree& t, const std::int64_t* first, const
 void launch_solve_diagonal(const SolveTree& t, const double* d_diag, const double* d_off,
                            const int* pivot_size, double* x, std::int64_t nrhs, cudaStream_t s);
 
-/// Backward gather of chunks [begin, begin+count): W = x at the fronts' rows.
+/// Backward gather of chunks [begin, begin+count): W = x at the fronts' rows, and a tall
+/// front's chunk's partial product (solve_device::backward_partials) into t.part.
 void launch_gather_backward(const SolveTree& t, SolveChunks c, std::int64_t begin,
                             std::int64_t count, const double* x, double* scratch, std::int64_t nrhs,
                             bool lu, cudaStream_t s);

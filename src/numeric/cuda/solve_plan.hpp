@@ -13,10 +13,12 @@
 // levels, where a solve by levels is a chain of launches that each do a few microseconds of
 // work; a block that solves a whole subtree replaces all of that subtree's launches with
 // one, at the price of solving its fronts one after another. A thread block streams a panel
-// at a small fraction of the device's bandwidth, so a level whose work sits in a few large
-// fronts (the top of a nested-dissection tree) is limited by one SM per front; cuBLAS
-// spreads one front over the whole device but costs a few microseconds of launch per call,
-// which a level of thousands of small fronts cannot afford. The planner picks the subtrees
+// at a small fraction of the device's bandwidth, so a front's products with L21 and U12
+// (most of a tall front's bytes) are spread over its gather and scatter chunks, leaving
+// one block its triangle; a level whose work sits in a few large triangles (the top of a
+// nested-dissection tree) is still limited by one SM per front there; cuBLAS spreads one
+// front over the whole device but costs a few microseconds of launch per call, which a
+// level of thousands of small fronts cannot afford. The planner picks the subtrees
 // and, per level, the split that minimize a simple time model (see kBlockBytesPerSecond
 // etc.): the largest fronts go to the library as long as that shortens the level.
 // Gathering by parent row (the inverse of the children's relative positions) lets every
@@ -53,10 +55,20 @@ struct SolveTree {
   const std::int64_t* pivot_row;     ///< per pivot position: the unknown it eliminated
   std::int64_t n;                    ///< unknowns
   std::int64_t u_total;              ///< doubles of the u arena per right-hand side
+  /// Per front: −1, or (a tall front, SolvePlan::tall_fronts) where its chunks' partial
+  /// products start in `part`, in doubles per right-hand side.
+  const std::int64_t* part_offset;
+  double* part;  ///< SolvePlan::part_total × nrhs doubles (the backward partial products)
 };
 
 /// Rows of one front handled by one block of the gather and scatter kernels.
 constexpr std::int64_t kChunkRows = 256;
+
+/// The chunks of a tall front (m rows, k pivots) that hold rows of L21 (rows k..m−1): the
+/// first is chunk k / kChunkRows of the front; their number.
+inline std::int64_t product_chunks(std::int64_t m, std::int64_t k) {
+  return (m + kChunkRows - 1) / kChunkRows - k / kChunkRows;
+}
 
 // The time model of the planner (seconds, bytes). Estimates for a Hopper GPU, not
 // measured per front; they only need to be right within a factor of a few to pick the
@@ -92,7 +104,12 @@ enum class SolvePath { model, all_block, all_library, block_subtrees };
 /// [l]..] (gathered, swept and scattered by one block), taller block-solved fronts
 /// tall_fronts[tall_offsets[l]..] and library-solved fronts large_fronts[large_offsets[l]..],
 /// and the gather/scatter blocks of the tall and library fronts [chunk_offsets[l],
-/// chunk_offsets[l+1]) of chunk_front/chunk_row (front, first row).
+/// chunk_offsets[l+1]) of chunk_front/chunk_row (front, first row). A tall front's block
+/// solves only its triangle; its L21 (and U12) products are spread over its chunks: the
+/// forward scatter's blocks subtract L21's rows times the solved pivots, the backward
+/// gather's blocks write partial products L21ᵀ W[k:m] (U12 W[k:m]) of their rows, k ×
+/// nrhs each at part_offset[f]·nrhs (product_chunks of them), which the sweep sums in
+/// chunk order.
 struct SolvePlan {
   std::uint64_t analysis = 0;             ///< Analysis::id it was made for
   int n_sm = 0;                           ///< streaming multiprocessors it was made for
@@ -104,6 +121,8 @@ struct SolvePlan {
   std::vector<std::int64_t> large_offsets{0}, large_fronts;
   std::vector<std::int64_t> tall_offsets{0}, tall_fronts;
   std::vector<std::int64_t> subtree_first, subtree_last;
+  std::vector<std::int64_t> part_offset;  ///< per front, −1 but for tall fronts
+  std::int64_t part_total = 0;            ///< doubles of the partial products per rhs
 };
 
 /// The update vectors' offsets and the inverse extend-add map of `p` (SolvePlan::u_offset,
@@ -157,10 +176,21 @@ inline SolvePlan make_solve_plan(const symbolic::AssemblyTree& t,
   auto bytes = [&](index_t f) {
     return 8.0 * static_cast<double>(t.n_rows(f)) * static_cast<double>(t.n_pivots(f));
   };
-  std::vector<double> block_seconds(nf);
-  for (index_t f = 0; f < nf; ++f)
-    block_seconds[f] = kBlockFrontSeconds + bytes(f) / kBlockBytesPerSecond +
-                       static_cast<double>((t.n_pivots(f) + 31) / 32) * kBlockTileSeconds;
+  // block_seconds: from the front's first block to its last; block_work: the blocks' time
+  // summed (they differ for a tall front, whose products run on its chunks side by side)
+  std::vector<double> block_seconds(nf), block_work(nf);
+  for (index_t f = 0; f < nf; ++f) {
+    const double tiles = static_cast<double>((t.n_pivots(f) + 31) / 32) * kBlockTileSeconds;
+    block_work[f] = kBlockFrontSeconds + bytes(f) / kBlockBytesPerSecond + tiles;
+    block_seconds[f] = block_work[f];
+    if (t.n_rows(f) > kChunkRows) {
+      const double k = static_cast<double>(t.n_pivots(f));
+      const double product = 8.0 * static_cast<double>(t.n_rows(f) - t.n_pivots(f)) * k;
+      block_seconds[f] = kBlockFrontSeconds + 8.0 * k * k / kBlockBytesPerSecond + tiles +
+                         product / kBlockBytesPerSecond /
+                             static_cast<double>(product_chunks(t.n_rows(f), t.n_pivots(f)));
+    }
+  }
   auto t_block = [&](index_t f) { return block_seconds[f]; };
   auto t_library = [&](index_t f) {
     return kLibraryCallSeconds + bytes(f) / kLibraryBytesPerSecond +
@@ -190,23 +220,28 @@ inline SolvePlan make_solve_plan(const symbolic::AssemblyTree& t,
   // A level's fronts outside the subtrees: the q largest on the library, the rest in one
   // launch (its longest block, or its total spread over the SMs); the q of least time.
   std::vector<index_t> rest;
-  std::vector<double> tail;  // tail[q]: Σ t_block of rest[q..]
+  // tail[q]: the block work of rest[q..]; longest[q]: their longest block time
+  std::vector<double> tail, longest;
   auto split = [&](double* level_time) -> std::size_t {
     const std::size_t nl = rest.size();
     tail.assign(nl + 1, 0.0);
-    for (std::size_t q = nl; q-- > 0;) tail[q] = tail[q + 1] + t_block(rest[q]);
+    longest.assign(nl + 1, 0.0);
+    for (std::size_t q = nl; q-- > 0;) {
+      tail[q] = tail[q + 1] + block_work[rest[q]];
+      longest[q] = std::max(longest[q + 1], t_block(rest[q]));
+    }
     std::size_t best = 0;
     double best_time = 0.0;
     if (path == SolvePath::all_library) {
       best = nl;
       for (index_t f : rest) best_time += t_library(f);
     } else if (path != SolvePath::model) {
-      best_time = nl ? std::max(t_block(rest[0]), tail[0] / p.n_sm) : 0.0;
+      best_time = nl ? std::max(longest[0], tail[0] / p.n_sm) : 0.0;
     } else {
       double lib = 0.0;
       for (std::size_t q = 0; q <= nl; ++q) {
         const double blocks =
-            q < nl ? kLaunchSeconds + std::max(t_block(rest[q]), tail[q] / p.n_sm) : 0.0;
+            q < nl ? kLaunchSeconds + std::max(longest[q], tail[q] / p.n_sm) : 0.0;
         const double time = lib + (q > 0 ? 2 * kLaunchSeconds : 0.0) + blocks;
         if (q == 0 || time < best_time) {
           best_time = time;
@@ -266,7 +301,8 @@ inline SolvePlan make_solve_plan(const symbolic::AssemblyTree& t,
       p.subtree_last.push_back(f);
     }
   // per level: the fronts outside the subtrees, split between block and library; the
-  // library's fronts' gather/scatter chunks
+  // tall and library fronts' gather/scatter chunks; the tall fronts' partial products
+  p.part_offset.assign(nf, -1);
   for (index_t l = 0; l < s.n_levels(); ++l) {
     rest.clear();
     for (index_t f : by_size[l])
@@ -288,6 +324,10 @@ inline SolvePlan make_solve_plan(const symbolic::AssemblyTree& t,
     p.large_fronts.insert(p.large_fronts.end(), large.begin(), large.end());
     p.small_fronts.insert(p.small_fronts.end(), small.begin(), small.end());
     p.tall_fronts.insert(p.tall_fronts.end(), tall.begin(), tall.end());
+    for (const index_t f : tall) {
+      p.part_offset[f] = p.part_total;
+      p.part_total += product_chunks(t.n_rows(f), t.n_pivots(f)) * t.n_pivots(f);
+    }
     p.large_offsets.push_back(static_cast<std::int64_t>(p.large_fronts.size()));
     p.small_offsets.push_back(static_cast<std::int64_t>(p.small_fronts.size()));
     p.tall_offsets.push_back(static_cast<std::int64_t>(p.tall_fronts.size()));
