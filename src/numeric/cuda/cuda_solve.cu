@@ -8,7 +8,7 @@
 // The sweeps are a fixed sequence of launches for a given analysis and number of
 // right-hand sides (one for the plan's subtrees, one per level for its block-path fronts,
 // a gather, a sweep, a scatter and a few library calls per level with tall or library-path
-// fronts; in each sweep); with Options::gpu_solve_graph they are recorded once as a CUDA graph and
+// fronts, a level's library fronts side by side on the executor's lanes; in each sweep); with Options::gpu_solve_graph they are recorded once as a CUDA graph and
 // replayed with one launch per solve, which removes the host's cost per launch and the
 // gaps between them on the device (CUDA C++ Programming Guide, "CUDA Graphs"). The graph
 // holds the device pointers of the solve that recorded it: it is replayed only while the
@@ -202,12 +202,31 @@ void CudaExecutor::enqueue_solve_sweeps(const Analysis& an, const numeric::Numer
   double* X = dsolve_.x.data();
   double* U = dsolve_.u.data();
   double* S = dsolve_.scratch.data();
-  CublasOps ops{blas_};
   const int nr = static_cast<int>(nrhs);
-  // a library-solved front's block W and panel
-  auto large = [&](std::int64_t f, auto&& run) {
-    run(panels_.data() + an.factor_layout.panel_offset[f], static_cast<int>(t.n_rows(f)),
-        static_cast<int>(t.n_pivots(f)), S + t.row_offsets[f] * nrhs);
+  // A level's library-solved fronts: the j-th (largest first) on lane j mod kSolveLanes,
+  // the lanes forked from the executor's stream and joined back to it (within a graph's
+  // capture these become parallel branches). Each front's block W and panel to `run`.
+  static_assert(kSolveLanes <= kLanes, "the solve's library fronts use the executor's lanes");
+  auto large = [&](std::int64_t q0, std::int64_t q1, auto&& run) {
+    const std::int64_t count = q1 - q0;
+    if (count <= 0) return;
+    std::vector<std::unique_ptr<Lane>>& lane = lanes();
+    const std::int64_t used = std::min<std::int64_t>(count, kSolveLanes);
+    if (used > 1) {
+      STRATA_CUDA(cudaEventRecord(lane[0]->done, stream_));
+      for (std::int64_t j = 1; j < used; ++j)
+        STRATA_CUDA(cudaStreamWaitEvent(lane[j]->stream, lane[0]->done, 0));
+    }
+    for (std::int64_t q = q0; q < q1; ++q) {
+      const std::int64_t f = p.large_fronts[q];
+      CublasOps ops{lane[(q - q0) % used]->blas};
+      run(ops, panels_.data() + an.factor_layout.panel_offset[f], static_cast<int>(t.n_rows(f)),
+          static_cast<int>(t.n_pivots(f)), S + t.row_offsets[f] * nrhs);
+    }
+    for (std::int64_t j = 1; j < used; ++j) {
+      STRATA_CUDA(cudaEventRecord(lane[j]->done, lane[j]->stream));
+      STRATA_CUDA(cudaStreamWaitEvent(stream_, lane[j]->done, 0));
+    }
   };
   const index_t levels = an.schedule.n_levels();
   const std::int64_t* small = dsolve_.small_fronts.data();
@@ -222,10 +241,10 @@ void CudaExecutor::enqueue_solve_sweeps(const Analysis& an, const numeric::Numer
     launch_fronts_forward(st, small, small, s0, ns, X, U, S, nrhs, unit, lu, stream_);
     launch_gather_forward(st, chunks, c0, nc, X, U, S, nrhs, stream_);
     launch_sweep_forward(st, tall, t0, nt, S, nrhs, unit, stream_);
-    for (std::int64_t q = p.large_offsets[l]; q < p.large_offsets[l + 1]; ++q)
-      large(p.large_fronts[q], [&](const double* L, int m, int k, double* W) {
-        large_front_forward(ops, L, m, k, nr, unit, W);
-      });
+    large(p.large_offsets[l], p.large_offsets[l + 1],
+          [&](CublasOps& ops, const double* L, int m, int k, double* W) {
+            large_front_forward(ops, L, m, k, nr, unit, W);
+          });
     launch_scatter_forward(st, chunks, c0, nc, X, U, S, nrhs, lu, stream_);
   }
   if (ldlt)
@@ -238,10 +257,10 @@ void CudaExecutor::enqueue_solve_sweeps(const Analysis& an, const numeric::Numer
     launch_fronts_backward(st, small, small, s0, ns, X, S, nrhs, lu, unit, stream_);
     launch_gather_backward(st, chunks, c0, nc, X, S, nrhs, lu, stream_);
     launch_sweep_backward(st, tall, t0, nt, S, nrhs, lu, unit, stream_);
-    for (std::int64_t q = p.large_offsets[l]; q < p.large_offsets[l + 1]; ++q)
-      large(p.large_fronts[q], [&](const double* L, int m, int k, double* W) {
-        large_front_backward(ops, L, m, k, nr, lu, unit, W);
-      });
+    large(p.large_offsets[l], p.large_offsets[l + 1],
+          [&](CublasOps& ops, const double* L, int m, int k, double* W) {
+            large_front_backward(ops, L, m, k, nr, lu, unit, W);
+          });
     launch_scatter_backward(st, chunks, c0, nc, X, S, nrhs, lu, stream_);
   }
   launch_fronts_backward(st, dsolve_.subtree_first.data(), dsolve_.subtree_last.data(), 0,

@@ -59,19 +59,39 @@ constexpr unsigned kFullMask = 0xffffffffu;
 
 __device__ std::int64_t min64(std::int64_t a, std::int64_t b) { return a < b ? a : b; }
 
-// s = Σ_{j<w} A[j·lda]·x[j], four independent sums so that the loads of several columns
-// are in flight together.
+// s = Σ_{j<w} A[j·lda]·x[j]. A thread's loads are what keeps the memory busy when few
+// blocks run (one block per front at the top of the tree): batches of kDotBatch columns
+// have all their loads issued before the first multiply waits for one, where a loop of
+// four sums waits once per four columns.
+constexpr int kDotBatch = 16;
 __device__ double tile_dot(const double* a, std::int64_t lda, const double* x, std::int64_t w) {
-  double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
+  double s[kDotBatch];
+#ifdef __CUDA_ARCH__
+#pragma unroll
+#endif
+  for (int q = 0; q < kDotBatch; ++q) s[q] = 0.0;
   std::int64_t j = 0;
-  for (; j + 4 <= w; j += 4) {
-    s0 += a[j * lda] * x[j];
-    s1 += a[(j + 1) * lda] * x[j + 1];
-    s2 += a[(j + 2) * lda] * x[j + 2];
-    s3 += a[(j + 3) * lda] * x[j + 3];
+  for (; j + kDotBatch <= w; j += kDotBatch) {
+    double av[kDotBatch], xv[kDotBatch];
+#ifdef __CUDA_ARCH__
+#pragma unroll
+#endif
+    for (int q = 0; q < kDotBatch; ++q) {
+      av[q] = a[(j + q) * lda];
+      xv[q] = x[j + q];
+    }
+#ifdef __CUDA_ARCH__
+#pragma unroll
+#endif
+    for (int q = 0; q < kDotBatch; ++q) s[q] += av[q] * xv[q];
   }
-  for (; j < w; ++j) s0 += a[j * lda] * x[j];
-  return (s0 + s1) + (s2 + s3);
+  double total = 0.0;
+  for (; j < w; ++j) total += a[j * lda] * x[j];
+#ifdef __CUDA_ARCH__
+#pragma unroll
+#endif
+  for (int q = 0; q < kDotBatch; ++q) total += s[q];
+  return total;
 }
 
 /// Forward gather of rows [i0, i1) of front f, all right-hand sides.
@@ -155,24 +175,41 @@ __device__ void backward_partials(const SolveTree& t, std::int64_t f, std::int64
   double* P = t.part + (t.part_offset[f] + (i0 / kChunkRows - k / kChunkRows) * k) * nrhs;
   if (lu) {
     const double* U12 = L + m * k;  // k × (m − k), leading dimension k
+    const std::int64_t len = i1 - lo;
     for (std::int64_t e = threadIdx.x; e < k * nrhs; e += blockDim.x) {
       const std::int64_t j = e % k, r = e / k;
       const double* xr = x + r * t.n;
-      double s = 0.0;
-      for (std::int64_t i = lo; i < i1; ++i) s += U12[j + (i - k) * k] * xr[prow[i]];
-      P[j + r * k] = s;
+      const double* u = U12 + j + (lo - k) * k;  // u[i·k]: U12(j, lo − k + i)
+      double s[4] = {0.0, 0.0, 0.0, 0.0};        // loads of four columns in flight
+      std::int64_t i = 0;
+      for (; i + 4 <= len; i += 4)
+        for (int q = 0; q < 4; ++q) s[q] += u[(i + q) * k] * xr[prow[lo + i + q]];
+      for (; i < len; ++i) s[0] += u[i * k] * xr[prow[lo + i]];
+      P[j + r * k] = (s[0] + s[1]) + (s[2] + s[3]);
     }
   } else {
+    // lane l takes rows lo + l + 32u (u < kChunkRows / 32); their x entries are read once
+    // per right-hand side, and a column's loads are all issued before the first is used
+    constexpr int kPerLane = static_cast<int>(kChunkRows / kWarp);
     const int lane = threadIdx.x % kWarp;
     const std::int64_t warp = threadIdx.x / kWarp, nwarps = blockDim.x / kWarp;
-    for (std::int64_t q = warp; q < k * nrhs; q += nwarps) {  // uniform across the warp
-      const std::int64_t j = q % k, r = q / k;
-      const double* Lj = L + j * m;
+    for (std::int64_t r = 0; r < nrhs; ++r) {
       const double* xr = x + r * t.n;
-      double s = 0.0;
-      for (std::int64_t i = lo + lane; i < i1; i += kWarp) s += Lj[i] * xr[prow[i]];
-      for (int off = kWarp / 2; off > 0; off /= 2) s += __shfl_down_sync(kFullMask, s, off);
-      if (lane == 0) P[j + r * k] = s;
+      double xv[kPerLane];
+      for (int u = 0; u < kPerLane; ++u) {
+        const std::int64_t i = lo + lane + u * kWarp;
+        xv[u] = i < i1 ? xr[prow[i]] : 0.0;
+      }
+      for (std::int64_t j = warp; j < k; j += nwarps) {  // uniform across the warp
+        const double* Lj = L + j * m;
+        double s = 0.0;
+        for (int u = 0; u < kPerLane; ++u) {
+          const std::int64_t i = lo + lane + u * kWarp;
+          s += (i < i1 ? Lj[i] : 0.0) * xv[u];
+        }
+        for (int off = kWarp / 2; off > 0; off /= 2) s += __shfl_down_sync(kFullMask, s, off);
+        if (lane == 0) P[j + r * k] = s;
+      }
     }
   }
 }
@@ -340,8 +377,12 @@ __device__ void sweep_backward(const SolveTree& t, std::int64_t f, double* scrat
         const std::int64_t j = j0 + q % w, r = q / w;
         const double* Lj = L + j * m;
         double* Wr = W + r * m;
-        double s = 0.0;
-        for (std::int64_t i = i0 + lane; i < row_end; i += kWarp) s += Lj[i] * Wr[i];
+        double s4[4] = {0.0, 0.0, 0.0, 0.0};  // loads of four rows per lane in flight
+        std::int64_t i = i0 + lane;
+        for (; i + 3 * kWarp < row_end; i += 4 * kWarp)
+          for (int q = 0; q < 4; ++q) s4[q] += Lj[i + q * kWarp] * Wr[i + q * kWarp];
+        for (; i < row_end; i += kWarp) s4[0] += Lj[i] * Wr[i];
+        double s = (s4[0] + s4[1]) + (s4[2] + s4[3]);
         for (int off = kWarp / 2; off > 0; off /= 2) s += __shfl_down_sync(kFullMask, s, off);
         if (lane == 0) Wr[j] -= s;
       }

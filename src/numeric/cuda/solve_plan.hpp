@@ -5,8 +5,8 @@
 // What: which subtrees at the bottom of the tree are solved one thread block each, their
 // fronts one after another (solve_device.cuh: front_forward/backward); then for each level
 // of the schedule, which of the other fronts are solved by one thread block each and which
-// by cuBLAS calls, one front after another on the stream (large_front_forward/backward
-// below); the blocks of the library fronts' gather and scatter kernels; and, for every
+// by cuBLAS calls, a level's on kSolveLanes streams side by side (large_front_forward/
+// backward below); the blocks of the library fronts' gather and scatter kernels; and, for every
 // front row, the children's update-vector entries that add into it.
 //
 // Why: the multibody Newton matrices' trees are a few hundred small fronts on 15 to 40
@@ -88,8 +88,13 @@ constexpr double kLaunchSeconds = 3e-6;
 constexpr double kLibraryBytesPerSecond = 2e12;
 // ...after two library calls' launch and enqueue cost...
 constexpr double kLibraryCallSeconds = 8e-6;
-// ...plus the triangular solve's sequential dependence, per pivot column.
-constexpr double kLibraryPivotSeconds = 2e-8;
+// ...plus the triangular solve's sequential dependence, per pivot column (cuBLAS's
+// DTRSV takes about 2 µs per 32 columns on an H100).
+constexpr double kLibraryPivotSeconds = 6.5e-8;
+
+/// Streams a level's library-path fronts run on side by side (cuda_solve.cu: the
+/// executor's lanes), the j-th largest on stream j mod kSolveLanes.
+constexpr int kSolveLanes = 8;
 
 /// Which path the planner may choose (the tests force each one).
 /// block_subtrees: every front on the block path, the subtrees of at most a quarter of the
@@ -102,7 +107,8 @@ enum class SolvePath { model, all_block, all_library, block_subtrees };
 /// reverse order backward. Then per level l (schedule order, deepest first), the fronts
 /// in no subtree: block-solved fronts of at most kChunkRows rows small_fronts[small_offsets
 /// [l]..] (gathered, swept and scattered by one block), taller block-solved fronts
-/// tall_fronts[tall_offsets[l]..] and library-solved fronts large_fronts[large_offsets[l]..],
+/// tall_fronts[tall_offsets[l]..] and library-solved fronts large_fronts[large_offsets[l]..]
+/// (largest first, run on kSolveLanes streams),
 /// and the gather/scatter blocks of the tall and library fronts [chunk_offsets[l],
 /// chunk_offsets[l+1]) of chunk_front/chunk_row (front, first row). A tall front's block
 /// solves only its triangle; its L21 (and U12) products are spread over its chunks: the
@@ -247,7 +253,9 @@ inline SolvePlan make_solve_plan(const symbolic::AssemblyTree& t,
           best_time = time;
           best = q;
         }
-        if (q < nl) lib += t_library(rest[q]);
+        // the fronts on the library run kSolveLanes side by side, the largest first: the
+        // level waits for the first lane's
+        if (q < nl && q % kSolveLanes == 0) lib += t_library(rest[q]);
       }
     }
     if (level_time) *level_time = best_time;
@@ -311,8 +319,7 @@ inline SolvePlan make_solve_plan(const symbolic::AssemblyTree& t,
     std::vector<index_t> large(rest.begin(), rest.begin() + best), small, tall;
     for (auto it = rest.begin() + best; it != rest.end(); ++it)
       (t.n_rows(*it) > kChunkRows ? tall : small).push_back(*it);
-    std::sort(large.begin(), large.end());
-    std::sort(small.begin(), small.end());
+    std::sort(small.begin(), small.end());  // large: largest first (the lanes' order)
     std::sort(tall.begin(), tall.end());
     for (const auto* fronts : {&tall, &large})
       for (const index_t f : *fronts)
