@@ -8,8 +8,9 @@
 // The sweeps are a fixed sequence of launches for a given analysis and number of
 // right-hand sides (one for the plan's subtrees, one per level for its block-path fronts,
 // a gather, a sweep, a scatter and a few library calls per level with tall or library-path
-// fronts, a level's library fronts side by side on the executor's lanes; in each sweep); with Options::gpu_solve_graph they are recorded once as a CUDA graph and
-// replayed with one launch per solve, which removes the host's cost per launch and the
+// fronts, a level's library fronts side by side on the executor's lanes; in each sweep);
+// with Options::gpu_solve_graph they are recorded once as a CUDA graph and replayed with
+// one launch per solve, which removes the host's cost per launch and the
 // gaps between them on the device (CUDA C++ Programming Guide, "CUDA Graphs"). The graph
 // holds the device pointers of the solve that recorded it: it is replayed only while the
 // analysis, nrhs, the factor's type and every buffer it reads are the same
