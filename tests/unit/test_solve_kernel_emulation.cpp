@@ -288,7 +288,8 @@ void emulate_device_solve(const Analysis& an, const numeric::NumericFactor& fac,
       dev::gather_forward(st, f, i0, i1, X, U, S, nrhs);
     });
     for (std::int64_t q = p.tall_offsets[l]; q < p.tall_offsets[l + 1]; ++q) {
-      run_block(sweep_threads, [&] { dev::sweep_forward(st, p.tall_fronts[q], S, nrhs, unit); });
+      run_block(sweep_threads,
+                [&] { dev::sweep_forward<16>(st, p.tall_fronts[q], S, nrhs, unit); });
       ++counts.block_fronts;
       ++counts.tall_fronts;
     }
@@ -299,7 +300,7 @@ void emulate_device_solve(const Analysis& an, const numeric::NumericFactor& fac,
       ++counts.library_fronts;
     }
     chunks(l, [&](std::int64_t f, std::int64_t i0, std::int64_t i1) {
-      dev::scatter_forward(st, f, i0, i1, X, U, S, nrhs, lu);
+      dev::scatter_forward<16>(st, f, i0, i1, X, U, S, nrhs, lu);
     });
   }
   if (ldlt)
@@ -320,7 +321,7 @@ void emulate_device_solve(const Analysis& an, const numeric::NumericFactor& fac,
     }
     for (std::int64_t q = p.tall_offsets[l]; q < p.tall_offsets[l + 1]; ++q)
       run_block(sweep_threads,
-                [&] { dev::sweep_backward(st, p.tall_fronts[q], S, nrhs, lu, unit); });
+                [&] { dev::sweep_backward<16>(st, p.tall_fronts[q], S, nrhs, lu, unit); });
     for (std::int64_t q = p.large_offsets[l]; q < p.large_offsets[l + 1]; ++q)
       large(p.large_fronts[q], [&](const double* L, int m, int k, double* W) {
         cuda::large_front_backward(ops, L, m, k, nr, lu, unit, W);

@@ -59,39 +59,44 @@ constexpr unsigned kFullMask = 0xffffffffu;
 
 __device__ std::int64_t min64(std::int64_t a, std::int64_t b) { return a < b ? a : b; }
 
-// s = Σ_{j<w} A[j·lda]·x[j]. A thread's loads are what keeps the memory busy when few
-// blocks run (one block per front at the top of the tree): batches of kDotBatch columns
-// have all their loads issued before the first multiply waits for one, where a loop of
-// four sums waits once per four columns.
-constexpr int kDotBatch = 16;
+// s = Σ_{j<w} A[j·lda]·x[j] with Batch (4 or 16) independent sums, the loads of a batch of
+// columns issued before the first multiply waits for one. A thread's loads in flight are
+// what keeps the memory busy where few blocks run (a tall front's triangle and products:
+// 16); the block path's kernels, many blocks of small fronts, keep 4 (fewer registers,
+// more blocks per SM).
+// s[0] + … + s[N−1] summed pairwise (N a power of two).
+template <int N>
+__device__ double pair_sum(const double* s) {
+  if constexpr (N == 1)
+    return s[0];
+  else
+    return pair_sum<N / 2>(s) + pair_sum<N / 2>(s + N / 2);
+}
+
+template <int Batch>
 __device__ double tile_dot(const double* a, std::int64_t lda, const double* x, std::int64_t w) {
-  double s[kDotBatch];
+  double s[Batch];
 #ifdef __CUDA_ARCH__
 #pragma unroll
 #endif
-  for (int q = 0; q < kDotBatch; ++q) s[q] = 0.0;
+  for (int q = 0; q < Batch; ++q) s[q] = 0.0;
   std::int64_t j = 0;
-  for (; j + kDotBatch <= w; j += kDotBatch) {
-    double av[kDotBatch], xv[kDotBatch];
+  for (; j + Batch <= w; j += Batch) {
+    double av[Batch], xv[Batch];
 #ifdef __CUDA_ARCH__
 #pragma unroll
 #endif
-    for (int q = 0; q < kDotBatch; ++q) {
+    for (int q = 0; q < Batch; ++q) {
       av[q] = a[(j + q) * lda];
       xv[q] = x[j + q];
     }
 #ifdef __CUDA_ARCH__
 #pragma unroll
 #endif
-    for (int q = 0; q < kDotBatch; ++q) s[q] += av[q] * xv[q];
+    for (int q = 0; q < Batch; ++q) s[q] += av[q] * xv[q];
   }
-  double total = 0.0;
-  for (; j < w; ++j) total += a[j * lda] * x[j];
-#ifdef __CUDA_ARCH__
-#pragma unroll
-#endif
-  for (int q = 0; q < kDotBatch; ++q) total += s[q];
-  return total;
+  for (; j < w; ++j) s[0] += a[j * lda] * x[j];
+  return pair_sum<Batch>(s);  // (s0 + s1) + (s2 + s3) for Batch 4
 }
 
 /// Forward gather of rows [i0, i1) of front f, all right-hand sides.
@@ -115,7 +120,9 @@ __device__ void gather_forward(const SolveTree& t, std::int64_t f, std::int64_t 
   }
 }
 
-/// Forward scatter of rows [i0, i1) of front f: pivots to x, the rest to u_f.
+/// Forward scatter of rows [i0, i1) of front f: pivots to x, the rest to u_f. Batch: the
+/// dot products' (tile_dot).
+template <int Batch>
 __device__ void scatter_forward(const SolveTree& t, std::int64_t f, std::int64_t i0,
                                 std::int64_t i1, double* x, double* u, const double* scratch,
                                 std::int64_t nrhs, bool lu) {
@@ -132,7 +139,7 @@ __device__ void scatter_forward(const SolveTree& t, std::int64_t f, std::int64_t
     if (i < k) {
       x[(lu ? fp + i : prow[i]) + r * t.n] = v;
     } else {
-      if (tall) v -= tile_dot(L + i, m, W + r * m, k);
+      if (tall) v -= tile_dot<Batch>(L + i, m, W + r * m, k);
       u[t.u_offset[f] + i - k + r * t.u_total] = v;
     }
   }
@@ -161,10 +168,10 @@ __device__ void gather_backward(const SolveTree& t, std::int64_t f, std::int64_t
 
 /// A tall front's partial product of rows [i0, i1) ∩ [k, m) for the backward sweep:
 /// P(j) = Σ_i A(j, i) x(i), j < k, with A = L21ᵀ (LLᵀ, LDLᵀ; a warp per j and right-hand
-/// side, coalesced down L's columns) or U12 (LU; a thread per j, coalesced along U12's
-/// columns), read from x (not W, which other threads of the block are writing), into the
-/// chunk's k × nrhs slot of t.part. Nothing for a front that is not tall or a chunk of
-/// pivot rows only.
+/// side, coalesced down L's columns) or U12 (LU; threads along U12's columns, coalesced),
+/// read from x (not W, which other threads of the block are writing), into the chunk's
+/// k × nrhs slot of t.part. Nothing for a front that is not tall or a chunk of pivot rows
+/// only (uniform across the block: the LU path has barriers). blockDim.x ≤ kChunkRows.
 __device__ void backward_partials(const SolveTree& t, std::int64_t f, std::int64_t i0,
                                   std::int64_t i1, const double* x, std::int64_t nrhs, bool lu) {
   const std::int64_t m = t.n_rows[f], k = t.n_pivots[f];
@@ -174,18 +181,41 @@ __device__ void backward_partials(const SolveTree& t, std::int64_t f, std::int64
   const std::int64_t lo = i0 > k ? i0 : k;
   double* P = t.part + (t.part_offset[f] + (i0 / kChunkRows - k / kChunkRows) * k) * nrhs;
   if (lu) {
+    // the chunk's x entries in shared memory; thread e takes column j = e % k of U12 over
+    // the rows of slice e / k (every nsl-th row), and the slices are summed in order, so
+    // that a front with few pivots still has every thread of the block reading
     const double* U12 = L + m * k;  // k × (m − k), leading dimension k
     const std::int64_t len = i1 - lo;
-    for (std::int64_t e = threadIdx.x; e < k * nrhs; e += blockDim.x) {
-      const std::int64_t j = e % k, r = e / k;
+    __shared__ double xs[kChunkRows];
+    __shared__ double sums[kChunkRows];  // blockDim.x ≤ kChunkRows
+    const std::int64_t nsl = k < static_cast<std::int64_t>(blockDim.x) ? blockDim.x / k : 1;
+    for (std::int64_t r = 0; r < nrhs; ++r) {
       const double* xr = x + r * t.n;
-      const double* u = U12 + j + (lo - k) * k;  // u[i·k]: U12(j, lo − k + i)
-      double s[4] = {0.0, 0.0, 0.0, 0.0};        // loads of four columns in flight
-      std::int64_t i = 0;
-      for (; i + 4 <= len; i += 4)
-        for (int q = 0; q < 4; ++q) s[q] += u[(i + q) * k] * xr[prow[lo + i + q]];
-      for (; i < len; ++i) s[0] += u[i * k] * xr[prow[lo + i]];
-      P[j + r * k] = (s[0] + s[1]) + (s[2] + s[3]);
+      for (std::int64_t i = threadIdx.x; i < len; i += blockDim.x) xs[i] = xr[prow[lo + i]];
+      __syncthreads();
+      for (std::int64_t e = threadIdx.x; e < (nsl > 1 ? nsl * k : k); e += blockDim.x) {
+        const std::int64_t j = e % k, sl = e / k;
+        const double* u = U12 + j + (lo - k) * k;  // u[i·k]: U12(j, lo − k + i)
+        double a = 0.0, b = 0.0;                   // two rows' loads in flight
+        std::int64_t i = sl;
+        for (; i + nsl < len; i += 2 * nsl) {
+          a += u[i * k] * xs[i];
+          b += u[(i + nsl) * k] * xs[i + nsl];
+        }
+        if (i < len) a += u[i * k] * xs[i];
+        if (nsl > 1)
+          sums[e] = a + b;
+        else
+          P[j + r * k] = a + b;
+      }
+      __syncthreads();
+      if (nsl > 1)
+        for (std::int64_t j = threadIdx.x; j < k; j += blockDim.x) {
+          double v = 0.0;
+          for (std::int64_t sl = 0; sl < nsl; ++sl) v += sums[sl * k + j];
+          P[j + r * k] = v;
+        }
+      __syncthreads();  // xs and sums are reused by the next right-hand side
     }
   } else {
     // lane l takes rows lo + l + 32u (u < kChunkRows / 32); their x entries are read once
@@ -279,6 +309,7 @@ __device__ void warp_triangle(const double* tile, std::int64_t m, std::int64_t w
 }
 
 /// Forward sweep of one front (W gathered). `unit`: L11 has a unit diagonal.
+template <int Batch>
 __device__ void sweep_forward(const SolveTree& t, std::int64_t f, double* scratch,
                               std::int64_t nrhs, bool unit) {
   const std::int64_t m = t.n_rows[f], k = t.n_pivots[f];
@@ -297,7 +328,7 @@ __device__ void sweep_forward(const SolveTree& t, std::int64_t f, double* scratc
     const std::int64_t i0 = j0 + w, below = row_end - i0;
     for (std::int64_t e = threadIdx.x; e < below * nrhs; e += blockDim.x) {
       const std::int64_t i = i0 + e % below, r = e / below;
-      W[i + r * m] -= tile_dot(L + j0 * m + i, m, W + r * m + j0, w);
+      W[i + r * m] -= tile_dot<Batch>(L + j0 * m + i, m, W + r * m + j0, w);
     }
     if (i0 < k) load_tile(L + i0 * m + i0, m, min64(kTile, k - i0), tile, false);
     __syncthreads();
@@ -305,6 +336,7 @@ __device__ void sweep_forward(const SolveTree& t, std::int64_t f, double* scratc
 }
 
 /// Backward sweep of one front (W gathered): L11ᵀ (LLᵀ, LDLᵀ) or U11 (LU).
+template <int Batch>
 __device__ void sweep_backward(const SolveTree& t, std::int64_t f, double* scratch,
                                std::int64_t nrhs, bool lu, bool unit) {
   const std::int64_t m = t.n_rows[f], k = t.n_pivots[f];
@@ -365,7 +397,7 @@ __device__ void sweep_backward(const SolveTree& t, std::int64_t f, double* scrat
       // memory
       for (std::int64_t e = threadIdx.x; e < j0 * nrhs; e += blockDim.x) {
         const std::int64_t i = e % j0, r = e / j0;
-        W[i + r * m] -= tile_dot(L + j0 * m + i, m, W + r * m + j0, w);
+        W[i + r * m] -= tile_dot<Batch>(L + j0 * m + i, m, W + r * m + j0, w);
       }
       if (j0 > 0) load_tile(L + (j0 - kTile) * m + (j0 - kTile), m, kTile, tile, false);
       __syncthreads();
@@ -377,12 +409,15 @@ __device__ void sweep_backward(const SolveTree& t, std::int64_t f, double* scrat
         const std::int64_t j = j0 + q % w, r = q / w;
         const double* Lj = L + j * m;
         double* Wr = W + r * m;
-        double s4[4] = {0.0, 0.0, 0.0, 0.0};  // loads of four rows per lane in flight
+        double s = 0.0;
         std::int64_t i = i0 + lane;
-        for (; i + 3 * kWarp < row_end; i += 4 * kWarp)
-          for (int q = 0; q < 4; ++q) s4[q] += Lj[i + q * kWarp] * Wr[i + q * kWarp];
-        for (; i < row_end; i += kWarp) s4[0] += Lj[i] * Wr[i];
-        double s = (s4[0] + s4[1]) + (s4[2] + s4[3]);
+        if constexpr (Batch >= 16) {  // loads of four rows per lane in flight
+          double s4[4] = {0.0, 0.0, 0.0, 0.0};
+          for (; i + 3 * kWarp < row_end; i += 4 * kWarp)
+            for (int q = 0; q < 4; ++q) s4[q] += Lj[i + q * kWarp] * Wr[i + q * kWarp];
+          s = (s4[0] + s4[1]) + (s4[2] + s4[3]);
+        }
+        for (; i < row_end; i += kWarp) s += Lj[i] * Wr[i];
         for (int off = kWarp / 2; off > 0; off /= 2) s += __shfl_down_sync(kFullMask, s, off);
         if (lane == 0) Wr[j] -= s;
       }
@@ -402,9 +437,9 @@ __device__ void front_forward(const SolveTree& t, std::int64_t f, double* x, dou
   const std::int64_t m = t.n_rows[f];
   gather_forward(t, f, 0, m, x, u, scratch, nrhs);
   __syncthreads();
-  sweep_forward(t, f, scratch, nrhs, unit);
+  sweep_forward<4>(t, f, scratch, nrhs, unit);
   __syncthreads();
-  scatter_forward(t, f, 0, m, x, u, scratch, nrhs, lu);
+  scatter_forward<4>(t, f, 0, m, x, u, scratch, nrhs, lu);
   __syncthreads();
 }
 
@@ -415,7 +450,7 @@ __device__ void front_backward(const SolveTree& t, std::int64_t f, double* x, do
   const std::int64_t m = t.n_rows[f];
   gather_backward(t, f, 0, m, x, scratch, nrhs, lu);
   __syncthreads();
-  sweep_backward(t, f, scratch, nrhs, lu, unit);
+  sweep_backward<4>(t, f, scratch, nrhs, lu, unit);
   __syncthreads();
   scatter_backward(t, f, 0, m, x, scratch, nrhs, lu);
   __syncthreads();

@@ -10,6 +10,9 @@ namespace {
 // gather/scatter and the diagonal: one thread per row (whole warps: backward_partials)
 constexpr int kThreads = 256;
 constexpr int kSweepThreads = 256;  // one front: 8 warps (a multiple of 32, solve_device.cuh)
+// the sweeps and the forward scatter of the tall and library fronts: few blocks, many loads
+// in flight per thread (solve_device::tile_dot)
+constexpr int kTallBatch = 16;
 static_assert(kSweepThreads % 32 == 0 && kThreads % 32 == 0, "the sweeps work in whole warps");
 
 __device__ void chunk_rows(const SolveTree& t, SolveChunks c, std::int64_t at, std::int64_t* f,
@@ -32,7 +35,7 @@ __global__ void scatter_forward_kernel(SolveTree t, SolveChunks c, std::int64_t 
                                        bool lu) {
   std::int64_t f, i0, i1;
   chunk_rows(t, c, begin + blockIdx.x, &f, &i0, &i1);
-  solve_device::scatter_forward(t, f, i0, i1, x, u, scratch, nrhs, lu);
+  solve_device::scatter_forward<kTallBatch>(t, f, i0, i1, x, u, scratch, nrhs, lu);
 }
 
 __global__ void gather_backward_kernel(SolveTree t, SolveChunks c, std::int64_t begin,
@@ -53,12 +56,12 @@ __global__ void scatter_backward_kernel(SolveTree t, SolveChunks c, std::int64_t
 
 __global__ void sweep_forward_kernel(SolveTree t, const std::int64_t* fronts, std::int64_t begin,
                                      double* scratch, std::int64_t nrhs, bool unit) {
-  solve_device::sweep_forward(t, fronts[begin + blockIdx.x], scratch, nrhs, unit);
+  solve_device::sweep_forward<kTallBatch>(t, fronts[begin + blockIdx.x], scratch, nrhs, unit);
 }
 
 __global__ void sweep_backward_kernel(SolveTree t, const std::int64_t* fronts, std::int64_t begin,
                                       double* scratch, std::int64_t nrhs, bool lu, bool unit) {
-  solve_device::sweep_backward(t, fronts[begin + blockIdx.x], scratch, nrhs, lu, unit);
+  solve_device::sweep_backward<kTallBatch>(t, fronts[begin + blockIdx.x], scratch, nrhs, lu, unit);
 }
 
 // Block q solves fronts first[begin + q] .. last[begin + q] in that order (forward) or in
