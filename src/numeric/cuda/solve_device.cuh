@@ -322,15 +322,40 @@ __device__ void sweep_forward(const SolveTree& t, std::int64_t f, double* scratc
   __syncthreads();
   for (std::int64_t j0 = 0; j0 < k; j0 += kTile) {
     const std::int64_t w = min64(kTile, k - j0);
+    const std::int64_t i0 = j0 + w, below = row_end - i0;
+    // Batch ≥ 16 (a tall front, few blocks): the thread's first row below the tile has its
+    // L(i, tile) loaded before the triangle, whose dependent steps hide the latency
+    double lv[kTile];
+    if constexpr (Batch >= 16) {
+      if (threadIdx.x < below * nrhs) {
+        const double* a = L + j0 * m + i0 + threadIdx.x % below;
+#ifdef __CUDA_ARCH__
+#pragma unroll
+#endif
+        for (int q = 0; q < kTile; ++q) lv[q] = q < w ? a[q * m] : 0.0;
+      }
+    }
     warp_triangle(tile, m, w, W + j0, nrhs, true, unit);
     __syncthreads();
-    // rows below the tile: W(i) −= L(i, tile)·W(tile); and the next tile into shared memory
-    const std::int64_t i0 = j0 + w, below = row_end - i0;
+    // the next tile into shared memory (its loads in flight with the products below), and
+    // the rows below the tile: W(i) −= L(i, tile)·W(tile)
+    if (i0 < k) load_tile(L + i0 * m + i0, m, min64(kTile, k - i0), tile, false);
     for (std::int64_t e = threadIdx.x; e < below * nrhs; e += blockDim.x) {
       const std::int64_t i = i0 + e % below, r = e / below;
-      W[i + r * m] -= tile_dot<Batch>(L + j0 * m + i, m, W + r * m + j0, w);
+      const double* x = W + r * m + j0;
+      if constexpr (Batch >= 16) {
+        if (e == threadIdx.x) {  // the prefetched row (lv is zero past w)
+          double s4[4] = {0.0, 0.0, 0.0, 0.0};
+#ifdef __CUDA_ARCH__
+#pragma unroll
+#endif
+          for (int q = 0; q < kTile; ++q) s4[q % 4] += lv[q] * (q < w ? x[q] : 0.0);
+          W[i + r * m] -= (s4[0] + s4[1]) + (s4[2] + s4[3]);
+          continue;
+        }
+      }
+      W[i + r * m] -= tile_dot<Batch>(L + j0 * m + i, m, x, w);
     }
-    if (i0 < k) load_tile(L + i0 * m + i0, m, min64(kTile, k - i0), tile, false);
     __syncthreads();
   }
 }
@@ -391,20 +416,45 @@ __device__ void sweep_backward(const SolveTree& t, std::int64_t f, double* scrat
   for (std::int64_t j0 = last; j0 >= 0; j0 -= kTile) {
     const std::int64_t w = min64(kTile, k - j0);
     if (lu) {
+      // Batch ≥ 16: the thread's first row above the tile has its U(i, tile) loaded before
+      // the triangle (as in sweep_forward)
+      double lv[kTile];
+      if constexpr (Batch >= 16) {
+        if (threadIdx.x < j0 * nrhs) {
+          const double* a = L + j0 * m + threadIdx.x % j0;
+#ifdef __CUDA_ARCH__
+#pragma unroll
+#endif
+          for (int q = 0; q < kTile; ++q) lv[q] = q < w ? a[q * m] : 0.0;
+        }
+      }
       warp_triangle(tile, m, w, W + j0, nrhs, false, false);
       __syncthreads();
-      // rows above the tile: W(i) −= U(i, tile)·W(tile); and the tile before into shared
-      // memory
+      // the tile before into shared memory, and the rows above the tile: W(i) −= U(i, tile)
+      // ·W(tile)
+      if (j0 > 0) load_tile(L + (j0 - kTile) * m + (j0 - kTile), m, kTile, tile, false);
       for (std::int64_t e = threadIdx.x; e < j0 * nrhs; e += blockDim.x) {
         const std::int64_t i = e % j0, r = e / j0;
-        W[i + r * m] -= tile_dot<Batch>(L + j0 * m + i, m, W + r * m + j0, w);
+        const double* x = W + r * m + j0;
+        if constexpr (Batch >= 16) {
+          if (e == threadIdx.x) {  // the prefetched row (lv is zero past w)
+            double s4[4] = {0.0, 0.0, 0.0, 0.0};
+#ifdef __CUDA_ARCH__
+#pragma unroll
+#endif
+            for (int q = 0; q < kTile; ++q) s4[q % 4] += lv[q] * (q < w ? x[q] : 0.0);
+            W[i + r * m] -= (s4[0] + s4[1]) + (s4[2] + s4[3]);
+            continue;
+          }
+        }
+        W[i + r * m] -= tile_dot<Batch>(L + j0 * m + i, m, x, w);
       }
-      if (j0 > 0) load_tile(L + (j0 - kTile) * m + (j0 - kTile), m, kTile, tile, false);
       __syncthreads();
     } else {
-      // the tile's columns: W(j) −= L(i0:m, j)·W(i0:m), rows i0 = j0 + w on are solved; and
-      // the tile's L11ᵀ into shared memory
+      // the tile's L11ᵀ into shared memory, and the tile's columns: W(j) −= L(i0:m, j)·
+      // W(i0:m), rows i0 = j0 + w on are solved
       const std::int64_t i0 = j0 + w;
+      load_tile(L + j0 * m + j0, m, w, tile, true);  // its loads in flight with the dots
       for (std::int64_t q = warp; q < w * nrhs; q += nwarps) {
         const std::int64_t j = j0 + q % w, r = q / w;
         const double* Lj = L + j * m;
@@ -414,14 +464,13 @@ __device__ void sweep_backward(const SolveTree& t, std::int64_t f, double* scrat
         if constexpr (Batch >= 16) {  // loads of four rows per lane in flight
           double s4[4] = {0.0, 0.0, 0.0, 0.0};
           for (; i + 3 * kWarp < row_end; i += 4 * kWarp)
-            for (int q = 0; q < 4; ++q) s4[q] += Lj[i + q * kWarp] * Wr[i + q * kWarp];
+            for (int u = 0; u < 4; ++u) s4[u] += Lj[i + u * kWarp] * Wr[i + u * kWarp];
           s = (s4[0] + s4[1]) + (s4[2] + s4[3]);
         }
         for (; i < row_end; i += kWarp) s += Lj[i] * Wr[i];
         for (int off = kWarp / 2; off > 0; off /= 2) s += __shfl_down_sync(kFullMask, s, off);
         if (lane == 0) Wr[j] -= s;
       }
-      load_tile(L + j0 * m + j0, m, w, tile, true);
       __syncthreads();
       warp_triangle(tile, m, w, W + j0, nrhs, false, unit);
       __syncthreads();

@@ -54,13 +54,15 @@ __global__ void scatter_backward_kernel(SolveTree t, SolveChunks c, std::int64_t
   solve_device::scatter_backward(t, f, i0, i1, x, scratch, nrhs, lu);
 }
 
-__global__ void sweep_forward_kernel(SolveTree t, const std::int64_t* fronts, std::int64_t begin,
-                                     double* scratch, std::int64_t nrhs, bool unit) {
+__global__ void __launch_bounds__(kSweepThreads, 2)
+    sweep_forward_kernel(SolveTree t, const std::int64_t* fronts, std::int64_t begin,
+                         double* scratch, std::int64_t nrhs, bool unit) {
   solve_device::sweep_forward<kTallBatch>(t, fronts[begin + blockIdx.x], scratch, nrhs, unit);
 }
 
-__global__ void sweep_backward_kernel(SolveTree t, const std::int64_t* fronts, std::int64_t begin,
-                                      double* scratch, std::int64_t nrhs, bool lu, bool unit) {
+__global__ void __launch_bounds__(kSweepThreads, 2)
+    sweep_backward_kernel(SolveTree t, const std::int64_t* fronts, std::int64_t begin,
+                          double* scratch, std::int64_t nrhs, bool lu, bool unit) {
   solve_device::sweep_backward<kTallBatch>(t, fronts[begin + blockIdx.x], scratch, nrhs, lu, unit);
 }
 
