@@ -195,18 +195,20 @@ __device__ void backward_partials(const SolveTree& t, std::int64_t f, std::int64
       __syncthreads();
       for (std::int64_t e = threadIdx.x; e < (nsl > 1 ? nsl * k : k); e += blockDim.x) {
         const std::int64_t j = e % k, sl = e / k;
-        const double* u = U12 + j + (lo - k) * k;  // u[i·k]: U12(j, lo − k + i)
-        double a = 0.0, b = 0.0;                   // two rows' loads in flight
+        const double* u = U12 + j + (lo - k) * k;                  // u[i·k]: U12(j, lo − k + i)
+        double acc[8] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};  // 8 loads in flight
         std::int64_t i = sl;
-        for (; i + nsl < len; i += 2 * nsl) {
-          a += u[i * k] * xs[i];
-          b += u[(i + nsl) * k] * xs[i + nsl];
-        }
-        if (i < len) a += u[i * k] * xs[i];
+        for (; i + 7 * nsl < len; i += 8 * nsl)
+#ifdef __CUDA_ARCH__
+#pragma unroll
+#endif
+          for (int q = 0; q < 8; ++q) acc[q] += u[(i + q * nsl) * k] * xs[i + q * nsl];
+        for (; i < len; i += nsl) acc[0] += u[i * k] * xs[i];
+        const double sum = pair_sum<8>(acc);
         if (nsl > 1)
-          sums[e] = a + b;
+          sums[e] = sum;
         else
-          P[j + r * k] = a + b;
+          P[j + r * k] = sum;
       }
       __syncthreads();
       if (nsl > 1)
