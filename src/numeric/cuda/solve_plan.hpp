@@ -254,8 +254,8 @@ inline SolvePlan make_solve_plan(const symbolic::AssemblyTree& t,
           best = q;
         }
         // the fronts on the library run kSolveLanes side by side, the largest first: the
-        // level waits for the first lane's
-        if (q < nl && q % kSolveLanes == 0) lib += t_library(rest[q]);
+        // level waits for the first lane's, and for every other front's launches
+        if (q < nl) lib += q % kSolveLanes == 0 ? t_library(rest[q]) : kLaunchSeconds;
       }
     }
     if (level_time) *level_time = best_time;
