@@ -310,6 +310,50 @@ __device__ void warp_triangle(const double* tile, std::int64_t m, std::int64_t w
   }
 }
 
+// Batch ≥ 16: this thread's first item of update_tile_rows (row row0 + threadIdx.x %
+// count, when threadIdx.x < count·nrhs) has the tile's w entries of its row of A (A the
+// panel's columns of the tile, leading dimension m) loaded into lv (zero past w), so that
+// their latency passes during the warp's triangle. Nothing for Batch < 16.
+template <int Batch>
+__device__ void prefetch_tile_row(const double* A, std::int64_t m, std::int64_t row0,
+                                  std::int64_t count, std::int64_t nrhs, std::int64_t w,
+                                  double* lv) {
+  if constexpr (Batch >= 16) {
+    if (threadIdx.x < count * nrhs) {
+      const double* a = A + row0 + threadIdx.x % count;
+#ifdef __CUDA_ARCH__
+#pragma unroll
+#endif
+      for (int q = 0; q < kTile; ++q) lv[q] = q < w ? a[q * m] : 0.0;
+    }
+  }
+}
+
+// W(i) −= A(i, tile)·W(j0 : j0 + w) for rows i in [row0, row0 + count) and every
+// right-hand side, one thread per (row, right-hand side); the thread's first one from lv
+// (prefetch_tile_row) when Batch ≥ 16.
+template <int Batch>
+__device__ void update_tile_rows(const double* A, std::int64_t m, std::int64_t row0,
+                                 std::int64_t count, std::int64_t j0, std::int64_t w, double* W,
+                                 std::int64_t nrhs, const double* lv) {
+  for (std::int64_t e = threadIdx.x; e < count * nrhs; e += blockDim.x) {
+    const std::int64_t i = row0 + e % count, r = e / count;
+    const double* x = W + r * m + j0;
+    if constexpr (Batch >= 16) {
+      if (e == threadIdx.x) {  // the prefetched row (lv is zero past w)
+        double s4[4] = {0.0, 0.0, 0.0, 0.0};
+#ifdef __CUDA_ARCH__
+#pragma unroll
+#endif
+        for (int q = 0; q < kTile; ++q) s4[q % 4] += lv[q] * (q < w ? x[q] : 0.0);
+        W[i + r * m] -= (s4[0] + s4[1]) + (s4[2] + s4[3]);
+        continue;
+      }
+    }
+    W[i + r * m] -= tile_dot<Batch>(A + i, m, x, w);
+  }
+}
+
 /// Forward sweep of one front (W gathered). `unit`: L11 has a unit diagonal.
 template <int Batch>
 __device__ void sweep_forward(const SolveTree& t, std::int64_t f, double* scratch,
@@ -328,36 +372,13 @@ __device__ void sweep_forward(const SolveTree& t, std::int64_t f, double* scratc
     // Batch ≥ 16 (a tall front, few blocks): the thread's first row below the tile has its
     // L(i, tile) loaded before the triangle, whose dependent steps hide the latency
     double lv[kTile];
-    if constexpr (Batch >= 16) {
-      if (threadIdx.x < below * nrhs) {
-        const double* a = L + j0 * m + i0 + threadIdx.x % below;
-#ifdef __CUDA_ARCH__
-#pragma unroll
-#endif
-        for (int q = 0; q < kTile; ++q) lv[q] = q < w ? a[q * m] : 0.0;
-      }
-    }
+    prefetch_tile_row<Batch>(L + j0 * m, m, i0, below, nrhs, w, lv);
     warp_triangle(tile, m, w, W + j0, nrhs, true, unit);
     __syncthreads();
     // the next tile into shared memory (its loads in flight with the products below), and
     // the rows below the tile: W(i) −= L(i, tile)·W(tile)
     if (i0 < k) load_tile(L + i0 * m + i0, m, min64(kTile, k - i0), tile, false);
-    for (std::int64_t e = threadIdx.x; e < below * nrhs; e += blockDim.x) {
-      const std::int64_t i = i0 + e % below, r = e / below;
-      const double* x = W + r * m + j0;
-      if constexpr (Batch >= 16) {
-        if (e == threadIdx.x) {  // the prefetched row (lv is zero past w)
-          double s4[4] = {0.0, 0.0, 0.0, 0.0};
-#ifdef __CUDA_ARCH__
-#pragma unroll
-#endif
-          for (int q = 0; q < kTile; ++q) s4[q % 4] += lv[q] * (q < w ? x[q] : 0.0);
-          W[i + r * m] -= (s4[0] + s4[1]) + (s4[2] + s4[3]);
-          continue;
-        }
-      }
-      W[i + r * m] -= tile_dot<Batch>(L + j0 * m + i, m, x, w);
-    }
+    update_tile_rows<Batch>(L + j0 * m, m, i0, below, j0, w, W, nrhs, lv);
     __syncthreads();
   }
 }
@@ -421,36 +442,13 @@ __device__ void sweep_backward(const SolveTree& t, std::int64_t f, double* scrat
       // Batch ≥ 16: the thread's first row above the tile has its U(i, tile) loaded before
       // the triangle (as in sweep_forward)
       double lv[kTile];
-      if constexpr (Batch >= 16) {
-        if (threadIdx.x < j0 * nrhs) {
-          const double* a = L + j0 * m + threadIdx.x % j0;
-#ifdef __CUDA_ARCH__
-#pragma unroll
-#endif
-          for (int q = 0; q < kTile; ++q) lv[q] = q < w ? a[q * m] : 0.0;
-        }
-      }
+      prefetch_tile_row<Batch>(L + j0 * m, m, 0, j0, nrhs, w, lv);
       warp_triangle(tile, m, w, W + j0, nrhs, false, false);
       __syncthreads();
       // the tile before into shared memory, and the rows above the tile: W(i) −= U(i, tile)
       // ·W(tile)
       if (j0 > 0) load_tile(L + (j0 - kTile) * m + (j0 - kTile), m, kTile, tile, false);
-      for (std::int64_t e = threadIdx.x; e < j0 * nrhs; e += blockDim.x) {
-        const std::int64_t i = e % j0, r = e / j0;
-        const double* x = W + r * m + j0;
-        if constexpr (Batch >= 16) {
-          if (e == threadIdx.x) {  // the prefetched row (lv is zero past w)
-            double s4[4] = {0.0, 0.0, 0.0, 0.0};
-#ifdef __CUDA_ARCH__
-#pragma unroll
-#endif
-            for (int q = 0; q < kTile; ++q) s4[q % 4] += lv[q] * (q < w ? x[q] : 0.0);
-            W[i + r * m] -= (s4[0] + s4[1]) + (s4[2] + s4[3]);
-            continue;
-          }
-        }
-        W[i + r * m] -= tile_dot<Batch>(L + j0 * m + i, m, x, w);
-      }
+      update_tile_rows<Batch>(L + j0 * m, m, 0, j0, j0, w, W, nrhs, lv);
       __syncthreads();
     } else {
       // the tile's L11ᵀ into shared memory, and the tile's columns: W(j) −= L(i0:m, j)·
