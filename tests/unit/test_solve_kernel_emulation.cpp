@@ -208,12 +208,16 @@ struct HostOps {
 
 struct EmulationCounts {
   index_t block_fronts = 0, library_fronts = 0, subtrees = 0, tall_fronts = 0;
+  index_t batch4_fronts = 0, batch16_fronts = 0;  ///< block-path fronts by kernel variant
 };
 
-// The device solve of cuda_solve.cu, step for step, on the host. x: n×nrhs.
+// The device solve of cuda_solve.cu, step for step, on the host. x: n×nrhs. few_blocks:
+// the block path's launches of at most this many blocks run the 16-batch variant
+// (kFewFrontBlocks on the device; 0 runs the other everywhere).
 void emulate_device_solve(const Analysis& an, const numeric::NumericFactor& fac, const SolvePlan& p,
                           std::vector<double>& x, index_t nrhs, unsigned sweep_threads,
-                          EmulationCounts& counts) {
+                          EmulationCounts& counts,
+                          std::int64_t few_blocks = cuda::kFewFrontBlocks) {
   const auto& t = an.tree;
   const index_t nf = t.n_fronts();
   const bool lu = fac.type == MatrixType::general;
@@ -270,19 +274,36 @@ void emulate_device_solve(const Analysis& an, const numeric::NumericFactor& fac,
   };
   namespace dev = cuda::solve_device;
   const std::size_t n_subtrees = p.subtree_first.size();
+  // the block path's launches: the variant the device picks by the launch's block count
+  const bool few_subtrees = static_cast<std::int64_t>(n_subtrees) <= few_blocks;
+  auto few = [&](index_t l) { return p.small_offsets[l + 1] - p.small_offsets[l] <= few_blocks; };
+  auto forward = [&](std::int64_t f, bool batch16) {
+    if (batch16)
+      dev::front_forward<16>(st, f, X, U, S, nrhs, unit, lu);
+    else
+      dev::front_forward<4>(st, f, X, U, S, nrhs, unit, lu);
+  };
+  auto backward = [&](std::int64_t f, bool batch16) {
+    if (batch16)
+      dev::front_backward<16>(st, f, X, S, nrhs, lu, unit);
+    else
+      dev::front_backward<4>(st, f, X, S, nrhs, lu, unit);
+  };
   for (std::size_t q = 0; q < n_subtrees; ++q) {
     run_block(sweep_threads, [&] {
       for (std::int64_t f = p.subtree_first[q]; f <= p.subtree_last[q]; ++f)
-        dev::front_forward(st, f, X, U, S, nrhs, unit, lu);
+        forward(f, few_subtrees);
     });
     counts.block_fronts += p.subtree_last[q] - p.subtree_first[q] + 1;
+    (few_subtrees ? counts.batch16_fronts : counts.batch4_fronts) +=
+        p.subtree_last[q] - p.subtree_first[q] + 1;
     ++counts.subtrees;
   }
   for (index_t l = 0; l < an.schedule.n_levels(); ++l) {
     for (std::int64_t q = p.small_offsets[l]; q < p.small_offsets[l + 1]; ++q) {
-      run_block(sweep_threads,
-                [&] { dev::front_forward(st, p.small_fronts[q], X, U, S, nrhs, unit, lu); });
+      run_block(sweep_threads, [&] { forward(p.small_fronts[q], few(l)); });
       ++counts.block_fronts;
+      ++(few(l) ? counts.batch16_fronts : counts.batch4_fronts);
     }
     chunks(l, [&](std::int64_t f, std::int64_t i0, std::int64_t i1) {
       dev::gather_forward(st, f, i0, i1, X, U, S, nrhs);
@@ -308,8 +329,7 @@ void emulate_device_solve(const Analysis& an, const numeric::NumericFactor& fac,
       dev::diagonal(st, q, fac.d_diag.data(), fac.d_off.data(), fac.pivot_size.data(), X, nrhs);
   for (index_t l = an.schedule.n_levels() - 1; l >= 0; --l) {
     for (std::int64_t q = p.small_offsets[l]; q < p.small_offsets[l + 1]; ++q)
-      run_block(sweep_threads,
-                [&] { dev::front_backward(st, p.small_fronts[q], X, S, nrhs, lu, unit); });
+      run_block(sweep_threads, [&] { backward(p.small_fronts[q], few(l)); });
     chunks(l, [&](std::int64_t f, std::int64_t i0, std::int64_t i1) {
       dev::gather_backward(st, f, i0, i1, X, S, nrhs, lu);
     });
@@ -333,7 +353,7 @@ void emulate_device_solve(const Analysis& an, const numeric::NumericFactor& fac,
   for (std::size_t q = 0; q < n_subtrees; ++q)
     run_block(sweep_threads, [&] {
       for (std::int64_t f = p.subtree_last[q]; f >= p.subtree_first[q]; --f)
-        dev::front_backward(st, f, X, S, nrhs, lu, unit);
+        backward(f, few_subtrees);
     });
 }
 
@@ -347,7 +367,8 @@ double max_abs(const std::vector<double>& v) {
 
 // Factors a on the CPU, then solves random right-hand sides both ways and compares.
 void check_problem(const Problem& pr, std::mt19937_64& rng, std::initializer_list<SolvePath> paths,
-                   unsigned sweep_threads, int n_sm, EmulationCounts& counts) {
+                   unsigned sweep_threads, int n_sm, EmulationCounts& counts,
+                   std::int64_t few_blocks = cuda::kFewFrontBlocks) {
   SCOPED_TRACE(pr.name);
   Options o;
   o.type = pr.type;
@@ -369,7 +390,7 @@ void check_problem(const Problem& pr, std::mt19937_64& rng, std::initializer_lis
       for (double& v : b) v = u(rng);
       std::vector<double> ref = b, got = b;
       numeric::solve_in_place(an, fac, ref.data(), nrhs);
-      emulate_device_solve(an, fac, plan, got, nrhs, sweep_threads, counts);
+      emulate_device_solve(an, fac, plan, got, nrhs, sweep_threads, counts, few_blocks);
       // Two summation orders of a solve with the same factor differ by about u·κ relative
       // to x, and random matrices are now and then badly conditioned. κ̂ = max|B|·‖x‖∞/‖b‖∞
       // is a lower bound on κ∞(B) that for random b is within about √n·(entries per row)
@@ -470,6 +491,15 @@ TEST(SolveKernelEmulation, LibraryPathLargeFronts) {
     check_problem(pr, rng, {SolvePath::all_block}, 32, 132, counts);
     EXPECT_GT(counts.tall_fronts, before);
   }
+  // the block path's two kernel variants: the device's choice by block count ran the one
+  // with 16 loads in flight above; the other one (launches of more than kFewFrontBlocks
+  // blocks), forced on every launch
+  EXPECT_GT(counts.batch16_fronts, 0);
+  for (const Problem& pr : problems) {
+    SCOPED_TRACE(pr.name + ", the 4-batch variant");
+    check_problem(pr, rng, {SolvePath::all_block, SolvePath::block_subtrees}, 32, 132, counts, 0);
+  }
+  EXPECT_GT(counts.batch4_fronts, 0);
 }
 
 // The planner: every front solved exactly once, in a subtree (a front and all its

@@ -480,26 +480,28 @@ __device__ void sweep_backward(const SolveTree& t, std::int64_t f, double* scrat
 
 /// The whole forward step of front f by one block: gather, sweep and scatter, with a
 /// barrier after each, the last so that the next front the block solves (a parent in the
-/// same subtree) reads the update vector this one wrote.
+/// same subtree) reads the update vector this one wrote. Batch: the sweep's (tile_dot).
+template <int Batch>
 __device__ void front_forward(const SolveTree& t, std::int64_t f, double* x, double* u,
                               double* scratch, std::int64_t nrhs, bool unit, bool lu) {
   const std::int64_t m = t.n_rows[f];
   gather_forward(t, f, 0, m, x, u, scratch, nrhs);
   __syncthreads();
-  sweep_forward<4>(t, f, scratch, nrhs, unit);
+  sweep_forward<Batch>(t, f, scratch, nrhs, unit);
   __syncthreads();
-  scatter_forward<4>(t, f, 0, m, x, u, scratch, nrhs, lu);
+  scatter_forward<Batch>(t, f, 0, m, x, u, scratch, nrhs, lu);
   __syncthreads();
 }
 
 /// The whole backward step of front f by one block (gather, sweep, scatter; barriers as
 /// in front_forward: the next front of the block, a child, reads the pivots written here).
+template <int Batch>
 __device__ void front_backward(const SolveTree& t, std::int64_t f, double* x, double* scratch,
                                std::int64_t nrhs, bool lu, bool unit) {
   const std::int64_t m = t.n_rows[f];
   gather_backward(t, f, 0, m, x, scratch, nrhs, lu);
   __syncthreads();
-  sweep_backward<4>(t, f, scratch, nrhs, lu, unit);
+  sweep_backward<Batch>(t, f, scratch, nrhs, lu, unit);
   __syncthreads();
   scatter_backward(t, f, 0, m, x, scratch, nrhs, lu);
   __syncthreads();

@@ -68,22 +68,27 @@ __global__ void __launch_bounds__(kSweepThreads, 2)
 
 // Block q solves fronts first[begin + q] .. last[begin + q] in that order (forward) or in
 // the reverse order (backward): one front per block for a level's fronts (first == last),
-// a subtree in postorder for the subtrees.
-__global__ void fronts_forward_kernel(SolveTree t, const std::int64_t* first,
-                                      const std::int64_t* last, std::int64_t begin, double* x,
-                                      double* u, double* scratch, std::int64_t nrhs, bool unit,
-                                      bool lu) {
+// a subtree in postorder for the subtrees. Batch 16 (launches of at most kFewFrontBlocks
+// blocks): more loads in flight per thread, 128 registers, two blocks per SM; Batch 4: 64
+// registers, four blocks per SM, for launches of many blocks.
+template <int Batch>
+__global__ void __launch_bounds__(kSweepThreads, Batch >= 16 ? 2 : 4)
+    fronts_forward_kernel(SolveTree t, const std::int64_t* first, const std::int64_t* last,
+                          std::int64_t begin, double* x, double* u, double* scratch,
+                          std::int64_t nrhs, bool unit, bool lu) {
   const std::int64_t q = begin + blockIdx.x;
   for (std::int64_t f = first[q]; f <= last[q]; ++f)
-    solve_device::front_forward(t, f, x, u, scratch, nrhs, unit, lu);
+    solve_device::front_forward<Batch>(t, f, x, u, scratch, nrhs, unit, lu);
 }
 
-__global__ void fronts_backward_kernel(SolveTree t, const std::int64_t* first,
-                                       const std::int64_t* last, std::int64_t begin, double* x,
-                                       double* scratch, std::int64_t nrhs, bool lu, bool unit) {
+template <int Batch>
+__global__ void __launch_bounds__(kSweepThreads, Batch >= 16 ? 2 : 4)
+    fronts_backward_kernel(SolveTree t, const std::int64_t* first, const std::int64_t* last,
+                           std::int64_t begin, double* x, double* scratch, std::int64_t nrhs,
+                           bool lu, bool unit) {
   const std::int64_t q = begin + blockIdx.x;
   for (std::int64_t f = last[q]; f >= first[q]; --f)
-    solve_device::front_backward(t, f, x, scratch, nrhs, lu, unit);
+    solve_device::front_backward<Batch>(t, f, x, scratch, nrhs, lu, unit);
 }
 
 __global__ void diagonal_kernel(SolveTree t, const double* d_diag, const double* d_off,
@@ -125,8 +130,12 @@ void launch_fronts_forward(const SolveTree& t, const std::int64_t* first, const 
                            std::int64_t begin, std::int64_t count, double* x, double* u,
                            double* scratch, std::int64_t nrhs, bool unit, bool lu, cudaStream_t s) {
   if (count == 0) return;
-  fronts_forward_kernel<<<static_cast<unsigned>(count), kSweepThreads, 0, s>>>(
-      t, first, last, begin, x, u, scratch, nrhs, unit, lu);
+  if (count <= kFewFrontBlocks)
+    fronts_forward_kernel<kTallBatch><<<static_cast<unsigned>(count), kSweepThreads, 0, s>>>(
+        t, first, last, begin, x, u, scratch, nrhs, unit, lu);
+  else
+    fronts_forward_kernel<4><<<static_cast<unsigned>(count), kSweepThreads, 0, s>>>(
+        t, first, last, begin, x, u, scratch, nrhs, unit, lu);
   STRATA_CUDA_LAUNCH();
 }
 
@@ -134,8 +143,12 @@ void launch_fronts_backward(const SolveTree& t, const std::int64_t* first, const
                             std::int64_t begin, std::int64_t count, double* x, double* scratch,
                             std::int64_t nrhs, bool lu, bool unit, cudaStream_t s) {
   if (count == 0) return;
-  fronts_backward_kernel<<<static_cast<unsigned>(count), kSweepThreads, 0, s>>>(
-      t, first, last, begin, x, scratch, nrhs, lu, unit);
+  if (count <= kFewFrontBlocks)
+    fronts_backward_kernel<kTallBatch><<<static_cast<unsigned>(count), kSweepThreads, 0, s>>>(
+        t, first, last, begin, x, scratch, nrhs, lu, unit);
+  else
+    fronts_backward_kernel<4><<<static_cast<unsigned>(count), kSweepThreads, 0, s>>>(
+        t, first, last, begin, x, scratch, nrhs, lu, unit);
   STRATA_CUDA_LAUNCH();
 }
 

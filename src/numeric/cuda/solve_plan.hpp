@@ -64,6 +64,12 @@ struct SolveTree {
 /// Rows of one front handled by one block of the gather and scatter kernels.
 constexpr std::int64_t kChunkRows = 256;
 
+/// A launch of the block path (solve_kernels.cu: fronts_forward/backward_kernel) of at
+/// most this many blocks — two per SM of a 132-SM GPU — runs the variant with 16 loads in
+/// flight per thread (few blocks: latency-bound); larger ones the variant with 4 and
+/// fewer registers (more blocks per SM).
+constexpr std::int64_t kFewFrontBlocks = 264;
+
 /// The chunks of a tall front (m rows, k pivots) that hold rows of L21 (rows k..m−1): the
 /// first is chunk k / kChunkRows of the front; their number.
 inline std::int64_t product_chunks(std::int64_t m, std::int64_t k) {
