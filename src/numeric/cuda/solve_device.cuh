@@ -59,11 +59,6 @@ constexpr unsigned kFullMask = 0xffffffffu;
 
 __device__ std::int64_t min64(std::int64_t a, std::int64_t b) { return a < b ? a : b; }
 
-// s = Σ_{j<w} A[j·lda]·x[j] with Batch (4 or 16) independent sums, the loads of a batch of
-// columns issued before the first multiply waits for one. A thread's loads in flight are
-// what keeps the memory busy where few blocks run (a tall front's triangle and products:
-// 16); the block path's kernels, many blocks of small fronts, keep 4 (fewer registers,
-// more blocks per SM).
 // s[0] + … + s[N−1] summed pairwise (N a power of two).
 template <int N>
 __device__ double pair_sum(const double* s) {
@@ -73,6 +68,11 @@ __device__ double pair_sum(const double* s) {
     return pair_sum<N / 2>(s) + pair_sum<N / 2>(s + N / 2);
 }
 
+// s = Σ_{j<w} A[j·lda]·x[j] with Batch (4 or 16) independent sums, the loads of a batch of
+// columns issued before the first multiply waits for one. A thread's loads in flight are
+// what keeps the memory busy where few blocks run (a tall front's triangle and products,
+// a level's few fronts near the top: 16); launches of many blocks keep 4 (fewer
+// registers, more blocks per SM).
 template <int Batch>
 __device__ double tile_dot(const double* a, std::int64_t lda, const double* x, std::int64_t w) {
   double s[Batch];
@@ -151,7 +151,8 @@ __device__ std::int64_t backward_col(const std::int64_t* prow, std::int64_t fp, 
   return lu && i < k ? fp + i : prow[i];
 }
 
-/// Backward gather of rows [i0, i1) of front f.
+/// Backward gather of rows [i0, i1) of front f (of a tall front only its pivot rows: the
+/// rest enter through backward_partials, which reads them from x).
 __device__ void gather_backward(const SolveTree& t, std::int64_t f, std::int64_t i0,
                                 std::int64_t i1, const double* x, double* scratch,
                                 std::int64_t nrhs, bool lu) {
@@ -159,7 +160,8 @@ __device__ void gather_backward(const SolveTree& t, std::int64_t f, std::int64_t
   const std::int64_t ro = t.row_offsets[f];
   const std::int64_t* prow = t.rows + ro;
   double* W = scratch + ro * nrhs;
-  const std::int64_t len = i1 - i0;
+  const std::int64_t end = t.part_offset[f] >= 0 ? min64(i1, k) : i1;
+  const std::int64_t len = end > i0 ? end - i0 : 0;
   for (std::int64_t e = threadIdx.x; e < len * nrhs; e += blockDim.x) {
     const std::int64_t i = i0 + e % len, r = e / len;
     W[i + r * m] = x[backward_col(prow, fp, k, i, lu) + r * t.n];
