@@ -10,8 +10,10 @@
 // redone, nnz(L), flops, subtrees, LPT balance, upper layers and their parts, the share
 // of the flops in the upper layers and in the final top part) and, unless
 // --no-factor, one factorization (reported apart as first_factor_seconds), then the median of
-// --repeat refactorizations, the backward error of one solve and the per-worker statistics of the
-// last run (busy, idle, subtrees run and stolen, upper parts run, bytes transferred).
+// --repeat refactorizations, the backward error of one solve, the median of --repeat
+// applications of the factor (first_solve_seconds; solve_on_device: on the GPUs holding the
+// parts) and the per-worker statistics of the last run (busy, idle, subtrees run and
+// stolen, upper parts run, bytes transferred).
 // --budget-share R (a list; 0: no budget) sets device_memory_limit to the per-GPU share of
 // the factor, factor bytes / workers / R, found by a first analysis (issue 6's "budget far
 // below the per-GPU factor share"); the row then also reports tiled fronts, spilled blocks
@@ -19,23 +21,25 @@
 // by path (the multibody Newton matrices of scripts/gpu/run_mechanical.sh). --backend
 // cuda runs on that many GPUs (the lent machines);
 // --backend cpu stands N host executors of --threads-per-worker threads each in for N
-// GPUs (the same driver, for machines without GPUs). Results: bench/results/multigpu-*.json.
+// GPUs (the same driver, for machines without GPUs). --solver-option sets any strata option
+// for every run (e.g. gpu_solve_parts=false). Results: bench/results/multigpu-*.json.
 //
 //   bench_multigpu [--problems a,b,...] [--backend cpu|cuda] [--workers 1,2,4]
 //                  [--subtrees 4] [--balance on,off] [--stealing on,off]
 //                  [--split-top on,off] [--split-fronts 2048,0] [--budget-share 0,20]
 //                  [--repeat R] [--max-block-size B]
-//                  [--threads-per-worker T] [--no-factor] [--tag NAME] [--results-dir DIR]
+//                  [--threads-per-worker T] [--no-factor] [--solver-option NAME=VALUE]...
+//                  [--tag NAME] [--results-dir DIR]
 #include <fmt/core.h>
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <memory>
 
+#include "base/timer.hpp"
 #include "bench_common.hpp"
 #include "core/solver_internal.hpp"
 #include "core/stats_json.hpp"
-#include "base/timer.hpp"
 #include "crash_report.hpp"
 #include "strata/strata.hpp"
 
@@ -94,23 +98,42 @@ int main(int argc, char** argv) {
   app.add_option("--repeat", repeat, "factorizations per measurement (median reported)");
   app.add_option("--threads-per-worker", threads_per_worker, "host threads of each CPU worker");
   app.add_flag("--no-factor", no_factor, "analysis figures only");
+  std::vector<std::string> solver_options;
+  app.add_option("--solver-option", solver_options,
+                 "a strata option for every run, NAME=VALUE (the names of strata::set_option, "
+                 "as strata simulate --solver-option); repeatable");
   app.add_option("--tag", tag, "label stored in the results and the file name")
       ->check(bench::check_tag);
   app.add_option("--results-dir", results_dir, "folder for the results file");
   CLI11_PARSE(app, argc, argv);
+  Options base;
+  for (const std::string& so : solver_options) {
+    const auto eq = so.find('=');
+    if (eq == std::string::npos) {
+      fmt::print(stderr, "bench_multigpu: --solver-option takes NAME=VALUE, got '{}'\n", so);
+      return 2;
+    }
+    try {
+      set_option(base, so.substr(0, eq), so.substr(eq + 1));
+    } catch (const Error& e) {
+      fmt::print(stderr, "bench_multigpu: --solver-option {}: {}\n", so, e.what());
+      return 2;
+    }
+  }
 
   json out = bench::run_metadata(argc, argv);
   out["benchmark"] = "multigpu";
   out["backend"] = backend;
   out["tag"] = tag;
+  out["solver_options"] = solver_options;
   out["rows"] = json::array();
   fmt::print(
       "{:<12} {:>2} {:>2} {:>3} {:>3} {:>3} {:>5} {:>9} {:>8} {:>8} {:>5} {:>9} {:>4} {:>7} {:>5} "
       "{:>6} "
-      "{:>6} {:>5} {:>8} {:>8} {:>9}\n",
+      "{:>6} {:>5} {:>8} {:>8} {:>9} {:>9}\n",
       "problem", "W", "s", "bal", "stl", "top", "splcb", "dist/blk", "order s", "bal s", "rebis",
       "flops", "subt", "balance", "layer", "upp %", "top %", "est x", "factor s", "berr",
-      "budget MB");
+      "budget MB", "solve ms");
   for (const std::string& name : problems) {
     const bench::Problem p = bench::load_problem(name);
     std::vector<double> b(p.a.n_rows);
@@ -127,7 +150,7 @@ int main(int argc, char** argv) {
                 for (const index_t split_cb : split_fronts)
                   for (const index_t dist : dist_fronts)
                     for (const index_t dist_block : dist_blocks) {
-                      Options o;
+                      Options o = base;  // --solver-option, then this row's settings
                       o.type = p.symmetric ? MatrixType::spd : MatrixType::general;
                       o.subtrees_per_gpu = s;
                       o.balance_by_work = bal == "on";
@@ -194,7 +217,7 @@ int main(int argc, char** argv) {
                                   {"budget_share_ratio", share},
                                   {"device_memory_limit", o.device_memory_limit},
                                   {"factor_bytes", an.factor_bytes}};
-                      double ts = 0, berr = 0, first = 0;
+                      double ts = 0, berr = 0, first = 0, solve = 0;
                       if (!no_factor) {
                         // the first factorization sets the executors up (device buffers, pinned
                         // host memory, library handles): reported apart; the figure is the median
@@ -211,6 +234,20 @@ int main(int argc, char** argv) {
                         ts = bench::median(times);
                         const auto x = solver.solve(b);
                         berr = bench::berr(p.a, x, b);
+                        // one application of the factor (SolveStats::first_solve_seconds:
+                        // no refinement), median of --repeat solves; on the GPUs that hold
+                        // the parts, or on the host with the panels fetched
+                        std::vector<double> solves;
+                        bool on_device = false;
+                        for (int k = 0; k < repeat; ++k) {
+                          (void)solver.solve(b);
+                          solves.push_back(solver.stats().solve.first_solve_seconds);
+                          on_device = solver.stats().solve.on_device;
+                        }
+                        solve = solves.empty() ? 0.0 : bench::median(solves);
+                        row["first_solve_seconds"] = solve;
+                        row["solve_times"] = solves;
+                        row["solve_on_device"] = on_device;
                         const json devices = solver.stats().factor.devices;
                         row["factor_seconds"] = ts;
                         row["refactor_times"] = times;  // the spread behind the median
@@ -231,14 +268,15 @@ int main(int argc, char** argv) {
                           "{:>5} "
                           "{:>9.3g} "
                           "{:>4} {:>7.3f} {:>5} {:>6.1f} {:>6.1f} {:>5.2f} {:>8.3f} {:>8.1e} "
-                          "{:>9}\n",
+                          "{:>9} {:>9.3f}\n",
                           p.name, w, s, bal, stl, split, split_cb,
                           fmt::format("{}/{}", dist, dist_block), an.ordering_seconds,
                           an.nd_balance_seconds, an.nd_rebisections, an.factor_flops, an.subtrees,
                           an.subtree_balance, fmt::format("{}/{}", an.upper_layers, an.upper_parts),
                           100 * an.upper_flops_fraction, 100 * an.top_flops_fraction,
                           an.estimated_speedup, ts, berr,
-                          share > 0 ? fmt::format("{:.1f}", o.device_memory_limit * 1e-6) : "-");
+                          share > 0 ? fmt::format("{:.1f}", o.device_memory_limit * 1e-6) : "-",
+                          1e3 * solve);
                       std::fflush(stdout);
                     }
   }

@@ -182,6 +182,12 @@ struct Options {
   /// (src/numeric/cuda/cuda_solve.cu); false launches them one by one at every solve.
   /// The same bits either way. Default on.
   bool gpu_solve_graph = true;
+  /// CUDA backend on several GPUs (num_gpus > 1): a solve runs part by part on the GPUs
+  /// that hold the parts' panels, only the parts' rows of x and their contribution to the
+  /// part above crossing the bus (src/numeric/cuda/part_solve.cu); false copies every
+  /// panel to host memory at the first solve after a factorization and solves there. The
+  /// same solution to rounding either way. Default on.
+  bool gpu_solve_parts = true;
 
   // --- several GPUs (docs/multigpu.md) ---
   /// GPUs the CUDA backend factors on; 0 means every visible GPU (default 0). With more

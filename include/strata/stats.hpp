@@ -276,7 +276,9 @@ struct SolveStats {
   /// A's solutions (not the only one). False with perturbed pivots and a larger
   /// relative_residual: b is not in the range, and x solves only the perturbed matrix.
   bool singular_consistent = false;
-  bool on_device = false;  ///< the triangular solves ran on the GPU (resident factor)
+  /// The triangular solves ran on the GPU (a resident factor) or GPUs (a multi-GPU factor,
+  /// each part on the GPU that holds its panels).
+  bool on_device = false;
   /// Host threads the triangular solves ran on: a factor with delayed pivots is solved by
   /// disjoint subtrees, one group per thread, then the top of the tree (1: sequential).
   int host_threads = 1;

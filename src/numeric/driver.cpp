@@ -1,7 +1,10 @@
 // strata — the tree and multi-worker drivers of the numeric phase (see driver.hpp).
 #include "numeric/driver.hpp"
 
+#include <exception>
+#include <mutex>
 #include <string>
+#include <thread>
 
 #include "base/device.hpp"
 #include "base/timer.hpp"
@@ -37,6 +40,66 @@ class HostSolve {
   bool reproducible_;
   SubtreeSolvePlan plan_;
 };
+
+// The solve over a split factor whose every part stayed with the executor that factored
+// it (Executor::solve_held_parts; cuda/part_solve.cu): the layers of an.partition — the
+// subtrees, the upper layers, the top part — forward from the bottom, then backward from
+// the top, a layer's executors side by side on threads of their own, the parts' exports
+// handed up through a host array of update vectors. False, having done nothing, when some
+// part's panels are on the host or its executor cannot solve it where it is.
+bool solve_where_held(const Analysis& an, const std::vector<Executor*>& execs,
+                      const NumericFactor& factor, double* x, index_t nrhs) {
+  const schedule::TreePartition& tp = an.partition;
+  if (tp.part_of.size() != static_cast<std::size_t>(an.tree.n_fronts()) ||
+      factor.held.size() != static_cast<std::size_t>(tp.n_parts()))
+    return false;
+  std::vector<int> worker(static_cast<std::size_t>(tp.n_parts()), -1);
+  for (const HeldPanels& h : factor.held) {
+    if (h.part < 0 || h.part >= tp.n_parts() || h.worker < 0 ||
+        h.worker >= static_cast<int>(execs.size()) || worker[h.part] >= 0)
+      return false;
+    worker[h.part] = h.worker;
+  }
+  std::vector<std::vector<int>> layers(1);
+  for (int id = 0; id < tp.top_id(); ++id) layers[0].push_back(id);
+  for (int l = 1; l <= tp.n_upper_layers(); ++l) {
+    layers.emplace_back();
+    for (index_t q = tp.upper_layer_offsets[l - 1]; q < tp.upper_layer_offsets[l]; ++q)
+      layers.back().push_back(tp.top_id() + 1 + static_cast<int>(q));
+  }
+  layers.push_back({tp.top_id()});
+  // per layer, each executor's parts
+  std::vector<std::vector<std::vector<int>>> lists(layers.size());
+  for (std::size_t l = 0; l < layers.size(); ++l) {
+    lists[l].resize(execs.size());
+    for (const int id : layers[l]) lists[l][worker[id]].push_back(id);
+    for (std::size_t w = 0; w < execs.size(); ++w)
+      if (!lists[l][w].empty() && !execs[w]->can_solve_held_parts(an, factor, lists[l][w]))
+        return false;
+  }
+  std::vector<double> u(static_cast<std::size_t>(an.child_rows.offsets.back()) * nrhs);
+  auto run_layer = [&](std::size_t l, bool forward) {
+    std::exception_ptr error;
+    std::mutex error_mutex;
+    std::vector<std::thread> threads;
+    for (std::size_t w = 0; w < execs.size(); ++w) {
+      if (lists[l][w].empty()) continue;
+      threads.emplace_back([&, w] {
+        try {
+          execs[w]->solve_held_parts(an, factor, lists[l][w], forward, x, u.data(), nrhs);
+        } catch (...) {
+          const std::lock_guard<std::mutex> lock(error_mutex);
+          if (!error) error = std::current_exception();
+        }
+      });
+    }
+    for (std::thread& t : threads) t.join();
+    if (error) std::rethrow_exception(error);
+  };
+  for (std::size_t l = 0; l < layers.size(); ++l) run_layer(l, true);
+  for (std::size_t l = layers.size(); l-- > 0;) run_layer(l, false);
+  return true;
+}
 
 class TreeDriver final : public NumericDriver {
  public:
@@ -139,7 +202,9 @@ class MultiWorkerDriver final : public NumericDriver {
                     &devices_);
   }
   bool solve(const Analysis& an, NumericFactor& factor, double* x, index_t nrhs) override {
-    host_solve_.run(an, executors(), factor, x, nrhs);
+    const std::vector<Executor*> execs = executors();
+    if (options_.gpu_solve_parts && solve_where_held(an, execs, factor, x, nrhs)) return true;
+    host_solve_.run(an, execs, factor, x, nrhs);
     return false;
   }
   Backend backend() const override {

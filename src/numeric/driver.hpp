@@ -9,7 +9,9 @@
 //     factor stayed there;
 //   - the multi-worker driver: one executor per worker (GPUs, or CPU executors for tests
 //     and benchmarks) over the analysis's split tree (numeric::factorize_multi,
-//     multi_device.cpp), the parts' panels fetched to the host for the solve;
+//     multi_device.cpp); the solve runs part by part on the GPUs that hold the parts'
+//     panels (cuda/part_solve.cu), or on the host with the panels fetched there when some
+//     part's panels are not on a GPU (LDLᵀ, tiled fronts, a memory limit, CPU workers);
 //   - the distributed driver (src/distributed): the factorization and the solves are
 //     collective over MPI ranks.
 // The analysis is made for the driver's workers() (Analysis::partition).
@@ -60,7 +62,8 @@ class NumericDriver {
                          NumericFactor& factor) = 0;
   /// x ← F⁻¹ x with the factor of the last factorize: x in tree numbering, n × nrhs
   /// column-major. Panels kept on devices are fetched to `factor` first when the solve
-  /// runs on the host. Returns whether it ran on a GPU.
+  /// runs on the host. Returns whether it ran on GPUs (the tree driver: the resident
+  /// factor's device solve; the multi-worker driver: every part on the GPU holding it).
   virtual bool solve(const Analysis& an, NumericFactor& factor, double* x, index_t nrhs) = 0;
   /// Where the last factorization ran (FactorStats::backend; never automatic).
   virtual Backend backend() const = 0;

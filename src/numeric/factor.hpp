@@ -229,6 +229,30 @@ class Executor {
   virtual void download_panels(const Analysis& an, int part, NumericFactor& fac) {
     throw InvalidState("download_panels: this executor holds no factor panels");
   }
+  /// Whether solve_held_parts can run over `parts` (ids of an.partition, TreePartition::
+  /// part) of `fac`: this executor holds their panels from its last factorization of
+  /// this analysis, and can solve with them there. The default cannot.
+  virtual bool can_solve_held_parts(const Analysis& an, const NumericFactor& fac,
+                                    const std::vector<int>& parts) const {
+    return false;
+  }
+  /// One sweep of the triangular solve over parts of `fac` that this executor holds,
+  /// where they are (SPRAL SSIDS's numeric subtrees; cuda/part_solve.cu): `parts` of one
+  /// layer of an.partition (independent of each other), `forward` the forward sweep (L)
+  /// else the backward one (Lᵀ or U). x: host, n × nrhs column-major, tree numbering —
+  /// forward reads the right-hand sides at the parts' pivot rows and writes the forward
+  /// results there; backward reads those and the solution at the pivot rows of the fronts
+  /// above the parts, and writes the solution at the parts' pivot rows. u: host, the update
+  /// vectors of the whole tree (an.child_rows.offsets[f] is front f's, the arena's length
+  /// offsets.back() per right-hand side, column-major) — forward reads those of the parts'
+  /// children in other parts and writes those of the parts' fronts whose parent is in
+  /// another part. Other entries of x and u are neither read nor written. Throws
+  /// InternalError when can_solve_held_parts is false, DeviceError on a device failure.
+  virtual void solve_held_parts(const Analysis& an, const NumericFactor& fac,
+                                const std::vector<int>& parts, bool forward, double* x, double* u,
+                                index_t nrhs) {
+    throw InternalError("solve_held_parts: this executor holds no factor panels");
+  }
   /// Adds backend figures of the last factorization (bytes moved, device time) to `fs`.
   virtual void report(FactorStats& fs) const {}
   /// Adds this executor's per-worker figures of the last factorization that the driver

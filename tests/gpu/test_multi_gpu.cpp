@@ -4,7 +4,8 @@
 // with a slowed GPU whose subtrees are stolen, with the top part split into upper layers
 // (on by default; one test asserts it and compares with the split off), for spd,
 // symmetric indefinite and general matrices, with large fronts' updates split over the
-// idle GPUs and with top fronts factored over all GPUs (both forced onto small fronts). Each test
+// idle GPUs and with top fronts factored over all GPUs (both forced onto small fronts), and
+// the solve run part by part on the GPUs that hold the parts' panels. Each test
 // skips, with a message, where fewer GPUs are visible than it needs (or the build has no CUDA
 // backend).
 #include <gtest/gtest.h>
@@ -14,6 +15,7 @@
 #include <string>
 
 #include "analysis/analysis.hpp"
+#include "numeric/driver.hpp"
 #include "numeric/factor.hpp"
 #include "sparse/generators.hpp"
 #include "strata/strata.hpp"
@@ -161,6 +163,25 @@ void factor_on_gpus(int gpus) {
       EXPECT_LT(test::relative_difference(kept_f.panels, gpu1_f.panels), 1e-13);
       EXPECT_EQ(kept_f.rows, multi_f.rows);
     }
+    {  // the multi-worker driver: every part solved on the GPU holding it, 1 and 3
+       // right-hand sides, against the host solve with GPU 0's factor
+      numeric::MultiWorkerConfig keep;
+      keep.keep_panels_on_devices = true;
+      auto driver = numeric::make_multi_worker_driver(o, gpus, 0, keep);
+      numeric::NumericFactor f;
+      driver->factorize(an, v, false, pr.type, pivot, f);
+      const bool held = pr.type != MatrixType::symmetric_indefinite;
+      EXPECT_EQ(f.held.size(), held ? static_cast<std::size_t>(an.partition.n_parts()) : 0u);
+      for (index_t nrhs : {1, 3}) {
+        std::vector<double> x(static_cast<std::size_t>(an.n * nrhs));
+        std::uniform_real_distribution<double> u(-1, 1);
+        for (double& e : x) e = u(rng);
+        std::vector<double> ref = x;
+        numeric::solve_in_place(an, gpu1_f, ref.data(), nrhs);
+        EXPECT_EQ(driver->solve(an, f, x.data(), nrhs), held) << nrhs << " right-hand sides";
+        EXPECT_LT(test::relative_difference(x, ref), 1e-8) << nrhs << " right-hand sides";
+      }
+    }
     EXPECT_EQ(multi_f.rows, gpu1_f.rows);
     if (pr.type == MatrixType::spd) {  // no pivoting: entrywise against the CPU
       EXPECT_LT(test::relative_difference(multi_f.panels, cpu_f.panels), 1e-12);
@@ -223,6 +244,10 @@ TEST(MultiGpu, SolverSolutionsAndRefactorization) {
       EXPECT_EQ(run, st.analysis.subtrees);
       EXPECT_LE(test::backward_error(a, xg.data(), b.data()), 1e-14);
       EXPECT_LT(test::relative_difference(xg, xc), 1e-8);
+      // each part solved on the GPU that holds its panels (not LDLᵀ, whose parts go to the
+      // host; nor a factor whose pivots were delayed on the host)
+      if (!st.factor.delayed_pivoting)
+        EXPECT_EQ(st.solve.on_device, pr.type != MatrixType::symmetric_indefinite);
       SparseMatrix a2 = a;
       std::vector<double> d(a.n_rows);
       for (double& x : d) x = scale(rng);
@@ -231,6 +256,8 @@ TEST(MultiGpu, SolverSolutionsAndRefactorization) {
           a2.values[p] *= d[a2.indices[p]] * d[j];
       gpu.refactorize(a2);
       const auto x2 = gpu.solve(b);
+      if (!gpu.stats().factor.delayed_pivoting)  // the refactorization's rows and panels
+        EXPECT_EQ(gpu.stats().solve.on_device, pr.type != MatrixType::symmetric_indefinite);
       Solver fresh(o);
       fresh.analyze(a);
       fresh.factorize(a2);

@@ -23,6 +23,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <limits>
 #include <memory>
 #include <random>
 #include <vector>
@@ -30,6 +31,7 @@
 #include "analysis/analysis.hpp"
 #include "base/blas.hpp"
 #include "numeric/factor.hpp"
+#include "schedule/tree_partition.hpp"
 #include "sparse/generators.hpp"
 #include "strata/strata.hpp"
 #include "support/test_support.hpp"
@@ -211,13 +213,22 @@ struct EmulationCounts {
   index_t batch4_fronts = 0, batch16_fronts = 0;  ///< block-path fronts by kernel variant
 };
 
-// The device solve of cuda_solve.cu, step for step, on the host. x: n×nrhs. few_blocks:
-// the block path's launches of at most this many blocks run the 16-batch variant
-// (kFewFrontBlocks on the device; 0 runs the other everywhere).
-void emulate_device_solve(const Analysis& an, const numeric::NumericFactor& fac, const SolvePlan& p,
-                          std::vector<double>& x, index_t nrhs, unsigned sweep_threads,
-                          EmulationCounts& counts,
-                          std::int64_t few_blocks = cuda::kFewFrontBlocks) {
+// A device's arrays for the emulated sweeps: x (n × nrhs), the update-vector arena, the
+// fronts' scratch and the tall fronts' partial products (sized by the caller).
+struct EmulatedDevice {
+  std::vector<double> x, u, scratch, part;
+};
+
+// The sweeps of cuda_solve.cu's enqueue_solve_sweeps, step for step, on the host: plan p's
+// forward sweep, its backward sweep or both (the LDLᵀ diagonal between them), over the
+// arrays of `dev`; `u_offset` the update vectors' offsets (SolvePlan::u_offset of the
+// whole tree's plan); the panels are fac's. few_blocks: the block path's launches of at
+// most this many blocks run the 16-batch variant (kFewFrontBlocks on the device; 0 runs
+// the other everywhere).
+void emulate_sweeps(const Analysis& an, const numeric::NumericFactor& fac, const SolvePlan& inverse,
+                    const SolvePlan& p, EmulatedDevice& dev, index_t nrhs, bool do_forward,
+                    bool do_backward, unsigned sweep_threads, EmulationCounts& counts,
+                    std::int64_t few_blocks = cuda::kFewFrontBlocks) {
   const auto& t = an.tree;
   const index_t nf = t.n_fronts();
   const bool lu = fac.type == MatrixType::general;
@@ -231,15 +242,15 @@ void emulate_device_solve(const Analysis& an, const numeric::NumericFactor& fac,
     for (index_t i = 0; i < t.n_pivots(f); ++i)
       pivot_row[t.first_pivot[f] + i] = fac.rows[t.row_offsets[f] + i];
   }
-  const std::int64_t u_total = p.u_offset.back();
+  const std::int64_t u_total = inverse.u_offset.back();
   SolveTree st{n_rows.data(),
                n_piv.data(),
                t.row_offsets.data(),
                t.first_pivot.data(),
                fac.rows.data(),
-               p.inv_offsets.data(),
-               p.inv_src.data(),
-               p.u_offset.data(),
+               inverse.inv_offsets.data(),
+               inverse.inv_src.data(),
+               inverse.u_offset.data(),
                panel_offset.data(),
                fac.panels.data(),
                pivot_row.data(),
@@ -247,13 +258,13 @@ void emulate_device_solve(const Analysis& an, const numeric::NumericFactor& fac,
                u_total,
                p.part_offset.data(),
                nullptr};
-  std::vector<double> u(static_cast<std::size_t>(u_total * nrhs) + 1, 0.0),
-      scratch(t.rows.size() * nrhs + 1, 0.0),
-      part(static_cast<std::size_t>(p.part_total * nrhs) + 1, 0.0);
-  st.part = part.data();
-  double* X = x.data();
-  double* U = u.data();
-  double* S = scratch.data();
+  if (dev.part.size() < static_cast<std::size_t>(p.part_total * nrhs) + 1)
+    dev.part.resize(static_cast<std::size_t>(p.part_total * nrhs) + 1,
+                    std::numeric_limits<double>::quiet_NaN());
+  st.part = dev.part.data();
+  double* X = dev.x.data();
+  double* U = dev.u.data();
+  double* S = dev.scratch.data();
   HostOps ops;
   const int nr = static_cast<int>(nrhs);
   // the gather/scatter use no barrier or shuffle: the calling thread plays a block of 3
@@ -289,7 +300,7 @@ void emulate_device_solve(const Analysis& an, const numeric::NumericFactor& fac,
     else
       dev::front_backward<4>(st, f, X, S, nrhs, lu, unit);
   };
-  for (std::size_t q = 0; q < n_subtrees; ++q) {
+  for (std::size_t q = 0; do_forward && q < n_subtrees; ++q) {
     run_block(sweep_threads, [&] {
       for (std::int64_t f = p.subtree_first[q]; f <= p.subtree_last[q]; ++f)
         forward(f, few_subtrees);
@@ -299,7 +310,7 @@ void emulate_device_solve(const Analysis& an, const numeric::NumericFactor& fac,
         p.subtree_last[q] - p.subtree_first[q] + 1;
     ++counts.subtrees;
   }
-  for (index_t l = 0; l < an.schedule.n_levels(); ++l) {
+  for (index_t l = 0; do_forward && l < an.schedule.n_levels(); ++l) {
     for (std::int64_t q = p.small_offsets[l]; q < p.small_offsets[l + 1]; ++q) {
       run_block(sweep_threads, [&] { forward(p.small_fronts[q], few(l)); });
       ++counts.block_fronts;
@@ -324,10 +335,10 @@ void emulate_device_solve(const Analysis& an, const numeric::NumericFactor& fac,
       dev::scatter_forward<16>(st, f, i0, i1, X, U, S, nrhs, lu);
     });
   }
-  if (ldlt)
+  if (ldlt && do_forward && do_backward)
     for (index_t q = 0; q < an.n; ++q)
       dev::diagonal(st, q, fac.d_diag.data(), fac.d_off.data(), fac.pivot_size.data(), X, nrhs);
-  for (index_t l = an.schedule.n_levels() - 1; l >= 0; --l) {
+  for (index_t l = an.schedule.n_levels() - 1; do_backward && l >= 0; --l) {
     for (std::int64_t q = p.small_offsets[l]; q < p.small_offsets[l + 1]; ++q)
       run_block(sweep_threads, [&] { backward(p.small_fronts[q], few(l)); });
     chunks(l, [&](std::int64_t f, std::int64_t i0, std::int64_t i1) {
@@ -350,11 +361,29 @@ void emulate_device_solve(const Analysis& an, const numeric::NumericFactor& fac,
       dev::scatter_backward(st, f, i0, i1, X, S, nrhs, lu);
     });
   }
-  for (std::size_t q = 0; q < n_subtrees; ++q)
+  for (std::size_t q = 0; do_backward && q < n_subtrees; ++q)
     run_block(sweep_threads, [&] {
       for (std::int64_t f = p.subtree_last[q]; f >= p.subtree_first[q]; --f)
         backward(f, few_subtrees);
     });
+}
+
+// The whole-tree device solve of cuda_solve.cu on the host (fresh arrays as the device's
+// workspaces). x: n×nrhs.
+void emulate_device_solve(const Analysis& an, const numeric::NumericFactor& fac, const SolvePlan& p,
+                          std::vector<double>& x, index_t nrhs, unsigned sweep_threads,
+                          EmulationCounts& counts,
+                          std::int64_t few_blocks = cuda::kFewFrontBlocks) {
+  EmulatedDevice dev;
+  dev.x = x;
+  // NaN, as the device's workspaces hold whatever they held: an entry read before it is
+  // written poisons the solution
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  dev.u.assign(static_cast<std::size_t>(p.u_offset.back() * nrhs) + 1, nan);
+  dev.scratch.assign(an.tree.rows.size() * nrhs + 1, nan);
+  dev.part.assign(static_cast<std::size_t>(p.part_total * nrhs) + 1, nan);
+  emulate_sweeps(an, fac, p, p, dev, nrhs, true, true, sweep_threads, counts, few_blocks);
+  x = dev.x;
 }
 
 using Problem = test::NamedMatrix;
@@ -500,6 +529,143 @@ TEST(SolveKernelEmulation, LibraryPathLargeFronts) {
     check_problem(pr, rng, {SolvePath::all_block, SolvePath::block_subtrees}, 32, 132, counts, 0);
   }
   EXPECT_GT(counts.batch4_fronts, 0);
+}
+
+// A factor split for several GPUs and solved part by part where its panels live
+// (cuda/part_solve.cu, driven as the multi-worker driver's solve_where_held does),
+// emulated: each part's plan over its own fronts (plan_sweeps with the part's front set)
+// runs on the arrays of the "device" that holds the part, which start as NaN, so that a row
+// of x or an update vector the exchange (part_exchange) fails to bring poisons the result;
+// the layers of the split run forward from the subtrees to the top part, then backward,
+// the x rows and update vectors going through host arrays. Compared with the CPU solve;
+// and each part's plan solves exactly the part's fronts.
+TEST(SolveKernelEmulation, SplitFactorSolvedPartByPart) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  std::vector<Problem> problems;
+  problems.push_back({"laplacian 14^3", generators::laplacian_3d(14, 14, 14), MatrixType::spd});
+  problems.push_back({"general 733", test::random_sparse(733, 4, test::RandomKind::general, rng),
+                      MatrixType::general});
+  for (index_t n : {1, 2, 3, 5})
+    problems.push_back({"general " + std::to_string(n),
+                        test::random_sparse(n, 3, test::RandomKind::general, rng),
+                        MatrixType::general});
+  problems.push_back(
+      {"spd 97", test::random_sparse(97, 3, test::RandomKind::spd, rng), MatrixType::spd});
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  std::uniform_real_distribution<double> uni(-1, 1);
+  EmulationCounts counts;
+  index_t split_problems = 0;
+  for (const Problem& pr : problems)
+    for (int workers : {2, 3}) {
+      SCOPED_TRACE(pr.name + ", " + std::to_string(workers) + " workers");
+      Options o;
+      o.type = pr.type;
+      Analysis an = analyze_matrix(pr.a, o);
+      schedule::PartitionOptions po;
+      po.workers = workers;
+      po.subtrees_per_worker = 2;
+      po.unsymmetric = pr.type == MatrixType::general;
+      an.partition = schedule::partition_tree(an.tree, po);
+      const schedule::TreePartition& tp = an.partition;
+      const auto& t = an.tree;
+      const index_t nf = t.n_fronts();
+      double pivot = 0;
+      const std::vector<double> values = test::scaled_values(an, pr.a, &pivot);
+      numeric::NumericFactor fac;
+      std::vector<double> arena;
+      auto cpu = numeric::make_cpu_executor(1);
+      numeric::factorize(an, values, pr.type, pivot, *cpu, fac, arena);
+      SolvePlan inverse;
+      cuda::plan_inverse_extend_add(t, an.child_rows, inverse);
+      const std::int64_t u_total = inverse.u_offset.back();
+      // the layers: subtrees, upper layers, the top part; a part's device: its id modulo
+      // the workers (the top part's id is the number of subtrees)
+      std::vector<std::vector<int>> layers(1);
+      for (int id = 0; id < tp.top_id(); ++id) layers[0].push_back(id);
+      for (int l = 1; l <= tp.n_upper_layers(); ++l) {
+        layers.emplace_back();
+        for (index_t q = tp.upper_layer_offsets[l - 1]; q < tp.upper_layer_offsets[l]; ++q)
+          layers.back().push_back(tp.top_id() + 1 + static_cast<int>(q));
+      }
+      layers.push_back({tp.top_id()});
+      if (tp.n_parts() > 2) ++split_problems;
+      for (SolvePath path : {SolvePath::model, SolvePath::all_block, SolvePath::all_library,
+                             SolvePath::block_subtrees}) {
+        SCOPED_TRACE("path " + std::to_string(static_cast<int>(path)));
+        std::vector<SolvePlan> plans(static_cast<std::size_t>(tp.n_parts()));
+        std::vector<cuda::PartExchange> exchange(plans.size());
+        std::vector<int> seen(nf, 0);
+        for (int id = 0; id < tp.n_parts(); ++id) {
+          const std::vector<index_t>& fronts = tp.part(id).fronts;
+          std::vector<char> in(nf, 0);
+          for (index_t f : fronts) in[f] = 1;
+          cuda::plan_sweeps(t, an.schedule, 132, path, &in, plans[id]);
+          exchange[id] = cuda::part_exchange(t, fronts, inverse.u_offset);
+          const SolvePlan& p = plans[id];
+          std::vector<std::int64_t> planned;
+          for (std::size_t q = 0; q < p.subtree_first.size(); ++q)
+            for (std::int64_t f = p.subtree_first[q]; f <= p.subtree_last[q]; ++f)
+              planned.push_back(f);
+          for (const auto* list : {&p.small_fronts, &p.tall_fronts, &p.large_fronts})
+            planned.insert(planned.end(), list->begin(), list->end());
+          for (std::int64_t f : planned) {
+            EXPECT_TRUE(in[f]) << "part " << id << " plans front " << f << " of another part";
+            ++seen[f];
+          }
+        }
+        for (index_t f = 0; f < nf; ++f) EXPECT_EQ(seen[f], 1) << "front " << f;
+        for (index_t nrhs : {1, 3}) {
+          SCOPED_TRACE("nrhs " + std::to_string(nrhs));
+          const std::size_t nx = static_cast<std::size_t>(an.n * nrhs);
+          std::vector<double> b(nx);
+          for (double& v : b) v = uni(rng);
+          std::vector<double> ref = b, x = b;
+          numeric::solve_in_place(an, fac, ref.data(), nrhs);
+          std::vector<double> u(static_cast<std::size_t>(u_total * nrhs) + 1, nan);
+          std::vector<EmulatedDevice> devs(static_cast<std::size_t>(workers));
+          for (EmulatedDevice& d : devs) {
+            d.x.assign(nx + 1, nan);
+            d.u.assign(u.size(), nan);
+            d.scratch.assign(t.rows.size() * nrhs + 1, nan);
+            d.part.assign(1, nan);
+          }
+          auto copy = [&](std::vector<double>& to, const std::vector<double>& from,
+                          const cuda::SolveRanges& ranges, std::int64_t ld) {
+            for (index_t r = 0; r < nrhs; ++r)
+              for (const auto& [lo, hi] : ranges)
+                std::copy(from.begin() + lo + r * ld, from.begin() + hi + r * ld,
+                          to.begin() + lo + r * ld);
+          };
+          auto sweep = [&](int id, bool forward) {
+            EmulatedDevice& d = devs[static_cast<std::size_t>(id % workers)];
+            const cuda::PartExchange& e = exchange[id];
+            copy(d.x, x, e.own_rows, an.n);
+            if (forward)
+              copy(d.u, u, e.imports, u_total);
+            else
+              copy(d.x, x, e.above_rows, an.n);
+            emulate_sweeps(an, fac, inverse, plans[id], d, nrhs, forward, !forward, 32, counts);
+            copy(x, d.x, e.own_rows, an.n);
+            if (forward) copy(u, d.u, e.exports, u_total);
+          };
+          for (const auto& layer : layers)
+            for (int id : layer) sweep(id, true);
+          for (auto l = layers.rbegin(); l != layers.rend(); ++l)
+            for (int id : *l) sweep(id, false);
+          for (std::size_t i = 0; i < nx; ++i)
+            ASSERT_FALSE(std::isnan(x[i])) << "row " << i % an.n << " rhs " << i / an.n;
+          // tolerance as check_problem's (κ̂ a lower bound on the conditioning)
+          const double kappa = max_abs(values) * max_abs(ref) / std::max(max_abs(b), 1e-300);
+          const double tol = std::max(1e-10, 1e-13 * std::sqrt(static_cast<double>(an.n)) * kappa);
+          EXPECT_LT(test::relative_difference(x, ref), tol) << "κ̂ " << kappa;
+        }
+      }
+    }
+  EXPECT_GT(split_problems, 0);  // some problem was cut into several parts
+  EXPECT_GT(counts.library_fronts, 0);
+  EXPECT_GT(counts.subtrees, 0);
 }
 
 // The planner: every front solved exactly once, in a subtree (a front and all its

@@ -192,10 +192,10 @@ void CudaExecutor::prepare(const Analysis& an, int workers) {
     prepare_solve_plan(an);
     dsolve_.x.resize(std::max<std::size_t>(static_cast<std::size_t>(an.n), 1));
     dsolve_.u.resize(
-        std::max<std::size_t>(static_cast<std::size_t>(dsolve_.plan.u_offset.back()), 1));
+        std::max<std::size_t>(static_cast<std::size_t>(dsolve_.u_offset_host.back()), 1));
     dsolve_.scratch.resize(std::max<std::size_t>(an.tree.rows.size(), 1));
     dsolve_.part.resize(
-        std::max<std::size_t>(static_cast<std::size_t>(dsolve_.plan.part_total), 1));
+        std::max<std::size_t>(static_cast<std::size_t>(dsolve_.whole.plan.part_total), 1));
   }
   STRATA_CUDA(cudaStreamSynchronize(stream_));
 }
@@ -211,6 +211,7 @@ void CudaExecutor::begin(const numeric::FactorContext& ctx) {
   phases_ = FactorStats::DevicePhases{};
   held_parts_.clear();
   dsolve_.resident_for = nullptr;
+  dsolve_.part_rows_current = false;
   pending_ = nullptr;  // a chunk left by a factorization that failed
   // strips of another executor's front still in flight (its factorization failed before
   // its end_part): they write into this pool

@@ -183,6 +183,11 @@ class CudaExecutor final : public numeric::Executor {
     return ctx.part->id == -1 ? device_only_ : part_device_only_;
   }
   void download_panels(const Analysis& an, int part, numeric::NumericFactor& fac) override;
+  bool can_solve_held_parts(const Analysis& an, const numeric::NumericFactor& fac,
+                            const std::vector<int>& parts) const override;  // part_solve.cu
+  void solve_held_parts(const Analysis& an, const numeric::NumericFactor& fac,
+                        const std::vector<int>& parts, bool forward, double* x, double* u,
+                        index_t nrhs) override;  // part_solve.cu
   void end_part(const numeric::FactorContext& ctx) override;
   void report(FactorStats& fs) const override;
   void report_worker(DeviceStats& d) const override;
@@ -200,11 +205,35 @@ class CudaExecutor final : public numeric::Executor {
   void presize_chunk_buffers(const Analysis& an, const std::vector<numeric::PartView>& views);
   /// The factor stays on the device only for a whole-tree factorization.
   bool keep_resident() const { return plan_.factor_resident && whole_; }
+  /// A plan's sweep arrays on the device (SolvePlan less its extend-add map, which
+  /// dsolve_ holds once per analysis) and where its fronts' panels sit: the whole tree's in
+  /// panels_ at the factor layout's offsets, or a held part's in its part_panels_ buffer.
+  /// For a part (part_solve.cu) also the rows and update vectors it exchanges with the
+  /// other parts (part_exchange).
+  struct SweepPlanDevice {
+    SolvePlan plan;
+    std::vector<std::int64_t> panel_offset_host;
+    DeviceBuffer<std::int64_t> panel_offset, chunk_front, chunk_row, small_fronts, tall_fronts,
+        subtree_first, subtree_last, part_offset;
+    PartExchange exchange;
+  };
+  /// The extend-add map of the device solve (plan_inverse_extend_add) on the device, once
+  /// per analysis (cuda_solve.cu).
+  void prepare_solve_inverse(const Analysis& an);
   void prepare_solve_plan(const Analysis& an);  // cuda_solve.cu
-  /// The device solve's sweeps over the resident factor (everything between the upload
-  /// of the right-hand sides into dsolve_.x and the download of the solutions), enqueued
-  /// on stream_ (cuda_solve.cu).
-  void enqueue_solve_sweeps(const Analysis& an, const numeric::NumericFactor& fac, index_t nrhs);
+  /// Uploads a plan's sweep arrays and panel offsets into sp (cuda_solve.cu).
+  void upload_sweep_plan(SweepPlanDevice& sp);
+  /// The part solve's plan of part `id` of an.partition, made on first use per analysis
+  /// (part_solve.cu).
+  SweepPlanDevice& part_sweep_plan(const Analysis& an, int id);
+  /// The device solve's sweeps of one plan (everything between the upload of the
+  /// right-hand sides into dsolve_.x and the download of the solutions): the forward
+  /// sweep, the backward sweep or both, with the diagonal solve of an LDLᵀ factor between
+  /// them when both; `panels` is where sp's panel offsets point. Enqueued on stream_
+  /// (cuda_solve.cu).
+  void enqueue_solve_sweeps(const Analysis& an, const numeric::NumericFactor& fac,
+                            const SweepPlanDevice& sp, const double* panels, index_t nrhs,
+                            bool forward, bool backward);
   /// What a recorded solve graph read: the analysis, the right-hand sides' count, the
   /// factor's type and every device buffer the sweeps use (cuda_solve.cu).
   std::vector<std::uintptr_t> solve_graph_key(const Analysis& an, const numeric::NumericFactor& fac,
@@ -494,12 +523,14 @@ class CudaExecutor final : public numeric::Executor {
     /// compare against it)
     std::vector<std::int64_t> rows_host, pivot_pos_host, pivot_row_host;
     DeviceBuffer<std::int64_t> moved_rows, moved_segments;  ///< their moved rows, packed
-    DeviceBuffer<std::int64_t> panel_offset;
     DeviceBuffer<double> d_diag, d_off, x, u, scratch, part;
-    std::vector<std::int64_t> u_offset_host;
-    SolvePlan plan;  ///< per analysis, and its copy below
-    DeviceBuffer<std::int64_t> plan_u_offset, inv_offsets, inv_src, chunk_front, chunk_row,
-        small_fronts, tall_fronts, subtree_first, subtree_last, part_offset;
+    std::vector<std::int64_t> u_offset_host;  ///< per front + 1: its update vector in u
+    std::uint64_t inverse_analysis = 0;       ///< what inv_offsets and inv_src are for
+    DeviceBuffer<std::int64_t> inv_offsets, inv_src;
+    SweepPlanDevice whole;                 ///< the whole tree's plan, per analysis
+    std::uint64_t parts_analysis = 0;      ///< what `parts` was planned for
+    std::map<int, SweepPlanDevice> parts;  ///< held parts' plans, by part id
+    bool part_rows_current = false;        ///< the row arrays hold the last factorization's
     /// The sweeps of a solve recorded as a CUDA graph (Options::gpu_solve_graph) and
     /// replayed, one launch per solve, while graph_key (solve_graph_key) is unchanged.
     cudaGraphExec_t graph = nullptr;

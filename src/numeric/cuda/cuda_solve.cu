@@ -62,27 +62,46 @@ struct CublasOps {
 
 }  // namespace
 
-// The solve plan of the current analysis and its device copy (once per analysis).
-void CudaExecutor::prepare_solve_plan(const Analysis& an) {
-  if (dsolve_.plan.analysis == an.id && dsolve_.plan.analysis != 0) return;
-  int n_sm = 0;
-  STRATA_CUDA(cudaDeviceGetAttribute(&n_sm, cudaDevAttrMultiProcessorCount, device_));
-  dsolve_.plan = make_solve_plan(an.tree, an.child_rows, an.schedule, n_sm);
-  dsolve_.plan.analysis = an.id;
+void CudaExecutor::prepare_solve_inverse(const Analysis& an) {
+  if (dsolve_.inverse_analysis == an.id && dsolve_.inverse_analysis != 0) return;
+  SolvePlan inverse;
+  plan_inverse_extend_add(an.tree, an.child_rows, inverse);
   // not upload(): these bytes belong to no factorization's statistics
+  dsolve_.inv_offsets.upload(inverse.inv_offsets.data(), inverse.inv_offsets.size(), stream_);
+  dsolve_.inv_src.upload(inverse.inv_src.data(), inverse.inv_src.size(), stream_);
+  STRATA_CUDA(cudaStreamSynchronize(stream_));  // the copies read `inverse`
+  dsolve_.inverse_analysis = an.id;
+}
+
+void CudaExecutor::upload_sweep_plan(SweepPlanDevice& sp) {
   auto up = [&](DeviceBuffer<std::int64_t>& d, const std::vector<std::int64_t>& h) {
     d.upload(h.data(), h.size(), stream_);
   };
-  up(dsolve_.plan_u_offset, dsolve_.plan.u_offset);
-  up(dsolve_.inv_offsets, dsolve_.plan.inv_offsets);
-  up(dsolve_.inv_src, dsolve_.plan.inv_src);
-  up(dsolve_.chunk_front, dsolve_.plan.chunk_front);
-  up(dsolve_.chunk_row, dsolve_.plan.chunk_row);
-  up(dsolve_.small_fronts, dsolve_.plan.small_fronts);
-  up(dsolve_.tall_fronts, dsolve_.plan.tall_fronts);
-  up(dsolve_.subtree_first, dsolve_.plan.subtree_first);
-  up(dsolve_.subtree_last, dsolve_.plan.subtree_last);
-  up(dsolve_.part_offset, dsolve_.plan.part_offset);
+  const SolvePlan& p = sp.plan;
+  up(sp.panel_offset, sp.panel_offset_host);
+  up(sp.chunk_front, p.chunk_front);
+  up(sp.chunk_row, p.chunk_row);
+  up(sp.small_fronts, p.small_fronts);
+  up(sp.tall_fronts, p.tall_fronts);
+  up(sp.subtree_first, p.subtree_first);
+  up(sp.subtree_last, p.subtree_last);
+  up(sp.part_offset, p.part_offset);
+  STRATA_CUDA(cudaStreamSynchronize(stream_));  // the copies read the host vectors
+}
+
+// The whole tree's solve plan and its device copy (once per analysis).
+void CudaExecutor::prepare_solve_plan(const Analysis& an) {
+  prepare_solve_inverse(an);
+  SweepPlanDevice& w = dsolve_.whole;
+  if (w.plan.analysis == an.id && w.plan.analysis != 0) return;
+  int n_sm = 0;
+  STRATA_CUDA(cudaDeviceGetAttribute(&n_sm, cudaDevAttrMultiProcessorCount, device_));
+  w.plan = SolvePlan{};
+  plan_sweeps(an.tree, an.schedule, n_sm, SolvePath::model, nullptr, w.plan);
+  w.plan.analysis = an.id;
+  w.panel_offset_host.assign(an.factor_layout.panel_offset.begin(),
+                             an.factor_layout.panel_offset.end());
+  upload_sweep_plan(w);
 }
 
 bool CudaExecutor::solve(const Analysis& an, const numeric::NumericFactor& fac, double* x,
@@ -95,13 +114,13 @@ bool CudaExecutor::solve(const Analysis& an, const numeric::NumericFactor& fac, 
   prepare_solve_plan(an);
   const std::size_t nx = static_cast<std::size_t>(an.n) * nrhs;
   dsolve_.x.upload(x, nx, stream_);
-  const std::int64_t u_total = dsolve_.plan.u_offset.back();
+  const std::int64_t u_total = dsolve_.u_offset_host.back();
   dsolve_.u.resize(std::max<std::size_t>(static_cast<std::size_t>(u_total) * nrhs, 1));
   dsolve_.scratch.resize(std::max<std::size_t>(an.tree.rows.size() * nrhs, 1));
   dsolve_.part.resize(
-      std::max<std::size_t>(static_cast<std::size_t>(dsolve_.plan.part_total) * nrhs, 1));
+      std::max<std::size_t>(static_cast<std::size_t>(dsolve_.whole.plan.part_total) * nrhs, 1));
   if (!solve_graph_) {
-    enqueue_solve_sweeps(an, fac, nrhs);
+    enqueue_solve_sweeps(an, fac, dsolve_.whole, panels_.data(), nrhs, true, true);
   } else {
     std::vector<std::uintptr_t> key = solve_graph_key(an, fac, nrhs);
     if (!dsolve_.graph || key != dsolve_.graph_key) {
@@ -113,7 +132,7 @@ bool CudaExecutor::solve(const Analysis& an, const numeric::NumericFactor& fac, 
       STRATA_CUDA(cudaStreamBeginCapture(stream_, cudaStreamCaptureModeRelaxed));
       cudaGraph_t g = nullptr;
       try {
-        enqueue_solve_sweeps(an, fac, nrhs);
+        enqueue_solve_sweeps(an, fac, dsolve_.whole, panels_.data(), nrhs, true, true);
       } catch (...) {
         if (cudaStreamEndCapture(stream_, &g) == cudaSuccess && g) cudaGraphDestroy(g);
         (void)cudaGetLastError();
@@ -150,23 +169,23 @@ std::vector<std::uintptr_t> CudaExecutor::solve_graph_key(const Analysis& an,
           ptr(dsolve_.first_pivot.data()),
           ptr(dsolve_.rows.data()),
           ptr(dsolve_.pivot_row.data()),
-          ptr(dsolve_.panel_offset.data()),
+          ptr(dsolve_.whole.panel_offset.data()),
           ptr(dsolve_.pivot_size.data()),
           ptr(dsolve_.d_diag.data()),
           ptr(dsolve_.d_off.data()),
           ptr(dsolve_.x.data()),
           ptr(dsolve_.u.data()),
           ptr(dsolve_.scratch.data()),
-          ptr(dsolve_.plan_u_offset.data()),
+          ptr(dsolve_.u_offset.data()),
           ptr(dsolve_.inv_offsets.data()),
           ptr(dsolve_.inv_src.data()),
-          ptr(dsolve_.chunk_front.data()),
-          ptr(dsolve_.chunk_row.data()),
-          ptr(dsolve_.small_fronts.data()),
-          ptr(dsolve_.tall_fronts.data()),
-          ptr(dsolve_.subtree_first.data()),
-          ptr(dsolve_.subtree_last.data()),
-          ptr(dsolve_.part_offset.data()),
+          ptr(dsolve_.whole.chunk_front.data()),
+          ptr(dsolve_.whole.chunk_row.data()),
+          ptr(dsolve_.whole.small_fronts.data()),
+          ptr(dsolve_.whole.tall_fronts.data()),
+          ptr(dsolve_.whole.subtree_first.data()),
+          ptr(dsolve_.whole.subtree_last.data()),
+          ptr(dsolve_.whole.part_offset.data()),
           ptr(dsolve_.part.data())};
 }
 
@@ -177,13 +196,14 @@ void CudaExecutor::drop_solve_graph() noexcept {
 }
 
 void CudaExecutor::enqueue_solve_sweeps(const Analysis& an, const numeric::NumericFactor& fac,
-                                        index_t nrhs) {
+                                        const SweepPlanDevice& sp, const double* panels,
+                                        index_t nrhs, bool forward, bool backward) {
   const auto& t = an.tree;
-  const SolvePlan& p = dsolve_.plan;
+  const SolvePlan& p = sp.plan;
   const bool lu = fac.type == MatrixType::general;
   const bool ldlt = fac.type == MatrixType::symmetric_indefinite;
   const bool unit = lu || ldlt;
-  const std::int64_t u_total = p.u_offset.back();
+  const std::int64_t u_total = dsolve_.u_offset_host.back();
   SolveTree st{n_rows_.data(),
                n_pivots_.data(),
                dsolve_.row_offsets.data(),
@@ -191,15 +211,15 @@ void CudaExecutor::enqueue_solve_sweeps(const Analysis& an, const numeric::Numer
                dsolve_.rows.data(),
                dsolve_.inv_offsets.data(),
                dsolve_.inv_src.data(),
-               dsolve_.plan_u_offset.data(),
-               dsolve_.panel_offset.data(),
-               panels_.data(),
+               dsolve_.u_offset.data(),
+               sp.panel_offset.data(),
+               panels,
                dsolve_.pivot_row.data(),
                an.n,
                u_total,
-               dsolve_.part_offset.data(),
+               sp.part_offset.data(),
                dsolve_.part.data()};
-  const SolveChunks chunks{dsolve_.chunk_front.data(), dsolve_.chunk_row.data()};
+  const SolveChunks chunks{sp.chunk_front.data(), sp.chunk_row.data()};
   double* X = dsolve_.x.data();
   double* U = dsolve_.u.data();
   double* S = dsolve_.scratch.data();
@@ -221,7 +241,7 @@ void CudaExecutor::enqueue_solve_sweeps(const Analysis& an, const numeric::Numer
     for (std::int64_t q = q0; q < q1; ++q) {
       const std::int64_t f = p.large_fronts[q];
       CublasOps ops{lane[(q - q0) % used]->blas};
-      run(ops, panels_.data() + an.factor_layout.panel_offset[f], static_cast<int>(t.n_rows(f)),
+      run(ops, panels + sp.panel_offset_host[f], static_cast<int>(t.n_rows(f)),
           static_cast<int>(t.n_pivots(f)), S + t.row_offsets[f] * nrhs);
     }
     for (std::int64_t j = 1; j < used; ++j) {
@@ -230,12 +250,13 @@ void CudaExecutor::enqueue_solve_sweeps(const Analysis& an, const numeric::Numer
     }
   };
   const index_t levels = an.schedule.n_levels();
-  const std::int64_t* small = dsolve_.small_fronts.data();
-  const std::int64_t* tall = dsolve_.tall_fronts.data();
+  const std::int64_t* small = sp.small_fronts.data();
+  const std::int64_t* tall = sp.tall_fronts.data();
   const std::int64_t n_subtrees = static_cast<std::int64_t>(p.subtree_first.size());
-  launch_fronts_forward(st, dsolve_.subtree_first.data(), dsolve_.subtree_last.data(), 0,
-                        n_subtrees, X, U, S, nrhs, unit, lu, stream_);
-  for (index_t l = 0; l < levels; ++l) {
+  if (forward)
+    launch_fronts_forward(st, sp.subtree_first.data(), sp.subtree_last.data(), 0, n_subtrees, X, U,
+                          S, nrhs, unit, lu, stream_);
+  for (index_t l = 0; forward && l < levels; ++l) {
     const std::int64_t c0 = p.chunk_offsets[l], nc = p.chunk_offsets[l + 1] - c0;
     const std::int64_t s0 = p.small_offsets[l], ns = p.small_offsets[l + 1] - s0;
     const std::int64_t t0 = p.tall_offsets[l], nt = p.tall_offsets[l + 1] - t0;
@@ -248,10 +269,10 @@ void CudaExecutor::enqueue_solve_sweeps(const Analysis& an, const numeric::Numer
           });
     launch_scatter_forward(st, chunks, c0, nc, X, U, S, nrhs, lu, stream_);
   }
-  if (ldlt)
+  if (ldlt && forward && backward)
     launch_solve_diagonal(st, dsolve_.d_diag.data(), dsolve_.d_off.data(),
                           dsolve_.pivot_size.data(), X, nrhs, stream_);
-  for (index_t l = levels - 1; l >= 0; --l) {
+  for (index_t l = levels - 1; backward && l >= 0; --l) {
     const std::int64_t c0 = p.chunk_offsets[l], nc = p.chunk_offsets[l + 1] - c0;
     const std::int64_t s0 = p.small_offsets[l], ns = p.small_offsets[l + 1] - s0;
     const std::int64_t t0 = p.tall_offsets[l], nt = p.tall_offsets[l + 1] - t0;
@@ -264,8 +285,9 @@ void CudaExecutor::enqueue_solve_sweeps(const Analysis& an, const numeric::Numer
           });
     launch_scatter_backward(st, chunks, c0, nc, X, S, nrhs, lu, stream_);
   }
-  launch_fronts_backward(st, dsolve_.subtree_first.data(), dsolve_.subtree_last.data(), 0,
-                         n_subtrees, X, S, nrhs, lu, unit, stream_);
+  if (backward)
+    launch_fronts_backward(st, sp.subtree_first.data(), sp.subtree_last.data(), 0, n_subtrees, X, S,
+                           nrhs, lu, unit, stream_);
 }
 
 }  // namespace strata::cuda

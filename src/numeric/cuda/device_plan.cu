@@ -172,8 +172,6 @@ void CudaExecutor::upload_analysis(const Analysis& an) {
   for (index_t f = 0; f < nf; ++f) u_off[f + 1] = u_off[f] + t.cb_size(f);
   dsolve_.u_offset_host = u_off;
   upload(dsolve_.u_offset, u_off);
-  upload(dsolve_.panel_offset, std::vector<std::int64_t>(an.factor_layout.panel_offset.begin(),
-                                                         an.factor_layout.panel_offset.end()));
   upload(dsolve_.row_offsets, t.row_offsets);
   upload(dsolve_.first_pivot, t.first_pivot);
   upload(dsolve_.level_offsets, s.level_offsets);

@@ -400,7 +400,8 @@ __device__ void sweep_backward(const SolveTree& t, std::int64_t f, double* scrat
   // chunk order; its rows below the pivots take no further part
   const std::int64_t row_end = tall ? k : m;
   if (tall) {
-    const std::int64_t np = (m + kChunkRows - 1) / kChunkRows - k / kChunkRows;  // product_chunks
+    // product_chunks: none when m = k (its chunks write no partial product)
+    const std::int64_t np = m > k ? (m + kChunkRows - 1) / kChunkRows - k / kChunkRows : 0;
     const double* P = t.part + t.part_offset[f] * nrhs;
     for (std::int64_t e = threadIdx.x; e < k * nrhs; e += blockDim.x) {
       double s = 0.0;

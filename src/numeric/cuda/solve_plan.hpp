@@ -33,6 +33,7 @@
 #include <cstdint>
 #include <limits>
 #include <numeric>
+#include <utility>
 #include <vector>
 
 #include "symbolic/symbolic.hpp"
@@ -71,9 +72,10 @@ constexpr std::int64_t kChunkRows = 256;
 constexpr std::int64_t kFewFrontBlocks = 264;
 
 /// The chunks of a tall front (m rows, k pivots) that hold rows of L21 (rows k..m−1): the
-/// first is chunk k / kChunkRows of the front; their number.
+/// first is chunk k / kChunkRows of the front; their number (0 when m = k: no L21).
+/// solve_device.cuh's backward sweep computes the same.
 inline std::int64_t product_chunks(std::int64_t m, std::int64_t k) {
-  return (m + kChunkRows - 1) / kChunkRows - k / kChunkRows;
+  return m > k ? (m + kChunkRows - 1) / kChunkRows - k / kChunkRows : 0;
 }
 
 // The time model of the planner (seconds, bytes). Estimates for a Hopper GPU, not
@@ -170,20 +172,19 @@ inline void plan_inverse_extend_add(const symbolic::AssemblyTree& t,
     }
 }
 
-/// Builds the plan for tree `t` (with its extend-add map `child_rows`, e.g.
-/// Analysis::child_rows) and its level schedule `s` on a device of `n_sm` multiprocessors
-/// (≥ 1). `path` forces the paths (tests); `model` picks by the time model above: the
-/// subtree limit (none, or 1 µs, 2 µs, … on one block) of least modelled sweep time, then
-/// each level's split between block and library. Deterministic.
-inline SolvePlan make_solve_plan(const symbolic::AssemblyTree& t,
-                                 const symbolic::ChildRowMap& child_rows,
-                                 const symbolic::LevelSchedule& s, int n_sm,
-                                 SolvePath path = SolvePath::model) {
+/// The sweeps' part of a plan (everything but u_offset, inv_offsets and inv_src, which
+/// plan_inverse_extend_add makes) for tree `t` and its level schedule `s` on a device of
+/// `n_sm` multiprocessors (≥ 1), into `p`. `path` forces the paths (tests); `model` picks
+/// by the time model above: the subtree limit (none, or 1 µs, 2 µs, … on one block) of
+/// least modelled sweep time, then each level's split between block and library. `in`:
+/// when given (one entry per front), only the fronts with in[f] != 0 are planned — a part
+/// of a multi-GPU split, solved where its panels live; a front outside heads no subtree
+/// and lies in none. Deterministic.
+inline void plan_sweeps(const symbolic::AssemblyTree& t, const symbolic::LevelSchedule& s, int n_sm,
+                        SolvePath path, const std::vector<char>* in, SolvePlan& p) {
   const index_t nf = t.n_fronts();
-  SolvePlan p;
   p.n_sm = std::max(n_sm, 1);
-  plan_inverse_extend_add(t, child_rows, p);
-
+  auto planned = [&](index_t f) { return !in || (*in)[f] != 0; };
   // The time model of one front on the block path and on the library path.
   auto bytes = [&](index_t f) {
     return 8.0 * static_cast<double>(t.n_rows(f)) * static_cast<double>(t.n_pivots(f));
@@ -198,9 +199,10 @@ inline SolvePlan make_solve_plan(const symbolic::AssemblyTree& t,
     if (t.n_rows(f) > kChunkRows) {
       const double k = static_cast<double>(t.n_pivots(f));
       const double product = 8.0 * static_cast<double>(t.n_rows(f) - t.n_pivots(f)) * k;
-      block_seconds[f] = kBlockFrontSeconds + 8.0 * k * k / kBlockBytesPerSecond + tiles +
-                         product / kBlockBytesPerSecond /
-                             static_cast<double>(product_chunks(t.n_rows(f), t.n_pivots(f)));
+      const std::int64_t chunks = product_chunks(t.n_rows(f), t.n_pivots(f));
+      block_seconds[f] =
+          kBlockFrontSeconds + 8.0 * k * k / kBlockBytesPerSecond + tiles +
+          (chunks > 0 ? product / kBlockBytesPerSecond / static_cast<double>(chunks) : 0.0);
     }
   }
   auto t_block = [&](index_t f) { return block_seconds[f]; };
@@ -213,7 +215,8 @@ inline SolvePlan make_solve_plan(const symbolic::AssemblyTree& t,
   std::vector<std::vector<index_t>> by_size(s.n_levels());
   for (index_t l = 0; l < s.n_levels(); ++l) {
     auto& order = by_size[l];
-    order.assign(s.fronts.begin() + s.level_offsets[l], s.fronts.begin() + s.level_offsets[l + 1]);
+    for (index_t q = s.level_offsets[l]; q < s.level_offsets[l + 1]; ++q)
+      if (planned(s.fronts[q])) order.push_back(s.fronts[q]);
     std::stable_sort(order.begin(), order.end(),
                      [&](index_t a, index_t b) { return bytes(a) > bytes(b); });
   }
@@ -221,9 +224,10 @@ inline SolvePlan make_solve_plan(const symbolic::AssemblyTree& t,
   std::vector<index_t> first(nf);
   std::iota(first.begin(), first.end(), index_t{0});
   // a front of more than kChunkRows rows is gathered and scattered by several blocks, so it
-  // is in no subtree (nor is any front above it)
+  // is in no subtree (nor is any front above it); nor is a front outside the planned set
   for (index_t f = 0; f < nf; ++f) {  // children come before their parent
-    serial[f] += t.n_rows(f) > kChunkRows ? std::numeric_limits<double>::infinity() : t_block(f);
+    serial[f] += t.n_rows(f) > kChunkRows || !planned(f) ? std::numeric_limits<double>::infinity()
+                                                         : t_block(f);
     if (t.parent[f] >= 0) {
       serial[t.parent[f]] += serial[f];
       first[t.parent[f]] = std::min(first[t.parent[f]], first[f]);
@@ -269,7 +273,7 @@ inline SolvePlan make_solve_plan(const symbolic::AssemblyTree& t,
   };
   // The subtrees of at most `limit` seconds on a block (closed under descendants: a
   // subtree's time is at least its children's), and the modelled time of the whole sweep.
-  auto in_subtree = [&](index_t f, double limit) { return serial[f] <= limit; };
+  auto in_subtree = [&](index_t f, double limit) { return planned(f) && serial[f] <= limit; };
   auto sweep_time = [&](double limit) {
     double most = 0.0, sum = 0.0, total = 0.0;
     bool any = false;
@@ -345,7 +349,64 @@ inline SolvePlan make_solve_plan(const symbolic::AssemblyTree& t,
     p.small_offsets.push_back(static_cast<std::int64_t>(p.small_fronts.size()));
     p.tall_offsets.push_back(static_cast<std::int64_t>(p.tall_fronts.size()));
   }
+}
+
+/// The plan of the whole tree `t` (with its extend-add map `child_rows`, e.g.
+/// Analysis::child_rows) and its level schedule `s` on a device of `n_sm` multiprocessors:
+/// plan_inverse_extend_add, then plan_sweeps over every front.
+inline SolvePlan make_solve_plan(const symbolic::AssemblyTree& t,
+                                 const symbolic::ChildRowMap& child_rows,
+                                 const symbolic::LevelSchedule& s, int n_sm,
+                                 SolvePath path = SolvePath::model) {
+  SolvePlan p;
+  plan_inverse_extend_add(t, child_rows, p);
+  plan_sweeps(t, s, n_sm, path, nullptr, p);
   return p;
+}
+
+/// Ranges [begin, end) of x's rows or of the update-vector arena.
+using SolveRanges = std::vector<std::pair<std::int64_t, std::int64_t>>;
+
+/// What the solve of one part of a multi-GPU split (part_solve.cu) exchanges with the
+/// other parts, for its fronts `fronts` (increasing) of tree `t` whose update vectors sit
+/// at `u_offset` (per front + 1, SolvePlan::u_offset): own_rows, the pivot rows of its
+/// fronts (x rows it reads and writes in both sweeps); above_rows, the pivot rows of the
+/// fronts above it in other parts, which its backward sweep reads; imports, the update
+/// vectors of its fronts' children in other parts, which its forward sweep reads; exports,
+/// the update vectors of its fronts whose parent is in another part, which its forward
+/// sweep writes. Each list increasing, adjacent ranges merged.
+struct PartExchange {
+  SolveRanges own_rows, above_rows, imports, exports;
+};
+
+inline PartExchange part_exchange(const symbolic::AssemblyTree& t,
+                                  const std::vector<index_t>& fronts,
+                                  const std::vector<std::int64_t>& u_offset) {
+  const index_t nf = t.n_fronts();
+  std::vector<char> in(static_cast<std::size_t>(nf), 0), above(static_cast<std::size_t>(nf), 0);
+  for (const index_t f : fronts) in[f] = 1;
+  auto add = [](SolveRanges& r, std::int64_t b, std::int64_t e) {
+    if (b == e) return;
+    if (!r.empty() && r.back().second == b)
+      r.back().second = e;
+    else
+      r.emplace_back(b, e);
+  };
+  PartExchange x;
+  std::vector<index_t> children;
+  for (const index_t f : fronts) {
+    add(x.own_rows, t.first_pivot[f], t.first_pivot[f] + t.n_pivots(f));
+    for (index_t q = t.child_offsets[f]; q < t.child_offsets[f + 1]; ++q)
+      if (!in[t.children[q]]) children.push_back(t.children[q]);
+    if (t.parent[f] < 0 || in[t.parent[f]]) continue;
+    add(x.exports, u_offset[f], u_offset[f + 1]);
+    for (index_t a = t.parent[f]; a >= 0 && !above[a]; a = t.parent[a]) above[a] = 1;
+  }
+  std::sort(children.begin(), children.end());
+  for (const index_t c : children) add(x.imports, u_offset[c], u_offset[c + 1]);
+  for (index_t f = 0; f < nf; ++f)
+    if (above[f] && !in[f]) add(x.above_rows, t.first_pivot[f], t.first_pivot[f] + t.n_pivots(f));
+  return x;
 }
 
 // --- one large front through a BLAS ----------------------------------------------------
