@@ -1,6 +1,7 @@
 // strata — the tree and multi-worker drivers of the numeric phase (see driver.hpp).
 #include "numeric/driver.hpp"
 
+#include <algorithm>
 #include <exception>
 #include <mutex>
 #include <string>
@@ -45,13 +46,13 @@ class HostSolve {
 // it (Executor::solve_held_parts; cuda/part_solve.cu): the layers of an.partition — the
 // subtrees, the upper layers, the top part — forward from the bottom, then backward from
 // the top, a layer's executors side by side on threads of their own, the parts' exports
-// handed up through a host array of update vectors. False, having done nothing, when some
-// part's panels are on the host or its executor cannot solve it where it is.
+// handed up through a host array of update vectors. False, x as it was, when some part's
+// panels are on the host, its executor cannot solve it where it is, or a GPU has no room
+// for the solve's workspaces.
 bool solve_where_held(const Analysis& an, const std::vector<Executor*>& execs,
                       const NumericFactor& factor, double* x, index_t nrhs) {
   const schedule::TreePartition& tp = an.partition;
-  if (tp.part_of.size() != static_cast<std::size_t>(an.tree.n_fronts()) ||
-      factor.held.size() != static_cast<std::size_t>(tp.n_parts()))
+  if (tp.part_of.size() != static_cast<std::size_t>(an.tree.n_fronts()) || factor.held.empty())
     return false;
   std::vector<int> worker(static_cast<std::size_t>(tp.n_parts()), -1);
   for (const HeldPanels& h : factor.held) {
@@ -60,6 +61,8 @@ bool solve_where_held(const Analysis& an, const std::vector<Executor*>& execs,
       return false;
     worker[h.part] = h.worker;
   }
+  for (int id = 0; id < tp.n_parts(); ++id)  // every part with fronts is held
+    if (worker[id] < 0 && !tp.part(id).fronts.empty()) return false;
   std::vector<std::vector<int>> layers(1);
   for (int id = 0; id < tp.top_id(); ++id) layers[0].push_back(id);
   for (int l = 1; l <= tp.n_upper_layers(); ++l) {
@@ -72,7 +75,8 @@ bool solve_where_held(const Analysis& an, const std::vector<Executor*>& execs,
   std::vector<std::vector<std::vector<int>>> lists(layers.size());
   for (std::size_t l = 0; l < layers.size(); ++l) {
     lists[l].resize(execs.size());
-    for (const int id : layers[l]) lists[l][worker[id]].push_back(id);
+    for (const int id : layers[l])
+      if (worker[id] >= 0) lists[l][worker[id]].push_back(id);
     for (std::size_t w = 0; w < execs.size(); ++w)
       if (!lists[l][w].empty() && !execs[w]->can_solve_held_parts(an, factor, lists[l][w]))
         return false;
@@ -96,8 +100,16 @@ bool solve_where_held(const Analysis& an, const std::vector<Executor*>& execs,
     for (std::thread& t : threads) t.join();
     if (error) std::rethrow_exception(error);
   };
-  for (std::size_t l = 0; l < layers.size(); ++l) run_layer(l, true);
-  for (std::size_t l = layers.size(); l-- > 0;) run_layer(l, false);
+  // the right-hand sides kept: a GPU without room for the solve's workspaces (they are
+  // outside the factorization's device budget) leaves the solve to the host
+  const std::vector<double> b(x, x + static_cast<std::size_t>(an.n) * nrhs);
+  try {
+    for (std::size_t l = 0; l < layers.size(); ++l) run_layer(l, true);
+    for (std::size_t l = layers.size(); l-- > 0;) run_layer(l, false);
+  } catch (const OutOfMemory&) {
+    std::copy(b.begin(), b.end(), x);
+    return false;
+  }
   return true;
 }
 
