@@ -680,6 +680,16 @@ class GpuSections:
         # key predate the option and ran with it off, which was then the default
         dist_rows: dict[tuple, tuple] = {}
         newest_s: dict = {}  # problem → the most subtrees per worker in its newest run
+        # the solve: (problem, workers) → {"parts" | "host": (row, run)}; runs with
+        # gpu_solve_parts=false give the host solve and are kept out of the factor tables
+        solves: dict[tuple, dict] = {}
+        for r in sorted(rs, key=lambda r: (r.date, r.name)):
+            host = "gpu_solve_parts=false" in (r.get("solver_options") or [])
+            for row in r.rows:
+                if isinstance(row, dict) and num(row.get("first_solve_seconds")) is not None:
+                    solves.setdefault((row.get("problem"), int(num(row.get("workers")) or 0)),
+                                      {})["host" if host else "parts"] = (row, r)
+        rs = [r for r in rs if not r.get("solver_options")]
         for r in sorted(rs, key=lambda r: (r.date, r.name)):  # newer runs override
             run_s: dict = {}
             for row in r.rows:
@@ -829,6 +839,29 @@ class GpuSections:
             self.w(table(["problem", unit + "s", "first factorization s",
                           "refactorization s", "set-up (difference) s", "first/refactor"],
                          first_rows, 1))
+        if solves:
+            srows = []
+            for (p, w), d in sorted(solves.items(), key=lambda kv: (str(kv[0][0]), kv[0][1])):
+                on, host = d.get("parts"), d.get("host")
+                one = solves.get((p, 1), {}).get("parts")
+                t_on = num(on[0].get("first_solve_seconds")) if on else None
+                t_host = num(host[0].get("first_solve_seconds")) if host else None
+                t_one = num(one[0].get("first_solve_seconds")) if one and w > 1 else None
+                where = ("–" if not on else "GPUs" if on[0].get("solve_on_device") else "host")
+                srows.append([str(p), str(w), f_sec(t_on), where, f_sec(t_host),
+                              f_ratio(ratio(t_host, t_on)), f_ratio(ratio(t_on, t_one)),
+                              ", ".join(sorted({f"[`{x[1].name}`]({self.rel(x[1].path)})"
+                                                for x in (on, host) if x}))])
+            self.w(f"Solve: one application of the factor (`first_solve_seconds`, median of "
+                   f"the run's solves, no refinement), seconds — with each part solved on the "
+                   f"{unit} that holds it (`gpu_solve_parts`, the default; *where*: where it "
+                   f"ran), and with the panels fetched to the host and solved there "
+                   f"(`--solver-option gpu_solve_parts=false`, a run of its own); *host / parts*: "
+                   f"over the parts' time; *over 1 {unit}*: the parts' time over the one-{unit} "
+                   f"solve (a resident factor):")
+            self.w()
+            self.w(table(["problem", unit + "s", "parts s", "where", "host s", "host / parts",
+                          f"over 1 {unit}", "files"], srows, 1))
         if phase_rows:
             self.w("GPU time per phase of the last refactorization (`factor_phases`, seconds, "
                    "as the driver stores them), default configuration:")
