@@ -34,6 +34,7 @@
 
 #include "analysis/patterns.hpp"
 #include "base/device.hpp"
+#include "base/serial_scope.hpp"
 #include "base/timer.hpp"
 #include "ordering/matching.hpp"
 #include "ordering/pairing.hpp"
@@ -566,16 +567,33 @@ static Analysis analyze_with_pivot_sequence_impl(const Analysis& previous,
 }
 
 // The analysis's parallel passes (analysis/patterns.cpp) run on Options::num_threads
-// threads, as the factorization does.
-Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers) {
+// threads, as the factorization does — except for a matrix of fewer than
+// kParallelAnalysisEntries entries, whose passes take microseconds: there they run on the
+// calling thread without entering TBB (base/serial_scope.hpp; the same result, the passes
+// do not depend on the thread count).
+namespace {
+constexpr std::size_t kParallelAnalysisEntries = std::size_t{1} << 16;
+
+template <class Impl>
+Analysis run_analysis(const Options& opts, std::size_t entries, Impl impl) {
+  if (entries < kParallelAnalysisEntries) {
+    const detail::SerialScope serial(true);
+    return impl();
+  }
   tbb::task_arena arena(cpu_threads(opts));
-  return arena.execute([&] { return analyze_matrix_impl(a, opts, workers); });
+  return arena.execute(impl);
+}
+}  // namespace
+
+Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers) {
+  return run_analysis(opts, a.indices.size(),
+                      [&] { return analyze_matrix_impl(a, opts, workers); });
 }
 
 Analysis analyze_with_order(const SparseMatrix& a, const Analysis& previous, const Options& opts,
                             int workers) {
-  tbb::task_arena arena(cpu_threads(opts));
-  return arena.execute([&] { return analyze_with_order_impl(a, previous, opts, workers); });
+  return run_analysis(opts, a.indices.size(),
+                      [&] { return analyze_with_order_impl(a, previous, opts, workers); });
 }
 
 Analysis analyze_with_pivot_sequence(const Analysis& previous,
@@ -584,8 +602,7 @@ Analysis analyze_with_pivot_sequence(const Analysis& previous,
                                      const std::vector<double>& row_rescaling,
                                      const std::vector<double>& col_rescaling, const Options& opts,
                                      int workers) {
-  tbb::task_arena arena(cpu_threads(opts));
-  return arena.execute([&] {
+  return run_analysis(opts, previous.pattern_indices.size(), [&] {
     return analyze_with_pivot_sequence_impl(previous, row_sequence, col_sequence, row_rescaling,
                                             col_rescaling, opts, workers);
   });

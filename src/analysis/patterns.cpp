@@ -11,7 +11,8 @@
 // (a union of two sorted lists, the copy of a column, the positions of a front's entries
 // through a row → local index map kept per thread). Why in parallel: these passes touch
 // every entry, as the ordering does, but unlike the nested dissection (METIS, sequential)
-// they split over a host's cores.
+// they split over a host's cores. A small matrix's analysis runs them on the calling
+// thread alone (base/serial_scope.hpp).
 //
 // B + Bᵀ, general: column j is the union of B(:, j) = A(:, q_j) and row j of B, both sorted
 // (a canonical column, and the transpose's rows listed in increasing column order), so a
@@ -26,15 +27,21 @@
 #include <algorithm>
 #include <utility>
 
+#include "base/serial_scope.hpp"
 #include "ordering/ordering.hpp"
 #include "sparse/bucket_entries.hpp"
 
 namespace strata::detail {
 namespace {
 
-// Runs body(j) for j in [0, n) over the calling arena's threads, in ranges of 256 or more.
+// Runs body(j) for j in [0, n) over the calling arena's threads, in ranges of 256 or more
+// (on the calling thread alone inside a SerialScope).
 template <class Body>
 void for_each_index(index_t n, Body body) {
+  if (serial_passes()) {
+    for (index_t j = 0; j < n; ++j) body(j);
+    return;
+  }
   tbb::parallel_for(tbb::blocked_range<index_t>(0, n, 256), [&](const auto& r) {
     for (index_t j = r.begin(); j < r.end(); ++j) body(j);
   });
@@ -164,11 +171,8 @@ AssemblyMap build_assembly_map(const SparseMatrix& c, const Analysis& an) {
       });
   // local positions through a row → local index map set per front (linear in the fronts'
   // rows plus the entries, no search), one map per thread
-  tbb::enumerable_thread_specific<std::vector<index_t>> locals(
-      [&] { return std::vector<index_t>(an.n, -1); });
-  tbb::parallel_for(tbb::blocked_range<index_t>(0, nf, 16), [&](const auto& r) {
-    std::vector<index_t>& local = locals.local();
-    for (index_t f = r.begin(); f < r.end(); ++f) {
+  auto place = [&](index_t f0, index_t f1, std::vector<index_t>& local) {
+    for (index_t f = f0; f < f1; ++f) {
       const index_t* rows = t.rows_of(f);
       const index_t m = t.n_rows(f);
       for (index_t i = 0; i < m; ++i) local[rows[i]] = i;
@@ -182,7 +186,16 @@ AssemblyMap build_assembly_map(const SparseMatrix& c, const Analysis& an) {
       }
       for (index_t i = 0; i < m; ++i) local[rows[i]] = -1;
     }
-  });
+  };
+  if (serial_passes()) {
+    std::vector<index_t> local(an.n, -1);
+    place(0, nf, local);
+    return map;
+  }
+  tbb::enumerable_thread_specific<std::vector<index_t>> locals(
+      [&] { return std::vector<index_t>(an.n, -1); });
+  tbb::parallel_for(tbb::blocked_range<index_t>(0, nf, 16),
+                    [&](const auto& r) { place(r.begin(), r.end(), locals.local()); });
   return map;
 }
 

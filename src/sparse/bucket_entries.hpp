@@ -23,6 +23,7 @@
 #include <algorithm>
 #include <vector>
 
+#include "base/serial_scope.hpp"
 #include "strata/types.hpp"
 
 namespace strata::detail {
@@ -39,7 +40,8 @@ namespace strata::detail {
 ///
 /// Returns the bucket offsets (n_buckets + 1 entries, offsets[0] = 0): bucket b holds the
 /// slots [offsets[b], offsets[b + 1]). A chunk of fewer than `min_chunk_entries` entries
-/// is not split off, so a small pattern is sorted on the calling thread.
+/// is not split off, so a small pattern is sorted on the calling thread, as every pattern is
+/// inside a SerialScope (base/serial_scope.hpp).
 template <class Range, class Key, class Emit>
 std::vector<index_t> bucket_entries(index_t n_lines, index_t n_buckets, Range range, Key key,
                                     Emit emit, index_t min_chunk_entries = index_t{1} << 15) {
@@ -51,8 +53,10 @@ std::vector<index_t> bucket_entries(index_t n_lines, index_t n_buckets, Range ra
   }
   const index_t nnz = before[n_lines];
   const index_t table_cap = index_t{1} << 25;
-  index_t chunks = std::max<index_t>(1, tbb::this_task_arena::max_concurrency());
-  chunks = std::min(chunks, std::max<index_t>(1, nnz / std::max<index_t>(1, min_chunk_entries)));
+  index_t chunks = std::max<index_t>(1, nnz / std::max<index_t>(1, min_chunk_entries));
+  if (chunks > 1)  // inside a SerialScope: one chunk, TBB not entered
+    chunks =
+        serial_passes() ? 1 : std::min<index_t>(chunks, tbb::this_task_arena::max_concurrency());
   chunks = std::min(chunks, std::max<index_t>(1, table_cap / (n_buckets + 1)));
   chunks = std::min(chunks, std::max<index_t>(1, n_lines));
   // chunk c covers the lines [first[c], first[c + 1])
