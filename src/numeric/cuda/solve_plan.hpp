@@ -172,6 +172,43 @@ inline void plan_inverse_extend_add(const symbolic::AssemblyTree& t,
     }
 }
 
+/// The bytes of front f's panel that a sweep reads (m × k doubles).
+inline double front_bytes(const symbolic::AssemblyTree& t, index_t f) {
+  return 8.0 * static_cast<double>(t.n_rows(f)) * static_cast<double>(t.n_pivots(f));
+}
+
+/// The time model of each front of `t` (seconds, the constants above): on the block path
+/// from its first block to its last (block_seconds) and its blocks' time summed
+/// (block_work; they differ for a tall front, whose products run on its chunks side by
+/// side), and on the library path.
+struct FrontTimes {
+  std::vector<double> block_seconds, block_work, library_seconds;
+};
+
+inline FrontTimes front_times(const symbolic::AssemblyTree& t) {
+  const index_t nf = t.n_fronts();
+  FrontTimes ft;
+  ft.block_seconds.resize(nf);
+  ft.block_work.resize(nf);
+  ft.library_seconds.resize(nf);
+  for (index_t f = 0; f < nf; ++f) {
+    const double k = static_cast<double>(t.n_pivots(f));
+    const double tiles = static_cast<double>((t.n_pivots(f) + 31) / 32) * kBlockTileSeconds;
+    ft.block_work[f] = kBlockFrontSeconds + front_bytes(t, f) / kBlockBytesPerSecond + tiles;
+    ft.block_seconds[f] = ft.block_work[f];
+    if (t.n_rows(f) > kChunkRows) {
+      const double product = 8.0 * static_cast<double>(t.n_rows(f) - t.n_pivots(f)) * k;
+      const std::int64_t chunks = product_chunks(t.n_rows(f), t.n_pivots(f));
+      ft.block_seconds[f] =
+          kBlockFrontSeconds + 8.0 * k * k / kBlockBytesPerSecond + tiles +
+          (chunks > 0 ? product / kBlockBytesPerSecond / static_cast<double>(chunks) : 0.0);
+    }
+    ft.library_seconds[f] =
+        kLibraryCallSeconds + front_bytes(t, f) / kLibraryBytesPerSecond + k * kLibraryPivotSeconds;
+  }
+  return ft;
+}
+
 /// The sweeps' part of a plan (everything but u_offset, inv_offsets and inv_src, which
 /// plan_inverse_extend_add makes) for tree `t` and its level schedule `s` on a device of
 /// `n_sm` multiprocessors (≥ 1), into `p`. `path` forces the paths (tests); `model` picks
@@ -185,31 +222,11 @@ inline void plan_sweeps(const symbolic::AssemblyTree& t, const symbolic::LevelSc
   const index_t nf = t.n_fronts();
   p.n_sm = std::max(n_sm, 1);
   auto planned = [&](index_t f) { return !in || (*in)[f] != 0; };
-  // The time model of one front on the block path and on the library path.
-  auto bytes = [&](index_t f) {
-    return 8.0 * static_cast<double>(t.n_rows(f)) * static_cast<double>(t.n_pivots(f));
-  };
-  // block_seconds: from the front's first block to its last; block_work: the blocks' time
-  // summed (they differ for a tall front, whose products run on its chunks side by side)
-  std::vector<double> block_seconds(nf), block_work(nf);
-  for (index_t f = 0; f < nf; ++f) {
-    const double tiles = static_cast<double>((t.n_pivots(f) + 31) / 32) * kBlockTileSeconds;
-    block_work[f] = kBlockFrontSeconds + bytes(f) / kBlockBytesPerSecond + tiles;
-    block_seconds[f] = block_work[f];
-    if (t.n_rows(f) > kChunkRows) {
-      const double k = static_cast<double>(t.n_pivots(f));
-      const double product = 8.0 * static_cast<double>(t.n_rows(f) - t.n_pivots(f)) * k;
-      const std::int64_t chunks = product_chunks(t.n_rows(f), t.n_pivots(f));
-      block_seconds[f] =
-          kBlockFrontSeconds + 8.0 * k * k / kBlockBytesPerSecond + tiles +
-          (chunks > 0 ? product / kBlockBytesPerSecond / static_cast<double>(chunks) : 0.0);
-    }
-  }
+  const FrontTimes times = front_times(t);
+  const std::vector<double>& block_seconds = times.block_seconds;
+  const std::vector<double>& block_work = times.block_work;
   auto t_block = [&](index_t f) { return block_seconds[f]; };
-  auto t_library = [&](index_t f) {
-    return kLibraryCallSeconds + bytes(f) / kLibraryBytesPerSecond +
-           static_cast<double>(t.n_pivots(f)) * kLibraryPivotSeconds;
-  };
+  auto t_library = [&](index_t f) { return times.library_seconds[f]; };
   // Each level's fronts, largest first, and the time of each subtree on one block (its
   // fronts one after another) with its first front in postorder.
   std::vector<std::vector<index_t>> by_size(s.n_levels());
@@ -218,7 +235,7 @@ inline void plan_sweeps(const symbolic::AssemblyTree& t, const symbolic::LevelSc
     for (index_t q = s.level_offsets[l]; q < s.level_offsets[l + 1]; ++q)
       if (planned(s.fronts[q])) order.push_back(s.fronts[q]);
     std::stable_sort(order.begin(), order.end(),
-                     [&](index_t a, index_t b) { return bytes(a) > bytes(b); });
+                     [&](index_t a, index_t b) { return front_bytes(t, a) > front_bytes(t, b); });
   }
   std::vector<double> serial(nf, 0.0);
   std::vector<index_t> first(nf);
