@@ -221,12 +221,12 @@ struct EmulatedDevice {
 
 // The sweeps of cuda_solve.cu's enqueue_solve_sweeps, step for step, on the host: plan p's
 // forward sweep, its backward sweep or both (the LDLᵀ diagonal between them), over the
-// arrays of `dev`; `u_offset` the update vectors' offsets (SolvePlan::u_offset of the
-// whole tree's plan); the panels are fac's. few_blocks: the block path's launches of at
-// most this many blocks run the 16-batch variant (kFewFrontBlocks on the device; 0 runs
-// the other everywhere).
+// arrays of `device`; `inverse` holds the update vectors' offsets and the inverse
+// extend-add map (plan_inverse_extend_add of the whole tree); the panels are fac's.
+// few_blocks: the block path's launches of at most this many blocks run the 16-batch
+// variant (kFewFrontBlocks on the device; 0 runs the other everywhere).
 void emulate_sweeps(const Analysis& an, const numeric::NumericFactor& fac, const SolvePlan& inverse,
-                    const SolvePlan& p, EmulatedDevice& dev, index_t nrhs, bool do_forward,
+                    const SolvePlan& p, EmulatedDevice& device, index_t nrhs, bool do_forward,
                     bool do_backward, unsigned sweep_threads, EmulationCounts& counts,
                     std::int64_t few_blocks = cuda::kFewFrontBlocks) {
   const auto& t = an.tree;
@@ -258,13 +258,13 @@ void emulate_sweeps(const Analysis& an, const numeric::NumericFactor& fac, const
                u_total,
                p.part_offset.data(),
                nullptr};
-  if (dev.part.size() < static_cast<std::size_t>(p.part_total * nrhs) + 1)
-    dev.part.resize(static_cast<std::size_t>(p.part_total * nrhs) + 1,
-                    std::numeric_limits<double>::quiet_NaN());
-  st.part = dev.part.data();
-  double* X = dev.x.data();
-  double* U = dev.u.data();
-  double* S = dev.scratch.data();
+  if (device.part.size() < static_cast<std::size_t>(p.part_total * nrhs) + 1)
+    device.part.resize(static_cast<std::size_t>(p.part_total * nrhs) + 1,
+                       std::numeric_limits<double>::quiet_NaN());
+  st.part = device.part.data();
+  double* X = device.x.data();
+  double* U = device.u.data();
+  double* S = device.scratch.data();
   HostOps ops;
   const int nr = static_cast<int>(nrhs);
   // the gather/scatter use no barrier or shuffle: the calling thread plays a block of 3
