@@ -597,11 +597,16 @@ TEST(SolveKernelEmulation, SplitFactorSolvedPartByPart) {
         std::vector<SolvePlan> plans(static_cast<std::size_t>(tp.n_parts()));
         std::vector<cuda::PartExchange> exchange(plans.size());
         std::vector<int> seen(nf, 0);
+        // the model path as the executor plans it: the parts take the whole tree's
+        // subtree limit; the forced paths choose per part
+        SolvePlan whole;
+        cuda::plan_sweeps(t, an.schedule, 132, path, nullptr, whole);
+        const double* limit = path == SolvePath::model ? &whole.subtree_limit : nullptr;
         for (int id = 0; id < tp.n_parts(); ++id) {
           const std::vector<index_t>& fronts = tp.part(id).fronts;
           std::vector<char> in(nf, 0);
           for (index_t f : fronts) in[f] = 1;
-          cuda::plan_sweeps(t, an.schedule, 132, path, &in, plans[id]);
+          cuda::plan_sweeps(t, an.schedule, 132, path, &in, plans[id], limit);
           exchange[id] = cuda::part_exchange(t, fronts, inverse.u_offset);
           const SolvePlan& p = plans[id];
           std::vector<std::int64_t> planned;

@@ -529,6 +529,7 @@ class CudaExecutor final : public numeric::Executor {
     DeviceBuffer<std::int64_t> inv_offsets, inv_src;
     SweepPlanDevice whole;                 ///< the whole tree's plan, per analysis
     std::uint64_t parts_analysis = 0;      ///< what `parts` was planned for
+    double parts_limit = -1.0;             ///< the whole tree's subtree limit, which the parts take
     std::map<int, SweepPlanDevice> parts;  ///< held parts' plans, by part id
     bool part_rows_current = false;        ///< the row arrays hold the last factorization's
     /// The sweeps of a solve recorded as a CUDA graph (Options::gpu_solve_graph) and

@@ -14,10 +14,10 @@
 // side, instead of every panel of the factor for a host solve.
 //
 // How: a part's sweeps are the device solve of cuda_solve.cu with a plan over the part's
-// fronts only (plan_sweeps with the part's front set), its panels read from the part's own
-// buffer. The x, update-vector and scratch arrays on the device are the whole tree's, so
-// the kernels index them as in the whole-tree solve and a part's imports and exports are
-// copies of ranges of the update-vector arena.
+// fronts only (plan_sweeps with the part's front set and the whole tree's subtree limit),
+// its panels read from the part's own buffer. The x, update-vector and scratch arrays on the device
+// are the whole tree's, so the kernels index them as in the whole-tree solve and a part's imports
+// and exports are copies of ranges of the update-vector arena.
 //
 // Source: the multifrontal solve of Liu (SIAM Review 34, 1992, §6); the split by subtrees
 // of Geist & Ng (1989); SPRAL SSIDS's subtree objects (Hogg, Ovtchinnikov, Scott, ACM
@@ -51,22 +51,28 @@ void copy_ranges(double* dev, double* host, const Ranges& ranges, std::int64_t l
 }  // namespace
 
 CudaExecutor::SweepPlanDevice& CudaExecutor::part_sweep_plan(const Analysis& an, int id) {
+  const auto& t = an.tree;
+  int n_sm = 0;
+  STRATA_CUDA(cudaDeviceGetAttribute(&n_sm, cudaDevAttrMultiProcessorCount, device_));
   if (dsolve_.parts_analysis != an.id) {
     dsolve_.parts.clear();
+    // the subtree limit the whole-tree solve would choose: every part's bottom is cut into
+    // the subtrees of the whole tree's plan (a part's own model sees fewer fronts per
+    // level and can take level launches where the whole tree's takes subtrees)
+    SolvePlan whole;
+    plan_sweeps(t, an.schedule, n_sm, SolvePath::model, nullptr, whole);
+    dsolve_.parts_limit = whole.subtree_limit;
     dsolve_.parts_analysis = an.id;
   }
   auto it = dsolve_.parts.find(id);
   if (it != dsolve_.parts.end()) return it->second;
-  const auto& t = an.tree;
   const index_t nf = t.n_fronts();
   const schedule::FactorPart& part = an.partition.part(id);  // fronts increasing
   const PartDevice& pd = parts_.at(id);
   SweepPlanDevice sp;
   std::vector<char> in(static_cast<std::size_t>(nf), 0);
   for (const index_t f : part.fronts) in[f] = 1;
-  int n_sm = 0;
-  STRATA_CUDA(cudaDeviceGetAttribute(&n_sm, cudaDevAttrMultiProcessorCount, device_));
-  plan_sweeps(t, an.schedule, n_sm, SolvePath::model, &in, sp.plan);
+  plan_sweeps(t, an.schedule, n_sm, SolvePath::model, &in, sp.plan, &dsolve_.parts_limit);
   sp.plan.analysis = an.id;
   sp.panel_offset_host.assign(static_cast<std::size_t>(nf), 0);
   for (std::size_t q = 0; q < pd.fronts_host.size(); ++q)

@@ -137,6 +137,8 @@ struct SolvePlan {
   std::vector<std::int64_t> subtree_first, subtree_last;
   std::vector<std::int64_t> part_offset;  ///< per front, −1 but for tall fronts
   std::int64_t part_total = 0;            ///< doubles of the partial products per rhs
+  /// The subtree limit the plan was made with: seconds on one block (−1: no subtree).
+  double subtree_limit = -1.0;
 };
 
 /// The update vectors' offsets and the inverse extend-add map of `p` (SolvePlan::u_offset,
@@ -216,19 +218,20 @@ inline FrontTimes front_times(const symbolic::AssemblyTree& t) {
 /// least modelled sweep time, then each level's split between block and library. `in`:
 /// when given (one entry per front), only the fronts with in[f] != 0 are planned — a part
 /// of a multi-GPU split, solved where its panels live; a front outside heads no subtree
-/// and lies in none. Deterministic.
+/// and lies in none. `fixed_limit`: when given, the subtree limit (SolvePlan::
+/// subtree_limit) instead of the model's choice — a part takes the whole tree's, so that
+/// its bottom is cut into the subtrees the whole-tree solve would use. Deterministic.
 inline void plan_sweeps(const symbolic::AssemblyTree& t, const symbolic::LevelSchedule& s, int n_sm,
-                        SolvePath path, const std::vector<char>* in, SolvePlan& p) {
+                        SolvePath path, const std::vector<char>* in, SolvePlan& p,
+                        const double* fixed_limit = nullptr) {
   const index_t nf = t.n_fronts();
   p.n_sm = std::max(n_sm, 1);
   auto planned = [&](index_t f) { return !in || (*in)[f] != 0; };
   const FrontTimes times = front_times(t);
-  const std::vector<double>& block_seconds = times.block_seconds;
-  const std::vector<double>& block_work = times.block_work;
-  auto t_block = [&](index_t f) { return block_seconds[f]; };
+  auto t_block = [&](index_t f) { return times.block_seconds[f]; };
   auto t_library = [&](index_t f) { return times.library_seconds[f]; };
-  // Each level's fronts, largest first, and the time of each subtree on one block (its
-  // fronts one after another) with its first front in postorder.
+  // Each level's fronts, largest first; the time of each subtree on one block (its fronts
+  // one after another).
   std::vector<std::vector<index_t>> by_size(s.n_levels());
   for (index_t l = 0; l < s.n_levels(); ++l) {
     auto& order = by_size[l];
@@ -238,7 +241,7 @@ inline void plan_sweeps(const symbolic::AssemblyTree& t, const symbolic::LevelSc
                      [&](index_t a, index_t b) { return front_bytes(t, a) > front_bytes(t, b); });
   }
   std::vector<double> serial(nf, 0.0);
-  std::vector<index_t> first(nf);
+  std::vector<index_t> first(nf);  // the first front of f's subtree in postorder
   std::iota(first.begin(), first.end(), index_t{0});
   // a front of more than kChunkRows rows is gathered and scattered by several blocks, so it
   // is in no subtree (nor is any front above it); nor is a front outside the planned set
@@ -252,15 +255,15 @@ inline void plan_sweeps(const symbolic::AssemblyTree& t, const symbolic::LevelSc
   }
   // A level's fronts outside the subtrees: the q largest on the library, the rest in one
   // launch (its longest block, or its total spread over the SMs); the q of least time.
+  // tail[q]: the block work of rest[q..]; longest[q]: their longest block time.
   std::vector<index_t> rest;
-  // tail[q]: the block work of rest[q..]; longest[q]: their longest block time
   std::vector<double> tail, longest;
   auto split = [&](double* level_time) -> std::size_t {
     const std::size_t nl = rest.size();
     tail.assign(nl + 1, 0.0);
     longest.assign(nl + 1, 0.0);
     for (std::size_t q = nl; q-- > 0;) {
-      tail[q] = tail[q + 1] + block_work[rest[q]];
+      tail[q] = tail[q + 1] + times.block_work[rest[q]];
       longest[q] = std::max(longest[q + 1], t_block(rest[q]));
     }
     std::size_t best = 0;
@@ -311,12 +314,12 @@ inline void plan_sweeps(const symbolic::AssemblyTree& t, const symbolic::LevelSc
     }
     return total;
   };
-  double limit = -1.0;  // no subtree
-  if (path == SolvePath::block_subtrees) {
+  double limit = fixed_limit ? *fixed_limit : -1.0;  // -1: no subtree
+  if (!fixed_limit && path == SolvePath::block_subtrees) {
     for (index_t f = 0; f < nf; ++f)
       if (serial[f] < std::numeric_limits<double>::infinity())
         limit = std::max(limit, serial[f] / 4);
-  } else if (path == SolvePath::model) {
+  } else if (!fixed_limit && path == SolvePath::model) {
     double largest = 0.0;  // the largest finite subtree time: no larger limit changes the cut
     for (index_t f = 0; f < nf; ++f)
       if (serial[f] < std::numeric_limits<double>::infinity())
@@ -330,6 +333,7 @@ inline void plan_sweeps(const symbolic::AssemblyTree& t, const symbolic::LevelSc
       }
     }
   }
+  p.subtree_limit = limit;
   for (index_t f = 0; f < nf; ++f)
     if (in_subtree(f, limit) && (t.parent[f] < 0 || !in_subtree(t.parent[f], limit))) {
       p.subtree_first.push_back(first[f]);
