@@ -50,7 +50,8 @@ class HostSolve {
 // panels are on the host, its executor cannot solve it where it is, or a GPU has no room
 // for the solve's workspaces.
 bool solve_where_held(const Analysis& an, const std::vector<Executor*>& execs,
-                      const NumericFactor& factor, double* x, index_t nrhs) {
+                      const NumericFactor& factor, double* x, index_t nrhs,
+                      std::vector<double>& u) {
   const schedule::TreePartition& tp = an.partition;
   if (tp.part_of.size() != static_cast<std::size_t>(an.tree.n_fronts()) || factor.held.empty())
     return false;
@@ -81,7 +82,10 @@ bool solve_where_held(const Analysis& an, const std::vector<Executor*>& execs,
       if (!lists[l][w].empty() && !execs[w]->can_solve_held_parts(an, factor, lists[l][w]))
         return false;
   }
-  std::vector<double> u(static_cast<std::size_t>(an.child_rows.offsets.back()) * nrhs);
+  // the whole tree's update-vector arena (the parts read and write only their imports
+  // and exports): kept by the driver, so that a solve neither allocates nor zero-fills it
+  const std::size_t u_size = static_cast<std::size_t>(an.child_rows.offsets.back()) * nrhs;
+  if (u.size() < u_size) u.resize(u_size);
   auto run_layer = [&](std::size_t l, bool forward) {
     std::exception_ptr error;
     std::mutex error_mutex;
@@ -215,7 +219,8 @@ class MultiWorkerDriver final : public NumericDriver {
   }
   bool solve(const Analysis& an, NumericFactor& factor, double* x, index_t nrhs) override {
     const std::vector<Executor*> execs = executors();
-    if (options_.gpu_solve_parts && solve_where_held(an, execs, factor, x, nrhs)) return true;
+    if (options_.gpu_solve_parts && solve_where_held(an, execs, factor, x, nrhs, part_solve_u_))
+      return true;
     host_solve_.run(an, execs, factor, x, nrhs);
     return false;
   }
@@ -237,6 +242,7 @@ class MultiWorkerDriver final : public NumericDriver {
   void release_workspaces() noexcept override {
     arenas_.clear();
     blocks_ = BlockBuffers{};
+    std::vector<double>().swap(part_solve_u_);
     host_solve_.release();
   }
   void release() noexcept override { release_workspaces(); }
@@ -264,6 +270,7 @@ class MultiWorkerDriver final : public NumericDriver {
   std::vector<std::vector<double>> arenas_;
   BlockBuffers blocks_;
   std::vector<DeviceStats> devices_;
+  std::vector<double> part_solve_u_;  // solve_where_held's update vectors
   HostSolve host_solve_;
   mutable double creation_seconds_ = 0;
 };
