@@ -64,14 +64,7 @@ bool solve_where_held(const Analysis& an, const std::vector<Executor*>& execs,
   }
   for (int id = 0; id < tp.n_parts(); ++id)  // every part with fronts is held
     if (worker[id] < 0 && !tp.part(id).fronts.empty()) return false;
-  std::vector<std::vector<int>> layers(1);
-  for (int id = 0; id < tp.top_id(); ++id) layers[0].push_back(id);
-  for (int l = 1; l <= tp.n_upper_layers(); ++l) {
-    layers.emplace_back();
-    for (index_t q = tp.upper_layer_offsets[l - 1]; q < tp.upper_layer_offsets[l]; ++q)
-      layers.back().push_back(tp.top_id() + 1 + static_cast<int>(q));
-  }
-  layers.push_back({tp.top_id()});
+  const std::vector<std::vector<int>> layers = tp.layers();
   // per layer, each executor's parts
   std::vector<std::vector<std::vector<int>>> lists(layers.size());
   for (std::size_t l = 0; l < layers.size(); ++l) {

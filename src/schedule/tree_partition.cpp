@@ -362,6 +362,18 @@ int TreePartition::worker_of(int id) const {
   return upper_owner[id - s - 1];
 }
 
+std::vector<std::vector<int>> TreePartition::layers() const {
+  std::vector<std::vector<int>> l(1);
+  for (int id = 0; id < top_id(); ++id) l[0].push_back(id);
+  for (int k = 1; k <= n_upper_layers(); ++k) {
+    l.emplace_back();
+    for (index_t q = upper_layer_offsets[k - 1]; q < upper_layer_offsets[k]; ++q)
+      l.back().push_back(top_id() + 1 + static_cast<int>(q));
+  }
+  l.push_back({top_id()});
+  return l;
+}
+
 std::vector<int> lpt_assign(const std::vector<double>& work, int workers, double* makespan) {
   std::vector<int> owner(work.size(), 0);
   std::vector<double> load(std::max(workers, 1), 0.0);

@@ -96,6 +96,10 @@ struct TreePartition {
   /// The worker that factors part `id`: the LPT owner of a subtree (before any stealing),
   /// the owner of an upper part, 0 for the top part.
   int worker_of(int id) const;
+  /// The part ids layer by layer, in the order a bottom-up pass over the tree takes them:
+  /// the subtrees (layer 0, possibly none), each upper layer, then the top part alone;
+  /// the parts of one layer depend on no other part of it.
+  std::vector<std::vector<int>> layers() const;
 };
 
 /// Splits the tree in the manner of Geist & Ng, "Task scheduling for parallel sparse

@@ -394,6 +394,19 @@ double max_abs(const std::vector<double>& v) {
   return m;
 }
 
+// pr's matrix scaled as the Solver scales it for `an` (into `values`) and factored by the
+// CPU executor (one thread).
+numeric::NumericFactor factor_on_cpu(const Analysis& an, const Problem& pr,
+                                     std::vector<double>& values) {
+  double pivot = 0;
+  values = test::scaled_values(an, pr.a, &pivot);
+  numeric::NumericFactor fac;
+  std::vector<double> arena;
+  auto cpu = numeric::make_cpu_executor(1);
+  numeric::factorize(an, values, pr.type, pivot, *cpu, fac, arena);
+  return fac;
+}
+
 // Factors a on the CPU, then solves random right-hand sides both ways and compares.
 void check_problem(const Problem& pr, std::mt19937_64& rng, std::initializer_list<SolvePath> paths,
                    unsigned sweep_threads, int n_sm, EmulationCounts& counts,
@@ -402,12 +415,8 @@ void check_problem(const Problem& pr, std::mt19937_64& rng, std::initializer_lis
   Options o;
   o.type = pr.type;
   Analysis an = analyze_matrix(pr.a, o);
-  double pivot = 0;
-  const std::vector<double> values = test::scaled_values(an, pr.a, &pivot);
-  numeric::NumericFactor fac;
-  std::vector<double> arena;
-  auto cpu = numeric::make_cpu_executor(1);
-  numeric::factorize(an, values, pr.type, pivot, *cpu, fac, arena);
+  std::vector<double> values;
+  const numeric::NumericFactor fac = factor_on_cpu(an, pr, values);
   std::uniform_real_distribution<double> u(-1, 1);
   const double bmax = max_abs(values);
   for (const SolvePath path : paths) {
@@ -571,25 +580,14 @@ TEST(SolveKernelEmulation, SplitFactorSolvedPartByPart) {
       const schedule::TreePartition& tp = an.partition;
       const auto& t = an.tree;
       const index_t nf = t.n_fronts();
-      double pivot = 0;
-      const std::vector<double> values = test::scaled_values(an, pr.a, &pivot);
-      numeric::NumericFactor fac;
-      std::vector<double> arena;
-      auto cpu = numeric::make_cpu_executor(1);
-      numeric::factorize(an, values, pr.type, pivot, *cpu, fac, arena);
+      std::vector<double> values;
+      const numeric::NumericFactor fac = factor_on_cpu(an, pr, values);
       SolvePlan inverse;
       cuda::plan_inverse_extend_add(t, an.child_rows, inverse);
       const std::int64_t u_total = inverse.u_offset.back();
       // the layers: subtrees, upper layers, the top part; a part's device: its id modulo
       // the workers (the top part's id is the number of subtrees)
-      std::vector<std::vector<int>> layers(1);
-      for (int id = 0; id < tp.top_id(); ++id) layers[0].push_back(id);
-      for (int l = 1; l <= tp.n_upper_layers(); ++l) {
-        layers.emplace_back();
-        for (index_t q = tp.upper_layer_offsets[l - 1]; q < tp.upper_layer_offsets[l]; ++q)
-          layers.back().push_back(tp.top_id() + 1 + static_cast<int>(q));
-      }
-      layers.push_back({tp.top_id()});
+      const std::vector<std::vector<int>> layers = tp.layers();
       if (tp.n_parts() > 2) ++split_problems;
       for (SolvePath path : {SolvePath::model, SolvePath::all_block, SolvePath::all_library,
                              SolvePath::block_subtrees}) {

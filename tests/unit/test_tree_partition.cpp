@@ -135,6 +135,22 @@ void check_upper_layers(const AssemblyTree& t, const schedule::TreePartition& p,
   }
   EXPECT_EQ(&p.part(static_cast<int>(s)), &p.top);
   EXPECT_EQ(p.worker_of(static_cast<int>(s)), 0);
+  {  // layers(): every part id once, each in the layer layer_of says, in increasing order
+    const auto layers = p.layers();
+    ASSERT_EQ(static_cast<int>(layers.size()), p.n_upper_layers() + 2);
+    std::vector<int> seen(p.n_parts(), 0);
+    for (std::size_t l = 0; l < layers.size(); ++l)
+      for (std::size_t q = 0; q < layers[l].size(); ++q) {
+        const int id = layers[l][q];
+        ASSERT_GE(id, 0);
+        ASSERT_LT(id, p.n_parts());
+        ++seen[id];
+        EXPECT_EQ(layer_of(p, id), static_cast<int>(l)) << "part " << id;
+        if (q > 0) EXPECT_LT(layers[l][q - 1], id);
+      }
+    for (int id = 0; id < p.n_parts(); ++id) EXPECT_EQ(seen[id], 1) << "part " << id;
+    EXPECT_EQ(layers.back(), std::vector<int>{static_cast<int>(s)});
+  }
   EXPECT_THROW(p.part(p.n_parts()), InvalidInput);
   EXPECT_THROW(p.part(-1), InvalidInput);
   // the list schedule the driver runs: each worker's subtrees in order, then its upper
