@@ -15,9 +15,9 @@
 //
 // How: a part's sweeps are the device solve of cuda_solve.cu with a plan over the part's
 // fronts only (plan_sweeps with the part's front set and the whole tree's subtree limit),
-// its panels read from the part's own buffer. The x, update-vector and scratch arrays on the device
-// are the whole tree's, so the kernels index them as in the whole-tree solve and a part's imports
-// and exports are copies of ranges of the update-vector arena.
+// its panels read from the part's own buffer. The x, update-vector and scratch arrays on
+// the device are the whole tree's, so the kernels index them as in the whole-tree solve
+// and a part's imports and exports are copies of ranges of the update-vector arena.
 //
 // Source: the multifrontal solve of Liu (SIAM Review 34, 1992, §6); the split by subtrees
 // of Geist & Ng (1989); SPRAL SSIDS's subtree objects (Hogg, Ovtchinnikov, Scott, ACM
