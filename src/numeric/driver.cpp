@@ -50,8 +50,8 @@ class HostSolve {
 // panels are on the host, its executor cannot solve it where it is, or a GPU has no room
 // for the solve's workspaces.
 bool solve_where_held(const Analysis& an, const std::vector<Executor*>& execs,
-                      const NumericFactor& factor, double* x, index_t nrhs,
-                      std::vector<double>& u) {
+                      const NumericFactor& factor, double* x, index_t nrhs, std::vector<double>& u,
+                      std::vector<double>& b) {
   const schedule::TreePartition& tp = an.partition;
   if (tp.part_of.size() != static_cast<std::size_t>(an.tree.n_fronts()) || factor.held.empty())
     return false;
@@ -97,9 +97,10 @@ bool solve_where_held(const Analysis& an, const std::vector<Executor*>& execs,
     for (std::thread& t : threads) t.join();
     if (error) std::rethrow_exception(error);
   };
-  // the right-hand sides kept: a GPU without room for the solve's workspaces (they are
-  // outside the factorization's device budget) leaves the solve to the host
-  const std::vector<double> b(x, x + static_cast<std::size_t>(an.n) * nrhs);
+  // the right-hand sides kept (in the driver's buffer, as u): a GPU without room for the
+  // solve's workspaces (outside the factorization's device budget) leaves the solve to
+  // the host
+  b.assign(x, x + static_cast<std::size_t>(an.n) * nrhs);
   try {
     for (std::size_t l = 0; l < layers.size(); ++l) run_layer(l, true);
     for (std::size_t l = layers.size(); l-- > 0;) run_layer(l, false);
@@ -212,7 +213,8 @@ class MultiWorkerDriver final : public NumericDriver {
   }
   bool solve(const Analysis& an, NumericFactor& factor, double* x, index_t nrhs) override {
     const std::vector<Executor*> execs = executors();
-    if (options_.gpu_solve_parts && solve_where_held(an, execs, factor, x, nrhs, part_solve_u_))
+    if (options_.gpu_solve_parts &&
+        solve_where_held(an, execs, factor, x, nrhs, part_solve_u_, part_solve_b_))
       return true;
     host_solve_.run(an, execs, factor, x, nrhs);
     return false;
@@ -236,6 +238,7 @@ class MultiWorkerDriver final : public NumericDriver {
     arenas_.clear();
     blocks_ = BlockBuffers{};
     std::vector<double>().swap(part_solve_u_);
+    std::vector<double>().swap(part_solve_b_);
     host_solve_.release();
   }
   void release() noexcept override { release_workspaces(); }
@@ -264,6 +267,7 @@ class MultiWorkerDriver final : public NumericDriver {
   BlockBuffers blocks_;
   std::vector<DeviceStats> devices_;
   std::vector<double> part_solve_u_;  // solve_where_held's update vectors
+  std::vector<double> part_solve_b_;  // and its copy of the right-hand sides
   HostSolve host_solve_;
   mutable double creation_seconds_ = 0;
 };
