@@ -13,11 +13,13 @@
 // "Matrix Computations", 4th ed., §3.2.11), in steps of 64 columns,
 // each step one launch of each kernel over every front still active (items sorted by k,
 // largest first, so the active fronts of a step are a prefix):
-//   1. lu_pivot_block_kernel, one block of 64 threads per front: the w×w diagonal block
-//      (w ≤ 64) into registers, one row per thread, unblocked LU (row j published through
-//      shared memory, one barrier per column), the block written back (L unit lower, U
-//      upper), and the inverses L_jj⁻¹ and U_jj⁻¹ (substitution on the identity, one
-//      thread per column) into the front's two 64×64 slots of the workspace;
+//   1. lu_pivot_block_kernel, one block of 256 threads per front: the w×w diagonal block
+//      (w ≤ 64) into registers, four threads per row, unblocked LU (row j published
+//      through shared memory, one barrier per column), the block written back (L unit
+//      lower, U upper), and the inverses L_jj⁻¹ and U_jj⁻¹ (substitution on the identity,
+//      four threads per column) into the front's two 64×64 slots of the workspace. Its
+//      time is the chain of 64 dependent steps and two chains of 64 rows, latency rather
+//      than arithmetic: four threads per row or column make each link a quarter as long;
 //   2. lu_panels_kernel, one block per 64-row tile below the diagonal block, L_ij =
 //      A_ij·U_jj⁻¹, and one per 64-column tile right of it, U_jc = L_jj⁻¹·A_jc — the U
 //      panel over every column of the front, so that the last step leaves U12 complete;
@@ -57,31 +59,48 @@ __host__ __device__ std::int64_t tiles_of(std::int64_t n) {
   return n > 0 ? (n + kStep - 1) / kStep : 0;
 }
 
-// The unblocked LU of the w×w block held one row per thread in `a` (thread i: row i),
-// without interchanges: row j published to R[j·64 …] at column j, one barrier per column;
-// *sbad set when a pivot is not finite or under static_pivot, or a multiplier exceeds 1.
-__device__ __forceinline__ void eliminate(double (&a)[kStep], double* R, int* sbad, int w,
+// The pivot block kernel's threads: four per row of the 64×64 block while it is
+// eliminated (thread t holds row t/4's columns c ≡ t mod 4, 16 of them, in registers), four
+// per column while the inverses are formed (thread t: column t/4, rows r ≡ t mod 4). Every
+// dependent chain is thus a quarter as long as with one thread per row or column, and the
+// four threads of a row or column are neighbouring lanes of one warp, which combine their
+// parts by shuffles.
+constexpr int kPivotThreads = 4 * kStep;
+constexpr int kPerThread = kStep / 4;  // the columns (rows) a thread holds
+constexpr int kPad = kStep + 1;        // the block's row stride in shared memory
+
+// The unblocked LU of the w×w block held as above, without interchanges: row j published
+// to R[(j mod 2)·64 …] at column j, one barrier per column (two buffers: a row is
+// overwritten two steps later, after a barrier every reader has passed); *sbad set when a
+// pivot is not finite or under static_pivot, or a multiplier exceeds 1.
+__device__ __forceinline__ void eliminate(double (&a)[kPerThread], double* R, int* sbad, int w,
                                           double static_pivot) {
-  const int i = threadIdx.x;
+  const int i = threadIdx.x >> 2, q = threadIdx.x & 3, lane = threadIdx.x & 31;
 #pragma unroll
   for (int j = 0; j < kStep; ++j) {
     if (j >= w) break;
+    double* row = R + (j & 1) * kStep;
     if (i == j) {
 #pragma unroll
-      for (int c = 0; c < kStep; ++c) R[j * kStep + c] = a[c];
+      for (int c = 0; c < kPerThread; ++c) row[4 * c + q] = a[c];
     }
     __syncthreads();
-    const double d = R[j * kStep + j];  // the same in every thread: a uniform break
+    const double d = row[j];  // the same in every thread: a uniform break
     if (!(fabs(d) >= static_pivot) || !(fabs(d) <= DBL_MAX)) {
-      if (i == 0) *sbad = 1;
+      if (threadIdx.x == 0) *sbad = 1;
       break;
     }
+    // A(i, j) from the thread of row i that holds column j (every lane takes part)
+    const double aij = __shfl_sync(0xffffffffu, a[j >> 2], (lane & ~3) | (j & 3));
     if (i > j && i < w) {
-      const double l = a[j] / d;
-      if (!(fabs(l) <= 1.0)) *sbad = 1;  // partial pivoting would interchange rows
-      a[j] = l;
+      const double l = aij / d;
+      if (q == (j & 3)) {
+        a[j >> 2] = l;
+        if (!(fabs(l) <= 1.0)) *sbad = 1;  // partial pivoting would interchange rows
+      }
 #pragma unroll
-      for (int c = j + 1; c < kStep; ++c) a[c] -= l * R[j * kStep + c];
+      for (int c = 0; c < kPerThread; ++c)
+        if (4 * c + q > j) a[c] -= l * row[4 * c + q];
     }
   }
 }
@@ -92,16 +111,20 @@ __device__ __forceinline__ void eliminate(double (&a)[kStep], double* R, int* sb
 // row j moves to its place (whole rows, the multipliers of earlier columns with them);
 // pos tracks which local row is where. Two barriers per column (the search's and the
 // interchange's); *sbad only for a pivot that is not finite or under static_pivot.
-__device__ __forceinline__ void eliminate_with_interchanges(double (&a)[kStep], double* R,
+__device__ __forceinline__ void eliminate_with_interchanges(double (&a)[kPerThread], double* R,
                                                             double* S, int* pos, int* sbad, int w,
                                                             double static_pivot) {
-  __shared__ double best_v[2];
-  __shared__ int best_i[2];
-  const int i = threadIdx.x, lane = i & 31, warp = i >> 5;
+  constexpr int kWarps = kPivotThreads / 32;
+  __shared__ double best_v[kWarps];
+  __shared__ int best_i[kWarps];
+  const int i = threadIdx.x >> 2, q = threadIdx.x & 3, lane = threadIdx.x & 31;
+  const int warp = threadIdx.x >> 5;
 #pragma unroll
   for (int j = 0; j < kStep; ++j) {
     if (j >= w) break;
-    double v = i >= j && i < w ? fabs(a[j]) : -1.0;
+    double* row = R + (j & 1) * kStep;
+    // the candidates: column j's entries in rows j … w−1, held by the lanes q = j mod 4
+    double v = q == (j & 3) && i >= j && i < w ? fabs(a[j >> 2]) : -1.0;
     int at = i;
 #pragma unroll
     for (int off = 16; off > 0; off >>= 1) {
@@ -117,15 +140,25 @@ __device__ __forceinline__ void eliminate_with_interchanges(double (&a)[kStep], 
       best_i[warp] = at;
     }
     __syncthreads();
-    const int p = best_v[1] > best_v[0] ? best_i[1] : best_i[0];  // warp 0's rows come first
+    // the warps hold rows in order: a later warp's row wins only when strictly larger; no
+    // candidate at all (a column of NaNs) leaves row j, whose pivot the check refuses
+    double bv = best_v[0];
+    int p = best_i[0];
+#pragma unroll
+    for (int x = 1; x < kWarps; ++x)
+      if (best_v[x] > bv) {
+        bv = best_v[x];
+        p = best_i[x];
+      }
+    if (!(bv >= 0.0)) p = j;
     if (i == p) {
 #pragma unroll
-      for (int c = 0; c < kStep; ++c) R[j * kStep + c] = a[c];
+      for (int c = 0; c < kPerThread; ++c) row[4 * c + q] = a[c];
     } else if (i == j) {
 #pragma unroll
-      for (int c = 0; c < kStep; ++c) S[c] = a[c];
+      for (int c = 0; c < kPerThread; ++c) S[4 * c + q] = a[c];
     }
-    if (i == 0 && p != j) {
+    if (threadIdx.x == 0 && p != j) {
       const int t = pos[j];
       pos[j] = pos[p];
       pos[p] = t;
@@ -133,87 +166,126 @@ __device__ __forceinline__ void eliminate_with_interchanges(double (&a)[kStep], 
     __syncthreads();
     if (p != j && i == p) {
 #pragma unroll
-      for (int c = 0; c < kStep; ++c) a[c] = S[c];
+      for (int c = 0; c < kPerThread; ++c) a[c] = S[4 * c + q];
     } else if (p != j && i == j) {
 #pragma unroll
-      for (int c = 0; c < kStep; ++c) a[c] = R[j * kStep + c];
+      for (int c = 0; c < kPerThread; ++c) a[c] = row[4 * c + q];
     }
-    const double d = R[j * kStep + j];
+    const double d = row[j];
     if (!(fabs(d) >= static_pivot) || !(fabs(d) <= DBL_MAX)) {
-      if (i == 0) *sbad = 1;
+      if (threadIdx.x == 0) *sbad = 1;
       break;
     }
+    const double aij = __shfl_sync(0xffffffffu, a[j >> 2], (lane & ~3) | (j & 3));
     if (i > j && i < w) {
-      const double l = a[j] / d;
-      a[j] = l;
+      const double l = aij / d;
+      if (q == (j & 3)) a[j >> 2] = l;
 #pragma unroll
-      for (int c = j + 1; c < kStep; ++c) a[c] -= l * R[j * kStep + c];
+      for (int c = 0; c < kPerThread; ++c)
+        if (4 * c + q > j) a[c] -= l * row[4 * c + q];
     }
   }
 }
 
-// Launch 1 of a step: block b (64 threads) factors item b's w×w diagonal block at (j0, j0),
-// thread i holding row i in registers — with interchanges for an item with a perm, whose
-// permutation it writes; writes the packed LU back, L_jj⁻¹ (column-major: entry (r, c) at
-// c·64 + r) to work[2b] and U_jj⁻¹ (row-major: entry (r, c) at r·64 + c, the layout
-// tile::product reads as kBRows) to work[2b + 1], both zero outside w×w.
-__global__ void __launch_bounds__(kStep)
+// L⁻¹ and U⁻¹ of the packed LU in T (row r at T[r·kPad …], the identity outside the w×w
+// block), written to WL (column-major: entry (r, c) at c·64 + r) and WU (row-major: at
+// r·64 + c), zero outside w×w. Thread t forms column c = t/4, rows r ≡ t mod 4, by rows in
+// order (L⁻¹) and in reverse (U⁻¹): X(r, c) = δ_rc − Σ_{l<r} L(r, l)·X(l, c) and
+// Y(r, c) = (δ_rc − Σ_{l>r} U(r, l)·Y(l, c)) / U(r, r), each sum in four parts (one per
+// thread of the column) added by two shuffles. The entries of a column above (L⁻¹) or
+// below (U⁻¹) the diagonal are formed as 0, which is what the sums need.
+__device__ __forceinline__ void triangular_inverses(const double* T, int w, double* WL,
+                                                    double* WU) {
+  const int c = threadIdx.x >> 2, q = threadIdx.x & 3;
+  double x[kPerThread];
+#pragma unroll
+  for (int s = 0; s < kPerThread; ++s) x[s] = 0.0;
+#pragma unroll
+  for (int r = 0; r < kStep; ++r) {
+    double part = 0.0;
+#pragma unroll
+    for (int s = 0; 4 * s < r; ++s)
+      if (4 * s + q < r) part += T[r * kPad + 4 * s + q] * x[s];
+    part += __shfl_xor_sync(0xffffffffu, part, 1);
+    part += __shfl_xor_sync(0xffffffffu, part, 2);
+    if (q == (r & 3)) x[r >> 2] = r == c ? 1.0 : (r > c ? -part : 0.0);
+  }
+#pragma unroll
+  for (int s = 0; s < kPerThread; ++s) {
+    const int r = 4 * s + q;
+    WL[c * kStep + r] = r < w && c < w ? x[s] : 0.0;
+    x[s] = 0.0;
+  }
+#pragma unroll
+  for (int r = kStep - 1; r >= 0; --r) {
+    double part = 0.0;
+#pragma unroll
+    for (int s = kPerThread - 1; 4 * s + 3 > r; --s)
+      if (4 * s + q > r) part += T[r * kPad + 4 * s + q] * x[s];
+    part += __shfl_xor_sync(0xffffffffu, part, 1);
+    part += __shfl_xor_sync(0xffffffffu, part, 2);
+    if (q == (r & 3)) x[r >> 2] = ((r == c ? 1.0 : 0.0) - part) / T[r * kPad + r];
+  }
+#pragma unroll
+  for (int s = 0; s < kPerThread; ++s) {
+    const int r = 4 * s + q;
+    WU[r * kStep + c] = r < w && c < w ? x[s] : 0.0;
+  }
+}
+
+// Launch 1 of a step: block b (kPivotThreads threads) factors item b's w×w diagonal block
+// at (j0, j0) — with interchanges for an item with a perm, whose permutation it writes;
+// writes the packed LU back, L_jj⁻¹ (column-major: entry (r, c) at c·64 + r) to work[2b]
+// and U_jj⁻¹ (row-major: entry (r, c) at r·64 + c, the layout tile::product reads as
+// kBRows) to work[2b + 1], both zero outside w×w.
+__global__ void __launch_bounds__(kPivotThreads)
     lu_pivot_block_kernel(const LuPanelItem* items, double* work, int* bad, double static_pivot,
                           std::int64_t j0) {
-  __shared__ double R[kStep * kStep];  // row j of the packed LU at [j·64 …], from step j on
-  __shared__ double S[kStep];          // a row on its way to the pivot row's place
-  __shared__ int pos[kStep];           // the local row now in each position (interchanges)
+  __shared__ double T[kStep * kPad];  // the block, row-major: staging, then the packed LU
+  __shared__ double R[2 * kStep];     // the pivot rows of the last two columns
+  __shared__ double S[kStep];         // a row on its way to the pivot row's place
+  __shared__ int pos[kStep];          // the local row now in each position (interchanges)
   __shared__ int sbad;
   if (bad[blockIdx.x]) return;  // rejected at an earlier step
   const LuPanelItem it = items[blockIdx.x];
   const std::int64_t ld = it.ld;
   const int w = static_cast<int>(imin(kStep, it.k - j0));
   double* D = it.F + j0 * ld + j0;
-  const int i = threadIdx.x;
-  if (i == 0) sbad = 0;
-  pos[i] = i;
-  double a[kStep];
-#pragma unroll
-  for (int c = 0; c < kStep; ++c) a[c] = i < w && c < w ? D[c * ld + i] : 0.0;
+  const int t = threadIdx.x, i = t >> 2, q = t & 3;
+  if (t == 0) sbad = 0;
+  if (t < kStep) pos[t] = t;
+  // the block read by columns (coalesced), then each thread's part of its row
+  for (int e = t; e < kStep * kStep; e += kPivotThreads) {
+    const int r = e & (kStep - 1), c = e >> 6;
+    T[r * kPad + c] = r < w && c < w ? D[static_cast<std::int64_t>(c) * ld + r] : 0.0;
+  }
   __syncthreads();
+  double a[kPerThread];
+#pragma unroll
+  for (int c = 0; c < kPerThread; ++c) a[c] = T[i * kPad + 4 * c + q];
   if (it.perm)
     eliminate_with_interchanges(a, R, S, pos, &sbad, w, static_pivot);
   else
     eliminate(a, R, &sbad, w, static_pivot);
   __syncthreads();
   if (sbad) {
-    if (i == 0) bad[blockIdx.x] = 1;
+    if (t == 0) bad[blockIdx.x] = 1;
     return;
   }
-  if (i < w) {
+  // the packed LU into T, the identity outside w×w (what the inverses need there)
 #pragma unroll
-    for (int c = 0; c < kStep; ++c)
-      if (c < w) D[c * ld + i] = a[c];
-    if (it.perm) it.perm[i] = pos[i];
+  for (int c = 0; c < kPerThread; ++c) {
+    const int col = 4 * c + q;
+    T[i * kPad + col] = i < w && col < w ? a[c] : (i == col ? 1.0 : 0.0);
+  }
+  if (it.perm && t < w) it.perm[t] = pos[t];
+  __syncthreads();
+  for (int e = t; e < kStep * kStep; e += kPivotThreads) {
+    const int r = e & (kStep - 1), c = e >> 6;
+    if (r < w && c < w) D[static_cast<std::int64_t>(c) * ld + r] = T[r * kPad + c];
   }
   double* WL = work + static_cast<std::int64_t>(blockIdx.x) * 2 * kSlot;
-  double* WU = WL + kSlot;
-  // L_jj·X = I, column i of X by rows in order (X(r, i) = 0 for r < i; every thread reads
-  // the same R entries: broadcasts)
-#pragma unroll
-  for (int r = 0; r < kStep; ++r) {
-    double x = r == i ? 1.0 : 0.0;
-#pragma unroll
-    for (int l = 0; l < r; ++l) x -= R[r * kStep + l] * a[l];
-    a[r] = r < w && i < w ? x : 0.0;
-  }
-#pragma unroll
-  for (int r = 0; r < kStep; ++r) WL[i * kStep + r] = a[r];
-    // U_jj·Y = I, column i of Y by rows in reverse (Y(r, i) = 0 for r > i)
-#pragma unroll
-  for (int r = kStep - 1; r >= 0; --r) {
-    double y = r == i ? 1.0 : 0.0;
-#pragma unroll
-    for (int l = r + 1; l < kStep; ++l) y -= R[r * kStep + l] * a[l];
-    a[r] = r <= i && r < w && i < w ? y / R[r * kStep + r] : 0.0;
-  }
-#pragma unroll
-  for (int r = 0; r < kStep; ++r) WU[r * kStep + i] = a[r];
+  triangular_inverses(T, w, WL, WL + kSlot);
 }
 
 // Launch 2 of a step: item blockIdx.x's T tiles of the L panel (rows j0 + w + 64y …,
@@ -334,7 +406,7 @@ void launch_lu_panel_batched(const LuPanelItem* items, const std::vector<std::in
       update_tiles = std::max(update_tiles, Tk * (2 * T - Tk));
     }
     const unsigned n = static_cast<unsigned>(active);
-    lu_pivot_block_kernel<<<n, kStep, 0, s>>>(items, work, bad, static_pivot, j0);
+    lu_pivot_block_kernel<<<n, kPivotThreads, 0, s>>>(items, work, bad, static_pivot, j0);
     STRATA_CUDA_LAUNCH();
     if (panel_tiles > 0) {
       lu_panels_kernel<<<dim3(n, grid_y(2 * panel_tiles)), kThreads, 0, s>>>(items, work, bad, j0);
