@@ -88,15 +88,17 @@ __global__ void assemble_kernel(DeviceTree t, std::int64_t begin, std::int64_t s
   // and one search after another was most of its block's time), the first children's while
   // the front is zeroed; then the children with a run here are added one after another: no
   // two writes collide.
+  // A slice of the whole front (most small fronts) takes every entry and child column.
   __shared__ std::int64_t run_lo[kThreads], run_hi[kThreads];
   const std::int64_t q_begin = t.child_offsets[f], q_end = t.child_offsets[f + 1];
+  const bool whole = c0 == 0 && c1 == m;
   auto find_runs = [&](std::int64_t q0) {
     if (q0 + threadIdx.x < q_end) {
       const std::int64_t c = t.children[q0 + threadIdx.x];
       const std::int64_t* rel = t.rel + t.rel_offsets[c];
       const std::int64_t mc = t.n_rows[c] - t.n_pivots[c];
-      run_lo[threadIdx.x] = lower_bound(rel, mc, c0);
-      run_hi[threadIdx.x] = lower_bound(rel, mc, c1);
+      run_lo[threadIdx.x] = whole ? 0 : lower_bound(rel, mc, c0);
+      run_hi[threadIdx.x] = whole ? mc : lower_bound(rel, mc, c1);
     }
   };
   find_runs(q_begin);
@@ -113,7 +115,8 @@ __global__ void assemble_kernel(DeviceTree t, std::int64_t begin, std::int64_t s
     // run; distinct destinations
     const std::int64_t e0 = t.entry_offsets[f], ne = t.entry_offsets[f + 1] - e0;
     const std::int64_t* dst = t.entry_dst + e0;
-    const std::int64_t lo = lower_bound(dst, ne, c0 * m), hi = lower_bound(dst, ne, c1 * m);
+    const std::int64_t lo = whole ? 0 : lower_bound(dst, ne, c0 * m);
+    const std::int64_t hi = whole ? ne : lower_bound(dst, ne, c1 * m);
     for (std::int64_t e = lo + threadIdx.x; e < hi; e += blockDim.x)
       F[dst[e]] += values[t.entry_src[e0 + e]];
   }
