@@ -13,13 +13,13 @@
 // "Matrix Computations", 4th ed., §3.2.11), in steps of 64 columns,
 // each step one launch of each kernel over every front still active (items sorted by k,
 // largest first, so the active fronts of a step are a prefix):
-//   1. lu_pivot_block_kernel, one block of 256 threads per front: the w×w diagonal block
-//      (w ≤ 64) into registers, four threads per row, unblocked LU (row j published
+//   1. lu_pivot_block_kernel, one block of 512 threads per front: the w×w diagonal block
+//      (w ≤ 64) into registers, eight threads per row, unblocked LU (row j published
 //      through shared memory, one barrier per column), the block written back (L unit
 //      lower, U upper), and the inverses L_jj⁻¹ and U_jj⁻¹ (substitution on the identity,
-//      four threads per column) into the front's two 64×64 slots of the workspace. Its
+//      eight threads per column) into the front's two 64×64 slots of the workspace. Its
 //      time is the chain of 64 dependent steps and two chains of 64 rows, latency rather
-//      than arithmetic: four threads per row or column make each link a quarter as long;
+//      than arithmetic: eight threads per row or column make each link an eighth as long;
 //   2. lu_panels_kernel, one block per 64-row tile below the diagonal block, L_ij =
 //      A_ij·U_jj⁻¹, and one per 64-column tile right of it, U_jc = L_jj⁻¹·A_jc — the U
 //      panel over every column of the front, so that the last step leaves U12 complete;
@@ -59,15 +59,16 @@ __host__ __device__ std::int64_t tiles_of(std::int64_t n) {
   return n > 0 ? (n + kStep - 1) / kStep : 0;
 }
 
-// The pivot block kernel's threads: four per row of the 64×64 block while it is
-// eliminated (thread t holds row t/4's columns c ≡ t mod 4, 16 of them, in registers), four
-// per column while the inverses are formed (thread t: column t/4, rows r ≡ t mod 4). Every
-// dependent chain is thus a quarter as long as with one thread per row or column, and the
-// four threads of a row or column are neighbouring lanes of one warp, which combine their
-// parts by shuffles.
-constexpr int kPivotThreads = 4 * kStep;
-constexpr int kPerThread = kStep / 4;  // the columns (rows) a thread holds
-constexpr int kPad = kStep + 1;        // the block's row stride in shared memory
+// The pivot block kernel's threads: kLanes per row of the 64×64 block while it is
+// eliminated (thread t holds row t/kLanes's columns c ≡ t mod kLanes in registers), kLanes
+// per column while the inverses are formed (thread t: column t/kLanes, rows r ≡ t mod
+// kLanes). Every dependent chain is thus kLanes times shorter than with one thread per row
+// or column, and the kLanes threads of a row or column are neighbouring lanes of one warp,
+// which combine their parts by shuffles.
+constexpr int kLanes = 8;
+constexpr int kPivotThreads = kLanes * kStep;
+constexpr int kPerThread = kStep / kLanes;  // the columns (rows) a thread holds
+constexpr int kPad = kStep + 1;             // the block's row stride in shared memory
 
 // The unblocked LU of the w×w block held as above, without interchanges: row j published
 // to R[(j mod 2)·64 …] at column j, one barrier per column (two buffers: a row is
@@ -75,14 +76,14 @@ constexpr int kPad = kStep + 1;        // the block's row stride in shared memor
 // pivot is not finite or under static_pivot, or a multiplier exceeds 1.
 __device__ __forceinline__ void eliminate(double (&a)[kPerThread], double* R, int* sbad, int w,
                                           double static_pivot) {
-  const int i = threadIdx.x >> 2, q = threadIdx.x & 3, lane = threadIdx.x & 31;
+  const int i = threadIdx.x / kLanes, q = threadIdx.x % kLanes, lane = threadIdx.x & 31;
 #pragma unroll
   for (int j = 0; j < kStep; ++j) {
     if (j >= w) break;
     double* row = R + (j & 1) * kStep;
     if (i == j) {
 #pragma unroll
-      for (int c = 0; c < kPerThread; ++c) row[4 * c + q] = a[c];
+      for (int c = 0; c < kPerThread; ++c) row[kLanes * c + q] = a[c];
     }
     __syncthreads();
     const double d = row[j];  // the same in every thread: a uniform break
@@ -91,16 +92,17 @@ __device__ __forceinline__ void eliminate(double (&a)[kPerThread], double* R, in
       break;
     }
     // A(i, j) from the thread of row i that holds column j (every lane takes part)
-    const double aij = __shfl_sync(0xffffffffu, a[j >> 2], (lane & ~3) | (j & 3));
+    const double aij =
+        __shfl_sync(0xffffffffu, a[j / kLanes], (lane & ~(kLanes - 1)) | (j % kLanes));
     if (i > j && i < w) {
       const double l = aij / d;
-      if (q == (j & 3)) {
-        a[j >> 2] = l;
+      if (q == (j % kLanes)) {
+        a[j / kLanes] = l;
         if (!(fabs(l) <= 1.0)) *sbad = 1;  // partial pivoting would interchange rows
       }
 #pragma unroll
-      for (int c = 0; c < kPerThread; ++c)
-        if (4 * c + q > j) a[c] -= l * row[4 * c + q];
+      for (int c = j / kLanes; c < kPerThread; ++c)  // the columns after j
+        if (kLanes * c + q > j) a[c] -= l * row[kLanes * c + q];
     }
   }
 }
@@ -117,14 +119,14 @@ __device__ __forceinline__ void eliminate_with_interchanges(double (&a)[kPerThre
   constexpr int kWarps = kPivotThreads / 32;
   __shared__ double best_v[kWarps];
   __shared__ int best_i[kWarps];
-  const int i = threadIdx.x >> 2, q = threadIdx.x & 3, lane = threadIdx.x & 31;
+  const int i = threadIdx.x / kLanes, q = threadIdx.x % kLanes, lane = threadIdx.x & 31;
   const int warp = threadIdx.x >> 5;
 #pragma unroll
   for (int j = 0; j < kStep; ++j) {
     if (j >= w) break;
     double* row = R + (j & 1) * kStep;
     // the candidates: column j's entries in rows j … w−1, held by the lanes q = j mod 4
-    double v = q == (j & 3) && i >= j && i < w ? fabs(a[j >> 2]) : -1.0;
+    double v = q == (j % kLanes) && i >= j && i < w ? fabs(a[j / kLanes]) : -1.0;
     int at = i;
 #pragma unroll
     for (int off = 16; off > 0; off >>= 1) {
@@ -153,10 +155,10 @@ __device__ __forceinline__ void eliminate_with_interchanges(double (&a)[kPerThre
     if (!(bv >= 0.0)) p = j;
     if (i == p) {
 #pragma unroll
-      for (int c = 0; c < kPerThread; ++c) row[4 * c + q] = a[c];
+      for (int c = 0; c < kPerThread; ++c) row[kLanes * c + q] = a[c];
     } else if (i == j) {
 #pragma unroll
-      for (int c = 0; c < kPerThread; ++c) S[4 * c + q] = a[c];
+      for (int c = 0; c < kPerThread; ++c) S[kLanes * c + q] = a[c];
     }
     if (threadIdx.x == 0 && p != j) {
       const int t = pos[j];
@@ -166,23 +168,24 @@ __device__ __forceinline__ void eliminate_with_interchanges(double (&a)[kPerThre
     __syncthreads();
     if (p != j && i == p) {
 #pragma unroll
-      for (int c = 0; c < kPerThread; ++c) a[c] = S[4 * c + q];
+      for (int c = 0; c < kPerThread; ++c) a[c] = S[kLanes * c + q];
     } else if (p != j && i == j) {
 #pragma unroll
-      for (int c = 0; c < kPerThread; ++c) a[c] = row[4 * c + q];
+      for (int c = 0; c < kPerThread; ++c) a[c] = row[kLanes * c + q];
     }
     const double d = row[j];
     if (!(fabs(d) >= static_pivot) || !(fabs(d) <= DBL_MAX)) {
       if (threadIdx.x == 0) *sbad = 1;
       break;
     }
-    const double aij = __shfl_sync(0xffffffffu, a[j >> 2], (lane & ~3) | (j & 3));
+    const double aij =
+        __shfl_sync(0xffffffffu, a[j / kLanes], (lane & ~(kLanes - 1)) | (j % kLanes));
     if (i > j && i < w) {
       const double l = aij / d;
-      if (q == (j & 3)) a[j >> 2] = l;
+      if (q == (j % kLanes)) a[j / kLanes] = l;
 #pragma unroll
-      for (int c = 0; c < kPerThread; ++c)
-        if (4 * c + q > j) a[c] -= l * row[4 * c + q];
+      for (int c = j / kLanes; c < kPerThread; ++c)  // the columns after j
+        if (kLanes * c + q > j) a[c] -= l * row[kLanes * c + q];
     }
   }
 }
@@ -191,12 +194,12 @@ __device__ __forceinline__ void eliminate_with_interchanges(double (&a)[kPerThre
 // block), written to WL (column-major: entry (r, c) at c·64 + r) and WU (row-major: at
 // r·64 + c), zero outside w×w. Thread t forms column c = t/4, rows r ≡ t mod 4, by rows in
 // order (L⁻¹) and in reverse (U⁻¹): X(r, c) = δ_rc − Σ_{l<r} L(r, l)·X(l, c) and
-// Y(r, c) = (δ_rc − Σ_{l>r} U(r, l)·Y(l, c)) / U(r, r), each sum in four parts (one per
-// thread of the column) added by two shuffles. The entries of a column above (L⁻¹) or
+// Y(r, c) = (δ_rc − Σ_{l>r} U(r, l)·Y(l, c)) / U(r, r), each sum in kLanes parts (one per
+// thread of the column) added by shuffles. The entries of a column above (L⁻¹) or
 // below (U⁻¹) the diagonal are formed as 0, which is what the sums need.
 __device__ __forceinline__ void triangular_inverses(const double* T, int w, double* WL,
                                                     double* WU) {
-  const int c = threadIdx.x >> 2, q = threadIdx.x & 3;
+  const int c = threadIdx.x / kLanes, q = threadIdx.x % kLanes;
   double x[kPerThread];
 #pragma unroll
   for (int s = 0; s < kPerThread; ++s) x[s] = 0.0;
@@ -204,15 +207,15 @@ __device__ __forceinline__ void triangular_inverses(const double* T, int w, doub
   for (int r = 0; r < kStep; ++r) {
     double part = 0.0;
 #pragma unroll
-    for (int s = 0; 4 * s < r; ++s)
-      if (4 * s + q < r) part += T[r * kPad + 4 * s + q] * x[s];
-    part += __shfl_xor_sync(0xffffffffu, part, 1);
-    part += __shfl_xor_sync(0xffffffffu, part, 2);
-    if (q == (r & 3)) x[r >> 2] = r == c ? 1.0 : (r > c ? -part : 0.0);
+    for (int s = 0; kLanes * s < r; ++s)
+      if (kLanes * s + q < r) part += T[r * kPad + kLanes * s + q] * x[s];
+#pragma unroll
+    for (int o = 1; o < kLanes; o <<= 1) part += __shfl_xor_sync(0xffffffffu, part, o);
+    if (q == (r % kLanes)) x[r / kLanes] = r == c ? 1.0 : (r > c ? -part : 0.0);
   }
 #pragma unroll
   for (int s = 0; s < kPerThread; ++s) {
-    const int r = 4 * s + q;
+    const int r = kLanes * s + q;
     WL[c * kStep + r] = r < w && c < w ? x[s] : 0.0;
     x[s] = 0.0;
   }
@@ -220,15 +223,15 @@ __device__ __forceinline__ void triangular_inverses(const double* T, int w, doub
   for (int r = kStep - 1; r >= 0; --r) {
     double part = 0.0;
 #pragma unroll
-    for (int s = kPerThread - 1; 4 * s + 3 > r; --s)
-      if (4 * s + q > r) part += T[r * kPad + 4 * s + q] * x[s];
-    part += __shfl_xor_sync(0xffffffffu, part, 1);
-    part += __shfl_xor_sync(0xffffffffu, part, 2);
-    if (q == (r & 3)) x[r >> 2] = ((r == c ? 1.0 : 0.0) - part) / T[r * kPad + r];
+    for (int s = kPerThread - 1; kLanes * s + kLanes - 1 > r; --s)
+      if (kLanes * s + q > r) part += T[r * kPad + kLanes * s + q] * x[s];
+#pragma unroll
+    for (int o = 1; o < kLanes; o <<= 1) part += __shfl_xor_sync(0xffffffffu, part, o);
+    if (q == (r % kLanes)) x[r / kLanes] = ((r == c ? 1.0 : 0.0) - part) / T[r * kPad + r];
   }
 #pragma unroll
   for (int s = 0; s < kPerThread; ++s) {
-    const int r = 4 * s + q;
+    const int r = kLanes * s + q;
     WU[r * kStep + c] = r < w && c < w ? x[s] : 0.0;
   }
 }
@@ -251,7 +254,7 @@ __global__ void __launch_bounds__(kPivotThreads)
   const std::int64_t ld = it.ld;
   const int w = static_cast<int>(imin(kStep, it.k - j0));
   double* D = it.F + j0 * ld + j0;
-  const int t = threadIdx.x, i = t >> 2, q = t & 3;
+  const int t = threadIdx.x, i = t / kLanes, q = t % kLanes;
   if (t == 0) sbad = 0;
   if (t < kStep) pos[t] = t;
   // the block read by columns (coalesced), then each thread's part of its row
@@ -262,7 +265,7 @@ __global__ void __launch_bounds__(kPivotThreads)
   __syncthreads();
   double a[kPerThread];
 #pragma unroll
-  for (int c = 0; c < kPerThread; ++c) a[c] = T[i * kPad + 4 * c + q];
+  for (int c = 0; c < kPerThread; ++c) a[c] = T[i * kPad + kLanes * c + q];
   if (it.perm)
     eliminate_with_interchanges(a, R, S, pos, &sbad, w, static_pivot);
   else
@@ -275,7 +278,7 @@ __global__ void __launch_bounds__(kPivotThreads)
   // the packed LU into T, the identity outside w×w (what the inverses need there)
 #pragma unroll
   for (int c = 0; c < kPerThread; ++c) {
-    const int col = 4 * c + q;
+    const int col = kLanes * c + q;
     T[i * kPad + col] = i < w && col < w ? a[c] : (i == col ? 1.0 : 0.0);
   }
   if (it.perm && t < w) it.perm[t] = pos[t];
