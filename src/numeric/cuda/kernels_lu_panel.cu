@@ -396,20 +396,6 @@ void launch_lu_panel_batched(const LuPanelItem* items, const std::vector<std::in
                              double static_pivot, cudaStream_t s) {
   const std::size_t count = pivots.size();
   if (count == 0) return;
-  // A launch of the pivot block kernel has a block per front, fewer than the SMs as a rule,
-  // and each block's time is its chain of dependent instructions: two blocks on one SM take
-  // turns issuing. Such a launch asks for more shared memory than half an SM's (unused), so
-  // that the blocks go one to an SM.
-  int device = 0, sms = 0, smem_per_sm = 0;
-  STRATA_CUDA(cudaGetDevice(&device));
-  STRATA_CUDA(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, device));
-  STRATA_CUDA(
-      cudaDeviceGetAttribute(&smem_per_sm, cudaDevAttrMaxSharedMemoryPerMultiprocessor, device));
-  const int spread_bytes =
-      smem_per_sm / 2 + 1024 - static_cast<int>(sizeof(double)) * (kStep * kPad + 3 * kStep);
-  if (spread_bytes > 0)
-    STRATA_CUDA(cudaFuncSetAttribute(lu_pivot_block_kernel,
-                                     cudaFuncAttributeMaxDynamicSharedMemorySize, spread_bytes));
   std::size_t active = count;
   for (std::int64_t j0 = 0; j0 < pivots[0]; j0 += kStep) {
     while (active > 0 && pivots[active - 1] <= j0) --active;
@@ -423,8 +409,7 @@ void launch_lu_panel_batched(const LuPanelItem* items, const std::vector<std::in
       update_tiles = std::max(update_tiles, Tk * (2 * T - Tk));
     }
     const unsigned n = static_cast<unsigned>(active);
-    const int spread = spread_bytes > 0 && n <= static_cast<unsigned>(sms) ? spread_bytes : 0;
-    lu_pivot_block_kernel<<<n, kPivotThreads, spread, s>>>(items, work, bad, static_pivot, j0);
+    lu_pivot_block_kernel<<<n, kPivotThreads, 0, s>>>(items, work, bad, static_pivot, j0);
     STRATA_CUDA_LAUNCH();
     if (panel_tiles > 0) {
       lu_panels_kernel<<<dim3(n, grid_y(2 * panel_tiles)), kThreads, 0, s>>>(items, work, bad, j0);
