@@ -266,11 +266,21 @@ __global__ void __launch_bounds__(kPivotThreads)
   double a[kPerThread];
 #pragma unroll
   for (int c = 0; c < kPerThread; ++c) a[c] = T[i * kPad + kLanes * c + q];
-  if (it.perm)
-    eliminate_with_interchanges(a, R, S, pos, &sbad, w, static_pivot);
-  else
-    eliminate(a, R, &sbad, w, static_pivot);
+  // Without interchanges first, also for an item factored with them: partial pivoting
+  // interchanges no row exactly when every multiplier is at most 1 in magnitude, and then
+  // both eliminations do the same operations; otherwise (or at a bad pivot) again from the
+  // block still in T, with interchanges (two barriers a column and a search).
+  eliminate(a, R, &sbad, w, static_pivot);
   __syncthreads();
+  if (it.perm && sbad) {
+    __syncthreads();  // sbad read by every thread
+    if (t == 0) sbad = 0;
+#pragma unroll
+    for (int c = 0; c < kPerThread; ++c) a[c] = T[i * kPad + kLanes * c + q];
+    __syncthreads();
+    eliminate_with_interchanges(a, R, S, pos, &sbad, w, static_pivot);
+    __syncthreads();
+  }
   if (sbad) {
     if (t == 0) bad[blockIdx.x] = 1;
     return;
