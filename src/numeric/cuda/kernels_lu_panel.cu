@@ -237,7 +237,8 @@ __device__ __forceinline__ void triangular_inverses(const double* T, int w, doub
 }
 
 // Launch 1 of a step: block b (kPivotThreads threads) factors item b's w×w diagonal block
-// at (j0, j0) — with interchanges for an item with a perm, whose permutation it writes;
+// at (j0, j0) — for an item with a perm (a front of one step), with the interchanges that
+// partial pivoting makes, if any, and their permutation written;
 // writes the packed LU back, L_jj⁻¹ (column-major: entry (r, c) at c·64 + r) to work[2b]
 // and U_jj⁻¹ (row-major: entry (r, c) at r·64 + c, the layout tile::product reads as
 // kBRows) to work[2b + 1], both zero outside w×w.
