@@ -5,8 +5,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 #include <numbers>
 #include <random>
+#include <set>
 #include <span>
 #include <tuple>
 
@@ -644,6 +646,67 @@ TEST_F(CudaBackend, LuFactorMatchesCpu) {
       EXPECT_NEAR(sg.log_abs_det, sc.log_abs_det,
                   (pr.zero_columns ? 1e-6 : 1e-9) * std::max(1.0, std::abs(sc.log_abs_det)));
     }
+}
+
+// A front with more children than a block of the GPU assembly has threads (256): the
+// children's column runs are searched in batches, and most children add nothing to a given
+// column slice. A bordered block-diagonal matrix — 600 diagonal 2×2 blocks, each coupled to
+// three columns of a dense 300-column border — ordered by AMD without amalgamation gives
+// the border's front (alone in its launch, so cut into narrow slices) 600 children. The
+// GPU factor equals the CPU's, for LU and Cholesky.
+TEST_F(CudaBackend, FrontWithHundredsOfChildrenAssemblesAsOnCpu) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  const index_t blocks = 600, border = 300, n = 2 * blocks + border;
+  std::uniform_real_distribution<double> u(-1, 1);
+  std::uniform_int_distribution<index_t> pick(0, border - 1);
+  for (const MatrixType type : {MatrixType::general, MatrixType::spd}) {
+    SCOPED_TRACE(to_string(type));
+    std::vector<std::map<index_t, double>> col(n);  // column j: row → value
+    auto couple = [&](index_t i, index_t j) {
+      const double v = u(rng);
+      col[j][i] = v;
+      col[i][j] = type == MatrixType::spd ? v : u(rng);
+    };
+    for (index_t b = 0; b < blocks; ++b) {
+      couple(2 * b, 2 * b + 1);
+      std::set<index_t> touched;
+      while (touched.size() < 3) touched.insert(2 * blocks + pick(rng));
+      for (const index_t c : touched) {
+        couple(2 * b, c);
+        couple(2 * b + 1, c);
+      }
+    }
+    for (index_t i = 2 * blocks; i < n; ++i)
+      for (index_t j = i + 1; j < n; ++j) couple(i, j);
+    SparseMatrix a;
+    a.n_rows = a.n_cols = n;
+    for (index_t j = 0; j < n; ++j) {
+      double sum = 0;
+      for (const auto& [i, v] : col[j]) sum += std::abs(v);
+      col[j][j] = sum + 1;  // diagonally dominant by columns (and rows, for spd)
+      for (const auto& [i, v] : col[j]) {
+        a.indices.push_back(i);
+        a.values.push_back(v);
+      }
+      a.offsets.push_back(static_cast<index_t>(a.indices.size()));
+    }
+    Options o;
+    o.ordering = OrderingMethod::amd;
+    o.relax_small = 0;
+    o.relax_zeros_1 = o.relax_zeros_2 = o.relax_zeros_3 = 0;
+    CpuAndGpu r = factor_on_cpu_and_gpu(a, type, false, 1e-8, o);
+    const auto& t = r.an.tree;
+    std::vector<index_t> children(t.n_fronts(), 0);
+    for (index_t f = 0; f < t.n_fronts(); ++f)
+      if (t.parent[f] >= 0) ++children[t.parent[f]];
+    ASSERT_GT(*std::max_element(children.begin(), children.end()), 512);  // three batches
+    numeric::NumericFactor& gf = r.gpu;
+    numeric::fetch_panels(r.an, *r.gpu_exec, gf);
+    ASSERT_EQ(r.cpu.rows, gf.rows);
+    EXPECT_LT(test::relative_difference(gf.panels, r.cpu.panels), 1e-10);
+  }
 }
 
 // LU refactorizations whose fronts pivot differently each time, solved on the device with
