@@ -21,9 +21,7 @@ namespace strata {
 /// Where each stored entry of the canonical input lands in the fronts: the entries that
 /// front f receives are entry_src[entry_offsets[f] .. entry_offsets[f+1]-1] (indices into
 /// the canonical input's values) added at the column-major offsets entry_dst[...] of the
-/// n_rows(f)×n_rows(f) front, each at its own offset; within a front the entries are in
-/// increasing order of their front column (entry_dst / n_rows(f)), so those of a range of
-/// columns are consecutive.
+/// n_rows(f)×n_rows(f) front.
 struct AssemblyMap {
   std::vector<index_t> entry_offsets{0};
   std::vector<index_t> entry_src;

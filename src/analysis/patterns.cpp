@@ -151,7 +151,7 @@ AssemblyMap build_assembly_map(const SparseMatrix& c, const Analysis& an) {
     return std::pair<index_t, index_t>{an.iperm[ci[p]], an.iperm[q_inv.empty() ? j : q_inv[j]]};
   };
   // the entries sorted by front (the front of the smaller permuted index), each with its
-  // input column
+  // column; within a front in the order of the input
   AssemblyMap map;
   map.entry_src.resize(nnz);
   map.entry_dst.resize(nnz);
@@ -170,55 +170,32 @@ AssemblyMap build_assembly_map(const SparseMatrix& c, const Analysis& an) {
         column_of[slot] = j;
       });
   // local positions through a row → local index map set per front (linear in the fronts'
-  // rows plus the entries, no search), one map per thread; then each front's entries
-  // bucketed by their front column (a stable counting sort), so that the entries of a
-  // range of columns are one run — the GPU's assembly spreads a front over column slices,
-  // each finding its run by binary search (numeric/cuda/kernels.cu). Every entry has its own
-  // destination, so the order within a front changes no sum.
-  struct Scratch {
-    std::vector<index_t> local, column, count, src, dst;
-  };
-  auto place = [&](index_t f0, index_t f1, Scratch& w) {
+  // rows plus the entries, no search), one map per thread
+  auto place = [&](index_t f0, index_t f1, std::vector<index_t>& local) {
     for (index_t f = f0; f < f1; ++f) {
       const index_t* rows = t.rows_of(f);
       const index_t m = t.n_rows(f);
-      const index_t e0 = map.entry_offsets[f], ne = map.entry_offsets[f + 1] - e0;
-      for (index_t i = 0; i < m; ++i) w.local[rows[i]] = i;
-      w.column.resize(ne);
-      for (index_t k = 0; k < ne; ++k) {
-        const auto [pi, pj] = permuted(column_of[e0 + k], map.entry_src[e0 + k]);
+      for (index_t i = 0; i < m; ++i) local[rows[i]] = i;
+      for (index_t k = map.entry_offsets[f]; k < map.entry_offsets[f + 1]; ++k) {
+        const auto [pi, pj] = permuted(column_of[k], map.entry_src[k]);
         const index_t lo = std::min(pi, pj), hi = std::max(pi, pj);
         const index_t lc = lo - t.first_pivot[f];  // pivot column of the front
-        const index_t lr = w.local[hi];
+        const index_t lr = local[hi];
         // symmetric: lower triangle (row hi, column lo); general: (pi, pj) as it stands
-        const bool lower = an.symmetric || pi >= pj;
-        map.entry_dst[e0 + k] = lower ? lc * m + lr : lr * m + lc;
-        w.column[k] = lower ? lc : lr;
+        map.entry_dst[k] = (an.symmetric || pi >= pj) ? lc * m + lr : lr * m + lc;
       }
-      for (index_t i = 0; i < m; ++i) w.local[rows[i]] = -1;
-      w.count.assign(m + 1, 0);
-      for (index_t k = 0; k < ne; ++k) ++w.count[w.column[k] + 1];
-      for (index_t c = 0; c < m; ++c) w.count[c + 1] += w.count[c];
-      w.src.resize(ne);
-      w.dst.resize(ne);
-      for (index_t k = 0; k < ne; ++k) {
-        const index_t slot = w.count[w.column[k]]++;
-        w.src[slot] = map.entry_src[e0 + k];
-        w.dst[slot] = map.entry_dst[e0 + k];
-      }
-      std::copy(w.src.begin(), w.src.end(), map.entry_src.begin() + e0);
-      std::copy(w.dst.begin(), w.dst.end(), map.entry_dst.begin() + e0);
+      for (index_t i = 0; i < m; ++i) local[rows[i]] = -1;
     }
   };
-  auto scratch = [&] { return Scratch{std::vector<index_t>(an.n, -1), {}, {}, {}, {}}; };
   if (serial_passes()) {
-    Scratch w = scratch();
-    place(0, nf, w);
+    std::vector<index_t> local(an.n, -1);
+    place(0, nf, local);
     return map;
   }
-  tbb::enumerable_thread_specific<Scratch> scratches(scratch);
+  tbb::enumerable_thread_specific<std::vector<index_t>> locals(
+      [&] { return std::vector<index_t>(an.n, -1); });
   tbb::parallel_for(tbb::blocked_range<index_t>(0, nf, 16),
-                    [&](const auto& r) { place(r.begin(), r.end(), scratches.local()); });
+                    [&](const auto& r) { place(r.begin(), r.end(), locals.local()); });
   return map;
 }
 

@@ -40,9 +40,7 @@ constexpr std::int64_t kMinSliceCols = 8;
 constexpr std::int64_t kTargetBlocks = 2048;  // ≈ 16 blocks of 256 threads per Hopper SM
 constexpr int kWarp = 32;
 
-// The first index whose value is at least c, in an array where the values below c all
-// come before the others: increasing values (a child's relative column indices), or a
-// front's entry offsets, in order of their column, for c the offset of a column's start.
+// First child CB column whose parent column is at least c (rel is increasing).
 __device__ std::int64_t lower_bound(const std::int64_t* rel, std::int64_t n, std::int64_t c) {
   std::int64_t lo = 0, hi = n;
   while (lo < hi) {
@@ -88,7 +86,7 @@ __global__ void assemble_kernel(DeviceTree t, std::int64_t begin, std::int64_t s
   // and one search after another was most of its block's time), the first children's while
   // the front is zeroed; then the children with a run here are added one after another: no
   // two writes collide.
-  // A slice of the whole front (most small fronts) takes every entry and child column.
+  // A slice of the whole front (most small fronts) takes every child column.
   __shared__ std::int64_t run_lo[kThreads], run_hi[kThreads];
   const std::int64_t q_begin = t.child_offsets[f], q_end = t.child_offsets[f + 1];
   const bool whole = c0 == 0 && c1 == m;
@@ -110,15 +108,10 @@ __global__ void assemble_kernel(DeviceTree t, std::int64_t begin, std::int64_t s
   for (std::int64_t c = c0 + warp; c < c1; c += warps)
     for (std::int64_t i = (c < whole_cols ? 0 : c) + lane; i < m; i += kWarp) F[c * m + i] = 0.0;
   __syncthreads();
-  {
-    // the front's entries are in order of their column (AssemblyMap): this slice's are one
-    // run; distinct destinations
-    const std::int64_t e0 = t.entry_offsets[f], ne = t.entry_offsets[f + 1] - e0;
-    const std::int64_t* dst = t.entry_dst + e0;
-    const std::int64_t lo = whole ? 0 : lower_bound(dst, ne, c0 * m);
-    const std::int64_t hi = whole ? ne : lower_bound(dst, ne, c1 * m);
-    for (std::int64_t e = lo + threadIdx.x; e < hi; e += blockDim.x)
-      F[dst[e]] += values[t.entry_src[e0 + e]];
+  for (std::int64_t e = t.entry_offsets[f] + threadIdx.x; e < t.entry_offsets[f + 1];
+       e += blockDim.x) {
+    const std::int64_t d = t.entry_dst[e];
+    if (d >= c0 * m && d < c1 * m) F[d] += values[t.entry_src[e]];  // distinct destinations
   }
   __syncthreads();
   for (std::int64_t q0 = q_begin; q0 < q_end; q0 += kThreads) {
