@@ -648,12 +648,11 @@ TEST_F(CudaBackend, LuFactorMatchesCpu) {
     }
 }
 
-// A front with more children than a block of the GPU assembly has threads (256): the
-// children's column runs are searched in batches, and most children add nothing to a given
-// column slice. A bordered block-diagonal matrix — 600 diagonal 2×2 blocks, each coupled to
-// three columns of a dense 300-column border — ordered by AMD without amalgamation gives
-// the border's front (alone in its launch, so cut into narrow slices) 600 children. The
-// GPU factor equals the CPU's, for LU and Cholesky.
+// A front with hundreds of children, which the GPU assembly adds one after another to each
+// column slice of the front: a bordered block-diagonal matrix — 600 diagonal 2×2 blocks,
+// each coupled to three columns of a dense 300-column border — ordered by AMD without
+// amalgamation gives the border's front (alone in its launch, so cut into narrow slices)
+// 600 children. The GPU factor equals the CPU's, for LU and Cholesky.
 TEST_F(CudaBackend, FrontWithHundredsOfChildrenAssemblesAsOnCpu) {
   unsigned long long seed = 0;
   auto rng = test::fresh_rng(&seed);
@@ -701,7 +700,7 @@ TEST_F(CudaBackend, FrontWithHundredsOfChildrenAssemblesAsOnCpu) {
     std::vector<index_t> children(t.n_fronts(), 0);
     for (index_t f = 0; f < t.n_fronts(); ++f)
       if (t.parent[f] >= 0) ++children[t.parent[f]];
-    ASSERT_GT(*std::max_element(children.begin(), children.end()), 512);  // three batches
+    ASSERT_GT(*std::max_element(children.begin(), children.end()), 512);
     numeric::NumericFactor& gf = r.gpu;
     numeric::fetch_panels(r.an, *r.gpu_exec, gf);
     ASSERT_EQ(r.cpu.rows, gf.rows);

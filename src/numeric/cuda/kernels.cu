@@ -81,25 +81,6 @@ __global__ void assemble_kernel(DeviceTree t, std::int64_t begin, std::int64_t s
   double* F = pool + t.pos_offset[pos];
   const int warp = threadIdx.x / kWarp, lane = threadIdx.x % kWarp;
   const int warps = blockDim.x / kWarp;
-  // The children's column runs in this slice are searched for side by side (a thread per
-  // child, kThreads children at a time: a front of the multibody matrices can have dozens,
-  // and one search after another was most of its block's time), the first children's while
-  // the front is zeroed; then the children with a run here are added one after another: no
-  // two writes collide.
-  // A slice of the whole front (most small fronts) takes every child column.
-  __shared__ std::int64_t run_lo[kThreads], run_hi[kThreads];
-  const std::int64_t q_begin = t.child_offsets[f], q_end = t.child_offsets[f + 1];
-  const bool whole = c0 == 0 && c1 == m;
-  auto find_runs = [&](std::int64_t q0) {
-    if (q0 + threadIdx.x < q_end) {
-      const std::int64_t c = t.children[q0 + threadIdx.x];
-      const std::int64_t* rel = t.rel + t.rel_offsets[c];
-      const std::int64_t mc = t.n_rows[c] - t.n_pivots[c];
-      run_lo[threadIdx.x] = whole ? 0 : lower_bound(rel, mc, c0);
-      run_hi[threadIdx.x] = whole ? mc : lower_bound(rel, mc, c1);
-    }
-  };
-  find_runs(q_begin);
   // nothing reads the strict upper triangle of a symmetric front's contribution block (the
   // factor kernels, the block store and the panel pack use the lower one): it stays
   // unwritten, about a third less to zero in a large front. The pivot columns are zeroed
@@ -114,35 +95,27 @@ __global__ void assemble_kernel(DeviceTree t, std::int64_t begin, std::int64_t s
     if (d >= c0 * m && d < c1 * m) F[d] += values[t.entry_src[e]];  // distinct destinations
   }
   __syncthreads();
-  for (std::int64_t q0 = q_begin; q0 < q_end; q0 += kThreads) {
-    if (q0 > q_begin) {
-      __syncthreads();  // every run of the children before read
-      find_runs(q0);
-      __syncthreads();
-    }
-    const std::int64_t nq = min(static_cast<std::int64_t>(kThreads), q_end - q0);
-    for (std::int64_t q = 0; q < nq; ++q) {
-      const std::int64_t j0 = run_lo[q], j1 = run_hi[q];
-      if (j0 >= j1) continue;  // the same in every thread
-      const std::int64_t c = t.children[q0 + q];
-      const std::int64_t mc = t.n_rows[c] - t.n_pivots[c];
-      const double* cb = t.cb_ptr[c];
-      const std::int64_t* rel = t.rel + t.rel_offsets[c];
-      for (std::int64_t jj = j0 + warp; jj < j1; jj += warps) {
-        double* fcol = F + rel[jj] * m;
-        const double* src = cb + jj * mc;
-        std::int64_t ii = (symmetric ? jj : 0) + lane;
-        for (; ii + kWarp < mc; ii += 2 * kWarp) {  // two in flight (see copy_range)
-          const std::int64_t r0 = rel[ii], r1 = rel[ii + kWarp];
-          const double v0 = src[ii], v1 = src[ii + kWarp];
-          const double f0 = fcol[r0], f1 = fcol[r1];
-          fcol[r0] = f0 + v0;
-          fcol[r1] = f1 + v1;
-        }
-        if (ii < mc) fcol[rel[ii]] += src[ii];
+  for (std::int64_t q = t.child_offsets[f]; q < t.child_offsets[f + 1]; ++q) {
+    const std::int64_t c = t.children[q];
+    const std::int64_t mc = t.n_rows[c] - t.n_pivots[c];
+    if (mc == 0) continue;
+    const double* cb = t.cb_ptr[c];
+    const std::int64_t* rel = t.rel + t.rel_offsets[c];
+    const std::int64_t j0 = lower_bound(rel, mc, c0), j1 = lower_bound(rel, mc, c1);
+    for (std::int64_t jj = j0 + warp; jj < j1; jj += warps) {
+      double* fcol = F + rel[jj] * m;
+      const double* src = cb + jj * mc;
+      std::int64_t ii = (symmetric ? jj : 0) + lane;
+      for (; ii + kWarp < mc; ii += 2 * kWarp) {  // two in flight (see copy_range)
+        const std::int64_t r0 = rel[ii], r1 = rel[ii + kWarp];
+        const double v0 = src[ii], v1 = src[ii + kWarp];
+        const double f0 = fcol[r0], f1 = fcol[r1];
+        fcol[r0] = f0 + v0;
+        fcol[r1] = f1 + v1;
       }
-      __syncthreads();  // the next child may add to the same entries
+      if (ii < mc) fcol[rel[ii]] += src[ii];
     }
+    __syncthreads();  // children are added one after another: no two writes collide
   }
 }
 
