@@ -125,7 +125,7 @@ __device__ __forceinline__ void eliminate_with_interchanges(double (&a)[kPerThre
   for (int j = 0; j < kStep; ++j) {
     if (j >= w) break;
     double* row = R + (j & 1) * kStep;
-    // the candidates: column j's entries in rows j … w−1, held by the lanes q = j mod 4
+    // the candidates: column j's entries in rows j … w−1, held by the lanes q = j mod kLanes
     double v = q == (j % kLanes) && i >= j && i < w ? fabs(a[j / kLanes]) : -1.0;
     int at = i;
 #pragma unroll
@@ -192,11 +192,12 @@ __device__ __forceinline__ void eliminate_with_interchanges(double (&a)[kPerThre
 
 // L⁻¹ and U⁻¹ of the packed LU in T (row r at T[r·kPad …], the identity outside the w×w
 // block), written to WL (column-major: entry (r, c) at c·64 + r) and WU (row-major: at
-// r·64 + c), zero outside w×w. Thread t forms column c = t/4, rows r ≡ t mod 4, by rows in
-// order (L⁻¹) and in reverse (U⁻¹): X(r, c) = δ_rc − Σ_{l<r} L(r, l)·X(l, c) and
-// Y(r, c) = (δ_rc − Σ_{l>r} U(r, l)·Y(l, c)) / U(r, r), each sum in kLanes parts (one per
-// thread of the column) added by shuffles. The entries of a column above (L⁻¹) or
-// below (U⁻¹) the diagonal are formed as 0, which is what the sums need.
+// r·64 + c), zero outside w×w. Thread t forms column c = t/kLanes, rows r ≡ t mod kLanes,
+// by rows in order (L⁻¹) and in reverse (U⁻¹):
+//   X(r, c) = δ_rc − Σ_{l<r} L(r, l)·X(l, c),
+//   Y(r, c) = (δ_rc − Σ_{l>r} U(r, l)·Y(l, c)) / U(r, r),
+// each sum in kLanes parts (one per thread of the column) added by shuffles. The entries of
+// a column above (L⁻¹) or below (U⁻¹) the diagonal are formed as 0, which the sums need.
 __device__ __forceinline__ void triangular_inverses(const double* T, int w, double* WL,
                                                     double* WU) {
   const int c = threadIdx.x / kLanes, q = threadIdx.x % kLanes;
@@ -260,7 +261,7 @@ __global__ void __launch_bounds__(kPivotThreads)
   if (t < kStep) pos[t] = t;
   // the block read by columns (coalesced), then each thread's part of its row
   for (int e = t; e < kStep * kStep; e += kPivotThreads) {
-    const int r = e & (kStep - 1), c = e >> 6;
+    const int r = e % kStep, c = e / kStep;
     T[r * kPad + c] = r < w && c < w ? D[static_cast<std::int64_t>(c) * ld + r] : 0.0;
   }
   __syncthreads();
@@ -295,7 +296,7 @@ __global__ void __launch_bounds__(kPivotThreads)
   if (it.perm && t < w) it.perm[t] = pos[t];
   __syncthreads();
   for (int e = t; e < kStep * kStep; e += kPivotThreads) {
-    const int r = e & (kStep - 1), c = e >> 6;
+    const int r = e % kStep, c = e / kStep;
     if (r < w && c < w) D[static_cast<std::int64_t>(c) * ld + r] = T[r * kPad + c];
   }
   double* WL = work + static_cast<std::int64_t>(blockIdx.x) * 2 * kSlot;
