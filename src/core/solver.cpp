@@ -341,7 +341,8 @@ NumericRun factor_values(SolverState& s, double norm1, double static_pivot) {
   pin_scaled(s);
   auto run = [&](MatrixType t) {
     r.driver_ran = true;
-    s.driver->factorize(an, s.scaled, s.values_on_device, t, static_pivot, s.factor);
+    s.driver->factorize(an, s.scaled, s.values_on_device, t,
+                        numeric::PivotPolicy(static_pivot, s.options.pivot_threshold), s.factor);
   };
 
   MatrixType type = an.type;

@@ -104,8 +104,9 @@ void receive_values(detail::CommImpl& comm, NumericState& ns, std::size_t nnz,
 /// 0, and there the top part. Throws on every rank what failed on any (agree()); the top
 /// part's errors only on rank 0.
 void factor_part(detail::CommImpl& comm, NumericState& ns, const Analysis& an,
-                 const std::vector<double>& values, MatrixType type, double static_pivot,
-                 bool work_stealing, numeric::NumericFactor& factor);
+                 const std::vector<double>& values, MatrixType type,
+                 const numeric::PivotPolicy& pivots, bool work_stealing,
+                 numeric::NumericFactor& factor);
 
 /// Collective: one solve with the distributed factor. x (tree numbering, n×nrhs) holds b
 /// on rank 0 on entry and the solution there on return; on the other ranks it is n×nrhs

@@ -98,10 +98,13 @@ void setup_numeric(DistributedState& s, Analysis& an, int per_rank) {
 }
 
 // Every rank: this rank's factorization; an error is thrown on every rank by agree()
-// inside, except the top part's (rank 0 only).
+// inside, except the top part's (rank 0 only). The static pivot comes from rank 0, LU's
+// threshold from the options every rank was given.
 void run_factor(DistributedState& s, const Analysis& an, const std::vector<double>& values,
                 MatrixType type, double pivot, numeric::NumericFactor& factor) {
-  factor_part(*s.comm.impl(), s.numeric, an, values, type, pivot, s.options.work_stealing, factor);
+  factor_part(*s.comm.impl(), s.numeric, an, values, type,
+              numeric::PivotPolicy(pivot, s.options.pivot_threshold), s.options.work_stealing,
+              factor);
 }
 
 // Rank 0's replacement of the Solver's numeric phases.
@@ -115,7 +118,9 @@ class DistributedDriver final : public numeric::NumericDriver {
   bool in_one_process() const override { return false; }
   bool uploads_values() const override { return false; }
   void factorize(const Analysis& an, const std::vector<double>& values, bool values_on_device,
-                 MatrixType type, double pivot, numeric::NumericFactor& factor) override {
+                 MatrixType type, const numeric::PivotPolicy& pivots,
+                 numeric::NumericFactor& factor) override {
+    const double pivot = pivots.static_pivot;
     if (values_on_device)
       throw InternalError("the distributed driver has no value pass on a device");
     detail::CommImpl& comm = *s_.comm.impl();

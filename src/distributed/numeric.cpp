@@ -63,8 +63,9 @@ std::size_t columns_of(const RankLayout& l, int r) {
 }  // namespace
 
 void factor_part(detail::CommImpl& comm, NumericState& ns, const Analysis& an,
-                 const std::vector<double>& values, MatrixType type, double static_pivot,
-                 bool work_stealing, numeric::NumericFactor& factor) {
+                 const std::vector<double>& values, MatrixType type,
+                 const numeric::PivotPolicy& pivots, bool work_stealing,
+                 numeric::NumericFactor& factor) {
   Timer timer;
   const RankLayout& l = ns.layout;
   const int rank = comm.rank();
@@ -128,13 +129,12 @@ void factor_part(detail::CommImpl& comm, NumericState& ns, const Analysis& an,
           throw InternalError("rank " + std::to_string(r) +
                               " sent pivot statistics of the wrong size");
         for (std::size_t k = 0; k < fr.size(); ++k)
-          std::memcpy(&factor.front_stats[fr[k]],
-                      all[r].data() + k * sizeof(numeric::PivotStats),
+          std::memcpy(&factor.front_stats[fr[k]], all[r].data() + k * sizeof(numeric::PivotStats),
                       sizeof(numeric::PivotStats));
       }
   };
   try {
-    numeric::factorize_multi(an, values, type, static_pivot, execs, factor, ns.arenas, config,
+    numeric::factorize_multi(an, values, type, pivots, execs, factor, ns.arenas, config,
                              &ns.devices);
     numeric::fetch_panels(an, execs, factor);
   } catch (...) {

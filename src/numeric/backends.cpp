@@ -28,7 +28,8 @@ bool cuda_llt_update(double*, const double*, index_t, index_t) {
 
 std::vector<char> cuda_lu_fronts_batched(std::vector<std::vector<double>>&,
                                          const std::vector<index_t>&, const std::vector<index_t>&,
-                                         index_t, double, std::vector<std::vector<index_t>>*) {
+                                         index_t, double, double,
+                                         std::vector<std::vector<index_t>>*) {
   throw NotSupported("this build of strata has no CUDA backend (nvcc was not found at build time)");
 }
 

@@ -35,10 +35,11 @@ bool cuda_llt_update(double* c, const double* l, index_t n, index_t k);
 /// so that tests can check it against the CPU's factor_front_lu. fronts[i] (host) is
 /// m[i] × m[i], column-major, leading dimension m[i], k[i] fully summed rows and columns
 /// (1 ≤ k[i] ≤ m[i]). A front of one 64-column step and one strip (k ≤ 64, k ≤ strip) is
-/// factored with restricted partial pivoting by the kernels; the others without
-/// interchanges. Returns, per front, 1 when it was kept — every pivot finite with magnitude
-/// at least static_pivot and, without interchanges, restricted partial pivoting would have
-/// interchanged no row — and 0 when it was rejected. A kept front comes back as
+/// factored with restricted threshold partial pivoting (u = threshold, in (0, 1]) by the
+/// kernels; the others without interchanges. Returns, per front, 1 when it was kept — every
+/// pivot finite with magnitude at least static_pivot and, without interchanges, the
+/// factor_front_lu rule with u = threshold would have interchanged no row — and 0 when it
+/// was rejected. A kept front comes back as
 /// factor_front_lu leaves it (L11 unit lower, U11, L21, U12, the Schur complement in its
 /// contribution block), with its local permutation in (*perms)[i] when perms is given (the
 /// identity for a front factored without interchanges); a rejected one is partly factored.
@@ -47,7 +48,7 @@ bool cuda_llt_update(double* c, const double* l, index_t n, index_t k);
 std::vector<char> cuda_lu_fronts_batched(std::vector<std::vector<double>>& fronts,
                                          const std::vector<index_t>& m,
                                          const std::vector<index_t>& k, index_t strip,
-                                         double static_pivot,
+                                         double static_pivot, double threshold,
                                          std::vector<std::vector<index_t>>* perms = nullptr);
 
 }  // namespace strata::numeric

@@ -127,9 +127,9 @@ class TreeDriver final : public NumericDriver {
     return gpu_ && executor().scale_values_on_device(an, values, stage, out);
   }
   void factorize(const Analysis& an, const std::vector<double>& scaled_values,
-                 bool values_on_device, MatrixType type, double static_pivot,
+                 bool values_on_device, MatrixType type, const PivotPolicy& pivots,
                  NumericFactor& factor) override {
-    numeric::factorize(an, scaled_values, type, static_pivot, executor(), factor, cb_arena_,
+    numeric::factorize(an, scaled_values, type, pivots, executor(), factor, cb_arena_,
                        values_on_device);
   }
   bool solve(const Analysis& an, NumericFactor& factor, double* x, index_t nrhs) override {
@@ -194,7 +194,7 @@ class MultiWorkerDriver final : public NumericDriver {
     creation_seconds_ = 0;  // part of the analysis's device set-up
   }
   void factorize(const Analysis& an, const std::vector<double>& scaled_values,
-                 bool values_on_device, MatrixType type, double static_pivot,
+                 bool values_on_device, MatrixType type, const PivotPolicy& pivots,
                  NumericFactor& factor) override {
     if (values_on_device)
       throw InternalError("the multi-worker driver has no value pass on a device");
@@ -203,13 +203,12 @@ class MultiWorkerDriver final : public NumericDriver {
     if (execs.size() == 1 && an.partition.part_id.empty()) {
       // an analysis for one worker is not split into parts: the whole tree on that worker
       arenas_.resize(1);
-      numeric::factorize(an, scaled_values, type, static_pivot, *execs[0], factor, arenas_[0]);
+      numeric::factorize(an, scaled_values, type, pivots, *execs[0], factor, arenas_[0]);
       return;
     }
     MultiWorkerConfig config = config_;
     config.block_buffers = &blocks_;
-    factorize_multi(an, scaled_values, type, static_pivot, execs, factor, arenas_, config,
-                    &devices_);
+    factorize_multi(an, scaled_values, type, pivots, execs, factor, arenas_, config, &devices_);
   }
   bool solve(const Analysis& an, NumericFactor& factor, double* x, index_t nrhs) override {
     const std::vector<Executor*> execs = executors();

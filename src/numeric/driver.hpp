@@ -53,12 +53,12 @@ class NumericDriver {
     return false;
   }
   /// Factors the scaled values (the analysis's canonical entry order) as `type` with
-  /// static pivots of size `static_pivot` into `factor`; values_on_device: those the last
-  /// scale_values_on_device left on the GPU instead (scaled_values is not read). Throws
-  /// NotPositiveDefinite, OutOfMemory (with the bytes), DeviceError, as the executors do;
+  /// the pivot policy `pivots` (static pivots, LU's threshold) into `factor`; values_on_device:
+  /// those the last scale_values_on_device left on the GPU instead (scaled_values is not read).
+  /// Throws NotPositiveDefinite, OutOfMemory (with the bytes), DeviceError, as the executors do;
   /// InternalError for values_on_device on a driver without that pass.
   virtual void factorize(const Analysis& an, const std::vector<double>& scaled_values,
-                         bool values_on_device, MatrixType type, double static_pivot,
+                         bool values_on_device, MatrixType type, const PivotPolicy& pivots,
                          NumericFactor& factor) = 0;
   /// x ← F⁻¹ x with the factor of the last factorize: x in tree numbering, n × nrhs
   /// column-major. Panels kept on devices are fetched to `factor` first when the solve

@@ -96,6 +96,22 @@ struct DeviceValueNorms {
 /// scale_values_on_device).
 using StageValues = std::function<void(std::size_t begin, std::size_t end)>;
 
+/// How a factorization chooses and repairs its pivots: the numeric side of
+/// Options::static_pivot_epsilon and Options::pivot_threshold.
+struct PivotPolicy {
+  /// Absolute: a pivot below this in magnitude becomes ±static_pivot (counted in PivotStats).
+  double static_pivot = 0;
+  /// LU in the analysis's fixed order, threshold partial pivoting among the fully summed
+  /// rows (Duff, Erisman & Reid, "Direct Methods for Sparse Matrices", 2nd ed., §5.4):
+  /// column j keeps its diagonal pivot when |a_jj| ≥ u·max_{j≤i<k} |a_ij|, else takes the
+  /// largest of those entries (the first on ties), so |L| ≤ 1/u in the fully summed rows.
+  /// u in (0, 1]; 1 is partial pivoting restricted to the fully summed rows.
+  double threshold = 1;
+  PivotPolicy() = default;
+  /// A static pivot with u = 1 unless given (implicit: a bare static pivot is this policy).
+  PivotPolicy(double sp, double u = 1) : static_pivot(sp), threshold(u) {}  // NOLINT
+};
+
 /// Everything an executor needs to factor a batch.
 struct FactorContext {
   const Analysis* analysis = nullptr;
@@ -104,7 +120,8 @@ struct FactorContext {
   /// ran for this factorization): `values` is not read.
   bool values_on_device = false;
   MatrixType type = MatrixType::spd;
-  double static_pivot = 0;  ///< absolute threshold / replacement for tiny pivots
+  double static_pivot = 0;     ///< absolute threshold / replacement for tiny pivots
+  double pivot_threshold = 1;  ///< LU's u (PivotPolicy::threshold)
   NumericFactor* factor = nullptr;
   std::vector<double>* cb_arena = nullptr;  ///< host arena of the part (host executors)
   const PartView* part = nullptr;           ///< set from begin_part to end_part
@@ -323,7 +340,7 @@ void store_ldlt_front(const Analysis& an, index_t f, const index_t* local_perm,
 /// tree; values_on_device: those its scale_values_on_device left on its device instead
 /// (scaled_values is not read). Fills `factor`; throws as Executor::factor_batch.
 void factorize(const Analysis& an, const std::vector<double>& scaled_values, MatrixType type,
-               double static_pivot, Executor& exec, NumericFactor& factor,
+               const PivotPolicy& pivots, Executor& exec, NumericFactor& factor,
                std::vector<double>& cb_arena, bool values_on_device = false);
 
 /// Options of the multi-worker driver that are not user options.
@@ -378,7 +395,7 @@ struct MultiWorkerConfig {
 /// `devices` (one per worker). The first exception of any worker is rethrown after all
 /// workers have stopped.
 void factorize_multi(const Analysis& an, const std::vector<double>& scaled_values, MatrixType type,
-                     double static_pivot, const std::vector<Executor*>& execs,
+                     const PivotPolicy& pivots, const std::vector<Executor*>& execs,
                      NumericFactor& factor, std::vector<std::vector<double>>& arenas,
                      const MultiWorkerConfig& config, std::vector<DeviceStats>* devices);
 

@@ -214,7 +214,7 @@ class KeptBuffers {
 class MultiRun {
  public:
   MultiRun(const Analysis& an, const std::vector<double>& scaled_values, MatrixType type,
-           double static_pivot, const std::vector<Executor*>& execs, NumericFactor& factor,
+           const PivotPolicy& pivots, const std::vector<Executor*>& execs, NumericFactor& factor,
            std::vector<std::vector<double>>& arenas, const MultiWorkerConfig& config)
       : an_(an),
         part_(an.partition),
@@ -233,7 +233,8 @@ class MultiRun {
     base_.analysis = &an;
     base_.values = scaled_values.data();
     base_.type = type;
-    base_.static_pivot = static_pivot;
+    base_.static_pivot = pivots.static_pivot;
+    base_.pivot_threshold = pivots.threshold;
     base_.factor = &factor;
     base_.keep_part_panels = config.keep_panels_on_devices;
     arenas_.resize(workers_);
@@ -434,7 +435,7 @@ class MultiRun {
 }  // namespace
 
 void factorize_multi(const Analysis& an, const std::vector<double>& scaled_values, MatrixType type,
-                     double static_pivot, const std::vector<Executor*>& execs,
+                     const PivotPolicy& pivots, const std::vector<Executor*>& execs,
                      NumericFactor& factor, std::vector<std::vector<double>>& arenas,
                      const MultiWorkerConfig& config, std::vector<DeviceStats>* devices) {
   const schedule::TreePartition& part = an.partition;
@@ -452,7 +453,7 @@ void factorize_multi(const Analysis& an, const std::vector<double>& scaled_value
   if (part.part_id.size() != static_cast<std::size_t>(an.tree.n_fronts()))
     throw InternalError("the analysis was not split into parts");
   prepare_factor(an, type, factor, false);
-  MultiRun(an, scaled_values, type, static_pivot, execs, factor, arenas, config).run(devices);
+  MultiRun(an, scaled_values, type, pivots, execs, factor, arenas, config).run(devices);
 }
 
 }  // namespace strata::numeric

@@ -52,7 +52,7 @@ void prepare_factor(const Analysis& an, MatrixType type, NumericFactor& factor, 
 }
 
 void factorize(const Analysis& an, const std::vector<double>& scaled_values, MatrixType type,
-               double static_pivot, Executor& exec, NumericFactor& factor,
+               const PivotPolicy& pivots, Executor& exec, NumericFactor& factor,
                std::vector<double>& cb_arena, bool values_on_device) {
   prepare_factor(an, type, factor, false);
 
@@ -62,7 +62,8 @@ void factorize(const Analysis& an, const std::vector<double>& scaled_values, Mat
   ctx.values = values_on_device ? nullptr : scaled_values.data();
   ctx.values_on_device = values_on_device;
   ctx.type = type;
-  ctx.static_pivot = static_pivot;
+  ctx.static_pivot = pivots.static_pivot;
+  ctx.pivot_threshold = pivots.threshold;
   ctx.factor = &factor;
   ctx.cb_arena = &cb_arena;
   exec.begin(ctx);

@@ -244,8 +244,13 @@ TEST_F(CudaBackend, RecursivePanelMatchesCpuFront) {
 // the static-pivot threshold are rejected, while a large entry in a row that is not fully
 // summed is not a reason to. Last, fronts of one step (k ≤ 64) with random pivot blocks,
 // which the kernels factor with the interchanges: the CPU's permutation and factor, and a
-// rejection only for a pivot that needs static pivoting.
-TEST_F(CudaBackend, LuStripsMatchCpuFront) {
+// rejection only for a pivot that needs static pivoting. All of it with the pivot threshold
+// u = 1 (partial pivoting) and u = 0.1 (multipliers up to 10 keep the diagonal), the CPU
+// given the same u.
+class LuStrips : public CudaBackend, public testing::WithParamInterface<double> {};
+
+TEST_P(LuStrips, MatchCpuFront) {
+  const double threshold = GetParam();
   auto rng = test::fresh_rng();
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   // off-diagonal entries in (−1, 1), the pivot block's diagonal ±(m + 1) (column sums of
@@ -280,13 +285,14 @@ TEST_F(CudaBackend, LuStripsMatchCpuFront) {
     const auto [m, k] = shapes[i];
     std::vector<index_t> perm(k);
     numeric::PivotStats st;
-    numeric::cpu::factor_front_lu(cpu[i].data(), m, k, m, 1e-8, perm.data(), st);
+    numeric::cpu::factor_front_lu(cpu[i].data(), m, k, m, 1e-8, threshold, perm.data(), st);
     for (index_t j = 0; j < k; ++j) ASSERT_EQ(perm[j], j);  // no interchange on the CPU
     ASSERT_EQ(st.perturbed, 0);
   }
   for (index_t strip : {64, 100, 256, 4096}) {
     std::vector<std::vector<double>> gpu = in;
-    const std::vector<char> kept = numeric::cuda_lu_fronts_batched(gpu, ms, ks, strip, 1e-8);
+    const std::vector<char> kept =
+        numeric::cuda_lu_fronts_batched(gpu, ms, ks, strip, 1e-8, threshold);
     for (std::size_t i = 0; i < shapes.size(); ++i) {
       SCOPED_TRACE("strip " + std::to_string(strip) + ", m=" + std::to_string(shapes[i].first) +
                    " k=" + std::to_string(shapes[i].second));
@@ -298,16 +304,19 @@ TEST_F(CudaBackend, LuStripsMatchCpuFront) {
   struct Case {
     index_t m, k, row, col;
     double value;
-    bool kept;
+    bool kept;             // with u = 1
+    bool kept_at_a_tenth;  // with u = 0.1
   };
   const std::vector<Case> cases = {
-      {300, 256, 5, 2, 1e4, false},      // multiplier over 1 in the first diagonal block
-      {300, 256, 150, 10, 1e4, false},   // in a fully summed row of a later L-panel tile
-      {733, 300, 200, 130, 1e4, false},  // at the third step (the second or third strip)
-      {733, 300, 299, 280, 1e4, false},  // the last fully summed row, in the last step
-      {733, 300, 300, 0, 1e4, true},     // the first row that is not fully summed: no reason
-      {733, 300, 700, 250, 1e4, true},
-      {300, 256, 70, 70, 1e-12, false},  // a pivot under the static-pivot threshold
+      {300, 256, 5, 2, 1e4, false, false},      // multiplier over 10 in the first diagonal block
+      {300, 256, 150, 10, 1e4, false, false},   // in a fully summed row of a later L-panel tile
+      {733, 300, 200, 130, 1e4, false, false},  // at the third step (the second or third strip)
+      {733, 300, 299, 280, 1e4, false, false},  // the last fully summed row, in the last step
+      {733, 300, 300, 0, 1e4, true, true},      // the first row that is not fully summed
+      {733, 300, 700, 250, 1e4, true, true},
+      {300, 256, 70, 70, 1e-12, false, false},       // a pivot under the static-pivot threshold
+      {300, 256, 5, 2, 3 * 301.0, false, true},      // a multiplier of about 3: within 1/u = 10
+      {733, 300, 200, 130, 3 * 734.0, false, true},  // the same at the third step
   };
   std::vector<std::vector<double>> cf;
   ms.clear();
@@ -330,18 +339,21 @@ TEST_F(CudaBackend, LuStripsMatchCpuFront) {
     const Case& c = cases[i];
     std::vector<index_t> perm(c.k);
     numeric::PivotStats st;
-    numeric::cpu::factor_front_lu(ccpu[i].data(), c.m, c.k, c.m, 1e-8, perm.data(), st);
+    numeric::cpu::factor_front_lu(ccpu[i].data(), c.m, c.k, c.m, 1e-8, threshold, perm.data(), st);
     identity[i] = st.perturbed == 0;
     for (index_t j = 0; j < c.k; ++j) identity[i] = identity[i] && perm[j] == j;
-    EXPECT_EQ(static_cast<bool>(identity[i]), c.kept) << "case " << i;  // the CPU agrees
+    // the CPU agrees
+    EXPECT_EQ(static_cast<bool>(identity[i]), threshold == 1.0 ? c.kept : c.kept_at_a_tenth)
+        << "case " << i;
   }
   for (index_t strip : {64, 256}) {
     std::vector<std::vector<double>> cg = cf;
-    const std::vector<char> ck = numeric::cuda_lu_fronts_batched(cg, ms, ks, strip, 1e-8);
+    const std::vector<char> ck =
+        numeric::cuda_lu_fronts_batched(cg, ms, ks, strip, 1e-8, threshold);
     for (std::size_t i = 0; i < cases.size(); ++i) {
       SCOPED_TRACE("strip " + std::to_string(strip) + ", case " + std::to_string(i));
-      EXPECT_EQ(static_cast<bool>(ck[i]), cases[i].kept);
-      if (cases[i].kept) EXPECT_LT(difference(ccpu[i], cg[i]), 1e-13);
+      EXPECT_EQ(static_cast<bool>(ck[i]), static_cast<bool>(identity[i]));
+      if (identity[i]) EXPECT_LT(difference(ccpu[i], cg[i]), 1e-13);
     }
   }  // one step: random values, interchanges due; a zero column among the fully summed rows
   // of the last front (a pivot that needs static pivoting whatever the interchanges)
@@ -361,7 +373,8 @@ TEST_F(CudaBackend, LuStripsMatchCpuFront) {
   for (index_t strip : {64, 256}) {
     std::vector<std::vector<double>> rg = rf;
     std::vector<std::vector<index_t>> gperm;
-    const std::vector<char> rk = numeric::cuda_lu_fronts_batched(rg, ms, ks, strip, 1e-8, &gperm);
+    const std::vector<char> rk =
+        numeric::cuda_lu_fronts_batched(rg, ms, ks, strip, 1e-8, threshold, &gperm);
     for (std::size_t i = 0; i < one_step.size(); ++i) {
       const auto [m, k] = one_step[i];
       SCOPED_TRACE("strip " + std::to_string(strip) + ", one step m=" + std::to_string(m) +
@@ -369,7 +382,7 @@ TEST_F(CudaBackend, LuStripsMatchCpuFront) {
       std::vector<double> cpu1 = rf[i];
       std::vector<index_t> perm(k);
       numeric::PivotStats st;
-      numeric::cpu::factor_front_lu(cpu1.data(), m, k, m, 1e-8, perm.data(), st);
+      numeric::cpu::factor_front_lu(cpu1.data(), m, k, m, 1e-8, threshold, perm.data(), st);
       EXPECT_EQ(static_cast<bool>(rk[i]), st.perturbed == 0);
       if (!rk[i]) continue;
       EXPECT_EQ(gperm[i], perm);
@@ -378,6 +391,8 @@ TEST_F(CudaBackend, LuStripsMatchCpuFront) {
     EXPECT_FALSE(rk.back());  // the zero column
   }
 }
+
+INSTANTIATE_TEST_SUITE_P(CudaBackend, LuStrips, testing::Values(1.0, 0.1));
 
 // A 3-D Laplacian shifted to have exactly one negative eigenvalue, declared spd: there is
 // one non-positive pivot in all, so the CPU and the GPU must fail at the same one whatever
@@ -538,8 +553,9 @@ TEST_F(CudaBackend, LargeLuFrontsMatchCpu) {
 }
 
 // One analysis of `a` factored by the CPU executor and by the CUDA executor on one GPU,
-// with the static pivot `sp`, the matching off when `matching` is false (it rejects a
-// singular matrix). The GPU executor is kept: a resident factor's panels stay with it.
+// with the static pivot `sp` and LU's threshold o.pivot_threshold, the matching off when
+// `matching` is false (it rejects a singular matrix). The GPU executor is kept: a resident
+// factor's panels stay with it.
 namespace {
 struct CpuAndGpu {
   Analysis an;
@@ -555,9 +571,10 @@ CpuAndGpu factor_on_cpu_and_gpu(const SparseMatrix& a, MatrixType type, bool mat
   r.an = analyze_matrix(a, o);
   const SparseMatrix c = canonical_values(r.an, a);
   std::vector<double> arena;
-  numeric::factorize(r.an, c.values, type, sp, *numeric::make_cpu_executor(2), r.cpu, arena);
+  const numeric::PivotPolicy pivots(sp, o.pivot_threshold);
+  numeric::factorize(r.an, c.values, type, pivots, *numeric::make_cpu_executor(2), r.cpu, arena);
   r.gpu_exec = numeric::make_cuda_executor(o);
-  numeric::factorize(r.an, c.values, type, sp, *r.gpu_exec, r.gpu, arena);
+  numeric::factorize(r.an, c.values, type, pivots, *r.gpu_exec, r.gpu, arena);
   return r;
 }
 }  // namespace
@@ -565,10 +582,10 @@ CpuAndGpu factor_on_cpu_and_gpu(const SparseMatrix& a, MatrixType type, bool mat
 // The GPU LU factor equals the CPU's entry by entry, for large fronts on all of their
 // paths: the batched kernels without interchanges (gpu_lu_strip_pivots at its
 // default) or GETRF without pivoting + TRSMs (0), both kept when no interchange was due;
-// GETRF with pivoting after the front is assembled again when one was; and the
+// GETRF with pivoting after the front is assembled again when one was (u = 1); the
 // panel-kernel path when a pivot needs static pivoting (exactly zero columns inside large
-// fronts). The factor is resident, so this also checks that the panels kept on the device
-// only come back intact.
+// fronts) or, with the threshold u = 0.1, for every front the check rejected. The factor is
+// resident, so this also checks that the panels kept on the device only come back intact.
 TEST_F(CudaBackend, LuFactorMatchesCpu) {
   unsigned long long seed = 0;
   auto rng = test::fresh_rng(&seed);
@@ -604,48 +621,51 @@ TEST_F(CudaBackend, LuFactorMatchesCpu) {
   problems.push_back(std::move(rows));
   // every front over 16 rows on the large fronts' paths too (gpu_small_front_rows)
   for (const Problem& pr : problems)
-    for (auto [lu_max, small_rows] : {std::pair{Options{}.gpu_lu_strip_pivots, index_t{256}},
-                                      std::pair{index_t{0}, index_t{256}},
-                                      std::pair{Options{}.gpu_lu_strip_pivots, index_t{16}},
-                                      std::pair{index_t{0}, index_t{16}}}) {
-      SCOPED_TRACE(pr.name + ", gpu_lu_strip_pivots " + std::to_string(lu_max) +
-                   ", gpu_small_front_rows " + std::to_string(small_rows));
-      Options o;
-      o.gpu_lu_strip_pivots = lu_max;
-      o.gpu_small_front_rows = small_rows;
-      CpuAndGpu r = factor_on_cpu_and_gpu(pr.a, MatrixType::general,
-                                          pr.matching && pr.zero_columns == 0, 1e-8, o);
-      const numeric::NumericFactor& cf = r.cpu;
-      numeric::NumericFactor& gf = r.gpu;
-      FactorStats fs;
-      r.gpu_exec->report(fs);
-      EXPECT_TRUE(fs.factor_resident);
-      ASSERT_EQ(gf.held.size(), 1u);  // the whole tree, on the device only
-      EXPECT_EQ(gf.held[0].part, -1);
-      // elasticity 8 has large fronts: after the matching most of them need no interchange,
-      // so their elimination without interchanges stands; with rows scaled and no matching
-      // some need interchanges, found by the check
-      if (pr.name == "elasticity 8") {
-        EXPECT_GT(fs.lu_large_fronts, fs.lu_large_fronts_pivoted);
+    for (double threshold : {1.0, 0.1})
+      for (auto [lu_max, small_rows] : {std::pair{Options{}.gpu_lu_strip_pivots, index_t{256}},
+                                        std::pair{index_t{0}, index_t{256}},
+                                        std::pair{Options{}.gpu_lu_strip_pivots, index_t{16}},
+                                        std::pair{index_t{0}, index_t{16}}}) {
+        SCOPED_TRACE(pr.name + ", pivot_threshold " + std::to_string(threshold) +
+                     ", gpu_lu_strip_pivots " + std::to_string(lu_max) + ", gpu_small_front_rows " +
+                     std::to_string(small_rows));
+        Options o;
+        o.pivot_threshold = threshold;
+        o.gpu_lu_strip_pivots = lu_max;
+        o.gpu_small_front_rows = small_rows;
+        CpuAndGpu r = factor_on_cpu_and_gpu(pr.a, MatrixType::general,
+                                            pr.matching && pr.zero_columns == 0, 1e-8, o);
+        const numeric::NumericFactor& cf = r.cpu;
+        numeric::NumericFactor& gf = r.gpu;
+        FactorStats fs;
+        r.gpu_exec->report(fs);
+        EXPECT_TRUE(fs.factor_resident);
+        ASSERT_EQ(gf.held.size(), 1u);  // the whole tree, on the device only
+        EXPECT_EQ(gf.held[0].part, -1);
+        // elasticity 8 has large fronts: after the matching most of them need no interchange,
+        // so their elimination without interchanges stands; with rows scaled and no matching
+        // some need interchanges, found by the check
+        if (pr.name == "elasticity 8") {
+          EXPECT_GT(fs.lu_large_fronts, fs.lu_large_fronts_pivoted);
+        }
+        EXPECT_EQ(fs.lu_large_fronts_batched, lu_max > 0 ? fs.lu_large_fronts : 0);
+        if (!pr.matching) {
+          EXPECT_GT(fs.lu_large_fronts_pivoted, 0);
+        }
+        numeric::fetch_panels(r.an, *r.gpu_exec, gf);
+        ASSERT_EQ(cf.rows, gf.rows);
+        // zero columns: a residue of rounding size, replaced by the static pivot on one side
+        // and not the other, changes entries at the pivot's size
+        EXPECT_LT(test::relative_difference(gf.panels, cf.panels), pr.zero_columns ? 1e-6 : 1e-10);
+        numeric::PivotStats sc, sg;
+        for (const auto& ps : cf.front_stats) sc.merge(ps);
+        for (const auto& ps : gf.front_stats) sg.merge(ps);
+        EXPECT_EQ(sg.perturbed, sc.perturbed);
+        EXPECT_GE(sg.perturbed, pr.zero_columns);
+        EXPECT_EQ(sg.det_sign, sc.det_sign);
+        EXPECT_NEAR(sg.log_abs_det, sc.log_abs_det,
+                    (pr.zero_columns ? 1e-6 : 1e-9) * std::max(1.0, std::abs(sc.log_abs_det)));
       }
-      EXPECT_EQ(fs.lu_large_fronts_batched, lu_max > 0 ? fs.lu_large_fronts : 0);
-      if (!pr.matching) {
-        EXPECT_GT(fs.lu_large_fronts_pivoted, 0);
-      }
-      numeric::fetch_panels(r.an, *r.gpu_exec, gf);
-      ASSERT_EQ(cf.rows, gf.rows);
-      // zero columns: a residue of rounding size, replaced by the static pivot on one side
-      // and not the other, changes entries at the pivot's size
-      EXPECT_LT(test::relative_difference(gf.panels, cf.panels), pr.zero_columns ? 1e-6 : 1e-10);
-      numeric::PivotStats sc, sg;
-      for (const auto& ps : cf.front_stats) sc.merge(ps);
-      for (const auto& ps : gf.front_stats) sg.merge(ps);
-      EXPECT_EQ(sg.perturbed, sc.perturbed);
-      EXPECT_GE(sg.perturbed, pr.zero_columns);
-      EXPECT_EQ(sg.det_sign, sc.det_sign);
-      EXPECT_NEAR(sg.log_abs_det, sc.log_abs_det,
-                  (pr.zero_columns ? 1e-6 : 1e-9) * std::max(1.0, std::abs(sc.log_abs_det)));
-    }
 }
 
 // A front with hundreds of children, which the GPU assembly adds one after another to each

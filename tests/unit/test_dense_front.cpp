@@ -17,6 +17,7 @@
 
 #include "base/blas.hpp"
 #include "numeric/cpu/dense_front.hpp"
+#include "strata/errors.hpp"
 #include "support/test_support.hpp"
 
 namespace strata::numeric::cpu {
@@ -466,19 +467,19 @@ struct LuResult {
   Mat out;
 };
 
-LuResult factor_lu(const Mat& f, index_t k, double sp) {
+LuResult factor_lu(const Mat& f, index_t k, double sp, double u = 1.0) {
   const index_t m = f.rows, ld = m + 1;
   std::vector<double> buf = pack(f, ld, false);
   LuResult r;
   r.perm.assign(static_cast<std::size_t>(k), -7);
-  factor_front_lu(buf.data(), m, k, ld, sp, r.perm.data(), r.st);
+  factor_front_lu(buf.data(), m, k, ld, sp, u, r.perm.data(), r.st);
   expect_untouched(buf, m, ld, false);
   r.out = unpack(buf, m, ld);
   return r;
 }
 
-void check_lu(const Mat& f, index_t k, const LuResult& r, bool check_schur,
-              double perturb_tol = 0) {
+void check_lu(const Mat& f, index_t k, const LuResult& r, bool check_schur, double perturb_tol = 0,
+              double u = 1.0) {
   const index_t m = f.rows;
   ASSERT_TRUE(is_permutation_of_k(r.perm, k)) << "local_perm is not a permutation of 0..k-1";
   Mat l11(k, k), u11(k, k);
@@ -497,7 +498,7 @@ void check_lu(const Mat& f, index_t k, const LuResult& r, bool check_schur,
   EXPECT_TRUE(all_finite(r.out));
   double lmax = 0;
   for (double x : l11.v) lmax = std::max(lmax, std::abs(x));
-  EXPECT_LE(lmax, 1.0 + 1e-12) << "partial pivoting bounds |L11| by 1";
+  EXPECT_LE(lmax, (1.0 + 1e-12) / u) << "threshold pivoting bounds |L11| by 1/u";
   const double tol = rec_tol(k);
   const Mat al = abs_of(l11), au = abs_of(u11);
   EXPECT_LE(diff(mul(l11, u11), pf11), tol * (fro(pf11) + fro(mul(al, au))) + perturb_tol);
@@ -546,6 +547,42 @@ void run_lu(index_t m, index_t k, std::mt19937_64& rng) {
   check_lu_det(f, k, r.st);
 }
 
+// The pivot order of threshold partial pivoting on F11 by the textbook unblocked
+// elimination (Duff, Erisman & Reid §5.4), written apart from the kernel: at column j
+// the diagonal when |a_jj| ≥ u·max_{i≥j} |a_ij|, else the first largest entry. Returns
+// local_perm's convention: position i holds original row perm[i].
+std::vector<index_t> threshold_pivot_order(const Mat& f, index_t k, double u) {
+  Mat a = block(f, 0, k, 0, k);
+  std::vector<index_t> perm(static_cast<std::size_t>(k));
+  for (index_t i = 0; i < k; ++i) perm[i] = i;
+  for (index_t j = 0; j < k; ++j) {
+    index_t p = j;
+    double best = -1;
+    for (index_t i = j; i < k; ++i)
+      if (std::abs(a(i, j)) > best) best = std::abs(a(i, j)), p = i;
+    if (std::abs(a(j, j)) >= u * best) p = j;
+    for (index_t c = 0; c < k; ++c) std::swap(a(j, c), a(p, c));
+    std::swap(perm[j], perm[p]);
+    for (index_t i = j + 1; i < k; ++i) {
+      const double l = a(i, j) / a(j, j);
+      for (index_t c = j + 1; c < k; ++c) a(i, c) -= l * a(j, c);
+    }
+  }
+  return perm;
+}
+
+void run_lu_threshold(index_t m, index_t k, double u, std::mt19937_64& rng) {
+  SCOPED_TRACE(testing::Message() << "LU m=" << m << " k=" << k << " u=" << u);
+  Mat f = random_front(m, Kind::general, rng);
+  // a diagonal of the size of the off-diagonal entries: partial pivoting interchanges
+  // rows in most columns, threshold pivoting in few
+  const LuResult r = factor_lu(f, k, 0.0, u);
+  check_lu(f, k, r, true, 0, u);
+  EXPECT_EQ(r.st.perturbed, 0);
+  EXPECT_EQ(r.perm, threshold_pivot_order(f, k, u)) << "pivot order differs from the reference";
+  check_lu_det(f, k, r.st);
+}
+
 // (m, k) grid: tiny, around the small-front threshold, around panel widths, large.
 // Paths: unblocked whole front (LLᵀ/LU m ≤ 24, LDLᵀ m ≤ 40), BLAS with an unblocked LDLᵀ
 // pivot block (k ≤ 64), panels of 32 (k > 64), recursive LU.
@@ -586,6 +623,39 @@ TEST(DenseFront, LuGrid) {
   Seeded s;
   TRACE_SEED(s);
   for (auto [m, k] : kGrid) run_lu(m, k, s.rng);
+}
+
+TEST(DenseFront, LuThresholdGrid) {
+  Seeded s;
+  TRACE_SEED(s);
+  for (double u : {1.0, 0.5, 0.1, 0.01})
+    for (auto [m, k] : kGrid) run_lu_threshold(m, k, u, s.rng);
+}
+
+TEST(DenseFront, LuThresholdKeepsTheDiagonalWithinTheBound) {
+  // column 0: |a00| = 1 against |a10| = 3: partial pivoting (u = 1) and u = 0.5 take row 1,
+  // u = 0.1 keeps the diagonal (1 ≥ 0.3) and makes L(1, 0) = 3
+  for (double u : {1.0, 0.5, 0.1}) {
+    SCOPED_TRACE(testing::Message() << "u=" << u);
+    Mat f(3, 3);
+    f(0, 0) = 1, f(1, 0) = 3, f(2, 0) = 7;  // row 2 is not fully summed (k = 2)
+    f(0, 1) = 2, f(1, 1) = 1, f(2, 1) = 1;
+    f(0, 2) = 1, f(1, 2) = 1, f(2, 2) = 1;
+    const LuResult r = factor_lu(f, 2, 0.0, u);
+    const bool keeps = u < 1.0 / 3;
+    EXPECT_EQ(r.perm, (keeps ? std::vector<index_t>{0, 1} : std::vector<index_t>{1, 0}));
+    EXPECT_EQ(r.out(1, 0), keeps ? 3.0 : 1.0 / 3);
+    check_lu(f, 2, r, true, 0, u);
+  }
+}
+
+TEST(DenseFront, LuThresholdOutsideItsRangeIsRejected) {
+  std::vector<double> f = {1, 2, 3, 4};
+  std::vector<index_t> perm(2);
+  PivotStats st;
+  for (double u : {0.0, -0.5, 1.5, std::nan("")})
+    EXPECT_THROW(factor_front_lu(f.data(), 2, 2, 2, 0.0, u, perm.data(), st), InvalidInput)
+        << "u=" << u;
 }
 
 TEST(DenseFront, MergeStats) {

@@ -50,9 +50,14 @@
 // log_abs_det/det_sign of det(D) = det(F11) (the symmetric permutation does not change it),
 // all of the perturbed D.
 //
-// LU. Partial pivoting restricted to the fully summed rows 0..k−1 (Golub & Van Loan §3.4),
-// with the same static pivoting rule as 1×1 LDLᵀ pivots. F11 is factored by recursive
-// column splitting (left half, TRSM + GEMM update of the right half, right half — the
+// LU. Threshold partial pivoting restricted to the fully summed rows 0..k−1 (Golub & Van
+// Loan §3.4; the threshold u as in Duff, Erisman & Reid §5.4): column j keeps its diagonal
+// pivot when |a_jj| ≥ u·max_{j≤i<k} |a_ij|, else takes the largest of those entries, the
+// first on ties (u = 1: partial pivoting). On a matrix whose matching put large entries on
+// the diagonal, u < 1 lets most fronts keep the analysis's order with |L| ≤ 1/u in the
+// fully summed rows, which the GPU's kernels exploit (they eliminate without interchanges
+// and check that bound). Then the same static pivoting rule as 1×1 LDLᵀ pivots. F11 is factored by
+// recursive column splitting (left half, TRSM + GEMM update of the right half, right half — the
 // recursive formulation of LAPACK's dgetrf2; Toledo, SIAM J. Matrix Anal. Appl. 18, 1997),
 // with unblocked dgetf2-like leaves of kLuLeaf
 // columns. The row interchanges are then applied to F12 (whole rows 0..k−1 of the front
@@ -522,21 +527,24 @@ void row_swaps(double* a, index_t ld, const index_t* ipiv, index_t j0, index_t j
 }
 
 // Unblocked right-looking LU (dgetf2-like) of columns [c0, c1): the pivot of column j is
-// the largest entry among the fully summed rows j..k−1 (restricted pivoting), replaced by
-// ±sp when tiny; row interchanges move columns [c0, c1); the multipliers are formed in
-// rows j+1..row_end−1. Both the recursive leaves (row_end = k, columns of the pivot block)
-// and whole small fronts (row_end = m, columns 0..m) use it, so the pivoting policy is
-// written once.
+// its diagonal entry when that is at least u times the largest entry among the fully summed
+// rows j..k−1, else the largest of them (threshold partial pivoting restricted to the fully
+// summed rows; u = 1: partial pivoting), replaced by ±sp when tiny; row interchanges move
+// columns [c0, c1); the multipliers are formed in rows j+1..row_end−1. Both the recursive
+// leaves (row_end = k, columns of the pivot block) and whole small fronts (row_end = m,
+// columns 0..m) use it, so the pivoting policy is written once.
 void lu_unblocked(double* a, index_t k, index_t ld, index_t c0, index_t c1, index_t row_end,
-                  double sp, index_t* ipiv, int& parity, PivotStats& st) {
+                  double sp, double u, index_t* ipiv, int& parity, PivotStats& st) {
   auto A = [&](index_t i, index_t j) -> double& { return a[i + j * ld]; };
   for (index_t j = c0; j < std::min(c1, k); ++j) {
     index_t p = j;
-    double vmax = std::abs(A(j, j));
+    const double diag = std::abs(A(j, j));
+    double vmax = diag;
     for (index_t i = j + 1; i < k; ++i) {
       const double v = std::abs(A(i, j));
       if (v > vmax) vmax = v, p = i;
     }
+    if (diag >= u * vmax) p = j;
     ipiv[j] = p;
     if (p != j) {
       for (index_t c = c0; c < c1; ++c) std::swap(A(j, c), A(p, c));
@@ -560,28 +568,28 @@ void lu_unblocked(double* a, index_t k, index_t ld, index_t c0, index_t c1, inde
 // Recursive LU with partial pivoting of columns [c0, c1) of the k×k pivot block (rows
 // c0..k−1), those columns being already updated by the columns before c0. Interchanges
 // are applied to columns [c0, c1) only; the caller applies them elsewhere.
-void lu_recursive(double* a, index_t k, index_t ld, index_t c0, index_t c1, double sp,
+void lu_recursive(double* a, index_t k, index_t ld, index_t c0, index_t c1, double sp, double u,
                   index_t* ipiv, int& parity, PivotStats& st) {
   auto A = [&](index_t i, index_t j) -> double& { return a[i + j * ld]; };
   if (c1 - c0 <= kLuLeaf) {
-    lu_unblocked(a, k, ld, c0, c1, k, sp, ipiv, parity, st);
+    lu_unblocked(a, k, ld, c0, c1, k, sp, u, ipiv, parity, st);
     return;
   }
   index_t mid = c0 + ((c1 - c0) / 2 + kLuLeaf - 1) / kLuLeaf * kLuLeaf;
   if (mid >= c1) mid = c0 + (c1 - c0) / 2;
-  lu_recursive(a, k, ld, c0, mid, sp, ipiv, parity, st);
+  lu_recursive(a, k, ld, c0, mid, sp, u, ipiv, parity, st);
   row_swaps(a, ld, ipiv, c0, mid, mid, c1);
   trsm('L', 'L', 'N', 'U', mid - c0, c1 - mid, &A(c0, c0), ld, &A(c0, mid), ld);
   gemm('N', 'N', k - mid, c1 - mid, mid - c0, -1.0, &A(mid, c0), ld, &A(c0, mid), ld, 1.0,
        &A(mid, mid), ld);
-  lu_recursive(a, k, ld, mid, c1, sp, ipiv, parity, st);
+  lu_recursive(a, k, ld, mid, c1, sp, u, ipiv, parity, st);
   row_swaps(a, ld, ipiv, mid, c1, c0, mid);
 }
 
 // Small fronts: the unblocked elimination over the whole front (all m columns, all m rows).
-void lu_small(double* f, index_t m, index_t k, index_t ld, double sp, index_t* ipiv, int& parity,
-              PivotStats& st) {
-  lu_unblocked(f, k, ld, 0, m, m, sp, ipiv, parity, st);
+void lu_small(double* f, index_t m, index_t k, index_t ld, double sp, double u, index_t* ipiv,
+              int& parity, PivotStats& st) {
+  lu_unblocked(f, k, ld, 0, m, m, sp, u, ipiv, parity, st);
 }
 
 }  // namespace
@@ -693,16 +701,19 @@ void ldlt_stats_from_d(index_t k, const double* d_diag, const double* d_off, con
 }
 
 void factor_front_lu(double* f, index_t m, index_t k, index_t ld, double static_pivot,
-                     index_t* local_perm, PivotStats& stats) {
+                     double threshold, index_t* local_perm, PivotStats& stats) {
   check_front(m, k, ld);
+  if (!(threshold > 0 && threshold <= 1))
+    throw InvalidInput("factor_front_lu: the pivot threshold must be in (0, 1], not " +
+                       std::to_string(threshold));
   if (k == 0) return;
   std::vector<index_t> ipiv(static_cast<std::size_t>(k));
   int parity = 1;
   if (m <= kSmallLu) {
-    lu_small(f, m, k, ld, static_pivot, ipiv.data(), parity, stats);
+    lu_small(f, m, k, ld, static_pivot, threshold, ipiv.data(), parity, stats);
   } else {
     const index_t zeros_before = stats.zero;
-    lu_recursive(f, k, ld, 0, k, static_pivot, ipiv.data(), parity, stats);
+    lu_recursive(f, k, ld, 0, k, static_pivot, threshold, ipiv.data(), parity, stats);
     const index_t n = m - k;
     if (n > 0) {
       row_swaps(f, ld, ipiv.data(), 0, k, k, m);              // P F12

@@ -59,10 +59,15 @@ void factor_front_ldlt(double* f, index_t m, index_t k, index_t ld, double stati
 void ldlt_stats_from_d(index_t k, const double* d_diag, const double* d_off, const int* pivot_size,
                        PivotStats& stats);
 
-/// LU partial factorization with partial pivoting restricted to the fully summed rows and
-/// static pivoting. On return local_perm[0..k) gives the row permutation of the pivot
-/// block: row i now holds original local row local_perm[i] (rows k..m are not moved).
+/// LU partial factorization of the m×m front f (column-major, leading dimension ld ≥ m)
+/// in its k fully summed rows and columns, with threshold partial pivoting restricted to
+/// the fully summed rows (Duff, Erisman & Reid, "Direct Methods for Sparse Matrices", 2nd
+/// ed., §5.4): column j keeps its diagonal pivot when |a_jj| ≥ threshold·max_{j≤i<k}
+/// |a_ij|, else takes the largest of those entries, the first on ties (threshold = 1:
+/// partial pivoting); then static pivoting (|pivot| < static_pivot → ±static_pivot). On
+/// return local_perm[0..k) gives the row permutation of the pivot block: row i now holds
+/// original local row local_perm[i] (rows k..m are not moved). threshold in (0, 1].
 void factor_front_lu(double* f, index_t m, index_t k, index_t ld, double static_pivot,
-                     index_t* local_perm, PivotStats& stats);
+                     double threshold, index_t* local_perm, PivotStats& stats);
 
 }  // namespace strata::numeric::cpu

@@ -11,7 +11,8 @@
 //      cuBLAS TRSM with gpu_recursive_panel off), for LU the pivot block and both panels
 //      by our batched kernels without interchanges (kernels_lu_panel.cu; cuSOLVER GETRF on
 //      the fully summed block + TRSMs for fronts with more pivots) + the GEMM, the
-//      front redone with partial pivoting where interchanges were due (kernels_lu.cu), or
+//      front redone with interchanges where the threshold pivoting rule wanted them
+//      (kernels_lu.cu), or
 //      a blocked Bunch–Kaufman LDLᵀ with our panel kernel and
 //      cuBLAS SYRKX (kernels_ldlt.cuh), all with pivoting restricted to the fully summed
 //      rows and the CPU backend's static pivoting. The large fronts of a chunk run side by

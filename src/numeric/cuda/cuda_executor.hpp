@@ -142,7 +142,8 @@ using LuFinalUpdate = std::function<void(std::size_t i, Lane&)>;
 /// The elimination without row interchanges of large LU fronts by strips of nb pivot
 /// columns (lu_fronts.cu): `fronts` (F, leading dimension ld = m, m, k, kc = k, perm; sorted
 /// by k, largest first) get L11\U11, L21 and U12 in place — those of one step and one strip
-/// (k ≤ 64, k ≤ nb) with restricted partial pivoting, their permutations in their perm — the
+/// (k ≤ 64, k ≤ nb) with restricted threshold partial pivoting (u = pivots.threshold),
+/// their permutations in their perm — the
 /// strips' pivot blocks and panels by launch_lu_panel_batched on lanes[0] for all fronts with
 /// pivots left in the strip, the rest of each strip's update of the pivot rows and columns by two
 /// cuBLAS GEMMs per front on the other lanes (lanes[0] waits for them before the next strip), and
@@ -154,7 +155,7 @@ using LuFinalUpdate = std::function<void(std::size_t i, Lane&)>;
 /// for nb < 1.
 void enqueue_lu_strips(const std::vector<LuPanelItem>& fronts, std::int64_t nb,
                        const std::vector<Lane*>& lanes, DeviceBuffer<LuPanelItem>& items,
-                       DeviceBuffer<double>& work, int* bad, double static_pivot,
+                       DeviceBuffer<double>& work, int* bad, const numeric::PivotPolicy& pivots,
                        cudaEvent_t strip_done, const LuFinalUpdate& final_update,
                        std::vector<Lane*>& lane_of);
 
@@ -353,17 +354,21 @@ class CudaExecutor final : public numeric::Executor {
   /// split_update; `assembled`: recorded after the chunk's assembly); a front whose check
   /// failed assembled again and factored by lu_fronts_redo. The fronts' lanes are updated
   /// to the ones their last work went to.
-  void lu_large_fronts(std::vector<LuFront>& fronts, double static_pivot, cudaEvent_t assembled);
+  void lu_large_fronts(std::vector<LuFront>& fronts, const numeric::PivotPolicy& pivots,
+                       cudaEvent_t assembled);
   /// The two ways of lu_large_fronts; each returns the indices of the fronts to factor
   /// again.
-  std::vector<std::size_t> lu_fronts_by_strips(std::vector<LuFront>& fronts, double static_pivot,
+  std::vector<std::size_t> lu_fronts_by_strips(std::vector<LuFront>& fronts,
+                                               const numeric::PivotPolicy& pivots,
                                                cudaEvent_t assembled);
-  std::vector<std::size_t> lu_fronts_by_library(std::vector<LuFront>& fronts, double static_pivot,
+  std::vector<std::size_t> lu_fronts_by_library(std::vector<LuFront>& fronts,
+                                                const numeric::PivotPolicy& pivots,
                                                 cudaEvent_t assembled);
-  /// Fronts `redo` of `fronts` assembled again and factored with partial pivoting (GETRF),
-  /// or by the blocked panel-kernel path when a pivot needs static pivoting.
+  /// Fronts `redo` of `fronts` assembled again and factored with partial pivoting (GETRF;
+  /// threshold 1 only), or by the blocked panel-kernel path when a pivot needs static
+  /// pivoting or the threshold is below 1 (GETRF's rule is not the CPU's then).
   void lu_fronts_redo(std::vector<LuFront>& fronts, const std::vector<std::size_t>& redo,
-                      double static_pivot, cudaEvent_t assembled);
+                      const numeric::PivotPolicy& pivots, cudaEvent_t assembled);
   /// A front whose k × k block GETRF factored (with the interchanges `ipiv`, 1-based, or
   /// none when null), on its lane: the interchanges applied to A12, L21 and U12 by cuBLAS
   /// TRSMs, and the contribution block's update (GEMM, or split_update over the team).

@@ -128,8 +128,8 @@ void CudaExecutor::chunk_small_fronts(const numeric::FactorContext& ctx, ChunkRe
                       perm_offset_.data(), stream_);
   else
     launch_factor_small(tree, small_pos_.data(), static_cast<std::int64_t>(ns), small_rows,
-                        pool_.data(), rec.lu, ctx.static_pivot, info_.data(), perturbed_.data(),
-                        perm_.data(), perm_offset_.data(), stream_);
+                        pool_.data(), rec.lu, ctx.static_pivot, ctx.pivot_threshold, info_.data(),
+                        perturbed_.data(), perm_.data(), perm_offset_.data(), stream_);
   STRATA_CUDA(cudaEventRecord(rec.ev[2], stream_));
 }
 
@@ -231,7 +231,9 @@ void CudaExecutor::chunk_large_fronts(const numeric::FactorContext& ctx, const C
         lu_fronts.push_back({ln, F, m, k, p, perm_f, perturbed_.data() + ns + i});
       }
     }
-  if (!lu_fronts.empty()) lu_large_fronts(lu_fronts, ctx.static_pivot, rec.ev[1]);
+  if (!lu_fronts.empty())
+    lu_large_fronts(lu_fronts, numeric::PivotPolicy(ctx.static_pivot, ctx.pivot_threshold),
+                    rec.ev[1]);
   for (std::size_t l = 1; l < n_lanes; ++l) {
     STRATA_CUDA(cudaEventRecord(lane[l]->done, lane[l]->stream));
     STRATA_CUDA(cudaStreamWaitEvent(stream_, lane[l]->done, 0));

@@ -9,9 +9,10 @@
 // time forms (llt_front, lu_columns) remain for larger blocks (lu_columns also serves the
 // large LU fronts' static-pivoting path and the tiled slabs). An LU batch whose fronts all
 // fit the device's shared memory per block (about 168 rows on an H100) copies each front
-// there and factors it in place (lu_small_shared_kernel). Partial pivoting for LU searches
-// only the fully summed rows (restricted pivoting) and replaces tiny pivots by
-// ±static_pivot, exactly as the CPU kernels do (numeric/cpu/dense_front.hpp).
+// there and factors it in place (lu_small_shared_kernel). Threshold partial pivoting for
+// LU searches only the fully summed rows (restricted pivoting), keeps the diagonal when it
+// is at least u times the largest candidate, and replaces tiny pivots by ±static_pivot,
+// exactly as the CPU kernels do (numeric/cpu/dense_front.hpp).
 #include <algorithm>
 #include <atomic>
 #include <cfloat>
@@ -201,18 +202,21 @@ __device__ double static_pivoted(double p, double static_pivot, std::int64_t* pe
 
 // Unblocked right-looking partial LU of columns [p0, p0+w) of the m-row matrix F (leading
 // dimension ld), updating columns up to `update_end` (m: whole front; p0+w: panel only).
+// Threshold partial pivoting among the fully summed rows as the CPU kernel's: the diagonal
+// when |F(j, j)| ≥ threshold · the column's largest candidate, else that largest.
 // Row swaps among the fully summed rows [j, k) move the columns [0, swap_end) (the whole
 // row of an in-core front; the slab's own columns for a front factored tile by tile).
 __device__ void lu_columns(double* F, std::int64_t ld, std::int64_t m, std::int64_t k,
                            std::int64_t p0, std::int64_t w, std::int64_t update_end,
-                           std::int64_t swap_end, double static_pivot, std::int64_t* perm,
-                           std::int64_t* perturbed) {
+                           std::int64_t swap_end, double static_pivot, double threshold,
+                           std::int64_t* perm, std::int64_t* perturbed) {
   __shared__ double sval[kThreads];
   __shared__ std::int64_t sidx[kThreads];
   __shared__ double spiv;
   for (std::int64_t j = p0; j < p0 + w; ++j) {
     double* colj = F + j * ld;
-    const std::int64_t r = block_argmax(colj, j, k, sval, sidx);
+    std::int64_t r = block_argmax(colj, j, k, sval, sidx);
+    if (fabs(colj[j]) >= threshold * fabs(colj[r])) r = j;
     if (r != j) {
       for (std::int64_t c = threadIdx.x; c < swap_end; c += blockDim.x) {
         const double tmp = F[c * ld + j];
@@ -383,8 +387,9 @@ __device__ void llt_front_blocked(double* F, std::int64_t m, std::int64_t k, std
 }
 
 // Blocked right-looking partial LU of a small front (m ≤ blockDim.x rows, F full), one
-// row per thread as llt_front_blocked, with partial pivoting among the fully summed rows
-// [j, k) and static pivoting exactly as lu_columns (largest magnitude, first row on ties;
+// row per thread as llt_front_blocked, with threshold partial pivoting among the fully
+// summed rows [j, k) and static pivoting exactly as lu_columns (the diagonal when it is at
+// least `threshold` times the largest magnitude, else that largest, first row on ties;
 // |pivot| < static_pivot replaced by ±static_pivot). A front's time is the chain of its
 // pivot steps, so a step is two barriers and no global memory: the search is a shuffle
 // reduction in the warps that hold candidate rows, whose maxima every thread then reads;
@@ -402,9 +407,10 @@ __device__ void llt_front_blocked(double* F, std::int64_t m, std::int64_t k, std
 // the update reads the U rows where they are, ush is not used).
 template <bool kShared>
 __device__ void lu_front_blocked(double* F, int ld, int m, int k, double static_pivot,
-                                 std::int64_t* perm, std::int64_t* perturbed,
+                                 double threshold, std::int64_t* perm, std::int64_t* perturbed,
                                  double (*ush)[kThreads]) {
   __shared__ double l11[kSmallNb][kSmallNb];  // L(j0 + q, j0 + p), q > p
+  __shared__ double sdiag;                    // |F(j, j)| at the current pivot step
   __shared__ double xch[2][kSmallNb];         // [1]: the pivot row's panel entries; [0]: row j's
   __shared__ double sval[kThreads / kWarp];
   __shared__ int sidx[kThreads / kWarp];
@@ -445,6 +451,7 @@ __device__ void lu_front_blocked(double* F, int ld, int m, int k, double static_
             sidx[wid] = at;
           }
         }
+        if (i == j) sdiag = fabs(r[p]);
         __syncthreads();
         // every thread the same choice: later warps hold later rows, so a tie stays with
         // the first
@@ -455,7 +462,7 @@ __device__ void lu_front_blocked(double* F, int ld, int m, int k, double static_
             bv = sval[q];
             pr = sidx[q];
           }
-        if (bv < 0) pr = j;  // NaNs compare false: the column keeps its row
+        if (bv < 0 || sdiag >= threshold * bv) pr = j;  // NaNs compare false: row j stays
         if (i == pr) {
 #pragma unroll
           for (int q = 0; q < kSmallNb; ++q) xch[1][q] = r[q];
@@ -552,8 +559,9 @@ __device__ void lu_front_blocked(double* F, int ld, int m, int k, double static_
 // fronts otherwise runs one block per SM, in waves.
 __global__ void __launch_bounds__(kThreads, 2)
     factor_small_kernel(DeviceTree t, const std::int64_t* positions, double* pool, bool lu,
-                        double static_pivot, std::int64_t* info, std::int64_t* perturbed,
-                        std::int64_t* perm, const std::int64_t* perm_offset) {
+                        double static_pivot, double threshold, std::int64_t* info,
+                        std::int64_t* perturbed, std::int64_t* perm,
+                        const std::int64_t* perm_offset) {
   const std::int64_t i = blockIdx.x;
   const std::int64_t pos = positions[i];
   const std::int64_t f = t.fronts[pos];
@@ -570,9 +578,9 @@ __global__ void __launch_bounds__(kThreads, 2)
     __syncthreads();
     if (m <= blockDim.x)
       lu_front_blocked<false>(F, static_cast<int>(m), static_cast<int>(m), static_cast<int>(k),
-                              static_pivot, p, perturbed + i, panel);
+                              static_pivot, threshold, p, perturbed + i, panel);
     else
-      lu_columns(F, m, m, k, 0, k, m, m, static_pivot, p, perturbed + i);
+      lu_columns(F, m, m, k, 0, k, m, m, static_pivot, threshold, p, perturbed + i);
   } else {
     __syncthreads();
     if (m <= blockDim.x)
@@ -592,8 +600,9 @@ __host__ __device__ constexpr int shared_ld(int m) { return m | 1; }
 // shared_ld(max_rows) · max_rows doubles.
 __global__ void __launch_bounds__(kThreads, 2)
     lu_small_shared_kernel(DeviceTree t, const std::int64_t* positions, double* pool,
-                           double static_pivot, std::int64_t* info, std::int64_t* perturbed,
-                           std::int64_t* perm, const std::int64_t* perm_offset) {
+                           double static_pivot, double threshold, std::int64_t* info,
+                           std::int64_t* perturbed, std::int64_t* perm,
+                           const std::int64_t* perm_offset) {
   extern __shared__ double fs[];
   const std::int64_t b = blockIdx.x;
   const std::int64_t pos = positions[b];
@@ -625,7 +634,8 @@ __global__ void __launch_bounds__(kThreads, 2)
     }
   }
   __syncthreads();
-  lu_front_blocked<true>(fs, ld, m, k, static_pivot, perm + perm_offset[b], perturbed + b, nullptr);
+  lu_front_blocked<true>(fs, ld, m, k, static_pivot, threshold, perm + perm_offset[b],
+                         perturbed + b, nullptr);
   __syncthreads();
   for (int x = threadIdx.x; x < total; x += step) {
     const int c = x / m;
@@ -634,14 +644,15 @@ __global__ void __launch_bounds__(kThreads, 2)
 }
 
 __global__ void lu_panel_kernel(double* f, std::int64_t m, std::int64_t k, std::int64_t p0,
-                                std::int64_t w, double static_pivot, std::int64_t* perm,
-                                std::int64_t* perturbed) {
-  lu_columns(f, m, m, k, p0, w, p0 + w, m, static_pivot, perm, perturbed);
+                                std::int64_t w, double static_pivot, double threshold,
+                                std::int64_t* perm, std::int64_t* perturbed) {
+  lu_columns(f, m, m, k, p0, w, p0 + w, m, static_pivot, threshold, perm, perturbed);
 }
 
 __global__ void lu_slab_kernel(double* s, std::int64_t r, std::int64_t w, std::int64_t kk,
-                               double static_pivot, std::int64_t* perm, std::int64_t* perturbed) {
-  lu_columns(s, r, r, kk, 0, w, w, w, static_pivot, perm, perturbed);
+                               double static_pivot, double threshold, std::int64_t* perm,
+                               std::int64_t* perturbed) {
+  lu_columns(s, r, r, kk, 0, w, w, w, static_pivot, threshold, perm, perturbed);
 }
 
 }  // namespace
@@ -719,8 +730,8 @@ std::int64_t lu_shared_max_rows() {
 
 void launch_factor_small(const DeviceTree& t, const std::int64_t* positions, std::int64_t count,
                          std::int64_t max_rows, double* pool, bool lu, double static_pivot,
-                         std::int64_t* info, std::int64_t* perturbed, std::int64_t* perm,
-                         const std::int64_t* perm_offset, cudaStream_t s) {
+                         double threshold, std::int64_t* info, std::int64_t* perturbed,
+                         std::int64_t* perm, const std::int64_t* perm_offset, cudaStream_t s) {
   if (count == 0) return;
   // a row per thread, in the fewest warps that hold the largest front (a power of two, as
   // block_argmax's tree needs): a pivot step's barriers then wait for fewer warps
@@ -730,26 +741,26 @@ void launch_factor_small(const DeviceTree& t, const std::int64_t* positions, std
     const std::size_t bytes = sizeof(double) * static_cast<std::size_t>(max_rows) *
                               static_cast<std::size_t>(shared_ld(static_cast<int>(max_rows)));
     lu_small_shared_kernel<<<static_cast<unsigned>(count), threads, bytes, s>>>(
-        t, positions, pool, static_pivot, info, perturbed, perm, perm_offset);
+        t, positions, pool, static_pivot, threshold, info, perturbed, perm, perm_offset);
     STRATA_CUDA_LAUNCH();
     return;
   }
   factor_small_kernel<<<static_cast<unsigned>(count), threads, 0, s>>>(
-      t, positions, pool, lu, static_pivot, info, perturbed, perm, perm_offset);
+      t, positions, pool, lu, static_pivot, threshold, info, perturbed, perm, perm_offset);
   STRATA_CUDA_LAUNCH();
 }
 
 void launch_lu_panel(double* f, std::int64_t m, std::int64_t k, std::int64_t p0, std::int64_t w,
-                     double static_pivot, std::int64_t* perm, std::int64_t* perturbed,
-                     cudaStream_t s) {
-  lu_panel_kernel<<<1, kThreads, 0, s>>>(f, m, k, p0, w, static_pivot, perm, perturbed);
+                     double static_pivot, double threshold, std::int64_t* perm,
+                     std::int64_t* perturbed, cudaStream_t s) {
+  lu_panel_kernel<<<1, kThreads, 0, s>>>(f, m, k, p0, w, static_pivot, threshold, perm, perturbed);
   STRATA_CUDA_LAUNCH();
 }
 
 void launch_lu_slab(double* s_, std::int64_t r, std::int64_t w, std::int64_t kk,
-                    double static_pivot, std::int64_t* perm, std::int64_t* perturbed,
-                    cudaStream_t s) {
-  lu_slab_kernel<<<1, kThreads, 0, s>>>(s_, r, w, kk, static_pivot, perm, perturbed);
+                    double static_pivot, double threshold, std::int64_t* perm,
+                    std::int64_t* perturbed, cudaStream_t s) {
+  lu_slab_kernel<<<1, kThreads, 0, s>>>(s_, r, w, kk, static_pivot, threshold, perm, perturbed);
   STRATA_CUDA_LAUNCH();
 }
 

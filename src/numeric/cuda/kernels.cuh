@@ -58,11 +58,12 @@ void launch_pack_panels(const DeviceTree& t, std::int64_t begin, std::int64_t co
 /// `positions` lists batch positions (device array of `count`); max_rows is the most rows
 /// of a listed front (it sizes the blocks). Per listed front i: info[i] = local index of a
 /// failed Cholesky pivot or -1; perturbed[i] = static pivots; perm (LU) receives the local
-/// row permutation at perm + first_pivot offsets given by perm_offset[i].
+/// row permutation at perm + first_pivot offsets given by perm_offset[i]. LU pivots by
+/// the CPU's rule (numeric/cpu/dense_front.hpp, factor_front_lu) with u = `threshold`.
 void launch_factor_small(const DeviceTree& t, const std::int64_t* positions, std::int64_t count,
                          std::int64_t max_rows, double* pool, bool lu, double static_pivot,
-                         std::int64_t* info, std::int64_t* perturbed, std::int64_t* perm,
-                         const std::int64_t* perm_offset, cudaStream_t s);
+                         double threshold, std::int64_t* info, std::int64_t* perturbed,
+                         std::int64_t* perm, const std::int64_t* perm_offset, cudaStream_t s);
 
 /// Doubles of workspace launch_llt_panel needs for `count` fronts (64×64 each).
 std::size_t llt_panel_work_size(std::int64_t count);
@@ -87,7 +88,7 @@ void launch_llt_panel(const DeviceTree& t, const std::int64_t* items,
 /// part has m rows and columns, its first k are the pivots to eliminate now (a strip), and
 /// its first kc ≥ k rows are fully summed (the rows whose multipliers the check covers).
 /// perm (device, k entries) non-null: a whole front with k = kc ≤ 64 (one step) whose rows
-/// the kernels interchange by restricted partial pivoting, recording its local row
+/// the kernels interchange by restricted threshold partial pivoting, recording its local row
 /// permutation there (perm[i] = the local row now in position i).
 struct LuPanelItem {
   double* F;
@@ -106,31 +107,34 @@ std::size_t lu_panel_work_size(std::int64_t count);
 /// in its k × k block, L21 = A21·U11⁻¹ below it (all m rows) and U12 = L11⁻¹·A12 right of it
 /// (all m columns); A22 is left for the caller's update A22 −= L21·U12. bad[i] (device,
 /// zeroed by the caller) is set to 1, and the item left partly factored, when restricted
-/// partial pivoting would interchange rows (a multiplier |L(r, j)| > 1 in a fully summed
-/// row r < kc) or a pivot is not finite or below `static_pivot` in magnitude; an item whose
+/// threshold partial pivoting with u = `threshold` (factor_front_lu's rule) would
+/// interchange rows (a multiplier |L(r, j)| > 1/u in a fully summed row r < kc) or a pivot
+/// is not finite or below `static_pivot` in magnitude; an item whose
 /// bad[i] is already set is left alone. An item with a perm (see LuPanelItem) is factored
 /// with the interchanges instead — P·A11 = L11·U11, U12 = L11⁻¹·P·A12, rows k.. not moved,
 /// as the CPU's factor_front_lu — and is bad only for a pivot that needs static pivoting. `work`:
 /// lu_panel_work_size(count) doubles. Throws DeviceError if a launch fails.
 void launch_lu_panel_batched(const LuPanelItem* items, const std::vector<std::int64_t>& rows,
                              const std::vector<std::int64_t>& pivots, double* work, int* bad,
-                             double static_pivot, cudaStream_t s);
+                             double static_pivot, double threshold, cudaStream_t s);
 
 /// One LU panel of a large front: columns p0..p0+w-1 of the m×m front F (fully summed
-/// rows 0..k-1), with row interchanges among rows p0..k-1 applied to whole rows, static
-/// pivoting, and the update restricted to the panel's columns. One block.
+/// rows 0..k-1), with row interchanges among rows p0..k-1 (threshold partial pivoting with
+/// u = `threshold`, factor_front_lu's rule) applied to whole rows, static pivoting, and the
+/// update restricted to the panel's columns. One block.
 void launch_lu_panel(double* f, std::int64_t m, std::int64_t k, std::int64_t p0, std::int64_t w,
-                     double static_pivot, std::int64_t* perm, std::int64_t* perturbed,
-                     cudaStream_t s);
+                     double static_pivot, double threshold, std::int64_t* perm,
+                     std::int64_t* perturbed, cudaStream_t s);
 
 /// LU of a column slab S (r×w, leading dimension r) that alone is on the device: the
 /// columns p0..p0+w of a front factored tile by tile, rows p0..m. Pivot candidates for
-/// slab column j are slab rows [j, kk) (kk = k − p0: the fully summed rows); row swaps
+/// slab column j are slab rows [j, kk) (kk = k − p0: the fully summed rows), chosen with
+/// threshold u = `threshold` as launch_lu_panel; row swaps
 /// move the slab's w columns only and are recorded in perm (slab rows 0..kk, initialized
 /// by the caller) for the caller to apply to the front's other columns.
 void launch_lu_slab(double* s_, std::int64_t r, std::int64_t w, std::int64_t kk,
-                    double static_pivot, std::int64_t* perm, std::int64_t* perturbed,
-                    cudaStream_t s);
+                    double static_pivot, double threshold, std::int64_t* perm,
+                    std::int64_t* perturbed, cudaStream_t s);
 
 /// Large-front LU glue (kernels_lu.cu). After cuSOLVER GETRF of the k×k block A11 (column-
 /// major, leading dimension ld): *bad = 1 when *getrf_info ≠ 0 or a pivot |A11(j,j)| is
@@ -140,12 +144,12 @@ void launch_lu_check(const double* a, std::int64_t ld, std::int64_t k, double st
 
 /// After cuSOLVER GETRF without pivoting of the k×k block A11 (leading dimension ld):
 /// *bad = 1 when *getrf_info ≠ 0, a pivot |U(j,j)| is below static_pivot or not finite,
-/// or a multiplier |L(i,j)| (i > j) is above 1 or not finite — that is, unless partial
-/// pivoting among these k rows would have interchanged no row — else 0; ipiv[j] = j + 1
-/// (no interchange, 1-based as GETRF's).
+/// or a multiplier |L(i,j)| (i > j) is above 1/threshold or not finite — that is, unless
+/// threshold partial pivoting among these k rows (factor_front_lu's rule) would have
+/// interchanged no row — else 0; ipiv[j] = j + 1 (no interchange, 1-based as GETRF's).
 void launch_lu_unpivoted_check(const double* a, std::int64_t ld, std::int64_t k,
-                               double static_pivot, const int* getrf_info, int* ipiv, int* bad,
-                               cudaStream_t s);
+                               double static_pivot, double threshold, const int* getrf_info,
+                               int* ipiv, int* bad, cudaStream_t s);
 
 /// The row permutation of GETRF's interchanges: perm[i] = the local row (0-based) that
 /// ended in position i, for ipiv (1-based, LAPACK) of length k. One thread.

@@ -3,20 +3,20 @@
 // A large LU front with more than Options::gpu_lu_strip_pivots pivots (and
 // any front whose elimination without interchanges was rejected) is factored by
 // whole-block library calls (lu_fronts.cu, lu_large_fronts; the others by the batched
-// kernels of kernels_lu_panel.cu): cuSOLVER GETRF on the k×k fully summed block A11 — partial
-// pivoting over the fully summed rows only, which is exactly the restricted pivoting of the CPU
-// kernel — then the row interchanges applied to A12, two TRSMs and one GEMM. GETRF runs
-// first without pivoting (several times faster at the large fronts' k: partial pivoting's
-// search and swaps are what make GETRF slow there), and that factor is kept only when
-// partial pivoting would have chosen the same pivots, i.e. every multiplier |L(i,j)| is
-// at most 1 (largest magnitude, first on ties: the diagonal); otherwise the front is
-// assembled again and GETRF runs with pivoting. GETRF does
-// no static pivoting, so the pivots it chose are checked afterwards: when one is below
-// the static-pivot threshold (or GETRF met an exact zero, or anything is not finite),
-// the front is assembled again and refactored by the blocked path with our panel kernel, which
-// perturbs tiny pivots as the CPU does. With no tiny pivot both paths make the same
-// pivot choices (largest magnitude, first on ties), so the result is the CPU's within
-// rounding either way.
+// kernels of kernels_lu_panel.cu): cuSOLVER GETRF on the k×k fully summed block A11 —
+// pivoting over the fully summed rows only, as the CPU kernel's restricted pivoting — then
+// the row interchanges applied to A12, two TRSMs and one GEMM. GETRF runs first without
+// pivoting (several times faster at the large fronts' k: partial pivoting's search and
+// swaps are what make GETRF slow there), and that factor is kept only when the CPU's
+// threshold partial pivoting (u = Options::pivot_threshold) would have chosen the same
+// pivots, i.e. every multiplier |L(i,j)| is at most 1/u (the diagonal within the
+// threshold); otherwise the front is assembled again and, for u = 1, GETRF runs with
+// partial pivoting — the CPU's rule then, largest magnitude, first on ties. GETRF does no
+// static pivoting, so the pivots it chose are checked afterwards: when one is below the
+// static-pivot threshold (or GETRF met an exact zero, or anything is not finite), or when
+// u < 1 (GETRF's rule is not the CPU's then), the front is assembled again and refactored
+// by the blocked path with our panel kernel, which applies the threshold and perturbs tiny
+// pivots as the CPU does. So the result is the CPU's within rounding either way.
 //
 // The two TRSMs (L₂₁ = A₂₁U₁₁⁻¹, U₁₂ = L₁₁⁻¹A₁₂) run far below the device's rate on
 // separator-front shapes and are a large share of an unsymmetric factorization's GPU time
@@ -58,8 +58,8 @@ __global__ void lu_check_kernel(const double* a, std::int64_t ld, std::int64_t k
 // One block per column (grid-stride): the column's pivot and its multipliers. Every
 // violation writes the same 1, so plain stores suffice; *bad was zeroed before.
 __global__ void lu_unpivoted_check_kernel(const double* a, std::int64_t ld, std::int64_t k,
-                                          double static_pivot, const int* getrf_info, int* ipiv,
-                                          int* bad) {
+                                          double static_pivot, double threshold,
+                                          const int* getrf_info, int* ipiv, int* bad) {
   if (blockIdx.x == 0 && threadIdx.x == 0 && *getrf_info != 0) *bad = 1;
   for (std::int64_t j = blockIdx.x; j < k; j += gridDim.x) {
     const double* col = a + j * ld;
@@ -69,7 +69,7 @@ __global__ void lu_unpivoted_check_kernel(const double* a, std::int64_t ld, std:
       if (!(fabs(d) >= static_pivot) || !(fabs(d) <= DBL_MAX)) *bad = 1;
     }
     for (std::int64_t i = j + 1 + threadIdx.x; i < k; i += blockDim.x)
-      if (!(fabs(col[i]) <= 1.0)) *bad = 1;
+      if (!(threshold * fabs(col[i]) <= 1.0)) *bad = 1;
   }
 }
 
@@ -139,12 +139,12 @@ void launch_lu_check(const double* a, std::int64_t ld, std::int64_t k, double st
 }
 
 void launch_lu_unpivoted_check(const double* a, std::int64_t ld, std::int64_t k,
-                               double static_pivot, const int* getrf_info, int* ipiv, int* bad,
-                               cudaStream_t s) {
+                               double static_pivot, double threshold, const int* getrf_info,
+                               int* ipiv, int* bad, cudaStream_t s) {
   STRATA_CUDA(cudaMemsetAsync(bad, 0, sizeof(int), s));
   const std::int64_t blocks = std::max<std::int64_t>(1, std::min<std::int64_t>(k, 1024));
   lu_unpivoted_check_kernel<<<static_cast<unsigned>(blocks), kThreads, 0, s>>>(
-      a, ld, k, static_pivot, getrf_info, ipiv, bad);
+      a, ld, k, static_pivot, threshold, getrf_info, ipiv, bad);
   STRATA_CUDA_LAUNCH();
 }
 

@@ -29,16 +29,17 @@
 // The products run on the FP64 tensor cores (tile_mma.cuh). Panels by the inverses of the
 // 64×64 diagonal blocks, as MAGMA's GPU TRSM does; the error bound grows with κ(U_jj) and
 // κ(L_jj) (Higham, "Accuracy and Stability of Numerical Algorithms", 2nd ed., §14.2),
-// which the check below keeps small: |L| ≤ 1 in the fully summed rows.
+// which the check below keeps bounded: |L| ≤ 1/u in the fully summed rows.
 //
-// Restricted partial pivoting (the CPU kernel's rule, numeric/cpu/dense_front.cpp) picks
-// the largest magnitude in column j among the fully summed rows j..kc−1, the first on
-// ties; it interchanges nothing exactly when every multiplier L(i, j), j < i < kc, has
-// |L(i, j)| ≤ 1. The kernels check that (and that every pivot is finite with |U(j, j)| at least the
-// static-pivot threshold) and set bad[item] on the first violation; every later launch
-// leaves that front alone, and the caller factors it again from its assembled values by
-// the pivoting path. So a front this path keeps is the one partial pivoting would have
-// produced, in another order of summation.
+// Restricted threshold partial pivoting (the CPU kernel's rule, numeric/cpu/
+// dense_front.cpp, with u = Options::pivot_threshold) keeps the diagonal of column j when
+// |a_jj| ≥ u·|a_ij| for every fully summed row i of j..kc−1, else takes the largest
+// magnitude among them; it interchanges nothing exactly when every multiplier L(i, j),
+// j < i < kc, has u·|L(i, j)| ≤ 1. The kernels check that (and that every pivot is finite
+// with |U(j, j)| at least the static-pivot threshold) and set bad[item] on the first
+// violation; every later launch leaves that front alone, and the caller factors it again
+// from its assembled values by the pivoting path. So a front this path keeps is the one
+// the CPU's pivoting would have produced, in another order of summation.
 #include <algorithm>
 #include <cfloat>
 #include <vector>
@@ -73,9 +74,10 @@ constexpr int kPad = kStep + 1;             // the block's row stride in shared 
 // The unblocked LU of the w×w block held as above, without interchanges: row j published
 // to R[(j mod 2)·64 …] at column j, one barrier per column (two buffers: a row is
 // overwritten two steps later, after a barrier every reader has passed); *sbad set when a
-// pivot is not finite or under static_pivot, or a multiplier exceeds 1.
+// pivot is not finite or under static_pivot, or an entry below it exceeds |pivot|/u (u =
+// threshold: the pivoting rule would take another row).
 __device__ __forceinline__ void eliminate(double (&a)[kPerThread], double* R, int* sbad, int w,
-                                          double static_pivot) {
+                                          double static_pivot, double threshold) {
   const int i = threadIdx.x / kLanes, q = threadIdx.x % kLanes, lane = threadIdx.x & 31;
 #pragma unroll
   for (int j = 0; j < kStep; ++j) {
@@ -98,7 +100,8 @@ __device__ __forceinline__ void eliminate(double (&a)[kPerThread], double* R, in
       const double l = aij / d;
       if (q == (j % kLanes)) {
         a[j / kLanes] = l;
-        if (!(fabs(l) <= 1.0)) *sbad = 1;  // partial pivoting would interchange rows
+        // the CPU's test, |a_jj| ≥ u·|a_ij|: else its pivoting would interchange rows
+        if (!(fabs(d) >= threshold * fabs(aij))) *sbad = 1;
       }
 #pragma unroll
       for (int c = j / kLanes; c < kPerThread; ++c)  // the columns after j
@@ -107,18 +110,20 @@ __device__ __forceinline__ void eliminate(double (&a)[kPerThread], double* R, in
   }
 }
 
-// The same with restricted partial pivoting among the block's w rows (a whole front's
-// fully summed rows): at column j the row with the largest |a(·, j)| among rows j … w−1,
-// the first on ties (LAPACK's IDAMAX, as the CPU kernel), is published as U's row j and
-// row j moves to its place (whole rows, the multipliers of earlier columns with them);
-// pos tracks which local row is where. Two barriers per column (the search's and the
-// interchange's); *sbad only for a pivot that is not finite or under static_pivot.
+// The same with restricted threshold partial pivoting among the block's w rows (a whole
+// front's fully summed rows): at column j row j when |a(j, j)| ≥ u·max, else the row with
+// the largest |a(·, j)| among rows j … w−1, the first on ties (LAPACK's IDAMAX, as the CPU
+// kernel), is published as U's row j and row j moves to its place (whole rows, the
+// multipliers of earlier columns with them); pos tracks which local row is where. Two
+// barriers per column (the search's and the interchange's); *sbad only for a pivot that
+// is not finite or under static_pivot.
 __device__ __forceinline__ void eliminate_with_interchanges(double (&a)[kPerThread], double* R,
                                                             double* S, int* pos, int* sbad, int w,
-                                                            double static_pivot) {
+                                                            double static_pivot, double threshold) {
   constexpr int kWarps = kPivotThreads / 32;
   __shared__ double best_v[kWarps];
   __shared__ int best_i[kWarps];
+  __shared__ double diag;  // |a(j, j)| at column j
   const int i = threadIdx.x / kLanes, q = threadIdx.x % kLanes, lane = threadIdx.x & 31;
   const int warp = threadIdx.x >> 5;
 #pragma unroll
@@ -141,9 +146,11 @@ __device__ __forceinline__ void eliminate_with_interchanges(double (&a)[kPerThre
       best_v[warp] = v;
       best_i[warp] = at;
     }
+    if (i == j && q == (j % kLanes)) diag = fabs(a[j / kLanes]);
     __syncthreads();
     // the warps hold rows in order: a later warp's row wins only when strictly larger; no
-    // candidate at all (a column of NaNs) leaves row j, whose pivot the check refuses
+    // candidate at all (a column of NaNs) leaves row j, whose pivot the check refuses; a
+    // diagonal within the threshold stays
     double bv = best_v[0];
     int p = best_i[0];
 #pragma unroll
@@ -152,7 +159,7 @@ __device__ __forceinline__ void eliminate_with_interchanges(double (&a)[kPerThre
         bv = best_v[x];
         p = best_i[x];
       }
-    if (!(bv >= 0.0)) p = j;
+    if (!(bv >= 0.0) || diag >= threshold * bv) p = j;
     if (i == p) {
 #pragma unroll
       for (int c = 0; c < kPerThread; ++c) row[kLanes * c + q] = a[c];
@@ -245,7 +252,7 @@ __device__ __forceinline__ void triangular_inverses(const double* T, int w, doub
 // kBRows) to work[2b + 1], both zero outside w×w.
 __global__ void __launch_bounds__(kPivotThreads)
     lu_pivot_block_kernel(const LuPanelItem* items, double* work, int* bad, double static_pivot,
-                          std::int64_t j0) {
+                          double threshold, std::int64_t j0) {
   __shared__ double T[kStep * kPad];  // the block, row-major: staging, then the packed LU
   __shared__ double R[2 * kStep];     // the pivot rows of the last two columns
   __shared__ double S[kStep];         // a row on its way to the pivot row's place
@@ -268,11 +275,11 @@ __global__ void __launch_bounds__(kPivotThreads)
   double a[kPerThread];
 #pragma unroll
   for (int c = 0; c < kPerThread; ++c) a[c] = T[i * kPad + kLanes * c + q];
-  // Without interchanges first, also for an item factored with them: partial pivoting
-  // interchanges no row exactly when every multiplier is at most 1 in magnitude, and then
+  // Without interchanges first, also for an item factored with them: the pivoting rule
+  // interchanges no row exactly when every multiplier is at most 1/u in magnitude, and then
   // both eliminations do the same operations; otherwise (or at a bad pivot) again from the
   // block still in T, with interchanges (two barriers a column and a search).
-  eliminate(a, R, &sbad, w, static_pivot);
+  eliminate(a, R, &sbad, w, static_pivot, threshold);
   __syncthreads();
   if (it.perm && sbad) {
     __syncthreads();  // sbad read by every thread
@@ -280,7 +287,7 @@ __global__ void __launch_bounds__(kPivotThreads)
 #pragma unroll
     for (int c = 0; c < kPerThread; ++c) a[c] = T[i * kPad + kLanes * c + q];
     __syncthreads();
-    eliminate_with_interchanges(a, R, S, pos, &sbad, w, static_pivot);
+    eliminate_with_interchanges(a, R, S, pos, &sbad, w, static_pivot, threshold);
     __syncthreads();
   }
   if (sbad) {
@@ -309,7 +316,7 @@ __global__ void __launch_bounds__(kPivotThreads)
 // columns j0 + w + 64y …), U = L_jj⁻¹·A; grid-stride over the 2T tiles (gridDim.y is
 // capped). In place: a tile is read whole before it is written, and no two tiles overlap.
 __global__ void lu_panels_kernel(const LuPanelItem* items, const double* work, int* bad,
-                                 std::int64_t j0) {
+                                 double threshold, std::int64_t j0) {
   __shared__ __align__(32) double sm[tile::kSharedDoubles];
   if (bad[blockIdx.x]) return;
   const LuPanelItem it = items[blockIdx.x];
@@ -335,7 +342,7 @@ __global__ void lu_panels_kernel(const LuPanelItem* items, const double* work, i
         if (r < n && c < w) {
           const double v = C[x];
           A[static_cast<std::int64_t>(c) * ld + r] = v;
-          if (x0 + r < it.kc && !(fabs(v) <= 1.0)) over = true;
+          if (x0 + r < it.kc && !(threshold * fabs(v) <= 1.0)) over = true;
         }
       }
       if (over) bad[blockIdx.x] = 1;  // every writer writes 1; the next launch reads it
@@ -405,7 +412,7 @@ std::size_t lu_panel_work_size(std::int64_t count) {
 
 void launch_lu_panel_batched(const LuPanelItem* items, const std::vector<std::int64_t>& rows,
                              const std::vector<std::int64_t>& pivots, double* work, int* bad,
-                             double static_pivot, cudaStream_t s) {
+                             double static_pivot, double threshold, cudaStream_t s) {
   const std::size_t count = pivots.size();
   if (count == 0) return;
   std::size_t active = count;
@@ -421,10 +428,12 @@ void launch_lu_panel_batched(const LuPanelItem* items, const std::vector<std::in
       update_tiles = std::max(update_tiles, Tk * (2 * T - Tk));
     }
     const unsigned n = static_cast<unsigned>(active);
-    lu_pivot_block_kernel<<<n, kPivotThreads, 0, s>>>(items, work, bad, static_pivot, j0);
+    lu_pivot_block_kernel<<<n, kPivotThreads, 0, s>>>(items, work, bad, static_pivot, threshold,
+                                                      j0);
     STRATA_CUDA_LAUNCH();
     if (panel_tiles > 0) {
-      lu_panels_kernel<<<dim3(n, grid_y(2 * panel_tiles)), kThreads, 0, s>>>(items, work, bad, j0);
+      lu_panels_kernel<<<dim3(n, grid_y(2 * panel_tiles)), kThreads, 0, s>>>(items, work, bad,
+                                                                             threshold, j0);
       STRATA_CUDA_LAUNCH();
     }
     if (update_tiles > 0) {

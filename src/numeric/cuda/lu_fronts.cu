@@ -4,12 +4,14 @@
 // (L11\U11, L21, U12, the Schur complement in the contribution block, the local row
 // permutation).
 //
-// Restricted partial pivoting (the CPU's rule: the largest magnitude among the fully summed
-// rows, the first on ties) interchanges no row in most fronts once the matching has put
-// large entries on the diagonal. So every front is first eliminated without interchanges
-// and kept when that was what partial pivoting would have done — every multiplier of a
-// fully summed row at most 1 in magnitude — and when no pivot needs static pivoting; the
-// others are factored again (lu_fronts_redo). Two ways to eliminate without interchanges:
+// Restricted threshold partial pivoting (the CPU's rule: the diagonal when it is at least
+// u = Options::pivot_threshold times the largest magnitude among the fully summed rows,
+// else that largest, the first on ties) interchanges no row in most fronts once the
+// matching has put large entries on the diagonal. So every front is first eliminated
+// without interchanges and kept when that was what the rule would have done — every
+// multiplier of a fully summed row at most 1/u in magnitude — and when no pivot needs
+// static pivoting; the others are factored again (lu_fronts_redo). Two ways to eliminate
+// without interchanges:
 //
 //   by strips (Options::gpu_lu_strip_pivots = nb > 0, the default): the blocked
 //   right-looking LU (Golub & Van Loan, "Matrix Computations", 4th ed., §3.2.11) with
@@ -33,11 +35,13 @@
 //
 // Factoring again (lu_fronts_redo): the front is assembled again — its original entries
 // and its children's contribution blocks are where the chunk's assembly read them, since
-// no block is stored before all the chunk's fronts are factored — then cuSOLVER GETRF with
-// partial pivoting on A11, the interchanges on A12, the TRSMs and the GEMM; a pivot GETRF
-// chose that is below the static-pivot threshold (or an exact zero, or not finite) sends
-// the front, assembled once more, to the blocked path with our panel kernel, which
-// perturbs tiny pivots as the CPU does (kernels_lu.cu).
+// no block is stored before all the chunk's fronts are factored — then, with u = 1,
+// cuSOLVER GETRF with partial pivoting on A11, the interchanges on A12, the TRSMs and the
+// GEMM; a pivot GETRF chose that is below the static-pivot threshold (or an exact zero, or
+// not finite) sends the front, assembled once more, to the blocked path with our panel
+// kernel, which perturbs tiny pivots as the CPU does (kernels_lu.cu). With u < 1 GETRF's
+// rule is not the CPU's, so the front goes to that blocked path straight away, whose
+// panel kernel applies the threshold.
 #include <algorithm>
 #include <string>
 
@@ -55,7 +59,7 @@ constexpr std::int64_t kStepPivots = 64;  // pivot columns per step of the batch
 
 void enqueue_lu_strips(const std::vector<LuPanelItem>& fronts, std::int64_t nb,
                        const std::vector<Lane*>& lanes, DeviceBuffer<LuPanelItem>& items,
-                       DeviceBuffer<double>& work, int* bad, double static_pivot,
+                       DeviceBuffer<double>& work, int* bad, const numeric::PivotPolicy& pivots,
                        cudaEvent_t strip_done, const LuFinalUpdate& final_update,
                        std::vector<Lane*>& lane_of) {
   const std::size_t n = fronts.size();
@@ -100,13 +104,13 @@ void enqueue_lu_strips(const std::vector<LuPanelItem>& fronts, std::int64_t nb,
   for (std::int64_t s = 0; s < strips; ++s) {
     const std::int64_t b0 = s * nb, b1 = b0 + nb;
     const std::size_t active = strip_at[s + 1] - strip_at[s];
-    std::vector<std::int64_t> rows(active), pivots(active);
+    std::vector<std::int64_t> rows(active), pivot_counts(active);
     for (std::size_t i = 0; i < active; ++i) {
       rows[i] = all[strip_at[s] + i].m;
-      pivots[i] = all[strip_at[s] + i].k;
+      pivot_counts[i] = all[strip_at[s] + i].k;
     }
-    launch_lu_panel_batched(items.data() + strip_at[s], rows, pivots, work.data(), bad,
-                            static_pivot, k0.stream);
+    launch_lu_panel_batched(items.data() + strip_at[s], rows, pivot_counts, work.data(), bad,
+                            pivots.static_pivot, pivots.threshold, k0.stream);
     STRATA_CUDA(cudaEventRecord(strip_done, k0.stream));
     std::vector<char> waited(lanes.size(), 0), continued(lanes.size(), 0);
     // first the rest of the pivot rows and columns of the fronts that go on (the next
@@ -150,7 +154,7 @@ void enqueue_lu_strips(const std::vector<LuPanelItem>& fronts, std::int64_t nb,
   }
 }
 
-void CudaExecutor::lu_large_fronts(std::vector<LuFront>& fronts, double static_pivot,
+void CudaExecutor::lu_large_fronts(std::vector<LuFront>& fronts, const numeric::PivotPolicy& pivots,
                                    cudaEvent_t assembled) {
   const std::size_t n = fronts.size();
   std::size_t sum_k = 0;
@@ -163,9 +167,9 @@ void CudaExecutor::lu_large_fronts(std::vector<LuFront>& fronts, double static_p
   lu_.bad_host.resize(n);
   lu_.fronts += static_cast<index_t>(n);
   std::vector<std::size_t> redo = lu_strip_pivots_ > 0
-                                      ? lu_fronts_by_strips(fronts, static_pivot, assembled)
-                                      : lu_fronts_by_library(fronts, static_pivot, assembled);
-  if (!redo.empty()) lu_fronts_redo(fronts, redo, static_pivot, assembled);
+                                      ? lu_fronts_by_strips(fronts, pivots, assembled)
+                                      : lu_fronts_by_library(fronts, pivots, assembled);
+  if (!redo.empty()) lu_fronts_redo(fronts, redo, pivots, assembled);
 }
 
 // The identity as each front's local permutation and no perturbed pivot: one kernel and
@@ -194,7 +198,7 @@ void CudaExecutor::lu_unpivoted_results(const std::vector<LuFront>& fronts, cuda
 }
 
 std::vector<std::size_t> CudaExecutor::lu_fronts_by_strips(std::vector<LuFront>& fronts,
-                                                           double static_pivot,
+                                                           const numeric::PivotPolicy& pivots,
                                                            cudaEvent_t assembled) {
   const std::size_t n = fronts.size();
   lu_unpivoted_results(fronts, stream_);
@@ -212,8 +216,7 @@ std::vector<std::size_t> CudaExecutor::lu_fronts_by_strips(std::vector<LuFront>&
   const double one = 1.0, minus_one = -1.0;
   std::vector<Lane*> lane_of;
   enqueue_lu_strips(
-      items, lu_strip_pivots_, lanes, lu_.items, lu_.work, lu_.bad.data(), static_pivot,
-      lu_.strip_done,
+      items, lu_strip_pivots_, lanes, lu_.items, lu_.work, lu_.bad.data(), pivots, lu_.strip_done,
       [&](std::size_t q, Lane& ln) {
         const LuFront& fr = fronts[order[q]];
         const int m = fr.m, k = fr.k;
@@ -240,7 +243,7 @@ std::vector<std::size_t> CudaExecutor::lu_fronts_by_strips(std::vector<LuFront>&
 }
 
 std::vector<std::size_t> CudaExecutor::lu_fronts_by_library(std::vector<LuFront>& fronts,
-                                                            double static_pivot,
+                                                            const numeric::PivotPolicy& pivots,
                                                             cudaEvent_t assembled) {
   const std::size_t n = fronts.size();
   std::size_t ipiv_at = 0;
@@ -248,12 +251,13 @@ std::vector<std::size_t> CudaExecutor::lu_fronts_by_library(std::vector<LuFront>
     const LuFront& fr = fronts[i];
     Lane& lane = *fr.lane;
     grow_getrf_work(lane, fr);
-    // without pivoting (devIpiv null); kept only where partial pivoting would have
+    // without pivoting (devIpiv null); kept only where the pivoting rule would have
     // interchanged nothing (kernels_lu.cu)
     STRATA_CUSOLVER(cusolverDnDgetrf(lane.solver, fr.k, fr.k, fr.F, fr.m, lane.getrf_work.data(),
                                      nullptr, lu_.info.data() + i));
-    launch_lu_unpivoted_check(fr.F, fr.m, fr.k, static_pivot, lu_.info.data() + i,
-                              lu_.ipiv.data() + ipiv_at, lu_.bad.data() + i, lane.stream);
+    launch_lu_unpivoted_check(fr.F, fr.m, fr.k, pivots.static_pivot, pivots.threshold,
+                              lu_.info.data() + i, lu_.ipiv.data() + ipiv_at, lu_.bad.data() + i,
+                              lane.stream);
     ipiv_at += static_cast<std::size_t>(fr.k);
   }
   fetch_lu_checks(n);
@@ -307,8 +311,8 @@ void CudaExecutor::fetch_lu_checks(std::size_t n) {
 }
 
 void CudaExecutor::lu_fronts_redo(std::vector<LuFront>& fronts,
-                                  const std::vector<std::size_t>& redo, double static_pivot,
-                                  cudaEvent_t assembled) {
+                                  const std::vector<std::size_t>& redo,
+                                  const numeric::PivotPolicy& pivots, cudaEvent_t assembled) {
   const double one = 1.0, minus_one = -1.0;
   // nothing of the rejected fronts may still be in flight on a lane or a helper GPU
   join_team();
@@ -320,19 +324,21 @@ void CudaExecutor::lu_fronts_redo(std::vector<LuFront>& fronts,
     launch_assemble(cur_->tree, fr.pos, 1, fr.m, values_.data(), pool_.data(), false,
                     fr.lane->stream);
   };
-  // GETRF with pivoting; its flags in the first redo.size() slots
-  for (std::size_t x = 0; x < redo.size(); ++x) {
+  // GETRF with pivoting (partial pivoting: the CPU's rule only for u = 1); its flags in the
+  // first redo.size() slots
+  const bool getrf = pivots.threshold >= 1.0;
+  for (std::size_t x = 0; getrf && x < redo.size(); ++x) {
     const LuFront& fr = fronts[redo[x]];
     Lane& lane = *fr.lane;
     reassemble(fr);
     grow_getrf_work(lane, fr);
     STRATA_CUSOLVER(cusolverDnDgetrf(lane.solver, fr.k, fr.k, fr.F, fr.m, lane.getrf_work.data(),
                                      lu_.ipiv.data() + ipiv_at[redo[x]], lu_.info.data() + x));
-    launch_lu_check(fr.F, fr.m, fr.k, static_pivot, lu_.info.data() + x, lu_.bad.data() + x,
+    launch_lu_check(fr.F, fr.m, fr.k, pivots.static_pivot, lu_.info.data() + x, lu_.bad.data() + x,
                     lane.stream);
   }
   lu_.fronts_pivoted += static_cast<index_t>(redo.size());
-  fetch_lu_checks(redo.size());
+  if (getrf) fetch_lu_checks(redo.size());
   for (std::size_t x = 0; x < redo.size(); ++x) {
     const LuFront& fr = fronts[redo[x]];
     Lane& lane = *fr.lane;
@@ -341,12 +347,12 @@ void CudaExecutor::lu_fronts_redo(std::vector<LuFront>& fronts,
     const std::size_t ld = static_cast<std::size_t>(m);
     const int* ipiv = lu_.ipiv.data() + ipiv_at[redo[x]];
     STRATA_CUDA(cudaMemsetAsync(fr.perturbed, 0, sizeof(std::int64_t), stream));
-    if (!lu_.bad_host.data()[x]) {
+    if (getrf && !lu_.bad_host.data()[x]) {
       launch_ipiv_to_perm(ipiv, k, fr.perm, stream);
       lu_panels_and_update(fr, ipiv, assembled);
       continue;
     }
-    // a pivot needs static pivoting: the front again, and the panel-kernel path
+    // a pivot needs static pivoting, or u < 1: the front again, and the panel-kernel path
     reassemble(fr);
     // iota_ outlives the asynchronous copy (it is a member, only ever grown)
     if (static_cast<int>(iota_.size()) < k) {
@@ -358,7 +364,8 @@ void CudaExecutor::lu_fronts_redo(std::vector<LuFront>& fronts,
                                 cudaMemcpyHostToDevice, stream));
     for (int p0 = 0; p0 < k; p0 += kLuPanel) {
       const int w = std::min<int>(kLuPanel, k - p0), rest = m - p0 - w;
-      launch_lu_panel(fr.F, m, k, p0, w, static_pivot, fr.perm, fr.perturbed, stream);
+      launch_lu_panel(fr.F, m, k, p0, w, pivots.static_pivot, pivots.threshold, fr.perm,
+                      fr.perturbed, stream);
       if (rest > 0) {
         double* a11 = fr.F + static_cast<std::size_t>(p0) * ld + p0;
         double* a12 = fr.F + static_cast<std::size_t>(p0 + w) * ld + p0;
@@ -378,7 +385,7 @@ namespace strata::numeric {
 std::vector<char> cuda_lu_fronts_batched(std::vector<std::vector<double>>& fronts,
                                          const std::vector<index_t>& m,
                                          const std::vector<index_t>& k, index_t strip,
-                                         double static_pivot,
+                                         double static_pivot, double threshold,
                                          std::vector<std::vector<index_t>>* perms) {
   const std::size_t n = fronts.size();
   if (m.size() != n || k.size() != n || strip < 1)
@@ -435,7 +442,8 @@ std::vector<char> cuda_lu_fronts_batched(std::vector<std::vector<double>>& front
   const double one = 1.0, minus_one = -1.0;
   std::vector<cuda::Lane*> lane_of;
   cuda::enqueue_lu_strips(
-      fr, strip, {&ln}, items, work, bad.data(), static_pivot, strip_done,
+      fr, strip, {&ln}, items, work, bad.data(), numeric::PivotPolicy(static_pivot, threshold),
+      strip_done,
       [&](std::size_t q, cuda::Lane& l) {
         const int mi = static_cast<int>(fr[q].m), ki = static_cast<int>(fr[q].k);
         double* F = fr[q].F;
