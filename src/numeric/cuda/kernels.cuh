@@ -126,6 +126,19 @@ void launch_lu_panel(double* f, std::int64_t m, std::int64_t k, std::int64_t p0,
                      double static_pivot, double threshold, std::int64_t* perm,
                      std::int64_t* perturbed, cudaStream_t s);
 
+/// One LU panel of a large front by one block in shared memory: columns p0..p0+w-1
+/// (w ≤ 64) of the m×m front F (leading dimension m), only its fully summed rows
+/// p0..k-1 — the pivots and multipliers by threshold partial pivoting (u = `threshold`,
+/// factor_front_lu's rule) and static pivoting as launch_lu_panel, the update within the
+/// panel, the interchanges applied to whole rows and to perm (k entries), static pivots
+/// added to *perturbed. Rows k..m-1 of the panel are left for the caller (their
+/// multipliers: a TRSM with the panel's U block). Returns false, launching nothing, when the
+/// panel's (k − p0) × w entries do not fit the device's shared memory. Throws
+/// InternalError for a panel outside the front.
+bool launch_lu_tall_panel(double* f, std::int64_t m, std::int64_t k, std::int64_t p0,
+                          std::int64_t w, double static_pivot, double threshold, std::int64_t* perm,
+                          std::int64_t* perturbed, cudaStream_t s);
+
 /// LU of a column slab S (r×w, leading dimension r) that alone is on the device: the
 /// columns p0..p0+w of a front factored tile by tile, rows p0..m. Pivot candidates for
 /// slab column j are slab rows [j, kk) (kk = k − p0: the fully summed rows), chosen with

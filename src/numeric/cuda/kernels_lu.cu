@@ -25,13 +25,24 @@
 // own (one thread per row of B, the triangle in shared memory) took twice cuBLAS's kernel
 // time there, too few rows per call to fill the device, and no wall-clock gain (2026-11-23);
 // so they stay cuBLAS calls.
+// A front rejected with u < 1 is factored again by the blocked path: per panel of 64
+// pivot columns, lu_tall_panel_kernel factors the panel's fully summed rows [p0, k) with
+// the CPU's threshold partial pivoting and static pivoting in shared memory (one block;
+// each pivot step a search by shuffles and a rank-1 update of at most k − p0 rows by 64
+// columns, four barriers), writes it back and moves the rest of the interchanged rows
+// (their other columns, one thread per column, in order); the caller then forms the panel's
+// rows [k, m) by a TRSM with its U block and updates the rest (lu_fronts.cu). Panels of
+// more rows than shared memory holds take lu_columns (kernels.cu), in global memory.
+//
 // The kernels here are the glue: the pivot checks (after the unpivoted GETRF also the
 // multipliers'), the conversion of GETRF's interchange
 // list (LAPACK's ipiv, 1-based) into the row permutation the factor records, the
 // interchanges on A12 (one thread per column, in order), and the gather of the pivots'
 // diagonal entries that the host bookkeeping reads when the panels stay on the device.
 #include <algorithm>
+#include <atomic>
 #include <cfloat>
+#include <string>
 
 #include "numeric/cuda/cuda_check.hpp"
 #include "numeric/cuda/kernels.cuh"
@@ -119,6 +130,122 @@ __global__ void laswp_kernel(double* a, std::int64_t ld, std::int64_t ncols, con
   }
 }
 
+constexpr int kTallThreads = 1024;
+constexpr int kTallWarps = kTallThreads / 32;
+constexpr int kTallCols = 64;
+
+// The largest value and its index over the block (ties: the smaller index); every thread
+// gets the result. wv, wi: shared arrays of kTallWarps.
+__device__ void tall_argmax(double& v, int& at, double* wv, int* wi) {
+  const int lane = threadIdx.x & 31, warp = threadIdx.x >> 5;
+  for (int off = 16; off > 0; off >>= 1) {
+    const double ov = __shfl_down_sync(0xffffffffu, v, off);
+    const int oi = __shfl_down_sync(0xffffffffu, at, off);
+    if (ov > v || (ov == v && oi < at)) {
+      v = ov;
+      at = oi;
+    }
+  }
+  if (lane == 0) {
+    wv[warp] = v;
+    wi[warp] = at;
+  }
+  __syncthreads();
+  v = wv[0];
+  at = wi[0];
+  for (int q = 1; q < kTallWarps; ++q)
+    if (wv[q] > v || (wv[q] == v && wi[q] < at)) {
+      v = wv[q];
+      at = wi[q];
+    }
+  __syncthreads();  // wv, wi free for the next call
+}
+
+// Panel [p0, p0 + w) of the m×m front F (leading dimension m, fully summed rows [0, k)),
+// its rows [p0, k) in shared memory P (R = k − p0 rows, column-major): threshold partial
+// pivoting and static pivoting as lu_columns, the interchanges applied to the whole rows,
+// perm (front-local, k entries) and *perturbed updated. Rows [k, m) of the panel are the
+// caller's (TRSM with the panel's U block).
+__global__ void __launch_bounds__(kTallThreads)
+    lu_tall_panel_kernel(double* F, std::int64_t m, std::int64_t k, std::int64_t p0, int w,
+                         double static_pivot, double threshold, std::int64_t* perm,
+                         std::int64_t* perturbed) {
+  extern __shared__ double P[];
+  __shared__ double wv[kTallWarps];
+  __shared__ int wi[kTallWarps];
+  __shared__ int ipiv[kTallCols];
+  __shared__ double spiv;
+  const int R = static_cast<int>(k - p0), t = threadIdx.x, step = blockDim.x;
+  double* A = F + p0 * m + p0;
+  for (int e = t; e < R * w; e += step) P[e] = A[static_cast<std::int64_t>(e / R) * m + e % R];
+  __syncthreads();
+  int npert = 0;  // thread 0's count
+  for (int j = 0; j < w; ++j) {
+    double* col = P + j * R;
+    double v = -1.0;  // a NaN is never chosen
+    int at = j;
+    for (int i = j + t; i < R; i += step) {
+      const double x = fabs(col[i]);
+      if (x > v) {
+        v = x;
+        at = i;
+      }
+    }
+    tall_argmax(v, at, wv, wi);
+    // the diagonal within the threshold stays (no candidate at all: row j too)
+    const int p = (v < 0 || fabs(col[j]) >= threshold * v) ? j : at;
+    if (t == 0) ipiv[j] = p;
+    if (p != j && t < w) {
+      const double x = P[t * R + j];
+      P[t * R + j] = P[t * R + p];
+      P[t * R + p] = x;
+    }
+    __syncthreads();
+    if (t == 0) {
+      double d = col[j];
+      if (fabs(d) < static_pivot) {  // static_pivoted (kernels.cu)
+        ++npert;
+        d = d < 0 ? -static_pivot : static_pivot;
+        col[j] = d;
+      }
+      spiv = d;
+    }
+    __syncthreads();
+    const double inv = 1.0 / spiv;
+    for (int i = j + 1 + t; i < R; i += step) col[i] *= inv;
+    __syncthreads();
+    const int rows = R - j - 1, cols = w - j - 1;
+    for (int x = t; x < rows * cols; x += step) {
+      const int i = j + 1 + x % rows, c = j + 1 + x / rows;
+      P[c * R + i] -= col[i] * P[c * R + j];
+    }
+    __syncthreads();
+  }
+  for (int e = t; e < R * w; e += step) A[static_cast<std::int64_t>(e / R) * m + e % R] = P[e];
+  // the panel's interchanges on the rest of its rows, column by column, in order
+  for (std::int64_t c = t; c < m; c += step) {
+    if (c >= p0 && c < p0 + w) continue;
+    double* fc = F + c * m + p0;
+    for (int q = 0; q < w; ++q) {
+      const int r = ipiv[q];
+      if (r != q) {
+        const double x = fc[q];
+        fc[q] = fc[r];
+        fc[r] = x;
+      }
+    }
+  }
+  if (t == 0) {
+    for (int q = 0; q < w; ++q)
+      if (ipiv[q] != q) {
+        const std::int64_t x = perm[p0 + q];
+        perm[p0 + q] = perm[p0 + ipiv[q]];
+        perm[p0 + ipiv[q]] = x;
+      }
+    *perturbed += npert;
+  }
+}
+
 __global__ void gather_diagonals_kernel(DeviceTree t, std::int64_t begin,
                                         const std::int64_t* panel_offset, const double* panels,
                                         const std::int64_t* diag_offset, double* diag) {
@@ -181,6 +308,37 @@ void launch_laswp(double* a, std::int64_t ld, std::int64_t ncols, const int* ipi
   const std::int64_t blocks = (ncols + kThreads - 1) / kThreads;
   laswp_kernel<<<static_cast<unsigned>(blocks), kThreads, 0, s>>>(a, ld, ncols, ipiv, k);
   STRATA_CUDA_LAUNCH();
+}
+
+bool launch_lu_tall_panel(double* f, std::int64_t m, std::int64_t k, std::int64_t p0,
+                          std::int64_t w, double static_pivot, double threshold, std::int64_t* perm,
+                          std::int64_t* perturbed, cudaStream_t s) {
+  if (w < 1 || w > kTallCols || p0 + w > k || k > m)
+    throw InternalError("launch_lu_tall_panel: panel " + std::to_string(p0) + " + " +
+                        std::to_string(w) + " of a front with " + std::to_string(k) +
+                        " pivots and " + std::to_string(m) + " rows");
+  // the opt-in shared memory per block, asked once per device (devices may differ)
+  constexpr int kDevices = 64;
+  static std::atomic<int> room[kDevices];  // 0: not asked yet
+  int dev = 0;
+  STRATA_CUDA(cudaGetDevice(&dev));
+  int bytes_max = dev < kDevices ? room[dev].load(std::memory_order_acquire) : 0;
+  if (bytes_max == 0) {
+    int optin = 0;
+    STRATA_CUDA(cudaDeviceGetAttribute(&optin, cudaDevAttrMaxSharedMemoryPerBlockOptin, dev));
+    cudaFuncAttributes attr{};
+    STRATA_CUDA(cudaFuncGetAttributes(&attr, lu_tall_panel_kernel));
+    bytes_max = std::max(1, optin - static_cast<int>(attr.sharedSizeBytes));
+    STRATA_CUDA(cudaFuncSetAttribute(lu_tall_panel_kernel,
+                                     cudaFuncAttributeMaxDynamicSharedMemorySize, bytes_max));
+    if (dev < kDevices) room[dev].store(bytes_max, std::memory_order_release);
+  }
+  const std::int64_t bytes = (k - p0) * w * static_cast<std::int64_t>(sizeof(double));
+  if (bytes > bytes_max) return false;
+  lu_tall_panel_kernel<<<1, kTallThreads, static_cast<std::size_t>(bytes), s>>>(
+      f, m, k, p0, static_cast<int>(w), static_pivot, threshold, perm, perturbed);
+  STRATA_CUDA_LAUNCH();
+  return true;
 }
 
 void launch_gather_diagonals(const DeviceTree& t, std::int64_t begin, std::int64_t count,

@@ -364,10 +364,20 @@ void CudaExecutor::lu_fronts_redo(std::vector<LuFront>& fronts,
                                 cudaMemcpyHostToDevice, stream));
     for (int p0 = 0; p0 < k; p0 += kLuPanel) {
       const int w = std::min<int>(kLuPanel, k - p0), rest = m - p0 - w;
-      launch_lu_panel(fr.F, m, k, p0, w, pivots.static_pivot, pivots.threshold, fr.perm,
-                      fr.perturbed, stream);
+      double* a11 = fr.F + static_cast<std::size_t>(p0) * ld + p0;
+      // the panel's fully summed rows in shared memory, then its other rows by a TRSM;
+      // or, too many rows for shared memory, the whole panel in global memory
+      if (launch_lu_tall_panel(fr.F, m, k, p0, w, pivots.static_pivot, pivots.threshold, fr.perm,
+                               fr.perturbed, stream)) {
+        if (m > k)
+          STRATA_CUBLAS(cublasDtrsm(lane.blas, CUBLAS_SIDE_RIGHT, CUBLAS_FILL_MODE_UPPER,
+                                    CUBLAS_OP_N, CUBLAS_DIAG_NON_UNIT, m - k, w, &one, a11, m,
+                                    a11 + (k - p0), m));
+      } else {
+        launch_lu_panel(fr.F, m, k, p0, w, pivots.static_pivot, pivots.threshold, fr.perm,
+                        fr.perturbed, stream);
+      }
       if (rest > 0) {
-        double* a11 = fr.F + static_cast<std::size_t>(p0) * ld + p0;
         double* a12 = fr.F + static_cast<std::size_t>(p0 + w) * ld + p0;
         STRATA_CUBLAS(cublasDtrsm(lane.blas, CUBLAS_SIDE_LEFT, CUBLAS_FILL_MODE_LOWER, CUBLAS_OP_N,
                                   CUBLAS_DIAG_UNIT, w, rest, &one, a11, m, a12, m));
