@@ -25,14 +25,15 @@
 // own (one thread per row of B, the triangle in shared memory) took twice cuBLAS's kernel
 // time there, too few rows per call to fill the device, and no wall-clock gain (2026-11-23);
 // so they stay cuBLAS calls.
-// A front rejected with u < 1 is factored again by the blocked path: per panel of 64
-// pivot columns, lu_tall_panel_kernel factors the panel's fully summed rows [p0, k) with
+// A front rejected with u < 1 is factored again by the blocked path: per panel of up to 64
+// pivot columns (as many as shared memory holds for its k − p0 rows), lu_tall_panel_kernel
+// factors the panel's fully summed rows [p0, k) with
 // the CPU's threshold partial pivoting and static pivoting in shared memory (one block;
 // each pivot step a search by shuffles and a rank-1 update of at most k − p0 rows by 64
 // columns, four barriers), writes it back and moves the rest of the interchanged rows
 // (their other columns, one thread per column, in order); the caller then forms the panel's
-// rows [k, m) by a TRSM with its U block and updates the rest (lu_fronts.cu). Panels of
-// more rows than shared memory holds take lu_columns (kernels.cu), in global memory.
+// rows [k, m) by a TRSM with its U block and updates the rest (lu_fronts.cu). Panels too
+// tall for 8 columns in shared memory take lu_columns (kernels.cu), in global memory.
 //
 // The kernels here are the glue: the pivot checks (after the unpivoted GETRF also the
 // multipliers'), the conversion of GETRF's interchange
@@ -310,14 +311,10 @@ void launch_laswp(double* a, std::int64_t ld, std::int64_t ncols, const int* ipi
   STRATA_CUDA_LAUNCH();
 }
 
-bool launch_lu_tall_panel(double* f, std::int64_t m, std::int64_t k, std::int64_t p0,
-                          std::int64_t w, double static_pivot, double threshold, std::int64_t* perm,
-                          std::int64_t* perturbed, cudaStream_t s) {
-  if (w < 1 || w > kTallCols || p0 + w > k || k > m)
-    throw InternalError("launch_lu_tall_panel: panel " + std::to_string(p0) + " + " +
-                        std::to_string(w) + " of a front with " + std::to_string(k) +
-                        " pivots and " + std::to_string(m) + " rows");
-  // the opt-in shared memory per block, asked once per device (devices may differ)
+namespace {
+// The opt-in shared memory per block left for lu_tall_panel_kernel's panel, in bytes,
+// asked (and allowed to the kernel) once per device: devices of one process may differ.
+int tall_panel_bytes() {
   constexpr int kDevices = 64;
   static std::atomic<int> room[kDevices];  // 0: not asked yet
   int dev = 0;
@@ -333,8 +330,25 @@ bool launch_lu_tall_panel(double* f, std::int64_t m, std::int64_t k, std::int64_
                                      cudaFuncAttributeMaxDynamicSharedMemorySize, bytes_max));
     if (dev < kDevices) room[dev].store(bytes_max, std::memory_order_release);
   }
+  return bytes_max;
+}
+}  // namespace
+
+std::int64_t lu_tall_panel_columns(std::int64_t rows) {
+  if (rows < 1) return kTallCols;
+  return std::min<std::int64_t>(
+      kTallCols, tall_panel_bytes() / (rows * static_cast<std::int64_t>(sizeof(double))));
+}
+
+bool launch_lu_tall_panel(double* f, std::int64_t m, std::int64_t k, std::int64_t p0,
+                          std::int64_t w, double static_pivot, double threshold, std::int64_t* perm,
+                          std::int64_t* perturbed, cudaStream_t s) {
+  if (w < 1 || w > kTallCols || p0 + w > k || k > m)
+    throw InternalError("launch_lu_tall_panel: panel " + std::to_string(p0) + " + " +
+                        std::to_string(w) + " of a front with " + std::to_string(k) +
+                        " pivots and " + std::to_string(m) + " rows");
   const std::int64_t bytes = (k - p0) * w * static_cast<std::int64_t>(sizeof(double));
-  if (bytes > bytes_max) return false;
+  if (bytes > tall_panel_bytes()) return false;
   lu_tall_panel_kernel<<<1, kTallThreads, static_cast<std::size_t>(bytes), s>>>(
       f, m, k, p0, static_cast<int>(w), static_pivot, threshold, perm, perturbed);
   STRATA_CUDA_LAUNCH();

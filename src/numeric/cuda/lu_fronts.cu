@@ -52,8 +52,9 @@
 namespace strata::cuda {
 namespace {
 
-constexpr std::int64_t kLuPanel = 64;     // panel width of the blocked LU with static pivoting
-constexpr std::int64_t kStepPivots = 64;  // pivot columns per step of the batched kernels
+constexpr std::int64_t kLuPanel = 64;      // panel width of the blocked LU with static pivoting
+constexpr std::int64_t kStepPivots = 64;   // pivot columns per step of the batched kernels
+constexpr std::int64_t kMinTallPanel = 8;  // narrowest panel of the shared-memory panel kernel
 
 }  // namespace
 
@@ -362,13 +363,17 @@ void CudaExecutor::lu_fronts_redo(std::vector<LuFront>& fronts,
     }
     STRATA_CUDA(cudaMemcpyAsync(fr.perm, iota_.data(), sizeof(std::int64_t) * k,
                                 cudaMemcpyHostToDevice, stream));
-    for (int p0 = 0; p0 < k; p0 += kLuPanel) {
-      const int w = std::min<int>(kLuPanel, k - p0), rest = m - p0 - w;
+    for (int p0 = 0, w = 0; p0 < k; p0 += w) {
+      // the panel's fully summed rows in shared memory — as many columns as fit, up to
+      // 64 — then its other rows by a TRSM; or, too tall for kMinTallPanel columns, the
+      // whole panel of 64 in global memory
+      const std::int64_t fit = lu_tall_panel_columns(k - p0);
+      const bool tall = fit >= std::min<std::int64_t>(kMinTallPanel, k - p0);
+      w = static_cast<int>(std::min<std::int64_t>(tall ? fit : kLuPanel, k - p0));
+      const int rest = m - p0 - w;
       double* a11 = fr.F + static_cast<std::size_t>(p0) * ld + p0;
-      // the panel's fully summed rows in shared memory, then its other rows by a TRSM;
-      // or, too many rows for shared memory, the whole panel in global memory
-      if (launch_lu_tall_panel(fr.F, m, k, p0, w, pivots.static_pivot, pivots.threshold, fr.perm,
-                               fr.perturbed, stream)) {
+      if (tall && launch_lu_tall_panel(fr.F, m, k, p0, w, pivots.static_pivot, pivots.threshold,
+                                       fr.perm, fr.perturbed, stream)) {
         if (m > k)
           STRATA_CUBLAS(cublasDtrsm(lane.blas, CUBLAS_SIDE_RIGHT, CUBLAS_FILL_MODE_UPPER,
                                     CUBLAS_OP_N, CUBLAS_DIAG_NON_UNIT, m - k, w, &one, a11, m,
