@@ -619,6 +619,24 @@ TEST_F(CudaBackend, LuFactorMatchesCpu) {
     for (index_t p = rows.a.offsets[j]; p < rows.a.offsets[j + 1]; ++p)
       rows.a.values[p] *= row_scale[rows.a.indices[p]];
   problems.push_back(std::move(rows));
+  // one dense front of 600 pivots, rows scaled, no matching: rejected and factored again;
+  // with u < 1 by panels narrower than 64 while their rows do not fit shared memory whole
+  {
+    const index_t nd = 600;
+    Problem d{"dense 600, rows scaled, no matching", {}, 0, false};
+    d.a.n_rows = d.a.n_cols = nd;
+    std::uniform_real_distribution<double> entry(-1, 1);
+    std::vector<double> scale(nd);
+    for (double& r : scale) r = std::pow(10.0, expo(rng));
+    for (index_t j = 0; j < nd; ++j) {
+      for (index_t i = 0; i < nd; ++i) {
+        d.a.indices.push_back(i);
+        d.a.values.push_back(entry(rng) * scale[i]);
+      }
+      d.a.offsets.push_back(static_cast<index_t>(d.a.indices.size()));
+    }
+    problems.push_back(std::move(d));
+  }
   // every front over 16 rows on the large fronts' paths too (gpu_small_front_rows)
   for (const Problem& pr : problems)
     for (double threshold : {1.0, 0.1})
