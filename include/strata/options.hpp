@@ -266,17 +266,20 @@ struct Options {
   /// pivoting runs on the host, after the fixed-order factorization of one executor or of
   /// several workers (GPUs) alike; the distributed solver keeps the fixed order.
   Pivoting pivoting = Pivoting::automatic;
-  /// The relative threshold u of LU's threshold partial pivoting, in (0, 1] (MUMPS's
-  /// CNTL(1); Duff, Erisman & Reid, "Direct Methods for Sparse Matrices", §5.4). In the
-  /// analysis's fixed order, column j of a front keeps its diagonal pivot when |a_jj| ≥
-  /// u·max |a_ij| over the front's fully summed rows i ≥ j, and otherwise takes the largest
-  /// of those entries (1: partial pivoting restricted to the fully summed rows); so
-  /// |L| ≤ 1/u there, and on a matrix whose matching put large entries on the diagonal few
-  /// fronts interchange rows (the CUDA backend eliminates a large front without
-  /// interchanges first and keeps it when no multiplier exceeds 1/u). In delayed pivoting
-  /// a pivot is taken when it is at least u times the largest entry of its column,
-  /// contribution-block rows included. Default 0.01.
+  /// The relative threshold u of delayed pivoting, in (0, 1]: a pivot is taken when it is
+  /// at least u times the largest entry of its column (|L| ≤ 1/u). Default 0.01.
   double pivot_threshold = 0.01;
+  /// LU in the analysis's fixed order (every factorization unless delayed pivoting runs):
+  /// the relative threshold u, in (0, 1], of its threshold partial pivoting with a
+  /// preference for the diagonal (UMFPACK's diagonal pivot tolerance; Duff, Erisman & Reid,
+  /// "Direct Methods for Sparse Matrices", 2nd ed., §5.4): column j of a front keeps its
+  /// diagonal pivot when |a_jj| ≥ u·max |a_ij| over the front's fully summed rows i ≥ j,
+  /// and otherwise takes the largest of those entries, the first on ties; so |L| ≤ 1/u
+  /// there. 1: partial pivoting restricted to the fully summed rows. After the matching has
+  /// put large entries on the diagonal, u < 1 leaves most fronts without interchanges, which
+  /// the CUDA backend exploits (a large front is eliminated without interchanges first and
+  /// kept when no multiplier exceeds 1/u). Default 0.1.
+  double diagonal_pivot_threshold = 0.1;
 
   // --- solve ---
   /// When the solve computes the backward error of its solution (one product with A per

@@ -219,6 +219,7 @@ void validate(const Options& o) {
   if (!(o.static_pivot_epsilon >= 0 && std::isfinite(o.static_pivot_epsilon)))
     out_of_range("static_pivot_epsilon", "finite and at least 0", o.static_pivot_epsilon);
   fraction("pivot_threshold", o.pivot_threshold, false, true);
+  fraction("diagonal_pivot_threshold", o.diagonal_pivot_threshold, false, true);
   at_least("refinement_max_steps", o.refinement_max_steps, 0);
   if (!(o.refinement_tolerance >= 0 && std::isfinite(o.refinement_tolerance)))
     out_of_range("refinement_tolerance", "finite and at least 0", o.refinement_tolerance);
@@ -334,6 +335,7 @@ const std::vector<Field>& fields() {
       number_field("static_pivot_epsilon", &O::static_pivot_epsilon),
       enum_field("pivoting", &O::pivoting),
       number_field("pivot_threshold", &O::pivot_threshold),
+      number_field("diagonal_pivot_threshold", &O::diagonal_pivot_threshold),
       enum_field("solve_check", &O::solve_check),
       integer_field("refinement_max_steps", &O::refinement_max_steps),
       number_field("refinement_tolerance", &O::refinement_tolerance),

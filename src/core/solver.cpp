@@ -342,7 +342,8 @@ NumericRun factor_values(SolverState& s, double norm1, double static_pivot) {
   auto run = [&](MatrixType t) {
     r.driver_ran = true;
     s.driver->factorize(an, s.scaled, s.values_on_device, t,
-                        numeric::PivotPolicy(static_pivot, s.options.pivot_threshold), s.factor);
+                        numeric::PivotPolicy(static_pivot, s.options.diagonal_pivot_threshold),
+                        s.factor);
   };
 
   MatrixType type = an.type;

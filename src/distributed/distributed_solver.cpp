@@ -103,8 +103,8 @@ void setup_numeric(DistributedState& s, Analysis& an, int per_rank) {
 void run_factor(DistributedState& s, const Analysis& an, const std::vector<double>& values,
                 MatrixType type, double pivot, numeric::NumericFactor& factor) {
   factor_part(*s.comm.impl(), s.numeric, an, values, type,
-              numeric::PivotPolicy(pivot, s.options.pivot_threshold), s.options.work_stealing,
-              factor);
+              numeric::PivotPolicy(pivot, s.options.diagonal_pivot_threshold),
+              s.options.work_stealing, factor);
 }
 
 // Rank 0's replacement of the Solver's numeric phases.

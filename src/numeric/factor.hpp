@@ -97,7 +97,7 @@ struct DeviceValueNorms {
 using StageValues = std::function<void(std::size_t begin, std::size_t end)>;
 
 /// How a factorization chooses and repairs its pivots: the numeric side of
-/// Options::static_pivot_epsilon and Options::pivot_threshold.
+/// Options::static_pivot_epsilon and Options::diagonal_pivot_threshold.
 struct PivotPolicy {
   /// Absolute: a pivot below this in magnitude becomes ±static_pivot (counted in PivotStats).
   double static_pivot = 0;
@@ -120,8 +120,8 @@ struct FactorContext {
   /// ran for this factorization): `values` is not read.
   bool values_on_device = false;
   MatrixType type = MatrixType::spd;
-  double static_pivot = 0;     ///< absolute threshold / replacement for tiny pivots
-  double pivot_threshold = 1;  ///< LU's u (PivotPolicy::threshold)
+  double static_pivot = 0;              ///< absolute threshold / replacement for tiny pivots
+  double diagonal_pivot_threshold = 1;  ///< LU's u (PivotPolicy::threshold)
   NumericFactor* factor = nullptr;
   std::vector<double>* cb_arena = nullptr;  ///< host arena of the part (host executors)
   const PartView* part = nullptr;           ///< set from begin_part to end_part

@@ -234,7 +234,7 @@ class MultiRun {
     base_.values = scaled_values.data();
     base_.type = type;
     base_.static_pivot = pivots.static_pivot;
-    base_.pivot_threshold = pivots.threshold;
+    base_.diagonal_pivot_threshold = pivots.threshold;
     base_.factor = &factor;
     base_.keep_part_panels = config.keep_panels_on_devices;
     arenas_.resize(workers_);

@@ -63,7 +63,7 @@ void factorize(const Analysis& an, const std::vector<double>& scaled_values, Mat
   ctx.values_on_device = values_on_device;
   ctx.type = type;
   ctx.static_pivot = pivots.static_pivot;
-  ctx.pivot_threshold = pivots.threshold;
+  ctx.diagonal_pivot_threshold = pivots.threshold;
   ctx.factor = &factor;
   ctx.cb_arena = &cb_arena;
   exec.begin(ctx);

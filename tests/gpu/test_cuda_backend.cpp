@@ -553,7 +553,7 @@ TEST_F(CudaBackend, LargeLuFrontsMatchCpu) {
 }
 
 // One analysis of `a` factored by the CPU executor and by the CUDA executor on one GPU,
-// with the static pivot `sp` and LU's threshold o.pivot_threshold, the matching off when
+// with the static pivot `sp` and LU's threshold o.diagonal_pivot_threshold, the matching off when
 // `matching` is false (it rejects a singular matrix). The GPU executor is kept: a resident
 // factor's panels stay with it.
 namespace {
@@ -571,7 +571,7 @@ CpuAndGpu factor_on_cpu_and_gpu(const SparseMatrix& a, MatrixType type, bool mat
   r.an = analyze_matrix(a, o);
   const SparseMatrix c = canonical_values(r.an, a);
   std::vector<double> arena;
-  const numeric::PivotPolicy pivots(sp, o.pivot_threshold);
+  const numeric::PivotPolicy pivots(sp, o.diagonal_pivot_threshold);
   numeric::factorize(r.an, c.values, type, pivots, *numeric::make_cpu_executor(2), r.cpu, arena);
   r.gpu_exec = numeric::make_cuda_executor(o);
   numeric::factorize(r.an, c.values, type, pivots, *r.gpu_exec, r.gpu, arena);
@@ -644,11 +644,11 @@ TEST_F(CudaBackend, LuFactorMatchesCpu) {
                                         std::pair{index_t{0}, index_t{256}},
                                         std::pair{Options{}.gpu_lu_strip_pivots, index_t{16}},
                                         std::pair{index_t{0}, index_t{16}}}) {
-        SCOPED_TRACE(pr.name + ", pivot_threshold " + std::to_string(threshold) +
+        SCOPED_TRACE(pr.name + ", diagonal_pivot_threshold " + std::to_string(threshold) +
                      ", gpu_lu_strip_pivots " + std::to_string(lu_max) + ", gpu_small_front_rows " +
                      std::to_string(small_rows));
         Options o;
-        o.pivot_threshold = threshold;
+        o.diagonal_pivot_threshold = threshold;
         o.gpu_lu_strip_pivots = lu_max;
         o.gpu_small_front_rows = small_rows;
         CpuAndGpu r = factor_on_cpu_and_gpu(pr.a, MatrixType::general,

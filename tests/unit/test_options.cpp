@@ -144,6 +144,10 @@ TEST(OptionsValidate, DefaultsPassAndEveryFieldOutOfRangeIsNamed) {
        [](Options& o, double v) { o.pivot_threshold = v; },
        {0, 1.01, nan},
        {1, 0.01}},
+      {"diagonal_pivot_threshold",
+       [](Options& o, double v) { o.diagonal_pivot_threshold = v; },
+       {0, -0.1, 1.01, inf, nan},
+       {1, 0.1, 1e-3}},
       {"refinement_max_steps",
        [](Options& o, double v) { o.refinement_max_steps = int(v); },
        {-1},
@@ -200,7 +204,7 @@ TEST(OptionsValidate, AnalysisRefusesBadOptions) {
 // written as text into a default Options and compared field by field.
 TEST(SetOption, EveryFieldRoundTripsThroughText) {
   const std::vector<std::string> names = option_fields();
-  EXPECT_EQ(names.size(), 42u);  // Options' fields but user_permutation
+  EXPECT_EQ(names.size(), 43u);  // Options' fields but user_permutation
   Options changed;
   for (const std::string& name : names) {
     const std::string before = get_option(changed, name);

@@ -245,7 +245,7 @@ void process_dense(const FactorContext& ctx, index_t f, const FrontBlocks& block
                              ps);
       break;
     case MatrixType::general:
-      cpu::factor_front_lu(F, m, k, m, ctx.static_pivot, ctx.pivot_threshold, w.local_perm.data(),
+      cpu::factor_front_lu(F, m, k, m, ctx.static_pivot, ctx.diagonal_pivot_threshold, w.local_perm.data(),
                            ps);
       break;
     default:

@@ -128,7 +128,7 @@ void CudaExecutor::chunk_small_fronts(const numeric::FactorContext& ctx, ChunkRe
                       perm_offset_.data(), stream_);
   else
     launch_factor_small(tree, small_pos_.data(), static_cast<std::int64_t>(ns), small_rows,
-                        pool_.data(), rec.lu, ctx.static_pivot, ctx.pivot_threshold, info_.data(),
+                        pool_.data(), rec.lu, ctx.static_pivot, ctx.diagonal_pivot_threshold, info_.data(),
                         perturbed_.data(), perm_.data(), perm_offset_.data(), stream_);
   STRATA_CUDA(cudaEventRecord(rec.ev[2], stream_));
 }
@@ -232,7 +232,7 @@ void CudaExecutor::chunk_large_fronts(const numeric::FactorContext& ctx, const C
       }
     }
   if (!lu_fronts.empty())
-    lu_large_fronts(lu_fronts, numeric::PivotPolicy(ctx.static_pivot, ctx.pivot_threshold),
+    lu_large_fronts(lu_fronts, numeric::PivotPolicy(ctx.static_pivot, ctx.diagonal_pivot_threshold),
                     rec.ev[1]);
   for (std::size_t l = 1; l < n_lanes; ++l) {
     STRATA_CUDA(cudaEventRecord(lane[l]->done, lane[l]->stream));

@@ -8,7 +8,7 @@
 // the row interchanges applied to A12, two TRSMs and one GEMM. GETRF runs first without
 // pivoting (several times faster at the large fronts' k: partial pivoting's search and
 // swaps are what make GETRF slow there), and that factor is kept only when the CPU's
-// threshold partial pivoting (u = Options::pivot_threshold) would have chosen the same
+// threshold partial pivoting (u = Options::diagonal_pivot_threshold) would have chosen the same
 // pivots, i.e. every multiplier |L(i,j)| is at most 1/u (the diagonal within the
 // threshold); otherwise the front is assembled again and, for u = 1, GETRF runs with
 // partial pivoting — the CPU's rule then, largest magnitude, first on ties. GETRF does no

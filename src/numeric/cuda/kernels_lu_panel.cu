@@ -32,7 +32,7 @@
 // which the check below keeps bounded: |L| ≤ 1/u in the fully summed rows.
 //
 // Restricted threshold partial pivoting (the CPU kernel's rule, numeric/cpu/
-// dense_front.cpp, with u = Options::pivot_threshold) keeps the diagonal of column j when
+// dense_front.cpp, with u = Options::diagonal_pivot_threshold) keeps the diagonal of column j when
 // |a_jj| ≥ u·|a_ij| for every fully summed row i of j..kc−1, else takes the largest
 // magnitude among them; it interchanges nothing exactly when every multiplier L(i, j),
 // j < i < kc, has u·|L(i, j)| ≤ 1. The kernels check that (and that every pivot is finite

@@ -5,7 +5,7 @@
 // permutation).
 //
 // Restricted threshold partial pivoting (the CPU's rule: the diagonal when it is at least
-// u = Options::pivot_threshold times the largest magnitude among the fully summed rows,
+// u = Options::diagonal_pivot_threshold times the largest magnitude among the fully summed rows,
 // else that largest, the first on ties) interchanges no row in most fronts once the
 // matching has put large entries on the diagonal. So every front is first eliminated
 // without interchanges and kept when that was what the rule would have done — every

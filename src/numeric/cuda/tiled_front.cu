@@ -105,7 +105,7 @@ void CudaExecutor::factor_tiled(const numeric::FactorContext& ctx, index_t pos) 
       }
       STRATA_CUDA(cudaMemcpyAsync(perm_.data(), iota_.data(), sizeof(std::int64_t) * kk,
                                   cudaMemcpyHostToDevice, stream_));
-      launch_lu_slab(S, r, w, kk, ctx.static_pivot, ctx.pivot_threshold, perm_.data(),
+      launch_lu_slab(S, r, w, kk, ctx.static_pivot, ctx.diagonal_pivot_threshold, perm_.data(),
                      perturbed_.data(), stream_);
       STRATA_CUDA(cudaMemcpyAsync(sperm.data(), perm_.data(), sizeof(std::int64_t) * kk,
                                   cudaMemcpyDeviceToHost, stream_));
