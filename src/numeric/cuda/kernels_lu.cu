@@ -47,6 +47,7 @@
 
 #include "numeric/cuda/cuda_check.hpp"
 #include "numeric/cuda/kernels.cuh"
+#include "numeric/cuda/warp_argmax.cuh"
 
 namespace strata::cuda {
 namespace {
@@ -139,14 +140,7 @@ constexpr int kTallCols = 64;
 // gets the result. wv, wi: shared arrays of kTallWarps.
 __device__ void tall_argmax(double& v, int& at, double* wv, int* wi) {
   const int lane = threadIdx.x & 31, warp = threadIdx.x >> 5;
-  for (int off = 16; off > 0; off >>= 1) {
-    const double ov = __shfl_down_sync(0xffffffffu, v, off);
-    const int oi = __shfl_down_sync(0xffffffffu, at, off);
-    if (ov > v || (ov == v && oi < at)) {
-      v = ov;
-      at = oi;
-    }
-  }
+  warp_argmax_down(v, at);
   if (lane == 0) {
     wv[warp] = v;
     wi[warp] = at;

@@ -47,6 +47,7 @@
 #include "numeric/cuda/cuda_check.hpp"
 #include "numeric/cuda/kernels.cuh"
 #include "numeric/cuda/tile_mma.cuh"
+#include "numeric/cuda/warp_argmax.cuh"
 
 namespace strata::cuda {
 namespace {
@@ -133,15 +134,7 @@ __device__ __forceinline__ void eliminate_with_interchanges(double (&a)[kPerThre
     // the candidates: column j's entries in rows j … w−1, held by the lanes q = j mod kLanes
     double v = q == (j % kLanes) && i >= j && i < w ? fabs(a[j / kLanes]) : -1.0;
     int at = i;
-#pragma unroll
-    for (int off = 16; off > 0; off >>= 1) {
-      const double ov = __shfl_down_sync(0xffffffffu, v, off);
-      const int oi = __shfl_down_sync(0xffffffffu, at, off);
-      if (ov > v || (ov == v && oi < at)) {
-        v = ov;
-        at = oi;
-      }
-    }
+    warp_argmax_down(v, at);
     if (lane == 0) {
       best_v[warp] = v;
       best_i[warp] = at;
