@@ -192,8 +192,8 @@ struct FactorStats {
   /// (Options::gpu_tiled_prefetch).
   index_t tiled_fronts_prefetched = 0;
   /// LU: large fronts (over Options::gpu_small_front_rows rows); of those the ones factored
-  /// again with interchanges (cuSOLVER GETRF for Options::diagonal_pivot_threshold = 1, strata's panel
-  /// kernel below it) because their elimination without interchanges
+  /// again with interchanges (cuSOLVER GETRF for Options::diagonal_pivot_threshold = 1,
+  /// strata's panel kernel below it) because their elimination without interchanges
   /// was rejected (rows to interchange, or a pivot needing static pivoting), and the ones
   /// eliminated by strata's batched kernels (Options::gpu_lu_strip_pivots > 0) rather than by GETRF
   /// without pivoting. Fronts of one 64-column step interchange rows inside the batched

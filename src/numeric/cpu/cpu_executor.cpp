@@ -245,8 +245,8 @@ void process_dense(const FactorContext& ctx, index_t f, const FrontBlocks& block
                              ps);
       break;
     case MatrixType::general:
-      cpu::factor_front_lu(F, m, k, m, ctx.static_pivot, ctx.diagonal_pivot_threshold, w.local_perm.data(),
-                           ps);
+      cpu::factor_front_lu(F, m, k, m, ctx.static_pivot, ctx.diagonal_pivot_threshold,
+                           w.local_perm.data(), ps);
       break;
     default:
       throw InternalError("unresolved matrix type in the CPU executor");

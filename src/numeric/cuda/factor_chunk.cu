@@ -128,8 +128,9 @@ void CudaExecutor::chunk_small_fronts(const numeric::FactorContext& ctx, ChunkRe
                       perm_offset_.data(), stream_);
   else
     launch_factor_small(tree, small_pos_.data(), static_cast<std::int64_t>(ns), small_rows,
-                        pool_.data(), rec.lu, ctx.static_pivot, ctx.diagonal_pivot_threshold, info_.data(),
-                        perturbed_.data(), perm_.data(), perm_offset_.data(), stream_);
+                        pool_.data(), rec.lu, ctx.static_pivot, ctx.diagonal_pivot_threshold,
+                        info_.data(), perturbed_.data(), perm_.data(), perm_offset_.data(),
+                        stream_);
   STRATA_CUDA(cudaEventRecord(rec.ev[2], stream_));
 }
 

@@ -126,6 +126,10 @@ void launch_lu_panel(double* f, std::int64_t m, std::int64_t k, std::int64_t p0,
                      double static_pivot, double threshold, std::int64_t* perm,
                      std::int64_t* perturbed, cudaStream_t s);
 
+/// The most columns (at most 64) a panel of `rows` fully summed rows may have for
+/// launch_lu_tall_panel on the current device; 0 when not even one column fits.
+std::int64_t lu_tall_panel_columns(std::int64_t rows);
+
 /// One LU panel of a large front by one block in shared memory: columns p0..p0+w-1
 /// (w ≤ 64) of the m×m front F (leading dimension m), only its fully summed rows
 /// p0..k-1 — the pivots and multipliers by threshold partial pivoting (u = `threshold`,
@@ -135,10 +139,6 @@ void launch_lu_panel(double* f, std::int64_t m, std::int64_t k, std::int64_t p0,
 /// multipliers: a TRSM with the panel's U block). Returns false, launching nothing, when the
 /// panel's (k − p0) × w entries do not fit the device's shared memory. Throws
 /// InternalError for a panel outside the front.
-/// The most columns (at most 64) a panel of `rows` fully summed rows may have for
-/// launch_lu_tall_panel on the current device; 0 when not even one column fits.
-std::int64_t lu_tall_panel_columns(std::int64_t rows);
-
 bool launch_lu_tall_panel(double* f, std::int64_t m, std::int64_t k, std::int64_t p0,
                           std::int64_t w, double static_pivot, double threshold, std::int64_t* perm,
                           std::int64_t* perturbed, cudaStream_t s);
