@@ -297,9 +297,11 @@ def main():
                 "nvlink": ASSUMED["nvlink_bytes_per_s"],
                 "ib_per_node": ASSUMED["ib_bytes_per_s_per_node"]}
     measured = []
+    machines = []
     for path in args.measured:
         with open(path) as f:
             run = json.load(f)
+        machines.append(run.get("machine", {}))
         for row in run.get("rows", []):
             # the configuration the driver ran with is the file's (a 1-rank row's own
             # gpus_per_rank has read 1 for 1 x 4)
@@ -307,8 +309,10 @@ def main():
                 if k in run:
                     row[k] = run[k]
             measured.append(row)
+    gpus = sorted({str(run_machine.get("gpu")) for run_machine in machines if run_machine.get("gpu")})
 
-    print("# The 4-GPU benchmark (one H200 machine; MPI through host memory between ranks)")
+    print(f"# The 4-GPU benchmark (one machine: {', '.join(gpus) or 'GPU not recorded'}; "
+          "MPI through host memory between ranks)")
     print(f"{'problem':<11} {'R x G':<6} {'top %':>6} {'subtree s':>9} {'CB MB':>8} "
           f"{'CB s':>6} {'vals s':>6} {'top s':>6} {'host s':>6} {'pred s':>7} {'meas s':>7} "
           f"{'pred MB':>8} {'meas MB':>8}")
