@@ -278,6 +278,11 @@ namespace {
 
 constexpr index_t kLoops = 2048;  // below this many multiply-adds, plain loops
 
+// The least work (factor entries read, Σ m·k over its fronts) given to a solve bin: below
+// it another thread costs more than it saves (bench/history.md, "The delayed solve's bins
+// by work").
+constexpr double kMinBinWork = 65536;
+
 // Forward step of front fr: L11 w = z(R[0..k)) in place, then the update L21 w of the rows
 // l21_rows, which `sink(row, value)` subtracts.
 template <class Sink>
@@ -369,13 +374,17 @@ void plan_delayed_solve(const Analysis& an, int threads, DelayedFactor& F) {
       }
       if (t.parent[f] < 0) total += work[f];
     }
+    // as many bins as threads, but none with less than kMinBinWork: on a small factor
+    // the threads' start-up and the top rows' per-bin sums cost more than they save
+    const int bins = static_cast<int>(
+        std::clamp(total / kMinBinWork, 1.0, static_cast<double>(std::max(threads, 1))));
     // split the heaviest subtree into its children until every subtree is at most a
-    // quarter of a thread's share (or 16 per thread); its root joins the top part
+    // quarter of a bin's share (or 16 per bin); its root joins the top part
     std::vector<index_t> cand, top;
     for (index_t f = 0; f < nf; ++f)
       if (t.parent[f] < 0) cand.push_back(f);
-    const double limit = total / (4.0 * std::max(threads, 1));
-    while (threads > 1 && !cand.empty() && cand.size() < static_cast<std::size_t>(16 * threads)) {
+    const double limit = total / (4.0 * bins);
+    while (bins > 1 && !cand.empty() && cand.size() < static_cast<std::size_t>(16 * bins)) {
       const auto heaviest = std::max_element(
           cand.begin(), cand.end(), [&](index_t a, index_t b) { return work[a] < work[b]; });
       const index_t f = *heaviest;
@@ -385,13 +394,13 @@ void plan_delayed_solve(const Analysis& an, int threads, DelayedFactor& F) {
       for (index_t q = t.child_offsets[f]; q < t.child_offsets[f + 1]; ++q)
         cand.push_back(t.children[q]);
     }
-    if (threads > 1 && cand.size() > 1) {
+    if (bins > 1 && cand.size() > 1) {
       // largest first to the least loaded bin (ties: the lower front number first)
       std::sort(cand.begin(), cand.end(), [&](index_t a, index_t b) {
         return work[a] != work[b] ? work[a] > work[b] : a < b;
       });
-      P.bins.resize(threads);
-      std::vector<double> load(threads, 0.0);
+      P.bins.resize(bins);
+      std::vector<double> load(bins, 0.0);
       for (index_t f : cand) {
         const int bin = static_cast<int>(std::min_element(load.begin(), load.end()) - load.begin());
         load[bin] += work[f];

@@ -103,6 +103,8 @@ void factorize_delayed(const Analysis& an, const double* scaled_values, MatrixTy
 
 /// The solve plan of `factor` (DelayedFactor::solve_plan) for `threads` threads: the
 /// subtree split when the analysis or the thread count changed, the rows' bins always.
+/// At most `threads` bins, fewer on a small factor (each bin gets a least share of the
+/// factor's entries).
 /// factorize_delayed calls it with its arena's thread count; one thread: no bins.
 void plan_delayed_solve(const Analysis& an, int threads, DelayedFactor& factor);
 

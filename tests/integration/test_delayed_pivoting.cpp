@@ -228,15 +228,16 @@ TEST(DelayedPivoting, SingularMatrixIsStillReported) {
 
 // The solve of a delayed factor by subtrees on several threads: the solution of dense
 // LAPACK (dgesv) for 2 and 4 threads as for 1, bit for bit the same from one solve to the
-// next, on a 3D grid's pattern (a tree with many subtrees; even, so that the zero diagonal
-// leaves it structurally nonsingular) with a stale matching, so that
-// pivots are delayed across the subtrees' roots into the top of the tree.
+// next, on a 3D grid's pattern (a tree with many subtrees, and enough factor entries for a
+// share on each of 4 threads, see SmallFactorSolvesOnFewerThreads; even, so that the zero
+// diagonal leaves it structurally nonsingular) with a stale matching, so that pivots are
+// delayed across the subtrees' roots into the top of the tree.
 TEST(DelayedPivoting, SolveBySubtreesOnSeveralThreadsMatchesDenseLu) {
   unsigned long long seed = 0;
   auto rng = test::fresh_rng(&seed);
   SCOPED_TRACE("seed " + std::to_string(seed));
   std::uniform_real_distribution<double> u(-1, 1);
-  const SparseMatrix grid = expand_symmetric(generators::laplacian_3d(10, 9, 9));
+  const SparseMatrix grid = expand_symmetric(generators::laplacian_3d(16, 15, 15));
   const index_t n = grid.n_rows;
   const SparseMatrix a1 = test::with_values(grid, 20.0, rng);
   const SparseMatrix a2 = test::with_values(grid, 0.0, rng);
@@ -270,6 +271,39 @@ TEST(DelayedPivoting, SolveBySubtreesOnSeveralThreadsMatchesDenseLu) {
       EXPECT_LE(test::relative_difference(xc, x1), tol);  // the sums differ only in order
     }
     EXPECT_EQ(s.solve(b), x);
+  }
+}
+
+// A small factor is solved on fewer threads than the solver has: each thread of the solve
+// gets a least share of the factor's entries (numeric/delayed.cpp, kMinBinWork), and a
+// 7-point grid of 810 unknowns has less than two shares. Its solution is still dense
+// LAPACK's, on 4 threads as on 1.
+TEST(DelayedPivoting, SmallFactorSolvesOnFewerThreads) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  std::uniform_real_distribution<double> u(-1, 1);
+  const SparseMatrix grid = expand_symmetric(generators::laplacian_3d(10, 9, 9));
+  const index_t n = grid.n_rows;
+  const SparseMatrix a1 = test::with_values(grid, 20.0, rng);
+  const SparseMatrix a2 = test::with_values(grid, 0.0, rng);
+  std::vector<double> b(n);
+  for (double& v : b) v = u(rng);
+  std::vector<double> ref = b;
+  ASSERT_TRUE(test::dense_solve(test::to_dense(a2), n, ref, 1));
+  const double kappa = std::max(kappa_lower(a2, ref, b), kappa_inf(a2));
+  const double tol = std::max(1e-10, 1e-13 * std::sqrt(double(n)) * kappa);
+  for (int threads : {1, 4}) {
+    SCOPED_TRACE("threads " + std::to_string(threads));
+    Options o = delayed_solves_only();
+    o.num_threads = threads;
+    Solver s(o);
+    s.analyze(a1);
+    s.factorize(a2);
+    EXPECT_GT(s.stats().factor.delayed_pivots, 0);
+    const std::vector<double> x = s.solve(b);
+    EXPECT_EQ(s.stats().solve.host_threads, 1);
+    EXPECT_LE(test::relative_difference(x, ref), tol);
   }
 }
 
