@@ -226,29 +226,27 @@ TEST(DelayedPivoting, SingularMatrixIsStillReported) {
   }
 }
 
-// The solve of a delayed factor by subtrees on several threads: the solution of dense
-// LAPACK (dgesv) for 2 and 4 threads as for 1, bit for bit the same from one solve to the
-// next, on a 3D grid's pattern (a tree with many subtrees, and enough factor entries for a
-// share on each of 4 threads, see SmallFactorSolvesOnFewerThreads; even, so that the zero
-// diagonal leaves it structurally nonsingular) with a stale matching, so that pivots are
-// delayed across the subtrees' roots into the top of the tree.
-TEST(DelayedPivoting, SolveBySubtreesOnSeveralThreadsMatchesDenseLu) {
-  unsigned long long seed = 0;
-  auto rng = test::fresh_rng(&seed);
-  SCOPED_TRACE("seed " + std::to_string(seed));
-  std::uniform_real_distribution<double> u(-1, 1);
-  const SparseMatrix grid = expand_symmetric(generators::laplacian_3d(16, 15, 15));
-  const index_t n = grid.n_rows;
-  const SparseMatrix a1 = test::with_values(grid, 20.0, rng);
-  const SparseMatrix a2 = test::with_values(grid, 0.0, rng);
-  std::vector<double> b(2 * n);
-  for (double& v : b) v = u(rng);
-  std::vector<double> ref = b;
-  ASSERT_TRUE(test::dense_solve(test::to_dense(a2), n, ref, 2));
-  const double kappa2 = kappa_inf(a2);
-  std::vector<double> one_thread;
-  for (int threads : {1, 2, 4}) {
-    SCOPED_TRACE("threads " + std::to_string(threads));
+// A 3D grid's pattern (even, so that the zero diagonal leaves it structurally nonsingular)
+// with a stale matching: analyzed with the values a1 (diagonal 20), factored with a2 (zero
+// diagonal), so that pivots are delayed across the subtrees' roots into the top of the
+// tree; nrhs random right-hand sides b and dense LAPACK's (dgesv) solution ref.
+struct StaleGrid {
+  index_t n = 0;
+  SparseMatrix a1, a2;
+  std::vector<double> b, ref;
+  StaleGrid(index_t nx, index_t ny, index_t nz, int nrhs, std::mt19937_64& rng) {
+    std::uniform_real_distribution<double> u(-1, 1);
+    const SparseMatrix grid = expand_symmetric(generators::laplacian_3d(nx, ny, nz));
+    n = grid.n_rows;
+    a1 = test::with_values(grid, 20.0, rng);
+    a2 = test::with_values(grid, 0.0, rng);
+    b.resize(static_cast<std::size_t>(nrhs) * n);
+    for (double& v : b) v = u(rng);
+    ref = b;
+    EXPECT_TRUE(test::dense_solve(test::to_dense(a2), n, ref, nrhs));
+  }
+  // The delayed factor's solution on `threads` threads, and the threads its solve used.
+  std::vector<double> solve(int threads, int* host_threads) const {
     Options o = delayed_solves_only();
     o.num_threads = threads;
     Solver s(o);
@@ -256,21 +254,45 @@ TEST(DelayedPivoting, SolveBySubtreesOnSeveralThreadsMatchesDenseLu) {
     s.factorize(a2);
     EXPECT_GT(s.stats().factor.delayed_pivots, 0);
     const std::vector<double> x = s.solve(b);
-    EXPECT_EQ(s.stats().solve.host_threads, threads);
+    *host_threads = s.stats().solve.host_threads;
+    EXPECT_EQ(s.solve(b), x);  // bit for bit the same from one solve to the next
+    return x;
+  }
+  // The tolerance against ref of column c: the lower bound ‖A‖‖x‖/‖b‖ of κ can be far
+  // below κ for a zero-diagonal draw, so LAPACK's estimate of κ∞ sets it too (both
+  // solutions are backward stable).
+  double tolerance(int c) const {
+    const std::vector<double> rc(ref.begin() + c * n, ref.begin() + (c + 1) * n);
+    const std::vector<double> bc(b.begin() + c * n, b.begin() + (c + 1) * n);
+    const double kappa = std::max(kappa_lower(a2, rc, bc), kappa_inf(a2));
+    return std::max(1e-10, 1e-13 * std::sqrt(double(n)) * kappa);
+  }
+};
+
+// The solve of a delayed factor by subtrees on several threads: dense LAPACK's solution
+// for 2 and 4 threads as for 1, on a grid whose factor has enough entries for a share on
+// each of 4 threads (see SmallFactorSolvesOnFewerThreads), two right-hand sides.
+TEST(DelayedPivoting, SolveBySubtreesOnSeveralThreadsMatchesDenseLu) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  const StaleGrid g(16, 15, 15, 2, rng);
+  const index_t n = g.n;
+  const double tol[2] = {g.tolerance(0), g.tolerance(1)};
+  std::vector<double> one_thread;
+  for (int threads : {1, 2, 4}) {
+    SCOPED_TRACE("threads " + std::to_string(threads));
+    int used = 0;
+    const std::vector<double> x = g.solve(threads, &used);
+    EXPECT_EQ(used, threads);
     if (threads == 1) one_thread = x;
     for (int c = 0; c < 2; ++c) {
       const std::vector<double> xc(x.begin() + c * n, x.begin() + (c + 1) * n);
       const std::vector<double> x1(one_thread.begin() + c * n, one_thread.begin() + (c + 1) * n);
-      const std::vector<double> rc(ref.begin() + c * n, ref.begin() + (c + 1) * n);
-      const std::vector<double> bc(b.begin() + c * n, b.begin() + (c + 1) * n);
-      // the lower bound ‖A‖‖x‖/‖b‖ of κ can be far below κ for a zero-diagonal draw: LAPACK's
-      // estimate of κ∞ sets the tolerance (both solutions are backward stable)
-      const double kappa = std::max(kappa_lower(a2, rc, bc), kappa2);
-      const double tol = std::max(1e-10, 1e-13 * std::sqrt(double(n)) * kappa);
-      EXPECT_LE(test::relative_difference(xc, rc), tol);
-      EXPECT_LE(test::relative_difference(xc, x1), tol);  // the sums differ only in order
+      const std::vector<double> rc(g.ref.begin() + c * n, g.ref.begin() + (c + 1) * n);
+      EXPECT_LE(test::relative_difference(xc, rc), tol[c]);
+      EXPECT_LE(test::relative_difference(xc, x1), tol[c]);  // the sums differ only in order
     }
-    EXPECT_EQ(s.solve(b), x);
   }
 }
 
@@ -282,28 +304,14 @@ TEST(DelayedPivoting, SmallFactorSolvesOnFewerThreads) {
   unsigned long long seed = 0;
   auto rng = test::fresh_rng(&seed);
   SCOPED_TRACE("seed " + std::to_string(seed));
-  std::uniform_real_distribution<double> u(-1, 1);
-  const SparseMatrix grid = expand_symmetric(generators::laplacian_3d(10, 9, 9));
-  const index_t n = grid.n_rows;
-  const SparseMatrix a1 = test::with_values(grid, 20.0, rng);
-  const SparseMatrix a2 = test::with_values(grid, 0.0, rng);
-  std::vector<double> b(n);
-  for (double& v : b) v = u(rng);
-  std::vector<double> ref = b;
-  ASSERT_TRUE(test::dense_solve(test::to_dense(a2), n, ref, 1));
-  const double kappa = std::max(kappa_lower(a2, ref, b), kappa_inf(a2));
-  const double tol = std::max(1e-10, 1e-13 * std::sqrt(double(n)) * kappa);
+  const StaleGrid g(10, 9, 9, 1, rng);
+  const double tol = g.tolerance(0);
   for (int threads : {1, 4}) {
     SCOPED_TRACE("threads " + std::to_string(threads));
-    Options o = delayed_solves_only();
-    o.num_threads = threads;
-    Solver s(o);
-    s.analyze(a1);
-    s.factorize(a2);
-    EXPECT_GT(s.stats().factor.delayed_pivots, 0);
-    const std::vector<double> x = s.solve(b);
-    EXPECT_EQ(s.stats().solve.host_threads, 1);
-    EXPECT_LE(test::relative_difference(x, ref), tol);
+    int used = 0;
+    const std::vector<double> x = g.solve(threads, &used);
+    EXPECT_EQ(used, 1);
+    EXPECT_LE(test::relative_difference(x, g.ref), tol);
   }
 }
 
