@@ -309,7 +309,7 @@ def main():
                 if k in run:
                     row[k] = run[k]
             measured.append(row)
-    gpus = sorted({str(run_machine.get("gpu")) for run_machine in machines if run_machine.get("gpu")})
+    gpus = sorted({str(m["gpu"]) for m in machines if m.get("gpu")})
 
     print(f"# The 4-GPU benchmark (one machine: {', '.join(gpus) or 'GPU not recorded'}; "
           "MPI through host memory between ranks)")

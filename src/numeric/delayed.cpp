@@ -278,8 +278,8 @@ namespace {
 
 constexpr index_t kLoops = 2048;  // below this many multiply-adds, plain loops
 
-// The least work (factor entries read, Σ m·k over its fronts) given to a solve bin: below
-// it another thread costs more than it saves (bench/history.md, "The delayed solve's bins
+// The least work given to a solve bin (Σ m·k over its fronts' symbolic sizes, about the
+// factor entries it reads): below it another thread costs more than it saves (bench/history.md, "The delayed solve's bins
 // by work").
 constexpr double kMinBinWork = 65536;
 
