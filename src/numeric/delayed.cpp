@@ -279,8 +279,8 @@ namespace {
 constexpr index_t kLoops = 2048;  // below this many multiply-adds, plain loops
 
 // The least work given to a solve bin (Σ m·k over its fronts' symbolic sizes, about the
-// factor entries it reads): below it another thread costs more than it saves (bench/history.md, "The delayed solve's bins
-// by work").
+// factor entries it reads): below it another thread costs more than it saves
+// (bench/history.md, "The delayed solve's bins by work").
 constexpr double kMinBinWork = 65536;
 
 // Forward step of front fr: L11 w = z(R[0..k)) in place, then the update L21 w of the rows
