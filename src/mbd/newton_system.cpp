@@ -6,6 +6,7 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <atomic>
 #include <stdexcept>
 
 #include "strata/errors.hpp"
@@ -117,8 +118,13 @@ void NewtonSystem::for_element_ranges(std::size_t n, F&& f) const {
     f(std::size_t{0}, n);
     return;
   }
+  // ranges of at most 64 elements, and at least four per thread: one element (a joint's
+  // derivatives, a contact) costs microseconds, so on many threads ranges of 64 left
+  // the joints' loop to a few threads
+  const std::size_t grain =
+      std::clamp<std::size_t>(n / (4 * static_cast<std::size_t>(threads_)), 1, 64);
   arena_->execute([&] {
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 64),
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, grain),
                       [&](const tbb::blocked_range<std::size_t>& r) { f(r.begin(), r.end()); });
   });
 }
@@ -205,17 +211,23 @@ bool NewtonSystem::prune_pattern() {
 }
 
 int NewtonSystem::check_candidates(const double* q) const {
-  int status = 0;
-  std::vector<double> lq;
-  for (std::size_t e = 0; e < model_.forces.size(); ++e) {
-    const Force& f = *model_.forces[e];
-    if (f.margin <= 0 || candidate_[e]) continue;
-    gather(f.dofs, q, lq);
-    const double p = f.proximity(lq.data());
-    if (p < 0) return 2;
-    if (p < 0.5 * f.margin) status = 1;
-  }
-  return status;
+  // the largest status over the elements, on the assembly's threads (the same for any
+  // number of them)
+  std::atomic<int> status{0};
+  for_element_ranges(model_.forces.size(), [&](std::size_t begin, std::size_t end) {
+    std::vector<double> lq;
+    int local = 0;
+    for (std::size_t e = begin; e < end && local < 2; ++e) {
+      const Force& f = *model_.forces[e];
+      if (f.margin <= 0 || candidate_[e]) continue;
+      gather(f.dofs, q, lq);
+      const double p = f.proximity(lq.data());
+      local = std::max(local, p < 0 ? 2 : p < 0.5 * f.margin ? 1 : 0);
+    }
+    for (int s = status.load(); s < local && !status.compare_exchange_weak(s, local);) {
+    }
+  });
+  return status.load();
 }
 
 index_t NewtonSystem::active_forces() const {

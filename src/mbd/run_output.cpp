@@ -1,11 +1,12 @@
 // strata::mbd — a simulation run's outputs (see run_output.hpp).
 #include "mbd/run_output.hpp"
 
-#include <fmt/core.h>
+#include <fmt/format.h>
 
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 
 #include "base/atomic_file.hpp"
 #include "base/timer.hpp"
@@ -29,10 +30,13 @@ class Csv {
     for (std::size_t i = 0; i < header.size(); ++i) out_ << (i ? "," : "") << header[i];
     out_ << '\n';
   }
+  // One row formatted into a buffer kept from row to row, then written at once.
   void row(double t, const double* x, std::size_t n) {
-    out_ << fmt::format("{:.17g}", t);
-    for (std::size_t i = 0; i < n; ++i) out_ << fmt::format(",{:.17g}", x[i]);
-    out_ << '\n';
+    buf_.clear();
+    fmt::format_to(std::back_inserter(buf_), "{:.17g}", t);
+    for (std::size_t i = 0; i < n; ++i) fmt::format_to(std::back_inserter(buf_), ",{:.17g}", x[i]);
+    buf_.push_back('\n');
+    out_.write(buf_.data(), static_cast<std::streamsize>(buf_.size()));
   }
   void raw(const std::string& line) { out_ << line << '\n'; }
   void flush() {
@@ -60,6 +64,7 @@ class Csv {
  private:
   std::string dir_, name_;
   std::ofstream out_;
+  fmt::memory_buffer buf_;
 };
 
 namespace {

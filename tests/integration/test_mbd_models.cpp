@@ -85,6 +85,42 @@ TEST(MbdModels, ContactPairsThatLeaveStayInThePattern) {
                                      pruned.indices[p]));
 }
 
+// check_candidates against its definition, evaluated here pair by pair: 2 when a pair
+// outside the candidate set penetrates, 1 when one is within half its margin, else 0 — the
+// same on any number of threads (the elements are checked in parallel).
+TEST(MbdModels, CandidateCheckMatchesItsDefinitionOnAnyThreads) {
+  const Model m = build_model(generate("tracked:100"), "tracked:100");
+  IntegratorOptions o;
+  o.t_end = 0.01;
+  Integrator in(m, o);
+  in.initialize();
+  NewtonSystem& sys = in.system();
+  const std::vector<double> q = in.q();
+  std::vector<double> away = q;
+  for (std::size_t i = 0; i < away.size(); ++i) away[i] += 100.0 * static_cast<double>(i % 7);
+  sys.update_candidates(away.data());  // most pairs out of the set
+  auto expected = [&](const std::vector<double>& at) {
+    int status = 0;
+    std::vector<double> lq;
+    for (std::size_t e = 0; e < m.forces.size(); ++e) {
+      const Force& f = *m.forces[e];
+      if (f.margin <= 0 || sys.candidates()[e]) continue;
+      lq.clear();
+      for (index_t d : f.dofs) lq.push_back(at[d]);
+      const double p = f.proximity(lq.data());
+      status = std::max(status, p < 0 ? 2 : p < 0.5 * f.margin ? 1 : 0);
+    }
+    return status;
+  };
+  const int at_q = expected(q);
+  EXPECT_GE(at_q, 1) << "no pair outside the set comes near at the initial positions";
+  for (int threads : {1, 2, 3, 5}) {
+    sys.set_threads(threads);
+    EXPECT_EQ(sys.check_candidates(q.data()), at_q) << threads << " threads";
+    EXPECT_EQ(sys.check_candidates(away.data()), expected(away)) << threads << " threads";
+  }
+}
+
 // The loop that analyzes once per pattern (refactorizations with the first values' matching
 // and scaling, delayed pivots, kept-order analyses when contact pairs enter) follows the
 // trajectory of a loop that analyzes afresh at every step: positions equal to 1e-8 at
