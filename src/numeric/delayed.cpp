@@ -378,29 +378,49 @@ void plan_delayed_solve(const Analysis& an, int threads, DelayedFactor& F) {
     // the threads' start-up and the top rows' per-bin sums cost more than they save
     const int bins = static_cast<int>(
         std::clamp(total / kMinBinWork, 1.0, static_cast<double>(std::max(threads, 1))));
-    // split the heaviest subtree into its children until every subtree is at most a
-    // quarter of a bin's share (or 16 per bin); its root joins the top part
+    // largest first to the least loaded bin (ties: the lower front number first)
+    auto by_work = [&](index_t a, index_t b) {
+      return work[a] != work[b] ? work[a] > work[b] : a < b;
+    };
+    std::vector<double> load(bins);
+    auto makespan = [&](std::vector<index_t> c) {
+      std::sort(c.begin(), c.end(), by_work);
+      std::fill(load.begin(), load.end(), 0.0);
+      for (index_t f : c) *std::min_element(load.begin(), load.end()) += work[f];
+      return *std::max_element(load.begin(), load.end());
+    };
+    // split the heaviest subtree into its children (its root joins the top part, which one
+    // thread solves) up to 16 subtrees per bin, and keep the split with the least estimated
+    // time: the top's work plus the most loaded bin's. On a multibody Newton matrix the
+    // upper fronts are large, and splitting down to small subtrees put a third of the
+    // factor into the top (bench/history.md, "The delayed solve's top part").
     std::vector<index_t> cand, top;
     for (index_t f = 0; f < nf; ++f)
       if (t.parent[f] < 0) cand.push_back(f);
-    const double limit = total / (4.0 * bins);
+    double top_work = 0, best = makespan(cand);
+    std::vector<index_t> best_cand = cand, best_top;
     while (bins > 1 && !cand.empty() && cand.size() < static_cast<std::size_t>(16 * bins)) {
       const auto heaviest = std::max_element(
           cand.begin(), cand.end(), [&](index_t a, index_t b) { return work[a] < work[b]; });
       const index_t f = *heaviest;
-      if (work[f] <= limit || t.child_offsets[f] == t.child_offsets[f + 1]) break;
+      if (t.child_offsets[f] == t.child_offsets[f + 1]) break;
       cand.erase(heaviest);
       top.push_back(f);
+      top_work += static_cast<double>(t.n_rows(f)) * t.n_pivots(f);
       for (index_t q = t.child_offsets[f]; q < t.child_offsets[f + 1]; ++q)
         cand.push_back(t.children[q]);
+      if (const double estimate = top_work + makespan(cand); estimate < best) {
+        best = estimate;
+        best_cand = cand;
+        best_top = top;
+      }
     }
+    cand = std::move(best_cand);
+    top = std::move(best_top);
     if (bins > 1 && cand.size() > 1) {
-      // largest first to the least loaded bin (ties: the lower front number first)
-      std::sort(cand.begin(), cand.end(), [&](index_t a, index_t b) {
-        return work[a] != work[b] ? work[a] > work[b] : a < b;
-      });
+      std::sort(cand.begin(), cand.end(), by_work);
       P.bins.resize(bins);
-      std::vector<double> load(bins, 0.0);
+      std::fill(load.begin(), load.end(), 0.0);
       for (index_t f : cand) {
         const int bin = static_cast<int>(std::min_element(load.begin(), load.end()) - load.begin());
         load[bin] += work[f];
