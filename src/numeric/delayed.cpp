@@ -16,8 +16,8 @@
 // parent (a root) may not delay: what is left there is singular to working precision and
 // gets static pivots.
 //
-// Order and storage: the fronts of one level of the analysis's level schedule are
-// independent and are factored concurrently (oneTBB), levels deepest first. Each front
+// Order and storage: on several threads a front is factored (oneTBB) as soon as its last
+// child is, the leaves first; on one, in the analysis's level schedule. Each front
 // keeps its own factor and contribution block in vectors that keep their capacity for the
 // next factorization; a child's block is released (its size, not its capacity) once the
 // parent is assembled. Keeping the capacity trades memory (the blocks of every front, not
@@ -27,8 +27,10 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_for_each.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cstring>
 #include <exception>
 #include <mutex>
@@ -235,32 +237,47 @@ void factorize_delayed(const Analysis& an, const double* vals, MatrixType type, 
   policy.threshold = threshold;
   policy.tiny = static_pivot;
   policy.static_pivot = static_pivot;
-  // one BLAS thread throughout: a level of one front splits its panel updates over the
-  // arena's threads instead (the BLAS's own threads would spin on after each call, taking
-  // cores from the arena's threads)
+  // one BLAS thread throughout: a large front splits its panel updates over the arena's
+  // threads instead (the BLAS's own threads would spin on after each call, taking cores
+  // from the arena's threads)
   openblas_set_num_threads(1);
-  for (index_t l = 0; l < sched.n_levels(); ++l) {
-    const index_t b = sched.level_offsets[l], e = sched.level_offsets[l + 1];
-    if (e - b == 1 || threads == 1) {
-      for (index_t q = b; q < e; ++q)
-        factor_front(an, vals, policy, sched.fronts[q], F, W.threads[threads],
-                     e - b == 1 && threads > 1 ? &arena : nullptr);
-      continue;
+  if (threads == 1) {
+    for (index_t q = 0; q < static_cast<index_t>(sched.fronts.size()); ++q)
+      factor_front(an, vals, policy, sched.fronts[q], F, W.threads[threads]);
+  } else {
+    // a front starts once its last child is done (no barrier between levels): the upper
+    // levels of a multibody Newton matrix's tree hold a few fronts each, and a level
+    // waited for its slowest front
+    const auto nf = static_cast<std::size_t>(t.n_fronts());
+    if (W.pending_size < nf) {
+      W.pending = std::make_unique<std::atomic<index_t>[]>(nf);
+      W.pending_size = nf;
+    }
+    std::atomic<index_t>* pending = W.pending.get();
+    std::vector<index_t>& leaves = W.leaves;
+    leaves.clear();
+    for (std::size_t f = 0; f < nf; ++f) {
+      const index_t c = t.child_offsets[f + 1] - t.child_offsets[f];
+      pending[f].store(c, std::memory_order_relaxed);
+      if (c == 0) leaves.push_back(static_cast<index_t>(f));
     }
     std::exception_ptr error;
     std::mutex error_mutex;
     arena.execute([&] {
-      tbb::parallel_for(tbb::blocked_range<index_t>(b, e, 1),
-                        [&](const tbb::blocked_range<index_t>& r) {
-                          const int slot = tbb::this_task_arena::current_thread_index();
-                          auto& w = W.threads[slot >= 0 && slot < threads ? slot : threads];
-                          for (index_t q = r.begin(); q != r.end(); ++q) try {
-                              factor_front(an, vals, policy, sched.fronts[q], F, w);
-                            } catch (...) {
-                              std::lock_guard<std::mutex> lock(error_mutex);
-                              if (!error) error = std::current_exception();
-                            }
-                        });
+      tbb::parallel_for_each(leaves.begin(), leaves.end(),
+                             [&](index_t f, tbb::feeder<index_t>& feeder) {
+                               const int slot = tbb::this_task_arena::current_thread_index();
+                               auto& w = W.threads[slot >= 0 && slot < threads ? slot : threads];
+                               try {
+                                 factor_front(an, vals, policy, f, F, w, &arena);
+                               } catch (...) {
+                                 std::lock_guard<std::mutex> lock(error_mutex);
+                                 if (!error) error = std::current_exception();
+                                 return;  // its parent never starts
+                               }
+                               const index_t p = t.parent[f];
+                               if (p >= 0 && pending[p].fetch_sub(1) == 1) feeder.add(p);
+                             });
     });
     if (error) std::rethrow_exception(error);
   }

@@ -20,8 +20,10 @@
 
 #include <tbb/task_arena.h>
 
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <utility>
 #include <vector>
 
@@ -84,6 +86,10 @@ struct DelayedWorkspace {
     std::vector<char> nonzero;
   };
   std::vector<Thread> threads;
+  /// Per front: children not yet factored (the parallel traversal), and the leaves.
+  std::unique_ptr<std::atomic<index_t>[]> pending;
+  std::size_t pending_size = 0;
+  std::vector<index_t> leaves;
 };
 
 /// Factors the scaled canonical values `scaled_values` (in the analysis's entry order,
@@ -91,10 +97,10 @@ struct DelayedWorkspace {
 /// `threshold` in (0, 1]; a pivot no larger than static_pivot is not taken below a root;
 /// at a root the remaining candidates are eliminated with partial pivoting and pivots
 /// under static_pivot replaced by ±static_pivot (counted in front_stats' perturbed).
-/// The fronts of a level of an.schedule are factored concurrently in `arena` (one BLAS
-/// thread each; a level of one front gets the arena's threads inside BLAS), each from its
-/// children's blocks in child order, so the factor does not depend on the thread count
-/// except through multithreaded BLAS on the lone fronts. Throws NotSupported for a type
+/// The fronts are factored concurrently in `arena`, each once its children are (one BLAS
+/// thread each; a large front's panel updates are split by column blocks over the arena's
+/// threads), each from its children's blocks in child order, so the factor does not
+/// depend on the thread count. Throws NotSupported for a type
 /// other than general, InvalidInput for a threshold outside (0, 1], OutOfMemory when the
 /// fronts grow beyond the memory.
 void factorize_delayed(const Analysis& an, const double* scaled_values, MatrixType type,

@@ -297,6 +297,38 @@ TEST(DelayedPivoting, SolveBySubtreesOnSeveralThreadsMatchesDenseLu) {
   }
 }
 
+// The delayed factorization on several threads (a front starts when its last child is
+// done, in whatever order the threads finish) gives the factor of one thread: the same
+// delayed pivots and, bit for bit, the same determinant (summed front by front in tree
+// order, so one front factored differently would show).
+TEST(DelayedPivoting, FactorDoesNotDependOnTheThreads) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  const StaleGrid g(12, 11, 11, 1, rng);
+  auto factor = [&](int threads) {
+    Options o = delayed_solves_only();
+    o.num_threads = threads;
+    Solver s(o);
+    s.analyze(g.a1);
+    s.factorize(g.a2);
+    return s.stats().factor;
+  };
+  const FactorStats one = factor(1);
+  EXPECT_GT(one.delayed_pivots, 0);
+  for (int threads : {2, 3, 5, 8}) {
+    SCOPED_TRACE("threads " + std::to_string(threads));
+    for (int rep = 0; rep < 3; ++rep) {  // a race would show in some repetition
+      const FactorStats f = factor(threads);
+      EXPECT_EQ(f.delayed_pivots, one.delayed_pivots);
+      EXPECT_EQ(f.fronts_delaying, one.fronts_delaying);
+      EXPECT_EQ(f.perturbed_pivots, one.perturbed_pivots);
+      EXPECT_EQ(f.determinant_sign, one.determinant_sign);
+      EXPECT_EQ(f.log_abs_determinant, one.log_abs_determinant);
+    }
+  }
+}
+
 // A small factor is solved on fewer threads than the solver has: each thread of the solve
 // gets a least share of the factor's entries (numeric/delayed.cpp, kMinBinWork), and a
 // 7-point grid of 810 unknowns has less than two shares. Its solution is still dense

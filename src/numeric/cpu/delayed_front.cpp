@@ -14,6 +14,7 @@
 #include "numeric/cpu/delayed_front.hpp"
 
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <cmath>
@@ -123,7 +124,11 @@ index_t factor_front_lu_delayed(double* f, index_t m, index_t p, index_t ld,
              ld);
       };
       if (arena && blocks > 1 && arena->max_concurrency() > 1)
-        arena->execute([&] { tbb::parallel_for(index_t{0}, blocks, update); });
+        // isolated: a thread waiting here takes no other front's task, whose work arrays
+        // (per thread) this front is using
+        arena->execute([&] {
+          tbb::this_task_arena::isolate([&] { tbb::parallel_for(index_t{0}, blocks, update); });
+        });
       else
         for (index_t b = 0; b < blocks; ++b) update(b);
     }
