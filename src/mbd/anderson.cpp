@@ -4,6 +4,37 @@
 #include <cmath>
 
 namespace strata::mbd {
+namespace {
+
+// Σ a_i b_i (c_i) in four interleaved partial sums: one running sum waits for each
+// addition in turn, and these products are most of a step's time.
+double dot(const double* a, const double* b, index_t n) {
+  double s0 = 0, s1 = 0, s2 = 0, s3 = 0;
+  index_t i = 0;
+  for (; i + 4 <= n; i += 4) {
+    s0 += a[i] * b[i];
+    s1 += a[i + 1] * b[i + 1];
+    s2 += a[i + 2] * b[i + 2];
+    s3 += a[i + 3] * b[i + 3];
+  }
+  for (; i < n; ++i) s0 += a[i] * b[i];
+  return (s0 + s1) + (s2 + s3);
+}
+
+double dot(const double* a, const double* b, const double* c, index_t n) {
+  double s0 = 0, s1 = 0, s2 = 0, s3 = 0;
+  index_t i = 0;
+  for (; i + 4 <= n; i += 4) {
+    s0 += a[i] * b[i] * c[i];
+    s1 += a[i + 1] * b[i + 1] * c[i + 1];
+    s2 += a[i + 2] * b[i + 2] * c[i + 2];
+    s3 += a[i + 3] * b[i + 3] * c[i + 3];
+  }
+  for (; i < n; ++i) s0 += a[i] * b[i] * c[i];
+  return (s0 + s1) + (s2 + s3);
+}
+
+}  // namespace
 
 void AndersonMixing::reset() {
   have_prev_ = false;
@@ -58,21 +89,15 @@ int AndersonMixing::step(double* x, const double* f, const double* w, index_t n)
   for (int c = 0; c < m; ++c) {
     const std::vector<double>& col = df_[m - 1 - c];
     double* qc = q_.data() + un * c;
-    double norm0 = 0;
-    for (index_t i = 0; i < n; ++i) {
-      qc[i] = w[i] * col[i];
-      norm0 += qc[i] * qc[i];
-    }
+    for (index_t i = 0; i < n; ++i) qc[i] = w[i] * col[i];
+    const double norm0 = dot(qc, qc, n);
     for (int l = 0; l < c; ++l) {
       const double* ql = q_.data() + un * l;
-      double d = 0;
-      for (index_t i = 0; i < n; ++i) d += ql[i] * qc[i];
+      const double d = dot(ql, qc, n);
       r_[l + c * m] = d;
       for (index_t i = 0; i < n; ++i) qc[i] -= d * ql[i];
     }
-    double norm = 0;
-    for (index_t i = 0; i < n; ++i) norm += qc[i] * qc[i];
-    norm = std::sqrt(norm);
+    const double norm = std::sqrt(dot(qc, qc, n));
     if (!(norm > 1e-8 * std::sqrt(norm0))) break;
     r_[c + c * m] = norm;
     for (index_t i = 0; i < n; ++i) qc[i] /= norm;
@@ -87,10 +112,7 @@ int AndersonMixing::step(double* x, const double* f, const double* w, index_t n)
   // R γ = Qᵀ W f, back substitution (column c of the basis is difference m−1−c)
   gamma_.assign(p, 0.0);
   for (int c = 0; c < p; ++c) {
-    const double* qc = q_.data() + un * c;
-    double d = 0;
-    for (index_t i = 0; i < n; ++i) d += qc[i] * w[i] * f[i];
-    gamma_[c] = d;
+    gamma_[c] = dot(q_.data() + un * c, w, f, n);
   }
   for (int c = p - 1; c >= 0; --c) {
     for (int l = c + 1; l < p; ++l) gamma_[c] -= r_[c + l * m] * gamma_[l];
