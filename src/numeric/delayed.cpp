@@ -263,21 +263,28 @@ void factorize_delayed(const Analysis& an, const double* vals, MatrixType type, 
     }
     std::exception_ptr error;
     std::mutex error_mutex;
+    // fronts started or ready and not done: a front that starts alone (the top of the
+    // tree) splits its panel updates over the threads, the others take one each (the
+    // bits are the same either way)
+    std::atomic<std::size_t> open{leaves.size()};
     arena.execute([&] {
-      tbb::parallel_for_each(leaves.begin(), leaves.end(),
-                             [&](index_t f, tbb::feeder<index_t>& feeder) {
-                               const int slot = tbb::this_task_arena::current_thread_index();
-                               auto& w = W.threads[slot >= 0 && slot < threads ? slot : threads];
-                               try {
-                                 factor_front(an, vals, policy, f, F, w, &arena);
-                               } catch (...) {
-                                 std::lock_guard<std::mutex> lock(error_mutex);
-                                 if (!error) error = std::current_exception();
-                                 return;  // its parent never starts
-                               }
-                               const index_t p = t.parent[f];
-                               if (p >= 0 && pending[p].fetch_sub(1) == 1) feeder.add(p);
-                             });
+      tbb::parallel_for_each(
+          leaves.begin(), leaves.end(), [&](index_t f, tbb::feeder<index_t>& feeder) {
+            const int slot = tbb::this_task_arena::current_thread_index();
+            auto& w = W.threads[slot >= 0 && slot < threads ? slot : threads];
+            try {
+              factor_front(an, vals, policy, f, F, w, open.load() == 1 ? &arena : nullptr);
+            } catch (...) {
+              std::lock_guard<std::mutex> lock(error_mutex);
+              if (!error) error = std::current_exception();
+              return;  // its parent never starts
+            }
+            const index_t p = t.parent[f];
+            if (p >= 0 && pending[p].fetch_sub(1) == 1)
+              feeder.add(p);  // this front's place goes to its parent
+            else
+              open.fetch_sub(1);
+          });
     });
     if (error) std::rethrow_exception(error);
   }
