@@ -45,13 +45,10 @@ TEST(MbdModels, BundledModelsRunAFewSteps) {
 // pair's return grows it back to a superset of the pruned one (the solver then analyzes it
 // keeping its order).
 TEST(MbdModels, ContactPairsThatLeaveStayInThePattern) {
-  const Model m = build_model(generate("tracked:100"), "tracked:100");
-  IntegratorOptions o;
-  o.t_end = 0.01;
-  Integrator in(m, o);
-  in.initialize();
-  NewtonSystem& sys = in.system();
-  std::vector<double> q = in.q(), away = q;
+  test::InitializedModel t("tracked:100");
+  const Model& m = t.model;
+  NewtonSystem& sys = t.in.system();
+  std::vector<double> q = t.in.q(), away = q;
   sys.update_candidates(q.data());
   sys.prune_pattern();  // as the first analysis does
   const SparseMatrix start = sys.matrix();
@@ -89,13 +86,10 @@ TEST(MbdModels, ContactPairsThatLeaveStayInThePattern) {
 // outside the candidate set penetrates, 1 when one is within half its margin, else 0 — the
 // same on any number of threads (the elements are checked in parallel).
 TEST(MbdModels, CandidateCheckMatchesItsDefinitionOnAnyThreads) {
-  const Model m = build_model(generate("tracked:100"), "tracked:100");
-  IntegratorOptions o;
-  o.t_end = 0.01;
-  Integrator in(m, o);
-  in.initialize();
-  NewtonSystem& sys = in.system();
-  const std::vector<double> q = in.q();
+  test::InitializedModel t("tracked:100");
+  const Model& m = t.model;
+  NewtonSystem& sys = t.in.system();
+  const std::vector<double> q = t.in.q();
   std::vector<double> away = q;
   for (std::size_t i = 0; i < away.size(); ++i) away[i] += 100.0 * static_cast<double>(i % 7);
   sys.update_candidates(away.data());  // most pairs out of the set

@@ -1,4 +1,5 @@
-// strata::mbd tests — two integrators of the same model stepped side by side.
+// strata::mbd tests — a generated model with its integrator initialized; two integrators
+// of the same model stepped side by side.
 #pragma once
 
 #include <gtest/gtest.h>
@@ -8,9 +9,27 @@
 #include <cstdio>
 #include <string>
 
+#include "mbd/generators.hpp"
 #include "mbd/integrator.hpp"
+#include "mbd/model.hpp"
 
 namespace strata::mbd::test {
+
+/// A generated model (`spec` as --generate takes it) and its integrator, initialized (the
+/// consistent initial state, the Newton system's pattern), with t_end = 0.01 s.
+struct InitializedModel {
+  explicit InitializedModel(const std::string& spec)
+      : model(build_model(generate(spec), spec)), in(model, options()) {
+    in.initialize();
+  }
+  static IntegratorOptions options() {
+    IntegratorOptions o;
+    o.t_end = 0.01;
+    return o;
+  }
+  Model model;
+  Integrator in;
+};
 
 /// Initializes a and b, then advances both a step at a time to their end: each step must
 /// end at the same time in both, and every position coordinate stay within `tolerance`

@@ -17,6 +17,7 @@
 #include "mbd/integrator.hpp"
 #include "mbd/model_io.hpp"
 #include "mbd/partition.hpp"
+#include "support/mbd_test_support.hpp"
 #include "support/test_support.hpp"
 
 namespace strata::mbd {
@@ -103,7 +104,7 @@ std::vector<index_t> some_dependent(const SparseRows& rows, std::mt19937_64& rng
 
 TEST(MbdPartition, MonitorEqualsDenseEliminationBitwise) {
   unsigned long long seed = 0;
-  std::mt19937_64 rng = test::fresh_rng(&seed);
+  std::mt19937_64 rng = strata::test::fresh_rng(&seed);
   SCOPED_TRACE("seed " + std::to_string(seed) + " (STRATA_TEST_SEED replays it)");
   int nonzero = 0;
   for (const index_t m : {1, 2, 3, 5, 40, 733})
@@ -131,7 +132,7 @@ TEST(MbdPartition, MonitorEqualsDenseEliminationBitwise) {
 
 TEST(MbdPartition, MonitorTakesPartitionCoordinatesOwnQuality) {
   unsigned long long seed = 0;
-  std::mt19937_64 rng = test::fresh_rng(&seed);
+  std::mt19937_64 rng = strata::test::fresh_rng(&seed);
   SCOPED_TRACE("seed " + std::to_string(seed) + " (STRATA_TEST_SEED replays it)");
   for (const index_t m : {1, 2, 3, 5, 733}) {
     // full row rank (a dominant diagonal), rows coupled by the band
@@ -179,15 +180,12 @@ TEST(MbdPartition, VanishingAndRepeatedPivotsGiveZero) {
 }
 
 TEST(MbdPartition, WholeElementPatternHoldsTheSameJacobian) {
-  const Model model = build_model(generate("tracked:20"), "tracked:20");
-  IntegratorOptions o;
-  o.t_end = 0.01;
-  Integrator in(model, o);
-  in.initialize();
+  test::InitializedModel t("tracked:20");
+  Integrator& in = t.in;
   NewtonSystem& sys = in.system();
   std::vector<double> q = in.q();
   unsigned long long seed = 0;
-  std::mt19937_64 rng = test::fresh_rng(&seed);
+  std::mt19937_64 rng = strata::test::fresh_rng(&seed);
   SCOPED_TRACE("seed " + std::to_string(seed) + " (STRATA_TEST_SEED replays it)");
   std::uniform_real_distribution<double> u(-1e-3, 1e-3);
   for (double& x : q) x += u(rng);
