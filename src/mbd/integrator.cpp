@@ -124,6 +124,7 @@ void Integrator::analyze(const BdfTerms& bdf, double t) {
   sys_.evaluate(x_.data(), t, bdf, true, res_.data());
   if (!solver_) solver_ = new_solver();
   solver_->analyze(sys_.matrix());
+  analyzed_pattern_ = sys_.pattern_id();
   analysis_values_ = sys_.matrix().values;
   analysis_forces_ = sys_.pattern_forces();
   analysis_factor_entries_ = solver_->factor_entries();
@@ -158,6 +159,7 @@ void Integrator::contacts_changed(int change, StepInfo* info) {
   }
   Timer timer;
   solver_->analyze_keeping_order(sys_.matrix());
+  analyzed_pattern_ = sys_.pattern_id();
   const double s = timer.seconds();
   stats_.analysis_seconds += s;
   stats_.solver_seconds += s;
@@ -182,7 +184,10 @@ void Integrator::contacts_changed(int change, StepInfo* info) {
 void Integrator::factorize(StepInfo& info, const BdfTerms& bdf, double t) {
   Timer timer;
   Timer tf;
-  solver_->factorize(sys_.matrix());
+  if (sys_.pattern_id() == analyzed_pattern_)
+    solver_->factorize_analyzed_pattern(sys_.matrix());
+  else
+    solver_->factorize(sys_.matrix());
   factor_values_ = sys_.matrix().values;
   stats_.factor_seconds += tf.seconds();
   if (solver_->perturbed_pivots() > 0 && !fresh_analysis_) {

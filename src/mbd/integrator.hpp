@@ -276,6 +276,8 @@ class Integrator {
   // the force elements in the pattern at the last analysis (restart), and its factor's size
   std::vector<char> analysis_forces_;
   index_t analysis_factor_entries_ = 0;
+  // NewtonSystem::pattern_id() of the pattern the solver last analyzed (0: none yet)
+  std::uint64_t analyzed_pattern_ = 0;
 };
 
 /// BDF coefficients α_0..α_p with ẏ(t₀) ≈ Σ α_j y(t_j), from the derivative of the

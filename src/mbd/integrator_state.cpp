@@ -253,6 +253,7 @@ void Integrator::restore_state(const json& j) {
       solver_->analyze_keeping_order(sys_.matrix());
       a = sys_.matrix();
     }
+    analyzed_pattern_ = sys_.pattern_id();  // the pattern of `a` and of the Newton system
     solver_->set_delaying(j.at("solver_delaying").get<bool>());
     if (factor_valid_) {
       expect_size(factor_values_, a.values.size(), "the factorized Jacobian");

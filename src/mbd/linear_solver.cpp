@@ -52,8 +52,14 @@ class StrataLinearSolver : public LinearSolver {
       solver_.factorize(a);
     else
       solver_.refactorize(a);
-    fresh_ = false;
-    if (adaptive_ && solver_.stats().factor.fixed_order_perturbed_pivots > 0) set_delaying(true);
+    factorized();
+  }
+  void factorize_analyzed_pattern(const SparseMatrix& a) override {
+    if (fresh_)
+      solver_.factorize(a);
+    else  // the values alone: the pattern is not compared with the analysis's
+      solver_.refactorize(std::span<const double>(a.values));
+    factorized();
   }
   bool delaying() const override { return delaying_; }
   void set_delaying(bool on) override {
@@ -68,6 +74,10 @@ class StrataLinearSolver : public LinearSolver {
   }
   index_t perturbed_pivots() const override { return solver_.stats().factor.perturbed_pivots; }
   double backward_error() const override { return solver_.stats().solve.backward_error; }
+  void factorized() {
+    fresh_ = false;
+    if (adaptive_ && solver_.stats().factor.fixed_order_perturbed_pivots > 0) set_delaying(true);
+  }
   std::string describe() const override {
     const FactorStats& f = solver_.stats().factor;
     return "strata LU (matching + scaling" +

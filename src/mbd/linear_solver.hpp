@@ -25,6 +25,9 @@ class LinearSolver {
   virtual void analyze_keeping_order(const SparseMatrix& a) { analyze(a); }
   /// Numeric factorization of A with the analyzed pattern.
   virtual void factorize(const SparseMatrix& a) = 0;
+  /// As factorize, when the caller knows that A's pattern is the very one analyzed (the
+  /// same arrays, unchanged since): a solver may then skip comparing it.
+  virtual void factorize_analyzed_pattern(const SparseMatrix& a) { factorize(a); }
   /// x = A⁻¹ b (one right-hand side of length n).
   virtual void solve(const double* b, double* x) = 0;
   /// Entries of the factor (nnz(L) + nnz(U) for LU; 0 if unknown).

@@ -146,6 +146,7 @@ void NewtonSystem::set_active_rows(const std::vector<char>& active) {
   m_ = static_cast<index_t>(model_row_.size());
   independent_.clear();
   jac_ = SparseMatrix{};
+  ++pattern_id_;
   pattern_current_ = false;
 }
 
@@ -317,6 +318,7 @@ void NewtonSystem::rebuild_pattern() {
   upos_.clear();
   visit(0);
   jac_ = pb.finish();
+  ++pattern_id_;
   visit(1);
   build_slot_sums();
   pattern_current_ = true;

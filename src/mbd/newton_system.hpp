@@ -38,6 +38,7 @@
 
 #include <tbb/task_arena.h>
 
+#include <cstdint>
 #include <memory>
 #include <vector>
 
@@ -142,6 +143,8 @@ class NewtonSystem {
   index_t active_forces() const;
   /// The Jacobian H_x (pattern fixed between set_partition calls).
   const SparseMatrix& matrix() const { return jac_; }
+  /// Changes whenever matrix()'s pattern is rebuilt or dropped (never repeats in a run).
+  std::uint64_t pattern_id() const { return pattern_id_; }
 
   /// Rows of Φ_q at (q, t) (m rows, n columns), for partitioning and initial conditions.
   SparseRows constraint_jacobian(const double* q, double t) const;
@@ -219,6 +222,7 @@ class NewtonSystem {
   void add_slot_sums(const SlotSums& sums, const double* slots, double* out) const;
   std::vector<index_t> upos_;  // 4 per BDF coordinate (independent, or all when stabilized)
   int threads_ = 1;
+  std::uint64_t pattern_id_ = 0;
   // the assembly's threads, kept: one arena for every evaluation
   std::unique_ptr<tbb::task_arena> arena_;
   // f(begin, end) over element ranges of [0, n), on the assembly's threads
