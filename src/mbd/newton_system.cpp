@@ -119,8 +119,8 @@ void NewtonSystem::for_element_ranges(std::size_t n, F&& f) const {
     return;
   }
   // ranges of at most 64 elements, and at least four per thread: one element (a joint's
-  // derivatives, a contact) costs microseconds, so on many threads ranges of 64 left
-  // the joints' loop to a few threads
+  // derivatives, a contact) costs microseconds, and a model has a few hundred joints, so
+  // ranges of 64 would leave them to a few threads
   const std::size_t grain =
       std::clamp<std::size_t>(n / (4 * static_cast<std::size_t>(threads_)), 1, 64);
   arena_->execute([&] {

@@ -237,17 +237,17 @@ void factorize_delayed(const Analysis& an, const double* vals, MatrixType type, 
   policy.threshold = threshold;
   policy.tiny = static_pivot;
   policy.static_pivot = static_pivot;
-  // one BLAS thread throughout: a large front splits its panel updates over the arena's
-  // threads instead (the BLAS's own threads would spin on after each call, taking cores
-  // from the arena's threads)
+  // one BLAS thread throughout: a front that starts alone splits its panel updates over
+  // the arena's threads instead (the BLAS's own threads would spin on after each call,
+  // taking cores from the arena's threads)
   openblas_set_num_threads(1);
   if (threads == 1) {
     for (index_t q = 0; q < static_cast<index_t>(sched.fronts.size()); ++q)
       factor_front(an, vals, policy, sched.fronts[q], F, W.threads[threads]);
   } else {
     // a front starts once its last child is done (no barrier between levels): the upper
-    // levels of a multibody Newton matrix's tree hold a few fronts each, and a level
-    // waited for its slowest front
+    // levels of a multibody Newton matrix's tree hold a few fronts each, and a barrier
+    // would wait for each level's slowest
     const auto nf = static_cast<std::size_t>(t.n_fronts());
     if (W.pending_size < nf) {
       W.pending = std::make_unique<std::atomic<index_t>[]>(nf);
@@ -415,9 +415,9 @@ void plan_delayed_solve(const Analysis& an, int threads, DelayedFactor& F) {
     };
     // split the heaviest subtree into its children (its root joins the top part, which one
     // thread solves) up to 16 subtrees per bin, and keep the split with the least estimated
-    // time: the top's work plus the most loaded bin's. On a multibody Newton matrix the
-    // upper fronts are large, and splitting down to small subtrees put a third of the
-    // factor into the top (bench/history.md, "The delayed solve's top part").
+    // time: the top's work plus the most loaded bin's. The upper fronts of a multibody
+    // Newton matrix are large: splitting every subtree small would move much of the
+    // factor into the top (bench/history.md, "The engine on sixteen threads").
     std::vector<index_t> cand, top;
     for (index_t f = 0; f < nf; ++f)
       if (t.parent[f] < 0) cand.push_back(f);
