@@ -21,6 +21,7 @@
 #include <cstdint>
 #include <mutex>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "mbd/autodiff.hpp"
@@ -92,6 +93,17 @@ class Force {
                         ForceEval& out) const = 0;
   virtual double kinetic_energy(const double* q, const double* v) const { return 0; }
   virtual double potential_energy(const double* q, double t) const { return 0; }
+  /// ∂g/∂a at local (q, v, t) with a = 0 into `da` (dofs.size()² entries, row-major as
+  /// ForceEval::da), for the initial acceleration analysis's mass matrix. The default
+  /// evaluates the element with its Jacobians; an element whose mass matrix is known
+  /// without them overrides it.
+  virtual void mass_matrix(const double* q, const double* v, double t,
+                           std::vector<double>& da) const {
+    const std::vector<double> a(dofs.size(), 0.0);
+    ForceEval fe;
+    evaluate(q, v, a.data(), t, true, fe);
+    da = std::move(fe.da);
+  }
 };
 
 // --------------------------------------------------------------- CRTP adaptors --------

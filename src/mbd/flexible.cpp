@@ -108,6 +108,14 @@ class Hexahedron : public Force {
     }
   }
 
+  // the consistent mass matrix, constant: M ⊗ I₃ in the nodes' (x, y, z) order
+  void mass_matrix(const double*, const double*, double, std::vector<double>& da) const override {
+    da.assign(576, 0.0);
+    for (int m = 0; m < 8; ++m)
+      for (int n = 0; n < 8; ++n)
+        for (int i = 0; i < 3; ++i) da[(3 * m + i) * 24 + 3 * n + i] = mass_[m][n];
+  }
+
   void evaluate(const double* q, const double* v, const double* a, double t, bool jacobian,
                 ForceEval& out) const override {
     out.g.assign(24, 0.0);
@@ -132,10 +140,7 @@ class Hexahedron : public Force {
     using S = Dual<double, 24>;
     out.dq.assign(576, 0.0);
     out.dv.assign(576, 0.0);
-    out.da.assign(576, 0.0);
-    for (int m = 0; m < 8; ++m)
-      for (int n = 0; n < 8; ++n)
-        for (int i = 0; i < 3; ++i) out.da[(3 * m + i) * 24 + 3 * n + i] = mass_[m][n];
+    mass_matrix(q, v, t, out.da);
     if (beta > 0) {
       Jet1<S> x[24], f[24];
       for (int i = 0; i < 24; ++i) x[i] = Jet1<S>(S(q[i], i), S(v[i]));

@@ -172,7 +172,7 @@ std::vector<double> Integrator::solve_partitioned(const SparseRows& rows,
     ci.push_back(ind[k]);
     vals.push_back(1.0);
   }
-  return solve_once(from_triplets(n, n, ri, ci, vals), b, what);
+  return solve_once(from_triplets(n, n, ri, ci, vals, sys_.arena()), b, what);
 }
 
 std::vector<double> Integrator::solve_once(const SparseMatrix& k, const std::vector<double>& b,
@@ -287,7 +287,7 @@ void Integrator::initialize() {
   for (index_t i = 0; i < n; ++i) rhs[i] = -g[i];
   for (index_t r = 0; r < m; ++r) rhs[n + r] = -phidd[r];
   const std::vector<double> al =
-      solve_once(from_triplets(n + m, n + m, ri, ci, vals), rhs, "acceleration");
+      solve_once(from_triplets(n + m, n + m, ri, ci, vals, sys_.arena()), rhs, "acceleration");
   std::copy(al.begin(), al.begin() + n, a_.begin());
   std::copy(al.begin() + n, al.end(), lambda_.begin());
   lambda_prev_ = lambda_;

@@ -9,57 +9,10 @@
 #include <atomic>
 #include <stdexcept>
 
+#include "base/serial_scope.hpp"
 #include "strata/errors.hpp"
 
 namespace strata::mbd {
-
-SparseMatrix PatternBuilder::finish() {
-  // Counting sort by column (O(keys + columns)), then each column's rows sorted and
-  // duplicates dropped: columns hold a few dozen entries, far cheaper than sorting all keys.
-  a_ = SparseMatrix{};
-  a_.n_rows = rows_;
-  a_.n_cols = cols_;
-  std::vector<index_t> start(cols_ + 1, 0);
-  for (unsigned long long key : keys_) ++start[static_cast<index_t>(key / rows_) + 1];
-  for (index_t c = 0; c < cols_; ++c) start[c + 1] += start[c];
-  std::vector<index_t> rows(keys_.size());
-  {
-    std::vector<index_t> next(start.begin(), start.end() - 1);
-    for (unsigned long long key : keys_)
-      rows[next[key / rows_]++] = static_cast<index_t>(key % rows_);
-  }
-  keys_.clear();
-  keys_.shrink_to_fit();
-  a_.offsets.assign(cols_ + 1, 0);
-  for (index_t c = 0; c < cols_; ++c) {
-    const auto b = rows.begin() + start[c], e = rows.begin() + start[c + 1];
-    std::sort(b, e);
-    a_.offsets[c + 1] = a_.offsets[c] + (std::unique(b, e) - b);
-  }
-  a_.indices.resize(a_.offsets[cols_]);
-  for (index_t c = 0; c < cols_; ++c)
-    std::copy(rows.begin() + start[c],
-              rows.begin() + start[c] + (a_.offsets[c + 1] - a_.offsets[c]),
-              a_.indices.begin() + a_.offsets[c]);
-  a_.values.assign(a_.indices.size(), 0.0);
-  return a_;
-}
-
-index_t PatternBuilder::find(index_t r, index_t c) const {
-  const auto b = a_.indices.begin() + a_.offsets[c], e = a_.indices.begin() + a_.offsets[c + 1];
-  const auto it = std::lower_bound(b, e, r);
-  if (it == e || *it != r) throw std::logic_error("PatternBuilder::find: entry not in pattern");
-  return it - a_.indices.begin();
-}
-
-SparseMatrix from_triplets(index_t n_rows, index_t n_cols, const std::vector<index_t>& rows,
-                           const std::vector<index_t>& cols, const std::vector<double>& vals) {
-  PatternBuilder pb(n_rows, n_cols);
-  for (std::size_t k = 0; k < rows.size(); ++k) pb.add(rows[k], cols[k]);
-  SparseMatrix a = pb.finish();
-  for (std::size_t k = 0; k < rows.size(); ++k) a.values[pb.find(rows[k], cols[k])] += vals[k];
-  return a;
-}
 
 NewtonSystem::NewtonSystem(const Model& model)
     : model_(model),
@@ -127,6 +80,16 @@ void NewtonSystem::for_element_ranges(std::size_t n, F&& f) const {
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, grain),
                       [&](const tbb::blocked_range<std::size_t>& r) { f(r.begin(), r.end()); });
   });
+}
+
+template <class F>
+void NewtonSystem::in_arena(F&& f) const {
+  if (arena_) {
+    arena_->execute(f);
+  } else {
+    detail::SerialScope serial(true);
+    f();
+  }
 }
 
 void NewtonSystem::set_formulation(Formulation f) {
@@ -250,76 +213,109 @@ void NewtonSystem::rebuild_pattern() {
     for (index_t i = 0; i < n; ++i) bdf_coords[i] = i;
   }
   const index_t nb = static_cast<index_t>(bdf_coords.size());
-  PatternBuilder pb(N, N);
-  // Enumerates every block: mode 0 collects, mode 1 records positions.
-  auto visit = [&](int mode) {
-    auto put = [&](index_t r, index_t c, std::vector<index_t>* pos) {
-      if (mode == 0)
-        pb.add(r, c);
-      else
-        pos->push_back(pb.find(r, c));
-    };
-    for (std::size_t e = 0; e < model_.forces.size(); ++e) {
-      if (!in_pattern_[e]) continue;
-      const Force& f = *model_.forces[e];
-      ForcePos& fp = fpos_[e];
-      for (index_t i : f.dofs)
-        for (index_t j : f.dofs) {
-          put(i, Q + j, &fp.q);
-          if (f.uses_v) put(i, V + j, &fp.v);
-          if (f.uses_a) put(i, A + j, &fp.a);
-        }
-    }
-    for (std::size_t e = 0; e < model_.constraints.size(); ++e) {
-      const Constraint& c = *model_.constraints[e];
-      ConstraintPos& cp = cpos_[e];
-      const index_t r0 = row0_[e];
-      for (index_t i : c.dofs)
-        for (index_t j : c.dofs) {
-          put(i, Q + j, &cp.hq);
-          if (stab) put(RU + n + i, Q + j, &cp.nuq);
-        }
-      for (index_t i : c.dofs)
-        for (int r = 0; r < c.rows; ++r) {
-          const index_t k = active_index_[r0 + r];
-          if (k < 0) continue;
-          put(i, L + k, &cp.fl);
-          if (stab) put(RU + n + i, NU + k, &cp.nu);
-        }
+  // The pairs of each element (forces, then constraints, then the BDF rows of each
+  // coordinate k < nb) in a fixed order: put(r, c, pos) for a pair whose position goes to
+  // the element's list `pos` (null for the BDF rows, whose positions go to upos_[4k …]).
+  auto force_pairs = [&](std::size_t e, auto&& put) {
+    if (!in_pattern_[e]) return;
+    const Force& f = *model_.forces[e];
+    ForcePos& fp = fpos_[e];
+    for (index_t i : f.dofs)
+      for (index_t j : f.dofs) {
+        put(i, Q + j, &fp.q);
+        if (f.uses_v) put(i, V + j, &fp.v);
+        if (f.uses_a) put(i, A + j, &fp.a);
+      }
+  };
+  auto constraint_pairs = [&](std::size_t e, auto&& put) {
+    const Constraint& c = *model_.constraints[e];
+    ConstraintPos& cp = cpos_[e];
+    const index_t r0 = row0_[e];
+    for (index_t i : c.dofs)
+      for (index_t j : c.dofs) {
+        put(i, Q + j, &cp.hq);
+        if (stab) put(RU + n + i, Q + j, &cp.nuq);
+      }
+    for (index_t i : c.dofs)
       for (int r = 0; r < c.rows; ++r) {
         const index_t k = active_index_[r0 + r];
         if (k < 0) continue;
-        for (index_t j : c.dofs) {
-          if (!stab) {
-            put(RA + k, A + j, &cp.aa);
-            put(RA + k, V + j, &cp.av);
-            put(RA + k, Q + j, &cp.aq);
-          }
-          put(RV + k, V + j, &cp.vv);
-          put(RV + k, Q + j, &cp.vq);
-          put(RP + k, Q + j, &cp.pq);
+        put(i, L + k, &cp.fl);
+        if (stab) put(RU + n + i, NU + k, &cp.nu);
+      }
+    for (int r = 0; r < c.rows; ++r) {
+      const index_t k = active_index_[r0 + r];
+      if (k < 0) continue;
+      for (index_t j : c.dofs) {
+        if (!stab) {
+          put(RA + k, A + j, &cp.aa);
+          put(RA + k, V + j, &cp.av);
+          put(RA + k, Q + j, &cp.aq);
         }
-        if (stab) {
-          put(RV + k, L + k, &cp.reg);
-          put(RP + k, NU + k, &cp.reg);
-        }
+        put(RV + k, V + j, &cp.vv);
+        put(RV + k, Q + j, &cp.vq);
+        put(RP + k, Q + j, &cp.pq);
+      }
+      if (stab) {
+        put(RV + k, L + k, &cp.reg);
+        put(RP + k, NU + k, &cp.reg);
       }
     }
-    for (index_t k = 0; k < nb; ++k) {
-      const index_t j = bdf_coords[k];
-      put(RU + k, A + j, &upos_);
-      put(RU + k, V + j, &upos_);
-      put(RU + nb + k, V + j, &upos_);
-      put(RU + nb + k, Q + j, &upos_);
-    }
   };
-  fpos_.assign(model_.forces.size(), {});
-  cpos_.assign(model_.constraints.size(), {});
-  upos_.clear();
-  visit(0);
-  jac_ = pb.finish();
+  auto bdf_pairs = [&](index_t k, auto&& put) {
+    const index_t j = bdf_coords[k];
+    std::vector<index_t>* none = nullptr;
+    put(RU + k, A + j, none);
+    put(RU + k, V + j, none);
+    put(RU + nb + k, V + j, none);
+    put(RU + nb + k, Q + j, none);
+  };
+  const std::size_t nf = model_.forces.size(), nc = model_.constraints.size();
+  const std::size_t elements = nf + nc + static_cast<std::size_t>(nb);
+  auto pairs = [&](std::size_t e, auto&& put) {
+    if (e < nf)
+      force_pairs(e, put);
+    else if (e < nf + nc)
+      constraint_pairs(e - nf, put);
+    else
+      bdf_pairs(static_cast<index_t>(e - nf - nc), put);
+  };
+  fpos_.assign(nf, {});
+  cpos_.assign(nc, {});
+  upos_.assign(4 * static_cast<std::size_t>(nb), 0);
+  // every element's pairs counted, then written to their own range of the builder's
+  // pairs; the pattern sorted; each element's positions looked up (all on the assembly's
+  // threads, the same result on any number of them)
+  std::vector<std::size_t> first(elements + 1, 0);
+  for_element_ranges(elements, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t e = begin; e < end; ++e) {
+      std::size_t count = 0;
+      pairs(e, [&](index_t, index_t, std::vector<index_t>*) { ++count; });
+      first[e + 1] = count;
+    }
+  });
+  for (std::size_t e = 0; e < elements; ++e) first[e + 1] += first[e];
+  PatternBuilder pb(N, N);
+  pb.grow(first[elements]);
+  for_element_ranges(elements, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t e = begin; e < end; ++e) {
+      std::size_t at = first[e];
+      pairs(e, [&](index_t r, index_t c, std::vector<index_t>*) { pb.set(at++, r, c); });
+    }
+  });
+  in_arena([&] { jac_ = pb.finish(); });
   ++pattern_id_;
-  visit(1);
+  for_element_ranges(elements, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t e = begin; e < end; ++e) {
+      std::size_t at = 4 * (e - std::min(e, nf + nc));  // a BDF row's first position
+      pairs(e, [&](index_t r, index_t c, std::vector<index_t>* pos) {
+        if (pos)
+          pos->push_back(pb.find(r, c));
+        else
+          upos_[at++] = pb.find(r, c);
+      });
+    }
+  });
   build_slot_sums();
   pattern_current_ = true;
 }
@@ -347,44 +343,40 @@ void NewtonSystem::build_slot_sums() {
   }
   rslots_.assign(constraint_rslot_[nc], 0.0);
   jslots_.assign(constraint_jslot_[nc], 0.0);
-  // every slot's target, in slot order, then grouped by target keeping that order
-  // (a counting sort, stable)
-  auto group = [](const std::vector<index_t>& target_of, index_t targets, SlotSums& sums) {
-    // each target's slot count, then (in place) where its slots start
-    std::vector<std::size_t> at(static_cast<std::size_t>(targets), 0);
-    for (index_t t : target_of) ++at[t];
-    sums.target.clear();
-    sums.first.assign(1, 0);
-    for (index_t t = 0; t < targets; ++t)
-      if (at[t] > 0) {
-        const std::size_t count = at[t];
-        at[t] = sums.first.back();
-        sums.target.push_back(t);
-        sums.first.push_back(sums.first.back() + count);
-      }
-    sums.slot.resize(target_of.size());
-    for (std::size_t k = 0; k < target_of.size(); ++k) sums.slot[at[target_of[k]]++] = k;
-  };
-  std::vector<index_t> target_of;
-  target_of.reserve(rslots_.size());
-  for (std::size_t e = 0; e < nf; ++e)
-    target_of.insert(target_of.end(), model_.forces[e]->dofs.begin(), model_.forces[e]->dofs.end());
-  for (std::size_t e = 0; e < nc; ++e) {
-    const auto& dofs = model_.constraints[e]->dofs;
-    target_of.insert(target_of.end(), dofs.begin(), dofs.end());
-    if (stab)
-      for (index_t d : dofs) target_of.push_back(hu + n_ + d);
-  }
-  group(target_of, size(), rsums_);
-  target_of.clear();
-  target_of.reserve(jslots_.size());
-  for (const ForcePos& fp : fpos_)
-    for (const auto* pos : {&fp.q, &fp.v, &fp.a})
-      target_of.insert(target_of.end(), pos->begin(), pos->end());
-  for (const ConstraintPos& cp : cpos_)
-    for (const auto* pos : {&cp.hq, &cp.nuq})
-      target_of.insert(target_of.end(), pos->begin(), pos->end());
-  group(target_of, static_cast<index_t>(jac_.values.size()), jsums_);
+  // every slot's target, in slot order (each element's slots at its own offset), then
+  // the slots grouped by target keeping that order
+  std::vector<index_t> target_of(rslots_.size());
+  for_element_ranges(nf, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t e = begin; e < end; ++e) {
+      const auto& dofs = model_.forces[e]->dofs;
+      std::copy(dofs.begin(), dofs.end(), target_of.begin() + force_rslot_[e]);
+    }
+  });
+  for_element_ranges(nc, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t e = begin; e < end; ++e) {
+      const auto& dofs = model_.constraints[e]->dofs;
+      auto at = std::copy(dofs.begin(), dofs.end(), target_of.begin() + constraint_rslot_[e]);
+      if (stab)
+        for (index_t d : dofs) *at++ = hu + n_ + d;
+    }
+  });
+  in_arena([&] { rsums_ = group_by_target(target_of, size()); });
+  target_of.assign(jslots_.size(), 0);
+  for_element_ranges(nf, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t e = begin; e < end; ++e) {
+      auto at = target_of.begin() + force_jslot_[e];
+      for (const auto* pos : {&fpos_[e].q, &fpos_[e].v, &fpos_[e].a})
+        at = std::copy(pos->begin(), pos->end(), at);
+    }
+  });
+  for_element_ranges(nc, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t e = begin; e < end; ++e) {
+      auto at = target_of.begin() + constraint_jslot_[e];
+      for (const auto* pos : {&cpos_[e].hq, &cpos_[e].nuq})
+        at = std::copy(pos->begin(), pos->end(), at);
+    }
+  });
+  in_arena([&] { jsums_ = group_by_target(target_of, static_cast<index_t>(jac_.values.size())); });
 }
 
 void NewtonSystem::add_slot_sums(const SlotSums& sums, const double* slots, double* out) const {
@@ -738,21 +730,19 @@ void NewtonSystem::mass_triplets(const double* q, const double* v, double t,
   cols.resize(offset[nf]);
   vals.resize(offset[nf]);
   auto blocks = [&](std::size_t begin, std::size_t end) {
-    std::vector<double> lq, lv, la;
-    ForceEval fe;
+    std::vector<double> lq, lv, da;
     for (std::size_t e = begin; e < end; ++e) {
       const Force& f = *model_.forces[e];
       if (!f.uses_a) continue;
       gather(f.dofs, q, lq);
       gather(f.dofs, v, lv);
-      la.assign(f.dofs.size(), 0.0);
-      f.evaluate(lq.data(), lv.data(), la.data(), t, true, fe);
+      f.mass_matrix(lq.data(), lv.data(), t, da);
       const std::size_t nz = f.dofs.size();
       for (std::size_t i = 0, k = offset[e]; i < nz; ++i)
         for (std::size_t j = 0; j < nz; ++j, ++k) {
           rows[k] = f.dofs[i];
           cols[k] = f.dofs[j];
-          vals[k] = fe.da[i * nz + j];
+          vals[k] = da[i * nz + j];
         }
     }
   };

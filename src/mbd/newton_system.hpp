@@ -44,27 +44,10 @@
 
 #include "mbd/model.hpp"
 #include "mbd/partition.hpp"
+#include "mbd/pattern_builder.hpp"
 #include "strata/sparse_matrix.hpp"
 
 namespace strata::mbd {
-
-/// Builds a canonical CSC matrix from (row, col) pairs and finds entry positions.
-class PatternBuilder {
- public:
-  explicit PatternBuilder(index_t n_rows, index_t n_cols) : rows_(n_rows), cols_(n_cols) {}
-  void add(index_t r, index_t c) {
-    keys_.push_back(static_cast<unsigned long long>(c) * rows_ + r);
-  }
-  /// Sorts, removes duplicates, and returns the pattern (values zero).
-  SparseMatrix finish();
-  /// Position of (r, c) in the finished matrix's values.
-  index_t find(index_t r, index_t c) const;
-
- private:
-  index_t rows_, cols_;
-  std::vector<unsigned long long> keys_;
-  SparseMatrix a_;
-};
 
 /// The BDF relation of the current step: β = h/b₀ and the history terms ζ₁, ζ₂ (n each);
 /// for the stabilized formulation also the regularisation ε (dimensionless, see the file
@@ -102,6 +85,9 @@ class NewtonSystem {
   index_t active_index(index_t k) const { return active_index_[k]; }
   /// Threads for the assembly (oneTBB); default 1.
   void set_threads(int threads);
+  /// The assembly's threads (null: the calling thread alone), for work of the same run
+  /// outside the Newton matrix (the initial conditions' matrices).
+  tbb::task_arena* arena() const { return arena_.get(); }
 
   /// Uses the partition's independent coordinates for U₁ = U₂ and rebuilds the pattern;
   /// returns false (and keeps the pattern) when they are those of the current pattern.
@@ -209,10 +195,7 @@ class NewtonSystem {
                                  double beta, double* J) const;
   // The shared entries' summation (see the file comment): each target (an index of H or
   // of H_x's values) and its slots, in element order (CSR: slot[first[t] .. first[t+1])).
-  struct SlotSums {
-    std::vector<index_t> target;
-    std::vector<std::size_t> first, slot;
-  };
+  using SlotSums = TargetGroups;
   // first residual / Jacobian slot of each force element (nf + 1) and constraint element
   // (nc + 1; constraints' slots follow the forces')
   std::vector<std::size_t> force_rslot_, constraint_rslot_, force_jslot_, constraint_jslot_;
@@ -228,10 +211,9 @@ class NewtonSystem {
   // f(begin, end) over element ranges of [0, n), on the assembly's threads
   template <class F>
   void for_element_ranges(std::size_t n, F&& f) const;
+  // f() on the assembly's threads (their arena), or inside a SerialScope without one
+  template <class F>
+  void in_arena(F&& f) const;
 };
-
-/// A CSC matrix from triplets (duplicates summed).
-SparseMatrix from_triplets(index_t n_rows, index_t n_cols, const std::vector<index_t>& rows,
-                           const std::vector<index_t>& cols, const std::vector<double>& vals);
 
 }  // namespace strata::mbd

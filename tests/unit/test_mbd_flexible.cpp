@@ -44,6 +44,15 @@ TEST(MbdFlexible, MassMatrixHasTheBodyMass) {
   for (int n = 0; n < 8; ++n) fx += e.g[3 * n], fz += e.g[3 * n + 2];
   EXPECT_NEAR(fx, kRho * 1.0, 1e-9);   // Σ M a = m
   EXPECT_NEAR(fz, kRho * 9.81, 1e-9);  // gravity: −(−m g)
+  // the mass matrix alone (the initial acceleration analysis's) is ∂g/∂a of the evaluation
+  // with Jacobians, and its entries add up to the mass in each direction
+  std::vector<double> da;
+  m.forces[0]->mass_matrix(m.q0.data(), zero.data(), 0, da);
+  m.forces[0]->evaluate(m.q0.data(), zero.data(), a.data(), 0, true, e);
+  EXPECT_EQ(da, e.da);
+  double total = 0;
+  for (double v : da) total += v;
+  EXPECT_NEAR(total, 3 * kRho * 1.0, 1e-9);
 }
 
 TEST(MbdFlexible, RigidMotionGivesNoElasticForce) {

@@ -1,0 +1,80 @@
+// strata::mbd — a CSC pattern from (row, column) pairs, built over the host's threads.
+//
+// What: PatternBuilder collects the (row, column) pairs of a matrix's entries, one at a
+// time or in blocks that several threads fill, and finishes them into a canonical CSC
+// pattern (each column's rows sorted, duplicates dropped); find() then gives an entry's
+// position in it. group_by_target lists, for an array of targets (entry positions, say),
+// the indices that share each target, in increasing order. from_triplets sums triplets
+// into a CSC matrix with these two.
+//
+// Why: the Newton matrix of a large model (a flexible body of 10⁶ coordinates has about
+// 4.5·10⁸ pairs for 2·10⁸ entries) has its pattern built at set-up and again whenever its
+// contact set or partition changes; sorting and searching that many pairs on one thread
+// is most of such a model's set-up.
+//
+// How: finish() distributes the pairs into columns by the stable bucket sort of
+// sparse/bucket_entries.hpp (blocks of pairs as its lines), then sorts and deduplicates
+// the columns, many at once. group_by_target buckets the indices by target the same way
+// (by coarse buckets of 2^s consecutive targets when the targets are too many for the
+// bucket sort's count tables, each bucket then sorted by target and index). Both run on
+// the threads of the calling TBB arena and give the same result for every thread count;
+// inside a SerialScope (base/serial_scope.hpp) they run on the calling thread.
+#pragma once
+
+#include <tbb/task_arena.h>
+
+#include <cstddef>
+#include <vector>
+
+#include "strata/sparse_matrix.hpp"
+
+namespace strata::mbd {
+
+/// Builds a canonical CSC pattern (0-based; rows sorted within each column, no
+/// duplicates) from (row, column) pairs and finds entry positions in it.
+class PatternBuilder {
+ public:
+  explicit PatternBuilder(index_t n_rows, index_t n_cols) : rows_(n_rows), cols_(n_cols) {}
+  /// Adds the pair (r, c): 0 ≤ r < n_rows, 0 ≤ c < n_cols (not checked).
+  void add(index_t r, index_t c) { keys_.push_back(key(r, c)); }
+  /// Makes room for `count` more pairs and returns the index of the first of them; set()
+  /// then writes each, from any thread (different indices).
+  std::size_t grow(std::size_t count);
+  void set(std::size_t k, index_t r, index_t c) { keys_[k] = key(r, c); }
+  /// Sorts the pairs into the pattern (values zero), on the calling arena's threads (see
+  /// the file comment), and keeps it for find(). The pairs are released.
+  SparseMatrix finish();
+  /// Position of (r, c) in the finished pattern's values; safe from several threads.
+  /// Throws std::logic_error when (r, c) is not in it (an internal error of the caller).
+  index_t find(index_t r, index_t c) const;
+
+ private:
+  unsigned long long key(index_t r, index_t c) const {
+    return static_cast<unsigned long long>(c) * static_cast<unsigned long long>(rows_) +
+           static_cast<unsigned long long>(r);
+  }
+  index_t rows_, cols_;
+  std::vector<unsigned long long> keys_;
+  SparseMatrix a_;
+};
+
+/// For target_of[k] in [0, targets) (k = 0 … K−1): the targets that occur, in increasing
+/// order (target), and for target[t] the indices k with target_of[k] = target[t] in
+/// increasing order, slot[first[t]] … slot[first[t + 1] − 1] (first has target.size() + 1
+/// entries, first[0] = 0). A stable counting sort of the indices by target.
+struct TargetGroups {
+  std::vector<index_t> target;
+  std::vector<std::size_t> first, slot;
+};
+
+/// TargetGroups of `target_of` on the calling arena's threads (see the file comment).
+TargetGroups group_by_target(const std::vector<index_t>& target_of, index_t targets);
+
+/// A CSC matrix (n_rows × n_cols, 0-based) from triplets (rows[k], cols[k], vals[k]),
+/// duplicates summed in the order of k (so the values are the same for any thread
+/// count). On the threads of `arena`; null: on the calling thread.
+SparseMatrix from_triplets(index_t n_rows, index_t n_cols, const std::vector<index_t>& rows,
+                           const std::vector<index_t>& cols, const std::vector<double>& vals,
+                           tbb::task_arena* arena = nullptr);
+
+}  // namespace strata::mbd
