@@ -7,7 +7,7 @@ namespace strata::mbd {
 namespace {
 
 // Σ a_i b_i (c_i) in four interleaved partial sums: one running sum waits for each
-// addition in turn, and these products are most of a step's time.
+// addition in turn, and these products are most of an Anderson step's arithmetic.
 double dot(const double* a, const double* b, index_t n) {
   double s0 = 0, s1 = 0, s2 = 0, s3 = 0;
   index_t i = 0;

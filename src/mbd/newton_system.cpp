@@ -290,7 +290,12 @@ void NewtonSystem::rebuild_pattern() {
   for_element_ranges(elements, [&](std::size_t begin, std::size_t end) {
     for (std::size_t e = begin; e < end; ++e) {
       std::size_t count = 0;
-      pairs(e, [&](index_t, index_t, std::vector<index_t>*) { ++count; });
+      if (e < nf) {  // a force's blocks are whole (see force_pairs)
+        const Force& f = *model_.forces[e];
+        count = in_pattern_[e] ? f.dofs.size() * f.dofs.size() * (1 + f.uses_v + f.uses_a) : 0;
+      } else {
+        pairs(e, [&](index_t, index_t, std::vector<index_t>*) { ++count; });
+      }
       first[e + 1] = count;
     }
   });

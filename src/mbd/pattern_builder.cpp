@@ -6,10 +6,12 @@
 
 #include <algorithm>
 #include <stdexcept>
+#include <string>
 #include <utility>
 
 #include "base/serial_scope.hpp"
 #include "sparse/bucket_entries.hpp"
+#include "strata/errors.hpp"
 
 namespace strata::mbd {
 namespace {
@@ -39,6 +41,12 @@ index_t blocks_of(std::size_t size) { return static_cast<index_t>((size + kBlock
 
 }  // namespace
 
+PatternBuilder::PatternBuilder(index_t n_rows, index_t n_cols) : rows_(n_rows), cols_(n_cols) {
+  if (n_rows < 0 || n_cols < 0 || n_rows > (index_t{1} << 32) || n_cols > (index_t{1} << 31))
+    throw InvalidInput("PatternBuilder: a matrix of " + std::to_string(n_rows) + " x " +
+                       std::to_string(n_cols) + " is outside 0..2^32 rows and 0..2^31 columns");
+}
+
 std::size_t PatternBuilder::grow(std::size_t count) {
   const std::size_t at = keys_.size();
   keys_.resize(at + count);
@@ -50,13 +58,14 @@ SparseMatrix PatternBuilder::finish() {
   a_.n_rows = rows_;
   a_.n_cols = cols_;
   const std::size_t size = keys_.size();
-  const auto r = static_cast<unsigned long long>(std::max<index_t>(rows_, 1));
   std::vector<index_t> rows(size);
   // the pairs by column (stable), then each column's rows sorted and made unique
   const std::vector<index_t> start = detail::bucket_entries(
       blocks_of(size), cols_, [&](index_t j) { return block(j, size); },
-      [&](index_t, index_t p) { return static_cast<index_t>(keys_[p] / r); },
-      [&](index_t slot, index_t, index_t p) { rows[slot] = static_cast<index_t>(keys_[p] % r); });
+      [&](index_t, index_t p) { return static_cast<index_t>(keys_[p] >> 32); },
+      [&](index_t slot, index_t, index_t p) {
+        rows[slot] = static_cast<index_t>(keys_[p] & 0xffffffffULL);
+      });
   std::vector<unsigned long long>().swap(keys_);
   const auto cols = static_cast<std::size_t>(cols_);
   std::vector<index_t> length(cols);
@@ -108,6 +117,15 @@ TargetGroups group_by_target(const std::vector<index_t>& target_of, index_t targ
                     return target_of[x] < target_of[y] || (target_of[x] == target_of[y] && x < y);
                   });
     });
+  if (shift == 0) {  // a bucket per target: its slots are its group
+    for (std::size_t b = 0; b < nb; ++b)
+      if (start[b + 1] > start[b]) {
+        g.target.push_back(static_cast<index_t>(b));
+        g.first.push_back(static_cast<std::size_t>(start[b]));
+      }
+    g.first.push_back(size);
+    return g;
+  }
   // the distinct targets of each bucket, then where each bucket's groups start
   auto is_new = [&](std::size_t b, index_t p) {
     return p == start[b] || target_of[g.slot[p]] != target_of[g.slot[p - 1]];

@@ -34,7 +34,9 @@ namespace strata::mbd {
 /// duplicates) from (row, column) pairs and finds entry positions in it.
 class PatternBuilder {
  public:
-  explicit PatternBuilder(index_t n_rows, index_t n_cols) : rows_(n_rows), cols_(n_cols) {}
+  /// Throws InvalidInput for more than 2^32 rows or 2^31 columns (a pair is kept in 64
+  /// bits: its column above its row).
+  PatternBuilder(index_t n_rows, index_t n_cols);
   /// Adds the pair (r, c): 0 ≤ r < n_rows, 0 ≤ c < n_cols (not checked).
   void add(index_t r, index_t c) { keys_.push_back(key(r, c)); }
   /// Makes room for `count` more pairs and returns the index of the first of them; set()
@@ -49,9 +51,8 @@ class PatternBuilder {
   index_t find(index_t r, index_t c) const;
 
  private:
-  unsigned long long key(index_t r, index_t c) const {
-    return static_cast<unsigned long long>(c) * static_cast<unsigned long long>(rows_) +
-           static_cast<unsigned long long>(r);
+  static unsigned long long key(index_t r, index_t c) {
+    return static_cast<unsigned long long>(c) << 32 | static_cast<unsigned long long>(r);
   }
   index_t rows_, cols_;
   std::vector<unsigned long long> keys_;

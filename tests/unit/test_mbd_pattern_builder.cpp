@@ -21,6 +21,7 @@
 
 #include "base/serial_scope.hpp"
 #include "mbd/pattern_builder.hpp"
+#include "strata/errors.hpp"
 #include "support/test_support.hpp"
 
 namespace strata::mbd {
@@ -98,6 +99,10 @@ TEST(MbdPatternBuilder, PatternIsTheSetOfPairsOnAnyThreads) {
     }
   // one row, one column
   check_pattern(random_pairs(1, 1, 5, rng), 2);
+  // a pair is kept in 64 bits: larger dimensions are refused
+  EXPECT_THROW(PatternBuilder((index_t{1} << 32) + 1, 1), InvalidInput);
+  EXPECT_THROW(PatternBuilder(1, (index_t{1} << 31) + 1), InvalidInput);
+  EXPECT_NO_THROW(PatternBuilder(index_t{1} << 32, index_t{1} << 31));
 }
 
 void check_groups(const std::vector<index_t>& target_of, index_t targets, int threads) {
