@@ -17,6 +17,7 @@
 #include "mbd/generators.hpp"
 #include "mbd/integrator.hpp"
 #include "mbd/model_io.hpp"
+#include "support/mbd_test_support.hpp"
 #include "support/test_support.hpp"
 
 namespace strata::mbd {
@@ -60,11 +61,8 @@ bool bitwise_equal(const std::vector<double>& a, const std::vector<double>& b) {
 
 void check_assembly(const std::string& name, Formulation formulation, std::mt19937_64& rng) {
   SCOPED_TRACE(name + (formulation == Formulation::stabilized ? " stabilized" : " partitioned"));
-  const Model model = build_model(generate(name), name);
-  IntegratorOptions o;
-  o.t_end = model.step;
-  Integrator in(model, o);
-  in.initialize();
+  test::InitializedModel im(name);
+  Integrator& in = im.in;
   NewtonSystem& sys = in.system();
   if (sys.formulation() != formulation) sys.set_formulation(formulation);
   const State s = random_state(in, sys, rng);
@@ -126,7 +124,7 @@ void check_assembly(const std::string& name, Formulation formulation, std::mt199
 }
 
 TEST(MbdAssembly, SameBitsOnAnyThreadsAndTheJacobianIsHsDerivative) {
-  std::mt19937_64 rng = test::fresh_rng();
+  std::mt19937_64 rng = strata::test::fresh_rng();
   for (const char* name : {"tracked:20", "flexible:8x2x2", "lattice:3"})
     for (Formulation f : {Formulation::partitioned, Formulation::stabilized})
       check_assembly(name, f, rng);
@@ -137,15 +135,12 @@ TEST(MbdAssembly, SameBitsOnAnyThreadsAndTheJacobianIsHsDerivative) {
 // pattern and the same bits, in both formulations, on models large enough for the
 // threaded passes.
 TEST(MbdAssembly, PatternBuiltOnAnyThreadsIsTheSame) {
-  std::mt19937_64 rng = test::fresh_rng();
+  std::mt19937_64 rng = strata::test::fresh_rng();
   for (const char* name : {"flexible:16x4x4", "tracked:100"})
     for (Formulation f : {Formulation::partitioned, Formulation::stabilized}) {
       SCOPED_TRACE(std::string(name) + (f == Formulation::stabilized ? " stabilized" : ""));
-      const Model model = build_model(generate(name), name);
-      IntegratorOptions o;
-      o.t_end = model.step;
-      Integrator in(model, o);
-      in.initialize();
+      test::InitializedModel im(name);
+      Integrator& in = im.in;
       NewtonSystem& sys = in.system();
       sys.set_threads(1);
       if (sys.formulation() != f)
