@@ -112,7 +112,7 @@ double umfpack_symbolic_seconds(const SparseMatrix& a, int repeat) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int driver_main(int argc, char** argv) {
   app::report_fatal_signals();  // a crash on a lent machine says where
   CLI::App app{"strata analysis benchmark (vs CHOLMOD + METIS)"};
   std::vector<std::string> problems = {"bcsstk09",         "bcsstk13",       "bcsstk16",
@@ -239,3 +239,5 @@ int main(int argc, char** argv) {
   fmt::print("results: {}\n", bench::write_result(out, stem, results_dir));
   return 0;
 }
+
+int main(int argc, char** argv) { return strata::bench::run_driver(argc, argv, driver_main); }

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <charconv>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -45,6 +46,16 @@ std::string utc_now(const char* fmt) {
 
 }  // namespace
 
+int run_driver(int argc, char** argv, int (*body)(int, char**)) {
+  try {
+    return body(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "%s: error: %s\n",
+                 std::filesystem::path(argc > 0 ? argv[0] : "bench").filename().c_str(), e.what());
+    return 1;
+  }
+}
+
 Problem load_problem(const std::string& name) {
   Problem p;
   p.name = name;
@@ -62,7 +73,11 @@ Problem load_problem(const std::string& name) {
   auto dash = name.find('-');
   if (dash != std::string::npos) {
     const std::string kind = name.substr(0, dash);
-    const index_t k = std::stoll(name.substr(dash + 1));
+    index_t k = 0;
+    const char* end = name.data() + name.size();
+    const auto [at, ec] = std::from_chars(name.data() + dash + 1, end, k);
+    if (ec != std::errc() || at != end || k < 1)
+      throw InvalidInput("problem '" + name + "': the size after '-' must be a positive integer");
     if (kind == "lap3d")
       p.a = generators::laplacian_3d(k, k, k);
     else if (kind == "lap2d")

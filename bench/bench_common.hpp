@@ -10,6 +10,12 @@
 
 namespace strata::bench {
 
+/// Runs a driver's body: an exception it lets out (a matrix file that cannot be read, a
+/// problem name that is not one, an error of a solver) is printed as
+/// "<program>: error: <message>" on stderr with exit status 1, instead of terminating the
+/// program with an abort. No results file is written then (the drivers write theirs last).
+int run_driver(int argc, char** argv, int (*body)(int, char**));
+
 /// A benchmark problem: a shared SuiteSparse matrix by name ("bcsstk16"), or a generated
 /// one: "lap3d-N" (7-point Laplacian N³), "elast3d-N" (3-dof 27-point stencil N³),
 /// "lap2d-N", "uelast3d-N" (elasticity pattern, unsymmetric values), or a Matrix Market

@@ -182,7 +182,7 @@ json to_json(const CudssResult& r) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int driver_main(int argc, char** argv) {
   app::report_fatal_signals();  // a crash on a lent machine says where
   CLI::App app{"strata vs NVIDIA cuDSS on one GPU"};
   std::vector<std::string> problems = {"bcsstk16",   "ccx_cubef2f3_K", "lap3d-60",
@@ -390,3 +390,5 @@ int main(int argc, char** argv) {
   if (!partial.empty()) std::remove(partial.c_str());
   return 0;
 }
+
+int main(int argc, char** argv) { return strata::bench::run_driver(argc, argv, driver_main); }

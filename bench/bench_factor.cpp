@@ -191,7 +191,7 @@ json memory_of(const std::string& solver, const std::string& name, int threads, 
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int driver_main(int argc, char** argv) {
   app::report_fatal_signals();  // a crash on a lent machine says where
   CLI::App app{"strata factorization benchmark (vs CHOLMOD and MUMPS, same permutation)"};
   std::vector<std::string> problems = {"bcsstk09",         "bcsstk13",       "bcsstk16",
@@ -372,3 +372,5 @@ int main(int argc, char** argv) {
   fmt::print("results: {}\n", bench::write_result(out, stem, results_dir));
   return 0;
 }
+
+int main(int argc, char** argv) { return strata::bench::run_driver(argc, argv, driver_main); }

@@ -77,7 +77,7 @@ Timing time_strata(const bench::Problem& p, Options o, int repeat,
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int driver_main(int argc, char** argv) {
   app::report_fatal_signals();  // a crash on a lent machine says where
   CLI::App app{"strata GPU benchmark (CUDA backend vs CPU backend and CHOLMOD)"};
   std::vector<std::string> problems = {"bcsstk16",    "ccx_cubef2f3_K", "lap3d-60",
@@ -219,3 +219,5 @@ int main(int argc, char** argv) {
   if (!partial.empty()) std::remove(partial.c_str());
   return 0;
 }
+
+int main(int argc, char** argv) { return strata::bench::run_driver(argc, argv, driver_main); }

@@ -557,7 +557,7 @@ Run run(const bench::Problem& p, Options o, int repeat) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int driver_main(int argc, char** argv) {
   app::report_fatal_signals();  // a crash on a lent machine says where
   CLI::App app{"strata GPU memory-budget, block-size and device benchmark"};
   std::vector<std::string> problems = {"lap3d-60", "elast3d-30", "uelast3d-20"};
@@ -873,3 +873,5 @@ int main(int argc, char** argv) {
   if (!partial.empty()) std::remove(partial.c_str());
   return 0;
 }
+
+int main(int argc, char** argv) { return strata::bench::run_driver(argc, argv, driver_main); }

@@ -46,7 +46,7 @@
 using namespace strata;
 using json = nlohmann::json;
 
-int main(int argc, char** argv) {
+static int driver_main(int argc, char** argv) {
   app::report_fatal_signals();  // a crash on a lent machine says where
   CLI::App app{"strata multi-worker factorization benchmark"};
   std::vector<std::string> problems = {"lap3d-30", "elast3d-14"};
@@ -283,3 +283,5 @@ int main(int argc, char** argv) {
   fmt::print("results: {}\n", bench::write_result(out, "multigpu", results_dir));
   return 0;
 }
+
+int main(int argc, char** argv) { return strata::bench::run_driver(argc, argv, driver_main); }
