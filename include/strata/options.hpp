@@ -80,6 +80,11 @@ struct Options {
   /// of nested dissection. More costs analysis time for less fill: 3 gives about 5% less
   /// nnz(L) on 3D grids for about 30% more ordering time (default 1).
   int nd_top_separators = 1;
+  /// Separators METIS computes (the best kept) at each bisection below the top three
+  /// levels; 0 (default): METIS_NodeND's rule, 2 where merging vertices of identical
+  /// adjacency leaves fewer than 2/3 of them (multi-dof meshes), else 1. More costs
+  /// ordering time for less fill.
+  int nd_separators = 0;
   /// Relaxed amalgamation: a child front is merged into its parent when the merged front
   /// has at most `relax_small` pivots, or when the share of explicit zeros it adds stays
   /// below relax_zeros_{1,2,3} for fronts of at most relax_size_{1,2} pivots / larger.

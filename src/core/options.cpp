@@ -194,6 +194,7 @@ void validate(const Options& o) {
   known("solve_check", o.solve_check);
   at_least<index_t>("nd_leaf_size", o.nd_leaf_size, 1);
   at_least("nd_top_separators", o.nd_top_separators, 1);
+  at_least("nd_separators", o.nd_separators, 0);
   at_least<index_t>("relax_small", o.relax_small, 0);
   at_least<index_t>("relax_size_1", o.relax_size_1, 0);
   at_least<index_t>("relax_size_2", o.relax_size_2, 0);
@@ -301,6 +302,7 @@ const std::vector<Field>& fields() {
        [](const Options& o) { return std::string(to_string(o.ordering)); }},
       integer_field("nd_leaf_size", &O::nd_leaf_size),
       integer_field("nd_top_separators", &O::nd_top_separators),
+      integer_field("nd_separators", &O::nd_separators),
       integer_field("relax_small", &O::relax_small),
       integer_field("relax_size_1", &O::relax_size_1),
       integer_field("relax_size_2", &O::relax_size_2),

@@ -54,7 +54,8 @@ class LinearSolver {
 /// (the Newton matrices are far too small for the tree split over several to pay), and
 /// solves checked only after perturbed pivots (Newton computes the residual at every
 /// iterate and stops on the size of its updates: a factor without perturbed pivots needs
-/// no separate check).
+/// no separate check), and one METIS separator per nested-dissection bisection
+/// (Options::nd_separators = 1: these matrices' analyses repeat during a run).
 Options engine_solver_options();
 
 /// strata's multifrontal LU of the Newton matrix (MatrixType::general) with options `o`.

@@ -225,8 +225,10 @@ class Driver {
       for (index_t p = cg_.mptr[c]; p < cg_.mptr[c + 1]; ++p)
         cweight_[c] += group_size(cg_.members[p]);
     }
-    // METIS_NodeND's rule: 2 separators per bisection when compression was effective.
+    // METIS_NodeND's rule unless the options name a count: 2 separators per bisection when
+    // compression was effective.
     nseps_ = (cg_.active && static_cast<double>(n) > 1.5 * static_cast<double>(cn_)) ? 2 : 1;
+    if (opts_.separators > 0) nseps_ = opts_.separators;
     top_separators_ = std::max(1, opts_.top_separators);
     cloc_.assign(cn_, -1);
     oloc_.assign(n, -1);

@@ -35,6 +35,10 @@ struct NestedDissectionOptions {
   /// METIS separators tried (the best kept) at each of the top three bisection levels;
   /// deeper levels use METIS_NodeND's own rule (see Options::nd_top_separators).
   int top_separators = 1;
+  /// METIS separators tried at each deeper level; 0: METIS_NodeND's rule (2 when
+  /// compression removed more than a third of the vertices, else 1; see
+  /// Options::nd_separators).
+  int separators = 0;
   /// Balance by work (several workers, Options::balance_by_work): the bisections of the
   /// top `balance_levels` levels are redone with weighted vertices when the estimated
   /// factorization work of their two sides differs by more than balance_tolerance
@@ -67,7 +71,7 @@ struct OrderingResult {
 
 /// The nested-dissection options requested by `opts` for `workers` workers (balance
 /// levels ⌈log₂(workers × subtrees_per_gpu)⌉ when balance_by_work and workers > 1);
-/// throws InvalidInput for a leaf size below 1.
+/// throws InvalidInput for a leaf size below 1 or a negative separator count.
 NestedDissectionOptions nd_options(const Options& opts, int workers = 1);
 
 /// strata's nested dissection: recursive vertex-separator bisection with

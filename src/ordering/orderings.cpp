@@ -123,9 +123,13 @@ NestedDissectionOptions nd_options(const Options& opts, int workers) {
   if (opts.nd_leaf_size < 1)
     throw InvalidInput("Options::nd_leaf_size must be at least 1 (got " +
                        std::to_string(opts.nd_leaf_size) + ")");
+  if (opts.nd_separators < 0)
+    throw InvalidInput("Options::nd_separators must be at least 0 (got " +
+                       std::to_string(opts.nd_separators) + ")");
   NestedDissectionOptions nd;
   nd.leaf_size = opts.nd_leaf_size;
   nd.top_separators = opts.nd_top_separators;
+  nd.separators = opts.nd_separators;
   if (opts.balance_by_work && workers > 1) {
     const long parts = static_cast<long>(workers) * std::max(1, opts.subtrees_per_gpu);
     while ((1L << nd.balance_levels) < parts) ++nd.balance_levels;  // ⌈log₂ parts⌉

@@ -108,6 +108,7 @@ TEST(OptionsValidate, DefaultsPassAndEveryFieldOutOfRangeIsNamed) {
        [](Options& o, double v) { o.nd_top_separators = int(v); },
        {0},
        {1, 3}},
+      {"nd_separators", [](Options& o, double v) { o.nd_separators = int(v); }, {-1}, {0, 1, 2}},
       {"relax_small", [](Options& o, double v) { o.relax_small = index_t(v); }, {-1}, {0, 4}},
       {"relax_zeros_1",
        [](Options& o, double v) { o.relax_zeros_1 = v; },
@@ -204,7 +205,7 @@ TEST(OptionsValidate, AnalysisRefusesBadOptions) {
 // written as text into a default Options and compared field by field.
 TEST(SetOption, EveryFieldRoundTripsThroughText) {
   const std::vector<std::string> names = option_fields();
-  EXPECT_EQ(names.size(), 43u);  // Options' fields but user_permutation
+  EXPECT_EQ(names.size(), 44u);  // Options' fields but user_permutation
   Options changed;
   for (const std::string& name : names) {
     const std::string before = get_option(changed, name);
@@ -239,6 +240,7 @@ TEST(SetOption, EveryFieldRoundTripsThroughText) {
   EXPECT_EQ(copy.backend, Backend::cuda);
   EXPECT_EQ(copy.pivoting, Pivoting::delayed);
   EXPECT_EQ(copy.nd_leaf_size, Options{}.nd_leaf_size + 1);
+  EXPECT_EQ(copy.nd_separators, Options{}.nd_separators + 1);
   EXPECT_EQ(copy.pivot_threshold, Options{}.pivot_threshold / 2);
   EXPECT_EQ(copy.reproducible, !Options{}.reproducible);
   EXPECT_EQ(copy.device_memory_limit, Options{}.device_memory_limit + 1);

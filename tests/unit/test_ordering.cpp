@@ -595,6 +595,38 @@ TEST(NestedDissection, LeafSizeIsRespected) {
   EXPECT_THROW(compute_ordering(g, o), InvalidInput);
 }
 
+// The separators per bisection below the top levels: by default METIS_NodeND's rule (2 on
+// a graph that compresses, as a 3-dof mesh's does; 1 on one that does not), else the
+// count asked for, which still gives a valid tree and fill close to METIS_NodeND's.
+TEST(NestedDissection, SeparatorsPerBisection) {
+  const Graph mesh = graph_of(generators::elasticity_3d(10, 10, 10));  // compresses 3x
+  const Graph grid = graph_of(generators::laplacian_3d(14, 14, 14));   // does not
+  auto with = [](int separators) {
+    NestedDissectionOptions o;
+    o.leaf_size = 64;
+    o.separators = separators;
+    return o;
+  };
+  EXPECT_EQ(nested_dissection(mesh, with(0)).perm, nested_dissection(mesh, with(2)).perm);
+  EXPECT_NE(nested_dissection(mesh, with(0)).perm, nested_dissection(mesh, with(1)).perm);
+  EXPECT_EQ(nested_dissection(grid, with(0)).perm, nested_dissection(grid, with(1)).perm);
+  for (const Graph* g : {&mesh, &grid}) {
+    const double rule = static_cast<double>(fill_nnz(*g, nested_dissection(*g, with(0)).perm));
+    for (int separators : {1, 3}) {
+      const OrderingResult r = nested_dissection(*g, with(separators));
+      check_tree(*g, r);
+      EXPECT_LE(static_cast<double>(fill_nnz(*g, r.perm)), 1.15 * rule)
+          << separators << " separators";
+    }
+  }
+  Options o;
+  o.nd_leaf_size = 64;
+  o.nd_separators = 1;
+  EXPECT_EQ(compute_ordering(mesh, o).perm, nested_dissection(mesh, with(1)).perm);
+  o.nd_separators = -1;
+  EXPECT_THROW(compute_ordering(mesh, o), InvalidInput);
+}
+
 // ---------------------------------------------------------------------------------------
 // user and natural orderings
 
