@@ -315,9 +315,9 @@ void NewtonSystem::rebuild_pattern() {
       std::size_t at = 4 * (e - std::min(e, nf + nc));  // a BDF row's first position
       pairs(e, [&](index_t r, index_t c, std::vector<index_t>* pos) {
         if (pos)
-          pos->push_back(pb.find(r, c));
+          pos->push_back(entry_position(jac_, r, c));
         else
-          upos_[at++] = pb.find(r, c);
+          upos_[at++] = entry_position(jac_, r, c);
       });
     }
   });
@@ -346,11 +346,19 @@ void NewtonSystem::build_slot_sums() {
         constraint_rslot_[e] + (stab ? 2 : 1) * model_.constraints[e]->dofs.size();
     constraint_jslot_[e + 1] = constraint_jslot_[e] + cp.hq.size() + cp.nuq.size();
   }
-  rslots_.assign(constraint_rslot_[nc], 0.0);
-  jslots_.assign(constraint_jslot_[nc], 0.0);
-  // every slot's target, in slot order (each element's slots at its own offset), then
-  // the slots grouped by target keeping that order
-  std::vector<index_t> target_of(rslots_.size());
+  // the slots zeroed, and every slot's target in slot order (each element's slots at its
+  // own offset), in pieces on the assembly's threads; then the slots grouped by target
+  // keeping that order
+  auto zeroed = [&](FillLater<double>& v, std::size_t n) {
+    v.resize(n);
+    constexpr std::size_t kPiece = std::size_t{1} << 16;
+    for_element_ranges((n + kPiece - 1) / kPiece, [&](std::size_t begin, std::size_t end) {
+      std::fill(v.begin() + begin * kPiece, v.begin() + std::min(n, end * kPiece), 0.0);
+    });
+  };
+  zeroed(rslots_, constraint_rslot_[nc]);
+  zeroed(jslots_, constraint_jslot_[nc]);
+  FillLater<index_t> target_of(rslots_.size());
   for_element_ranges(nf, [&](std::size_t begin, std::size_t end) {
     for (std::size_t e = begin; e < end; ++e) {
       const auto& dofs = model_.forces[e]->dofs;
@@ -366,7 +374,7 @@ void NewtonSystem::build_slot_sums() {
     }
   });
   in_arena([&] { rsums_ = group_by_target(target_of, size()); });
-  target_of.assign(jslots_.size(), 0);
+  target_of.resize(jslots_.size());
   for_element_ranges(nf, [&](std::size_t begin, std::size_t end) {
     for (std::size_t e = begin; e < end; ++e) {
       auto at = target_of.begin() + force_jslot_[e];

@@ -199,7 +199,7 @@ class NewtonSystem {
   // first residual / Jacobian slot of each force element (nf + 1) and constraint element
   // (nc + 1; constraints' slots follow the forces')
   std::vector<std::size_t> force_rslot_, constraint_rslot_, force_jslot_, constraint_jslot_;
-  std::vector<double> rslots_, jslots_;
+  FillLater<double> rslots_, jslots_;
   SlotSums rsums_, jsums_;
   void build_slot_sums();
   void add_slot_sums(const SlotSums& sums, const double* slots, double* out) const;

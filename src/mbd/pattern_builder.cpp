@@ -54,11 +54,11 @@ std::size_t PatternBuilder::grow(std::size_t count) {
 }
 
 SparseMatrix PatternBuilder::finish() {
-  a_ = SparseMatrix{};
-  a_.n_rows = rows_;
-  a_.n_cols = cols_;
+  SparseMatrix a;
+  a.n_rows = rows_;
+  a.n_cols = cols_;
   const std::size_t size = keys_.size();
-  std::vector<index_t> rows(size);
+  FillLater<index_t> rows(size);
   // the pairs by column (stable), then each column's rows sorted and made unique
   const std::vector<index_t> start = detail::bucket_entries(
       blocks_of(size), cols_, [&](index_t j) { return block(j, size); },
@@ -66,7 +66,7 @@ SparseMatrix PatternBuilder::finish() {
       [&](index_t slot, index_t, index_t p) {
         rows[slot] = static_cast<index_t>(keys_[p] & 0xffffffffULL);
       });
-  std::vector<unsigned long long>().swap(keys_);
+  FillLater<unsigned long long>().swap(keys_);
   const auto cols = static_cast<std::size_t>(cols_);
   std::vector<index_t> length(cols);
   for_pieces(cols, 512, [&](std::size_t c0, std::size_t c1) {
@@ -76,25 +76,25 @@ SparseMatrix PatternBuilder::finish() {
       length[c] = std::unique(b, e) - b;
     }
   });
-  a_.offsets.assign(cols + 1, 0);
-  for (std::size_t c = 0; c < cols; ++c) a_.offsets[c + 1] = a_.offsets[c] + length[c];
-  a_.indices.resize(a_.offsets[cols]);
+  a.offsets.assign(cols + 1, 0);
+  for (std::size_t c = 0; c < cols; ++c) a.offsets[c + 1] = a.offsets[c] + length[c];
+  a.indices.resize(a.offsets[cols]);
   for_pieces(cols, 512, [&](std::size_t c0, std::size_t c1) {
     for (std::size_t c = c0; c < c1; ++c)
-      std::copy_n(rows.begin() + start[c], length[c], a_.indices.begin() + a_.offsets[c]);
+      std::copy_n(rows.begin() + start[c], length[c], a.indices.begin() + a.offsets[c]);
   });
-  a_.values.assign(a_.indices.size(), 0.0);
-  return a_;
+  a.values.assign(a.indices.size(), 0.0);
+  return a;
 }
 
-index_t PatternBuilder::find(index_t r, index_t c) const {
-  const auto b = a_.indices.begin() + a_.offsets[c], e = a_.indices.begin() + a_.offsets[c + 1];
+index_t entry_position(const SparseMatrix& a, index_t r, index_t c) {
+  const auto b = a.indices.begin() + a.offsets[c], e = a.indices.begin() + a.offsets[c + 1];
   const auto it = std::lower_bound(b, e, r);
-  if (it == e || *it != r) throw std::logic_error("PatternBuilder::find: entry not in pattern");
-  return it - a_.indices.begin();
+  if (it == e || *it != r) throw std::logic_error("entry_position: entry not in the pattern");
+  return it - a.indices.begin();
 }
 
-TargetGroups group_by_target(const std::vector<index_t>& target_of, index_t targets) {
+TargetGroups group_by_target(std::span<const index_t> target_of, index_t targets) {
   const std::size_t size = target_of.size();
   // coarse buckets of 2^shift targets: at most 2^21 of them, so that the bucket sort's
   // count tables leave room for 16 chunks
@@ -164,9 +164,9 @@ SparseMatrix from_triplets(index_t n_rows, index_t n_cols, const std::vector<ind
       for (std::size_t k = k0; k < k1; ++k) pb.set(k, rows[k], cols[k]);
     });
     a = pb.finish();
-    std::vector<index_t> position(size);
+    FillLater<index_t> position(size);
     for_pieces(size, 16384, [&](std::size_t k0, std::size_t k1) {
-      for (std::size_t k = k0; k < k1; ++k) position[k] = pb.find(rows[k], cols[k]);
+      for (std::size_t k = k0; k < k1; ++k) position[k] = entry_position(a, rows[k], cols[k]);
     });
     // each entry the sum of its triplets in the order of k
     const TargetGroups g = group_by_target(position, a.nnz());

@@ -2,8 +2,8 @@
 //
 // What: PatternBuilder collects the (row, column) pairs of a matrix's entries, one at a
 // time or in blocks that several threads fill, and finishes them into a canonical CSC
-// pattern (each column's rows sorted, duplicates dropped); find() then gives an entry's
-// position in it. group_by_target lists, for an array of targets (entry positions, say),
+// pattern (each column's rows sorted, duplicates dropped); entry_position() then gives an
+// entry's position in it. group_by_target lists, for an array of targets (entry positions, say),
 // the indices that share each target, in increasing order. from_triplets sums triplets
 // into a CSC matrix with these two.
 //
@@ -18,17 +18,47 @@
 // (by coarse buckets of 2^s consecutive targets when the targets are too many for the
 // bucket sort's count tables, each bucket then sorted by target and index). Both run on
 // the threads of the calling TBB arena and give the same result for every thread count;
-// inside a SerialScope (base/serial_scope.hpp) they run on the calling thread.
+// inside a SerialScope (base/serial_scope.hpp) they run on the calling thread. Their large
+// arrays are not zeroed when allocated (FillLater): the threads that fill them are the first
+// to write, and so to map, their pages.
 #pragma once
 
 #include <tbb/task_arena.h>
 
 #include <cstddef>
+#include <memory>
+#include <new>
+#include <span>
+#include <utility>
 #include <vector>
 
 #include "strata/sparse_matrix.hpp"
 
 namespace strata::mbd {
+
+/// std::allocator whose value construction leaves a scalar uninitialized (resize() does not
+/// zero), for arrays that are filled right after, in parallel.
+template <class T>
+struct UninitializedAllocator : std::allocator<T> {
+  template <class U>
+  struct rebind {
+    using other = UninitializedAllocator<U>;
+  };
+  UninitializedAllocator() = default;
+  template <class U>
+  UninitializedAllocator(const UninitializedAllocator<U>&) noexcept {}
+  template <class U>
+  void construct(U* p) noexcept {
+    ::new (static_cast<void*>(p)) U;
+  }
+  template <class U, class... Args>
+  void construct(U* p, Args&&... args) {
+    ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
+  }
+};
+/// A vector whose new elements are uninitialized until written (see UninitializedAllocator).
+template <class T>
+using FillLater = std::vector<T, UninitializedAllocator<T>>;
 
 /// Builds a canonical CSC pattern (0-based; rows sorted within each column, no
 /// duplicates) from (row, column) pairs and finds entry positions in it.
@@ -43,21 +73,22 @@ class PatternBuilder {
   /// then writes each, from any thread (different indices).
   std::size_t grow(std::size_t count);
   void set(std::size_t k, index_t r, index_t c) { keys_[k] = key(r, c); }
-  /// Sorts the pairs into the pattern (values zero), on the calling arena's threads (see
-  /// the file comment), and keeps it for find(). The pairs are released.
+  /// The pairs sorted into the pattern (values zero), on the calling arena's threads (see
+  /// the file comment). The pairs are released.
   SparseMatrix finish();
-  /// Position of (r, c) in the finished pattern's values; safe from several threads.
-  /// Throws std::logic_error when (r, c) is not in it (an internal error of the caller).
-  index_t find(index_t r, index_t c) const;
 
  private:
   static unsigned long long key(index_t r, index_t c) {
     return static_cast<unsigned long long>(c) << 32 | static_cast<unsigned long long>(r);
   }
   index_t rows_, cols_;
-  std::vector<unsigned long long> keys_;
-  SparseMatrix a_;
+  FillLater<unsigned long long> keys_;
 };
+
+/// Position of entry (r, c) in the values of `a` (canonical CSC: rows sorted within each
+/// column). Throws std::logic_error when (r, c) is not in the pattern (an internal error
+/// of the caller).
+index_t entry_position(const SparseMatrix& a, index_t r, index_t c);
 
 /// For target_of[k] in [0, targets) (k = 0 … K−1): the targets that occur, in increasing
 /// order (target), and for target[t] the indices k with target_of[k] = target[t] in
@@ -65,11 +96,12 @@ class PatternBuilder {
 /// entries, first[0] = 0). A stable counting sort of the indices by target.
 struct TargetGroups {
   std::vector<index_t> target;
-  std::vector<std::size_t> first, slot;
+  std::vector<std::size_t> first;
+  FillLater<std::size_t> slot;
 };
 
 /// TargetGroups of `target_of` on the calling arena's threads (see the file comment).
-TargetGroups group_by_target(const std::vector<index_t>& target_of, index_t targets);
+TargetGroups group_by_target(std::span<const index_t> target_of, index_t targets);
 
 /// A CSC matrix (n_rows × n_cols, 0-based) from triplets (rows[k], cols[k], vals[k]),
 /// duplicates summed in the order of k (so the values are the same for any thread
