@@ -3,9 +3,9 @@
 // What: PatternBuilder collects the (row, column) pairs of a matrix's entries, one at a
 // time or in blocks that several threads fill, and finishes them into a canonical CSC
 // pattern (each column's rows sorted, duplicates dropped); entry_position() then gives an
-// entry's position in it. group_by_target lists, for an array of targets (entry positions, say),
-// the indices that share each target, in increasing order. from_triplets sums triplets
-// into a CSC matrix with these two.
+// entry's position in it. group_by_target lists, for an array of targets (entry positions,
+// say), the indices that share each target, in increasing order. from_triplets sums
+// triplets into a CSC matrix with these.
 //
 // Why: the Newton matrix of a large model (a flexible body of 10⁶ coordinates has about
 // 4.5·10⁸ pairs for 2·10⁸ entries) has its pattern built at set-up and again whenever its
@@ -61,7 +61,7 @@ template <class T>
 using FillLater = std::vector<T, UninitializedAllocator<T>>;
 
 /// Builds a canonical CSC pattern (0-based; rows sorted within each column, no
-/// duplicates) from (row, column) pairs and finds entry positions in it.
+/// duplicates) from (row, column) pairs; entry_position finds entries in it.
 class PatternBuilder {
  public:
   /// Throws InvalidInput for more than 2^32 rows or 2^31 columns (a pair is kept in 64
