@@ -18,6 +18,7 @@
 
 #include "base/atomic_file.hpp"
 #include "base/timer.hpp"
+#include "blas_kernels.hpp"
 #include "core/stats_json.hpp"
 #include "sparse/generators.hpp"
 #include "strata/errors.hpp"
@@ -47,6 +48,7 @@ std::string utc_now(const char* fmt) {
 }  // namespace
 
 int run_driver(int argc, char** argv, int (*body)(int, char**)) {
+  app::use_fitting_blas_kernels(argv);  // every solver of the run gets the same kernels
   try {
     return body(argc, argv);
   } catch (const std::exception& e) {
@@ -140,6 +142,7 @@ nlohmann::json run_metadata(int argc, char** argv) {
        {{"host", host},
         {"cpu", cpu},
         {"hardware_threads", std::thread::hardware_concurrency()},
+        {"blas", app::blas_description()},
         {"gpu", command_output(
                     "nvidia-smi --query-gpu=name --format=csv,noheader 2>/dev/null | head -1")}}}};
 }

@@ -17,9 +17,10 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
-#include "bench_common.hpp"
-#include "core/stats_json.hpp"
 #include "base/timer.hpp"
+#include "bench_common.hpp"
+#include "blas_kernels.hpp"
+#include "core/stats_json.hpp"
 #include "crash_report.hpp"
 #include "distributed/distributed_internal.hpp"
 #include "strata/distributed.hpp"
@@ -156,7 +157,8 @@ int run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  app::report_fatal_signals();  // a crash on a lent machine says where
+  app::use_fitting_blas_kernels(argv);  // before MPI_Init: the program may start again
+  app::report_fatal_signals();          // a crash on a lent machine says where
   int provided = 0;
   MPI_Init_thread(&argc, &argv, MPI_THREAD_SERIALIZED, &provided);
   int rc = 1;

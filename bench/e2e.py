@@ -107,6 +107,15 @@ def main(argv: list[str] | None = None) -> int:
                 baseline_label=args.baseline_label, rows=[])
     binaries = [("current", args.strata)] + ([("baseline", args.baseline)] if args.baseline
                                              else [])
+    # Both binaries run the same OpenBLAS kernels: those the binary under test chooses (it
+    # replaces OpenBLAS's Prescott fallback, apps/common/blas_kernels.hpp; an older baseline
+    # may not), unless OPENBLAS_CORETYPE is set already.
+    if "OPENBLAS_CORETYPE" not in os.environ:
+        version = subprocess.run([args.strata, "--version"], capture_output=True, text=True)
+        m = re.search(r", (\w+) kernels\)", version.stdout)
+        if m:
+            os.environ["OPENBLAS_CORETYPE"] = m.group(1)
+    data["openblas_coretype"] = os.environ.get("OPENBLAS_CORETYPE", "")
     models = []
     for item in args.models.split(","):
         # SPEC:T_END; every generated model but andrews has an argument (tracked:100), so

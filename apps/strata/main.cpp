@@ -42,6 +42,7 @@
 #include <string>
 
 #include "base/atomic_file.hpp"
+#include "blas_kernels.hpp"
 #include "core/stats_json.hpp"
 #include "crash_report.hpp"
 #include "launch.hpp"
@@ -660,10 +661,12 @@ int run_simulate_checked(const SimulateArgs& a, bool& started) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  strata::app::report_fatal_signals();  // an internal crash says where, on stderr
+  strata::app::use_fitting_blas_kernels(argv);  // may execute the program again, at once
+  strata::app::report_fatal_signals();          // an internal crash says where, on stderr
   CLI::App app{"strata: a multifrontal sparse direct solver for CPU and GPU"};
   app.require_subcommand(1);
-  app.set_version_flag("--version", fmt::format("strata {}", strata_version()));
+  app.set_version_flag("--version", fmt::format("strata {} ({})", strata_version(),
+                                                strata::app::blas_description()));
   // every --help ends with the exit statuses (README.md, "Exit status")
   const std::string exit_codes =
       "Exit status: 0 success; 1 solver or input error (\"strata: error: ...\"); 2 usage "

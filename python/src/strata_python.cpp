@@ -15,6 +15,7 @@
 #include <span>
 #include <string>
 
+#include "blas_kernels.hpp"
 #include "core/stats_json.hpp"
 #include "strata/distributed.hpp"
 #include "strata/strata.h"
@@ -400,6 +401,16 @@ PYBIND11_MODULE(_strata, m) {
 #endif
       },
       "True when this build has the CUDA backend.");
+  m.def(
+      "blas_kernels",
+      [] {
+        py::dict d;
+        d["library"] = strata::app::blas_description();
+        d["fitting"] = strata::app::openblas_core_for_cpu();
+        return d;
+      },
+      "The BLAS in use (\"OpenBLAS 0.3.21, SkylakeX kernels\") and the OpenBLAS core type "
+      "this CPU supports best (\"SkylakeX\", \"Haswell\" or \"\").");
   bind_simulate(m, exc_invalid_input, exc_error);
   m.attr("__version__") = strata_version();  // the project version (CMakeLists.txt)
 }

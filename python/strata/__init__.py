@@ -49,9 +49,35 @@ from ._strata import (  # noqa: F401  (re-exported)
     OutOfMemoryError,
     SimulationError,
     __version__,
+    blas_kernels,
     cuda_in_build,
 )
 from . import _strata
+
+
+def _check_blas_kernels():
+    # OpenBLAS before 0.3.25 runs its Prescott (SSE3) kernels on Intel CPUs it does not know
+    # (OpenBLAS issue #4267); OPENBLAS_CORETYPE fixes that, but only when set before the
+    # library loads, i.e. before Python starts. The command-line programs set it themselves.
+    import os
+    import warnings
+
+    blas = blas_kernels()
+    if (
+        blas["library"].endswith("Prescott kernels")
+        and blas["fitting"]
+        and "OPENBLAS_CORETYPE" not in os.environ
+    ):
+        warnings.warn(
+            f"strata: {blas['library']} on a CPU that runs OpenBLAS's {blas['fitting']} "
+            f"kernels, which factor several times faster: start Python with "
+            f"OPENBLAS_CORETYPE={blas['fitting']} in the environment",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+
+
+_check_blas_kernels()
 from ._simulate import SimulationResult, generate_model, simulate  # noqa: F401
 from ._plot import plot  # noqa: F401
 
@@ -64,6 +90,7 @@ __all__ = [
     "SimulationResult",
     "plot",
     "cuda_in_build",
+    "blas_kernels",
     "mpi_in_build",
     "Error",
     "InternalError",

@@ -255,5 +255,22 @@ check "output folder not writable" 1 "cannot write" "$strata" simulate --generat
 # a later complete run in the same folder replaces the partial files
 check "complete after failure" 0 "complete" "${sim[@]}" --t-end 0.001 --output "$tmp/f_run"
 no_file "stale partial removed" "$tmp/f_run/positions.partial.csv"
+
+# OpenBLAS's kernels (apps/common/blas_kernels.hpp): a user's OPENBLAS_CORETYPE is kept;
+# without one, a CPU with AVX2 and FMA never runs the Prescott fallback. The reference is
+# the CPU's flags as the kernel lists them, not the compiler's CPU checks.
+check "user's OPENBLAS_CORETYPE kept" 0 "Prescott kernels" env OPENBLAS_CORETYPE=Prescott "$strata" --version
+cpu_flags=" $(grep -m1 '^flags' /proc/cpuinfo 2>/dev/null | cut -d: -f2) "
+if [[ $cpu_flags == *" avx2 "* && $cpu_flags == *" fma "* ]]; then
+  out=$(env -u OPENBLAS_CORETYPE "$strata" --version 2>&1)
+  if [[ $out == *"OpenBLAS"*" kernels"* && $out != *"Prescott kernels"* ]]; then
+    pass=$((pass + 1))
+  else
+    fail=$((fail + 1))
+    echo "FAIL BLAS kernels on an AVX2 CPU: $out"
+  fi
+else
+  echo "BLAS kernels on an AVX2 CPU: skipped (the CPU has no AVX2 and FMA)"
+fi
 echo "$pass passed, $fail failed"
 [[ $fail -eq 0 ]]

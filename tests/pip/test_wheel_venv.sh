@@ -45,7 +45,7 @@ assert where.startswith(venv + os.sep), f"strata imported from {where}, not the 
 cli = os.path.join(venv, "bin", "strata")
 out = subprocess.run([cli, "--version"], capture_output=True, text=True, check=True).stdout
 meta = importlib.metadata.version("strata")
-assert out.strip() == f"strata {strata.__version__}" and meta == strata.__version__, \
+assert out.startswith(f"strata {strata.__version__} (") and meta == strata.__version__, \
     (out, strata.__version__, meta)
 print(f"installed: {where}, version {meta}, command {cli}")
 EOF

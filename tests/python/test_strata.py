@@ -396,3 +396,42 @@ def test_cuda_device_is_supported_or_a_clear_error():
     assert s.stats["factor"]["backend"] == "cuda"
     b = np.ones(17)
     assert backward_error(A, s.solve(b), b) < 1e-13
+
+
+def _cpu_flags():
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("flags"):
+                    return set(line.split(":", 1)[1].split())
+    except OSError:
+        pass
+    return set()
+
+
+def test_blas_kernels_and_the_prescott_fallback_warning():
+    # the CPU's best OpenBLAS core type from the kernel's flag list (the module asks the
+    # compiler's CPU checks), and the warning exactly when OpenBLAS fell back to Prescott
+    import subprocess
+    import sys
+
+    flags = _cpu_flags()
+    if not flags:
+        pytest.skip("no /proc/cpuinfo flags on this system")
+    if {"avx512f", "avx512cd", "avx512bw", "avx512dq", "avx512vl"} <= flags:
+        fitting = "SkylakeX"
+    elif {"avx2", "fma"} <= flags:
+        fitting = "Haswell"
+    else:
+        fitting = ""
+    assert strata.blas_kernels()["fitting"] == fitting
+    code = "import strata; print(strata.blas_kernels()['library'])"
+    env = dict(os.environ, OPENBLAS_CORETYPE="Prescott")
+    run = [sys.executable, "-W", "always", "-c", code]
+    r = subprocess.run(run, env=env, capture_output=True, text=True, check=True)
+    assert r.stdout.strip().endswith("Prescott kernels"), r.stdout
+    assert "OPENBLAS_CORETYPE=" not in r.stderr  # the user's own choice is not warned about
+    del env["OPENBLAS_CORETYPE"]
+    r = subprocess.run(run, env=env, capture_output=True, text=True, check=True)
+    fell_back = r.stdout.strip().endswith("Prescott kernels")
+    assert ("OPENBLAS_CORETYPE=" + fitting in r.stderr) == (fell_back and fitting != ""), r.stderr
