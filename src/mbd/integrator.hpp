@@ -225,6 +225,8 @@ class Integrator {
                                         const char* what) const;
   std::vector<double> solve_once(const SparseMatrix& k, const std::vector<double>& b,
                                  const char* what) const;
+  std::vector<double> solve_symmetric_once(const SparseMatrix& k, const std::vector<double>& b,
+                                           const char* what) const;
   bool try_step(double h, StepInfo& info);
   void predict(double h, BdfTerms& bdf);
   int newton(double h, StepInfo& info, const BdfTerms& bdf);

@@ -188,6 +188,28 @@ std::vector<double> Integrator::solve_once(const SparseMatrix& k, const std::vec
   return x;
 }
 
+// x = K⁻¹ b for a symmetric K given with both triangles (the acceleration analysis's
+// saddle-point matrix) by strata's L D Lᵀ: about half the work of the LU of solve_once and
+// no unsymmetric matching. Its pivots are restricted to the analysis's fronts, so a front
+// may need static pivots; when it did and refinement did not bring the backward error down
+// to Options::refinement_tolerance, the LU of solve_once (delayed pivoting) solves instead.
+std::vector<double> Integrator::solve_symmetric_once(const SparseMatrix& k,
+                                                     const std::vector<double>& b,
+                                                     const char* what) const {
+  if (opts_.dense_solver) return solve_once(k, b, what);
+  Options o = opts_.solver;  // the Newton matrix's, but for its type
+  o.type = MatrixType::symmetric_indefinite;
+  auto s = make_strata_symmetric_solver(o);
+  s->analyze(k);
+  s->factorize(k);
+  std::vector<double> x(b.size());
+  s->solve(b.data(), x.data());
+  if (all_finite(x) &&
+      (s->perturbed_pivots() == 0 || s->backward_error() <= opts_.solver.refinement_tolerance))
+    return x;
+  return solve_once(k, b, what);
+}
+
 // The largest change of a body's centre between the model's values and the consistent
 // ones (positions or velocities), as a warning when it exceeds 1e-6 of the model's size.
 void Integrator::report_initial_change(const std::vector<double>& given,
@@ -286,8 +308,8 @@ void Integrator::initialize() {
   sys_.constraint_values(q_.data(), v_.data(), zero.data(), t_, nullptr, nullptr, phidd.data());
   for (index_t i = 0; i < n; ++i) rhs[i] = -g[i];
   for (index_t r = 0; r < m; ++r) rhs[n + r] = -phidd[r];
-  const std::vector<double> al =
-      solve_once(from_triplets(n + m, n + m, ri, ci, vals, sys_.arena()), rhs, "acceleration");
+  const std::vector<double> al = solve_symmetric_once(
+      from_triplets(n + m, n + m, ri, ci, vals, sys_.arena()), rhs, "acceleration");
   std::copy(al.begin(), al.begin() + n, a_.begin());
   std::copy(al.begin() + n, al.end(), lambda_.begin());
   lambda_prev_ = lambda_;

@@ -18,16 +18,24 @@ namespace {
 
 class StrataLinearSolver : public LinearSolver {
  public:
-  explicit StrataLinearSolver(const Options& o)
-      : solver_(options(o)),
-        adaptive_(o.pivoting == Pivoting::automatic && solver_on_gpu(o.backend)) {}
-  static Options options(Options o) {
-    if (o.type != MatrixType::automatic && o.type != MatrixType::general)
-      throw InvalidInput(std::string("the Newton matrix is unsymmetric: the solver's type must be "
-                                     "general, got ") +
+  StrataLinearSolver(const Options& o, MatrixType type)
+      : solver_(options(o, type)),
+        adaptive_(type == MatrixType::general && o.pivoting == Pivoting::automatic &&
+                  solver_on_gpu(o.backend)) {}
+  static Options options(Options o, MatrixType type) {
+    if (o.type != MatrixType::automatic && o.type != type)
+      throw InvalidInput(std::string(type == MatrixType::general
+                                         ? "the Newton matrix is unsymmetric: the solver's type "
+                                           "must be general, got "
+                                         : "this solver is for symmetric matrices: its type must "
+                                           "be symmetric_indefinite, got ") +
                          to_string(o.type));
     validate(o);
-    o.type = MatrixType::general;
+    o.type = type;
+    if (type != MatrixType::general) {
+      if (o.pivoting == Pivoting::delayed) o.pivoting = Pivoting::automatic;
+      return o;
+    }
     // The Newton matrix's values drift from those the analysis matched and scaled (step
     // size, contacts, rotations): on the host every factorization delays the pivots the
     // analysis's order cannot take (numeric/delayed.hpp). A GPU factors in that order until
@@ -80,6 +88,8 @@ class StrataLinearSolver : public LinearSolver {
   }
   std::string describe() const override {
     const FactorStats& f = solver_.stats().factor;
+    if (f.type == MatrixType::symmetric_indefinite)
+      return std::string("strata LDLT (matching + scaling) on ") + to_string(f.backend);
     return "strata LU (matching + scaling" +
            std::string(f.delayed_pivoting ? ", delayed pivots" : "") + ") on " +
            to_string(f.backend);
@@ -144,7 +154,10 @@ Options engine_solver_options() {
 }
 
 std::unique_ptr<LinearSolver> make_strata_solver(const Options& o) {
-  return std::make_unique<StrataLinearSolver>(o);
+  return std::make_unique<StrataLinearSolver>(o, MatrixType::general);
+}
+std::unique_ptr<LinearSolver> make_strata_symmetric_solver(const Options& o) {
+  return std::make_unique<StrataLinearSolver>(o, MatrixType::symmetric_indefinite);
 }
 std::unique_ptr<LinearSolver> make_dense_solver() { return std::make_unique<DenseLinearSolver>(); }
 

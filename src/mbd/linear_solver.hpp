@@ -66,6 +66,13 @@ Options engine_solver_options();
 /// says. Throws InvalidInput when o.type is neither automatic nor general (the Newton
 /// matrix is unsymmetric) or when validate(o) refuses a field.
 std::unique_ptr<LinearSolver> make_strata_solver(const Options& o);
+/// strata's multifrontal L D Lᵀ (MatrixType::symmetric_indefinite: restricted Bunch–Kaufman
+/// 1×1/2×2 pivots, static pivots and refinement; no delayed pivoting, so Pivoting::delayed
+/// acts as automatic) with options `o`, for a symmetric matrix given with both triangles,
+/// such as the set-up's saddle-point system [M Φ_qᵀ; Φ_q 0]: half the factorization of LU
+/// and no unsymmetric matching. Throws InvalidInput when o.type is neither automatic nor
+/// symmetric_indefinite or when validate(o) refuses a field.
+std::unique_ptr<LinearSolver> make_strata_symmetric_solver(const Options& o);
 /// Whether make_strata_solver({.backend = backend, ...}) factorizes on a GPU: Backend::cuda,
 /// or Backend::automatic in a build and on a machine with one.
 bool solver_on_gpu(Backend backend);
