@@ -193,10 +193,12 @@ std::vector<double> Integrator::solve_once(const SparseMatrix& k, const std::vec
 // no unsymmetric matching. Its pivots are restricted to the analysis's fronts, so a front
 // may need static pivots; when it did and refinement did not bring the backward error down
 // to Options::refinement_tolerance, the LU of solve_once (delayed pivoting) solves instead.
+// On a GPU the LU of solve_once: there strata's L D Lᵀ took about twice the LU's time on
+// a flexible body's saddle-point matrix (bench/history.md, 2026-11-27).
 std::vector<double> Integrator::solve_symmetric_once(const SparseMatrix& k,
                                                      const std::vector<double>& b,
                                                      const char* what) const {
-  if (opts_.dense_solver) return solve_once(k, b, what);
+  if (opts_.dense_solver || solver_on_gpu(opts_.solver.backend)) return solve_once(k, b, what);
   Options o = opts_.solver;  // the Newton matrix's, but for its type
   o.type = MatrixType::symmetric_indefinite;
   auto s = make_strata_symmetric_solver(o);
