@@ -60,8 +60,18 @@
 // 2018); the exponent comes from George 1973 (nested dissection of a k×k×k grid costs
 // O(n²) flops).
 //
+// Threads: the two parts of a bisection (and the components of a split) share no edge, so
+// once a cut has left large pieces they are dissected side by side over the calling TBB
+// arena's threads, each piece in a region of its own whose tree nodes are appended in the
+// order of the sequential walk. METIS draws its random numbers from the C library's
+// rand(), one state per process; strata gives each thread its own state, seeded as METIS
+// seeds it (metis_random.hpp), so every METIS call gets the numbers it would get alone and
+// the permutation and tree are the same for any thread count. Where that does not take
+// effect (strata loaded as a shared module), the driver keeps to one thread.
+//
 // Robustness: the recursion is an explicit stack of pending subgraphs (disjoint, so O(n)
-// memory in all), so a degenerate chain of bisections cannot overflow the call stack. A
+// memory in all), so a degenerate chain of bisections cannot overflow the call stack (the
+// regions dissected side by side nest at most kSideBySideLevels deep). A
 // bisection that leaves a part empty is not followed: the subgraph is ordered as one
 // AMD leaf instead. METIS 5.1 uses 32-bit indices; a subgraph that does not fit is
 // rejected with InvalidInput.
@@ -73,8 +83,11 @@
 // Duff, "An approximate minimum degree ordering algorithm", SIAM J. Matrix Anal. Appl. 17
 // (1996) for the leaves.
 #include <metis.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -83,6 +96,8 @@
 #include <numeric>
 #include <string>
 
+#include "base/serial_scope.hpp"
+#include "ordering/metis_random.hpp"
 #include "ordering/ordering.hpp"
 #include "strata/errors.hpp"
 #include "symbolic/symbolic.hpp"
@@ -183,6 +198,14 @@ Compressed compress(const Graph& g) {
   return c;
 }
 
+// Pieces dissected side by side (Driver::drain): at most this many levels of regions
+// inside regions, and only when the pieces of a cut weigh this many vertices together.
+constexpr int kSideBySideLevels = 24;
+constexpr index_t kSideBySideWeight = 1024;
+// Task::parent of a region's first subgraph: the node of the enclosing region that the
+// region's Region::outer_parent names.
+constexpr index_t kOuter = -2;
+
 // A pending subgraph: compressed vertices `verts`, total weight (original vertices)
 // `weight`, to be numbered from pivot `lo`, hanging under tree node `parent` (-1: root).
 struct Task {
@@ -191,6 +214,16 @@ struct Task {
   index_t lo = 0;
   index_t parent = -1;
   int depth = 0;  ///< number of bisections above
+};
+
+// The nodes made and the subgraphs pending in one sequential part of the dissection: the
+// whole graph's (Driver::top_), or a piece's dissected side by side with others. Node ids
+// and Task::parent are indices into `nodes`; kOuter stands for outer_parent, a node of the
+// enclosing region.
+struct Region {
+  std::vector<SeparatorTree::Node> nodes;
+  std::vector<Task> stack;
+  index_t outer_parent = -1;
 };
 
 class Driver {
@@ -238,8 +271,7 @@ class Driver {
     root.verts.resize(cn_);
     std::iota(root.verts.begin(), root.verts.end(), index_t{0});
     root.weight = total;
-    root_ = process(root);
-    drain();
+    root_ = dissect(top_, root);
     if (opts_.balance_levels > 0 && !info_.empty()) {
       const auto t0 = std::chrono::steady_clock::now();
       balance_by_work();
@@ -247,6 +279,7 @@ class Driver {
           std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       r.rebisections = rebisections_;
     }
+    r.side_by_side = side_by_side_pieces_.load();
     r.perm = std::move(perm_);
     r.tree = postorder_tree();
     return r;
@@ -280,28 +313,96 @@ class Driver {
     for (index_t p = cg_.mptr[c]; p < cg_.mptr[c + 1]; ++p) out.push_back(cg_.members[p]);
   }
 
-  index_t add_node(index_t parent, index_t begin, index_t end) {
+  index_t add_node(Region& r, index_t parent, index_t begin, index_t end) {
     SeparatorTree::Node node;
     node.begin = begin;
     node.end = end;
     node.parent = parent;
-    nodes_.push_back(std::move(node));
-    const index_t id = static_cast<index_t>(nodes_.size()) - 1;
-    if (parent >= 0) nodes_[parent].children.push_back(id);
+    r.nodes.push_back(std::move(node));
+    const index_t id = static_cast<index_t>(r.nodes.size()) - 1;
+    if (parent >= 0) r.nodes[parent].children.push_back(id);
     return id;
   }
 
-  void drain() {
-    while (!stack_.empty()) {
-      Task t = std::move(stack_.back());
-      stack_.pop_back();
-      process(t);
+  // Dissects the region's pending subgraphs, in the order of a depth-first walk (the first
+  // child's subtree before the second's). When a subgraph just cut leaves two or more large
+  // pieces and METIS's random numbers are per thread (metis_random.hpp), the pieces are
+  // dissected side by side, each in a region of its own, and the regions' nodes appended
+  // in the order the sequential walk would have made them: the tree and the permutation
+  // are the same for any thread count. Side by side the subgraphs share cloc_, oloc_, perm_
+  // and vfirst_ without a race: pending subgraphs are disjoint and no edge joins two of
+  // them (separators or components lie between), so each reads and writes entries of its
+  // own vertices only, and -1 for any neighbour outside it.
+  void drain(Region& r, int levels) {
+    while (!r.stack.empty()) {
+      Task t = std::move(r.stack.back());
+      r.stack.pop_back();
+      step(r, t, levels);
     }
   }
 
+  // Dissects subgraph t and everything below it in region r (whose stack is empty);
+  // returns t's node.
+  index_t dissect(Region& r, Task& t, const std::vector<idx_t>* multiplier = nullptr) {
+    const auto id = static_cast<index_t>(r.nodes.size());  // t's node is made first
+    step(r, t, kSideBySideLevels, multiplier);
+    drain(r, kSideBySideLevels);
+    return id;
+  }
+
+  // Cuts t (process) and dissects the pieces side by side when that pays (see drain).
+  void step(Region& r, Task& t, int levels, const std::vector<idx_t>* multiplier = nullptr) {
+    const std::size_t mark = r.stack.size();
+    process(r, t, multiplier);
+    const std::size_t pieces = r.stack.size() - mark;
+    if (levels <= 0 || pieces < 2 || !side_by_side()) return;
+    index_t weight = 0;
+    bool balanced_below = true;  // balance by work keeps its levels in the top region
+    for (std::size_t i = mark; i < r.stack.size(); ++i) {
+      weight += r.stack[i].weight;
+      balanced_below = balanced_below && r.stack[i].depth >= opts_.balance_levels;
+    }
+    if (weight < kSideBySideWeight || !balanced_below) return;
+    std::vector<Region> sub(pieces);
+    for (std::size_t i = 0; i < pieces; ++i) {  // the top of the stack is processed first
+      Task& piece = r.stack[r.stack.size() - 1 - i];
+      sub[i].outer_parent = piece.parent;
+      piece.parent = kOuter;
+      sub[i].stack.push_back(std::move(piece));
+    }
+    r.stack.resize(mark);
+    side_by_side_pieces_ += static_cast<index_t>(pieces);
+    tbb::parallel_for(std::size_t{0}, pieces, [&](std::size_t i) { drain(sub[i], levels - 1); });
+    for (Region& s : sub) append(r, s);
+  }
+
+  // Appends the nodes of region s (made side by side) to r, linking those whose parent is
+  // kOuter to s.outer_parent.
+  static void append(Region& r, Region& s) {
+    const auto offset = static_cast<index_t>(r.nodes.size());
+    for (SeparatorTree::Node& node : s.nodes) {
+      const index_t id = static_cast<index_t>(&node - s.nodes.data()) + offset;
+      for (index_t& c : node.children) c += offset;
+      if (node.parent == kOuter) {
+        node.parent = s.outer_parent;
+        if (node.parent >= 0) r.nodes[node.parent].children.push_back(id);
+      } else if (node.parent >= 0) {
+        node.parent += offset;
+      }
+      r.nodes.push_back(std::move(node));
+    }
+  }
+
+  // Whether pieces may be dissected side by side: several threads in the calling arena
+  // and METIS's random numbers per thread (known after the first bisection).
+  bool side_by_side() const {
+    return per_thread_random_ && !detail::serial_passes() &&
+           tbb::this_task_arena::max_concurrency() > 1;
+  }
+
   // Orders the task's subgraph (pushing its parts on the stack); returns its tree node.
-  index_t process(Task& t, const std::vector<idx_t>* multiplier = nullptr) {
-    if (t.weight <= opts_.leaf_size || t.verts.size() < 3) return leaf(t);
+  index_t process(Region& r, Task& t, const std::vector<idx_t>* multiplier = nullptr) {
+    if (t.weight <= opts_.leaf_size || t.verts.size() < 3) return leaf(r, t);
     const index_t m = static_cast<index_t>(t.verts.size());
     for (index_t i = 0; i < m; ++i) cloc_[t.verts[i]] = i;
 
@@ -331,13 +432,13 @@ class Driver {
     const index_t ncomp = static_cast<index_t>(cstart.size()) - 1;
     if (ncomp > 1) {
       for (const index_t v : t.verts) cloc_[v] = -1;
-      return split_components(t, order, cstart);
+      return split_components(r, t, order, cstart);
     }
-    return bisect(t, multiplier);  // resets cloc_
+    return bisect(r, t, multiplier);  // resets cloc_
   }
 
   // Orders the subgraph with AMD on its original vertices.
-  index_t leaf(Task& t) {
+  index_t leaf(Region& r, Task& t) {
     std::vector<index_t> orig;  // vertices of g_
     orig.reserve(t.weight);
     for (const index_t c : t.verts) expand(c, orig);
@@ -359,14 +460,14 @@ class Driver {
     const std::vector<index_t> p = (m <= 2) ? std::vector<index_t>{} : amd_ordering(s);
     index_t next = t.lo;
     for (index_t k = 0; k < m; ++k) next = number(orig[p.empty() ? k : p[k]], next);
-    return add_node(t.parent, t.lo, t.lo + t.weight);
+    return add_node(r, t.parent, t.lo, t.lo + t.weight);
   }
 
   // Several components: a node with an empty separator whose children are the large
   // components and the small ones packed together into leaves of at most leaf_size.
-  index_t split_components(Task& t, const std::vector<index_t>& order,
+  index_t split_components(Region& r, Task& t, const std::vector<index_t>& order,
                            const std::vector<index_t>& cstart) {
-    const index_t id = add_node(t.parent, t.lo + t.weight, t.lo + t.weight);
+    const index_t id = add_node(r, t.parent, t.lo + t.weight, t.lo + t.weight);
     std::vector<Task> children;
     Task pack;
     auto flush = [&]() {
@@ -397,13 +498,14 @@ class Driver {
       lo += c.weight;
     }
     // Push in reverse so that the first child is processed (and listed) first.
-    for (auto it = children.rbegin(); it != children.rend(); ++it) stack_.push_back(std::move(*it));
+    for (auto it = children.rbegin(); it != children.rend(); ++it)
+      r.stack.push_back(std::move(*it));
     return id;
   }
 
   // One METIS vertex separator on a connected subgraph (cloc_ holds its local numbers).
   // `multiplier` (balance by work): per local vertex, a factor on its METIS weight.
-  index_t bisect(Task& t, const std::vector<idx_t>* multiplier = nullptr) {
+  index_t bisect(Region& r, Task& t, const std::vector<idx_t>* multiplier = nullptr) {
     const index_t m = static_cast<index_t>(t.verts.size());
     constexpr index_t idx_max = std::numeric_limits<idx_t>::max();
     std::vector<idx_t> xadj(m + 1), vwgt(m), where(m);
@@ -436,8 +538,13 @@ class Driver {
     // do not move the cut at all.
     if (multiplier) options[METIS_OPTION_UFACTOR] = kBalanceUfactor;
     idx_t nv = static_cast<idx_t>(m), sepsize = 0;
-    const int status = METIS_ComputeVertexSeparator(&nv, xadj.data(), adjncy.data(), vwgt.data(),
-                                                    options, &sepsize, where.data());
+    int status = METIS_OK;
+    {
+      const MetisRandomScope random;
+      status = METIS_ComputeVertexSeparator(&nv, xadj.data(), adjncy.data(), vwgt.data(), options,
+                                            &sepsize, where.data());
+      if (&r == &top_) per_thread_random_ = random.seeded();  // top_ runs alone
+    }
     if (status == METIS_ERROR_MEMORY) throw OutOfMemory(0, "METIS_ComputeVertexSeparator");
     if (status != METIS_OK)
       throw InvalidInput("METIS_ComputeVertexSeparator failed (status " + std::to_string(status) +
@@ -456,9 +563,10 @@ class Driver {
         wsep += weight(v);
       }
     }
-    if (part[0].weight == 0 || part[1].weight == 0) return leaf(t);  // degenerate: AMD leaf
-    const index_t id = add_node(t.parent, t.lo + t.weight - wsep, t.lo + t.weight);
-    if (t.depth < opts_.balance_levels) {  // may be redone to balance work
+    if (part[0].weight == 0 || part[1].weight == 0) return leaf(r, t);  // degenerate: AMD leaf
+    const index_t id = add_node(r, t.parent, t.lo + t.weight - wsep, t.lo + t.weight);
+    if (t.depth <
+        opts_.balance_levels) {  // only in top_ (see drain)  // may be redone to balance work
       Bisection& b = info_[id];
       b.verts = t.verts;
       b.where.assign(where.begin(), where.end());
@@ -479,8 +587,8 @@ class Driver {
     part[1].lo = t.lo + part[0].weight;
     part[0].parent = part[1].parent = id;
     part[0].depth = part[1].depth = t.depth + 1;
-    stack_.push_back(std::move(part[1]));
-    stack_.push_back(std::move(part[0]));
+    r.stack.push_back(std::move(part[1]));
+    r.stack.push_back(std::move(part[0]));
     return id;
   }
 
@@ -588,8 +696,7 @@ class Driver {
     t.lo = b.lo;
     t.parent = -1;  // linked in place of `id` below
     t.depth = b.depth;
-    const index_t now = process(t, &mult);
-    drain();
+    const index_t now = dissect(top_, t, &mult);
     replace_node(id, now);
     ++rebisections_;
     return now;
@@ -711,9 +818,11 @@ class Driver {
   int top_separators_ = 1;
   std::vector<index_t> cloc_, oloc_, perm_;
   std::vector<index_t> vfirst_;  // first pivot of each vertex of g_
-  std::vector<SeparatorTree::Node> nodes_;
+  Region top_;                   // the tree's nodes (the region of the whole graph)
+  std::vector<SeparatorTree::Node>& nodes_ = top_.nodes;
+  bool per_thread_random_ = false;  // METIS's random numbers are per thread
+  std::atomic<index_t> side_by_side_pieces_{0};
   index_t root_ = -1;
-  std::vector<Task> stack_;
   std::map<index_t, Bisection> info_;  // top bisections, by node (balance by work)
   index_t rebisections_ = 0;
 };

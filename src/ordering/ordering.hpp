@@ -67,6 +67,9 @@ struct OrderingResult {
   SeparatorTree tree;          ///< empty unless nested_dissection
   index_t rebisections = 0;    ///< bisections redone to balance work (balance_levels)
   double balance_seconds = 0;  ///< time spent estimating work and redoing bisections
+  /// Nested dissection: subgraphs dissected side by side on the arena's threads (0 on one
+  /// thread, or where METIS's random numbers cannot be made per thread: metis_random.hpp).
+  index_t side_by_side = 0;
 };
 
 /// The nested-dissection options requested by `opts` for `workers` workers (balance

@@ -8,6 +8,7 @@
 // The tests DISABLED_ReportQuality and DISABLED_ReportLarge print the timings and ND / METIS_NodeND
 // fill ratios on the large problems (run with --gtest_also_run_disabled_tests).
 #include <gtest/gtest.h>
+#include <tbb/task_arena.h>
 #include <zlib.h>
 
 #include <algorithm>
@@ -575,6 +576,51 @@ TEST(NestedDissection, DeterministicForAFixedSeed) {
         EXPECT_EQ(a.tree.nodes[k].begin, b.tree.nodes[k].begin);
         EXPECT_EQ(a.tree.nodes[k].end, b.tree.nodes[k].end);
         EXPECT_EQ(a.tree.nodes[k].parent, b.tree.nodes[k].parent);
+      }
+    }
+  }
+}
+
+// Pieces dissected side by side over the arena's threads give the ordering of one thread:
+// the same permutation and the same tree, with or without balance by work and vertex
+// groups; and with several threads some pieces did run side by side (this test program
+// links strata statically, so METIS's random numbers are per thread: metis_random.hpp).
+TEST(NestedDissection, SameOrderingOnAnyThreadCount) {
+  std::mt19937_64 rng(std::random_device{}());
+  struct Case {
+    Graph g;
+    bool large;
+  };
+  std::vector<Case> cases;
+  for (const index_t n : {1, 2, 3, 5}) cases.push_back({path_graph(n), false});
+  cases.push_back({random_graph(733, 4, rng), false});
+  cases.push_back({graph_of(generators::laplacian_3d(20, 20, 20)), true});
+  cases.push_back({graph_of(generators::elasticity_3d(12, 12, 12)), true});
+  cases.push_back({disconnected_graph(rng), false});
+  for (const auto& [g, large] : cases) {
+    for (const int balance_levels : {0, 2}) {
+      NestedDissectionOptions o;
+      o.leaf_size = 32;
+      o.balance_levels = balance_levels;
+      auto on = [&](int threads) {
+        tbb::task_arena arena(threads);
+        return arena.execute([&] { return nested_dissection(g, o); });
+      };
+      const OrderingResult one = on(1);
+      check_tree(g, one);
+      EXPECT_EQ(one.side_by_side, 0);
+      for (const int threads : {2, 4}) {
+        const OrderingResult r = on(threads);
+        EXPECT_EQ(r.perm, one.perm) << g.n << " vertices, " << threads << " threads";
+        ASSERT_EQ(r.tree.nodes.size(), one.tree.nodes.size());
+        for (std::size_t k = 0; k < r.tree.nodes.size(); ++k) {
+          EXPECT_EQ(r.tree.nodes[k].begin, one.tree.nodes[k].begin);
+          EXPECT_EQ(r.tree.nodes[k].end, one.tree.nodes[k].end);
+          EXPECT_EQ(r.tree.nodes[k].parent, one.tree.nodes[k].parent);
+          EXPECT_EQ(r.tree.nodes[k].children, one.tree.nodes[k].children);
+        }
+        EXPECT_EQ(r.rebisections, one.rebisections);
+        if (large) EXPECT_GT(r.side_by_side, 0) << g.n << " vertices, " << threads << " threads";
       }
     }
   }
