@@ -91,6 +91,7 @@
 #include <limits>
 #include <string>
 
+#include "base/parallel_ranges.hpp"
 #include "sparse/canonical.hpp"
 #include "strata/errors.hpp"
 
@@ -112,33 +113,50 @@ struct CostGraph {
   std::vector<char> matchable;     // a_j > 0
 };
 
+// Two passes in ranges of columns over the calling arena's threads (each column writes
+// only its own entries): the column maxima, their logs and the edges per column, then,
+// after the prefix sums, the edges and their costs. The same graph for any thread count.
 CostGraph build_cost_graph(const SparseMatrix& full) {
   CostGraph g;
   const index_t n = full.n_cols;
   const bool vals = !full.values.empty();
+  auto magnitude = [&](index_t p) { return vals ? std::abs(full.values[p]) : 1.0; };
   g.n = n;
   g.colptr.assign(n + 1, 0);
   g.log_colmax.assign(n, 0.0);
   g.matchable.assign(n, 0);
-  g.rowind.reserve(full.nnz());
-  g.cost.reserve(full.nnz());
-  for (index_t j = 0; j < n; ++j) {
-    double amax = 0.0;
-    for (index_t p = full.offsets[j]; p < full.offsets[j + 1]; ++p)
-      amax = std::max(amax, vals ? std::abs(full.values[p]) : 1.0);
-    if (amax > 0.0) {
-      const double lmax = std::log(amax);
-      g.log_colmax[j] = lmax;
-      g.matchable[j] = 1;
+  detail::parallel_ranges(n, 512, [&](index_t j0, index_t j1) {
+    for (index_t j = j0; j < j1; ++j) {
+      double amax = 0.0;
+      index_t edges = 0;
       for (index_t p = full.offsets[j]; p < full.offsets[j + 1]; ++p) {
-        const double a = vals ? std::abs(full.values[p]) : 1.0;
-        if (a == 0.0) continue;  // explicit zero: not an edge
-        g.rowind.push_back(full.indices[p]);
-        g.cost.push_back(std::max(0.0, lmax - std::log(a)));
+        const double a = magnitude(p);
+        amax = std::max(amax, a);
+        edges += a != 0.0;  // explicit zeros are not edges
+      }
+      if (amax > 0.0) {
+        g.log_colmax[j] = std::log(amax);
+        g.matchable[j] = 1;
+        g.colptr[j + 1] = edges;
       }
     }
-    g.colptr[j + 1] = static_cast<index_t>(g.rowind.size());
-  }
+  });
+  for (index_t j = 0; j < n; ++j) g.colptr[j + 1] += g.colptr[j];
+  g.rowind.resize(g.colptr[n]);
+  g.cost.resize(g.colptr[n]);
+  detail::parallel_ranges(n, 512, [&](index_t j0, index_t j1) {
+    for (index_t j = j0; j < j1; ++j) {
+      if (!g.matchable[j]) continue;
+      const double lmax = g.log_colmax[j];
+      index_t out = g.colptr[j];
+      for (index_t p = full.offsets[j]; p < full.offsets[j + 1]; ++p) {
+        const double a = magnitude(p);
+        if (a == 0.0) continue;
+        g.rowind[out] = full.indices[p];
+        g.cost[out++] = std::max(0.0, lmax - std::log(a));
+      }
+    }
+  });
   return g;
 }
 

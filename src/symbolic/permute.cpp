@@ -19,7 +19,9 @@ namespace strata::symbolic {
 SparseMatrix permute_symmetric_pattern(const SparseMatrix& full, const std::vector<index_t>& perm) {
   // Canonical full CSC first (expands a lower/upper matrix, sorts, removes duplicates).
   const bool canonical_full = full.layout == Layout::csc && full.storage == Storage::full;
-  const SparseMatrix a = canonical_full ? full : expand_symmetric(full);
+  SparseMatrix expanded;
+  if (!canonical_full) expanded = expand_symmetric(full);
+  const SparseMatrix& a = canonical_full ? full : expanded;  // no copy of a canonical one
   const index_t n = a.n_cols;
   if (a.n_rows != n) throw InvalidInput("permute_symmetric_pattern needs a square matrix");
   if (static_cast<index_t>(perm.size()) != n)
