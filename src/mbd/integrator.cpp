@@ -131,10 +131,19 @@ void Integrator::analyze(const BdfTerms& bdf, double t) {
   stats_.analysis_seconds += ta.seconds();
   ++stats_.analyses;
   if (opts_.verbose) {
-    fmt::print(stderr,
-               "t = {:.9g}: analysis of the Newton matrix ({} rows, {} entries): {:.3f} s\n", t,
-               sys_.matrix().n_rows, sys_.matrix().nnz(), ta.seconds());
-    if (const Stats* ss = solver_->stats(); ss && !ss->analysis.device_setup_error.empty())
+    const Stats* ss = solver_->stats();
+    fmt::print(stderr, "t = {:.9g}: analysis of the Newton matrix ({} rows, {} entries): {:.3f} s",
+               t, sys_.matrix().n_rows, sys_.matrix().nnz(), ta.seconds());
+    if (ss) {  // the solver's phases (AnalysisStats), the rest is the Jacobian and copies
+      const AnalysisStats& as = ss->analysis;
+      fmt::print(stderr,
+                 " (matching and ordering {:.3f}, symbolic {:.3f}, plan {:.3f}, device set-up "
+                 "{:.3f}, Jacobian and copies {:.3f})",
+                 as.ordering_seconds, as.symbolic_seconds, as.plan_seconds, as.device_setup_seconds,
+                 ta.seconds() - as.total_seconds);
+    }
+    fmt::print(stderr, "\n");
+    if (ss && !ss->analysis.device_setup_error.empty())
       fmt::print(stderr, "t = {:.9g}: the device set-up at analysis failed: {}\n", t,
                  ss->analysis.device_setup_error);
   }
