@@ -45,12 +45,18 @@
 //    original entry A(i, j), j < i, from the front of j up the assembly tree to the front
 //    of i, stopping at a front already marked for row i (the row-subtree traversal of
 //    Liu 1990 / Davis 2006 §4.2 on the contracted tree). Rows are visited in increasing
-//    order, so every front's list comes out sorted, and the work is O(nnz(A) + Σ rows):
-//    linear in the input plus the output. This is exactly the symbolic union of the
-//    children's contribution-block rows and the front's original entries.
+//    order (in consecutive ranges side by side, each range's rows placed after the
+//    previous range's), so every front's list comes out sorted, and the work is
+//    O(nnz(A) + Σ rows): linear in the input plus the output. This is exactly the symbolic union of
+//    the children's contribution-block rows and the front's original entries.
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
 #include <algorithm>
+#include <cstdint>
 #include <string>
 
+#include "base/serial_scope.hpp"
 #include "strata/errors.hpp"
 #include "symbolic/symbolic.hpp"
 
@@ -190,6 +196,17 @@ Partition block_separators(const Partition& p, index_t max_block, const std::vec
 /// sweep: columns are visited in increasing order, so the entries (j, i), j < i, of
 /// column i are met in the order they are stored; each entry A(i, j), i > j, must be the
 /// next unmatched one above the diagonal of column i. O(nnz), O(n) memory.
+// Ranges of rows for the row-structure walks (analyze_pattern): one per thread of the
+// calling arena, none under 4096 rows, and their count tables (one entry per front each)
+// together at most 2^25 entries; 1 inside a SerialScope.
+index_t row_ranges(index_t n, index_t fronts) {
+  if (detail::serial_passes()) return 1;
+  const auto threads = static_cast<std::int64_t>(tbb::this_task_arena::max_concurrency());
+  const std::int64_t by_rows = n / 4096,
+                     by_memory = (std::int64_t{1} << 25) / std::max<index_t>(fronts, 1);
+  return static_cast<index_t>(std::max<std::int64_t>(1, std::min({threads, by_rows, by_memory})));
+}
+
 void require_symmetric_pattern(const SparseMatrix& a) {
   auto fail = [](index_t r, index_t c) {
     throw InvalidInput("analyze_pattern: the pattern is not symmetric (or not sorted): entry (" +
@@ -313,11 +330,17 @@ SymbolicFactorization analyze_pattern(const SparseMatrix& a, const AmalgamationO
 
   // Row structures by row-subtree walks on the assembly tree, two passes (count, fill).
   // Row i of the tree is column post[i] of the input; its entries left of the diagonal
-  // are the entries of input column post[i] whose postordered index is below i.
-  std::vector<index_t> mark(nf, -1), extra(nf, 0);
-  auto walk = [&](auto&& visit) {
-    std::fill(mark.begin(), mark.end(), -1);
-    for (index_t i = 0; i < n; ++i) {
+  // are the entries of input column post[i] whose postordered index is below i. The rows
+  // are cut into consecutive ranges walked side by side over the calling arena's threads,
+  // each with its own marks and counts per front; a range's rows go to the slots after
+  // those of the ranges before it, so every list is in increasing row order and the
+  // structure is the same for any number of ranges.
+  const index_t ranges = row_ranges(n, nf);
+  auto range_begin = [&](index_t r) { return static_cast<index_t>(std::int64_t{n} * r / ranges); };
+  std::vector<std::vector<index_t>> count(ranges, std::vector<index_t>(nf, 0));
+  auto walk = [&](index_t r, auto&& visit) {
+    std::vector<index_t> mark(nf, -1);
+    for (index_t i = range_begin(r); i < range_begin(r + 1); ++i) {
       const index_t fi = t.front_of_column[i];
       const index_t col = sf.post[i];
       for (index_t p = a.offsets[col]; p < a.offsets[col + 1]; ++p) {
@@ -333,18 +356,32 @@ SymbolicFactorization analyze_pattern(const SparseMatrix& a, const AmalgamationO
       }
     }
   };
-  walk([&](index_t f, index_t) { ++extra[f]; });
+  auto over_ranges = [&](auto&& body) {
+    if (ranges == 1) {
+      body(index_t{0});
+      return;
+    }
+    tbb::parallel_for(index_t{0}, ranges, [&](index_t r) { body(r); });
+  };
+  over_ranges([&](index_t r) { walk(r, [&](index_t f, index_t) { ++count[r][f]; }); });
   t.row_offsets.assign(nf + 1, 0);
-  for (index_t f = 0; f < nf; ++f)
-    t.row_offsets[f + 1] = t.row_offsets[f] + t.n_pivots(f) + extra[f];
-  t.rows.resize(t.row_offsets[nf]);
-  std::vector<index_t> fill(nf);
   for (index_t f = 0; f < nf; ++f) {
+    index_t extra = 0;
+    for (index_t r = 0; r < ranges; ++r) extra += count[r][f];
+    t.row_offsets[f + 1] = t.row_offsets[f] + t.n_pivots(f) + extra;
+  }
+  t.rows.resize(t.row_offsets[nf]);
+  for (index_t f = 0; f < nf; ++f) {  // count[r][f] becomes range r's first slot in f
     index_t w = t.row_offsets[f];
     for (index_t j = t.first_pivot[f]; j < t.first_pivot[f + 1]; ++j) t.rows[w++] = j;
-    fill[f] = w;
+    for (index_t r = 0; r < ranges; ++r) {
+      const index_t c = count[r][f];
+      count[r][f] = w;
+      w += c;
+    }
   }
-  walk([&](index_t f, index_t i) { t.rows[fill[f]++] = i; });
+  over_ranges(
+      [&](index_t r) { walk(r, [&](index_t f, index_t i) { t.rows[count[r][f]++] = i; }); });
   return sf;
 }
 

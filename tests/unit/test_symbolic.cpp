@@ -5,6 +5,7 @@
 #include <cholmod.h>
 #include <gtest/gtest.h>
 #include <metis.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <cstdint>
@@ -14,6 +15,8 @@
 
 #include "analysis/analysis.hpp"
 #include "base/timer.hpp"
+#include "ordering/graph.hpp"
+#include "ordering/ordering.hpp"
 #include "sparse/generators.hpp"
 #include "strata/errors.hpp"
 #include "strata/matrix_market.hpp"
@@ -661,6 +664,38 @@ TEST(Symbolic, PermuteSymmetricPattern) {
   std::vector<index_t> bad = identity(n);
   bad[3] = 4;
   EXPECT_THROW(symbolic::permute_symmetric_pattern(a, bad), InvalidInput);
+}
+
+// The fronts' row structures are walked in ranges of rows over the arena's threads: the
+// same tree and rows on 1, 2, 3 and 4 threads, for a grid in a random order (many short
+// row subtrees) and in its nested-dissection order (long ones), with sizes that do not
+// split evenly.
+TEST(Symbolic, RowStructuresSameOnAnyThreadCount) {
+  unsigned long long seed = 0;
+  std::mt19937_64 rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  const SparseMatrix grid = symmetric_pattern(generators::laplacian_3d(29, 23, 31));
+  const index_t n = grid.n_cols;
+  Options o;
+  o.ordering = OrderingMethod::nested_dissection;
+  const std::vector<index_t> nd =
+      compute_ordering(ordering::graph_of_symmetric_pattern(grid), o).perm;
+  for (const auto& perm : {random_order(n, rng), nd}) {
+    const SparseMatrix b = symbolic::permute_symmetric_pattern(grid, perm);
+    auto on = [&](int threads) {
+      tbb::task_arena arena(threads);
+      return arena.execute([&] { return symbolic::analyze_pattern(b, {}); });
+    };
+    const symbolic::SymbolicFactorization one = on(1);
+    for (const int threads : {2, 3, 4}) {
+      const symbolic::SymbolicFactorization r = on(threads);
+      EXPECT_EQ(r.tree.first_pivot, one.tree.first_pivot) << threads << " threads";
+      EXPECT_EQ(r.tree.parent, one.tree.parent);
+      EXPECT_EQ(r.tree.row_offsets, one.tree.row_offsets);
+      EXPECT_EQ(r.tree.rows, one.tree.rows);
+      EXPECT_EQ(r.nnz_l, one.nnz_l);
+    }
+  }
 }
 
 TEST(Symbolic, RejectsUnsymmetricPattern) {
