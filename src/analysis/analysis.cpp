@@ -38,6 +38,7 @@
 #include "base/timer.hpp"
 #include "ordering/matching.hpp"
 #include "ordering/pairing.hpp"
+#include "sparse/canonical.hpp"
 #include "strata/errors.hpp"
 
 namespace strata {
@@ -276,7 +277,11 @@ static Analysis analyze_matrix_impl(const SparseMatrix& a, const Options& opts, 
     an.type = sym ? MatrixType::automatic : MatrixType::general;
   }
   an.symmetric = an.type != MatrixType::general;
-  SparseMatrix c = an.symmetric ? lower_triangle(a) : expand_symmetric(a);
+  // the canonical input: a general matrix that is canonical already is read as it is
+  const bool as_is = !an.symmetric && detail::is_canonical_full(a);
+  SparseMatrix converted;
+  if (!as_is) converted = an.symmetric ? lower_triangle(a) : expand_symmetric(a);
+  const SparseMatrix& c = as_is ? a : converted;
   an.pattern_offsets = c.offsets;
   an.pattern_indices = c.indices;
   if (an.type == MatrixType::automatic && has_nonpositive_diagonal(c))

@@ -4,9 +4,11 @@
 // sorts indices in linear time, and duplicates are summed on the way.
 #include "strata/sparse_matrix.hpp"
 
+#include <atomic>
 #include <cmath>
 #include <string>
 
+#include "base/parallel_ranges.hpp"
 #include "sparse/canonical.hpp"
 #include "strata/errors.hpp"
 
@@ -126,11 +128,63 @@ SparseMatrix sort_and_sum(const SparseMatrix& a) {
 
 // True when a (validated) is compressed-column with strictly increasing row indices in
 // every column: already canonical, so sorting and summing would only copy it.
+// The O(nnz) checks of a matrix with at least this many entries run in ranges of columns
+// over the calling TBB arena's threads (base/parallel_ranges.hpp).
+constexpr std::size_t kParallelCheckEntries = std::size_t{1} << 16;
+
+// Whether ok(j0, j1) holds for every range of the major index: over the threads for a
+// large matrix, else on the calling thread.
+template <class Ok>
+bool every_range(const SparseMatrix& a, const Ok& ok) {
+  const index_t nmaj = a.n_major();
+  if (a.indices.size() < kParallelCheckEntries) return ok(index_t{0}, nmaj);
+  std::atomic<bool> all{true};
+  detail::parallel_ranges(nmaj, 256, [&](index_t j0, index_t j1) {
+    if (all.load(std::memory_order_relaxed) && !ok(j0, j1)) all = false;
+  });
+  return all;
+}
+
 bool sorted_csc(const SparseMatrix& a) {
   if (a.layout != Layout::csc) return false;
-  for (index_t j = 0; j < a.n_cols; ++j)
-    for (index_t p = a.offsets[j] + 1; p < a.offsets[j + 1]; ++p)
-      if (a.indices[p] <= a.indices[p - 1]) return false;
+  return every_range(a, [&](index_t j0, index_t j1) {
+    for (index_t j = j0; j < j1; ++j)
+      for (index_t p = a.offsets[j] + 1; p < a.offsets[j + 1]; ++p)
+        if (a.indices[p] <= a.indices[p - 1]) return false;
+    return true;
+  });
+}
+
+// validate's checks of the entries of major indices [j0, j1) (offsets already checked):
+// false at the first entry out of range, not finite, or outside the stored triangle, or
+// (report) InvalidInput naming it.
+bool entries_valid(const SparseMatrix& a, index_t j0, index_t j1, bool report) {
+  const index_t nmin = a.layout == Layout::csc ? a.n_rows : a.n_cols;
+  for (index_t j = j0; j < j1; ++j)
+    for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p) {
+      const index_t i = a.indices[p];
+      if (i < 0 || i >= nmin) {
+        if (!report) return false;
+        throw InvalidInput(at("indices", p) + " = " + std::to_string(i) + " is out of range [0, " +
+                           std::to_string(nmin) + ")");
+      }
+      if (!a.values.empty() && !std::isfinite(a.values[p])) {
+        if (!report) return false;
+        throw InvalidInput(at("values", p) + " is not finite (row " +
+                           std::to_string(a.layout == Layout::csc ? i : j) + ", column " +
+                           std::to_string(a.layout == Layout::csc ? j : i) + ")");
+      }
+      if (a.storage != Storage::full) {
+        index_t r, c;
+        row_col(a, j, p, r, c);
+        if ((a.storage == Storage::lower && r < c) || (a.storage == Storage::upper && r > c)) {
+          if (!report) return false;
+          throw InvalidInput("entry (" + std::to_string(r) + ", " + std::to_string(c) +
+                             ") lies outside the stored " +
+                             (a.storage == Storage::lower ? "lower" : "upper") + " triangle");
+        }
+      }
+    }
   return true;
 }
 
@@ -141,7 +195,6 @@ void validate(const SparseMatrix& a) {
     throw InvalidInput("matrix has negative dimensions " + std::to_string(a.n_rows) + "x" +
                        std::to_string(a.n_cols));
   const index_t nmaj = a.n_major();
-  const index_t nmin = a.layout == Layout::csc ? a.n_rows : a.n_cols;
   // (compared as offsets.size() - 1 == nmaj: nmaj + 1 overflows for nmaj = INT64_MAX)
   if (a.offsets.empty() || static_cast<index_t>(a.offsets.size() - 1) != nmaj)
     throw InvalidInput("offsets has " + std::to_string(a.offsets.size()) + " entries, expected " +
@@ -159,25 +212,10 @@ void validate(const SparseMatrix& a) {
                        std::to_string(nnz));
   if (a.storage != Storage::full && a.n_rows != a.n_cols)
     throw InvalidInput("symmetric (lower/upper) storage needs a square matrix");
-  for (index_t j = 0; j < nmaj; ++j)
-    for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p) {
-      const index_t i = a.indices[p];
-      if (i < 0 || i >= nmin)
-        throw InvalidInput(at("indices", p) + " = " + std::to_string(i) + " is out of range [0, " +
-                           std::to_string(nmin) + ")");
-      if (!a.values.empty() && !std::isfinite(a.values[p]))
-        throw InvalidInput(at("values", p) + " is not finite (row " +
-                           std::to_string(a.layout == Layout::csc ? i : j) + ", column " +
-                           std::to_string(a.layout == Layout::csc ? j : i) + ")");
-      if (a.storage != Storage::full) {
-        index_t r, c;
-        row_col(a, j, p, r, c);
-        if ((a.storage == Storage::lower && r < c) || (a.storage == Storage::upper && r > c))
-          throw InvalidInput("entry (" + std::to_string(r) + ", " + std::to_string(c) +
-                             ") lies outside the stored " +
-                             (a.storage == Storage::lower ? "lower" : "upper") + " triangle");
-      }
-    }
+  // the entries over the threads; where one is bad, again in order for the first one's
+  // message
+  if (!every_range(a, [&](index_t j0, index_t j1) { return entries_valid(a, j0, j1, false); }))
+    entries_valid(a, 0, nmaj, true);
 }
 
 SparseMatrix canonicalize(const SparseMatrix& a) {

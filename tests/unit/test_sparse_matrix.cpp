@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <random>
+#include <string>
 
 #include "sparse/generators.hpp"
 #include "strata/errors.hpp"
@@ -125,6 +127,54 @@ TEST(SparseMatrix, ValidateNamesTheProblem) {
   EXPECT_NO_THROW(validate(a));
   a.values.resize(2);
   EXPECT_THROW(validate(a), InvalidInput);
+}
+
+// A matrix large enough for the checks to run over the threads (2^16 entries or more):
+// the message still names the first bad entry, wherever the others lie; an unsorted
+// column is still found and sorted.
+TEST(SparseMatrix, ValidateALargeMatrixNamesTheFirstBadEntry) {
+  std::mt19937_64 rng(std::random_device{}());
+  const SparseMatrix good = generators::laplacian_3d(31, 29, 27);
+  const auto nnz = static_cast<index_t>(good.nnz());
+  ASSERT_GE(nnz, index_t{1} << 16);
+  EXPECT_NO_THROW(validate(good));
+  auto message = [](const SparseMatrix& m) {
+    try {
+      validate(m);
+    } catch (const InvalidInput& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  for (int trial = 0; trial < 5; ++trial) {
+    std::uniform_int_distribution<index_t> at(0, nnz - 1);
+    index_t p1 = at(rng), p2 = at(rng);
+    while (p2 == p1) p2 = at(rng);
+    if (p2 < p1) std::swap(p1, p2);
+    SparseMatrix a = good;
+    a.values[p1] = std::nan("");
+    a.indices[p2] = good.n_rows + 7;
+    EXPECT_NE(message(a).find("values[" + std::to_string(p1) + "] is not finite"),
+              std::string::npos)
+        << message(a);
+    a = good;
+    a.indices[p1] = -1;
+    a.values[p2] = INFINITY;
+    EXPECT_NE(message(a).find("indices[" + std::to_string(p1) + "] = -1"), std::string::npos)
+        << message(a);
+  }
+  SparseMatrix unsorted = good;
+  const index_t j = good.n_cols / 2;
+  std::swap(unsorted.indices[unsorted.offsets[j]], unsorted.indices[unsorted.offsets[j] + 1]);
+  std::swap(unsorted.values[unsorted.offsets[j]], unsorted.values[unsorted.offsets[j] + 1]);
+  const SparseMatrix sorted = expand_symmetric(unsorted), reference = expand_symmetric(good);
+  EXPECT_EQ(sorted.offsets, reference.offsets);
+  EXPECT_EQ(sorted.indices, reference.indices);
+  EXPECT_EQ(sorted.values, reference.values);
+  SparseMatrix full_unsorted = reference;  // full storage: only the sortedness check differs
+  std::swap(full_unsorted.indices[full_unsorted.offsets[j]],
+            full_unsorted.indices[full_unsorted.offsets[j] + 1]);
+  EXPECT_EQ(expand_symmetric(full_unsorted).indices, reference.indices);
 }
 
 TEST(SparseMatrix, NumericalSymmetry) {
