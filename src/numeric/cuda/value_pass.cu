@@ -28,6 +28,7 @@
 #include <cmath>
 
 #include "numeric/cuda/cuda_executor.hpp"
+#include "sparse/bucket_entries.hpp"
 
 namespace strata::cuda {
 namespace {
@@ -169,20 +170,22 @@ void CudaExecutor::prepare_value_pass(const Analysis& an) {
   const std::size_t nnz = an.pattern_indices.size();
   // positions and indices are stored in 32 bits; a pattern this large keeps the host pass
   if (nnz >= static_cast<std::size_t>(INT32_MAX) || an.pattern_offsets.size() != n + 1) return;
-  // the row-wise map of the canonical pattern: a counting sort of the entries by row
-  std::vector<std::int64_t> row_ptr(n + 1, 0);
-  for (index_t i : an.pattern_indices) ++row_ptr[static_cast<std::size_t>(i) + 1];
-  for (std::size_t i = 0; i < n; ++i) row_ptr[i + 1] += row_ptr[i];
+  // the row-wise map of the canonical pattern: a stable counting sort of the entries by
+  // row over the host's threads (sparse/bucket_entries.hpp: each row's entries in column
+  // order, whatever the thread count)
   std::vector<int> row_pos(nnz), row_col(nnz), col_row(nnz);
-  std::vector<std::int64_t> next(row_ptr.begin(), row_ptr.end() - 1);
-  for (std::size_t j = 0; j < n; ++j)
-    for (index_t p = an.pattern_offsets[j]; p < an.pattern_offsets[j + 1]; ++p) {
-      const auto i = static_cast<std::size_t>(an.pattern_indices[p]);
-      const std::int64_t q = next[i]++;
-      row_pos[q] = static_cast<int>(p);
-      row_col[q] = static_cast<int>(j);
-      col_row[p] = static_cast<int>(i);
-    }
+  const std::vector<index_t> by_row = detail::bucket_entries(
+      an.n, an.n,
+      [&](index_t j) {
+        return std::pair<index_t, index_t>{an.pattern_offsets[j], an.pattern_offsets[j + 1]};
+      },
+      [&](index_t, index_t p) { return an.pattern_indices[p]; },
+      [&](index_t q, index_t j, index_t p) {
+        row_pos[q] = static_cast<int>(p);
+        row_col[q] = static_cast<int>(j);
+        col_row[p] = static_cast<int>(an.pattern_indices[p]);
+      });
+  const std::vector<std::int64_t> row_ptr(by_row.begin(), by_row.end());
   ValuePass& v = value_pass_;
   try {
     upload(v.row_ptr, row_ptr);
