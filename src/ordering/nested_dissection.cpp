@@ -84,6 +84,7 @@
 // (1996) for the leaves.
 #include <metis.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -96,6 +97,7 @@
 #include <numeric>
 #include <string>
 
+#include "base/parallel_ranges.hpp"
 #include "base/serial_scope.hpp"
 #include "ordering/metis_random.hpp"
 #include "ordering/ordering.hpp"
@@ -129,44 +131,125 @@ struct Compressed {
 
 // Compression as in METIS's CompressGraph: vertices are sorted by the sum of their closed
 // neighbourhood, and within a run of equal sums a vertex joins the group of an earlier
-// one when it has the same degree and its closed neighbourhood is marked by the earlier
-// vertex's. Isolated vertices are never merged (their closed neighbourhoods differ).
+// one when it has the same degree and the same closed neighbourhood. Isolated vertices
+// are never merged (their closed neighbourhoods differ). Groups are numbered in the order
+// of their first members in the sorted list.
+//
+// Over the threads (graphs whose adjacency lists are sorted, as graph_of and
+// graph_of_symmetric_pattern make them): the sums, the sort (the keys are distinct: the
+// vertex breaks ties), the comparison of closed neighbourhoods within each run (runs are
+// independent; two sorted lists are compared by merging, without a mark array) and the
+// compressed adjacency lists run in ranges; the numbering of groups is one sequential
+// pass. The result is that of the sequential marking, which an unsorted graph still gets.
+
+// Whether u and v (u ≠ v, equal degrees) have the same closed neighbourhood, their
+// adjacency lists being sorted: the merged sequences adj(u) ∪ {u} and adj(v) ∪ {v}.
+bool same_closed_neighbourhood(const Graph& g, index_t u, index_t v) {
+  index_t pu = g.xadj[u], pv = g.xadj[v];
+  const index_t eu = g.xadj[u + 1], ev = g.xadj[v + 1];
+  bool u_done = false, v_done = false;  // u (v) taken from its own sequence
+  for (;;) {
+    const bool u_end = pu == eu && u_done, v_end = pv == ev && v_done;
+    if (u_end || v_end) return u_end && v_end;
+    index_t a;
+    if (!u_done && (pu == eu || u < g.adjncy[pu])) {
+      a = u;
+      u_done = true;
+    } else {
+      a = g.adjncy[pu++];
+    }
+    index_t b;
+    if (!v_done && (pv == ev || v < g.adjncy[pv])) {
+      b = v;
+      v_done = true;
+    } else {
+      b = g.adjncy[pv++];
+    }
+    if (a != b) return false;
+  }
+}
+
+bool adjacency_sorted(const Graph& g) {
+  std::atomic<bool> sorted{true};
+  detail::parallel_ranges(g.n, 1024, [&](index_t v0, index_t v1) {
+    for (index_t v = v0; v < v1 && sorted.load(std::memory_order_relaxed); ++v)
+      for (index_t p = g.xadj[v] + 1; p < g.xadj[v + 1]; ++p)
+        if (g.adjncy[p] <= g.adjncy[p - 1]) sorted = false;
+  });
+  return sorted;
+}
+
 Compressed compress(const Graph& g) {
   const index_t n = g.n;
   Compressed c;
   if (n < 2) return c;
   std::vector<std::pair<std::uint64_t, index_t>> keys(n);
-  for (index_t v = 0; v < n; ++v) {
-    std::uint64_t s = static_cast<std::uint64_t>(v);
-    for (index_t p = g.xadj[v]; p < g.xadj[v + 1]; ++p)
-      s += static_cast<std::uint64_t>(g.adjncy[p]);
-    keys[v] = {s, v};
-  }
-  std::sort(keys.begin(), keys.end());
-  std::vector<index_t> group(n, -1), mark(n, -1);
-  index_t cn = 0;
-  std::vector<index_t> rep;  // representative (first member) of each compressed vertex
-  rep.reserve(n);
-  for (index_t a = 0; a < n; ++a) {
-    const index_t u = keys[a].second;
-    if (group[u] >= 0) continue;
-    group[u] = cn;
-    rep.push_back(u);
-    const index_t du = g.xadj[u + 1] - g.xadj[u];
-    if (du > 0) {
+  detail::parallel_ranges(n, 1024, [&](index_t v0, index_t v1) {
+    for (index_t v = v0; v < v1; ++v) {
+      std::uint64_t s = static_cast<std::uint64_t>(v);
+      for (index_t p = g.xadj[v]; p < g.xadj[v + 1]; ++p)
+        s += static_cast<std::uint64_t>(g.adjncy[p]);
+      keys[v] = {s, v};
+    }
+  });
+  if (detail::serial_passes())
+    std::sort(keys.begin(), keys.end());
+  else
+    tbb::parallel_sort(keys.begin(), keys.end());
+  // rep[v]: the first vertex of v's group in the sorted order
+  std::vector<index_t> rep(n, -1);
+  if (adjacency_sorted(g)) {
+    std::vector<index_t> run_start{0};  // runs of equal sums in the sorted order
+    for (index_t a = 1; a < n; ++a)
+      if (keys[a].first != keys[a - 1].first) run_start.push_back(a);
+    run_start.push_back(n);
+    const auto runs = static_cast<index_t>(run_start.size()) - 1;
+    detail::parallel_ranges(runs, 256, [&](index_t r0, index_t r1) {
+      for (index_t r = r0; r < r1; ++r)
+        for (index_t a = run_start[r]; a < run_start[r + 1]; ++a) {
+          const index_t u = keys[a].second;
+          if (rep[u] >= 0) continue;
+          rep[u] = u;
+          const index_t du = g.xadj[u + 1] - g.xadj[u];
+          if (du == 0) continue;
+          for (index_t b = a + 1; b < run_start[r + 1]; ++b) {
+            const index_t v = keys[b].second;
+            if (rep[v] < 0 && g.xadj[v + 1] - g.xadj[v] == du && same_closed_neighbourhood(g, u, v))
+              rep[v] = u;
+          }
+        }
+    });
+  } else {  // the sequential marking of closed neighbourhoods
+    std::vector<index_t> mark(n, -1);
+    for (index_t a = 0; a < n; ++a) {
+      const index_t u = keys[a].second;
+      if (rep[u] >= 0) continue;
+      rep[u] = u;
+      const index_t du = g.xadj[u + 1] - g.xadj[u];
+      if (du == 0) continue;
       mark[u] = u;
       for (index_t p = g.xadj[u]; p < g.xadj[u + 1]; ++p) mark[g.adjncy[p]] = u;
       for (index_t b = a + 1; b < n && keys[b].first == keys[a].first; ++b) {
         const index_t v = keys[b].second;
-        if (group[v] >= 0 || g.xadj[v + 1] - g.xadj[v] != du || mark[v] != u) continue;
+        if (rep[v] >= 0 || g.xadj[v + 1] - g.xadj[v] != du || mark[v] != u) continue;
         bool same = true;
         for (index_t p = g.xadj[v]; p < g.xadj[v + 1] && same; ++p) same = mark[g.adjncy[p]] == u;
-        if (same) group[v] = cn;
+        if (same) rep[v] = u;
       }
     }
-    ++cn;
   }
+  std::vector<index_t> group(n, -1), first;  // first: the representative of each group
+  first.reserve(n);
+  for (index_t a = 0; a < n; ++a) {
+    const index_t u = keys[a].second;
+    if (rep[u] == u) {
+      group[u] = static_cast<index_t>(first.size());
+      first.push_back(u);
+    }
+  }
+  const auto cn = static_cast<index_t>(first.size());
   if (static_cast<double>(cn) >= kCompressionFraction * static_cast<double>(n)) return c;
+  for (index_t v = 0; v < n; ++v) group[v] = group[rep[v]];
 
   c.active = true;
   c.n = cn;
@@ -178,23 +261,39 @@ Compressed compress(const Graph& g) {
     std::vector<index_t> next(c.mptr.begin(), c.mptr.end() - 1);
     for (index_t v = 0; v < n; ++v) c.members[next[group[v]]++] = v;
   }
-  // Adjacency of a compressed vertex: the groups of its representative's neighbours. All
-  // members of a neighbouring group are neighbours too, so each group is met exactly
-  // |group| times; `mark` (reset to -1) keeps the first.
-  std::fill(mark.begin(), mark.end(), -1);
+  // Adjacency of a compressed vertex: the groups of its representative's neighbours (all
+  // members of a neighbouring group are neighbours too), sorted, without repeats or the
+  // vertex itself; in fixed ranges of compressed vertices, each into its own list, joined
+  // in order.
+  const index_t ranges =
+      detail::serial_passes() || cn < 4096 ? 1 : std::min<index_t>(cn / 4096, 256);
+  std::vector<std::vector<index_t>> part(ranges);
   c.xadj.assign(cn + 1, 0);
-  for (index_t k = 0; k < cn; ++k) {
-    const index_t u = rep[k];
-    mark[k] = k;
-    for (index_t p = g.xadj[u]; p < g.xadj[u + 1]; ++p) {
-      const index_t h = group[g.adjncy[p]];
-      if (mark[h] == k) continue;
-      mark[h] = k;
-      c.adjncy.push_back(h);
+  auto range_of = [&](index_t r) { return static_cast<index_t>(std::int64_t{cn} * r / ranges); };
+  auto build = [&](index_t r) {
+    std::vector<index_t>& out = part[r];
+    for (index_t k = range_of(r); k < range_of(r + 1); ++k) {
+      const index_t u = first[k];
+      const std::size_t at = out.size();
+      for (index_t p = g.xadj[u]; p < g.xadj[u + 1]; ++p) {
+        const index_t h = group[g.adjncy[p]];
+        if (h != k) out.push_back(h);
+      }
+      std::sort(out.begin() + static_cast<std::ptrdiff_t>(at), out.end());
+      out.erase(std::unique(out.begin() + static_cast<std::ptrdiff_t>(at), out.end()), out.end());
+      c.xadj[k + 1] = static_cast<index_t>(out.size() - at);
     }
-    std::sort(c.adjncy.begin() + c.xadj[k], c.adjncy.end());
-    c.xadj[k + 1] = static_cast<index_t>(c.adjncy.size());
-  }
+  };
+  if (ranges == 1)
+    build(0);
+  else
+    tbb::parallel_for(index_t{0}, ranges, build);
+  for (index_t k = 0; k < cn; ++k) c.xadj[k + 1] += c.xadj[k];
+  c.adjncy.resize(c.xadj[cn]);
+  detail::parallel_ranges(ranges, 1, [&](index_t r0, index_t r1) {
+    for (index_t r = r0; r < r1; ++r)
+      std::copy(part[r].begin(), part[r].end(), c.adjncy.begin() + c.xadj[range_of(r)]);
+  });
   return c;
 }
 
