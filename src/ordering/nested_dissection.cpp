@@ -145,28 +145,24 @@ struct Compressed {
 // Whether u and v (u ≠ v, equal degrees) have the same closed neighbourhood, their
 // adjacency lists being sorted: the merged sequences adj(u) ∪ {u} and adj(v) ∪ {v}.
 bool same_closed_neighbourhood(const Graph& g, index_t u, index_t v) {
-  index_t pu = g.xadj[u], pv = g.xadj[v];
-  const index_t eu = g.xadj[u + 1], ev = g.xadj[v + 1];
-  bool u_done = false, v_done = false;  // u (v) taken from its own sequence
-  for (;;) {
-    const bool u_end = pu == eu && u_done, v_end = pv == ev && v_done;
-    if (u_end || v_end) return u_end && v_end;
-    index_t a;
-    if (!u_done && (pu == eu || u < g.adjncy[pu])) {
-      a = u;
-      u_done = true;
-    } else {
-      a = g.adjncy[pu++];
+  // one vertex's closed neighbourhood in increasing order: its list with itself merged in
+  struct Closed {
+    const Graph& g;
+    index_t self, p, end;
+    bool self_done = false;
+    bool empty() const { return p == end && self_done; }
+    index_t next() {
+      if (!self_done && (p == end || self < g.adjncy[p])) {
+        self_done = true;
+        return self;
+      }
+      return g.adjncy[p++];
     }
-    index_t b;
-    if (!v_done && (pv == ev || v < g.adjncy[pv])) {
-      b = v;
-      v_done = true;
-    } else {
-      b = g.adjncy[pv++];
-    }
-    if (a != b) return false;
-  }
+  };
+  Closed a{g, u, g.xadj[u], g.xadj[u + 1]}, b{g, v, g.xadj[v], g.xadj[v + 1]};
+  while (!a.empty() && !b.empty())
+    if (a.next() != b.next()) return false;
+  return a.empty() && b.empty();
 }
 
 bool adjacency_sorted(const Graph& g) {
