@@ -3,6 +3,7 @@
 
 #include <stdlib.h>
 
+#include <cstdint>
 #include <cstring>
 
 namespace strata::ordering {
@@ -17,7 +18,7 @@ struct ThreadRandom {
   bool seeded = false;
   bool initialised = false;
   random_data data;
-  char state[kStateBytes];
+  alignas(std::int32_t) char state[kStateBytes];
 };
 
 ThreadRandom& thread_random() noexcept {
