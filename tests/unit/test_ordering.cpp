@@ -597,7 +597,9 @@ TEST(NestedDissection, SameOrderingOnAnyThreadCount) {
   cases.push_back({graph_of(generators::laplacian_3d(20, 20, 20)), true});
   cases.push_back({graph_of(generators::elasticity_3d(12, 12, 12)), true});
   cases.push_back({disconnected_graph(rng), false});
-  for (const auto& [g, large] : cases) {
+  for (const Case& c : cases) {
+    const Graph& g = c.g;  // (a structured binding cannot be captured by clang's C++20)
+    const bool large = c.large;
     for (const int balance_levels : {0, 2}) {
       NestedDissectionOptions o;
       o.leaf_size = 32;
