@@ -27,6 +27,7 @@
 #include <algorithm>
 #include <utility>
 
+#include "base/parallel_ranges.hpp"
 #include "base/serial_scope.hpp"
 #include "ordering/ordering.hpp"
 #include "sparse/bucket_entries.hpp"
@@ -35,15 +36,11 @@ namespace strata::detail {
 namespace {
 
 // Runs body(j) for j in [0, n) over the calling arena's threads, in ranges of 256 or more
-// (on the calling thread alone inside a SerialScope).
+// (on the calling thread alone inside a SerialScope: base/parallel_ranges.hpp).
 template <class Body>
 void for_each_index(index_t n, Body body) {
-  if (serial_passes()) {
-    for (index_t j = 0; j < n; ++j) body(j);
-    return;
-  }
-  tbb::parallel_for(tbb::blocked_range<index_t>(0, n, 256), [&](const auto& r) {
-    for (index_t j = r.begin(); j < r.end(); ++j) body(j);
+  detail::parallel_ranges(n, 256, [&](index_t j0, index_t j1) {
+    for (index_t j = j0; j < j1; ++j) body(j);
   });
 }
 
