@@ -20,6 +20,7 @@
 #include <cmath>
 #include <cstdint>
 #include <mutex>
+#include <span>
 #include <string>
 #include <utility>
 #include <vector>
@@ -91,6 +92,35 @@ class Force {
   /// g(q, v, a, t) with local vectors; Jacobians when jacobian=true.
   virtual void evaluate(const double* q, const double* v, const double* a, double t, bool jacobian,
                         ForceEval& out) const = 0;
+  /// The structure of ∂g/∂a (uses_a): the positions i·nz + j (nz = dofs.size(), row-major
+  /// as ForceEval::da) of the mass block's entries that may be nonzero, ascending; empty
+  /// (the default) when any of the nz² may be. Entries outside it are exactly zero at every
+  /// state (tests/unit/test_mbd_jacobians.cpp checks), and the initial acceleration
+  /// analysis's matrix leaves them out (a hexahedron's M ⊗ I₃ has 192 of 576). The Newton
+  /// matrix keeps whole blocks: with them a node's coordinates have the same rows there,
+  /// which the nested dissection compresses to one vertex.
+  virtual std::span<const std::uint32_t> mass_structure() const { return {}; }
+  /// The number of entries of the mass block in the acceleration analysis's matrix:
+  /// mass_structure()'s, or dofs.size()² when it is empty; 0 without inertia.
+  std::size_t mass_entries() const {
+    if (!uses_a) return 0;
+    const std::size_t listed = mass_structure().size();
+    return listed ? listed : dofs.size() * dofs.size();
+  }
+  /// Calls put(i, j) (local indices) for each entry of mass_structure() (all nz² when it is
+  /// empty, none without inertia), in row-major order.
+  template <class Put>
+  void for_each_mass_entry(Put&& put) const {
+    if (!uses_a) return;
+    const std::size_t nz = dofs.size();
+    const std::span<const std::uint32_t> listed = mass_structure();
+    if (listed.empty()) {
+      for (std::size_t i = 0; i < nz; ++i)
+        for (std::size_t j = 0; j < nz; ++j) put(i, j);
+    } else {
+      for (const std::uint32_t s : listed) put(s / nz, s % nz);
+    }
+  }
   virtual double kinetic_energy(const double* q, const double* v) const { return 0; }
   virtual double potential_energy(const double* q, double t) const { return 0; }
   /// ∂g/∂a at local (q, v, t) with a = 0 into `da` (dofs.size()² entries, row-major as

@@ -108,6 +108,18 @@ class Hexahedron : public Force {
     }
   }
 
+  // M ⊗ I₃ couples a node's coordinate only with the same coordinate of the other nodes
+  std::span<const std::uint32_t> mass_structure() const override {
+    static const std::array<std::uint32_t, 192> structure = [] {
+      std::array<std::uint32_t, 192> s{};
+      std::size_t k = 0;
+      for (std::uint32_t r = 0; r < 24; ++r)
+        for (std::uint32_t c = r % 3; c < 24; c += 3) s[k++] = r * 24 + c;
+      return s;
+    }();
+    return structure;
+  }
+
   // the consistent mass matrix, constant: M ⊗ I₃ in the nodes' (x, y, z) order
   void mass_matrix(const double*, const double*, double, std::vector<double>& da) const override {
     da.assign(576, 0.0);

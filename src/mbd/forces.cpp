@@ -3,7 +3,10 @@
 // velocities (Jet1), then maps them to generalized forces with add_wrench2/3.
 #include "mbd/forces.hpp"
 
+#include <array>
 #include <cmath>
+#include <cstdint>
+#include <span>
 
 namespace strata::mbd {
 namespace {
@@ -40,10 +43,13 @@ class InertiaOf : public InertiaT<InertiaOf<K, NZ>, NZ> {
     return k_.kinetic(q, v);
   }
   double potential_energy(const double* q, double) const override { return k_.potential(q); }
+  std::span<const std::uint32_t> mass_structure() const override { return K::kMassStructure; }
   K k_;
 };
 
 struct PlanarBody {
+  // the mass matrix diag(m, m, J): the body's reference point is its centre of mass
+  static constexpr std::array<std::uint32_t, 3> kMassStructure{0, 4, 8};
   double m, J;
   Vec3<double> g;
   template <class S>
@@ -59,6 +65,9 @@ struct PlanarBody {
 };
 
 struct SpatialBody {
+  // m I₃ for the centre of mass's position, 4 Gᵀ J G for the Euler parameters, no coupling
+  static constexpr std::array<std::uint32_t, 19> kMassStructure{
+      0, 8, 16, 24, 25, 26, 27, 31, 32, 33, 34, 38, 39, 40, 41, 45, 46, 47, 48};
   double m;
   Mat3<double> J;
   Vec3<double> g;

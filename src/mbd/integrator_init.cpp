@@ -175,13 +175,40 @@ std::vector<double> Integrator::solve_partitioned(const SparseRows& rows,
   return solve_once(from_triplets(n, n, ri, ci, vals, sys_.arena()), b, what);
 }
 
+// --verbose: the phases of one set-up solve (the matrix's size, the solver's analysis split
+// as for the Newton matrix, its factorization and solve).
+void Integrator::report_set_up_solve(const char* what, const char* method, const SparseMatrix& k,
+                                     const LinearSolver& s, double analysis, double factorization,
+                                     double solve) const {
+  if (!opts_.verbose) return;
+  std::string split;
+  if (const Stats* ss = s.stats()) {
+    const AnalysisStats& as = ss->analysis;
+    split = fmt::format(
+        " (matching and ordering {:.3f}, symbolic {:.3f}, plan {:.3f}, device "
+        "set-up {:.3f})",
+        as.ordering_seconds, as.symbolic_seconds, as.plan_seconds, as.device_setup_seconds);
+  }
+  fmt::print(stderr,
+             "initial conditions: {} solve by {} ({} rows, {} entries, nnz(L) {}): analysis "
+             "{:.3f} s{}, factorization {:.3f} s, solve {:.3f} s\n",
+             what, method, k.n_rows, k.nnz(), s.factor_entries(), analysis, split, factorization,
+             solve);
+}
+
 std::vector<double> Integrator::solve_once(const SparseMatrix& k, const std::vector<double>& b,
                                            const char* what) const {
   auto s = new_solver();
+  Timer t;
   s->analyze(k);
+  const double analysis = t.seconds();
+  t.reset();
   s->factorize(k);
+  const double factorization = t.seconds();
+  t.reset();
   std::vector<double> x(b.size());
   s->solve(b.data(), x.data());
+  report_set_up_solve(what, "LU", k, *s, analysis, factorization, t.seconds());
   if (!all_finite(x))
     throw SimulationError(std::string("initial conditions: the ") + what +
                           " analysis produced non-finite values");
@@ -202,10 +229,16 @@ std::vector<double> Integrator::solve_symmetric_once(const SparseMatrix& k,
   Options o = opts_.solver;  // the Newton matrix's, but for its type
   o.type = MatrixType::symmetric_indefinite;
   auto s = make_strata_symmetric_solver(o);
+  Timer t;
   s->analyze(k);
+  const double analysis = t.seconds();
+  t.reset();
   s->factorize(k);
+  const double factorization = t.seconds();
+  t.reset();
   std::vector<double> x(b.size());
   s->solve(b.data(), x.data());
+  report_set_up_solve(what, "LDLT", k, *s, analysis, factorization, t.seconds());
   if (all_finite(x) &&
       (s->perturbed_pivots() == 0 || s->backward_error() <= opts_.solver.refinement_tolerance))
     return x;

@@ -732,12 +732,13 @@ void NewtonSystem::force_values(const double* q, const double* v, const double* 
 void NewtonSystem::mass_triplets(const double* q, const double* v, double t,
                                  std::vector<index_t>& rows, std::vector<index_t>& cols,
                                  std::vector<double>& vals) const {
-  // each element's nz² block at its own offset, so elements are evaluated in parallel
+  // each element's mass block (Force::mass_structure) at its own offset, so elements are
+  // evaluated in parallel
   const std::size_t nf = model_.forces.size(), base = rows.size();
   std::vector<std::size_t> offset(nf + 1, base);
   for (std::size_t e = 0; e < nf; ++e) {
     const Force& f = *model_.forces[e];
-    offset[e + 1] = offset[e] + (f.uses_a ? f.dofs.size() * f.dofs.size() : 0);
+    offset[e + 1] = offset[e] + f.mass_entries();
   }
   rows.resize(offset[nf]);
   cols.resize(offset[nf]);
@@ -751,12 +752,12 @@ void NewtonSystem::mass_triplets(const double* q, const double* v, double t,
       gather(f.dofs, v, lv);
       f.mass_matrix(lq.data(), lv.data(), t, da);
       const std::size_t nz = f.dofs.size();
-      for (std::size_t i = 0, k = offset[e]; i < nz; ++i)
-        for (std::size_t j = 0; j < nz; ++j, ++k) {
-          rows[k] = f.dofs[i];
-          cols[k] = f.dofs[j];
-          vals[k] = da[i * nz + j];
-        }
+      std::size_t k = offset[e];
+      f.for_each_mass_entry([&](std::size_t i, std::size_t j) {
+        rows[k] = f.dofs[i];
+        cols[k] = f.dofs[j];
+        vals[k++] = da[i * nz + j];
+      });
     }
   };
   for_element_ranges(nf, blocks);

@@ -149,7 +149,8 @@ class NewtonSystem {
   SparseRows model_constraint_jacobian(const double* q, double t) const;
   /// Σ g(q, v, a, t) (n), and optionally the mass matrix ∂g/∂a as triplets.
   void force_values(const double* q, const double* v, const double* a, double t, double* g) const;
-  /// ∂g/∂a entries (row, col, value), for the initial acceleration analysis.
+  /// ∂g/∂a entries (row, col, value) within each element's Force::mass_structure, appended,
+  /// for the initial acceleration analysis.
   void mass_triplets(const double* q, const double* v, double t, std::vector<index_t>& rows,
                      std::vector<index_t>& cols, std::vector<double>& vals) const;
   /// Kinetic and potential energy at (q, v, t).

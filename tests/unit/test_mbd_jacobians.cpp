@@ -223,6 +223,27 @@ int check_model(const Model& m, std::mt19937_64& rng) {
     expect_close(e.dq, fq, "dg/dq");
     if (f->uses_v) expect_close(e.dv, fv, "dg/dv");
     if (f->uses_a) expect_close(e.da, fa, "dg/da");
+    // the declared mass structure: ascending positions of the nz × nz block, and every
+    // entry outside it exactly zero (the Newton matrix leaves those out)
+    const auto listed = f->mass_structure();
+    if (f->uses_a && !listed.empty()) {
+      std::vector<char> in(nz * nz, 0);
+      for (std::size_t k = 0; k < listed.size(); ++k) {
+        EXPECT_LT(listed[k], nz * nz) << f->name;
+        if (k) EXPECT_LT(listed[k - 1], listed[k]) << f->name << ": not ascending";
+        if (listed[k] < nz * nz) in[listed[k]] = 1;
+      }
+      std::vector<double> mass;
+      f->mass_matrix(q.data(), v.data(), t, mass);
+      for (std::size_t k = 0; k < nz * nz; ++k)
+        if (!in[k]) {
+          EXPECT_EQ(e.da[k], 0.0) << f->name << ": dg/da(" << k / nz << ", " << k % nz
+                                  << ") outside the mass structure";
+          EXPECT_EQ(mass[k], 0.0) << f->name << ": mass_matrix outside the mass structure";
+          EXPECT_LT(std::abs(fa[k]), 1e-7) << f->name << ": finite difference outside it";
+        }
+      EXPECT_EQ(f->mass_entries(), listed.size());
+    }
     double fvmax = 0, famax = 0;
     for (double x : fv) fvmax = std::max(fvmax, std::abs(x));
     for (double x : fa) famax = std::max(famax, std::abs(x));
