@@ -153,26 +153,37 @@ void Integrator::initial_positions() {
   }
 }
 
-// x = [Φ_q; Uᵀ]⁻¹ b for the current partition (one sparse solve by strata).
+// x = [Φ_q; Uᵀ]⁻¹ b for the current partition. The rows of Uᵀ give the independent
+// coordinates (x_i = b[m + k]); the dependent ones solve the square m × m system
+// Φ_q(:, d) x_d = b[0:m] − Φ_q(:, i) x_i (one sparse solve by strata), which the partition
+// made nonsingular.
 std::vector<double> Integrator::solve_partitioned(const SparseRows& rows,
                                                   const std::vector<double>& b,
                                                   const char* what) const {
   const index_t n = sys_.n(), m = sys_.m();
+  std::vector<double> x(n, 0.0);
+  const auto& ind = partition_.independent;
+  for (std::size_t k = 0; k < ind.size(); ++k) x[ind[k]] = b[m + static_cast<index_t>(k)];
+  if (m == 0) return x;
+  std::vector<index_t> reduced(n, -1);  // a dependent coordinate's column in Φ_q(:, d)
+  for (index_t r = 0; r < m; ++r) reduced[partition_.dependent[r]] = r;
   std::vector<index_t> ri, ci;
-  std::vector<double> vals;
+  std::vector<double> vals, rhs(b.begin(), b.begin() + m);
   for (index_t r = 0; r < m; ++r)
     for (index_t p = rows.ptr[r]; p < rows.ptr[r + 1]; ++p) {
-      ri.push_back(r);
-      ci.push_back(rows.cols[p]);
-      vals.push_back(rows.vals[p]);
+      const index_t c = rows.cols[p];
+      if (reduced[c] >= 0) {
+        ri.push_back(r);
+        ci.push_back(reduced[c]);
+        vals.push_back(rows.vals[p]);
+      } else {
+        rhs[r] -= rows.vals[p] * x[c];
+      }
     }
-  const auto& ind = partition_.independent;
-  for (std::size_t k = 0; k < ind.size(); ++k) {
-    ri.push_back(m + static_cast<index_t>(k));
-    ci.push_back(ind[k]);
-    vals.push_back(1.0);
-  }
-  return solve_once(from_triplets(n, n, ri, ci, vals, sys_.arena()), b, what);
+  const std::vector<double> xd =
+      solve_once(from_triplets(m, m, ri, ci, vals, sys_.arena()), rhs, what);
+  for (index_t r = 0; r < m; ++r) x[partition_.dependent[r]] = xd[r];
+  return x;
 }
 
 // --verbose: the phases of one set-up solve (the matrix's size, the solver's analysis split
