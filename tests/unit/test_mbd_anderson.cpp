@@ -130,7 +130,9 @@ TEST(Anderson, ShallowDepthOutrunsThePlainIterationOnALargeMap) {
   AndersonMixing plain(0), aa(3);
   const std::vector<double> xp = iterate(f, plain, w, 60), xa = iterate(f, aa, w, 60);
   EXPECT_GT(max_rel_error(xp, ref), 1e-4);
-  EXPECT_LT(max_rel_error(xa, ref), 1e-10);
+  // depth 3's error after 60 maps is limited by the rounding of its least-squares fits, which
+  // spreads up to about 1e-10 over fresh draws: five orders below the plain iteration's
+  EXPECT_LT(max_rel_error(xa, ref), 1e-9);
 }
 
 TEST(Anderson, StalledIteratesStayFinite) {
