@@ -89,9 +89,9 @@ TEST(Anderson, DepthZeroIsThePlainIteration) {
   std::vector<double> w(5, 1.0), x(5, 0.0), g(5);
   AndersonMixing aa(0);
   const std::vector<double> y = iterate(f, aa, w, 4);
-  for (int k = 0; k < 4; ++k) {
+  for (int k = 0; k < 4; ++k) {  // x + (g(x) − x): the update as the mixing receives it
     f.apply(x.data(), g.data());
-    x = g;
+    for (int i = 0; i < 5; ++i) x[i] += g[i] - x[i];
   }
   for (int i = 0; i < 5; ++i) EXPECT_EQ(y[i], x[i]);
 }
