@@ -206,8 +206,7 @@ void Integrator::factorize(StepInfo& info, const BdfTerms& bdf, double t) {
     if (opts_.verbose)
       fmt::print(stderr, "t = {:.9g} step {}: {} perturbed pivots; analyzing again\n", t, step_ + 1,
                  solver_->perturbed_pivots());
-    analyze(bdf, t);
-    sys_.evaluate(x_.data(), t, bdf, true, res_.data());
+    analyze(bdf, t);  // evaluates the Jacobian (and the residual) at x_ again
     Timer tf2;
     solver_->factorize(sys_.matrix());
     factor_values_ = sys_.matrix().values;
@@ -305,17 +304,18 @@ int Integrator::newton(double h, StepInfo& info, const BdfTerms& bdf) {
     const bool need_jac = !factor_valid_ || refresh || !opts_.modified_newton || (dump && it == 1);
     if (need_jac && (pattern_changed_ || !solver_)) {
       Timer tan;
-      analyze(bdf, tn);
+      analyze(bdf, tn);  // the Jacobian and the residual at x_ too
       fresh_analysis_ = true;
       const double s = tan.seconds();
       info.solver_seconds += s;
       stats_.solver_seconds += s;
+    } else {
+      Timer ta;
+      sys_.evaluate(x_.data(), tn, bdf, need_jac, res_.data());
+      const double s = ta.seconds();
+      info.assembly_seconds += s;
+      stats_.assembly_seconds += s;
     }
-    Timer ta;
-    sys_.evaluate(x_.data(), tn, bdf, need_jac, res_.data());
-    const double s = ta.seconds();
-    info.assembly_seconds += s;
-    stats_.assembly_seconds += s;
     if (!all_finite(res_)) return 0;
     if (need_jac) {
       if (dump && it == 1) {

@@ -236,6 +236,7 @@ class Integrator {
   bool constraints_hold(const double* q, const double* v, double t);
   void newton_tolerances(double* atol, double* rtol) const;
   bool energy_ok(double h, int p, const double* q, const double* v, double t);
+  // The Newton matrix and the residual evaluated at x_ (sys_.matrix(), res_), then analyzed.
   void analyze(const BdfTerms& bdf, double t);
   void contacts_changed(int change, StepInfo* info);
   void factorize(StepInfo& info, const BdfTerms& bdf, double t);
