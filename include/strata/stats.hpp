@@ -87,6 +87,9 @@ struct AnalysisStats {
   /// ordering_seconds).
   index_t nd_rebisections = 0;
   double nd_balance_seconds = 0;
+  /// The matching and scaling (maximum product matching of a general matrix, symmetric
+  /// matching of a symmetric indefinite one), included in ordering_seconds.
+  double matching_seconds = 0;
   double ordering_seconds = 0;
   double symbolic_seconds = 0;
   double plan_seconds = 0;

@@ -307,6 +307,7 @@ static Analysis analyze_matrix_impl(const SparseMatrix& a, const Options& opts, 
     unmatched_row = sp.first_unmatched_row;
     an.pivot_groups = std::move(sp.groups);
   }
+  an.stats.matching_seconds = step.seconds();
   if (an.structurally_singular)
     throw InvalidInput(
         "the matrix is structurally singular: no permutation puts nonzero "

@@ -121,6 +121,7 @@ inline void to_json(nlohmann::json& j, const AnalysisStats& s) {
        {"device_setup_error", s.device_setup_error},
        {"seconds",
         {{"ordering", s.ordering_seconds},
+         {"matching", s.matching_seconds},
          {"nd_balance", s.nd_balance_seconds},
          {"symbolic", s.symbolic_seconds},
          {"plan", s.plan_seconds},

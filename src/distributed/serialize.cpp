@@ -143,6 +143,7 @@ void stats_io(IO& io, S& s) {
   io.value(s.estimated_speedup);
   io.value(s.nd_rebisections);
   io.value(s.nd_balance_seconds);
+  io.value(s.matching_seconds);
   io.value(s.ordering_seconds);
   io.value(s.symbolic_seconds);
   io.value(s.plan_seconds);

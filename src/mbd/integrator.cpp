@@ -137,9 +137,10 @@ void Integrator::analyze(const BdfTerms& bdf, double t) {
     if (ss) {  // the solver's phases (AnalysisStats), the rest is the Jacobian and copies
       const AnalysisStats& as = ss->analysis;
       fmt::print(stderr,
-                 " (matching and ordering {:.3f}, symbolic {:.3f}, plan {:.3f}, device set-up "
-                 "{:.3f}, Jacobian and copies {:.3f})",
-                 as.ordering_seconds, as.symbolic_seconds, as.plan_seconds, as.device_setup_seconds,
+                 " (matching {:.3f}, ordering {:.3f}, symbolic {:.3f}, plan {:.3f}, device "
+                 "set-up {:.3f}, Jacobian and copies {:.3f})",
+                 as.matching_seconds, as.ordering_seconds - as.matching_seconds,
+                 as.symbolic_seconds, as.plan_seconds, as.device_setup_seconds,
                  ta.seconds() - as.total_seconds);
     }
     fmt::print(stderr, "\n");
