@@ -338,9 +338,9 @@ void Integrator::initialize() {
   report_initial_change(model_.v0, v_, "velocity analysis changed the velocity of", "m/s");
   phase_done("velocity analysis");
   // acceleration analysis: [M Φ_qᵀ; Φ_q 0][a; λ] = [−g(q, v, 0); −Φ̈(q, v, 0)]
+  // Φ_q's triplets first, then M's appended (its arrays are the large ones: allocated once)
   std::vector<index_t> ri, ci;
   std::vector<double> vals;
-  sys_.mass_triplets(q_.data(), v_.data(), t_, ri, ci, vals);
   for (index_t r = 0; r < m; ++r)
     for (index_t p = rows.ptr[r]; p < rows.ptr[r + 1]; ++p) {
       ri.push_back(n + r);
@@ -350,6 +350,7 @@ void Integrator::initialize() {
       ci.push_back(n + r);
       vals.push_back(rows.vals[p]);
     }
+  sys_.mass_triplets(q_.data(), v_.data(), t_, ri, ci, vals);
   std::vector<double> g(n), rhs(n + m);
   sys_.force_values(q_.data(), v_.data(), zero.data(), t_, g.data());
   sys_.constraint_values(q_.data(), v_.data(), zero.data(), t_, nullptr, nullptr, phidd.data());
