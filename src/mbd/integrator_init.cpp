@@ -208,9 +208,20 @@ void Integrator::report_set_up_solve(const char* what, const char* method, const
              solve);
 }
 
+// The set-up's solves take the Newton matrix's solver options but their own ordering: these
+// are other matrices (a user permutation is the Newton matrix's), factored once, so the
+// ordering is chosen by CHOLMOD's rule (OrderingMethod::automatic: AMD when its factor is
+// cheap, else nested dissection).
+Options Integrator::set_up_options() const {
+  Options o = opts_.solver;
+  o.ordering = OrderingMethod::automatic;
+  o.user_permutation.clear();
+  return o;
+}
+
 std::vector<double> Integrator::solve_once(const SparseMatrix& k, const std::vector<double>& b,
                                            const char* what) const {
-  auto s = new_solver();
+  auto s = opts_.dense_solver ? make_dense_solver() : make_strata_solver(set_up_options());
   Timer t;
   s->analyze(k);
   const double analysis = t.seconds();
@@ -238,7 +249,7 @@ std::vector<double> Integrator::solve_symmetric_once(const SparseMatrix& k,
                                                      const std::vector<double>& b,
                                                      const char* what) const {
   if (opts_.dense_solver || solver_on_gpu(opts_.solver.backend)) return solve_once(k, b, what);
-  Options o = opts_.solver;  // the Newton matrix's, but for its type
+  Options o = set_up_options();
   o.type = MatrixType::symmetric_indefinite;
   auto s = make_strata_symmetric_solver(o);
   Timer t;
