@@ -312,6 +312,12 @@ void NewtonSystem::rebuild_pattern() {
   ++pattern_id_;
   for_element_ranges(elements, [&](std::size_t begin, std::size_t end) {
     for (std::size_t e = begin; e < end; ++e) {
+      if (e < nf && in_pattern_[e]) {  // a force's lists are whole blocks: sized at once
+        const std::size_t nz = model_.forces[e]->dofs.size();
+        fpos_[e].q.reserve(nz * nz);
+        if (model_.forces[e]->uses_v) fpos_[e].v.reserve(nz * nz);
+        if (model_.forces[e]->uses_a) fpos_[e].a.reserve(nz * nz);
+      }
       std::size_t at = 4 * (e - std::min(e, nf + nc));  // a BDF row's first position
       pairs(e, [&](index_t r, index_t c, std::vector<index_t>* pos) {
         if (pos)
