@@ -208,14 +208,16 @@ void Integrator::report_set_up_solve(const char* what, const char* method, const
              solve);
 }
 
-// The set-up's solves take the Newton matrix's solver options but their own ordering: these
-// are other matrices (a user permutation is the Newton matrix's), factored once, so the
-// ordering is chosen by CHOLMOD's rule (OrderingMethod::automatic: AMD when its factor is
-// cheap, else nested dissection).
+// The set-up's solves take the Newton matrix's solver options, but not a user permutation
+// (it is the Newton matrix's; these are other matrices): nested dissection instead. Not
+// CHOLMOD's rule (OrderingMethod::automatic) by default: on a large flexible body's
+// saddle-point matrix it rejects AMD and adds AMD's time to the dissection's.
 Options Integrator::set_up_options() const {
   Options o = opts_.solver;
-  o.ordering = OrderingMethod::automatic;
-  o.user_permutation.clear();
+  if (o.ordering == OrderingMethod::user) {
+    o.ordering = OrderingMethod::nested_dissection;
+    o.user_permutation.clear();
+  }
   return o;
 }
 
