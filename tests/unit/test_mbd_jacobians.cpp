@@ -224,7 +224,7 @@ int check_model(const Model& m, std::mt19937_64& rng) {
     if (f->uses_v) expect_close(e.dv, fv, "dg/dv");
     if (f->uses_a) expect_close(e.da, fa, "dg/da");
     // the declared mass structure: ascending positions of the nz × nz block, and every
-    // entry outside it exactly zero (the Newton matrix leaves those out)
+    // entry outside it exactly zero (the acceleration analysis leaves those out)
     const auto listed = f->mass_structure();
     if (f->uses_a && !listed.empty()) {
       std::vector<char> in(nz * nz, 0);
