@@ -345,10 +345,10 @@ int run_solve(const SolveArgs& a, const Communicator& comm) {
       fmt::print(
           "GPU                   {:.3f} s on the device, {:.2f} TFLOP/s, {} launch groups, {} "
           "tiled fronts; {:.1f} MB to the device, {:.1f} MB back; budget {:.1f} MB ({:.1f} MB "
-          "held){}{}\n",
+          "held), {:.1f} MB page-locked on the host{}{}\n",
           f.device_seconds, f.gflops * 1e-3, f.device_batches, f.tiled_fronts,
           f.bytes_to_device * 1e-6, f.bytes_to_host * 1e-6, f.device_budget * 1e-6,
-          f.device_working_bytes * 1e-6,
+          f.device_working_bytes * 1e-6, f.host_pinned_bytes * 1e-6,
           f.contribution_blocks_on_host ? ", contribution blocks spilled to host" : "",
           f.factor_resident ? ", factor resident (solve on the GPU)" : "");
     if (f.backend == Backend::cuda) {

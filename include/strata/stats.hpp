@@ -211,6 +211,12 @@ struct FactorStats {
   /// host (or the whole factor when it stays). Within device_budget, except where a
   /// device_memory_limit is below the pool and its staging together.
   std::size_t device_working_bytes = 0;
+  /// Bytes of page-locked host memory the GPU plan holds: the two chunk buffers the factor
+  /// panels come back through (when the factor does not stay on the device), spilled
+  /// contribution blocks, and the host copy of the largest front factored by slabs. The
+  /// plan keeps these and the host factor within the host memory available at analysis,
+  /// or throws OutOfMemory naming the bytes.
+  std::size_t host_pinned_bytes = 0;
   bool contribution_blocks_on_host = false;  ///< some blocks spilled to pinned host memory
   bool factor_resident = false;              ///< the factor stayed on the device: solve runs there
   /// Where the GPU time went (seconds, from CUDA events around each in-core launch group;

@@ -311,6 +311,7 @@ const std::vector<Field>& fields() {
       number_field("relax_zeros_3", &O::relax_zeros_3),
       integer_field("max_block_size", &O::max_block_size),
       integer_field("device_memory_limit", &O::device_memory_limit),
+      integer_field("host_memory_limit", &O::host_memory_limit),
       enum_field("backend", &O::backend),
       integer_field("num_threads", &O::num_threads),
       flag_field("reproducible", &O::reproducible),

@@ -159,6 +159,7 @@ inline void to_json(nlohmann::json& j, const FactorStats& f) {
        {"device_budget", f.device_budget},
        {"device_pool_bytes", f.device_pool_bytes},
        {"device_working_bytes", f.device_working_bytes},
+       {"host_pinned_bytes", f.host_pinned_bytes},
        {"contribution_blocks_on_host", f.contribution_blocks_on_host},
        {"factor_resident", f.factor_resident},
        {"device_phases", f.device_phases},

@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <thread>
 
+#include "base/host_copy.hpp"
 #include "base/timer.hpp"
 #include "strata/matrix_market.hpp"
 
@@ -125,7 +126,7 @@ void Integrator::analyze(const BdfTerms& bdf, double t) {
   if (!solver_) solver_ = new_solver();
   solver_->analyze(sys_.matrix());
   analyzed_pattern_ = sys_.pattern_id();
-  analysis_values_ = sys_.matrix().values;
+  keep_values(analysis_values_);
   analysis_forces_ = sys_.pattern_forces();
   analysis_factor_entries_ = solver_->factor_entries();
   stats_.analysis_seconds += ta.seconds();
@@ -191,6 +192,15 @@ void Integrator::contacts_changed(int change, StepInfo* info) {
   }
 }
 
+void Integrator::keep_values(std::vector<double>& kept) const {
+  const std::vector<double>& v = sys_.matrix().values;
+  if (kept.size() != v.size()) kept.resize(v.size());
+  if (tbb::task_arena* a = sys_.arena())
+    a->execute([&] { parallel_copy(kept.data(), v.data(), v.size()); });
+  else
+    std::copy(v.begin(), v.end(), kept.begin());
+}
+
 void Integrator::factorize(StepInfo& info, const BdfTerms& bdf, double t) {
   Timer timer;
   Timer tf;
@@ -198,7 +208,7 @@ void Integrator::factorize(StepInfo& info, const BdfTerms& bdf, double t) {
     solver_->factorize_analyzed_pattern(sys_.matrix());
   else
     solver_->factorize(sys_.matrix());
-  factor_values_ = sys_.matrix().values;
+  keep_values(factor_values_);
   stats_.factor_seconds += tf.seconds();
   if (solver_->perturbed_pivots() > 0 && !fresh_analysis_) {
     // The analysis was made for other values; with the current ones its matching may put
@@ -210,7 +220,7 @@ void Integrator::factorize(StepInfo& info, const BdfTerms& bdf, double t) {
     analyze(bdf, t);  // evaluates the Jacobian (and the residual) at x_ again
     Timer tf2;
     solver_->factorize(sys_.matrix());
-    factor_values_ = sys_.matrix().values;
+    keep_values(factor_values_);
     stats_.factor_seconds += tf2.seconds();
     ++stats_.factorizations;
   }

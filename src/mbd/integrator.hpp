@@ -241,6 +241,9 @@ class Integrator {
   void analyze(const BdfTerms& bdf, double t);
   void contacts_changed(int change, StepInfo* info);
   void factorize(StepInfo& info, const BdfTerms& bdf, double t);
+  /// kept = the Newton matrix's values (for a checkpoint), copied over the assembly's
+  /// threads: 1–2 GB for models of 10⁶ coordinates.
+  void keep_values(std::vector<double>& kept) const;
   void choose_order(double h, int p, double tn, const double* xq, const double* xv, double est);
 
   const Model& model_;

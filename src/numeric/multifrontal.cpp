@@ -102,6 +102,7 @@ void merge_device_figures(FactorStats& into, const FactorStats& one) {
   into.device_budget = std::max(into.device_budget, one.device_budget);
   into.device_pool_bytes = std::max(into.device_pool_bytes, one.device_pool_bytes);
   into.device_working_bytes = std::max(into.device_working_bytes, one.device_working_bytes);
+  into.host_pinned_bytes += one.host_pinned_bytes;
   into.contribution_blocks_on_host |= one.contribution_blocks_on_host;
   auto& d = into.device_phases;
   const auto& o = one.device_phases;

@@ -449,6 +449,61 @@ TEST_F(CudaMemory, WorkingMemoryStaysWithinTheBudget) {
   EXPECT_GT(spilled_with_room, 0);
 }
 
+// The host side of the plan: with the factor going to the host (a device budget below
+// it), the page-locked buffers and the host factor stay within Options::host_memory_limit
+// (the panels' buffers made smaller: more, smaller chunks) and the solution is unchanged;
+// a limit below the host factor itself is refused at analysis with the bytes, leaving
+// no factor to solve with.
+TEST_F(CudaMemory, HostMemoryLimitBoundsThePinnedBuffers) {
+  SparseMatrix a = expand_symmetric(generators::laplacian_3d(22, 22, 22));
+  auto rng = test::fresh_rng();
+  std::uniform_real_distribution<double> u(0.5, 1.5);
+  for (double& v : a.values) v *= u(rng);
+  Options o;
+  o.num_gpus = 1;  // one GPU, whatever the machine has
+  o.type = MatrixType::general;
+  Solver cpu(o);
+  cpu.factorize(a);
+  std::vector<double> b(a.n_rows);
+  for (double& v : b) v = u(rng);
+  const auto xc = cpu.solve(b);
+  const std::size_t factor = cpu.stats().analysis.factor_bytes;
+  o.backend = Backend::cuda;
+  o.device_memory_limit = factor / 3;
+  Solver free_host(o);
+  free_host.factorize(a);
+  const FactorStats& f0 = free_host.stats().factor;
+  ASSERT_FALSE(f0.factor_resident);
+  EXPECT_GT(f0.host_pinned_bytes, 0u);
+  const std::size_t limit = factor + factor / 4;
+  for (const std::size_t host : {limit, limit / 2}) {
+    SCOPED_TRACE("factor " + std::to_string(factor) + " bytes, host_memory_limit " +
+                 std::to_string(host));
+    Options h = o;
+    h.host_memory_limit = host;
+    Solver s(h);
+    if (host < factor) {
+      try {
+        s.factorize(a);
+        FAIL() << "expected OutOfMemory";
+      } catch (const OutOfMemory& e) {
+        EXPECT_GT(e.bytes_requested(), host);
+        EXPECT_NE(std::string(e.what()).find("host memory"), std::string::npos) << e.what();
+      }
+      EXPECT_THROW(s.solve(b), InvalidState);  // no factor that looks complete
+      continue;
+    }
+    s.factorize(a);
+    const FactorStats& fs = s.stats().factor;
+    EXPECT_LE(fs.host_pinned_bytes + factor, limit);
+    EXPECT_LE(fs.host_pinned_bytes, f0.host_pinned_bytes);
+    EXPECT_GE(fs.device_batches, f0.device_batches);
+    const auto x = s.solve(b);
+    EXPECT_LT(test::backward_error(a, x.data(), b.data()), 1e-14);
+    EXPECT_LT(test::relative_difference(x, xc), 1e-8);
+  }
+}
+
 // A budget too small for even one slab of the largest front is refused with the bytes.
 TEST_F(CudaMemory, ImpossibleBudgetNamesTheBytes) {
   const SparseMatrix a = generators::laplacian_3d(20, 20, 20);

@@ -96,6 +96,7 @@ namespace strata::cuda {
 CudaExecutor::CudaExecutor(const Options& o, int device)
     : device_(device),
       limit_(o.device_memory_limit),
+      host_limit_(o.host_memory_limit),
       small_front_rows_(std::min<std::int64_t>(o.gpu_small_front_rows, kSmallFront)),
       panel_max_pivots_(o.gpu_panel_kernel_max_pivots),
       lu_strip_pivots_(o.gpu_lu_strip_pivots),
@@ -503,6 +504,7 @@ void CudaExecutor::report(FactorStats& fs) const {
   fs.device_budget = plan_.budget;
   fs.device_pool_bytes = plan_.pool * sizeof(double);
   fs.device_working_bytes = (pool_.size() + arena_.size() + panels_.size()) * sizeof(double);
+  fs.host_pinned_bytes = plan_.host_pinned;
   fs.contribution_blocks_on_host = plan_.arena_on_host;
   fs.factor_resident = keep_resident();
   fs.device_phases = phases_;

@@ -55,6 +55,10 @@ struct DevicePlan {
   /// doubles: the panels of the largest chunk, staged on the device on their way to the
   /// host factor (when the factor does not stay there); part of the budget
   std::size_t staging = 1;
+  /// doubles: where the host arena of spilled contribution blocks starts in the arena
+  /// layout (blocks at or after it that do not fit arena_device live there)
+  std::size_t host_arena_base = 0;
+  std::size_t host_pinned = 0;  ///< bytes of page-locked host memory the plan holds
 };
 
 /// What the executor keeps on the device for one part of the tree (the whole tree, or a
@@ -443,6 +447,7 @@ class CudaExecutor final : public numeric::Executor {
   cublasHandle_t blas_ = nullptr;
   cusolverDnHandle_t solver_ = nullptr;
   std::size_t limit_ = 0;
+  std::size_t host_limit_ = 0;  ///< Options::host_memory_limit (0: what the host has)
   std::int64_t small_front_rows_ = kSmallFront;  ///< Options::gpu_small_front_rows
   std::int64_t panel_max_pivots_ = 0;            ///< Options::gpu_panel_kernel_max_pivots
   std::int64_t lu_strip_pivots_ = 0;             ///< Options::gpu_lu_strip_pivots

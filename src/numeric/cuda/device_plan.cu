@@ -10,11 +10,31 @@
 
 #include "base/alloc.hpp"
 #include "base/host_copy.hpp"
+#include "base/host_memory.hpp"
 #include "base/timer.hpp"
 #include "numeric/cpu/dense_front.hpp"
 #include "numeric/cuda/cuda_executor.hpp"
 
 namespace strata::cuda {
+
+namespace {
+
+// fn(f, offset, size) for every contribution block the part `v` writes or reads (its
+// fronts' and their children's): its offset in the part's arena layout and its order.
+template <class Fn>
+void for_each_cb(const symbolic::AssemblyTree& t, const numeric::PartView& v, Fn&& fn) {
+  auto one = [&](index_t f) {
+    const std::size_t cb = static_cast<std::size_t>(t.cb_size(f));
+    if (cb == 0 || t.parent[f] < 0) return;
+    fn(f, v.cb_layout->cb_offset[f], cb);
+  };
+  for (const index_t f : v.schedule->fronts) {
+    one(f);
+    for (index_t q = t.child_offsets[f]; q < t.child_offsets[f + 1]; ++q) one(t.children[q]);
+  }
+}
+
+}  // namespace
 
 // Decides what lives where (see the file header) and lays out the chunks of every part
 // in `views`: positions [p, chunk_end[p]) of one batch share the pool; tiled[p] marks a
@@ -82,7 +102,31 @@ void CudaExecutor::plan_device_memory(const Analysis& an,
                       "the device pool for the largest front (device_memory_limit is " +
                           std::to_string(limit_) + " bytes)");
   p.pool = std::max<std::size_t>(pool, 1);
-  // chunks: consecutive non-tiled positions of a batch whose fronts fit the pool
+  // Host memory. A factor that does not stay on the device is copied chunk by chunk into
+  // the host factor through two pinned buffers (one per chunk slot) of the largest
+  // chunk's panels; with a pool of half the device those two alone could take more than
+  // the host has (page-locked memory is never swapped, and the kernel's out-of-memory
+  // killer ends the process without a message). So a chunk's panels are capped too: the
+  // two slots together at an eighth of the host memory left beside the host factor, but
+  // never below the largest single front's panels.
+  const std::size_t rest = budget_d > p.pool ? budget_d - p.pool : 0;
+  const bool resident = whole && rest >= arena + factor;
+  const std::size_t host_avail =  // 0: unknown
+      (host_limit_ > 0 ? host_limit_ : available_host_memory()) / sizeof(double);
+  const std::size_t factor_host = resident ? 0 : factor;
+  std::size_t largest_panel = 1;
+  for (const numeric::PartView& v : views)
+    for (std::size_t q = 0; q < v.schedule->fronts.size(); ++q)
+      if (!parts_[v.id].tiled[q])
+        largest_panel =
+            std::max(largest_panel, panel_size(t, v.schedule->fronts[q], !an.symmetric));
+  std::size_t panel_cap = p.pool;
+  if (host_avail > 0 && !resident)
+    panel_cap =
+        std::max(largest_panel,
+                 std::min(p.pool, (host_avail > factor_host ? host_avail - factor_host : 0) / 16));
+  // chunks: consecutive non-tiled positions of a batch whose fronts fit the pool and whose
+  // panels fit panel_cap
   for (const numeric::PartView& v : views) {
     const auto& s = *v.schedule;
     PartDevice& pd = parts_[v.id];
@@ -90,13 +134,16 @@ void CudaExecutor::plan_device_memory(const Analysis& an,
     pd.chunk_end.assign(s.fronts.size(), 0);
     for (const BatchInfo& b : *v.batches) {
       index_t start = b.begin;
-      std::size_t off = 0;
+      std::size_t off = 0, panels = 0;
       for (index_t q = b.begin; q <= b.end; ++q) {
-        const bool flush = q == b.end || pd.tiled[q] || off + sq(t.n_rows(s.fronts[q])) > p.pool;
+        const std::size_t pan = q == b.end ? 0 : panel_size(t, s.fronts[q], !an.symmetric);
+        const bool flush = q == b.end || pd.tiled[q] || off + sq(t.n_rows(s.fronts[q])) > p.pool ||
+                           panels + pan > panel_cap;
         if (flush && q > start) {
           pd.chunk_end[start] = q;
           start = q;
           off = 0;
+          panels = 0;
         }
         if (q == b.end) break;
         if (pd.tiled[q]) {
@@ -105,6 +152,7 @@ void CudaExecutor::plan_device_memory(const Analysis& an,
         }
         pd.pos_offset_host[q] = static_cast<std::int64_t>(off);
         off += sq(t.n_rows(s.fronts[q]));
+        panels += pan;
       }
     }
   }
@@ -124,14 +172,32 @@ void CudaExecutor::plan_device_memory(const Analysis& an,
   // the arena, then the resident factor (whole tree only; its panels need no staging), in
   // what the pool leaves; otherwise the arena's device part in what the pool and the
   // staging leave (the rest of it in host memory)
-  const std::size_t rest = budget_d > p.pool ? budget_d - p.pool : 0;
-  if (whole && rest >= arena + factor) {
+  if (resident) {
     p.arena_device = arena;
     p.factor_resident = true;
   } else {
     p.arena_device = std::min(arena, rest > p.staging ? rest - p.staging : 0);
   }
   p.arena_on_host = p.arena_device < arena;
+  // the spilled blocks' host arena starts at the first block that does not fit the device
+  p.host_arena_base = arena;
+  if (p.arena_on_host)
+    for (const numeric::PartView& v : views)
+      for_each_cb(t, v, [&](index_t f, std::size_t off, std::size_t cb) {
+        if (off + cb * cb > p.arena_device) p.host_arena_base = std::min(p.host_arena_base, off);
+      });
+  // what the host must hold: the host factor, the spilled blocks, the panels' pinned
+  // buffers and the largest tiled front's host copy (tiled_front.cu, tiled_llt.cu)
+  const bool pinned_panels = !resident && an.type != MatrixType::symmetric_indefinite;
+  p.host_pinned = sizeof(double) * ((arena - std::min(arena, p.host_arena_base)) +
+                                    (pinned_panels ? 2 * p.staging : 0) + sq(tiled_rows));
+  const std::size_t host_need = p.host_pinned + sizeof(double) * factor_host;
+  if (host_avail > 0 && host_need > host_avail * sizeof(double))
+    throw OutOfMemory(
+        host_need, "host memory for the GPU factorization (the host factor " +
+                       std::to_string(sizeof(double) * factor_host) +
+                       " bytes, page-locked buffers " + std::to_string(p.host_pinned) + " bytes; " +
+                       std::to_string(host_avail * sizeof(double)) + " bytes available)");
   plan_ = p;
 }
 
@@ -187,6 +253,7 @@ void CudaExecutor::upload_analysis(const Analysis& an) {
 void CudaExecutor::plan_parts(const Analysis& an, bool whole) {
   for (auto* b : {&pool_, &arena_, &panels_}) b->clear();
   host_arena_.clear();
+  for (ChunkRecord& c : chunk_) c.panels.clear();  // resized below, for this plan
   parts_.clear();
   part_panels_.clear();
   held_parts_.clear();
@@ -206,7 +273,7 @@ void CudaExecutor::plan_parts(const Analysis& an, bool whole) {
   for (const numeric::PartView& v : views) arena = std::max(arena, v.cb_layout->arena_size);
   const std::size_t chunk_panels = plan_.staging;
   arena_.resize(std::max<std::size_t>(plan_.arena_device, 1));
-  if (plan_.arena_on_host) host_arena_.resize(arena);
+  if (plan_.arena_on_host) host_arena_.resize(arena - plan_.host_arena_base);
   // staging for the panels of one chunk, or the whole resident factor
   panels_.resize(plan_.factor_resident ? std::max<std::size_t>(an.factor_layout.total, 1)
                                        : chunk_panels);
@@ -345,17 +412,11 @@ void CudaExecutor::upload_part(const Analysis& an, const numeric::PartView& v) {
   upload(pd.pos_offset, pd.pos_offset_host);
   // where each contribution block the part writes or reads lives
   pd.cb_ptr_host.assign(nf, nullptr);
-  auto place = [&](index_t f) {
-    const std::size_t cb = static_cast<std::size_t>(t.cb_size(f));
-    if (cb == 0 || t.parent[f] < 0) return;
-    const std::size_t off = v.cb_layout->cb_offset[f];
-    pd.cb_ptr_host[f] =
-        off + cb * cb <= plan_.arena_device ? arena_.data() + off : host_arena_.data() + off;
-  };
-  for (const index_t f : v.schedule->fronts) {
-    place(f);
-    for (index_t q = t.child_offsets[f]; q < t.child_offsets[f + 1]; ++q) place(t.children[q]);
-  }
+  for_each_cb(t, v, [&](index_t f, std::size_t off, std::size_t cb) {
+    pd.cb_ptr_host[f] = off + cb * cb <= plan_.arena_device
+                            ? arena_.data() + off
+                            : host_arena_.data() + (off - plan_.host_arena_base);
+  });
   upload(pd.cb_ptr, pd.cb_ptr_host);
   pd.tree = DeviceTree{pd.fronts.data(),  pd.pos_offset.data(), n_rows_.data(),
                        n_pivots_.data(),  parent_.data(),       entry_offsets_.data(),
