@@ -125,73 +125,81 @@ void CudaExecutor::plan_device_memory(const Analysis& an,
     panel_cap =
         std::max(largest_panel,
                  std::min(p.pool, (host_avail > factor_host ? host_avail - factor_host : 0) / 16));
-  // chunks: consecutive non-tiled positions of a batch whose fronts fit the pool and whose
-  // panels fit panel_cap
-  for (const numeric::PartView& v : views) {
-    const auto& s = *v.schedule;
-    PartDevice& pd = parts_[v.id];
-    pd.pos_offset_host.assign(s.fronts.size(), 0);
-    pd.chunk_end.assign(s.fronts.size(), 0);
-    for (const BatchInfo& b : *v.batches) {
-      index_t start = b.begin;
-      std::size_t off = 0, panels = 0;
-      for (index_t q = b.begin; q <= b.end; ++q) {
-        const std::size_t pan = q == b.end ? 0 : panel_size(t, s.fronts[q], !an.symmetric);
-        const bool flush = q == b.end || pd.tiled[q] || off + sq(t.n_rows(s.fronts[q])) > p.pool ||
-                           panels + pan > panel_cap;
-        if (flush && q > start) {
-          pd.chunk_end[start] = q;
-          start = q;
-          off = 0;
-          panels = 0;
+  // The chunks, the panels' staging, the arena's device part and what the host must hold,
+  // for chunks whose panels are at most `cap`: consecutive non-tiled positions of a batch
+  // whose fronts fit the pool and whose panels fit the cap.
+  auto lay_out = [&](std::size_t cap) {
+    p.staging = 1;
+    for (const numeric::PartView& v : views) {
+      const auto& s = *v.schedule;
+      PartDevice& pd = parts_[v.id];
+      pd.pos_offset_host.assign(s.fronts.size(), 0);
+      pd.chunk_end.assign(s.fronts.size(), 0);
+      for (const BatchInfo& b : *v.batches) {
+        index_t start = b.begin;
+        std::size_t off = 0, panels = 0;
+        for (index_t q = b.begin; q <= b.end; ++q) {
+          const std::size_t pan = q == b.end ? 0 : panel_size(t, s.fronts[q], !an.symmetric);
+          const bool flush = q == b.end || pd.tiled[q] ||
+                             off + sq(t.n_rows(s.fronts[q])) > p.pool || panels + pan > cap;
+          if (flush && q > start) {
+            pd.chunk_end[start] = q;
+            start = q;
+            off = 0;
+            panels = 0;
+          }
+          if (q == b.end) break;
+          if (pd.tiled[q]) {
+            start = q + 1;
+            continue;
+          }
+          pd.pos_offset_host[q] = static_cast<std::int64_t>(off);
+          off += sq(t.n_rows(s.fronts[q]));
+          panels += pan;
         }
-        if (q == b.end) break;
-        if (pd.tiled[q]) {
-          start = q + 1;
-          continue;
-        }
-        pd.pos_offset_host[q] = static_cast<std::int64_t>(off);
-        off += sq(t.n_rows(s.fronts[q]));
-        panels += pan;
       }
     }
-  }
-  // the panels of the largest chunk, staged on the device on their way to the host factor
-  // (each front's panels are at most its m² entries, so the staging is at most the pool)
-  for (const numeric::PartView& v : views) {
-    const auto& s = *v.schedule;
-    const PartDevice& pd = parts_[v.id];
-    for (index_t q = 0; q < static_cast<index_t>(s.fronts.size()); ++q)
-      if (!pd.tiled[q] && pd.chunk_end[q] > q) {
-        std::size_t sum = 0;
-        for (index_t r = q; r < pd.chunk_end[q]; ++r)
-          sum += panel_size(t, s.fronts[r], !an.symmetric);
-        p.staging = std::max(p.staging, sum);
-      }
-  }
-  // the arena, then the resident factor (whole tree only; its panels need no staging), in
-  // what the pool leaves; otherwise the arena's device part in what the pool and the
-  // staging leave (the rest of it in host memory)
-  if (resident) {
-    p.arena_device = arena;
-    p.factor_resident = true;
-  } else {
-    p.arena_device = std::min(arena, rest > p.staging ? rest - p.staging : 0);
-  }
-  p.arena_on_host = p.arena_device < arena;
-  // the spilled blocks' host arena starts at the first block that does not fit the device
-  p.host_arena_base = arena;
-  if (p.arena_on_host)
-    for (const numeric::PartView& v : views)
-      for_each_cb(t, v, [&](index_t f, std::size_t off, std::size_t cb) {
-        if (off + cb * cb > p.arena_device) p.host_arena_base = std::min(p.host_arena_base, off);
-      });
-  // what the host must hold: the host factor, the spilled blocks, the panels' pinned
-  // buffers and the largest tiled front's host copy (tiled_front.cu, tiled_llt.cu)
-  const bool pinned_panels = !resident && an.type != MatrixType::symmetric_indefinite;
-  p.host_pinned = sizeof(double) * ((arena - std::min(arena, p.host_arena_base)) +
-                                    (pinned_panels ? 2 * p.staging : 0) + sq(tiled_rows));
-  const std::size_t host_need = p.host_pinned + sizeof(double) * factor_host;
+    // the panels of the largest chunk, staged on the device on their way to the host factor
+    // (each front's panels are at most its m² entries, so the staging is at most the pool)
+    for (const numeric::PartView& v : views) {
+      const auto& s = *v.schedule;
+      const PartDevice& pd = parts_[v.id];
+      for (index_t q = 0; q < static_cast<index_t>(s.fronts.size()); ++q)
+        if (!pd.tiled[q] && pd.chunk_end[q] > q) {
+          std::size_t sum = 0;
+          for (index_t r = q; r < pd.chunk_end[q]; ++r)
+            sum += panel_size(t, s.fronts[r], !an.symmetric);
+          p.staging = std::max(p.staging, sum);
+        }
+    }
+    // the arena, then the resident factor (whole tree only; its panels need no staging), in
+    // what the pool leaves; otherwise the arena's device part in what the pool and the
+    // staging leave (the rest of it in host memory)
+    if (resident) {
+      p.arena_device = arena;
+      p.factor_resident = true;
+    } else {
+      p.arena_device = std::min(arena, rest > p.staging ? rest - p.staging : 0);
+    }
+    p.arena_on_host = p.arena_device < arena;
+    // the spilled blocks' host arena starts at the first block that does not fit the device
+    p.host_arena_base = arena;
+    if (p.arena_on_host)
+      for (const numeric::PartView& v : views)
+        for_each_cb(t, v, [&](index_t f, std::size_t off, std::size_t cb) {
+          if (off + cb * cb > p.arena_device) p.host_arena_base = std::min(p.host_arena_base, off);
+        });
+    // what the host must hold: the host factor, the spilled blocks, the panels' pinned
+    // buffers and the largest tiled front's host copy (tiled_front.cu, tiled_llt.cu)
+    const bool pinned_panels = !resident && an.type != MatrixType::symmetric_indefinite;
+    p.host_pinned = sizeof(double) * ((arena - std::min(arena, p.host_arena_base)) +
+                                      (pinned_panels ? 2 * p.staging : 0) + sq(tiled_rows));
+    return p.host_pinned + sizeof(double) * factor_host;
+  };
+  std::size_t host_need = lay_out(panel_cap);
+  // over what the host has: the smallest chunks the largest front allows
+  if (host_avail > 0 && host_need > host_avail * sizeof(double) && panel_cap > largest_panel)
+    host_need = lay_out(largest_panel);
   if (host_avail > 0 && host_need > host_avail * sizeof(double))
     throw OutOfMemory(
         host_need, "host memory for the GPU factorization (the host factor " +
