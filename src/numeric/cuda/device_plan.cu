@@ -109,7 +109,7 @@ void CudaExecutor::plan_device_memory(const Analysis& an,
   // killer ends the process without a message). So a chunk's panels are capped too: the
   // two slots together at an eighth of the host memory left beside the host factor, but
   // never below the largest single front's panels.
-  const std::size_t rest = budget_d > p.pool ? budget_d - p.pool : 0;
+  std::size_t rest = budget_d > p.pool ? budget_d - p.pool : 0;
   const bool resident = whole && rest >= arena + factor;
   const std::size_t host_avail =  // 0: unknown
       (host_limit_ > 0 ? host_limit_ : available_host_memory()) / sizeof(double);
@@ -197,6 +197,16 @@ void CudaExecutor::plan_device_memory(const Analysis& an,
     return p.host_pinned + sizeof(double) * factor_host;
   };
   std::size_t host_need = lay_out(panel_cap);
+  // Blocks spilled to the host are read and written by the kernels over the bus, and take
+  // page-locked host memory: when a smaller pool (down to the largest front it must hold
+  // alone) lets the whole arena stay on the device beside the staging, the pool gives
+  // that up, as it does above for a resident factor.
+  if (p.arena_on_host && tiled_rows == 0 && budget_d > arena + p.staging &&
+      budget_d - arena - p.staging >= largest && budget_d - arena - p.staging < p.pool) {
+    p.pool = budget_d - arena - p.staging;
+    rest = budget_d - p.pool;
+    host_need = lay_out(std::min(panel_cap, p.pool));
+  }
   // over what the host has: the smallest chunks the largest front allows
   if (host_avail > 0 && host_need > host_avail * sizeof(double) && panel_cap > largest_panel)
     host_need = lay_out(largest_panel);
