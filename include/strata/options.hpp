@@ -106,11 +106,13 @@ struct Options {
   /// (for the CPU backend: no limit). Default 0.
   std::size_t device_memory_limit = 0;
   /// Host memory the CUDA backend's plan may count on, in bytes: the host factor (when
-  /// the factor does not stay on the device) and the page-locked buffers beside it
-  /// (FactorStats::host_pinned_bytes) are kept within it, the factor panels' buffers
-  /// made smaller to fit, else the analysis throws OutOfMemory naming the bytes; 0 means
-  /// what the operating system reports available when the plan is made (MemAvailable,
-  /// and the room under a cgroup memory limit). Default 0.
+  /// the factor does not stay on the device), the page-locked buffers beside it
+  /// (FactorStats::host_pinned_bytes) and the factorization's value arrays (about three
+  /// of nnz(A)), with a reserve of a sixteenth for the rest of the process, are kept
+  /// within it, the factor panels' buffers made smaller to fit, else the analysis throws
+  /// OutOfMemory naming the bytes; 0 means what the operating system reports available
+  /// when the plan is made (MemAvailable, and the room under a cgroup memory limit).
+  /// Default 0.
   std::size_t host_memory_limit = 0;
 
   // --- numeric factorization ---

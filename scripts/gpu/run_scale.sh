@@ -18,7 +18,7 @@ model=${1:?usage: run_scale.sh MODEL T_END [ARGS...]}
 t_end=${2:?usage: run_scale.sh MODEL T_END [ARGS...]}
 shift 2
 stamp=$(date -u +%Y%m%dT%H%M%SZ)
-res="$OUT/scale-${model//[:x]/-}-$stamp.txt"
+res="$OUT/scale-${model//:/-}-$stamp.txt"
 work=$(mktemp -d)
 cmd=("$S" simulate --generate "$model" --t-end "$t_end" --verbose --output "$work/o" "$@")
 gpu=$(nvidia-smi --query-gpu=name --format=csv,noheader 2>/dev/null | head -1)

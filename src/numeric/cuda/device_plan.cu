@@ -113,7 +113,10 @@ void CudaExecutor::plan_device_memory(const Analysis& an,
   const bool resident = whole && rest >= arena + factor;
   const std::size_t host_avail =  // 0: unknown
       (host_limit_ > 0 ? host_limit_ : available_host_memory()) / sizeof(double);
-  const std::size_t factor_host = resident ? 0 : factor;
+  // the host factor, and the arrays of values a factorization makes (the input gathered
+  // into the analyzed pattern, scaled, and their sums: about three of nnz(A))
+  const std::size_t values_host = 3 * an.pattern_indices.size();
+  const std::size_t factor_host = (resident ? 0 : factor) + values_host;
   std::size_t largest_panel = 1;
   for (const numeric::PartView& v : views)
     for (std::size_t q = 0; q < v.schedule->fronts.size(); ++q)
@@ -194,7 +197,9 @@ void CudaExecutor::plan_device_memory(const Analysis& an,
     const bool pinned_panels = !resident && an.type != MatrixType::symmetric_indefinite;
     p.host_pinned = sizeof(double) * ((arena - std::min(arena, p.host_arena_base)) +
                                       (pinned_panels ? 2 * p.staging : 0) + sq(tiled_rows));
-    return p.host_pinned + sizeof(double) * factor_host;
+    // with a reserve of a sixteenth for what the rest of the process allocates meanwhile
+    const std::size_t need = p.host_pinned + sizeof(double) * factor_host;
+    return need + need / 16;
   };
   std::size_t host_need = lay_out(panel_cap);
   // Blocks spilled to the host are read and written by the kernels over the bus, and take
@@ -211,11 +216,14 @@ void CudaExecutor::plan_device_memory(const Analysis& an,
   if (host_avail > 0 && host_need > host_avail * sizeof(double) && panel_cap > largest_panel)
     host_need = lay_out(largest_panel);
   if (host_avail > 0 && host_need > host_avail * sizeof(double))
-    throw OutOfMemory(
-        host_need, "host memory for the GPU factorization (the host factor " +
-                       std::to_string(sizeof(double) * factor_host) +
-                       " bytes, page-locked buffers " + std::to_string(p.host_pinned) + " bytes; " +
-                       std::to_string(host_avail * sizeof(double)) + " bytes available)");
+    throw OutOfMemory(host_need,
+                      "host memory for the GPU factorization (the host factor " +
+                          std::to_string(sizeof(double) * (resident ? 0 : factor)) +
+                          " bytes, the factorization's value arrays " +
+                          std::to_string(sizeof(double) * values_host) +
+                          " bytes, page-locked buffers " + std::to_string(p.host_pinned) +
+                          " bytes and a reserve of a sixteenth; " +
+                          std::to_string(host_avail * sizeof(double)) + " bytes available)");
   plan_ = p;
 }
 
