@@ -108,7 +108,7 @@ struct Options {
   /// Host memory the CUDA backend's plan may count on, in bytes: the host factor (when
   /// the factor does not stay on the device), the page-locked buffers beside it
   /// (FactorStats::host_pinned_bytes) and the factorization's value arrays (about three
-  /// of nnz(A)), with a reserve of a sixteenth for the rest of the process, are kept
+  /// of nnz(A)), with a reserve of an eighth for the rest of the process, are kept
   /// within it, the factor panels' buffers made smaller to fit, else the analysis throws
   /// OutOfMemory naming the bytes; 0 means what the operating system reports available
   /// when the plan is made (MemAvailable, and the room under a cgroup memory limit).

@@ -197,24 +197,31 @@ void CudaExecutor::plan_device_memory(const Analysis& an,
     const bool pinned_panels = !resident && an.type != MatrixType::symmetric_indefinite;
     p.host_pinned = sizeof(double) * ((arena - std::min(arena, p.host_arena_base)) +
                                       (pinned_panels ? 2 * p.staging : 0) + sq(tiled_rows));
-    // with a reserve of a sixteenth for what the rest of the process allocates meanwhile
+    // with a reserve of an eighth for what the rest of the process allocates meanwhile
     const std::size_t need = p.host_pinned + sizeof(double) * factor_host;
-    return need + need / 16;
+    return need + need / 8;
   };
-  std::size_t host_need = lay_out(panel_cap);
-  // Blocks spilled to the host are read and written by the kernels over the bus, and take
-  // page-locked host memory: when a smaller pool (down to the largest front it must hold
-  // alone) lets the whole arena stay on the device beside the staging, the pool gives
-  // that up, as it does above for a resident factor.
-  if (p.arena_on_host && tiled_rows == 0 && budget_d > arena + p.staging &&
-      budget_d - arena - p.staging >= largest && budget_d - arena - p.staging < p.pool) {
-    p.pool = budget_d - arena - p.staging;
-    rest = budget_d - p.pool;
-    host_need = lay_out(std::min(panel_cap, p.pool));
-  }
+  // The layout for a cap, after the pool has given way to the arena where that keeps
+  // every block on the device: blocks spilled to the host are read and written by the
+  // kernels over the bus and take page-locked host memory, so a smaller pool (down to the
+  // largest front it must hold alone) is better, as it is above for a resident factor.
+  const std::size_t pool0 = p.pool;
+  auto plan_with = [&](std::size_t cap) {
+    p.pool = pool0;
+    rest = budget_d > p.pool ? budget_d - p.pool : 0;
+    std::size_t need = lay_out(cap);
+    if (p.arena_on_host && tiled_rows == 0 && budget_d > arena + p.staging &&
+        budget_d - arena - p.staging >= largest && budget_d - arena - p.staging < p.pool) {
+      p.pool = budget_d - arena - p.staging;
+      rest = budget_d - p.pool;
+      need = lay_out(std::min(cap, p.pool));
+    }
+    return need;
+  };
+  std::size_t host_need = plan_with(panel_cap);
   // over what the host has: the smallest chunks the largest front allows
   if (host_avail > 0 && host_need > host_avail * sizeof(double) && panel_cap > largest_panel)
-    host_need = lay_out(largest_panel);
+    host_need = plan_with(largest_panel);
   if (host_avail > 0 && host_need > host_avail * sizeof(double))
     throw OutOfMemory(host_need,
                       "host memory for the GPU factorization (the host factor " +
@@ -222,7 +229,7 @@ void CudaExecutor::plan_device_memory(const Analysis& an,
                           " bytes, the factorization's value arrays " +
                           std::to_string(sizeof(double) * values_host) +
                           " bytes, page-locked buffers " + std::to_string(p.host_pinned) +
-                          " bytes and a reserve of a sixteenth; " +
+                          " bytes and a reserve of an eighth; " +
                           std::to_string(host_avail * sizeof(double)) + " bytes available)");
   plan_ = p;
 }
