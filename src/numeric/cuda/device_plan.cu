@@ -111,8 +111,8 @@ void CudaExecutor::plan_device_memory(const Analysis& an,
   // never below the largest single front's panels.
   std::size_t rest = budget_d > p.pool ? budget_d - p.pool : 0;
   const bool resident = whole && rest >= arena + factor;
-  const std::size_t host_avail =  // 0: unknown
-      (host_limit_ > 0 ? host_limit_ : available_host_memory()) / sizeof(double);
+  const std::size_t host_bytes = host_limit_ > 0 ? host_limit_ : available_host_memory();
+  const std::size_t host_avail = host_bytes / sizeof(double);  // 0: unknown
   // the host factor, and the arrays of values a factorization makes (the input gathered
   // into the analyzed pattern, scaled, and their sums: about three of nnz(A))
   const std::size_t values_host = 3 * an.pattern_indices.size();
@@ -220,17 +220,17 @@ void CudaExecutor::plan_device_memory(const Analysis& an,
   };
   std::size_t host_need = plan_with(panel_cap);
   // over what the host has: the smallest chunks the largest front allows
-  if (host_avail > 0 && host_need > host_avail * sizeof(double) && panel_cap > largest_panel)
+  if (host_bytes > 0 && host_need > host_bytes && panel_cap > largest_panel)
     host_need = plan_with(largest_panel);
-  if (host_avail > 0 && host_need > host_avail * sizeof(double))
-    throw OutOfMemory(host_need,
-                      "host memory for the GPU factorization (the host factor " +
-                          std::to_string(sizeof(double) * (resident ? 0 : factor)) +
-                          " bytes, the factorization's value arrays " +
-                          std::to_string(sizeof(double) * values_host) +
-                          " bytes, page-locked buffers " + std::to_string(p.host_pinned) +
-                          " bytes and a reserve of an eighth; " +
-                          std::to_string(host_avail * sizeof(double)) + " bytes available)");
+  if (host_bytes > 0 && host_need > host_bytes)
+    throw OutOfMemory(host_need, "host memory for the GPU factorization (the host factor " +
+                                     std::to_string(sizeof(double) * (resident ? 0 : factor)) +
+                                     " bytes, the factorization's value arrays " +
+                                     std::to_string(sizeof(double) * values_host) +
+                                     " bytes, page-locked buffers " +
+                                     std::to_string(p.host_pinned) +
+                                     " bytes and a reserve of an eighth; " +
+                                     std::to_string(host_bytes) + " bytes available)");
   plan_ = p;
 }
 
