@@ -109,10 +109,11 @@ struct Options {
   /// the factor does not stay on the device), the page-locked buffers beside it
   /// (FactorStats::host_pinned_bytes) and the factorization's value arrays (about three
   /// of nnz(A)), with a reserve of an eighth for the rest of the process, are kept
-  /// within it, the factor panels' buffers made smaller to fit, else the analysis throws
-  /// OutOfMemory naming the bytes; 0 means what the operating system reports available
-  /// when the plan is made (MemAvailable, and the room under a cgroup memory limit).
-  /// Default 0.
+  /// within it, the factor panels' buffers made smaller to fit; else the analysis's
+  /// device set-up fails (AnalysisStats::device_setup_error) and the first factorization
+  /// throws OutOfMemory naming the bytes. 0 means what the operating system reports
+  /// available when the plan is made (MemAvailable, and the room under a cgroup memory
+  /// limit). Default 0.
   std::size_t host_memory_limit = 0;
 
   // --- numeric factorization ---

@@ -214,8 +214,8 @@ struct FactorStats {
   /// Bytes of page-locked host memory the GPU plan holds: the two chunk buffers the factor
   /// panels come back through (when the factor does not stay on the device), spilled
   /// contribution blocks, and the host copy of the largest front factored by slabs. The
-  /// plan keeps these and the host factor within the host memory available at analysis,
-  /// or throws OutOfMemory naming the bytes.
+  /// plan keeps these, the host factor and the value arrays within
+  /// Options::host_memory_limit (by default the host memory available at analysis).
   std::size_t host_pinned_bytes = 0;
   bool contribution_blocks_on_host = false;  ///< some blocks spilled to pinned host memory
   bool factor_resident = false;              ///< the factor stayed on the device: solve runs there
