@@ -42,6 +42,7 @@
 #include <string>
 
 #include "base/atomic_file.hpp"
+#include "base/cpu_level.hpp"
 #include "blas_kernels.hpp"
 #include "core/stats_json.hpp"
 #include "crash_report.hpp"
@@ -665,8 +666,9 @@ int main(int argc, char** argv) {
   strata::app::report_fatal_signals();          // an internal crash says where, on stderr
   CLI::App app{"strata: a multifrontal sparse direct solver for CPU and GPU"};
   app.require_subcommand(1);
-  app.set_version_flag("--version", fmt::format("strata {} ({})", strata_version(),
-                                                strata::app::blas_description()));
+  app.set_version_flag(
+      "--version", fmt::format("strata {} ({}; host code for {})", strata_version(),
+                               strata::app::blas_description(), strata::detail::build_cpu_arch()));
   // every --help ends with the exit statuses (README.md, "Exit status")
   const std::string exit_codes =
       "Exit status: 0 success; 1 solver or input error (\"strata: error: ...\"); 2 usage "

@@ -35,6 +35,7 @@
 
 #include "analysis/analysis.hpp"
 #include "base/alloc.hpp"
+#include "base/cpu_level.hpp"
 #include "base/host_copy.hpp"
 #include "base/timer.hpp"
 #include "core/rescale.hpp"
@@ -487,6 +488,11 @@ void factor_phase(SolverState& s, const SparseMatrix* a, std::span<const double>
 }  // namespace
 
 Solver::Solver(Options options) : state_(std::make_unique<detail::SolverState>()) {
+  // The start-up check has stopped the program on a CPU below the build's level already;
+  // this call also links that check into every program that makes a Solver.
+  if (!detail::cpu_supports_build_level())
+    throw NotSupported(std::string("this CPU lacks instructions of ") + detail::build_cpu_arch() +
+                       ", which strata was compiled for: rebuild with -DSTRATA_CPU_ARCH=native");
   state_->options = std::move(options);
 }
 Solver::~Solver() = default;
