@@ -95,6 +95,77 @@ struct PlanarTranslationDriver : PlanarPair {
 };
 
 // ------------------------------------------------------------------ spatial --------
+// A spatial body's pose in doubles with the derivatives of A(p) with respect to its Euler
+// parameters (rot3's entries are quadratic forms in p: Haug 1989, Eq. 6.3.20), giving its
+// points and vectors as dual numbers whose derivative lanes are the body's coordinates
+// local … local+6 (r, then p), for duals seeded with the unit directions of the
+// constraint's local coordinates. The values are computed as pose3's are (the same
+// operations in the same order).
+template <int N>
+class PoseLanes {
+ public:
+  using D = Dual<double, N>;
+  PoseLanes(const BodyRef& b, const D* z) : moving_(b.moving()), local_(b.local) {
+    Vec4<double> p;
+    if (moving_) {
+      for (int i = 0; i < 3; ++i) r_[i] = z[local_ + i].v;
+      for (int i = 0; i < 4; ++i) p[i] = z[local_ + 3 + i].v;
+    } else {
+      r_ = b.r;
+      p = b.p;
+    }
+    a_ = rot3(p);
+    if (!moving_) return;
+    const double e0 = 2 * p[0], e1 = 2 * p[1], e2 = 2 * p[2], e3 = 2 * p[3];
+    // ∂a_ij/∂e_k, k = 0..3, row by row
+    const double da[3][3][4] = {{{e0, e1, -e2, -e3}, {-e3, e2, e1, -e0}, {e2, e3, e0, e1}},
+                                {{e3, e2, e1, e0}, {e0, -e1, e2, -e3}, {-e1, -e0, e3, e2}},
+                                {{-e2, e3, -e0, e1}, {e1, e0, e3, e2}, {e0, -e1, -e2, e3}}};
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j)
+        for (int k = 0; k < 4; ++k) da_[k](i, j) = da[i][j][k];
+  }
+  /// A u, and its derivatives in the Euler parameters' lanes.
+  Vec3<D> vec(const Vec3<double>& u) const {
+    const Vec3<double> v = a_ * u;
+    Vec3<D> out;
+    for (int i = 0; i < 3; ++i) out[i].v = v[i];
+    if (!moving_) return out;
+    for (int k = 0; k < 4; ++k) {
+      const Vec3<double> dv = da_[k] * u;
+      for (int i = 0; i < 3; ++i) out[i].d[local_ + 3 + k] = dv[i];
+    }
+    return out;
+  }
+  /// r + A s, and its derivatives (the identity in the position lanes).
+  Vec3<D> point(const Vec3<double>& s) const {
+    Vec3<D> out = vec(s);
+    for (int i = 0; i < 3; ++i) out[i].v = r_[i] + out[i].v;
+    if (moving_)
+      for (int i = 0; i < 3; ++i) out[i].d[local_ + i] = 1.0;
+    return out;
+  }
+
+ private:
+  bool moving_;
+  int local_;
+  Vec3<double> r_{};
+  Mat3<double> a_{};
+  Mat3<double> da_[4]{};
+};
+
+// Whether the body's coordinates in z are seeded with their own unit directions (the
+// gradient pass of ConstraintT::evaluate_gradient), the condition of PoseLanes.
+template <int N>
+bool unit_seeded(const BodyRef& b, const Dual<double, N>* z) {
+  if (!b.moving()) return true;
+  if (b.local < 0 || b.local + 7 > N) return false;
+  for (int c = b.local; c < b.local + 7; ++c)
+    for (int k = 0; k < N; ++k)
+      if (z[c].d[k] != (k == c ? 1.0 : 0.0)) return false;
+  return true;
+}
+
 struct SpatialPair {
   BodyRef bi, bj;
   Frame3 fi, fj;
@@ -105,6 +176,20 @@ struct SpatialPair {
   template <class T>
   Kin<T> kin(const T* z) const {
     const Pose3<T> pi = pose3(bi, z), pj = pose3(bj, z);
+    return {pj.point(fj.s) - pi.point(fi.s),
+            pi.vec(fi.x),
+            pi.vec(fi.y),
+            pi.vec(fi.z),
+            pj.vec(fj.x),
+            pj.vec(fj.y),
+            pj.vec(fj.z)};
+  }
+  // The gradient pass: the rotations' derivatives in doubles (PoseLanes) rather than dual
+  // arithmetic through A(p), most of a residual evaluation's time in the joints.
+  template <int N>
+  Kin<Dual<double, N>> kin(const Dual<double, N>* z) const {
+    if (!unit_seeded(bi, z) || !unit_seeded(bj, z)) return kin<Dual<double, N>>(z);
+    const PoseLanes<N> pi(bi, z), pj(bj, z);
     return {pj.point(fj.s) - pi.point(fi.s),
             pi.vec(fi.x),
             pi.vec(fi.y),
