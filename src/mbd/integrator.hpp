@@ -223,7 +223,7 @@ class Integrator {
                              const char* what, const char* unit);
   std::vector<double> solve_partitioned(const SparseRows& rows, const std::vector<double>& b,
                                         const char* what) const;
-  Options set_up_options() const;
+  Options set_up_options(index_t rows) const;
   void report_set_up_solve(const char* what, const char* method, const SparseMatrix& k,
                            const LinearSolver& s, double analysis, double factorization,
                            double solve) const;

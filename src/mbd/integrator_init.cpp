@@ -208,22 +208,29 @@ void Integrator::report_set_up_solve(const char* what, const char* method, const
              solve);
 }
 
+// A set-up matrix of fewer rows than this is solved on the host even when the Newton
+// matrix goes to a GPU: its factorization takes milliseconds there, less than a device
+// solver's set-up (the CUDA context at the first one, its streams, handles and plan).
+constexpr index_t kHostSetUpRows = 50000;
+
 // The set-up's solves take the Newton matrix's solver options, but not a user permutation
 // (it is the Newton matrix's; these are other matrices): nested dissection instead. Not
 // CHOLMOD's rule (OrderingMethod::automatic) by default: on a large flexible body's
-// saddle-point matrix it rejects AMD and adds AMD's time to the dissection's.
-Options Integrator::set_up_options() const {
+// saddle-point matrix it rejects AMD and adds AMD's time to the dissection's. A matrix of
+// `rows` < kHostSetUpRows goes to the host.
+Options Integrator::set_up_options(index_t rows) const {
   Options o = opts_.solver;
   if (o.ordering == OrderingMethod::user) {
     o.ordering = OrderingMethod::nested_dissection;
     o.user_permutation.clear();
   }
+  if (rows < kHostSetUpRows && solver_on_gpu(o.backend)) o.backend = Backend::cpu;
   return o;
 }
 
 std::vector<double> Integrator::solve_once(const SparseMatrix& k, const std::vector<double>& b,
                                            const char* what) const {
-  auto s = opts_.dense_solver ? make_dense_solver() : make_strata_solver(set_up_options());
+  auto s = opts_.dense_solver ? make_dense_solver() : make_strata_solver(set_up_options(k.n_rows));
   Timer t;
   s->analyze(k);
   const double analysis = t.seconds();
@@ -245,13 +252,14 @@ std::vector<double> Integrator::solve_once(const SparseMatrix& k, const std::vec
 // no unsymmetric matching. Its pivots are restricted to the analysis's fronts, so a front
 // may need static pivots; when it did and refinement did not bring the backward error down
 // to Options::refinement_tolerance, the LU of solve_once (delayed pivoting) solves instead.
-// On a GPU the LU of solve_once: there strata's L D Lᵀ took about twice the LU's time on
-// a flexible body's saddle-point matrix (bench/history.md, 2026-11-27).
+// On a GPU (a matrix of kHostSetUpRows rows or more) the LU of solve_once: there strata's L D Lᵀ
+// took about twice the LU's time on a flexible body's saddle-point matrix (bench/history.md,
+// 2026-11-27).
 std::vector<double> Integrator::solve_symmetric_once(const SparseMatrix& k,
                                                      const std::vector<double>& b,
                                                      const char* what) const {
-  if (opts_.dense_solver || solver_on_gpu(opts_.solver.backend)) return solve_once(k, b, what);
-  Options o = set_up_options();
+  Options o = set_up_options(k.n_rows);
+  if (opts_.dense_solver || solver_on_gpu(o.backend)) return solve_once(k, b, what);
   o.type = MatrixType::symmetric_indefinite;
   auto s = make_strata_symmetric_solver(o);
   Timer t;
