@@ -14,6 +14,14 @@ bool cuda_available();
 /// Number of visible CUDA devices (0 in a build without CUDA or when the driver fails).
 int cuda_device_count();
 
+/// Starts creating the CUDA context of `device` (its primary context) on a thread of its
+/// own and returns at once, so that a program that will use the GPU later overlaps the
+/// context's creation (a few hundred milliseconds) with its host work; a CUDA call of
+/// another thread in the meantime waits for it. Once per process (later calls do
+/// nothing); the thread is joined at exit. Nothing in a build without CUDA or on a machine
+/// without a GPU; an error is left to the first CUDA call of the code that uses the GPU.
+void start_device_context(int device = 0);
+
 /// Whether `backend` resolves to the CUDA executor on this machine: Backend::cuda, or
 /// Backend::automatic with a GPU visible.
 inline bool uses_cuda(Backend backend) {

@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <thread>
 
+#include "base/device.hpp"
 #include "base/host_copy.hpp"
 #include "base/timer.hpp"
 #include "strata/matrix_market.hpp"
@@ -76,6 +77,9 @@ Integrator::Integrator(const Model& model, IntegratorOptions options)
                    : elements < 500
                        ? 1
                        : static_cast<int>(std::max(1u, std::thread::hardware_concurrency())));
+  // The Newton matrix goes to a GPU: its CUDA context is created on a thread of its own
+  // while the set-up works on the host (its small solves run there, integrator_init.cpp)
+  if (!opts_.dense_solver && solver_on_gpu(opts_.solver.backend)) numeric::start_device_context(0);
 }
 
 std::unique_ptr<LinearSolver> Integrator::new_solver() const {

@@ -12,6 +12,8 @@ bool cuda_available() { return false; }
 
 int cuda_device_count() { return 0; }
 
+void start_device_context(int) {}
+
 std::unique_ptr<Executor> make_cuda_executor(const Options&, int) {
   throw NotSupported("this build of strata has no CUDA backend (nvcc was not found at build time)");
 }

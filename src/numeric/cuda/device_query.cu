@@ -1,7 +1,9 @@
 // strata — what the CUDA build offers: whether a GPU is visible and how many
 // (base/device.hpp), page-locking host memory for transfers, and the CUDA executor's
 // factory (numeric/factor.hpp). A build without CUDA has numeric/backends.cpp instead.
+#include <mutex>
 #include <string>
+#include <thread>
 
 #include "numeric/cuda/cuda_executor.hpp"
 
@@ -31,6 +33,27 @@ int cuda_device_count() {
     return 0;
   }
   return count;
+}
+
+void start_device_context(int device) {
+  // the thread is kept in a static object whose destructor joins it: a program that ends
+  // while the driver is still creating the context waits for it rather than tearing the
+  // runtime down under it
+  struct Starter {
+    std::thread thread;
+    ~Starter() {
+      if (thread.joinable()) thread.join();
+    }
+  };
+  static Starter starter;
+  static std::once_flag once;
+  std::call_once(once, [device] {
+    if (device < 0 || device >= cuda_device_count()) return;
+    starter.thread = std::thread([device] {
+      if (cudaSetDevice(device) != cudaSuccess || cudaFree(nullptr) != cudaSuccess)
+        (void)cudaGetLastError();  // left to the code that uses the GPU
+    });
+  });
 }
 
 namespace {
