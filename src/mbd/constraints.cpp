@@ -175,21 +175,18 @@ struct SpatialPair {
   };
   template <class T>
   Kin<T> kin(const T* z) const {
-    const Pose3<T> pi = pose3(bi, z), pj = pose3(bj, z);
-    return {pj.point(fj.s) - pi.point(fi.s),
-            pi.vec(fi.x),
-            pi.vec(fi.y),
-            pi.vec(fi.z),
-            pj.vec(fj.x),
-            pj.vec(fj.y),
-            pj.vec(fj.z)};
+    return kin_of<T>(pose3(bi, z), pose3(bj, z));
   }
   // The gradient pass: the rotations' derivatives in doubles (PoseLanes) rather than dual
   // arithmetic through A(p), most of a residual evaluation's time in the joints.
   template <int N>
   Kin<Dual<double, N>> kin(const Dual<double, N>* z) const {
     if (!unit_seeded(bi, z) || !unit_seeded(bj, z)) return kin<Dual<double, N>>(z);
-    const PoseLanes<N> pi(bi, z), pj(bj, z);
+    return kin_of<Dual<double, N>>(PoseLanes<N>(bi, z), PoseLanes<N>(bj, z));
+  }
+  // The joint frames' points and axes from the bodies' poses (Pose3 or PoseLanes).
+  template <class T, class Pose>
+  Kin<T> kin_of(const Pose& pi, const Pose& pj) const {
     return {pj.point(fj.s) - pi.point(fi.s),
             pi.vec(fi.x),
             pi.vec(fi.y),
