@@ -4,6 +4,8 @@
 // by numeric/backends.cpp, which answers "none".
 #pragma once
 
+#include <string>
+
 #include "strata/options.hpp"
 
 namespace strata::numeric {
@@ -13,6 +15,11 @@ bool cuda_available();
 
 /// Number of visible CUDA devices (0 in a build without CUDA or when the driver fails).
 int cuda_device_count();
+
+/// Why the CUDA backend cannot run here, or "" when it can: the message of the
+/// NotSupported error that asking for it gives (no CUDA backend in this build, or no GPU
+/// visible).
+std::string cuda_unavailable_reason();
 
 /// Starts creating the CUDA context of `device` (its primary context) on a thread of its
 /// own and returns at once, so that a program that will use the GPU later overlaps the

@@ -77,8 +77,14 @@ Integrator::Integrator(const Model& model, IntegratorOptions options)
                    : elements < 500
                        ? 1
                        : static_cast<int>(std::max(1u, std::thread::hardware_concurrency())));
+  // The CUDA backend asked for where it cannot run: refused now, as the set-up's first
+  // solve on the device would have been (the small ones run on the host,
+  // integrator_init.cpp)
+  if (!opts_.dense_solver && opts_.solver.backend == Backend::cuda)
+    if (const std::string why = numeric::cuda_unavailable_reason(); !why.empty())
+      throw NotSupported(why);
   // The Newton matrix goes to a GPU: its CUDA context is created on a thread of its own
-  // while the set-up works on the host (its small solves run there, integrator_init.cpp)
+  // while the set-up works on the host
   if (!opts_.dense_solver && solver_on_gpu(opts_.solver.backend)) numeric::start_device_context(0);
 }
 

@@ -14,8 +14,12 @@ int cuda_device_count() { return 0; }
 
 void start_device_context(int) {}
 
+std::string cuda_unavailable_reason() {
+  return "this build of strata has no CUDA backend (nvcc was not found at build time)";
+}
+
 std::unique_ptr<Executor> make_cuda_executor(const Options&, int) {
-  throw NotSupported("this build of strata has no CUDA backend (nvcc was not found at build time)");
+  throw NotSupported(cuda_unavailable_reason());
 }
 
 std::unique_ptr<PinnedHostRange> pin_host_memory(void*, std::size_t) { return nullptr; }

@@ -73,9 +73,12 @@ std::unique_ptr<PinnedHostRange> pin_host_memory(void* p, std::size_t bytes) {
   return std::make_unique<CudaPinnedRange>(p, bytes);
 }
 
+std::string cuda_unavailable_reason() {
+  return cuda::device_present() ? "" : "the CUDA backend was asked for, but no CUDA GPU is visible";
+}
+
 std::unique_ptr<Executor> make_cuda_executor(const Options& opts, int device) {
-  if (!cuda::device_present())
-    throw NotSupported("the CUDA backend was asked for, but no CUDA GPU is visible");
+  if (!cuda::device_present()) throw NotSupported(cuda_unavailable_reason());
   const int count = cuda_device_count();
   if (device < 0 || device >= count)
     throw NotSupported("CUDA device " + std::to_string(device) + " was asked for, " +
