@@ -6,7 +6,8 @@
 # 4 × 2), each rank's time and bytes moved between ranks, then the cost model's
 # prediction beside each measurement.
 # Results (distributed-*.json, cost-model.json, run_mpi.log) go to $OUT (default
-# bench/results). Needs mpirun: the machine's, or the OpenMPI staged by
+# bench/results). With test_distributed_mpi staged beside bench_distributed, the
+# distributed tests run first on one rank per GPU (their GPU ranks' case included). Needs mpirun: the machine's, or the OpenMPI staged by
 # scripts/gpu/prepare_mpi.sh in .carry-mpi/ (carried with .carry/).
 # Usage: bash scripts/gpu/run_mpi.sh [PROBLEMS] (default lap3d-80,elast3d-40,lap3d-100,elast3d-50)
 set -uo pipefail
@@ -71,6 +72,14 @@ case $ngpu in
   4 | 5 | 6 | 7) configs="1x1 1x4 2x2 4x1" ;;
   *) configs="1x1 1x8 2x4 4x2 8x1" ;;
 esac
+# the distributed tests with GPU ranks, one rank per GPU (tests/mpi/test_distributed_mpi.cpp;
+# its GPU case runs where GPUs are visible), when that binary is staged beside the benchmark
+tests=$(dirname "$bench")/test_distributed_mpi
+if [ -x "$tests" ] && [ "$ngpu" -ge 2 ]; then
+  echo "=== test_distributed_mpi on $ngpu ranks"
+  OPENBLAS_NUM_THREADS=1 mpirun -n "$ngpu" --bind-to none --oversubscribe -x LD_LIBRARY_PATH \
+    -x PATH -x OPENBLAS_NUM_THREADS "$tests" || status=1
+fi
 for cfg in $configs; do
   r=${cfg%x*} g=${cfg#*x}
   echo "=== $r rank(s) x $g GPU(s): $problems"

@@ -86,6 +86,11 @@ struct NumericState {
   std::vector<std::vector<index_t>> value_positions;
   RankStats stats;    ///< this rank's figures of the current phases
   bool nccl = false;  ///< contribution blocks between GPUs through NCCL
+  /// Options::gpu_solve_parts: solve on the GPUs that hold the parts (solve.cpp).
+  bool solve_where_held = true;
+  /// The device solve's update vectors (the whole tree's arena: an.child_rows.offsets)
+  /// and rank 0's copy of b, kept from one solve to the next.
+  std::vector<double> solve_u, solve_b;
   std::shared_ptr<NcclContext> nccl_context;
 };
 
@@ -110,9 +115,11 @@ void factor_part(detail::CommImpl& comm, NumericState& ns, const Analysis& an,
 
 /// Collective: one solve with the distributed factor. x (tree numbering, n×nrhs) holds b
 /// on rank 0 on entry and the solution there on return; on the other ranks it is n×nrhs
-/// scratch.
-void solve_part(detail::CommImpl& comm, NumericState& ns, const Analysis& an,
-                const numeric::NumericFactor& factor, double* x, index_t nrhs);
+/// scratch. On the GPUs that hold the parts' panels when every rank can solve its parts
+/// there (returns true), else on the host: the held panels are fetched into `factor`
+/// first (returns false). Same result on every rank.
+bool solve_part(detail::CommImpl& comm, NumericState& ns, const Analysis& an,
+                numeric::NumericFactor& factor, double* x, index_t nrhs);
 
 }  // namespace strata::distributed
 

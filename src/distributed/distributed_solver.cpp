@@ -2,13 +2,13 @@
 // (docs/distributed.md).
 //
 // Rank 0 holds an ordinary Solver whose numeric driver (SolverAccess::set_driver,
-// numeric/driver.hpp) runs the collective phases of numeric.cpp, so that validation, type
-// resolution (Cholesky first, LDLᵀ on failure), scaling, static pivoting, statistics and
-// iterative refinement are exactly the Solver's. The other ranks wait in the same public
-// call and follow rank 0's commands (protocol.cpp): the analysis, computed once on rank 0
-// and broadcast; at every (re)factorization the scaled values, each rank sent only those its
-// subtrees assemble (values.cpp); one command per solve with the factor (refinement and
-// GMRES make several). Each phase ends with `end`
+// numeric/driver.hpp) runs the collective phases of numeric.cpp and solve.cpp, so that
+// validation, type resolution (Cholesky first, LDLᵀ on failure), scaling, static pivoting,
+// statistics and iterative refinement are exactly the Solver's. The other ranks wait in
+// the same public call and follow rank 0's commands (protocol.cpp): the analysis, computed
+// once on rank 0 and broadcast; at every (re)factorization the scaled values, each rank
+// sent only those its subtrees assemble (values.cpp); one command per solve with the
+// factor (refinement and GMRES make several). Each phase ends with `end`
 // and a gather of every rank's figures onto rank 0, or with `error`, which every rank
 // throws. With one rank the Solver runs alone.
 #include <cstring>
@@ -75,6 +75,7 @@ void setup_numeric(DistributedState& s, Analysis& an, int per_rank) {
     ns.arenas.clear();
     ns.blocks = numeric::BlockBuffers{};
     const bool gpu = wants_gpu(s);
+    ns.solve_where_held = s.options.gpu_solve_parts;
     const int visible = gpu ? numeric::cuda_device_count() : 0;
     for (int g = 0; g < per_rank; ++g) {
       if (!gpu) {
@@ -109,8 +110,8 @@ void run_factor(DistributedState& s, const Analysis& an, const std::vector<doubl
 
 // Rank 0's replacement of the Solver's numeric phases.
 // Rank 0's numeric driver: its Solver's factorization and solves as collective commands
-// to every rank (numeric.cpp), so that validation, type resolution, scaling, statistics
-// and refinement stay the Solver's.
+// to every rank (numeric.cpp, solve.cpp), so that validation, type resolution, scaling,
+// statistics and refinement stay the Solver's.
 class DistributedDriver final : public numeric::NumericDriver {
  public:
   DistributedDriver(DistributedState& s, int per_rank) : s_(s), per_rank_(per_rank) {}
@@ -147,9 +148,9 @@ class DistributedDriver final : public numeric::NumericDriver {
     h.command = Command::apply;
     h.b = nrhs;
     send_command(comm, h);
-    solve_part(comm, s_.numeric, an, factor, x, nrhs);
+    const bool on_devices = solve_part(comm, s_.numeric, an, factor, x, nrhs);
     bytes.add_to(s_.numeric.stats.solve_bytes_sent, s_.numeric.stats.solve_bytes_received);
-    return false;
+    return on_devices;
   }
   Backend backend() const override { return wants_gpu(s_) ? Backend::cuda : Backend::cpu; }
   void report(FactorStats& fs) const override {

@@ -26,7 +26,7 @@
 namespace strata::distributed {
 namespace {
 
-constexpr int kTagValues = 10;  // the scaled values (numeric.cpp uses 8, 9 and 100 + i)
+constexpr int kTagValues = 10;  // the scaled values (solve.cpp uses 8, 9, 11; numeric.cpp 100 + i)
 
 }  // namespace
 

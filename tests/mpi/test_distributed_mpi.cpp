@@ -9,13 +9,16 @@
 // test_distributed_serialize.cpp checks which). Also: refactorization with new values —
 // with refinement and, so that a stale or missing value on any rank shows in the answer,
 // without — several right-hand sides, R ranks × 2 CPU workers each, and an error raised
-// on some rank thrown on every rank.
+// on some rank thrown on every rank. Where CUDA GPUs are visible (a lent machine, run by
+// hand under mpirun), GPU ranks: the solve on the GPUs that hold the factor's parts
+// against the host solve and the one-process solve.
 #include <gtest/gtest.h>
 #include <mpi.h>
 
 #include <cmath>
 #include <string>
 
+#include "base/device.hpp"
 #include "distributed/distributed_internal.hpp"
 #include "sparse/generators.hpp"
 #include "strata/distributed.hpp"
@@ -318,6 +321,62 @@ TEST(Distributed, ErrorsReachEveryRank) {
     EXPECT_LE(test::backward_error(a, x.data(), b.data()), 1e-14);
     EXPECT_GT(dsi.stats().factor.inertia_negative, 0);
   }
+}
+
+// GPU ranks (the CUDA backend, one GPU per rank: rank r on GPU r mod the visible ones;
+// skipped without a GPU): each GPU keeps the panels of the parts it factored and the solve
+// runs there (the Solver reports the solve on the device); the same factorization solved
+// on the host instead (gpu_solve_parts off, the panels fetched at the solve) and the
+// one-process CPU solve agree, for two right-hand sides, and again after a refactorization
+// with new values (the held panels are the new factor's).
+TEST(Distributed, GpuRanksSolveWhereTheFactorIs) {
+  if (numeric::cuda_device_count() == 0)
+    GTEST_SKIP() << "no CUDA GPU: the distributed solve on GPU ranks is not run";
+  const int rank = world_rank(), ranks = world_size();
+  auto rng = test::fresh_rng();
+  std::uniform_real_distribution<double> u(-1, 1), scale(0.5, 2.0);
+  std::vector<Problem> probs;
+  probs.push_back({"lap3d 20", rank == 0 ? generators::laplacian_3d(20, 20, 20) : SparseMatrix{},
+                   MatrixType::spd});
+  probs.push_back({"random kkt 733", rank == 0 ? test::random_kkt(733, rng) : SparseMatrix{},
+                   MatrixType::symmetric_indefinite});
+  probs.push_back(
+      {"random general 1500",
+       rank == 0 ? test::random_sparse(1500, 4, test::RandomKind::general, rng) : SparseMatrix{},
+       MatrixType::general});
+  for (const Problem& pr : probs)
+    for (const bool where_held : {true, false}) {
+      SCOPED_TRACE(pr.name + (where_held ? ", solved on the GPUs" : ", solved on the host"));
+      Options o = options_for(pr.type);
+      o.backend = Backend::cuda;
+      o.num_gpus = 1;
+      o.gpu_solve_parts = where_held;
+      DistributedSolver ds(mpi_communicator(MPI_COMM_WORLD), o);
+      const index_t n = pr.a.n_rows, nrhs = 2;
+      std::vector<double> b(static_cast<std::size_t>(n) * nrhs), x(b.size());
+      for (double& v : b) v = u(rng);
+      ds.analyze(pr.a);
+      ds.factorize(pr.a);
+      ds.solve(rank == 0 ? b.data() : nullptr, rank == 0 ? x.data() : nullptr, nrhs);
+      if (rank == 0) {
+        if (ranks > 1) EXPECT_EQ(ds.stats().solve.on_device, where_held);
+        check_against_one_process(pr, ds, b, x, nrhs);
+      }
+      SparseMatrix a2 = pr.a;
+      if (rank == 0) {
+        std::vector<double> d(n);
+        for (double& v : d) v = scale(rng);
+        for (index_t j = 0; j < a2.n_cols; ++j)
+          for (index_t p = a2.offsets[j]; p < a2.offsets[j + 1]; ++p)
+            a2.values[p] *= d[a2.indices[p]] * d[j];
+      }
+      ds.refactorize(a2);
+      ds.solve(rank == 0 ? b.data() : nullptr, rank == 0 ? x.data() : nullptr, nrhs);
+      if (rank == 0) {
+        if (ranks > 1) EXPECT_EQ(ds.stats().solve.on_device, where_held);
+        check_against_one_process({pr.name, a2, pr.type}, ds, b, x, nrhs);
+      }
+    }
 }
 
 }  // namespace
