@@ -127,6 +127,18 @@ void check_against_one_process(const Problem& pr, const DistributedSolver& ds,
   }
 }
 
+// D·A·D for a diagonal D of factors drawn from `scale` (new values on the same pattern).
+SparseMatrix symmetrically_scaled(const SparseMatrix& a,
+                                  std::uniform_real_distribution<double>& scale,
+                                  std::mt19937_64& rng) {
+  SparseMatrix s = a;
+  std::vector<double> d(static_cast<std::size_t>(a.n_rows));
+  for (double& v : d) v = scale(rng);
+  for (index_t j = 0; j < s.n_cols; ++j)
+    for (index_t p = s.offsets[j]; p < s.offsets[j + 1]; ++p) s.values[p] *= d[s.indices[p]] * d[j];
+  return s;
+}
+
 // Every problem, every type: the distributed solution agrees with the one-process one;
 // every rank factored its subtrees and rank 0 gathered every rank's figures.
 void run_all(int workers_per_rank) {
@@ -224,14 +236,7 @@ TEST(Distributed, Refactorization) {
     ds.factorize(pr.a);
     std::vector<double> b(n);
     for (double& v : b) v = u(rng);
-    SparseMatrix a2 = pr.a;
-    if (rank == 0) {
-      std::vector<double> d(n);
-      for (double& v : d) v = scale(rng);
-      for (index_t j = 0; j < a2.n_cols; ++j)
-        for (index_t p = a2.offsets[j]; p < a2.offsets[j + 1]; ++p)
-          a2.values[p] *= d[a2.indices[p]] * d[j];
-    }
+    const SparseMatrix a2 = rank == 0 ? symmetrically_scaled(pr.a, scale, rng) : pr.a;
     ds.refactorize(a2);
     std::vector<double> x(n);
     ds.solve(rank == 0 ? b.data() : nullptr, rank == 0 ? x.data() : nullptr, 1);
@@ -365,14 +370,7 @@ TEST(Distributed, GpuRanksSolveWhereTheFactorIs) {
         if (ranks > 1) EXPECT_EQ(ds.stats().solve.on_device, on_gpus);
         check_against_one_process(pr, ds, b, x, nrhs);
       }
-      SparseMatrix a2 = pr.a;
-      if (rank == 0) {
-        std::vector<double> d(n);
-        for (double& v : d) v = scale(rng);
-        for (index_t j = 0; j < a2.n_cols; ++j)
-          for (index_t p = a2.offsets[j]; p < a2.offsets[j + 1]; ++p)
-            a2.values[p] *= d[a2.indices[p]] * d[j];
-      }
+      const SparseMatrix a2 = rank == 0 ? symmetrically_scaled(pr.a, scale, rng) : pr.a;
       ds.refactorize(a2);
       ds.solve(rank == 0 ? b.data() : nullptr, rank == 0 ? x.data() : nullptr, nrhs);
       if (rank == 0) {
