@@ -137,6 +137,27 @@ struct FactorContext {
   std::vector<Executor*> helpers;
 };
 
+/// How the host buffers of contribution blocks in transit are allocated: new[] by
+/// default; a GPU executor lends page-locked memory, which its copies to and from the
+/// device move at the bus's full rate (Executor::transfer_memory). `allocate` may return
+/// nullptr (no page-locked memory to spare): new[] is used then.
+struct TransferMemory {
+  double* (*allocate)(std::size_t doubles) = nullptr;
+  void (*release)(double* p) = nullptr;
+};
+
+/// Frees a transfer buffer as it was allocated (TransferMemory::release, else delete[]).
+struct TransferBufferDelete {
+  void (*release)(double* p) = nullptr;
+  void operator()(double* p) const {
+    if (release)
+      release(p);
+    else
+      delete[] p;
+  }
+};
+using TransferBuffer = std::unique_ptr<double[], TransferBufferDelete>;
+
 /// A contribution block on its way from the part that produced it (a subtree or an upper
 /// part) to the part of its parent (an upper part or the top part).
 /// The driver provides host_buffer() (size doubles); an exporter either fills it, or — a device
@@ -150,14 +171,17 @@ struct CbTransfer {
   const double* device = nullptr;  ///< or: the block in the exporter's device memory
   int device_ordinal = -1;         ///< CUDA device holding `device`
   int target_device = -1;          ///< CUDA device of the importer (-1: a host executor)
-  std::unique_ptr<double[]> host_storage;
+  TransferMemory memory;           ///< how host_buffer() allocates
+  TransferBuffer host_storage;
 
   /// The host buffer (`size` doubles, uninitialized), allocated on first use: a block
   /// that goes device to device never needs one — allocating (and zeroing) every subtree
   /// root's block up front cost more than the multi-GPU factorization itself.
   double* host_buffer() {
     if (!host) {
-      host_storage.reset(new double[size]);
+      double* p = memory.allocate ? memory.allocate(size) : nullptr;
+      host_storage = p ? TransferBuffer(p, TransferBufferDelete{memory.release})
+                       : TransferBuffer(new double[size]);
       host = host_storage.get();
     }
     return host;
@@ -182,6 +206,9 @@ class Executor {
   /// zero-filling) a host arena of several GB for it cost seconds of the first
   /// factorization and was never read.
   virtual bool uses_host_arena() const { return true; }
+  /// How the host buffers of the contribution blocks this executor exports or imports
+  /// through host memory are allocated (see TransferMemory); the default: new[].
+  virtual TransferMemory transfer_memory() const { return {}; }
   /// Optional set-up for the analysis `an` ahead of its first factorization, for a
   /// factorization by `workers` executors (1: the whole tree on this one): what a device
   /// executor would otherwise do at the start of the first factorization (upload the
@@ -349,7 +376,7 @@ void factorize(const Analysis& an, const std::vector<double>& scaled_values, Mat
 /// them afresh each time made every copy into them fault its pages in again (both sides of
 /// an MPI exchange: 612 MB per refactorization of lap3d 80³ on 2 ranks).
 struct BlockBuffers {
-  std::vector<std::unique_ptr<double[]>> buffer;
+  std::vector<TransferBuffer> buffer;
   std::vector<std::size_t> size;  ///< doubles in buffer[id]
 };
 

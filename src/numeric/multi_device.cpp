@@ -287,6 +287,7 @@ class MultiRun {
       const index_t r = part_.part(id).root;
       CbTransfer& x = transfer[id];
       x.front = r;
+      x.memory = execs_[0]->transfer_memory();  // every worker of a process is of one kind
       if (config_.exchange) {
         // distributed: the importer is worker 0's device here; a process that does not
         // factor the top sends its blocks on through host memory (MPI), unless they are

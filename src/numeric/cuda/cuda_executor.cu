@@ -63,11 +63,13 @@
 // factorization. An upper part may import blocks from several GPUs, each from its own
 // outbox (peer access enabled per source GPU on first use).
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <string>
 
 #include "base/host_copy.hpp"
+#include "base/host_memory.hpp"
 #include "base/timer.hpp"
 #include "numeric/cpu/dense_front.hpp"
 #include "numeric/cuda/cuda_executor.hpp"
@@ -349,6 +351,42 @@ void CudaExecutor::download_panels(const Analysis& an, int part, numeric::Numeri
     std::memcpy(fac.panels.data() + an.factor_layout.panel_offset[f], host + pd.panel_off_host[q],
                 sizeof(double) * panel_size(an.tree, f, lu));
   }
+}
+
+namespace {
+
+// Page-locked transfer buffers (TransferMemory): portable (every GPU of the process copies
+// to and from them at the full rate), each with its size in a 64-byte header so that the
+// process's total can be kept; none while that total would pass a quarter of the host
+// memory available (base/host_memory.hpp): the rest of the process still needs pageable
+// memory, and a block that gets none is allocated by new[] instead.
+constexpr std::size_t kTransferHeader = 64 / sizeof(double);
+std::atomic<std::size_t> g_transfer_pinned{0};
+
+double* allocate_transfer(std::size_t doubles) {
+  const std::size_t bytes = (doubles + kTransferHeader) * sizeof(double);
+  const std::size_t avail = available_host_memory();
+  if (avail > 0 && g_transfer_pinned.load() + bytes > avail / 4) return nullptr;
+  void* p = nullptr;
+  if (cudaHostAlloc(&p, bytes, cudaHostAllocPortable) != cudaSuccess) {
+    (void)cudaGetLastError();
+    return nullptr;
+  }
+  g_transfer_pinned += bytes;
+  *static_cast<std::size_t*>(p) = bytes;
+  return static_cast<double*>(p) + kTransferHeader;
+}
+
+void release_transfer(double* p) {
+  double* base = p - kTransferHeader;
+  g_transfer_pinned -= *reinterpret_cast<std::size_t*>(base);
+  cudaFreeHost(base);
+}
+
+}  // namespace
+
+numeric::TransferMemory CudaExecutor::transfer_memory() const {
+  return {&allocate_transfer, &release_transfer};
 }
 
 std::size_t CudaExecutor::export_cb(const numeric::FactorContext& ctx, numeric::CbTransfer& t) {

@@ -172,6 +172,7 @@ class CudaExecutor final : public numeric::Executor {
   Backend backend() const override { return Backend::cuda; }
   int device() const override { return device_; }
   bool uses_host_arena() const override { return false; }
+  numeric::TransferMemory transfer_memory() const override;
   void prepare(const Analysis& an, int workers) override;
   bool scale_values_on_device(const Analysis& an, const double* values,
                               const numeric::StageValues& stage,
