@@ -72,6 +72,8 @@ case $ngpu in
   4 | 5 | 6 | 7) configs="1x1 1x4 2x2 4x1" ;;
   *) configs="1x1 1x8 2x4 4x2 8x1" ;;
 esac
+# STRATA_MPI_CONFIGS="2x1 1x2": only these ranks × GPUs (e.g. to fit a call's time limit)
+configs=${STRATA_MPI_CONFIGS:-$configs}
 # the distributed tests with GPU ranks, one rank per GPU (tests/mpi/test_distributed_mpi.cpp;
 # its GPU case runs where GPUs are visible), when that binary is staged beside the benchmark
 tests=$(dirname "$bench")/test_distributed_mpi
