@@ -9,7 +9,8 @@
 # bench/results). With test_distributed_mpi staged beside bench_distributed, the
 # distributed tests run first on one rank per GPU (their GPU ranks' case included). Needs mpirun: the machine's, or the OpenMPI staged by
 # scripts/gpu/prepare_mpi.sh in .carry-mpi/ (carried with .carry/).
-# Usage: bash scripts/gpu/run_mpi.sh [PROBLEMS] (default lap3d-80,elast3d-40,lap3d-100,elast3d-50)
+# Usage: bash scripts/gpu/run_mpi.sh [PROBLEMS] (default lap3d-80,elast3d-40,lap3d-100,elast3d-50);
+# STRATA_MPI_CONFIGS="1x2 2x1" runs only those ranks × GPUs configurations.
 set -uo pipefail
 cd "$(dirname "$0")/../.."
 OUT=${OUT:-bench/results}
