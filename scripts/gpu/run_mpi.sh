@@ -7,7 +7,8 @@
 # prediction beside each measurement.
 # Results (distributed-*.json, cost-model.json, run_mpi.log) go to $OUT (default
 # bench/results). With test_distributed_mpi staged beside bench_distributed, the
-# distributed tests run first on one rank per GPU (their GPU ranks' case included). Needs mpirun: the machine's, or the OpenMPI staged by
+# distributed tests run first on one rank per GPU (their GPU ranks' case included).
+# Needs mpirun: the machine's, or the OpenMPI staged by
 # scripts/gpu/prepare_mpi.sh in .carry-mpi/ (carried with .carry/).
 # Usage: bash scripts/gpu/run_mpi.sh [PROBLEMS] (default lap3d-80,elast3d-40,lap3d-100,elast3d-50);
 # STRATA_MPI_CONFIGS="1x2 2x1" runs only those ranks × GPUs configurations.
