@@ -86,6 +86,19 @@ void setup_numeric(DistributedState& s, Analysis& an, int per_rank) {
         ns.executors.push_back(numeric::make_cuda_executor(s.options, device));
       }
     }
+    // the GPUs' set-up for this analysis (part plans, the part solve's arrays), here as
+    // the one-process solver makes it at analysis, not in the first factorization and
+    // solve; a failure is not reported here: the factorization meets it again and reports
+    // it with its context
+    for (auto& e : ns.executors) {
+      if (!gpu) break;
+      try {
+        e->prepare(an, comm.size() * per_rank);
+      } catch (const InternalError&) {
+        throw;
+      } catch (const Error&) {
+      }
+    }
 #ifdef STRATA_HAVE_NCCL
     // NCCL with any number of GPUs per rank: a rank's blocks from its other GPUs are
     // staged onto its NCCL GPU on the NCCL stream (nccl_blocks.cpp; an unordered staging

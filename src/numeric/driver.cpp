@@ -190,7 +190,28 @@ class MultiWorkerDriver final : public NumericDriver {
   bool uploads_values() const override { return cpu_threads_ == 0; }
   void prepare(const Analysis& an) override {
     if (cpu_threads_ > 0) return;
-    for (Executor* e : executors()) e->prepare(an, workers_);
+    // the GPUs side by side: each one's set-up is mostly host work of its own (plans,
+    // uploads from pageable memory)
+    const std::vector<Executor*> execs = executors();
+    std::exception_ptr error;
+    std::mutex error_mutex;
+    std::vector<std::thread> threads;
+    for (Executor* e : execs)
+      threads.emplace_back([&, e] {
+        try {
+          e->prepare(an, workers_);
+        } catch (...) {
+          const std::lock_guard<std::mutex> lock(error_mutex);
+          if (!error) error = std::current_exception();
+        }
+      });
+    for (std::thread& t : threads) t.join();
+    if (error) std::rethrow_exception(error);
+    // the part solve's host array of update vectors for one right-hand side, zero-filled
+    // here rather than in the first solve
+    if (options_.gpu_solve_parts &&
+        an.partition.part_of.size() == static_cast<std::size_t>(an.tree.n_fronts()))
+      part_solve_u_.resize(static_cast<std::size_t>(an.child_rows.offsets.back()));
     creation_seconds_ = 0;  // part of the analysis's device set-up
   }
   void factorize(const Analysis& an, const std::vector<double>& scaled_values,

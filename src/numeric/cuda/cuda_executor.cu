@@ -107,7 +107,8 @@ CudaExecutor::CudaExecutor(const Options& o, int device)
       dist_block_(std::max<index_t>(64, o.distributed_front_block_size)),
       potrf_block_(static_cast<int>(o.gpu_potrf_block_size)),
       recursive_panel_(o.gpu_recursive_panel),
-      solve_graph_(o.gpu_solve_graph) {
+      solve_graph_(o.gpu_solve_graph),
+      solve_parts_(o.gpu_solve_parts) {
   tiled_.pool_share = o.gpu_tiled_pool_share;
   tiled_.stream_cols = o.gpu_tiled_stream_columns;
   tiled_.prefetch_on = o.gpu_tiled_prefetch;
@@ -179,6 +180,9 @@ void CudaExecutor::prepare(const Analysis& an, int workers) {
   if (workers > 1 && planned_ != 2 &&
       an.partition.part_of.size() == static_cast<std::size_t>(an.tree.n_fronts()))
     plan_parts(an, false);
+  // a split factor's parts are solved where they are held: what that solve needs besides
+  // the parts' own plans (part_solve.cu), here rather than in the first solve
+  if (workers > 1 && planned_ == 2 && solve_parts_) prepare_part_solve(an);
   // A Cholesky factor keeps the analysis' row order (no pivoting): the device solve's row
   // arrays are known now, and are uploaded here rather than at the end of the first
   // factorization (end() finds them current).

@@ -232,6 +232,14 @@ class CudaExecutor final : public numeric::Executor {
   /// The part solve's plan of part `id` of an.partition, made on first use per analysis
   /// (part_solve.cu).
   SweepPlanDevice& part_sweep_plan(const Analysis& an, int id);
+  /// The subtree limit every part's plan takes (that of the whole tree's plan), once per
+  /// analysis (part_solve.cu).
+  void prepare_part_limit(const Analysis& an);
+  /// What a solve of held parts (solve_held_parts) needs whatever parts this GPU holds,
+  /// made at the analysis as for a whole-tree factor: the extend-add map, the row arrays
+  /// of the analysis' order and the whole tree's workspaces for one right-hand side.
+  /// Without room for them nothing is kept and the first solve tries again (part_solve.cu).
+  void prepare_part_solve(const Analysis& an);
   /// The device solve's sweeps of one plan (everything between the upload of the
   /// right-hand sides into dsolve_.x and the download of the solutions): the forward
   /// sweep, the backward sweep or both, with the diagonal solve of an LDLᵀ factor between
@@ -458,6 +466,7 @@ class CudaExecutor final : public numeric::Executor {
   int potrf_block_ = 0;                          ///< Options::gpu_potrf_block_size
   bool recursive_panel_ = true;                  ///< Options::gpu_recursive_panel
   bool solve_graph_ = true;                      ///< Options::gpu_solve_graph
+  bool solve_parts_ = true;                      ///< Options::gpu_solve_parts
   std::uint64_t analysis_id_ = 0;
   DevicePlan plan_;
   // analysis arrays (fronts_: the whole tree's schedule, for the device solve)

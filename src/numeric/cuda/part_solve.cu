@@ -50,20 +50,50 @@ void copy_ranges(double* dev, double* host, const Ranges& ranges, std::int64_t l
 
 }  // namespace
 
+void CudaExecutor::prepare_part_limit(const Analysis& an) {
+  if (dsolve_.parts_analysis == an.id) return;
+  int n_sm = 0;
+  STRATA_CUDA(cudaDeviceGetAttribute(&n_sm, cudaDevAttrMultiProcessorCount, device_));
+  dsolve_.parts.clear();
+  // the subtree limit the whole-tree solve would choose: every part's bottom is cut into
+  // the subtrees of the whole tree's plan (a part's own model sees fewer fronts per
+  // level and can take level launches where the whole tree's takes subtrees)
+  SolvePlan whole;
+  plan_sweeps(an.tree, an.schedule, n_sm, SolvePath::model, nullptr, whole);
+  dsolve_.parts_limit = whole.subtree_limit;
+  dsolve_.parts_analysis = an.id;
+}
+
+void CudaExecutor::prepare_part_solve(const Analysis& an) {
+  // an LDLᵀ factor's panels go to the host (its solve is the host's)
+  const bool cholesky = an.type == MatrixType::spd || an.type == MatrixType::automatic;
+  if (!cholesky && an.type != MatrixType::general) return;
+  const MatrixType rows_type = cholesky ? MatrixType::spd : MatrixType::general;
+  try {
+    prepare_solve_inverse(an);
+    prepare_part_limit(an);
+    if (!(dsolve_.rows_analysis == an.id && dsolve_.rows_type == rows_type))
+      upload_solve_rows(an, an.tree.rows.data(), rows_type, nullptr);
+    dsolve_.x.resize(std::max<std::size_t>(static_cast<std::size_t>(an.n), 1));
+    dsolve_.u.resize(
+        std::max<std::size_t>(static_cast<std::size_t>(dsolve_.u_offset_host.back()), 1));
+    dsolve_.scratch.resize(std::max<std::size_t>(an.tree.rows.size(), 1));
+  } catch (const OutOfMemory&) {
+    // the factorization's memory comes first; the first solve tries again or leaves the
+    // solve to the host
+    for (auto* b : {&dsolve_.x, &dsolve_.u, &dsolve_.scratch}) b->clear();
+    dsolve_.inv_offsets.clear();
+    dsolve_.inv_src.clear();
+    dsolve_.inverse_analysis = 0;
+    dsolve_.rows_analysis = 0;
+  }
+}
+
 CudaExecutor::SweepPlanDevice& CudaExecutor::part_sweep_plan(const Analysis& an, int id) {
   const auto& t = an.tree;
   int n_sm = 0;
   STRATA_CUDA(cudaDeviceGetAttribute(&n_sm, cudaDevAttrMultiProcessorCount, device_));
-  if (dsolve_.parts_analysis != an.id) {
-    dsolve_.parts.clear();
-    // the subtree limit the whole-tree solve would choose: every part's bottom is cut into
-    // the subtrees of the whole tree's plan (a part's own model sees fewer fronts per
-    // level and can take level launches where the whole tree's takes subtrees)
-    SolvePlan whole;
-    plan_sweeps(t, an.schedule, n_sm, SolvePath::model, nullptr, whole);
-    dsolve_.parts_limit = whole.subtree_limit;
-    dsolve_.parts_analysis = an.id;
-  }
+  prepare_part_limit(an);
   auto it = dsolve_.parts.find(id);
   if (it != dsolve_.parts.end()) return it->second;
   const index_t nf = t.n_fronts();
