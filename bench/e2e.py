@@ -51,7 +51,8 @@ PATTERNS = {
     "value_input_ms": (r"value input ([\d.]+) each", float),
     "gpu_factorization_ms": (r"GPU ([\d.]+) each", float),
     "values_on_device_factorizations": (r"values scaled on the GPU in (\d+) of", int),
-    "rescaled_factorizations": (r"equilibrated again on the host in (\d+)", int),
+    # (binaries before 2026-11-28 print "equilibrated again on the host in N")
+    "rescaled_factorizations": (r"equilibrated again (?:on the host )?in (\d+)", int),
 }
 
 

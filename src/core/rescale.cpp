@@ -127,4 +127,25 @@ Rescaling rescale_values(const SparseMatrix& c, bool symmetric, std::vector<doub
   return out;
 }
 
+void apply_rescaling(const SparseMatrix& c, const Rescaling& r, std::vector<double>& values,
+                     tbb::task_arena* arena) {
+  if (r.row.empty()) return;
+  const index_t n = c.n_cols;
+  auto scale = [&](index_t j0, index_t j1) {
+    for (index_t j = j0; j < j1; ++j)
+      for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p)
+        values[p] *= r.row[c.indices[p]] * r.col[j];
+  };
+  if (!arena || c.nnz() < kParallelEntries) {
+    scale(0, n);
+    return;
+  }
+  arena->execute([&] {
+    tbb::parallel_for(0, kBlocks, [&](int b) {
+      scale(static_cast<index_t>(static_cast<std::int64_t>(n) * b / kBlocks),
+            static_cast<index_t>(static_cast<std::int64_t>(n) * (b + 1) / kBlocks));
+    });
+  });
+}
+
 }  // namespace strata

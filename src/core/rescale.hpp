@@ -51,4 +51,13 @@ Rescaling rescale_values(const SparseMatrix& pattern, bool symmetric, std::vecto
 /// [1/2, 2].
 bool within_factor_two(std::span<const double> maxima);
 
+/// values[p] *= r.row[i]·r.col[j] for every entry p = (i, j) of `pattern` (canonical CSC;
+/// symmetric: lower storage): the extra scaling `r` (rescale_values' result, or a device's
+/// pass's) applied in one pass to values scaled by the analysis's scaling alone. Its
+/// factors are powers of two, so every product is exact and the bits are those the
+/// sweeps gave. Nothing when r is empty. With `arena`, large patterns in column blocks on
+/// its threads.
+void apply_rescaling(const SparseMatrix& pattern, const Rescaling& r, std::vector<double>& values,
+                     tbb::task_arena* arena = nullptr);
+
 }  // namespace strata

@@ -185,14 +185,19 @@ void keep_analyzed_input(SolverState& s, const SparseMatrix& a) {
                "analyze: value sums");
 }
 
+// Equilibration sweeps of values far from the analysis's (rescale.hpp), on the host or the
+// device: each halves the logarithm of every row's and column's distance from 1.
+constexpr int kRescalingSweeps = 3;
+
 // The input stage on the GPU (the tree driver's CUDA executor, numeric/cuda/value_pass.cu)
 // for `values` in the entry order of `pattern`, the analyzed pattern: staged in the
-// page-locked `scaled`, checked, scaled and measured on the device, which keeps the scaled
-// values for the factorization. On acceptance the staged values become the kept ones (the
-// two buffers trade places, so nothing is copied twice); refused values (not finite,
-// overflowing sums) throw with the kept values and the factor as they were. False, with
-// nothing changed that matters, where the driver has no such pass or B needs
-// equilibrating again (the host then rescales). Sets norm1 = ‖B‖₁.
+// page-locked `scaled`, checked, scaled, equilibrated again where they are far from the
+// analysis's (the host's sweeps, on the device) and measured on the device, which keeps
+// the scaled values for the factorization. On acceptance the staged values become the
+// kept ones (the two buffers trade places, so nothing is copied twice); refused values
+// (not finite, overflowing sums) throw with the kept values and the factor as they were.
+// False, with nothing changed that matters, where the driver has no such pass. Sets
+// norm1 = ‖B‖₁.
 bool values_on_gpu(SolverState& s, const SparseMatrix& pattern, std::span<const double> values,
                    double& norm1) {
   const Analysis& an = *s.analysis;
@@ -210,14 +215,18 @@ bool values_on_gpu(SolverState& s, const SparseMatrix& pattern, std::span<const 
     s.scaled_current = false;  // raw values now, whatever follows
     detail::copy_range(staged + b, values.data() + b, e - b, arena);
   };
+  // values far from the analysis's are equilibrated again there, as on the host (not
+  // when the analysis's scaling was clamped: see prepare_values)
+  const bool equilibrate = !an.row_scaling.empty() && !scaling_clamped(an);
   numeric::DeviceValueNorms dn;
-  if (!s.driver->scale_values_on_device(an, staged, stage, dn)) return false;
+  if (!s.driver->scale_values_on_device(an, staged, stage, equilibrate ? kRescalingSweeps : 0, dn))
+    return false;
   if (!dn.finite) detail::throw_first_not_finite(pattern, values.data());
   if (!dn.sums_finite) {
     check_norms(pattern, values.data());
     throw InternalError("the device found a row or column sum that overflows; the host did not");
   }
-  if (!an.row_scaling.empty() && !dn.equilibrated && !scaling_clamped(an)) return false;
+  if (equilibrate && !dn.equilibrated && dn.rescaling_sweeps == 0) return false;
   s.factor.valid = false;
   s.delayed.valid = false;
   s.norm_inf = dn.norm_inf;
@@ -226,6 +235,11 @@ bool values_on_gpu(SolverState& s, const SparseMatrix& pattern, std::span<const 
   std::swap(s.values_pin, s.scaled_pin);
   s.values_on_device = true;
   s.rescaling = Rescaling{};
+  if (dn.rescaling_sweeps > 0) {
+    s.rescaling.row = std::move(dn.row_rescaling);
+    s.rescaling.col = std::move(dn.col_rescaling);
+    s.rescaling.sweeps = dn.rescaling_sweeps;
+  }
   return true;
 }
 
@@ -236,6 +250,7 @@ void host_scaled(SolverState& s) {
   if (s.scaled_current) return;
   refactor_values(*s.analysis, s.values, s.values.values.data(), host_arena(s), s.value_sums,
                   s.scaled);
+  apply_rescaling(s.values, s.rescaling, s.scaled, &host_arena(s));  // the device's, if any
   s.scaled_current = true;
 }
 
@@ -315,8 +330,8 @@ double prepare_values(SolverState& s, const SparseMatrix* a, std::span<const dou
   // subnormal range. The refactorization's pass has already found whether B needs it.
   s.rescaling = Rescaling{};
   if (scale && !equilibrated && !scaling_clamped(an)) {
-    s.rescaling = rescale_values(s.values, an.symmetric, s.scaled, 3, &arena, &s.value_sums,
-                                 row_max, col_max);
+    s.rescaling = rescale_values(s.values, an.symmetric, s.scaled, kRescalingSweeps, &arena,
+                                 &s.value_sums, row_max, col_max);
     if (!s.rescaling.row.empty())
       norm1 = scaled_norm1(s.values, an.symmetric, s.scaled, arena, s.value_sums);
   }

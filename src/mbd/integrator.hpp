@@ -143,7 +143,8 @@ struct IntegratorStats {
   /// strata's own split of its factorizations (FactorStats, summed): value input (checks,
   /// norms, scaling, the copy to a GPU) and the GPU's time; the factorizations whose values
   /// were scaled on the GPU (FactorStats::values_scaled_on_device) and those whose values
-  /// were equilibrated again on the host, far from the analysis's (rescaling_sweeps > 0).
+  /// were equilibrated again, far from the analysis's (rescaling_sweeps > 0; on the GPU
+  /// too when their values were scaled there).
   double factor_input_seconds = 0, factor_device_seconds = 0;
   index_t values_on_device_factorizations = 0, rescaled_factorizations = 0;
   /// partition_seconds: coordinate partitionings and the partition and redundancy checks,

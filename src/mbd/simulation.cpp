@@ -462,7 +462,7 @@ std::string summary(const Model& model, const SimulationResult& r) {
   if (s.factorizations && (s.factor_device_seconds > 0 || s.rescaled_factorizations))
     o += fmt::format(
         "factorization [ms]    value input {:.3f} each, GPU {:.3f} each; values scaled on the "
-        "GPU in {} of {}, equilibrated again on the host in {}\n",
+        "GPU in {} of {}, equilibrated again in {}\n",
         1e3 * s.factor_input_seconds / s.factorizations,
         1e3 * s.factor_device_seconds / s.factorizations, s.values_on_device_factorizations,
         s.factorizations, s.rescaled_factorizations);

@@ -123,8 +123,8 @@ class TreeDriver final : public NumericDriver {
     creation_seconds_ = 0;  // part of the analysis's device set-up, not a factorization's
   }
   bool scale_values_on_device(const Analysis& an, const double* values, const StageValues& stage,
-                              DeviceValueNorms& out) override {
-    return gpu_ && executor().scale_values_on_device(an, values, stage, out);
+                              int max_sweeps, DeviceValueNorms& out) override {
+    return gpu_ && executor().scale_values_on_device(an, values, stage, max_sweeps, out);
   }
   void factorize(const Analysis& an, const std::vector<double>& scaled_values,
                  bool values_on_device, MatrixType type, const PivotPolicy& pivots,

@@ -45,11 +45,13 @@ class NumericDriver {
   virtual void prepare(const Analysis& an) {}
   /// The value pass of the next factorizations on the GPU (Executor::scale_values_on_device
   /// of the tree driver's CUDA executor): `values` (host, canonical entry order, filled
-  /// piece by piece by `stage`) checked, scaled and measured on the device, `out` its
-  /// findings. False, having done nothing,
-  /// for every other driver and where the executor has no such pass.
+  /// piece by piece by `stage`) checked, scaled, equilibrated again by at most
+  /// `max_sweeps` sweeps where needed, and measured on the device, `out` its findings.
+  /// False, having done nothing, for every other driver and where the executor has no
+  /// such pass.
   virtual bool scale_values_on_device(const Analysis& an, const double* values,
-                                      const StageValues& stage, DeviceValueNorms& out) {
+                                      const StageValues& stage, int max_sweeps,
+                                      DeviceValueNorms& out) {
     return false;
   }
   /// Factors the scaled values (the analysis's canonical entry order) as `type` with

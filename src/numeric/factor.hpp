@@ -90,6 +90,12 @@ struct DeviceValueNorms {
   double norm_inf = 0;        ///< ‖A‖∞ (max row sum of |a|, symmetric storage expanded)
   double scaled_norm1 = 0;    ///< ‖B‖₁ (max column sum of |b|)
   bool equilibrated = false;  ///< every row and column maximum of |b| is 0 or in [½, 2]
+  /// Equilibration sweeps the pass made on B (core/rescale.hpp, as rescale_values makes
+  /// them; 0: none asked or none needed), and their factors (powers of two, n each,
+  /// original numbering) when it made any: B, ‖B‖₁ and `equilibrated` are then of
+  /// diag(row_rescaling)·B·diag(col_rescaling).
+  int rescaling_sweeps = 0;
+  std::vector<double> row_rescaling, col_rescaling;
 };
 
 /// Fills entries [begin, end) of a value pass's staging buffer (Executor::
@@ -218,7 +224,9 @@ class Executor {
   virtual void prepare(const Analysis& an, int workers) {}
   /// The value pass of a factorization on the executor's device: `values` (host, the
   /// analysis's canonical entry order; page-locked for a fast copy) uploaded, checked,
-  /// scaled by the analysis's matching scaling and measured there (`out`), and kept for
+  /// scaled by the analysis's matching scaling, equilibrated again by at most
+  /// `max_sweeps` sweeps when B is not within a factor 2 of equilibrium (0: not; see
+  /// DeviceValueNorms) and measured there (`out`), and kept for
   /// the factorizations that follow with FactorContext::values_on_device, until the next
   /// call or analysis. The upload goes in pieces, each after stage(begin, end) has put
   /// values[begin, end) in place (when `stage` is set), so that the caller's filling of
@@ -227,7 +235,8 @@ class Executor {
   /// read the values on the host (fronts factored tile by tile). Throws DeviceError, as
   /// factorize.
   virtual bool scale_values_on_device(const Analysis& an, const double* values,
-                                      const StageValues& stage, DeviceValueNorms& out) {
+                                      const StageValues& stage, int max_sweeps,
+                                      DeviceValueNorms& out) {
     return false;
   }
   /// Called once per factorization, before this executor's first part (ctx.part unset).

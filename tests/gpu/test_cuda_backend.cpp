@@ -1527,27 +1527,71 @@ TEST_F(CudaBackend, ValuesRefusedOnTheDeviceKeepTheFactor) {
   EXPECT_LE(s.stats().solve.backward_error, 1e-14);
 }
 
-// Values far from the analysis's (a column scaled by 10⁶) need equilibrating again, which
-// the host does: the factorization takes the host's pass and solves to full accuracy.
-TEST_F(CudaBackend, ValuesFarFromTheAnalysisAreEquilibratedOnTheHost) {
-  auto rng = test::fresh_rng();
-  const SparseMatrix a = test::random_sparse(200, 4, test::RandomKind::general, rng);
-  SparseMatrix far = a;
-  for (index_t p = far.offsets[7]; p < far.offsets[8]; ++p) far.values[p] *= 1e6;
-  Options o = one_gpu();
-  o.solve_check = SolveCheck::always;
-  Solver s(o);
-  s.factorize(a);
-  s.refactorize(far);
-  EXPECT_FALSE(s.stats().factor.values_scaled_on_device);
-  EXPECT_GT(s.stats().factor.rescaling_sweeps, 0);
-  const std::vector<double> b(200, 1.0);
-  const std::vector<double> x = s.solve(b);
-  EXPECT_LE(test::backward_error(far, x.data(), b.data()), 1e-14);
-  s.refactorize(a);  // near the analysis's values again: the device's pass
-  EXPECT_TRUE(s.stats().factor.values_scaled_on_device);
-  const std::vector<double> y = s.solve(b);
-  EXPECT_LE(test::backward_error(a, y.data(), b.data()), 1e-14);
+// Values far from the analysis's (a row and a column scaled by 10^±3, so a diagonal
+// entry by 10^±6) need equilibrating again, which the device's pass does with the host's
+// sweeps: against the host's pass (the same matrix given with explicit zeros) the same
+// number of sweeps, the same factor (log |det|, which counts the rescaling's factors),
+// the same solution without refinement, and full accuracy with it; LU and LDLᵀ, sizes 5
+// to 733. Near the analysis's values again, no sweep.
+TEST_F(CudaBackend, ValuesFarFromTheAnalysisAreEquilibratedOnTheDevice) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed) + " (STRATA_TEST_SEED replays it)");
+  const std::pair<test::RandomKind, MatrixType> kinds[] = {
+      {test::RandomKind::general, MatrixType::general},
+      {test::RandomKind::symmetric_indefinite, MatrixType::symmetric_indefinite}};
+  for (const auto& [kind, type] : kinds)
+    for (const index_t n : {5, 200, 733}) {
+      SCOPED_TRACE("type " + std::string(to_string(type)) + ", n = " + std::to_string(n));
+      const SparseMatrix a = test::random_sparse(n, 4, kind, rng);
+      SparseMatrix far = a;  // row and column k by 10³, row and column k2 by 10⁻³
+      const index_t k = n / 2, k2 = n - 1;
+      for (index_t j = 0; j < n; ++j)
+        for (index_t p = far.offsets[j]; p < far.offsets[j + 1]; ++p) {
+          const index_t i = far.indices[p];
+          for (const index_t t : {i, j}) far.values[p] *= t == k ? 1e3 : t == k2 ? 1e-3 : 1.0;
+        }
+      Options o = one_gpu(type);
+      o.refinement_max_steps = 0;
+      o.gmres_max_iterations = 0;
+      o.solve_check = SolveCheck::after_perturbed_pivots;
+      Solver dev(o), host(o);
+      dev.analyze(a);
+      host.analyze(a);
+      dev.factorize(a);
+      host.factorize(with_duplicate_zeros(a));
+      dev.refactorize(far);
+      host.refactorize(with_duplicate_zeros(far));
+      const FactorStats& fd = dev.stats().factor;
+      const FactorStats& fh = host.stats().factor;
+      EXPECT_TRUE(fd.values_scaled_on_device);
+      EXPECT_FALSE(fh.values_scaled_on_device);
+      EXPECT_GT(fh.rescaling_sweeps, 0);
+      EXPECT_EQ(fd.rescaling_sweeps, fh.rescaling_sweeps);
+      EXPECT_EQ(fd.perturbed_pivots, fh.perturbed_pivots);
+      std::vector<double> b(n);
+      std::uniform_real_distribution<double> rhs(-1.0, 1.0);
+      for (double& v : b) v = rhs(rng);
+      const std::vector<double> xd = dev.solve(b), xh = host.solve(b);
+      if (fh.perturbed_pivots == 0) {
+        EXPECT_EQ(fd.log_abs_determinant, fh.log_abs_determinant);
+        EXPECT_EQ(xd, xh);
+      }
+      Options r = one_gpu(type);  // refined: full accuracy on the far values
+      r.solve_check = SolveCheck::always;
+      Solver refined(r);
+      refined.analyze(a);
+      refined.factorize(a);
+      refined.refactorize(far);
+      EXPECT_TRUE(refined.stats().factor.values_scaled_on_device);
+      const std::vector<double> x = refined.solve(b);
+      EXPECT_LE(test::backward_error(far, x.data(), b.data()), 1e-14);
+      refined.refactorize(a);  // near the analysis's values again
+      EXPECT_TRUE(refined.stats().factor.values_scaled_on_device);
+      EXPECT_EQ(refined.stats().factor.rescaling_sweeps, 0);
+      const std::vector<double> y = refined.solve(b);
+      EXPECT_LE(test::backward_error(a, y.data(), b.data()), 1e-14);
+    }
 }
 
 // Pivoting::delayed on a general matrix factors on the host from the first pivot: the

@@ -1,7 +1,8 @@
 // Ruiz equilibration of a refactorization's values (core/rescale.hpp): rows and columns
 // scaled by powers of two end with their largest magnitude in [1/2, 2]; the scaled values
-// are exactly diag(row)·B·diag(col); a matrix within a factor 2 is left alone; the passes
-// in column blocks on several threads give bitwise the sequential result.
+// are exactly diag(row)·B·diag(col), also when the factors are applied in one pass
+// (apply_rescaling); a matrix within a factor 2 is left alone; the passes in column blocks
+// on several threads give bitwise the sequential result.
 #include <gtest/gtest.h>
 #include <tbb/task_arena.h>
 
@@ -63,6 +64,13 @@ TEST(Rescale, EquilibratesExactlyAndThreadsGiveTheSameBits) {
       EXPECT_EQ(rs.row, rp.row);
       EXPECT_EQ(rs.col, rp.col);
       EXPECT_EQ(rs.sweeps, rp.sweeps);
+      // the factors applied to the unscaled values in one pass (apply_rescaling, as after
+      // a device's sweeps): the sweeps' bits, on one thread and in blocks
+      std::vector<double> once = a.values, once_par = a.values;
+      apply_rescaling(a, rs, once);
+      apply_rescaling(a, rs, once_par, &arena);
+      EXPECT_EQ(once, seq);
+      EXPECT_EQ(once_par, seq);
       if (rs.row.empty()) continue;  // already within a factor 2
       if (symmetric) EXPECT_EQ(rs.row, rs.col);
       for (index_t j = 0; j < n; ++j)

@@ -175,7 +175,7 @@ class CudaExecutor final : public numeric::Executor {
   numeric::TransferMemory transfer_memory() const override;
   void prepare(const Analysis& an, int workers) override;
   bool scale_values_on_device(const Analysis& an, const double* values,
-                              const numeric::StageValues& stage,
+                              const numeric::StageValues& stage, int max_sweeps,
                               numeric::DeviceValueNorms& out) override;  // value_pass.cu
   void begin(const numeric::FactorContext& ctx) override;
   void begin_part(const numeric::FactorContext& ctx) override;
@@ -490,13 +490,14 @@ class CudaExecutor final : public numeric::Executor {
   std::map<index_t, DeviceBuffer<double>> outbox_;
   /// The value pass on the device (value_pass.cu): the canonical pattern by columns
   /// (col_ptr, col_row) and by rows (row_ptr; per entry of a row its position and
-  /// column), the matching scaling, the per-row and per-column figures (6n), the flag of a
+  /// column), the matching scaling, the per-row and per-column figures (6n), an
+  /// equilibration's factors (4n: the sweeps' products and the last sweep's), the flag of a
   /// value that is not finite and the five numbers for the host; `analysis`: the
   /// Analysis::id they were made for (0: none).
   struct ValuePass {
     DeviceBuffer<std::int64_t> row_ptr, col_ptr;
     DeviceBuffer<int> row_pos, row_col, col_row, bad;
-    DeviceBuffer<double> row_scaling, col_scaling, sums;
+    DeviceBuffer<double> row_scaling, col_scaling, sums, rescale;
     PinnedBuffer<double> out;
     std::uint64_t analysis = 0;
   } value_pass_;

@@ -158,6 +158,29 @@ __global__ void combine(std::int64_t n, bool symmetric, const double* ra, const 
   }
 }
 
+// The power of two nearest to 1/√x (x > 0), as core/rescale.cpp takes it.
+__device__ double inverse_sqrt_pow2(double x) {
+  int e = 0;
+  frexp(x, &e);  // x = f·2^e, f in [1/2, 1)
+  return ldexp(1.0, -((e - 1) / 2));
+}
+
+// One equilibration sweep's factors (core/rescale.hpp): r_i from row i's maximum of |b|,
+// s_j from column j's (symmetric: both from the full row's, rm and cm together), 1 for an
+// empty row or column; the factors of the sweeps so far, R and C, multiplied by them (set
+// by the first sweep).
+__global__ void sweep_factors(std::int64_t n, bool symmetric, bool first, const double* rm,
+                              const double* cm, double* r, double* s, double* R, double* C) {
+  const std::int64_t i = static_cast<std::int64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i >= n) return;
+  const double row = symmetric ? fmax(rm[i], cm[i]) : rm[i];
+  const double col = symmetric ? row : cm[i];
+  r[i] = row > 0 ? inverse_sqrt_pow2(row) : 1.0;
+  s[i] = col > 0 ? inverse_sqrt_pow2(col) : 1.0;
+  R[i] = first ? r[i] : R[i] * r[i];
+  C[i] = first ? s[i] : C[i] * s[i];
+}
+
 unsigned blocks_for(std::int64_t n) {
   return static_cast<unsigned>((n + kThreads / kWarp - 1) / (kThreads / kWarp));
 }
@@ -199,6 +222,7 @@ void CudaExecutor::prepare_value_pass(const Analysis& an) {
       upload(v.col_scaling, an.col_scaling);
     }
     v.sums.resize(std::max<std::size_t>(6 * n, 1));
+    v.rescale.resize(std::max<std::size_t>(4 * n, 1));
     v.bad.resize(1);
     v.out.resize(5);
     values_.resize(std::max<std::size_t>(nnz, 1));
@@ -207,14 +231,14 @@ void CudaExecutor::prepare_value_pass(const Analysis& an) {
     // no room: the host pass serves; give back what was taken
     for (auto* b : {&v.row_ptr, &v.col_ptr}) b->clear();
     for (auto* b : {&v.row_pos, &v.row_col, &v.col_row}) b->clear();
-    for (auto* b : {&v.row_scaling, &v.col_scaling, &v.sums}) b->clear();
+    for (auto* b : {&v.row_scaling, &v.col_scaling, &v.sums, &v.rescale}) b->clear();
     return;
   }
   v.analysis = an.id;
 }
 
 bool CudaExecutor::scale_values_on_device(const Analysis& an, const double* values,
-                                          const numeric::StageValues& stage,
+                                          const numeric::StageValues& stage, int max_sweeps,
                                           numeric::DeviceValueNorms& out) {
   STRATA_CUDA(cudaSetDevice(device_));
   ValuePass& v = value_pass_;
@@ -260,6 +284,44 @@ bool CudaExecutor::scale_values_on_device(const Analysis& an, const double* valu
   out.sums_finite = r[2] == 0;
   out.equilibrated = r[3] == 0;
   out.finite = r[4] == 0;
+  out.rescaling_sweeps = 0;
+  out.row_rescaling.clear();
+  out.col_rescaling.clear();
+  if (!scale || out.equilibrated || !out.finite || !out.sums_finite || max_sweeps <= 0 || n == 0)
+    return true;
+  // Equilibrated again as rescale_values does it on the host: per sweep the factors from
+  // the last maxima, then the row and column passes scale B in place by them and take its
+  // new maxima and ‖B‖₁ (the figures of A in ra and ca are not read again), until every
+  // maximum is within a factor 2 of 1 or max_sweeps sweeps are made. The factors are
+  // powers of two, so B's bits are the host's.
+  double* R = v.rescale.data();
+  double *C = R + n, *rr = C + n, *ss = rr + n;
+  const unsigned grid = static_cast<unsigned>((n + kThreads - 1) / kThreads);
+  while (out.rescaling_sweeps < max_sweeps) {
+    sweep_factors<<<grid, kThreads, 0, stream_>>>(n, an.symmetric, out.rescaling_sweeps == 0, rm,
+                                                  cm, rr, ss, R, C);
+    STRATA_CUDA(cudaGetLastError());
+    row_pass<<<blocks_for(n), kThreads, 0, stream_>>>(n, v.row_ptr.data(), v.row_pos.data(),
+                                                      v.row_col.data(), values_.data(), rr, ss, ra,
+                                                      rb, rm);
+    STRATA_CUDA(cudaGetLastError());
+    column_pass<<<blocks_for(n), kThreads, 0, stream_>>>(n, v.col_ptr.data(), v.col_row.data(),
+                                                         values_.data(), rr, ss, an.symmetric, ca,
+                                                         cb, cm, v.bad.data());
+    STRATA_CUDA(cudaGetLastError());
+    combine<<<1, kThreads, 0, stream_>>>(n, an.symmetric, ra, rb, rm, ca, cb, cm, v.bad.data(),
+                                         v.out.data());
+    STRATA_CUDA(cudaGetLastError());
+    STRATA_CUDA(cudaStreamSynchronize(stream_));
+    ++out.rescaling_sweeps;
+    out.scaled_norm1 = r[1];
+    out.equilibrated = r[3] == 0;
+    if (out.equilibrated) break;
+  }
+  out.row_rescaling.resize(static_cast<std::size_t>(n));
+  out.col_rescaling.resize(static_cast<std::size_t>(n));
+  STRATA_CUDA(cudaMemcpy(out.row_rescaling.data(), R, sizeof(double) * n, cudaMemcpyDeviceToHost));
+  STRATA_CUDA(cudaMemcpy(out.col_rescaling.data(), C, sizeof(double) * n, cudaMemcpyDeviceToHost));
   return true;
 }
 
