@@ -202,11 +202,6 @@ bool values_on_gpu(SolverState& s, const SparseMatrix& pattern, std::span<const 
                    double& norm1) {
   const Analysis& an = *s.analysis;
   if (!s.driver->uploads_values() || values.empty()) return false;
-  // a general matrix whose pivots are delayed straight away is factored on the host
-  // (factor_values), which needs the scaled values there
-  if (s.options.pivoting == Pivoting::delayed && an.type == MatrixType::general &&
-      s.driver->in_one_process())
-    return false;
   tbb::task_arena& arena = host_arena(s);
   resize_scaled(s, values.size(), "factorize: staged values");
   pin_scaled(s);
@@ -244,10 +239,17 @@ bool values_on_gpu(SolverState& s, const SparseMatrix& pattern, std::span<const 
 }
 
 // The scaled values on the host for a host algorithm (the delayed factorization) after a
-// value pass on the GPU: recomputed from the kept values by the host's pass, which gives
-// the bits the device computed.
+// value pass on the GPU: copied back from the device (one copy instead of the host's pass
+// and sweeps, up to six passes over the entries), else recomputed from the kept values by
+// the host's pass, which gives the bits the device computed.
 void host_scaled(SolverState& s) {
   if (s.scaled_current) return;
+  const Analysis& an = *s.analysis;
+  if (s.values_on_device && s.scaled.size() == an.pattern_indices.size() &&
+      s.driver->download_scaled_values(an, s.scaled.data())) {
+    s.scaled_current = true;
+    return;
+  }
   refactor_values(*s.analysis, s.values, s.values.values.data(), host_arena(s), s.value_sums,
                   s.scaled);
   apply_rescaling(s.values, s.rescaling, s.scaled, &host_arena(s));  // the device's, if any

@@ -126,6 +126,9 @@ class TreeDriver final : public NumericDriver {
                               int max_sweeps, DeviceValueNorms& out) override {
     return gpu_ && executor().scale_values_on_device(an, values, stage, max_sweeps, out);
   }
+  bool download_scaled_values(const Analysis& an, double* host) override {
+    return gpu_ && executor().download_scaled_values(an, host);
+  }
   void factorize(const Analysis& an, const std::vector<double>& scaled_values,
                  bool values_on_device, MatrixType type, const PivotPolicy& pivots,
                  NumericFactor& factor) override {

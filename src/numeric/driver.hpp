@@ -54,6 +54,9 @@ class NumericDriver {
                                       DeviceValueNorms& out) {
     return false;
   }
+  /// The values the last scale_values_on_device scaled, copied back into `host`
+  /// (Executor::download_scaled_values); false for every other driver.
+  virtual bool download_scaled_values(const Analysis& an, double* host) { return false; }
   /// Factors the scaled values (the analysis's canonical entry order) as `type` with
   /// the pivot policy `pivots` (static pivots, LU's threshold) into `factor`; values_on_device:
   /// those the last scale_values_on_device left on the GPU instead (scaled_values is not read).

@@ -239,6 +239,11 @@ class Executor {
                                       DeviceValueNorms& out) {
     return false;
   }
+  /// The scaled values the last scale_values_on_device left on the device (B in the
+  /// analysis's canonical entry order, an.pattern_indices.size() of them) copied into
+  /// `host`, for a host algorithm that needs them (the delayed LU). False, having done
+  /// nothing, where the executor holds none for `an`. Throws DeviceError.
+  virtual bool download_scaled_values(const Analysis& an, double* host) { return false; }
   /// Called once per factorization, before this executor's first part (ctx.part unset).
   virtual void begin(const FactorContext& ctx) {}
   /// Called before the batches of the part ctx.part.

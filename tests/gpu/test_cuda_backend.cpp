@@ -1594,21 +1594,53 @@ TEST_F(CudaBackend, ValuesFarFromTheAnalysisAreEquilibratedOnTheDevice) {
     }
 }
 
-// Pivoting::delayed on a general matrix factors on the host from the first pivot: the
-// value pass stays on the host too (no copy to the device and back).
-TEST_F(CudaBackend, PivotsDelayedStraightAwayKeepTheHostsValuePass) {
-  auto rng = test::fresh_rng();
-  const SparseMatrix a = test::random_sparse(200, 4, test::RandomKind::general, rng);
-  Options o = one_gpu();
-  o.pivoting = Pivoting::delayed;
-  Solver s(o);
-  s.factorize(a);
-  s.refactorize(std::span<const double>(a.values));
-  EXPECT_FALSE(s.stats().factor.values_scaled_on_device);
-  EXPECT_TRUE(s.stats().factor.delayed_pivoting);
-  const std::vector<double> b(200, 1.0);
-  const std::vector<double> x = s.solve(b);
-  EXPECT_LE(test::backward_error(a, x.data(), b.data()), 1e-14);
+// Pivoting::delayed on a general matrix factors on the host from the first pivot, from
+// the values the device's pass scaled (and equilibrated again, for values far from the
+// analysis's) copied back: the same factor and solution as from the host's pass (the
+// matrix given with explicit zeros), n = 5, 200, 733.
+TEST_F(CudaBackend, PivotsDelayedStraightAwayTakeTheDevicesValuePass) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed) + " (STRATA_TEST_SEED replays it)");
+  for (const index_t n : {5, 200, 733}) {
+    SCOPED_TRACE("n = " + std::to_string(n));
+    const SparseMatrix a = test::random_sparse(n, 4, test::RandomKind::general, rng);
+    SparseMatrix far = a;  // row and column n/2 by 10⁴: equilibrated again
+    for (index_t j = 0; j < n; ++j)
+      for (index_t p = far.offsets[j]; p < far.offsets[j + 1]; ++p)
+        for (const index_t t : {far.indices[p], j})
+          if (t == n / 2) far.values[p] *= 1e4;
+    Options o = one_gpu(MatrixType::general);
+    o.pivoting = Pivoting::delayed;
+    o.refinement_max_steps = 0;
+    o.gmres_max_iterations = 0;
+    o.solve_check = SolveCheck::after_perturbed_pivots;
+    Solver dev(o), host(o);
+    dev.analyze(a);
+    host.analyze(a);
+    std::vector<double> b(n);
+    std::uniform_real_distribution<double> rhs(-1.0, 1.0);
+    for (double& v : b) v = rhs(rng);
+    const SparseMatrix* values[] = {&a, &far};
+    for (const SparseMatrix* m : values) {
+      dev.refactorize(std::span<const double>(m->values));
+      host.refactorize(with_duplicate_zeros(*m));
+      const FactorStats& fd = dev.stats().factor;
+      const FactorStats& fh = host.stats().factor;
+      EXPECT_TRUE(fd.values_scaled_on_device);
+      EXPECT_FALSE(fh.values_scaled_on_device);
+      EXPECT_TRUE(fd.delayed_pivoting);
+      EXPECT_TRUE(fh.delayed_pivoting);
+      EXPECT_EQ(fd.rescaling_sweeps, fh.rescaling_sweeps);
+      EXPECT_EQ(fd.perturbed_pivots, fh.perturbed_pivots);
+      const std::vector<double> xd = dev.solve(b), xh = host.solve(b);
+      if (fh.perturbed_pivots == 0) {
+        EXPECT_EQ(fd.log_abs_determinant, fh.log_abs_determinant);
+        EXPECT_EQ(xd, xh);
+        EXPECT_LE(test::backward_error(*m, xd.data(), b.data()), 1e-12);
+      }
+    }
+  }
 }
 
 // A factorization that delays its pivots straight away runs on the host: its statistics

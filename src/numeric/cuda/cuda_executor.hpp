@@ -176,7 +176,8 @@ class CudaExecutor final : public numeric::Executor {
   void prepare(const Analysis& an, int workers) override;
   bool scale_values_on_device(const Analysis& an, const double* values,
                               const numeric::StageValues& stage, int max_sweeps,
-                              numeric::DeviceValueNorms& out) override;  // value_pass.cu
+                              numeric::DeviceValueNorms& out) override;    // value_pass.cu
+  bool download_scaled_values(const Analysis& an, double* host) override;  // value_pass.cu
   void begin(const numeric::FactorContext& ctx) override;
   void begin_part(const numeric::FactorContext& ctx) override;
   void factor_batch(const numeric::FactorContext& ctx, const BatchInfo& b) override;

@@ -237,6 +237,17 @@ void CudaExecutor::prepare_value_pass(const Analysis& an) {
   v.analysis = an.id;
 }
 
+bool CudaExecutor::download_scaled_values(const Analysis& an, double* host) {
+  const std::size_t nnz = an.pattern_indices.size();
+  if (value_pass_.analysis != an.id || an.id != analysis_id_ || values_.size() < nnz) return false;
+  STRATA_CUDA(cudaSetDevice(device_));
+  if (nnz > 0)
+    STRATA_CUDA(cudaMemcpyAsync(host, values_.data(), nnz * sizeof(double), cudaMemcpyDeviceToHost,
+                                stream_));
+  STRATA_CUDA(cudaStreamSynchronize(stream_));
+  return true;
+}
+
 bool CudaExecutor::scale_values_on_device(const Analysis& an, const double* values,
                                           const numeric::StageValues& stage, int max_sweeps,
                                           numeric::DeviceValueNorms& out) {
