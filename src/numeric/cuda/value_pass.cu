@@ -273,22 +273,25 @@ bool CudaExecutor::scale_values_on_device(const Analysis& an, const double* valu
   STRATA_CUDA(cudaMemsetAsync(v.bad.data(), 0, sizeof(int), stream_));
   double* s = v.sums.data();
   double *ra = s, *rb = s + n, *rm = s + 2 * n, *ca = s + 3 * n, *cb = s + 4 * n, *cm = s + 5 * n;
-  const double* rs = scale ? v.row_scaling.data() : nullptr;
-  const double* cs = scale ? v.col_scaling.data() : nullptr;
-  if (n > 0) {
-    row_pass<<<blocks_for(n), kThreads, 0, stream_>>>(n, v.row_ptr.data(), v.row_pos.data(),
-                                                      v.row_col.data(), values_.data(), rs, cs, ra,
-                                                      rb, rm);
+  // the row and column passes over values_ scaled by (rs, cs) in place, then the five
+  // numbers, on the host when this returns
+  auto passes = [&](const double* rs, const double* cs) {
+    if (n > 0) {
+      row_pass<<<blocks_for(n), kThreads, 0, stream_>>>(n, v.row_ptr.data(), v.row_pos.data(),
+                                                        v.row_col.data(), values_.data(), rs, cs,
+                                                        ra, rb, rm);
+      STRATA_CUDA(cudaGetLastError());
+      column_pass<<<blocks_for(n), kThreads, 0, stream_>>>(n, v.col_ptr.data(), v.col_row.data(),
+                                                           values_.data(), rs, cs, an.symmetric, ca,
+                                                           cb, cm, v.bad.data());
+      STRATA_CUDA(cudaGetLastError());
+    }
+    combine<<<1, kThreads, 0, stream_>>>(n, an.symmetric, ra, rb, rm, ca, cb, cm, v.bad.data(),
+                                         v.out.data());
     STRATA_CUDA(cudaGetLastError());
-    column_pass<<<blocks_for(n), kThreads, 0, stream_>>>(n, v.col_ptr.data(), v.col_row.data(),
-                                                         values_.data(), rs, cs, an.symmetric, ca,
-                                                         cb, cm, v.bad.data());
-    STRATA_CUDA(cudaGetLastError());
-  }
-  combine<<<1, kThreads, 0, stream_>>>(n, an.symmetric, ra, rb, rm, ca, cb, cm, v.bad.data(),
-                                       v.out.data());
-  STRATA_CUDA(cudaGetLastError());
-  STRATA_CUDA(cudaStreamSynchronize(stream_));
+    STRATA_CUDA(cudaStreamSynchronize(stream_));
+  };
+  passes(scale ? v.row_scaling.data() : nullptr, scale ? v.col_scaling.data() : nullptr);
   const double* r = v.out.data();
   out.norm_inf = r[0];
   out.scaled_norm1 = r[1];
@@ -312,18 +315,7 @@ bool CudaExecutor::scale_values_on_device(const Analysis& an, const double* valu
     sweep_factors<<<grid, kThreads, 0, stream_>>>(n, an.symmetric, out.rescaling_sweeps == 0, rm,
                                                   cm, rr, ss, R, C);
     STRATA_CUDA(cudaGetLastError());
-    row_pass<<<blocks_for(n), kThreads, 0, stream_>>>(n, v.row_ptr.data(), v.row_pos.data(),
-                                                      v.row_col.data(), values_.data(), rr, ss, ra,
-                                                      rb, rm);
-    STRATA_CUDA(cudaGetLastError());
-    column_pass<<<blocks_for(n), kThreads, 0, stream_>>>(n, v.col_ptr.data(), v.col_row.data(),
-                                                         values_.data(), rr, ss, an.symmetric, ca,
-                                                         cb, cm, v.bad.data());
-    STRATA_CUDA(cudaGetLastError());
-    combine<<<1, kThreads, 0, stream_>>>(n, an.symmetric, ra, rb, rm, ca, cb, cm, v.bad.data(),
-                                         v.out.data());
-    STRATA_CUDA(cudaGetLastError());
-    STRATA_CUDA(cudaStreamSynchronize(stream_));
+    passes(rr, ss);
     ++out.rescaling_sweeps;
     out.scaled_norm1 = r[1];
     out.equilibrated = r[3] == 0;
