@@ -3,9 +3,12 @@
 // What: the checks, norms and scaling the host's value pass makes (core/value_pass.hpp:
 // every value finite, the row and column magnitude sums of A finite, ‖A‖∞, the scaled
 // values B = Dr·A(:,Q)·Dc in A's entry order, ‖B‖₁, and whether B's row and column
-// maxima are already within a factor 2 of 1), made on the GPU from the raw values of a
-// refactorization copied there once. The scaled values stay on the device, where the
-// assembly reads them (FactorContext::values_on_device); the host gets five numbers.
+// maxima are already within a factor 2 of 1; when they are not, the equilibration sweeps
+// of core/rescale.hpp), made on the GPU from the raw values of a refactorization copied
+// there once. The scaled values stay on the device, where the assembly reads them
+// (FactorContext::values_on_device); the host gets five numbers, and the sweeps' factors
+// when there were sweeps (the scaled values themselves only when a host algorithm asks for
+// them: download_scaled_values).
 //
 // How: two passes over the entries, one warp per row and one per column. The row pass
 // reads the entries of a row through a row-wise map of the canonical (column-wise)
