@@ -15,6 +15,28 @@
 namespace strata::numeric {
 namespace {
 
+// Runs f(w) for w in [0, count) where run(w), each on a thread of its own (the GPUs side
+// by side); rethrows the first exception once every thread is done.
+template <class Run, class F>
+void on_threads(std::size_t count, Run&& run, F&& f) {
+  std::exception_ptr error;
+  std::mutex error_mutex;
+  std::vector<std::thread> threads;
+  for (std::size_t w = 0; w < count; ++w) {
+    if (!run(w)) continue;
+    threads.emplace_back([&, w] {
+      try {
+        f(w);
+      } catch (...) {
+        const std::lock_guard<std::mutex> lock(error_mutex);
+        if (!error) error = std::current_exception();
+      }
+    });
+  }
+  for (std::thread& t : threads) t.join();
+  if (error) std::rethrow_exception(error);
+}
+
 // The host solve's threads and plan, kept by a driver from one solve to the next: the
 // subtree cut of the analysis (numeric/subtree_solve.hpp), made at the first solve after
 // an analysis, and an arena of Options::num_threads threads (0: all).
@@ -80,22 +102,11 @@ bool solve_where_held(const Analysis& an, const std::vector<Executor*>& execs,
   const std::size_t u_size = static_cast<std::size_t>(an.child_rows.offsets.back()) * nrhs;
   if (u.size() < u_size) u.resize(u_size);
   auto run_layer = [&](std::size_t l, bool forward) {
-    std::exception_ptr error;
-    std::mutex error_mutex;
-    std::vector<std::thread> threads;
-    for (std::size_t w = 0; w < execs.size(); ++w) {
-      if (lists[l][w].empty()) continue;
-      threads.emplace_back([&, w] {
-        try {
+    on_threads(
+        execs.size(), [&](std::size_t w) { return !lists[l][w].empty(); },
+        [&](std::size_t w) {
           execs[w]->solve_held_parts(an, factor, lists[l][w], forward, x, u.data(), nrhs);
-        } catch (...) {
-          const std::lock_guard<std::mutex> lock(error_mutex);
-          if (!error) error = std::current_exception();
-        }
-      });
-    }
-    for (std::thread& t : threads) t.join();
-    if (error) std::rethrow_exception(error);
+        });
   };
   // the right-hand sides kept (in the driver's buffer, as u): a GPU without room for the
   // solve's workspaces (outside the factorization's device budget) leaves the solve to
@@ -196,20 +207,9 @@ class MultiWorkerDriver final : public NumericDriver {
     // the GPUs side by side: each one's set-up is mostly host work of its own (plans,
     // uploads from pageable memory)
     const std::vector<Executor*> execs = executors();
-    std::exception_ptr error;
-    std::mutex error_mutex;
-    std::vector<std::thread> threads;
-    for (Executor* e : execs)
-      threads.emplace_back([&, e] {
-        try {
-          e->prepare(an, workers_);
-        } catch (...) {
-          const std::lock_guard<std::mutex> lock(error_mutex);
-          if (!error) error = std::current_exception();
-        }
-      });
-    for (std::thread& t : threads) t.join();
-    if (error) std::rethrow_exception(error);
+    on_threads(
+        execs.size(), [](std::size_t) { return true; },
+        [&](std::size_t w) { execs[w]->prepare(an, workers_); });
     // the part solve's host array of update vectors for one right-hand side, zero-filled
     // here rather than in the first solve
     if (options_.gpu_solve_parts &&

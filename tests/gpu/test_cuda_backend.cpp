@@ -1401,6 +1401,16 @@ Options one_gpu(MatrixType type = MatrixType::automatic) {
   return o;
 }
 
+// one_gpu without refinement (one application of the factor: solutions comparable bit for
+// bit), the backward error checked only after static pivots.
+Options one_gpu_unrefined(MatrixType type) {
+  Options o = one_gpu(type);
+  o.refinement_max_steps = 0;
+  o.gmres_max_iterations = 0;
+  o.solve_check = SolveCheck::after_perturbed_pivots;
+  return o;
+}
+
 // `a` with an explicit zero after each column's entries, repeating the column's first row:
 // the same matrix, not in the analyzed pattern (it has duplicates), so that the Solver
 // takes the host's value pass for it.
@@ -1441,10 +1451,7 @@ TEST_F(CudaBackend, ValuePassOnTheDeviceGivesTheHostsFactor) {
     const SparseMatrix& next = c.next;
     std::vector<double> b(c.n);
     for (double& v : b) v = rhs(rng);
-    Options o = one_gpu(c.type);
-    o.refinement_max_steps = 0;
-    o.gmres_max_iterations = 0;
-    o.solve_check = SolveCheck::after_perturbed_pivots;
+    const Options o = one_gpu_unrefined(c.type);
     Solver dev(o), host(o);
     dev.analyze(a);
     host.analyze(a);
@@ -1551,10 +1558,7 @@ TEST_F(CudaBackend, ValuesFarFromTheAnalysisAreEquilibratedOnTheDevice) {
           const index_t i = far.indices[p];
           for (const index_t t : {i, j}) far.values[p] *= t == k ? 1e3 : t == k2 ? 1e-3 : 1.0;
         }
-      Options o = one_gpu(type);
-      o.refinement_max_steps = 0;
-      o.gmres_max_iterations = 0;
-      o.solve_check = SolveCheck::after_perturbed_pivots;
+      const Options o = one_gpu_unrefined(type);
       Solver dev(o), host(o);
       dev.analyze(a);
       host.analyze(a);
@@ -1610,11 +1614,8 @@ TEST_F(CudaBackend, PivotsDelayedStraightAwayTakeTheDevicesValuePass) {
       for (index_t p = far.offsets[j]; p < far.offsets[j + 1]; ++p)
         for (const index_t t : {far.indices[p], j})
           if (t == n / 2) far.values[p] *= 1e4;
-    Options o = one_gpu(MatrixType::general);
+    Options o = one_gpu_unrefined(MatrixType::general);
     o.pivoting = Pivoting::delayed;
-    o.refinement_max_steps = 0;
-    o.gmres_max_iterations = 0;
-    o.solve_check = SolveCheck::after_perturbed_pivots;
     Solver dev(o), host(o);
     dev.analyze(a);
     host.analyze(a);
