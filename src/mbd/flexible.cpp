@@ -108,6 +108,93 @@ class Hexahedron : public Force {
     }
   }
 
+  // The Jacobians of the elastic and damping forces in closed form: dq += ∂(f + β K ẋ)/∂x
+  // and dv += β K, K = ∂f/∂x (row-major 24 × 24, rows and columns in the nodes' (x, y, z)
+  // order). Per Gauss point (weight w = det J), with G_a = ∇₀N_a, u_a = F G_a and
+  // C = F Fᵀ, the 3 × 3 block of nodes a, b is the material part plus the initial-stress
+  // part of the total Lagrangian tangent (Bonet & Wood 2008, ch. 9):
+  //   K_ab = w [λ u_a u_bᵀ + μ ((G_a·G_b) C + u_b u_aᵀ) + (G_a·S G_b) I].
+  // The damping force β K ẋ is β times the derivative of f along ẋ; its ∂/∂x is the second
+  // derivative of f along ẋ and x: the same products with F replaced by Ḟ = Σ ẋ_a ⊗ G_a in
+  // one factor at a time (u̇_a = Ḟ G_a, Ṡ = λ tr(Ė) I + 2μĖ, Ė = ½(ḞᵀF + FᵀḞ)):
+  //   w [λ (u̇_a u_bᵀ + u_a u̇_bᵀ) + μ (u_b u̇_aᵀ + u̇_b u_aᵀ + (G_a·G_b)(Ḟ Fᵀ + F Ḟᵀ))
+  //      + (G_a·Ṡ G_b) I].
+  // Automatic differentiation of f gives the same to rounding at about ten times the cost
+  // (tests/unit/test_mbd_flexible.cpp checks against exact differences of the cubic f).
+  void tangent(const double* x, const double* xd, double beta, double* dq, double* dv) const {
+    const bool damped = beta > 0;
+    for (int k = 0; k < 8; ++k) {
+      const double(&G)[8][3] = grad_[k];
+      const double w = wdet_[k];
+      double F[3][3] = {}, Fd[3][3] = {};
+      for (int n = 0; n < 8; ++n)
+        for (int i = 0; i < 3; ++i)
+          for (int j = 0; j < 3; ++j) {
+            F[i][j] += x[3 * n + i] * G[n][j];
+            Fd[i][j] += xd[3 * n + i] * G[n][j];
+          }
+      // E = ½(FᵀF − I), Ė = ½(ḞᵀF + FᵀḞ); S, Ṡ; C = F Fᵀ, D = Ḟ Fᵀ + F Ḟᵀ
+      double E[3][3], Ed[3][3], S[3][3], Sd[3][3], C[3][3], D[3][3];
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) {
+          double e = 0, ed = 0, c = 0, d = 0;
+          for (int p = 0; p < 3; ++p) {
+            e += F[p][i] * F[p][j];
+            ed += Fd[p][i] * F[p][j] + F[p][i] * Fd[p][j];
+            c += F[i][p] * F[j][p];
+            d += Fd[i][p] * F[j][p] + F[i][p] * Fd[j][p];
+          }
+          E[i][j] = 0.5 * (e - (i == j ? 1.0 : 0.0));
+          Ed[i][j] = 0.5 * ed;
+          C[i][j] = c;
+          D[i][j] = d;
+        }
+      const double tr = E[0][0] + E[1][1] + E[2][2], trd = Ed[0][0] + Ed[1][1] + Ed[2][2];
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) {
+          S[i][j] = 2 * mu_ * E[i][j] + (i == j ? lambda_ * tr : 0.0);
+          Sd[i][j] = 2 * mu_ * Ed[i][j] + (i == j ? lambda_ * trd : 0.0);
+        }
+      // per node: u = F G, u̇ = Ḟ G, S G, Ṡ G
+      double U[8][3], Ud[8][3], SG[8][3], SdG[8][3];
+      for (int n = 0; n < 8; ++n)
+        for (int i = 0; i < 3; ++i) {
+          double u = 0, ud = 0, sg = 0, sdg = 0;
+          for (int j = 0; j < 3; ++j) {
+            u += F[i][j] * G[n][j];
+            ud += Fd[i][j] * G[n][j];
+            sg += S[i][j] * G[n][j];
+            sdg += Sd[i][j] * G[n][j];
+          }
+          U[n][i] = u;
+          Ud[n][i] = ud;
+          SG[n][i] = sg;
+          SdG[n][i] = sdg;
+        }
+      for (int a = 0; a < 8; ++a)
+        for (int b = 0; b < 8; ++b) {
+          const double gab = G[a][0] * G[b][0] + G[a][1] * G[b][1] + G[a][2] * G[b][2];
+          const double sab = G[a][0] * SG[b][0] + G[a][1] * SG[b][1] + G[a][2] * SG[b][2];
+          const double sdab = G[a][0] * SdG[b][0] + G[a][1] * SdG[b][1] + G[a][2] * SdG[b][2];
+          for (int i = 0; i < 3; ++i)
+            for (int m = 0; m < 3; ++m) {
+              double ke = lambda_ * U[a][i] * U[b][m] + mu_ * (gab * C[i][m] + U[b][i] * U[a][m]);
+              if (i == m) ke += sab;
+              const std::size_t at = static_cast<std::size_t>(3 * a + i) * 24 + 3 * b + m;
+              if (!damped) {
+                dq[at] += w * ke;
+                continue;
+              }
+              double kd = lambda_ * (Ud[a][i] * U[b][m] + U[a][i] * Ud[b][m]) +
+                          mu_ * (U[b][i] * Ud[a][m] + Ud[b][i] * U[a][m] + gab * D[i][m]);
+              if (i == m) kd += sdab;
+              dq[at] += w * (ke + beta * kd);
+              dv[at] += w * beta * ke;
+            }
+        }
+    }
+  }
+
   // M ⊗ I₃ couples a node's coordinate only with the same coordinate of the other nodes
   std::span<const std::uint32_t> mass_structure() const override {
     static const std::array<std::uint32_t, 192> structure = [] {
@@ -136,43 +223,21 @@ class Hexahedron : public Force {
         for (int i = 0; i < 3; ++i) out.g[3 * m + i] += mass_[m][n] * a[3 * n + i];
     for (int i = 0; i < 24; ++i) out.g[i] -= gravity_[i];
     const double beta = mat_.damping;
-    if (!jacobian) {
-      if (beta > 0) {
-        Jet1<double> x[24], f[24];
-        for (int i = 0; i < 24; ++i) x[i] = Jet1<double>(q[i], v[i]);
-        elastic(x, f);
-        for (int i = 0; i < 24; ++i) out.g[i] += f[i].c0 + beta * f[i].c1;
-      } else {
-        double f[24];
-        elastic(q, f);
-        for (int i = 0; i < 24; ++i) out.g[i] += f[i];
-      }
-      return;
+    if (beta > 0) {  // f(x) + β K(x) ẋ: the first-order Taylor coefficient along ẋ
+      Jet1<double> x[24], f[24];
+      for (int i = 0; i < 24; ++i) x[i] = Jet1<double>(q[i], v[i]);
+      elastic(x, f);
+      for (int i = 0; i < 24; ++i) out.g[i] += f[i].c0 + beta * f[i].c1;
+    } else {
+      double f[24];
+      elastic(q, f);
+      for (int i = 0; i < 24; ++i) out.g[i] += f[i];
     }
-    using S = Dual<double, 24>;
+    if (!jacobian) return;
     out.dq.assign(576, 0.0);
     out.dv.assign(576, 0.0);
     mass_matrix(q, v, t, out.da);
-    if (beta > 0) {
-      Jet1<S> x[24], f[24];
-      for (int i = 0; i < 24; ++i) x[i] = Jet1<S>(S(q[i], i), S(v[i]));
-      elastic(x, f);
-      for (int i = 0; i < 24; ++i) {
-        out.g[i] += f[i].c0.v + beta * f[i].c1.v;
-        for (int k = 0; k < 24; ++k) {
-          out.dq[i * 24 + k] = f[i].c0.d[k] + beta * f[i].c1.d[k];
-          out.dv[i * 24 + k] = beta * f[i].c0.d[k];
-        }
-      }
-      return;
-    }
-    S x[24], f[24];
-    for (int i = 0; i < 24; ++i) x[i] = S(q[i], i);
-    elastic(x, f);
-    for (int i = 0; i < 24; ++i) {
-      out.g[i] += f[i].v;
-      for (int k = 0; k < 24; ++k) out.dq[i * 24 + k] = f[i].d[k];
-    }
+    tangent(q, v, beta, out.dq.data(), out.dv.data());
   }
 
   double kinetic_energy(const double* q, const double* v) const override {

@@ -6,8 +6,9 @@
 // & Kim 2014), so the mass matrix M = ∫ρ NᵀN dV is constant and the elastic forces are
 // f = ∫ P : ∇₀N dV with P = F S, S = λ tr(E) I + 2μE, E = ½(FᵀF − I), F = Σ x_a ⊗ ∇₀N_a
 // (total Lagrangian; Bonet & Wood, "Nonlinear Continuum Mechanics for FEA", 2008, ch. 6).
-// Integration: 2×2×2 Gauss points. The consistent tangent ∂f/∂x comes from automatic
-// differentiation of f. Optional stiffness-proportional damping β K(x) ẋ.
+// Integration: 2×2×2 Gauss points. The consistent tangent ∂f/∂x is formed in closed form
+// (material and initial-stress parts; Bonet & Wood ch. 9). Optional stiffness-proportional
+// damping β K(x) ẋ.
 #pragma once
 
 #include <array>

@@ -1,9 +1,12 @@
 // strata::mbd — the St. Venant–Kirchhoff hexahedron against closed forms: its mass, zero
 // elastic force under rigid motion, the face load of a homogeneous stretch
-// (P = F S, S = λ tr(E) I + 2μE), and its forces as the gradient of its strain energy.
+// (P = F S, S = λ tr(E) I + 2μE), its forces as the gradient of its strain energy, and its
+// closed-form tangent as the exact derivative of its forces.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <random>
 
 #include "mbd/linalg.hpp"
 #include "mbd/model_io.hpp"
@@ -99,6 +102,69 @@ TEST(MbdFlexible, ForcesAreTheGradientOfTheStrainEnergy) {
                        m.forces[0]->potential_energy(xm.data(), 0)) /
                       (2 * eps);
     EXPECT_NEAR(f[i], dW, 1e-5 * (1 + std::abs(dW))) << "coordinate " << i;
+  }
+}
+
+// A distorted, damped hexahedron at a random strained state: the closed-form Jacobians
+// (∂g/∂q with the damping's second-derivative term, ∂g/∂v = β K) against differences of
+// the residual that are exact for its polynomial dependence: g is cubic in q (Richardson's
+// extrapolation of central differences, (4 D(h) − D(2h))/3, removes the h² term, the only
+// one) and linear in v (a central difference is exact). What remains is rounding.
+TEST(MbdFlexible, TangentIsTheExactDerivativeOfTheForces) {
+  const unsigned seed = std::random_device{}();
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (const double damping : {0.0, 0.02}) {
+    SCOPED_TRACE("damping " + std::to_string(damping));
+    json nodes = json::array();
+    const int corner[8][3] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0},
+                              {0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}};
+    for (const auto& c : corner)  // a hexahedron of 0.5 × 0.8 × 1.2 with its nodes moved
+      nodes.push_back(
+          {0.5 * c[0] + 0.08 * u(rng), 0.8 * c[1] + 0.08 * u(rng), 1.2 * c[2] + 0.08 * u(rng)});
+    json j = {{"type", "spatial"}, {"gravity", {0, 0, -9.81}}};
+    j["flexible_bodies"] = {
+        {{"name", "block"},
+         {"material", {{"density", kRho}, {"young", kE}, {"poisson", kNu}, {"damping", damping}}},
+         {"nodes", nodes},
+         {"elements", {{0, 1, 2, 3, 4, 5, 6, 7}}}}};
+    const Model m = build_model(j, "block");
+    const Force& f = *m.forces[0];
+    std::vector<double> q = m.q0, v(24), a(24);
+    for (int i = 0; i < 24; ++i) {
+      q[i] += 0.1 * u(rng);  // strains of about ten percent
+      v[i] = u(rng);
+      a[i] = u(rng);
+    }
+    ForceEval e, p, n;
+    f.evaluate(q.data(), v.data(), a.data(), 0, true, e);
+    auto difference = [&](std::vector<double>& x, int k, double h, int i) {
+      const double x0 = x[k];
+      x[k] = x0 + h;
+      f.evaluate(q.data(), v.data(), a.data(), 0, false, p);
+      x[k] = x0 - h;
+      f.evaluate(q.data(), v.data(), a.data(), 0, false, n);
+      x[k] = x0;
+      return (p.g[i] - n.g[i]) / (2 * h);
+    };
+    double kmax = 0;
+    for (double x : e.dq) kmax = std::max(kmax, std::abs(x));
+    ASSERT_GT(kmax, 0.0);
+    double worst_q = 0, worst_v = 0, dvmax = 0;
+    const double h = 1e-3;
+    for (int k = 0; k < 24; ++k)
+      for (int i = 0; i < 24; ++i) {
+        const double dq = (4 * difference(q, k, h, i) - difference(q, k, 2 * h, i)) / 3;
+        worst_q = std::max(worst_q, std::abs(e.dq[i * 24 + k] - dq));
+        const double dv = difference(v, k, h, i);
+        worst_v = std::max(worst_v, std::abs(e.dv[i * 24 + k] - dv));
+        dvmax = std::max(dvmax, std::abs(dv));
+      }
+    EXPECT_LE(worst_q, 1e-9 * kmax) << "dg/dq, largest entry " << kmax;
+    EXPECT_LE(worst_v, 1e-9 * kmax) << "dg/dv";
+    if (damping == 0) EXPECT_EQ(dvmax, 0.0);
+    if (damping > 0) EXPECT_GT(dvmax, 1e-3 * damping * kmax);
   }
 }
 
