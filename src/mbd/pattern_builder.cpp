@@ -1,10 +1,12 @@
 // strata::mbd — a CSC pattern from (row, column) pairs (see pattern_builder.hpp).
 #include "mbd/pattern_builder.hpp"
 
+#include <sys/mman.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <cstdint>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -40,6 +42,19 @@ std::pair<index_t, index_t> block(index_t j, std::size_t size) {
 index_t blocks_of(std::size_t size) { return static_cast<index_t>((size + kBlock - 1) / kBlock); }
 
 }  // namespace
+
+void advise_huge_pages(void* p, std::size_t bytes) noexcept {
+#ifdef MADV_HUGEPAGE
+  constexpr std::uintptr_t kHuge = std::uintptr_t{1} << 21;
+  if (bytes < 4 * kHuge) return;
+  const auto begin = (reinterpret_cast<std::uintptr_t>(p) + kHuge - 1) & ~(kHuge - 1);
+  const auto end = (reinterpret_cast<std::uintptr_t>(p) + bytes) & ~(kHuge - 1);
+  if (end > begin) madvise(reinterpret_cast<void*>(begin), end - begin, MADV_HUGEPAGE);
+#else
+  (void)p;
+  (void)bytes;
+#endif
+}
 
 PatternBuilder::PatternBuilder(index_t n_rows, index_t n_cols) : rows_(n_rows), cols_(n_cols) {
   if (n_rows < 0 || n_cols < 0 || n_rows > (index_t{1} << 32) || n_cols > (index_t{1} << 31))
@@ -108,15 +123,27 @@ TargetGroups group_by_target(std::span<const index_t> target_of, index_t targets
       [&](index_t, index_t k) { return target_of[k] >> shift; },
       [&](index_t at, index_t, index_t k) { g.slot[at] = static_cast<std::size_t>(k); });
   const auto nb = static_cast<std::size_t>(buckets);
-  // a coarse bucket holds its indices in increasing order: sorted by target they stay so
-  if (shift > 0)
+  // a coarse bucket holds its indices in increasing order; a stable counting sort on the
+  // target's low `shift` bits keeps that order among the indices of one target
+  if (shift > 0) {
+    const index_t low = (index_t{1} << shift) - 1;
     for_pieces(nb, 256, [&](std::size_t b0, std::size_t b1) {
-      for (std::size_t b = b0; b < b1; ++b)
-        std::sort(g.slot.begin() + start[b], g.slot.begin() + start[b + 1],
-                  [&](std::size_t x, std::size_t y) {
-                    return target_of[x] < target_of[y] || (target_of[x] == target_of[y] && x < y);
-                  });
+      std::vector<index_t> count(static_cast<std::size_t>(low) + 2);
+      std::vector<std::size_t> sorted;
+      for (std::size_t b = b0; b < b1; ++b) {
+        const auto first = static_cast<std::size_t>(start[b]);
+        const auto last = static_cast<std::size_t>(start[b + 1]);
+        if (last - first < 2) continue;
+        std::fill(count.begin(), count.end(), 0);
+        for (std::size_t p = first; p < last; ++p) ++count[(target_of[g.slot[p]] & low) + 1];
+        for (std::size_t v = 1; v < count.size(); ++v) count[v] += count[v - 1];
+        sorted.resize(last - first);
+        for (std::size_t p = first; p < last; ++p)
+          sorted[count[target_of[g.slot[p]] & low]++] = g.slot[p];
+        std::copy(sorted.begin(), sorted.end(), g.slot.begin() + first);
+      }
     });
+  }
   if (shift == 0) {  // a bucket per target: its slots are its group
     for (std::size_t b = 0; b < nb; ++b)
       if (start[b + 1] > start[b]) {

@@ -16,7 +16,8 @@
 // sparse/bucket_entries.hpp (blocks of pairs as its lines), then sorts and deduplicates
 // the columns, many at once. group_by_target buckets the indices by target the same way
 // (by coarse buckets of 2^s consecutive targets when the targets are too many for the
-// bucket sort's count tables, each bucket then sorted by target and index). Both run on
+// bucket sort's count tables, each bucket then ordered by a stable counting sort on the
+// targets' low s bits). Both run on
 // the threads of the calling TBB arena and give the same result for every thread count;
 // inside a SerialScope (base/serial_scope.hpp) they run on the calling thread. Their large
 // arrays are not zeroed when allocated (FillLater): the threads that fill them are the first
@@ -36,8 +37,14 @@
 
 namespace strata::mbd {
 
+/// Asks the kernel for transparent huge pages on the whole 2 MiB pages of [p, p + bytes)
+/// when that is at least 8 MiB (madvise MADV_HUGEPAGE; nothing where it is not supported):
+/// arrays of this size are written once each, and 4 KiB pages would cost a page fault
+/// every 4 KiB of them.
+void advise_huge_pages(void* p, std::size_t bytes) noexcept;
+
 /// std::allocator whose value construction leaves a scalar uninitialized (resize() does not
-/// zero), for arrays that are filled right after, in parallel.
+/// zero), for arrays that are filled right after, in parallel; large ones on huge pages.
 template <class T>
 struct UninitializedAllocator : std::allocator<T> {
   template <class U>
@@ -54,6 +61,11 @@ struct UninitializedAllocator : std::allocator<T> {
   template <class U, class... Args>
   void construct(U* p, Args&&... args) {
     ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
+  }
+  T* allocate(std::size_t n) {
+    T* p = std::allocator<T>::allocate(n);
+    advise_huge_pages(p, n * sizeof(T));
+    return p;
   }
 };
 /// A vector whose new elements are uninitialized until written (see UninitializedAllocator).
