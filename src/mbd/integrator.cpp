@@ -143,8 +143,10 @@ void Integrator::analyze(const BdfTerms& bdf, double t) {
   ++stats_.analyses;
   if (opts_.verbose) {
     const Stats* ss = solver_->stats();
-    fmt::print(stderr, "t = {:.9g}: analysis of the Newton matrix ({} rows, {} entries): {:.3f} s",
-               t, sys_.matrix().n_rows, sys_.matrix().nnz(), ta.seconds());
+    fmt::print(
+        stderr,
+        "t = {:.9g}: analysis of the Newton matrix ({} rows, {} entries, nnz(L) {}): {:.3f} s", t,
+        sys_.matrix().n_rows, sys_.matrix().nnz(), solver_->factor_entries(), ta.seconds());
     if (ss) {  // the solver's phases (AnalysisStats), the rest is the Jacobian and copies
       const AnalysisStats& as = ss->analysis;
       fmt::print(stderr,

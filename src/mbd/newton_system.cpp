@@ -29,6 +29,10 @@ NewtonSystem::NewtonSystem(const Model& model)
   model_row_.resize(rows);
   active_index_.resize(rows);
   for (index_t k = 0; k < rows; ++k) model_row_[k] = active_index_[k] = k;
+  node_first_.assign(n_, -1);
+  for (const Body& b : model.bodies)
+    if (b.kind == BodyKind::node && b.offset >= 0)
+      for (int c = 0; c < b.n_coords; ++c) node_first_[b.offset + c] = b.offset;
 }
 
 // Mass scale of each constraint's coordinates (the regularisation of the stabilized
@@ -262,6 +266,13 @@ void NewtonSystem::rebuild_pattern() {
       }
     }
   };
+  // A flexible-body node's BDF rows also hold its other two coordinates' columns, as
+  // explicit zeros that nothing writes: a node's three coordinates then have rows of the
+  // same pattern in every block, which the nested dissection's compression merges into one
+  // vertex of its graph (their BDF rows alone differed), for a third of the BDF vertices
+  // and the same fill. Rigid bodies' rows are left as they are (their coordinates couple
+  // differently; the blocks added fill there).
+  std::vector<index_t> structural_zero;  // the position list of those pairs: none is kept
   auto bdf_pairs = [&](index_t k, auto&& put) {
     const index_t j = bdf_coords[k];
     std::vector<index_t>* none = nullptr;
@@ -269,6 +280,14 @@ void NewtonSystem::rebuild_pattern() {
     put(RU + k, V + j, none);
     put(RU + nb + k, V + j, none);
     put(RU + nb + k, Q + j, none);
+    if (const index_t first = node_first_[j]; first >= 0)
+      for (index_t o = first; o < n && node_first_[o] == first; ++o)
+        if (o != j) {
+          put(RU + k, A + o, &structural_zero);
+          put(RU + k, V + o, &structural_zero);
+          put(RU + nb + k, V + o, &structural_zero);
+          put(RU + nb + k, Q + o, &structural_zero);
+        }
   };
   const std::size_t nf = model_.forces.size(), nc = model_.constraints.size();
   const std::size_t elements = nf + nc + static_cast<std::size_t>(nb);
@@ -320,6 +339,7 @@ void NewtonSystem::rebuild_pattern() {
       }
       std::size_t at = 4 * (e - std::min(e, nf + nc));  // a BDF row's first position
       pairs(e, [&](index_t r, index_t c, std::vector<index_t>* pos) {
+        if (pos == &structural_zero) return;
         if (pos)
           pos->push_back(entry_position(jac_, r, c));
         else

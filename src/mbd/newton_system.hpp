@@ -175,6 +175,9 @@ class NewtonSystem {
   std::vector<index_t> model_row_, active_index_;
   std::vector<double> mass_scale_;  // per constraint element: mean mass of its coordinates
   std::vector<index_t> independent_;
+  // per coordinate: the first coordinate of its flexible-body node (a node's coordinates
+  // are consecutive), −1 for the coordinates of other bodies (rebuild_pattern)
+  std::vector<index_t> node_first_;
   std::vector<char> candidate_;   // per force: evaluated into the Newton matrix
   std::vector<char> in_pattern_;  // per force: entries in the pattern (⊇ candidate_)
   bool pattern_current_ = false;  // jac_ is the pattern of the state above
