@@ -45,6 +45,22 @@ void count(double d, PivotStats& st) {
   st.log_abs_det += std::log(std::abs(d));
 }
 
+// B = L⁻¹·B for the panel's unit lower triangle L (np × np, np ≤ kPanel) and w columns
+// of B, a column at a time (forward substitution by columns of L, skipping zeros): at these
+// shapes TRSM's packing costs more than the arithmetic, and the delayed fronts' U rows are
+// mostly zeros (contact pairs in the pattern that are not in contact).
+void unit_lower_solve(index_t np, index_t w, const double* l, index_t ldl, double* b, index_t ldb) {
+  for (index_t j = 0; j < w; ++j) {
+    double* x = b + static_cast<std::size_t>(j) * ldb;
+    for (index_t c = 0; c + 1 < np; ++c) {
+      const double u = x[c];
+      if (u == 0.0) continue;
+      const double* lc = l + static_cast<std::size_t>(c) * ldl;
+      for (index_t i = c + 1; i < np; ++i) x[i] -= lc[i] * u;
+    }
+  }
+}
+
 }  // namespace
 
 index_t factor_front_lu_delayed(double* f, index_t m, index_t p, index_t ld,
@@ -119,7 +135,7 @@ index_t factor_front_lu_delayed(double* f, index_t m, index_t p, index_t ld,
       auto update = [&](index_t b) {
         const index_t c0 = npiv + b * kUpdateColumns;
         const index_t w = std::min(kUpdateColumns, m - c0);
-        trsm('L', 'L', 'N', 'U', np, w, &A(j0, j0), ld, &A(j0, c0), ld);
+        unit_lower_solve(np, w, &A(j0, j0), ld, &A(j0, c0), ld);
         gemm('N', 'N', m - npiv, w, np, -1.0, &A(npiv, j0), ld, &A(j0, c0), ld, 1.0, &A(npiv, c0),
              ld);
       };
