@@ -101,7 +101,11 @@ void check_assembly(const std::string& name, Formulation formulation, std::mt199
     for (index_t c = 0; c < J.n_cols; ++c)
       for (index_t p = J.offsets[c]; p < J.offsets[c + 1]; ++p)
         jd[J.indices[p]] += J.values[p] * d[c];
-    const double eps = 1e-6;
+    // a small step: the contact forces' curvature along d is large at some states, and
+    // they are not differentiable where a pair touches or its slip changes direction (a
+    // step that crosses such a point compares nothing); the residual's rounding, about
+    // 1e-16 of its entries divided by the step, stays far below the tolerance
+    const double eps = 1e-8;
     xp = s.x;
     xm = s.x;
     for (std::size_t k = 0; k < d.size(); ++k) {
@@ -124,7 +128,9 @@ void check_assembly(const std::string& name, Formulation formulation, std::mt199
 }
 
 TEST(MbdAssembly, SameBitsOnAnyThreadsAndTheJacobianIsHsDerivative) {
-  std::mt19937_64 rng = strata::test::fresh_rng();
+  unsigned long long seed = 0;
+  std::mt19937_64 rng = strata::test::fresh_rng(&seed);
+  SCOPED_TRACE("STRATA_TEST_SEED=" + std::to_string(seed));
   for (const char* name : {"tracked:20", "flexible:8x2x2", "lattice:3"})
     for (Formulation f : {Formulation::partitioned, Formulation::stabilized})
       check_assembly(name, f, rng);
