@@ -17,11 +17,11 @@
 // the columns, many at once. group_by_target buckets the indices by target the same way
 // (by coarse buckets of 2^s consecutive targets when the targets are too many for the
 // bucket sort's count tables, each bucket then ordered by a stable counting sort on the
-// targets' low s bits). Both run on
-// the threads of the calling TBB arena and give the same result for every thread count;
-// inside a SerialScope (base/serial_scope.hpp) they run on the calling thread. Their large
-// arrays are not zeroed when allocated (FillLater): the threads that fill them are the first
-// to write, and so to map, their pages.
+// targets' low s bits). Both run on the threads of the calling TBB arena and give the
+// same result for every thread count; inside a SerialScope (base/serial_scope.hpp) they
+// run on the calling thread. Their large arrays are not zeroed when allocated (FillLater):
+// the threads that fill them are the first to write, and so to map, their pages (huge
+// pages for the large ones, advise_huge_pages).
 #pragma once
 
 #include <tbb/task_arena.h>

@@ -4,13 +4,13 @@
 // LU, blocked. Pivots are taken in panels of kPanel: inside a panel left-looking (the next
 // candidate column is brought up to date with the panel's earlier pivots, over all m rows,
 // since the threshold test's column maximum must see the contribution-block rows as they
-// are), after it right-looking (one TRSM for the U rows of every column behind the panel
-// and one GEMM for their Schur complement: BLAS-3, the delayed and contribution-block
-// rows and columns among them). The up-to-date column is built in a copy: a refused
-// column is swapped, as it was, with the last untried candidate, and gets the panel's
-// pivots with every other column behind the panel. Whole rows are interchanged at once:
-// the rows interchanged are both below the panel's earlier pivots, where every column
-// behind the panel is still waiting for the same update.
+// are), after it right-looking (the U rows of every column behind the panel by forward
+// substitution, then one GEMM for their Schur complement: BLAS-3, the delayed and
+// contribution-block rows and columns among them). The up-to-date column is built in a
+// copy: a refused column is swapped, as it was, with the last untried candidate, and gets
+// the panel's pivots with every other column behind the panel. Whole rows are interchanged
+// at once: the rows interchanged are both below the panel's earlier pivots, where every
+// column behind the panel is still waiting for the same update.
 #include "numeric/cpu/delayed_front.hpp"
 
 #include <tbb/parallel_for.h>
