@@ -197,15 +197,6 @@ struct Options {
   /// (src/numeric/cuda/cuda_solve.cu); false launches them one by one at every solve.
   /// The same bits either way. Default on.
   bool gpu_solve_graph = true;
-  /// CUDA backend, one GPU: the smallest factor (AnalysisStats::factor_bytes) that is
-  /// solved on the device when it stays there after the factorization. A smaller one is
-  /// solved on the host: its panels are copied to host memory once per factorization, at
-  /// the first solve after it, and the host's solve by subtrees over the threads runs
-  /// (src/numeric/subtree_solve.cpp). The device's sweeps cost launches and a wait per
-  /// level of the tree whatever the fronts' sizes, which a small factor's host solve
-  /// undercuts. 0: every factor kept on the device is solved there. Default 2^25 bytes
-  /// (32 MiB); at least 0.
-  std::size_t gpu_solve_min_factor_bytes = std::size_t{1} << 25;
   /// CUDA backend on several GPUs (num_gpus > 1): a solve runs part by part on the GPUs
   /// that hold the parts' panels, only the parts' rows of x and their contribution to the
   /// part above crossing the bus (src/numeric/cuda/part_solve.cu); false copies every

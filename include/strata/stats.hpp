@@ -218,9 +218,7 @@ struct FactorStats {
   /// Options::host_memory_limit (by default the host memory available at analysis).
   std::size_t host_pinned_bytes = 0;
   bool contribution_blocks_on_host = false;  ///< some blocks spilled to pinned host memory
-  /// The factor stayed on the device: solves run there, unless it is smaller than
-  /// Options::gpu_solve_min_factor_bytes (then on the host, from a copy of its panels).
-  bool factor_resident = false;
+  bool factor_resident = false;              ///< the factor stayed on the device: solve runs there
   /// Where the GPU time went (seconds, from CUDA events around each in-core launch group;
   /// summed over groups and, with several GPUs, over the GPUs). `host` is the wall time
   /// after each group's GPU work: copying its panels to the host factor (unless the

@@ -148,9 +148,7 @@ class TreeDriver final : public NumericDriver {
   }
   bool solve(const Analysis& an, NumericFactor& factor, double* x, index_t nrhs) override {
     Executor& e = executor();
-    // a small factor on the host (Options::gpu_solve_min_factor_bytes)
-    const bool small = an.plan.factor_bytes < options_.gpu_solve_min_factor_bytes;
-    if (!small && e.solve(an, factor, x, nrhs)) return true;
+    if (e.solve(an, factor, x, nrhs)) return true;
     host_solve_.run(an, {&e}, factor, x, nrhs);
     return false;
   }

@@ -71,11 +71,9 @@ void factorize(const Analysis& an, const std::vector<double>& scaled_values, Mat
   exec.begin_part(ctx);
   // The panels go to the host unless the executor keeps them (a resident GPU factor):
   // then the host holds no copy at all — for a large factor that copy cost more than the
-  // factorization (pinned staging, a host memcpy, and sizing the vector the first time) —
-  // except the storage of a copy a host solve fetched after an earlier factorization of
-  // this analysis, kept for the next fetch (its pages already touched).
+  // factorization (pinned staging, a host memcpy, and sizing the vector the first time).
   if (exec.keeps_panels(ctx)) {
-    if (factor.panels.size() != an.factor_layout.total) std::vector<double>().swap(factor.panels);
+    std::vector<double>().swap(factor.panels);
     factor.held.push_back(HeldPanels{whole.id, 0});
   } else {
     sized_resize(factor.panels, an.factor_layout.total, "factorize: factor panels");

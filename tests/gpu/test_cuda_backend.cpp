@@ -424,7 +424,6 @@ TEST_F(CudaBackend, CholeskyFailureNamesTheCpusColumn) {
     o.num_gpus = 1;  // one GPU, whatever the machine has
     o.type = MatrixType::spd;
     o.backend = gpu ? Backend::cuda : Backend::cpu;
-    o.gpu_solve_min_factor_bytes = 0;  // device solves, small factors too
     o.gpu_panel_kernel_max_pivots = gpu >= 2 ? 0 : 1024;
     o.gpu_potrf_block_size = gpu == 3 ? 7 : 0;
     o.gpu_recursive_panel = gpu == 4;
@@ -462,7 +461,6 @@ TEST_F(CudaBackend, PrepareAtAnalysis) {
     EXPECT_EQ(early.factor.panels, late.factor.panels);
 
     o.backend = Backend::cuda;
-    o.gpu_solve_min_factor_bytes = 0;  // device solves, small factors too
     Solver two_phases(o), one_call(o);
     two_phases.analyze(a);
     EXPECT_GT(two_phases.stats().analysis.device_setup_seconds, 0.0);
@@ -487,7 +485,6 @@ TEST_F(CudaBackend, ReanalysisAcrossSizes) {
   auto rng = test::fresh_rng();
   Options o = one_gpu_spd();
   o.backend = Backend::cuda;
-  o.gpu_solve_min_factor_bytes = 0;  // device solves, small factors too
   Solver s(o);
   for (const SparseMatrix& a :
        {generators::laplacian_3d(12, 12, 12),
@@ -526,7 +523,6 @@ TEST_F(CudaBackend, SolutionsMatchCpu) {
       o.type = type;
       Solver cpu(o);
       o.backend = Backend::cuda;
-      o.gpu_solve_min_factor_bytes = 0;  // device solves, small factors too
       Solver gpu(o);
       cpu.factorize(a);
       gpu.factorize(a);
@@ -559,7 +555,6 @@ TEST_F(CudaBackend, LargeLuFrontsMatchCpu) {
   o.type = MatrixType::general;
   Solver cpu(o);
   o.backend = Backend::cuda;
-  o.gpu_solve_min_factor_bytes = 0;  // device solves, small factors too
   Solver gpu(o);
   cpu.factorize(a);
   gpu.factorize(a);
@@ -792,7 +787,6 @@ TEST_F(CudaBackend, LuRefactorizationsWithOtherPivotsSolveOnDevice) {
   o.matching_and_scaling = false;
   Solver cpu(o);
   o.backend = Backend::cuda;
-  o.gpu_solve_min_factor_bytes = 0;  // device solves, small factors too
   Solver gpu(o);
   std::vector<double> b(base.n_rows);
   std::uniform_real_distribution<double> ub(-1, 1);
@@ -818,75 +812,6 @@ TEST_F(CudaBackend, LuRefactorizationsWithOtherPivotsSolveOnDevice) {
   }
 }
 
-// A factor kept on the device that is smaller than Options::gpu_solve_min_factor_bytes is
-// solved on the host, from a copy of its panels fetched at the first solve after each
-// factorization. Refactorizations with values drawn afresh (LU whose fronts pivot
-// differently each round; an SPD matrix scaled symmetrically) are solved with their own
-// factor — one application, no refinement: a stale copy would show in the backward
-// error — the same as the device solve of that factor to rounding, and a second solve
-// of the same factor gives the same bits. The threshold at the factor's size solves on
-// the device.
-TEST_F(CudaBackend, SmallFactorsSolveOnTheHost) {
-  unsigned long long seed = 0;
-  auto rng = test::fresh_rng(&seed);
-  SCOPED_TRACE("seed " + std::to_string(seed));
-  const SparseMatrix base = expand_symmetric(generators::elasticity_3d(6, 6, 6));
-  std::uniform_real_distribution<double> u(0.5, 1.5), expo(-2, 2), ub(-1, 1);
-  for (const MatrixType type : {MatrixType::general, MatrixType::spd}) {
-    SCOPED_TRACE(to_string(type));
-    auto round_values = [&] {
-      SparseMatrix a = base;
-      std::vector<double> d(a.n_rows);
-      for (double& r : d) r = std::pow(10.0, expo(rng));
-      for (index_t j = 0; j < a.n_cols; ++j)
-        for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p)
-          a.values[p] *=
-              type == MatrixType::spd ? d[a.indices[p]] * d[j] : u(rng) * d[a.indices[p]];
-      return a;
-    };
-    Options o;
-    o.num_gpus = 1;
-    o.type = type;
-    o.backend = Backend::cuda;
-    o.solve_check = SolveCheck::after_perturbed_pivots;
-    Options dev = o;
-    dev.gpu_solve_min_factor_bytes = 0;
-    Solver host_solved(o), device_solved(dev);
-    std::vector<double> b(base.n_rows);
-    for (double& v : b) v = ub(rng);
-    for (int round = 0; round < 3; ++round) {
-      SCOPED_TRACE("round " + std::to_string(round));
-      const SparseMatrix a = round_values();
-      if (round == 0) {
-        host_solved.factorize(a);
-        device_solved.factorize(a);
-        ASSERT_LT(host_solved.stats().analysis.factor_bytes, o.gpu_solve_min_factor_bytes);
-      } else {
-        host_solved.refactorize(a);
-        device_solved.refactorize(a);
-      }
-      ASSERT_TRUE(host_solved.stats().factor.factor_resident);
-      const auto xh = host_solved.solve(b);
-      EXPECT_FALSE(host_solved.stats().solve.on_device);
-      EXPECT_EQ(host_solved.stats().solve.refinement_steps, 0);
-      const auto xd = device_solved.solve(b);
-      EXPECT_TRUE(device_solved.stats().solve.on_device);
-      EXPECT_LT(test::backward_error(a, xh.data(), b.data()), 1e-13);
-      EXPECT_LT(test::relative_difference(xh, xd), 1e-8);
-      EXPECT_EQ(host_solved.solve(b), xh);
-    }
-    // the threshold at the factor's size: solved on the device
-    Options at_size = o;
-    at_size.gpu_solve_min_factor_bytes = host_solved.stats().analysis.factor_bytes;
-    Solver s(at_size);
-    const SparseMatrix a = round_values();
-    s.factorize(a);
-    const auto x = s.solve(b);
-    EXPECT_TRUE(s.stats().solve.on_device);
-    EXPECT_LT(test::backward_error(a, x.data(), b.data()), 1e-13);
-  }
-}
-
 // Shared SPD and unsymmetric matrices solve on the GPU as accurately as on the CPU.
 TEST_F(CudaBackend, SharedMatrices) {
   for (const std::string& name : test::shared_matrix_names()) {
@@ -899,7 +824,6 @@ TEST_F(CudaBackend, SharedMatrices) {
     o.num_gpus = 1;  // one GPU, whatever the machine has
     Solver cpu(o);
     o.backend = Backend::cuda;
-    o.gpu_solve_min_factor_bytes = 0;  // device solves, small factors too
     Solver gpu(o);
     cpu.factorize(a);
     gpu.factorize(a);
@@ -928,7 +852,6 @@ TEST_F(CudaBackend, RefactorizationIsDeterministic) {
   o.num_gpus = 1;  // one GPU, whatever the machine has
   o.type = MatrixType::spd;
   o.backend = Backend::cuda;
-  o.gpu_solve_min_factor_bytes = 0;  // device solves, small factors too
   Solver s1(o), s2(o);
   s1.factorize(a);
   s1.refactorize(a);
@@ -1116,7 +1039,6 @@ TEST_F(CudaBackend, LdltSolutionsMatchCpu) {
       o.type = MatrixType::symmetric_indefinite;
       Solver cpu(o);
       o.backend = Backend::cuda;
-      o.gpu_solve_min_factor_bytes = 0;  // device solves, small factors too
       Solver gpu(o);
       cpu.factorize(a);
       gpu.factorize(a);
@@ -1177,7 +1099,6 @@ TEST_F(CudaBackend, LdltLargeFronts) {
     o.type = MatrixType::symmetric_indefinite;
     Solver cpu(o);
     o.backend = Backend::cuda;
-    o.gpu_solve_min_factor_bytes = 0;  // device solves, small factors too
     Solver gpu(o);
     cpu.factorize(a);
     gpu.factorize(a);
@@ -1377,7 +1298,6 @@ TEST_F(CudaBackend, LdltRefactorizationIsDeterministic) {
   o.num_gpus = 1;  // one GPU, whatever the machine has
   o.type = MatrixType::symmetric_indefinite;
   o.backend = Backend::cuda;
-  o.gpu_solve_min_factor_bytes = 0;  // device solves, small factors too
   Solver s1(o), s2(o);
   s1.factorize(a);
   s1.refactorize(a);
@@ -1394,7 +1314,6 @@ Options leaf_fronts_lu(bool gpu) {
   Options o;
   o.type = MatrixType::general;
   o.backend = gpu ? Backend::cuda : Backend::cpu;
-  o.gpu_solve_min_factor_bytes = 0;  // device solves, small factors too
   o.num_gpus = 1;
   o.pivoting = Pivoting::automatic;
   o.relax_small = 0;
@@ -1477,7 +1396,6 @@ TEST_F(CudaBackend, AnalysisInThePivotOrderRefactorsOnTheDevice) {
 Options one_gpu(MatrixType type = MatrixType::automatic) {
   Options o;
   o.backend = Backend::cuda;
-  o.gpu_solve_min_factor_bytes = 0;  // device solves, small factors too
   o.num_gpus = 1;
   o.type = type;
   return o;

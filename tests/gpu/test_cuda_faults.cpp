@@ -40,7 +40,6 @@ TEST(CudaFaults, DeviceAllocationFailureIsOutOfMemoryAndRecoverable) {
     Options o;
     o.type = c.type;
     o.backend = Backend::cuda;
-    o.gpu_solve_min_factor_bytes = 0;  // device solves, small factors too
     // one GPU: with several, work stealing decides which GPU holds which subtree's panels,
     // so what a factorization allocates differs from run to run (on two H200s a capped run
     // then fitted under a cap set below the measured total)

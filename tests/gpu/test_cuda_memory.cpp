@@ -161,7 +161,6 @@ TEST_F(CudaMemory, TiledCholeskyFailureNamesTheCpusColumn) {
     cpu_column = e.column();
   }
   o.backend = Backend::cuda;
-  o.gpu_solve_min_factor_bytes = 0;  // device solves, small factors too
   for (std::size_t limit : {256 * std::size_t{1024}, MiB})
     for (auto [recursive, stream] : {std::pair{true, index_t{0}}, std::pair{false, index_t{0}},
                                      std::pair{true, index_t{32}}, std::pair{true, index_t{-1}}}) {
@@ -202,7 +201,6 @@ TEST_F(CudaMemory, LuUnderATightBudgetEqualsInCore) {
     SCOPED_TRACE("device_memory_limit " + std::to_string(limit));
     Options g = o;
     g.backend = Backend::cuda;
-    g.gpu_solve_min_factor_bytes = 0;  // device solves, small factors too
     g.device_memory_limit = limit;
     Solver gpu(g);
     gpu.factorize(a);
@@ -238,8 +236,7 @@ TEST_F(CudaMemory, DeviceSolveMatchesHostSolve) {
         o.num_gpus = 1;  // one GPU, whatever the machine has
         o.type = type;
         o.backend = Backend::cuda;
-        o.gpu_solve_min_factor_bytes = 0;  // device solves, small factors too
-        o.refinement_max_steps = 0;        // compare the plain solves
+        o.refinement_max_steps = 0;  // compare the plain solves
         o.gmres_max_iterations = 0;
         Solver gpu(o);
         gpu.factorize(a);
@@ -291,7 +288,6 @@ TEST_F(CudaMemory, DeviceSolveWithLargeFronts) {
   Options o;
   o.num_gpus = 1;  // one GPU, whatever the machine has
   o.backend = Backend::cuda;
-  o.gpu_solve_min_factor_bytes = 0;  // device solves, small factors too
   Solver gpu(o);
   gpu.factorize(a);
   ASSERT_GT(gpu.stats().analysis.largest_front_rows, 256);
@@ -320,7 +316,6 @@ TEST_F(CudaMemory, FactorStaysResidentBesideASmallerPool) {
     o.num_gpus = 1;  // one GPU, whatever the machine has
     o.type = MatrixType::spd;
     o.backend = Backend::cuda;
-    o.gpu_solve_min_factor_bytes = 0;  // device solves, small factors too
     const Analysis unlimited = analyze_matrix(a, o);
     const auto largest = static_cast<std::size_t>(unlimited.stats.largest_front_rows);
     const std::size_t need = unlimited.factor_layout.total + unlimited.cb_layout.arena_size +
@@ -380,7 +375,6 @@ TEST_F(CudaMemory, LdltUnderABudget) {
   const double largest = static_cast<double>(cpu.stats().analysis.largest_front_rows);
   ASSERT_GT(largest, 256);
   o.backend = Backend::cuda;
-  o.gpu_solve_min_factor_bytes = 0;  // device solves, small factors too
   // six fronts' worth: the largest front's working set (itself, its children's blocks and
   // its own block) fits, so nothing is tiled, yet levels are cut into chunks
   o.device_memory_limit = static_cast<std::size_t>(48 * largest * largest);
@@ -436,7 +430,6 @@ TEST_F(CudaMemory, WorkingMemoryStaysWithinTheBudget) {
       SCOPED_TRACE(std::string(to_string(type)) + ", device_memory_limit " + std::to_string(limit));
       Options g = o;
       g.backend = Backend::cuda;
-      g.gpu_solve_min_factor_bytes = 0;  // device solves, small factors too
       g.device_memory_limit = limit;
       Solver gpu(g);
       gpu.factorize(a);
@@ -478,7 +471,6 @@ TEST_F(CudaMemory, HostMemoryLimitBoundsThePinnedBuffers) {
   for (const std::size_t device : {factor / 3, factor}) {
     Options g = o;
     g.backend = Backend::cuda;
-    g.gpu_solve_min_factor_bytes = 0;  // device solves, small factors too
     g.device_memory_limit = device;
     Solver free_host(g);
     free_host.factorize(a);
@@ -532,7 +524,6 @@ TEST_F(CudaMemory, ImpossibleBudgetNamesTheBytes) {
   o.num_gpus = 1;  // one GPU, whatever the machine has
   o.type = MatrixType::spd;
   o.backend = Backend::cuda;
-  o.gpu_solve_min_factor_bytes = 0;  // device solves, small factors too
   o.device_memory_limit = 4096;
   Solver s(o);
   try {

@@ -57,7 +57,6 @@ std::vector<double> random_rhs(index_t n, std::mt19937_64& rng) {
 std::vector<DeviceStats> refactorize_and_solve(const test::NamedMatrix& pr, Options o, int gpus,
                                                const std::vector<double>& b) {
   o.backend = Backend::cuda;
-  o.gpu_solve_min_factor_bytes = 0;  // device solves, small factors too
   o.num_gpus = gpus;
   Solver s(o);
   s.factorize(pr.a);
@@ -235,7 +234,6 @@ TEST(MultiGpu, SolverSolutionsAndRefactorization) {
       o.type = pr.type;
       Solver cpu(o);
       o.backend = Backend::cuda;
-      o.gpu_solve_min_factor_bytes = 0;  // device solves, small factors too
       o.num_gpus = gpus;
       Solver gpu(o);
       cpu.factorize(a);
@@ -384,7 +382,6 @@ TEST(MultiGpu, UpperLayersMatchOneGpuAndCpu) {
         Options so;
         so.type = pr.type;
         so.backend = Backend::cuda;
-        so.gpu_solve_min_factor_bytes = 0;  // device solves, small factors too
         so.num_gpus = gpus;
         so.subtrees_per_gpu = 4;
         so.split_top = split;
@@ -598,7 +595,6 @@ TEST(MultiGpu, TooManyGpusIsRefused) {
   const SparseMatrix a = generators::laplacian_3d(8, 8, 8);
   Options o;
   o.backend = Backend::cuda;
-  o.gpu_solve_min_factor_bytes = 0;  // device solves, small factors too
   o.num_gpus = numeric::cuda_device_count() + 1;
   Solver too_many(o);
   EXPECT_THROW(too_many.analyze(a), InvalidInput);

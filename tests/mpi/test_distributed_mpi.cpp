@@ -355,7 +355,6 @@ TEST(Distributed, GpuRanksSolveWhereTheFactorIs) {
       SCOPED_TRACE(pr.name + (where_held ? ", solved on the GPUs" : ", solved on the host"));
       Options o = options_for(pr.type);
       o.backend = Backend::cuda;
-      o.gpu_solve_min_factor_bytes = 0;  // device solves, small factors too
       o.num_gpus = 1;
       o.gpu_solve_parts = where_held;
       // an LDLᵀ factor's panels come to the host (as on one process with several GPUs)
