@@ -149,6 +149,7 @@ static int driver_main(int argc, char** argv) {
     json row = {{"problem", name},
                 {"n", p.a.n_rows},
                 {"nnz_l", an.nnz_l},
+                {"factor_bytes", an.factor_bytes},
                 {"factor_flops", an.factor_flops},
                 {"type", to_string(o.type)},
                 {"strata_gpu",
