@@ -695,7 +695,8 @@ int main(int argc, char** argv) {
   solve
       ->add_option("--device", solve_args.common.device,
                    "where the factorization and solve run (default auto: the GPU when the "
-                   "build and the machine have one)")
+                   "build and the machine have one and the factor needs at least 1e10 flops "
+                   "(--solver-option gpu_min_flops=F), else the host)")
       ->check(choice<Backend>());
   SimulateArgs sim;
   auto* simulate = app.add_subcommand(
@@ -716,7 +717,9 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 5));
   simulate
       ->add_option("--device", sim.device,
-                   "where strata factorizes (default auto: the GPU when present)")
+                   "where strata factorizes (default auto: the GPU when present and the Newton "
+                   "matrix's factor needs at least 1e10 flops, --solver-option gpu_min_flops=F; "
+                   "else the host)")
       ->check(choice<Backend>());
   simulate->add_option("--device-memory-limit", sim.device_memory_limit,
                        "GPU memory budget [bytes] (default 0: 90% of the free device memory)");

@@ -40,9 +40,11 @@ enum class OrderingMethod {
 
 /// Where the numeric phases run.
 enum class Backend {
-  cpu,        ///< BLAS/LAPACK on host threads (default).
-  cuda,       ///< one or more CUDA GPUs; NotSupported in a build without CUDA.
-  automatic,  ///< cuda when a GPU is present and the build has CUDA, else cpu.
+  cpu,   ///< BLAS/LAPACK on host threads (default).
+  cuda,  ///< one or more CUDA GPUs; NotSupported in a build without CUDA.
+  /// cuda when a GPU is present, the build has CUDA and the analysis's factor needs at
+  /// least Options::gpu_min_flops flops; else cpu.
+  automatic,
 };
 
 /// How pivots that the analysis's fixed order cannot take are handled (LU; see
@@ -119,6 +121,16 @@ struct Options {
   // --- numeric factorization ---
   /// Where factorize/solve run (default: cpu).
   Backend backend = Backend::cpu;
+  /// Backend::automatic with a GPU present: an analysis whose factor needs fewer flops
+  /// than this (AnalysisStats::factor_flops) is factored and solved on the host, the
+  /// CPU backend, and AnalysisStats::backend says so; a larger one on the GPU(s). A GPU
+  /// run pays fixed costs (its context, the device set-up, launches and a wait per level
+  /// of the tree) that a small factorization does not win back; the crossover on the
+  /// multibody Newton matrices is in bench/history.md. An analysis made for several
+  /// GPUs is made again for the host's one worker; one made for one GPU is kept, with
+  /// its separator blocking. 0: the GPU for every analysis. The distributed solver (several MPI ranks)
+  /// does not use it: there automatic means the ranks' GPUs. Default 1e10; at least 0.
+  double gpu_min_flops = 1e10;
   /// Host threads for the CPU backend and for the analysis's linear passes (whose result
   /// does not depend on it); 0 means all hardware threads (default 0). The CPU
   /// factorization's memory depends on it: with 4 threads or more independent subtrees run

@@ -66,6 +66,10 @@ struct AnalysisStats {
   /// method reported are the analysis's before; ordering_seconds is the time to form the
   /// new order).
   bool order_from_pivots = false;
+  /// Where the factorizations of this analysis run: Options::backend, with
+  /// Backend::automatic resolved (cuda or cpu, by the GPUs present and
+  /// Options::gpu_min_flops).
+  Backend backend = Backend::cpu;
   /// Several workers (GPUs): the split of the tree (docs/multigpu.md). workers is 1 and
   /// the rest 0 when the analysis was made for one.
   index_t workers = 1;

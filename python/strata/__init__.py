@@ -209,8 +209,10 @@ class Solver:
         its factor is cheap, else nested dissection, as CHOLMOD chooses).
     device : {"auto", "cpu", "cuda"}
         Where the factorization runs. "auto" (default) uses a GPU when the build and the
-        machine have one (for LLᵀ, LDLᵀ and LU alike); "cuda" raises NotSupportedError in
-        a build without CUDA or on a machine without a GPU.
+        machine have one and the factor needs at least the option gpu_min_flops (1e10)
+        flops, else the host (for LLᵀ, LDLᵀ and LU alike; stats["backend"] says
+        which); "cuda" raises NotSupportedError in a build without CUDA or on a
+        machine without a GPU.
     storage : {"full", "lower", "upper"}
         Which part of A is given: "lower"/"upper" mean A holds one triangle of a
         symmetric matrix (diagonal included) and the other is implied. Default "full".
@@ -380,7 +382,8 @@ class Solver:
         fronts; LU about twice), fronts, largest_front_rows, largest_front_pivots,
         max_block_size, tree_height, fronts_per_level (list, deepest level first),
         peak_working_bytes, factor_bytes, memory_budget, batches (the memory plan), type
-        (the type analyzed for), ordering, pairs, odd_cycles, the multi-worker split
+        (the type analyzed for), backend (where its factorizations run: "cpu" or "cuda",
+        device "auto" resolved), ordering, pairs, odd_cycles, the multi-worker split
         (workers, subtrees, ...) and seconds (a dict: ordering, nd_balance, symbolic,
         plan, device_setup, total).
         "factor" (after a factorization), a dict: type ("spd", "symmetric_indefinite",

@@ -203,6 +203,8 @@ void validate(const Options& o) {
   fraction("relax_zeros_3", o.relax_zeros_3, true, true);
   at_least<index_t>("max_block_size", o.max_block_size, 0);
   at_least("num_threads", o.num_threads, 0);
+  if (!(o.gpu_min_flops >= 0))  // NaN too; +inf keeps every automatic analysis on the host
+    out_of_range("gpu_min_flops", "at least 0", o.gpu_min_flops);
   if (o.gpu_small_front_rows < 1 || o.gpu_small_front_rows > 256)
     out_of_range("gpu_small_front_rows", "in [1, 256]", o.gpu_small_front_rows);
   at_least<index_t>("gpu_panel_kernel_max_pivots", o.gpu_panel_kernel_max_pivots, 0);
@@ -313,6 +315,7 @@ const std::vector<Field>& fields() {
       integer_field("device_memory_limit", &O::device_memory_limit),
       integer_field("host_memory_limit", &O::host_memory_limit),
       enum_field("backend", &O::backend),
+      number_field("gpu_min_flops", &O::gpu_min_flops),
       integer_field("num_threads", &O::num_threads),
       flag_field("reproducible", &O::reproducible),
       integer_field("gpu_small_front_rows", &O::gpu_small_front_rows),

@@ -89,12 +89,20 @@ int parity(const std::vector<index_t>& p) {
   return sign;
 }
 
-// The driver of an analysis for `workers` workers (resolve_workers): kept while the
-// count stays, else one executor on the whole tree or one per GPU over the split tree.
-// A driver set through SolverAccess is kept as it is.
-void ensure_driver(SolverState& s, int workers) {
-  if (s.driver_set || (s.driver && s.driver->workers() == workers)) return;
-  if (workers > 1) {
+// The driver of an analysis for `workers` workers (resolve_workers), on the host when
+// `host` (Backend::automatic resolved to the CPU: automatic_on_host): kept while the count
+// and the backend stay, else one executor on the whole tree or one per GPU over the split
+// tree. A driver set through SolverAccess is kept as it is.
+void ensure_driver(SolverState& s, int workers, bool host) {
+  if (s.driver_set) return;
+  if (s.driver && s.driver->workers() == workers &&
+      (s.driver->backend() == Backend::cpu) == (host || !numeric::uses_cuda(s.options.backend)))
+    return;
+  if (host) {
+    Options o = s.options;
+    o.backend = Backend::cpu;
+    s.driver = numeric::make_tree_driver(o);
+  } else if (workers > 1) {
     numeric::MultiWorkerConfig config;
     config.work_stealing = s.options.work_stealing;
     // GPUs keep their parts' panels: the host copy is what made several GPUs slower than
@@ -104,6 +112,14 @@ void ensure_driver(SolverState& s, int workers) {
   } else {
     s.driver = numeric::make_tree_driver(s.options);
   }
+}
+
+// Backend::automatic with a GPU present, and a factor of fewer flops than
+// Options::gpu_min_flops: the host factors and solves (the GPU's fixed costs outweigh
+// what it would save).
+bool automatic_on_host(const Options& o, const Analysis& an) {
+  return o.backend == Backend::automatic && numeric::uses_cuda(o.backend) &&
+         an.stats.factor_flops < o.gpu_min_flops;
 }
 
 // Sizes the scaled values to n, first releasing their pinning if that may move them.
@@ -529,6 +545,7 @@ void clear_numeric(SolverState& s) {
 // factorization, the devices prepared, the statistics started anew.
 void adopt_analysis(SolverState& s, Analysis an, const SparseMatrix& a) {
   s.analysis = std::move(an);
+  s.analysis->stats.backend = s.driver->backend();
   keep_analyzed_input(s, a);
   const double setup = prepare_devices(s);
   s.analysis->stats.device_setup_seconds = setup;
@@ -545,10 +562,18 @@ void Solver::analyze(const SparseMatrix& a) {
     validate(a);
     clear_numeric(*state_);
     state_->analysis.reset();
-    const int workers =
-        state_->driver_set ? state_->driver->workers() : resolve_workers(state_->options);
-    ensure_driver(*state_, workers);
-    adopt_analysis(*state_, analyze_matrix(a, state_->options, workers), a);
+    const Options& o = state_->options;
+    int workers = state_->driver_set ? state_->driver->workers() : resolve_workers(o);
+    Analysis an = analyze_matrix(a, o, workers);
+    const bool host = !state_->driver_set && automatic_on_host(o, an);
+    if (host && workers > 1) {  // made again for the one worker the host is
+      Options one = o;
+      one.backend = Backend::cpu;
+      workers = 1;
+      an = analyze_matrix(a, one, workers);
+    }
+    ensure_driver(*state_, workers, host);
+    adopt_analysis(*state_, std::move(an), a);
   });
 }
 

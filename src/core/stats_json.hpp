@@ -104,6 +104,7 @@ inline void to_json(nlohmann::json& j, const AnalysisStats& s) {
        {"memory_budget", s.memory_budget},
        {"batches", batches},
        {"type", to_string(s.type)},
+       {"backend", to_string(s.backend)},
        {"pairs", s.pairs},
        {"odd_cycles", s.odd_cycles},
        {"ordering", to_string(s.ordering)},

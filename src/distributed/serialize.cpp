@@ -130,6 +130,7 @@ void stats_io(IO& io, S& s) {
   io.value(s.memory_budget);
   io.vec(s.batches);
   io.value(s.type);
+  io.value(s.backend);
   io.value(s.pairs);
   io.value(s.odd_cycles);
   io.value(s.ordering);

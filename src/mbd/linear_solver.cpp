@@ -48,7 +48,9 @@ class StrataLinearSolver : public LinearSolver {
   }
   void analyze(const SparseMatrix& a) override {
     solver_.analyze(a);
-    set_delaying(false);
+    // Backend::automatic may have put a small factor on the host: delayed pivots from the
+    // first factorization there, as with Backend::cpu (options())
+    set_delaying(solver_.stats().analysis.backend == Backend::cpu);
     fresh_ = true;
   }
   void analyze_keeping_order(const SparseMatrix& a) override {

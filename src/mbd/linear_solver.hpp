@@ -50,7 +50,8 @@ class LinearSolver {
 };
 
 /// The options of the engine's Newton matrices unless a run sets others: strata's
-/// defaults with the GPU when the build and machine have one (Backend::automatic), one GPU
+/// defaults with the GPU when the build and machine have one and the Newton matrix's factor
+/// is large enough (Backend::automatic, Options::gpu_min_flops), one GPU
 /// (the Newton matrices are far too small for the tree split over several to pay), and
 /// solves checked only after perturbed pivots (Newton computes the residual at every
 /// iterate and stops on the size of its updates: a factor without perturbed pivots needs
@@ -73,8 +74,9 @@ std::unique_ptr<LinearSolver> make_strata_solver(const Options& o);
 /// and no unsymmetric matching. Throws InvalidInput when o.type is neither automatic nor
 /// symmetric_indefinite or when validate(o) refuses a field.
 std::unique_ptr<LinearSolver> make_strata_symmetric_solver(const Options& o);
-/// Whether make_strata_solver({.backend = backend, ...}) factorizes on a GPU: Backend::cuda,
-/// or Backend::automatic in a build and on a machine with one.
+/// Whether make_strata_solver({.backend = backend, ...}) may factorize on a GPU:
+/// Backend::cuda, or Backend::automatic in a build and on a machine with one (where the
+/// analysis then decides by the factor's flops, Options::gpu_min_flops).
 bool solver_on_gpu(Backend backend);
 /// Dense LU with partial pivoting (LAPACK); for tests and tiny models only.
 std::unique_ptr<LinearSolver> make_dense_solver();

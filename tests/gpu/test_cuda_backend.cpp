@@ -812,6 +812,49 @@ TEST_F(CudaBackend, LuRefactorizationsWithOtherPivotsSolveOnDevice) {
   }
 }
 
+// Backend::automatic factors on the GPU when the factor needs at least
+// Options::gpu_min_flops flops and on the host below: the threshold at the factor's flops
+// puts it on the GPU, the next double above them on the host (for one worker, also where
+// several GPUs are visible), each solving as the explicit backend does.
+TEST_F(CudaBackend, AutomaticBackendChoosesByFactorFlops) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  for (const auto& [kind, type] : {std::pair{test::RandomKind::general, MatrixType::general},
+                                   std::pair{test::RandomKind::spd, MatrixType::spd}}) {
+    SCOPED_TRACE(to_string(type));
+    const SparseMatrix a = test::random_sparse(733, 3, kind, rng);
+    std::vector<double> b(a.n_rows);
+    std::uniform_real_distribution<double> u(-1, 1);
+    for (double& v : b) v = u(rng);
+    Options o;
+    o.type = type;
+    o.backend = Backend::automatic;
+    o.gpu_min_flops = 0;
+    Solver probe(o);
+    probe.analyze(a);
+    const double flops = probe.stats().analysis.factor_flops;
+    ASSERT_EQ(probe.stats().analysis.backend, Backend::cuda);
+    o.gpu_min_flops = flops;
+    Solver on_gpu(o);
+    on_gpu.factorize(a);
+    EXPECT_EQ(on_gpu.stats().analysis.backend, Backend::cuda);
+    EXPECT_EQ(on_gpu.stats().factor.backend, Backend::cuda);
+    const auto xg = on_gpu.solve(b);
+    o.gpu_min_flops = std::nextafter(flops, std::numeric_limits<double>::infinity());
+    Solver on_host(o);
+    on_host.factorize(a);
+    EXPECT_EQ(on_host.stats().analysis.backend, Backend::cpu);
+    EXPECT_EQ(on_host.stats().factor.backend, Backend::cpu);
+    EXPECT_EQ(on_host.stats().analysis.workers, 1);
+    const auto xh = on_host.solve(b);
+    EXPECT_FALSE(on_host.stats().solve.on_device);
+    EXPECT_LT(test::backward_error(a, xg.data(), b.data()), 1e-14);
+    EXPECT_LT(test::backward_error(a, xh.data(), b.data()), 1e-14);
+    EXPECT_LT(test::relative_difference(xh, xg), 1e-10);
+  }
+}
+
 // Shared SPD and unsymmetric matrices solve on the GPU as accurately as on the CPU.
 TEST_F(CudaBackend, SharedMatrices) {
   for (const std::string& name : test::shared_matrix_names()) {

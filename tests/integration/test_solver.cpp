@@ -78,6 +78,42 @@ TEST(Solver, AutomaticTypeResolution) {
   }
 }
 
+// Backend::automatic factors a factor below Options::gpu_min_flops on the host, GPU or
+// not (the analysis and the factorization say so, and the statistics document too), with
+// the solution of the CPU backend bit for bit; Backend::cpu stays on the host whatever the
+// threshold. Types LU and Cholesky, sizes 1 to 733.
+TEST(Solver, AutomaticBackendPutsSmallFactorsOnTheHost) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  for (const Case& c : {kCases[0], kCases[2]})
+    for (index_t n : {1, 2, 3, 5, 733}) {
+      SCOPED_TRACE(std::string(c.name) + " n " + std::to_string(n));
+      const SparseMatrix a = test::random_sparse(n, 4, c.kind, rng);
+      Options automatic;
+      automatic.type = c.type;
+      automatic.backend = Backend::automatic;
+      Solver s(automatic);
+      s.factorize(a);
+      ASSERT_LT(s.stats().analysis.factor_flops, automatic.gpu_min_flops);
+      EXPECT_EQ(s.stats().analysis.backend, Backend::cpu);
+      EXPECT_EQ(s.stats().factor.backend, Backend::cpu);
+      EXPECT_EQ(s.stats().analysis.workers, 1);
+      Options cpu = automatic;
+      cpu.backend = Backend::cpu;
+      cpu.gpu_min_flops = 0;
+      Solver h(cpu);
+      h.factorize(a);
+      EXPECT_EQ(h.stats().analysis.backend, Backend::cpu);
+      std::vector<double> b(n);
+      std::uniform_real_distribution<double> u(-1, 1);
+      for (double& v : b) v = u(rng);
+      const auto x = s.solve(b);
+      EXPECT_EQ(x, h.solve(b));
+      EXPECT_LT(test::backward_error(a, x.data(), b.data()), 1e-14);
+    }
+}
+
 // Inertia of LDLᵀ equals the signs of the eigenvalues of the dense matrix (KKT systems).
 TEST(Solver, LdltInertiaMatchesEigenvalues) {
   auto rng = test::fresh_rng();

@@ -181,7 +181,10 @@ def test_options(ordering, type_):
     # "auto" reports the method it chose (AMD or nested dissection)
     assert s.stats["ordering"] == ordering if ordering != "auto" else s.stats["ordering"] in (
         "amd", "nd")
-    assert s.stats["factor"]["backend"] == "cpu"
+    assert s.stats["factor"]["backend"] == "cpu" and s.stats["backend"] == "cpu"
+    # device "auto" puts a factor this small on the host, GPU or not (gpu_min_flops)
+    auto = strata.Solver(A, type=type_, ordering=ordering, num_threads=1)
+    assert auto.stats["backend"] == "cpu" and auto.stats["factor_flops"] < 1e10
     perm = s.permutation
     assert perm.dtype == np.int64 and sorted(perm.tolist()) == list(range(733))
 

@@ -198,6 +198,14 @@ TEST(OptionsValidate, AnalysisRefusesBadOptions) {
   } catch (const InvalidInput& e) {
     EXPECT_STREQ(e.what(), "Options::pivot_threshold must be in (0, 1] (got 2)");
   }
+  Options negative;
+  negative.gpu_min_flops = -1;
+  try {
+    Solver(negative).analyze(a);
+    FAIL() << "analysis accepted gpu_min_flops -1";
+  } catch (const InvalidInput& e) {
+    EXPECT_STREQ(e.what(), "Options::gpu_min_flops must be at least 0 (got -1)");
+  }
 }
 
 // Every field set_option knows reads back what was written, through a second Options:
@@ -205,7 +213,7 @@ TEST(OptionsValidate, AnalysisRefusesBadOptions) {
 // written as text into a default Options and compared field by field.
 TEST(SetOption, EveryFieldRoundTripsThroughText) {
   const std::vector<std::string> names = option_fields();
-  EXPECT_EQ(names.size(), 45u);  // Options' fields but user_permutation
+  EXPECT_EQ(names.size(), 46u);  // Options' fields but user_permutation
   Options changed;
   for (const std::string& name : names) {
     const std::string before = get_option(changed, name);
@@ -245,6 +253,7 @@ TEST(SetOption, EveryFieldRoundTripsThroughText) {
   EXPECT_EQ(copy.reproducible, !Options{}.reproducible);
   EXPECT_EQ(copy.device_memory_limit, Options{}.device_memory_limit + 1);
   EXPECT_EQ(copy.host_memory_limit, Options{}.host_memory_limit + 1);
+  EXPECT_EQ(copy.gpu_min_flops, Options{}.gpu_min_flops / 2);
 }
 
 TEST(SetOption, AliasesFlagsAndFullRanges) {
