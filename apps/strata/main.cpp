@@ -695,8 +695,8 @@ int main(int argc, char** argv) {
   solve
       ->add_option("--device", solve_args.common.device,
                    "where the factorization and solve run (default auto: the GPU when the "
-                   "build and the machine have one and the factor needs at least 1e10 flops "
-                   "(--solver-option gpu_min_flops=F), else the host)")
+                   "build and the machine have one; --solver-option gpu_min_flops=F keeps "
+                   "factors of fewer flops on the host)")
       ->check(choice<Backend>());
   SimulateArgs sim;
   auto* simulate = app.add_subcommand(
@@ -717,9 +717,9 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 5));
   simulate
       ->add_option("--device", sim.device,
-                   "where strata factorizes (default auto: the GPU when present and the Newton "
-                   "matrix's factor needs at least 1e10 flops, --solver-option gpu_min_flops=F; "
-                   "else the host)")
+                   "where strata factorizes (default auto: the GPU when present; "
+                   "--solver-option gpu_min_flops=F keeps a Newton matrix whose factor needs "
+                   "fewer flops on the host)")
       ->check(choice<Backend>());
   simulate->add_option("--device-memory-limit", sim.device_memory_limit,
                        "GPU memory budget [bytes] (default 0: 90% of the free device memory)");

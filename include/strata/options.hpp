@@ -42,8 +42,8 @@ enum class OrderingMethod {
 enum class Backend {
   cpu,   ///< BLAS/LAPACK on host threads (default).
   cuda,  ///< one or more CUDA GPUs; NotSupported in a build without CUDA.
-  /// cuda when a GPU is present, the build has CUDA and the analysis's factor needs at
-  /// least Options::gpu_min_flops flops; else cpu.
+  /// cuda when a GPU is present and the build has CUDA (and the analysis's factor needs at
+  /// least Options::gpu_min_flops flops, 0 by default); else cpu.
   automatic,
 };
 
@@ -125,12 +125,13 @@ struct Options {
   /// than this (AnalysisStats::factor_flops) is factored and solved on the host, the
   /// CPU backend, and AnalysisStats::backend says so; a larger one on the GPU(s). A GPU
   /// run pays fixed costs (its context, the device set-up, launches and a wait per level
-  /// of the tree) that a small factorization does not win back; the crossover on the
-  /// multibody Newton matrices is in bench/history.md. An analysis made for several
-  /// GPUs is made again for the host's one worker; one made for one GPU is kept, with
-  /// its separator blocking. 0: the GPU for every analysis. The distributed solver (several MPI ranks)
-  /// does not use it: there automatic means the ranks' GPUs. Default 1e10; at least 0.
-  double gpu_min_flops = 1e10;
+  /// of the tree) that a small factorization may not win back; where the crossover lies
+  /// depends on the host's CPU (the multibody Newton matrices: bench/history.md), so
+  /// the default keeps every analysis on the GPU. An analysis made for several GPUs is
+  /// made again for the host's one worker; one made for one GPU is kept, with its
+  /// separator blocking. The distributed solver (several MPI ranks) does not use it:
+  /// there automatic means the ranks' GPUs. Default 0; at least 0.
+  double gpu_min_flops = 0;
   /// Host threads for the CPU backend and for the analysis's linear passes (whose result
   /// does not depend on it); 0 means all hardware threads (default 0). The CPU
   /// factorization's memory depends on it: with 4 threads or more independent subtrees run

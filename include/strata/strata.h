@@ -114,8 +114,8 @@ typedef enum strata_ordering {
 typedef enum strata_backend {
   STRATA_BACKEND_CPU = 0,  /**< BLAS/LAPACK on host threads (default) */
   STRATA_BACKEND_CUDA = 1, /**< a CUDA GPU; NOT_SUPPORTED without CUDA or a GPU */
-  STRATA_BACKEND_AUTO = 2  /**< the GPU when the build and the machine have one and the factor
-                               needs at least the option gpu_min_flops flops, else CPU */
+  STRATA_BACKEND_AUTO = 2  /**< the GPU when the build and the machine have one (and the factor
+                               needs at least the option gpu_min_flops flops), else CPU */
 } strata_backend;
 
 /* Options are read by strata_analyze: an option set after strata_analyze takes effect

@@ -209,9 +209,9 @@ class Solver:
         its factor is cheap, else nested dissection, as CHOLMOD chooses).
     device : {"auto", "cpu", "cuda"}
         Where the factorization runs. "auto" (default) uses a GPU when the build and the
-        machine have one and the factor needs at least the option gpu_min_flops (1e10)
-        flops, else the host (for LLᵀ, LDLᵀ and LU alike; stats["backend"] says
-        which); "cuda" raises NotSupportedError in a build without CUDA or on a
+        machine have one, else the host (for LLᵀ, LDLᵀ and LU alike; the option
+        gpu_min_flops keeps factors of fewer flops on the host; stats["backend"] says
+        where); "cuda" raises NotSupportedError in a build without CUDA or on a
         machine without a GPU.
     storage : {"full", "lower", "upper"}
         Which part of A is given: "lower"/"upper" mean A holds one triangle of a

@@ -50,8 +50,8 @@ class LinearSolver {
 };
 
 /// The options of the engine's Newton matrices unless a run sets others: strata's
-/// defaults with the GPU when the build and machine have one and the Newton matrix's factor
-/// is large enough (Backend::automatic, Options::gpu_min_flops), one GPU
+/// defaults with the GPU when the build and machine have one (Backend::automatic; with
+/// Options::gpu_min_flops, only for a Newton matrix whose factor is that large), one GPU
 /// (the Newton matrices are far too small for the tree split over several to pay), and
 /// solves checked only after perturbed pivots (Newton computes the residual at every
 /// iterate and stops on the size of its updates: a factor without perturbed pivots needs
@@ -76,7 +76,7 @@ std::unique_ptr<LinearSolver> make_strata_solver(const Options& o);
 std::unique_ptr<LinearSolver> make_strata_symmetric_solver(const Options& o);
 /// Whether make_strata_solver({.backend = backend, ...}) may factorize on a GPU:
 /// Backend::cuda, or Backend::automatic in a build and on a machine with one (where the
-/// analysis then decides by the factor's flops, Options::gpu_min_flops).
+/// analysis may still put a small factor on the host: Options::gpu_min_flops).
 bool solver_on_gpu(Backend backend);
 /// Dense LU with partial pivoting (LAPACK); for tests and tiny models only.
 std::unique_ptr<LinearSolver> make_dense_solver();

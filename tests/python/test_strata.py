@@ -182,9 +182,9 @@ def test_options(ordering, type_):
     assert s.stats["ordering"] == ordering if ordering != "auto" else s.stats["ordering"] in (
         "amd", "nd")
     assert s.stats["factor"]["backend"] == "cpu" and s.stats["backend"] == "cpu"
-    # device "auto" puts a factor this small on the host, GPU or not (gpu_min_flops)
+    # device "auto": the analysis reports where its factorizations run
     auto = strata.Solver(A, type=type_, ordering=ordering, num_threads=1)
-    assert auto.stats["backend"] == "cpu" and auto.stats["factor_flops"] < 1e10
+    assert auto.stats["backend"] == auto.stats["factor"]["backend"] in ("cpu", "cuda")
     perm = s.permutation
     assert perm.dtype == np.int64 and sorted(perm.tolist()) == list(range(733))
 
