@@ -115,8 +115,8 @@ void ensure_driver(SolverState& s, int workers, bool host) {
 }
 
 // Backend::automatic with a GPU present, and a factor of fewer flops than
-// Options::gpu_min_flops: the host factors and solves (the GPU's fixed costs outweigh
-// what it would save).
+// Options::gpu_min_flops: the host factors and solves (where the GPU's fixed costs would
+// outweigh what it saves).
 bool automatic_on_host(const Options& o, const Analysis& an) {
   return o.backend == Backend::automatic && numeric::uses_cuda(o.backend) &&
          an.stats.factor_flops < o.gpu_min_flops;
