@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "base/blas.hpp"
+#include "numeric/cpu/dense_blas.hpp"
 #include "numeric/cpu/dense_front.hpp"
 #include "strata/errors.hpp"
 #include "support/test_support.hpp"
@@ -902,6 +903,73 @@ TEST(DenseFront, ZeroPivotCountedWithoutStaticPivoting) {
     EXPECT_EQ(ldl.st.positive + ldl.st.negative, k - 1);
     EXPECT_TRUE(all_finite(block(ldl.out, 0, m, 0, m)));
   }
+}
+
+// The trsm wrapper (dense_blas.hpp), recursive above kTrsmLeaf for the combinations the
+// front kernels use and DTRSM otherwise, against the definition: op(A)·X = B or
+// X·op(A) = B checked entry by entry with sums over A's referenced triangle only, within
+// the componentwise backward-error bound of a triangular solve (Higham, "Accuracy and
+// Stability of Numerical Algorithms", 2nd ed., Thm. 8.5). The triangle that must not be
+// read is NaN, a unit diagonal is kSentinel, and the padding rows of A and B must stay.
+TEST(DenseBlas, TrsmSolvesEveryCombinationTheFrontsUse) {
+  Seeded s;
+  TRACE_SEED(s);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  struct Combo {
+    char side, uplo, ta, diag;
+  };
+  for (const Combo c :
+       {Combo{'R', 'L', 'T', 'N'}, Combo{'R', 'L', 'T', 'U'}, Combo{'R', 'U', 'N', 'N'},
+        Combo{'L', 'L', 'N', 'U'}, Combo{'L', 'L', 'N', 'N'}, Combo{'L', 'U', 'N', 'N'}})
+    for (const index_t order : {1, 2, 3, 5, 64, 65, 97, 200, 733})
+      for (const index_t other : {1, 3, 130}) {
+        SCOPED_TRACE(testing::Message() << c.side << c.uplo << c.ta << c.diag << " order=" << order
+                                        << " other=" << other);
+        const bool right = c.side == 'R', lower = c.uplo == 'L', unit = c.diag == 'U';
+        const index_t lda = order + 3, rows = right ? other : order, cols = right ? order : other;
+        const index_t ldb = rows + 2;
+        std::vector<double> a(static_cast<std::size_t>(lda * order), kSentinel);
+        auto A = [&](index_t i, index_t j) -> double& { return a[i + j * lda]; };
+        for (index_t j = 0; j < order; ++j)
+          for (index_t i = 0; i < order; ++i) {
+            if (i == j)
+              A(i, j) = unit ? kSentinel : 1.0 + 0.5 * (u(s.rng) + 1.0);
+            else if ((i > j) == lower)
+              A(i, j) = u(s.rng) / static_cast<double>(order);
+            else
+              A(i, j) = nan;
+          }
+        // op(A)(i, j) over the referenced triangle, 1 on a unit diagonal
+        auto opA = [&](index_t i, index_t j) {
+          const index_t r = c.ta == 'T' ? j : i, q = c.ta == 'T' ? i : j;
+          if (r == q) return unit ? 1.0 : A(r, r);
+          return (r > q) == lower ? A(r, q) : 0.0;
+        };
+        std::vector<double> b(static_cast<std::size_t>(ldb * cols), kSentinel);
+        for (index_t j = 0; j < cols; ++j)
+          for (index_t i = 0; i < rows; ++i) b[i + j * ldb] = u(s.rng);
+        std::vector<double> x = b;
+        trsm(c.side, c.uplo, c.ta, c.diag, rows, cols, a.data(), lda, x.data(), ldb);
+        const double eps = std::numeric_limits<double>::epsilon();
+        index_t outside = 0;  // entries beyond the bound (or NaN)
+        for (index_t j = 0; j < cols; ++j)
+          for (index_t i = 0; i < rows; ++i) {
+            double sum = 0.0, mag = 0.0;
+            for (index_t l = 0; l < order; ++l) {
+              const double t = right ? x[i + l * ldb] * opA(l, j) : opA(i, l) * x[l + j * ldb];
+              sum += t;
+              mag += std::abs(t);
+            }
+            const double bound = 4.0 * static_cast<double>(order + 1) * eps * mag;
+            if (!(std::abs(sum - b[i + j * ldb]) <= bound)) ++outside;
+          }
+        EXPECT_EQ(outside, 0);
+        for (index_t j = 0; j < cols; ++j)
+          for (index_t i = rows; i < ldb; ++i) ASSERT_EQ(x[i + j * ldb], kSentinel);
+        for (index_t j = 0; j < order; ++j)
+          for (index_t i = order; i < lda; ++i) ASSERT_EQ(A(i, j), kSentinel);
+      }
 }
 
 }  // namespace
