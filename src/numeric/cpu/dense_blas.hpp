@@ -41,9 +41,9 @@ constexpr index_t kTrsmLeaf = 64;
 /// recursive blocked TRSM of Elmroth, Gustavson, Jonsson & Kågström ("Recursive blocked
 /// algorithms and hybrid data structures for dense matrix library software", SIAM Review
 /// 46, 2004), which puts most of the flops in DGEMM, faster than OpenBLAS's own DTRSM on the
-/// fronts' shapes (bench/history.md). Recursive for the combinations
-/// the front kernels use — ('R','L','T'), ('R','U','N'), ('L','L','N') — and plain DTRSM
-/// for the others; diag ('N' or 'U') passes to the leaves.
+/// fronts' shapes (bench/history.md). Recursive for the combinations the front kernels use
+/// — ('R','L','T'), ('R','U','N'), ('L','L','N') — and plain DTRSM for the others; diag
+/// ('N' or 'U') passes to the leaves.
 inline void trsm(char side, char uplo, char ta, char diag, index_t m, index_t n, const double* a,
                  index_t lda, double* b, index_t ldb) {
   if (m <= 0 || n <= 0) return;
