@@ -248,10 +248,10 @@ RefResult run_cholmod(const SparseMatrix& a, const std::vector<index_t>& perm,
 nlohmann::json device_figures(const FactorStats& fs) {
   const nlohmann::json all = fs;  // the one vocabulary of the statistics (core/stats_json.hpp)
   nlohmann::json j;
-  for (const char* key :
-       {"seconds", "input_seconds", "values_scaled_on_device", "gflops", "device_seconds",
-        "bytes_to_device", "bytes_to_host", "device_batches", "tiled_fronts", "lu_large_fronts",
-        "lu_large_fronts_pivoted", "lu_large_fronts_batched", "factor_resident"})
+  for (const char* key : {"seconds", "input_seconds", "values_scaled_on_device", "gflops",
+                          "device_seconds", "bytes_to_device", "bytes_to_host", "device_batches",
+                          "device_fused_batches", "tiled_fronts", "lu_large_fronts",
+                          "lu_large_fronts_pivoted", "lu_large_fronts_batched", "factor_resident"})
     j[key] = all.at(key);
   j["phases"] = all.at("device_phases");  // the results files' name for them
   return j;

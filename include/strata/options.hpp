@@ -153,6 +153,19 @@ struct Options {
   /// serial within the block); larger fronts by the batched panel kernels and library
   /// calls below, which spread one front over many blocks. In [1, 256]; default 256.
   index_t gpu_small_front_rows = 256;
+  /// CUDA backend: the most threads of a small-front block. A block has a thread per row
+  /// of the largest front of its launch (a power of two); a launch of few fronts, which
+  /// leaves most of the GPU idle, gets blocks up to this wide so that each front's trailing
+  /// updates are spread over more threads (src/numeric/cuda/kernels.cu). The same
+  /// results bit for bit. 0: a thread per row always. In [0, 512]; default 512.
+  int gpu_small_front_threads = 512;
+  /// CUDA backend, LU with the factor kept on the device: a launch group (a level of the
+  /// schedule, or the part of one that fits the device pool) whose fronts all fit shared
+  /// memory (up to about 168 rows on an H100) and gpu_small_front_rows is assembled,
+  /// factored, and its contribution blocks and panels stored by one launch, each front
+  /// assembled straight into shared memory, instead of four launches through the device
+  /// pool (src/numeric/cuda/kernels.cu). The same results bit for bit. Default on.
+  bool gpu_fused_small_batches = true;
   /// CUDA backend, Cholesky: fronts over gpu_small_front_rows rows with at most this many
   /// pivots get their
   /// pivot block and panel from strata's batched kernels (all such fronts of a batch

@@ -194,7 +194,10 @@ struct FactorStats {
   std::size_t bytes_to_host = 0;    ///< device→host bytes (factor panels, spilled blocks)
   index_t device_batches = 0;       ///< launch groups run (memory-plan batches, split
                                     ///< further when the device pool is smaller)
-  index_t tiled_fronts = 0;         ///< fronts over the device budget, factored by slabs
+  /// Of device_batches, those assembled, factored and stored by one launch, each front
+  /// straight in shared memory (Options::gpu_fused_small_batches).
+  index_t device_fused_batches = 0;
+  index_t tiled_fronts = 0;  ///< fronts over the device budget, factored by slabs
   /// Of tiled_fronts, those assembled on the host beside the previous one's device work
   /// (Options::gpu_tiled_prefetch).
   index_t tiled_fronts_prefetched = 0;

@@ -207,6 +207,8 @@ void validate(const Options& o) {
     out_of_range("gpu_min_flops", "at least 0", o.gpu_min_flops);
   if (o.gpu_small_front_rows < 1 || o.gpu_small_front_rows > 256)
     out_of_range("gpu_small_front_rows", "in [1, 256]", o.gpu_small_front_rows);
+  if (o.gpu_small_front_threads < 0 || o.gpu_small_front_threads > 512)
+    out_of_range("gpu_small_front_threads", "in [0, 512]", o.gpu_small_front_threads);
   at_least<index_t>("gpu_panel_kernel_max_pivots", o.gpu_panel_kernel_max_pivots, 0);
   at_least<index_t>("gpu_lu_strip_pivots", o.gpu_lu_strip_pivots, 0);
   fraction("gpu_tiled_pool_share", o.gpu_tiled_pool_share, true, false);
@@ -319,6 +321,8 @@ const std::vector<Field>& fields() {
       integer_field("num_threads", &O::num_threads),
       flag_field("reproducible", &O::reproducible),
       integer_field("gpu_small_front_rows", &O::gpu_small_front_rows),
+      integer_field("gpu_small_front_threads", &O::gpu_small_front_threads),
+      flag_field("gpu_fused_small_batches", &O::gpu_fused_small_batches),
       integer_field("gpu_panel_kernel_max_pivots", &O::gpu_panel_kernel_max_pivots),
       integer_field("gpu_lu_strip_pivots", &O::gpu_lu_strip_pivots),
       number_field("gpu_tiled_pool_share", &O::gpu_tiled_pool_share),

@@ -152,6 +152,7 @@ inline void to_json(nlohmann::json& j, const FactorStats& f) {
        {"bytes_to_device", f.bytes_to_device},
        {"bytes_to_host", f.bytes_to_host},
        {"device_batches", f.device_batches},
+       {"device_fused_batches", f.device_fused_batches},
        {"tiled_fronts", f.tiled_fronts},
        {"tiled_fronts_prefetched", f.tiled_fronts_prefetched},
        {"lu_large_fronts", f.lu_large_fronts},

@@ -94,6 +94,7 @@ void merge_device_figures(FactorStats& into, const FactorStats& one) {
   into.bytes_to_device += one.bytes_to_device;
   into.bytes_to_host += one.bytes_to_host;
   into.device_batches += one.device_batches;
+  into.device_fused_batches += one.device_fused_batches;
   into.tiled_fronts += one.tiled_fronts;
   into.tiled_fronts_prefetched += one.tiled_fronts_prefetched;
   into.lu_large_fronts += one.lu_large_fronts;

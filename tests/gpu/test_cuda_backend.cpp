@@ -699,6 +699,103 @@ TEST_F(CudaBackend, LuFactorMatchesCpu) {
       }
 }
 
+// The small-front kernels' blocks widened past a thread per row (Options::
+// gpu_small_front_threads) for launches of few fronts, and LU launch groups assembled,
+// factored and stored by one launch (Options::gpu_fused_small_batches): the same factor
+// bit for bit as blocks of a thread per row in separate launches, and the CPU's to
+// rounding. Dense fronts of 150 rows (LU in shared memory on an H100 or H200: fused) and
+// 200 rows (LU in global memory: not fused), rows scaled and no matching so that partial
+// pivoting interchanges rows; random matrices of sizes 1, 2, 3, 5, 733; LU and Cholesky.
+TEST_F(CudaBackend, SmallFrontLaunchesOfEveryShapeGiveTheSameFactor) {
+  // the widths: a thread per row (a power of two) with 0; wider for few fronts, not for many
+  EXPECT_EQ(numeric::cuda_small_front_threads(1, 166, 0), 256);
+  EXPECT_EQ(numeric::cuda_small_front_threads(1, 20, 0), 32);
+  EXPECT_EQ(numeric::cuda_small_front_threads(1, 166, 256), 256);
+  EXPECT_EQ(numeric::cuda_small_front_threads(1, 166, 512), 512);
+  EXPECT_EQ(numeric::cuda_small_front_threads(1, 20, 512), 512);
+  EXPECT_EQ(numeric::cuda_small_front_threads(1, 20, 100), 64);
+  EXPECT_EQ(numeric::cuda_small_front_threads(1000000, 166, 512), 256);
+  EXPECT_EQ(numeric::cuda_small_front_threads(1000000, 20, 512), 32);
+  EXPECT_THROW(numeric::cuda_small_front_threads(1, 257, 512), InvalidInput);
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  std::uniform_real_distribution<double> entry(-1, 1), expo(-2, 2);
+  // a dense n × n matrix: rows scaled by 10^[-2, 2] (general), or B·Bᵀ + n·I (spd)
+  auto dense = [&](index_t n, bool spd) {
+    std::vector<double> b(static_cast<std::size_t>(n) * n), scale(n);
+    for (double& v : b) v = entry(rng);
+    for (double& r : scale) r = std::pow(10.0, expo(rng));
+    SparseMatrix a;
+    a.n_rows = a.n_cols = n;
+    for (index_t j = 0; j < n; ++j) {
+      for (index_t i = 0; i < n; ++i) {
+        double v = b[static_cast<std::size_t>(j) * n + i] * scale[i];
+        if (spd) {
+          v = i == j ? n : 0.0;
+          for (index_t q = 0; q < n; ++q)
+            v += b[static_cast<std::size_t>(q) * n + i] * b[static_cast<std::size_t>(q) * n + j];
+        }
+        a.indices.push_back(i);
+        a.values.push_back(v);
+      }
+      a.offsets.push_back(static_cast<index_t>(a.indices.size()));
+    }
+    return a;
+  };
+  for (MatrixType type : {MatrixType::general, MatrixType::spd}) {
+    const bool lu = type == MatrixType::general;
+    std::vector<std::pair<std::string, SparseMatrix>> problems;
+    for (index_t n : {1, 2, 3, 5, 733})
+      problems.push_back(
+          {"random " + std::to_string(n),
+           test::random_sparse(n, 3, lu ? test::RandomKind::general : test::RandomKind::spd, rng)});
+    problems.push_back({"dense 150", dense(150, !lu)});
+    problems.push_back({"dense 200", dense(200, !lu)});
+    for (const auto& [name, a] : problems) {
+      SCOPED_TRACE(name + (lu ? ", LU" : ", Cholesky"));
+      std::vector<double> panels;
+      std::vector<index_t> rows;
+      for (auto [threads, fused] :
+           {std::pair{0, false}, std::pair{256, false}, std::pair{512, false}, std::pair{0, true},
+            std::pair{512, true}}) {
+        SCOPED_TRACE("gpu_small_front_threads " + std::to_string(threads) +
+                     ", gpu_fused_small_batches " + std::to_string(fused));
+        Options o;
+        o.gpu_small_front_threads = threads;
+        o.gpu_fused_small_batches = fused;
+        // the random matrices with the matching (without it their pivots can differ between
+        // CPU and GPU by rounding, as LuFactorMatchesCpu's), the dense ones without
+        CpuAndGpu r = factor_on_cpu_and_gpu(a, type, name.starts_with("random"), 1e-8, o);
+        FactorStats fs;
+        r.gpu_exec->report(fs);
+        EXPECT_TRUE(fs.factor_resident);
+        if (!fused || !lu || name == "dense 200") {
+          EXPECT_EQ(fs.device_fused_batches, 0);
+        } else {
+          EXPECT_GT(fs.device_fused_batches, 0);
+        }
+        numeric::fetch_panels(r.an, *r.gpu_exec, r.gpu);
+        ASSERT_EQ(r.cpu.rows, r.gpu.rows);
+        EXPECT_LT(test::relative_difference(r.gpu.panels, r.cpu.panels), 1e-10);
+        numeric::PivotStats sc, sg;
+        for (const auto& ps : r.cpu.front_stats) sc.merge(ps);
+        for (const auto& ps : r.gpu.front_stats) sg.merge(ps);
+        EXPECT_EQ(sg.perturbed, sc.perturbed);
+        EXPECT_EQ(sg.det_sign, sc.det_sign);
+        EXPECT_NEAR(sg.log_abs_det, sc.log_abs_det, 1e-9 * std::max(1.0, std::abs(sc.log_abs_det)));
+        if (threads == 0 && !fused) {
+          panels = r.gpu.panels;
+          rows = r.gpu.rows;
+        } else {
+          EXPECT_EQ(r.gpu.rows, rows);
+          EXPECT_TRUE(r.gpu.panels == panels) << "not bitwise the factor of a thread per row";
+        }
+      }
+    }
+  }
+}
+
 // A front with hundreds of children, which the GPU assembly adds one after another to each
 // column slice of the front: a bordered block-diagonal matrix — 600 diagonal 2×2 blocks,
 // each coupled to three columns of a dense 300-column border — ordered by AMD without

@@ -127,6 +127,10 @@ TEST(OptionsValidate, DefaultsPassAndEveryFieldOutOfRangeIsNamed) {
        [](Options& o, double v) { o.gpu_small_front_rows = index_t(v); },
        {0, -1, 257},
        {1, 64, 256}},
+      {"gpu_small_front_threads",
+       [](Options& o, double v) { o.gpu_small_front_threads = int(v); },
+       {-1, 513},
+       {0, 256, 512}},
       {"num_gpus", [](Options& o, double v) { o.num_gpus = int(v); }, {-1}, {0}},
       {"subtrees_per_gpu", [](Options& o, double v) { o.subtrees_per_gpu = int(v); }, {0}, {1}},
       {"distributed_front_block_size",
@@ -213,7 +217,7 @@ TEST(OptionsValidate, AnalysisRefusesBadOptions) {
 // written as text into a default Options and compared field by field.
 TEST(SetOption, EveryFieldRoundTripsThroughText) {
   const std::vector<std::string> names = option_fields();
-  EXPECT_EQ(names.size(), 46u);  // Options' fields but user_permutation
+  EXPECT_EQ(names.size(), 48u);  // Options' fields but user_permutation
   Options changed;
   for (const std::string& name : names) {
     const std::string before = get_option(changed, name);
@@ -230,6 +234,8 @@ TEST(SetOption, EveryFieldRoundTripsThroughText) {
       text = "delayed";
     } else if (name == "solve_check") {
       text = "after_perturbed_pivots";
+    } else if (name == "gpu_small_front_threads") {
+      text = "256";  // the default is the largest
     } else if (before.find_first_of(".e") != std::string::npos) {
       text = std::to_string(std::stod(before) / 2);
     } else {

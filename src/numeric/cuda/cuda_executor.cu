@@ -26,6 +26,8 @@
 //      the factor stays resident for an LLᵀ or LU: then the panels stay on the device
 //      only (NumericFactor::held names it; download_panels on demand) and
 //      only the pivots' diagonal entries come back for the host bookkeeping.
+// A chunk of LU fronts that all fit shared memory, whose panels stay on the device, takes
+// steps 1–4 in one launch instead (factor_chunk_fused, Options::gpu_fused_small_batches).
 // CUDA events between the steps give FactorStats::device_phases.
 // A front whose working set alone is over the budget is factored slab by slab from
 // pinned host memory (tiled_front.cu; LLᵀ and LU only).
@@ -100,6 +102,8 @@ CudaExecutor::CudaExecutor(const Options& o, int device)
       limit_(o.device_memory_limit),
       host_limit_(o.host_memory_limit),
       small_front_rows_(std::min<std::int64_t>(o.gpu_small_front_rows, kSmallFront)),
+      small_front_threads_(o.gpu_small_front_threads),
+      fused_small_batches_(o.gpu_fused_small_batches),
       panel_max_pivots_(o.gpu_panel_kernel_max_pivots),
       lu_strip_pivots_(o.gpu_lu_strip_pivots),
       split_min_cb_(o.split_front_min_cb),
@@ -214,7 +218,7 @@ void CudaExecutor::begin(const numeric::FactorContext& ctx) {
   whole_ = false;  // until begin_part says which part: no resident factor from no part
   const Analysis& an = *ctx.analysis;
   bytes_h2d_ = bytes_d2h_ = 0;
-  chunks_ = tiled_.count = tiled_.prefetched = 0;
+  chunks_ = fused_chunks_ = tiled_.count = tiled_.prefetched = 0;
   lu_.fronts = lu_.fronts_pivoted = lu_.fronts_batched = 0;
   phases_ = FactorStats::DevicePhases{};
   held_parts_.clear();
@@ -538,6 +542,7 @@ void CudaExecutor::report(FactorStats& fs) const {
   fs.bytes_to_device = bytes_h2d_;
   fs.bytes_to_host = bytes_d2h_;
   fs.device_batches = chunks_;
+  fs.device_fused_batches = fused_chunks_;
   fs.tiled_fronts = tiled_.count;
   fs.tiled_fronts_prefetched = tiled_.prefetched;
   fs.lu_large_fronts = lu_.fronts;

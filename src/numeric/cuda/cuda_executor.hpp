@@ -271,7 +271,8 @@ class CudaExecutor final : public numeric::Executor {
     bool lu = false, ldlt = false, dev_only = false;
     index_t max_rows = 0;  ///< the chunk's largest front
     std::vector<std::int64_t> small, big, perm_off, big_perm_at, diag_off;
-    std::int64_t perm_total = 0;  ///< pivots of the chunk (small fronts' then large ones')
+    std::int64_t perm_total = 0;   ///< pivots of the chunk (small fronts' then large ones')
+    std::size_t panels_total = 0;  ///< doubles of the chunk's panels (chunk_panel_layout)
     PinnedBuffer<std::int64_t> info, perturbed, perm;
     PinnedBuffer<int> pinfo, psize;
     PinnedBuffer<double> diag;
@@ -292,6 +293,11 @@ class CudaExecutor final : public numeric::Executor {
   /// lanes): the small fronts, the large fronts (with the panel kernels' share), the
   /// panels packed and copied back, the host part's results fetched into `rec`.
   void chunk_small_fronts(const numeric::FactorContext& ctx, ChunkRecord& rec);
+  void chunk_split_fronts(const numeric::FactorContext& ctx, ChunkRecord& rec);
+  double* chunk_panel_layout(const numeric::FactorContext& ctx, ChunkRecord& rec);
+  /// The whole chunk by one launch when every front is a small LU front that fits shared
+  /// memory and the panels stay on the device (Options::gpu_fused_small_batches).
+  void factor_chunk_fused(const numeric::FactorContext& ctx, ChunkRecord& rec);
   std::vector<char> chunk_panel_kernels(const numeric::FactorContext& ctx, const ChunkRecord& rec);
   void chunk_large_fronts(const numeric::FactorContext& ctx, const ChunkRecord& rec);
   void chunk_pack_panels(const numeric::FactorContext& ctx, ChunkRecord& rec);
@@ -459,6 +465,8 @@ class CudaExecutor final : public numeric::Executor {
   std::size_t limit_ = 0;
   std::size_t host_limit_ = 0;  ///< Options::host_memory_limit (0: what the host has)
   std::int64_t small_front_rows_ = kSmallFront;  ///< Options::gpu_small_front_rows
+  int small_front_threads_ = 0;                  ///< Options::gpu_small_front_threads
+  bool fused_small_batches_ = true;              ///< Options::gpu_fused_small_batches
   std::int64_t panel_max_pivots_ = 0;            ///< Options::gpu_panel_kernel_max_pivots
   std::int64_t lu_strip_pivots_ = 0;             ///< Options::gpu_lu_strip_pivots
   std::int64_t split_min_cb_ = 0;                ///< Options::split_front_min_cb
@@ -561,7 +569,7 @@ class CudaExecutor final : public numeric::Executor {
   } dsolve_;
   // statistics of the last factorization
   std::size_t bytes_h2d_ = 0, bytes_d2h_ = 0;
-  index_t chunks_ = 0;
+  index_t chunks_ = 0, fused_chunks_ = 0;
   double device_seconds_ = 0;
   cudaEvent_t start_ = nullptr, stop_ = nullptr;
   cudaEvent_t panels_done_ = nullptr;  // the chunk's launch_llt_panel: the lanes wait for it

@@ -67,6 +67,11 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
   rec.max_rows = 0;
   for (index_t p = begin; p < end; ++p)
     rec.max_rows = std::max(rec.max_rows, t.n_rows(s.fronts[p]));
+  if (fused_small_batches_ && rec.lu && rec.dev_only && rec.max_rows <= small_front_rows_ &&
+      rec.max_rows <= lu_shared_max_rows()) {
+    factor_chunk_fused(ctx, rec);
+    return;
+  }
   STRATA_CUDA(cudaEventRecord(rec.ev[0], stream_));
   launch_assemble(cur_->tree, begin, end - begin, rec.max_rows, values_.data(), pool_.data(),
                   !rec.lu, stream_);
@@ -87,20 +92,65 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
   if (rec.ldlt && !rec.dev_only) flush_chunk(ctx);
 }
 
+// A chunk of small LU fronts whose panels stay on the device, by one launch
+// (launch_lu_small_fused): the chunk's layout (chunk_split_fronts, chunk_panel_layout),
+// the launch, the results fetched; the phase events as factor_chunk's, the launch's time
+// counted as small fronts.
+void CudaExecutor::factor_chunk_fused(const numeric::FactorContext& ctx, ChunkRecord& rec) {
+  ++fused_chunks_;
+  chunk_split_fronts(ctx, rec);
+  double* const pack_to = chunk_panel_layout(ctx, rec);
+  STRATA_CUDA(cudaEventRecord(rec.ev[0], stream_));
+  STRATA_CUDA(cudaEventRecord(rec.ev[1], stream_));
+  launch_lu_small_fused(cur_->tree, small_pos_.data(), static_cast<std::int64_t>(rec.small.size()),
+                        rec.max_rows, values_.data(), ctx.static_pivot,
+                        ctx.diagonal_pivot_threshold, info_.data(), perturbed_.data(), perm_.data(),
+                        perm_offset_.data(), stage_offset_.data(), pack_to, diag_offset_.data(),
+                        diag_.data(), small_front_threads_, stream_);
+  STRATA_CUDA(cudaEventRecord(rec.ev[2], stream_));
+  STRATA_CUDA(cudaEventRecord(rec.ev[3], stream_));
+  STRATA_CUDA(cudaEventRecord(rec.ev[4], stream_));
+  rec.panels_async = false;
+  chunk_fetch_results(rec);
+  STRATA_CUDA(cudaEventRecord(rec.ev[5], stream_));
+  flush_chunk(ctx);  // the previous chunk's host part, while the GPU runs this one
+  pending_ = &rec;
+}
+
 // Step 2 for the small fronts: split the chunk into small fronts (one thread block each,
-// one launch for all) and large ones, lay out the pivot permutations (small fronts first,
-// then the large ones in order) and size the per-front result buffers.
+// one launch for all) and large ones (chunk_split_fronts), then the small fronts' launch.
 void CudaExecutor::chunk_small_fronts(const numeric::FactorContext& ctx, ChunkRecord& rec) {
+  chunk_split_fronts(ctx, rec);
+  const std::size_t ns = rec.small.size();
+  std::int64_t small_rows = 0;
+  for (std::int64_t p : rec.small)
+    small_rows = std::max<std::int64_t>(small_rows,
+                                        ctx.analysis->tree.n_rows(ctx.part->schedule->fronts[p]));
+  const DeviceTree& tree = cur_->tree;
+  if (rec.ldlt)
+    launch_ldlt_small(tree, small_pos_.data(), static_cast<std::int64_t>(ns), pool_.data(),
+                      ctx.static_pivot, perturbed_.data(), perm_.data(), pivot_size_.data(),
+                      perm_offset_.data(), stream_);
+  else
+    launch_factor_small(tree, small_pos_.data(), static_cast<std::int64_t>(ns), small_rows,
+                        pool_.data(), rec.lu, ctx.static_pivot, ctx.diagonal_pivot_threshold,
+                        info_.data(), perturbed_.data(), perm_.data(), perm_offset_.data(),
+                        small_front_threads_, stream_);
+  STRATA_CUDA(cudaEventRecord(rec.ev[2], stream_));
+}
+
+// The chunk's fronts split into small ones (rec.small) and large ones (rec.big), the pivot
+// permutations laid out (small fronts first, then the large ones in order), the small
+// fronts' positions and permutation offsets uploaded and the per-front result buffers sized.
+void CudaExecutor::chunk_split_fronts(const numeric::FactorContext& ctx, ChunkRecord& rec) {
   const auto& t = ctx.analysis->tree;
   const auto& s = *ctx.part->schedule;
   rec.small.clear();
   rec.big.clear();
   rec.perm_off.assign(1, 0);
-  std::int64_t small_rows = 0;
   for (index_t p = rec.begin; p < rec.end; ++p) {
     const index_t f = s.fronts[p];
     if (t.n_rows(f) <= small_front_rows_) {
-      small_rows = std::max<std::int64_t>(small_rows, t.n_rows(f));
       rec.small.push_back(p);
       rec.perm_off.push_back(rec.perm_off.back() + t.n_pivots(f));
     } else {
@@ -121,17 +171,6 @@ void CudaExecutor::chunk_small_fronts(const numeric::FactorContext& ctx, ChunkRe
   perm_.resize(rec.perm_total + 1);
   potrf_info_.resize(nb + 1);
   pivot_size_.resize(rec.perm_total + 1);
-  const DeviceTree& tree = cur_->tree;
-  if (rec.ldlt)
-    launch_ldlt_small(tree, small_pos_.data(), static_cast<std::int64_t>(ns), pool_.data(),
-                      ctx.static_pivot, perturbed_.data(), perm_.data(), pivot_size_.data(),
-                      perm_offset_.data(), stream_);
-  else
-    launch_factor_small(tree, small_pos_.data(), static_cast<std::int64_t>(ns), small_rows,
-                        pool_.data(), rec.lu, ctx.static_pivot, ctx.diagonal_pivot_threshold,
-                        info_.data(), perturbed_.data(), perm_.data(), perm_offset_.data(),
-                        stream_);
-  STRATA_CUDA(cudaEventRecord(rec.ev[2], stream_));
 }
 
 // LLᵀ fronts up to gpu_panel_kernel_max_pivots: their pivot blocks and panels by our
@@ -250,23 +289,11 @@ void CudaExecutor::chunk_large_fronts(const numeric::FactorContext& ctx, const C
 // the pivots' diagonal entries.
 void CudaExecutor::chunk_pack_panels(const numeric::FactorContext& ctx, ChunkRecord& rec) {
   const Analysis& an = *ctx.analysis;
-  const auto& t = an.tree;
   const auto& s = *ctx.part->schedule;
   const index_t begin = rec.begin;
   const std::int64_t count = rec.end - rec.begin;
-  double* const pack_to = part_device_only_ ? part_panels_.at(ctx.part->id).data() : panels_.data();
-  std::vector<std::int64_t> stage_off(count);
-  rec.diag_off.assign(count + 1, 0);
-  std::size_t total = 0;
-  for (std::int64_t i = 0; i < count; ++i) {
-    const index_t f = s.fronts[begin + i];
-    stage_off[i] = keep_resident()     ? static_cast<std::int64_t>(an.factor_layout.panel_offset[f])
-                   : part_device_only_ ? cur_->panel_off_host[begin + i]
-                                       : static_cast<std::int64_t>(total);
-    total += panel_size(t, f, rec.lu);
-    rec.diag_off[i + 1] = rec.diag_off[i] + t.n_pivots(f);
-  }
-  upload(stage_offset_, stage_off);
+  double* const pack_to = chunk_panel_layout(ctx, rec);
+  const std::size_t total = rec.panels_total;
   // the staging area is free once the previous chunk's panels are on their way out
   if (copy_issued_) STRATA_CUDA(cudaStreamWaitEvent(stream_, panels_copied_, 0));
   launch_pack_panels(cur_->tree, begin, count, rec.max_rows, pool_.data(), stage_offset_.data(),
@@ -286,12 +313,39 @@ void CudaExecutor::chunk_pack_panels(const numeric::FactorContext& ctx, ChunkRec
     copy_issued_ = true;
     bytes_d2h_ += sizeof(double) * total;
   }
+  if (rec.dev_only)
+    launch_gather_diagonals(cur_->tree, begin, count, stage_offset_.data(), pack_to,
+                            diag_offset_.data(), diag_.data(), stream_);
+}
+
+// Where the chunk's panels go: per chunk position its offset in the returned buffer (the
+// device factor, the part's own buffer, or the staging area in chunk order) uploaded to
+// stage_offset_ (rec.panels_total doubles in all), and for device-only panels each front's
+// first diagonal slot uploaded to diag_offset_ (rec.diag_off) with diag_ sized.
+double* CudaExecutor::chunk_panel_layout(const numeric::FactorContext& ctx, ChunkRecord& rec) {
+  const Analysis& an = *ctx.analysis;
+  const auto& t = an.tree;
+  const auto& s = *ctx.part->schedule;
+  const index_t begin = rec.begin;
+  const std::int64_t count = rec.end - rec.begin;
+  std::vector<std::int64_t> stage_off(count);
+  rec.diag_off.assign(count + 1, 0);
+  std::size_t total = 0;
+  for (std::int64_t i = 0; i < count; ++i) {
+    const index_t f = s.fronts[begin + i];
+    stage_off[i] = keep_resident()     ? static_cast<std::int64_t>(an.factor_layout.panel_offset[f])
+                   : part_device_only_ ? cur_->panel_off_host[begin + i]
+                                       : static_cast<std::int64_t>(total);
+    total += panel_size(t, f, rec.lu);
+    rec.diag_off[i + 1] = rec.diag_off[i] + t.n_pivots(f);
+  }
+  rec.panels_total = total;
+  upload(stage_offset_, stage_off);
   if (rec.dev_only) {
     upload(diag_offset_, rec.diag_off);
     diag_.resize(static_cast<std::size_t>(rec.diag_off[count]) + 1);
-    launch_gather_diagonals(cur_->tree, begin, count, stage_offset_.data(), pack_to,
-                            diag_offset_.data(), diag_.data(), stream_);
   }
+  return part_device_only_ ? part_panels_.at(ctx.part->id).data() : panels_.data();
 }
 
 // The results the host part needs (pivot checks, permutations, LDLᵀ pivot sizes, the

@@ -9,21 +9,31 @@
 // time forms (llt_front, lu_columns) remain for larger blocks (lu_columns also serves the
 // large LU fronts' static-pivoting path and the tiled slabs). An LU batch whose fronts all
 // fit the device's shared memory per block (about 168 rows on an H100) copies each front
-// there and factors it in place (lu_small_shared_kernel). Threshold partial pivoting for
+// there and factors it in place (lu_small_shared_kernel); when the whole launch group is
+// such fronts and the factor stays on the device, one launch does the group's assembly,
+// factorization, stores and packing, each front assembled straight into shared memory
+// (lu_small_fused_kernel). A launch of few fronts gets blocks wider than a thread per row
+// (small_front_threads), so that the trailing updates, which are most of a front's time,
+// are spread over more threads of an SM that would otherwise idle. Threshold partial pivoting for
 // LU searches only the fully summed rows (restricted pivoting), keeps the diagonal when it
 // is at least u times the largest candidate, and replaces tiny pivots by ±static_pivot,
 // exactly as the CPU kernels do (numeric/cpu/dense_front.hpp).
 #include <algorithm>
 #include <atomic>
 #include <cfloat>
+#include <string>
 
 #include "numeric/cuda/cuda_check.hpp"
 #include "numeric/cuda/kernels.cuh"
+#include "numeric/cuda_testing.hpp"
+#include "strata/errors.hpp"
 
 namespace strata::cuda {
 namespace {
 
-constexpr int kThreads = 256;
+constexpr int kThreads = 256;  // the most rows of a small front; its shared arrays' size
+// the widest small-front block (launch_factor_small): two of kThreads' register budget
+constexpr int kWideThreads = 2 * kThreads;
 
 // The per-front kernels below run on a 2-D grid: blockIdx.x is the front (its batch
 // position minus `begin`), blockIdx.y a slice of `slice` columns of it, so that a large
@@ -366,7 +376,7 @@ __device__ void llt_front_blocked(double* F, std::int64_t m, std::int64_t k, std
         __syncthreads();
         if (sfail) return;
         if (i > j && row) r[p] /= lsh[p][j];
-        if (i > j) lsh[p][i] = row ? r[p] : 0.0;
+        if (i > j && i < kThreads) lsh[p][i] = row ? r[p] : 0.0;
         __syncthreads();
         // the panel's later columns: r[q] -= L(i, j) L(j0 + q, j) for rows at or below them
 #pragma unroll
@@ -555,9 +565,12 @@ __device__ void lu_front_blocked(double* F, int ld, int m, int k, double static_
   if (i == 0) *perturbed += npert;
 }
 
-// Two blocks of kThreads per SM at least (a register cap of 128): a level of many small
-// fronts otherwise runs one block per SM, in waves.
-__global__ void __launch_bounds__(kThreads, 2)
+// kBlock threads: kThreads, two blocks per SM at least (a register cap of 128: a level of
+// many small fronts otherwise runs one block per SM, in waves), or kWideThreads, one per SM
+// at the same cap (a launch of few fronts, launch_factor_small). Threads past the front's
+// rows take part in the trailing updates and the barriers only.
+template <int kBlock>
+__global__ void __launch_bounds__(kBlock, kThreads * 2 / kBlock)
     factor_small_kernel(DeviceTree t, const std::int64_t* positions, double* pool, bool lu,
                         double static_pivot, double threshold, std::int64_t* info,
                         std::int64_t* perturbed, std::int64_t* perm,
@@ -597,8 +610,9 @@ __host__ __device__ constexpr int shared_ld(int m) { return m | 1; }
 // Small LU fronts each copied into shared memory, factored there (lu_front_blocked<true>)
 // and copied back: a pivot step and the trailing update then wait for shared memory, not
 // for global memory, many times per front. Dynamic shared memory of
-// shared_ld(max_rows) · max_rows doubles.
-__global__ void __launch_bounds__(kThreads, 2)
+// shared_ld(max_rows) · max_rows doubles. kBlock as factor_small_kernel's.
+template <int kBlock>
+__global__ void __launch_bounds__(kBlock, kThreads * 2 / kBlock)
     lu_small_shared_kernel(DeviceTree t, const std::int64_t* positions, double* pool,
                            double static_pivot, double threshold, std::int64_t* info,
                            std::int64_t* perturbed, std::int64_t* perm,
@@ -640,6 +654,76 @@ __global__ void __launch_bounds__(kThreads, 2)
   for (int x = threadIdx.x; x < total; x += step) {
     const int c = x / m;
     F[x] = fs[c * ld + (x - c * m)];
+  }
+}
+
+// A launch group of small LU fronts in one launch (launch_lu_small_fused): each block
+// assembles its front straight into shared memory in assemble_kernel's order of additions
+// (zeros, the original entries at distinct places, then each child's block, one child
+// after another), factors it there (lu_front_blocked<true>) and writes out what the
+// separate launches would have left: the panel and U12 into the factor, the contribution
+// block into the arena, the pivots' diagonal entries. One launch per group instead of
+// four (assembly, factorization, store, pack), and no trip of the front through the pool.
+// Dynamic shared memory as lu_small_shared_kernel's.
+template <int kBlock>
+__global__ void __launch_bounds__(kBlock, kThreads * 2 / kBlock)
+    lu_small_fused_kernel(DeviceTree t, const std::int64_t* positions, const double* values,
+                          double static_pivot, double threshold, std::int64_t* info,
+                          std::int64_t* perturbed, std::int64_t* perm,
+                          const std::int64_t* perm_offset, const std::int64_t* panel_offset,
+                          double* panels, const std::int64_t* diag_offset, double* diag) {
+  extern __shared__ double fs[];
+  const std::int64_t b = blockIdx.x;
+  const std::int64_t f = t.fronts[positions[b]];
+  const int m = static_cast<int>(t.n_rows[f]), k = static_cast<int>(t.n_pivots[f]);
+  const int ld = shared_ld(m), mc = m - k;
+  const int tid = threadIdx.x, step = static_cast<int>(blockDim.x);
+  const int warp = tid / kWarp, lane = tid % kWarp, warps = step / kWarp;
+  if (tid == 0) {
+    info[b] = -1;
+    perturbed[b] = 0;
+  }
+  for (int x = tid; x < m * ld; x += step) fs[x] = 0.0;
+  __syncthreads();
+  for (std::int64_t e = t.entry_offsets[f] + tid; e < t.entry_offsets[f + 1]; e += step) {
+    const int d = static_cast<int>(t.entry_dst[e]), c = d / m;
+    fs[c * ld + (d - c * m)] += values[t.entry_src[e]];  // distinct destinations
+  }
+  __syncthreads();
+  for (std::int64_t q = t.child_offsets[f]; q < t.child_offsets[f + 1]; ++q) {
+    const std::int64_t c = t.children[q];
+    const int cm = static_cast<int>(t.n_rows[c] - t.n_pivots[c]);
+    if (cm == 0) continue;
+    const double* cb = t.cb_ptr[c];
+    const std::int64_t* rel = t.rel + t.rel_offsets[c];
+    for (int jj = warp; jj < cm; jj += warps) {
+      double* col = fs + static_cast<int>(rel[jj]) * ld;
+      const double* src = cb + static_cast<std::int64_t>(jj) * cm;
+      for (int ii = lane; ii < cm; ii += kWarp) col[rel[ii]] += src[ii];
+    }
+    __syncthreads();  // one child after another: no two additions to one entry collide
+  }
+  lu_front_blocked<true>(fs, ld, m, k, static_pivot, threshold, perm + perm_offset[b],
+                         perturbed + b, nullptr);
+  __syncthreads();
+  double* panel = panels + panel_offset[b];
+  for (int x = tid; x < m * k; x += step) {  // L11\U11 and L21: columns [0, k), ld m
+    const int c = x / m;
+    panel[x] = fs[c * ld + (x - c * m)];
+  }
+  double* u12 = panel + static_cast<std::int64_t>(m) * k;
+  for (int x = tid; x < k * mc; x += step) {  // U12(i, j) = F(i, k + j), ld k
+    const int j = x / k;
+    u12[x] = fs[(k + j) * ld + (x - j * k)];
+  }
+  double* d = diag + diag_offset[b];
+  for (int i = tid; i < k; i += step) d[i] = fs[i * ld + i];
+  if (t.parent[f] >= 0 && mc > 0) {  // the contribution block, ld mc
+    double* out = t.cb_ptr[f];
+    for (int x = tid; x < mc * mc; x += step) {
+      const int j = x / mc;
+      out[x] = fs[(k + j) * ld + k + (x - j * mc)];
+    }
   }
 }
 
@@ -711,8 +795,17 @@ std::int64_t lu_shared_max_rows() {
   if (dev < kDevices && rows[dev].load(std::memory_order_acquire) > 0) return rows[dev].load();
   int optin = 0;
   STRATA_CUDA(cudaDeviceGetAttribute(&optin, cudaDevAttrMaxSharedMemoryPerBlockOptin, dev));
+  // the four kernels that take a front in dynamic shared memory, beside their own
+  const void* kernels[] = {reinterpret_cast<const void*>(lu_small_shared_kernel<kThreads>),
+                           reinterpret_cast<const void*>(lu_small_shared_kernel<kWideThreads>),
+                           reinterpret_cast<const void*>(lu_small_fused_kernel<kThreads>),
+                           reinterpret_cast<const void*>(lu_small_fused_kernel<kWideThreads>)};
   cudaFuncAttributes attr{};
-  STRATA_CUDA(cudaFuncGetAttributes(&attr, lu_small_shared_kernel));
+  for (const void* k : kernels) {
+    cudaFuncAttributes a{};
+    STRATA_CUDA(cudaFuncGetAttributes(&a, k));
+    attr.sharedSizeBytes = std::max(attr.sharedSizeBytes, a.sharedSizeBytes);
+  }
   const std::size_t room = optin > static_cast<int>(attr.sharedSizeBytes)
                                ? static_cast<std::size_t>(optin) - attr.sharedSizeBytes
                                : 0;
@@ -720,33 +813,87 @@ std::int64_t lu_shared_max_rows() {
   while (m < kThreads &&
          sizeof(double) * static_cast<std::size_t>(m + 1) * shared_ld(m + 1) <= room)
     ++m;
-  if (m > 0)
-    STRATA_CUDA(cudaFuncSetAttribute(lu_small_shared_kernel,
-                                     cudaFuncAttributeMaxDynamicSharedMemorySize,
-                                     static_cast<int>(sizeof(double) * m * shared_ld(m))));
+  if (m > 0) {
+    const int bytes = static_cast<int>(sizeof(double) * m * shared_ld(m));
+    for (const void* k : kernels)
+      STRATA_CUDA(cudaFuncSetAttribute(k, cudaFuncAttributeMaxDynamicSharedMemorySize, bytes));
+  }
   if (dev < kDevices) rows[dev].store(m > 0 ? m : -1, std::memory_order_release);
   return m;
+}
+
+unsigned small_front_threads(std::int64_t count, std::int64_t max_rows, int max_threads) {
+  // a row per thread, in the fewest warps that hold the largest front (a power of two, as
+  // block_argmax's tree needs): a pivot step's barriers then wait for fewer warps
+  unsigned threads = kWarp;
+  while (threads < kThreads && threads < max_rows) threads *= 2;
+  // A launch of few fronts leaves SMs idle and each busy one latency-bound (one instruction
+  // issued every ~8 cycles), with the trailing updates on at most one thread per row: wider
+  // blocks, up to max_threads, spread them (trailing_update's column groups) while the
+  // launch's threads stay within a quarter of the device's (512 per SM).
+  if (max_threads <= 0) return threads;
+  int dev = 0, sms = 1;
+  STRATA_CUDA(cudaGetDevice(&dev));
+  STRATA_CUDA(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, dev));
+  const std::int64_t room = static_cast<std::int64_t>(sms) * kWideThreads;
+  const unsigned cap = static_cast<unsigned>(std::min(max_threads, kWideThreads));
+  while (2 * threads <= cap && count * 2 * static_cast<std::int64_t>(threads) <= room) threads *= 2;
+  return threads;
 }
 
 void launch_factor_small(const DeviceTree& t, const std::int64_t* positions, std::int64_t count,
                          std::int64_t max_rows, double* pool, bool lu, double static_pivot,
                          double threshold, std::int64_t* info, std::int64_t* perturbed,
-                         std::int64_t* perm, const std::int64_t* perm_offset, cudaStream_t s) {
+                         std::int64_t* perm, const std::int64_t* perm_offset, int max_threads,
+                         cudaStream_t s) {
   if (count == 0) return;
-  // a row per thread, in the fewest warps that hold the largest front (a power of two, as
-  // block_argmax's tree needs): a pivot step's barriers then wait for fewer warps
-  unsigned threads = kWarp;
-  while (threads < kThreads && threads < max_rows) threads *= 2;
+  const unsigned threads = small_front_threads(count, max_rows, max_threads);
+  const bool wide = threads > static_cast<unsigned>(kThreads);
+  const unsigned blocks = static_cast<unsigned>(count);
   if (lu && max_rows <= lu_shared_max_rows()) {
     const std::size_t bytes = sizeof(double) * static_cast<std::size_t>(max_rows) *
                               static_cast<std::size_t>(shared_ld(static_cast<int>(max_rows)));
-    lu_small_shared_kernel<<<static_cast<unsigned>(count), threads, bytes, s>>>(
-        t, positions, pool, static_pivot, threshold, info, perturbed, perm, perm_offset);
+    if (wide)
+      lu_small_shared_kernel<kWideThreads><<<blocks, threads, bytes, s>>>(
+          t, positions, pool, static_pivot, threshold, info, perturbed, perm, perm_offset);
+    else
+      lu_small_shared_kernel<kThreads><<<blocks, threads, bytes, s>>>(
+          t, positions, pool, static_pivot, threshold, info, perturbed, perm, perm_offset);
     STRATA_CUDA_LAUNCH();
     return;
   }
-  factor_small_kernel<<<static_cast<unsigned>(count), threads, 0, s>>>(
-      t, positions, pool, lu, static_pivot, threshold, info, perturbed, perm, perm_offset);
+  if (wide)
+    factor_small_kernel<kWideThreads><<<blocks, threads, 0, s>>>(
+        t, positions, pool, lu, static_pivot, threshold, info, perturbed, perm, perm_offset);
+  else
+    factor_small_kernel<kThreads><<<blocks, threads, 0, s>>>(
+        t, positions, pool, lu, static_pivot, threshold, info, perturbed, perm, perm_offset);
+  STRATA_CUDA_LAUNCH();
+}
+
+void launch_lu_small_fused(const DeviceTree& t, const std::int64_t* positions, std::int64_t count,
+                           std::int64_t max_rows, const double* values, double static_pivot,
+                           double threshold, std::int64_t* info, std::int64_t* perturbed,
+                           std::int64_t* perm, const std::int64_t* perm_offset,
+                           const std::int64_t* panel_offset, double* panels,
+                           const std::int64_t* diag_offset, double* diag, int max_threads,
+                           cudaStream_t s) {
+  if (count == 0) return;
+  if (max_rows > lu_shared_max_rows())
+    throw InternalError("launch_lu_small_fused: a front of " + std::to_string(max_rows) +
+                        " rows does not fit shared memory");
+  const unsigned threads = small_front_threads(count, max_rows, max_threads);
+  const std::size_t bytes = sizeof(double) * static_cast<std::size_t>(max_rows) *
+                            static_cast<std::size_t>(shared_ld(static_cast<int>(max_rows)));
+  const unsigned blocks = static_cast<unsigned>(count);
+  if (threads > static_cast<unsigned>(kThreads))
+    lu_small_fused_kernel<kWideThreads><<<blocks, threads, bytes, s>>>(
+        t, positions, values, static_pivot, threshold, info, perturbed, perm, perm_offset,
+        panel_offset, panels, diag_offset, diag);
+  else
+    lu_small_fused_kernel<kThreads><<<blocks, threads, bytes, s>>>(
+        t, positions, values, static_pivot, threshold, info, perturbed, perm, perm_offset,
+        panel_offset, panels, diag_offset, diag);
   STRATA_CUDA_LAUNCH();
 }
 
@@ -765,3 +912,16 @@ void launch_lu_slab(double* s_, std::int64_t r, std::int64_t w, std::int64_t kk,
 }
 
 }  // namespace strata::cuda
+
+namespace strata::numeric {
+
+int cuda_small_front_threads(index_t count, index_t max_rows, int max_threads) {
+  if (count < 1 || max_rows < 1 || max_rows > cuda::kThreads)
+    throw InvalidInput(
+        "cuda_small_front_threads: needs count >= 1 and max_rows in [1, 256] (count = " +
+        std::to_string(count) + ", max_rows = " + std::to_string(max_rows) + ")");
+  STRATA_CUDA(cudaSetDevice(0));
+  return static_cast<int>(cuda::small_front_threads(count, max_rows, max_threads));
+}
+
+}  // namespace strata::numeric

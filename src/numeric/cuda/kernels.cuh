@@ -60,10 +60,40 @@ void launch_pack_panels(const DeviceTree& t, std::int64_t begin, std::int64_t co
 /// failed Cholesky pivot or -1; perturbed[i] = static pivots; perm (LU) receives the local
 /// row permutation at perm + first_pivot offsets given by perm_offset[i]. LU pivots by
 /// the CPU's rule (numeric/cpu/dense_front.hpp, factor_front_lu) with u = `threshold`.
+/// Blocks have a thread per row of the largest front (rounded up to a power of two); a
+/// launch of few fronts gets wider ones, up to `max_threads` (Options::
+/// gpu_small_front_threads; 0: never wider), the same results bit for bit.
 void launch_factor_small(const DeviceTree& t, const std::int64_t* positions, std::int64_t count,
                          std::int64_t max_rows, double* pool, bool lu, double static_pivot,
                          double threshold, std::int64_t* info, std::int64_t* perturbed,
-                         std::int64_t* perm, const std::int64_t* perm_offset, cudaStream_t s);
+                         std::int64_t* perm, const std::int64_t* perm_offset, int max_threads,
+                         cudaStream_t s);
+
+/// A launch group of small LU fronts, all of them, by one launch, each front by one block
+/// in shared memory (max_rows ≤ lu_shared_max_rows()): the front assembled there as
+/// launch_assemble assembles it (zeroed, the original entries of `values`, each child's
+/// contribution block in child order: the same bits), factored as launch_factor_small
+/// factors it, its panel (m×k, leading dimension m) and U12 (k×(m−k), leading dimension
+/// k) written to panels + panel_offset[i], its contribution block to t.cb_ptr[f] (fronts
+/// with a parent) and its k pivots' diagonal entries to diag + diag_offset[i]; the pool
+/// is not touched. `positions` lists the group's batch positions (device array of
+/// `count`); info, perturbed, perm and perm_offset as launch_factor_small's, per listed
+/// front. Blocks as launch_factor_small's for max_threads.
+void launch_lu_small_fused(const DeviceTree& t, const std::int64_t* positions, std::int64_t count,
+                           std::int64_t max_rows, const double* values, double static_pivot,
+                           double threshold, std::int64_t* info, std::int64_t* perturbed,
+                           std::int64_t* perm, const std::int64_t* perm_offset,
+                           const std::int64_t* panel_offset, double* panels,
+                           const std::int64_t* diag_offset, double* diag, int max_threads,
+                           cudaStream_t s);
+
+/// The most rows of a front the shared-memory LU kernels (launch_factor_small's for LU,
+/// launch_lu_small_fused) take on the current device (0 when none fits).
+std::int64_t lu_shared_max_rows();
+
+/// The threads per block launch_factor_small gives `count` fronts of at most max_rows rows
+/// on the current device (a power of two from 32 to 512).
+unsigned small_front_threads(std::int64_t count, std::int64_t max_rows, int max_threads);
 
 /// Doubles of workspace launch_llt_panel needs for `count` fronts (64×64 each).
 std::size_t llt_panel_work_size(std::int64_t count);
