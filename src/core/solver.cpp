@@ -222,9 +222,11 @@ bool values_on_gpu(SolverState& s, const SparseMatrix& pattern, std::span<const 
   resize_scaled(s, values.size(), "factorize: staged values");
   pin_scaled(s);
   double* staged = s.scaled.data();
-  const numeric::StageValues stage = [&](std::size_t b, std::size_t e) {
+  const numeric::StageValues stage = [&](std::size_t b, std::size_t e,
+                                         const numeric::StagedPiece& done) {
     s.scaled_current = false;  // raw values now, whatever follows
-    detail::copy_range(staged + b, values.data() + b, e - b, arena);
+    detail::stage_range(staged + b, values.data() + b, e - b, arena,
+                        [&](std::size_t pb, std::size_t pe) { done(b + pb, b + pe); });
   };
   // values far from the analysis's are equilibrated again there, as on the host (not
   // when the analysis's scaling was clamped: see prepare_values)

@@ -279,6 +279,23 @@ void copy_range(double* to, const double* from, std::size_t n, tbb::task_arena& 
   arena.execute([&] { parallel_copy(to, from, n); });
 }
 
+void stage_range(double* to, const double* from, std::size_t n, tbb::task_arena& arena,
+                 const std::function<void(std::size_t, std::size_t)>& done) {
+  constexpr std::size_t kPiece = std::size_t{1} << 17;  // doubles: 1 MiB
+  if (n < 2 * kPiece) {
+    std::copy(from, from + n, to);
+    done(0, n);
+    return;
+  }
+  arena.execute([&] {
+    tbb::parallel_for(std::size_t{0}, (n + kPiece - 1) / kPiece, [&](std::size_t c) {
+      const std::size_t b = c * kPiece, e = std::min(n, b + kPiece);
+      std::copy(from + b, from + e, to + b);
+      done(b, e);
+    });
+  });
+}
+
 bool has_analyzed_pattern(const Analysis& an, const SparseMatrix& a, tbb::task_arena& arena) {
   return a.n_rows == an.n && a.n_cols == an.n && a.layout == Layout::csc &&
          a.storage != Storage::upper && a.values.size() == a.indices.size() &&

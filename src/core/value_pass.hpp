@@ -18,6 +18,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
+#include <functional>
 #include <span>
 #include <vector>
 
@@ -63,6 +64,13 @@ void copy_values(std::vector<double>& to, std::span<const double> from, tbb::tas
 
 /// to[0, n) = from[0, n) (parallel chunks on `arena` when n is large).
 void copy_range(double* to, const double* from, std::size_t n, tbb::task_arena& arena);
+
+/// to[0, n) = from[0, n) in pieces of 1 MiB copied side by side on `arena`'s threads, each
+/// piece [b, e) reported to done(b, e) by the thread that copied it as soon as it is in
+/// place (a small n: one piece, on this thread). One parallel loop for the whole range:
+/// entering the arena once per piece cost about 0.2 ms each on a 16-core host.
+void stage_range(double* to, const double* from, std::size_t n, tbb::task_arena& arena,
+                 const std::function<void(std::size_t, std::size_t)>& done);
 
 // The per-refactorization passes over the values run over kValueBlocks fixed column
 // ranges in parallel; sums that scatter (row sums, the mirrored half of a symmetric

@@ -98,9 +98,16 @@ struct DeviceValueNorms {
   std::vector<double> row_rescaling, col_rescaling;
 };
 
+/// Called by a StageValues for each piece of the staging buffer it has filled: entries
+/// [begin, end) are in place. Pieces are disjoint and may be reported from several of
+/// the caller's threads at once.
+using StagedPiece = std::function<void(std::size_t begin, std::size_t end)>;
+
 /// Fills entries [begin, end) of a value pass's staging buffer (Executor::
-/// scale_values_on_device).
-using StageValues = std::function<void(std::size_t begin, std::size_t end)>;
+/// scale_values_on_device), reporting each filled piece to `done` as soon as it is in
+/// place (on the caller's threads), and returns when all of them are.
+using StageValues =
+    std::function<void(std::size_t begin, std::size_t end, const StagedPiece& done)>;
 
 /// How a factorization chooses and repairs its pivots: the numeric side of
 /// Options::static_pivot_epsilon and Options::diagonal_pivot_threshold.
@@ -228,9 +235,9 @@ class Executor {
   /// `max_sweeps` sweeps when B is not within a factor 2 of equilibrium (0: not; see
   /// DeviceValueNorms) and measured there (`out`), and kept for
   /// the factorizations that follow with FactorContext::values_on_device, until the next
-  /// call or analysis. The upload goes in pieces, each after stage(begin, end) has put
-  /// values[begin, end) in place (when `stage` is set), so that the caller's filling of
-  /// the buffer overlaps the copies. Returns false, having called nothing and changed
+  /// call or analysis. When `stage` is set it fills `values` and each piece goes up as
+  /// soon as stage reports it in place, so that the caller's filling of the buffer
+  /// overlaps the copies. Returns false, having called nothing and changed
   /// nothing, where the executor has no such pass: host executors, or a plan whose fronts
   /// read the values on the host (fronts factored tile by tile). Throws DeviceError, as
   /// factorize.

@@ -5,8 +5,10 @@
 #include <gtest/gtest.h>
 #include <tbb/task_arena.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
+#include <mutex>
 #include <random>
 #include <string>
 #include <vector>
@@ -156,6 +158,46 @@ TEST(ValuePass, NamesTheFirstValueThatIsNotFinite) {
           << e.what();
     }
   }
+}
+
+// stage_range copies every entry and reports disjoint pieces that cover [0, n), each after
+// its entries are in place, on one thread and on several; sizes from empty to many pieces.
+TEST(ValuePass, StageRangeReportsEveryPieceOnceItIsInPlace) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  std::uniform_real_distribution<double> u(-1, 1);
+  constexpr std::size_t kPiece = std::size_t{1} << 17;
+  for (int threads : {1, 4})
+    for (std::size_t n :
+         {std::size_t{0}, std::size_t{1}, std::size_t{2}, std::size_t{3}, std::size_t{5},
+          std::size_t{733}, 2 * kPiece - 1, 2 * kPiece, 5 * kPiece + 7}) {
+      SCOPED_TRACE("n " + std::to_string(n) + ", threads " + std::to_string(threads));
+      std::vector<double> from(n), to(n, std::nan(""));
+      for (double& v : from) v = u(rng);
+      tbb::task_arena arena(threads);
+      std::mutex m;
+      std::vector<std::pair<std::size_t, std::size_t>> pieces;
+      bool in_place = true;
+      detail::stage_range(to.data(), from.data(), n, arena, [&](std::size_t b, std::size_t e) {
+        bool same = true;
+        for (std::size_t i = b; i < e; ++i) same = same && to[i] == from[i];
+        const std::lock_guard<std::mutex> lock(m);
+        in_place = in_place && same;
+        pieces.emplace_back(b, e);
+      });
+      EXPECT_TRUE(in_place) << "a piece was reported before its entries were copied";
+      EXPECT_EQ(to, from);
+      std::sort(pieces.begin(), pieces.end());
+      std::size_t covered = 0;
+      for (const auto& [b, e] : pieces) {
+        EXPECT_EQ(b, covered) << "pieces overlap or leave a gap";
+        EXPECT_LE(e, n);
+        covered = e;
+      }
+      EXPECT_EQ(covered, n);
+      EXPECT_EQ(pieces.size(), n < 2 * kPiece ? 1u : (n + kPiece - 1) / kPiece);
+    }
 }
 
 }  // namespace

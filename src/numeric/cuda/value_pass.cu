@@ -38,8 +38,6 @@ namespace {
 
 constexpr int kWarp = 32;
 constexpr int kThreads = 256;  // 8 warps: 8 rows (columns) per block
-// values staged and copied per piece: 4 MB, a fraction of a millisecond each way
-constexpr std::size_t kStagePiece = std::size_t{1} << 19;
 
 struct Figures {
   double a_sum, b_sum, b_max;
@@ -264,15 +262,22 @@ bool CudaExecutor::scale_values_on_device(const Analysis& an, const double* valu
   const auto n = static_cast<std::int64_t>(an.n);
   const std::size_t nnz = an.pattern_indices.size();
   const bool scale = !an.row_scaling.empty();
-  // in pieces, each copied while the caller stages the next (counted by begin, in
-  // FactorStats::bytes_to_device)
+  // each piece copied as soon as the caller has staged it, from the thread that staged it
+  // (counted by begin, in FactorStats::bytes_to_device)
   values_.resize(std::max<std::size_t>(nnz, 1));
-  for (std::size_t b = 0; b < nnz; b += kStagePiece) {
-    const std::size_t e = std::min(nnz, b + kStagePiece);
-    if (stage) stage(b, e);
-    STRATA_CUDA(cudaMemcpyAsync(values_.data() + b, values + b, (e - b) * sizeof(double),
-                                cudaMemcpyHostToDevice, stream_));
-  }
+  double* const to = values_.data();
+  const int device = device_;
+  cudaStream_t const stream = stream_;
+  const auto upload_piece = [to, values, device, stream](std::size_t b, std::size_t e) {
+    if (e <= b) return;
+    STRATA_CUDA(cudaSetDevice(device));  // the staging thread's current device
+    STRATA_CUDA(cudaMemcpyAsync(to + b, values + b, (e - b) * sizeof(double),
+                                cudaMemcpyHostToDevice, stream));
+  };
+  if (stage)
+    stage(0, nnz, upload_piece);
+  else
+    upload_piece(0, nnz);
   STRATA_CUDA(cudaMemsetAsync(v.bad.data(), 0, sizeof(int), stream_));
   double* s = v.sums.data();
   double *ra = s, *rb = s + n, *rm = s + 2 * n, *ca = s + 3 * n, *cb = s + 4 * n, *cm = s + 5 * n;
