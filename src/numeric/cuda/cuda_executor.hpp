@@ -481,6 +481,7 @@ class CudaExecutor final : public numeric::Executor {
   // analysis arrays (fronts_: the whole tree's schedule, for the device solve)
   DeviceBuffer<std::int64_t> fronts_, n_rows_, n_pivots_, parent_, entry_offsets_, entry_src_,
       entry_dst_, child_offsets_, children_, rel_offsets_, rel_;
+  DeviceBuffer<std::uint32_t> lu_interchanges_;  ///< DeviceTree::lu_interchanges
   std::map<int, PartDevice> parts_;  ///< by PartView::id: -1 whole tree, 0..P subtrees, top
   PartDevice* cur_ = nullptr;        ///< the part being factored
   bool whole_ = true;                ///< the last factorization was of the whole tree

@@ -266,6 +266,8 @@ void CudaExecutor::upload_analysis(const Analysis& an) {
   upload(children_, t.children);
   upload(rel_offsets_, rel_off);
   upload(rel_, rel);
+  // every panel of every front tries its diagonal first in the first factorization
+  upload(lu_interchanges_, std::vector<std::uint32_t>(nf, 0u));
   // solve arrays
   std::vector<std::int64_t> u_off(nf + 1, 0);
   for (index_t f = 0; f < nf; ++f) u_off[f + 1] = u_off[f] + t.cb_size(f);
@@ -451,11 +453,11 @@ void CudaExecutor::upload_part(const Analysis& an, const numeric::PartView& v) {
                             : host_arena_.data() + (off - plan_.host_arena_base);
   });
   upload(pd.cb_ptr, pd.cb_ptr_host);
-  pd.tree = DeviceTree{pd.fronts.data(),  pd.pos_offset.data(), n_rows_.data(),
-                       n_pivots_.data(),  parent_.data(),       entry_offsets_.data(),
-                       entry_src_.data(), entry_dst_.data(),    child_offsets_.data(),
-                       children_.data(),  pd.cb_ptr.data(),     rel_offsets_.data(),
-                       rel_.data()};
+  pd.tree = DeviceTree{pd.fronts.data(),  pd.pos_offset.data(),   n_rows_.data(),
+                       n_pivots_.data(),  parent_.data(),         entry_offsets_.data(),
+                       entry_src_.data(), entry_dst_.data(),      child_offsets_.data(),
+                       children_.data(),  pd.cb_ptr.data(),       rel_offsets_.data(),
+                       rel_.data(),       lu_interchanges_.data()};
 }
 
 }  // namespace strata::cuda

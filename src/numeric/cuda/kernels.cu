@@ -401,29 +401,35 @@ __device__ void llt_front_blocked(double* F, std::int64_t m, std::int64_t k, std
 // summed rows [j, k) and static pivoting exactly as lu_columns (the diagonal when it is at
 // least `threshold` times the largest magnitude, else that largest, first row on ties;
 // |pivot| < static_pivot replaced by ±static_pivot). A front's time is the chain of its
-// pivot steps, so a step is two barriers and no global memory: the search is a shuffle
-// reduction in the warps that hold candidate rows, whose maxima every thread then reads;
-// the pivot row and row j trade their panel registers through shared memory, and the pivot
-// row is read there by all; the multipliers and the panel's later columns are updated in
-// registers. The interchanges of the columns outside the panel are made once per panel
-// (LAPACK's DLASWP after each panel of DGETRF): thread c takes column c, reads the rows the
-// panel moved from where they were (src, the panel's net row permutation), and, for a
-// trailing column, solves the panel's unit L₁₁ for its U rows in the same registers; then
-// the rows below the panel get the rank-w product, each trailing entry read and written
-// once per panel (Golub & Van Loan, 4th ed., §3.4.7). The operations on every entry are
-// those of the unblocked form in the same order, so the results do not change with the
+// pivot steps, so each panel is first factored on its diagonal, one barrier a step and no
+// search, every candidate row checking that the threshold test would keep the diagonal
+// (after a matching and scaling it mostly does); only a panel where some row beats its
+// diagonal is factored again with the search: two barriers and no global memory a step,
+// the search a shuffle reduction in the warps that hold candidate rows, whose maxima every
+// thread then reads; the pivot row and row j trade their panel registers through shared
+// memory, and the pivot row is read there by all. Either way the multipliers and the
+// panel's later columns are updated in registers, with the same operations. The interchanges of the
+// columns outside the panel are made once per panel (LAPACK's DLASWP after each panel of DGETRF):
+// thread c takes column c, reads the rows the panel moved from where they were (src, the panel's
+// net row permutation), and, for a trailing column, solves the panel's unit L₁₁ for its U rows in
+// the same registers; then the rows below the panel get the rank-w product, each trailing entry
+// read and written once per panel (Golub & Van Loan, 4th ed., §3.4.7). The operations on every
+// entry are those of the unblocked form in the same order, so the results do not change with the
 // blocking, nor with where the front is: in the pool (ld = m; the U rows for the update
 // also go to ush) or copied into shared memory by the caller (kShared: ld of the copy;
 // the update reads the U rows where they are, ush is not used).
 template <bool kShared>
 __device__ void lu_front_blocked(double* F, int ld, int m, int k, double static_pivot,
                                  double threshold, std::int64_t* perm, std::int64_t* perturbed,
-                                 double (*ush)[kThreads]) {
+                                 double (*ush)[kThreads], std::uint32_t* interchanges) {
   __shared__ double l11[kSmallNb][kSmallNb];  // L(j0 + q, j0 + p), q > p
   __shared__ double sdiag;                    // |F(j, j)| at the current pivot step
   __shared__ double xch[2][kSmallNb];         // [1]: the pivot row's panel entries; [0]: row j's
   __shared__ double sval[kThreads / kWarp];
   __shared__ int sidx[kThreads / kWarp];
+  // row j's panel entries when the panel is tried on its diagonal, by step parity: a step
+  // writes the other half than the step before, which slower threads may still read
+  __shared__ double xdiag[2][kSmallNb];
   __shared__ int src[kThreads];   // rows [j0, k): the row that position r held at the panel's start
   __shared__ int ipiv[kSmallNb];  // the panel's pivot rows
   __shared__ int lperm[kThreads];  // the front's row permutation, rows [0, k)
@@ -431,6 +437,10 @@ __device__ void lu_front_blocked(double* F, int ld, int m, int k, double static_
   const bool row = i < m;
   const int wid = i / kWarp;
   int npert = 0;  // static pivots (thread 0's count)
+  // panels that interchanged rows in the front's last factorization are searched straight
+  // away (read by all before thread 0 may write it, after the last barrier)
+  const std::uint32_t searched_before = interchanges ? *interchanges : 0u;
+  std::uint32_t searched_now = 0;  // thread 0's
   if (i < k) lperm[i] = i;
   for (int j0 = 0; j0 < k; j0 += kSmallNb) {
     const int w = k - j0 < kSmallNb ? k - j0 : kSmallNb;
@@ -438,10 +448,56 @@ __device__ void lu_front_blocked(double* F, int ld, int m, int k, double static_
 #pragma unroll
     for (int p = 0; p < kSmallNb; ++p) r[p] = (p < w && row) ? F[(j0 + p) * ld + i] : 0.0;
     if (i >= j0 && i < k) src[i] = i;
+    // First the panel on its diagonal: row j's entries through xdiag, no search. Every
+    // candidate row checks that it would not have been chosen, i.e. that the threshold
+    // test keeps the diagonal; when all do, the steps are those of the search below, which
+    // would have kept every diagonal.
+    const std::uint32_t panel_bit = 1u << (j0 / kSmallNb);
+    const bool diagonal_first = !(searched_before & panel_bit);
+    int spert = 0;  // thread 0's static pivots on the diagonal
+    bool beaten = false;
+#pragma unroll
+    for (int p = 0; p < kSmallNb; ++p) {
+      if (diagonal_first && p < w) {
+        const int j = j0 + p;
+        double* x = xdiag[p % 2];
+        if (i == j) {
+#pragma unroll
+          for (int q = 0; q < kSmallNb; ++q) x[q] = r[q];
+        }
+        __syncthreads();
+        const double dj = x[p];
+        if (i > j && i < k) {  // a NaN candidate is never chosen
+          const double a = fabs(r[p]);
+          if (a == a && !(fabs(dj) >= threshold * a)) beaten = true;
+        }
+        double piv = dj;
+        if (fabs(piv) < static_pivot) {  // static_pivoted, counted once
+          if (i == 0) ++spert;
+          piv = piv < 0 ? -static_pivot : static_pivot;
+        }
+        if (i == j) r[p] = piv;
+        if (row && i > j) {
+          r[p] /= piv;
+#pragma unroll
+          for (int q = p + 1; q < kSmallNb; ++q)
+            if (q < w) r[q] -= r[p] * x[q];
+        }
+      }
+    }
+    const bool search = !diagonal_first || __syncthreads_or(beaten);
+    if (!search) {
+      npert += spert;
+      if (i < w) ipiv[i] = j0 + i;
+    } else if (diagonal_first) {  // a row beat its diagonal: the panel again from F, searched
+#pragma unroll
+      for (int p = 0; p < kSmallNb; ++p) r[p] = (p < w && row) ? F[(j0 + p) * ld + i] : 0.0;
+    }
+    bool interchanged = false;         // thread 0's: the search moved a row
     const int w_hi = (k - 1) / kWarp;  // the last warp with fully summed rows
 #pragma unroll
     for (int p = 0; p < kSmallNb; ++p) {
-      if (p < w) {
+      if (search && p < w) {
         const int j = j0 + p;
         const int w_lo = j / kWarp;  // warps [w_lo, w_hi] hold the candidates [j, k)
         if (wid >= w_lo && wid <= w_hi) {
@@ -484,6 +540,7 @@ __device__ void lu_front_blocked(double* F, int ld, int m, int k, double static_
         if (i == 0) {
           ipiv[p] = pr;
           if (pr != j) {
+            interchanged = true;
             const int tp = lperm[j];
             lperm[j] = lperm[pr];
             lperm[pr] = tp;
@@ -511,8 +568,9 @@ __device__ void lu_front_blocked(double* F, int ld, int m, int k, double static_
         }
       }
     }
-    // the panel back to F, and L₁₁ to shared memory (only now: a later interchange in the
-    // panel moves rows' earlier multipliers too)
+    if (interchanged) searched_now |= panel_bit;
+      // the panel back to F, and L₁₁ to shared memory (only now: a later interchange in the
+      // panel moves rows' earlier multipliers too)
 #pragma unroll
     for (int p = 0; p < kSmallNb; ++p) {
       if (p < w && row) F[(j0 + p) * ld + i] = r[p];
@@ -562,6 +620,7 @@ __device__ void lu_front_blocked(double* F, int ld, int m, int k, double static_
     __syncthreads();  // the next panel reads what this one wrote, and reuses the buffers
   }
   if (i < k) perm[i] = lperm[i];
+  if (i == 0 && interchanges && searched_now != searched_before) *interchanges = searched_now;
   if (i == 0) *perturbed += npert;
 }
 
@@ -591,7 +650,8 @@ __global__ void __launch_bounds__(kBlock, kThreads * 2 / kBlock)
     __syncthreads();
     if (m <= blockDim.x)
       lu_front_blocked<false>(F, static_cast<int>(m), static_cast<int>(m), static_cast<int>(k),
-                              static_pivot, threshold, p, perturbed + i, panel);
+                              static_pivot, threshold, p, perturbed + i, panel,
+                              t.lu_interchanges ? t.lu_interchanges + f : nullptr);
     else
       lu_columns(F, m, m, k, 0, k, m, m, static_pivot, threshold, p, perturbed + i);
   } else {
@@ -649,7 +709,8 @@ __global__ void __launch_bounds__(kBlock, kThreads * 2 / kBlock)
   }
   __syncthreads();
   lu_front_blocked<true>(fs, ld, m, k, static_pivot, threshold, perm + perm_offset[b],
-                         perturbed + b, nullptr);
+                         perturbed + b, nullptr,
+                         t.lu_interchanges ? t.lu_interchanges + f : nullptr);
   __syncthreads();
   for (int x = threadIdx.x; x < total; x += step) {
     const int c = x / m;
@@ -685,9 +746,31 @@ __global__ void __launch_bounds__(kBlock, kThreads * 2 / kBlock)
   }
   for (int x = tid; x < m * ld; x += step) fs[x] = 0.0;
   __syncthreads();
-  for (std::int64_t e = t.entry_offsets[f] + tid; e < t.entry_offsets[f + 1]; e += step) {
-    const int d = static_cast<int>(t.entry_dst[e]), c = d / m;
-    fs[c * ld + (d - c * m)] += values[t.entry_src[e]];  // distinct destinations
+  // the original entries (distinct destinations) and each child's block, kUnroll loads in
+  // flight per thread before their additions: the loads' latency, not the additions, is
+  // what an assembly waits for
+  constexpr int kUnroll = 4;
+  auto add_entry = [&](std::int64_t d, double v) {
+    const int di = static_cast<int>(d), c = di / m;
+    fs[c * ld + (di - c * m)] += v;
+  };
+  {
+    const std::int64_t e1 = t.entry_offsets[f + 1];
+    std::int64_t e = t.entry_offsets[f] + tid;
+    for (; e + (kUnroll - 1) * step < e1; e += kUnroll * step) {
+      std::int64_t d[kUnroll], from[kUnroll];
+      double v[kUnroll];
+#pragma unroll
+      for (int u = 0; u < kUnroll; ++u) {
+        d[u] = t.entry_dst[e + u * step];
+        from[u] = t.entry_src[e + u * step];
+      }
+#pragma unroll
+      for (int u = 0; u < kUnroll; ++u) v[u] = values[from[u]];
+#pragma unroll
+      for (int u = 0; u < kUnroll; ++u) add_entry(d[u], v[u]);
+    }
+    for (; e < e1; e += step) add_entry(t.entry_dst[e], values[t.entry_src[e]]);
   }
   __syncthreads();
   for (std::int64_t q = t.child_offsets[f]; q < t.child_offsets[f + 1]; ++q) {
@@ -699,12 +782,25 @@ __global__ void __launch_bounds__(kBlock, kThreads * 2 / kBlock)
     for (int jj = warp; jj < cm; jj += warps) {
       double* col = fs + static_cast<int>(rel[jj]) * ld;
       const double* src = cb + static_cast<std::int64_t>(jj) * cm;
-      for (int ii = lane; ii < cm; ii += kWarp) col[rel[ii]] += src[ii];
+      int ii = lane;
+      for (; ii + (kUnroll - 1) * kWarp < cm; ii += kUnroll * kWarp) {
+        std::int64_t to[kUnroll];
+        double v[kUnroll];
+#pragma unroll
+        for (int u = 0; u < kUnroll; ++u) {
+          to[u] = rel[ii + u * kWarp];
+          v[u] = src[ii + u * kWarp];
+        }
+#pragma unroll
+        for (int u = 0; u < kUnroll; ++u) col[to[u]] += v[u];  // distinct rows
+      }
+      for (; ii < cm; ii += kWarp) col[rel[ii]] += src[ii];
     }
     __syncthreads();  // one child after another: no two additions to one entry collide
   }
   lu_front_blocked<true>(fs, ld, m, k, static_pivot, threshold, perm + perm_offset[b],
-                         perturbed + b, nullptr);
+                         perturbed + b, nullptr,
+                         t.lu_interchanges ? t.lu_interchanges + f : nullptr);
   __syncthreads();
   double* panel = panels + panel_offset[b];
   for (int x = tid; x < m * k; x += step) {  // L11\U11 and L21: columns [0, k), ld m

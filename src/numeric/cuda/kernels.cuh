@@ -31,6 +31,11 @@ struct DeviceTree {
                                     ///< the device budget is short; null: no block)
   const std::int64_t* rel_offsets;  ///< per child: its CB rows' positions in the parent
   const std::int64_t* rel;
+  /// Per front, for the small-front LU kernels: bit q set when panel q (pivot columns
+  /// [16q, 16q + 16)) interchanged rows in the front's last factorization, so that the next
+  /// one searches that panel's pivots straight away instead of trying its diagonal first
+  /// (zero: every panel tries its diagonal first). Either way the same factor results.
+  std::uint32_t* lu_interchanges;
 };
 
 /// Zeroes the batch's fronts, scatters the original entries and extend-adds the

@@ -17,8 +17,9 @@
 // column pass then does the same per column, writes b over a in place and flags a value
 // that is not finite. For symmetric storage (the lower triangle) a row of the full matrix
 // is its stored row plus the column of the same index below the diagonal, so the column
-// pass leaves the diagonal out there. A last single-block kernel combines the per-row and
-// per-column figures into the five numbers.
+// pass leaves the diagonal out there. The column pass also combines the per-row and
+// per-column figures into the five numbers: each block its own indices, and the block
+// that finishes last (a ticket counter) the blocks' partial figures.
 //
 // Why: on the multibody Newton matrices the host pass was a third of a refactorization on
 // the GPU (bench/history.md). Each entry of B is computed as the host computes it,
@@ -78,84 +79,130 @@ __global__ void row_pass(std::int64_t n, const std::int64_t* row_ptr, const int*
   }
 }
 
-// Per column j: the same figures over its entries (symmetric storage: below the diagonal
-// only), b written over a, `bad` set when a value is not finite.
-__global__ void column_pass(std::int64_t n, const std::int64_t* col_ptr, const int* col_row,
-                            double* a, const double* rs, const double* cs, bool symmetric,
-                            double* ca, double* cb, double* cm, int* bad) {
-  const std::int64_t j =
-      static_cast<std::int64_t>(blockIdx.x) * (kThreads / kWarp) + threadIdx.x / kWarp;
-  const int lane = threadIdx.x % kWarp;
-  if (j >= n) return;
-  const double cj = cs ? cs[j] : 1.0;
-  Figures f{0, 0, 0};
-  bool not_finite = false;
-  for (std::int64_t p = col_ptr[j] + lane; p < col_ptr[j + 1]; p += kWarp) {
-    const int i = col_row[p];
-    const double x = a[p];
-    not_finite |= !(fabs(x) <= DBL_MAX);
-    const double b = rs ? x * rs[i] * cj : x;
-    a[p] = b;
-    if (symmetric && i == j) continue;
-    f.a_sum += fabs(x);
-    f.b_sum += fabs(b);
-    f.b_max = fmax(f.b_max, fabs(b));
-  }
-  f = warp_reduce(f);
-  if (__any_sync(0xffffffffu, not_finite) && lane == 0) atomicOr(bad, 1);
-  if (lane == 0) {
-    ca[j] = f.a_sum;
-    cb[j] = f.b_sum;
-    cm[j] = f.b_max;
-  }
-}
-
 __device__ bool outside_factor_two(double v) { return v != 0 && (v < 0.5 || v > 2); }
 
-// One block: out[0] ‖A‖∞, out[1] ‖B‖₁, out[2] 1 when a row or column sum of |a| is not
-// finite, out[3] 1 when a row or column maximum of |b| is outside {0} ∪ [½, 2], out[4]
-// 1 when a value was not finite (`bad`).
-__global__ void combine(std::int64_t n, bool symmetric, const double* ra, const double* rb,
-                        const double* rm, const double* ca, const double* cb, const double* cm,
-                        const int* bad, double* out) {
-  __shared__ double s_norm_inf[kThreads], s_norm1[kThreads];
-  __shared__ int s_overflow[kThreads], s_spread[kThreads];
+// The five numbers' parts over some indices: ‖A‖∞ and ‖B‖₁ so far, whether a row or
+// column sum of |a| was not finite, whether a maximum of |b| was outside {0} ∪ [½, 2].
+struct Combined {
   double norm_inf = 0, norm1 = 0;
-  bool overflow = false, spread = false;
-  for (std::int64_t i = threadIdx.x; i < n; i += kThreads) {
-    if (symmetric) {
-      const double row_a = ra[i] + ca[i], row_b = rb[i] + cb[i];
-      norm_inf = fmax(norm_inf, row_a);
-      norm1 = fmax(norm1, row_b);
-      overflow |= !(row_a <= DBL_MAX);
-      spread |= outside_factor_two(fmax(rm[i], cm[i]));
-    } else {
-      norm_inf = fmax(norm_inf, ra[i]);
-      norm1 = fmax(norm1, cb[i]);
-      overflow |= !(ra[i] <= DBL_MAX) || !(ca[i] <= DBL_MAX);
-      spread |= outside_factor_two(rm[i]) || outside_factor_two(cm[i]);
+  int overflow = 0, spread = 0;
+};
+
+__device__ Combined merge(Combined x, const Combined& y) {
+  x.norm_inf = fmax(x.norm_inf, y.norm_inf);
+  x.norm1 = fmax(x.norm1, y.norm1);
+  x.overflow |= y.overflow;
+  x.spread |= y.spread;
+  return x;
+}
+
+// Index i's part: its row's figures (ra, rb, rm) and its column's (a, b, m). For symmetric
+// storage a row of the full matrix is its stored row plus the column of the same index.
+__device__ Combined index_part(bool symmetric, double ra, double rb, double rm, double a, double b,
+                               double m) {
+  Combined c;
+  if (symmetric) {
+    const double row_a = ra + a, row_b = rb + b;
+    c.norm_inf = row_a;
+    c.norm1 = row_b;
+    c.overflow = !(row_a <= DBL_MAX);
+    c.spread = outside_factor_two(fmax(rm, m));
+  } else {
+    c.norm_inf = ra;
+    c.norm1 = b;
+    c.overflow = !(ra <= DBL_MAX) || !(a <= DBL_MAX);
+    c.spread = outside_factor_two(rm) || outside_factor_two(m);
+  }
+  // fmax, as the maxima are taken, leaves a NaN sum out (its overflow flag tells)
+  c.norm_inf = fmax(0.0, c.norm_inf);
+  c.norm1 = fmax(0.0, c.norm1);
+  return c;
+}
+
+// Per column j: the same figures over its entries (symmetric storage: below the diagonal
+// only), b written over a, flags[0] set when a value is not finite; then the five numbers
+// (out[0] ‖A‖∞, out[1] ‖B‖₁, out[2] 1 when a row or column sum of |a| is not finite,
+// out[3] 1 when a row or column maximum of |b| is outside {0} ∪ [½, 2], out[4] 1 when a
+// value was not finite): each block's part of them in partial (4 per block), and the last
+// block to finish (flags[1], a ticket the caller zeroes) merges the parts into out. Max
+// and or do not depend on the order of merging: the numbers are the same every run.
+__global__ void column_pass(std::int64_t n, const std::int64_t* col_ptr, const int* col_row,
+                            double* a, const double* rs, const double* cs, bool symmetric,
+                            const double* ra, const double* rb, const double* rm, double* ca,
+                            double* cb, double* cm, int* flags, double* partial, double* out) {
+  __shared__ Combined s_part[kThreads / kWarp];
+  __shared__ bool s_last;
+  const int warp = threadIdx.x / kWarp, lane = threadIdx.x % kWarp;
+  const std::int64_t j = static_cast<std::int64_t>(blockIdx.x) * (kThreads / kWarp) + warp;
+  Combined part;
+  if (j < n) {  // whole warps: a column each
+    const double cj = cs ? cs[j] : 1.0;
+    Figures f{0, 0, 0};
+    bool not_finite = false;
+    for (std::int64_t p = col_ptr[j] + lane; p < col_ptr[j + 1]; p += kWarp) {
+      const int i = col_row[p];
+      const double x = a[p];
+      not_finite |= !(fabs(x) <= DBL_MAX);
+      const double b = rs ? x * rs[i] * cj : x;
+      a[p] = b;
+      if (symmetric && i == j) continue;
+      f.a_sum += fabs(x);
+      f.b_sum += fabs(b);
+      f.b_max = fmax(f.b_max, fabs(b));
+    }
+    f = warp_reduce(f);
+    if (__any_sync(0xffffffffu, not_finite) && lane == 0) atomicOr(flags, 1);
+    if (lane == 0) {
+      ca[j] = f.a_sum;
+      cb[j] = f.b_sum;
+      cm[j] = f.b_max;
+      part = index_part(symmetric, ra[j], rb[j], rm[j], f.a_sum, f.b_sum, f.b_max);
     }
   }
-  s_norm_inf[threadIdx.x] = norm_inf;
-  s_norm1[threadIdx.x] = norm1;
-  s_overflow[threadIdx.x] = overflow;
-  s_spread[threadIdx.x] = spread;
+  if (lane == 0) s_part[warp] = part;
   __syncthreads();
-  for (int half = kThreads / 2; half > 0; half /= 2) {
-    if (threadIdx.x < half) {
-      s_norm_inf[threadIdx.x] = fmax(s_norm_inf[threadIdx.x], s_norm_inf[threadIdx.x + half]);
-      s_norm1[threadIdx.x] = fmax(s_norm1[threadIdx.x], s_norm1[threadIdx.x + half]);
-      s_overflow[threadIdx.x] |= s_overflow[threadIdx.x + half];
-      s_spread[threadIdx.x] |= s_spread[threadIdx.x + half];
-    }
-    __syncthreads();
-  }
   if (threadIdx.x == 0) {
-    out[0] = s_norm_inf[0];
-    out[1] = s_norm1[0];
-    out[2] = s_overflow[0];
-    out[3] = s_spread[0];
-    out[4] = *bad != 0;
+    Combined b = s_part[0];
+    for (int w = 1; w < kThreads / kWarp; ++w) b = merge(b, s_part[w]);
+    double* mine = partial + 4 * static_cast<std::int64_t>(blockIdx.x);
+    mine[0] = b.norm_inf;
+    mine[1] = b.norm1;
+    mine[2] = b.overflow;
+    mine[3] = b.spread;
+    __threadfence();  // the part, and this block's not-finite flag, before the ticket
+    s_last = atomicAdd(reinterpret_cast<unsigned*>(flags + 1), 1u) == gridDim.x - 1;
+  }
+  __syncthreads();
+  if (!s_last) return;
+  __threadfence();
+  Combined all;
+  for (std::int64_t q = threadIdx.x; q < gridDim.x; q += kThreads) {
+    const double* x = partial + 4 * q;
+    Combined c;
+    c.norm_inf = __ldcg(x);  // written by other blocks: read past this SM's L1
+    c.norm1 = __ldcg(x + 1);
+    c.overflow = __ldcg(x + 2) != 0;
+    c.spread = __ldcg(x + 3) != 0;
+    all = merge(all, c);
+  }
+  for (int off = kWarp / 2; off > 0; off /= 2) {
+    Combined o;
+    o.norm_inf = __shfl_xor_sync(0xffffffffu, all.norm_inf, off);
+    o.norm1 = __shfl_xor_sync(0xffffffffu, all.norm1, off);
+    o.overflow = __shfl_xor_sync(0xffffffffu, all.overflow, off);
+    o.spread = __shfl_xor_sync(0xffffffffu, all.spread, off);
+    all = merge(all, o);
+  }
+  if (lane == 0) s_part[warp] = all;
+  __syncthreads();
+  if (threadIdx.x == 0) {
+    for (int w = 1; w < kThreads / kWarp; ++w) all = merge(all, s_part[w]);
+    out[0] = all.norm_inf;
+    out[1] = all.norm1;
+    out[2] = all.overflow;
+    out[3] = all.spread;
+    out[4] = atomicOr(flags, 0) != 0;
+    flags[1] = 0;  // the ticket, for the next pass (the caller zeroes it too)
   }
 }
 
@@ -222,9 +269,10 @@ void CudaExecutor::prepare_value_pass(const Analysis& an) {
       upload(v.row_scaling, an.row_scaling);
       upload(v.col_scaling, an.col_scaling);
     }
-    v.sums.resize(std::max<std::size_t>(6 * n, 1));
+    // the row and column figures (6n), then column_pass's partial figures (4 per block)
+    v.sums.resize(std::max<std::size_t>(6 * n + 4 * static_cast<std::size_t>(blocks_for(an.n)), 1));
     v.rescale.resize(std::max<std::size_t>(4 * n, 1));
-    v.bad.resize(1);
+    v.bad.resize(2);  // the not-finite flag, column_pass's ticket
     v.out.resize(5);
     values_.resize(std::max<std::size_t>(nnz, 1));
     STRATA_CUDA(cudaStreamSynchronize(stream_));
@@ -278,25 +326,27 @@ bool CudaExecutor::scale_values_on_device(const Analysis& an, const double* valu
     stage(0, nnz, upload_piece);
   else
     upload_piece(0, nnz);
-  STRATA_CUDA(cudaMemsetAsync(v.bad.data(), 0, sizeof(int), stream_));
+  STRATA_CUDA(cudaMemsetAsync(v.bad.data(), 0, 2 * sizeof(int), stream_));
   double* s = v.sums.data();
   double *ra = s, *rb = s + n, *rm = s + 2 * n, *ca = s + 3 * n, *cb = s + 4 * n, *cm = s + 5 * n;
-  // the row and column passes over values_ scaled by (rs, cs) in place, then the five
+  double* const partial = s + 6 * n;
+  // the row and column passes over values_ scaled by (rs, cs) in place, and the five
   // numbers, on the host when this returns
   auto passes = [&](const double* rs, const double* cs) {
-    if (n > 0) {
+    if (n == 0) {  // no entries: the numbers of an empty matrix
+      std::fill(v.out.data(), v.out.data() + 5, 0.0);
+      return;
+    }
+    {
       row_pass<<<blocks_for(n), kThreads, 0, stream_>>>(n, v.row_ptr.data(), v.row_pos.data(),
                                                         v.row_col.data(), values_.data(), rs, cs,
                                                         ra, rb, rm);
       STRATA_CUDA(cudaGetLastError());
-      column_pass<<<blocks_for(n), kThreads, 0, stream_>>>(n, v.col_ptr.data(), v.col_row.data(),
-                                                           values_.data(), rs, cs, an.symmetric, ca,
-                                                           cb, cm, v.bad.data());
+      column_pass<<<blocks_for(n), kThreads, 0, stream_>>>(
+          n, v.col_ptr.data(), v.col_row.data(), values_.data(), rs, cs, an.symmetric, ra, rb, rm,
+          ca, cb, cm, v.bad.data(), partial, v.out.data());
       STRATA_CUDA(cudaGetLastError());
     }
-    combine<<<1, kThreads, 0, stream_>>>(n, an.symmetric, ra, rb, rm, ca, cb, cm, v.bad.data(),
-                                         v.out.data());
-    STRATA_CUDA(cudaGetLastError());
     STRATA_CUDA(cudaStreamSynchronize(stream_));
   };
   passes(scale ? v.row_scaling.data() : nullptr, scale ? v.col_scaling.data() : nullptr);
