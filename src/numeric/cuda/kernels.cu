@@ -4,7 +4,9 @@
 // 256) rows by one thread block, the fronts of a batch side by side in one launch: the
 // batched-small-front case that vendor batched POTRF handles poorly (DESIGN.md §2). It is
 // blocked right-looking with one row per thread (llt_front_blocked, lu_front_blocked:
-// panels of 16 pivot columns in registers), the trailing matrix updated once per panel by
+// panels of kSmallNb = 8 pivot columns in registers: each pivot step of a panel is unrolled,
+// and a wider panel costs more in registers and instruction fetches than the trailing
+// passes it saves), the trailing matrix updated once per panel by
 // all the block's threads whatever the number of trailing rows; the unblocked one-pivot-at-a-
 // time forms (llt_front, lu_columns) remain for larger blocks (lu_columns also serves the
 // large LU fronts' static-pivoting path and the tiled slabs). An LU batch whose fronts all
@@ -13,7 +15,7 @@
 // such fronts and the factor stays on the device, one launch does the group's assembly,
 // factorization, stores and packing, each front assembled straight into shared memory
 // (lu_small_fused_kernel). A launch of few fronts gets blocks wider than a thread per row
-// (small_front_threads), so that the trailing updates, which are most of a front's time,
+// (small_front_threads), so that the trailing updates, a large share of a front's time,
 // are spread over more threads of an SM that would otherwise idle. Threshold partial pivoting for
 // LU searches only the fully summed rows (restricted pivoting), keeps the diagonal when it
 // is at least u times the largest candidate, and replaces tiny pivots by ±static_pivot,
@@ -300,7 +302,9 @@ __device__ void llt_front(double* F, std::int64_t m, std::int64_t k, std::int64_
 // wrote the whole trailing triangle in global memory once per pivot, with a 64-bit
 // division per entry: a small front of k pivots made k such passes. The arithmetic is
 // the unblocked one's in another order (same operations per entry, summed panel by panel).
-constexpr int kSmallNb = 16;
+constexpr int kSmallNb = 8;
+// a front's panels (at most kThreads pivots) as the bits of DeviceTree::lu_interchanges
+static_assert(kThreads / kSmallNb <= 32);
 
 // The trailing update of the blocked small-front kernels after a panel of w ≤ kSmallNb
 // pivot columns ending at c0: F(i, c) −= Σ_{p<w} L(i, p) · V(p, c) for the rows i ∈ [c0, m)

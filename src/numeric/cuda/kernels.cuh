@@ -32,7 +32,7 @@ struct DeviceTree {
   const std::int64_t* rel_offsets;  ///< per child: its CB rows' positions in the parent
   const std::int64_t* rel;
   /// Per front, for the small-front LU kernels: bit q set when panel q (pivot columns
-  /// [16q, 16q + 16)) interchanged rows in the front's last factorization, so that the next
+  /// [8q, 8q + 8)) interchanged rows in the front's last factorization, so that the next
   /// one searches that panel's pivots straight away instead of trying its diagonal first
   /// (zero: every panel tries its diagonal first). Either way the same factor results.
   std::uint32_t* lu_interchanges;
