@@ -412,13 +412,14 @@ __device__ void llt_front_blocked(double* F, std::int64_t m, std::int64_t k, std
 // the search a shuffle reduction in the warps that hold candidate rows, whose maxima every
 // thread then reads; the pivot row and row j trade their panel registers through shared
 // memory, and the pivot row is read there by all. Either way the multipliers and the
-// panel's later columns are updated in registers, with the same operations. The interchanges of the
-// columns outside the panel are made once per panel (LAPACK's DLASWP after each panel of DGETRF):
-// thread c takes column c, reads the rows the panel moved from where they were (src, the panel's
-// net row permutation), and, for a trailing column, solves the panel's unit L₁₁ for its U rows in
-// the same registers; then the rows below the panel get the rank-w product, each trailing entry
-// read and written once per panel (Golub & Van Loan, 4th ed., §3.4.7). The operations on every
-// entry are those of the unblocked form in the same order, so the results do not change with the
+// panel's later columns are updated in registers, with the same operations. The
+// interchanges of the columns outside the panel are made once per panel (LAPACK's DLASWP
+// after each panel of DGETRF): thread c takes column c, reads the rows the panel moved from
+// where they were (src, the panel's net row permutation), and, for a trailing column,
+// solves the panel's unit L₁₁ for its U rows in the same registers; then the rows below the
+// panel get the rank-w product, each trailing entry read and written once per panel (Golub
+// & Van Loan, 4th ed., §3.4.7). The operations on every entry are those of the unblocked
+// form in the same order, so the results do not change with the
 // blocking, nor with where the front is: in the pool (ld = m; the U rows for the update
 // also go to ush) or copied into shared memory by the caller (kShared: ld of the copy;
 // the update reads the U rows where they are, ush is not used).
@@ -572,14 +573,14 @@ __device__ void lu_front_blocked(double* F, int ld, int m, int k, double static_
         }
       }
     }
-    if (interchanged) searched_now |= panel_bit;
-      // the panel back to F, and L₁₁ to shared memory (only now: a later interchange in the
-      // panel moves rows' earlier multipliers too)
+    // the panel back to F, and L₁₁ to shared memory (only now: a later interchange in the
+    // panel moves rows' earlier multipliers too)
 #pragma unroll
     for (int p = 0; p < kSmallNb; ++p) {
       if (p < w && row) F[(j0 + p) * ld + i] = r[p];
       if (p < w && i > j0 + p && i < j0 + w) l11[i - j0][p] = r[p];
     }
+    if (interchanged) searched_now |= panel_bit;
     __syncthreads();
     // column c = i outside the panel: its moved rows, each read from where it was (all
     // reads before any write), and for a trailing column its U rows by forward substitution
