@@ -400,6 +400,27 @@ __device__ void llt_front_blocked(double* F, std::int64_t m, std::int64_t k, std
   }
 }
 
+// The rest of lu_front_blocked's pivot step p (pivot column j = j0 + p) for this thread's
+// row i, once the pivot row's panel entries u are in shared memory: the pivot u[p], or
+// ±static_pivot in its place (counted in thread 0's `count`), stored in row j, and below
+// it the multiplier and the update of the panel's later columns.
+__device__ __forceinline__ void lu_pivot_step(double (&r)[kSmallNb], const double* u, int p, int w,
+                                              int i, int j, bool row, double static_pivot,
+                                              int& count) {
+  double piv = u[p];
+  if (fabs(piv) < static_pivot) {  // static_pivoted, counted once
+    if (i == 0) ++count;
+    piv = piv < 0 ? -static_pivot : static_pivot;
+  }
+  if (i == j) r[p] = piv;
+  if (row && i > j) {
+    r[p] /= piv;
+#pragma unroll
+    for (int q = p + 1; q < kSmallNb; ++q)
+      if (q < w) r[q] -= r[p] * u[q];
+  }
+}
+
 // Blocked right-looking partial LU of a small front (m ≤ blockDim.x rows, F full), one
 // row per thread as llt_front_blocked, with threshold partial pivoting among the fully
 // summed rows [j, k) and static pivoting exactly as lu_columns (the diagonal when it is at
@@ -476,18 +497,7 @@ __device__ void lu_front_blocked(double* F, int ld, int m, int k, double static_
           const double a = fabs(r[p]);
           if (a == a && !(fabs(dj) >= threshold * a)) beaten = true;
         }
-        double piv = dj;
-        if (fabs(piv) < static_pivot) {  // static_pivoted, counted once
-          if (i == 0) ++spert;
-          piv = piv < 0 ? -static_pivot : static_pivot;
-        }
-        if (i == j) r[p] = piv;
-        if (row && i > j) {
-          r[p] /= piv;
-#pragma unroll
-          for (int q = p + 1; q < kSmallNb; ++q)
-            if (q < w) r[q] -= r[p] * x[q];
-        }
+        lu_pivot_step(r, x, p, w, i, j, row, static_pivot, spert);
       }
     }
     const bool search = !diagonal_first || __syncthreads_or(beaten);
@@ -559,18 +569,7 @@ __device__ void lu_front_blocked(double* F, int ld, int m, int k, double static_
 #pragma unroll
           for (int q = 0; q < kSmallNb; ++q) r[q] = xch[i == j ? 1 : 0][q];
         }
-        double piv = xch[1][p];
-        if (fabs(piv) < static_pivot) {  // static_pivoted, counted once
-          if (i == 0) ++npert;
-          piv = piv < 0 ? -static_pivot : static_pivot;
-        }
-        if (i == j) r[p] = piv;
-        if (row && i > j) {
-          r[p] /= piv;
-#pragma unroll
-          for (int q = p + 1; q < kSmallNb; ++q)
-            if (q < w) r[q] -= r[p] * xch[1][q];
-        }
+        lu_pivot_step(r, xch[1], p, w, i, j, row, static_pivot, npert);
       }
     }
     // the panel back to F, and L₁₁ to shared memory (only now: a later interchange in the
