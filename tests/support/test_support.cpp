@@ -9,6 +9,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <functional>
+#include <limits>
 #include <numeric>
 #include <set>
 #include <thread>
@@ -324,6 +325,8 @@ double backward_error(const SparseMatrix& a, const double* x, const double* b) {
 double relative_difference(const std::vector<double>& x, const std::vector<double>& y) {
   double num = 0, den = 0;
   for (size_t i = 0; i < x.size(); ++i) {
+    // a NaN on one side only is as far as it gets (std::max would drop it)
+    if (std::isnan(x[i]) != std::isnan(y[i])) return std::numeric_limits<double>::infinity();
     num = std::max(num, std::abs(x[i] - y[i]));
     den = std::max(den, std::abs(y[i]));
   }

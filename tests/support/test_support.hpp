@@ -121,7 +121,8 @@ bool dense_solve(std::vector<double> a, index_t n, std::vector<double>& b, index
 /// ‖b − A x‖∞ / (‖A‖∞ ‖x‖∞ + ‖b‖∞) for one right-hand side.
 double backward_error(const SparseMatrix& a, const double* x, const double* b);
 
-/// Max-norm relative difference ‖x − y‖∞ / ‖y‖∞ (or the absolute one when y is 0).
+/// Max-norm relative difference ‖x − y‖∞ / ‖y‖∞ (or the absolute one when y is 0); +∞
+/// where an entry is NaN in one vector and not in the other.
 double relative_difference(const std::vector<double>& x, const std::vector<double>& y);
 
 /// The values the numeric phase factors for `an` (A's canonical values with the
