@@ -8,6 +8,9 @@
 // normwise backward error ‖b − A x‖∞ / (‖A‖∞‖x‖∞ + ‖b‖∞) (Rigal and Gaches; Higham,
 // Accuracy and Stability of Numerical Algorithms, 2nd ed., §7.1) is checked against
 // max(Options::refinement_tolerance, (m+1)·u) for m the most entries in a row of A (§3.5).
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <cmath>
 #include <limits>
 #include <string>
@@ -41,33 +44,66 @@ inline double scaled_by(double v, double d, double e) {
   return std::isnormal(f) ? v * f : v * d * e;
 }
 
-// One solve with the factor: x = A⁻¹ b for nrhs columns (original numbering). Returns
-// true when the triangular solves ran on the device that holds the factor.
-bool apply_inverse(SolverState& s, const double* b, double* x, index_t nrhs,
-                   std::vector<double>& work) {
+// Entries (rows × right-hand sides) from which a solve's permutation and scaling loops run
+// over the host's threads.
+constexpr index_t kParallelEntries = index_t{1} << 15;
+
+// f(e) for e in [0, count): on the host's threads for a large count (f writes entries of
+// its own only).
+template <class F>
+void for_entries(SolverState& s, index_t count, const F& f) {
+  if (count < kParallelEntries) {
+    for (index_t e = 0; e < count; ++e) f(e);
+    return;
+  }
+  host_arena(s).execute([&] {
+    tbb::parallel_for(tbb::blocked_range<index_t>(0, count, kParallelEntries / 8),
+                      [&](const tbb::blocked_range<index_t>& r) {
+                        for (index_t e = r.begin(); e < r.end(); ++e) f(e);
+                      });
+  });
+}
+
+// s.solve_work sized for `entries` doubles, page-locked when a GPU backend will copy it
+// (a copy from pageable memory is staged through a driver buffer and holds the host).
+double* solve_work(SolverState& s, std::size_t entries) {
+  if (s.solve_work.size() < entries) {
+    s.solve_work_pin.reset();
+    s.solve_work.resize(entries);
+  }
+  if (!s.solve_work_pin && s.driver->uploads_values() && !s.delayed.valid)
+    s.solve_work_pin =
+        numeric::pin_host_memory(s.solve_work.data(), s.solve_work.size() * sizeof(double));
+  return s.solve_work.data();
+}
+
+// One solve with the factor: x = A⁻¹ b for nrhs columns (original numbering), through
+// s.solve_work. Returns true when the triangular solves ran on the device that holds the
+// factor.
+bool apply_inverse(SolverState& s, const double* b, double* x, index_t nrhs) {
   const Analysis& an = *s.analysis;
   const index_t n = an.n;
-  work.resize(static_cast<std::size_t>(n) * nrhs);
+  double* const work = solve_work(s, static_cast<std::size_t>(n) * nrhs);
   const bool scale = !an.row_scaling.empty();
   const bool match = !an.matching_perm.empty();
   const bool rescale = !s.rescaling.row.empty();
-  for (index_t r = 0; r < nrhs; ++r)
-    for (index_t k = 0; k < n; ++k) {
-      const index_t i = an.perm[k];  // row of B is a row of A
-      work[k + r * n] = scaled_by(b[i + r * n], scale ? an.row_scaling[i] : 1.0,
-                                  rescale ? s.rescaling.row[i] : 1.0);
-    }
+  for_entries(s, n * nrhs, [&](index_t e) {
+    const index_t k = e % n, r = e / n;
+    const index_t i = an.perm[k];  // row of B is a row of A
+    work[e] = scaled_by(b[i + r * n], scale ? an.row_scaling[i] : 1.0,
+                        rescale ? s.rescaling.row[i] : 1.0);
+  });
   bool on_device = false;
   if (s.delayed.valid)
-    numeric::solve_delayed(an, s.delayed, work.data(), nrhs, &host_arena(s));
+    numeric::solve_delayed(an, s.delayed, work, nrhs, &host_arena(s));
   else
-    on_device = s.driver->solve(an, s.factor, work.data(), nrhs);
-  for (index_t r = 0; r < nrhs; ++r)
-    for (index_t k = 0; k < n; ++k) {
-      const index_t col = match ? an.matching_perm[an.perm[k]] : an.perm[k];
-      x[col + r * n] = scaled_by(work[k + r * n], scale ? an.col_scaling[col] : 1.0,
-                                 rescale ? s.rescaling.col[col] : 1.0);
-    }
+    on_device = s.driver->solve(an, s.factor, work, nrhs);
+  for_entries(s, n * nrhs, [&](index_t e) {
+    const index_t k = e % n, r = e / n;
+    const index_t col = match ? an.matching_perm[an.perm[k]] : an.perm[k];
+    x[col + r * n] =
+        scaled_by(work[e], scale ? an.col_scaling[col] : 1.0, rescale ? s.rescaling.col[col] : 1.0);
+  });
   return on_device;
 }
 
@@ -110,9 +146,8 @@ void solve_phase(SolverState& s, const double* b, double* x, index_t nrhs) {
   // Options::solve_check: after a factorization without perturbed pivots the caller may
   // take the factor's solution unchecked
   const bool check = o.solve_check == SolveCheck::always || s.stats.factor.perturbed_pivots > 0;
-  std::vector<double> work;
   Timer first;
-  const bool on_device = apply_inverse(s, b, x, nrhs, work);
+  const bool on_device = apply_inverse(s, b, x, nrhs);
   const double first_solve_seconds = first.seconds();
   check_solution_finite(x, n, nrhs);
 
@@ -122,9 +157,8 @@ void solve_phase(SolverState& s, const double* b, double* x, index_t nrhs) {
   const double enough = std::max(o.refinement_tolerance, floor);
   solve::RefinementResult refined;
   if (check) {
-    std::vector<double> tmp;
     const solve::BlockOperator m_inv = [&](const double* in, double* out, index_t k) {
-      apply_inverse(s, in, out, k, tmp);
+      apply_inverse(s, in, out, k);
     };
     refined = solve::refine(
         n, nrhs, op_a, m_inv, s.norm_inf, b, x,

@@ -46,6 +46,11 @@ struct SolverState {
   std::unique_ptr<tbb::task_arena> arena;
   int arena_threads = -1;
   numeric::NumericFactor factor;
+  // a solve's right-hand sides in the factor's numbering (apply_inverse), kept between
+  // solves; page-locked while a GPU backend copies it (declared after it: released first;
+  // released before it is resized)
+  std::vector<double> solve_work;
+  std::unique_ptr<numeric::PinnedHostRange> solve_work_pin;
   // the extra scaling of the last factorization (core/rescale.hpp), empty when none
   Rescaling rescaling;
   // the factor of delayed pivoting (Options::pivoting), valid instead of `factor`

@@ -61,6 +61,49 @@ TEST(Solver, RandomMatricesMatchDenseLapack) {
 }
 
 // Automatic type: spd when Cholesky succeeds, LDLᵀ for symmetric indefinite, LU otherwise.
+// Enough right-hand sides of a large enough matrix that a solve's permutation and scaling
+// loops run over the host's threads (core/solve_phase.cpp), for LU (matching, row and
+// column scalings, column permutation) and Cholesky: every column's backward error at the
+// rounding level, and, without refinement, each column the same to rounding as its solve
+// alone (the serial loops).
+TEST(Solver, ManyRightHandSidesOverTheHostThreads) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  const index_t n = 4200, nrhs = 8;  // 33,600 entries: over the loops' serial limit
+  for (const Case& c : {kCases[0], kCases[2]}) {
+    SCOPED_TRACE(c.name);
+    SparseMatrix a = test::random_sparse(n, 3, c.kind, rng);
+    std::vector<double> b(n * nrhs);
+    std::uniform_real_distribution<double> u(-1, 1);
+    for (double& v : b) v = u(rng);
+    Options o;
+    o.type = c.type;
+    o.num_threads = 2;
+    Solver s(o);
+    s.analyze(a);
+    s.factorize(a);
+    std::vector<double> x(b.size());
+    s.solve(b.data(), x.data(), nrhs);
+    for (index_t r = 0; r < nrhs; ++r)
+      EXPECT_LT(test::backward_error(a, x.data() + r * n, b.data() + r * n), 1e-14);
+    // the first application of the factor alone (refinement would mend a wrong one)
+    Options once = o;
+    once.solve_check = SolveCheck::after_perturbed_pivots;
+    Solver s1(once);
+    s1.analyze(a);
+    s1.factorize(a);
+    ASSERT_EQ(s1.stats().factor.perturbed_pivots, 0);
+    s1.solve(b.data(), x.data(), nrhs);
+    for (index_t r = 0; r < nrhs; ++r) {
+      const std::vector<double> one(b.begin() + r * n, b.begin() + (r + 1) * n);
+      const std::vector<double> x_one = s1.solve(one);
+      const std::vector<double> x_r(x.begin() + r * n, x.begin() + (r + 1) * n);
+      EXPECT_LT(test::relative_difference(x_r, x_one), 1e-10) << "column " << r;
+    }
+  }
+}
+
 TEST(Solver, AutomaticTypeResolution) {
   auto rng = test::fresh_rng();
   const std::pair<RandomKind, MatrixType> expect[] = {
