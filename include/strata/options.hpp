@@ -155,7 +155,8 @@ struct Options {
   index_t gpu_small_front_rows = 256;
   /// CUDA backend: the most threads of a small-front block. A block has a thread per row
   /// of the largest front of its launch (a power of two); a launch of few fronts, which
-  /// leaves most of the GPU idle, gets blocks up to this wide so that each front's trailing
+  /// leaves most of the GPU idle, or of fronts copied into shared memory so large that few
+  /// of them fit an SM at once, gets blocks up to this wide so that each front's trailing
   /// updates are spread over more threads (src/numeric/cuda/kernels.cu). The same
   /// results bit for bit. 0: a thread per row always. In [0, 512]; default 512.
   int gpu_small_front_threads = 512;

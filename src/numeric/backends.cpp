@@ -39,7 +39,7 @@ std::vector<char> cuda_lu_fronts_batched(std::vector<std::vector<double>>&,
   throw NotSupported("this build of strata has no CUDA backend (nvcc was not found at build time)");
 }
 
-int cuda_small_front_threads(index_t, index_t, int) {
+int cuda_small_front_threads(index_t, index_t, int, bool) {
   throw NotSupported("this build of strata has no CUDA backend (nvcc was not found at build time)");
 }
 

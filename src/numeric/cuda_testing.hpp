@@ -53,9 +53,10 @@ std::vector<char> cuda_lu_fronts_batched(std::vector<std::vector<double>>& front
 
 /// The threads per block the small-front kernels get on CUDA device 0 for a launch of
 /// `count` fronts of at most max_rows rows (1 ≤ max_rows ≤ 256) under
-/// Options::gpu_small_front_threads = max_threads (numeric/cuda/kernels.cu), so that tests
+/// Options::gpu_small_front_threads = max_threads (numeric/cuda/kernels.cu), with each
+/// front copied into shared memory (`shared`: LU fronts that fit it) or not, so that tests
 /// can see which width a factorization used. Throws InvalidInput for count < 1 or max_rows
 /// outside [1, 256], NotSupported in a build without CUDA.
-int cuda_small_front_threads(index_t count, index_t max_rows, int max_threads);
+int cuda_small_front_threads(index_t count, index_t max_rows, int max_threads, bool shared = false);
 
 }  // namespace strata::numeric

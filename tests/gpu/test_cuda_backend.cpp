@@ -716,6 +716,10 @@ TEST_F(CudaBackend, SmallFrontLaunchesOfEveryShapeGiveTheSameFactor) {
   EXPECT_EQ(numeric::cuda_small_front_threads(1, 20, 100), 64);
   EXPECT_EQ(numeric::cuda_small_front_threads(1000000, 166, 512), 256);
   EXPECT_EQ(numeric::cuda_small_front_threads(1000000, 20, 512), 32);
+  // many fronts in shared memory, two of 111 rows to an SM's 228 KiB (an H100 or H200):
+  // only those run at once, so their blocks are widened as for a launch of that many
+  EXPECT_EQ(numeric::cuda_small_front_threads(1000000, 111, 512, true), 256);
+  EXPECT_EQ(numeric::cuda_small_front_threads(1000000, 111, 0, true), 128);
   EXPECT_THROW(numeric::cuda_small_front_threads(1, 257, 512), InvalidInput);
   unsigned long long seed = 0;
   auto rng = test::fresh_rng(&seed);

@@ -884,11 +884,28 @@ void launch_pack_panels(const DeviceTree& t, std::int64_t begin, std::int64_t co
   STRATA_CUDA_LAUNCH();
 }
 
+namespace {
+constexpr int kDevices = 64;
+// per device: the shared-memory LU kernels' own (static) shared memory, bytes (0: not
+// asked yet; lu_shared_max_rows sets it)
+std::atomic<std::size_t>& static_bytes(int dev) {
+  static std::atomic<std::size_t> bytes[kDevices];
+  return bytes[dev];
+}
+}  // namespace
+
+std::size_t lu_shared_static_bytes() {
+  int dev = 0;
+  STRATA_CUDA(cudaGetDevice(&dev));
+  if (dev >= kDevices) return 0;
+  if (static_bytes(dev).load(std::memory_order_acquire) == 0) (void)lu_shared_max_rows();
+  return static_bytes(dev).load(std::memory_order_acquire);
+}
+
 // The most rows of a front lu_small_shared_kernel takes on the current device: its copy
 // and the kernel's own shared memory within the device's opt-in limit per block (which the
 // kernel is allowed once per device). Devices of one process may differ, so per device.
 std::int64_t lu_shared_max_rows() {
-  constexpr int kDevices = 64;
   static std::atomic<int> rows[kDevices];  // 0: not asked yet
   int dev = 0;
   STRATA_CUDA(cudaGetDevice(&dev));
@@ -906,6 +923,7 @@ std::int64_t lu_shared_max_rows() {
     STRATA_CUDA(cudaFuncGetAttributes(&a, k));
     attr.sharedSizeBytes = std::max(attr.sharedSizeBytes, a.sharedSizeBytes);
   }
+  if (dev < kDevices) static_bytes(dev).store(attr.sharedSizeBytes, std::memory_order_release);
   const std::size_t room = optin > static_cast<int>(attr.sharedSizeBytes)
                                ? static_cast<std::size_t>(optin) - attr.sharedSizeBytes
                                : 0;
@@ -922,7 +940,8 @@ std::int64_t lu_shared_max_rows() {
   return m;
 }
 
-unsigned small_front_threads(std::int64_t count, std::int64_t max_rows, int max_threads) {
+unsigned small_front_threads(std::int64_t count, std::int64_t max_rows, int max_threads,
+                             std::size_t shared_bytes) {
   // a row per thread, in the fewest warps that hold the largest front (a power of two, as
   // block_argmax's tree needs): a pivot step's barriers then wait for fewer warps
   unsigned threads = kWarp;
@@ -930,14 +949,26 @@ unsigned small_front_threads(std::int64_t count, std::int64_t max_rows, int max_
   // A launch of few fronts leaves SMs idle and each busy one latency-bound (one instruction
   // issued every ~8 cycles), with the trailing updates on at most one thread per row: wider
   // blocks, up to max_threads, spread them (trailing_update's column groups) while the
-  // launch's threads stay within a quarter of the device's (512 per SM).
+  // threads of the blocks that run at once stay within a quarter of the device's (512 per
+  // SM). Fronts in shared memory: no more blocks run at once than the SMs' shared memory
+  // holds (the kernels' own shared memory and the 1 KiB the device keeps per block beside
+  // each front's copy), however many the launch has.
   if (max_threads <= 0) return threads;
   int dev = 0, sms = 1;
   STRATA_CUDA(cudaGetDevice(&dev));
   STRATA_CUDA(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, dev));
+  std::int64_t running = count;
+  if (shared_bytes > 0) {
+    int per_sm = 0;
+    STRATA_CUDA(cudaDeviceGetAttribute(&per_sm, cudaDevAttrMaxSharedMemoryPerMultiprocessor, dev));
+    const std::size_t block = shared_bytes + lu_shared_static_bytes() + 1024;
+    const auto fit = static_cast<std::int64_t>(static_cast<std::size_t>(per_sm) / block);
+    running = std::min(count, static_cast<std::int64_t>(sms) * std::max<std::int64_t>(fit, 1));
+  }
   const std::int64_t room = static_cast<std::int64_t>(sms) * kWideThreads;
   const unsigned cap = static_cast<unsigned>(std::min(max_threads, kWideThreads));
-  while (2 * threads <= cap && count * 2 * static_cast<std::int64_t>(threads) <= room) threads *= 2;
+  while (2 * threads <= cap && running * 2 * static_cast<std::int64_t>(threads) <= room)
+    threads *= 2;
   return threads;
 }
 
@@ -947,12 +978,15 @@ void launch_factor_small(const DeviceTree& t, const std::int64_t* positions, std
                          std::int64_t* perm, const std::int64_t* perm_offset, int max_threads,
                          cudaStream_t s) {
   if (count == 0) return;
-  const unsigned threads = small_front_threads(count, max_rows, max_threads);
+  const bool shared = lu && max_rows <= lu_shared_max_rows();
+  const std::size_t bytes =
+      shared ? sizeof(double) * static_cast<std::size_t>(max_rows) *
+                   static_cast<std::size_t>(shared_ld(static_cast<int>(max_rows)))
+             : 0;
+  const unsigned threads = small_front_threads(count, max_rows, max_threads, bytes);
   const bool wide = threads > static_cast<unsigned>(kThreads);
   const unsigned blocks = static_cast<unsigned>(count);
-  if (lu && max_rows <= lu_shared_max_rows()) {
-    const std::size_t bytes = sizeof(double) * static_cast<std::size_t>(max_rows) *
-                              static_cast<std::size_t>(shared_ld(static_cast<int>(max_rows)));
+  if (shared) {
     if (wide)
       lu_small_shared_kernel<kWideThreads><<<blocks, threads, bytes, s>>>(
           t, positions, pool, static_pivot, threshold, info, perturbed, perm, perm_offset);
@@ -982,9 +1016,9 @@ void launch_lu_small_fused(const DeviceTree& t, const std::int64_t* positions, s
   if (max_rows > lu_shared_max_rows())
     throw InternalError("launch_lu_small_fused: a front of " + std::to_string(max_rows) +
                         " rows does not fit shared memory");
-  const unsigned threads = small_front_threads(count, max_rows, max_threads);
   const std::size_t bytes = sizeof(double) * static_cast<std::size_t>(max_rows) *
                             static_cast<std::size_t>(shared_ld(static_cast<int>(max_rows)));
+  const unsigned threads = small_front_threads(count, max_rows, max_threads, bytes);
   const unsigned blocks = static_cast<unsigned>(count);
   if (threads > static_cast<unsigned>(kThreads))
     lu_small_fused_kernel<kWideThreads><<<blocks, threads, bytes, s>>>(
@@ -1015,13 +1049,17 @@ void launch_lu_slab(double* s_, std::int64_t r, std::int64_t w, std::int64_t kk,
 
 namespace strata::numeric {
 
-int cuda_small_front_threads(index_t count, index_t max_rows, int max_threads) {
+int cuda_small_front_threads(index_t count, index_t max_rows, int max_threads, bool shared) {
   if (count < 1 || max_rows < 1 || max_rows > cuda::kThreads)
     throw InvalidInput(
         "cuda_small_front_threads: needs count >= 1 and max_rows in [1, 256] (count = " +
         std::to_string(count) + ", max_rows = " + std::to_string(max_rows) + ")");
   STRATA_CUDA(cudaSetDevice(0));
-  return static_cast<int>(cuda::small_front_threads(count, max_rows, max_threads));
+  const std::size_t bytes =
+      shared ? sizeof(double) * static_cast<std::size_t>(max_rows) *
+                   static_cast<std::size_t>(cuda::shared_ld(static_cast<int>(max_rows)))
+             : 0;
+  return static_cast<int>(cuda::small_front_threads(count, max_rows, max_threads, bytes));
 }
 
 }  // namespace strata::numeric

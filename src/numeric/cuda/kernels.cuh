@@ -96,9 +96,15 @@ void launch_lu_small_fused(const DeviceTree& t, const std::int64_t* positions, s
 /// launch_lu_small_fused) take on the current device (0 when none fits).
 std::int64_t lu_shared_max_rows();
 
-/// The threads per block launch_factor_small gives `count` fronts of at most max_rows rows
-/// on the current device (a power of two from 32 to 512).
-unsigned small_front_threads(std::int64_t count, std::int64_t max_rows, int max_threads);
+/// The shared-memory LU kernels' own (static) shared memory per block on the current
+/// device, bytes.
+std::size_t lu_shared_static_bytes();
+
+/// The threads per block launch_factor_small and launch_lu_small_fused give `count` fronts
+/// of at most max_rows rows on the current device (a power of two from 32 to 512), for
+/// fronts copied into shared_bytes of dynamic shared memory per block (0: none).
+unsigned small_front_threads(std::int64_t count, std::int64_t max_rows, int max_threads,
+                             std::size_t shared_bytes = 0);
 
 /// Doubles of workspace launch_llt_panel needs for `count` fronts (64×64 each).
 std::size_t llt_panel_work_size(std::int64_t count);
