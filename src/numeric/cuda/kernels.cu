@@ -671,6 +671,12 @@ __global__ void __launch_bounds__(kBlock, kThreads * 2 / kBlock)
 // warp reading along a row (a column each, the interchanges and U rows) hit different banks.
 __host__ __device__ constexpr int shared_ld(int m) { return m | 1; }
 
+// Bytes of dynamic shared memory for a copy of a front of m rows (shared_ld(m) · m doubles).
+std::size_t shared_front_bytes(std::int64_t m) {
+  return sizeof(double) * static_cast<std::size_t>(m) *
+         static_cast<std::size_t>(shared_ld(static_cast<int>(m)));
+}
+
 // Small LU fronts each copied into shared memory, factored there (lu_front_blocked<true>)
 // and copied back: a pivot step and the trailing update then wait for shared memory, not
 // for global memory, many times per front. Dynamic shared memory of
@@ -928,11 +934,9 @@ std::int64_t lu_shared_max_rows() {
                                ? static_cast<std::size_t>(optin) - attr.sharedSizeBytes
                                : 0;
   int m = 0;
-  while (m < kThreads &&
-         sizeof(double) * static_cast<std::size_t>(m + 1) * shared_ld(m + 1) <= room)
-    ++m;
+  while (m < kThreads && shared_front_bytes(m + 1) <= room) ++m;
   if (m > 0) {
-    const int bytes = static_cast<int>(sizeof(double) * m * shared_ld(m));
+    const int bytes = static_cast<int>(shared_front_bytes(m));
     for (const void* k : kernels)
       STRATA_CUDA(cudaFuncSetAttribute(k, cudaFuncAttributeMaxDynamicSharedMemorySize, bytes));
   }
@@ -979,10 +983,7 @@ void launch_factor_small(const DeviceTree& t, const std::int64_t* positions, std
                          cudaStream_t s) {
   if (count == 0) return;
   const bool shared = lu && max_rows <= lu_shared_max_rows();
-  const std::size_t bytes =
-      shared ? sizeof(double) * static_cast<std::size_t>(max_rows) *
-                   static_cast<std::size_t>(shared_ld(static_cast<int>(max_rows)))
-             : 0;
+  const std::size_t bytes = shared ? shared_front_bytes(max_rows) : 0;
   const unsigned threads = small_front_threads(count, max_rows, max_threads, bytes);
   const bool wide = threads > static_cast<unsigned>(kThreads);
   const unsigned blocks = static_cast<unsigned>(count);
@@ -1016,8 +1017,7 @@ void launch_lu_small_fused(const DeviceTree& t, const std::int64_t* positions, s
   if (max_rows > lu_shared_max_rows())
     throw InternalError("launch_lu_small_fused: a front of " + std::to_string(max_rows) +
                         " rows does not fit shared memory");
-  const std::size_t bytes = sizeof(double) * static_cast<std::size_t>(max_rows) *
-                            static_cast<std::size_t>(shared_ld(static_cast<int>(max_rows)));
+  const std::size_t bytes = shared_front_bytes(max_rows);
   const unsigned threads = small_front_threads(count, max_rows, max_threads, bytes);
   const unsigned blocks = static_cast<unsigned>(count);
   if (threads > static_cast<unsigned>(kThreads))
@@ -1055,11 +1055,8 @@ int cuda_small_front_threads(index_t count, index_t max_rows, int max_threads, b
         "cuda_small_front_threads: needs count >= 1 and max_rows in [1, 256] (count = " +
         std::to_string(count) + ", max_rows = " + std::to_string(max_rows) + ")");
   STRATA_CUDA(cudaSetDevice(0));
-  const std::size_t bytes =
-      shared ? sizeof(double) * static_cast<std::size_t>(max_rows) *
-                   static_cast<std::size_t>(cuda::shared_ld(static_cast<int>(max_rows)))
-             : 0;
-  return static_cast<int>(cuda::small_front_threads(count, max_rows, max_threads, bytes));
+  return static_cast<int>(cuda::small_front_threads(
+      count, max_rows, max_threads, shared ? cuda::shared_front_bytes(max_rows) : 0));
 }
 
 }  // namespace strata::numeric

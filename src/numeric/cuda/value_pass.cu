@@ -30,6 +30,7 @@
 #include <algorithm>
 #include <cfloat>
 #include <cmath>
+#include <memory>
 
 #include "numeric/cuda/cuda_executor.hpp"
 #include "sparse/bucket_entries.hpp"
@@ -229,6 +230,17 @@ __global__ void sweep_factors(std::int64_t n, bool symmetric, bool first, const 
   C[i] = first ? s[i] : C[i] * s[i];
 }
 
+// The column-wise map's row of each entry from the row-wise map (one warp per row, as
+// row_pass): col_row[row_pos[q]] = i for the entries q of row i.
+__global__ void fill_col_row(std::int64_t n, const std::int64_t* row_ptr, const int* row_pos,
+                             int* col_row) {
+  const std::int64_t i =
+      static_cast<std::int64_t>(blockIdx.x) * (kThreads / kWarp) + threadIdx.x / kWarp;
+  if (i >= n) return;
+  for (std::int64_t q = row_ptr[i] + threadIdx.x % kWarp; q < row_ptr[i + 1]; q += kWarp)
+    col_row[row_pos[q]] = static_cast<int>(i);
+}
+
 unsigned blocks_for(std::int64_t n) {
   return static_cast<unsigned>((n + kThreads / kWarp - 1) / (kThreads / kWarp));
 }
@@ -243,8 +255,10 @@ void CudaExecutor::prepare_value_pass(const Analysis& an) {
   if (nnz >= static_cast<std::size_t>(INT32_MAX) || an.pattern_offsets.size() != n + 1) return;
   // the row-wise map of the canonical pattern: a stable counting sort of the entries by
   // row over the host's threads (sparse/bucket_entries.hpp: each row's entries in column
-  // order, whatever the thread count)
-  std::vector<int> row_pos(nnz), row_col(nnz), col_row(nnz);
+  // order, whatever the thread count), into arrays that sorting writes in full (not zeroed
+  // first); the column-wise map's rows are made from it on the device
+  const std::unique_ptr<int[]> row_pos(new int[std::max<std::size_t>(nnz, 1)]);
+  const std::unique_ptr<int[]> row_col(new int[std::max<std::size_t>(nnz, 1)]);
   const std::vector<index_t> by_row = detail::bucket_entries(
       an.n, an.n,
       [&](index_t j) {
@@ -254,7 +268,6 @@ void CudaExecutor::prepare_value_pass(const Analysis& an) {
       [&](index_t q, index_t j, index_t p) {
         row_pos[q] = static_cast<int>(p);
         row_col[q] = static_cast<int>(j);
-        col_row[p] = static_cast<int>(an.pattern_indices[p]);
       });
   const std::vector<std::int64_t> row_ptr(by_row.begin(), by_row.end());
   ValuePass& v = value_pass_;
@@ -262,9 +275,15 @@ void CudaExecutor::prepare_value_pass(const Analysis& an) {
     upload(v.row_ptr, row_ptr);
     upload(v.col_ptr,
            std::vector<std::int64_t>(an.pattern_offsets.begin(), an.pattern_offsets.end()));
-    upload(v.row_pos, row_pos);
-    upload(v.row_col, row_col);
-    upload(v.col_row, col_row);
+    v.row_pos.upload(row_pos.get(), nnz, stream_);
+    v.row_col.upload(row_col.get(), nnz, stream_);
+    bytes_h2d_ += 2 * nnz * sizeof(int);
+    v.col_row.resize(std::max<std::size_t>(nnz, 1));
+    if (an.n > 0) {
+      fill_col_row<<<blocks_for(an.n), kThreads, 0, stream_>>>(an.n, v.row_ptr.data(),
+                                                               v.row_pos.data(), v.col_row.data());
+      STRATA_CUDA_LAUNCH();
+    }
     if (!an.row_scaling.empty()) {
       upload(v.row_scaling, an.row_scaling);
       upload(v.col_scaling, an.col_scaling);
