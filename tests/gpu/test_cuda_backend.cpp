@@ -1298,6 +1298,54 @@ TEST_F(CudaBackend, AutomaticRunsLdltOnGpu) {
   }
 }
 
+// Refactorizations of one analysis that alternate between Cholesky and LDLᵀ (type
+// automatic: the shifted Laplacian's values, then the Laplacian's plus a positive shift,
+// then the shifted values again): each chunk's layout (kept for the plan's later
+// factorizations) is made again when the factor kind changes what it depends on, so each
+// round's inertia and solution equal the CPU backend's.
+TEST_F(CudaBackend, RefactorizationsAlternatingCholeskyAndLdltMatchTheCpu) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  const ShiftedLaplacian l = shifted_laplacian(11, rng);
+  SparseMatrix spd = l.a;
+  std::uniform_real_distribution<double> shift(2.0, 3.0);
+  const double s2 = shift(rng);
+  for (index_t j = 0; j < spd.n_cols; ++j) spd.values[spd.offsets[j]] += s2;  // diagonal first
+  Options o;
+  o.backend = Backend::cuda;
+  o.num_gpus = 1;  // one GPU, whatever the machine has
+  Solver gpu(o);
+  o.backend = Backend::cpu;
+  Solver cpu(o);
+  std::vector<double> b(l.a.n_rows);
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (double& v : b) v = u(rng);
+  const SparseMatrix* rounds[] = {&l.a, &spd, &l.a, &spd};
+  for (int r = 0; r < 4; ++r) {
+    SCOPED_TRACE("round " + std::to_string(r));
+    const SparseMatrix& a = *rounds[r];
+    if (r == 0) {
+      gpu.factorize(a);
+      cpu.factorize(a);
+    } else {
+      gpu.refactorize(a);
+      cpu.refactorize(a);
+    }
+    const bool indefinite = &a == &l.a;
+    EXPECT_EQ(gpu.matrix_type(), cpu.matrix_type());
+    EXPECT_EQ(gpu.stats().factor.type,
+              indefinite ? MatrixType::symmetric_indefinite : MatrixType::spd);
+    EXPECT_EQ(gpu.stats().factor.inertia_negative, indefinite ? l.negative : 0);
+    EXPECT_EQ(gpu.stats().factor.inertia_negative, cpu.stats().factor.inertia_negative);
+    const auto xg = gpu.solve(b);
+    const auto xc = cpu.solve(b);
+    EXPECT_LE(test::backward_error(a, xg.data(), b.data()), 1e-14);
+    // the shifted Laplacian's smallest |eigenvalue| is at least 1e-3: κ ≤ 12 / 1e-3
+    EXPECT_LE(test::relative_difference(xg, xc), 1e-8);
+  }
+}
+
 // A problem of the device-solve tests.
 struct SolveProblem {
   std::string name;

@@ -61,6 +61,20 @@ struct DevicePlan {
   std::size_t host_pinned = 0;  ///< bytes of page-locked host memory the plan holds
 };
 
+/// How one chunk's fronts are split and where their pivots, diagonals and panels go, the
+/// same at every factorization of a plan: the small fronts (one thread block each) and the
+/// large ones as chunk positions, the pivot permutations' offsets (small fronts first, then
+/// the large ones), each front's first diagonal slot and the panels' size. The device copies of
+/// `small`, `perm_off`, each position's panel offset and `diag_off` sit in PartDevice::layout at
+/// `device_at`; `key` is what they depend on besides the plan (CudaExecutor::chunk_layout).
+struct ChunkLayout {
+  std::vector<std::int64_t> small, big, perm_off, big_perm_at, diag_off;
+  std::int64_t perm_total = 0;
+  std::size_t panels_total = 0;
+  std::size_t device_at = 0;
+  int key = -1;  ///< −1: not made yet
+};
+
 /// What the executor keeps on the device for one part of the tree (the whole tree, or a
 /// subtree / the top part of a multi-GPU split): the part's schedule, where each of its
 /// fronts sits in the pool, how its batches are cut into chunks, where each contribution
@@ -78,6 +92,12 @@ struct PartDevice {
   std::size_t panel_total = 0;
   std::vector<double*> cb_ptr_host;  ///< per front: where its block lives
   DeviceTree tree{};
+  /// Per position starting a chunk: the chunk's layout (CudaExecutor::chunk_layout), made
+  /// by the chunk's first factorization and reused by the plan's later ones.
+  std::vector<ChunkLayout> layouts;
+  /// Every chunk's device index arrays, the chunk starting at position q at 6q
+  /// (ChunkLayout::device_at): uploaded once, not at each factorization.
+  DeviceBuffer<std::int64_t> layout;
 };
 
 /// A stream with its own library handles and workspaces, on which the large fronts of a
@@ -270,12 +290,22 @@ class CudaExecutor final : public numeric::Executor {
     index_t begin = 0, end = 0;
     bool lu = false, ldlt = false, dev_only = false;
     index_t max_rows = 0;  ///< the chunk's largest front
+    bool fused = false;    ///< factored by factor_chunk_fused
     std::vector<std::int64_t> small, big, perm_off, big_perm_at, diag_off;
     std::int64_t perm_total = 0;   ///< pivots of the chunk (small fronts' then large ones')
-    std::size_t panels_total = 0;  ///< doubles of the chunk's panels (chunk_panel_layout)
+    std::size_t panels_total = 0;  ///< doubles of the chunk's panels (chunk_layout)
+    /// The layout's device arrays: small fronts' positions, their perm offsets, each
+    /// position's panel offset and first diagonal slot.
+    const std::int64_t *small_pos = nullptr, *perm_offset = nullptr, *stage_offset = nullptr,
+                       *diag_offset = nullptr;
     PinnedBuffer<std::int64_t> info, perturbed, perm;
     PinnedBuffer<int> pinfo, psize;
     PinnedBuffer<double> diag;
+    /// A fused chunk's results in one copy: info, perturbed, perm, diag back to back.
+    PinnedBuffer<std::int64_t> packed;
+    /// Where the host part reads the results (the buffers above, or in `packed`).
+    const std::int64_t *info_at = nullptr, *perturbed_at = nullptr, *perm_at = nullptr;
+    const double* diag_at = nullptr;
     /// The chunk's panels on their way to the host factor (LLᵀ and LU whose panels do not
     /// stay on the device): copied there on copy_stream_ while the next chunk computes,
     /// then into the factor by the host part.
@@ -293,8 +323,12 @@ class CudaExecutor final : public numeric::Executor {
   /// lanes): the small fronts, the large fronts (with the panel kernels' share), the
   /// panels packed and copied back, the host part's results fetched into `rec`.
   void chunk_small_fronts(const numeric::FactorContext& ctx, ChunkRecord& rec);
-  void chunk_split_fronts(const numeric::FactorContext& ctx, ChunkRecord& rec);
-  double* chunk_panel_layout(const numeric::FactorContext& ctx, ChunkRecord& rec);
+  /// The chunk's layout (ChunkLayout) into `rec`: the part's cached one when its key
+  /// matches, else made and its device arrays uploaded (the chunk's first factorization).
+  void chunk_layout(const numeric::FactorContext& ctx, ChunkRecord& rec);
+  /// Where the chunk's panels are packed (the device factor, the part's own buffer or the
+  /// staging area, as the layout's panel offsets assume).
+  double* chunk_panel_target(const numeric::FactorContext& ctx);
   /// The whole chunk by one launch when every front is a small LU front that fits shared
   /// memory and the panels stay on the device (Options::gpu_fused_small_batches).
   void factor_chunk_fused(const numeric::FactorContext& ctx, ChunkRecord& rec);
@@ -517,7 +551,8 @@ class CudaExecutor final : public numeric::Executor {
   DeviceBuffer<int> potrf_info_;
   DeviceBuffer<std::int64_t> panel_items_;  // launch_llt_panel's (position, slot)
   DeviceBuffer<double> panel_work_;         // launch_llt_panel's diagonal-block inverses
-  DeviceBuffer<std::int64_t> small_pos_, info_, perturbed_, perm_, perm_offset_, stage_offset_;
+  DeviceBuffer<std::int64_t> info_, perturbed_, perm_;
+  DeviceBuffer<std::int64_t> packed_results_;  // a fused chunk's results (ChunkRecord::packed)
   std::vector<std::int64_t> iota_;
   DeviceBuffer<int> pivot_size_;         // LDLᵀ: local pivot sizes, laid out as perm_
   DeviceBuffer<std::int64_t> psize_at_;  // LDLᵀ: per chunk position, its offset in pivot_size_
@@ -536,7 +571,6 @@ class CudaExecutor final : public numeric::Executor {
     PinnedBuffer<int> bad_host;
     index_t fronts = 0, fronts_pivoted = 0, fronts_batched = 0;
   } lu_;
-  DeviceBuffer<std::int64_t> diag_offset_;
   std::vector<std::unique_ptr<Lane>> lanes_;  ///< large fronts of a chunk, side by side
   LdltLarge ldlt_large_;
   /// The device solve's state (cuda_solve.cu): the factor it holds resident and the

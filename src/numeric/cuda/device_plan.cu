@@ -331,7 +331,7 @@ void CudaExecutor::presize_chunk_buffers(const Analysis& an,
                                          const std::vector<numeric::PartView>& views) {
   const auto& t = an.tree;
   const bool lu = !an.symmetric;
-  std::size_t count = 1, big = 1, small = 1, pivots = 1, diag = 1, diag_slab = 1, strips = 1;
+  std::size_t count = 1, big = 1, pivots = 1, diag = 1, diag_slab = 1, strips = 1;
   std::size_t host_front = 0;  // pinned doubles for the largest tiled front's host side
   int potrf = 1, getrf = 1, blocks = 1;
   std::vector<std::unique_ptr<Lane>>& lane = lanes();
@@ -354,15 +354,12 @@ void CudaExecutor::presize_chunk_buffers(const Analysis& an,
             diag_slab, llt_recursive_work_size(tiled_llt_widths(t.n_rows(f), t.n_pivots(f)).slab));
       }
       if (pd.tiled[q] || pd.chunk_end[q] <= q) continue;
-      std::size_t nb = 0, ns = 0, np = 0, ni = 0;
+      std::size_t nb = 0, np = 0, ni = 0;
       for (index_t r = q; r < pd.chunk_end[q]; ++r) {
         const index_t f = s.fronts[r];
         const int m = static_cast<int>(t.n_rows(f)), k = static_cast<int>(t.n_pivots(f));
         np += static_cast<std::size_t>(k);
-        if (m <= small_front_rows_) {
-          ++ns;
-          continue;
-        }
+        if (m <= small_front_rows_) continue;
         ++nb;
         if (lu_strip_pivots_ > 0)  // enqueue_lu_strips' items: one per strip
           ni += static_cast<std::size_t>((k + lu_strip_pivots_ - 1) / lu_strip_pivots_);
@@ -383,12 +380,20 @@ void CudaExecutor::presize_chunk_buffers(const Analysis& an,
       }
       count = std::max(count, static_cast<std::size_t>(pd.chunk_end[q] - q));
       big = std::max(big, nb);
-      small = std::max(small, ns);
       pivots = std::max(pivots, np);
       strips = std::max(strips, ni);
     }
   }
-  for (auto* b : {&info_, &perturbed_, &stage_offset_, &diag_offset_}) b->resize(count + 1);
+  for (auto* b : {&info_, &perturbed_}) b->resize(count + 1);
+  // a fused chunk's results: info and perturbed per front, then its pivots' permutation
+  // and diagonal entries (factor_chunk_fused)
+  packed_results_.resize(2 * count + 2 * pivots + 1);
+  // every chunk's layout at 6 × its first position (chunk_layout)
+  for (const numeric::PartView& v : views) {
+    PartDevice& pd = parts_.at(v.id);
+    pd.layout.resize(6 * v.schedule->fronts.size() + 1);
+    pd.layouts.assign(v.schedule->fronts.size(), ChunkLayout{});
+  }
   // the tiled fronts' pinned buffers: the prefetch's (LLᵀ) the same size, since the two
   // trade places at every prefetched front and must not grow on the way
   if (host_front > 0) {
@@ -398,8 +403,6 @@ void CudaExecutor::presize_chunk_buffers(const Analysis& an,
       } catch (const OutOfMemory&) {  // no room for the second: no prefetch (tiled_llt.cu)
       }
   }
-  small_pos_.resize(small);
-  perm_offset_.resize(small + 1);
   potrf_info_.resize(big + 1);
   panel_items_.resize(2 * big);
   if (!lu) panel_work_.resize(llt_panel_work_size(static_cast<std::int64_t>(big)));
@@ -413,6 +416,7 @@ void CudaExecutor::presize_chunk_buffers(const Analysis& an,
     c.pinfo.resize(big + 1);
     c.psize.resize(pivots + 1);
     c.diag.resize(pivots + 1);
+    c.packed.resize(2 * count + 2 * pivots + 1);
   }
   for (auto& l : lane) {
     l->potrf_work.resize(static_cast<std::size_t>(potrf));

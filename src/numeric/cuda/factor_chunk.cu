@@ -67,8 +67,10 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
   rec.max_rows = 0;
   for (index_t p = begin; p < end; ++p)
     rec.max_rows = std::max(rec.max_rows, t.n_rows(s.fronts[p]));
-  if (fused_small_batches_ && rec.lu && rec.dev_only && rec.max_rows <= small_front_rows_ &&
-      rec.max_rows <= lu_shared_max_rows()) {
+  rec.fused = fused_small_batches_ && rec.lu && rec.dev_only && rec.max_rows <= small_front_rows_ &&
+              rec.max_rows <= lu_shared_max_rows();
+  chunk_layout(ctx, rec);
+  if (rec.fused) {
     factor_chunk_fused(ctx, rec);
     return;
   }
@@ -93,84 +95,139 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
 }
 
 // A chunk of small LU fronts whose panels stay on the device, by one launch
-// (launch_lu_small_fused): the chunk's layout (chunk_split_fronts, chunk_panel_layout),
-// the launch, the results fetched; the phase events as factor_chunk's, the launch's time
-// counted as small fronts.
+// (launch_lu_small_fused), its results (pivot checks, permutations, diagonals) written
+// back to back into packed_results_ and fetched by one copy instead of four: each copy
+// has a latency of its own on the stream, and a chunk of the multibody matrices' lower
+// levels computes for a few tens of microseconds. Timed from ev[1] to ev[2] (small
+// fronts); ev[5] ends the copy.
 void CudaExecutor::factor_chunk_fused(const numeric::FactorContext& ctx, ChunkRecord& rec) {
   ++fused_chunks_;
-  chunk_split_fronts(ctx, rec);
-  double* const pack_to = chunk_panel_layout(ctx, rec);
-  STRATA_CUDA(cudaEventRecord(rec.ev[0], stream_));
+  double* const pack_to = chunk_panel_target(ctx);
+  const std::size_t ns = rec.small.size(), np = static_cast<std::size_t>(rec.perm_total);
+  const std::size_t nd = static_cast<std::size_t>(rec.diag_off.back());
+  std::int64_t* const r = packed_results_.data();
   STRATA_CUDA(cudaEventRecord(rec.ev[1], stream_));
-  launch_lu_small_fused(cur_->tree, small_pos_.data(), static_cast<std::int64_t>(rec.small.size()),
-                        rec.max_rows, values_.data(), ctx.static_pivot,
-                        ctx.diagonal_pivot_threshold, info_.data(), perturbed_.data(), perm_.data(),
-                        perm_offset_.data(), stage_offset_.data(), pack_to, diag_offset_.data(),
-                        diag_.data(), small_front_threads_, stream_);
+  launch_lu_small_fused(cur_->tree, rec.small_pos, static_cast<std::int64_t>(ns), rec.max_rows,
+                        values_.data(), ctx.static_pivot, ctx.diagonal_pivot_threshold, r, r + ns,
+                        r + 2 * ns, rec.perm_offset, rec.stage_offset, pack_to, rec.diag_offset,
+                        reinterpret_cast<double*>(r + 2 * ns + np), small_front_threads_, stream_);
   STRATA_CUDA(cudaEventRecord(rec.ev[2], stream_));
-  STRATA_CUDA(cudaEventRecord(rec.ev[3], stream_));
-  STRATA_CUDA(cudaEventRecord(rec.ev[4], stream_));
   rec.panels_async = false;
-  chunk_fetch_results(rec);
+  const std::size_t words = 2 * ns + np + nd;
+  if (words)
+    STRATA_CUDA(cudaMemcpyAsync(rec.packed.data(), r, sizeof(std::int64_t) * words,
+                                cudaMemcpyDeviceToHost, stream_));
+  rec.info_at = rec.packed.data();
+  rec.perturbed_at = rec.info_at + ns;
+  rec.perm_at = rec.info_at + 2 * ns;
+  rec.diag_at = reinterpret_cast<const double*>(rec.info_at + 2 * ns + np);
   STRATA_CUDA(cudaEventRecord(rec.ev[5], stream_));
   flush_chunk(ctx);  // the previous chunk's host part, while the GPU runs this one
   pending_ = &rec;
 }
 
-// Step 2 for the small fronts: split the chunk into small fronts (one thread block each,
-// one launch for all) and large ones (chunk_split_fronts), then the small fronts' launch.
+// Step 2 for the small fronts (rec.small from chunk_layout, one thread block each, one
+// launch for all).
 void CudaExecutor::chunk_small_fronts(const numeric::FactorContext& ctx, ChunkRecord& rec) {
-  chunk_split_fronts(ctx, rec);
-  const std::size_t ns = rec.small.size();
+  const std::size_t ns = rec.small.size(), nb = rec.big.size();
+  info_.resize(ns + nb + 1);  // presized at planning: no allocation here
+  perturbed_.resize(ns + nb + 1);
+  perm_.resize(rec.perm_total + 1);
+  potrf_info_.resize(nb + 1);
+  pivot_size_.resize(rec.perm_total + 1);
   std::int64_t small_rows = 0;
   for (std::int64_t p : rec.small)
     small_rows = std::max<std::int64_t>(small_rows,
                                         ctx.analysis->tree.n_rows(ctx.part->schedule->fronts[p]));
   const DeviceTree& tree = cur_->tree;
   if (rec.ldlt)
-    launch_ldlt_small(tree, small_pos_.data(), static_cast<std::int64_t>(ns), pool_.data(),
+    launch_ldlt_small(tree, rec.small_pos, static_cast<std::int64_t>(ns), pool_.data(),
                       ctx.static_pivot, perturbed_.data(), perm_.data(), pivot_size_.data(),
-                      perm_offset_.data(), stream_);
+                      rec.perm_offset, stream_);
   else
-    launch_factor_small(tree, small_pos_.data(), static_cast<std::int64_t>(ns), small_rows,
+    launch_factor_small(tree, rec.small_pos, static_cast<std::int64_t>(ns), small_rows,
                         pool_.data(), rec.lu, ctx.static_pivot, ctx.diagonal_pivot_threshold,
-                        info_.data(), perturbed_.data(), perm_.data(), perm_offset_.data(),
+                        info_.data(), perturbed_.data(), perm_.data(), rec.perm_offset,
                         small_front_threads_, stream_);
   STRATA_CUDA(cudaEventRecord(rec.ev[2], stream_));
 }
 
-// The chunk's fronts split into small ones (rec.small) and large ones (rec.big), the pivot
-// permutations laid out (small fronts first, then the large ones in order), the small
-// fronts' positions and permutation offsets uploaded and the per-front result buffers sized.
-void CudaExecutor::chunk_split_fronts(const numeric::FactorContext& ctx, ChunkRecord& rec) {
-  const auto& t = ctx.analysis->tree;
+// The chunk's layout: its fronts split into small ones (rec.small) and large ones
+// (rec.big), the pivot permutations laid out (small fronts first, then the large ones in
+// order), each position's panel offset in chunk_panel_target's buffer (the device factor,
+// the part's own buffer, or the staging area in chunk order; rec.panels_total doubles in
+// all) and each front's first diagonal slot (rec.diag_off). Made once per plan and what it
+// depends on (`key`): the factorizations of the engine's Newton matrices then upload
+// nothing per chunk.
+void CudaExecutor::chunk_layout(const numeric::FactorContext& ctx, ChunkRecord& rec) {
+  const Analysis& an = *ctx.analysis;
+  const auto& t = an.tree;
   const auto& s = *ctx.part->schedule;
-  rec.small.clear();
-  rec.big.clear();
-  rec.perm_off.assign(1, 0);
-  for (index_t p = rec.begin; p < rec.end; ++p) {
-    const index_t f = s.fronts[p];
-    if (t.n_rows(f) <= small_front_rows_) {
-      rec.small.push_back(p);
-      rec.perm_off.push_back(rec.perm_off.back() + t.n_pivots(f));
-    } else {
-      rec.big.push_back(p);
+  PartDevice& pd = *cur_;
+  const index_t begin = rec.begin;
+  const std::int64_t count = rec.end - rec.begin;
+  const int key = (rec.lu ? 1 : 0) | (rec.dev_only ? 2 : 0) | (keep_resident() ? 4 : 0) |
+                  (part_device_only_ ? 8 : 0);
+  if (pd.layouts.size() < s.fronts.size()) pd.layouts.resize(s.fronts.size());
+  ChunkLayout& L = pd.layouts[begin];
+  if (L.key != key) {
+    L.key = -1;  // until made whole
+    L.small.clear();
+    L.big.clear();
+    L.perm_off.assign(1, 0);
+    for (index_t p = begin; p < rec.end; ++p) {
+      const index_t f = s.fronts[p];
+      if (t.n_rows(f) <= small_front_rows_) {
+        L.small.push_back(p);
+        L.perm_off.push_back(L.perm_off.back() + t.n_pivots(f));
+      } else {
+        L.big.push_back(p);
+      }
     }
+    L.perm_total = L.perm_off.back();
+    L.big_perm_at.resize(L.big.size());
+    for (std::size_t i = 0; i < L.big.size(); ++i) {
+      L.big_perm_at[i] = L.perm_total;
+      L.perm_total += t.n_pivots(s.fronts[L.big[i]]);
+    }
+    std::vector<std::int64_t> stage_off(count);
+    L.diag_off.assign(count + 1, 0);
+    std::size_t total = 0;
+    for (std::int64_t i = 0; i < count; ++i) {
+      const index_t f = s.fronts[begin + i];
+      stage_off[i] = keep_resident() ? static_cast<std::int64_t>(an.factor_layout.panel_offset[f])
+                     : part_device_only_ ? pd.panel_off_host[begin + i]
+                                         : static_cast<std::int64_t>(total);
+      total += panel_size(t, f, rec.lu);
+      L.diag_off[i + 1] = L.diag_off[i] + t.n_pivots(f);
+    }
+    L.panels_total = total;
+    // small, perm_off, stage offsets, diag_off: 2·ns + 2·count + 2 ≤ 6·count entries
+    std::vector<std::int64_t> dev(L.small);
+    dev.insert(dev.end(), L.perm_off.begin(), L.perm_off.end());
+    dev.insert(dev.end(), stage_off.begin(), stage_off.end());
+    dev.insert(dev.end(), L.diag_off.begin(), L.diag_off.end());
+    L.device_at = 6 * static_cast<std::size_t>(begin);
+    if (L.device_at + dev.size() > pd.layout.size())
+      throw InternalError("chunk_layout: the part's layout buffer was not sized for its chunks");
+    STRATA_CUDA(cudaMemcpyAsync(pd.layout.data() + L.device_at, dev.data(),
+                                sizeof(std::int64_t) * dev.size(), cudaMemcpyHostToDevice,
+                                stream_));
+    L.key = key;
   }
-  const std::size_t ns = rec.small.size(), nb = rec.big.size();
-  rec.big_perm_at.resize(nb);
-  rec.perm_total = rec.perm_off.back();
-  for (std::size_t i = 0; i < nb; ++i) {
-    rec.big_perm_at[i] = rec.perm_total;
-    rec.perm_total += t.n_pivots(s.fronts[rec.big[i]]);
-  }
-  upload(small_pos_, rec.small);
-  upload(perm_offset_, rec.perm_off);
-  info_.resize(ns + nb + 1);
-  perturbed_.resize(ns + nb + 1);
-  perm_.resize(rec.perm_total + 1);
-  potrf_info_.resize(nb + 1);
-  pivot_size_.resize(rec.perm_total + 1);
+  rec.small.assign(L.small.begin(), L.small.end());
+  rec.big.assign(L.big.begin(), L.big.end());
+  rec.perm_off.assign(L.perm_off.begin(), L.perm_off.end());
+  rec.big_perm_at.assign(L.big_perm_at.begin(), L.big_perm_at.end());
+  rec.diag_off.assign(L.diag_off.begin(), L.diag_off.end());
+  rec.perm_total = L.perm_total;
+  rec.panels_total = L.panels_total;
+  const std::size_t ns = L.small.size();
+  rec.small_pos = pd.layout.data() + L.device_at;
+  rec.perm_offset = rec.small_pos + ns;
+  rec.stage_offset = rec.perm_offset + ns + 1;
+  rec.diag_offset = rec.stage_offset + count;
+  if (rec.dev_only) diag_.resize(static_cast<std::size_t>(rec.diag_off[count]) + 1);
 }
 
 // LLᵀ fronts up to gpu_panel_kernel_max_pivots: their pivot blocks and panels by our
@@ -292,11 +349,11 @@ void CudaExecutor::chunk_pack_panels(const numeric::FactorContext& ctx, ChunkRec
   const auto& s = *ctx.part->schedule;
   const index_t begin = rec.begin;
   const std::int64_t count = rec.end - rec.begin;
-  double* const pack_to = chunk_panel_layout(ctx, rec);
+  double* const pack_to = chunk_panel_target(ctx);
   const std::size_t total = rec.panels_total;
   // the staging area is free once the previous chunk's panels are on their way out
   if (copy_issued_) STRATA_CUDA(cudaStreamWaitEvent(stream_, panels_copied_, 0));
-  launch_pack_panels(cur_->tree, begin, count, rec.max_rows, pool_.data(), stage_offset_.data(),
+  launch_pack_panels(cur_->tree, begin, count, rec.max_rows, pool_.data(), rec.stage_offset,
                      pack_to, rec.lu, stream_);
   rec.panels_async = !rec.dev_only && !rec.ldlt;
   if (rec.panels_async) {
@@ -314,37 +371,12 @@ void CudaExecutor::chunk_pack_panels(const numeric::FactorContext& ctx, ChunkRec
     bytes_d2h_ += sizeof(double) * total;
   }
   if (rec.dev_only)
-    launch_gather_diagonals(cur_->tree, begin, count, stage_offset_.data(), pack_to,
-                            diag_offset_.data(), diag_.data(), stream_);
+    launch_gather_diagonals(cur_->tree, begin, count, rec.stage_offset, pack_to, rec.diag_offset,
+                            diag_.data(), stream_);
 }
 
-// Where the chunk's panels go: per chunk position its offset in the returned buffer (the
-// device factor, the part's own buffer, or the staging area in chunk order) uploaded to
-// stage_offset_ (rec.panels_total doubles in all), and for device-only panels each front's
-// first diagonal slot uploaded to diag_offset_ (rec.diag_off) with diag_ sized.
-double* CudaExecutor::chunk_panel_layout(const numeric::FactorContext& ctx, ChunkRecord& rec) {
-  const Analysis& an = *ctx.analysis;
-  const auto& t = an.tree;
-  const auto& s = *ctx.part->schedule;
-  const index_t begin = rec.begin;
-  const std::int64_t count = rec.end - rec.begin;
-  std::vector<std::int64_t> stage_off(count);
-  rec.diag_off.assign(count + 1, 0);
-  std::size_t total = 0;
-  for (std::int64_t i = 0; i < count; ++i) {
-    const index_t f = s.fronts[begin + i];
-    stage_off[i] = keep_resident()     ? static_cast<std::int64_t>(an.factor_layout.panel_offset[f])
-                   : part_device_only_ ? cur_->panel_off_host[begin + i]
-                                       : static_cast<std::int64_t>(total);
-    total += panel_size(t, f, rec.lu);
-    rec.diag_off[i + 1] = rec.diag_off[i] + t.n_pivots(f);
-  }
-  rec.panels_total = total;
-  upload(stage_offset_, stage_off);
-  if (rec.dev_only) {
-    upload(diag_offset_, rec.diag_off);
-    diag_.resize(static_cast<std::size_t>(rec.diag_off[count]) + 1);
-  }
+// Where a chunk's panels are packed, as chunk_layout's panel offsets assume.
+double* CudaExecutor::chunk_panel_target(const numeric::FactorContext& ctx) {
   return part_device_only_ ? part_panels_.at(ctx.part->id).data() : panels_.data();
 }
 
@@ -380,6 +412,10 @@ void CudaExecutor::chunk_fetch_results(ChunkRecord& rec) {
   if (rec.dev_only && n_diag > 0)
     STRATA_CUDA(cudaMemcpyAsync(rec.diag.data(), diag_.data(), sizeof(double) * n_diag,
                                 cudaMemcpyDeviceToHost, stream_));
+  rec.info_at = rec.info.data();
+  rec.perturbed_at = rec.perturbed.data();
+  rec.perm_at = rec.perm.data();
+  rec.diag_at = rec.diag.data();
 }
 
 void CudaExecutor::flush_chunk(const numeric::FactorContext& ctx) {
@@ -413,15 +449,16 @@ void CudaExecutor::finish_chunk(const numeric::FactorContext& ctx, ChunkRecord& 
   const std::vector<std::int64_t>& big_perm_at = c.big_perm_at;
   const std::vector<std::int64_t>& diag_off = c.diag_off;
   const std::size_t ns = small.size(), nall = ns + big.size();
-  const std::int64_t* info = c.info.data();
-  const std::int64_t* perturbed = c.perturbed.data();
-  const std::int64_t* perm = c.perm.data();
+  const std::int64_t* info = c.info_at;
+  const std::int64_t* perturbed = c.perturbed_at;
+  const std::int64_t* perm = c.perm_at;
   const int* pinfo = c.pinfo.data();
   const int* psize = c.psize.data();
   STRATA_CUDA(cudaEventSynchronize(c.ev[5]));
   if (c.panels_async) STRATA_CUDA(cudaEventSynchronize(c.ev[7]));
   float ms[4] = {};
-  for (int e = 0; e < 4; ++e) STRATA_CUDA(cudaEventElapsedTime(&ms[e], c.ev[e], c.ev[e + 1]));
+  for (int e = c.fused ? 1 : 0; e < (c.fused ? 2 : 4); ++e)
+    STRATA_CUDA(cudaEventElapsedTime(&ms[e], c.ev[e], c.ev[e + 1]));
   phases_.assembly += 1e-3 * ms[0];
   phases_.small_fronts += 1e-3 * ms[1];
   phases_.large_fronts += 1e-3 * ms[2];
@@ -455,7 +492,7 @@ void CudaExecutor::finish_chunk(const numeric::FactorContext& ctx, ChunkRecord& 
     }
     if (keep_resident()) {  // the device copy of the panels still holds D
       upload(psize_at_, psize_at);
-      launch_ldlt_unit_panels(tree, begin, count, stage_offset_.data(), pivot_size_.data(),
+      launch_ldlt_unit_panels(tree, begin, count, c.stage_offset, pivot_size_.data(),
                               psize_at_.data(), panels_.data(), stream_);
     }
     return;
@@ -464,7 +501,7 @@ void CudaExecutor::finish_chunk(const numeric::FactorContext& ctx, ChunkRecord& 
   // (into `buffer`)
   auto diag_of = [&](index_t p, std::vector<double>& buffer) -> const double* {
     const index_t f = s.fronts[p];
-    if (dev_only) return c.diag.data() + diag_off[p - begin];
+    if (dev_only) return c.diag_at + diag_off[p - begin];
     const index_t m = t.n_rows(f), k = t.n_pivots(f);
     const double* panel = ctx.factor->panels.data() + an.factor_layout.panel_offset[f];
     buffer.resize(k);
