@@ -16,7 +16,7 @@
 // whole matrix for unsymmetric ones; 32-bit indices. Results: <dir>/cudss-*.json.
 //
 //   bench_cudss [--problems a,b,...] [--repeat R] [--solver-option NAME=VALUE]... [--tag NAME]
-//               [--results-dir DIR]
+//               [--results-dir DIR] [--dump-orders DIR]
 #include <cuda_runtime.h>
 #include <cudss.h>
 #include <fmt/core.h>
@@ -85,8 +85,32 @@ SparseMatrix cudss_csr(const SparseMatrix& a, bool spd) {
   return low;
 }
 
+// cuDSS's own orders after its analysis into `path` (--dump-orders): one line each for
+// CUDSS_DATA_PERM_REORDER_ROW, _REORDER_COL and _MATCHING (the last only when cuDSS
+// matched), the name then n 0-based entries. For comparing cuDSS's elimination tree with
+// strata's on the same matrix.
+void dump_orders(cudssHandle_t h, cudssData_t data, std::int64_t n, const std::string& path) {
+  std::FILE* f = std::fopen(path.c_str(), "w");
+  if (!f) throw std::runtime_error("--dump-orders: cannot write " + path);
+  const std::pair<const char*, cudssDataParam_t> what[] = {
+      {"reorder_row", CUDSS_DATA_PERM_REORDER_ROW},
+      {"reorder_col", CUDSS_DATA_PERM_REORDER_COL},
+      {"matching", CUDSS_DATA_PERM_MATCHING}};
+  std::vector<int> v(static_cast<std::size_t>(n));
+  for (const auto& [name, param] : what) {
+    std::size_t written = 0;
+    if (cudssDataGet(h, data, param, v.data(), sizeof(int) * v.size(), &written) !=
+        CUDSS_STATUS_SUCCESS)
+      continue;
+    std::fprintf(f, "%s", name);
+    for (int x : v) std::fprintf(f, " %d", x);
+    std::fprintf(f, "\n");
+  }
+  std::fclose(f);
+}
+
 CudssResult run_cudss(const SparseMatrix& a_input, bool spd, const std::vector<int>* perm,
-                      int repeat) {
+                      int repeat, const std::string& orders_to = "") {
   CudssResult r;
   const SparseMatrix csr = cudss_csr(a_input, spd);
   const std::int64_t n = csr.n_rows, nnz = csr.nnz();
@@ -120,6 +144,7 @@ CudssResult run_cudss(const SparseMatrix& a_input, bool spd, const std::vector<i
     ck(cudssExecute(h, CUDSS_PHASE_ANALYSIS, cfg, data, A, X, B), "analysis");
     cudaDeviceSynchronize();
     r.analysis = t.seconds();
+    if (!orders_to.empty()) dump_orders(h, data, n, orders_to);
     t.reset();
     ck(cudssExecute(h, CUDSS_PHASE_FACTORIZATION, cfg, data, A, X, B), "factorization");
     cudaDeviceSynchronize();
@@ -193,6 +218,10 @@ static int driver_main(int argc, char** argv) {
   app.add_option("--problems", problems, "problems")->delimiter(',');
   app.add_option("--repeat", repeat, "refactorizations per measurement (median)");
   app.add_option("--results-dir", results_dir, "where to write the JSON (default bench/results)");
+  std::string orders_dir;
+  app.add_option("--dump-orders", orders_dir,
+                 "write cuDSS's reordering and matching permutations after its default analysis "
+                 "to DIR/<problem>.cudss-orders (one line each, 0-based)");
   std::vector<std::string> solver_options;
   app.add_option("--solver-option", solver_options,
                  "a strata option for every problem, NAME=VALUE (the names of strata::set_option, "
@@ -320,7 +349,10 @@ static int driver_main(int argc, char** argv) {
                      {"backward_error", bench::berr(p.a, px, b)},
                      {"last_refactor", bench::device_figures(ps)}};
     }
-    const CudssResult def = run_cudss(p.a, p.symmetric, nullptr, repeat);
+    const std::string stem = name.substr(name.find_last_of('/') + 1);
+    const CudssResult def =
+        run_cudss(p.a, p.symmetric, nullptr, repeat,
+                  orders_dir.empty() ? "" : orders_dir + "/" + stem + ".cudss-orders");
     CudssResult up = run_cudss(p.a, p.symmetric, &perm, repeat);
     CudssResult ui = run_cudss(p.a, p.symmetric, &iperm, repeat);
     const bool use_inverse = ui.ok && (!up.ok || ui.lu_nnz < up.lu_nnz);
