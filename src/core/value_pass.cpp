@@ -279,22 +279,17 @@ void copy_range(double* to, const double* from, std::size_t n, tbb::task_arena& 
   arena.execute([&] { parallel_copy(to, from, n); });
 }
 
-std::size_t stage_piece(std::size_t n) {
-  constexpr std::size_t kLarge = std::size_t{1} << 17, kSmall = std::size_t{1} << 14;
-  return n >= 2 * kLarge ? kLarge : n >= 2 * kSmall ? kSmall : n;
-}
-
 void stage_range(double* to, const double* from, std::size_t n, tbb::task_arena& arena,
                  const std::function<void(std::size_t, std::size_t)>& done) {
-  const std::size_t piece = stage_piece(n);
-  if (piece == n) {
+  constexpr std::size_t kPiece = std::size_t{1} << 17;  // doubles: 1 MiB
+  if (n < 2 * kPiece) {
     std::copy(from, from + n, to);
     done(0, n);
     return;
   }
   arena.execute([&] {
-    tbb::parallel_for(std::size_t{0}, (n + piece - 1) / piece, [&](std::size_t c) {
-      const std::size_t b = c * piece, e = std::min(n, b + piece);
+    tbb::parallel_for(std::size_t{0}, (n + kPiece - 1) / kPiece, [&](std::size_t c) {
+      const std::size_t b = c * kPiece, e = std::min(n, b + kPiece);
       std::copy(from + b, from + e, to + b);
       done(b, e);
     });

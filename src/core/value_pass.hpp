@@ -65,16 +65,10 @@ void copy_values(std::vector<double>& to, std::span<const double> from, tbb::tas
 /// to[0, n) = from[0, n) (parallel chunks on `arena` when n is large).
 void copy_range(double* to, const double* from, std::size_t n, tbb::task_arena& arena);
 
-/// The pieces stage_range cuts n doubles into: 1 MiB (2^17 doubles) from 2 MiB on, 128 KiB
-/// (2^14 doubles) from 256 KiB on, else the whole range as one piece (0 for n = 0).
-std::size_t stage_piece(std::size_t n);
-
-/// to[0, n) = from[0, n) in pieces of stage_piece(n) doubles copied side by side on
-/// `arena`'s threads, each piece [b, e) reported to done(b, e) by the thread that copied
-/// it as soon as it is in place (one piece: on this thread). One parallel loop for the
-/// whole range: entering the arena once per piece cost about 0.2 ms each on a 16-core
-/// host. The smaller pieces of a range under 2 MiB keep one thread's copy from holding
-/// the transfer that follows (a refactorization's values of a few MB on the GPU).
+/// to[0, n) = from[0, n) in pieces of 1 MiB copied side by side on `arena`'s threads, each
+/// piece [b, e) reported to done(b, e) by the thread that copied it as soon as it is in
+/// place (a small n: one piece, on this thread). One parallel loop for the whole range:
+/// entering the arena once per piece cost about 0.2 ms each on a 16-core host.
 void stage_range(double* to, const double* from, std::size_t n, tbb::task_arena& arena,
                  const std::function<void(std::size_t, std::size_t)>& done);
 
