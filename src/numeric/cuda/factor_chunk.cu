@@ -96,16 +96,21 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
 
 // A chunk of small LU fronts whose panels stay on the device, by one launch
 // (launch_lu_small_fused), its results (pivot checks, permutations, diagonals) written
-// back to back into packed_results_ and fetched by one copy instead of four: each copy
-// has a latency of its own on the stream, and a chunk of the multibody matrices' lower
-// levels computes for a few tens of microseconds. Timed from ev[1] to ev[2] (small
-// fronts); ev[5] ends the copy.
+// back to back into the record's half of packed_results_ and fetched by one copy instead
+// of four, on copy_stream_: each copy has a latency of its own, and a chunk of the
+// multibody matrices' lower levels computes for a few tens of microseconds, so the next
+// chunk's launch does not wait for it. The half is not written again before this chunk's
+// host part has waited for the copy (the record's next chunk comes after that). Timed
+// from ev[1] to ev[2] (small fronts); ev[5] ends the copy.
 void CudaExecutor::factor_chunk_fused(const numeric::FactorContext& ctx, ChunkRecord& rec) {
   ++fused_chunks_;
   double* const pack_to = chunk_panel_target(ctx);
   const std::size_t ns = rec.small.size(), np = static_cast<std::size_t>(rec.perm_total);
   const std::size_t nd = static_cast<std::size_t>(rec.diag_off.back());
-  std::int64_t* const r = packed_results_.data();
+  const std::size_t half = packed_results_.size() / 2;
+  std::int64_t* const r = packed_results_.data() + (&rec == &chunk_[0] ? 0 : half);
+  if (2 * ns + np + nd > half)
+    throw InternalError("factor_chunk_fused: the results buffer was not sized for this chunk");
   STRATA_CUDA(cudaEventRecord(rec.ev[1], stream_));
   launch_lu_small_fused(cur_->tree, rec.small_pos, static_cast<std::int64_t>(ns), rec.max_rows,
                         values_.data(), ctx.static_pivot, ctx.diagonal_pivot_threshold, r, r + ns,
@@ -114,14 +119,15 @@ void CudaExecutor::factor_chunk_fused(const numeric::FactorContext& ctx, ChunkRe
   STRATA_CUDA(cudaEventRecord(rec.ev[2], stream_));
   rec.panels_async = false;
   const std::size_t words = 2 * ns + np + nd;
+  STRATA_CUDA(cudaStreamWaitEvent(copy_stream_, rec.ev[2], 0));
   if (words)
     STRATA_CUDA(cudaMemcpyAsync(rec.packed.data(), r, sizeof(std::int64_t) * words,
-                                cudaMemcpyDeviceToHost, stream_));
+                                cudaMemcpyDeviceToHost, copy_stream_));
   rec.info_at = rec.packed.data();
   rec.perturbed_at = rec.info_at + ns;
   rec.perm_at = rec.info_at + 2 * ns;
   rec.diag_at = reinterpret_cast<const double*>(rec.info_at + 2 * ns + np);
-  STRATA_CUDA(cudaEventRecord(rec.ev[5], stream_));
+  STRATA_CUDA(cudaEventRecord(rec.ev[5], copy_stream_));
   flush_chunk(ctx);  // the previous chunk's host part, while the GPU runs this one
   pending_ = &rec;
 }
