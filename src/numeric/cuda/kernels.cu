@@ -429,10 +429,13 @@ __device__ __forceinline__ void lu_pivot_step(double (&r)[kSmallNb], const doubl
 // pivot steps, so each panel is first factored on its diagonal, one barrier a step and no
 // search, every candidate row checking that the threshold test would keep the diagonal
 // (after a matching and scaling it mostly does); only a panel where some row beats its
-// diagonal is factored again with the search: two barriers and no global memory a step,
-// the search a shuffle reduction in the warps that hold candidate rows, whose maxima every
+// diagonal (or one that interchanged rows in the front's last factorization) is factored
+// again step by step, each step trying its diagonal first in the same way (two barriers)
+// and searching only when a row beats it: two more barriers and no global memory, the
+// search a shuffle reduction in the warps that hold candidate rows, whose maxima every
 // thread then reads; the pivot row and row j trade their panel registers through shared
-// memory, and the pivot row is read there by all. Either way the multipliers and the
+// memory, and the pivot row is read there by all. (In the tracked vehicles' top fronts a
+// searched panel has one or two steps that need the search.) Either way the multipliers and the
 // panel's later columns are updated in registers, with the same operations. The
 // interchanges of the columns outside the panel are made once per panel (LAPACK's DLASWP
 // after each panel of DGETRF): thread c takes column c, reads the rows the panel moved from
@@ -514,6 +517,24 @@ __device__ void lu_front_blocked(double* F, int ld, int m, int k, double static_
     for (int p = 0; p < kSmallNb; ++p) {
       if (search && p < w) {
         const int j = j0 + p;
+        // this step's diagonal first: when no candidate row beats it, the search would keep
+        // it too, and the step is a diagonal step (two barriers, no search)
+        double* x = xdiag[p % 2];
+        if (i == j) {
+#pragma unroll
+          for (int q = 0; q < kSmallNb; ++q) x[q] = r[q];
+        }
+        __syncthreads();
+        bool beats = false;
+        if (i > j && i < k) {  // a NaN candidate is never chosen
+          const double a = fabs(r[p]);
+          beats = a == a && !(fabs(x[p]) >= threshold * a);
+        }
+        if (!__syncthreads_or(beats)) {
+          if (i == 0) ipiv[p] = j;
+          lu_pivot_step(r, x, p, w, i, j, row, static_pivot, npert);
+          continue;
+        }
         const int w_lo = j / kWarp;  // warps [w_lo, w_hi] hold the candidates [j, k)
         if (wid >= w_lo && wid <= w_hi) {
           double v = (i >= j && i < k) ? fabs(r[p]) : -1.0;
