@@ -61,8 +61,8 @@ int parity(const std::vector<index_t>& seq, std::vector<char>& seen) {
   return sign;
 }
 
-template <class T>
-void sized(std::vector<T>& v, std::size_t size, const char* what) {
+template <class T, class A>
+void sized(std::vector<T, A>& v, std::size_t size, const char* what) {
   try {
     v.resize(size);
   } catch (const std::bad_alloc&) {

@@ -28,6 +28,7 @@
 #include <vector>
 
 #include "analysis/analysis.hpp"
+#include "base/default_init.hpp"
 #include "numeric/cpu/delayed_front.hpp"
 
 namespace strata::numeric {
@@ -41,12 +42,13 @@ namespace strata::numeric {
 /// `l21_rows` / `u12_cols`: the rows / columns (tree numbering) of those kept rows of L21
 /// and columns of U12; `cb`: the contribution block ((m−k)×(m−k), rows rows[k..m), columns
 /// cols[k..m)), kept until the parent is assembled. The vectors keep their capacity from
-/// one factorization to the next.
+/// one factorization to the next; `lu` and `cb` are written whole before they are read, so
+/// growing them does not zero them first.
 struct DelayedFront {
   index_t m = 0, k = 0, delayed = 0;
   std::vector<index_t> rows, cols;
   std::vector<index_t> l21_rows, u12_cols;
-  std::vector<double> lu, cb;
+  UninitVector<double> lu, cb;
   PivotStats stats;
 };
 
