@@ -2,10 +2,10 @@
 //
 // std::vector::resize value-initializes what it adds: for a buffer of doubles that is
 // written entirely before it is read (a contribution block copied out of its front, say)
-// that is a pass over the memory for nothing, and on the multibody engine's host
-// factorizations it was about 1.5 % of the run. DefaultInitAllocator default-initializes
-// instead (nothing, for a trivial type); construction with arguments (resize(n, x),
-// push_back, copies) is the standard allocator's.
+// that is a pass over the memory for nothing, once per front and factorization.
+// DefaultInitAllocator default-initializes instead (nothing, for a trivial type);
+// construction with arguments (resize(n, x), push_back, copies) is the standard
+// allocator's.
 #pragma once
 
 #include <memory>

@@ -434,8 +434,7 @@ __device__ __forceinline__ void lu_pivot_step(double (&r)[kSmallNb], const doubl
 // and searching only when a row beats it: two more barriers and no global memory, the
 // search a shuffle reduction in the warps that hold candidate rows, whose maxima every
 // thread then reads; the pivot row and row j trade their panel registers through shared
-// memory, and the pivot row is read there by all. (In the tracked vehicles' top fronts a
-// searched panel has one or two steps that need the search.) Either way the multipliers and the
+// memory, and the pivot row is read there by all. Either way the multipliers and the
 // panel's later columns are updated in registers, with the same operations. The
 // interchanges of the columns outside the panel are made once per panel (LAPACK's DLASWP
 // after each panel of DGETRF): thread c takes column c, reads the rows the panel moved from
