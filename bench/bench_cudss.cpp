@@ -3,11 +3,12 @@
 //
 // For each problem: strata on the GPU (analysis, first factorization, median of --repeat
 // refactorizations of the values alone (Solver::refactorize(span), as cuDSS's after
-// cudssMatrixSetValues), for LU also with Pivoting::fixed and, when the refactorization delayed
-// pivots, in their order (Solver::analyze_in_pivot_order), solve with refinement); cuDSS with
-// its default reordering and with strata's permutation given as CUDSS_DATA_USER_PERM
-// (both directions of the permutation are tried and the one with the smaller LU_NNZ kept,
-// since the documentation does not say which one it expects), each: analysis,
+// cudssMatrixSetValues; the values page-locked, as those cuDSS's timed copy reads, so
+// that strata copies them to the device directly), for LU also with Pivoting::fixed and, when the
+// refactorization delayed pivots, in their order (Solver::analyze_in_pivot_order), solve with
+// refinement); cuDSS with its default reordering and with strata's permutation given as
+// CUDSS_DATA_USER_PERM (both directions of the permutation are tried and the one with the smaller
+// LU_NNZ kept, since the documentation does not say which one it expects), each: analysis,
 // factorization, median of --repeat REFACTORIZATION, the same with the values copied to the
 // device from page-locked host memory before each (what a host-assembled matrix such as the
 // multibody engine's costs cuDSS, as strata's refactorizations take host values), solve,
@@ -284,6 +285,7 @@ static int driver_main(int argc, char** argv) {
     // the refactorizations take the values alone, as cuDSS's take cudssMatrixSetValues'
     // (the matrices here are canonical: the pattern is the analyzed one)
     const std::span<const double> values = p.a.values;
+    const auto pin = numeric::pin_host_memory(p.a.values.data(), values.size_bytes());
     std::vector<double> times;
     for (int k = 0; k < repeat; ++k) {
       t.reset();
@@ -381,6 +383,7 @@ static int driver_main(int argc, char** argv) {
                   {"first_factor", bench::device_figures(first_stats)},
                   {"last_refactor", bench::device_figures(refactor_stats)},
                   {"delayed_pivoting", refactor_stats.delayed_pivoting},
+                  {"values_page_locked", pin != nullptr},
                   {"fixed_order", fixed_order},
                   {"pivot_order", pivot_order}}},
                 {"cudss_default", to_json(def)},

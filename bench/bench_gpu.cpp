@@ -9,11 +9,13 @@
 // JSON. Results: <results-dir>/gpu-*.json with "backend": "cuda".
 //
 //   bench_gpu [--problems a,b,...] [--repeat R] [--threads 4,16] [--gpu-only] [--tag T]
-//             [--solver-option NAME=VALUE]... [--results-dir DIR]
+//             [--solver-option NAME=VALUE]... [--page-locked-values] [--results-dir DIR]
 // Solve times: the median of R solves after a first one (solve: the whole call, with the
 // refinement its check asks for; apply: one application of the factor).
 // --tag T: stored in the results and in the file name (gpu-T-*.json), so that runs over
 // different problem sets (bench/run gpu splits them) are kept apart by the report.
+// --page-locked-values: the matrix's values page-locked (cudaHostRegister) for the GPU's
+// refactorizations, which then copy them to the device directly (Solver::refactorize).
 #include <fmt/core.h>
 
 #include <CLI/CLI.hpp>
@@ -99,6 +101,9 @@ static int driver_main(int argc, char** argv) {
   app.add_option("--solver-option", solver_options,
                  "a strata option for the GPU runs, NAME=VALUE (the names of strata::set_option, "
                  "as strata simulate --solver-option); repeatable");
+  bool page_locked_values = false;
+  app.add_flag("--page-locked-values", page_locked_values,
+               "page-lock the values the GPU refactorizations are given");
   CLI11_PARSE(app, argc, argv);
   if (gpu_only) threads.clear();
   if (!numeric::cuda_available()) {
@@ -110,6 +115,7 @@ static int driver_main(int argc, char** argv) {
   out["backend"] = "cuda";
   if (!tag.empty()) out["tag"] = tag;
   out["solver_options"] = solver_options;
+  out["page_locked_values"] = page_locked_values;
   out["rows"] = json::array();
   fmt::print("{:<14} {:>8} {:>11} {:>9} {:>8} {:>9} {:>4} {:>9} {:>7} {:>7} {:>9} {:>9} {:>9}\n",
              "problem", "n", "nnz(L)", "gpu s", "GFLOP/s", "cpu s", "thr", "chol s", "cpu/gpu",
@@ -135,6 +141,11 @@ static int driver_main(int argc, char** argv) {
     std::vector<index_t> perm;
     Timing g;
     try {
+      const auto pin = page_locked_values
+                           ? numeric::pin_host_memory(p.a.values.data(), p.a.values.size() * 8)
+                           : nullptr;
+      if (page_locked_values && !pin)
+        fmt::print(stderr, "bench_gpu: {}: the values could not be page-locked\n", name);
       g = time_strata(p, og, repeat, &perm);
     } catch (const NotPositiveDefinite& e) {
       // a symmetric matrix is timed as spd (the CHOLMOD anchor is Cholesky): say so and go

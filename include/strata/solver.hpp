@@ -99,8 +99,13 @@ class Solver {
   /// The pattern is not compared (refactorize(A) does), so a caller that assembles into a
   /// fixed pattern saves a pass over it; a canonical matrix (CSC, row indices sorted, no
   /// duplicates, the lower triangle when symmetric) is read in place, another is gathered
-  /// into that form first. Throws InvalidState before analyze, InvalidInput when
-  /// values.size() is not that matrix's number of entries, and as refactorize.
+  /// into that form first. On one GPU (the CUDA backend) a canonical matrix's values in
+  /// page-locked host memory (cudaMallocHost, cudaHostAlloc, cudaHostRegister) are copied to
+  /// the device directly, and into the solver's own copy on the host's threads while the
+  /// device factorizes; values in pageable memory are first staged in a page-locked buffer
+  /// of the solver's (stats().factor.input_seconds). The values may be changed again once
+  /// this returns. Throws InvalidState before analyze, InvalidInput when values.size() is
+  /// not that matrix's number of entries, and as refactorize.
   void refactorize(std::span<const double> values);
 
   /// Solves A X = B for nrhs right-hand sides. b and x are column-major n×nrhs arrays

@@ -155,7 +155,8 @@ struct FactorStats {
   /// Of `seconds`, the work on the input before the numeric factorization: the pattern
   /// compared with the analyzed one (not for refactorize(values)), the values checked
   /// (finite, norms), copied and scaled, on the host or, with values_scaled_on_device,
-  /// staged, copied to the GPU and checked and scaled there.
+  /// staged, copied to the GPU and checked and scaled there (page-locked values are not
+  /// staged, and their host copy overlaps the factorization: Solver::refactorize).
   double input_seconds = 0;
   /// The values were checked, measured and scaled on the GPU (the CUDA backend, one GPU,
   /// values in the analyzed pattern), not on the host.

@@ -212,27 +212,33 @@ constexpr int kRescalingSweeps = 3;
 // the scaled values for the factorization. On acceptance the staged values become the
 // kept ones (the two buffers trade places, so nothing is copied twice); refused values
 // (not finite, overflowing sums) throw with the kept values and the factor as they were.
-// False, with nothing changed that matters, where the driver has no such pass. Sets
-// norm1 = ‖B‖₁.
+// Values the caller holds in page-locked memory go to the device from there, and their
+// copy into `scaled` (which becomes the kept values all the same) runs on the host's
+// threads once the device has accepted them, beside the factorization; s.kept_copy is
+// waited for before the factorization returns or the host reads them. False, with nothing
+// changed that matters, where the driver has no such pass. Sets norm1 = ‖B‖₁.
 bool values_on_gpu(SolverState& s, const SparseMatrix& pattern, std::span<const double> values,
                    double& norm1) {
   const Analysis& an = *s.analysis;
   if (!s.driver->uploads_values() || values.empty()) return false;
   tbb::task_arena& arena = host_arena(s);
   resize_scaled(s, values.size(), "factorize: staged values");
-  pin_scaled(s);
+  const bool direct = numeric::page_locked(values.data(), values.size_bytes());
+  if (!direct) pin_scaled(s);
   double* staged = s.scaled.data();
-  const numeric::StageValues stage = [&](std::size_t b, std::size_t e,
-                                         const numeric::StagedPiece& done) {
-    s.scaled_current = false;  // raw values now, whatever follows
-    detail::stage_range(staged + b, values.data() + b, e - b, arena,
-                        [&](std::size_t pb, std::size_t pe) { done(b + pb, b + pe); });
-  };
+  numeric::StageValues stage;
+  if (!direct)
+    stage = [&](std::size_t b, std::size_t e, const numeric::StagedPiece& done) {
+      s.scaled_current = false;  // raw values now, whatever follows
+      detail::stage_range(staged + b, values.data() + b, e - b, arena,
+                          [&](std::size_t pb, std::size_t pe) { done(b + pb, b + pe); });
+    };
   // values far from the analysis's are equilibrated again there, as on the host (not
   // when the analysis's scaling was clamped: see prepare_values)
   const bool equilibrate = !an.row_scaling.empty() && !scaling_clamped(an);
   numeric::DeviceValueNorms dn;
-  if (!s.driver->scale_values_on_device(an, staged, stage, equilibrate ? kRescalingSweeps : 0, dn))
+  if (!s.driver->scale_values_on_device(an, direct ? values.data() : staged, stage,
+                                        equilibrate ? kRescalingSweeps : 0, dn))
     return false;
   if (!dn.finite) detail::throw_first_not_finite(pattern, values.data());
   if (!dn.sums_finite) {
@@ -240,6 +246,10 @@ bool values_on_gpu(SolverState& s, const SparseMatrix& pattern, std::span<const 
     throw InternalError("the device found a row or column sum that overflows; the host did not");
   }
   if (equilibrate && !dn.equilibrated && dn.rescaling_sweeps == 0) return false;
+  if (direct) {
+    s.scaled_current = false;
+    s.kept_copy.start(arena, staged, values.data(), values.size());
+  }
   s.factor.valid = false;
   s.delayed.valid = false;
   s.norm_inf = dn.norm_inf;
@@ -261,6 +271,7 @@ bool values_on_gpu(SolverState& s, const SparseMatrix& pattern, std::span<const 
 // and sweeps, up to six passes over the entries), else recomputed from the kept values by
 // the host's pass, which gives the bits the device computed.
 void host_scaled(SolverState& s) {
+  s.kept_copy.wait();  // the kept values complete (and `scaled` free) before either is used
   if (s.scaled_current) return;
   const Analysis& an = *s.analysis;
   if (s.values_on_device && s.scaled.size() == an.pattern_indices.size() &&
@@ -488,11 +499,18 @@ void report_factorization(SolverState& s, const NumericRun& r, double norm1, dou
 }
 
 void run_factorization(SolverState& s, const SparseMatrix* a, std::span<const double> values) {
+  // the kept values' copy, if the input stage started one, is complete when this returns
+  // or throws (the caller may then change or free its values)
+  struct WaitForCopy {
+    BackgroundCopy& copy;
+    ~WaitForCopy() { copy.wait(); }
+  } wait_for_copy{s.kept_copy};
   Timer timer;
   const double norm1 = prepare_values(s, a, values);
   const double input_seconds = timer.seconds();
   const double static_pivot = s.options.static_pivot_epsilon * (norm1 > 0 ? norm1 : 1.0);
   const NumericRun r = factor_values(s, norm1, static_pivot);
+  s.kept_copy.wait();  // in the factorization's time
   report_factorization(s, r, norm1, input_seconds, timer);
 }
 

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "analysis/analysis.hpp"
+#include "base/host_copy.hpp"
 #include "core/rescale.hpp"
 #include "numeric/delayed.hpp"
 #include "numeric/driver.hpp"
@@ -40,6 +41,10 @@ struct SolverState {
   // needs them (host_scaled)
   bool scaled_current = true;
   bool values_on_device = false;
+  // a refactorization's page-locked input values copied into the kept ones on the host's
+  // threads while the GPU works (values_on_gpu); waited for before the factorization
+  // returns or anything reads `values` or `scaled` (declared after both: waited first)
+  BackgroundCopy kept_copy;
   std::vector<double> value_sums;  // per-range vectors of the blocked value passes, kept
   // the host threads of those passes (Options::num_threads), kept: creating a task arena
   // for each parallel loop cost milliseconds per refactorization on a 64-core host

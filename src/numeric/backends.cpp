@@ -24,6 +24,8 @@ std::unique_ptr<Executor> make_cuda_executor(const Options&, int) {
 
 std::unique_ptr<PinnedHostRange> pin_host_memory(void*, std::size_t) { return nullptr; }
 
+bool page_locked(const void*, std::size_t) { return false; }
+
 index_t cuda_llt_pivot_block_and_panel(double*, index_t, index_t) {
   throw NotSupported("this build of strata has no CUDA backend (nvcc was not found at build time)");
 }

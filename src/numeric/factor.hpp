@@ -356,6 +356,12 @@ class PinnedHostRange {
 /// transfers then go from pageable memory, slower; nothing is reported).
 std::unique_ptr<PinnedHostRange> pin_host_memory(void* p, std::size_t bytes);
 
+/// Whether the host range [p, p + bytes) is page-locked for the GPUs (cudaMallocHost,
+/// cudaHostAlloc, cudaHostRegister: cudaPointerGetAttributes reports host memory at its
+/// first and its last byte), so that a copy to a device can read it directly. False in a
+/// build without CUDA, without a visible GPU and for an empty range.
+bool page_locked(const void* p, std::size_t bytes);
+
 /// Sizes `factor` for the analysis and type (a no-op when it already is: refactorization
 /// reuses the storage) and marks it invalid; the panels only when `host_panels`.
 void prepare_factor(const Analysis& an, MatrixType type, NumericFactor& factor,

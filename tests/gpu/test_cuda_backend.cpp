@@ -1733,6 +1733,93 @@ TEST_F(CudaBackend, ValuesRefusedOnTheDeviceKeepTheFactor) {
   EXPECT_LE(s.stats().solve.backward_error, 1e-14);
 }
 
+// Values in page-locked memory go to the device from there, and the solver's own copy of
+// them is made beside the factorization (Solver::refactorize): against the same values in
+// pageable memory, the same factor (log |det|, pivots) and the same solution bit for bit —
+// LU in the analysis's order, LU whose values need their pivots delayed on the host (a
+// stale analysis: the delayed factorization reads the kept values' scaling), LDLᵀ,
+// Cholesky; sizes 1, 2, 3, 5, 200, 733. The caller may overwrite its buffer once
+// refactorize returns (the refined solution's residual is of the values given); refused
+// values in it leave the factor and the kept values as they were.
+TEST_F(CudaBackend, PageLockedValuesGiveTheFactorOfPageableOnes) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed) + " (STRATA_TEST_SEED replays it)");
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  struct Case {
+    MatrixType type;
+    test::RandomKind kind;
+    bool stale;  // LU with values whose pivots the analysis's order cannot take
+  };
+  const Case cases[] = {
+      {MatrixType::general, test::RandomKind::general, false},
+      {MatrixType::general, test::RandomKind::general, true},
+      {MatrixType::symmetric_indefinite, test::RandomKind::symmetric_indefinite, false},
+      {MatrixType::spd, test::RandomKind::spd, false}};
+  for (const Case& c : cases)
+    for (const index_t n : {1, 2, 3, 5, 200, 733}) {
+      SCOPED_TRACE("type " + std::string(to_string(c.type)) + (c.stale ? " (stale)" : "") +
+                   ", n = " + std::to_string(n));
+      SparseMatrix a, next;
+      if (c.stale) {
+        if (n < 5) continue;  // stale_analysis needs room for its off-diagonal entries
+        test::StaleAnalysis st = test::stale_analysis(n, rng);
+        a = std::move(st.analyzed);
+        next = std::move(st.stale);
+      } else {
+        a = test::random_sparse(n, 3, c.kind, rng);
+        next = a;
+        for (double& v : next.values) v *= 1.0 + 0.25 * u(rng);
+        if (c.type == MatrixType::spd)  // still diagonally dominant: positive definite
+          for (index_t j = 0; j < n; ++j)
+            for (index_t p = next.offsets[j]; p < next.offsets[j + 1]; ++p)
+              if (next.indices[p] == j) next.values[p] = std::abs(a.values[p]) * 2.0 + 1.0;
+      }
+      std::vector<double> locked = next.values;
+      const auto pin = numeric::pin_host_memory(locked.data(), locked.size() * sizeof(double));
+      ASSERT_TRUE(pin) << "cudaHostRegister refused the test's buffer";
+      ASSERT_TRUE(numeric::page_locked(locked.data(), locked.size() * sizeof(double)));
+      ASSERT_FALSE(numeric::page_locked(next.values.data(), next.values.size() * sizeof(double)));
+      Options o = one_gpu(c.type);
+      o.solve_check = SolveCheck::always;  // refined against the kept values
+      Solver direct(o), staged(o);
+      for (Solver* s : {&direct, &staged}) {
+        s->analyze(a);
+        s->factorize(a);
+      }
+      direct.refactorize(std::span<const double>(locked));
+      staged.refactorize(std::span<const double>(next.values));
+      const FactorStats& fd = direct.stats().factor;
+      const FactorStats& fs = staged.stats().factor;
+      EXPECT_TRUE(fd.values_scaled_on_device);
+      EXPECT_TRUE(fs.values_scaled_on_device);
+      EXPECT_EQ(fd.delayed_pivoting, fs.delayed_pivoting);
+      if (c.stale) EXPECT_TRUE(fd.delayed_pivoting);
+      EXPECT_EQ(fd.perturbed_pivots, fs.perturbed_pivots);
+      EXPECT_EQ(fd.log_abs_determinant, fs.log_abs_determinant);
+      EXPECT_EQ(fd.determinant_sign, fs.determinant_sign);
+      std::vector<double> b(n);
+      for (double& v : b) v = u(rng);
+      const std::vector<double> xd = direct.solve(b);
+      EXPECT_EQ(xd, staged.solve(b));
+      EXPECT_LE(test::backward_error(next, xd.data(), b.data()), 1e-14);
+      // the buffer overwritten: the refined solve still takes the values given
+      std::fill(locked.begin(), locked.end(), std::nan(""));
+      const std::vector<double> x = direct.solve(b);
+      EXPECT_EQ(x, xd);
+      EXPECT_LE(direct.stats().solve.backward_error, 1e-14);
+      // refused (a NaN from the page-locked buffer): the factor and kept values stay
+      try {
+        direct.refactorize(std::span<const double>(locked));
+        ADD_FAILURE() << "a NaN value was accepted";
+      } catch (const InvalidInput& e) {
+        EXPECT_NE(std::string(e.what()).find("values[0] is not finite"), std::string::npos)
+            << e.what();
+      }
+      EXPECT_EQ(direct.solve(b), x);
+    }
+}
+
 // Values far from the analysis's (a row and a column scaled by 10^±3, so a diagonal
 // entry by 10^±6) need equilibrating again, which the device's pass does with the host's
 // sweeps: against the host's pass (the same matrix given with explicit zeros) the same

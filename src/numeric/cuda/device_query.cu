@@ -73,6 +73,19 @@ std::unique_ptr<PinnedHostRange> pin_host_memory(void* p, std::size_t bytes) {
   return std::make_unique<CudaPinnedRange>(p, bytes);
 }
 
+bool page_locked(const void* p, std::size_t bytes) {
+  if (!p || bytes == 0 || !cuda::device_present()) return false;
+  const auto host = [](const void* q) {
+    cudaPointerAttributes a{};
+    if (cudaPointerGetAttributes(&a, q) != cudaSuccess) {
+      (void)cudaGetLastError();
+      return false;
+    }
+    return a.type == cudaMemoryTypeHost;
+  };
+  return host(p) && host(static_cast<const char*>(p) + (bytes - 1));
+}
+
 std::string cuda_unavailable_reason() {
   return cuda::device_present() ? "" : "the CUDA backend was asked for, but no CUDA GPU is visible";
 }
