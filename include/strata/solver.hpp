@@ -101,11 +101,12 @@ class Solver {
   /// duplicates, the lower triangle when symmetric) is read in place, another is gathered
   /// into that form first. On one GPU (the CUDA backend) a canonical matrix's values in
   /// page-locked host memory (cudaMallocHost, cudaHostAlloc, cudaHostRegister) are copied to
-  /// the device directly, and into the solver's own copy on the host's threads while the
-  /// device factorizes; values in pageable memory are first staged in a page-locked buffer
-  /// of the solver's (stats().factor.input_seconds). The values may be changed again once
-  /// this returns. Throws InvalidState before analyze, InvalidInput when values.size() is
-  /// not that matrix's number of entries, and as refactorize.
+  /// the device directly and the solver's copy of them is kept there, copied back only when
+  /// the host needs it (the residuals of a checked solve); values in pageable memory are
+  /// first staged in a page-locked buffer of the solver's (stats().factor.input_seconds).
+  /// Either way the caller may change its values once this returns. Throws InvalidState
+  /// before analyze, InvalidInput when values.size() is not that matrix's number of
+  /// entries, and as refactorize.
   void refactorize(std::span<const double> values);
 
   /// Solves A X = B for nrhs right-hand sides. b and x are column-major n×nrhs arrays

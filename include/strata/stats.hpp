@@ -156,7 +156,7 @@ struct FactorStats {
   /// compared with the analyzed one (not for refactorize(values)), the values checked
   /// (finite, norms), copied and scaled, on the host or, with values_scaled_on_device,
   /// staged, copied to the GPU and checked and scaled there (page-locked values are not
-  /// staged, and their host copy overlaps the factorization: Solver::refactorize).
+  /// staged: Solver::refactorize).
   double input_seconds = 0;
   /// The values were checked, measured and scaled on the GPU (the CUDA backend, one GPU,
   /// values in the analyzed pattern), not on the host.

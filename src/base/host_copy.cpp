@@ -35,21 +35,4 @@ void parallel_copy_2d(double* dst, std::size_t ld_dst, const double* src, std::s
   });
 }
 
-void BackgroundCopy::start(tbb::task_arena& arena, double* dst, const double* src, std::size_t n) {
-  wait();
-  if (arena.max_concurrency() <= 1) {
-    arena.execute([&] { parallel_copy(dst, src, n); });
-    return;
-  }
-  arena.execute([&] { group_.run([=] { parallel_copy(dst, src, n); }); });
-  arena_ = &arena;
-}
-
-void BackgroundCopy::wait() noexcept {
-  if (!arena_) return;
-  // inside the arena: with every worker busy elsewhere the waiting thread runs the copy
-  arena_->execute([&] { group_.wait(); });
-  arena_ = nullptr;
-}
-
 }  // namespace strata

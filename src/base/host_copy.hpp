@@ -8,9 +8,6 @@
 // copy over the calling thread's TBB arena in chunks of at least 1 MiB, so a small copy
 // stays on one thread.
 #pragma once
-#include <tbb/task_arena.h>
-#include <tbb/task_group.h>
-
 #include <cstddef>
 
 namespace strata {
@@ -22,27 +19,5 @@ void parallel_copy(double* dst, const double* src, std::size_t n);
 /// (leading dimension ld_dst ≥ rows), columns in parallel; the blocks must not overlap.
 void parallel_copy_2d(double* dst, std::size_t ld_dst, const double* src, std::size_t ld_src,
                       std::size_t rows, std::size_t cols);
-
-/// A copy dst[0, n) = src[0, n) (parallel_copy) that runs on an arena's worker threads
-/// while the thread that started it goes on, and is waited for by wait() or the
-/// destructor. An arena of one thread has no worker to run it: start() then copies before
-/// it returns. Neither range may be touched by anyone else until the wait.
-class BackgroundCopy {
- public:
-  BackgroundCopy() = default;
-  BackgroundCopy(const BackgroundCopy&) = delete;
-  BackgroundCopy& operator=(const BackgroundCopy&) = delete;
-  ~BackgroundCopy() { wait(); }
-
-  /// Starts the copy (one at a time: a copy still running is waited for first).
-  void start(tbb::task_arena& arena, double* dst, const double* src, std::size_t n);
-  /// Returns once the copy started last is complete (at once when none runs).
-  void wait() noexcept;
-  bool running() const { return arena_ != nullptr; }
-
- private:
-  tbb::task_arena* arena_ = nullptr;  // where the running copy was started, or none
-  tbb::task_group group_;
-};
 
 }  // namespace strata

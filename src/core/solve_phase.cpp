@@ -146,6 +146,7 @@ void solve_phase(SolverState& s, const double* b, double* x, index_t nrhs) {
   // Options::solve_check: after a factorization without perturbed pivots the caller may
   // take the factor's solution unchecked
   const bool check = o.solve_check == SolveCheck::always || s.stats.factor.perturbed_pivots > 0;
+  if (check) host_values(s);  // the residuals' matrix
   Timer first;
   const bool on_device = apply_inverse(s, b, x, nrhs);
   const double first_solve_seconds = first.seconds();

@@ -177,6 +177,7 @@ double prepare_devices(SolverState& s) {
 void keep_analyzed_input(SolverState& s, const SparseMatrix& a) {
   const Analysis& an = *s.analysis;
   s.values_pin.reset();
+  s.kept_values_on_device = false;
   s.input_map.clear();
   s.input_map_analysis = 0;
   if (has_analyzed_pattern(an, a, host_arena(s))) {
@@ -201,6 +202,17 @@ void keep_analyzed_input(SolverState& s, const SparseMatrix& a) {
                "analyze: value sums");
 }
 
+}  // namespace
+
+void detail::host_values(SolverState& s) {
+  if (!s.kept_values_on_device) return;
+  if (!s.driver || !s.driver->download_device_input(*s.analysis, s.values.values.data()))
+    throw InternalError("the factorized values kept on the GPU could not be copied back");
+  s.kept_values_on_device = false;
+}
+
+namespace {
+
 // Equilibration sweeps of values far from the analysis's (rescale.hpp), on the host or the
 // device: each halves the logarithm of every row's and column's distance from 1.
 constexpr int kRescalingSweeps = 3;
@@ -212,11 +224,11 @@ constexpr int kRescalingSweeps = 3;
 // the scaled values for the factorization. On acceptance the staged values become the
 // kept ones (the two buffers trade places, so nothing is copied twice); refused values
 // (not finite, overflowing sums) throw with the kept values and the factor as they were.
-// Values the caller holds in page-locked memory go to the device from there, and their
-// copy into `scaled` (which becomes the kept values all the same) runs on the host's
-// threads once the device has accepted them, beside the factorization; s.kept_copy is
-// waited for before the factorization returns or the host reads them. False, with nothing
-// changed that matters, where the driver has no such pass. Sets norm1 = ‖B‖₁.
+// Values the caller holds in page-locked memory go to the device from there, unstaged, and
+// the device keeps a copy of them as given, which becomes the kept values (copied to the
+// host only when the host needs them: host_values); where the device has no room for that
+// copy, the host copies them. False, with nothing changed that matters, where the driver
+// has no such pass. Sets norm1 = ‖B‖₁.
 bool values_on_gpu(SolverState& s, const SparseMatrix& pattern, std::span<const double> values,
                    double& norm1) {
   const Analysis& an = *s.analysis;
@@ -238,7 +250,7 @@ bool values_on_gpu(SolverState& s, const SparseMatrix& pattern, std::span<const 
   const bool equilibrate = !an.row_scaling.empty() && !scaling_clamped(an);
   numeric::DeviceValueNorms dn;
   if (!s.driver->scale_values_on_device(an, direct ? values.data() : staged, stage,
-                                        equilibrate ? kRescalingSweeps : 0, dn))
+                                        equilibrate ? kRescalingSweeps : 0, direct, dn))
     return false;
   if (!dn.finite) detail::throw_first_not_finite(pattern, values.data());
   if (!dn.sums_finite) {
@@ -246,16 +258,19 @@ bool values_on_gpu(SolverState& s, const SparseMatrix& pattern, std::span<const 
     throw InternalError("the device found a row or column sum that overflows; the host did not");
   }
   if (equilibrate && !dn.equilibrated && dn.rescaling_sweeps == 0) return false;
-  if (direct) {
-    s.scaled_current = false;
-    s.kept_copy.start(arena, staged, values.data(), values.size());
-  }
   s.factor.valid = false;
   s.delayed.valid = false;
   s.norm_inf = dn.norm_inf;
   norm1 = dn.scaled_norm1;
-  std::swap(s.values.values, s.scaled);  // same size: the kept values are the staged ones
-  std::swap(s.values_pin, s.scaled_pin);
+  if (!direct) {
+    std::swap(s.values.values, s.scaled);  // same size: the kept values are the staged ones
+    std::swap(s.values_pin, s.scaled_pin);
+    s.kept_values_on_device = false;
+  } else {
+    s.scaled_current = false;  // of the values before
+    s.kept_values_on_device = dn.input_copied && s.driver->keep_device_input(an);
+    if (!s.kept_values_on_device) copy_values(s.values.values, values, arena);
+  }
   s.values_on_device = true;
   s.rescaling = Rescaling{};
   if (dn.rescaling_sweeps > 0) {
@@ -271,7 +286,6 @@ bool values_on_gpu(SolverState& s, const SparseMatrix& pattern, std::span<const 
 // and sweeps, up to six passes over the entries), else recomputed from the kept values by
 // the host's pass, which gives the bits the device computed.
 void host_scaled(SolverState& s) {
-  s.kept_copy.wait();  // the kept values complete (and `scaled` free) before either is used
   if (s.scaled_current) return;
   const Analysis& an = *s.analysis;
   if (s.values_on_device && s.scaled.size() == an.pattern_indices.size() &&
@@ -279,6 +293,7 @@ void host_scaled(SolverState& s) {
     s.scaled_current = true;
     return;
   }
+  host_values(s);
   refactor_values(*s.analysis, s.values, s.values.values.data(), host_arena(s), s.value_sums,
                   s.scaled);
   apply_rescaling(s.values, s.rescaling, s.scaled, &host_arena(s));  // the device's, if any
@@ -308,9 +323,11 @@ double prepare_values(SolverState& s, const SparseMatrix* a, std::span<const dou
     s.values = *a;
     s.values.storage = an.symmetric ? Storage::lower : Storage::full;
     s.values_analysis = an.id;
+    s.kept_values_on_device = false;
   }
   if (analyzed_pattern && values_on_gpu(s, s.values, values, norm1)) return norm1;
-  s.scaled_current = true;  // every path below writes the scaled values
+  s.kept_values_on_device = false;  // every path below writes the kept values
+  s.scaled_current = true;          // every path below writes the scaled values
   if (analyzed_pattern) {
     // Refactorization with the analyzed pattern (a Newton loop, a benchmark): one parallel
     // pass checks the values and the norms and scales them (refactor_values), then only
@@ -499,18 +516,11 @@ void report_factorization(SolverState& s, const NumericRun& r, double norm1, dou
 }
 
 void run_factorization(SolverState& s, const SparseMatrix* a, std::span<const double> values) {
-  // the kept values' copy, if the input stage started one, is complete when this returns
-  // or throws (the caller may then change or free its values)
-  struct WaitForCopy {
-    BackgroundCopy& copy;
-    ~WaitForCopy() { copy.wait(); }
-  } wait_for_copy{s.kept_copy};
   Timer timer;
   const double norm1 = prepare_values(s, a, values);
   const double input_seconds = timer.seconds();
   const double static_pivot = s.options.static_pivot_epsilon * (norm1 > 0 ? norm1 : 1.0);
   const NumericRun r = factor_values(s, norm1, static_pivot);
-  s.kept_copy.wait();  // in the factorization's time
   report_factorization(s, r, norm1, input_seconds, timer);
 }
 
@@ -518,6 +528,11 @@ void run_factorization(SolverState& s, const SparseMatrix* a, std::span<const do
 // executor hold (panels, contribution blocks, front workspaces, device buffers), so that
 // the caller can free memory elsewhere and try again. The analysis is kept.
 void release_factor(SolverState& s) noexcept {
+  try {
+    host_values(s);  // before the device that keeps them lets them go
+  } catch (const Error&) {
+    // left on the device that is going: host_values reports it if they are ever needed
+  }
   s.factor = numeric::NumericFactor{};
   s.delayed = numeric::DelayedFactor{};
   s.scaled_pin.reset();
@@ -622,6 +637,7 @@ void Solver::analyze_in_pivot_order() {
     // computed before anything is released: an allocation failure leaves the solver as it was
     Analysis next = analyze_with_pivot_sequence(*s.analysis, rows, cols, s.rescaling.row,
                                                 s.rescaling.col, s.options, workers);
+    host_values(s);
     const SparseMatrix values = s.values;  // the factorized values, in the analyzed pattern
     // the same pattern: refactorize(values) keeps taking the analyzed matrix's order
     std::vector<index_t> input_map = s.input_map;

@@ -13,7 +13,6 @@
 #include <vector>
 
 #include "analysis/analysis.hpp"
-#include "base/host_copy.hpp"
 #include "core/rescale.hpp"
 #include "numeric/delayed.hpp"
 #include "numeric/driver.hpp"
@@ -41,10 +40,10 @@ struct SolverState {
   // needs them (host_scaled)
   bool scaled_current = true;
   bool values_on_device = false;
-  // a refactorization's page-locked input values copied into the kept ones on the host's
-  // threads while the GPU works (values_on_gpu); waited for before the factorization
-  // returns or anything reads `values` or `scaled` (declared after both: waited first)
-  BackgroundCopy kept_copy;
+  // the values of `values` are those of a refactorization that took page-locked input,
+  // kept on the GPU that factored it (values_on_gpu), not yet copied here: host_values
+  // fetches them before anything on the host reads them
+  bool kept_values_on_device = false;
   std::vector<double> value_sums;  // per-range vectors of the blocked value passes, kept
   // the host threads of those passes (Options::num_threads), kept: creating a task arena
   // for each parallel loop cost milliseconds per refactorization on a 64-core host
@@ -86,6 +85,11 @@ struct SolverState {
   std::uint64_t det_terms_of = 0;
   Stats stats;
 };
+
+/// Copies the factorized values that a refactorization left on the GPU alone
+/// (kept_values_on_device) into `values`, so that the host can read them; nothing when they
+/// are there already. Throws InternalError when the device no longer holds them, DeviceError.
+void host_values(SolverState& s);
 
 /// The solver's host task arena for Options::num_threads (0: all hardware threads), made
 /// on first use and when the option changes.

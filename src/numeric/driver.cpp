@@ -134,11 +134,18 @@ class TreeDriver final : public NumericDriver {
     creation_seconds_ = 0;  // part of the analysis's device set-up, not a factorization's
   }
   bool scale_values_on_device(const Analysis& an, const double* values, const StageValues& stage,
-                              int max_sweeps, DeviceValueNorms& out) override {
-    return gpu_ && executor().scale_values_on_device(an, values, stage, max_sweeps, out);
+                              int max_sweeps, bool copy_input, DeviceValueNorms& out) override {
+    return gpu_ &&
+           executor().scale_values_on_device(an, values, stage, max_sweeps, copy_input, out);
   }
   bool download_scaled_values(const Analysis& an, double* host) override {
     return gpu_ && executor().download_scaled_values(an, host);
+  }
+  bool keep_device_input(const Analysis& an) override {
+    return gpu_ && executor_ && executor_->keep_device_input(an);
+  }
+  bool download_device_input(const Analysis& an, double* host) override {
+    return gpu_ && executor_ && executor_->download_device_input(an, host);
   }
   void factorize(const Analysis& an, const std::vector<double>& scaled_values,
                  bool values_on_device, MatrixType type, const PivotPolicy& pivots,

@@ -46,17 +46,22 @@ class NumericDriver {
   /// The value pass of the next factorizations on the GPU (Executor::scale_values_on_device
   /// of the tree driver's CUDA executor): `values` (host, canonical entry order, filled
   /// piece by piece by `stage`) checked, scaled, equilibrated again by at most
-  /// `max_sweeps` sweeps where needed, and measured on the device, `out` its findings.
+  /// `max_sweeps` sweeps where needed, and measured on the device, `out` its findings;
+  /// with `copy_input` also copied there as given.
   /// False, having done nothing, for every other driver and where the executor has no
   /// such pass.
   virtual bool scale_values_on_device(const Analysis& an, const double* values,
-                                      const StageValues& stage, int max_sweeps,
+                                      const StageValues& stage, int max_sweeps, bool copy_input,
                                       DeviceValueNorms& out) {
     return false;
   }
   /// The values the last scale_values_on_device scaled, copied back into `host`
   /// (Executor::download_scaled_values); false for every other driver.
   virtual bool download_scaled_values(const Analysis& an, double* host) { return false; }
+  /// Executor::keep_device_input and download_device_input of that executor; false for
+  /// every other driver.
+  virtual bool keep_device_input(const Analysis& an) { return false; }
+  virtual bool download_device_input(const Analysis& an, double* host) { return false; }
   /// Factors the scaled values (the analysis's canonical entry order) as `type` with
   /// the pivot policy `pivots` (static pivots, LU's threshold) into `factor`; values_on_device:
   /// those the last scale_values_on_device left on the GPU instead (scaled_values is not read).

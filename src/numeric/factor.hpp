@@ -96,6 +96,9 @@ struct DeviceValueNorms {
   /// diag(row_rescaling)·B·diag(col_rescaling).
   int rescaling_sweeps = 0;
   std::vector<double> row_rescaling, col_rescaling;
+  /// The pass was asked to copy the values as given (copy_input) and had the device
+  /// memory for it: Executor::keep_device_input can keep them.
+  bool input_copied = false;
 };
 
 /// Called by a StageValues for each piece of the staging buffer it has filled: entries
@@ -237,15 +240,25 @@ class Executor {
   /// the factorizations that follow with FactorContext::values_on_device, until the next
   /// call or analysis. When `stage` is set it fills `values` and each piece goes up as
   /// soon as stage reports it in place, so that the caller's filling of the buffer
-  /// overlaps the copies. Returns false, having called nothing and changed
+  /// overlaps the copies. `copy_input`: the values as given are also copied, on the
+  /// device, before they are scaled, where keep_device_input can keep them
+  /// (out.input_copied: there was room). Returns false, having called nothing and changed
   /// nothing, where the executor has no such pass: host executors, or a plan whose fronts
   /// read the values on the host (fronts factored tile by tile). Throws DeviceError, as
   /// factorize.
   virtual bool scale_values_on_device(const Analysis& an, const double* values,
-                                      const StageValues& stage, int max_sweeps,
+                                      const StageValues& stage, int max_sweeps, bool copy_input,
                                       DeviceValueNorms& out) {
     return false;
   }
+  /// Makes the values the last scale_values_on_device copied as given (copy_input) the
+  /// executor's kept input for `an`, in place of those kept before: a factorization
+  /// accepted them. False, having done nothing, where there is no such copy for `an`.
+  virtual bool keep_device_input(const Analysis& an) { return false; }
+  /// The kept input (keep_device_input) copied into `host` (an.pattern_indices.size()
+  /// values). False, having done nothing, where the executor keeps none for `an` (another
+  /// analysis since, or its device memory released). Throws DeviceError.
+  virtual bool download_device_input(const Analysis& an, double* host) { return false; }
   /// The scaled values the last scale_values_on_device left on the device (B in the
   /// analysis's canonical entry order, an.pattern_indices.size() of them) copied into
   /// `host`, for a host algorithm that needs them (the delayed LU). False, having done

@@ -1,19 +1,15 @@
 // strata — the host memory the GPU plan counts on (base/host_memory.hpp), against the
 // physical memory sysconf reports (an independent source); the vectors whose resize does
-// not zero (base/default_init.hpp), against std::vector; the copy that runs beside its
-// caller (base/host_copy.hpp), against the source.
+// not zero (base/default_init.hpp), against std::vector.
 #include <gtest/gtest.h>
-#include <tbb/task_arena.h>
 #include <unistd.h>
 
 #include <algorithm>
-#include <cmath>
 #include <random>
 #include <string>
 #include <vector>
 
 #include "base/default_init.hpp"
-#include "base/host_copy.hpp"
 #include "base/host_memory.hpp"
 #include "support/test_support.hpp"
 
@@ -73,45 +69,6 @@ TEST(UninitVector, ConstructsAsStdVectorExceptTheDefaultElements) {
     s.resize(n + 2, "strata");
     if (n > 0) EXPECT_TRUE(s.front().empty());
     EXPECT_EQ(s.back(), "strata");
-  }
-}
-
-// BackgroundCopy: the destination equals the source after wait(), with the caller busy
-// meanwhile and with arenas of one thread (copied in start) and of several; sizes 0, 1, 2,
-// 3, 5, 733 and one of several parallel_copy chunks; a second start waits for the first;
-// the destructor waits for a copy nobody waited for. Fresh random values.
-TEST(BackgroundCopy, CopiesBesideTheCallerAndIsCompleteAfterTheWait) {
-  unsigned long long seed = 0;
-  auto rng = test::fresh_rng(&seed);
-  SCOPED_TRACE("seed " + std::to_string(seed));
-  std::uniform_real_distribution<double> u(-1, 1);
-  for (int threads : {1, 2}) {
-    SCOPED_TRACE("threads " + std::to_string(threads));
-    tbb::task_arena arena(threads);
-    for (std::size_t n : {std::size_t{0}, std::size_t{1}, std::size_t{2}, std::size_t{3},
-                          std::size_t{5}, std::size_t{733}, std::size_t{3} << 18}) {
-      SCOPED_TRACE("n " + std::to_string(n));
-      std::vector<double> src(n), dst(n, 0.0), again(n, 0.0);
-      for (double& v : src) v = u(rng);
-      BackgroundCopy copy;
-      copy.start(arena, dst.data(), src.data(), n);
-      if (threads == 1) EXPECT_FALSE(copy.running());
-      double busy = 0;  // the caller's own work meanwhile
-      for (int i = 0; i < 1000; ++i) busy += u(rng);
-      EXPECT_TRUE(std::isfinite(busy));
-      copy.start(arena, again.data(), src.data(), n);  // waits for the first copy
-      EXPECT_EQ(dst, src);
-      copy.wait();
-      EXPECT_FALSE(copy.running());
-      EXPECT_EQ(again, src);
-      copy.wait();  // nothing running: returns at once
-      std::vector<double> last(n, 0.0);
-      {
-        BackgroundCopy unwaited;
-        unwaited.start(arena, last.data(), src.data(), n);
-      }
-      EXPECT_EQ(last, src);
-    }
   }
 }
 

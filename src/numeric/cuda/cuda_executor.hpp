@@ -195,9 +195,11 @@ class CudaExecutor final : public numeric::Executor {
   numeric::TransferMemory transfer_memory() const override;
   void prepare(const Analysis& an, int workers) override;
   bool scale_values_on_device(const Analysis& an, const double* values,
-                              const numeric::StageValues& stage, int max_sweeps,
+                              const numeric::StageValues& stage, int max_sweeps, bool copy_input,
                               numeric::DeviceValueNorms& out) override;    // value_pass.cu
   bool download_scaled_values(const Analysis& an, double* host) override;  // value_pass.cu
+  bool keep_device_input(const Analysis& an) override;                     // value_pass.cu
+  bool download_device_input(const Analysis& an, double* host) override;   // value_pass.cu
   void begin(const numeric::FactorContext& ctx) override;
   void begin_part(const numeric::FactorContext& ctx) override;
   void factor_batch(const numeric::FactorContext& ctx, const BatchInfo& b) override;
@@ -545,6 +547,11 @@ class CudaExecutor final : public numeric::Executor {
     PinnedBuffer<double> out;
     std::uint64_t analysis = 0;
   } value_pass_;
+  // the values as given of the last value pass that copied them (input_next_) and of the
+  // last factorization that kept them (input_, for analysis input_analysis_):
+  // keep_device_input, download_device_input
+  DeviceBuffer<double> input_, input_next_;
+  std::uint64_t input_analysis_ = 0;
   // numeric working memory
   DeviceBuffer<double> values_, arena_, pool_, potrf_work_, panels_;
   PinnedBuffer<double> host_arena_, host_staging_;

@@ -8,7 +8,9 @@
 // there once. The scaled values stay on the device, where the assembly reads them
 // (FactorContext::values_on_device); the host gets five numbers, and the sweeps' factors
 // when there were sweeps (the scaled values themselves only when a host algorithm asks for
-// them: download_scaled_values).
+// them: download_scaled_values). Values the caller holds page-locked are also kept on the
+// device as given (copy_input, keep_device_input), so that the host copies them back only
+// when it needs them (download_device_input).
 //
 // How: two passes over the entries, one warp per row and one per column. The row pass
 // reads the entries of a row through a row-wise map of the canonical (column-wise)
@@ -316,9 +318,27 @@ bool CudaExecutor::download_scaled_values(const Analysis& an, double* host) {
   return true;
 }
 
+bool CudaExecutor::keep_device_input(const Analysis& an) {
+  if (an.id != analysis_id_ || input_next_.size() < an.pattern_indices.size()) return false;
+  std::swap(input_, input_next_);
+  input_analysis_ = an.id;
+  return true;
+}
+
+bool CudaExecutor::download_device_input(const Analysis& an, double* host) {
+  const std::size_t nnz = an.pattern_indices.size();
+  if (input_analysis_ != an.id || an.id != analysis_id_ || input_.size() < nnz) return false;
+  STRATA_CUDA(cudaSetDevice(device_));
+  if (nnz > 0)
+    STRATA_CUDA(cudaMemcpyAsync(host, input_.data(), nnz * sizeof(double), cudaMemcpyDeviceToHost,
+                                stream_));
+  STRATA_CUDA(cudaStreamSynchronize(stream_));
+  return true;
+}
+
 bool CudaExecutor::scale_values_on_device(const Analysis& an, const double* values,
                                           const numeric::StageValues& stage, int max_sweeps,
-                                          numeric::DeviceValueNorms& out) {
+                                          bool copy_input, numeric::DeviceValueNorms& out) {
   STRATA_CUDA(cudaSetDevice(device_));
   ValuePass& v = value_pass_;
   if (v.analysis != an.id || an.id != analysis_id_ || planned_ != 1) return false;
@@ -345,6 +365,19 @@ bool CudaExecutor::scale_values_on_device(const Analysis& an, const double* valu
     stage(0, nnz, upload_piece);
   else
     upload_piece(0, nnz);
+  // the values as given, before the passes scale them in place (outside the memory plan:
+  // where the device has no room the caller keeps them on the host)
+  out.input_copied = false;
+  if (copy_input && nnz > 0) {
+    try {
+      input_next_.resize(nnz);
+      out.input_copied = true;
+    } catch (const OutOfMemory&) {
+    }
+    if (out.input_copied)
+      STRATA_CUDA(cudaMemcpyAsync(input_next_.data(), values_.data(), nnz * sizeof(double),
+                                  cudaMemcpyDeviceToDevice, stream_));
+  }
   STRATA_CUDA(cudaMemsetAsync(v.bad.data(), 0, 2 * sizeof(int), stream_));
   double* s = v.sums.data();
   double *ra = s, *rb = s + n, *rm = s + 2 * n, *ca = s + 3 * n, *cb = s + 4 * n, *cm = s + 5 * n;
