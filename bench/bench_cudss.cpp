@@ -3,8 +3,8 @@
 //
 // For each problem: strata on the GPU (analysis, first factorization, median of --repeat
 // refactorizations of the values alone (Solver::refactorize(span), as cuDSS's after
-// cudssMatrixSetValues; the values page-locked, as those cuDSS's timed copy reads, so
-// that strata copies them to the device directly), for LU also with Pivoting::fixed and, when the
+// cudssMatrixSetValues; the values in cudaMallocHost memory, as those cuDSS's timed copy
+// reads, so that strata copies them to the device directly), for LU also with Pivoting::fixed and, when the
 // refactorization delayed pivots, in their order (Solver::analyze_in_pivot_order), solve with
 // refinement); cuDSS with its default reordering and with strata's permutation given as
 // CUDSS_DATA_USER_PERM (both directions of the permutation are tried and the one with the smaller
@@ -284,8 +284,21 @@ static int driver_main(int argc, char** argv) {
     const FactorStats first_stats = s.stats().factor;  // its device set-up among the phases
     // the refactorizations take the values alone, as cuDSS's take cudssMatrixSetValues'
     // (the matrices here are canonical: the pattern is the analyzed one)
-    const std::span<const double> values = p.a.values;
-    const auto pin = numeric::pin_host_memory(p.a.values.data(), values.size_bytes());
+    // in page-locked memory from cudaMallocHost, as the values of cuDSS's timed copy
+    struct PinnedValues {
+      double* p = nullptr;
+      ~PinnedValues() {
+        if (p) cudaFreeHost(p);
+      }
+    } pinned;
+    const std::size_t nv = p.a.values.size();
+    if (cudaMallocHost(&pinned.p, sizeof(double) * std::max<std::size_t>(nv, 1)) != cudaSuccess) {
+      (void)cudaGetLastError();
+      pinned.p = nullptr;
+    }
+    if (pinned.p) std::copy(p.a.values.begin(), p.a.values.end(), pinned.p);
+    const std::span<const double> values =
+        pinned.p ? std::span<const double>(pinned.p, nv) : std::span<const double>(p.a.values);
     std::vector<double> times;
     for (int k = 0; k < repeat; ++k) {
       t.reset();
@@ -383,7 +396,7 @@ static int driver_main(int argc, char** argv) {
                   {"first_factor", bench::device_figures(first_stats)},
                   {"last_refactor", bench::device_figures(refactor_stats)},
                   {"delayed_pivoting", refactor_stats.delayed_pivoting},
-                  {"values_page_locked", pin != nullptr},
+                  {"values_page_locked", pinned.p != nullptr},
                   {"fixed_order", fixed_order},
                   {"pivot_order", pivot_order}}},
                 {"cudss_default", to_json(def)},

@@ -1793,7 +1793,10 @@ TEST_F(CudaBackend, PageLockedValuesGiveTheFactorOfPageableOnes) {
       }
       direct.refactorize(std::span<const double>(locked));
       staged.refactorize(std::span<const double>(next.values));
-      numeric::set_device_allocation_cap(0);  // no room for the device's copy of the values
+      // a refactorization's own device buffers made by a pageable one first, then no room
+      // for the device's copy of the values
+      no_room.refactorize(std::span<const double>(next.values));
+      numeric::set_device_allocation_cap(0);
       try {
         no_room.refactorize(std::span<const double>(locked));
       } catch (...) {
