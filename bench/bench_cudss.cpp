@@ -3,18 +3,18 @@
 //
 // For each problem: strata on the GPU (analysis, first factorization, median of --repeat
 // refactorizations of the values alone (Solver::refactorize(span), as cuDSS's after
-// cudssMatrixSetValues; the values in cudaMallocHost memory, as those cuDSS's timed copy
-// reads, so that strata copies them to the device directly), for LU also with Pivoting::fixed and, when the
-// refactorization delayed pivots, in their order (Solver::analyze_in_pivot_order), solve with
-// refinement); cuDSS with its default reordering and with strata's permutation given as
-// CUDSS_DATA_USER_PERM (both directions of the permutation are tried and the one with the smaller
-// LU_NNZ kept, since the documentation does not say which one it expects), each: analysis,
-// factorization, median of --repeat REFACTORIZATION, the same with the values copied to the
-// device from page-locked host memory before each (what a host-assembled matrix such as the
-// multibody engine's costs cuDSS, as strata's refactorizations take host values), solve,
-// backward error computed on the host, LU_NNZ.
-// cuDSS gets the upper triangle (CSR view of strata's lower CSC) for SPD matrices and the
-// whole matrix for unsymmetric ones; 32-bit indices. Results: <dir>/cudss-*.json.
+// cudssMatrixSetValues: from GPU memory, as cuDSS's timed REFACTORIZATION reads them, and
+// from cudaMallocHost memory, as cuDSS's timed copy before it reads them), for LU also with
+// Pivoting::fixed and, when the refactorization delayed pivots, in their order
+// (Solver::analyze_in_pivot_order), solve with refinement); cuDSS with its default reordering and
+// with strata's permutation given as CUDSS_DATA_USER_PERM (both directions of the permutation are
+// tried and the one with the smaller LU_NNZ kept, since the documentation does not say which one it
+// expects), each: analysis, factorization, median of --repeat REFACTORIZATION, the same with the
+// values copied to the device from page-locked host memory before each (what a host-assembled
+// matrix such as the multibody engine's costs cuDSS, as strata's refactorizations take host
+// values), solve, backward error computed on the host, LU_NNZ. cuDSS gets the upper triangle (CSR
+// view of strata's lower CSC) for SPD matrices and the whole matrix for unsymmetric ones; 32-bit
+// indices. Results: <dir>/cudss-*.json.
 //
 //   bench_cudss [--problems a,b,...] [--repeat R] [--solver-option NAME=VALUE]... [--tag NAME]
 //               [--results-dir DIR] [--dump-orders DIR]
@@ -299,14 +299,37 @@ static int driver_main(int argc, char** argv) {
     if (pinned.p) std::copy(p.a.values.begin(), p.a.values.end(), pinned.p);
     const std::span<const double> values =
         pinned.p ? std::span<const double>(pinned.p, nv) : std::span<const double>(p.a.values);
-    std::vector<double> times;
+    // and in GPU memory (cudaMalloc), as cuDSS's timed REFACTORIZATION reads them
+    struct GpuValues {
+      double* p = nullptr;
+      ~GpuValues() {
+        if (p) cudaFree(p);
+      }
+    } on_gpu;
+    if (cudaMalloc(&on_gpu.p, sizeof(double) * std::max<std::size_t>(nv, 1)) != cudaSuccess ||
+        cudaMemcpy(on_gpu.p, p.a.values.data(), sizeof(double) * nv, cudaMemcpyHostToDevice) !=
+            cudaSuccess) {
+      (void)cudaGetLastError();
+      if (on_gpu.p) cudaFree(on_gpu.p);
+      on_gpu.p = nullptr;
+    }
+    const std::span<const double> gpu_values =
+        on_gpu.p ? std::span<const double>(on_gpu.p, nv) : values;
+    std::vector<double> times, host_times;
     for (int k = 0; k < repeat; ++k) {
       t.reset();
-      s.refactorize(values);
+      s.refactorize(gpu_values);
       times.push_back(t.seconds());
     }
     const double rf_s = bench::median(times);
     const FactorStats refactor_stats = s.stats().factor;  // the last refactorization's
+    for (int k = 0; k < repeat; ++k) {
+      t.reset();
+      s.refactorize(values);
+      host_times.push_back(t.seconds());
+    }
+    const double rf_host_s = bench::median(host_times);
+    const FactorStats refactor_host_stats = s.stats().factor;
     // LU: also in the analysis's order alone (Pivoting::fixed, static pivots as cuDSS
     // takes them), which separates the device's refactorization from the delayed one on
     // the host that the default (automatic) adds when that order needs static pivots
@@ -397,6 +420,9 @@ static int driver_main(int argc, char** argv) {
                   {"last_refactor", bench::device_figures(refactor_stats)},
                   {"delayed_pivoting", refactor_stats.delayed_pivoting},
                   {"values_page_locked", pinned.p != nullptr},
+                  {"values_in_gpu_memory", on_gpu.p != nullptr},
+                  {"refactor_host_seconds", rf_host_s},
+                  {"last_refactor_host", bench::device_figures(refactor_host_stats)},
                   {"fixed_order", fixed_order},
                   {"pivot_order", pivot_order}}},
                 {"cudss_default", to_json(def)},
@@ -405,11 +431,11 @@ static int driver_main(int argc, char** argv) {
     const double best = std::min(def.ok ? def.refactor : 1e300, same.ok ? same.refactor : 1e300);
     if (best < 1e300) row["ratio_strata_refactor_over_best_cudss_refactor"] = rf_s / best;
     if (def.ok) row["ratio_strata_factor_over_cudss_default_factor"] = f_s / def.factor;
-    // strata's refactorizations take host values: against cuDSS's with the values' copy
+    // strata's refactorizations from host values: against cuDSS's with the values' copy
     const double best_up = std::min(def.ok ? def.refactor_with_upload : 1e300,
                                     same.ok ? same.refactor_with_upload : 1e300);
     if (best_up < 1e300)
-      row["ratio_strata_refactor_over_best_cudss_refactor_with_upload"] = rf_s / best_up;
+      row["ratio_strata_refactor_over_best_cudss_refactor_with_upload"] = rf_host_s / best_up;
     if (best_up < 1e300 && !fixed_order.is_null())
       row["ratio_strata_fixed_order_refactor_over_best_cudss_refactor_with_upload"] =
           fixed_order["refactor_seconds"].get<double>() / best_up;
@@ -421,6 +447,10 @@ static int driver_main(int argc, char** argv) {
         p.name, p.a.n_rows, an.nnz_l, f_s, def.ok ? def.factor : -1.0, rf_s,
         def.ok ? def.refactor : -1.0, same.ok ? same.refactor : -1.0,
         best < 1e300 ? rf_s / best : -1.0, def.ok ? f_s / def.factor : -1.0);
+    fmt::print(
+        "  strata from page-locked host values: refactorization {:.4f} s; cuDSS with their copy "
+        "{:.4f} s\n",
+        rf_host_s, best_up < 1e300 ? best_up : -1.0);
     if (!fixed_order.is_null())
       fmt::print(
           "  strata in the analysis's order only (Pivoting::fixed): refactorization {:.4f} s, "

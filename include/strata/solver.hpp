@@ -99,14 +99,16 @@ class Solver {
   /// The pattern is not compared (refactorize(A) does), so a caller that assembles into a
   /// fixed pattern saves a pass over it; a canonical matrix (CSC, row indices sorted, no
   /// duplicates, the lower triangle when symmetric) is read in place, another is gathered
-  /// into that form first. On one GPU (the CUDA backend) a canonical matrix's values in
-  /// page-locked host memory (cudaMallocHost, cudaHostAlloc, cudaHostRegister) are copied to
-  /// the device directly and the solver's copy of them is kept there, copied back only when
-  /// the host needs it (the residuals of a checked solve); values in pageable memory are
-  /// first staged in a page-locked buffer of the solver's (stats().factor.input_seconds).
-  /// Either way the caller may change its values once this returns. Throws InvalidState
-  /// before analyze, InvalidInput when values.size() is not that matrix's number of
-  /// entries, and as refactorize.
+  /// into that form first. `values` may also lie in GPU memory (cudaMalloc), as cuDSS's
+  /// cudssMatrixSetValues takes them. On one GPU (the CUDA backend) a canonical matrix's
+  /// values in GPU memory or in page-locked host memory (cudaMallocHost, cudaHostAlloc,
+  /// cudaHostRegister) are copied to the device directly and the solver's copy of them is
+  /// kept there, copied to the host only when the host needs it (the residuals of a checked
+  /// solve); values in pageable memory are first staged in a page-locked buffer of the
+  /// solver's (stats().factor.input_seconds); without that GPU pass, values in GPU memory
+  /// are fetched to the host first. Either way the caller may change its values once this
+  /// returns. Throws InvalidState before analyze, InvalidInput when values.size() is not
+  /// that matrix's number of entries, and as refactorize.
   void refactorize(std::span<const double> values);
 
   /// Solves A X = B for nrhs right-hand sides. b and x are column-major n×nrhs arrays

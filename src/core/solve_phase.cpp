@@ -4,7 +4,8 @@
 // One solve with the factor (apply_inverse) takes b to the analysis's numbering and
 // scaling (B = Dr·P·A·Q·Dc, with the extra rescaling of the last factorization when there
 // was one), solves with the factor where it lives (the host's delayed factor, the device's
-// resident factor, or the host's copy) and takes the solution back. Each column's
+// resident factor, or the host's copy) and takes the solution back; for a factor resident
+// on a GPU the permutation and scaling run there too (Executor::solve_original). Each column's
 // normwise backward error ‖b − A x‖∞ / (‖A‖∞‖x‖∞ + ‖b‖∞) (Rigal and Gaches; Higham,
 // Accuracy and Stability of Numerical Algorithms, 2nd ed., §7.1) is checked against
 // max(Options::refinement_tolerance, (m+1)·u) for m the most entries in a row of A (§3.5).
@@ -87,6 +88,11 @@ bool apply_inverse(SolverState& s, const double* b, double* x, index_t nrhs) {
   const bool scale = !an.row_scaling.empty();
   const bool match = !an.matching_perm.empty();
   const bool rescale = !s.rescaling.row.empty();
+  // the factor resident on a GPU: the permutation and scaling there too
+  if (!s.delayed.valid &&
+      s.driver->solve_original(an, s.factor, b, x, nrhs, rescale ? s.rescaling.row.data() : nullptr,
+                               rescale ? s.rescaling.col.data() : nullptr, work))
+    return true;
   for_entries(s, n * nrhs, [&](index_t e) {
     const index_t k = e % n, r = e / n;
     const index_t i = an.perm[k];  // row of B is a row of A

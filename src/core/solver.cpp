@@ -235,7 +235,8 @@ bool values_on_gpu(SolverState& s, const SparseMatrix& pattern, std::span<const 
   if (!s.driver->uploads_values() || values.empty()) return false;
   tbb::task_arena& arena = host_arena(s);
   resize_scaled(s, values.size(), "factorize: staged values");
-  const bool direct = numeric::page_locked(values.data(), values.size_bytes());
+  const bool on_device = numeric::device_memory_of(values.data()) >= 0;
+  const bool direct = on_device || numeric::page_locked(values.data(), values.size_bytes());
   if (!direct) pin_scaled(s);
   double* staged = s.scaled.data();
   numeric::StageValues stage;
@@ -252,9 +253,17 @@ bool values_on_gpu(SolverState& s, const SparseMatrix& pattern, std::span<const 
   if (!s.driver->scale_values_on_device(an, direct ? values.data() : staged, stage,
                                         equilibrate ? kRescalingSweeps : 0, direct, dn))
     return false;
-  if (!dn.finite) detail::throw_first_not_finite(pattern, values.data());
+  // refused: the host names the first bad value or sum (values in device memory fetched)
+  std::vector<double> fetched;
+  auto host_view = [&] {
+    if (!on_device) return values.data();
+    fetched.resize(values.size());
+    numeric::copy_from_device(fetched.data(), values.data(), values.size());
+    return static_cast<const double*>(fetched.data());
+  };
+  if (!dn.finite) detail::throw_first_not_finite(pattern, host_view());
   if (!dn.sums_finite) {
-    check_norms(pattern, values.data());
+    check_norms(pattern, host_view());
     throw InternalError("the device found a row or column sum that overflows; the host did not");
   }
   if (equilibrate && !dn.equilibrated && dn.rescaling_sweeps == 0) return false;
@@ -327,7 +336,14 @@ double prepare_values(SolverState& s, const SparseMatrix* a, std::span<const dou
   }
   if (analyzed_pattern && values_on_gpu(s, s.values, values, norm1)) return norm1;
   s.kept_values_on_device = false;  // every path below writes the kept values
-  s.scaled_current = true;          // every path below writes the scaled values
+  // every path below reads the values on the host: values in device memory fetched first
+  std::vector<double> fetched;
+  if (numeric::device_memory_of(values.data()) >= 0) {
+    fetched.resize(values.size());
+    numeric::copy_from_device(fetched.data(), values.data(), values.size());
+    values = fetched;
+  }
+  s.scaled_current = true;  // every path below writes the scaled values
   if (analyzed_pattern) {
     // Refactorization with the analyzed pattern (a Newton loop, a benchmark): one parallel
     // pass checks the values and the norms and scales them (refactor_values), then only
@@ -675,6 +691,13 @@ void Solver::refactorize(std::span<const double> values) {
   if (!mapped) {
     factor_phase(s, nullptr, values);
     return;
+  }
+  // gathered on the host below: values in device memory fetched first
+  std::vector<double> fetched;
+  if (numeric::device_memory_of(values.data()) >= 0) {
+    fetched.resize(values.size());
+    numeric::copy_from_device(fetched.data(), values.data(), values.size());
+    values = fetched;
   }
   // the analyzed matrix's own order: its values gathered into the canonical pattern
   // (duplicates added in its order; entries the analysis does not keep left out)

@@ -26,6 +26,16 @@ std::unique_ptr<PinnedHostRange> pin_host_memory(void*, std::size_t) { return nu
 
 bool page_locked(const void*, std::size_t) { return false; }
 
+int device_memory_of(const void*) { return -1; }
+
+void copy_from_device(double*, const double*, std::size_t) {
+  throw NotSupported("this build of strata has no CUDA backend (nvcc was not found at build time)");
+}
+
+std::shared_ptr<double> cuda_device_copy(const std::vector<double>&) {
+  throw NotSupported("this build of strata has no CUDA backend (nvcc was not found at build time)");
+}
+
 index_t cuda_llt_pivot_block_and_panel(double*, index_t, index_t) {
   throw NotSupported("this build of strata has no CUDA backend (nvcc was not found at build time)");
 }

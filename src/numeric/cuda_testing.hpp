@@ -4,6 +4,7 @@
 // NotSupported (numeric/backends.cpp).
 #pragma once
 
+#include <memory>
 #include <vector>
 
 #include "strata/types.hpp"
@@ -58,5 +59,10 @@ std::vector<char> cuda_lu_fronts_batched(std::vector<std::vector<double>>& front
 /// can see which width a factorization used. Throws InvalidInput for count < 1 or max_rows
 /// outside [1, 256], NotSupported in a build without CUDA.
 int cuda_small_front_threads(index_t count, index_t max_rows, int max_threads, bool shared = false);
+
+/// A copy of `host` in device memory of CUDA device 0 (cudaMalloc), freed with the last
+/// owner, so that tests can give the solver values that live on the GPU. Throws
+/// DeviceError, NotSupported in a build without CUDA or without a GPU.
+std::shared_ptr<double> cuda_device_copy(const std::vector<double>& host);
 
 }  // namespace strata::numeric

@@ -75,6 +75,15 @@ class NumericDriver {
   /// runs on the host. Returns whether it ran on GPUs (the tree driver: the resident
   /// factor's device solve; the multi-worker driver: every part on the GPU holding it).
   virtual bool solve(const Analysis& an, NumericFactor& factor, double* x, index_t nrhs) = 0;
+  /// Executor::solve_original of the tree driver's executor (b and x in the original
+  /// numbering, permuted and scaled where the factor is); false, having done nothing, for
+  /// every other driver and where that executor's solve would not run (the caller then
+  /// permutes and scales on the host and calls solve).
+  virtual bool solve_original(const Analysis& an, NumericFactor& factor, const double* b, double* x,
+                              index_t nrhs, const double* row_rescale, const double* col_rescale,
+                              double* stage) {
+    return false;
+  }
   /// Where the last factorization ran (FactorStats::backend; never automatic).
   virtual Backend backend() const = 0;
   /// Adds the last factorization's own figures to `fs`: the device figures (summed over

@@ -232,8 +232,9 @@ class Executor {
   /// Solver::analyze calls it, as cuDSS's analysis phase prepares the device. Throws what
   /// that set-up throws (OutOfMemory, DeviceError); the default does nothing.
   virtual void prepare(const Analysis& an, int workers) {}
-  /// The value pass of a factorization on the executor's device: `values` (host, the
-  /// analysis's canonical entry order; page-locked for a fast copy) uploaded, checked,
+  /// The value pass of a factorization on the executor's device: `values` (the analysis's
+  /// canonical entry order; host memory, page-locked for a fast copy, or device memory)
+  /// copied there, checked,
   /// scaled by the analysis's matching scaling, equilibrated again by at most
   /// `max_sweeps` sweeps when B is not within a factor 2 of equilibrium (0: not; see
   /// DeviceValueNorms) and measured there (`out`), and kept for
@@ -292,6 +293,19 @@ class Executor {
   /// stayed resident on the device): x as solve_in_place. Returns false when it cannot
   /// (the caller then runs solve_in_place on the host); the default cannot.
   virtual bool solve(const Analysis& an, const NumericFactor& fac, double* x, index_t nrhs) {
+    return false;
+  }
+  /// solve for right-hand sides in the analysis's original numbering: x = A⁻¹ b for b and
+  /// x host arrays of n × nrhs (column-major; they may not alias), the analysis's
+  /// permutation and matching scaling and the factorization's rescaling (row_rescale,
+  /// col_rescale: n each, original numbering, or null for none) applied where the factor
+  /// is, around the triangular solves; b and x move through `stage` (page-locked host
+  /// memory of n × nrhs doubles) unless they are page-locked themselves. Returns false,
+  /// having done nothing, where solve would (the caller then permutes and scales on the
+  /// host and calls solve); the default does.
+  virtual bool solve_original(const Analysis& an, const NumericFactor& fac, const double* b,
+                              double* x, index_t nrhs, const double* row_rescale,
+                              const double* col_rescale, double* stage) {
     return false;
   }
   /// After begin_part: true when the panels of the part ctx.part will stay in the
@@ -374,6 +388,15 @@ std::unique_ptr<PinnedHostRange> pin_host_memory(void* p, std::size_t bytes);
 /// first and its last byte), so that a copy to a device can read it directly. False in a
 /// build without CUDA, without a visible GPU and for an empty range.
 bool page_locked(const void* p, std::size_t bytes);
+
+/// The CUDA device whose memory holds `p` (cudaMalloc: cudaPointerGetAttributes reports
+/// device memory), or -1 for host memory (managed memory included: the host reads it), in
+/// a build without CUDA and without a visible GPU.
+int device_memory_of(const void* p);
+
+/// host[0, n) = device[0, n), a copy from device memory (device_memory_of ≥ 0) that
+/// returns when it is complete. Throws DeviceError; NotSupported in a build without CUDA.
+void copy_from_device(double* host, const double* device, std::size_t n);
 
 /// Sizes `factor` for the analysis and type (a no-op when it already is: refactorization
 /// reuses the storage) and marks it invalid; the panels only when `host_panels`.

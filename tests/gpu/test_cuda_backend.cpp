@@ -1743,7 +1743,8 @@ TEST_F(CudaBackend, ValuesRefusedOnTheDeviceKeepTheFactor) {
 // the values given, and so is an analysis in the delayed pivots' order. Refused values from
 // it leave the factor and the kept values as they were. Without device memory for the copy
 // (the test-only cap) the host keeps the values, with the same results. Page-locked and
-// pageable values alternating in one solver give each one's factor.
+// pageable values alternating in one solver give each one's factor. Values in GPU memory
+// (cudaMalloc) likewise, and refused ones are named as from the host.
 TEST_F(CudaBackend, PageLockedValuesGiveTheFactorOfPageableOnes) {
   unsigned long long seed = 0;
   auto rng = test::fresh_rng(&seed);
@@ -1786,13 +1787,15 @@ TEST_F(CudaBackend, PageLockedValuesGiveTheFactorOfPageableOnes) {
       ASSERT_FALSE(numeric::page_locked(next.values.data(), bytes));
       Options o = one_gpu(c.type);
       o.solve_check = SolveCheck::always;  // refined: the residuals read the kept values
-      Solver direct(o), staged(o), no_room(o);
-      for (Solver* s : {&direct, &staged, &no_room}) {
+      Solver direct(o), staged(o), no_room(o), in_gpu_memory(o);
+      for (Solver* s : {&direct, &staged, &no_room, &in_gpu_memory}) {
         s->analyze(a);
         s->factorize(a);
       }
       direct.refactorize(std::span<const double>(locked));
       staged.refactorize(std::span<const double>(next.values));
+      const std::shared_ptr<double> on_gpu = numeric::cuda_device_copy(next.values);
+      in_gpu_memory.refactorize(std::span<const double>(on_gpu.get(), next.values.size()));
       // a refactorization's own device buffers made by a pageable one first, then no room
       // for the device's copy of the values
       no_room.refactorize(std::span<const double>(next.values));
@@ -1805,7 +1808,7 @@ TEST_F(CudaBackend, PageLockedValuesGiveTheFactorOfPageableOnes) {
       }
       numeric::clear_device_allocation_cap();
       const FactorStats& fs = staged.stats().factor;
-      for (const Solver* s : {&direct, &no_room}) {
+      for (const Solver* s : {&direct, &no_room, &in_gpu_memory}) {
         const FactorStats& fd = s->stats().factor;
         EXPECT_TRUE(fd.values_scaled_on_device);
         EXPECT_EQ(fd.delayed_pivoting, fs.delayed_pivoting);
@@ -1824,6 +1827,7 @@ TEST_F(CudaBackend, PageLockedValuesGiveTheFactorOfPageableOnes) {
       EXPECT_EQ(direct.solve(b), x);
       EXPECT_LE(direct.stats().solve.backward_error, 1e-14);
       EXPECT_EQ(no_room.solve(b), x);
+      EXPECT_EQ(in_gpu_memory.solve(b), x);
       if (fs.delayed_pivoting) {  // its order from the kept values' factorization
         direct.analyze_in_pivot_order();
         staged.analyze_in_pivot_order();
@@ -1843,6 +1847,16 @@ TEST_F(CudaBackend, PageLockedValuesGiveTheFactorOfPageableOnes) {
             << e.what();
       }
       EXPECT_EQ(direct.solve(b), x);
+      const std::shared_ptr<double> nan_on_gpu =
+          numeric::cuda_device_copy(std::vector<double>(next.values.size(), std::nan("")));
+      try {
+        in_gpu_memory.refactorize(std::span<const double>(nan_on_gpu.get(), next.values.size()));
+        ADD_FAILURE() << "a NaN value in GPU memory was accepted";
+      } catch (const InvalidInput& e) {
+        EXPECT_NE(std::string(e.what()).find("values[0] is not finite"), std::string::npos)
+            << e.what();
+      }
+      EXPECT_EQ(in_gpu_memory.solve(b), x);
       // pageable, then page-locked values again in the same solver
       direct.refactorize(std::span<const double>(a.values));
       std::copy(next.values.begin(), next.values.end(), locked.begin());
@@ -1852,6 +1866,44 @@ TEST_F(CudaBackend, PageLockedValuesGiveTheFactorOfPageableOnes) {
       EXPECT_EQ(direct.stats().factor.log_abs_determinant, fs.log_abs_determinant);
       EXPECT_EQ(direct.solve(b), x);
     }
+}
+
+// Values in GPU memory where the host reads them — the CPU backend's factorization, and a
+// matrix analyzed in a non-canonical form (its values gathered on the host) — are fetched
+// first: the same factor and solution as from the same values in host memory, n = 1, 5, 733.
+TEST_F(CudaBackend, ValuesInGpuMemoryAreFetchedWhereTheHostReadsThem) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed) + " (STRATA_TEST_SEED replays it)");
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (const index_t n : {1, 5, 733}) {
+    SCOPED_TRACE("n = " + std::to_string(n));
+    const SparseMatrix a = test::random_sparse(n, 3, test::RandomKind::general, rng);
+    SparseMatrix next = a;
+    for (double& v : next.values) v *= 1.0 + 0.25 * u(rng);
+    std::vector<double> b(n);
+    for (double& v : b) v = u(rng);
+    Options cpu = one_gpu_unrefined(MatrixType::general);
+    cpu.backend = Backend::cpu;
+    const SparseMatrix dup = with_duplicate_zeros(a), dup_next = with_duplicate_zeros(next);
+    struct Form {
+      Options options;
+      const SparseMatrix* analyzed;
+      const std::vector<double>* values;
+    };
+    const Form forms[] = {{cpu, &a, &next.values},
+                          {one_gpu_unrefined(MatrixType::general), &dup, &dup_next.values}};
+    for (const Form& f : forms) {
+      Solver host(f.options), device(f.options);
+      for (Solver* s : {&host, &device}) s->analyze(*f.analyzed);
+      host.refactorize(std::span<const double>(*f.values));
+      const std::shared_ptr<double> on_gpu = numeric::cuda_device_copy(*f.values);
+      device.refactorize(std::span<const double>(on_gpu.get(), f.values->size()));
+      EXPECT_EQ(device.stats().factor.backend, host.stats().factor.backend);
+      EXPECT_EQ(device.stats().factor.log_abs_determinant, host.stats().factor.log_abs_determinant);
+      EXPECT_EQ(device.solve(b), host.solve(b));
+    }
+  }
 }
 
 // Values far from the analysis's (a row and a column scaled by 10^±3, so a diagonal

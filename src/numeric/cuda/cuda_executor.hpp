@@ -208,6 +208,9 @@ class CudaExecutor final : public numeric::Executor {
   void end(const numeric::FactorContext& ctx) override;
   bool solve(const Analysis& an, const numeric::NumericFactor& fac, double* x,
              index_t nrhs) override;
+  bool solve_original(const Analysis& an, const numeric::NumericFactor& fac, const double* b,
+                      double* x, index_t nrhs, const double* row_rescale, const double* col_rescale,
+                      double* stage) override;  // cuda_solve.cu
   bool keeps_panels(const numeric::FactorContext& ctx) const override {
     return ctx.part->id == -1 ? device_only_ : part_device_only_;
   }
@@ -250,6 +253,14 @@ class CudaExecutor final : public numeric::Executor {
   /// per analysis (cuda_solve.cu).
   void prepare_solve_inverse(const Analysis& an);
   void prepare_solve_plan(const Analysis& an);  // cuda_solve.cu
+  /// solve_original's permutations and scale factors for `an`, once per analysis.
+  void prepare_solve_io(const Analysis& an);  // cuda_solve.cu
+  /// Whether `fac` is the factor resident here for `an` (solve, solve_original can run).
+  bool solves_resident(const Analysis& an, const numeric::NumericFactor& fac) const;
+  /// The solve's workspaces sized for nrhs and its sweeps enqueued on the stream over
+  /// dsolve_.x (the recorded graph, or the launches one by one).
+  void enqueue_resident_solve(const Analysis& an, const numeric::NumericFactor& fac,
+                              index_t nrhs);  // cuda_solve.cu
   /// Uploads a plan's sweep arrays and panel offsets into sp (cuda_solve.cu).
   void upload_sweep_plan(SweepPlanDevice& sp);
   /// The part solve's plan of part `id` of an.partition, made on first use per analysis
@@ -596,6 +607,12 @@ class CudaExecutor final : public numeric::Executor {
     std::vector<std::int64_t> rows_host, pivot_pos_host, pivot_row_host;
     DeviceBuffer<std::int64_t> moved_rows, moved_segments;  ///< their moved rows, packed
     DeviceBuffer<double> d_diag, d_off, x, u, scratch, part;
+    /// solve_original: the right-hand sides and solutions in the original numbering, the
+    /// factorization's rescaling, and per analysis (io_analysis) the permutations and
+    /// scale factors between the two numberings (prepare_solve_io)
+    DeviceBuffer<double> b, row_rescale, col_rescale, in_scale, out_scale;
+    DeviceBuffer<std::int64_t> in_index, out_index;
+    std::uint64_t io_analysis = 0;
     std::vector<std::int64_t> u_offset_host;  ///< per front + 1: its update vector in u
     std::uint64_t inverse_analysis = 0;       ///< what inv_offsets and inv_src are for
     DeviceBuffer<std::int64_t> inv_offsets, inv_src;

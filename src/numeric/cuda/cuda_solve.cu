@@ -4,6 +4,11 @@
 // and backward sweeps run, the solutions come back once; iterative refinement calls this
 // again per step, so each step moves only 2·n·nrhs doubles. When the factor is not
 // resident the executor declines and the host solve runs.
+// solve_original takes the right-hand sides in the matrix's own numbering and does the
+// analysis's permutation and scaling (and the factorization's rescaling) on the device as
+// well, two elementwise kernels around the sweeps, instead of the host's loops over every
+// entry before and after (on the multibody Newton matrices those loops were a third of a
+// solve's time on the host).
 //
 // The sweeps are a fixed sequence of launches for a given analysis and number of
 // right-hand sides (one for the plan's subtrees, one per level for its block-path fronts,
@@ -24,6 +29,7 @@
 // members, grown when the analysis or nrhs needs more, so a solve allocates nothing after
 // the first.
 #include <algorithm>
+#include <cstring>
 
 #include "numeric/cuda/cuda_executor.hpp"
 #include "numeric/cuda/solve_kernels.cuh"
@@ -104,16 +110,13 @@ void CudaExecutor::prepare_solve_plan(const Analysis& an) {
   upload_sweep_plan(w);
 }
 
-bool CudaExecutor::solve(const Analysis& an, const numeric::NumericFactor& fac, double* x,
-                         index_t nrhs) {
-  if (!keep_resident() || dsolve_.resident_for != &fac || dsolve_.resident_analysis != an.id ||
-      !fac.valid || an.id != analysis_id_)
-    return false;
-  if (an.n == 0 || nrhs == 0) return true;
-  STRATA_CUDA(cudaSetDevice(device_));
-  prepare_solve_plan(an);
-  const std::size_t nx = static_cast<std::size_t>(an.n) * nrhs;
-  dsolve_.x.upload(x, nx, stream_);
+bool CudaExecutor::solves_resident(const Analysis& an, const numeric::NumericFactor& fac) const {
+  return keep_resident() && dsolve_.resident_for == &fac && dsolve_.resident_analysis == an.id &&
+         fac.valid && an.id == analysis_id_;
+}
+
+void CudaExecutor::enqueue_resident_solve(const Analysis& an, const numeric::NumericFactor& fac,
+                                          index_t nrhs) {
   const std::int64_t u_total = dsolve_.u_offset_host.back();
   dsolve_.u.resize(std::max<std::size_t>(static_cast<std::size_t>(u_total) * nrhs, 1));
   dsolve_.scratch.resize(std::max<std::size_t>(an.tree.rows.size() * nrhs, 1));
@@ -121,37 +124,108 @@ bool CudaExecutor::solve(const Analysis& an, const numeric::NumericFactor& fac, 
       std::max<std::size_t>(static_cast<std::size_t>(dsolve_.whole.plan.part_total) * nrhs, 1));
   if (!solve_graph_) {
     enqueue_solve_sweeps(an, fac, dsolve_.whole, panels_.data(), nrhs, true, true);
-  } else {
-    std::vector<std::uintptr_t> key = solve_graph_key(an, fac, nrhs);
-    if (!dsolve_.graph || key != dsolve_.graph_key) {
-      drop_solve_graph();
-      // Recorded, not run: the kernels and library calls of the sweeps become the graph's
-      // nodes with the pointers and sizes of this solve, which the key lists. Relaxed
-      // capture mode: cuBLAS may set up its workspace in its first call. A failure ends the
-      // capture before it is reported, so the stream stays usable.
-      STRATA_CUDA(cudaStreamBeginCapture(stream_, cudaStreamCaptureModeRelaxed));
-      cudaGraph_t g = nullptr;
-      try {
-        enqueue_solve_sweeps(an, fac, dsolve_.whole, panels_.data(), nrhs, true, true);
-      } catch (...) {
-        if (cudaStreamEndCapture(stream_, &g) == cudaSuccess && g) cudaGraphDestroy(g);
-        (void)cudaGetLastError();
-        throw;
-      }
-      STRATA_CUDA(cudaStreamEndCapture(stream_, &g));
-      const cudaError_t e = cudaGraphInstantiate(&dsolve_.graph, g, 0);
-      cudaGraphDestroy(g);
-      if (e != cudaSuccess) {
-        dsolve_.graph = nullptr;
-        STRATA_CUDA(e);
-      }
-      dsolve_.graph_key = std::move(key);
-    }
-    STRATA_CUDA(cudaGraphLaunch(dsolve_.graph, stream_));
+    return;
   }
+  std::vector<std::uintptr_t> key = solve_graph_key(an, fac, nrhs);
+  if (!dsolve_.graph || key != dsolve_.graph_key) {
+    drop_solve_graph();
+    // Recorded, not run: the kernels and library calls of the sweeps become the graph's
+    // nodes with the pointers and sizes of this solve, which the key lists. Relaxed
+    // capture mode: cuBLAS may set up its workspace in its first call. A failure ends the
+    // capture before it is reported, so the stream stays usable.
+    STRATA_CUDA(cudaStreamBeginCapture(stream_, cudaStreamCaptureModeRelaxed));
+    cudaGraph_t g = nullptr;
+    try {
+      enqueue_solve_sweeps(an, fac, dsolve_.whole, panels_.data(), nrhs, true, true);
+    } catch (...) {
+      if (cudaStreamEndCapture(stream_, &g) == cudaSuccess && g) cudaGraphDestroy(g);
+      (void)cudaGetLastError();
+      throw;
+    }
+    STRATA_CUDA(cudaStreamEndCapture(stream_, &g));
+    const cudaError_t e = cudaGraphInstantiate(&dsolve_.graph, g, 0);
+    cudaGraphDestroy(g);
+    if (e != cudaSuccess) {
+      dsolve_.graph = nullptr;
+      STRATA_CUDA(e);
+    }
+    dsolve_.graph_key = std::move(key);
+  }
+  STRATA_CUDA(cudaGraphLaunch(dsolve_.graph, stream_));
+}
+
+bool CudaExecutor::solve(const Analysis& an, const numeric::NumericFactor& fac, double* x,
+                         index_t nrhs) {
+  if (!solves_resident(an, fac)) return false;
+  if (an.n == 0 || nrhs == 0) return true;
+  STRATA_CUDA(cudaSetDevice(device_));
+  prepare_solve_plan(an);
+  const std::size_t nx = static_cast<std::size_t>(an.n) * nrhs;
+  dsolve_.x.upload(x, nx, stream_);
+  enqueue_resident_solve(an, fac, nrhs);
   STRATA_CUDA(
       cudaMemcpyAsync(x, dsolve_.x.data(), sizeof(double) * nx, cudaMemcpyDeviceToHost, stream_));
   STRATA_CUDA(cudaStreamSynchronize(stream_));
+  return true;
+}
+
+void CudaExecutor::prepare_solve_io(const Analysis& an) {
+  if (dsolve_.io_analysis == an.id && dsolve_.io_analysis != 0) return;
+  const index_t n = an.n;
+  const bool scale = !an.row_scaling.empty(), match = !an.matching_perm.empty();
+  std::vector<std::int64_t> in(n), out(n);
+  std::vector<double> in_scale(n, 1.0), out_scale(n, 1.0);
+  for (index_t k = 0; k < n; ++k) {
+    in[k] = an.perm[k];
+    out[k] = match ? an.matching_perm[an.perm[k]] : an.perm[k];
+    if (scale) {
+      in_scale[k] = an.row_scaling[in[k]];
+      out_scale[k] = an.col_scaling[out[k]];
+    }
+  }
+  // not upload(): these bytes belong to no factorization's statistics
+  dsolve_.in_index.upload(in.data(), in.size(), stream_);
+  dsolve_.out_index.upload(out.data(), out.size(), stream_);
+  dsolve_.in_scale.upload(in_scale.data(), in_scale.size(), stream_);
+  dsolve_.out_scale.upload(out_scale.data(), out_scale.size(), stream_);
+  STRATA_CUDA(cudaStreamSynchronize(stream_));  // the copies read the host vectors
+  dsolve_.io_analysis = an.id;
+}
+
+bool CudaExecutor::solve_original(const Analysis& an, const numeric::NumericFactor& fac,
+                                  const double* b, double* x, index_t nrhs,
+                                  const double* row_rescale, const double* col_rescale,
+                                  double* stage) {
+  if (!solves_resident(an, fac)) return false;
+  if (an.n == 0 || nrhs == 0) return true;
+  STRATA_CUDA(cudaSetDevice(device_));
+  prepare_solve_plan(an);
+  prepare_solve_io(an);
+  const index_t n = an.n;
+  const std::size_t nx = static_cast<std::size_t>(n) * nrhs, bytes = nx * sizeof(double);
+  // b up as it is (a copy into the page-locked stage first unless it is page-locked: a
+  // copy from pageable memory goes through a driver buffer at a fraction of the rate)
+  const double* from = b;
+  if (!numeric::page_locked(b, bytes)) {
+    std::memcpy(stage, b, bytes);
+    from = stage;
+  }
+  dsolve_.b.upload(from, nx, stream_);
+  if (row_rescale) dsolve_.row_rescale.upload(row_rescale, static_cast<std::size_t>(n), stream_);
+  if (col_rescale) dsolve_.col_rescale.upload(col_rescale, static_cast<std::size_t>(n), stream_);
+  dsolve_.x.resize(nx);
+  launch_permute_in(dsolve_.b.data(), dsolve_.in_index.data(), dsolve_.in_scale.data(),
+                    row_rescale ? dsolve_.row_rescale.data() : nullptr, dsolve_.x.data(), n, nrhs,
+                    stream_);
+  enqueue_resident_solve(an, fac, nrhs);
+  launch_permute_out(dsolve_.x.data(), dsolve_.out_index.data(), dsolve_.out_scale.data(),
+                     col_rescale ? dsolve_.col_rescale.data() : nullptr, dsolve_.b.data(), n, nrhs,
+                     stream_);
+  const bool direct = numeric::page_locked(x, bytes);
+  STRATA_CUDA(cudaMemcpyAsync(direct ? x : stage, dsolve_.b.data(), bytes, cudaMemcpyDeviceToHost,
+                              stream_));
+  STRATA_CUDA(cudaStreamSynchronize(stream_));
+  if (!direct) std::memcpy(x, stage, bytes);
   return true;
 }
 

@@ -1,11 +1,14 @@
 // strata — what the CUDA build offers: whether a GPU is visible and how many
 // (base/device.hpp), page-locking host memory for transfers, and the CUDA executor's
 // factory (numeric/factor.hpp). A build without CUDA has numeric/backends.cpp instead.
+#include <algorithm>
+#include <memory>
 #include <mutex>
 #include <string>
 #include <thread>
 
 #include "numeric/cuda/cuda_executor.hpp"
+#include "numeric/cuda_testing.hpp"
 
 namespace strata::cuda {
 namespace {
@@ -84,6 +87,31 @@ bool page_locked(const void* p, std::size_t bytes) {
     return a.type == cudaMemoryTypeHost;
   };
   return host(p) && host(static_cast<const char*>(p) + (bytes - 1));
+}
+
+int device_memory_of(const void* p) {
+  if (!p || !cuda::device_present()) return -1;
+  cudaPointerAttributes a{};
+  if (cudaPointerGetAttributes(&a, p) != cudaSuccess) {
+    (void)cudaGetLastError();
+    return -1;
+  }
+  return a.type == cudaMemoryTypeDevice ? a.device : -1;
+}
+
+void copy_from_device(double* host, const double* device, std::size_t n) {
+  if (n > 0) STRATA_CUDA(cudaMemcpy(host, device, n * sizeof(double), cudaMemcpyDefault));
+}
+
+std::shared_ptr<double> cuda_device_copy(const std::vector<double>& host) {
+  if (!cuda::device_present()) throw NotSupported(cuda_unavailable_reason());
+  STRATA_CUDA(cudaSetDevice(0));
+  double* p = nullptr;
+  STRATA_CUDA(cudaMalloc(&p, std::max<std::size_t>(host.size(), 1) * sizeof(double)));
+  std::shared_ptr<double> owned(p, [](double* q) { cudaFree(q); });
+  if (!host.empty())
+    STRATA_CUDA(cudaMemcpy(p, host.data(), host.size() * sizeof(double), cudaMemcpyHostToDevice));
+  return owned;
 }
 
 std::string cuda_unavailable_reason() {

@@ -1,5 +1,9 @@
 // strata — CUDA kernels of the triangular solves (see solve_kernels.cuh): thin __global__
-// wrappers around the device code of solve_device.cuh, which the CPU tests also run.
+// wrappers around the device code of solve_device.cuh, which the CPU tests also run, and
+// the permutation and scaling of the right-hand sides into the factor's numbering and of
+// the solutions back.
+#include <cfloat>
+
 #include "numeric/cuda/cuda_check.hpp"
 #include "numeric/cuda/solve_device.cuh"
 #include "numeric/cuda/solve_kernels.cuh"
@@ -97,7 +101,52 @@ __global__ void diagonal_kernel(SolveTree t, const double* d_diag, const double*
   if (p < t.n) solve_device::diagonal(t, p, d_diag, d_off, pivot_size, x, nrhs);
 }
 
+// v·d·e as core/solve_phase.cpp's scaled_by: one rounding when d·e is a normal number
+__device__ double scaled_by(double v, double d, double e) {
+  const double f = d * e;
+  const double a = fabs(f);
+  return a >= DBL_MIN && a <= DBL_MAX ? v * f : v * d * e;
+}
+
+__global__ void permute_in_kernel(const double* from, const std::int64_t* index,
+                                  const double* scale, const double* rescale, double* to,
+                                  std::int64_t n, std::int64_t total) {
+  const std::int64_t e = blockIdx.x * static_cast<std::int64_t>(blockDim.x) + threadIdx.x;
+  if (e >= total) return;
+  const std::int64_t k = e % n, r = e / n, i = index[k];
+  to[e] = scaled_by(from[i + r * n], scale[k], rescale ? rescale[i] : 1.0);
+}
+
+__global__ void permute_out_kernel(const double* from, const std::int64_t* index,
+                                   const double* scale, const double* rescale, double* to,
+                                   std::int64_t n, std::int64_t total) {
+  const std::int64_t e = blockIdx.x * static_cast<std::int64_t>(blockDim.x) + threadIdx.x;
+  if (e >= total) return;
+  const std::int64_t k = e % n, r = e / n, j = index[k];
+  to[j + r * n] = scaled_by(from[e], scale[k], rescale ? rescale[j] : 1.0);
+}
+
 }  // namespace
+
+void launch_permute_in(const double* from, const std::int64_t* index, const double* scale,
+                       const double* rescale, double* to, std::int64_t n, std::int64_t nrhs,
+                       cudaStream_t s) {
+  const std::int64_t total = n * nrhs;
+  if (total == 0) return;
+  permute_in_kernel<<<static_cast<unsigned>((total + kThreads - 1) / kThreads), kThreads, 0, s>>>(
+      from, index, scale, rescale, to, n, total);
+  STRATA_CUDA_LAUNCH();
+}
+
+void launch_permute_out(const double* from, const std::int64_t* index, const double* scale,
+                        const double* rescale, double* to, std::int64_t n, std::int64_t nrhs,
+                        cudaStream_t s) {
+  const std::int64_t total = n * nrhs;
+  if (total == 0) return;
+  permute_out_kernel<<<static_cast<unsigned>((total + kThreads - 1) / kThreads), kThreads, 0, s>>>(
+      from, index, scale, rescale, to, n, total);
+  STRATA_CUDA_LAUNCH();
+}
 
 void launch_gather_forward(const SolveTree& t, SolveChunks c, std::int64_t begin,
                            std::int64_t count, const double* x, const double* u, double* scratch,

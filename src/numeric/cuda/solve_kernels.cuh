@@ -88,4 +88,17 @@ void launch_scatter_backward(const SolveTree& t, SolveChunks c, std::int64_t beg
                              std::int64_t count, double* x, const double* scratch,
                              std::int64_t nrhs, bool lu, cudaStream_t s);
 
+/// The right-hand sides into the factor's numbering and scaling, for n unknowns and nrhs
+/// columns (column-major): to[k + r·n] = scaled(from[index[k] + r·n], scale[k],
+/// rescale[index[k]]) (rescale null: 1), scaled(v, d, e) = v·(d·e) when d·e is a normal
+/// number, else v·d·e — the host's arithmetic (core/solve_phase.cpp), so the same bits.
+void launch_permute_in(const double* from, const std::int64_t* index, const double* scale,
+                       const double* rescale, double* to, std::int64_t n, std::int64_t nrhs,
+                       cudaStream_t s);
+
+/// The solutions back: to[index[k] + r·n] = scaled(from[k + r·n], scale[k], rescale[index[k]]).
+void launch_permute_out(const double* from, const std::int64_t* index, const double* scale,
+                        const double* rescale, double* to, std::int64_t n, std::int64_t nrhs,
+                        cudaStream_t s);
+
 }  // namespace strata::cuda

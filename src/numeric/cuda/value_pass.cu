@@ -358,8 +358,9 @@ bool CudaExecutor::scale_values_on_device(const Analysis& an, const double* valu
   const auto upload_piece = [to, values, device, stream](std::size_t b, std::size_t e) {
     if (e <= b) return;
     STRATA_CUDA(cudaSetDevice(device));  // the staging thread's current device
-    STRATA_CUDA(cudaMemcpyAsync(to + b, values + b, (e - b) * sizeof(double),
-                                cudaMemcpyHostToDevice, stream));
+    // cudaMemcpyDefault: `values` may also be device memory (Solver::refactorize)
+    STRATA_CUDA(
+        cudaMemcpyAsync(to + b, values + b, (e - b) * sizeof(double), cudaMemcpyDefault, stream));
   };
   if (stage)
     stage(0, nnz, upload_piece);
