@@ -256,7 +256,7 @@ class Report(GpuSections, Distributed, EndToEnd, IftommSection):
                                    + (", multibody Newton matrices" if r.tag == "mbd" else "")
                                    + " (" + ("each its own ordering" if k == "cudss_default"
                                              else "strata's ordering")
-                                   + (", cuDSS's values copied from the host"
+                                   + (", both from values in host memory"
                                       if theirs != what else "") + ")", g, pp, r)
                     if g is not None:
                         lines.append(f"- Geometric mean of {name}{mbd_label(r)}: "
