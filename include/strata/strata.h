@@ -224,7 +224,8 @@ strata_status strata_refactorize(strata_solver* solver, const strata_matrix* a);
 /** strata_refactorize for values alone, as cuDSS's cudssMatrixSetValues: values[p] is the
  *  value of entry p of the strata_matrix given to strata_analyze (its values array: the
  *  same layout, storage and entry order; nnz of them). The pattern is not read again.
- *  Errors: INVALID_STATE (no analysis), INVALID_INPUT (values NULL, nnz not that
+ *  `values` may lie in GPU memory (cudaMalloc) or page-locked host memory, which the CUDA
+ *  backend copies to the device directly (Solver::refactorize). Errors: INVALID_STATE (no analysis), INVALID_INPUT (values NULL, nnz not that
  *  matrix's number of entries, a value NaN/Inf), and those of strata_factorize. */
 strata_status strata_refactorize_values(strata_solver* solver, int64_t nnz, const double* values);
 
