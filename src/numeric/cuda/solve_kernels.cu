@@ -108,22 +108,28 @@ __device__ double scaled_by(double v, double d, double e) {
   return a >= DBL_MIN && a <= DBL_MAX ? v * f : v * d * e;
 }
 
-__global__ void permute_in_kernel(const double* from, const std::int64_t* index,
-                                  const double* scale, const double* rescale, double* to,
-                                  std::int64_t n, std::int64_t total) {
+// Out = false: to[k + r·n] = scaled(from[index[k] + r·n], ...) (launch_permute_in);
+// Out = true: to[index[k] + r·n] = scaled(from[k + r·n], ...) (launch_permute_out).
+template <bool Out>
+__global__ void permute_kernel(const double* from, const std::int64_t* index, const double* scale,
+                               const double* rescale, double* to, std::int64_t n,
+                               std::int64_t total) {
   const std::int64_t e = blockIdx.x * static_cast<std::int64_t>(blockDim.x) + threadIdx.x;
   if (e >= total) return;
   const std::int64_t k = e % n, r = e / n, i = index[k];
-  to[e] = scaled_by(from[i + r * n], scale[k], rescale ? rescale[i] : 1.0);
+  const double v = scaled_by(Out ? from[e] : from[i + r * n], scale[k], rescale ? rescale[i] : 1.0);
+  (Out ? to[i + r * n] : to[e]) = v;
 }
 
-__global__ void permute_out_kernel(const double* from, const std::int64_t* index,
-                                   const double* scale, const double* rescale, double* to,
-                                   std::int64_t n, std::int64_t total) {
-  const std::int64_t e = blockIdx.x * static_cast<std::int64_t>(blockDim.x) + threadIdx.x;
-  if (e >= total) return;
-  const std::int64_t k = e % n, r = e / n, j = index[k];
-  to[j + r * n] = scaled_by(from[e], scale[k], rescale ? rescale[j] : 1.0);
+template <bool Out>
+void launch_permute(const double* from, const std::int64_t* index, const double* scale,
+                    const double* rescale, double* to, std::int64_t n, std::int64_t nrhs,
+                    cudaStream_t s) {
+  const std::int64_t total = n * nrhs;
+  if (total == 0) return;
+  permute_kernel<Out><<<static_cast<unsigned>((total + kThreads - 1) / kThreads), kThreads, 0, s>>>(
+      from, index, scale, rescale, to, n, total);
+  STRATA_CUDA_LAUNCH();
 }
 
 }  // namespace
@@ -131,21 +137,13 @@ __global__ void permute_out_kernel(const double* from, const std::int64_t* index
 void launch_permute_in(const double* from, const std::int64_t* index, const double* scale,
                        const double* rescale, double* to, std::int64_t n, std::int64_t nrhs,
                        cudaStream_t s) {
-  const std::int64_t total = n * nrhs;
-  if (total == 0) return;
-  permute_in_kernel<<<static_cast<unsigned>((total + kThreads - 1) / kThreads), kThreads, 0, s>>>(
-      from, index, scale, rescale, to, n, total);
-  STRATA_CUDA_LAUNCH();
+  launch_permute<false>(from, index, scale, rescale, to, n, nrhs, s);
 }
 
 void launch_permute_out(const double* from, const std::int64_t* index, const double* scale,
                         const double* rescale, double* to, std::int64_t n, std::int64_t nrhs,
                         cudaStream_t s) {
-  const std::int64_t total = n * nrhs;
-  if (total == 0) return;
-  permute_out_kernel<<<static_cast<unsigned>((total + kThreads - 1) / kThreads), kThreads, 0, s>>>(
-      from, index, scale, rescale, to, n, total);
-  STRATA_CUDA_LAUNCH();
+  launch_permute<true>(from, index, scale, rescale, to, n, nrhs, s);
 }
 
 void launch_gather_forward(const SolveTree& t, SolveChunks c, std::int64_t begin,
