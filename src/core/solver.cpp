@@ -217,6 +217,15 @@ namespace {
 // device: each halves the logarithm of every row's and column's distance from 1.
 constexpr int kRescalingSweeps = 3;
 
+// `values` as the host can read them: values in GPU memory copied into `fetched` first.
+std::span<const double> host_readable(std::span<const double> values,
+                                      std::vector<double>& fetched) {
+  if (numeric::device_memory_of(values.data()) < 0) return values;
+  fetched.resize(values.size());
+  numeric::copy_from_device(fetched.data(), values.data(), values.size());
+  return fetched;
+}
+
 // The input stage on the GPU (the tree driver's CUDA executor, numeric/cuda/value_pass.cu)
 // for `values` in the entry order of `pattern`, the analyzed pattern: staged in the
 // page-locked `scaled`, checked, scaled, equilibrated again where they are far from the
@@ -224,11 +233,11 @@ constexpr int kRescalingSweeps = 3;
 // the scaled values for the factorization. On acceptance the staged values become the
 // kept ones (the two buffers trade places, so nothing is copied twice); refused values
 // (not finite, overflowing sums) throw with the kept values and the factor as they were.
-// Values the caller holds in page-locked memory go to the device from there, unstaged, and
-// the device keeps a copy of them as given, which becomes the kept values (copied to the
-// host only when the host needs them: host_values); where the device has no room for that
-// copy, the host copies them. False, with nothing changed that matters, where the driver
-// has no such pass. Sets norm1 = ‖B‖₁.
+// Values the caller holds in GPU memory or page-locked host memory go to the device from
+// there, unstaged, and the device keeps a copy of them as given, which becomes the kept
+// values (copied to the host only when the host needs them: host_values); where the device
+// has no room for that copy, the host copies them. False, with nothing changed that matters, where
+// the driver has no such pass. Sets norm1 = ‖B‖₁.
 bool values_on_gpu(SolverState& s, const SparseMatrix& pattern, std::span<const double> values,
                    double& norm1) {
   const Analysis& an = *s.analysis;
@@ -253,17 +262,11 @@ bool values_on_gpu(SolverState& s, const SparseMatrix& pattern, std::span<const 
   if (!s.driver->scale_values_on_device(an, direct ? values.data() : staged, stage,
                                         equilibrate ? kRescalingSweeps : 0, direct, dn))
     return false;
-  // refused: the host names the first bad value or sum (values in device memory fetched)
+  // refused: the host names the first bad value or sum
   std::vector<double> fetched;
-  auto host_view = [&] {
-    if (!on_device) return values.data();
-    fetched.resize(values.size());
-    numeric::copy_from_device(fetched.data(), values.data(), values.size());
-    return static_cast<const double*>(fetched.data());
-  };
-  if (!dn.finite) detail::throw_first_not_finite(pattern, host_view());
+  if (!dn.finite) detail::throw_first_not_finite(pattern, host_readable(values, fetched).data());
   if (!dn.sums_finite) {
-    check_norms(pattern, host_view());
+    check_norms(pattern, host_readable(values, fetched).data());
     throw InternalError("the device found a row or column sum that overflows; the host did not");
   }
   if (equilibrate && !dn.equilibrated && dn.rescaling_sweeps == 0) return false;
@@ -278,7 +281,10 @@ bool values_on_gpu(SolverState& s, const SparseMatrix& pattern, std::span<const 
   } else {
     s.scaled_current = false;  // of the values before
     s.kept_values_on_device = dn.input_copied && s.driver->keep_device_input(an);
-    if (!s.kept_values_on_device) copy_values(s.values.values, values, arena);
+    if (!s.kept_values_on_device && on_device)
+      numeric::copy_from_device(s.values.values.data(), values.data(), values.size());
+    else if (!s.kept_values_on_device)
+      copy_values(s.values.values, values, arena);
   }
   s.values_on_device = true;
   s.rescaling = Rescaling{};
@@ -336,13 +342,8 @@ double prepare_values(SolverState& s, const SparseMatrix* a, std::span<const dou
   }
   if (analyzed_pattern && values_on_gpu(s, s.values, values, norm1)) return norm1;
   s.kept_values_on_device = false;  // every path below writes the kept values
-  // every path below reads the values on the host: values in device memory fetched first
-  std::vector<double> fetched;
-  if (numeric::device_memory_of(values.data()) >= 0) {
-    fetched.resize(values.size());
-    numeric::copy_from_device(fetched.data(), values.data(), values.size());
-    values = fetched;
-  }
+  std::vector<double> fetched;      // every path below reads the values on the host
+  values = host_readable(values, fetched);
   s.scaled_current = true;  // every path below writes the scaled values
   if (analyzed_pattern) {
     // Refactorization with the analyzed pattern (a Newton loop, a benchmark): one parallel
@@ -692,13 +693,8 @@ void Solver::refactorize(std::span<const double> values) {
     factor_phase(s, nullptr, values);
     return;
   }
-  // gathered on the host below: values in device memory fetched first
-  std::vector<double> fetched;
-  if (numeric::device_memory_of(values.data()) >= 0) {
-    fetched.resize(values.size());
-    numeric::copy_from_device(fetched.data(), values.data(), values.size());
-    values = fetched;
-  }
+  std::vector<double> fetched;  // gathered on the host below
+  values = host_readable(values, fetched);
   // the analyzed matrix's own order: its values gathered into the canonical pattern
   // (duplicates added in its order; entries the analysis does not keep left out)
   phase("factorize",

@@ -1787,8 +1787,8 @@ TEST_F(CudaBackend, PageLockedValuesGiveTheFactorOfPageableOnes) {
       ASSERT_FALSE(numeric::page_locked(next.values.data(), bytes));
       Options o = one_gpu(c.type);
       o.solve_check = SolveCheck::always;  // refined: the residuals read the kept values
-      Solver direct(o), staged(o), no_room(o), in_gpu_memory(o);
-      for (Solver* s : {&direct, &staged, &no_room, &in_gpu_memory}) {
+      Solver direct(o), staged(o), no_room(o), in_gpu_memory(o), in_gpu_no_room(o);
+      for (Solver* s : {&direct, &staged, &no_room, &in_gpu_memory, &in_gpu_no_room}) {
         s->analyze(a);
         s->factorize(a);
       }
@@ -1799,16 +1799,18 @@ TEST_F(CudaBackend, PageLockedValuesGiveTheFactorOfPageableOnes) {
       // a refactorization's own device buffers made by a pageable one first, then no room
       // for the device's copy of the values
       no_room.refactorize(std::span<const double>(next.values));
+      in_gpu_no_room.refactorize(std::span<const double>(next.values));
       numeric::set_device_allocation_cap(0);
       try {
         no_room.refactorize(std::span<const double>(locked));
+        in_gpu_no_room.refactorize(std::span<const double>(on_gpu.get(), next.values.size()));
       } catch (...) {
         numeric::clear_device_allocation_cap();
         throw;
       }
       numeric::clear_device_allocation_cap();
       const FactorStats& fs = staged.stats().factor;
-      for (const Solver* s : {&direct, &no_room, &in_gpu_memory}) {
+      for (const Solver* s : {&direct, &no_room, &in_gpu_memory, &in_gpu_no_room}) {
         const FactorStats& fd = s->stats().factor;
         EXPECT_TRUE(fd.values_scaled_on_device);
         EXPECT_EQ(fd.delayed_pivoting, fs.delayed_pivoting);
@@ -1828,6 +1830,7 @@ TEST_F(CudaBackend, PageLockedValuesGiveTheFactorOfPageableOnes) {
       EXPECT_LE(direct.stats().solve.backward_error, 1e-14);
       EXPECT_EQ(no_room.solve(b), x);
       EXPECT_EQ(in_gpu_memory.solve(b), x);
+      EXPECT_EQ(in_gpu_no_room.solve(b), x);
       if (fs.delayed_pivoting) {  // its order from the kept values' factorization
         direct.analyze_in_pivot_order();
         staged.analyze_in_pivot_order();
