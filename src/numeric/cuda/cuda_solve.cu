@@ -7,8 +7,8 @@
 // solve_original takes the right-hand sides in the matrix's own numbering and does the
 // analysis's permutation and scaling (and the factorization's rescaling) on the device as
 // well, two elementwise kernels around the sweeps, instead of the host's loops over every
-// entry before and after (on the multibody Newton matrices those loops were a third of a
-// solve's time on the host).
+// entry before and after (on the multibody Newton matrices those loops were a large share
+// of a solve: bench/history.md).
 //
 // The sweeps are a fixed sequence of launches for a given analysis and number of
 // right-hand sides (one for the plan's subtrees, one per level for its block-path fronts,

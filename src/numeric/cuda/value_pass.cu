@@ -8,9 +8,9 @@
 // there once. The scaled values stay on the device, where the assembly reads them
 // (FactorContext::values_on_device); the host gets five numbers, and the sweeps' factors
 // when there were sweeps (the scaled values themselves only when a host algorithm asks for
-// them: download_scaled_values). Values the caller holds page-locked are also kept on the
-// device as given (copy_input, keep_device_input), so that the host copies them back only
-// when it needs them (download_device_input).
+// them: download_scaled_values). Values the caller holds in GPU memory or page-locked host
+// memory are also kept on the device as given (copy_input, keep_device_input), so that the
+// host copies them back only when it needs them (download_device_input).
 //
 // How: two passes over the entries, one warp per row and one per column. The row pass
 // reads the entries of a row through a row-wise map of the canonical (column-wise)
