@@ -141,9 +141,10 @@ static int driver_main(int argc, char** argv) {
     std::vector<index_t> perm;
     Timing g;
     try {
-      const auto pin = page_locked_values
-                           ? numeric::pin_host_memory(p.a.values.data(), p.a.values.size() * 8)
-                           : nullptr;
+      const auto pin =
+          page_locked_values
+              ? numeric::pin_host_memory(p.a.values.data(), p.a.values.size() * sizeof(double))
+              : nullptr;
       if (page_locked_values && !pin)
         fmt::print(stderr, "bench_gpu: {}: the values could not be page-locked\n", name);
       g = time_strata(p, og, repeat, &perm);

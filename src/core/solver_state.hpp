@@ -40,9 +40,9 @@ struct SolverState {
   // needs them (host_scaled)
   bool scaled_current = true;
   bool values_on_device = false;
-  // the values of `values` are those of a refactorization that took page-locked input,
-  // kept on the GPU that factored it (values_on_gpu), not yet copied here: host_values
-  // fetches them before anything on the host reads them
+  // the values of `values` are those of a refactorization that took them from GPU memory
+  // or page-locked host memory, kept on the GPU that factored it (values_on_gpu), not yet
+  // copied here: host_values fetches them before anything on the host reads them
   bool kept_values_on_device = false;
   std::vector<double> value_sums;  // per-range vectors of the blocked value passes, kept
   // the host threads of those passes (Options::num_threads), kept: creating a task arena

@@ -301,8 +301,8 @@ class Executor {
   /// col_rescale: n each, original numbering, or null for none) applied where the factor
   /// is, around the triangular solves; b and x move through `stage` (page-locked host
   /// memory of n × nrhs doubles) unless they are page-locked themselves. Returns false,
-  /// having done nothing, where solve would (the caller then permutes and scales on the
-  /// host and calls solve); the default does.
+  /// having done nothing, where solve would return false (the caller then permutes and
+  /// scales on the host and calls solve); the default does.
   virtual bool solve_original(const Analysis& an, const NumericFactor& fac, const double* b,
                               double* x, index_t nrhs, const double* row_rescale,
                               const double* col_rescale, double* stage) {
