@@ -46,6 +46,8 @@ PATTERNS = {
     "partitioning_s": (r"partitioning ([\d.]+)", float),
     "factorization_ms": (r"factorization ([\d.]+) each", float),
     "solve_ms": (r"solve ([\d.]+) each", float),
+    "device_solves": (r"\((\d+) on the GPU", int),
+    "device_solve_ms": (r"on the GPU, ([\d.]+) each", float),
     # strata's own split of a factorization (the line "factorization [ms]", printed when
     # a GPU ran or values were equilibrated again)
     "value_input_ms": (r"value input ([\d.]+) each", float),

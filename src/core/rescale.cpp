@@ -5,6 +5,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdint>
 
@@ -29,6 +30,11 @@ bool within_factor_two(std::span<const double> maxima) {
   for (double v : maxima)
     if (v != 0 && (v < 0.5 || v > 2)) return false;
   return true;
+}
+
+std::uint64_t next_rescaling_id() {
+  static std::atomic<std::uint64_t> last{0};
+  return ++last;
 }
 
 Rescaling rescale_values(const SparseMatrix& c, bool symmetric, std::vector<double>& values,

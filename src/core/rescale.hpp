@@ -18,6 +18,7 @@
 
 #include <tbb/task_arena.h>
 
+#include <cstdint>
 #include <span>
 #include <vector>
 
@@ -25,11 +26,17 @@
 
 namespace strata {
 
+/// A number no earlier call returned (thread-safe; never 0).
+std::uint64_t next_rescaling_id();
+
 /// The extra scaling of one factorization: B' = diag(row)·B·diag(col) (original numbering
 /// of A's rows and columns; symmetric: row == col). Empty when B needed none.
 struct Rescaling {
   std::vector<double> row, col;
   int sweeps = 0;  ///< equilibration sweeps made (0: B was within a factor 2 already)
+  /// Names these factors (numeric::RescaleView::id): a new number for every Rescaling
+  /// made, which its copies keep; row and col are set once, right after it is made.
+  std::uint64_t id = next_rescaling_id();
 };
 
 /// Equilibrates `values` (B's values in the entry order of `pattern`, canonical CSC; lower

@@ -89,9 +89,10 @@ bool apply_inverse(SolverState& s, const double* b, double* x, index_t nrhs) {
   const bool match = !an.matching_perm.empty();
   const bool rescale = !s.rescaling.row.empty();
   // the factor resident on a GPU: the permutation and scaling there too
-  if (!s.delayed.valid &&
-      s.driver->solve_original(an, s.factor, b, x, nrhs, rescale ? s.rescaling.row.data() : nullptr,
-                               rescale ? s.rescaling.col.data() : nullptr, work))
+  const numeric::RescaleView view{rescale ? s.rescaling.row.data() : nullptr,
+                                  rescale ? s.rescaling.col.data() : nullptr,
+                                  rescale ? s.rescaling.id : 0};
+  if (!s.delayed.valid && s.driver->solve_original(an, s.factor, b, x, nrhs, view, work))
     return true;
   for_entries(s, n * nrhs, [&](index_t e) {
     const index_t k = e % n, r = e / n;

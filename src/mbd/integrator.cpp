@@ -371,6 +371,10 @@ int Integrator::newton(double h, StepInfo& info, const BdfTerms& bdf) {
     }
     const double s2 = ts.seconds();
     stats_.solve_seconds += s2;
+    if (const Stats* st = solver_->stats(); st && st->solve.on_device) {
+      ++stats_.device_solves;
+      stats_.device_solve_seconds += s2;
+    }
     info.solver_seconds += s2;
     stats_.solver_seconds += s2;
     ++stats_.solves;

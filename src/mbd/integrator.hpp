@@ -140,6 +140,11 @@ struct IntegratorStats {
   double energy_drift = 0;  ///< conservative models: max |E − E(0)| so far (J)
   double energy_scale = 0;  ///< largest kinetic energy so far (J), the drift's reference
   double factor_seconds = 0, solve_seconds = 0;  ///< parts of solver_seconds
+  /// The solves whose triangular solves ran on a GPU (SolveStats::on_device) and their
+  /// seconds (part of solve_seconds); the others ran on the host (a host factor, or one
+  /// with delayed pivots).
+  index_t device_solves = 0;
+  double device_solve_seconds = 0;
   /// strata's own split of its factorizations (FactorStats, summed): value input (checks,
   /// norms, scaling, the copy to a GPU) and the GPU's time; the factorizations whose values
   /// were scaled on the GPU (FactorStats::values_scaled_on_device) and those whose values

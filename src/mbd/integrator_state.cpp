@@ -49,6 +49,8 @@ json stats_to_json(const IntegratorStats& s) {
           {"values_on_device_factorizations", s.values_on_device_factorizations},
           {"rescaled_factorizations", s.rescaled_factorizations},
           {"solve_seconds", s.solve_seconds},
+          {"device_solves", s.device_solves},
+          {"device_solve_seconds", s.device_solve_seconds},
           {"assembly_seconds", s.assembly_seconds},
           {"solver_seconds", s.solver_seconds},
           {"analysis_seconds", s.analysis_seconds},
@@ -92,6 +94,8 @@ IntegratorStats stats_from_json(const json& j) {
   s.values_on_device_factorizations = j.value("values_on_device_factorizations", index_t{0});
   s.rescaled_factorizations = j.value("rescaled_factorizations", index_t{0});
   j.at("solve_seconds").get_to(s.solve_seconds);
+  s.device_solves = j.value("device_solves", index_t{0});  // (older checkpoints: none)
+  s.device_solve_seconds = j.value("device_solve_seconds", 0.0);
   j.at("assembly_seconds").get_to(s.assembly_seconds);
   j.at("solver_seconds").get_to(s.solver_seconds);
   j.at("analysis_seconds").get_to(s.analysis_seconds);

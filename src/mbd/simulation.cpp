@@ -456,9 +456,12 @@ std::string summary(const Model& model, const SimulationResult& r) {
   if (s.factorizations && s.solves && s.analyses)
     o += fmt::format(
         "strata [ms]           analysis {:.3f} each, factorization {:.3f} each, solve {:.3f} "
-        "each\n",
+        "each{}\n",
         1e3 * s.analysis_seconds / s.analyses, 1e3 * s.factor_seconds / s.factorizations,
-        1e3 * s.solve_seconds / s.solves);
+        1e3 * s.solve_seconds / s.solves,
+        s.device_solves ? fmt::format(" ({} on the GPU, {:.3f} each)", s.device_solves,
+                                      1e3 * s.device_solve_seconds / s.device_solves)
+                        : std::string());
   if (s.factorizations && (s.factor_device_seconds > 0 || s.rescaled_factorizations))
     o += fmt::format(
         "factorization [ms]    value input {:.3f} each, GPU {:.3f} each; values scaled on the "

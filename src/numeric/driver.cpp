@@ -160,10 +160,8 @@ class TreeDriver final : public NumericDriver {
     return false;
   }
   bool solve_original(const Analysis& an, NumericFactor& factor, const double* b, double* x,
-                      index_t nrhs, const double* row_rescale, const double* col_rescale,
-                      double* stage) override {
-    return executor_ &&
-           executor_->solve_original(an, factor, b, x, nrhs, row_rescale, col_rescale, stage);
+                      index_t nrhs, const RescaleView& rescale, double* stage) override {
+    return executor_ && executor_->solve_original(an, factor, b, x, nrhs, rescale, stage);
   }
   Backend backend() const override {
     return executor_ ? executor_->backend() : gpu_ ? Backend::cuda : Backend::cpu;

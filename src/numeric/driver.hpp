@@ -80,8 +80,7 @@ class NumericDriver {
   /// every other driver and where that executor's solve would not run (the caller then
   /// permutes and scales on the host and calls solve).
   virtual bool solve_original(const Analysis& an, NumericFactor& factor, const double* b, double* x,
-                              index_t nrhs, const double* row_rescale, const double* col_rescale,
-                              double* stage) {
+                              index_t nrhs, const RescaleView& rescale, double* stage) {
     return false;
   }
   /// Where the last factorization ran (FactorStats::backend; never automatic).

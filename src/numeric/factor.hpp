@@ -32,6 +32,16 @@ namespace strata::numeric {
 /// part `part` (PartView::id: -1 the whole tree, else a part of an.partition) in the
 /// memory of worker `worker`'s executor (the index of that executor in the list the
 /// factorization ran with: 0 for a whole-tree factorization).
+/// A factorization's rescaling (core/rescale.hpp) as Executor::solve_original takes it:
+/// row and col, n each in the original numbering, or null for none; `id` names their
+/// values (a new id whenever they change, 0 for none), so an executor may keep the copy
+/// it made for an earlier solve of the same factorization.
+struct RescaleView {
+  const double* row = nullptr;
+  const double* col = nullptr;
+  std::uint64_t id = 0;
+};
+
 struct HeldPanels {
   int part = -1;
   int worker = 0;
@@ -297,15 +307,13 @@ class Executor {
   }
   /// solve for right-hand sides in the analysis's original numbering: x = A⁻¹ b for b and
   /// x host arrays of n × nrhs (column-major; they may not alias), the analysis's
-  /// permutation and matching scaling and the factorization's rescaling (row_rescale,
-  /// col_rescale: n each, original numbering, or null for none) applied where the factor
-  /// is, around the triangular solves; b and x move through `stage` (page-locked host
-  /// memory of n × nrhs doubles) unless they are page-locked themselves. Returns false,
-  /// having done nothing, where solve would return false (the caller then permutes and
+  /// permutation and matching scaling and the factorization's rescaling (`rescale`)
+  /// applied where the factor is, around the triangular solves; b and x move through `stage`
+  /// (page-locked host memory of n × nrhs doubles) unless they are page-locked themselves. Returns
+  /// false, having done nothing, where solve would return false (the caller then permutes and
   /// scales on the host and calls solve); the default does.
   virtual bool solve_original(const Analysis& an, const NumericFactor& fac, const double* b,
-                              double* x, index_t nrhs, const double* row_rescale,
-                              const double* col_rescale, double* stage) {
+                              double* x, index_t nrhs, const RescaleView& rescale, double* stage) {
     return false;
   }
   /// After begin_part: true when the panels of the part ctx.part will stay in the

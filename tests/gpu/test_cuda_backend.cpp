@@ -1914,7 +1914,9 @@ TEST_F(CudaBackend, ValuesInGpuMemoryAreFetchedWhereTheHostReadsThem) {
 // sweeps: against the host's pass (the same matrix given with explicit zeros) the same
 // number of sweeps, the same factor (log |det|, which counts the rescaling's factors),
 // the same solution without refinement, and full accuracy with it; LU and LDLᵀ, sizes 5
-// to 733. Near the analysis's values again, no sweep.
+// to 733. The device solve keeps a factorization's rescaling for its later solves: two
+// solves after each of three refactorizations (the scaled row and column swapped, then
+// back) give the host's solutions. Near the analysis's values again, no sweep.
 TEST_F(CudaBackend, ValuesFarFromTheAnalysisAreEquilibratedOnTheDevice) {
   unsigned long long seed = 0;
   auto rng = test::fresh_rng(&seed);
@@ -1926,35 +1928,46 @@ TEST_F(CudaBackend, ValuesFarFromTheAnalysisAreEquilibratedOnTheDevice) {
     for (const index_t n : {5, 200, 733}) {
       SCOPED_TRACE("type " + std::string(to_string(type)) + ", n = " + std::to_string(n));
       const SparseMatrix a = test::random_sparse(n, 4, kind, rng);
-      SparseMatrix far = a;  // row and column k by 10³, row and column k2 by 10⁻³
+      // row and column k by 10³, row and column k2 by 10⁻³ (far), or the other way (far2)
       const index_t k = n / 2, k2 = n - 1;
-      for (index_t j = 0; j < n; ++j)
-        for (index_t p = far.offsets[j]; p < far.offsets[j + 1]; ++p) {
-          const index_t i = far.indices[p];
-          for (const index_t t : {i, j}) far.values[p] *= t == k ? 1e3 : t == k2 ? 1e-3 : 1.0;
-        }
+      auto scaled = [&](double big, double small) {
+        SparseMatrix m = a;
+        for (index_t j = 0; j < n; ++j)
+          for (index_t p = m.offsets[j]; p < m.offsets[j + 1]; ++p) {
+            const index_t i = m.indices[p];
+            for (const index_t t : {i, j}) m.values[p] *= t == k ? big : t == k2 ? small : 1.0;
+          }
+        return m;
+      };
+      const SparseMatrix far = scaled(1e3, 1e-3), far2 = scaled(1e-3, 1e3);
       const Options o = one_gpu_unrefined(type);
       Solver dev(o), host(o);
       dev.analyze(a);
       host.analyze(a);
       dev.factorize(a);
       host.factorize(with_duplicate_zeros(a));
-      dev.refactorize(far);
-      host.refactorize(with_duplicate_zeros(far));
-      const FactorStats& fd = dev.stats().factor;
-      const FactorStats& fh = host.stats().factor;
-      EXPECT_TRUE(fd.values_scaled_on_device);
-      EXPECT_FALSE(fh.values_scaled_on_device);
-      EXPECT_GT(fh.rescaling_sweeps, 0);
-      EXPECT_EQ(fd.rescaling_sweeps, fh.rescaling_sweeps);
-      EXPECT_EQ(fd.perturbed_pivots, fh.perturbed_pivots);
-      std::vector<double> b(n);
+      std::vector<double> b(n), b2(n);
       std::uniform_real_distribution<double> rhs(-1.0, 1.0);
       for (double& v : b) v = rhs(rng);
-      const std::vector<double> xd = dev.solve(b), xh = host.solve(b);
-      if (fh.perturbed_pivots == 0) {
-        EXPECT_EQ(fd.log_abs_determinant, fh.log_abs_determinant);
-        EXPECT_EQ(xd, xh);
+      for (double& v : b2) v = rhs(rng);
+      for (const SparseMatrix* m : {&far, &far2, &far}) {
+        dev.refactorize(*m);
+        host.refactorize(with_duplicate_zeros(*m));
+        const FactorStats& fd = dev.stats().factor;
+        const FactorStats& fh = host.stats().factor;
+        EXPECT_TRUE(fd.values_scaled_on_device);
+        EXPECT_FALSE(fh.values_scaled_on_device);
+        EXPECT_GT(fh.rescaling_sweeps, 0);
+        EXPECT_EQ(fd.rescaling_sweeps, fh.rescaling_sweeps);
+        EXPECT_EQ(fd.perturbed_pivots, fh.perturbed_pivots);
+        const std::vector<double> xd = dev.solve(b), xh = host.solve(b);
+        const std::vector<double> yd = dev.solve(b2), yh = host.solve(b2);
+        EXPECT_TRUE(dev.stats().solve.on_device);
+        if (fh.perturbed_pivots == 0) {
+          EXPECT_EQ(fd.log_abs_determinant, fh.log_abs_determinant);
+          EXPECT_EQ(xd, xh);
+          EXPECT_EQ(yd, yh);
+        }
       }
       Options r = one_gpu(type);  // refined: full accuracy on the far values
       r.solve_check = SolveCheck::always;

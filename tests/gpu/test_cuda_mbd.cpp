@@ -34,7 +34,15 @@ TEST(CudaMbd, PerturbedPivotsAreDelayedAndTheTrajectoryEqualsTheCpus) {
   EXPECT_EQ(s.reanalyses, 0);
   EXPECT_EQ(s.perturbed_pivots, 0);
   EXPECT_NE(s.solver.find("cuda"), std::string::npos) << s.solver;
+  // the solves after factorizations in the analysis's order run on the GPU, those after
+  // delayed ones on the host; the CPU backend's never on a GPU
+  EXPECT_GT(s.device_solves, 0);
+  EXPECT_LE(s.device_solves, s.solves);
+  EXPECT_LE(s.device_solve_seconds, s.solve_seconds);
+  EXPECT_EQ(cpu.stats().device_solves, 0);
   RecordProperty("largest position difference", test::scientific(worst));
+  RecordProperty("solves on the GPU",
+                 std::to_string(s.device_solves) + " of " + std::to_string(s.solves));
   RecordProperty("delayed factorizations", std::to_string(s.delayed_factorizations) + " of " +
                                                std::to_string(s.factorizations));
 }

@@ -209,7 +209,7 @@ class CudaExecutor final : public numeric::Executor {
   bool solve(const Analysis& an, const numeric::NumericFactor& fac, double* x,
              index_t nrhs) override;
   bool solve_original(const Analysis& an, const numeric::NumericFactor& fac, const double* b,
-                      double* x, index_t nrhs, const double* row_rescale, const double* col_rescale,
+                      double* x, index_t nrhs, const numeric::RescaleView& rescale,
                       double* stage) override;  // cuda_solve.cu
   bool keeps_panels(const numeric::FactorContext& ctx) const override {
     return ctx.part->id == -1 ? device_only_ : part_device_only_;
@@ -246,7 +246,12 @@ class CudaExecutor final : public numeric::Executor {
     SolvePlan plan;
     std::vector<std::int64_t> panel_offset_host;
     DeviceBuffer<std::int64_t> panel_offset, chunk_front, chunk_row, small_fronts, tall_fronts,
-        subtree_first, subtree_last, part_offset;
+        part_offset, item_first, item_last, item_parent;
+    /// The runs' counters (SolvePlan::run_offsets): per front its pending children
+    /// (forward) and its done flag (backward), then a ticket per run and sweep; set from
+    /// sync_init before the sweeps, written by them.
+    mutable DeviceBuffer<int> sync;
+    DeviceBuffer<int> sync_init;
     PartExchange exchange;
   };
   /// The extend-add map of the device solve (plan_inverse_extend_add) on the device, once
@@ -608,11 +613,12 @@ class CudaExecutor final : public numeric::Executor {
     DeviceBuffer<std::int64_t> moved_rows, moved_segments;  ///< their moved rows, packed
     DeviceBuffer<double> d_diag, d_off, x, u, scratch, part;
     /// solve_original: the right-hand sides and solutions in the original numbering, the
-    /// factorization's rescaling, and per analysis (io_analysis) the permutations and
-    /// scale factors between the two numberings (prepare_solve_io)
+    /// factorization's rescaling (RescaleView::id rescale_id, 0: none copied), and per
+    /// analysis (io_analysis) the permutations and scale factors between the two
+    /// numberings (prepare_solve_io)
     DeviceBuffer<double> b, row_rescale, col_rescale, in_scale, out_scale;
     DeviceBuffer<std::int64_t> in_index, out_index;
-    std::uint64_t io_analysis = 0;
+    std::uint64_t io_analysis = 0, rescale_id = 0;
     std::vector<std::int64_t> u_offset_host;  ///< per front + 1: its update vector in u
     std::uint64_t inverse_analysis = 0;       ///< what inv_offsets and inv_src are for
     DeviceBuffer<std::int64_t> inv_offsets, inv_src;
