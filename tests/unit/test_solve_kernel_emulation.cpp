@@ -26,8 +26,6 @@
 #include <limits>
 #include <memory>
 #include <random>
-#include <stdexcept>
-#include <string>
 #include <vector>
 
 #include "analysis/analysis.hpp"
@@ -286,7 +284,9 @@ void emulate_sweeps(const Analysis& an, const numeric::NumericFactor& fac, const
         static_cast<int>(n_piv[f]), S + t.row_offsets[f] * nrhs);
   };
   namespace dev = cuda::solve_device;
+  const std::size_t n_subtrees = p.subtree_first.size();
   // the block path's launches: the variant the device picks by the launch's block count
+  const bool few_subtrees = static_cast<std::int64_t>(n_subtrees) <= few_blocks;
   auto few = [&](index_t l) { return p.small_offsets[l + 1] - p.small_offsets[l] <= few_blocks; };
   auto forward = [&](std::int64_t f, bool batch16) {
     if (batch16)
@@ -300,49 +300,17 @@ void emulate_sweeps(const Analysis& an, const numeric::NumericFactor& fac, const
     else
       dev::front_backward<4>(st, f, X, S, nrhs, lu, unit);
   };
-  // The runs (solve_kernels.cu's run kernels): the items one after another in the order
-  // the device's blocks take them, each checked to find what it waits for done already —
-  // the order the device needs to make progress — and to be taken once per sweep.
-  const std::int64_t runs = p.n_runs();
-  std::vector<std::int64_t> pending(p.run_pending.begin(), p.run_pending.end());
-  std::vector<char> done(static_cast<std::size_t>(nf), 0), launched(2 * runs, 0);
-  auto run = [&](std::int64_t r, bool fwd) {
-    char& was = launched[static_cast<std::size_t>(fwd ? r : runs + r)];
-    if (was) return;
-    was = 1;
-    const std::int64_t q0 = p.run_offsets[r], q1 = p.run_offsets[r + 1];
-    const bool batch16 = q1 - q0 <= few_blocks;
-    for (std::int64_t k = 0; k < q1 - q0; ++k) {
-      const std::int64_t q = fwd ? q0 + k : q1 - 1 - k;
-      const std::int64_t first = p.item_first[q], last = p.item_last[q], up = p.item_parent[q];
-      if (fwd) {
-        if (pending[last] != 0)
-          throw std::logic_error("run item " + std::to_string(q) + " would wait for " +
-                                 std::to_string(pending[last]) + " children after it");
-        run_block(sweep_threads, [&] {
-          for (std::int64_t f = first; f <= last; ++f) forward(f, batch16);
-        });
-        if (up >= 0) --pending[up];
-        counts.block_fronts += last - first + 1;
-        (batch16 ? counts.batch16_fronts : counts.batch4_fronts) += last - first + 1;
-        counts.subtrees += r == p.subtree_run && q - q0 < std::ssize(p.subtree_first);
-      } else {
-        if (up >= 0 && !done[up])
-          throw std::logic_error("run item " + std::to_string(q) + " would wait for its parent " +
-                                 std::to_string(up) + ", taken after it");
-        run_block(sweep_threads, [&] {
-          for (std::int64_t f = last; f >= first; --f) backward(f, batch16);
-        });
-        done[last] = 1;
-      }
-    }
-  };
-  if (do_forward && p.subtree_run >= 0) run(p.subtree_run, true);
+  for (std::size_t q = 0; do_forward && q < n_subtrees; ++q) {
+    run_block(sweep_threads, [&] {
+      for (std::int64_t f = p.subtree_first[q]; f <= p.subtree_last[q]; ++f)
+        forward(f, few_subtrees);
+    });
+    counts.block_fronts += p.subtree_last[q] - p.subtree_first[q] + 1;
+    (few_subtrees ? counts.batch16_fronts : counts.batch4_fronts) +=
+        p.subtree_last[q] - p.subtree_first[q] + 1;
+    ++counts.subtrees;
+  }
   for (index_t l = 0; do_forward && l < an.schedule.n_levels(); ++l) {
-    if (p.level_run[l] >= 0) {
-      run(p.level_run[l], true);
-      continue;
-    }
     for (std::int64_t q = p.small_offsets[l]; q < p.small_offsets[l + 1]; ++q) {
       run_block(sweep_threads, [&] { forward(p.small_fronts[q], few(l)); });
       ++counts.block_fronts;
@@ -371,10 +339,6 @@ void emulate_sweeps(const Analysis& an, const numeric::NumericFactor& fac, const
     for (index_t q = 0; q < an.n; ++q)
       dev::diagonal(st, q, fac.d_diag.data(), fac.d_off.data(), fac.pivot_size.data(), X, nrhs);
   for (index_t l = an.schedule.n_levels() - 1; do_backward && l >= 0; --l) {
-    if (p.level_run[l] >= 0) {
-      run(p.level_run[l], false);
-      continue;
-    }
     for (std::int64_t q = p.small_offsets[l]; q < p.small_offsets[l + 1]; ++q)
       run_block(sweep_threads, [&] { backward(p.small_fronts[q], few(l)); });
     chunks(l, [&](std::int64_t f, std::int64_t i0, std::int64_t i1) {
@@ -397,7 +361,11 @@ void emulate_sweeps(const Analysis& an, const numeric::NumericFactor& fac, const
       dev::scatter_backward(st, f, i0, i1, X, S, nrhs, lu);
     });
   }
-  if (do_backward && p.subtree_run >= 0) run(p.subtree_run, false);
+  for (std::size_t q = 0; do_backward && q < n_subtrees; ++q)
+    run_block(sweep_threads, [&] {
+      for (std::int64_t f = p.subtree_last[q]; f >= p.subtree_first[q]; --f)
+        backward(f, few_subtrees);
+    });
 }
 
 // The whole-tree device solve of cuda_solve.cu on the host (fresh arrays as the device's
@@ -790,93 +758,6 @@ TEST(SolveKernelEmulation, PlanCoversEveryFrontOnce) {
   Analysis thin = analyze_matrix(generators::laplacian_3d(64, 2, 2), o);
   const SolvePlan pt = cuda::make_solve_plan(thin.tree, thin.child_rows, thin.schedule, 132);
   EXPECT_FALSE(pt.subtree_first.empty());
-}
-
-// The runs (SolvePlan::run_offsets ...) against the plan's own lists: a level is in a run
-// exactly when its fronts outside the subtrees are all small block-path fronts, each such
-// front and each subtree is one item, consecutive runs are split by a level with tall or
-// library fronts, and item_parent / run_pending are the tree's parent links inside a run.
-TEST(SolveKernelEmulation, RunsJoinConsecutiveBlockLaunches) {
-  index_t joined_levels = 0;  // levels in a run with another level or the subtrees
-  for (index_t k : {8, 16}) {
-    SparseMatrix a = generators::laplacian_3d(k, k, k);
-    Options o;
-    o.type = MatrixType::spd;
-    Analysis an = analyze_matrix(a, o);
-    const auto& t = an.tree;
-    const auto& s = an.schedule;
-    const index_t nf = t.n_fronts();
-    for (SolvePath path : {SolvePath::model, SolvePath::block_subtrees, SolvePath::all_block,
-                           SolvePath::all_library})
-      for (int n_sm : {1, 132}) {
-        SCOPED_TRACE("k " + std::to_string(k) + " path " + std::to_string(static_cast<int>(path)) +
-                     " SMs " + std::to_string(n_sm));
-        const SolvePlan p = cuda::make_solve_plan(t, an.child_rows, s, n_sm, path);
-        ASSERT_EQ(p.level_run.size(), static_cast<std::size_t>(s.n_levels()));
-        ASSERT_EQ(p.item_first.size(), p.item_last.size());
-        ASSERT_EQ(p.item_parent.size(), p.item_last.size());
-        ASSERT_EQ(static_cast<std::size_t>(p.run_offsets.back()), p.item_last.size());
-        std::vector<std::int64_t> run_of(nf, -1), items_of_run(p.n_runs(), 0);
-        for (std::int64_t r = 0; r < p.n_runs(); ++r)
-          for (std::int64_t q = p.run_offsets[r]; q < p.run_offsets[r + 1]; ++q) {
-            EXPECT_EQ(run_of[p.item_last[q]], -1);  // an item once
-            run_of[p.item_last[q]] = r;
-            ++items_of_run[r];
-          }
-        // the subtrees: the first items of one run, in the plan's order
-        const std::size_t ns = p.subtree_first.size();
-        ASSERT_EQ(p.subtree_run >= 0, ns > 0);
-        for (std::size_t q = 0; q < ns; ++q) {
-          const std::int64_t at = p.run_offsets[p.subtree_run] + static_cast<std::int64_t>(q);
-          EXPECT_EQ(p.item_first[at], p.subtree_first[q]);
-          EXPECT_EQ(p.item_last[at], p.subtree_last[q]);
-        }
-        std::int64_t open = ns > 0 ? p.subtree_run : -1;  // the run a joinable level extends
-        for (index_t l = 0; l < s.n_levels(); ++l) {
-          const std::int64_t small = p.small_offsets[l + 1] - p.small_offsets[l];
-          const bool other = p.tall_offsets[l + 1] > p.tall_offsets[l] ||
-                             p.large_offsets[l + 1] > p.large_offsets[l];
-          if (other) {
-            EXPECT_EQ(p.level_run[l], -1) << "level " << l;
-            open = -1;
-            continue;
-          }
-          if (small == 0) {
-            EXPECT_EQ(p.level_run[l], -1) << "level " << l;
-            continue;
-          }
-          ASSERT_GE(p.level_run[l], 0) << "level " << l;
-          if (open >= 0) {
-            EXPECT_EQ(p.level_run[l], open) << "level " << l;
-            ++joined_levels;
-          }
-          open = p.level_run[l];
-          for (std::int64_t q = p.small_offsets[l]; q < p.small_offsets[l + 1]; ++q) {
-            const std::int64_t f = p.small_fronts[q];
-            EXPECT_EQ(run_of[f], p.level_run[l]) << "front " << f;
-            for (std::int64_t i = p.run_offsets[run_of[f]]; i < p.run_offsets[run_of[f] + 1]; ++i)
-              if (p.item_last[i] == f) EXPECT_EQ(p.item_first[i], f);
-          }
-        }
-        // every item is a subtree or a small front of a level in its run
-        std::int64_t listed = static_cast<std::int64_t>(ns);
-        for (index_t l = 0; l < s.n_levels(); ++l)
-          if (p.level_run[l] >= 0) listed += p.small_offsets[l + 1] - p.small_offsets[l];
-        EXPECT_EQ(listed, static_cast<std::int64_t>(p.item_last.size()));
-        // item_parent: the tree's parent when that is an item of the same run
-        std::vector<std::int64_t> pending(nf, 0);
-        for (std::int64_t r = 0; r < p.n_runs(); ++r)
-          for (std::int64_t q = p.run_offsets[r]; q < p.run_offsets[r + 1]; ++q) {
-            const index_t up = t.parent[p.item_last[q]];
-            const bool same = up >= 0 && run_of[up] == r;
-            EXPECT_EQ(p.item_parent[q], same ? up : -1) << "item " << q;
-            if (same) ++pending[up];
-          }
-        ASSERT_EQ(p.run_pending.size(), static_cast<std::size_t>(nf));
-        for (index_t f = 0; f < nf; ++f) EXPECT_EQ(p.run_pending[f], pending[f]) << "front " << f;
-      }
-  }
-  EXPECT_GT(joined_levels, 0);  // the sizes above make runs of several launches
 }
 
 }  // namespace

@@ -246,12 +246,7 @@ class CudaExecutor final : public numeric::Executor {
     SolvePlan plan;
     std::vector<std::int64_t> panel_offset_host;
     DeviceBuffer<std::int64_t> panel_offset, chunk_front, chunk_row, small_fronts, tall_fronts,
-        part_offset, item_first, item_last, item_parent;
-    /// The runs' counters (SolvePlan::run_offsets): per front its pending children
-    /// (forward) and its done flag (backward), then a ticket per run and sweep; set from
-    /// sync_init before the sweeps, written by them.
-    mutable DeviceBuffer<int> sync;
-    DeviceBuffer<int> sync_init;
+        subtree_first, subtree_last, part_offset;
     PartExchange exchange;
   };
   /// The extend-add map of the device solve (plan_inverse_extend_add) on the device, once

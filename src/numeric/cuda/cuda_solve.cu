@@ -89,15 +89,9 @@ void CudaExecutor::upload_sweep_plan(SweepPlanDevice& sp) {
   up(sp.chunk_row, p.chunk_row);
   up(sp.small_fronts, p.small_fronts);
   up(sp.tall_fronts, p.tall_fronts);
+  up(sp.subtree_first, p.subtree_first);
+  up(sp.subtree_last, p.subtree_last);
   up(sp.part_offset, p.part_offset);
-  up(sp.item_first, p.item_first);
-  up(sp.item_last, p.item_last);
-  up(sp.item_parent, p.item_parent);
-  const std::size_t nf = p.run_pending.size(), runs = static_cast<std::size_t>(p.n_runs());
-  std::vector<int> init(2 * nf + 2 * runs, 0);  // pending children; done flags, tickets 0
-  for (std::size_t f = 0; f < nf; ++f) init[f] = static_cast<int>(p.run_pending[f]);
-  sp.sync_init.upload(init.data(), init.size(), stream_);
-  sp.sync.resize(init.size());
   STRATA_CUDA(cudaStreamSynchronize(stream_));  // the copies read the host vectors
 }
 
@@ -267,12 +261,9 @@ std::vector<std::uintptr_t> CudaExecutor::solve_graph_key(const Analysis& an,
           ptr(dsolve_.whole.chunk_row.data()),
           ptr(dsolve_.whole.small_fronts.data()),
           ptr(dsolve_.whole.tall_fronts.data()),
+          ptr(dsolve_.whole.subtree_first.data()),
+          ptr(dsolve_.whole.subtree_last.data()),
           ptr(dsolve_.whole.part_offset.data()),
-          ptr(dsolve_.whole.item_first.data()),
-          ptr(dsolve_.whole.item_last.data()),
-          ptr(dsolve_.whole.item_parent.data()),
-          ptr(dsolve_.whole.sync.data()),
-          ptr(dsolve_.whole.sync_init.data()),
           ptr(dsolve_.part.data())};
 }
 
@@ -339,36 +330,11 @@ void CudaExecutor::enqueue_solve_sweeps(const Analysis& an, const numeric::Numer
   const index_t levels = an.schedule.n_levels();
   const std::int64_t* small = sp.small_fronts.data();
   const std::int64_t* tall = sp.tall_fronts.data();
-  // The runs: one launch each way in place of the launches of their subtrees and levels,
-  // at the first of those the sweep reaches; their counters set first.
-  const std::int64_t runs = p.n_runs();
-  const std::size_t nf = p.run_pending.size();
-  int* pending = sp.sync.data();
-  int* done = pending + nf;
-  int* ticket = done + nf;  // forward: ticket[r]; backward: ticket[runs + r]
-  if (runs > 0)
-    STRATA_CUDA(cudaMemcpyAsync(sp.sync.data(), sp.sync_init.data(), sizeof(int) * sp.sync.size(),
-                                cudaMemcpyDeviceToDevice, stream_));
-  const RunItems items{sp.item_first.data(), sp.item_last.data(), sp.item_parent.data()};
-  std::vector<char> launched(static_cast<std::size_t>(2 * runs), 0);
-  auto run = [&](std::int64_t r, bool fwd) {
-    char& was = launched[static_cast<std::size_t>(fwd ? r : runs + r)];
-    if (was) return;
-    was = 1;
-    const std::int64_t q0 = p.run_offsets[r], count = p.run_offsets[r + 1] - q0;
-    if (fwd)
-      launch_run_forward(st, items, q0, count, ticket + r, pending, X, U, S, nrhs, unit, lu,
-                         stream_);
-    else
-      launch_run_backward(st, items, q0, count, ticket + runs + r, done, X, S, nrhs, lu, unit,
-                          stream_);
-  };
-  if (forward && p.subtree_run >= 0) run(p.subtree_run, true);  // the subtrees are in a run
+  const std::int64_t n_subtrees = static_cast<std::int64_t>(p.subtree_first.size());
+  if (forward)
+    launch_fronts_forward(st, sp.subtree_first.data(), sp.subtree_last.data(), 0, n_subtrees, X, U,
+                          S, nrhs, unit, lu, stream_);
   for (index_t l = 0; forward && l < levels; ++l) {
-    if (p.level_run[l] >= 0) {  // a run's level has small fronts only
-      run(p.level_run[l], true);
-      continue;
-    }
     const std::int64_t c0 = p.chunk_offsets[l], nc = p.chunk_offsets[l + 1] - c0;
     const std::int64_t s0 = p.small_offsets[l], ns = p.small_offsets[l + 1] - s0;
     const std::int64_t t0 = p.tall_offsets[l], nt = p.tall_offsets[l + 1] - t0;
@@ -385,10 +351,6 @@ void CudaExecutor::enqueue_solve_sweeps(const Analysis& an, const numeric::Numer
     launch_solve_diagonal(st, dsolve_.d_diag.data(), dsolve_.d_off.data(),
                           dsolve_.pivot_size.data(), X, nrhs, stream_);
   for (index_t l = levels - 1; backward && l >= 0; --l) {
-    if (p.level_run[l] >= 0) {
-      run(p.level_run[l], false);
-      continue;
-    }
     const std::int64_t c0 = p.chunk_offsets[l], nc = p.chunk_offsets[l + 1] - c0;
     const std::int64_t s0 = p.small_offsets[l], ns = p.small_offsets[l + 1] - s0;
     const std::int64_t t0 = p.tall_offsets[l], nt = p.tall_offsets[l + 1] - t0;
@@ -401,7 +363,9 @@ void CudaExecutor::enqueue_solve_sweeps(const Analysis& an, const numeric::Numer
           });
     launch_scatter_backward(st, chunks, c0, nc, X, S, nrhs, lu, stream_);
   }
-  if (backward && p.subtree_run >= 0) run(p.subtree_run, false);
+  if (backward)
+    launch_fronts_backward(st, sp.subtree_first.data(), sp.subtree_last.data(), 0, n_subtrees, X, S,
+                           nrhs, lu, unit, stream_);
 }
 
 }  // namespace strata::cuda

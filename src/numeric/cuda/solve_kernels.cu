@@ -3,7 +3,6 @@
 // the permutation and scaling of the right-hand sides into the factor's numbering and of
 // the solutions back.
 #include <cfloat>
-#include <cuda/atomic>
 
 #include "numeric/cuda/cuda_check.hpp"
 #include "numeric/cuda/solve_device.cuh"
@@ -94,61 +93,6 @@ __global__ void __launch_bounds__(kSweepThreads, Batch >= 16 ? 2 : 4)
   const std::int64_t q = begin + blockIdx.x;
   for (std::int64_t f = last[q]; f >= first[q]; --f)
     solve_device::front_backward<Batch>(t, f, x, scratch, nrhs, lu, unit);
-}
-
-// A run's items (launch_run_forward/backward): thread 0 takes the block's item and waits
-// for what it depends on, then the barrier lets the block start. The counters are read
-// with acquire and written with release at device scope after a fence (the pattern of a
-// grid-wide barrier), so the x and update-vector entries another block wrote before its
-// release are what this block reads after its acquire. Blocks take items in the order
-// they start, so an item waits only for items already held by started blocks: no launch
-// waits on a block that cannot run.
-using DeviceCounter = ::cuda::atomic_ref<int, ::cuda::thread_scope_device>;
-
-template <int Batch>
-__global__ void __launch_bounds__(kSweepThreads, Batch >= 16 ? 2 : 4)
-    run_forward_kernel(SolveTree t, RunItems items, std::int64_t begin, int* ticket, int* pending,
-                       double* x, double* u, double* scratch, std::int64_t nrhs, bool unit,
-                       bool lu) {
-  __shared__ std::int64_t item;
-  if (threadIdx.x == 0) {
-    const std::int64_t q = begin + atomicAdd(ticket, 1);
-    DeviceCounter children(pending[items.last[q]]);
-    while (children.load(::cuda::memory_order_acquire) != 0) __nanosleep(32);
-    item = q;
-  }
-  __syncthreads();
-  const std::int64_t q = item;
-  for (std::int64_t f = items.first[q]; f <= items.last[q]; ++f)
-    solve_device::front_forward<Batch>(t, f, x, u, scratch, nrhs, unit, lu);  // ends in a barrier
-  if (threadIdx.x == 0 && items.parent[q] >= 0) {
-    __threadfence();
-    DeviceCounter(pending[items.parent[q]]).fetch_sub(1, ::cuda::memory_order_release);
-  }
-}
-
-template <int Batch>
-__global__ void __launch_bounds__(kSweepThreads, Batch >= 16 ? 2 : 4)
-    run_backward_kernel(SolveTree t, RunItems items, std::int64_t begin, std::int64_t count,
-                        int* ticket, int* done, double* x, double* scratch, std::int64_t nrhs,
-                        bool lu, bool unit) {
-  __shared__ std::int64_t item;
-  if (threadIdx.x == 0) {
-    const std::int64_t q = begin + count - 1 - atomicAdd(ticket, 1);
-    if (items.parent[q] >= 0) {
-      DeviceCounter parent(done[items.parent[q]]);
-      while (parent.load(::cuda::memory_order_acquire) == 0) __nanosleep(32);
-    }
-    item = q;
-  }
-  __syncthreads();
-  const std::int64_t q = item;
-  for (std::int64_t f = items.last[q]; f >= items.first[q]; --f)
-    solve_device::front_backward<Batch>(t, f, x, scratch, nrhs, lu, unit);  // ends in a barrier
-  if (threadIdx.x == 0) {
-    __threadfence();
-    DeviceCounter(done[items.last[q]]).store(1, ::cuda::memory_order_release);
-  }
 }
 
 __global__ void diagonal_kernel(SolveTree t, const double* d_diag, const double* d_off,
@@ -252,32 +196,6 @@ void launch_fronts_backward(const SolveTree& t, const std::int64_t* first, const
   else
     fronts_backward_kernel<4><<<static_cast<unsigned>(count), kSweepThreads, 0, s>>>(
         t, first, last, begin, x, scratch, nrhs, lu, unit);
-  STRATA_CUDA_LAUNCH();
-}
-
-void launch_run_forward(const SolveTree& t, RunItems items, std::int64_t begin, std::int64_t count,
-                        int* ticket, int* pending, double* x, double* u, double* scratch,
-                        std::int64_t nrhs, bool unit, bool lu, cudaStream_t s) {
-  if (count == 0) return;
-  if (count <= kFewFrontBlocks)
-    run_forward_kernel<kTallBatch><<<static_cast<unsigned>(count), kSweepThreads, 0, s>>>(
-        t, items, begin, ticket, pending, x, u, scratch, nrhs, unit, lu);
-  else
-    run_forward_kernel<4><<<static_cast<unsigned>(count), kSweepThreads, 0, s>>>(
-        t, items, begin, ticket, pending, x, u, scratch, nrhs, unit, lu);
-  STRATA_CUDA_LAUNCH();
-}
-
-void launch_run_backward(const SolveTree& t, RunItems items, std::int64_t begin, std::int64_t count,
-                         int* ticket, int* done, double* x, double* scratch, std::int64_t nrhs,
-                         bool lu, bool unit, cudaStream_t s) {
-  if (count == 0) return;
-  if (count <= kFewFrontBlocks)
-    run_backward_kernel<kTallBatch><<<static_cast<unsigned>(count), kSweepThreads, 0, s>>>(
-        t, items, begin, count, ticket, done, x, scratch, nrhs, lu, unit);
-  else
-    run_backward_kernel<4><<<static_cast<unsigned>(count), kSweepThreads, 0, s>>>(
-        t, items, begin, count, ticket, done, x, scratch, nrhs, lu, unit);
   STRATA_CUDA_LAUNCH();
 }
 

@@ -16,10 +16,7 @@
 // order: levels from the root, then the subtrees with their fronts in reverse postorder;
 // gather W = x at the front's rows, sweep, scatter the pivots. Fronts solved side by side
 // write disjoint entries and every sum has a fixed order, so the solve is deterministic.
-// Runs (SolvePlan::run_offsets) join the subtrees' launch and the block-path launches of the
-// levels after it into one launch each way: a block takes the next item (a subtree or a
-// front) in the plan's order and waits, spinning on a counter, until the fronts it depends
-// on are done. The planner (solve_plan.hpp) decides which fronts take which path.
+// The planner (solve_plan.hpp) decides which fronts take which path.
 #pragma once
 
 #include <cuda_runtime.h>
@@ -75,28 +72,6 @@ void launch_fronts_forward(const SolveTree& t, const std::int64_t* first, const 
 void launch_fronts_backward(const SolveTree& t, const std::int64_t* first, const std::int64_t* last,
                             std::int64_t begin, std::int64_t count, double* x, double* scratch,
                             std::int64_t nrhs, bool lu, bool unit, cudaStream_t s);
-
-/// The items of the runs (device arrays of SolvePlan::item_first, item_last, item_parent).
-struct RunItems {
-  const std::int64_t* first;
-  const std::int64_t* last;
-  const std::int64_t* parent;
-};
-
-/// Forward solve of one run, items [begin, begin+count), one block each: a block takes the
-/// next item through *ticket (0 before the launch), waits until pending[its last front]
-/// is 0 (the run's children of that front are done; SolvePlan::run_pending before the
-/// launch), solves the item's fronts in order and counts down pending[item_parent].
-void launch_run_forward(const SolveTree& t, RunItems items, std::int64_t begin, std::int64_t count,
-                        int* ticket, int* pending, double* x, double* u, double* scratch,
-                        std::int64_t nrhs, bool unit, bool lu, cudaStream_t s);
-
-/// Backward solve of one run: the items from the last, one block each, taken through
-/// *ticket (0 before the launch); a block waits until done[item_parent] is set (0 before
-/// the launch), solves the item's fronts in the reverse order and sets done[its last front].
-void launch_run_backward(const SolveTree& t, RunItems items, std::int64_t begin, std::int64_t count,
-                         int* ticket, int* done, double* x, double* scratch, std::int64_t nrhs,
-                         bool lu, bool unit, cudaStream_t s);
 
 /// x ← D⁻¹ x for LDLᵀ (1×1 and 2×2 blocks by pivot position).
 void launch_solve_diagonal(const SolveTree& t, const double* d_diag, const double* d_off,

@@ -21,11 +21,6 @@
 // level of thousands of small fronts cannot afford. The planner picks the subtrees
 // and, per level, the split that minimize a simple time model (see kBlockBytesPerSecond
 // etc.): the largest fronts go to the library as long as that shortens the level.
-// Launches of the block path that follow one another — the subtrees' and those of the
-// levels above them whose fronts are all small — are joined into runs (plan_runs), one
-// launch each way, in which a front waits for its children (forward) or its parent
-// (backward) instead of for the level below or above to end: a front of an upper level
-// takes a few microseconds, about what a launch and the drain before the next cost.
 // Gathering by parent row (the inverse of the children's relative positions) lets every
 // thread build its row alone — no ordering between children, no atomics, the same
 // summation order as the CPU solve's child-by-child extend-add.
@@ -144,76 +139,7 @@ struct SolvePlan {
   std::int64_t part_total = 0;            ///< doubles of the partial products per rhs
   /// The subtree limit the plan was made with: seconds on one block (−1: no subtree).
   double subtree_limit = -1.0;
-  /// Runs: block-path launches that follow one another in the forward sweep (the subtrees'
-  /// launch, then levels whose fronts outside the subtrees are all small block-path fronts;
-  /// levels with no such front in between) joined into one launch each way (plan_runs).
-  /// Run r's items are item_first/item_last[run_offsets[r] .. run_offsets[r+1]): a subtree
-  /// (its fronts in postorder), or one small front (first == last), the subtrees first,
-  /// then the levels deepest first. An item is a block's work; blocks take items in this
-  /// order forward and in the reverse order backward, through a counter (the order blocks
-  /// start in), so an item waits only for items taken before it. item_parent[q]: the
-  /// parent of item q's last front when that parent is the last front of an item of the
-  /// same run, else −1: forward, q counts down that front's pending children
-  /// (run_pending, per front) and the front's item waits for 0; backward, q waits until
-  /// that front's item is done.
-  std::vector<std::int64_t> run_offsets{0}, item_first, item_last, item_parent;
-  std::vector<std::int64_t> run_pending;  ///< per front: the items whose item_parent it is
-  std::vector<std::int64_t> level_run;    ///< per level: the run of its small fronts, or −1
-  std::int64_t subtree_run = -1;          ///< the run of the subtrees, −1 when none
-  std::int64_t n_runs() const { return static_cast<std::int64_t>(run_offsets.size()) - 1; }
 };
-
-/// The runs of `p` (SolvePlan::run_offsets and what follows it) from its subtrees and its
-/// per-level lists, which plan_sweeps has made. Why: the fronts of a multibody Newton
-/// matrix's upper levels take a few microseconds each, about what a launch and the drain
-/// before the next cost; in one launch a front starts as soon as its children are done
-/// instead of when its whole level is.
-inline void plan_runs(const symbolic::AssemblyTree& t, SolvePlan& p) {
-  const index_t nf = t.n_fronts();
-  const auto levels = static_cast<std::int64_t>(p.small_offsets.size()) - 1;
-  p.run_offsets.assign(1, 0);
-  p.item_first.clear();
-  p.item_last.clear();
-  p.level_run.assign(static_cast<std::size_t>(levels), -1);
-  p.subtree_run = -1;
-  std::vector<std::int64_t> run_of(nf, -1);  // the run of the item whose last front it is
-  std::int64_t run = -1;                     // the run being extended, −1: none
-  auto add = [&](std::int64_t first, std::int64_t last) {
-    if (run < 0) {
-      run = p.n_runs();
-      p.run_offsets.push_back(p.run_offsets.back());
-    }
-    p.item_first.push_back(first);
-    p.item_last.push_back(last);
-    run_of[last] = run;
-    ++p.run_offsets.back();
-  };
-  for (std::size_t q = 0; q < p.subtree_first.size(); ++q) {
-    add(p.subtree_first[q], p.subtree_last[q]);
-    p.subtree_run = run;
-  }
-  for (std::int64_t l = 0; l < levels; ++l) {
-    const std::int64_t small = p.small_offsets[l + 1] - p.small_offsets[l];
-    const std::int64_t other =
-        p.tall_offsets[l + 1] - p.tall_offsets[l] + p.large_offsets[l + 1] - p.large_offsets[l];
-    if (other > 0) {
-      run = -1;  // gathers, sweeps and library calls between: the run ends
-      continue;
-    }
-    for (std::int64_t q = p.small_offsets[l]; q < p.small_offsets[l + 1]; ++q)
-      add(p.small_fronts[q], p.small_fronts[q]);
-    if (small > 0) p.level_run[l] = run;
-  }
-  p.item_parent.assign(p.item_last.size(), -1);
-  p.run_pending.assign(nf, 0);
-  for (std::int64_t r = 0; r < p.n_runs(); ++r)
-    for (std::int64_t q = p.run_offsets[r]; q < p.run_offsets[r + 1]; ++q) {
-      const index_t parent = t.parent[p.item_last[q]];
-      if (parent < 0 || run_of[parent] != r) continue;
-      p.item_parent[q] = parent;
-      ++p.run_pending[parent];
-    }
-}
 
 /// The update vectors' offsets and the inverse extend-add map of `p` (SolvePlan::u_offset,
 /// inv_offsets, inv_src): for each parent row, the child entries adding into it, in child
@@ -444,7 +370,6 @@ inline void plan_sweeps(const symbolic::AssemblyTree& t, const symbolic::LevelSc
     p.small_offsets.push_back(static_cast<std::int64_t>(p.small_fronts.size()));
     p.tall_offsets.push_back(static_cast<std::int64_t>(p.tall_fronts.size()));
   }
-  plan_runs(t, p);
 }
 
 /// The plan of the whole tree `t` (with its extend-add map `child_rows`, e.g.
