@@ -34,6 +34,7 @@ PATTERNS = {
     "analyses": (r"analyses (\d+):", int),
     "analyses_perturbed": (r"perturbed pivots (\d+)[,;]", int),
     "analyses_contacts": (r"contact-set changes (\d+)", int),
+    "analyses_matching_kept": (r"\(matching kept in (\d+)\)", int),
     "analyses_order_kept": (r"order kept for (\d+)", int),
     "static_pivots_left": (r"static pivots left (\d+)", int),
     "delayed_factorizations": (r"delayed pivoting in (\d+) factorizations", int),

@@ -61,6 +61,19 @@ class Solver {
   /// an analyzed entry is missing (named; nothing changes then), OutOfMemory as analyze.
   void analyze_keeping_order(const SparseMatrix& a);
 
+  /// Analysis of a pattern that differs from the analyzed one (entries added and removed:
+  /// contact pairs that closed and others that opened) keeping the matching and scaling of
+  /// the current analysis and computing a new fill-reducing order for A's pattern: analyze
+  /// without its matching (Options::matching_and_scaling), where the kept order would fill
+  /// too much and a new matching would cost more than the order. A's values are not read.
+  /// A general matrix's pattern must hold every matched entry; a symmetric indefinite one
+  /// with 2×2 pivots must contain the analyzed pattern. The values' drift from the kept
+  /// scaling is corrected at each factorization, as after analyze_keeping_order. Follow it
+  /// with factorize. The factor is discarded. Throws InvalidState before analyze,
+  /// InvalidInput when A is not square of the analyzed size, has an empty row or column,
+  /// or misses such an entry (named; nothing changes then), OutOfMemory as analyze.
+  void analyze_keeping_matching(const SparseMatrix& a);
+
   /// Analysis of the factorized pattern in the order in which the last factorization took
   /// its pivots; that factorization must have delayed pivots (stats().factor.delayed_pivoting:
   /// the analysis's order needed static pivots for its values, Options::pivoting). The

@@ -61,6 +61,9 @@ struct AnalysisStats {
   /// analysis before were kept for a pattern that contains its own (ordering_seconds is
   /// then the time to form the permuted pattern).
   bool order_kept = false;
+  /// Solver::analyze_keeping_matching: the matching and scaling of the analysis before
+  /// were kept and a new fill-reducing order computed (matching_seconds is then 0).
+  bool matching_kept = false;
   /// Solver::analyze_in_pivot_order: the matching and order are those in which the last
   /// factorization with delayed pivots took its pivots (the pattern and the ordering
   /// method reported are the analysis's before; ordering_seconds is the time to form the

@@ -442,15 +442,19 @@ void finish_analysis(Analysis& an, const SparseMatrix& c, const SparseMatrix& pa
 
 }  // namespace
 
-static Analysis analyze_with_order_impl(const SparseMatrix& a, const Analysis& previous,
-                                        const Options& opts, int workers) {
+// analyze_with_order (kept order) and analyze_with_matching (a new order): previous's
+// matching, scaling and pivot groups on a's pattern.
+static Analysis analyze_keeping_impl(const SparseMatrix& a, const Analysis& previous,
+                                     const Options& opts, int workers, bool keep_order) {
   Timer total;
+  const char* what = keep_order ? "analyze_with_order" : "analyze_with_matching";
   if (workers < 1)
-    throw InvalidInput("analyze_with_order: workers must be at least 1 (got " +
+    throw InvalidInput(std::string(what) + ": workers must be at least 1 (got " +
                        std::to_string(workers) + ")");
   if (a.n_rows != a.n_cols || a.n_rows != previous.n)
-    throw InvalidInput("analyze_with_order: the matrix is " + std::to_string(a.n_rows) + "x" +
-                       std::to_string(a.n_cols) + ", the analysis whose order it keeps was for " +
+    throw InvalidInput(std::string(what) + ": the matrix is " + std::to_string(a.n_rows) + "x" +
+                       std::to_string(a.n_cols) + ", the analysis whose " +
+                       (keep_order ? "order" : "matching") + " it keeps was for " +
                        std::to_string(previous.n) + "x" + std::to_string(previous.n));
   Analysis an;
   an.id = next_analysis_id();
@@ -459,18 +463,35 @@ static Analysis analyze_with_order_impl(const SparseMatrix& a, const Analysis& p
   an.type = previous.type;
   an.symmetric = previous.symmetric;
   SparseMatrix c = an.symmetric ? lower_triangle(a) : expand_symmetric(a);
-  // every analyzed entry must still be there: the matching's entries are then entries of
-  // the new pattern, and B's diagonal keeps them
-  for (index_t j = 0; j < an.n; ++j) {
-    index_t p = c.offsets[j];
-    for (index_t q = previous.pattern_offsets[j]; q < previous.pattern_offsets[j + 1]; ++q) {
-      const index_t i = previous.pattern_indices[q];
-      while (p < c.offsets[j + 1] && c.indices[p] < i) ++p;
-      if (p == c.offsets[j + 1] || c.indices[p] != i)
-        throw InvalidInput("analyze_with_order: entry (" + std::to_string(i) + ", " +
-                           std::to_string(j) +
-                           ") of the analyzed pattern is missing from the new one; the order "
-                           "can only be kept for a pattern that contains the analyzed one");
+  const bool grouped = previous.pivot_groups.n_groups() > 0;
+  if (keep_order || grouped) {
+    // every analyzed entry must still be there: the matching's entries (and a pair's
+    // coupling) are then entries of the new pattern, and B's diagonal keeps them
+    for (index_t j = 0; j < an.n; ++j) {
+      index_t p = c.offsets[j];
+      for (index_t q = previous.pattern_offsets[j]; q < previous.pattern_offsets[j + 1]; ++q) {
+        const index_t i = previous.pattern_indices[q];
+        while (p < c.offsets[j + 1] && c.indices[p] < i) ++p;
+        if (p == c.offsets[j + 1] || c.indices[p] != i)
+          throw InvalidInput(std::string(what) + ": entry (" + std::to_string(i) + ", " +
+                             std::to_string(j) +
+                             ") of the analyzed pattern is missing from the new one; the " +
+                             (keep_order ? "order" : "matching and its 2x2 pivots") +
+                             " can only be kept for a pattern that contains the analyzed one");
+      }
+    }
+  } else {
+    check_no_empty_line(c, an.symmetric);
+    // a general matrix's matched entries: A(j, q[j]) is B's diagonal entry j
+    const std::vector<index_t>& q = previous.matching_perm;
+    for (index_t j = 0; j < an.n && !q.empty(); ++j) {
+      const auto first = c.indices.begin() + c.offsets[q[j]];
+      const auto last = c.indices.begin() + c.offsets[q[j] + 1];
+      if (!std::binary_search(first, last, j))
+        throw InvalidInput("analyze_with_matching: the matched entry (" + std::to_string(j) + ", " +
+                           std::to_string(q[j]) +
+                           ") is not in the new pattern; the matching can only be kept for a "
+                           "pattern that has every matched entry");
     }
   }
   an.pattern_offsets = c.offsets;
@@ -482,14 +503,26 @@ static Analysis analyze_with_order_impl(const SparseMatrix& a, const Analysis& p
   Timer step;
   const SparseMatrix pattern = detail::symmetric_pattern(c, an.symmetric, an.matching_perm);
   ordering::OrderingResult ord;
-  // the order of the analysis that computed one (postordered: as good a fill-reducing order
-  // as the one it came from)
-  ord.perm = previous.kept_order.empty() ? previous.perm : previous.kept_order;
-  an.kept_order = ord.perm;
+  if (keep_order) {
+    // the order of the analysis that computed one (postordered: as good a fill-reducing
+    // order as the one it came from)
+    ord.perm = previous.kept_order.empty() ? previous.perm : previous.kept_order;
+    an.kept_order = ord.perm;
+    ord.method = previous.stats.ordering;
+  } else {
+    const ordering::Graph graph = ordering::graph_of_symmetric_pattern(pattern);
+    ord = grouped ? ordering::compute_grouped_ordering(
+                        graph, ordering::complete_groups(an.n, an.pivot_groups), opts, workers)
+                  : ordering::compute_ordering(graph, opts, workers);
+    an.stats.nd_rebisections = ord.rebisections;
+    an.stats.nd_balance_seconds = ord.balance_seconds;
+  }
+  const OrderingMethod method = ord.method;
   an.stats.ordering_seconds = step.seconds();
-  an.stats.order_kept = true;
+  an.stats.order_kept = keep_order;
+  an.stats.matching_kept = !keep_order;
   finish_analysis(an, c, pattern, std::move(ord), opts, workers);
-  an.stats.ordering = previous.stats.ordering;
+  an.stats.ordering = method;
   an.stats.total_seconds = total.seconds();
   return an;
 }
@@ -599,7 +632,13 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers)
 Analysis analyze_with_order(const SparseMatrix& a, const Analysis& previous, const Options& opts,
                             int workers) {
   return run_analysis(opts, a.indices.size(),
-                      [&] { return analyze_with_order_impl(a, previous, opts, workers); });
+                      [&] { return analyze_keeping_impl(a, previous, opts, workers, true); });
+}
+
+Analysis analyze_with_matching(const SparseMatrix& a, const Analysis& previous, const Options& opts,
+                               int workers) {
+  return run_analysis(opts, a.indices.size(),
+                      [&] { return analyze_keeping_impl(a, previous, opts, workers, false); });
 }
 
 Analysis analyze_with_pivot_sequence(const Analysis& previous,

@@ -112,6 +112,16 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers 
 Analysis analyze_with_order(const SparseMatrix& a, const Analysis& previous, const Options& opts,
                             int workers = 1);
 
+/// The analysis of a pattern that differs from previous's (contact pairs that closed and
+/// others that opened) with previous's matching, scaling and pivot groups kept and a new
+/// fill-reducing order computed for it: the analysis without the matching (steps 3–7 of
+/// analysis.cpp). A general matrix's pattern must hold every matched entry (A(j, q[j])); a
+/// symmetric indefinite one with 2×2 pivots must contain previous's pattern. Throws
+/// InvalidInput when the size differs or such an entry is missing (naming it), when a row
+/// or column is empty, or for workers < 1.
+Analysis analyze_with_matching(const SparseMatrix& a, const Analysis& previous, const Options& opts,
+                               int workers = 1);
+
 /// The analysis of previous's pattern (a general matrix) in the pivot sequence that a
 /// factorization with delayed pivots took (numeric/delayed.hpp): row_sequence[k] and
 /// col_sequence[k] are the row and the column (previous's tree numbering: index t stands

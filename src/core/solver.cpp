@@ -641,6 +641,18 @@ void Solver::analyze_keeping_order(const SparseMatrix& a) {
   });
 }
 
+void Solver::analyze_keeping_matching(const SparseMatrix& a) {
+  if (!state_->analysis) throw InvalidState("analyze_keeping_matching called before analyze");
+  phase("analyze", [&] {
+    validate(a);
+    const int workers = static_cast<int>(std::max<index_t>(1, state_->analysis->stats.workers));
+    // computed before anything is released: bad input leaves the solver as it was
+    Analysis next = analyze_with_matching(a, *state_->analysis, state_->options, workers);
+    clear_numeric(*state_);
+    adopt_analysis(*state_, std::move(next), a);
+  });
+}
+
 void Solver::analyze_in_pivot_order() {
   SolverState& s = *state_;
   if (!s.analysis || !s.delayed.valid)

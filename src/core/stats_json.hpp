@@ -109,6 +109,7 @@ inline void to_json(nlohmann::json& j, const AnalysisStats& s) {
        {"odd_cycles", s.odd_cycles},
        {"ordering", to_string(s.ordering)},
        {"order_kept", s.order_kept},
+       {"matching_kept", s.matching_kept},
        {"order_from_pivots", s.order_from_pivots},
        {"workers", s.workers},
        {"subtrees", s.subtrees},

@@ -138,6 +138,7 @@ void Integrator::analyze(const BdfTerms& bdf, double t) {
   analyzed_pattern_ = sys_.pattern_id();
   keep_values(analysis_values_);
   analysis_forces_ = sys_.pattern_forces();
+  reorder_forces_.clear();
   analysis_factor_entries_ = solver_->factor_entries();
   stats_.analysis_seconds += ta.seconds();
   ++stats_.analyses;
@@ -169,8 +170,12 @@ void Integrator::analyze(const BdfTerms& bdf, double t) {
 // After NewtonSystem::update_candidates returned `change`: a new Jacobian is needed; a
 // pair new to the pattern grew it, and the solver analyzes the grown pattern keeping its
 // order (the pattern contains the analyzed one: pairs that left stay in it until the next
-// analysis), unless a full analysis is pending anyway or the kept order's factor has grown
-// by more than a quarter, when the next Newton iteration analyzes afresh.
+// analysis), unless a full analysis is pending anyway. When the kept order's factor has
+// grown by more than a quarter, the next Newton iteration analyzes afresh, or, with
+// IntegratorOptions::reorder_keeping_matching, the pairs that left are dropped from the
+// pattern and it is ordered anew with the analysis's matching and scaling kept (the
+// matching's entries are those of bodies and joints, rarely of a contact; afresh where the
+// pattern lost a matched entry).
 void Integrator::contacts_changed(int change, StepInfo* info) {
   if (change == 0) return;
   ++stats_.contact_updates;
@@ -198,10 +203,39 @@ void Integrator::contacts_changed(int change, StepInfo* info) {
                t_, stats_.factor_nnz,
                stats_.factor_nnz / std::max(1.0, static_cast<double>(analysis_factor_entries_)),
                grown ? "; a new analysis follows" : "");
-  if (grown) {
+  if (!grown) return;
+  ++stats_.contact_analyses;
+  if (!opts_.reorder_keeping_matching) {
     pattern_changed_ = true;
-    ++stats_.contact_analyses;
+    return;
   }
+  Timer reorder;
+  sys_.prune_pattern();  // contact pairs that left since the last analysis
+  try {
+    solver_->analyze_keeping_matching(sys_.matrix());
+  } catch (const InvalidInput&) {  // a matched entry left with a pair: a new matching
+    pattern_changed_ = true;
+    stats_.analysis_seconds += reorder.seconds();
+    stats_.solver_seconds += reorder.seconds();
+    if (info) info->solver_seconds += reorder.seconds();
+    return;
+  }
+  const double r = reorder.seconds();
+  stats_.analysis_seconds += r;
+  stats_.solver_seconds += r;
+  if (info) info->solver_seconds += r;
+  ++stats_.analyses;
+  ++stats_.matching_kept_analyses;
+  analyzed_pattern_ = sys_.pattern_id();
+  reorder_forces_ = sys_.pattern_forces();
+  analysis_factor_entries_ = solver_->factor_entries();
+  stats_.jacobian_nnz = sys_.matrix().nnz();
+  stats_.factor_nnz = analysis_factor_entries_;
+  if (opts_.verbose)
+    fmt::print(stderr,
+               "t = {:.9g}: new order keeping the matching and scaling ({} rows, {} entries, "
+               "nnz(L) {}): {:.3f} s\n",
+               t_, sys_.matrix().n_rows, sys_.matrix().nnz(), analysis_factor_entries_, r);
 }
 
 void Integrator::keep_values(std::vector<double>& kept) const {

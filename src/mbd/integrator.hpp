@@ -72,6 +72,14 @@ struct IntegratorOptions {
   /// A fresh analysis of the Newton matrix at every step attempt, with the current
   /// values (tests: the reference for the loop that reuses one analysis per pattern).
   bool analyze_every_step = false;
+  /// When contact pairs new to the pattern make the kept order's factor more than a
+  /// quarter larger than the last analysis's: false (default) analyzes afresh at the next
+  /// Newton iteration, with a new matching from the values then; true drops the pairs that
+  /// left and orders the pattern anew keeping the analysis's matching and scaling
+  /// (Solver::analyze_keeping_matching; afresh where the pattern lost a matched entry),
+  /// which costs less per analysis but leaves the later factorizations the older matching
+  /// (more delayed pivots where the values have drifted from those it was made for).
+  bool reorder_keeping_matching = false;
   index_t dump_step = -1;  ///< write the Newton Jacobian of this step (1-based)
   std::string dump_dir;    ///< ... into this folder (Matrix Market)
   bool verbose = false;
@@ -126,6 +134,9 @@ struct IntegratorStats {
   /// Analyses (counted in `analyses`) made because the kept order's factor had grown past
   /// 1.25 times the entries of the last analysis's.
   index_t contact_analyses = 0;
+  /// Of those, the analyses that kept the matching and scaling of the analysis before and
+  /// ordered the pattern anew (Solver::analyze_keeping_matching).
+  index_t matching_kept_analyses = 0;
   index_t error_rejections = 0;  ///< variable step: steps rejected by the local error test
   index_t perturbed_pivots = 0;  ///< static pivots over all factorizations
   /// Factorizations with delayed pivoting (strata's Options::pivoting) and the pivots they
@@ -292,6 +303,9 @@ class Integrator {
   // the force elements in the pattern at the last analysis (restart), and its factor's size
   std::vector<char> analysis_forces_;
   index_t analysis_factor_entries_ = 0;
+  // the force elements in the pattern of the last analysis with a new order and the
+  // matching of analysis_forces_'s kept (contacts_changed; restart), empty when none since
+  std::vector<char> reorder_forces_;
   // NewtonSystem::pattern_id() of the pattern the solver last analyzed (0: none yet)
   std::uint64_t analyzed_pattern_ = 0;
 };

@@ -31,6 +31,7 @@ json stats_to_json(const IntegratorStats& s) {
           {"contact_updates", s.contact_updates},
           {"kept_order_analyses", s.kept_order_analyses},
           {"contact_analyses", s.contact_analyses},
+          {"matching_kept_analyses", s.matching_kept_analyses},
           {"error_rejections", s.error_rejections},
           {"perturbed_pivots", s.perturbed_pivots},
           {"delayed_factorizations", s.delayed_factorizations},
@@ -75,6 +76,7 @@ IntegratorStats stats_from_json(const json& j) {
   j.at("contact_updates").get_to(s.contact_updates);
   j.at("kept_order_analyses").get_to(s.kept_order_analyses);
   j.at("contact_analyses").get_to(s.contact_analyses);
+  s.matching_kept_analyses = j.value("matching_kept_analyses", index_t{0});  // (older: none)
   j.at("error_rejections").get_to(s.error_rejections);
   j.at("perturbed_pivots").get_to(s.perturbed_pivots);
   j.at("delayed_factorizations").get_to(s.delayed_factorizations);
@@ -122,6 +124,7 @@ json Integrator::save_state() const {
   std::vector<int> cand(sys_.candidates().begin(), sys_.candidates().end());
   std::vector<int> pattern(sys_.pattern_forces().begin(), sys_.pattern_forces().end());
   std::vector<int> analyzed(analysis_forces_.begin(), analysis_forces_.end());
+  std::vector<int> reordered(reorder_forces_.begin(), reorder_forces_.end());
   std::vector<int> active(sys_.active_rows().begin(), sys_.active_rows().end());
   return {{"n", sys_.n()},
           {"m", sys_.model_m()},
@@ -159,6 +162,7 @@ json Integrator::save_state() const {
           {"candidates", cand},
           {"pattern_forces", pattern},
           {"analysis_forces", analyzed},
+          {"reorder_forces", reordered},
           {"analysis_factor_entries", analysis_factor_entries_},
           {"analysis_values", analysis_values_},
           {"factor_values", factor_values_},
@@ -232,6 +236,9 @@ void Integrator::restore_state(const json& j) {
   j.at("analysis_factor_entries").get_to(analysis_factor_entries_);
   sys_.set_candidates(std::vector<char>(cand.begin(), cand.end()));
   analysis_forces_.assign(analyzed.begin(), analyzed.end());
+  // (checkpoints written before the engine ordered contact patterns anew have none)
+  const auto reordered = j.value("reorder_forces", std::vector<int>{});
+  reorder_forces_.assign(reordered.begin(), reordered.end());
   const bool analyzed_pattern = !analysis_forces_.empty();
   // the pattern of the last analysis first (its values are saved for it), then the one
   // that grew from it by contact pairs with the analysis's order kept
@@ -251,7 +258,16 @@ void Integrator::restore_state(const json& j) {
     a.values = analysis_values_;
     solver_ = new_solver();
     solver_->analyze(a);
-    if (now != analysis_forces_) {
+    // then the pattern ordered anew with that matching (contacts_changed), then the one
+    // that grew from it with the order kept
+    const std::vector<char>& ordered = reorder_forces_.empty() ? analysis_forces_ : reorder_forces_;
+    if (!reorder_forces_.empty()) {
+      sys_.set_pattern_forces(reorder_forces_);
+      sys_.rebuild_pattern();
+      solver_->analyze_keeping_matching(sys_.matrix());
+      a = sys_.matrix();
+    }
+    if (now != ordered) {
       sys_.set_pattern_forces(now);
       sys_.rebuild_pattern();
       solver_->analyze_keeping_order(sys_.matrix());

@@ -57,6 +57,10 @@ class StrataLinearSolver : public LinearSolver {
     solver_.analyze_keeping_order(a);  // the matching and scaling stay: so does delaying
     fresh_ = true;
   }
+  void analyze_keeping_matching(const SparseMatrix& a) override {
+    solver_.analyze_keeping_matching(a);  // as analyze_keeping_order: delaying stays
+    fresh_ = true;
+  }
   void factorize(const SparseMatrix& a) override {
     if (fresh_)
       solver_.factorize(a);

@@ -23,6 +23,11 @@ class LinearSolver {
   /// Analysis of a pattern that contains the analyzed one, keeping its ordering
   /// (strata::Solver::analyze_keeping_order); a solver without that analyzes afresh.
   virtual void analyze_keeping_order(const SparseMatrix& a) { analyze(a); }
+  /// Analysis of a changed pattern with a new ordering and the analyzed matching and
+  /// scaling kept (strata::Solver::analyze_keeping_matching; A's values are not read);
+  /// a solver without that analyzes afresh. Throws InvalidInput, changing nothing, when
+  /// the pattern lacks a matched entry.
+  virtual void analyze_keeping_matching(const SparseMatrix& a) { analyze(a); }
   /// Numeric factorization of A with the analyzed pattern.
   virtual void factorize(const SparseMatrix& a) = 0;
   /// As factorize, when the caller knows that A's pattern is the very one analyzed (the

@@ -68,6 +68,7 @@ nlohmann::json integrator_options_json(const IntegratorOptions& o) {
           {"order", o.order},
           {"modified_newton", o.modified_newton},
           {"anderson_depth", o.anderson_depth},
+          {"reorder_keeping_matching", o.reorder_keeping_matching},
           {"max_newton_iterations", o.max_newton_iterations},
           {"newton_rtol", o.newton_rtol},
           {"newton_atol", o.newton_atol},
@@ -104,6 +105,8 @@ IntegratorOptions checkpoint_integrator_options(const nlohmann::json& ck) {
   j.at("order").get_to(o.order);
   j.at("modified_newton").get_to(o.modified_newton);
   o.anderson_depth = j.value("anderson_depth", 0);  // checkpoints written before it: plain
+  // (written before it: a new matching at every such analysis)
+  o.reorder_keeping_matching = j.value("reorder_keeping_matching", false);
   j.at("max_newton_iterations").get_to(o.max_newton_iterations);
   j.at("newton_rtol").get_to(o.newton_rtol);
   j.at("newton_atol").get_to(o.newton_atol);
@@ -431,12 +434,12 @@ std::string summary(const Model& model, const SimulationResult& r) {
   const index_t other_analyses =
       std::max<index_t>(0, s.analyses - 1 - s.repartitions - s.contact_analyses - s.reanalyses);
   o += fmt::format(
-      "factorizations        {} (analyses {}: first 1, new partitions {}, contact-set changes {}, "
-      "perturbed pivots {}, new formulation or constraint set {}; order kept for {} of {} "
-      "contact-set changes; static pivots left {}; delayed pivoting in {} factorizations, "
-      "{} pivots delayed)\n",
-      s.factorizations, s.analyses, s.repartitions, s.contact_analyses, s.reanalyses,
-      other_analyses, s.kept_order_analyses, s.contact_updates, s.perturbed_pivots,
+      "factorizations        {} (analyses {}: first 1, new partitions {}, contact-set changes {} "
+      "(matching kept in {}), perturbed pivots {}, new formulation or constraint set {}; order "
+      "kept for {} of {} contact-set changes; static pivots left {}; delayed pivoting in {} "
+      "factorizations, {} pivots delayed)\n",
+      s.factorizations, s.analyses, s.repartitions, s.contact_analyses, s.matching_kept_analyses,
+      s.reanalyses, other_analyses, s.kept_order_analyses, s.contact_updates, s.perturbed_pivots,
       s.delayed_factorizations, s.delayed_pivots);
   o += fmt::format("Newton matrix         {} x {}, nnz {}, nnz(L) {}\n", s.jacobian_size,
                    s.jacobian_size, s.jacobian_nnz, s.factor_nnz);

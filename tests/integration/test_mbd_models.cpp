@@ -147,6 +147,48 @@ TEST(MbdModels, TrajectoriesEqualAFreshAnalysisAtEveryStep) {
   }
 }
 
+// When contact pairs entering the pattern make the kept order fill too much, the loop with
+// reorder_keeping_matching orders the pattern anew keeping the analysis's matching and
+// scaling: the default model
+// through its first such change (t ≈ 0.39 s) follows, to 1e-8 at every step, the loop that
+// analyzes afresh there (a new matching from the values), with no perturbed pivot; and an
+// integrator restored from a state saved after that change continues it bit for bit (the
+// state replays the analysis, the new order and the kept order).
+TEST(MbdModels, ContactChangesOrderAnewKeepingTheMatching) {
+  const Model m = build_model(generate("tracked:100"), "tracked:100");
+  IntegratorOptions o;
+  o.t_end = 0.4;
+  o.newton_rtol = 1e-10;  // tight, as above: the two runs' converged states differ by little
+  o.newton_atol = 1e-12;
+  o.reorder_keeping_matching = true;
+  IntegratorOptions afresh = o;
+  afresh.reorder_keeping_matching = false;
+  Integrator reordered(m, o), reference(m, afresh);
+  double worst = 0;
+  test::step_side_by_side(reordered, reference, 1e-8, &worst);
+  EXPECT_GE(reordered.stats().matching_kept_analyses, 1);
+  EXPECT_EQ(reference.stats().matching_kept_analyses, 0);
+  EXPECT_EQ(reordered.stats().contact_analyses, reference.stats().contact_analyses);
+  EXPECT_EQ(reordered.stats().perturbed_pivots, 0);
+  RecordProperty("largest position difference", test::scientific(worst));
+
+  IntegratorOptions longer = o;
+  longer.t_end = 0.41;
+  Integrator straight(m, longer);
+  straight.initialize();
+  while (straight.stats().matching_kept_analyses == 0 && !straight.done()) straight.advance();
+  ASSERT_FALSE(straight.done()) << "no new order keeping the matching before t = 0.41";
+  straight.advance();  // a step after it, so that the state holds its factor too
+  const nlohmann::json state = straight.save_state();
+  Integrator resumed(m, longer);
+  resumed.restore_state(state);
+  while (!straight.done()) straight.advance();
+  while (!resumed.done()) resumed.advance();
+  EXPECT_EQ(resumed.t(), straight.t());
+  EXPECT_EQ(resumed.q(), straight.q());
+  EXPECT_EQ(resumed.stats().analyses, straight.stats().analyses);
+}
+
 // The acceleration analysis solves the symmetric [M Φ_qᵀ; Φ_q 0] by strata's L D Lᵀ (LU
 // only after static pivots); the reference is the same system by LAPACK's dense LU with
 // partial pivoting (IntegratorOptions::dense_solver). Models with constraints, contacts and

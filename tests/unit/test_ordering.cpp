@@ -837,5 +837,53 @@ TEST(Quality, DISABLED_ReportLarge) {
   report(big, "7-point 100^3", false);
 }
 
+// analyze_with_matching on a general pattern that lost one matched entry A(j, q[j]) (its
+// row and column keep others) is refused, naming the entry; on the pattern as analyzed it
+// keeps the matching and scaling and orders the pattern as the analysis did.
+TEST(AnalysisWithMatching, NeedsEveryMatchedEntry) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  for (index_t n : {1, 2, 3, 5, 733}) {
+    SCOPED_TRACE("n = " + std::to_string(n));
+    const SparseMatrix a = test::random_sparse(n, 3, test::RandomKind::general, rng);
+    Options o;
+    o.type = MatrixType::general;
+    const Analysis an = analyze_matrix(a, o);
+    const Analysis again = analyze_with_matching(a, an, o);
+    EXPECT_TRUE(again.stats.matching_kept);
+    EXPECT_FALSE(again.stats.order_kept);
+    EXPECT_EQ(again.matching_perm, an.matching_perm);
+    EXPECT_EQ(again.row_scaling, an.row_scaling);
+    EXPECT_EQ(again.col_scaling, an.col_scaling);
+    EXPECT_EQ(again.perm, an.perm);
+    // a matched entry (j, q[j]) whose row and column hold other entries
+    std::vector<index_t> row_count(n, 0);
+    for (index_t i : a.indices) ++row_count[i];
+    index_t j = 0;
+    while (j < n && (row_count[j] < 2 ||
+                     a.offsets[an.matching_perm[j] + 1] - a.offsets[an.matching_perm[j]] < 2))
+      ++j;
+    if (j == n) continue;  // none (a tiny matrix)
+    const index_t col = an.matching_perm[j];
+    SparseMatrix lost = a;
+    const auto at = std::find(lost.indices.begin() + lost.offsets[col],
+                              lost.indices.begin() + lost.offsets[col + 1], j);
+    ASSERT_NE(at, lost.indices.begin() + lost.offsets[col + 1]);
+    lost.values.erase(lost.values.begin() + (at - lost.indices.begin()));
+    lost.indices.erase(at);
+    for (index_t k = col + 1; k <= n; ++k) --lost.offsets[k];
+    try {
+      (void)analyze_with_matching(lost, an, o);
+      ADD_FAILURE() << "a pattern without the matched entry was accepted";
+    } catch (const InvalidInput& e) {
+      EXPECT_NE(std::string(e.what()).find("matched entry (" + std::to_string(j) + ", " +
+                                           std::to_string(col) + ")"),
+                std::string::npos)
+          << e.what();
+    }
+  }
+}
+
 }  // namespace
 }  // namespace strata::ordering
