@@ -629,28 +629,35 @@ void Solver::analyze(const SparseMatrix& a) {
   });
 }
 
-void Solver::analyze_keeping_order(const SparseMatrix& a) {
-  if (!state_->analysis) throw InvalidState("analyze_keeping_order called before analyze");
+namespace {
+
+// analyze_keeping_order and analyze_keeping_matching: `make` (analyze_with_order or
+// analyze_with_matching) builds the next analysis from the current one before anything is
+// released, so bad input leaves the solver as it was.
+template <class Make>
+void analyze_keeping(SolverState& s, const SparseMatrix& a, const char* what, Make make) {
+  if (!s.analysis) throw InvalidState(std::string(what) + " called before analyze");
   phase("analyze", [&] {
     validate(a);
-    const int workers = static_cast<int>(std::max<index_t>(1, state_->analysis->stats.workers));
-    // computed before anything is released: bad input leaves the solver as it was
-    Analysis next = analyze_with_order(a, *state_->analysis, state_->options, workers);
-    clear_numeric(*state_);
-    adopt_analysis(*state_, std::move(next), a);
+    const int workers = static_cast<int>(std::max<index_t>(1, s.analysis->stats.workers));
+    Analysis next = make(a, *s.analysis, s.options, workers);
+    clear_numeric(s);
+    adopt_analysis(s, std::move(next), a);
   });
 }
 
+}  // namespace
+
+void Solver::analyze_keeping_order(const SparseMatrix& a) {
+  analyze_keeping(*state_, a, "analyze_keeping_order",
+                  [](const SparseMatrix& m, const Analysis& previous, const Options& o,
+                     int workers) { return analyze_with_order(m, previous, o, workers); });
+}
+
 void Solver::analyze_keeping_matching(const SparseMatrix& a) {
-  if (!state_->analysis) throw InvalidState("analyze_keeping_matching called before analyze");
-  phase("analyze", [&] {
-    validate(a);
-    const int workers = static_cast<int>(std::max<index_t>(1, state_->analysis->stats.workers));
-    // computed before anything is released: bad input leaves the solver as it was
-    Analysis next = analyze_with_matching(a, *state_->analysis, state_->options, workers);
-    clear_numeric(*state_);
-    adopt_analysis(*state_, std::move(next), a);
-  });
+  analyze_keeping(*state_, a, "analyze_keeping_matching",
+                  [](const SparseMatrix& m, const Analysis& previous, const Options& o,
+                     int workers) { return analyze_with_matching(m, previous, o, workers); });
 }
 
 void Solver::analyze_in_pivot_order() {

@@ -358,6 +358,38 @@ SparseMatrix grown(const SparseMatrix& a, index_t extra, RandomKind kind, std::m
   return canonicalize(g);  // duplicates summed
 }
 
+// Solver `chain` analyzes a, then a1 and a2 by `keep` (a member such as
+// Solver::analyze_keeping_order); a second solver analyzes a, then a2 by `keep`: the same
+// permutation, the same solution of a2 for a random b, and that solution against dense
+// LAPACK's. Returns the solution; b is set.
+template <class Keep>
+std::vector<double> keep_chain(const Case& c, const SparseMatrix& a, const SparseMatrix& a1,
+                               const SparseMatrix& a2, Solver& chain, Keep keep,
+                               std::vector<double>& b, std::mt19937_64& rng) {
+  const index_t n = a.n_cols;
+  b.resize(n);
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (double& v : b) v = u(rng);
+  std::vector<double> ref = b;
+  EXPECT_TRUE(test::dense_solve(test::to_dense(a2), n, ref, 1));
+  Options o;
+  o.type = c.type;
+  Solver direct(o);
+  chain.analyze(a);
+  direct.analyze(a);
+  (chain.*keep)(a1);
+  (chain.*keep)(a2);
+  (direct.*keep)(a2);
+  EXPECT_EQ(chain.permutation(), direct.permutation());
+  chain.factorize(a2);
+  direct.factorize(a2);
+  const std::vector<double> x = chain.solve(b), y = direct.solve(b);
+  EXPECT_EQ(x, y);
+  EXPECT_LT(test::relative_difference(x, ref), 1e-8);
+  EXPECT_LT(test::backward_error(a2, x.data(), b.data()), 1e-14);
+  return x;
+}
+
 // An analysis keeping the order of the one before solves a grown pattern as a dense LU
 // does; a chain of such analyses gives what one from the first analysis gives; a pattern
 // that lost an analyzed entry is refused and the solver keeps its analysis.
@@ -371,27 +403,13 @@ TEST(Solver, AnalysisKeepingOrderSolvesGrownPatterns) {
       const SparseMatrix a = test::random_sparse(n, 3, c.kind, rng);
       const SparseMatrix a1 = grown(a, std::max<index_t>(1, n / 50), c.kind, rng);
       const SparseMatrix a2 = grown(a1, std::max<index_t>(1, n / 20), c.kind, rng);
-      std::vector<double> b(n);
-      std::uniform_real_distribution<double> u(-1, 1);
-      for (double& v : b) v = u(rng);
-      std::vector<double> ref = b;
-      ASSERT_TRUE(test::dense_solve(test::to_dense(a2), n, ref, 1));
       Options o;
       o.type = c.type;
-      Solver chain(o), direct(o);
-      chain.analyze(a);
-      direct.analyze(a);
-      chain.analyze_keeping_order(a1);
+      Solver chain(o);
+      std::vector<double> b;
+      const std::vector<double> x =
+          keep_chain(c, a, a1, a2, chain, &Solver::analyze_keeping_order, b, rng);
       EXPECT_TRUE(chain.stats().analysis.order_kept);
-      chain.analyze_keeping_order(a2);
-      direct.analyze_keeping_order(a2);
-      EXPECT_EQ(chain.permutation(), direct.permutation());
-      chain.factorize(a2);
-      direct.factorize(a2);
-      const std::vector<double> x = chain.solve(b), y = direct.solve(b);
-      EXPECT_EQ(x, y);
-      EXPECT_LT(test::relative_difference(x, ref), 1e-8);
-      EXPECT_LT(test::backward_error(a2, x.data(), b.data()), 1e-14);
       // a pattern without one of the analyzed entries: refused, the analysis of a2 kept
       SparseMatrix lost = a2;
       if (lost.nnz() > 0 && n > 1) {
@@ -446,28 +464,14 @@ TEST(Solver, AnalysisKeepingMatchingOrdersChangedPatternsAnew) {
           c.type == MatrixType::general
               ? grown(without_additions(a1, a), std::max<index_t>(1, n / 20), c.kind, rng)
               : grown(a1, std::max<index_t>(1, n / 20), c.kind, rng);
-      std::vector<double> b(n);
-      std::uniform_real_distribution<double> u(-1, 1);
-      for (double& v : b) v = u(rng);
-      std::vector<double> ref = b;
-      ASSERT_TRUE(test::dense_solve(test::to_dense(a2), n, ref, 1));
       Options o;
       o.type = c.type;
-      Solver chain(o), direct(o);
-      chain.analyze(a);
-      direct.analyze(a);
-      chain.analyze_keeping_matching(a1);
+      Solver chain(o);
+      std::vector<double> b;
+      const std::vector<double> x =
+          keep_chain(c, a, a1, a2, chain, &Solver::analyze_keeping_matching, b, rng);
       EXPECT_TRUE(chain.stats().analysis.matching_kept);
       EXPECT_FALSE(chain.stats().analysis.order_kept);
-      chain.analyze_keeping_matching(a2);
-      direct.analyze_keeping_matching(a2);
-      EXPECT_EQ(chain.permutation(), direct.permutation());
-      chain.factorize(a2);
-      direct.factorize(a2);
-      const std::vector<double> x = chain.solve(b), y = direct.solve(b);
-      EXPECT_EQ(x, y);
-      EXPECT_LT(test::relative_difference(x, ref), 1e-8);
-      EXPECT_LT(test::backward_error(a2, x.data(), b.data()), 1e-14);
       // an empty column: refused, the analysis and factor of a2 kept
       if (c.type == MatrixType::general && n > 1) {
         SparseMatrix empty = a2;
