@@ -24,9 +24,5 @@ if [ ! -x "$BIN/bench_cudss" ] || ldd "$BIN/bench_cudss" | grep -q "not found"; 
   exit 0
 fi
 list=$(bash scripts/gpu/mechanical_matrices.sh "$S" "$WORK" "${models[@]}" | tail -n 1)
-# analyzed with the option the engine sets for its Newton matrices (mbd::engine_solver_options:
-# one METIS separator per nested-dissection bisection), so that the row measures the
-# analysis `strata simulate` makes of them
-"$BIN/bench_cudss" --tag mbd --solver-option nd_separators=1 --problems "$list" \
-  --results-dir "$RESULTS" "$@"
+"$BIN/bench_cudss" --tag mbd --problems "$list" --results-dir "$RESULTS" "$@"
 rm -rf "$WORK"
