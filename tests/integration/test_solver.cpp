@@ -358,22 +358,28 @@ SparseMatrix grown(const SparseMatrix& a, index_t extra, RandomKind kind, std::m
   return canonicalize(g);  // duplicates summed
 }
 
-// Solver `chain` analyzes a, then a1 and a2 by `keep` (a member such as
-// Solver::analyze_keeping_order); a second solver analyzes a, then a2 by `keep`: the same
-// permutation, the same solution of a2 for a random b, and that solution against dense
-// LAPACK's. Returns the solution; b is set.
+// A solver that analyzed a, then a1 and a2 by a member such as
+// Solver::analyze_keeping_order, and factorized a2; b random, x its solution.
+struct KeptChain {
+  Solver chain;
+  std::vector<double> b, x;
+};
+
+// The chain of c's type; a second solver analyzes a, then a2 by `keep`: the same
+// permutation, the same solution of a2, and that solution against dense LAPACK's.
 template <class Keep>
-std::vector<double> keep_chain(const Case& c, const SparseMatrix& a, const SparseMatrix& a1,
-                               const SparseMatrix& a2, Solver& chain, Keep keep,
-                               std::vector<double>& b, std::mt19937_64& rng) {
+KeptChain keep_chain(const Case& c, const SparseMatrix& a, const SparseMatrix& a1,
+                     const SparseMatrix& a2, Keep keep, std::mt19937_64& rng) {
   const index_t n = a.n_cols;
-  b.resize(n);
+  Options o;
+  o.type = c.type;
+  KeptChain k{Solver(o), std::vector<double>(n), {}};
+  Solver& chain = k.chain;
+  std::vector<double>& b = k.b;
   std::uniform_real_distribution<double> u(-1, 1);
   for (double& v : b) v = u(rng);
   std::vector<double> ref = b;
   EXPECT_TRUE(test::dense_solve(test::to_dense(a2), n, ref, 1));
-  Options o;
-  o.type = c.type;
   Solver direct(o);
   chain.analyze(a);
   direct.analyze(a);
@@ -387,7 +393,8 @@ std::vector<double> keep_chain(const Case& c, const SparseMatrix& a, const Spars
   EXPECT_EQ(x, y);
   EXPECT_LT(test::relative_difference(x, ref), 1e-8);
   EXPECT_LT(test::backward_error(a2, x.data(), b.data()), 1e-14);
-  return x;
+  k.x = x;
+  return k;
 }
 
 // An analysis keeping the order of the one before solves a grown pattern as a dense LU
@@ -403,12 +410,9 @@ TEST(Solver, AnalysisKeepingOrderSolvesGrownPatterns) {
       const SparseMatrix a = test::random_sparse(n, 3, c.kind, rng);
       const SparseMatrix a1 = grown(a, std::max<index_t>(1, n / 50), c.kind, rng);
       const SparseMatrix a2 = grown(a1, std::max<index_t>(1, n / 20), c.kind, rng);
-      Options o;
-      o.type = c.type;
-      Solver chain(o);
-      std::vector<double> b;
-      const std::vector<double> x =
-          keep_chain(c, a, a1, a2, chain, &Solver::analyze_keeping_order, b, rng);
+      KeptChain k = keep_chain(c, a, a1, a2, &Solver::analyze_keeping_order, rng);
+      Solver& chain = k.chain;
+      const std::vector<double>&b = k.b, &x = k.x;
       EXPECT_TRUE(chain.stats().analysis.order_kept);
       // a pattern without one of the analyzed entries: refused, the analysis of a2 kept
       SparseMatrix lost = a2;
@@ -464,12 +468,9 @@ TEST(Solver, AnalysisKeepingMatchingOrdersChangedPatternsAnew) {
           c.type == MatrixType::general
               ? grown(without_additions(a1, a), std::max<index_t>(1, n / 20), c.kind, rng)
               : grown(a1, std::max<index_t>(1, n / 20), c.kind, rng);
-      Options o;
-      o.type = c.type;
-      Solver chain(o);
-      std::vector<double> b;
-      const std::vector<double> x =
-          keep_chain(c, a, a1, a2, chain, &Solver::analyze_keeping_matching, b, rng);
+      KeptChain k = keep_chain(c, a, a1, a2, &Solver::analyze_keeping_matching, rng);
+      Solver& chain = k.chain;
+      const std::vector<double>&b = k.b, &x = k.x;
       EXPECT_TRUE(chain.stats().analysis.matching_kept);
       EXPECT_FALSE(chain.stats().analysis.order_kept);
       // an empty column: refused, the analysis and factor of a2 kept
