@@ -61,6 +61,14 @@ class Solver {
   /// an analyzed entry is missing (named; nothing changes then), OutOfMemory as analyze.
   void analyze_keeping_order(const SparseMatrix& a);
 
+  /// The number of entries of L (stats().analysis.nnz_l: the column counts' sum, diagonal
+  /// included, before amalgamation) that analyze_keeping_order(a) would give, from the
+  /// elimination tree and column counts of A's pattern in the kept order (Gilbert, Ng &
+  /// Peyton, SIMAX 15, 1994) and nothing else of the analysis: whether keeping the order is
+  /// worth it, decided before paying for the rest. The solver is not changed. Throws
+  /// InvalidState before analyze, InvalidInput as analyze_keeping_order.
+  index_t factor_entries_keeping_order(const SparseMatrix& a) const;
+
   /// Analysis of a pattern that differs from the analyzed one (entries added and removed:
   /// contact pairs that closed and others that opened) keeping the matching and scaling of
   /// the current analysis and computing a new fill-reducing order for A's pattern: analyze

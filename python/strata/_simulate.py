@@ -60,8 +60,8 @@ class SimulationResult:
         Totals of the run: steps, rejected, error_rejections, newton_iterations,
         factorizations, analyses (full ones), reanalyses, repartitions, contact_updates
         (changes of the contact pairs in the matrix), kept_order_analyses (those that grew
-        the pattern: analyses keeping the order, not counted in analyses),
-        contact_analyses (full analyses after the kept order's fill grew by 25%), solves,
+        the pattern and kept the order: not counted in analyses), contact_analyses
+        (full analyses where the kept order's factor would grow by more than 25%), solves,
         perturbed_pivots, jacobian_size and jacobian_nnz (the Newton matrix),
         factor_nnz (nnz(L)), linear_solver (str), and times in s: wall_seconds,
         solver_seconds (= analysis + factorization + solves), factor_seconds,

@@ -442,32 +442,23 @@ void finish_analysis(Analysis& an, const SparseMatrix& c, const SparseMatrix& pa
 
 }  // namespace
 
-// analyze_with_order (kept order) and analyze_with_matching (a new order): previous's
-// matching, scaling and pivot groups on a's pattern.
-static Analysis analyze_keeping_impl(const SparseMatrix& a, const Analysis& previous,
-                                     const Options& opts, int workers, bool keep_order) {
-  Timer total;
-  const char* what = keep_order ? "analyze_with_order" : "analyze_with_matching";
-  if (workers < 1)
-    throw InvalidInput(std::string(what) + ": workers must be at least 1 (got " +
-                       std::to_string(workers) + ")");
+// a's pattern for an analysis that keeps previous's matching (and, with keep_order, its
+// order): the canonical input (lower triangle or full), after checking that a is square of
+// previous's size and holds what is kept. Every analyzed entry when the order or 2×2 pivot
+// groups are kept (the matching's entries, and a pair's coupling, are then entries of the
+// new pattern, and B's diagonal keeps them); otherwise no empty line and every matched
+// entry A(j, q[j]) of a general matrix.
+static SparseMatrix kept_input(const SparseMatrix& a, const Analysis& previous, const char* what,
+                               bool keep_order) {
   if (a.n_rows != a.n_cols || a.n_rows != previous.n)
     throw InvalidInput(std::string(what) + ": the matrix is " + std::to_string(a.n_rows) + "x" +
                        std::to_string(a.n_cols) + ", the analysis whose " +
                        (keep_order ? "order" : "matching") + " it keeps was for " +
                        std::to_string(previous.n) + "x" + std::to_string(previous.n));
-  Analysis an;
-  an.id = next_analysis_id();
-  an.n = previous.n;
-  an.input_storage = a.storage;
-  an.type = previous.type;
-  an.symmetric = previous.symmetric;
-  SparseMatrix c = an.symmetric ? lower_triangle(a) : expand_symmetric(a);
-  const bool grouped = previous.pivot_groups.n_groups() > 0;
-  if (keep_order || grouped) {
-    // every analyzed entry must still be there: the matching's entries (and a pair's
-    // coupling) are then entries of the new pattern, and B's diagonal keeps them
-    for (index_t j = 0; j < an.n; ++j) {
+  SparseMatrix c = previous.symmetric ? lower_triangle(a) : expand_symmetric(a);
+  const index_t n = previous.n;
+  if (keep_order || previous.pivot_groups.n_groups() > 0) {
+    for (index_t j = 0; j < n; ++j) {
       index_t p = c.offsets[j];
       for (index_t q = previous.pattern_offsets[j]; q < previous.pattern_offsets[j + 1]; ++q) {
         const index_t i = previous.pattern_indices[q];
@@ -481,19 +472,44 @@ static Analysis analyze_keeping_impl(const SparseMatrix& a, const Analysis& prev
       }
     }
   } else {
-    check_no_empty_line(c, an.symmetric);
-    // a general matrix's matched entries: A(j, q[j]) is B's diagonal entry j
+    check_no_empty_line(c, previous.symmetric);
     const std::vector<index_t>& q = previous.matching_perm;
-    for (index_t j = 0; j < an.n && !q.empty(); ++j) {
+    for (index_t j = 0; j < n && !q.empty(); ++j) {
       const auto first = c.indices.begin() + c.offsets[q[j]];
       const auto last = c.indices.begin() + c.offsets[q[j] + 1];
       if (!std::binary_search(first, last, j))
-        throw InvalidInput("analyze_with_matching: the matched entry (" + std::to_string(j) + ", " +
+        throw InvalidInput(std::string(what) + ": the matched entry (" + std::to_string(j) + ", " +
                            std::to_string(q[j]) +
                            ") is not in the new pattern; the matching can only be kept for a "
                            "pattern that has every matched entry");
     }
   }
+  return c;
+}
+
+// The order analyze_with_order keeps: that of the analysis that computed one (postordered:
+// as good a fill-reducing order as the one it came from).
+static const std::vector<index_t>& kept_order_of(const Analysis& previous) {
+  return previous.kept_order.empty() ? previous.perm : previous.kept_order;
+}
+
+// analyze_with_order (kept order) and analyze_with_matching (a new order): previous's
+// matching, scaling and pivot groups on a's pattern.
+static Analysis analyze_keeping_impl(const SparseMatrix& a, const Analysis& previous,
+                                     const Options& opts, int workers, bool keep_order) {
+  Timer total;
+  const char* what = keep_order ? "analyze_with_order" : "analyze_with_matching";
+  if (workers < 1)
+    throw InvalidInput(std::string(what) + ": workers must be at least 1 (got " +
+                       std::to_string(workers) + ")");
+  SparseMatrix c = kept_input(a, previous, what, keep_order);
+  Analysis an;
+  an.id = next_analysis_id();
+  an.n = previous.n;
+  an.input_storage = a.storage;
+  an.type = previous.type;
+  an.symmetric = previous.symmetric;
+  const bool grouped = previous.pivot_groups.n_groups() > 0;
   an.pattern_offsets = c.offsets;
   an.pattern_indices = c.indices;
   an.matching_perm = previous.matching_perm;
@@ -504,9 +520,7 @@ static Analysis analyze_keeping_impl(const SparseMatrix& a, const Analysis& prev
   const SparseMatrix pattern = detail::symmetric_pattern(c, an.symmetric, an.matching_perm);
   ordering::OrderingResult ord;
   if (keep_order) {
-    // the order of the analysis that computed one (postordered: as good a fill-reducing
-    // order as the one it came from)
-    ord.perm = previous.kept_order.empty() ? previous.perm : previous.kept_order;
+    ord.perm = kept_order_of(previous);
     an.kept_order = ord.perm;
     ord.method = previous.stats.ordering;
   } else {
@@ -633,6 +647,20 @@ Analysis analyze_with_order(const SparseMatrix& a, const Analysis& previous, con
                             int workers) {
   return run_analysis(opts, a.indices.size(),
                       [&] { return analyze_keeping_impl(a, previous, opts, workers, true); });
+}
+
+index_t factor_entries_with_order(const SparseMatrix& a, const Analysis& previous) {
+  const SparseMatrix c = kept_input(a, previous, "factor_entries_with_order", true);
+  const SparseMatrix pattern =
+      detail::symmetric_pattern(c, previous.symmetric, previous.matching_perm);
+  const SparseMatrix permuted =
+      symbolic::permute_symmetric_pattern(pattern, kept_order_of(previous));
+  const std::vector<index_t> parent = symbolic::elimination_tree(permuted);
+  const std::vector<index_t> counts =
+      symbolic::column_counts(permuted, parent, symbolic::postorder(parent));
+  index_t entries = 0;
+  for (index_t cnt : counts) entries += cnt;
+  return entries;
 }
 
 Analysis analyze_with_matching(const SparseMatrix& a, const Analysis& previous, const Options& opts,

@@ -112,6 +112,13 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers 
 Analysis analyze_with_order(const SparseMatrix& a, const Analysis& previous, const Options& opts,
                             int workers = 1);
 
+/// The entries of L (AnalysisStats::nnz_l: Σ of the column counts, diagonal included,
+/// before amalgamation) that analyze_with_order(a, previous) would give, computed from the
+/// elimination tree and column counts of a's symmetrized pattern in the kept order
+/// (Gilbert, Ng & Peyton, SIMAX 15, 1994) without the rest of the analysis: a cheap test
+/// of whether keeping the order is worth it. Throws InvalidInput as analyze_with_order.
+index_t factor_entries_with_order(const SparseMatrix& a, const Analysis& previous);
+
 /// The analysis of a pattern that differs from previous's (contact pairs that closed and
 /// others that opened) with previous's matching, scaling and pivot groups kept and a new
 /// fill-reducing order computed for it: the analysis without the matching (steps 3–7 of

@@ -654,6 +654,17 @@ void Solver::analyze_keeping_order(const SparseMatrix& a) {
                      int workers) { return analyze_with_order(m, previous, o, workers); });
 }
 
+index_t Solver::factor_entries_keeping_order(const SparseMatrix& a) const {
+  const SolverState& s = *state_;
+  if (!s.analysis) throw InvalidState("factor_entries_keeping_order called before analyze");
+  index_t entries = 0;
+  phase("analyze", [&] {
+    validate(a);
+    entries = factor_entries_with_order(a, *s.analysis);
+  });
+  return entries;
+}
+
 void Solver::analyze_keeping_matching(const SparseMatrix& a) {
   analyze_keeping(*state_, a, "analyze_keeping_matching",
                   [](const SparseMatrix& m, const Analysis& previous, const Options& o,

@@ -170,10 +170,11 @@ void Integrator::analyze(const BdfTerms& bdf, double t) {
 // After NewtonSystem::update_candidates returned `change`: a new Jacobian is needed; a
 // pair new to the pattern grew it, and the solver analyzes the grown pattern keeping its
 // order (the pattern contains the analyzed one: pairs that left stay in it until the next
-// analysis), unless a full analysis is pending anyway. When the kept order's factor has
-// grown by more than a quarter, the next Newton iteration analyzes afresh, or, with
-// IntegratorOptions::reorder_keeping_matching, the pairs that left are dropped from the
-// pattern and it is ordered anew with the analysis's matching and scaling kept (the
+// analysis), unless a full analysis is pending anyway. When the kept order's factor would
+// grow by more than a quarter (counted from its elimination tree and column counts alone,
+// before any of the analysis is paid for), the next Newton iteration analyzes afresh, or,
+// with IntegratorOptions::reorder_keeping_matching, the pairs that left are dropped from
+// the pattern and it is ordered anew with the analysis's matching and scaling kept (the
 // matching's entries are those of bodies and joints, rarely of a contact; afresh where the
 // pattern lost a matched entry).
 void Integrator::contacts_changed(int change, StepInfo* info) {
@@ -186,23 +187,26 @@ void Integrator::contacts_changed(int change, StepInfo* info) {
     return;
   }
   Timer timer;
-  solver_->analyze_keeping_order(sys_.matrix());
-  analyzed_pattern_ = sys_.pattern_id();
+  const index_t kept_entries = solver_->factor_entries_keeping_order(sys_.matrix());
+  const bool grown = kept_entries > 1.25 * static_cast<double>(analysis_factor_entries_);
+  if (!grown) {
+    solver_->analyze_keeping_order(sys_.matrix());
+    analyzed_pattern_ = sys_.pattern_id();
+    ++stats_.kept_order_analyses;
+    stats_.jacobian_nnz = sys_.matrix().nnz();
+    stats_.factor_nnz = solver_->factor_entries();
+  }
   const double s = timer.seconds();
   stats_.analysis_seconds += s;
   stats_.solver_seconds += s;
   if (info) info->solver_seconds += s;
-  ++stats_.kept_order_analyses;
-  stats_.jacobian_nnz = sys_.matrix().nnz();
-  stats_.factor_nnz = solver_->factor_entries();
-  const bool grown = stats_.factor_nnz > 1.25 * static_cast<double>(analysis_factor_entries_);
   if (opts_.verbose)
     fmt::print(stderr,
-               "t = {:.9g}: contact pairs new to the pattern; analysis keeping the order: "
-               "nnz(L) {} ({:.2f} times the last analysis's){}\n",
-               t_, stats_.factor_nnz,
-               stats_.factor_nnz / std::max(1.0, static_cast<double>(analysis_factor_entries_)),
-               grown ? "; a new analysis follows" : "");
+               "t = {:.9g}: contact pairs new to the pattern; nnz(L) in the kept order {} ({:.2f} "
+               "times the last analysis's){} ({:.3f} s)\n",
+               t_, kept_entries,
+               kept_entries / std::max(1.0, static_cast<double>(analysis_factor_entries_)),
+               grown ? ": a new analysis follows" : ": analysis keeping the order", s);
   if (!grown) return;
   ++stats_.contact_analyses;
   if (!opts_.reorder_keeping_matching) {

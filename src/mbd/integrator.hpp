@@ -131,8 +131,8 @@ struct IntegratorStats {
   /// Analyses that kept the ordering of the analysis before (Solver::analyze_keeping_order)
   /// because a contact pair new to the pattern entered: not counted in `analyses`.
   index_t kept_order_analyses = 0;
-  /// Analyses (counted in `analyses`) made because the kept order's factor had grown past
-  /// 1.25 times the entries of the last analysis's.
+  /// Analyses (counted in `analyses`) made because the kept order's factor would have grown
+  /// past 1.25 times the entries of the last analysis's.
   index_t contact_analyses = 0;
   /// Of those, the analyses that kept the matching and scaling of the analysis before and
   /// ordered the pattern anew (Solver::analyze_keeping_matching).

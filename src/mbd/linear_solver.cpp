@@ -57,6 +57,9 @@ class StrataLinearSolver : public LinearSolver {
     solver_.analyze_keeping_order(a);  // the matching and scaling stay: so does delaying
     fresh_ = true;
   }
+  index_t factor_entries_keeping_order(const SparseMatrix& a) const override {
+    return solver_.factor_entries_keeping_order(a);
+  }
   void analyze_keeping_matching(const SparseMatrix& a) override {
     solver_.analyze_keeping_matching(a);  // as analyze_keeping_order: delaying stays
     fresh_ = true;
@@ -131,6 +134,9 @@ class DenseLinearSolver : public LinearSolver {
     dgetrs_("N", &n_, &one, lu_.data(), &n_, piv_.data(), x, &n_, &info);
   }
   index_t factor_entries() const override { return static_cast<index_t>(n_) * n_; }
+  index_t factor_entries_keeping_order(const SparseMatrix& a) const override {
+    return a.n_rows * a.n_rows;
+  }
   index_t perturbed_pivots() const override { return singular_; }
   double backward_error() const override { return 0; }
   std::string describe() const override { return "dense LAPACK LU"; }

@@ -23,6 +23,9 @@ class LinearSolver {
   /// Analysis of a pattern that contains the analyzed one, keeping its ordering
   /// (strata::Solver::analyze_keeping_order); a solver without that analyzes afresh.
   virtual void analyze_keeping_order(const SparseMatrix& a) { analyze(a); }
+  /// The entries of the factor that analyze_keeping_order(a) would give (nnz(L), as
+  /// factor_entries), counted without analyzing; the solver is not changed.
+  virtual index_t factor_entries_keeping_order(const SparseMatrix& a) const = 0;
   /// Analysis of a changed pattern with a new ordering and the analyzed matching and
   /// scaling kept (strata::Solver::analyze_keeping_matching; A's values are not read);
   /// a solver without that analyzes afresh. Throws InvalidInput, changing nothing, when

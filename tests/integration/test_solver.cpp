@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <random>
 #include <span>
 #include <utility>
@@ -423,6 +424,80 @@ TEST(Solver, AnalysisKeepingOrderSolvesGrownPatterns) {
         EXPECT_THROW(chain.analyze_keeping_order(lost), InvalidInput);
         chain.refactorize(a2);
         EXPECT_EQ(chain.solve(b), x);
+      }
+    }
+}
+
+// nnz(L), diagonal included, of the Cholesky factor of the symmetric pattern of `a` (both
+// triangles of each stored entry) in the order `perm` (new to old), by dense boolean
+// elimination: row sets as bit sets, each pivot's lower rows joined into one another's.
+index_t dense_symbolic_entries(const SparseMatrix& a, const std::vector<index_t>& perm) {
+  const index_t n = a.n_cols, words = (n + 63) / 64;
+  std::vector<index_t> iperm(n);
+  for (index_t k = 0; k < n; ++k) iperm[perm[k]] = k;
+  std::vector<std::uint64_t> s(static_cast<std::size_t>(n * words), 0);
+  auto set = [&](index_t i, index_t j) { s[i * words + j / 64] |= std::uint64_t{1} << (j % 64); };
+  for (index_t j = 0; j < n; ++j)
+    for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p) {
+      set(iperm[a.indices[p]], iperm[j]);
+      set(iperm[j], iperm[a.indices[p]]);
+    }
+  index_t entries = n;
+  for (index_t k = 0; k < n; ++k) {
+    std::vector<index_t> below;  // rows i > k of column k of the filled pattern
+    for (index_t i = k + 1; i < n; ++i)
+      if (s[k * words + i / 64] >> (i % 64) & 1) below.push_back(i);
+    entries += static_cast<index_t>(below.size());
+    for (index_t i : below)
+      for (index_t w = 0; w < words; ++w) s[i * words + w] |= s[k * words + w];
+  }
+  return entries;
+}
+
+// The kept order's factor entries, counted without analyzing, are those of the analysis
+// keeping the order; for a symmetric positive definite matrix (no matching) they equal a
+// dense symbolic elimination's in that order. The solver is not changed; a pattern that
+// lost an analyzed entry is refused as analyze_keeping_order refuses it.
+TEST(Solver, FactorEntriesKeepingOrderCountWhatTheAnalysisGives) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  Solver fresh;
+  EXPECT_THROW(
+      (void)fresh.factor_entries_keeping_order(test::random_sparse(3, 2, RandomKind::spd, rng)),
+      InvalidState);
+  for (const Case& c : kCases)
+    for (index_t n : {1, 2, 3, 5, 733}) {
+      SCOPED_TRACE(std::string(c.name) + " n=" + std::to_string(n));
+      const SparseMatrix a = test::random_sparse(n, 3, c.kind, rng);
+      const SparseMatrix a2 = grown(a, std::max<index_t>(1, n / 10), c.kind, rng);
+      Options o;
+      o.type = c.type;
+      Solver counted(o), kept(o);
+      counted.analyze(a);
+      kept.analyze(a);
+      const std::vector<index_t> order = counted.permutation();
+      const index_t entries = counted.factor_entries_keeping_order(a2);
+      kept.analyze_keeping_order(a2);
+      EXPECT_EQ(entries, kept.stats().analysis.nnz_l);
+      EXPECT_GE(entries, counted.stats().analysis.nnz_l);  // entries only added
+      if (c.type == MatrixType::spd) EXPECT_EQ(entries, dense_symbolic_entries(a2, order));
+      // unchanged: the analysis of a, its factor solving a
+      EXPECT_EQ(counted.permutation(), order);
+      EXPECT_FALSE(counted.stats().analysis.order_kept);
+      counted.factorize(a);
+      std::vector<double> b(n, 1.0);
+      const std::vector<double> x = counted.solve(b);
+      EXPECT_LT(test::backward_error(a, x.data(), b.data()), 1e-14);
+      if (n > 1 && a.offsets[1] > 0) {  // a2 without a's first entry
+        SparseMatrix lost = a2;
+        const auto p =
+            std::find(lost.indices.begin(), lost.indices.begin() + lost.offsets[1], a.indices[0]);
+        ASSERT_NE(p, lost.indices.begin() + lost.offsets[1]);
+        lost.values.erase(lost.values.begin() + (p - lost.indices.begin()));
+        lost.indices.erase(p);
+        for (index_t j = 1; j <= n; ++j) --lost.offsets[j];
+        EXPECT_THROW((void)counted.factor_entries_keeping_order(lost), InvalidInput);
       }
     }
 }
