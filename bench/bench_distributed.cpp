@@ -136,6 +136,7 @@ int run(int argc, char** argv) {
                 {"first_factor_seconds", first_factor},
                 {"factor_seconds", bench::median(times)},
                 {"bytes_between_ranks", between},
+                {"blocks_transport", ds.blocks_transport},
                 {"values_bytes_between_ranks", values_scattered},
                 {"values_bytes_if_broadcast", values_broadcast},
                 {"first_solve_seconds", first_solve},
@@ -148,10 +149,11 @@ int run(int argc, char** argv) {
                 {"devices", devices}};
     out["rows"].push_back(row);
     std::printf(
-        "%-12s %dx%d  factor %.3f s (first %.3f s), %.1f MB between ranks (values %.1f MB, "
+        "%-12s %dx%d  factor %.3f s (first %.3f s), %.1f MB between ranks%s%s (values %.1f MB, "
         "%.1f MB if broadcast), solve %.3f s (first %.3f s; %d refinement steps, %d GMRES "
         "iterations), berr %.1e\n",
         name.c_str(), ranks, per_rank, bench::median(times), first_factor, between * 1e-6,
+        ds.blocks_transport.empty() ? "" : ", blocks by ", ds.blocks_transport.c_str(),
         values_scattered * 1e-6, values_broadcast * 1e-6, row["solve_seconds"].get<double>(),
         first_solve, st.solve.refinement_steps, st.solve.gmres_iterations,
         row["backward_error"].get<double>());

@@ -84,6 +84,9 @@ struct DistributedStats {
   int workers_per_rank = 1;
   std::size_t analysis_bytes = 0;  ///< size of the broadcast analysis
   double analysis_broadcast_seconds = 0;
+  /// How the subtree roots' contribution blocks go to rank 0: "nccl" (GPU to GPU, a build
+  /// with STRATA_NCCL and GPU ranks), "mpi" (host buffers), "" with one rank.
+  std::string blocks_transport;
   std::vector<RankStats> per_rank;  ///< one per rank, by rank (rank 0: all of them)
 };
 

@@ -63,6 +63,9 @@ bench=.carry-mpi/bin/bench_distributed
 [ -x "$bench" ] || bench=build/bench/bench_distributed
 [ -x "$bench" ] || { echo "run_mpi: no bench_distributed binary"; exit 2; }
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
+# NVLink multicast stays off (the lent machines' rule: it can take the host's GPUs out of
+# service); passed to every rank explicitly
+export NCCL_NVLS_ENABLE=0
 nvidia-smi -L || true
 mpirun --version | head -1
 status=0
@@ -82,13 +85,13 @@ tests=$(dirname "$bench")/test_distributed_mpi
 if [ -x "$tests" ] && [ "$ngpu" -ge 2 ]; then
   echo "=== test_distributed_mpi on $ngpu ranks"
   OPENBLAS_NUM_THREADS=1 mpirun -n "$ngpu" --bind-to none --oversubscribe -x LD_LIBRARY_PATH \
-    -x PATH -x OPENBLAS_NUM_THREADS "$tests" || status=1
+    -x PATH -x OPENBLAS_NUM_THREADS -x NCCL_NVLS_ENABLE "$tests" || status=1
 fi
 for cfg in $configs; do
   r=${cfg%x*} g=${cfg#*x}
   echo "=== $r rank(s) x $g GPU(s): $problems"
   # --bind-to none: each rank drives its GPUs from several host threads
-  mpirun -n "$r" --bind-to none --oversubscribe -x LD_LIBRARY_PATH -x PATH \
+  mpirun -n "$r" --bind-to none --oversubscribe -x LD_LIBRARY_PATH -x PATH -x NCCL_NVLS_ENABLE \
     "$bench" --backend cuda --gpus-per-rank "$g" --problems "$problems" --repeat 3 \
     --tag "${r}x${g}" --results-dir "$OUT" || status=1
 done

@@ -224,6 +224,7 @@ void lead_analysis(DistributedState& s, const SparseMatrix& a) {
   s.numeric.stats = RankStats{};
   try {
     setup_numeric(s, an, per_rank);
+    s.dstats.blocks_transport = comm.size() == 1 ? "" : s.numeric.nccl ? "nccl" : "mpi";
   } catch (...) {  // no usable analysis: a later factorize analyzes again
     detail::SolverAccess::set_driver(*s.solver, std::make_unique<DistributedDriver>(s, per_rank));
     throw;

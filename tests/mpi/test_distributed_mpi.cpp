@@ -164,6 +164,7 @@ void run_all(int workers_per_rank) {
       continue;
     }
     EXPECT_EQ(ds.stats().analysis.workers, ranks * workers_per_rank);
+    EXPECT_EQ(st.blocks_transport, ranks == 1 ? "" : "mpi");  // CPU ranks: host buffers
     ASSERT_EQ(st.per_rank.size(), static_cast<std::size_t>(ranks));
     index_t subtrees = 0;
     std::size_t held = 0, values_received = 0;
