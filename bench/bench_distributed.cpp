@@ -135,6 +135,8 @@ int run(int argc, char** argv) {
                 {"analysis_bytes", ds.analysis_bytes},
                 {"first_factor_seconds", first_factor},
                 {"factor_seconds", bench::median(times)},
+                // rank 0's Solver: of its last refactorization, the input (checks, scaling)
+                {"input_seconds", st.factor.input_seconds},
                 {"bytes_between_ranks", between},
                 {"blocks_transport", ds.blocks_transport},
                 {"values_bytes_between_ranks", values_scattered},

@@ -61,10 +61,17 @@ class Communicator {
 /// What one rank did in the last factorization and the last solve.
 struct RankStats {
   int rank = 0;
-  int workers = 1;                        ///< executors (GPUs, or 1 CPU executor) on it
-  index_t subtrees = 0;                   ///< subtrees it factored
-  double factor_flops = 0;                ///< Σ front flops (Cholesky count) it factored
-  double factor_seconds = 0;              ///< its part of the factorization, wall time
+  int workers = 1;            ///< executors (GPUs, or 1 CPU executor) on it
+  index_t subtrees = 0;       ///< subtrees it factored
+  double factor_flops = 0;    ///< Σ front flops (Cholesky count) it factored
+  double factor_seconds = 0;  ///< its part of the factorization, wall time
+  /// Wall time, s, before its part: the scaled values sent (rank 0, to every other rank)
+  /// or received (the others), by MPI from host memory.
+  double values_seconds = 0;
+  /// Of factor_seconds, the exchange after its subtrees: agreeing on errors, the subtree
+  /// roots' contribution blocks to rank 0 (waiting for the last of them on rank 0) and
+  /// the pivot statistics.
+  double exchange_seconds = 0;
   std::size_t factor_bytes_sent = 0;      ///< values (rank 0), blocks, pivot statistics
   std::size_t factor_bytes_received = 0;  ///< its scaled values, blocks (rank 0)
   /// Bytes of scaled matrix values in the last factorize / refactorize call (part of the

@@ -71,6 +71,8 @@ inline void to_json(nlohmann::json& j, const RankStats& r) {
        {"subtrees", r.subtrees},
        {"factor_flops", r.factor_flops},
        {"factor_seconds", r.factor_seconds},
+       {"values_seconds", r.values_seconds},
+       {"exchange_seconds", r.exchange_seconds},
        {"factor_bytes_sent", r.factor_bytes_sent},
        {"factor_bytes_received", r.factor_bytes_received},
        {"values_bytes", r.values_bytes},

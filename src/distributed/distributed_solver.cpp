@@ -146,7 +146,9 @@ class DistributedDriver final : public numeric::NumericDriver {
     h.c = pivot;
     try {
       send_command(comm, h);
+      Timer sending;
       send_values(comm, s_.numeric, values);
+      s_.numeric.stats.values_seconds += sending.seconds();
       run_factor(s_, an, values, type, pivot, factor);
     } catch (...) {
       bytes.add_to(s_.numeric.stats.factor_bytes_sent, s_.numeric.stats.factor_bytes_received);
@@ -279,7 +281,9 @@ void follow(DistributedState& s) {
         if (h.b != static_cast<std::int64_t>(nnz))
           throw InternalError(std::to_string(h.b) + " values for a pattern of " +
                               std::to_string(nnz) + " entries");
+        Timer receiving;
         receive_values(comm, s.numeric, nnz, s.values);
+        st.values_seconds += receiving.seconds();
         try {
           run_factor(s, *s.analysis, s.values, static_cast<MatrixType>(h.a), h.c, s.factor);
         } catch (...) {
@@ -307,6 +311,8 @@ void follow(DistributedState& s) {
 
 void reset_factor_stats(RankStats& st) {
   st.factor_seconds = 0;
+  st.values_seconds = 0;
+  st.exchange_seconds = 0;
   st.factor_bytes_sent = st.factor_bytes_received = 0;
   st.values_bytes = 0;
 }

@@ -59,6 +59,7 @@ void factor_part(detail::CommImpl& comm, NumericState& ns, const Analysis& an,
   bool exchanged = false;
   config.exchange = [&](std::vector<numeric::CbTransfer>& tr, std::exception_ptr failed) {
     exchanged = true;
+    Timer exchange;
     agree(comm, failed);
     // the subtree roots' contribution blocks to rank 0
     std::vector<detail::Message> sends, recvs;
@@ -105,6 +106,7 @@ void factor_part(detail::CommImpl& comm, NumericState& ns, const Analysis& an,
           std::memcpy(&factor.front_stats[fr[k]], all[r].data() + k * sizeof(numeric::PivotStats),
                       sizeof(numeric::PivotStats));
       }
+    ns.stats.exchange_seconds += exchange.seconds();
   };
   try {
     numeric::factorize_multi(an, values, type, pivots, execs, factor, ns.arenas, config,
