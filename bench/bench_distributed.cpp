@@ -17,7 +17,9 @@
 #include <mpi.h>
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <nlohmann/json.hpp>
+#include <thread>
 
 #include "base/timer.hpp"
 #include "bench_common.hpp"
@@ -38,7 +40,7 @@ int run(int argc, char** argv) {
   CLI::App app{"strata distributed factorization benchmark (run under mpirun)"};
   std::vector<std::string> problems = {"lap3d-30"};
   std::string backend = "cpu", tag, results_dir;
-  int per_rank = 1, repeat = 3, threads = 1;
+  int per_rank = 1, repeat = 3, threads = 0;
   app.add_option("--problems", problems, "problems (shared matrix names, lap3d-N, elast3d-N)")
       ->delimiter(',');
   app.add_option("--backend", backend, "cuda: GPUs; cpu: CPU executors standing in for GPUs")
@@ -47,7 +49,11 @@ int run(int argc, char** argv) {
       ->check(CLI::PositiveNumber);
   app.add_option("--repeat", repeat, "factorizations per problem (median reported)")
       ->check(CLI::PositiveNumber);
-  app.add_option("--threads", threads, "host threads of each CPU executor");
+  app.add_option("--threads", threads,
+                 "host threads per rank (Options::num_threads; default: 1 with --backend cpu, "
+                 "where they are each CPU executor's, else the machine's hardware threads "
+                 "shared by the ranks on it)")
+      ->check(CLI::NonNegativeNumber);
   app.add_option("--tag", tag, "label stored in the results and the file name")
       ->check(bench::check_tag);
   app.add_option("--results-dir", results_dir, "folder for the results file");
@@ -55,12 +61,23 @@ int run(int argc, char** argv) {
 
   Communicator comm = mpi_communicator(MPI_COMM_WORLD);
   const int rank = comm.rank(), ranks = comm.size();
+  if (threads == 0) {
+    // the ranks sharing this machine (MPI-3 shared-memory split) share its threads
+    MPI_Comm node;
+    MPI_Comm_split_type(MPI_COMM_WORLD, MPI_COMM_TYPE_SHARED, 0, MPI_INFO_NULL, &node);
+    int local = 1;
+    MPI_Comm_size(node, &local);
+    MPI_Comm_free(&node);
+    const int hw = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+    threads = backend == "cpu" ? 1 : std::max(1, hw / std::max(1, local));
+  }
   json out = bench::run_metadata(argc, argv);
   out["benchmark"] = "distributed";
   out["backend"] = backend;
   out["tag"] = tag;
   out["ranks"] = ranks;
   out["gpus_per_rank"] = per_rank;
+  out["threads_per_rank"] = threads;
   out["rows"] = json::array();
   for (const std::string& name : problems) {
     bench::Problem p;

@@ -84,7 +84,12 @@ struct NumericState {
   /// value_positions per rank, made once per analysis: rank 0 holds every rank's list
   /// (its own empty: it has all values); a rank r > 0 only its own, at index r.
   std::vector<std::vector<index_t>> value_positions;
-  RankStats stats;    ///< this rank's figures of the current phases
+  RankStats stats;  ///< this rank's figures of the current phases
+  int threads = 0;  ///< host threads for its loops over values (Options::num_threads)
+  /// GPU ranks r > 0: their values array (receive_values) page-locked while it stays, as
+  /// the Solver pins rank 0's scaled values, for its upload at every factorization.
+  bool pin_values = false;
+  std::unique_ptr<numeric::PinnedHostRange> values_pin;
   bool nccl = false;  ///< contribution blocks between GPUs through NCCL
   /// Options::gpu_solve_parts: solve on the GPUs that hold the parts (solve.cpp).
   bool solve_where_held = true;

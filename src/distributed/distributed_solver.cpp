@@ -71,6 +71,8 @@ void setup_numeric(DistributedState& s, Analysis& an, int per_rank) {
       if (comm.rank() == 0 || comm.rank() == r)
         ns.value_positions[r] = value_positions(an, ns.layout, r);
     localize_factor_layout(an, ns.layout);
+    ns.threads = s.options.num_threads;
+    ns.pin_values = wants_gpu(s);
     ns.executors.clear();
     ns.arenas.clear();
     ns.blocks = numeric::BlockBuffers{};
@@ -130,7 +132,9 @@ class DistributedDriver final : public numeric::NumericDriver {
   DistributedDriver(DistributedState& s, int per_rank) : s_(s), per_rank_(per_rank) {}
   int workers() const override { return s_.comm.size() * per_rank_; }
   bool in_one_process() const override { return false; }
-  bool uploads_values() const override { return false; }
+  // GPU ranks: rank 0's executors upload its scaled values (the Solver pins them); the
+  // value pass on a device is refused (scale_values_on_device's default)
+  bool uploads_values() const override { return wants_gpu(s_); }
   void factorize(const Analysis& an, const std::vector<double>& values, bool values_on_device,
                  MatrixType type, const numeric::PivotPolicy& pivots,
                  numeric::NumericFactor& factor) override {

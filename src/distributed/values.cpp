@@ -13,11 +13,17 @@
 //
 // Storage on the receiving ranks (a choice): a values array of the full length nnz(A),
 // with only the rank's positions written and the rest zero. The executors read
-// ctx.values[entry_src[k]] and the CUDA executor uploads the array whole, so nothing
-// downstream changes. The consequence: a rank r > 0 still allocates nnz(A) doubles of host
-// memory (and, with a GPU, the same on the device) whatever its share; the scatter cuts the
-// traffic and the copying, not that footprint. A compact array with a per-rank renumbered
-// entry_src (and an executor that uploads only the rank's share) would cut the memory too.
+// ctx.values[entry_src[k]] and the CUDA executor uploads the array whole (page-locked on
+// GPU ranks while the array stays, as rank 0's Solver pins its scaled values), so nothing
+// downstream changes. Packing and unpacking run over Options::num_threads host threads. The
+// consequence: a rank r > 0 still allocates nnz(A) doubles of host memory (and, with a GPU, the
+// same on the device) whatever its share; the scatter cuts the traffic and the copying, not that
+// footprint. A compact array with a per-rank renumbered entry_src (and an executor that uploads
+// only the rank's share) would cut the memory too.
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
 #include <algorithm>
 #include <string>
 
@@ -27,6 +33,24 @@ namespace strata::distributed {
 namespace {
 
 constexpr int kTagValues = 10;  // the scaled values (solve.cpp uses 8, 9, 11; numeric.cpp 100 + i)
+
+// body(k) for k in [0, count), over `threads` host threads (0: all): packing and unpacking
+// millions of values by position is memory-bound gather/scatter work.
+template <class Body>
+void for_positions(std::size_t count, int threads, Body body) {
+  constexpr std::size_t kGrain = 1 << 16;
+  if (count < 2 * kGrain || threads == 1) {
+    for (std::size_t k = 0; k < count; ++k) body(k);
+    return;
+  }
+  tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
+  arena.execute([&] {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, kGrain),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t k = r.begin(); k != r.end(); ++k) body(k);
+                      });
+  });
+}
 
 }  // namespace
 
@@ -53,7 +77,8 @@ void send_values(detail::CommImpl& comm, NumericState& ns, const std::vector<dou
       throw InternalError("rank " + std::to_string(r) + " needs value " +
                           std::to_string(pos.back()) + " of " + std::to_string(values.size()));
     packed[r].resize(pos.size());
-    for (std::size_t k = 0; k < pos.size(); ++k) packed[r][k] = values[pos[k]];
+    double* out = packed[r].data();
+    for_positions(pos.size(), ns.threads, [&](std::size_t k) { out[k] = values[pos[k]]; });
     sends.push_back({r, kTagValues, packed[r].data(), sizeof(double) * pos.size()});
     ns.stats.values_bytes += sizeof(double) * pos.size();
   }
@@ -64,7 +89,12 @@ void receive_values(detail::CommImpl& comm, NumericState& ns, std::size_t nnz,
                     std::vector<double>& values) {
   const int rank = comm.rank();
   const std::vector<index_t>& pos = ns.value_positions.at(rank);
-  if (values.size() != nnz) values.assign(nnz, 0.0);
+  if (values.size() != nnz) {
+    ns.values_pin.reset();
+    values.assign(nnz, 0.0);
+  }
+  if (ns.pin_values && !ns.values_pin)
+    ns.values_pin = numeric::pin_host_memory(values.data(), sizeof(double) * nnz);
   if (!pos.empty() && static_cast<std::size_t>(pos.back()) >= nnz)
     throw InternalError("rank " + std::to_string(rank) + " needs value " +
                         std::to_string(pos.back()) + " of " + std::to_string(nnz));
@@ -72,7 +102,8 @@ void receive_values(detail::CommImpl& comm, NumericState& ns, std::size_t nnz,
   std::vector<detail::Message> recvs;
   if (!pos.empty()) recvs.push_back({0, kTagValues, packed.data(), sizeof(double) * pos.size()});
   comm.exchange({}, recvs);
-  for (std::size_t k = 0; k < pos.size(); ++k) values[pos[k]] = packed[k];
+  double* in = values.data();
+  for_positions(pos.size(), ns.threads, [&](std::size_t k) { in[pos[k]] = packed[k]; });
   ns.stats.values_bytes += sizeof(double) * pos.size();
 }
 
