@@ -90,6 +90,9 @@ struct NumericState {
   /// the Solver pins rank 0's scaled values, for its upload at every factorization.
   bool pin_values = false;
   std::unique_ptr<numeric::PinnedHostRange> values_pin;
+  /// The values packed for each rank (rank 0) or as received (the others), kept from one
+  /// factorization to the next: 8 bytes per position of value_positions.
+  std::vector<std::vector<double>> values_packed;
   bool nccl = false;  ///< contribution blocks between GPUs through NCCL
   /// Options::gpu_solve_parts: solve on the GPUs that hold the parts (solve.cpp).
   bool solve_where_held = true;

@@ -72,6 +72,7 @@ void setup_numeric(DistributedState& s, Analysis& an, int per_rank) {
         ns.value_positions[r] = value_positions(an, ns.layout, r);
     localize_factor_layout(an, ns.layout);
     ns.threads = s.options.num_threads;
+    ns.values_packed.clear();
     ns.pin_values = wants_gpu(s);
     ns.executors.clear();
     ns.arenas.clear();

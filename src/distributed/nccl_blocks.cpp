@@ -37,11 +37,12 @@ void nccl_check(ncclResult_t r, const char* what) {
 struct DeviceBlock {
   double* p = nullptr;
   int device = -1;
+  std::size_t size = 0;  // doubles
   DeviceBlock() = default;
-  DeviceBlock(std::size_t n, int dev) : device(dev) {
+  DeviceBlock(std::size_t n, int dev) : device(dev), size(n) {
     cuda_check(cudaMalloc(&p, sizeof(double) * (n ? n : 1)), "cudaMalloc (NCCL block)");
   }
-  DeviceBlock(DeviceBlock&& o) noexcept : p(o.p), device(o.device) { o.p = nullptr; }
+  DeviceBlock(DeviceBlock&& o) noexcept : p(o.p), device(o.device), size(o.size) { o.p = nullptr; }
   DeviceBlock& operator=(DeviceBlock&&) = delete;
   ~DeviceBlock() {
     if (p) {
@@ -57,7 +58,10 @@ struct NcclContext {
   ncclComm_t comm = nullptr;
   int device = -1;
   cudaStream_t stream = nullptr;
-  std::vector<DeviceBlock> blocks;  // rank 0: received blocks, kept until the top part ends
+  // rank 0: the received blocks, kept until the next exchange, which reuses them when
+  // their sizes are the same (a refactorization): no allocation, and no cudaFree, which
+  // waits for the device, in the factorization's path
+  std::vector<DeviceBlock> blocks;
   ~NcclContext() {
     blocks.clear();
     if (stream) cudaStreamDestroy(stream);
@@ -80,7 +84,9 @@ void exchange_blocks_nccl(detail::CommImpl& comm, NumericState& ns, const RankLa
     ns.nccl_context = std::move(ctx);
   }
   NcclContext& c = *ns.nccl_context;
+  std::vector<DeviceBlock> kept = std::move(c.blocks);
   c.blocks.clear();
+  std::size_t next_kept = 0;
   std::vector<DeviceBlock> staging;  // senders: blocks not on the NCCL device
   // tr is indexed by part id: the subtrees come first (the top part's entry follows)
   const int n_sub = static_cast<int>(l.subtree_rank.size());
@@ -92,7 +98,10 @@ void exchange_blocks_nccl(detail::CommImpl& comm, NumericState& ns, const RankLa
     const int owner = l.subtree_rank[i];
     if (x.size == 0 || owner == 0) continue;
     if (rank == 0) {
-      c.blocks.emplace_back(x.size, device);
+      if (next_kept < kept.size() && kept[next_kept].size == x.size)
+        c.blocks.push_back(std::move(kept[next_kept++]));
+      else
+        c.blocks.emplace_back(x.size, device);
       src[i] = c.blocks.back().p;
     } else if (owner == rank) {
       if (!x.on_host && x.device_ordinal == device) {

@@ -68,7 +68,8 @@ std::vector<index_t> value_positions(const Analysis& an, const RankLayout& l, in
 
 void send_values(detail::CommImpl& comm, NumericState& ns, const std::vector<double>& values) {
   const int ranks = comm.size();
-  std::vector<std::vector<double>> packed(ranks);
+  std::vector<std::vector<double>>& packed = ns.values_packed;
+  packed.resize(ranks);
   std::vector<detail::Message> sends;
   for (int r = 1; r < ranks; ++r) {
     const std::vector<index_t>& pos = ns.value_positions.at(r);
@@ -98,7 +99,9 @@ void receive_values(detail::CommImpl& comm, NumericState& ns, std::size_t nnz,
   if (!pos.empty() && static_cast<std::size_t>(pos.back()) >= nnz)
     throw InternalError("rank " + std::to_string(rank) + " needs value " +
                         std::to_string(pos.back()) + " of " + std::to_string(nnz));
-  std::vector<double> packed(pos.size());
+  ns.values_packed.resize(1);
+  std::vector<double>& packed = ns.values_packed[0];
+  packed.resize(pos.size());
   std::vector<detail::Message> recvs;
   if (!pos.empty()) recvs.push_back({0, kTagValues, packed.data(), sizeof(double) * pos.size()});
   comm.exchange({}, recvs);
