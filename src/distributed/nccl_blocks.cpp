@@ -21,7 +21,11 @@
 #include <cuda_runtime.h>
 #include <nccl.h>
 
+#include <cmath>
+#include <cstdint>
 #include <string>
+
+#include "numeric/cuda/triangle_pack.hpp"
 
 namespace strata::distributed {
 namespace {
@@ -52,25 +56,39 @@ struct DeviceBlock {
   }
 };
 
+// Takes a kept buffer of `size` doubles in order from `kept` (reused when the sizes
+// agree, as at every refactorization), else allocates one; appends it to `into`.
+double* reuse_block(std::vector<DeviceBlock>& kept, std::size_t& next,
+                    std::vector<DeviceBlock>& into, std::size_t size, int device) {
+  if (next < kept.size() && kept[next].size == size)
+    into.push_back(std::move(kept[next++]));
+  else
+    into.emplace_back(size, device);
+  return into.back().p;
+}
+
 }  // namespace
 
 struct NcclContext {
   ncclComm_t comm = nullptr;
   int device = -1;
   cudaStream_t stream = nullptr;
-  // rank 0: the received blocks, kept until the next exchange, which reuses them when
-  // their sizes are the same (a refactorization): no allocation, and no cudaFree, which
-  // waits for the device, in the factorization's path
-  std::vector<DeviceBlock> blocks;
+  // Kept from one exchange to the next, which reuses them when their sizes are the same (a
+  // refactorization): no allocation, and no cudaFree, which waits for the device, in the
+  // factorization's path. Rank 0: the received blocks (imported by the top part) and,
+  // for symmetric types, the packed triangles they arrive in; the others: the packed
+  // triangles and staging copies they send from.
+  std::vector<DeviceBlock> blocks, packed;
   ~NcclContext() {
     blocks.clear();
+    packed.clear();
     if (stream) cudaStreamDestroy(stream);
     if (comm) ncclCommDestroy(comm);
   }
 };
 
 void exchange_blocks_nccl(detail::CommImpl& comm, NumericState& ns, const RankLayout& l,
-                          std::vector<numeric::CbTransfer>& tr, int device) {
+                          std::vector<numeric::CbTransfer>& tr, int device, bool symmetric) {
   const int rank = comm.rank();
   cuda_check(cudaSetDevice(device), "cudaSetDevice");
   if (!ns.nccl_context || ns.nccl_context->device != device) {
@@ -84,64 +102,81 @@ void exchange_blocks_nccl(detail::CommImpl& comm, NumericState& ns, const RankLa
     ns.nccl_context = std::move(ctx);
   }
   NcclContext& c = *ns.nccl_context;
-  std::vector<DeviceBlock> kept = std::move(c.blocks);
+  std::vector<DeviceBlock> kept_blocks = std::move(c.blocks), kept_packed = std::move(c.packed);
   c.blocks.clear();
-  std::size_t next_kept = 0;
-  std::vector<DeviceBlock> staging;  // senders: blocks not on the NCCL device
+  c.packed.clear();
+  std::size_t next_block = 0, next_packed = 0;
   // tr is indexed by part id: the subtrees come first (the top part's entry follows)
   const int n_sub = static_cast<int>(l.subtree_rank.size());
   if (tr.size() < l.subtree_rank.size()) throw InternalError("fewer block transfers than subtrees");
-  // stage first (copies may not be inside the NCCL group), on the NCCL stream (see above)
-  std::vector<const double*> src(n_sub, nullptr);
+  // Stage first (copies may not be inside the NCCL group), on the NCCL stream (see above).
+  // A symmetric type's block (its lower triangle is what the importer needs) travels as
+  // its packed lower triangle, about half the bytes, unpacked on rank 0 with both
+  // triangles as the block was.
+  std::vector<const double*> wire(n_sub, nullptr);  // what the send reads / the receive writes
+  std::vector<std::size_t> count(n_sub, 0);
+  std::vector<double*> full(n_sub, nullptr);  // rank 0: the block the importer gets
   for (int i = 0; i < n_sub; ++i) {
     numeric::CbTransfer& x = tr[i];
     const int owner = l.subtree_rank[i];
     if (x.size == 0 || owner == 0) continue;
+    const auto m = static_cast<std::int64_t>(std::llround(std::sqrt(static_cast<double>(x.size))));
+    if (static_cast<std::size_t>(m * m) != x.size)
+      throw InternalError("a contribution block of " + std::to_string(x.size) +
+                          " doubles is not square");
+    count[i] = symmetric ? static_cast<std::size_t>(cuda::packed_lower_size(m)) : x.size;
     if (rank == 0) {
-      if (next_kept < kept.size() && kept[next_kept].size == x.size)
-        c.blocks.push_back(std::move(kept[next_kept++]));
-      else
-        c.blocks.emplace_back(x.size, device);
-      src[i] = c.blocks.back().p;
+      full[i] = reuse_block(kept_blocks, next_block, c.blocks, x.size, device);
+      wire[i] =
+          symmetric ? reuse_block(kept_packed, next_packed, c.packed, count[i], device) : full[i];
     } else if (owner == rank) {
-      if (!x.on_host && x.device_ordinal == device) {
-        src[i] = x.device;
-      } else {
-        staging.emplace_back(x.size, device);
+      const double* block = x.device;
+      if (x.on_host || x.device_ordinal != device) {
+        double* copy = reuse_block(kept_packed, next_packed, c.packed, x.size, device);
         const std::size_t bytes = sizeof(double) * x.size;
         if (x.on_host)
-          cuda_check(
-              cudaMemcpyAsync(staging.back().p, x.host, bytes, cudaMemcpyHostToDevice, c.stream),
-              "cudaMemcpyAsync (NCCL staging)");
+          cuda_check(cudaMemcpyAsync(copy, x.host, bytes, cudaMemcpyHostToDevice, c.stream),
+                     "cudaMemcpyAsync (NCCL staging)");
         else  // another GPU of this rank: explicit devices, no peer access needed
-          cuda_check(cudaMemcpyPeerAsync(staging.back().p, device, x.device, x.device_ordinal,
-                                         bytes, c.stream),
+          cuda_check(cudaMemcpyPeerAsync(copy, device, x.device, x.device_ordinal, bytes, c.stream),
                      "cudaMemcpyPeerAsync (NCCL staging)");
-        src[i] = staging.back().p;
+        block = copy;
       }
+      if (symmetric) {
+        double* tri = reuse_block(kept_packed, next_packed, c.packed, count[i], device);
+        cuda::pack_lower_triangle(block, m, tri, c.stream);
+        block = tri;
+      }
+      wire[i] = block;
     }
   }
   nccl_check(ncclGroupStart(), "ncclGroupStart");
   for (int i = 0; i < n_sub; ++i) {
-    if (!src[i]) continue;
-    numeric::CbTransfer& x = tr[i];
+    if (!wire[i]) continue;
     if (rank == 0) {
-      nccl_check(ncclRecv(const_cast<double*>(src[i]), x.size, ncclDouble, l.subtree_rank[i],
+      nccl_check(ncclRecv(const_cast<double*>(wire[i]), count[i], ncclDouble, l.subtree_rank[i],
                           c.comm, c.stream),
                  "ncclRecv");
-      comm.bytes_received += sizeof(double) * x.size;
+      comm.bytes_received += sizeof(double) * count[i];
     } else {
-      nccl_check(ncclSend(src[i], x.size, ncclDouble, 0, c.comm, c.stream), "ncclSend");
-      comm.bytes_sent += sizeof(double) * x.size;
+      nccl_check(ncclSend(wire[i], count[i], ncclDouble, 0, c.comm, c.stream), "ncclSend");
+      comm.bytes_sent += sizeof(double) * count[i];
     }
   }
   nccl_check(ncclGroupEnd(), "ncclGroupEnd");
+  if (rank == 0 && symmetric)
+    for (int i = 0; i < n_sub; ++i)
+      if (wire[i]) {
+        const auto m =
+            static_cast<std::int64_t>(std::llround(std::sqrt(static_cast<double>(tr[i].size))));
+        cuda::unpack_symmetric(wire[i], m, full[i], c.stream);
+      }
   cuda_check(cudaStreamSynchronize(c.stream), "cudaStreamSynchronize (NCCL)");
   if (rank == 0)
     for (int i = 0; i < n_sub; ++i) {
-      if (!src[i]) continue;
+      if (!wire[i]) continue;
       numeric::CbTransfer& x = tr[i];
-      x.device = src[i];
+      x.device = full[i];
       x.device_ordinal = device;
       x.on_host = false;
     }

@@ -16,9 +16,10 @@ namespace strata::distributed {
 /// device memory by its exporter, or on the host) to rank 0, whose receives land in
 /// device buffers on `device` (rank 0's top-part GPU) and are handed to the importer as
 /// device blocks (tr[i].device, device_ordinal). `device` is this rank's NCCL GPU (its first
-/// executor's). Counts the bytes in comm's counters. Throws DeviceError on a CUDA or NCCL
-/// failure.
+/// executor's). `symmetric` (LLᵀ, LDLᵀ): each block travels as its packed lower triangle
+/// and arrives with both triangles. Counts the bytes in comm's counters. Throws
+/// DeviceError on a CUDA or NCCL failure, InternalError for a block that is not square.
 void exchange_blocks_nccl(detail::CommImpl& comm, NumericState& ns, const RankLayout& l,
-                          std::vector<numeric::CbTransfer>& tr, int device);
+                          std::vector<numeric::CbTransfer>& tr, int device, bool symmetric);
 
 }  // namespace strata::distributed

@@ -65,7 +65,7 @@ void factor_part(detail::CommImpl& comm, NumericState& ns, const Analysis& an,
     std::vector<detail::Message> sends, recvs;
 #ifdef STRATA_HAVE_NCCL
     if (ns.nccl) {
-      exchange_blocks_nccl(comm, ns, l, tr, execs[0]->device());
+      exchange_blocks_nccl(comm, ns, l, tr, execs[0]->device(), type != MatrixType::general);
     } else
 #endif
     {

@@ -29,6 +29,15 @@ index_t cuda_llt_pivot_block_and_panel(double* f, index_t m, index_t k);
 /// n < 1 or k < 1, NotSupported in a build without CUDA.
 bool cuda_llt_update(double* c, const double* l, index_t n, index_t k);
 
+/// The packing of a symmetric block's lower triangle for its transfer between ranks and
+/// its unpacking (numeric/cuda/triangle_pack.cu) on device 0, so that tests can check them:
+/// returns the packed lower triangle of `a` (host, m × m, column-major; m(m+1)/2 doubles,
+/// column j's rows j … m − 1 in order) and sets `full` (m × m) to its unpacking, both
+/// triangles from the lower one. Throws InvalidInput for m < 0, NotSupported in a build
+/// without CUDA.
+std::vector<double> cuda_pack_and_unpack_lower(const double* a, index_t m,
+                                               std::vector<double>& full);
+
 /// The CUDA executor's LU of large fronts without row interchanges on device 0
 /// (numeric/cuda/lu_fronts.cu, enqueue_lu_strips: strips of `strip` pivot columns whose
 /// pivot blocks and panels come from the batched kernels of kernels_lu_panel.cu, all fronts
