@@ -72,6 +72,9 @@ struct RankStats {
   /// roots' contribution blocks to rank 0 (waiting for the last of them on rank 0) and
   /// the pivot statistics.
   double exchange_seconds = 0;
+  /// Of exchange_seconds, the contribution blocks' transfer alone (packing, sends and
+  /// receives, unpacking, up to their arrival), after the ranks agreed that none failed.
+  double blocks_seconds = 0;
   std::size_t factor_bytes_sent = 0;      ///< values (rank 0), blocks, pivot statistics
   std::size_t factor_bytes_received = 0;  ///< its scaled values, blocks (rank 0)
   /// Bytes of scaled matrix values in the last factorize / refactorize call (part of the

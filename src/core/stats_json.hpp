@@ -73,6 +73,7 @@ inline void to_json(nlohmann::json& j, const RankStats& r) {
        {"factor_seconds", r.factor_seconds},
        {"values_seconds", r.values_seconds},
        {"exchange_seconds", r.exchange_seconds},
+       {"blocks_seconds", r.blocks_seconds},
        {"factor_bytes_sent", r.factor_bytes_sent},
        {"factor_bytes_received", r.factor_bytes_received},
        {"values_bytes", r.values_bytes},

@@ -318,6 +318,7 @@ void reset_factor_stats(RankStats& st) {
   st.factor_seconds = 0;
   st.values_seconds = 0;
   st.exchange_seconds = 0;
+  st.blocks_seconds = 0;
   st.factor_bytes_sent = st.factor_bytes_received = 0;
   st.values_bytes = 0;
 }

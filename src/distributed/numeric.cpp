@@ -62,6 +62,7 @@ void factor_part(detail::CommImpl& comm, NumericState& ns, const Analysis& an,
     Timer exchange;
     agree(comm, failed);
     // the subtree roots' contribution blocks to rank 0
+    Timer blocks;
     std::vector<detail::Message> sends, recvs;
 #ifdef STRATA_HAVE_NCCL
     if (ns.nccl) {
@@ -86,6 +87,7 @@ void factor_part(detail::CommImpl& comm, NumericState& ns, const Analysis& an,
       }
       comm.exchange(sends, recvs);
     }
+    ns.stats.blocks_seconds += blocks.seconds();
     // the pivot statistics of every rank's fronts to rank 0
     std::vector<char> mine;
     if (rank != 0) {
