@@ -93,6 +93,9 @@ struct NumericState {
   /// The values packed for each rank (rank 0) or as received (the others), kept from one
   /// factorization to the next: 8 bytes per position of value_positions.
   std::vector<std::vector<double>> values_packed;
+  /// Rank 0: the fronts of each rank's subtrees, increasing (the order in which a rank
+  /// sends their pivot statistics), made at the first factorization of an analysis.
+  std::vector<std::vector<index_t>> fronts_of_rank;
   bool nccl = false;  ///< contribution blocks between GPUs through NCCL
   /// Options::gpu_solve_parts: solve on the GPUs that hold the parts (solve.cpp).
   bool solve_where_held = true;
@@ -153,6 +156,9 @@ struct DistributedAccess {
   /// Every rank runs `per_rank` CPU executors (one host thread each) as its workers, as
   /// it would run that many GPUs. Call before analyze on every rank.
   static void use_host_workers(DistributedSolver& s, int per_rank);
+  /// This rank's view of the analysis (rank 0: its Solver's; the others: the broadcast
+  /// copy), or nullptr before analyze.
+  static const Analysis* analysis(const DistributedSolver& s);
 };
 
 }  // namespace strata::detail

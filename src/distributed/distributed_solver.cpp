@@ -73,6 +73,7 @@ void setup_numeric(DistributedState& s, Analysis& an, int per_rank) {
     localize_factor_layout(an, ns.layout);
     ns.threads = s.options.num_threads;
     ns.values_packed.clear();
+    ns.fronts_of_rank.clear();
     ns.pin_values = wants_gpu(s);
     ns.executors.clear();
     ns.arenas.clear();
@@ -402,6 +403,10 @@ const Stats& DistributedSolver::stats() const {
 }
 const DistributedStats& DistributedSolver::distributed_stats() const { return state_->dstats; }
 const Communicator& DistributedSolver::communicator() const { return state_->comm; }
+
+const Analysis* detail::DistributedAccess::analysis(const DistributedSolver& solver) {
+  return solver.state_->analysis;
+}
 
 void detail::DistributedAccess::use_host_workers(DistributedSolver& solver, int per_rank) {
   if (per_rank < 0) throw InvalidInput("use_host_workers: per_rank must be at least 0");

@@ -56,7 +56,7 @@ void factor_part(detail::CommImpl& comm, NumericState& ns, const Analysis& an,
   // each GPU keeps its parts' panels (no copy and wait after every launch group): the
   // solve runs there, or fetches them to the host first (solve_part)
   config.keep_panels_on_devices = true;
-  bool exchanged = false;
+  bool exchanged = false, blocks_done = false;
   config.exchange = [&](std::vector<numeric::CbTransfer>& tr, std::exception_ptr failed) {
     exchanged = true;
     Timer exchange;
@@ -88,19 +88,29 @@ void factor_part(detail::CommImpl& comm, NumericState& ns, const Analysis& an,
       comm.exchange(sends, recvs);
     }
     ns.stats.blocks_seconds += blocks.seconds();
-    // the pivot statistics of every rank's fronts to rank 0
+    blocks_done = true;
+    ns.stats.exchange_seconds += exchange.seconds();
+  };
+  if (rank == 0 && static_cast<int>(ns.fronts_of_rank.size()) != l.ranks) {
+    ns.fronts_of_rank.assign(l.ranks, {});
+    for (int r = 1; r < l.ranks; ++r) ns.fronts_of_rank[r] = fronts_of_rank(an, l, r);
+  }
+  // The pivot statistics of every rank's fronts to rank 0, once the blocks are there:
+  // rank 0 needs them only for the whole factorization's figures, so they travel after
+  // its top part, not on the way to it.
+  auto gather_pivot_stats = [&] {
     std::vector<char> mine;
     if (rank != 0) {
-      for (const index_t f : l.my_fronts) {
-        const char* p = reinterpret_cast<const char*>(&factor.front_stats[f]);
-        mine.insert(mine.end(), p, p + sizeof(numeric::PivotStats));
-      }
+      mine.resize(l.my_fronts.size() * sizeof(numeric::PivotStats));
+      for (std::size_t k = 0; k < l.my_fronts.size(); ++k)
+        std::memcpy(mine.data() + k * sizeof(numeric::PivotStats),
+                    &factor.front_stats[l.my_fronts[k]], sizeof(numeric::PivotStats));
     }
     std::vector<std::vector<char>> all;
     comm.gather(mine, all, 0);
     if (rank == 0)
       for (int r = 1; r < l.ranks; ++r) {
-        const std::vector<index_t> fr = fronts_of_rank(an, l, r);
+        const std::vector<index_t>& fr = ns.fronts_of_rank.at(r);
         if (all[r].size() != fr.size() * sizeof(numeric::PivotStats))
           throw InternalError("rank " + std::to_string(r) +
                               " sent pivot statistics of the wrong size");
@@ -108,7 +118,6 @@ void factor_part(detail::CommImpl& comm, NumericState& ns, const Analysis& an,
           std::memcpy(&factor.front_stats[fr[k]], all[r].data() + k * sizeof(numeric::PivotStats),
                       sizeof(numeric::PivotStats));
       }
-    ns.stats.exchange_seconds += exchange.seconds();
   };
   try {
     numeric::factorize_multi(an, values, type, pivots, execs, factor, ns.arenas, config,
@@ -116,8 +125,11 @@ void factor_part(detail::CommImpl& comm, NumericState& ns, const Analysis& an,
   } catch (...) {
     // failed before the exchange (sizing the factor): the other ranks wait in agree()
     if (!exchanged) agree(comm, std::current_exception());
+    // rank 0's top part failed after the blocks came: the others wait in the gather
+    if (blocks_done) gather_pivot_stats();
     throw;
   }
+  gather_pivot_stats();
   RankStats& st = ns.stats;
   st.workers = l.workers_per_rank;
   st.subtrees = static_cast<index_t>(l.subtrees_of[rank].size());

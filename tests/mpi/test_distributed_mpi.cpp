@@ -329,6 +329,35 @@ TEST(Distributed, ErrorsReachEveryRank) {
   }
 }
 
+// A matrix declared spd whose only pivot that is not positive is the last one, in the top
+// part that rank 0 factors after the other ranks sent their blocks: NotPositiveDefinite
+// on every rank (rank 0's error reaches the others after they sent their pivot
+// statistics), and the solver stays usable: refactorized with the first values it solves
+// as the one-process Solver does.
+TEST(Distributed, TopPartFailureReachesEveryRank) {
+  const int rank = world_rank(), ranks = world_size();
+  if (ranks == 1) GTEST_SKIP() << "one rank: no top part apart from the subtrees";
+  SparseMatrix a = rank == 0 ? generators::laplacian_3d(12, 12, 12) : SparseMatrix{};
+  DistributedSolver ds(mpi_communicator(MPI_COMM_WORLD), options_for(MatrixType::spd));
+  ds.analyze(a);
+  SparseMatrix bad = a;
+  if (rank == 0) {
+    const Analysis& an = *detail::DistributedAccess::analysis(ds);
+    const index_t root = an.tree.n_fronts() - 1, last = an.n - 1;
+    ASSERT_EQ(an.partition.part_of[root], -1) << "the root front is not in the top part";
+    ASSERT_EQ(an.tree.front_of_column[last], root);
+    const index_t v = an.perm[last];  // spd: B = A, pivot k is column perm[k]
+    for (index_t p = bad.offsets[v]; p < bad.offsets[v + 1]; ++p)
+      if (bad.indices[p] == v) bad.values[p] -= 1e3;
+  }
+  ds.factorize(a);
+  EXPECT_THROW(ds.refactorize(bad), NotPositiveDefinite);
+  ds.refactorize(a);
+  std::vector<double> b(rank == 0 ? a.n_rows : 0, 1.0), x(b.size());
+  ds.solve(rank == 0 ? b.data() : nullptr, rank == 0 ? x.data() : nullptr, 1);
+  if (rank == 0) check_against_one_process({"lap3d 12", a, MatrixType::spd}, ds, b, x, 1);
+}
+
 // GPU ranks (the CUDA backend, one GPU per rank: rank r on GPU r mod the visible ones;
 // skipped without a GPU): each GPU keeps the panels of the parts it factored and the solve
 // runs there (the Solver reports the solve on the device; LLᵀ and LU — an LDLᵀ factor's
