@@ -273,6 +273,57 @@ def predict_benchmark(c, ranks, gpus, pcie):
             "total_seconds": other + t_sub + t_top + t_cb + t_values}
 
 
+def calibrate_two_gpu(rows):
+    """Rates from one run of scripts/gpu/run_mpi.sh on a two-GPU machine (rows of its 1 × 1,
+    1 × 2 and 2 × 1 files, one problem): the subtree rate of GPU 1 in 1 × 2 (subtrees
+    only), the top-part rate of GPU 0 there, the host-side time of 1 × 2 outside GPU 0's
+    parts, and the links of 2 × 1 as its ranks measured them — the contribution blocks
+    (RankStats::blocks_seconds, packing and NCCL included) and the scaled values
+    (values_seconds, MPI from host memory). None when a configuration or figure is missing."""
+    by = {(r.get("ranks"), r.get("gpus_per_rank")): r for r in rows}
+    one, two, dist = by.get((1, 1)), by.get((1, 2)), by.get((2, 1))
+    if not (one and two and dist) or len(two.get("devices", [])) < 2 or not dist.get("per_rank"):
+        return None
+    g0, g1 = two["devices"][0], two["devices"][1]
+    top = [p for p in g0["parts"] if p["kind"] == "top"]
+    if not top or "blocks_seconds" not in dist["per_rank"][0]:
+        return None
+    top_seconds = sum(p["end_seconds"] - p["start_seconds"] for p in top)
+    rank0 = dist["per_rank"][0]
+    values = dist["values_bytes_between_ranks"]
+    return {
+        "flops": one["flops"],
+        "one_gpu_seconds": one["factor_seconds"],
+        "top_flops_fraction": two["top_flops_fraction"],
+        "subtree_rate": g1["flops"] / g1["busy_seconds"],
+        "top_rate": sum(p["flops"] for p in top) / top_seconds,
+        "host_seconds": two["factor_seconds"] - max(p["end_seconds"] for p in g0["parts"]),
+        "blocks_bytes_per_s": (dist["bytes_between_ranks"] - values) / rank0["blocks_seconds"],
+        "values_bytes_per_s": values / rank0["values_seconds"] if rank0["values_seconds"] else 0,
+        "per_rank_flops": [r["factor_flops"] for r in dist["per_rank"]],
+        "blocks_bytes": dist["bytes_between_ranks"] - values,
+        "values_bytes": values,
+    }
+
+
+def predict_two_gpu(c, ranks, gpus):
+    """1 × 2 or 2 × 1 from calibrate_two_gpu's figures (the current schedule): the host
+    time, then (2 × 1) the values sent before any subtree starts, the busiest worker's
+    subtrees at the subtree rate, (2 × 1) the blocks to rank 0, and the top part on one
+    GPU at the top rate. Within one process the blocks go GPU to GPU beside the work
+    (counted in the top part's measured rate), so 1 × 2 has no transfer term."""
+    top = c["top_flops_fraction"] * c["flops"]
+    sub = [f - (top if i == 0 else 0.0) for i, f in enumerate(c["per_rank_flops"])]
+    t_sub = max(sub) / c["subtree_rate"]
+    t_values = c["values_bytes"] / c["values_bytes_per_s"] if ranks > 1 and c["values_bytes_per_s"] else 0.0
+    t_cb = c["blocks_bytes"] / c["blocks_bytes_per_s"] if ranks > 1 else 0.0
+    t_top = top / c["top_rate"]
+    return {"ranks": ranks, "gpus_per_rank": gpus, "host_seconds": c["host_seconds"],
+            "values_seconds": t_values, "subtree_seconds": t_sub, "cb_seconds": t_cb,
+            "top_seconds": t_top,
+            "total_seconds": c["host_seconds"] + t_values + t_sub + t_cb + t_top}
+
+
 def problem_tree(name):
     kind, k = name.rsplit("-", 1)
     k = int(k)
@@ -334,6 +385,33 @@ def main():
                   f"{p['cb_seconds']:>6.3f} {p['values_seconds']:>6.3f} {p['top_seconds']:>6.3f} "
                   f"{p['host_seconds']:>6.2f} {p['total_seconds']:>7.3f} {ms:>7} "
                   f"{p['bytes_between_ranks'] / 1e6:>8.1f} {mb:>8}")
+
+    # the two-GPU benchmark, where the measured files have 1 × 1, 1 × 2 and 2 × 1 of a problem
+    two_gpu = {}
+    for row in measured:
+        two_gpu.setdefault(row.get("problem"), []).append(row)
+    header = False
+    for prob, rows in sorted(two_gpu.items()):
+        c = calibrate_two_gpu(rows)
+        if not c:
+            continue
+        if not header:
+            print("\n# The 2-GPU benchmark, calibrated on its own 1 x 1 and 1 x 2 runs and the "
+                  "2 x 1 run's links")
+            print(f"{'problem':<11} {'R x G':<6} {'host s':>6} {'vals s':>6} {'subtree s':>9} "
+                  f"{'CB s':>6} {'top s':>6} {'pred s':>7} {'meas s':>7}")
+            header = True
+        out.setdefault("calibration_2gpu", {})[prob] = c
+        for R, G in ((1, 2), (2, 1)):
+            p = predict_two_gpu(c, R, G)
+            p["problem"] = prob
+            m = next((r for r in rows if r.get("ranks") == R and r.get("gpus_per_rank") == G), None)
+            p["measured_seconds"] = m.get("factor_seconds") if m else None
+            out.setdefault("benchmark_2gpu", []).append(p)
+            ms = f"{p['measured_seconds']:.3f}" if p["measured_seconds"] else "-"
+            print(f"{prob:<11} {R}x{G:<4} {p['host_seconds']:>6.3f} {p['values_seconds']:>6.3f} "
+                  f"{p['subtree_seconds']:>9.3f} {p['cb_seconds']:>6.3f} {p['top_seconds']:>6.3f} "
+                  f"{p['total_seconds']:>7.3f} {ms:>7}")
 
     print("\n# 8, 64, 512 GPUs (8 GPUs and one rank per node; inter-node "
           f"{ASSUMED['ib_bytes_per_s_per_node'] / 1e9:.0f} GB/s per node, NCCL)")
