@@ -72,7 +72,7 @@ void agree(detail::CommImpl& comm, std::exception_ptr mine);
 /// r > 0 is sent at each factorization (values.cpp).
 std::vector<index_t> value_positions(const Analysis& an, const RankLayout& l, int r);
 
-struct NcclContext;  // nccl_blocks.cpp (STRATA_NCCL)
+struct NcclContext;  // nccl_transport.cpp (STRATA_NCCL)
 
 /// What every rank keeps for the numeric phases.
 struct NumericState {
@@ -93,10 +93,13 @@ struct NumericState {
   /// The values packed for each rank (rank 0) or as received (the others), kept from one
   /// factorization to the next: 8 bytes per position of value_positions.
   std::vector<std::vector<double>> values_packed;
+  /// With NCCL, values_packed's buffers page-locked (released before the buffers; declared
+  /// after them so that they go first).
+  std::vector<std::unique_ptr<numeric::PinnedHostRange>> values_packed_pins;
   /// Rank 0: the fronts of each rank's subtrees, increasing (the order in which a rank
   /// sends their pivot statistics), made at the first factorization of an analysis.
   std::vector<std::vector<index_t>> fronts_of_rank;
-  bool nccl = false;  ///< contribution blocks between GPUs through NCCL
+  bool nccl = false;  ///< values and contribution blocks between GPUs through NCCL
   /// Options::gpu_solve_parts: solve on the GPUs that hold the parts (solve.cpp).
   bool solve_where_held = true;
   /// The device solve's update vectors (the whole tree's arena: an.child_rows.offsets)
@@ -107,11 +110,14 @@ struct NumericState {
 
 /// Collective with receive_values: rank 0 sends each rank r > 0 the scaled values at
 /// ns.value_positions[r], packed in that order (MPI point-to-point, one message per
-/// rank). `values`: all nnz scaled values. Adds the bytes sent to ns.stats.values_bytes.
+/// rank; NCCL between GPU ranks, ns.nccl). `values`: all nnz scaled values. Adds the
+/// bytes sent to ns.stats.values_bytes. An error on any rank (an InternalError for a
+/// position past the values; DeviceError) is thrown on every rank (agree()).
 void send_values(detail::CommImpl& comm, NumericState& ns, const std::vector<double>& values);
 /// Ranks r > 0: receives this rank's scaled values into `values`, which is made nnz long
 /// (zero-filled) when it is not: only this rank's positions are written, the others are
-/// never read by its fronts. Adds the bytes received to ns.stats.values_bytes.
+/// never read by its fronts. Adds the bytes received to ns.stats.values_bytes. Throws as
+/// send_values.
 void receive_values(detail::CommImpl& comm, NumericState& ns, std::size_t nnz,
                     std::vector<double>& values);
 

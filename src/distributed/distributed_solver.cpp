@@ -72,6 +72,7 @@ void setup_numeric(DistributedState& s, Analysis& an, int per_rank) {
         ns.value_positions[r] = value_positions(an, ns.layout, r);
     localize_factor_layout(an, ns.layout);
     ns.threads = s.options.num_threads;
+    ns.values_packed_pins.clear();  // before the buffers they lock
     ns.values_packed.clear();
     ns.fronts_of_rank.clear();
     ns.pin_values = wants_gpu(s);
@@ -105,7 +106,7 @@ void setup_numeric(DistributedState& s, Analysis& an, int per_rank) {
     }
 #ifdef STRATA_HAVE_NCCL
     // NCCL with any number of GPUs per rank: a rank's blocks from its other GPUs are
-    // staged onto its NCCL GPU on the NCCL stream (nccl_blocks.cpp; an unordered staging
+    // staged onto its NCCL GPU on the NCCL stream (nccl_transport.cpp; an unordered staging
     // copy there once gave a wrong 2 × 2 factor, docs/distributed.md §5)
     ns.nccl = gpu && comm.size() > 1;
 #endif
@@ -287,14 +288,14 @@ void follow(DistributedState& s) {
         if (h.b != static_cast<std::int64_t>(nnz))
           throw InternalError(std::to_string(h.b) + " values for a pattern of " +
                               std::to_string(nnz) + " entries");
-        Timer receiving;
-        receive_values(comm, s.numeric, nnz, s.values);
-        st.values_seconds += receiving.seconds();
         try {
+          Timer receiving;
+          receive_values(comm, s.numeric, nnz, s.values);
+          st.values_seconds += receiving.seconds();
           run_factor(s, *s.analysis, s.values, static_cast<MatrixType>(h.a), h.c, s.factor);
         } catch (...) {
-          // agreed with every rank inside factor_part: rank 0 decides what follows (the
-          // LDLᵀ retry of an automatic type, or an `error` command)
+          // agreed with every rank inside receive_values or factor_part: rank 0 decides
+          // what follows (the LDLᵀ retry of an automatic type, or an `error` command)
         }
         bytes.add_to(st.factor_bytes_sent, st.factor_bytes_received);
         break;

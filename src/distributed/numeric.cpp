@@ -15,7 +15,7 @@
 #include "distributed/distributed_internal.hpp"
 
 #ifdef STRATA_HAVE_NCCL
-#include "distributed/nccl_blocks.hpp"
+#include "distributed/nccl_transport.hpp"
 #endif
 
 namespace strata::distributed {

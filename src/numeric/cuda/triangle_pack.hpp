@@ -1,6 +1,6 @@
 // strata — a symmetric matrix's lower triangle packed for a transfer and unpacked again on
 // the GPU (the contribution blocks that symmetric factorizations send between ranks:
-// distributed/nccl_blocks.cpp), so that half the bytes travel.
+// distributed/nccl_transport.cpp), so that half the bytes travel.
 #pragma once
 
 #include <cuda_runtime.h>

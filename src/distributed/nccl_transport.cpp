@@ -1,4 +1,5 @@
-// strata — contribution blocks through NCCL (see nccl_blocks.hpp).
+// strata — the values and the contribution blocks between ranks through NCCL (see
+// nccl_transport.hpp).
 //
 // Why: with GPUs on every rank, a block through MPI from host buffers crosses PCIe twice
 // on each side (device → host, host → network → host, host → device); NCCL moves it from
@@ -16,7 +17,7 @@
 // the staging buffer before the copy reached it: the likely cause of the wrong factor of
 // the 2 ranks × 2 GPUs run (docs/distributed.md §5; not yet confirmed on a GPU), as only
 // a rank's second GPU stages its blocks.
-#include "distributed/nccl_blocks.hpp"
+#include "distributed/nccl_transport.hpp"
 
 #include <cuda_runtime.h>
 #include <nccl.h>
@@ -24,6 +25,7 @@
 #include <cmath>
 #include <cstdint>
 #include <string>
+#include <utility>
 
 #include "numeric/cuda/triangle_pack.hpp"
 
@@ -47,7 +49,12 @@ struct DeviceBlock {
     cuda_check(cudaMalloc(&p, sizeof(double) * (n ? n : 1)), "cudaMalloc (NCCL block)");
   }
   DeviceBlock(DeviceBlock&& o) noexcept : p(o.p), device(o.device), size(o.size) { o.p = nullptr; }
-  DeviceBlock& operator=(DeviceBlock&&) = delete;
+  DeviceBlock& operator=(DeviceBlock&& o) noexcept {  // the old buffer goes with o
+    std::swap(p, o.p);
+    std::swap(device, o.device);
+    std::swap(size, o.size);
+    return *this;
+  }
   ~DeviceBlock() {
     if (p) {
       cudaSetDevice(device);
@@ -73,35 +80,109 @@ struct NcclContext {
   ncclComm_t comm = nullptr;
   int device = -1;
   cudaStream_t stream = nullptr;
+  cudaEvent_t copied = nullptr;  // rank 0: its values' host-to-device copies done
   // Kept from one exchange to the next, which reuses them when their sizes are the same (a
   // refactorization): no allocation, and no cudaFree, which waits for the device, in the
   // factorization's path. Rank 0: the received blocks (imported by the top part) and,
   // for symmetric types, the packed triangles they arrive in; the others: the packed
-  // triangles and staging copies they send from.
-  std::vector<DeviceBlock> blocks, packed;
+  // triangles and staging copies they send from. `values`: rank 0's packed values for
+  // each rank (index r), the others' as received (index 0).
+  std::vector<DeviceBlock> blocks, packed, values;
   ~NcclContext() {
+    if (stream) cudaStreamSynchronize(stream);  // a values send may still be in flight
     blocks.clear();
     packed.clear();
+    values.clear();
+    if (copied) cudaEventDestroy(copied);
     if (stream) cudaStreamDestroy(stream);
     if (comm) ncclCommDestroy(comm);
   }
 };
 
-void exchange_blocks_nccl(detail::CommImpl& comm, NumericState& ns, const RankLayout& l,
-                          std::vector<numeric::CbTransfer>& tr, int device, bool symmetric) {
-  const int rank = comm.rank();
+namespace {
+
+// This rank's NCCL communicator on `device`, made at the first transfer after an
+// analysis (collective: every rank calls it at the same point).
+NcclContext& context(detail::CommImpl& comm, NumericState& ns, int device) {
   cuda_check(cudaSetDevice(device), "cudaSetDevice");
   if (!ns.nccl_context || ns.nccl_context->device != device) {
+    ns.nccl_context.reset();
     ncclUniqueId id;
-    if (rank == 0) nccl_check(ncclGetUniqueId(&id), "ncclGetUniqueId");
+    if (comm.rank() == 0) nccl_check(ncclGetUniqueId(&id), "ncclGetUniqueId");
     comm.broadcast(&id, sizeof id, 0);
     auto ctx = std::make_shared<NcclContext>();
     ctx->device = device;
-    nccl_check(ncclCommInitRank(&ctx->comm, comm.size(), id, rank), "ncclCommInitRank");
+    nccl_check(ncclCommInitRank(&ctx->comm, comm.size(), id, comm.rank()), "ncclCommInitRank");
     cuda_check(cudaStreamCreateWithFlags(&ctx->stream, cudaStreamNonBlocking), "cudaStreamCreate");
+    cuda_check(cudaEventCreateWithFlags(&ctx->copied, cudaEventDisableTiming), "cudaEventCreate");
     ns.nccl_context = std::move(ctx);
   }
-  NcclContext& c = *ns.nccl_context;
+  return *ns.nccl_context;
+}
+
+}  // namespace
+
+void transfer_values_nccl(detail::CommImpl& comm, NumericState& ns, int device,
+                          std::exception_ptr failed) {
+  const int rank = comm.rank();
+  std::vector<std::vector<double>>& packed = ns.values_packed;
+  NcclContext* c = nullptr;
+  try {
+    c = &context(comm, ns, device);
+    // the device buffers, before anything travels: an allocation that fails on one rank
+    // must not leave another waiting in an NCCL receive
+    const std::size_t first = rank == 0 ? 1 : 0, end = rank == 0 ? packed.size() : 1;
+    if (c->values.size() < end) c->values.resize(end);
+    for (std::size_t r = first; r < end && !failed; ++r)
+      if (c->values[r].size != packed[r].size()) {
+        c->values[r] = DeviceBlock();
+        if (!packed[r].empty()) c->values[r] = DeviceBlock(packed[r].size(), device);
+      }
+  } catch (...) {
+    if (!failed) failed = std::current_exception();
+  }
+  agree(comm, failed);
+  cudaStream_t s = c->stream;
+  if (rank == 0) {
+    for (std::size_t r = 1; r < packed.size(); ++r)
+      if (!packed[r].empty())
+        cuda_check(cudaMemcpyAsync(c->values[r].p, packed[r].data(),
+                                   sizeof(double) * packed[r].size(), cudaMemcpyHostToDevice, s),
+                   "cudaMemcpyAsync (values)");
+    cuda_check(cudaEventRecord(c->copied, s), "cudaEventRecord");
+  }
+  nccl_check(ncclGroupStart(), "ncclGroupStart");
+  if (rank == 0) {
+    for (std::size_t r = 1; r < packed.size(); ++r)
+      if (!packed[r].empty()) {
+        nccl_check(
+            ncclSend(c->values[r].p, packed[r].size(), ncclDouble, static_cast<int>(r), c->comm, s),
+            "ncclSend (values)");
+        comm.bytes_sent += sizeof(double) * packed[r].size();
+      }
+  } else if (!packed[0].empty()) {
+    nccl_check(ncclRecv(c->values[0].p, packed[0].size(), ncclDouble, 0, c->comm, s),
+               "ncclRecv (values)");
+    comm.bytes_received += sizeof(double) * packed[0].size();
+  }
+  nccl_check(ncclGroupEnd(), "ncclGroupEnd");
+  if (rank == 0) {
+    // the host buffers may be written again once copied; the sends go on beside rank 0's
+    // own subtrees, in stream order before any later use of the device buffers
+    cuda_check(cudaEventSynchronize(c->copied), "cudaEventSynchronize (values)");
+    return;
+  }
+  if (!packed[0].empty())
+    cuda_check(cudaMemcpyAsync(packed[0].data(), c->values[0].p, sizeof(double) * packed[0].size(),
+                               cudaMemcpyDeviceToHost, s),
+               "cudaMemcpyAsync (values)");
+  cuda_check(cudaStreamSynchronize(s), "cudaStreamSynchronize (values)");
+}
+
+void exchange_blocks_nccl(detail::CommImpl& comm, NumericState& ns, const RankLayout& l,
+                          std::vector<numeric::CbTransfer>& tr, int device, bool symmetric) {
+  const int rank = comm.rank();
+  NcclContext& c = context(comm, ns, device);
   std::vector<DeviceBlock> kept_blocks = std::move(c.blocks), kept_packed = std::move(c.packed);
   c.blocks.clear();
   c.packed.clear();
