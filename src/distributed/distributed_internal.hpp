@@ -106,6 +106,13 @@ struct NumericState {
   /// and rank 0's copy of b, kept from one solve to the next.
   std::vector<double> solve_u, solve_b;
   std::shared_ptr<NcclContext> nccl_context;
+  /// Made anew with value_positions (at each analysis), so that the NCCL transfer uploads
+  /// its copy of the positions once per analysis.
+  std::uint64_t positions_generation = 0;
+  /// With NCCL: the current factorization's scaled values on GPU device_values_device
+  /// (FactorContext::device_values; set by send_values / receive_values), else null.
+  const double* device_values = nullptr;
+  int device_values_device = -1;
 };
 
 /// Collective with receive_values: rank 0 sends each rank r > 0 the scaled values at
@@ -116,8 +123,10 @@ struct NumericState {
 void send_values(detail::CommImpl& comm, NumericState& ns, const std::vector<double>& values);
 /// Ranks r > 0: receives this rank's scaled values into `values`, which is made nnz long
 /// (zero-filled) when it is not: only this rank's positions are written, the others are
-/// never read by its fronts. Adds the bytes received to ns.stats.values_bytes. Throws as
-/// send_values.
+/// never read by its fronts. With NCCL they arrive on the rank's first GPU
+/// (ns.device_values) and `values` is filled only when an executor reads values on the
+/// host (Executor::reads_host_values), else left as it is. Adds the bytes received to
+/// ns.stats.values_bytes. Throws as send_values.
 void receive_values(detail::CommImpl& comm, NumericState& ns, std::size_t nnz,
                     std::vector<double>& values);
 

@@ -72,6 +72,8 @@ void setup_numeric(DistributedState& s, Analysis& an, int per_rank) {
         ns.value_positions[r] = value_positions(an, ns.layout, r);
     localize_factor_layout(an, ns.layout);
     ns.threads = s.options.num_threads;
+    ++ns.positions_generation;
+    ns.device_values = nullptr;
     ns.values_packed_pins.clear();  // before the buffers they lock
     ns.values_packed.clear();
     ns.fronts_of_rank.clear();

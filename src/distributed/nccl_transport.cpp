@@ -22,12 +22,15 @@
 #include <cuda_runtime.h>
 #include <nccl.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <string>
 #include <utility>
 
+#include "numeric/cuda/device_buffer.hpp"
 #include "numeric/cuda/triangle_pack.hpp"
+#include "numeric/cuda/value_positions.hpp"
 
 namespace strata::distributed {
 namespace {
@@ -85,14 +88,25 @@ struct NcclContext {
   // refactorization): no allocation, and no cudaFree, which waits for the device, in the
   // factorization's path. Rank 0: the received blocks (imported by the top part) and,
   // for symmetric types, the packed triangles they arrive in; the others: the packed
-  // triangles and staging copies they send from. `values`: rank 0's packed values for
-  // each rank (index r), the others' as received (index 0).
-  std::vector<DeviceBlock> blocks, packed, values;
+  // triangles and staging copies they send from.
+  std::vector<DeviceBlock> blocks, packed;
+  // The scaled values (values.cpp): `full`, every value in the canonical order (rank 0:
+  // uploaded from its host; the others: their share scattered in, zero elsewhere), which
+  // the executors copy; `shares` and `positions`, each rank's share and its positions in
+  // `full` (rank 0: index r for each rank r; the others: their own at index 0), the
+  // positions uploaded once per analysis (positions_generation).
+  cuda::DeviceBuffer<double> full;
+  std::vector<cuda::DeviceBuffer<double>> shares;
+  std::vector<cuda::DeviceBuffer<index_t>> positions;
+  std::uint64_t positions_generation = 0;
   ~NcclContext() {
     if (stream) cudaStreamSynchronize(stream);  // a values send may still be in flight
+    if (device >= 0) cudaSetDevice(device);
     blocks.clear();
     packed.clear();
-    values.clear();
+    full.clear();
+    shares.clear();
+    positions.clear();
     if (copied) cudaEventDestroy(copied);
     if (stream) cudaStreamDestroy(stream);
     if (comm) ncclCommDestroy(comm);
@@ -122,61 +136,100 @@ NcclContext& context(detail::CommImpl& comm, NumericState& ns, int device) {
 
 }  // namespace
 
-void transfer_values_nccl(detail::CommImpl& comm, NumericState& ns, int device,
-                          std::exception_ptr failed) {
-  const int rank = comm.rank();
-  std::vector<std::vector<double>>& packed = ns.values_packed;
+void send_values_nccl(detail::CommImpl& comm, NumericState& ns, const std::vector<double>& values,
+                      int device, std::exception_ptr failed) {
+  const int ranks = comm.size();
+  ns.device_values = nullptr;
   NcclContext* c = nullptr;
   try {
     c = &context(comm, ns, device);
-    // the device buffers, before anything travels: an allocation that fails on one rank
-    // must not leave another waiting in an NCCL receive
-    const std::size_t first = rank == 0 ? 1 : 0, end = rank == 0 ? packed.size() : 1;
-    if (c->values.size() < end) c->values.resize(end);
-    for (std::size_t r = first; r < end && !failed; ++r)
-      if (c->values[r].size != packed[r].size()) {
-        c->values[r] = DeviceBlock();
-        if (!packed[r].empty()) c->values[r] = DeviceBlock(packed[r].size(), device);
+    if (!failed) {
+      c->full.resize(std::max<std::size_t>(values.size(), 1));
+      c->shares.resize(ranks);
+      c->positions.resize(ranks);
+      const bool upload = c->positions_generation != ns.positions_generation;
+      for (int r = 1; r < ranks; ++r) {
+        const std::vector<index_t>& pos = ns.value_positions.at(r);
+        c->shares[r].resize(std::max<std::size_t>(pos.size(), 1));
+        if (upload) c->positions[r].upload(pos.data(), pos.size(), c->stream);
       }
+      c->positions_generation = ns.positions_generation;
+    }
+  } catch (...) {
+    if (!failed) failed = std::current_exception();
+  }
+  // before anything travels: an error on any rank (an allocation here) is thrown on all,
+  // so that none is left waiting in an NCCL receive
+  agree(comm, failed);
+  cudaStream_t s = c->stream;
+  if (!values.empty())
+    cuda_check(cudaMemcpyAsync(c->full.data(), values.data(), sizeof(double) * values.size(),
+                               cudaMemcpyHostToDevice, s),
+               "cudaMemcpyAsync (values)");
+  cuda_check(cudaEventRecord(c->copied, s), "cudaEventRecord");
+  for (int r = 1; r < ranks; ++r)
+    cuda::gather_positions(c->full.data(), c->positions[r].data(),
+                           static_cast<std::int64_t>(ns.value_positions[r].size()),
+                           c->shares[r].data(), s);
+  nccl_check(ncclGroupStart(), "ncclGroupStart");
+  for (int r = 1; r < ranks; ++r) {
+    const std::size_t count = ns.value_positions[r].size();
+    if (count == 0) continue;
+    nccl_check(ncclSend(c->shares[r].data(), count, ncclDouble, r, c->comm, s),
+               "ncclSend (values)");
+    comm.bytes_sent += sizeof(double) * count;
+  }
+  nccl_check(ncclGroupEnd(), "ncclGroupEnd");
+  // the executors copy the values from c->full once they are there; the gathers and
+  // sends go on beside rank 0's own subtrees (the next factorization's upload into
+  // c->full comes after the executors' copies: they finish within this factorization)
+  cuda_check(cudaEventSynchronize(c->copied), "cudaEventSynchronize (values)");
+  ns.device_values = c->full.data();
+  ns.device_values_device = device;
+}
+
+void receive_values_nccl(detail::CommImpl& comm, NumericState& ns, std::size_t nnz, int device,
+                         double* host_share, std::exception_ptr failed) {
+  const int rank = comm.rank();
+  ns.device_values = nullptr;
+  const std::vector<index_t>& pos = ns.value_positions.at(rank);
+  NcclContext* c = nullptr;
+  try {
+    c = &context(comm, ns, device);
+    if (!failed) {
+      c->shares.resize(1);
+      c->positions.resize(1);
+      c->shares[0].resize(std::max<std::size_t>(pos.size(), 1));
+      if (c->positions_generation != ns.positions_generation || c->full.size() < nnz) {
+        // entries off this rank's positions are never read: zero, once per analysis
+        c->full.resize(std::max<std::size_t>(nnz, 1));
+        cuda_check(cudaMemsetAsync(c->full.data(), 0, sizeof(double) * c->full.size(), c->stream),
+                   "cudaMemsetAsync (values)");
+        c->positions[0].upload(pos.data(), pos.size(), c->stream);
+        c->positions_generation = ns.positions_generation;
+      }
+    }
   } catch (...) {
     if (!failed) failed = std::current_exception();
   }
   agree(comm, failed);
   cudaStream_t s = c->stream;
-  if (rank == 0) {
-    for (std::size_t r = 1; r < packed.size(); ++r)
-      if (!packed[r].empty())
-        cuda_check(cudaMemcpyAsync(c->values[r].p, packed[r].data(),
-                                   sizeof(double) * packed[r].size(), cudaMemcpyHostToDevice, s),
-                   "cudaMemcpyAsync (values)");
-    cuda_check(cudaEventRecord(c->copied, s), "cudaEventRecord");
-  }
-  nccl_check(ncclGroupStart(), "ncclGroupStart");
-  if (rank == 0) {
-    for (std::size_t r = 1; r < packed.size(); ++r)
-      if (!packed[r].empty()) {
-        nccl_check(
-            ncclSend(c->values[r].p, packed[r].size(), ncclDouble, static_cast<int>(r), c->comm, s),
-            "ncclSend (values)");
-        comm.bytes_sent += sizeof(double) * packed[r].size();
-      }
-  } else if (!packed[0].empty()) {
-    nccl_check(ncclRecv(c->values[0].p, packed[0].size(), ncclDouble, 0, c->comm, s),
+  if (!pos.empty()) {
+    nccl_check(ncclGroupStart(), "ncclGroupStart");
+    nccl_check(ncclRecv(c->shares[0].data(), pos.size(), ncclDouble, 0, c->comm, s),
                "ncclRecv (values)");
-    comm.bytes_received += sizeof(double) * packed[0].size();
+    nccl_check(ncclGroupEnd(), "ncclGroupEnd");
+    comm.bytes_received += sizeof(double) * pos.size();
+    cuda::scatter_positions(c->shares[0].data(), c->positions[0].data(),
+                            static_cast<std::int64_t>(pos.size()), c->full.data(), s);
+    if (host_share)
+      cuda_check(cudaMemcpyAsync(host_share, c->shares[0].data(), sizeof(double) * pos.size(),
+                                 cudaMemcpyDeviceToHost, s),
+                 "cudaMemcpyAsync (values)");
   }
-  nccl_check(ncclGroupEnd(), "ncclGroupEnd");
-  if (rank == 0) {
-    // the host buffers may be written again once copied; the sends go on beside rank 0's
-    // own subtrees, in stream order before any later use of the device buffers
-    cuda_check(cudaEventSynchronize(c->copied), "cudaEventSynchronize (values)");
-    return;
-  }
-  if (!packed[0].empty())
-    cuda_check(cudaMemcpyAsync(packed[0].data(), c->values[0].p, sizeof(double) * packed[0].size(),
-                               cudaMemcpyDeviceToHost, s),
-               "cudaMemcpyAsync (values)");
   cuda_check(cudaStreamSynchronize(s), "cudaStreamSynchronize (values)");
+  ns.device_values = c->full.data();
+  ns.device_values_device = device;
 }
 
 void exchange_blocks_nccl(detail::CommImpl& comm, NumericState& ns, const RankLayout& l,

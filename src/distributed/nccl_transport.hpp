@@ -1,6 +1,7 @@
 // strata — the scaled values and the contribution blocks between the ranks' GPUs through
-// NCCL (build option STRATA_NCCL): each rank's values go from rank 0's host memory over
-// rank 0's first GPU to the rank's first GPU; the subtree roots' blocks go from the GPU
+// NCCL (build option STRATA_NCCL): each rank's share of the values goes from rank 0's
+// first GPU, where they are uploaded once, to the rank's first GPU, where its executors
+// copy them from; the subtree roots' blocks go from the GPU
 // that factored them straight to rank 0's first GPU, where the top part imports them,
 // without a copy through host memory on either side (docs/distributed.md §2). NCCL
 // (NVIDIA Collective Communications Library) point-to-point ncclSend/ncclRecv inside one
@@ -15,20 +16,26 @@
 
 namespace strata::distributed {
 
-/// Collective over the ranks, at every factorization: the packed values of ns.values_packed
-/// travel from rank 0 (packed[r], r = 1 … R − 1, as send_values packed them) to each rank
-/// r (into packed[0], sized by receive_values to what r receives), through rank 0's and
-/// r's GPU `device` (this rank's NCCL GPU, its first executor's): host-to-device copy,
-/// ncclSend/ncclRecv, device-to-host copy. Page-locked host buffers make the copies
-/// direct. `failed`: this rank's error from its packing or preparation (or null), agreed
-/// with every rank after the device buffers are allocated and before anything travels,
-/// so that every rank throws the same error (agree()) and none waits in a receive. Rank 0
-/// returns once its host buffers are copied (the sends finish beside its factorization,
-/// in stream order before the next use of the device buffers); the others once their
-/// values are in packed[0]. Counts the bytes in comm's counters. Throws DeviceError on a
-/// CUDA or NCCL failure.
-void transfer_values_nccl(detail::CommImpl& comm, NumericState& ns, int device,
-                          std::exception_ptr failed);
+/// Rank 0's side of a collective with receive_values_nccl, at every factorization: its
+/// scaled values (all nnz, page-locked by the Solver for a direct copy) uploaded once to
+/// its NCCL GPU `device` (its first executor's), each rank r's share (ns.value_positions[r])
+/// gathered there and sent by NCCL. Sets ns.device_values to the uploaded array, from which
+/// rank 0's executors copy the values device to device. `failed`: this rank's error from
+/// its checks (or null), agreed with every rank after the device buffers are allocated
+/// and before anything travels, so that every rank throws the same error (agree()) and
+/// none waits in a receive. Returns once the upload is done (the sends finish beside the
+/// factorization). Counts the bytes in comm's counters. Throws OutOfMemory (device
+/// buffers) or DeviceError (CUDA, NCCL) on every rank.
+void send_values_nccl(detail::CommImpl& comm, NumericState& ns, const std::vector<double>& values,
+                      int device, std::exception_ptr failed);
+
+/// A rank r > 0's side: its share received on its NCCL GPU `device` and scattered into an
+/// nnz-long array of the canonical order there (zero off its positions), to which
+/// ns.device_values is set; with `host_share` (page-locked, ns.value_positions[r].size()
+/// doubles) also copied there, for executors that read values on the host. Returns once
+/// both are in place. Throws as send_values_nccl.
+void receive_values_nccl(detail::CommImpl& comm, NumericState& ns, std::size_t nnz, int device,
+                         double* host_share, std::exception_ptr failed);
 
 /// Collective over the ranks: each rank sends the blocks of its subtrees (tr[i], left in
 /// device memory by its exporter, or on the host) to rank 0, whose receives land in

@@ -53,6 +53,8 @@ void factor_part(detail::CommImpl& comm, NumericState& ns, const Analysis& an,
   config.factor_top = rank == 0;
   config.remote_blocks_on_device = ns.nccl;
   config.block_buffers = &ns.blocks;
+  config.device_values = ns.device_values;  // with NCCL: where the values arrived
+  config.device_values_device = ns.device_values_device;
   // each GPU keeps its parts' panels (no copy and wait after every launch group): the
   // solve runs there, or fetches them to the host first (solve_part)
   config.keep_panels_on_devices = true;

@@ -11,10 +11,13 @@
 // (each stored entry lands in exactly one front, so the lists are disjoint and their sum is
 // at most nnz(A)), where a broadcast of the whole array moved (R − 1)·nnz(A) doubles.
 //
-// Transport: MPI point-to-point from host memory; between GPU ranks with NCCL
-// (nccl_transport.cpp), from rank 0's page-locked packed buffer over its GPU to the rank's
-// GPU and into its page-locked buffer, which moves them over NVLink where the GPUs have it
-// instead of through a shared-memory copy between the processes.
+// Transport: MPI point-to-point from host memory. Between GPU ranks with NCCL
+// (nccl_transport.cpp) the values travel on the GPUs instead: rank 0 uploads them once to
+// its first GPU (its executors copy them from there), gathers each rank's share there and
+// sends it by NCCL (over NVLink where the GPUs have it, not through a shared-memory copy
+// between the processes); a rank scatters its share into an array of the canonical order
+// on its first GPU, from which its executors copy. The host array below is then filled only
+// for executors that read values on the host (Executor::reads_host_values).
 //
 // Storage on the receiving ranks (a choice): a values array of the full length nnz(A),
 // with only the rank's positions written and the rest zero. The executors read
@@ -62,7 +65,8 @@ void for_positions(std::size_t count, int threads, Body body) {
 }
 
 // ns.values_packed[i] made `count` doubles long, kept from one factorization to the next,
-// and page-locked for the NCCL transfer's copies (released before the buffer moves).
+// and page-locked for the NCCL receive's copy to the host (released before the buffer
+// moves).
 void packed_buffer(NumericState& ns, std::size_t i, std::size_t count) {
   std::vector<std::vector<double>>& packed = ns.values_packed;
   std::vector<std::unique_ptr<numeric::PinnedHostRange>>& pins = ns.values_packed_pins;
@@ -74,21 +78,6 @@ void packed_buffer(NumericState& ns, std::size_t i, std::size_t count) {
   }
   if (ns.nccl && !pins[i] && count > 0)
     pins[i] = numeric::pin_host_memory(packed[i].data(), sizeof(double) * count);
-}
-
-// Rank 0's sends or a rank's receive, after every rank's preparation is agreed (agree():
-// an error on any rank is thrown on all, so that none waits for a message that will not
-// come): by NCCL on GPU ranks that have it, else by MPI.
-void transfer(detail::CommImpl& comm, NumericState& ns, const std::vector<detail::Message>& sends,
-              const std::vector<detail::Message>& recvs, std::exception_ptr failed) {
-#ifdef STRATA_HAVE_NCCL
-  if (ns.nccl) {
-    transfer_values_nccl(comm, ns, ns.executors.at(0)->device(), failed);
-    return;
-  }
-#endif
-  agree(comm, failed);
-  comm.exchange(sends, recvs);
 }
 
 }  // namespace
@@ -107,17 +96,33 @@ std::vector<index_t> value_positions(const Analysis& an, const RankLayout& l, in
 
 void send_values(detail::CommImpl& comm, NumericState& ns, const std::vector<double>& values) {
   const int ranks = comm.size();
-  std::vector<std::vector<double>>& packed = ns.values_packed;
-  std::vector<detail::Message> sends;
   std::exception_ptr failed;
   try {
-    packed.resize(ranks);
     for (int r = 1; r < ranks; ++r) {
       const std::vector<index_t>& pos = ns.value_positions.at(r);
-      if (pos.empty()) continue;
-      if (static_cast<std::size_t>(pos.back()) >= values.size())
+      if (!pos.empty() && static_cast<std::size_t>(pos.back()) >= values.size())
         throw InternalError("rank " + std::to_string(r) + " needs value " +
                             std::to_string(pos.back()) + " of " + std::to_string(values.size()));
+    }
+  } catch (...) {
+    failed = std::current_exception();
+  }
+  ns.device_values = nullptr;
+#ifdef STRATA_HAVE_NCCL
+  if (ns.nccl) {
+    send_values_nccl(comm, ns, values, ns.executors.at(0)->device(), failed);
+    for (int r = 1; r < ranks; ++r)
+      ns.stats.values_bytes += sizeof(double) * ns.value_positions[r].size();
+    return;
+  }
+#endif
+  std::vector<std::vector<double>>& packed = ns.values_packed;
+  std::vector<detail::Message> sends;
+  try {
+    packed.resize(ranks);
+    for (int r = 1; r < ranks && !failed; ++r) {
+      const std::vector<index_t>& pos = ns.value_positions[r];
+      if (pos.empty()) continue;
       packed_buffer(ns, r, pos.size());
       double* out = packed[r].data();
       for_positions(pos.size(), ns.threads, [&](std::size_t k) { out[k] = values[pos[k]]; });
@@ -125,37 +130,57 @@ void send_values(detail::CommImpl& comm, NumericState& ns, const std::vector<dou
       ns.stats.values_bytes += sizeof(double) * pos.size();
     }
   } catch (...) {
-    failed = std::current_exception();
+    if (!failed) failed = std::current_exception();
   }
-  transfer(comm, ns, sends, {}, failed);
+  // an error on any rank is thrown on all, so that none waits for a message that will
+  // not come
+  agree(comm, failed);
+  comm.exchange(sends, {});
 }
 
 void receive_values(detail::CommImpl& comm, NumericState& ns, std::size_t nnz,
                     std::vector<double>& values) {
   const int rank = comm.rank();
   const std::vector<index_t>& pos = ns.value_positions.at(rank);
-  std::vector<detail::Message> recvs;
+  ns.device_values = nullptr;
+  // the host array: always with MPI; with NCCL only for executors that read values there
+  bool host = !ns.nccl;
+  for (const auto& e : ns.executors) host = host || e->reads_host_values();
   std::exception_ptr failed;
   try {
-    if (values.size() != nnz) {
-      ns.values_pin.reset();
-      values.assign(nnz, 0.0);
-    }
-    if (ns.pin_values && !ns.values_pin)
-      ns.values_pin = numeric::pin_host_memory(values.data(), sizeof(double) * nnz);
     if (!pos.empty() && static_cast<std::size_t>(pos.back()) >= nnz)
       throw InternalError("rank " + std::to_string(rank) + " needs value " +
                           std::to_string(pos.back()) + " of " + std::to_string(nnz));
-    packed_buffer(ns, 0, pos.size());
-    if (!pos.empty())
-      recvs.push_back({0, kTagValues, ns.values_packed[0].data(), sizeof(double) * pos.size()});
+    if (host) {
+      if (values.size() != nnz) {
+        ns.values_pin.reset();
+        values.assign(nnz, 0.0);
+      }
+      if (ns.pin_values && !ns.values_pin)
+        ns.values_pin = numeric::pin_host_memory(values.data(), sizeof(double) * nnz);
+      packed_buffer(ns, 0, pos.size());
+    }
   } catch (...) {
     failed = std::current_exception();
   }
-  transfer(comm, ns, {}, recvs, failed);
-  const double* packed = ns.values_packed[0].data();
-  double* in = values.data();
-  for_positions(pos.size(), ns.threads, [&](std::size_t k) { in[pos[k]] = packed[k]; });
+#ifdef STRATA_HAVE_NCCL
+  if (ns.nccl) {
+    receive_values_nccl(comm, ns, nnz, ns.executors.at(0)->device(),
+                        host ? ns.values_packed[0].data() : nullptr, failed);
+  } else
+#endif
+  {
+    agree(comm, failed);
+    std::vector<detail::Message> recvs;
+    if (!pos.empty())
+      recvs.push_back({0, kTagValues, ns.values_packed[0].data(), sizeof(double) * pos.size()});
+    comm.exchange({}, recvs);
+  }
+  if (host) {
+    const double* packed = ns.values_packed[0].data();
+    double* in = values.data();
+    for_positions(pos.size(), ns.threads, [&](std::size_t k) { in[pos[k]] = packed[k]; });
+  }
   ns.stats.values_bytes += sizeof(double) * pos.size();
 }
 

@@ -48,6 +48,12 @@ std::vector<double> cuda_pack_and_unpack_lower(const double*, index_t, std::vect
   throw NotSupported("this build of strata has no CUDA backend (nvcc was not found at build time)");
 }
 
+std::vector<double> cuda_gather_and_scatter_positions(const std::vector<double>&,
+                                                      const std::vector<index_t>&,
+                                                      std::vector<double>&) {
+  throw NotSupported("this build of strata has no CUDA backend (nvcc was not found at build time)");
+}
+
 std::vector<char> cuda_lu_fronts_batched(std::vector<std::vector<double>>&,
                                          const std::vector<index_t>&, const std::vector<index_t>&,
                                          index_t, double, double,

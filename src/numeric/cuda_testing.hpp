@@ -38,6 +38,15 @@ bool cuda_llt_update(double* c, const double* l, index_t n, index_t k);
 std::vector<double> cuda_pack_and_unpack_lower(const double* a, index_t m,
                                                std::vector<double>& full);
 
+/// The gathering and scattering of values by position that distributed ranks use for
+/// their shares of the scaled values (numeric/cuda/value_positions.cu) on device 0, so that
+/// tests can check them: returns values[pos[k]] for each k and sets `scattered` (as long as
+/// `values`, zero elsewhere) to those gathered values put back at pos. Throws InvalidInput
+/// for a position outside `values`, NotSupported in a build without CUDA.
+std::vector<double> cuda_gather_and_scatter_positions(const std::vector<double>& values,
+                                                      const std::vector<index_t>& pos,
+                                                      std::vector<double>& scattered);
+
 /// The CUDA executor's LU of large fronts without row interchanges on device 0
 /// (numeric/cuda/lu_fronts.cu, enqueue_lu_strips: strips of `strip` pivot columns whose
 /// pivot blocks and panels come from the batched kernels of kernels_lu_panel.cu, all fronts

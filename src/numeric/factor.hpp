@@ -145,6 +145,13 @@ struct FactorContext {
   /// The executor's device already holds the scaled values (its scale_values_on_device
   /// ran for this factorization): `values` is not read.
   bool values_on_device = false;
+  /// The same scaled values (an.pattern_indices.size() of them, canonical entry order) in
+  /// the memory of GPU `device_values_device`, or null: a GPU executor copies them from
+  /// there, device to device, instead of uploading `values`, which then needs to hold only
+  /// what the executors that read values on the host read (Executor::reads_host_values).
+  /// Distributed ranks receive their share of the values there (src/distributed).
+  const double* device_values = nullptr;
+  int device_values_device = -1;
   MatrixType type = MatrixType::spd;
   double static_pivot = 0;              ///< absolute threshold / replacement for tiny pivots
   double diagonal_pivot_threshold = 1;  ///< LU's u (PivotPolicy::threshold)
@@ -275,6 +282,11 @@ class Executor {
   /// `host`, for a host algorithm that needs them (the delayed LU). False, having done
   /// nothing, where the executor holds none for `an`. Throws DeviceError.
   virtual bool download_scaled_values(const Analysis& an, double* host) { return false; }
+  /// Whether this executor's factorizations of the analysis it was last prepared for
+  /// read FactorContext::values on the host even when FactorContext::device_values is
+  /// given: host executors, and a GPU whose plan factors some front tile by tile (their
+  /// assembly runs on the host) or that has no plan yet.
+  virtual bool reads_host_values() const { return true; }
   /// Called once per factorization, before this executor's first part (ctx.part unset).
   virtual void begin(const FactorContext& ctx) {}
   /// Called before the batches of the part ctx.part.
@@ -479,6 +491,9 @@ struct MultiWorkerConfig {
   bool keep_panels_on_devices = false;
   /// Optional: where the transfers' host buffers are kept between factorizations.
   BlockBuffers* block_buffers = nullptr;
+  /// Optional: the scaled values also in device memory (FactorContext::device_values).
+  const double* device_values = nullptr;
+  int device_values_device = -1;
 };
 
 /// Runs the numeric factorization on several executors (one per worker, one host thread

@@ -232,6 +232,8 @@ class MultiRun {
         progress_(part_.n_parts(), queues_) {
     base_.analysis = &an;
     base_.values = scaled_values.data();
+    base_.device_values = config.device_values;
+    base_.device_values_device = config.device_values_device;
     base_.type = type;
     base_.static_pivot = pivots.static_pivot;
     base_.diagonal_pivot_threshold = pivots.threshold;

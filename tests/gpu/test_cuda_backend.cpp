@@ -192,6 +192,42 @@ TEST_F(CudaBackend, SymmetricBlockPackingMatchesHost) {
   }
 }
 
+// The distributed ranks' gathering and scattering of value shares by position
+// (value_positions.cu) against the host's indexing: random increasing distinct positions
+// (a rank's share), all positions, none, and arrays longer than one launch's grid.
+TEST_F(CudaBackend, ValuePositionsGatherAndScatterMatchHost) {
+  auto rng = test::fresh_rng();
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  std::bernoulli_distribution take(0.4);
+  for (std::size_t n : {0, 1, 2, 3, 5, 733, 20000000}) {
+    SCOPED_TRACE("n=" + std::to_string(n));
+    std::vector<double> values(n);
+    for (double& x : values) x = u(rng);
+    for (int variant = 0; variant < 3; ++variant) {
+      std::vector<index_t> pos;
+      for (std::size_t i = 0; i < n; ++i)
+        if (variant == 1 || (variant == 2 && take(rng))) pos.push_back(static_cast<index_t>(i));
+      std::vector<double> scattered;
+      const std::vector<double> gathered =
+          numeric::cuda_gather_and_scatter_positions(values, pos, scattered);
+      ASSERT_EQ(gathered.size(), pos.size());
+      ASSERT_EQ(scattered.size(), n);
+      std::vector<double> expect(n, 0.0);
+      std::size_t wrong_gathered = 0, wrong_scattered = 0;
+      for (std::size_t k = 0; k < pos.size(); ++k) {
+        wrong_gathered += gathered[k] != values[pos[k]];
+        expect[pos[k]] = values[pos[k]];
+      }
+      for (std::size_t i = 0; i < n; ++i) wrong_scattered += scattered[i] != expect[i];
+      EXPECT_EQ(wrong_gathered, 0u);
+      EXPECT_EQ(wrong_scattered, 0u);
+    }
+  }
+  std::vector<double> scattered;
+  EXPECT_THROW(numeric::cuda_gather_and_scatter_positions({1.0, 2.0}, {2}, scattered),
+               InvalidInput);
+}
+
 // The recursive pivot block and panel (llt_recursive.cu) of single dense fronts against
 // the CPU's partial Cholesky (numeric/cpu/dense_front.cpp: LAPACK POTRF + TRSM) of the
 // same front: sizes around the 64-column base case and the recursion's halves, and fronts

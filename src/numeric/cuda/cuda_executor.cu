@@ -212,6 +212,14 @@ void CudaExecutor::prepare(const Analysis& an, int workers) {
   STRATA_CUDA(cudaStreamSynchronize(stream_));
 }
 
+bool CudaExecutor::reads_host_values() const {
+  if (planned_ == 0 || parts_.empty()) return true;  // the plan made in begin_part may tile
+  for (const auto& [id, part] : parts_)
+    for (const char tiled : part.tiled)
+      if (tiled) return true;  // assembled on the host (tiled_host.cpp)
+  return false;
+}
+
 void CudaExecutor::begin(const numeric::FactorContext& ctx) {
   STRATA_CUDA(cudaSetDevice(device_));
   outbox_.clear();
@@ -248,8 +256,18 @@ void CudaExecutor::begin(const numeric::FactorContext& ctx) {
     count_h2d(an.pattern_indices.size() * sizeof(double));  // copied by the value pass
     return;  // scale_values_on_device left them in values_
   }
-  values_.upload(ctx.values, an.pattern_indices.size(), stream_);
-  count_h2d(an.pattern_indices.size() * sizeof(double));
+  const std::size_t nnz = an.pattern_indices.size();
+  if (ctx.device_values) {
+    // already on a GPU (a distributed rank's share): device to device, over NVLink or
+    // PCIe when that GPU is another (explicit devices: no peer access needed)
+    values_.resize(std::max<std::size_t>(nnz, 1));
+    if (nnz > 0)
+      STRATA_CUDA(cudaMemcpyPeerAsync(values_.data(), device_, ctx.device_values,
+                                      ctx.device_values_device, nnz * sizeof(double), stream_));
+    return;
+  }
+  values_.upload(ctx.values, nnz, stream_);
+  count_h2d(nnz * sizeof(double));
 }
 
 void CudaExecutor::begin_part(const numeric::FactorContext& ctx) {
