@@ -28,6 +28,10 @@ Calibration (cite: bench/results/…):
     contribution-block bytes;
   gpu-memory-20261121T213929Z.json (H100): pinned PCIe 54.9 GB/s, DGEMM 64.5 TFLOP/s;
   strata's analysis (cudss-20261121T213723Z.json, H100): lap3d-100 and elast3d-50 factor flops.
+With --measured runs of scripts/gpu/run_mpi.sh on a two-GPU machine, also:
+  the 2-GPU benchmark calibrated on its own 1 x 1 / 1 x 2 / 2 x 1 runs (calibrate_two_gpu);
+  one GPU's rate as a function of the size of its work, fitted on every part of the
+    1 x 2 runs (calibrate_rate_curves), and the 8/64/512-GPU predictions made with it.
 
 Usage: python3 bench/cost_model.py [--json OUT.json] [--measured RUN.json ...]
 (--measured: JSON files of scripts/gpu/run_mpi.sh; each measurement is printed next to
@@ -197,6 +201,30 @@ def lpt(works, workers):
 
 # ---- time of one factorization ---------------------------------------------------------
 
+def tiled_top(fronts, top, W, link, flops_scale, rate_for):
+    """Seconds of the top fronts in the tiled schedule (docs/distributed.md §1.5): a front at
+    depth d gets the P = W / 2^d GPUs of its subcube, its tiles 2D block-cyclic, so it
+    takes flops / (P · rate_for(flops)) plus 8 m²/√P bytes per GPU over NVLink (P ≤ 8) or
+    the node's InfiniBand share, plus 2 log₂P latencies per tile column. The fronts of one
+    depth run at once on disjoint subcubes, so a depth costs its slowest front and the
+    depths add up. Returns (compute s, communication s)."""
+    by_depth = {}
+    for f in top:
+        fr = fronts[f]
+        P = max(1, W >> fr["depth"])
+        flops = fr["flops"] * flops_scale
+        compute = flops / (P * rate_for(flops))
+        m = fr["pivots"] + fr["cb"]
+        per_gpu = 8.0 * m * m / math.sqrt(P) if P > 1 else 0.0
+        bw = link["nvlink"] if P <= ASSUMED["gpus_per_node"] else \
+            link["ib_per_node"] / ASSUMED["gpus_per_node"]
+        steps = math.ceil(fr["pivots"] / ASSUMED["tile"])
+        lat = steps * 2 * math.log2(P) * ASSUMED["message_latency_s"] if P > 1 else 0
+        c, t = by_depth.get(fr["depth"], (0.0, 0.0))
+        by_depth[fr["depth"]] = (max(c, compute), max(t, per_gpu / bw + lat))
+    return (sum(c for c, _ in by_depth.values()), sum(t for _, t in by_depth.values()))
+
+
 def predict(fronts, root, ranks, gpus, cal, link, schedule="current", flops_scale=1.0):
     """Seconds of one factorization on ranks × gpus, with the parts that add up to it.
     link: bytes/s between two ranks (ingress of rank 0), transfers through host
@@ -220,18 +248,8 @@ def predict(fronts, root, ranks, gpus, cal, link, schedule="current", flops_scal
         t_top_comm = 0.0
     else:
         # subtree-to-subcube: a top front at depth d gets W / 2^d GPUs, tiles 2D cyclic
-        t_top = t_top_comm = 0.0
-        for f in top:
-            fr = fronts[f]
-            P = max(1, W >> fr["depth"])
-            t_top += fr["flops"] * flops_scale / (P * cal["top_rate"])
-            m = fr["pivots"] + fr["cb"]
-            per_gpu = 8.0 * m * m / math.sqrt(P) if P > 1 else 0.0
-            bw = link["nvlink"] if P <= ASSUMED["gpus_per_node"] else \
-                link["ib_per_node"] / ASSUMED["gpus_per_node"]
-            steps = math.ceil(fr["pivots"] / ASSUMED["tile"])
-            lat = steps * 2 * math.log2(P) * ASSUMED["message_latency_s"] if P > 1 else 0
-            t_top_comm += per_gpu / bw + lat
+        t_top, t_top_comm = tiled_top(fronts, top, W, link, flops_scale,
+                                      lambda flops: cal["top_rate"])
     return {
         "ranks": ranks, "gpus_per_rank": gpus, "schedule": schedule,
         "subtrees": len(subs), "top_flops_fraction": top_flops / (top_flops + sum(sub_flops)),
@@ -324,6 +342,117 @@ def predict_two_gpu(c, ranks, gpus):
             "total_seconds": c["host_seconds"] + t_values + t_sub + t_cb + t_top}
 
 
+# ---- rates that depend on the size of the work -------------------------------------------
+
+def rate_of(curve, flops):
+    """Flop rate of one GPU on a piece of `flops` flops by a fitted curve:
+    r(F) = r_inf / (1 + (F_half / F)^beta) — a saturating form after Hockney's r_inf and
+    n_1/2 (Hockney & Jesshope, "Parallel Computers 2", 1988, §1.3.3), with an exponent
+    because the pieces here are subtrees and top parts whose largest fronts, not their
+    count, grow with their flops."""
+    if flops <= 0:
+        return curve["r_inf"]
+    return curve["r_inf"] / (1.0 + (curve["f_half"] / flops) ** curve["beta"])
+
+
+def seconds_of(curve, flops):
+    return curve.get("overhead_s", 0.0) + (flops / rate_of(curve, flops) if flops > 0 else 0.0)
+
+
+def fit_rate_curve(points):
+    """(r_inf, F_half, beta) minimizing the squared log error of the predicted seconds over
+    points (flops, seconds), by a grid search refined three times around the best (no
+    external solver; the fit has three parameters and tens of points)."""
+    pts = [(f, t) for f, t in points if f > 0 and t > 0]
+    if len(pts) < 3:
+        return None
+
+    def err(r, h, b):
+        c = {"r_inf": r, "f_half": h, "beta": b}
+        return sum((math.log(f / rate_of(c, f)) - math.log(t)) ** 2 for f, t in pts)
+
+    lr, lh, b = math.log(2e13), math.log(1e11), 0.6
+    span = (2.0, 6.0, 0.5)
+    best = (err(math.exp(lr), math.exp(lh), b), lr, lh, b)
+    for _ in range(4):
+        _, lr0, lh0, b0 = best
+        for i in range(-6, 7):
+            for j in range(-6, 7):
+                for k in range(-6, 7):
+                    cand = (lr0 + span[0] * i / 6, lh0 + span[1] * j / 6, b0 + span[2] * k / 6)
+                    if cand[2] <= 0.05:
+                        continue
+                    e = err(math.exp(cand[0]), math.exp(cand[1]), cand[2])
+                    if e < best[0]:
+                        best = (e, *cand)
+        span = tuple(x / 3 for x in span)
+    e, lr, lh, b = best
+    return {"r_inf": math.exp(lr), "f_half": math.exp(lh), "beta": b,
+            "rms_log_error": math.sqrt(e / len(pts)), "points": len(pts)}
+
+
+def calibrate_rate_curves(rows):
+    """One GPU's rate as a function of the size of its work, from the 1 × 2 rows of runs
+    of scripts/gpu/run_mpi.sh (several problems and sizes): each subtree part (flops,
+    end − start) of either GPU for the subtree curve, each top part for the top curve; a
+    subtree part of under 1e6 flops is no rate but the fixed cost of a part (median of
+    their times), added to every subtree. None without 1 × 2 rows."""
+    sub, top, tiny = [], [], []
+    for r in rows:
+        if (r.get("ranks"), r.get("gpus_per_rank")) != (1, 2):
+            continue
+        for d in r.get("devices", []):
+            for p in d.get("parts", []):
+                t = p["end_seconds"] - p["start_seconds"]
+                if p["kind"] == "subtree":
+                    (tiny if p["flops"] < 1e6 else sub).append((p["flops"], t))
+                elif p["kind"] == "top":
+                    top.append((p["flops"], t))
+    s, t = fit_rate_curve(sub), fit_rate_curve(top)
+    if not s or not t:
+        return None
+    tiny_t = sorted(x for _, x in tiny)
+    s["overhead_s"] = tiny_t[len(tiny_t) // 2] if tiny_t else 0.0
+    return {"subtree": s, "top": t,
+            "subtree_points": sub, "top_points": top, "small_part_seconds": tiny_t}
+
+
+def predict_curves(fronts, root, ranks, gpus, curves, link, schedule, flops_scale):
+    """predict() with the size-dependent rates of calibrate_rate_curves: each worker's
+    subtrees (LPT by flops) at the subtree curve's rate for each subtree's flops, plus
+    the fixed cost of a part per subtree; the top part at the top curve's rate for its
+    flops (current schedule), or each top front's share of its P GPUs at the rate of the
+    whole front (tiled). The transfers as in predict(), over NCCL."""
+    W = ranks * gpus
+    subs, top = split(fronts, root, W, ASSUMED["subtrees_per_worker"])
+    sub_flops = [fronts[s]["subtree_flops"] * flops_scale for s in subs]
+    _, owner = lpt(sub_flops, W)
+    busy = [0.0] * W
+    for i, f in enumerate(sub_flops):
+        busy[owner[i]] += seconds_of(curves["subtree"], f)
+    t_sub = max(busy)
+    top_flops = sum(fronts[f]["flops"] for f in top) * flops_scale
+    remote = sum(8.0 * fronts[subs[i]]["cb"] ** 2 for i in range(len(subs))
+                 if owner[i] // gpus != 0)
+    t_cb = remote / link["rank_bytes_per_s"]
+    t_top_comm = 0.0
+    if schedule == "current":
+        t_top = top_flops / rate_of(curves["top"], top_flops)
+    else:
+        # each GPU's share of a front's tiles at the rate of the whole front (tiles of a
+        # fixed order run as fast as the front's own updates, not slower for being fewer
+        # per GPU)
+        t_top, t_top_comm = tiled_top(fronts, top, W, link, flops_scale,
+                                      lambda flops: rate_of(curves["top"], flops))
+    return {
+        "ranks": ranks, "gpus_per_rank": gpus, "schedule": schedule, "rates": "size-dependent",
+        "subtrees": len(subs), "top_flops_fraction": top_flops / (top_flops + sum(sub_flops)),
+        "subtree_seconds": t_sub, "cb_bytes_between_ranks": remote, "cb_seconds": t_cb,
+        "top_seconds": t_top, "top_comm_seconds": t_top_comm, "host_seconds": 0.0,
+        "total_seconds": t_sub + t_cb + t_top + t_top_comm,
+    }
+
+
 def problem_tree(name):
     kind, k = name.rsplit("-", 1)
     k = int(k)
@@ -412,6 +541,57 @@ def main():
             print(f"{prob:<11} {R}x{G:<4} {p['host_seconds']:>6.3f} {p['values_seconds']:>6.3f} "
                   f"{p['subtree_seconds']:>9.3f} {p['cb_seconds']:>6.3f} {p['top_seconds']:>6.3f} "
                   f"{p['total_seconds']:>7.3f} {ms:>7}")
+
+    # 8-512 GPUs with rates that depend on the size of the work, when the measured files
+    # have 1 x 2 runs (of several sizes) to fit them on
+    curves = calibrate_rate_curves(measured)
+    if curves:
+        out["rate_curves"] = curves
+        print("\n# One GPU's rate against the size of its work, fitted on the 1 x 2 runs' parts "
+              "(r(F) = r_inf / (1 + (F_half / F)^beta))")
+        for k in ("subtree", "top"):
+            c = curves[k]
+            print(f"{k:<8} r_inf {c['r_inf'] / 1e12:6.1f} TFLOP/s  F_half {c['f_half']:.3g} flops  "
+                  f"beta {c['beta']:.2f}  rms log error {c['rms_log_error']:.2f} "
+                  f"({c['points']} parts)" +
+                  (f"; fixed cost of a part {1e3 * c['overhead_s']:.2f} ms" if k == "subtree" else ""))
+        nv = {"rank_bytes_per_s": ASSUMED["nvlink_bytes_per_s"], "via_host": False,
+              "nvlink": ASSUMED["nvlink_bytes_per_s"],
+              "ib_per_node": ASSUMED["ib_bytes_per_s_per_node"]}
+        print("\n# 8, 64, 512 GPUs with the size-dependent rates (NCCL; 8 GPUs and one rank "
+              "per node; the flop count of the measured 1 x 1 run where there is one)")
+        print(f"{'problem':<12} {'GPUs':>5} {'schedule':<8} {'top %':>6} {'subtree s':>9} "
+              f"{'CB GB':>7} {'CB s':>6} {'top s':>7} {'top comm s':>10} {'numeric s':>9} "
+              f"{'speed-up':>8}")
+        for prob in ("lap3d-100", "elast3d-50", "lap3d-200", "elast3d-100"):
+            fronts, root = problem_tree(prob)
+            model_flops = fronts[root]["subtree_flops"]
+            one_row = next((r for r in measured if r.get("problem") == prob
+                            and (r.get("ranks"), r.get("gpus_per_rank")) == (1, 1)), None)
+            scale = one_row["flops"] / model_flops if one_row else 1.0
+            if not one_row:  # the measured scale of the same kind's smaller problem
+                base = "lap3d-100" if prob.startswith("lap") else "elast3d-50"
+                b_row = next((r for r in measured if r.get("problem") == base
+                              and (r.get("ranks"), r.get("gpus_per_rank")) == (1, 1)), None)
+                if b_row:
+                    bf, br = problem_tree(base)
+                    scale = b_row["flops"] / bf[br]["subtree_flops"]
+            # one GPU: the same model on one worker (its subtrees, then the top part)
+            one = predict_curves(fronts, root, 1, 1, curves, nv, "current", scale)["total_seconds"]
+            for W in (8, 64, 512):
+                R, G = max(1, W // ASSUMED["gpus_per_node"]), min(W, ASSUMED["gpus_per_node"])
+                for sched in ("current", "tiled"):
+                    p = predict_curves(fronts, root, R, G, curves, nv, sched, scale)
+                    p["problem"] = prob
+                    p["gpus"] = W
+                    p["one_gpu_numeric_seconds"] = one
+                    num = p["total_seconds"]
+                    p["speedup_vs_one_gpu"] = one / num
+                    out.setdefault("scaling_size_dependent", []).append(p)
+                    print(f"{prob:<12} {W:>5} {sched:<8} {100 * p['top_flops_fraction']:>5.1f}% "
+                          f"{p['subtree_seconds']:>9.4f} {p['cb_bytes_between_ranks'] / 1e9:>7.2f} "
+                          f"{p['cb_seconds']:>6.3f} {p['top_seconds']:>7.3f} "
+                          f"{p['top_comm_seconds']:>10.3f} {num:>9.3f} {one / num:>8.1f}")
 
     print("\n# 8, 64, 512 GPUs (8 GPUs and one rank per node; inter-node "
           f"{ASSUMED['ib_bytes_per_s_per_node'] / 1e9:.0f} GB/s per node, NCCL)")
