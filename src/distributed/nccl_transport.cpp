@@ -26,7 +26,6 @@
 #include <cmath>
 #include <cstdint>
 #include <string>
-#include <utility>
 
 #include "numeric/cuda/device_buffer.hpp"
 #include "numeric/cuda/triangle_pack.hpp"
@@ -52,12 +51,7 @@ struct DeviceBlock {
     cuda_check(cudaMalloc(&p, sizeof(double) * (n ? n : 1)), "cudaMalloc (NCCL block)");
   }
   DeviceBlock(DeviceBlock&& o) noexcept : p(o.p), device(o.device), size(o.size) { o.p = nullptr; }
-  DeviceBlock& operator=(DeviceBlock&& o) noexcept {  // the old buffer goes with o
-    std::swap(p, o.p);
-    std::swap(device, o.device);
-    std::swap(size, o.size);
-    return *this;
-  }
+  DeviceBlock& operator=(DeviceBlock&&) = delete;
   ~DeviceBlock() {
     if (p) {
       cudaSetDevice(device);
