@@ -453,6 +453,26 @@ def predict_curves(fronts, root, ranks, gpus, curves, link, schedule, flops_scal
     }
 
 
+def scaling_rows(prob, one, rows, predict_at):
+    """The 8/64/512-GPU rows of one problem: predict_at(R, G, schedule) for each number of
+    GPUs (8 per node) and both schedules, with the speed-up against `one` (the one-GPU
+    numeric seconds); appended to `rows` and printed."""
+    for W in (8, 64, 512):
+        R, G = max(1, W // ASSUMED["gpus_per_node"]), min(W, ASSUMED["gpus_per_node"])
+        for sched in ("current", "tiled"):
+            p = predict_at(R, G, sched)
+            p["problem"] = prob
+            p["gpus"] = W
+            p["one_gpu_numeric_seconds"] = one
+            num = p["total_seconds"]
+            p["speedup_vs_one_gpu"] = one / num
+            rows.append(p)
+            print(f"{prob:<12} {W:>5} {sched:<8} {100 * p['top_flops_fraction']:>5.1f}% "
+                  f"{p['subtree_seconds']:>9.4f} {p['cb_bytes_between_ranks'] / 1e9:>7.2f} "
+                  f"{p['cb_seconds']:>6.3f} {p['top_seconds']:>7.3f} "
+                  f"{p['top_comm_seconds']:>10.3f} {num:>9.3f} {one / num:>8.1f}")
+
+
 def problem_tree(name):
     kind, k = name.rsplit("-", 1)
     k = int(k)
@@ -578,20 +598,9 @@ def main():
                     scale = b_row["flops"] / bf[br]["subtree_flops"]
             # one GPU: the same model on one worker (its subtrees, then the top part)
             one = predict_curves(fronts, root, 1, 1, curves, nv, "current", scale)["total_seconds"]
-            for W in (8, 64, 512):
-                R, G = max(1, W // ASSUMED["gpus_per_node"]), min(W, ASSUMED["gpus_per_node"])
-                for sched in ("current", "tiled"):
-                    p = predict_curves(fronts, root, R, G, curves, nv, sched, scale)
-                    p["problem"] = prob
-                    p["gpus"] = W
-                    p["one_gpu_numeric_seconds"] = one
-                    num = p["total_seconds"]
-                    p["speedup_vs_one_gpu"] = one / num
-                    out.setdefault("scaling_size_dependent", []).append(p)
-                    print(f"{prob:<12} {W:>5} {sched:<8} {100 * p['top_flops_fraction']:>5.1f}% "
-                          f"{p['subtree_seconds']:>9.4f} {p['cb_bytes_between_ranks'] / 1e9:>7.2f} "
-                          f"{p['cb_seconds']:>6.3f} {p['top_seconds']:>7.3f} "
-                          f"{p['top_comm_seconds']:>10.3f} {num:>9.3f} {one / num:>8.1f}")
+            scaling_rows(prob, one, out.setdefault("scaling_size_dependent", []),
+                         lambda R, G, sched: predict_curves(fronts, root, R, G, curves, nv,
+                                                            sched, scale))
 
     print("\n# 8, 64, 512 GPUs (8 GPUs and one rank per node; inter-node "
           f"{ASSUMED['ib_bytes_per_s_per_node'] / 1e9:.0f} GB/s per node, NCCL)")
@@ -610,20 +619,8 @@ def main():
         bf, br = problem_tree(base)
         scale = c["flops"] / bf[br]["subtree_flops"]
         one = fronts[root]["subtree_flops"] * scale / c["subtree_rate"]
-        for W in (8, 64, 512):
-            R, G = max(1, W // ASSUMED["gpus_per_node"]), min(W, ASSUMED["gpus_per_node"])
-            for sched in ("current", "tiled"):
-                p = predict(fronts, root, R, G, c, ib, sched, scale)
-                p["problem"] = prob
-                p["gpus"] = W
-                p["one_gpu_numeric_seconds"] = one
-                num = p["total_seconds"]
-                p["speedup_vs_one_gpu"] = one / num
-                out["scaling"].append(p)
-                print(f"{prob:<12} {W:>5} {sched:<8} {100 * p['top_flops_fraction']:>5.1f}% "
-                      f"{p['subtree_seconds']:>9.4f} {p['cb_bytes_between_ranks'] / 1e9:>7.2f} "
-                      f"{p['cb_seconds']:>6.3f} {p['top_seconds']:>7.3f} "
-                      f"{p['top_comm_seconds']:>10.3f} {num:>9.3f} {one / num:>8.1f}")
+        scaling_rows(prob, one, out["scaling"],
+                     lambda R, G, sched: predict(fronts, root, R, G, c, ib, sched, scale))
     if args.json:
         with open(args.json, "w") as f:
             json.dump(out, f, indent=1)
