@@ -11,7 +11,8 @@
 # Needs mpirun: the machine's, or the OpenMPI staged by
 # scripts/gpu/prepare_mpi.sh in .carry-mpi/ (carried with .carry/).
 # Usage: bash scripts/gpu/run_mpi.sh [PROBLEMS] (default lap3d-80,elast3d-40,lap3d-100,elast3d-50);
-# STRATA_MPI_CONFIGS="1x2 2x1" runs only those ranks × GPUs configurations.
+# STRATA_MPI_CONFIGS="1x2 2x1" runs only those ranks × GPUs configurations; STRATA_MPI_ENV
+# names more environment variables to pass to every rank.
 set -uo pipefail
 cd "$(dirname "$0")/../.."
 OUT=${OUT:-bench/results}
@@ -79,6 +80,10 @@ case $ngpu in
 esac
 # STRATA_MPI_CONFIGS="2x1 1x2": only these ranks × GPUs (e.g. to fit a call's time limit)
 configs=${STRATA_MPI_CONFIGS:-$configs}
+# STRATA_MPI_ENV="NCCL_P2P_NVL_CHUNKSIZE NCCL_MAX_NCHANNELS": more variables of this
+# environment passed to every rank (e.g. NCCL settings to compare)
+extra_env=()
+for v in ${STRATA_MPI_ENV:-}; do extra_env+=(-x "$v"); done
 # the distributed tests with GPU ranks, one rank per GPU (tests/mpi/test_distributed_mpi.cpp;
 # its GPU case runs where GPUs are visible), when that binary is staged beside the benchmark
 tests=$(dirname "$bench")/test_distributed_mpi
@@ -92,7 +97,7 @@ for cfg in $configs; do
   echo "=== $r rank(s) x $g GPU(s): $problems"
   # --bind-to none: each rank drives its GPUs from several host threads
   mpirun -n "$r" --bind-to none --oversubscribe -x LD_LIBRARY_PATH -x PATH -x NCCL_NVLS_ENABLE \
-    "$bench" --backend cuda --gpus-per-rank "$g" --problems "$problems" --repeat 3 \
+    "${extra_env[@]}" "$bench" --backend cuda --gpus-per-rank "$g" --problems "$problems" --repeat 3 \
     --tag "${r}x${g}" --results-dir "$OUT" || status=1
 done
 # the prediction beside this session's measurements (files newer than the start of this script)
