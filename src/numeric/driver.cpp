@@ -226,23 +226,51 @@ class MultiWorkerDriver final : public NumericDriver {
     if (options_.gpu_solve_parts &&
         an.partition.part_of.size() == static_cast<std::size_t>(an.tree.n_fronts()))
       part_solve_u_.resize(static_cast<std::size_t>(an.child_rows.offsets.back()));
+    // the value pass on the first GPU (one worker's prepare sets it up itself); the others
+    // copy its scaled values at each factorization
+    if (execs.size() > 1) execs[0]->prepare_shared_value_pass(an);
     creation_seconds_ = 0;  // part of the analysis's device set-up
+  }
+  // The value pass on the first GPU, as the tree driver's: refused where another GPU reads
+  // values on the host (fronts factored tile by tile), which needs the host's pass.
+  bool scale_values_on_device(const Analysis& an, const double* values, const StageValues& stage,
+                              int max_sweeps, bool copy_input, DeviceValueNorms& out) override {
+    if (cpu_threads_ > 0) return false;
+    const std::vector<Executor*> execs = executors();
+    for (std::size_t w = 1; w < execs.size(); ++w)
+      if (execs[w]->reads_host_values()) return false;
+    return execs[0]->scale_values_on_device(an, values, stage, max_sweeps, copy_input, out);
+  }
+  bool download_scaled_values(const Analysis& an, double* host) override {
+    return cpu_threads_ == 0 && executors()[0]->download_scaled_values(an, host);
+  }
+  bool keep_device_input(const Analysis& an) override {
+    return cpu_threads_ == 0 && !executors_.empty() && executors_[0]->keep_device_input(an);
+  }
+  bool download_device_input(const Analysis& an, double* host) override {
+    return cpu_threads_ == 0 && !executors_.empty() &&
+           executors_[0]->download_device_input(an, host);
   }
   void factorize(const Analysis& an, const std::vector<double>& scaled_values,
                  bool values_on_device, MatrixType type, const PivotPolicy& pivots,
                  NumericFactor& factor) override {
-    if (values_on_device)
-      throw InternalError("the multi-worker driver has no value pass on a device");
     const std::vector<Executor*> execs = executors();
     devices_.clear();
     if (execs.size() == 1 && an.partition.part_id.empty()) {
       // an analysis for one worker is not split into parts: the whole tree on that worker
       arenas_.resize(1);
-      numeric::factorize(an, scaled_values, type, pivots, *execs[0], factor, arenas_[0]);
+      numeric::factorize(an, scaled_values, type, pivots, *execs[0], factor, arenas_[0],
+                         values_on_device);
       return;
     }
     MultiWorkerConfig config = config_;
     config.block_buffers = &blocks_;
+    if (values_on_device) {  // scale_values_on_device's result on the first GPU
+      config.device_values = execs[0]->device_scaled_values(an);
+      if (!config.device_values)
+        throw InternalError("values on the device from no value pass of this analysis");
+      config.device_values_device = execs[0]->device();
+    }
     factorize_multi(an, scaled_values, type, pivots, execs, factor, arenas_, config, &devices_);
   }
   bool solve(const Analysis& an, NumericFactor& factor, double* x, index_t nrhs) override {

@@ -44,7 +44,8 @@ class NumericDriver {
   /// analysis phase does; nothing for host executors. Throws as factorize.
   virtual void prepare(const Analysis& an) {}
   /// The value pass of the next factorizations on the GPU (Executor::scale_values_on_device
-  /// of the tree driver's CUDA executor): `values` (host, canonical entry order, filled
+  /// of the tree driver's CUDA executor, or of the multi-worker driver's first GPU, whose
+  /// scaled values the other GPUs copy): `values` (host, canonical entry order, filled
   /// piece by piece by `stage`) checked, scaled, equilibrated again by at most
   /// `max_sweeps` sweeps where needed, and measured on the device, `out` its findings;
   /// with `copy_input` also copied there as given.
@@ -56,10 +57,10 @@ class NumericDriver {
     return false;
   }
   /// The values the last scale_values_on_device scaled, copied back into `host`
-  /// (Executor::download_scaled_values); false for every other driver.
+  /// (Executor::download_scaled_values); false for drivers without that pass.
   virtual bool download_scaled_values(const Analysis& an, double* host) { return false; }
   /// Executor::keep_device_input and download_device_input of that executor; false for
-  /// every other driver.
+  /// drivers without that pass.
   virtual bool keep_device_input(const Analysis& an) { return false; }
   virtual bool download_device_input(const Analysis& an, double* host) { return false; }
   /// Factors the scaled values (the analysis's canonical entry order) as `type` with

@@ -148,8 +148,10 @@ struct FactorContext {
   /// The same scaled values (an.pattern_indices.size() of them, canonical entry order) in
   /// the memory of GPU `device_values_device`, or null: a GPU executor copies them from
   /// there, device to device, instead of uploading `values`, which then needs to hold only
-  /// what the executors that read values on the host read (Executor::reads_host_values).
-  /// Distributed ranks receive their share of the values there (src/distributed).
+  /// what the executors that read values on the host read (Executor::reads_host_values);
+  /// the executor whose own buffer they are copies nothing. Distributed ranks receive
+  /// their share of the values there (src/distributed); with several GPUs in one process
+  /// they are the value pass's result on the first GPU (Executor::device_scaled_values).
   const double* device_values = nullptr;
   int device_values_device = -1;
   MatrixType type = MatrixType::spd;
@@ -282,6 +284,18 @@ class Executor {
   /// `host`, for a host algorithm that needs them (the delayed LU). False, having done
   /// nothing, where the executor holds none for `an`. Throws DeviceError.
   virtual bool download_scaled_values(const Analysis& an, double* host) { return false; }
+  /// Sets up the value pass (scale_values_on_device) for `an` on an executor prepared for
+  /// several workers, whose prepare leaves it out: with several GPUs in one process one of
+  /// them scales the values and the others copy its result (device_scaled_values). Call
+  /// after prepare. Returns whether the pass is ready; false, having changed nothing, where
+  /// the executor has no such pass or its device has no room for its arrays. Throws
+  /// DeviceError.
+  virtual bool prepare_shared_value_pass(const Analysis& an) { return false; }
+  /// The scaled values the last scale_values_on_device left on this executor's device
+  /// for `an` (device memory, an.pattern_indices.size() doubles), once the pass's work on
+  /// them is done (it waits for that); null where the executor holds none for `an`. They
+  /// stay until its next value pass or analysis. Throws DeviceError.
+  virtual const double* device_scaled_values(const Analysis& an) { return nullptr; }
   /// Whether this executor's factorizations of the analysis it was last prepared for
   /// read FactorContext::values on the host even when FactorContext::device_values is
   /// given: host executors, and a GPU whose plan factors some front tile by tile (their

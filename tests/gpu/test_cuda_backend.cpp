@@ -1675,28 +1675,6 @@ Options one_gpu_unrefined(MatrixType type) {
   return o;
 }
 
-// `a` with an explicit zero after each column's entries, repeating the column's first row:
-// the same matrix, not in the analyzed pattern (it has duplicates), so that the Solver
-// takes the host's value pass for it.
-SparseMatrix with_duplicate_zeros(const SparseMatrix& a) {
-  SparseMatrix d = a;
-  d.indices.clear();
-  d.values.clear();
-  for (index_t j = 0; j < a.n_cols; ++j) {
-    d.offsets[j] = static_cast<index_t>(d.indices.size());
-    for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p) {
-      d.indices.push_back(a.indices[p]);
-      d.values.push_back(a.values[p]);
-    }
-    if (a.offsets[j + 1] > a.offsets[j]) {
-      d.indices.push_back(a.indices[a.offsets[j]]);
-      d.values.push_back(0.0);
-    }
-  }
-  d.offsets[a.n_cols] = static_cast<index_t>(d.indices.size());
-  return d;
-}
-
 // The value pass on the device (numeric/cuda/value_pass.cu) against the host's
 // (core/value_pass.hpp): for LU, LLᵀ/LDLᵀ (automatic) and LDLᵀ, sizes 1 to 733, a
 // factorization and a refactorization with other values in the analyzed pattern run the
@@ -1720,13 +1698,13 @@ TEST_F(CudaBackend, ValuePassOnTheDeviceGivesTheHostsFactor) {
     dev.analyze(a);
     host.analyze(a);
     dev.factorize(a);
-    host.factorize(with_duplicate_zeros(a));
+    host.factorize(test::with_duplicate_zeros(a));
     EXPECT_TRUE(dev.stats().factor.values_scaled_on_device);
     EXPECT_FALSE(host.stats().factor.values_scaled_on_device);
     if (host.stats().factor.perturbed_pivots == 0)  // else ε‖B‖₁ to rounding, as below
       EXPECT_EQ(dev.stats().factor.log_abs_determinant, host.stats().factor.log_abs_determinant);
     dev.refactorize(next);
-    host.refactorize(with_duplicate_zeros(next));
+    host.refactorize(test::with_duplicate_zeros(next));
     const FactorStats& fd = dev.stats().factor;
     const FactorStats& fh = host.stats().factor;
     EXPECT_TRUE(fd.values_scaled_on_device);
@@ -1745,8 +1723,8 @@ TEST_F(CudaBackend, ValuePassOnTheDeviceGivesTheHostsFactor) {
     EXPECT_EQ(by_values.stats().factor.log_abs_determinant, fd.log_abs_determinant);
     // analyzed in another form (duplicates): its values gathered, then the device's pass
     Solver gathered(o);
-    gathered.analyze(with_duplicate_zeros(a));
-    gathered.refactorize(std::span<const double>(with_duplicate_zeros(next).values));
+    gathered.analyze(test::with_duplicate_zeros(a));
+    gathered.refactorize(std::span<const double>(test::with_duplicate_zeros(next).values));
     EXPECT_TRUE(gathered.stats().factor.values_scaled_on_device);
     EXPECT_EQ(gathered.stats().factor.log_abs_determinant, fd.log_abs_determinant);
     const std::vector<double> xd = dev.solve(b), xh = host.solve(b);
@@ -1952,7 +1930,8 @@ TEST_F(CudaBackend, ValuesInGpuMemoryAreFetchedWhereTheHostReadsThem) {
     for (double& v : b) v = u(rng);
     Options cpu = one_gpu_unrefined(MatrixType::general);
     cpu.backend = Backend::cpu;
-    const SparseMatrix dup = with_duplicate_zeros(a), dup_next = with_duplicate_zeros(next);
+    const SparseMatrix dup = test::with_duplicate_zeros(a),
+                       dup_next = test::with_duplicate_zeros(next);
     struct Form {
       Options options;
       const SparseMatrix* analyzed;
@@ -2009,14 +1988,14 @@ TEST_F(CudaBackend, ValuesFarFromTheAnalysisAreEquilibratedOnTheDevice) {
       dev.analyze(a);
       host.analyze(a);
       dev.factorize(a);
-      host.factorize(with_duplicate_zeros(a));
+      host.factorize(test::with_duplicate_zeros(a));
       std::vector<double> b(n), b2(n);
       std::uniform_real_distribution<double> rhs(-1.0, 1.0);
       for (double& v : b) v = rhs(rng);
       for (double& v : b2) v = rhs(rng);
       for (const SparseMatrix* m : {&far, &far2, &far}) {
         dev.refactorize(*m);
-        host.refactorize(with_duplicate_zeros(*m));
+        host.refactorize(test::with_duplicate_zeros(*m));
         const FactorStats& fd = dev.stats().factor;
         const FactorStats& fh = host.stats().factor;
         EXPECT_TRUE(fd.values_scaled_on_device);
@@ -2077,7 +2056,7 @@ TEST_F(CudaBackend, PivotsDelayedStraightAwayTakeTheDevicesValuePass) {
     const SparseMatrix* values[] = {&a, &far};
     for (const SparseMatrix* m : values) {
       dev.refactorize(std::span<const double>(m->values));
-      host.refactorize(with_duplicate_zeros(*m));
+      host.refactorize(test::with_duplicate_zeros(*m));
       const FactorStats& fd = dev.stats().factor;
       const FactorStats& fh = host.stats().factor;
       EXPECT_TRUE(fd.values_scaled_on_device);

@@ -272,6 +272,59 @@ TEST(MultiGpu, SolverSolutionsAndRefactorization) {
   }
 }
 
+// The value pass with two GPUs: the first GPU checks and scales the values, the other
+// copies its result (MultiWorkerDriver::scale_values_on_device). For LU, LLᵀ/LDLᵀ
+// (automatic) and LDLᵀ, sizes 1 to 733, a factorization and a refactorization in the
+// analyzed pattern take it, the same matrices given with explicit zeros (not the analyzed
+// pattern) take the host's pass; the scaled values are the same bits, so the factors
+// agree: the same static pivots and determinant sign, log |det| and the unrefined
+// solutions to rounding (the two factorizations may assemble a front's children in
+// another order), ‖B‖₁ to rounding.
+TEST(MultiGpu, ValuePassOnTheFirstGpuGivesTheHostsFactor) {
+  REQUIRE_GPUS(2);
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed) + " (STRATA_TEST_SEED replays it)");
+  std::uniform_real_distribution<double> rhs(-1.0, 1.0);
+  for (const test::ValueChange& c : test::value_changes(rng)) {
+    SCOPED_TRACE("type " + std::string(to_string(c.type)) + ", n = " + std::to_string(c.n));
+    Options o;
+    o.backend = Backend::cuda;
+    o.num_gpus = 2;
+    o.type = c.type;
+    o.refinement_max_steps = 0;  // one application of the factor
+    o.gmres_max_iterations = 0;
+    o.solve_check = SolveCheck::after_perturbed_pivots;
+    Solver dev(o), host(o);
+    dev.analyze(c.a);
+    host.analyze(c.a);
+    dev.factorize(c.a);
+    host.factorize(test::with_duplicate_zeros(c.a));
+    EXPECT_TRUE(dev.stats().factor.values_scaled_on_device);
+    EXPECT_FALSE(host.stats().factor.values_scaled_on_device);
+    EXPECT_EQ(dev.stats().factor.devices.size(), 2u);
+    dev.refactorize(c.next);
+    host.refactorize(test::with_duplicate_zeros(c.next));
+    const FactorStats& fd = dev.stats().factor;
+    const FactorStats& fh = host.stats().factor;
+    EXPECT_TRUE(fd.values_scaled_on_device);
+    EXPECT_FALSE(fh.values_scaled_on_device);
+    EXPECT_EQ(fd.type, fh.type);
+    EXPECT_EQ(fd.perturbed_pivots, fh.perturbed_pivots);
+    EXPECT_EQ(fd.determinant_sign, fh.determinant_sign);
+    EXPECT_NEAR(fd.matrix_norm, fh.matrix_norm, 1e-14 * fh.matrix_norm);
+    EXPECT_NEAR(fd.log_abs_determinant, fh.log_abs_determinant,
+                1e-12 * std::max(1.0, std::abs(fh.log_abs_determinant)));
+    std::vector<double> b(c.n);
+    for (double& v : b) v = rhs(rng);
+    const std::vector<double> xd = dev.solve(b), xh = host.solve(b);
+    if (fh.perturbed_pivots == 0) {
+      EXPECT_LT(test::relative_difference(xd, xh), 1e-10);
+      EXPECT_LE(test::backward_error(c.next, xd.data(), b.data()), 1e-12);
+    }
+  }
+}
+
 // GPU 0 slowed by an injected delay: the other GPUs steal its subtrees; same factor.
 TEST(MultiGpu, SlowGpuHasItsSubtreesStolen) {
   REQUIRE_GPUS(2);

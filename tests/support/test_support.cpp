@@ -121,6 +121,25 @@ StaleAnalysis stale_analysis(index_t n, std::mt19937_64& rng) {
   }
 }
 
+SparseMatrix with_duplicate_zeros(const SparseMatrix& a) {
+  SparseMatrix d = a;
+  d.indices.clear();
+  d.values.clear();
+  for (index_t j = 0; j < a.n_cols; ++j) {
+    d.offsets[j] = static_cast<index_t>(d.indices.size());
+    for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p) {
+      d.indices.push_back(a.indices[p]);
+      d.values.push_back(a.values[p]);
+    }
+    if (a.offsets[j + 1] > a.offsets[j]) {
+      d.indices.push_back(a.indices[a.offsets[j]]);
+      d.values.push_back(0.0);
+    }
+  }
+  d.offsets[a.n_cols] = static_cast<index_t>(d.indices.size());
+  return d;
+}
+
 std::vector<ValueChange> value_changes(std::mt19937_64& rng) {
   std::uniform_real_distribution<double> wiggle(0.97, 1.03);
   const std::pair<RandomKind, MatrixType> kinds[] = {

@@ -77,6 +77,11 @@ struct ValueChange {
 };
 std::vector<ValueChange> value_changes(std::mt19937_64& rng);
 
+/// `a` with an explicit zero after each column's entries, repeating the column's first
+/// row: the same matrix, not in the analyzed pattern (it has duplicates), so that the
+/// Solver takes the host's value pass for it.
+SparseMatrix with_duplicate_zeros(const SparseMatrix& a);
+
 /// A random KKT (saddle point) matrix K = P [[H, Bᵀ], [B, 0]] Pᵀ of order n, Storage::lower,
 /// canonical: n/3 constraints, H random sparse SPD (diagonally dominant) of order
 /// n − n/3, B random sparse of full row rank (each row has one entry of magnitude in

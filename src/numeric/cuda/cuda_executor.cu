@@ -258,8 +258,13 @@ void CudaExecutor::begin(const numeric::FactorContext& ctx) {
   }
   const std::size_t nnz = an.pattern_indices.size();
   if (ctx.device_values) {
-    // already on a GPU (a distributed rank's share): device to device, over NVLink or
-    // PCIe when that GPU is another (explicit devices: no peer access needed)
+    // already on a GPU (a distributed rank's share, or another GPU's value pass): device to
+    // device, over NVLink or PCIe when that GPU is another (explicit devices: no peer
+    // access needed); nothing to copy when they are this executor's own value pass's
+    if (ctx.device_values == values_.data() && ctx.device_values_device == device_) {
+      count_h2d(nnz * sizeof(double));  // copied by the value pass
+      return;
+    }
     values_.resize(std::max<std::size_t>(nnz, 1));
     if (nnz > 0)
       STRATA_CUDA(cudaMemcpyPeerAsync(values_.data(), device_, ctx.device_values,

@@ -200,6 +200,8 @@ class CudaExecutor final : public numeric::Executor {
   bool download_scaled_values(const Analysis& an, double* host) override;  // value_pass.cu
   bool keep_device_input(const Analysis& an) override;                     // value_pass.cu
   bool download_device_input(const Analysis& an, double* host) override;   // value_pass.cu
+  bool prepare_shared_value_pass(const Analysis& an) override;             // value_pass.cu
+  const double* device_scaled_values(const Analysis& an) override;         // value_pass.cu
   bool reads_host_values() const override;
   void begin(const numeric::FactorContext& ctx) override;
   void begin_part(const numeric::FactorContext& ctx) override;

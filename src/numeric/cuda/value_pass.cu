@@ -307,6 +307,22 @@ void CudaExecutor::prepare_value_pass(const Analysis& an) {
   v.analysis = an.id;
 }
 
+bool CudaExecutor::prepare_shared_value_pass(const Analysis& an) {
+  if (an.id != analysis_id_) return false;  // not prepared for `an`
+  STRATA_CUDA(cudaSetDevice(device_));
+  if (value_pass_.analysis != an.id) prepare_value_pass(an);
+  return value_pass_.analysis == an.id;
+}
+
+const double* CudaExecutor::device_scaled_values(const Analysis& an) {
+  if (value_pass_.analysis != an.id || an.id != analysis_id_ ||
+      values_.size() < an.pattern_indices.size())
+    return nullptr;
+  STRATA_CUDA(cudaSetDevice(device_));
+  STRATA_CUDA(cudaStreamSynchronize(stream_));
+  return values_.data();
+}
+
 bool CudaExecutor::download_scaled_values(const Analysis& an, double* host) {
   const std::size_t nnz = an.pattern_indices.size();
   if (value_pass_.analysis != an.id || an.id != analysis_id_ || values_.size() < nnz) return false;
@@ -341,11 +357,9 @@ bool CudaExecutor::scale_values_on_device(const Analysis& an, const double* valu
                                           bool copy_input, numeric::DeviceValueNorms& out) {
   STRATA_CUDA(cudaSetDevice(device_));
   ValuePass& v = value_pass_;
-  if (v.analysis != an.id || an.id != analysis_id_ || planned_ != 1) return false;
-  const auto whole = parts_.find(-1);
-  if (whole == parts_.end()) return false;
-  for (char tiled : whole->second.tiled)
-    if (tiled) return false;  // tiled fronts assemble from the host's scaled values
+  // the whole tree's plan or the parts' (several GPUs: this one's pass serves them all);
+  // tiled fronts assemble from the host's scaled values
+  if (v.analysis != an.id || an.id != analysis_id_ || reads_host_values()) return false;
   const auto n = static_cast<std::int64_t>(an.n);
   const std::size_t nnz = an.pattern_indices.size();
   const bool scale = !an.row_scaling.empty();
