@@ -38,6 +38,7 @@ Usage: python3 bench/cost_model.py [--json OUT.json] [--measured RUN.json ...]
 its prediction.)
 """
 import argparse
+import functools
 import heapq
 import json
 import math
@@ -154,29 +155,61 @@ def nd_tree(nx, ny, nz, dof, leaf=64):
     return fronts, root
 
 
+_SPLITS = {}  # split()'s results by (tree, root, workers, per_worker, max_steps)
+
+
 def split(fronts, root, workers, per_worker, max_steps=4096):
+    """The split below, made once per tree and worker count (the trees of problem_tree are
+    made once per name, and the 8-512-GPU tables ask for each split several times)."""
+    key = (id(fronts), root, workers, per_worker, max_steps)
+    if key not in _SPLITS:
+        _SPLITS[key] = (fronts, _split(fronts, root, workers, per_worker, max_steps))
+    subs, top = _SPLITS[key][1]
+    return list(subs), list(top)
+
+
+def _split(fronts, root, workers, per_worker, max_steps):
     """strata's split (schedule/tree_partition.cpp, Geist & Ng 1989): split the heaviest
     subtree into its children, score every state by LPT makespan + top work, keep the
     best state with at least workers × per_worker subtrees. Returns (subtree roots,
-    top fronts)."""
+    top fronts). The heaviest subtree comes from a heap (ties: the earliest in the list,
+    as max() over it would take), the top work is a running sum, and a state whose lower
+    bound (its largest subtree or its mean load, + top work) cannot beat the best kept
+    states is not scheduled — the same result as scoring every state."""
     subs, top = [root], []
+    seq = 0
+    heap = [(-fronts[root]["subtree_flops"], seq, root)]
+    top_work = 0.0
+    sub_total = fronts[root]["subtree_flops"]
     best_enough = best_any = None
     for step in range(max_steps):
         enough = len(subs) >= workers * per_worker
         if enough or step % 32 == 0:  # (states short of enough: sampled, for speed)
-            load = lpt_makespan([fronts[f]["subtree_flops"] for f in subs], workers)
-            score = load + sum(fronts[f]["flops"] for f in top)
-            state = (score, list(subs), list(top))
-            if best_any is None or score < best_any[0]:
-                best_any = state
-            if enough and (best_enough is None or score < best_enough[0]):
-                best_enough = state
-        f = max(subs, key=lambda q: fronts[q]["subtree_flops"])
+            bound = max(-heap[0][0], sub_total / workers) * (1 - 1e-12) + top_work
+            beats_any = best_any is None or bound < best_any[0]
+            beats_enough = enough and (best_enough is None or bound < best_enough[0])
+            if beats_any or beats_enough:
+                load = lpt_makespan([fronts[f]["subtree_flops"] for f in subs], workers)
+                score = load + top_work
+                state = None
+                if best_any is None or score < best_any[0]:
+                    state = (score, list(subs), list(top))
+                    best_any = state
+                if enough and (best_enough is None or score < best_enough[0]):
+                    best_enough = state or (score, list(subs), list(top))
+        f = heap[0][2]
         if not fronts[f]["children"]:
             break
+        heapq.heappop(heap)
         subs.remove(f)
         top.append(f)
-        subs.extend(fronts[f]["children"])
+        top_work += fronts[f]["flops"]
+        sub_total -= fronts[f]["subtree_flops"]
+        for c in fronts[f]["children"]:
+            subs.append(c)
+            seq += 1
+            heapq.heappush(heap, (-fronts[c]["subtree_flops"], seq, c))
+            sub_total += fronts[c]["subtree_flops"]
     best = best_enough or best_any
     return best[1], best[2]
 
@@ -361,31 +394,34 @@ def seconds_of(curve, flops):
 
 def fit_rate_curve(points):
     """(r_inf, F_half, beta) minimizing the squared log error of the predicted seconds over
-    points (flops, seconds), by a grid search refined three times around the best (no
-    external solver; the fit has three parameters and tens of points)."""
-    pts = [(f, t) for f, t in points if f > 0 and t > 0]
+    points (flops, seconds): log t = log F − log r_inf + log(1 + (F_half/F)^beta), so for a
+    given (F_half, beta) the best log r_inf is the mean of the residuals, in closed form;
+    (F_half, beta) by a grid search refined around the best six times (no external solver;
+    tens of points)."""
+    pts = [(math.log(f), math.log(t), f) for f, t in points if f > 0 and t > 0]
     if len(pts) < 3:
         return None
 
-    def err(r, h, b):
-        c = {"r_inf": r, "f_half": h, "beta": b}
-        return sum((math.log(f / rate_of(c, f)) - math.log(t)) ** 2 for f, t in pts)
+    def best_for(lh, b):  # (error, log r_inf) for F_half = e^lh, beta = b
+        g = [lf + math.log1p(math.exp(b * (lh - lf))) - lt for lf, lt, _ in pts]
+        lr = sum(g) / len(g)
+        return sum((x - lr) ** 2 for x in g), lr
 
-    lr, lh, b = math.log(2e13), math.log(1e11), 0.6
-    span = (2.0, 6.0, 0.5)
-    best = (err(math.exp(lr), math.exp(lh), b), lr, lh, b)
-    for _ in range(4):
-        _, lr0, lh0, b0 = best
-        for i in range(-6, 7):
-            for j in range(-6, 7):
-                for k in range(-6, 7):
-                    cand = (lr0 + span[0] * i / 6, lh0 + span[1] * j / 6, b0 + span[2] * k / 6)
-                    if cand[2] <= 0.05:
-                        continue
-                    e = err(math.exp(cand[0]), math.exp(cand[1]), cand[2])
-                    if e < best[0]:
-                        best = (e, *cand)
-        span = tuple(x / 3 for x in span)
+    lh, b = math.log(1e11), 0.6
+    e, lr = best_for(lh, b)
+    best = (e, lr, lh, b)
+    span = (8.0, 0.6)
+    for _ in range(6):
+        _, _, lh0, b0 = best
+        for j in range(-8, 9):
+            for k in range(-8, 9):
+                cand_h, cand_b = lh0 + span[0] * j / 8, b0 + span[1] * k / 8
+                if cand_b <= 0.05:
+                    continue
+                e, lr = best_for(cand_h, cand_b)
+                if e < best[0]:
+                    best = (e, lr, cand_h, cand_b)
+        span = (span[0] / 4, span[1] / 4)
     e, lr, lh, b = best
     return {"r_inf": math.exp(lr), "f_half": math.exp(lh), "beta": b,
             "rms_log_error": math.sqrt(e / len(pts)), "points": len(pts)}
@@ -473,7 +509,10 @@ def scaling_rows(prob, one, rows, predict_at):
                   f"{p['top_comm_seconds']:>10.3f} {num:>9.3f} {one / num:>8.1f}")
 
 
+@functools.lru_cache(maxsize=None)
 def problem_tree(name):
+    """The geometric tree of a lap3d-N / elast3d-N problem (made once per name; callers
+    read it and do not change it)."""
     kind, k = name.rsplit("-", 1)
     k = int(k)
     dof = 3 if kind.startswith("elast") else 1
