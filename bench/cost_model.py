@@ -532,9 +532,6 @@ def main():
            "machine": {"cpu": "model", "hardware_threads": 0, "gpu": ""},
            "command": " ".join(sys.argv), "rows": [],
            "assumed": ASSUMED, "calibration": cal, "benchmark_4gpu": [], "scaling": []}
-    mpi_host = {"rank_bytes_per_s": ASSUMED["mpi_shm_bytes_per_s"], "via_host": True,
-                "nvlink": ASSUMED["nvlink_bytes_per_s"],
-                "ib_per_node": ASSUMED["ib_bytes_per_s_per_node"]}
     measured = []
     machines = []
     for path in args.measured:
