@@ -24,6 +24,13 @@ cp build-gpu/strata build-gpu/tests/test_solver build-gpu/bench/bench_factor .ca
 for src in tests/gpu/*.cpp; do cp "build-gpu/tests/$(basename "$src" .cpp)" .carry/bin/; done
 for b in bench_gpu bench_gpu_memory bench_cudss bench_multigpu bench_analysis; do [ -f build-gpu/bench/$b ] && cp build-gpu/bench/$b .carry/bin/; done
 cp data/matrices/*.mtx.gz data/matrices/README.md .carry/matrices/
+# the GPU timeline recorder (bench/tools/cupti_trace.cpp) and the CUPTI it loads:
+# LD_LIBRARY_PATH=.carry/trace LD_PRELOAD=.carry/trace/libstrata_cupti_trace.so
+if [ -f build-gpu/bench/libstrata_cupti_trace.so ]; then
+  mkdir -p .carry/trace
+  cp build-gpu/bench/libstrata_cupti_trace.so .carry/trace/
+  cp -L "$(ldd build-gpu/bench/libstrata_cupti_trace.so | awk '/libcupti/ {print $3}')" .carry/trace/
+fi
 # every non-system, non-CUDA library the binaries load
 for b in .carry/bin/*; do
   ldd "$b" | awk '/=>/ {print $3}'

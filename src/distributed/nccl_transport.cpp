@@ -259,6 +259,9 @@ void exchange_blocks_nccl(detail::CommImpl& comm, NumericState& ns, const RankLa
           symmetric ? reuse_block(kept_packed, next_packed, c.packed, count[i], device) : full[i];
     } else if (owner == rank) {
       const double* block = x.device;
+      if (!x.on_host && x.device_ready)  // pushed here by its exporter: once the copy is done
+        cuda_check(cudaStreamWaitEvent(c.stream, static_cast<cudaEvent_t>(x.device_ready), 0),
+                   "cudaStreamWaitEvent (NCCL staging)");
       if (x.on_host || x.device_ordinal != device) {
         double* copy = reuse_block(kept_packed, next_packed, c.packed, x.size, device);
         const std::size_t bytes = sizeof(double) * x.size;

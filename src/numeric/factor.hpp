@@ -205,8 +205,12 @@ struct CbTransfer {
   bool on_host = false;            ///< the exporter filled `host`
   const double* device = nullptr;  ///< or: the block in the exporter's device memory
   int device_ordinal = -1;         ///< CUDA device holding `device`
-  int target_device = -1;          ///< CUDA device of the importer (-1: a host executor)
-  TransferMemory memory;           ///< how host_buffer() allocates
+  /// With `device`: an event of the device runtime (CUDA: a cudaEvent_t of the exporter's
+  /// device) that completes once `device` holds the block, for a copy still in flight when
+  /// export_cb returned; null: it holds it then.
+  void* device_ready = nullptr;
+  int target_device = -1;  ///< CUDA device of the importer (-1: a host executor)
+  TransferMemory memory;   ///< how host_buffer() allocates
   TransferBuffer host_storage;
 
   /// The host buffer (`size` doubles, uninitialized), allocated on first use: a block

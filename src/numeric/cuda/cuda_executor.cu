@@ -133,6 +133,7 @@ CudaExecutor::CudaExecutor(const Options& o, int device)
                          &team_.dist_done})
     STRATA_CUDA(cudaEventCreateWithFlags(e, cudaEventDisableTiming));
   STRATA_CUDA(cudaStreamCreateWithFlags(&team_.dist_copy, cudaStreamNonBlocking));
+  STRATA_CUDA(cudaStreamCreateWithFlags(&push_stream_, cudaStreamNonBlocking));
   for (ChunkRecord& c : chunk_)
     for (cudaEvent_t& e : c.ev) STRATA_CUDA(cudaEventCreate(&e));
 }
@@ -163,6 +164,9 @@ CudaExecutor::~CudaExecutor() {
     cudaEventDestroy(e);
   for (cudaEvent_t e : team_.dist_events) cudaEventDestroy(e);
   cudaStreamDestroy(team_.dist_copy);
+  drop_landings();
+  cudaSetDevice(device_);
+  cudaStreamDestroy(push_stream_);
   for (ChunkRecord& c : chunk_)
     for (cudaEvent_t e : c.ev) cudaEventDestroy(e);
   if (solver_) cusolverDnDestroy(solver_);
@@ -435,6 +439,9 @@ std::size_t CudaExecutor::export_cb(const numeric::FactorContext& ctx, numeric::
     t.device = box.data();
     t.device_ordinal = device_;
     t.on_host = false;
+    t.device_ready = nullptr;
+    // another GPU's block: on its way to that GPU now, while it still works
+    if (peer && push_block(t)) return bytes;
     return 0;  // nothing crossed the bus yet: the importer counts the copy
   }
   STRATA_CUDA(cudaMemcpyAsync(t.host_buffer(), src, bytes, cudaMemcpyDefault, stream_));
@@ -444,12 +451,81 @@ std::size_t CudaExecutor::export_cb(const numeric::FactorContext& ctx, numeric::
   return bytes;
 }
 
+// A block for another GPU, pushed by its exporter (export_cb) into a buffer on the
+// importing GPU as soon as it is made, instead of being pulled by the importer once it
+// needs it: the importer is often still busy with its own parts then, and a large block
+// takes milliseconds to cross the link, which the importer would otherwise wait for
+// before its next part. The copy runs on this GPU's push stream from the outbox (the arena
+// is reused by the next part at once) and records `ready`, which the importer's stream
+// waits for. Not with a device memory budget (the plan does not hold the buffer) or where
+// the importer has too little free memory for it; false then, and the importer pulls the
+// block.
+bool CudaExecutor::push_block(numeric::CbTransfer& t) {
+  if (limit_ != 0 || t.size == 0) return false;
+  const std::size_t bytes = sizeof(double) * t.size;
+  Landing& l = landing_[t.front];
+  if (l.device >= 0 && l.device != t.target_device) {  // another importer now: a new buffer
+    if (l.ready) STRATA_CUDA(cudaEventSynchronize(l.ready));
+    STRATA_CUDA(cudaSetDevice(l.device));
+    l.buffer.clear();
+    STRATA_CUDA(cudaSetDevice(device_));
+    l.device = -1;
+  }
+  if (l.ready) STRATA_CUDA(cudaEventSynchronize(l.ready));  // the previous push into it
+  if (l.buffer.size() < t.size) {
+    STRATA_CUDA(cudaSetDevice(t.target_device));
+    std::size_t free_bytes = 0, total = 0;
+    STRATA_CUDA(cudaMemGetInfo(&free_bytes, &total));
+    bool room = free_bytes > bytes + total / 8;  // leave the importer's plan its margin
+    if (room) {
+      try {
+        l.buffer.resize(t.size);
+      } catch (const OutOfMemory&) {
+        room = false;
+      }
+    }
+    STRATA_CUDA(cudaSetDevice(device_));
+    if (!room) return false;
+  }
+  l.device = t.target_device;
+  if (!l.ready) STRATA_CUDA(cudaEventCreateWithFlags(&l.ready, cudaEventDisableTiming));
+  const cudaError_t e = cudaDeviceEnablePeerAccess(t.target_device, 0);
+  if (e == cudaErrorPeerAccessAlreadyEnabled)
+    (void)cudaGetLastError();
+  else
+    STRATA_CUDA(e);
+  STRATA_CUDA(cudaMemcpyPeerAsync(l.buffer.data(), t.target_device, t.device, device_, bytes,
+                                  push_stream_));
+  STRATA_CUDA(cudaEventRecord(l.ready, push_stream_));
+  t.device = l.buffer.data();
+  t.device_ordinal = t.target_device;
+  t.device_ready = l.ready;
+  return true;
+}
+
+void CudaExecutor::drop_landings() noexcept {
+  for (auto& [front, l] : landing_) {
+    if (l.ready) {
+      cudaEventSynchronize(l.ready);
+      cudaEventDestroy(l.ready);
+    }
+    if (l.device >= 0) {
+      cudaSetDevice(l.device);
+      l.buffer.clear();
+    }
+  }
+  landing_.clear();
+  cudaSetDevice(device_);
+}
+
 std::size_t CudaExecutor::import_cb(const numeric::FactorContext& ctx,
                                     const numeric::CbTransfer& t) {
   STRATA_CUDA(cudaSetDevice(device_));
   double* dst = cur_->cb_ptr_host[t.front];
   const std::size_t bytes = sizeof(double) * t.size;
   const bool dst_on_device = dst >= arena_.data() && dst < arena_.data() + arena_.size();
+  if (!t.on_host && t.device_ready)  // pushed here: once its copy is done
+    STRATA_CUDA(cudaStreamWaitEvent(stream_, static_cast<cudaEvent_t>(t.device_ready), 0));
   if (t.on_host) {
     STRATA_CUDA(cudaMemcpyAsync(dst, t.host, bytes, cudaMemcpyDefault, stream_));
     bytes_h2d_ += bytes;

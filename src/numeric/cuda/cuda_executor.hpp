@@ -548,6 +548,19 @@ class CudaExecutor final : public numeric::Executor {
   /// Blocks of subtree roots exported for a peer copy (or the same device), kept until
   /// the next factorization: the arena they came from is reused by the next subtree.
   std::map<index_t, DeviceBuffer<double>> outbox_;
+  /// Blocks pushed to the GPU that imports them as soon as they are exported (export_cb,
+  /// push_block), while that GPU is still busy: per part root, the buffer on that GPU and
+  /// the event on this one that completes with the copy. Kept from one factorization to
+  /// the next (the same sizes); dropped with the analysis.
+  struct Landing {
+    int device = -1;
+    DeviceBuffer<double> buffer;
+    cudaEvent_t ready = nullptr;
+  };
+  std::map<index_t, Landing> landing_;
+  cudaStream_t push_stream_ = nullptr;  ///< the pushes' copies
+  bool push_block(numeric::CbTransfer& t);
+  void drop_landings() noexcept;
   /// The value pass on the device (value_pass.cu): the canonical pattern by columns
   /// (col_ptr, col_row) and by rows (row_ptr; per entry of a row its position and
   /// column), the matching scaling, the per-row and per-column figures (6n), an

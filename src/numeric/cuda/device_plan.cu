@@ -244,6 +244,7 @@ void CudaExecutor::upload_analysis(const Analysis& an) {
   host_arena_.clear();
   parts_.clear();
   outbox_.clear();
+  drop_landings();
   cur_ = nullptr;
   planned_ = 0;
   analysis_id_ = 0;

@@ -154,7 +154,8 @@ bool CudaExecutor::team_layout(Lane& lane, double* F, std::int64_t m,
     // a helper's copies land in its pool: after its own last work (set_team's event)
     if (g > 0) STRATA_CUDA(cudaStreamWaitEvent(u.copy, x.team_.help_ready, 0));
     u.work->diag_work.resize(llt_recursive_work_size(nb));  // no reallocation between steps
-    event_at(x.team_.dist_events, 3 * static_cast<std::size_t>(P) - 1);  // E, R and D of every step
+    // E, R and D of every step, then the end of the helper's fill (distributed_llt)
+    event_at(x.team_.dist_events, 3 * static_cast<std::size_t>(P));
   }
   return true;
 }
@@ -185,22 +186,33 @@ bool CudaExecutor::distributed_llt(Lane& lane, double* F, int m, int k, int* inf
 
   // after the previous distributed front (another lane of this chunk may have had one:
   // the helpers' pools and the panel slots are shared), the helpers' blocks copied out
-  // of F once it is assembled, on each helper's stream
+  // of F once it is assembled: a helper's first block on its compute stream (it updates
+  // that block first), the others on its copy stream after panel 0 (below: fill), so that
+  // the helper starts on its first block and the first panel while the rest arrives
   STRATA_CUDA(cudaSetDevice(device_));
   if (team_.dist_done_recorded) STRATA_CUDA(cudaStreamWaitEvent(lane.stream, team_.dist_done, 0));
   STRATA_CUDA(cudaEventRecord(team_.dist_ready, lane.stream));
+  auto copy_out = [&](TeamGpu& u, int j, cudaStream_t stream) {
+    const std::size_t rb = sizeof(double) * static_cast<std::size_t>(rows(j));
+    STRATA_CUDA(cudaMemcpy2DAsync(u.block[j], rb, F + c[j] * static_cast<std::int64_t>(m) + c[j],
+                                  sizeof(double) * m, rb, width(j), cudaMemcpyDefault, stream));
+    u.ex->team_.help_bytes += 2 * rb * static_cast<std::size_t>(width(j));  // out and back
+  };
   for (int g = 1; g < G; ++g) {
     TeamGpu& u = gpu[g];
     STRATA_CUDA(cudaSetDevice(u.ex->device_));
     STRATA_CUDA(cudaStreamWaitEvent(u.work->stream, team_.dist_ready, 0));
-    for (int j = g; j < NB; j += G) {
-      const std::size_t rb = sizeof(double) * static_cast<std::size_t>(rows(j));
-      STRATA_CUDA(cudaMemcpy2DAsync(u.block[j], rb, F + c[j] * static_cast<std::int64_t>(m) + c[j],
-                                    sizeof(double) * m, rb, width(j), cudaMemcpyDefault,
-                                    u.work->stream));
-      u.ex->team_.help_bytes += 2 * rb * static_cast<std::size_t>(width(j));  // out and back
-    }
+    STRATA_CUDA(cudaStreamWaitEvent(u.copy, team_.dist_ready, 0));
+    copy_out(u, g, u.work->stream);
   }
+  // the end of helper g's fill: the event after its other blocks' copies
+  auto filled = [&](int g) { return gpu[g].ex->team_.dist_events[3 * P]; };
+  auto fill = [&](int g) {
+    TeamGpu& u = gpu[g];
+    STRATA_CUDA(cudaSetDevice(u.ex->device_));
+    for (int j = g + G; j < NB; j += G) copy_out(u, j, u.copy);
+    STRATA_CUDA(cudaEventRecord(filled(g), u.copy));
+  };
 
   const double one = 1.0, minus_one = -1.0;
   // step 1 of block p on its GPU, then its copies to the GPUs that need it
@@ -238,6 +250,10 @@ bool CudaExecutor::distributed_llt(Lane& lane, double* F, int m, int k, int* inf
   };
 
   panel(0);
+  for (int g = 1; g < G; ++g) fill(g);  // queued behind panel 0's copy to g
+  // a helper's pivot block that the owner received as a panel goes into F from there, on
+  // the owner's stream while the factorization goes on, not back from the helper at the end
+  auto placed_by_owner = [&](int p) { return p < P && owner(p) != 0 && holds_right_of(0, p); };
   for (int p = 0; p < P; ++p)
     for (int g = 0; g < G; ++g) {
       if (!holds_right_of(g, p)) continue;
@@ -251,16 +267,29 @@ bool CudaExecutor::distributed_llt(Lane& lane, double* F, int m, int k, int* inf
         STRATA_CUDA(cudaSetDevice(u.ex->device_));
         first = p + 2;
       }
-      for (int j = first; j < NB; ++j)
-        if (owner(j) == g) update(g, j, p);
+      for (int j = first; j < NB; ++j) {
+        if (owner(j) != g) continue;
+        // a helper's blocks after its first are there once its fill is (step 0 only:
+        // the stream then holds the wait for the later steps)
+        if (p == 0 && g > 0 && j > g)
+          STRATA_CUDA(cudaStreamWaitEvent(u.work->stream, filled(g), 0));
+        update(g, j, p);
+      }
+      if (g == 0 && placed_by_owner(p)) {  // before D(0, p): slot p mod 2 is read here
+        const std::size_t rb = sizeof(double) * static_cast<std::size_t>(rows(p));
+        STRATA_CUDA(cudaMemcpy2DAsync(F + c[p] * static_cast<std::int64_t>(m) + c[p],
+                                      sizeof(double) * m, u.slots[p % 2], rb, rb, width(p),
+                                      cudaMemcpyDeviceToDevice, u.work->stream));
+      }
       STRATA_CUDA(cudaEventRecord(D(g, p), u.work->stream));
     }
 
-  // the helpers' blocks and statuses back to the owner; the owner waits for them
+  // the helpers' other blocks and statuses back to the owner; the owner waits for them
   for (int g = 1; g < G; ++g) {
     TeamGpu& u = gpu[g];
     STRATA_CUDA(cudaSetDevice(u.ex->device_));
     for (int j = g; j < NB; j += G) {
+      if (placed_by_owner(j)) continue;
       const std::size_t rb = sizeof(double) * static_cast<std::size_t>(rows(j));
       STRATA_CUDA(cudaMemcpy2DAsync(F + c[j] * static_cast<std::int64_t>(m) + c[j],
                                     sizeof(double) * m, u.block[j], rb, rb, width(j),
