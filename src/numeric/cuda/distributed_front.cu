@@ -29,9 +29,11 @@
 // it and starts its copies before its other updates of step p, so the next panel is on
 // its way while every GPU is still busy with step p (the standard remedy for the serial
 // chain of panels; the panels are what ran slowly on one GPU: the recursive pivot block
-// and panel of a 4,096-pivot front reached about half the update's rate). At the end
-// each helper copies its blocks back into F, so the front leaves as the one-GPU code
-// leaves it — its contribution block stored, its panel packed, by the chunk as usual.
+// and panel of a 4,096-pivot front reached about half the update's rate). A helper's
+// pivot block that the owner receives as a panel is written into F from the owner's slot
+// as the steps go on; at the end each helper copies its other blocks back into F, so the
+// front leaves as the one-GPU code leaves it — its contribution block stored, its panel
+// packed, by the chunk as usual.
 //
 // Why whole columns and not strips of the update (split_update.cu): the pivot block and
 // panel, most of a top front's time on one GPU, are spread over the GPUs too, and what
@@ -44,7 +46,10 @@
 // copy of panel p to GPU g waits for E[p] and for D_g[p − 2] (g done with the slot it
 // overwrites), then records R_g[p]; W_g waits for R_g[p] before its step-3 updates of p
 // and records D_g[p] after them. One stream per GPU for compute keeps the blocks' updates
-// in step order without more events.
+// in step order without more events. A helper's first block is copied out of F on W_g, its
+// other blocks on C_g behind panel 0's copy, recording the fill event that W_g waits for
+// before its first update of those blocks: the helper starts on its first block and the
+// next panel while the rest arrives.
 //
 // Results: every entry gets the same products as in the one-GPU factorization, in
 // another order of summation (blocks of nb columns), so the factor agrees with the
