@@ -9,7 +9,8 @@
     does not, and an activity that ends late keeps the window open (worked by hand);
   * short_name drops template arguments, parameters and the launch shape;
   * the command line on a small CSV written here: the window list and a window's sums
-    (busy time per device, the largest gap), worked by hand.
+    (busy time per device, the largest gap), and a host call listed with --api but in no
+    window, worked by hand.
 """
 import os
 import random
@@ -71,6 +72,8 @@ with tempfile.TemporaryDirectory() as d:
         # window 1: device 0 9.0..9.5, a gap of 0.3, 9.8..10.0
         f.write('kernel,0,7,9000000,9500000,0,"c grid=1.1.1 block=32.1.1"\n')
         f.write('memcpy_p2p,0,7,9800000,10000000,2000000,"PtoP 1->0"\n')
+        # a host call 0.5 ms before window 1 (not device activity: no window of its own)
+        f.write('api,-1,4242,8500000,8900000,0,"cudaFree_v3020"\n')
     script = os.path.join(HERE, "..", "bench", "tools", "trace_summary.py")
     out = subprocess.run([sys.executable, script, path], capture_output=True, text=True).stdout
     check("0: 2.000, 1: 0.700" in out, f"window 0's busy figures in:\n{out}")
@@ -78,6 +81,10 @@ with tempfile.TemporaryDirectory() as d:
     out = subprocess.run([sys.executable, script, path, "--window", "-1"], capture_output=True,
                          text=True).stdout
     check("busy 0.700 ms" in out and "0.300 @ 0.500" in out, f"window 1's sums in:\n{out}")
+    check(out.count("window:") == 1 and "cudaFree" not in out, f"a host call outside --api:\n{out}")
+    out = subprocess.run([sys.executable, script, path, "--window", "1", "--api", "0.1"],
+                         capture_output=True, text=True).stdout
+    check("-0.500    0.400 thread       4242 cudaFree_v3020" in out, f"the host call listed in:\n{out}")
 
 if failures:
     print(f"{len(failures)} failures")

@@ -10,12 +10,14 @@
 //
 //   kind,device,stream,start_ns,end_ns,bytes,detail
 //
-// kind is kernel, memcpy, memcpy_p2p or memset; start_ns and end_ns are CUPTI's GPU
-// timestamps (nanoseconds, one clock for all devices); bytes is 0 for kernels; detail is
-// the kernel's name with its grid and block ("name grid=gx.gy.gz block=bx.by.bz"), a
-// copy's direction (HtoD, DtoH, DtoD, PtoP src->dst, ...), or empty. bench/tools/
-// trace_summary.py cuts the timeline into windows of activity and sums each window by
-// device, kernel name and copy kind.
+// kind is kernel, memcpy, memcpy_p2p, memset, or api: a CUDA runtime call on the host (its
+// "device" column is -1 and its "stream" column the calling thread's id, shortened to 32
+// bits); start_ns and end_ns are CUPTI's timestamps (nanoseconds, one clock for the host
+// and all devices); bytes is 0 for kernels and calls; detail is the kernel's name with its
+// grid and block ("name grid=gx.gy.gz block=bx.by.bz"), a copy's direction (HtoD, DtoH,
+// DtoD, PtoP src->dst, ...), the call's name, or empty. bench/tools/trace_summary.py cuts
+// the devices' timeline into windows of activity and sums each window by device, kernel
+// name and copy kind, and lists the host's long calls in it.
 //
 // Why: where a factorization's time goes between kernels (copies, gaps, launch chains) is
 // what per-kernel profilers do not show.
@@ -114,6 +116,15 @@ void CUPTIAPI buffer_completed(CUcontext, std::uint32_t, std::uint8_t* buffer, s
                            "->" + std::to_string(m->dstDeviceId)});
         break;
       }
+      case CUPTI_ACTIVITY_KIND_RUNTIME: {
+        const auto* a = reinterpret_cast<const CUpti_ActivityAPI*>(rec);
+        const char* name = nullptr;
+        if (cuptiGetCallbackName(CUPTI_CB_DOMAIN_RUNTIME_API, a->cbid, &name) != CUPTI_SUCCESS)
+          name = nullptr;
+        got.push_back({"api", static_cast<std::uint32_t>(-1), a->threadId, a->start, a->end, 0,
+                       name ? name : "?"});
+        break;
+      }
       case CUPTI_ACTIVITY_KIND_MEMSET: {
         const auto* m = reinterpret_cast<const CUpti_ActivityMemset4*>(rec);
         got.push_back({"memset", m->deviceId, m->streamId, m->start, m->end, m->bytes, ""});
@@ -144,8 +155,9 @@ struct Tracer {
       report("cuptiActivityRegisterCallbacks", r);
       return;
     }
-    for (CUpti_ActivityKind k : {CUPTI_ACTIVITY_KIND_CONCURRENT_KERNEL, CUPTI_ACTIVITY_KIND_MEMCPY,
-                                 CUPTI_ACTIVITY_KIND_MEMCPY2, CUPTI_ACTIVITY_KIND_MEMSET})
+    for (CUpti_ActivityKind k :
+         {CUPTI_ACTIVITY_KIND_CONCURRENT_KERNEL, CUPTI_ACTIVITY_KIND_MEMCPY,
+          CUPTI_ACTIVITY_KIND_MEMCPY2, CUPTI_ACTIVITY_KIND_MEMSET, CUPTI_ACTIVITY_KIND_RUNTIME})
       if ((r = cuptiActivityEnable(k)) != CUPTI_SUCCESS) {
         report("cuptiActivityEnable", r);
         return;
@@ -170,7 +182,7 @@ struct Tracer {
               [](const Activity& a, const Activity& b) { return a.start < b.start; });
     std::fprintf(f, "kind,device,stream,start_ns,end_ns,bytes,detail\n");
     for (const Activity& a : g_records)
-      std::fprintf(f, "%s,%u,%u,%llu,%llu,%llu,%s\n", a.kind, a.device, a.stream,
+      std::fprintf(f, "%s,%d,%u,%llu,%llu,%llu,%s\n", a.kind, static_cast<int>(a.device), a.stream,
                    static_cast<unsigned long long>(a.start), static_cast<unsigned long long>(a.end),
                    static_cast<unsigned long long>(a.bytes), csv_field(a.detail).c_str());
     std::fclose(f);

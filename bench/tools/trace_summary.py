@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 """Sums a GPU timeline written by bench/tools/cupti_trace.cpp (CSV: kind, device, stream,
-start_ns, end_ns, bytes, detail).
+start_ns, end_ns, bytes, detail; the host's CUDA runtime calls are kind "api", device -1,
+stream the calling thread).
 
 The timeline is cut into windows: runs of activity separated by an idle gap of at least
 --gap milliseconds on every device (a benchmark's factorizations and solves are separated
@@ -8,7 +9,9 @@ by host work). Without --window it lists the windows (start, length, activities,
 busy time per device); with --window K (0-based, negative from the end) it sums window K:
 per device the busy time (the union of its activities' intervals), per kernel name and per
 copy kind the count and the summed time, copy bytes and rate, the largest idle gaps inside
-the window, and with --timeline N its first N activities in order.
+the window, and with --timeline N its first N activities in order. With --api MS it also
+lists the host's runtime calls of at least MS milliseconds from --lead milliseconds before
+the window to its end, and sums the calls by thread and name.
 
     python3 bench/tools/trace_summary.py trace.csv
     python3 bench/tools/trace_summary.py trace.csv --window -1 --top 25
@@ -96,6 +99,27 @@ def list_windows(ws):
         print(f"{i:>6} {(w[0]['start'] - t0) / 1e6:>10.3f} {length / 1e6:>10.3f} {len(w):>10}  {per}")
 
 
+def host_calls(api, t0, t1, lead_ns, min_ns):
+    """The runtime calls that start in [t0 - lead, t1]: the long ones, and sums by thread."""
+    calls = [r for r in api if t0 - lead_ns <= r["start"] <= t1]
+    if not calls:
+        return
+    print(f"\nhost runtime calls from {lead_ns / 1e6:.1f} ms before the window (ms from its start):")
+    by = defaultdict(lambda: [0, 0])
+    for r in calls:
+        v = by[(r["stream"], r["detail"])]
+        v[0] += 1
+        v[1] += r["end"] - r["start"]
+    for (thread, name), (n, ns) in sorted(by.items(), key=lambda kv: -kv[1][1])[:15]:
+        print(f"  thread {thread:>10} {name:<40} {n:>6} calls {ns / 1e6:>9.3f} ms")
+    for r in calls:
+        if r["end"] - r["start"] >= min_ns:
+            print(
+                f"  {(r['start'] - t0) / 1e6:>9.3f} {(r['end'] - r['start']) / 1e6:>8.3f} "
+                f"thread {r['stream']:>10} {r['detail']}"
+            )
+
+
 def summarize(w, top, timeline):
     t0 = w[0]["start"]
     t1 = max(r["end"] for r in w)
@@ -153,15 +177,22 @@ def main():
     ap.add_argument("--window", type=int, help="the window to sum (negative: from the end)")
     ap.add_argument("--top", type=int, default=20, help="rows of the per-name table")
     ap.add_argument("--timeline", type=int, default=0, help="print the window's first N activities")
+    ap.add_argument("--api", type=float, help="list the host's runtime calls of at least this many ms")
+    ap.add_argument("--lead", type=float, default=5.0, help="ms before the window whose calls --api lists")
     a = ap.parse_args()
     rows = load(a.trace)
+    api = [r for r in rows if r["kind"] == "api"]
+    rows = [r for r in rows if r["kind"] != "api"]
     if not rows:
         sys.exit(f"{a.trace}: no activities")
     ws = windows(rows, int(a.gap * 1e6))
     if a.window is None:
         list_windows(ws)
     else:
-        summarize(ws[a.window], a.top, a.timeline)
+        w = ws[a.window]
+        summarize(w, a.top, a.timeline)
+        if a.api is not None:
+            host_calls(api, w[0]["start"], max(r["end"] for r in w), int(a.lead * 1e6), int(a.api * 1e6))
 
 
 if __name__ == "__main__":

@@ -226,7 +226,6 @@ bool CudaExecutor::reads_host_values() const {
 
 void CudaExecutor::begin(const numeric::FactorContext& ctx) {
   STRATA_CUDA(cudaSetDevice(device_));
-  outbox_.clear();
   whole_ = false;  // until begin_part says which part: no resident factor from no part
   const Analysis& an = *ctx.analysis;
   bytes_h2d_ = bytes_d2h_ = 0;
@@ -434,6 +433,9 @@ std::size_t CudaExecutor::export_cb(const numeric::FactorContext& ctx, numeric::
   if (t.target_device == device_ || peer) {  // stays on this GPU until the importer copies
     DeviceBuffer<double>& box = outbox_[t.front];
     box.resize(t.size);
+    // the box is kept from one factorization to the next: after the last push out of it
+    if (const auto l = landing_.find(t.front); l != landing_.end() && l->second.ready)
+      STRATA_CUDA(cudaStreamWaitEvent(stream_, l->second.ready, 0));
     STRATA_CUDA(cudaMemcpyAsync(box.data(), src, bytes, cudaMemcpyDefault, stream_));
     STRATA_CUDA(cudaStreamSynchronize(stream_));
     t.device = box.data();

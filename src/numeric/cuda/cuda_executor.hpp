@@ -545,8 +545,10 @@ class CudaExecutor final : public numeric::Executor {
   std::map<int, DeviceBuffer<double>> part_panels_;
   std::vector<int> held_parts_;  ///< parts of this factorization kept so (the rest are freed)
   int planned_ = 0;              ///< parts_ planned for: 0 nothing, 1 whole, 2 split
-  /// Blocks of subtree roots exported for a peer copy (or the same device), kept until
-  /// the next factorization: the arena they came from is reused by the next subtree.
+  /// Blocks of subtree roots exported for a peer copy (or the same device): the arena they
+  /// came from is reused by the next subtree. Kept from one factorization to the next (the
+  /// same sizes: freeing and allocating them again at every factorization cost each GPU a
+  /// synchronizing cudaFree before its first launch); dropped with the analysis.
   std::map<index_t, DeviceBuffer<double>> outbox_;
   /// Blocks pushed to the GPU that imports them as soon as they are exported (export_cb,
   /// push_block), while that GPU is still busy: per part root, the buffer on that GPU and
