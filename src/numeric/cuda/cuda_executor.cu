@@ -235,7 +235,7 @@ void CudaExecutor::begin(const numeric::FactorContext& ctx) {
   held_parts_.clear();
   dsolve_.resident_for = nullptr;
   dsolve_.part_rows_current = false;
-  pending_.clear();  // chunks left by a factorization that failed
+  pending_ = nullptr;  // a chunk left by a factorization that failed
   // strips of another executor's front still in flight (its factorization failed before
   // its end_part): they write into this pool
   if (team_.helped) {

@@ -352,11 +352,9 @@ class CudaExecutor final : public numeric::Executor {
   void chunk_large_fronts(const numeric::FactorContext& ctx, const ChunkRecord& rec);
   void chunk_pack_panels(const numeric::FactorContext& ctx, ChunkRecord& rec);
   void chunk_fetch_results(ChunkRecord& rec);
-  /// Runs the pending chunks' host parts, if any (before anything that needs the host
+  /// Runs the pending chunk's host part, if any (before anything that needs the host
   /// factor complete: a tiled front, the end of a part or of the factorization).
   void flush_chunk(const numeric::FactorContext& ctx);
-  /// Runs the oldest pending chunk's host part.
-  void flush_oldest_chunk(const numeric::FactorContext& ctx);
   void finish_chunk(const numeric::FactorContext& ctx, ChunkRecord& c);
   /// A front over the budget, factored through the device in pieces: LLᵀ by
   /// factor_tiled_llt (tiled_llt.cu), LU slab by slab right-looking (tiled_front.cu).
@@ -658,14 +656,10 @@ class CudaExecutor final : public numeric::Executor {
   cudaStream_t copy_stream_ = nullptr;
   cudaEvent_t panels_copied_ = nullptr;
   bool copy_issued_ = false;
-  /// Chunk records used in turn. A fused chunk's host part runs once the two chunks after
-  /// it are queued on the device (factor_chunk_fused), so that the device does not wait
-  /// for the host between short chunks; other chunks keep one record in flight.
-  static constexpr int kChunkRecords = 3;
-  ChunkRecord chunk_[kChunkRecords];
+  /// Two chunk records used in turn: one launched, the previous one finishing on the host.
+  ChunkRecord chunk_[2];
   int slot_ = 0;
-  /// Launched chunks whose host part has not run yet, oldest first.
-  std::vector<ChunkRecord*> pending_;
+  ChunkRecord* pending_ = nullptr;
   FactorStats::DevicePhases phases_;  ///< summed over the chunks of the factorization
   /// Several GPUs' help with one large front (split_update.cu, distributed_front.cu).
   struct GpuTeam {

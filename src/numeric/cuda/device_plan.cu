@@ -386,9 +386,9 @@ void CudaExecutor::presize_chunk_buffers(const Analysis& an,
     }
   }
   for (auto* b : {&info_, &perturbed_}) b->resize(count + 1);
-  // a fused chunk's results, one part per chunk record: info and perturbed per front, then
+  // a fused chunk's results, one half per chunk record: info and perturbed per front, then
   // its pivots' permutation and diagonal entries (factor_chunk_fused)
-  packed_results_.resize(kChunkRecords * (2 * count + 2 * pivots + 1));
+  packed_results_.resize(2 * (2 * count + 2 * pivots + 1));
   // every chunk's layout at 6 × its first position (chunk_layout)
   for (const numeric::PartView& v : views) {
     PartDevice& pd = parts_.at(v.id);

@@ -3,8 +3,7 @@
 // is assembled in one launch, its small fronts factored in one launch, its large fronts
 // on the lanes, its contribution blocks stored and its panels packed and copied back.
 // The host bookkeeping of a chunk (pivot checks, LDLᵀ's D and pivot sizes, the
-// statistics) runs while the next chunk computes (flush_chunk / finish_chunk), a fused
-// chunk's once the next two are launched.
+// statistics) runs while the next chunk computes (flush_chunk / finish_chunk).
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -59,10 +58,7 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
   const auto& s = *ctx.part->schedule;
   ++chunks_;
   ChunkRecord& rec = chunk_[slot_];
-  slot_ = (slot_ + 1) % kChunkRecords;
-  // the record's last chunk: its host part first (it reads the record)
-  while (std::find(pending_.begin(), pending_.end(), &rec) != pending_.end())
-    flush_oldest_chunk(ctx);
+  slot_ ^= 1;
   rec.begin = begin;
   rec.end = end;
   rec.lu = ctx.type == MatrixType::general;
@@ -94,30 +90,26 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
   // writes to the host factor (panels copied back, LDLᵀ): the next chunk's stores would
   // overwrite the staging area it reads
   flush_chunk(ctx);
-  pending_.push_back(&rec);
+  pending_ = &rec;
   if (rec.ldlt && !rec.dev_only) flush_chunk(ctx);
 }
 
 // A chunk of small LU fronts whose panels stay on the device, by one launch
 // (launch_lu_small_fused), its results (pivot checks, permutations, diagonals) written
-// back to back into the record's part of packed_results_ and fetched by one copy instead
+// back to back into the record's half of packed_results_ and fetched by one copy instead
 // of four, on copy_stream_: each copy has a latency of its own, and a chunk of the
 // multibody matrices' lower levels computes for a few tens of microseconds, so the next
-// chunk's launch does not wait for it. Its host part (finish_chunk: every front's rows,
-// pivot statistics, determinant) runs only once the next two chunks are launched: it
-// takes longer than some chunks compute, and run right after the next chunk's launch it
-// held the launch after that while the device waited. Nothing a later chunk launches reads
-// what the host part writes (the host factor's rows and statistics). The part is not
-// written again before this chunk's host part has waited for the copy (the record's next
-// chunk comes after that). Timed from ev[1] to ev[2] (small fronts); ev[5] ends the copy.
+// chunk's launch does not wait for it. The half is not written again before this chunk's
+// host part has waited for the copy (the record's next chunk comes after that). Timed
+// from ev[1] to ev[2] (small fronts); ev[5] ends the copy.
 void CudaExecutor::factor_chunk_fused(const numeric::FactorContext& ctx, ChunkRecord& rec) {
   ++fused_chunks_;
   double* const pack_to = chunk_panel_target(ctx);
   const std::size_t ns = rec.small.size(), np = static_cast<std::size_t>(rec.perm_total);
   const std::size_t nd = static_cast<std::size_t>(rec.diag_off.back());
-  const std::size_t part = packed_results_.size() / kChunkRecords;
-  std::int64_t* const r = packed_results_.data() + static_cast<std::size_t>(&rec - chunk_) * part;
-  if (2 * ns + np + nd > part)
+  const std::size_t half = packed_results_.size() / 2;
+  std::int64_t* const r = packed_results_.data() + (&rec == &chunk_[0] ? 0 : half);
+  if (2 * ns + np + nd > half)
     throw InternalError("factor_chunk_fused: the results buffer was not sized for this chunk");
   STRATA_CUDA(cudaEventRecord(rec.ev[1], stream_));
   launch_lu_small_fused(cur_->tree, rec.small_pos, static_cast<std::int64_t>(ns), rec.max_rows,
@@ -136,10 +128,8 @@ void CudaExecutor::factor_chunk_fused(const numeric::FactorContext& ctx, ChunkRe
   rec.perm_at = rec.info_at + 2 * ns;
   rec.diag_at = reinterpret_cast<const double*>(rec.info_at + 2 * ns + np);
   STRATA_CUDA(cudaEventRecord(rec.ev[5], copy_stream_));
-  // the host part of the chunk two before this one, while the GPU runs the one before and
-  // this one
-  pending_.push_back(&rec);
-  while (pending_.size() > static_cast<std::size_t>(kChunkRecords) - 1) flush_oldest_chunk(ctx);
+  flush_chunk(ctx);  // the previous chunk's host part, while the GPU runs this one
+  pending_ = &rec;
 }
 
 // Step 2 for the small fronts (rec.small from chunk_layout, one thread block each, one
@@ -435,17 +425,12 @@ void CudaExecutor::chunk_fetch_results(ChunkRecord& rec) {
 }
 
 void CudaExecutor::flush_chunk(const numeric::FactorContext& ctx) {
-  while (!pending_.empty()) flush_oldest_chunk(ctx);
-}
-
-void CudaExecutor::flush_oldest_chunk(const numeric::FactorContext& ctx) {
-  if (pending_.empty()) return;
-  ChunkRecord& c = *pending_.front();
-  pending_.erase(pending_.begin());
+  if (!pending_) return;
+  ChunkRecord& c = *pending_;
+  pending_ = nullptr;
   try {
     finish_chunk(ctx, c);
   } catch (...) {
-    pending_.clear();  // the factorization fails: no later chunk's host part runs
     // a later chunk may still run (on a failed pivot's NaNs): let it end before the
     // buffers it uses can be freed or reused
     (void)cudaDeviceSynchronize();
