@@ -26,6 +26,10 @@
 // cuptiActivityRegisterCallbacks, cuptiActivityEnable, cuptiActivityFlushAll. Records are
 // copied out of CUPTI's buffers as they complete, so a buffer is reused at once.
 //
+// The host's runtime calls are recorded only with STRATA_CUPTI_API=1: recording them costs
+// time in every call, enough to open gaps of its own between launches of a few tens of
+// microseconds (bench/history.md), so the device's timeline is then not the untraced one.
+//
 // Without STRATA_CUPTI_TRACE set the library does nothing. Errors from CUPTI are reported
 // on stderr once, and the program runs on untraced. Child processes inherit LD_PRELOAD
 // (a benchmark's popen of git or nvidia-smi): a process that recorded nothing writes
@@ -155,13 +159,17 @@ struct Tracer {
       report("cuptiActivityRegisterCallbacks", r);
       return;
     }
+    const char* api = std::getenv("STRATA_CUPTI_API");
+    const bool calls = api && std::string(api) == "1";
     for (CUpti_ActivityKind k :
          {CUPTI_ACTIVITY_KIND_CONCURRENT_KERNEL, CUPTI_ACTIVITY_KIND_MEMCPY,
-          CUPTI_ACTIVITY_KIND_MEMCPY2, CUPTI_ACTIVITY_KIND_MEMSET, CUPTI_ACTIVITY_KIND_RUNTIME})
+          CUPTI_ACTIVITY_KIND_MEMCPY2, CUPTI_ACTIVITY_KIND_MEMSET, CUPTI_ACTIVITY_KIND_RUNTIME}) {
+      if (k == CUPTI_ACTIVITY_KIND_RUNTIME && !calls) continue;
       if ((r = cuptiActivityEnable(k)) != CUPTI_SUCCESS) {
         report("cuptiActivityEnable", r);
         return;
       }
+    }
     g_pid = getpid();
     g_enabled = true;
   }

@@ -10,7 +10,7 @@ busy time per device); with --window K (0-based, negative from the end) it sums 
 per device the busy time (the union of its activities' intervals), per kernel name and per
 copy kind the count and the summed time, copy bytes and rate, the largest idle gaps inside
 the window, and with --timeline N its first N activities in order. With --api MS it also
-lists the host's runtime calls of at least MS milliseconds from --lead milliseconds before
+lists the host's runtime calls (recorded with STRATA_CUPTI_API=1) of at least MS milliseconds from --lead milliseconds before
 the window to its end, and sums the calls by thread and name.
 
     python3 bench/tools/trace_summary.py trace.csv
