@@ -58,31 +58,24 @@ constexpr int kThreads = 2 * kBase;  // one row each: the diagonal block's, then
 // diagonal block over its 64 panel rows): the panel rows come out as A_b·L_jj⁻ᵀ, the
 // forward substitution, with the same operations as the diagonal block's rows below the
 // diagonal. Thread t holds row t of that matrix in registers (threads 0–63 the diagonal
-// block's rows, 64–127 the panel rows). Column j (one barrier per column): the diagonal
-// block's threads have published their entries of column j, not yet scaled, in column j
-// of U (shared memory); every thread reads d = U(j, j), scales its own entry,
-// l(t, j) = a(t, j)/√d, stores it (the panel rows into P, block 0's diagonal rows into
-// the slot), and updates its entries right of j, a(t, c) −= l(t, j)·U(c, j)/√d; the
-// diagonal block's threads then publish column j + 1 into U's next column (no column is
-// written twice, so one barrier per column is enough).
-// The column loop is not unrolled: the row's registers move one place left after each
-// column, so that column j is always a[0] and the update's register indices are
-// compile-time. That costs 63 updates per column where 63 − j would do (the places past
-// column 63 are never read back), but keeps the code to one column's worth: the fully
-// unrolled loop (about 4,000 instructions) stalled on fetching its own instructions. Every
-// entry gets the same operations as in the unrolled form. U holds column j at
-// (63 − j)·64, so that the reads for the places past column 63 fall in column j − 1, which
-// no thread writes any more, and not in column j + 1, being written.
-__host__ __device__ constexpr int u_column(int j) { return (kBase - 1 - j) * kBase; }
+// block's rows, 64–127 the panel rows); every loop is unrolled, so the register indices
+// are compile-time. Column j (one barrier per column): the diagonal block's threads publish
+// their entries of column j, not yet scaled, in column j of U (shared memory); after the
+// barrier every thread reads d = U(j, j), scales its own entry, l(t, j) = a(t, j)/√d, and
+// updates its entries right of j, a(t, c) −= l(t, j)·U(c, j)/√d; the diagonal block's
+// threads then publish column j + 1 into U's next column (no column is written twice, so
+// one barrier per column is enough).
+// The limit of this kernel is issue latency, not the FP64 pipe (Nsight Compute); the
+// variants measured against it (a 16 × 16 grid of register tiles, rows in shared memory
+// with rolled loops, 32 columns per base case) are in bench/history.md.
 __global__ void __launch_bounds__(kThreads)
     llt_base_kernel(double* P, std::int64_t ld, std::int64_t rows, int w, double* slot, int* info,
                     std::int64_t col0) {
-  __shared__ double U[kBase * kBase];  // column j at u_column(j): the diagonal block's, unscaled
+  __shared__ double U[kBase * kBase];  // column j: the diagonal block's column j, unscaled
   if (col0 > 0 && *info != 0) return;  // an earlier base case of this front failed
   const int t = threadIdx.x;
   const bool diag = t < kBase;
   const std::int64_t pr = w + static_cast<std::int64_t>(blockIdx.x) * kBase + (t - kBase);
-  const bool store_row = diag ? blockIdx.x == 0 : pr < rows;
   double a[kBase];
   if (diag) {
 #pragma unroll
@@ -91,12 +84,13 @@ __global__ void __launch_bounds__(kThreads)
 #pragma unroll
     for (int c = 0; c < kBase; ++c) a[c] = pr < rows && c < w ? P[c * ld + pr] : 0.0;
   }
-  if (diag) U[u_column(0) + t] = a[0];
+  if (diag) U[t] = a[0];
   __syncthreads();
   int fail = -1;  // the same in every thread (every thread reads the same d)
-#pragma unroll 1
-  for (int j = 0; j < w; ++j) {
-    const double d = U[u_column(j) + j];
+#pragma unroll
+  for (int j = 0; j < kBase; ++j) {
+    if (j >= w) break;
+    const double d = U[j * kBase + j];
     if (!(d > 0.0)) {
       fail = j;
       break;
@@ -104,20 +98,13 @@ __global__ void __launch_bounds__(kThreads)
     const double rs = rsqrt(d);
     // the diagonal block's rows above j: zero (their entries right of the diagonal are
     // never read, and the zero keeps them from growing)
-    const double l = diag ? (t > j ? a[0] * rs : (t == j ? d * rs : 0.0)) : a[0] * rs;
-    if (store_row) {
-      if (diag)
-        slot[j * kBase + t] = t < w ? l : 0.0;
-      else
-        P[j * ld + pr] = l;
-    }
+    const double l = diag ? (t > j ? a[j] * rs : (t == j ? d * rs : 0.0)) : a[j] * rs;
+    a[j] = l;
     const double f = l * rs;
-    const double* u = U + u_column(j) + j;  // U(j + c, j) at u[c] while j + c < 64
 #pragma unroll
-    for (int c = 1; c < kBase; ++c) a[c - 1] = a[c] - f * u[c];
-    a[kBase - 1] = 0.0;
+    for (int c = j + 1; c < kBase; ++c) a[c] -= f * U[j * kBase + c];
     if (j + 1 < w) {
-      if (diag) U[u_column(j + 1) + t] = a[0];
+      if (diag) U[(j + 1) * kBase + t] = a[j + 1];
       __syncthreads();
     }
   }
@@ -126,8 +113,16 @@ __global__ void __launch_bounds__(kThreads)
     return;
   }
   if (blockIdx.x == 0 && t == 0 && col0 == 0) *info = 0;
-  if (diag && blockIdx.x == 0)  // the slot's columns past w
-    for (int c = w; c < kBase; ++c) slot[c * kBase + t] = 0.0;
+  if (diag) {
+    if (blockIdx.x == 0) {
+#pragma unroll
+      for (int c = 0; c < kBase; ++c) slot[c * kBase + t] = c <= t && t < w ? a[c] : 0.0;
+    }
+  } else if (pr < rows) {
+#pragma unroll
+    for (int c = 0; c < kBase; ++c)
+      if (c < w) P[c * ld + pr] = a[c];
+  }
 }
 
 // Block (b, y), y ≤ b, is the 64 × 64 tile of the k × k pivot block at rows 64y, columns
