@@ -117,10 +117,14 @@ struct NumericState {
 
 /// Collective with receive_values: rank 0 sends each rank r > 0 the scaled values at
 /// ns.value_positions[r], packed in that order (MPI point-to-point, one message per
-/// rank; NCCL between GPU ranks, ns.nccl). `values`: all nnz scaled values. Adds the
+/// rank; NCCL between GPU ranks, ns.nccl). `values`: all nnz scaled values, or, with
+/// `device_values` (NCCL only), their size alone: the values are then those nnz on rank 0's
+/// NCCL GPU, where the value pass ran (DistributedDriver::scale_values_on_device). Adds the
 /// bytes sent to ns.stats.values_bytes. An error on any rank (an InternalError for a
-/// position past the values; DeviceError) is thrown on every rank (agree()).
-void send_values(detail::CommImpl& comm, NumericState& ns, const std::vector<double>& values);
+/// position past the values or device values without NCCL; DeviceError) is thrown on
+/// every rank (agree()).
+void send_values(detail::CommImpl& comm, NumericState& ns, const std::vector<double>& values,
+                 const double* device_values = nullptr);
 /// Ranks r > 0: receives this rank's scaled values into `values`, which is made nnz long
 /// (zero-filled) when it is not: only this rank's positions are written, the others are
 /// never read by its fronts. With NCCL they arrive on the rank's first GPU

@@ -111,6 +111,16 @@ void setup_numeric(DistributedState& s, Analysis& an, int per_rank) {
     // staged onto its NCCL GPU on the NCCL stream (nccl_transport.cpp; an unordered staging
     // copy there once gave a wrong 2 × 2 factor, docs/distributed.md §5)
     ns.nccl = gpu && comm.size() > 1;
+    // the value pass on rank 0's first GPU for the whole tree (DistributedDriver::
+    // scale_values_on_device); a failure here leaves the host's pass
+    if (ns.nccl && comm.rank() == 0 && !ns.executors.empty()) {
+      try {
+        ns.executors[0]->prepare_shared_value_pass(an);
+      } catch (const InternalError&) {
+        throw;
+      } catch (const Error&) {
+      }
+    }
 #endif
   } catch (...) {
     failed = std::current_exception();
@@ -137,15 +147,48 @@ class DistributedDriver final : public numeric::NumericDriver {
   DistributedDriver(DistributedState& s, int per_rank) : s_(s), per_rank_(per_rank) {}
   int workers() const override { return s_.comm.size() * per_rank_; }
   bool in_one_process() const override { return false; }
-  // GPU ranks: rank 0's executors upload its scaled values (the Solver pins them); the
-  // value pass on a device is refused (scale_values_on_device's default)
+  // GPU ranks: rank 0's executors upload its scaled values (the Solver pins them), or,
+  // with NCCL, the value pass runs on rank 0's first GPU (scale_values_on_device)
   bool uploads_values() const override { return wants_gpu(s_); }
+  // The value pass (checks, norms, scaling) on rank 0's first GPU, from which the values go
+  // to the other ranks by NCCL (send_values) and to rank 0's other GPUs device to device, as
+  // one process with several GPUs makes it (MultiWorkerDriver), instead of a pass over
+  // every entry on rank 0's host while the other ranks wait for their values. Refused
+  // without NCCL (MPI sends host values) and where an executor of rank 0 reads values on
+  // the host; the Solver then makes the host's pass.
+  bool scale_values_on_device(const Analysis& an, const double* values,
+                              const numeric::StageValues& stage, int max_sweeps, bool copy_input,
+                              numeric::DeviceValueNorms& out) override {
+    const NumericState& ns = s_.numeric;
+    if (!ns.nccl || ns.executors.empty()) return false;
+    for (const auto& e : ns.executors)
+      if (e->reads_host_values()) return false;
+    return ns.executors[0]->scale_values_on_device(an, values, stage, max_sweeps, copy_input, out);
+  }
+  bool download_scaled_values(const Analysis& an, double* host) override {
+    return s_.numeric.nccl && !s_.numeric.executors.empty() &&
+           s_.numeric.executors[0]->download_scaled_values(an, host);
+  }
+  bool keep_device_input(const Analysis& an) override {
+    return s_.numeric.nccl && !s_.numeric.executors.empty() &&
+           s_.numeric.executors[0]->keep_device_input(an);
+  }
+  bool download_device_input(const Analysis& an, double* host) override {
+    return s_.numeric.nccl && !s_.numeric.executors.empty() &&
+           s_.numeric.executors[0]->download_device_input(an, host);
+  }
   void factorize(const Analysis& an, const std::vector<double>& values, bool values_on_device,
                  MatrixType type, const numeric::PivotPolicy& pivots,
                  numeric::NumericFactor& factor) override {
     const double pivot = pivots.static_pivot;
-    if (values_on_device)
-      throw InternalError("the distributed driver has no value pass on a device");
+    const double* device_values = nullptr;
+    if (values_on_device) {  // scale_values_on_device's result on rank 0's first GPU
+      device_values = s_.numeric.executors.empty()
+                          ? nullptr
+                          : s_.numeric.executors[0]->device_scaled_values(an);
+      if (!device_values)
+        throw InternalError("values on the device from no value pass of this analysis");
+    }
     detail::CommImpl& comm = *s_.comm.impl();
     ByteCount bytes(comm);
     Header h;
@@ -156,7 +199,7 @@ class DistributedDriver final : public numeric::NumericDriver {
     try {
       send_command(comm, h);
       Timer sending;
-      send_values(comm, s_.numeric, values);
+      send_values(comm, s_.numeric, values, device_values);
       s_.numeric.stats.values_seconds += sending.seconds();
       run_factor(s_, an, values, type, pivot, factor);
     } catch (...) {

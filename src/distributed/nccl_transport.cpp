@@ -130,15 +130,15 @@ NcclContext& context(detail::CommImpl& comm, NumericState& ns, int device) {
 
 }  // namespace
 
-void send_values_nccl(detail::CommImpl& comm, NumericState& ns, const std::vector<double>& values,
-                      int device, std::exception_ptr failed) {
+void send_values_nccl(detail::CommImpl& comm, NumericState& ns, const double* values,
+                      std::size_t nnz, int device, std::exception_ptr failed) {
   const int ranks = comm.size();
   ns.device_values = nullptr;
   NcclContext* c = nullptr;
   try {
     c = &context(comm, ns, device);
     if (!failed) {
-      c->full.resize(std::max<std::size_t>(values.size(), 1));
+      c->full.resize(std::max<std::size_t>(nnz, 1));
       c->shares.resize(ranks);
       c->positions.resize(ranks);
       const bool upload = c->positions_generation != ns.positions_generation;
@@ -156,9 +156,8 @@ void send_values_nccl(detail::CommImpl& comm, NumericState& ns, const std::vecto
   // so that none is left waiting in an NCCL receive
   agree(comm, failed);
   cudaStream_t s = c->stream;
-  if (!values.empty())
-    cuda_check(cudaMemcpyAsync(c->full.data(), values.data(), sizeof(double) * values.size(),
-                               cudaMemcpyHostToDevice, s),
+  if (nnz > 0)  // cudaMemcpyDefault: host memory, or the device where the value pass ran
+    cuda_check(cudaMemcpyAsync(c->full.data(), values, sizeof(double) * nnz, cudaMemcpyDefault, s),
                "cudaMemcpyAsync (values)");
   cuda_check(cudaEventRecord(c->copied, s), "cudaEventRecord");
   for (int r = 1; r < ranks; ++r)

@@ -17,17 +17,18 @@
 namespace strata::distributed {
 
 /// Rank 0's side of a collective with receive_values_nccl, at every factorization: its
-/// scaled values (all nnz, page-locked by the Solver for a direct copy) uploaded once to
-/// its NCCL GPU `device` (its first executor's), each rank r's share (ns.value_positions[r])
-/// gathered there and sent by NCCL. Sets ns.device_values to the uploaded array, from which
+/// `nnz` scaled values — in host memory (page-locked by the Solver for a direct copy) or
+/// already on its NCCL GPU `device` (its first executor's, where the value pass ran) —
+/// copied once into a buffer there, each rank r's share (ns.value_positions[r]) gathered
+/// there and sent by NCCL. Sets ns.device_values to the uploaded array, from which
 /// rank 0's executors copy the values device to device. `failed`: this rank's error from
 /// its checks (or null), agreed with every rank after the device buffers are allocated
 /// and before anything travels, so that every rank throws the same error (agree()) and
 /// none waits in a receive. Returns once the upload is done (the sends finish beside the
 /// factorization). Counts the bytes in comm's counters. Throws OutOfMemory (device
 /// buffers) or DeviceError (CUDA, NCCL) on every rank.
-void send_values_nccl(detail::CommImpl& comm, NumericState& ns, const std::vector<double>& values,
-                      int device, std::exception_ptr failed);
+void send_values_nccl(detail::CommImpl& comm, NumericState& ns, const double* values,
+                      std::size_t nnz, int device, std::exception_ptr failed);
 
 /// A rank r > 0's side: its share received on its NCCL GPU `device` and scattered into an
 /// nnz-long array of the canonical order there (zero off its positions), to which

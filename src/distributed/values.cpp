@@ -94,7 +94,8 @@ std::vector<index_t> value_positions(const Analysis& an, const RankLayout& l, in
   return out;
 }
 
-void send_values(detail::CommImpl& comm, NumericState& ns, const std::vector<double>& values) {
+void send_values(detail::CommImpl& comm, NumericState& ns, const std::vector<double>& values,
+                 const double* device_values) {
   const int ranks = comm.size();
   std::exception_ptr failed;
   try {
@@ -104,13 +105,15 @@ void send_values(detail::CommImpl& comm, NumericState& ns, const std::vector<dou
         throw InternalError("rank " + std::to_string(r) + " needs value " +
                             std::to_string(pos.back()) + " of " + std::to_string(values.size()));
     }
+    if (device_values && !ns.nccl) throw InternalError("values on a device to send without NCCL");
   } catch (...) {
     failed = std::current_exception();
   }
   ns.device_values = nullptr;
 #ifdef STRATA_HAVE_NCCL
   if (ns.nccl) {
-    send_values_nccl(comm, ns, values, ns.executors.at(0)->device(), failed);
+    send_values_nccl(comm, ns, device_values ? device_values : values.data(), values.size(),
+                     ns.executors.at(0)->device(), failed);
     for (int r = 1; r < ranks; ++r)
       ns.stats.values_bytes += sizeof(double) * ns.value_positions[r].size();
     return;
