@@ -547,8 +547,8 @@ class CudaExecutor final : public numeric::Executor {
   int planned_ = 0;              ///< parts_ planned for: 0 nothing, 1 whole, 2 split
   /// Blocks of subtree roots exported for a peer copy (or the same device): the arena they
   /// came from is reused by the next subtree. Kept from one factorization to the next (the
-  /// same sizes: freeing and allocating them again at every factorization cost each GPU a
-  /// synchronizing cudaFree before its first launch); dropped with the analysis.
+  /// same sizes), so that no GPU begins a factorization with a synchronizing cudaFree;
+  /// dropped with the analysis.
   std::map<index_t, DeviceBuffer<double>> outbox_;
   /// Blocks pushed to the GPU that imports them as soon as they are exported (export_cb,
   /// push_block), while that GPU is still busy: per part root, the buffer on that GPU and
