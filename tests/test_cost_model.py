@@ -19,13 +19,7 @@ import sys
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "bench"))
 import cost_model as cm  # noqa: E402
 
-failures = []
-
-
-def check(cond, what):
-    if not cond:
-        failures.append(what)
-        print("FAIL:", what)
+from script_checks import check, finish  # noqa: E402
 
 
 rng = random.Random()
@@ -79,5 +73,4 @@ for R, G in ((1, 1), (4, 1), (8, 1)):
     for k in ("subtree_seconds", "top_seconds", "cb_seconds", "total_seconds"):
         check(abs(a[k] - b[k]) <= 1e-9 * max(1.0, a[k]), f"{R}x{G} {k}: {a[k]} != {b[k]}")
 
-print("FAILED" if failures else "all passed")
-sys.exit(1 if failures else 0)
+finish("cost_model: all checks passed")

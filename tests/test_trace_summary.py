@@ -22,13 +22,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "bench", "tools"))
 import trace_summary as ts  # noqa: E402
 
-failures = []
-
-
-def check(cond, what):
-    if not cond:
-        failures.append(what)
-        print("FAIL:", what)
+from script_checks import check, finish  # noqa: E402
 
 
 rng = random.Random()
@@ -86,7 +80,4 @@ with tempfile.TemporaryDirectory() as d:
                          capture_output=True, text=True).stdout
     check("-0.500    0.400 thread       4242 cudaFree_v3020" in out, f"the host call listed in:\n{out}")
 
-if failures:
-    print(f"{len(failures)} failures")
-    sys.exit(1)
-print("trace_summary: all checks passed")
+finish("trace_summary: all checks passed")
