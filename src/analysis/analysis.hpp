@@ -21,7 +21,9 @@ namespace strata {
 /// Where each stored entry of the canonical input lands in the fronts: the entries that
 /// front f receives are entry_src[entry_offsets[f] .. entry_offsets[f+1]-1] (indices into
 /// the canonical input's values) added at the column-major offsets entry_dst[...] of the
-/// n_rows(f)×n_rows(f) front.
+/// n_rows(f)×n_rows(f) front, distinct within a front. A front's entries are ordered by
+/// the front's column they land in (entry_dst / n_rows(f), non-decreasing; within a column
+/// in the order of the input), so that any range of columns receives a contiguous range.
 struct AssemblyMap {
   std::vector<index_t> entry_offsets{0};
   std::vector<index_t> entry_src;

@@ -148,7 +148,8 @@ AssemblyMap build_assembly_map(const SparseMatrix& c, const Analysis& an) {
     return std::pair<index_t, index_t>{an.iperm[ci[p]], an.iperm[q_inv.empty() ? j : q_inv[j]]};
   };
   // the entries sorted by front (the front of the smaller permuted index), each with its
-  // column; within a front in the order of the input
+  // column; within a front in the order of the input until place() orders them by the
+  // column they land in
   AssemblyMap map;
   map.entry_src.resize(nnz);
   map.entry_dst.resize(nnz);
@@ -167,13 +168,21 @@ AssemblyMap build_assembly_map(const SparseMatrix& c, const Analysis& an) {
         column_of[slot] = j;
       });
   // local positions through a row → local index map set per front (linear in the fronts'
-  // rows plus the entries, no search), one map per thread
-  auto place = [&](index_t f0, index_t f1, std::vector<index_t>& local) {
+  // rows plus the entries, no search), then the front's entries ordered by the column of
+  // the front they land in, stably (a counting sort over its m columns): a part of the
+  // front's columns receives a contiguous range of its entries, which the GPU's assembly
+  // of a front cut into column slices finds by a search. One scratch per thread.
+  struct Scratch {
+    std::vector<index_t> local, count, src, dst;
+  };
+  auto place = [&](index_t f0, index_t f1, Scratch& s) {
+    std::vector<index_t>& local = s.local;
     for (index_t f = f0; f < f1; ++f) {
       const index_t* rows = t.rows_of(f);
       const index_t m = t.n_rows(f);
+      const index_t e0 = map.entry_offsets[f], e1 = map.entry_offsets[f + 1];
       for (index_t i = 0; i < m; ++i) local[rows[i]] = i;
-      for (index_t k = map.entry_offsets[f]; k < map.entry_offsets[f + 1]; ++k) {
+      for (index_t k = e0; k < e1; ++k) {
         const auto [pi, pj] = permuted(column_of[k], map.entry_src[k]);
         const index_t lo = std::min(pi, pj), hi = std::max(pi, pj);
         const index_t lc = lo - t.first_pivot[f];  // pivot column of the front
@@ -182,17 +191,30 @@ AssemblyMap build_assembly_map(const SparseMatrix& c, const Analysis& an) {
         map.entry_dst[k] = (an.symmetric || pi >= pj) ? lc * m + lr : lr * m + lc;
       }
       for (index_t i = 0; i < m; ++i) local[rows[i]] = -1;
+      s.count.assign(static_cast<std::size_t>(m) + 1, 0);
+      for (index_t k = e0; k < e1; ++k) ++s.count[map.entry_dst[k] / m + 1];
+      prefix_sum(s.count);
+      s.src.resize(static_cast<std::size_t>(e1 - e0));
+      s.dst.resize(static_cast<std::size_t>(e1 - e0));
+      for (index_t k = e0; k < e1; ++k) {
+        const index_t at = s.count[map.entry_dst[k] / m]++;
+        s.src[at] = map.entry_src[k];
+        s.dst[at] = map.entry_dst[k];
+      }
+      std::copy(s.src.begin(), s.src.end(), map.entry_src.begin() + e0);
+      std::copy(s.dst.begin(), s.dst.end(), map.entry_dst.begin() + e0);
     }
   };
   if (serial_passes()) {
-    std::vector<index_t> local(an.n, -1);
-    place(0, nf, local);
+    Scratch s{std::vector<index_t>(an.n, -1), {}, {}, {}};
+    place(0, nf, s);
     return map;
   }
-  tbb::enumerable_thread_specific<std::vector<index_t>> locals(
-      [&] { return std::vector<index_t>(an.n, -1); });
+  tbb::enumerable_thread_specific<Scratch> scratch([&] {
+    return Scratch{std::vector<index_t>(an.n, -1), {}, {}, {}};
+  });
   tbb::parallel_for(tbb::blocked_range<index_t>(0, nf, 16),
-                    [&](const auto& r) { place(r.begin(), r.end(), locals.local()); });
+                    [&](const auto& r) { place(r.begin(), r.end(), scratch.local()); });
   return map;
 }
 

@@ -21,7 +21,8 @@ SparseMatrix symmetric_pattern(const SparseMatrix& c, bool symmetric,
 
 /// Where every entry of the canonical input `c` lands: its front (the front of the
 /// smaller of its two permuted indices) and its position in that front's dense m × m
-/// column-major block (symmetric: the lower triangle). Needs an.tree, an.iperm and
+/// column-major block (symmetric: the lower triangle), a front's entries ordered by that
+/// column (AssemblyMap says why). Needs an.tree, an.iperm and
 /// an.matching_perm. Runs on the threads of the calling arena, the same result for every
 /// thread count.
 AssemblyMap build_assembly_map(const SparseMatrix& c, const Analysis& an);

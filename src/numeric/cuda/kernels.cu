@@ -53,17 +53,24 @@ constexpr std::int64_t kMinSliceCols = 8;
 constexpr std::int64_t kTargetBlocks = 2048;  // ≈ 16 blocks of 256 threads per Hopper SM
 constexpr int kWarp = 32;
 
-// First child CB column whose parent column is at least c (rel is increasing).
-__device__ std::int64_t lower_bound(const std::int64_t* rel, std::int64_t n, std::int64_t c) {
-  std::int64_t lo = 0, hi = n;
-  while (lo < hi) {
-    const std::int64_t mid = (lo + hi) / 2;
-    if (rel[mid] < c)
-      lo = mid + 1;
-    else
-      hi = mid;
+// The first e in [lo, hi) with a[e] ≥ key (hi if none), where a[e] < key holds on a prefix
+// of [lo, hi); every lane of the calling warp takes part and gets the result. Each round
+// reads 32 samples spread over the range and keeps the gap after the last one under the
+// key: about log₃₂ of the length dependent reads instead of log₂.
+__device__ std::int64_t warp_lower_bound(const std::int64_t* a, std::int64_t lo, std::int64_t hi,
+                                         std::int64_t key) {
+  const int lane = threadIdx.x % kWarp;
+  while (hi - lo > kWarp) {
+    const std::int64_t step = (hi - lo + kWarp - 1) / kWarp;
+    const std::int64_t at = lo + lane * step;
+    const int n = __popc(__ballot_sync(0xffffffffu, at < hi && a[at] < key));
+    if (n == 0) return lo;
+    const std::int64_t last = lo + (n - 1) * step;  // a[last] < key ≤ a[last + step]
+    lo = last + 1;
+    hi = min(hi, last + step);
   }
-  return lo;
+  const std::int64_t at = lo + lane;
+  return lo + __popc(__ballot_sync(0xffffffffu, at < hi && a[at] < key));
 }
 
 // dst[i] = src[i] for i in [from, to), `step` apart per thread starting at from + tid:
@@ -102,11 +109,12 @@ __global__ void assemble_kernel(DeviceTree t, std::int64_t begin, std::int64_t s
   for (std::int64_t c = c0 + warp; c < c1; c += warps)
     for (std::int64_t i = (c < whole_cols ? 0 : c) + lane; i < m; i += kWarp) F[c * m + i] = 0.0;
   __syncthreads();
-  for (std::int64_t e = t.entry_offsets[f] + threadIdx.x; e < t.entry_offsets[f + 1];
-       e += blockDim.x) {
-    const std::int64_t d = t.entry_dst[e];
-    if (d >= c0 * m && d < c1 * m) F[d] += values[t.entry_src[e]];  // distinct destinations
-  }
+  // the front's entries are ordered by column (AssemblyMap): the slice's are a range
+  const std::int64_t e0 =
+      warp_lower_bound(t.entry_dst, t.entry_offsets[f], t.entry_offsets[f + 1], c0 * m);
+  const std::int64_t e1 = warp_lower_bound(t.entry_dst, e0, t.entry_offsets[f + 1], c1 * m);
+  for (std::int64_t e = e0 + threadIdx.x; e < e1; e += blockDim.x)
+    F[t.entry_dst[e]] += values[t.entry_src[e]];  // distinct destinations
   __syncthreads();
   for (std::int64_t q = t.child_offsets[f]; q < t.child_offsets[f + 1]; ++q) {
     const std::int64_t c = t.children[q];
@@ -114,7 +122,8 @@ __global__ void assemble_kernel(DeviceTree t, std::int64_t begin, std::int64_t s
     if (mc == 0) continue;
     const double* cb = t.cb_ptr[c];
     const std::int64_t* rel = t.rel + t.rel_offsets[c];
-    const std::int64_t j0 = lower_bound(rel, mc, c0), j1 = lower_bound(rel, mc, c1);
+    const std::int64_t j0 = warp_lower_bound(rel, 0, mc, c0);
+    const std::int64_t j1 = warp_lower_bound(rel, j0, mc, c1);
     for (std::int64_t jj = j0 + warp; jj < j1; jj += warps) {
       double* fcol = F + rel[jj] * m;
       const double* src = cb + jj * mc;

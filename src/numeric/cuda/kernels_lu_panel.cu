@@ -17,9 +17,10 @@
 //      (w ≤ 64) into registers, eight threads per row, unblocked LU (row j published
 //      through shared memory, one barrier per column), the block written back (L unit
 //      lower, U upper), and the inverses L_jj⁻¹ and U_jj⁻¹ (substitution on the identity,
-//      eight threads per column) into the front's two 64×64 slots of the workspace. Its
-//      time is the chain of 64 dependent steps and two chains of 64 rows, latency rather
-//      than arithmetic: eight threads per row or column make each link an eighth as long;
+//      both at once on half the threads each, four per column) into the front's two 64×64
+//      slots of the workspace. Its time is the chain of 64 dependent steps and the chain
+//      of 64 rows of the inverses, latency rather than arithmetic: several threads per
+//      row or column make each link shorter;
 //   2. lu_panels_kernel, one block per 64-row tile below the diagonal block, L_ij =
 //      A_ij·U_jj⁻¹, and one per 64-column tile right of it, U_jc = L_jj⁻¹·A_jc — the U
 //      panel over every column of the front, so that the last step leaves U12 complete;
@@ -46,6 +47,7 @@
 
 #include "numeric/cuda/cuda_check.hpp"
 #include "numeric/cuda/kernels.cuh"
+#include "numeric/cuda/row_lanes.cuh"
 #include "numeric/cuda/tile_mma.cuh"
 #include "numeric/cuda/warp_argmax.cuh"
 
@@ -61,16 +63,12 @@ __host__ __device__ std::int64_t tiles_of(std::int64_t n) {
   return n > 0 ? (n + kStep - 1) / kStep : 0;
 }
 
-// The pivot block kernel's threads: kLanes per row of the 64×64 block while it is
-// eliminated (thread t holds row t/kLanes's columns c ≡ t mod kLanes in registers), kLanes
-// per column while the inverses are formed (thread t: column t/kLanes, rows r ≡ t mod
-// kLanes). Every dependent chain is thus kLanes times shorter than with one thread per row
-// or column, and the kLanes threads of a row or column are neighbouring lanes of one warp,
-// which combine their parts by shuffles.
-constexpr int kLanes = 8;
-constexpr int kPivotThreads = kLanes * kStep;
-constexpr int kPerThread = kStep / kLanes;  // the columns (rows) a thread holds
-constexpr int kPad = kStep + 1;             // the block's row stride in shared memory
+// The pivot block kernel's threads: row_lanes.cuh (eight per row of the 64×64 block while
+// it is eliminated, eight per column while the inverses are formed).
+using row_lanes::kLanes;
+using row_lanes::kPad;
+using row_lanes::kPerThread;
+constexpr int kPivotThreads = row_lanes::kThreads;
 
 // The unblocked LU of the w×w block held as above, without interchanges: row j published
 // to R[(j mod 2)·64 …] at column j, one barrier per column (two buffers: a row is
@@ -192,48 +190,55 @@ __device__ __forceinline__ void eliminate_with_interchanges(double (&a)[kPerThre
 
 // L⁻¹ and U⁻¹ of the packed LU in T (row r at T[r·kPad …], the identity outside the w×w
 // block), written to WL (column-major: entry (r, c) at c·64 + r) and WU (row-major: at
-// r·64 + c), zero outside w×w. Thread t forms column c = t/kLanes, rows r ≡ t mod kLanes,
-// by rows in order (L⁻¹) and in reverse (U⁻¹):
+// r·64 + c), zero outside w×w. The two are independent, so each has half the threads at
+// the same time (the first eight warps L⁻¹, the last eight U⁻¹, each branch warp-uniform):
+// thread t of a half forms column c = t/kInvLanes, rows r ≡ t mod kInvLanes, by rows in
+// order (L⁻¹) and in reverse (U⁻¹):
 //   X(r, c) = δ_rc − Σ_{l<r} L(r, l)·X(l, c),
 //   Y(r, c) = (δ_rc − Σ_{l>r} U(r, l)·Y(l, c)) / U(r, r),
-// each sum in kLanes parts (one per thread of the column) added by shuffles. The entries of
-// a column above (L⁻¹) or below (U⁻¹) the diagonal are formed as 0, which the sums need.
+// each sum in kInvLanes parts (one per thread of the column) added by shuffles. The entries
+// of a column above (L⁻¹) or below (U⁻¹) the diagonal are formed as 0, which the sums need.
+constexpr int kInvLanes = 4;
+constexpr int kInvPerThread = kStep / kInvLanes;  // the rows of a column a thread holds
+static_assert(kInvLanes * kStep == kPivotThreads / 2, "a half of the threads per inverse");
 __device__ __forceinline__ void triangular_inverses(const double* T, int w, double* WL,
                                                     double* WU) {
-  const int c = threadIdx.x / kLanes, q = threadIdx.x % kLanes;
-  double x[kPerThread];
+  const bool upper = threadIdx.x >= kPivotThreads / 2;
+  const int t = threadIdx.x % (kPivotThreads / 2);
+  const int c = t / kInvLanes, q = t % kInvLanes;
+  double x[kInvPerThread];
 #pragma unroll
-  for (int s = 0; s < kPerThread; ++s) x[s] = 0.0;
+  for (int s = 0; s < kInvPerThread; ++s) x[s] = 0.0;
+  if (!upper) {
 #pragma unroll
-  for (int r = 0; r < kStep; ++r) {
-    double part = 0.0;
+    for (int r = 0; r < kStep; ++r) {
+      double part = 0.0;
 #pragma unroll
-    for (int s = 0; kLanes * s < r; ++s)
-      if (kLanes * s + q < r) part += T[r * kPad + kLanes * s + q] * x[s];
+      for (int s = 0; kInvLanes * s < r; ++s)
+        if (kInvLanes * s + q < r) part += T[r * kPad + kInvLanes * s + q] * x[s];
+      part = row_lanes::lane_sum<kInvLanes>(part);
+      if (q == (r % kInvLanes)) x[r / kInvLanes] = r == c ? 1.0 : (r > c ? -part : 0.0);
+    }
 #pragma unroll
-    for (int o = 1; o < kLanes; o <<= 1) part += __shfl_xor_sync(0xffffffffu, part, o);
-    if (q == (r % kLanes)) x[r / kLanes] = r == c ? 1.0 : (r > c ? -part : 0.0);
-  }
+    for (int s = 0; s < kInvPerThread; ++s) {
+      const int r = kInvLanes * s + q;
+      WL[c * kStep + r] = r < w && c < w ? x[s] : 0.0;
+    }
+  } else {
 #pragma unroll
-  for (int s = 0; s < kPerThread; ++s) {
-    const int r = kLanes * s + q;
-    WL[c * kStep + r] = r < w && c < w ? x[s] : 0.0;
-    x[s] = 0.0;
-  }
+    for (int r = kStep - 1; r >= 0; --r) {
+      double part = 0.0;
 #pragma unroll
-  for (int r = kStep - 1; r >= 0; --r) {
-    double part = 0.0;
+      for (int s = kInvPerThread - 1; kInvLanes * s + kInvLanes - 1 > r; --s)
+        if (kInvLanes * s + q > r) part += T[r * kPad + kInvLanes * s + q] * x[s];
+      part = row_lanes::lane_sum<kInvLanes>(part);
+      if (q == (r % kInvLanes)) x[r / kInvLanes] = ((r == c ? 1.0 : 0.0) - part) / T[r * kPad + r];
+    }
 #pragma unroll
-    for (int s = kPerThread - 1; kLanes * s + kLanes - 1 > r; --s)
-      if (kLanes * s + q > r) part += T[r * kPad + kLanes * s + q] * x[s];
-#pragma unroll
-    for (int o = 1; o < kLanes; o <<= 1) part += __shfl_xor_sync(0xffffffffu, part, o);
-    if (q == (r % kLanes)) x[r / kLanes] = ((r == c ? 1.0 : 0.0) - part) / T[r * kPad + r];
-  }
-#pragma unroll
-  for (int s = 0; s < kPerThread; ++s) {
-    const int r = kLanes * s + q;
-    WU[r * kStep + c] = r < w && c < w ? x[s] : 0.0;
+    for (int s = 0; s < kInvPerThread; ++s) {
+      const int r = kInvLanes * s + q;
+      WU[r * kStep + c] = r < w && c < w ? x[s] : 0.0;
+    }
   }
 }
 

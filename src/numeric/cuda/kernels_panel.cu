@@ -12,12 +12,14 @@
 // "Matrix Computations", 4th ed., §4.2.9), in steps of kStep = 64 columns, each step one
 // launch of each kernel over every front still active (items sorted by k, largest first, so
 // the active fronts of a step are a prefix):
-//   1. pivot_block_kernel, one block of 64 threads per front: the w×w diagonal block
-//      (w ≤ 64) into registers, one row per thread, unblocked right-looking Cholesky there
-//      (the pivot column shared through shared memory), L_jj written
-//      back (lower triangle; the strict upper one is left as it was, as POTRF leaves it)
-//      and its inverse L_jj⁻¹ (forward substitution on the identity, one thread per column)
-//      into the front's 64×64 slot of the workspace;
+//   1. pivot_block_kernel, one block of 512 threads per front: the w×w diagonal block
+//      (w ≤ 64) into registers, eight threads per row (row_lanes.cuh), unblocked
+//      right-looking Cholesky there (the pivot row shared through shared memory, one
+//      barrier per column), L_jj written back (lower triangle; the strict upper one is
+//      left as it was, as POTRF leaves it) and its inverse L_jj⁻¹ (forward substitution
+//      on the identity, eight threads per column) into the front's 64×64 slot of the
+//      workspace. Its time is the chain of 64 dependent steps and the chain of 64 rows of
+//      the inverse: several threads per row or column make each link shorter;
 //   2. panel_kernel, one block per 64-row tile below the diagonal block: L_ij = A_ij·L_jj⁻ᵀ,
 //      a 64×64×w product from shared memory, written in place (the tile is read whole
 //      before it is written);
@@ -36,6 +38,7 @@
 
 #include "numeric/cuda/cuda_check.hpp"
 #include "numeric/cuda/kernels.cuh"
+#include "numeric/cuda/row_lanes.cuh"
 #include "numeric/cuda/tile_mma.cuh"
 
 namespace strata::cuda {
@@ -43,7 +46,6 @@ namespace {
 
 constexpr int kStep = tile::kEdge;        // columns per step, and the tile edge of the products
 constexpr int kThreads = tile::kThreads;  // products: 8 warps, a 32×16 part of the tile each
-constexpr int kLd = kStep + 1;            // padded leading dimension (rows read across threads)
 
 __device__ std::int64_t imin(std::int64_t a, std::int64_t b) { return a < b ? a : b; }
 
@@ -58,81 +60,106 @@ __device__ Item item(const DeviceTree& t, const std::int64_t* items, double* poo
   return {t.n_rows[f], t.n_pivots[f], items[2 * blockIdx.x + 1], pool + t.pos_offset[pos]};
 }
 
-// Launch 1 of a step: one block of 64 threads per front factors its w×w diagonal block at
-// (j0, j0), thread i holding row i in registers (the loops over columns unrolled, so that
-// the row stays in registers: this kernel is the serial part of a step, its latency is
-// what counts); writes L_jj back and L_jj⁻¹ to work[blockIdx.x] (64×64, entry (c, t) at
-// t·64 + c, zero outside the w×w lower triangle); info on a non-positive pivot.
-__global__ void __launch_bounds__(kStep)
+// Launch 1 of a step: one block of row_lanes::kThreads threads per front factors its w×w
+// diagonal block at (j0, j0), held as row_lanes.cuh lays it out (eight threads per row).
+// The block is made symmetric (its lower triangle mirrored)
+// and row j is published at column j, one barrier a column: L(c, j) = A(j, c)/√A(j, j) for
+// every c > j comes from the published row instead of from the column, and A(i, c) −=
+// L(i, j)·L(c, j) is applied to the whole trailing block, so that the row published next is
+// up to date; the two entries of a pair get the same product, so the block stays exactly
+// symmetric and every entry of L is what the column-oriented elimination computes. Writes
+// L_jj back (lower triangle; the strict upper one is left as it was, as POTRF leaves it)
+// and L_jj⁻¹ to work[blockIdx.x] (64×64, entry (c, t) at t·64 + c, zero outside the w×w
+// lower triangle: eight threads per column, by rows in order, X(r, c) = (δ_rc −
+// Σ_{l<r} L(r, l)·X(l, c)) / L(r, r), the sum in eight parts added by shuffles); info on a
+// non-positive pivot.
+__global__ void __launch_bounds__(row_lanes::kThreads)
     pivot_block_kernel(DeviceTree t, const std::int64_t* items, double* pool, double* work,
                        int* info, std::int64_t j0) {
-  __shared__ double col[kStep];       // column j of L, per step
+  using row_lanes::kLanes;
+  using row_lanes::kPad;
+  using row_lanes::kPerThread;
+  __shared__ double T[kStep * kPad];  // the block by rows (symmetric), then L
+  __shared__ double R[2 * kStep];     // row j at column j, by parity (see below)
   __shared__ double rdiag[kStep];     // 1 / L(j, j)
-  __shared__ double Ls[kStep * kLd];  // L by rows, then L_jj⁻¹ by columns
-  __shared__ int sfail;
   const Item it = item(t, items, pool);
   if (j0 > 0 && info[it.slot] != 0) return;  // failed at an earlier step
   const int w = static_cast<int>(imin(kStep, it.k - j0));
   const std::int64_t m = it.m;
   double* D = it.F + j0 * m + j0;  // the diagonal block, leading dimension m
-  const int i = threadIdx.x;
-  if (i == 0) sfail = 0;
-  double a[kStep];  // row i of the block, lower part
-#pragma unroll
-  for (int c = 0; c < kStep; ++c)
-    a[c] = c <= i && i < w ? D[static_cast<std::int64_t>(c) * m + i] : 0.0;
+  const int tid = threadIdx.x, i = tid / kLanes, q = tid % kLanes;
+  // the lower triangle read by columns (coalesced) and mirrored; zero outside w×w
+  for (int e = tid; e < kStep * kStep; e += row_lanes::kThreads) {
+    const int r = e % kStep, c = e / kStep;
+    if (c <= r) {
+      const double v = r < w ? D[static_cast<std::int64_t>(c) * m + r] : 0.0;
+      T[r * kPad + c] = v;
+      T[c * kPad + r] = v;
+    }
+  }
   __syncthreads();
+  double a[kPerThread];  // row i, columns kLanes·s + q
+#pragma unroll
+  for (int s = 0; s < kPerThread; ++s) a[s] = T[i * kPad + kLanes * s + q];
+  // Row j goes to R[(j mod 2)·64 …]: a buffer is written again two columns later, after a
+  // barrier that every reader of it has passed.
+  int fail = 0;
 #pragma unroll
   for (int j = 0; j < kStep; ++j) {
     if (j >= w) break;
+    double* row = R + (j & 1) * kStep;
     if (i == j) {
-      const double d = a[j];
-      if (!(d > 0.0)) {
-        sfail = static_cast<int>(j0) + j + 1;
-      } else {
-        a[j] = sqrt(d);
-        rdiag[j] = 1.0 / a[j];
-      }
+#pragma unroll
+      for (int s = 0; s < kPerThread; ++s) row[kLanes * s + q] = a[s];
     }
     __syncthreads();
-    if (sfail) break;
-    if (i > j) {
-      a[j] *= rdiag[j];
-      col[i] = a[j];
+    const double d = row[j];  // the same in every thread: a uniform break
+    if (!(d > 0.0)) {
+      fail = static_cast<int>(j0) + j + 1;
+      break;
     }
-    __syncthreads();
-    if (i > j) {
+    const double ljj = sqrt(d), r = 1.0 / ljj;
+    const int js = j / kLanes, jq = j % kLanes;
+    if (i == j && q == jq) {
+      a[js] = ljj;
+      rdiag[j] = r;
+    }
+    if (i > j && i < w) {
+      const double l = row[i] * r;  // L(i, j)
+      if (q == jq) a[js] = l;
 #pragma unroll
-      for (int c = j + 1; c < kStep; ++c)
-        if (c <= i) a[c] -= a[j] * col[c];
+      for (int s = js; s < kPerThread; ++s)  // the columns after j
+        if (kLanes * s + q > j) a[s] -= l * (row[kLanes * s + q] * r);
     }
   }
-  if (i == 0 && (j0 == 0 || sfail)) info[it.slot] = sfail;
-  if (sfail) return;
+  if (tid == 0 && (j0 == 0 || fail)) info[it.slot] = fail;
+  if (fail) return;
+  __syncthreads();  // every thread done reading T's first contents
 #pragma unroll
-  for (int c = 0; c < kStep; ++c) {
-    if (c <= i && i < w) D[static_cast<std::int64_t>(c) * m + i] = a[c];
-    Ls[i * kLd + c] = a[c];
-  }
+  for (int s = 0; s < kPerThread; ++s) T[i * kPad + kLanes * s + q] = a[s];
   __syncthreads();
-  // L_jj·X = I, thread i solving for column i by rows r in order (X(l, i) = 0 for l < i;
-  // every thread reads the same L(r, l): a broadcast)
+  for (int e = tid; e < kStep * kStep; e += row_lanes::kThreads) {
+    const int r = e % kStep, c = e / kStep;
+    if (c <= r && r < w) D[static_cast<std::int64_t>(c) * m + r] = T[r * kPad + c];
+  }
+  // L_jj·X = I: thread (c, q) forms X(r, c) for the rows r ≡ q (mod kLanes), rows in order
+  const int c = i;
+  double x[kPerThread];
+#pragma unroll
+  for (int s = 0; s < kPerThread; ++s) x[s] = 0.0;
 #pragma unroll
   for (int r = 0; r < kStep; ++r) {
-    double x = r == i ? 1.0 : 0.0;
+    double part = 0.0;
 #pragma unroll
-    for (int l = 0; l < r; ++l) x -= Ls[r * kLd + l] * a[l];
-    a[r] = r >= i && r < w ? x * rdiag[r] : 0.0;
+    for (int s = 0; kLanes * s < r; ++s)
+      if (kLanes * s + q < r) part += T[r * kPad + kLanes * s + q] * x[s];
+    part = row_lanes::lane_sum<kLanes>(part);
+    if (q == r % kLanes && r >= c && r < w)
+      x[r / kLanes] = ((r == c ? 1.0 : 0.0) - part) * rdiag[r];
   }
-  __syncthreads();  // every thread done reading L
-#pragma unroll
-  for (int r = 0; r < kStep; ++r) Ls[i * kLd + r] = a[r];  // X(r, i)
-  __syncthreads();
   double* W = work + static_cast<std::int64_t>(blockIdx.x) * kStep * kStep;
-  for (int x = i; x < kStep * kStep; x += kStep) {
-    const int tt = x >> 6, c = x & 63;
-    W[x] = Ls[tt * kLd + c];  // entry (c, t) of L_jj⁻¹ = X(c, t) at t·64 + c
-  }
+#pragma unroll
+  for (int s = 0; s < kPerThread; ++s) W[c * kStep + kLanes * s + q] = x[s];  // X(r, c)
 }
 
 // Launch 2 of a step: block (i, y) computes L_ij = A_ij·L_jj⁻ᵀ for rows j0 + w + 64y … of
@@ -202,7 +229,7 @@ void launch_llt_panel(const DeviceTree& t, const std::int64_t* items,
     while (active > 0 && pivots[active - 1] <= j0) --active;
     const unsigned n = static_cast<unsigned>(active);
     const std::int64_t below = max_rows[active - 1] - j0;  // rows at and below the step
-    pivot_block_kernel<<<n, kStep, 0, s>>>(t, items, pool, work, info, j0);
+    pivot_block_kernel<<<n, row_lanes::kThreads, 0, s>>>(t, items, pool, work, info, j0);
     STRATA_CUDA_LAUNCH();
     panel_kernel<<<dim3(n, tiles(below)), kThreads, 0, s>>>(t, items, pool, work, info, j0);
     STRATA_CUDA_LAUNCH();
