@@ -16,11 +16,12 @@
 //   1. lu_pivot_block_kernel, one block of 512 threads per front: the w×w diagonal block
 //      (w ≤ 64) into registers, eight threads per row, unblocked LU (row j published
 //      through shared memory, one barrier per column), the block written back (L unit
-//      lower, U upper), and the inverses L_jj⁻¹ and U_jj⁻¹ (substitution on the identity,
-//      both at once on half the threads each, four per column) into the front's two 64×64
-//      slots of the workspace. Its time is the chain of 64 dependent steps and the chain
-//      of 64 rows of the inverses, latency rather than arithmetic: several threads per
-//      row or column make each link shorter;
+//      lower, U upper), and the inverses L_jj⁻¹ and U_jj⁻¹ into the front's two 64×64
+//      slots of the workspace, formed during the elimination (L⁻¹ by Gauss–Jordan on the
+//      identity in the rows still being eliminated, U⁻¹ column by column in the rows done
+//      with); after interchanges by substitution on the identity, both at once on half the
+//      threads each. Its time is the chain of 64 dependent steps, latency rather than
+//      arithmetic: eight threads per row make each link shorter;
 //   2. lu_panels_kernel, one block per 64-row tile below the diagonal block, L_ij =
 //      A_ij·U_jj⁻¹, and one per 64-column tile right of it, U_jc = L_jj⁻¹·A_jc — the U
 //      panel over every column of the front, so that the last step leaves U12 complete;
@@ -70,21 +71,40 @@ using row_lanes::kPad;
 using row_lanes::kPerThread;
 constexpr int kPivotThreads = row_lanes::kThreads;
 
-// The unblocked LU of the w×w block held as above, without interchanges: row j published
-// to R[(j mod 2)·64 …] at column j, one barrier per column (two buffers: a row is
-// overwritten two steps later, after a barrier every reader has passed); *sbad set when a
-// pivot is not finite or under static_pivot, or an entry below it exceeds |pivot|/u (u =
-// threshold: the pivoting rule would take another row).
-__device__ __forceinline__ void eliminate(double (&a)[kPerThread], double* R, int* sbad, int w,
-                                          double static_pivot, double threshold) {
+// The unblocked LU of the w×w block held as above, without interchanges, and with it the
+// inverses of both factors, so that no chain of their own follows the elimination's. At
+// column j row j of U and row j of L⁻¹ are published to R[(j mod 2)·128 …] (two buffers: a
+// row is overwritten two steps later, after a barrier every reader has passed) and U's row
+// j is kept in T (the block staged there is no longer needed: each row was read by its own
+// threads before the loop); one barrier per column. Then
+//   rows i > j: the multiplier l = a(i, j)/a(j, j), the update of a(i, ·) right of j, and
+//     x(i, ·) −= l·x(j, ·) (Gauss–Jordan on the identity: x ends as row i of L⁻¹);
+//   rows i ≤ j (done eliminating): column j of U⁻¹, y(i, j) = (δ_ij − Σ_{i≤l<j} y(i, l)·
+//     U(l, j)) / U(j, j) — Y·U = I read along row i, with U's rows kept in T.
+// *sbad set when a pivot is not finite or under static_pivot, or an entry below it exceeds
+// |pivot|/u (u = threshold: the pivoting rule would take another row). Every thread takes
+// part in the shuffles (the sums of the U⁻¹ column are formed by all, kept by the rows
+// i ≤ j).
+__device__ __forceinline__ void eliminate(double (&a)[kPerThread], double (&x)[kPerThread],
+                                          double (&y)[kPerThread], double* T, double* R, int* sbad,
+                                          int w, double static_pivot, double threshold) {
   const int i = threadIdx.x / kLanes, q = threadIdx.x % kLanes, lane = threadIdx.x & 31;
+#pragma unroll
+  for (int c = 0; c < kPerThread; ++c) {
+    x[c] = kLanes * c + q == i ? 1.0 : 0.0;
+    y[c] = 0.0;
+  }
 #pragma unroll
   for (int j = 0; j < kStep; ++j) {
     if (j >= w) break;
-    double* row = R + (j & 1) * kStep;
+    double* row = R + (j & 1) * 2 * kStep;  // U's row j, then L⁻¹'s
     if (i == j) {
 #pragma unroll
-      for (int c = 0; c < kPerThread; ++c) row[kLanes * c + q] = a[c];
+      for (int c = 0; c < kPerThread; ++c) {
+        row[kLanes * c + q] = a[c];
+        row[kStep + kLanes * c + q] = x[c];
+        T[j * kPad + kLanes * c + q] = a[c];
+      }
     }
     __syncthreads();
     const double d = row[j];  // the same in every thread: a uniform break
@@ -105,7 +125,16 @@ __device__ __forceinline__ void eliminate(double (&a)[kPerThread], double* R, in
 #pragma unroll
       for (int c = j / kLanes; c < kPerThread; ++c)  // the columns after j
         if (kLanes * c + q > j) a[c] -= l * row[kLanes * c + q];
+#pragma unroll
+      for (int c = 0; c <= j / kLanes; ++c)  // L⁻¹'s row j: columns up to j
+        if (kLanes * c + q <= j) x[c] -= l * row[kStep + kLanes * c + q];
     }
+    double part = 0.0;
+#pragma unroll
+    for (int c = 0; kLanes * c < j; ++c)
+      if (kLanes * c + q < j && kLanes * c + q >= i) part += y[c] * T[(kLanes * c + q) * kPad + j];
+    part = row_lanes::lane_sum<kLanes>(part);
+    if (i <= j && q == (j % kLanes)) y[j / kLanes] = ((i == j ? 1.0 : 0.0) - part) / d;
   }
 }
 
@@ -252,7 +281,7 @@ __global__ void __launch_bounds__(kPivotThreads)
     lu_pivot_block_kernel(const LuPanelItem* items, double* work, int* bad, double static_pivot,
                           double threshold, std::int64_t j0) {
   __shared__ double T[kStep * kPad];  // the block, row-major: staging, then the packed LU
-  __shared__ double R[2 * kStep];     // the pivot rows of the last two columns
+  __shared__ double R[4 * kStep];     // the pivot rows (U's, L⁻¹'s) of the last two columns
   __shared__ double S[kStep];         // a row on its way to the pivot row's place
   __shared__ int pos[kStep];          // the local row now in each position (interchanges)
   __shared__ int sbad;
@@ -270,18 +299,25 @@ __global__ void __launch_bounds__(kPivotThreads)
     T[r * kPad + c] = r < w && c < w ? D[static_cast<std::int64_t>(c) * ld + r] : 0.0;
   }
   __syncthreads();
-  double a[kPerThread];
+  double a[kPerThread], x[kPerThread], y[kPerThread];
 #pragma unroll
   for (int c = 0; c < kPerThread; ++c) a[c] = T[i * kPad + kLanes * c + q];
   // Without interchanges first, also for an item factored with them: the pivoting rule
   // interchanges no row exactly when every multiplier is at most 1/u in magnitude, and then
   // both eliminations do the same operations; otherwise (or at a bad pivot) again from the
-  // block still in T, with interchanges (two barriers a column and a search).
-  eliminate(a, R, &sbad, w, static_pivot, threshold);
+  // block, read once more from the front (T holds U's rows now), with interchanges (two
+  // barriers a column and a search), and the inverses formed after it.
+  eliminate(a, x, y, T, R, &sbad, w, static_pivot, threshold);
   __syncthreads();
-  if (it.perm && sbad) {
+  const bool interchanged = it.perm && sbad;
+  if (interchanged) {
     __syncthreads();  // sbad read by every thread
     if (t == 0) sbad = 0;
+    for (int e = t; e < kStep * kStep; e += kPivotThreads) {
+      const int r = e % kStep, c = e / kStep;
+      T[r * kPad + c] = r < w && c < w ? D[static_cast<std::int64_t>(c) * ld + r] : 0.0;
+    }
+    __syncthreads();
 #pragma unroll
     for (int c = 0; c < kPerThread; ++c) a[c] = T[i * kPad + kLanes * c + q];
     __syncthreads();
@@ -305,7 +341,18 @@ __global__ void __launch_bounds__(kPivotThreads)
     if (r < w && c < w) D[static_cast<std::int64_t>(c) * ld + r] = T[r * kPad + c];
   }
   double* WL = work + static_cast<std::int64_t>(blockIdx.x) * 2 * kSlot;
-  triangular_inverses(T, w, WL, WL + kSlot);
+  double* WU = WL + kSlot;
+  if (interchanged) {
+    triangular_inverses(T, w, WL, WU);
+    return;
+  }
+#pragma unroll
+  for (int c = 0; c < kPerThread; ++c) {
+    const int col = kLanes * c + q;
+    const bool in = i < w && col < w;
+    WL[col * kStep + i] = in ? x[c] : 0.0;
+    WU[i * kStep + col] = in ? y[c] : 0.0;
+  }
 }
 
 // Launch 2 of a step: item blockIdx.x's T tiles of the L panel (rows j0 + w + 64y …,
