@@ -16,10 +16,10 @@
 //      (w ≤ 64) into registers, eight threads per row (row_lanes.cuh), unblocked
 //      right-looking Cholesky there (the pivot row shared through shared memory, one
 //      barrier per column), L_jj written back (lower triangle; the strict upper one is
-//      left as it was, as POTRF leaves it) and its inverse L_jj⁻¹ (forward substitution
-//      on the identity, eight threads per column) into the front's 64×64 slot of the
-//      workspace. Its time is the chain of 64 dependent steps and the chain of 64 rows of
-//      the inverse: several threads per row or column make each link shorter;
+//      left as it was, as POTRF leaves it) and its inverse L_jj⁻¹ (Gauss–Jordan on the
+//      identity, in the same steps) into the front's 64×64 slot of the workspace. Its
+//      time is the chain of 64 dependent steps, latency rather than arithmetic: eight
+//      threads per row make each link shorter;
 //   2. panel_kernel, one block per 64-row tile below the diagonal block: L_ij = A_ij·L_jj⁻ᵀ,
 //      a 64×64×w product from shared memory, written in place (the tile is read whole
 //      before it is written);
@@ -62,17 +62,16 @@ __device__ Item item(const DeviceTree& t, const std::int64_t* items, double* poo
 
 // Launch 1 of a step: one block of row_lanes::kThreads threads per front factors its w×w
 // diagonal block at (j0, j0), held as row_lanes.cuh lays it out (eight threads per row).
-// The block is made symmetric (its lower triangle mirrored)
-// and row j is published at column j, one barrier a column: L(c, j) = A(j, c)/√A(j, j) for
-// every c > j comes from the published row instead of from the column, and A(i, c) −=
-// L(i, j)·L(c, j) is applied to the whole trailing block, so that the row published next is
-// up to date; the two entries of a pair get the same product, so the block stays exactly
-// symmetric and every entry of L is what the column-oriented elimination computes. Writes
-// L_jj back (lower triangle; the strict upper one is left as it was, as POTRF leaves it)
-// and L_jj⁻¹ to work[blockIdx.x] (64×64, entry (c, t) at t·64 + c, zero outside the w×w
-// lower triangle: eight threads per column, by rows in order, X(r, c) = (δ_rc −
-// Σ_{l<r} L(r, l)·X(l, c)) / L(r, r), the sum in eight parts added by shuffles); info on a
-// non-positive pivot.
+// The block is made symmetric (its lower triangle mirrored) and row j is published at column j, one
+// barrier a column: L(c, j) = A(j, c)/√A(j, j) for every c > j comes from the published row instead
+// of from the column, and A(i, c) −= L(i, j)·L(c, j) is applied to the whole trailing block, so
+// that the row published next is up to date; the two entries of a pair get the same product, so the
+// block stays exactly symmetric and every entry of L is what the column-oriented elimination
+// computes. Writes L_jj back (lower triangle; the strict upper one is left as it was, as POTRF
+// leaves it) and L_jj⁻¹ to work[blockIdx.x] (64×64, entry (c, t) at t·64 + c, zero outside the w×w
+// lower triangle), formed in the same 64 steps by Gauss–Jordan on the identity (X(j, ·) =
+// (e_j − Σ_{k<j} L(j, k)·X(k, ·)) / L(j, j), each row's sum taken one step at a time), so
+// that no chain of its own follows; info on a non-positive pivot.
 __global__ void __launch_bounds__(row_lanes::kThreads)
     pivot_block_kernel(DeviceTree t, const std::int64_t* items, double* pool, double* work,
                        int* info, std::int64_t j0) {
@@ -80,8 +79,7 @@ __global__ void __launch_bounds__(row_lanes::kThreads)
   using row_lanes::kPad;
   using row_lanes::kPerThread;
   __shared__ double T[kStep * kPad];  // the block by rows (symmetric), then L
-  __shared__ double R[2 * kStep];     // row j at column j, by parity (see below)
-  __shared__ double rdiag[kStep];     // 1 / L(j, j)
+  __shared__ double R[4 * kStep];     // row j and z's row j at column j, by parity (below)
   const Item it = item(t, items, pool);
   if (j0 > 0 && info[it.slot] != 0) return;  // failed at an earlier step
   const int w = static_cast<int>(imin(kStep, it.k - j0));
@@ -101,16 +99,24 @@ __global__ void __launch_bounds__(row_lanes::kThreads)
   double a[kPerThread];  // row i, columns kLanes·s + q
 #pragma unroll
   for (int s = 0; s < kPerThread; ++s) a[s] = T[i * kPad + kLanes * s + q];
-  // Row j goes to R[(j mod 2)·64 …]: a buffer is written again two columns later, after a
-  // barrier that every reader of it has passed.
+  // Row j goes to R[(j mod 2)·128 …]: a buffer is written again two columns later, after
+  // a barrier that every reader of it has passed.
+  // z: row i of the identity, less the rows of L⁻¹ taken so far (Gauss–Jordan): at column
+  // j, row j of L⁻¹ is z(j, ·)/L(j, j), and each row i > j takes L(i, j) times it
+  double z[kPerThread];
+#pragma unroll
+  for (int s = 0; s < kPerThread; ++s) z[s] = kLanes * s + q == i ? 1.0 : 0.0;
   int fail = 0;
 #pragma unroll
   for (int j = 0; j < kStep; ++j) {
     if (j >= w) break;
-    double* row = R + (j & 1) * kStep;
+    double* row = R + (j & 1) * 2 * kStep;  // A's row j, then z's
     if (i == j) {
 #pragma unroll
-      for (int s = 0; s < kPerThread; ++s) row[kLanes * s + q] = a[s];
+      for (int s = 0; s < kPerThread; ++s) {
+        row[kLanes * s + q] = a[s];
+        row[kStep + kLanes * s + q] = z[s];
+      }
     }
     __syncthreads();
     const double d = row[j];  // the same in every thread: a uniform break
@@ -120,9 +126,10 @@ __global__ void __launch_bounds__(row_lanes::kThreads)
     }
     const double ljj = sqrt(d), r = 1.0 / ljj;
     const int js = j / kLanes, jq = j % kLanes;
-    if (i == j && q == jq) {
-      a[js] = ljj;
-      rdiag[j] = r;
+    if (i == j) {
+      if (q == jq) a[js] = ljj;
+#pragma unroll
+      for (int s = 0; s <= js; ++s) z[s] *= r;  // row j of L⁻¹ (columns up to j)
     }
     if (i > j && i < w) {
       const double l = row[i] * r;  // L(i, j)
@@ -130,6 +137,9 @@ __global__ void __launch_bounds__(row_lanes::kThreads)
 #pragma unroll
       for (int s = js; s < kPerThread; ++s)  // the columns after j
         if (kLanes * s + q > j) a[s] -= l * (row[kLanes * s + q] * r);
+#pragma unroll
+      for (int s = 0; s <= js; ++s)  // L⁻¹'s row j: columns up to j
+        if (kLanes * s + q <= j) z[s] -= l * (row[kStep + kLanes * s + q] * r);
     }
   }
   if (tid == 0 && (j0 == 0 || fail)) info[it.slot] = fail;
@@ -142,24 +152,13 @@ __global__ void __launch_bounds__(row_lanes::kThreads)
     const int r = e % kStep, c = e / kStep;
     if (c <= r && r < w) D[static_cast<std::int64_t>(c) * m + r] = T[r * kPad + c];
   }
-  // L_jj·X = I: thread (c, q) forms X(r, c) for the rows r ≡ q (mod kLanes), rows in order
-  const int c = i;
-  double x[kPerThread];
-#pragma unroll
-  for (int s = 0; s < kPerThread; ++s) x[s] = 0.0;
-#pragma unroll
-  for (int r = 0; r < kStep; ++r) {
-    double part = 0.0;
-#pragma unroll
-    for (int s = 0; kLanes * s < r; ++s)
-      if (kLanes * s + q < r) part += T[r * kPad + kLanes * s + q] * x[s];
-    part = row_lanes::lane_sum<kLanes>(part);
-    if (q == r % kLanes && r >= c && r < w)
-      x[r / kLanes] = ((r == c ? 1.0 : 0.0) - part) * rdiag[r];
-  }
+  // L_jj⁻¹ by columns: entry (c, t) = X(c, t) at t·64 + c, zero outside w×w
   double* W = work + static_cast<std::int64_t>(blockIdx.x) * kStep * kStep;
 #pragma unroll
-  for (int s = 0; s < kPerThread; ++s) W[c * kStep + kLanes * s + q] = x[s];  // X(r, c)
+  for (int s = 0; s < kPerThread; ++s) {
+    const int col = kLanes * s + q;
+    W[col * kStep + i] = i < w && col < w ? z[s] : 0.0;
+  }
 }
 
 // Launch 2 of a step: block (i, y) computes L_ij = A_ij·L_jj⁻ᵀ for rows j0 + w + 64y … of
