@@ -65,7 +65,7 @@ __host__ __device__ std::int64_t tiles_of(std::int64_t n) {
 }
 
 // The pivot block kernel's threads: row_lanes.cuh (eight per row of the 64×64 block while
-// it is eliminated, eight per column while the inverses are formed).
+// it is eliminated; after interchanges, four per column of each inverse).
 using row_lanes::kLanes;
 using row_lanes::kPad;
 using row_lanes::kPerThread;
