@@ -173,7 +173,7 @@ AssemblyMap build_assembly_map(const SparseMatrix& c, const Analysis& an) {
   // front's columns receives a contiguous range of its entries, which the GPU's assembly
   // of a front cut into column slices finds by a search. One scratch per thread.
   struct Scratch {
-    std::vector<index_t> local, count, src, dst;
+    std::vector<index_t> local, count, col, src, dst;
   };
   auto place = [&](index_t f0, index_t f1, Scratch& s) {
     std::vector<index_t>& local = s.local;
@@ -181,37 +181,42 @@ AssemblyMap build_assembly_map(const SparseMatrix& c, const Analysis& an) {
       const index_t* rows = t.rows_of(f);
       const index_t m = t.n_rows(f);
       const index_t e0 = map.entry_offsets[f], e1 = map.entry_offsets[f + 1];
+      const std::size_t ne = static_cast<std::size_t>(e1 - e0);
+      s.count.assign(static_cast<std::size_t>(m) + 1, 0);
+      s.col.resize(ne);
+      s.src.resize(ne);
+      s.dst.resize(ne);
       for (index_t i = 0; i < m; ++i) local[rows[i]] = i;
-      for (index_t k = e0; k < e1; ++k) {
+      for (std::size_t x = 0; x < ne; ++x) {
+        const index_t k = e0 + static_cast<index_t>(x);
         const auto [pi, pj] = permuted(column_of[k], map.entry_src[k]);
         const index_t lo = std::min(pi, pj), hi = std::max(pi, pj);
         const index_t lc = lo - t.first_pivot[f];  // pivot column of the front
         const index_t lr = local[hi];
         // symmetric: lower triangle (row hi, column lo); general: (pi, pj) as it stands
-        map.entry_dst[k] = (an.symmetric || pi >= pj) ? lc * m + lr : lr * m + lc;
+        const bool lower = an.symmetric || pi >= pj;
+        const index_t col = lower ? lc : lr;
+        s.col[x] = col;
+        s.src[x] = map.entry_src[k];
+        s.dst[x] = col * m + (lower ? lr : lc);
+        ++s.count[col + 1];
       }
       for (index_t i = 0; i < m; ++i) local[rows[i]] = -1;
-      s.count.assign(static_cast<std::size_t>(m) + 1, 0);
-      for (index_t k = e0; k < e1; ++k) ++s.count[map.entry_dst[k] / m + 1];
       prefix_sum(s.count);
-      s.src.resize(static_cast<std::size_t>(e1 - e0));
-      s.dst.resize(static_cast<std::size_t>(e1 - e0));
-      for (index_t k = e0; k < e1; ++k) {
-        const index_t at = s.count[map.entry_dst[k] / m]++;
-        s.src[at] = map.entry_src[k];
-        s.dst[at] = map.entry_dst[k];
+      for (std::size_t x = 0; x < ne; ++x) {
+        const index_t at = e0 + s.count[s.col[x]]++;
+        map.entry_src[at] = s.src[x];
+        map.entry_dst[at] = s.dst[x];
       }
-      std::copy(s.src.begin(), s.src.end(), map.entry_src.begin() + e0);
-      std::copy(s.dst.begin(), s.dst.end(), map.entry_dst.begin() + e0);
     }
   };
   if (serial_passes()) {
-    Scratch s{std::vector<index_t>(an.n, -1), {}, {}, {}};
+    Scratch s{std::vector<index_t>(an.n, -1), {}, {}, {}, {}};
     place(0, nf, s);
     return map;
   }
   tbb::enumerable_thread_specific<Scratch> scratch([&] {
-    return Scratch{std::vector<index_t>(an.n, -1), {}, {}, {}};
+    return Scratch{std::vector<index_t>(an.n, -1), {}, {}, {}, {}};
   });
   tbb::parallel_for(tbb::blocked_range<index_t>(0, nf, 16),
                     [&](const auto& r) { place(r.begin(), r.end(), scratch.local()); });
