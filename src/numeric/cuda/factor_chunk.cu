@@ -334,9 +334,14 @@ void CudaExecutor::chunk_large_fronts(const numeric::FactorContext& ctx, const C
         lu_fronts.push_back({ln, F, m, k, p, perm_f, perturbed_.data() + ns + i});
       }
     }
-  if (!lu_fronts.empty())
+  if (!lu_fronts.empty()) {
+    // the LU fronts' pivot checks make the host wait for this chunk's kernels: the
+    // previous chunk's host part runs now, in that wait, rather than after this chunk's
+    // stores are launched, where the device would have nothing left to do behind it
+    flush_chunk(ctx);
     lu_large_fronts(lu_fronts, numeric::PivotPolicy(ctx.static_pivot, ctx.diagonal_pivot_threshold),
                     rec.ev[1]);
+  }
   for (std::size_t l = 1; l < n_lanes; ++l) {
     STRATA_CUDA(cudaEventRecord(lane[l]->done, lane[l]->stream));
     STRATA_CUDA(cudaStreamWaitEvent(stream_, lane[l]->done, 0));
