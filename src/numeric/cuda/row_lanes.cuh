@@ -1,9 +1,10 @@
 // strata — the layout of a 64×64 diagonal block factored by one block of threads in the
 // batched panel kernels (kernels_lu_panel.cu for LU, kernels_panel.cu for Cholesky): eight
 // threads per row while it is eliminated (thread t holds row t / kLanes's columns
-// c ≡ t mod kLanes in registers), several per column while the inverses are formed. Every
-// dependent chain of the block is thus several times shorter than with one thread per row
-// or column, and the threads of a row or column are neighbouring lanes of one warp, which
+// c ≡ t mod kLanes in registers); the inverses are formed in the same rows (Gauss–Jordan),
+// or, in the LU kernel after row interchanges, four threads per column. Every dependent
+// chain of the block is thus several times shorter than with one thread per row or
+// column, and the threads of a row or column are neighbouring lanes of one warp, which
 // combine their parts by shuffles.
 #pragma once
 
