@@ -26,6 +26,7 @@
 #include <string>
 
 #include "numeric/cuda/cuda_check.hpp"
+#include "numeric/cuda/divide.cuh"
 #include "numeric/cuda/kernels.cuh"
 #include "numeric/cuda_testing.hpp"
 #include "strata/errors.hpp"
@@ -388,7 +389,7 @@ __device__ void llt_front_blocked(double* F, std::int64_t m, std::int64_t k, std
         }
         __syncthreads();
         if (sfail) return;
-        if (i > j && row) r[p] /= lsh[p][j];
+        if (i > j && row) r[p] = divide_rn(r[p], lsh[p][j]);
         if (i > j && i < kThreads) lsh[p][i] = row ? r[p] : 0.0;
         __syncthreads();
         // the panel's later columns: r[q] -= L(i, j) L(j0 + q, j) for rows at or below them
@@ -423,7 +424,7 @@ __device__ __forceinline__ void lu_pivot_step(double (&r)[kSmallNb], const doubl
   }
   if (i == j) r[p] = piv;
   if (row && i > j) {
-    r[p] /= piv;
+    r[p] = divide_rn(r[p], piv);
 #pragma unroll
     for (int q = p + 1; q < kSmallNb; ++q)
       if (q < w) r[q] -= r[p] * u[q];

@@ -47,6 +47,7 @@
 #include <vector>
 
 #include "numeric/cuda/cuda_check.hpp"
+#include "numeric/cuda/divide.cuh"
 #include "numeric/cuda/kernels.cuh"
 #include "numeric/cuda/row_lanes.cuh"
 #include "numeric/cuda/tile_mma.cuh"
@@ -116,7 +117,7 @@ __device__ __forceinline__ void eliminate(double (&a)[kPerThread], double (&x)[k
     const double aij =
         __shfl_sync(0xffffffffu, a[j / kLanes], (lane & ~(kLanes - 1)) | (j % kLanes));
     if (i > j && i < w) {
-      const double l = aij / d;
+      const double l = divide_rn(aij, d);
       if (q == (j % kLanes)) {
         a[j / kLanes] = l;
         // the CPU's test, |a_jj| ≥ u·|a_ij|: else its pivoting would interchange rows
@@ -134,7 +135,7 @@ __device__ __forceinline__ void eliminate(double (&a)[kPerThread], double (&x)[k
     for (int c = 0; kLanes * c < j; ++c)
       if (kLanes * c + q < j && kLanes * c + q >= i) part += y[c] * T[(kLanes * c + q) * kPad + j];
     part = row_lanes::lane_sum<kLanes>(part);
-    if (i <= j && q == (j % kLanes)) y[j / kLanes] = ((i == j ? 1.0 : 0.0) - part) / d;
+    if (i <= j && q == (j % kLanes)) y[j / kLanes] = divide_rn((i == j ? 1.0 : 0.0) - part, d);
   }
 }
 
@@ -208,7 +209,7 @@ __device__ __forceinline__ void eliminate_with_interchanges(double (&a)[kPerThre
     const double aij =
         __shfl_sync(0xffffffffu, a[j / kLanes], (lane & ~(kLanes - 1)) | (j % kLanes));
     if (i > j && i < w) {
-      const double l = aij / d;
+      const double l = divide_rn(aij, d);
       if (q == (j % kLanes)) a[j / kLanes] = l;
 #pragma unroll
       for (int c = j / kLanes; c < kPerThread; ++c)  // the columns after j
@@ -261,7 +262,8 @@ __device__ __forceinline__ void triangular_inverses(const double* T, int w, doub
       for (int s = kInvPerThread - 1; kInvLanes * s + kInvLanes - 1 > r; --s)
         if (kInvLanes * s + q > r) part += T[r * kPad + kInvLanes * s + q] * x[s];
       part = row_lanes::lane_sum<kInvLanes>(part);
-      if (q == (r % kInvLanes)) x[r / kInvLanes] = ((r == c ? 1.0 : 0.0) - part) / T[r * kPad + r];
+      if (q == (r % kInvLanes))
+        x[r / kInvLanes] = divide_rn((r == c ? 1.0 : 0.0) - part, T[r * kPad + r]);
     }
 #pragma unroll
     for (int s = 0; s < kInvPerThread; ++s) {
