@@ -61,6 +61,10 @@ std::vector<char> cuda_lu_fronts_batched(std::vector<std::vector<double>>&,
   throw NotSupported("this build of strata has no CUDA backend (nvcc was not found at build time)");
 }
 
+std::vector<double> cuda_divide_rn(const std::vector<double>&, const std::vector<double>&) {
+  throw NotSupported("this build of strata has no CUDA backend (nvcc was not found at build time)");
+}
+
 int cuda_small_front_threads(index_t, index_t, int, bool) {
   throw NotSupported("this build of strata has no CUDA backend (nvcc was not found at build time)");
 }

@@ -70,6 +70,12 @@ std::vector<char> cuda_lu_fronts_batched(std::vector<std::vector<double>>& front
                                          double static_pivot, double threshold,
                                          std::vector<std::vector<index_t>>* perms = nullptr);
 
+/// divide_rn (numeric/cuda/divide.cuh), the elimination kernels' quotient, on CUDA device 0
+/// for each pair (x[i], d[i]), so that tests can check it against the host's IEEE
+/// division bit for bit. Throws InvalidInput when x and d differ in length, NotSupported in
+/// a build without CUDA.
+std::vector<double> cuda_divide_rn(const std::vector<double>& x, const std::vector<double>& d);
+
 /// The threads per block the small-front kernels get on CUDA device 0 for a launch of
 /// `count` fronts of at most max_rows rows (1 ≤ max_rows ≤ 256) under
 /// Options::gpu_small_front_threads = max_threads (numeric/cuda/kernels.cu), with each

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <limits>
 #include <map>
@@ -762,6 +763,59 @@ TEST_F(CudaBackend, LuFactorMatchesCpu) {
         EXPECT_NEAR(sg.log_abs_det, sc.log_abs_det,
                     (pr.zero_columns ? 1e-6 : 1e-9) * std::max(1.0, std::abs(sc.log_abs_det)));
       }
+}
+
+// divide_rn, the elimination kernels' quotient, gives the bits of the host's IEEE division
+// x / d (correctly rounded, as CUDA's div.rn): zero dividends of either sign (which it
+// answers without dividing) against every kind of divisor, tiny and subnormal dividends,
+// infinities and NaN (compared as NaN), and fresh random pairs over many binades.
+TEST_F(CudaBackend, DivideRnIsTheDivisionBitForBit) {
+  using L = std::numeric_limits<double>;
+  const std::vector<double> special = {0.0,
+                                       -0.0,
+                                       1.0,
+                                       -1.0,
+                                       L::min(),
+                                       -L::min(),
+                                       L::denorm_min(),
+                                       -L::denorm_min(),
+                                       L::max(),
+                                       -L::max(),
+                                       0x1p-1000,
+                                       -0x1p-1000,
+                                       3.0,
+                                       -7.5e-300,
+                                       L::infinity(),
+                                       -L::infinity(),
+                                       L::quiet_NaN()};
+  std::vector<double> x, d;
+  for (const double a : special)
+    for (const double b : special) {
+      x.push_back(a);
+      d.push_back(b);
+    }
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  std::uniform_real_distribution<double> mantissa(-1, 1);
+  std::uniform_int_distribution<int> exponent(-1060, 1020);
+  for (int t = 0; t < 4096; ++t) {
+    // a quarter of the dividends zero, as in a sparse front's column
+    x.push_back(t % 4 == 0 ? (t % 8 == 0 ? 0.0 : -0.0) : std::ldexp(mantissa(rng), exponent(rng)));
+    d.push_back(std::ldexp(mantissa(rng), exponent(rng)));
+  }
+  const std::vector<double> q = numeric::cuda_divide_rn(x, d);
+  ASSERT_EQ(q.size(), x.size());
+  for (std::size_t i = 0; i < x.size(); ++i) {
+    const double want = x[i] / d[i];
+    if (std::isnan(want)) {
+      EXPECT_TRUE(std::isnan(q[i])) << x[i] << " / " << d[i];
+    } else {
+      EXPECT_EQ(std::bit_cast<std::uint64_t>(q[i]), std::bit_cast<std::uint64_t>(want))
+          << std::hexfloat << x[i] << " / " << d[i] << ": " << q[i] << " against " << want;
+    }
+  }
+  EXPECT_THROW(numeric::cuda_divide_rn({1.0}, {}), InvalidInput);
 }
 
 // The small-front kernels' blocks widened past a thread per row (Options::

@@ -24,8 +24,10 @@
 #include <atomic>
 #include <cfloat>
 #include <string>
+#include <vector>
 
 #include "numeric/cuda/cuda_check.hpp"
+#include "numeric/cuda/device_buffer.hpp"
 #include "numeric/cuda/divide.cuh"
 #include "numeric/cuda/kernels.cuh"
 #include "numeric/cuda_testing.hpp"
@@ -410,6 +412,56 @@ __device__ void llt_front_blocked(double* F, std::int64_t m, std::int64_t k, std
   }
 }
 
+// d = a·b + c on the FP64 tensor cores (PTX mma.m8n8k4 with .f64: an 8 × 4 A, a 4 × 8 B and
+// an 8 × 8 C), in the PTX ISA's fragment layout for that shape: with g = lane / 4 and
+// t = lane % 4, a = A(g, t), b = B(t, g), and (c0, c1) = C(g, 2t), C(g, 2t + 1) (d the same).
+// Every lane of the warp takes part.
+__device__ __forceinline__ void mma_8x8x4(double& d0, double& d1, double a, double b, double c0,
+                                          double c1) {
+  asm volatile("mma.sync.aligned.m8n8k4.row.col.f64.f64.f64.f64 {%0, %1}, {%2}, {%3}, {%4, %5};"
+               : "=d"(d0), "=d"(d1)
+               : "d"(a), "d"(b), "d"(c0), "d"(c1));
+}
+
+// lu_front_blocked's trailing update for a front in shared memory, on the FP64 tensor cores:
+// F(i, c) −= Σ_{p<w} F(i, j0 + p) · F(j0 + p, c) for the rows and columns [j0 + w, m) (the
+// panel's L columns times its U rows; F column-major, leading dimension ld). The trailing
+// block is cut into 8 × 8 tiles; a warp takes a row of tiles and kChunk consecutive column
+// tiles, keeps −L's two 8 × 4 fragments in registers and, per tile, reads U's two 4 × 8
+// fragments and the tile, adds the two products (mma_8x8x4) and writes the tile back.
+// Entries past row or column m and pivots past w enter as zeros and are not written. The
+// same tiles and the same two products per entry whatever the block's width: the result
+// does not depend on it.
+__device__ __forceinline__ void lu_trailing_update_mma(double* F, int ld, int m, int j0, int w) {
+  const int c0 = j0 + w, nr = m - c0;
+  if (nr <= 0) return;
+  constexpr int kChunk = 4;  // column tiles a warp takes at once
+  const int tiles = (nr + 7) / 8, chunks = (tiles + kChunk - 1) / kChunk;
+  const int lane = static_cast<int>(threadIdx.x) % kWarp,
+            warps = static_cast<int>(blockDim.x) / kWarp;
+  const int g = lane >> 2, t = lane & 3;
+  for (int u = static_cast<int>(threadIdx.x) / kWarp; u < tiles * chunks; u += warps) {
+    const int ti = u % tiles, ch = u / tiles;
+    const int r = c0 + 8 * ti + g;  // this lane's row of A and of the tiles
+    const bool row_in = r < m;
+    const double a0 = row_in && t < w ? -F[(j0 + t) * ld + r] : 0.0;
+    const double a1 = row_in && t + 4 < w ? -F[(j0 + t + 4) * ld + r] : 0.0;
+    const int tj_end = min(tiles, (ch + 1) * kChunk);
+    for (int tj = ch * kChunk; tj < tj_end; ++tj) {
+      const int cb = c0 + 8 * tj + g;  // this lane's column of B
+      const double b0 = cb < m && t < w ? F[cb * ld + j0 + t] : 0.0;
+      const double b1 = cb < m && t + 4 < w ? F[cb * ld + j0 + t + 4] : 0.0;
+      const int cc = c0 + 8 * tj + 2 * t;  // this lane's two columns of the tile
+      const bool in0 = row_in && cc < m, in1 = row_in && cc + 1 < m;
+      double x0 = in0 ? F[cc * ld + r] : 0.0, x1 = in1 ? F[(cc + 1) * ld + r] : 0.0;
+      mma_8x8x4(x0, x1, a0, b0, x0, x1);
+      mma_8x8x4(x0, x1, a1, b1, x0, x1);
+      if (in0) F[cc * ld + r] = x0;
+      if (in1) F[(cc + 1) * ld + r] = x1;
+    }
+  }
+}
+
 // The rest of lu_front_blocked's pivot step p (pivot column j = j0 + p) for this thread's
 // row i, once the pivot row's panel entries u are in shared memory: the pivot u[p], or
 // ±static_pivot in its place (counted in thread 0's `count`), stored in row j, and below
@@ -451,11 +503,12 @@ __device__ __forceinline__ void lu_pivot_step(double (&r)[kSmallNb], const doubl
 // where they were (src, the panel's net row permutation), and, for a trailing column,
 // solves the panel's unit L₁₁ for its U rows in the same registers; then the rows below the
 // panel get the rank-w product, each trailing entry read and written once per panel (Golub
-// & Van Loan, 4th ed., §3.4.7). The operations on every entry are those of the unblocked
-// form in the same order, so the results do not change with the
-// blocking, nor with where the front is: in the pool (ld = m; the U rows for the update
-// also go to ush) or copied into shared memory by the caller (kShared: ld of the copy;
-// the update reads the U rows where they are, ush is not used).
+// & Van Loan, 4th ed., §3.4.7). The front is in the pool (ld = m; the U rows for the update
+// also go to ush) or copied into shared memory by the caller (kShared: ld of the copy). In
+// the pool every entry gets the operations of the unblocked form in the same order; in
+// shared memory the rank-w product runs on the FP64 tensor cores (lu_trailing_update_mma),
+// whose sums are rounded otherwise. Either way the results do not change with the block's
+// width.
 template <bool kShared>
 __device__ void lu_front_blocked(double* F, int ld, int m, int k, double static_pivot,
                                  double threshold, std::int64_t* perm, std::int64_t* perturbed,
@@ -643,10 +696,8 @@ __device__ void lu_front_blocked(double* F, int ld, int m, int k, double static_
     __syncthreads();
     // the rows below the panel: F(i, c) −= Σ_p L(i, j0 + p) U(j0 + p, c), L(i, ·) read back
     // from F (stored above)
-    if (kShared)
-      trailing_update(
-          F, ld, m, j0 + w, w, [&](int p, std::int64_t c) { return F[c * ld + j0 + p]; }, false,
-          [&](std::int64_t ri, int p) { return F[(j0 + p) * ld + ri]; });
+    if constexpr (kShared)
+      lu_trailing_update_mma(F, ld, m, j0, w);
     else
       trailing_update(
           F, ld, m, j0 + w, w, [&](int p, std::int64_t c) { return ush[p][c]; }, false,
@@ -1068,6 +1119,13 @@ void launch_lu_panel(double* f, std::int64_t m, std::int64_t k, std::int64_t p0,
   STRATA_CUDA_LAUNCH();
 }
 
+namespace {
+__global__ void divide_rn_kernel(const double* x, const double* d, std::int64_t n, double* q) {
+  const std::int64_t i = blockIdx.x * static_cast<std::int64_t>(blockDim.x) + threadIdx.x;
+  if (i < n) q[i] = divide_rn(x[i], d[i]);
+}
+}  // namespace
+
 void launch_lu_slab(double* s_, std::int64_t r, std::int64_t w, std::int64_t kk,
                     double static_pivot, double threshold, std::int64_t* perm,
                     std::int64_t* perturbed, cudaStream_t s) {
@@ -1078,6 +1136,26 @@ void launch_lu_slab(double* s_, std::int64_t r, std::int64_t w, std::int64_t kk,
 }  // namespace strata::cuda
 
 namespace strata::numeric {
+
+std::vector<double> cuda_divide_rn(const std::vector<double>& x, const std::vector<double>& d) {
+  if (x.size() != d.size())
+    throw InvalidInput("cuda_divide_rn: " + std::to_string(x.size()) + " dividends but " +
+                       std::to_string(d.size()) + " divisors");
+  STRATA_CUDA(cudaSetDevice(0));
+  const std::size_t n = x.size();
+  cuda::DeviceBuffer<double> X(n ? n : 1), D(n ? n : 1), Q(n ? n : 1);
+  STRATA_CUDA(cudaMemcpy(X.data(), x.data(), n * sizeof(double), cudaMemcpyHostToDevice));
+  STRATA_CUDA(cudaMemcpy(D.data(), d.data(), n * sizeof(double), cudaMemcpyHostToDevice));
+  if (n > 0) {
+    constexpr int kBlock = 256;
+    cuda::divide_rn_kernel<<<static_cast<unsigned>((n + kBlock - 1) / kBlock), kBlock>>>(
+        X.data(), D.data(), static_cast<std::int64_t>(n), Q.data());
+    STRATA_CUDA_LAUNCH();
+  }
+  std::vector<double> q(n);
+  STRATA_CUDA(cudaMemcpy(q.data(), Q.data(), n * sizeof(double), cudaMemcpyDeviceToHost));
+  return q;
+}
 
 int cuda_small_front_threads(index_t count, index_t max_rows, int max_threads, bool shared) {
   if (count < 1 || max_rows < 1 || max_rows > cuda::kThreads)
