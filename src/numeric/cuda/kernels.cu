@@ -7,7 +7,10 @@
 // panels of kSmallNb = 8 pivot columns in registers: each pivot step of a panel is unrolled,
 // and a wider panel costs more in registers and instruction fetches than the trailing
 // passes it saves), the trailing matrix updated once per panel by
-// all the block's threads whatever the number of trailing rows; the unblocked one-pivot-at-a-
+// all the block's threads whatever the number of trailing rows (for an LU front in shared
+// memory on the FP64 tensor cores: lu_trailing_update_mma); the multipliers divide by
+// divide_rn (divide.cuh), which skips CUDA's general division routine for the zero entries
+// that most of a sparse front's columns hold; the unblocked one-pivot-at-a-
 // time forms (llt_front, lu_columns) remain for larger blocks (lu_columns also serves the
 // large LU fronts' static-pivoting path and the tiled slabs). An LU batch whose fronts all
 // fit the device's shared memory per block (about 168 rows on an H100) copies each front
