@@ -1265,9 +1265,11 @@ TEST_F(CudaBackend, LdltFactorMatchesCpu) {
     // 3000 (STRATA_TEST_SEED=4660620958987591335 on the H100); an error of the kernels is
     // O(1) here.
     EXPECT_LT(test::relative_difference(gf.panels, cf.panels), 1e-9);
-    // Exactly singular columns: their pivots are exactly zero on both executors and become
-    // +1e-8 (static pivoting), so D agrees as closely as for the other problems.
-    const double d_tol = 1e-10;
+    // D: the same rounding and the same growth as the panels (1.97e-10 seen on random 3000,
+    // STRATA_TEST_SEED=8833352268078613044 on an H200); exactly singular columns' pivots
+    // are exactly zero on both executors and become +1e-8 (static pivoting), so D agrees as
+    // closely there as for the other problems.
+    const double d_tol = 1e-9;
     EXPECT_LT(test::relative_difference(gf.d_diag, cf.d_diag), d_tol);
     EXPECT_LT(test::relative_difference(gf.d_off, cf.d_off), d_tol);
     numeric::PivotStats sc, sg;
