@@ -76,6 +76,14 @@ std::vector<char> cuda_lu_fronts_batched(std::vector<std::vector<double>>& front
 /// a build without CUDA.
 std::vector<double> cuda_divide_rn(const std::vector<double>& x, const std::vector<double>& d);
 
+/// y + alpha·A·x by the device solve's GEMV (cuda::launch_gemv_n) on CUDA device 0, for A
+/// rows × cols column-major with leading dimension lda ≥ max(rows, 1) (a.size() ≥
+/// lda·cols), x of cols entries and y of rows, so that tests can check it against the
+/// host. Throws InvalidInput for inconsistent sizes, NotSupported in a build without CUDA.
+std::vector<double> cuda_gemv_n(index_t rows, index_t cols, double alpha,
+                                const std::vector<double>& a, index_t lda,
+                                const std::vector<double>& x, std::vector<double> y);
+
 /// The threads per block the small-front kernels get on CUDA device 0 for a launch of
 /// `count` fronts of at most max_rows rows (1 ≤ max_rows ≤ 256) under
 /// Options::gpu_small_front_threads = max_threads (numeric/cuda/kernels.cu), with each

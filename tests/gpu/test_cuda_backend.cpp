@@ -769,6 +769,41 @@ TEST_F(CudaBackend, LuFactorMatchesCpu) {
 // x / d (correctly rounded, as CUDA's div.rn): zero dividends of either sign (which it
 // answers without dividing) against every kind of divisor, tiny and subnormal dividends,
 // infinities and NaN (compared as NaN), and fresh random pairs over many binades.
+// The device solve's GEMV of a library-path front's products (launch_gemv_n) against the
+// host's sum in long double, for fresh random A, x, y of every shape with 1, 2, 3, 5 and
+// 733 rows and columns, lda > rows; the bound is the GEMV's rounding error, (cols + 2)·u
+// times Σ|α a_ij x_j| + |y_i| per row.
+TEST_F(CudaBackend, SolveGemvMatchesHost) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  std::uniform_real_distribution<double> u(-1, 1);
+  const double eps = std::numeric_limits<double>::epsilon();
+  for (const index_t rows : {1, 2, 3, 5, 733})
+    for (const index_t cols : {1, 2, 3, 5, 733}) {
+      SCOPED_TRACE(std::to_string(rows) + " x " + std::to_string(cols));
+      const index_t lda = rows + 3;
+      std::vector<double> a(static_cast<std::size_t>(lda * cols)), x(cols), y(rows);
+      for (double& v : a) v = u(rng);
+      for (double& v : x) v = u(rng);
+      for (double& v : y) v = u(rng);
+      const double alpha = -1.0;
+      const std::vector<double> got = numeric::cuda_gemv_n(rows, cols, alpha, a, lda, x, y);
+      ASSERT_EQ(got.size(), y.size());
+      for (index_t i = 0; i < rows; ++i) {
+        long double want = y[i], mag = std::abs(y[i]);
+        for (index_t j = 0; j < cols; ++j) {
+          const long double p = static_cast<long double>(alpha) * a[i + j * lda] * x[j];
+          want += p;
+          mag += std::abs(p);
+        }
+        EXPECT_LE(std::abs(got[i] - want), (cols + 2) * eps * mag) << "row " << i;
+      }
+    }
+  EXPECT_THROW(numeric::cuda_gemv_n(2, 2, 1.0, std::vector<double>(3), 2, {1.0, 1.0}, {0.0, 0.0}),
+               InvalidInput);
+}
+
 TEST_F(CudaBackend, DivideRnIsTheDivisionBitForBit) {
   using L = std::numeric_limits<double>;
   const std::vector<double> special = {0.0,

@@ -37,9 +37,11 @@
 namespace strata::cuda {
 namespace {
 
-// large_front_forward/backward's BLAS on the device (host pointer mode: the scalars are
-// read before the call returns).
-struct CublasOps {
+// large_front_forward/backward's BLAS on the device: cuBLAS (host pointer mode: the
+// scalars are read before the call returns), but for the non-transposed GEMV with β = 1 —
+// a front's L21·x or U12·x — strata's launch_gemv_n on the handle's stream, which spreads
+// those few hundred rows over a block per 32.
+struct DeviceOps {
   cublasHandle_t h;
   static cublasFillMode_t fill(bool upper) {
     return upper ? CUBLAS_FILL_MODE_UPPER : CUBLAS_FILL_MODE_LOWER;
@@ -57,6 +59,12 @@ struct CublasOps {
   }
   void gemv(bool trans, int rows, int cols, double alpha, const double* a, int lda, const double* x,
             double beta, double* y) {
+    if (!trans && beta == 1.0) {
+      cudaStream_t s = nullptr;
+      STRATA_CUBLAS(cublasGetStream(h, &s));
+      launch_gemv_n(rows, cols, alpha, a, lda, x, y, s);
+      return;
+    }
     STRATA_CUBLAS(cublasDgemv(h, op(trans), rows, cols, &alpha, a, lda, x, 1, &beta, y, 1));
   }
   void gemm(bool trans_a, int m, int n, int k, double alpha, const double* a, int lda,
@@ -318,7 +326,7 @@ void CudaExecutor::enqueue_solve_sweeps(const Analysis& an, const numeric::Numer
     }
     for (std::int64_t q = q0; q < q1; ++q) {
       const std::int64_t f = p.large_fronts[q];
-      CublasOps ops{lane[(q - q0) % used]->blas};
+      DeviceOps ops{lane[(q - q0) % used]->blas};
       run(ops, panels + sp.panel_offset_host[f], static_cast<int>(t.n_rows(f)),
           static_cast<int>(t.n_pivots(f)), S + t.row_offsets[f] * nrhs);
     }
@@ -342,7 +350,7 @@ void CudaExecutor::enqueue_solve_sweeps(const Analysis& an, const numeric::Numer
     launch_gather_forward(st, chunks, c0, nc, X, U, S, nrhs, stream_);
     launch_sweep_forward(st, tall, t0, nt, S, nrhs, unit, stream_);
     large(p.large_offsets[l], p.large_offsets[l + 1],
-          [&](CublasOps& ops, const double* L, int m, int k, double* W) {
+          [&](DeviceOps& ops, const double* L, int m, int k, double* W) {
             large_front_forward(ops, L, m, k, nr, unit, W);
           });
     launch_scatter_forward(st, chunks, c0, nc, X, U, S, nrhs, lu, stream_);
@@ -358,7 +366,7 @@ void CudaExecutor::enqueue_solve_sweeps(const Analysis& an, const numeric::Numer
     launch_gather_backward(st, chunks, c0, nc, X, S, nrhs, lu, stream_);
     launch_sweep_backward(st, tall, t0, nt, S, nrhs, lu, unit, stream_);
     large(p.large_offsets[l], p.large_offsets[l + 1],
-          [&](CublasOps& ops, const double* L, int m, int k, double* W) {
+          [&](DeviceOps& ops, const double* L, int m, int k, double* W) {
             large_front_backward(ops, L, m, k, nr, lu, unit, W);
           });
     launch_scatter_backward(st, chunks, c0, nc, X, S, nrhs, lu, stream_);

@@ -13,9 +13,11 @@
 //   sweep (forward)    W[0:k] ← L11⁻¹ W[0:k], W[k:m] −= L21 W[0:k] — by tiles of 32 pivot
 //                      columns: one warp solves a tile's triangle per right-hand side from
 //                      the tile's copy in shared memory (register shuffles between its
-//                      steps), then every thread updates the rows below the tile with a
-//                      32-wide dot product while the block copies the next tile; two
-//                      barriers per tile instead of one or two per pivot;
+//                      steps), then the threads update the rows below the tile with
+//                      32-wide dot products (a row's columns split over the threads
+//                      that fewer rows than threads leave idle: sliced_products) while
+//                      the block copies the next tile; two or three barriers per tile
+//                      instead of one or two per pivot;
 //   scatter (forward)  W[0:k] → x (LU: at the column positions), W[k:m] → the front's
 //                      update vector;
 //   gather (backward)  W = x at the front's rows (col(i): LU pivots at their column
@@ -32,8 +34,8 @@
 //                      take the dot products of L(solved rows, j) with W (one warp per
 //                      column and right-hand side — coalesced reads of L's columns, L21ᵀ
 //                      included), then a warp solves the tile's L11ᵀ triangle; LU right-
-//                      looking: W[0:k] −= U12 W[k:m] (one thread per row, coalesced; a warp
-//                      per row when there are few rows and columns), then
+//                      looking: W[0:k] −= U12 W[k:m] (threads down U12's columns,
+//                      coalesced, each row's columns sliced over the idle threads), then
 //                      per tile from the last a warp solves U11's triangle and every thread
 //                      updates the rows above;
 //   scatter (backward) W[0:k] → x;
@@ -42,7 +44,7 @@
 // block path solves, alone or a whole subtree one after another in postorder).
 // Every thread of a block reaches every __syncthreads() (loop trip counts depend only on
 // m, k, nrhs); every lane of a warp reaches every shuffle (the loops around them are
-// uniform within a warp). blockDim.x must be a multiple of 32.
+// uniform within a warp). blockDim.x must be a multiple of 32 and at most kChunkRows.
 #pragma once
 
 #include <cstdint>
@@ -269,12 +271,82 @@ constexpr int kTileLd = kWarp + 1;  // leading dimension of a tile in shared mem
 // The block copies the w×w triangle T (leading dimension m) to `tile` (kWarp × kWarp,
 // leading dimension kTileLd, zero outside w×w), transposed if asked (tile(i, j) = T(j, i)),
 // so that the warp that solves it reads shared memory, not global memory, in each of its
-// dependent steps. A barrier must follow before the tile is read.
+// dependent steps. A thread's entries (four for a block of 256) are all loaded before the
+// first is stored, so that their latencies overlap rather than follow one another. A
+// barrier must follow before the tile is read.
 __device__ void load_tile(const double* T, std::int64_t m, std::int64_t w, double* tile,
                           bool transposed) {
-  for (int e = threadIdx.x; e < kWarp * kWarp; e += blockDim.x) {
-    const int i = e % kWarp, j = e / kWarp;
-    tile[i + j * kTileLd] = i < w && j < w ? (transposed ? T[j + i * m] : T[i + j * m]) : 0.0;
+  constexpr int kPer = 4;
+  const int step = static_cast<int>(blockDim.x);
+  for (int e0 = threadIdx.x; e0 < kWarp * kWarp; e0 += kPer * step) {
+    double v[kPer];
+#ifdef __CUDA_ARCH__
+#pragma unroll
+#endif
+    for (int q = 0; q < kPer; ++q) {
+      const int e = e0 + q * step, i = e % kWarp, j = e / kWarp;
+      v[q] = e < kWarp * kWarp && i < w && j < w ? (transposed ? T[j + i * m] : T[i + j * m]) : 0.0;
+    }
+#ifdef __CUDA_ARCH__
+#pragma unroll
+#endif
+    for (int q = 0; q < kPer; ++q) {
+      const int e = e0 + q * step;
+      if (e < kWarp * kWarp) tile[e % kWarp + e / kWarp * kTileLd] = v[q];
+    }
+  }
+}
+
+// Products y(q) = Σ_{c<len} a_q[c·lda]·x_q[c] for items q < items, given to done(q, y(q)),
+// with the block's idle threads put to work: when items < blockDim.x, the columns of each
+// item are split into nsl = blockDim.x / items slices (column c in slice c mod nsl), thread
+// e taking item e mod items in slice e / items, and the slices' sums are added in slice
+// order after a barrier. Consecutive threads take consecutive items, so the loads of a
+// column-major A (a_q = A + row of q) are coalesced; each thread keeps four loads in
+// flight. A front's product of a few dozen rows by a tile of 32 columns is then one or two
+// rounds of memory latency instead of eight. `sums`: shared memory of at least
+// blockDim.x doubles. Every thread of the block must call it (the barrier, when nsl > 1,
+// is uniform: nsl depends on items and blockDim.x only); done(q, ·) is called once per q,
+// by one thread.
+template <class AOf, class XOf, class Done>
+__device__ void sliced_products(std::int64_t items, std::int64_t len, std::int64_t lda, AOf a_of,
+                                XOf x_of, Done done, double* sums) {
+  const std::int64_t threads = blockDim.x;
+  const std::int64_t nsl = items > 0 && items < threads ? threads / items : 1;
+  for (std::int64_t e = threadIdx.x; e < nsl * items; e += threads) {
+    const std::int64_t q = e % items, sl = e / items;
+    const double* a = a_of(q);
+    const double* x = x_of(q);
+    double acc[4] = {0.0, 0.0, 0.0, 0.0};
+    std::int64_t c = sl;
+    for (; c + 3 * nsl < len; c += 4 * nsl) {
+      double av[4], xv[4];
+#ifdef __CUDA_ARCH__
+#pragma unroll
+#endif
+      for (int u = 0; u < 4; ++u) {
+        av[u] = a[(c + u * nsl) * lda];
+        xv[u] = x[c + u * nsl];
+      }
+#ifdef __CUDA_ARCH__
+#pragma unroll
+#endif
+      for (int u = 0; u < 4; ++u) acc[u] += av[u] * xv[u];
+    }
+    for (; c < len; c += nsl) acc[0] += a[c * lda] * x[c];
+    const double y = pair_sum<4>(acc);
+    if (nsl > 1)
+      sums[e] = y;
+    else
+      done(q, y);
+  }
+  if (nsl > 1) {  // uniform across the block
+    __syncthreads();
+    for (std::int64_t q = threadIdx.x; q < items; q += threads) {
+      double y = 0.0;
+      for (std::int64_t sl = 0; sl < nsl; ++sl) y += sums[sl * items + q];
+      done(q, y);
+    }
   }
 }
 
@@ -332,16 +404,23 @@ __device__ void prefetch_tile_row(const double* A, std::int64_t m, std::int64_t 
 }
 
 // W(i) −= A(i, tile)·W(j0 : j0 + w) for rows i in [row0, row0 + count) and every
-// right-hand side, one thread per (row, right-hand side); the thread's first one from lv
-// (prefetch_tile_row) when Batch ≥ 16.
+// right-hand side: Batch ≥ 16 (launches of few blocks), one thread per (row, right-hand
+// side), the thread's first one from lv (prefetch_tile_row); otherwise by
+// sliced_products (a barrier inside when the items leave threads idle; every thread of
+// the block must call it).
 template <int Batch>
 __device__ void update_tile_rows(const double* A, std::int64_t m, std::int64_t row0,
                                  std::int64_t count, std::int64_t j0, std::int64_t w, double* W,
-                                 std::int64_t nrhs, const double* lv) {
-  for (std::int64_t e = threadIdx.x; e < count * nrhs; e += blockDim.x) {
-    const std::int64_t i = row0 + e % count, r = e / count;
-    const double* x = W + r * m + j0;
-    if constexpr (Batch >= 16) {
+                                 std::int64_t nrhs, const double* lv, double* sums) {
+  if constexpr (Batch < 16) {
+    sliced_products(
+        count * nrhs, w, m, [&](std::int64_t q) { return A + row0 + q % count; },
+        [&](std::int64_t q) { return W + q / count * m + j0; },
+        [&](std::int64_t q, double y) { W[row0 + q % count + q / count * m] -= y; }, sums);
+  } else {
+    for (std::int64_t e = threadIdx.x; e < count * nrhs; e += blockDim.x) {
+      const std::int64_t i = row0 + e % count, r = e / count;
+      const double* x = W + r * m + j0;
       if (e == threadIdx.x) {  // the prefetched row (lv is zero past w)
         double s4[4] = {0.0, 0.0, 0.0, 0.0};
 #ifdef __CUDA_ARCH__
@@ -351,8 +430,8 @@ __device__ void update_tile_rows(const double* A, std::int64_t m, std::int64_t r
         W[i + r * m] -= (s4[0] + s4[1]) + (s4[2] + s4[3]);
         continue;
       }
+      W[i + r * m] -= tile_dot<Batch>(A + i, m, x, w);
     }
-    W[i + r * m] -= tile_dot<Batch>(A + i, m, x, w);
   }
 }
 
@@ -366,6 +445,7 @@ __device__ void sweep_forward(const SolveTree& t, std::int64_t f, double* scratc
   const double* L = t.panels + t.panel_offset[f];
   double* W = scratch + t.row_offsets[f] * nrhs;
   __shared__ double tile[kWarp * kTileLd];
+  __shared__ double sums[kChunkRows];  // update_tile_rows' (blockDim.x ≤ kChunkRows)
   if (k > 0) load_tile(L, m, min64(kTile, k), tile, false);
   __syncthreads();
   for (std::int64_t j0 = 0; j0 < k; j0 += kTile) {
@@ -380,7 +460,7 @@ __device__ void sweep_forward(const SolveTree& t, std::int64_t f, double* scratc
     // the next tile into shared memory (its loads in flight with the products below), and
     // the rows below the tile: W(i) −= L(i, tile)·W(tile)
     if (i0 < k) load_tile(L + i0 * m + i0, m, min64(kTile, k - i0), tile, false);
-    update_tile_rows<Batch>(L + j0 * m, m, i0, below, j0, w, W, nrhs, lv);
+    update_tile_rows<Batch>(L + j0 * m, m, i0, below, j0, w, W, nrhs, lv, sums);
     __syncthreads();
   }
 }
@@ -396,6 +476,7 @@ __device__ void sweep_backward(const SolveTree& t, std::int64_t f, double* scrat
   const int lane = threadIdx.x % kWarp;
   const std::int64_t warp = threadIdx.x / kWarp, nwarps = blockDim.x / kWarp;
   const bool tall = t.part_offset[f] >= 0;
+  __shared__ double sums[kChunkRows];  // sliced_products' (blockDim.x ≤ kChunkRows)
   // a tall front: W[0:k] −= the partial products of its chunks (backward_partials), in
   // chunk order; its rows below the pivots take no further part
   const std::int64_t row_end = tall ? k : m;
@@ -410,29 +491,13 @@ __device__ void sweep_backward(const SolveTree& t, std::int64_t f, double* scrat
     }
     __syncthreads();
   } else if (lu) {
-    // W[0:k] −= U12 W[k:m]; U12 is k×(m−k) with leading dimension k
-    // (few rows: a warp per row and right-hand side, its lanes over the columns; many: a
-    // thread each)
+    // W[0:k] −= U12 W[k:m]; U12 is k×(m−k) with leading dimension k: consecutive threads
+    // down U12's columns, the columns sliced over the threads the k rows leave idle
     const double* U12 = L + m * k;
-    const std::int64_t rest = m - k, items = k * nrhs;
-    if (2 * items <= static_cast<std::int64_t>(blockDim.x) && rest <= 8 * kWarp) {
-      for (std::int64_t q = warp; q < items; q += nwarps) {  // uniform across the warp
-        const std::int64_t i = q % k, r = q / k;
-        const double* Wr = W + r * m + k;
-        double s = 0.0;
-        for (std::int64_t j = lane; j < rest; j += kWarp) s += U12[i + j * k] * Wr[j];
-        for (int off = kWarp / 2; off > 0; off /= 2) s += __shfl_down_sync(kFullMask, s, off);
-        if (lane == 0) W[i + r * m] -= s;
-      }
-    } else {
-      for (std::int64_t e = threadIdx.x; e < items; e += blockDim.x) {
-        const std::int64_t i = e % k, r = e / k;
-        const double* Wr = W + r * m + k;
-        double s = 0.0;
-        for (std::int64_t j = 0; j < rest; ++j) s += U12[i + j * k] * Wr[j];
-        W[i + r * m] -= s;
-      }
-    }
+    sliced_products(
+        k * nrhs, m - k, k, [&](std::int64_t q) { return U12 + q % k; },
+        [&](std::int64_t q) { return W + q / k * m + k; },
+        [&](std::int64_t q, double y) { W[q % k + q / k * m] -= y; }, sums);
     __syncthreads();
   }
   __shared__ double tile[kWarp * kTileLd];
@@ -451,7 +516,7 @@ __device__ void sweep_backward(const SolveTree& t, std::int64_t f, double* scrat
       // the tile before into shared memory, and the rows above the tile: W(i) −= U(i, tile)
       // ·W(tile)
       if (j0 > 0) load_tile(L + (j0 - kTile) * m + (j0 - kTile), m, kTile, tile, false);
-      update_tile_rows<Batch>(L + j0 * m, m, 0, j0, j0, w, W, nrhs, lv);
+      update_tile_rows<Batch>(L + j0 * m, m, 0, j0, j0, w, W, nrhs, lv, sums);
       __syncthreads();
     } else {
       // the tile's L11ᵀ into shared memory, and the tile's columns: W(j) −= L(i0:m, j)·

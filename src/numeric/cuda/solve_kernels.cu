@@ -1,12 +1,17 @@
 // strata — CUDA kernels of the triangular solves (see solve_kernels.cuh): thin __global__
-// wrappers around the device code of solve_device.cuh, which the CPU tests also run, and
-// the permutation and scaling of the right-hand sides into the factor's numbering and of
-// the solutions back.
+// wrappers around the device code of solve_device.cuh, which the CPU tests also run, the
+// permutation and scaling of the right-hand sides into the factor's numbering and of the
+// solutions back, and the GEMV of the library-path fronts' products (launch_gemv_n).
+#include <algorithm>
 #include <cfloat>
+#include <string>
+#include <vector>
 
 #include "numeric/cuda/cuda_check.hpp"
+#include "numeric/cuda/device_buffer.hpp"
 #include "numeric/cuda/solve_device.cuh"
 #include "numeric/cuda/solve_kernels.cuh"
+#include "numeric/cuda_testing.hpp"
 
 namespace strata::cuda {
 namespace {
@@ -132,7 +137,54 @@ void launch_permute(const double* from, const std::int64_t* index, const double*
   STRATA_CUDA_LAUNCH();
 }
 
+// y += alpha·A·x, A rows × cols column-major with leading dimension lda: block b takes rows
+// [32b, 32b + 32), a row per lane, and warp w the columns w, w + warps, …, kGemvLoads loads
+// in flight per lane; the warps' sums are then added in warp order, so the result does not
+// depend on timing. A front's L21 or U12 (a few hundred rows and columns) gets a block per
+// 32 rows and every column's loads coalesced down the rows.
+constexpr int kGemvThreads = 256;
+constexpr int kGemvLoads = 8;
+__global__ void __launch_bounds__(kGemvThreads)
+    gemv_n_kernel(std::int64_t rows, std::int64_t cols, double alpha, const double* a,
+                  std::int64_t lda, const double* x, double* y) {
+  constexpr int kWarps = kGemvThreads / 32;
+  __shared__ double part[kGemvThreads];
+  const int lane = threadIdx.x % 32, warp = threadIdx.x / 32;
+  const std::int64_t i = static_cast<std::int64_t>(blockIdx.x) * 32 + lane;
+  double acc[kGemvLoads] = {};
+  if (i < rows) {
+    const double* ai = a + i;
+    std::int64_t j = warp;
+    for (; j + (kGemvLoads - 1) * kWarps < cols; j += kGemvLoads * kWarps) {
+      double av[kGemvLoads], xv[kGemvLoads];
+#pragma unroll
+      for (int q = 0; q < kGemvLoads; ++q) {
+        av[q] = ai[(j + q * kWarps) * lda];
+        xv[q] = x[j + q * kWarps];
+      }
+#pragma unroll
+      for (int q = 0; q < kGemvLoads; ++q) acc[q] += av[q] * xv[q];
+    }
+    for (; j < cols; j += kWarps) acc[0] += ai[j * lda] * x[j];
+  }
+  part[threadIdx.x] = solve_device::pair_sum<kGemvLoads>(acc);
+  __syncthreads();
+  if (warp == 0 && i < rows) {
+    double sum = 0.0;
+    for (int w = 0; w < kWarps; ++w) sum += part[w * 32 + lane];
+    y[i] += alpha * sum;
+  }
+}
+
 }  // namespace
+
+void launch_gemv_n(std::int64_t rows, std::int64_t cols, double alpha, const double* a,
+                   std::int64_t lda, const double* x, double* y, cudaStream_t s) {
+  if (rows <= 0 || cols <= 0) return;
+  gemv_n_kernel<<<static_cast<unsigned>((rows + 31) / 32), kGemvThreads, 0, s>>>(rows, cols, alpha,
+                                                                                 a, lda, x, y);
+  STRATA_CUDA_LAUNCH();
+}
 
 void launch_permute_in(const double* from, const std::int64_t* index, const double* scale,
                        const double* rescale, double* to, std::int64_t n, std::int64_t nrhs,
@@ -235,3 +287,28 @@ void launch_scatter_backward(const SolveTree& t, SolveChunks c, std::int64_t beg
 }
 
 }  // namespace strata::cuda
+
+namespace strata::numeric {
+
+std::vector<double> cuda_gemv_n(index_t rows, index_t cols, double alpha,
+                                const std::vector<double>& a, index_t lda,
+                                const std::vector<double>& x, std::vector<double> y) {
+  if (rows < 0 || cols < 0 || lda < std::max<index_t>(rows, 1) ||
+      a.size() < static_cast<std::size_t>(lda) * static_cast<std::size_t>(cols) ||
+      x.size() != static_cast<std::size_t>(cols) || y.size() != static_cast<std::size_t>(rows))
+    throw InvalidInput("cuda_gemv_n: inconsistent sizes (rows " + std::to_string(rows) + ", cols " +
+                       std::to_string(cols) + ", lda " + std::to_string(lda) + ", a " +
+                       std::to_string(a.size()) + ", x " + std::to_string(x.size()) + ", y " +
+                       std::to_string(y.size()) + ")");
+  STRATA_CUDA(cudaSetDevice(0));
+  cuda::DeviceBuffer<double> A(std::max<std::size_t>(a.size(), 1)),
+      X(std::max<std::size_t>(x.size(), 1)), Y(std::max<std::size_t>(y.size(), 1));
+  STRATA_CUDA(cudaMemcpy(A.data(), a.data(), a.size() * sizeof(double), cudaMemcpyHostToDevice));
+  STRATA_CUDA(cudaMemcpy(X.data(), x.data(), x.size() * sizeof(double), cudaMemcpyHostToDevice));
+  STRATA_CUDA(cudaMemcpy(Y.data(), y.data(), y.size() * sizeof(double), cudaMemcpyHostToDevice));
+  cuda::launch_gemv_n(rows, cols, alpha, A.data(), lda, X.data(), Y.data(), nullptr);
+  STRATA_CUDA(cudaMemcpy(y.data(), Y.data(), y.size() * sizeof(double), cudaMemcpyDeviceToHost));
+  return y;
+}
+
+}  // namespace strata::numeric

@@ -88,6 +88,14 @@ void launch_scatter_backward(const SolveTree& t, SolveChunks c, std::int64_t beg
                              std::int64_t count, double* x, const double* scratch,
                              std::int64_t nrhs, bool lu, cudaStream_t s);
 
+/// y ← y + alpha·A·x for A rows × cols, column-major with leading dimension lda (device
+/// pointers; x of cols entries, y of rows, not overlapping): a block per 32 rows, each
+/// row's columns split over the block's warps and summed in a fixed order (deterministic).
+/// For the products of a library-path front (L21·x forward, U12·x backward), which are
+/// too small for a library GEMV to spread over the device. Nothing for rows or cols ≤ 0.
+void launch_gemv_n(std::int64_t rows, std::int64_t cols, double alpha, const double* a,
+                   std::int64_t lda, const double* x, double* y, cudaStream_t s);
+
 /// The right-hand sides into the factor's numbering and scaling, for n unknowns and nrhs
 /// columns (column-major): to[k + r·n] = scaled(from[index[k] + r·n], scale[k],
 /// rescale[index[k]]) (rescale null: 1), scaled(v, d, e) = v·(d·e) when d·e is a normal
