@@ -40,7 +40,7 @@ namespace {
 // large_front_forward/backward's BLAS on the device: cuBLAS (host pointer mode: the
 // scalars are read before the call returns), but for the non-transposed GEMV with β = 1 —
 // a front's L21·x or U12·x — strata's launch_gemv_n on the handle's stream, which spreads
-// those few hundred rows over a block per 32.
+// those few hundred rows over a block per 8 to 32 of them.
 struct DeviceOps {
   cublasHandle_t h;
   static cublasFillMode_t fill(bool upper) {

@@ -138,40 +138,42 @@ void launch_permute(const double* from, const std::int64_t* index, const double*
 }
 
 // y += alpha·A·x, A rows × cols column-major with leading dimension lda: block b takes rows
-// [32b, 32b + 32), a row per lane, and warp w the columns w, w + warps, …, kGemvLoads loads
-// in flight per lane; the warps' sums are then added in warp order, so the result does not
-// depend on timing. A front's L21 or U12 (a few hundred rows and columns) gets a block per
-// 32 rows and every column's loads coalesced down the rows.
+// [R·b, R·b + R), thread t row R·b + t mod R and the columns j ≡ t / R (mod S), S =
+// kGemvThreads / R slices, kGemvLoads loads in flight; the slices' sums are then added in
+// slice order, so the result does not depend on timing. R (8, 16 or 32, a function of rows
+// only) is the largest that still gives the device a block per SM: a front's L21 or U12 of
+// a few hundred rows then has every thread few columns, and each column's R rows are one
+// coalesced load.
 constexpr int kGemvThreads = 256;
 constexpr int kGemvLoads = 8;
 __global__ void __launch_bounds__(kGemvThreads)
-    gemv_n_kernel(std::int64_t rows, std::int64_t cols, double alpha, const double* a,
-                  std::int64_t lda, const double* x, double* y) {
-  constexpr int kWarps = kGemvThreads / 32;
+    gemv_n_kernel(std::int64_t rows, std::int64_t cols, int rows_per_block, double alpha,
+                  const double* a, std::int64_t lda, const double* x, double* y) {
   __shared__ double part[kGemvThreads];
-  const int lane = threadIdx.x % 32, warp = threadIdx.x / 32;
-  const std::int64_t i = static_cast<std::int64_t>(blockIdx.x) * 32 + lane;
+  const int R = rows_per_block, slices = kGemvThreads / R;
+  const int r = threadIdx.x % R, sl = threadIdx.x / R;
+  const std::int64_t i = static_cast<std::int64_t>(blockIdx.x) * R + r;
   double acc[kGemvLoads] = {};
   if (i < rows) {
     const double* ai = a + i;
-    std::int64_t j = warp;
-    for (; j + (kGemvLoads - 1) * kWarps < cols; j += kGemvLoads * kWarps) {
+    std::int64_t j = sl;
+    for (; j + (kGemvLoads - 1) * slices < cols; j += kGemvLoads * slices) {
       double av[kGemvLoads], xv[kGemvLoads];
 #pragma unroll
       for (int q = 0; q < kGemvLoads; ++q) {
-        av[q] = ai[(j + q * kWarps) * lda];
-        xv[q] = x[j + q * kWarps];
+        av[q] = ai[(j + q * slices) * lda];
+        xv[q] = x[j + q * slices];
       }
 #pragma unroll
       for (int q = 0; q < kGemvLoads; ++q) acc[q] += av[q] * xv[q];
     }
-    for (; j < cols; j += kWarps) acc[0] += ai[j * lda] * x[j];
+    for (; j < cols; j += slices) acc[0] += ai[j * lda] * x[j];
   }
   part[threadIdx.x] = solve_device::pair_sum<kGemvLoads>(acc);
   __syncthreads();
-  if (warp == 0 && i < rows) {
+  if (sl == 0 && i < rows) {
     double sum = 0.0;
-    for (int w = 0; w < kWarps; ++w) sum += part[w * 32 + lane];
+    for (int q = 0; q < slices; ++q) sum += part[q * R + r];
     y[i] += alpha * sum;
   }
 }
@@ -181,8 +183,13 @@ __global__ void __launch_bounds__(kGemvThreads)
 void launch_gemv_n(std::int64_t rows, std::int64_t cols, double alpha, const double* a,
                    std::int64_t lda, const double* x, double* y, cudaStream_t s) {
   if (rows <= 0 || cols <= 0) return;
-  gemv_n_kernel<<<static_cast<unsigned>((rows + 31) / 32), kGemvThreads, 0, s>>>(rows, cols, alpha,
-                                                                                 a, lda, x, y);
+  int sms = 0, dev = 0;
+  STRATA_CUDA(cudaGetDevice(&dev));
+  STRATA_CUDA(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, dev));
+  int R = 32;
+  while (R > 8 && (rows + R - 1) / R < sms) R /= 2;
+  gemv_n_kernel<<<static_cast<unsigned>((rows + R - 1) / R), kGemvThreads, 0, s>>>(
+      rows, cols, R, alpha, a, lda, x, y);
   STRATA_CUDA_LAUNCH();
 }
 
