@@ -280,6 +280,27 @@ class Report(GpuSections, Distributed, EndToEnd, IftommSection):
                                  f"{sum(1 for _, x in pp if x is not None)} problems on "
                                  f"{machine_label(r.machine)} "
                                  f"([`{r.name}`]({self.rel(r.path)})).")
+            if r.kind == "cudss" and not r.get("solver_options") and any(
+                    (num(dig(row, "strata_gpu", "first_solve_gpu_arrays_seconds")) or -1) > 0
+                    for row in r.rows):
+                def on_gpu(row):  # -1: not measured
+                    v = num(dig(row, "strata_gpu", "first_solve_gpu_arrays_seconds"))
+                    return v if v is not None and v > 0 else None
+                pp = [(row.get("problem"), ratio(on_gpu(row), dig(row, "cudss_default",
+                                                                   "solve_seconds")))
+                      for row in r.rows]
+                name = ("solve time strata GPU first solve with b and x in GPU memory/cuDSS "
+                        "solve (default reordering)")
+                g = judge(name, r.machine, pp)
+                self.key_ratio("GPU solve time, strata / cuDSS"
+                               + (", multibody Newton matrices" if r.tag == "mbd" else "")
+                               + " (b and x in GPU memory for both, no refinement)", g, pp, r)
+                if g is not None:
+                    lines.append(f"- Geometric mean of {name}{mbd_label(r)}: "
+                                 f"**{f_ratio(g)}** over "
+                                 f"{sum(1 for _, x in pp if x is not None)} problems on "
+                                 f"{machine_label(r.machine)} "
+                                 f"([`{r.name}`]({self.rel(r.path)})).")
             if r.kind == "analysis" and r.tag == "":
                 for key, what in (("nnz_l", "nnz(L) strata/CHOLMOD+METIS"),
                                   ("seconds", "analysis time strata/CHOLMOD+METIS")):

@@ -281,7 +281,8 @@ struct SolveStats {
   /// about this much (Higham, Accuracy and Stability of Numerical Algorithms, §12.1).
   double backward_error_floor = 0;
   /// max over right-hand sides of ‖A‖∞‖x‖∞/‖b‖∞ (b ≠ 0): a lower bound on κ∞(A) that
-  /// every solution gives. Near 1/u (1e16) or above, A is singular to working precision
+  /// every solution gives (b and x in GPU memory: ‖A‖∞ max‖x‖∞ / max‖b‖∞ over the columns,
+  /// no larger). Near 1/u (1e16) or above, A is singular to working precision
   /// (x then holds an arbitrary null-space component), whether or not pivots were perturbed.
   double condition_lower_bound = 0;
   /// The backward error reached Options::refinement_tolerance, or the rounding floor when

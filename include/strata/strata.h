@@ -225,13 +225,16 @@ strata_status strata_refactorize(strata_solver* solver, const strata_matrix* a);
  *  value of entry p of the strata_matrix given to strata_analyze (its values array: the
  *  same layout, storage and entry order; nnz of them). The pattern is not read again.
  *  `values` may lie in GPU memory (cudaMalloc) or page-locked host memory, which the CUDA
- *  backend copies to the device directly (Solver::refactorize). Errors: INVALID_STATE (no analysis), INVALID_INPUT (values NULL, nnz not that
- *  matrix's number of entries, a value NaN/Inf), and those of strata_factorize. */
+ *  backend copies to the device directly (Solver::refactorize). Errors: INVALID_STATE
+ *  (no analysis), INVALID_INPUT (values NULL, nnz not that matrix's number of entries, a
+ *  value NaN/Inf), and those of strata_factorize. */
 strata_status strata_refactorize_values(strata_solver* solver, int64_t nnz, const double* values);
 
 /** Solves A X = B for nrhs ≥ 0 right-hand sides. b and x are column-major n×nrhs
  *  arrays with leading dimension n (n = strata_size). x may equal b (in place);
- *  otherwise they must not overlap. Iterative refinement follows the options.
+ *  otherwise they must not overlap. Iterative refinement follows the options. b and x may
+ *  lie in GPU memory (cudaMalloc), which the CUDA backend reads and writes there when the
+ *  factor stays on that GPU (Solver::solve).
  *  Errors: INVALID_STATE (no valid factor), INVALID_INPUT (NULL array with nrhs > 0,
  *  nrhs < 0, a NaN/Inf in b). */
 strata_status strata_solve(strata_solver* solver, int64_t nrhs, const double* b, double* x);

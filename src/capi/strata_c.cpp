@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "core/stats_json.hpp"
+#include "numeric/factor.hpp"
 #include "strata/strata.h"
 #include "strata/strata.hpp"
 
@@ -418,8 +419,12 @@ strata_status strata_solve(strata_solver* s, int64_t nrhs, const double* b, doub
     }
     if (b == nullptr || x == nullptr)
       throw strata::InvalidInput(b == nullptr ? "b is NULL" : "x is NULL");
-    if (b == x) {  // in place: the C++ solver needs separate arrays
-      const std::vector<double> copy(b, b + n * nrhs);
+    if (b == x) {  // in place: the C++ solver needs separate arrays (b in GPU memory: fetched)
+      std::vector<double> copy(static_cast<std::size_t>(n * nrhs));
+      if (strata::numeric::device_memory_of(b) >= 0)
+        strata::numeric::copy_from_device(copy.data(), b, copy.size());
+      else
+        std::copy(b, b + n * nrhs, copy.begin());
       s->solver->solve(copy.data(), x, nrhs);
     } else {
       s->solver->solve(b, x, nrhs);

@@ -5,7 +5,8 @@
 // scaling (B = Dr·P·A·Q·Dc, with the extra rescaling of the last factorization when there
 // was one), solves with the factor where it lives (the host's delayed factor, the device's
 // resident factor, or the host's copy) and takes the solution back; for a factor resident
-// on a GPU the permutation and scaling run there too (Executor::solve_original). Each column's
+// on a GPU the permutation and scaling run there too (Executor::solve_original), and b and
+// x may lie in that GPU's memory (Executor::solve_gpu_arrays). Each column's
 // normwise backward error ‖b − A x‖∞ / (‖A‖∞‖x‖∞ + ‖b‖∞) (Rigal and Gaches; Higham,
 // Accuracy and Stability of Numerical Algorithms, 2nd ed., §7.1) is checked against
 // max(Options::refinement_tolerance, (m+1)·u) for m the most entries in a row of A (§3.5).
@@ -25,17 +26,26 @@
 namespace strata::detail {
 namespace {
 
+// The errors for entry i (column-major) of b, or of x, that is not finite.
+[[noreturn]] void throw_rhs_not_finite(index_t i, index_t n) {
+  n = std::max<index_t>(n, 1);
+  throw InvalidInput("right-hand side entry " + std::to_string(i % n) + " of column " +
+                     std::to_string(i / n) + " is not finite");
+}
+[[noreturn]] void throw_no_representable_solution(index_t i, index_t n) {
+  throw InvalidInput("no representable solution: entry " + std::to_string(i % n) +
+                     " of solution column " + std::to_string(i / n) +
+                     " overflows the double range in the solve with the factorization "
+                     "(the matrix is singular to working precision, or A and b are too "
+                     "badly scaled for double precision)");
+}
+
 // Throws when a column of x is not finite: the solution (or the solve with the factor)
 // overflows the double range. Returning it would hand the caller Inf/NaN with nothing
 // in the statistics to say so.
 void check_solution_finite(const double* x, index_t n, index_t nrhs) {
   for (index_t i = 0; i < n * nrhs; ++i)
-    if (!std::isfinite(x[i]))
-      throw InvalidInput("no representable solution: entry " + std::to_string(i % n) +
-                         " of solution column " + std::to_string(i / n) +
-                         " overflows the double range in the solve with the factorization "
-                         "(the matrix is singular to working precision, or A and b are too "
-                         "badly scaled for double precision)");
+    if (!std::isfinite(x[i])) throw_no_representable_solution(i, n);
 }
 
 // v·d·e for a scale factor d and a power of two e: one rounding, as v·d alone would have,
@@ -135,30 +145,13 @@ double rounding_floor(SolverState& s) {
   return static_cast<double>(s.max_row_entries + 1) * kUnitRoundoff;
 }
 
-}  // namespace
-
-// The solve phase: one solve with the factor, iterative refinement, GMRES if it stalls.
-void solve_phase(SolverState& s, const double* b, double* x, index_t nrhs) {
-  if (!s.analysis || !(s.factor.valid || s.delayed.valid))
-    throw InvalidState("solve called before factorize");
-  if (nrhs < 0) throw InvalidInput("negative number of right-hand sides");
-  Timer timer;
+// After the first application of the factor (x = A⁻¹ b, host arrays, its seconds and
+// whether it ran on the device): the backward error of each column, refinement, GMRES
+// where it stalls (solve/refinement.hpp) when `check`, and the statistics.
+void finish_solve(SolverState& s, const double* b, double* x, index_t nrhs, bool check,
+                  double first_solve_seconds, bool on_device, const Timer& timer) {
   const index_t n = s.analysis->n;
   const Options& o = s.options;
-  for (index_t i = 0; i < n * nrhs; ++i)
-    if (!std::isfinite(b[i]))
-      throw InvalidInput("right-hand side entry " + std::to_string(i % std::max<index_t>(n, 1)) +
-                         " of column " + std::to_string(i / std::max<index_t>(n, 1)) +
-                         " is not finite");
-  // Options::solve_check: after a factorization without perturbed pivots the caller may
-  // take the factor's solution unchecked
-  const bool check = o.solve_check == SolveCheck::always || s.stats.factor.perturbed_pivots > 0;
-  if (check) host_values(s);  // the residuals' matrix
-  Timer first;
-  const bool on_device = apply_inverse(s, b, x, nrhs);
-  const double first_solve_seconds = first.seconds();
-  check_solution_finite(x, n, nrhs);
-
   // backward error of each column, refinement, GMRES where it stalls (solve/refinement.hpp)
   const solve::Operator op_a = [&](const double* in, double* out) { multiply(s.values, in, out); };
   const double floor = rounding_floor(s);
@@ -223,6 +216,91 @@ void solve_phase(SolverState& s, const double* b, double* x, index_t nrhs) {
   }
   ss.first_solve_seconds = first_solve_seconds;
   ss.seconds = timer.seconds();
+}
+
+// b or x in GPU memory (cudaMalloc), as cuDSS's dense matrices may lie. Where the factor
+// is resident on that GPU, b is read and x written there, and only four check words come
+// to the host (Executor::solve_gpu_arrays); a checked solve then fetches both and refines
+// on the host (finish_solve), x going back once. Otherwise b is fetched, solved as a host
+// array and x copied back.
+void solve_gpu_arrays(SolverState& s, const double* b, double* x, index_t nrhs, bool b_gpu,
+                      bool x_gpu, bool check, const Timer& timer) {
+  const Analysis& an = *s.analysis;
+  const index_t n = an.n;
+  const std::size_t count = static_cast<std::size_t>(n) * static_cast<std::size_t>(nrhs);
+  std::vector<double> hb, hx;
+  auto fetch = [&](std::vector<double>& h, const double* d) {
+    h.resize(count);
+    numeric::copy_from_device(h.data(), d, count);
+  };
+  if (b_gpu && x_gpu && !s.delayed.valid) {
+    if (check) host_values(s);  // the residuals' matrix
+    const bool rescale = !s.rescaling.row.empty();
+    const numeric::RescaleView view{rescale ? s.rescaling.row.data() : nullptr,
+                                    rescale ? s.rescaling.col.data() : nullptr,
+                                    rescale ? s.rescaling.id : 0};
+    numeric::GpuArrayCheck found;
+    Timer first;
+    if (s.driver->solve_gpu_arrays(an, s.factor, b, x, nrhs, view, found)) {
+      const double first_seconds = first.seconds();
+      if (found.b_not_finite >= 0) throw_rhs_not_finite(found.b_not_finite, n);
+      if (found.x_not_finite >= 0) throw_no_representable_solution(found.x_not_finite, n);
+      if (check) {
+        fetch(hb, b);
+        fetch(hx, x);
+        finish_solve(s, hb.data(), hx.data(), nrhs, true, first_seconds, true, timer);
+        numeric::copy_to_device(x, hx.data(), count);
+        return;
+      }
+      SolveStats& ss = s.stats.solve;
+      ss = SolveStats{};
+      ss.first_solve_seconds = first_seconds;
+      ss.backward_error = std::numeric_limits<double>::quiet_NaN();  // unchecked
+      ss.backward_error_floor = rounding_floor(s);
+      // the largest magnitudes of all columns together: a bound no larger than the
+      // host's per-column one
+      ss.condition_lower_bound = found.b_max > 0 ? s.norm_inf * found.x_max / found.b_max : 0.0;
+      ss.on_device = true;
+      ss.seconds = timer.seconds();
+      return;
+    }
+  }
+  const double* bh = b;
+  if (b_gpu) {
+    fetch(hb, b);
+    bh = hb.data();
+  }
+  if (x_gpu) hx.resize(count);
+  solve_phase(s, bh, x_gpu ? hx.data() : x, nrhs);
+  if (x_gpu) numeric::copy_to_device(x, hx.data(), count);
+}
+
+}  // namespace
+
+// The solve phase: one solve with the factor, iterative refinement, GMRES if it stalls.
+void solve_phase(SolverState& s, const double* b, double* x, index_t nrhs) {
+  if (!s.analysis || !(s.factor.valid || s.delayed.valid))
+    throw InvalidState("solve called before factorize");
+  if (nrhs < 0) throw InvalidInput("negative number of right-hand sides");
+  Timer timer;
+  const index_t n = s.analysis->n;
+  const Options& o = s.options;
+  // Options::solve_check: after a factorization without perturbed pivots the caller may
+  // take the factor's solution unchecked
+  const bool check = o.solve_check == SolveCheck::always || s.stats.factor.perturbed_pivots > 0;
+  const bool b_gpu = numeric::device_memory_of(b) >= 0, x_gpu = numeric::device_memory_of(x) >= 0;
+  if (b_gpu || x_gpu) {
+    solve_gpu_arrays(s, b, x, nrhs, b_gpu, x_gpu, check, timer);
+    return;
+  }
+  for (index_t i = 0; i < n * nrhs; ++i)
+    if (!std::isfinite(b[i])) throw_rhs_not_finite(i, n);
+  if (check) host_values(s);  // the residuals' matrix
+  Timer first;
+  const bool on_device = apply_inverse(s, b, x, nrhs);
+  const double first_seconds = first.seconds();
+  check_solution_finite(x, n, nrhs);
+  finish_solve(s, b, x, nrhs, check, first_seconds, on_device, timer);
 }
 
 }  // namespace strata::detail

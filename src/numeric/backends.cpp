@@ -32,6 +32,10 @@ void copy_from_device(double*, const double*, std::size_t) {
   throw NotSupported("this build of strata has no CUDA backend (nvcc was not found at build time)");
 }
 
+void copy_to_device(double*, const double*, std::size_t) {
+  throw NotSupported("this build of strata has no CUDA backend (nvcc was not found at build time)");
+}
+
 std::shared_ptr<double> cuda_device_copy(const std::vector<double>&) {
   throw NotSupported("this build of strata has no CUDA backend (nvcc was not found at build time)");
 }

@@ -163,6 +163,10 @@ class TreeDriver final : public NumericDriver {
                       index_t nrhs, const RescaleView& rescale, double* stage) override {
     return executor_ && executor_->solve_original(an, factor, b, x, nrhs, rescale, stage);
   }
+  bool solve_gpu_arrays(const Analysis& an, NumericFactor& factor, const double* b, double* x,
+                        index_t nrhs, const RescaleView& rescale, GpuArrayCheck& check) override {
+    return executor_ && executor_->solve_gpu_arrays(an, factor, b, x, nrhs, rescale, check);
+  }
   Backend backend() const override {
     return executor_ ? executor_->backend() : gpu_ ? Backend::cuda : Backend::cpu;
   }

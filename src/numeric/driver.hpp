@@ -84,6 +84,13 @@ class NumericDriver {
                               index_t nrhs, const RescaleView& rescale, double* stage) {
     return false;
   }
+  /// Executor::solve_gpu_arrays of the tree driver's executor (b and x in that GPU's
+  /// memory); false, having done nothing, for every other driver and where it returns false.
+  virtual bool solve_gpu_arrays(const Analysis& an, NumericFactor& factor, const double* b,
+                                double* x, index_t nrhs, const RescaleView& rescale,
+                                GpuArrayCheck& check) {
+    return false;
+  }
   /// Where the last factorization ran (FactorStats::backend; never automatic).
   virtual Backend backend() const = 0;
   /// Adds the last factorization's own figures to `fs`: the device figures (summed over

@@ -42,6 +42,15 @@ struct RescaleView {
   std::uint64_t id = 0;
 };
 
+/// What a solve whose right-hand sides b and solutions x lie in GPU memory found there
+/// (Executor::solve_gpu_arrays; the host does not read them): the first entry of b
+/// (column-major index) that is not finite, −1 for none (x is then left as it was); the same
+/// for x; and the largest magnitudes of b and x (the solve's condition estimate).
+struct GpuArrayCheck {
+  std::int64_t b_not_finite = -1, x_not_finite = -1;
+  double b_max = 0, x_max = 0;
+};
+
 struct HeldPanels {
   int part = -1;
   int worker = 0;
@@ -346,6 +355,17 @@ class Executor {
                               double* x, index_t nrhs, const RescaleView& rescale, double* stage) {
     return false;
   }
+  /// solve_original for b and x in the GPU memory of this executor's device (cudaMalloc;
+  /// n × nrhs column-major, not aliasing), with nothing through the host: b is checked on
+  /// the device and x written only when every entry of b is finite, x checked after
+  /// (`check`). Work on the legacy default stream that writes b is complete before b is
+  /// read. Returns false, having done nothing, where solve_original would, or when b or x
+  /// is not in this device's memory; the default does.
+  virtual bool solve_gpu_arrays(const Analysis& an, const NumericFactor& fac, const double* b,
+                                double* x, index_t nrhs, const RescaleView& rescale,
+                                GpuArrayCheck& check) {
+    return false;
+  }
   /// After begin_part: true when the panels of the part ctx.part will stay in the
   /// executor's memory only (a resident GPU factor of the whole tree; a part's panels kept
   /// on its GPU when FactorContext::keep_part_panels asks for it). The driver then records
@@ -435,6 +455,9 @@ int device_memory_of(const void* p);
 /// host[0, n) = device[0, n), a copy from device memory (device_memory_of ≥ 0) that
 /// returns when it is complete. Throws DeviceError; NotSupported in a build without CUDA.
 void copy_from_device(double* host, const double* device, std::size_t n);
+
+/// device[0, n) = host[0, n), the other way; the same errors.
+void copy_to_device(double* device, const double* host, std::size_t n);
 
 /// Sizes `factor` for the analysis and type (a no-op when it already is: refactorization
 /// reuses the storage) and marks it invalid; the panels only when `host_panels`.

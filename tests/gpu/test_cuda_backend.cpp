@@ -609,6 +609,87 @@ TEST_F(CudaBackend, SolutionsMatchCpu) {
     }
 }
 
+// b and x in GPU memory (Solver::solve): with the factor resident and the solve unchecked,
+// the same bits as from host arrays (the same kernels, nothing through the host), and a
+// non-finite entry of b named with x left as it was; checked (refined on the host) and with
+// only one of the two on the GPU, the host arrays' results. LU and Cholesky, n from 1 to
+// 733, two right-hand sides.
+TEST_F(CudaBackend, SolveArraysInGpuMemory) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (auto [kind, type] : {std::pair{test::RandomKind::spd, MatrixType::spd},
+                            std::pair{test::RandomKind::general, MatrixType::general}})
+    for (index_t n : {1, 2, 3, 5, 733}) {
+      SCOPED_TRACE(std::string(to_string(type)) + " n=" + std::to_string(n));
+      const SparseMatrix a = test::random_sparse(n, 3, kind, rng);
+      const index_t nrhs = 2;
+      std::vector<double> b(static_cast<std::size_t>(n * nrhs));
+      for (double& v : b) v = u(rng);
+      for (const SolveCheck check : {SolveCheck::after_perturbed_pivots, SolveCheck::always}) {
+        Options o;
+        o.num_gpus = 1;
+        o.type = type;
+        o.backend = Backend::cuda;
+        o.solve_check = check;
+        Solver s(o);
+        s.factorize(a);
+        ASSERT_TRUE(s.stats().factor.factor_resident);
+        const bool unchecked =
+            check == SolveCheck::after_perturbed_pivots && s.stats().factor.perturbed_pivots == 0;
+        std::vector<double> want(b.size());
+        s.solve(b.data(), want.data(), nrhs);
+        const SolveStats host = s.stats().solve;
+        const std::shared_ptr<double> db = numeric::cuda_device_copy(b);
+        const std::shared_ptr<double> dx =
+            numeric::cuda_device_copy(std::vector<double>(b.size(), 7.0));
+        s.solve(db.get(), dx.get(), nrhs);
+        std::vector<double> got(b.size());
+        numeric::copy_from_device(got.data(), dx.get(), got.size());
+        EXPECT_EQ(got, want);
+        EXPECT_TRUE(s.stats().solve.on_device);
+        EXPECT_EQ(s.stats().solve.refinement_steps, host.refinement_steps);
+        if (unchecked) {
+          EXPECT_TRUE(std::isnan(s.stats().solve.backward_error));
+          // one column's magnitudes against the other's: no larger than the host's bound
+          EXPECT_GT(s.stats().solve.condition_lower_bound, 0.0);
+          EXPECT_LE(s.stats().solve.condition_lower_bound,
+                    host.condition_lower_bound * (1 + 1e-15));
+        } else {
+          EXPECT_EQ(s.stats().solve.backward_error, host.backward_error);
+        }
+        // one of the two on the host
+        std::vector<double> got_host(b.size(), 7.0);
+        s.solve(db.get(), got_host.data(), nrhs);
+        EXPECT_EQ(got_host, want);
+        const std::shared_ptr<double> dx2 =
+            numeric::cuda_device_copy(std::vector<double>(b.size(), 7.0));
+        s.solve(b.data(), dx2.get(), nrhs);
+        numeric::copy_from_device(got.data(), dx2.get(), got.size());
+        EXPECT_EQ(got, want);
+        // a NaN in b: named, x left as it was
+        std::vector<double> bad = b;
+        const index_t at = n * nrhs - 1;
+        bad[static_cast<std::size_t>(at)] = std::nan("");
+        const std::shared_ptr<double> dbad = numeric::cuda_device_copy(bad);
+        const std::shared_ptr<double> dx3 =
+            numeric::cuda_device_copy(std::vector<double>(b.size(), 7.0));
+        try {
+          s.solve(dbad.get(), dx3.get(), nrhs);
+          ADD_FAILURE() << "no error for a NaN in b";
+        } catch (const InvalidInput& e) {
+          EXPECT_NE(std::string(e.what()).find("right-hand side entry " + std::to_string(n - 1) +
+                                               " of column 1 is not finite"),
+                    std::string::npos)
+              << e.what();
+        }
+        numeric::copy_from_device(got.data(), dx3.get(), got.size());
+        EXPECT_EQ(got, std::vector<double>(b.size(), 7.0));
+      }
+    }
+}
+
 // Large LU fronts go through the blocked panel path.
 TEST_F(CudaBackend, LargeLuFrontsMatchCpu) {
   SparseMatrix a = expand_symmetric(generators::elasticity_3d(8, 8, 8));

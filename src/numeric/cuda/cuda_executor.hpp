@@ -214,6 +214,9 @@ class CudaExecutor final : public numeric::Executor {
   bool solve_original(const Analysis& an, const numeric::NumericFactor& fac, const double* b,
                       double* x, index_t nrhs, const numeric::RescaleView& rescale,
                       double* stage) override;  // cuda_solve.cu
+  bool solve_gpu_arrays(const Analysis& an, const numeric::NumericFactor& fac, const double* b,
+                        double* x, index_t nrhs, const numeric::RescaleView& rescale,
+                        numeric::GpuArrayCheck& check) override;  // cuda_solve.cu
   bool keeps_panels(const numeric::FactorContext& ctx) const override {
     return ctx.part->id == -1 ? device_only_ : part_device_only_;
   }
@@ -258,6 +261,8 @@ class CudaExecutor final : public numeric::Executor {
   void prepare_solve_plan(const Analysis& an);  // cuda_solve.cu
   /// solve_original's permutations and scale factors for `an`, once per analysis.
   void prepare_solve_io(const Analysis& an);  // cuda_solve.cu
+  /// The factorization's rescaling to the device unless it is there already (cuda_solve.cu).
+  void upload_rescale(const Analysis& an, const numeric::RescaleView& rescale);
   /// Whether `fac` is the factor resident here for `an` (solve, solve_original can run).
   bool solves_resident(const Analysis& an, const numeric::NumericFactor& fac) const;
   /// The solve's workspaces sized for nrhs and its sweeps enqueued on the stream over
@@ -631,6 +636,10 @@ class CudaExecutor final : public numeric::Executor {
     /// numberings (prepare_solve_io)
     DeviceBuffer<double> b, row_rescale, col_rescale, in_scale, out_scale;
     DeviceBuffer<std::int64_t> in_index, out_index;
+    /// solve_gpu_arrays: b's first non-finite entry, x's, b's and x's largest magnitude
+    /// (launch_check_entries), and their copy on the host
+    DeviceBuffer<unsigned long long> checks;
+    PinnedBuffer<unsigned long long> checks_host;
     std::uint64_t io_analysis = 0, rescale_id = 0;
     std::vector<std::int64_t> u_offset_host;  ///< per front + 1: its update vector in u
     std::uint64_t inverse_analysis = 0;       ///< what inv_offsets and inv_src are for

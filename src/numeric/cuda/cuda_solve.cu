@@ -218,13 +218,7 @@ bool CudaExecutor::solve_original(const Analysis& an, const numeric::NumericFact
     from = stage;
   }
   dsolve_.b.upload(from, nx, stream_);
-  // the rescaling once per factorization: the solves and refinement steps after it reuse it
-  if (rescale.id == 0 || rescale.id != dsolve_.rescale_id) {
-    dsolve_.rescale_id = 0;
-    if (rescale.row) dsolve_.row_rescale.upload(rescale.row, static_cast<std::size_t>(n), stream_);
-    if (rescale.col) dsolve_.col_rescale.upload(rescale.col, static_cast<std::size_t>(n), stream_);
-    dsolve_.rescale_id = rescale.id;
-  }
+  upload_rescale(an, rescale);
   dsolve_.x.resize(nx);
   launch_permute_in(dsolve_.b.data(), dsolve_.in_index.data(), dsolve_.in_scale.data(),
                     rescale.row ? dsolve_.row_rescale.data() : nullptr, dsolve_.x.data(), n, nrhs,
@@ -238,6 +232,68 @@ bool CudaExecutor::solve_original(const Analysis& an, const numeric::NumericFact
                               stream_));
   STRATA_CUDA(cudaStreamSynchronize(stream_));
   if (!direct) std::memcpy(x, stage, bytes);
+  return true;
+}
+
+// The rescaling once per factorization: the solves and refinement steps after it reuse it.
+void CudaExecutor::upload_rescale(const Analysis& an, const numeric::RescaleView& rescale) {
+  if (rescale.id != 0 && rescale.id == dsolve_.rescale_id) return;
+  const std::size_t n = static_cast<std::size_t>(an.n);
+  dsolve_.rescale_id = 0;
+  if (rescale.row) dsolve_.row_rescale.upload(rescale.row, n, stream_);
+  if (rescale.col) dsolve_.col_rescale.upload(rescale.col, n, stream_);
+  dsolve_.rescale_id = rescale.id;
+}
+
+// solve_original with b and x in this device's memory: b checked, permuted and scaled
+// into the factor's numbering, the sweeps (the same graph), the solutions permuted and
+// scaled into x unless b held an entry that is not finite, x checked; only the four check
+// words come back to the host.
+bool CudaExecutor::solve_gpu_arrays(const Analysis& an, const numeric::NumericFactor& fac,
+                                    const double* b, double* x, index_t nrhs,
+                                    const numeric::RescaleView& rescale,
+                                    numeric::GpuArrayCheck& check) {
+  if (!solves_resident(an, fac)) return false;
+  if (numeric::device_memory_of(b) != device_ || numeric::device_memory_of(x) != device_)
+    return false;
+  check = numeric::GpuArrayCheck{};
+  if (an.n == 0 || nrhs == 0) return true;
+  STRATA_CUDA(cudaSetDevice(device_));
+  prepare_solve_plan(an);
+  prepare_solve_io(an);
+  const index_t n = an.n;
+  const std::int64_t count = static_cast<std::int64_t>(n) * nrhs;
+  upload_rescale(an, rescale);
+  dsolve_.x.resize(static_cast<std::size_t>(count));
+  dsolve_.checks.resize(4);
+  dsolve_.checks_host.resize(4);
+  unsigned long long* c = dsolve_.checks.data();  // b's first bad, x's; b's largest, x's
+  STRATA_CUDA(cudaMemsetAsync(c, 0xff, 2 * sizeof(unsigned long long), stream_));
+  STRATA_CUDA(cudaMemsetAsync(c + 2, 0, 2 * sizeof(unsigned long long), stream_));
+  launch_check_entries(b, count, c, c + 2, nullptr, stream_);
+  launch_permute_in(b, dsolve_.in_index.data(), dsolve_.in_scale.data(),
+                    rescale.row ? dsolve_.row_rescale.data() : nullptr, dsolve_.x.data(), n, nrhs,
+                    stream_);
+  enqueue_resident_solve(an, fac, nrhs);
+  launch_permute_out(dsolve_.x.data(), dsolve_.out_index.data(), dsolve_.out_scale.data(),
+                     rescale.col ? dsolve_.col_rescale.data() : nullptr, x, n, nrhs, stream_, c);
+  launch_check_entries(x, count, c + 1, c + 3, c, stream_);
+  unsigned long long* h = dsolve_.checks_host.data();
+  STRATA_CUDA(
+      cudaMemcpyAsync(h, c, 4 * sizeof(unsigned long long), cudaMemcpyDeviceToHost, stream_));
+  STRATA_CUDA(cudaStreamSynchronize(stream_));
+  auto index = [](unsigned long long v) {
+    return v == ~0ull ? std::int64_t{-1} : static_cast<std::int64_t>(v);
+  };
+  auto magnitude = [](unsigned long long v) {
+    double d = 0;
+    std::memcpy(&d, &v, sizeof d);
+    return d;
+  };
+  check.b_not_finite = index(h[0]);
+  check.x_not_finite = check.b_not_finite >= 0 ? -1 : index(h[1]);
+  check.b_max = magnitude(h[2]);
+  check.x_max = check.b_not_finite >= 0 ? 0.0 : magnitude(h[3]);
   return true;
 }
 

@@ -103,6 +103,10 @@ void copy_from_device(double* host, const double* device, std::size_t n) {
   if (n > 0) STRATA_CUDA(cudaMemcpy(host, device, n * sizeof(double), cudaMemcpyDefault));
 }
 
+void copy_to_device(double* device, const double* host, std::size_t n) {
+  if (n > 0) STRATA_CUDA(cudaMemcpy(device, host, n * sizeof(double), cudaMemcpyDefault));
+}
+
 std::shared_ptr<double> cuda_device_copy(const std::vector<double>& host) {
   if (!cuda::device_present()) throw NotSupported(cuda_unavailable_reason());
   STRATA_CUDA(cudaSetDevice(0));

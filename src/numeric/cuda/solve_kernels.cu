@@ -106,6 +106,44 @@ __global__ void diagonal_kernel(SolveTree t, const double* d_diag, const double*
   if (p < t.n) solve_device::diagonal(t, p, d_diag, d_off, pivot_size, x, nrhs);
 }
 
+constexpr unsigned long long kNoEntry = ~0ull;  // launch_check_entries: none found
+
+// launch_check_entries: per block the least index of a non-finite entry and the largest
+// magnitude (as its bits: non-negative doubles order as their bit patterns), then one
+// atomic each.
+__global__ void check_entries_kernel(const double* v, std::int64_t count,
+                                     unsigned long long* first_bad, unsigned long long* max_bits,
+                                     const unsigned long long* unless) {
+  if (unless && *unless != kNoEntry) return;
+  __shared__ unsigned long long bad[kThreads], big[kThreads];
+  unsigned long long b = kNoEntry, m = 0;
+  const std::int64_t step = static_cast<std::int64_t>(gridDim.x) * blockDim.x;
+  for (std::int64_t e = blockIdx.x * static_cast<std::int64_t>(blockDim.x) + threadIdx.x; e < count;
+       e += step) {
+    const double a = fabs(v[e]);
+    if (!(a <= DBL_MAX)) {  // infinite or NaN
+      if (static_cast<unsigned long long>(e) < b) b = static_cast<unsigned long long>(e);
+    } else {
+      const unsigned long long bits = static_cast<unsigned long long>(__double_as_longlong(a));
+      if (bits > m) m = bits;
+    }
+  }
+  bad[threadIdx.x] = b;
+  big[threadIdx.x] = m;
+  __syncthreads();
+  for (int h = kThreads / 2; h > 0; h /= 2) {
+    if (threadIdx.x < h) {
+      bad[threadIdx.x] = min(bad[threadIdx.x], bad[threadIdx.x + h]);
+      big[threadIdx.x] = max(big[threadIdx.x], big[threadIdx.x + h]);
+    }
+    __syncthreads();
+  }
+  if (threadIdx.x == 0) {
+    if (bad[0] != kNoEntry) atomicMin(first_bad, bad[0]);
+    atomicMax(max_bits, big[0]);
+  }
+}
+
 // v·d·e as core/solve_phase.cpp's scaled_by: one rounding when d·e is a normal number
 __device__ double scaled_by(double v, double d, double e) {
   const double f = d * e;
@@ -115,10 +153,13 @@ __device__ double scaled_by(double v, double d, double e) {
 
 // Out = false: to[k + r·n] = scaled(from[index[k] + r·n], ...) (launch_permute_in);
 // Out = true: to[index[k] + r·n] = scaled(from[k + r·n], ...) (launch_permute_out).
+// Nothing when `unless` is given and holds an index (launch_check_entries found an entry
+// that is not finite).
 template <bool Out>
 __global__ void permute_kernel(const double* from, const std::int64_t* index, const double* scale,
                                const double* rescale, double* to, std::int64_t n,
-                               std::int64_t total) {
+                               std::int64_t total, const unsigned long long* unless) {
+  if (unless && *unless != kNoEntry) return;
   const std::int64_t e = blockIdx.x * static_cast<std::int64_t>(blockDim.x) + threadIdx.x;
   if (e >= total) return;
   const std::int64_t k = e % n, r = e / n, i = index[k];
@@ -129,11 +170,11 @@ __global__ void permute_kernel(const double* from, const std::int64_t* index, co
 template <bool Out>
 void launch_permute(const double* from, const std::int64_t* index, const double* scale,
                     const double* rescale, double* to, std::int64_t n, std::int64_t nrhs,
-                    cudaStream_t s) {
+                    cudaStream_t s, const unsigned long long* unless) {
   const std::int64_t total = n * nrhs;
   if (total == 0) return;
   permute_kernel<Out><<<static_cast<unsigned>((total + kThreads - 1) / kThreads), kThreads, 0, s>>>(
-      from, index, scale, rescale, to, n, total);
+      from, index, scale, rescale, to, n, total, unless);
   STRATA_CUDA_LAUNCH();
 }
 
@@ -196,13 +237,27 @@ void launch_gemv_n(std::int64_t rows, std::int64_t cols, double alpha, const dou
 void launch_permute_in(const double* from, const std::int64_t* index, const double* scale,
                        const double* rescale, double* to, std::int64_t n, std::int64_t nrhs,
                        cudaStream_t s) {
-  launch_permute<false>(from, index, scale, rescale, to, n, nrhs, s);
+  launch_permute<false>(from, index, scale, rescale, to, n, nrhs, s, nullptr);
 }
 
 void launch_permute_out(const double* from, const std::int64_t* index, const double* scale,
                         const double* rescale, double* to, std::int64_t n, std::int64_t nrhs,
-                        cudaStream_t s) {
-  launch_permute<true>(from, index, scale, rescale, to, n, nrhs, s);
+                        cudaStream_t s, const unsigned long long* unless) {
+  launch_permute<true>(from, index, scale, rescale, to, n, nrhs, s, unless);
+}
+
+void launch_check_entries(const double* v, std::int64_t count, unsigned long long* first_bad,
+                          unsigned long long* max_bits, const unsigned long long* unless,
+                          cudaStream_t s) {
+  if (count <= 0) return;
+  int sms = 0, dev = 0;
+  STRATA_CUDA(cudaGetDevice(&dev));
+  STRATA_CUDA(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, dev));
+  const std::int64_t blocks =
+      std::min<std::int64_t>((count + kThreads - 1) / kThreads, 4 * static_cast<std::int64_t>(sms));
+  check_entries_kernel<<<static_cast<unsigned>(blocks), kThreads, 0, s>>>(v, count, first_bad,
+                                                                          max_bits, unless);
+  STRATA_CUDA_LAUNCH();
 }
 
 void launch_gather_forward(const SolveTree& t, SolveChunks c, std::int64_t begin,

@@ -106,8 +106,19 @@ void launch_permute_in(const double* from, const std::int64_t* index, const doub
                        cudaStream_t s);
 
 /// The solutions back: to[index[k] + r·n] = scaled(from[k + r·n], scale[k], rescale[index[k]]).
+/// Nothing when `unless` (device memory) is given and holds an index other than ~0
+/// (launch_check_entries found an entry of the right-hand sides that is not finite).
 void launch_permute_out(const double* from, const std::int64_t* index, const double* scale,
                         const double* rescale, double* to, std::int64_t n, std::int64_t nrhs,
-                        cudaStream_t s);
+                        cudaStream_t s, const unsigned long long* unless = nullptr);
+
+/// Checks v[0, count) on the device: *first_bad ← min(*first_bad, the least index of an
+/// entry that is not finite) and *max_bits ← max(*max_bits, the bits of the largest
+/// magnitude of a finite entry) — the bits of a non-negative double order as its value;
+/// the caller sets *first_bad to ~0 (none) and *max_bits to 0 first. Nothing when `unless`
+/// is given and holds an index other than ~0. The result does not depend on timing.
+void launch_check_entries(const double* v, std::int64_t count, unsigned long long* first_bad,
+                          unsigned long long* max_bits, const unsigned long long* unless,
+                          cudaStream_t s);
 
 }  // namespace strata::cuda
