@@ -134,6 +134,7 @@ CudaExecutor::CudaExecutor(const Options& o, int device)
     STRATA_CUDA(cudaEventCreateWithFlags(e, cudaEventDisableTiming));
   STRATA_CUDA(cudaStreamCreateWithFlags(&team_.dist_copy, cudaStreamNonBlocking));
   STRATA_CUDA(cudaStreamCreateWithFlags(&push_stream_, cudaStreamNonBlocking));
+  STRATA_CUDA(cudaStreamCreateWithFlags(&small_stream_, cudaStreamNonBlocking));
   for (ChunkRecord& c : chunk_)
     for (cudaEvent_t& e : c.ev) STRATA_CUDA(cudaEventCreate(&e));
 }
@@ -167,6 +168,7 @@ CudaExecutor::~CudaExecutor() {
   drop_landings();
   cudaSetDevice(device_);
   cudaStreamDestroy(push_stream_);
+  cudaStreamDestroy(small_stream_);
   for (ChunkRecord& c : chunk_)
     for (cudaEvent_t e : c.ev) cudaEventDestroy(e);
   if (solver_) cusolverDnDestroy(solver_);

@@ -322,10 +322,14 @@ class CudaExecutor final : public numeric::Executor {
     PinnedBuffer<std::int64_t> info, perturbed, perm;
     PinnedBuffer<int> pinfo, psize;
     PinnedBuffer<double> diag;
-    /// A fused chunk's results in one copy: info, perturbed, perm, diag back to back.
+    /// A fused chunk's results in one copy: info, perturbed, perm, diag back to back; or
+    /// another device-only chunk's (chunk_pack_results: packed_words of them, POTRF's
+    /// infos and LDLᵀ's pivot sizes among them, widened to words).
     PinnedBuffer<std::int64_t> packed;
+    std::size_t packed_words = 0;
     /// Where the host part reads the results (the buffers above, or in `packed`).
     const std::int64_t *info_at = nullptr, *perturbed_at = nullptr, *perm_at = nullptr;
+    const std::int64_t *pinfo_at = nullptr, *psize_at = nullptr;  ///< packed_words > 0
     const double* diag_at = nullptr;
     /// The chunk's panels on their way to the host factor (LLᵀ and LU whose panels do not
     /// stay on the device): copied there on copy_stream_ while the next chunk computes,
@@ -343,7 +347,7 @@ class CudaExecutor final : public numeric::Executor {
   /// factor_chunk's stages (factor_chunk.cu), in order, each enqueued on stream_ (and the
   /// lanes): the small fronts, the large fronts (with the panel kernels' share), the
   /// panels packed and copied back, the host part's results fetched into `rec`.
-  void chunk_small_fronts(const numeric::FactorContext& ctx, ChunkRecord& rec);
+  void chunk_small_fronts(const numeric::FactorContext& ctx, ChunkRecord& rec, cudaStream_t s);
   /// The chunk's layout (ChunkLayout) into `rec`: the part's cached one when its key
   /// matches, else made and its device arrays uploaded (the chunk's first factorization).
   void chunk_layout(const numeric::FactorContext& ctx, ChunkRecord& rec);
@@ -353,8 +357,15 @@ class CudaExecutor final : public numeric::Executor {
   /// The whole chunk by one launch when every front is a small LU front that fits shared
   /// memory and the panels stay on the device (Options::gpu_fused_small_batches).
   void factor_chunk_fused(const numeric::FactorContext& ctx, ChunkRecord& rec);
+  /// A device-only chunk's results packed for one copy (factor_chunk.cu); false when not.
+  bool chunk_pack_results(ChunkRecord& rec);
+  /// The record's half of packed_results_.
+  std::int64_t* packed_half(const ChunkRecord& rec);
   std::vector<char> chunk_panel_kernels(const numeric::FactorContext& ctx, const ChunkRecord& rec);
-  void chunk_large_fronts(const numeric::FactorContext& ctx, const ChunkRecord& rec);
+  /// `after`: the event its lanes wait for (the small fronts' end, or the assembly's when
+  /// the small fronts run beside them).
+  void chunk_large_fronts(const numeric::FactorContext& ctx, const ChunkRecord& rec,
+                          cudaEvent_t after);
   void chunk_pack_panels(const numeric::FactorContext& ctx, ChunkRecord& rec);
   void chunk_fetch_results(ChunkRecord& rec);
   /// Runs the pending chunk's host part, if any (before anything that needs the host
@@ -566,6 +577,9 @@ class CudaExecutor final : public numeric::Executor {
   };
   std::map<index_t, Landing> landing_;
   cudaStream_t push_stream_ = nullptr;  ///< the pushes' copies
+  /// A chunk's small-front kernel when the chunk also has large fronts (factor_chunk):
+  /// the two kinds, independent fronts of one level, run side by side.
+  cudaStream_t small_stream_ = nullptr;
   bool push_block(numeric::CbTransfer& t);
   void drop_landings() noexcept;
   /// The value pass on the device (value_pass.cu): the canonical pattern by columns

@@ -386,9 +386,10 @@ void CudaExecutor::presize_chunk_buffers(const Analysis& an,
     }
   }
   for (auto* b : {&info_, &perturbed_}) b->resize(count + 1);
-  // a fused chunk's results, one half per chunk record: info and perturbed per front, then
-  // its pivots' permutation and diagonal entries (factor_chunk_fused)
-  packed_results_.resize(2 * (2 * count + 2 * pivots + 1));
+  // a chunk's results, one half per chunk record: info and perturbed per front, POTRF's
+  // info per large front, then its pivots' permutation, LDLᵀ pivot sizes and diagonal
+  // entries (factor_chunk_fused, chunk_pack_results)
+  packed_results_.resize(2 * (3 * count + 3 * pivots + 1));
   // every chunk's layout at 6 × its first position (chunk_layout)
   for (const numeric::PartView& v : views) {
     PartDevice& pd = parts_.at(v.id);
@@ -417,7 +418,7 @@ void CudaExecutor::presize_chunk_buffers(const Analysis& an,
     c.pinfo.resize(big + 1);
     c.psize.resize(pivots + 1);
     c.diag.resize(pivots + 1);
-    c.packed.resize(2 * count + 2 * pivots + 1);
+    c.packed.resize(3 * count + 3 * pivots + 1);
   }
   for (auto& l : lane) {
     l->potrf_work.resize(static_cast<std::size_t>(potrf));

@@ -78,14 +78,29 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
   launch_assemble(cur_->tree, begin, end - begin, rec.max_rows, values_.data(), pool_.data(),
                   !rec.lu, stream_);
   STRATA_CUDA(cudaEventRecord(rec.ev[1], stream_));
-  chunk_small_fronts(ctx, rec);
-  chunk_large_fronts(ctx, rec);
+  // a level's small and large fronts are independent: with both, the small fronts' kernel
+  // runs on small_stream_ beside the large fronts' work, and the stores wait for both (the
+  // large-front phase is then what they took beyond the small fronts' end)
+  const bool side = !rec.small.empty() && !rec.big.empty();
+  if (side) STRATA_CUDA(cudaStreamWaitEvent(small_stream_, rec.ev[1], 0));
+  chunk_small_fronts(ctx, rec, side ? small_stream_ : stream_);
+  chunk_large_fronts(ctx, rec, side ? rec.ev[1] : rec.ev[2]);
+  if (side) STRATA_CUDA(cudaStreamWaitEvent(stream_, rec.ev[2], 0));
   STRATA_CUDA(cudaEventRecord(rec.ev[3], stream_));
   launch_store_cb(cur_->tree, begin, end - begin, rec.max_rows, pool_.data(), !rec.lu, stream_);
   chunk_pack_panels(ctx, rec);
+  const bool packed = chunk_pack_results(rec);
   STRATA_CUDA(cudaEventRecord(rec.ev[4], stream_));
-  chunk_fetch_results(rec);
-  STRATA_CUDA(cudaEventRecord(rec.ev[5], stream_));
+  if (packed) {  // one copy beside the next chunk's launches (see chunk_pack_results)
+    STRATA_CUDA(cudaStreamWaitEvent(copy_stream_, rec.ev[4], 0));
+    STRATA_CUDA(cudaMemcpyAsync(rec.packed.data(), packed_half(rec),
+                                sizeof(std::int64_t) * rec.packed_words, cudaMemcpyDeviceToHost,
+                                copy_stream_));
+    STRATA_CUDA(cudaEventRecord(rec.ev[5], copy_stream_));
+  } else {
+    chunk_fetch_results(rec);
+    STRATA_CUDA(cudaEventRecord(rec.ev[5], stream_));
+  }
   // the previous chunk's host part, while the GPU runs this one; this one's waits when it
   // writes to the host factor (panels copied back, LDLᵀ): the next chunk's stores would
   // overwrite the staging area it reads
@@ -108,7 +123,7 @@ void CudaExecutor::factor_chunk_fused(const numeric::FactorContext& ctx, ChunkRe
   const std::size_t ns = rec.small.size(), np = static_cast<std::size_t>(rec.perm_total);
   const std::size_t nd = static_cast<std::size_t>(rec.diag_off.back());
   const std::size_t half = packed_results_.size() / 2;
-  std::int64_t* const r = packed_results_.data() + (&rec == &chunk_[0] ? 0 : half);
+  std::int64_t* const r = packed_half(rec);
   if (2 * ns + np + nd > half)
     throw InternalError("factor_chunk_fused: the results buffer was not sized for this chunk");
   STRATA_CUDA(cudaEventRecord(rec.ev[1], stream_));
@@ -133,8 +148,9 @@ void CudaExecutor::factor_chunk_fused(const numeric::FactorContext& ctx, ChunkRe
 }
 
 // Step 2 for the small fronts (rec.small from chunk_layout, one thread block each, one
-// launch for all).
-void CudaExecutor::chunk_small_fronts(const numeric::FactorContext& ctx, ChunkRecord& rec) {
+// launch for all), on stream s; ev[2] marks its end there.
+void CudaExecutor::chunk_small_fronts(const numeric::FactorContext& ctx, ChunkRecord& rec,
+                                      cudaStream_t s) {
   const std::size_t ns = rec.small.size(), nb = rec.big.size();
   info_.resize(ns + nb + 1);  // presized at planning: no allocation here
   perturbed_.resize(ns + nb + 1);
@@ -149,13 +165,13 @@ void CudaExecutor::chunk_small_fronts(const numeric::FactorContext& ctx, ChunkRe
   if (rec.ldlt)
     launch_ldlt_small(tree, rec.small_pos, static_cast<std::int64_t>(ns), pool_.data(),
                       ctx.static_pivot, perturbed_.data(), perm_.data(), pivot_size_.data(),
-                      rec.perm_offset, stream_);
+                      rec.perm_offset, s);
   else
     launch_factor_small(tree, rec.small_pos, static_cast<std::int64_t>(ns), small_rows,
                         pool_.data(), rec.lu, ctx.static_pivot, ctx.diagonal_pivot_threshold,
                         info_.data(), perturbed_.data(), perm_.data(), rec.perm_offset,
-                        small_front_threads_, stream_);
-  STRATA_CUDA(cudaEventRecord(rec.ev[2], stream_));
+                        small_front_threads_, s);
+  STRATA_CUDA(cudaEventRecord(rec.ev[2], s));
 }
 
 // The chunk's layout: its fronts split into small ones (rec.small) and large ones
@@ -278,7 +294,8 @@ std::vector<char> CudaExecutor::chunk_panel_kernels(const numeric::FactorContext
 // those kernels (lane 0 is stream_ itself, behind them); then the updates of the ones they
 // took, each lane waiting once for panels_done_. Ends with the lanes and the GPU team
 // joined on stream_: the stores read every front.
-void CudaExecutor::chunk_large_fronts(const numeric::FactorContext& ctx, const ChunkRecord& rec) {
+void CudaExecutor::chunk_large_fronts(const numeric::FactorContext& ctx, const ChunkRecord& rec,
+                                      cudaEvent_t after) {
   const auto& t = ctx.analysis->tree;
   const auto& s = *ctx.part->schedule;
   const std::vector<std::int64_t>& big = rec.big;
@@ -295,7 +312,7 @@ void CudaExecutor::chunk_large_fronts(const numeric::FactorContext& ctx, const C
   std::vector<char> waited(n_lanes, 0);
   for (std::size_t l = 0; l < n_lanes; ++l) {
     lane[l]->load = 0;
-    if (l > 0) STRATA_CUDA(cudaStreamWaitEvent(lane[l]->stream, rec.ev[2], 0));
+    if (l > 0) STRATA_CUDA(cudaStreamWaitEvent(lane[l]->stream, after, 0));
   }
   for (int pass = 0; pass < 2; ++pass)
     for (std::size_t i = 0; i < big.size(); ++i) {
@@ -391,6 +408,54 @@ double* CudaExecutor::chunk_panel_target(const numeric::FactorContext& ctx) {
   return part_device_only_ ? part_panels_.at(ctx.part->id).data() : panels_.data();
 }
 
+std::int64_t* CudaExecutor::packed_half(const ChunkRecord& rec) {
+  return packed_results_.data() + (&rec == &chunk_[0] ? 0 : packed_results_.size() / 2);
+}
+
+// A chunk whose panels stay on the device: its results (small fronts' checks, every
+// front's perturbed count, the permutations, POTRF's infos, LDLᵀ's pivot sizes, the
+// diagonals) packed by one kernel into the record's half of packed_results_, for one copy
+// on copy_stream_. The shared result buffers are then free for the next chunk as soon as
+// the kernel has read them, and the next chunk's launches do not queue behind five small
+// copies; the half is not written again before this chunk's host part has waited for
+// the copy (ev[5]; the record's next chunk comes after it). False, having done nothing,
+// for a chunk whose panels come back to the host (its host part waits for them anyway)
+// or whose results do not fit the half.
+bool CudaExecutor::chunk_pack_results(ChunkRecord& rec) {
+  rec.packed_words = 0;
+  if (!rec.dev_only) return false;
+  const std::int64_t ns = static_cast<std::int64_t>(rec.small.size());
+  const std::int64_t nb = static_cast<std::int64_t>(rec.big.size()), nall = ns + nb;
+  const std::int64_t np = rec.perm_total, nd = rec.diag_off.back();
+  const bool llt = !rec.lu && !rec.ldlt;
+  ResultSegments g;
+  std::int64_t at = 0;
+  auto segment = [&](int q, const void* src, std::int64_t n, int kind) {
+    at += n;
+    g.src[q] = src;
+    g.end[q] = at;
+    g.kind[q] = kind;
+  };
+  segment(0, info_.data(), rec.ldlt ? 0 : ns, 0);
+  segment(1, perturbed_.data(), nall, 0);
+  segment(2, perm_.data(), np, 0);
+  segment(3, potrf_info_.data(), llt ? nb : 0, 1);
+  segment(4, pivot_size_.data(), rec.ldlt ? np : 0, 1);
+  segment(5, diag_.data(), nd, 2);
+  if (static_cast<std::size_t>(at) > packed_results_.size() / 2) return false;
+  launch_pack_results(g, packed_half(rec), stream_);
+  rec.packed.resize(static_cast<std::size_t>(at) + 1);  // presized at planning
+  const std::int64_t* h = rec.packed.data();
+  rec.info_at = h;
+  rec.perturbed_at = h + g.end[0];
+  rec.perm_at = h + g.end[1];
+  rec.pinfo_at = h + g.end[2];
+  rec.psize_at = h + g.end[3];
+  rec.diag_at = reinterpret_cast<const double*>(h + g.end[4]);
+  rec.packed_words = static_cast<std::size_t>(at);
+  return true;
+}
+
 // The results the host part needs (pivot checks, permutations, LDLᵀ pivot sizes, the
 // diagonal of device-only panels), into the record's pinned buffers, so that the copies
 // do not hold the host: the host part runs after the next chunk is launched.
@@ -463,9 +528,18 @@ void CudaExecutor::finish_chunk(const numeric::FactorContext& ctx, ChunkRecord& 
   const std::int64_t* info = c.info_at;
   const std::int64_t* perturbed = c.perturbed_at;
   const std::int64_t* perm = c.perm_at;
+  STRATA_CUDA(cudaEventSynchronize(c.ev[5]));
+  if (c.packed_words > 0) {  // POTRF's infos and LDLᵀ's pivot sizes from their words
+    const std::size_t nb = big.size(), np = static_cast<std::size_t>(c.perm_total);
+    c.pinfo.resize(nb + 1);
+    c.psize.resize(np + 1);
+    if (!lu && !ldlt)
+      for (std::size_t i = 0; i < nb; ++i) c.pinfo.data()[i] = static_cast<int>(c.pinfo_at[i]);
+    if (ldlt)
+      for (std::size_t i = 0; i < np; ++i) c.psize.data()[i] = static_cast<int>(c.psize_at[i]);
+  }
   const int* pinfo = c.pinfo.data();
   const int* psize = c.psize.data();
-  STRATA_CUDA(cudaEventSynchronize(c.ev[5]));
   if (c.panels_async) STRATA_CUDA(cudaEventSynchronize(c.ev[7]));
   float ms[4] = {};
   for (int e = c.fused ? 1 : 0; e < (c.fused ? 2 : 4); ++e)

@@ -238,4 +238,18 @@ void launch_gather_diagonals(const DeviceTree& t, std::int64_t begin, std::int64
                              const std::int64_t* panel_offset, const double* panels,
                              const std::int64_t* diag_offset, double* diag, cudaStream_t s);
 
+/// Up to six device arrays packed back to back into one of int64 words
+/// (launch_pack_results): segment q is src[q][0, end[q] − end[q−1]) (end[−1] = 0), of
+/// std::int64_t (kind 0), int (kind 1, widened) or double (kind 2, its bits). Unused
+/// segments are empty (end[q] = end[q−1]).
+struct ResultSegments {
+  const void* src[6] = {};
+  std::int64_t end[6] = {};
+  int kind[6] = {};
+};
+
+/// out[0, seg.end[5]) ← the segments of `seg` back to back, so that a chunk's results
+/// (pivot checks, permutations, diagonals) come back in one copy.
+void launch_pack_results(const ResultSegments& seg, std::int64_t* out, cudaStream_t s);
+
 }  // namespace strata::cuda

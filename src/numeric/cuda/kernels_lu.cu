@@ -358,4 +358,33 @@ void launch_gather_diagonals(const DeviceTree& t, std::int64_t begin, std::int64
   STRATA_CUDA_LAUNCH();
 }
 
+namespace {
+__global__ void pack_results_kernel(ResultSegments g, std::int64_t* out) {
+  const std::int64_t total = g.end[5];
+  const std::int64_t step = static_cast<std::int64_t>(gridDim.x) * blockDim.x;
+  for (std::int64_t e = blockIdx.x * static_cast<std::int64_t>(blockDim.x) + threadIdx.x; e < total;
+       e += step) {
+    int q = 0;
+    while (e >= g.end[q]) ++q;
+    const std::int64_t i = e - (q > 0 ? g.end[q - 1] : 0);
+    std::int64_t v;
+    if (g.kind[q] == 0)
+      v = static_cast<const std::int64_t*>(g.src[q])[i];
+    else if (g.kind[q] == 1)
+      v = static_cast<const int*>(g.src[q])[i];
+    else
+      v = __double_as_longlong(static_cast<const double*>(g.src[q])[i]);
+    out[e] = v;
+  }
+}
+}  // namespace
+
+void launch_pack_results(const ResultSegments& seg, std::int64_t* out, cudaStream_t s) {
+  const std::int64_t total = seg.end[5];
+  if (total <= 0) return;
+  const std::int64_t blocks = std::min<std::int64_t>((total + kThreads - 1) / kThreads, 64);
+  pack_results_kernel<<<static_cast<unsigned>(blocks), kThreads, 0, s>>>(seg, out);
+  STRATA_CUDA_LAUNCH();
+}
+
 }  // namespace strata::cuda
