@@ -264,37 +264,30 @@ class Report(GpuSections, Distributed, EndToEnd, IftommSection):
                                      f"{sum(1 for _, x in pp if x is not None)} problems on "
                                      f"{machine_label(r.machine)} "
                                      f"([`{r.name}`]({self.rel(r.path)})).")
-            if r.kind == "cudss" and not r.get("solver_options"):
-                pp = [(row.get("problem"), ratio(dig(row, "strata_gpu", "first_solve_seconds"),
-                                                 dig(row, "cudss_default", "solve_seconds")))
-                      for row in r.rows]
-                name = ("solve time strata GPU first solve (one application of the factor, "
-                        "no refinement)/cuDSS solve (default reordering)")
-                g = judge(name, r.machine, pp)
-                self.key_ratio("GPU solve time, strata / cuDSS"
-                               + (", multibody Newton matrices" if r.tag == "mbd" else "")
-                               + " (one right-hand side, no refinement)", g, pp, r)
-                if g is not None:
-                    lines.append(f"- Geometric mean of {name}{mbd_label(r)}: "
-                                 f"**{f_ratio(g)}** over "
-                                 f"{sum(1 for _, x in pp if x is not None)} problems on "
-                                 f"{machine_label(r.machine)} "
-                                 f"([`{r.name}`]({self.rel(r.path)})).")
-            if r.kind == "cudss" and not r.get("solver_options") and any(
-                    (num(dig(row, "strata_gpu", "first_solve_gpu_arrays_seconds")) or -1) > 0
-                    for row in r.rows):
-                def on_gpu(row):  # -1: not measured
-                    v = num(dig(row, "strata_gpu", "first_solve_gpu_arrays_seconds"))
+            # the first solve from host arrays, and from arrays in GPU memory where the run
+            # measured it (-1 or absent: not measured), against cuDSS's (GPU arrays)
+            for field, what, label in (
+                    ("first_solve_seconds", "(one application of the factor, no refinement)",
+                     "one right-hand side, no refinement"),
+                    ("first_solve_gpu_arrays_seconds", "with b and x in GPU memory",
+                     "b and x in GPU memory for both, no refinement")):
+                if r.kind != "cudss" or r.get("solver_options"):
+                    break
+
+                def strata_s(row, field=field):
+                    v = num(dig(row, "strata_gpu", field))
                     return v if v is not None and v > 0 else None
-                pp = [(row.get("problem"), ratio(on_gpu(row), dig(row, "cudss_default",
-                                                                   "solve_seconds")))
+                pp = [(row.get("problem"), ratio(strata_s(row), dig(row, "cudss_default",
+                                                                     "solve_seconds")))
                       for row in r.rows]
-                name = ("solve time strata GPU first solve with b and x in GPU memory/cuDSS "
-                        "solve (default reordering)")
+                if all(x is None for _, x in pp):
+                    continue
+                name = (f"solve time strata GPU first solve {what}/cuDSS solve "
+                        "(default reordering)")
                 g = judge(name, r.machine, pp)
                 self.key_ratio("GPU solve time, strata / cuDSS"
                                + (", multibody Newton matrices" if r.tag == "mbd" else "")
-                               + " (b and x in GPU memory for both, no refinement)", g, pp, r)
+                               + f" ({label})", g, pp, r)
                 if g is not None:
                     lines.append(f"- Geometric mean of {name}{mbd_label(r)}: "
                                  f"**{f_ratio(g)}** over "
