@@ -124,6 +124,7 @@ void CudaExecutor::factor_chunk_fused(const numeric::FactorContext& ctx, ChunkRe
   const std::size_t nd = static_cast<std::size_t>(rec.diag_off.back());
   const std::size_t half = packed_results_.size() / 2;
   std::int64_t* const r = packed_half(rec);
+  rec.packed_words = 0;  // the fused layout below (no POTRF infos or pivot sizes)
   if (2 * ns + np + nd > half)
     throw InternalError("factor_chunk_fused: the results buffer was not sized for this chunk");
   STRATA_CUDA(cudaEventRecord(rec.ev[1], stream_));
