@@ -7,15 +7,15 @@
 // from cudaMallocHost memory, as cuDSS's timed copy before it reads them), for LU also with
 // Pivoting::fixed and, when the refactorization delayed pivots, in their order
 // (Solver::analyze_in_pivot_order), solve with refinement, and a solve with b and x in GPU
-// memory as cuDSS's are, its first application of the factor timed); cuDSS with its default reordering and
-// with strata's permutation given as CUDSS_DATA_USER_PERM (both directions of the permutation are
-// tried and the one with the smaller LU_NNZ kept, since the documentation does not say which one it
-// expects), each: analysis, factorization, median of --repeat REFACTORIZATION, the same with the
-// values copied to the device from page-locked host memory before each (what a host-assembled
-// matrix such as the multibody engine's costs cuDSS, as strata's refactorizations take host
-// values), solve, backward error computed on the host, LU_NNZ. cuDSS gets the upper triangle (CSR
-// view of strata's lower CSC) for SPD matrices and the whole matrix for unsymmetric ones; 32-bit
-// indices. Results: <dir>/cudss-*.json.
+// memory as cuDSS's are, its first application of the factor timed); cuDSS with its default
+// reordering and with strata's permutation given as CUDSS_DATA_USER_PERM (both directions of the
+// permutation are tried and the one with the smaller LU_NNZ kept, since the documentation does not
+// say which one it expects), each: analysis, factorization, median of --repeat REFACTORIZATION, the
+// same with the values copied to the device from page-locked host memory before each (what a
+// host-assembled matrix such as the multibody engine's costs cuDSS, as strata's refactorizations
+// take host values), solve, backward error computed on the host, LU_NNZ. cuDSS gets the upper
+// triangle (CSR view of strata's lower CSC) for SPD matrices and the whole matrix for unsymmetric
+// ones; 32-bit indices. Results: <dir>/cudss-*.json.
 //
 //   bench_cudss [--problems a,b,...] [--repeat R] [--solver-option NAME=VALUE]... [--tag NAME]
 //               [--results-dir DIR] [--dump-orders DIR]
@@ -384,7 +384,7 @@ static int driver_main(int argc, char** argv) {
     // in that fixed order on the device (after the solve above: the row's other figures
     // are the default's)
     json pivot_order;
-    if (refactor_stats.delayed_pivoting) {
+    if (refactor_stats.delayed_pivoting && refactor_stats.type == MatrixType::general) {
       t.reset();
       s.analyze_in_pivot_order();
       const double pa = t.seconds();

@@ -47,7 +47,7 @@ enum class Backend {
   automatic,
 };
 
-/// How pivots that the analysis's fixed order cannot take are handled (LU; see
+/// How pivots that the analysis's fixed order cannot take are handled (LU and LDLᵀ; see
 /// Options::pivoting).
 enum class Pivoting {
   fixed,      ///< static pivots only: a tiny pivot becomes ±static_pivot_epsilon·‖B‖₁.
@@ -142,7 +142,9 @@ struct Options {
   /// always factored one per thread in a schedule-independent way; what differs between
   /// thread counts is only multithreaded OpenBLAS on the large fronts (more than 2e7
   /// flops), which rounds differently for different thread counts. With this set, those
-  /// fronts run single-threaded BLAS too, giving up their parallelism. Without it, results
+  /// fronts run single-threaded BLAS too, giving up their parallelism, and a factor with
+  /// delayed pivots (whose solve splits its subtrees by the thread count) is solved on one
+  /// thread. Without it, results
   /// for a fixed num_threads are still bitwise repeatable run to run, and results for
   /// different thread counts differ at the level of the unit roundoff. Default off.
   /// (docs/reliability.md, "Determinism".)
@@ -297,9 +299,10 @@ struct Options {
   /// replaced by ±static_pivot_epsilon · ‖A‖₁ and counted in FactorStats (default 1e-8 ≈ √ε, as in
   /// SuperLU_DIST and MUMPS).
   double static_pivot_epsilon = 1e-8;
-  /// Delayed pivoting (LU, MatrixType::general; numeric/delayed.hpp): fronts refuse pivots
-  /// below pivot_threshold times their column's largest entry and pass them to their
-  /// parent (MUMPS, MA57), so static pivots remain only where the matrix is numerically
+  /// Delayed pivoting (LU and LDLᵀ: MatrixType::general and symmetric_indefinite;
+  /// numeric/delayed.hpp): fronts refuse pivots below pivot_threshold times their column's
+  /// largest entry (LDLᵀ: 1×1 or 2×2 pivots by MA57's test) and pass them to their parent
+  /// (MUMPS, MA57), so static pivots remain only where the matrix is numerically
   /// singular. automatic (default) factors in the analysis's fixed order first and runs
   /// the delayed factorization only when that needed static pivots; delayed always runs
   /// it (a Newton loop whose values keep drifting from the analysis's); fixed never does.

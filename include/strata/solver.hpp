@@ -97,7 +97,8 @@ class Solver {
   /// The factor may have more entries than the fresh analysis's (delayed pivots move up
   /// the tree: stats().analysis.nnz_l says). The factor is discarded: follow it with factorize or
   /// refactorize. Throws InvalidState when the last factorization delayed no pivot (or there
-  /// is none), OutOfMemory as analyze (the solver then keeps its analysis and factor).
+  /// is none), NotSupported when it was of a symmetric indefinite matrix (LU only),
+  /// OutOfMemory as analyze (the solver then keeps its analysis and factor).
   void analyze_in_pivot_order();
 
   /// Numeric factorization of A, whose pattern must be the analyzed one (analyzes first

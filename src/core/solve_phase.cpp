@@ -111,8 +111,10 @@ bool apply_inverse(SolverState& s, const double* b, double* x, index_t nrhs) {
                         rescale ? s.rescaling.row[i] : 1.0);
   });
   bool on_device = false;
-  if (s.delayed.valid)
-    numeric::solve_delayed(an, s.delayed, work, nrhs, &host_arena(s));
+  if (s.delayed.valid)  // by subtrees on the threads, whose split depends on their count:
+                        // one thread under Options::reproducible
+    numeric::solve_delayed(an, s.delayed, work, nrhs,
+                           s.options.reproducible ? nullptr : &host_arena(s));
   else
     on_device = s.driver->solve(an, s.factor, work, nrhs);
   for_entries(s, n * nrhs, [&](index_t e) {
@@ -210,7 +212,7 @@ void finish_solve(SolverState& s, const double* b, double* x, index_t nrhs, bool
   }
   ss.on_device = on_device;
   ss.host_threads = 1;
-  if (s.delayed.valid && !s.delayed.solve_plan.bins.empty()) {
+  if (s.delayed.valid && !s.delayed.solve_plan.bins.empty() && !s.options.reproducible) {
     ss.host_threads = 0;
     for (const auto& bin : s.delayed.solve_plan.bins) ss.host_threads += !bin.empty();
   }

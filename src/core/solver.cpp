@@ -413,8 +413,9 @@ struct NumericRun {
 
 // The numeric stage: the factor of s.scaled by the driver (one executor, several
 // workers, or the distributed driver), Cholesky tried first for an automatic symmetric type, then,
-// for a general matrix with delayed pivoting allowed, the delayed factorization on the host when
-// the fixed order needed static pivots (or always with Pivoting::delayed).
+// for a general or symmetric indefinite matrix with delayed pivoting allowed, the delayed
+// factorization on the host when the fixed order needed static pivots (or always with
+// Pivoting::delayed).
 NumericRun factor_values(SolverState& s, double norm1, double static_pivot) {
   const Analysis& an = *s.analysis;
   tbb::task_arena& arena = host_arena(s);
@@ -437,12 +438,14 @@ NumericRun factor_values(SolverState& s, double norm1, double static_pivot) {
       type = MatrixType::symmetric_indefinite;
     }
   }
-  // Delayed pivoting (general, the whole tree in this process; Options::pivoting): the fixed order
-  // first unless asked to delay always, the delayed factorization on the host when the fixed order
-  // needed static pivots.
+  // Delayed pivoting (general and symmetric indefinite, the whole tree in this process;
+  // Options::pivoting): the fixed order first unless asked to delay always, the delayed
+  // factorization on the host when the fixed order needed static pivots.
   s.delayed.valid = false;
-  const bool can_delay = s.options.pivoting != Pivoting::fixed && type == MatrixType::general &&
-                         s.driver->in_one_process();
+  const bool can_delay =
+      s.options.pivoting != Pivoting::fixed &&
+      (type == MatrixType::general || type == MatrixType::symmetric_indefinite) &&
+      s.driver->in_one_process();
   const bool delay_directly = can_delay && s.options.pivoting == Pivoting::delayed;
   index_t fixed_perturbed = 0;
   if (delay_directly) {
@@ -677,6 +680,10 @@ void Solver::analyze_in_pivot_order() {
     throw InvalidState(
         "analyze_in_pivot_order: the last factorization delayed no pivot "
         "(stats().factor.delayed_pivoting is false), so its order is the analysis's");
+  if (s.delayed.type != MatrixType::general)
+    throw NotSupported(
+        "analyze_in_pivot_order: the order of a symmetric matrix's delayed pivots is not "
+        "kept (an LU's row and column pivot sequences are)");
   phase("analyze", [&] {
     std::vector<index_t> rows, cols;
     numeric::delayed_pivot_sequence(*s.analysis, s.delayed, rows, cols);

@@ -1,7 +1,9 @@
-// strata — multifrontal LU with delayed pivots (see delayed.hpp).
+// strata — multifrontal LU and LDLᵀ with delayed pivots (see delayed.hpp).
 //
 // Front f of the assembly tree, with msym symbolic rows (its ksym pivots first) and d rows
-// and columns delayed by its children, is assembled as an m×m dense matrix, m = d + msym:
+// and columns delayed by its children, is assembled as an m×m dense matrix, m = d + msym
+// (a symmetric matrix's front whole: each entry of its lower triangle at its mirror
+// position too):
 //
 //   rows    = the children's delayed rows (in child order), then f's symbolic rows,
 //   columns = the children's delayed columns (in child order), then f's symbolic rows,
@@ -11,7 +13,8 @@
 // and each child's contribution block is added at the positions of its row and column
 // lists (a delayed variable's row and column hold nothing from other children: it is
 // coupled only to what was in its own front). The partial factorization
-// (cpu::factor_front_lu_delayed) eliminates npiv ≤ p pivots; the rest of the fully summed
+// (cpu::factor_front_lu_delayed, or cpu::factor_front_sym_delayed for a symmetric
+// matrix) eliminates npiv ≤ p pivots; the rest of the fully summed
 // rows and columns lead the contribution block pushed for the parent. A front without a
 // parent (a root) may not delay: what is left there is singular to working precision and
 // gets static pivots.
@@ -108,14 +111,19 @@ void factor_front(const Analysis& an, const double* vals, const cpu::DelayPolicy
   if (w.front.size() < mm) sized(w.front, mm, "front workspace");
   double* A = w.front.data();
   std::fill(A, A + mm, 0.0);
-  if (d == 0) {  // no delayed rows: the symbolic front's own layout
+  const bool symmetric = F.type == MatrixType::symmetric_indefinite;
+  if (d == 0 && !symmetric) {  // no delayed rows: the symbolic front's own layout
     for (index_t e = am.entry_offsets[f]; e < am.entry_offsets[f + 1]; ++e)
       A[am.entry_dst[e]] += vals[am.entry_src[e]];
   } else {
+    // shifted past the delayed rows; a symmetric matrix's entries (its lower triangle, in
+    // the front's lower triangle) also at their mirror position: its front is held whole
     for (index_t e = am.entry_offsets[f]; e < am.entry_offsets[f + 1]; ++e) {
       const index_t dst = am.entry_dst[e];
       const index_t i = dst % msym, j = dst / msym;
-      A[(d + i) + static_cast<std::size_t>(d + j) * m] += vals[am.entry_src[e]];
+      const double v = vals[am.entry_src[e]];
+      A[(d + i) + static_cast<std::size_t>(d + j) * m] += v;
+      if (symmetric && i != j) A[(d + j) + static_cast<std::size_t>(d + i) * m] += v;
     }
   }
   for (index_t q = c0; q < c1; ++q) {
@@ -145,8 +153,11 @@ void factor_front(const Analysis& an, const double* vals, const cpu::DelayPolicy
   cpu::DelayPolicy policy = root_policy;
   policy.may_delay = t.parent[f] >= 0;
   fr.stats = PivotStats{};
-  const index_t npiv = cpu::factor_front_lu_delayed(A, m, p, m, policy, w.row_perm.data(),
-                                                    w.col_perm.data(), fr.stats, arena);
+  const index_t npiv = symmetric
+                           ? cpu::factor_front_sym_delayed(A, m, p, m, policy, w.row_perm.data(),
+                                                           w.col_perm.data(), fr.stats, arena)
+                           : cpu::factor_front_lu_delayed(A, m, p, m, policy, w.row_perm.data(),
+                                                          w.col_perm.data(), fr.stats, arena);
   sized(w.scratch, 2 * static_cast<std::size_t>(p), "front permutation");
   for (index_t i = 0; i < p; ++i) {
     w.scratch[i] = R[w.row_perm[i]];
@@ -217,8 +228,9 @@ void factor_front(const Analysis& an, const double* vals, const cpu::DelayPolicy
 void factorize_delayed(const Analysis& an, const double* vals, MatrixType type, double threshold,
                        double static_pivot, DelayedFactor& F, DelayedWorkspace& W,
                        tbb::task_arena& arena) {
-  if (type != MatrixType::general)
-    throw NotSupported("delayed pivoting is implemented for LU (general matrices) only");
+  if (type != MatrixType::general && type != MatrixType::symmetric_indefinite)
+    throw NotSupported(
+        "delayed pivoting is implemented for general and symmetric indefinite matrices only");
   if (!(threshold > 0 && threshold <= 1))
     throw InvalidInput("the pivot threshold must be in (0, 1], got " + std::to_string(threshold));
   const auto& t = an.tree;

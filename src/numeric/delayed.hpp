@@ -12,10 +12,15 @@
 // analysis's level schedule (deepest first), those of a level concurrently; each keeps its
 // contribution block until its parent has been assembled.
 //
-// LU only (MatrixType::general): rows and columns permute independently, so each front
-// keeps a row list and a column list. The factor is of B = the scaled, matched, ordered
-// matrix of the analysis, in tree numbering: L·U = B(σr, σc) for the row and column pivot
-// sequences σr, σc (each front's first k rows / columns, fronts in postorder).
+// General matrices (LU): rows and columns permute independently, so each front keeps a
+// row list and a column list. Symmetric indefinite matrices: each front is held whole and
+// eliminated with symmetric interchanges by 1×1 and 2×2 pivots (numeric/cpu/
+// delayed_front.hpp), so a delayed variable's row and column travel together and the
+// pivots give the inertia; the factor is stored as an LU as well (a 2×2 pivot as two
+// elimination steps), so both types share the layout and the solve. The factor is of B =
+// the scaled, matched, ordered matrix of the analysis, in tree numbering: L·U = B(σr, σc)
+// for the row and column pivot sequences σr, σc (each front's first k rows / columns,
+// fronts in postorder).
 #pragma once
 
 #include <tbb/task_arena.h>
@@ -102,9 +107,10 @@ struct DelayedWorkspace {
 /// The fronts are factored concurrently in `arena`, each once its children are (one BLAS
 /// thread each; a large front's panel updates are split by column blocks over the arena's
 /// threads), each from its children's blocks in child order, so the factor does not
-/// depend on the thread count. Throws NotSupported for a type
-/// other than general, InvalidInput for a threshold outside (0, 1], OutOfMemory when the
-/// fronts grow beyond the memory.
+/// depend on the thread count. `scaled_values` of a symmetric_indefinite matrix are its
+/// lower triangle (the analysis's symmetric entry order). Throws NotSupported for a type
+/// other than general and symmetric_indefinite, InvalidInput for a threshold outside
+/// (0, 1], OutOfMemory when the fronts grow beyond the memory.
 void factorize_delayed(const Analysis& an, const double* scaled_values, MatrixType type,
                        double threshold, double static_pivot, DelayedFactor& factor,
                        DelayedWorkspace& work, tbb::task_arena& arena);

@@ -1812,6 +1812,42 @@ TEST_F(CudaBackend, DelayedPivotingEqualsCpu) {
   EXPECT_EQ(x[1], x[0]);
 }
 
+// The same for LDLᵀ: a KKT matrix refactorized in an analysis made with a positive
+// constraint diagonal; the GPU's fixed order needs static pivots, the host's delayed 1×1 and
+// 2×2 pivots take them all, with the CPU backend's factor, inertia and solution.
+TEST_F(CudaBackend, SymmetricDelayedPivotingEqualsCpu) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed) + " (STRATA_TEST_SEED replays it)");
+  const test::StaleKkt k = test::stale_kkt(733, rng);
+  std::vector<double> b(733);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (double& v : b) v = u(rng);
+  std::vector<double> x[2];
+  FactorStats f[2];
+  for (int gpu = 0; gpu < 2; ++gpu) {
+    Options o = leaf_fronts_lu(gpu != 0);
+    o.type = MatrixType::symmetric_indefinite;
+    Solver s(o);
+    s.analyze(k.analyzed);
+    s.factorize(k.kkt);
+    f[gpu] = s.stats().factor;
+    x[gpu] = s.solve(b);
+    EXPECT_LE(s.stats().solve.backward_error, 1e-14);
+  }
+  EXPECT_EQ(f[1].backend, Backend::cuda);
+  EXPECT_TRUE(f[1].delayed_pivoting);
+  EXPECT_GT(f[1].fixed_order_perturbed_pivots, 0);
+  EXPECT_EQ(f[1].perturbed_pivots, 0);
+  EXPECT_EQ(f[1].delayed_pivots, f[0].delayed_pivots);
+  EXPECT_EQ(f[1].two_by_two_pivots, f[0].two_by_two_pivots);
+  EXPECT_TRUE(f[1].inertia_valid);
+  EXPECT_EQ(f[1].inertia_negative, k.constraints);
+  EXPECT_EQ(f[1].inertia_negative, f[0].inertia_negative);
+  EXPECT_EQ(f[1].log_abs_determinant, f[0].log_abs_determinant);
+  EXPECT_EQ(x[1], x[0]);
+}
+
 // Solver::analyze_in_pivot_order on the GPU: the delayed factorization's pivot order made
 // the fixed order, the device refactorizes the same values with neither static nor delayed
 // pivots, the same pivots as the CPU in that order (log|det| to rounding) and its solution.
@@ -2073,7 +2109,8 @@ TEST_F(CudaBackend, PageLockedValuesGiveTheFactorOfPageableOnes) {
       EXPECT_EQ(no_room.solve(b), x);
       EXPECT_EQ(in_gpu_memory.solve(b), x);
       EXPECT_EQ(in_gpu_no_room.solve(b), x);
-      if (fs.delayed_pivoting) {  // its order from the kept values' factorization
+      // an LU's delayed pivots: its order from the kept values' factorization
+      if (fs.delayed_pivoting && c.type == MatrixType::general) {
         direct.analyze_in_pivot_order();
         staged.analyze_in_pivot_order();
         direct.refactorize(next);

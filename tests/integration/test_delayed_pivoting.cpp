@@ -543,5 +543,141 @@ TEST(DelayedPivoting, OffKeepsStaticPivoting) {
   EXPECT_GT(s.stats().factor.perturbed_pivots, 0);
 }
 
+// Symmetric indefinite matrices (LDLᵀ) --------------------------------------------------
+
+// LDLᵀ on the CPU with fundamental supernodes only: a constraint row with a zero diagonal
+// alone in a leaf front has no pivot in the analysis's order.
+Options ldlt_leaf_fronts() {
+  Options o = leaf_fronts();
+  o.type = MatrixType::symmetric_indefinite;
+  return o;
+}
+
+// The analysis is made with a positive constraint diagonal; the KKT matrix refactorized has
+// zeros there, which the analysis's order may not be able to pivot on. Delayed pivots
+// (1×1 and 2×2) then leave no static pivot: the inertia is the KKT matrix's, log|det| and
+// its sign dense LU's, the solution dense LAPACK's with a backward error at the tolerance.
+TEST(DelayedPivoting, SymmetricIndefiniteStaleAnalysisKeepsTheInertia) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (index_t n : {2, 3, 5, 733}) {
+    SCOPED_TRACE("n=" + std::to_string(n));
+    const test::StaleKkt k = test::stale_kkt(n, rng);
+    std::vector<double> b(n);
+    for (double& v : b) v = u(rng);
+    std::vector<double> ref = b;
+    ASSERT_TRUE(test::dense_solve(test::to_dense(k.kkt), n, ref, 1));
+    double logdet = 0;
+    int sign = 0;
+    dense_logdet(k.kkt, &logdet, &sign);
+    for (Pivoting pivoting : {Pivoting::automatic, Pivoting::delayed}) {
+      SCOPED_TRACE(pivoting == Pivoting::delayed ? "delayed" : "automatic");
+      Options o = ldlt_leaf_fronts();
+      o.pivoting = pivoting;
+      Solver s(o);
+      s.analyze(k.analyzed);
+      s.factorize(k.kkt);
+      const FactorStats& f = s.stats().factor;
+      EXPECT_EQ(f.perturbed_pivots, 0);
+      if (n == 733) {
+        EXPECT_TRUE(f.delayed_pivoting);
+        EXPECT_GT(f.delayed_pivots, 0);
+        if (pivoting == Pivoting::automatic) EXPECT_GT(f.fixed_order_perturbed_pivots, 0);
+      }
+      EXPECT_TRUE(f.inertia_valid);
+      EXPECT_EQ(f.inertia_positive, n - k.constraints);
+      EXPECT_EQ(f.inertia_negative, k.constraints);
+      EXPECT_EQ(f.inertia_zero, 0);
+      EXPECT_NEAR(f.log_abs_determinant, logdet, 1e-9 * std::max(1.0, std::abs(logdet)));
+      EXPECT_EQ(f.determinant_sign, sign);
+      const std::vector<double> x = s.solve(b);
+      EXPECT_LE(s.stats().solve.backward_error, 1e-14);
+      EXPECT_EQ(s.stats().solve.gmres_iterations, 0);
+      EXPECT_LE(test::relative_difference(x, ref),
+                std::max(1e-10, 1e-13 * std::sqrt(double(n)) * kappa_lower(k.kkt, ref, b)));
+    }
+  }
+}
+
+// A contact-like sequence for LDLᵀ: between refactorizations the KKT matrix's values are
+// redrawn within a factor 2 and random variables scaled by 10^±6 (symmetrically, which
+// keeps the inertia). No static pivot, the inertia kept, backward error at the tolerance.
+TEST(DelayedPivoting, SymmetricValuesChangingBySixDecadesBetweenRefactorizations) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  std::uniform_real_distribution<double> u(-1, 1), factor(0.5, 1.5);
+  std::uniform_int_distribution<int> coin(0, 9);
+  const index_t n = 733;
+  const test::StaleKkt k = test::stale_kkt(n, rng);
+  Options o;
+  o.type = MatrixType::symmetric_indefinite;
+  o.backend = Backend::cpu;
+  Solver s(o);
+  s.factorize(k.analyzed);
+  index_t delayed = 0;
+  for (int step = 0; step < 6; ++step) {
+    SCOPED_TRACE("step " + std::to_string(step));
+    std::vector<double> d(n);
+    for (double& v : d) v = coin(rng) == 0 ? 1e6 : coin(rng) == 0 ? 1e-6 : 1.0;
+    SparseMatrix a = k.kkt;
+    for (index_t j = 0; j < n; ++j)
+      for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p)
+        a.values[p] *= (a.indices[p] == j ? 1.0 : factor(rng)) * d[a.indices[p]] * d[j];
+    std::vector<double> rhs(n);
+    for (double& v : rhs) v = u(rng);
+    s.refactorize(a);
+    const FactorStats& f = s.stats().factor;
+    EXPECT_EQ(f.perturbed_pivots, 0);
+    EXPECT_TRUE(f.inertia_valid);
+    EXPECT_EQ(f.inertia_negative, k.constraints);
+    delayed += f.delayed_pivots;
+    s.solve(rhs);
+    EXPECT_LE(s.stats().solve.backward_error, 1e-14);
+    EXPECT_EQ(s.stats().solve.gmres_iterations, 0);
+  }
+  EXPECT_GT(delayed, 0) << "no pivot was delayed: the case is not covered";
+}
+
+// A symmetric matrix singular to working precision (a constraint row of zeros, its pattern
+// kept) is still reported: static pivots at the root, the inertia marked invalid.
+TEST(DelayedPivoting, SymmetricSingularMatrixIsStillReported) {
+  auto rng = test::fresh_rng();
+  for (index_t n : {3, 5, 733}) {
+    SCOPED_TRACE("n=" + std::to_string(n));
+    const test::StaleKkt k = test::stale_kkt(n, rng);
+    SparseMatrix a = k.kkt;
+    // the last column's variable: every entry of its row and column zero
+    const index_t dead = n - 1;
+    for (index_t j = 0; j < n; ++j)
+      for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p)
+        if (a.indices[p] == dead || j == dead) a.values[p] = 0.0;
+    Solver s(ldlt_leaf_fronts());
+    s.analyze(k.analyzed);
+    s.factorize(a);
+    EXPECT_GE(s.stats().factor.perturbed_pivots, 1);
+    EXPECT_FALSE(s.stats().factor.inertia_valid);
+  }
+}
+
+// analyze_in_pivot_order keeps an LU's pivot sequences only: after a symmetric matrix's
+// delayed factorization it says so and keeps the solver as it was.
+TEST(DelayedPivoting, PivotOrderAnalysisIsForLuOnly) {
+  auto rng = test::fresh_rng();
+  const test::StaleKkt k = test::stale_kkt(60, rng);
+  Options o = ldlt_leaf_fronts();
+  o.pivoting = Pivoting::delayed;
+  Solver s(o);
+  s.analyze(k.analyzed);
+  s.factorize(k.kkt);
+  ASSERT_TRUE(s.stats().factor.delayed_pivoting);
+  const std::vector<double> b(60, 1.0);
+  const std::vector<double> x = s.solve(b);
+  EXPECT_THROW(s.analyze_in_pivot_order(), NotSupported);
+  EXPECT_EQ(s.solve(b), x);
+}
+
 }  // namespace
 }  // namespace strata

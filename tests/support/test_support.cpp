@@ -296,6 +296,35 @@ SparseMatrix random_kkt(index_t n, std::mt19937_64& rng, double decades,
   return a;
 }
 
+StaleKkt stale_kkt(index_t n, std::mt19937_64& rng, double decades) {
+  std::vector<char> constraint;
+  const SparseMatrix k = random_kkt(n, rng, decades, &constraint);
+  // the constraint rows' diagonal (lower storage: it leads its column) set to `diag`
+  auto with_diagonal = [&](double diag) {
+    SparseMatrix a;
+    a.n_rows = a.n_cols = n;
+    a.storage = Storage::lower;
+    a.offsets.assign(1, 0);
+    for (index_t j = 0; j < n; ++j) {
+      if (constraint[j]) {
+        a.indices.push_back(j);
+        a.values.push_back(diag);
+      }
+      for (index_t p = k.offsets[j]; p < k.offsets[j + 1]; ++p) {
+        a.indices.push_back(k.indices[p]);
+        a.values.push_back(k.values[p]);
+      }
+      a.offsets.push_back(static_cast<index_t>(a.indices.size()));
+    }
+    return a;
+  };
+  StaleKkt r;
+  r.analyzed = with_diagonal(20.0);
+  r.kkt = with_diagonal(0.0);
+  r.constraints = n / 3;
+  return r;
+}
+
 std::vector<double> to_dense(const SparseMatrix& a) {
   std::vector<double> d(static_cast<size_t>(a.n_rows * a.n_cols), 0.0);
   for (index_t j = 0; j < a.n_major(); ++j)

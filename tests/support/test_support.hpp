@@ -93,6 +93,16 @@ SparseMatrix with_duplicate_zeros(const SparseMatrix& a);
 SparseMatrix random_kkt(index_t n, std::mt19937_64& rng, double decades = 0,
                         std::vector<char>* is_constraint = nullptr);
 
+/// A random_kkt matrix with explicit diagonal entries in its constraint rows: `analyzed`
+/// with 20 there, `kkt` with 0 (the KKT matrix itself, its pattern holding the diagonal),
+/// so that an analysis of `analyzed` is stale for `kkt`: the zero pivots may be where its
+/// order cannot take them. `constraints` = n/3, kkt's inertia (n − n/3, n/3, 0).
+struct StaleKkt {
+  SparseMatrix analyzed, kkt;
+  index_t constraints = 0;
+};
+StaleKkt stale_kkt(index_t n, std::mt19937_64& rng, double decades = 0);
+
 /// A random n×n pattern (canonical CSC, Storage::full, values 0): the diagonal, plus
 /// `per_column` random entries per column and the transposed positions of half of them.
 SparseMatrix random_pattern_with_diagonal(index_t n, index_t per_column, std::mt19937_64& rng);

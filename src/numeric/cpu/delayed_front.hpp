@@ -58,4 +58,21 @@ index_t factor_front_lu_delayed(double* f, index_t m, index_t p, index_t ld,
                                 const DelayPolicy& policy, index_t* row_perm, index_t* col_perm,
                                 PivotStats& stats, tbb::task_arena* arena = nullptr);
 
+/// The symmetric counterpart (delayed_front_sym.cpp): the m×m front of a symmetric
+/// indefinite matrix, given whole (both triangles), eliminated with symmetric interchanges
+/// only, by 1×1 and 2×2 pivots chosen by a threshold test (MA57's) over the p fully summed
+/// columns, the candidates no pivot can take delayed together with their rows; at a root
+/// (!policy.may_delay) by the Bunch–Kaufman rule, a pivot step under static_pivot replaced
+/// by ±static_pivot. Returns npiv; the factor is left in factor_front_lu_delayed's layout
+/// and permutations (an LU: a 2×2 pivot is two elimination steps whose two rows may be
+/// interchanged, so row_perm and col_perm differ at most within 2×2 pivots; the delayed
+/// positions npiv..p hold the same variables in both). stats: the inertia of the pivots
+/// (positive, negative, zero; a 2×2 pivot by its determinant and trace), two_by_two, the
+/// perturbed pivots, and the sign and log|·| of the elimination steps' pivots (det of the
+/// pivot block up to the row list's parity, which the caller applies). Throws InvalidInput
+/// for inconsistent sizes or a threshold outside (0, 1].
+index_t factor_front_sym_delayed(double* f, index_t m, index_t p, index_t ld,
+                                 const DelayPolicy& policy, index_t* row_perm, index_t* col_perm,
+                                 PivotStats& stats, tbb::task_arena* arena = nullptr);
+
 }  // namespace strata::numeric::cpu
