@@ -25,11 +25,14 @@
 // Math. Comp. 31, 1977; Higham, "Accuracy and Stability of Numerical Algorithms", 2nd ed.,
 // §11.1.2): backward stable for any symmetric matrix; a pivot below static_pivot there is
 // the last resort of a numerically singular matrix and is replaced by ±static_pivot.
-// The candidates' columns (all rows) are updated after every pivot (right-looking over the
-// p fully summed columns, as the tests need them current); the columns behind them, the
-// contribution block's, get every pivot at the end at once (their U rows by a triangular
-// solve, then one GEMM for their Schur complement), in blocks of columns that run on the
-// arena's threads when one is given.
+// Blocked as the LU kernel is: pivots are taken in panels of about kPanel, inside a panel
+// left-looking (the candidate column tested, and for a 2×2 test its partner's, brought up
+// to date with the panel's earlier pivots over all m rows, in a copy), after it
+// right-looking (the U rows of every column behind the panel by a triangular solve, then
+// one GEMM for their Schur complement), in blocks of columns that run on the arena's
+// threads when one is given. A symmetric interchange moves whole rows and whole columns:
+// both rows lie below the panel's earlier pivots and both columns behind them, where every
+// entry still waits for the same update.
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
@@ -45,7 +48,10 @@
 namespace strata::numeric::cpu {
 namespace {
 
-// Columns per block of the final update of the columns behind the candidates.
+// Pivots per panel (a 2×2 pivot may end a panel one past it).
+constexpr index_t kPanel = 32;
+
+// Columns per block of a panel's update of the columns behind it.
 constexpr index_t kUpdateColumns = 128;
 
 // The Bunch–Kaufman constant (1 + √17)/8: it minimizes the bound on the growth of a
@@ -72,8 +78,7 @@ index_t factor_front_sym_delayed(double* f, index_t m, index_t p, index_t ld,
     throw InvalidInput("delayed symmetric front: the pivot threshold must be in (0, 1]");
   auto A = [&](index_t i, index_t j) -> double& { return f[i + j * ld]; };
   for (index_t i = 0; i < p; ++i) row_perm[i] = col_perm[i] = i;
-  // positions a, b (both candidates at or after the next pivot) interchanged symmetrically:
-  // whole rows (L's part, the pending columns) and whole candidate columns (U's part)
+  // positions a, b (candidates behind the panel's pivots) interchanged symmetrically
   auto sym_swap = [&](index_t a, index_t b) {
     if (a == b) return;
     for (index_t c = 0; c < m; ++c) std::swap(A(a, c), A(b, c));
@@ -81,33 +86,38 @@ index_t factor_front_sym_delayed(double* f, index_t m, index_t p, index_t ld,
     std::swap(row_perm[a], row_perm[b]);
     std::swap(col_perm[a], col_perm[b]);
   };
-  // the largest |entry| of column j over rows [s, m) outside rows x and y
-  auto column_max = [&](index_t j, index_t s, index_t x, index_t y) {
+  index_t j0 = 0;  // the panel's first pivot
+  index_t s = 0;   // the next pivot position
+  // column j brought up to date with the panel's pivots j0..s-1, rows j0..m-1 into col
+  // (its first s − j0 entries are its U rows)
+  auto current = [&](index_t j, std::vector<double>& col) {
+    col.assign(&A(j0, j), &A(j0, j) + (m - j0));
+    for (index_t c = 0; c < s - j0; ++c) {
+      const double u = col[c];
+      if (u == 0.0) continue;
+      const double* l = &A(j0, j0 + c);
+      for (index_t i = c + 1; i < m - j0; ++i) col[i] -= l[i] * u;
+    }
+  };
+  // the largest |entry| of an up-to-date column over rows s..m-1 outside rows x and y
+  auto column_max = [&](const std::vector<double>& col, index_t x, index_t y) {
     double g = 0;
-    const double* col = &A(0, j);
     for (index_t i = s; i < m; ++i)
-      if (i != x && i != y) g = std::max(g, std::abs(col[i]));
+      if (i != x && i != y) g = std::max(g, std::abs(col[i - j0]));
     return g;
   };
-  // one elimination step at (s, s): L's column, then the candidates' columns behind it
-  // (their rows below s); a root's pivot under static_pivot is replaced first
-  auto eliminate = [&](index_t s) {
-    double d = A(s, s);
+  // L's column at position t (its up-to-date values in place): a root's pivot under
+  // static_pivot replaced first
+  auto scale_column = [&](index_t t) {
+    double d = A(t, t);
     if (!policy.may_delay && std::abs(d) < policy.static_pivot) {
       d = d < 0 ? -policy.static_pivot : policy.static_pivot;
-      A(s, s) = d;
+      A(t, t) = d;
       ++st.perturbed;
     }
     count_step(d, st);
     const double inv = d != 0 ? 1.0 / d : 0.0;
-    double* l = &A(0, s);
-    for (index_t i = s + 1; i < m; ++i) l[i] *= inv;
-    for (index_t c = s + 1; c < p; ++c) {
-      const double u = A(s, c);
-      if (u == 0.0) continue;
-      double* col = &A(0, c);
-      for (index_t i = s + 1; i < m; ++i) col[i] -= l[i] * u;
-    }
+    for (index_t i = t + 1; i < m; ++i) A(i, t) *= inv;
     return d;
   };
   auto count_inertia = [&](double d) {
@@ -120,98 +130,119 @@ index_t factor_front_sym_delayed(double* f, index_t m, index_t p, index_t ld,
   };
 
   const double u = policy.threshold;
-  index_t s = 0;
-  index_t last = p;  // candidates are s..last-1; last..p-1 were refused (delayed)
+  std::vector<double> cs, cr;  // the up-to-date candidate column and its partner's
+  index_t last = p;            // candidates are s..last-1; last..p-1 were refused (delayed)
   while (s < last) {
-    const index_t j = s;
-    const double gj = column_max(j, s, j, j);
-    // the candidate partner of the largest |a_rj|
-    index_t r = -1;
-    double arj = 0;
-    for (index_t i = s + 1; i < last; ++i)
-      if (std::abs(A(i, j)) > arj) arj = std::abs(A(i, j)), r = i;
-    const double ajj = std::abs(A(j, j));
-    enum { none, one_j, one_r, two } choice = none;
-    if (policy.may_delay) {
-      if (ajj > policy.tiny && ajj >= u * gj) {
-        choice = one_j;
-      } else if (r >= 0) {
-        const double gj2 = column_max(j, s, j, r), gr2 = column_max(r, s, j, r);
-        const double det = A(j, j) * A(r, r) - A(r, j) * A(j, r);
-        const double piv0 = std::max(ajj, arj), adet = std::abs(det);
-        const double piv1 = piv0 > 0 ? adet / piv0 : 0.0;
-        if (piv0 > policy.tiny && piv1 > policy.tiny &&
-            std::abs(A(r, r)) * gj2 + std::abs(A(j, r)) * gr2 <= adet / u &&
-            std::abs(A(r, j)) * gj2 + ajj * gr2 <= adet / u)
+    j0 = s;
+    while (s < last && s - j0 < kPanel) {
+      current(s, cs);
+      const double gj = column_max(cs, s, s);
+      const double ajj = std::abs(cs[s - j0]);
+      index_t r = -1;  // the candidate partner of the largest |a_rs|
+      double ars = 0;
+      for (index_t i = s + 1; i < last; ++i)
+        if (std::abs(cs[i - j0]) > ars) ars = std::abs(cs[i - j0]), r = i;
+      enum { none, one_s, one_r, two } choice = none;
+      if (policy.may_delay) {
+        if (ajj > policy.tiny && ajj >= u * gj) {
+          choice = one_s;
+        } else if (r >= 0) {
+          current(r, cr);
+          const double gs2 = column_max(cs, s, r), gr2 = column_max(cr, s, r);
+          const double arr = std::abs(cr[r - j0]), asr = std::abs(cr[s - j0]);
+          const double det = cs[s - j0] * cr[r - j0] - cs[r - j0] * cr[s - j0];
+          const double piv0 = std::max(ajj, ars), adet = std::abs(det);
+          const double piv1 = piv0 > 0 ? adet / piv0 : 0.0;
+          if (piv0 > policy.tiny && piv1 > policy.tiny && arr * gs2 + asr * gr2 <= adet / u &&
+              ars * gs2 + ajj * gr2 <= adet / u)
+            choice = two;
+        }
+        if (choice == none) {  // refused: behind the remaining candidates, row and column
+          --last;
+          sym_swap(s, last);
+          continue;
+        }
+      } else if (ajj >= kBunchKaufmanAlpha * gj || r < 0 || ars == 0) {
+        choice = one_s;  // (a zero column: the static pivot)
+      } else {
+        current(r, cr);
+        const double gr = column_max(cr, r, r);
+        if (ajj * gr >= kBunchKaufmanAlpha * gj * gj)
+          choice = one_s;
+        else if (std::abs(cr[r - j0]) >= kBunchKaufmanAlpha * gr)
+          choice = one_r;
+        else
           choice = two;
       }
-      if (choice == none) {  // refused: behind the remaining candidates, row and column
-        --last;
-        sym_swap(j, last);
+      // the chosen columns' up-to-date copies follow the interchange of rows: position t
+      // of `col` was row t before sym_swap(a, b) moved rows a and b
+      auto swap_rows_of = [&](std::vector<double>& col, index_t a, index_t b) {
+        std::swap(col[a - j0], col[b - j0]);
+      };
+      if (choice == one_s || choice == one_r) {
+        if (choice == one_r) {
+          sym_swap(s, r);
+          swap_rows_of(cr, s, r);
+        }
+        const std::vector<double>& col = choice == one_r ? cr : cs;
+        std::copy(col.begin(), col.end(), &A(j0, s));
+        count_inertia(scale_column(s));
+        ++s;
         continue;
       }
-    } else if (ajj >= kBunchKaufmanAlpha * gj || r < 0 || arj == 0) {
-      choice = one_j;  // (a zero column: the static pivot below)
-    } else {
-      const double gr = column_max(r, s, r, r);
-      if (ajj * gr >= kBunchKaufmanAlpha * gj * gj)
-        choice = one_j;
-      else if (std::abs(A(r, r)) >= kBunchKaufmanAlpha * gr)
-        choice = one_r;
+      // a 2×2 pivot at s, s+1: the partner r beside s, then the larger entry of D's first
+      // column on top, then two elimination steps on the two columns
+      sym_swap(s + 1, r);
+      swap_rows_of(cs, s + 1, r);
+      swap_rows_of(cr, s + 1, r);
+      std::copy(cs.begin(), cs.end(), &A(j0, s));
+      std::copy(cr.begin(), cr.end(), &A(j0, s + 1));
+      const double det = A(s, s) * A(s + 1, s + 1) - A(s + 1, s) * A(s, s + 1);
+      const double trace = A(s, s) + A(s + 1, s + 1);
+      if (std::abs(A(s + 1, s)) > std::abs(A(s, s))) {
+        for (index_t c = 0; c < m; ++c) std::swap(A(s, c), A(s + 1, c));
+        std::swap(row_perm[s], row_perm[s + 1]);
+      }
+      const index_t perturbed = st.perturbed;
+      scale_column(s);
+      const double u01 = A(s, s + 1);
+      if (u01 != 0.0)
+        for (index_t i = s + 1; i < m; ++i) A(i, s + 1) -= A(i, s) * u01;
+      scale_column(s + 1);
+      ++st.two_by_two;
+      if (st.perturbed != perturbed) {  // a root's singular block: inertia not known
+        st.zero += 2;
+      } else if (det < 0) {
+        ++st.positive;
+        ++st.negative;
+      } else if (det > 0) {
+        (trace > 0 ? st.positive : st.negative) += 2;
+      } else {
+        st.zero += 2;
+      }
+      s += 2;
+    }
+    // the panel's pivots applied to every column behind it (the candidates left, the
+    // refused ones and the contribution block's): their U rows, then their Schur complement
+    const index_t np = s - j0, nrest = m - s;
+    if (np > 0 && nrest > 0) {
+      const index_t blocks = (nrest + kUpdateColumns - 1) / kUpdateColumns;
+      auto update = [&](index_t b) {
+        const index_t c0 = s + b * kUpdateColumns;
+        const index_t w = std::min(kUpdateColumns, m - c0);
+        trsm('L', 'L', 'N', 'U', np, w, &A(j0, j0), ld, &A(j0, c0), ld);
+        gemm('N', 'N', m - s, w, np, -1.0, &A(s, j0), ld, &A(j0, c0), ld, 1.0, &A(s, c0), ld);
+      };
+      if (arena && blocks > 1 && arena->max_concurrency() > 1)
+        // isolated: a thread waiting here takes no other front's task (see the LU kernel)
+        arena->execute([&] {
+          tbb::this_task_arena::isolate([&] { tbb::parallel_for(index_t{0}, blocks, update); });
+        });
       else
-        choice = two;
+        for (index_t b = 0; b < blocks; ++b) update(b);
     }
-    if (choice == one_j || choice == one_r) {
-      if (choice == one_r) sym_swap(s, r);
-      count_inertia(eliminate(s));
-      ++s;
-      continue;
-    }
-    // a 2×2 pivot at s, s+1: r beside j, then the larger of D's first column on top
-    sym_swap(s + 1, r);
-    const double det = A(s, s) * A(s + 1, s + 1) - A(s + 1, s) * A(s, s + 1);
-    const double trace = A(s, s) + A(s + 1, s + 1);
-    if (std::abs(A(s + 1, s)) > std::abs(A(s, s))) {
-      for (index_t c = 0; c < m; ++c) std::swap(A(s, c), A(s + 1, c));
-      std::swap(row_perm[s], row_perm[s + 1]);
-    }
-    const index_t perturbed = st.perturbed;
-    eliminate(s);
-    eliminate(s + 1);
-    ++st.two_by_two;
-    if (st.perturbed != perturbed) {  // a root's singular block: inertia not known
-      st.zero += 2;
-    } else if (det < 0) {
-      ++st.positive;
-      ++st.negative;
-    } else if (det > 0) {
-      (trace > 0 ? st.positive : st.negative) += 2;
-    } else {
-      st.zero += 2;
-    }
-    s += 2;
   }
-
-  // every pivot applied to the columns behind the candidates: their U rows, then their
-  // Schur complement (the delayed rows and the contribution block's)
-  const index_t k = s, nrest = m - p;
-  if (k > 0 && nrest > 0) {
-    const index_t blocks = (nrest + kUpdateColumns - 1) / kUpdateColumns;
-    auto update = [&](index_t b) {
-      const index_t c0 = p + b * kUpdateColumns;
-      const index_t w = std::min(kUpdateColumns, m - c0);
-      trsm('L', 'L', 'N', 'U', k, w, &A(0, 0), ld, &A(0, c0), ld);
-      gemm('N', 'N', m - k, w, k, -1.0, &A(k, 0), ld, &A(0, c0), ld, 1.0, &A(k, c0), ld);
-    };
-    if (arena && blocks > 1 && arena->max_concurrency() > 1)
-      // isolated: a thread waiting here takes no other front's task (see the LU kernel)
-      arena->execute([&] {
-        tbb::this_task_arena::isolate([&] { tbb::parallel_for(index_t{0}, blocks, update); });
-      });
-    else
-      for (index_t b = 0; b < blocks; ++b) update(b);
-  }
-  return k;
+  return s;
 }
 
 }  // namespace strata::numeric::cpu
