@@ -131,14 +131,27 @@ void factor_front(const Analysis& an, const double* vals, const cpu::DelayPolicy
     const index_t s = ch.m - ch.k;
     const index_t* br = ch.rows.data() + ch.k;
     const index_t* bc = ch.cols.data() + ch.k;
-    // the block's rows' positions in this front, looked up once for all its columns
-    sized(w.rel, static_cast<std::size_t>(s), "front assembly");
+    // the block's rows' positions in this front (rel), looked up once for all its
+    // columns, and the runs of rows whose positions are consecutive (runs: each run's
+    // first row, then s): a child's rows mostly land on consecutive rows of its parent,
+    // where a column's sum is contiguous (vectorized)
+    sized(w.rel, 2 * static_cast<std::size_t>(s) + 1, "front assembly");
     index_t* rel = w.rel.data();
-    for (index_t r = 0; r < s; ++r) rel[r] = w.row_pos[br[r]];
+    index_t* runs = rel + s;
+    index_t n_runs = 0;
+    for (index_t r = 0; r < s; ++r) {
+      rel[r] = w.row_pos[br[r]];
+      if (r == 0 || rel[r] != rel[r - 1] + 1) runs[n_runs++] = r;
+    }
+    runs[n_runs] = s;
     for (index_t c = 0; c < s; ++c) {
       double* dst = A + static_cast<std::size_t>(w.col_pos[bc[c]]) * m;
       const double* src = ch.cb.data() + static_cast<std::size_t>(c) * s;
-      for (index_t r = 0; r < s; ++r) dst[rel[r]] += src[r];
+      for (index_t q = 0; q < n_runs; ++q) {
+        const index_t r0 = runs[q], r1 = runs[q + 1];
+        double* d = dst + rel[r0] - r0;
+        for (index_t r = r0; r < r1; ++r) d[r] += src[r];
+      }
     }
     ch.cb.clear();  // consumed (the capacity stays for the next factorization)
   }

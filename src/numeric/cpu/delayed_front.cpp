@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "numeric/cpu/dense_blas.hpp"
+#include "numeric/cpu/small_dense.hpp"
 #include "strata/errors.hpp"
 
 namespace strata::numeric::cpu {
@@ -92,13 +93,20 @@ index_t factor_front_lu_delayed(double* f, index_t m, index_t p, index_t ld,
         const double* l = &A(j0, j0 + c);
         for (index_t i = c + 1; i < m - j0; ++i) col[i] -= l[i] * u;
       }
-      // largest entry among the remaining fully summed rows, and over all remaining rows
+      // largest entry among the remaining fully summed rows (the first of them, j first,
+      // on ties), and over all remaining rows: the maxima first, then where (a NaN on the
+      // diagonal stays the pivot, as a comparison with it fails)
       index_t r = j;
       double best = std::abs(col[q]);
-      for (index_t i = j + 1; i < p; ++i)
-        if (std::abs(col[i - j0]) > best) best = std::abs(col[i - j0]), r = i;
-      double colmax = best;
-      for (index_t i = p; i < m; ++i) colmax = std::max(colmax, std::abs(col[i - j0]));
+      if (!std::isnan(best)) {
+        const double most = max_abs(col.data() + q + 1, p - j - 1);
+        if (most > best) {
+          best = most;
+          r = j + 1;
+          while (std::abs(col[r - j0]) != most) ++r;
+        }
+      }
+      const double colmax = std::max(best, max_abs(col.data() + (p - j0), m - p));
       const bool good = best > policy.tiny && best >= policy.threshold * colmax;
       if (!good && policy.may_delay) {
         // refuse column j (as it was): behind the remaining candidates

@@ -12,9 +12,27 @@
 // same factor and right-hand side gives bitwise the same result.
 #pragma once
 
+#include <algorithm>
+#include <cmath>
+
 #include "strata/types.hpp"
 
 namespace strata::numeric::cpu {
+
+/// The largest |x_i| over n entries (0 for n ≤ 0). Eight partial maxima, so that the loop
+/// is not one chain of dependent maxima (a pivot test's column scan); a maximum is exact in
+/// any order and each partial takes std::max(m, |x_i|), which passes over a NaN, so the
+/// result is the plain loop's.
+inline double max_abs(const double* x, index_t n) {
+  double m[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+  index_t i = 0;
+  for (; i + 8 <= n; i += 8)
+    for (int q = 0; q < 8; ++q) m[q] = std::max(m[q], std::abs(x[i + q]));
+  for (; i < n; ++i) m[0] = std::max(m[0], std::abs(x[i]));
+  double r = m[0];
+  for (int q = 1; q < 8; ++q) r = std::max(r, m[q]);
+  return r;
+}
 
 /// y −= A·x for A rows×cols (leading dimension lda ≥ rows), x of length cols, y of length
 /// rows. Four columns at a time; a group of four zero entries of x is skipped (sparse
