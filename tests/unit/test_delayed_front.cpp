@@ -44,6 +44,21 @@ Result run(const std::vector<double>& f0, index_t m, index_t p, const DelayPolic
   return r;
 }
 
+// x with F0 x = b for a root's factor (every pivot taken: L U = F0(P, Q)): L U x' = b(P),
+// x(Q) = x'.
+std::vector<double> solve_root(const Result& r, index_t m, const std::vector<double>& b) {
+  std::vector<double> y(m), x(m);
+  for (index_t i = 0; i < m; ++i) y[i] = b[r.rp[i]];
+  for (index_t j = 0; j < m; ++j)
+    for (index_t i = j + 1; i < m; ++i) y[i] -= r.f[i + j * m] * y[j];
+  for (index_t j = m - 1; j >= 0; --j) {
+    y[j] /= r.f[j + j * m];
+    for (index_t i = 0; i < j; ++i) y[i] -= r.f[i + j * m] * y[j];
+  }
+  for (index_t j = 0; j < m; ++j) x[r.cp[j]] = y[j];
+  return x;
+}
+
 // Checks F0(P, Q) = L U + [0 0; 0 S] entrywise to c·u·(|L||U| + |F0|).
 void expect_reconstructs(const std::vector<double>& f0, index_t m, index_t p, const Result& r) {
   const index_t k = r.npiv;
@@ -184,16 +199,7 @@ TEST(DelayedFront, RootSolvesLikeDgesv) {
     pol.may_delay = false;
     const Result r = run(f0, m, m, pol);
     ASSERT_EQ(r.npiv, m);
-    // solve: L U x' = b(P), x(Q) = x'
-    std::vector<double> y(m), x(m);
-    for (index_t i = 0; i < m; ++i) y[i] = b[r.rp[i]];
-    for (index_t j = 0; j < m; ++j)
-      for (index_t i = j + 1; i < m; ++i) y[i] -= r.f[i + j * m] * y[j];
-    for (index_t j = m - 1; j >= 0; --j) {
-      y[j] /= r.f[j + j * m];
-      for (index_t i = 0; i < j; ++i) y[i] -= r.f[i + j * m] * y[j];
-    }
-    for (index_t j = 0; j < m; ++j) x[r.cp[j]] = y[j];
+    const std::vector<double> x = solve_root(r, m, b);
     std::vector<double> ref = b;
     ASSERT_TRUE(test::dense_solve(f0, m, ref, 1));
     // κ-aware: the two solutions agree to about κ·u
@@ -368,15 +374,7 @@ TEST(DelayedFrontSymmetric, RootSolvesLikeDgesvWithTheFrontsInertia) {
     const std::array<index_t, 3> in = eigen_inertia(f0, m, all);
     EXPECT_EQ(r.st.positive, in[0]);
     EXPECT_EQ(r.st.negative, in[1]);
-    std::vector<double> y(m), x(m);
-    for (index_t i = 0; i < m; ++i) y[i] = b[r.rp[i]];
-    for (index_t j = 0; j < m; ++j)
-      for (index_t i = j + 1; i < m; ++i) y[i] -= r.f[i + j * m] * y[j];
-    for (index_t j = m - 1; j >= 0; --j) {
-      y[j] /= r.f[j + j * m];
-      for (index_t i = 0; i < j; ++i) y[i] -= r.f[i + j * m] * y[j];
-    }
-    for (index_t j = 0; j < m; ++j) x[r.cp[j]] = y[j];
+    const std::vector<double> x = solve_root(r, m, b);
     double anorm = 0, xnorm = 0, bnorm = 0;
     for (index_t i = 0; i < m; ++i) {
       double row = 0;

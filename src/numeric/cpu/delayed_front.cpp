@@ -64,6 +64,30 @@ void unit_lower_solve(index_t np, index_t w, const double* l, index_t ldl, doubl
 
 }  // namespace
 
+void update_behind_panel(double* f, index_t m, index_t ld, index_t j0, index_t k,
+                         tbb::task_arena* arena) {
+  const index_t np = k - j0, nrest = m - k;
+  if (np <= 0 || nrest <= 0) return;
+  auto A = [&](index_t i, index_t j) -> double* { return f + i + j * ld; };
+  // in blocks of kUpdateColumns columns, each independent of the others: the same calls,
+  // so the same bits, whether the blocks run one after another or on an arena
+  const index_t blocks = (nrest + kUpdateColumns - 1) / kUpdateColumns;
+  auto update = [&](index_t b) {
+    const index_t c0 = k + b * kUpdateColumns;
+    const index_t w = std::min(kUpdateColumns, m - c0);
+    unit_lower_solve(np, w, A(j0, j0), ld, A(j0, c0), ld);
+    gemm('N', 'N', m - k, w, np, -1.0, A(k, j0), ld, A(j0, c0), ld, 1.0, A(k, c0), ld);
+  };
+  if (arena && blocks > 1 && arena->max_concurrency() > 1)
+    // isolated: a thread waiting here takes no other front's task, whose work arrays
+    // (per thread) this front is using
+    arena->execute([&] {
+      tbb::this_task_arena::isolate([&] { tbb::parallel_for(index_t{0}, blocks, update); });
+    });
+  else
+    for (index_t b = 0; b < blocks; ++b) update(b);
+}
+
 index_t factor_front_lu_delayed(double* f, index_t m, index_t p, index_t ld,
                                 const DelayPolicy& policy, index_t* row_perm, index_t* col_perm,
                                 PivotStats& st, tbb::task_arena* arena) {
@@ -135,27 +159,7 @@ index_t factor_front_lu_delayed(double* f, index_t m, index_t p, index_t ld,
     }
     // the panel's pivots applied to every column behind it (the candidates left, the
     // refused ones and the contribution block's): their U rows, then their Schur complement
-    const index_t np = npiv - j0, nrest = m - npiv;
-    if (np > 0 && nrest > 0) {
-      // in blocks of kUpdateColumns columns, each independent of the others: the same
-      // calls, so the same bits, whether the blocks run one after another or on an arena
-      const index_t blocks = (nrest + kUpdateColumns - 1) / kUpdateColumns;
-      auto update = [&](index_t b) {
-        const index_t c0 = npiv + b * kUpdateColumns;
-        const index_t w = std::min(kUpdateColumns, m - c0);
-        unit_lower_solve(np, w, &A(j0, j0), ld, &A(j0, c0), ld);
-        gemm('N', 'N', m - npiv, w, np, -1.0, &A(npiv, j0), ld, &A(j0, c0), ld, 1.0, &A(npiv, c0),
-             ld);
-      };
-      if (arena && blocks > 1 && arena->max_concurrency() > 1)
-        // isolated: a thread waiting here takes no other front's task, whose work arrays
-        // (per thread) this front is using
-        arena->execute([&] {
-          tbb::this_task_arena::isolate([&] { tbb::parallel_for(index_t{0}, blocks, update); });
-        });
-      else
-        for (index_t b = 0; b < blocks; ++b) update(b);
-    }
+    update_behind_panel(f, m, ld, j0, npiv, arena);
   }
   return npiv;
 }

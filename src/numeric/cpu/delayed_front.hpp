@@ -58,6 +58,15 @@ index_t factor_front_lu_delayed(double* f, index_t m, index_t p, index_t ld,
                                 const DelayPolicy& policy, index_t* row_perm, index_t* col_perm,
                                 PivotStats& stats, tbb::task_arena* arena = nullptr);
 
+/// A panel's pivots j0..k−1 (L's columns and U's rows in place, L unit lower) applied to the
+/// columns k..m−1 of an m×m front F (leading dimension ld): their U rows F[j0:k, k:m] =
+/// L11⁻¹·F[j0:k, k:m] by forward substitution (zeros skipped), then their Schur complement
+/// F[k:m, k:m] −= F[k:m, j0:k]·F[j0:k, k:m] by GEMM, in blocks of 128 columns that run on
+/// `arena`'s threads when one of more than one thread is given (the same bits either way).
+/// The right-looking step of both delayed front kernels.
+void update_behind_panel(double* f, index_t m, index_t ld, index_t j0, index_t k,
+                         tbb::task_arena* arena);
+
 /// The symmetric counterpart (delayed_front_sym.cpp): the m×m front of a symmetric
 /// indefinite matrix, given whole (both triangles), eliminated with symmetric interchanges
 /// only, by 1×1 and 2×2 pivots chosen by a threshold test (MA57's) over the p fully summed

@@ -33,7 +33,6 @@
 // threads when one is given. A symmetric interchange moves whole rows and whole columns:
 // both rows lie below the panel's earlier pivots and both columns behind them, where every
 // entry still waits for the same update.
-#include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -42,7 +41,6 @@
 #include <utility>
 
 #include "numeric/cpu/delayed_front.hpp"
-#include "numeric/cpu/dense_blas.hpp"
 #include "strata/errors.hpp"
 
 namespace strata::numeric::cpu {
@@ -50,9 +48,6 @@ namespace {
 
 // Pivots per panel (a 2×2 pivot may end a panel one past it).
 constexpr index_t kPanel = 32;
-
-// Columns per block of a panel's update of the columns behind it.
-constexpr index_t kUpdateColumns = 128;
 
 // The Bunch–Kaufman constant (1 + √17)/8: it minimizes the bound on the growth of a
 // 1×1 / 2×2 pivoting step.
@@ -223,24 +218,8 @@ index_t factor_front_sym_delayed(double* f, index_t m, index_t p, index_t ld,
       s += 2;
     }
     // the panel's pivots applied to every column behind it (the candidates left, the
-    // refused ones and the contribution block's): their U rows, then their Schur complement
-    const index_t np = s - j0, nrest = m - s;
-    if (np > 0 && nrest > 0) {
-      const index_t blocks = (nrest + kUpdateColumns - 1) / kUpdateColumns;
-      auto update = [&](index_t b) {
-        const index_t c0 = s + b * kUpdateColumns;
-        const index_t w = std::min(kUpdateColumns, m - c0);
-        trsm('L', 'L', 'N', 'U', np, w, &A(j0, j0), ld, &A(j0, c0), ld);
-        gemm('N', 'N', m - s, w, np, -1.0, &A(s, j0), ld, &A(j0, c0), ld, 1.0, &A(s, c0), ld);
-      };
-      if (arena && blocks > 1 && arena->max_concurrency() > 1)
-        // isolated: a thread waiting here takes no other front's task (see the LU kernel)
-        arena->execute([&] {
-          tbb::this_task_arena::isolate([&] { tbb::parallel_for(index_t{0}, blocks, update); });
-        });
-      else
-        for (index_t b = 0; b < blocks; ++b) update(b);
-    }
+    // refused ones and the contribution block's)
+    update_behind_panel(f, m, ld, j0, s, arena);
   }
   return s;
 }
