@@ -32,10 +32,7 @@ class StrataLinearSolver : public LinearSolver {
                          to_string(o.type));
     validate(o);
     o.type = type;
-    if (type != MatrixType::general) {
-      if (o.pivoting == Pivoting::delayed) o.pivoting = Pivoting::automatic;
-      return o;
-    }
+    if (type != MatrixType::general) return o;
     // The Newton matrix's values drift from those the analysis matched and scaled (step
     // size, contacts, rotations): on the host every factorization delays the pivots the
     // analysis's order cannot take (numeric/delayed.hpp). A GPU factors in that order until

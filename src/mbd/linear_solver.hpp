@@ -76,8 +76,9 @@ Options engine_solver_options();
 /// matrix is unsymmetric) or when validate(o) refuses a field.
 std::unique_ptr<LinearSolver> make_strata_solver(const Options& o);
 /// strata's multifrontal L D Lᵀ (MatrixType::symmetric_indefinite: restricted Bunch–Kaufman
-/// 1×1/2×2 pivots, static pivots and refinement; no delayed pivoting, so Pivoting::delayed
-/// acts as automatic) with options `o`, for a symmetric matrix given with both triangles,
+/// 1×1/2×2 pivots in the analysis's order; where that order needs static pivots, delayed
+/// 1×1/2×2 pivots on the host, as Options::pivoting says) with options `o`, for a
+/// symmetric matrix given with both triangles,
 /// such as the set-up's saddle-point system [M Φ_qᵀ; Φ_q 0]: half the factorization of LU
 /// and no unsymmetric matching. Throws InvalidInput when o.type is neither automatic nor
 /// symmetric_indefinite or when validate(o) refuses a field.

@@ -282,5 +282,37 @@ TEST(MbdModels, SolverOptionsReachTheSolverAndTheCheckpoint) {
   EXPECT_THROW(make_strata_solver(bad), InvalidInput);
 }
 
+// The engine's symmetric solver (the set-up's saddle-point systems) takes the run's
+// pivoting as the library does: Pivoting::delayed factors a KKT matrix with delayed 1×1
+// and 2×2 pivots (no static pivot, the inertia known), fixed keeps the analysis's order.
+TEST(MbdModels, SymmetricSolverTakesTheRunsPivoting) {
+  unsigned long long seed = 0;
+  auto rng = strata::test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  const strata::test::StaleKkt k = strata::test::stale_kkt(300, rng);
+  // both triangles, as the engine gives its symmetric systems
+  const SparseMatrix whole = expand_symmetric(k.kkt);
+  std::vector<double> b(300, 1.0), x(300);
+  for (Pivoting p : {Pivoting::delayed, Pivoting::fixed}) {
+    Options o = engine_solver_options();
+    o.type = MatrixType::automatic;  // the symmetric solver's own type
+    o.backend = Backend::cpu;
+    o.pivoting = p;
+    const std::unique_ptr<LinearSolver> s = make_strata_symmetric_solver(o);
+    s->analyze(whole);
+    s->factorize(whole);
+    ASSERT_NE(s->stats(), nullptr);
+    const FactorStats& f = s->stats()->factor;
+    EXPECT_EQ(f.delayed_pivoting, p == Pivoting::delayed);
+    if (p == Pivoting::delayed) {
+      EXPECT_EQ(f.perturbed_pivots, 0);
+      EXPECT_TRUE(f.inertia_valid);
+      EXPECT_EQ(f.inertia_negative, k.constraints);
+    }
+    s->solve(b.data(), x.data());
+    EXPECT_LE(strata::test::backward_error(whole, x.data(), b.data()), 1e-13);
+  }
+}
+
 }  // namespace
 }  // namespace strata::mbd
