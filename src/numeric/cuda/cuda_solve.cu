@@ -32,6 +32,7 @@
 #include <cstring>
 
 #include "numeric/cuda/cuda_executor.hpp"
+#include "numeric/cuda/multiprocessors.hpp"
 #include "numeric/cuda/solve_kernels.cuh"
 
 namespace strata::cuda {
@@ -108,8 +109,7 @@ void CudaExecutor::prepare_solve_plan(const Analysis& an) {
   prepare_solve_inverse(an);
   SweepPlanDevice& w = dsolve_.whole;
   if (w.plan.analysis == an.id && w.plan.analysis != 0) return;
-  int n_sm = 0;
-  STRATA_CUDA(cudaDeviceGetAttribute(&n_sm, cudaDevAttrMultiProcessorCount, device_));
+  const int n_sm = multiprocessor_count(device_);
   w.plan = SolvePlan{};
   plan_sweeps(an.tree, an.schedule, n_sm, SolvePath::model, nullptr, w.plan);
   w.plan.analysis = an.id;

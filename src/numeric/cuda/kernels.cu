@@ -33,6 +33,7 @@
 #include "numeric/cuda/device_buffer.hpp"
 #include "numeric/cuda/divide.cuh"
 #include "numeric/cuda/kernels.cuh"
+#include "numeric/cuda/multiprocessors.hpp"
 #include "numeric/cuda_testing.hpp"
 #include "strata/errors.hpp"
 
@@ -1042,9 +1043,9 @@ unsigned small_front_threads(std::int64_t count, std::int64_t max_rows, int max_
   // holds (the kernels' own shared memory and the 1 KiB the device keeps per block beside
   // each front's copy), however many the launch has.
   if (max_threads <= 0) return threads;
-  int dev = 0, sms = 1;
+  int dev = 0;
   STRATA_CUDA(cudaGetDevice(&dev));
-  STRATA_CUDA(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, dev));
+  const int sms = multiprocessor_count(dev);
   std::int64_t running = count;
   if (shared_bytes > 0) {
     int per_sm = 0;

@@ -26,6 +26,7 @@
 #include <string>
 
 #include "numeric/cuda/cuda_executor.hpp"
+#include "numeric/cuda/multiprocessors.hpp"
 
 namespace strata::cuda {
 namespace {
@@ -52,8 +53,7 @@ void copy_ranges(double* dev, double* host, const Ranges& ranges, std::int64_t l
 
 void CudaExecutor::prepare_part_limit(const Analysis& an) {
   if (dsolve_.parts_analysis == an.id) return;
-  int n_sm = 0;
-  STRATA_CUDA(cudaDeviceGetAttribute(&n_sm, cudaDevAttrMultiProcessorCount, device_));
+  const int n_sm = multiprocessor_count(device_);
   dsolve_.parts.clear();
   // the subtree limit the whole-tree solve would choose: every part's bottom is cut into
   // the subtrees of the whole tree's plan (a part's own model sees fewer fronts per
@@ -91,8 +91,7 @@ void CudaExecutor::prepare_part_solve(const Analysis& an) {
 
 CudaExecutor::SweepPlanDevice& CudaExecutor::part_sweep_plan(const Analysis& an, int id) {
   const auto& t = an.tree;
-  int n_sm = 0;
-  STRATA_CUDA(cudaDeviceGetAttribute(&n_sm, cudaDevAttrMultiProcessorCount, device_));
+  const int n_sm = multiprocessor_count(device_);
   prepare_part_limit(an);
   auto it = dsolve_.parts.find(id);
   if (it != dsolve_.parts.end()) return it->second;

@@ -9,6 +9,7 @@
 
 #include "numeric/cuda/cuda_check.hpp"
 #include "numeric/cuda/device_buffer.hpp"
+#include "numeric/cuda/multiprocessors.hpp"
 #include "numeric/cuda/solve_device.cuh"
 #include "numeric/cuda/solve_kernels.cuh"
 #include "numeric/cuda_testing.hpp"
@@ -224,9 +225,7 @@ __global__ void __launch_bounds__(kGemvThreads)
 void launch_gemv_n(std::int64_t rows, std::int64_t cols, double alpha, const double* a,
                    std::int64_t lda, const double* x, double* y, cudaStream_t s) {
   if (rows <= 0 || cols <= 0) return;
-  int sms = 0, dev = 0;
-  STRATA_CUDA(cudaGetDevice(&dev));
-  STRATA_CUDA(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, dev));
+  const int sms = multiprocessor_count();
   int R = 32;
   while (R > 8 && (rows + R - 1) / R < sms) R /= 2;
   gemv_n_kernel<<<static_cast<unsigned>((rows + R - 1) / R), kGemvThreads, 0, s>>>(
@@ -250,9 +249,7 @@ void launch_check_entries(const double* v, std::int64_t count, unsigned long lon
                           unsigned long long* max_bits, const unsigned long long* unless,
                           cudaStream_t s) {
   if (count <= 0) return;
-  int sms = 0, dev = 0;
-  STRATA_CUDA(cudaGetDevice(&dev));
-  STRATA_CUDA(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, dev));
+  const int sms = multiprocessor_count();
   const std::int64_t blocks =
       std::min<std::int64_t>((count + kThreads - 1) / kThreads, 4 * static_cast<std::int64_t>(sms));
   check_entries_kernel<<<static_cast<unsigned>(blocks), kThreads, 0, s>>>(v, count, first_bad,
