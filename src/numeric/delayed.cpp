@@ -148,9 +148,8 @@ void factor_front(const Analysis& an, const double* vals, const cpu::DelayPolicy
       double* dst = A + static_cast<std::size_t>(w.col_pos[bc[c]]) * m;
       const double* src = ch.cb.data() + static_cast<std::size_t>(c) * s;
       for (index_t q = 0; q < n_runs; ++q) {
-        const index_t r0 = runs[q], r1 = runs[q + 1];
-        double* d = dst + rel[r0] - r0;
-        for (index_t r = r0; r < r1; ++r) d[r] += src[r];
+        const index_t r0 = runs[q], r1 = runs[q + 1], shift = rel[r0] - r0;
+        for (index_t r = r0; r < r1; ++r) dst[r + shift] += src[r];
       }
     }
     ch.cb.clear();  // consumed (the capacity stays for the next factorization)

@@ -39,6 +39,7 @@
 #include <cmath>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include "numeric/cpu/delayed_front.hpp"
 #include "strata/errors.hpp"
