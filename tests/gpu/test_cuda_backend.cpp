@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cmath>
 #include <limits>
@@ -1789,17 +1790,23 @@ Options leaf_fronts_lu(bool gpu) {
 // diagonal at analysis, a zero one refactorized) need static pivots in the analysis's
 // order; delayed pivoting then runs on the host. The factor, the statistics and the
 // solution equal the CPU backend's (the same host code after the same fixed-order check).
-TEST_F(CudaBackend, DelayedPivotingEqualsCpu) {
-  auto rng = test::fresh_rng();
-  const test::StaleAnalysis m = test::stale_analysis(733, rng);
+// `analyzed` analyzed and `values` factored with leaf fronts of `type` on the CPU and on one
+// GPU, solved for b: the GPU's fixed order needed static pivots, the host's delayed
+// factorization took them all, and its factor and solution are the CPU backend's. Returns
+// both statistics (CPU, GPU) for the caller's further checks.
+std::array<FactorStats, 2> expect_delayed_equals_cpu(MatrixType type, const SparseMatrix& analyzed,
+                                                     const SparseMatrix& values,
+                                                     const std::vector<double>& b) {
   std::vector<double> x[2];
-  FactorStats f[2];
+  std::array<FactorStats, 2> f;
   for (int gpu = 0; gpu < 2; ++gpu) {
-    Solver s(leaf_fronts_lu(gpu != 0));
-    s.factorize(m.analyzed);
-    s.refactorize(m.stale);
+    Options o = leaf_fronts_lu(gpu != 0);
+    o.type = type;
+    Solver s(o);
+    s.analyze(analyzed);
+    s.factorize(values);
     f[gpu] = s.stats().factor;
-    x[gpu] = s.solve(m.b);
+    x[gpu] = s.solve(b);
     EXPECT_LE(s.stats().solve.backward_error, 1e-14);
   }
   EXPECT_EQ(f[1].backend, Backend::cuda);
@@ -1808,8 +1815,16 @@ TEST_F(CudaBackend, DelayedPivotingEqualsCpu) {
   EXPECT_EQ(f[1].perturbed_pivots, 0);
   EXPECT_EQ(f[1].delayed_pivots, f[0].delayed_pivots);
   EXPECT_EQ(f[1].fronts_delaying, f[0].fronts_delaying);
+  EXPECT_EQ(f[1].two_by_two_pivots, f[0].two_by_two_pivots);
   EXPECT_EQ(f[1].log_abs_determinant, f[0].log_abs_determinant);
   EXPECT_EQ(x[1], x[0]);
+  return f;
+}
+
+TEST_F(CudaBackend, DelayedPivotingEqualsCpu) {
+  auto rng = test::fresh_rng();
+  const test::StaleAnalysis m = test::stale_analysis(733, rng);
+  expect_delayed_equals_cpu(MatrixType::general, m.analyzed, m.stale, m.b);
 }
 
 // The same for LDLᵀ: a KKT matrix refactorized in an analysis made with a positive
@@ -1823,29 +1838,11 @@ TEST_F(CudaBackend, SymmetricDelayedPivotingEqualsCpu) {
   std::vector<double> b(733);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   for (double& v : b) v = u(rng);
-  std::vector<double> x[2];
-  FactorStats f[2];
-  for (int gpu = 0; gpu < 2; ++gpu) {
-    Options o = leaf_fronts_lu(gpu != 0);
-    o.type = MatrixType::symmetric_indefinite;
-    Solver s(o);
-    s.analyze(k.analyzed);
-    s.factorize(k.kkt);
-    f[gpu] = s.stats().factor;
-    x[gpu] = s.solve(b);
-    EXPECT_LE(s.stats().solve.backward_error, 1e-14);
-  }
-  EXPECT_EQ(f[1].backend, Backend::cuda);
-  EXPECT_TRUE(f[1].delayed_pivoting);
-  EXPECT_GT(f[1].fixed_order_perturbed_pivots, 0);
-  EXPECT_EQ(f[1].perturbed_pivots, 0);
-  EXPECT_EQ(f[1].delayed_pivots, f[0].delayed_pivots);
-  EXPECT_EQ(f[1].two_by_two_pivots, f[0].two_by_two_pivots);
+  const std::array<FactorStats, 2> f =
+      expect_delayed_equals_cpu(MatrixType::symmetric_indefinite, k.analyzed, k.kkt, b);
   EXPECT_TRUE(f[1].inertia_valid);
   EXPECT_EQ(f[1].inertia_negative, k.constraints);
   EXPECT_EQ(f[1].inertia_negative, f[0].inertia_negative);
-  EXPECT_EQ(f[1].log_abs_determinant, f[0].log_abs_determinant);
-  EXPECT_EQ(x[1], x[0]);
 }
 
 // Solver::analyze_in_pivot_order on the GPU: the delayed factorization's pivot order made

@@ -88,14 +88,19 @@ void update_behind_panel(double* f, index_t m, index_t ld, index_t j0, index_t k
     for (index_t b = 0; b < blocks; ++b) update(b);
 }
 
+void check_delayed_front(index_t m, index_t p, index_t ld, const DelayPolicy& policy,
+                         const char* what) {
+  if (m < 0 || p < 0 || p > m || ld < std::max<index_t>(m, 1))
+    throw InvalidInput(std::string(what) + ": need 0 <= p <= m <= ld (m=" + std::to_string(m) +
+                       ", p=" + std::to_string(p) + ", ld=" + std::to_string(ld) + ")");
+  if (!(policy.threshold > 0 && policy.threshold <= 1))
+    throw InvalidInput(std::string(what) + ": the pivot threshold must be in (0, 1]");
+}
+
 index_t factor_front_lu_delayed(double* f, index_t m, index_t p, index_t ld,
                                 const DelayPolicy& policy, index_t* row_perm, index_t* col_perm,
                                 PivotStats& st, tbb::task_arena* arena) {
-  if (m < 0 || p < 0 || p > m || ld < std::max<index_t>(m, 1))
-    throw InvalidInput("delayed front: need 0 <= p <= m <= ld (m=" + std::to_string(m) +
-                       ", p=" + std::to_string(p) + ", ld=" + std::to_string(ld) + ")");
-  if (!(policy.threshold > 0 && policy.threshold <= 1))
-    throw InvalidInput("delayed front: the pivot threshold must be in (0, 1]");
+  check_delayed_front(m, p, ld, policy, "delayed front");
   auto A = [&](index_t i, index_t j) -> double& { return f[i + j * ld]; };
   for (index_t i = 0; i < p; ++i) row_perm[i] = col_perm[i] = i;
   std::vector<double> col;  // the candidate column brought up to date with the panel

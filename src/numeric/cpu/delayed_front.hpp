@@ -58,6 +58,11 @@ index_t factor_front_lu_delayed(double* f, index_t m, index_t p, index_t ld,
                                 const DelayPolicy& policy, index_t* row_perm, index_t* col_perm,
                                 PivotStats& stats, tbb::task_arena* arena = nullptr);
 
+/// Throws InvalidInput, its message starting with `what`, unless 0 ≤ p ≤ m ≤ ld (ld ≥ 1) and
+/// policy.threshold is in (0, 1]: the two front kernels' arguments.
+void check_delayed_front(index_t m, index_t p, index_t ld, const DelayPolicy& policy,
+                         const char* what);
+
 /// A panel's pivots j0..k−1 (L's columns and U's rows in place, L unit lower) applied to the
 /// columns k..m−1 of an m×m front F (leading dimension ld): their U rows F[j0:k, k:m] =
 /// L11⁻¹·F[j0:k, k:m] by forward substitution (zeros skipped), then their Schur complement

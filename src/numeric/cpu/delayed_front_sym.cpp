@@ -37,7 +37,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <string>
 #include <utility>
 #include <vector>
 
@@ -67,11 +66,7 @@ void count_step(double u, PivotStats& st) {
 index_t factor_front_sym_delayed(double* f, index_t m, index_t p, index_t ld,
                                  const DelayPolicy& policy, index_t* row_perm, index_t* col_perm,
                                  PivotStats& st, tbb::task_arena* arena) {
-  if (m < 0 || p < 0 || p > m || ld < std::max<index_t>(m, 1))
-    throw InvalidInput("delayed symmetric front: need 0 <= p <= m <= ld (m=" + std::to_string(m) +
-                       ", p=" + std::to_string(p) + ", ld=" + std::to_string(ld) + ")");
-  if (!(policy.threshold > 0 && policy.threshold <= 1))
-    throw InvalidInput("delayed symmetric front: the pivot threshold must be in (0, 1]");
+  check_delayed_front(m, p, ld, policy, "delayed symmetric front");
   auto A = [&](index_t i, index_t j) -> double& { return f[i + j * ld]; };
   for (index_t i = 0; i < p; ++i) row_perm[i] = col_perm[i] = i;
   // positions a, b (candidates behind the panel's pivots) interchanged symmetrically
