@@ -142,8 +142,9 @@ void fill_separator_work(ordering::SeparatorTree& tree, const std::vector<index_
   for (auto& node : tree.nodes) node.work = prefix[node.end] - prefix[node.subtree_begin];
 }
 
-void finish_analysis(Analysis& an, const SparseMatrix& c, const SparseMatrix& pattern,
-                     ordering::OrderingResult ord, const Options& opts, int workers);
+void finish_analysis(Analysis& an, const SparseMatrix& c, const ordering::Graph& graph,
+                     index_t diagonal_entries, ordering::OrderingResult ord, const Options& opts,
+                     int workers);
 
 int cpu_threads(const Options& opts) {
   return opts.num_threads > 0 ? opts.num_threads
@@ -291,7 +292,7 @@ static Analysis analyze_matrix_impl(const SparseMatrix& a, const Options& opts, 
   Timer step;
   index_t unmatched_row = -1;
   if (!an.symmetric && opts.matching_and_scaling && an.n > 0 && !c.values.empty()) {
-    ordering::Matching m = ordering::maximum_product_matching(c);
+    ordering::Matching m = ordering::maximum_product_matching_canonical(c);
     an.matching_perm = std::move(m.column_permutation);
     an.row_scaling = std::move(m.row_scaling);
     an.col_scaling = std::move(m.column_scaling);
@@ -315,8 +316,9 @@ static Analysis analyze_matrix_impl(const SparseMatrix& a, const Options& opts, 
         std::to_string(unmatched_row) +
         " (0-based) is left unmatched (explicit zeros do not count as entries)");
   const bool grouped = an.pivot_groups.n_groups() > 0;
-  const SparseMatrix pattern = detail::symmetric_pattern(c, an.symmetric, an.matching_perm);
-  const ordering::Graph graph = ordering::graph_of_symmetric_pattern(pattern);
+  index_t diagonal_entries = 0;
+  const ordering::Graph graph =
+      detail::symmetric_graph(c, an.symmetric, an.matching_perm, &diagonal_entries);
   ordering::OrderingResult ord =
       grouped ? ordering::compute_grouped_ordering(
                     graph, ordering::complete_groups(an.n, an.pivot_groups), opts, workers)
@@ -324,7 +326,7 @@ static Analysis analyze_matrix_impl(const SparseMatrix& a, const Options& opts, 
   an.stats.nd_rebisections = ord.rebisections;
   an.stats.nd_balance_seconds = ord.balance_seconds;
   an.stats.ordering_seconds = step.seconds();
-  finish_analysis(an, c, pattern, std::move(ord), opts, workers);
+  finish_analysis(an, c, graph, diagonal_entries, std::move(ord), opts, workers);
   an.stats.total_seconds = total.seconds();
   return an;
 }
@@ -332,12 +334,15 @@ static Analysis analyze_matrix_impl(const SparseMatrix& a, const Options& opts, 
 namespace {
 
 // Steps 4–7 of the file comment for an analysis whose matching, scaling and ordering are
-// made: `c` the canonical input, `pattern` the symmetric pattern of B that `ord` orders.
-void finish_analysis(Analysis& an, const SparseMatrix& c, const SparseMatrix& pattern,
-                     ordering::OrderingResult ord, const Options& opts, int workers) {
+// made: `c` the canonical input, `graph` the graph of B + Bᵀ that `ord` orders and
+// `diagonal_entries` B's diagonal entries (detail::symmetric_graph).
+void finish_analysis(Analysis& an, const SparseMatrix& c, const ordering::Graph& graph,
+                     index_t diagonal_entries, ordering::OrderingResult ord, const Options& opts,
+                     int workers) {
   const bool grouped = an.pivot_groups.n_groups() > 0;
   Timer step;
-  const SparseMatrix permuted = symbolic::permute_symmetric_pattern(pattern, ord.perm);
+  const SparseMatrix permuted =
+      symbolic::permute_symmetric_pattern(graph.n, graph.xadj, graph.adjncy, ord.perm);
   symbolic::AmalgamationOptions ao;
   ao.relax_small = opts.relax_small;
   ao.relax_size_1 = opts.relax_size_1;
@@ -403,7 +408,7 @@ void finish_analysis(Analysis& an, const SparseMatrix& c, const SparseMatrix& pa
   // statistics
   AnalysisStats& st = an.stats;
   st.n = an.n;
-  st.nnz_a = pattern.nnz();
+  st.nnz_a = graph.n_edges_directed() + diagonal_entries;
   st.nnz_l = sym.nnz_l;
   st.type = an.type;
   st.max_block_size = resolve_max_block_size(opts, an.type);
@@ -517,14 +522,15 @@ static Analysis analyze_keeping_impl(const SparseMatrix& a, const Analysis& prev
   an.col_scaling = previous.col_scaling;
   an.pivot_groups = previous.pivot_groups;
   Timer step;
-  const SparseMatrix pattern = detail::symmetric_pattern(c, an.symmetric, an.matching_perm);
+  index_t diagonal_entries = 0;
+  const ordering::Graph graph =
+      detail::symmetric_graph(c, an.symmetric, an.matching_perm, &diagonal_entries);
   ordering::OrderingResult ord;
   if (keep_order) {
     ord.perm = kept_order_of(previous);
     an.kept_order = ord.perm;
     ord.method = previous.stats.ordering;
   } else {
-    const ordering::Graph graph = ordering::graph_of_symmetric_pattern(pattern);
     ord = grouped ? ordering::compute_grouped_ordering(
                         graph, ordering::complete_groups(an.n, an.pivot_groups), opts, workers)
                   : ordering::compute_ordering(graph, opts, workers);
@@ -535,7 +541,7 @@ static Analysis analyze_keeping_impl(const SparseMatrix& a, const Analysis& prev
   an.stats.ordering_seconds = step.seconds();
   an.stats.order_kept = keep_order;
   an.stats.matching_kept = !keep_order;
-  finish_analysis(an, c, pattern, std::move(ord), opts, workers);
+  finish_analysis(an, c, graph, diagonal_entries, std::move(ord), opts, workers);
   an.stats.ordering = method;
   an.stats.total_seconds = total.seconds();
   return an;
@@ -610,9 +616,11 @@ static Analysis analyze_with_pivot_sequence_impl(const Analysis& previous,
   c.storage = Storage::full;
   c.offsets = an.pattern_offsets;
   c.indices = an.pattern_indices;
-  const SparseMatrix pattern = detail::symmetric_pattern(c, false, an.matching_perm);
+  index_t diagonal_entries = 0;
+  const ordering::Graph graph =
+      detail::symmetric_graph(c, false, an.matching_perm, &diagonal_entries);
   an.stats.ordering_seconds = step.seconds();
-  finish_analysis(an, c, pattern, std::move(ord), opts, workers);
+  finish_analysis(an, c, graph, diagonal_entries, std::move(ord), opts, workers);
   an.stats.ordering = previous.stats.ordering;
   an.stats.order_from_pivots = true;
   an.stats.total_seconds = total.seconds();
@@ -651,10 +659,10 @@ Analysis analyze_with_order(const SparseMatrix& a, const Analysis& previous, con
 
 index_t factor_entries_with_order(const SparseMatrix& a, const Analysis& previous) {
   const SparseMatrix c = kept_input(a, previous, "factor_entries_with_order", true);
-  const SparseMatrix pattern =
-      detail::symmetric_pattern(c, previous.symmetric, previous.matching_perm);
-  const SparseMatrix permuted =
-      symbolic::permute_symmetric_pattern(pattern, kept_order_of(previous));
+  const ordering::Graph graph =
+      detail::symmetric_graph(c, previous.symmetric, previous.matching_perm);
+  const SparseMatrix permuted = symbolic::permute_symmetric_pattern(
+      graph.n, graph.xadj, graph.adjncy, kept_order_of(previous));
   const std::vector<index_t> parent = symbolic::elimination_tree(permuted);
   const std::vector<index_t> counts =
       symbolic::column_counts(permuted, parent, symbolic::postorder(parent));

@@ -1,6 +1,7 @@
 // strata — the patterns the analysis derives from its input (see patterns.hpp).
 //
-// What: (1) the symmetric pattern of B + Bᵀ that the ordering and the symbolic phase work
+// What: (1) the graph of B + Bᵀ (its pattern without the diagonal, which neither the
+// ordering nor the symbolic phase looks at) that the ordering and the symbolic phase work
 // on, and (2) the assembly map, which sorts the input's entries by the front they are
 // added to and gives each its place in that front.
 //
@@ -8,17 +9,18 @@
 // arena with the same result for every thread count. The transposes and the sorting by
 // front are stable bucket sorts (sparse/bucket_entries.hpp: Gustavson's bucket transpose,
 // split into chunks of lines); the other passes are independent per column or per front
-// (a union of two sorted lists, the copy of a column, the positions of a front's entries
-// through a row → local index map kept per thread). Why in parallel: these passes touch
-// every entry, as the ordering does, but unlike the nested dissection (METIS, sequential)
-// they split over a host's cores. A small matrix's analysis runs them on the calling
-// thread alone (base/serial_scope.hpp).
+// (a union of two sorted lists, the positions of a front's entries through a row → local
+// index map kept per thread). Why in parallel: these passes touch every entry, as the
+// ordering does, but unlike the nested dissection (METIS, sequential) they split over a
+// host's cores. A small matrix's analysis runs them on the calling thread alone
+// (base/serial_scope.hpp).
 //
-// B + Bᵀ, general: column j is the union of B(:, j) = A(:, q_j) and row j of B, both sorted
-// (a canonical column, and the transpose's rows listed in increasing column order), so a
-// merge gives the canonical union without a sort; B itself is never formed. Symmetric:
-// column j of the expansion of the lower triangle is row j of it without the diagonal
-// (the entries above the diagonal, in increasing column order) followed by column j.
+// B + Bᵀ: column j is the union of B(:, j) and row j of B, both sorted (a canonical
+// column, and the transpose's rows listed in increasing column order), so a merge gives
+// the sorted union without a sort; B itself is never formed. General: B(:, j) =
+// A(:, q_j). Symmetric: B(:, j) is column j of the lower triangle and row j of it the
+// entries above the diagonal. Each column is merged once, into room for both lists, and
+// then moved down to its place (the union is known only once merged).
 #include "analysis/patterns.hpp"
 
 #include <tbb/enumerable_thread_specific.h>
@@ -68,71 +70,75 @@ Transposed transpose_lines(index_t n_lines, index_t n_buckets, const index_t* in
   return t;
 }
 
-SparseMatrix full_csc(index_t n) {
-  SparseMatrix f;
-  f.n_rows = f.n_cols = n;
-  f.layout = Layout::csc;
-  f.storage = Storage::full;
-  return f;
+// Column j of the graph from its two sorted halves: the union of the sorted lists
+// [a, ae) and [b, be) without j, written to out; returns its length. Branch-free merge.
+index_t union_without(index_t j, const index_t* a, const index_t* ae, const index_t* b,
+                      const index_t* be, index_t* out) {
+  index_t w = 0;
+  while (a < ae && b < be) {
+    const index_t ia = *a, ib = *b, i = ia < ib ? ia : ib;
+    out[w] = i;
+    w += i != j;
+    a += ia == i;
+    b += ib == i;
+  }
+  for (; a < ae; ++a) {
+    out[w] = *a;
+    w += *a != j;
+  }
+  for (; b < be; ++b) {
+    out[w] = *b;
+    w += *b != j;
+  }
+  return w;
 }
 
 }  // namespace
 
-SparseMatrix symmetric_pattern(const SparseMatrix& c, bool symmetric,
-                               const std::vector<index_t>& q) {
+ordering::Graph symmetric_graph(const SparseMatrix& c, bool symmetric,
+                                const std::vector<index_t>& q, index_t* diagonal_entries) {
   const index_t n = c.n_cols;
-  SparseMatrix u = full_csc(n);
   const index_t* ci = c.indices.data();
   const index_t* co = c.offsets.data();
-  if (symmetric) {
-    // row j of the lower triangle: the columns k ≤ j holding row j, increasing (the
-    // diagonal, when stored, is the last one)
-    const Transposed t = transpose_lines(n, n, ci, [&](index_t k) {
-      return std::pair<index_t, index_t>{co[k], co[k + 1]};
-    });
-    auto upper_end = [&](index_t j) {  // row j's entries left of the diagonal
-      index_t e = t.offsets[j + 1];
-      return e > t.offsets[j] && t.lines[e - 1] == j ? e - 1 : e;
-    };
-    u.offsets.assign(n + 1, 0);
-    for_each_index(n, [&](index_t j) {
-      u.offsets[j + 1] = (upper_end(j) - t.offsets[j]) + (co[j + 1] - co[j]);
-    });
-    prefix_sum(u.offsets);
-    u.indices.resize(u.offsets[n]);
-    for_each_index(n, [&](index_t j) {
-      index_t* out = u.indices.data() + u.offsets[j];
-      out = std::copy(t.lines.begin() + t.offsets[j], t.lines.begin() + upper_end(j), out);
-      std::copy(ci + co[j], ci + co[j + 1], out);
-    });
-    return u;
-  }
-  // column k of B is column q[k] of A
+  // column k of B: column q[k] of A (general), column k of the lower triangle (symmetric)
   auto column_of_b = [&](index_t k) {
-    const index_t j = q.empty() ? k : q[k];
+    const index_t j = symmetric || q.empty() ? k : q[k];
     return std::pair<index_t, index_t>{co[j], co[j + 1]};
   };
+  // row j of B, the columns holding row j in increasing order: for a symmetric matrix the
+  // part of column j of B + Bᵀ above the diagonal
   const Transposed t = transpose_lines(n, n, ci, column_of_b);
-  // the union of B(:, j) and row j of B: sizes first, then the merge
-  auto merge = [&](index_t j, index_t* out) {
-    auto [a, ae] = column_of_b(j);
-    index_t b = t.offsets[j], be = t.offsets[j + 1], w = 0;
-    while (a < ae || b < be) {
-      const index_t ia = a < ae ? ci[a] : n, ib = b < be ? t.lines[b] : n;
-      const index_t i = std::min(ia, ib);
-      a += ia == i;
-      b += ib == i;
-      if (out) out[w] = i;
-      ++w;
+  // Each column merged once into room for both halves, then moved down to its place.
+  ordering::Graph g;
+  g.n = n;
+  g.xadj.assign(n + 1, 0);
+  std::vector<index_t> room(n + 1, 0);
+  for (index_t j = 0; j < n; ++j) {
+    const auto [b0, b1] = column_of_b(j);
+    room[j + 1] = room[j] + (b1 - b0) + (t.offsets[j + 1] - t.offsets[j]);
+  }
+  g.adjncy.resize(room[n]);
+  index_t* adj = g.adjncy.data();
+  const index_t* tl = t.lines.data();
+  for_each_index(n, [&](index_t j) {
+    const auto [b0, b1] = column_of_b(j);
+    g.xadj[j + 1] =
+        union_without(j, ci + b0, ci + b1, tl + t.offsets[j], tl + t.offsets[j + 1], adj + room[j]);
+  });
+  if (diagonal_entries) {  // B(j, j) in its sorted column
+    *diagonal_entries = 0;
+    for (index_t j = 0; j < n; ++j) {
+      const auto [b0, b1] = column_of_b(j);
+      *diagonal_entries += std::binary_search(ci + b0, ci + b1, j);
     }
-    return w;
-  };
-  u.offsets.assign(n + 1, 0);
-  for_each_index(n, [&](index_t j) { u.offsets[j + 1] = merge(j, nullptr); });
-  prefix_sum(u.offsets);
-  u.indices.resize(u.offsets[n]);
-  for_each_index(n, [&](index_t j) { merge(j, u.indices.data() + u.offsets[j]); });
-  return u;
+  }
+  for (index_t j = 0; j < n; ++j) {  // in place: each column moves down, never up
+    const index_t len = g.xadj[j + 1];
+    g.xadj[j + 1] = g.xadj[j] + len;
+    if (g.xadj[j] != room[j]) std::copy(adj + room[j], adj + room[j] + len, adj + g.xadj[j]);
+  }
+  g.adjncy.resize(g.xadj[n]);
+  return g;
 }
 
 AssemblyMap build_assembly_map(const SparseMatrix& c, const Analysis& an) {

@@ -20,36 +20,9 @@
 #include <algorithm>
 #include <string>
 
-#include "base/parallel_ranges.hpp"
 #include "strata/errors.hpp"
 
 namespace strata::ordering {
-
-// The pattern's columns without their diagonal entries: each column's count of kept
-// entries, their prefix sums, then the copy, the two passes in ranges of columns over the
-// calling arena's threads (base/parallel_ranges.hpp); the same graph for any thread count.
-Graph graph_of_symmetric_pattern(const SparseMatrix& full) {
-  Graph g;
-  g.n = full.n_cols;
-  g.xadj.assign(g.n + 1, 0);
-  detail::parallel_ranges(g.n, 1024, [&](index_t j0, index_t j1) {
-    for (index_t j = j0; j < j1; ++j) {
-      index_t kept = 0;
-      for (index_t p = full.offsets[j]; p < full.offsets[j + 1]; ++p) kept += full.indices[p] != j;
-      g.xadj[j + 1] = kept;
-    }
-  });
-  for (index_t j = 0; j < g.n; ++j) g.xadj[j + 1] += g.xadj[j];
-  g.adjncy.resize(g.xadj[g.n]);
-  detail::parallel_ranges(g.n, 1024, [&](index_t j0, index_t j1) {
-    for (index_t j = j0; j < j1; ++j) {
-      index_t out = g.xadj[j];
-      for (index_t p = full.offsets[j]; p < full.offsets[j + 1]; ++p)
-        if (full.indices[p] != j) g.adjncy[out++] = full.indices[p];
-    }
-  });
-  return g;
-}
 
 Graph graph_of(const SparseMatrix& a) {
   if (a.n_rows != a.n_cols)

@@ -21,11 +21,6 @@ struct Graph {
 /// layout and storage. Throws InvalidInput if A is not square.
 Graph graph_of(const SparseMatrix& a);
 
-/// The graph of a pattern that is already symmetric, full and sorted (canonical CSC with
-/// both triangles, e.g. from expand_symmetric): its columns without the diagonal, in one
-/// pass. The caller guarantees the symmetry (not checked).
-Graph graph_of_symmetric_pattern(const SparseMatrix& full);
-
 /// The subgraph induced by `vertices` (original numbers); local vertex i is
 /// vertices[i]. Edges to vertices outside the set are dropped.
 Graph induced_subgraph(const Graph& g, const std::vector<index_t>& vertices);

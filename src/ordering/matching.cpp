@@ -54,8 +54,10 @@
 //      costs r = 0. Dijkstra's algorithm with a binary heap of rows, from the free column
 //      j0, stops as soon as the smallest tentative distance in the heap is not below the
 //      best distance D found so far to a free row (free rows are never pushed: they end a
-//      path). With d_i the distance of a row that was taken out of the heap ("finalized",
-//      d_i ≤ D), the duals are updated by
+//      path). A row reached at the distance being expanded (a zero reduced cost, common
+//      where many magnitudes are equal) is final at once: it waits in a list taken before
+//      the heap, without a heap operation. With d_i the distance of a row taken out of the
+//      search ("finalized", d_i ≤ D), the duals are updated by
 //
 //          u_i ← u_i + (d_i − D),  v_{m(i)} ← v_{m(i)} + (D − d_i)  (m(i): column matched
 //          to row i), and v_{j0} ← v_{j0} + D,
@@ -104,13 +106,16 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kMaxLogScale = 700.0;
 
 // The bipartite graph of the nonzeros of A in compressed-column form, with the costs c_ij.
+// Without explicit zeros its columns are A's own (colptr and rowind point into A's
+// arrays); otherwise they are copies without the zeros.
 struct CostGraph {
   index_t n = 0;
-  std::vector<index_t> colptr;     // n+1
-  std::vector<index_t> rowind;     // row of each edge
-  std::vector<double> cost;        // c_ij of each edge
-  std::vector<double> log_colmax;  // log a_j (0 for unmatchable columns)
-  std::vector<char> matchable;     // a_j > 0
+  const index_t* colptr = nullptr;              // n+1
+  const index_t* rowind = nullptr;              // row of each edge
+  std::vector<double> cost;                     // c_ij of each edge
+  std::vector<double> log_colmax;               // log a_j (0 for unmatchable columns)
+  std::vector<char> matchable;                  // a_j > 0
+  std::vector<index_t> own_colptr, own_rowind;  // the copies, when A has explicit zeros
 };
 
 // Two passes in ranges of columns over the calling arena's threads (each column writes
@@ -122,7 +127,8 @@ CostGraph build_cost_graph(const SparseMatrix& full) {
   const bool vals = !full.values.empty();
   auto magnitude = [&](index_t p) { return vals ? std::abs(full.values[p]) : 1.0; };
   g.n = n;
-  g.colptr.assign(n + 1, 0);
+  std::vector<index_t>& edges_before = g.own_colptr;  // per column first, then summed
+  edges_before.assign(n + 1, 0);
   g.log_colmax.assign(n, 0.0);
   g.matchable.assign(n, 0);
   detail::parallel_ranges(n, 512, [&](index_t j0, index_t j1) {
@@ -137,13 +143,22 @@ CostGraph build_cost_graph(const SparseMatrix& full) {
       if (amax > 0.0) {
         g.log_colmax[j] = std::log(amax);
         g.matchable[j] = 1;
-        g.colptr[j + 1] = edges;
+        edges_before[j + 1] = edges;
       }
     }
   });
-  for (index_t j = 0; j < n; ++j) g.colptr[j + 1] += g.colptr[j];
-  g.rowind.resize(g.colptr[n]);
-  g.cost.resize(g.colptr[n]);
+  for (index_t j = 0; j < n; ++j) edges_before[j + 1] += edges_before[j];
+  const bool zeros = edges_before[n] != full.offsets[n];
+  if (zeros) {
+    g.own_rowind.resize(edges_before[n]);
+    g.colptr = g.own_colptr.data();
+    g.rowind = g.own_rowind.data();
+  } else {
+    g.own_colptr = {};
+    g.colptr = full.offsets.data();
+    g.rowind = full.indices.data();
+  }
+  g.cost.resize(edges_before[n]);
   detail::parallel_ranges(n, 512, [&](index_t j0, index_t j1) {
     for (index_t j = j0; j < j1; ++j) {
       if (!g.matchable[j]) continue;
@@ -152,7 +167,7 @@ CostGraph build_cost_graph(const SparseMatrix& full) {
       for (index_t p = full.offsets[j]; p < full.offsets[j + 1]; ++p) {
         const double a = magnitude(p);
         if (a == 0.0) continue;
-        g.rowind[out] = full.indices[p];
+        if (zeros) g.own_rowind[out] = full.indices[p];
         g.cost[out++] = std::max(0.0, lmax - std::log(a));
       }
     }
@@ -162,8 +177,9 @@ CostGraph build_cost_graph(const SparseMatrix& full) {
 
 // Per-row state touched on every edge relaxation, packed so that a relaxation costs one
 // cache line. `slot` is the row's position in the Dijkstra heap (>= 0) or one of kOut,
-// kFinalized (taken out of the heap in the current search), kDead (see retire_dead_set).
-constexpr index_t kOut = -1, kFinalized = -2, kDead = -3;
+// kFinalized (taken out of the heap in the current search), kDead (see retire_dead_set),
+// kLevel (waiting in the search's list of rows at the current distance).
+constexpr index_t kOut = -1, kFinalized = -2, kDead = -3, kLevel = -4;
 struct RowState {
   double u = 0.0;       // dual variable (for a dead row: stored, see dead_shift_)
   double dist = kInf;   // Dijkstra: tentative distance in the current search
@@ -339,11 +355,11 @@ class Matcher {
   // pointer (scanning for a free tight row) only moves forward over all phases.
   void tight_augmentations() {
     const index_t n = g_.n;
-    std::vector<index_t> look(g_.colptr.begin(), g_.colptr.end() - 1);
+    std::vector<index_t> look(g_.colptr, g_.colptr + n);
     std::vector<index_t> iter(n), visited(n, -1);
     std::vector<index_t> stack, edge_in;  // columns; edge_in[k]: edge from stack[k-1]
     for (index_t phase = 0;; ++phase) {
-      std::copy(g_.colptr.begin(), g_.colptr.end() - 1, iter.begin());
+      std::copy(g_.colptr, g_.colptr + n, iter.begin());
       index_t augmented = 0;
       for (index_t j0 = 0; j0 < n; ++j0) {
         if (!g_.matchable[j0] || row_of_col_[j0] != kNone) continue;
@@ -415,18 +431,33 @@ class Matcher {
         if (r.col == kNone) {
           best = nd;
           best_row = i;
+        } else if (nd == dj && r.slot == kOut) {
+          // at the distance being expanded, the smallest there is: final already
+          r.slot = kLevel;
+          level_.push_back(i);
         } else {
           heap_.push_or_decrease(i, nd);
         }
       }
-      if (heap_.empty() || heap_.top_key() >= best) break;
-      const index_t i = heap_.pop();
+      // the next row: one of the current distance first (no heap operation), else the
+      // heap's smallest
+      index_t i;
+      if (level_head_ < level_.size()) {
+        if (dj >= best) break;
+        i = level_[level_head_++];
+      } else {
+        if (heap_.empty() || heap_.top_key() >= best) break;
+        i = heap_.pop();
+      }
       rows_[i].slot = kFinalized;
       done_.push_back(i);
       j = rows_[i].col;
       dj = rows_[i].dist;
     }
     heap_.clear();
+    for (std::size_t k = level_head_; k < level_.size(); ++k) rows_[level_[k]].slot = kOut;
+    level_.clear();
+    level_head_ = 0;
 
     if (best_row == kNone) {
       retire_dead_set(j0);
@@ -502,6 +533,8 @@ class Matcher {
   std::vector<index_t> via_col_;         // Dijkstra: column a row was reached from
   std::vector<index_t> via_edge_;        // Dijkstra: and by which edge
   std::vector<index_t> touched_, done_;  // rows to reset; finalized rows
+  std::vector<index_t> level_;           // Dijkstra: rows reached at the distance expanded
+  std::size_t level_head_ = 0;           // the first of level_ not yet taken
   RowHeap heap_;
 };
 
@@ -515,8 +548,11 @@ Matching maximum_product_matching(const SparseMatrix& a) {
   const bool as_is = detail::is_canonical_full(a);
   SparseMatrix expanded;
   if (!as_is) expanded = expand_symmetric(a);
-  const SparseMatrix& full = as_is ? a : expanded;
-  const CostGraph g = build_cost_graph(full);
+  return maximum_product_matching_canonical(as_is ? a : expanded);
+}
+
+Matching maximum_product_matching_canonical(const SparseMatrix& a) {
+  const CostGraph g = build_cost_graph(a);
   Matcher matcher(g);
   matcher.run();
   return matcher.result();

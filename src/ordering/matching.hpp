@@ -32,4 +32,8 @@ struct Matching {
 /// not square.
 Matching maximum_product_matching(const SparseMatrix& a);
 
+/// The same for a matrix the caller has validated and knows to be canonical full CSC
+/// (the analysis's canonical input): no check of A, no copy.
+Matching maximum_product_matching_canonical(const SparseMatrix& a);
+
 }  // namespace strata::ordering

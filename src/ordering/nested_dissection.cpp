@@ -136,7 +136,7 @@ struct Compressed {
 // of their first members in the sorted list.
 //
 // Over the threads (graphs whose adjacency lists are sorted, as graph_of and
-// graph_of_symmetric_pattern make them): the sums, the sort (the keys are distinct: the
+// detail::symmetric_graph make them): the sums, the sort (the keys are distinct: the
 // vertex breaks ties), the comparison of closed neighbourhoods within each run (runs are
 // independent; two sorted lists are compared by merging, without a mark array) and the
 // compressed adjacency lists run in ranges; the numbering of groups is one sequential
@@ -711,13 +711,7 @@ class Driver {
       for (const index_t v : at)
         if (v >= 0) order.push_back(v);
     }
-    SparseMatrix pattern;
-    pattern.n_rows = pattern.n_cols = n;
-    pattern.layout = Layout::csc;
-    pattern.storage = Storage::full;
-    pattern.offsets = g_.xadj;
-    pattern.indices = g_.adjncy;
-    const SparseMatrix pp = symbolic::permute_symmetric_pattern(pattern, order);
+    const SparseMatrix pp = symbolic::permute_symmetric_pattern(n, g_.xadj, g_.adjncy, order);
     const std::vector<index_t> parent = symbolic::elimination_tree(pp);
     const std::vector<index_t> post = symbolic::postorder(parent);
     const std::vector<index_t> cc = symbolic::column_counts(pp, parent, post);

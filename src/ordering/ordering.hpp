@@ -99,7 +99,7 @@ std::vector<index_t> metis_ordering(const Graph& g,
 /// SuiteSparse AMD (Amestoy, Davis & Duff 1996) on the whole graph.
 std::vector<index_t> amd_ordering(const Graph& g);
 
-/// What AMD's ordering implies for a Cholesky factor of the graph's matrix (amd_l_order's
+/// What AMD's ordering implies for a Cholesky factor of the graph's matrix (amd_l2's
 /// Info, no symbolic factorization): nnz(L) with the diagonal, and the flops of an LDLᵀ
 /// factorization (divisions + 2 × multiply-subtract pairs) — exact, or slightly above
 /// where AMD's aggressive absorption kept approximate degrees.

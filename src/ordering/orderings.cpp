@@ -46,18 +46,24 @@ std::vector<index_t> amd_ordering(const Graph& g, AmdCounts* counts) {
     if (counts) *counts = {static_cast<double>(n), static_cast<double>(n)};
     return perm;
   }
-  double control[AMD_CONTROL], info[AMD_INFO];
-  amd_l_defaults(control);
+  // The graph is what AMD's core routine amd_l2 takes (symmetric, sorted, no diagonal, no
+  // duplicates), so it is called directly rather than through amd_l_order, which would
+  // check the pattern and form A + Aᵀ again. amd_l2 overwrites its copy of the lists and
+  // needs room after them: at least n entries (amd_l_order gives nz/5 + n, as here).
   static_assert(sizeof(SuiteSparse_long) == sizeof(index_t), "AMD long index must be 64-bit");
-  // index_t is int64_t; SuiteSparse_long is long (LP64): same representation.
-  const auto* ap = reinterpret_cast<const SuiteSparse_long*>(g.xadj.data());
-  const auto* ai = reinterpret_cast<const SuiteSparse_long*>(g.adjncy.data());
-  auto* p = reinterpret_cast<SuiteSparse_long*>(perm.data());
-  const SuiteSparse_long status = amd_l_order(n, ap, ai, p, control, info);
-  if (status == AMD_OUT_OF_MEMORY)
-    throw OutOfMemory(static_cast<std::size_t>(info[AMD_MEMORY]), "amd_l_order");
-  if (status != AMD_OK && status != AMD_OK_BUT_JUMBLED)
-    throw InvalidInput("amd_l_order rejected the graph (status " + std::to_string(status) + ")");
+  using Long = SuiteSparse_long;  // index_t is int64_t; SuiteSparse_long is long (LP64)
+  const Long nz = g.n_edges_directed();
+  const Long iwlen = nz + nz / 5 + n;
+  std::vector<Long> iw(static_cast<std::size_t>(iwlen));
+  std::copy(g.adjncy.begin(), g.adjncy.end(), iw.begin());
+  std::vector<Long> pe(g.xadj.begin(), g.xadj.end() - 1), len(n);
+  for (index_t v = 0; v < n; ++v) len[v] = g.xadj[v + 1] - g.xadj[v];
+  std::vector<Long> nv(n), pinv(n), head(n), elen(n), degree(n), w(n);
+  double control[AMD_CONTROL], info[AMD_INFO] = {};
+  amd_l_defaults(control);
+  auto* p = reinterpret_cast<Long*>(perm.data());
+  amd_l2(n, pe.data(), iw.data(), len.data(), iwlen, nz, nv.data(), pinv.data(), p, head.data(),
+         elen.data(), degree.data(), w.data(), control, info);
   if (counts) {
     counts->nnz_l = info[AMD_LNZ] + static_cast<double>(n);
     counts->flops = info[AMD_NDIV] + 2 * info[AMD_NMULTSUBS_LDL];

@@ -145,7 +145,7 @@ SymmetricPairing symmetric_matching_pairing(const SparseMatrix& a, double thresh
   if (full.values.empty() && full.nnz() > 0)
     throw InvalidInput("symmetric_matching_pairing: the matrix has no values");
   SymmetricPairing r;
-  const Matching m = maximum_product_matching(full);
+  const Matching m = maximum_product_matching_canonical(full);
   r.structurally_singular = m.structurally_singular;
   r.first_unmatched_row = m.first_unmatched_row;
   r.matching = m.column_permutation;

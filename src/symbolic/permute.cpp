@@ -16,14 +16,12 @@
 
 namespace strata::symbolic {
 
-SparseMatrix permute_symmetric_pattern(const SparseMatrix& full, const std::vector<index_t>& perm) {
-  // Canonical full CSC first (expands a lower/upper matrix, sorts, removes duplicates).
-  const bool canonical_full = full.layout == Layout::csc && full.storage == Storage::full;
-  SparseMatrix expanded;
-  if (!canonical_full) expanded = expand_symmetric(full);
-  const SparseMatrix& a = canonical_full ? full : expanded;  // no copy of a canonical one
-  const index_t n = a.n_cols;
-  if (a.n_rows != n) throw InvalidInput("permute_symmetric_pattern needs a square matrix");
+SparseMatrix permute_symmetric_pattern(index_t n, const std::vector<index_t>& offsets,
+                                       const std::vector<index_t>& indices,
+                                       const std::vector<index_t>& perm) {
+  if (static_cast<index_t>(offsets.size()) != n + 1)
+    throw InvalidInput("permute_symmetric_pattern: offsets has " + std::to_string(offsets.size()) +
+                       " entries, expected " + std::to_string(n + 1));
   if (static_cast<index_t>(perm.size()) != n)
     throw InvalidInput("permute_symmetric_pattern: permutation has " + std::to_string(perm.size()) +
                        " entries, expected " + std::to_string(n));
@@ -39,18 +37,28 @@ SparseMatrix permute_symmetric_pattern(const SparseMatrix& full, const std::vect
   b.n_rows = b.n_cols = n;
   b.layout = Layout::csc;
   b.storage = Storage::full;
-  b.indices.resize(a.nnz());
+  b.indices.resize(offsets[n]);
   // row r of B (= column r, by symmetry) is iperm[A(:, perm[r])]: rows of B emitted in
   // increasing r into column buckets, in parallel chunks of rows
   index_t* out = b.indices.data();
   b.offsets = detail::bucket_entries(
       n, n,
       [&](index_t r) {
-        return std::pair<index_t, index_t>{a.offsets[perm[r]], a.offsets[perm[r] + 1]};
+        return std::pair<index_t, index_t>{offsets[perm[r]], offsets[perm[r] + 1]};
       },
-      [&](index_t, index_t p) { return iperm[a.indices[p]]; },
+      [&](index_t, index_t p) { return iperm[indices[p]]; },
       [&](index_t slot, index_t r, index_t) { out[slot] = r; });
   return b;
+}
+
+SparseMatrix permute_symmetric_pattern(const SparseMatrix& full, const std::vector<index_t>& perm) {
+  // Canonical full CSC first (expands a lower/upper matrix, sorts, removes duplicates).
+  const bool canonical_full = full.layout == Layout::csc && full.storage == Storage::full;
+  SparseMatrix expanded;
+  if (!canonical_full) expanded = expand_symmetric(full);
+  const SparseMatrix& a = canonical_full ? full : expanded;  // no copy of a canonical one
+  if (a.n_rows != a.n_cols) throw InvalidInput("permute_symmetric_pattern needs a square matrix");
+  return permute_symmetric_pattern(a.n_cols, a.offsets, a.indices, perm);
 }
 
 }  // namespace strata::symbolic

@@ -24,6 +24,13 @@ namespace strata::symbolic {
 /// non-square matrix or a perm that is not a permutation of 0..n-1.
 SparseMatrix permute_symmetric_pattern(const SparseMatrix& full, const std::vector<index_t>& perm);
 
+/// The same for a symmetric pattern given by its full CSC arrays: n + 1 offsets and the
+/// sorted rows of each column, e.g. an ordering::Graph's xadj and adjncy (the result then
+/// has no diagonal either, which no function here needs). Same errors.
+SparseMatrix permute_symmetric_pattern(index_t n, const std::vector<index_t>& offsets,
+                                       const std::vector<index_t>& indices,
+                                       const std::vector<index_t>& perm);
+
 /// Elimination tree: parent[j] is the parent of column j, -1 for a root.
 std::vector<index_t> elimination_tree(const SparseMatrix& a);
 

@@ -112,13 +112,18 @@ void check_against_one_process(const Problem& pr, const DistributedSolver& ds,
     EXPECT_NEAR(f.log_abs_determinant, fr.log_abs_determinant,
                 1e-8 * std::max(1.0, std::abs(fr.log_abs_determinant)));
   }
+  double kappa = -1;  // κ∞(A), estimated only where a difference needs it (O(n³))
   for (index_t c = 0; c < nrhs; ++c) {
     const double berr = test::backward_error(a, x.data() + c * n, b.data() + c * n);
     const double berr_ref = test::backward_error(a, xr.data() + c * n, b.data() + c * n);
     EXPECT_LE(berr, std::max(1e-14, 2 * berr_ref)) << "column " << c;
     const std::vector<double> xc(x.begin() + c * n, x.begin() + (c + 1) * n);
     const std::vector<double> xrc(xr.begin() + c * n, xr.begin() + (c + 1) * n);
-    EXPECT_LT(test::relative_difference(xc, xrc), 1e-8) << "column " << c;
+    // two backward-stable solutions differ by at most about κ times their backward errors
+    // (the two runs' orders differ; nnc1374's κ∞ is about 1e15)
+    const double diff = test::relative_difference(xc, xrc);
+    if (diff >= 1e-8 && kappa < 0) kappa = test::condition_inf(a);
+    EXPECT_LE(diff, std::max(1e-8, 4 * kappa * (berr + berr_ref))) << "column " << c;
   }
   if (n <= 1500) {  // an independent reference: dense LAPACK LU
     std::vector<double> xd = b;

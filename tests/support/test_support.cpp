@@ -19,6 +19,9 @@
 #include "base/blas.hpp"
 #include "numeric/factor.hpp"
 
+extern "C" void dgecon_(const char* norm, const int* n, const double* a, const int* lda,
+                        const double* anorm, double* rcond, double* work, int* iwork, int* info);
+
 namespace strata::test {
 
 std::string matrix_path(const std::string& name) {
@@ -344,6 +347,28 @@ bool dense_solve(std::vector<double> a, index_t n, std::vector<double>& b, index
   std::vector<int> ipiv(n);
   dgesv_(&ni, &nr, a.data(), &ni, ipiv.data(), b.data(), &ni, &info);
   return info == 0;
+}
+
+double condition_inf(const SparseMatrix& a) {
+  const index_t n = a.n_cols;
+  if (n == 0) return 0.0;
+  std::vector<double> d = to_dense(a);  // column-major n × n, symmetric storage expanded
+  double norm = 0;
+  for (index_t i = 0; i < n; ++i) {
+    double r = 0;
+    for (index_t j = 0; j < n; ++j) r += std::abs(d[i + static_cast<std::size_t>(j) * n]);
+    norm = std::max(norm, r);
+  }
+  const int in = static_cast<int>(n);
+  std::vector<int> ipiv(n), iwork(n);
+  std::vector<double> work(4 * static_cast<std::size_t>(n));
+  int info = 0;
+  dgetrf_(&in, &in, d.data(), &in, ipiv.data(), &info);
+  if (info != 0) return std::numeric_limits<double>::infinity();
+  const char inf_norm = 'I';
+  double rcond = 0;
+  dgecon_(&inf_norm, &in, d.data(), &in, &norm, &rcond, work.data(), iwork.data(), &info);
+  return rcond > 0 ? 1.0 / rcond : std::numeric_limits<double>::infinity();
 }
 
 double backward_error(const SparseMatrix& a, const double* x, const double* b) {

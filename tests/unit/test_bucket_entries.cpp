@@ -108,7 +108,7 @@ bool canonical(const SparseMatrix& a) {
   return true;
 }
 
-TEST(AnalysisPatterns, SymmetricPatternAndPermutationMatchTheirDefinitions) {
+TEST(AnalysisPatterns, SymmetricGraphAndPermutationMatchTheirDefinitions) {
   unsigned long long seed = 0;
   auto rng = test::fresh_rng(&seed);
   SCOPED_TRACE("seed " + std::to_string(seed) + " (STRATA_TEST_SEED replays it)");
@@ -122,10 +122,13 @@ TEST(AnalysisPatterns, SymmetricPatternAndPermutationMatchTheirDefinitions) {
       std::shuffle(q.begin(), q.end(), rng);
       const std::vector<index_t> q_inv =
           symmetric ? std::vector<index_t>{} : ordering::invert_permutation(q);
-      // B + Bᵀ by definition
+      // B + Bᵀ off its diagonal, and B's diagonal entries, by definition
       std::set<std::pair<index_t, index_t>> want;
+      index_t want_diagonal = 0;
       for (const auto& [i, j] : entries(c)) {
         const index_t bj = symmetric ? j : q_inv[j];
+        want_diagonal += i == bj;
+        if (i == bj) continue;
         want.insert({i, bj});
         want.insert({bj, i});
       }
@@ -140,11 +143,17 @@ TEST(AnalysisPatterns, SymmetricPatternAndPermutationMatchTheirDefinitions) {
         SCOPED_TRACE("n " + std::to_string(n) + (symmetric ? " symmetric" : " general") + ", " +
                      std::to_string(threads) + " threads");
         tbb::task_arena(threads).execute([&] {
-          const SparseMatrix u =
-              detail::symmetric_pattern(c, symmetric, symmetric ? std::vector<index_t>{} : q);
+          index_t diagonal = -1;
+          const ordering::Graph g = detail::symmetric_graph(
+              c, symmetric, symmetric ? std::vector<index_t>{} : q, &diagonal);
+          SparseMatrix u;
+          u.n_rows = u.n_cols = n;
+          u.offsets = g.xadj;
+          u.indices = g.adjncy;
           EXPECT_TRUE(canonical(u));
           EXPECT_EQ(entries(u), want);
-          const SparseMatrix p = symbolic::permute_symmetric_pattern(u, perm);
+          EXPECT_EQ(diagonal, want_diagonal);
+          const SparseMatrix p = symbolic::permute_symmetric_pattern(n, g.xadj, g.adjncy, perm);
           EXPECT_TRUE(canonical(p));
           EXPECT_EQ(entries(p), want_permuted);
           if (threads == 1) first = p;

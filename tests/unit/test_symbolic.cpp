@@ -678,8 +678,7 @@ TEST(Symbolic, RowStructuresSameOnAnyThreadCount) {
   const index_t n = grid.n_cols;
   Options o;
   o.ordering = OrderingMethod::nested_dissection;
-  const std::vector<index_t> nd =
-      compute_ordering(ordering::graph_of_symmetric_pattern(grid), o).perm;
+  const std::vector<index_t> nd = compute_ordering(ordering::graph_of(grid), o).perm;
   for (const auto& perm : {random_order(n, rng), nd}) {
     const SparseMatrix b = symbolic::permute_symmetric_pattern(grid, perm);
     auto on = [&](int threads) {
