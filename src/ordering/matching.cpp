@@ -54,10 +54,8 @@
 //      costs r = 0. Dijkstra's algorithm with a binary heap of rows, from the free column
 //      j0, stops as soon as the smallest tentative distance in the heap is not below the
 //      best distance D found so far to a free row (free rows are never pushed: they end a
-//      path). A row reached at the distance being expanded (a zero reduced cost, common
-//      where many magnitudes are equal) is final at once: it waits in a list taken before
-//      the heap, without a heap operation. With d_i the distance of a row taken out of the
-//      search ("finalized", d_i ≤ D), the duals are updated by
+//      path). With d_i the distance of a row that was taken out of the heap ("finalized",
+//      d_i ≤ D), the duals are updated by
 //
 //          u_i ← u_i + (d_i − D),  v_{m(i)} ← v_{m(i)} + (D − d_i)  (m(i): column matched
 //          to row i), and v_{j0} ← v_{j0} + D,
@@ -177,9 +175,8 @@ CostGraph build_cost_graph(const SparseMatrix& full) {
 
 // Per-row state touched on every edge relaxation, packed so that a relaxation costs one
 // cache line. `slot` is the row's position in the Dijkstra heap (>= 0) or one of kOut,
-// kFinalized (taken out of the heap in the current search), kDead (see retire_dead_set),
-// kLevel (waiting in the search's list of rows at the current distance).
-constexpr index_t kOut = -1, kFinalized = -2, kDead = -3, kLevel = -4;
+// kFinalized (taken out of the heap in the current search), kDead (see retire_dead_set).
+constexpr index_t kOut = -1, kFinalized = -2, kDead = -3;
 struct RowState {
   double u = 0.0;       // dual variable (for a dead row: stored, see dead_shift_)
   double dist = kInf;   // Dijkstra: tentative distance in the current search
@@ -431,33 +428,18 @@ class Matcher {
         if (r.col == kNone) {
           best = nd;
           best_row = i;
-        } else if (nd == dj && r.slot == kOut) {
-          // at the distance being expanded, the smallest there is: final already
-          r.slot = kLevel;
-          level_.push_back(i);
         } else {
           heap_.push_or_decrease(i, nd);
         }
       }
-      // the next row: one of the current distance first (no heap operation), else the
-      // heap's smallest
-      index_t i;
-      if (level_head_ < level_.size()) {
-        if (dj >= best) break;
-        i = level_[level_head_++];
-      } else {
-        if (heap_.empty() || heap_.top_key() >= best) break;
-        i = heap_.pop();
-      }
+      if (heap_.empty() || heap_.top_key() >= best) break;
+      const index_t i = heap_.pop();
       rows_[i].slot = kFinalized;
       done_.push_back(i);
       j = rows_[i].col;
       dj = rows_[i].dist;
     }
     heap_.clear();
-    for (std::size_t k = level_head_; k < level_.size(); ++k) rows_[level_[k]].slot = kOut;
-    level_.clear();
-    level_head_ = 0;
 
     if (best_row == kNone) {
       retire_dead_set(j0);
@@ -533,8 +515,6 @@ class Matcher {
   std::vector<index_t> via_col_;         // Dijkstra: column a row was reached from
   std::vector<index_t> via_edge_;        // Dijkstra: and by which edge
   std::vector<index_t> touched_, done_;  // rows to reset; finalized rows
-  std::vector<index_t> level_;           // Dijkstra: rows reached at the distance expanded
-  std::size_t level_head_ = 0;           // the first of level_ not yet taken
   RowHeap heap_;
 };
 
