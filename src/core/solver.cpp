@@ -619,6 +619,12 @@ void Solver::analyze(const SparseMatrix& a) {
     state_->analysis.reset();
     const Options& o = state_->options;
     int workers = state_->driver_set ? state_->driver->workers() : resolve_workers(o);
+    // the device's context, streams and handles made while the host analyzes (unless the
+    // analysis may still send the factorization to the host: Options::gpu_min_flops)
+    if (!(o.backend == Backend::automatic && o.gpu_min_flops > 0)) {
+      ensure_driver(*state_, workers, false);
+      state_->driver->begin_setup();
+    }
     Analysis an = analyze_matrix(a, o, workers);
     const bool host = !state_->driver_set && automatic_on_host(o, an);
     if (host && workers > 1) {  // made again for the one worker the host is

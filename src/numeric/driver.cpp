@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <exception>
+#include <future>
 #include <mutex>
 #include <string>
 #include <thread>
@@ -133,6 +134,10 @@ class TreeDriver final : public NumericDriver {
     executor().prepare(an, 1);
     creation_seconds_ = 0;  // part of the analysis's device set-up, not a factorization's
   }
+  void begin_setup() override {
+    if (!gpu_ || executor_ || pending_.valid()) return;
+    pending_ = std::async(std::launch::async, [o = options_] { return make_cuda_executor(o); });
+  }
   bool scale_values_on_device(const Analysis& an, const double* values, const StageValues& stage,
                               int max_sweeps, bool copy_input, DeviceValueNorms& out) override {
     return gpu_ &&
@@ -183,16 +188,29 @@ class TreeDriver final : public NumericDriver {
   void release() noexcept override {
     std::vector<double>().swap(cb_arena_);
     host_solve_.release();
+    drop_executors();
+  }
+  void drop_executors() noexcept override {
+    if (pending_.valid()) {
+      try {
+        pending_.get();  // made or failed: dropped either way
+      } catch (...) {
+      }
+    }
     executor_.reset();
   }
-  void drop_executors() noexcept override { executor_.reset(); }
 
  private:
   Executor& executor() {
     if (!executor_) {
-      const Timer t;  // a new CUDA executor: device context, streams, library handles
-      executor_ = gpu_ ? make_cuda_executor(options_)
-                       : make_cpu_executor(options_.num_threads, options_.reproducible);
+      // a new CUDA executor (device context, streams, library handles), or the one
+      // begin_setup started: the time spent waiting for it
+      const Timer t;
+      if (pending_.valid())
+        executor_ = pending_.get();
+      else
+        executor_ = gpu_ ? make_cuda_executor(options_)
+                         : make_cpu_executor(options_.num_threads, options_.reproducible);
       creation_seconds_ += t.seconds();
     }
     return *executor_;
@@ -201,6 +219,7 @@ class TreeDriver final : public NumericDriver {
   Options options_;
   bool gpu_;
   std::unique_ptr<Executor> executor_;
+  std::future<std::unique_ptr<Executor>> pending_;  // begin_setup's executor, until taken
   std::vector<double> cb_arena_;
   HostSolve host_solve_;
   mutable double creation_seconds_ = 0;  // reported once, with the next factorization

@@ -43,6 +43,12 @@ class NumericDriver {
   /// the device memory plan, streams and library handles), done at analysis as cuDSS's
   /// analysis phase does; nothing for host executors. Throws as factorize.
   virtual void prepare(const Analysis& an) {}
+  /// Starts, on a thread of its own, the part of that set-up that does not need the
+  /// analysis (the CUDA context, streams and library handles of a new CUDA executor), so
+  /// that it overlaps the host's analysis; prepare (or any later call that needs the
+  /// executor) waits for it and rethrows its error. Nothing for host executors, or when
+  /// the executors exist.
+  virtual void begin_setup() {}
   /// The value pass of the next factorizations on the GPU (Executor::scale_values_on_device
   /// of the tree driver's CUDA executor, or of the multi-worker driver's first GPU, whose
   /// scaled values the other GPUs copy): `values` (host, canonical entry order, filled
