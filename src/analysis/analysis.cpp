@@ -374,7 +374,9 @@ void finish_analysis(Analysis& an, const SparseMatrix& c, const ordering::Graph&
     for (index_t g = 0; g < gr.n_groups(); ++g)
       if (links[g] == gr.size(g) - 1) ++(gr.size(g) == 2 ? an.stats.pairs : an.stats.odd_cycles);
   }
-  symbolic::SymbolicFactorization sym = symbolic::analyze_pattern(permuted, ao);
+  // B + Bᵀ by construction (detail::symmetric_graph), permuted with sorted columns
+  symbolic::SymbolicFactorization sym =
+      symbolic::analyze_pattern(permuted, ao, symbolic::PatternCheck::trusted);
   // the tree is in the postordered numbering: pivot k is permuted column post[k]
   an.perm.resize(an.n);
   for (index_t k = 0; k < an.n; ++k) an.perm[k] = ord.perm[sym.post[k]];

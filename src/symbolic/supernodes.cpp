@@ -243,13 +243,14 @@ double front_flops(const AssemblyTree& t, index_t f) {
   return flops;
 }
 
-SymbolicFactorization analyze_pattern(const SparseMatrix& a, const AmalgamationOptions& opts) {
+SymbolicFactorization analyze_pattern(const SparseMatrix& a, const AmalgamationOptions& opts,
+                                      PatternCheck check) {
   if (a.layout != Layout::csc || a.n_rows != a.n_cols)
     throw InvalidInput("analyze_pattern needs a square CSC pattern, got " +
                        std::to_string(a.n_rows) + "x" + std::to_string(a.n_cols));
   if (static_cast<index_t>(a.offsets.size()) != a.n_cols + 1)
     throw InvalidInput("analyze_pattern: offsets has the wrong length");
-  require_symmetric_pattern(a);
+  if (check == PatternCheck::full) require_symmetric_pattern(a);
   const index_t n = a.n_cols;
   SymbolicFactorization sf;
   sf.parent = elimination_tree(a);

@@ -113,13 +113,19 @@ struct AmalgamationOptions {
   std::vector<char> keep_with_next;
 };
 
+/// Whether analyze_pattern checks its pattern's symmetry: `full` (in O(nnz), on the
+/// canonical, sorted form), or `trusted` for a pattern its caller built symmetric with
+/// sorted columns and indices in range (the analysis's permuted B + Bᵀ).
+enum class PatternCheck { full, trusted };
+
 /// Runs the whole symbolic phase: etree, postorder, column counts, fundamental
 /// supernodes, relaxed amalgamation, separator blocking, row structures of the fronts.
 /// Time and memory are near-linear in n + nnz(A) + Σ rows of the fronts. Throws
-/// InvalidInput when the pattern is not square or not symmetric (checked in O(nnz) on the
-/// canonical, sorted form), or when opts.keep_with_next has the wrong size or flags a
-/// column j whose etree parent is not j+1.
-SymbolicFactorization analyze_pattern(const SparseMatrix& a, const AmalgamationOptions& opts);
+/// InvalidInput when the pattern is not square or (PatternCheck::full) not symmetric, or
+/// when opts.keep_with_next has the wrong size or flags a column j whose etree parent is
+/// not j+1.
+SymbolicFactorization analyze_pattern(const SparseMatrix& a, const AmalgamationOptions& opts,
+                                      PatternCheck check = PatternCheck::full);
 
 /// Factor flops of front f for Cholesky: Σ over its pivots of (number of rows below and
 /// including the pivot)² — the usual count Σ_j c_j² for c_j = rows of L(:,j) in the front.
