@@ -11,6 +11,7 @@
 #include <utility>
 
 #include "base/blas.hpp"
+#include "base/device.hpp"
 #include "sparse/generators.hpp"
 #include "strata/strata.hpp"
 #include "support/test_support.hpp"
@@ -120,6 +121,38 @@ TEST(Solver, AutomaticTypeResolution) {
     auto x = s.solve(b);
     EXPECT_LT(test::backward_error(a, x.data(), b.data()), 1e-14);
   }
+}
+
+// Backend::cuda where no GPU is visible (CI): the analysis (whose device set-up starts on a
+// thread of its own) succeeds, every factorization throws NotSupported saying so, the solve
+// refuses (no factor), and the Solver, its analysis kept, neither crashes nor hangs; the
+// same with the symmetric and unsymmetric types, sizes 1 to 733.
+TEST(Solver, CudaBackendWithoutAGpuIsReportedAtEveryFactorization) {
+  if (numeric::cuda_available())
+    GTEST_SKIP() << "a CUDA GPU is present: this test is for machines without";
+  auto rng = test::fresh_rng();
+  for (const Case& c : kCases)
+    for (index_t n : {1, 2, 3, 5, 733}) {
+      SCOPED_TRACE(std::string(c.name) + " n " + std::to_string(n));
+      const SparseMatrix a = test::random_sparse(n, 4, c.kind, rng);
+      Options o;
+      o.type = c.type;
+      o.backend = Backend::cuda;
+      Solver s(o);
+      ASSERT_NO_THROW(s.analyze(a));
+      EXPECT_GT(s.stats().analysis.nnz_l, 0);
+      for (int attempt = 0; attempt < 2; ++attempt) {
+        try {
+          s.factorize(a);
+          ADD_FAILURE() << "factorize succeeded without a GPU";
+        } catch (const NotSupported& e) {
+          EXPECT_NE(std::string(e.what()).find("CUDA"), std::string::npos) << e.what();
+        }
+      }
+      std::vector<double> b(n, 1.0);
+      EXPECT_THROW(s.solve(b), InvalidState);
+      EXPECT_EQ(s.stats().analysis.n, n);
+    }
 }
 
 // Backend::automatic factors a factor below Options::gpu_min_flops on the host, GPU or
