@@ -69,6 +69,10 @@ std::vector<double> cuda_divide_rn(const std::vector<double>&, const std::vector
   throw NotSupported("this build of strata has no CUDA backend (nvcc was not found at build time)");
 }
 
+std::vector<double> cuda_pivot_reciprocal(const std::vector<double>&, const std::vector<double>&) {
+  throw NotSupported("this build of strata has no CUDA backend (nvcc was not found at build time)");
+}
+
 std::vector<double> cuda_gemv_n(index_t, index_t, double, const std::vector<double>&, index_t,
                                 const std::vector<double>&, std::vector<double>) {
   throw NotSupported("this build of strata has no CUDA backend (nvcc was not found at build time)");

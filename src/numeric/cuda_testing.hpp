@@ -70,11 +70,15 @@ std::vector<char> cuda_lu_fronts_batched(std::vector<std::vector<double>>& front
                                          double static_pivot, double threshold,
                                          std::vector<std::vector<index_t>>* perms = nullptr);
 
-/// divide_rn (numeric/cuda/divide.cuh), the elimination kernels' quotient, on CUDA device 0
-/// for each pair (x[i], d[i]), so that tests can check it against the host's IEEE
-/// division bit for bit. Throws InvalidInput when x and d differ in length, NotSupported in
-/// a build without CUDA.
+/// divide_rn (numeric/cuda/divide.cuh), the quotient of the elimination kernels that divide,
+/// on CUDA device 0 for each pair (x[i], d[i]), so that tests can check it against the
+/// host's IEEE division bit for bit. Throws InvalidInput when x and d differ in length,
+/// NotSupported in a build without CUDA.
 std::vector<double> cuda_divide_rn(const std::vector<double>& x, const std::vector<double>& d);
+/// PivotReciprocal (numeric/cuda/divide.cuh), the elimination kernels' multipliers x / d as
+/// x · (1/d), on CUDA device 0 for each pair; errors as cuda_divide_rn.
+std::vector<double> cuda_pivot_reciprocal(const std::vector<double>& x,
+                                          const std::vector<double>& d);
 
 /// y + alpha·A·x by the device solve's GEMV (cuda::launch_gemv_n) on CUDA device 0, for A
 /// rows × cols column-major with leading dimension lda ≥ max(rows, 1) (a.size() ≥

@@ -914,7 +914,7 @@ TEST_F(CudaBackend, SolveGemvMatchesHost) {
                InvalidInput);
 }
 
-TEST_F(CudaBackend, DivideRnIsTheDivisionBitForBit) {
+TEST_F(CudaBackend, DivideRnIsTheDivisionBitForBitAndPivotReciprocalWithinOneRounding) {
   using L = std::numeric_limits<double>;
   const std::vector<double> special = {0.0,
                                        -0.0,
@@ -961,6 +961,27 @@ TEST_F(CudaBackend, DivideRnIsTheDivisionBitForBit) {
     }
   }
   EXPECT_THROW(numeric::cuda_divide_rn({1.0}, {}), InvalidInput);
+  // PivotReciprocal, the multipliers of the elimination kernels: x · (1/d), both roundings
+  // the host's, where 1/d is finite and normal; the division itself for tiny, infinite and
+  // NaN pivots (and zero ones): the same pairs
+  const std::vector<double> r = numeric::cuda_pivot_reciprocal(x, d);
+  ASSERT_EQ(r.size(), x.size());
+  for (std::size_t i = 0; i < x.size(); ++i) {
+    const bool scaled = std::abs(d[i]) >= 0x1p-1020 && std::abs(d[i]) <= L::max();
+    const double want = scaled ? x[i] * (1.0 / d[i]) : x[i] / d[i];
+    if (std::isnan(want)) {
+      EXPECT_TRUE(std::isnan(r[i])) << x[i] << " / " << d[i];
+      continue;
+    }
+    EXPECT_EQ(std::bit_cast<std::uint64_t>(r[i]), std::bit_cast<std::uint64_t>(want))
+        << std::hexfloat << x[i] << " / " << d[i] << ": " << r[i] << " against " << want;
+    // at most one rounding more than the quotient where that is a normal number
+    const double exact = x[i] / d[i];
+    if (std::isfinite(exact) && std::abs(exact) >= L::min())
+      EXPECT_LE(std::abs(r[i] - exact), 2 * L::epsilon() * std::abs(exact))
+          << x[i] << " / " << d[i];
+  }
+  EXPECT_THROW(numeric::cuda_pivot_reciprocal({1.0}, {}), InvalidInput);
 }
 
 // The small-front kernels' blocks widened past a thread per row (Options::

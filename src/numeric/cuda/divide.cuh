@@ -9,6 +9,13 @@
 // divisor that is neither zero nor NaN the correctly rounded quotient is the signed zero
 // x · sign(d), which divide_rn returns without dividing: the same bits as x / d in every
 // case.
+//
+// Where one pivot divides many entries along an elimination's chain of dependent steps,
+// PivotReciprocal gives the multipliers as x · (1/d) instead: one correctly rounded
+// reciprocal per step (__drcp_rn) and a product per entry, at most one rounding from x / d.
+// A division of nonzero operands is a long link of a step's chain (about 170 cycles on an
+// H200, bench/history.md); the host's dense kernels (OpenBLAS's TRSM and GETRF) scale by
+// reciprocals of the pivots as well.
 #pragma once
 
 namespace strata::cuda {
@@ -19,5 +26,20 @@ namespace strata::cuda {
 __device__ __forceinline__ double divide_rn(double x, double d) {
   return (x != 0.0 || !(fabs(d) > 0.0)) ? x / d : x * copysign(1.0, d);
 }
+
+/// The multipliers x / d of one pivot d: x · (1/d) with 1/d correctly rounded, or divide_rn
+/// where 1/d could overflow or d is not finite (|d| < 2^−1020, ±∞, NaN), so that a zero,
+/// infinite or NaN pivot gives what the division gives.
+struct PivotReciprocal {
+  double d, r;
+  bool scale;
+  __device__ __forceinline__ explicit PivotReciprocal(double pivot)
+      : d(pivot), scale(fabs(pivot) >= 0x1p-1020 && fabs(pivot) <= 0x1.fffffffffffffp+1023) {
+    r = scale ? __drcp_rn(pivot) : 0.0;
+  }
+  __device__ __forceinline__ double operator()(double x) const {
+    return scale ? x * r : divide_rn(x, d);
+  }
+};
 
 }  // namespace strata::cuda

@@ -8,9 +8,9 @@
 // and a wider panel costs more in registers and instruction fetches than the trailing
 // passes it saves), the trailing matrix updated once per panel by
 // all the block's threads whatever the number of trailing rows (for an LU front in shared
-// memory on the FP64 tensor cores: lu_trailing_update_mma); the multipliers divide by
-// divide_rn (divide.cuh), which skips CUDA's general division routine for the zero entries
-// that most of a sparse front's columns hold; the unblocked one-pivot-at-a-
+// memory on the FP64 tensor cores: lu_trailing_update_mma); the multipliers are the entries
+// times the pivot's reciprocal (PivotReciprocal, divide.cuh: one reciprocal a step instead
+// of a division per row on the step's chain); the unblocked one-pivot-at-a-
 // time forms (llt_front, lu_columns) remain for larger blocks (lu_columns also serves the
 // large LU fronts' static-pivoting path and the tiled slabs). An LU batch whose fronts all
 // fit the device's shared memory per block (about 168 rows on an H100) copies each front
@@ -395,7 +395,7 @@ __device__ void llt_front_blocked(double* F, std::int64_t m, std::int64_t k, std
         }
         __syncthreads();
         if (sfail) return;
-        if (i > j && row) r[p] = divide_rn(r[p], lsh[p][j]);
+        if (i > j && row) r[p] = PivotReciprocal(lsh[p][j])(r[p]);
         if (i > j && i < kThreads) lsh[p][i] = row ? r[p] : 0.0;
         __syncthreads();
         // the panel's later columns: r[q] -= L(i, j) L(j0 + q, j) for rows at or below them
@@ -480,7 +480,7 @@ __device__ __forceinline__ void lu_pivot_step(double (&r)[kSmallNb], const doubl
   }
   if (i == j) r[p] = piv;
   if (row && i > j) {
-    r[p] = divide_rn(r[p], piv);
+    r[p] = PivotReciprocal(piv)(r[p]);
 #pragma unroll
     for (int q = p + 1; q < kSmallNb; ++q)
       if (q < w) r[q] -= r[p] * u[q];
@@ -1124,9 +1124,10 @@ void launch_lu_panel(double* f, std::int64_t m, std::int64_t k, std::int64_t p0,
 }
 
 namespace {
+template <bool kReciprocal>
 __global__ void divide_rn_kernel(const double* x, const double* d, std::int64_t n, double* q) {
   const std::int64_t i = blockIdx.x * static_cast<std::int64_t>(blockDim.x) + threadIdx.x;
-  if (i < n) q[i] = divide_rn(x[i], d[i]);
+  if (i < n) q[i] = kReciprocal ? PivotReciprocal(d[i])(x[i]) : divide_rn(x[i], d[i]);
 }
 }  // namespace
 
@@ -1141,9 +1142,11 @@ void launch_lu_slab(double* s_, std::int64_t r, std::int64_t w, std::int64_t kk,
 
 namespace strata::numeric {
 
-std::vector<double> cuda_divide_rn(const std::vector<double>& x, const std::vector<double>& d) {
+namespace {
+std::vector<double> device_quotients(const std::vector<double>& x, const std::vector<double>& d,
+                                     bool reciprocal, const char* who) {
   if (x.size() != d.size())
-    throw InvalidInput("cuda_divide_rn: " + std::to_string(x.size()) + " dividends but " +
+    throw InvalidInput(std::string(who) + ": " + std::to_string(x.size()) + " dividends but " +
                        std::to_string(d.size()) + " divisors");
   STRATA_CUDA(cudaSetDevice(0));
   const std::size_t n = x.size();
@@ -1152,13 +1155,28 @@ std::vector<double> cuda_divide_rn(const std::vector<double>& x, const std::vect
   STRATA_CUDA(cudaMemcpy(D.data(), d.data(), n * sizeof(double), cudaMemcpyHostToDevice));
   if (n > 0) {
     constexpr int kBlock = 256;
-    cuda::divide_rn_kernel<<<static_cast<unsigned>((n + kBlock - 1) / kBlock), kBlock>>>(
-        X.data(), D.data(), static_cast<std::int64_t>(n), Q.data());
+    const unsigned blocks = static_cast<unsigned>((n + kBlock - 1) / kBlock);
+    if (reciprocal)
+      cuda::divide_rn_kernel<true>
+          <<<blocks, kBlock>>>(X.data(), D.data(), static_cast<std::int64_t>(n), Q.data());
+    else
+      cuda::divide_rn_kernel<false>
+          <<<blocks, kBlock>>>(X.data(), D.data(), static_cast<std::int64_t>(n), Q.data());
     STRATA_CUDA_LAUNCH();
   }
   std::vector<double> q(n);
   STRATA_CUDA(cudaMemcpy(q.data(), Q.data(), n * sizeof(double), cudaMemcpyDeviceToHost));
   return q;
+}
+}  // namespace
+
+std::vector<double> cuda_divide_rn(const std::vector<double>& x, const std::vector<double>& d) {
+  return device_quotients(x, d, false, "cuda_divide_rn");
+}
+
+std::vector<double> cuda_pivot_reciprocal(const std::vector<double>& x,
+                                          const std::vector<double>& d) {
+  return device_quotients(x, d, true, "cuda_pivot_reciprocal");
 }
 
 int cuda_small_front_threads(index_t count, index_t max_rows, int max_threads, bool shared) {

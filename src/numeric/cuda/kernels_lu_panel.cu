@@ -114,10 +114,11 @@ __device__ __forceinline__ void eliminate(double (&a)[kPerThread], double (&x)[k
       break;
     }
     // A(i, j) from the thread of row i that holds column j (every lane takes part)
+    const PivotReciprocal by_d(d);  // one reciprocal for the step's multipliers
     const double aij =
         __shfl_sync(0xffffffffu, a[j / kLanes], (lane & ~(kLanes - 1)) | (j % kLanes));
     if (i > j && i < w) {
-      const double l = divide_rn(aij, d);
+      const double l = by_d(aij);
       if (q == (j % kLanes)) {
         a[j / kLanes] = l;
         // the CPU's test, |a_jj| ≥ u·|a_ij|: else its pivoting would interchange rows
@@ -135,7 +136,7 @@ __device__ __forceinline__ void eliminate(double (&a)[kPerThread], double (&x)[k
     for (int c = 0; kLanes * c < j; ++c)
       if (kLanes * c + q < j && kLanes * c + q >= i) part += y[c] * T[(kLanes * c + q) * kPad + j];
     part = row_lanes::lane_sum<kLanes>(part);
-    if (i <= j && q == (j % kLanes)) y[j / kLanes] = divide_rn((i == j ? 1.0 : 0.0) - part, d);
+    if (i <= j && q == (j % kLanes)) y[j / kLanes] = by_d((i == j ? 1.0 : 0.0) - part);
   }
 }
 
@@ -206,10 +207,11 @@ __device__ __forceinline__ void eliminate_with_interchanges(double (&a)[kPerThre
       if (threadIdx.x == 0) *sbad = 1;
       break;
     }
+    const PivotReciprocal by_d(d);  // one reciprocal for the step's multipliers
     const double aij =
         __shfl_sync(0xffffffffu, a[j / kLanes], (lane & ~(kLanes - 1)) | (j % kLanes));
     if (i > j && i < w) {
-      const double l = divide_rn(aij, d);
+      const double l = by_d(aij);
       if (q == (j % kLanes)) a[j / kLanes] = l;
 #pragma unroll
       for (int c = j / kLanes; c < kPerThread; ++c)  // the columns after j

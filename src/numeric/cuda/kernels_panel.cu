@@ -124,7 +124,7 @@ __global__ void __launch_bounds__(row_lanes::kThreads)
       fail = static_cast<int>(j0) + j + 1;
       break;
     }
-    const double ljj = sqrt(d), r = 1.0 / ljj;
+    const double ljj = sqrt(d), r = __drcp_rn(ljj);  // 1.0 / ljj, the same bits
     const int js = j / kLanes, jq = j % kLanes;
     if (i == j) {
       if (q == jq) a[js] = ljj;
