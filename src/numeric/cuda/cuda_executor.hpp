@@ -171,17 +171,21 @@ using LuFinalUpdate = std::function<void(std::size_t i, Lane&)>;
 /// strips' pivot blocks and panels by launch_lu_panel_batched on lanes[0] for all fronts with
 /// pivots left in the strip, the rest of each strip's update of the pivot rows and columns by two
 /// cuBLAS GEMMs per front on the other lanes (lanes[0] waits for them before the next strip), and
-/// after a front's last strip `final_update(i, lane)` on a lane (lane_of[i] says which), which must
-/// update the contribution block (A22 −= L21·U12). bad[i] (device) as launch_lu_panel_batched's,
-/// zeroed here. `items` and `work` are grown as needed (Σ ⌈k/nb⌉ items; count fronts'
-/// inverses); `strip_done` is recorded on lanes[0] after each strip's kernels, last after
-/// the last one's. Everything is enqueued; nothing waits on the host. Throws InvalidInput
-/// for nb < 1.
+/// after a front's last strip the update of its contribution block (A22 −= L21·U12) on a lane
+/// (lane_of[i] says which): for the fronts ending in a strip whose block has at most
+/// kLuBatchedCbMaxRows rows and that `may_batch(i)` allows, one launch_lu_cb_update_batched
+/// for all of them (their items in `cb_items`, grown as needed), for the others
+/// `final_update(i, lane)`, which must do that update. bad[i] (device) as
+/// launch_lu_panel_batched's, zeroed here. `items` and `work` are grown as needed (Σ ⌈k/nb⌉
+/// items; count fronts' inverses); `strip_done` is recorded on lanes[0] after each strip's
+/// kernels, last after the last one's. Everything is enqueued; nothing waits on the host.
+/// Throws InvalidInput for nb < 1.
 void enqueue_lu_strips(const std::vector<LuPanelItem>& fronts, std::int64_t nb,
                        const std::vector<Lane*>& lanes, DeviceBuffer<LuPanelItem>& items,
-                       DeviceBuffer<double>& work, int* bad, const numeric::PivotPolicy& pivots,
-                       cudaEvent_t strip_done, const LuFinalUpdate& final_update,
-                       std::vector<Lane*>& lane_of);
+                       DeviceBuffer<LuPanelItem>& cb_items, DeviceBuffer<double>& work, int* bad,
+                       const numeric::PivotPolicy& pivots, cudaEvent_t strip_done,
+                       const std::function<bool(std::size_t)>& may_batch,
+                       const LuFinalUpdate& final_update, std::vector<Lane*>& lane_of);
 
 class CudaExecutor final : public numeric::Executor {
  public:
@@ -619,6 +623,7 @@ class CudaExecutor final : public numeric::Executor {
   struct LuLargeFronts {
     DeviceBuffer<double> work;
     DeviceBuffer<LuPanelItem> items;
+    DeviceBuffer<LuPanelItem> cb_items;      ///< their contribution blocks' batched updates
     DeviceBuffer<std::int64_t> perm_offset;  ///< lu_unpivoted_results: the fronts' perm offsets
     cudaEvent_t strip_done = nullptr;        ///< enqueue_lu_strips' strip_done
     cudaStream_t check_stream = nullptr;     ///< copies the LU checks beside the lanes' work

@@ -159,6 +159,20 @@ void launch_lu_panel_batched(const LuPanelItem* items, const std::vector<std::in
                              const std::vector<std::int64_t>& pivots, double* work, int* bad,
                              double static_pivot, double threshold, cudaStream_t s);
 
+/// Fronts whose contribution block has at most this many rows and columns get their update
+/// from launch_lu_cb_update_batched in enqueue_lu_strips; larger ones one cuBLAS GEMM each.
+constexpr std::int64_t kLuBatchedCbMaxRows = 512;
+
+/// The contribution blocks of large LU fronts once their pivots are eliminated, A22 −=
+/// L21·U12, all fronts of the list in one launch on stream s (kernels_lu_panel.cu): items
+/// (device) with F at the front's entry (0, 0), leading dimension ld, m rows and columns and
+/// k pivots (kc and perm unused); one block per 64×64 tile of A22 (grid-stride over the
+/// tiles), the products on the FP64 tensor cores over the whole inner dimension k.
+/// max_tiles: the most A22 tiles of any item, ⌈(m − k)/64⌉². Nothing for count ≤ 0. Throws
+/// DeviceError if the launch fails.
+void launch_lu_cb_update_batched(const LuPanelItem* items, std::int64_t count,
+                                 std::int64_t max_tiles, cudaStream_t s);
+
 /// One LU panel of a large front: columns p0..p0+w-1 of the m×m front F (fully summed
 /// rows 0..k-1), with row interchanges among rows p0..k-1 (threshold partial pivoting with
 /// u = `threshold`, factor_front_lu's rule) applied to whole rows, static pivoting, and the

@@ -447,6 +447,28 @@ __global__ void lu_update_kernel(const LuPanelItem* items, const int* bad, std::
   }
 }
 
+// The contribution block of item blockIdx.x, A22 −= L21·U12, by 64×64 tiles (grid-stride
+// over the T² tiles, T = ⌈(m − k)/64⌉), each the product over all k pivot columns.
+__global__ void lu_cb_update_kernel(const LuPanelItem* items) {
+  __shared__ __align__(32) double sm[tile::kSharedDoubles];
+  const LuPanelItem it = items[blockIdx.x];
+  const std::int64_t m = it.m, k = it.k, ld = it.ld;
+  const std::int64_t T = tiles_of(m - k);
+  for (std::int64_t q = blockIdx.y; q < T * T; q += gridDim.y) {
+    const std::int64_t r0 = k + (q % T) * kStep, c0 = k + (q / T) * kStep;
+    const int rows = static_cast<int>(imin(kStep, m - r0));
+    const int cols = static_cast<int>(imin(kStep, m - c0));
+    const double* C = tile::product<tile::BLayout::kBCols>(it.F + r0, ld, rows, it.F + c0 * ld, ld,
+                                                           cols, static_cast<int>(k), sm);
+    double* A = it.F + c0 * ld + r0;
+    for (int x = threadIdx.x; x < kSlot; x += kThreads) {
+      const int r = x & (kStep - 1), c = x >> 6;
+      if (r < rows && c < cols) A[static_cast<std::int64_t>(c) * ld + r] -= C[x];
+    }
+    __syncthreads();  // C (in sm) read by every thread before the next tile's staging
+  }
+}
+
 constexpr std::int64_t kMaxGridY = 65535;
 
 unsigned grid_y(std::int64_t n) {
@@ -490,6 +512,14 @@ void launch_lu_panel_batched(const LuPanelItem* items, const std::vector<std::in
       STRATA_CUDA_LAUNCH();
     }
   }
+}
+
+void launch_lu_cb_update_batched(const LuPanelItem* items, std::int64_t count,
+                                 std::int64_t max_tiles, cudaStream_t s) {
+  if (count <= 0 || max_tiles <= 0) return;
+  lu_cb_update_kernel<<<dim3(static_cast<unsigned>(count), grid_y(max_tiles)), kThreads, 0, s>>>(
+      items);
+  STRATA_CUDA_LAUNCH();
 }
 
 }  // namespace strata::cuda

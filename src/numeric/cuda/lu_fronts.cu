@@ -19,8 +19,12 @@
 //   batched kernels of kernels_lu_panel.cu — for every front of the chunk with pivots left
 //   in that strip, in one launch sequence; the rest of the pivot rows and columns gets the
 //   strip's rank-nb update by two cuBLAS GEMMs per front, on the lanes; after a front's
-//   last strip its contribution block gets its one rank-k GEMM (or split_update over the
-//   team), on a lane, while the larger fronts go on with their strips. Nothing waits for
+//   last strip its contribution block gets its one rank-k update, on a lane, while the
+//   larger fronts go on with their strips: for all the fronts ending in a strip whose
+//   blocks are small (kLuBatchedCbMaxRows) one launch of launch_lu_cb_update_batched —
+//   their GEMMs are a few microseconds of device time each, and launched one by one the
+//   host's calls were the longer part — otherwise a cuBLAS GEMM (or split_update over the
+//   team). Nothing waits for
 //   the checks: they are read once, after the last strip's kernels, while the GEMMs run.
 //   A rejected front's speculative updates are wasted work and harmless, since that front
 //   is assembled again from scratch. A front of one 64-column step (k ≤ 64, k ≤ nb) is
@@ -60,9 +64,10 @@ constexpr std::int64_t kMinTallPanel = 8;  // narrowest panel of the shared-memo
 
 void enqueue_lu_strips(const std::vector<LuPanelItem>& fronts, std::int64_t nb,
                        const std::vector<Lane*>& lanes, DeviceBuffer<LuPanelItem>& items,
-                       DeviceBuffer<double>& work, int* bad, const numeric::PivotPolicy& pivots,
-                       cudaEvent_t strip_done, const LuFinalUpdate& final_update,
-                       std::vector<Lane*>& lane_of) {
+                       DeviceBuffer<LuPanelItem>& cb_items, DeviceBuffer<double>& work, int* bad,
+                       const numeric::PivotPolicy& pivots, cudaEvent_t strip_done,
+                       const std::function<bool(std::size_t)>& may_batch,
+                       const LuFinalUpdate& final_update, std::vector<Lane*>& lane_of) {
   const std::size_t n = fronts.size();
   lane_of.assign(n, nullptr);
   if (n == 0) return;
@@ -84,6 +89,31 @@ void enqueue_lu_strips(const std::vector<LuPanelItem>& fronts, std::int64_t nb,
     strip_at.push_back(all.size());
   }
   items.upload(all.data(), all.size(), k0.stream);
+  // the contribution blocks updated by one launch per strip, of the fronts ending there
+  // (launch_lu_cb_update_batched), in the order of the strips
+  std::vector<char> batched(n, 0);
+  std::vector<LuPanelItem> cb_all;
+  std::vector<std::size_t> cb_at{0};
+  std::vector<std::int64_t> cb_tiles;
+  std::vector<double> cb_flops;
+  for (std::int64_t s = 0; s < strips; ++s) {
+    std::int64_t tiles = 0;
+    double flops = 0;
+    for (std::size_t i = 0; i < n && fronts[i].k > s * nb; ++i) {
+      const LuPanelItem& f = fronts[i];
+      const std::int64_t cb = f.m - f.k;
+      if (f.k > (s + 1) * nb || cb < 1 || cb > kLuBatchedCbMaxRows || !may_batch(i)) continue;
+      batched[i] = 1;
+      cb_all.push_back({f.F, f.ld, f.m, f.k, f.k, nullptr});
+      const std::int64_t t = (cb + 63) / 64;
+      tiles = std::max(tiles, t * t);
+      flops += 2.0 * cb * cb * f.k;
+    }
+    cb_at.push_back(cb_all.size());
+    cb_tiles.push_back(tiles);
+    cb_flops.push_back(flops);
+  }
+  if (!cb_all.empty()) cb_items.upload(cb_all.data(), cb_all.size(), k0.stream);
   work.resize(lu_panel_work_size(static_cast<std::int64_t>(n)));
   STRATA_CUDA(cudaMemsetAsync(bad, 0, sizeof(int) * n, k0.stream));
   // the updates go to the lanes other than the kernels' own (when there are any), the
@@ -117,9 +147,21 @@ void enqueue_lu_strips(const std::vector<LuPanelItem>& fronts, std::int64_t nb,
     // first the rest of the pivot rows and columns of the fronts that go on (the next
     // strip's kernels wait for those), then the contribution blocks of those that end here
     for (int ending = 0; ending < 2; ++ending) {
+      if (ending && cb_at[s + 1] > cb_at[s]) {
+        const std::size_t l = pick(true, cb_flops[s]);
+        Lane& ln = *lanes[l];
+        if (l != 0 && !waited[l]) STRATA_CUDA(cudaStreamWaitEvent(ln.stream, strip_done, 0));
+        waited[l] = 1;
+        launch_lu_cb_update_batched(cb_items.data() + cb_at[s],
+                                    static_cast<std::int64_t>(cb_at[s + 1] - cb_at[s]), cb_tiles[s],
+                                    ln.stream);
+        for (std::size_t i = 0; i < active; ++i)
+          if (batched[i] && fronts[i].k <= b1) lane_of[i] = &ln;
+      }
       for (std::size_t i = 0; i < active; ++i) {
         const LuPanelItem& f = fronts[i];
         if ((f.k <= b1) != static_cast<bool>(ending)) continue;
+        if (ending && batched[i]) continue;
         const std::int64_t m = f.m, k = f.k, ld = f.ld;
         const double flops = ending ? 2.0 * (m - k) * (m - k) * k
                                     : 2.0 * nb * ((m - b1) * (k - b1) + (k - b1) * (m - k));
@@ -217,7 +259,12 @@ std::vector<std::size_t> CudaExecutor::lu_fronts_by_strips(std::vector<LuFront>&
   const double one = 1.0, minus_one = -1.0;
   std::vector<Lane*> lane_of;
   enqueue_lu_strips(
-      items, lu_strip_pivots_, lanes, lu_.items, lu_.work, lu_.bad.data(), pivots, lu_.strip_done,
+      items, lu_strip_pivots_, lanes, lu_.items, lu_.cb_items, lu_.work, lu_.bad.data(), pivots,
+      lu_.strip_done,
+      [&](std::size_t q) {
+        const LuFront& fr = fronts[order[q]];
+        return !split_front(fr.m, fr.k);  // the team's fronts: split_update
+      },
       [&](std::size_t q, Lane& ln) {
         const LuFront& fr = fronts[order[q]];
         const int m = fr.m, k = fr.k;
@@ -422,7 +469,7 @@ std::vector<char> cuda_lu_fronts_batched(std::vector<std::vector<double>>& front
   for (std::size_t i = 0; i < n; ++i) order[i] = i;
   std::stable_sort(order.begin(), order.end(), [&](auto a, auto b) { return k[a] > k[b]; });
   cuda::DeviceBuffer<double> pool(std::max<std::size_t>(offset[n], 1)), work;
-  cuda::DeviceBuffer<cuda::LuPanelItem> items;
+  cuda::DeviceBuffer<cuda::LuPanelItem> items, cb_items;
   cuda::DeviceBuffer<int> bad(std::max<std::size_t>(n, 1));
   // the local permutations, the identity unless the kernels interchange rows
   std::vector<std::size_t> perm_at(n + 1, 0);
@@ -457,8 +504,8 @@ std::vector<char> cuda_lu_fronts_batched(std::vector<std::vector<double>>& front
   const double one = 1.0, minus_one = -1.0;
   std::vector<cuda::Lane*> lane_of;
   cuda::enqueue_lu_strips(
-      fr, strip, {&ln}, items, work, bad.data(), numeric::PivotPolicy(static_pivot, threshold),
-      strip_done,
+      fr, strip, {&ln}, items, cb_items, work, bad.data(),
+      numeric::PivotPolicy(static_pivot, threshold), strip_done, [](std::size_t) { return true; },
       [&](std::size_t q, cuda::Lane& l) {
         const int mi = static_cast<int>(fr[q].m), ki = static_cast<int>(fr[q].k);
         double* F = fr[q].F;

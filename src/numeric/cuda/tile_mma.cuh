@@ -1,7 +1,7 @@
 // strata — the 64×64 tile product of strata's batched panel kernels (kernels_panel.cu for
 // Cholesky, kernels_lu_panel.cu for LU), on the FP64 tensor cores.
 //
-// C = A·Bᵀ for a 64 × w block A and a 64 × w block B (w ≤ 64 the inner dimension), the
+// C = A·Bᵀ for a 64 × w block A and a 64 × w block B (w the inner dimension, any size), the
 // operands staged through shared memory kChunk inner columns at a time, the products by
 // WMMA m8n8k4 in FP64 (sm_80 and later): 256 threads, 8 warps, a 32×16 part of C each.
 // Two layouts of B in global memory:
