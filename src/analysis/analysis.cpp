@@ -60,9 +60,10 @@ bool is_canonical_lower(const SparseMatrix& a) {
   return true;
 }
 
-SparseMatrix lower_triangle(const SparseMatrix& a) {
-  if (is_canonical_lower(a)) {  // validated by the caller or validate below
-    validate(a);
+// `validated`: the caller has checked a (validate); otherwise it is checked here.
+SparseMatrix lower_triangle(const SparseMatrix& a, bool validated) {
+  if (is_canonical_lower(a)) {
+    if (!validated) validate(a);
     return a;
   }
   SparseMatrix full = expand_symmetric(a);
@@ -231,7 +232,7 @@ SparseMatrix canonical_values(const Analysis& an, const SparseMatrix& a) {
     throw InvalidInput("matrix is " + std::to_string(a.n_rows) + "x" + std::to_string(a.n_cols) +
                        ", the analysis was for " + std::to_string(an.n) + "x" +
                        std::to_string(an.n));
-  SparseMatrix c = an.symmetric ? lower_triangle(a) : canonicalize(a);
+  SparseMatrix c = an.symmetric ? lower_triangle(a, false) : canonicalize(a);
   if (c.offsets != an.pattern_offsets || c.indices != an.pattern_indices)
     throw InvalidInput("the matrix pattern differs from the analyzed pattern; call analyze again");
   if (c.values.empty() && c.nnz() > 0) throw InvalidInput("the matrix has no values");
@@ -259,7 +260,10 @@ index_t resolve_max_block_size(const Options& opts, MatrixType type) {
   return numeric::uses_cuda(opts.backend) && type == MatrixType::spd ? 4096 : 1024;
 }
 
-static Analysis analyze_matrix_impl(const SparseMatrix& a, const Options& opts, int workers) {
+// `canonical_full`: null, or what the caller's validation of `a` found
+// (detail::is_canonical_full), so that `a` is not checked again here.
+static Analysis analyze_matrix_impl(const SparseMatrix& a, const Options& opts, int workers,
+                                    const bool* canonical_full) {
   Timer total;
   if (workers < 1)
     throw InvalidInput("analyze_matrix: workers must be at least 1 (got " +
@@ -279,9 +283,11 @@ static Analysis analyze_matrix_impl(const SparseMatrix& a, const Options& opts, 
   }
   an.symmetric = an.type != MatrixType::general;
   // the canonical input: a general matrix that is canonical already is read as it is
-  const bool as_is = !an.symmetric && detail::is_canonical_full(a);
+  const bool as_is =
+      !an.symmetric && (canonical_full ? *canonical_full : detail::is_canonical_full(a));
   SparseMatrix converted;
-  if (!as_is) converted = an.symmetric ? lower_triangle(a) : expand_symmetric(a);
+  if (!as_is)
+    converted = an.symmetric ? lower_triangle(a, canonical_full != nullptr) : expand_symmetric(a);
   const SparseMatrix& c = as_is ? a : converted;
   an.pattern_offsets = c.offsets;
   an.pattern_indices = c.indices;
@@ -462,7 +468,7 @@ static SparseMatrix kept_input(const SparseMatrix& a, const Analysis& previous, 
                        std::to_string(a.n_cols) + ", the analysis whose " +
                        (keep_order ? "order" : "matching") + " it keeps was for " +
                        std::to_string(previous.n) + "x" + std::to_string(previous.n));
-  SparseMatrix c = previous.symmetric ? lower_triangle(a) : expand_symmetric(a);
+  SparseMatrix c = previous.symmetric ? lower_triangle(a, false) : expand_symmetric(a);
   const index_t n = previous.n;
   if (keep_order || previous.pivot_groups.n_groups() > 0) {
     for (index_t j = 0; j < n; ++j) {
@@ -650,7 +656,13 @@ Analysis run_analysis(const Options& opts, std::size_t entries, Impl impl) {
 
 Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers) {
   return run_analysis(opts, a.indices.size(),
-                      [&] { return analyze_matrix_impl(a, opts, workers); });
+                      [&] { return analyze_matrix_impl(a, opts, workers, nullptr); });
+}
+
+Analysis analyze_validated(const SparseMatrix& a, bool canonical_full, const Options& opts,
+                           int workers) {
+  return run_analysis(opts, a.indices.size(),
+                      [&] { return analyze_matrix_impl(a, opts, workers, &canonical_full); });
 }
 
 Analysis analyze_with_order(const SparseMatrix& a, const Analysis& previous, const Options& opts,

@@ -104,6 +104,12 @@ struct Analysis {
 /// work. Throws InvalidInput for workers < 1.
 Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers = 1);
 
+/// analyze_matrix for an `a` that the caller has validated, with what that one pass over
+/// its entries found: `canonical_full` = detail::is_canonical_full(a) (Solver::analyze),
+/// so that the entries are not checked again.
+Analysis analyze_validated(const SparseMatrix& a, bool canonical_full, const Options& opts,
+                           int workers);
+
 /// The analysis of a pattern that contains previous's (entries added, none removed: a
 /// contact that closed in a Newton loop) with previous's matching, scaling, pivot groups
 /// and fill-reducing order kept: only steps 4–7 of analysis.cpp are redone (tree, level

@@ -45,6 +45,7 @@
 #include "numeric/delayed.hpp"
 #include "numeric/driver.hpp"
 #include "numeric/factor.hpp"
+#include "sparse/canonical.hpp"
 
 namespace strata {
 
@@ -614,7 +615,7 @@ void adopt_analysis(SolverState& s, Analysis an, const SparseMatrix& a) {
 
 void Solver::analyze(const SparseMatrix& a) {
   phase("analyze", [&] {
-    validate(a);
+    const bool canonical_full = detail::is_canonical_full(a);  // validates a
     clear_numeric(*state_);
     state_->analysis.reset();
     const Options& o = state_->options;
@@ -625,13 +626,13 @@ void Solver::analyze(const SparseMatrix& a) {
       ensure_driver(*state_, workers, false);
       state_->driver->begin_setup();
     }
-    Analysis an = analyze_matrix(a, o, workers);
+    Analysis an = analyze_validated(a, canonical_full, o, workers);
     const bool host = !state_->driver_set && automatic_on_host(o, an);
     if (host && workers > 1) {  // made again for the one worker the host is
       Options one = o;
       one.backend = Backend::cpu;
       workers = 1;
-      an = analyze_matrix(a, one, workers);
+      an = analyze_validated(a, canonical_full, one, workers);
     }
     ensure_driver(*state_, workers, host);
     adopt_analysis(*state_, std::move(an), a);

@@ -32,6 +32,7 @@
 #include <string>
 #include <type_traits>
 
+#include "base/default_init.hpp"
 #include "ordering/ordering.hpp"
 #include "strata/errors.hpp"
 
@@ -54,7 +55,8 @@ std::vector<index_t> amd_ordering(const Graph& g, AmdCounts* counts) {
   using Long = SuiteSparse_long;  // index_t is int64_t; SuiteSparse_long is long (LP64)
   const Long nz = g.n_edges_directed();
   const Long iwlen = nz + nz / 5 + n;
-  std::vector<Long> iw(static_cast<std::size_t>(iwlen));
+  // not value-initialized: amd_l2 reads only the first nz entries before writing the rest
+  UninitVector<Long> iw(static_cast<std::size_t>(iwlen));
   std::copy(g.adjncy.begin(), g.adjncy.end(), iw.begin());
   std::vector<Long> pe(g.xadj.begin(), g.xadj.end() - 1), len(n);
   for (index_t v = 0; v < n; ++v) len[v] = g.xadj[v + 1] - g.xadj[v];

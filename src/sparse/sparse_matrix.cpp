@@ -157,12 +157,16 @@ bool sorted_csc(const SparseMatrix& a) {
 
 // validate's checks of the entries of major indices [j0, j1) (offsets already checked):
 // false at the first entry out of range, not finite, or outside the stored triangle, or
-// (report) InvalidInput naming it.
-bool entries_valid(const SparseMatrix& a, index_t j0, index_t j1, bool report) {
+// (report) InvalidInput naming it. With `sorted`, also clears *sorted where a line's
+// indices do not strictly increase (the same pass: is_canonical_full).
+bool entries_valid(const SparseMatrix& a, index_t j0, index_t j1, bool report,
+                   bool* sorted = nullptr) {
   const index_t nmin = a.layout == Layout::csc ? a.n_rows : a.n_cols;
+  bool increasing = true;
   for (index_t j = j0; j < j1; ++j)
     for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p) {
       const index_t i = a.indices[p];
+      increasing &= p == a.offsets[j] || a.indices[p - 1] < i;
       if (i < 0 || i >= nmin) {
         if (!report) return false;
         throw InvalidInput(at("indices", p) + " = " + std::to_string(i) + " is out of range [0, " +
@@ -185,12 +189,17 @@ bool entries_valid(const SparseMatrix& a, index_t j0, index_t j1, bool report) {
         }
       }
     }
+  if (sorted && !increasing) *sorted = false;
   return true;
 }
 
 }  // namespace
 
-void validate(const SparseMatrix& a) {
+namespace {
+
+// validate(a); with `sorted`, also whether every line's indices strictly increase, found
+// in the same pass over the entries.
+void validate_lines(const SparseMatrix& a, bool* sorted) {
   if (a.n_rows < 0 || a.n_cols < 0)
     throw InvalidInput("matrix has negative dimensions " + std::to_string(a.n_rows) + "x" +
                        std::to_string(a.n_cols));
@@ -214,9 +223,21 @@ void validate(const SparseMatrix& a) {
     throw InvalidInput("symmetric (lower/upper) storage needs a square matrix");
   // the entries over the threads; where one is bad, again in order for the first one's
   // message
-  if (!every_range(a, [&](index_t j0, index_t j1) { return entries_valid(a, j0, j1, false); }))
-    entries_valid(a, 0, nmaj, true);
+  if (sorted) *sorted = true;
+  std::atomic<bool> increasing{true};
+  const bool valid = every_range(a, [&](index_t j0, index_t j1) {
+    bool in_order = true;
+    const bool ok = entries_valid(a, j0, j1, false, sorted ? &in_order : nullptr);
+    if (!in_order) increasing.store(false, std::memory_order_relaxed);
+    return ok;
+  });
+  if (!valid) entries_valid(a, 0, nmaj, true);
+  if (sorted) *sorted = increasing.load();
 }
+
+}  // namespace
+
+void validate(const SparseMatrix& a) { validate_lines(a, nullptr); }
 
 SparseMatrix canonicalize(const SparseMatrix& a) {
   validate(a);
@@ -227,8 +248,9 @@ SparseMatrix canonicalize(const SparseMatrix& a) {
 }
 
 bool detail::is_canonical_full(const SparseMatrix& a) {
-  validate(a);
-  return a.storage == Storage::full && sorted_csc(a);
+  bool sorted = false;
+  validate_lines(a, &sorted);  // one pass over the entries for both
+  return a.storage == Storage::full && a.layout == Layout::csc && sorted;
 }
 
 SparseMatrix expand_symmetric(const SparseMatrix& a) {
