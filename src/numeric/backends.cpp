@@ -78,6 +78,11 @@ std::vector<double> cuda_gemv_n(index_t, index_t, double, const std::vector<doub
   throw NotSupported("this build of strata has no CUDA backend (nvcc was not found at build time)");
 }
 
+std::vector<double> cuda_trsv_tiles(int, bool, index_t, const std::vector<double>&, index_t,
+                                    std::vector<double>) {
+  throw NotSupported("this build of strata has no CUDA backend (nvcc was not found at build time)");
+}
+
 int cuda_small_front_threads(index_t, index_t, int, bool) {
   throw NotSupported("this build of strata has no CUDA backend (nvcc was not found at build time)");
 }

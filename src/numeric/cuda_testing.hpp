@@ -88,6 +88,15 @@ std::vector<double> cuda_gemv_n(index_t rows, index_t cols, double alpha,
                                 const std::vector<double>& a, index_t lda,
                                 const std::vector<double>& x, std::vector<double> y);
 
+/// x ← op(A)⁻¹ x by the device solve's tiled triangular solve (cuda::launch_trsv_inverses,
+/// then cuda::launch_trsv_tiles, twice, so that the second run starts from the flags the
+/// first left) on CUDA device 0: op(A) the lower (form 0), upper (1) or transposed lower
+/// (2) triangle of the n × n A (column-major, leading dimension lda ≥ max(n, 1),
+/// a.size() ≥ lda·n), with a unit diagonal when `unit`; x of n entries. Throws
+/// InvalidInput for inconsistent arguments, NotSupported in a build without CUDA.
+std::vector<double> cuda_trsv_tiles(int form, bool unit, index_t n, const std::vector<double>& a,
+                                    index_t lda, std::vector<double> x);
+
 /// The threads per block the small-front kernels get on CUDA device 0 for a launch of
 /// `count` fronts of at most max_rows rows (1 ≤ max_rows ≤ 256) under
 /// Options::gpu_small_front_threads = max_threads (numeric/cuda/kernels.cu), with each

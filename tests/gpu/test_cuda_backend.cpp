@@ -914,6 +914,57 @@ TEST_F(CudaBackend, SolveGemvMatchesHost) {
                InvalidInput);
 }
 
+// The device solve's tiled triangular solve (trsv_tiles.cuh: each tile's unknowns by the
+// inverse of its diagonal block) against the host: fresh random triangles of orders 1, 2,
+// 3, 5, 64, 65, 733 and 1,024 (one tile, a tile and one unknown, many tiles) in its three
+// forms, unit and not (a unit form's stored diagonal, here 7.5, must not be read), lda > n;
+// the residual of the long double equations within 8·n·u of |op(A)||x| + |b|, a backward
+// error a wrong unknown or a stale flag would far exceed.
+TEST_F(CudaBackend, SolveTiledTriangleMatchesHost) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  std::uniform_real_distribution<double> u(-1, 1);
+  const double eps = std::numeric_limits<double>::epsilon();
+  for (const int form : {0, 1, 2})
+    for (const bool unit : {false, true})
+      for (const index_t n : {1, 2, 3, 5, 64, 65, 733, 1024}) {
+        SCOPED_TRACE("form " + std::to_string(form) + (unit ? " unit" : "") + ", n " +
+                     std::to_string(n));
+        const index_t lda = n + 5;
+        std::vector<double> a(static_cast<std::size_t>(lda * n)), b(n);
+        for (double& v : a) v = u(rng) * 2.0 / std::sqrt(static_cast<double>(n) + 1.0);
+        for (index_t i = 0; i < n; ++i)
+          a[i + i * lda] = unit ? 7.5 : (u(rng) < 0 ? -1.0 : 1.0) * (1.0 + std::abs(u(rng)));
+        for (double& v : b) v = u(rng);
+        const std::vector<double> x = numeric::cuda_trsv_tiles(form, unit, n, a, lda, b);
+        ASSERT_EQ(x.size(), b.size());
+        // coefficient of unknown c in equation r of op(A), the unit diagonal as 1
+        auto coef = [&](index_t r, index_t c) -> long double {
+          if (r == c && unit) return 1.0L;
+          const bool lower_part = form == 0 ? c <= r : c >= r;
+          if (!lower_part) return 0.0L;
+          return form == 2 ? a[c + r * lda] : a[r + c * lda];
+        };
+        long double worst = 0, scale = 0;
+        for (index_t r = 0; r < n; ++r) {
+          long double res = b[r], mag = std::abs(b[r]);
+          for (index_t c = 0; c < n; ++c) {
+            const long double p = coef(r, c) * x[c];
+            res -= p;
+            mag += std::abs(p);
+          }
+          worst = std::max(worst, std::abs(res));
+          scale = std::max(scale, mag);
+        }
+        EXPECT_LE(worst, 8.0L * n * eps * scale);
+      }
+  EXPECT_THROW(numeric::cuda_trsv_tiles(3, false, 2, std::vector<double>(4), 2, {1.0, 1.0}),
+               InvalidInput);
+  EXPECT_THROW(numeric::cuda_trsv_tiles(0, false, 2, std::vector<double>(3), 2, {1.0, 1.0}),
+               InvalidInput);
+}
+
 TEST_F(CudaBackend, DivideRnIsTheDivisionBitForBitAndPivotReciprocalWithinOneRounding) {
   using L = std::numeric_limits<double>;
   const std::vector<double> special = {0.0,

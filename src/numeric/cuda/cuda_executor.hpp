@@ -258,6 +258,16 @@ class CudaExecutor final : public numeric::Executor {
     DeviceBuffer<std::int64_t> panel_offset, chunk_front, chunk_row, small_fronts, tall_fronts,
         subtree_first, subtree_last, part_offset;
     PartExchange exchange;
+    /// The library-path fronts' tiled triangular solves for one right-hand side
+    /// (trsv_tiles.cuh; prepare_trsv_tiles): per front of the tree where its tiles'
+    /// inverses start (−1: none, cuBLAS's TRSV) and its flags; the jobs that make the
+    /// inverses; the forward and backward triangles' inverses and the flags, written by
+    /// every solve (zero between launches).
+    std::vector<std::int64_t> trsv_inverse_at, trsv_sync_at;
+    std::int64_t trsv_jobs_count = 0;
+    DeviceBuffer<std::int64_t> trsv_jobs;
+    mutable DeviceBuffer<double> trsv_forward, trsv_backward;
+    mutable DeviceBuffer<int> trsv_sync;
   };
   /// The extend-add map of the device solve (plan_inverse_extend_add) on the device, once
   /// per analysis (cuda_solve.cu).
@@ -275,6 +285,9 @@ class CudaExecutor final : public numeric::Executor {
                               index_t nrhs);  // cuda_solve.cu
   /// Uploads a plan's sweep arrays and panel offsets into sp (cuda_solve.cu).
   void upload_sweep_plan(SweepPlanDevice& sp);
+  /// sp's tiled triangular solves (SweepPlanDevice::trsv_*) for the fronts of sp's plan
+  /// that go through the library; none where the device lacks the memory (cuda_solve.cu).
+  void prepare_trsv_tiles(const Analysis& an, SweepPlanDevice& sp);
   /// The part solve's plan of part `id` of an.partition, made on first use per analysis
   /// (part_solve.cu).
   SweepPlanDevice& part_sweep_plan(const Analysis& an, int id);

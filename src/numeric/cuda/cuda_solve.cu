@@ -41,15 +41,33 @@ namespace {
 // large_front_forward/backward's BLAS on the device: cuBLAS (host pointer mode: the
 // scalars are read before the call returns), but for the non-transposed GEMV with β = 1 —
 // a front's L21·x or U12·x — strata's launch_gemv_n on the handle's stream, which spreads
-// those few hundred rows over a block per 8 to 32 of them.
+// those few hundred rows over a block per 8 to 32 of them, and for the triangle of one
+// right-hand side, when the plan made its tiles' inverses, launch_trsv_tiles
+// (trsv_tiles.cuh), which takes 64 unknowns per step where cuBLAS's TRSV takes 32.
 struct DeviceOps {
   cublasHandle_t h;
+  // the front's tiles' inverses for the forward and the backward triangle
+  // (SweepPlanDevice::trsv_*), or null: then cuBLAS's TRSV
+  const double* inverse_forward = nullptr;
+  const double* inverse_backward = nullptr;
+  trsv_tiles::TrsvSync sync{};
   static cublasFillMode_t fill(bool upper) {
     return upper ? CUBLAS_FILL_MODE_UPPER : CUBLAS_FILL_MODE_LOWER;
   }
   static cublasOperation_t op(bool trans) { return trans ? CUBLAS_OP_T : CUBLAS_OP_N; }
   static cublasDiagType_t diag(bool unit) { return unit ? CUBLAS_DIAG_UNIT : CUBLAS_DIAG_NON_UNIT; }
   void trsv(bool upper, bool trans, bool unit, int n, const double* a, int lda, double* x) {
+    using trsv_tiles::TrsvForm;
+    const bool fwd = !upper && !trans;  // the forward sweep's L11; else U11 or L11ᵀ
+    if (const double* inv = fwd ? inverse_forward : inverse_backward) {
+      cudaStream_t s = nullptr;
+      STRATA_CUBLAS(cublasGetStream(h, &s));
+      const TrsvForm form = fwd     ? TrsvForm::lower
+                            : upper ? TrsvForm::upper
+                                    : TrsvForm::lower_transposed;
+      launch_trsv_tiles(form, n, a, lda, x, inv, sync, s);
+      return;
+    }
     STRATA_CUBLAS(cublasDtrsv(h, fill(upper), op(trans), diag(unit), n, a, lda, x, 1));
   }
   void trsm(bool upper, bool trans, bool unit, int n, int nrhs, const double* a, int lda, double* b,
@@ -116,6 +134,46 @@ void CudaExecutor::prepare_solve_plan(const Analysis& an) {
   w.panel_offset_host.assign(an.factor_layout.panel_offset.begin(),
                              an.factor_layout.panel_offset.end());
   upload_sweep_plan(w);
+  prepare_trsv_tiles(an, w);
+}
+
+void CudaExecutor::prepare_trsv_tiles(const Analysis& an, SweepPlanDevice& sp) {
+  using trsv_tiles::kTrsvTile;
+  constexpr std::int64_t tile_doubles = std::int64_t{kTrsvTile} * kTrsvTile;
+  const auto& t = an.tree;
+  sp.trsv_inverse_at.assign(static_cast<std::size_t>(t.n_fronts()), -1);
+  sp.trsv_sync_at.assign(static_cast<std::size_t>(t.n_fronts()), -1);
+  sp.trsv_jobs_count = 0;
+  std::vector<trsv_tiles::TrsvTileJob> jobs;
+  std::int64_t flags = 0;
+  for (const std::int64_t f : sp.plan.large_fronts) {
+    const std::int64_t k = t.n_pivots(f), tiles = (k + kTrsvTile - 1) / kTrsvTile;
+    if (k == 0) continue;
+    const auto first = static_cast<std::int64_t>(jobs.size());
+    sp.trsv_inverse_at[f] = first * tile_doubles;
+    sp.trsv_sync_at[f] = flags;
+    flags += tiles + 2;  // a flag per tile, the ticket, the counter
+    for (std::int64_t q = 0; q < tiles; ++q)
+      jobs.push_back({sp.panel_offset_host[f], t.n_rows(f), k, q, (first + q) * tile_doubles});
+  }
+  if (jobs.empty()) return;
+  static_assert(sizeof(trsv_tiles::TrsvTileJob) == 5 * sizeof(std::int64_t));
+  try {
+    sp.trsv_jobs.upload(reinterpret_cast<const std::int64_t*>(jobs.data()), 5 * jobs.size(),
+                        stream_);
+    sp.trsv_forward.resize(jobs.size() * tile_doubles);
+    sp.trsv_backward.resize(jobs.size() * tile_doubles);
+    sp.trsv_sync.resize(static_cast<std::size_t>(flags));
+    STRATA_CUDA(cudaMemsetAsync(sp.trsv_sync.data(), 0, sizeof(int) * flags, stream_));
+    STRATA_CUDA(cudaStreamSynchronize(stream_));  // the upload reads `jobs`
+  } catch (const OutOfMemory&) {                  // no room: those fronts keep cuBLAS's TRSV
+    STRATA_CUDA(cudaStreamSynchronize(stream_));
+    sp.trsv_forward.resize(0);
+    sp.trsv_backward.resize(0);
+    std::fill(sp.trsv_inverse_at.begin(), sp.trsv_inverse_at.end(), -1);
+    return;
+  }
+  sp.trsv_jobs_count = static_cast<std::int64_t>(jobs.size());
 }
 
 bool CudaExecutor::solves_resident(const Analysis& an, const numeric::NumericFactor& fac) const {
@@ -370,9 +428,37 @@ void CudaExecutor::enqueue_solve_sweeps(const Analysis& an, const numeric::Numer
   // the lanes forked from the executor's stream and joined back to it (within a graph's
   // capture these become parallel branches). Each front's block W and panel to `run`.
   static_assert(kSolveLanes <= kLanes, "the solve's library fronts use the executor's lanes");
+  static_assert(kSolveLanes > 1, "the triangles' inverses are made on a lane of their own");
+  // One right-hand side: the library fronts' triangles by tiles (trsv_tiles.cuh), their
+  // inverses made on lane 1 beside the sweeps below them, joined before the first library
+  // front (nothing of the lanes runs before that).
+  const bool tiled = nrhs == 1 && sp.trsv_jobs_count > 0;
+  bool inverses_pending = false;
+  if (tiled) {
+    std::vector<std::unique_ptr<Lane>>& lane = lanes();
+    STRATA_CUDA(cudaEventRecord(lane[0]->done, stream_));
+    STRATA_CUDA(cudaStreamWaitEvent(lane[1]->stream, lane[0]->done, 0));
+    const auto* jobs = reinterpret_cast<const trsv_tiles::TrsvTileJob*>(sp.trsv_jobs.data());
+    if (forward)
+      launch_trsv_inverses(jobs, sp.trsv_jobs_count, panels, sp.trsv_forward.data(),
+                           trsv_tiles::TrsvForm::lower, unit, lane[1]->stream);
+    if (backward)
+      launch_trsv_inverses(
+          jobs, sp.trsv_jobs_count, panels, sp.trsv_backward.data(),
+          lu ? trsv_tiles::TrsvForm::upper : trsv_tiles::TrsvForm::lower_transposed,
+          lu ? false : unit, lane[1]->stream);
+    STRATA_CUDA(cudaEventRecord(lane[1]->done, lane[1]->stream));
+    inverses_pending = true;
+  }
+  auto join_inverses = [&] {
+    if (!inverses_pending) return;
+    STRATA_CUDA(cudaStreamWaitEvent(stream_, lanes()[1]->done, 0));
+    inverses_pending = false;
+  };
   auto large = [&](std::int64_t q0, std::int64_t q1, auto&& run) {
     const std::int64_t count = q1 - q0;
     if (count <= 0) return;
+    join_inverses();
     std::vector<std::unique_ptr<Lane>>& lane = lanes();
     const std::int64_t used = std::min<std::int64_t>(count, kSolveLanes);
     if (used > 1) {
@@ -383,6 +469,13 @@ void CudaExecutor::enqueue_solve_sweeps(const Analysis& an, const numeric::Numer
     for (std::int64_t q = q0; q < q1; ++q) {
       const std::int64_t f = p.large_fronts[q];
       DeviceOps ops{lane[(q - q0) % used]->blas};
+      if (tiled && sp.trsv_inverse_at[f] >= 0) {
+        const std::int64_t at = sp.trsv_inverse_at[f];
+        int* flags = sp.trsv_sync.data() + sp.trsv_sync_at[f];
+        if (forward) ops.inverse_forward = sp.trsv_forward.data() + at;
+        if (backward) ops.inverse_backward = sp.trsv_backward.data() + at;
+        ops.sync = {flags + 2, flags, flags + 1};
+      }
       run(ops, panels + sp.panel_offset_host[f], static_cast<int>(t.n_rows(f)),
           static_cast<int>(t.n_pivots(f)), S + t.row_offsets[f] * nrhs);
     }
@@ -430,6 +523,7 @@ void CudaExecutor::enqueue_solve_sweeps(const Analysis& an, const numeric::Numer
   if (backward)
     launch_fronts_backward(st, sp.subtree_first.data(), sp.subtree_last.data(), 0, n_subtrees, X, S,
                            nrhs, lu, unit, stream_);
+  join_inverses();  // a recorded graph's branches all end on the stream
 }
 
 }  // namespace strata::cuda

@@ -4,6 +4,7 @@
 // solutions back, and the GEMV of the library-path fronts' products (launch_gemv_n).
 #include <algorithm>
 #include <cfloat>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -233,6 +234,46 @@ void launch_gemv_n(std::int64_t rows, std::int64_t cols, double alpha, const dou
   STRATA_CUDA_LAUNCH();
 }
 
+void launch_trsv_inverses(const trsv_tiles::TrsvTileJob* jobs, std::int64_t count,
+                          const double* panels, double* inverses, trsv_tiles::TrsvForm form,
+                          bool unit, cudaStream_t s) {
+  using trsv_tiles::trsv_inverse_kernel;
+  using trsv_tiles::TrsvForm;
+  if (count <= 0) return;
+  const auto blocks = static_cast<unsigned>(count);
+  constexpr int T = trsv_tiles::kTrsvTile;
+  if (form == TrsvForm::lower)
+    unit ? trsv_inverse_kernel<TrsvForm::lower, true><<<blocks, T, 0, s>>>(jobs, panels, inverses)
+         : trsv_inverse_kernel<TrsvForm::lower, false><<<blocks, T, 0, s>>>(jobs, panels, inverses);
+  else if (form == TrsvForm::upper)
+    unit ? trsv_inverse_kernel<TrsvForm::upper, true><<<blocks, T, 0, s>>>(jobs, panels, inverses)
+         : trsv_inverse_kernel<TrsvForm::upper, false><<<blocks, T, 0, s>>>(jobs, panels, inverses);
+  else
+    unit ? trsv_inverse_kernel<TrsvForm::lower_transposed, true>
+        <<<blocks, T, 0, s>>>(jobs, panels, inverses)
+         : trsv_inverse_kernel<TrsvForm::lower_transposed, false>
+        <<<blocks, T, 0, s>>>(jobs, panels, inverses);
+  STRATA_CUDA_LAUNCH();
+}
+
+void launch_trsv_tiles(trsv_tiles::TrsvForm form, std::int64_t n, const double* a, std::int64_t lda,
+                       double* x, const double* inv, trsv_tiles::TrsvSync sync, cudaStream_t s) {
+  using trsv_tiles::trsv_tiles_kernel;
+  using trsv_tiles::TrsvForm;
+  if (n <= 0) return;
+  const auto blocks =
+      static_cast<unsigned>((n + trsv_tiles::kTrsvTile - 1) / trsv_tiles::kTrsvTile);
+  const int nn = static_cast<int>(n), threads = trsv_tiles::kTrsvThreads;
+  if (form == TrsvForm::lower)
+    trsv_tiles_kernel<TrsvForm::lower><<<blocks, threads, 0, s>>>(nn, a, lda, x, inv, sync);
+  else if (form == TrsvForm::upper)
+    trsv_tiles_kernel<TrsvForm::upper><<<blocks, threads, 0, s>>>(nn, a, lda, x, inv, sync);
+  else
+    trsv_tiles_kernel<TrsvForm::lower_transposed>
+        <<<blocks, threads, 0, s>>>(nn, a, lda, x, inv, sync);
+  STRATA_CUDA_LAUNCH();
+}
+
 void launch_permute_in(const double* from, const std::int64_t* index, const double* scale,
                        const double* rescale, double* to, std::int64_t n, std::int64_t nrhs,
                        cudaStream_t s) {
@@ -368,6 +409,44 @@ std::vector<double> cuda_gemv_n(index_t rows, index_t cols, double alpha,
   cuda::launch_gemv_n(rows, cols, alpha, A.data(), lda, X.data(), Y.data(), nullptr);
   STRATA_CUDA(cudaMemcpy(y.data(), Y.data(), y.size() * sizeof(double), cudaMemcpyDeviceToHost));
   return y;
+}
+
+std::vector<double> cuda_trsv_tiles(int form, bool unit, index_t n, const std::vector<double>& a,
+                                    index_t lda, std::vector<double> x) {
+  if (form < 0 || form > 2 || n < 0 || lda < std::max<index_t>(n, 1) ||
+      a.size() < static_cast<std::size_t>(lda) * static_cast<std::size_t>(n) ||
+      x.size() != static_cast<std::size_t>(n) || n > std::numeric_limits<int>::max())
+    throw InvalidInput("cuda_trsv_tiles: inconsistent arguments (form " + std::to_string(form) +
+                       ", n " + std::to_string(n) + ", lda " + std::to_string(lda) + ", a " +
+                       std::to_string(a.size()) + ", x " + std::to_string(x.size()) + ")");
+  if (n == 0) return x;
+  using cuda::trsv_tiles::kTrsvTile;
+  STRATA_CUDA(cudaSetDevice(0));
+  const index_t tiles = (n + kTrsvTile - 1) / kTrsvTile;
+  std::vector<cuda::trsv_tiles::TrsvTileJob> jobs(static_cast<std::size_t>(tiles));
+  for (index_t t = 0; t < tiles; ++t) jobs[t] = {0, lda, n, t, t * kTrsvTile * kTrsvTile};
+  cuda::DeviceBuffer<double> A(a.size()), X(x.size()),
+      inv(static_cast<std::size_t>(tiles) * kTrsvTile * kTrsvTile);
+  cuda::DeviceBuffer<std::int64_t> J(jobs.size() * 5);
+  cuda::DeviceBuffer<int> sync(static_cast<std::size_t>(tiles) + 2);
+  STRATA_CUDA(cudaMemcpy(A.data(), a.data(), a.size() * sizeof(double), cudaMemcpyHostToDevice));
+  STRATA_CUDA(cudaMemcpy(X.data(), x.data(), x.size() * sizeof(double), cudaMemcpyHostToDevice));
+  STRATA_CUDA(
+      cudaMemcpy(J.data(), jobs.data(), jobs.size() * sizeof(jobs[0]), cudaMemcpyHostToDevice));
+  STRATA_CUDA(cudaMemset(sync.data(), 0, sync.size() * sizeof(int)));
+  const auto f = static_cast<cuda::trsv_tiles::TrsvForm>(form);
+  const auto* job_ptr = reinterpret_cast<const cuda::trsv_tiles::TrsvTileJob*>(J.data());
+  cuda::launch_trsv_inverses(job_ptr, tiles, A.data(), inv.data(), f, unit, nullptr);
+  const cuda::trsv_tiles::TrsvSync s{sync.data() + 2, sync.data(), sync.data() + 1};
+  // twice: the second launch finds the flags the first one left, which must be zero again
+  for (int run = 0; run < 2; ++run) {
+    if (run == 1)
+      STRATA_CUDA(
+          cudaMemcpy(X.data(), x.data(), x.size() * sizeof(double), cudaMemcpyHostToDevice));
+    cuda::launch_trsv_tiles(f, n, A.data(), lda, X.data(), inv.data(), s, nullptr);
+  }
+  STRATA_CUDA(cudaMemcpy(x.data(), X.data(), x.size() * sizeof(double), cudaMemcpyDeviceToHost));
+  return x;
 }
 
 }  // namespace strata::numeric

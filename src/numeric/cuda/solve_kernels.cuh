@@ -24,6 +24,7 @@
 #include <cstdint>
 
 #include "numeric/cuda/solve_plan.hpp"
+#include "numeric/cuda/trsv_tiles.cuh"
 
 namespace strata::cuda {
 
@@ -96,6 +97,20 @@ void launch_scatter_backward(const SolveTree& t, SolveChunks c, std::int64_t beg
 /// too small for a library GEMV to spread over the device. Nothing for rows or cols ≤ 0.
 void launch_gemv_n(std::int64_t rows, std::int64_t cols, double alpha, const double* a,
                    std::int64_t lda, const double* x, double* y, cudaStream_t s);
+
+/// The inverses of op(A)'s diagonal tiles for `count` jobs (trsv_tiles.cuh: TrsvTileJob,
+/// device array), op(A) of `form` with a unit diagonal when `unit`, A's entries at
+/// panels + job.panel, the inverses at inverses + job.out. Nothing for count ≤ 0.
+void launch_trsv_inverses(const trsv_tiles::TrsvTileJob* jobs, std::int64_t count,
+                          const double* panels, double* inverses, trsv_tiles::TrsvForm form,
+                          bool unit, cudaStream_t s);
+
+/// x ← op(A)⁻¹ x for the n × n triangle of A (column-major, leading dimension lda, device
+/// pointers) by tiles of trsv_tiles::kTrsvTile unknowns (trsv_tiles.cuh), `inv` the tiles'
+/// inverses from launch_trsv_inverses and `sync` ⌈n/kTrsvTile⌉ flags, a ticket and a
+/// counter, zero before and after. Nothing for n ≤ 0.
+void launch_trsv_tiles(trsv_tiles::TrsvForm form, std::int64_t n, const double* a, std::int64_t lda,
+                       double* x, const double* inv, trsv_tiles::TrsvSync sync, cudaStream_t s);
 
 /// The right-hand sides into the factor's numbering and scaling, for n unknowns and nrhs
 /// columns (column-major): to[k + r·n] = scaled(from[index[k] + r·n], scale[k],
