@@ -235,6 +235,7 @@ void CudaExecutor::begin(const numeric::FactorContext& ctx) {
   lu_.fronts = lu_.fronts_pivoted = lu_.fronts_batched = 0;
   phases_ = FactorStats::DevicePhases{};
   held_parts_.clear();
+  ++factorization_count_;  // the panels change: the solve's tile inverses are stale
   dsolve_.resident_for = nullptr;
   dsolve_.part_rows_current = false;
   pending_ = nullptr;  // a chunk left by a factorization that failed

@@ -261,13 +261,17 @@ class CudaExecutor final : public numeric::Executor {
     /// The library-path fronts' tiled triangular solves for one right-hand side
     /// (trsv_tiles.cuh; prepare_trsv_tiles): per front of the tree where its tiles'
     /// inverses start (−1: none, cuBLAS's TRSV) and its flags; the jobs that make the
-    /// inverses; the forward and backward triangles' inverses and the flags, written by
-    /// every solve (zero between launches).
+    /// inverses; the forward and backward triangles' inverses (make_trsv_inverses, once per
+    /// factorization: trsv_made is the factorization_count_ and trsv_type the type they
+    /// were made for, 0 for none) and the flags (written by every solve, zero between
+    /// launches).
     std::vector<std::int64_t> trsv_inverse_at, trsv_sync_at;
     std::int64_t trsv_jobs_count = 0;
     DeviceBuffer<std::int64_t> trsv_jobs;
-    mutable DeviceBuffer<double> trsv_forward, trsv_backward;
+    DeviceBuffer<double> trsv_forward, trsv_backward;
     mutable DeviceBuffer<int> trsv_sync;
+    std::uint64_t trsv_made = 0;
+    MatrixType trsv_type = MatrixType::automatic;
   };
   /// The extend-add map of the device solve (plan_inverse_extend_add) on the device, once
   /// per analysis (cuda_solve.cu).
@@ -288,6 +292,14 @@ class CudaExecutor final : public numeric::Executor {
   /// sp's tiled triangular solves (SweepPlanDevice::trsv_*) for the fronts of sp's plan
   /// that go through the library; none where the device lacks the memory (cuda_solve.cu).
   void prepare_trsv_tiles(const Analysis& an, SweepPlanDevice& sp);
+  /// Enqueues on stream_ the inverses of sp's tiles for the factor of `type` at `panels`
+  /// unless they were made for this factorization already (cuda_solve.cu).
+  void make_trsv_inverses(SweepPlanDevice& sp, const double* panels, MatrixType type);
+  /// Whether sp's tiled triangular solves can run for this factorization (their inverses
+  /// made for it and `type`).
+  bool trsv_current(const SweepPlanDevice& sp, MatrixType type) const {
+    return sp.trsv_jobs_count > 0 && sp.trsv_made == factorization_count_ && sp.trsv_type == type;
+  }
   /// The part solve's plan of part `id` of an.partition, made on first use per analysis
   /// (part_solve.cu).
   SweepPlanDevice& part_sweep_plan(const Analysis& an, int id);
@@ -560,6 +572,7 @@ class CudaExecutor final : public numeric::Executor {
   bool solve_graph_ = true;                      ///< Options::gpu_solve_graph
   bool solve_parts_ = true;                      ///< Options::gpu_solve_parts
   std::uint64_t analysis_id_ = 0;
+  std::uint64_t factorization_count_ = 0;  ///< factorizations begun here (begin)
   DevicePlan plan_;
   // analysis arrays (fronts_: the whole tree's schedule, for the device solve)
   DeviceBuffer<std::int64_t> fronts_, n_rows_, n_pivots_, parent_, entry_offsets_, entry_src_,

@@ -174,6 +174,21 @@ void CudaExecutor::prepare_trsv_tiles(const Analysis& an, SweepPlanDevice& sp) {
     return;
   }
   sp.trsv_jobs_count = static_cast<std::int64_t>(jobs.size());
+  sp.trsv_made = 0;
+}
+
+void CudaExecutor::make_trsv_inverses(SweepPlanDevice& sp, const double* panels, MatrixType type) {
+  if (sp.trsv_jobs_count == 0 || trsv_current(sp, type)) return;
+  const bool lu = type == MatrixType::general,
+             unit = lu || type == MatrixType::symmetric_indefinite;
+  const auto* jobs = reinterpret_cast<const trsv_tiles::TrsvTileJob*>(sp.trsv_jobs.data());
+  launch_trsv_inverses(jobs, sp.trsv_jobs_count, panels, sp.trsv_forward.data(),
+                       trsv_tiles::TrsvForm::lower, unit, stream_);
+  launch_trsv_inverses(jobs, sp.trsv_jobs_count, panels, sp.trsv_backward.data(),
+                       lu ? trsv_tiles::TrsvForm::upper : trsv_tiles::TrsvForm::lower_transposed,
+                       lu ? false : unit, stream_);
+  sp.trsv_made = factorization_count_;
+  sp.trsv_type = type;
 }
 
 bool CudaExecutor::solves_resident(const Analysis& an, const numeric::NumericFactor& fac) const {
@@ -184,6 +199,8 @@ bool CudaExecutor::solves_resident(const Analysis& an, const numeric::NumericFac
 void CudaExecutor::enqueue_resident_solve(const Analysis& an, const numeric::NumericFactor& fac,
                                           index_t nrhs) {
   const std::int64_t u_total = dsolve_.u_offset_host.back();
+  // the tiles' inverses once per factorization, before (not in) the recorded sweeps
+  if (nrhs == 1) make_trsv_inverses(dsolve_.whole, panels_.data(), fac.type);
   dsolve_.u.resize(std::max<std::size_t>(static_cast<std::size_t>(u_total) * nrhs, 1));
   dsolve_.scratch.resize(std::max<std::size_t>(an.tree.rows.size() * nrhs, 1));
   dsolve_.part.resize(
@@ -428,37 +445,12 @@ void CudaExecutor::enqueue_solve_sweeps(const Analysis& an, const numeric::Numer
   // the lanes forked from the executor's stream and joined back to it (within a graph's
   // capture these become parallel branches). Each front's block W and panel to `run`.
   static_assert(kSolveLanes <= kLanes, "the solve's library fronts use the executor's lanes");
-  static_assert(kSolveLanes > 1, "the triangles' inverses are made on a lane of their own");
-  // One right-hand side: the library fronts' triangles by tiles (trsv_tiles.cuh), their
-  // inverses made on lane 1 beside the sweeps below them, joined before the first library
-  // front (nothing of the lanes runs before that).
-  const bool tiled = nrhs == 1 && sp.trsv_jobs_count > 0;
-  bool inverses_pending = false;
-  if (tiled) {
-    std::vector<std::unique_ptr<Lane>>& lane = lanes();
-    STRATA_CUDA(cudaEventRecord(lane[0]->done, stream_));
-    STRATA_CUDA(cudaStreamWaitEvent(lane[1]->stream, lane[0]->done, 0));
-    const auto* jobs = reinterpret_cast<const trsv_tiles::TrsvTileJob*>(sp.trsv_jobs.data());
-    if (forward)
-      launch_trsv_inverses(jobs, sp.trsv_jobs_count, panels, sp.trsv_forward.data(),
-                           trsv_tiles::TrsvForm::lower, unit, lane[1]->stream);
-    if (backward)
-      launch_trsv_inverses(
-          jobs, sp.trsv_jobs_count, panels, sp.trsv_backward.data(),
-          lu ? trsv_tiles::TrsvForm::upper : trsv_tiles::TrsvForm::lower_transposed,
-          lu ? false : unit, lane[1]->stream);
-    STRATA_CUDA(cudaEventRecord(lane[1]->done, lane[1]->stream));
-    inverses_pending = true;
-  }
-  auto join_inverses = [&] {
-    if (!inverses_pending) return;
-    STRATA_CUDA(cudaStreamWaitEvent(stream_, lanes()[1]->done, 0));
-    inverses_pending = false;
-  };
+  // One right-hand side: the library fronts' triangles by tiles (trsv_tiles.cuh) where
+  // their inverses were made for this factorization (make_trsv_inverses).
+  const bool tiled = nrhs == 1 && trsv_current(sp, fac.type);
   auto large = [&](std::int64_t q0, std::int64_t q1, auto&& run) {
     const std::int64_t count = q1 - q0;
     if (count <= 0) return;
-    join_inverses();
     std::vector<std::unique_ptr<Lane>>& lane = lanes();
     const std::int64_t used = std::min<std::int64_t>(count, kSolveLanes);
     if (used > 1) {
@@ -472,8 +464,8 @@ void CudaExecutor::enqueue_solve_sweeps(const Analysis& an, const numeric::Numer
       if (tiled && sp.trsv_inverse_at[f] >= 0) {
         const std::int64_t at = sp.trsv_inverse_at[f];
         int* flags = sp.trsv_sync.data() + sp.trsv_sync_at[f];
-        if (forward) ops.inverse_forward = sp.trsv_forward.data() + at;
-        if (backward) ops.inverse_backward = sp.trsv_backward.data() + at;
+        ops.inverse_forward = sp.trsv_forward.data() + at;
+        ops.inverse_backward = sp.trsv_backward.data() + at;
         ops.sync = {flags + 2, flags, flags + 1};
       }
       run(ops, panels + sp.panel_offset_host[f], static_cast<int>(t.n_rows(f)),
@@ -523,7 +515,6 @@ void CudaExecutor::enqueue_solve_sweeps(const Analysis& an, const numeric::Numer
   if (backward)
     launch_fronts_backward(st, sp.subtree_first.data(), sp.subtree_last.data(), 0, n_subtrees, X, S,
                            nrhs, lu, unit, stream_);
-  join_inverses();  // a recorded graph's branches all end on the stream
 }
 
 }  // namespace strata::cuda

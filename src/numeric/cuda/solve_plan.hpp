@@ -96,9 +96,10 @@ constexpr double kLaunchSeconds = 3e-6;
 constexpr double kLibraryBytesPerSecond = 2e12;
 // ...after two library calls' launch and enqueue cost...
 constexpr double kLibraryCallSeconds = 8e-6;
-// ...plus the triangular solve's sequential dependence, per pivot column (cuBLAS's
-// DTRSV takes about 2 µs per 32 columns on an H100).
-constexpr double kLibraryPivotSeconds = 6.5e-8;
+// ...plus the triangular solve's sequential dependence, per pivot column (the tiled solve
+// of trsv_tiles.cuh takes about 2 µs per 64 columns on an H200; cuBLAS's DTRSV, which
+// several right-hand sides still use, about 2 µs per 32).
+constexpr double kLibraryPivotSeconds = 3.5e-8;
 
 /// Streams a level's library-path fronts run on side by side (cuda_solve.cu: the
 /// executor's lanes), the j-th largest on stream j mod kSolveLanes.
