@@ -41,7 +41,7 @@ namespace {
 // large_front_forward/backward's BLAS on the device: cuBLAS (host pointer mode: the
 // scalars are read before the call returns), but for the non-transposed GEMV with β = 1 —
 // a front's L21·x or U12·x — strata's launch_gemv_n on the handle's stream, which spreads
-// those few hundred rows over a block per 8 to 32 of them, and for the triangle of one
+// those few hundred rows over a block per 4 to 32 of them, and for the triangle of one
 // right-hand side, when the plan made its tiles' inverses, launch_trsv_tiles
 // (trsv_tiles.cuh), which takes 64 unknowns per step where cuBLAS's TRSV takes 32.
 struct DeviceOps {

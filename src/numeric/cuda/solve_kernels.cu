@@ -183,7 +183,7 @@ void launch_permute(const double* from, const std::int64_t* index, const double*
 // y += alpha·A·x, A rows × cols column-major with leading dimension lda: block b takes rows
 // [R·b, R·b + R), thread t row R·b + t mod R and the columns j ≡ t / R (mod S), S =
 // kGemvThreads / R slices, kGemvLoads loads in flight; the slices' sums are then added in
-// slice order, so the result does not depend on timing. R (8, 16 or 32, a function of rows
+// slice order, so the result does not depend on timing. R (4, 8, 16 or 32, a function of rows
 // only) is the largest that still gives the device a block per SM: a front's L21 or U12 of
 // a few hundred rows then has every thread few columns, and each column's R rows are one
 // coalesced load.
@@ -228,7 +228,7 @@ void launch_gemv_n(std::int64_t rows, std::int64_t cols, double alpha, const dou
   if (rows <= 0 || cols <= 0) return;
   const int sms = multiprocessor_count();
   int R = 32;
-  while (R > 8 && (rows + R - 1) / R < sms) R /= 2;
+  while (R > 4 && (rows + R - 1) / R < sms) R /= 2;
   gemv_n_kernel<<<static_cast<unsigned>((rows + R - 1) / R), kGemvThreads, 0, s>>>(
       rows, cols, R, alpha, a, lda, x, y);
   STRATA_CUDA_LAUNCH();

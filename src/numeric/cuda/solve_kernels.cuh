@@ -90,7 +90,7 @@ void launch_scatter_backward(const SolveTree& t, SolveChunks c, std::int64_t beg
                              std::int64_t nrhs, bool lu, cudaStream_t s);
 
 /// y ← y + alpha·A·x for A rows × cols, column-major with leading dimension lda (device
-/// pointers; x of cols entries, y of rows, not overlapping): a block per 8, 16 or 32 rows
+/// pointers; x of cols entries, y of rows, not overlapping): a block per 4, 8, 16 or 32 rows
 /// (as many as leave a block per SM of the current device), each row's columns split over
 /// the block's threads and summed in a fixed order (deterministic for a given device).
 /// For the products of a library-path front (L21·x forward, U12·x backward), which are
