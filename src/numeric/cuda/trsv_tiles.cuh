@@ -10,10 +10,11 @@
 // trsv_tiles_kernel then solves with them.
 //
 // Why: a triangle is a chain of dependent steps. A library TRSV hands 32 solved unknowns
-// at a time from one thread block to the next through global memory, about 1.8 µs a step
-// on an H200 (58 µs for a front of 1,024 pivots). With the diagonal blocks' inverses a
-// step is a matrix–vector product, so a block takes 64 unknowns per step in about the
-// time of one hand-over: 28–31 µs for 1,024 pivots, 10 µs for 320 (bench/history.md).
+// at a time from one thread block to the next through global memory, and each hand-over
+// costs a round trip through L2. With the diagonal blocks' inverses a step is a
+// matrix–vector product, so a block takes 64 unknowns per step in about the time of one
+// hand-over: half the steps, and none of them a chain inside the block (the measurements
+// are in bench/history.md, "The library fronts' triangles by tiles").
 //
 // How: the blocked column substitution (Golub & Van Loan, "Matrix Computations", 4th ed.,
 // §3.1) with inverted diagonal blocks, as in the block-inverse triangular solves of the
