@@ -207,7 +207,18 @@ __device__ void backward_partials(const SolveTree& t, std::int64_t f, std::int64
 #pragma unroll
 #endif
           for (int q = 0; q < 8; ++q) acc[q] += u[(i + q * nsl) * k] * xs[i + q * nsl];
-        for (; i < len; i += nsl) acc[0] += u[i * k] * xs[i];
+        for (; i < len; i += 4 * nsl) {  // the rest: each four's loads issued together
+          double uv[4];
+#ifdef __CUDA_ARCH__
+#pragma unroll
+#endif
+          for (int q = 0; q < 4; ++q) uv[q] = i + q * nsl < len ? u[(i + q * nsl) * k] : 0.0;
+#ifdef __CUDA_ARCH__
+#pragma unroll
+#endif
+          for (int q = 0; q < 4; ++q)
+            if (i + q * nsl < len) acc[0] += uv[q] * xs[i + q * nsl];
+        }
         const double sum = pair_sum<8>(acc);
         if (nsl > 1)
           sums[e] = sum;
@@ -303,11 +314,11 @@ __device__ void load_tile(const double* T, std::int64_t m, std::int64_t w, doubl
 // e taking item e mod items in slice e / items, and the slices' sums are added in slice
 // order after a barrier. Consecutive threads take consecutive items, so the loads of a
 // column-major A (a_q = A + row of q) are coalesced; each thread keeps four loads in
-// flight. A front's product of a few dozen rows by a tile of 32 columns is then one or two
-// rounds of memory latency instead of eight. `sums`: shared memory of at least
-// blockDim.x doubles. Every thread of the block must call it (the barrier, when nsl > 1,
-// is uniform: nsl depends on items and blockDim.x only); done(q, ·) is called once per q,
-// by one thread.
+// flight, and its last one to three columns' loads go out together. A front's product of
+// a few dozen rows by a tile of 32 columns is then one or two rounds of memory latency
+// instead of eight. `sums`: shared memory of at least blockDim.x doubles. Every thread of
+// the block must call it (the barrier, when nsl > 1, is uniform: nsl depends on items and
+// blockDim.x only); done(q, ·) is called once per q, by one thread.
 template <class AOf, class XOf, class Done>
 __device__ void sliced_products(std::int64_t items, std::int64_t len, std::int64_t lda, AOf a_of,
                                 XOf x_of, Done done, double* sums) {
@@ -333,7 +344,24 @@ __device__ void sliced_products(std::int64_t items, std::int64_t len, std::int64
 #endif
       for (int u = 0; u < 4; ++u) acc[u] += av[u] * xv[u];
     }
-    for (; c < len; c += nsl) acc[0] += a[c * lda] * x[c];
+    // at most three columns are left (c + 3·nsl ≥ len): their loads in flight together,
+    // then added into acc[0] in column order
+    {
+      double av[3], xv[3];
+#ifdef __CUDA_ARCH__
+#pragma unroll
+#endif
+      for (int u = 0; u < 3; ++u) {
+        const std::int64_t cu = c + u * nsl;
+        av[u] = cu < len ? a[cu * lda] : 0.0;
+        xv[u] = cu < len ? x[cu] : 0.0;
+      }
+#ifdef __CUDA_ARCH__
+#pragma unroll
+#endif
+      for (int u = 0; u < 3; ++u)
+        if (c + u * nsl < len) acc[0] += av[u] * xv[u];
+    }
     const double y = pair_sum<4>(acc);
     if (nsl > 1)
       sums[e] = y;
@@ -535,7 +563,24 @@ __device__ void sweep_backward(const SolveTree& t, std::int64_t f, double* scrat
             for (int u = 0; u < 4; ++u) s4[u] += Lj[i + u * kWarp] * Wr[i + u * kWarp];
           s = (s4[0] + s4[1]) + (s4[2] + s4[3]);
         }
-        for (; i < row_end; i += kWarp) s += Lj[i] * Wr[i];
+        // the rest (all of it for Batch < 16) four rows a lane at a time, each four's loads
+        // issued together, added into s in row order
+        for (; i < row_end; i += 4 * kWarp) {
+          double lv4[4], wv4[4];
+#ifdef __CUDA_ARCH__
+#pragma unroll
+#endif
+          for (int u = 0; u < 4; ++u) {
+            const std::int64_t iu = i + u * kWarp;
+            lv4[u] = iu < row_end ? Lj[iu] : 0.0;
+            wv4[u] = iu < row_end ? Wr[iu] : 0.0;
+          }
+#ifdef __CUDA_ARCH__
+#pragma unroll
+#endif
+          for (int u = 0; u < 4; ++u)
+            if (i + u * kWarp < row_end) s += lv4[u] * wv4[u];
+        }
         for (int off = kWarp / 2; off > 0; off /= 2) s += __shfl_down_sync(kFullMask, s, off);
         if (lane == 0) Wr[j] -= s;
       }
