@@ -74,8 +74,10 @@ __device__ double pair_sum(const double* s) {
 // columns issued before the first multiply waits for one. A thread's loads in flight are
 // what keeps the memory busy where few blocks run (a tall front's triangle and products,
 // a level's few fronts near the top: 16); launches of many blocks keep 4 (fewer
-// registers, more blocks per SM).
-template <int Batch>
+// registers, more blocks per SM). The last w mod Batch columns go Tail at a time (their
+// loads together, added into s[0] in column order): 4 where the registers allow it (a
+// tall front's scatter chunks), 1 in the kernels at their register limit.
+template <int Batch, int Tail = 1>
 __device__ double tile_dot(const double* a, std::int64_t lda, const double* x, std::int64_t w) {
   double s[Batch];
 #ifdef __CUDA_ARCH__
@@ -97,7 +99,21 @@ __device__ double tile_dot(const double* a, std::int64_t lda, const double* x, s
 #endif
     for (int q = 0; q < Batch; ++q) s[q] += av[q] * xv[q];
   }
-  for (; j < w; ++j) s[0] += a[j * lda] * x[j];
+  for (; j < w; j += Tail) {
+    double av[Tail], xv[Tail];
+#ifdef __CUDA_ARCH__
+#pragma unroll
+#endif
+    for (int q = 0; q < Tail; ++q) {
+      av[q] = j + q < w ? a[(j + q) * lda] : 0.0;
+      xv[q] = j + q < w ? x[j + q] : 0.0;
+    }
+#ifdef __CUDA_ARCH__
+#pragma unroll
+#endif
+    for (int q = 0; q < Tail; ++q)
+      if (j + q < w) s[0] += av[q] * xv[q];
+  }
   return pair_sum<Batch>(s);  // (s0 + s1) + (s2 + s3) for Batch 4
 }
 
@@ -116,15 +132,35 @@ __device__ void gather_forward(const SolveTree& t, std::int64_t f, std::int64_t 
     // pivots (prow[i] is one of fp..fp+k−1), the others stay
     const std::int64_t p = i < k ? prow[i] - fp : i;
     double v = i < k ? x[prow[i] + r * t.n] : 0.0;
-    for (std::int64_t s = t.inv_offsets[ro + p]; s < t.inv_offsets[ro + p + 1]; ++s)
-      v += u[t.inv_src[s] + r * t.u_total];
+    // the children's entries four at a time: their indices' loads together, then their
+    // values' (two rounds of latency per four entries instead of two per entry), added in
+    // child order
+    const std::int64_t s0 = t.inv_offsets[ro + p], s1 = t.inv_offsets[ro + p + 1];
+    for (std::int64_t s = s0; s < s1; s += 4) {
+      std::int64_t src[4];
+      double uv[4];
+#ifdef __CUDA_ARCH__
+#pragma unroll
+#endif
+      for (int q = 0; q < 4; ++q) src[q] = s + q < s1 ? t.inv_src[s + q] : 0;
+#ifdef __CUDA_ARCH__
+#pragma unroll
+#endif
+      for (int q = 0; q < 4; ++q) uv[q] = s + q < s1 ? u[src[q] + r * t.u_total] : 0.0;
+#ifdef __CUDA_ARCH__
+#pragma unroll
+#endif
+      for (int q = 0; q < 4; ++q)
+        if (s + q < s1) v += uv[q];
+    }
     W[i + r * m] = v;
   }
 }
 
 /// Forward scatter of rows [i0, i1) of front f: pivots to x, the rest to u_f. Batch: the
-/// dot products' (tile_dot).
-template <int Batch>
+/// dot products' (tile_dot). MayBeTall: f may be a tall front (the scatter chunks' kernel;
+/// the fronts a block solves whole never are, and their kernels leave the products out).
+template <int Batch, bool MayBeTall = true>
 __device__ void scatter_forward(const SolveTree& t, std::int64_t f, std::int64_t i0,
                                 std::int64_t i1, double* x, double* u, const double* scratch,
                                 std::int64_t nrhs, bool lu) {
@@ -141,7 +177,8 @@ __device__ void scatter_forward(const SolveTree& t, std::int64_t f, std::int64_t
     if (i < k) {
       x[(lu ? fp + i : prow[i]) + r * t.n] = v;
     } else {
-      if (tall) v -= tile_dot<Batch>(L + i, m, W + r * m, k);
+      if constexpr (MayBeTall)
+        if (tall) v -= tile_dot<Batch, 4>(L + i, m, W + r * m, k);
       u[t.u_offset[f] + i - k + r * t.u_total] = v;
     }
   }
@@ -602,7 +639,7 @@ __device__ void front_forward(const SolveTree& t, std::int64_t f, double* x, dou
   __syncthreads();
   sweep_forward<Batch>(t, f, scratch, nrhs, unit);
   __syncthreads();
-  scatter_forward<Batch>(t, f, 0, m, x, u, scratch, nrhs, lu);
+  scatter_forward<Batch, false>(t, f, 0, m, x, u, scratch, nrhs, lu);
   __syncthreads();
 }
 
