@@ -551,7 +551,18 @@ __device__ void sweep_backward(const SolveTree& t, std::int64_t f, double* scrat
     const double* P = t.part + t.part_offset[f] * nrhs;
     for (std::int64_t e = threadIdx.x; e < k * nrhs; e += blockDim.x) {
       double s = 0.0;
-      for (std::int64_t c = 0; c < np; ++c) s += P[c * k * nrhs + e];
+      for (std::int64_t c = 0; c < np; c += 4) {  // each four chunks' loads together
+        double pv[4];
+#ifdef __CUDA_ARCH__
+#pragma unroll
+#endif
+        for (int q = 0; q < 4; ++q) pv[q] = c + q < np ? P[(c + q) * k * nrhs + e] : 0.0;
+#ifdef __CUDA_ARCH__
+#pragma unroll
+#endif
+        for (int q = 0; q < 4; ++q)
+          if (c + q < np) s += pv[q];
+      }
       W[e % k + e / k * m] -= s;
     }
     __syncthreads();

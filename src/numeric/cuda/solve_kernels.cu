@@ -210,7 +210,20 @@ __global__ void __launch_bounds__(kGemvThreads)
 #pragma unroll
       for (int q = 0; q < kGemvLoads; ++q) acc[q] += av[q] * xv[q];
     }
-    for (; j < cols; j += slices) acc[0] += ai[j * lda] * x[j];
+    // the last columns (fewer than kGemvLoads) with their loads together too, added
+    // into acc[0] in column order
+    if (j < cols) {
+      double av[kGemvLoads - 1], xv[kGemvLoads - 1];
+#pragma unroll
+      for (int q = 0; q < kGemvLoads - 1; ++q) {
+        const std::int64_t jq = j + q * slices;
+        av[q] = jq < cols ? ai[jq * lda] : 0.0;
+        xv[q] = jq < cols ? x[jq] : 0.0;
+      }
+#pragma unroll
+      for (int q = 0; q < kGemvLoads - 1; ++q)
+        if (j + q * slices < cols) acc[0] += av[q] * xv[q];
+    }
   }
   part[threadIdx.x] = solve_device::pair_sum<kGemvLoads>(acc);
   __syncthreads();
