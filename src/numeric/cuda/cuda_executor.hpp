@@ -261,11 +261,15 @@ class CudaExecutor final : public numeric::Executor {
     /// The library-path fronts' tiled triangular solves for one right-hand side
     /// (trsv_tiles.cuh; prepare_trsv_tiles): per front of the tree where its tiles'
     /// inverses start (−1: none, cuBLAS's TRSV) and its flags; the jobs that make the
-    /// inverses; the forward and backward triangles' inverses (make_trsv_inverses, once per
+    /// inverses, on the host until the first solve that uses them puts them and the
+    /// buffers below on the device (trsv_flags flags; trsv_jobs_count once there); the
+    /// forward and backward triangles' inverses (make_trsv_inverses, once per
     /// factorization: trsv_made is the factorization_count_ and trsv_type the type they
     /// were made for, 0 for none) and the flags (written by every solve, zero between
     /// launches).
     std::vector<std::int64_t> trsv_inverse_at, trsv_sync_at;
+    std::vector<std::int64_t> trsv_jobs_host;  // 5 per job (trsv_tiles::TrsvTileJob)
+    std::int64_t trsv_flags = 0;
     std::int64_t trsv_jobs_count = 0;
     DeviceBuffer<std::int64_t> trsv_jobs;
     DeviceBuffer<double> trsv_forward, trsv_backward;
@@ -290,8 +294,14 @@ class CudaExecutor final : public numeric::Executor {
   /// Uploads a plan's sweep arrays and panel offsets into sp (cuda_solve.cu).
   void upload_sweep_plan(SweepPlanDevice& sp);
   /// sp's tiled triangular solves (SweepPlanDevice::trsv_*) for the fronts of sp's plan
-  /// that go through the library; none where the device lacks the memory (cuda_solve.cu).
+  /// that go through the library: where each front's tiles go, and their jobs on the host
+  /// (cuda_solve.cu).
   void prepare_trsv_tiles(const Analysis& an, SweepPlanDevice& sp);
+  /// The jobs and the tiles' buffers on the device, at the first solve that uses them:
+  /// they are the solve's and can be done without, so the analysis's device set-up, whose
+  /// allocations a factorization needs, does not make them; none where the device lacks
+  /// the memory (those fronts keep cuBLAS's TRSV) (cuda_solve.cu).
+  void allocate_trsv_tiles(SweepPlanDevice& sp);
   /// Enqueues on stream_ the inverses of sp's tiles for the factor of `type` at `panels`
   /// unless they were made for this factorization already (cuda_solve.cu).
   void make_trsv_inverses(SweepPlanDevice& sp, const double* panels, MatrixType type);

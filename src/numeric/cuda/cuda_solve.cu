@@ -156,15 +156,26 @@ void CudaExecutor::prepare_trsv_tiles(const Analysis& an, SweepPlanDevice& sp) {
     for (std::int64_t q = 0; q < tiles; ++q)
       jobs.push_back({sp.panel_offset_host[f], t.n_rows(f), k, q, (first + q) * tile_doubles});
   }
-  if (jobs.empty()) return;
   static_assert(sizeof(trsv_tiles::TrsvTileJob) == 5 * sizeof(std::int64_t));
+  const auto* words = reinterpret_cast<const std::int64_t*>(jobs.data());
+  sp.trsv_jobs_host.assign(words, words + 5 * jobs.size());
+  sp.trsv_flags = flags;
+  sp.trsv_made = 0;
+}
+
+void CudaExecutor::allocate_trsv_tiles(SweepPlanDevice& sp) {
+  using trsv_tiles::kTrsvTile;
+  constexpr std::size_t tile_doubles = std::size_t{kTrsvTile} * kTrsvTile;
+  if (sp.trsv_jobs_host.empty()) return;
+  const std::vector<std::int64_t> jobs = std::move(sp.trsv_jobs_host);
+  sp.trsv_jobs_host.clear();  // tried once per plan
+  const std::size_t count = jobs.size() / 5;
   try {
-    sp.trsv_jobs.upload(reinterpret_cast<const std::int64_t*>(jobs.data()), 5 * jobs.size(),
-                        stream_);
-    sp.trsv_forward.resize(jobs.size() * tile_doubles);
-    sp.trsv_backward.resize(jobs.size() * tile_doubles);
-    sp.trsv_sync.resize(static_cast<std::size_t>(flags));
-    STRATA_CUDA(cudaMemsetAsync(sp.trsv_sync.data(), 0, sizeof(int) * flags, stream_));
+    sp.trsv_jobs.upload(jobs.data(), jobs.size(), stream_);
+    sp.trsv_forward.resize(count * tile_doubles);
+    sp.trsv_backward.resize(count * tile_doubles);
+    sp.trsv_sync.resize(static_cast<std::size_t>(sp.trsv_flags));
+    STRATA_CUDA(cudaMemsetAsync(sp.trsv_sync.data(), 0, sizeof(int) * sp.trsv_flags, stream_));
     STRATA_CUDA(cudaStreamSynchronize(stream_));  // the upload reads `jobs`
   } catch (const OutOfMemory&) {                  // no room: those fronts keep cuBLAS's TRSV
     STRATA_CUDA(cudaStreamSynchronize(stream_));
@@ -173,11 +184,12 @@ void CudaExecutor::prepare_trsv_tiles(const Analysis& an, SweepPlanDevice& sp) {
     std::fill(sp.trsv_inverse_at.begin(), sp.trsv_inverse_at.end(), -1);
     return;
   }
-  sp.trsv_jobs_count = static_cast<std::int64_t>(jobs.size());
+  sp.trsv_jobs_count = static_cast<std::int64_t>(count);
   sp.trsv_made = 0;
 }
 
 void CudaExecutor::make_trsv_inverses(SweepPlanDevice& sp, const double* panels, MatrixType type) {
+  allocate_trsv_tiles(sp);
   if (sp.trsv_jobs_count == 0 || trsv_current(sp, type)) return;
   const bool lu = type == MatrixType::general,
              unit = lu || type == MatrixType::symmetric_indefinite;
