@@ -670,10 +670,14 @@ TEST_F(CudaBackend, SolveArraysInGpuMemory) {
         s.solve(b.data(), dx2.get(), nrhs);
         numeric::copy_from_device(got.data(), dx2.get(), got.size());
         EXPECT_EQ(got, want);
-        // a NaN in b: named, x left as it was
+        // a NaN in b (and an infinity after it where there is room): the first named, x
+        // left as it was
         std::vector<double> bad = b;
-        const index_t at = n * nrhs - 1;
+        const index_t at = std::uniform_int_distribution<index_t>(0, n * nrhs - 1)(rng);
         bad[static_cast<std::size_t>(at)] = std::nan("");
+        if (at + 1 < n * nrhs)
+          bad[static_cast<std::size_t>(std::uniform_int_distribution<index_t>(
+              at + 1, n * nrhs - 1)(rng))] = -std::numeric_limits<double>::infinity();
         const std::shared_ptr<double> dbad = numeric::cuda_device_copy(bad);
         const std::shared_ptr<double> dx3 =
             numeric::cuda_device_copy(std::vector<double>(b.size(), 7.0));
@@ -681,9 +685,10 @@ TEST_F(CudaBackend, SolveArraysInGpuMemory) {
           s.solve(dbad.get(), dx3.get(), nrhs);
           ADD_FAILURE() << "no error for a NaN in b";
         } catch (const InvalidInput& e) {
-          EXPECT_NE(std::string(e.what()).find("right-hand side entry " + std::to_string(n - 1) +
-                                               " of column 1 is not finite"),
-                    std::string::npos)
+          EXPECT_NE(
+              std::string(e.what()).find("right-hand side entry " + std::to_string(at % n) +
+                                         " of column " + std::to_string(at / n) + " is not finite"),
+              std::string::npos)
               << e.what();
         }
         numeric::copy_from_device(got.data(), dx3.get(), got.size());

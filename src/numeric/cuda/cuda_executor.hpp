@@ -325,10 +325,17 @@ class CudaExecutor final : public numeric::Executor {
   /// right-hand sides into dsolve_.x and the download of the solutions): the forward
   /// sweep, the backward sweep or both, with the diagonal solve of an LDLᵀ factor between
   /// them when both; `panels` is where sp's panel offsets point. Enqueued on stream_
-  /// (cuda_solve.cu).
+  /// (cuda_solve.cu). With `forward_subtrees` false the forward sweep leaves out its first
+  /// launch, the plan's subtrees, which the caller then enqueues before it
+  /// (enqueue_forward_subtrees).
   void enqueue_solve_sweeps(const Analysis& an, const numeric::NumericFactor& fac,
                             const SweepPlanDevice& sp, const double* panels, index_t nrhs,
-                            bool forward, bool backward);
+                            bool forward, bool backward, bool forward_subtrees = true);
+  /// The forward sweep's first launch alone: every subtree of sp's plan, one block each.
+  void enqueue_forward_subtrees(const Analysis& an, const numeric::NumericFactor& fac,
+                                const SweepPlanDevice& sp, const double* panels, index_t nrhs);
+  /// The device solve's view of the tree, the factor's row arrays and sp's panels.
+  SolveTree solve_tree(const Analysis& an, const SweepPlanDevice& sp, const double* panels);
   /// What a recorded solve graph read: the analysis, the right-hand sides' count, the
   /// factor's type and every device buffer the sweeps use (cuda_solve.cu).
   std::vector<std::uintptr_t> solve_graph_key(const Analysis& an, const numeric::NumericFactor& fac,
@@ -691,8 +698,8 @@ class CudaExecutor final : public numeric::Executor {
     /// numberings (prepare_solve_io)
     DeviceBuffer<double> b, row_rescale, col_rescale, in_scale, out_scale;
     DeviceBuffer<std::int64_t> in_index, out_index;
-    /// solve_gpu_arrays: b's first non-finite entry, x's, b's and x's largest magnitude
-    /// (launch_check_entries), and their copy on the host
+    /// solve_gpu_arrays: b's first non-finite entry, x's (complemented), b's and x's
+    /// largest magnitude (EntryCheck), and their copy on the host
     DeviceBuffer<unsigned long long> checks;
     PinnedBuffer<unsigned long long> checks_host;
     std::uint64_t io_analysis = 0, rescale_id = 0;
@@ -705,7 +712,8 @@ class CudaExecutor final : public numeric::Executor {
     std::map<int, SweepPlanDevice> parts;  ///< held parts' plans, by part id
     bool part_rows_current = false;        ///< the row arrays hold the last factorization's
     /// The sweeps of a solve recorded as a CUDA graph (Options::gpu_solve_graph) and
-    /// replayed, one launch per solve, while graph_key (solve_graph_key) is unchanged.
+    /// replayed, one launch per solve, while graph_key (solve_graph_key) is unchanged;
+    /// all but the forward subtrees' launch, which each solve enqueues just before it.
     cudaGraphExec_t graph = nullptr;
     std::vector<std::uintptr_t> graph_key;
   } dsolve_;

@@ -231,7 +231,7 @@ void CudaExecutor::enqueue_resident_solve(const Analysis& an, const numeric::Num
     STRATA_CUDA(cudaStreamBeginCapture(stream_, cudaStreamCaptureModeRelaxed));
     cudaGraph_t g = nullptr;
     try {
-      enqueue_solve_sweeps(an, fac, dsolve_.whole, panels_.data(), nrhs, true, true);
+      enqueue_solve_sweeps(an, fac, dsolve_.whole, panels_.data(), nrhs, true, true, false);
     } catch (...) {
       if (cudaStreamEndCapture(stream_, &g) == cudaSuccess && g) cudaGraphDestroy(g);
       (void)cudaGetLastError();
@@ -246,6 +246,10 @@ void CudaExecutor::enqueue_resident_solve(const Analysis& an, const numeric::Num
     }
     dsolve_.graph_key = std::move(key);
   }
+  // The subtrees' launch, the longest of the forward sweep, goes first on its own: the
+  // device works on it while the host submits the graph, whose launch costs the host tens
+  // of microseconds for the sweeps' nodes, which would otherwise leave the device idle.
+  enqueue_forward_subtrees(an, fac, dsolve_.whole, panels_.data(), nrhs);
   STRATA_CUDA(cudaGraphLaunch(dsolve_.graph, stream_));
 }
 
@@ -354,23 +358,23 @@ bool CudaExecutor::solve_gpu_arrays(const Analysis& an, const numeric::NumericFa
   dsolve_.x.resize(static_cast<std::size_t>(count));
   dsolve_.checks.resize(4);
   dsolve_.checks_host.resize(4);
-  unsigned long long* c = dsolve_.checks.data();  // b's first bad, x's; b's largest, x's
-  STRATA_CUDA(cudaMemsetAsync(c, 0xff, 2 * sizeof(unsigned long long), stream_));
-  STRATA_CUDA(cudaMemsetAsync(c + 2, 0, 2 * sizeof(unsigned long long), stream_));
-  launch_check_entries(b, count, c, c + 2, nullptr, stream_);
+  // b's check and x's: the complement of the first entry that is not finite, the
+  // largest magnitude's bits (EntryCheck), made by the permutations on the way
+  unsigned long long* c = dsolve_.checks.data();
+  STRATA_CUDA(cudaMemsetAsync(c, 0, 4 * sizeof(unsigned long long), stream_));
   launch_permute_in(b, dsolve_.in_index.data(), dsolve_.in_scale.data(),
                     rescale.row ? dsolve_.row_rescale.data() : nullptr, dsolve_.x.data(), n, nrhs,
-                    stream_);
+                    stream_, EntryCheck{c, c + 2});
   enqueue_resident_solve(an, fac, nrhs);
   launch_permute_out(dsolve_.x.data(), dsolve_.out_index.data(), dsolve_.out_scale.data(),
-                     rescale.col ? dsolve_.col_rescale.data() : nullptr, x, n, nrhs, stream_, c);
-  launch_check_entries(x, count, c + 1, c + 3, c, stream_);
+                     rescale.col ? dsolve_.col_rescale.data() : nullptr, x, n, nrhs, stream_, c,
+                     EntryCheck{c + 1, c + 3});
   unsigned long long* h = dsolve_.checks_host.data();
   STRATA_CUDA(
       cudaMemcpyAsync(h, c, 4 * sizeof(unsigned long long), cudaMemcpyDeviceToHost, stream_));
   STRATA_CUDA(cudaStreamSynchronize(stream_));
   auto index = [](unsigned long long v) {
-    return v == ~0ull ? std::int64_t{-1} : static_cast<std::int64_t>(v);
+    return v == 0 ? std::int64_t{-1} : static_cast<std::int64_t>(~v);
   };
   auto magnitude = [](unsigned long long v) {
     double d = 0;
@@ -424,30 +428,46 @@ void CudaExecutor::drop_solve_graph() noexcept {
   dsolve_.graph_key.clear();
 }
 
+SolveTree CudaExecutor::solve_tree(const Analysis& an, const SweepPlanDevice& sp,
+                                   const double* panels) {
+  return SolveTree{n_rows_.data(),
+                   n_pivots_.data(),
+                   dsolve_.row_offsets.data(),
+                   dsolve_.first_pivot.data(),
+                   dsolve_.rows.data(),
+                   dsolve_.inv_offsets.data(),
+                   dsolve_.inv_src.data(),
+                   dsolve_.u_offset.data(),
+                   sp.panel_offset.data(),
+                   panels,
+                   dsolve_.pivot_row.data(),
+                   an.n,
+                   dsolve_.u_offset_host.back(),
+                   sp.part_offset.data(),
+                   dsolve_.part.data()};
+}
+
+void CudaExecutor::enqueue_forward_subtrees(const Analysis& an, const numeric::NumericFactor& fac,
+                                            const SweepPlanDevice& sp, const double* panels,
+                                            index_t nrhs) {
+  const bool lu = fac.type == MatrixType::general;
+  const bool unit = lu || fac.type == MatrixType::symmetric_indefinite;
+  const SolveTree st = solve_tree(an, sp, panels);
+  launch_fronts_forward(st, sp.subtree_first.data(), sp.subtree_last.data(), 0,
+                        static_cast<std::int64_t>(sp.plan.subtree_first.size()), dsolve_.x.data(),
+                        dsolve_.u.data(), dsolve_.scratch.data(), nrhs, unit, lu, stream_);
+}
+
 void CudaExecutor::enqueue_solve_sweeps(const Analysis& an, const numeric::NumericFactor& fac,
                                         const SweepPlanDevice& sp, const double* panels,
-                                        index_t nrhs, bool forward, bool backward) {
+                                        index_t nrhs, bool forward, bool backward,
+                                        bool forward_subtrees) {
   const auto& t = an.tree;
   const SolvePlan& p = sp.plan;
   const bool lu = fac.type == MatrixType::general;
   const bool ldlt = fac.type == MatrixType::symmetric_indefinite;
   const bool unit = lu || ldlt;
-  const std::int64_t u_total = dsolve_.u_offset_host.back();
-  SolveTree st{n_rows_.data(),
-               n_pivots_.data(),
-               dsolve_.row_offsets.data(),
-               dsolve_.first_pivot.data(),
-               dsolve_.rows.data(),
-               dsolve_.inv_offsets.data(),
-               dsolve_.inv_src.data(),
-               dsolve_.u_offset.data(),
-               sp.panel_offset.data(),
-               panels,
-               dsolve_.pivot_row.data(),
-               an.n,
-               u_total,
-               sp.part_offset.data(),
-               dsolve_.part.data()};
+  const SolveTree st = solve_tree(an, sp, panels);
   const SolveChunks chunks{sp.chunk_front.data(), sp.chunk_row.data()};
   double* X = dsolve_.x.data();
   double* U = dsolve_.u.data();
@@ -492,9 +512,7 @@ void CudaExecutor::enqueue_solve_sweeps(const Analysis& an, const numeric::Numer
   const std::int64_t* small = sp.small_fronts.data();
   const std::int64_t* tall = sp.tall_fronts.data();
   const std::int64_t n_subtrees = static_cast<std::int64_t>(p.subtree_first.size());
-  if (forward)
-    launch_fronts_forward(st, sp.subtree_first.data(), sp.subtree_last.data(), 0, n_subtrees, X, U,
-                          S, nrhs, unit, lu, stream_);
+  if (forward && forward_subtrees) enqueue_forward_subtrees(an, fac, sp, panels, nrhs);
   for (index_t l = 0; forward && l < levels; ++l) {
     const std::int64_t c0 = p.chunk_offsets[l], nc = p.chunk_offsets[l + 1] - c0;
     const std::int64_t s0 = p.small_offsets[l], ns = p.small_offsets[l + 1] - s0;

@@ -108,44 +108,6 @@ __global__ void diagonal_kernel(SolveTree t, const double* d_diag, const double*
   if (p < t.n) solve_device::diagonal(t, p, d_diag, d_off, pivot_size, x, nrhs);
 }
 
-constexpr unsigned long long kNoEntry = ~0ull;  // launch_check_entries: none found
-
-// launch_check_entries: per block the least index of a non-finite entry and the largest
-// magnitude (as its bits: non-negative doubles order as their bit patterns), then one
-// atomic each.
-__global__ void check_entries_kernel(const double* v, std::int64_t count,
-                                     unsigned long long* first_bad, unsigned long long* max_bits,
-                                     const unsigned long long* unless) {
-  if (unless && *unless != kNoEntry) return;
-  __shared__ unsigned long long bad[kThreads], big[kThreads];
-  unsigned long long b = kNoEntry, m = 0;
-  const std::int64_t step = static_cast<std::int64_t>(gridDim.x) * blockDim.x;
-  for (std::int64_t e = blockIdx.x * static_cast<std::int64_t>(blockDim.x) + threadIdx.x; e < count;
-       e += step) {
-    const double a = fabs(v[e]);
-    if (!(a <= DBL_MAX)) {  // infinite or NaN
-      if (static_cast<unsigned long long>(e) < b) b = static_cast<unsigned long long>(e);
-    } else {
-      const unsigned long long bits = static_cast<unsigned long long>(__double_as_longlong(a));
-      if (bits > m) m = bits;
-    }
-  }
-  bad[threadIdx.x] = b;
-  big[threadIdx.x] = m;
-  __syncthreads();
-  for (int h = kThreads / 2; h > 0; h /= 2) {
-    if (threadIdx.x < h) {
-      bad[threadIdx.x] = min(bad[threadIdx.x], bad[threadIdx.x + h]);
-      big[threadIdx.x] = max(big[threadIdx.x], big[threadIdx.x + h]);
-    }
-    __syncthreads();
-  }
-  if (threadIdx.x == 0) {
-    if (bad[0] != kNoEntry) atomicMin(first_bad, bad[0]);
-    atomicMax(max_bits, big[0]);
-  }
-}
-
 // v·d·e as core/solve_phase.cpp's scaled_by: one rounding when d·e is a normal number
 __device__ double scaled_by(double v, double d, double e) {
   const double f = d * e;
@@ -155,28 +117,68 @@ __device__ double scaled_by(double v, double d, double e) {
 
 // Out = false: to[k + r·n] = scaled(from[index[k] + r·n], ...) (launch_permute_in);
 // Out = true: to[index[k] + r·n] = scaled(from[k + r·n], ...) (launch_permute_out).
-// Nothing when `unless` is given and holds an index (launch_check_entries found an entry
-// that is not finite).
-template <bool Out>
+// Nothing when `unless` is given and is not zero (the check of the right-hand sides found
+// an entry that is not finite). With Check, the entries of the original-numbered array
+// (from for Out = false, to for Out = true) are checked as they pass (EntryCheck): per
+// block the largest complement of a non-finite entry's index and the largest magnitude's
+// bits, through the warps' shuffles and then shared memory, then one atomic each.
+template <bool Out, bool Check>
 __global__ void permute_kernel(const double* from, const std::int64_t* index, const double* scale,
                                const double* rescale, double* to, std::int64_t n,
-                               std::int64_t total, const unsigned long long* unless) {
-  if (unless && *unless != kNoEntry) return;
+                               std::int64_t total, const unsigned long long* unless,
+                               EntryCheck check) {
+  if (unless && *unless != 0) return;
   const std::int64_t e = blockIdx.x * static_cast<std::int64_t>(blockDim.x) + threadIdx.x;
-  if (e >= total) return;
-  const std::int64_t k = e % n, r = e / n, i = index[k];
-  const double v = scaled_by(Out ? from[e] : from[i + r * n], scale[k], rescale ? rescale[i] : 1.0);
-  (Out ? to[i + r * n] : to[e]) = v;
+  unsigned long long bad = 0, big = 0;
+  if (e < total) {
+    const std::int64_t k = e % n, r = e / n, i = index[k];
+    const double a = Out ? from[e] : from[i + r * n];
+    const double v = scaled_by(a, scale[k], rescale ? rescale[i] : 1.0);
+    (Out ? to[i + r * n] : to[e]) = v;
+    if constexpr (Check) {
+      const double m = fabs(Out ? v : a);
+      if (!(m <= DBL_MAX))  // infinite or NaN
+        bad = ~static_cast<unsigned long long>(i + r * n);
+      else
+        big = static_cast<unsigned long long>(__double_as_longlong(m));
+    }
+  }
+  if constexpr (Check) {
+    __shared__ unsigned long long warp_bad[kThreads / 32], warp_big[kThreads / 32];
+    for (int h = 16; h > 0; h /= 2) {
+      bad = max(bad, __shfl_down_sync(0xffffffffu, bad, h));
+      big = max(big, __shfl_down_sync(0xffffffffu, big, h));
+    }
+    const int lane = threadIdx.x % 32, warp = threadIdx.x / 32;
+    if (lane == 0) {
+      warp_bad[warp] = bad;
+      warp_big[warp] = big;
+    }
+    __syncthreads();
+    if (threadIdx.x == 0) {
+      for (int w = 1; w < kThreads / 32; ++w) {
+        bad = max(bad, warp_bad[w]);
+        big = max(big, warp_big[w]);
+      }
+      if (bad != 0) atomicMax(check.bad, bad);
+      atomicMax(check.max_bits, big);
+    }
+  }
 }
 
 template <bool Out>
 void launch_permute(const double* from, const std::int64_t* index, const double* scale,
                     const double* rescale, double* to, std::int64_t n, std::int64_t nrhs,
-                    cudaStream_t s, const unsigned long long* unless) {
+                    cudaStream_t s, const unsigned long long* unless, EntryCheck check) {
   const std::int64_t total = n * nrhs;
   if (total == 0) return;
-  permute_kernel<Out><<<static_cast<unsigned>((total + kThreads - 1) / kThreads), kThreads, 0, s>>>(
-      from, index, scale, rescale, to, n, total, unless);
+  const auto blocks = static_cast<unsigned>((total + kThreads - 1) / kThreads);
+  if (check.bad)
+    permute_kernel<Out, true>
+        <<<blocks, kThreads, 0, s>>>(from, index, scale, rescale, to, n, total, unless, check);
+  else
+    permute_kernel<Out, false>
+        <<<blocks, kThreads, 0, s>>>(from, index, scale, rescale, to, n, total, unless, check);
   STRATA_CUDA_LAUNCH();
 }
 
@@ -289,26 +291,14 @@ void launch_trsv_tiles(trsv_tiles::TrsvForm form, std::int64_t n, const double* 
 
 void launch_permute_in(const double* from, const std::int64_t* index, const double* scale,
                        const double* rescale, double* to, std::int64_t n, std::int64_t nrhs,
-                       cudaStream_t s) {
-  launch_permute<false>(from, index, scale, rescale, to, n, nrhs, s, nullptr);
+                       cudaStream_t s, EntryCheck check) {
+  launch_permute<false>(from, index, scale, rescale, to, n, nrhs, s, nullptr, check);
 }
 
 void launch_permute_out(const double* from, const std::int64_t* index, const double* scale,
                         const double* rescale, double* to, std::int64_t n, std::int64_t nrhs,
-                        cudaStream_t s, const unsigned long long* unless) {
-  launch_permute<true>(from, index, scale, rescale, to, n, nrhs, s, unless);
-}
-
-void launch_check_entries(const double* v, std::int64_t count, unsigned long long* first_bad,
-                          unsigned long long* max_bits, const unsigned long long* unless,
-                          cudaStream_t s) {
-  if (count <= 0) return;
-  const int sms = multiprocessor_count();
-  const std::int64_t blocks =
-      std::min<std::int64_t>((count + kThreads - 1) / kThreads, 4 * static_cast<std::int64_t>(sms));
-  check_entries_kernel<<<static_cast<unsigned>(blocks), kThreads, 0, s>>>(v, count, first_bad,
-                                                                          max_bits, unless);
-  STRATA_CUDA_LAUNCH();
+                        cudaStream_t s, const unsigned long long* unless, EntryCheck check) {
+  launch_permute<true>(from, index, scale, rescale, to, n, nrhs, s, unless, check);
 }
 
 void launch_gather_forward(const SolveTree& t, SolveChunks c, std::int64_t begin,

@@ -112,28 +112,34 @@ void launch_trsv_inverses(const trsv_tiles::TrsvTileJob* jobs, std::int64_t coun
 void launch_trsv_tiles(trsv_tiles::TrsvForm form, std::int64_t n, const double* a, std::int64_t lda,
                        double* x, const double* inv, trsv_tiles::TrsvSync sync, cudaStream_t s);
 
+/// The checks of a solve from GPU arrays, made as the entries pass through
+/// launch_permute_in (the right-hand sides) or launch_permute_out (the solutions), both in
+/// device memory: *bad ← max(*bad, ~e) for every entry e (its index in the column-major
+/// array in the original numbering) that is not finite, and *max_bits ← max(*max_bits,
+/// the bits of every finite magnitude; the bits of a non-negative double order as its
+/// value). The caller zeroes both first: *bad is then the complement of the least such
+/// index, 0 when every entry is finite. The result does not depend on timing. Null `bad`:
+/// no check.
+struct EntryCheck {
+  unsigned long long* bad = nullptr;
+  unsigned long long* max_bits = nullptr;
+};
+
 /// The right-hand sides into the factor's numbering and scaling, for n unknowns and nrhs
 /// columns (column-major): to[k + r·n] = scaled(from[index[k] + r·n], scale[k],
 /// rescale[index[k]]) (rescale null: 1), scaled(v, d, e) = v·(d·e) when d·e is a normal
 /// number, else v·d·e — the host's arithmetic (core/solve_phase.cpp), so the same bits.
+/// `check`: from's entries checked (EntryCheck).
 void launch_permute_in(const double* from, const std::int64_t* index, const double* scale,
                        const double* rescale, double* to, std::int64_t n, std::int64_t nrhs,
-                       cudaStream_t s);
+                       cudaStream_t s, EntryCheck check = {});
 
 /// The solutions back: to[index[k] + r·n] = scaled(from[k + r·n], scale[k], rescale[index[k]]).
-/// Nothing when `unless` (device memory) is given and holds an index other than ~0
-/// (launch_check_entries found an entry of the right-hand sides that is not finite).
+/// Nothing when `unless` (device memory) is given and is not zero (the right-hand sides'
+/// EntryCheck found an entry that is not finite). `check`: to's entries checked.
 void launch_permute_out(const double* from, const std::int64_t* index, const double* scale,
                         const double* rescale, double* to, std::int64_t n, std::int64_t nrhs,
-                        cudaStream_t s, const unsigned long long* unless = nullptr);
-
-/// Checks v[0, count) on the device: *first_bad ← min(*first_bad, the least index of an
-/// entry that is not finite) and *max_bits ← max(*max_bits, the bits of the largest
-/// magnitude of a finite entry) — the bits of a non-negative double order as its value;
-/// the caller sets *first_bad to ~0 (none) and *max_bits to 0 first. Nothing when `unless`
-/// is given and holds an index other than ~0. The result does not depend on timing.
-void launch_check_entries(const double* v, std::int64_t count, unsigned long long* first_bad,
-                          unsigned long long* max_bits, const unsigned long long* unless,
-                          cudaStream_t s);
+                        cudaStream_t s, const unsigned long long* unless = nullptr,
+                        EntryCheck check = {});
 
 }  // namespace strata::cuda
