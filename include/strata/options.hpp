@@ -226,6 +226,13 @@ struct Options {
   /// (src/numeric/cuda/cuda_solve.cu); false launches them one by one at every solve.
   /// The same bits either way. Default on.
   bool gpu_solve_graph = true;
+  /// CUDA backend: the device solve's subtrees and the bottom levels of small fronts
+  /// above them run as one launch per sweep whose thread blocks wait on the device for
+  /// the fronts they read (a front starts when its children, or forward its parent, are
+  /// done; src/numeric/cuda/solve_plan.hpp: plan_chain); false: one launch for the
+  /// subtrees and one per level. The plan differs (the planner prices the chain), so the
+  /// results agree to rounding, not bit for bit; each is the same on every run. Default on.
+  bool gpu_solve_chain = true;
   /// CUDA backend on several GPUs (num_gpus > 1): a solve runs part by part on the GPUs
   /// that hold the parts' panels, only the parts' rows of x and their contribution to the
   /// part above crossing the bus (src/numeric/cuda/part_solve.cu); false copies every

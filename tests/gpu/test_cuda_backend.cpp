@@ -1770,10 +1770,13 @@ TEST_F(CudaBackend, DeviceSolveMatchesCpuSolve) {
 
 // The device solve's sweeps recorded once as a CUDA graph and replayed
 // (Options::gpu_solve_graph, the default) give the same bits as the same launches made one
-// by one: on repeated solves, when the number of right-hand sides changes (a new
-// recording) and changes back, after refactorizations with new values (the graph reads
-// the new panels and, for LU, the rows the new pivots moved), and after a new analysis
-// on the same executor; each against the CPU's solve of the same factor.
+// by one, and the chain's launches (Options::gpu_solve_chain, the default: blocks that
+// wait on the device, a plan of its own) the solution of one launch for the subtrees and
+// one per level to rounding (a front's products may be summed in another order): on
+// repeated solves, when the number of right-hand sides changes (a new recording) and
+// changes back, after refactorizations with new values (the graph reads the new panels
+// and, for LU, the rows the new pivots moved), and after a new analysis on the same
+// executor; each against the CPU's solve of the same factor.
 TEST_F(CudaBackend, DeviceSolveGraphEqualsTheLaunchesOneByOne) {
   unsigned long long seed = 0;
   auto rng = test::fresh_rng(&seed);
@@ -1796,29 +1799,36 @@ TEST_F(CudaBackend, DeviceSolveGraphEqualsTheLaunchesOneByOne) {
     replayed.type = pr.type;
     Options one_by_one = replayed;
     one_by_one.gpu_solve_graph = false;
+    Options by_levels = replayed;
+    by_levels.gpu_solve_chain = false;
     auto graph_gpu = numeric::make_cuda_executor(replayed);
     auto plain_gpu = numeric::make_cuda_executor(one_by_one);
+    auto levels_gpu = numeric::make_cuda_executor(by_levels);
     SparseMatrix a = pr.a;
     for (int analysis = 0; analysis < 2; ++analysis) {  // the second: a new analysis
       SCOPED_TRACE("analysis " + std::to_string(analysis));
       const Analysis an = analyze_matrix(a, replayed);
-      numeric::NumericFactor gf, pf;
-      std::vector<double> garena, parena;
+      numeric::NumericFactor gf, pf, lf;
+      std::vector<double> garena, parena, larena;
       for (int values = 0; values < 2; ++values) {  // the second: a refactorization
         SCOPED_TRACE("values " + std::to_string(values));
         double pivot = 0;
         const std::vector<double> v = test::scaled_values(an, a, &pivot);
         numeric::factorize(an, v, pr.type, pivot, *graph_gpu, gf, garena);
         numeric::factorize(an, v, pr.type, pivot, *plain_gpu, pf, parena);
+        numeric::factorize(an, v, pr.type, pivot, *levels_gpu, lf, larena);
         numeric::fetch_panels(an, *graph_gpu, gf);  // the CPU solve's copy of the panels
         for (index_t nrhs : {1, 1, 3, 1}) {
           SCOPED_TRACE("nrhs " + std::to_string(nrhs));
           std::vector<double> b(static_cast<std::size_t>(an.n * nrhs));
           for (double& x : b) x = u(rng);
-          std::vector<double> xg = b, xp = b, xc = b;
+          std::vector<double> xg = b, xp = b, xl = b, xc = b;
           ASSERT_TRUE(graph_gpu->solve(an, gf, xg.data(), nrhs)) << "not resident";
           ASSERT_TRUE(plain_gpu->solve(an, pf, xp.data(), nrhs)) << "not resident";
+          ASSERT_TRUE(levels_gpu->solve(an, lf, xl.data(), nrhs)) << "not resident";
           EXPECT_EQ(xg, xp) << "the replayed sweeps differ from the launches one by one";
+          EXPECT_LT(test::relative_difference(xg, xl), 1e-9)
+              << "the chain's launches differ from the launches by level";
           numeric::solve_in_place(an, gf, xc.data(), nrhs);
           EXPECT_LT(test::relative_difference(xg, xc), 1e-9);
         }

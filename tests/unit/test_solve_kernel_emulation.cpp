@@ -211,6 +211,7 @@ struct HostOps {
 struct EmulationCounts {
   index_t block_fronts = 0, library_fronts = 0, subtrees = 0, tall_fronts = 0;
   index_t batch4_fronts = 0, batch16_fronts = 0;  ///< block-path fronts by kernel variant
+  index_t chain_items = 0;                        ///< items of the chain's launches (forward)
 };
 
 // A device's arrays for the emulated sweeps: x (n × nrhs), the update-vector arena, the
@@ -300,7 +301,27 @@ void emulate_sweeps(const Analysis& an, const numeric::NumericFactor& fac, const
     else
       dev::front_backward<4>(st, f, X, S, nrhs, lu, unit);
   };
-  for (std::size_t q = 0; do_forward && q < n_subtrees; ++q) {
+  // the chain (plan_chain): its items in ticket order forward, the reverse backward, each
+  // only once what its device block would wait for is done
+  const std::int64_t chained = p.chain_levels, items = std::ssize(p.chain_first);
+  const bool few_items = items <= few_blocks;
+  std::vector<char> done(static_cast<std::size_t>(nf), 0);
+  for (std::int64_t q = 0; do_forward && q < items; ++q) {
+    const std::int64_t first = p.chain_first[q], last = p.chain_last[q];
+    index_t children = 0;
+    for (index_t c = t.child_offsets[first]; c < t.child_offsets[first + 1]; ++c) {
+      EXPECT_TRUE(done[t.children[c]]) << "front " << first << " before its child";
+      children += p.chain_parent[t.children[c]] == first;
+    }
+    EXPECT_EQ(p.chain_wait[first], first == last ? children : 0) << "front " << first;
+    run_block(sweep_threads, [&] {
+      for (std::int64_t f = first; f <= last; ++f) forward(f, few_items);
+    });
+    done[last] = 1;
+    counts.chain_items += 1;
+  }
+  if (chained > 0) std::fill(done.begin(), done.end(), 0);
+  for (std::size_t q = 0; do_forward && chained == 0 && q < n_subtrees; ++q) {
     run_block(sweep_threads, [&] {
       for (std::int64_t f = p.subtree_first[q]; f <= p.subtree_last[q]; ++f)
         forward(f, few_subtrees);
@@ -310,7 +331,7 @@ void emulate_sweeps(const Analysis& an, const numeric::NumericFactor& fac, const
         p.subtree_last[q] - p.subtree_first[q] + 1;
     ++counts.subtrees;
   }
-  for (index_t l = 0; do_forward && l < an.schedule.n_levels(); ++l) {
+  for (index_t l = static_cast<index_t>(chained); do_forward && l < an.schedule.n_levels(); ++l) {
     for (std::int64_t q = p.small_offsets[l]; q < p.small_offsets[l + 1]; ++q) {
       run_block(sweep_threads, [&] { forward(p.small_fronts[q], few(l)); });
       ++counts.block_fronts;
@@ -338,7 +359,7 @@ void emulate_sweeps(const Analysis& an, const numeric::NumericFactor& fac, const
   if (ldlt && do_forward && do_backward)
     for (index_t q = 0; q < an.n; ++q)
       dev::diagonal(st, q, fac.d_diag.data(), fac.d_off.data(), fac.pivot_size.data(), X, nrhs);
-  for (index_t l = an.schedule.n_levels() - 1; do_backward && l >= 0; --l) {
+  for (index_t l = an.schedule.n_levels() - 1; do_backward && l >= chained; --l) {
     for (std::int64_t q = p.small_offsets[l]; q < p.small_offsets[l + 1]; ++q)
       run_block(sweep_threads, [&] { backward(p.small_fronts[q], few(l)); });
     chunks(l, [&](std::int64_t f, std::int64_t i0, std::int64_t i1) {
@@ -361,7 +382,17 @@ void emulate_sweeps(const Analysis& an, const numeric::NumericFactor& fac, const
       dev::scatter_backward(st, f, i0, i1, X, S, nrhs, lu);
     });
   }
-  for (std::size_t q = 0; do_backward && q < n_subtrees; ++q)
+  for (std::int64_t q = items - 1; do_backward && q >= 0; --q) {
+    const std::int64_t first = p.chain_first[q], last = p.chain_last[q];
+    const std::int64_t parent = p.chain_parent[last];
+    if (parent >= 0) EXPECT_TRUE(done[parent]) << "front " << last << " before its parent";
+    EXPECT_EQ(parent >= 0, t.parent[last] >= 0 && an.schedule.level_of[t.parent[last]] < chained);
+    run_block(sweep_threads, [&] {
+      for (std::int64_t f = last; f >= first; --f) backward(f, few_items);
+    });
+    done[last] = 1;
+  }
+  for (std::size_t q = 0; do_backward && chained == 0 && q < n_subtrees; ++q)
     run_block(sweep_threads, [&] {
       for (std::int64_t f = p.subtree_last[q]; f >= p.subtree_first[q]; --f)
         backward(f, few_subtrees);
@@ -421,23 +452,29 @@ void check_problem(const Problem& pr, std::mt19937_64& rng, std::initializer_lis
   const double bmax = max_abs(values);
   for (const SolvePath path : paths) {
     const SolvePlan plan = cuda::make_solve_plan(an.tree, an.child_rows, an.schedule, n_sm, path);
-    for (index_t nrhs : {1, 2, 5}) {
-      SCOPED_TRACE("path " + std::to_string(static_cast<int>(path)) + " nrhs " +
-                   std::to_string(nrhs));
-      std::vector<double> b(static_cast<std::size_t>(an.n * nrhs));
-      for (double& v : b) v = u(rng);
-      std::vector<double> ref = b, got = b;
-      numeric::solve_in_place(an, fac, ref.data(), nrhs);
-      emulate_device_solve(an, fac, plan, got, nrhs, sweep_threads, counts, few_blocks);
-      // Two summation orders of a solve with the same factor differ by about u·κ relative
-      // to x, and random matrices are now and then badly conditioned. κ̂ = max|B|·‖x‖∞/‖b‖∞
-      // is a lower bound on κ∞(B) that for random b is within about √n·(entries per row)
-      // of it; 1e-13·√n·κ̂ leaves ~10³ over u·κ̂ and stays far below the O(1) difference an
-      // index or ordering error gives.
-      const double kappa = bmax * max_abs(ref) / std::max(max_abs(b), 1e-300);
-      const double tol = std::max(1e-10, 1e-13 * std::sqrt(static_cast<double>(an.n)) * kappa);
-      EXPECT_LT(test::relative_difference(got, ref), tol) << "κ̂ " << kappa;
-    }
+    // the subtrees and the bottom levels in one launch (the model pricing it so)
+    const SolvePlan chained =
+        cuda::make_solve_plan(an.tree, an.child_rows, an.schedule, n_sm, path, true);
+    for (index_t nrhs : {1, 2, 5})
+      for (const bool chain : {false, true}) {
+        if (chain && chained.chain_levels == 0) continue;
+        SCOPED_TRACE("path " + std::to_string(static_cast<int>(path)) + " nrhs " +
+                     std::to_string(nrhs) + (chain ? " chained" : ""));
+        std::vector<double> b(static_cast<std::size_t>(an.n * nrhs));
+        for (double& v : b) v = u(rng);
+        std::vector<double> ref = b, got = b;
+        numeric::solve_in_place(an, fac, ref.data(), nrhs);
+        emulate_device_solve(an, fac, chain ? chained : plan, got, nrhs, sweep_threads, counts,
+                             few_blocks);
+        // Two summation orders of a solve with the same factor differ by about u·κ relative
+        // to x, and random matrices are now and then badly conditioned. κ̂ = max|B|·‖x‖∞/‖b‖∞
+        // is a lower bound on κ∞(B) that for random b is within about √n·(entries per row)
+        // of it; 1e-13·√n·κ̂ leaves ~10³ over u·κ̂ and stays far below the O(1) difference an
+        // index or ordering error gives.
+        const double kappa = bmax * max_abs(ref) / std::max(max_abs(b), 1e-300);
+        const double tol = std::max(1e-10, 1e-13 * std::sqrt(static_cast<double>(an.n)) * kappa);
+        EXPECT_LT(test::relative_difference(got, ref), tol) << "κ̂ " << kappa;
+      }
   }
 }
 
@@ -467,6 +504,7 @@ TEST(SolveKernelEmulation, SmallProblemsEveryPath) {
   EXPECT_GT(counts.block_fronts, 0);
   EXPECT_GT(counts.library_fronts, 0);
   EXPECT_GT(counts.subtrees, 0);
+  EXPECT_GT(counts.chain_items, 0);
 }
 
 // LDLᵀ with 2×2 pivots (KKT matrices) and LU with row pivoting on fronts of more than one
@@ -758,6 +796,93 @@ TEST(SolveKernelEmulation, PlanCoversEveryFrontOnce) {
   Analysis thin = analyze_matrix(generators::laplacian_3d(64, 2, 2), o);
   const SolvePlan pt = cuda::make_solve_plan(thin.tree, thin.child_rows, thin.schedule, 132);
   EXPECT_FALSE(pt.subtree_first.empty());
+}
+
+// The chain (plan_chain): the subtrees, then the bottom levels' fronts one item each, every
+// front of them once; the levels it takes hold no tall or library front and the first it
+// leaves holds one; a level front waits for all its children, each of them the last front
+// of an earlier item that names it as the parent it signals; nothing else waits or signals.
+TEST(SolveKernelEmulation, ChainItemsComeAfterWhatTheyWaitFor) {
+  Options o;
+  o.type = MatrixType::spd;
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  std::vector<Analysis> analyses;
+  analyses.push_back(analyze_matrix(generators::laplacian_3d(16, 16, 16), o));
+  analyses.push_back(analyze_matrix(generators::laplacian_3d(64, 2, 2), o));
+  o.type = MatrixType::general;
+  analyses.push_back(
+      analyze_matrix(test::random_sparse(733, 3, test::RandomKind::general, rng), o));
+  index_t with_chain = 0;
+  for (const Analysis& an : analyses)
+    for (SolvePath path : {SolvePath::model, SolvePath::block_subtrees, SolvePath::all_block,
+                           SolvePath::all_library})
+      for (int n_sm : {1, 132})
+        for (const bool priced : {false, true}) {  // plan_sweeps's model with the chain or not
+          SCOPED_TRACE("n " + std::to_string(an.n) + " path " +
+                       std::to_string(static_cast<int>(path)) + " SMs " + std::to_string(n_sm) +
+                       (priced ? " priced as chained" : ""));
+          const auto& t = an.tree;
+          const auto& s = an.schedule;
+          const index_t nf = t.n_fronts();
+          SolvePlan p = cuda::make_solve_plan(t, an.child_rows, s, n_sm, path, priced);
+          cuda::plan_chain(t, s, p);  // again: the same
+          auto plain = [&](index_t l) {
+            return p.tall_offsets[l] == p.tall_offsets[l + 1] &&
+                   p.large_offsets[l] == p.large_offsets[l + 1] &&
+                   p.chunk_offsets[l] == p.chunk_offsets[l + 1];
+          };
+          for (index_t l = 0; l < p.chain_levels; ++l) EXPECT_TRUE(plain(l)) << "level " << l;
+          if (p.chain_levels < s.n_levels())
+            EXPECT_FALSE(plain(static_cast<index_t>(p.chain_levels)));
+          if (p.chain_levels == 0) {
+            EXPECT_TRUE(p.chain_first.empty());
+            continue;
+          }
+          ++with_chain;
+          ASSERT_EQ(p.chain_first.size(), p.chain_last.size());
+          ASSERT_EQ(p.chain_wait.size(), static_cast<std::size_t>(nf));
+          ASSERT_EQ(p.chain_parent.size(), static_cast<std::size_t>(nf));
+          EXPECT_TRUE(
+              std::equal(p.subtree_first.begin(), p.subtree_first.end(), p.chain_first.begin()));
+          std::vector<int> seen(nf, 0);
+          std::vector<std::int64_t> item_of(nf, -1);
+          for (std::size_t q = 0; q < p.chain_first.size(); ++q)
+            for (std::int64_t f = p.chain_first[q]; f <= p.chain_last[q]; ++f) {
+              ++seen[f];
+              item_of[f] = static_cast<std::int64_t>(q);
+            }
+          std::vector<int> expected(nf, 0);
+          for (std::size_t q = 0; q < p.subtree_first.size(); ++q)
+            for (std::int64_t f = p.subtree_first[q]; f <= p.subtree_last[q]; ++f) expected[f] = 1;
+          for (std::int64_t q = p.small_offsets[0]; q < p.small_offsets[p.chain_levels]; ++q)
+            expected[p.small_fronts[q]] = 1;
+          for (index_t f = 0; f < nf; ++f) {
+            EXPECT_EQ(seen[f], expected[f]) << "front " << f;
+            if (!seen[f]) {
+              EXPECT_EQ(p.chain_wait[f], 0);
+              EXPECT_EQ(p.chain_parent[f], -1);
+              continue;
+            }
+            const std::int64_t q = item_of[f];
+            const bool level_front =
+                p.chain_first[q] == p.chain_last[q] && s.level_of[f] < p.chain_levels &&
+                std::find(p.small_fronts.begin(), p.small_fronts.end(), f) != p.small_fronts.end();
+            EXPECT_EQ(p.chain_wait[f],
+                      level_front ? t.child_offsets[f + 1] - t.child_offsets[f] : 0)
+                << "front " << f;
+            for (index_t c = t.child_offsets[f]; c < t.child_offsets[f + 1]; ++c) {
+              const index_t child = t.children[c];
+              if (!level_front) continue;
+              EXPECT_EQ(p.chain_last[item_of[child]], child);
+              EXPECT_LT(item_of[child], q);
+              EXPECT_EQ(p.chain_parent[child], f);
+            }
+            if (p.chain_parent[f] >= 0) EXPECT_EQ(p.chain_parent[f], t.parent[f]);
+          }
+        }
+  EXPECT_GT(with_chain, 0);
 }
 
 }  // namespace

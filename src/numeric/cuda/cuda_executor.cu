@@ -112,6 +112,7 @@ CudaExecutor::CudaExecutor(const Options& o, int device)
       potrf_block_(static_cast<int>(o.gpu_potrf_block_size)),
       recursive_panel_(o.gpu_recursive_panel),
       solve_graph_(o.gpu_solve_graph),
+      solve_chain_(o.gpu_solve_chain),
       solve_parts_(o.gpu_solve_parts) {
   tiled_.pool_share = o.gpu_tiled_pool_share;
   tiled_.stream_cols = o.gpu_tiled_stream_columns;

@@ -257,6 +257,9 @@ class CudaExecutor final : public numeric::Executor {
     std::vector<std::int64_t> panel_offset_host;
     DeviceBuffer<std::int64_t> panel_offset, chunk_front, chunk_row, small_fronts, tall_fronts,
         subtree_first, subtree_last, part_offset;
+    /// The chain's arrays (SolvePlan::chain_*) and synchronization words (SolveChain)
+    DeviceBuffer<std::int64_t> chain_first, chain_last, chain_wait, chain_parent;
+    mutable DeviceBuffer<unsigned long long> chain_sync;  // written by every solve
     PartExchange exchange;
     /// The library-path fronts' tiled triangular solves for one right-hand side
     /// (trsv_tiles.cuh; prepare_trsv_tiles): per front of the tree where its tiles'
@@ -331,11 +334,15 @@ class CudaExecutor final : public numeric::Executor {
   void enqueue_solve_sweeps(const Analysis& an, const numeric::NumericFactor& fac,
                             const SweepPlanDevice& sp, const double* panels, index_t nrhs,
                             bool forward, bool backward, bool forward_subtrees = true);
-  /// The forward sweep's first launch alone: every subtree of sp's plan, one block each.
+  /// The forward sweep's first launch alone: every subtree of sp's plan, one block each,
+  /// or where the plan has a chain (SolvePlan::chain_levels) the chain's forward launch,
+  /// which also takes the bottom levels that enqueue_solve_sweeps then leaves out.
   void enqueue_forward_subtrees(const Analysis& an, const numeric::NumericFactor& fac,
                                 const SweepPlanDevice& sp, const double* panels, index_t nrhs);
   /// The device solve's view of the tree, the factor's row arrays and sp's panels.
   SolveTree solve_tree(const Analysis& an, const SweepPlanDevice& sp, const double* panels);
+  /// sp's chain on the device (SolvePlan::chain_levels > 0).
+  static SolveChain solve_chain(const SweepPlanDevice& sp);
   /// What a recorded solve graph read: the analysis, the right-hand sides' count, the
   /// factor's type and every device buffer the sweeps use (cuda_solve.cu).
   std::vector<std::uintptr_t> solve_graph_key(const Analysis& an, const numeric::NumericFactor& fac,
@@ -587,6 +594,7 @@ class CudaExecutor final : public numeric::Executor {
   int potrf_block_ = 0;                          ///< Options::gpu_potrf_block_size
   bool recursive_panel_ = true;                  ///< Options::gpu_recursive_panel
   bool solve_graph_ = true;                      ///< Options::gpu_solve_graph
+  bool solve_chain_ = true;                      ///< Options::gpu_solve_chain
   bool solve_parts_ = true;                      ///< Options::gpu_solve_parts
   std::uint64_t analysis_id_ = 0;
   std::uint64_t factorization_count_ = 0;  ///< factorizations begun here (begin)

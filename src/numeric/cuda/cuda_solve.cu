@@ -11,7 +11,9 @@
 // of a solve: bench/history.md).
 //
 // The sweeps are a fixed sequence of launches for a given analysis and number of
-// right-hand sides (one for the plan's subtrees, one per level for its block-path fronts,
+// right-hand sides (one for the plan's subtrees, or with Options::gpu_solve_chain one for
+// the subtrees and the bottom levels together, solve_plan.hpp: plan_chain; one per level
+// for the other block-path fronts,
 // a gather, a sweep, a scatter and a few library calls per level with tall or library-path
 // fronts, a level's library fronts side by side on the executor's lanes; in each sweep);
 // with Options::gpu_solve_graph they are recorded once as a CUDA graph and replayed with
@@ -119,6 +121,16 @@ void CudaExecutor::upload_sweep_plan(SweepPlanDevice& sp) {
   up(sp.subtree_first, p.subtree_first);
   up(sp.subtree_last, p.subtree_last);
   up(sp.part_offset, p.part_offset);
+  if (p.chain_levels > 0) {
+    up(sp.chain_first, p.chain_first);
+    up(sp.chain_last, p.chain_last);
+    up(sp.chain_wait, p.chain_wait);
+    up(sp.chain_parent, p.chain_parent);
+    const std::size_t words = 2 * p.chain_wait.size() + 3;
+    sp.chain_sync.resize(words);
+    STRATA_CUDA(
+        cudaMemsetAsync(sp.chain_sync.data(), 0, sizeof(unsigned long long) * words, stream_));
+  }
   STRATA_CUDA(cudaStreamSynchronize(stream_));  // the copies read the host vectors
 }
 
@@ -129,7 +141,8 @@ void CudaExecutor::prepare_solve_plan(const Analysis& an) {
   if (w.plan.analysis == an.id && w.plan.analysis != 0) return;
   const int n_sm = multiprocessor_count(device_);
   w.plan = SolvePlan{};
-  plan_sweeps(an.tree, an.schedule, n_sm, SolvePath::model, nullptr, w.plan);
+  plan_sweeps(an.tree, an.schedule, n_sm, SolvePath::model, nullptr, w.plan, nullptr, solve_chain_);
+  if (solve_chain_) plan_chain(an.tree, an.schedule, w.plan);
   w.plan.analysis = an.id;
   w.panel_offset_host.assign(an.factor_layout.panel_offset.begin(),
                              an.factor_layout.panel_offset.end());
@@ -246,9 +259,9 @@ void CudaExecutor::enqueue_resident_solve(const Analysis& an, const numeric::Num
     }
     dsolve_.graph_key = std::move(key);
   }
-  // The subtrees' launch, the longest of the forward sweep, goes first on its own: the
-  // device works on it while the host submits the graph, whose launch costs the host tens
-  // of microseconds for the sweeps' nodes, which would otherwise leave the device idle.
+  // The subtrees' (or the chain's) launch, the longest of the forward sweep, goes first on its own:
+  // the device works on it while the host submits the graph, whose launch costs the host tens of
+  // microseconds for the sweeps' nodes, which would otherwise leave the device idle.
   enqueue_forward_subtrees(an, fac, dsolve_.whole, panels_.data(), nrhs);
   STRATA_CUDA(cudaGraphLaunch(dsolve_.graph, stream_));
 }
@@ -419,7 +432,12 @@ std::vector<std::uintptr_t> CudaExecutor::solve_graph_key(const Analysis& an,
           ptr(dsolve_.whole.subtree_first.data()),
           ptr(dsolve_.whole.subtree_last.data()),
           ptr(dsolve_.whole.part_offset.data()),
-          ptr(dsolve_.part.data())};
+          ptr(dsolve_.part.data()),
+          ptr(dsolve_.whole.chain_first.data()),
+          ptr(dsolve_.whole.chain_last.data()),
+          ptr(dsolve_.whole.chain_wait.data()),
+          ptr(dsolve_.whole.chain_parent.data()),
+          ptr(dsolve_.whole.chain_sync.data())};
 }
 
 void CudaExecutor::drop_solve_graph() noexcept {
@@ -447,12 +465,27 @@ SolveTree CudaExecutor::solve_tree(const Analysis& an, const SweepPlanDevice& sp
                    dsolve_.part.data()};
 }
 
+SolveChain CudaExecutor::solve_chain(const SweepPlanDevice& sp) {
+  return SolveChain{sp.chain_first.data(),
+                    sp.chain_last.data(),
+                    sp.chain_wait.data(),
+                    sp.chain_parent.data(),
+                    sp.chain_sync.data(),
+                    static_cast<std::int64_t>(sp.plan.chain_wait.size()),
+                    static_cast<std::int64_t>(sp.plan.chain_first.size())};
+}
+
 void CudaExecutor::enqueue_forward_subtrees(const Analysis& an, const numeric::NumericFactor& fac,
                                             const SweepPlanDevice& sp, const double* panels,
                                             index_t nrhs) {
   const bool lu = fac.type == MatrixType::general;
   const bool unit = lu || fac.type == MatrixType::symmetric_indefinite;
   const SolveTree st = solve_tree(an, sp, panels);
+  if (sp.plan.chain_levels > 0) {
+    launch_chain_forward(st, solve_chain(sp), dsolve_.x.data(), dsolve_.u.data(),
+                         dsolve_.scratch.data(), nrhs, unit, lu, stream_);
+    return;
+  }
   launch_fronts_forward(st, sp.subtree_first.data(), sp.subtree_last.data(), 0,
                         static_cast<std::int64_t>(sp.plan.subtree_first.size()), dsolve_.x.data(),
                         dsolve_.u.data(), dsolve_.scratch.data(), nrhs, unit, lu, stream_);
@@ -513,7 +546,8 @@ void CudaExecutor::enqueue_solve_sweeps(const Analysis& an, const numeric::Numer
   const std::int64_t* tall = sp.tall_fronts.data();
   const std::int64_t n_subtrees = static_cast<std::int64_t>(p.subtree_first.size());
   if (forward && forward_subtrees) enqueue_forward_subtrees(an, fac, sp, panels, nrhs);
-  for (index_t l = 0; forward && l < levels; ++l) {
+  const index_t chained = static_cast<index_t>(p.chain_levels);  // in the chain's launches
+  for (index_t l = chained; forward && l < levels; ++l) {
     const std::int64_t c0 = p.chunk_offsets[l], nc = p.chunk_offsets[l + 1] - c0;
     const std::int64_t s0 = p.small_offsets[l], ns = p.small_offsets[l + 1] - s0;
     const std::int64_t t0 = p.tall_offsets[l], nt = p.tall_offsets[l + 1] - t0;
@@ -529,7 +563,7 @@ void CudaExecutor::enqueue_solve_sweeps(const Analysis& an, const numeric::Numer
   if (ldlt && forward && backward)
     launch_solve_diagonal(st, dsolve_.d_diag.data(), dsolve_.d_off.data(),
                           dsolve_.pivot_size.data(), X, nrhs, stream_);
-  for (index_t l = levels - 1; backward && l >= 0; --l) {
+  for (index_t l = levels - 1; backward && l >= chained; --l) {
     const std::int64_t c0 = p.chunk_offsets[l], nc = p.chunk_offsets[l + 1] - c0;
     const std::int64_t s0 = p.small_offsets[l], ns = p.small_offsets[l + 1] - s0;
     const std::int64_t t0 = p.tall_offsets[l], nt = p.tall_offsets[l + 1] - t0;
@@ -542,7 +576,9 @@ void CudaExecutor::enqueue_solve_sweeps(const Analysis& an, const numeric::Numer
           });
     launch_scatter_backward(st, chunks, c0, nc, X, S, nrhs, lu, stream_);
   }
-  if (backward)
+  if (backward && chained > 0)
+    launch_chain_backward(st, solve_chain(sp), X, S, nrhs, lu, unit, stream_);
+  else if (backward)
     launch_fronts_backward(st, sp.subtree_first.data(), sp.subtree_last.data(), 0, n_subtrees, X, S,
                            nrhs, lu, unit, stream_);
 }

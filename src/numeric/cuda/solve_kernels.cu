@@ -4,6 +4,7 @@
 // solutions back, and the GEMV of the library-path fronts' products (launch_gemv_n).
 #include <algorithm>
 #include <cfloat>
+#include <cuda/atomic>
 #include <limits>
 #include <string>
 #include <vector>
@@ -100,6 +101,91 @@ __global__ void __launch_bounds__(kSweepThreads, Batch >= 16 ? 2 : 4)
   const std::int64_t q = begin + blockIdx.x;
   for (std::int64_t f = last[q]; f >= first[q]; --f)
     solve_device::front_backward<Batch>(t, f, x, scratch, nrhs, lu, unit);
+}
+
+// The chain (launch_chain_forward/backward). Thread 0 takes the item and waits; the
+// barrier after it hands what the acquire made visible to the block. At the end every
+// thread's writes are fenced, the barrier gathers them, and thread 0 releases them to the
+// waiting item; the last block to finish clears the ticket and the count and advances the
+// epoch (every block read it before it counted itself finished).
+using ChainWord = ::cuda::atomic_ref<unsigned long long, ::cuda::thread_scope_device>;
+
+struct ChainItem {
+  std::int64_t q;
+  unsigned long long epoch;
+};
+
+__device__ ChainItem chain_take(const SolveChain& c, bool reverse) {
+  __shared__ ChainItem item;
+  if (threadIdx.x == 0) {
+    unsigned long long* words = c.sync + 2 * c.n_fronts;
+    const auto ticket = static_cast<std::int64_t>(atomicAdd(words, 1ull));
+    item.q = reverse ? c.items - 1 - ticket : ticket;
+    item.epoch = ChainWord(words[2]).load(::cuda::memory_order_relaxed);
+  }
+  __syncthreads();
+  return item;
+}
+
+// Thread 0 spins until *word reaches `value` (acquire), then the block goes on.
+__device__ void chain_wait_for(unsigned long long* word, unsigned long long value) {
+  if (threadIdx.x == 0) {
+    ChainWord w(*word);
+    while (w.load(::cuda::memory_order_acquire) < value) __nanosleep(32);
+  }
+  __syncthreads();
+}
+
+__device__ void chain_finish(const SolveChain& c) {
+  if (threadIdx.x == 0) {
+    unsigned long long* words = c.sync + 2 * c.n_fronts;
+    ChainWord finished(words[1]);
+    if (finished.fetch_add(1, ::cuda::memory_order_acq_rel) ==
+        static_cast<unsigned long long>(c.items - 1)) {
+      words[0] = 0;
+      finished.store(0, ::cuda::memory_order_relaxed);
+      ChainWord(words[2]).fetch_add(1, ::cuda::memory_order_release);
+    }
+  }
+}
+
+template <int Batch>
+__global__ void __launch_bounds__(kSweepThreads, Batch >= 16 ? 2 : 4)
+    chain_forward_kernel(SolveTree t, SolveChain c, double* x, double* u, double* scratch,
+                         std::int64_t nrhs, bool unit, bool lu) {
+  const ChainItem item = chain_take(c, false);
+  const std::int64_t first = c.first[item.q], last = c.last[item.q];
+  unsigned long long* arrived = c.sync;
+  if (c.wait[first] > 0) {
+    chain_wait_for(arrived + first, static_cast<unsigned long long>(c.wait[first]));
+    if (threadIdx.x == 0) arrived[first] = 0;  // every child has counted: ready for the next
+  }
+  for (std::int64_t f = first; f <= last; ++f)
+    solve_device::front_forward<Batch>(t, f, x, u, scratch, nrhs, unit, lu);
+  __threadfence();
+  __syncthreads();
+  const std::int64_t parent = c.parent[last];
+  if (threadIdx.x == 0 && parent >= 0)
+    ChainWord(arrived[parent]).fetch_add(1, ::cuda::memory_order_release);
+  chain_finish(c);
+}
+
+template <int Batch>
+__global__ void __launch_bounds__(kSweepThreads, Batch >= 16 ? 2 : 4)
+    chain_backward_kernel(SolveTree t, SolveChain c, double* x, double* scratch, std::int64_t nrhs,
+                          bool lu, bool unit) {
+  const ChainItem item = chain_take(c, true);
+  const std::int64_t first = c.first[item.q], last = c.last[item.q];
+  unsigned long long* ended = c.sync + c.n_fronts;  // epoch + 1 once a front's step ended
+  const std::int64_t parent = c.parent[last];
+  if (parent >= 0) chain_wait_for(ended + parent, item.epoch + 1);
+  for (std::int64_t f = last; f >= first; --f)
+    solve_device::front_backward<Batch>(t, f, x, scratch, nrhs, lu, unit);
+  __threadfence();
+  __syncthreads();
+  if (threadIdx.x == 0 && c.wait[last] > 0)  // a level front: its children wait for it
+    ChainWord(ended[last]).store(item.epoch + 1, ::cuda::memory_order_release);
+  chain_finish(c);
 }
 
 __global__ void diagonal_kernel(SolveTree t, const double* d_diag, const double* d_off,
@@ -351,6 +437,30 @@ void launch_fronts_backward(const SolveTree& t, const std::int64_t* first, const
   else
     fronts_backward_kernel<4><<<static_cast<unsigned>(count), kSweepThreads, 0, s>>>(
         t, first, last, begin, x, scratch, nrhs, lu, unit);
+  STRATA_CUDA_LAUNCH();
+}
+
+void launch_chain_forward(const SolveTree& t, const SolveChain& c, double* x, double* u,
+                          double* scratch, std::int64_t nrhs, bool unit, bool lu, cudaStream_t s) {
+  if (c.items == 0) return;
+  if (c.items <= kFewFrontBlocks)
+    chain_forward_kernel<kTallBatch><<<static_cast<unsigned>(c.items), kSweepThreads, 0, s>>>(
+        t, c, x, u, scratch, nrhs, unit, lu);
+  else
+    chain_forward_kernel<4><<<static_cast<unsigned>(c.items), kSweepThreads, 0, s>>>(
+        t, c, x, u, scratch, nrhs, unit, lu);
+  STRATA_CUDA_LAUNCH();
+}
+
+void launch_chain_backward(const SolveTree& t, const SolveChain& c, double* x, double* scratch,
+                           std::int64_t nrhs, bool lu, bool unit, cudaStream_t s) {
+  if (c.items == 0) return;
+  if (c.items <= kFewFrontBlocks)
+    chain_backward_kernel<kTallBatch>
+        <<<static_cast<unsigned>(c.items), kSweepThreads, 0, s>>>(t, c, x, scratch, nrhs, lu, unit);
+  else
+    chain_backward_kernel<4>
+        <<<static_cast<unsigned>(c.items), kSweepThreads, 0, s>>>(t, c, x, scratch, nrhs, lu, unit);
   STRATA_CUDA_LAUNCH();
 }
 

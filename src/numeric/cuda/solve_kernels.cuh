@@ -74,6 +74,19 @@ void launch_fronts_backward(const SolveTree& t, const std::int64_t* first, const
                             std::int64_t begin, std::int64_t count, double* x, double* scratch,
                             std::int64_t nrhs, bool lu, bool unit, cudaStream_t s);
 
+/// The chain's forward solve in one launch of c.items blocks: each block takes the next
+/// item from the ticket, waits (on the device) until its children have signalled, solves
+/// the item's fronts in order as launch_fronts_forward's blocks do, and signals the parent
+/// (release and acquire at device scope: the parent reads what its children wrote). The
+/// same arithmetic in the same order as the subtrees' and levels' launches: the same bits.
+void launch_chain_forward(const SolveTree& t, const SolveChain& c, double* x, double* u,
+                          double* scratch, std::int64_t nrhs, bool unit, bool lu, cudaStream_t s);
+
+/// The chain's backward solve: the items in the reverse order, each waiting until its
+/// parent's backward step has ended, its fronts from last to first.
+void launch_chain_backward(const SolveTree& t, const SolveChain& c, double* x, double* scratch,
+                           std::int64_t nrhs, bool lu, bool unit, cudaStream_t s);
+
 /// x ← D⁻¹ x for LDLᵀ (1×1 and 2×2 blocks by pivot position).
 void launch_solve_diagonal(const SolveTree& t, const double* d_diag, const double* d_off,
                            const int* pivot_size, double* x, std::int64_t nrhs, cudaStream_t s);

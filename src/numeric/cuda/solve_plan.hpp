@@ -62,6 +62,22 @@ struct SolveTree {
   double* part;  ///< SolvePlan::part_total × nrhs doubles (the backward partial products)
 };
 
+/// The chain of a solve plan on the device (SolvePlan::chain_*, solve_plan.hpp:
+/// plan_chain; device arrays, tree numbering) and its synchronization words, `sync`:
+/// 2·n_fronts + 3 zeros before the first launch — per front the children arrived
+/// (forward) and the epoch at which its backward step ended, then the ticket, the blocks
+/// finished and the epoch; each launch leaves the first of these per front, the ticket and
+/// the count at zero and the epoch one higher, so the launches replay from a graph.
+struct SolveChain {
+  const std::int64_t* first;
+  const std::int64_t* last;
+  const std::int64_t* wait;
+  const std::int64_t* parent;
+  unsigned long long* sync;
+  std::int64_t n_fronts;
+  std::int64_t items;  ///< the chain's items (one block each)
+};
+
 /// Rows of one front handled by one block of the gather and scatter kernels.
 constexpr std::int64_t kChunkRows = 256;
 
@@ -92,6 +108,9 @@ constexpr double kBlockTileSeconds = 2e-6;
 constexpr double kBlockFrontSeconds = 2e-6;
 // Per kernel launched from the solve's graph: the launch and the drain before the next.
 constexpr double kLaunchSeconds = 3e-6;
+// In the chain's launch (plan_chain): from a front's end to its parent's start on another
+// block (a release, an acquire that sees it, a barrier).
+constexpr double kChainSeconds = 1e-6;
 // cuBLAS over one front: most of the device's bandwidth...
 constexpr double kLibraryBytesPerSecond = 2e12;
 // ...after two library calls' launch and enqueue cost...
@@ -140,6 +159,12 @@ struct SolvePlan {
   std::int64_t part_total = 0;            ///< doubles of the partial products per rhs
   /// The subtree limit the plan was made with: seconds on one block (−1: no subtree).
   double subtree_limit = -1.0;
+  /// The chain (plan_chain; none when chain_levels is 0): the subtrees and the fronts of
+  /// the levels [0, chain_levels) as one launch per sweep. Item q is the fronts
+  /// chain_first[q]..chain_last[q]; per front the children its forward step waits for
+  /// (chain_wait) and the parent it signals (chain_parent, −1: none).
+  std::int64_t chain_levels = 0;
+  std::vector<std::int64_t> chain_first, chain_last, chain_wait, chain_parent;
 };
 
 /// The update vectors' offsets and the inverse extend-add map of `p` (SolvePlan::u_offset,
@@ -221,10 +246,12 @@ inline FrontTimes front_times(const symbolic::AssemblyTree& t) {
 /// of a multi-GPU split, solved where its panels live; a front outside heads no subtree
 /// and lies in none. `fixed_limit`: when given, the subtree limit (SolvePlan::
 /// subtree_limit) instead of the model's choice — a part takes the whole tree's, so that
-/// its bottom is cut into the subtrees the whole-tree solve would use. Deterministic.
+/// its bottom is cut into the subtrees the whole-tree solve would use. `chain`: the model
+/// prices the plan as plan_chain will run it (the subtrees and the bottom levels of block
+/// fronts as one launch). Deterministic.
 inline void plan_sweeps(const symbolic::AssemblyTree& t, const symbolic::LevelSchedule& s, int n_sm,
                         SolvePath path, const std::vector<char>* in, SolvePlan& p,
-                        const double* fixed_limit = nullptr) {
+                        const double* fixed_limit = nullptr, bool chain = false) {
   const index_t nf = t.n_fronts();
   p.n_sm = std::max(n_sm, 1);
   auto planned = [&](index_t f) { return !in || (*in)[f] != 0; };
@@ -315,6 +342,44 @@ inline void plan_sweeps(const symbolic::AssemblyTree& t, const symbolic::LevelSc
     }
     return total;
   };
+  // With the chain (plan_chain, chain true): the subtrees and the bottom levels of block
+  // fronts in one launch, each front starting kChainSeconds after its children end, so
+  // that part costs its longest path (or its work over the SMs), not a launch per level.
+  std::vector<double> finish(chain ? static_cast<std::size_t>(nf) : 0);
+  auto chain_time = [&](double limit) {
+    double total = kLaunchSeconds, work = 0.0, path_end = 0.0;
+    for (index_t f = 0; f < nf; ++f)
+      if (in_subtree(f, limit) && (t.parent[f] < 0 || !in_subtree(t.parent[f], limit))) {
+        finish[f] = serial[f];
+        work += serial[f];
+        path_end = std::max(path_end, serial[f]);
+      }
+    bool chained = true;
+    for (index_t l = 0; l < s.n_levels(); ++l) {
+      rest.clear();
+      for (index_t f : by_size[l])
+        if (!in_subtree(f, limit)) rest.push_back(f);
+      double level_time = 0.0;
+      if (chained)
+        for (index_t f : rest) chained = chained && t.n_rows(f) <= kChunkRows;
+      if (chained && !rest.empty()) chained = split(&level_time) == 0;
+      if (!chained) {
+        if (!rest.empty()) split(&level_time);
+        total += level_time;
+        continue;
+      }
+      for (index_t f : rest) {
+        double start = 0.0;
+        for (index_t q = t.child_offsets[f]; q < t.child_offsets[f + 1]; ++q)
+          start = std::max(start, finish[t.children[q]] + kChainSeconds);
+        finish[f] = start + t_block(f);
+        work += times.block_work[f];
+        path_end = std::max(path_end, finish[f]);
+      }
+    }
+    return total + std::max(path_end, work / p.n_sm);
+  };
+  auto model_time = [&](double limit) { return chain ? chain_time(limit) : sweep_time(limit); };
   double limit = fixed_limit ? *fixed_limit : -1.0;  // -1: no subtree
   if (!fixed_limit && path == SolvePath::block_subtrees) {
     for (index_t f = 0; f < nf; ++f)
@@ -325,9 +390,9 @@ inline void plan_sweeps(const symbolic::AssemblyTree& t, const symbolic::LevelSc
     for (index_t f = 0; f < nf; ++f)
       if (serial[f] < std::numeric_limits<double>::infinity())
         largest = std::max(largest, serial[f]);
-    double best = sweep_time(limit);
+    double best = model_time(limit);
     for (double cand = 1e-6; cand < 1e-1 && cand < 2 * largest; cand *= 2) {
-      const double time = sweep_time(cand);
+      const double time = model_time(cand);
       if (time < best) {
         best = time;
         limit = cand;
@@ -373,16 +438,69 @@ inline void plan_sweeps(const symbolic::AssemblyTree& t, const symbolic::LevelSc
   }
 }
 
+/// The chain of plan `p` (made by plan_sweeps for the whole tree `t` with schedule `s`):
+/// the bottom levels whose fronts outside the subtrees are all block-path fronts of at
+/// most kChunkRows rows (no tall or library front, no gather or scatter chunk), the
+/// deepest chain_levels of them, solved together with the subtrees in one launch per sweep
+/// (solve_kernels.cuh: launch_chain_forward/backward) instead of one launch for the
+/// subtrees and one per level: the launch's blocks take the items in order from a ticket
+/// and wait on the device, forward for their children's items, backward for their
+/// parent's, so a front starts when what it reads is written rather than when its whole
+/// level is. Items: the subtrees (SolvePlan::subtree_first/last) in their order, then
+/// level by level from the deepest each level front alone, so every item comes after the
+/// items it waits for forward (and before them in the reverse order the backward sweep
+/// takes). chain_wait[f]: a level front's children (every one of them is the last front of
+/// an earlier item), 0 for other fronts; chain_parent[f]: for an item's last front whose
+/// parent is a level front of the chain, that parent, else −1. No chain (chain_levels 0)
+/// when the deepest level has a tall or library front. Deterministic.
+inline void plan_chain(const symbolic::AssemblyTree& t, const symbolic::LevelSchedule& s,
+                       SolvePlan& p) {
+  const index_t nf = t.n_fronts();
+  p.chain_levels = 0;
+  p.chain_first.clear();
+  p.chain_last.clear();
+  p.chain_wait.clear();
+  p.chain_parent.clear();
+  std::int64_t levels = 0;
+  auto none = [](const std::vector<std::int64_t>& offsets, std::int64_t l) {
+    return offsets[l + 1] == offsets[l];
+  };
+  while (levels < s.n_levels() && none(p.tall_offsets, levels) && none(p.large_offsets, levels) &&
+         none(p.chunk_offsets, levels))
+    ++levels;
+  if (levels == 0) return;
+  p.chain_levels = levels;
+  p.chain_first = p.subtree_first;
+  p.chain_last = p.subtree_last;
+  p.chain_wait.assign(static_cast<std::size_t>(nf), 0);
+  p.chain_parent.assign(static_cast<std::size_t>(nf), -1);
+  std::vector<char> level_front(static_cast<std::size_t>(nf), 0);
+  for (std::int64_t q = p.small_offsets[0]; q < p.small_offsets[levels]; ++q) {
+    const std::int64_t f = p.small_fronts[q];
+    p.chain_first.push_back(f);
+    p.chain_last.push_back(f);
+    level_front[f] = 1;
+  }
+  for (const std::int64_t r : p.chain_last) {
+    const index_t parent = t.parent[r];
+    if (parent >= 0 && level_front[parent]) {
+      p.chain_parent[r] = parent;
+      ++p.chain_wait[parent];
+    }
+  }
+}
+
 /// The plan of the whole tree `t` (with its extend-add map `child_rows`, e.g.
 /// Analysis::child_rows) and its level schedule `s` on a device of `n_sm` multiprocessors:
 /// plan_inverse_extend_add, then plan_sweeps over every front.
 inline SolvePlan make_solve_plan(const symbolic::AssemblyTree& t,
                                  const symbolic::ChildRowMap& child_rows,
                                  const symbolic::LevelSchedule& s, int n_sm,
-                                 SolvePath path = SolvePath::model) {
+                                 SolvePath path = SolvePath::model, bool chain = false) {
   SolvePlan p;
   plan_inverse_extend_add(t, child_rows, p);
-  plan_sweeps(t, s, n_sm, path, nullptr, p);
+  plan_sweeps(t, s, n_sm, path, nullptr, p, nullptr, chain);
+  if (chain) plan_chain(t, s, p);
   return p;
 }
 
