@@ -108,9 +108,10 @@ constexpr double kBlockTileSeconds = 2e-6;
 constexpr double kBlockFrontSeconds = 2e-6;
 // Per kernel launched from the solve's graph: the launch and the drain before the next.
 constexpr double kLaunchSeconds = 3e-6;
-// In the chain's launch (plan_chain): from a front's end to its parent's start on another
-// block (a release, an acquire that sees it, a barrier).
-constexpr double kChainSeconds = 1e-6;
+// In the chain's launch (plan_chain), per item: from a front's end to its parent's start on
+// another block (a release, an acquire that sees it, a barrier) and the item's own cost (its
+// ticket, its block's start), so that tiny subtrees stay whole rather than one item a front.
+constexpr double kChainSeconds = 4e-6;
 // cuBLAS over one front: most of the device's bandwidth...
 constexpr double kLibraryBytesPerSecond = 2e12;
 // ...after two library calls' launch and enqueue cost...
