@@ -20,7 +20,10 @@
 // front over the whole device but costs a few microseconds of launch per call, which a
 // level of thousands of small fronts cannot afford. The planner picks the subtrees
 // and, per level, the split that minimize a simple time model (see kBlockBytesPerSecond
-// etc.): the largest fronts go to the library as long as that shortens the level.
+// etc.): the largest fronts go to the library as long as that shortens the level. The
+// chain (plan_chain) then runs the subtrees and the bottom levels of block-path fronts as
+// one launch whose blocks wait on the device for the fronts they read, instead of a
+// launch per level, and the model prices the subtrees for it.
 // Gathering by parent row (the inverse of the children's relative positions) lets every
 // thread build its row alone — no ordering between children, no atomics, the same
 // summation order as the CPU solve's child-by-child extend-add.
@@ -62,8 +65,8 @@ struct SolveTree {
   double* part;  ///< SolvePlan::part_total × nrhs doubles (the backward partial products)
 };
 
-/// The chain of a solve plan on the device (SolvePlan::chain_*, solve_plan.hpp:
-/// plan_chain; device arrays, tree numbering) and its synchronization words, `sync`:
+/// The chain of a solve plan on the device (SolvePlan::chain_*, plan_chain below; device
+/// arrays, tree numbering) and its synchronization words, `sync`:
 /// 2·n_fronts + 3 zeros before the first launch — per front the children arrived
 /// (forward) and the epoch at which its backward step ended, then the ticket, the blocks
 /// finished and the epoch; each launch leaves the first of these per front, the ticket and
