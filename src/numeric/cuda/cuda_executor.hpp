@@ -329,7 +329,7 @@ class CudaExecutor final : public numeric::Executor {
   /// sweep, the backward sweep or both, with the diagonal solve of an LDLᵀ factor between
   /// them when both; `panels` is where sp's panel offsets point. Enqueued on stream_
   /// (cuda_solve.cu). With `forward_subtrees` false the forward sweep leaves out its first
-  /// launch, the plan's subtrees, which the caller then enqueues before it
+  /// launch, the plan's subtrees (or its chain), which the caller then enqueues before it
   /// (enqueue_forward_subtrees).
   void enqueue_solve_sweeps(const Analysis& an, const numeric::NumericFactor& fac,
                             const SweepPlanDevice& sp, const double* panels, index_t nrhs,
@@ -721,7 +721,8 @@ class CudaExecutor final : public numeric::Executor {
     bool part_rows_current = false;        ///< the row arrays hold the last factorization's
     /// The sweeps of a solve recorded as a CUDA graph (Options::gpu_solve_graph) and
     /// replayed, one launch per solve, while graph_key (solve_graph_key) is unchanged;
-    /// all but the forward subtrees' launch, which each solve enqueues just before it.
+    /// all but the forward sweep's first launch (the subtrees', or the chain's), which each
+    /// solve enqueues just before it.
     cudaGraphExec_t graph = nullptr;
     std::vector<std::uintptr_t> graph_key;
   } dsolve_;
