@@ -41,13 +41,13 @@ done | sort -u | grep -v -E '/(libc|libm|libdl|libpthread|librt|libgcc_s|libstdc
 xz -T2 -6 .carry/lib/libopenblas.so.0 .carry/lib/liblapack.so.3 .carry/bin/*
 du -sh .carry
 # cuDSS's library is 167 MB (143 MB compressed), over what one call carries: it travels
-# in parts of 24 MiB, which leave room for the tracked tree (about 27 MiB) within the 64 MiB
-# a call carries, .cudss1, .cudss2, ..., one per call, each copied whole (its part and
+# in parts of 13 MiB, which leave room for the tracked tree (about 40 MB) within what a
+# call carries, .cudss1, .cudss2, ..., one per call, each copied whole (its part and
 # the file `parts`, their number) to build-cudss/ on the device (ignored paths there are
 # kept while the machine stays warm); carried.sh joins them once all are there.
 if [ -f .whl/nvidia/cu13/lib/libcudss.so.1 ] && [ ! -f .cudss1/parts ]; then
   rm -rf .cudss[0-9]* .cudss-part-*
-  xz -T2 -6 -c .whl/nvidia/cu13/lib/libcudss.so.1 | split -b 24M - .cudss-part-
+  xz -T2 -6 -c .whl/nvidia/cu13/lib/libcudss.so.1 | split -b 13M - .cudss-part-
   i=0
   for f in .cudss-part-*; do i=$((i + 1)); mkdir -p ".cudss$i" && mv "$f" ".cudss$i/${f#.cudss-}"; done
   for d in .cudss[0-9]*; do echo "$i" >"$d/parts"; done

@@ -4,7 +4,8 @@
 // the barrier placement and the warp exchanges in CI against the CPU solve). Only
 // solve_kernels.cu and that test include this file. It uses nothing from CUDA but
 // threadIdx/blockDim, __syncthreads, __shfl_sync, __shfl_down_sync, __device__ and
-// __shared__ (the tile a warp solves).
+// __shared__ (the tile a warp solves), and one cache hint, a PTX prefetch compiled for the
+// device only (prefetch_lines).
 //
 // Per front (m rows, k pivots; panel L column-major m×k, leading dimension m; W the
 // front's block of the scratch, m×nrhs with leading dimension m, at row_offsets[f]·nrhs):
@@ -637,6 +638,42 @@ __device__ void sweep_backward(const SolveTree& t, std::int64_t f, double* scrat
       __syncthreads();
     }
   }
+}
+
+// Asks the SM's L1 cache for the 128-byte lines of [begin, end), the block's threads taking
+// one line each in turn (a hint: no register waits for it; nothing on the host).
+__device__ void prefetch_lines(const void* begin, const void* end) {
+#ifdef __CUDA_ARCH__
+  constexpr std::uintptr_t kLine = 128;
+  const std::uintptr_t b = reinterpret_cast<std::uintptr_t>(begin) & ~(kLine - 1);
+  const std::uintptr_t e = reinterpret_cast<std::uintptr_t>(end);
+  for (std::uintptr_t p = b + threadIdx.x * kLine; p < e; p += blockDim.x * kLine)
+    asm volatile("prefetch.global.L1 [%0];" ::"l"(p));
+#else
+  (void)begin;
+  (void)end;
+#endif
+}
+
+/// What the forward (or backward) step of front f reads that no block writes during the
+/// solve — its rows, the children's update positions adding into them (forward) and its
+/// panel (L, and U12 for LU) — asked into the L1 cache of the block's SM, for a block
+/// about to wait for other blocks (the chain's level fronts): the step's index and panel
+/// loads after the wait then find them there, and only the loads of x and of the update
+/// vectors, which the awaited blocks write, go to memory. Every thread calls it; it has no
+/// barrier and writes nothing.
+__device__ void prefetch_front(const SolveTree& t, std::int64_t f, bool forward, bool lu) {
+  const std::int64_t m = t.n_rows[f], k = t.n_pivots[f], ro = t.row_offsets[f];
+  prefetch_lines(t.first_pivot + f, t.first_pivot + f + 1);
+  prefetch_lines(t.u_offset + f, t.u_offset + f + 1);
+  prefetch_lines(t.part_offset + f, t.part_offset + f + 1);
+  prefetch_lines(t.rows + ro, t.rows + ro + m);
+  if (forward) {
+    prefetch_lines(t.inv_offsets + ro, t.inv_offsets + ro + m + 1);
+    prefetch_lines(t.inv_src + t.inv_offsets[ro], t.inv_src + t.inv_offsets[ro + m]);
+  }
+  const double* L = t.panels + t.panel_offset[f];
+  prefetch_lines(L, L + (lu ? k * (2 * m - k) : m * k));  // L (m × k), then U12 (k × (m − k))
 }
 
 /// The whole forward step of front f by one block: gather, sweep and scatter, with a

@@ -104,7 +104,9 @@ __global__ void __launch_bounds__(kSweepThreads, Batch >= 16 ? 2 : 4)
 }
 
 // The chain (launch_chain_forward/backward). Thread 0 takes the item and waits; the
-// barrier after it hands what the acquire made visible to the block. At the end every
+// barrier after it hands what the acquire made visible to the block. Before waiting, the
+// block asks for the front's rows, index maps and panel (prefetch_front), which no block
+// writes, so that its step's latency after the wait is that of x and u alone. At the end every
 // thread's writes are fenced, the barrier gathers them, and thread 0 releases them to the
 // waiting item; the last block to finish clears the ticket and the count and advances the
 // epoch (every block read it before it counted itself finished).
@@ -156,7 +158,8 @@ __global__ void __launch_bounds__(kSweepThreads, Batch >= 16 ? 2 : 4)
   const ChainItem item = chain_take(c, false);
   const std::int64_t first = c.first[item.q], last = c.last[item.q];
   unsigned long long* arrived = c.sync;
-  if (c.wait[first] > 0) {
+  if (c.wait[first] > 0) {  // a level front (first == last): its children first
+    solve_device::prefetch_front(t, first, true, lu);
     chain_wait_for(arrived + first, static_cast<unsigned long long>(c.wait[first]));
     if (threadIdx.x == 0) arrived[first] = 0;  // every child has counted: ready for the next
   }
@@ -178,7 +181,10 @@ __global__ void __launch_bounds__(kSweepThreads, Batch >= 16 ? 2 : 4)
   const std::int64_t first = c.first[item.q], last = c.last[item.q];
   unsigned long long* ended = c.sync + c.n_fronts;  // epoch + 1 once a front's step ended
   const std::int64_t parent = c.parent[last];
-  if (parent >= 0) chain_wait_for(ended + parent, item.epoch + 1);
+  if (parent >= 0) {
+    solve_device::prefetch_front(t, last, false, lu);
+    chain_wait_for(ended + parent, item.epoch + 1);
+  }
   for (std::int64_t f = last; f >= first; --f)
     solve_device::front_backward<Batch>(t, f, x, scratch, nrhs, lu, unit);
   __threadfence();
