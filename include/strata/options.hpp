@@ -162,9 +162,10 @@ struct Options {
   /// updates are spread over more threads (src/numeric/cuda/kernels.cu). The same
   /// results bit for bit. 0: a thread per row always. In [0, 512]; default 512.
   int gpu_small_front_threads = 512;
-  /// CUDA backend, LU with the factor kept on the device: a launch group (a level of the
-  /// schedule, or the part of one that fits the device pool) whose fronts all fit shared
-  /// memory (up to about 168 rows on an H100) and gpu_small_front_rows is assembled,
+  /// CUDA backend, LU and Cholesky with the factor kept on the device: a launch group (a
+  /// level of the schedule, or the part of one that fits the device pool) whose fronts all
+  /// fit shared memory (up to about 168 rows for LU, 161 for Cholesky on an H100) and
+  /// gpu_small_front_rows is assembled,
   /// factored, and its contribution blocks and panels stored by one launch, each front
   /// assembled straight into shared memory, instead of four launches through the device
   /// pool (src/numeric/cuda/kernels.cu). The same results bit for bit. Default on.

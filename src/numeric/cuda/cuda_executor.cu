@@ -26,8 +26,8 @@
 //      the factor stays resident for an LLᵀ or LU: then the panels stay on the device
 //      only (NumericFactor::held names it; download_panels on demand) and
 //      only the pivots' diagonal entries come back for the host bookkeeping.
-// A chunk of LU fronts that all fit shared memory, whose panels stay on the device, takes
-// steps 1–4 in one launch instead (factor_chunk_fused, Options::gpu_fused_small_batches).
+// A chunk of LU or Cholesky fronts that all fit shared memory, whose panels stay on the device,
+// takes steps 1–4 in one launch instead (factor_chunk_fused, Options::gpu_fused_small_batches).
 // CUDA events between the steps give FactorStats::device_phases.
 // A front whose working set alone is over the budget is factored slab by slab from
 // pinned host memory (tiled_front.cu; LLᵀ and LU only).

@@ -407,8 +407,8 @@ class CudaExecutor final : public numeric::Executor {
   /// Where the chunk's panels are packed (the device factor, the part's own buffer or the
   /// staging area, as the layout's panel offsets assume).
   double* chunk_panel_target(const numeric::FactorContext& ctx);
-  /// The whole chunk by one launch when every front is a small LU front that fits shared
-  /// memory and the panels stay on the device (Options::gpu_fused_small_batches).
+  /// The whole chunk by one launch when every front is a small LU or Cholesky front that fits
+  /// shared memory and the panels stay on the device (Options::gpu_fused_small_batches).
   void factor_chunk_fused(const numeric::FactorContext& ctx, ChunkRecord& rec);
   /// A device-only chunk's results packed for one copy (factor_chunk.cu); false when not.
   bool chunk_pack_results(ChunkRecord& rec);

@@ -67,8 +67,10 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
   rec.max_rows = 0;
   for (index_t p = begin; p < end; ++p)
     rec.max_rows = std::max(rec.max_rows, t.n_rows(s.fronts[p]));
-  rec.fused = fused_small_batches_ && rec.lu && rec.dev_only && rec.max_rows <= small_front_rows_ &&
-              rec.max_rows <= lu_shared_max_rows();
+  const bool llt = !rec.lu && !rec.ldlt;
+  rec.fused = fused_small_batches_ && (rec.lu || llt) && rec.dev_only &&
+              rec.max_rows <= small_front_rows_ &&
+              rec.max_rows <= (rec.lu ? lu_shared_max_rows() : llt_fused_max_rows());
   chunk_layout(ctx, rec);
   if (rec.fused) {
     factor_chunk_fused(ctx, rec);
@@ -109,8 +111,8 @@ void CudaExecutor::factor_chunk(const numeric::FactorContext& ctx, index_t begin
   if (rec.ldlt && !rec.dev_only) flush_chunk(ctx);
 }
 
-// A chunk of small LU fronts whose panels stay on the device, by one launch
-// (launch_lu_small_fused), its results (pivot checks, permutations, diagonals) written
+// A chunk of small LU or Cholesky fronts whose panels stay on the device, by one launch
+// (launch_small_fused), its results (pivot checks, permutations, diagonals) written
 // back to back into the record's half of packed_results_ and fetched by one copy instead
 // of four, on copy_stream_: each copy has a latency of its own, and a chunk of the
 // multibody matrices' lower levels computes for a few tens of microseconds, so the next
@@ -128,10 +130,10 @@ void CudaExecutor::factor_chunk_fused(const numeric::FactorContext& ctx, ChunkRe
   if (2 * ns + np + nd > half)
     throw InternalError("factor_chunk_fused: the results buffer was not sized for this chunk");
   STRATA_CUDA(cudaEventRecord(rec.ev[1], stream_));
-  launch_lu_small_fused(cur_->tree, rec.small_pos, static_cast<std::int64_t>(ns), rec.max_rows,
-                        values_.data(), ctx.static_pivot, ctx.diagonal_pivot_threshold, r, r + ns,
-                        r + 2 * ns, rec.perm_offset, rec.stage_offset, pack_to, rec.diag_offset,
-                        reinterpret_cast<double*>(r + 2 * ns + np), small_front_threads_, stream_);
+  launch_small_fused(cur_->tree, rec.lu, rec.small_pos, static_cast<std::int64_t>(ns), rec.max_rows,
+                     values_.data(), ctx.static_pivot, ctx.diagonal_pivot_threshold, r, r + ns,
+                     r + 2 * ns, rec.perm_offset, rec.stage_offset, pack_to, rec.diag_offset,
+                     reinterpret_cast<double*>(r + 2 * ns + np), small_front_threads_, stream_);
   STRATA_CUDA(cudaEventRecord(rec.ev[2], stream_));
   rec.panels_async = false;
   const std::size_t words = 2 * ns + np + nd;

@@ -17,12 +17,12 @@
 // there and factors it in place (lu_small_shared_kernel); when the whole launch group is
 // such fronts and the factor stays on the device, one launch does the group's assembly,
 // factorization, stores and packing, each front assembled straight into shared memory
-// (lu_small_fused_kernel). A launch of few fronts gets blocks wider than a thread per row
-// (small_front_threads), so that the trailing updates, a large share of a front's time,
-// are spread over more threads of an SM that would otherwise idle. Threshold partial pivoting for
-// LU searches only the fully summed rows (restricted pivoting), keeps the diagonal when it
-// is at least u times the largest candidate, and replaces tiny pivots by ±static_pivot,
-// exactly as the CPU kernels do (numeric/cpu/dense_front.hpp).
+// (small_fused_kernel, for Cholesky groups too). A launch of few fronts gets blocks wider than a
+// thread per row (small_front_threads), so that the trailing updates, a large share of a front's
+// time, are spread over more threads of an SM that would otherwise idle. Threshold partial pivoting
+// for LU searches only the fully summed rows (restricted pivoting), keeps the diagonal when it is
+// at least u times the largest candidate, and replaces tiny pivots by ±static_pivot, exactly as the
+// CPU kernels do (numeric/cpu/dense_front.hpp).
 #include <algorithm>
 #include <atomic>
 #include <cfloat>
@@ -309,7 +309,8 @@ __device__ void llt_front(double* F, std::int64_t m, std::int64_t k, std::int64_
 }
 
 // Blocked right-looking partial Cholesky of a small front (m ≤ blockDim.x rows, lower
-// triangle), one row per thread: thread i keeps row i of the current panel of kSmallNb
+// triangle, leading dimension ld: m in the pool, shared_ld(m) in shared memory), one row
+// per thread: thread i keeps row i of the current panel of kSmallNb
 // pivot columns in registers, factors the panel there (each column's entries shared
 // through shared memory as they are finished), writes it back, and then updates the
 // trailing lower triangle by the rank-kSmallNb product of the panel with itself (all the
@@ -366,8 +367,8 @@ __device__ __forceinline__ void trailing_update(double* F, std::int64_t ld, std:
     F[c * ld + ri] = acc;
   }
 }
-__device__ void llt_front_blocked(double* F, std::int64_t m, std::int64_t k, std::int64_t* info,
-                                  double (*lsh)[kThreads]) {
+__device__ void llt_front_blocked(double* F, std::int64_t ld, std::int64_t m, std::int64_t k,
+                                  std::int64_t* info, double (*lsh)[kThreads]) {
   // lsh[p][row]: the panel's columns, L(row, j0 + p) (the kernel's shared buffer)
   __shared__ int sfail;
   const std::int64_t i = threadIdx.x;  // this thread's row
@@ -379,7 +380,7 @@ __device__ void llt_front_blocked(double* F, std::int64_t m, std::int64_t k, std
     double r[kSmallNb];
 #pragma unroll
     for (int p = 0; p < kSmallNb; ++p)
-      r[p] = (p < w && row && i >= j0 + p) ? F[(j0 + p) * m + i] : 0.0;
+      r[p] = (p < w && row && i >= j0 + p) ? F[(j0 + p) * ld + i] : 0.0;
 #pragma unroll
     for (int p = 0; p < kSmallNb; ++p) {
       if (p < w) {
@@ -406,11 +407,11 @@ __device__ void llt_front_blocked(double* F, std::int64_t m, std::int64_t k, std
     }
 #pragma unroll
     for (int p = 0; p < kSmallNb; ++p)
-      if (p < w && row && i >= j0 + p) F[(j0 + p) * m + i] = r[p];
+      if (p < w && row && i >= j0 + p) F[(j0 + p) * ld + i] = r[p];
     // trailing lower triangle: F(i, c) −= Σ_p L(i, j0 + p) L(c, j0 + p), j0 + w ≤ c ≤ i;
     // every row's panel is in lsh by now
     trailing_update(
-        F, m, m, j0 + w, w, [&](int p, std::int64_t c) { return lsh[p][c]; }, true,
+        F, ld, m, j0 + w, w, [&](int p, std::int64_t c) { return lsh[p][c]; }, true,
         [&](std::int64_t ri, int p) { return lsh[p][ri]; });
     __syncthreads();  // the next panel reads what this one wrote, and reuses lsh
   }
@@ -746,7 +747,7 @@ __global__ void __launch_bounds__(kBlock, kThreads * 2 / kBlock)
   } else {
     __syncthreads();
     if (m <= blockDim.x)
-      llt_front_blocked(F, m, k, info + i, panel);
+      llt_front_blocked(F, m, m, k, info + i, panel);
     else
       llt_front(F, m, k, info + i);
   }
@@ -813,21 +814,24 @@ __global__ void __launch_bounds__(kBlock, kThreads * 2 / kBlock)
   }
 }
 
-// A launch group of small LU fronts in one launch (launch_lu_small_fused): each block
-// assembles its front straight into shared memory in assemble_kernel's order of additions
-// (zeros, the original entries at distinct places, then each child's block, one child
-// after another), factors it there (lu_front_blocked<true>) and writes out what the
-// separate launches would have left: the panel and U12 into the factor, the contribution
-// block into the arena, the pivots' diagonal entries. One launch per group instead of
-// four (assembly, factorization, store, pack), and no trip of the front through the pool.
-// Dynamic shared memory as lu_small_shared_kernel's.
-template <int kBlock>
+// A launch group of small LU (kLu) or Cholesky fronts in one launch (launch_small_fused):
+// each block assembles its front straight into shared memory in assemble_kernel's order of
+// additions (zeros, the original entries at distinct places, then each child's block —
+// Cholesky: its lower triangle — one child after another), factors it there
+// (lu_front_blocked<true>, llt_front_blocked) and writes out what the separate launches
+// would have left: the panel (and U12) into the factor, the contribution block (Cholesky:
+// its lower triangle, as store_cb_kernel) into the arena, the pivots' diagonal entries. One
+// launch per group instead of four (assembly, factorization, store, pack), and no trip of
+// the front through the pool. Dynamic shared memory as lu_small_shared_kernel's, and for
+// Cholesky llt_front_blocked's panel buffer after the front (kLltPanelBytes).
+constexpr std::size_t kLltPanelBytes = sizeof(double) * kSmallNb * kThreads;
+template <int kBlock, bool kLu>
 __global__ void __launch_bounds__(kBlock, kThreads * 2 / kBlock)
-    lu_small_fused_kernel(DeviceTree t, const std::int64_t* positions, const double* values,
-                          double static_pivot, double threshold, std::int64_t* info,
-                          std::int64_t* perturbed, std::int64_t* perm,
-                          const std::int64_t* perm_offset, const std::int64_t* panel_offset,
-                          double* panels, const std::int64_t* diag_offset, double* diag) {
+    small_fused_kernel(DeviceTree t, const std::int64_t* positions, const double* values,
+                       double static_pivot, double threshold, std::int64_t* info,
+                       std::int64_t* perturbed, std::int64_t* perm, const std::int64_t* perm_offset,
+                       const std::int64_t* panel_offset, double* panels,
+                       const std::int64_t* diag_offset, double* diag) {
   extern __shared__ double fs[];
   const std::int64_t b = blockIdx.x;
   const std::int64_t f = t.fronts[positions[b]];
@@ -877,7 +881,7 @@ __global__ void __launch_bounds__(kBlock, kThreads * 2 / kBlock)
     for (int jj = warp; jj < cm; jj += warps) {
       double* col = fs + static_cast<int>(rel[jj]) * ld;
       const double* src = cb + static_cast<std::int64_t>(jj) * cm;
-      int ii = lane;
+      int ii = (kLu ? 0 : jj) + lane;  // Cholesky: the block's lower triangle
       for (; ii + (kUnroll - 1) * kWarp < cm; ii += kUnroll * kWarp) {
         std::int64_t to[kUnroll];
         double v[kUnroll];
@@ -893,27 +897,35 @@ __global__ void __launch_bounds__(kBlock, kThreads * 2 / kBlock)
     }
     __syncthreads();  // one child after another: no two additions to one entry collide
   }
-  lu_front_blocked<true>(fs, ld, m, k, static_pivot, threshold, perm + perm_offset[b],
-                         perturbed + b, nullptr,
-                         t.lu_interchanges ? t.lu_interchanges + f : nullptr);
+  if constexpr (kLu) {
+    lu_front_blocked<true>(fs, ld, m, k, static_pivot, threshold, perm + perm_offset[b],
+                           perturbed + b, nullptr,
+                           t.lu_interchanges ? t.lu_interchanges + f : nullptr);
+  } else {
+    (void)static_pivot, (void)threshold, (void)perm, (void)perm_offset;
+    auto* lsh = reinterpret_cast<double(*)[kThreads]>(fs + m * ld);
+    llt_front_blocked(fs, ld, m, k, info + b, lsh);
+  }
   __syncthreads();
   double* panel = panels + panel_offset[b];
-  for (int x = tid; x < m * k; x += step) {  // L11\U11 and L21: columns [0, k), ld m
+  for (int x = tid; x < m * k; x += step) {  // L11\U11 (L11) and L21: columns [0, k), ld m
     const int c = x / m;
     panel[x] = fs[c * ld + (x - c * m)];
   }
-  double* u12 = panel + static_cast<std::int64_t>(m) * k;
-  for (int x = tid; x < k * mc; x += step) {  // U12(i, j) = F(i, k + j), ld k
-    const int j = x / k;
-    u12[x] = fs[(k + j) * ld + (x - j * k)];
+  if constexpr (kLu) {
+    double* u12 = panel + static_cast<std::int64_t>(m) * k;
+    for (int x = tid; x < k * mc; x += step) {  // U12(i, j) = F(i, k + j), ld k
+      const int j = x / k;
+      u12[x] = fs[(k + j) * ld + (x - j * k)];
+    }
   }
   double* d = diag + diag_offset[b];
   for (int i = tid; i < k; i += step) d[i] = fs[i * ld + i];
   if (t.parent[f] >= 0 && mc > 0) {  // the contribution block, ld mc
     double* out = t.cb_ptr[f];
     for (int x = tid; x < mc * mc; x += step) {
-      const int j = x / mc;
-      out[x] = fs[(k + j) * ld + k + (x - j * mc)];
+      const int j = x / mc, i = x - j * mc;
+      if (kLu || i >= j) out[x] = fs[(k + j) * ld + k + i];
     }
   }
 }
@@ -993,9 +1005,18 @@ std::size_t lu_shared_static_bytes() {
   return static_bytes(dev).load(std::memory_order_acquire);
 }
 
+// Per device: the most rows of a front the fused Cholesky kernel takes (0: not asked yet,
+// −1: none; lu_shared_max_rows sets it).
+std::atomic<int>& llt_fused_rows(int dev) {
+  static std::atomic<int> rows[kDevices];
+  return rows[dev];
+}
+
 // The most rows of a front lu_small_shared_kernel takes on the current device: its copy
 // and the kernel's own shared memory within the device's opt-in limit per block (which the
-// kernel is allowed once per device). Devices of one process may differ, so per device.
+// kernel is allowed once per device); also the fused Cholesky kernel's, whose front shares
+// that room with its panel buffer (llt_fused_max_rows). Devices of one process may differ,
+// so per device.
 std::int64_t lu_shared_max_rows() {
   static std::atomic<int> rows[kDevices];  // 0: not asked yet
   int dev = 0;
@@ -1003,13 +1024,22 @@ std::int64_t lu_shared_max_rows() {
   if (dev < kDevices && rows[dev].load(std::memory_order_acquire) > 0) return rows[dev].load();
   int optin = 0;
   STRATA_CUDA(cudaDeviceGetAttribute(&optin, cudaDevAttrMaxSharedMemoryPerBlockOptin, dev));
-  // the four kernels that take a front in dynamic shared memory, beside their own
-  const void* kernels[] = {reinterpret_cast<const void*>(lu_small_shared_kernel<kThreads>),
-                           reinterpret_cast<const void*>(lu_small_shared_kernel<kWideThreads>),
-                           reinterpret_cast<const void*>(lu_small_fused_kernel<kThreads>),
-                           reinterpret_cast<const void*>(lu_small_fused_kernel<kWideThreads>)};
+  // the kernels that take a front in dynamic shared memory, beside their own
+  const void* lu_kernels[] = {
+      reinterpret_cast<const void*>(lu_small_shared_kernel<kThreads>),
+      reinterpret_cast<const void*>(lu_small_shared_kernel<kWideThreads>),
+      reinterpret_cast<const void*>(small_fused_kernel<kThreads, true>),
+      reinterpret_cast<const void*>(small_fused_kernel<kWideThreads, true>)};
+  const void* llt_kernels[] = {
+      reinterpret_cast<const void*>(small_fused_kernel<kThreads, false>),
+      reinterpret_cast<const void*>(small_fused_kernel<kWideThreads, false>)};
   cudaFuncAttributes attr{};
-  for (const void* k : kernels) {
+  for (const void* k : lu_kernels) {
+    cudaFuncAttributes a{};
+    STRATA_CUDA(cudaFuncGetAttributes(&a, k));
+    attr.sharedSizeBytes = std::max(attr.sharedSizeBytes, a.sharedSizeBytes);
+  }
+  for (const void* k : llt_kernels) {
     cudaFuncAttributes a{};
     STRATA_CUDA(cudaFuncGetAttributes(&a, k));
     attr.sharedSizeBytes = std::max(attr.sharedSizeBytes, a.sharedSizeBytes);
@@ -1022,11 +1052,27 @@ std::int64_t lu_shared_max_rows() {
   while (m < kThreads && shared_front_bytes(m + 1) <= room) ++m;
   if (m > 0) {
     const int bytes = static_cast<int>(shared_front_bytes(m));
-    for (const void* k : kernels)
+    for (const void* k : lu_kernels)
       STRATA_CUDA(cudaFuncSetAttribute(k, cudaFuncAttributeMaxDynamicSharedMemorySize, bytes));
   }
+  int ml = 0;
+  while (ml < kThreads && shared_front_bytes(ml + 1) + kLltPanelBytes <= room) ++ml;
+  if (ml > 0) {
+    const int bytes = static_cast<int>(shared_front_bytes(ml) + kLltPanelBytes);
+    for (const void* k : llt_kernels)
+      STRATA_CUDA(cudaFuncSetAttribute(k, cudaFuncAttributeMaxDynamicSharedMemorySize, bytes));
+  }
+  if (dev < kDevices) llt_fused_rows(dev).store(ml > 0 ? ml : -1, std::memory_order_release);
   if (dev < kDevices) rows[dev].store(m > 0 ? m : -1, std::memory_order_release);
   return m;
+}
+
+std::int64_t llt_fused_max_rows() {
+  int dev = 0;
+  STRATA_CUDA(cudaGetDevice(&dev));
+  if (dev >= kDevices) return 0;
+  if (llt_fused_rows(dev).load(std::memory_order_acquire) == 0) (void)lu_shared_max_rows();
+  return std::max(llt_fused_rows(dev).load(std::memory_order_acquire), 0);
 }
 
 unsigned small_front_threads(std::int64_t count, std::int64_t max_rows, int max_threads,
@@ -1091,28 +1137,27 @@ void launch_factor_small(const DeviceTree& t, const std::int64_t* positions, std
   STRATA_CUDA_LAUNCH();
 }
 
-void launch_lu_small_fused(const DeviceTree& t, const std::int64_t* positions, std::int64_t count,
-                           std::int64_t max_rows, const double* values, double static_pivot,
-                           double threshold, std::int64_t* info, std::int64_t* perturbed,
-                           std::int64_t* perm, const std::int64_t* perm_offset,
-                           const std::int64_t* panel_offset, double* panels,
-                           const std::int64_t* diag_offset, double* diag, int max_threads,
-                           cudaStream_t s) {
+void launch_small_fused(const DeviceTree& t, bool lu, const std::int64_t* positions,
+                        std::int64_t count, std::int64_t max_rows, const double* values,
+                        double static_pivot, double threshold, std::int64_t* info,
+                        std::int64_t* perturbed, std::int64_t* perm,
+                        const std::int64_t* perm_offset, const std::int64_t* panel_offset,
+                        double* panels, const std::int64_t* diag_offset, double* diag,
+                        int max_threads, cudaStream_t s) {
   if (count == 0) return;
-  if (max_rows > lu_shared_max_rows())
-    throw InternalError("launch_lu_small_fused: a front of " + std::to_string(max_rows) +
+  if (max_rows > (lu ? lu_shared_max_rows() : llt_fused_max_rows()))
+    throw InternalError("launch_small_fused: a front of " + std::to_string(max_rows) +
                         " rows does not fit shared memory");
-  const std::size_t bytes = shared_front_bytes(max_rows);
+  const std::size_t bytes = shared_front_bytes(max_rows) + (lu ? 0 : kLltPanelBytes);
   const unsigned threads = small_front_threads(count, max_rows, max_threads, bytes);
   const unsigned blocks = static_cast<unsigned>(count);
-  if (threads > static_cast<unsigned>(kThreads))
-    lu_small_fused_kernel<kWideThreads><<<blocks, threads, bytes, s>>>(
-        t, positions, values, static_pivot, threshold, info, perturbed, perm, perm_offset,
-        panel_offset, panels, diag_offset, diag);
-  else
-    lu_small_fused_kernel<kThreads><<<blocks, threads, bytes, s>>>(
-        t, positions, values, static_pivot, threshold, info, perturbed, perm, perm_offset,
-        panel_offset, panels, diag_offset, diag);
+  const bool wide = threads > static_cast<unsigned>(kThreads);
+  auto kernel =
+      lu ? (wide ? small_fused_kernel<kWideThreads, true> : small_fused_kernel<kThreads, true>)
+         : (wide ? small_fused_kernel<kWideThreads, false> : small_fused_kernel<kThreads, false>);
+  kernel<<<blocks, threads, bytes, s>>>(t, positions, values, static_pivot, threshold, info,
+                                        perturbed, perm, perm_offset, panel_offset, panels,
+                                        diag_offset, diag);
   STRATA_CUDA_LAUNCH();
 }
 

@@ -74,33 +74,39 @@ void launch_factor_small(const DeviceTree& t, const std::int64_t* positions, std
                          std::int64_t* perm, const std::int64_t* perm_offset, int max_threads,
                          cudaStream_t s);
 
-/// A launch group of small LU fronts, all of them, by one launch, each front by one block
-/// in shared memory (max_rows ≤ lu_shared_max_rows()): the front assembled there as
-/// launch_assemble assembles it (zeroed, the original entries of `values`, each child's
-/// contribution block in child order: the same bits), factored as launch_factor_small
-/// factors it, its panel (m×k, leading dimension m) and U12 (k×(m−k), leading dimension
-/// k) written to panels + panel_offset[i], its contribution block to t.cb_ptr[f] (fronts
-/// with a parent) and its k pivots' diagonal entries to diag + diag_offset[i]; the pool
-/// is not touched. `positions` lists the group's batch positions (device array of
-/// `count`); info, perturbed, perm and perm_offset as launch_factor_small's, per listed
-/// front. Blocks as launch_factor_small's for max_threads.
-void launch_lu_small_fused(const DeviceTree& t, const std::int64_t* positions, std::int64_t count,
-                           std::int64_t max_rows, const double* values, double static_pivot,
-                           double threshold, std::int64_t* info, std::int64_t* perturbed,
-                           std::int64_t* perm, const std::int64_t* perm_offset,
-                           const std::int64_t* panel_offset, double* panels,
-                           const std::int64_t* diag_offset, double* diag, int max_threads,
-                           cudaStream_t s);
+/// A launch group of small LU (lu) or Cholesky fronts, all of them, by one launch, each
+/// front by one block in shared memory (max_rows ≤ lu_shared_max_rows() for LU,
+/// llt_fused_max_rows() for Cholesky): the front assembled there as launch_assemble
+/// assembles it (zeroed, the original entries of `values`, each child's contribution block
+/// in child order: the same bits), factored as launch_factor_small factors it, its panel
+/// (m×k, leading dimension m) and for LU U12 (k×(m−k), leading dimension k) written to
+/// panels + panel_offset[i], its contribution block (Cholesky: the lower triangle, as
+/// launch_store_cb) to t.cb_ptr[f] (fronts with a parent) and its k pivots' diagonal
+/// entries to diag + diag_offset[i]; the pool is not touched. `positions` lists the
+/// group's batch positions (device array of `count`); info, perturbed, perm and
+/// perm_offset as launch_factor_small's, per listed front (Cholesky: info only, perturbed
+/// set to 0). Blocks as launch_factor_small's for max_threads.
+void launch_small_fused(const DeviceTree& t, bool lu, const std::int64_t* positions,
+                        std::int64_t count, std::int64_t max_rows, const double* values,
+                        double static_pivot, double threshold, std::int64_t* info,
+                        std::int64_t* perturbed, std::int64_t* perm,
+                        const std::int64_t* perm_offset, const std::int64_t* panel_offset,
+                        double* panels, const std::int64_t* diag_offset, double* diag,
+                        int max_threads, cudaStream_t s);
 
 /// The most rows of a front the shared-memory LU kernels (launch_factor_small's for LU,
-/// launch_lu_small_fused) take on the current device (0 when none fits).
+/// launch_small_fused's) take on the current device (0 when none fits).
 std::int64_t lu_shared_max_rows();
+
+/// The most rows of a front launch_small_fused takes for Cholesky on the current device
+/// (its front shares the room with llt_front_blocked's panel buffer; 0 when none fits).
+std::int64_t llt_fused_max_rows();
 
 /// The shared-memory LU kernels' own (static) shared memory per block on the current
 /// device, bytes.
 std::size_t lu_shared_static_bytes();
 
-/// The threads per block launch_factor_small and launch_lu_small_fused give `count` fronts
+/// The threads per block launch_factor_small and launch_small_fused give `count` fronts
 /// of at most max_rows rows on the current device (a power of two from 32 to 512), for
 /// fronts copied into shared_bytes of dynamic shared memory per block (0: none).
 unsigned small_front_threads(std::int64_t count, std::int64_t max_rows, int max_threads,
