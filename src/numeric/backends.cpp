@@ -61,7 +61,7 @@ std::vector<double> cuda_gather_and_scatter_positions(const std::vector<double>&
 std::vector<char> cuda_lu_fronts_batched(std::vector<std::vector<double>>&,
                                          const std::vector<index_t>&, const std::vector<index_t>&,
                                          index_t, double, double,
-                                         std::vector<std::vector<index_t>>*) {
+                                         std::vector<std::vector<index_t>>*, bool) {
   throw NotSupported("this build of strata has no CUDA backend (nvcc was not found at build time)");
 }
 

@@ -62,13 +62,15 @@ std::vector<double> cuda_gather_and_scatter_positions(const std::vector<double>&
 /// factor_front_lu leaves it (L11 unit lower, U11, L21, U12, the Schur complement in its
 /// contribution block), with its local permutation in (*perms)[i] when perms is given (the
 /// identity for a front factored without interchanges); a rejected one is partly factored.
-/// Throws InvalidInput for inconsistent sizes or strip < 1, NotSupported in a build
-/// without CUDA.
+/// `lookahead`: the strips' pivot blocks run one step ahead on a side stream, as the CUDA
+/// executor runs them (launch_lu_panel_batched's LuLookahead). Throws InvalidInput for
+/// inconsistent sizes or strip < 1, NotSupported in a build without CUDA.
 std::vector<char> cuda_lu_fronts_batched(std::vector<std::vector<double>>& fronts,
                                          const std::vector<index_t>& m,
                                          const std::vector<index_t>& k, index_t strip,
                                          double static_pivot, double threshold,
-                                         std::vector<std::vector<index_t>>* perms = nullptr);
+                                         std::vector<std::vector<index_t>>* perms = nullptr,
+                                         bool lookahead = false);
 
 /// divide_rn (numeric/cuda/divide.cuh), the quotient of the elimination kernels that divide,
 /// on CUDA device 0 for each pair (x[i], d[i]), so that tests can check it against the

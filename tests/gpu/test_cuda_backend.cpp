@@ -315,7 +315,8 @@ TEST_F(CudaBackend, RecursivePanelMatchesCpuFront) {
 // which the kernels factor with the interchanges: the CPU's permutation and factor, and a
 // rejection only for a pivot that needs static pivoting. All of it with the pivot threshold
 // u = 1 (partial pivoting) and u = 0.1 (multipliers up to 10 keep the diagonal), the CPU
-// given the same u.
+// given the same u; the kept fronts and the rejections again with each strip's pivot blocks
+// run one step ahead on a side stream (the executor's way), the factor bit for bit the same.
 class LuStrips : public CudaBackend, public testing::WithParamInterface<double> {};
 
 TEST_P(LuStrips, MatchCpuFront) {
@@ -359,14 +360,19 @@ TEST_P(LuStrips, MatchCpuFront) {
     ASSERT_EQ(st.perturbed, 0);
   }
   for (index_t strip : {64, 100, 256, 4096}) {
-    std::vector<std::vector<double>> gpu = in;
+    std::vector<std::vector<double>> gpu = in, ahead = in;
     const std::vector<char> kept =
         numeric::cuda_lu_fronts_batched(gpu, ms, ks, strip, 1e-8, threshold);
+    // the pivot blocks one step ahead on a side stream: the same operations, the same bits
+    const std::vector<char> kept_ahead =
+        numeric::cuda_lu_fronts_batched(ahead, ms, ks, strip, 1e-8, threshold, nullptr, true);
     for (std::size_t i = 0; i < shapes.size(); ++i) {
       SCOPED_TRACE("strip " + std::to_string(strip) + ", m=" + std::to_string(shapes[i].first) +
                    " k=" + std::to_string(shapes[i].second));
       ASSERT_TRUE(kept[i]);
+      ASSERT_TRUE(kept_ahead[i]);
       EXPECT_LT(difference(cpu[i], gpu[i]), 1e-13);
+      EXPECT_TRUE(ahead[i] == gpu[i]);
     }
   }
   // rejections: (m, k, row, column, value) written into a dominant front
@@ -415,12 +421,13 @@ TEST_P(LuStrips, MatchCpuFront) {
     EXPECT_EQ(static_cast<bool>(identity[i]), threshold == 1.0 ? c.kept : c.kept_at_a_tenth)
         << "case " << i;
   }
-  for (index_t strip : {64, 256}) {
+  for (auto [strip, ahead] : {std::pair<index_t, bool>{64, false}, {256, false}, {256, true}}) {
     std::vector<std::vector<double>> cg = cf;
     const std::vector<char> ck =
-        numeric::cuda_lu_fronts_batched(cg, ms, ks, strip, 1e-8, threshold);
+        numeric::cuda_lu_fronts_batched(cg, ms, ks, strip, 1e-8, threshold, nullptr, ahead);
     for (std::size_t i = 0; i < cases.size(); ++i) {
-      SCOPED_TRACE("strip " + std::to_string(strip) + ", case " + std::to_string(i));
+      SCOPED_TRACE("strip " + std::to_string(strip) + (ahead ? " ahead" : "") + ", case " +
+                   std::to_string(i));
       EXPECT_EQ(static_cast<bool>(ck[i]), static_cast<bool>(identity[i]));
       if (identity[i]) EXPECT_LT(difference(ccpu[i], cg[i]), 1e-13);
     }

@@ -129,6 +129,9 @@ CudaExecutor::CudaExecutor(const Options& o, int device)
   STRATA_CUDA(cudaStreamCreateWithFlags(&copy_stream_, cudaStreamNonBlocking));
   STRATA_CUDA(cudaStreamCreateWithFlags(&lu_.check_stream, cudaStreamNonBlocking));
   STRATA_CUDA(cudaEventCreateWithFlags(&lu_.strip_done, cudaEventDisableTiming));
+  STRATA_CUDA(cudaStreamCreateWithFlags(&lu_.ahead.stream, cudaStreamNonBlocking));
+  STRATA_CUDA(cudaEventCreateWithFlags(&lu_.ahead.ready, cudaEventDisableTiming));
+  STRATA_CUDA(cudaEventCreateWithFlags(&lu_.ahead.done, cudaEventDisableTiming));
   STRATA_CUDA(cudaEventCreateWithFlags(&panels_copied_, cudaEventDisableTiming));
   for (cudaEvent_t* e : {&team_.split_ready, &team_.help_ready, &team_.help_done, &team_.dist_ready,
                          &team_.dist_done})
@@ -161,6 +164,9 @@ CudaExecutor::~CudaExecutor() {
   cudaStreamDestroy(copy_stream_);
   cudaStreamDestroy(lu_.check_stream);
   cudaEventDestroy(lu_.strip_done);
+  cudaStreamDestroy(lu_.ahead.stream);
+  cudaEventDestroy(lu_.ahead.ready);
+  cudaEventDestroy(lu_.ahead.done);
   for (cudaEvent_t e :
        {team_.split_ready, team_.help_ready, team_.help_done, team_.dist_ready, team_.dist_done})
     cudaEventDestroy(e);

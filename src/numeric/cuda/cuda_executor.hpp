@@ -178,13 +178,14 @@ using LuFinalUpdate = std::function<void(std::size_t i, Lane&)>;
 /// `final_update(i, lane)`, which must do that update. bad[i] (device) as
 /// launch_lu_panel_batched's, zeroed here. `items` and `work` are grown as needed (Σ ⌈k/nb⌉
 /// items; count fronts' inverses); `strip_done` is recorded on lanes[0] after each strip's
-/// kernels, last after the last one's. Everything is enqueued; nothing waits on the host.
+/// kernels, last after the last one's; `ahead` (may be null) the strips' look-ahead stream
+/// and events (launch_lu_panel_batched). Everything is enqueued; nothing waits on the host.
 /// Throws InvalidInput for nb < 1.
 void enqueue_lu_strips(const std::vector<LuPanelItem>& fronts, std::int64_t nb,
                        const std::vector<Lane*>& lanes, DeviceBuffer<LuPanelItem>& items,
                        DeviceBuffer<LuPanelItem>& cb_items, DeviceBuffer<double>& work, int* bad,
                        const numeric::PivotPolicy& pivots, cudaEvent_t strip_done,
-                       const std::function<bool(std::size_t)>& may_batch,
+                       const LuLookahead* ahead, const std::function<bool(std::size_t)>& may_batch,
                        const LuFinalUpdate& final_update, std::vector<Lane*>& lane_of);
 
 class CudaExecutor final : public numeric::Executor {
@@ -677,6 +678,7 @@ class CudaExecutor final : public numeric::Executor {
     DeviceBuffer<LuPanelItem> cb_items;      ///< their contribution blocks' batched updates
     DeviceBuffer<std::int64_t> perm_offset;  ///< lu_unpivoted_results: the fronts' perm offsets
     cudaEvent_t strip_done = nullptr;        ///< enqueue_lu_strips' strip_done
+    LuLookahead ahead;                       ///< the strips' look-ahead stream and events
     cudaStream_t check_stream = nullptr;     ///< copies the LU checks beside the lanes' work
     DeviceBuffer<int> ipiv, info, bad;
     PinnedBuffer<int> bad_host;

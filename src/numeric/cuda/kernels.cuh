@@ -143,9 +143,16 @@ struct LuPanelItem {
   std::int64_t* perm;
 };
 
-/// Doubles of workspace launch_lu_panel_batched needs for `count` fronts (two 64×64
-/// inverses each).
+/// Doubles of workspace launch_lu_panel_batched needs for `count` fronts (two pairs of
+/// 64×64 inverses each: a step's and the next's).
 std::size_t lu_panel_work_size(std::int64_t count);
+
+/// A side stream and two events (no timing) for launch_lu_panel_batched's look-ahead: the
+/// next step's pivot block on `stream` while the current step's panels and update go on.
+struct LuLookahead {
+  cudaStream_t stream = nullptr;
+  cudaEvent_t ready = nullptr, done = nullptr;
+};
 
 /// The pivot block, L panel and U panel of large LU fronts without row interchanges, all
 /// fronts of the list together, three launches per 64 pivot columns on stream s
@@ -160,10 +167,17 @@ std::size_t lu_panel_work_size(std::int64_t count);
 /// bad[i] is already set is left alone. An item with a perm (see LuPanelItem) is factored
 /// with the interchanges instead — P·A11 = L11·U11, U12 = L11⁻¹·P·A12, rows k.. not moved,
 /// as the CPU's factor_front_lu — and is bad only for a pivot that needs static pivoting. `work`:
-/// lu_panel_work_size(count) doubles. Throws DeviceError if a launch fails.
+/// lu_panel_work_size(count) doubles. With `ahead`, each step's first panel tiles and
+/// trailing diagonal tile go first and the next step's pivot block then runs on
+/// ahead->stream beside the rest of the step (a look-ahead of one step, Kurzak & Dongarra,
+/// "Implementing linear algebra routines on multi-core processors with pipelining and a
+/// look ahead", 2006); every entry takes the same operations in the same order, so the
+/// factor is the same bit for bit, and s waits for the side stream before each next step's
+/// panels and at the end. Throws DeviceError if a launch fails.
 void launch_lu_panel_batched(const LuPanelItem* items, const std::vector<std::int64_t>& rows,
                              const std::vector<std::int64_t>& pivots, double* work, int* bad,
-                             double static_pivot, double threshold, cudaStream_t s);
+                             double static_pivot, double threshold, cudaStream_t s,
+                             const LuLookahead* ahead = nullptr);
 
 /// Fronts whose contribution block has at most this many rows and columns get their update
 /// from launch_lu_cb_update_batched in enqueue_lu_strips; larger ones one cuBLAS GEMM each.

@@ -1,7 +1,8 @@
 // strata — the pivot block, the L panel and the U panel of a strip of large LU fronts
 // (Options::gpu_lu_strip_pivots pivot columns; lu_fronts.cu cuts the fronts into strips),
 // for all the chunk's fronts with pivots in that strip at once, without row interchanges:
-// three launches per 64-column step (see kernels.cuh, launch_lu_panel_batched).
+// three launches per 64-column step, or five with the look-ahead (see kernels.cuh,
+// launch_lu_panel_batched).
 //
 // Why: the library path (kernels_lu.cu) is one cuSOLVER GETRF of the k×k fully summed
 // block A11 and two cuBLAS TRSMs (L21 = A21·U11⁻¹, U12 = L11⁻¹·A12) per front, and at
@@ -28,6 +29,11 @@
 //   3. lu_update_kernel, one block per 64×64 tile of the trailing part of the strip's
 //      L-shaped region: A_rc −= L_rj·U_jc where r < k or c < k, k the strip's pivots
 //      (the rest, r ≥ k and c ≥ k, is the caller's: GEMMs per front, lu_fronts.cu).
+// A step's pivot block is the chain's slow link, and the next one needs only the first
+// tiles of this step's two panels and the trailing diagonal tile: with a look-ahead stream
+// (LuLookahead) those go first, then the next pivot block runs beside the rest of the
+// step's panels and update; the inverses are kept in two pairs of slots by the step's
+// parity, so that it does not overwrite those the rest of the step reads.
 // The products run on the FP64 tensor cores (tile_mma.cuh). Panels by the inverses of the
 // 64×64 diagonal blocks, as MAGMA's GPU TRSM does; the error bound grows with κ(U_jj) and
 // κ(L_jj) (Higham, "Accuracy and Stability of Numerical Algorithms", 2nd ed., §14.2),
@@ -64,6 +70,18 @@ __device__ std::int64_t imin(std::int64_t a, std::int64_t b) { return a < b ? a 
 __host__ __device__ std::int64_t tiles_of(std::int64_t n) {
   return n > 0 ? (n + kStep - 1) / kStep : 0;
 }
+
+// Where item b's two inverses of the step at pivot j0 live in the workspace: two pairs of
+// slots per item, by the parity of the step, so that the next step's pivot block (run
+// ahead, launch_lu_panel_batched) does not overwrite the inverses this step's panels read.
+__host__ __device__ std::int64_t inverse_slots(std::int64_t b, std::int64_t j0) {
+  return (2 * b + (j0 / kStep) % 2) * 2 * kSlot;
+}
+
+// Which tiles of a step a panels or update launch takes (launch_lu_panel_batched): all of
+// them, only those the next step's pivot block depends on (the L and U panels' first tiles
+// and the trailing diagonal tile), or the others.
+enum class StepTiles : int { all, next_pivot_block, rest };
 
 // The pivot block kernel's threads: row_lanes.cuh (eight per row of the 64×64 block while
 // it is eliminated; after interchanges, four per column of each inverse).
@@ -344,7 +362,7 @@ __global__ void __launch_bounds__(kPivotThreads)
     const int r = e % kStep, c = e / kStep;
     if (r < w && c < w) D[static_cast<std::int64_t>(c) * ld + r] = T[r * kPad + c];
   }
-  double* WL = work + static_cast<std::int64_t>(blockIdx.x) * 2 * kSlot;
+  double* WL = work + inverse_slots(blockIdx.x, j0);
   double* WU = WL + kSlot;
   if (interchanged) {
     triangular_inverses(T, w, WL, WU);
@@ -365,20 +383,27 @@ __global__ void __launch_bounds__(kPivotThreads)
 // columns j0 + w + 64y …), U = L_jj⁻¹·A; grid-stride over the 2T tiles (gridDim.y is
 // capped). In place: a tile is read whole before it is written, and no two tiles overlap.
 __global__ void lu_panels_kernel(const LuPanelItem* items, const double* work, int* bad,
-                                 double threshold, std::int64_t j0) {
+                                 double threshold, std::int64_t j0, StepTiles which) {
   __shared__ __align__(32) double sm[tile::kSharedDoubles];
   if (bad[blockIdx.x]) return;
   const LuPanelItem it = items[blockIdx.x];
   const std::int64_t m = it.m, ld = it.ld;
   const int w = static_cast<int>(imin(kStep, it.k - j0));
   const std::int64_t base = j0 + w, T = tiles_of(m - base);
-  const double* WL = work + static_cast<std::int64_t>(blockIdx.x) * 2 * kSlot;
+  const double* WL = work + inverse_slots(blockIdx.x, j0);
   const double* WU = WL + kSlot;
   // an item factored with interchanges: its U panel is L_jj⁻¹·P·A, the rows read through P
   __shared__ int prow[kStep];
   if (it.perm && threadIdx.x < w) prow[threadIdx.x] = static_cast<int>(it.perm[threadIdx.x]);
   __syncthreads();
-  for (std::int64_t q = blockIdx.y; q < 2 * T; q += gridDim.y) {
+  // the first tiles of both panels are q = 0 and q = T
+  const std::int64_t count = which == StepTiles::all                ? 2 * T
+                             : which == StepTiles::next_pivot_block ? (T > 0 ? 2 : 0)
+                                                                    : (T > 0 ? 2 * T - 2 : 0);
+  for (std::int64_t e = blockIdx.y; e < count; e += gridDim.y) {
+    const std::int64_t q = which == StepTiles::all                ? e
+                           : which == StepTiles::next_pivot_block ? e * T
+                                                                  : (e < T - 1 ? e + 1 : e + 2);
     const bool lpanel = q < T;
     const std::int64_t x0 = base + (lpanel ? q : q - T) * kStep;
     const int n = static_cast<int>(imin(kStep, m - x0));
@@ -414,7 +439,8 @@ __global__ void lu_panels_kernel(const LuPanelItem* items, const double* work, i
 // then the (T − Tk)·Tk tiles of the contribution block's columns in the fully summed
 // rows; A_rc −= L_rj·U_jc, entries with r ≥ k and c ≥ k left alone. Grid-stride over the
 // tiles (gridDim.y is capped).
-__global__ void lu_update_kernel(const LuPanelItem* items, const int* bad, std::int64_t j0) {
+__global__ void lu_update_kernel(const LuPanelItem* items, const int* bad, std::int64_t j0,
+                                 StepTiles which) {
   __shared__ __align__(32) double sm[tile::kSharedDoubles];
   if (bad[blockIdx.x]) return;
   const LuPanelItem it = items[blockIdx.x];
@@ -422,8 +448,11 @@ __global__ void lu_update_kernel(const LuPanelItem* items, const int* bad, std::
   const int w = static_cast<int>(imin(kStep, k - j0));
   const std::int64_t base = j0 + w;
   const std::int64_t T = tiles_of(m - base), Tk = tiles_of(k - base);
-  const std::int64_t count = Tk * (2 * T - Tk);
-  for (std::int64_t q = blockIdx.y; q < count; q += gridDim.y) {
+  // the trailing diagonal tile (the next step's pivot block) is q = 0
+  const std::int64_t all = Tk * (2 * T - Tk);
+  const std::int64_t first = which == StepTiles::rest && all > 0 ? 1 : 0;
+  const std::int64_t count = which == StepTiles::next_pivot_block ? (all > 0 ? 1 : 0) : all;
+  for (std::int64_t q = first + blockIdx.y; q < count; q += gridDim.y) {
     std::int64_t y, z;
     if (q < Tk * T) {
       z = q / T;
@@ -478,38 +507,70 @@ unsigned grid_y(std::int64_t n) {
 }  // namespace
 
 std::size_t lu_panel_work_size(std::int64_t count) {
-  return static_cast<std::size_t>(std::max<std::int64_t>(count, 1)) * 2 * kSlot;
+  return static_cast<std::size_t>(std::max<std::int64_t>(count, 1)) * 4 * kSlot;
 }
 
 void launch_lu_panel_batched(const LuPanelItem* items, const std::vector<std::int64_t>& rows,
                              const std::vector<std::int64_t>& pivots, double* work, int* bad,
-                             double static_pivot, double threshold, cudaStream_t s) {
+                             double static_pivot, double threshold, cudaStream_t s,
+                             const LuLookahead* ahead) {
   const std::size_t count = pivots.size();
   if (count == 0) return;
-  std::size_t active = count;
+  auto active_at = [&](std::int64_t j0) {  // the items with pivots from j0 on: a prefix
+    std::size_t a = count;
+    while (a > 0 && pivots[a - 1] <= j0) --a;
+    return static_cast<unsigned>(a);
+  };
+  auto pivot_block = [&](std::int64_t j0, cudaStream_t on) {
+    lu_pivot_block_kernel<<<active_at(j0), kPivotThreads, 0, on>>>(items, work, bad, static_pivot,
+                                                                   threshold, j0);
+    STRATA_CUDA_LAUNCH();
+  };
+  auto panels = [&](std::int64_t j0, unsigned n, std::int64_t tiles, StepTiles which) {
+    if (tiles <= 0) return;
+    lu_panels_kernel<<<dim3(n, grid_y(tiles)), kThreads, 0, s>>>(items, work, bad, threshold, j0,
+                                                                 which);
+    STRATA_CUDA_LAUNCH();
+  };
+  auto update = [&](std::int64_t j0, unsigned n, std::int64_t tiles, StepTiles which) {
+    if (tiles <= 0) return;
+    lu_update_kernel<<<dim3(n, grid_y(tiles)), kThreads, 0, s>>>(items, bad, j0, which);
+    STRATA_CUDA_LAUNCH();
+  };
+  pivot_block(0, s);
   for (std::int64_t j0 = 0; j0 < pivots[0]; j0 += kStep) {
-    while (active > 0 && pivots[active - 1] <= j0) --active;
+    const unsigned n = active_at(j0);
     // per step: the most tiles of any active front below / right of its diagonal block,
     // and the most update tiles
     std::int64_t panel_tiles = 0, update_tiles = 0;
-    for (std::size_t i = 0; i < active; ++i) {
+    for (std::size_t i = 0; i < n; ++i) {
       const std::int64_t base = j0 + std::min<std::int64_t>(kStep, pivots[i] - j0);
       const std::int64_t T = tiles_of(rows[i] - base), Tk = tiles_of(pivots[i] - base);
       panel_tiles = std::max(panel_tiles, T);
       update_tiles = std::max(update_tiles, Tk * (2 * T - Tk));
     }
-    const unsigned n = static_cast<unsigned>(active);
-    lu_pivot_block_kernel<<<n, kPivotThreads, 0, s>>>(items, work, bad, static_pivot, threshold,
-                                                      j0);
-    STRATA_CUDA_LAUNCH();
-    if (panel_tiles > 0) {
-      lu_panels_kernel<<<dim3(n, grid_y(2 * panel_tiles)), kThreads, 0, s>>>(items, work, bad,
-                                                                             threshold, j0);
-      STRATA_CUDA_LAUNCH();
-    }
-    if (update_tiles > 0) {
-      lu_update_kernel<<<dim3(n, grid_y(update_tiles)), kThreads, 0, s>>>(items, bad, j0);
-      STRATA_CUDA_LAUNCH();
+    const std::int64_t next = j0 + kStep;
+    if (next >= pivots[0]) {  // the last step
+      panels(j0, n, 2 * panel_tiles, StepTiles::all);
+      update(j0, n, update_tiles, StepTiles::all);
+    } else if (!ahead) {
+      panels(j0, n, 2 * panel_tiles, StepTiles::all);
+      update(j0, n, update_tiles, StepTiles::all);
+      pivot_block(next, s);
+    } else {
+      // the next step's pivot block needs the first tiles of this step's panels and the
+      // trailing diagonal tile only: those first, then that pivot block on the side stream
+      // while the rest of this step's panels and update run here; the next step's panels
+      // wait for it
+      panels(j0, n, 2, StepTiles::next_pivot_block);
+      update(j0, n, 1, StepTiles::next_pivot_block);
+      STRATA_CUDA(cudaEventRecord(ahead->ready, s));
+      STRATA_CUDA(cudaStreamWaitEvent(ahead->stream, ahead->ready, 0));
+      pivot_block(next, ahead->stream);
+      STRATA_CUDA(cudaEventRecord(ahead->done, ahead->stream));
+      panels(j0, n, 2 * panel_tiles - 2, StepTiles::rest);
+      update(j0, n, update_tiles - 1, StepTiles::rest);
+      STRATA_CUDA(cudaStreamWaitEvent(s, ahead->done, 0));
     }
   }
 }

@@ -66,7 +66,7 @@ void enqueue_lu_strips(const std::vector<LuPanelItem>& fronts, std::int64_t nb,
                        const std::vector<Lane*>& lanes, DeviceBuffer<LuPanelItem>& items,
                        DeviceBuffer<LuPanelItem>& cb_items, DeviceBuffer<double>& work, int* bad,
                        const numeric::PivotPolicy& pivots, cudaEvent_t strip_done,
-                       const std::function<bool(std::size_t)>& may_batch,
+                       const LuLookahead* ahead, const std::function<bool(std::size_t)>& may_batch,
                        const LuFinalUpdate& final_update, std::vector<Lane*>& lane_of) {
   const std::size_t n = fronts.size();
   lane_of.assign(n, nullptr);
@@ -141,7 +141,7 @@ void enqueue_lu_strips(const std::vector<LuPanelItem>& fronts, std::int64_t nb,
       pivot_counts[i] = all[strip_at[s] + i].k;
     }
     launch_lu_panel_batched(items.data() + strip_at[s], rows, pivot_counts, work.data(), bad,
-                            pivots.static_pivot, pivots.threshold, k0.stream);
+                            pivots.static_pivot, pivots.threshold, k0.stream, ahead);
     STRATA_CUDA(cudaEventRecord(strip_done, k0.stream));
     std::vector<char> waited(lanes.size(), 0), continued(lanes.size(), 0);
     // first the rest of the pivot rows and columns of the fronts that go on (the next
@@ -260,7 +260,7 @@ std::vector<std::size_t> CudaExecutor::lu_fronts_by_strips(std::vector<LuFront>&
   std::vector<Lane*> lane_of;
   enqueue_lu_strips(
       items, lu_strip_pivots_, lanes, lu_.items, lu_.cb_items, lu_.work, lu_.bad.data(), pivots,
-      lu_.strip_done,
+      lu_.strip_done, &lu_.ahead,
       [&](std::size_t q) {
         const LuFront& fr = fronts[order[q]];
         return !split_front(fr.m, fr.k);  // the team's fronts: split_update
@@ -448,7 +448,7 @@ std::vector<char> cuda_lu_fronts_batched(std::vector<std::vector<double>>& front
                                          const std::vector<index_t>& m,
                                          const std::vector<index_t>& k, index_t strip,
                                          double static_pivot, double threshold,
-                                         std::vector<std::vector<index_t>>* perms) {
+                                         std::vector<std::vector<index_t>>* perms, bool lookahead) {
   const std::size_t n = fronts.size();
   if (m.size() != n || k.size() != n || strip < 1)
     throw InvalidInput("cuda_lu_fronts_batched: " + std::to_string(n) + " fronts, " +
@@ -495,17 +495,27 @@ std::vector<char> cuda_lu_fronts_batched(std::vector<std::vector<double>>& front
   struct Handles {
     cublasHandle_t b;
     cudaEvent_t e1, e2;
+    cuda::LuLookahead a;
     ~Handles() {
       cublasDestroy(b);
       cudaEventDestroy(e1);
       cudaEventDestroy(e2);
+      if (a.stream) cudaStreamDestroy(a.stream);
+      if (a.ready) cudaEventDestroy(a.ready);
+      if (a.done) cudaEventDestroy(a.done);
     }
-  } owned{ln.blas, ln.done, strip_done};
+  } owned{ln.blas, ln.done, strip_done, {}};
+  if (lookahead) {  // the executor's look-ahead stream and events
+    STRATA_CUDA(cudaStreamCreateWithFlags(&owned.a.stream, cudaStreamNonBlocking));
+    STRATA_CUDA(cudaEventCreateWithFlags(&owned.a.ready, cudaEventDisableTiming));
+    STRATA_CUDA(cudaEventCreateWithFlags(&owned.a.done, cudaEventDisableTiming));
+  }
   const double one = 1.0, minus_one = -1.0;
   std::vector<cuda::Lane*> lane_of;
   cuda::enqueue_lu_strips(
       fr, strip, {&ln}, items, cb_items, work, bad.data(),
-      numeric::PivotPolicy(static_pivot, threshold), strip_done, [](std::size_t) { return true; },
+      numeric::PivotPolicy(static_pivot, threshold), strip_done, lookahead ? &owned.a : nullptr,
+      [](std::size_t) { return true; },
       [&](std::size_t q, cuda::Lane& l) {
         const int mi = static_cast<int>(fr[q].m), ki = static_cast<int>(fr[q].k);
         double* F = fr[q].F;
