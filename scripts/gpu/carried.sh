@@ -1,5 +1,6 @@
 # Sourced (not run) by the scripts/gpu run scripts, from the repository's root: when a
 # staged .carry/ is there (scripts/gpu/prepare.sh), unpacks its binaries and libraries,
+# links .carry/matrices to the tree's data/matrices,
 # reassembles cuDSS from the parts earlier calls left in build-cudss/ (all of them: the
 # number in build-cudss/parts, see prepare.sh), puts both on
 # LD_LIBRARY_PATH and sets STRATA_CARRIED=1, so that the results name the staged
@@ -8,7 +9,11 @@
 # $BIN/strata) and RESULTS (where results go: $STRATA_RESULTS_DIR, which bench/run sets,
 # else $OUT, else /tmp/strata-out).
 if [ -d .carry/lib ]; then
-  for z in .carry/lib/*.xz .carry/bin/*.xz .carry/base/*.xz; do [ -f "$z" ] && xz -d -f "$z"; done
+  for z in .carry/lib/*.xz .carry/bin/*.xz .carry/base/*.xz .carry/trace/*.xz; do
+    [ -f "$z" ] && xz -d -f "$z"
+  done
+  # the shared matrices (the build's STRATA_MATRIX_DIR) are the tree's own, not carried
+  [ -e .carry/matrices ] || ln -sfn "$PWD/data/matrices" .carry/matrices
   if [ -f build-cudss/parts ] && [ ! -f build-cudss/libcudss.so.1 ] &&
     [ "$(ls build-cudss/part-* | wc -l)" -eq "$(cat build-cudss/parts)" ]; then
     cat build-cudss/part-* | xz -d -T8 >build-cudss/libcudss.so.1

@@ -1,9 +1,13 @@
 #!/usr/bin/env bash
 # Builds strata for the lent GPU machine (sm_90) here and stages what the device run
 # needs in .carry/ (ignored by git): the test and benchmark binaries, the shared
-# libraries the device image lacks, and the shared matrices. The device runs Ubuntu
-# 24.04 with the same CUDA 13.0 and a newer glibc, so binaries built here run there.
-# Usage: scripts/gpu/prepare.sh   then: device run with carry [".carry"] and
+# libraries the device image lacks, compressed. The device runs Ubuntu 24.04 with the
+# same CUDA 13.0 and a newer glibc, so binaries built here run there. The shared matrices
+# are not copied: carried.sh links .carry/matrices to the tree's data/matrices there.
+# A call carries about 22 MB beside the tree: name the binaries a call needs (their build
+# paths' last parts, e.g. strata bench_cudss test_cuda_backend); without names every
+# test and benchmark binary is staged (more than one call carries).
+# Usage: scripts/gpu/prepare.sh [BINARY...]   then: device run with carry [".carry"] and
 #        command "bash scripts/gpu/run.sh"
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -16,14 +20,24 @@ fi
 cmake -S . -B build-gpu -G Ninja -DCMAKE_BUILD_TYPE=Release -DCMAKE_CUDA_ARCHITECTURES=90 \
   -DSTRATA_MATRIX_DIR=.carry/matrices -DSTRATA_CUDSS_DIR="$PWD/.whl/nvidia/cu13" >/dev/null
 cmake --build build-gpu -j2
-rm -rf .carry && mkdir -p .carry/bin .carry/lib .carry/matrices
+rm -rf .carry && mkdir -p .carry/bin .carry/lib
 # the commit the binaries were built from (logs on the device name it; it has no .git)
 echo "$(git rev-parse --short HEAD)$(git diff --quiet HEAD -- . || echo ' with uncommitted changes')" >.carry/COMMIT
-cp build-gpu/strata build-gpu/tests/test_solver build-gpu/bench/bench_factor .carry/bin/
-# every gpu-labelled test binary (one per file in tests/gpu)
-for src in tests/gpu/*.cpp; do cp "build-gpu/tests/$(basename "$src" .cpp)" .carry/bin/; done
-for b in bench_gpu bench_gpu_memory bench_cudss bench_multigpu bench_analysis; do [ -f build-gpu/bench/$b ] && cp build-gpu/bench/$b .carry/bin/; done
-cp data/matrices/*.mtx.gz data/matrices/README.md .carry/matrices/
+if [ $# -gt 0 ]; then
+  for b in "$@"; do
+    found=""
+    for d in build-gpu build-gpu/tests build-gpu/bench; do
+      if [ -f "$d/$b" ]; then found="$d/$b"; fi
+    done
+    [ -n "$found" ] || { echo "prepare.sh: no binary $b in build-gpu" >&2; exit 1; }
+    cp "$found" .carry/bin/
+  done
+else
+  cp build-gpu/strata build-gpu/tests/test_solver build-gpu/bench/bench_factor .carry/bin/
+  # every gpu-labelled test binary (one per file in tests/gpu)
+  for src in tests/gpu/*.cpp; do cp "build-gpu/tests/$(basename "$src" .cpp)" .carry/bin/; done
+  for b in bench_gpu bench_gpu_memory bench_cudss bench_multigpu bench_analysis; do [ -f build-gpu/bench/$b ] && cp build-gpu/bench/$b .carry/bin/; done
+fi
 # the GPU timeline recorder (bench/tools/cupti_trace.cpp) and the CUPTI it loads:
 # LD_LIBRARY_PATH=.carry/trace LD_PRELOAD=.carry/trace/libstrata_cupti_trace.so
 if [ -f build-gpu/bench/libstrata_cupti_trace.so ]; then
@@ -36,9 +50,10 @@ for b in .carry/bin/*; do
   ldd "$b" | awk '/=>/ {print $3}'
 done | sort -u | grep -v -E '/(libc|libm|libdl|libpthread|librt|libgcc_s|libstdc\+\+)\.so|cuda|libcu|libnv' |
   while read -r lib; do cp -L "$lib" .carry/lib/; done
-# the large BLAS/LAPACK and the binaries travel compressed (the tree that travels is
-# limited to 64 MiB; the binaries alone were 39 MB); the run scripts unpack them
-xz -T2 -6 .carry/lib/libopenblas.so.0 .carry/lib/liblapack.so.3 .carry/bin/*
+# the libraries and the binaries travel compressed; the run scripts unpack them
+# (carried.sh)
+xz -T2 -6 .carry/lib/* .carry/bin/*
+[ -d .carry/trace ] && xz -T2 -6 .carry/trace/libcupti*
 du -sh .carry
 # cuDSS's library is 167 MB (143 MB compressed), over what one call carries: it travels
 # in parts of 13 MiB, which leave room for the tracked tree (about 40 MB) within what a

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Runs on the lent GPU machine over the staged .carry/ (see prepare.sh): the gpu-labelled
-# tests, then the GPU benchmarks asked for (--bench ARGS, --memory-bench ARGS,
-# --cudss-bench ARGS, --multigpu-bench ARGS). Logs and
+# tests staged (those staged for another call are named and skipped), then the GPU
+# benchmarks asked for (--bench ARGS, --memory-bench ARGS, --cudss-bench ARGS,
+# --multigpu-bench ARGS). Logs and
 # results go to $OUT.
 set -uo pipefail
 cd "$(dirname "$0")/../.."
@@ -16,6 +17,10 @@ nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv | tee "$OUT
 rc=0
 # the gpu-labelled tests (every binary built from tests/gpu)
 for t in $(ls tests/gpu/*.cpp | xargs -n1 basename | sed 's/\.cpp$//'); do
+  if [ ! -x .carry/bin/$t ]; then  # staged in another call (prepare.sh BINARY...)
+    echo "=== $t: not staged in this call" | tee -a "$OUT/gpu-tests.log"
+    continue
+  fi
   echo "=== $t" | tee -a "$OUT/gpu-tests.log"
   .carry/bin/$t 2>&1 | tail -n 60 | tee -a "$OUT/gpu-tests.log"
   [ "${PIPESTATUS[0]}" -eq 0 ] || rc=1
