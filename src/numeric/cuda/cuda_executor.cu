@@ -595,9 +595,12 @@ void CudaExecutor::upload_solve_rows(const Analysis& an, const index_t* factor_r
   // moved front, costs a large share of a multibody refactorization (thousands of small
   // fronts that pivot).
   if (type == MatrixType::general && dsolve_.rows_analysis == an.id &&
-      dsolve_.rows_type == MatrixType::general && dsolve_.rows_host.size() == t.rows.size()) {
+      dsolve_.rows_type == MatrixType::general && dsolve_.rows_host.size() == t.rows.size() &&
+      dsolve_.rows_moved.size() == static_cast<std::size_t>(t.n_fronts())) {
     std::vector<std::int64_t> packed, seg;  // seg: destination, length, offset in packed
     for (index_t f = 0; f < t.n_fronts(); ++f) {
+      if (!dsolve_.rows_moved[f]) continue;  // finish_front compared its rows
+      dsolve_.rows_moved[f] = 0;
       const index_t fp = t.first_pivot[f], k = t.n_pivots(f), ro = t.row_offsets[f];
       const index_t* prow = factor_rows + ro;
       std::int64_t* held = dsolve_.rows_host.data() + ro;
@@ -624,6 +627,7 @@ void CudaExecutor::upload_solve_rows(const Analysis& an, const index_t* factor_r
   // what the device solve needs besides the panels: the factored row order, where each
   // pivot went in its front (LU, LDLᵀ), and D (LDLᵀ)
   dsolve_.rows_host.assign(factor_rows, factor_rows + t.rows.size());
+  dsolve_.rows_moved.assign(type == MatrixType::general ? t.n_fronts() : 0, 0);
   dsolve_.pivot_pos_host.assign(an.n, 0);
   dsolve_.pivot_row_host.assign(an.n, 0);
   for (index_t f = 0; f < t.n_fronts(); ++f) {

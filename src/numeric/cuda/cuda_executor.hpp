@@ -354,7 +354,9 @@ class CudaExecutor final : public numeric::Executor {
   /// position in its front and the row each pivot position holds, and for LDLᵀ D and the
   /// pivot sizes of `fac`. Records the analysis and type they hold.
   /// For LU, after a first upload for the analysis, only the fronts whose pivot rows moved
-  /// since the last one are sent (host copies in dsolve_.rows_host and beside it).
+  /// since the last one are sent (host copies in dsolve_.rows_host and beside it; the
+  /// fronts marked in dsolve_.rows_moved by finish_front, the comparison made while the GPU
+  /// factors the next chunk rather than after the last).
   void upload_solve_rows(const Analysis& an, const index_t* factor_rows, MatrixType type,
                          const numeric::NumericFactor* fac);
   /// An in-core chunk whose work was launched and whose host part has not run yet (see
@@ -700,6 +702,9 @@ class CudaExecutor final : public numeric::Executor {
     /// What rows, pivot_pos and pivot_row hold (upload_solve_rows' incremental LU uploads
     /// compare against it)
     std::vector<std::int64_t> rows_host, pivot_pos_host, pivot_row_host;
+    /// LU, per front: its pivot rows in the factor differ from rows_host's (set by
+    /// finish_front as each chunk's host part runs, cleared by upload_solve_rows)
+    std::vector<char> rows_moved;
     DeviceBuffer<std::int64_t> moved_rows, moved_segments;  ///< their moved rows, packed
     DeviceBuffer<double> d_diag, d_off, x, u, scratch, part;
     /// solve_original: the right-hand sides and solutions in the original numbering, the

@@ -701,6 +701,12 @@ void CudaExecutor::finish_front(const numeric::FactorContext& ctx, index_t f, st
       if (len % 2 == 0) sign = -sign;
     }
     ps.perturbed = npert;
+    // the device solve's rows of this analysis: whether this front's pivot rows differ
+    // from those it holds (upload_solve_rows then sends only the fronts marked)
+    if (dsolve_.rows_moved.size() == static_cast<std::size_t>(t.n_fronts()) &&
+        dsolve_.rows_analysis == an.id && dsolve_.rows_type == MatrixType::general &&
+        !std::equal(frows, frows + k, dsolve_.rows_host.data() + t.row_offsets[f]))
+      dsolve_.rows_moved[f] = 1;
   } else {
     ps.positive = k;
   }
