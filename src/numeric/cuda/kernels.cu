@@ -451,18 +451,36 @@ __device__ __forceinline__ void lu_trailing_update_mma(double* F, int ld, int m,
     const bool row_in = r < m;
     const double a0 = row_in && t < w ? -F[(j0 + t) * ld + r] : 0.0;
     const double a1 = row_in && t + 4 < w ? -F[(j0 + t + 4) * ld + r] : 0.0;
-    const int tj_end = min(tiles, (ch + 1) * kChunk);
-    for (int tj = ch * kChunk; tj < tj_end; ++tj) {
+    // every fragment and tile of the chunk loaded before any tile is written back (the
+    // tiles are disjoint, and U's rows are not written here): the loads of one tile do not
+    // wait for the stores of the one before
+    double b0[kChunk], b1[kChunk], x0[kChunk], x1[kChunk];
+    bool in0[kChunk], in1[kChunk];
+#pragma unroll
+    for (int q = 0; q < kChunk; ++q) {
+      const int tj = ch * kChunk + q;
+      const bool tile = tj < tiles;
       const int cb = c0 + 8 * tj + g;  // this lane's column of B
-      const double b0 = cb < m && t < w ? F[cb * ld + j0 + t] : 0.0;
-      const double b1 = cb < m && t + 4 < w ? F[cb * ld + j0 + t + 4] : 0.0;
+      b0[q] = tile && cb < m && t < w ? F[cb * ld + j0 + t] : 0.0;
+      b1[q] = tile && cb < m && t + 4 < w ? F[cb * ld + j0 + t + 4] : 0.0;
       const int cc = c0 + 8 * tj + 2 * t;  // this lane's two columns of the tile
-      const bool in0 = row_in && cc < m, in1 = row_in && cc + 1 < m;
-      double x0 = in0 ? F[cc * ld + r] : 0.0, x1 = in1 ? F[(cc + 1) * ld + r] : 0.0;
-      mma_8x8x4(x0, x1, a0, b0, x0, x1);
-      mma_8x8x4(x0, x1, a1, b1, x0, x1);
-      if (in0) F[cc * ld + r] = x0;
-      if (in1) F[(cc + 1) * ld + r] = x1;
+      in0[q] = tile && row_in && cc < m;
+      in1[q] = tile && row_in && cc + 1 < m;
+      x0[q] = in0[q] ? F[cc * ld + r] : 0.0;
+      x1[q] = in1[q] ? F[(cc + 1) * ld + r] : 0.0;
+    }
+#pragma unroll
+    for (int q = 0; q < kChunk; ++q) {
+      if (ch * kChunk + q < tiles) {  // the same for the whole warp
+        mma_8x8x4(x0[q], x1[q], a0, b0[q], x0[q], x1[q]);
+        mma_8x8x4(x0[q], x1[q], a1, b1[q], x0[q], x1[q]);
+      }
+    }
+#pragma unroll
+    for (int q = 0; q < kChunk; ++q) {
+      const int cc = c0 + 8 * (ch * kChunk + q) + 2 * t;
+      if (in0[q]) F[cc * ld + r] = x0[q];
+      if (in1[q]) F[(cc + 1) * ld + r] = x1[q];
     }
   }
 }
