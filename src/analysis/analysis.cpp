@@ -347,8 +347,6 @@ void finish_analysis(Analysis& an, const SparseMatrix& c, const ordering::Graph&
                      int workers) {
   const bool grouped = an.pivot_groups.n_groups() > 0;
   Timer step;
-  const SparseMatrix permuted =
-      symbolic::permute_symmetric_pattern(graph.n, graph.xadj, graph.adjncy, ord.perm);
   symbolic::AmalgamationOptions ao;
   ao.relax_small = opts.relax_small;
   ao.relax_size_1 = opts.relax_size_1;
@@ -380,9 +378,9 @@ void finish_analysis(Analysis& an, const SparseMatrix& c, const ordering::Graph&
     for (index_t g = 0; g < gr.n_groups(); ++g)
       if (links[g] == gr.size(g) - 1) ++(gr.size(g) == 2 ? an.stats.pairs : an.stats.odd_cycles);
   }
-  // B + Bᵀ by construction (detail::symmetric_graph), permuted with sorted columns
+  // B + Bᵀ by construction (detail::symmetric_graph), read through the ordering
   symbolic::SymbolicFactorization sym =
-      symbolic::analyze_pattern(permuted, ao, symbolic::PatternCheck::trusted);
+      symbolic::analyze_permuted_graph(graph.n, graph.xadj, graph.adjncy, ord.perm, ao);
   // the tree is in the postordered numbering: pivot k is permuted column post[k]
   an.perm.resize(an.n);
   for (index_t k = 0; k < an.n; ++k) an.perm[k] = ord.perm[sym.post[k]];

@@ -24,19 +24,22 @@
 //    parents as the postorder traversal leaves each node ("ancestor" array with path
 //    compression): Tarjan, J. ACM 26(4), 1979.
 // With path compression alone the total time is O(nnz(A) · log n) in the worst case and
-// near-linear in practice, with O(n) extra memory.
+// near-linear in practice, with O(n) extra memory. The entries of a column are distinct
+// rows with state of their own, so their order does not matter: the pass also runs on a
+// permuted pattern read through its permutation (pattern_view.hpp).
 #include <string>
 
 #include "strata/errors.hpp"
+#include "symbolic/pattern_view.hpp"
 #include "symbolic/symbolic.hpp"
 
 namespace strata::symbolic {
 
-std::vector<index_t> column_counts(const SparseMatrix& a, const std::vector<index_t>& parent,
-                                   const std::vector<index_t>& post) {
-  const index_t n = a.n_cols;
-  if (a.layout != Layout::csc || a.n_rows != n || static_cast<index_t>(parent.size()) != n ||
-      static_cast<index_t>(post.size()) != n)
+template <class Columns>
+std::vector<index_t> column_counts_of(const Columns& cols, const std::vector<index_t>& parent,
+                                      const std::vector<index_t>& post) {
+  const index_t n = cols.n;
+  if (static_cast<index_t>(parent.size()) != n || static_cast<index_t>(post.size()) != n)
     throw InvalidInput("column_counts: pattern, parent and post must all be of order n");
 
   std::vector<index_t> delta(n, 0);
@@ -58,15 +61,14 @@ std::vector<index_t> column_counts(const SparseMatrix& a, const std::vector<inde
   for (index_t k = 0; k < n; ++k) {
     const index_t j = post[k];
     if (parent[j] != -1) --delta[parent[j]];  // j is not a root
-    for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p) {
-      const index_t i = a.indices[p];
+    cols.for_each(j, [&](index_t i) {
       // Only entries below the diagonal, and only when j starts a new branch of T_i.
-      if (i <= j || first[j] <= maxfirst[i]) continue;
+      if (i <= j || first[j] <= maxfirst[i]) return;
       maxfirst[i] = first[j];
       const index_t prev = prevleaf[i];
       prevleaf[i] = j;
-      ++delta[j];                // j is a leaf of the row subtree of i
-      if (prev == -1) continue;  // first leaf of T_i: its subtree root is i itself
+      ++delta[j];              // j is a leaf of the row subtree of i
+      if (prev == -1) return;  // first leaf of T_i: its subtree root is i itself
       // Subsequent leaf: subtract at the least common ancestor of prev and j, the root of
       // prev's disjoint set, compressing the path to it.
       index_t q = prev;
@@ -77,7 +79,7 @@ std::vector<index_t> column_counts(const SparseMatrix& a, const std::vector<inde
         s = up;
       }
       --delta[q];
-    }
+    });
     if (parent[j] != -1) ancestor[j] = parent[j];  // j's subtree is done: join its parent
   }
 
@@ -85,6 +87,18 @@ std::vector<index_t> column_counts(const SparseMatrix& a, const std::vector<inde
   for (index_t j = 0; j < n; ++j)
     if (parent[j] != -1) delta[parent[j]] += delta[j];
   return delta;
+}
+
+template std::vector<index_t> column_counts_of(const CscColumns&, const std::vector<index_t>&,
+                                               const std::vector<index_t>&);
+template std::vector<index_t> column_counts_of(const RelabeledColumns&, const std::vector<index_t>&,
+                                               const std::vector<index_t>&);
+
+std::vector<index_t> column_counts(const SparseMatrix& a, const std::vector<index_t>& parent,
+                                   const std::vector<index_t>& post) {
+  if (a.layout != Layout::csc || a.n_rows != a.n_cols)
+    throw InvalidInput("column_counts: pattern, parent and post must all be of order n");
+  return column_counts_of(CscColumns{a.offsets.data(), a.indices.data(), a.n_cols}, parent, post);
 }
 
 }  // namespace strata::symbolic

@@ -6,7 +6,9 @@
 // i < k the path from i to the root of its current subtree is followed and k becomes the
 // new root. A separate "virtual ancestor" array, overwritten with k along the path, is
 // the path compression that makes the whole pass O(nnz(A) · α) in practice (Liu 1990;
-// Davis, "Direct Methods for Sparse Linear Systems", SIAM 2006, §4.1).
+// Davis, "Direct Methods for Sparse Linear Systems", SIAM 2006, §4.1). The order of the
+// entries within a column does not matter (the tree is unique), so the pass also runs on
+// a permuted pattern read through its permutation (pattern_view.hpp).
 //
 // Postorder: an iterative depth-first search of the forest, children visited in
 // increasing order, roots in increasing order (Davis 2006, §4.3). No recursion, so
@@ -14,30 +16,38 @@
 #include <string>
 
 #include "strata/errors.hpp"
+#include "symbolic/pattern_view.hpp"
 #include "symbolic/symbolic.hpp"
 
 namespace strata::symbolic {
 
-std::vector<index_t> elimination_tree(const SparseMatrix& a) {
-  if (a.layout != Layout::csc || a.n_rows != a.n_cols)
-    throw InvalidInput("elimination_tree needs a square CSC pattern");
-  const index_t n = a.n_cols;
+template <class Columns>
+std::vector<index_t> elimination_tree_of(const Columns& cols) {
+  const index_t n = cols.n;
   std::vector<index_t> parent(n, -1);
   std::vector<index_t> ancestor(n, -1);  // virtual ancestor (path-compressed)
   for (index_t k = 0; k < n; ++k) {
-    for (index_t p = a.offsets[k]; p < a.offsets[k + 1]; ++p) {
+    cols.for_each(k, [&](index_t i) {
       // Entry A(i, k) with i < k: the upper triangle of column k is row k of the lower
       // triangle, i.e. the entries of row k left of the diagonal.
-      index_t i = a.indices[p];
       while (i != -1 && i < k) {
         const index_t next = ancestor[i];
         ancestor[i] = k;                // compress the path towards k
         if (next == -1) parent[i] = k;  // i was a root: k adopts it
         i = next;
       }
-    }
+    });
   }
   return parent;
+}
+
+template std::vector<index_t> elimination_tree_of(const CscColumns&);
+template std::vector<index_t> elimination_tree_of(const RelabeledColumns&);
+
+std::vector<index_t> elimination_tree(const SparseMatrix& a) {
+  if (a.layout != Layout::csc || a.n_rows != a.n_cols)
+    throw InvalidInput("elimination_tree needs a square CSC pattern");
+  return elimination_tree_of(CscColumns{a.offsets.data(), a.indices.data(), a.n_cols});
 }
 
 std::vector<index_t> postorder(const std::vector<index_t>& parent) {

@@ -49,6 +49,11 @@
 //    previous range's), so every front's list comes out sorted, and the work is
 //    O(nnz(A) + Σ rows): linear in the input plus the output. This is exactly the symbolic union of
 //    the children's contribution-block rows and the front's original entries.
+//  * analyze_permuted_graph runs the same phase on the ordering's graph read through the
+//    permutation (symbolic/pattern_view.hpp) instead of a formed, sorted P A Pᵀ: none of
+//    the passes needs a column's rows in order. After the etree and its postorder the
+//    graph is copied once in the postordered numbering (rows unsorted, no bucket sort),
+//    which the column counts and the row walks then read column after column.
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
@@ -56,8 +61,10 @@
 #include <cstdint>
 #include <string>
 
+#include "base/default_init.hpp"
 #include "base/serial_scope.hpp"
 #include "strata/errors.hpp"
+#include "symbolic/pattern_view.hpp"
 #include "symbolic/symbolic.hpp"
 
 namespace strata::symbolic {
@@ -243,31 +250,17 @@ double front_flops(const AssemblyTree& t, index_t f) {
   return flops;
 }
 
-SymbolicFactorization analyze_pattern(const SparseMatrix& a, const AmalgamationOptions& opts,
-                                      PatternCheck check) {
-  if (a.layout != Layout::csc || a.n_rows != a.n_cols)
-    throw InvalidInput("analyze_pattern needs a square CSC pattern, got " +
-                       std::to_string(a.n_rows) + "x" + std::to_string(a.n_cols));
-  if (static_cast<index_t>(a.offsets.size()) != a.n_cols + 1)
-    throw InvalidInput("analyze_pattern: offsets has the wrong length");
-  if (check == PatternCheck::full) require_symmetric_pattern(a);
-  const index_t n = a.n_cols;
-  SymbolicFactorization sf;
-  sf.parent = elimination_tree(a);
-  sf.post = postorder(sf.parent);
-  sf.colcount = column_counts(a, sf.parent, sf.post);
-  sf.nnz_l = 0;
-  for (index_t c : sf.colcount) sf.nnz_l += c;
+namespace {
 
-  // The etree and counts in the postordered numbering: parent[k] > k.
-  std::vector<index_t> ipost(n), par(n), cc(n);
-  for (index_t k = 0; k < n; ++k) ipost[sf.post[k]] = k;
-  for (index_t k = 0; k < n; ++k) {
-    const index_t p = sf.parent[sf.post[k]];
-    par[k] = p == -1 ? -1 : ipost[p];
-    cc[k] = sf.colcount[sf.post[k]];
-  }
-
+// The symbolic phase once sf.parent, sf.post, sf.colcount and sf.nnz_l are known: `cols`
+// gives the pattern's columns in the postordered numbering (column k is input column
+// post[k], with postordered indices), `par` and `cc` the etree and the column counts in
+// that numbering.
+template <class Columns>
+void build_assembly_tree(SymbolicFactorization& sf, const Columns& cols,
+                         const std::vector<index_t>& par, const std::vector<index_t>& cc,
+                         const AmalgamationOptions& opts) {
+  const index_t n = cols.n;
   // Kept pairs in the postordered numbering (see the file header).
   std::vector<char> keep;
   if (!opts.keep_with_next.empty()) {
@@ -343,10 +336,8 @@ SymbolicFactorization analyze_pattern(const SparseMatrix& a, const AmalgamationO
     std::vector<index_t> mark(nf, -1);
     for (index_t i = range_begin(r); i < range_begin(r + 1); ++i) {
       const index_t fi = t.front_of_column[i];
-      const index_t col = sf.post[i];
-      for (index_t p = a.offsets[col]; p < a.offsets[col + 1]; ++p) {
-        const index_t j = ipost[a.indices[p]];
-        if (j >= i) continue;
+      cols.for_each(i, [&](index_t j) {
+        if (j >= i) return;
         for (index_t f = t.front_of_column[j]; f != fi; f = t.parent[f]) {
           // Only an unsymmetric pattern can leave the tree before reaching row i's front.
           if (f == -1) throw InvalidInput("analyze_pattern: the pattern is not symmetric");
@@ -354,7 +345,7 @@ SymbolicFactorization analyze_pattern(const SparseMatrix& a, const AmalgamationO
           mark[f] = i;
           visit(f, i);
         }
-      }
+      });
     }
   };
   auto over_ranges = [&](auto&& body) {
@@ -383,6 +374,92 @@ SymbolicFactorization analyze_pattern(const SparseMatrix& a, const AmalgamationO
   }
   over_ranges(
       [&](index_t r) { walk(r, [&](index_t f, index_t i) { t.rows[count[r][f]++] = i; }); });
+}
+
+}  // namespace
+
+SymbolicFactorization analyze_pattern(const SparseMatrix& a, const AmalgamationOptions& opts,
+                                      PatternCheck check) {
+  if (a.layout != Layout::csc || a.n_rows != a.n_cols)
+    throw InvalidInput("analyze_pattern needs a square CSC pattern, got " +
+                       std::to_string(a.n_rows) + "x" + std::to_string(a.n_cols));
+  if (static_cast<index_t>(a.offsets.size()) != a.n_cols + 1)
+    throw InvalidInput("analyze_pattern: offsets has the wrong length");
+  if (check == PatternCheck::full) require_symmetric_pattern(a);
+  const index_t n = a.n_cols;
+  SymbolicFactorization sf;
+  sf.parent = elimination_tree(a);
+  sf.post = postorder(sf.parent);
+  sf.colcount = column_counts(a, sf.parent, sf.post);
+  sf.nnz_l = 0;
+  for (index_t c : sf.colcount) sf.nnz_l += c;
+
+  // The etree and counts in the postordered numbering: parent[k] > k.
+  std::vector<index_t> ipost(n), par(n), cc(n);
+  for (index_t k = 0; k < n; ++k) ipost[sf.post[k]] = k;
+  for (index_t k = 0; k < n; ++k) {
+    const index_t p = sf.parent[sf.post[k]];
+    par[k] = p == -1 ? -1 : ipost[p];
+    cc[k] = sf.colcount[sf.post[k]];
+  }
+  const RelabeledColumns cols{a.offsets.data(), a.indices.data(), sf.post.data(), ipost.data(), n};
+  build_assembly_tree(sf, cols, par, cc, opts);
+  return sf;
+}
+
+SymbolicFactorization analyze_permuted_graph(index_t n, const std::vector<index_t>& offsets,
+                                             const std::vector<index_t>& indices,
+                                             const std::vector<index_t>& perm,
+                                             const AmalgamationOptions& opts) {
+  if (static_cast<index_t>(offsets.size()) != n + 1)
+    throw InvalidInput("analyze_permuted_graph: offsets has " + std::to_string(offsets.size()) +
+                       " entries, expected " + std::to_string(n + 1));
+  if (static_cast<index_t>(perm.size()) != n)
+    throw InvalidInput("analyze_permuted_graph: permutation has " + std::to_string(perm.size()) +
+                       " entries, expected " + std::to_string(n));
+  std::vector<index_t> iperm(n, -1);
+  for (index_t k = 0; k < n; ++k) {
+    const index_t o = perm[k];
+    if (o < 0 || o >= n || iperm[o] != -1)
+      throw InvalidInput("analyze_permuted_graph: perm[" + std::to_string(k) +
+                         "] = " + std::to_string(o) + " is out of range or repeated");
+    iperm[o] = k;
+  }
+  SymbolicFactorization sf;
+  sf.parent = elimination_tree_of(
+      RelabeledColumns{offsets.data(), indices.data(), perm.data(), iperm.data(), n});
+  sf.post = postorder(sf.parent);
+  // From here on the pattern is in the postordered numbering: column k is graph vertex
+  // perm[post[k]] (`fin`); `iperm` becomes the inverse of fin.
+  std::vector<index_t> ipost(n), par(n), fin(n), identity(n);
+  for (index_t k = 0; k < n; ++k) ipost[sf.post[k]] = k;
+  for (index_t k = 0; k < n; ++k) {
+    const index_t p = sf.parent[sf.post[k]];
+    par[k] = p == -1 ? -1 : ipost[p];
+    fin[k] = perm[sf.post[k]];
+    iperm[fin[k]] = k;
+    identity[k] = k;
+  }
+  // The graph in that numbering, formed once (rows unsorted): the column counts and the
+  // two row walks then read it column after column.
+  std::vector<index_t> final_offsets(n + 1);
+  final_offsets[0] = 0;
+  for (index_t k = 0; k < n; ++k)
+    final_offsets[k + 1] = final_offsets[k] + (offsets[fin[k] + 1] - offsets[fin[k]]);
+  UninitVector<index_t> final_indices(static_cast<std::size_t>(final_offsets[n]));
+  for (index_t k = 0; k < n; ++k) {
+    index_t* out = final_indices.data() + final_offsets[k];
+    for (index_t p = offsets[fin[k]]; p < offsets[fin[k] + 1]; ++p) *out++ = iperm[indices[p]];
+  }
+  const CscColumns cols{final_offsets.data(), final_indices.data(), n};
+  const std::vector<index_t> cc = column_counts_of(cols, par, identity);
+  sf.colcount.resize(n);
+  sf.nnz_l = 0;
+  for (index_t k = 0; k < n; ++k) {
+    sf.colcount[sf.post[k]] = cc[k];
+    sf.nnz_l += cc[k];
+  }
+  build_assembly_tree(sf, cols, par, cc, opts);
   return sf;
 }
 

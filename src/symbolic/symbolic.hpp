@@ -127,6 +127,16 @@ enum class PatternCheck { full, trusted };
 SymbolicFactorization analyze_pattern(const SparseMatrix& a, const AmalgamationOptions& opts,
                                       PatternCheck check = PatternCheck::full);
 
+/// analyze_pattern(permute_symmetric_pattern(n, offsets, indices, perm), opts,
+/// PatternCheck::trusted) without forming the permuted pattern: the same result (parent,
+/// post and colcount in the numbering of perm, the tree), for a symmetric pattern given by
+/// its full CSC arrays (an ordering::Graph's xadj and adjncy; the order of the rows within
+/// a column does not matter) and perm new→old. Same errors as both.
+SymbolicFactorization analyze_permuted_graph(index_t n, const std::vector<index_t>& offsets,
+                                             const std::vector<index_t>& indices,
+                                             const std::vector<index_t>& perm,
+                                             const AmalgamationOptions& opts);
+
 /// Factor flops of front f for Cholesky: Σ over its pivots of (number of rows below and
 /// including the pivot)² — the usual count Σ_j c_j² for c_j = rows of L(:,j) in the front.
 double front_flops(const AssemblyTree& t, index_t f);
