@@ -159,7 +159,14 @@ AssemblyMap build_assembly_map(const SparseMatrix& c, const Analysis& an) {
   AssemblyMap map;
   map.entry_src.resize(nnz);
   map.entry_dst.resize(nnz);
-  std::vector<index_t> column_of(nnz);
+  // Until place() writes the positions, entry_dst holds each entry's permuted pair packed
+  // as (pi << bits) | pj, so that place() reads it in order instead of going back to the
+  // input's rows; an order too large for that (2·bits > 62) keeps each entry's column.
+  int bits = 1;
+  while (bits < 62 && (index_t{1} << bits) < an.n) ++bits;
+  const bool packed = 2 * bits <= 62;
+  const index_t low_mask = (index_t{1} << bits) - 1;
+  std::vector<index_t> column_of(packed ? 0 : nnz);
   map.entry_offsets = bucket_entries(
       c.n_cols, nf,
       [&](index_t j) {
@@ -171,7 +178,12 @@ AssemblyMap build_assembly_map(const SparseMatrix& c, const Analysis& an) {
       },
       [&](index_t slot, index_t j, index_t p) {
         map.entry_src[slot] = p;
-        column_of[slot] = j;
+        if (packed) {
+          const auto [pi, pj] = permuted(j, p);
+          map.entry_dst[slot] = (pi << bits) | pj;
+        } else {
+          column_of[slot] = j;
+        }
       });
   // local positions through a row → local index map set per front (linear in the fronts'
   // rows plus the entries, no search), then the front's entries ordered by the column of
@@ -195,7 +207,9 @@ AssemblyMap build_assembly_map(const SparseMatrix& c, const Analysis& an) {
       for (index_t i = 0; i < m; ++i) local[rows[i]] = i;
       for (std::size_t x = 0; x < ne; ++x) {
         const index_t k = e0 + static_cast<index_t>(x);
-        const auto [pi, pj] = permuted(column_of[k], map.entry_src[k]);
+        const auto [pi, pj] = packed ? std::pair<index_t, index_t>{map.entry_dst[k] >> bits,
+                                                                   map.entry_dst[k] & low_mask}
+                                     : permuted(column_of[k], map.entry_src[k]);
         const index_t lo = std::min(pi, pj), hi = std::max(pi, pj);
         const index_t lc = lo - t.first_pivot[f];  // pivot column of the front
         const index_t lr = local[hi];
