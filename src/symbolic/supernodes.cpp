@@ -49,11 +49,9 @@
 //    previous range's), so every front's list comes out sorted, and the work is
 //    O(nnz(A) + Σ rows): linear in the input plus the output. This is exactly the symbolic union of
 //    the children's contribution-block rows and the front's original entries.
-//  * analyze_permuted_graph runs the same phase on the ordering's graph read through the
-//    permutation (symbolic/pattern_view.hpp) instead of a formed, sorted P A Pᵀ: none of
-//    the passes needs a column's rows in order. After the etree and its postorder the
-//    graph is copied once in the postordered numbering (rows unsorted, no bucket sort),
-//    which the column counts and the row walks then read column after column.
+//  * analyze_permuted_graph runs the same phase on P A Pᵀ gathered column by column from
+//    the ordering's graph, its rows left unsorted (no bucket sort): none of the passes
+//    needs a column's rows in order (symbolic/pattern_view.hpp).
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
@@ -378,19 +376,16 @@ void build_assembly_tree(SymbolicFactorization& sf, const Columns& cols,
 
 }  // namespace
 
-SymbolicFactorization analyze_pattern(const SparseMatrix& a, const AmalgamationOptions& opts,
-                                      PatternCheck check) {
-  if (a.layout != Layout::csc || a.n_rows != a.n_cols)
-    throw InvalidInput("analyze_pattern needs a square CSC pattern, got " +
-                       std::to_string(a.n_rows) + "x" + std::to_string(a.n_cols));
-  if (static_cast<index_t>(a.offsets.size()) != a.n_cols + 1)
-    throw InvalidInput("analyze_pattern: offsets has the wrong length");
-  if (check == PatternCheck::full) require_symmetric_pattern(a);
-  const index_t n = a.n_cols;
+namespace {
+
+// The whole symbolic phase on the pattern given by `cols` (columns in any row order).
+template <class Columns>
+SymbolicFactorization analyze_columns(const Columns& cols, const AmalgamationOptions& opts) {
+  const index_t n = cols.n;
   SymbolicFactorization sf;
-  sf.parent = elimination_tree(a);
+  sf.parent = elimination_tree_of(cols);
   sf.post = postorder(sf.parent);
-  sf.colcount = column_counts(a, sf.parent, sf.post);
+  sf.colcount = column_counts_of(cols, sf.parent, sf.post);
   sf.nnz_l = 0;
   for (index_t c : sf.colcount) sf.nnz_l += c;
 
@@ -402,9 +397,22 @@ SymbolicFactorization analyze_pattern(const SparseMatrix& a, const AmalgamationO
     par[k] = p == -1 ? -1 : ipost[p];
     cc[k] = sf.colcount[sf.post[k]];
   }
-  const RelabeledColumns cols{a.offsets.data(), a.indices.data(), sf.post.data(), ipost.data(), n};
-  build_assembly_tree(sf, cols, par, cc, opts);
+  const RelabeledColumns postordered{cols.offsets, cols.indices, sf.post.data(), ipost.data(), n};
+  build_assembly_tree(sf, postordered, par, cc, opts);
   return sf;
+}
+
+}  // namespace
+
+SymbolicFactorization analyze_pattern(const SparseMatrix& a, const AmalgamationOptions& opts,
+                                      PatternCheck check) {
+  if (a.layout != Layout::csc || a.n_rows != a.n_cols)
+    throw InvalidInput("analyze_pattern needs a square CSC pattern, got " +
+                       std::to_string(a.n_rows) + "x" + std::to_string(a.n_cols));
+  if (static_cast<index_t>(a.offsets.size()) != a.n_cols + 1)
+    throw InvalidInput("analyze_pattern: offsets has the wrong length");
+  if (check == PatternCheck::full) require_symmetric_pattern(a);
+  return analyze_columns(CscColumns{a.offsets.data(), a.indices.data(), a.n_cols}, opts);
 }
 
 SymbolicFactorization analyze_permuted_graph(index_t n, const std::vector<index_t>& offsets,
@@ -425,42 +433,17 @@ SymbolicFactorization analyze_permuted_graph(index_t n, const std::vector<index_
                          "] = " + std::to_string(o) + " is out of range or repeated");
     iperm[o] = k;
   }
-  SymbolicFactorization sf;
-  sf.parent = elimination_tree_of(
-      RelabeledColumns{offsets.data(), indices.data(), perm.data(), iperm.data(), n});
-  sf.post = postorder(sf.parent);
-  // From here on the pattern is in the postordered numbering: column k is graph vertex
-  // perm[post[k]] (`fin`); `iperm` becomes the inverse of fin.
-  std::vector<index_t> ipost(n), par(n), fin(n), identity(n);
-  for (index_t k = 0; k < n; ++k) ipost[sf.post[k]] = k;
-  for (index_t k = 0; k < n; ++k) {
-    const index_t p = sf.parent[sf.post[k]];
-    par[k] = p == -1 ? -1 : ipost[p];
-    fin[k] = perm[sf.post[k]];
-    iperm[fin[k]] = k;
-    identity[k] = k;
-  }
-  // The graph in that numbering, formed once (rows unsorted): the column counts and the
-  // two row walks then read it column after column.
-  std::vector<index_t> final_offsets(n + 1);
-  final_offsets[0] = 0;
+  // P A Pᵀ gathered column by column, its rows left in the graph's order (unsorted)
+  std::vector<index_t> permuted_offsets(n + 1);
+  permuted_offsets[0] = 0;
   for (index_t k = 0; k < n; ++k)
-    final_offsets[k + 1] = final_offsets[k] + (offsets[fin[k] + 1] - offsets[fin[k]]);
-  UninitVector<index_t> final_indices(static_cast<std::size_t>(final_offsets[n]));
+    permuted_offsets[k + 1] = permuted_offsets[k] + (offsets[perm[k] + 1] - offsets[perm[k]]);
+  UninitVector<index_t> permuted_indices(static_cast<std::size_t>(permuted_offsets[n]));
   for (index_t k = 0; k < n; ++k) {
-    index_t* out = final_indices.data() + final_offsets[k];
-    for (index_t p = offsets[fin[k]]; p < offsets[fin[k] + 1]; ++p) *out++ = iperm[indices[p]];
+    index_t* out = permuted_indices.data() + permuted_offsets[k];
+    for (index_t p = offsets[perm[k]]; p < offsets[perm[k] + 1]; ++p) *out++ = iperm[indices[p]];
   }
-  const CscColumns cols{final_offsets.data(), final_indices.data(), n};
-  const std::vector<index_t> cc = column_counts_of(cols, par, identity);
-  sf.colcount.resize(n);
-  sf.nnz_l = 0;
-  for (index_t k = 0; k < n; ++k) {
-    sf.colcount[sf.post[k]] = cc[k];
-    sf.nnz_l += cc[k];
-  }
-  build_assembly_tree(sf, cols, par, cc, opts);
-  return sf;
+  return analyze_columns(CscColumns{permuted_offsets.data(), permuted_indices.data(), n}, opts);
 }
 
 }  // namespace strata::symbolic
