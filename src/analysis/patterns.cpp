@@ -19,8 +19,9 @@
 // column, and the transpose's rows listed in increasing column order), so a merge gives
 // the sorted union without a sort; B itself is never formed. General: B(:, j) =
 // A(:, q_j). Symmetric: B(:, j) is column j of the lower triangle and row j of it the
-// entries above the diagonal. Each column is merged once, into room for both lists, and
-// then moved down to its place (the union is known only once merged).
+// entries above the diagonal. Each range of columns is merged once, side by side into the
+// room for both lists of its columns, and then moved down to its place (the union is
+// known only once merged).
 #include "analysis/patterns.hpp"
 
 #include <tbb/enumerable_thread_specific.h>
@@ -36,15 +37,6 @@
 
 namespace strata::detail {
 namespace {
-
-// Runs body(j) for j in [0, n) over the calling arena's threads, in ranges of 256 or more
-// (on the calling thread alone inside a SerialScope: base/parallel_ranges.hpp).
-template <class Body>
-void for_each_index(index_t n, Body body) {
-  detail::parallel_ranges(n, 256, [&](index_t j0, index_t j1) {
-    for (index_t j = j0; j < j1; ++j) body(j);
-  });
-}
 
 // Turns per-line counts (counts[j + 1] for line j, counts[0] = 0) into offsets.
 void prefix_sum(std::vector<index_t>& counts) {
@@ -108,7 +100,8 @@ ordering::Graph symmetric_graph(const SparseMatrix& c, bool symmetric,
   // row j of B, the columns holding row j in increasing order: for a symmetric matrix the
   // part of column j of B + Bᵀ above the diagonal
   const Transposed t = transpose_lines(n, n, ci, column_of_b);
-  // Each column merged once into room for both halves, then moved down to its place.
+  // Each column merged once into room for both halves, then moved down to its place (in
+  // place already when one range holds all the columns).
   ordering::Graph g;
   g.n = n;
   g.xadj.assign(n + 1, 0);
@@ -120,10 +113,17 @@ ordering::Graph symmetric_graph(const SparseMatrix& c, bool symmetric,
   g.adjncy.resize(room[n]);
   index_t* adj = g.adjncy.data();
   const index_t* tl = t.lines.data();
-  for_each_index(n, [&](index_t j) {
-    const auto [b0, b1] = column_of_b(j);
-    g.xadj[j + 1] =
-        union_without(j, ci + b0, ci + b1, tl + t.offsets[j], tl + t.offsets[j + 1], adj + room[j]);
+  // a range of columns is merged side by side from the room of its first column on;
+  // room[j] becomes where column j was written
+  detail::parallel_ranges(n, 256, [&](index_t j0, index_t j1) {
+    index_t at = room[j0];
+    for (index_t j = j0; j < j1; ++j) {
+      const auto [b0, b1] = column_of_b(j);
+      room[j] = at;
+      g.xadj[j + 1] =
+          union_without(j, ci + b0, ci + b1, tl + t.offsets[j], tl + t.offsets[j + 1], adj + at);
+      at += g.xadj[j + 1];
+    }
   });
   if (diagonal_entries) {  // B(j, j) in its sorted column
     *diagonal_entries = 0;
