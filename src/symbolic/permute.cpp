@@ -16,23 +16,30 @@
 
 namespace strata::symbolic {
 
-SparseMatrix permute_symmetric_pattern(index_t n, const std::vector<index_t>& offsets,
-                                       const std::vector<index_t>& indices,
-                                       const std::vector<index_t>& perm) {
-  if (static_cast<index_t>(offsets.size()) != n + 1)
-    throw InvalidInput("permute_symmetric_pattern: offsets has " + std::to_string(offsets.size()) +
+std::vector<index_t> checked_inverse(index_t n, std::size_t offsets_size,
+                                     const std::vector<index_t>& perm, const char* who) {
+  if (static_cast<index_t>(offsets_size) != n + 1)
+    throw InvalidInput(std::string(who) + ": offsets has " + std::to_string(offsets_size) +
                        " entries, expected " + std::to_string(n + 1));
   if (static_cast<index_t>(perm.size()) != n)
-    throw InvalidInput("permute_symmetric_pattern: permutation has " + std::to_string(perm.size()) +
+    throw InvalidInput(std::string(who) + ": permutation has " + std::to_string(perm.size()) +
                        " entries, expected " + std::to_string(n));
   std::vector<index_t> iperm(n, -1);
   for (index_t k = 0; k < n; ++k) {
     const index_t o = perm[k];
     if (o < 0 || o >= n || iperm[o] != -1)
-      throw InvalidInput("permute_symmetric_pattern: perm[" + std::to_string(k) +
+      throw InvalidInput(std::string(who) + ": perm[" + std::to_string(k) +
                          "] = " + std::to_string(o) + " is out of range or repeated");
     iperm[o] = k;
   }
+  return iperm;
+}
+
+SparseMatrix permute_symmetric_pattern(index_t n, const std::vector<index_t>& offsets,
+                                       const std::vector<index_t>& indices,
+                                       const std::vector<index_t>& perm) {
+  const std::vector<index_t> iperm =
+      checked_inverse(n, offsets.size(), perm, "permute_symmetric_pattern");
   SparseMatrix b;
   b.n_rows = b.n_cols = n;
   b.layout = Layout::csc;

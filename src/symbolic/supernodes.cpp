@@ -419,20 +419,8 @@ SymbolicFactorization analyze_permuted_graph(index_t n, const std::vector<index_
                                              const std::vector<index_t>& indices,
                                              const std::vector<index_t>& perm,
                                              const AmalgamationOptions& opts) {
-  if (static_cast<index_t>(offsets.size()) != n + 1)
-    throw InvalidInput("analyze_permuted_graph: offsets has " + std::to_string(offsets.size()) +
-                       " entries, expected " + std::to_string(n + 1));
-  if (static_cast<index_t>(perm.size()) != n)
-    throw InvalidInput("analyze_permuted_graph: permutation has " + std::to_string(perm.size()) +
-                       " entries, expected " + std::to_string(n));
-  std::vector<index_t> iperm(n, -1);
-  for (index_t k = 0; k < n; ++k) {
-    const index_t o = perm[k];
-    if (o < 0 || o >= n || iperm[o] != -1)
-      throw InvalidInput("analyze_permuted_graph: perm[" + std::to_string(k) +
-                         "] = " + std::to_string(o) + " is out of range or repeated");
-    iperm[o] = k;
-  }
+  const std::vector<index_t> iperm =
+      checked_inverse(n, offsets.size(), perm, "analyze_permuted_graph");
   // P A Pᵀ gathered column by column, its rows left in the graph's order (unsorted)
   std::vector<index_t> permuted_offsets(n + 1);
   permuted_offsets[0] = 0;

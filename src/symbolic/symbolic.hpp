@@ -31,6 +31,12 @@ SparseMatrix permute_symmetric_pattern(index_t n, const std::vector<index_t>& of
                                        const std::vector<index_t>& indices,
                                        const std::vector<index_t>& perm);
 
+/// The inverse (old→new) of the new→old permutation perm of a symmetric pattern of n
+/// columns given by offsets_size = n + 1 column offsets. Throws InvalidInput naming `who`
+/// for either size wrong or an entry of perm out of range or repeated.
+std::vector<index_t> checked_inverse(index_t n, std::size_t offsets_size,
+                                     const std::vector<index_t>& perm, const char* who);
+
 /// Elimination tree: parent[j] is the parent of column j, -1 for a root.
 std::vector<index_t> elimination_tree(const SparseMatrix& a);
 
