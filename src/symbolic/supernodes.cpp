@@ -374,10 +374,6 @@ void build_assembly_tree(SymbolicFactorization& sf, const Columns& cols,
       [&](index_t r) { walk(r, [&](index_t f, index_t i) { t.rows[count[r][f]++] = i; }); });
 }
 
-}  // namespace
-
-namespace {
-
 // The whole symbolic phase on the pattern given by `cols` (columns in any row order).
 template <class Columns>
 SymbolicFactorization analyze_columns(const Columns& cols, const AmalgamationOptions& opts) {
