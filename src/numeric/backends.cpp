@@ -87,5 +87,9 @@ int cuda_small_front_threads(index_t, index_t, int, bool) {
   throw NotSupported("this build of strata has no CUDA backend (nvcc was not found at build time)");
 }
 
+index_t cuda_fused_front_max_rows(bool) {
+  throw NotSupported("this build of strata has no CUDA backend (nvcc was not found at build time)");
+}
+
 }  // namespace strata::numeric
 #endif

@@ -107,6 +107,13 @@ std::vector<double> cuda_trsv_tiles(int form, bool unit, index_t n, const std::v
 /// outside [1, 256], NotSupported in a build without CUDA.
 int cuda_small_front_threads(index_t count, index_t max_rows, int max_threads, bool shared = false);
 
+/// The most rows of a front that a launch group assembled, factored and stored by one
+/// launch in shared memory (Options::gpu_fused_small_batches) may have on CUDA device 0,
+/// for LU (lu) or Cholesky (a Cholesky front is held as its packed lower triangle, so it
+/// fits larger fronts), so that tests can tell which fronts are fused; 0 when none fits.
+/// Throws NotSupported in a build without CUDA.
+index_t cuda_fused_front_max_rows(bool lu);
+
 /// A copy of `host` in device memory of CUDA device 0 (cudaMalloc), freed with the last
 /// owner, so that tests can give the solver values that live on the GPU. Throws
 /// DeviceError, NotSupported in a build without CUDA or without a GPU.

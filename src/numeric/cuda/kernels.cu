@@ -17,7 +17,8 @@
 // there and factors it in place (lu_small_shared_kernel); when the whole launch group is
 // such fronts and the factor stays on the device, one launch does the group's assembly,
 // factorization, stores and packing, each front assembled straight into shared memory
-// (small_fused_kernel, for Cholesky groups too). A launch of few fronts gets blocks wider than a
+// (small_fused_kernel, for Cholesky groups too, whose fronts are held as their packed
+// lower triangle: up to about 230 rows). A launch of few fronts gets blocks wider than a
 // thread per row (small_front_threads), so that the trailing updates, a large share of a front's
 // time, are spread over more threads of an SM that would otherwise idle. Threshold partial pivoting
 // for LU searches only the fully summed rows (restricted pivoting), keeps the diagonal when it is
@@ -325,16 +326,15 @@ static_assert(kThreads / kSmallNb <= 32);
 
 // The trailing update of the blocked small-front kernels after a panel of w ≤ kSmallNb
 // pivot columns ending at c0: F(i, c) −= Σ_{p<w} L(i, p) · V(p, c) for the rows i ∈ [c0, m)
-// and the columns c ∈ [c0, m) (lower: c ≤ i only) of F (leading dimension ld), V(p, c) =
+// and the columns c ∈ [c0, m) (lower: c ≤ i only) of F (entry (i, c) at F[at(i, c)]), V(p, c) =
 // col_v(p, c) and L(i, p) = row_l(i, p) (from shared memory, or from F in the pool). By the whole
 // block rather than one thread per row: the nr = m − c0 trailing rows times ⌊blockDim.x / nr⌋
 // groups of columns (thread t: row c0 + t mod nr, columns c0 + t div nr + groups·q), four columns'
 // loads in flight at once. Each entry takes its w products in the order p = 0, 1, …, as one thread
 // per row did: the same result bit for bit. Needs m ≤ blockDim.x.
-template <class ColV, class RowL>
-__device__ __forceinline__ void trailing_update(double* F, std::int64_t ld, std::int64_t m,
-                                                std::int64_t c0, int w, ColV col_v, bool lower,
-                                                RowL row_l) {
+template <class At, class ColV, class RowL>
+__device__ __forceinline__ void trailing_update(double* F, At at, std::int64_t m, std::int64_t c0,
+                                                int w, ColV col_v, bool lower, RowL row_l) {
   const std::int64_t nr = m - c0;
   if (nr <= 0) return;
   const std::int64_t groups = blockDim.x / nr;  // ≥ 1: nr < m ≤ blockDim.x
@@ -349,7 +349,7 @@ __device__ __forceinline__ void trailing_update(double* F, std::int64_t ld, std:
   for (; c + 3 * groups < end; c += 4 * groups) {
     double a[4];
 #pragma unroll
-    for (int q = 0; q < 4; ++q) a[q] = F[(c + q * groups) * ld + ri];
+    for (int q = 0; q < 4; ++q) a[q] = F[at(ri, c + q * groups)];
 #pragma unroll
     for (int q = 0; q < 4; ++q) {
 #pragma unroll
@@ -357,17 +357,39 @@ __device__ __forceinline__ void trailing_update(double* F, std::int64_t ld, std:
         if (p < w) a[q] -= l[p] * col_v(p, c + q * groups);
     }
 #pragma unroll
-    for (int q = 0; q < 4; ++q) F[(c + q * groups) * ld + ri] = a[q];
+    for (int q = 0; q < 4; ++q) F[at(ri, c + q * groups)] = a[q];
   }
   for (; c < end; c += groups) {
-    double acc = F[c * ld + ri];
+    double acc = F[at(ri, c)];
 #pragma unroll
     for (int p = 0; p < kSmallNb; ++p)
       if (p < w) acc -= l[p] * col_v(p, c);
-    F[c * ld + ri] = acc;
+    F[at(ri, c)] = acc;
   }
 }
-__device__ void llt_front_blocked(double* F, std::int64_t ld, std::int64_t m, std::int64_t k,
+// Where entry (i, c) of a front lies: column-major with leading dimension ld (a front in the
+// pool), or the lower triangle's columns one after another (PackedLower, a Cholesky front in
+// shared memory: column c holds rows [c, m) and starts at c·(2m − c − 1)/2 + c, so that
+// (i, c) is at c·(2m − c − 1)/2 + i). The packed triangle takes about half a square's room,
+// so that fronts of up to ~230 rows fit an H100's or H200's shared memory per block.
+struct ColumnMajor {
+  std::int64_t ld;
+  __device__ std::int64_t operator()(std::int64_t i, std::int64_t c) const { return c * ld + i; }
+};
+struct PackedLower {
+  int m;
+  __device__ int operator()(std::int64_t i, std::int64_t c) const {
+    const int ci = static_cast<int>(c);
+    return ci * (2 * m - ci - 1) / 2 + static_cast<int>(i);
+  }
+};
+// Doubles of a packed lower triangle of m rows (PackedLower).
+__host__ __device__ constexpr std::int64_t packed_lower_size(std::int64_t m) {
+  return m * (m + 1) / 2;
+}
+
+template <class At>
+__device__ void llt_front_blocked(double* F, At at, std::int64_t m, std::int64_t k,
                                   std::int64_t* info, double (*lsh)[kThreads]) {
   // lsh[p][row]: the panel's columns, L(row, j0 + p) (the kernel's shared buffer)
   __shared__ int sfail;
@@ -380,7 +402,7 @@ __device__ void llt_front_blocked(double* F, std::int64_t ld, std::int64_t m, st
     double r[kSmallNb];
 #pragma unroll
     for (int p = 0; p < kSmallNb; ++p)
-      r[p] = (p < w && row && i >= j0 + p) ? F[(j0 + p) * ld + i] : 0.0;
+      r[p] = (p < w && row && i >= j0 + p) ? F[at(i, j0 + p)] : 0.0;
 #pragma unroll
     for (int p = 0; p < kSmallNb; ++p) {
       if (p < w) {
@@ -407,11 +429,11 @@ __device__ void llt_front_blocked(double* F, std::int64_t ld, std::int64_t m, st
     }
 #pragma unroll
     for (int p = 0; p < kSmallNb; ++p)
-      if (p < w && row && i >= j0 + p) F[(j0 + p) * ld + i] = r[p];
+      if (p < w && row && i >= j0 + p) F[at(i, j0 + p)] = r[p];
     // trailing lower triangle: F(i, c) −= Σ_p L(i, j0 + p) L(c, j0 + p), j0 + w ≤ c ≤ i;
     // every row's panel is in lsh by now
     trailing_update(
-        F, ld, m, j0 + w, w, [&](int p, std::int64_t c) { return lsh[p][c]; }, true,
+        F, at, m, j0 + w, w, [&](int p, std::int64_t c) { return lsh[p][c]; }, true,
         [&](std::int64_t ri, int p) { return lsh[p][ri]; });
     __syncthreads();  // the next panel reads what this one wrote, and reuses lsh
   }
@@ -723,7 +745,7 @@ __device__ void lu_front_blocked(double* F, int ld, int m, int k, double static_
       lu_trailing_update_mma(F, ld, m, j0, w);
     else
       trailing_update(
-          F, ld, m, j0 + w, w, [&](int p, std::int64_t c) { return ush[p][c]; }, false,
+          F, ColumnMajor{ld}, m, j0 + w, w, [&](int p, std::int64_t c) { return ush[p][c]; }, false,
           [&](std::int64_t ri, int p) { return F[(j0 + p) * ld + ri]; });
     __syncthreads();  // the next panel reads what this one wrote, and reuses the buffers
   }
@@ -765,7 +787,7 @@ __global__ void __launch_bounds__(kBlock, kThreads * 2 / kBlock)
   } else {
     __syncthreads();
     if (m <= blockDim.x)
-      llt_front_blocked(F, m, m, k, info + i, panel);
+      llt_front_blocked(F, ColumnMajor{m}, m, k, info + i, panel);
     else
       llt_front(F, m, k, info + i);
   }
@@ -832,6 +854,45 @@ __global__ void __launch_bounds__(kBlock, kThreads * 2 / kBlock)
   }
 }
 
+// Small Cholesky fronts each copied into shared memory as their packed lower triangle
+// (PackedLower), factored there (llt_front_blocked) and copied back: the Cholesky
+// counterpart of lu_small_shared_kernel, for the launches that are not fused. Dynamic
+// shared memory of llt_fused_bytes(max_rows): the triangle, then llt_front_blocked's panel
+// buffer. kBlock as factor_small_kernel's.
+template <int kBlock>
+__global__ void __launch_bounds__(kBlock, kThreads * 2 / kBlock)
+    llt_small_shared_kernel(DeviceTree t, const std::int64_t* positions, double* pool,
+                            std::int64_t* info, std::int64_t* perturbed) {
+  extern __shared__ double fs[];
+  const std::int64_t b = blockIdx.x;
+  const std::int64_t pos = positions[b];
+  const std::int64_t f = t.fronts[pos];
+  const int m = static_cast<int>(t.n_rows[f]), k = static_cast<int>(t.n_pivots[f]);
+  double* F = pool + t.pos_offset[pos];
+  if (threadIdx.x == 0) {
+    info[b] = -1;
+    perturbed[b] = 0;
+  }
+  // the lower triangle in and out a column per warp, its lanes down the column
+  const PackedLower at{m};
+  const int lane = static_cast<int>(threadIdx.x) % kWarp,
+            warps = static_cast<int>(blockDim.x) / kWarp;
+  for (int c = static_cast<int>(threadIdx.x) / kWarp; c < m; c += warps) {
+    const double* src = F + static_cast<std::int64_t>(c) * m;
+    double* dst = fs + at(0, c);
+    for (int i = c + lane; i < m; i += kWarp) dst[i] = src[i];
+  }
+  __syncthreads();
+  auto* lsh = reinterpret_cast<double(*)[kThreads]>(fs + packed_lower_size(m));
+  llt_front_blocked(fs, at, m, k, info + b, lsh);
+  __syncthreads();
+  for (int c = static_cast<int>(threadIdx.x) / kWarp; c < m; c += warps) {
+    double* dst = F + static_cast<std::int64_t>(c) * m;
+    const double* src = fs + at(0, c);
+    for (int i = c + lane; i < m; i += kWarp) dst[i] = src[i];
+  }
+}
+
 // A launch group of small LU (kLu) or Cholesky fronts in one launch (launch_small_fused):
 // each block assembles its front straight into shared memory in assemble_kernel's order of
 // additions (zeros, the original entries at distinct places, then each child's block —
@@ -840,9 +901,13 @@ __global__ void __launch_bounds__(kBlock, kThreads * 2 / kBlock)
 // would have left: the panel (and U12) into the factor, the contribution block (Cholesky:
 // its lower triangle, as store_cb_kernel) into the arena, the pivots' diagonal entries. One
 // launch per group instead of four (assembly, factorization, store, pack), and no trip of
-// the front through the pool. Dynamic shared memory as lu_small_shared_kernel's, and for
-// Cholesky llt_front_blocked's panel buffer after the front (kLltPanelBytes).
+// the front through the pool. Dynamic shared memory: LU as lu_small_shared_kernel's;
+// Cholesky the front's lower triangle packed (PackedLower) and llt_front_blocked's panel
+// buffer after it (llt_fused_bytes).
 constexpr std::size_t kLltPanelBytes = sizeof(double) * kSmallNb * kThreads;
+std::size_t llt_fused_bytes(std::int64_t m) {
+  return sizeof(double) * static_cast<std::size_t>(packed_lower_size(m)) + kLltPanelBytes;
+}
 template <int kBlock, bool kLu>
 __global__ void __launch_bounds__(kBlock, kThreads * 2 / kBlock)
     small_fused_kernel(DeviceTree t, const std::int64_t* positions, const double* values,
@@ -861,7 +926,10 @@ __global__ void __launch_bounds__(kBlock, kThreads * 2 / kBlock)
     info[b] = -1;
     perturbed[b] = 0;
   }
-  for (int x = tid; x < m * ld; x += step) fs[x] = 0.0;
+  // LU: the square with leading dimension ld; Cholesky: the packed lower triangle
+  auto column = [&](int c) { return kLu ? c * ld : PackedLower{m}(0, c); };
+  const int size = kLu ? m * ld : static_cast<int>(packed_lower_size(m));
+  for (int x = tid; x < size; x += step) fs[x] = 0.0;
   __syncthreads();
   // the original entries (distinct destinations) and each child's block, kUnroll loads in
   // flight per thread before their additions: the loads' latency, not the additions, is
@@ -869,7 +937,7 @@ __global__ void __launch_bounds__(kBlock, kThreads * 2 / kBlock)
   constexpr int kUnroll = 4;
   auto add_entry = [&](std::int64_t d, double v) {
     const int di = static_cast<int>(d), c = di / m;
-    fs[c * ld + (di - c * m)] += v;
+    fs[column(c) + (di - c * m)] += v;
   };
   {
     const std::int64_t e1 = t.entry_offsets[f + 1];
@@ -897,7 +965,7 @@ __global__ void __launch_bounds__(kBlock, kThreads * 2 / kBlock)
     const double* cb = t.cb_ptr[c];
     const std::int64_t* rel = t.rel + t.rel_offsets[c];
     for (int jj = warp; jj < cm; jj += warps) {
-      double* col = fs + static_cast<int>(rel[jj]) * ld;
+      double* col = fs + column(static_cast<int>(rel[jj]));
       const double* src = cb + static_cast<std::int64_t>(jj) * cm;
       int ii = (kLu ? 0 : jj) + lane;  // Cholesky: the block's lower triangle
       for (; ii + (kUnroll - 1) * kWarp < cm; ii += kUnroll * kWarp) {
@@ -921,14 +989,14 @@ __global__ void __launch_bounds__(kBlock, kThreads * 2 / kBlock)
                            t.lu_interchanges ? t.lu_interchanges + f : nullptr);
   } else {
     (void)static_pivot, (void)threshold, (void)perm, (void)perm_offset;
-    auto* lsh = reinterpret_cast<double(*)[kThreads]>(fs + m * ld);
-    llt_front_blocked(fs, ld, m, k, info + b, lsh);
+    auto* lsh = reinterpret_cast<double(*)[kThreads]>(fs + size);
+    llt_front_blocked(fs, PackedLower{m}, m, k, info + b, lsh);
   }
   __syncthreads();
   double* panel = panels + panel_offset[b];
   for (int x = tid; x < m * k; x += step) {  // L11\U11 (L11) and L21: columns [0, k), ld m
-    const int c = x / m;
-    panel[x] = fs[c * ld + (x - c * m)];
+    const int c = x / m, i = x - c * m;
+    panel[x] = kLu || i >= c ? fs[column(c) + i] : 0.0;  // Cholesky: zeros above L11
   }
   if constexpr (kLu) {
     double* u12 = panel + static_cast<std::int64_t>(m) * k;
@@ -938,12 +1006,12 @@ __global__ void __launch_bounds__(kBlock, kThreads * 2 / kBlock)
     }
   }
   double* d = diag + diag_offset[b];
-  for (int i = tid; i < k; i += step) d[i] = fs[i * ld + i];
+  for (int i = tid; i < k; i += step) d[i] = fs[column(i) + i];
   if (t.parent[f] >= 0 && mc > 0) {  // the contribution block, ld mc
     double* out = t.cb_ptr[f];
     for (int x = tid; x < mc * mc; x += step) {
       const int j = x / mc, i = x - j * mc;
-      if (kLu || i >= j) out[x] = fs[(k + j) * ld + k + i];
+      if (kLu || i >= j) out[x] = fs[column(k + j) + k + i];
     }
   }
 }
@@ -1049,6 +1117,8 @@ std::int64_t lu_shared_max_rows() {
       reinterpret_cast<const void*>(small_fused_kernel<kThreads, true>),
       reinterpret_cast<const void*>(small_fused_kernel<kWideThreads, true>)};
   const void* llt_kernels[] = {
+      reinterpret_cast<const void*>(llt_small_shared_kernel<kThreads>),
+      reinterpret_cast<const void*>(llt_small_shared_kernel<kWideThreads>),
       reinterpret_cast<const void*>(small_fused_kernel<kThreads, false>),
       reinterpret_cast<const void*>(small_fused_kernel<kWideThreads, false>)};
   cudaFuncAttributes attr{};
@@ -1074,9 +1144,9 @@ std::int64_t lu_shared_max_rows() {
       STRATA_CUDA(cudaFuncSetAttribute(k, cudaFuncAttributeMaxDynamicSharedMemorySize, bytes));
   }
   int ml = 0;
-  while (ml < kThreads && shared_front_bytes(ml + 1) + kLltPanelBytes <= room) ++ml;
+  while (ml < kThreads && llt_fused_bytes(ml + 1) <= room) ++ml;
   if (ml > 0) {
-    const int bytes = static_cast<int>(shared_front_bytes(ml) + kLltPanelBytes);
+    const int bytes = static_cast<int>(llt_fused_bytes(ml));
     for (const void* k : llt_kernels)
       STRATA_CUDA(cudaFuncSetAttribute(k, cudaFuncAttributeMaxDynamicSharedMemorySize, bytes));
   }
@@ -1131,11 +1201,22 @@ void launch_factor_small(const DeviceTree& t, const std::int64_t* positions, std
                          std::int64_t* perm, const std::int64_t* perm_offset, int max_threads,
                          cudaStream_t s) {
   if (count == 0) return;
-  const bool shared = lu && max_rows <= lu_shared_max_rows();
-  const std::size_t bytes = shared ? shared_front_bytes(max_rows) : 0;
+  const bool shared = max_rows <= (lu ? lu_shared_max_rows() : llt_fused_max_rows());
+  const std::size_t bytes =
+      !shared ? 0 : (lu ? shared_front_bytes(max_rows) : llt_fused_bytes(max_rows));
   const unsigned threads = small_front_threads(count, max_rows, max_threads, bytes);
   const bool wide = threads > static_cast<unsigned>(kThreads);
   const unsigned blocks = static_cast<unsigned>(count);
+  if (shared && !lu) {
+    if (wide)
+      llt_small_shared_kernel<kWideThreads>
+          <<<blocks, threads, bytes, s>>>(t, positions, pool, info, perturbed);
+    else
+      llt_small_shared_kernel<kThreads>
+          <<<blocks, threads, bytes, s>>>(t, positions, pool, info, perturbed);
+    STRATA_CUDA_LAUNCH();
+    return;
+  }
   if (shared) {
     if (wide)
       lu_small_shared_kernel<kWideThreads><<<blocks, threads, bytes, s>>>(
@@ -1166,7 +1247,7 @@ void launch_small_fused(const DeviceTree& t, bool lu, const std::int64_t* positi
   if (max_rows > (lu ? lu_shared_max_rows() : llt_fused_max_rows()))
     throw InternalError("launch_small_fused: a front of " + std::to_string(max_rows) +
                         " rows does not fit shared memory");
-  const std::size_t bytes = shared_front_bytes(max_rows) + (lu ? 0 : kLltPanelBytes);
+  const std::size_t bytes = lu ? shared_front_bytes(max_rows) : llt_fused_bytes(max_rows);
   const unsigned threads = small_front_threads(count, max_rows, max_threads, bytes);
   const unsigned blocks = static_cast<unsigned>(count);
   const bool wide = threads > static_cast<unsigned>(kThreads);
@@ -1250,6 +1331,11 @@ int cuda_small_front_threads(index_t count, index_t max_rows, int max_threads, b
   STRATA_CUDA(cudaSetDevice(0));
   return static_cast<int>(cuda::small_front_threads(
       count, max_rows, max_threads, shared ? cuda::shared_front_bytes(max_rows) : 0));
+}
+
+index_t cuda_fused_front_max_rows(bool lu) {
+  STRATA_CUDA(cudaSetDevice(0));
+  return lu ? cuda::lu_shared_max_rows() : cuda::llt_fused_max_rows();
 }
 
 }  // namespace strata::numeric

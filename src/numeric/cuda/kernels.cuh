@@ -67,7 +67,10 @@ void launch_pack_panels(const DeviceTree& t, std::int64_t begin, std::int64_t co
 /// the CPU's rule (numeric/cpu/dense_front.hpp, factor_front_lu) with u = `threshold`.
 /// Blocks have a thread per row of the largest front (rounded up to a power of two); a
 /// launch of few fronts gets wider ones, up to `max_threads` (Options::
-/// gpu_small_front_threads; 0: never wider), the same results bit for bit.
+/// gpu_small_front_threads; 0: never wider), the same results bit for bit. A launch whose
+/// fronts fit the device's shared memory per block (max_rows ≤ lu_shared_max_rows() for
+/// LU, llt_fused_max_rows() for Cholesky, whose lower triangle is copied there packed)
+/// factors a copy of each front there.
 void launch_factor_small(const DeviceTree& t, const std::int64_t* positions, std::int64_t count,
                          std::int64_t max_rows, double* pool, bool lu, double static_pivot,
                          double threshold, std::int64_t* info, std::int64_t* perturbed,
@@ -99,7 +102,8 @@ void launch_small_fused(const DeviceTree& t, bool lu, const std::int64_t* positi
 std::int64_t lu_shared_max_rows();
 
 /// The most rows of a front launch_small_fused takes for Cholesky on the current device
-/// (its front shares the room with llt_front_blocked's panel buffer; 0 when none fits).
+/// (its front's lower triangle, packed, shares the room with llt_front_blocked's panel
+/// buffer; 0 when none fits).
 std::int64_t llt_fused_max_rows();
 
 /// The shared-memory LU kernels' own (static) shared memory per block on the current
