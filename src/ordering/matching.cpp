@@ -191,8 +191,9 @@ class RowHeap {
   bool empty() const { return heap_.empty(); }
   double top_key() const { return heap_.front().key; }
 
-  // Inserts row i with key d, or lowers its key to d.
-  void push_or_decrease(index_t i, double d) {
+  // Inserts row i with key d, or lowers its key to d. Out of line: the searches' scans of
+  // edges, which call it, keep their own variables in registers.
+  [[gnu::noinline]] void push_or_decrease(index_t i, double d) {
     index_t at = rows_[i].slot;
     if (at < 0) {
       at = static_cast<index_t>(heap_.size());
@@ -410,21 +411,33 @@ class Matcher {
     double dead_min = kInf;  // shortest distance found to a dead row (see retire_dead_set)
     index_t j = j0;
     double dj = 0.0;
+    // the arrays the scans read, in locals: the heap's updates (out of line) would otherwise
+    // make the compiler reload them, and the loop's own variables, at every edge
+    const index_t* const colptr = g_.colptr;
+    const index_t* const rowind = g_.rowind;
+    const double* const cost = g_.cost.data();
+    RowState* const rows = rows_.data();
+    index_t* const via_col = via_col_.data();
+    index_t* const via_edge = via_edge_.data();
+    const double shift = dead_shift_;
     for (;;) {
-      for (index_t p = g_.colptr[j]; p < g_.colptr[j + 1]; ++p) {
-        const index_t i = g_.rowind[p];
-        RowState& r = rows_[i];
-        if (r.slot == kFinalized) continue;
-        if (r.slot == kDead) {
-          dead_min = std::min(dead_min, dj + reduced(p, r.u - dead_shift_, j));
+      const double vj = v_[j];  // r_ij = (c_ij − u_i) − v_j, as reduced() evaluates it
+      const index_t end = colptr[j + 1];
+      for (index_t p = colptr[j]; p < end; ++p) {
+        const index_t i = rowind[p];
+        RowState& r = rows[i];
+        const index_t slot = r.slot;
+        if (slot == kFinalized) continue;
+        if (slot == kDead) {
+          dead_min = std::min(dead_min, dj + ((cost[p] - (r.u - shift)) - vj));
           continue;
         }
-        const double nd = dj + std::max(0.0, reduced(p, r.u, j));
+        const double nd = dj + std::max(0.0, (cost[p] - r.u) - vj);
         if (nd >= best || nd >= r.dist) continue;
         if (r.dist == kInf) touched_.push_back(i);
         r.dist = nd;
-        via_col_[i] = j;
-        via_edge_[i] = p;
+        via_col[i] = j;
+        via_edge[i] = p;
         if (r.col == kNone) {
           best = nd;
           best_row = i;
