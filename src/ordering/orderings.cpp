@@ -38,6 +38,46 @@
 
 namespace strata::ordering {
 
+namespace {
+
+// AMD's core routine on g with index type Int: amd_2 (int) when the graph's lists and their
+// elbow room fit 32-bit indices, which halves the bytes AMD works through, else amd_l2
+// (SuiteSparse_long); the same algorithm, the same permutation. The graph is what amd_2
+// takes (symmetric, no diagonal, no duplicates), so it is called directly rather than
+// through amd_order, which would check the pattern and form A + Aᵀ again. amd_2 overwrites
+// its copy of the lists and needs room after them: at least n entries (amd_order gives
+// nz/5 + n, as here).
+template <class Int>
+void amd_core(const Graph& g, index_t* perm, AmdCounts* counts) {
+  const Int n = static_cast<Int>(g.n);
+  const Int nz = static_cast<Int>(g.n_edges_directed());
+  const Int iwlen = nz + nz / 5 + n;
+  // not value-initialized: amd_2 reads only the first nz entries before writing the rest
+  UninitVector<Int> iw(static_cast<std::size_t>(iwlen));
+  std::copy(g.adjncy.begin(), g.adjncy.end(), iw.begin());
+  UninitVector<Int> pe(static_cast<std::size_t>(n)), len(static_cast<std::size_t>(n));
+  for (Int v = 0; v < n; ++v) {
+    pe[v] = static_cast<Int>(g.xadj[v]);
+    len[v] = static_cast<Int>(g.xadj[v + 1] - g.xadj[v]);
+  }
+  std::vector<Int> nv(n), next(n), last(n), head(n), elen(n), degree(n), w(n);
+  double control[AMD_CONTROL], info[AMD_INFO] = {};
+  amd_defaults(control);
+  if constexpr (sizeof(Int) == sizeof(int))
+    amd_2(n, pe.data(), iw.data(), len.data(), iwlen, nz, nv.data(), next.data(), last.data(),
+          head.data(), elen.data(), degree.data(), w.data(), control, info);
+  else
+    amd_l2(n, pe.data(), iw.data(), len.data(), iwlen, nz, nv.data(), next.data(), last.data(),
+           head.data(), elen.data(), degree.data(), w.data(), control, info);
+  std::copy(last.begin(), last.end(), perm);  // Last: the k-th pivot
+  if (counts) {
+    counts->nnz_l = info[AMD_LNZ] + static_cast<double>(n);
+    counts->flops = info[AMD_NDIV] + 2 * info[AMD_NMULTSUBS_LDL];
+  }
+}
+
+}  // namespace
+
 std::vector<index_t> amd_ordering(const Graph& g, AmdCounts* counts) {
   const index_t n = g.n;
   if (n == 0) return {};
@@ -47,29 +87,12 @@ std::vector<index_t> amd_ordering(const Graph& g, AmdCounts* counts) {
     if (counts) *counts = {static_cast<double>(n), static_cast<double>(n)};
     return perm;
   }
-  // The graph is what AMD's core routine amd_l2 takes (symmetric, sorted, no diagonal, no
-  // duplicates), so it is called directly rather than through amd_l_order, which would
-  // check the pattern and form A + Aᵀ again. amd_l2 overwrites its copy of the lists and
-  // needs room after them: at least n entries (amd_l_order gives nz/5 + n, as here).
   static_assert(sizeof(SuiteSparse_long) == sizeof(index_t), "AMD long index must be 64-bit");
-  using Long = SuiteSparse_long;  // index_t is int64_t; SuiteSparse_long is long (LP64)
-  const Long nz = g.n_edges_directed();
-  const Long iwlen = nz + nz / 5 + n;
-  // not value-initialized: amd_l2 reads only the first nz entries before writing the rest
-  UninitVector<Long> iw(static_cast<std::size_t>(iwlen));
-  std::copy(g.adjncy.begin(), g.adjncy.end(), iw.begin());
-  std::vector<Long> pe(g.xadj.begin(), g.xadj.end() - 1), len(n);
-  for (index_t v = 0; v < n; ++v) len[v] = g.xadj[v + 1] - g.xadj[v];
-  std::vector<Long> nv(n), pinv(n), head(n), elen(n), degree(n), w(n);
-  double control[AMD_CONTROL], info[AMD_INFO] = {};
-  amd_l_defaults(control);
-  auto* p = reinterpret_cast<Long*>(perm.data());
-  amd_l2(n, pe.data(), iw.data(), len.data(), iwlen, nz, nv.data(), pinv.data(), p, head.data(),
-         elen.data(), degree.data(), w.data(), control, info);
-  if (counts) {
-    counts->nnz_l = info[AMD_LNZ] + static_cast<double>(n);
-    counts->flops = info[AMD_NDIV] + 2 * info[AMD_NMULTSUBS_LDL];
-  }
+  const index_t nz = g.n_edges_directed();
+  if (nz + nz / 5 + n <= std::numeric_limits<int>::max())
+    amd_core<int>(g, perm.data(), counts);
+  else
+    amd_core<SuiteSparse_long>(g, perm.data(), counts);
   return perm;
 }
 
