@@ -164,7 +164,8 @@ struct Options {
   int gpu_small_front_threads = 512;
   /// CUDA backend, LU and Cholesky with the factor kept on the device: a launch group (a
   /// level of the schedule, or the part of one that fits the device pool) whose fronts all
-  /// fit shared memory (up to about 168 rows for LU, 161 for Cholesky on an H100) and
+  /// fit shared memory (up to about 168 rows for LU and 230 for Cholesky, whose fronts are
+  /// held as their packed lower triangle, on an H100 or H200) and
   /// gpu_small_front_rows is assembled,
   /// factored, and its contribution blocks and panels stored by one launch, each front
   /// assembled straight into shared memory, instead of four launches through the device
