@@ -340,6 +340,66 @@ TEST(Matching, OptimalAgainstDenseHungarian) {
   }
 }
 
+// Magnitudes from four values only ({1, 1/2, 1/4, 1e-3}, random signs), so that many costs
+// are exactly equal and the searches cross whole regions of tight edges at one distance
+// (as on the multibody Newton matrices): general sparse matrices, and saddle-point ones
+// [H Gᵀ; G 0] with a zero (2,2) block. Optimal against the dense Hungarian algorithm.
+TEST(Matching, EqualMagnitudesAgainstDenseHungarian) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  std::uniform_real_distribution<double> u01(0.0, 1.0);
+  const double levels[] = {1.0, 0.5, 0.25, 1e-3};
+  auto draw = [&] {
+    const double m = levels[static_cast<int>(u01(rng) * 4) % 4];
+    return u01(rng) < 0.5 ? -m : m;
+  };
+  const index_t sizes[] = {1, 2, 3, 5, 8, 24, 40, 61, 80};
+  for (int trial = 0; trial < 36; ++trial) {
+    const index_t n = sizes[trial % 9];
+    const bool saddle = trial % 2 == 1 && n % 2 == 0;
+    const double density = std::min(1.0, 3.0 / n + 0.05);
+    std::vector<double> d(n * n, 0.0);
+    std::vector<index_t> sigma(n);
+    std::iota(sigma.begin(), sigma.end(), 0);
+    if (saddle) {  // H (k×k) with its diagonal, G (k×k) with a transversal, Gᵀ's pattern
+      const index_t k = n / 2;
+      std::shuffle(sigma.begin(), sigma.begin() + k, rng);
+      for (index_t j = 0; j < k; ++j)
+        for (index_t i = 0; i < k; ++i) {
+          if (i == j || u01(rng) < density) d[i + j * n] = draw();
+          const bool g = sigma[j] == i || u01(rng) < density;
+          if (g) {
+            d[(k + i) + j * n] = draw();  // G(i, j)
+            d[j + (k + i) * n] = draw();  // Gᵀ(j, i), its own value
+          }
+        }
+    } else {
+      std::shuffle(sigma.begin(), sigma.end(), rng);
+      for (index_t j = 0; j < n; ++j)
+        for (index_t i = 0; i < n; ++i)
+          if (u01(rng) < density) d[i + j * n] = draw();
+      for (index_t i = 0; i < n; ++i)
+        if (d[i + sigma[i] * n] == 0.0) d[i + sigma[i] * n] = draw();
+    }
+    const SparseMatrix a = from_dense(d, n);
+    ASSERT_EQ(structural_rank(a), n);
+    std::vector<double> cost(n * n);
+    for (index_t i = 0; i < n; ++i)
+      for (index_t j = 0; j < n; ++j)
+        cost[i * n + j] = d[i + j * n] != 0.0 ? -std::log(std::abs(d[i + j * n])) : 1e5;
+    const std::vector<index_t> ref = hungarian(cost, n);
+    double ref_log = 0.0;
+    for (index_t i = 0; i < n; ++i) ref_log += std::log(std::abs(d[i + ref[i] * n]));
+    const Matching m = maximum_product_matching(a);
+    SCOPED_TRACE("trial " + std::to_string(trial) + " n " + std::to_string(n) +
+                 (saddle ? " saddle point" : ""));
+    const SparseMatrix full = check_matching(a, m);
+    EXPECT_FALSE(m.structurally_singular);
+    EXPECT_NEAR(log_diag_product(full, m), ref_log, 1e-11 * std::max(1.0, std::abs(ref_log)));
+  }
+}
+
 TEST(Matching, ScalingWideRangeAndDuality) {
   unsigned long long seed = 0;
   auto rng = test::fresh_rng(&seed);
