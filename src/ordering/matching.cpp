@@ -54,14 +54,8 @@
 //      costs r = 0. Dijkstra's algorithm with a binary heap of rows, from the free column
 //      j0, stops as soon as the smallest tentative distance in the heap is not below the
 //      best distance D found so far to a free row (free rows are never pushed: they end a
-//      path). A row reached by a tight edge (r = 0) from a row of the current distance has
-//      that distance too, the smallest there is: it goes to a list of rows at the current
-//      distance, taken last in, first out before the heap is looked at, instead of
-//      through the heap (MC64 keeps such a list beside its heap, Duff & Koster §5). On
-//      the multibody Newton matrices nearly every row a search takes is at the distance
-//      of the row before it, in regions of tight edges that the searches cross again and
-//      again, so this spares most of the heap's work. With d_i the distance of a row that
-//      was taken ("finalized", d_i ≤ D), the duals are updated by
+//      path). With d_i the distance of a row that was taken out of the heap ("finalized",
+//      d_i ≤ D), the duals are updated by
 //
 //          u_i ← u_i + (d_i − D),  v_{m(i)} ← v_{m(i)} + (D − d_i)  (m(i): column matched
 //          to row i), and v_{j0} ← v_{j0} + D,
@@ -181,9 +175,8 @@ CostGraph build_cost_graph(const SparseMatrix& full) {
 
 // Per-row state touched on every edge relaxation, packed so that a relaxation costs one
 // cache line. `slot` is the row's position in the Dijkstra heap (>= 0) or one of kOut,
-// kFinalized (taken out of the heap in the current search), kDead (see retire_dead_set),
-// kLevel (in the list of rows at the current distance, see shortest_augmenting_path).
-constexpr index_t kOut = -1, kFinalized = -2, kDead = -3, kLevel = -4;
+// kFinalized (taken out of the heap in the current search), kDead (see retire_dead_set).
+constexpr index_t kOut = -1, kFinalized = -2, kDead = -3;
 struct RowState {
   double u = 0.0;       // dual variable (for a dead row: stored, see dead_shift_)
   double dist = kInf;   // Dijkstra: tentative distance in the current search
@@ -207,19 +200,6 @@ class RowHeap {
       heap_.push_back({d, i});
     }
     sift_up(at, {d, i});
-  }
-
-  // Removes row i, which is in the heap; its slot is set to kOut.
-  [[gnu::noinline]] void erase(index_t i) {
-    const index_t at = rows_[i].slot;
-    rows_[i].slot = kOut;
-    const Item last = heap_.back();
-    heap_.pop_back();
-    if (at == static_cast<index_t>(heap_.size())) return;
-    if (at > 0 && heap_[(at - 1) / 2].key > last.key)
-      sift_up(at, last);
-    else
-      sift_down(at, last);
   }
 
   // Removes the row of smallest key; its slot is set to kOut.
@@ -461,30 +441,18 @@ class Matcher {
         if (r.col == kNone) {
           best = nd;
           best_row = i;
-        } else if (nd == dj) {  // a tight edge: the row is at the current distance
-          if (slot >= 0) heap_.erase(i);
-          r.slot = kLevel;
-          level_.push_back(i);
         } else {
           heap_.push_or_decrease(i, nd);
         }
       }
-      index_t i;
-      if (!level_.empty() && dj < best) {
-        i = level_.back();
-        level_.pop_back();
-      } else {
-        if (!level_.empty() || heap_.empty() || heap_.top_key() >= best) break;
-        i = heap_.pop();
-      }
+      if (heap_.empty() || heap_.top_key() >= best) break;
+      const index_t i = heap_.pop();
       rows_[i].slot = kFinalized;
       done_.push_back(i);
       j = rows_[i].col;
       dj = rows_[i].dist;
     }
     heap_.clear();
-    for (index_t i : level_) rows_[i].slot = kOut;
-    level_.clear();
 
     if (best_row == kNone) {
       retire_dead_set(j0);
@@ -560,7 +528,6 @@ class Matcher {
   std::vector<index_t> via_col_;         // Dijkstra: column a row was reached from
   std::vector<index_t> via_edge_;        // Dijkstra: and by which edge
   std::vector<index_t> touched_, done_;  // rows to reset; finalized rows
-  std::vector<index_t> level_;           // Dijkstra: rows at the current distance, to expand
   RowHeap heap_;
 };
 
