@@ -204,6 +204,20 @@ std::vector<index_t> hungarian(const std::vector<double>& cost, index_t n) {
   return sigma;
 }
 
+// Σ log|a_{i,σ(i)}| of a maximum-product matching of the dense column-major n×n d (one
+// with a perfect matching), by the dense Hungarian algorithm on cost = −log|a_ij| with a
+// large finite penalty on zeros.
+double optimal_log_product(const std::vector<double>& d, index_t n) {
+  std::vector<double> cost(n * n);
+  for (index_t i = 0; i < n; ++i)
+    for (index_t j = 0; j < n; ++j)
+      cost[i * n + j] = d[i + j * n] != 0.0 ? -std::log(std::abs(d[i + j * n])) : 1e5;
+  const std::vector<index_t> ref = hungarian(cost, n);
+  double ref_log = 0.0;
+  for (index_t i = 0; i < n; ++i) ref_log += std::log(std::abs(d[i + ref[i] * n]));
+  return ref_log;
+}
+
 TEST(Matching, RandomGeneralNonzeroDiagonalAndScaling) {
   unsigned long long seed = 0;
   auto rng = test::fresh_rng(&seed);
@@ -322,14 +336,7 @@ TEST(Matching, OptimalAgainstDenseHungarian) {
       if (d[i + sigma[i] * n] == 0.0) d[i + sigma[i] * n] = 1e-3;
     const SparseMatrix a = from_dense(d, n);
     ASSERT_EQ(structural_rank(a), n);
-    // cost = -log|a_ij|, a large finite penalty on zeros
-    std::vector<double> cost(n * n);
-    for (index_t i = 0; i < n; ++i)
-      for (index_t j = 0; j < n; ++j)
-        cost[i * n + j] = d[i + j * n] != 0.0 ? -std::log(std::abs(d[i + j * n])) : 1e5;
-    const std::vector<index_t> ref = hungarian(cost, n);
-    double ref_log = 0.0;
-    for (index_t i = 0; i < n; ++i) ref_log += std::log(std::abs(d[i + ref[i] * n]));
+    const double ref_log = optimal_log_product(d, n);
     const Matching m = maximum_product_matching(a);
     SCOPED_TRACE("trial " + std::to_string(trial) + " n " + std::to_string(n));
     const SparseMatrix full = check_matching(a, m);
@@ -384,13 +391,7 @@ TEST(Matching, EqualMagnitudesAgainstDenseHungarian) {
     }
     const SparseMatrix a = from_dense(d, n);
     ASSERT_EQ(structural_rank(a), n);
-    std::vector<double> cost(n * n);
-    for (index_t i = 0; i < n; ++i)
-      for (index_t j = 0; j < n; ++j)
-        cost[i * n + j] = d[i + j * n] != 0.0 ? -std::log(std::abs(d[i + j * n])) : 1e5;
-    const std::vector<index_t> ref = hungarian(cost, n);
-    double ref_log = 0.0;
-    for (index_t i = 0; i < n; ++i) ref_log += std::log(std::abs(d[i + ref[i] * n]));
+    const double ref_log = optimal_log_product(d, n);
     const Matching m = maximum_product_matching(a);
     SCOPED_TRACE("trial " + std::to_string(trial) + " n " + std::to_string(n) +
                  (saddle ? " saddle point" : ""));
