@@ -28,6 +28,17 @@ struct SolverState;
 struct SolverAccess;  // internal hooks for tests and benchmarks (src/core/solver_internal.hpp)
 }  // namespace detail
 
+/// Where the maximum-product matching of a general matrix's analysis may start
+/// (Solver::analyze(a, start)): the row scaling and the matched column of each row of an
+/// earlier analysis of a matrix of the same order n (Solver::matching_start()). Both
+/// vectors have n entries, 0-based; row_scaling[i] > 0 is exp(u_i) of the matching's row
+/// dual, matched_column[i] the column whose entry the analysis put on row i's diagonal.
+struct MatchingStart {
+  std::vector<double> row_scaling;
+  std::vector<index_t> matched_column;
+  bool empty() const { return row_scaling.empty() && matched_column.empty(); }
+};
+
 /// A sparse direct solver for one matrix pattern. Not thread-safe: one Solver per thread.
 class Solver {
  public:
@@ -49,6 +60,26 @@ class Solver {
   /// column), NotSupported, OutOfMemory (the solver then holds no analysis and stays
   /// usable).
   void analyze(const SparseMatrix& a);
+
+  /// analyze(a) with the maximum-product matching of a general matrix (Options::
+  /// matching_and_scaling) started from `start` instead of from scratch: the row duals
+  /// u_i = log start.row_scaling[i], the column duals made feasible for A's values
+  /// (v_j = min_i (c_ij − u_i)), and the start's pairs that are then tight kept as the
+  /// initial matching; the shortest augmenting paths (Duff & Koster 2001) match the rest.
+  /// The result is again a maximum-product matching with its scaling; when A's values are
+  /// near those of the analysis the start came from (a Newton loop's next analysis), most
+  /// columns keep their pair and the searches are few. Where several matchings have the
+  /// same product it may be another one than analyze(a) finds, so the factor may differ
+  /// from a fresh solver's in its rounding. An empty start, or any other matrix type,
+  /// gives analyze(a). Throws as analyze, and InvalidInput when the start's vectors do not
+  /// have n entries, a row scaling is not finite and positive, or a matched column is out
+  /// of range (named; the solver is left as it was).
+  void analyze(const SparseMatrix& a, const MatchingStart& start);
+
+  /// The current analysis's matching as the start of a later analysis (Solver::analyze(a,
+  /// start)): its row scaling and matched columns. Empty before analyze and for analyses
+  /// without an unsymmetric matching (symmetric types, matching_and_scaling off).
+  MatchingStart matching_start() const;
 
   /// Analysis of a pattern that contains the analyzed one (entries added, none removed:
   /// in a Newton loop, a contact that closes adds a block) keeping the last analysis's

@@ -263,7 +263,8 @@ index_t resolve_max_block_size(const Options& opts, MatrixType type) {
 // `canonical_full`: null, or what the caller's validation of `a` found
 // (detail::is_canonical_full), so that `a` is not checked again here.
 static Analysis analyze_matrix_impl(const SparseMatrix& a, const Options& opts, int workers,
-                                    const bool* canonical_full) {
+                                    const bool* canonical_full,
+                                    const ordering::Matching* start = nullptr) {
   Timer total;
   if (workers < 1)
     throw InvalidInput("analyze_matrix: workers must be at least 1 (got " +
@@ -298,7 +299,7 @@ static Analysis analyze_matrix_impl(const SparseMatrix& a, const Options& opts, 
   Timer step;
   index_t unmatched_row = -1;
   if (!an.symmetric && opts.matching_and_scaling && an.n > 0 && !c.values.empty()) {
-    ordering::Matching m = ordering::maximum_product_matching_canonical(c);
+    ordering::Matching m = ordering::maximum_product_matching_canonical(c, start);
     an.matching_perm = std::move(m.column_permutation);
     an.row_scaling = std::move(m.row_scaling);
     an.col_scaling = std::move(m.column_scaling);
@@ -659,8 +660,14 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers)
 
 Analysis analyze_validated(const SparseMatrix& a, bool canonical_full, const Options& opts,
                            int workers) {
-  return run_analysis(opts, a.indices.size(),
-                      [&] { return analyze_matrix_impl(a, opts, workers, &canonical_full); });
+  return analyze_validated(a, canonical_full, opts, workers, nullptr);
+}
+
+Analysis analyze_validated(const SparseMatrix& a, bool canonical_full, const Options& opts,
+                           int workers, const ordering::Matching* start) {
+  return run_analysis(opts, a.indices.size(), [&] {
+    return analyze_matrix_impl(a, opts, workers, &canonical_full, start);
+  });
 }
 
 Analysis analyze_with_order(const SparseMatrix& a, const Analysis& previous, const Options& opts,

@@ -16,6 +16,10 @@
 #include "strata/stats.hpp"
 #include "symbolic/symbolic.hpp"
 
+namespace strata::ordering {
+struct Matching;  // ordering/matching.hpp
+}  // namespace strata::ordering
+
 namespace strata {
 
 /// Where each stored entry of the canonical input lands in the fronts: the entries that
@@ -109,6 +113,11 @@ Analysis analyze_matrix(const SparseMatrix& a, const Options& opts, int workers 
 /// so that the entries are not checked again.
 Analysis analyze_validated(const SparseMatrix& a, bool canonical_full, const Options& opts,
                            int workers);
+/// analyze_validated with the unsymmetric matching of a general matrix started from
+/// `start` (ordering::maximum_product_matching_canonical; checked by the caller), when
+/// given and the matrix is general with matching_and_scaling.
+Analysis analyze_validated(const SparseMatrix& a, bool canonical_full, const Options& opts,
+                           int workers, const ordering::Matching* start);
 
 /// The analysis of a pattern that contains previous's (entries added, none removed: a
 /// contact that closed in a Newton loop) with previous's matching, scaling, pivot groups

@@ -31,6 +31,7 @@
 #include <numbers>
 #include <optional>
 #include <span>
+#include <string>
 #include <string_view>
 
 #include "analysis/analysis.hpp"
@@ -45,6 +46,7 @@
 #include "numeric/delayed.hpp"
 #include "numeric/driver.hpp"
 #include "numeric/factor.hpp"
+#include "ordering/matching.hpp"
 #include "sparse/canonical.hpp"
 
 namespace strata {
@@ -613,30 +615,83 @@ void adopt_analysis(SolverState& s, Analysis an, const SparseMatrix& a) {
 
 }  // namespace
 
+namespace {
+
+// Solver::analyze with the matching started from `start` (null: from scratch).
+void analyze_phase(SolverState& s, const SparseMatrix& a, const ordering::Matching* start) {
+  const bool canonical_full = detail::is_canonical_full(a);  // validates a
+  clear_numeric(s);
+  s.analysis.reset();
+  const Options& o = s.options;
+  int workers = s.driver_set ? s.driver->workers() : resolve_workers(o);
+  // the device's context, streams and handles made while the host analyzes (unless the
+  // analysis may still send the factorization to the host: Options::gpu_min_flops)
+  if (!(o.backend == Backend::automatic && o.gpu_min_flops > 0)) {
+    ensure_driver(s, workers, false);
+    s.driver->begin_setup();
+  }
+  Analysis an = analyze_validated(a, canonical_full, o, workers, start);
+  const bool host = !s.driver_set && automatic_on_host(o, an);
+  if (host && workers > 1) {  // made again for the one worker the host is
+    Options one = o;
+    one.backend = Backend::cpu;
+    workers = 1;
+    an = analyze_validated(a, canonical_full, one, workers, start);
+  }
+  ensure_driver(s, workers, host);
+  adopt_analysis(s, std::move(an), a);
+}
+
+// The start as the matching takes it, after checking it against A's order n.
+ordering::Matching checked_start(const MatchingStart& start, index_t n) {
+  if (static_cast<index_t>(start.row_scaling.size()) != n ||
+      static_cast<index_t>(start.matched_column.size()) != n)
+    throw InvalidInput("analyze: the matching start has " +
+                       std::to_string(start.row_scaling.size()) + " row scalings and " +
+                       std::to_string(start.matched_column.size()) +
+                       " matched columns for a matrix of order " + std::to_string(n));
+  for (index_t i = 0; i < n; ++i) {
+    const double d = start.row_scaling[i];
+    if (!(std::isfinite(d) && d > 0))
+      throw InvalidInput("analyze: the matching start's row_scaling[" + std::to_string(i) +
+                         "] = " + std::to_string(d) + " is not finite and positive");
+    const index_t j = start.matched_column[i];
+    if (j < 0 || j >= n)
+      throw InvalidInput("analyze: the matching start's matched_column[" + std::to_string(i) +
+                         "] = " + std::to_string(j) + " is out of range [0, " + std::to_string(n) +
+                         ")");
+  }
+  ordering::Matching m;
+  m.row_scaling = start.row_scaling;
+  m.column_permutation = start.matched_column;
+  return m;
+}
+
+}  // namespace
+
 void Solver::analyze(const SparseMatrix& a) {
+  phase("analyze", [&] { analyze_phase(*state_, a, nullptr); });
+}
+
+void Solver::analyze(const SparseMatrix& a, const MatchingStart& start) {
+  if (start.empty()) {
+    analyze(a);
+    return;
+  }
   phase("analyze", [&] {
-    const bool canonical_full = detail::is_canonical_full(a);  // validates a
-    clear_numeric(*state_);
-    state_->analysis.reset();
-    const Options& o = state_->options;
-    int workers = state_->driver_set ? state_->driver->workers() : resolve_workers(o);
-    // the device's context, streams and handles made while the host analyzes (unless the
-    // analysis may still send the factorization to the host: Options::gpu_min_flops)
-    if (!(o.backend == Backend::automatic && o.gpu_min_flops > 0)) {
-      ensure_driver(*state_, workers, false);
-      state_->driver->begin_setup();
+    if (a.n_rows != a.n_cols) {  // analyze's own message
+      analyze_phase(*state_, a, nullptr);
+      return;
     }
-    Analysis an = analyze_validated(a, canonical_full, o, workers);
-    const bool host = !state_->driver_set && automatic_on_host(o, an);
-    if (host && workers > 1) {  // made again for the one worker the host is
-      Options one = o;
-      one.backend = Backend::cpu;
-      workers = 1;
-      an = analyze_validated(a, canonical_full, one, workers);
-    }
-    ensure_driver(*state_, workers, host);
-    adopt_analysis(*state_, std::move(an), a);
+    const ordering::Matching m = checked_start(start, a.n_rows);  // before anything changes
+    analyze_phase(*state_, a, &m);
   });
+}
+
+MatchingStart Solver::matching_start() const {
+  const auto& an = state_->analysis;
+  if (!an || an->symmetric || an->matching_perm.empty() || an->row_scaling.empty()) return {};
+  return MatchingStart{an->row_scaling, an->matching_perm};
 }
 
 namespace {

@@ -133,8 +133,17 @@ void Integrator::analyze(const BdfTerms& bdf, double t) {
   Timer ta;
   sys_.prune_pattern();  // contact pairs that left since the last analysis
   sys_.evaluate(x_.data(), t, bdf, true, res_.data());
+  // The matching starts from the last analysis's (a Newton matrix of the same order: its
+  // values have moved since, but most of its pairs still hold), unless this analysis is
+  // to be the fresh reference of analyze_every_step.
+  analysis_start_ = {};
+  if (solver_ && !opts_.analyze_every_step) {
+    analysis_start_ = solver_->matching_start();
+    if (static_cast<index_t>(analysis_start_.row_scaling.size()) != sys_.matrix().n_rows)
+      analysis_start_ = {};
+  }
   if (!solver_) solver_ = new_solver();
-  solver_->analyze(sys_.matrix());
+  solver_->analyze_from(sys_.matrix(), analysis_start_);
   analyzed_pattern_ = sys_.pattern_id();
   keep_values(analysis_values_);
   analysis_forces_ = sys_.pattern_forces();
@@ -481,7 +490,8 @@ int Integrator::newton(double h, StepInfo& info, const BdfTerms& bdf) {
       anderson_.step(x_.data(), dx_.data(), weights_.data(), N);
     }
     if (!converged) continue;
-    if (sys_.check_candidates(xq) == 2) {
+    converged_candidates_ = sys_.check_candidates(xq);
+    if (converged_candidates_ == 2) {
       // a contact pair outside the Newton matrix closed during the step: take it in and
       // redo the step
       contacts_changed(sys_.update_candidates(xq), &info);
@@ -577,11 +587,15 @@ bool Integrator::try_step(double h, StepInfo& info) {
     pattern_changed_ = true;
     factor_valid_ = false;
   }
+  converged_candidates_ = -1;
   const int r = newton(h, info, bdf);
   if (r == 2) retry_ = true;
   if (r != 1) return false;
   double *xa = x_.data(), *xv = xa + n, *xq = xa + 2 * n, *xl = xa + 3 * n;
-  if (opts_.perturb_converged) opts_.perturb_converged(xq, xv);
+  if (opts_.perturb_converged) {
+    opts_.perturb_converged(xq, xv);
+    converged_candidates_ = -1;  // the check was of the iterate before
+  }
   if (!constraints_hold(xq, xv, tn)) {
     ++stats_.residual_rejections;
     factor_valid_ = false;
@@ -788,9 +802,12 @@ StepInfo Integrator::advance() {
     // orders, where variable-coefficient BDF tolerates only moderate step ratios
     h_ = std::min(opts_.step, (info.order <= 2 ? 2.0 : 1.25) * h_);
   }
-  // contact pairs approaching: update the set in the Newton matrix
-  if (sys_.check_candidates(q_.data()) == 1)
-    contacts_changed(sys_.update_candidates(q_.data()), &info);
+  // contact pairs approaching: update the set in the Newton matrix (q_ is the iterate that
+  // Newton's convergence test checked, unless something changed it since)
+  const int candidates =
+      converged_candidates_ >= 0 ? converged_candidates_ : sys_.check_candidates(q_.data());
+  converged_candidates_ = -1;
+  if (candidates == 1) contacts_changed(sys_.update_candidates(q_.data()), &info);
   partition_check(info);
   if (conservative_) {
     double kin = 0, pot = 0;

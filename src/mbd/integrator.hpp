@@ -284,6 +284,9 @@ class Integrator {
   int steps_at_order_ = 0;
   double factor_beta_ = 0;
   bool slow_last_step_ = false;
+  // check_candidates at the converged iterate of the last try_step, which becomes q_ when
+  // the step is accepted (-1: not known, e.g. the iterate was changed after the check)
+  int converged_candidates_ = -1;
   double t_ = 0, h_ = 0;
   std::vector<double> q_, v_, a_, lambda_, lambda_prev_;
   std::deque<Point> history_;
@@ -300,6 +303,8 @@ class Integrator {
   index_t step_ = 0;
   // Jacobian values the solver's analysis and its current factor come from (restart)
   std::vector<double> analysis_values_, factor_values_;
+  // where the last analysis's matching started: the analysis before it (restart)
+  MatchingStart analysis_start_;
   // the force elements in the pattern at the last analysis (restart), and its factor's size
   std::vector<char> analysis_forces_;
   index_t analysis_factor_entries_ = 0;

@@ -110,7 +110,8 @@ IntegratorStats stats_from_json(const json& j) {
   return s;
 }
 
-void expect_size(const std::vector<double>& v, std::size_t n, const char* what) {
+template <class T>
+void expect_size(const std::vector<T>& v, std::size_t n, const char* what) {
   if (v.size() != n)
     throw InvalidInput(std::string("checkpoint: ") + what + " has " + std::to_string(v.size()) +
                        " entries, the model needs " + std::to_string(n));
@@ -165,6 +166,9 @@ json Integrator::save_state() const {
           {"reorder_forces", reordered},
           {"analysis_factor_entries", analysis_factor_entries_},
           {"analysis_values", analysis_values_},
+          {"analysis_start",
+           {{"row_scaling", analysis_start_.row_scaling},
+            {"matched_column", analysis_start_.matched_column}}},
           {"factor_values", factor_values_},
           {"stats", stats_to_json(stats_)}};
 }
@@ -246,6 +250,11 @@ void Integrator::restore_state(const json& j) {
                                            : std::vector<char>(pattern.begin(), pattern.end()));
   sys_.set_partition(partition_);  // rebuilds the Newton matrix pattern
   j.at("analysis_values").get_to(analysis_values_);
+  analysis_start_ = {};
+  if (const auto it = j.find("analysis_start"); it != j.end()) {  // older checkpoints: none
+    it->at("row_scaling").get_to(analysis_start_.row_scaling);
+    it->at("matched_column").get_to(analysis_start_.matched_column);
+  }
   j.at("factor_values").get_to(factor_values_);
   stats_ = stats_from_json(j.at("stats"));
   // The solver as it was: same analysis (its matching and scaling come from the values it
@@ -257,7 +266,12 @@ void Integrator::restore_state(const json& j) {
     expect_size(analysis_values_, a.values.size(), "the analyzed Jacobian");
     a.values = analysis_values_;
     solver_ = new_solver();
-    solver_->analyze(a);
+    if (!analysis_start_.empty()) {
+      const auto order = static_cast<std::size_t>(a.n_rows);
+      expect_size(analysis_start_.row_scaling, order, "the analysis's matching start");
+      expect_size(analysis_start_.matched_column, order, "the analysis's matching start");
+    }
+    solver_->analyze_from(a, analysis_start_);  // as the run made it
     // then the pattern ordered anew with that matching (contacts_changed), then the one
     // that grew from it with the order kept
     const std::vector<char>& ordered = reorder_forces_.empty() ? analysis_forces_ : reorder_forces_;

@@ -43,13 +43,15 @@ class StrataLinearSolver : public LinearSolver {
       o.pivoting = Pivoting::delayed;
     return o;
   }
-  void analyze(const SparseMatrix& a) override {
-    solver_.analyze(a);
+  void analyze(const SparseMatrix& a) override { analyze_from(a, MatchingStart{}); }
+  void analyze_from(const SparseMatrix& a, const MatchingStart& start) override {
+    solver_.analyze(a, start);
     // Backend::automatic may have put a small factor on the host: delayed pivots from the
     // first factorization there, as with Backend::cpu (options())
     set_delaying(solver_.stats().analysis.backend == Backend::cpu);
     fresh_ = true;
   }
+  MatchingStart matching_start() const override { return solver_.matching_start(); }
   void analyze_keeping_order(const SparseMatrix& a) override {
     solver_.analyze_keeping_order(a);  // the matching and scaling stay: so does delaying
     fresh_ = true;

@@ -10,6 +10,7 @@
 #include <string>
 
 #include "strata/options.hpp"
+#include "strata/solver.hpp"
 #include "strata/sparse_matrix.hpp"
 #include "strata/stats.hpp"
 
@@ -20,6 +21,15 @@ class LinearSolver {
   virtual ~LinearSolver() = default;
   /// Analysis of the pattern (and, for strata's matching and scaling, the values) of A.
   virtual void analyze(const SparseMatrix& a) = 0;
+  /// analyze(a) with strata's matching started from `start` (strata::Solver::analyze(a,
+  /// start), an earlier analysis's matching_start()); a solver without that analyzes
+  /// afresh.
+  virtual void analyze_from(const SparseMatrix& a, const MatchingStart& start) {
+    (void)start;
+    analyze(a);
+  }
+  /// The analysis's matching as a later analysis's start (empty when there is none).
+  virtual MatchingStart matching_start() const { return {}; }
   /// Analysis of a pattern that contains the analyzed one, keeping its ordering
   /// (strata::Solver::analyze_keeping_order); a solver without that analyzes afresh.
   virtual void analyze_keeping_order(const SparseMatrix& a) { analyze(a); }

@@ -49,6 +49,10 @@
 //      such a path has length 0, so flipping it changes no dual. This matters for
 //      matrices with many equal magnitudes, where Dijkstra would degenerate into one
 //      breadth-first search per column.
+//      With a start (an earlier matching of a matrix of the same order: a Newton loop's
+//      last analysis), its row duals are taken instead, the column duals made feasible
+//      by the column minimum, and its pairs that are tight under these duals matched
+//      before the greedy pass; the steps below then match only what the start did not.
 //   2. For every column still free, a shortest augmenting path in the residual graph:
 //      column j → row i along an unmatched edge costs r_ij ≥ 0; row i → its matched column
 //      costs r = 0. Dijkstra's algorithm with a binary heap of rows, from the free column
@@ -265,8 +269,11 @@ class Matcher {
         via_edge_(g.n, kNone),
         heap_(rows_) {}
 
-  void run() {
-    initial_duals();
+  void run(const Matching* start) {
+    if (start)
+      start_from(*start);
+    else
+      initial_duals();
     greedy_tight_matching();
     tight_augmentations();
     for (index_t j = 0; j < g_.n; ++j)
@@ -332,16 +339,42 @@ class Matcher {
     }
   }
 
-  // A free tight row for each column in turn (the paper's cheap initial matching).
+  // A start from an earlier matching: its row duals u_i = log(row scaling), the column
+  // duals v_j = min_i (c_ij − u_i) (so r ≥ 0 on every edge, and r = 0 on the edge that
+  // defined the minimum), and each of its pairs (i, j) that is an edge, tight, and whose
+  // column is still free, matched. Rows without an edge are left free.
+  void start_from(const Matching& m) {
+    for (index_t i = 0; i < g_.n; ++i) rows_[i].u = std::log(m.row_scaling[i]);
+    for (index_t j = 0; j < g_.n; ++j) {
+      double vmin = kInf;
+      for (index_t p = g_.colptr[j]; p < g_.colptr[j + 1]; ++p)
+        vmin = std::min(vmin, g_.cost[p] - rows_[g_.rowind[p]].u);
+      v_[j] = vmin < kInf ? vmin : 0.0;
+    }
+    for (index_t i = 0; i < g_.n; ++i) {
+      const index_t j = m.column_permutation[i];
+      if (!g_.matchable[j] || row_of_col_[j] != kNone) continue;
+      const index_t* b = g_.rowind + g_.colptr[j];
+      const index_t* e = g_.rowind + g_.colptr[j + 1];
+      const index_t* f = std::lower_bound(b, e, i);  // a canonical column: rows sorted
+      if (f == e || *f != i) continue;
+      const index_t p = f - g_.rowind;
+      if (reduced(p, rows_[i].u, j) <= 0.0) match(i, j, p);
+    }
+  }
+
+  // A free tight row for each column still free, in turn (the paper's cheap initial
+  // matching).
   void greedy_tight_matching() {
     for (index_t j = 0; j < g_.n; ++j)
-      for (index_t p = g_.colptr[j]; p < g_.colptr[j + 1]; ++p) {
-        const index_t i = g_.rowind[p];
-        if (rows_[i].col == kNone && reduced(p, rows_[i].u, j) <= 0.0) {
-          match(i, j, p);
-          break;
+      if (row_of_col_[j] == kNone)
+        for (index_t p = g_.colptr[j]; p < g_.colptr[j + 1]; ++p) {
+          const index_t i = g_.rowind[p];
+          if (rows_[i].col == kNone && reduced(p, rows_[i].u, j) <= 0.0) {
+            match(i, j, p);
+            break;
+          }
         }
-      }
   }
 
   // Grows the matching by augmenting paths made of tight edges (r = 0) only: depth-first
@@ -544,10 +577,10 @@ Matching maximum_product_matching(const SparseMatrix& a) {
   return maximum_product_matching_canonical(as_is ? a : expanded);
 }
 
-Matching maximum_product_matching_canonical(const SparseMatrix& a) {
+Matching maximum_product_matching_canonical(const SparseMatrix& a, const Matching* start) {
   const CostGraph g = build_cost_graph(a);
   Matcher matcher(g);
-  matcher.run();
+  matcher.run(start);
   return matcher.result();
 }
 

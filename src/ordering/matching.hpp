@@ -33,7 +33,11 @@ struct Matching {
 Matching maximum_product_matching(const SparseMatrix& a);
 
 /// The same for a matrix the caller has validated and knows to be canonical full CSC
-/// (the analysis's canonical input): no check of A, no copy.
-Matching maximum_product_matching_canonical(const SparseMatrix& a);
+/// (the analysis's canonical input): no check of A, no copy. With `start` (the
+/// row_scaling and column_permutation of a matching of a matrix of the same order,
+/// checked by the caller: n entries, finite positive scalings, columns in range), the
+/// searches start from its row duals and from its pairs that are tight under them
+/// (Solver::analyze(a, start) says how); the result is again a maximum-product matching.
+Matching maximum_product_matching_canonical(const SparseMatrix& a, const Matching* start = nullptr);
 
 }  // namespace strata::ordering

@@ -24,6 +24,7 @@ namespace {
 
 using ordering::Matching;
 using ordering::maximum_product_matching;
+using ordering::maximum_product_matching_canonical;
 
 // Builds a canonical CSC matrix from a dense column-major array (zeros dropped, except
 // where `keep_zero` marks an explicit zero to be stored).
@@ -398,6 +399,96 @@ TEST(Matching, EqualMagnitudesAgainstDenseHungarian) {
     const SparseMatrix full = check_matching(a, m);
     EXPECT_FALSE(m.structurally_singular);
     EXPECT_NEAR(log_diag_product(full, m), ref_log, 1e-11 * std::max(1.0, std::abs(ref_log)));
+  }
+}
+
+// A matching started from another one (Solver::analyze(a, start)): from the matching of
+// the same matrix, of the matrix with its values moved (a Newton loop's next analysis),
+// and from a random start (scalings over twenty decades, a random permutation), the result
+// is again optimal against the dense Hungarian algorithm, with the scaling's properties;
+// general and saddle-point matrices, magnitudes spread or from four values (many ties).
+TEST(Matching, StartedFromAnotherMatchingIsOptimal) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  std::uniform_real_distribution<double> u01(0.0, 1.0);
+  const double levels[] = {1.0, 0.5, 0.25, 1e-3};
+  const index_t sizes[] = {1, 2, 3, 5, 8, 24, 61, 80};
+  for (int trial = 0; trial < 48; ++trial) {
+    const index_t n = sizes[trial % 8];
+    const bool ties = trial % 3 == 0;
+    auto draw = [&] {
+      const double m =
+          ties ? levels[static_cast<int>(u01(rng) * 4) % 4] : std::pow(10.0, 8 * u01(rng) - 4);
+      return u01(rng) < 0.5 ? -m : m;
+    };
+    const bool saddle = trial % 2 == 1 && n % 2 == 0;
+    const double density = std::min(1.0, 3.0 / n + 0.05);
+    std::vector<double> d(n * n, 0.0);
+    std::vector<index_t> sigma(n);
+    std::iota(sigma.begin(), sigma.end(), 0);
+    if (saddle) {  // [H Gᵀ; G 0], G with a transversal
+      const index_t k = n / 2;
+      std::shuffle(sigma.begin(), sigma.begin() + k, rng);
+      for (index_t j = 0; j < k; ++j)
+        for (index_t i = 0; i < k; ++i) {
+          if (i == j || u01(rng) < density) d[i + j * n] = draw();
+          if (sigma[j] == i || u01(rng) < density) {
+            d[(k + i) + j * n] = draw();
+            d[j + (k + i) * n] = draw();
+          }
+        }
+    } else {
+      std::shuffle(sigma.begin(), sigma.end(), rng);
+      for (index_t j = 0; j < n; ++j)
+        for (index_t i = 0; i < n; ++i)
+          if (u01(rng) < density) d[i + j * n] = draw();
+      for (index_t i = 0; i < n; ++i)
+        if (d[i + sigma[i] * n] == 0.0) d[i + sigma[i] * n] = draw();
+    }
+    // the same pattern with every value moved by up to a factor 3 (ties: kept)
+    std::vector<double> moved = d;
+    if (!ties)
+      for (double& x : moved) x *= std::pow(3.0, 2 * u01(rng) - 1);
+    const SparseMatrix a = from_dense(d, n), b = from_dense(moved, n);
+    ASSERT_EQ(structural_rank(b), n);
+    const double ref_log = optimal_log_product(moved, n);
+    Matching random_start;
+    random_start.row_scaling.resize(n);
+    for (double& x : random_start.row_scaling) x = std::pow(10.0, 20 * u01(rng) - 10);
+    random_start.column_permutation.resize(n);
+    std::iota(random_start.column_permutation.begin(), random_start.column_permutation.end(), 0);
+    std::shuffle(random_start.column_permutation.begin(), random_start.column_permutation.end(),
+                 rng);
+    const Matching own = maximum_product_matching_canonical(b);
+    const Matching earlier = maximum_product_matching_canonical(a);
+    const std::pair<const char*, const Matching*> starts[] = {
+        {"its own matching", &own},
+        {"the matching before the values moved", &earlier},
+        {"a random start", &random_start}};
+    for (const auto& [what, start] : starts) {
+      SCOPED_TRACE("trial " + std::to_string(trial) + " n " + std::to_string(n) +
+                   (saddle ? " saddle point" : "") + (ties ? " ties" : "") + ", from " + what);
+      const Matching m = maximum_product_matching_canonical(b, start);
+      const SparseMatrix full = check_matching(b, m);
+      EXPECT_FALSE(m.structurally_singular);
+      EXPECT_NEAR(log_diag_product(full, m), ref_log, 1e-11 * std::max(1.0, std::abs(ref_log)));
+    }
+  }
+  // n = 733, sparse: started from the matching of the values before they moved, the
+  // product is the one a matching from scratch finds (optimal: the tests above)
+  for (const index_t per_column : {2, 4, 8}) {
+    const SparseMatrix a =
+        canonicalize(test::random_sparse(733, per_column, test::RandomKind::general, rng));
+    SparseMatrix b = a;
+    for (double& x : b.values) x *= std::pow(3.0, 2 * u01(rng) - 1);
+    const Matching cold = maximum_product_matching_canonical(b);
+    if (cold.structurally_singular) continue;
+    const Matching earlier = maximum_product_matching_canonical(a);
+    const Matching m = maximum_product_matching_canonical(b, &earlier);
+    const SparseMatrix full = check_matching(b, m);
+    const double ref = log_diag_product(full, cold);
+    EXPECT_NEAR(log_diag_product(full, m), ref, 1e-11 * std::max(1.0, std::abs(ref)));
   }
 }
 
