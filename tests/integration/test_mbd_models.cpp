@@ -147,6 +147,19 @@ TEST(MbdModels, TrajectoriesEqualAFreshAnalysisAtEveryStep) {
   }
 }
 
+// An integrator restored from `state` (saved from `straight`, options o) and `straight`
+// itself, both run to the end: the same time, positions and analyses, bit for bit.
+void expect_resumed_run_equal(const Model& m, const IntegratorOptions& o, Integrator& straight,
+                              const nlohmann::json& state) {
+  Integrator resumed(m, o);
+  resumed.restore_state(state);
+  while (!straight.done()) straight.advance();
+  while (!resumed.done()) resumed.advance();
+  EXPECT_EQ(resumed.t(), straight.t());
+  EXPECT_EQ(resumed.q(), straight.q());
+  EXPECT_EQ(resumed.stats().analyses, straight.stats().analyses);
+}
+
 // When contact pairs entering the pattern make the kept order fill too much, the loop with
 // reorder_keeping_matching orders the pattern anew keeping the analysis's matching and
 // scaling: the default model
@@ -179,14 +192,7 @@ TEST(MbdModels, ContactChangesOrderAnewKeepingTheMatching) {
   while (straight.stats().matching_kept_analyses == 0 && !straight.done()) straight.advance();
   ASSERT_FALSE(straight.done()) << "no new order keeping the matching before t = 0.41";
   straight.advance();  // a step after it, so that the state holds its factor too
-  const nlohmann::json state = straight.save_state();
-  Integrator resumed(m, longer);
-  resumed.restore_state(state);
-  while (!straight.done()) straight.advance();
-  while (!resumed.done()) resumed.advance();
-  EXPECT_EQ(resumed.t(), straight.t());
-  EXPECT_EQ(resumed.q(), straight.q());
-  EXPECT_EQ(resumed.stats().analyses, straight.stats().analyses);
+  expect_resumed_run_equal(m, longer, straight, straight.save_state());
 }
 
 // A new analysis starts its matching from the last analysis's (Solver::analyze(a, start)):
@@ -203,13 +209,7 @@ TEST(MbdModels, ResumedAfterAnAnalysisFromTheLastMatching) {
   ASSERT_FALSE(straight.done()) << "no second analysis before t = 0.41";
   const nlohmann::json state = straight.save_state();
   ASSERT_FALSE(state.at("analysis_start").at("row_scaling").empty());
-  Integrator resumed(m, o);
-  resumed.restore_state(state);
-  while (!straight.done()) straight.advance();
-  while (!resumed.done()) resumed.advance();
-  EXPECT_EQ(resumed.t(), straight.t());
-  EXPECT_EQ(resumed.q(), straight.q());
-  EXPECT_EQ(resumed.stats().analyses, straight.stats().analyses);
+  expect_resumed_run_equal(m, o, straight, state);
   // a start of another order in the state is refused by name
   nlohmann::json bad = state;
   bad["analysis_start"]["row_scaling"].push_back(1.0);

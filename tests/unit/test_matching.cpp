@@ -219,6 +219,38 @@ double optimal_log_product(const std::vector<double>& d, index_t n) {
   return ref_log;
 }
 
+// A random dense column-major n×n matrix (values from draw()) with a perfect matching:
+// about 3 entries per column plus a random transversal; saddle (n even): [H Gᵀ; G 0] with
+// H's diagonal, G with a transversal and Gᵀ with G's pattern and values of its own.
+template <class Draw>
+std::vector<double> with_transversal(index_t n, bool saddle, Draw&& draw, std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> u01(0.0, 1.0);
+  const double density = std::min(1.0, 3.0 / n + 0.05);
+  std::vector<double> d(n * n, 0.0);
+  std::vector<index_t> sigma(n);
+  std::iota(sigma.begin(), sigma.end(), 0);
+  if (saddle) {
+    const index_t k = n / 2;
+    std::shuffle(sigma.begin(), sigma.begin() + k, rng);
+    for (index_t j = 0; j < k; ++j)
+      for (index_t i = 0; i < k; ++i) {
+        if (i == j || u01(rng) < density) d[i + j * n] = draw();
+        if (sigma[j] == i || u01(rng) < density) {
+          d[(k + i) + j * n] = draw();  // G(i, j)
+          d[j + (k + i) * n] = draw();  // Gᵀ(j, i), its own value
+        }
+      }
+  } else {
+    std::shuffle(sigma.begin(), sigma.end(), rng);
+    for (index_t j = 0; j < n; ++j)
+      for (index_t i = 0; i < n; ++i)
+        if (u01(rng) < density) d[i + j * n] = draw();
+    for (index_t i = 0; i < n; ++i)
+      if (d[i + sigma[i] * n] == 0.0) d[i + sigma[i] * n] = draw();
+  }
+  return d;
+}
+
 TEST(Matching, RandomGeneralNonzeroDiagonalAndScaling) {
   unsigned long long seed = 0;
   auto rng = test::fresh_rng(&seed);
@@ -366,30 +398,7 @@ TEST(Matching, EqualMagnitudesAgainstDenseHungarian) {
   for (int trial = 0; trial < 36; ++trial) {
     const index_t n = sizes[trial % 9];
     const bool saddle = trial % 2 == 1 && n % 2 == 0;
-    const double density = std::min(1.0, 3.0 / n + 0.05);
-    std::vector<double> d(n * n, 0.0);
-    std::vector<index_t> sigma(n);
-    std::iota(sigma.begin(), sigma.end(), 0);
-    if (saddle) {  // H (k×k) with its diagonal, G (k×k) with a transversal, Gᵀ's pattern
-      const index_t k = n / 2;
-      std::shuffle(sigma.begin(), sigma.begin() + k, rng);
-      for (index_t j = 0; j < k; ++j)
-        for (index_t i = 0; i < k; ++i) {
-          if (i == j || u01(rng) < density) d[i + j * n] = draw();
-          const bool g = sigma[j] == i || u01(rng) < density;
-          if (g) {
-            d[(k + i) + j * n] = draw();  // G(i, j)
-            d[j + (k + i) * n] = draw();  // Gᵀ(j, i), its own value
-          }
-        }
-    } else {
-      std::shuffle(sigma.begin(), sigma.end(), rng);
-      for (index_t j = 0; j < n; ++j)
-        for (index_t i = 0; i < n; ++i)
-          if (u01(rng) < density) d[i + j * n] = draw();
-      for (index_t i = 0; i < n; ++i)
-        if (d[i + sigma[i] * n] == 0.0) d[i + sigma[i] * n] = draw();
-    }
+    const std::vector<double> d = with_transversal(n, saddle, draw, rng);
     const SparseMatrix a = from_dense(d, n);
     ASSERT_EQ(structural_rank(a), n);
     const double ref_log = optimal_log_product(d, n);
@@ -423,29 +432,7 @@ TEST(Matching, StartedFromAnotherMatchingIsOptimal) {
       return u01(rng) < 0.5 ? -m : m;
     };
     const bool saddle = trial % 2 == 1 && n % 2 == 0;
-    const double density = std::min(1.0, 3.0 / n + 0.05);
-    std::vector<double> d(n * n, 0.0);
-    std::vector<index_t> sigma(n);
-    std::iota(sigma.begin(), sigma.end(), 0);
-    if (saddle) {  // [H Gᵀ; G 0], G with a transversal
-      const index_t k = n / 2;
-      std::shuffle(sigma.begin(), sigma.begin() + k, rng);
-      for (index_t j = 0; j < k; ++j)
-        for (index_t i = 0; i < k; ++i) {
-          if (i == j || u01(rng) < density) d[i + j * n] = draw();
-          if (sigma[j] == i || u01(rng) < density) {
-            d[(k + i) + j * n] = draw();
-            d[j + (k + i) * n] = draw();
-          }
-        }
-    } else {
-      std::shuffle(sigma.begin(), sigma.end(), rng);
-      for (index_t j = 0; j < n; ++j)
-        for (index_t i = 0; i < n; ++i)
-          if (u01(rng) < density) d[i + j * n] = draw();
-      for (index_t i = 0; i < n; ++i)
-        if (d[i + sigma[i] * n] == 0.0) d[i + sigma[i] * n] = draw();
-    }
+    const std::vector<double> d = with_transversal(n, saddle, draw, rng);
     // the same pattern with every value moved by up to a factor 3 (ties: kept)
     std::vector<double> moved = d;
     if (!ties)
