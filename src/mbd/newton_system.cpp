@@ -723,22 +723,25 @@ void NewtonSystem::constraint_values(const double* q, const double* v, const dou
 
 void NewtonSystem::model_constraint_values(const double* q, const double* v, double t, double* phi,
                                            double* phid) const {
-  std::vector<double> lq, lv, la;
-  ConstraintEval ce;
-  for (std::size_t e = 0; e < model_.constraints.size(); ++e) {
-    const auto& c = model_.constraints[e];
-    gather(c->dofs, q, lq);
-    la.assign(c->dofs.size(), 0.0);
-    if (v)
-      gather(c->dofs, v, lv);
-    else
-      lv = la;
-    c->evaluate(lq.data(), lv.data(), la.data(), t, false, ce);
-    for (int r = 0; r < c->rows; ++r) {
-      if (phi) phi[row0_[e] + r] = ce.phi[r];
-      if (phid) phid[row0_[e] + r] = ce.phid[r];
+  // each element writes its own rows: on the assembly's threads
+  for_element_ranges(model_.constraints.size(), [&](std::size_t begin, std::size_t end) {
+    std::vector<double> lq, lv, la;
+    ConstraintEval ce;
+    for (std::size_t e = begin; e < end; ++e) {
+      const auto& c = model_.constraints[e];
+      gather(c->dofs, q, lq);
+      la.assign(c->dofs.size(), 0.0);
+      if (v)
+        gather(c->dofs, v, lv);
+      else
+        lv = la;
+      c->evaluate(lq.data(), lv.data(), la.data(), t, false, ce);
+      for (int r = 0; r < c->rows; ++r) {
+        if (phi) phi[row0_[e] + r] = ce.phi[r];
+        if (phid) phid[row0_[e] + r] = ce.phid[r];
+      }
     }
-  }
+  });
 }
 
 void NewtonSystem::force_values(const double* q, const double* v, const double* a, double t,
@@ -791,13 +794,24 @@ void NewtonSystem::mass_triplets(const double* q, const double* v, double t,
 
 void NewtonSystem::energy(const double* q, const double* v, double t, double* kinetic,
                           double* potential) const {
-  std::vector<double> lq, lv;
+  // each element's energies on the assembly's threads, then summed in the elements' order:
+  // the sums one thread's loop makes, for any number of threads
+  const std::size_t nf = model_.forces.size();
+  std::vector<double> ek(nf), ep(nf);
+  for_element_ranges(nf, [&](std::size_t begin, std::size_t end) {
+    std::vector<double> lq, lv;
+    for (std::size_t e = begin; e < end; ++e) {
+      const auto& f = model_.forces[e];
+      gather(f->dofs, q, lq);
+      gather(f->dofs, v, lv);
+      ek[e] = f->kinetic_energy(lq.data(), lv.data());
+      ep[e] = f->potential_energy(lq.data(), t);
+    }
+  });
   double k = 0, p = 0;
-  for (const auto& f : model_.forces) {
-    gather(f->dofs, q, lq);
-    gather(f->dofs, v, lv);
-    k += f->kinetic_energy(lq.data(), lv.data());
-    p += f->potential_energy(lq.data(), t);
+  for (std::size_t e = 0; e < nf; ++e) {
+    k += ek[e];
+    p += ep[e];
   }
   *kinetic = k;
   *potential = p;
