@@ -698,48 +698,50 @@ SparseRows NewtonSystem::model_constraint_jacobian(const double* q, double t) co
       });
 }
 
-void NewtonSystem::constraint_values(const double* q, const double* v, const double* a, double t,
-                                     double* phi, double* phid, double* phidd) const {
-  // each element writes its own rows: on the assembly's threads
+template <class Put>
+void NewtonSystem::each_constraint_value(const double* q, const double* v, const double* a,
+                                         double t, Put&& put) const {
   for_element_ranges(model_.constraints.size(), [&](std::size_t begin, std::size_t end) {
     std::vector<double> lq, lv, la;
     ConstraintEval ce;
     for (std::size_t e = begin; e < end; ++e) {
       const auto& c = model_.constraints[e];
       gather(c->dofs, q, lq);
-      gather(c->dofs, v, lv);
-      gather(c->dofs, a, la);
+      if (v)
+        gather(c->dofs, v, lv);
+      else
+        lv.assign(c->dofs.size(), 0.0);
+      if (a)
+        gather(c->dofs, a, la);
+      else
+        la.assign(c->dofs.size(), 0.0);
       c->evaluate(lq.data(), lv.data(), la.data(), t, false, ce);
-      for (int r = 0; r < c->rows; ++r) {
-        const index_t k = active_index_[row0_[e] + r];
-        if (k < 0) continue;
-        if (phi) phi[k] = ce.phi[r];
-        if (phid) phid[k] = ce.phid[r];
-        if (phidd) phidd[k] = ce.phidd[r];
-      }
+      put(e, ce);
+    }
+  });
+}
+
+void NewtonSystem::constraint_values(const double* q, const double* v, const double* a, double t,
+                                     double* phi, double* phid, double* phidd) const {
+  each_constraint_value(q, v, a, t, [&](std::size_t e, const ConstraintEval& ce) {
+    const int rows = model_.constraints[e]->rows;
+    for (int r = 0; r < rows; ++r) {
+      const index_t k = active_index_[row0_[e] + r];
+      if (k < 0) continue;
+      if (phi) phi[k] = ce.phi[r];
+      if (phid) phid[k] = ce.phid[r];
+      if (phidd) phidd[k] = ce.phidd[r];
     }
   });
 }
 
 void NewtonSystem::model_constraint_values(const double* q, const double* v, double t, double* phi,
                                            double* phid) const {
-  // each element writes its own rows: on the assembly's threads
-  for_element_ranges(model_.constraints.size(), [&](std::size_t begin, std::size_t end) {
-    std::vector<double> lq, lv, la;
-    ConstraintEval ce;
-    for (std::size_t e = begin; e < end; ++e) {
-      const auto& c = model_.constraints[e];
-      gather(c->dofs, q, lq);
-      la.assign(c->dofs.size(), 0.0);
-      if (v)
-        gather(c->dofs, v, lv);
-      else
-        lv = la;
-      c->evaluate(lq.data(), lv.data(), la.data(), t, false, ce);
-      for (int r = 0; r < c->rows; ++r) {
-        if (phi) phi[row0_[e] + r] = ce.phi[r];
-        if (phid) phid[row0_[e] + r] = ce.phid[r];
-      }
+  each_constraint_value(q, v, nullptr, t, [&](std::size_t e, const ConstraintEval& ce) {
+    const int rows = model_.constraints[e]->rows;
+    for (int r = 0; r < rows; ++r) {
+      if (phi) phi[row0_[e] + r] = ce.phi[r];
+      if (phid) phid[row0_[e] + r] = ce.phid[r];
     }
   });
 }

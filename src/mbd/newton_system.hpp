@@ -218,6 +218,11 @@ class NewtonSystem {
   // f() on the assembly's threads (their arena), or inside a SerialScope without one
   template <class F>
   void in_arena(F&& f) const;
+  // Each constraint element's Φ, Φ̇, Φ̈ at (q, v, a, t) without Jacobians (v, a null: zero),
+  // on the assembly's threads; put(e, eval) writes element e's rows (its own only).
+  template <class Put>
+  void each_constraint_value(const double* q, const double* v, const double* a, double t,
+                             Put&& put) const;
 };
 
 }  // namespace strata::mbd
