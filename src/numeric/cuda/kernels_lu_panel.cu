@@ -299,13 +299,21 @@ __device__ __forceinline__ void triangular_inverses(const double* T, int w, doub
 // writes the packed LU back, L_jj⁻¹ (column-major: entry (r, c) at c·64 + r) to work[2b]
 // and U_jj⁻¹ (row-major: entry (r, c) at r·64 + c, the layout tile::product reads as
 // kBRows) to work[2b + 1], both zero outside w×w.
+// With `own_update` (a step after the first, its block run ahead of the previous step's
+// update, launch_lu_panel_batched), the block first takes the previous step's update of
+// itself, A(j0.., j0..) −= L(j0.., j0 − 64..)·U(j0 − 64.., j0..) over that step's 64
+// columns (lu_update_kernel's tile q = 0), from that step's first panel tiles
+// (lu_panels_kernel, StepTiles::next_pivot_block): one launch less in the chain of steps.
 __global__ void __launch_bounds__(kPivotThreads)
     lu_pivot_block_kernel(const LuPanelItem* items, double* work, int* bad, double static_pivot,
-                          double threshold, std::int64_t j0) {
-  __shared__ double T[kStep * kPad];  // the block, row-major: staging, then the packed LU
-  __shared__ double R[4 * kStep];     // the pivot rows (U's, L⁻¹'s) of the last two columns
-  __shared__ double S[kStep];         // a row on its way to the pivot row's place
-  __shared__ int pos[kStep];          // the local row now in each position (interchanges)
+                          double threshold, std::int64_t j0, bool own_update) {
+  // the block, row-major: staging, then the packed LU; before it, tile::product's buffer
+  // for the previous step's update of the block
+  __shared__ __align__(32) double T[kStep * kPad];
+  static_assert(kStep * kPad >= tile::kSharedDoubles, "the update's product fits in T");
+  __shared__ double R[4 * kStep];  // the pivot rows (U's, L⁻¹'s) of the last two columns
+  __shared__ double S[kStep];      // a row on its way to the pivot row's place
+  __shared__ int pos[kStep];       // the local row now in each position (interchanges)
   __shared__ int sbad;
   if (bad[blockIdx.x]) return;  // rejected at an earlier step
   const LuPanelItem it = items[blockIdx.x];
@@ -313,6 +321,18 @@ __global__ void __launch_bounds__(kPivotThreads)
   const int w = static_cast<int>(imin(kStep, it.k - j0));
   double* D = it.F + j0 * ld + j0;
   const int t = threadIdx.x, i = t / kLanes, q = t % kLanes;
+  if (own_update) {  // as lu_update_kernel's tile q = 0 of the step at j0 − 64
+    const std::int64_t p0 = j0 - kStep;
+    const int n = static_cast<int>(imin(kStep, it.m - j0));
+    const double* C = tile::product<tile::BLayout::kBCols, kPivotThreads>(
+        it.F + p0 * ld + j0, ld, n, it.F + j0 * ld + p0, ld, n, kStep, T);
+    for (int x = t; x < kSlot; x += kPivotThreads) {
+      const int r = x & (kStep - 1), c = x >> 6;
+      if (r < n && c < n && (j0 + r < it.k || j0 + c < it.k))
+        D[static_cast<std::int64_t>(c) * ld + r] -= C[x];
+    }
+    __syncthreads();  // the block's new entries, before any thread reads them below
+  }
   if (t == 0) sbad = 0;
   if (t < kStep) pos[t] = t;
   // the block read by columns (coalesced), then each thread's part of its row
@@ -521,9 +541,9 @@ void launch_lu_panel_batched(const LuPanelItem* items, const std::vector<std::in
     while (a > 0 && pivots[a - 1] <= j0) --a;
     return static_cast<unsigned>(a);
   };
-  auto pivot_block = [&](std::int64_t j0, cudaStream_t on) {
+  auto pivot_block = [&](std::int64_t j0, cudaStream_t on, bool own_update) {
     lu_pivot_block_kernel<<<active_at(j0), kPivotThreads, 0, on>>>(items, work, bad, static_pivot,
-                                                                   threshold, j0);
+                                                                   threshold, j0, own_update);
     STRATA_CUDA_LAUNCH();
   };
   auto panels = [&](std::int64_t j0, unsigned n, std::int64_t tiles, StepTiles which) {
@@ -537,7 +557,7 @@ void launch_lu_panel_batched(const LuPanelItem* items, const std::vector<std::in
     lu_update_kernel<<<dim3(n, grid_y(tiles)), kThreads, 0, s>>>(items, bad, j0, which);
     STRATA_CUDA_LAUNCH();
   };
-  pivot_block(0, s);
+  pivot_block(0, s, false);
   for (std::int64_t j0 = 0; j0 < pivots[0]; j0 += kStep) {
     const unsigned n = active_at(j0);
     // per step: the most tiles of any active front below / right of its diagonal block,
@@ -556,17 +576,16 @@ void launch_lu_panel_batched(const LuPanelItem* items, const std::vector<std::in
     } else if (!ahead) {
       panels(j0, n, 2 * panel_tiles, StepTiles::all);
       update(j0, n, update_tiles, StepTiles::all);
-      pivot_block(next, s);
+      pivot_block(next, s, false);
     } else {
       // the next step's pivot block needs the first tiles of this step's panels and the
-      // trailing diagonal tile only: those first, then that pivot block on the side stream
-      // while the rest of this step's panels and update run here; the next step's panels
-      // wait for it
+      // trailing diagonal tile only: the panels' first tiles, then that pivot block on the
+      // side stream, which updates its diagonal tile itself (own_update), while the rest
+      // of this step's panels and update run here; the next step's panels wait for it
       panels(j0, n, 2, StepTiles::next_pivot_block);
-      update(j0, n, 1, StepTiles::next_pivot_block);
       STRATA_CUDA(cudaEventRecord(ahead->ready, s));
       STRATA_CUDA(cudaStreamWaitEvent(ahead->stream, ahead->ready, 0));
-      pivot_block(next, ahead->stream);
+      pivot_block(next, ahead->stream, true);
       STRATA_CUDA(cudaEventRecord(ahead->done, ahead->stream));
       panels(j0, n, 2 * panel_tiles - 2, StepTiles::rest);
       update(j0, n, update_tiles - 1, StepTiles::rest);

@@ -3,7 +3,8 @@
 //
 // C = A·Bᵀ for a 64 × w block A and a 64 × w block B (w the inner dimension, any size), the
 // operands staged through shared memory kChunk inner columns at a time, the products by
-// WMMA m8n8k4 in FP64 (sm_80 and later): 256 threads, 8 warps, a 32×16 part of C each.
+// WMMA m8n8k4 in FP64 (sm_80 and later): 256 threads, 8 warps, a 32×16 part of C each (or
+// 512 threads, 16 warps, a 16×16 part each, for a kernel of that many).
 // Two layouts of B in global memory:
 //   kBRows: B(c, t) = b[t·ldb + c] — B's columns are the inner dimension (the panel's own
 //           columns, as in A·Lᵀ);
@@ -34,22 +35,28 @@ enum class BLayout { kBRows, kBCols };
 /// `brow` (w entries, shared or global memory), B(c, t) = b[c·ldb + brow[t]] instead (the
 /// rows of a column block read in another order). `sm`: kSharedDoubles of shared memory,
 /// 32-byte aligned, owned by the calling kernel. Returns C in `sm`, C(r, c) at [c·64 + r],
-/// valid until the next call. Every thread of the block (kThreads) must call it.
-template <BLayout L>
+/// valid until the next call. Every thread of the block (`Threads`: 256, or 512 for a
+/// kernel of that many) must call it; each warp forms a 32×16 (256) or 16×16 (512) part of
+/// C, every entry summed over t in the same order either way, so both give the same bits.
+template <BLayout L, int Threads = kThreads>
 __device__ const double* product(const double* a, std::int64_t lda, int a_rows, const double* b,
                                  std::int64_t ldb, int b_rows, int w, double* sm,
                                  const int* brow = nullptr) {
+  static_assert(Threads == 256 || Threads == 512, "tile::product: 256 or 512 threads");
   using namespace nvcuda;
-  double* As = sm;                   // A(r, t) at [t·64 + r]: column-major, ld 64
+  constexpr int kRowWarps = Threads / 128;      // warps along C's rows: 2 or 4
+  constexpr int kWarpRows = kEdge / kRowWarps;  // C's rows per warp: 32 or 16
+  constexpr int kFragRows = kWarpRows / 8;      // 8×8 fragments along them: 4 or 2
+  double* As = sm;                              // A(r, t) at [t·64 + r]: column-major, ld 64
   double* Bs = sm + kChunk * kEdge;  // kBRows: B(c, t) at [t·64 + c]; kBCols: at [c·32 + t]
   const int tid = threadIdx.x, warp = tid >> 5;
-  const int wr = (warp & 1) * 32, wc = (warp >> 1) * 16;  // this warp's part of C
+  const int wr = (warp % kRowWarps) * kWarpRows, wc = (warp / kRowWarps) * 16;  // its part of C
   using BMajor = std::conditional_t<L == BLayout::kBRows, wmma::row_major, wmma::col_major>;
-  wmma::fragment<wmma::accumulator, 8, 8, 4, double> acc[4][2];
+  wmma::fragment<wmma::accumulator, 8, 8, 4, double> acc[kFragRows][2];
   for (auto& row : acc)
     for (auto& f : row) wmma::fill_fragment(f, 0.0);
   for (int t0 = 0; t0 < w; t0 += kChunk) {
-    for (int x = tid; x < kChunk * kEdge; x += kThreads) {
+    for (int x = tid; x < kChunk * kEdge; x += Threads) {
       const int tt = x >> 6, r = x & 63;
       const bool in = t0 + tt < w;
       As[x] = in && r < a_rows ? a[static_cast<std::int64_t>(t0 + tt) * lda + r] : 0.0;
@@ -64,10 +71,10 @@ __device__ const double* product(const double* a, std::int64_t lda, int a_rows, 
     __syncthreads();
     const int steps = min(kChunk, w - t0);
     for (int tt = 0; tt < steps; tt += 4) {
-      wmma::fragment<wmma::matrix_a, 8, 8, 4, double, wmma::col_major> fa[4];
+      wmma::fragment<wmma::matrix_a, 8, 8, 4, double, wmma::col_major> fa[kFragRows];
       wmma::fragment<wmma::matrix_b, 8, 8, 4, double, BMajor> fb[2];
 #pragma unroll
-      for (int i = 0; i < 4; ++i)
+      for (int i = 0; i < kFragRows; ++i)
         wmma::load_matrix_sync(fa[i], As + tt * kEdge + wr + 8 * i, kEdge);
 #pragma unroll
       for (int j = 0; j < 2; ++j) {
@@ -77,14 +84,14 @@ __device__ const double* product(const double* a, std::int64_t lda, int a_rows, 
           wmma::load_matrix_sync(fb[j], Bs + (wc + 8 * j) * kChunk + tt, kChunk);
       }
 #pragma unroll
-      for (int i = 0; i < 4; ++i)
+      for (int i = 0; i < kFragRows; ++i)
 #pragma unroll
         for (int j = 0; j < 2; ++j) wmma::mma_sync(acc[i][j], fa[i], fb[j], acc[i][j]);
     }
     __syncthreads();
   }
 #pragma unroll
-  for (int i = 0; i < 4; ++i)
+  for (int i = 0; i < kFragRows; ++i)
 #pragma unroll
     for (int j = 0; j < 2; ++j)
       wmma::store_matrix_sync(sm + (wc + 8 * j) * kEdge + wr + 8 * i, acc[i][j], kEdge,
