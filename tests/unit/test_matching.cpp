@@ -219,6 +219,15 @@ double optimal_log_product(const std::vector<double>& d, index_t n) {
   return ref_log;
 }
 
+// One of four magnitudes, {1, 1/2, 1/4, 1e-3}, each with probability 1/4: many costs
+// exactly equal, so that the searches cross whole regions of tight edges at one distance
+// (as on the multibody Newton matrices).
+double tied_magnitude(std::mt19937_64& rng) {
+  static constexpr double kLevels[] = {1.0, 0.5, 0.25, 1e-3};
+  std::uniform_real_distribution<double> u01(0.0, 1.0);
+  return kLevels[static_cast<int>(u01(rng) * 4) % 4];
+}
+
 // A random dense column-major n×n matrix (values from draw()) with a perfect matching:
 // about 3 entries per column plus a random transversal; saddle (n even): [H Gᵀ; G 0] with
 // H's diagonal, G with a transversal and Gᵀ with G's pattern and values of its own.
@@ -389,9 +398,8 @@ TEST(Matching, EqualMagnitudesAgainstDenseHungarian) {
   auto rng = test::fresh_rng(&seed);
   SCOPED_TRACE("seed " + std::to_string(seed));
   std::uniform_real_distribution<double> u01(0.0, 1.0);
-  const double levels[] = {1.0, 0.5, 0.25, 1e-3};
   auto draw = [&] {
-    const double m = levels[static_cast<int>(u01(rng) * 4) % 4];
+    const double m = tied_magnitude(rng);
     return u01(rng) < 0.5 ? -m : m;
   };
   const index_t sizes[] = {1, 2, 3, 5, 8, 24, 40, 61, 80};
@@ -421,14 +429,12 @@ TEST(Matching, StartedFromAnotherMatchingIsOptimal) {
   auto rng = test::fresh_rng(&seed);
   SCOPED_TRACE("seed " + std::to_string(seed));
   std::uniform_real_distribution<double> u01(0.0, 1.0);
-  const double levels[] = {1.0, 0.5, 0.25, 1e-3};
   const index_t sizes[] = {1, 2, 3, 5, 8, 24, 61, 80};
   for (int trial = 0; trial < 48; ++trial) {
     const index_t n = sizes[trial % 8];
     const bool ties = trial % 3 == 0;
     auto draw = [&] {
-      const double m =
-          ties ? levels[static_cast<int>(u01(rng) * 4) % 4] : std::pow(10.0, 8 * u01(rng) - 4);
+      const double m = ties ? tied_magnitude(rng) : std::pow(10.0, 8 * u01(rng) - 4);
       return u01(rng) < 0.5 ? -m : m;
     };
     const bool saddle = trial % 2 == 1 && n % 2 == 0;
