@@ -19,7 +19,8 @@ if [ ! -f .whl/nvidia/cu13/lib/libcudss.so.1 ]; then
 fi
 cmake -S . -B build-gpu -G Ninja -DCMAKE_BUILD_TYPE=Release -DCMAKE_CUDA_ARCHITECTURES=90 \
   -DSTRATA_MATRIX_DIR=.carry/matrices -DSTRATA_CUDSS_DIR="$PWD/.whl/nvidia/cu13" >/dev/null
-cmake --build build-gpu -j2
+# only the named binaries (their targets) when names are given
+if [ $# -gt 0 ]; then cmake --build build-gpu -j2 --target "$@"; else cmake --build build-gpu -j2; fi
 rm -rf .carry && mkdir -p .carry/bin .carry/lib
 # the commit the binaries were built from (logs on the device name it; it has no .git)
 echo "$(git rev-parse --short HEAD)$(git diff --quiet HEAD -- . || echo ' with uncommitted changes')" >.carry/COMMIT

@@ -79,8 +79,8 @@ __host__ __device__ std::int64_t inverse_slots(std::int64_t b, std::int64_t j0) 
 }
 
 // Which tiles of a step a panels or update launch takes (launch_lu_panel_batched): all of
-// them, only those the next step's pivot block depends on (the L and U panels' first tiles
-// and the trailing diagonal tile), or the others.
+// them, only those the next step's pivot block depends on (the L and U panels' first tiles;
+// the trailing diagonal tile's update is that pivot block's own), or the others.
 enum class StepTiles : int { all, next_pivot_block, rest };
 
 // The pivot block kernel's threads: row_lanes.cuh (eight per row of the 64×64 block while
@@ -113,48 +113,59 @@ __device__ __forceinline__ void eliminate(double (&a)[kPerThread], double (&x)[k
     x[c] = kLanes * c + q == i ? 1.0 : 0.0;
     y[c] = 0.0;
   }
+  // columns j = kLanes·cb + jq (row_lanes.cuh: only the loop over cb unrolled)
+  bool stop = false;
 #pragma unroll
-  for (int j = 0; j < kStep; ++j) {
-    if (j >= w) break;
-    double* row = R + (j & 1) * 2 * kStep;  // U's row j, then L⁻¹'s
-    if (i == j) {
-#pragma unroll
-      for (int c = 0; c < kPerThread; ++c) {
-        row[kLanes * c + q] = a[c];
-        row[kStep + kLanes * c + q] = x[c];
-        T[j * kPad + kLanes * c + q] = a[c];
+  for (int cb = 0; cb < kPerThread; ++cb) {
+#pragma unroll 1
+    for (int jq = 0; jq < kLanes; ++jq) {
+      const int j = kLanes * cb + jq;
+      if (j >= w) {
+        stop = true;
+        break;
       }
-    }
-    __syncthreads();
-    const double d = row[j];  // the same in every thread: a uniform break
-    if (!(fabs(d) >= static_pivot) || !(fabs(d) <= DBL_MAX)) {
-      if (threadIdx.x == 0) *sbad = 1;
-      break;
-    }
-    // A(i, j) from the thread of row i that holds column j (every lane takes part)
-    const PivotReciprocal by_d(d);  // one reciprocal for the step's multipliers
-    const double aij =
-        __shfl_sync(0xffffffffu, a[j / kLanes], (lane & ~(kLanes - 1)) | (j % kLanes));
-    if (i > j && i < w) {
-      const double l = by_d(aij);
-      if (q == (j % kLanes)) {
-        a[j / kLanes] = l;
-        // the CPU's test, |a_jj| ≥ u·|a_ij|: else its pivoting would interchange rows
-        if (!(fabs(d) >= threshold * fabs(aij))) *sbad = 1;
+      double* row = R + (j & 1) * 2 * kStep;  // U's row j, then L⁻¹'s
+      if (i == j) {
+#pragma unroll
+        for (int c = 0; c < kPerThread; ++c) {
+          row[kLanes * c + q] = a[c];
+          row[kStep + kLanes * c + q] = x[c];
+          T[j * kPad + kLanes * c + q] = a[c];
+        }
       }
+      __syncthreads();
+      const double d = row[j];  // the same in every thread: a uniform break
+      if (!(fabs(d) >= static_pivot) || !(fabs(d) <= DBL_MAX)) {
+        if (threadIdx.x == 0) *sbad = 1;
+        stop = true;
+        break;
+      }
+      // A(i, j) from the thread of row i that holds column j (every lane takes part)
+      const PivotReciprocal by_d(d);  // one reciprocal for the step's multipliers
+      const double aij = __shfl_sync(0xffffffffu, a[cb], (lane & ~(kLanes - 1)) | jq);
+      if (i > j && i < w) {
+        const double l = by_d(aij);
+        if (q == jq) {
+          a[cb] = l;
+          // the CPU's test, |a_jj| ≥ u·|a_ij|: else its pivoting would interchange rows
+          if (!(fabs(d) >= threshold * fabs(aij))) *sbad = 1;
+        }
 #pragma unroll
-      for (int c = j / kLanes; c < kPerThread; ++c)  // the columns after j
-        if (kLanes * c + q > j) a[c] -= l * row[kLanes * c + q];
+        for (int c = cb; c < kPerThread; ++c)  // the columns after j
+          if (kLanes * c + q > j) a[c] -= l * row[kLanes * c + q];
 #pragma unroll
-      for (int c = 0; c <= j / kLanes; ++c)  // L⁻¹'s row j: columns up to j
-        if (kLanes * c + q <= j) x[c] -= l * row[kStep + kLanes * c + q];
+        for (int c = 0; c <= cb; ++c)  // L⁻¹'s row j: columns up to j
+          if (kLanes * c + q <= j) x[c] -= l * row[kStep + kLanes * c + q];
+      }
+      double part = 0.0;
+#pragma unroll
+      for (int c = 0; c <= cb; ++c)
+        if (kLanes * c + q < j && kLanes * c + q >= i)
+          part += y[c] * T[(kLanes * c + q) * kPad + j];
+      part = row_lanes::lane_sum<kLanes>(part);
+      if (i <= j && q == jq) y[cb] = by_d((i == j ? 1.0 : 0.0) - part);
     }
-    double part = 0.0;
-#pragma unroll
-    for (int c = 0; kLanes * c < j; ++c)
-      if (kLanes * c + q < j && kLanes * c + q >= i) part += y[c] * T[(kLanes * c + q) * kPad + j];
-    part = row_lanes::lane_sum<kLanes>(part);
-    if (i <= j && q == (j % kLanes)) y[j / kLanes] = by_d((i == j ? 1.0 : 0.0) - part);
+    if (stop) break;
   }
 }
 
@@ -174,67 +185,77 @@ __device__ __forceinline__ void eliminate_with_interchanges(double (&a)[kPerThre
   __shared__ double diag;  // |a(j, j)| at column j
   const int i = threadIdx.x / kLanes, q = threadIdx.x % kLanes, lane = threadIdx.x & 31;
   const int warp = threadIdx.x >> 5;
+  // columns j = kLanes·cb + jq, only the loop over cb unrolled (as in eliminate)
+  bool stop = false;
 #pragma unroll
-  for (int j = 0; j < kStep; ++j) {
-    if (j >= w) break;
-    double* row = R + (j & 1) * kStep;
-    // the candidates: column j's entries in rows j … w−1, held by the lanes q = j mod kLanes
-    double v = q == (j % kLanes) && i >= j && i < w ? fabs(a[j / kLanes]) : -1.0;
-    int at = i;
-    warp_argmax_down(v, at);
-    if (lane == 0) {
-      best_v[warp] = v;
-      best_i[warp] = at;
-    }
-    if (i == j && q == (j % kLanes)) diag = fabs(a[j / kLanes]);
-    __syncthreads();
-    // the warps hold rows in order: a later warp's row wins only when strictly larger; no
-    // candidate at all (a column of NaNs) leaves row j, whose pivot the check refuses; a
-    // diagonal within the threshold stays
-    double bv = best_v[0];
-    int p = best_i[0];
-#pragma unroll
-    for (int x = 1; x < kWarps; ++x)
-      if (best_v[x] > bv) {
-        bv = best_v[x];
-        p = best_i[x];
+  for (int cb = 0; cb < kPerThread; ++cb) {
+#pragma unroll 1
+    for (int jq = 0; jq < kLanes; ++jq) {
+      const int j = kLanes * cb + jq;
+      if (j >= w) {
+        stop = true;
+        break;
       }
-    if (!(bv >= 0.0) || diag >= threshold * bv) p = j;
-    if (i == p) {
+      double* row = R + (j & 1) * kStep;
+      // the candidates: column j's entries in rows j … w−1, held by the lanes q = j mod kLanes
+      double v = q == jq && i >= j && i < w ? fabs(a[cb]) : -1.0;
+      int at = i;
+      warp_argmax_down(v, at);
+      if (lane == 0) {
+        best_v[warp] = v;
+        best_i[warp] = at;
+      }
+      if (i == j && q == jq) diag = fabs(a[cb]);
+      __syncthreads();
+      // the warps hold rows in order: a later warp's row wins only when strictly larger; no
+      // candidate at all (a column of NaNs) leaves row j, whose pivot the check refuses; a
+      // diagonal within the threshold stays
+      double bv = best_v[0];
+      int p = best_i[0];
 #pragma unroll
-      for (int c = 0; c < kPerThread; ++c) row[kLanes * c + q] = a[c];
-    } else if (i == j) {
+      for (int x = 1; x < kWarps; ++x)
+        if (best_v[x] > bv) {
+          bv = best_v[x];
+          p = best_i[x];
+        }
+      if (!(bv >= 0.0) || diag >= threshold * bv) p = j;
+      if (i == p) {
 #pragma unroll
-      for (int c = 0; c < kPerThread; ++c) S[kLanes * c + q] = a[c];
-    }
-    if (threadIdx.x == 0 && p != j) {
-      const int t = pos[j];
-      pos[j] = pos[p];
-      pos[p] = t;
-    }
-    __syncthreads();
-    if (p != j && i == p) {
+        for (int c = 0; c < kPerThread; ++c) row[kLanes * c + q] = a[c];
+      } else if (i == j) {
 #pragma unroll
-      for (int c = 0; c < kPerThread; ++c) a[c] = S[kLanes * c + q];
-    } else if (p != j && i == j) {
+        for (int c = 0; c < kPerThread; ++c) S[kLanes * c + q] = a[c];
+      }
+      if (threadIdx.x == 0 && p != j) {
+        const int t = pos[j];
+        pos[j] = pos[p];
+        pos[p] = t;
+      }
+      __syncthreads();
+      if (p != j && i == p) {
 #pragma unroll
-      for (int c = 0; c < kPerThread; ++c) a[c] = row[kLanes * c + q];
-    }
-    const double d = row[j];
-    if (!(fabs(d) >= static_pivot) || !(fabs(d) <= DBL_MAX)) {
-      if (threadIdx.x == 0) *sbad = 1;
-      break;
-    }
-    const PivotReciprocal by_d(d);  // one reciprocal for the step's multipliers
-    const double aij =
-        __shfl_sync(0xffffffffu, a[j / kLanes], (lane & ~(kLanes - 1)) | (j % kLanes));
-    if (i > j && i < w) {
-      const double l = by_d(aij);
-      if (q == (j % kLanes)) a[j / kLanes] = l;
+        for (int c = 0; c < kPerThread; ++c) a[c] = S[kLanes * c + q];
+      } else if (p != j && i == j) {
 #pragma unroll
-      for (int c = j / kLanes; c < kPerThread; ++c)  // the columns after j
-        if (kLanes * c + q > j) a[c] -= l * row[kLanes * c + q];
+        for (int c = 0; c < kPerThread; ++c) a[c] = row[kLanes * c + q];
+      }
+      const double d = row[j];
+      if (!(fabs(d) >= static_pivot) || !(fabs(d) <= DBL_MAX)) {
+        if (threadIdx.x == 0) *sbad = 1;
+        stop = true;
+        break;
+      }
+      const PivotReciprocal by_d(d);  // one reciprocal for the step's multipliers
+      const double aij = __shfl_sync(0xffffffffu, a[cb], (lane & ~(kLanes - 1)) | jq);
+      if (i > j && i < w) {
+        const double l = by_d(aij);
+        if (q == jq) a[cb] = l;
+#pragma unroll
+        for (int c = cb; c < kPerThread; ++c)  // the columns after j
+          if (kLanes * c + q > j) a[c] -= l * row[kLanes * c + q];
+      }
     }
+    if (stop) break;
   }
 }
 
@@ -248,6 +269,7 @@ __device__ __forceinline__ void eliminate_with_interchanges(double (&a)[kPerThre
 //   Y(r, c) = (δ_rc − Σ_{l>r} U(r, l)·Y(l, c)) / U(r, r),
 // each sum in kInvLanes parts (one per thread of the column) added by shuffles. The entries
 // of a column above (L⁻¹) or below (U⁻¹) the diagonal are formed as 0, which the sums need.
+// Rows r = kInvLanes·rb + rq: only the loop over rb unrolled (as in eliminate).
 constexpr int kInvLanes = 4;
 constexpr int kInvPerThread = kStep / kInvLanes;  // the rows of a column a thread holds
 static_assert(kInvLanes * kStep == kPivotThreads / 2, "a half of the threads per inverse");
@@ -261,13 +283,17 @@ __device__ __forceinline__ void triangular_inverses(const double* T, int w, doub
   for (int s = 0; s < kInvPerThread; ++s) x[s] = 0.0;
   if (!upper) {
 #pragma unroll
-    for (int r = 0; r < kStep; ++r) {
-      double part = 0.0;
+    for (int rb = 0; rb < kInvPerThread; ++rb) {
+#pragma unroll 1
+      for (int rq = 0; rq < kInvLanes; ++rq) {
+        const int r = kInvLanes * rb + rq;
+        double part = 0.0;
 #pragma unroll
-      for (int s = 0; kInvLanes * s < r; ++s)
-        if (kInvLanes * s + q < r) part += T[r * kPad + kInvLanes * s + q] * x[s];
-      part = row_lanes::lane_sum<kInvLanes>(part);
-      if (q == (r % kInvLanes)) x[r / kInvLanes] = r == c ? 1.0 : (r > c ? -part : 0.0);
+        for (int s = 0; s <= rb; ++s)
+          if (kInvLanes * s + q < r) part += T[r * kPad + kInvLanes * s + q] * x[s];
+        part = row_lanes::lane_sum<kInvLanes>(part);
+        if (q == rq) x[rb] = r == c ? 1.0 : (r > c ? -part : 0.0);
+      }
     }
 #pragma unroll
     for (int s = 0; s < kInvPerThread; ++s) {
@@ -276,14 +302,17 @@ __device__ __forceinline__ void triangular_inverses(const double* T, int w, doub
     }
   } else {
 #pragma unroll
-    for (int r = kStep - 1; r >= 0; --r) {
-      double part = 0.0;
+    for (int rb = kInvPerThread - 1; rb >= 0; --rb) {
+#pragma unroll 1
+      for (int rq = kInvLanes - 1; rq >= 0; --rq) {
+        const int r = kInvLanes * rb + rq;
+        double part = 0.0;
 #pragma unroll
-      for (int s = kInvPerThread - 1; kInvLanes * s + kInvLanes - 1 > r; --s)
-        if (kInvLanes * s + q > r) part += T[r * kPad + kInvLanes * s + q] * x[s];
-      part = row_lanes::lane_sum<kInvLanes>(part);
-      if (q == (r % kInvLanes))
-        x[r / kInvLanes] = divide_rn((r == c ? 1.0 : 0.0) - part, T[r * kPad + r]);
+        for (int s = kInvPerThread - 1; s >= rb; --s)
+          if (kInvLanes * s + q > r) part += T[r * kPad + kInvLanes * s + q] * x[s];
+        part = row_lanes::lane_sum<kInvLanes>(part);
+        if (q == rq) x[rb] = divide_rn((r == c ? 1.0 : 0.0) - part, T[r * kPad + r]);
+      }
     }
 #pragma unroll
     for (int s = 0; s < kInvPerThread; ++s) {
@@ -468,10 +497,10 @@ __global__ void lu_update_kernel(const LuPanelItem* items, const int* bad, std::
   const int w = static_cast<int>(imin(kStep, k - j0));
   const std::int64_t base = j0 + w;
   const std::int64_t T = tiles_of(m - base), Tk = tiles_of(k - base);
-  // the trailing diagonal tile (the next step's pivot block) is q = 0
-  const std::int64_t all = Tk * (2 * T - Tk);
-  const std::int64_t first = which == StepTiles::rest && all > 0 ? 1 : 0;
-  const std::int64_t count = which == StepTiles::next_pivot_block ? (all > 0 ? 1 : 0) : all;
+  // the trailing diagonal tile is q = 0: with StepTiles::rest the next step's pivot block
+  // takes it (own_update); StepTiles::next_pivot_block is not a launch of this kernel
+  const std::int64_t count = Tk * (2 * T - Tk);
+  const std::int64_t first = which == StepTiles::rest && count > 0 ? 1 : 0;
   for (std::int64_t q = first + blockIdx.y; q < count; q += gridDim.y) {
     std::int64_t y, z;
     if (q < Tk * T) {

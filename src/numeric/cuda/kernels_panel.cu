@@ -106,41 +106,51 @@ __global__ void __launch_bounds__(row_lanes::kThreads)
   double z[kPerThread];
 #pragma unroll
   for (int s = 0; s < kPerThread; ++s) z[s] = kLanes * s + q == i ? 1.0 : 0.0;
+  // columns j = kLanes·js + jq (row_lanes.cuh: only the loop over js unrolled)
   int fail = 0;
+  bool stop = false;
 #pragma unroll
-  for (int j = 0; j < kStep; ++j) {
-    if (j >= w) break;
-    double* row = R + (j & 1) * 2 * kStep;  // A's row j, then z's
-    if (i == j) {
+  for (int js = 0; js < kPerThread; ++js) {
+#pragma unroll 1
+    for (int jq = 0; jq < kLanes; ++jq) {
+      const int j = kLanes * js + jq;
+      if (j >= w) {
+        stop = true;
+        break;
+      }
+      double* row = R + (j & 1) * 2 * kStep;  // A's row j, then z's
+      if (i == j) {
 #pragma unroll
-      for (int s = 0; s < kPerThread; ++s) {
-        row[kLanes * s + q] = a[s];
-        row[kStep + kLanes * s + q] = z[s];
+        for (int s = 0; s < kPerThread; ++s) {
+          row[kLanes * s + q] = a[s];
+          row[kStep + kLanes * s + q] = z[s];
+        }
+      }
+      __syncthreads();
+      const double d = row[j];  // the same in every thread: a uniform break
+      if (!(d > 0.0)) {
+        fail = static_cast<int>(j0) + j + 1;
+        stop = true;
+        break;
+      }
+      const double ljj = sqrt(d), r = __drcp_rn(ljj);  // 1.0 / ljj, the same bits
+      if (i == j) {
+        if (q == jq) a[js] = ljj;
+#pragma unroll
+        for (int s = 0; s <= js; ++s) z[s] *= r;  // row j of L⁻¹ (columns up to j)
+      }
+      if (i > j && i < w) {
+        const double l = row[i] * r;  // L(i, j)
+        if (q == jq) a[js] = l;
+#pragma unroll
+        for (int s = js; s < kPerThread; ++s)  // the columns after j
+          if (kLanes * s + q > j) a[s] -= l * (row[kLanes * s + q] * r);
+#pragma unroll
+        for (int s = 0; s <= js; ++s)  // L⁻¹'s row j: columns up to j
+          if (kLanes * s + q <= j) z[s] -= l * (row[kStep + kLanes * s + q] * r);
       }
     }
-    __syncthreads();
-    const double d = row[j];  // the same in every thread: a uniform break
-    if (!(d > 0.0)) {
-      fail = static_cast<int>(j0) + j + 1;
-      break;
-    }
-    const double ljj = sqrt(d), r = __drcp_rn(ljj);  // 1.0 / ljj, the same bits
-    const int js = j / kLanes, jq = j % kLanes;
-    if (i == j) {
-      if (q == jq) a[js] = ljj;
-#pragma unroll
-      for (int s = 0; s <= js; ++s) z[s] *= r;  // row j of L⁻¹ (columns up to j)
-    }
-    if (i > j && i < w) {
-      const double l = row[i] * r;  // L(i, j)
-      if (q == jq) a[js] = l;
-#pragma unroll
-      for (int s = js; s < kPerThread; ++s)  // the columns after j
-        if (kLanes * s + q > j) a[s] -= l * (row[kLanes * s + q] * r);
-#pragma unroll
-      for (int s = 0; s <= js; ++s)  // L⁻¹'s row j: columns up to j
-        if (kLanes * s + q <= j) z[s] -= l * (row[kStep + kLanes * s + q] * r);
-    }
+    if (stop) break;
   }
   if (tid == 0 && (j0 == 0 || fail)) info[it.slot] = fail;
   if (fail) return;

@@ -6,6 +6,12 @@
 // chain of the block is thus several times shorter than with one thread per row or
 // column, and the threads of a row or column are neighbouring lanes of one warp, which
 // combine their parts by shuffles.
+//
+// The kernels' loops over the block's 64 columns (or rows) are written as an unrolled loop
+// over the kPerThread register columns and, inside it, a loop over the kLanes columns of
+// each that is not unrolled: a register array needs indices known at compile time, and 64
+// unrolled steps would make each kernel hundreds of KB of code, more than the SM's
+// instruction cache holds, fetched again at every launch.
 #pragma once
 
 #include "numeric/cuda/tile_mma.cuh"
