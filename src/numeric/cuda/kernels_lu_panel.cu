@@ -350,24 +350,41 @@ __global__ void __launch_bounds__(kPivotThreads)
   const int w = static_cast<int>(imin(kStep, it.k - j0));
   double* D = it.F + j0 * ld + j0;
   const int t = threadIdx.x, i = t / kLanes, q = t % kLanes;
+  // this thread's entries of the block, e = t + kPivotThreads·u (row e mod 64, column
+  // e / 64; read by columns, coalesced), loaded first so that the loads overlap the update
+  constexpr int kStaged = kSlot / kPivotThreads;
+  double v[kStaged];
+#pragma unroll
+  for (int u = 0; u < kStaged; ++u) {
+    const int e = t + u * kPivotThreads, r = e % kStep, c = e / kStep;
+    v[u] = r < w && c < w ? D[static_cast<std::int64_t>(c) * ld + r] : 0.0;
+  }
   if (own_update) {  // as lu_update_kernel's tile q = 0 of the step at j0 − 64
     const std::int64_t p0 = j0 - kStep;
     const int n = static_cast<int>(imin(kStep, it.m - j0));
     const double* C = tile::product<tile::BLayout::kBCols, kPivotThreads>(
         it.F + p0 * ld + j0, ld, n, it.F + j0 * ld + p0, ld, n, kStep, T);
-    for (int x = t; x < kSlot; x += kPivotThreads) {
-      const int r = x & (kStep - 1), c = x >> 6;
-      if (r < n && c < n && (j0 + r < it.k || j0 + c < it.k))
-        D[static_cast<std::int64_t>(c) * ld + r] -= C[x];
+#pragma unroll
+    for (int u = 0; u < kStaged; ++u) {
+      const int e = t + u * kPivotThreads, r = e % kStep, c = e / kStep;
+      if (r < n && c < n && (j0 + r < it.k || j0 + c < it.k)) {
+        double* at = D + static_cast<std::int64_t>(c) * ld + r;
+        if (r < w && c < w) {  // the block: its write-back below stores it factored
+          v[u] -= C[e];
+          if (it.perm) *at = v[u];  // the elimination with interchanges reads it again
+        } else {  // a last step narrower than 64: the rest of the tile is the panels'
+          *at -= C[e];
+        }
+      }
     }
-    __syncthreads();  // the block's new entries, before any thread reads them below
+    __syncthreads();  // C (in T) read by every thread before T is overwritten
   }
   if (t == 0) sbad = 0;
   if (t < kStep) pos[t] = t;
-  // the block read by columns (coalesced), then each thread's part of its row
-  for (int e = t; e < kStep * kStep; e += kPivotThreads) {
-    const int r = e % kStep, c = e / kStep;
-    T[r * kPad + c] = r < w && c < w ? D[static_cast<std::int64_t>(c) * ld + r] : 0.0;
+#pragma unroll
+  for (int u = 0; u < kStaged; ++u) {
+    const int e = t + u * kPivotThreads;
+    T[(e % kStep) * kPad + e / kStep] = v[u];
   }
   __syncthreads();
   double a[kPerThread], x[kPerThread], y[kPerThread];

@@ -55,18 +55,30 @@ __device__ const double* product(const double* a, std::int64_t lda, int a_rows, 
   wmma::fragment<wmma::accumulator, 8, 8, 4, double> acc[kFragRows][2];
   for (auto& row : acc)
     for (auto& f : row) wmma::fill_fragment(f, 0.0);
+  // a thread's entries of a chunk, x = tid + Threads·u: every load issued before the first
+  // store to shared memory, so that they are in flight together (the compiler cannot tell
+  // that the stores do not alias the operands, and would otherwise wait for each load)
+  constexpr int kPer = kChunk * kEdge / Threads;
   for (int t0 = 0; t0 < w; t0 += kChunk) {
-    for (int x = tid; x < kChunk * kEdge; x += Threads) {
+    double va[kPer], vb[kPer];
+#pragma unroll
+    for (int u = 0; u < kPer; ++u) {
+      const int x = tid + u * Threads;
       const int tt = x >> 6, r = x & 63;
       const bool in = t0 + tt < w;
-      As[x] = in && r < a_rows ? a[static_cast<std::int64_t>(t0 + tt) * lda + r] : 0.0;
+      va[u] = in && r < a_rows ? a[static_cast<std::int64_t>(t0 + tt) * lda + r] : 0.0;
       if constexpr (L == BLayout::kBRows) {
-        Bs[x] = in && r < b_rows ? b[static_cast<std::int64_t>(t0 + tt) * ldb + r] : 0.0;
+        vb[u] = in && r < b_rows ? b[static_cast<std::int64_t>(t0 + tt) * ldb + r] : 0.0;
       } else {
         const int t = x & (kChunk - 1), c = x >> 5;
         const int row = brow ? (t0 + t < w ? brow[t0 + t] : 0) : t0 + t;
-        Bs[x] = t0 + t < w && c < b_rows ? b[static_cast<std::int64_t>(c) * ldb + row] : 0.0;
+        vb[u] = t0 + t < w && c < b_rows ? b[static_cast<std::int64_t>(c) * ldb + row] : 0.0;
       }
+    }
+#pragma unroll
+    for (int u = 0; u < kPer; ++u) {
+      As[tid + u * Threads] = va[u];
+      Bs[tid + u * Threads] = vb[u];
     }
     __syncthreads();
     const int steps = min(kChunk, w - t0);
