@@ -5,8 +5,11 @@
 # same CUDA 13.0 and a newer glibc, so binaries built here run there. The shared matrices
 # are not copied: carried.sh links .carry/matrices to the tree's data/matrices there.
 # A call carries about 22 MB beside the tree: name the binaries a call needs (their build
-# paths' last parts, e.g. strata bench_cudss test_cuda_backend); without names every
-# test and benchmark binary is staged (more than one call carries).
+# paths' last parts, e.g. strata bench_cudss test_cuda_backend; only those are built);
+# without names every test and benchmark binary is built and staged (more than one call
+# carries). A set for the next call can wait in .carry-b/ (ignored): `mv .carry .carry-b`
+# after staging it, and that call carries .carry-b and begins `rm -rf .carry && mv .carry-b
+# .carry`.
 # Usage: scripts/gpu/prepare.sh [BINARY...]   then: device run with carry [".carry"] and
 #        command "bash scripts/gpu/run.sh"
 set -euo pipefail
@@ -60,7 +63,9 @@ du -sh .carry
 # in parts of 13 MiB, which leave room for the tracked tree (about 40 MB) within what a
 # call carries, .cudss1, .cudss2, ..., one per call, each copied whole (its part and
 # the file `parts`, their number) to build-cudss/ on the device (ignored paths there are
-# kept while the machine stays warm); carried.sh joins them once all are there.
+# kept while the machine stays warm); carried.sh joins them once all are there. Send the
+# first part's call alone and the others only once it has run: after a start is refused,
+# every call for the next minutes is refused too, each at a cost in device time.
 if [ -f .whl/nvidia/cu13/lib/libcudss.so.1 ] && [ ! -f .cudss1/parts ]; then
   rm -rf .cudss[0-9]* .cudss-part-*
   xz -T2 -6 -c .whl/nvidia/cu13/lib/libcudss.so.1 | split -b 13M - .cudss-part-
