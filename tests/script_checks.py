@@ -1,6 +1,6 @@
 """The checks of the test scripts that ctest runs with Python (test_cost_model.py,
-test_trace_summary.py): check() records and prints a failed condition, finish() ends the
-script with exit status 1 when any failed."""
+test_trace_summary.py, test_phase_summary.py): check() records and prints a failed
+condition, finish() ends the script with exit status 1 when any failed."""
 import sys
 
 failures = []
