@@ -8,10 +8,8 @@
 # drivers' folder: $STRATA_BIN_DIR, else .carry/bin), S (the strata binary: $STRATA_BIN, else
 # $BIN/strata) and RESULTS (where results go: $STRATA_RESULTS_DIR, which bench/run sets,
 # else $OUT, else /tmp/strata-out).
-if [ -d .carry/lib ]; then
-  for z in .carry/lib/*.xz .carry/bin/*.xz .carry/base/*.xz .carry/trace/*.xz; do
-    [ -f "$z" ] && xz -d -f "$z"
-  done
+if [ -d .carry/lib ] || [ -f .carry/staged.tar.xz ]; then
+  bash scripts/gpu/unpack.sh .carry
   # the shared matrices (the build's STRATA_MATRIX_DIR) are the tree's own, not carried
   [ -e .carry/matrices ] || ln -sfn "$PWD/data/matrices" .carry/matrices
   if [ -f build-cudss/parts ] && [ ! -f build-cudss/libcudss.so.1 ] &&

@@ -6,10 +6,11 @@
 # are not copied: carried.sh links .carry/matrices to the tree's data/matrices there.
 # A call carries about 22 MB beside the tree: name the binaries a call needs (their build
 # paths' last parts, e.g. strata bench_cudss test_cuda_backend; only those are built);
-# without names every test and benchmark binary is built and staged (more than one call
-# carries). A set for the next call can wait in .carry-b/ (ignored): `mv .carry .carry-b`
-# after staging it, and that call carries .carry-b and begins `rm -rf .carry && mv .carry-b
-# .carry`.
+# without names every test and benchmark binary is built and staged. They are packed into
+# one archive, .carry/staged.tar.xz (pack.sh; another commit's binaries for an A/B run go
+# into .carry/base/ and pack.sh is run again). A set for the next call can wait in
+# .carry-b/ (ignored): `mv .carry .carry-b` after staging it, and that call carries
+# .carry-b and begins `rm -rf .carry && mv .carry-b .carry`.
 # Usage: scripts/gpu/prepare.sh [BINARY...]   then: device run with carry [".carry"] and
 #        command "bash scripts/gpu/run.sh"
 set -euo pipefail
@@ -54,11 +55,9 @@ for b in .carry/bin/*; do
   ldd "$b" | awk '/=>/ {print $3}'
 done | sort -u | grep -v -E '/(libc|libm|libdl|libpthread|librt|libgcc_s|libstdc\+\+)\.so|cuda|libcu|libnv' |
   while read -r lib; do cp -L "$lib" .carry/lib/; done
-# the libraries and the binaries travel compressed; the run scripts unpack them
-# (carried.sh)
-xz -T2 -6 .carry/lib/* .carry/bin/*
-[ -d .carry/trace ] && xz -T2 -6 .carry/trace/libcupti*
-du -sh .carry
+# the binaries and libraries travel in one solid archive (pack.sh); the run scripts
+# unpack it (unpack.sh)
+bash scripts/gpu/pack.sh .carry
 # cuDSS's library is 167 MB (143 MB compressed), over what one call carries: it travels
 # in parts of 13 MiB, which leave room for the tracked tree (about 40 MB) within what a
 # call carries, .cudss1, .cudss2, ..., one per call, each copied whole (its part and

@@ -22,10 +22,7 @@ log="$OUT/run_mpi.log"
 # under bench/run (STRATA_RESULTS_DIR set) the console output is logged by bench/run
 [ -n "${STRATA_RESULTS_DIR:-}" ] && log=/dev/null
 exec > >(tee -a "$log") 2>&1
-if [ -f .carry/lib/libopenblas.so.0.xz ] && [ ! -f .carry/lib/libopenblas.so.0 ]; then
-  xz -dk .carry/lib/*.xz
-fi
-for z in .carry/bin/*.xz; do [ -f "$z" ] && xz -d -f "$z"; done
+bash scripts/gpu/unpack.sh .carry
 export LD_LIBRARY_PATH="$PWD/.carry/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
 # NCCL (for a STRATA_NCCL build) from PyTorch's nvidia-nccl wheel when present
 nccl_lib=$(python3 -c 'import nvidia.nccl, os; print(os.path.join(os.path.dirname(nvidia.nccl.__file__), "lib"))' 2>/dev/null || true)
