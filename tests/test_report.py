@@ -38,6 +38,9 @@ made with round ratios, so the expected figures below are worked out by hand:
   distrib.  1x4, 2x2, 4x1: 1, 1.5, 2 s vs predicted 2, 2.5, 2.5 -> 0.500, 0.600, 0.800;
             bytes 400/800 MB vs 200/400 -> 2.000; the 1x4 row says gpus_per_rank 1 (the
             file's 4 counts)
+  cudss mbd a run tagged mbd: flexible-64x4x4 refactor 0.5 vs 1 ms -> 0.500, and bcsstk16
+            (0.4 vs 0.2 ms, a bundled matrix, not a Newton matrix) left out of its
+            "multibody Newton matrices" lines -> 0.500 over 1 problem
   python    overhead 1.00% on the large matrix (goal 5%: met); strata/SuperLU 0.25 and
             1.0 -> 0.500, strata/CHOLMOD 2.0 and 0.5 -> 1.000
 Exit status 1 with a list of failed checks if anything is off.
@@ -304,9 +307,18 @@ def main():
     skipped = section(secs, "## Results files skipped") or ""
     check("broken-20250101T000000Z.json" in skipped, "the truncated file is not listed as skipped")
 
+    # --- a cuDSS run tagged mbd: its headline ratios over the Newton matrices only
+    mbd_rows = [ln for ln in open(readme, encoding="utf-8").read().splitlines()
+                if "multibody Newton matrices (each its own ordering)" in ln
+                and "cudss-mbd-20250105T110000Z.json" in ln]
+    check(len(mbd_rows) == 1 and "| **0.500** | 1 |" in mbd_rows[0],
+          f"README's mbd line should be 0.500 over 1 problem (bcsstk16 left out): {mbd_rows}")
+    check("multibody Newton matrices: **0.500** over 1 problems" in text,
+          "REPORT's mbd refactorization line should be 0.500 over 1 problem")
+
     # --- plots: every referenced PNG exists and is a PNG; each has a caption with a file
     plots = re.findall(r"!\[[^\]]*\]\((plots/[^)]+\.png)\)", text)
-    check(len(plots) == 16, f"expected 16 plots (sweep CPU and GPU, analysis, factor, 2 cuDSS, "
+    check(len(plots) == 17, f"expected 17 plots (sweep CPU and GPU, analysis, factor, 3 cuDSS, "
           f"4 GPU phase plots, multigpu GPU (2 machines) and CPU, distributed, solvability, "
           f"simulate), found {len(plots)}")
     for p in plots:
