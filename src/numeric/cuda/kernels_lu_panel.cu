@@ -150,18 +150,23 @@ __device__ __forceinline__ void eliminate(double (&a)[kPerThread], double (&x)[k
           // the CPU's test, |a_jj| ≥ u·|a_ij|: else its pivoting would interchange rows
           if (!(fabs(d) >= threshold * fabs(aij))) *sbad = 1;
         }
+        // The columns after j, then L⁻¹'s row j up to column j. Of the register columns
+        // only cb holds columns on both sides of j (lanes after jq, lanes up to jq); every
+        // other one lies wholly after (c > cb) or before (c < cb), so those need no
+        // per-lane test — the compiler cannot tell that jq < kLanes and would test each.
+        if (q > jq) a[cb] -= l * row[kLanes * cb + q];
 #pragma unroll
-        for (int c = cb; c < kPerThread; ++c)  // the columns after j
-          if (kLanes * c + q > j) a[c] -= l * row[kLanes * c + q];
+        for (int c = cb + 1; c < kPerThread; ++c) a[c] -= l * row[kLanes * c + q];
 #pragma unroll
-        for (int c = 0; c <= cb; ++c)  // L⁻¹'s row j: columns up to j
-          if (kLanes * c + q <= j) x[c] -= l * row[kStep + kLanes * c + q];
+        for (int c = 0; c < cb; ++c) x[c] -= l * row[kStep + kLanes * c + q];
+        if (q <= jq) x[cb] -= l * row[kStep + kLanes * cb + q];
       }
+      // U⁻¹'s column j: columns l of row i with i ≤ l < j (c < cb wholly before j)
       double part = 0.0;
 #pragma unroll
-      for (int c = 0; c <= cb; ++c)
-        if (kLanes * c + q < j && kLanes * c + q >= i)
-          part += y[c] * T[(kLanes * c + q) * kPad + j];
+      for (int c = 0; c < cb; ++c)
+        if (kLanes * c + q >= i) part += y[c] * T[(kLanes * c + q) * kPad + j];
+      if (q < jq && kLanes * cb + q >= i) part += y[cb] * T[(kLanes * cb + q) * kPad + j];
       part = row_lanes::lane_sum<kLanes>(part);
       if (i <= j && q == jq) y[cb] = by_d((i == j ? 1.0 : 0.0) - part);
     }

@@ -142,12 +142,14 @@ __global__ void __launch_bounds__(row_lanes::kThreads)
       if (i > j && i < w) {
         const double l = row[i] * r;  // L(i, j)
         if (q == jq) a[js] = l;
+        // the columns after j, then L⁻¹'s row j up to column j: only register column js
+        // holds columns on both sides of j, the others need no per-lane test
+        if (q > jq) a[js] -= l * (row[kLanes * js + q] * r);
 #pragma unroll
-        for (int s = js; s < kPerThread; ++s)  // the columns after j
-          if (kLanes * s + q > j) a[s] -= l * (row[kLanes * s + q] * r);
+        for (int s = js + 1; s < kPerThread; ++s) a[s] -= l * (row[kLanes * s + q] * r);
 #pragma unroll
-        for (int s = 0; s <= js; ++s)  // L⁻¹'s row j: columns up to j
-          if (kLanes * s + q <= j) z[s] -= l * (row[kStep + kLanes * s + q] * r);
+        for (int s = 0; s < js; ++s) z[s] -= l * (row[kStep + kLanes * s + q] * r);
+        if (q <= jq) z[js] -= l * (row[kStep + kLanes * js + q] * r);
       }
     }
     if (stop) break;
