@@ -9,7 +9,8 @@
 // by path) are unsymmetric and analyzed as the engine does: --matching keeps strata's
 // matching and scaling (the pattern-only comparison with CHOLMOD turns them off), and
 // --umfpack adds the time of UMFPACK's symbolic phase (umfpack_dl_symbolic with its
-// default strategy, the values given) on the same matrix.
+// default strategy, the values given) on the same matrix, one call after each of strata's
+// analyses; the ratios reported are the medians of these pairs' ratios.
 //
 //   bench_analysis [--problems a,b,...] [--repeat R] [--ordering nd|metis|amd|auto] [--no-cholmod]
 //                  [--matching] [--umfpack] [--threads N] [--tag NAME] [--results-dir DIR]
@@ -18,6 +19,8 @@
 #include <sys/resource.h>
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
+#include <optional>
 #ifdef STRATA_BENCH_HAVE_UMFPACK
 #include <umfpack.h>
 #endif
@@ -86,28 +89,35 @@ CholmodAnalysis cholmod_analysis(const SparseMatrix& a, bool symmetric, int repe
 }
 
 #ifdef STRATA_BENCH_HAVE_UMFPACK
-// Median time of umfpack_dl_symbolic (default control: its own choice of strategy and
-// ordering) on the full matrix a, values included (its strategy looks at them).
-double umfpack_symbolic_seconds(const SparseMatrix& a, int repeat) {
-  const SparseMatrix f = expand_symmetric(a);
-  const auto n = static_cast<SuiteSparse_long>(f.n_cols);
-  std::vector<SuiteSparse_long> ap(f.offsets.begin(), f.offsets.end()),
-      ai(f.indices.begin(), f.indices.end());
-  double control[UMFPACK_CONTROL], info[UMFPACK_INFO];
-  umfpack_dl_defaults(control);
-  std::vector<double> times;
-  for (int k = 0; k < repeat; ++k) {
+// umfpack_dl_symbolic (default control: its own choice of strategy and ordering) on the
+// full matrix, values included (its strategy looks at them), timed one call at a time so
+// that the driver can interleave its calls with strata's analyses.
+class UmfpackSymbolic {
+ public:
+  explicit UmfpackSymbolic(const SparseMatrix& a) : f_(expand_symmetric(a)) {
+    ap_.assign(f_.offsets.begin(), f_.offsets.end());
+    ai_.assign(f_.indices.begin(), f_.indices.end());
+    umfpack_dl_defaults(control_);
+  }
+  double seconds() {
     void* symbolic = nullptr;
+    double info[UMFPACK_INFO];
     Timer t;
-    const SuiteSparse_long status =
-        umfpack_dl_symbolic(n, n, ap.data(), ai.data(), f.values.data(), &symbolic, control, info);
-    times.push_back(t.seconds());
+    const SuiteSparse_long status = umfpack_dl_symbolic(
+        static_cast<SuiteSparse_long>(f_.n_cols), static_cast<SuiteSparse_long>(f_.n_cols),
+        ap_.data(), ai_.data(), f_.values.data(), &symbolic, control_, info);
+    const double s = t.seconds();
     if (status != UMFPACK_OK)
       throw Error("umfpack_dl_symbolic failed with status " + std::to_string(status));
     umfpack_dl_free_symbolic(&symbolic);
+    return s;
   }
-  return bench::median(times);
-}
+
+ private:
+  SparseMatrix f_;
+  std::vector<SuiteSparse_long> ap_, ai_;
+  double control_[UMFPACK_CONTROL];
+};
 #endif
 
 }  // namespace
@@ -171,15 +181,31 @@ static int driver_main(int argc, char** argv) {
     // (AnalysisStats::total_seconds: matching and scaling, ordering, symbolic phase, plan),
     // without the solver's validation of the input and its copy of it for the
     // factorizations and refinement
-    std::vector<double> times, phase_times;
+    // With --umfpack each analysis is followed by one UMFPACK symbolic phase, and the
+    // ratios are the medians of these pairs' ratios: a machine whose speed drifts over
+    // the run (a shared or throttled host) moves both members of a pair alike.
+    std::vector<double> times, phase_times, umfpack_times, pair_ratios, phase_pair_ratios;
+#ifdef STRATA_BENCH_HAVE_UMFPACK
+    std::optional<UmfpackSymbolic> umf;
+    if (umfpack) umf.emplace(p.a);
+#endif
     AnalysisStats st;
     for (int k = 0; k < repeat; ++k) {
-      Solver s(o);
-      Timer t;
-      s.analyze(p.a);
-      times.push_back(t.seconds());
-      st = s.stats().analysis;
-      phase_times.push_back(st.total_seconds);
+      {
+        Solver s(o);
+        Timer t;
+        s.analyze(p.a);
+        times.push_back(t.seconds());
+        st = s.stats().analysis;
+        phase_times.push_back(st.total_seconds);
+      }
+#ifdef STRATA_BENCH_HAVE_UMFPACK
+      if (umf) {
+        umfpack_times.push_back(umf->seconds());
+        pair_ratios.push_back(times.back() / umfpack_times.back());
+        phase_pair_ratios.push_back(phase_times.back() / umfpack_times.back());
+      }
+#endif
     }
     const double ts = bench::median(times), tp = bench::median(phase_times);
     json row = {{"problem", name},
@@ -198,18 +224,23 @@ static int driver_main(int argc, char** argv) {
                   {"tree_height", st.tree_height}}}};
 #ifdef STRATA_BENCH_HAVE_UMFPACK
     if (umfpack) {
-      const double tu = umfpack_symbolic_seconds(p.a, repeat);
+      const double tu = bench::median(umfpack_times);
+      const double rt = bench::median(pair_ratios), rp = bench::median(phase_pair_ratios);
       row["umfpack_symbolic_seconds"] = tu;
-      row["umfpack_time_ratio"] = ts / tu;
-      row["umfpack_phase_ratio"] = tp / tu;
-      umfpack_ratios.push_back(ts / tu);
-      umfpack_phase_ratios.push_back(tp / tu);
+      row["umfpack_time_ratio"] = rt;
+      row["umfpack_phase_ratio"] = rp;
+      row["umfpack_phase_ratio_range"] = {
+          *std::min_element(phase_pair_ratios.begin(), phase_pair_ratios.end()),
+          *std::max_element(phase_pair_ratios.begin(), phase_pair_ratios.end())};
+      umfpack_ratios.push_back(rt);
+      umfpack_phase_ratios.push_back(rp);
       fmt::print(
           "{:<18} strata analyze {:.4f} s, of which the analysis {:.4f} s (matching and "
           "ordering {:.4f}, symbolic {:.4f}, plan {:.4f}); UMFPACK symbolic {:.4f} s; ratio "
-          "{:.2f} (the analysis alone {:.2f})\n",
-          name, ts, tp, st.ordering_seconds, st.symbolic_seconds, st.plan_seconds, tu, ts / tu,
-          tp / tu);
+          "{:.2f} (the analysis alone {:.2f}, pairs {:.2f}-{:.2f})\n",
+          name, ts, tp, st.ordering_seconds, st.symbolic_seconds, st.plan_seconds, tu, rt, rp,
+          row["umfpack_phase_ratio_range"][0].get<double>(),
+          row["umfpack_phase_ratio_range"][1].get<double>());
     }
 #endif
     if (!no_cholmod) {
