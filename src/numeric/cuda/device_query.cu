@@ -8,6 +8,7 @@
 #include <thread>
 
 #include "numeric/cuda/cuda_executor.hpp"
+#include "numeric/cuda/cuda_libraries.hpp"
 #include "numeric/cuda_testing.hpp"
 
 namespace strata::cuda {
@@ -55,6 +56,12 @@ void start_device_context(int device) {
     starter.thread = std::thread([device] {
       if (cudaSetDevice(device) != cudaSuccess || cudaFree(nullptr) != cudaSuccess)
         (void)cudaGetLastError();  // left to the code that uses the GPU
+      // cuBLAS and cuSOLVER too (cuda_libraries.cpp); a failure is reported again, and
+      // thrown, by the executor's factory
+      try {
+        cuda::load_libraries();
+      } catch (const Error&) {
+      }
     });
   });
 }
@@ -124,6 +131,7 @@ std::string cuda_unavailable_reason() {
 
 std::unique_ptr<Executor> make_cuda_executor(const Options& opts, int device) {
   if (!cuda::device_present()) throw NotSupported(cuda_unavailable_reason());
+  cuda::load_libraries();  // NotSupported, naming the library, before any handle is made
   const int count = cuda_device_count();
   if (device < 0 || device >= count)
     throw NotSupported("CUDA device " + std::to_string(device) + " was asked for, " +
