@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # strata — the command line starts without NVIDIA cuBLAS and cuSOLVER: the CUDA build opens
-# them on the CUDA backend's first use (src/numeric/cuda/cuda_libraries.cpp), because
-# loading them costs every process about 0.1 s (cuBLASLt's start-up). Checked on the
+# them on the CUDA backend's first use (src/numeric/cuda/cuda_libraries.cpp), so that a
+# process that never uses a GPU does not pay cuBLASLt's start-up. Checked on the
 # binary's dynamic section and on the libraries the loader opens (LD_DEBUG=files) for
 # `--version` and for a solve on the CPU backend; also that the start-up check itself
 # sees a library that is loaded (libstdc++, which every run loads).

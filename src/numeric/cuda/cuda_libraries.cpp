@@ -1,10 +1,11 @@
 // strata — NVIDIA cuBLAS and cuSOLVER loaded on first use (see cuda_libraries.hpp).
 //
 // Why. Linked as usual, libcublas.so and libcusolver.so are loaded and initialised when
-// any program that links strata starts, whether it ever touches a GPU or not: cuBLASLt,
-// which cuBLAS loads, touches about 110 MB of its own pages at start-up (some 28,000 page
-// faults), 75–125 ms of every process on a 2-core host. The command line, the Python
-// module and every test paid it, on the CPU backend too.
+// any program that links strata starts, whether it ever touches a GPU or not, and
+// cuBLASLt, which cuBLAS loads, initialises itself by touching over a hundred megabytes
+// of its own pages: a start-up cost for the command line, the Python module and every
+// test, on the CPU backend too (bench/history.md, "cuBLAS and cuSOLVER opened on first
+// use", has the figures).
 //
 // How. strata's library does not link them. This file defines the cuBLAS and cuSOLVER
 // entry points that strata calls, with the signatures of the toolkit's own headers (the
