@@ -56,11 +56,12 @@ void start_device_context(int device) {
     starter.thread = std::thread([device] {
       if (cudaSetDevice(device) != cudaSuccess || cudaFree(nullptr) != cudaSuccess)
         (void)cudaGetLastError();  // left to the code that uses the GPU
-      // cuBLAS and cuSOLVER too (cuda_libraries.cpp); a failure is reported again, and
-      // thrown, by the executor's factory
+      // cuBLAS and cuSOLVER too (cuda_libraries.cpp); any failure is left to the
+      // executor's factory, which loads them again and throws (nothing may escape a
+      // thread's function)
       try {
         cuda::load_libraries();
-      } catch (const Error&) {
+      } catch (...) {
       }
     });
   });
