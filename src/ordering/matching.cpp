@@ -95,7 +95,9 @@
 #include <limits>
 #include <string>
 
+#include "base/default_init.hpp"
 #include "base/parallel_ranges.hpp"
+#include "base/vector_math.hpp"
 #include "sparse/canonical.hpp"
 #include "strata/errors.hpp"
 
@@ -112,66 +114,78 @@ constexpr double kMaxLogScale = 700.0;
 // arrays); otherwise they are copies without the zeros.
 struct CostGraph {
   index_t n = 0;
-  const index_t* colptr = nullptr;              // n+1
-  const index_t* rowind = nullptr;              // row of each edge
-  std::vector<double> cost;                     // c_ij of each edge
-  std::vector<double> log_colmax;               // log a_j (0 for unmatchable columns)
-  std::vector<char> matchable;                  // a_j > 0
-  std::vector<index_t> own_colptr, own_rowind;  // the copies, when A has explicit zeros
+  const index_t* colptr = nullptr;  // n+1
+  const index_t* rowind = nullptr;  // row of each edge
+  UninitVector<double> cost;        // c_ij of each edge
+  std::vector<double> log_colmax;   // log a_j (0 for unmatchable columns)
+  std::vector<char> matchable;      // a_j > 0
+  std::vector<index_t> own_colptr;  // the copies, when A has explicit zeros
+  UninitVector<index_t> own_rowind;
 };
 
-// Two passes in ranges of columns over the calling arena's threads (each column writes
-// only its own entries): the column maxima, their logs and the edges per column, then,
-// after the prefix sums, the edges and their costs. The same graph for any thread count.
+// Three passes in ranges of columns over the calling arena's threads (each column writes
+// only its own entries), the same graph for any thread count: the edges per column; the
+// magnitudes of the edges (copied without the explicit zeros when there are any) turned
+// into their logarithms in place, a vector pass (detail::log_magnitudes); per column
+// log a_j = the largest of its logarithms (the logarithm is increasing) and c_ij =
+// log a_j − log|a_ij|. No array but the costs (and the copies) is made: on a large matrix
+// the fresh memory's first touch costs as much as the arithmetic.
 CostGraph build_cost_graph(const SparseMatrix& full) {
   CostGraph g;
   const index_t n = full.n_cols;
+  const index_t* co = full.offsets.data();
   const bool vals = !full.values.empty();
-  auto magnitude = [&](index_t p) { return vals ? std::abs(full.values[p]) : 1.0; };
+  const double* a = full.values.data();
   g.n = n;
-  std::vector<index_t>& edges_before = g.own_colptr;  // per column first, then summed
-  edges_before.assign(n + 1, 0);
   g.log_colmax.assign(n, 0.0);
   g.matchable.assign(n, 0);
+  std::vector<index_t>& edges_before = g.own_colptr;  // per column first, then summed
+  edges_before.assign(n + 1, 0);
   detail::parallel_ranges(n, 512, [&](index_t j0, index_t j1) {
     for (index_t j = j0; j < j1; ++j) {
-      double amax = 0.0;
-      index_t edges = 0;
-      for (index_t p = full.offsets[j]; p < full.offsets[j + 1]; ++p) {
-        const double a = magnitude(p);
-        amax = std::max(amax, a);
-        edges += a != 0.0;  // explicit zeros are not edges
-      }
-      if (amax > 0.0) {
-        g.log_colmax[j] = std::log(amax);
-        g.matchable[j] = 1;
-        edges_before[j + 1] = edges;
-      }
+      index_t edges = co[j + 1] - co[j];
+      if (vals)
+        for (index_t p = co[j]; p < co[j + 1]; ++p) edges -= a[p] == 0.0;
+      edges_before[j + 1] = edges;
     }
   });
   for (index_t j = 0; j < n; ++j) edges_before[j + 1] += edges_before[j];
-  const bool zeros = edges_before[n] != full.offsets[n];
+  const bool zeros = edges_before[n] != co[n];
+  g.cost.resize(edges_before[n]);
+  double* cost = g.cost.data();
   if (zeros) {
     g.own_rowind.resize(edges_before[n]);
     g.colptr = g.own_colptr.data();
     g.rowind = g.own_rowind.data();
   } else {
     g.own_colptr = {};
-    g.colptr = full.offsets.data();
+    g.colptr = co;
     g.rowind = full.indices.data();
   }
-  g.cost.resize(edges_before[n]);
+  detail::parallel_ranges(n, 512, [&](index_t j0, index_t j1) {
+    const index_t e0 = g.colptr[j0], e1 = g.colptr[j1];
+    if (!vals) {
+      std::fill(cost + e0, cost + e1, 0.0);  // every magnitude 1
+      return;
+    }
+    if (zeros) {
+      index_t out = e0;
+      for (index_t p = co[j0]; p < co[j1]; ++p) {
+        if (a[p] == 0.0) continue;
+        g.own_rowind[out] = full.indices[p];
+        cost[out++] = a[p];
+      }
+    }
+    detail::log_magnitudes(zeros ? cost + e0 : a + e0, cost + e0, e1 - e0);
+  });
   detail::parallel_ranges(n, 512, [&](index_t j0, index_t j1) {
     for (index_t j = j0; j < j1; ++j) {
-      if (!g.matchable[j]) continue;
-      const double lmax = g.log_colmax[j];
-      index_t out = g.colptr[j];
-      for (index_t p = full.offsets[j]; p < full.offsets[j + 1]; ++p) {
-        const double a = magnitude(p);
-        if (a == 0.0) continue;
-        if (zeros) g.own_rowind[out] = full.indices[p];
-        g.cost[out++] = std::max(0.0, lmax - std::log(a));
-      }
+      const index_t e0 = g.colptr[j], e1 = g.colptr[j + 1];
+      if (e0 == e1) continue;  // no entry, or only explicit zeros: a_j = 0
+      const double lmax = *std::max_element(cost + e0, cost + e1);
+      g.log_colmax[j] = lmax;
+      g.matchable[j] = 1;
+      for (index_t p = e0; p < e1; ++p) cost[p] = std::max(0.0, lmax - cost[p]);
     }
   });
   return g;
