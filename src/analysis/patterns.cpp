@@ -145,51 +145,59 @@ AssemblyMap build_assembly_map(const SparseMatrix& c, const Analysis& an) {
   const auto& t = an.tree;
   const index_t nf = t.n_fronts();
   const index_t nnz = c.nnz();
-  std::vector<index_t> q_inv;
-  if (!an.matching_perm.empty()) q_inv = ordering::invert_permutation(an.matching_perm);
+  const bool symmetric = an.symmetric;
   const index_t* ci = c.indices.data();
   const index_t* co = c.offsets.data();
-  // the permuted indices of entry p of column j: (pi, pj)
-  auto permuted = [&](index_t j, index_t p) {
-    return std::pair<index_t, index_t>{an.iperm[ci[p]], an.iperm[q_inv.empty() ? j : q_inv[j]]};
+  // Line k of the bucket pass: general, the input column that becomes pivot column k (pj =
+  // k), column perm[k] of B, which is column q[perm[k]] of A; symmetric, column k of the
+  // lower triangle (pj = iperm[k]).
+  auto input_column = [&](index_t k) {
+    if (symmetric) return k;
+    const index_t b = an.perm[k];
+    return an.matching_perm.empty() ? b : an.matching_perm[b];
   };
-  // the entries sorted by front (the front of the smaller permuted index), each with its
-  // column; within a front in the order of the input until place() orders them by the
-  // column they land in
+  auto pivot_of_line = [&](index_t k) { return symmetric ? an.iperm[k] : k; };
+  // the entries sorted by front (the front of the smaller permuted index), in the order of
+  // the lines and then of each column's entries (symmetric: the input's order)
   AssemblyMap map;
   map.entry_src.resize(nnz);
   map.entry_dst.resize(nnz);
   // Until place() writes the positions, entry_dst holds each entry's permuted pair packed
   // as (pi << bits) | pj, so that place() reads it in order instead of going back to the
-  // input's rows; an order too large for that (2·bits > 62) keeps each entry's column.
+  // input's rows; an order too large for that (2·bits > 62) keeps each entry's pj.
   int bits = 1;
   while (bits < 62 && (index_t{1} << bits) < an.n) ++bits;
   const bool packed = 2 * bits <= 62;
   const index_t low_mask = (index_t{1} << bits) - 1;
   std::vector<index_t> column_of(packed ? 0 : nnz);
   map.entry_offsets = bucket_entries(
-      c.n_cols, nf,
-      [&](index_t j) {
+      an.n, nf,
+      [&](index_t k) {
+        const index_t j = input_column(k);
         return std::pair<index_t, index_t>{co[j], co[j + 1]};
       },
-      [&](index_t j, index_t p) {
-        const auto [pi, pj] = permuted(j, p);
-        return t.front_of_column[std::min(pi, pj)];
+      [&](index_t k, index_t p) {
+        return t.front_of_column[std::min(an.iperm[ci[p]], pivot_of_line(k))];
       },
-      [&](index_t slot, index_t j, index_t p) {
+      [&](index_t slot, index_t k, index_t p) {
         map.entry_src[slot] = p;
-        if (packed) {
-          const auto [pi, pj] = permuted(j, p);
-          map.entry_dst[slot] = (pi << bits) | pj;
-        } else {
-          column_of[slot] = j;
-        }
+        if (packed)
+          map.entry_dst[slot] = (an.iperm[ci[p]] << bits) | pivot_of_line(k);
+        else
+          column_of[slot] = pivot_of_line(k);
       });
-  // local positions through a row → local index map set per front (linear in the fronts'
-  // rows plus the entries, no search), then the front's entries ordered by the column of
-  // the front they land in, stably (a counting sort over its m columns): a part of the
+  // Each entry's place: its column in the front is the local index of max(pi, pj) for the
+  // part above the diagonal (general) and of min(pi, pj) otherwise, found through a
+  // row → local index map set per front (linear in the fronts' rows plus the entries, no
+  // search). A front's entries must be ordered by that column, stably (a part of the
   // front's columns receives a contiguous range of its entries, which the GPU's assembly
-  // of a front cut into column slices finds by a search. One scratch per thread.
+  // of a front cut into column slices finds by a search). General: they are already, as
+  // the column is the local index of pj (lower part: pj = min(pi, pj) is a pivot of the
+  // front, at pj − first pivot; upper part: pj = max(pi, pj) is a row of the front), the
+  // local index increases with the row (a front's rows are sorted) and the lines came in
+  // increasing pj, each column's entries in the input's order. Symmetric: the column is
+  // that of min(pi, pj), which no order of the lines gives, so a counting sort over the
+  // front's m columns orders them, stably from the input's order. One scratch per thread.
   struct Scratch {
     std::vector<index_t> local, count, col, src, dst;
   };
@@ -200,34 +208,42 @@ AssemblyMap build_assembly_map(const SparseMatrix& c, const Analysis& an) {
       const index_t m = t.n_rows(f);
       const index_t e0 = map.entry_offsets[f], e1 = map.entry_offsets[f + 1];
       const std::size_t ne = static_cast<std::size_t>(e1 - e0);
-      s.count.assign(static_cast<std::size_t>(m) + 1, 0);
-      s.col.resize(ne);
-      s.src.resize(ne);
-      s.dst.resize(ne);
       for (index_t i = 0; i < m; ++i) local[rows[i]] = i;
-      for (std::size_t x = 0; x < ne; ++x) {
-        const index_t k = e0 + static_cast<index_t>(x);
-        const auto [pi, pj] = packed ? std::pair<index_t, index_t>{map.entry_dst[k] >> bits,
-                                                                   map.entry_dst[k] & low_mask}
-                                     : permuted(column_of[k], map.entry_src[k]);
-        const index_t lo = std::min(pi, pj), hi = std::max(pi, pj);
-        const index_t lc = lo - t.first_pivot[f];  // pivot column of the front
-        const index_t lr = local[hi];
-        // symmetric: lower triangle (row hi, column lo); general: (pi, pj) as it stands
-        const bool lower = an.symmetric || pi >= pj;
-        const index_t col = lower ? lc : lr;
-        s.col[x] = col;
-        s.src[x] = map.entry_src[k];
-        s.dst[x] = col * m + (lower ? lr : lc);
-        ++s.count[col + 1];
+      auto pair_of = [&](index_t k) {
+        return packed ? std::pair<index_t, index_t>{map.entry_dst[k] >> bits,
+                                                    map.entry_dst[k] & low_mask}
+                      : std::pair<index_t, index_t>{an.iperm[ci[map.entry_src[k]]], column_of[k]};
+      };
+      if (!symmetric) {
+        for (index_t k = e0; k < e1; ++k) {
+          const auto [pi, pj] = pair_of(k);
+          // lower part (pi ≥ pj): row pi, column pj; upper part: row pi, column pj of the
+          // front's U block, both as local indices
+          map.entry_dst[k] = local[pj] * m + local[pi];
+        }
+      } else {
+        s.count.assign(static_cast<std::size_t>(m) + 1, 0);
+        s.col.resize(ne);
+        s.src.resize(ne);
+        s.dst.resize(ne);
+        for (std::size_t x = 0; x < ne; ++x) {
+          const index_t k = e0 + static_cast<index_t>(x);
+          const auto [pi, pj] = pair_of(k);
+          // the lower triangle: row max(pi, pj), column min(pi, pj)
+          const index_t col = local[std::min(pi, pj)];
+          s.col[x] = col;
+          s.src[x] = map.entry_src[k];
+          s.dst[x] = col * m + local[std::max(pi, pj)];
+          ++s.count[col + 1];
+        }
+        prefix_sum(s.count);
+        for (std::size_t x = 0; x < ne; ++x) {
+          const index_t at = e0 + s.count[s.col[x]]++;
+          map.entry_src[at] = s.src[x];
+          map.entry_dst[at] = s.dst[x];
+        }
       }
       for (index_t i = 0; i < m; ++i) local[rows[i]] = -1;
-      prefix_sum(s.count);
-      for (std::size_t x = 0; x < ne; ++x) {
-        const index_t at = e0 + s.count[s.col[x]]++;
-        map.entry_src[at] = s.src[x];
-        map.entry_dst[at] = s.dst[x];
-      }
     }
   };
   if (serial_passes()) {

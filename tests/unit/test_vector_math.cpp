@@ -34,8 +34,8 @@ double draw(std::mt19937_64& rng) {
 // |x − y| within `ulps` units in the last place of y
 bool within_ulps(double x, double y, double ulps) {
   if (x == y) return true;
-  const double ulp = std::nextafter(std::abs(y), std::numeric_limits<double>::infinity()) -
-                     std::abs(y);
+  const double ulp =
+      std::nextafter(std::abs(y), std::numeric_limits<double>::infinity()) - std::abs(y);
   return std::abs(x - y) <= ulps * ulp;
 }
 
@@ -54,9 +54,8 @@ TEST(VectorMath, LogMagnitudesAgainstScalarLog) {
         continue;
       }
       const double ref = std::log(std::abs(a[k]));
-      EXPECT_TRUE(within_ulps(out[k], ref, 2.0))
-          << "n " << n << " k " << k << ": log|" << a[k] << "| = " << out[k] << ", std::log "
-          << ref;
+      EXPECT_TRUE(within_ulps(out[k], ref, 2.0)) << "n " << n << " k " << k << ": log|" << a[k]
+                                                 << "| = " << out[k] << ", std::log " << ref;
     }
     EXPECT_EQ(zeros, expected_zeros) << "n " << n;
     // in place: the same results
