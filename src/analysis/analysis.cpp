@@ -381,7 +381,7 @@ void finish_analysis(Analysis& an, const SparseMatrix& c, const ordering::Graph&
   }
   // B + Bᵀ by construction (detail::symmetric_graph), read through the ordering
   symbolic::SymbolicFactorization sym =
-      symbolic::analyze_permuted_graph(graph.n, graph.xadj, graph.adjncy, ord.perm, ao);
+      symbolic::analyze_permuted_graph(graph.n, graph.xadj, graph.adjncy.data(), ord.perm, ao);
   // the tree is in the postordered numbering: pivot k is permuted column post[k]
   an.perm.resize(an.n);
   for (index_t k = 0; k < an.n; ++k) an.perm[k] = ord.perm[sym.post[k]];
@@ -681,7 +681,7 @@ index_t factor_entries_with_order(const SparseMatrix& a, const Analysis& previou
   const ordering::Graph graph =
       detail::symmetric_graph(c, previous.symmetric, previous.matching_perm);
   const SparseMatrix permuted = symbolic::permute_symmetric_pattern(
-      graph.n, graph.xadj, graph.adjncy, kept_order_of(previous));
+      graph.n, graph.xadj, graph.adjncy.data(), kept_order_of(previous));
   const std::vector<index_t> parent = symbolic::elimination_tree(permuted);
   const std::vector<index_t> counts =
       symbolic::column_counts(permuted, parent, symbolic::postorder(parent));

@@ -69,7 +69,7 @@ Graph graph_of(const SparseMatrix& a) {
   // Pass 2: sweep targets in increasing order and append each to its source's row.
   Graph g;
   g.n = n;
-  std::vector<index_t> rows(start[n]);
+  UninitVector<index_t> rows(start[n]);  // every slot written by pass 2
   {
     std::vector<index_t> next(start.begin(), start.end() - 1);
     for (index_t v = 0; v < n; ++v)

@@ -711,7 +711,8 @@ class Driver {
       for (const index_t v : at)
         if (v >= 0) order.push_back(v);
     }
-    const SparseMatrix pp = symbolic::permute_symmetric_pattern(n, g_.xadj, g_.adjncy, order);
+    const SparseMatrix pp =
+        symbolic::permute_symmetric_pattern(n, g_.xadj, g_.adjncy.data(), order);
     const std::vector<index_t> parent = symbolic::elimination_tree(pp);
     const std::vector<index_t> post = symbolic::postorder(parent);
     const std::vector<index_t> cc = symbolic::column_counts(pp, parent, post);

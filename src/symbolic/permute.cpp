@@ -36,8 +36,7 @@ std::vector<index_t> checked_inverse(index_t n, std::size_t offsets_size,
 }
 
 SparseMatrix permute_symmetric_pattern(index_t n, const std::vector<index_t>& offsets,
-                                       const std::vector<index_t>& indices,
-                                       const std::vector<index_t>& perm) {
+                                       const index_t* indices, const std::vector<index_t>& perm) {
   const std::vector<index_t> iperm =
       checked_inverse(n, offsets.size(), perm, "permute_symmetric_pattern");
   SparseMatrix b;
@@ -65,7 +64,7 @@ SparseMatrix permute_symmetric_pattern(const SparseMatrix& full, const std::vect
   if (!canonical_full) expanded = expand_symmetric(full);
   const SparseMatrix& a = canonical_full ? full : expanded;  // no copy of a canonical one
   if (a.n_rows != a.n_cols) throw InvalidInput("permute_symmetric_pattern needs a square matrix");
-  return permute_symmetric_pattern(a.n_cols, a.offsets, a.indices, perm);
+  return permute_symmetric_pattern(a.n_cols, a.offsets, a.indices.data(), perm);
 }
 
 }  // namespace strata::symbolic

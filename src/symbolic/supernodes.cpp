@@ -412,7 +412,7 @@ SymbolicFactorization analyze_pattern(const SparseMatrix& a, const AmalgamationO
 }
 
 SymbolicFactorization analyze_permuted_graph(index_t n, const std::vector<index_t>& offsets,
-                                             const std::vector<index_t>& indices,
+                                             const index_t* indices,
                                              const std::vector<index_t>& perm,
                                              const AmalgamationOptions& opts) {
   const std::vector<index_t> iperm =

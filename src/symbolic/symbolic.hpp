@@ -25,11 +25,11 @@ namespace strata::symbolic {
 SparseMatrix permute_symmetric_pattern(const SparseMatrix& full, const std::vector<index_t>& perm);
 
 /// The same for a symmetric pattern given by its full CSC arrays: n + 1 offsets and the
-/// sorted rows of each column, e.g. an ordering::Graph's xadj and adjncy (the result then
+/// offsets[n] sorted rows of the columns (`indices`), e.g. an ordering::Graph's xadj and
+/// adjncy.data() (the result then
 /// has no diagonal either, which no function here needs). Same errors.
 SparseMatrix permute_symmetric_pattern(index_t n, const std::vector<index_t>& offsets,
-                                       const std::vector<index_t>& indices,
-                                       const std::vector<index_t>& perm);
+                                       const index_t* indices, const std::vector<index_t>& perm);
 
 /// The inverse (old→new) of the new→old permutation perm of a symmetric pattern of n
 /// columns given by offsets_size = n + 1 column offsets. Throws InvalidInput naming `who`
@@ -136,10 +136,11 @@ SymbolicFactorization analyze_pattern(const SparseMatrix& a, const AmalgamationO
 /// analyze_pattern(permute_symmetric_pattern(n, offsets, indices, perm), opts,
 /// PatternCheck::trusted) without forming the permuted pattern: the same result (parent,
 /// post and colcount in the numbering of perm, the tree), for a symmetric pattern given by
-/// its full CSC arrays (an ordering::Graph's xadj and adjncy; the order of the rows within
-/// a column does not matter) and perm new→old. Same errors as both.
+/// its full CSC arrays (n + 1 offsets and offsets[n] rows, an ordering::Graph's xadj and
+/// adjncy.data(); the order of the rows within a column does not matter) and perm
+/// new→old. Same errors as both.
 SymbolicFactorization analyze_permuted_graph(index_t n, const std::vector<index_t>& offsets,
-                                             const std::vector<index_t>& indices,
+                                             const index_t* indices,
                                              const std::vector<index_t>& perm,
                                              const AmalgamationOptions& opts);
 

@@ -463,7 +463,7 @@ void check_all(const SparseMatrix& pattern, const std::vector<index_t>& perm,
     check_tree(b, sf, c.o, small ? &ref : nullptr, c.exact);
     check_schedule(sf.tree, symbolic::level_schedule(sf.tree));
     const SymbolicFactorization g =
-        symbolic::analyze_permuted_graph(n, shuffled.offsets, shuffled.indices, perm, c.o);
+        symbolic::analyze_permuted_graph(n, shuffled.offsets, shuffled.indices.data(), perm, c.o);
     EXPECT_EQ(g.parent, sf.parent);
     EXPECT_EQ(g.post, sf.post);
     EXPECT_EQ(g.colcount, sf.colcount);
