@@ -97,7 +97,6 @@
 
 #include "base/default_init.hpp"
 #include "base/parallel_ranges.hpp"
-#include "base/vector_math.hpp"
 #include "sparse/canonical.hpp"
 #include "strata/errors.hpp"
 
@@ -126,10 +125,14 @@ struct CostGraph {
 // Three passes in ranges of columns over the calling arena's threads (each column writes
 // only its own entries), the same graph for any thread count: the edges per column; the
 // magnitudes of the edges (copied without the explicit zeros when there are any) turned
-// into their logarithms in place, a vector pass (detail::log_magnitudes); per column
-// log a_j = the largest of its logarithms (the logarithm is increasing) and c_ij =
+// into their logarithms in place; per column log a_j = the largest of its logarithms
+// (std::log is monotone, so this is log of the largest magnitude, bit for bit) and c_ij =
 // log a_j − log|a_ij|. No array but the costs (and the copies) is made: on a large matrix
-// the fresh memory's first touch costs as much as the arithmetic.
+// the fresh memory's first touch costs as much as the arithmetic. The logarithm is libm's
+// scalar one on purpose: the Newton matrices hold many entries of equal or related
+// magnitudes, so optimal matchings tie, and a logarithm rounded differently (glibc's
+// vector one, within 2 units in the last place) picks another of them, which on
+// tracked:1000 left pivots the fixed order could not take.
 CostGraph build_cost_graph(const SparseMatrix& full) {
   CostGraph g;
   const index_t n = full.n_cols;
@@ -176,7 +179,8 @@ CostGraph build_cost_graph(const SparseMatrix& full) {
         cost[out++] = a[p];
       }
     }
-    detail::log_magnitudes(zeros ? cost + e0 : a + e0, cost + e0, e1 - e0);
+    const double* from = zeros ? cost : a;
+    for (index_t p = e0; p < e1; ++p) cost[p] = std::log(std::abs(from[p]));
   });
   detail::parallel_ranges(n, 512, [&](index_t j0, index_t j1) {
     for (index_t j = j0; j < j1; ++j) {
