@@ -88,9 +88,12 @@ Integrator::Integrator(const Model& model, IntegratorOptions options)
   if (!opts_.dense_solver && solver_on_gpu(opts_.solver.backend)) numeric::start_device_context(0);
 }
 
+// The solver of the Newton matrices: the system condensed by the BDF relations
+// (condensed_solver.hpp), which every formulation has, then strata (or the dense LU).
 std::unique_ptr<LinearSolver> Integrator::new_solver() const {
-  if (opts_.dense_solver) return make_dense_solver();
-  return make_strata_solver(opts_.solver);
+  std::unique_ptr<LinearSolver> inner =
+      opts_.dense_solver ? make_dense_solver() : make_strata_solver(opts_.solver);
+  return make_condensed_solver(std::move(inner), [this] { return sys_.bdf_eliminations(); });
 }
 
 void Integrator::use_stabilized(const char* why) {
@@ -139,7 +142,8 @@ void Integrator::analyze(const BdfTerms& bdf, double t) {
   analysis_start_ = {};
   if (solver_ && !opts_.analyze_every_step) {
     analysis_start_ = solver_->matching_start();
-    if (static_cast<index_t>(analysis_start_.row_scaling.size()) != sys_.matrix().n_rows)
+    if (static_cast<index_t>(analysis_start_.row_scaling.size()) !=
+        solver_->system_order(sys_.matrix()))
       analysis_start_ = {};
   }
   if (!solver_) solver_ = new_solver();
@@ -395,6 +399,19 @@ int Integrator::newton(double h, StepInfo& info, const BdfTerms& bdf) {
         for (index_t i = 0; i < N; ++i) rhs_[i] = -res_[i];
         write_dense_matrix_market(opts_.dump_dir + "/" + fmt::format("rhs_step{}.mtx", step_ + 1),
                                   rhs_.data(), N, 1);
+        // and the system the sparse solver factors: condensed by the BDF relations
+        CondensedSystem cs;
+        SparseMatrix reduced;
+        cs.build(sys_.matrix(), sys_.bdf_eliminations(), reduced);
+        cs.values(sys_.matrix().values, reduced.values);
+        std::vector<double> reduced_rhs(reduced.n_rows);
+        cs.reduce_rhs(rhs_.data(), reduced_rhs.data());
+        write_matrix_market(
+            opts_.dump_dir + "/" + fmt::format("jacobian_condensed_step{}.mtx", step_ + 1),
+            reduced);
+        write_dense_matrix_market(
+            opts_.dump_dir + "/" + fmt::format("rhs_condensed_step{}.mtx", step_ + 1),
+            reduced_rhs.data(), reduced.n_rows, 1);
       }
       try {
         factorize(info, bdf, tn);

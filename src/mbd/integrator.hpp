@@ -81,7 +81,10 @@ struct IntegratorOptions {
   /// (more delayed pivots where the values have drifted from those it was made for).
   bool reorder_keeping_matching = false;
   index_t dump_step = -1;  ///< write the Newton Jacobian of this step (1-based)
-  std::string dump_dir;    ///< ... into this folder (Matrix Market)
+  std::string dump_dir;    ///< ... into this folder (Matrix Market): jacobian_stepK.mtx and
+                           ///< rhs_stepK.mtx, and the system the sparse solver factors,
+                           ///< condensed by the BDF relations (condensed_solver.hpp):
+                           ///< jacobian_condensed_stepK.mtx, rhs_condensed_stepK.mtx
   bool verbose = false;
   /// Variable step size and order with local error control: the local error of q and v
   /// is estimated from the difference between the converged solution and the predictor

@@ -267,7 +267,7 @@ void Integrator::restore_state(const json& j) {
     a.values = analysis_values_;
     solver_ = new_solver();
     if (!analysis_start_.empty()) {
-      const auto order = static_cast<std::size_t>(a.n_rows);
+      const auto order = static_cast<std::size_t>(solver_->system_order(a));
       expect_size(analysis_start_.row_scaling, order, "the analysis's matching start");
       expect_size(analysis_start_.matched_column, order, "the analysis's matching start");
     }

@@ -30,6 +30,9 @@ class LinearSolver {
   }
   /// The analysis's matching as a later analysis's start (empty when there is none).
   virtual MatchingStart matching_start() const { return {}; }
+  /// The order of the system that analyze(a) hands the sparse solver (that of a matching
+  /// start for it): a's, unless the solver condenses it first (condensed_solver.hpp).
+  virtual index_t system_order(const SparseMatrix& a) const { return a.n_rows; }
   /// Analysis of a pattern that contains the analyzed one, keeping its ordering
   /// (strata::Solver::analyze_keeping_order); a solver without that analyzes afresh.
   virtual void analyze_keeping_order(const SparseMatrix& a) { analyze(a); }

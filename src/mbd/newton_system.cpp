@@ -351,6 +351,21 @@ void NewtonSystem::rebuild_pattern() {
   pattern_current_ = true;
 }
 
+std::vector<RowElimination> NewtonSystem::bdf_eliminations() const {
+  const index_t n = n_, m = m_;
+  const bool stab = formulation_ == Formulation::stabilized;
+  const index_t A = 0, V = n, Q = 2 * n;          // column blocks (rebuild_pattern)
+  const index_t RU = (stab ? n : n + m) + 2 * m;  // the BDF rows' first row
+  const index_t nb = stab ? n : static_cast<index_t>(independent_.size());
+  auto coord = [&](index_t k) { return stab ? k : independent_[k]; };
+  std::vector<RowElimination> out;
+  out.reserve(stab ? nb : 2 * nb);
+  if (!stab)
+    for (index_t k = 0; k < nb; ++k) out.push_back({RU + nb + k, Q + coord(k), V + coord(k)});
+  for (index_t k = 0; k < nb; ++k) out.push_back({RU + k, V + coord(k), A + coord(k)});
+  return out;
+}
+
 void NewtonSystem::build_slot_sums() {
   const std::size_t nf = model_.forces.size(), nc = model_.constraints.size();
   const bool stab = formulation_ == Formulation::stabilized;

@@ -42,6 +42,7 @@
 #include <memory>
 #include <vector>
 
+#include "mbd/condensed_solver.hpp"
 #include "mbd/model.hpp"
 #include "mbd/partition.hpp"
 #include "mbd/pattern_builder.hpp"
@@ -95,6 +96,11 @@ class NewtonSystem {
   /// Rebuilds the pattern (after a change of the partition or the candidate set).
   void rebuild_pattern();
   const std::vector<index_t>& independent() const { return independent_; }
+  /// The BDF relations as eliminations of matrix() (condensed_solver.hpp), in the order
+  /// they are made: partitioned, each independent coordinate's q_j by its relation
+  /// β v_j − q_j, then its v_j by β a_j − v_j; stabilized, every v_j by β a_j − v_j (the
+  /// relation of q also holds β Φ_qᵀν). Follows the formulation, partition and active set.
+  std::vector<RowElimination> bdf_eliminations() const;
 
   /// H(x) into h (size()), and the Jacobian values when `jacobian`. With
   /// skip_intermittent, contact elements are left out (values for the solver's analysis).

@@ -270,6 +270,30 @@ TEST(MbdModels, DumpMatrixWritesTheNewtonSystem) {
   EXPECT_EQ(cols, 1);
   EXPECT_EQ(a.matrix.nnz(), r.stats.jacobian_nnz);
   std::filesystem::remove_all(o.integrator.dump_dir);
+  // The system the sparse solver factors, written beside it: its solution is the full
+  // system's without the unknowns the BDF relations eliminate (the rest in their order).
+  Integrator in(m, o.integrator);
+  in.initialize();
+  while (!in.done()) in.advance();
+  const std::string dir = o.integrator.dump_dir;
+  const MMMatrix full = read_matrix_market(dir + "/jacobian_step2.mtx");
+  const MMMatrix c = read_matrix_market(dir + "/jacobian_condensed_step2.mtx");
+  std::vector<double> x = read_dense_matrix_market(dir + "/rhs_step2.mtx", &rows, &cols);
+  std::vector<double> xc = read_dense_matrix_market(dir + "/rhs_condensed_step2.mtx", &rows, &cols);
+  const std::vector<RowElimination> list = in.system().bdf_eliminations();
+  ASSERT_FALSE(list.empty());
+  EXPECT_EQ(c.matrix.n_rows, size - static_cast<index_t>(list.size()));
+  EXPECT_EQ(rows, c.matrix.n_rows);
+  ASSERT_TRUE(strata::test::dense_solve(strata::test::to_dense(full.matrix), size, x, 1));
+  ASSERT_TRUE(strata::test::dense_solve(strata::test::to_dense(c.matrix), c.matrix.n_rows, xc, 1));
+  std::vector<char> eliminated(size, 0);
+  for (const RowElimination& e : list) eliminated[e.column] = 1;
+  std::vector<double> kept;
+  for (index_t j = 0; j < size; ++j)
+    if (!eliminated[j]) kept.push_back(x[j]);
+  EXPECT_LE(strata::test::relative_difference(xc, kept),
+            1e-13 * strata::test::condition_inf(full.matrix));
+  std::filesystem::remove_all(o.integrator.dump_dir);
 }
 
 // The engine carries a whole strata::Options: options set for a run reach the solver
