@@ -2,6 +2,9 @@
 // condensed_solver.hpp for the algebra).
 #include "mbd/condensed_solver.hpp"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -16,6 +19,20 @@ namespace {
 std::string where(const RowElimination& e) {
   return "row " + std::to_string(e.row) + ", column " + std::to_string(e.column) + ", partner " +
          std::to_string(e.partner);
+}
+
+// body(i0, i1) over [0, n) in ranges on the calling arena's threads when n is large
+// enough to pay for them (each range writes only its own entries: the same result for
+// any number of threads).
+template <class Body>
+void for_ranges(index_t n, const Body& body) {
+  constexpr index_t kGrain = 16384;
+  if (n <= 2 * kGrain) {
+    if (n > 0) body(index_t{0}, n);
+    return;
+  }
+  tbb::parallel_for(tbb::blocked_range<index_t>(0, n, kGrain),
+                    [&](const tbb::blocked_range<index_t>& r) { body(r.begin(), r.end()); });
 }
 
 // The position of entry (row, column) of a CSC matrix with sorted rows, or −1.
@@ -107,8 +124,6 @@ void CondensedSystem::build(const SparseMatrix& a, const std::vector<RowEliminat
   // the other entries of the pivot rows (explicit zeros), and the entries of eliminated
   // columns in rows that stay (for the right-hand side)
   zero_pos_.clear();
-  rhs_pos_.clear();
-  rhs_row_.clear();
   for (index_t j = 0; j < n; ++j)
     for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p) {
       const index_t i = a.indices[p];
@@ -116,16 +131,30 @@ void CondensedSystem::build(const SparseMatrix& a, const std::vector<RowEliminat
         if (j != elim_[k].column && j != elim_[k].partner) zero_pos_.push_back(p);
       }
     }
-  // by elimination (its column's entries together: one S_c for a run of them)
-  rhs_ptr_.assign(ne + 1, 0);
+  // by row of R (each row's sum in a fixed order, the rows independent of each other):
+  // counted, then filled column by column
+  kept_row_.assign(nr, 0);
+  for (index_t i = 0; i < n; ++i)
+    if (new_row_[i] >= 0) kept_row_[new_row_[i]] = i;
+  rhs_ptr_.assign(nr + 1, 0);
   for (index_t k = 0; k < ne; ++k) {
     const index_t c = elim_[k].column;
     for (index_t p = a.offsets[c]; p < a.offsets[c + 1]; ++p)
-      if (const index_t ri = new_row_[a.indices[p]]; ri >= 0) {
-        rhs_pos_.push_back(p);
-        rhs_row_.push_back(ri);
-      }
-    rhs_ptr_[k + 1] = static_cast<index_t>(rhs_pos_.size());
+      if (const index_t ri = new_row_[a.indices[p]]; ri >= 0) ++rhs_ptr_[ri + 1];
+  }
+  for (index_t r = 0; r < nr; ++r) rhs_ptr_[r + 1] += rhs_ptr_[r];
+  rhs_pos_.resize(rhs_ptr_[nr]);
+  rhs_elim_.resize(rhs_ptr_[nr]);
+  {
+    std::vector<index_t> at(rhs_ptr_.begin(), rhs_ptr_.end() - 1);
+    for (index_t k = 0; k < ne; ++k) {
+      const index_t c = elim_[k].column;
+      for (index_t p = a.offsets[c]; p < a.offsets[c + 1]; ++p)
+        if (const index_t ri = new_row_[a.indices[p]]; ri >= 0) {
+          rhs_pos_[at[ri]] = p;
+          rhs_elim_[at[ri]++] = k;
+        }
+    }
   }
   rhs_val_.assign(rhs_pos_.size(), 0.0);
   // R's columns: column K's entries are the union of the rows that stay of K and of every
@@ -213,44 +242,55 @@ void CondensedSystem::values(const std::vector<double>& full, std::vector<double
     m_[k] = -full[partner_pos_[k]] / pivot;
     w_[k] = m_[k] * (partner_elim_[k] < 0 ? 1.0 : w_[partner_elim_[k]]);
   }
-  for (std::size_t t = 0; t < rhs_pos_.size(); ++t) rhs_val_[t] = full[rhs_pos_[t]];
+  for_ranges(static_cast<index_t>(rhs_pos_.size()), [&](index_t t0, index_t t1) {
+    for (index_t t = t0; t < t1; ++t) rhs_val_[t] = full[rhs_pos_[t]];
+  });
   for (const index_t p : zero_pos_)
     if (full[p] != 0.0)
       throw InternalError("condensed system: entry " + std::to_string(p) +
                           " of a pivot row is not zero");
   const index_t nq = static_cast<index_t>(contrib_ptr_.size()) - 1;
   reduced.resize(nq);
-  for (index_t q = 0; q < nq; ++q) {
-    double v = 0.0;
-    for (index_t t = contrib_ptr_[q]; t < contrib_ptr_[q + 1]; ++t) {
-      const index_t e = contrib_elim_[t];
-      v += e < 0 ? full[contrib_pos_[t]] : full[contrib_pos_[t]] * w_[e];
+  for_ranges(nq, [&](index_t q0, index_t q1) {
+    for (index_t q = q0; q < q1; ++q) {
+      double v = 0.0;
+      for (index_t t = contrib_ptr_[q]; t < contrib_ptr_[q + 1]; ++t) {
+        const index_t e = contrib_elim_[t];
+        v += e < 0 ? full[contrib_pos_[t]] : full[contrib_pos_[t]] * w_[e];
+      }
+      reduced[q] = v;
     }
-    reduced[q] = v;
-  }
+  });
   have_values_ = true;
 }
 
 void CondensedSystem::reduce_rhs(const double* b, double* reduced_b) {
   if (!have_values_) throw InvalidState("condensed system: reduce_rhs before values()");
   const index_t ne = static_cast<index_t>(elim_.size());
-  for (index_t k = 0; k < ne; ++k)
+  bool any = false;  // once Newton's updates satisfy the relations, b is 0 on their rows
+  for (index_t k = 0; k < ne; ++k) {
     s_[k] =
         b[elim_[k].row] / pivot_[k] + m_[k] * (partner_elim_[k] < 0 ? 0.0 : s_[partner_elim_[k]]);
-  for (index_t i = 0; i < n_; ++i)
-    if (new_row_[i] >= 0) reduced_b[new_row_[i]] = b[i];
-  for (index_t k = 0; k < ne; ++k) {
-    const double sk = s_[k];
-    if (sk == 0.0) continue;  // the relation holds exactly (after Newton's first update, often)
-    for (index_t t = rhs_ptr_[k]; t < rhs_ptr_[k + 1]; ++t)
-      reduced_b[rhs_row_[t]] -= rhs_val_[t] * sk;
+    any = any || s_[k] != 0.0;
   }
+  const index_t nr = static_cast<index_t>(kept_row_.size());
+  for_ranges(nr, [&](index_t r0, index_t r1) {
+    for (index_t r = r0; r < r1; ++r) {
+      double v = b[kept_row_[r]];
+      if (any)
+        for (index_t t = rhs_ptr_[r]; t < rhs_ptr_[r + 1]; ++t) v -= rhs_val_[t] * s_[rhs_elim_[t]];
+      reduced_b[r] = v;
+    }
+  });
 }
 
 void CondensedSystem::expand(const double* reduced_x, double* x) const {
-  for (std::size_t K = 0; K < kept_col_.size(); ++K) x[kept_col_[K]] = reduced_x[K];
-  for (std::size_t k = 0; k < elim_.size(); ++k)
-    x[elim_[k].column] = s_[k] + w_[k] * reduced_x[final_col_[k]];
+  for_ranges(static_cast<index_t>(kept_col_.size()), [&](index_t k0, index_t k1) {
+    for (index_t K = k0; K < k1; ++K) x[kept_col_[K]] = reduced_x[K];
+  });
+  for_ranges(static_cast<index_t>(elim_.size()), [&](index_t k0, index_t k1) {
+    for (index_t k = k0; k < k1; ++k) x[elim_[k].column] = s_[k] + w_[k] * reduced_x[final_col_[k]];
+  });
 }
 
 namespace {

@@ -87,9 +87,9 @@ class CondensedSystem {
   // R's entries: contrib_[contrib_ptr_[q] .. contrib_ptr_[q+1]) are the full matrix's
   // entries summed into entry q, each with the elimination whose w scales it (−1: w = 1)
   std::vector<index_t> contrib_ptr_, contrib_pos_, contrib_elim_;
-  // the entries of eliminated columns in rows that stay, by elimination (rhs_ptr_): their
-  // positions, R's rows and (from values()) their values
-  std::vector<index_t> rhs_ptr_, rhs_pos_, rhs_row_;
+  // the entries of eliminated columns in rows that stay, by row of R (rhs_ptr_): their
+  // positions, eliminations and (from values()) values; R's rows in the full matrix
+  std::vector<index_t> kept_row_, rhs_ptr_, rhs_pos_, rhs_elim_;
   std::vector<double> rhs_val_;
   // per elimination, from the last values() (pivot, m, w) and reduce_rhs() (S): what a
   // solve needs stays here, so the full matrix may change between values() and the solves
