@@ -320,11 +320,11 @@ class CondensedSolver : public LinearSolver {
 
   void analyze(const SparseMatrix& a) override {
     map(a, eliminations_(), true);
-    inner_analysis([&] { inner_->analyze(reduced_); });
+    inner_analysis([&] { inner_->analyze(system_of(a)); });
   }
   void analyze_from(const SparseMatrix& a, const MatchingStart& start) override {
     map(a, eliminations_(), true);
-    inner_analysis([&] { inner_->analyze_from(reduced_, start); });
+    inner_analysis([&] { inner_->analyze_from(system_of(a), start); });
   }
   MatchingStart matching_start() const override { return inner_->matching_start(); }
   index_t system_order(const SparseMatrix& a) const override {
@@ -334,21 +334,27 @@ class CondensedSolver : public LinearSolver {
   // entries may not hold values yet, so R's values are left for the factorization.
   void analyze_keeping_order(const SparseMatrix& a) override {
     map(a, eliminations_(), false);
-    inner_analysis([&] { inner_->analyze_keeping_order(reduced_); });
+    inner_analysis([&] { inner_->analyze_keeping_order(system_of(a)); });
   }
   index_t factor_entries_keeping_order(const SparseMatrix& a) const override {
+    const std::vector<RowElimination> el = eliminations_();
+    if (el.empty()) return inner_->factor_entries_keeping_order(a);
     CondensedSystem cs;
     SparseMatrix r;
-    cs.build(a, eliminations_(), r);
+    cs.build(a, el, r);
     return inner_->factor_entries_keeping_order(r);
   }
   void analyze_keeping_matching(const SparseMatrix& a) override {
     map(a, eliminations_(), false);
-    inner_analysis([&] { inner_->analyze_keeping_matching(reduced_); });
+    inner_analysis([&] { inner_->analyze_keeping_matching(system_of(a)); });
   }
   void factorize(const SparseMatrix& a) override {
     std::vector<RowElimination> el = eliminations_();
-    if (!mapped_ || el != system_.eliminations() || pattern_hash(a) != hash_)
+    if (el.empty()) {
+      map(a, el, false);
+      return inner_->factorize(a);
+    }
+    if (!mapped_ || identity_ || el != system_.eliminations() || pattern_hash(a) != hash_)
       map(a, std::move(el), true);
     else
       system_.values(a.values, reduced_.values);
@@ -356,12 +362,14 @@ class CondensedSolver : public LinearSolver {
   }
   void factorize_analyzed_pattern(const SparseMatrix& a) override {
     if (!mapped_) return factorize(a);  // an analysis failed since: map the pattern again
+    if (identity_) return inner_->factorize_analyzed_pattern(a);
     if (a.nnz() != mapped_nnz_ || a.n_rows != system_.full_order())
       throw InternalError("condensed solver: the values of another pattern than the analyzed one");
     system_.values(a.values, reduced_.values);  // the pattern mapped: the values alone
     inner_->factorize_analyzed_pattern(reduced_);
   }
   void solve(const double* b, double* x) override {
+    if (identity_) return inner_->solve(b, x);
     const index_t r = system_.reduced_order();
     rb_.resize(r);
     rx_.resize(r);
@@ -373,6 +381,7 @@ class CondensedSolver : public LinearSolver {
   index_t perturbed_pivots() const override { return inner_->perturbed_pivots(); }
   double backward_error() const override { return inner_->backward_error(); }
   std::string describe() const override {
+    if (identity_) return inner_->describe();
     // first: what follows ends with the device ("… on cuda"), as the summary's readers expect
     return "BDF rows condensed (" + std::to_string(system_.reduced_order()) + " of " +
            std::to_string(system_.full_order()) + " rows), " + inner_->describe();
@@ -393,9 +402,17 @@ class CondensedSolver : public LinearSolver {
       throw;
     }
   }
-  // R's pattern for a's (and its values with `values`)
+  // What the inner solver is given for a: R, or a itself when nothing is eliminated.
+  const SparseMatrix& system_of(const SparseMatrix& a) const { return identity_ ? a : reduced_; }
+  // R's pattern for a's (and its values with `values`); none without eliminations
   void map(const SparseMatrix& a, const std::vector<RowElimination>& el, bool values) {
     mapped_ = false;
+    identity_ = el.empty();
+    if (identity_) {
+      reduced_ = SparseMatrix{};
+      mapped_ = true;
+      return;
+    }
     system_.build(a, el, reduced_);
     if (values) system_.values(a.values, reduced_.values);
     hash_ = pattern_hash(a);
@@ -410,10 +427,15 @@ class CondensedSolver : public LinearSolver {
   std::uint64_t hash_ = 0;
   index_t mapped_nnz_ = 0;
   bool mapped_ = false;
+  bool identity_ = false;  // no elimination: the inner solver gets the matrix as it is
   std::vector<double> rb_, rx_;
 };
 
 }  // namespace
+
+bool worth_condensing(index_t order, std::size_t eliminations) {
+  return 3 * static_cast<double>(eliminations) >= static_cast<double>(order);
+}
 
 std::unique_ptr<LinearSolver> make_condensed_solver(
     std::unique_ptr<LinearSolver> inner,

@@ -97,10 +97,18 @@ class CondensedSystem {
   bool have_values_ = false;
 };
 
+/// Whether the engine condenses a Newton matrix of this order by this many eliminations:
+/// when they remove at least a third of its rows (a flexible body's two thirds, a lattice
+/// of bushings over half; not a tracked vehicle's 8–21 %, where on a GPU the passes around
+/// the solver cost more than the smaller factor saves: bench/history.md, "The Newton
+/// matrix condensed by its BDF relations").
+bool worth_condensing(index_t order, std::size_t eliminations);
+
 /// A LinearSolver that hands `inner` the system condensed by `eliminations()` (called at
 /// every analysis and at every factorization of a pattern other than the one mapped, so
-/// it follows the engine's formulation and partition). Statistics, factor entries and
-/// pivots are those of `inner` on the reduced system.
+/// it follows the engine's formulation and partition; an empty list hands it the matrix
+/// as it is). Statistics, factor entries and pivots are those of `inner` on the reduced
+/// system.
 std::unique_ptr<LinearSolver> make_condensed_solver(
     std::unique_ptr<LinearSolver> inner, std::function<std::vector<RowElimination>()> eliminations);
 

@@ -93,7 +93,15 @@ Integrator::Integrator(const Model& model, IntegratorOptions options)
 std::unique_ptr<LinearSolver> Integrator::new_solver() const {
   std::unique_ptr<LinearSolver> inner =
       opts_.dense_solver ? make_dense_solver() : make_strata_solver(opts_.solver);
-  return make_condensed_solver(std::move(inner), [this] { return sys_.bdf_eliminations(); });
+  return make_condensed_solver(std::move(inner), [this] { return condensation(); });
+}
+
+// The eliminations the solver of the Newton matrices condenses it by (none where they
+// would not pay: worth_condensing).
+std::vector<RowElimination> Integrator::condensation() const {
+  std::vector<RowElimination> el = sys_.bdf_eliminations();
+  if (!worth_condensing(sys_.size(), el.size())) el.clear();
+  return el;
 }
 
 void Integrator::use_stabilized(const char* why) {
@@ -399,19 +407,22 @@ int Integrator::newton(double h, StepInfo& info, const BdfTerms& bdf) {
         for (index_t i = 0; i < N; ++i) rhs_[i] = -res_[i];
         write_dense_matrix_market(opts_.dump_dir + "/" + fmt::format("rhs_step{}.mtx", step_ + 1),
                                   rhs_.data(), N, 1);
-        // and the system the sparse solver factors: condensed by the BDF relations
-        CondensedSystem cs;
-        SparseMatrix reduced;
-        cs.build(sys_.matrix(), sys_.bdf_eliminations(), reduced);
-        cs.values(sys_.matrix().values, reduced.values);
-        std::vector<double> reduced_rhs(reduced.n_rows);
-        cs.reduce_rhs(rhs_.data(), reduced_rhs.data());
-        write_matrix_market(
-            opts_.dump_dir + "/" + fmt::format("jacobian_condensed_step{}.mtx", step_ + 1),
-            reduced);
-        write_dense_matrix_market(
-            opts_.dump_dir + "/" + fmt::format("rhs_condensed_step{}.mtx", step_ + 1),
-            reduced_rhs.data(), reduced.n_rows, 1);
+        // and the system the sparse solver factors when it is condensed by the BDF
+        // relations
+        if (const std::vector<RowElimination> el = condensation(); !el.empty()) {
+          CondensedSystem cs;
+          SparseMatrix reduced;
+          cs.build(sys_.matrix(), el, reduced);
+          cs.values(sys_.matrix().values, reduced.values);
+          std::vector<double> reduced_rhs(reduced.n_rows);
+          cs.reduce_rhs(rhs_.data(), reduced_rhs.data());
+          write_matrix_market(
+              opts_.dump_dir + "/" + fmt::format("jacobian_condensed_step{}.mtx", step_ + 1),
+              reduced);
+          write_dense_matrix_market(
+              opts_.dump_dir + "/" + fmt::format("rhs_condensed_step{}.mtx", step_ + 1),
+              reduced_rhs.data(), reduced.n_rows, 1);
+        }
       }
       try {
         factorize(info, bdf, tn);

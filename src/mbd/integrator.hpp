@@ -82,9 +82,10 @@ struct IntegratorOptions {
   bool reorder_keeping_matching = false;
   index_t dump_step = -1;  ///< write the Newton Jacobian of this step (1-based)
   std::string dump_dir;    ///< ... into this folder (Matrix Market): jacobian_stepK.mtx and
-                           ///< rhs_stepK.mtx, and the system the sparse solver factors,
-                           ///< condensed by the BDF relations (condensed_solver.hpp):
-                           ///< jacobian_condensed_stepK.mtx, rhs_condensed_stepK.mtx
+                           ///< rhs_stepK.mtx, and, when the engine condenses it by the BDF
+                           ///< relations (condensed_solver.hpp), the system the sparse
+                           ///< solver factors: jacobian_condensed_stepK.mtx,
+                           ///< rhs_condensed_stepK.mtx
   bool verbose = false;
   /// Variable step size and order with local error control: the local error of q and v
   /// is estimated from the difference between the converged solution and the predictor
@@ -231,6 +232,7 @@ class Integrator {
     std::vector<double> q, v, a;
   };
   std::unique_ptr<LinearSolver> new_solver() const;
+  std::vector<RowElimination> condensation() const;
   void repartition(double t, const double* q);
   void use_stabilized(const char* why);
   void find_redundant(const double* q, double t, bool initial);

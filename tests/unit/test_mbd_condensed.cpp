@@ -200,6 +200,35 @@ TEST(MbdCondensed, NewtonMatricesOfBothFormulations) {
   }
 }
 
+// Without eliminations the wrapper hands the inner solver the matrix as it is: the
+// solution is the inner solver's own, bit for bit. The engine condenses only where a third
+// of the rows or more go.
+TEST(MbdCondensed, NoEliminationIsTheInnerSolver) {
+  auto rng = strata::test::fresh_rng();
+  const Condensable s = random_condensable(733, rng);
+  Options o = engine_solver_options();
+  o.backend = Backend::cpu;
+  auto plain = make_strata_solver(o);
+  auto wrapped =
+      make_condensed_solver(make_strata_solver(o), [] { return std::vector<RowElimination>{}; });
+  const std::vector<double> b = random_vector(733, rng);
+  std::vector<double> x(733), y(733);
+  for (LinearSolver* ls : {plain.get(), wrapped.get()}) {
+    ls->analyze(s.a);
+    ls->factorize(s.a);
+    ls->factorize_analyzed_pattern(s.a);
+  }
+  plain->solve(b.data(), x.data());
+  wrapped->solve(b.data(), y.data());
+  EXPECT_EQ(x, y);
+  EXPECT_EQ(wrapped->describe(), plain->describe());
+  EXPECT_EQ(wrapped->system_order(s.a), 733);
+  EXPECT_TRUE(worth_condensing(3, 1));
+  EXPECT_FALSE(worth_condensing(100, 33));
+  EXPECT_TRUE(worth_condensing(14728, 9600));  // flexible:64x4x4
+  EXPECT_FALSE(worth_condensing(7069, 1505));  // the default model, stabilized
+}
+
 TEST(MbdCondensed, ListsThatDoNotFitAreRefused) {
   // [[-1, 2, 0], [0, 3, 1], [1, 0, 2]] with an explicit zero at (0, 2)
   SparseMatrix a;
