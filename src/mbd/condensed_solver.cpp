@@ -145,15 +145,24 @@ void CondensedSystem::build(const SparseMatrix& a, const std::vector<RowEliminat
   for (index_t r = 0; r < nr; ++r) rhs_ptr_[r + 1] += rhs_ptr_[r];
   rhs_pos_.resize(rhs_ptr_[nr]);
   rhs_elim_.resize(rhs_ptr_[nr]);
+  // and the same entries by elimination (col_ptr_: each one's slot in the rows' lists
+  // and its row), for a right-hand side with few S_c ≠ 0
+  col_ptr_.assign(ne + 1, 0);
+  col_slot_.resize(rhs_ptr_[nr]);
+  col_row_.resize(rhs_ptr_[nr]);
   {
     std::vector<index_t> at(rhs_ptr_.begin(), rhs_ptr_.end() - 1);
+    index_t u = 0;
     for (index_t k = 0; k < ne; ++k) {
       const index_t c = elim_[k].column;
       for (index_t p = a.offsets[c]; p < a.offsets[c + 1]; ++p)
         if (const index_t ri = new_row_[a.indices[p]]; ri >= 0) {
+          col_slot_[u] = at[ri];
+          col_row_[u++] = ri;
           rhs_pos_[at[ri]] = p;
           rhs_elim_[at[ri]++] = k;
         }
+      col_ptr_[k + 1] = u;
     }
   }
   rhs_val_.assign(rhs_pos_.size(), 0.0);
@@ -267,21 +276,33 @@ void CondensedSystem::values(const std::vector<double>& full, std::vector<double
 void CondensedSystem::reduce_rhs(const double* b, double* reduced_b) {
   if (!have_values_) throw InvalidState("condensed system: reduce_rhs before values()");
   const index_t ne = static_cast<index_t>(elim_.size());
-  bool any = false;  // once Newton's updates satisfy the relations, b is 0 on their rows
+  index_t nonzero = 0;  // S_c ≠ 0: where b is not 0 on the relations' rows
   for (index_t k = 0; k < ne; ++k) {
     s_[k] =
         b[elim_[k].row] / pivot_[k] + m_[k] * (partner_elim_[k] < 0 ? 0.0 : s_[partner_elim_[k]]);
-    any = any || s_[k] != 0.0;
+    nonzero += s_[k] != 0.0;
   }
+  // b_k − Σ_c J(k, c) S_c, each row's terms subtracted in the order of the eliminations
+  // either way: by row over every term (many S_c ≠ 0: the rows in parallel), or by
+  // elimination over those with S_c ≠ 0 only (few: Newton's updates after the first
+  // satisfy most relations exactly); the same result, the terms left out being zero
   const index_t nr = static_cast<index_t>(kept_row_.size());
+  const bool by_row = 8 * nonzero >= ne;
   for_ranges(nr, [&](index_t r0, index_t r1) {
     for (index_t r = r0; r < r1; ++r) {
       double v = b[kept_row_[r]];
-      if (any)
+      if (by_row)
         for (index_t t = rhs_ptr_[r]; t < rhs_ptr_[r + 1]; ++t) v -= rhs_val_[t] * s_[rhs_elim_[t]];
       reduced_b[r] = v;
     }
   });
+  if (by_row || nonzero == 0) return;
+  for (index_t k = 0; k < ne; ++k) {
+    const double sk = s_[k];
+    if (sk == 0.0) continue;
+    for (index_t u = col_ptr_[k]; u < col_ptr_[k + 1]; ++u)
+      reduced_b[col_row_[u]] -= rhs_val_[col_slot_[u]] * sk;
+  }
 }
 
 void CondensedSystem::expand(const double* reduced_x, double* x) const {

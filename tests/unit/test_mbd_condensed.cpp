@@ -127,7 +127,9 @@ TEST(MbdCondensed, RandomSystemsEqualADenseSolve) {
       // first: the relations hold)
       std::vector<double> b0 = random_vector(n, rng);
       for (const RowElimination& e : s.eliminations) b0[e.row] = 0.0;
-      for (const std::vector<double>& b : {random_vector(n, rng), b0}) {
+      std::vector<double> b1 = b0;  // and with one relation's right-hand side not 0
+      if (!s.eliminations.empty()) b1[s.eliminations.front().row] = 0.5;
+      for (const std::vector<double>& b : {random_vector(n, rng), b0, b1}) {
         std::vector<double> rb(r.n_rows), x(n);
         cs.reduce_rhs(b.data(), rb.data());
         const std::vector<double> rx = r.n_rows > 0 ? dense_solution(r, rb) : std::vector<double>{};
