@@ -24,9 +24,10 @@ std::string where(const RowElimination& e) {
 // body(i0, i1) over [0, n) in ranges on the calling arena's threads when n is large
 // enough to pay for them (each range writes only its own entries: the same result for
 // any number of threads).
+constexpr index_t kGrain = 16384;  // for_ranges' least range
+
 template <class Body>
 void for_ranges(index_t n, const Body& body) {
-  constexpr index_t kGrain = 16384;
   if (n <= 2 * kGrain) {
     if (n > 0) body(index_t{0}, n);
     return;
@@ -283,11 +284,12 @@ void CondensedSystem::reduce_rhs(const double* b, double* reduced_b) {
     nonzero += s_[k] != 0.0;
   }
   // b_k − Σ_c J(k, c) S_c, each row's terms subtracted in the order of the eliminations
-  // either way: by row over every term (many S_c ≠ 0: the rows in parallel), or by
-  // elimination over those with S_c ≠ 0 only (few: Newton's updates after the first
-  // satisfy most relations exactly); the same result, the terms left out being zero
+  // either way: by row over every term (a system large enough for the rows in parallel,
+  // with many S_c ≠ 0), or by elimination over those with S_c ≠ 0 only (Newton's updates
+  // after the first satisfy many relations exactly); the same result, the terms left out
+  // being zero
   const index_t nr = static_cast<index_t>(kept_row_.size());
-  const bool by_row = 8 * nonzero >= ne;
+  const bool by_row = nr > 2 * kGrain && 8 * nonzero >= ne;
   for_ranges(nr, [&](index_t r0, index_t r1) {
     for (index_t r = r0; r < r1; ++r) {
       double v = b[kept_row_[r]];

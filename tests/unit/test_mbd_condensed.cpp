@@ -202,6 +202,60 @@ TEST(MbdCondensed, NewtonMatricesOfBothFormulations) {
   }
 }
 
+// A banded system of order n (entries |i − j| ≤ 2, a strong diagonal) with every third
+// row a pivot row β x_d − x_c whose partner d is the next column (itself eliminated at
+// times: chains), its other band entries explicit zeros: large enough for the condensed
+// passes to run over threads, with little fill for a sparse reference.
+Condensable banded_condensable(index_t n, std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> u(0.5, 2.0);
+  Condensable out;
+  std::vector<char> pivot(n, 0);
+  for (index_t c = 0; c + 1 < n; c += 3) pivot[c] = 1;
+  for (index_t c = 1; c + 1 < n; c += 30) pivot[c] = 1;  // c−1 → c → c+1: a chain
+  SparseMatrix& a = out.a;
+  a.n_rows = a.n_cols = n;
+  a.offsets.assign(n + 1, 0);
+  for (index_t j = 0; j < n; ++j) {
+    for (index_t i = std::max<index_t>(0, j - 2); i <= std::min(n - 1, j + 2); ++i) {
+      double v = i == j ? 8.0 * (j % 2 ? 1 : -1) : u(rng) - 1.25;
+      if (pivot[i]) v = i == j ? -u(rng) : (j == i + 1 ? u(rng) : 0.0);
+      a.indices.push_back(i);
+      a.values.push_back(v);
+    }
+    a.offsets[j + 1] = static_cast<index_t>(a.indices.size());
+  }
+  for (index_t c = 0; c + 1 < n; ++c)
+    if (pivot[c]) out.eliminations.push_back({c, c, c + 1});
+  return out;
+}
+
+// The condensed solve against the full system's, both by strata's LU, on a system large
+// enough for the passes over threads (R's values, the reduced right-hand side by row).
+TEST(MbdCondensed, LargeSystemsOverThreads) {
+  auto rng = strata::test::fresh_rng();
+  const index_t n = 120000;
+  const Condensable s = banded_condensable(n, rng);
+  const auto list = s.eliminations;
+  Options o = engine_solver_options();
+  o.backend = Backend::cpu;
+  auto full = make_strata_solver(o);
+  auto condensed = make_condensed_solver(make_strata_solver(o), [list] { return list; });
+  EXPECT_GT(condensed->system_order(s.a), 70000);
+  std::vector<double> b = random_vector(n, rng), b1 = b;
+  for (const RowElimination& e : list) b1[e.row] = 0.0;
+  b1[list[7].row] = 1.0;  // few relations with a right-hand side: by elimination
+  for (LinearSolver* ls : {full.get(), condensed.get()}) {
+    ls->analyze(s.a);
+    ls->factorize(s.a);
+  }
+  for (const std::vector<double>& rhs : {b, b1}) {
+    std::vector<double> x(n), y(n);
+    full->solve(rhs.data(), x.data());
+    condensed->solve(rhs.data(), y.data());
+    EXPECT_LE(strata::test::relative_difference(y, x), 1e-12);
+  }
+}
+
 // Without eliminations the wrapper hands the inner solver the matrix as it is: the
 // solution is the inner solver's own, bit for bit. The engine condenses only where a third
 // of the rows or more go.
