@@ -146,10 +146,10 @@ void CondensedSystem::build(const SparseMatrix& a, const std::vector<RowEliminat
   for (index_t r = 0; r < nr; ++r) rhs_ptr_[r + 1] += rhs_ptr_[r];
   rhs_pos_.resize(rhs_ptr_[nr]);
   rhs_elim_.resize(rhs_ptr_[nr]);
-  // and the same entries by elimination (col_ptr_: each one's slot in the rows' lists
-  // and its row), for a right-hand side with few S_c ≠ 0
+  // and the same entries by elimination (col_ptr_: their positions and rows; their values
+  // kept in that order too), for a right-hand side with few S_c ≠ 0
   col_ptr_.assign(ne + 1, 0);
-  col_slot_.resize(rhs_ptr_[nr]);
+  col_pos_.resize(rhs_ptr_[nr]);
   col_row_.resize(rhs_ptr_[nr]);
   {
     std::vector<index_t> at(rhs_ptr_.begin(), rhs_ptr_.end() - 1);
@@ -158,7 +158,7 @@ void CondensedSystem::build(const SparseMatrix& a, const std::vector<RowEliminat
       const index_t c = elim_[k].column;
       for (index_t p = a.offsets[c]; p < a.offsets[c + 1]; ++p)
         if (const index_t ri = new_row_[a.indices[p]]; ri >= 0) {
-          col_slot_[u] = at[ri];
+          col_pos_[u] = p;
           col_row_[u++] = ri;
           rhs_pos_[at[ri]] = p;
           rhs_elim_[at[ri]++] = k;
@@ -167,6 +167,7 @@ void CondensedSystem::build(const SparseMatrix& a, const std::vector<RowEliminat
     }
   }
   rhs_val_.assign(rhs_pos_.size(), 0.0);
+  col_val_.assign(col_pos_.size(), 0.0);
   // R's columns: column K's entries are the union of the rows that stay of K and of every
   // column eliminated into K, each entry summing its contributions
   std::vector<index_t> source_ptr(nc + 1, 0), sources(n);
@@ -253,7 +254,10 @@ void CondensedSystem::values(const std::vector<double>& full, std::vector<double
     w_[k] = m_[k] * (partner_elim_[k] < 0 ? 1.0 : w_[partner_elim_[k]]);
   }
   for_ranges(static_cast<index_t>(rhs_pos_.size()), [&](index_t t0, index_t t1) {
-    for (index_t t = t0; t < t1; ++t) rhs_val_[t] = full[rhs_pos_[t]];
+    for (index_t t = t0; t < t1; ++t) {
+      rhs_val_[t] = full[rhs_pos_[t]];
+      col_val_[t] = full[col_pos_[t]];
+    }
   });
   for (const index_t p : zero_pos_)
     if (full[p] != 0.0)
@@ -303,7 +307,7 @@ void CondensedSystem::reduce_rhs(const double* b, double* reduced_b) {
     const double sk = s_[k];
     if (sk == 0.0) continue;
     for (index_t u = col_ptr_[k]; u < col_ptr_[k + 1]; ++u)
-      reduced_b[col_row_[u]] -= rhs_val_[col_slot_[u]] * sk;
+      reduced_b[col_row_[u]] -= col_val_[u] * sk;
   }
 }
 

@@ -90,7 +90,8 @@ class CondensedSystem {
   // the entries of eliminated columns in rows that stay, by row of R (rhs_ptr_): their
   // positions, eliminations and (from values()) values; R's rows in the full matrix
   std::vector<index_t> kept_row_, rhs_ptr_, rhs_pos_, rhs_elim_;
-  std::vector<index_t> col_ptr_, col_slot_, col_row_;  // the same by elimination
+  std::vector<index_t> col_ptr_, col_pos_, col_row_;  // the same by elimination
+  std::vector<double> col_val_;
   std::vector<double> rhs_val_;
   // per elimination, from the last values() (pivot, m, w) and reduce_rhs() (S): what a
   // solve needs stays here, so the full matrix may change between values() and the solves
