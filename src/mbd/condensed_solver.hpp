@@ -101,9 +101,9 @@ class CondensedSystem {
 
 /// Whether the engine condenses a Newton matrix of this order by this many eliminations:
 /// when they remove at least a third of its rows (a flexible body's two thirds, a lattice
-/// of bushings over half; not a tracked vehicle's 8–21 %, where on a GPU the passes around
-/// the solver cost more than the smaller factor saves: bench/history.md, "The Newton
-/// matrix condensed by its BDF relations").
+/// of bushings over half; not a tracked vehicle's 8–21 %, whose condensed runs were no
+/// faster on the host and slower on a GPU: bench/history.md, "The Newton matrix condensed
+/// by its BDF relations").
 bool worth_condensing(index_t order, std::size_t eliminations);
 
 /// A LinearSolver that hands `inner` the system condensed by `eliminations()` (called at
