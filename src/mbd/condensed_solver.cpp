@@ -4,6 +4,7 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <cmath>
@@ -339,8 +340,9 @@ std::uint64_t pattern_hash(const SparseMatrix& a) {
 class CondensedSolver : public LinearSolver {
  public:
   CondensedSolver(std::unique_ptr<LinearSolver> inner,
-                  std::function<std::vector<RowElimination>()> eliminations)
-      : inner_(std::move(inner)), eliminations_(std::move(eliminations)) {
+                  std::function<std::vector<RowElimination>()> eliminations,
+                  std::function<tbb::task_arena*()> arena)
+      : inner_(std::move(inner)), eliminations_(std::move(eliminations)), arena_(std::move(arena)) {
     if (!inner_ || !eliminations_)
       throw InvalidInput("make_condensed_solver: a solver and a list of eliminations are needed");
   }
@@ -384,7 +386,7 @@ class CondensedSolver : public LinearSolver {
     if (!mapped_ || identity_ || el != system_.eliminations() || pattern_hash(a) != hash_)
       map(a, std::move(el), true);
     else
-      system_.values(a.values, reduced_.values);
+      in_arena([&] { system_.values(a.values, reduced_.values); });
     inner_->factorize(reduced_);
   }
   void factorize_analyzed_pattern(const SparseMatrix& a) override {
@@ -392,7 +394,7 @@ class CondensedSolver : public LinearSolver {
     if (identity_) return inner_->factorize_analyzed_pattern(a);
     if (a.nnz() != mapped_nnz_ || a.n_rows != system_.full_order())
       throw InternalError("condensed solver: the values of another pattern than the analyzed one");
-    system_.values(a.values, reduced_.values);  // the pattern mapped: the values alone
+    in_arena([&] { system_.values(a.values, reduced_.values); });  // the values alone
     inner_->factorize_analyzed_pattern(reduced_);
   }
   void solve(const double* b, double* x) override {
@@ -400,9 +402,9 @@ class CondensedSolver : public LinearSolver {
     const index_t r = system_.reduced_order();
     rb_.resize(r);
     rx_.resize(r);
-    system_.reduce_rhs(b, rb_.data());
+    in_arena([&] { system_.reduce_rhs(b, rb_.data()); });
     inner_->solve(rb_.data(), rx_.data());
-    system_.expand(rx_.data(), x);
+    in_arena([&] { system_.expand(rx_.data(), x); });
   }
   index_t factor_entries() const override { return inner_->factor_entries(); }
   index_t perturbed_pivots() const override { return inner_->perturbed_pivots(); }
@@ -429,6 +431,16 @@ class CondensedSolver : public LinearSolver {
       throw;
     }
   }
+  // f() on the caller's arena (its threads, as --threads says), on one thread when the
+  // caller has none (its work runs on the calling thread alone), else where it is called
+  template <class F>
+  void in_arena(F&& f) {
+    if (!arena_) return f();
+    if (tbb::task_arena* a = arena_())
+      a->execute(f);
+    else
+      one_thread_.execute(f);
+  }
   // What the inner solver is given for a: R, or a itself when nothing is eliminated.
   const SparseMatrix& system_of(const SparseMatrix& a) const { return identity_ ? a : reduced_; }
   // R's pattern for a's (and its values with `values`); none without eliminations
@@ -441,7 +453,7 @@ class CondensedSolver : public LinearSolver {
       return;
     }
     system_.build(a, el, reduced_);
-    if (values) system_.values(a.values, reduced_.values);
+    if (values) in_arena([&] { system_.values(a.values, reduced_.values); });
     hash_ = pattern_hash(a);
     mapped_nnz_ = a.nnz();
     mapped_ = true;
@@ -449,6 +461,8 @@ class CondensedSolver : public LinearSolver {
 
   std::unique_ptr<LinearSolver> inner_;
   std::function<std::vector<RowElimination>()> eliminations_;
+  std::function<tbb::task_arena*()> arena_;
+  tbb::task_arena one_thread_{1};
   CondensedSystem system_;
   SparseMatrix reduced_;
   std::uint64_t hash_ = 0;
@@ -465,9 +479,10 @@ bool worth_condensing(index_t order, std::size_t eliminations) {
 }
 
 std::unique_ptr<LinearSolver> make_condensed_solver(
-    std::unique_ptr<LinearSolver> inner,
-    std::function<std::vector<RowElimination>()> eliminations) {
-  return std::make_unique<CondensedSolver>(std::move(inner), std::move(eliminations));
+    std::unique_ptr<LinearSolver> inner, std::function<std::vector<RowElimination>()> eliminations,
+    std::function<tbb::task_arena*()> arena) {
+  return std::make_unique<CondensedSolver>(std::move(inner), std::move(eliminations),
+                                           std::move(arena));
 }
 
 }  // namespace strata::mbd

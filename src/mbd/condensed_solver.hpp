@@ -28,6 +28,8 @@
 // it factors and solves R; the engine uses it for every Newton matrix.
 #pragma once
 
+#include <tbb/task_arena.h>
+
 #include <functional>
 #include <memory>
 #include <vector>
@@ -109,9 +111,12 @@ bool worth_condensing(index_t order, std::size_t eliminations);
 /// A LinearSolver that hands `inner` the system condensed by `eliminations()` (called at
 /// every analysis and at every factorization of a pattern other than the one mapped, so
 /// it follows the engine's formulation and partition; an empty list hands it the matrix
-/// as it is). Statistics, factor entries and pivots are those of `inner` on the reduced
-/// system.
+/// as it is). The passes over R's values and the right-hand side run on the threads of
+/// `arena()` (the engine's, as its thread count says; null: one thread), or without an
+/// `arena` function on the calling thread's arena. Statistics, factor entries and pivots are those
+/// of `inner` on the reduced system.
 std::unique_ptr<LinearSolver> make_condensed_solver(
-    std::unique_ptr<LinearSolver> inner, std::function<std::vector<RowElimination>()> eliminations);
+    std::unique_ptr<LinearSolver> inner, std::function<std::vector<RowElimination>()> eliminations,
+    std::function<tbb::task_arena*()> arena = {});
 
 }  // namespace strata::mbd

@@ -93,7 +93,8 @@ Integrator::Integrator(const Model& model, IntegratorOptions options)
 std::unique_ptr<LinearSolver> Integrator::new_solver() const {
   std::unique_ptr<LinearSolver> inner =
       opts_.dense_solver ? make_dense_solver() : make_strata_solver(opts_.solver);
-  return make_condensed_solver(std::move(inner), [this] { return condensation(); });
+  return make_condensed_solver(
+      std::move(inner), [this] { return condensation(); }, [this] { return sys_.arena(); });
 }
 
 // The eliminations the solver of the Newton matrices condenses it by (none where they
