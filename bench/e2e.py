@@ -7,7 +7,12 @@ another build (an older commit's, say), with that one too in the same run, model
 alternating, so the ratio is measured and not remembered.
 
     python3 bench/e2e.py [--strata build/strata] [--baseline OLD/strata] [--device cpu]
-                         [--threads N] [--models SPEC:T_END,...] [--repeat R]
+                         [--baseline-args=ARGS] [--threads N] [--models SPEC:T_END,...]
+                         [--repeat R]
+
+--baseline-args gives the baseline's runs more arguments: with --baseline the binary under
+test, `--baseline-args=--no-condensation` measures the condensation by the BDF relations
+against the full Newton matrix in one run.
 
 Writes bench/results/e2e-<UTC time>.json (machine, date, commit, command, every figure,
 the ratios current / baseline) and prints a table. Each figure is the one the summary of
@@ -19,6 +24,7 @@ import argparse
 import json
 import os
 import re
+import shlex
 import subprocess
 import sys
 import time
@@ -30,6 +36,7 @@ DEFAULT_MODELS = "tracked:100:1.0,tracked:1000:0.02,flexible:64x4x4:0.01,lattice
 # lines of the summary of `strata simulate` and the figures read from them
 PATTERNS = {
     "steps": (r"^steps\s+(\d+) accepted", int),
+    "newton_iterations": (r"^Newton iterations\s+(\d+)", int),
     "factorizations": (r"^factorizations\s+(\d+)", int),
     "analyses": (r"analyses (\d+):", int),
     "analyses_perturbed": (r"perturbed pivots (\d+)[,;]", int),
@@ -49,6 +56,8 @@ PATTERNS = {
     "solve_ms": (r"solve ([\d.]+) each", float),
     "device_solves": (r"\((\d+) on the GPU", int),
     "device_solve_ms": (r"on the GPU, ([\d.]+) each", float),
+    # the host's share of the condensation by the BDF relations (factorizations and solves)
+    "condensation_ms": (r"condensation on the host ([\d.]+) in all", float),
     # strata's own split of a factorization (the line "factorization [ms]", printed when
     # a GPU ran or values were equilibrated again)
     "value_input_ms": (r"value input ([\d.]+) each", float),
@@ -71,9 +80,10 @@ def parse(text: str) -> dict:
     return row
 
 
-def run(binary: str, spec: str, t_end: float, device: str, threads: int) -> dict:
+def run(binary: str, spec: str, t_end: float, device: str, threads: int,
+        extra: list[str]) -> dict:
     cmd = [binary, "simulate", "--generate", spec, "--t-end", str(t_end), "--quiet", "--output",
-           "", "--device", device]
+           "", "--device", device] + extra
     if threads > 0:
         cmd += ["--threads", str(threads)]
     t0 = time.perf_counter()
@@ -98,6 +108,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--baseline", help="another strata binary, run side by side")
     ap.add_argument("--baseline-label", default="",
                     help="what the baseline is (its commit), recorded in the results")
+    ap.add_argument("--baseline-args", default="",
+                    help="more simulate arguments for the baseline's runs (one string, split "
+                         "as a shell would), e.g. --baseline-args=--no-condensation with "
+                         "--baseline the same binary")
     ap.add_argument("--device", default="cpu", choices=["cpu", "gpu", "auto"])
     ap.add_argument("--threads", type=int, default=0, help="host threads (0: all)")
     ap.add_argument("--models", default=DEFAULT_MODELS,
@@ -108,9 +122,10 @@ def main(argv: list[str] | None = None) -> int:
     data = {"benchmark": "e2e", **metadata([sys.argv[0]] + (argv if argv is not None
                                                               else sys.argv[1:]))}
     data.update(device=args.device, threads=args.threads, baseline=args.baseline or "",
-                baseline_label=args.baseline_label, rows=[])
-    binaries = [("current", args.strata)] + ([("baseline", args.baseline)] if args.baseline
-                                             else [])
+                baseline_label=args.baseline_label,
+                baseline_args=args.baseline_args, rows=[])
+    binaries = [("current", args.strata, [])] + (
+        [("baseline", args.baseline, shlex.split(args.baseline_args))] if args.baseline else [])
     # Both binaries run the same OpenBLAS kernels: those the binary under test chooses (it
     # replaces OpenBLAS's Prescott fallback, apps/common/blas_kernels.hpp; an older baseline
     # may not), unless OPENBLAS_CORETYPE is set already.
@@ -134,11 +149,11 @@ def main(argv: list[str] | None = None) -> int:
     for spec, t_end in models:
         best = {}
         for _ in range(max(args.repeat, 1)):
-            for name, binary in binaries:  # alternating, so both see the same machine
-                r = run(binary, spec, t_end, args.device, args.threads)
+            for name, binary, extra in binaries:  # alternating: both see the same machine
+                r = run(binary, spec, t_end, args.device, args.threads, extra)
                 if name not in best or r["wall_s"] < best[name]["wall_s"]:
                     best[name] = r
-        row = {"model": spec, **{name: best[name] for name, _ in binaries}}
+        row = {"model": spec, **{name: best[name] for name, _, _ in binaries}}
         if args.baseline:
             row["ratio"] = {k: best["current"][k] / best["baseline"][k]
                             for k in ("wall_s", "solver_s", "assembly_s", "factorization_ms",

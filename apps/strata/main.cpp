@@ -435,7 +435,7 @@ struct SimulateArgs {
   int order = 0, threads = 0, anderson_depth = -1;
   index_t dump_step = 1;
   bool vtk = false, full_newton = false, quiet = false, verbose = false, dense = false,
-       variable_step = false, plot = false;
+       no_condensation = false, variable_step = false, plot = false;
   std::string plot_coordinates;             // comma-separated coordinate names (implies plot)
   std::vector<std::string> solver_options;  // NAME=VALUE, set_option's vocabulary
 };
@@ -593,6 +593,7 @@ int run_simulate_checked(const SimulateArgs& a, bool& started) {
     rs.atol = a.atol;
     rs.max_step = a.max_step;
     rs.dense_reference = a.dense;
+    rs.condensation = !a.no_condensation;
     rs.formulation = a.formulation == "partitioned"  ? FormulationChoice::partitioned
                      : a.formulation == "stabilized" ? FormulationChoice::stabilized
                                                      : FormulationChoice::automatic;
@@ -789,6 +790,9 @@ int main(int argc, char** argv) {
       ->check(kPositive);
   simulate->add_flag("--dense-reference", sim.dense,
                      "solve with dense LAPACK LU instead of strata (diagnosis; small models)");
+  simulate->add_flag("--no-condensation", sim.no_condensation,
+                     "factor the full Newton matrix: do not eliminate its BDF relations' rows "
+                     "first (docs/formulation.md §5)");
   simulate
       ->add_option("--checkpoint-every", sim.checkpoint_every,
                    "write a restart point every N accepted steps (and when interrupted; "
@@ -841,11 +845,26 @@ int main(int argc, char** argv) {
     }
   } finish{comm};
   if (rank != 0 && !*solve) return 0;
-  for (const char* opt :
-       {"--step", "--order", "--device", "--output-interval", "--vtk", "--full-newton",
-        "--anderson-depth", "--newton-tol", "--threads", "--variable-step", "--rtol", "--atol",
-        "--max-step", "--dense-reference", "--write-model", "--formulation", "--energy-tol",
-        "--pivoting", "--solver-option"})
+  for (const char* opt : {"--step",
+                          "--order",
+                          "--device",
+                          "--output-interval",
+                          "--vtk",
+                          "--full-newton",
+                          "--anderson-depth",
+                          "--newton-tol",
+                          "--threads",
+                          "--variable-step",
+                          "--rtol",
+                          "--atol",
+                          "--max-step",
+                          "--dense-reference",
+                          "--no-condensation",
+                          "--write-model",
+                          "--formulation",
+                          "--energy-tol",
+                          "--pivoting",
+                          "--solver-option"})
     if (simulate->count(opt) > 0) sim.resume_conflicts.push_back(opt);
   try {
     if (*analyze) return run_analyze(analyze_args);

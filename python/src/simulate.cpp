@@ -95,6 +95,7 @@ py::dict stats_dict(const strata::mbd::SimulationResult& r) {
   d["solver_seconds"] = s.solver_seconds;
   d["factor_seconds"] = s.factor_seconds;
   d["solve_seconds"] = s.solve_seconds;
+  d["condensation_seconds"] = s.condensation_seconds;
   d["analysis_seconds"] = s.analysis_seconds;
   d["assembly_seconds"] = s.assembly_seconds;
   d["partition_seconds"] = s.partition_seconds;
@@ -142,6 +143,7 @@ py::dict run(const std::string& kind, const std::string& source, const std::stri
   num("atol", rs.atol);
   num("max_step", rs.max_step);
   flag("dense_reference", rs.dense_reference);
+  flag("condensation", rs.condensation);
   text("output_dir", rs.output_dir);
   num("output_interval", rs.output_interval);
   flag("vtk", rs.vtk);

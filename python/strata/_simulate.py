@@ -65,7 +65,9 @@ class SimulationResult:
         perturbed_pivots, jacobian_size and jacobian_nnz (the Newton matrix),
         factor_nnz (nnz(L)), linear_solver (str), and times in s: wall_seconds,
         solver_seconds (= analysis + factorization + solves), factor_seconds,
-        solve_seconds, analysis_seconds, assembly_seconds, partition_seconds,
+        solve_seconds, condensation_seconds (the host's share of factor_seconds and
+        solve_seconds spent on the system condensed by the BDF relations),
+        analysis_seconds, assembly_seconds, partition_seconds,
         initial_conditions_seconds, output_seconds; energy_initial, energy_final (J),
         max_position_violation, max_velocity_violation.
     model : dict
@@ -142,7 +144,8 @@ def simulate(model=None, *, generate=None, t_end=None, step=None, order=None, de
              threads=0, full_newton=False, anderson_depth=None, newton_tol=None,
              variable_step=False, rtol=1e-4,
              atol=1e-6, max_step=None, output_interval=None, output_dir=None, vtk=False,
-             dump_matrix=None, dump_step=1, dense_reference=False, solver_options=None):
+             dump_matrix=None, dump_step=1, dense_reference=False, condensation=True,
+             solver_options=None):
     """Runs a multibody simulation and returns its time histories as NumPy arrays.
 
     Parameters
@@ -190,6 +193,10 @@ def simulate(model=None, *, generate=None, t_end=None, step=None, order=None, de
         (Matrix Market).
     dense_reference : bool
         Solve with dense LAPACK LU instead of strata (diagnosis of small models).
+    condensation : bool
+        Eliminate the Newton matrix's BDF relations before the sparse solve where they are
+        a third of its rows or more (default; docs/formulation.md §5); False factors the
+        full matrix (``--no-condensation``).
     solver_options : dict, optional
         Any strata option for the Newton matrices by its name, as the command line's
         ``--solver-option NAME=VALUE``: the names of ``strata::Options``' fields
@@ -254,6 +261,7 @@ def simulate(model=None, *, generate=None, t_end=None, step=None, order=None, de
         "rtol": float(rtol), "atol": float(atol), "max_step": float(max_step or 0),
         "output_interval": float(output_interval or 0), "vtk": bool(vtk),
         "dump_step": int(dump_step), "dense_reference": bool(dense_reference),
+        "condensation": bool(condensation),
     }
     for key, value in (("t_end", t_end), ("step", step), ("order", order)):
         if value is not None and not value > 0:

@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <string>
 
+#include "base/timer.hpp"
 #include "strata/errors.hpp"
 
 namespace strata::mbd {
@@ -28,12 +29,12 @@ std::string where(const RowElimination& e) {
 constexpr index_t kGrain = 16384;  // for_ranges' least range
 
 template <class Body>
-void for_ranges(index_t n, const Body& body) {
-  if (n <= 2 * kGrain) {
+void for_ranges(index_t n, const Body& body, index_t grain = kGrain) {
+  if (n <= 2 * grain) {
     if (n > 0) body(index_t{0}, n);
     return;
   }
-  tbb::parallel_for(tbb::blocked_range<index_t>(0, n, kGrain),
+  tbb::parallel_for(tbb::blocked_range<index_t>(0, n, grain),
                     [&](const tbb::blocked_range<index_t>& r) { body(r.begin(), r.end()); });
 }
 
@@ -289,20 +290,30 @@ void CondensedSystem::reduce_rhs(const double* b, double* reduced_b) {
     nonzero += s_[k] != 0.0;
   }
   // b_k − Σ_c J(k, c) S_c, each row's terms subtracted in the order of the eliminations
-  // either way: by row over every term (a system large enough for the rows in parallel,
-  // with many S_c ≠ 0), or by elimination over those with S_c ≠ 0 only (Newton's updates
-  // after the first satisfy many relations exactly); the same result, the terms left out
+  // either way: by row over every term, the rows in ranges of about kGrain terms over the
+  // threads (many S_c ≠ 0: a step's first iteration, whose predictor does not satisfy the
+  // relations), or by elimination over those with S_c ≠ 0 only (Newton's updates satisfy
+  // them, their rows then read 0: newton_system.cpp); the same result, the terms left out
   // being zero
   const index_t nr = static_cast<index_t>(kept_row_.size());
-  const bool by_row = nr > 2 * kGrain && 8 * nonzero >= ne;
-  for_ranges(nr, [&](index_t r0, index_t r1) {
-    for (index_t r = r0; r < r1; ++r) {
-      double v = b[kept_row_[r]];
-      if (by_row)
-        for (index_t t = rhs_ptr_[r]; t < rhs_ptr_[r + 1]; ++t) v -= rhs_val_[t] * s_[rhs_elim_[t]];
-      reduced_b[r] = v;
-    }
-  });
+  const bool by_row = 8 * nonzero >= ne;
+  const index_t terms = rhs_ptr_.empty() ? 0 : rhs_ptr_[nr];
+  const index_t grain =
+      by_row ? std::max<index_t>(64, static_cast<index_t>(static_cast<double>(nr) * kGrain /
+                                                          std::max<index_t>(terms, 1)))
+             : kGrain;
+  for_ranges(
+      nr,
+      [&](index_t r0, index_t r1) {
+        for (index_t r = r0; r < r1; ++r) {
+          double v = b[kept_row_[r]];
+          if (by_row)
+            for (index_t t = rhs_ptr_[r]; t < rhs_ptr_[r + 1]; ++t)
+              v -= rhs_val_[t] * s_[rhs_elim_[t]];
+          reduced_b[r] = v;
+        }
+      },
+      grain);
   if (by_row || nonzero == 0) return;
   for (index_t k = 0; k < ne; ++k) {
     const double sk = s_[k];
@@ -378,6 +389,7 @@ class CondensedSolver : public LinearSolver {
     inner_analysis([&] { inner_->analyze_keeping_matching(system_of(a)); });
   }
   void factorize(const SparseMatrix& a) override {
+    seconds_ = 0;
     std::vector<RowElimination> el = eliminations_();
     if (el.empty()) {
       map(a, el, false);
@@ -390,6 +402,7 @@ class CondensedSolver : public LinearSolver {
     inner_->factorize(reduced_);
   }
   void factorize_analyzed_pattern(const SparseMatrix& a) override {
+    seconds_ = 0;
     if (!mapped_) return factorize(a);  // an analysis failed since: map the pattern again
     if (identity_) return inner_->factorize_analyzed_pattern(a);
     if (a.nnz() != mapped_nnz_ || a.n_rows != system_.full_order())
@@ -398,6 +411,7 @@ class CondensedSolver : public LinearSolver {
     inner_->factorize_analyzed_pattern(reduced_);
   }
   void solve(const double* b, double* x) override {
+    seconds_ = 0;
     if (identity_) return inner_->solve(b, x);
     const index_t r = system_.reduced_order();
     rb_.resize(r);
@@ -416,6 +430,7 @@ class CondensedSolver : public LinearSolver {
            std::to_string(system_.full_order()) + " rows), " + inner_->describe();
   }
   const Stats* stats() const override { return inner_->stats(); }
+  double condensation_seconds() const override { return seconds_; }
   bool delaying() const override { return inner_->delaying(); }
   void set_delaying(bool on) override { inner_->set_delaying(on); }
 
@@ -433,13 +448,17 @@ class CondensedSolver : public LinearSolver {
   }
   // f() on the caller's arena (its threads, as --threads says), on one thread when the
   // caller has none (its work runs on the calling thread alone), else where it is called
+  // (its seconds added to seconds_)
   template <class F>
   void in_arena(F&& f) {
-    if (!arena_) return f();
-    if (tbb::task_arena* a = arena_())
+    Timer t;
+    if (!arena_)
+      f();
+    else if (tbb::task_arena* a = arena_())
       a->execute(f);
     else
       one_thread_.execute(f);
+    seconds_ += t.seconds();
   }
   // What the inner solver is given for a: R, or a itself when nothing is eliminated.
   const SparseMatrix& system_of(const SparseMatrix& a) const { return identity_ ? a : reduced_; }
@@ -452,7 +471,9 @@ class CondensedSolver : public LinearSolver {
       mapped_ = true;
       return;
     }
+    Timer t;
     system_.build(a, el, reduced_);
+    seconds_ += t.seconds();
     if (values) in_arena([&] { system_.values(a.values, reduced_.values); });
     hash_ = pattern_hash(a);
     mapped_nnz_ = a.nnz();
@@ -470,6 +491,7 @@ class CondensedSolver : public LinearSolver {
   bool mapped_ = false;
   bool identity_ = false;  // no elimination: the inner solver gets the matrix as it is
   std::vector<double> rb_, rx_;
+  double seconds_ = 0;  // condensation_seconds()
 };
 
 }  // namespace

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <limits>
 #include <thread>
 
 #include "base/device.hpp"
@@ -28,6 +29,19 @@ std::vector<double> bdf_coefficients(const std::vector<double>& T) {
     al[j] = num / den;
   }
   return al;
+}
+
+std::vector<double> bdf_nodes(double tn, const std::vector<double>& past, double h) {
+  constexpr double kUnitRoundoff = 0.5 * std::numeric_limits<double>::epsilon();
+  std::vector<double> T{0.0};
+  double prev = tn;
+  for (const double tj : past) {
+    double gap = prev - tj;
+    if (std::abs(gap - h) <= 8 * kUnitRoundoff * (std::abs(prev) + std::abs(tj))) gap = h;
+    T.push_back(T.back() - gap);
+    prev = tj;
+  }
+  return T;
 }
 
 namespace {
@@ -89,7 +103,8 @@ Integrator::Integrator(const Model& model, IntegratorOptions options)
 }
 
 // The solver of the Newton matrices: the system condensed by the BDF relations
-// (condensed_solver.hpp), which every formulation has, then strata (or the dense LU).
+// (condensed_solver.hpp) where condensation() gives eliminations, then strata (or the
+// dense LU).
 std::unique_ptr<LinearSolver> Integrator::new_solver() const {
   std::unique_ptr<LinearSolver> inner =
       opts_.dense_solver ? make_dense_solver() : make_strata_solver(opts_.solver);
@@ -100,6 +115,7 @@ std::unique_ptr<LinearSolver> Integrator::new_solver() const {
 // The eliminations the solver of the Newton matrices condenses it by (none where they
 // would not pay: worth_condensing).
 std::vector<RowElimination> Integrator::condensation() const {
+  if (!opts_.condensation) return {};
   std::vector<RowElimination> el = sys_.bdf_eliminations();
   if (!worth_condensing(sys_.size(), el.size())) el.clear();
   return el;
@@ -280,6 +296,7 @@ void Integrator::factorize(StepInfo& info, const BdfTerms& bdf, double t) {
     solver_->factorize_analyzed_pattern(sys_.matrix());
   else
     solver_->factorize(sys_.matrix());
+  stats_.condensation_seconds += solver_->condensation_seconds();
   keep_values(factor_values_);
   stats_.factor_seconds += tf.seconds();
   if (solver_->perturbed_pivots() > 0 && !fresh_analysis_) {
@@ -292,6 +309,7 @@ void Integrator::factorize(StepInfo& info, const BdfTerms& bdf, double t) {
     analyze(bdf, t);  // evaluates the Jacobian (and the residual) at x_ again
     Timer tf2;
     solver_->factorize(sys_.matrix());
+    stats_.condensation_seconds += solver_->condensation_seconds();
     keep_values(factor_values_);
     stats_.factor_seconds += tf2.seconds();
     ++stats_.factorizations;
@@ -326,9 +344,11 @@ void Integrator::predict(double h, BdfTerms& bdf) {
   const int target = opts_.variable_step ? order_ : opts_.order;
   const int p = std::min<int>(target, static_cast<int>(history_.size()));
   const double tn = t_ + h;
-  std::vector<double> T{tn};
-  for (int j = 0; j < p; ++j) T.push_back(history_[j].t);
-  const std::vector<double> al = bdf_coefficients(T);
+  std::vector<double> past;
+  for (int j = 0; j < p; ++j) past.push_back(history_[j].t);
+  // equal steps: the same coefficients at every step, bit for bit, so that a factor made
+  // at an earlier step has this step's β in its BDF rows (newton())
+  const std::vector<double> al = bdf_coefficients(bdf_nodes(tn, past, h));
   bdf.beta = 1.0 / al[0];
   zeta1_.assign(n, 0.0);
   zeta2_.assign(n, 0.0);
@@ -372,8 +392,14 @@ int Integrator::newton(double h, StepInfo& info, const BdfTerms& bdf) {
   const index_t n = sys_.n(), N = sys_.size();
   const double tn = t_ + h;
   double *xa = x_.data(), *xv = xa + n, *xq = xa + 2 * n;
+  // A factor made for another β has other BDF rows than this step's: its updates leave
+  // them unsatisfied (Newton converges more slowly, and a condensed system's right-hand
+  // side then needs every eliminated column: condensed_solver.hpp). With fixed steps β
+  // changes only during the start-up and at a last, shorter step: a new factor then;
+  // variable steps change it at every step, and a factor is kept within 20 %.
+  const double beta_change = opts_.variable_step ? 0.2 : 0.0;
   if (!opts_.modified_newton || slow_last_step_ ||
-      std::abs(factor_beta_ - bdf.beta) > 0.2 * bdf.beta)
+      std::abs(factor_beta_ - bdf.beta) > beta_change * bdf.beta)
     factor_valid_ = false;
   res_.resize(N);
   dx_.resize(N);
@@ -447,6 +473,7 @@ int Integrator::newton(double h, StepInfo& info, const BdfTerms& bdf) {
     }
     const double s2 = ts.seconds();
     stats_.solve_seconds += s2;
+    stats_.condensation_seconds += solver_->condensation_seconds();
     if (const Stats* st = solver_->stats(); st && st->solve.on_device) {
       ++stats_.device_solves;
       stats_.device_solve_seconds += s2;

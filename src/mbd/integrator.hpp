@@ -69,6 +69,10 @@ struct IntegratorOptions {
   /// else all).
   Options solver = engine_solver_options();
   bool dense_solver = false;  ///< LAPACK instead of strata (tests only)
+  /// Eliminate the BDF relations' rows from the Newton matrix before the sparse solve
+  /// where they are a third of its rows or more (condensed_solver.hpp, worth_condensing;
+  /// docs/formulation.md §5); false: the solver factors the full matrix.
+  bool condensation = true;
   /// A fresh analysis of the Newton matrix at every step attempt, with the current
   /// values (tests: the reference for the loop that reuses one analysis per pattern).
   bool analyze_every_step = false;
@@ -160,6 +164,11 @@ struct IntegratorStats {
   /// with delayed pivots).
   index_t device_solves = 0;
   double device_solve_seconds = 0;
+  /// Host seconds of the condensation by the BDF relations (condensed_solver.hpp): the
+  /// reduced matrix's values at each factorization, the reduced right-hand side and the
+  /// expanded solution at each solve (part of factor_seconds and solve_seconds; 0 when
+  /// the matrix is not condensed).
+  double condensation_seconds = 0;
   /// strata's own split of its factorizations (FactorStats, summed): value input (checks,
   /// norms, scaling, the copy to a GPU) and the GPU's time; the factorizations whose values
   /// were scaled on the GPU (FactorStats::values_scaled_on_device) and those whose values
@@ -323,5 +332,13 @@ class Integrator {
 /// BDF coefficients α_0..α_p with ẏ(t₀) ≈ Σ α_j y(t_j), from the derivative of the
 /// interpolating polynomial through the points times[0..p] (times[0] the new time).
 std::vector<double> bdf_coefficients(const std::vector<double>& times);
+
+/// The nodes of a BDF step to tn for bdf_coefficients, relative to tn: tn and the past
+/// times `past` (newest first), each gap between consecutive ones that is within the
+/// rounding of the times themselves (8u of their magnitudes) of the step `h` [s] taken as
+/// h exactly. Equal steps then give bit for bit the same coefficients at every step,
+/// where the differences of times accumulated in floating point would move them by about
+/// u·t/h.
+std::vector<double> bdf_nodes(double tn, const std::vector<double>& past, double h);
 
 }  // namespace strata::mbd

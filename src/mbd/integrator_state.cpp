@@ -52,6 +52,7 @@ json stats_to_json(const IntegratorStats& s) {
           {"solve_seconds", s.solve_seconds},
           {"device_solves", s.device_solves},
           {"device_solve_seconds", s.device_solve_seconds},
+          {"condensation_seconds", s.condensation_seconds},
           {"assembly_seconds", s.assembly_seconds},
           {"solver_seconds", s.solver_seconds},
           {"analysis_seconds", s.analysis_seconds},
@@ -98,6 +99,7 @@ IntegratorStats stats_from_json(const json& j) {
   j.at("solve_seconds").get_to(s.solve_seconds);
   s.device_solves = j.value("device_solves", index_t{0});  // (older checkpoints: none)
   s.device_solve_seconds = j.value("device_solve_seconds", 0.0);
+  s.condensation_seconds = j.value("condensation_seconds", 0.0);
   j.at("assembly_seconds").get_to(s.assembly_seconds);
   j.at("solver_seconds").get_to(s.solver_seconds);
   j.at("analysis_seconds").get_to(s.analysis_seconds);

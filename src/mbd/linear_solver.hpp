@@ -62,6 +62,10 @@ class LinearSolver {
   virtual std::string describe() const = 0;
   /// The strata statistics, when the solver is strata.
   virtual const Stats* stats() const { return nullptr; }
+  /// Host seconds the last factorize or solve call spent condensing the system before
+  /// the sparse solver's part and expanding its solution after (condensed_solver.hpp; 0
+  /// for a solver that does not condense).
+  virtual double condensation_seconds() const { return 0; }
   /// Adaptive pivoting (strata on a GPU without a pivoting choice): whether the
   /// factorizations delay pivots directly, the analysis's fixed order having needed static
   /// pivots since the last analyze. A checkpoint keeps it so that a restart factors as the

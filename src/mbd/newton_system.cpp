@@ -7,6 +7,8 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cmath>
+#include <limits>
 #include <stdexcept>
 
 #include "base/serial_scope.hpp"
@@ -612,8 +614,23 @@ void NewtonSystem::write_constraint_jacobian(const ConstraintPos& cp, std::size_
   }
 }
 
+namespace {
+// x − y − z, or exactly 0 where it is within the rounding error of its own evaluation,
+// γ₃(|x| + |y| + |z|) with γ₃ ≈ 3u (Higham, Accuracy and Stability of Numerical
+// Algorithms, §3.1), taken as 4u: the data cannot tell such a value from 0. A Newton
+// update satisfies the (linear) BDF relations exactly but for the rounding of x += δx, so
+// from the second iteration on their rows read 0, and the condensed system's right-hand
+// side (condensed_solver.hpp) skips the columns of the rows that do.
+double relation_residual(double x, double y, double z) {
+  constexpr double kFloor = 4 * 0.5 * std::numeric_limits<double>::epsilon();
+  const double r = x - y - z;
+  return std::abs(r) <= kFloor * (std::abs(x) + std::abs(y) + std::abs(z)) ? 0.0 : r;
+}
+}  // namespace
+
 // The BDF relations β a − v − ζ₁ and β v − q − ζ₂ of the independent coordinates
-// (partitioned) or of every coordinate (stabilized), added to hu and the Jacobian.
+// (partitioned) or of every coordinate (stabilized), added to hu and the Jacobian
+// (each 0 where within its rounding error: relation_residual).
 void NewtonSystem::add_bdf_rows(const double* a, const double* v, const double* q,
                                 const BdfTerms& bdf, bool jacobian, double* hu) {
   const bool stab = formulation_ == Formulation::stabilized;
@@ -621,8 +638,8 @@ void NewtonSystem::add_bdf_rows(const double* a, const double* v, const double* 
   double* J = jac_.values.data();
   for (index_t k = 0; k < nb; ++k) {
     const index_t j = stab ? k : independent_[k];
-    hu[k] += bdf.beta * a[j] - v[j] - bdf.zeta1[j];
-    hu[nb + k] += bdf.beta * v[j] - q[j] - bdf.zeta2[j];
+    hu[k] += relation_residual(bdf.beta * a[j], v[j], bdf.zeta1[j]);
+    hu[nb + k] += relation_residual(bdf.beta * v[j], q[j], bdf.zeta2[j]);
     if (!jacobian) continue;
     J[upos_[4 * k]] += bdf.beta;
     J[upos_[4 * k + 1]] += -1.0;

@@ -79,6 +79,7 @@ nlohmann::json integrator_options_json(const IntegratorOptions& o) {
           {"min_step", o.min_step},
           {"solver", solver_options_json(o.solver)},
           {"dense_solver", o.dense_solver},
+          {"condensation", o.condensation},
           {"variable_step", o.variable_step},
           {"rtol", o.rtol},
           {"atol", o.atol},
@@ -125,6 +126,7 @@ IntegratorOptions checkpoint_integrator_options(const nlohmann::json& ck) {
     j.at("threads").get_to(o.solver.num_threads);
   }
   j.at("dense_solver").get_to(o.dense_solver);
+  o.condensation = j.value("condensation", true);  // (written before it: automatic)
   j.at("variable_step").get_to(o.variable_step);
   j.at("rtol").get_to(o.rtol);
   j.at("atol").get_to(o.atol);
@@ -192,6 +194,7 @@ SimulationOptions simulation_options(const Model& model, const RunSettings& s) {
   io.dump_dir = s.dump_dir;
   io.verbose = s.verbose;
   io.dense_solver = s.dense_reference;
+  io.condensation = s.condensation;
   io.variable_step = s.variable_step;
   io.rtol = s.rtol;
   io.atol = s.atol;
@@ -459,12 +462,15 @@ std::string summary(const Model& model, const SimulationResult& r) {
   if (s.factorizations && s.solves && s.analyses)
     o += fmt::format(
         "strata [ms]           analysis {:.3f} each, factorization {:.3f} each, solve {:.3f} "
-        "each{}\n",
+        "each{}{}\n",
         1e3 * s.analysis_seconds / s.analyses, 1e3 * s.factor_seconds / s.factorizations,
         1e3 * s.solve_seconds / s.solves,
         s.device_solves ? fmt::format(" ({} on the GPU, {:.3f} each)", s.device_solves,
                                       1e3 * s.device_solve_seconds / s.device_solves)
-                        : std::string());
+                        : std::string(),
+        s.condensation_seconds > 0
+            ? fmt::format("; condensation on the host {:.3f} in all", 1e3 * s.condensation_seconds)
+            : std::string());
   if (s.factorizations && (s.factor_device_seconds > 0 || s.rescaled_factorizations))
     o += fmt::format(
         "factorization [ms]    value input {:.3f} each, GPU {:.3f} each; values scaled on the "

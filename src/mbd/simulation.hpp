@@ -134,6 +134,7 @@ struct RunSettings {
   bool variable_step = false;  ///< variable step and order with local error control
   double rtol = 1e-4, atol = 1e-6, max_step = 0;  ///< of variable steps (max_step 0: t_end/10)
   bool dense_reference = false;                   ///< dense LAPACK instead of strata (diagnosis)
+  bool condensation = true;                       ///< IntegratorOptions::condensation
   FormulationChoice formulation = FormulationChoice::automatic;
   double energy_tolerance = -1;  ///< relative energy drift allowed (< 0: the model's or 1e-3)
   bool verbose = false;          ///< every Newton iteration to stderr

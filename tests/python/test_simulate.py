@@ -302,6 +302,17 @@ def test_solver_options_reach_the_solver():
         strata.simulate(generate="chain2d:1", solver_options=["ordering=amd"])
 
 
+def test_condensation_off_factors_the_full_matrix():
+    """condensation=False (the command line's --no-condensation): the full Newton matrix
+    goes to the solver (a larger one), the motion is the same, and no host time is spent
+    condensing."""
+    a = strata.simulate(generate="flexible:4x2x2", t_end=0.004, threads=1)
+    b = strata.simulate(generate="flexible:4x2x2", t_end=0.004, threads=1, condensation=False)
+    assert "condensed" in a.summary and "condensed" not in b.summary
+    assert a.stats["condensation_seconds"] > 0 and b.stats["condensation_seconds"] == 0
+    np.testing.assert_allclose(a.positions, b.positions, rtol=1e-8, atol=1e-10)
+
+
 def test_failure_raises_with_the_partial_result():
     with pytest.raises(strata.SimulationError, match=r"stopped at t = 0\.[345]\d* s: .*did not "
                        r"converge") as err:

@@ -1,9 +1,11 @@
 // strata::mbd — building blocks against closed forms: BDF coefficients (classical
-// constant-step values, exactness on polynomials), Euler-parameter kinematics, the
-// automatic derivatives of the Taylor-series types, and coordinate partitioning.
+// constant-step values, exactness on polynomials, equal steps' nodes), Euler-parameter kinematics,
+// the automatic derivatives of the Taylor-series types, and coordinate partitioning.
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <string>
+#include <vector>
 
 #include "mbd/autodiff.hpp"
 #include "mbd/integrator.hpp"
@@ -35,6 +37,39 @@ TEST(MbdCore, BdfCoefficientsDifferentiatePolynomialsExactly) {
     for (int j = 0; j <= p; ++j) d += a[j] * std::pow(T[j], p);
     EXPECT_NEAR(d, p * std::pow(t[0], p - 1), 1e-9) << "order " << p;
   }
+}
+
+// Times accumulated step by step (t += h, as the integrator does) drift from multiples of
+// h by rounding: bdf_nodes gives every step of equal size the same coefficients bit for
+// bit (the raw time differences do not), unequal steps keep their own, and the nodes
+// still differentiate polynomials exactly.
+TEST(MbdCore, BdfNodesOfEqualStepsGiveTheSameCoefficients) {
+  for (const double h : {1e-3, 1e-4, 0.1}) {
+    SCOPED_TRACE("h = " + std::to_string(h));
+    std::vector<double> t = {0.0};  // newest last
+    for (int i = 0; i < 3000; ++i) t.push_back(t.back() + h);
+    const std::vector<double> first = bdf_coefficients(bdf_nodes(t[3] + h, {t[3], t[2], t[1]}, h));
+    int raw_differ = 0;
+    for (std::size_t i = 3; i + 1 < t.size(); ++i) {
+      const double tn = t[i] + h;
+      const std::vector<double> past = {t[i], t[i - 1], t[i - 2]};
+      ASSERT_EQ(bdf_coefficients(bdf_nodes(tn, past, h)), first) << "step " << i;
+      raw_differ += bdf_coefficients({tn, t[i], t[i - 1], t[i - 2]})[0] !=
+                    bdf_coefficients({t[4], t[3], t[2], t[1]})[0];
+    }
+    EXPECT_GT(raw_differ, 0);  // what the nodes are for
+    const double c3[4] = {11.0 / 6, -3.0, 1.5, -1.0 / 3};
+    for (int j = 0; j < 4; ++j) EXPECT_NEAR(first[j] * h, c3[j], 1e-12);
+  }
+  // unequal steps (h, h/2, h): the gaps are their own
+  const double h = 0.01;
+  const std::vector<double> T = bdf_nodes(1.0 + h, {1.0, 1.0 - h / 2, 1.0 - 1.5 * h}, h);
+  EXPECT_NEAR(T[2], -1.5 * h, 1e-15);
+  EXPECT_NEAR(T[3], -2.5 * h, 1e-15);
+  const auto a = bdf_coefficients(T);
+  double d = 0;
+  for (int j = 0; j < 4; ++j) d += a[j] * std::pow(T[j] - 0.3, 3);
+  EXPECT_NEAR(d, 3 * 0.09, 1e-9);
 }
 
 TEST(MbdCore, EulerParametersGiveRotationsAndAngularVelocity) {
