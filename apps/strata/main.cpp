@@ -26,10 +26,12 @@
 // stopped a simulation (its partial results and a checkpoint are kept). Every error line
 // starts with "strata: error:".
 #include <fmt/core.h>
+#include <malloc.h>
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
 #include <cfloat>
+#include <climits>
 #include <chrono>
 #include <cmath>
 #include <csignal>
@@ -665,6 +667,14 @@ int run_simulate_checked(const SimulateArgs& a, bool& started) {
 int main(int argc, char** argv) {
   strata::app::use_fitting_blas_kernels(argv);  // may execute the program again, at once
   strata::app::report_fatal_signals();          // an internal crash says where, on stderr
+  // The analyses and factorizations allocate and free large temporaries (graphs, copies of
+  // the matrix, fronts) many times over; glibc serves every block above its mmap threshold
+  // with a mapping of its own and unmaps it when freed, so the kernel faults in and zeroes
+  // the same amount again at each allocation. This program keeps them in the heap, freed
+  // memory kept for the next one (glibc mallopt: M_MMAP_MAX 0, M_TRIM_THRESHOLD), as a
+  // solver process would; the library leaves its caller's allocator as it is.
+  mallopt(M_MMAP_MAX, 0);
+  mallopt(M_TRIM_THRESHOLD, INT_MAX);
   CLI::App app{"strata: a multifrontal sparse direct solver for CPU and GPU"};
   app.require_subcommand(1);
   app.set_version_flag(
