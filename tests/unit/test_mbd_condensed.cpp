@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 #include <random>
 #include <string>
 #include <vector>
@@ -174,6 +175,14 @@ TEST(MbdCondensed, SolverWrapperEqualsTheFullSolve) {
   }
 }
 
+// The engine's integrator of `model` with `io`, run to io.t_end.
+std::unique_ptr<Integrator> integrated(const Model& model, const IntegratorOptions& io) {
+  auto in = std::make_unique<Integrator>(model, io);
+  in->initialize();
+  while (!in->done()) in->advance();
+  return in;
+}
+
 // The engine's Newton matrix after a few steps of a model, both formulations: the
 // condensed solve (strata's LU on the host) against the dense LU of the full matrix.
 TEST(MbdCondensed, NewtonMatricesOfBothFormulations) {
@@ -186,10 +195,8 @@ TEST(MbdCondensed, NewtonMatricesOfBothFormulations) {
       io.t_end = 0.003;
       io.formulation = f;
       io.solver.backend = Backend::cpu;
-      Integrator in(model, io);
-      in.initialize();
-      while (!in.done()) in.advance();
-      const NewtonSystem& sys = in.system();
+      const std::unique_ptr<Integrator> in = integrated(model, io);
+      const NewtonSystem& sys = in->system();
       const SparseMatrix& a = sys.matrix();
       const std::vector<RowElimination> list = sys.bdf_eliminations();
       EXPECT_FALSE(list.empty());
@@ -301,16 +308,14 @@ TEST(MbdCondensed, TheEngineWithAndWithoutCondensation) {
     io.t_end = 0.004;
     io.condensation = condense;
     io.solver.backend = Backend::cpu;
-    Integrator in(model, io);
-    in.initialize();
-    while (!in.done()) in.advance();
-    q[condense ? 0 : 1] = in.q();
-    EXPECT_EQ(in.stats().solver.find("condensed") != std::string::npos, condense)
-        << in.stats().solver;
+    const std::unique_ptr<Integrator> in = integrated(model, io);
+    q[condense ? 0 : 1] = in->q();
+    const IntegratorStats& st = in->stats();
+    EXPECT_EQ(st.solver.find("condensed") != std::string::npos, condense) << st.solver;
     if (condense)
-      EXPECT_GT(in.stats().condensation_seconds, 0.0);
+      EXPECT_GT(st.condensation_seconds, 0.0);
     else
-      EXPECT_EQ(in.stats().condensation_seconds, 0.0);
+      EXPECT_EQ(st.condensation_seconds, 0.0);
   }
   ASSERT_EQ(q[0].size(), q[1].size());
   for (std::size_t i = 0; i < q[0].size(); ++i)
