@@ -31,8 +31,8 @@
 
 #include <CLI/CLI.hpp>
 #include <cfloat>
-#include <climits>
 #include <chrono>
+#include <climits>
 #include <cmath>
 #include <csignal>
 #include <cstdio>
@@ -855,26 +855,13 @@ int main(int argc, char** argv) {
     }
   } finish{comm};
   if (rank != 0 && !*solve) return 0;
-  for (const char* opt : {"--step",
-                          "--order",
-                          "--device",
-                          "--output-interval",
-                          "--vtk",
-                          "--full-newton",
-                          "--anderson-depth",
-                          "--newton-tol",
-                          "--threads",
-                          "--variable-step",
-                          "--rtol",
-                          "--atol",
-                          "--max-step",
-                          "--dense-reference",
-                          "--no-condensation",
-                          "--write-model",
-                          "--formulation",
-                          "--energy-tol",
-                          "--pivoting",
-                          "--solver-option"})
+  // the options --resume refuses: a resumed run integrates as its checkpoint says
+  static const char* const kFromCheckpoint[] = {
+      "--step",        "--order",          "--device",     "--output-interval", "--vtk",
+      "--full-newton", "--anderson-depth", "--newton-tol", "--threads",         "--variable-step",
+      "--rtol",        "--atol",           "--max-step",   "--dense-reference", "--no-condensation",
+      "--write-model", "--formulation",    "--energy-tol", "--pivoting",        "--solver-option"};
+  for (const char* opt : kFromCheckpoint)
     if (simulate->count(opt) > 0) sim.resume_conflicts.push_back(opt);
   try {
     if (*analyze) return run_analyze(analyze_args);

@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include "base/roundoff.hpp"
 #include "base/timer.hpp"
 #include "core/solver_state.hpp"
 #include "solve/refinement.hpp"
@@ -125,8 +126,6 @@ bool apply_inverse(SolverState& s, const double* b, double* x, index_t nrhs) {
   });
   return on_device;
 }
-
-constexpr double kUnitRoundoff = 0.5 * std::numeric_limits<double>::epsilon();
 
 // (m+1)·u for the most entries m in a row of the factorized matrix (see solve_phase); m is
 // computed once per analyzed pattern.

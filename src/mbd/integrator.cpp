@@ -6,11 +6,11 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
-#include <limits>
 #include <thread>
 
 #include "base/device.hpp"
 #include "base/host_copy.hpp"
+#include "base/roundoff.hpp"
 #include "base/timer.hpp"
 #include "strata/matrix_market.hpp"
 
@@ -32,7 +32,6 @@ std::vector<double> bdf_coefficients(const std::vector<double>& T) {
 }
 
 std::vector<double> bdf_nodes(double tn, const std::vector<double>& past, double h) {
-  constexpr double kUnitRoundoff = 0.5 * std::numeric_limits<double>::epsilon();
   std::vector<double> T{0.0};
   double prev = tn;
   for (const double tj : past) {

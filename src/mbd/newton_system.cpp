@@ -8,9 +8,9 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
-#include <limits>
 #include <stdexcept>
 
+#include "base/roundoff.hpp"
 #include "base/serial_scope.hpp"
 #include "strata/errors.hpp"
 
@@ -622,7 +622,7 @@ namespace {
 // from the second iteration on their rows read 0, and the condensed system's right-hand
 // side (condensed_solver.hpp) skips the columns of the rows that do.
 double relation_residual(double x, double y, double z) {
-  constexpr double kFloor = 4 * 0.5 * std::numeric_limits<double>::epsilon();
+  constexpr double kFloor = 4 * kUnitRoundoff;
   const double r = x - y - z;
   return std::abs(r) <= kFloor * (std::abs(x) + std::abs(y) + std::abs(z)) ? 0.0 : r;
 }
