@@ -45,6 +45,7 @@ PATTERNS = {
     "analyses_order_kept": (r"order kept for (\d+)", int),
     "static_pivots_left": (r"static pivots left (\d+)", int),
     "delayed_factorizations": (r"delayed pivoting in (\d+) factorizations", int),
+    "corrected_factorizations": (r"static pivots corrected in (\d+) factorizations", int),
     "rows": (r"^Newton matrix\s+(\d+) x", int),
     "total_s": (r"^time \[s\]\s+total ([\d.]+)", float),
     "solver_s": (r"solver ([\d.]+) \(", float),

@@ -760,9 +760,10 @@ int main(int argc, char** argv) {
   simulate
       ->add_option("--pivoting", sim.pivoting,
                    "pivots the analysis's order cannot take: fixed (static pivots), delayed "
-                   "(delayed pivoting, on the host), automatic (default: delayed on the CPU; "
-                   "on a GPU the fixed order, then delayed until the next analysis once it "
-                   "needed static pivots)")
+                   "(delayed pivoting, on the host), corrected (static pivots shifted and "
+                   "corrected in the solve, where the factor lives), automatic (default: "
+                   "delayed on the CPU; on a GPU corrected, then delayed until the next "
+                   "analysis once a correction could not be made)")
       ->check(choice<Pivoting>());
   simulate
       ->add_option("--solver-option", sim.solver_options,

@@ -54,6 +54,9 @@ enum class Pivoting {
   automatic,  ///< the fixed order first; when it needs static pivots, delayed pivoting
               ///< on the host (default).
   delayed,    ///< delayed pivoting on the host for every factorization.
+  corrected,  ///< the fixed order; its static pivots made regular and corrected in the
+              ///< solve (Sherman–Morrison–Woodbury), delayed pivoting on the host only
+              ///< where that cannot be done (Options::pivoting).
 };
 
 /// When a solve checks the solution it returns (see Options::solve_check).
@@ -319,7 +322,22 @@ struct Options {
   /// restarted from a checkpoint repeats the uninterrupted one bit for bit. Delayed
   /// pivoting runs on the host, after the fixed-order factorization of one executor or of
   /// several workers (GPUs) alike; the distributed solver keeps the fixed order.
+  ///
+  /// corrected (LU only; symmetric indefinite matrices as automatic): every factorization in
+  /// the analysis's fixed order, where the factor lives (a GPU's too). Where that order
+  /// needs static pivots, the entries of B at those k pivots get +1 (B's entries are at
+  /// most about 1) and B is factored again, so the factor is of A + E with E of rank k and
+  /// known exactly; each solve then corrects x = (A + E)⁻¹b to A⁻¹b by the
+  /// Sherman–Morrison–Woodbury formula (Golub & Van Loan, "Matrix Computations", 4th ed.,
+  /// §2.1.4): k solves and a k×k LU at the factorization, one k-column product per solve.
+  /// Delayed pivoting on the host instead when the pivot's entry is not in A's pattern,
+  /// more than max_corrected_pivots are needed, new static pivots remain after three such
+  /// rounds, or the k×k matrix is singular to working precision (A numerically singular).
+  /// The choice depends on the values alone, as automatic's does.
   Pivoting pivoting = Pivoting::automatic;
+  /// Pivoting::corrected: the most static pivots corrected by the solve's low-rank update
+  /// (each costs one more solve at the factorization). Default 64.
+  index_t max_corrected_pivots = 64;
   /// The relative threshold u of delayed pivoting, in (0, 1]: a pivot is taken when it is
   /// at least u times the largest entry of its column (|L| ≤ 1/u). Default 0.01.
   double pivot_threshold = 0.01;

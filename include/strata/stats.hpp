@@ -175,6 +175,9 @@ struct FactorStats {
   index_t delayed_pivots = 0;
   index_t fronts_delaying = 0;
   index_t fixed_order_perturbed_pivots = 0;
+  /// Pivoting::corrected: the static pivots of the fixed order made regular in this factor
+  /// and corrected by each solve's low-rank update (0: none, or delayed pivoting ran).
+  index_t corrected_pivots = 0;
   /// Equilibration sweeps applied on top of the analysis's scaling because the values had
   /// moved far from those it was computed for (core/rescale.hpp); 0 when none was needed.
   int rescaling_sweeps = 0;

@@ -73,7 +73,8 @@ struct Vocabulary<Pivoting> {
   static const std::vector<Named<Pivoting>>& values() {
     static const std::vector<Named<Pivoting>> v = {{Pivoting::fixed, {"fixed"}},
                                                    {Pivoting::automatic, {"automatic", "auto"}},
-                                                   {Pivoting::delayed, {"delayed"}}};
+                                                   {Pivoting::delayed, {"delayed"}},
+                                                   {Pivoting::corrected, {"corrected"}}};
     return v;
   }
 };
@@ -223,6 +224,7 @@ void validate(const Options& o) {
     out_of_range("pairing_threshold", "finite", o.pairing_threshold);
   if (!(o.static_pivot_epsilon >= 0 && std::isfinite(o.static_pivot_epsilon)))
     out_of_range("static_pivot_epsilon", "finite and at least 0", o.static_pivot_epsilon);
+  at_least<index_t>("max_corrected_pivots", o.max_corrected_pivots, 0);
   fraction("pivot_threshold", o.pivot_threshold, false, true);
   fraction("diagonal_pivot_threshold", o.diagonal_pivot_threshold, false, true);
   at_least("refinement_max_steps", o.refinement_max_steps, 0);
@@ -345,6 +347,7 @@ const std::vector<Field>& fields() {
       number_field("pairing_threshold", &O::pairing_threshold),
       number_field("static_pivot_epsilon", &O::static_pivot_epsilon),
       enum_field("pivoting", &O::pivoting),
+      integer_field("max_corrected_pivots", &O::max_corrected_pivots),
       number_field("pivot_threshold", &O::pivot_threshold),
       number_field("diagonal_pivot_threshold", &O::diagonal_pivot_threshold),
       enum_field("solve_check", &O::solve_check),

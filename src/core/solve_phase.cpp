@@ -89,10 +89,12 @@ double* solve_work(SolverState& s, std::size_t entries) {
   return s.solve_work.data();
 }
 
-// One solve with the factor: x = A⁻¹ b for nrhs columns (original numbering), through
+}  // namespace
+
+// One solve with the factor: x = F⁻¹ b for nrhs columns (original numbering), through
 // s.solve_work. Returns true when the triangular solves ran on the device that holds the
 // factor.
-bool apply_inverse(SolverState& s, const double* b, double* x, index_t nrhs) {
+bool apply_factor(SolverState& s, const double* b, double* x, index_t nrhs) {
   const Analysis& an = *s.analysis;
   const index_t n = an.n;
   double* const work = solve_work(s, static_cast<std::size_t>(n) * nrhs);
@@ -124,6 +126,16 @@ bool apply_inverse(SolverState& s, const double* b, double* x, index_t nrhs) {
     x[col + r * n] =
         scaled_by(work[e], scale ? an.col_scaling[col] : 1.0, rescale ? s.rescaling.col[col] : 1.0);
   });
+  return on_device;
+}
+
+namespace {
+
+// One solve with the factor and, for a factor of Pivoting::corrected, its low-rank
+// correction: x = A⁻¹ b.
+bool apply_inverse(SolverState& s, const double* b, double* x, index_t nrhs) {
+  const bool on_device = apply_factor(s, b, x, nrhs);
+  apply_correction(s.correction, s.analysis->n, x, nrhs);
   return on_device;
 }
 
@@ -234,7 +246,7 @@ void solve_gpu_arrays(SolverState& s, const double* b, double* x, index_t nrhs, 
     h.resize(count);
     numeric::copy_from_device(h.data(), d, count);
   };
-  if (b_gpu && x_gpu && !s.delayed.valid) {
+  if (b_gpu && x_gpu && !s.delayed.valid && !s.correction.active) {
     if (check) host_values(s);  // the residuals' matrix
     const bool rescale = !s.rescaling.row.empty();
     const numeric::RescaleView view{rescale ? s.rescaling.row.data() : nullptr,

@@ -274,6 +274,7 @@ bool values_on_gpu(SolverState& s, const SparseMatrix& pattern, std::span<const 
   }
   if (equilibrate && !dn.equilibrated && dn.rescaling_sweeps == 0) return false;
   s.factor.valid = false;
+  s.correction.clear();
   s.delayed.valid = false;
   s.norm_inf = dn.norm_inf;
   norm1 = dn.scaled_norm1;
@@ -357,6 +358,7 @@ double prepare_values(SolverState& s, const SparseMatrix* a, std::span<const dou
     const ValueNorms norms =
         refactor_values(an, s.values, values.data(), arena, s.value_sums, s.scaled);
     s.factor.valid = false;
+    s.correction.clear();
     s.delayed.valid = false;
     s.norm_inf = norms.norm_inf;
     norm1 = norms.scaled_norm1;
@@ -369,6 +371,7 @@ double prepare_values(SolverState& s, const SparseMatrix* a, std::span<const dou
     SparseMatrix checked = canonical_values(an, *a);
     check_norms(checked);
     s.factor.valid = false;
+    s.correction.clear();
     s.delayed.valid = false;
     s.values_pin.reset();
     s.values = std::move(checked);
@@ -406,12 +409,31 @@ double prepare_values(SolverState& s, const SparseMatrix* a, std::span<const dou
   return norm1;
 }
 
+// Pivoting::corrected after a fixed-order factorization that shifted static pivots
+// (numeric/static_pivot.hpp): the low-rank correction of its solves
+// (core/pivot_correction.hpp). Returns true when s.correction is active; false (cleared)
+// when delayed pivoting must take over: the pivots could not all be told, there are more
+// than Options::max_corrected_pivots, or A is singular to working precision.
+bool correct_shifted_pivots(SolverState& s) {
+  detail::PivotCorrection& c = s.correction;
+  c.clear();
+  const bool done =
+      detail::find_shifted_pivots(s, c.entries) &&
+      c.k() <= static_cast<index_t>(s.options.max_corrected_pivots) &&
+      detail::build_correction(c, s.analysis->n, [&](const double* b, double* x, index_t nrhs) {
+        detail::apply_factor(s, b, x, nrhs);
+      });
+  if (!done) c.clear();
+  return done;
+}
+
 // What the numeric stage did: the type factored (automatic resolved) and the perturbed
 // pivots of the fixed order (before a delayed factorization).
 struct NumericRun {
   MatrixType type = MatrixType::automatic;
   index_t fixed_perturbed = 0;
   bool driver_ran = false;  // false: delayed pivoting alone, on the host
+  bool corrected = false;   // Pivoting::corrected made the static pivots regular
 };
 
 // The numeric stage: the factor of s.scaled by the driver (one executor, several
@@ -424,10 +446,15 @@ NumericRun factor_values(SolverState& s, double norm1, double static_pivot) {
   tbb::task_arena& arena = host_arena(s);
   NumericRun r;
   pin_scaled(s);
+  // Pivoting::corrected: LU's static pivots shifted (a negative static pivot,
+  // numeric/static_pivot.hpp) and corrected in the solve
+  const bool shift = s.options.pivoting == Pivoting::corrected && an.type == MatrixType::general &&
+                     s.driver->in_one_process();
   auto run = [&](MatrixType t) {
     r.driver_ran = true;
     s.driver->factorize(an, s.scaled, s.values_on_device, t,
-                        numeric::PivotPolicy(static_pivot, s.options.diagonal_pivot_threshold),
+                        numeric::PivotPolicy(shift ? -static_pivot : static_pivot,
+                                             s.options.diagonal_pivot_threshold),
                         s.factor);
   };
 
@@ -453,11 +480,14 @@ NumericRun factor_values(SolverState& s, double norm1, double static_pivot) {
   index_t fixed_perturbed = 0;
   if (delay_directly) {
     s.factor.valid = false;
+    s.correction.clear();
   } else if (type != MatrixType::spd || an.type != MatrixType::automatic) {
     run(type);
     for (const auto& ps : s.factor.front_stats) fixed_perturbed += ps.perturbed;
   }
-  if (can_delay && (delay_directly || fixed_perturbed > 0)) {
+  // Pivoting::corrected: delayed pivoting only where the correction cannot be made
+  if (shift && fixed_perturbed > 0 && correct_shifted_pivots(s)) r.corrected = true;
+  if (can_delay && (delay_directly || (fixed_perturbed > 0 && !r.corrected))) {
     // a root takes every remaining pivot by partial pivoting over the whole remaining
     // Schur complement (backward stable); only those at the rounding level of ‖B‖₁ are
     // zeros of a numerically singular matrix and get static pivots
@@ -498,6 +528,13 @@ void report_factorization(SolverState& s, const NumericRun& r, double norm1, dou
     fs.fronts_delaying = s.delayed.fronts_delaying;
     fs.fixed_order_perturbed_pivots = fixed_perturbed;
     total.det_sign = numeric::delayed_determinant_sign(an, s.delayed);
+  }
+  if (s.correction.active) {  // det A = det F · det S (core/pivot_correction.hpp)
+    fs.corrected_pivots = s.correction.k();
+    fs.fixed_order_perturbed_pivots = fixed_perturbed;
+    total.perturbed = 0;  // shifted, and corrected by every solve
+    total.log_abs_det += s.correction.log_abs_det;
+    total.det_sign *= s.correction.det_sign;
   }
   fs.perturbed_pivots = total.perturbed;
   fs.two_by_two_pivots = total.two_by_two;
@@ -557,6 +594,7 @@ void release_factor(SolverState& s) noexcept {
     // left on the device that is going: host_values reports it if they are ever needed
   }
   s.factor = numeric::NumericFactor{};
+  s.correction = detail::PivotCorrection{};
   s.delayed = numeric::DelayedFactor{};
   s.scaled_pin.reset();
   std::vector<double>().swap(s.scaled);
@@ -595,6 +633,7 @@ namespace {
 // The factor and the numeric workspaces of the analysis before go (a new analysis).
 void clear_numeric(SolverState& s) {
   s.factor = numeric::NumericFactor{};
+  s.correction = detail::PivotCorrection{};
   s.delayed = numeric::DelayedFactor{};
   if (s.driver) s.driver->release_workspaces();
 }
@@ -847,6 +886,7 @@ void detail::SolverAccess::set_driver(Solver& solver,
   s.driver = std::move(driver);
   s.analysis.reset();
   s.factor = numeric::NumericFactor{};
+  s.correction = detail::PivotCorrection{};
   s.delayed = numeric::DelayedFactor{};
 }
 

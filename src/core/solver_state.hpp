@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "analysis/analysis.hpp"
+#include "core/pivot_correction.hpp"
 #include "core/rescale.hpp"
 #include "numeric/delayed.hpp"
 #include "numeric/driver.hpp"
@@ -57,6 +58,9 @@ struct SolverState {
   std::unique_ptr<numeric::PinnedHostRange> solve_work_pin;
   // the extra scaling of the last factorization (core/rescale.hpp), empty when none
   Rescaling rescaling;
+  // Pivoting::corrected: the low-rank update every solve with `factor` applies
+  // (core/pivot_correction.hpp); inactive when the factor needed none
+  PivotCorrection correction;
   // the factor of delayed pivoting (Options::pivoting), valid instead of `factor`
   numeric::DelayedFactor delayed;
   numeric::DelayedWorkspace delayed_work;
@@ -106,6 +110,12 @@ void phase(const char* name, F&& f) {
     throw OutOfMemory(0, name);
   }
 }
+
+/// One application of the factor `s.factor` or `s.delayed` (solve_phase.cpp): x = F⁻¹b for
+/// nrhs columns (original numbering, column-major), without the low-rank correction of
+/// Pivoting::corrected. Returns true when the triangular solves ran on the device that
+/// holds the factor.
+bool apply_factor(SolverState& s, const double* b, double* x, index_t nrhs);
 
 /// The solve phase (solve_phase.cpp): x = A⁻¹ b for nrhs columns of n = analysis->n
 /// entries each (column-major, original numbering), checked and refined as

@@ -321,6 +321,10 @@ void Integrator::factorize(StepInfo& info, const BdfTerms& bdf, double t) {
       ++stats_.delayed_factorizations;
       stats_.delayed_pivots += f.delayed_pivots;
     }
+    if (f.corrected_pivots > 0) {
+      ++stats_.corrected_factorizations;
+      stats_.corrected_pivots += f.corrected_pivots;
+    }
     stats_.factor_input_seconds += f.input_seconds;
     stats_.factor_device_seconds += f.device_seconds;
     stats_.values_on_device_factorizations += f.values_scaled_on_device ? 1 : 0;

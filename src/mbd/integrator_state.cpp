@@ -36,6 +36,8 @@ json stats_to_json(const IntegratorStats& s) {
           {"perturbed_pivots", s.perturbed_pivots},
           {"delayed_factorizations", s.delayed_factorizations},
           {"delayed_pivots", s.delayed_pivots},
+          {"corrected_factorizations", s.corrected_factorizations},
+          {"corrected_pivots", s.corrected_pivots},
           {"residual_rejections", s.residual_rejections},
           {"energy_rejections", s.energy_rejections},
           {"stabilized_steps", s.stabilized_steps},
@@ -82,6 +84,8 @@ IntegratorStats stats_from_json(const json& j) {
   j.at("perturbed_pivots").get_to(s.perturbed_pivots);
   j.at("delayed_factorizations").get_to(s.delayed_factorizations);
   j.at("delayed_pivots").get_to(s.delayed_pivots);
+  s.corrected_factorizations = j.value("corrected_factorizations", index_t{0});  // (older: none)
+  s.corrected_pivots = j.value("corrected_pivots", index_t{0});
   j.at("residual_rejections").get_to(s.residual_rejections);
   j.at("energy_rejections").get_to(s.energy_rejections);
   j.at("stabilized_steps").get_to(s.stabilized_steps);

@@ -35,12 +35,13 @@ class StrataLinearSolver : public LinearSolver {
     if (type != MatrixType::general) return o;
     // The Newton matrix's values drift from those the analysis matched and scaled (step
     // size, contacts, rotations): on the host every factorization delays the pivots the
-    // analysis's order cannot take (numeric/delayed.hpp). A GPU factors in that order until
-    // it needs static pivots; the delayed pivoting then runs on the host, directly for the
-    // later factorizations of the same analysis (adaptive_), so that no pivot is perturbed
-    // and no new analysis is needed for them.
-    if (o.pivoting == Pivoting::automatic && !solver_on_gpu(o.backend))
-      o.pivoting = Pivoting::delayed;
+    // analysis's order cannot take (numeric/delayed.hpp). A GPU factors in that order and
+    // corrects the static pivots it needs in the solve (Pivoting::corrected, on the
+    // device); where that cannot be done the delayed pivoting runs on the host, directly
+    // for the later factorizations of the same analysis (adaptive_), so that no pivot is
+    // perturbed and no new analysis is needed for them.
+    if (o.pivoting == Pivoting::automatic)
+      o.pivoting = solver_on_gpu(o.backend) ? Pivoting::corrected : Pivoting::delayed;
     return o;
   }
   void analyze(const SparseMatrix& a) override { analyze_from(a, MatchingStart{}); }
@@ -81,7 +82,7 @@ class StrataLinearSolver : public LinearSolver {
   void set_delaying(bool on) override {
     if (!adaptive_) return;
     delaying_ = on;
-    solver_.set_pivoting(on ? Pivoting::delayed : Pivoting::automatic);
+    solver_.set_pivoting(on ? Pivoting::delayed : Pivoting::corrected);
   }
   void solve(const double* b, double* x) override { solver_.solve(b, x, 1); }
   index_t factor_entries() const override {
@@ -92,7 +93,7 @@ class StrataLinearSolver : public LinearSolver {
   double backward_error() const override { return solver_.stats().solve.backward_error; }
   void factorized() {
     fresh_ = false;
-    if (adaptive_ && solver_.stats().factor.fixed_order_perturbed_pivots > 0) set_delaying(true);
+    if (adaptive_ && solver_.stats().factor.delayed_pivoting) set_delaying(true);
   }
   std::string describe() const override {
     const FactorStats& f = solver_.stats().factor;

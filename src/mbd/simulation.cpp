@@ -440,10 +440,11 @@ std::string summary(const Model& model, const SimulationResult& r) {
       "factorizations        {} (analyses {}: first 1, new partitions {}, contact-set changes {} "
       "(matching kept in {}), perturbed pivots {}, new formulation or constraint set {}; order "
       "kept for {} of {} contact-set changes; static pivots left {}; delayed pivoting in {} "
-      "factorizations, {} pivots delayed)\n",
+      "factorizations, {} pivots delayed; static pivots corrected in {} factorizations, {} "
+      "pivots)\n",
       s.factorizations, s.analyses, s.repartitions, s.contact_analyses, s.matching_kept_analyses,
       s.reanalyses, other_analyses, s.kept_order_analyses, s.contact_updates, s.perturbed_pivots,
-      s.delayed_factorizations, s.delayed_pivots);
+      s.delayed_factorizations, s.delayed_pivots, s.corrected_factorizations, s.corrected_pivots);
   o += fmt::format("Newton matrix         {} x {}, nnz {}, nnz(L) {}\n", s.jacobian_size,
                    s.jacobian_size, s.jacobian_nnz, s.factor_nnz);
   o += fmt::format("linear solver         {}\n", s.solver);

@@ -14,6 +14,7 @@
 // to the part of the root's parent through export_cb / import_cb.
 #pragma once
 
+#include <cmath>
 #include <exception>
 #include <functional>
 #include <memory>
@@ -22,6 +23,7 @@
 #include "analysis/analysis.hpp"
 #include "base/device.hpp"
 #include "numeric/pivot_stats.hpp"
+#include "numeric/static_pivot.hpp"
 #include "strata/errors.hpp"
 #include "strata/options.hpp"
 #include "strata/stats.hpp"
@@ -78,8 +80,24 @@ struct NumericFactor {
   std::vector<double> d_off;
   std::vector<int> pivot_size;
   std::vector<PivotStats> front_stats;  ///< per front, merged in front order
+  /// LU, by pivot position (tree numbering, n entries): where static pivoting replaced the
+  /// pivot, 1 when the new pivot is positive and 2 when it is negative, else 0 — written by the
+  /// executors for the fronts whose front_stats count perturbed pivots only (the other fronts'
+  /// entries are left as they were). The pivot of position first_pivot[f] + j is in row
+  /// rows[row_offsets[f] + j].
+  std::vector<unsigned char> static_pivot_at;
   bool valid = false;
 };
+
+/// Records in factor.static_pivot_at which of a front's k pivots static pivoting replaced
+/// (is_static_pivot; pivot i at diag[i·stride], the front's first pivot position is
+/// `first`). For a front whose PivotStats count perturbed pivots.
+inline void mark_static_pivots(const double* diag, index_t stride, index_t k, index_t first,
+                               double static_pivot, NumericFactor& factor) {
+  for (index_t i = 0; i < k; ++i)
+    factor.static_pivot_at[first + i] =
+        is_static_pivot(diag[i * stride], static_pivot) ? (diag[i * stride] < 0 ? 2 : 1) : 0;
+}
 
 /// The part of the tree an executor is factoring: its level schedule, the batches of its
 /// memory plan (positions index schedule->fronts) and its arena layout.
@@ -134,7 +152,10 @@ using StageValues =
 /// How a factorization chooses and repairs its pivots: the numeric side of
 /// Options::static_pivot_epsilon and Options::diagonal_pivot_threshold.
 struct PivotPolicy {
-  /// Absolute: a pivot below this in magnitude becomes ±static_pivot (counted in PivotStats).
+  /// Static pivoting's threshold, absolute: a pivot below |static_pivot| in magnitude is
+  /// replaced (numeric/static_pivot.hpp: by ±static_pivot when it is positive, shifted by
+  /// ±kCorrectedPivotShift when it is negative, LU only: Pivoting::corrected) and counted
+  /// in PivotStats; 0: none.
   double static_pivot = 0;
   /// LU in the analysis's fixed order, threshold partial pivoting among the fully summed
   /// rows (Duff, Erisman & Reid, "Direct Methods for Sparse Matrices", 2nd ed., §5.4):

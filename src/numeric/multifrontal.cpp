@@ -44,6 +44,7 @@ void prepare_factor(const Analysis& an, MatrixType type, NumericFactor& factor, 
   if (host_panels) sized_resize(factor.panels, an.factor_layout.total, "factorize: factor panels");
   sized_resize(factor.rows, t.rows.size(), "factorize: factor row indices");
   factor.front_stats.assign(t.n_fronts(), PivotStats{});
+  if (type == MatrixType::general) factor.static_pivot_at.resize(an.n);
   if (type == MatrixType::symmetric_indefinite) {
     factor.d_diag.resize(an.n);
     factor.d_off.resize(an.n);

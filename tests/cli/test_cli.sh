@@ -99,7 +99,7 @@ check "unknown option" 2 "strata: error:" "$strata" solve "$tmp/good.mtx" --bogu
 # the engine (strata::parse), aliases included
 check "unknown ordering" 2 "ordering must be 'nd', 'metis', 'amd', 'natural' or 'auto' (aliases: nested_dissection = nd, automatic = auto), got 'rcm'" "$strata" solve "$tmp/good.mtx" --ordering rcm
 check "unknown type" 2 "type must be 'auto', 'spd', 'symmetric_indefinite' or 'general'" "$strata" solve "$tmp/good.mtx" --type cholesky
-check "unknown pivoting" 2 "pivoting must be 'fixed', 'automatic' or 'delayed'" "$strata" simulate --pivoting partial
+check "unknown pivoting" 2 "pivoting must be 'fixed', 'automatic', 'delayed' or 'corrected'" "$strata" simulate --pivoting partial
 # any solver option of a simulation by its name (set_option's vocabulary)
 check "unknown solver option" 2 "unknown option 'bogus'" "$strata" simulate --solver-option bogus=1
 check "bad solver option value" 2 "option pivot_threshold must be a finite number, got 'x'" "$strata" simulate --solver-option pivot_threshold=x

@@ -1,8 +1,9 @@
 // strata::mbd on the CUDA backend: the engine's Newton loop on a GPU factors in the
-// analysis's order until a refactorization needs static pivots, then delays pivots on the
-// host until the next analysis (mbd/linear_solver.hpp). No analysis is made for perturbed
-// pivots, none are left, and the trajectory equals the CPU backend's (which delays pivots
-// at every refactorization).
+// analysis's order and corrects the static pivots a refactorization needs in the solve
+// (Pivoting::corrected), delaying pivots on the host only where that cannot be done, until
+// the next analysis (mbd/linear_solver.hpp). No analysis is made for perturbed pivots, none
+// are left, and the trajectory equals the CPU backend's (which delays pivots at every
+// refactorization).
 #include <gtest/gtest.h>
 
 #include <string>
@@ -16,7 +17,7 @@
 namespace strata::mbd {
 namespace {
 
-TEST(CudaMbd, PerturbedPivotsAreDelayedAndTheTrajectoryEqualsTheCpus) {
+TEST(CudaMbd, StaticPivotsAreCorrectedAndTheTrajectoryEqualsTheCpus) {
   if (!numeric::cuda_available())
     GTEST_SKIP() << "no CUDA GPU present (or this build has no CUDA backend): GPU test skipped";
   const Model m = build_model(generate("tracked:100"), "tracked:100");
@@ -34,17 +35,20 @@ TEST(CudaMbd, PerturbedPivotsAreDelayedAndTheTrajectoryEqualsTheCpus) {
   EXPECT_EQ(s.reanalyses, 0);
   EXPECT_EQ(s.perturbed_pivots, 0);
   EXPECT_NE(s.solver.find("cuda"), std::string::npos) << s.solver;
-  // the solves after factorizations in the analysis's order run on the GPU, those after
-  // delayed ones on the host; the CPU backend's never on a GPU
+  // the solves after factorizations in the analysis's order (corrected or not) run on the
+  // GPU, those after delayed ones on the host; the CPU backend's never on a GPU
   EXPECT_GT(s.device_solves, 0);
   EXPECT_LE(s.device_solves, s.solves);
   EXPECT_LE(s.device_solve_seconds, s.solve_seconds);
   EXPECT_EQ(cpu.stats().device_solves, 0);
+  EXPECT_EQ(cpu.stats().corrected_factorizations, 0);
   RecordProperty("largest position difference", test::scientific(worst));
   RecordProperty("solves on the GPU",
                  std::to_string(s.device_solves) + " of " + std::to_string(s.solves));
   RecordProperty("delayed factorizations", std::to_string(s.delayed_factorizations) + " of " +
                                                std::to_string(s.factorizations));
+  RecordProperty("corrected factorizations", std::to_string(s.corrected_factorizations) + " (" +
+                                                 std::to_string(s.corrected_pivots) + " pivots)");
 }
 
 // The set-up's solves of matrices below 50,000 rows run on the host even when the Newton

@@ -40,7 +40,8 @@ TEST(OptionNames, CanonicalNamesRoundTrip) {
   expect_round_trip<OrderingMethod>({OrderingMethod::nested_dissection, OrderingMethod::metis,
                                      OrderingMethod::amd, OrderingMethod::natural});
   expect_round_trip<Backend>({Backend::automatic, Backend::cpu, Backend::cuda});
-  expect_round_trip<Pivoting>({Pivoting::fixed, Pivoting::automatic, Pivoting::delayed});
+  expect_round_trip<Pivoting>(
+      {Pivoting::fixed, Pivoting::automatic, Pivoting::delayed, Pivoting::corrected});
   expect_round_trip<SolveCheck>({SolveCheck::always, SolveCheck::after_perturbed_pivots});
   EXPECT_STREQ(to_string(OrderingMethod::user), "user");
 }

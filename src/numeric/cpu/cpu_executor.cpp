@@ -247,6 +247,8 @@ void process_dense(const FactorContext& ctx, index_t f, const FrontBlocks& block
     case MatrixType::general:
       cpu::factor_front_lu(F, m, k, m, ctx.static_pivot, ctx.diagonal_pivot_threshold,
                            w.local_perm.data(), ps);
+      if (ps.perturbed > 0)  // which pivots: those now exactly ±static_pivot
+        mark_static_pivots(F, m + 1, k, t.first_pivot[f], ctx.static_pivot, fac);
       break;
     default:
       throw InternalError("unresolved matrix type in the CPU executor");

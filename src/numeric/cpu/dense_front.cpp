@@ -93,6 +93,7 @@
 #include <vector>
 
 #include "numeric/cpu/dense_blas.hpp"
+#include "numeric/static_pivot.hpp"
 #include "strata/errors.hpp"
 
 namespace strata::numeric::cpu {
@@ -209,11 +210,11 @@ void lower_update(index_t n, index_t r, const double* a, index_t lda, const doub
 
 // --- pivots and statistics ------------------------------------------------------------
 
-// Static pivoting of one pivot: |d| < sp becomes sign(d)·sp, sign(0) = +.
+// Static pivoting of one pivot (numeric/static_pivot.hpp).
 double perturb(double d, double sp, PivotStats& st) {
-  if (std::abs(d) < sp) {
+  if (needs_static_pivot(d, sp)) {
     ++st.perturbed;
-    return d < 0 ? -sp : sp;
+    return static_pivot_value(d, sp);
   }
   return d;
 }

@@ -701,6 +701,7 @@ void CudaExecutor::finish_front(const numeric::FactorContext& ctx, index_t f, st
       if (len % 2 == 0) sign = -sign;
     }
     ps.perturbed = npert;
+    if (npert > 0) numeric::mark_static_pivots(diag, 1, k, t.first_pivot[f], ctx.static_pivot, fac);
     // the device solve's rows of this analysis: whether this front's pivot rows differ
     // from those it holds (upload_solve_rows then sends only the fronts marked)
     if (dsolve_.rows_moved.size() == static_cast<std::size_t>(t.n_fronts()) &&

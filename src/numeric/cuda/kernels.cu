@@ -36,10 +36,14 @@
 #include "numeric/cuda/kernels.cuh"
 #include "numeric/cuda/multiprocessors.hpp"
 #include "numeric/cuda_testing.hpp"
+#include "numeric/static_pivot.hpp"
 #include "strata/errors.hpp"
 
 namespace strata::cuda {
 namespace {
+
+using numeric::needs_static_pivot;
+using numeric::static_pivot_value;
 
 constexpr int kThreads = 256;  // the most rows of a small front; its shared arrays' size
 // the widest small-front block (launch_factor_small): two of kThreads' register budget
@@ -224,9 +228,9 @@ __device__ std::int64_t block_argmax(const double* col, std::int64_t r0, std::in
 // Static pivoting (numeric/cpu/dense_front.hpp): a pivot below static_pivot in magnitude
 // becomes ±static_pivot (sign(0) taken as +), counted in *perturbed.
 __device__ double static_pivoted(double p, double static_pivot, std::int64_t* perturbed) {
-  if (!(fabs(p) < static_pivot)) return p;
+  if (!needs_static_pivot(p, static_pivot)) return p;
   ++*perturbed;
-  return p < 0 ? -static_pivot : static_pivot;
+  return static_pivot_value(p, static_pivot);
 }
 
 // Unblocked right-looking partial LU of columns [p0, p0+w) of the m-row matrix F (leading
@@ -515,9 +519,9 @@ __device__ __forceinline__ void lu_pivot_step(double (&r)[kSmallNb], const doubl
                                               int i, int j, bool row, double static_pivot,
                                               int& count) {
   double piv = u[p];
-  if (fabs(piv) < static_pivot) {  // static_pivoted, counted once
+  if (needs_static_pivot(piv, static_pivot)) {  // static_pivoted, counted once
     if (i == 0) ++count;
-    piv = piv < 0 ? -static_pivot : static_pivot;
+    piv = static_pivot_value(piv, static_pivot);
   }
   if (i == j) r[p] = piv;
   if (row && i > j) {

@@ -48,9 +48,13 @@
 #include "numeric/cuda/cuda_check.hpp"
 #include "numeric/cuda/kernels.cuh"
 #include "numeric/cuda/warp_argmax.cuh"
+#include "numeric/static_pivot.hpp"
 
 namespace strata::cuda {
 namespace {
+
+using numeric::needs_static_pivot;
+using numeric::static_pivot_value;
 
 constexpr int kThreads = 256;
 
@@ -62,7 +66,7 @@ __global__ void lu_check_kernel(const double* a, std::int64_t ld, std::int64_t k
   for (std::int64_t j = threadIdx.x; j < k; j += blockDim.x) {
     const double d = a[j * ld + j];
     // !(|d| >= sp) also catches NaN; an infinite pivot means growth we do not accept
-    if (!(fabs(d) >= static_pivot) || !(fabs(d) <= DBL_MAX)) sbad = 1;
+    if (!(fabs(d) >= fabs(static_pivot)) || !(fabs(d) <= DBL_MAX)) sbad = 1;
   }
   __syncthreads();
   if (threadIdx.x == 0) *bad = sbad;
@@ -79,7 +83,7 @@ __global__ void lu_unpivoted_check_kernel(const double* a, std::int64_t ld, std:
     if (threadIdx.x == 0) {
       ipiv[j] = static_cast<int>(j + 1);
       const double d = col[j];
-      if (!(fabs(d) >= static_pivot) || !(fabs(d) <= DBL_MAX)) *bad = 1;
+      if (!(fabs(d) >= fabs(static_pivot)) || !(fabs(d) <= DBL_MAX)) *bad = 1;
     }
     for (std::int64_t i = j + 1 + threadIdx.x; i < k; i += blockDim.x)
       if (!(threshold * fabs(col[i]) <= 1.0)) *bad = 1;
@@ -198,9 +202,9 @@ __global__ void __launch_bounds__(kTallThreads)
     __syncthreads();
     if (t == 0) {
       double d = col[j];
-      if (fabs(d) < static_pivot) {  // static_pivoted (kernels.cu)
+      if (needs_static_pivot(d, static_pivot)) {  // static_pivoted (kernels.cu)
         ++npert;
-        d = d < 0 ? -static_pivot : static_pivot;
+        d = static_pivot_value(d, static_pivot);
         col[j] = d;
       }
       spiv = d;

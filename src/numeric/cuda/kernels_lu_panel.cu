@@ -135,7 +135,7 @@ __device__ __forceinline__ void eliminate(double (&a)[kPerThread], double (&x)[k
       }
       __syncthreads();
       const double d = row[j];  // the same in every thread: a uniform break
-      if (!(fabs(d) >= static_pivot) || !(fabs(d) <= DBL_MAX)) {
+      if (!(fabs(d) >= fabs(static_pivot)) || !(fabs(d) <= DBL_MAX)) {
         if (threadIdx.x == 0) *sbad = 1;
         stop = true;
         break;

@@ -1,0 +1,247 @@
+// Static pivots corrected in the solve (Options::pivoting = Pivoting::corrected;
+// core/pivot_correction.hpp) through the Solver: an analysis made for values whose
+// matching is wrong for the values refactorized (the Newton loop of a simulation whose
+// contacts and rotations changed) factors in the fixed order, shifts the pivots it cannot
+// take and corrects every solve by the Sherman–Morrison–Woodbury formula. The solutions
+// must be dense LAPACK's (dgesv) to the conditioning without refinement, log|det| and its
+// sign dgetrf's, the statistics must say which mechanism ran, and a numerically singular
+// matrix must still be reported as such (the correction gives way to delayed pivoting).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "base/blas.hpp"
+#include "sparse/generators.hpp"
+#include "strata/strata.hpp"
+#include "support/test_support.hpp"
+
+namespace strata {
+namespace {
+
+// LU on the CPU with fundamental supernodes only (no amalgamation): leaf fronts of one
+// pivot, which a zero diagonal leaves without a pivot in the analysis's order; the
+// solution checked (its backward error computed) but not refined, so that what is
+// measured is the corrected factor's own solution.
+Options corrected_solves_only(index_t max_corrected) {
+  Options o;
+  o.type = MatrixType::general;
+  o.backend = Backend::cpu;
+  o.relax_small = 0;
+  o.relax_zeros_1 = o.relax_zeros_2 = o.relax_zeros_3 = 0;
+  o.pivoting = Pivoting::corrected;
+  o.max_corrected_pivots = max_corrected;
+  o.refinement_max_steps = 0;
+  o.gmres_max_iterations = 0;
+  return o;
+}
+
+// log|det A| and its sign from LAPACK's dgetrf on the dense copy.
+void dense_logdet(const SparseMatrix& a, double* logdet, int* sign) {
+  std::vector<double> d = test::to_dense(a);
+  const int n = static_cast<int>(a.n_rows);
+  std::vector<int> ipiv(n);
+  int info = 0;
+  dgetrf_(&n, &n, d.data(), &n, ipiv.data(), &info);
+  *logdet = 0;
+  *sign = 1;
+  for (int i = 0; i < n; ++i) {
+    const double u = d[i + static_cast<std::size_t>(i) * n];
+    *logdet += std::log(std::abs(u));
+    if (u < 0) *sign = -*sign;
+    if (ipiv[i] != i + 1) *sign = -*sign;
+  }
+}
+
+// The analysis is made for a dominant diagonal (the matching takes it); the values
+// refactorized have a zero diagonal, so that the analysis's order meets zero pivots.
+TEST(PivotCorrection, StaleMatchingSolvedThroughTheCorrection) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (index_t n : {2, 3, 5, 733}) {
+    SCOPED_TRACE("n=" + std::to_string(n));
+    const SparseMatrix pattern = test::random_pattern_with_diagonal(n, 3, rng);
+    const SparseMatrix a1 = test::with_values(pattern, 20.0, rng);
+    // values of another draw, and one diagonal entry in ten zero (all of them for n < 10)
+    SparseMatrix a2 = test::with_values(pattern, 1.0, rng);
+    std::uniform_int_distribution<int> coin(0, 9);
+    for (index_t j = 0; j < n; ++j)
+      if (n < 10 || coin(rng) == 0)
+        for (index_t p = a2.offsets[j]; p < a2.offsets[j + 1]; ++p)
+          if (a2.indices[p] == j) a2.values[p] = 0.0;
+    const int nrhs = 3;
+    std::vector<double> b(static_cast<std::size_t>(n) * nrhs);
+    for (double& v : b) v = u(rng);
+    std::vector<double> ref = b;
+    if (!test::dense_solve(test::to_dense(a2), n, ref, nrhs)) continue;  // singular draw
+    if (!test::structurally_nonsingular(a2)) continue;
+    const double kappa = test::condition_inf(a2);
+    if (!(kappa < 1e10)) continue;  // too close to singular to test a solution's digits
+
+    Solver s(corrected_solves_only(n));
+    s.factorize(a1);
+    EXPECT_EQ(s.stats().factor.corrected_pivots, 0);
+    s.refactorize(a2);
+    const FactorStats& f = s.stats().factor;
+    EXPECT_EQ(f.perturbed_pivots, 0);
+    EXPECT_FALSE(f.delayed_pivoting);
+    EXPECT_EQ(f.corrected_pivots, f.fixed_order_perturbed_pivots);
+    if (n == 733) EXPECT_GT(f.corrected_pivots, 0);  // small ones may be one front
+    EXPECT_TRUE(f.inertia_valid);
+    double logdet = 0;
+    int sign = 0;
+    dense_logdet(a2, &logdet, &sign);
+    EXPECT_NEAR(f.log_abs_determinant, logdet, 1e-9 * std::max(1.0, std::abs(logdet)));
+    EXPECT_EQ(f.determinant_sign, sign);
+
+    // the correction's solution without refinement: backward stable to the conditioning
+    // (the formula is not backward stable in general, Yip 1986: its error grows with the
+    // conditioning of A + E and of the k×k matrix, here with k in the hundreds)
+    std::vector<double> x(b.size());
+    s.solve(b.data(), x.data(), nrhs);
+    const SolveStats& ss = s.stats().solve;
+    EXPECT_EQ(ss.refinement_steps, 0);
+    EXPECT_LE(ss.backward_error, std::max(1e-13, 1e-14 * kappa)) << "kappa " << kappa;
+    const double tol = std::max(1e-12, 1e-14 * n * kappa);
+    EXPECT_LE(test::relative_difference(x, ref), tol);
+    // one column at a time: the solution of each
+    for (int c = 0; c < nrhs; ++c) {
+      const std::vector<double> bc(b.begin() + c * n, b.begin() + (c + 1) * n);
+      const std::vector<double> rc(ref.begin() + c * n, ref.begin() + (c + 1) * n);
+      EXPECT_LE(test::relative_difference(s.solve(bc), rc), tol);
+    }
+  }
+}
+
+// Values moving by six decades between refactorizations (contact-like: rows scaled by
+// 1e6 or 1e-6) with the analysis of the first: no perturbed pivot in any factor, whether
+// corrected or delayed, and the solve (checked and refined, Options' default) at the
+// tolerance.
+TEST(PivotCorrection, ValuesChangingBySixDecadesBetweenRefactorizations) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  std::uniform_real_distribution<double> u(-1, 1);
+  std::uniform_int_distribution<int> coin(0, 9);
+  const index_t n = 733;
+  const SparseMatrix pattern = test::random_pattern_with_diagonal(n, 4, rng);
+  Options o = corrected_solves_only(n);  // leaf fronts: static pivots in every step
+  o.refinement_max_steps = Options{}.refinement_max_steps;
+  o.gmres_max_iterations = Options{}.gmres_max_iterations;
+  Solver s(o);
+  s.factorize(test::with_values(pattern, 10.0, rng));
+  for (int step = 0; step < 6; ++step) {
+    SCOPED_TRACE("step " + std::to_string(step));
+    SparseMatrix a = test::with_values(pattern, u(rng), rng);
+    std::vector<double> rs(n);
+    for (double& r : rs) r = coin(rng) == 0 ? 1e6 : coin(rng) == 0 ? 1e-6 : 1.0;
+    // and one diagonal entry in ten zero: pivots the analysis's order cannot take
+    for (index_t j = 0; j < n; ++j) {
+      const bool zero = coin(rng) == 0;
+      for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p) {
+        if (zero && a.indices[p] == j) a.values[p] = 0.0;
+        a.values[p] *= rs[a.indices[p]];
+      }
+    }
+    std::vector<double> rhs(n), ref;
+    for (double& v : rhs) v = u(rng);
+    ref = rhs;
+    if (!test::dense_solve(test::to_dense(a), n, ref, 1)) continue;
+    s.refactorize(a);
+    const FactorStats& f = s.stats().factor;
+    EXPECT_EQ(f.perturbed_pivots, 0);
+    EXPECT_GT(f.fixed_order_perturbed_pivots, 0);
+    // corrected, or (κ(A) here reaches 1e15: its k×k matrix too ill-conditioned to keep
+    // half of the digits) delayed
+    if (f.delayed_pivoting)
+      EXPECT_EQ(f.corrected_pivots, 0);
+    else
+      EXPECT_EQ(f.corrected_pivots, f.fixed_order_perturbed_pivots);
+    s.solve(rhs);
+    EXPECT_LE(s.stats().solve.backward_error, 1e-14);
+    EXPECT_TRUE(s.stats().solve.refinement_converged);
+  }
+}
+
+// A nonsingular 1×1 matrix needs no static pivot: nothing to correct.
+TEST(PivotCorrection, OneByOneNeedsNone) {
+  auto rng = test::fresh_rng();
+  std::uniform_real_distribution<double> u(0.5, 2);
+  SparseMatrix a = test::with_values(test::random_pattern_with_diagonal(1, 1, rng), 1.0, rng);
+  a.values[0] = -u(rng);
+  Solver s(corrected_solves_only(64));
+  s.factorize(a);
+  EXPECT_EQ(s.stats().factor.corrected_pivots, 0);
+  EXPECT_EQ(s.stats().factor.perturbed_pivots, 0);
+  const std::vector<double> x = s.solve(std::vector<double>{3.0});
+  EXPECT_NEAR(x[0], 3.0 / a.values[0], 1e-15 * std::abs(x[0]));
+}
+
+// More static pivots than max_corrected_pivots: delayed pivoting factors instead, with the
+// solution of dense LAPACK.
+TEST(PivotCorrection, TooManyPivotsGoToDelayedPivoting) {
+  auto rng = test::fresh_rng();
+  std::uniform_real_distribution<double> u(-1, 1);
+  std::uniform_int_distribution<int> coin(0, 9);
+  const index_t n = 733;
+  const SparseMatrix pattern = test::random_pattern_with_diagonal(n, 3, rng);
+  SparseMatrix a2 = test::with_values(pattern, 1.0, rng);
+  for (index_t j = 0; j < n; ++j)
+    if (coin(rng) == 0)
+      for (index_t p = a2.offsets[j]; p < a2.offsets[j + 1]; ++p)
+        if (a2.indices[p] == j) a2.values[p] = 0.0;
+  std::vector<double> b(n);
+  for (double& v : b) v = u(rng);
+  std::vector<double> ref = b;
+  if (!test::dense_solve(test::to_dense(a2), n, ref, 1) || !test::structurally_nonsingular(a2))
+    GTEST_SKIP() << "a singular draw";
+  Solver one(corrected_solves_only(1));
+  one.factorize(test::with_values(pattern, 20.0, rng));
+  one.refactorize(a2);
+  const FactorStats& f = one.stats().factor;
+  ASSERT_GT(f.fixed_order_perturbed_pivots, 1);
+  EXPECT_EQ(f.corrected_pivots, 0);
+  EXPECT_TRUE(f.delayed_pivoting);
+  EXPECT_EQ(f.perturbed_pivots, 0);
+  const double kappa = test::condition_inf(a2);
+  EXPECT_LE(test::relative_difference(one.solve(b), ref), std::max(1e-12, 1e-14 * n * kappa));
+}
+
+// A numerically singular matrix: its correction's k×k matrix is singular, so delayed
+// pivoting factors it and reports the static pivots it needs at the root.
+TEST(PivotCorrection, SingularMatrixIsStillReported) {
+  auto rng = test::fresh_rng();
+  for (index_t n : {2, 5, 733}) {
+    SCOPED_TRACE("n=" + std::to_string(n));
+    const SparseMatrix pattern = test::random_pattern_with_diagonal(n, 3, rng);
+    Solver s(corrected_solves_only(n));
+    s.factorize(test::with_values(pattern, 20.0, rng));
+    SparseMatrix a2 = test::with_values(pattern, 0.0, rng);
+    const index_t dead = n / 2;
+    for (index_t j = 0; j < n; ++j)
+      for (index_t p = a2.offsets[j]; p < a2.offsets[j + 1]; ++p)
+        if (a2.indices[p] == dead) a2.values[p] = 0.0;
+    s.refactorize(a2);
+    EXPECT_EQ(s.stats().factor.corrected_pivots, 0);
+    EXPECT_GE(s.stats().factor.perturbed_pivots, 1);
+    EXPECT_FALSE(s.stats().factor.inertia_valid);
+  }
+}
+
+// The pivoting by name, as the CLI's --pivoting and the Python options give it.
+TEST(PivotCorrection, ParsedByName) {
+  Options o;
+  set_option(o, "pivoting", "corrected");
+  EXPECT_EQ(o.pivoting, Pivoting::corrected);
+  set_option(o, "max_corrected_pivots", "7");
+  EXPECT_EQ(o.max_corrected_pivots, 7);
+  set_option(o, "max_corrected_pivots", "-1");
+  EXPECT_THROW(validate(o), InvalidInput);
+}
+
+}  // namespace
+}  // namespace strata
