@@ -245,7 +245,7 @@ __device__ __forceinline__ void eliminate_with_interchanges(double (&a)[kPerThre
         for (int c = 0; c < kPerThread; ++c) a[c] = row[kLanes * c + q];
       }
       const double d = row[j];
-      if (!(fabs(d) >= static_pivot) || !(fabs(d) <= DBL_MAX)) {
+      if (!(fabs(d) >= fabs(static_pivot)) || !(fabs(d) <= DBL_MAX)) {
         if (threadIdx.x == 0) *sbad = 1;
         stop = true;
         break;
