@@ -167,6 +167,47 @@ TEST(PivotCorrection, ValuesChangingBySixDecadesBetweenRefactorizations) {
   }
 }
 
+// The same on a 9×9×9 grid's pattern with the default amalgamation: large fronts (the
+// recursive LU of the pivot block) meet the zero pivots.
+TEST(PivotCorrection, StaleMatchingInLargeFronts) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  std::uniform_real_distribution<double> u(-1, 1);
+  std::uniform_int_distribution<int> coin(0, 9);
+  const SparseMatrix pattern = expand_symmetric(generators::laplacian_3d(9, 9, 9));
+  const index_t n = pattern.n_rows;
+  SparseMatrix a2 = test::with_values(pattern, 1.0, rng);
+  for (index_t j = 0; j < n; ++j)
+    if (coin(rng) == 0)
+      for (index_t p = a2.offsets[j]; p < a2.offsets[j + 1]; ++p)
+        if (a2.indices[p] == j) a2.values[p] = 0.0;
+  std::vector<double> b(n);
+  for (double& v : b) v = u(rng);
+  std::vector<double> ref = b;
+  if (!test::dense_solve(test::to_dense(a2), n, ref, 1)) GTEST_SKIP() << "a singular draw";
+  const double kappa = test::condition_inf(a2);
+  Options o = corrected_solves_only(n);
+  o.relax_small = Options{}.relax_small;
+  o.relax_zeros_1 = Options{}.relax_zeros_1;
+  o.relax_zeros_2 = Options{}.relax_zeros_2;
+  o.relax_zeros_3 = Options{}.relax_zeros_3;
+  Solver s(o);
+  s.factorize(test::with_values(pattern, 20.0, rng));
+  s.refactorize(a2);
+  const FactorStats& f = s.stats().factor;
+  EXPECT_GT(f.fixed_order_perturbed_pivots, 0);
+  EXPECT_EQ(f.perturbed_pivots, 0);
+  if (!f.delayed_pivoting) EXPECT_EQ(f.corrected_pivots, f.fixed_order_perturbed_pivots);
+  double logdet = 0;
+  int sign = 0;
+  dense_logdet(a2, &logdet, &sign);
+  EXPECT_NEAR(f.log_abs_determinant, logdet, 1e-9 * std::max(1.0, std::abs(logdet)));
+  EXPECT_EQ(f.determinant_sign, sign);
+  EXPECT_LE(test::relative_difference(s.solve(b), ref), std::max(1e-12, 1e-14 * n * kappa));
+  RecordProperty("corrected pivots", std::to_string(f.corrected_pivots));
+}
+
 // A nonsingular 1×1 matrix needs no static pivot: nothing to correct.
 TEST(PivotCorrection, OneByOneNeedsNone) {
   auto rng = test::fresh_rng();
