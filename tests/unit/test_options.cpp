@@ -218,7 +218,7 @@ TEST(OptionsValidate, AnalysisRefusesBadOptions) {
 // written as text into a default Options and compared field by field.
 TEST(SetOption, EveryFieldRoundTripsThroughText) {
   const std::vector<std::string> names = option_fields();
-  EXPECT_EQ(names.size(), 49u);  // Options' fields but user_permutation
+  EXPECT_EQ(names.size(), 50u);  // Options' fields but user_permutation
   Options changed;
   for (const std::string& name : names) {
     const std::string before = get_option(changed, name);
@@ -254,6 +254,7 @@ TEST(SetOption, EveryFieldRoundTripsThroughText) {
   EXPECT_EQ(copy.ordering, OrderingMethod::amd);
   EXPECT_EQ(copy.backend, Backend::cuda);
   EXPECT_EQ(copy.pivoting, Pivoting::delayed);
+  EXPECT_EQ(copy.max_corrected_pivots, Options{}.max_corrected_pivots + 1);
   EXPECT_EQ(copy.nd_leaf_size, Options{}.nd_leaf_size + 1);
   EXPECT_EQ(copy.nd_separators, Options{}.nd_separators + 1);
   EXPECT_EQ(copy.pivot_threshold, Options{}.pivot_threshold / 2);
