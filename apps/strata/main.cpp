@@ -762,8 +762,7 @@ int main(int argc, char** argv) {
                    "pivots the analysis's order cannot take: fixed (static pivots), delayed "
                    "(delayed pivoting, on the host), corrected (static pivots shifted and "
                    "corrected in the solve, where the factor lives), automatic (default: "
-                   "delayed on the CPU; on a GPU corrected, then delayed until the next "
-                   "analysis once a correction could not be made)")
+                   "delayed on the CPU, corrected on a GPU)")
       ->check(choice<Pivoting>());
   simulate
       ->add_option("--solver-option", sim.solver_options,

@@ -51,7 +51,7 @@ bool find_shifted_pivots(const SolverState& s, std::vector<CorrectedEntry>& out)
           (scale ? an.col_scaling[e.col] : 1.0) * (rescale ? s.rescaling.col[e.col] : 1.0);
       out.push_back(e);
     }
-    if (found != np) {  // a pivot within τ of the shift that static pivoting did not make
+    if (found != np) {
       out.clear();
       return false;
     }

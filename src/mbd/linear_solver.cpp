@@ -37,9 +37,11 @@ class StrataLinearSolver : public LinearSolver {
     // size, contacts, rotations): on the host every factorization delays the pivots the
     // analysis's order cannot take (numeric/delayed.hpp). A GPU factors in that order and
     // corrects the static pivots it needs in the solve (Pivoting::corrected, on the
-    // device); where that cannot be done the delayed pivoting runs on the host, directly
-    // for the later factorizations of the same analysis (adaptive_), so that no pivot is
-    // perturbed and no new analysis is needed for them.
+    // device); a factorization whose pivots cannot be corrected (too many, or too
+    // ill-conditioned a correction: typically a few at a step-size change) delays them on
+    // the host, and the next one tries the GPU again. So no pivot is perturbed and no new
+    // analysis is needed for them. An analysis that Backend::automatic put on the host
+    // delays pivots directly (delaying_).
     if (o.pivoting == Pivoting::automatic)
       o.pivoting = solver_on_gpu(o.backend) ? Pivoting::corrected : Pivoting::delayed;
     return o;
@@ -91,10 +93,7 @@ class StrataLinearSolver : public LinearSolver {
   }
   index_t perturbed_pivots() const override { return solver_.stats().factor.perturbed_pivots; }
   double backward_error() const override { return solver_.stats().solve.backward_error; }
-  void factorized() {
-    fresh_ = false;
-    if (adaptive_ && solver_.stats().factor.delayed_pivoting) set_delaying(true);
-  }
+  void factorized() { fresh_ = false; }
   std::string describe() const override {
     const FactorStats& f = solver_.stats().factor;
     if (f.type == MatrixType::symmetric_indefinite)
@@ -107,7 +106,7 @@ class StrataLinearSolver : public LinearSolver {
 
  private:
   Solver solver_;
-  bool adaptive_ = false;  // automatic pivoting until delaying_ (see options())
+  bool adaptive_ = false;  // the engine's choice of pivoting, delaying_ on the host (options())
   bool delaying_ = false;
   bool fresh_ = true;
 };

@@ -67,9 +67,8 @@ class LinearSolver {
   /// for a solver that does not condense).
   virtual double condensation_seconds() const { return 0; }
   /// Adaptive pivoting (strata on a GPU without a pivoting choice): whether the
-  /// factorizations delay pivots directly, a factorization since the last analyze having
-  /// needed delayed pivoting (static pivots its correction could not take). A checkpoint keeps it
-  /// so that a restart factors as the uninterrupted run did.
+  /// factorizations delay pivots directly (the last analyze put the factor on the host). A
+  /// checkpoint keeps it so that a restart factors as the uninterrupted run did.
   virtual bool delaying() const { return false; }
   virtual void set_delaying(bool) {}
 };
@@ -87,11 +86,11 @@ Options engine_solver_options();
 /// strata's multifrontal LU of the Newton matrix (MatrixType::general) with options `o`.
 /// Pivoting::automatic (the default) is the engine's choice: delayed pivoting on the host
 /// for every factorization, and on a GPU Pivoting::corrected (the fixed order, its static
-/// pivots corrected in the solve) until a factorization cannot be corrected and needs
-/// delayed pivoting (run on the host), delayed from then until the next analyze
-/// (LinearSolver::delaying); Pivoting::fixed, delayed and corrected as Options::pivoting
-/// says. Throws InvalidInput when o.type is neither automatic nor general (the Newton
-/// matrix is unsymmetric) or when validate(o) refuses a field.
+/// pivots corrected in the solve; delayed pivoting on the host for a factorization whose
+/// pivots cannot be corrected), or delayed pivoting directly where Backend::automatic put
+/// the analysis on the host (LinearSolver::delaying); Pivoting::fixed, delayed and
+/// corrected as Options::pivoting says. Throws InvalidInput when o.type is neither automatic nor
+/// general (the Newton matrix is unsymmetric) or when validate(o) refuses a field.
 std::unique_ptr<LinearSolver> make_strata_solver(const Options& o);
 /// strata's multifrontal L D Lᵀ (MatrixType::symmetric_indefinite: restricted Bunch–Kaufman
 /// 1×1/2×2 pivots in the analysis's order; where that order needs static pivots, delayed

@@ -1,7 +1,7 @@
 // strata::mbd on the CUDA backend: the engine's Newton loop on a GPU factors in the
 // analysis's order and corrects the static pivots a refactorization needs in the solve
-// (Pivoting::corrected), delaying pivots on the host only where that cannot be done, until
-// the next analysis (mbd/linear_solver.hpp). No analysis is made for perturbed pivots, none
+// (Pivoting::corrected), delaying pivots on the host only in a factorization where that
+// cannot be done (mbd/linear_solver.hpp). No analysis is made for perturbed pivots, none
 // are left, and the trajectory equals the CPU backend's (which delays pivots at every
 // refactorization).
 #include <gtest/gtest.h>
