@@ -32,9 +32,9 @@
 // diag(c_{j_l})), a k×k matrix of order one whatever A's scaling, and its LU with partial
 // pivoting and reciprocal condition number (LAPACK getrf, gecon). Per solve, after
 // x = F⁻¹b: t_l = x(j_l)/c_{j_l}, y = S⁻¹t, x += W·y. S is singular exactly when A is
-// (det A = det F · Π σ_l · det S); an S whose reciprocal condition is below √u (A nearly
-// singular, or F so ill-conditioned that S's entries come from cancellation) sends the
-// factorization to delayed pivoting, which reports A's numerical singularity where there
+// (det A = det F · Π σ_l · det S); an S whose reciprocal condition is below 10⁻³ (its
+// solves would lose more than three digits: A nearly singular, or F so ill-conditioned
+// that S's entries come from cancellation) sends the factorization to delayed pivoting, which reports A's numerical singularity where there
 // is one. The formula is not backward stable in general (Yip, SIAM J. Sci. Stat. Comput.
 // 7 (1986)): its error grows with the conditioning of F and S, which is why k is bounded
 // (Options::max_corrected_pivots) and solves are refined as Options::solve_check says.
@@ -81,7 +81,7 @@ bool find_shifted_pivots(const SolverState& s, std::vector<CorrectedEntry>& out)
 /// Completes c for its entries and the factor of A + E just made: W by one call of
 /// `apply_factor` (x = F⁻¹b for n × nrhs columns, original numbering, no correction), S
 /// and its LU. Returns true and sets c.active when S's reciprocal condition number is at
-/// least √u (its solves keep at least half of the digits), else false.
+/// least 10⁻³ (its solves lose at most three digits), else false.
 bool build_correction(
     PivotCorrection& c, index_t n,
     const std::function<void(const double* b, double* x, index_t nrhs)>& apply_factor);
