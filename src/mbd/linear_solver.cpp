@@ -21,7 +21,8 @@ class StrataLinearSolver : public LinearSolver {
   StrataLinearSolver(const Options& o, MatrixType type)
       : solver_(options(o, type)),
         adaptive_(type == MatrixType::general && o.pivoting == Pivoting::automatic &&
-                  solver_on_gpu(o.backend)) {}
+                  solver_on_gpu(o.backend)),
+        max_corrected_(o.max_corrected_pivots) {}
   static Options options(Options o, MatrixType type) {
     if (o.type != MatrixType::automatic && o.type != type)
       throw InvalidInput(std::string(type == MatrixType::general
@@ -37,11 +38,11 @@ class StrataLinearSolver : public LinearSolver {
     // size, contacts, rotations): on the host every factorization delays the pivots the
     // analysis's order cannot take (numeric/delayed.hpp). A GPU factors in that order and
     // corrects the static pivots it needs in the solve (Pivoting::corrected, on the
-    // device); a factorization whose pivots cannot be corrected (too many, or too
-    // ill-conditioned a correction: typically a few at a step-size change) delays them on
-    // the host, and the next one tries the GPU again. So no pivot is perturbed and no new
-    // analysis is needed for them. An analysis that Backend::automatic put on the host
-    // delays pivots directly (delaying_).
+    // device); a factorization whose correction is too ill-conditioned delays its pivots on
+    // the host, and the next one tries the GPU again; one that needs more static pivots
+    // than a correction takes makes the later factorizations of the same analysis delay
+    // pivots directly (delaying_), as does an analysis that Backend::automatic put on the
+    // host. So no pivot is perturbed and no new analysis is needed for them.
     if (o.pivoting == Pivoting::automatic)
       o.pivoting = solver_on_gpu(o.backend) ? Pivoting::corrected : Pivoting::delayed;
     return o;
@@ -93,7 +94,14 @@ class StrataLinearSolver : public LinearSolver {
   }
   index_t perturbed_pivots() const override { return solver_.stats().factor.perturbed_pivots; }
   double backward_error() const override { return solver_.stats().solve.backward_error; }
-  void factorized() { fresh_ = false; }
+  void factorized() {
+    fresh_ = false;
+    // more static pivots than a correction takes: the analysis's order is far from what
+    // these values need, and the next factorizations would try the GPU for nothing
+    const FactorStats& f = solver_.stats().factor;
+    if (adaptive_ && f.delayed_pivoting && f.fixed_order_perturbed_pivots > max_corrected_)
+      set_delaying(true);
+  }
   std::string describe() const override {
     const FactorStats& f = solver_.stats().factor;
     if (f.type == MatrixType::symmetric_indefinite)
@@ -106,7 +114,8 @@ class StrataLinearSolver : public LinearSolver {
 
  private:
   Solver solver_;
-  bool adaptive_ = false;  // the engine's choice of pivoting, delaying_ on the host (options())
+  bool adaptive_ = false;      // the engine's choice of pivoting, delaying_ on the host (options())
+  index_t max_corrected_ = 0;  // Options::max_corrected_pivots
   bool delaying_ = false;
   bool fresh_ = true;
 };

@@ -67,7 +67,8 @@ class LinearSolver {
   /// for a solver that does not condense).
   virtual double condensation_seconds() const { return 0; }
   /// Adaptive pivoting (strata on a GPU without a pivoting choice): whether the
-  /// factorizations delay pivots directly (the last analyze put the factor on the host). A
+  /// factorizations delay pivots directly (the last analyze put the factor on the host, or
+  /// a factorization since needed more static pivots than a correction takes). A
   /// checkpoint keeps it so that a restart factors as the uninterrupted run did.
   virtual bool delaying() const { return false; }
   virtual void set_delaying(bool) {}
@@ -87,10 +88,11 @@ Options engine_solver_options();
 /// Pivoting::automatic (the default) is the engine's choice: delayed pivoting on the host
 /// for every factorization, and on a GPU Pivoting::corrected (the fixed order, its static
 /// pivots corrected in the solve; delayed pivoting on the host for a factorization whose
-/// pivots cannot be corrected), or delayed pivoting directly where Backend::automatic put
-/// the analysis on the host (LinearSolver::delaying); Pivoting::fixed, delayed and
-/// corrected as Options::pivoting says. Throws InvalidInput when o.type is neither automatic nor
-/// general (the Newton matrix is unsymmetric) or when validate(o) refuses a field.
+/// pivots cannot be corrected, and for every later one of the same analysis once one
+/// needed more than Options::max_corrected_pivots), or delayed pivoting directly where
+/// Backend::automatic put the analysis on the host (LinearSolver::delaying); Pivoting::fixed,
+/// delayed and corrected as Options::pivoting says. Throws InvalidInput when o.type is neither
+/// automatic nor general (the Newton matrix is unsymmetric) or when validate(o) refuses a field.
 std::unique_ptr<LinearSolver> make_strata_solver(const Options& o);
 /// strata's multifrontal L D Lᵀ (MatrixType::symmetric_indefinite: restricted Bunch–Kaufman
 /// 1×1/2×2 pivots in the analysis's order; where that order needs static pivots, delayed
