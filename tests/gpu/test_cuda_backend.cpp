@@ -2447,11 +2447,7 @@ TEST_F(CudaBackend, CorrectedStaticPivotsAsOnTheCpu) {
     const SparseMatrix pattern = large ? grid : test::random_pattern_with_diagonal(n, 3, rng);
     const SparseMatrix a1 = test::with_values(pattern, 20.0, rng);
     SparseMatrix a2 = test::with_values(pattern, 8.0, rng);
-    std::uniform_int_distribution<int> coin(0, large ? 9 : 49);  // one zero in 10 or 50
-    for (index_t j = 0; j < n; ++j)
-      if (n < 10 || coin(rng) == 0)
-        for (index_t p = a2.offsets[j]; p < a2.offsets[j + 1]; ++p)
-          if (a2.indices[p] == j) a2.values[p] = 0.0;
+    test::zero_some_diagonal(a2, n < 10 ? 1 : large ? 10 : 50, rng);
     std::vector<double> b(n);
     for (double& v : b) v = u(rng);
     std::vector<double> ref = b;

@@ -44,23 +44,6 @@ Options delayed_solves_only() {
   return o;
 }
 
-// log|det A| and its sign from LAPACK's dgetrf on the dense copy.
-void dense_logdet(const SparseMatrix& a, double* logdet, int* sign) {
-  std::vector<double> d = test::to_dense(a);
-  const int n = static_cast<int>(a.n_rows);
-  std::vector<int> ipiv(n);
-  int info = 0;
-  dgetrf_(&n, &n, d.data(), &n, ipiv.data(), &info);
-  *logdet = 0;
-  *sign = 1;
-  for (int i = 0; i < n; ++i) {
-    const double u = d[i + static_cast<std::size_t>(i) * n];
-    *logdet += std::log(std::abs(u));
-    if (u < 0) *sign = -*sign;
-    if (ipiv[i] != i + 1) *sign = -*sign;
-  }
-}
-
 // ‖A‖∞·‖x‖∞/‖b‖∞: a lower bound on κ∞(A) that sets the forward-error tolerance.
 double kappa_lower(const SparseMatrix& a, const std::vector<double>& x,
                    const std::vector<double>& b) {
@@ -109,7 +92,7 @@ TEST(DelayedPivoting, StaleMatchingFactorsWithoutStaticPivots) {
     EXPECT_TRUE(f.inertia_valid);
     double logdet = 0;
     int sign = 0;
-    dense_logdet(a2, &logdet, &sign);
+    test::dense_logdet(a2, &logdet, &sign);
     EXPECT_NEAR(f.log_abs_determinant, logdet, 1e-9 * std::max(1.0, std::abs(logdet)));
     EXPECT_EQ(f.determinant_sign, sign);
     const std::vector<double> x = s.solve(b);
@@ -510,7 +493,7 @@ TEST(DelayedPivoting, AnalysisInThePivotOrderFactorsInTheFixedOrder) {
       EXPECT_TRUE(f.inertia_valid);
       double logdet = 0;
       int sign = 0;
-      dense_logdet(m.stale, &logdet, &sign);
+      test::dense_logdet(m.stale, &logdet, &sign);
       EXPECT_NEAR(f.log_abs_determinant, logdet, 1e-9 * std::max(1.0, std::abs(logdet)));
       EXPECT_EQ(f.determinant_sign, sign);
       std::vector<double> x = s.solve(m.b);
@@ -571,7 +554,7 @@ TEST(DelayedPivoting, SymmetricIndefiniteStaleAnalysisKeepsTheInertia) {
     ASSERT_TRUE(test::dense_solve(test::to_dense(k.kkt), n, ref, 1));
     double logdet = 0;
     int sign = 0;
-    dense_logdet(k.kkt, &logdet, &sign);
+    test::dense_logdet(k.kkt, &logdet, &sign);
     for (Pivoting pivoting : {Pivoting::automatic, Pivoting::delayed}) {
       SCOPED_TRACE(pivoting == Pivoting::delayed ? "delayed" : "automatic");
       Options o = ldlt_leaf_fronts();

@@ -38,23 +38,6 @@ Options corrected_solves_only(index_t max_corrected) {
   return o;
 }
 
-// log|det A| and its sign from LAPACK's dgetrf on the dense copy.
-void dense_logdet(const SparseMatrix& a, double* logdet, int* sign) {
-  std::vector<double> d = test::to_dense(a);
-  const int n = static_cast<int>(a.n_rows);
-  std::vector<int> ipiv(n);
-  int info = 0;
-  dgetrf_(&n, &n, d.data(), &n, ipiv.data(), &info);
-  *logdet = 0;
-  *sign = 1;
-  for (int i = 0; i < n; ++i) {
-    const double u = d[i + static_cast<std::size_t>(i) * n];
-    *logdet += std::log(std::abs(u));
-    if (u < 0) *sign = -*sign;
-    if (ipiv[i] != i + 1) *sign = -*sign;
-  }
-}
-
 // The analysis is made for a dominant diagonal (the matching takes it); the values
 // refactorized have some zero diagonal entries, so that the analysis's order meets zero
 // pivots: corrected (a few of them, as in the engine's Newton matrices), or, where the
@@ -72,11 +55,7 @@ TEST(PivotCorrection, StaleMatchingSolvedThroughTheCorrection) {
     const SparseMatrix a1 = test::with_values(pattern, 20.0, rng);
     // values of another draw, and one diagonal entry in fifty zero (all of them for n < 10)
     SparseMatrix a2 = test::with_values(pattern, 8.0, rng);
-    std::uniform_int_distribution<int> coin(0, 49);
-    for (index_t j = 0; j < n; ++j)
-      if (n < 10 || coin(rng) == 0)
-        for (index_t p = a2.offsets[j]; p < a2.offsets[j + 1]; ++p)
-          if (a2.indices[p] == j) a2.values[p] = 0.0;
+    test::zero_some_diagonal(a2, n < 10 ? 1 : 50, rng);
     const int nrhs = 3;
     std::vector<double> b(static_cast<std::size_t>(n) * nrhs);
     for (double& v : b) v = u(rng);
@@ -100,7 +79,7 @@ TEST(PivotCorrection, StaleMatchingSolvedThroughTheCorrection) {
     EXPECT_TRUE(f.inertia_valid);
     double logdet = 0;
     int sign = 0;
-    dense_logdet(a2, &logdet, &sign);
+    test::dense_logdet(a2, &logdet, &sign);
     EXPECT_NEAR(f.log_abs_determinant, logdet, 1e-9 * std::max(1.0, std::abs(logdet)));
     EXPECT_EQ(f.determinant_sign, sign);
 
@@ -181,14 +160,10 @@ TEST(PivotCorrection, StaleMatchingInLargeFronts) {
   auto rng = test::fresh_rng(&seed);
   SCOPED_TRACE("seed " + std::to_string(seed));
   std::uniform_real_distribution<double> u(-1, 1);
-  std::uniform_int_distribution<int> coin(0, 9);
   const SparseMatrix pattern = expand_symmetric(generators::laplacian_3d(9, 9, 9));
   const index_t n = pattern.n_rows;
   SparseMatrix a2 = test::with_values(pattern, 8.0, rng);
-  for (index_t j = 0; j < n; ++j)
-    if (coin(rng) == 0)
-      for (index_t p = a2.offsets[j]; p < a2.offsets[j + 1]; ++p)
-        if (a2.indices[p] == j) a2.values[p] = 0.0;
+  test::zero_some_diagonal(a2, 10, rng);
   std::vector<double> b(n);
   for (double& v : b) v = u(rng);
   std::vector<double> ref = b;
@@ -208,7 +183,7 @@ TEST(PivotCorrection, StaleMatchingInLargeFronts) {
   if (!f.delayed_pivoting) EXPECT_EQ(f.corrected_pivots, f.fixed_order_perturbed_pivots);
   double logdet = 0;
   int sign = 0;
-  dense_logdet(a2, &logdet, &sign);
+  test::dense_logdet(a2, &logdet, &sign);
   EXPECT_NEAR(f.log_abs_determinant, logdet, 1e-9 * std::max(1.0, std::abs(logdet)));
   EXPECT_EQ(f.determinant_sign, sign);
   EXPECT_LE(test::relative_difference(s.solve(b), ref), std::max(1e-12, 1e-14 * n * kappa));
@@ -234,14 +209,10 @@ TEST(PivotCorrection, OneByOneNeedsNone) {
 TEST(PivotCorrection, TooManyPivotsGoToDelayedPivoting) {
   auto rng = test::fresh_rng();
   std::uniform_real_distribution<double> u(-1, 1);
-  std::uniform_int_distribution<int> coin(0, 9);
   const index_t n = 733;
   const SparseMatrix pattern = test::random_pattern_with_diagonal(n, 3, rng);
   SparseMatrix a2 = test::with_values(pattern, 1.0, rng);
-  for (index_t j = 0; j < n; ++j)
-    if (coin(rng) == 0)
-      for (index_t p = a2.offsets[j]; p < a2.offsets[j + 1]; ++p)
-        if (a2.indices[p] == j) a2.values[p] = 0.0;
+  test::zero_some_diagonal(a2, 10, rng);
   std::vector<double> b(n);
   for (double& v : b) v = u(rng);
   std::vector<double> ref = b;

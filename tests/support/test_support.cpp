@@ -349,6 +349,31 @@ bool dense_solve(std::vector<double> a, index_t n, std::vector<double>& b, index
   return info == 0;
 }
 
+void dense_logdet(const SparseMatrix& a, double* logdet, int* sign) {
+  std::vector<double> d = to_dense(a);
+  const int n = static_cast<int>(a.n_rows);
+  std::vector<int> ipiv(std::max(n, 1));
+  int info = 0;
+  dgetrf_(&n, &n, d.data(), &n, ipiv.data(), &info);
+  *logdet = 0;
+  *sign = 1;
+  for (int i = 0; i < n; ++i) {
+    const double u = d[i + static_cast<std::size_t>(i) * n];
+    *logdet += std::log(std::abs(u));
+    if (u < 0) *sign = -*sign;
+    if (u == 0) *sign = 0;
+    if (ipiv[i] != i + 1) *sign = -*sign;
+  }
+}
+
+void zero_some_diagonal(SparseMatrix& a, int one_in, std::mt19937_64& rng) {
+  std::uniform_int_distribution<int> coin(0, std::max(one_in, 1) - 1);
+  for (index_t j = 0; j < a.n_cols; ++j)
+    if (coin(rng) == 0)
+      for (index_t p = a.offsets[j]; p < a.offsets[j + 1]; ++p)
+        if (a.indices[p] == j) a.values[p] = 0.0;
+}
+
 double condition_inf(const SparseMatrix& a) {
   const index_t n = a.n_cols;
   if (n == 0) return 0.0;

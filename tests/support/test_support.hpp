@@ -133,6 +133,14 @@ std::vector<double> to_dense(const SparseMatrix& a);
 /// dgesv reports a singular matrix.
 bool dense_solve(std::vector<double> a, index_t n, std::vector<double>& b, index_t nrhs);
 
+/// log|det A| and its sign from LAPACK's dgetrf of a dense copy (sign 0 when singular).
+void dense_logdet(const SparseMatrix& a, double* logdet, int* sign);
+
+/// Sets to zero, in place, the diagonal entry of every column of A (square, full storage,
+/// pattern kept) with probability 1/one_in (every column for one_in ≤ 1): pivots an
+/// analysis made with a dominant diagonal cannot take.
+void zero_some_diagonal(SparseMatrix& a, int one_in, std::mt19937_64& rng);
+
 /// κ∞(A) = ‖A‖∞‖A⁻¹‖∞ as LAPACK estimates it on a dense copy (dgetrf, then dgecon:
 /// Higham's estimator of ‖A⁻¹‖₁ on Aᵀ), for tolerances that follow the conditioning;
 /// +∞ when dgetrf finds A singular. O(n³): for matrices of a few thousand rows.
