@@ -62,7 +62,7 @@ enum class Pivoting {
 /// When a solve checks the solution it returns (see Options::solve_check).
 enum class SolveCheck {
   always,                  ///< the backward error of every solution, refinement, GMRES
-  after_perturbed_pivots,  ///< only when the factorization perturbed pivots
+  after_perturbed_pivots,  ///< only when the factorization perturbed pivots or corrected them
 };
 
 /// Options of every phase. Units: bytes for memory, seconds for time.
@@ -356,7 +356,8 @@ struct Options {
   // --- solve ---
   /// When the solve computes the backward error of its solution (one product with A per
   /// right-hand side) and refines it. always (default): every solve.
-  /// after_perturbed_pivots: only after a factorization that perturbed pivots; otherwise
+  /// after_perturbed_pivots: only after a factorization that perturbed pivots or corrected
+  /// them (Pivoting::corrected: the low-rank correction is not backward stable); otherwise
   /// x is the factor's solution as it is (no product with A, no refinement) and
   /// SolveStats::backward_error is NaN (not computed). For callers that check their
   /// solutions themselves: a Newton iteration recomputes its residual at the next iterate

@@ -298,9 +298,12 @@ void solve_phase(SolverState& s, const double* b, double* x, index_t nrhs) {
   Timer timer;
   const index_t n = s.analysis->n;
   const Options& o = s.options;
-  // Options::solve_check: after a factorization without perturbed pivots the caller may
-  // take the factor's solution unchecked
-  const bool check = o.solve_check == SolveCheck::always || s.stats.factor.perturbed_pivots > 0;
+  // Options::solve_check: after a factorization without perturbed or corrected pivots the
+  // caller may take the factor's solution unchecked. A corrected solve is checked: the
+  // Sherman–Morrison–Woodbury formula is not backward stable (Yip 1986), and the fixed
+  // order's factor of A + E bounds no growth.
+  const bool check = o.solve_check == SolveCheck::always || s.stats.factor.perturbed_pivots > 0 ||
+                     s.correction.active;
   const bool b_gpu = numeric::device_memory_of(b) >= 0, x_gpu = numeric::device_memory_of(x) >= 0;
   if (b_gpu || x_gpu) {
     solve_gpu_arrays(s, b, x, nrhs, b_gpu, x_gpu, check, timer);

@@ -325,6 +325,16 @@ void Integrator::factorize(StepInfo& info, const BdfTerms& bdf, double t) {
       ++stats_.corrected_factorizations;
       stats_.corrected_pivots += f.corrected_pivots;
     }
+    if (opts_.verbose && f.fixed_order_perturbed_pivots > 0)
+      fmt::print(stderr,
+                 "t = {:.9g} step {}: the analysis's order needed {} static pivots: {} ({:.3f} "
+                 "s)\n",
+                 t, step_ + 1, f.fixed_order_perturbed_pivots,
+                 f.corrected_pivots > 0 ? fmt::format("corrected in the solves")
+                 : f.delayed_pivoting   ? fmt::format("delayed pivoting ({} delayed, {} perturbed)",
+                                                      f.delayed_pivots, f.perturbed_pivots)
+                                        : fmt::format("left perturbed"),
+                 tf.seconds());
     stats_.factor_input_seconds += f.input_seconds;
     stats_.factor_device_seconds += f.device_seconds;
     stats_.values_on_device_factorizations += f.values_scaled_on_device ? 1 : 0;
