@@ -330,10 +330,13 @@ struct Options {
   /// known exactly; each solve then corrects x = (A + E)⁻¹b to A⁻¹b by the
   /// Sherman–Morrison–Woodbury formula (Golub & Van Loan, "Matrix Computations", 4th ed.,
   /// §2.1.4): k solves and a k×k LU at the factorization, one k-column product per solve.
-  /// Delayed pivoting on the host instead when the pivot's entry is not in A's pattern,
-  /// more than max_corrected_pivots are needed, new static pivots remain after three such
-  /// rounds, or the k×k matrix is singular to working precision (A numerically singular).
-  /// The choice depends on the values alone, as automatic's does.
+  /// Delayed pivoting on the host instead when more than max_corrected_pivots are needed,
+  /// the k×k matrix is singular to working precision (A numerically singular), or
+  /// the corrected solve of a fixed probe b = A·x̂ misses the backward error that a checked
+  /// solve must reach (max(refinement_tolerance, (m+1)·u), m the most entries in a row) within
+  /// one step of refinement.
+  /// Corrected solves are always checked and refined. The choice depends on the values
+  /// alone, as automatic's does.
   Pivoting pivoting = Pivoting::automatic;
   /// Pivoting::corrected: the most static pivots corrected by the solve's low-rank update
   /// (each costs one more solve at the factorization). Default 64.

@@ -70,17 +70,25 @@ bool find_shifted_pivots(const SolverState& s, std::vector<CorrectedEntry>& out)
 
 bool build_correction(
     PivotCorrection& c, index_t n,
-    const std::function<void(const double* b, double* x, index_t nrhs)>& apply_factor) {
+    const std::function<void(const double* b, double* x, index_t nrhs)>& apply_factor,
+    const double* probe_b, double* probe_x) {
   c.active = false;
   const index_t k = c.k();
   if (k == 0) return false;
   const std::size_t nk = static_cast<std::size_t>(n) * static_cast<std::size_t>(k);
-  // W = F⁻¹·U·D_r⁻¹: column m solves with e_{i_m} / r_{i_m}
-  std::vector<double> u(nk, 0.0);
+  const index_t columns = k + (probe_b ? 1 : 0);
+  // W = F⁻¹·U·D_r⁻¹: column m solves with e_{i_m} / r_{i_m}; the probe's right-hand side
+  // as column k of the same solve
+  std::vector<double> u(nk + (probe_b ? n : 0), 0.0);
   for (index_t m = 0; m < k; ++m)
     u[static_cast<std::size_t>(m) * n + c.entries[m].row] = 1.0 / c.entries[m].row_scale;
-  c.w.resize(nk);
-  apply_factor(u.data(), c.w.data(), k);
+  if (probe_b) std::copy(probe_b, probe_b + n, u.begin() + static_cast<std::ptrdiff_t>(nk));
+  c.w.resize(nk + (probe_b ? n : 0));
+  apply_factor(u.data(), c.w.data(), columns);
+  if (probe_b) {
+    std::copy(c.w.begin() + static_cast<std::ptrdiff_t>(nk), c.w.end(), probe_x);
+    c.w.resize(nk);
+  }
   for (double v : c.w)
     if (!std::isfinite(v)) return false;
   // S = D_c⁻¹·(Γ⁻¹ − Vᵀ·F⁻¹·U)·D_r⁻¹: S_lm = δ_lm/σ_l − W(j_l, m) / c_{j_l}
@@ -116,7 +124,12 @@ bool build_correction(
     if (c.ipiv[l] != l + 1) c.det_sign = -c.det_sign;
   }
   c.active = true;
+  if (probe_b) apply_correction(c, n, probe_x, 1);
   return true;
+}
+
+void correction_probe(index_t n, double* x_hat) {
+  for (index_t i = 0; i < n; ++i) x_hat[i] = (i % 2 ? -1.0 : 1.0) * (1.0 + 0.5 * (i % 3));
 }
 
 void apply_correction(const PivotCorrection& c, index_t n, double* x, index_t nrhs) {

@@ -34,10 +34,15 @@
 // x = F⁻¹b: t_l = x(j_l)/c_{j_l}, y = S⁻¹t, x += W·y. S is singular exactly when A is
 // (det A = det F · Π σ_l · det S); an S whose reciprocal condition is below 10⁻³ (its
 // solves would lose more than three digits: A nearly singular, or F so ill-conditioned
-// that S's entries come from cancellation) sends the factorization to delayed pivoting, which reports A's numerical singularity where there
-// is one. The formula is not backward stable in general (Yip, SIAM J. Sci. Stat. Comput.
-// 7 (1986)): its error grows with the conditioning of F and S, which is why k is bounded
-// (Options::max_corrected_pivots) and solves are refined as Options::solve_check says.
+// that S's entries come from cancellation) sends the factorization to delayed pivoting,
+// which reports A's numerical singularity where there is one. The formula is not backward
+// stable in general (Yip, SIAM J. Sci. Stat. Comput. 7 (1986)): its error grows with the
+// conditioning of F and S, and F, the fixed order's factor of A + E, may grow where the
+// analysis's stale matching leaves small pivots that are not static ones. So k is bounded
+// (Options::max_corrected_pivots), the factorization's W-solve carries one more column, a
+// probe b = A·x̂ whose corrected solution must reach the backward error of a checked solve
+// within one refinement step (else delayed pivoting takes over), and every corrected solve is
+// checked and refined.
 #pragma once
 
 #include <functional>
@@ -80,11 +85,22 @@ bool find_shifted_pivots(const SolverState& s, std::vector<CorrectedEntry>& out)
 
 /// Completes c for its entries and the factor of A + E just made: W by one call of
 /// `apply_factor` (x = F⁻¹b for n × nrhs columns, original numbering, no correction), S
-/// and its LU. Returns true and sets c.active when S's reciprocal condition number is at
-/// least 10⁻³ (its solves lose at most three digits), else false.
+/// and its LU. With `probe_b` (n entries, or null) the same call also solves with it, and
+/// `probe_x` (n entries) receives the corrected solution A⁻¹·probe_b. Returns true and
+/// sets c.active when S's reciprocal condition number is at least 10⁻³ (its solves lose at
+/// most three digits), else false (probe_x then unspecified).
 bool build_correction(
     PivotCorrection& c, index_t n,
-    const std::function<void(const double* b, double* x, index_t nrhs)>& apply_factor);
+    const std::function<void(const double* b, double* x, index_t nrhs)>& apply_factor,
+    const double* probe_b = nullptr, double* probe_x = nullptr);
+
+/// The probe solution x̂ of a correction's test (n entries, none zero, of one sign pattern
+/// that no structure of A favours): x̂_i = (−1)^i·(1 + (i mod 3)/2). A correction is kept
+/// only when its solve of A·x = A·x̂ reaches the backward error every checked solve must
+/// reach (Options::refinement_tolerance, or the rounding floor) within one refinement
+/// step: the rcond test of S bounds S's
+/// own error, not the growth in the fixed order's factor of A + E.
+void correction_probe(index_t n, double* x_hat);
 
 /// x (n × nrhs, column-major, original numbering) = F⁻¹b on entry, A⁻¹b on return.
 void apply_correction(const PivotCorrection& c, index_t n, double* x, index_t nrhs);

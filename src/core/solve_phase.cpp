@@ -139,25 +139,6 @@ bool apply_inverse(SolverState& s, const double* b, double* x, index_t nrhs) {
   return on_device;
 }
 
-// (m+1)·u for the most entries m in a row of the factorized matrix (see solve_phase); m is
-// computed once per analyzed pattern.
-double rounding_floor(SolverState& s) {
-  if (s.row_entries_of != s.values_analysis || s.max_row_entries == 0) {
-    const SparseMatrix& c = s.values;
-    std::vector<index_t> count(c.n_rows, 0);
-    for (index_t j = 0; j < c.n_cols; ++j)
-      for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) {
-        ++count[c.indices[p]];
-        if (c.storage != Storage::full && c.indices[p] != j) ++count[j];
-      }
-    index_t m = 0;
-    for (index_t k : count) m = std::max(m, k);
-    s.max_row_entries = std::max<index_t>(m, 1);
-    s.row_entries_of = s.values_analysis;
-  }
-  return static_cast<double>(s.max_row_entries + 1) * kUnitRoundoff;
-}
-
 // After the first application of the factor (x = A⁻¹ b, host arrays, its seconds and
 // whether it ran on the device): the backward error of each column, refinement, GMRES
 // where it stalls (solve/refinement.hpp) when `check`, and the statistics.
@@ -289,6 +270,23 @@ void solve_gpu_arrays(SolverState& s, const double* b, double* x, index_t nrhs, 
 }
 
 }  // namespace
+
+double rounding_floor(SolverState& s) {
+  if (s.row_entries_of != s.values_analysis || s.max_row_entries == 0) {
+    const SparseMatrix& c = s.values;
+    std::vector<index_t> count(c.n_rows, 0);
+    for (index_t j = 0; j < c.n_cols; ++j)
+      for (index_t p = c.offsets[j]; p < c.offsets[j + 1]; ++p) {
+        ++count[c.indices[p]];
+        if (c.storage != Storage::full && c.indices[p] != j) ++count[j];
+      }
+    index_t m = 0;
+    for (index_t k : count) m = std::max(m, k);
+    s.max_row_entries = std::max<index_t>(m, 1);
+    s.row_entries_of = s.values_analysis;
+  }
+  return static_cast<double>(s.max_row_entries + 1) * kUnitRoundoff;
+}
 
 // The solve phase: one solve with the factor, iterative refinement, GMRES if it stalls.
 void solve_phase(SolverState& s, const double* b, double* x, index_t nrhs) {

@@ -47,6 +47,7 @@
 #include "numeric/driver.hpp"
 #include "numeric/factor.hpp"
 #include "ordering/matching.hpp"
+#include "solve/refinement.hpp"
 #include "sparse/canonical.hpp"
 
 namespace strata {
@@ -413,16 +414,45 @@ double prepare_values(SolverState& s, const SparseMatrix* a, std::span<const dou
 // (numeric/static_pivot.hpp): the low-rank correction of its solves
 // (core/pivot_correction.hpp). Returns true when s.correction is active; false (cleared)
 // when delayed pivoting must take over: the pivots could not all be told, there are more
-// than Options::max_corrected_pivots, or A is singular to working precision.
+// than Options::max_corrected_pivots, A is singular to working precision, or the corrected
+// solve of the probe b = A·x̂ (correction_probe) misses the backward error that a checked
+// solve must reach, max(Options::refinement_tolerance, rounding floor), even after one
+// step of refinement (none where Options::refinement_max_steps is 0): later solves would
+// then need several steps or GMRES, where the delayed factor needs none.
 bool correct_shifted_pivots(SolverState& s) {
   detail::PivotCorrection& c = s.correction;
   c.clear();
-  const bool done =
-      detail::find_shifted_pivots(s, c.entries) &&
-      c.k() <= static_cast<index_t>(s.options.max_corrected_pivots) &&
-      detail::build_correction(c, s.analysis->n, [&](const double* b, double* x, index_t nrhs) {
-        detail::apply_factor(s, b, x, nrhs);
-      });
+  const index_t n = s.analysis->n;
+  if (!detail::find_shifted_pivots(s, c.entries) ||
+      c.k() > static_cast<index_t>(s.options.max_corrected_pivots)) {
+    c.clear();
+    return false;
+  }
+  host_values(s);  // the probe's matrix
+  std::vector<double> x_hat(n), b(n), x(n);
+  detail::correction_probe(n, x_hat.data());
+  multiply(s.values, x_hat.data(), b.data());
+  bool done = detail::build_correction(
+      c, n,
+      [&](const double* rhs, double* sol, index_t nrhs) {
+        detail::apply_factor(s, rhs, sol, nrhs);
+      },
+      b.data(), x.data());
+  if (done) {  // the probe's solve as a checked solve would refine it, by one step at most
+    const Options& o = s.options;
+    const solve::Operator op_a = [&](const double* in, double* out) {
+      multiply(s.values, in, out);
+    };
+    const solve::BlockOperator m_inv = [&](const double* in, double* out, index_t k) {
+      detail::apply_factor(s, in, out, k);
+      detail::apply_correction(c, n, out, k);
+    };
+    const double floor = detail::rounding_floor(s);
+    const solve::RefinementResult probe =
+        solve::refine(n, 1, op_a, m_inv, s.norm_inf, b.data(), x.data(),
+                      {std::min(o.refinement_max_steps, 1), o.refinement_tolerance, floor, 0});
+    done = probe.backward_error.at(0) <= std::max(o.refinement_tolerance, floor);
+  }
   if (!done) c.clear();
   return done;
 }

@@ -117,6 +117,11 @@ void phase(const char* name, F&& f) {
 /// holds the factor.
 bool apply_factor(SolverState& s, const double* b, double* x, index_t nrhs);
 
+/// The rounding level of a backward error with the factorized matrix `s.values`:
+/// (m+1)·u for m the most entries in a row (symmetric storage expanded; Higham, "Accuracy
+/// and Stability of Numerical Algorithms", 2nd ed., §3.5), m computed once per pattern.
+double rounding_floor(SolverState& s);
+
 /// The solve phase (solve_phase.cpp): x = A⁻¹ b for nrhs columns of n = analysis->n
 /// entries each (column-major, original numbering), checked and refined as
 /// Options::solve_check says; fills stats.solve. Throws InvalidState before a

@@ -8,9 +8,11 @@
 // matrix must still be reported as such (the correction gives way to delayed pivoting).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "base/blas.hpp"
@@ -234,6 +236,98 @@ TEST(PivotCorrection, CorrectedSolvesAreCheckedWhereOnlyPerturbedOnesWouldBe) {
     EXPECT_LE(test::relative_difference(x, ref), std::max(1e-12, 1e-14 * n * kappa));
   }
   EXPECT_EQ(corrected, 1);
+}
+
+// Stars of five nodes (three leaves joined to two roots, numbered leaves first) and, for
+// n not a multiple of five, a dense diagonal block of the rest. Analysis values: diagonal
+// 10, off-diagonal entries in [-1, 1]. Refactorized values: in the first three stars (a
+// few static pivots, as in the engine's Newton matrices) a leaf with diagonal delta joined
+// to both roots by 1 (a pivot that is small but not static when delta is, and a Schur
+// complement of rank one and size 1/delta at the roots) and a leaf with a zero diagonal
+// (a static pivot, corrected); every other leaf and root block regular.
+SparseMatrix stars(index_t n, bool refactorized, double delta, std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> u(0.5, 1.0);
+  std::bernoulli_distribution sign(0.5);
+  auto draw = [&] { return sign(rng) ? u(rng) : -u(rng); };
+  std::vector<std::vector<std::pair<index_t, double>>> col(n);
+  auto add = [&](index_t i, index_t j, double v) { col[j].push_back({i, v}); };
+  const index_t n_stars = n / 5;
+  for (index_t s = 0; s < n_stars; ++s) {
+    const index_t b = 5 * s, r1 = b + 3, r2 = b + 4;
+    for (index_t l = b; l < b + 3; ++l) {
+      double diag = 10, to1 = draw(), to2 = draw(), from1 = draw(), from2 = draw();
+      if (refactorized) diag = 3 * u(rng);
+      if (refactorized && s < 3 && l == b) diag = delta, to1 = to2 = from1 = from2 = 1.0;
+      if (refactorized && s < 3 && l == b + 1) diag = 0;
+      add(l, l, diag);
+      add(r1, l, to1);
+      add(r2, l, to2);
+      add(l, r1, from1);
+      add(l, r2, from2);
+    }
+    add(r1, r1, refactorized ? 2 + u(rng) : 10);
+    add(r2, r2, refactorized ? -2 - u(rng) : 10);
+    add(r1, r2, 0.5 * draw());
+    add(r2, r1, 0.5 * draw());
+  }
+  for (index_t j = 5 * n_stars; j < n; ++j)
+    for (index_t i = 5 * n_stars; i < n; ++i) add(i, j, i == j ? 10.0 : draw());
+  SparseMatrix a;
+  a.n_rows = a.n_cols = n;
+  a.offsets.assign(1, 0);
+  for (index_t j = 0; j < n; ++j) {
+    for (const auto& [i, v] : col[j]) {
+      a.indices.push_back(i);
+      a.values.push_back(v);
+    }
+    a.offsets.push_back(static_cast<index_t>(a.indices.size()));
+  }
+  return a;
+}
+
+// A correction whose solves would miss the backward error of a checked solve: the fixed
+// order's factor of A + E grows by 1/delta at a leaf's small pivot that is not a static
+// one, so the probe's corrected solve (core/pivot_correction.hpp) fails the test and
+// delayed pivoting factors instead, with dgesv's solution; the same stars with a regular
+// small leaf (delta = 0.5) are corrected.
+TEST(PivotCorrection, CorrectionThatMissesTheProbeGoesToDelayedPivoting) {
+  unsigned long long seed = 0;
+  auto rng = test::fresh_rng(&seed);
+  SCOPED_TRACE("seed " + std::to_string(seed));
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (index_t n : {5, 733}) {
+    for (double delta : {0.5, 1e-6}) {
+      SCOPED_TRACE("n=" + std::to_string(n) + " delta=" + std::to_string(delta));
+      Options o = corrected_solves_only(n);
+      o.ordering = OrderingMethod::natural;  // every leaf before its roots
+      Solver s(o);
+      s.factorize(stars(n, false, delta, rng));
+      ASSERT_EQ(s.stats().factor.fixed_order_perturbed_pivots, 0);
+      const SparseMatrix a2 = stars(n, true, delta, rng);
+      std::vector<double> b(n);
+      for (double& v : b) v = u(rng);
+      std::vector<double> ref = b;
+      ASSERT_TRUE(test::dense_solve(test::to_dense(a2), n, ref, 1));
+      const double kappa = test::condition_inf(a2);
+      s.refactorize(a2);
+      const FactorStats& f = s.stats().factor;
+      const index_t zero_leaves = std::min<index_t>(n / 5, 3);
+      EXPECT_EQ(f.fixed_order_perturbed_pivots, zero_leaves);
+      EXPECT_EQ(f.perturbed_pivots, 0);
+      if (delta < 1e-3) {
+        EXPECT_EQ(f.corrected_pivots, 0);
+        EXPECT_TRUE(f.delayed_pivoting);
+      } else {
+        EXPECT_EQ(f.corrected_pivots, zero_leaves);
+        EXPECT_FALSE(f.delayed_pivoting);
+      }
+      const std::vector<double> x = s.solve(b);
+      EXPECT_LE(s.stats().solve.backward_error,
+                std::max(Options{}.refinement_tolerance, s.stats().solve.backward_error_floor));
+      EXPECT_LE(test::relative_difference(x, ref), std::max(1e-12, 1e-14 * n * kappa))
+          << "kappa " << kappa;
+    }
+  }
 }
 
 // A nonsingular 1×1 matrix needs no static pivot: nothing to correct.
