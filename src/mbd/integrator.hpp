@@ -151,7 +151,7 @@ struct IntegratorStats {
   /// passed from fronts to their parents (FactorStats::delayed_pivots, summed).
   index_t delayed_factorizations = 0, delayed_pivots = 0;
   /// Factorizations whose static pivots were corrected in the solve (Pivoting::corrected,
-  /// the GPU's default) and those pivots (FactorStats::corrected_pivots, summed).
+  /// when the run asks for it) and those pivots (FactorStats::corrected_pivots, summed).
   index_t corrected_factorizations = 0, corrected_pivots = 0;
   index_t residual_rejections = 0;  ///< steps redone: constraints violated after convergence
   index_t energy_rejections = 0;    ///< variable step: steps redone for their energy change

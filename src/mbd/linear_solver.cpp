@@ -21,8 +21,7 @@ class StrataLinearSolver : public LinearSolver {
   StrataLinearSolver(const Options& o, MatrixType type)
       : solver_(options(o, type)),
         adaptive_(type == MatrixType::general && o.pivoting == Pivoting::automatic &&
-                  solver_on_gpu(o.backend)),
-        max_corrected_(o.max_corrected_pivots) {}
+                  solver_on_gpu(o.backend)) {}
   static Options options(Options o, MatrixType type) {
     if (o.type != MatrixType::automatic && o.type != type)
       throw InvalidInput(std::string(type == MatrixType::general
@@ -36,15 +35,16 @@ class StrataLinearSolver : public LinearSolver {
     if (type != MatrixType::general) return o;
     // The Newton matrix's values drift from those the analysis matched and scaled (step
     // size, contacts, rotations): on the host every factorization delays the pivots the
-    // analysis's order cannot take (numeric/delayed.hpp). A GPU factors in that order and
-    // corrects the static pivots it needs in the solve (Pivoting::corrected, on the
-    // device); a factorization whose correction is too ill-conditioned delays its pivots on
-    // the host, and the next one tries the GPU again; one that needs more static pivots
-    // than a correction takes makes the later factorizations of the same analysis delay
-    // pivots directly (delaying_), as does an analysis that Backend::automatic put on the
-    // host. So no pivot is perturbed and no new analysis is needed for them.
-    if (o.pivoting == Pivoting::automatic)
-      o.pivoting = solver_on_gpu(o.backend) ? Pivoting::corrected : Pivoting::delayed;
+    // analysis's order cannot take (numeric/delayed.hpp). A GPU factors in that order
+    // (Pivoting::automatic); the first factorization that needs static pivots delays them
+    // on the host, and so do the later factorizations of the same analysis, directly
+    // (delaying_: their values keep drifting the same way), as does an analysis that
+    // Backend::automatic put on the host. So no pivot is perturbed and no new analysis is
+    // needed for them. Pivoting::corrected (the static pivots corrected in the GPU's
+    // solves) is the run's choice only: its checked and refined solves cost more than the
+    // delayed factorization saves on the engine's matrices (bench/history.md).
+    if (o.pivoting == Pivoting::automatic && !solver_on_gpu(o.backend))
+      o.pivoting = Pivoting::delayed;
     return o;
   }
   void analyze(const SparseMatrix& a) override { analyze_from(a, MatchingStart{}); }
@@ -85,7 +85,7 @@ class StrataLinearSolver : public LinearSolver {
   void set_delaying(bool on) override {
     if (!adaptive_) return;
     delaying_ = on;
-    solver_.set_pivoting(on ? Pivoting::delayed : Pivoting::corrected);
+    solver_.set_pivoting(on ? Pivoting::delayed : Pivoting::automatic);
   }
   void solve(const double* b, double* x) override { solver_.solve(b, x, 1); }
   index_t factor_entries() const override {
@@ -96,11 +96,10 @@ class StrataLinearSolver : public LinearSolver {
   double backward_error() const override { return solver_.stats().solve.backward_error; }
   void factorized() {
     fresh_ = false;
-    // more static pivots than a correction takes: the analysis's order is far from what
-    // these values need, and the next factorizations would try the GPU for nothing
+    // static pivots in the analysis's order: it no longer fits these values, and the next
+    // factorizations would try the GPU for nothing
     const FactorStats& f = solver_.stats().factor;
-    if (adaptive_ && f.delayed_pivoting && f.fixed_order_perturbed_pivots > max_corrected_)
-      set_delaying(true);
+    if (adaptive_ && f.delayed_pivoting && f.fixed_order_perturbed_pivots > 0) set_delaying(true);
   }
   std::string describe() const override {
     const FactorStats& f = solver_.stats().factor;
@@ -114,8 +113,7 @@ class StrataLinearSolver : public LinearSolver {
 
  private:
   Solver solver_;
-  bool adaptive_ = false;      // the engine's choice of pivoting, delaying_ on the host (options())
-  index_t max_corrected_ = 0;  // Options::max_corrected_pivots
+  bool adaptive_ = false;  // the engine's choice of pivoting, delaying_ on the host (options())
   bool delaying_ = false;
   bool fresh_ = true;
 };

@@ -68,7 +68,7 @@ class LinearSolver {
   virtual double condensation_seconds() const { return 0; }
   /// Adaptive pivoting (strata on a GPU without a pivoting choice): whether the
   /// factorizations delay pivots directly (the last analyze put the factor on the host, or
-  /// a factorization since needed more static pivots than a correction takes). A
+  /// a factorization since needed static pivots in the analysis's order). A
   /// checkpoint keeps it so that a restart factors as the uninterrupted run did.
   virtual bool delaying() const { return false; }
   virtual void set_delaying(bool) {}
@@ -86,11 +86,10 @@ Options engine_solver_options();
 
 /// strata's multifrontal LU of the Newton matrix (MatrixType::general) with options `o`.
 /// Pivoting::automatic (the default) is the engine's choice: delayed pivoting on the host
-/// for every factorization, and on a GPU Pivoting::corrected (the fixed order, its static
-/// pivots corrected in the solve; delayed pivoting on the host for a factorization whose
-/// pivots cannot be corrected, and for every later one of the same analysis once one
-/// needed more than Options::max_corrected_pivots), or delayed pivoting directly where
-/// Backend::automatic put the analysis on the host (LinearSolver::delaying); Pivoting::fixed,
+/// for every factorization, and on a GPU the analysis's fixed order until a factorization
+/// needs static pivots, which delays them on the host, as every later factorization of
+/// the same analysis does directly (LinearSolver::delaying; so does one that
+/// Backend::automatic put on the host); Pivoting::fixed,
 /// delayed and corrected as Options::pivoting says. Throws InvalidInput when o.type is neither
 /// automatic nor general (the Newton matrix is unsymmetric) or when validate(o) refuses a field.
 std::unique_ptr<LinearSolver> make_strata_solver(const Options& o);
