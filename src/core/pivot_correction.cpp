@@ -100,6 +100,20 @@ bool build_correction(
           (l == m ? 1.0 / e.shift : 0.0) -
           c.w[static_cast<std::size_t>(m) * n + e.col] / e.col_scale;
     }
+  // rows equilibrated (D·S, D = diag(1/max_m |S_lm|)), so that the condition number
+  // measures S's nearness to singularity, not how differently its rows are scaled (a
+  // diagonal S, pivots of independent blocks, is exact whatever its entries)
+  c.s_row_scale.assign(k, 0.0);
+  for (index_t m = 0; m < k; ++m)
+    for (index_t l = 0; l < k; ++l)
+      c.s_row_scale[l] =
+          std::max(c.s_row_scale[l], std::abs(c.s_lu[static_cast<std::size_t>(m) * k + l]));
+  for (index_t l = 0; l < k; ++l) {
+    if (!(c.s_row_scale[l] > 0) || !std::isfinite(c.s_row_scale[l])) return false;  // singular
+    c.s_row_scale[l] = 1.0 / c.s_row_scale[l];
+  }
+  for (index_t m = 0; m < k; ++m)
+    for (index_t l = 0; l < k; ++l) c.s_lu[static_cast<std::size_t>(m) * k + l] *= c.s_row_scale[l];
   const int kk = static_cast<int>(k);
   int info = 0;
   const char one = '1';
@@ -112,11 +126,11 @@ bool build_correction(
   double rcond = 0;
   dgecon_(&one, &kk, c.s_lu.data(), &kk, &anorm, &rcond, work.data(), iwork.data(), &info);
   if (info != 0 || !(rcond >= kCorrectionMinRcond)) return false;
-  // det A / det F = Π σ_l · det S
+  // det A / det F = Π σ_l · det S, det S = det(D·S) / Π d_l
   c.log_abs_det = 0;
   c.det_sign = 1;
   for (index_t l = 0; l < k; ++l) {
-    c.log_abs_det += std::log(std::abs(c.entries[l].shift));
+    c.log_abs_det += std::log(std::abs(c.entries[l].shift)) - std::log(c.s_row_scale[l]);
     if (c.entries[l].shift < 0) c.det_sign = -c.det_sign;
     const double d = c.s_lu[static_cast<std::size_t>(l) * k + l];
     c.log_abs_det += std::log(std::abs(d));
@@ -136,12 +150,14 @@ void apply_correction(const PivotCorrection& c, index_t n, double* x, index_t nr
   const index_t k = c.k();
   if (!c.active || k == 0 || nrhs <= 0) return;
   const int kk = static_cast<int>(k), nn = static_cast<int>(n), nr = static_cast<int>(nrhs);
-  // t = D_c⁻¹·Vᵀ·x for every column, then y = S⁻¹·t (one getrs for all columns)
+  // t = D_c⁻¹·Vᵀ·x for every column, then y = S⁻¹·t = (D·S)⁻¹·D·t (one getrs for all
+  // columns)
   std::vector<double> y(static_cast<std::size_t>(k) * nrhs);
   for (index_t r = 0; r < nrhs; ++r)
     for (index_t l = 0; l < k; ++l)
       y[static_cast<std::size_t>(r) * k + l] =
-          x[static_cast<std::size_t>(r) * n + c.entries[l].col] / c.entries[l].col_scale;
+          x[static_cast<std::size_t>(r) * n + c.entries[l].col] / c.entries[l].col_scale *
+          c.s_row_scale[l];
   int info = 0;
   const char no = 'N';
   dgetrs_(&no, &kk, &nr, c.s_lu.data(), &kk, c.ipiv.data(), y.data(), &kk, &info);

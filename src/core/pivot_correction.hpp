@@ -29,10 +29,11 @@
 //
 // At the factorization: W = F⁻¹·U·D_r⁻¹ (k solves with the factor, D_r = diag(r_{i_l})),
 // S = D_c⁻¹·(Γ⁻¹ − VᵀF⁻¹U)·D_r⁻¹, i.e. S_lm = δ_lm/σ_l − W(j_l, m)/c_{j_l} (D_c =
-// diag(c_{j_l})), a k×k matrix of order one whatever A's scaling, and its LU with partial
-// pivoting and reciprocal condition number (LAPACK getrf, gecon). Per solve, after
-// x = F⁻¹b: t_l = x(j_l)/c_{j_l}, y = S⁻¹t, x += W·y. S is singular exactly when A is
-// (det A = det F · Π σ_l · det S); an S whose reciprocal condition is below 10⁻³ (its
+// diag(c_{j_l})), a k×k matrix of order one whatever A's scaling, its rows equilibrated
+// (D·S), and the LU of D·S with partial pivoting and its reciprocal condition number
+// (LAPACK getrf, gecon). Per solve, after x = F⁻¹b: t_l = x(j_l)/c_{j_l},
+// y = S⁻¹t = (D·S)⁻¹·D·t, x += W·y. S is singular exactly when A is
+// (det A = det F · Π σ_l · det S); a D·S whose reciprocal condition is below 10⁻³ (its
 // solves would lose more than three digits: A nearly singular, or F so ill-conditioned
 // that S's entries come from cancellation) sends the factorization to delayed pivoting,
 // which reports A's numerical singularity where there is one. The formula is not backward
@@ -40,9 +41,9 @@
 // conditioning of F and S, and F, the fixed order's factor of A + E, may grow where the
 // analysis's stale matching leaves small pivots that are not static ones. So k is bounded
 // (Options::max_corrected_pivots), the factorization's W-solve carries one more column, a
-// probe b = A·x̂ whose corrected solution must reach the backward error of a checked solve
-// within one refinement step (else delayed pivoting takes over), and every corrected solve is
-// checked and refined.
+// probe b = A·x̂ whose corrected solution must reach the backward error of a checked
+// solve within one refinement step (else delayed pivoting takes over), and every
+// corrected solve is checked and refined.
 #pragma once
 
 #include <functional>
@@ -66,12 +67,13 @@ struct CorrectedEntry {
 /// The low-rank correction of one factorization (see above).
 struct PivotCorrection {
   std::vector<CorrectedEntry> entries;
-  std::vector<double> w;     ///< n × k, column-major: F⁻¹·U·D_r⁻¹
-  std::vector<double> s_lu;  ///< k × k, column-major: the LU of S (getrf)
-  std::vector<int> ipiv;     ///< getrf's row interchanges (1-based)
-  double log_abs_det = 0;    ///< log|det S|
-  int det_sign = 1;          ///< sign of det S
-  bool active = false;       ///< the solve applies it (set once it is complete)
+  std::vector<double> w;            ///< n × k, column-major: F⁻¹·U·D_r⁻¹
+  std::vector<double> s_row_scale;  ///< k: D, 1 / the largest entry of each row of S
+  std::vector<double> s_lu;         ///< k × k, column-major: the LU of D·S (getrf)
+  std::vector<int> ipiv;            ///< getrf's row interchanges (1-based)
+  double log_abs_det = 0;           ///< log|det S|
+  int det_sign = 1;                 ///< sign of det S
+  bool active = false;              ///< the solve applies it (set once it is complete)
 
   index_t k() const { return static_cast<index_t>(entries.size()); }
   void clear();
@@ -87,8 +89,8 @@ bool find_shifted_pivots(const SolverState& s, std::vector<CorrectedEntry>& out)
 /// `apply_factor` (x = F⁻¹b for n × nrhs columns, original numbering, no correction), S
 /// and its LU. With `probe_b` (n entries, or null) the same call also solves with it, and
 /// `probe_x` (n entries) receives the corrected solution A⁻¹·probe_b. Returns true and
-/// sets c.active when S's reciprocal condition number is at least 10⁻³ (its solves lose at
-/// most three digits), else false (probe_x then unspecified).
+/// sets c.active when D·S's reciprocal condition number is at least 10⁻³ (its solves lose
+/// at most three digits), else false (probe_x then unspecified).
 bool build_correction(
     PivotCorrection& c, index_t n,
     const std::function<void(const double* b, double* x, index_t nrhs)>& apply_factor,
@@ -98,8 +100,8 @@ bool build_correction(
 /// that no structure of A favours): x̂_i = (−1)^i·(1 + (i mod 3)/2). A correction is kept
 /// only when its solve of A·x = A·x̂ reaches the backward error every checked solve must
 /// reach (Options::refinement_tolerance, or the rounding floor) within one refinement
-/// step: the rcond test of S bounds S's
-/// own error, not the growth in the fixed order's factor of A + E.
+/// step: the rcond test of D·S bounds S's own error, not the growth in the fixed order's
+/// factor of A + E.
 void correction_probe(index_t n, double* x_hat);
 
 /// x (n × nrhs, column-major, original numbering) = F⁻¹b on entry, A⁻¹b on return.
