@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cstddef>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -178,6 +179,11 @@ struct FactorStats {
   /// Pivoting::corrected: the static pivots of the fixed order made regular in this factor
   /// and corrected by each solve's low-rank update (0: none, or delayed pivoting ran).
   index_t corrected_pivots = 0;
+  /// Pivoting::corrected: the normwise backward error of the correction's probe, the
+  /// corrected solve of A·x = A·x̂ after at most one refinement step, which kept the
+  /// correction when at most max(Options::refinement_tolerance, (m+1)·u); NaN where no
+  /// probe ran (no static pivot, too many, or the k×k matrix refused).
+  double correction_backward_error = std::numeric_limits<double>::quiet_NaN();
   /// Equilibration sweeps applied on top of the analysis's scaling because the values had
   /// moved far from those it was computed for (core/rescale.hpp); 0 when none was needed.
   int rescaling_sweeps = 0;

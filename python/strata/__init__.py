@@ -390,6 +390,7 @@ class Solver:
         "general"), backend ("cpu" or "cuda"), seconds, input_seconds, gflops,
         perturbed_pivots (static pivoting), delayed_pivoting, delayed_pivots,
         corrected_pivots (Pivoting corrected's low-rank update),
+        correction_backward_error (its probe's; None where no probe ran),
         two_by_two_pivots, inertia (positive, negative, zero), log_abs_determinant,
         determinant_sign (these three None when inertia_valid is False: static pivoting
         perturbed pivots, and they would describe the nearby matrix factored, not A),

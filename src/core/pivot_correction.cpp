@@ -28,6 +28,7 @@ void PivotCorrection::clear() {
   active = false;
   log_abs_det = 0;
   det_sign = 1;
+  probe_backward_error = std::numeric_limits<double>::quiet_NaN();
 }
 
 bool find_shifted_pivots(const SolverState& s, std::vector<CorrectedEntry>& out) {

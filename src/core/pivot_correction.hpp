@@ -47,6 +47,7 @@
 #pragma once
 
 #include <functional>
+#include <limits>
 #include <vector>
 
 #include "strata/types.hpp"
@@ -74,6 +75,9 @@ struct PivotCorrection {
   double log_abs_det = 0;           ///< log|det S|
   int det_sign = 1;                 ///< sign of det S
   bool active = false;              ///< the solve applies it (set once it is complete)
+  /// the probe's backward error (correction_probe) when one ran for this factorization,
+  /// kept or not; NaN otherwise
+  double probe_backward_error = std::numeric_limits<double>::quiet_NaN();
 
   index_t k() const { return static_cast<index_t>(entries.size()); }
   void clear();

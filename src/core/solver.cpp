@@ -451,9 +451,12 @@ bool correct_shifted_pivots(SolverState& s) {
     const solve::RefinementResult probe =
         solve::refine(n, 1, op_a, m_inv, s.norm_inf, b.data(), x.data(),
                       {std::min(o.refinement_max_steps, 1), o.refinement_tolerance, floor, 0});
-    done = probe.backward_error.at(0) <= std::max(o.refinement_tolerance, floor);
+    c.probe_backward_error = probe.backward_error.at(0);
+    done = c.probe_backward_error <= std::max(o.refinement_tolerance, floor);
   }
+  const double probe_error = c.probe_backward_error;
   if (!done) c.clear();
+  c.probe_backward_error = probe_error;
   return done;
 }
 
@@ -559,6 +562,7 @@ void report_factorization(SolverState& s, const NumericRun& r, double norm1, dou
     fs.fixed_order_perturbed_pivots = fixed_perturbed;
     total.det_sign = numeric::delayed_determinant_sign(an, s.delayed);
   }
+  fs.correction_backward_error = s.correction.probe_backward_error;
   if (s.correction.active) {  // det A = det F · det S (core/pivot_correction.hpp)
     fs.corrected_pivots = s.correction.k();
     fs.fixed_order_perturbed_pivots = fixed_perturbed;

@@ -149,6 +149,7 @@ inline void to_json(nlohmann::json& j, const FactorStats& f) {
        {"fronts_delaying", f.fronts_delaying},
        {"fixed_order_perturbed_pivots", f.fixed_order_perturbed_pivots},
        {"corrected_pivots", f.corrected_pivots},
+       {"correction_backward_error", f.correction_backward_error},
        {"rescaling_sweeps", f.rescaling_sweeps},
        {"two_by_two_pivots", f.two_by_two_pivots},
        {"inertia_valid", f.inertia_valid},

@@ -2434,7 +2434,8 @@ TEST_F(CudaBackend, DelayedFactorizationOnTheHostReportsNoDeviceFigures) {
 // host's) alike. Random patterns of n = 2, 3, 5, 733 without amalgamation (small fronts
 // that meet zero pivots), and a 9×9×9 grid's pattern with every front taken as a large
 // one (gpu_small_front_rows = 1: cuSOLVER's LU, its check, the pivot-block and panel
-// kernels).
+// kernels). Where the correction's probe lies at its limit the two may decide otherwise
+// (corrected on one, delayed on the other), with the same solution.
 TEST_F(CudaBackend, CorrectedStaticPivotsAsOnTheCpu) {
   unsigned long long seed = 0;
   auto rng = test::fresh_rng(&seed);
@@ -2478,8 +2479,21 @@ TEST_F(CudaBackend, CorrectedStaticPivotsAsOnTheCpu) {
       const FactorStats& fg = s->stats().factor;
       EXPECT_EQ(fg.backend, Backend::cuda);
       EXPECT_EQ(fg.fixed_order_perturbed_pivots, fc.fixed_order_perturbed_pivots);
-      EXPECT_EQ(fg.corrected_pivots, fc.corrected_pivots);
-      EXPECT_EQ(fg.delayed_pivoting, fc.delayed_pivoting);
+      if (fg.corrected_pivots != fc.corrected_pivots) {
+        // a correction is kept when its probe's backward error is below a limit: the
+        // GPU's factor, rounded otherwise, may fall on the other side only where both
+        // probes lie close to it
+        ASSERT_TRUE(std::isfinite(fg.correction_backward_error)) << "rcond or count differ";
+        ASSERT_TRUE(std::isfinite(fc.correction_backward_error)) << "rcond or count differ";
+        const double lo = std::min(fg.correction_backward_error, fc.correction_backward_error);
+        const double hi = std::max(fg.correction_backward_error, fc.correction_backward_error);
+        EXPECT_LE(hi, 10 * lo) << "probes " << fg.correction_backward_error << " (GPU), "
+                               << fc.correction_backward_error << " (CPU)";
+        EXPECT_NE(fg.delayed_pivoting, fc.delayed_pivoting);
+        RecordProperty("probe decided otherwise", "n = " + std::to_string(n));
+      } else {
+        EXPECT_EQ(fg.delayed_pivoting, fc.delayed_pivoting);
+      }
       EXPECT_EQ(fg.perturbed_pivots, 0);
       EXPECT_NEAR(fg.log_abs_determinant, fc.log_abs_determinant,
                   1e-9 * std::max(1.0, std::abs(fc.log_abs_determinant)));

@@ -323,10 +323,13 @@ TEST(PivotCorrection, CorrectionThatMissesTheProbeGoesToDelayedPivoting) {
       const index_t zero_leaves = std::min<index_t>(n / 5, 3);
       EXPECT_EQ(f.fixed_order_perturbed_pivots, zero_leaves);
       EXPECT_EQ(f.perturbed_pivots, 0);
+      ASSERT_TRUE(std::isfinite(f.correction_backward_error));  // the probe decided
       if (delta < 1e-3) {
+        EXPECT_GT(f.correction_backward_error, 1e-13);
         EXPECT_EQ(f.corrected_pivots, 0);
         EXPECT_TRUE(f.delayed_pivoting);
       } else {
+        EXPECT_LE(f.correction_backward_error, 1e-14);
         EXPECT_EQ(f.corrected_pivots, zero_leaves);
         EXPECT_FALSE(f.delayed_pivoting);
       }
@@ -352,6 +355,7 @@ TEST(PivotCorrection, OneByOneNeedsNone) {
   s.factorize(a);
   EXPECT_EQ(s.stats().factor.corrected_pivots, 0);
   EXPECT_EQ(s.stats().factor.perturbed_pivots, 0);
+  EXPECT_TRUE(std::isnan(s.stats().factor.correction_backward_error));  // no probe ran
   const std::vector<double> x = s.solve(std::vector<double>{3.0});
   EXPECT_NEAR(x[0], 3.0 / a.values[0], 1e-15 * std::abs(x[0]));
 }
