@@ -762,7 +762,9 @@ int main(int argc, char** argv) {
                    "pivots the analysis's order cannot take: fixed (static pivots), delayed "
                    "(delayed pivoting, on the host), corrected (static pivots shifted and "
                    "corrected in the solve, where the factor lives), automatic (default: "
-                   "delayed on the CPU, corrected on a GPU)")
+                   "delayed on the CPU; on a GPU the analysis's order until a "
+                   "factorization needs static pivots, then delayed until the next "
+                   "analysis)")
       ->check(choice<Pivoting>());
   simulate
       ->add_option("--solver-option", sim.solver_options,

@@ -238,6 +238,12 @@ struct Options {
   /// subtrees and one per level. The plan differs (the planner prices the chain), so the
   /// results agree to rounding, not bit for bit; each is the same on every run. Default on.
   bool gpu_solve_chain = true;
+  /// CUDA backend: a checked solve (solve_check) with the factor resident on the GPU
+  /// computes its residuals b − A·x and backward errors there and refines there, with a
+  /// copy of A's values on the device (src/numeric/cuda/residual.cu); only GMRES, where
+  /// refinement stalls, runs on the host. false: the residuals on the host, each
+  /// refinement step's solve on the device. Default on.
+  bool gpu_refinement = true;
   /// CUDA backend on several GPUs (num_gpus > 1): a solve runs part by part on the GPUs
   /// that hold the parts' panels, only the parts' rows of x and their contribution to the
   /// part above crossing the bus (src/numeric/cuda/part_solve.cu); false copies every

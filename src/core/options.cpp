@@ -333,6 +333,7 @@ const std::vector<Field>& fields() {
       integer_field("gpu_potrf_block_size", &O::gpu_potrf_block_size),
       flag_field("gpu_recursive_panel", &O::gpu_recursive_panel),
       flag_field("gpu_solve_graph", &O::gpu_solve_graph),
+      flag_field("gpu_refinement", &O::gpu_refinement),
       flag_field("gpu_solve_chain", &O::gpu_solve_chain),
       flag_field("gpu_solve_parts", &O::gpu_solve_parts),
       integer_field("num_gpus", &O::num_gpus),

@@ -10,6 +10,10 @@
 // normwise backward error ‖b − A x‖∞ / (‖A‖∞‖x‖∞ + ‖b‖∞) (Rigal and Gaches; Higham,
 // Accuracy and Stability of Numerical Algorithms, 2nd ed., §7.1) is checked against
 // max(Options::refinement_tolerance, (m+1)·u) for m the most entries in a row of A (§3.5).
+// With a factor resident on a GPU (and Options::gpu_refinement) the whole checked solve
+// runs there: b up once, the residuals from a device copy of A's values and the
+// refinement steps (solve/refinement.hpp's refine_steps over a DeviceSpace), x down once;
+// only GMRES, for columns refinement leaves above the tolerance, runs on the host.
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -139,47 +143,51 @@ bool apply_inverse(SolverState& s, const double* b, double* x, index_t nrhs) {
   return on_device;
 }
 
-// After the first application of the factor (x = A⁻¹ b, host arrays, its seconds and
-// whether it ran on the device): the backward error of each column, refinement, GMRES
-// where it stalls (solve/refinement.hpp) when `check`, and the statistics.
-void finish_solve(SolverState& s, const double* b, double* x, index_t nrhs, bool check,
-                  double first_solve_seconds, bool on_device, const Timer& timer) {
+// Per column of a solve: ‖b − A x‖∞ (where known), ‖x‖∞ and ‖b‖∞.
+struct ColumnMaxima {
+  double r = 0, x = 0, b = 0;
+};
+
+// The columns' maxima of host arrays b and x; the residual's only after perturbed pivots
+// (the statistics read it only then).
+std::vector<ColumnMaxima> host_maxima(SolverState& s, const double* b, const double* x,
+                                      index_t nrhs) {
   const index_t n = s.analysis->n;
-  const Options& o = s.options;
-  // backward error of each column, refinement, GMRES where it stalls (solve/refinement.hpp)
+  std::vector<ColumnMaxima> m(nrhs);
+  std::vector<double> r;
+  if (s.stats.factor.perturbed_pivots > 0) r.resize(n);
   const solve::Operator op_a = [&](const double* in, double* out) { multiply(s.values, in, out); };
-  const double floor = rounding_floor(s);
-  const double enough = std::max(o.refinement_tolerance, floor);
-  solve::RefinementResult refined;
-  if (check) {
-    const solve::BlockOperator m_inv = [&](const double* in, double* out, index_t k) {
-      apply_inverse(s, in, out, k);
-    };
-    refined = solve::refine(
-        n, nrhs, op_a, m_inv, s.norm_inf, b, x,
-        {o.refinement_max_steps, o.refinement_tolerance, floor, o.gmres_max_iterations});
+  for (index_t c = 0; c < nrhs; ++c) {
+    for (index_t i = 0; i < n; ++i) {
+      m[c].x = std::max(m[c].x, std::abs(x[i + c * n]));
+      m[c].b = std::max(m[c].b, std::abs(b[i + c * n]));
+    }
+    if (r.empty()) continue;
+    solve::backward_error(n, op_a, s.norm_inf, b + c * n, x + c * n, r.data());
+    for (index_t i = 0; i < n; ++i) m[c].r = std::max(m[c].r, std::abs(r[i]));
   }
-  const std::vector<double>& berr = refined.backward_error;
-  check_solution_finite(x, n, nrhs);  // refinement keeps the better iterate: a safeguard
+  return m;
+}
+
+// The solve's statistics from its refinement (`check`: it ran) and its columns' maxima.
+void record_solve(SolverState& s, const solve::RefinementResult& refined, bool check,
+                  const std::vector<ColumnMaxima>& m, double first_solve_seconds, bool on_device,
+                  const Timer& timer) {
+  const double floor = rounding_floor(s);
+  const double enough = std::max(s.options.refinement_tolerance, floor);
   SolveStats& ss = s.stats.solve;
   ss.gmres_iterations = refined.gmres_iterations;
   ss.refinement_steps = refined.steps;
   ss.backward_error = 0;
-  for (double e : berr) ss.backward_error = std::max(ss.backward_error, e);
+  for (double e : refined.backward_error) ss.backward_error = std::max(ss.backward_error, e);
   if (!check) ss.backward_error = std::numeric_limits<double>::quiet_NaN();
   ss.backward_error_floor = floor;
   // κ∞(A) ≥ ‖A‖∞‖x‖∞/‖b‖∞ for every solution: a singular or ill-conditioned A shows here
   // even when no pivot was small enough to perturb (a rank deficiency spread over the
   // off-diagonal of U)
   ss.condition_lower_bound = 0;
-  for (index_t c = 0; c < nrhs; ++c) {
-    double xn = 0, bn = 0;
-    for (index_t i = 0; i < n; ++i) {
-      xn = std::max(xn, std::abs(x[i + c * n]));
-      bn = std::max(bn, std::abs(b[i + c * n]));
-    }
-    if (bn > 0) ss.condition_lower_bound = std::max(ss.condition_lower_bound, s.norm_inf * xn / bn);
-  }
+  for (const ColumnMaxima& c : m)
+    if (c.b > 0) ss.condition_lower_bound = std::max(ss.condition_lower_bound, s.norm_inf * c.x / c.b);
   ss.refinement_converged = ss.backward_error <= enough;
   // Pivots perturbed: A is numerically singular, and a small normwise backward error only
   // says that x solves a nearby nonsingular matrix (x grows along A's near-null space as
@@ -189,16 +197,9 @@ void finish_solve(SolverState& s, const double* b, double* x, index_t nrhs, bool
   ss.relative_residual = 0;
   ss.singular_consistent = false;
   if (s.stats.factor.perturbed_pivots > 0) {
-    std::vector<double> r(static_cast<std::size_t>(n) * nrhs);
-    for (index_t c = 0; c < nrhs; ++c) {
-      solve::backward_error(n, op_a, s.norm_inf, b + c * n, x + c * n, r.data() + c * n);
-      double rn = 0, bn = 0;
-      for (index_t i = 0; i < n; ++i) {
-        rn = std::max(rn, std::abs(r[i + c * n]));
-        bn = std::max(bn, std::abs(b[i + c * n]));
-      }
-      ss.relative_residual = std::max(ss.relative_residual, bn > 0 ? rn / bn : rn > 0 ? 1.0 : 0.0);
-    }
+    for (const ColumnMaxima& c : m)
+      ss.relative_residual =
+          std::max(ss.relative_residual, c.b > 0 ? c.r / c.b : c.r > 0 ? 1.0 : 0.0);
     ss.singular_consistent =
         ss.refinement_converged && ss.relative_residual <= std::sqrt(kUnitRoundoff);
   }
@@ -210,6 +211,183 @@ void finish_solve(SolverState& s, const double* b, double* x, index_t nrhs, bool
   }
   ss.first_solve_seconds = first_solve_seconds;
   ss.seconds = timer.seconds();
+}
+
+// Refinement (max_steps of them) and GMRES where it stalls, on the host (solve/
+// refinement.hpp), of x = A⁻¹ b in host arrays.
+solve::RefinementResult refine_on_host(SolverState& s, const double* b, double* x, index_t nrhs,
+                                       int max_steps) {
+  const Options& o = s.options;
+  const solve::Operator op_a = [&](const double* in, double* out) { multiply(s.values, in, out); };
+  const solve::BlockOperator m_inv = [&](const double* in, double* out, index_t k) {
+    apply_inverse(s, in, out, k);
+  };
+  return solve::refine(s.analysis->n, nrhs, op_a, m_inv, s.norm_inf, b, x,
+                       {max_steps, o.refinement_tolerance, rounding_floor(s), o.gmres_max_iterations});
+}
+
+// After the first application of the factor (x = A⁻¹ b, host arrays, its seconds and
+// whether it ran on the device): the backward error of each column, refinement, GMRES
+// where it stalls (solve/refinement.hpp) when `check`, and the statistics.
+void finish_solve(SolverState& s, const double* b, double* x, index_t nrhs, bool check,
+                  double first_solve_seconds, bool on_device, const Timer& timer) {
+  solve::RefinementResult refined;
+  if (check) refined = refine_on_host(s, b, x, nrhs, s.options.refinement_max_steps);
+  check_solution_finite(x, s.analysis->n, nrhs);  // refinement keeps the better iterate
+  record_solve(s, refined, check, host_maxima(s, b, x, nrhs), first_solve_seconds, on_device,
+               timer);
+}
+
+// The vectors of a refinement in the memory of the GPU that holds the factor: the
+// residuals there (Executor::residual, with A's values copied there once per
+// factorization), each correction a solve with b and x in that memory.
+class DeviceSpace final : public solve::RefinementSpace {
+ public:
+  DeviceSpace(SolverState& s, const double* b, double* x, double* r, double* d, double* kept,
+              index_t nrhs, const numeric::RescaleView& view)
+      : s_(s), b_(b), x_(x), r_(r), d_(d), kept_(kept), nrhs_(nrhs), view_(view), m_(nrhs),
+        kept_m_(nrhs) {}
+  // the first residual, false where the device cannot make it (nothing changed)
+  bool prime() {
+    primed_.resize(nrhs_);
+    if (!measure()) return false;
+    for (index_t c = 0; c < nrhs_; ++c) primed_[c] = berr_of(c);
+    return true;
+  }
+  void residual(double* berr) override {
+    if (!primed_.empty()) {
+      std::copy(primed_.begin(), primed_.end(), berr);
+      primed_.clear();
+      return;
+    }
+    if (!measure()) throw InternalError("the GPU could not compute a residual it computed before");
+    for (index_t c = 0; c < nrhs_; ++c) berr[c] = berr_of(c);
+  }
+  void correct() override {
+    numeric::GpuArrayCheck found;
+    if (!s_.driver->solve_gpu_arrays(*s_.analysis, s_.factor, r_, d_, nrhs_, view_, found))
+      throw InternalError("the GPU that holds the factor declined a refinement step's solve");
+    if (found.b_not_finite >= 0 || found.x_not_finite >= 0)  // no correction: x stays
+      numeric::copy_to_device(d_, std::vector<double>(size(), 0.0).data(), size());
+  }
+  void step(index_t c) override {
+    kept_m_[c] = m_[c];
+    s_.driver->refinement_step(x_ + c * n(), d_ + c * n(), kept_ + c * n(), n(), false);
+  }
+  void undo(index_t c) override {
+    m_[c] = kept_m_[c];
+    s_.driver->refinement_step(x_ + c * n(), d_ + c * n(), kept_ + c * n(), n(), true);
+  }
+  const std::vector<ColumnMaxima>& maxima() const { return m_; }
+
+ private:
+  index_t n() const { return s_.analysis->n; }
+  std::size_t size() const { return static_cast<std::size_t>(n()) * nrhs_; }
+  bool measure() {
+    const numeric::MatrixValues a{s_.kept_values_on_device ? nullptr : s_.values.values.data(),
+                                  s_.values_serial};
+    std::vector<double> mx(3 * static_cast<std::size_t>(nrhs_));
+    if (!s_.driver->residual(*s_.analysis, a, b_, x_, r_, nrhs_, mx.data())) return false;
+    for (index_t c = 0; c < nrhs_; ++c) m_[c] = {mx[3 * c], mx[3 * c + 1], mx[3 * c + 2]};
+    return true;
+  }
+  double berr_of(index_t c) const {
+    return solve::backward_error_of(m_[c].r, m_[c].x, m_[c].b, s_.norm_inf);
+  }
+  SolverState& s_;
+  const double* b_;
+  double *x_, *r_, *d_, *kept_;
+  index_t nrhs_;
+  numeric::RescaleView view_;
+  std::vector<ColumnMaxima> m_, kept_m_;
+  std::vector<double> primed_;
+};
+
+// A checked solve on the GPU that holds the factor (Options::gpu_refinement): b up once
+// (unless it lies in that GPU's memory), the first solve, the residuals and refinement
+// steps there, x down once (unless it lies there); GMRES on the host for the columns that
+// refinement leaves above what can be checked. Returns false, having written nothing the
+// caller sees, where it cannot run: the caller then solves on the host.
+bool checked_solve_on_device(SolverState& s, const double* b, double* x, index_t nrhs, bool b_gpu,
+                             bool x_gpu, const Timer& timer) {
+  const Analysis& an = *s.analysis;
+  const index_t n = an.n;
+  const Options& o = s.options;
+  if (!o.gpu_refinement || s.delayed.valid || s.correction.active || n == 0 || nrhs == 0)
+    return false;
+  const std::size_t count = static_cast<std::size_t>(n) * static_cast<std::size_t>(nrhs);
+  double* const work = s.driver->refinement_workspace(count * (3 + !b_gpu + !x_gpu));
+  if (!work) return false;
+  double *r = work, *d = work + count, *kept = work + 2 * count, *next = work + 3 * count;
+  Timer first;
+  const double* bd = b;
+  if (!b_gpu) {
+    numeric::copy_to_device(next, b, count);
+    bd = next;
+    next += count;
+  }
+  double* const xd = x_gpu ? x : next;
+  const bool rescale = !s.rescaling.row.empty();
+  const numeric::RescaleView view{rescale ? s.rescaling.row.data() : nullptr,
+                                  rescale ? s.rescaling.col.data() : nullptr,
+                                  rescale ? s.rescaling.id : 0};
+  numeric::GpuArrayCheck found;
+  if (!s.driver->solve_gpu_arrays(an, s.factor, bd, xd, nrhs, view, found)) return false;
+  const double first_seconds = first.seconds();
+  if (found.b_not_finite >= 0) throw_rhs_not_finite(found.b_not_finite, n);
+  if (found.x_not_finite >= 0) throw_no_representable_solution(found.x_not_finite, n);
+  DeviceSpace space(s, bd, xd, r, d, kept, nrhs, view);
+  std::vector<double> hb, hx;
+  if (!space.prime()) {  // no residual on the device: refine on the host
+    hx.resize(count);
+    numeric::copy_from_device(hx.data(), xd, count);
+    const double* bh = b;
+    if (b_gpu) {
+      hb.resize(count);
+      numeric::copy_from_device(hb.data(), b, count);
+      bh = hb.data();
+    }
+    host_values(s);
+    finish_solve(s, bh, hx.data(), nrhs, true, first_seconds, true, timer);
+    if (x_gpu)
+      numeric::copy_to_device(x, hx.data(), count);
+    else
+      std::copy(hx.begin(), hx.end(), x);
+    return true;
+  }
+  solve::RefinementResult refined =
+      solve::refine_steps(space, nrhs, o.refinement_max_steps, o.refinement_tolerance);
+  const double enough = std::max(o.refinement_tolerance, rounding_floor(s));
+  bool stalled = false;
+  for (double e : refined.backward_error) stalled |= !(e <= enough);
+  std::vector<ColumnMaxima> maxima = space.maxima();
+  bool finite = true;
+  for (const ColumnMaxima& c : maxima) finite &= std::isfinite(c.x);
+  if ((stalled && o.gmres_max_iterations > 0) || !finite) {
+    // GMRES where refinement stalled (or the entry that is not finite named), on the host
+    hx.resize(count);
+    numeric::copy_from_device(hx.data(), xd, count);
+    const double* bh = b;
+    if (b_gpu) {
+      hb.resize(count);
+      numeric::copy_from_device(hb.data(), b, count);
+      bh = hb.data();
+    }
+    host_values(s);
+    const int steps = refined.steps;
+    refined = refine_on_host(s, bh, hx.data(), nrhs, 0);
+    refined.steps = steps;
+    check_solution_finite(hx.data(), n, nrhs);
+    maxima = host_maxima(s, bh, hx.data(), nrhs);
+    if (x_gpu)
+      numeric::copy_to_device(x, hx.data(), count);
+    else
+      std::copy(hx.begin(), hx.end(), x);
+  } else if (!x_gpu) {
+    numeric::copy_from_device(x, xd, count);
+  }
+  record_solve(s, refined, true, maxima, first_seconds, true, timer);
+  return true;
 }
 
 // b or x in GPU memory (cudaMalloc), as cuDSS's dense matrices may lie. Where the factor
@@ -227,6 +405,7 @@ void solve_gpu_arrays(SolverState& s, const double* b, double* x, index_t nrhs, 
     h.resize(count);
     numeric::copy_from_device(h.data(), d, count);
   };
+  if (check && checked_solve_on_device(s, b, x, nrhs, b_gpu, x_gpu, timer)) return;
   if (b_gpu && x_gpu && !s.delayed.valid && !s.correction.active) {
     if (check) host_values(s);  // the residuals' matrix
     const bool rescale = !s.rescaling.row.empty();
@@ -307,6 +486,7 @@ void solve_phase(SolverState& s, const double* b, double* x, index_t nrhs) {
     solve_gpu_arrays(s, b, x, nrhs, b_gpu, x_gpu, check, timer);
     return;
   }
+  if (check && checked_solve_on_device(s, b, x, nrhs, false, false, timer)) return;
   for (index_t i = 0; i < n * nrhs; ++i)
     if (!std::isfinite(b[i])) throw_rhs_not_finite(i, n);
   if (check) host_values(s);  // the residuals' matrix

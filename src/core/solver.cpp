@@ -335,6 +335,7 @@ double prepare_values(SolverState& s, const SparseMatrix* a, std::span<const dou
   std::vector<double> row_max, col_max;  // B's maxima when known and not equilibrated
   tbb::task_arena& arena = host_arena(s);
   s.values_on_device = false;
+  ++s.values_serial;  // whatever follows: the values may change from here on
   const bool analyzed_pattern = a == nullptr || has_analyzed_pattern(an, *a, arena);
   if (analyzed_pattern && a != nullptr && s.values_analysis != an.id) {
     // the pattern kept from now on; no factor of this analysis exists that the values

@@ -72,6 +72,9 @@ struct SolverState {
   MatrixType resolved = MatrixType::automatic;
   double norm_inf = 0;                // ‖A‖∞ of the input
   std::uint64_t values_analysis = 0;  // Analysis::id whose canonical pattern `values` holds
+  // a new number at every factorization's input stage: names the values of `values` for
+  // the copy a GPU keeps for the residuals of checked solves (numeric::MatrixValues::id)
+  std::uint64_t values_serial = 0;
   // the analyzed matrix was not canonical: where its entries land in the canonical
   // pattern (input_entry_map), for refactorize(values) in its own order, and the
   // canonical values gathered from those

@@ -172,6 +172,17 @@ class TreeDriver final : public NumericDriver {
                         index_t nrhs, const RescaleView& rescale, GpuArrayCheck& check) override {
     return executor_ && executor_->solve_gpu_arrays(an, factor, b, x, nrhs, rescale, check);
   }
+  double* refinement_workspace(std::size_t count) override {
+    return executor_ ? executor_->refinement_workspace(count) : nullptr;
+  }
+  bool residual(const Analysis& an, const MatrixValues& a, const double* b, const double* x,
+                double* r, index_t nrhs, double* maxima) override {
+    return executor_ && executor_->residual(an, a, b, x, r, nrhs, maxima);
+  }
+  void refinement_step(double* x, const double* d, double* kept, index_t n, bool undo) override {
+    if (!executor_) throw InternalError("refinement_step: no executor holds the vectors");
+    executor_->refinement_step(x, d, kept, n, undo);
+  }
   Backend backend() const override {
     return executor_ ? executor_->backend() : gpu_ ? Backend::cuda : Backend::cpu;
   }

@@ -97,6 +97,16 @@ class NumericDriver {
                                 GpuArrayCheck& check) {
     return false;
   }
+  /// Executor::refinement_workspace, residual and refinement_step of the tree driver's
+  /// executor; null, false and InternalError for every other driver.
+  virtual double* refinement_workspace(std::size_t count) { return nullptr; }
+  virtual bool residual(const Analysis& an, const MatrixValues& a, const double* b,
+                        const double* x, double* r, index_t nrhs, double* maxima) {
+    return false;
+  }
+  virtual void refinement_step(double* x, const double* d, double* kept, index_t n, bool undo) {
+    throw InternalError("refinement_step: this driver holds no vectors on a GPU");
+  }
   /// Where the last factorization ran (FactorStats::backend; never automatic).
   virtual Backend backend() const = 0;
   /// Adds the last factorization's own figures to `fs`: the device figures (summed over

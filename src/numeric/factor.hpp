@@ -53,6 +53,14 @@ struct GpuArrayCheck {
   double b_max = 0, x_max = 0;
 };
 
+/// A matrix's values for Executor::residual: `host` (the canonical entry order of the
+/// analysis's pattern) named by `id`, a number that changes whenever they do; host null
+/// for the values the executor's last factorization kept on its device.
+struct MatrixValues {
+  const double* host = nullptr;
+  std::uint64_t id = 0;
+};
+
 struct HeldPanels {
   int part = -1;
   int worker = 0;
@@ -386,6 +394,28 @@ class Executor {
                                 double* x, index_t nrhs, const RescaleView& rescale,
                                 GpuArrayCheck& check) {
     return false;
+  }
+  /// Device vectors for a checked solve with a factor resident on this executor's GPU
+  /// (core/solve_phase.cpp): `count` doubles of its memory, kept until the next call, the
+  /// next analysis or release. Null where it has none (no GPU, or no room for them).
+  virtual double* refinement_workspace(std::size_t count) { return nullptr; }
+  /// The residuals of a checked solve on this executor's GPU: r = b − A·x for nrhs columns
+  /// (b, x, r: n × nrhs column-major in that GPU's memory, original numbering; r may not
+  /// alias the others) with A the values `a` in the canonical entry order of an's pattern
+  /// (a.host: host memory, copied to the device once per a.id; null: the values the last
+  /// factorization kept on the device, keep_device_input), and per column c
+  /// maxima[3c .. 3c+2] = ‖r_c‖∞, ‖x_c‖∞, ‖b_c‖∞ (host; a NaN's magnitude compares above
+  /// +inf). Returns false, having done nothing, where it cannot (no device row map of the
+  /// pattern, no room for A's values, no values kept). Throws DeviceError.
+  virtual bool residual(const Analysis& an, const MatrixValues& a, const double* b,
+                        const double* x, double* r, index_t nrhs, double* maxima) {
+    return false;
+  }
+  /// A refinement step of column vectors of length n in this executor's GPU memory, in
+  /// order with residual and solve_gpu_arrays: kept = x, then x += d; or, with `undo`,
+  /// x = kept. Throws DeviceError.
+  virtual void refinement_step(double* x, const double* d, double* kept, index_t n, bool undo) {
+    throw InternalError("refinement_step: this executor holds no vectors on a GPU");
   }
   /// After begin_part: true when the panels of the part ctx.part will stay in the
   /// executor's memory only (a resident GPU factor of the whole tree; a part's panels kept

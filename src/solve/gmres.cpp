@@ -37,6 +37,11 @@ double backward_error(index_t n, const Operator& a, double norm_a, const double*
     bn = std::max(bn, std::abs(b[i]));
   }
   if (!finite) return std::numeric_limits<double>::infinity();
+  return backward_error_of(rn, xn, bn, norm_a);
+}
+
+double backward_error_of(double rn, double xn, double bn, double norm_a) {
+  if (!std::isfinite(rn) || !std::isfinite(xn)) return std::numeric_limits<double>::infinity();
   const double den = norm_a * xn + bn;
   // norm_a·‖x‖∞ past DBL_MAX (both finite): ‖b‖∞ is negligible beside it
   if (!std::isfinite(den)) return rn / xn / norm_a;

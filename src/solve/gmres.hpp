@@ -23,6 +23,11 @@ using Operator = std::function<void(const double* x, double* y)>;
 double backward_error(index_t n, const Operator& a, double norm_a, const double* b,
                       const double* x, double* r);
 
+/// The same backward error from the three maxima r_max = ‖b − A x‖∞, x_max = ‖x‖∞ and
+/// b_max = ‖b‖∞ (computed elsewhere, e.g. on a GPU): +inf when r_max or x_max is not
+/// finite (a NaN's magnitude included).
+double backward_error_of(double r_max, double x_max, double b_max, double norm_a);
+
 struct GmresResult {
   int iterations = 0;
   double backward_error = 0;  ///< normwise, of the returned x (true residual)

@@ -5,38 +5,71 @@
 
 namespace strata::solve {
 
-RefinementResult refine(index_t n, index_t nrhs, const Operator& a, const BlockOperator& m_inv,
-                        double norm_a, const double* b, double* x, const RefinementSettings& s) {
+namespace {
+
+// Host arrays: A applied one column at a time, M⁻¹ to all columns at once.
+class HostSpace final : public RefinementSpace {
+ public:
+  HostSpace(index_t n, index_t nrhs, const Operator& a, const BlockOperator& m_inv,
+            double norm_a, const double* b, double* x)
+      : n_(n), nrhs_(nrhs), a_(a), m_inv_(m_inv), norm_a_(norm_a), b_(b), x_(x),
+        r_(static_cast<std::size_t>(n) * nrhs), d_(r_.size()), kept_(r_.size()) {}
+  void residual(double* berr) override {
+    for (index_t c = 0; c < nrhs_; ++c)
+      berr[c] = backward_error(n_, a_, norm_a_, b_ + c * n_, x_ + c * n_, r_.data() + c * n_);
+  }
+  void correct() override { m_inv_(r_.data(), d_.data(), nrhs_); }
+  void step(index_t c) override {
+    double* x = x_ + c * n_;
+    std::copy(x, x + n_, kept_.data() + c * n_);
+    for (index_t i = 0; i < n_; ++i) x[i] += d_[i + c * n_];
+  }
+  void undo(index_t c) override {
+    std::copy(kept_.data() + c * n_, kept_.data() + (c + 1) * n_, x_ + c * n_);
+  }
+
+ private:
+  index_t n_, nrhs_;
+  const Operator& a_;
+  const BlockOperator& m_inv_;
+  double norm_a_;
+  const double* b_;
+  double* x_;
+  std::vector<double> r_, d_, kept_;
+};
+
+}  // namespace
+
+RefinementResult refine_steps(RefinementSpace& space, index_t nrhs, int max_steps,
+                              double tolerance) {
   RefinementResult res;
-  std::vector<double> r(static_cast<std::size_t>(n) * nrhs), d(r.size());
-  auto berr_of = [&](index_t col) {
-    return backward_error(n, a, norm_a, b + col * n, x + col * n, r.data() + col * n);
-  };
   std::vector<double>& berr = res.backward_error;
   berr.assign(nrhs, 0.0);
   std::vector<double> last(nrhs);
   std::vector<char> active(nrhs, 1);
-  for (index_t c = 0; c < nrhs; ++c) berr[c] = berr_of(c);
-  for (; res.steps < s.max_steps; ++res.steps) {
+  space.residual(berr.data());
+  for (; res.steps < max_steps; ++res.steps) {
     bool any = false;
     for (index_t c = 0; c < nrhs; ++c) {
-      if (active[c] && berr[c] <= s.tolerance) active[c] = 0;
+      if (active[c] && berr[c] <= tolerance) active[c] = 0;
       any |= active[c] != 0;
     }
     if (!any) break;
-    m_inv(r.data(), d.data(), nrhs);
+    space.correct();
+    for (index_t c = 0; c < nrhs; ++c)
+      if (active[c]) space.step(c);
+    last = berr;
+    space.residual(berr.data());
     bool improved = false;
     for (index_t c = 0; c < nrhs; ++c) {
-      if (!active[c]) continue;
-      std::vector<double> saved(x + c * n, x + (c + 1) * n);
-      for (index_t i = 0; i < n; ++i) x[i + c * n] += d[i + c * n];
-      last[c] = berr[c];
-      berr[c] = berr_of(c);
+      if (!active[c]) {
+        berr[c] = last[c];  // x(:, c) did not change
+        continue;
+      }
       if (berr[c] > 0.5 * last[c]) {  // no longer converging: keep the better iterate
         if (berr[c] > last[c]) {
-          std::copy(saved.begin(), saved.end(), x + c * n);
+          space.undo(c);
           berr[c] = last[c];
-          berr_of(c);
         }
         active[c] = 0;
       } else {
@@ -48,6 +81,14 @@ RefinementResult refine(index_t n, index_t nrhs, const Operator& a, const BlockO
       break;
     }
   }
+  return res;
+}
+
+RefinementResult refine(index_t n, index_t nrhs, const Operator& a, const BlockOperator& m_inv,
+                        double norm_a, const double* b, double* x, const RefinementSettings& s) {
+  HostSpace space(n, nrhs, a, m_inv, norm_a, b, x);
+  RefinementResult res = refine_steps(space, nrhs, s.max_steps, s.tolerance);
+  std::vector<double>& berr = res.backward_error;
   // refinement stalled above what can be checked: GMRES preconditioned by the factor
   const double enough = std::max(s.tolerance, s.floor);
   if (s.gmres_max_iterations > 0) {

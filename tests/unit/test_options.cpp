@@ -218,7 +218,7 @@ TEST(OptionsValidate, AnalysisRefusesBadOptions) {
 // written as text into a default Options and compared field by field.
 TEST(SetOption, EveryFieldRoundTripsThroughText) {
   const std::vector<std::string> names = option_fields();
-  EXPECT_EQ(names.size(), 50u);  // Options' fields but user_permutation
+  EXPECT_EQ(names.size(), 51u);  // Options' fields but user_permutation
   Options changed;
   for (const std::string& name : names) {
     const std::string before = get_option(changed, name);

@@ -222,6 +222,12 @@ class CudaExecutor final : public numeric::Executor {
   bool solve_gpu_arrays(const Analysis& an, const numeric::NumericFactor& fac, const double* b,
                         double* x, index_t nrhs, const numeric::RescaleView& rescale,
                         numeric::GpuArrayCheck& check) override;  // cuda_solve.cu
+  double* refinement_workspace(std::size_t count) override;  // residual.cu
+  bool residual(const Analysis& an, const numeric::MatrixValues& a, const double* b,
+                const double* x, double* r, index_t nrhs,
+                double* maxima) override;  // residual.cu
+  void refinement_step(double* x, const double* d, double* kept, index_t n,
+                       bool undo) override;  // residual.cu
   bool keeps_panels(const numeric::FactorContext& ctx) const override {
     return ctx.part->id == -1 ? device_only_ : part_device_only_;
   }
@@ -658,6 +664,15 @@ class CudaExecutor final : public numeric::Executor {
   // keep_device_input, download_device_input
   DeviceBuffer<double> input_, input_next_;
   std::uint64_t input_analysis_ = 0;
+  // a checked solve's refinement on the device (residual.cu): the caller's vectors
+  // (refinement_workspace), A's values from the host (values, for analysis
+  // values_analysis and MatrixValues::id values_id), the residual's maxima per column
+  struct Refinement {
+    DeviceBuffer<double> work, values;
+    std::uint64_t values_analysis = 0, values_id = 0;
+    DeviceBuffer<unsigned long long> maxima;
+    PinnedBuffer<unsigned long long> maxima_host;
+  } refine_;
   // numeric working memory
   DeviceBuffer<double> values_, arena_, pool_, potrf_work_, panels_;
   PinnedBuffer<double> host_arena_, host_staging_;
