@@ -2512,9 +2512,10 @@ TEST_F(CudaBackend, CorrectedStaticPivotsAsOnTheCpu) {
 // reads each row's mirror) and LU, n = 1 … 733, 1 and 3 right-hand sides, refinement to
 // the end (tolerance 0). The backward error the statistics report is the solution's own
 // (recomputed here on the host), every column's is at the rounding floor, and the
-// solution agrees with the dense one to its condition. Then a factor with static pivots
-// (a stale matching, Pivoting::fixed): refinement stalls and GMRES on the host finishes
-// from the device's iterate.
+// solution agrees with the dense one to its condition. Then factors with static pivots
+// (values far from the analysis's, Pivoting::fixed): GMRES on the host finishes from the
+// device's iterate where refinement stalls, to the backward error the host's own
+// refinement reaches.
 TEST_F(CudaBackend, RefinementOnTheDeviceMatchesTheHosts) {
   unsigned long long seed = 0;
   auto rng = test::fresh_rng(&seed);
@@ -2581,19 +2582,49 @@ TEST_F(CudaBackend, RefinementOnTheDeviceMatchesTheHosts) {
                     4 * dev.stats().solve.backward_error_floor)
               << "refactorized, column " << c;
       }
-  // static pivots: GMRES on the host after the device's steps
-  const test::StaleAnalysis m = test::stale_analysis(733, rng);
-  Options o = leaf_fronts_lu(true);
-  o.pivoting = Pivoting::fixed;
-  Solver s(o);
-  s.analyze(m.analyzed);
-  s.factorize(m.stale);
-  ASSERT_GT(s.stats().factor.perturbed_pivots, 0);
-  const std::vector<double> x = s.solve(m.b);
-  EXPECT_TRUE(s.stats().solve.on_device);
-  EXPECT_LE(test::backward_error(m.stale, x.data(), m.b.data()), 1e-14);
-  EXPECT_LE(s.stats().solve.backward_error, 1e-14);
-  EXPECT_GT(s.stats().solve.refinement_steps + s.stats().solve.gmres_iterations, 0);
+  // static pivots (values far from the analysis's, Pivoting::fixed): where refinement
+  // stalls GMRES on the host finishes from the device's iterate and reaches what the host's
+  // own refinement reaches; draws whose fixed order takes every pivot are skipped
+  const index_t n = 733;
+  const SparseMatrix pattern = test::random_pattern_with_diagonal(n, 3, rng);
+  int perturbed_draws = 0;
+  for (int draw = 0; draw < 16 && perturbed_draws < 2; ++draw) {
+    const SparseMatrix a1 = test::with_values(pattern, 20.0, rng);
+    SparseMatrix a2 = test::with_values(pattern, 8.0, rng);
+    test::zero_some_diagonal(a2, 50, rng);
+    std::vector<double> b(n);
+    for (double& v : b) v = u(rng);
+    std::vector<double> ref = b;
+    if (!test::dense_solve(test::to_dense(a2), n, ref, 1) || !test::structurally_nonsingular(a2))
+      continue;  // a singular draw
+    const double kappa = test::condition_inf(a2);
+    if (!(kappa < 1e10)) continue;
+    Options o = leaf_fronts_lu(true);
+    o.pivoting = Pivoting::fixed;
+    Options host_residuals = o;
+    host_residuals.gpu_refinement = false;
+    Solver dev(o), host(host_residuals);
+    for (Solver* s : {&dev, &host}) {
+      s->analyze(a1);
+      s->factorize(a2);
+    }
+    if (dev.stats().factor.perturbed_pivots == 0) continue;
+    ++perturbed_draws;
+    SCOPED_TRACE("draw " + std::to_string(draw) + ": " +
+                 std::to_string(dev.stats().factor.perturbed_pivots) + " static pivots, kappa " +
+                 std::to_string(kappa));
+    const std::vector<double> xd = dev.solve(b), xh = host.solve(b);
+    const SolveStats& sd = dev.stats().solve;
+    EXPECT_TRUE(sd.on_device);
+    const double ed = test::backward_error(a2, xd.data(), b.data());
+    const double eh = test::backward_error(a2, xh.data(), b.data());
+    EXPECT_LE(ed, std::max(4 * sd.backward_error_floor, 4 * eh)) << "host's " << eh;
+    EXPECT_LE(std::abs(sd.backward_error - ed), 2 * sd.backward_error_floor + 0.01 * ed)
+        << "reported " << sd.backward_error << ", recomputed " << ed;
+    EXPECT_LE(test::relative_difference(xd, ref),
+              kappa * (4 * std::max(ed, sd.backward_error_floor) + 16 * n * 1.1e-16));
+  }
+  EXPECT_GT(perturbed_draws, 0) << "no draw needed static pivots";
 }
 
 }  // namespace
