@@ -239,10 +239,12 @@ struct Options {
   /// results agree to rounding, not bit for bit; each is the same on every run. Default on.
   bool gpu_solve_chain = true;
   /// CUDA backend: a checked solve (solve_check) with the factor resident on the GPU
-  /// computes its residuals b − A·x and backward errors there and refines there, with a
-  /// copy of A's values on the device (src/numeric/cuda/residual.cu); only GMRES, where
-  /// refinement stalls, runs on the host. false: the residuals on the host, each
-  /// refinement step's solve on the device. Default on.
+  /// computes its residuals b − A·x and backward errors there and refines there
+  /// (src/numeric/cuda/residual.cu); only GMRES, where refinement stalls, runs on the host.
+  /// A's values are read from a copy on the device: with solve_check always, a
+  /// factorization's value pass on the GPU keeps one (8 bytes per entry of A); otherwise the first
+  /// checked solve after a factorization copies them there. false: the residuals on the
+  /// host, each refinement step's solve on the device. Default on.
   bool gpu_refinement = true;
   /// CUDA backend on several GPUs (num_gpus > 1): a solve runs part by part on the GPUs
   /// that hold the parts' panels, only the parts' rows of x and their contribution to the

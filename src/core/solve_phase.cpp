@@ -187,7 +187,8 @@ void record_solve(SolverState& s, const solve::RefinementResult& refined, bool c
   // off-diagonal of U)
   ss.condition_lower_bound = 0;
   for (const ColumnMaxima& c : m)
-    if (c.b > 0) ss.condition_lower_bound = std::max(ss.condition_lower_bound, s.norm_inf * c.x / c.b);
+    if (c.b > 0)
+      ss.condition_lower_bound = std::max(ss.condition_lower_bound, s.norm_inf * c.x / c.b);
   ss.refinement_converged = ss.backward_error <= enough;
   // Pivots perturbed: A is numerically singular, and a small normwise backward error only
   // says that x solves a nearby nonsingular matrix (x grows along A's near-null space as
@@ -198,8 +199,9 @@ void record_solve(SolverState& s, const solve::RefinementResult& refined, bool c
   ss.singular_consistent = false;
   if (s.stats.factor.perturbed_pivots > 0) {
     for (const ColumnMaxima& c : m)
-      ss.relative_residual =
-          std::max(ss.relative_residual, c.b > 0 ? c.r / c.b : c.r > 0 ? 1.0 : 0.0);
+      ss.relative_residual = std::max(ss.relative_residual, c.b > 0   ? c.r / c.b
+                                                            : c.r > 0 ? 1.0
+                                                                      : 0.0);
     ss.singular_consistent =
         ss.refinement_converged && ss.relative_residual <= std::sqrt(kUnitRoundoff);
   }
@@ -222,8 +224,9 @@ solve::RefinementResult refine_on_host(SolverState& s, const double* b, double* 
   const solve::BlockOperator m_inv = [&](const double* in, double* out, index_t k) {
     apply_inverse(s, in, out, k);
   };
-  return solve::refine(s.analysis->n, nrhs, op_a, m_inv, s.norm_inf, b, x,
-                       {max_steps, o.refinement_tolerance, rounding_floor(s), o.gmres_max_iterations});
+  return solve::refine(
+      s.analysis->n, nrhs, op_a, m_inv, s.norm_inf, b, x,
+      {max_steps, o.refinement_tolerance, rounding_floor(s), o.gmres_max_iterations});
 }
 
 // After the first application of the factor (x = A⁻¹ b, host arrays, its seconds and
@@ -245,7 +248,15 @@ class DeviceSpace final : public solve::RefinementSpace {
  public:
   DeviceSpace(SolverState& s, const double* b, double* x, double* r, double* d, double* kept,
               index_t nrhs, const numeric::RescaleView& view)
-      : s_(s), b_(b), x_(x), r_(r), d_(d), kept_(kept), nrhs_(nrhs), view_(view), m_(nrhs),
+      : s_(s),
+        b_(b),
+        x_(x),
+        r_(r),
+        d_(d),
+        kept_(kept),
+        nrhs_(nrhs),
+        view_(view),
+        m_(nrhs),
         kept_m_(nrhs) {}
   // the first residual, false where the device cannot make it (nothing changed)
   bool prime() {
@@ -254,7 +265,7 @@ class DeviceSpace final : public solve::RefinementSpace {
     for (index_t c = 0; c < nrhs_; ++c) primed_[c] = berr_of(c);
     return true;
   }
-  void residual(double* berr) override {
+  void residual(double* berr, const char*) override {  // every column, in one launch
     if (!primed_.empty()) {
       std::copy(primed_.begin(), primed_.end(), berr);
       primed_.clear();
@@ -284,8 +295,8 @@ class DeviceSpace final : public solve::RefinementSpace {
   index_t n() const { return s_.analysis->n; }
   std::size_t size() const { return static_cast<std::size_t>(n()) * nrhs_; }
   bool measure() {
-    const numeric::MatrixValues a{s_.kept_values_on_device ? nullptr : s_.values.values.data(),
-                                  s_.values_serial};
+    const bool on_device = s_.kept_values_on_device || s_.values_copy_on_device;
+    const numeric::MatrixValues a{on_device ? nullptr : s_.values.values.data(), s_.values_serial};
     std::vector<double> mx(3 * static_cast<std::size_t>(nrhs_));
     if (!s_.driver->residual(*s_.analysis, a, b_, x_, r_, nrhs_, mx.data())) return false;
     for (index_t c = 0; c < nrhs_; ++c) m_[c] = {mx[3 * c], mx[3 * c + 1], mx[3 * c + 2]};

@@ -182,6 +182,7 @@ void keep_analyzed_input(SolverState& s, const SparseMatrix& a) {
   const Analysis& an = *s.analysis;
   s.values_pin.reset();
   s.kept_values_on_device = false;
+  s.values_copy_on_device = false;
   s.input_map.clear();
   s.input_map_analysis = 0;
   if (has_analyzed_pattern(an, a, host_arena(s))) {
@@ -263,8 +264,12 @@ bool values_on_gpu(SolverState& s, const SparseMatrix& pattern, std::span<const 
   // when the analysis's scaling was clamped: see prepare_values)
   const bool equilibrate = !an.row_scaling.empty() && !scaling_clamped(an);
   numeric::DeviceValueNorms dn;
+  // the values as given kept on the device too where checked solves will read them there
+  // (a copy on the device, instead of one from the host per factorization)
+  const bool keep_copy = s.options.solve_check == SolveCheck::always && s.options.gpu_refinement;
   if (!s.driver->scale_values_on_device(an, direct ? values.data() : staged, stage,
-                                        equilibrate ? kRescalingSweeps : 0, direct, dn))
+                                        equilibrate ? kRescalingSweeps : 0, direct || keep_copy,
+                                        dn))
     return false;
   // refused: the host names the first bad value or sum
   std::vector<double> fetched;
@@ -283,9 +288,11 @@ bool values_on_gpu(SolverState& s, const SparseMatrix& pattern, std::span<const 
     std::swap(s.values.values, s.scaled);  // same size: the kept values are the staged ones
     std::swap(s.values_pin, s.scaled_pin);
     s.kept_values_on_device = false;
+    s.values_copy_on_device = dn.input_copied && s.driver->keep_device_input(an);
   } else {
     s.scaled_current = false;  // of the values before
     s.kept_values_on_device = dn.input_copied && s.driver->keep_device_input(an);
+    s.values_copy_on_device = s.kept_values_on_device;
     if (!s.kept_values_on_device && on_device)
       numeric::copy_from_device(s.values.values.data(), values.data(), values.size());
     else if (!s.kept_values_on_device)
@@ -345,10 +352,12 @@ double prepare_values(SolverState& s, const SparseMatrix* a, std::span<const dou
     s.values.storage = an.symmetric ? Storage::lower : Storage::full;
     s.values_analysis = an.id;
     s.kept_values_on_device = false;
+    s.values_copy_on_device = false;
   }
   if (analyzed_pattern && values_on_gpu(s, s.values, values, norm1)) return norm1;
   s.kept_values_on_device = false;  // every path below writes the kept values
-  std::vector<double> fetched;      // every path below reads the values on the host
+  s.values_copy_on_device = false;
+  std::vector<double> fetched;  // every path below reads the values on the host
   values = host_readable(values, fetched);
   s.scaled_current = true;  // every path below writes the scaled values
   if (analyzed_pattern) {
@@ -635,6 +644,7 @@ void release_factor(SolverState& s) noexcept {
   std::vector<double>().swap(s.scaled);
   s.scaled_current = false;
   s.values_on_device = false;
+  s.values_copy_on_device = false;
   std::vector<double>().swap(s.value_sums);
   if (s.driver) s.driver->release();
 }

@@ -45,6 +45,10 @@ struct SolverState {
   // or page-locked host memory, kept on the GPU that factored it (values_on_gpu), not yet
   // copied here: host_values fetches them before anything on the host reads them
   bool kept_values_on_device = false;
+  // the GPU that factored them holds a copy of the values of `values` as given (kept
+  // there by keep_device_input, also when the host has them too): the residuals of
+  // checked solves on that GPU read it (numeric::MatrixValues with host null)
+  bool values_copy_on_device = false;
   std::vector<double> value_sums;  // per-range vectors of the blocked value passes, kept
   // the host threads of those passes (Options::num_threads), kept: creating a task arena
   // for each parallel loop cost milliseconds per refactorization on a 64-core host

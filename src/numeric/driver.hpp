@@ -100,8 +100,8 @@ class NumericDriver {
   /// Executor::refinement_workspace, residual and refinement_step of the tree driver's
   /// executor; null, false and InternalError for every other driver.
   virtual double* refinement_workspace(std::size_t count) { return nullptr; }
-  virtual bool residual(const Analysis& an, const MatrixValues& a, const double* b,
-                        const double* x, double* r, index_t nrhs, double* maxima) {
+  virtual bool residual(const Analysis& an, const MatrixValues& a, const double* b, const double* x,
+                        double* r, index_t nrhs, double* maxima) {
     return false;
   }
   virtual void refinement_step(double* x, const double* d, double* kept, index_t n, bool undo) {

@@ -407,8 +407,8 @@ class Executor {
   /// maxima[3c .. 3c+2] = ‖r_c‖∞, ‖x_c‖∞, ‖b_c‖∞ (host; a NaN's magnitude compares above
   /// +inf). Returns false, having done nothing, where it cannot (no device row map of the
   /// pattern, no room for A's values, no values kept). Throws DeviceError.
-  virtual bool residual(const Analysis& an, const MatrixValues& a, const double* b,
-                        const double* x, double* r, index_t nrhs, double* maxima) {
+  virtual bool residual(const Analysis& an, const MatrixValues& a, const double* b, const double* x,
+                        double* r, index_t nrhs, double* maxima) {
     return false;
   }
   /// A refinement step of column vectors of length n in this executor's GPU memory, in

@@ -20,8 +20,8 @@ using Operator = std::function<void(const double* x, double* y)>;
 /// Normwise backward error ‖b − A x‖∞ / (norm_a·‖x‖∞ + ‖b‖∞) of x, with r = b − A x
 /// (length n) left in `r`. +inf when x or the residual is not finite (an overflow in
 /// A x, or a NaN): never NaN, and never small because of a NaN that max() skipped.
-double backward_error(index_t n, const Operator& a, double norm_a, const double* b,
-                      const double* x, double* r);
+double backward_error(index_t n, const Operator& a, double norm_a, const double* b, const double* x,
+                      double* r);
 
 /// The same backward error from the three maxima r_max = ‖b − A x‖∞, x_max = ‖x‖∞ and
 /// b_max = ‖b‖∞ (computed elsewhere, e.g. on a GPU): +inf when r_max or x_max is not

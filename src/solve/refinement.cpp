@@ -10,13 +10,22 @@ namespace {
 // Host arrays: A applied one column at a time, M⁻¹ to all columns at once.
 class HostSpace final : public RefinementSpace {
  public:
-  HostSpace(index_t n, index_t nrhs, const Operator& a, const BlockOperator& m_inv,
-            double norm_a, const double* b, double* x)
-      : n_(n), nrhs_(nrhs), a_(a), m_inv_(m_inv), norm_a_(norm_a), b_(b), x_(x),
-        r_(static_cast<std::size_t>(n) * nrhs), d_(r_.size()), kept_(r_.size()) {}
-  void residual(double* berr) override {
+  HostSpace(index_t n, index_t nrhs, const Operator& a, const BlockOperator& m_inv, double norm_a,
+            const double* b, double* x)
+      : n_(n),
+        nrhs_(nrhs),
+        a_(a),
+        m_inv_(m_inv),
+        norm_a_(norm_a),
+        b_(b),
+        x_(x),
+        r_(static_cast<std::size_t>(n) * nrhs),
+        d_(r_.size()),
+        kept_(r_.size()) {}
+  void residual(double* berr, const char* active) override {
     for (index_t c = 0; c < nrhs_; ++c)
-      berr[c] = backward_error(n_, a_, norm_a_, b_ + c * n_, x_ + c * n_, r_.data() + c * n_);
+      if (!active || active[c])
+        berr[c] = backward_error(n_, a_, norm_a_, b_ + c * n_, x_ + c * n_, r_.data() + c * n_);
   }
   void correct() override { m_inv_(r_.data(), d_.data(), nrhs_); }
   void step(index_t c) override {
@@ -47,7 +56,7 @@ RefinementResult refine_steps(RefinementSpace& space, index_t nrhs, int max_step
   berr.assign(nrhs, 0.0);
   std::vector<double> last(nrhs);
   std::vector<char> active(nrhs, 1);
-  space.residual(berr.data());
+  space.residual(berr.data(), nullptr);
   for (; res.steps < max_steps; ++res.steps) {
     bool any = false;
     for (index_t c = 0; c < nrhs; ++c) {
@@ -59,7 +68,7 @@ RefinementResult refine_steps(RefinementSpace& space, index_t nrhs, int max_step
     for (index_t c = 0; c < nrhs; ++c)
       if (active[c]) space.step(c);
     last = berr;
-    space.residual(berr.data());
+    space.residual(berr.data(), active.data());
     bool improved = false;
     for (index_t c = 0; c < nrhs; ++c) {
       if (!active[c]) {

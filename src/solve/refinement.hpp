@@ -45,9 +45,10 @@ struct RefinementResult {
 class RefinementSpace {
  public:
   virtual ~RefinementSpace() = default;
-  /// r = b − A x for every column, and each column's normwise backward error into berr
-  /// (nrhs; +inf for a column whose residual or x is not finite).
-  virtual void residual(double* berr) = 0;
+  /// r = b − A x and each column's normwise backward error into berr (nrhs; +inf for a
+  /// column whose residual or x is not finite), for every column, or for the columns c
+  /// with active[c] where `active` is given (the others may be left as they were).
+  virtual void residual(double* berr, const char* active) = 0;
   /// d = M⁻¹ r for every column.
   virtual void correct() = 0;
   /// Keeps column c of x, then x(:, c) += d(:, c).

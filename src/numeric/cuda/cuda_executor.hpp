@@ -222,7 +222,7 @@ class CudaExecutor final : public numeric::Executor {
   bool solve_gpu_arrays(const Analysis& an, const numeric::NumericFactor& fac, const double* b,
                         double* x, index_t nrhs, const numeric::RescaleView& rescale,
                         numeric::GpuArrayCheck& check) override;  // cuda_solve.cu
-  double* refinement_workspace(std::size_t count) override;  // residual.cu
+  double* refinement_workspace(std::size_t count) override;       // residual.cu
   bool residual(const Analysis& an, const numeric::MatrixValues& a, const double* b,
                 const double* x, double* r, index_t nrhs,
                 double* maxima) override;  // residual.cu

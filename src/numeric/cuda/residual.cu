@@ -14,9 +14,10 @@
 // map). The warp's sum is a fixed shuffle tree, so a residual is the same on every run.
 // The maxima are taken as the bits of non-negative doubles, which order as the numbers do
 // (a NaN's magnitude above +inf, so that the host sees a column that is not finite),
-// by one atomicMax per block and column. A's values come from the values the last
-// factorization kept on the device when the caller gave them from GPU or page-locked
-// memory (keep_device_input), else from the host once per factorization (MatrixValues::id).
+// by one atomicMax per block and column. A's values come from the copy the last
+// factorization kept on the device (keep_device_input: values given from GPU or
+// page-locked memory, or copied by the value pass for checked solves), else from the host
+// once per factorization (MatrixValues::id).
 //
 // Why: a checked solve with the residual on the host copied x back, read A and b there,
 // and sent each correction's right-hand side up again: on the multibody Newton matrices
@@ -41,10 +42,9 @@ __device__ unsigned long long magnitude_bits(double v) {
 // r = b − A x for row i (blockIdx.x's warps) of column c (blockIdx.y + c0), and the block's
 // maxima of |r|, |x| and |b| over its rows into maxima[3c .. 3c+2] (atomicMax on the bits).
 __global__ void residual_kernel(std::int64_t n, const std::int64_t* row_ptr, const int* row_pos,
-                               const int* row_col, const std::int64_t* col_ptr,
-                               const int* col_row, bool symmetric, const double* a,
-                               const double* b, const double* x, double* r, std::int64_t c0,
-                               unsigned long long* maxima) {
+                                const int* row_col, const std::int64_t* col_ptr, const int* col_row,
+                                bool symmetric, const double* a, const double* b, const double* x,
+                                double* r, std::int64_t c0, unsigned long long* maxima) {
   __shared__ unsigned long long s_max[kThreads / kWarp][3];
   const int warp = threadIdx.x / kWarp, lane = threadIdx.x % kWarp;
   const std::int64_t i = static_cast<std::int64_t>(blockIdx.x) * (kThreads / kWarp) + warp;
@@ -157,13 +157,12 @@ bool CudaExecutor::residual(const Analysis& an, const numeric::MatrixValues& a, 
   return true;
 }
 
-void CudaExecutor::refinement_step(double* x, const double* d, double* kept, index_t n,
-                                   bool undo) {
+void CudaExecutor::refinement_step(double* x, const double* d, double* kept, index_t n, bool undo) {
   if (n <= 0) return;
   STRATA_CUDA(cudaSetDevice(device_));
   constexpr int kBlock = 256;
-  step_kernel<<<static_cast<unsigned>((n + kBlock - 1) / kBlock), kBlock, 0, stream_>>>(
-      n, x, d, kept, undo);
+  step_kernel<<<static_cast<unsigned>((n + kBlock - 1) / kBlock), kBlock, 0, stream_>>>(n, x, d,
+                                                                                        kept, undo);
   STRATA_CUDA_LAUNCH();
 }
 
