@@ -2,7 +2,8 @@
 // allocation cap (numeric/device_cap.hpp) makes a device allocation fail as cudaMalloc
 // would. The factorization must stop with OutOfMemory naming the bytes asked for, give
 // back its device buffers, and the same Solver must factorize and solve correctly once the
-// cap is lifted. Skipped where no CUDA GPU is present.
+// cap is lifted; an allocation the factorization can do without (the copy of A kept for
+// checked solves) is left out instead. Skipped where no CUDA GPU is present.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -44,6 +45,10 @@ TEST(CudaFaults, DeviceAllocationFailureIsOutOfMemoryAndRecoverable) {
     // so what a factorization allocates differs from run to run (on two H200s a capped run
     // then fitted under a cap set below the measured total)
     o.num_gpus = 1;
+    // solves checked only after perturbed pivots: every device allocation of a
+    // factorization is then one it needs (with checks always, the value pass also keeps a
+    // copy of A for the checks' residuals where there is room: below)
+    o.solve_check = SolveCheck::after_perturbed_pivots;
     std::vector<double> b(c.a.n_rows);
     for (std::size_t i = 0; i < b.size(); ++i) b[i] = std::sin(1.0 + i);
     // how much an analysis and its first factorization allocate on the device (the
@@ -87,6 +92,33 @@ TEST(CudaFaults, DeviceAllocationFailureIsOutOfMemoryAndRecoverable) {
       EXPECT_EQ(s.stats().factor.backend, Backend::cuda);
     }
     EXPECT_EQ(failures, 17);
+    // checks always: the copy of A that the value pass keeps for the residuals on the
+    // device is charged too, and is left out where the cap leaves no room for it: the
+    // factorization under the cap of the one without it succeeds, and its checked solve
+    // (residuals from the host's values, or on the host) reaches its backward error
+    Options checked = o;
+    checked.solve_check = SolveCheck::always;
+    std::size_t with_copy = 0;
+    {
+      Solver s(checked);
+      numeric::set_device_allocation_cap(std::numeric_limits<std::size_t>::max() - 1);
+      s.analyze(c.a);
+      s.factorize(c.a);
+      with_copy = numeric::device_bytes_charged();
+      numeric::clear_device_allocation_cap();
+    }
+    Solver s(checked);
+    numeric::set_device_allocation_cap(total);
+    s.analyze(c.a);
+    if (with_copy > total) {
+      EXPECT_NO_THROW(s.factorize(c.a)) << "the copy of A is not optional";
+    } else {  // no copy taken (the value pass ran on the host)
+      s.factorize(c.a);
+    }
+    numeric::clear_device_allocation_cap();
+    const std::vector<double> x = s.solve(b);
+    EXPECT_LT(test::backward_error(c.a, x.data(), b.data()), 1e-14);
+    EXPECT_LE(s.stats().solve.backward_error, 1e-14);
   }
 }
 
