@@ -279,13 +279,16 @@ class Report(GpuSections, Distributed, EndToEnd, IftommSection):
                                      f"{sum(1 for _, x in pp if x is not None)} problems on "
                                      f"{machine_label(r.machine)} "
                                      f"([`{r.name}`]({self.rel(r.path)})).")
-            # the first solve from host arrays, and from arrays in GPU memory where the run
-            # measured it (-1 or absent: not measured), against cuDSS's (GPU arrays)
+            # the first solve from host arrays, from arrays in GPU memory where the run
+            # measured it (-1 or absent: not measured), and the default checked solve,
+            # against cuDSS's (GPU arrays)
             for field, what, label in (
                     ("first_solve_seconds", "(one application of the factor, no refinement)",
                      "one right-hand side, no refinement"),
                     ("first_solve_gpu_arrays_seconds", "with b and x in GPU memory",
-                     "b and x in GPU memory for both, no refinement")):
+                     "b and x in GPU memory for both, no refinement"),
+                    ("solve_seconds", "checked (residual, refinement to 1e-15), from host arrays",
+                     "strata's default checked solve against cuDSS's unchecked one")):
                 if r.kind != "cudss" or r.get("solver_options"):
                     break
 
