@@ -173,10 +173,12 @@ class Solver {
   /// stats().solve.backward_error says whether it solves the system (+inf when the residual
   /// overflows).
   /// b and x may also lie in GPU memory (cudaMalloc), as cuDSS's dense matrices may: with
-  /// the factor resident on that GPU (one GPU, stats().factor.factor_resident) and the
-  /// solve unchecked, b is read and x written there with nothing through the host (a
-  /// non-finite b is found there too, and x is then left as it was); otherwise b is
-  /// fetched to the host and x copied back. Work that writes b must be complete, or on
+  /// the factor resident on that GPU (one GPU, stats().factor.factor_resident), b is read
+  /// and x written there with nothing through the host (a non-finite b is found there too,
+  /// and x is then left as it was); a checked solve's residuals and refinement steps run
+  /// there as well (Options::gpu_refinement), only GMRES after a stalled refinement on the
+  /// host. Otherwise b is fetched to the host and x copied back. With host arrays and a
+  /// resident factor, the checked solve's residuals and steps also run on that GPU. Work that writes b must be complete, or on
   /// the legacy default stream, when solve is called; x is complete when it returns.
   void solve(const double* b, double* x, index_t nrhs = 1);
 
