@@ -348,22 +348,27 @@ bool checked_solve_on_device(SolverState& s, const double* b, double* x, index_t
   if (found.b_not_finite >= 0) throw_rhs_not_finite(found.b_not_finite, n);
   if (found.x_not_finite >= 0) throw_no_representable_solution(found.x_not_finite, n);
   DeviceSpace space(s, bd, xd, r, d, kept, nrhs, view);
+  // the host's part: x (and b, where it lies on the GPU) in host arrays, A's values there
   std::vector<double> hb, hx;
-  if (!space.prime()) {  // no residual on the device: refine on the host
+  const auto to_host = [&]() -> const double* {
     hx.resize(count);
     numeric::copy_from_device(hx.data(), xd, count);
-    const double* bh = b;
-    if (b_gpu) {
-      hb.resize(count);
-      numeric::copy_from_device(hb.data(), b, count);
-      bh = hb.data();
-    }
     host_values(s);
-    finish_solve(s, bh, hx.data(), nrhs, true, first_seconds, true, timer);
+    if (!b_gpu) return b;
+    hb.resize(count);
+    numeric::copy_from_device(hb.data(), b, count);
+    return hb.data();
+  };
+  const auto from_host = [&] {
     if (x_gpu)
       numeric::copy_to_device(x, hx.data(), count);
     else
       std::copy(hx.begin(), hx.end(), x);
+  };
+  if (!space.prime()) {  // no residual on the device: refine on the host
+    const double* bh = to_host();
+    finish_solve(s, bh, hx.data(), nrhs, true, first_seconds, true, timer);
+    from_host();
     return true;
   }
   solve::RefinementResult refined =
@@ -376,24 +381,13 @@ bool checked_solve_on_device(SolverState& s, const double* b, double* x, index_t
   for (const ColumnMaxima& c : maxima) finite &= std::isfinite(c.x);
   if ((stalled && o.gmres_max_iterations > 0) || !finite) {
     // GMRES where refinement stalled (or the entry that is not finite named), on the host
-    hx.resize(count);
-    numeric::copy_from_device(hx.data(), xd, count);
-    const double* bh = b;
-    if (b_gpu) {
-      hb.resize(count);
-      numeric::copy_from_device(hb.data(), b, count);
-      bh = hb.data();
-    }
-    host_values(s);
+    const double* bh = to_host();
     const int steps = refined.steps;
     refined = refine_on_host(s, bh, hx.data(), nrhs, 0);
     refined.steps = steps;
     check_solution_finite(hx.data(), n, nrhs);
     maxima = host_maxima(s, bh, hx.data(), nrhs);
-    if (x_gpu)
-      numeric::copy_to_device(x, hx.data(), count);
-    else
-      std::copy(hx.begin(), hx.end(), x);
+    from_host();
   } else if (!x_gpu) {
     numeric::copy_from_device(x, xd, count);
   }

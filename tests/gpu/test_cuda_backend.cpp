@@ -2446,16 +2446,15 @@ TEST_F(CudaBackend, CorrectedStaticPivotsAsOnTheCpu) {
     const bool large = n == 729;
     SCOPED_TRACE("n = " + std::to_string(n) + (large ? " (grid, large fronts)" : ""));
     const SparseMatrix pattern = large ? grid : test::random_pattern_with_diagonal(n, 3, rng);
-    const SparseMatrix a1 = test::with_values(pattern, 20.0, rng);
-    SparseMatrix a2 = test::with_values(pattern, 8.0, rng);
-    test::zero_some_diagonal(a2, n < 10 ? 1 : large ? 10 : 50, rng);
-    std::vector<double> b(n);
-    for (double& v : b) v = u(rng);
-    std::vector<double> ref = b;
-    if (!test::dense_solve(test::to_dense(a2), n, ref, 1) || !test::structurally_nonsingular(a2))
-      continue;  // a singular draw
-    const double kappa = test::condition_inf(a2);
-    if (!(kappa < 1e10)) continue;
+    const std::optional<test::StaleValues> draw = test::stale_values(pattern,
+                                                                     n < 10  ? 1
+                                                                     : large ? 10
+                                                                             : 50,
+                                                                     rng);
+    if (!draw) continue;  // a singular or ill-conditioned draw
+    const SparseMatrix &a1 = draw->analyzed, &a2 = draw->stale;
+    const std::vector<double>&b = draw->b, &ref = draw->ref;
+    const double kappa = draw->kappa;
     Options o = one_gpu_unrefined(MatrixType::general);
     if (large) {
       o.gpu_small_front_rows = 1;
@@ -2591,16 +2590,11 @@ TEST_F(CudaBackend, RefinementOnTheDeviceMatchesTheHosts) {
   const SparseMatrix pattern = test::random_pattern_with_diagonal(n, 3, rng);
   int perturbed_draws = 0;
   for (int draw = 0; draw < 16 && perturbed_draws < 2; ++draw) {
-    const SparseMatrix a1 = test::with_values(pattern, 20.0, rng);
-    SparseMatrix a2 = test::with_values(pattern, 8.0, rng);
-    test::zero_some_diagonal(a2, 50, rng);
-    std::vector<double> b(n);
-    for (double& v : b) v = u(rng);
-    std::vector<double> ref = b;
-    if (!test::dense_solve(test::to_dense(a2), n, ref, 1) || !test::structurally_nonsingular(a2))
-      continue;  // a singular draw
-    const double kappa = test::condition_inf(a2);
-    if (!(kappa < 1e10)) continue;
+    const std::optional<test::StaleValues> values = test::stale_values(pattern, 50, rng);
+    if (!values) continue;  // a singular or ill-conditioned draw
+    const SparseMatrix &a1 = values->analyzed, &a2 = values->stale;
+    const std::vector<double>&b = values->b, &ref = values->ref;
+    const double kappa = values->kappa;
     Options o = leaf_fronts_lu(true);
     o.pivoting = Pivoting::fixed;
     // checked only for the static pivots: the value pass keeps no copy of A on the device,

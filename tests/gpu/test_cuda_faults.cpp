@@ -55,15 +55,16 @@ TEST(CudaFaults, DeviceAllocationFailureIsOutOfMemoryAndRecoverable) {
     // analysis' device set-up, Executor::prepare, sizes nearly all of it, so that the
     // factorization allocates nothing; a failure in that set-up is left for the
     // factorization, which allocates afresh and reports it)
-    std::size_t total = 0;
-    {
-      Solver s(o);
+    const auto charged = [&c](const Options& options) {
+      Solver s(options);
       numeric::set_device_allocation_cap(std::numeric_limits<std::size_t>::max() - 1);
       s.analyze(c.a);
       s.factorize(c.a);
-      total = numeric::device_bytes_charged();
+      const std::size_t bytes = numeric::device_bytes_charged();
       numeric::clear_device_allocation_cap();
-    }
+      return bytes;
+    };
+    const std::size_t total = charged(o);
     ASSERT_GT(total, 0u);
     int failures = 0;
     for (int k = 0; k <= 16; ++k) {
@@ -98,15 +99,7 @@ TEST(CudaFaults, DeviceAllocationFailureIsOutOfMemoryAndRecoverable) {
     // (residuals from the host's values, or on the host) reaches its backward error
     Options checked = o;
     checked.solve_check = SolveCheck::always;
-    std::size_t with_copy = 0;
-    {
-      Solver s(checked);
-      numeric::set_device_allocation_cap(std::numeric_limits<std::size_t>::max() - 1);
-      s.analyze(c.a);
-      s.factorize(c.a);
-      with_copy = numeric::device_bytes_charged();
-      numeric::clear_device_allocation_cap();
-    }
+    const std::size_t with_copy = charged(checked);
     Solver s(checked);
     numeric::set_device_allocation_cap(total);
     s.analyze(c.a);

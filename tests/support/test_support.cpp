@@ -124,6 +124,22 @@ StaleAnalysis stale_analysis(index_t n, std::mt19937_64& rng) {
   }
 }
 
+std::optional<StaleValues> stale_values(const SparseMatrix& pattern, int zero_one_in,
+                                        std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> u(-1, 1);
+  const index_t n = pattern.n_rows;
+  StaleValues v{with_values(pattern, 20.0, rng), with_values(pattern, 8.0, rng), {}, {}, 0};
+  zero_some_diagonal(v.stale, zero_one_in, rng);
+  v.b.resize(n);
+  for (double& x : v.b) x = u(rng);
+  v.ref = v.b;
+  if (!dense_solve(to_dense(v.stale), n, v.ref, 1) || !structurally_nonsingular(v.stale))
+    return std::nullopt;
+  v.kappa = condition_inf(v.stale);
+  if (!(v.kappa < 1e10)) return std::nullopt;
+  return v;
+}
+
 SparseMatrix with_duplicate_zeros(const SparseMatrix& a) {
   SparseMatrix d = a;
   d.indices.clear();

@@ -2,6 +2,7 @@
 // type, dense conversions and dense LAPACK references.
 #pragma once
 
+#include <optional>
 #include <random>
 #include <string>
 #include <vector>
@@ -125,6 +126,19 @@ struct StaleAnalysis {
   std::vector<double> b;
 };
 StaleAnalysis stale_analysis(index_t n, std::mt19937_64& rng);
+
+/// Values far from an analysis's on one pattern with its diagonal, for static pivots in the
+/// analysis's order: `analyzed` with a dominant diagonal (20), `stale` with the diagonal 8
+/// and one diagonal entry in `zero_one_in` zeroed (fresh off-diagonal values for each);
+/// `b` uniform in [−1, 1], `ref` = stale⁻¹·b by dense LU (dgesv) and `kappa` = κ∞(stale).
+/// Empty for a singular draw (structurally, or for dgesv) or κ∞ ≥ 1e10.
+struct StaleValues {
+  SparseMatrix analyzed, stale;
+  std::vector<double> b, ref;
+  double kappa = 0;
+};
+std::optional<StaleValues> stale_values(const SparseMatrix& pattern, int zero_one_in,
+                                        std::mt19937_64& rng);
 
 /// Dense column-major n_rows×n_cols copy of A (symmetric storage expanded).
 std::vector<double> to_dense(const SparseMatrix& a);
