@@ -93,6 +93,12 @@ double* solve_work(SolverState& s, std::size_t entries) {
   return s.solve_work.data();
 }
 
+// The factorization's rescaling as the device solves take it (none: null, id 0).
+numeric::RescaleView rescale_view(const SolverState& s) {
+  if (s.rescaling.row.empty()) return {};
+  return {s.rescaling.row.data(), s.rescaling.col.data(), s.rescaling.id};
+}
+
 }  // namespace
 
 // One solve with the factor: x = F⁻¹ b for nrhs columns (original numbering), through
@@ -106,9 +112,7 @@ bool apply_factor(SolverState& s, const double* b, double* x, index_t nrhs) {
   const bool match = !an.matching_perm.empty();
   const bool rescale = !s.rescaling.row.empty();
   // the factor resident on a GPU: the permutation and scaling there too
-  const numeric::RescaleView view{rescale ? s.rescaling.row.data() : nullptr,
-                                  rescale ? s.rescaling.col.data() : nullptr,
-                                  rescale ? s.rescaling.id : 0};
+  const numeric::RescaleView view = rescale_view(s);
   if (!s.delayed.valid && s.driver->solve_original(an, s.factor, b, x, nrhs, view, work))
     return true;
   for_entries(s, n * nrhs, [&](index_t e) {
@@ -338,10 +342,7 @@ bool checked_solve_on_device(SolverState& s, const double* b, double* x, index_t
     next += count;
   }
   double* const xd = x_gpu ? x : next;
-  const bool rescale = !s.rescaling.row.empty();
-  const numeric::RescaleView view{rescale ? s.rescaling.row.data() : nullptr,
-                                  rescale ? s.rescaling.col.data() : nullptr,
-                                  rescale ? s.rescaling.id : 0};
+  const numeric::RescaleView view = rescale_view(s);
   numeric::GpuArrayCheck found;
   if (!s.driver->solve_gpu_arrays(an, s.factor, bd, xd, nrhs, view, found)) return false;
   const double first_seconds = first.seconds();
@@ -413,10 +414,7 @@ void solve_gpu_arrays(SolverState& s, const double* b, double* x, index_t nrhs, 
   if (check && checked_solve_on_device(s, b, x, nrhs, b_gpu, x_gpu, timer)) return;
   if (b_gpu && x_gpu && !s.delayed.valid && !s.correction.active) {
     if (check) host_values(s);  // the residuals' matrix
-    const bool rescale = !s.rescaling.row.empty();
-    const numeric::RescaleView view{rescale ? s.rescaling.row.data() : nullptr,
-                                    rescale ? s.rescaling.col.data() : nullptr,
-                                    rescale ? s.rescaling.id : 0};
+    const numeric::RescaleView view = rescale_view(s);
     numeric::GpuArrayCheck found;
     Timer first;
     if (s.driver->solve_gpu_arrays(an, s.factor, b, x, nrhs, view, found)) {
