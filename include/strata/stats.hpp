@@ -278,7 +278,9 @@ struct SolveStats {
   double seconds = 0;
   /// Seconds of the first application of the factor alone (permutation and scaling, the
   /// forward and backward triangular solves, and on the GPU the transfers of b and x):
-  /// what a solver without refinement reports as its solve phase.
+  /// what a solver without refinement reports as its solve phase. A checked solve on the
+  /// GPU that holds the factor waits for that application together with its first
+  /// residual: there the first residual is included.
   double first_solve_seconds = 0;
   int refinement_steps = 0;
   int gmres_iterations = 0;  ///< total over right-hand sides (0 when refinement sufficed)

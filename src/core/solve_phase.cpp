@@ -278,11 +278,18 @@ class DeviceSpace final : public solve::RefinementSpace {
     if (!measure()) throw InternalError("the GPU could not compute a residual it computed before");
     for (index_t c = 0; c < nrhs_; ++c) berr[c] = berr_of(c);
   }
+  // d = M⁻¹ r. With every residual finite the host does not wait for it: a d that is not
+  // finite makes x's maxima not finite at the next residual, whose backward error is then
+  // +inf, and refine_steps undoes the step. A residual that is not finite would leave d
+  // as it was (solve_gpu_arrays does not write x for such a b): d = 0 then.
   void correct() override {
+    bool finite = true;
+    for (const ColumnMaxima& c : m_) finite &= std::isfinite(c.r);
     numeric::GpuArrayCheck found;
-    if (!s_.driver->solve_gpu_arrays(*s_.analysis, s_.factor, r_, d_, nrhs_, view_, found))
+    if (!s_.driver->solve_gpu_arrays(*s_.analysis, s_.factor, r_, d_, nrhs_, view_,
+                                     finite ? nullptr : &found))
       throw InternalError("the GPU that holds the factor declined a refinement step's solve");
-    if (found.b_not_finite >= 0 || found.x_not_finite >= 0)  // no correction: x stays
+    if (!finite && (found.b_not_finite >= 0 || found.x_not_finite >= 0))  // x stays
       numeric::copy_to_device(d_, std::vector<double>(size(), 0.0).data(), size());
   }
   void step(index_t c) override {
@@ -294,6 +301,12 @@ class DeviceSpace final : public solve::RefinementSpace {
     s_.driver->refinement_step(x_ + c * n(), d_ + c * n(), kept_ + c * n(), n(), true);
   }
   const std::vector<ColumnMaxima>& maxima() const { return m_; }
+  // every column's b and x finite at the last residual
+  bool finite() const {
+    bool f = true;
+    for (const ColumnMaxima& c : m_) f &= std::isfinite(c.x) && std::isfinite(c.b);
+    return f;
+  }
 
  private:
   index_t n() const { return s_.analysis->n; }
@@ -319,10 +332,13 @@ class DeviceSpace final : public solve::RefinementSpace {
 };
 
 // A checked solve on the GPU that holds the factor (Options::gpu_refinement): b up once
-// (unless it lies in that GPU's memory), the first solve, the residuals and refinement
-// steps there, x down once (unless it lies there); GMRES on the host for the columns that
-// refinement leaves above what can be checked. Returns false, having written nothing the
-// caller sees, where it cannot run: the caller then solves on the host.
+// (unless it lies in that GPU's memory; through the page-locked solve_work), the first
+// solve, the residuals and refinement steps there, x down once (unless it lies there); GMRES
+// on the host for the columns that refinement leaves above what can be checked. The host
+// waits for the first solve only with its residual, and reads the solve's own check of b
+// and x only where the residual's maxima show an entry that is not finite. Returns false,
+// having written nothing the caller sees, where it cannot run: the caller then solves on
+// the host.
 bool checked_solve_on_device(SolverState& s, const double* b, double* x, index_t nrhs, bool b_gpu,
                              bool x_gpu, const Timer& timer) {
   const Analysis& an = *s.analysis;
@@ -334,21 +350,28 @@ bool checked_solve_on_device(SolverState& s, const double* b, double* x, index_t
   double* const work = s.driver->refinement_workspace(count * (3 + !b_gpu + !x_gpu));
   if (!work) return false;
   double *r = work, *d = work + count, *kept = work + 2 * count, *next = work + 3 * count;
+  // b and x pass through the page-locked stage when they are host arrays
+  double* const stage = b_gpu && x_gpu ? nullptr : solve_work(s, count);
   Timer first;
   const double* bd = b;
   if (!b_gpu) {
-    numeric::copy_to_device(next, b, count);
+    std::copy(b, b + count, stage);
+    numeric::copy_to_device(next, stage, count);
     bd = next;
     next += count;
   }
   double* const xd = x_gpu ? x : next;
   const numeric::RescaleView view = rescale_view(s);
-  numeric::GpuArrayCheck found;
-  if (!s.driver->solve_gpu_arrays(an, s.factor, bd, xd, nrhs, view, found)) return false;
-  const double first_seconds = first.seconds();
-  if (found.b_not_finite >= 0) throw_rhs_not_finite(found.b_not_finite, n);
-  if (found.x_not_finite >= 0) throw_no_representable_solution(found.x_not_finite, n);
+  if (!s.driver->solve_gpu_arrays(an, s.factor, bd, xd, nrhs, view, nullptr)) return false;
   DeviceSpace space(s, bd, xd, r, d, kept, nrhs, view);
+  const bool primed = space.prime();  // waits for the solve and its residual
+  const double first_seconds = first.seconds();
+  if (!primed || !space.finite()) {
+    numeric::GpuArrayCheck found;
+    s.driver->last_gpu_array_check(found);
+    if (found.b_not_finite >= 0) throw_rhs_not_finite(found.b_not_finite, n);
+    if (found.x_not_finite >= 0) throw_no_representable_solution(found.x_not_finite, n);
+  }
   // the host's part: x (and b, where it lies on the GPU) in host arrays, A's values there
   std::vector<double> hb, hx;
   const auto to_host = [&]() -> const double* {
@@ -366,7 +389,7 @@ bool checked_solve_on_device(SolverState& s, const double* b, double* x, index_t
     else
       std::copy(hx.begin(), hx.end(), x);
   };
-  if (!space.prime()) {  // no residual on the device: refine on the host
+  if (!primed) {  // no residual on the device: refine on the host
     const double* bh = to_host();
     finish_solve(s, bh, hx.data(), nrhs, true, first_seconds, true, timer);
     from_host();
@@ -390,7 +413,8 @@ bool checked_solve_on_device(SolverState& s, const double* b, double* x, index_t
     maxima = host_maxima(s, bh, hx.data(), nrhs);
     from_host();
   } else if (!x_gpu) {
-    numeric::copy_from_device(x, xd, count);
+    numeric::copy_from_device(stage, xd, count);
+    std::copy(stage, stage + count, x);
   }
   record_solve(s, refined, true, maxima, first_seconds, true, timer);
   return true;
@@ -417,7 +441,7 @@ void solve_gpu_arrays(SolverState& s, const double* b, double* x, index_t nrhs, 
     const numeric::RescaleView view = rescale_view(s);
     numeric::GpuArrayCheck found;
     Timer first;
-    if (s.driver->solve_gpu_arrays(an, s.factor, b, x, nrhs, view, found)) {
+    if (s.driver->solve_gpu_arrays(an, s.factor, b, x, nrhs, view, &found)) {
       const double first_seconds = first.seconds();
       if (found.b_not_finite >= 0) throw_rhs_not_finite(found.b_not_finite, n);
       if (found.x_not_finite >= 0) throw_no_representable_solution(found.x_not_finite, n);

@@ -169,8 +169,12 @@ class TreeDriver final : public NumericDriver {
     return executor_ && executor_->solve_original(an, factor, b, x, nrhs, rescale, stage);
   }
   bool solve_gpu_arrays(const Analysis& an, NumericFactor& factor, const double* b, double* x,
-                        index_t nrhs, const RescaleView& rescale, GpuArrayCheck& check) override {
+                        index_t nrhs, const RescaleView& rescale, GpuArrayCheck* check) override {
     return executor_ && executor_->solve_gpu_arrays(an, factor, b, x, nrhs, rescale, check);
+  }
+  void last_gpu_array_check(GpuArrayCheck& check) override {
+    if (!executor_) throw InternalError("last_gpu_array_check: no executor ran the solve");
+    executor_->last_gpu_array_check(check);
   }
   double* refinement_workspace(std::size_t count) override {
     return executor_ ? executor_->refinement_workspace(count) : nullptr;

@@ -90,12 +90,16 @@ class NumericDriver {
                               index_t nrhs, const RescaleView& rescale, double* stage) {
     return false;
   }
-  /// Executor::solve_gpu_arrays of the tree driver's executor (b and x in that GPU's
-  /// memory); false, having done nothing, for every other driver and where it returns false.
+  /// Executor::solve_gpu_arrays and last_gpu_array_check of the tree driver's executor (b
+  /// and x in that GPU's memory); false, having done nothing, and InternalError for every
+  /// other driver, and false where that executor's returns false.
   virtual bool solve_gpu_arrays(const Analysis& an, NumericFactor& factor, const double* b,
                                 double* x, index_t nrhs, const RescaleView& rescale,
-                                GpuArrayCheck& check) {
+                                GpuArrayCheck* check) {
     return false;
+  }
+  virtual void last_gpu_array_check(GpuArrayCheck& check) {
+    throw InternalError("last_gpu_array_check: this driver ran no solve of GPU arrays");
   }
   /// Executor::refinement_workspace, residual and refinement_step of the tree driver's
   /// executor; null, false and InternalError for every other driver.

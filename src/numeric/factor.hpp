@@ -388,12 +388,20 @@ class Executor {
   /// n × nrhs column-major, not aliasing), with nothing through the host: b is checked on
   /// the device and x written only when every entry of b is finite, x checked after
   /// (`check`). Work on the legacy default stream that writes b is complete before b is
-  /// read. Returns false, having done nothing, where solve_original would, or when b or x
-  /// is not in this device's memory; the default does.
+  /// read. With `check` null the solve is only enqueued: the host does not wait for it, and
+  /// its check stays on the device until last_gpu_array_check reads it (a checked solve
+  /// waits once, for its residual, instead of twice). Returns false, having done nothing,
+  /// where solve_original would, or when b or x is not in this device's memory; the
+  /// default does.
   virtual bool solve_gpu_arrays(const Analysis& an, const NumericFactor& fac, const double* b,
                                 double* x, index_t nrhs, const RescaleView& rescale,
-                                GpuArrayCheck& check) {
+                                GpuArrayCheck* check) {
     return false;
+  }
+  /// Waits for the last solve_gpu_arrays and writes what it found to `check`. Throws
+  /// InternalError where no such solve ran on this executor; the default does.
+  virtual void last_gpu_array_check(GpuArrayCheck& check) {
+    throw InternalError("last_gpu_array_check: this executor ran no solve of GPU arrays");
   }
   /// Device vectors for a checked solve with a factor resident on this executor's GPU
   /// (core/solve_phase.cpp): `count` doubles of its memory, kept until the next call, the

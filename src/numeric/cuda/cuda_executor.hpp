@@ -221,8 +221,9 @@ class CudaExecutor final : public numeric::Executor {
                       double* stage) override;  // cuda_solve.cu
   bool solve_gpu_arrays(const Analysis& an, const numeric::NumericFactor& fac, const double* b,
                         double* x, index_t nrhs, const numeric::RescaleView& rescale,
-                        numeric::GpuArrayCheck& check) override;  // cuda_solve.cu
-  double* refinement_workspace(std::size_t count) override;       // residual.cu
+                        numeric::GpuArrayCheck* check) override;      // cuda_solve.cu
+  void last_gpu_array_check(numeric::GpuArrayCheck& check) override;  // cuda_solve.cu
+  double* refinement_workspace(std::size_t count) override;           // residual.cu
   bool residual(const Analysis& an, const numeric::MatrixValues& a, const double* b,
                 const double* x, double* r, index_t nrhs,
                 double* maxima) override;  // residual.cu
@@ -729,9 +730,11 @@ class CudaExecutor final : public numeric::Executor {
     DeviceBuffer<double> b, row_rescale, col_rescale, in_scale, out_scale;
     DeviceBuffer<std::int64_t> in_index, out_index;
     /// solve_gpu_arrays: b's first non-finite entry, x's (complemented), b's and x's
-    /// largest magnitude (EntryCheck), and their copy on the host
+    /// largest magnitude (EntryCheck), and their copy on the host (complete once the
+    /// stream is; checks_pending: a solve of GPU arrays wrote it)
     DeviceBuffer<unsigned long long> checks;
     PinnedBuffer<unsigned long long> checks_host;
+    bool checks_pending = false;
     std::uint64_t io_analysis = 0, rescale_id = 0;
     std::vector<std::int64_t> u_offset_host;  ///< per front + 1: its update vector in u
     std::uint64_t inverse_analysis = 0;       ///< what inv_offsets and inv_src are for

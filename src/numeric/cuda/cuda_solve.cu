@@ -352,16 +352,22 @@ void CudaExecutor::upload_rescale(const Analysis& an, const numeric::RescaleView
 // solve_original with b and x in this device's memory: b checked, permuted and scaled
 // into the factor's numbering, the sweeps (the same graph), the solutions permuted and
 // scaled into x unless b held an entry that is not finite, x checked; only the four check
-// words come back to the host.
+// words come back to the host (page-locked, read when the host waits: at once, or by
+// last_gpu_array_check).
 bool CudaExecutor::solve_gpu_arrays(const Analysis& an, const numeric::NumericFactor& fac,
                                     const double* b, double* x, index_t nrhs,
                                     const numeric::RescaleView& rescale,
-                                    numeric::GpuArrayCheck& check) {
+                                    numeric::GpuArrayCheck* check) {
   if (!solves_resident(an, fac)) return false;
   if (numeric::device_memory_of(b) != device_ || numeric::device_memory_of(x) != device_)
     return false;
-  check = numeric::GpuArrayCheck{};
-  if (an.n == 0 || nrhs == 0) return true;
+  dsolve_.checks_host.resize(4);
+  dsolve_.checks_pending = true;
+  if (an.n == 0 || nrhs == 0) {
+    std::fill_n(dsolve_.checks_host.data(), 4, 0ULL);
+    if (check) last_gpu_array_check(*check);
+    return true;
+  }
   STRATA_CUDA(cudaSetDevice(device_));
   prepare_solve_plan(an);
   prepare_solve_io(an);
@@ -370,7 +376,6 @@ bool CudaExecutor::solve_gpu_arrays(const Analysis& an, const numeric::NumericFa
   upload_rescale(an, rescale);
   dsolve_.x.resize(static_cast<std::size_t>(count));
   dsolve_.checks.resize(4);
-  dsolve_.checks_host.resize(4);
   // b's check and x's: the complement of the first entry that is not finite, the
   // largest magnitude's bits (EntryCheck), made by the permutations on the way
   unsigned long long* c = dsolve_.checks.data();
@@ -382,10 +387,18 @@ bool CudaExecutor::solve_gpu_arrays(const Analysis& an, const numeric::NumericFa
   launch_permute_out(dsolve_.x.data(), dsolve_.out_index.data(), dsolve_.out_scale.data(),
                      rescale.col ? dsolve_.col_rescale.data() : nullptr, x, n, nrhs, stream_, c,
                      EntryCheck{c + 1, c + 3});
-  unsigned long long* h = dsolve_.checks_host.data();
-  STRATA_CUDA(
-      cudaMemcpyAsync(h, c, 4 * sizeof(unsigned long long), cudaMemcpyDeviceToHost, stream_));
+  STRATA_CUDA(cudaMemcpyAsync(dsolve_.checks_host.data(), c, 4 * sizeof(unsigned long long),
+                              cudaMemcpyDeviceToHost, stream_));
+  if (check) last_gpu_array_check(*check);
+  return true;
+}
+
+void CudaExecutor::last_gpu_array_check(numeric::GpuArrayCheck& check) {
+  if (!dsolve_.checks_pending || dsolve_.checks_host.size() < 4)
+    throw InternalError("last_gpu_array_check: no solve of GPU arrays ran on this executor");
+  STRATA_CUDA(cudaSetDevice(device_));
   STRATA_CUDA(cudaStreamSynchronize(stream_));
+  const unsigned long long* h = dsolve_.checks_host.data();
   auto index = [](unsigned long long v) {
     return v == 0 ? std::int64_t{-1} : static_cast<std::int64_t>(~v);
   };
@@ -398,7 +411,6 @@ bool CudaExecutor::solve_gpu_arrays(const Analysis& an, const numeric::NumericFa
   check.x_not_finite = check.b_not_finite >= 0 ? -1 : index(h[1]);
   check.b_max = magnitude(h[2]);
   check.x_max = check.b_not_finite >= 0 ? 0.0 : magnitude(h[3]);
-  return true;
 }
 
 std::vector<std::uintptr_t> CudaExecutor::solve_graph_key(const Analysis& an,
