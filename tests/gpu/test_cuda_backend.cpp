@@ -620,7 +620,7 @@ TEST_F(CudaBackend, SolutionsMatchCpu) {
 
 // b and x in GPU memory (Solver::solve): with the factor resident and the solve unchecked,
 // the same bits as from host arrays (the same kernels, nothing through the host), and a
-// non-finite entry of b named with x left as it was; checked (refined on the host) and with
+// non-finite entry of b named with x left as it was (and from host arrays); checked and with
 // only one of the two on the GPU, the host arrays' results. LU and Cholesky, n from 1 to
 // 733, two right-hand sides.
 TEST_F(CudaBackend, SolveArraysInGpuMemory) {
@@ -700,6 +700,20 @@ TEST_F(CudaBackend, SolveArraysInGpuMemory) {
         }
         numeric::copy_from_device(got.data(), dx3.get(), got.size());
         EXPECT_EQ(got, std::vector<double>(b.size(), 7.0));
+        // the same from host arrays (a checked solve reads the device's check of b only
+        // after its residual): the same entry named, x left as it was
+        std::vector<double> hx3(b.size(), 7.0);
+        try {
+          s.solve(bad.data(), hx3.data(), nrhs);
+          ADD_FAILURE() << "no error for a NaN in b (host arrays)";
+        } catch (const InvalidInput& e) {
+          EXPECT_NE(
+              std::string(e.what()).find("right-hand side entry " + std::to_string(at % n) +
+                                         " of column " + std::to_string(at / n) + " is not finite"),
+              std::string::npos)
+              << e.what();
+        }
+        EXPECT_EQ(hx3, std::vector<double>(b.size(), 7.0));
       }
     }
 }
