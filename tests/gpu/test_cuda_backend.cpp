@@ -688,31 +688,26 @@ TEST_F(CudaBackend, SolveArraysInGpuMemory) {
         const std::shared_ptr<double> dbad = numeric::cuda_device_copy(bad);
         const std::shared_ptr<double> dx3 =
             numeric::cuda_device_copy(std::vector<double>(b.size(), 7.0));
-        try {
-          s.solve(dbad.get(), dx3.get(), nrhs);
-          ADD_FAILURE() << "no error for a NaN in b";
-        } catch (const InvalidInput& e) {
-          EXPECT_NE(
-              std::string(e.what()).find("right-hand side entry " + std::to_string(at % n) +
-                                         " of column " + std::to_string(at / n) + " is not finite"),
-              std::string::npos)
-              << e.what();
-        }
+        // the error names entry `at`
+        const auto expect_named = [&](const double* rhs, double* x, const char* where) {
+          try {
+            s.solve(rhs, x, nrhs);
+            ADD_FAILURE() << "no error for a NaN in b (" << where << ")";
+          } catch (const InvalidInput& e) {
+            EXPECT_NE(std::string(e.what()).find("right-hand side entry " + std::to_string(at % n) +
+                                                 " of column " + std::to_string(at / n) +
+                                                 " is not finite"),
+                      std::string::npos)
+                << where << ": " << e.what();
+          }
+        };
+        expect_named(dbad.get(), dx3.get(), "GPU arrays");
         numeric::copy_from_device(got.data(), dx3.get(), got.size());
         EXPECT_EQ(got, std::vector<double>(b.size(), 7.0));
         // the same from host arrays (a checked solve reads the device's check of b only
         // after its residual): the same entry named, x left as it was
         std::vector<double> hx3(b.size(), 7.0);
-        try {
-          s.solve(bad.data(), hx3.data(), nrhs);
-          ADD_FAILURE() << "no error for a NaN in b (host arrays)";
-        } catch (const InvalidInput& e) {
-          EXPECT_NE(
-              std::string(e.what()).find("right-hand side entry " + std::to_string(at % n) +
-                                         " of column " + std::to_string(at / n) + " is not finite"),
-              std::string::npos)
-              << e.what();
-        }
+        expect_named(bad.data(), hx3.data(), "host arrays");
         EXPECT_EQ(hx3, std::vector<double>(b.size(), 7.0));
       }
     }
